@@ -1,0 +1,101 @@
+"""`missionctl` command line.
+
+backend owns the entry point and the commands that need only backend
+(validate, schema, server, ctl). `sim` and `console` plug their commands in
+through the `missionctl.commands` entry-point group, so backend never imports
+them.
+
+Exit codes: 0 ok, 1 operation refused, 2 bad input/usage, 3 server unreachable.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from importlib.metadata import entry_points
+
+EXIT_OK, EXIT_REFUSED, EXIT_BAD_INPUT, EXIT_UNREACHABLE = 0, 1, 2, 3
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # usage errors exit 2 without a traceback
+        self.print_usage(sys.stderr)
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    from .files import validate_file
+
+    bad = 0
+    for f in args.files:
+        issues = validate_file(f)
+        for issue in issues:
+            print(issue, file=sys.stderr)
+        if issues:
+            bad += 1
+        elif not args.quiet:
+            print(f"{f}: ok")
+    return EXIT_BAD_INPUT if bad else EXIT_OK
+
+
+def cmd_schema(args: argparse.Namespace) -> int:
+    from .schema import schemas
+
+    all_schemas = schemas()
+    if args.kind != "all":
+        out = all_schemas[args.kind]
+    else:
+        out = all_schemas
+    print(json.dumps(out, indent=2))
+    return EXIT_OK
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(
+        prog="missionctl",
+        description="Mission operation console for heterogeneous robot teams.",
+    )
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+
+    v = sub.add_parser("validate", help="check mission and skill-library files")
+    v.add_argument("files", nargs="+", metavar="FILE")
+    v.add_argument("-q", "--quiet", action="store_true", help="print only errors")
+    v.set_defaults(func=cmd_validate)
+
+    s = sub.add_parser("schema", help="print the JSON Schema of mission and library files")
+    s.add_argument("kind", nargs="?", choices=["all", "mission", "library"], default="all")
+    s.set_defaults(func=cmd_schema)
+
+    for name, register in _registrations():
+        register(sub)
+    return p
+
+
+def _registrations():
+    """Commands other packages plug in (sim, console)."""
+    plugged = []
+    for ep in entry_points(group="missionctl.commands"):
+        try:
+            plugged.append((ep.name, ep.load()))
+        except ImportError as e:  # a broken plug-in must not take the CLI down
+            print(f"missionctl: command '{ep.name}' unavailable: {e}", file=sys.stderr)
+    return sorted(plugged, key=lambda x: x[0])
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help(sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        return 130
+    except BrokenPipeError:
+        return EXIT_OK
+
+
+if __name__ == "__main__":
+    sys.exit(main())

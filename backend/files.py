@@ -1,0 +1,448 @@
+"""Mission and library files: load, check, save.
+
+Every problem is an `Issue` with the file, the field path and, once resolved
+against the YAML, the line and column. Loading never raises for bad input: it
+returns every issue of the file at once.
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+from dataclasses import dataclass
+from pathlib import Path as FsPath
+from typing import Any
+
+from pydantic import ValidationError
+
+from . import yamlio
+from .library import LIBRARY_FORMAT, Library, check_params
+from .model import MISSION_FORMAT, Mission, format_path, section_problems
+
+Path = tuple[str | int, ...]
+
+
+@dataclass
+class Issue:
+    file: str
+    path: Path
+    message: str
+    line: int = 1
+    col: int = 1
+
+    def __str__(self) -> str:
+        where = format_path(self.path)
+        field = f"{where}: " if where else ""
+        return f"{self.file}:{self.line}:{self.col}: {field}{self.message}"
+
+
+class FileProblems(Exception):
+    """A file could not be loaded; `issues` says every reason."""
+
+    def __init__(self, issues: list[Issue]):
+        super().__init__("\n".join(str(i) for i in issues))
+        self.issues = issues
+
+
+# -- pydantic errors as sentences -------------------------------------------
+
+
+def _clean_loc(data: Any, loc: tuple) -> Path:
+    """Map a pydantic error location onto the data: drop the segments pydantic
+    adds for tagged unions (the marker kind) and validators."""
+    out: list[str | int] = []
+    cur = data
+    for i, seg in enumerate(loc):
+        nxt = loc[i + 1] if i + 1 < len(loc) else None
+        if isinstance(cur, dict) and cur.get("kind") == seg and nxt is not None and nxt in cur:
+            continue  # union tag
+        if isinstance(cur, dict) and seg in cur:
+            out.append(seg)
+            cur = cur[seg]
+        elif isinstance(cur, list) and isinstance(seg, int) and 0 <= seg < len(cur):
+            out.append(seg)
+            cur = cur[seg]
+        elif isinstance(cur, dict) and isinstance(seg, str) and not seg.startswith("function-"):
+            out.append(seg)  # a missing field: nothing below it exists
+            cur = None
+    return tuple(out)
+
+
+_EXPECTED = {
+    "float_parsing": "a number",
+    "float_type": "a number",
+    "int_parsing": "an integer",
+    "int_type": "an integer",
+    "int_from_float": "an integer",
+    "bool_parsing": "true or false",
+    "bool_type": "true or false",
+    "string_type": "a string",
+    "dict_type": "a mapping",
+    "model_type": "a mapping",
+    "list_type": "a list",
+    "datetime_parsing": "an ISO date-time",
+    "datetime_type": "an ISO date-time",
+}
+
+
+def _sentence(err: dict) -> str:
+    t = err["type"]
+    loc = err["loc"]
+    last = loc[-1] if loc else ""
+    if t == "missing":
+        return f"missing required field '{last}'"
+    if t == "extra_forbidden":
+        return f"unknown field '{last}'"
+    if t == "literal_error" and last == "format":
+        return f"unsupported format {err.get('input')!r}; expected {err['ctx']['expected']}"
+    if t == "union_tag_invalid":
+        return f"unknown kind {err['ctx'].get('tag')!r}; expected one of {err['ctx'].get('expected_tags')}"
+    if t == "union_tag_not_found":
+        return "missing field 'kind' (pose, position or area)"
+    if t in _EXPECTED:
+        return f"expected {_EXPECTED[t]}, got {err.get('input')!r}"
+    msg = err["msg"]
+    if msg.startswith("Value error, "):
+        msg = msg[len("Value error, ") :]
+    if t == "string_pattern_mismatch":
+        msg = f"{err.get('input')!r} is not a valid name (letters, digits, '_' and '-', starting with a letter)"
+    return msg
+
+
+def pydantic_issues(file: str, doc: yamlio.YamlDoc, exc: ValidationError) -> list[Issue]:
+    out = []
+    for err in exc.errors():
+        path = _clean_loc(doc.data, err["loc"])
+        line, col = doc.mark(path)
+        out.append(Issue(file, path, _sentence(err), line, col))
+    return out
+
+
+def _located(file: str, doc: yamlio.YamlDoc | None, path: Path, message: str) -> Issue:
+    line, col = doc.mark(path) if doc else (1, 1)
+    return Issue(file, path, message, line, col)
+
+
+# -- semantic checks ---------------------------------------------------------
+
+
+def check_library(lib: Library) -> list[tuple[Path, str]]:
+    out: list[tuple[Path, str]] = []
+    for tname, rt in lib.robot_types.items():
+        seen = set()
+        for i, s in enumerate(rt.skills):
+            if s not in lib.skills:
+                out.append((("robot_types", tname, "skills", i), f"unknown skill '{s}' (not defined under 'skills')"))
+            if s in seen:
+                out.append((("robot_types", tname, "skills", i), f"skill '{s}' is listed twice"))
+            seen.add(s)
+    for sname, spec in lib.skills.items():
+        d = spec.duration
+        if d.goal_param is not None:
+            p = spec.params.get(d.goal_param)
+            if p is None or p.type not in ("pose", "position"):
+                out.append(((
+                    "skills", sname, "duration", "goal_param"),
+                    f"'{d.goal_param}' is not a pose or position parameter of '{sname}'",
+                ))
+        for pname in d.per_param_s:
+            p = spec.params.get(pname)
+            if p is None or p.type not in ("int", "float"):
+                out.append((("skills", sname, "duration", "per_param_s", pname), f"'{pname}' is not a numeric parameter of '{sname}'"))
+    return out
+
+
+def resolve_shorthands(m: Mission, lib: Library) -> None:
+    """`goal: "@POI-A"` in a file binds the parameter to marker POI-A."""
+    for robot, task in m.tasks.items():
+        rtype = m.robots[robot].type if robot in m.robots else None
+        for s in task:
+            spec = lib.skill_for(rtype, s.skill) if rtype else None
+            for name, v in list(s.params.items()):
+                if not (isinstance(v, str) and v.startswith("@")):
+                    continue
+                pspec = spec.params.get(name) if spec else None
+                if pspec is not None and pspec.type == "marker":
+                    s.params[name] = v[1:]
+                elif pspec is not None and pspec.type in ("pose", "position", "area"):
+                    s.bindings[name] = v[1:]
+                    del s.params[name]
+
+
+def check_mission(m: Mission, lib: Library, *, fill: bool = True) -> list[tuple[Path, str]]:
+    """Every rule a mission must satisfy against its library. With `fill`,
+    parameters are normalized and defaults filled in place."""
+    out: list[tuple[Path, str]] = []
+    robots = set(m.robots)
+    for name, spec in m.robots.items():
+        if spec.type not in lib.robot_types:
+            known = ", ".join(lib.robot_types) or "none"
+            out.append((("robots", name, "type"), f"unknown robot type '{spec.type}' (library types: {known})"))
+    ids: dict[str, Path] = {}
+    for robot, task in m.tasks.items():
+        if robot not in m.robots:
+            out.append((("tasks", robot), f"tasks for unknown robot '{robot}' (robots: {', '.join(sorted(robots)) or 'none'})"))
+            continue
+        rtype = m.robots[robot].type
+        for i, s in enumerate(task):
+            here: Path = ("tasks", robot, i)
+            if s.id in ids:
+                out.append(((*here, "id"), f"duplicate skill id '{s.id}' (first used at {format_path(ids[s.id])})"))
+            else:
+                ids[s.id] = here
+            if rtype not in lib.robot_types:
+                continue
+            if lib.skill_for(rtype, s.skill) is None:
+                offered = ", ".join(lib.skills_of(rtype)) or "none"
+                out.append(((*here, "skill"), f"robot '{robot}' ({rtype}) has no skill '{s.skill}' (it offers: {offered})"))
+                continue
+            params, problems = check_params(
+                lib, rtype, s.skill, s.params, s.bindings, markers=m.markers, robots=robots
+            )
+            for p in problems:
+                base = "bindings" if p.path and p.path[0] in s.bindings and p.path[0] not in s.params else "params"
+                out.append(((*here, base, *p.path), p.message))
+            if not problems and fill:
+                s.params = params
+        for i, why in section_problems(task):
+            out.append((("tasks", robot, i, "status"), why))
+    owner: dict[str, str] = {}
+    for bid, b in m.barriers.items():
+        robots_in: dict[str, str] = {}
+        for j, sid in enumerate(b.skills):
+            where: Path = ("barriers", bid, "skills", j)
+            found = m.find(sid)
+            if found is None:
+                out.append((where, f"unknown skill id '{sid}'"))
+                continue
+            robot = found[0]
+            if robot in robots_in:
+                out.append((where, f"skills '{robots_in[robot]}' and '{sid}' both belong to robot '{robot}'; a barrier has one skill per robot"))
+            robots_in[robot] = sid
+            if sid in owner:
+                out.append((where, f"skill '{sid}' is already in barrier '{owner[sid]}'"))
+            owner[sid] = bid
+        if len(robots_in) < 2 and len(b.skills) >= 2 and all(m.find(s) for s in b.skills):
+            out.append((("barriers", bid), "a barrier needs skills of at least two robots"))
+    return out
+
+
+# -- loading ------------------------------------------------------------------
+
+
+def _read(path: FsPath) -> tuple[str, yamlio.YamlDoc]:
+    file = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise FileProblems([Issue(file, (), "no such file")]) from None
+    except IsADirectoryError:
+        raise FileProblems([Issue(file, (), "is a directory, not a file")]) from None
+    except UnicodeDecodeError as e:
+        raise FileProblems([Issue(file, (), f"not UTF-8 text ({e.reason} at byte {e.start})")]) from None
+    except OSError as e:
+        raise FileProblems([Issue(file, (), f"cannot read: {e.strerror}")]) from None
+    try:
+        doc = yamlio.load(text)
+    except yamlio.YamlSyntaxError as e:
+        raise FileProblems([Issue(file, (), e.message, e.line, e.col)]) from None
+    issues = [Issue(file, p, "duplicate key: a later entry would silently replace the first", ln, c) for p, ln, c in doc.duplicates]
+    if issues:
+        raise FileProblems(issues)
+    if not isinstance(doc.data, dict):
+        raise FileProblems([Issue(file, (), "expected a YAML mapping at the top of the file", 1, 1)])
+    return file, doc
+
+
+def file_kind(data: dict) -> str | None:
+    fmt = data.get("format")
+    if isinstance(fmt, str):
+        if fmt.startswith("missionctl/mission"):
+            return "mission"  # a wrong version is reported by the model
+        if fmt.startswith("missionctl/library"):
+            return "library"
+        return None
+    if "tasks" in data or "robots" in data:
+        return "mission"
+    if "robot_types" in data or "skills" in data:
+        return "library"
+    return None
+
+
+def load_library(path: str | FsPath) -> Library:
+    file, doc = _read(FsPath(path))
+    return _library_from(file, doc)
+
+
+def _library_from(file: str, doc: yamlio.YamlDoc) -> Library:
+    try:
+        lib = Library.model_validate(doc.data)
+    except ValidationError as e:
+        raise FileProblems(pydantic_issues(file, doc, e)) from None
+    problems = check_library(lib)
+    if problems:
+        raise FileProblems([_located(file, doc, p, msg) for p, msg in problems])
+    return lib
+
+
+def library_path(mission_file: str | FsPath, library: str) -> FsPath:
+    return (FsPath(mission_file).parent / library).resolve()
+
+
+def load_mission(path: str | FsPath) -> tuple[Mission, Library]:
+    file, doc = _read(FsPath(path))
+    return _mission_from(file, doc)
+
+
+def _mission_from(file: str, doc: yamlio.YamlDoc) -> tuple[Mission, Library]:
+    issues: list[Issue] = []
+    salvage = _Salvage(doc.data)
+    try:
+        m = Mission.model_validate(doc.data)
+    except ValidationError as e:
+        issues = pydantic_issues(file, doc, e)
+        # Drop the broken entries and check the rest too, so one run reports
+        # every problem of the file, not just the structural ones.
+        try:
+            m = Mission.model_validate(salvage.without([i.path for i in issues]))
+        except (ValidationError, _Unsalvageable):
+            raise FileProblems(issues) from None
+    lib_file = library_path(file, m.library)
+    try:
+        lib = load_library(lib_file)
+    except FileProblems as e:
+        head = _located(file, doc, ("library",), f"library '{m.library}' cannot be loaded ({len(e.issues)} problem(s) listed below)")
+        raise FileProblems([*issues, head, *e.issues]) from None
+    resolve_shorthands(m, lib)
+    for path, msg in check_mission(m, lib):
+        if salvage.explains(msg):
+            continue
+        path = salvage.original(path)
+        if len(path) > 4 and path[3] == "bindings" and (*path[:3], "params", path[4]) in doc.marks:
+            path = (*path[:3], "params", *path[4:])  # written as "@MARKER" under params
+        issues.append(_located(file, doc, path, msg))
+    if issues:
+        raise FileProblems(sorted(issues, key=lambda i: (i.line, i.col)))
+    _fill_counters(m)
+    return m, lib
+
+
+class _Unsalvageable(Exception):
+    pass
+
+
+class _Salvage:
+    """A copy of a file's data without its broken entries, remembering what was
+    dropped (to not report it twice) and where the kept task items were."""
+
+    def __init__(self, data: Any):
+        self.data = data
+        self.dropped: set[str] = set()
+        self.kept: dict[str, list[int]] = {}
+
+    def without(self, paths: list[Path]) -> dict:
+        data = copy.deepcopy(self.data)
+        drop_items: dict[str, set[int]] = {}
+        for p in paths:
+            if len(p) >= 2 and p[0] in ("markers", "robots", "barriers") and isinstance(data.get(p[0]), dict):
+                data[p[0]].pop(p[1], None)
+                self.dropped.add(str(p[1]))
+            elif len(p) >= 3 and p[0] == "tasks" and isinstance(p[2], int):
+                drop_items.setdefault(str(p[1]), set()).add(p[2])
+            elif len(p) == 2 and p[0] == "tasks" and isinstance(data.get("tasks"), dict):
+                data["tasks"].pop(p[1], None)
+                self.dropped.add(str(p[1]))
+            else:
+                raise _Unsalvageable(p)
+        for robot, idx in drop_items.items():
+            items = data["tasks"][robot]
+            for i in idx:
+                if isinstance(items[i], dict) and isinstance(items[i].get("id"), str):
+                    self.dropped.add(items[i]["id"])
+            self.kept[robot] = [i for i in range(len(items)) if i not in idx]
+            data["tasks"][robot] = [items[i] for i in self.kept[robot]]
+        return data
+
+    def explains(self, message: str) -> bool:
+        return any(f"'{name}'" in message for name in self.dropped)
+
+    def original(self, path: Path) -> Path:
+        if len(path) >= 3 and path[0] == "tasks" and isinstance(path[2], int) and path[1] in self.kept:
+            return (*path[:2], self.kept[str(path[1])][path[2]], *path[3:])
+        return path
+
+
+def _fill_counters(m: Mission) -> None:
+    """Keep generated ids clear of those already in the file."""
+    for sid in m.all_ids():
+        tail = sid.rsplit("-", 1)[-1]
+        if tail.isdigit():
+            m.next_skill = max(m.next_skill, int(tail) + 1)
+    for bid in m.barriers:
+        if bid.startswith("b") and bid[1:].isdigit():
+            m.next_barrier = max(m.next_barrier, int(bid[1:]) + 1)
+    for robot in m.robots:
+        m.tasks.setdefault(robot, [])
+
+
+def validate_file(path: str | FsPath) -> list[Issue]:
+    """All issues of one mission or library file (empty when valid)."""
+    try:
+        file, doc = _read(FsPath(path))
+        kind = file_kind(doc.data)
+        if kind == "library":
+            _library_from(file, doc)
+        elif kind == "mission":
+            _mission_from(file, doc)
+        else:
+            return [
+                Issue(file, ("format",), f"not a missionctl file: set 'format: {MISSION_FORMAT}' or 'format: {LIBRARY_FORMAT}'", *doc.mark(("format",)))
+            ]
+    except FileProblems as e:
+        return e.issues
+    return []
+
+
+# -- saving -------------------------------------------------------------------
+
+
+_SKILL_DEFAULTS = {
+    "label": "",
+    "bindings": {},
+    "status": "idle",
+    "status_info": "",
+    "attempt": 1,
+    "started_at": None,
+    "finished_at": None,
+    "policies": {"retries": 0, "pause_out_of_comms": False, "recharge_below": None},
+    "rev": 0,
+}
+
+
+def _drop(d: dict[str, Any], defaults: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in d.items() if not (k in defaults and v == defaults[k])}
+
+
+def mission_to_data(m: Mission) -> dict[str, Any]:
+    """Readable file content: stable key order, noise-free defaults left out."""
+    data = m.model_dump(mode="json")
+    data["robots"] = {n: _drop(r, {"description": ""}) for n, r in data["robots"].items()}
+    data["markers"] = {n: _drop(mk, {"description": ""}) for n, mk in data["markers"].items()}
+    data["tasks"] = {r: [_drop(s, _SKILL_DEFAULTS) for s in t] for r, t in data["tasks"].items()}
+    return _drop(data, {"task_revs": {}, "next_skill": 1, "next_barrier": 1, "barriers": {}})
+
+
+def mission_to_yaml(m: Mission) -> str:
+    return yamlio.dump(mission_to_data(m))
+
+
+def save_mission(m: Mission, path: str | FsPath, library_file: str | FsPath | None = None) -> None:
+    """Write atomically (a crash mid-save never leaves half a file). With
+    `library_file`, the library reference is rewritten relative to `path`."""
+    p = FsPath(path)
+    if library_file is not None:
+        rel = os.path.relpath(FsPath(library_file).resolve(), p.resolve().parent)
+        m = m.model_copy(update={"library": rel})
+    tmp = p.with_name(p.name + ".tmp")
+    tmp.write_text(mission_to_yaml(m), encoding="utf-8")
+    tmp.replace(p)

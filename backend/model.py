@@ -1,0 +1,239 @@
+"""The mission model: the single source of truth for files, protocol and state.
+
+A mission has robots, one task (ordered skill instances) per robot, barriers
+tying skills of different robots together, markers (poses, positions, areas)
+that parameters can be bound to, and a revision that grows with every applied
+operation.
+"""
+
+from __future__ import annotations
+
+import re
+from datetime import datetime
+from enum import StrEnum
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+MISSION_FORMAT = "missionctl/mission@1"
+
+# Names of robots, markers, skills and ids appear in keys (Zenoh, YAML, CLI):
+# keep them to a portable character set.
+NAME_PATTERN = r"^[A-Za-z][A-Za-z0-9_\-]*$"
+ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_\-.]*$"
+NAME_RE = re.compile(NAME_PATTERN)
+
+Name = Annotated[str, Field(pattern=NAME_PATTERN, max_length=64)]
+SkillId = Annotated[str, Field(pattern=ID_PATTERN, max_length=64)]
+
+
+class Strict(BaseModel):
+    """Base for every file and protocol model: unknown fields are errors."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=False)
+
+
+class Status(StrEnum):
+    IDLE = "idle"
+    IDLE_SYNCHRONIZED = "idle_synchronized"
+    SYNCHWAITING = "synchwaiting"
+    RUNNING = "running"
+    PAUSED = "paused"
+    SUCCESS = "success"
+    FAILURE = "failure"
+
+
+FINISHED = frozenset({Status.SUCCESS, Status.FAILURE})
+ACTIVE = frozenset({Status.RUNNING, Status.PAUSED, Status.SYNCHWAITING})
+
+# Section rank: a robot's list must be sorted by it (finished log, at most one
+# active, queued, unsynchronized).
+SECTION_RANK: dict[Status, int] = {
+    Status.SUCCESS: 0,
+    Status.FAILURE: 0,
+    Status.RUNNING: 1,
+    Status.PAUSED: 1,
+    Status.SYNCHWAITING: 1,
+    Status.IDLE_SYNCHRONIZED: 2,
+    Status.IDLE: 3,
+}
+
+# Status changes a robot may report (the server enforces this table).
+TRANSITIONS: dict[Status, frozenset[Status]] = {
+    Status.IDLE: frozenset(),  # leaves idle only through a sync acknowledgement
+    Status.IDLE_SYNCHRONIZED: frozenset(
+        {Status.SYNCHWAITING, Status.RUNNING, Status.FAILURE}
+    ),
+    Status.SYNCHWAITING: frozenset(
+        {Status.RUNNING, Status.IDLE_SYNCHRONIZED, Status.FAILURE}
+    ),
+    Status.RUNNING: frozenset(
+        {Status.PAUSED, Status.SUCCESS, Status.FAILURE, Status.IDLE_SYNCHRONIZED}
+    ),
+    Status.PAUSED: frozenset({Status.RUNNING, Status.IDLE_SYNCHRONIZED, Status.FAILURE}),
+    Status.SUCCESS: frozenset(),
+    Status.FAILURE: frozenset(),
+}
+
+
+class Pose(Strict):
+    """Euler 6D pose in the site frame (metres, radians)."""
+
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+    roll: float = 0.0
+    pitch: float = 0.0
+    yaw: float = 0.0
+
+
+class Position(Strict):
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+
+
+class PoseMarker(Strict):
+    kind: Literal["pose"] = "pose"
+    pose: Pose
+    description: str = ""
+
+
+class PositionMarker(Strict):
+    kind: Literal["position"] = "position"
+    position: Position
+    description: str = ""
+
+
+class AreaMarker(Strict):
+    kind: Literal["area"] = "area"
+    area: list[Position] = Field(min_length=3)
+    description: str = ""
+
+
+Marker = Annotated[PoseMarker | PositionMarker | AreaMarker, Field(discriminator="kind")]
+
+
+class Policies(Strict):
+    """Optional per-skill policies the robot applies without a round trip."""
+
+    retries: int = Field(0, ge=0, le=20, description="autonomous retries after a failure")
+    pause_out_of_comms: bool = Field(
+        False, description="pause while the robot is out of communication range"
+    )
+    recharge_below: float | None = Field(
+        None, ge=0.0, le=1.0, description="return to recharge below this battery level (0..1)"
+    )
+
+    def is_default(self) -> bool:
+        return self == Policies()
+
+
+class SkillInstance(Strict):
+    id: SkillId
+    skill: Name
+    label: str = ""
+    params: dict[str, Any] = Field(default_factory=dict)
+    # parameter name -> marker name; the value in params is the marker's value
+    # at the time it was last applied to this skill.
+    bindings: dict[str, Name] = Field(default_factory=dict)
+    status: Status = Status.IDLE
+    status_info: str = ""
+    attempt: int = Field(1, ge=1)
+    started_at: datetime | None = None
+    finished_at: datetime | None = None
+    policies: Policies = Field(default_factory=Policies)
+    # revision of the last change to this skill (optimistic concurrency)
+    rev: int = Field(0, ge=0)
+
+    def display(self) -> str:
+        """How messages name a skill: its id, with the label when it has one."""
+        return f"{self.id} ({self.label})" if self.label else f"{self.id} ({self.skill})"
+
+
+class RobotSpec(Strict):
+    type: Name
+    description: str = ""
+
+
+class Barrier(Strict):
+    skills: list[SkillId] = Field(min_length=2)
+
+    @field_validator("skills")
+    @classmethod
+    def _unique(cls, ids: list[str]) -> list[str]:
+        if len(set(ids)) != len(ids):
+            raise ValueError("a barrier lists each skill once")
+        return ids
+
+
+class Mission(Strict):
+    format: Literal["missionctl/mission@1"] = MISSION_FORMAT
+    name: str = "mission"
+    library: str = Field(
+        ..., description="skill library file, relative to the mission file's folder"
+    )
+    revision: int = Field(0, ge=0)
+    robots: dict[Name, RobotSpec] = Field(default_factory=dict)
+    markers: dict[Name, Marker] = Field(default_factory=dict)
+    tasks: dict[Name, list[SkillInstance]] = Field(default_factory=dict)
+    barriers: dict[Name, Barrier] = Field(default_factory=dict)
+    # per-robot revision of the list's membership and order
+    task_revs: dict[Name, int] = Field(default_factory=dict)
+    # counters for generated ids; persisted so ids are never reused
+    next_skill: int = Field(1, ge=1)
+    next_barrier: int = Field(1, ge=1)
+
+    # -- lookups ---------------------------------------------------------
+    def find(self, skill_id: str) -> tuple[str, int, SkillInstance] | None:
+        for robot, task in self.tasks.items():
+            for i, s in enumerate(task):
+                if s.id == skill_id:
+                    return robot, i, s
+        return None
+
+    def barrier_of(self, skill_id: str) -> str | None:
+        for bid, b in self.barriers.items():
+            if skill_id in b.skills:
+                return bid
+        return None
+
+    def all_ids(self) -> set[str]:
+        return {s.id for task in self.tasks.values() for s in task}
+
+
+def section_problems(task: list[SkillInstance]) -> list[tuple[int, str]]:
+    """Where a robot's list breaks the section order: (index, sentence)."""
+    problems: list[tuple[int, str]] = []
+    active: int | None = None
+    prev: SkillInstance | None = None
+    for i, s in enumerate(task):
+        if prev is not None and SECTION_RANK[s.status] < SECTION_RANK[prev.status]:
+            problems.append(
+                (
+                    i,
+                    f"'{s.status.value}' after '{prev.status.value}' breaks the section order "
+                    "(success/failure, then one running/paused/synchwaiting, then "
+                    "idle_synchronized, then idle)",
+                )
+            )
+        elif s.status in ACTIVE and active is not None:
+            problems.append(
+                (i, f"second active skill: '{task[active].id}' is already {task[active].status.value}")
+            )
+        if s.status in ACTIVE and active is None:
+            active = i
+        if prev is None or SECTION_RANK[s.status] >= SECTION_RANK[prev.status]:
+            prev = s
+    return problems
+
+
+def format_path(path: tuple[str | int, ...] | list[str | int]) -> str:
+    """('tasks', 'lru2', 3, 'params', 'goal') -> 'tasks.lru2[3].params.goal'."""
+    out = ""
+    for part in path:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += ("." if out else "") + str(part)
+    return out

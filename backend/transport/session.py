@@ -1,0 +1,93 @@
+"""Opening and closing Zenoh sessions with clear errors."""
+
+from __future__ import annotations
+
+import json
+import logging
+import re
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import zenoh
+
+log = logging.getLogger(__name__)
+
+_UNREACHABLE_DETAIL = (
+    "no router accepted the connection (is it running? are the address, TLS settings "
+    "and credentials right?)"
+)
+
+
+class TransportError(Exception):
+    """Base of every error raised by backend.transport."""
+
+
+class TransportUnreachable(TransportError, ConnectionError):
+    """No router could be reached at any of the configured endpoints."""
+
+    def __init__(self, endpoints: list[str], detail: str, *, what: str = "the mission server"):
+        self.endpoints = list(endpoints)
+        self.detail = detail
+        where = ", ".join(self.endpoints) or "(no endpoint configured)"
+        super().__init__(f"cannot reach {what} at {where}: {detail}")
+
+
+class ListenFailed(TransportError):
+    """A router could not listen on one of its endpoints (e.g. address in use)."""
+
+    def __init__(self, endpoints: list[str], detail: str):
+        self.endpoints = list(endpoints)
+        self.detail = detail
+        super().__init__(f"cannot listen on {', '.join(self.endpoints)}: {detail}")
+
+
+def clean_zenoh_message(text: str) -> str:
+    """Drop the Rust source locations (" at /root/.cargo/...rs:61.") from a ZError text."""
+    return re.sub(r"\s+at \S+\.rs:\d+\.?", "", text).strip()
+
+
+def _endpoints(config: zenoh.Config, section: str) -> list[str]:
+    try:
+        value = json.loads(config.get_json(f"{section}/endpoints"))
+    except (zenoh.ZError, ValueError):
+        return []
+    if isinstance(value, dict):  # per-mode form: {"router": [...], "client": [...]}
+        return [str(e) for eps in value.values() for e in (eps or [])]
+    return [str(e) for e in (value or [])]
+
+
+def open_session(config: zenoh.Config, *, what: str = "the mission server") -> zenoh.Session:
+    """`zenoh.open` with our exceptions; the caller must close the session.
+
+    Raises `TransportUnreachable` (router down, wrong address, rejected
+    credentials all look the same to Zenoh), `ListenFailed`, or `TransportError`.
+    """
+    try:
+        return zenoh.open(config)
+    except zenoh.ZError as exc:
+        raw = str(exc)
+        if "Unable to connect" in raw:
+            raise TransportUnreachable(_endpoints(config, "connect"), _UNREACHABLE_DETAIL, what=what) from exc
+        if "listener" in raw:
+            raise ListenFailed(_endpoints(config, "listen"), clean_zenoh_message(raw)) from exc
+        raise TransportError(f"cannot open a Zenoh session: {clean_zenoh_message(raw)}") from exc
+
+
+def close_session(session: zenoh.Session) -> None:
+    """Close a session (idempotent). Must be called explicitly: a process whose
+    session still has callback subscribers open at interpreter exit never ends."""
+    try:
+        if not session.is_closed():
+            session.close()
+    except zenoh.ZError:
+        log.exception("error while closing the Zenoh session")
+
+
+@contextmanager
+def session_scope(config: zenoh.Config, *, what: str = "the mission server") -> Iterator[zenoh.Session]:
+    """`with session_scope(cfg) as session:` — opened with `open_session`, always closed."""
+    session = open_session(config, what=what)
+    try:
+        yield session
+    finally:
+        close_session(session)
