@@ -67,7 +67,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("kind", nargs="?", choices=["all", "mission", "library"], default="all")
     s.set_defaults(func=cmd_schema)
 
-    for name, register in _registrations():
+    for _name, register in _registrations():
         register(sub)
     return p
 

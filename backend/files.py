@@ -429,7 +429,7 @@ def mission_to_data(m: Mission) -> dict[str, Any]:
     data["robots"] = {n: _drop(r, {"description": ""}) for n, r in data["robots"].items()}
     data["markers"] = {n: _drop(mk, {"description": ""}) for n, mk in data["markers"].items()}
     data["tasks"] = {r: [_drop(s, _SKILL_DEFAULTS) for s in t] for r, t in data["tasks"].items()}
-    return _drop(data, {"task_revs": {}, "next_skill": 1, "next_barrier": 1, "barriers": {}})
+    return _drop(data, {"task_revs": {}, "marker_revs": {}, "report_seqs": {}, "next_skill": 1, "next_barrier": 1, "barriers": {}})
 
 
 def mission_to_yaml(m: Mission) -> str:

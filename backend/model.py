@@ -180,6 +180,9 @@ class Mission(Strict):
     barriers: dict[Name, Barrier] = Field(default_factory=dict)
     # per-robot revision of the list's membership and order
     task_revs: dict[Name, int] = Field(default_factory=dict)
+    marker_revs: dict[Name, int] = Field(default_factory=dict)
+    # highest report sequence number applied per robot (reports are idempotent)
+    report_seqs: dict[Name, int] = Field(default_factory=dict)
     # counters for generated ids; persisted so ids are never reused
     next_skill: int = Field(1, ge=1)
     next_barrier: int = Field(1, ge=1)

@@ -22,7 +22,7 @@ def _schema(model: type, title: str, internal: set[str]) -> dict[str, Any]:
 def schemas() -> dict[str, dict[str, Any]]:
     return {
         "mission": _schema(
-            Mission, "missionctl mission file", {"revision", "task_revs", "next_skill", "next_barrier"}
+            Mission, "missionctl mission file", {"revision", "task_revs", "marker_revs", "report_seqs", "next_skill", "next_barrier"}
         ),
         "library": _schema(Library, "missionctl skill library file", set()),
     }

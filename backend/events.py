@@ -1,0 +1,168 @@
+"""Events: the small, ordered changes an applied operation makes.
+
+`apply_events` is the only code that mutates a mission. The engine applies
+the events it produces through it, the journal replays them through it, and
+clients mirror the server through it — so the three cannot drift apart.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import Field
+
+from .model import Barrier, Marker, Mission, Name, SkillId, SkillInstance, Strict
+
+
+class SkillAdded(Strict):
+    ev: Literal["skill_added"] = "skill_added"
+    robot: Name
+    index: int
+    skill: SkillInstance
+
+
+class SkillRemoved(Strict):
+    ev: Literal["skill_removed"] = "skill_removed"
+    robot: Name
+    id: SkillId
+
+
+class SkillMoved(Strict):
+    ev: Literal["skill_moved"] = "skill_moved"
+    robot: Name
+    id: SkillId
+    index: int
+
+
+class SkillChanged(Strict):
+    """Changed fields of one skill (JSON values), e.g. {"status": "running"}."""
+
+    ev: Literal["skill_changed"] = "skill_changed"
+    id: SkillId
+    changes: dict[str, Any]
+
+
+class BarrierSet(Strict):
+    ev: Literal["barrier_set"] = "barrier_set"
+    id: Name
+    barrier: Barrier
+
+
+class BarrierRemoved(Strict):
+    ev: Literal["barrier_removed"] = "barrier_removed"
+    id: Name
+
+
+class MarkerSet(Strict):
+    ev: Literal["marker_set"] = "marker_set"
+    name: Name
+    marker: Marker
+
+
+class MarkerRemoved(Strict):
+    ev: Literal["marker_removed"] = "marker_removed"
+    name: Name
+
+
+class ReportSeq(Strict):
+    """Highest report sequence number applied for a robot (idempotency)."""
+
+    ev: Literal["report_seq"] = "report_seq"
+    robot: Name
+    seq: int
+
+
+class MissionReplaced(Strict):
+    ev: Literal["mission_replaced"] = "mission_replaced"
+    mission: Mission
+
+
+Event = Annotated[
+    SkillAdded
+    | SkillRemoved
+    | SkillMoved
+    | SkillChanged
+    | BarrierSet
+    | BarrierRemoved
+    | MarkerSet
+    | MarkerRemoved
+    | ReportSeq
+    | MissionReplaced,
+    Field(discriminator="ev"),
+]
+
+
+class EventBatch(Strict):
+    """What one applied operation changed; revisions are consecutive."""
+
+    revision: int
+    events: list[Event]
+    actor: str = ""
+    op: str = ""
+
+
+def _task_of(m: Mission, skill_id: str) -> tuple[list[SkillInstance], int]:
+    for task in m.tasks.values():
+        for i, s in enumerate(task):
+            if s.id == skill_id:
+                return task, i
+    raise KeyError(skill_id)
+
+
+def _bump_counters(m: Mission, skill_id: str | None = None, barrier_id: str | None = None) -> None:
+    if skill_id is not None:
+        tail = skill_id.rsplit("-", 1)[-1]
+        if tail.isdigit():
+            m.next_skill = max(m.next_skill, int(tail) + 1)
+    if barrier_id is not None and barrier_id[1:].isdigit():
+        m.next_barrier = max(m.next_barrier, int(barrier_id[1:]) + 1)
+
+
+def apply_event(m: Mission, ev: Any, revision: int) -> Mission:
+    """Apply one event in place (or return the replacement mission)."""
+    match ev:
+        case SkillAdded(robot=robot, index=index, skill=skill):
+            s = skill.model_copy(deep=True)
+            s.rev = revision
+            m.tasks.setdefault(robot, []).insert(index, s)
+            m.task_revs[robot] = revision
+            _bump_counters(m, skill_id=s.id)
+        case SkillRemoved(robot=robot, id=sid):
+            task, i = _task_of(m, sid)
+            del task[i]
+            m.task_revs[robot] = revision
+        case SkillMoved(robot=robot, id=sid, index=index):
+            task, i = _task_of(m, sid)
+            task.insert(index, task.pop(i))
+            m.task_revs[robot] = revision
+        case SkillChanged(id=sid, changes=changes):
+            task, i = _task_of(m, sid)
+            data = task[i].model_dump()
+            data.update(changes)
+            data["rev"] = revision
+            task[i] = SkillInstance.model_validate(data)
+        case BarrierSet(id=bid, barrier=b):
+            m.barriers[bid] = b.model_copy(deep=True)
+            _bump_counters(m, barrier_id=bid)
+        case BarrierRemoved(id=bid):
+            m.barriers.pop(bid, None)
+        case MarkerSet(name=name, marker=marker):
+            m.markers[name] = marker.model_copy(deep=True)
+            m.marker_revs[name] = revision
+        case MarkerRemoved(name=name):
+            m.markers.pop(name, None)
+            m.marker_revs.pop(name, None)
+        case ReportSeq(robot=robot, seq=seq):
+            m.report_seqs[robot] = seq
+        case MissionReplaced(mission=new):
+            m = new.model_copy(deep=True)
+        case _:
+            raise TypeError(f"unknown event {ev!r}")
+    return m
+
+
+def apply_events(m: Mission, batch: EventBatch) -> Mission:
+    for ev in batch.events:
+        m = apply_event(m, ev, batch.revision)
+    m.revision = batch.revision
+    return m

@@ -1,0 +1,277 @@
+"""Operations: what operators and robots ask the mission to do.
+
+Operator operations come from consoles and `ctl`; robot operations are the
+acknowledgements and reports of robot agents, applied by the server. Both are
+validated by `backend.rules.Engine`; these models are also the protocol.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Annotated, Any, Literal
+
+from pydantic import Field
+
+from .model import (
+    AreaMarker,
+    Barrier,
+    Marker,
+    Mission,
+    Name,
+    Policies,
+    Pose,
+    PoseMarker,
+    Position,
+    PositionMarker,
+    SkillId,
+    SkillInstance,
+    Status,
+    Strict,
+)
+
+# -- operator operations -------------------------------------------------------
+
+
+class AddSkill(Strict):
+    op: Literal["add"] = "add"
+    robot: Name
+    skill: Name
+    label: str = ""
+    params: dict[str, Any] = Field(default_factory=dict)
+    bindings: dict[str, Name] = Field(default_factory=dict)
+    policies: Policies | None = None
+    at: int | None = Field(None, description="index within the unsynchronized section; end if omitted")
+
+
+class DeleteSkills(Strict):
+    op: Literal["delete"] = "delete"
+    ids: list[SkillId] = Field(min_length=1)
+
+
+class MoveSkill(Strict):
+    op: Literal["move"] = "move"
+    id: SkillId
+    index: int = Field(ge=0, description="new index within the unsynchronized section")
+
+
+class EditSkill(Strict):
+    op: Literal["edit"] = "edit"
+    id: SkillId
+    label: str | None = None
+    params: dict[str, Any] = Field(default_factory=dict, description="values to change")
+    bindings: dict[str, Name | None] = Field(
+        default_factory=dict, description="bind a parameter to a marker; null unbinds"
+    )
+    policies: Policies | None = None
+
+
+class Sync(Strict):
+    op: Literal["sync"] = "sync"
+    robot: Name
+    through: SkillId | None = Field(None, description="last skill to synchronize; all idle if omitted")
+
+
+class Unsync(Strict):
+    op: Literal["unsync"] = "unsync"
+    robot: Name
+    from_id: SkillId | None = Field(None, description="first queued skill to take back; all if omitted")
+
+
+class Control(Strict):
+    op: Literal["run", "pause", "stop", "reset"]
+    robot: Name | None = Field(None, description="one robot, or every robot if omitted")
+
+
+class Retry(Strict):
+    op: Literal["retry"] = "retry"
+    id: SkillId
+
+
+class AddBarrier(Strict):
+    op: Literal["barrier"] = "barrier"
+    ids: list[SkillId] = Field(min_length=2)
+
+
+class RemoveBarrier(Strict):
+    op: Literal["unbarrier"] = "unbarrier"
+    barrier: Name
+
+
+class MarkerAdd(Strict):
+    op: Literal["marker_add"] = "marker_add"
+    name: Name
+    marker: Marker
+
+
+class MarkerMove(Strict):
+    op: Literal["marker_move"] = "marker_move"
+    name: Name
+    value: Pose | Position | list[Position] = Field(
+        description="new pose, position or area polygon (same kind as the marker)"
+    )
+
+
+class MarkerRename(Strict):
+    op: Literal["marker_rename"] = "marker_rename"
+    name: Name
+    new_name: Name
+
+
+class MarkerDelete(Strict):
+    op: Literal["marker_delete"] = "marker_delete"
+    name: Name
+
+
+class LoadMission(Strict):
+    op: Literal["load"] = "load"
+    mission: Mission
+
+
+class NewMission(Strict):
+    op: Literal["new"] = "new"
+    name: str = "mission"
+
+
+class Undo(Strict):
+    op: Literal["undo"] = "undo"
+
+
+class Redo(Strict):
+    op: Literal["redo"] = "redo"
+
+
+# -- internal operations (undo/redo), never sent by clients --------------------
+
+
+class RestoreItem(Strict):
+    robot: Name
+    index: int
+    skill: SkillInstance
+
+
+class RestoreSkills(Strict):
+    op: Literal["restore_skills"] = "restore_skills"
+    items: list[RestoreItem]
+    barriers: dict[Name, Barrier] = Field(default_factory=dict)
+
+
+class SetSkill(Strict):
+    op: Literal["set_skill"] = "set_skill"
+    id: SkillId
+    label: str
+    params: dict[str, Any]
+    bindings: dict[str, Name]
+    policies: Policies
+
+
+class RestoreBarrier(Strict):
+    op: Literal["restore_barrier"] = "restore_barrier"
+    barrier: Name
+    skills: list[SkillId]
+
+
+# -- robot operations (applied by the server on behalf of a robot) -------------
+
+
+class SyncAck(Strict):
+    op: Literal["sync_ack"] = "sync_ack"
+    robot: Name
+    ids: list[SkillId]
+
+
+class UnsyncDone(Strict):
+    op: Literal["unsync_done"] = "unsync_done"
+    robot: Name
+    ids: list[SkillId] = Field(description="skills the robot removed from its queue")
+
+
+class RetryAck(Strict):
+    op: Literal["retry_ack"] = "retry_ack"
+    robot: Name
+    failed_id: SkillId
+    skill: SkillInstance
+
+
+class Report(Strict):
+    """A robot's status change for one skill, numbered per robot."""
+
+    op: Literal["report"] = "report"
+    robot: Name
+    seq: int = Field(ge=1)
+    id: SkillId
+    status: Status
+    info: str = ""
+    attempt: int | None = Field(None, ge=1)
+    at: datetime | None = None
+
+
+OperatorOp = Annotated[
+    AddSkill
+    | DeleteSkills
+    | MoveSkill
+    | EditSkill
+    | Sync
+    | Unsync
+    | Control
+    | Retry
+    | AddBarrier
+    | RemoveBarrier
+    | MarkerAdd
+    | MarkerMove
+    | MarkerRename
+    | MarkerDelete
+    | LoadMission
+    | NewMission
+    | Undo
+    | Redo,
+    Field(discriminator="op"),
+]
+
+RobotOp = Annotated[SyncAck | UnsyncDone | RetryAck | Report, Field(discriminator="op")]
+
+AnyOp = Annotated[
+    AddSkill
+    | DeleteSkills
+    | MoveSkill
+    | EditSkill
+    | Sync
+    | Unsync
+    | Control
+    | Retry
+    | AddBarrier
+    | RemoveBarrier
+    | MarkerAdd
+    | MarkerMove
+    | MarkerRename
+    | MarkerDelete
+    | LoadMission
+    | NewMission
+    | Undo
+    | Redo
+    | RestoreSkills
+    | SetSkill
+    | RestoreBarrier
+    | SyncAck
+    | UnsyncDone
+    | RetryAck
+    | Report,
+    Field(discriminator="op"),
+]
+
+# operations that change the unsynchronized plan and can be undone
+UNDOABLE = (
+    AddSkill,
+    DeleteSkills,
+    MoveSkill,
+    EditSkill,
+    AddBarrier,
+    RemoveBarrier,
+    MarkerAdd,
+    MarkerMove,
+    MarkerRename,
+    RestoreSkills,
+    SetSkill,
+    RestoreBarrier,
+)
+
+MARKER_TYPES = {"pose": PoseMarker, "position": PositionMarker, "area": AreaMarker}
