@@ -15,6 +15,8 @@ from typing import Any
 
 import zenoh
 
+from .session import clean_zenoh_message
+
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 
 
@@ -27,7 +29,9 @@ def set_option(config: zenoh.Config, path: str, value: Any) -> None:
     try:
         config.insert_json5(_key(path), json.dumps(value))
     except zenoh.ZError as exc:
-        raise ValueError(f"invalid Zenoh config option {path!r} = {value!r}: {exc}") from exc
+        raise ValueError(
+            f"invalid Zenoh config option {path!r} = {value!r}: {clean_zenoh_message(str(exc))}"
+        ) from exc
 
 
 def apply_options(config: zenoh.Config, options: Mapping[str, Any] | None) -> zenoh.Config:
@@ -115,7 +119,9 @@ def load_config_file(path: str | PathLike[str]) -> dict[str, Any]:
     try:
         loaded = zenoh.Config.from_file(str(path))
     except zenoh.ZError as exc:
-        raise ValueError(f"cannot load Zenoh config {path}: {exc}") from exc
+        raise ValueError(
+            f"cannot load Zenoh config {path}: {clean_zenoh_message(str(exc))}"
+        ) from exc
     # str(Config) is the full config as JSON; diff against the defaults.
     out: dict[str, Any] = {}
     _flat_diff(json.loads(str(zenoh.Config())), json.loads(str(loaded)), "", out)

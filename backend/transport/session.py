@@ -67,7 +67,9 @@ def open_session(config: zenoh.Config, *, what: str = "the mission server") -> z
     except zenoh.ZError as exc:
         raw = str(exc)
         if "Unable to connect" in raw:
-            raise TransportUnreachable(_endpoints(config, "connect"), _UNREACHABLE_DETAIL, what=what) from exc
+            raise TransportUnreachable(
+                _endpoints(config, "connect"), _UNREACHABLE_DETAIL, what=what
+            ) from exc
         if "listener" in raw:
             raise ListenFailed(_endpoints(config, "listen"), clean_zenoh_message(raw)) from exc
         raise TransportError(f"cannot open a Zenoh session: {clean_zenoh_message(raw)}") from exc
@@ -84,7 +86,9 @@ def close_session(session: zenoh.Session) -> None:
 
 
 @contextmanager
-def session_scope(config: zenoh.Config, *, what: str = "the mission server") -> Iterator[zenoh.Session]:
+def session_scope(
+    config: zenoh.Config, *, what: str = "the mission server"
+) -> Iterator[zenoh.Session]:
     """`with session_scope(cfg) as session:` — opened with `open_session`, always closed."""
     session = open_session(config, what=what)
     try:
