@@ -16,8 +16,16 @@ from typing import Any
 from pydantic import ValidationError
 
 from . import yamlio
-from .library import LIBRARY_FORMAT, Library, check_params
-from .model import MISSION_FORMAT, Mission, format_path, section_problems
+from .library import LIBRARY_FORMAT, VERSION_PATTERN, Library, check_params
+from .model import (
+    ID_PATTERN,
+    MISSION_FORMAT,
+    NAME_PATTERN,
+    Mission,
+    Status,
+    format_path,
+    section_problems,
+)
 
 Path = tuple[str | int, ...]
 
@@ -54,10 +62,12 @@ def _clean_loc(data: Any, loc: tuple) -> Path:
     cur = data
     for i, seg in enumerate(loc):
         nxt = loc[i + 1] if i + 1 < len(loc) else None
+        if seg == "[key]":
+            continue  # the error is about the key itself
         if isinstance(cur, dict) and cur.get("kind") == seg and nxt is not None and nxt in cur:
             continue  # union tag
         if isinstance(cur, dict) and seg in cur:
-            out.append(seg)
+            out.append(seg if isinstance(seg, str) else str(seg))  # a key, not an index
             cur = cur[seg]
         elif isinstance(cur, list) and isinstance(seg, int) and 0 <= seg < len(cur):
             out.append(seg)
@@ -82,6 +92,13 @@ _EXPECTED = {
     "list_type": "a list",
     "datetime_parsing": "an ISO date-time",
     "datetime_type": "an ISO date-time",
+    "datetime_from_date_parsing": "an ISO date-time",
+}
+
+_PATTERNS = {
+    NAME_PATTERN: "is not a valid name (letters, digits, '_' and '-', starting with a letter)",
+    ID_PATTERN: "is not a valid skill id (letters, digits, '_', '-' and '.'; no spaces)",
+    VERSION_PATTERN: "is not a valid version (MAJOR.MINOR.PATCH, e.g. 1.2.0)",
 }
 
 
@@ -99,13 +116,30 @@ def _sentence(err: dict) -> str:
         return f"unknown kind {err['ctx'].get('tag')!r}; expected one of {err['ctx'].get('expected_tags')}"
     if t == "union_tag_not_found":
         return "missing field 'kind' (pose, position or area)"
+    value = err.get("input")
+    ctx = err.get("ctx", {})
     if t in _EXPECTED:
-        return f"expected {_EXPECTED[t]}, got {err.get('input')!r}"
+        return f"expected {_EXPECTED[t]}, got {value!r}"
+    if t == "string_pattern_mismatch":
+        pattern = ctx.get("pattern", "")
+        return f"{value!r} " + _PATTERNS.get(pattern, f"does not match {pattern}")
+    if t in ("enum", "literal_error"):
+        return f"{value!r} is not one of: {ctx.get('expected')}"
+    if t in ("greater_than_equal", "greater_than"):
+        bound = ctx.get("ge", ctx.get("gt"))
+        return f"{value!r} is below the minimum {bound}"
+    if t in ("less_than_equal", "less_than"):
+        bound = ctx.get("le", ctx.get("lt"))
+        return f"{value!r} is above the maximum {bound}"
+    if t == "too_short":
+        if len(loc) >= 3 and loc[0] == "barriers" and loc[-1] == "skills":
+            return "a barrier needs skills of at least two robots"
+        return f"needs at least {ctx.get('min_length')} items, has {ctx.get('actual_length')}"
+    if t == "too_long":
+        return f"has more than {ctx.get('max_length')} items or characters"
     msg = err["msg"]
     if msg.startswith("Value error, "):
         msg = msg[len("Value error, ") :]
-    if t == "string_pattern_mismatch":
-        msg = f"{err.get('input')!r} is not a valid name (letters, digits, '_' and '-', starting with a letter)"
     return msg
 
 
@@ -116,6 +150,13 @@ def pydantic_issues(file: str, doc: yamlio.YamlDoc, exc: ValidationError) -> lis
         line, col = doc.mark(path)
         out.append(Issue(file, path, _sentence(err), line, col))
     return out
+
+
+def duplicate_issues(file: str, doc: yamlio.YamlDoc) -> list[Issue]:
+    return [
+        Issue(file, p, "duplicate key: the later entry would silently replace the first", ln, c)
+        for p, ln, c in doc.duplicates
+    ]
 
 
 def _located(file: str, doc: yamlio.YamlDoc | None, path: Path, message: str) -> Issue:
@@ -137,6 +178,10 @@ def check_library(lib: Library) -> list[tuple[Path, str]]:
                 out.append((("robot_types", tname, "skills", i), f"skill '{s}' is listed twice"))
             seen.add(s)
     for sname, spec in lib.skills.items():
+        for pname, pspec in spec.params.items():
+            why = pspec.default_problem()
+            if why:
+                out.append((("skills", sname, "params", pname, "default"), why))
         d = spec.duration
         if d.goal_param is not None:
             p = spec.params.get(d.goal_param)
@@ -196,8 +241,12 @@ def check_mission(m: Mission, lib: Library, *, fill: bool = True) -> list[tuple[
                 offered = ", ".join(lib.skills_of(rtype)) or "none"
                 out.append(((*here, "skill"), f"robot '{robot}' ({rtype}) has no skill '{s.skill}' (it offers: {offered})"))
                 continue
+            # a skill on a robot (or in the log) keeps the values it was sent
+            # with: its bindings are history, never re-applied
+            idle = s.status == Status.IDLE
             params, problems = check_params(
-                lib, rtype, s.skill, s.params, s.bindings, markers=m.markers, robots=robots
+                lib, rtype, s.skill, s.params, s.bindings if idle else {},
+                markers=m.markers, robots=robots, fill_defaults=idle,
             )
             for p in problems:
                 base = "bindings" if p.path and p.path[0] in s.bindings and p.path[0] not in s.params else "params"
@@ -211,6 +260,9 @@ def check_mission(m: Mission, lib: Library, *, fill: bool = True) -> list[tuple[
         robots_in: dict[str, str] = {}
         for j, sid in enumerate(b.skills):
             where: Path = ("barriers", bid, "skills", j)
+            if sid in b.skills[:j]:
+                out.append((where, f"skill '{sid}' is listed twice"))
+                continue
             found = m.find(sid)
             if found is None:
                 out.append((where, f"unknown skill id '{sid}'"))
@@ -245,10 +297,7 @@ def _read(path: FsPath) -> tuple[str, yamlio.YamlDoc]:
     try:
         doc = yamlio.load(text)
     except yamlio.YamlSyntaxError as e:
-        raise FileProblems([Issue(file, (), e.message, e.line, e.col)]) from None
-    issues = [Issue(file, p, "duplicate key: a later entry would silently replace the first", ln, c) for p, ln, c in doc.duplicates]
-    if issues:
-        raise FileProblems(issues)
+        raise FileProblems([Issue(file, e.path, e.message, e.line, e.col)]) from None
     if not isinstance(doc.data, dict):
         raise FileProblems([Issue(file, (), "expected a YAML mapping at the top of the file", 1, 1)])
     return file, doc
@@ -274,14 +323,32 @@ def load_library(path: str | FsPath) -> Library:
     return _library_from(file, doc)
 
 
-def _library_from(file: str, doc: yamlio.YamlDoc) -> Library:
+def _validated(model: type, file: str, doc: yamlio.YamlDoc, salvage: _Salvage) -> tuple[Any, list[Issue]]:
+    """Validate the structure; on errors, validate what is left without the
+    broken entries so one run reports every problem of the file."""
+    issues = duplicate_issues(file, doc)
     try:
-        lib = Library.model_validate(doc.data)
+        return model.model_validate(doc.data), issues
     except ValidationError as e:
-        raise FileProblems(pydantic_issues(file, doc, e)) from None
-    problems = check_library(lib)
-    if problems:
-        raise FileProblems([_located(file, doc, p, msg) for p, msg in problems])
+        issues += pydantic_issues(file, doc, e)
+    try:
+        return model.model_validate(salvage.without([i.path for i in issues])), issues
+    except (ValidationError, _Unsalvageable):
+        raise FileProblems(_sorted(issues)) from None
+
+
+def _sorted(issues: list[Issue]) -> list[Issue]:
+    return sorted(issues, key=lambda i: (i.file, i.line, i.col))
+
+
+def _library_from(file: str, doc: yamlio.YamlDoc) -> Library:
+    salvage = _Salvage(doc.data, entries=(("skills",), ("skills", "*", "params"), ("robot_types",)), required=("format",))
+    lib, issues = _validated(Library, file, doc, salvage)
+    for path, msg in check_library(lib):
+        if not salvage.explains(msg):
+            issues.append(_located(file, doc, path, msg))
+    if issues:
+        raise FileProblems(_sorted(issues))
     return lib
 
 
@@ -295,24 +362,14 @@ def load_mission(path: str | FsPath) -> tuple[Mission, Library]:
 
 
 def _mission_from(file: str, doc: yamlio.YamlDoc) -> tuple[Mission, Library]:
-    issues: list[Issue] = []
-    salvage = _Salvage(doc.data)
-    try:
-        m = Mission.model_validate(doc.data)
-    except ValidationError as e:
-        issues = pydantic_issues(file, doc, e)
-        # Drop the broken entries and check the rest too, so one run reports
-        # every problem of the file, not just the structural ones.
-        try:
-            m = Mission.model_validate(salvage.without([i.path for i in issues]))
-        except (ValidationError, _Unsalvageable):
-            raise FileProblems(issues) from None
+    salvage = _Salvage(doc.data, entries=(("markers",), ("robots",), ("barriers",)), required=("format", "library"))
+    m, issues = _validated(Mission, file, doc, salvage)
     lib_file = library_path(file, m.library)
     try:
         lib = load_library(lib_file)
     except FileProblems as e:
         head = _located(file, doc, ("library",), f"library '{m.library}' cannot be loaded ({len(e.issues)} problem(s) listed below)")
-        raise FileProblems([*issues, head, *e.issues]) from None
+        raise FileProblems([*_sorted([*issues, head]), *e.issues]) from None
     resolve_shorthands(m, lib)
     for path, msg in check_mission(m, lib):
         if salvage.explains(msg):
@@ -322,7 +379,7 @@ def _mission_from(file: str, doc: yamlio.YamlDoc) -> tuple[Mission, Library]:
             path = (*path[:3], "params", *path[4:])  # written as "@MARKER" under params
         issues.append(_located(file, doc, path, msg))
     if issues:
-        raise FileProblems(sorted(issues, key=lambda i: (i.line, i.col)))
+        raise FileProblems(_sorted(issues))
     _fill_counters(m)
     return m, lib
 
@@ -335,8 +392,10 @@ class _Salvage:
     """A copy of a file's data without its broken entries, remembering what was
     dropped (to not report it twice) and where the kept task items were."""
 
-    def __init__(self, data: Any):
+    def __init__(self, data: Any, *, entries: tuple[str, ...], required: tuple[str, ...]):
         self.data = data
+        self.entries = entries  # mappings whose broken entries can be dropped
+        self.required = required  # top-level fields that cannot be left out
         self.dropped: set[str] = set()
         self.kept: dict[str, list[int]] = {}
 
@@ -344,12 +403,17 @@ class _Salvage:
         data = copy.deepcopy(self.data)
         drop_items: dict[str, set[int]] = {}
         for p in paths:
-            if len(p) >= 2 and p[0] in ("markers", "robots", "barriers") and isinstance(data.get(p[0]), dict):
-                data[p[0]].pop(p[1], None)
-                self.dropped.add(str(p[1]))
-            elif len(p) >= 3 and p[0] == "tasks" and isinstance(p[2], int):
-                drop_items.setdefault(str(p[1]), set()).add(p[2])
-            elif len(p) == 2 and p[0] == "tasks" and isinstance(data.get("tasks"), dict):
+            if not p or (len(p) == 1 and p[0] in self.required):
+                raise _Unsalvageable(p)
+            if len(p) == 1:
+                data.pop(p[0], None)  # an unknown or broken optional field
+            elif (where := self._entry(data, p)) is not None:
+                container, name = where
+                container.pop(name, None)
+                self.dropped.add(str(name))
+            elif p[0] == "tasks" and len(p) >= 3 and isinstance(p[2], int):
+                drop_items.setdefault(p[1], set()).add(p[2])
+            elif p[0] == "tasks" and isinstance(data.get("tasks"), dict):
                 data["tasks"].pop(p[1], None)
                 self.dropped.add(str(p[1]))
             else:
@@ -363,12 +427,28 @@ class _Salvage:
             data["tasks"][robot] = [items[i] for i in self.kept[robot]]
         return data
 
+    def _entry(self, data: Any, p: Path) -> tuple[dict, Any] | None:
+        """The mapping holding the deepest droppable entry on path `p`."""
+        for pattern in sorted(self.entries, key=len, reverse=True):
+            if len(p) > len(pattern) and all(a == "*" or a == b for a, b in zip(pattern, p, strict=False)):
+                cur = data
+                for seg in p[: len(pattern)]:
+                    cur = cur.get(seg) if isinstance(cur, dict) else None
+                if isinstance(cur, dict):
+                    return cur, p[len(pattern)]
+        return None
+
     def explains(self, message: str) -> bool:
-        return any(f"'{name}'" in message for name in self.dropped)
+        """A reference to a dropped entry was reported through that entry."""
+        return any(
+            f"unknown {what} '{name}'" in message or f"no skill '{name}'" in message
+            for name in self.dropped
+            for what in ("skill", "skill id", "marker", "robot", "robot type")
+        ) or any(f"tasks for unknown robot '{name}'" in message for name in self.dropped)
 
     def original(self, path: Path) -> Path:
         if len(path) >= 3 and path[0] == "tasks" and isinstance(path[2], int) and path[1] in self.kept:
-            return (*path[:2], self.kept[str(path[1])][path[2]], *path[3:])
+            return (*path[:2], self.kept[path[1]][path[2]], *path[3:])
         return path
 
 

@@ -24,6 +24,7 @@ from .model import (
 )
 
 LIBRARY_FORMAT = "missionctl/library@1"
+VERSION_PATTERN = r"^\d+\.\d+\.\d+$"
 
 ParamType = Literal[
     "bool",
@@ -70,11 +71,15 @@ class ParamSpec(Strict):
             raise ValueError("'min'/'max' only apply to int and float parameters")
         if self.min is not None and self.max is not None and self.min > self.max:
             raise ValueError(f"min {self.min} is greater than max {self.max}")
-        if self.default is not None:
-            problems = check_value(self, self.default, markers=None, robots=None)
-            if problems:
-                raise ValueError(f"default {self.default!r}: {problems[0][1]}")
         return self
+
+    def default_problem(self) -> str | None:
+        """Why the default does not fit the spec (checked with the library file,
+        so the error points at the default itself)."""
+        if self.default is None:
+            return None
+        problems = check_value(self, self.default, markers=None, robots=None)
+        return problems[0][1] if problems else None
 
     @property
     def is_required(self) -> bool:
@@ -94,7 +99,7 @@ class DurationModel(Strict):
 
 class SkillSpec(Strict):
     description: str = ""
-    version: str = Field("1.0.0", pattern=r"^\d+\.\d+\.\d+$")
+    version: str = Field("1.0.0", pattern=VERSION_PATTERN)
     params: dict[Name, ParamSpec] = Field(default_factory=dict)
     duration: DurationModel = Field(default_factory=DurationModel)
 

@@ -364,7 +364,15 @@ class Engine:
             sizes[it.robot] += 1
             skill = it.skill.model_copy(update={"status": Status.IDLE})
             events.append(ev.SkillAdded(robot=it.robot, index=idx, skill=skill))
+        restored = {it.skill.id for it in op.items}
         for bid, b in op.barriers.items():
+            for sid in b.skills:
+                if sid in restored:
+                    continue
+                robot, _, partner = self.skill(sid)
+                other = self.mission.barrier_of(sid)
+                if partner.status != Status.IDLE or other not in (None, bid):
+                    raise Refusal("barrier_invalid", f"cannot restore barrier {bid}: its partner {partner.display()} on {robot} has changed since", robot=robot, skill=sid)
             events.append(ev.BarrierSet(id=bid, barrier=b))
         return events, [], {}, DeleteSkills(ids=[it.skill.id for it in op.items])
 
@@ -523,8 +531,11 @@ class Engine:
         if op.new_name in self.mission.markers:
             raise Refusal("exists", f"a marker named '{op.new_name}' exists already")
         events: list = [ev.MarkerSet(name=op.new_name, marker=mk), ev.MarkerRemoved(name=op.name)]
-        # a binding names where a value came from, not the value: follow the rename everywhere
+        # a binding names where a value came from, not the value: follow the
+        # rename on the plan and the queue; the execution log stays as it ran
         for _, s, pname in self._bound(op.name):
+            if s.status in FINISHED:
+                continue
             events.append(ev.SkillChanged(id=s.id, changes={"bindings": {**s.bindings, pname: op.new_name}}))
         return events, [], {}, MarkerRename(name=op.new_name, new_name=op.name)
 

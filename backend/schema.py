@@ -12,11 +12,25 @@ SCHEMA_DIALECT = "https://json-schema.org/draft/2020-12/schema"
 
 def _schema(model: type, title: str, internal: set[str]) -> dict[str, Any]:
     s = model.model_json_schema(mode="validation")
+    _close_pattern_keys(s)
     s["$schema"] = SCHEMA_DIALECT
     s["title"] = title
     for name in internal:  # server bookkeeping: allowed in files, not for authors
         s.get("properties", {}).get(name, {}).setdefault("readOnly", True)
     return s
+
+
+def _close_pattern_keys(node: Any) -> None:
+    """Mappings keyed by names come out as patternProperties; without
+    additionalProperties false, a key breaking the pattern would pass."""
+    if isinstance(node, dict):
+        if "patternProperties" in node:
+            node.setdefault("additionalProperties", False)
+        for v in node.values():
+            _close_pattern_keys(v)
+    elif isinstance(node, list):
+        for v in node:
+            _close_pattern_keys(v)
 
 
 def schemas() -> dict[str, dict[str, Any]]:

@@ -32,9 +32,9 @@ class YamlDoc:
 
 
 class YamlSyntaxError(Exception):
-    def __init__(self, line: int, col: int, message: str):
+    def __init__(self, line: int, col: int, message: str, path: Path = ()):
         super().__init__(message)
-        self.line, self.col, self.message = line, col, message
+        self.line, self.col, self.message, self.path = line, col, message, path
 
 
 def load(text: str) -> YamlDoc:
@@ -44,7 +44,7 @@ def load(text: str) -> YamlDoc:
         if node is None:
             return YamlDoc(None, {(): (1, 1)})
         doc = YamlDoc(None)
-        _walk(loader, node, (), doc)
+        _walk(loader, node, (), doc, set())
         doc.data = loader.construct_document(node)
         return doc
     except yaml.MarkedYAMLError as e:
@@ -64,24 +64,28 @@ def _pos(node: yaml.Node) -> tuple[int, int]:
     return node.start_mark.line + 1, node.start_mark.column + 1
 
 
-def _walk(loader: yaml.SafeLoader, node: yaml.Node, path: Path, doc: YamlDoc) -> None:
+def _walk(loader: yaml.SafeLoader, node: yaml.Node, path: Path, doc: YamlDoc, above: set[int]) -> None:
     doc.marks.setdefault(path, _pos(node))
+    if id(node) in above:  # an alias of one of its own ancestors
+        line, col = _pos(node)
+        raise YamlSyntaxError(line, col, "recursive YAML alias: a value cannot contain itself", path[:-1])
+    above = above | {id(node)}
     if isinstance(node, yaml.MappingNode):
         seen: set[Any] = set()
         for knode, vnode in node.value:
             key = loader.construct_object(knode, deep=True) if isinstance(knode, yaml.ScalarNode) else None
-            if not isinstance(key, str | int) or isinstance(key, bool):
-                key = str(key)
+            # keys are named as written; a number key is not a list index
+            key = key if isinstance(key, str) else str(key)
             sub = (*path, key)
             if key in seen:
                 doc.duplicates.append((sub, *_pos(knode)))
             seen.add(key)
             # an entry is found at its key: that is the line a person looks at
             doc.marks[sub] = _pos(knode)
-            _walk(loader, vnode, sub, doc)  # setdefault keeps the key's position
+            _walk(loader, vnode, sub, doc, above)  # setdefault keeps the key's position
     elif isinstance(node, yaml.SequenceNode):
         for i, item in enumerate(node.value):
-            _walk(loader, item, (*path, i), doc)
+            _walk(loader, item, (*path, i), doc, above)
 
 
 class _Dumper(yaml.SafeDumper):

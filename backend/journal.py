@@ -1,0 +1,550 @@
+"""The mission journal: every applied operation's events, plus snapshots, in SQLite.
+
+The server appends one `EventBatch` per applied operation (operator edits and
+robot acknowledgements and reports alike: they all go through
+`Engine.submit`), with the operation itself as JSON, who sent it and its
+request id. Every few hundred batches it stores a snapshot of the whole
+mission. Restarting, `load()` takes the newest readable snapshot and replays
+the batches after it through `events.apply_events` — the same, only mutation
+path the engine uses — so the mission comes back exactly as it was after the
+last committed operation, never half of one.
+
+Invariants:
+- batch revisions are consecutive (each is the previous one plus one); an
+  append that breaks this is refused with `ValueError`;
+- a journal starts with a snapshot (its base mission); batches are only
+  accepted once there is one;
+- one transaction per `append` (or per `append_many`): after a crash the
+  journal holds a prefix of what was appended, at batch boundaries.
+
+Tables:
+  meta(key, value)                      format, library, created
+  batches(revision PK, ts, actor, client, request_id, op, events)
+  snapshots(revision PK, mission)       the last `keep_snapshots` only
+  index batches_request on batches(client, request_id)
+
+Usage (a server):
+
+    with Journal.open("mission.db", library="libraries/mars.yaml") as journal:
+        mission, requests = journal.load()
+        if mission is None:
+            mission, library = load_mission(path)
+            journal.snapshot(mission)
+        engine = Engine(mission, library)
+        remember_requests(engine, requests)
+        ...
+        applied = engine.submit(op, client=c, request_id=r)
+        journal.record(applied, op, client=c, request_id=r, mission=engine.mission)
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import sqlite3
+import threading
+import time
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import pydantic_core
+from pydantic import BaseModel, ValidationError
+
+from .events import EventBatch, apply_events
+from .model import Mission
+
+JOURNAL_FORMAT = "missionctl/journal@1"
+SNAPSHOT_EVERY = 500
+KEEP_SNAPSHOTS = 3
+REMEMBERED_REQUESTS = 10_000  # as many as the engine remembers
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (
+    key   TEXT PRIMARY KEY,
+    value TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS batches (
+    revision   INTEGER PRIMARY KEY,
+    ts         REAL NOT NULL,
+    actor      TEXT NOT NULL DEFAULT '',
+    client     TEXT NOT NULL DEFAULT '',
+    request_id TEXT,
+    op         TEXT NOT NULL DEFAULT '',
+    events     TEXT NOT NULL
+);
+CREATE INDEX IF NOT EXISTS batches_request ON batches (client, request_id);
+CREATE TABLE IF NOT EXISTS snapshots (
+    revision INTEGER PRIMARY KEY,
+    mission  TEXT NOT NULL
+);
+"""
+
+
+class JournalError(Exception):
+    """The journal file cannot be used (not a journal, another format version)."""
+
+
+class JournalCorrupt(JournalError):
+    """The journal cannot give back a whole mission (no readable snapshot, a
+    damaged or missing batch). Nothing partial is ever returned."""
+
+
+class Entry(NamedTuple):
+    """One batch to append, with what caused it."""
+
+    batch: EventBatch
+    op_json: str = ""
+    client: str = ""
+    request_id: str | None = None
+
+
+class Record(NamedTuple):
+    """One journaled batch, as read back (the event log, clients catching up)."""
+
+    revision: int
+    ts: float
+    actor: str
+    client: str
+    request_id: str | None
+    op: str
+    batch: EventBatch
+
+
+@dataclass
+class LoadInfo:
+    """How the last `load()` rebuilt the mission."""
+
+    snapshot_revision: int | None = None
+    replayed: int = 0
+    # newer snapshots that could not be read: (revision, why)
+    skipped_snapshots: list[tuple[int, str]] = field(default_factory=list)
+    seconds: float = 0.0
+
+
+def _faithful_serializer(model_cls: type[BaseModel]) -> pydantic_core.SchemaSerializer | None:
+    """A JSON serializer for `model_cls` that writes non-finite floats as
+    NaN/Infinity instead of null (pydantic's default), so what the journal
+    stores always reads back to an equal model. The mission model accepts
+    such floats in marker coordinates (and so in bound parameters): writing
+    them as null would make the journal unreadable. Same speed as
+    `model_dump_json`; None if this pydantic's schema layout is unexpected."""
+    try:
+        schema = copy.deepcopy(model_cls.__pydantic_core_schema__)
+
+        def walk(node: Any) -> None:
+            if isinstance(node, dict):
+                if isinstance(node.get("config"), dict):
+                    node["config"]["ser_json_inf_nan"] = "constants"
+                for v in node.values():
+                    walk(v)
+            elif isinstance(node, list):
+                for v in node:
+                    walk(v)
+
+        walk(schema)
+        return pydantic_core.SchemaSerializer(schema, {"ser_json_inf_nan": "constants"})
+    except Exception:  # pragma: no cover - a future pydantic: fall back to model_dump_json
+        return None
+
+
+_MISSION_JSON = _faithful_serializer(Mission)
+_BATCH_JSON = _faithful_serializer(EventBatch)
+
+
+def _dump(serializer: pydantic_core.SchemaSerializer | None, model: BaseModel, exclude: set[str] | None = None) -> str:
+    if serializer is None:
+        return model.model_dump_json(exclude=exclude)
+    return serializer.to_json(model, exclude=exclude).decode()
+
+
+def _op_text(op: Any) -> str:
+    if op is None:
+        return ""
+    if isinstance(op, str):
+        return op
+    if isinstance(op, BaseModel):
+        return op.model_dump_json()
+    return json.dumps(op)
+
+
+class Journal:
+    """Append-only journal of a mission's event batches, with snapshots.
+
+    Thread-safe (one lock around the connection). One writing process per file.
+    """
+
+    def __init__(
+        self,
+        conn: sqlite3.Connection,
+        path: Path,
+        *,
+        snapshot_every: int = SNAPSHOT_EVERY,
+        keep_snapshots: int = KEEP_SNAPSHOTS,
+    ):
+        self._conn: sqlite3.Connection | None = conn
+        self.path = path
+        self.snapshot_every = snapshot_every
+        self.keep_snapshots = max(1, keep_snapshots)
+        self._lock = threading.RLock()
+        self.load_info = LoadInfo()
+        row = conn.execute("SELECT max(revision) FROM snapshots").fetchone()
+        self._snapshot_rev: int | None = row[0]
+
+    # -- opening and closing -----------------------------------------------------
+    @classmethod
+    def open(
+        cls,
+        path: str | Path,
+        *,
+        library: str | None = None,
+        snapshot_every: int = SNAPSHOT_EVERY,
+        keep_snapshots: int = KEEP_SNAPSHOTS,
+    ) -> Journal:
+        """Open (or create) the journal at `path`. `library` is recorded in a
+        new journal (the skill library file the mission refers to); an
+        existing journal keeps the one it has."""
+        p = Path(path)
+        if not p.parent.is_dir():
+            raise JournalError(f"{p}: cannot open the journal: no such folder {p.parent}")
+        try:
+            conn = sqlite3.connect(p, isolation_level=None, check_same_thread=False, timeout=10.0)
+        except sqlite3.Error as e:
+            raise JournalError(f"{p}: cannot open the journal: {e}") from None
+        try:
+            mode = conn.execute("PRAGMA journal_mode=WAL").fetchone()[0]
+            if str(mode).lower() != "wal":
+                raise JournalError(f"{p}: SQLite refused write-ahead logging (journal_mode={mode})")
+            # WAL + synchronous=NORMAL: a commit is in the WAL file (the OS
+            # page cache) when COMMIT returns, so a killed process (SIGKILL,
+            # OOM, a crash) loses nothing it committed and never leaves half a
+            # transaction. Only a power loss or kernel crash may drop the last
+            # commits (never corrupt the file); synchronous=FULL would cover
+            # that too at the price of an fsync per operation.
+            conn.execute("PRAGMA synchronous=NORMAL")
+            conn.execute("BEGIN IMMEDIATE")
+            tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+            if tables and "meta" not in tables:
+                raise JournalError(f"{p}: an SQLite database, but not a missionctl journal (tables: {', '.join(sorted(tables))})")
+            for stmt in _SCHEMA.split(";"):
+                if stmt.strip():
+                    conn.execute(stmt)
+            meta = dict(conn.execute("SELECT key, value FROM meta").fetchall())
+            if not meta:
+                now = datetime.now(UTC).isoformat(timespec="seconds")
+                conn.executemany(
+                    "INSERT INTO meta (key, value) VALUES (?, ?)",
+                    [("format", JOURNAL_FORMAT), ("library", library or ""), ("created", now)],
+                )
+            elif meta.get("format") != JOURNAL_FORMAT:
+                raise JournalError(
+                    f"{p}: journal format {meta.get('format')!r} is not supported "
+                    f"(this version reads {JOURNAL_FORMAT!r})"
+                )
+            elif library and not meta.get("library"):
+                conn.execute("UPDATE meta SET value = ? WHERE key = 'library'", (library,))
+            conn.execute("COMMIT")
+        except JournalError:
+            _rollback(conn)
+            conn.close()
+            raise
+        except sqlite3.Error as e:
+            _rollback(conn)
+            conn.close()
+            raise JournalError(f"{p}: not a usable journal: {e}") from None
+        return cls(conn, p, snapshot_every=snapshot_every, keep_snapshots=keep_snapshots)
+
+    def close(self) -> None:
+        with self._lock:
+            if self._conn is not None:
+                self._conn.close()
+                self._conn = None
+
+    def __enter__(self) -> Journal:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def conn(self) -> sqlite3.Connection:
+        if self._conn is None:
+            raise JournalError(f"{self.path}: the journal is closed")
+        return self._conn
+
+    # -- metadata ------------------------------------------------------------------
+    def meta(self) -> dict[str, str]:
+        with self._lock:
+            return dict(self.conn.execute("SELECT key, value FROM meta").fetchall())
+
+    @property
+    def library(self) -> str:
+        """The library path recorded when the journal was created."""
+        return self.meta().get("library", "")
+
+    def last_revision(self) -> int | None:
+        """Revision of the newest batch or snapshot; None for an empty journal."""
+        with self._lock:
+            return self._last(self.conn)
+
+    @staticmethod
+    def _last(conn: sqlite3.Connection) -> int | None:
+        b = conn.execute("SELECT max(revision) FROM batches").fetchone()[0]
+        s = conn.execute("SELECT max(revision) FROM snapshots").fetchone()[0]
+        if b is None:
+            return s
+        return b if s is None else max(b, s)
+
+    def snapshot_revisions(self) -> list[int]:
+        with self._lock:
+            return [r for (r,) in self.conn.execute("SELECT revision FROM snapshots ORDER BY revision")]
+
+    # -- writing -------------------------------------------------------------------
+    def append(
+        self,
+        batch: EventBatch,
+        *,
+        op_json: str = "",
+        client: str = "",
+        request_id: str | None = None,
+    ) -> None:
+        """Append one batch in its own transaction. Raises ValueError unless its
+        revision is the last one plus one (and the journal has a base snapshot)."""
+        self.append_many([Entry(batch, op_json, client, request_id)])
+
+    def append_many(self, entries: Iterable[Entry | EventBatch]) -> int:
+        """Append several batches in one transaction (all or none). Returns
+        how many were appended."""
+        now = time.time()
+        rows = []
+        for e in entries:
+            if isinstance(e, EventBatch):
+                e = Entry(e)
+            b = e.batch
+            if not b.events:
+                raise ValueError(f"batch {b.revision} has no events: no-ops are not journaled")
+            op = e.op_json or b.op
+            events = _dump(_BATCH_JSON, b, exclude={"op"})
+            rows.append((b.revision, now, b.actor, e.client, e.request_id, op, events))
+        if not rows:
+            return 0
+        with self._lock:
+            conn = self.conn
+            conn.execute("BEGIN IMMEDIATE")
+            try:
+                last = self._last(conn)
+                if last is None:
+                    raise ValueError(
+                        "the journal has no base mission: store a snapshot(mission) before appending batches"
+                    )
+                for row in rows:
+                    if row[0] != last + 1:
+                        raise ValueError(
+                            f"batch revision {row[0]} does not follow the journal's last revision {last} "
+                            f"(expected {last + 1}): revisions are consecutive"
+                        )
+                    last = row[0]
+                conn.executemany(
+                    "INSERT INTO batches (revision, ts, actor, client, request_id, op, events) "
+                    "VALUES (?, ?, ?, ?, ?, ?, ?)",
+                    rows,
+                )
+                conn.execute("COMMIT")
+            except BaseException:
+                _rollback(conn)
+                raise
+        return len(rows)
+
+    def record(
+        self,
+        applied: Any,
+        op: Any = None,
+        *,
+        actor: str = "",
+        client: str = "",
+        request_id: str | None = None,
+        mission: Mission | None = None,
+    ) -> bool:
+        """Journal what `Engine.submit` returned: nothing for a duplicate or a
+        no-op, else its batch with the operation. With `mission` (the engine's
+        mission after the operation), snapshot when one is due. Returns True
+        when a batch was written."""
+        if applied.duplicate or not applied.events:
+            return False
+        self.append(
+            applied.batch(actor or client),
+            op_json=_op_text(op),
+            client=client,
+            request_id=request_id,
+        )
+        if mission is not None:
+            self.maybe_snapshot(mission)
+        return True
+
+    def snapshot(self, mission: Mission) -> None:
+        """Store the whole mission at its revision; keep the newest
+        `keep_snapshots`. The mission must be the state after the journal's
+        batch of the same revision (or the journal's first, base mission)."""
+        text = _dump(_MISSION_JSON, mission)
+        rev = mission.revision
+        with self._lock:
+            conn = self.conn
+            conn.execute("BEGIN IMMEDIATE")
+            try:
+                last = self._last(conn)
+                if last is not None and rev > last:
+                    raise ValueError(
+                        f"cannot snapshot revision {rev}: the journal ends at revision {last}; "
+                        "append the batches up to it first"
+                    )
+                conn.execute("INSERT OR REPLACE INTO snapshots (revision, mission) VALUES (?, ?)", (rev, text))
+                conn.execute(
+                    "DELETE FROM snapshots WHERE revision NOT IN "
+                    "(SELECT revision FROM snapshots ORDER BY revision DESC LIMIT ?)",
+                    (self.keep_snapshots,),
+                )
+                conn.execute("COMMIT")
+            except BaseException:
+                _rollback(conn)
+                raise
+            if self._snapshot_rev is None or rev >= self._snapshot_rev:
+                self._snapshot_rev = rev
+
+    def maybe_snapshot(self, mission: Mission) -> bool:
+        """Snapshot when `snapshot_every` batches were appended since the last
+        (readable) snapshot. Returns True when it did."""
+        base = self._snapshot_rev
+        if base is not None and mission.revision - base < self.snapshot_every:
+            return False
+        self.snapshot(mission)
+        return True
+
+    # -- reading -------------------------------------------------------------------
+    def load(self) -> tuple[Mission | None, list[tuple[str, str, int]]]:
+        """The mission as of the last committed batch, and the (client,
+        request_id, revision) of the last requests, oldest first.
+
+        (None, []) for an empty journal. The newest readable snapshot is the
+        base; an unreadable one is skipped for an older one (see `load_info`).
+        Raises JournalCorrupt rather than return a partial mission."""
+        t0 = time.perf_counter()
+        info = LoadInfo()
+        with self._lock:
+            conn = self.conn
+            conn.execute("BEGIN")  # one consistent read of snapshots and batches
+            try:
+                snaps = conn.execute("SELECT revision FROM snapshots ORDER BY revision DESC").fetchall()
+                n_batches = conn.execute("SELECT count(*) FROM batches").fetchone()[0]
+                if not snaps and not n_batches:
+                    self.load_info = info
+                    return None, []
+                mission: Mission | None = None
+                for (rev,) in snaps:
+                    (text,) = conn.execute("SELECT mission FROM snapshots WHERE revision = ?", (rev,)).fetchone()
+                    try:
+                        m = Mission.model_validate_json(text)
+                    except (ValidationError, ValueError, TypeError) as e:
+                        info.skipped_snapshots.append((rev, _why(e)))
+                        continue
+                    if m.revision != rev:
+                        info.skipped_snapshots.append((rev, f"it holds revision {m.revision}"))
+                        continue
+                    mission = m
+                    break
+                if mission is None:
+                    if snaps:
+                        why = "; ".join(f"revision {r}: {w}" for r, w in info.skipped_snapshots)
+                        raise JournalCorrupt(f"{self.path}: no snapshot can be read ({why})")
+                    raise JournalCorrupt(f"{self.path}: batches without a base snapshot")
+                info.snapshot_revision = mission.revision
+                expected = mission.revision + 1
+                cur = conn.execute(
+                    "SELECT revision, events FROM batches WHERE revision > ? ORDER BY revision",
+                    (mission.revision,),
+                )
+                for rev, text in cur:
+                    if rev != expected:
+                        raise JournalCorrupt(
+                            f"{self.path}: batch {expected} is missing (the next one is {rev}); "
+                            f"cannot replay past revision {expected - 1}"
+                        )
+                    try:
+                        batch = EventBatch.model_validate_json(text)
+                        if batch.revision != rev:
+                            raise ValueError(f"it says revision {batch.revision}")
+                        mission = apply_events(mission, batch)
+                    except (ValidationError, ValueError, KeyError, TypeError, IndexError) as e:
+                        raise JournalCorrupt(f"{self.path}: batch {rev} cannot be replayed: {_why(e)}") from None
+                    info.replayed += 1
+                    expected += 1
+                rows = conn.execute(
+                    "SELECT client, request_id, revision FROM batches WHERE request_id IS NOT NULL "
+                    "ORDER BY revision DESC LIMIT ?",
+                    (REMEMBERED_REQUESTS,),
+                ).fetchall()
+            finally:
+                conn.execute("COMMIT")
+            # snapshot policy counts from the snapshot actually usable
+            self._snapshot_rev = info.snapshot_revision
+        info.seconds = time.perf_counter() - t0
+        self.load_info = info
+        rows.reverse()
+        return mission, [(c, r, rev) for c, r, rev in rows]
+
+    def request_revision(self, client: str, request_id: str) -> int | None:
+        """Revision at which a request was applied, if it is journaled."""
+        with self._lock:
+            row = self.conn.execute(
+                "SELECT revision FROM batches WHERE client = ? AND request_id = ? ORDER BY revision DESC LIMIT 1",
+                (client, request_id),
+            ).fetchone()
+        return None if row is None else row[0]
+
+    def records(self, after: int = 0, limit: int | None = None) -> Iterator[Record]:
+        """Journaled batches with revision > `after`, oldest first."""
+        with self._lock:
+            rows = self.conn.execute(
+                "SELECT revision, ts, actor, client, request_id, op, events FROM batches "
+                "WHERE revision > ? ORDER BY revision LIMIT ?",
+                (after, -1 if limit is None else limit),
+            ).fetchall()
+        for rev, ts, actor, client, rid, op, events in rows:
+            batch = EventBatch.model_validate_json(events)
+            batch.op = op
+            yield Record(rev, ts, actor, client, rid, op, batch)
+
+    def size_bytes(self) -> int:
+        """Bytes on disk: the database and its write-ahead log."""
+        total = 0
+        for suffix in ("", "-wal"):
+            f = self.path.with_name(self.path.name + suffix)
+            if f.exists():
+                total += f.stat().st_size
+        return total
+
+
+def remember_requests(engine: Any, requests: Iterable[tuple[str, str, int]]) -> None:
+    """Teach a fresh engine the requests `load()` returned, so a client that
+    retries a request applied before the restart gets the duplicate answer."""
+    from .rules import Applied
+
+    for client, request_id, revision in requests:
+        engine.remember(client, request_id, Applied(revision, duplicate=False))
+
+
+def _rollback(conn: sqlite3.Connection) -> None:
+    if conn.in_transaction:
+        try:
+            conn.execute("ROLLBACK")
+        except sqlite3.Error:
+            pass
+
+
+def _why(e: BaseException) -> str:
+    if isinstance(e, ValidationError):
+        err = e.errors()[0]
+        loc = ".".join(str(x) for x in err.get("loc", ()))
+        return f"{err.get('msg', 'invalid')}" + (f" at {loc}" if loc else "")
+    return str(e) or type(e).__name__
