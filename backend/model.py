@@ -30,7 +30,8 @@ SkillId = Annotated[str, Field(pattern=ID_PATTERN, max_length=64)]
 class Strict(BaseModel):
     """Base for every file and protocol model: unknown fields are errors."""
 
-    model_config = ConfigDict(extra="forbid", validate_assignment=False)
+    # NaN/inf are no coordinates, and JSON cannot carry them
+    model_config = ConfigDict(extra="forbid", validate_assignment=False, allow_inf_nan=False)
 
 
 class Status(StrEnum):

@@ -164,6 +164,13 @@ class SetSkill(Strict):
     policies: Policies
 
 
+class RestoreMarker(Strict):
+    op: Literal["restore_marker"] = "restore_marker"
+    name: Name
+    marker: Marker
+    bindings: list[tuple[SkillId, str]] = Field(default_factory=list, description="(skill, parameter) to bind again")
+
+
 class RestoreBarrier(Strict):
     op: Literal["restore_barrier"] = "restore_barrier"
     barrier: Name
@@ -251,6 +258,7 @@ AnyOp = Annotated[
     | RestoreSkills
     | SetSkill
     | RestoreBarrier
+    | RestoreMarker
     | SyncAck
     | UnsyncDone
     | RetryAck
@@ -269,9 +277,11 @@ UNDOABLE = (
     MarkerAdd,
     MarkerMove,
     MarkerRename,
+    MarkerDelete,
     RestoreSkills,
     SetSkill,
     RestoreBarrier,
+    RestoreMarker,
 )
 
 MARKER_TYPES = {"pose": PoseMarker, "position": PositionMarker, "area": AreaMarker}

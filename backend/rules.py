@@ -48,6 +48,7 @@ from .ops import (
     Report,
     RestoreBarrier,
     RestoreItem,
+    RestoreMarker,
     RestoreSkills,
     Retry,
     RetryAck,
@@ -112,8 +113,13 @@ class Engine:
         # robot -> the command in flight to it (one at a time per robot)
         self.pending: dict[str, str] = {}
         self.requests: OrderedDict[tuple[str, str], Applied] = OrderedDict()
-        self.undo_stack: dict[str, list[tuple[Any, Any, str]]] = {}
-        self.redo_stack: dict[str, list[tuple[Any, Any, str]]] = {}
+        # client -> [(operation that reverts, what it reverts, revision made at)]
+        self.undo_stack: dict[str, list[tuple[Any, str, int]]] = {}
+        self.redo_stack: dict[str, list[tuple[Any, str, int]]] = {}
+        # skill id -> parameter values sent with an in-flight sync
+        self.sent: dict[str, dict[str, Any]] = {}
+        # client -> revisions its own edits made (undo may revert over them)
+        self.own_revs: dict[str, set[int]] = {}
 
     # -- entry point -----------------------------------------------------
     def submit(
@@ -133,15 +139,17 @@ class Engine:
             self.check_fresh(op, expected_revision)
         handler = getattr(self, f"_op_{op.op}", None)
         if handler is None:
-            raise Refusal("bad_request", f"'{op.op}' is planned with plan_{op.op}(), not submitted")
+            plan = "plan_control" if op.op in ("run", "pause", "stop", "reset") else f"plan_{op.op}"
+            raise Refusal("bad_request", f"'{op.op}' is planned with {plan}(), not submitted")
         result = handler(op, client)
         if isinstance(result, Applied):
             applied = result
         else:
             events, notes, value, undo = result
             applied = self._commit(events, notes, value)
-            if undo is not None and isinstance(op, UNDOABLE):
-                self._push_undo(client, undo, op)
+            if undo is not None and isinstance(op, UNDOABLE) and applied.events:
+                self._push_undo(client, undo, op.op, applied.revision)
+                self._mine(client, applied.revision)
         if request_id is not None:
             self.remember(client, request_id, applied)
         return applied
@@ -217,9 +225,10 @@ class Engine:
         if s.id in self.locked:
             raise Refusal("locked", f"cannot {doing} {s.display()} on {robot}: {self.locked[s.id]}", robot=robot, skill=s.id)
 
-    def check_fresh(self, op: Any, seen: int) -> None:
+    def check_fresh(self, op: Any, seen: int, mine: set[int] | frozenset[int] = frozenset()) -> None:
         """Optimistic concurrency: refuse if what the operation touches changed
-        after the revision the client saw."""
+        after the revision the client saw (changes at revisions in `mine`, the
+        client's own, do not count)."""
         m = self.mission
         revs: list[tuple[int, str]] = []
 
@@ -246,15 +255,15 @@ class Engine:
                 skill_rev(sid)
                 found = m.find(sid)
                 task_rev(found[0] if found else None)
-            case EditSkill(id=sid) | Retry(id=sid):
+            case EditSkill(id=sid) | Retry(id=sid) | SetSkill(id=sid):
                 skill_rev(sid)
             case RemoveBarrier(barrier=bid):
-                for sid in m.barriers.get(bid, Barrier(skills=["-", "--"])).skills:
+                for sid in m.barriers[bid].skills if bid in m.barriers else []:
                     skill_rev(sid)
-            case MarkerMove(name=n) | MarkerRename(name=n) | MarkerDelete(name=n):
+            case MarkerMove(name=n) | MarkerRename(name=n) | MarkerDelete(name=n) | RestoreMarker(name=n):
                 revs.append((m.marker_revs.get(n, 0), f"marker {n}"))
         for rev, what in revs:
-            if rev > seen:
+            if rev > seen and rev not in mine:
                 raise Refusal(
                     "stale",
                     f"{what} changed at revision {rev}, after the revision {seen} you saw; "
@@ -325,7 +334,7 @@ class Engine:
             rest = [sid for sid in b.skills if sid not in gone]
             for sid in rest:
                 robot, _, partner = self.skill(sid)
-                if partner.status != Status.IDLE:
+                if partner.status != Status.IDLE and partner.status not in FINISHED:
                     raise Refusal(
                         "barrier_partner_synchronized",
                         f"cannot {doing} {', '.join(sorted(gone & set(b.skills)))}: barrier {bid} ties it to "
@@ -362,7 +371,12 @@ class Engine:
             idx = min(max(it.index, self.first_idle(task)), sizes[it.robot])
             self._outside_locked(it.robot, task, min(idx, len(task)))
             sizes[it.robot] += 1
-            skill = it.skill.model_copy(update={"status": Status.IDLE})
+            bindings = {k: v for k, v in it.skill.bindings.items() if v in self.mission.markers}
+            try:  # markers may have moved since: take their current values
+                params = self._check_params(it.robot, it.skill.skill, it.skill.params, bindings, skill_id=it.skill.id)
+            except Refusal:
+                params, bindings = it.skill.params, {}
+            skill = it.skill.model_copy(update={"status": Status.IDLE, "params": params, "bindings": bindings})
             events.append(ev.SkillAdded(robot=it.robot, index=idx, skill=skill))
         restored = {it.skill.id for it in op.items}
         for bid, b in op.barriers.items():
@@ -467,8 +481,10 @@ class Engine:
             raise Refusal("unknown_barrier", f"no barrier '{op.barrier}' (barriers: {known})")
         for sid in b.skills:
             robot, _, s = self.skill(sid)
-            if s.status != Status.IDLE:
+            if s.status != Status.IDLE and s.status not in FINISHED:
                 raise Refusal("not_idle", f"cannot remove barrier {op.barrier}: {s.display()} is {s.status.value} on {robot}; unsynchronize it first", robot=robot, skill=sid)
+            if sid in self.locked:
+                raise Refusal("locked", f"cannot remove barrier {op.barrier}: {s.display()}: {self.locked[sid]}", robot=robot, skill=sid)
         return [ev.BarrierRemoved(id=op.barrier)], [], {}, RestoreBarrier(barrier=op.barrier, skills=list(b.skills))
 
     # -- markers -------------------------------------------------------------
@@ -511,10 +527,16 @@ class Engine:
         self.mission.markers[op.name] = new  # to compute the bound values
         try:
             for robot, s, pname in self._bound(op.name):
-                if s.status == Status.IDLE and s.id not in self.locked:
+                if s.status == Status.IDLE:
                     params = self._check_params(robot, s.skill, s.params, s.bindings, skill_id=s.id)
                     if params != s.params:
                         events.append(ev.SkillChanged(id=s.id, changes={"params": params}))
+                    if s.id in self.locked:  # left with the old value; its ack will say so
+                        stale.append(s.id)
+                        notes.append(
+                            f"{robot}: {s.display()} is being synchronized with the old value of "
+                            f"{op.name} for '{pname}'; unsynchronize it once it is queued to update"
+                        )
                 elif s.status not in FINISHED:
                     stale.append(s.id)
                     notes.append(
@@ -540,8 +562,9 @@ class Engine:
         return events, [], {}, MarkerRename(name=op.new_name, new_name=op.name)
 
     def _op_marker_delete(self, op: MarkerDelete, client: str):
-        self._marker(op.name)
+        marker = self._marker(op.name)
         events: list = [ev.MarkerRemoved(name=op.name)]
+        unbound: list[tuple[str, str]] = []
         for robot, s, pname in self._bound(op.name):
             if s.status in FINISHED:
                 continue  # the execution log keeps the name it ran with
@@ -549,13 +572,35 @@ class Engine:
                 raise Refusal("marker_in_use", f"cannot delete marker '{op.name}': {s.display()} on {robot} is {s.status.value} and uses it for '{pname}'", robot=robot, skill=s.id)
             bindings = {k: v for k, v in s.bindings.items() if v != op.name}
             events.append(ev.SkillChanged(id=s.id, changes={"bindings": bindings}))  # keeps its values
-        return events, [], {}, None
+            unbound.append((s.id, pname))
+        return events, [], {}, RestoreMarker(name=op.name, marker=marker, bindings=unbound)
+
+    def _op_restore_marker(self, op: RestoreMarker, client: str):
+        if op.name in self.mission.markers:
+            raise Refusal("exists", f"a marker named '{op.name}' exists already")
+        events: list = [ev.MarkerSet(name=op.name, marker=op.marker)]
+        self.mission.markers[op.name] = op.marker  # to compute the bound values
+        try:
+            for sid, pname in op.bindings:
+                found = self.mission.find(sid)
+                if found is None or found[2].status != Status.IDLE or sid in self.locked:
+                    continue  # gone or on a robot since: leave it as it is
+                robot, _, s = found
+                bindings = {**s.bindings, pname: op.name}
+                params = self._check_params(robot, s.skill, s.params, bindings, skill_id=sid)
+                events.append(ev.SkillChanged(id=sid, changes={"bindings": bindings, "params": params}))
+        finally:
+            del self.mission.markers[op.name]
+        return events, [], {}, MarkerDelete(name=op.name)
 
     # -- whole missions ----------------------------------------------------------
     def _busy_robots(self) -> list[str]:
         return [r for r, t in self.mission.tasks.items() if any(s.status not in FINISHED and s.status != Status.IDLE for s in t)]
 
     def _op_load(self, op: LoadMission, client: str):
+        if self.pending:
+            busy = ", ".join(f"{r} ({what})" for r, what in self.pending.items())
+            raise Refusal("robot_busy", f"cannot replace the mission while commands are in flight: {busy}; try again when they end")
         busy = self._busy_robots()
         if busy:
             raise Refusal("robots_busy", f"cannot replace the mission while {', '.join(busy)} hold synchronized skills; reset them first")
@@ -568,6 +613,14 @@ class Engine:
 
             raise Refusal("bad_mission", f"the mission is invalid at {format_path(path)}: {msg}")
         new.revision = self.mission.revision
+        # everything in the new mission counts as changed now (stale edits of
+        # the old mission are refused)
+        stamp = self.mission.revision + 1
+        for task in new.tasks.values():
+            for sk in task:
+                sk.rev = stamp
+        new.task_revs = dict.fromkeys(new.robots, stamp)
+        new.marker_revs = dict.fromkeys(new.markers, stamp)
         new.next_skill = max(new.next_skill, self.mission.next_skill)
         new.next_barrier = max(new.next_barrier, self.mission.next_barrier)
         new.report_seqs = dict(self.mission.report_seqs)
@@ -587,37 +640,42 @@ class Engine:
         return self._op_load(LoadMission(mission=empty), client)
 
     # -- undo / redo -------------------------------------------------------------
-    def _push_undo(self, client: str, inverse: Any, done: Any) -> None:
+    def _mine(self, client: str, revision: int) -> None:
+        own = self.own_revs.setdefault(client, set())
+        own.add(revision)
+        if len(own) > 4 * UNDO_DEPTH:
+            own.discard(min(own))
+
+    def _push_undo(self, client: str, inverse: Any, what: str, revision: int) -> None:
         stack = self.undo_stack.setdefault(client, [])
-        stack.append((inverse, done, done.op))
+        stack.append((inverse, what, revision))
         del stack[:-UNDO_DEPTH]
-        if not isinstance(done, Undo | Redo):
-            self.redo_stack.pop(client, None)
+        self.redo_stack.pop(client, None)  # a new edit starts a new future
+
+    def _revert(self, op: Any, client: str, source: dict, target: dict, verb: str) -> Applied:
+        stack = source.get(client) or []
+        if not stack:
+            raise Refusal(f"nothing_to_{verb}", f"nothing to {verb} (only your own edits of unsynchronized skills, barriers and markers can be undone)")
+        inverse, what, made_at = stack.pop()
+        try:
+            events, notes, value, back = getattr(self, f"_op_{inverse.op}")(inverse, client)
+            try:
+                self.check_fresh(inverse, made_at, self.own_revs.get(client, frozenset()))
+            except Refusal as r:  # do not overwrite someone else's later edit
+                raise Refusal("stale", f"another client changed it since ({r.message.split(' changed at')[0]})") from None
+        except Refusal as r:
+            raise Refusal(r.code, f"cannot {verb} {what} (dropped from your history): {r.message}", robot=r.robot, skill=r.skill) from None
+        applied = self._commit(events, notes, {**value, "undone" if verb == "undo" else "redone": what})
+        self._mine(client, applied.revision)
+        if back is not None:
+            target.setdefault(client, []).append((back, what, applied.revision))
+        return applied
 
     def _op_undo(self, op: Undo, client: str) -> Applied:
-        stack = self.undo_stack.get(client) or []
-        if not stack:
-            raise Refusal("nothing_to_undo", "nothing to undo (only your own edits of unsynchronized skills, barriers and markers can be undone)")
-        inverse, done, what = stack.pop()
-        try:
-            events, notes, value, _ = getattr(self, f"_op_{inverse.op}")(inverse, client)
-        except Refusal as r:
-            raise Refusal(r.code, f"cannot undo {what}: {r.message}", robot=r.robot, skill=r.skill) from None
-        self.redo_stack.setdefault(client, []).append((inverse, done, what))
-        return self._commit(events, notes, {**value, "undone": what})
+        return self._revert(op, client, self.undo_stack, self.redo_stack, "undo")
 
     def _op_redo(self, op: Redo, client: str) -> Applied:
-        stack = self.redo_stack.get(client) or []
-        if not stack:
-            raise Refusal("nothing_to_redo", "nothing to redo")
-        _, done, what = stack.pop()
-        try:
-            events, notes, value, inverse = getattr(self, f"_op_{done.op}")(done, client)
-        except Refusal as r:
-            raise Refusal(r.code, f"cannot redo {what}: {r.message}", robot=r.robot, skill=r.skill) from None
-        if inverse is not None:
-            self.undo_stack.setdefault(client, []).append((inverse, done, what))
-        return self._commit(events, notes, {**value, "redone": what})
+        return self._revert(op, client, self.redo_stack, self.undo_stack, "redo")
 
     # -- two-phase operations: plans ----------------------------------------------
     def _claim(self, robot: str, what: str) -> None:
@@ -645,12 +703,14 @@ class Engine:
         for s in chosen:
             if s.id in self.locked:
                 raise Refusal("locked", f"{s.display()} on {op.robot}: {self.locked[s.id]}", robot=op.robot, skill=s.id)
-            # re-check against the current library and markers before it leaves
-            self._check_params(op.robot, s.skill, s.params, s.bindings, skill_id=s.id)
-        for s in chosen:
+        # check against the current library and markers; bound values are
+        # taken fresh from their markers as they leave
+        fresh = [self._check_params(op.robot, s.skill, s.params, s.bindings, skill_id=s.id) for s in chosen]
+        for s, params in zip(chosen, fresh, strict=True):
             self.locked[s.id] = f"it is being synchronized to {op.robot}"
+            self.sent[s.id] = params
         self.pending[op.robot] = "a sync"
-        return [s.model_copy(deep=True) for s in chosen]
+        return [s.model_copy(update={"params": p}, deep=True) for s, p in zip(chosen, fresh, strict=True)]
 
     def barrier_partners(self, skill_id: str) -> list[tuple[str, str]]:
         """(robot, skill id) of the other members of a skill's barrier."""
@@ -734,7 +794,7 @@ class Engine:
             raise Refusal("cannot_retry", f"{robot} has executed other skills since {s.display()} failed; add a new skill instead", robot=robot, skill=s.id)
         act = self.active(task)
         if act is not None:
-            raise Refusal("cannot_retry", f"{robot} is executing {act.display()}; stop it first", robot=robot, skill=s.id)
+            raise Refusal("cannot_retry", f"cannot retry {s.display()}: {robot} is executing {act.display()}; stop it first", robot=robot, skill=s.id)
         self._claim(robot, "retry")
         self.pending[robot] = "a retry"
         return SkillInstance(
@@ -747,6 +807,7 @@ class Engine:
         self.pending.pop(robot, None)
         for sid in ids:
             self.locked.pop(sid, None)
+            self.sent.pop(sid, None)
 
     # -- robot answers ------------------------------------------------------------
     def _op_sync_ack(self, op: SyncAck, client: str):
@@ -755,9 +816,20 @@ class Engine:
         head = [s.id for s in task[start : start + len(op.ids)]]
         if head != list(op.ids):
             raise Refusal("bad_report", f"{op.robot} acknowledged {op.ids}, but the head of its unsynchronized section is {head}", robot=op.robot)
+        late = [sid for sid in op.ids if sid not in self.sent]
+        if late:
+            # the sync was given up (and the skill maybe edited since): the
+            # robot's copy is not ours; reconciliation sorts it out
+            raise Refusal("bad_report", f"{op.robot} acknowledged {', '.join(late)}, which is not being synchronized", robot=op.robot)
+        events = []
+        for s in task[start : start + len(op.ids)]:
+            changes: dict[str, Any] = {"status": Status.IDLE_SYNCHRONIZED.value}
+            if self.sent[s.id] != s.params:
+                changes["params"] = self.sent[s.id]  # what the robot holds
+            events.append(ev.SkillChanged(id=s.id, changes=changes))
         for sid in op.ids:
             self.locked.pop(sid, None)
-        events = [ev.SkillChanged(id=sid, changes={"status": Status.IDLE_SYNCHRONIZED.value}) for sid in op.ids]
+            self.sent.pop(sid, None)
         return events, [], {"synchronized": list(op.ids)}, None
 
     def _op_unsync_done(self, op: UnsyncDone, client: str):
@@ -767,7 +839,18 @@ class Engine:
             raise Refusal("bad_report", f"{op.robot} removed {op.ids}, which is not the end of its queue {queued}", robot=op.robot)
         # the removed skills are the end of the queue: turning them idle puts
         # them, in order, at the head of the unsynchronized section
-        events = [ev.SkillChanged(id=sid, changes={"status": Status.IDLE.value, "status_info": ""}) for sid in op.ids]
+        events = []
+        for sid in op.ids:
+            _, _, s = self.skill(sid)
+            changes: dict[str, Any] = {"status": Status.IDLE.value, "status_info": ""}
+            if s.bindings:  # back in the plan: bound values follow their markers again
+                try:
+                    params = self._check_params(op.robot, s.skill, s.params, s.bindings, skill_id=sid)
+                    if params != s.params:
+                        changes["params"] = params
+                except Refusal:
+                    pass  # keeps its values; the operator sees the problem on the next edit
+            events.append(ev.SkillChanged(id=sid, changes=changes))
         return events, [], {"unsynchronized": list(op.ids)}, None
 
     def _op_retry_ack(self, op: RetryAck, client: str):
@@ -791,7 +874,10 @@ class Engine:
         task = m.tasks[robot]
         new = op.status
         restart = new == Status.RUNNING and s.status == Status.RUNNING and (op.attempt or 0) > s.attempt
-        if new not in TRANSITIONS[s.status] and not restart and new != s.status:
+        # an active skill may repeat its status with new information
+        # ("waiting for lru2 (offline)"); the log and the queue may not
+        same = new == s.status and s.status in ACTIVE
+        if new not in TRANSITIONS[s.status] and not restart and not same:
             raise Refusal("bad_report", f"{robot} reported {s.display()} going {s.status.value} -> {new.value}, which the transition table forbids", robot=robot, skill=s.id)
         if new in ACTIVE or new in FINISHED:
             act = self.active(task)
@@ -799,6 +885,8 @@ class Engine:
                 raise Refusal("bad_report", f"{robot} reported {s.display()} {new.value} while {act.display()} is {act.status.value}", robot=robot, skill=s.id)
             if s.status == Status.IDLE_SYNCHRONIZED and self.first_queued(task) != i:
                 raise Refusal("bad_report", f"{robot} started {s.display()} before the skills queued ahead of it", robot=robot, skill=s.id)
+        if op.attempt is not None and op.attempt < s.attempt:
+            raise Refusal("bad_report", f"{robot} reported attempt {op.attempt} of {s.display()}, which is at attempt {s.attempt}", robot=robot, skill=s.id)
         changes: dict[str, Any] = {}
         if new != s.status:
             changes["status"] = new.value

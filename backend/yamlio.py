@@ -31,6 +31,11 @@ class YamlDoc:
         return self.marks.get((), (1, 1))
 
 
+# libyaml's parser is ~4x faster; positions are the same
+_Loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+_BaseDumper = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+
+
 class YamlSyntaxError(Exception):
     def __init__(self, line: int, col: int, message: str, path: Path = ()):
         super().__init__(message)
@@ -38,7 +43,7 @@ class YamlSyntaxError(Exception):
 
 
 def load(text: str) -> YamlDoc:
-    loader = yaml.SafeLoader(text)
+    loader = _Loader(text)
     try:
         node = loader.get_single_node()
         if node is None:
@@ -64,7 +69,7 @@ def _pos(node: yaml.Node) -> tuple[int, int]:
     return node.start_mark.line + 1, node.start_mark.column + 1
 
 
-def _walk(loader: yaml.SafeLoader, node: yaml.Node, path: Path, doc: YamlDoc, above: set[int]) -> None:
+def _walk(loader: Any, node: yaml.Node, path: Path, doc: YamlDoc, above: set[int]) -> None:
     doc.marks.setdefault(path, _pos(node))
     if id(node) in above:  # an alias of one of its own ancestors
         line, col = _pos(node)
@@ -88,11 +93,11 @@ def _walk(loader: yaml.SafeLoader, node: yaml.Node, path: Path, doc: YamlDoc, ab
             _walk(loader, item, (*path, i), doc, above)
 
 
-class _Dumper(yaml.SafeDumper):
+class _Dumper(_BaseDumper):
     pass
 
 
-def _repr_dict(dumper: yaml.SafeDumper, data: dict) -> yaml.Node:
+def _repr_dict(dumper: Any, data: dict) -> yaml.Node:
     # small mappings of scalars (poses, positions) read best on one line
     flow = 0 < len(data) <= 6 and all(
         isinstance(v, int | float | str | bool) or v is None for v in data.values()
@@ -103,7 +108,7 @@ def _repr_dict(dumper: yaml.SafeDumper, data: dict) -> yaml.Node:
 _FLOW_KEYS = {"x", "y", "z", "roll", "pitch", "yaw"}
 
 
-def _repr_str(dumper: yaml.SafeDumper, data: str) -> yaml.Node:
+def _repr_str(dumper: Any, data: str) -> yaml.Node:
     style = "|" if "\n" in data else None
     return dumper.represent_scalar("tag:yaml.org,2002:str", data, style=style)
 

@@ -51,8 +51,8 @@ def assert_same(loaded: Mission, original: Mission, saved: Path, library_file: P
 
 def sync_and_ack(e: Engine, robot: str, through: str | None = None) -> list[str]:
     ids = [s.id for s in e.plan_sync(Sync(robot=robot, through=through))]
-    e.release(robot, ids)
     e.submit(SyncAck(robot=robot, ids=ids))
+    e.release(robot, ids)
     return ids
 
 

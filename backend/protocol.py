@@ -1,0 +1,281 @@
+"""The wire protocol: key space and messages (JSON from these models).
+
+Documented for third parties in docs/protocol.md (generated sections come
+from these models). Bump PROTOCOL_VERSION on any incompatible change.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Annotated, Any, Literal
+
+from pydantic import Field
+
+from .events import EventBatch
+from .library import Library
+from .model import Mission, Name, Pose, SkillId, SkillInstance, Status, Strict
+from .ops import OperatorOp, Report
+
+PROTOCOL_VERSION = 1
+PREFIX = f"mc/v{PROTOCOL_VERSION}"
+
+
+class Keys:
+    """The key space. `{robot}` is a robot name; `*` matches one chunk."""
+
+    # server side
+    SERVER_ALIVE = f"{PREFIX}/server/alive"  # liveliness token of the mission server
+    OP = f"{PREFIX}/server/op"  # queryable: Request -> OpReply | ErrorReply
+    STATE = f"{PREFIX}/server/state"  # queryable: StateRequest -> StateSnapshot
+    EVENTS = f"{PREFIX}/server/events"  # publication: EventBatch, revisions consecutive
+    FLEET = f"{PREFIX}/server/fleet"  # publication: FleetEvent
+    ALERTS = f"{PREFIX}/server/alerts"  # publication: Alert
+
+    @staticmethod
+    def register(robot: str) -> str:  # queryable: Register -> RegisterReply
+        return f"{PREFIX}/server/register/{robot}"
+
+    @staticmethod
+    def reports(robot: str) -> str:  # queryable: ReportBatch -> ReportAck
+        return f"{PREFIX}/server/report/{robot}"
+
+    # robot side
+    @staticmethod
+    def alive(robot: str) -> str:  # liveliness token of a robot agent
+        return f"{PREFIX}/robot/{robot}/alive"
+
+    @staticmethod
+    def command(robot: str) -> str:  # queryable on the robot: Command -> CommandReply
+        return f"{PREFIX}/robot/{robot}/cmd"
+
+    @staticmethod
+    def telemetry(robot: str) -> str:  # publication: Telemetry
+        return f"{PREFIX}/robot/{robot}/telemetry"
+
+    @staticmethod
+    def world(robot: str) -> str:  # queryable on the robot: WorldMessage -> WorldReply
+        return f"{PREFIX}/robot/{robot}/world"
+
+    @staticmethod
+    def barrier_ready(barrier: str, robot: str) -> str:  # liveliness token while waiting
+        return f"{PREFIX}/barrier/{barrier}/ready/{robot}"
+
+    ALL_ALIVE = f"{PREFIX}/robot/*/alive"
+    ALL_TELEMETRY = f"{PREFIX}/robot/*/telemetry"
+
+    @staticmethod
+    def robot_of(key: str) -> str:
+        """Robot name in a `.../robot/{robot}/...` or `.../{robot}` key."""
+        parts = key.split("/")
+        if "robot" in parts:
+            return parts[parts.index("robot") + 1]
+        return parts[-1]
+
+
+# -- consoles and ctl -> server -------------------------------------------------
+
+
+class Request(Strict):
+    client: str = Field(description="stable id of the client (console, ctl run)")
+    request_id: str = Field(description="unique per client; a retried request is applied once")
+    user: str = ""
+    expected_revision: int | None = Field(
+        None, description="revision the client saw; a change to what the op touches after it is refused"
+    )
+    op: OperatorOp
+
+
+class OpReply(Strict):
+    ok: Literal[True] = True
+    revision: int
+    value: dict[str, Any] = Field(default_factory=dict)
+    notes: list[str] = Field(default_factory=list)
+    duplicate: bool = False
+
+
+class ErrorReply(Strict):
+    """A refusal (reply_err payload). `code` is stable; `message` is a sentence."""
+
+    ok: Literal[False] = False
+    code: str
+    message: str
+    robot: str | None = None
+    skill: str | None = None
+    param: str | None = None
+
+
+class StateRequest(Strict):
+    protocol: int = PROTOCOL_VERSION
+    client: str = ""
+
+
+class Module(Strict):
+    name: Name
+    version: str = Field(pattern=r"^\d+\.\d+\.\d+")
+
+
+class Manifest(Strict):
+    """What a robot says about itself when it registers."""
+
+    name: Name
+    type: Name
+    protocol: int = PROTOCOL_VERSION
+    modules: list[Module] = Field(default_factory=list)
+    properties: dict[str, Any] = Field(default_factory=dict)
+    skills: dict[Name, str] = Field(
+        default_factory=dict, description="skill name -> implemented version (SemVer)"
+    )
+
+
+class RobotInfo(Strict):
+    """The server's view of a robot: presence and manifest."""
+
+    name: Name
+    online: bool = False
+    since: datetime | None = Field(None, description="when it went online/offline")
+    manifest: Manifest | None = None
+
+
+class StateSnapshot(Strict):
+    protocol: int = PROTOCOL_VERSION
+    server_id: str = Field(description="changes when the server restarts")
+    revision: int
+    mission: Mission
+    library: Library
+    robots: dict[Name, RobotInfo] = Field(default_factory=dict)
+
+
+class FleetEvent(Strict):
+    robot: RobotInfo
+
+
+class Alert(Strict):
+    level: Literal["info", "warning", "error"] = "warning"
+    robot: str | None = None
+    skill: str | None = None
+    message: str
+    at: datetime
+
+
+# -- robots -> server -------------------------------------------------------------
+
+
+class QueueEntry(Strict):
+    id: SkillId
+    status: Status
+
+
+class Register(Strict):
+    manifest: Manifest
+    queue: list[QueueEntry] = Field(
+        default_factory=list, description="the robot's own synchronized queue (active first)"
+    )
+    reports: list[Report] = Field(default_factory=list, description="reports not yet acknowledged")
+
+
+class RegisterReply(Strict):
+    accepted: bool = True
+    reason: str = ""
+    last_seq: int = 0
+    # skills the server holds as synchronized to this robot that the robot
+    # does not know (it restarted): the robot may ask to have them again
+    missing: list[SkillId] = Field(default_factory=list)
+
+
+class ReportBatch(Strict):
+    reports: list[Report]
+
+
+class ReportAck(Strict):
+    last_seq: int
+    refused: list[ErrorReply] = Field(default_factory=list)
+
+
+class Telemetry(Strict):
+    robot: Name
+    pose: Pose = Field(default_factory=Pose)
+    battery: float = Field(1.0, ge=0.0, le=1.0)
+    link: float = Field(1.0, ge=0.0, le=1.0, description="link quality 0..1")
+    in_range: bool = True
+    mode: str = "idle"
+    skill: SkillId | None = None
+    progress: float | None = Field(None, ge=0.0, le=1.0)
+    eta_s: float | None = None
+    info: str = ""
+    at: datetime
+
+
+# -- server -> robot ------------------------------------------------------------------
+
+
+class Enqueue(Strict):
+    cmd: Literal["enqueue"] = "enqueue"
+    skills: list[SkillInstance]
+    # skill id -> partners (robot, skill id) it must wait for at a barrier
+    barriers: dict[SkillId, BarrierInfo] = Field(default_factory=dict)
+    front: bool = Field(False, description="put before the rest of the queue (retries)")
+
+
+class BarrierInfo(Strict):
+    barrier: Name
+    partners: dict[Name, SkillId]
+
+
+class Dequeue(Strict):
+    cmd: Literal["dequeue"] = "dequeue"
+    ids: list[SkillId]
+
+
+class Run(Strict):
+    cmd: Literal["run"] = "run"
+
+
+class Pause(Strict):
+    cmd: Literal["pause"] = "pause"
+
+
+class Stop(Strict):
+    cmd: Literal["stop"] = "stop"
+
+
+class Reset(Strict):
+    cmd: Literal["reset"] = "reset"
+
+
+Command = Annotated[Enqueue | Dequeue | Run | Pause | Stop | Reset, Field(discriminator="cmd")]
+
+
+class CommandReply(Strict):
+    ok: bool = True
+    reason: str = ""
+    ids: list[SkillId] = Field(default_factory=list, description="enqueued or removed skills")
+    kept: list[SkillId] = Field(default_factory=list, description="asked to remove but already started")
+    # reports made before answering, so the server sees them first
+    reports: list[Report] = Field(default_factory=list)
+
+
+# -- robot <-> robot ------------------------------------------------------------------
+
+
+class WorldMessage(Strict):
+    kind: Literal["ask", "tell"]
+    sender: Name
+    topic: str = Field(description="e.g. 'stone', 'box', 'rss'")
+    data: dict[str, Any] = Field(default_factory=dict)
+
+
+class WorldReply(Strict):
+    known: bool = True
+    data: dict[str, Any] = Field(default_factory=dict)
+
+
+Enqueue.model_rebuild()
+
+
+def dumps(model: Strict) -> bytes:
+    return model.model_dump_json(exclude_none=False).encode()
+
+
+def event_batch_bytes(batch: EventBatch) -> bytes:
+    # events are small: leave out defaults that replay restores anyway
+    return batch.model_dump_json().encode()

@@ -1,0 +1,1 @@
+"""Unit tests of the pure operation rules (backend.rules.Engine)."""
