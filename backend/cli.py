@@ -67,6 +67,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("kind", nargs="?", choices=["all", "mission", "library"], default="all")
     s.set_defaults(func=cmd_schema)
 
+    from . import server_cli
+
+    server_cli.register(sub)
     for _name, register in _registrations():
         register(sub)
     return p

@@ -199,6 +199,15 @@ class RetryAck(Strict):
     skill: SkillInstance
 
 
+class Reconcile(Strict):
+    """A robot (re)registered without skills the mission holds as synchronized
+    to it (it restarted): they return to the head of the plan, in order."""
+
+    op: Literal["reconcile"] = "reconcile"
+    robot: Name
+    lost: list[SkillId]
+
+
 class Report(Strict):
     """A robot's status change for one skill, numbered per robot."""
 
@@ -234,7 +243,7 @@ OperatorOp = Annotated[
     Field(discriminator="op"),
 ]
 
-RobotOp = Annotated[SyncAck | UnsyncDone | RetryAck | Report, Field(discriminator="op")]
+RobotOp = Annotated[SyncAck | UnsyncDone | RetryAck | Reconcile | Report, Field(discriminator="op")]
 
 AnyOp = Annotated[
     AddSkill
@@ -262,6 +271,7 @@ AnyOp = Annotated[
     | SyncAck
     | UnsyncDone
     | RetryAck
+    | Reconcile
     | Report,
     Field(discriminator="op"),
 ]

@@ -43,6 +43,7 @@ from .ops import (
     MarkerRename,
     MoveSkill,
     NewMission,
+    Reconcile,
     Redo,
     RemoveBarrier,
     Report,
@@ -862,6 +863,20 @@ class Engine:
         skill = op.skill.model_copy(update={"status": Status.IDLE_SYNCHRONIZED})
         events: list = [ev.SkillAdded(robot=robot, index=i + 1, skill=skill)]
         return events, [], {"id": skill.id}, None
+
+    def _op_reconcile(self, op: Reconcile, client: str):
+        task = self.task(op.robot)
+        lost = set(op.lost)
+        synced = [s for s in task if s.status != Status.IDLE and s.status not in FINISHED]
+        # only a tail of the synchronized section can be lost, the log never
+        keep = [s for s in synced if s.id not in lost]
+        if any(s.id not in lost for s in synced[len(keep):]) or [s.id for s in synced[: len(keep)]] != [s.id for s in keep]:
+            raise Refusal("bad_report", f"{op.robot} lost {sorted(lost)}, which is not the end of its synchronized section", robot=op.robot)
+        events = [
+            ev.SkillChanged(id=s.id, changes={"status": Status.IDLE.value, "status_info": f"returned to the plan: {op.robot} no longer had it", "started_at": None})
+            for s in synced[len(keep):]
+        ]
+        return events, [], {"unsynchronized": [s.id for s in synced[len(keep):]]}, None
 
     def _op_report(self, op: Report, client: str):
         m = self.mission

@@ -1,0 +1,371 @@
+"""Client library: what consoles and `missionctl ctl` use to talk to the server.
+
+It keeps a mirror of the mission (snapshot + event stream through
+`events.apply_events`), detects gaps and resynchronizes, follows a server
+restart, tracks robot presence and telemetry, and submits operations. Every
+call is asyncio-friendly: Zenoh callbacks only hand data to the event loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import logging
+import os
+import uuid
+from collections.abc import Callable
+from typing import Any
+
+import zenoh
+from pydantic import ValidationError
+
+from . import events as ev
+from .library import Library
+from .model import Mission
+from .protocol import (
+    PROTOCOL_VERSION,
+    Alert,
+    ErrorReply,
+    FleetEvent,
+    Keys,
+    OpReply,
+    Request,
+    RobotInfo,
+    StateRequest,
+    StateSnapshot,
+    Telemetry,
+    dumps,
+)
+from .transport import (
+    NoResponder,
+    QueryError,
+    QueryTimeout,
+    client_config,
+    query,
+    subscribe,
+    transport_events,
+    watch_liveliness,
+)
+from .transport.session import TransportUnreachable, close_session, open_session
+
+log = logging.getLogger(__name__)
+
+DEFAULT_TIMEOUT = 10.0
+
+
+class ClientError(Exception):
+    """Base of what a client reports; `str()` is a sentence for a person."""
+
+
+class ServerUnreachable(ClientError):
+    pass
+
+
+class ProtocolMismatch(ClientError):
+    pass
+
+
+class OperationTimeout(ClientError):
+    pass
+
+
+class OperationRefused(ClientError):
+    def __init__(self, reply: ErrorReply):
+        super().__init__(reply.message)
+        self.reply = reply
+        self.code = reply.code
+
+
+Listener = Callable[[str, Any], None]
+
+
+class MissionClient:
+    """One connection to a mission server.
+
+    Listeners get `(kind, payload)` on the event loop: "state" (StateSnapshot
+    after (re)sync), "events" (EventBatch), "fleet" (RobotInfo), "telemetry"
+    (Telemetry), "alert" (Alert), "connection" ("connected" | "reconnecting").
+    """
+
+    def __init__(
+        self,
+        connect: str | list[str],
+        *,
+        client_id: str | None = None,
+        user: str = "",
+        zenoh_extra: dict[str, Any] | None = None,
+        timeout: float = DEFAULT_TIMEOUT,
+        telemetry: bool = True,
+    ):
+        self.endpoints = [connect] if isinstance(connect, str) else list(connect)
+        self.client_id = client_id or f"{os.uname().nodename}-{os.getpid()}-{uuid.uuid4().hex[:6]}"
+        self.user = user
+        self.zenoh_extra = zenoh_extra
+        self.timeout = timeout
+        self.want_telemetry = telemetry
+        self.session: zenoh.Session | None = None
+        self.mission: Mission | None = None
+        self.library: Library | None = None
+        self.robots: dict[str, RobotInfo] = {}
+        self.telemetry: dict[str, Telemetry] = {}
+        self.server_id: str | None = None
+        self.connected = False
+        self._listeners: list[Listener] = []
+        self._entities: list[Any] = []
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._pending: list[ev.EventBatch] = []  # events arriving during a resync
+        self._syncing = False
+        self._resync_task: asyncio.Task | None = None
+        self._ids = itertools.count(1)
+
+    # -- lifecycle ---------------------------------------------------------
+    async def connect(self) -> StateSnapshot:
+        self._loop = asyncio.get_running_loop()
+        cfg = client_config(self.endpoints, extra=self.zenoh_extra)
+        try:
+            self.session = await asyncio.to_thread(open_session, cfg)
+        except TransportUnreachable as e:
+            raise ServerUnreachable(str(e)) from None
+        try:
+            s = self.session
+            # subscribe before the snapshot so nothing between the two is lost
+            self._entities.append(subscribe(s, Keys.EVENTS, self._on_events))
+            self._entities.append(subscribe(s, Keys.FLEET, self._on_fleet))
+            self._entities.append(subscribe(s, Keys.ALERTS, self._on_alert))
+            if self.want_telemetry:
+                self._entities.append(subscribe(s, Keys.ALL_TELEMETRY, self._on_telemetry))
+            snap = await self.resync()
+            self._entities.append(
+                watch_liveliness(s, Keys.SERVER_ALIVE, self._on_server_alive, history=False)
+            )
+            self._entities.append(transport_events(s, self._on_transport, history=False))
+            return snap
+        except BaseException:
+            await self.close()
+            raise
+
+    async def close(self) -> None:
+        if self._resync_task is not None:
+            self._resync_task.cancel()
+        session, self.session = self.session, None
+        self._entities.clear()
+        if session is not None:
+            await asyncio.to_thread(close_session, session)
+        self.connected = False
+
+    async def __aenter__(self) -> MissionClient:
+        await self.connect()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    def add_listener(self, fn: Listener) -> None:
+        self._listeners.append(fn)
+
+    def _emit(self, kind: str, payload: Any) -> None:
+        for fn in list(self._listeners):
+            try:
+                fn(kind, payload)
+            except Exception:  # a listener's bug must not stop the stream
+                log.exception("client listener failed on %s", kind)
+
+    # -- state -----------------------------------------------------------------
+    @property
+    def revision(self) -> int:
+        return self.mission.revision if self.mission else -1
+
+    async def resync(self) -> StateSnapshot:
+        """Fetch the full state and apply what arrived meanwhile."""
+        self._syncing = True
+        try:
+            try:
+                raw = await query(
+                    self._session(), Keys.STATE, dumps(StateRequest(client=self.client_id)), self.timeout
+                )
+            except NoResponder:
+                raise ServerUnreachable(
+                    f"no mission server answers at {', '.join(self.endpoints)} (a Zenoh router is there, "
+                    "but no missionctl server)"
+                ) from None
+            except QueryTimeout:
+                raise ServerUnreachable(f"the mission server at {', '.join(self.endpoints)} did not answer in {self.timeout:g} s") from None
+            try:
+                snap = StateSnapshot.model_validate_json(raw)
+            except ValidationError:
+                raise ProtocolMismatch(
+                    f"the server at {', '.join(self.endpoints)} speaks another protocol version "
+                    f"(this client speaks {PROTOCOL_VERSION}); upgrade the older side"
+                ) from None
+            if snap.protocol != PROTOCOL_VERSION:
+                raise ProtocolMismatch(
+                    f"the server speaks protocol {snap.protocol}, this client {PROTOCOL_VERSION}; upgrade the older side"
+                )
+            self.mission, self.library = snap.mission, snap.library
+            self.robots = dict(snap.robots)
+            self.server_id = snap.server_id
+            pending, self._pending = self._pending, []
+            for batch in pending:
+                if batch.revision > self.mission.revision:
+                    self._apply(batch, emit=False)
+        finally:
+            self._syncing = False
+        self.connected = True
+        self._emit("state", snap)
+        self._emit("connection", "connected")
+        return snap
+
+    def _apply(self, batch: ev.EventBatch, *, emit: bool = True) -> None:
+        assert self.mission is not None
+        if batch.revision <= self.mission.revision:
+            return  # already in the snapshot
+        if batch.revision != self.mission.revision + 1:
+            self._schedule_resync()  # a gap: some events were lost
+            return
+        self.mission = ev.apply_events(self.mission, batch)
+        if emit:
+            self._emit("events", batch)
+
+    def _schedule_resync(self) -> None:
+        if self._resync_task is None or self._resync_task.done():
+            self._resync_task = asyncio.ensure_future(self._resync_quietly())
+
+    async def _resync_quietly(self) -> None:
+        delay = 0.1
+        while self.session is not None:
+            try:
+                await self.resync()
+                return
+            except ClientError as e:
+                log.info("resync failed (%s), retrying", e)
+                await asyncio.sleep(delay)  # back-off while the server restarts
+                delay = min(delay * 2, 2.0)
+
+    # -- Zenoh callbacks (other threads): hand over to the loop ---------------------
+    def _post(self, fn: Callable[..., None], *args: Any) -> None:
+        loop = self._loop
+        if loop is not None and not loop.is_closed():
+            loop.call_soon_threadsafe(fn, *args)
+
+    def _on_events(self, msg: Any) -> None:
+        try:
+            batch = ev.EventBatch.model_validate_json(msg.payload)
+        except ValidationError:
+            log.warning("ignoring a malformed event batch on %s", msg.key)
+            return
+        self._post(self._got_batch, batch)
+
+    def _got_batch(self, batch: ev.EventBatch) -> None:
+        if self._syncing or self.mission is None:
+            self._pending.append(batch)
+        else:
+            self._apply(batch)
+
+    def _on_fleet(self, msg: Any) -> None:
+        try:
+            info = FleetEvent.model_validate_json(msg.payload).robot
+        except ValidationError:
+            return
+        self._post(self._got_fleet, info)
+
+    def _got_fleet(self, info: RobotInfo) -> None:
+        self.robots[info.name] = info
+        self._emit("fleet", info)
+
+    def _on_telemetry(self, msg: Any) -> None:
+        try:
+            t = Telemetry.model_validate_json(msg.payload)
+        except ValidationError:
+            return
+        self._post(self._got_telemetry, t)
+
+    def _got_telemetry(self, t: Telemetry) -> None:
+        self.telemetry[t.robot] = t
+        self._emit("telemetry", t)
+
+    def _on_alert(self, msg: Any) -> None:
+        try:
+            a = Alert.model_validate_json(msg.payload)
+        except ValidationError:
+            return
+        self._post(self._emit, "alert", a)
+
+    def _on_server_alive(self, key: str, alive: bool) -> None:
+        self._post(self._server_presence, alive)
+
+    def _on_transport(self, change: Any) -> None:
+        self._post(self._server_presence, change.connected)
+
+    def _server_presence(self, alive: bool) -> None:
+        if alive:
+            self._schedule_resync()
+        elif self.connected:
+            self.connected = False
+            self._emit("connection", "reconnecting")
+
+    # -- operations --------------------------------------------------------------------
+    def _session(self) -> zenoh.Session:
+        if self.session is None:
+            raise ClientError("not connected")
+        return self.session
+
+    def new_request_id(self) -> str:
+        return f"r{next(self._ids)}"
+
+    async def submit(
+        self,
+        op: Any,
+        *,
+        expected_revision: int | None = None,
+        request_id: str | None = None,
+        timeout: float | None = None,
+    ) -> OpReply:
+        """Apply an operation on the server. Raises OperationRefused (with the
+        server's code and sentence), OperationTimeout or ServerUnreachable.
+        Retrying with the same `request_id` is safe: it is applied once."""
+        req = Request(
+            client=self.client_id,
+            request_id=request_id or self.new_request_id(),
+            user=self.user,
+            expected_revision=expected_revision,
+            op=op,
+        )
+        wait = timeout or self.timeout
+        try:
+            raw = await query(self._session(), Keys.OP, dumps(req), wait)
+        except QueryError as e:
+            raise OperationRefused(_error_reply(e.payload)) from None
+        except QueryTimeout:
+            raise OperationTimeout(
+                f"the server did not answer '{op.op}' within {wait:g} s; it may still apply it — "
+                f"retry with request id {req.request_id} to be safe"
+            ) from None
+        except NoResponder:
+            raise ServerUnreachable(f"no mission server answers at {', '.join(self.endpoints)}") from None
+        reply = OpReply.model_validate_json(raw)
+        return reply
+
+    async def wait_for(self, predicate: Callable[[Mission], bool], timeout: float = 10.0) -> Mission:
+        """Wait until the mirrored mission satisfies `predicate`."""
+        done = asyncio.Event()
+
+        def check(kind: str, _payload: Any) -> None:
+            if self.mission is not None and predicate(self.mission):
+                done.set()
+
+        self.add_listener(check)
+        try:
+            check("", None)
+            await asyncio.wait_for(done.wait(), timeout)
+        finally:
+            self._listeners.remove(check)
+        assert self.mission is not None
+        return self.mission
+
+
+def _error_reply(payload: bytes) -> ErrorReply:
+    try:
+        return ErrorReply.model_validate_json(payload)
+    except ValidationError:
+        text = payload.decode(errors="replace")
+        return ErrorReply(code="server_error", message=text)

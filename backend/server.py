@@ -1,0 +1,480 @@
+"""The mission server: a Zenoh router hosting the rules, the journal and the
+link to the robots.
+
+All mission state lives on one asyncio loop: Zenoh callbacks only schedule
+coroutines on it (transport.serve_async), so the engine is never touched from
+two threads. Operations involving a robot are serialized per robot and hold
+the skills they send locked until the robot answers.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import uuid
+from collections.abc import Awaitable, Callable
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from pydantic import ValidationError
+
+from .events import EventBatch
+from .files import library_path, load_library, load_mission
+from .journal import Journal, remember_requests
+from .library import Library
+from .model import Mission
+from .ops import (
+    Control,
+    Reconcile,
+    Report,
+    Retry,
+    RetryAck,
+    Sync,
+    SyncAck,
+    Unsync,
+    UnsyncDone,
+)
+from .protocol import (
+    PROTOCOL_VERSION,
+    Alert,
+    BarrierInfo,
+    CommandReply,
+    Dequeue,
+    Enqueue,
+    ErrorReply,
+    FleetEvent,
+    Keys,
+    OpReply,
+    Pause,
+    Register,
+    RegisterReply,
+    ReportAck,
+    ReportBatch,
+    Request,
+    RobotInfo,
+    Run,
+    StateSnapshot,
+    Stop,
+    dumps,
+)
+from .protocol import Reset as ResetCmd
+from .rules import Applied, Engine, Refusal
+from .transport import (
+    NoResponder,
+    QueryError,
+    QueryTimeout,
+    declare_publisher,
+    declare_token,
+    query,
+    router_config,
+    serve_async,
+    watch_liveliness,
+)
+from .transport import Refusal as ReplyErr
+from .transport.session import close_session, open_session
+
+log = logging.getLogger(__name__)
+
+COMMANDS = {"run": Run, "pause": Pause, "stop": Stop, "reset": ResetCmd}
+
+
+def _now() -> datetime:
+    return datetime.now(UTC)
+
+
+def _major(version: str) -> str:
+    return version.split(".", 1)[0]
+
+
+class MissionServer:
+    def __init__(
+        self,
+        *,
+        db: str | Path,
+        mission_file: str | Path | None = None,
+        listen: list[str] | None = None,
+        zenoh_extra: dict[str, Any] | None = None,
+        command_timeout: float = 10.0,
+    ):
+        self.db = Path(db)
+        self.mission_file = Path(mission_file) if mission_file else None
+        self.listen = listen or ["tcp/127.0.0.1:7447"]
+        self.zenoh_extra = zenoh_extra
+        self.command_timeout = command_timeout
+        self.server_id = uuid.uuid4().hex[:12]
+        self.robots: dict[str, RobotInfo] = {}
+        self.engine: Engine | None = None
+        self.journal: Journal | None = None
+        self.library_file: Path | None = None
+        self.resumed = False
+        self._session = None
+        self._entities: list[Any] = []
+        self._robot_locks: dict[str, asyncio.Lock] = {}
+        self._inflight: dict[tuple[str, str], asyncio.Future] = {}
+        self._events_pub = None
+        self._fleet_pub = None
+        self._alerts_pub = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+
+    # -- start / stop ---------------------------------------------------------
+    def _load(self) -> None:
+        """Resume from the journal, or start it from the mission file."""
+        journal = Journal.open(self.db)
+        try:
+            mission, requests = journal.load()
+            if mission is not None:
+                lib_file = Path(journal.library) if journal.library else None
+                if lib_file is None and self.mission_file is not None:
+                    lib_file = library_path(self.mission_file, mission.library)
+                if lib_file is None:
+                    raise SystemExit(f"{self.db}: the journal does not say which skill library it uses")
+                library = load_library(lib_file)
+                self.resumed = True
+            else:
+                if self.mission_file is None:
+                    raise SystemExit(f"{self.db} is empty: give a mission file to start from (--mission FILE)")
+                mission, library = load_mission(self.mission_file)
+                lib_file = library_path(self.mission_file, mission.library)
+                journal.close()
+                journal = Journal.open(self.db, library=str(lib_file))
+                journal.snapshot(mission)
+                requests = []
+        except BaseException:
+            journal.close()
+            raise
+        self.journal = journal
+        self.library_file = lib_file
+        self.engine = Engine(mission, library)
+        remember_requests(self.engine, requests)
+        for name in mission.robots:
+            self.robots[name] = RobotInfo(name=name, online=False, since=None)
+
+    async def start(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._load()
+        cfg = router_config(self.listen, extra=self.zenoh_extra)
+        try:
+            self._session = await asyncio.to_thread(open_session, cfg, what="the listen endpoint")
+        except BaseException:
+            self.journal.close()
+            raise
+        s = self._session
+        self._events_pub = declare_publisher(s, Keys.EVENTS)
+        self._fleet_pub = declare_publisher(s, Keys.FLEET)
+        self._alerts_pub = declare_publisher(s, Keys.ALERTS)
+        self._entities += [
+            serve_async(s, Keys.OP, self._guard(self._handle_op)),
+            serve_async(s, Keys.STATE, self._guard(self._handle_state)),
+            serve_async(s, Keys.register("*"), self._guard(self._handle_register)),
+            serve_async(s, Keys.reports("*"), self._guard(self._handle_reports)),
+            watch_liveliness(s, Keys.ALL_ALIVE, self._on_presence),
+        ]
+        # declared last: robots (re)register when they see it
+        self._entities.append(declare_token(s, Keys.SERVER_ALIVE))
+
+    async def stop(self) -> None:
+        self._entities.clear()
+        session, self._session = self._session, None
+        if session is not None:
+            await asyncio.to_thread(close_session, session)
+        if self.journal is not None:
+            self.journal.close()
+            self.journal = None
+
+    async def __aenter__(self) -> MissionServer:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.stop()
+
+    @property
+    def mission(self) -> Mission:
+        assert self.engine is not None
+        return self.engine.mission
+
+    @property
+    def library(self) -> Library:
+        assert self.engine is not None
+        return self.engine.library
+
+    # -- plumbing -------------------------------------------------------------
+    def _guard(self, handler: Callable[[bytes], Awaitable[bytes]]) -> Callable[[bytes], Awaitable[bytes]]:
+        """Bad input and refusals become an ErrorReply; nothing else escapes."""
+
+        async def run(payload: bytes) -> bytes:
+            try:
+                return await handler(payload)
+            except Refusal as r:
+                raise ReplyErr(dumps(ErrorReply(**r.to_dict()))) from None
+            except ValidationError as e:
+                first = e.errors()[0]
+                where = ".".join(str(x) for x in first["loc"])
+                msg = f"malformed request: {where}: {first['msg']}" if where else f"malformed request: {first['msg']}"
+                raise ReplyErr(dumps(ErrorReply(code="bad_request", message=msg))) from None
+
+        return run
+
+    def _commit(self, applied: Applied, op: Any, *, client: str = "", request_id: str | None = None, actor: str = "") -> None:
+        """Journal, then publish, an applied operation (nothing for no-ops)."""
+        if applied.duplicate or not applied.events:
+            return
+        assert self.journal is not None
+        batch = EventBatch(revision=applied.revision, events=applied.events, actor=actor or client, op=op.op)
+        self.journal.record(applied, op, actor=batch.actor, client=client, request_id=request_id, mission=self.mission)
+        self._events_pub.put(batch.model_dump_json().encode())
+        if any(e.ev == "mission_replaced" for e in applied.events):
+            for name in self.mission.robots:  # a loaded mission may name other robots
+                if name not in self.robots:
+                    self._set_robot(RobotInfo(name=name))
+
+    def _submit(self, op: Any, *, client: str = "", request_id: str | None = None, actor: str = "", expected_revision: int | None = None) -> Applied:
+        applied = self.engine.submit(op, client=client, request_id=request_id, expected_revision=expected_revision)
+        self._commit(applied, op, client=client, request_id=request_id, actor=actor)
+        return applied
+
+    def alert(self, message: str, *, level: str = "warning", robot: str | None = None, skill: str | None = None) -> None:
+        log.warning("%s", message)
+        if self._alerts_pub is not None:
+            a = Alert(level=level, robot=robot, skill=skill, message=message, at=_now())
+            self._alerts_pub.put(dumps(a))
+
+    # -- state ------------------------------------------------------------------
+    async def _handle_state(self, payload: bytes) -> bytes:
+        snap = StateSnapshot(
+            protocol=PROTOCOL_VERSION,
+            server_id=self.server_id,
+            revision=self.mission.revision,
+            mission=self.mission,
+            library=self.library,
+            robots=self.robots,
+        )
+        return snap.model_dump_json().encode()
+
+    # -- operations from consoles and ctl -------------------------------------------
+    async def _handle_op(self, payload: bytes) -> bytes:
+        req = Request.model_validate_json(payload)
+        key = (req.client, req.request_id)
+        if key in self._inflight:  # the same request retried while in progress
+            return await asyncio.shield(self._inflight[key])
+        fut: asyncio.Future = self._loop.create_future()
+        self._inflight[key] = fut
+        try:
+            reply = await self._apply_request(req)
+            fut.set_result(reply)
+            return reply
+        except BaseException as e:
+            fut.set_exception(e)
+            fut.exception()  # retrieved: no "never retrieved" warning
+            raise
+        finally:
+            del self._inflight[key]
+
+    async def _apply_request(self, req: Request) -> bytes:
+        op = req.op
+        actor = f"{req.user}@{req.client}" if req.user else req.client
+        done = self.engine.requests.get((req.client, req.request_id))
+        if done is not None:
+            return _reply(Applied(done.revision, [], done.notes, done.value, duplicate=True))
+        if isinstance(op, Sync | Unsync | Control | Retry):
+            if req.expected_revision is not None:
+                self.engine.check_fresh(op, req.expected_revision)
+            applied = await self._robot_op(op, actor)
+            self.engine.remember(req.client, req.request_id, applied)
+            return _reply(applied)
+        applied = self._submit(op, client=req.client, request_id=req.request_id, actor=actor, expected_revision=req.expected_revision)
+        return _reply(applied)
+
+    def _lock(self, robot: str) -> asyncio.Lock:
+        return self._robot_locks.setdefault(robot, asyncio.Lock())
+
+    async def _command(self, robot: str, cmd: Any) -> CommandReply:
+        """Send a command to a robot agent; refusals say which robot and why.
+        Reports the robot made before answering are applied first."""
+        info = self.robots.get(robot)
+        if info is None or not info.online:
+            since = f" since {info.since:%H:%M:%S}" if info and info.since else ""
+            raise Refusal("robot_offline", f"robot {robot} is not connected{since}: nothing was sent", robot=robot)
+        try:
+            raw = await query(self._session, Keys.command(robot), dumps(cmd), self.command_timeout)
+        except QueryError as e:
+            try:
+                err = ErrorReply.model_validate_json(e.payload)
+                raise Refusal(err.code, f"{robot}: {err.message}", robot=robot) from None
+            except ValidationError:
+                raise Refusal("robot_error", f"{robot} refused: {e.payload.decode(errors='replace')}", robot=robot) from None
+        except QueryTimeout:
+            raise Refusal("robot_timeout", f"{robot} did not answer within {self.command_timeout:g} s (out of reach?): nothing changed", robot=robot) from None
+        except NoResponder:
+            raise Refusal("robot_offline", f"robot {robot} does not answer commands: nothing was sent", robot=robot) from None
+        reply = CommandReply.model_validate_json(raw)
+        self._apply_reports(robot, reply.reports)
+        if not reply.ok:
+            raise Refusal("robot_refused", f"{robot} refused: {reply.reason}", robot=robot)
+        return reply
+
+    def _check_manifest(self, robot: str, skills: list[Any]) -> None:
+        info = self.robots[robot]
+        if not info.online or info.manifest is None:
+            since = f" (offline since {info.since:%H:%M:%S})" if info.since else " (not seen since the server started)"
+            raise Refusal("robot_offline", f"robot {robot} is not connected{since}: nothing was sent", robot=robot)
+        manifest = info.manifest
+        for s in skills:
+            have = manifest.skills.get(s.skill)
+            want = self.library.skills[s.skill].version
+            if have is None:
+                raise Refusal("incompatible", f"{robot} does not offer skill '{s.skill}' (its manifest lists: {', '.join(manifest.skills) or 'none'}); {s.id} stays unsynchronized", robot=robot, skill=s.id)
+            if _major(have) != _major(want):
+                raise Refusal("incompatible", f"{robot} implements {s.skill} {have}, the library needs {want} (major versions differ); {s.id} stays unsynchronized", robot=robot, skill=s.id)
+
+    async def _robot_op(self, op: Any, actor: str) -> Applied:
+        e = self.engine
+        if isinstance(op, Sync):
+            async with self._lock(op.robot):
+                skills = e.plan_sync(op)
+                ids = [s.id for s in skills]
+                try:
+                    self._check_manifest(op.robot, skills)
+                    barriers = {}
+                    for s in skills:
+                        partners = e.barrier_partners(s.id)
+                        if partners:
+                            barriers[s.id] = BarrierInfo(barrier=e.mission.barrier_of(s.id), partners=dict(partners))
+                    await self._command(op.robot, Enqueue(skills=skills, barriers=barriers))
+                    return self._submit(SyncAck(robot=op.robot, ids=ids), actor=actor)
+                finally:
+                    e.release(op.robot, ids)
+        if isinstance(op, Unsync):
+            async with self._lock(op.robot):
+                ids = e.plan_unsync(op)
+                try:
+                    reply = await self._command(op.robot, Dequeue(ids=ids))
+                    applied = self._submit(UnsyncDone(robot=op.robot, ids=reply.ids), actor=actor)
+                finally:
+                    e.release(op.robot)
+                if reply.kept:
+                    applied.notes.append(f"{op.robot} had already started {', '.join(reply.kept)}: it stays synchronized")
+                applied.value["kept"] = list(reply.kept)
+                return applied
+        if isinstance(op, Retry):
+            robot = e.mission.find(op.id)[0] if e.mission.find(op.id) else ""
+            async with self._lock(robot or "?"):
+                new = e.plan_retry(op)
+                try:
+                    self._check_manifest(robot, [new])
+                    await self._command(robot, Enqueue(skills=[new], front=True))
+                    return self._submit(RetryAck(robot=robot, failed_id=op.id, skill=new), actor=actor)
+                finally:
+                    e.release(robot)
+        # run / pause / stop / reset, for one robot or all
+        robots = e.plan_control(op)
+        results: dict[str, str] = {}
+        last = e.mission.revision
+        try:
+            for robot in robots:
+                try:
+                    async with self._lock(robot):
+                        reply = await self._command(robot, COMMANDS[op.op]())
+                        if op.op == "reset" and reply.ids:
+                            last = self._submit(UnsyncDone(robot=robot, ids=reply.ids), actor=actor).revision
+                    results[robot] = "ok"
+                except Refusal as r:
+                    if op.robot is not None:
+                        raise
+                    results[robot] = r.message
+        finally:
+            for robot in robots:
+                if op.op == "reset":
+                    e.release(robot)
+        failed = {r: m for r, m in results.items() if m != "ok"}
+        if failed and len(failed) == len(results):
+            raise Refusal("robot_unreachable", f"{op.op} reached no robot: " + "; ".join(failed.values()))
+        notes = [f"{op.op} not applied: {m}" for m in failed.values()]
+        return Applied(max(last, e.mission.revision), [], notes, {"robots": results})
+
+    # -- robots ------------------------------------------------------------------------
+    def _robot_from(self, name: str) -> None:
+        if name not in self.mission.robots:
+            raise Refusal("unknown_robot", f"robot '{name}' is not part of this mission (robots: {', '.join(self.mission.robots)})", robot=name)
+
+    async def _handle_register(self, payload: bytes) -> bytes:
+        reg = Register.model_validate_json(payload)
+        m = reg.manifest
+        if m.protocol != PROTOCOL_VERSION:
+            return dumps(RegisterReply(accepted=False, reason=f"protocol {m.protocol} is not supported (server speaks {PROTOCOL_VERSION})"))
+        if m.name not in self.mission.robots:
+            return dumps(RegisterReply(accepted=False, reason=f"robot '{m.name}' is not part of this mission"))
+        expected = self.mission.robots[m.name].type
+        if m.type != expected:
+            return dumps(RegisterReply(accepted=False, reason=f"robot '{m.name}' is a {expected} in this mission, not a {m.type}"))
+        info = self.robots[m.name]
+        info = info.model_copy(update={"manifest": m, "online": True, "since": info.since if info.online else _now()})
+        self._set_robot(info)
+        self._apply_reports(m.name, reg.reports)
+        self._reconcile(m.name, {q.id for q in reg.queue})
+        return dumps(RegisterReply(accepted=True, last_seq=self.mission.report_seqs.get(m.name, 0)))
+
+    def _reconcile(self, robot: str, robot_has: set[str]) -> None:
+        """After a restart on either side: skills the mission holds as on the
+        robot but the robot does not have go back to the plan."""
+        task = self.mission.tasks.get(robot, [])
+        held = [s.id for s in task if s.status.value not in ("idle", "success", "failure")]
+        lost = [sid for sid in held if sid not in robot_has]
+        if lost:
+            try:
+                self._submit(Reconcile(robot=robot, lost=lost), actor=robot)
+                self.alert(f"{robot} no longer had {', '.join(lost)}: returned to the plan", robot=robot)
+            except Refusal as r:
+                self.alert(f"cannot reconcile {robot}: {r.message}", level="error", robot=robot)
+
+    def _apply_reports(self, robot: str, reports: list[Report]) -> list[ErrorReply]:
+        refused = []
+        for rep in sorted(reports, key=lambda r: r.seq):
+            if rep.robot != robot:
+                refused.append(ErrorReply(code="bad_report", message=f"{robot} cannot report for {rep.robot}", robot=robot))
+                continue
+            try:
+                applied = self._submit(rep, actor=robot)
+            except Refusal as r:
+                refused.append(ErrorReply(**r.to_dict()))
+                self.alert(f"report refused: {r.message}", level="error", robot=robot, skill=rep.id)
+                continue
+            if not applied.duplicate and rep.status.value == "failure":
+                self.alert(f"{robot}: {rep.id} failed: {rep.info}", level="error", robot=robot, skill=rep.id)
+        return refused
+
+    async def _handle_reports(self, payload: bytes) -> bytes:
+        batch = ReportBatch.model_validate_json(payload)
+        robots = {r.robot for r in batch.reports}
+        if len(robots) > 1:
+            raise Refusal("bad_report", "a report batch comes from one robot")
+        robot = robots.pop() if robots else ""
+        if robot:
+            self._robot_from(robot)
+        refused = self._apply_reports(robot, batch.reports)
+        # refused reports are consumed too: the robot must not send them again
+        last = max([self.mission.report_seqs.get(robot, 0), *(r.seq for r in batch.reports)])
+        return dumps(ReportAck(last_seq=last, refused=refused))
+
+    def _set_robot(self, info: RobotInfo) -> None:
+        self.robots[info.name] = info
+        if self._fleet_pub is not None:
+            self._fleet_pub.put(dumps(FleetEvent(robot=info)))
+
+    def _on_presence(self, key: str, alive: bool) -> None:
+        if self._loop is not None and not self._loop.is_closed():
+            self._loop.call_soon_threadsafe(self._presence, Keys.robot_of(key), alive)
+
+    def _presence(self, robot: str, alive: bool) -> None:
+        info = self.robots.get(robot)
+        if info is None or info.online == alive:
+            return
+        # online again once it registers (with its manifest and queue)
+        if not alive:
+            self._set_robot(info.model_copy(update={"online": False, "since": _now()}))
+            self.alert(f"robot {robot} went offline", robot=robot)
+
+
+def _reply(applied: Applied) -> bytes:
+    return dumps(OpReply(revision=applied.revision, value=applied.value, notes=applied.notes, duplicate=applied.duplicate))
