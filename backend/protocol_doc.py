@@ -1,0 +1,201 @@
+"""Writes docs/protocol.md: the prose below plus JSON Schemas generated from
+the protocol models (so the document cannot drift from the code; a test
+checks it is up to date).
+
+    python -m backend.protocol_doc > docs/protocol.md
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from pydantic import TypeAdapter
+
+from . import protocol as p
+from .events import EventBatch
+from .ops import OperatorOp, Report
+
+PROSE = f"""# missionctl protocol, version {p.PROTOCOL_VERSION}
+
+This is what a third party needs to connect a robot, a console or a script
+to a missionctl mission server without reading our code. Transport is
+[Eclipse Zenoh](https://zenoh.io) 1.x; every payload is UTF-8 JSON of the
+models below. The mission server *is* the Zenoh router (default
+`tcp/127.0.0.1:7447`, multicast scouting off); robots and consoles connect to
+it in `client` mode.
+
+Conventions: names of robots, markers and barriers match
+`^[A-Za-z][A-Za-z0-9_-]*$`; skill ids match `^[A-Za-z0-9][A-Za-z0-9_.-]*$`.
+Times are ISO 8601 with a zone. A refusal is always a Zenoh `reply_err` whose
+payload is an `ErrorReply` (`code` is stable, `message` is a sentence for a
+person naming robot, skill and reason).
+
+## Key space
+
+| key | kind | who declares | payload |
+| --- | --- | --- | --- |
+| `{p.Keys.SERVER_ALIVE}` | liveliness token | server | — |
+| `{p.Keys.OP}` | queryable | server | `Request` → `OpReply` / `ErrorReply` |
+| `{p.Keys.STATE}` | queryable | server | `StateRequest` → `StateSnapshot` |
+| `{p.Keys.EVENTS}` | publication | server | `EventBatch` (revisions consecutive) |
+| `{p.Keys.FLEET}` | publication | server | `FleetEvent` (presence, manifest) |
+| `{p.Keys.ALERTS}` | publication | server | `Alert` |
+| `{p.Keys.register('ROBOT')}` | queryable | server | `Register` → `RegisterReply` |
+| `{p.Keys.reports('ROBOT')}` | queryable | server | `ReportBatch` → `ReportAck` |
+| `{p.Keys.alive('ROBOT')}` | liveliness token | robot | — |
+| `{p.Keys.command('ROBOT')}` | queryable | robot | `Command` → `CommandReply` / `ErrorReply` |
+| `{p.Keys.telemetry('ROBOT')}` | publication | robot | `Telemetry` |
+| `{p.Keys.world('ROBOT')}` | queryable | robot | `WorldMessage` → `WorldReply` |
+| `{p.Keys.barrier_ready('BARRIER', 'ROBOT')}` | liveliness token | robot | — (present while waiting at a barrier) |
+
+Publications are declared with congestion control `BLOCK` (state must not be
+dropped). Events are small: one `EventBatch` per applied operation, never a
+full-state dump (except `mission_replaced` when a whole mission is loaded).
+
+## Statuses
+
+`idle` (unsynchronized, editable), `idle_synchronized` (queued on the robot),
+`synchwaiting` (waiting at a barrier), `running`, `paused`, `success`,
+`failure`. A robot's list always reads: finished log, at most one active
+skill, queued skills, unsynchronized skills. Robots may report these
+transitions (anything else is refused with `bad_report`):
+
+| from | to |
+| --- | --- |
+| `idle_synchronized` | `synchwaiting`, `running`, `failure` |
+| `synchwaiting` | `running`, `idle_synchronized` (stopped), `failure`, itself with new info |
+| `running` | `paused`, `success`, `failure`, `idle_synchronized` (stopped), itself with a higher `attempt` (autonomous retry) |
+| `paused` | `running`, `idle_synchronized` (stopped), `failure` |
+| `success`, `failure` | nothing: they are the execution log |
+
+## Sequences
+
+### Late join and event stream (consoles, scripts)
+1. Subscribe to `{p.Keys.EVENTS}` (and `{p.Keys.FLEET}`, `{p.Keys.ALERTS}`, telemetry) first.
+2. Query `{p.Keys.STATE}`; apply the snapshot; then apply buffered batches
+   whose `revision` is greater than the snapshot's.
+3. Apply each batch with `revision == current + 1`. A larger revision means a
+   gap: query the state again.
+4. When the server's liveliness token disappears, show "reconnecting"; when it
+   (or the Zenoh link) comes back, query the state again. A new `server_id`
+   means the server restarted (it resumed from its journal).
+
+### An operation
+`Request{{client, request_id, expected_revision?, op}}` to `{p.Keys.OP}`. The
+same `(client, request_id)` is applied once: retry freely after a timeout.
+With `expected_revision`, the operation is refused (`stale`) if anything it
+touches changed after that revision. The reply is `OpReply{{revision, value,
+notes}}` or an `ErrorReply`.
+
+### Robot registration and reconciliation
+1. The robot connects, declares `{p.Keys.alive('ROBOT')}`, its command and
+   world queryables, and watches `{p.Keys.SERVER_ALIVE}`.
+2. Whenever the server token appears (start, server restart), the robot
+   queries `{p.Keys.register('ROBOT')}` with `Register{{manifest, queue,
+   reports}}`: its manifest (type, modules and skills with SemVer), its own
+   synchronized queue, and its unacknowledged reports.
+3. The server applies the reports, then returns to the plan (`idle`) any skill
+   it holds as synchronized to that robot that the robot does not have (it
+   restarted). The reply carries `last_seq`: the robot continues numbering
+   after it.
+
+### Synchronize
+1. Operator: `op: sync {{robot, through?}}`.
+2. Server: checks the robot is online, offers every skill (by name) with the
+   library's major version, locks the skills, and queries
+   `{p.Keys.command('ROBOT')}` with `Enqueue{{skills, barriers}}` (`barriers` maps a
+   skill id to its barrier and partner robots' skill ids).
+3. Robot: appends them to its queue, answers `CommandReply{{ids}}`.
+4. Server: marks them `idle_synchronized` (one `EventBatch`) and replies. No
+   answer (out of range, timeout, offline) → nothing changed, and the
+   refusal names the robot and why.
+
+### Unsynchronize, and the race with a starting robot
+1. Operator: `op: unsync {{robot, from_id?}}`: the queued skills from `from_id`
+   to the end.
+2. Server → robot: `Dequeue{{ids}}`.
+3. Robot: removes those it has not started; answers `CommandReply{{ids:
+   removed, kept: started meanwhile, reports}}`. `reports` holds the status
+   changes it made and the server has not acknowledged yet (e.g. the skill it
+   just started): the server applies them **before** the removal, so the
+   started skill is `running` and the others return, in order, to the head of
+   the unsynchronized section. The reply to the operator names the kept ones.
+
+### Run, pause, stop, reset
+Server → robot: `Run`, `Pause`, `Stop`, `Reset`. The robot changes its
+execution and reports the status changes (`Report`, numbered per robot). Run
+on a paused robot resumes; after a failure, run continues with the next
+queued skill. Stop returns the active skill to `idle_synchronized` (the next
+run starts it from the beginning). Reset = stop + remove everything queued;
+its reply lists the removed ids, which return to the plan.
+
+### Reports
+Each status change is a `Report{{robot, seq, id, status, info, attempt, at}}`
+with `seq` increasing by one per robot. The robot keeps them in an outbox and
+queries `{p.Keys.reports('ROBOT')}` with `ReportBatch`; `ReportAck.last_seq` tells
+which it may drop. While out of reach the outbox grows and is flushed on
+return; a report the server already applied is ignored (idempotent). A
+refused report is acknowledged too (listed in `refused`) and raises an alert.
+
+### Failure and retry
+A failing skill becomes `failure` and the robot halts its queue. The
+operator decides: `op: retry {{id}}` creates `ID.N` (attempt N, same
+parameters) which the server sends with `Enqueue{{front: true}}`; once
+acknowledged it is queued right after the failed one, which stays in the log.
+`op: run` continues with the next skill; `op: unsync` takes the rest back.
+A skill with `policies.retries: N` is retried by the robot itself: it reports
+`running` again with `attempt` + 1 (never `failure` before the last attempt).
+
+### Barriers (robot to robot; the server is not in this loop)
+Each skill of a barrier reaches its robot with the partners' robot and skill
+ids. A robot reaching it reports `synchwaiting`, subscribes (with history) to
+the liveliness tokens `{p.Keys.barrier_ready('BARRIER', '*')}`, **then**
+declares its own token (in this order no robot can miss the last arrival),
+and watches its partners' `{p.Keys.alive('ROBOT')}` tokens. When every partner's
+ready token is present, it reports `running`. While a partner is offline it
+reports `synchwaiting` again with info "waiting for ROBOT (offline)".
+
+### World knowledge (robot to robot)
+`WorldMessage{{kind: ask|tell, sender, topic, data}}` to
+`{p.Keys.world('ROBOT')}`; the answer is a `WorldReply{{known, data}}`.
+
+## Messages (JSON Schema, generated)
+"""
+
+MODELS = [
+    ("Request", p.Request),
+    ("OpReply", p.OpReply),
+    ("ErrorReply", p.ErrorReply),
+    ("StateRequest", p.StateRequest),
+    ("StateSnapshot (mission and library: see `missionctl schema`)", None),
+    ("EventBatch", EventBatch),
+    ("FleetEvent", p.FleetEvent),
+    ("Alert", p.Alert),
+    ("Register", p.Register),
+    ("RegisterReply", p.RegisterReply),
+    ("Report", Report),
+    ("ReportBatch", p.ReportBatch),
+    ("ReportAck", p.ReportAck),
+    ("Command", p.Command),
+    ("CommandReply", p.CommandReply),
+    ("Telemetry", p.Telemetry),
+    ("WorldMessage", p.WorldMessage),
+    ("WorldReply", p.WorldReply),
+    ("Operations (the `op` of a Request)", OperatorOp),
+]
+
+
+def render() -> str:
+    out = [PROSE]
+    for title, model in MODELS:
+        out.append(f"\n### {title}\n")
+        if model is None:
+            continue
+        schema = TypeAdapter(model).json_schema()
+        out.append("```json\n" + json.dumps(schema, indent=1, sort_keys=False) + "\n```\n")
+    return "".join(out)
+
+
+if __name__ == "__main__":
+    sys.stdout.write(render())
