@@ -1,0 +1,1303 @@
+"""The robot-side SDK: connect a real or simulated robot to the mission server.
+
+    agent = RobotAgent("lru2", "rover", connect=["tcp/127.0.0.1:7447"],
+                       modules={"nav": "2.1.0"})
+    agent.pose = lambda: current_pose()          # telemetry sources (optional)
+    agent.battery = lambda: 0.8
+
+    @agent.skill("drive_to", version="1.0.0")
+    async def drive_to(ctx, goal: Pose, speed: float = 0.5):
+        while not arrived():
+            await ctx.sleep(0.1)                  # honours pause/stop, sim time
+            ctx.progress(done_fraction(), eta_s=remaining_s())
+        # return None/True: success; raise SkillFailed("why") or return Failure("why")
+
+    async with agent:                            # start() ... stop()
+        await forever()
+
+What the agent does (the contract is backend/protocol.py):
+
+- holds the liveliness token `Keys.alive(name)`, answers commands on
+  `Keys.command(name)` and robot-to-robot world messages on `Keys.world(name)`,
+  publishes `Telemetry`;
+- watches the server's token and registers (`Register`: manifest, its queue,
+  unacknowledged reports) each time the server appears;
+- keeps its synchronized queue itself and executes it with the registered
+  handlers; every status change is a numbered `Report` kept in an outbox until
+  the server acknowledges it (also attached to every command reply);
+- meets its partners at barriers directly through liveliness tokens.
+
+Parameters reach handlers converted by shape (the agent has no skill library;
+the server sends normalized values): a mapping with exactly the pose fields
+x, y, z, roll, pitch, yaw becomes a `Pose`; one with exactly x, y, z a
+`Position`; a list of at least three such mappings (an area) a
+`list[Position]`; everything else (marker/robot/str/enum as str, numbers,
+lists, dicts) is passed as it came. A `dict` parameter that happens to look
+like a position would be converted too: register the skill with `raw=True` to
+get plain values, and use `ctx.params` / `ctx.pose(name)` / `ctx.position(name)`.
+
+Threading: every state change runs on the asyncio loop that called `start()`.
+Zenoh callbacks only post to that loop. Synchronous handlers run in a daemon
+worker thread (so a handler that ignores stop cannot hang interpreter exit);
+they may call `ctx.progress()` and `ctx.check()` (blocks while paused, raises
+`SkillStopped` once stopped). Asynchronous handlers are cancelled on stop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import inspect
+import logging
+import re
+import threading
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from typing import Any
+
+import zenoh
+from pydantic import TypeAdapter, ValidationError
+from zenoh.handlers import Callback
+
+from . import transport
+from .model import Pose, Position, SkillInstance, Status
+from .ops import Report
+from .protocol import (
+    BarrierInfo,
+    Command,
+    CommandReply,
+    Dequeue,
+    Enqueue,
+    ErrorReply,
+    Keys,
+    Manifest,
+    Module,
+    Pause,
+    QueueEntry,
+    Register,
+    RegisterReply,
+    ReportAck,
+    ReportBatch,
+    Reset,
+    Run,
+    Stop,
+    Telemetry,
+    WorldMessage,
+    WorldReply,
+    dumps,
+)
+
+log = logging.getLogger(__name__)
+
+_COMMAND = TypeAdapter(Command)
+_SEMVER = re.compile(r"^\d+\.\d+\.\d+")
+_POSE_KEYS = frozenset(Pose.model_fields)
+_POSITION_KEYS = frozenset(Position.model_fields)
+
+# How often the link model is polled (it is a plain callable of the integrator).
+_LINK_POLL_S = 0.05
+# Retry delay for registration and report flushes that found nobody.
+_RETRY_S = 0.5
+
+
+# ---------------------------------------------------------------- outcomes
+
+
+class SkillFailed(Exception):
+    """Raise in a handler to end the skill with `failure` and this reason."""
+
+    def __init__(self, reason: str = "skill failed"):
+        self.reason = reason
+        super().__init__(reason)
+
+
+class SkillStopped(asyncio.CancelledError):
+    """Raised by `ctx.check()` / `ctx.checkpoint()` once the skill was stopped.
+
+    A CancelledError (a BaseException), so `except Exception` in a handler
+    does not swallow it: a stop always ends the handler.
+    """
+
+
+@dataclass(frozen=True)
+class Failure:
+    """Return `Failure("reason")` from a handler instead of raising SkillFailed."""
+
+    reason: str = "skill failed"
+
+
+# ---------------------------------------------------------------- link model
+
+
+class Link:
+    """The operator link as the robot sees it. No-op by default (always in range).
+
+    A simulator sets `reachable` (or overrides `in_range`), `delay_s` (one-way
+    delay applied before each command is handled and before each report
+    flush) and `quality` (0..1, shown in telemetry).
+    """
+
+    def __init__(self, *, reachable: bool = True, delay_s: float = 0.0, quality: float = 1.0):
+        self.reachable = reachable
+        self.delay_s = delay_s
+        self.quality = quality
+
+    def in_range(self) -> bool:
+        return self.reachable
+
+
+# ---------------------------------------------------------------- execution state
+
+
+@dataclass
+class _Entry:
+    """A skill the robot holds (queued or active)."""
+
+    skill: SkillInstance
+    barrier: BarrierInfo | None = None
+    status: Status = Status.IDLE_SYNCHRONIZED
+    attempt: int = 1
+    retries_used: int = 0
+
+    @property
+    def id(self) -> str:
+        return self.skill.id
+
+
+@dataclass
+class _Active:
+    """The executing entry and everything that must be released when it ends."""
+
+    entry: _Entry
+    task: asyncio.Task[None] | None = None
+    aborted: bool = False  # stopped/reset: the task must not touch agent state any more
+    paused_by_operator: bool = False
+    paused_by_comms: bool = False
+    # set while not paused; the asyncio one for coroutines, the threading one for threads
+    resumed: asyncio.Event = field(default_factory=asyncio.Event)
+    resumed_t: threading.Event = field(default_factory=threading.Event)
+    pause_requested: asyncio.Event = field(default_factory=asyncio.Event)
+    # barrier resources (withdrawn when the skill ends or is stopped)
+    barrier_entities: list[Any] = field(default_factory=list)
+    barrier_token: zenoh.LivelinessToken | None = None
+
+    def __post_init__(self) -> None:
+        self.resumed.set()
+        self.resumed_t.set()
+
+    @property
+    def paused(self) -> bool:
+        return self.paused_by_operator or self.paused_by_comms
+
+    def sync_pause_flags(self) -> None:
+        if self.paused:
+            self.resumed.clear()
+            self.resumed_t.clear()
+            self.pause_requested.set()
+        else:
+            self.pause_requested.clear()
+            self.resumed.set()
+            self.resumed_t.set()
+
+
+def _convert(value: Any) -> Any:
+    """Typed value by shape (see the module docstring)."""
+    if isinstance(value, dict):
+        keys = set(value)
+        if keys == _POSE_KEYS:
+            return Pose(**value)
+        if keys == _POSITION_KEYS:
+            return Position(**value)
+        return value
+    if (
+        isinstance(value, list)
+        and len(value) >= 3
+        and all(isinstance(p, dict) and set(p) == _POSITION_KEYS for p in value)
+    ):
+        return [Position(**p) for p in value]
+    return value
+
+
+@dataclass(frozen=True)
+class _Handler:
+    fn: Callable[..., Any]
+    version: str
+    raw: bool
+
+    @property
+    def is_async(self) -> bool:
+        return inspect.iscoroutinefunction(self.fn)
+
+
+# ---------------------------------------------------------------- skill context
+
+
+class SkillContext:
+    """What a handler gets as its first argument."""
+
+    def __init__(self, agent: RobotAgent, act: _Active, params: dict[str, Any], purpose: str = "skill"):
+        self.agent = agent
+        self._act = act
+        self.skill: SkillInstance = act.entry.skill
+        self.params: dict[str, Any] = params  # the raw values as sent by the server
+        self.attempt: int = act.entry.attempt
+        self.purpose = purpose  # "skill" or "recharge" (a recharge run before this skill)
+
+    # -- state -----------------------------------------------------------
+    @property
+    def stopped(self) -> bool:
+        return self._act.aborted
+
+    @property
+    def paused(self) -> bool:
+        return self._act.paused
+
+    def _on_loop(self) -> bool:
+        return threading.get_ident() == self.agent._loop_thread
+
+    # -- progress ----------------------------------------------------------
+    def progress(self, fraction: float, info: str = "", eta_s: float | None = None) -> None:
+        """Report progress (0..1) for telemetry; callable from handler threads.
+
+        Raises `SkillStopped` once the skill was stopped (handy for sync loops).
+        """
+        if self._act.aborted:
+            raise SkillStopped()
+        fraction = min(1.0, max(0.0, float(fraction)))
+        if self._on_loop():
+            self.agent._set_progress(self._act, fraction, info, eta_s)
+        else:
+            self.agent._post(self.agent._set_progress, self._act, fraction, info, eta_s)
+
+    # -- pause / stop --------------------------------------------------------
+    async def checkpoint(self) -> None:
+        """Return when not paused; raise `SkillStopped` if stopped."""
+        while True:
+            if self._act.aborted:
+                raise SkillStopped()
+            if not self._act.paused:
+                return
+            await self._act.resumed.wait()
+
+    def check(self) -> None:
+        """Synchronous checkpoint for handlers running in a thread: blocks while
+        paused, raises `SkillStopped` once stopped."""
+        if self._on_loop():
+            # never block the event loop: an async handler must await checkpoint()
+            if self._act.aborted:
+                raise SkillStopped()
+            return
+        while True:
+            if self._act.aborted:
+                raise SkillStopped()
+            if self._act.resumed_t.wait(0.1):
+                if self._act.aborted:
+                    raise SkillStopped()
+                return
+
+    async def sleep(self, seconds: float) -> None:
+        """Sleep `seconds` of robot time (divided by `agent.time_scale`), not
+        counting time spent paused; raises `SkillStopped` when stopped."""
+        scale = self.agent.time_scale if self.agent.time_scale > 0 else 1.0
+        remaining = max(0.0, float(seconds)) / scale
+        loop = asyncio.get_running_loop()
+        while True:
+            await self.checkpoint()
+            if remaining <= 0:
+                return
+            started = loop.time()
+            try:
+                # returns early when a pause is requested, else times out
+                await asyncio.wait_for(self._act.pause_requested.wait(), remaining)
+            except TimeoutError:
+                await self.checkpoint()
+                return
+            remaining -= loop.time() - started
+
+    # -- typed parameters ------------------------------------------------------
+    def pose(self, name: str) -> Pose:
+        """Parameter `name` as a Pose (a position gets zero orientation)."""
+        value = self.params[name]
+        if isinstance(value, Pose):
+            return value
+        if isinstance(value, Position):
+            return Pose(**value.model_dump())
+        return Pose(**value)
+
+    def position(self, name: str) -> Position:
+        """Parameter `name` as a Position (a pose loses its orientation)."""
+        value = self.params[name]
+        if isinstance(value, Position):
+            return value
+        if isinstance(value, Pose):
+            return Position(x=value.x, y=value.y, z=value.z)
+        return Position(**{k: value[k] for k in value if k in _POSITION_KEYS})
+
+    def area(self, name: str) -> list[Position]:
+        return [p if isinstance(p, Position) else Position(**p) for p in self.params[name]]
+
+    # -- world -------------------------------------------------------------------
+    async def ask(self, robot: str, topic: str, data: dict[str, Any] | None = None) -> dict[str, Any] | None:
+        return await self.agent.ask(robot, topic, data)
+
+    async def tell(self, robot: str, topic: str, data: dict[str, Any] | None = None) -> bool:
+        return await self.agent.tell(robot, topic, data)
+
+
+# ---------------------------------------------------------------- the agent
+
+
+class RobotAgent:
+    """A robot's connection to the mission: registration, queue, execution,
+    reports, telemetry, barriers and world messages. See the module docstring."""
+
+    def __init__(
+        self,
+        name: str,
+        robot_type: str,
+        *,
+        connect: list[str],
+        modules: dict[str, str] | None = None,
+        properties: dict[str, Any] | None = None,
+        lease_ms: int = 1000,
+        zenoh_extra: dict[str, Any] | None = None,
+        telemetry_hz: float = 2.0,
+        request_timeout: float = 5.0,
+    ):
+        self.name = name
+        self.robot_type = robot_type
+        self.connect = list(connect)
+        self.modules = dict(modules or {})
+        self.properties = dict(properties or {})
+        self.lease_ms = lease_ms
+        self.zenoh_extra = zenoh_extra
+        self.telemetry_hz = telemetry_hz
+        self.request_timeout = request_timeout
+
+        # integrator-settable sources and models
+        self.pose: Callable[[], Pose] = Pose
+        self.battery: Callable[[], float] = lambda: 1.0
+        self.link = Link()
+        self.time_scale = 1.0
+
+        self._handlers: dict[str, _Handler] = {}
+        self._ask_handlers: dict[str, Callable[..., Any]] = {}
+        self._tell_handlers: dict[str, Callable[..., Any]] = {}
+        self.world_stats = {"asks_sent": 0, "tells_sent": 0, "asks_received": 0, "tells_received": 0}
+        # called with every Report as it is made (simulator, logs, tests)
+        self.report_listeners: list[Callable[[Report], object]] = []
+
+        # queue and execution (loop thread only)
+        self._queue: list[_Entry] = []
+        self._active: _Active | None = None
+        self._run_enabled = False  # halted until `run`
+        self._done: set[str] = set()  # finished skill ids (a re-sent enqueue never re-runs them)
+
+        # reports
+        self._seq = 0
+        self._outbox: list[Report] = []
+        self._acked_evt = asyncio.Event()  # set whenever an ack removed reports
+
+        # telemetry fields
+        self._mode = "idle"
+        self._progress: float | None = None
+        self._eta: float | None = None
+        self._info = ""
+
+        # connection state
+        self._session: zenoh.Session | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._loop_thread: int | None = None
+        self._entities: list[Any] = []
+        self._token: zenoh.LivelinessToken | None = None
+        self._publisher: zenoh.Publisher | None = None
+        self._tasks: list[asyncio.Task[None]] = []
+        self._server_up = False
+        self._registered = False
+        self._in_range = True
+        self._register_wake: asyncio.Event | None = None
+        self._flush_wake: asyncio.Event | None = None
+        self._registered_evt: asyncio.Event | None = None
+        self.last_register_reply: RegisterReply | None = None
+        self.refused_reports: list[ErrorReply] = []
+
+    # ------------------------------------------------------------ registration API
+
+    def skill(
+        self, name: str, version: str = "1.0.0", *, raw: bool = False
+    ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+        """Decorator: `@agent.skill("drive_to", version="1.0.0")` registers a handler
+        `handler(ctx, **params)` (function or coroutine). `raw=True` passes the
+        parameter values unconverted."""
+
+        def register(fn: Callable[..., Any]) -> Callable[..., Any]:
+            self.add_skill(name, fn, version=version, raw=raw)
+            return fn
+
+        return register
+
+    def add_skill(self, name: str, fn: Callable[..., Any], *, version: str = "1.0.0", raw: bool = False) -> None:
+        if not _SEMVER.match(version):
+            raise ValueError(f"skill {name}: version {version!r} is not SemVer (like 1.2.0)")
+        self._handlers[name] = _Handler(fn, version, raw)
+
+    def on_ask(self, topic: str, fn: Callable[..., Any]) -> None:
+        """`fn(data, sender) -> dict | None` (or a coroutine) answers asks on
+        `topic`; None means "unknown". Runs on the agent's loop: keep it short."""
+        self._ask_handlers[topic] = fn
+
+    def on_tell(self, topic: str, fn: Callable[..., Any]) -> None:
+        """`fn(data, sender)` (or a coroutine) receives tells on `topic`."""
+        self._tell_handlers[topic] = fn
+
+    def manifest(self) -> Manifest:
+        return Manifest(
+            name=self.name,
+            type=self.robot_type,
+            modules=[Module(name=k, version=v) for k, v in self.modules.items()],
+            properties=self.properties,
+            skills={k: h.version for k, h in self._handlers.items()},
+        )
+
+    # ------------------------------------------------------------ introspection
+
+    @property
+    def queue(self) -> list[str]:
+        """Ids of the queued (not started) skills, in order."""
+        return [e.id for e in self._queue]
+
+    @property
+    def active(self) -> tuple[str, Status] | None:
+        """(id, status) of the active skill, if any."""
+        if self._active is None:
+            return None
+        return self._active.entry.id, self._active.entry.status
+
+    @property
+    def pending_reports(self) -> list[Report]:
+        """Reports not acknowledged by the server yet."""
+        return list(self._outbox)
+
+    @property
+    def registered(self) -> bool:
+        return self._registered
+
+    async def wait_acknowledged(self, timeout: float | None = None) -> None:
+        """Return once the server acknowledged every report made so far
+        (TimeoutError after `timeout` seconds)."""
+        async with asyncio.timeout(timeout):
+            while self._outbox:
+                self._acked_evt.clear()
+                await self._acked_evt.wait()
+
+    async def wait_registered(self, timeout: float | None = None) -> None:
+        """Return once the current server accepted our registration (TimeoutError
+        after `timeout` seconds)."""
+        if self._registered_evt is None:
+            raise RuntimeError(f"agent {self.name} is not started")
+        async with asyncio.timeout(timeout):
+            await self._registered_evt.wait()
+
+    # ------------------------------------------------------------ lifecycle
+
+    async def __aenter__(self) -> RobotAgent:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.stop()
+
+    async def start(self) -> None:
+        """Connect, declare everything, and begin registering with the server.
+
+        Raises `transport.TransportUnreachable` when the router is down.
+        """
+        if self._session is not None:
+            raise RuntimeError(f"agent {self.name} is already started")
+        self._loop = asyncio.get_running_loop()
+        self._loop_thread = threading.get_ident()
+        self._register_wake = asyncio.Event()
+        self._flush_wake = asyncio.Event()
+        self._registered_evt = asyncio.Event()
+        self._in_range = self._link_in_range()
+        config = transport.client_config(self.connect, lease_ms=self.lease_ms, extra=self.zenoh_extra)
+        session = transport.open_session(config, what=f"the router (for robot {self.name})")
+        self._session = session
+        try:
+            # Queryables first: once the server sees our token, commands must work.
+            self._entities.append(transport.serve_async(session, Keys.command(self.name), self._on_command))
+            self._entities.append(transport.serve_async(session, Keys.world(self.name), self._on_world))
+            self._publisher = transport.declare_publisher(session, Keys.telemetry(self.name))
+            self._token = transport.declare_token(session, Keys.alive(self.name))
+            self._tasks = [
+                asyncio.create_task(self._registrar(), name=f"{self.name}-register"),
+                asyncio.create_task(self._flusher(), name=f"{self.name}-flush"),
+                asyncio.create_task(self._telemetry_loop(), name=f"{self.name}-telemetry"),
+                asyncio.create_task(self._link_loop(), name=f"{self.name}-link"),
+            ]
+            # Last: this may (re)register at once.
+            self._entities.append(
+                transport.watch_liveliness(
+                    session, Keys.SERVER_ALIVE, lambda _key, alive: self._post(self._on_server, alive)
+                )
+            )
+        except BaseException:
+            await self.stop()
+            raise
+
+    async def stop(self) -> None:
+        """Stop executing, try to deliver pending reports briefly, close the session.
+
+        Safe to call twice. No report is made for a skill interrupted here: the
+        robot simply goes offline (the server sees its token vanish).
+        """
+        session = self._session
+        if session is None:
+            return
+        act = self._active
+        tasks = list(self._tasks)
+        if act is not None:
+            self._release(act, abort=True)
+            self._active = None
+            if act.task is not None:
+                tasks.append(act.task)
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        self._tasks = []
+        if self._outbox and self._registered and self._link_in_range():
+            try:
+                await asyncio.wait_for(self._flush_once(), 1.0)
+            except Exception:  # best effort only
+                pass
+        self._session = None
+        self._registered = False
+        self._server_up = False
+        self._entities.clear()
+        self._token = None
+        self._publisher = None
+        # Closing undeclares every entity and token; without it the process
+        # would hang at exit (callback subscribers keep it alive).
+        transport.close_session(session)
+
+    # ------------------------------------------------------------ loop helpers
+
+    def _post(self, fn: Callable[..., object], *args: Any) -> None:
+        """Run `fn(*args)` on the agent's loop (from any thread, never blocks)."""
+        loop = self._loop
+        if loop is None:
+            return
+        try:
+            loop.call_soon_threadsafe(fn, *args)
+        except RuntimeError:  # loop closed
+            pass
+
+    def _link_in_range(self) -> bool:
+        try:
+            return bool(self.link.in_range())
+        except Exception:
+            log.exception("%s: link.in_range() failed; assuming in range", self.name)
+            return True
+
+    async def _delay(self) -> None:
+        delay = float(getattr(self.link, "delay_s", 0.0) or 0.0)
+        if delay > 0:
+            await asyncio.sleep(delay)  # models the one-way link delay
+
+    # ------------------------------------------------------------ server presence & registration
+
+    def _on_server(self, alive: bool) -> None:
+        self._server_up = alive
+        # A (re)appearing server may be a new instance: always register again.
+        self._registered = False
+        if self._registered_evt is not None:
+            self._registered_evt.clear()
+        if alive and self._register_wake is not None:
+            self._register_wake.set()
+
+    def _queue_entries(self) -> list[QueueEntry]:
+        out = []
+        if self._active is not None:
+            out.append(QueueEntry(id=self._active.entry.id, status=self._active.entry.status))
+        out += [QueueEntry(id=e.id, status=e.status) for e in self._queue]
+        return out
+
+    async def _registrar(self) -> None:
+        assert self._register_wake is not None
+        while True:
+            await self._register_wake.wait()
+            self._register_wake.clear()
+            if not self._server_up or self._registered or not self._link_in_range():
+                continue  # the link loop / server watcher wakes us again
+            try:
+                await self._register_once()
+            except asyncio.CancelledError:
+                raise
+            except Exception as exc:
+                log.info("%s: registration failed (%s); retrying", self.name, exc)
+                assert self._loop is not None
+                self._loop.call_later(_RETRY_S, self._register_wake.set)
+
+    async def _register_once(self) -> None:
+        assert self._session is not None
+        await self._delay()
+        request = Register(manifest=self.manifest(), queue=self._queue_entries(), reports=list(self._outbox))
+        raw = await transport.query(
+            self._session, Keys.register(self.name), dumps(request), timeout=self.request_timeout
+        )
+        reply = RegisterReply.model_validate_json(raw)
+        self.last_register_reply = reply
+        if not reply.accepted:
+            log.error("%s: the server refused the registration: %s", self.name, reply.reason)
+            return  # tried again when the server (re)appears
+        if reply.last_seq > self._seq:
+            # The server applied reports of a previous run of this robot with
+            # higher numbers: ours would be ignored as duplicates. Renumber the
+            # unacknowledged ones after it (none of them can have been applied,
+            # as the server never saw a number this high from us).
+            self._outbox = [
+                r.model_copy(update={"seq": reply.last_seq + 1 + i}) for i, r in enumerate(self._outbox)
+            ]
+            self._seq = reply.last_seq + len(self._outbox)
+        else:
+            self._ack(reply.last_seq)
+        if reply.missing:
+            log.warning("%s: the server holds skills this robot does not know: %s", self.name, reply.missing)
+        self._registered = True
+        assert self._registered_evt is not None
+        self._registered_evt.set()
+        self._wake_flush()
+
+    # ------------------------------------------------------------ reports
+
+    def _report(self, entry: _Entry, status: Status, info: str = "") -> Report:
+        """Record a status change: numbered report into the outbox, telemetry out."""
+        self._seq += 1
+        entry.status = status
+        report = Report(
+            robot=self.name,
+            seq=self._seq,
+            id=entry.id,
+            status=status,
+            info=info,
+            attempt=entry.attempt,
+            at=datetime.now(UTC),
+        )
+        self._outbox.append(report)
+        self._info = info
+        self._update_mode()
+        for listener in list(self.report_listeners):
+            try:
+                listener(report)
+            except Exception:
+                log.exception("%s: report listener failed", self.name)
+        self._publish_telemetry()
+        self._wake_flush()
+        return report
+
+    def _ack(self, last_seq: int) -> None:
+        before = len(self._outbox)
+        self._outbox = [r for r in self._outbox if r.seq > last_seq]
+        if len(self._outbox) < before:
+            self._acked_evt.set()
+
+    def _wake_flush(self) -> None:
+        if self._flush_wake is not None:
+            self._flush_wake.set()
+
+    async def _flusher(self) -> None:
+        assert self._flush_wake is not None
+        while True:
+            await self._flush_wake.wait()
+            self._flush_wake.clear()
+            if not self._outbox or not self._registered or not self._link_in_range():
+                continue  # registration / the link loop wakes us again
+            try:
+                progressed = await self._flush_once()
+            except asyncio.CancelledError:
+                raise
+            except Exception as exc:
+                log.info("%s: report flush failed (%s); retrying", self.name, exc)
+                progressed = False
+            if self._outbox:
+                assert self._loop is not None
+                if progressed:
+                    self._flush_wake.set()
+                else:
+                    self._loop.call_later(_RETRY_S, self._flush_wake.set)
+
+    async def _flush_once(self) -> bool:
+        """Send the outbox once; True when the ack removed something."""
+        assert self._session is not None
+        await self._delay()
+        if not self._link_in_range() or not self._outbox:
+            return False
+        batch = list(self._outbox)
+        raw = await transport.query(
+            self._session,
+            Keys.reports(self.name),
+            dumps(ReportBatch(reports=batch)),
+            timeout=self.request_timeout,
+        )
+        ack = ReportAck.model_validate_json(raw)
+        if ack.refused:
+            self.refused_reports.extend(ack.refused)
+            for refusal in ack.refused:
+                log.warning("%s: the server refused a report: %s", self.name, refusal.message)
+        before = len(self._outbox)
+        self._ack(ack.last_seq)
+        return len(self._outbox) < before
+
+    # ------------------------------------------------------------ telemetry
+
+    def _update_mode(self) -> None:
+        if self._active is not None:
+            self._mode = self._active.entry.status.value
+        elif self._queue:
+            self._mode = "running" if self._run_enabled else "halted"
+        else:
+            self._mode = "idle"
+
+    def _set_progress(self, act: _Active, fraction: float, info: str, eta_s: float | None) -> None:
+        if act is not self._active or act.aborted:
+            return
+        self._progress = fraction
+        self._eta = eta_s
+        if info:
+            self._info = info
+
+    def telemetry(self) -> Telemetry:
+        try:
+            pose = self.pose()
+        except Exception:
+            log.exception("%s: agent.pose() failed", self.name)
+            pose = Pose()
+        try:
+            battery = min(1.0, max(0.0, float(self.battery())))
+        except Exception:
+            log.exception("%s: agent.battery() failed", self.name)
+            battery = 0.0
+        quality = min(1.0, max(0.0, float(getattr(self.link, "quality", 1.0))))
+        act = self._active
+        in_range = self._link_in_range()
+        return Telemetry(
+            robot=self.name,
+            pose=pose,
+            battery=battery,
+            link=quality if in_range else 0.0,
+            in_range=in_range,
+            mode=self._mode,
+            skill=act.entry.id if act is not None else None,
+            progress=self._progress if act is not None else None,
+            eta_s=self._eta if act is not None else None,
+            info=self._info,
+            at=datetime.now(UTC),
+        )
+
+    def _publish_telemetry(self) -> None:
+        if self._publisher is None or not self._link_in_range():
+            return  # out of range: the operator cannot hear us
+        try:
+            self._publisher.put(dumps(self.telemetry()))
+        except Exception:
+            log.exception("%s: cannot publish telemetry", self.name)
+
+    async def _telemetry_loop(self) -> None:
+        period = 1.0 / self.telemetry_hz if self.telemetry_hz > 0 else None
+        if period is None:
+            return
+        while True:
+            self._publish_telemetry()
+            await asyncio.sleep(period)
+
+    # ------------------------------------------------------------ link
+
+    async def _link_loop(self) -> None:
+        """Poll the link model; act on range changes."""
+        while True:
+            await asyncio.sleep(_LINK_POLL_S)
+            now = self._link_in_range()
+            if now == self._in_range:
+                continue
+            self._in_range = now
+            log.info("%s: %s communication range", self.name, "back in" if now else "out of")
+            self._apply_comms_policy()
+            if now:
+                assert self._register_wake is not None
+                self._register_wake.set()
+                self._wake_flush()
+                self._publish_telemetry()
+
+    def _apply_comms_policy(self) -> None:
+        """policies.pause_out_of_comms: pause the running skill while out of range."""
+        act = self._active
+        if act is None or act.aborted or not act.entry.skill.policies.pause_out_of_comms:
+            return
+        status = act.entry.status
+        in_range = self._link_in_range()
+        if not in_range and not act.paused_by_comms and status in (Status.RUNNING, Status.PAUSED):
+            act.paused_by_comms = True
+            act.sync_pause_flags()
+            if status == Status.RUNNING:
+                self._report(act.entry, Status.PAUSED, "paused: out of communication range")
+        elif in_range and act.paused_by_comms:
+            act.paused_by_comms = False
+            act.sync_pause_flags()
+            if not act.paused:
+                self._report(act.entry, Status.RUNNING, "resumed: back in communication range")
+
+    # ------------------------------------------------------------ commands
+
+    async def _on_command(self, payload: bytes) -> bytes:
+        if not self._link_in_range():
+            raise self._unreachable()
+        await self._delay()
+        if not self._link_in_range():
+            raise self._unreachable()
+        try:
+            cmd = _COMMAND.validate_json(payload)
+        except ValidationError as exc:
+            raise transport.Refusal(
+                dumps(ErrorReply(code="bad_request", message=f"{self.name} cannot read the command: {exc}", robot=self.name))
+            ) from None
+        # Everything below is synchronous: no other command or skill step
+        # interleaves, and the reply carries every report made so far.
+        if isinstance(cmd, Enqueue):
+            reply = self._cmd_enqueue(cmd)
+        elif isinstance(cmd, Dequeue):
+            reply = self._cmd_dequeue(cmd)
+        elif isinstance(cmd, Run):
+            reply = self._cmd_run()
+        elif isinstance(cmd, Pause):
+            reply = self._cmd_pause()
+        elif isinstance(cmd, Stop):
+            reply = self._cmd_stop()
+        elif isinstance(cmd, Reset):
+            reply = self._cmd_reset()
+        else:  # pragma: no cover - the discriminated union is exhaustive
+            raise transport.Refusal(dumps(ErrorReply(code="bad_request", message="unknown command")))
+        self._update_mode()
+        self._publish_telemetry()
+        reply.reports = list(self._outbox)
+        return dumps(reply)
+
+    def _unreachable(self) -> transport.Refusal:
+        return transport.Refusal(
+            dumps(
+                ErrorReply(
+                    code="unreachable",
+                    message=f"{self.name} is out of communication range",
+                    robot=self.name,
+                )
+            )
+        )
+
+    def _known(self, skill_id: str) -> _Entry | None:
+        if self._active is not None and self._active.entry.id == skill_id:
+            return self._active.entry
+        return next((e for e in self._queue if e.id == skill_id), None)
+
+    def _cmd_enqueue(self, cmd: Enqueue) -> CommandReply:
+        unknown = sorted({s.skill for s in cmd.skills if s.skill not in self._handlers})
+        if unknown:
+            return CommandReply(
+                ok=False,
+                reason=f"{self.name} has no handler for skill {', '.join(unknown)} "
+                f"(it offers: {', '.join(sorted(self._handlers)) or 'none'})",
+            )
+        new: list[_Entry] = []
+        ids: list[str] = []
+        for s in cmd.skills:
+            if s.id in self._done:
+                continue  # a re-sent enqueue: it ran already
+            ids.append(s.id)
+            if self._known(s.id) is not None or any(e.id == s.id for e in new):
+                continue  # a re-sent enqueue: it is queued already
+            skill = s.model_copy(update={"status": Status.IDLE_SYNCHRONIZED})
+            new.append(_Entry(skill=skill, barrier=cmd.barriers.get(s.id), attempt=s.attempt))
+        self._queue = new + self._queue if cmd.front else self._queue + new
+        self._kick()
+        return CommandReply(ids=ids)
+
+    def _cmd_dequeue(self, cmd: Dequeue) -> CommandReply:
+        wanted = set(cmd.ids)
+        removed = [e.id for e in self._queue if e.id in wanted]
+        self._queue = [e for e in self._queue if e.id not in wanted]
+        # Started meanwhile (active or finished): the unsync race; the server
+        # learns their status from the reports attached to this reply.
+        kept = [i for i in cmd.ids if i in self._done or (self._active is not None and self._active.entry.id == i)]
+        # Ids we never had cannot run either: report them as removed.
+        removed += [i for i in cmd.ids if i not in removed and i not in kept]
+        return CommandReply(ids=removed, kept=kept)
+
+    def _cmd_run(self) -> CommandReply:
+        self._run_enabled = True
+        act = self._active
+        if act is not None and act.paused_by_operator:
+            act.paused_by_operator = False
+            act.sync_pause_flags()
+            if not act.paused:
+                self._report(act.entry, Status.RUNNING, "resumed")
+            return CommandReply()
+        if act is None and not self._queue:
+            # Stays in run mode: skills synchronized later start at once.
+            return CommandReply(reason=f"{self.name} has nothing queued; it will run what is synchronized next")
+        self._kick()
+        return CommandReply()
+
+    def _cmd_pause(self) -> CommandReply:
+        act = self._active
+        if act is not None and act.entry.status == Status.SYNCHWAITING:
+            return CommandReply(
+                ok=False,
+                reason=f"{self.name} is waiting at a barrier with {act.entry.id}; only a running skill can be paused (stop it instead)",
+            )
+        self._run_enabled = False
+        if act is None:
+            return CommandReply(reason=f"{self.name} has no running skill; its queue is halted")
+        if not act.paused_by_operator:
+            was_running = act.entry.status == Status.RUNNING
+            act.paused_by_operator = True
+            act.sync_pause_flags()
+            if was_running:
+                self._report(act.entry, Status.PAUSED, "paused by operator")
+        return CommandReply()
+
+    def _cmd_stop(self) -> CommandReply:
+        self._run_enabled = False
+        if self._active is None:
+            return CommandReply(reason=f"{self.name} has no active skill; its queue is halted")
+        entry = self._stop_active("stopped by operator")
+        self._queue.insert(0, entry)
+        return CommandReply()
+
+    def _cmd_reset(self) -> CommandReply:
+        self._run_enabled = False
+        removed: list[str] = []
+        if self._active is not None:
+            removed.append(self._stop_active("reset by operator").id)
+        removed += [e.id for e in self._queue]
+        self._queue = []
+        return CommandReply(ids=removed)
+
+    # ------------------------------------------------------------ execution
+
+    def _kick(self) -> None:
+        """Start the next queued skill if running and idle."""
+        if not self._run_enabled or self._active is not None or not self._queue or self._session is None:
+            return
+        entry = self._queue.pop(0)
+        act = _Active(entry)
+        self._active = act
+        self._progress = None
+        self._eta = None
+        act.task = asyncio.get_running_loop().create_task(self._execute(act), name=f"{self.name}-{entry.id}")
+
+    def _stop_active(self, info: str) -> _Entry:
+        """Stop the active skill now (synchronously): handler cancelled, barrier
+        token withdrawn, `idle_synchronized` reported. Returns its entry."""
+        act = self._active
+        assert act is not None
+        self._release(act, abort=True)
+        self._active = None
+        entry = act.entry
+        if entry.status != Status.IDLE_SYNCHRONIZED:
+            self._report(entry, Status.IDLE_SYNCHRONIZED, info)
+        return entry
+
+    def _release(self, act: _Active, *, abort: bool) -> None:
+        if abort:
+            act.aborted = True
+            act.resumed.set()  # wake waiters so they see the stop
+            act.resumed_t.set()
+            if act.task is not None and not act.task.done():
+                act.task.cancel()
+        for entity in act.barrier_entities:
+            try:
+                entity.undeclare()
+            except Exception:
+                pass
+        act.barrier_entities.clear()
+        if act.barrier_token is not None:
+            try:
+                act.barrier_token.undeclare()
+            except Exception:
+                pass
+            act.barrier_token = None
+
+    def _finish(self, act: _Active, status: Status, info: str) -> None:
+        self._release(act, abort=False)
+        self._active = None
+        self._done.add(act.entry.id)
+        if status == Status.FAILURE:
+            self._run_enabled = False  # the operator decides: retry, run (continue) or unsync
+        self._report(act.entry, status, info)
+        self._kick()
+
+    async def _execute(self, act: _Active) -> None:
+        entry = act.entry
+        try:
+            start_info = ""
+            recharge = await self._maybe_recharge(act)
+            if act.aborted:
+                return
+            if recharge is not None:  # the recharge failed: the skill fails
+                self._finish(act, Status.FAILURE, recharge)
+                return
+            if entry.barrier is not None:
+                await self._wait_barrier(act)
+                start_info = f"barrier {entry.barrier.barrier}: all partners ready"
+            retries = entry.skill.policies.retries
+            while True:
+                if act.paused:
+                    # paused between attempts: the retry starts once resumed
+                    await act.resumed.wait()
+                    if act.aborted:
+                        return
+                self._report(entry, Status.RUNNING, start_info)
+                self._apply_comms_policy()
+                reason = await self._call_handler(act)
+                if act.aborted:
+                    return
+                if reason is None:
+                    self._finish(act, Status.SUCCESS, "")
+                    return
+                if entry.retries_used >= retries:
+                    self._finish(act, Status.FAILURE, reason)
+                    return
+                # Autonomous retry: stays `running` with the next attempt
+                # (failure is final, so it is never reported in between).
+                entry.retries_used += 1
+                entry.attempt += 1
+                self._progress = None
+                start_info = f"retry {entry.retries_used}/{retries} after: {reason}"
+        except asyncio.CancelledError:
+            if act.aborted or self._session is None:
+                return  # stopped / agent stopping: whoever cancelled reported it
+            raise
+        except Exception as exc:  # a bug in the SDK itself: never leave the skill hanging
+            log.exception("%s: executing %s failed", self.name, entry.id)
+            if not act.aborted and self._active is act:
+                self._finish(act, Status.FAILURE, f"agent error: {type(exc).__name__}: {exc}")
+
+    async def _maybe_recharge(self, act: _Active) -> str | None:
+        """policies.recharge_below: run the `recharge` handler first when the
+        battery is low. Returns a failure reason, or None."""
+        threshold = act.entry.skill.policies.recharge_below
+        if threshold is None or "recharge" not in self._handlers or act.entry.skill.skill == "recharge":
+            return None
+        try:
+            level = float(self.battery())
+        except Exception:
+            log.exception("%s: agent.battery() failed", self.name)
+            return None
+        if level >= threshold:
+            return None
+        # Report it under the skill's own status: synchwaiting for a barrier skill
+        # (it is not ready yet), running otherwise.
+        status = Status.SYNCHWAITING if act.entry.barrier is not None else Status.RUNNING
+        self._report(act.entry, status, f"recharging first: battery {level:.0%} below {threshold:.0%}")
+        reason = await self._call_handler(act, purpose="recharge")
+        if reason is not None:
+            return f"recharge before the skill failed: {reason}"
+        return None
+
+    async def _call_handler(self, act: _Active, purpose: str = "skill") -> str | None:
+        """Run the handler once. None = success, else the failure reason.
+        Cancellation (stop) propagates."""
+        name = "recharge" if purpose == "recharge" else act.entry.skill.skill
+        handler = self._handlers[name]
+        raw_params = dict(act.entry.skill.params) if purpose == "skill" else {}
+        params = raw_params if handler.raw else {k: _convert(v) for k, v in raw_params.items()}
+        ctx = SkillContext(self, act, raw_params, purpose)
+        try:
+            if handler.is_async:
+                result = await handler.fn(ctx, **params)
+            else:
+                result = await _in_daemon_thread(handler.fn, ctx, **params)
+                if inspect.isawaitable(result):  # a sync function returning a coroutine
+                    result = await result
+        except SkillFailed as exc:
+            return exc.reason or "skill failed"
+        except asyncio.CancelledError:
+            if act.aborted or self._session is None:
+                raise
+            # The handler cancelled itself (e.g. a SkillStopped it raised
+            # without a stop): a failure, not a stop.
+            return "the handler was cancelled"
+        except Exception as exc:
+            return f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+        if isinstance(result, Failure):
+            return result.reason
+        if result is False:
+            return "the handler returned False"
+        return None
+
+    # ------------------------------------------------------------ barriers
+
+    async def _wait_barrier(self, act: _Active) -> None:
+        """Wait (synchwaiting) until every partner's ready token is present."""
+        assert self._session is not None and act.entry.barrier is not None
+        info = act.entry.barrier
+        session = self._session
+        partners = sorted(p for p in info.partners if p != self.name)
+        ready: set[str] = set()
+        online: dict[str, bool | None] = dict.fromkeys(partners)  # None: not known yet
+        changed = asyncio.Event()
+
+        def on_ready(key: str, alive: bool) -> None:
+            robot = key.rsplit("/", 1)[-1]
+            (ready.add if alive else ready.discard)(robot)
+            changed.set()
+
+        def on_alive(robot: str, alive: bool, from_query: bool) -> None:
+            # the subscriber is authoritative; the query only fills the unknown
+            if from_query and online[robot] is not None:
+                return
+            online[robot] = alive
+            changed.set()
+
+        # Order matters (race-free): subscribe to the partners' ready tokens
+        # (with history) BEFORE declaring ours. A partner starts only after it
+        # saw our token, and withdraws its own only after starting; so its
+        # token is either already there when we subscribe (history) or appears
+        # later (live): we cannot miss it. Declaring first could let a fast
+        # partner see us, start and withdraw before our subscription existed.
+        act.barrier_entities.append(
+            transport.watch_liveliness(
+                session,
+                Keys.barrier_ready(info.barrier, "*"),
+                lambda key, alive: self._post(on_ready, key, alive),
+            )
+        )
+        act.barrier_token = transport.declare_token(session, Keys.barrier_ready(info.barrier, self.name))
+        for p in partners:
+            act.barrier_entities.append(
+                transport.watch_liveliness(
+                    session, Keys.alive(p), lambda _k, alive, p=p: self._post(on_alive, p, alive, False)
+                )
+            )
+            self._query_presence(p, lambda alive, p=p: self._post(on_alive, p, alive, True))
+
+        reported_offline: tuple[str, ...] | None = None
+        while True:
+            missing = [p for p in partners if p not in ready]
+            if not missing:
+                return  # our token stays until the skill ends (see _release)
+            offline = tuple(p for p in missing if online[p] is False)
+            if offline:
+                text = "waiting for " + ", ".join(f"{p} (offline)" for p in offline)
+            else:
+                text = "waiting for " + ", ".join(missing)
+            # Report when entering and whenever a partner goes offline or comes
+            # back; other changes only update telemetry (no report flood).
+            if offline != reported_offline:
+                self._report(act.entry, Status.SYNCHWAITING, text)
+                reported_offline = offline
+            elif text != self._info:
+                self._info = text
+                self._publish_telemetry()
+            # all state changes happen on this loop: clearing here loses nothing
+            changed.clear()
+            await changed.wait()
+
+    def _query_presence(self, robot: str, on_result: Callable[[bool], object]) -> None:
+        """Ask once whether `robot`'s alive token exists (the subscriber's
+        history does not tell when "none" is final; this query does)."""
+        assert self._session is not None
+        found = [False]
+
+        def on_reply(reply: zenoh.Reply) -> None:
+            if reply.ok is not None:
+                found[0] = True
+
+        try:
+            self._session.liveliness().get(
+                Keys.alive(robot),
+                Callback(on_reply, lambda: on_result(found[0])),
+                timeout=self.request_timeout,
+            )
+        except zenoh.ZError:
+            log.exception("%s: cannot query the presence of %s", self.name, robot)
+
+    # ------------------------------------------------------------ world
+
+    async def _on_world(self, payload: bytes) -> bytes:
+        try:
+            msg = WorldMessage.model_validate_json(payload)
+        except ValidationError as exc:
+            raise transport.Refusal(
+                dumps(ErrorReply(code="bad_request", message=f"{self.name} cannot read the world message: {exc}"))
+            ) from None
+        if msg.kind == "ask":
+            self.world_stats["asks_received"] += 1
+            fn = self._ask_handlers.get(msg.topic)
+            data = await _maybe_await(fn(msg.data, msg.sender)) if fn is not None else None
+            if data is None:
+                return dumps(WorldReply(known=False))
+            return dumps(WorldReply(known=True, data=dict(data)))
+        self.world_stats["tells_received"] += 1
+        fn = self._tell_handlers.get(msg.topic)
+        if fn is not None:
+            await _maybe_await(fn(msg.data, msg.sender))
+        return dumps(WorldReply(known=fn is not None))
+
+    async def _world_query(self, robot: str, kind: str, topic: str, data: dict[str, Any] | None) -> WorldReply | None:
+        if self._session is None:
+            raise RuntimeError(f"agent {self.name} is not started")
+        msg = WorldMessage(kind=kind, sender=self.name, topic=topic, data=dict(data or {}))  # type: ignore[arg-type]
+        try:
+            raw = await transport.query(self._session, Keys.world(robot), dumps(msg), timeout=self.request_timeout)
+            return WorldReply.model_validate_json(raw)
+        except (transport.QueryFailed, transport.TransportError, ValidationError) as exc:
+            log.info("%s: %s %s/%s failed: %s", self.name, kind, robot, topic, exc)
+            return None
+
+    async def ask(self, robot: str, topic: str, data: dict[str, Any] | None = None) -> dict[str, Any] | None:
+        """Ask `robot` about `topic`; its answer, or None (unknown / unreachable)."""
+        self.world_stats["asks_sent"] += 1
+        reply = await self._world_query(robot, "ask", topic, data)
+        return reply.data if reply is not None and reply.known else None
+
+    async def tell(self, robot: str, topic: str, data: dict[str, Any] | None = None) -> bool:
+        """Tell `robot` something; True when it was delivered to a handler."""
+        self.world_stats["tells_sent"] += 1
+        reply = await self._world_query(robot, "tell", topic, data)
+        return reply is not None and reply.known
+
+
+# ---------------------------------------------------------------- helpers
+
+
+async def _maybe_await(value: Any) -> Any:
+    return await value if inspect.isawaitable(value) else value
+
+
+def _in_daemon_thread(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Awaitable[Any]:
+    """Like asyncio.to_thread, but in a daemon thread: a sync handler that never
+    checks for stop keeps running, yet cannot keep the process from exiting."""
+    loop = asyncio.get_running_loop()
+    future: asyncio.Future[Any] = loop.create_future()
+
+    def settle(ok: bool, value: Any) -> None:
+        if future.done():
+            return  # cancelled (stopped) meanwhile
+        if ok:
+            future.set_result(value)
+        else:
+            future.set_exception(value)
+
+    def run() -> None:
+        try:
+            result = fn(*args, **kwargs)
+        except BaseException as exc:  # noqa: BLE001 - handed to the awaiting task
+            outcome = (False, exc)
+        else:
+            outcome = (True, result)
+        try:
+            loop.call_soon_threadsafe(settle, *outcome)
+        except RuntimeError:
+            pass  # loop closed
+
+    threading.Thread(target=run, name=f"skill-{getattr(fn, '__name__', 'handler')}", daemon=True).start()
+    return future

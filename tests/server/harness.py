@@ -1,0 +1,125 @@
+"""Multi-process fixtures: a mission server and robot agents in subprocesses,
+clients in the test process; free loopback ports; everything stopped in
+teardown."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+from backend.client import MissionClient
+from backend.protocol import Keys, WorldMessage, dumps
+from backend.transport import free_port, loopback_endpoint, query
+
+ROOT = Path(__file__).resolve().parents[2]
+HERE = Path(__file__).resolve().parent
+
+
+class Proc:
+    """A subprocess whose output lines can be awaited."""
+
+    def __init__(self, args: list[str]):
+        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        self.p = subprocess.Popen(args, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        self.lines: list[str] = []
+
+    def wait_line(self, needle: str, timeout: float = 20.0) -> str:
+        import selectors
+        import time
+
+        sel = selectors.DefaultSelector()
+        sel.register(self.p.stdout, selectors.EVENT_READ)
+        deadline = time.monotonic() + timeout
+        for line in self.lines:
+            if needle in line:
+                return line
+        while time.monotonic() < deadline:
+            if not sel.select(timeout=max(0.0, deadline - time.monotonic())):
+                break
+            line = self.p.stdout.readline()
+            if not line:
+                break
+            self.lines.append(line)
+            if needle in line:
+                return line
+        raise AssertionError(f"no {needle!r} from {self.p.args} within {timeout}s; output:\n{''.join(self.lines)}")
+
+    def kill(self, sig: int = signal.SIGKILL) -> None:
+        if self.p.poll() is None:
+            self.p.send_signal(sig)
+        try:
+            self.p.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.p.kill()
+            self.p.wait()
+
+    def stop(self) -> None:
+        self.kill(signal.SIGTERM)
+
+
+class Cluster:
+    def __init__(self, tmp: Path, mission: str):
+        self.port = free_port()
+        self.endpoint = loopback_endpoint(self.port)
+        self.db = tmp / "mission.db"
+        self.mission = str(ROOT / mission)
+        self.procs: list[Proc] = []
+        self.server: Proc | None = None
+
+    def start_server(self) -> Proc:
+        self.server = Proc([sys.executable, "-m", "backend.cli", "server", "--mission", self.mission,
+                            "--listen", self.endpoint, "--db", str(self.db), "--command-timeout", "5"])
+        self.server.wait_line("listening on")
+        self.procs.append(self.server)
+        return self.server
+
+    def start_robots(self, *robots: str, delay: float = 0.0) -> Proc:
+        p = Proc([sys.executable, str(HERE / "robots.py"), "--connect", self.endpoint, "--delay", str(delay), *robots])
+        for r in robots:
+            p.wait_line(f"ready {r.split(':')[0]}")
+        self.procs.append(p)
+        return p
+
+    def stop(self) -> None:
+        for p in reversed(self.procs):
+            p.stop()
+
+
+def drive(cluster: Cluster, scenario, *, clients: int = 1, timeout: float = 90.0):
+    """Run `scenario(*clients)` on a fresh event loop with connected clients
+    (closed afterwards, whatever happens)."""
+
+    async def main():
+        opened = []
+        try:
+            for i in range(clients):
+                c = MissionClient(cluster.endpoint, client_id=f"test{i}")
+                await c.connect()
+                opened.append(c)
+            return await asyncio.wait_for(scenario(*opened), timeout)
+        finally:
+            for c in opened:
+                await c.close()
+
+    return asyncio.run(main())
+
+
+async def tell(client: MissionClient, robot: str, topic: str, data: dict) -> None:
+    msg = WorldMessage(kind="tell", sender="test", topic=topic, data=data)
+    await query(client.session, Keys.world(robot), dumps(msg), 5.0)
+
+
+def status(mission, sid: str) -> str | None:
+    found = mission.find(sid)
+    return found[2].status.value if found else None
+
+
+async def until(client: MissionClient, pred, timeout: float = 15.0):
+    return await client.wait_for(pred, timeout)
+
+
+__all__ = ["Cluster", "Proc", "drive", "status", "tell", "until"]

@@ -1,0 +1,79 @@
+"""Robot agents with trivial handlers, run as a separate process by the
+server tests:  python robots.py --connect E lru1:lru_science [lru2:...]
+
+Behaviour by skill label (so a test can script a robot from the plan):
+  "hold"   runs until another robot or the test tells it topic "release"
+           with {"id": skill id}, or until stopped;
+  "fail"   fails ("asked to fail");
+  "flaky"  fails on attempt 1, succeeds on later attempts;
+  anything else succeeds at once.
+Prints "ready NAME" per registered robot, then runs until SIGTERM/SIGINT.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import signal
+import sys
+
+from backend.agent import RobotAgent, SkillFailed
+
+SKILLS = {
+    "lru_science": ["drive_to", "explore", "take_science_image", "identify_stone", "recharge"],
+    "lru_manipulator": ["drive_to", "explore", "identify_stone", "pick_stone", "drop_stone",
+                        "pick_payload_box", "place_payload_box", "deploy_wifi_box", "recharge"],
+}
+
+
+def make_agent(name: str, rtype: str, connect: str, delay: float) -> RobotAgent:
+    agent = RobotAgent(name, rtype, connect=[connect], modules={"base": "1.0.0"}, lease_ms=1000,
+                       telemetry_hz=5)
+    agent.link.delay_s = delay
+    released: set[str] = set()
+    agent.on_tell("release", lambda data, sender: released.add(data.get("id", "")))
+
+    async def handler(ctx, **params):
+        label = ctx.skill.label
+        if "fail" in label and "flaky" not in label:
+            raise SkillFailed("asked to fail")
+        if "flaky" in label and ctx.skill.attempt == 1:
+            raise SkillFailed("flaky: first attempt fails")
+        if "hold" in label:
+            base = ctx.skill.id.split(".")[0]
+            while ctx.skill.id not in released and base not in released:
+                ctx.progress(0.5, "holding")
+                await ctx.sleep(0.01)
+        ctx.progress(1.0)
+
+    for skill in SKILLS[rtype]:
+        agent.add_skill(skill, handler, version="1.0.0", raw=True)
+    return agent
+
+
+async def main(argv: list[str]) -> int:
+    p = argparse.ArgumentParser()
+    p.add_argument("--connect", required=True)
+    p.add_argument("--delay", type=float, default=0.0)
+    p.add_argument("robots", nargs="+", metavar="NAME:TYPE")
+    args = p.parse_args(argv)
+    agents = [make_agent(*r.split(":"), args.connect, args.delay) for r in args.robots]
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        loop.add_signal_handler(sig, stop.set)
+    for a in agents:
+        await a.start()
+    try:
+        for a in agents:
+            await a.wait_registered(timeout=20)
+            print(f"ready {a.name}", flush=True)
+        await stop.wait()
+    finally:
+        for a in agents:
+            await a.stop()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(asyncio.run(main(sys.argv[1:])))
