@@ -78,7 +78,7 @@ class Cluster:
         return self.server
 
     def start_robots(self, *robots: str, delay: float = 0.0) -> Proc:
-        p = Proc([sys.executable, str(HERE / "robots.py"), "--connect", self.endpoint, "--delay", str(delay), *robots])
+        p = Proc([sys.executable, str(ROOT / "docs" / "examples" / "trivial_robots.py"), "--connect", self.endpoint, "--delay", str(delay), *robots])
         for r in robots:
             p.wait_line(f"ready {r.split(':')[0]}")
         self.procs.append(p)

@@ -1,5 +1,8 @@
-"""Robot agents with trivial handlers, run as a separate process by the
-server tests:  python robots.py --connect E lru1:lru_science [lru2:...]
+"""Robot agents with trivial handlers: the smallest integration of the robot
+SDK, used by the live tests and the README's three-terminal walk-through:
+
+    python docs/examples/trivial_robots.py --connect tcp/127.0.0.1:7447 \
+        lru1:lru_science lru2:lru_manipulator
 
 Behaviour by skill label (so a test can script a robot from the plan):
   "hold"   runs until another robot or the test tells it topic "release"
