@@ -70,6 +70,9 @@ def build_parser() -> argparse.ArgumentParser:
     from . import server_cli
 
     server_cli.register(sub)
+    from . import ctl
+
+    ctl.register(sub)
     for _name, register in _registrations():
         register(sub)
     return p

@@ -549,11 +549,27 @@ class Engine:
         old_value = old.area if old.kind == "area" else getattr(old, old.kind)
         return events, notes, {"stale": stale}, MarkerMove(name=op.name, value=old_value)
 
+    def _named(self, name: str):
+        """Skills whose marker-type parameter names marker `name` (not finished)."""
+        for robot, task in self.mission.tasks.items():
+            rtype = self.mission.robots[robot].type if robot in self.mission.robots else ""
+            for s in task:
+                spec = self.library.skill_for(rtype, s.skill)
+                if spec is None or s.status in FINISHED:
+                    continue
+                for pname, pspec in spec.params.items():
+                    if pspec.type == "marker" and s.params.get(pname) == name:
+                        yield robot, s, pname
+
     def _op_marker_rename(self, op: MarkerRename, client: str):
         mk = self._marker(op.name)
         if op.new_name in self.mission.markers:
             raise Refusal("exists", f"a marker named '{op.new_name}' exists already")
         events: list = [ev.MarkerSet(name=op.new_name, marker=mk), ev.MarkerRemoved(name=op.name)]
+        for robot, s, pname in self._named(op.name):
+            if s.status != Status.IDLE:
+                raise Refusal("marker_in_use", f"cannot rename marker '{op.name}': {s.display()} on {robot} is {s.status.value} and names it in '{pname}'", robot=robot, skill=s.id)
+            events.append(ev.SkillChanged(id=s.id, changes={"params": {**s.params, pname: op.new_name}}))
         # a binding names where a value came from, not the value: follow the
         # rename on the plan and the queue; the execution log stays as it ran
         for _, s, pname in self._bound(op.name):
@@ -564,6 +580,8 @@ class Engine:
 
     def _op_marker_delete(self, op: MarkerDelete, client: str):
         marker = self._marker(op.name)
+        for robot, s, pname in self._named(op.name):
+            raise Refusal("marker_in_use", f"cannot delete marker '{op.name}': {s.display()} on {robot} names it in '{pname}'; change that first", robot=robot, skill=s.id)
         events: list = [ev.MarkerRemoved(name=op.name)]
         unbound: list[tuple[str, str]] = []
         for robot, s, pname in self._bound(op.name):
@@ -614,6 +632,7 @@ class Engine:
 
             raise Refusal("bad_mission", f"the mission is invalid at {format_path(path)}: {msg}")
         new.revision = self.mission.revision
+        new.library = self.mission.library  # the server's library stays; the file's path was relative to it
         # everything in the new mission counts as changed now (stale edits of
         # the old mission are refused)
         stamp = self.mission.revision + 1

@@ -1,0 +1,452 @@
+"""`missionctl ctl` without a server: argument parsing, parameter values and
+the operation each sub-command builds."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from backend import ops
+from backend.ctl import (
+    DEFAULT_CONNECT,
+    FileInvalid,
+    MarkerRef,
+    UsageError,
+    build_op,
+    default_client_id,
+    default_endpoints,
+    parse_area,
+    parse_args,
+    parse_param,
+    parse_params,
+    parse_pose,
+    parse_position,
+    run,
+    short_value,
+)
+from backend.files import load_mission
+from backend.model import Policies
+from backend.transport import free_port, loopback_endpoint
+
+from .helpers import LIBRARY, ROOT, TUTORIAL
+
+
+@pytest.fixture(scope="module")
+def tutorial():
+    mission, library = load_mission(TUTORIAL)
+    return mission, library
+
+
+def op_of(argv: list[str], tutorial=None):
+    args = parse_args(argv)
+    if tutorial is None:
+        return build_op(args)
+    mission, library = tutorial
+    return build_op(args, library, mission)
+
+
+# ---------------------------------------------------------------- --param
+
+
+@pytest.mark.parametrize(
+    ("text", "name", "value"),
+    [
+        ("speed=0.5", "speed", 0.5),
+        ("slot=3", "slot", 3),
+        ("return_to_start=true", "return_to_start", True),
+        ("filter=near_infrared", "filter", "near_infrared"),
+        ("label=hello world", "label", "hello world"),
+        ("box='3'", "box", "3"),
+        ("speed=", "speed", None),
+        ("speed=null", "speed", None),
+        ("expr=a=b", "expr", "a=b"),
+        ("day=2024-05-01", "day", "2024-05-01"),
+        ("goal={x: 3, y: 4, yaw: 0}", "goal", {"x": 3, "y": 4, "yaw": 0}),
+        ("camera={exposure_ms: 20, gain: 1.5}", "camera", {"exposure_ms": 20, "gain": 1.5}),
+        ("sensors=[stereo_camera, lidar]", "sensors", ["stereo_camera", "lidar"]),
+        ("area=[{x: 0, y: 0}, {x: 1, y: 0}, {x: 1, y: 1}]", "area", [{"x": 0, "y": 0}, {"x": 1, "y": 0}, {"x": 1, "y": 1}]),
+        ("goal=@POI-A", "goal", MarkerRef("POI-A")),
+        ('goal="@POI-A"', "goal", MarkerRef("POI-A")),
+        (" goal =@POI-A", "goal", MarkerRef("POI-A")),
+    ],
+)
+def test_param_values(text, name, value):
+    assert parse_param(text) == (name, value)
+
+
+@pytest.mark.parametrize(
+    ("text", "needle"),
+    [
+        ("goal", "expected NAME=VALUE"),
+        ("=3", "expected NAME=VALUE"),
+        ("bad name=3", "not a parameter name"),
+        ("goal={x: 3", "not a valid YAML value"),
+        ("goal={x: 3", "quote the whole argument"),
+        ("goal=x: 3, y: 4", "braces"),
+        ("goal=x: 3", "braces"),
+        ("sensors=- a", "brackets"),
+        ("speed=.inf", "not a finite number"),
+        ("speed=.nan", "not a finite number"),
+        ("goal={x: .nan}", "not a finite number"),
+        ("goal=@", "not a valid name"),
+        ("goal=@bad name", "not a valid name"),
+        ("goal=[1, 2", "not a valid YAML value"),
+    ],
+)
+def test_bad_params(text, needle):
+    with pytest.raises(UsageError) as e:
+        parse_param(text)
+    assert needle in str(e.value)
+    assert "--param" in str(e.value)
+
+
+def test_param_given_twice():
+    with pytest.raises(UsageError, match="given twice"):
+        parse_params(["speed=0.1", "speed=0.2"])
+
+
+# ---------------------------------------------------------------- geometry
+
+
+def test_geometry():
+    assert parse_pose("1,2") == {"x": 1, "y": 2}
+    assert parse_pose("1,2,3,0.1,0.2,0.3") == {"x": 1, "y": 2, "z": 3, "roll": 0.1, "pitch": 0.2, "yaw": 0.3}
+    assert parse_pose("{x: 1, y: 2, yaw: 1.5}") == {"x": 1, "y": 2, "yaw": 1.5}
+    assert parse_pose("-1, 2.5") == {"x": -1, "y": 2.5}
+    assert parse_position("1,2,3") == {"x": 1, "y": 2, "z": 3}
+    assert parse_area("0,0 5,0 5,5") == [{"x": 0, "y": 0}, {"x": 5, "y": 0}, {"x": 5, "y": 5}]
+    assert parse_area("0,0;5,0;5,5,1") == [{"x": 0, "y": 0}, {"x": 5, "y": 0}, {"x": 5, "y": 5, "z": 1}]
+    assert parse_area("[[0, 0], {x: 5, y: 0}, [5, 5]]") == [{"x": 0, "y": 0}, {"x": 5, "y": 0}, {"x": 5, "y": 5}]
+    for bad, needle in [
+        (lambda: parse_pose("1"), "2 to 6"),
+        (lambda: parse_pose("1,2,3,4,5,6,7"), "2 to 6"),
+        (lambda: parse_pose("1,north"), "not a number"),
+        (lambda: parse_pose("1,inf"), "finite"),
+        (lambda: parse_pose("{x: 1, heading: 2}"), "unknown field 'heading'"),
+        (lambda: parse_position("1,2,3,4"), "2 to 3"),
+        (lambda: parse_area("0,0 1,1"), "at least 3 points"),
+        (lambda: parse_area("0,0 1,1 2"), "--area point 3"),
+    ]:
+        with pytest.raises(UsageError) as e:
+            bad()
+        assert needle in str(e.value)
+
+
+def test_short_value():
+    assert short_value({"x": 9.0, "y": 4.0, "z": 0.0, "roll": 0.0, "pitch": 0.0, "yaw": 0.0}) == "(9,4)"
+    assert short_value({"x": 1.0, "y": 2.0, "z": 0.0, "roll": 0.0, "pitch": 0.0, "yaw": 1.5}) == "(1,2 yaw=1.5)"
+    assert short_value([{"x": 0, "y": 0}] * 4) == "[4 points]"
+    assert short_value("near_infrared") == "near_infrared"
+    assert short_value("two words") == '"two words"'
+    assert len(short_value(list(range(100)))) <= 40
+
+
+# ---------------------------------------------------------------- options
+
+
+def test_common_options_before_or_after_op(monkeypatch):
+    monkeypatch.delenv("MISSIONCTL_CONNECT", raising=False)
+    a = parse_args(["state"])
+    assert a.json is False and a.connect is None and a.timeout == 10.0 and a.client_id is None
+    assert parse_args(["--json", "state"]).json is True
+    assert parse_args(["state", "--json"]).json is True
+    a = parse_args(["--connect", "tcp/127.0.0.1:1", "--timeout", "2", "add", "lru1", "recharge", "--client-id", "me"])
+    assert a.connect == ["tcp/127.0.0.1:1"] and a.timeout == 2.0 and a.client_id == "me"
+    assert parse_args(["add", "lru1", "recharge", "--connect", "tcp/127.0.0.1:2"]).connect == ["tcp/127.0.0.1:2"]
+    assert parse_args(["edit", "x", "--label", "y", "--expect-revision", "4"]).expect_revision == 4
+    assert parse_args(["marker", "delete", "M", "--json"]).json is True
+    assert default_endpoints() == [DEFAULT_CONNECT]
+    monkeypatch.setenv("MISSIONCTL_CONNECT", "tcp/127.0.0.1:9,tcp/127.0.0.1:10")
+    assert default_endpoints() == ["tcp/127.0.0.1:9", "tcp/127.0.0.1:10"]
+
+
+def test_client_id_is_stable_across_invocations(monkeypatch):
+    monkeypatch.delenv("MISSIONCTL_CLIENT_ID", raising=False)
+    assert default_client_id() == default_client_id()
+    assert default_client_id().startswith("ctl-")
+    monkeypatch.setenv("MISSIONCTL_CLIENT_ID", "console-7")
+    assert default_client_id() == "console-7"
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["frobnicate"],
+        ["add", "lru1"],
+        ["move", "lru1-1", "first"],
+        ["marker", "add", "M"],  # no geometry
+        ["marker", "add", "M", "--pose", "1,2", "--position", "1,2"],
+        ["marker", "spin", "M"],
+        ["add", "lru1", "recharge", "--retries", "-1"],
+        ["add", "lru1", "recharge", "--recharge-below", "1.5"],
+        ["state", "--timeout", "0"],
+        ["watch", "--count", "many"],
+    ],
+)
+def test_argparse_errors_exit_2(argv, capsys):
+    with pytest.raises(SystemExit) as e:
+        parse_args(argv)
+    assert e.value.code == 2
+    assert "error:" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------- operations
+
+
+def test_add(tutorial):
+    op = op_of(["add", "lru1", "drive_to", "--param", "goal={x: 3, y: 4, yaw: 0}", "--param", "speed=0.4",
+                "--label", "drive out", "--at", "1"], tutorial)
+    assert op == ops.AddSkill(robot="lru1", skill="drive_to", label="drive out",
+                              params={"goal": {"x": 3, "y": 4, "yaw": 0}, "speed": 0.4}, at=1)
+    # @MARKER: a pose parameter is bound; a marker parameter names the marker
+    op = op_of(["add", "lru2", "pick_stone", "--param", "target=@POI-A", "--param", "region=@ROI-1"], tutorial)
+    assert op.params == {"region": "ROI-1"} and op.bindings == {"target": "POI-A"}
+    # other parameter types keep the text (as in mission files); without a
+    # library the reference is a binding (the server names what is wrong)
+    op = op_of(["add", "lru1", "explore", "--param", "sensors=@lidar"], tutorial)
+    assert op.params == {"sensors": "@lidar"} and op.bindings == {}
+    op = op_of(["add", "lru2", "pick_stone", "--param", "region=@ROI-1"])
+    assert op.bindings == {"region": "ROI-1"}
+    op = op_of(["add", "lru1", "recharge", "--retries", "3", "--pause-out-of-comms", "--recharge-below", "0.2"], tutorial)
+    assert op.policies == Policies(retries=3, pause_out_of_comms=True, recharge_below=0.2)
+    assert op_of(["add", "lru1", "recharge"], tutorial).policies is None
+
+
+def test_add_bad_input(tutorial):
+    for argv, needle in [
+        (["add", "lru 1", "recharge"], "ROBOT"),
+        (["add", "lru1", "re charge"], "SKILL"),
+        (["add", "lru1", "recharge", "--retries", "50"], "policies"),
+        (["add", "lru1", "drive_to", "--param", "goal"], "--param"),
+    ]:
+        with pytest.raises(UsageError) as e:
+            op_of(argv, tutorial)
+        assert needle in str(e.value)
+
+
+def test_edit(tutorial):
+    mission, _ = tutorial
+    op = op_of(["edit", "lru1-1", "--label", "new", "--param", "speed=0.7", "--param", "goal=@POI-A"], tutorial)
+    assert op == ops.EditSkill(id="lru1-1", label="new", params={"speed": 0.7}, bindings={"goal": "POI-A"})
+    op = op_of(["edit", "lru1-1", "--unbind", "goal"], tutorial)
+    assert op.bindings == {"goal": None} and op.params == {} and op.label is None
+    # unnamed policies are kept from the skill as it is
+    mission.tasks["lru1"][0].policies = Policies(retries=2, recharge_below=0.3)
+    try:
+        op = op_of(["edit", "lru1-1", "--pause-out-of-comms"], tutorial)
+        assert op.policies == Policies(retries=2, pause_out_of_comms=True, recharge_below=0.3)
+        op = op_of(["edit", "lru1-1", "--recharge-below", "off"], tutorial)
+        assert op.policies == Policies(retries=2, recharge_below=None)
+    finally:
+        mission.tasks["lru1"][0].policies = Policies()
+    with pytest.raises(UsageError, match="nothing to change"):
+        op_of(["edit", "lru1-1"], tutorial)
+    with pytest.raises(UsageError, match="contradict"):
+        op_of(["edit", "lru1-1", "--param", "goal={x: 1}", "--unbind", "goal"], tutorial)
+    with pytest.raises(UsageError, match="not a valid name or id"):
+        op_of(["edit", "lru1 1", "--label", "x"], tutorial)
+
+
+def test_simple_operations(tutorial):
+    cases = [
+        (["delete", "lru1-1", "lru2-2"], ops.DeleteSkills(ids=["lru1-1", "lru2-2"])),
+        (["move", "lru1-2", "0"], ops.MoveSkill(id="lru1-2", index=0)),
+        (["sync", "lru1"], ops.Sync(robot="lru1")),
+        (["sync", "lru1", "--through", "lru1-1"], ops.Sync(robot="lru1", through="lru1-1")),
+        (["unsync", "lru2"], ops.Unsync(robot="lru2")),
+        (["unsync", "lru2", "--from", "lru2-2"], ops.Unsync(robot="lru2", from_id="lru2-2")),
+        (["retry", "lru1-1"], ops.Retry(id="lru1-1")),
+        (["barrier", "lru1-2", "lru2-2"], ops.AddBarrier(ids=["lru1-2", "lru2-2"])),
+        (["unbarrier", "b1"], ops.RemoveBarrier(barrier="b1")),
+        (["new"], ops.NewMission(name="mission")),
+        (["new", "Day 2"], ops.NewMission(name="Day 2")),
+        (["undo"], ops.Undo()),
+        (["redo"], ops.Redo()),
+    ]
+    for action in ("run", "pause", "stop", "reset"):
+        cases.append(([action, "lru1"], ops.Control(op=action, robot="lru1")))
+        cases.append(([action, "--all"], ops.Control(op=action, robot=None)))
+    for argv, expected in cases:
+        assert op_of(argv, tutorial) == expected, argv
+        assert op_of(argv) == expected, argv  # the same without server data
+    for argv in (["state"], ["state", "lru1"], ["robots"], ["watch"], ["save", "x.yaml"]):
+        assert op_of(argv, tutorial) is None
+
+
+def test_operation_usage_errors(tutorial):
+    for argv, needle in [
+        (["move", "lru1-1", "-1"], "INDEX must be 0 or more"),
+        (["barrier", "lru1-1"], "at least two"),
+        (["run"], "ROBOT or --all"),
+        (["stop", "lru1", "--all"], "ROBOT or --all"),
+        (["delete", "no such id"], "not a valid name or id"),
+        (["state", "bad robot"], "ROBOT"),
+        (["marker", "rename", "POI-A", "bad name"], "NEW_NAME"),
+    ]:
+        with pytest.raises(UsageError) as e:
+            op_of(argv, tutorial)
+        assert needle in str(e.value), argv
+
+
+def test_markers(tutorial):
+    op = op_of(["marker", "add", "P1", "--pose", "1,2,0,0,0,1.5", "--description", "a rock"], tutorial)
+    assert op.op == "marker_add" and op.marker.kind == "pose" and op.marker.pose.yaw == 1.5
+    assert op.marker.description == "a rock"
+    op = op_of(["marker", "add", "P2", "--pose=-3,4"], tutorial)
+    assert (op.marker.pose.x, op.marker.pose.y) == (-3, 4)
+    op = op_of(["marker", "add", "Q", "--position", "1,2"], tutorial)
+    assert op.marker.kind == "position" and op.marker.position.y == 2
+    op = op_of(["marker", "add", "R", "--area", "0,0 4,0 4,4 0,4"], tutorial)
+    assert op.marker.kind == "area" and len(op.marker.area) == 4
+    op = op_of(["marker", "move", "R", "--area", "0,0 5,0 5,5"], tutorial)
+    assert op.op == "marker_move" and len(op.value) == 3
+    op = op_of(["marker", "move", "POI-A", "--pose", "1,2,0,0,0,0.5"], tutorial)
+    assert op.value.yaw == 0.5
+    # --position on a pose marker keeps its orientation
+    mission, _ = tutorial
+    mission.markers["POI-A"].pose.yaw = 0.7
+    try:
+        op = op_of(["marker", "move", "POI-A", "--position", "3,4"], tutorial)
+        assert (op.value.x, op.value.y, op.value.yaw) == (3, 4, 0.7)
+    finally:
+        mission.markers["POI-A"].pose.yaw = 0.0
+    assert op_of(["marker", "rename", "POI-A", "POI-B"], tutorial) == ops.MarkerRename(name="POI-A", new_name="POI-B")
+    assert op_of(["marker", "delete", "POI-A"], tutorial) == ops.MarkerDelete(name="POI-A")
+
+
+def test_load(tmp_path):
+    op = op_of(["load", str(TUTORIAL)])
+    assert op.op == "load" and op.mission.name == "Tutorial"
+    assert op.mission.tasks["lru1"][0].bindings == {"goal": "POI-A"}  # "@POI-A" in the file
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(f"format: missionctl/mission@1\nlibrary: {LIBRARY}\nrobots:\n  lru1: {{type: hovercraft}}\n")
+    with pytest.raises(FileInvalid) as e:
+        op_of(["load", str(bad)])
+    assert any("hovercraft" in str(i) and f"{bad}:4:" in str(i) for i in e.value.issues)
+    with pytest.raises(FileInvalid):
+        op_of(["load", str(tmp_path / "missing.yaml")])
+
+
+# ---------------------------------------------------------------- run(): exit codes without a server
+
+
+def _nobody() -> str:
+    return loopback_endpoint(free_port())  # nothing listens there
+
+
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["add", "lru1", "drive_to", "--param", "goal"], "--param 'goal'"),
+        (["add", "lru1", "drive_to", "--param", "goal={x: 3"], "--param goal"),
+        (["edit", "lru1-1"], "nothing to change"),
+        (["barrier", "lru1-1"], "at least two"),
+        (["run"], "ROBOT or --all"),
+        (["marker", "add", "M", "--area", "1,1"], "--area"),
+        (["move", "lru1-1", "-2"], "INDEX"),
+    ],
+)
+def test_bad_usage_exits_2_before_connecting(argv, needle, capsys):
+    """Bad input is refused here (exit 2) even though no server runs (that would be 3)."""
+    code = run(parse_args(["--connect", _nobody(), *argv]))
+    out, err = capsys.readouterr()
+    assert code == 2
+    assert needle in err and "Traceback" not in err
+    assert out == ""
+
+
+def test_bad_usage_json(capsys):
+    code = run(parse_args(["--connect", _nobody(), "--json", "add", "lru1", "drive_to", "--param", "speed"]))
+    out, err = capsys.readouterr()
+    assert code == 2
+    obj = json.loads(out)
+    assert obj["ok"] is False and obj["code"] == "bad_input" and "--param" in obj["message"]
+    assert "--param" in err
+
+
+def test_invalid_file_exits_2_before_connecting(tmp_path, capsys):
+    bad = tmp_path / "broken.yaml"
+    bad.write_text("format: missionctl/mission@1\nlibrary: nowhere.yaml\n")
+    code = run(parse_args(["--connect", _nobody(), "load", str(bad)]))
+    err = capsys.readouterr().err
+    assert code == 2
+    assert f"{bad}:2:" in err and "nowhere.yaml" in err
+
+
+def test_bad_endpoint_exits_2(capsys):
+    code = run(parse_args(["--connect", "not-an-endpoint", "state"]))
+    assert code == 2
+    assert "--connect" in capsys.readouterr().err
+
+
+def test_save_into_missing_folder_exits_2(tmp_path, capsys):
+    code = run(parse_args(["--connect", _nobody(), "save", str(tmp_path / "no" / "such" / "m.yaml")]))
+    assert code == 2
+    assert "does not exist" in capsys.readouterr().err
+
+
+def test_help_documents_everything():
+    import contextlib
+    import io
+
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf), pytest.raises(SystemExit):
+        parse_args(["--help"])
+    text = buf.getvalue()
+    for needle in ("--param NAME=VALUE", "@MARKER", "Exit codes", "--expect-revision", "MISSIONCTL_CONNECT",
+                   "marker add", "watch", "--json"):
+        assert needle in text, needle
+    assert ROOT.exists()
+
+
+# ---------------------------------------------------------------- rendering (no server)
+
+
+def _fake_client(tutorial):
+    from types import SimpleNamespace
+
+    from backend.model import Status
+    from backend.protocol import RobotInfo
+
+    mission, library = tutorial
+    m = mission.model_copy(deep=True)
+    m.tasks["lru1"][0].status = Status.SUCCESS
+    m.tasks["lru1"][1].status = Status.RUNNING
+    m.tasks["lru1"][1].status_info = "imaging"
+    m.tasks["lru2"][0].attempt = 2
+    robots = {"lru1": RobotInfo(name="lru1", online=True), "lru2": RobotInfo(name="lru2")}
+    return SimpleNamespace(mission=m, library=library, robots=robots, telemetry={}, endpoints=["tcp/127.0.0.1:1"],
+                           server_id="s1", revision=m.revision)
+
+
+def test_state_text_and_json_without_server(tutorial):
+    from backend.ctl import state_json, state_text
+
+    client = _fake_client(tutorial)
+    text = state_text(client, unicode=True)
+    assert "✓ lru1-1" in text and "▶ lru1-2" in text and "○ lru2-1" in text
+    assert "goal=@POI-A" in text and "speed" not in text  # defaults are left out
+    assert "— imaging" in text and "(attempt 2)" in text and "lru1 (lru_science) — online" in text
+    ascii_text = state_text(client, unicode=False)
+    assert ascii_text.isascii() and "+ lru1-1" in ascii_text and "> lru1-2" in ascii_text
+    only = state_text(client, ["lru2"], unicode=True)
+    assert "lru1-1" not in only and "lru2-1" in only
+    data = state_json(client)
+    json.dumps(data)  # plain JSON
+    assert data["tasks"]["lru1"][1]["status"] == "running" and data["tasks"]["lru1"][1]["status_info"] == "imaging"
+    assert data["robots"]["lru1"]["online"] is True and data["robots"]["lru2"]["online"] is False
+
+
+def test_describe_lines():
+    from backend.ctl import describe
+    from backend.protocol import OpReply
+
+    add = ops.AddSkill(robot="lru1", skill="drive_to")
+    assert describe(add, OpReply(revision=12, value={"id": "lru1-7"}), 11, None) == "added lru1-7 (drive_to) to lru1 at revision 12"
+    edit = ops.EditSkill(id="lru1-7", label="x")
+    assert "nothing changed" in describe(edit, OpReply(revision=12), 12, None)
+    dup = describe(add, OpReply(revision=12, value={"id": "lru1-7"}, duplicate=True), 12, None)
+    assert dup.endswith("(this request had been applied already)")
+    run_all = ops.Control(op="run")
+    assert describe(run_all, OpReply(revision=3, value={"robots": {"lru1": "ok", "lru2": "lru2 is busy"}}), 3, None) == "run sent to lru1 at revision 3"
