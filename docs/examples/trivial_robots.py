@@ -59,7 +59,12 @@ async def main(argv: list[str]) -> int:
     p.add_argument("--connect", required=True)
     p.add_argument("--delay", type=float, default=0.0)
     p.add_argument("robots", nargs="+", metavar="NAME:TYPE")
+    p.add_argument("-v", "--verbose", action="store_true", help="log the agents' activity")
     args = p.parse_args(argv)
+    if args.verbose:
+        import logging
+
+        logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
     agents = [make_agent(*r.split(":"), args.connect, args.delay) for r in args.robots]
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()

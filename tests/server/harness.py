@@ -9,6 +9,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 from backend.client import MissionClient
@@ -20,33 +21,36 @@ HERE = Path(__file__).resolve().parent
 
 
 class Proc:
-    """A subprocess whose output lines can be awaited."""
+    """A subprocess whose output lines can be awaited (a reader thread takes
+    them off the pipe: select() on a buffered pipe misses lines already read)."""
 
     def __init__(self, args: list[str]):
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         self.p = subprocess.Popen(args, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         self.lines: list[str] = []
+        self._cond = threading.Condition()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        for line in self.p.stdout:
+            with self._cond:
+                self.lines.append(line)
+                self._cond.notify_all()
+        with self._cond:
+            self._cond.notify_all()
+
+    def output(self) -> str:
+        with self._cond:
+            return "".join(self.lines)
 
     def wait_line(self, needle: str, timeout: float = 20.0) -> str:
-        import selectors
-        import time
+        def found() -> str | None:
+            return next((line for line in self.lines if needle in line), None)
 
-        sel = selectors.DefaultSelector()
-        sel.register(self.p.stdout, selectors.EVENT_READ)
-        deadline = time.monotonic() + timeout
-        for line in self.lines:
-            if needle in line:
-                return line
-        while time.monotonic() < deadline:
-            if not sel.select(timeout=max(0.0, deadline - time.monotonic())):
-                break
-            line = self.p.stdout.readline()
-            if not line:
-                break
-            self.lines.append(line)
-            if needle in line:
-                return line
-        raise AssertionError(f"no {needle!r} from {self.p.args} within {timeout}s; output:\n{''.join(self.lines)}")
+        with self._cond:
+            if self._cond.wait_for(lambda: found() is not None or self.p.poll() is not None, timeout) and found():
+                return found()
+        raise AssertionError(f"no {needle!r} from {self.p.args} within {timeout}s; output:\n{self.output()}")
 
     def kill(self, sig: int = signal.SIGKILL) -> None:
         if self.p.poll() is None:
@@ -72,13 +76,13 @@ class Cluster:
 
     def start_server(self) -> Proc:
         self.server = Proc([sys.executable, "-m", "backend.cli", "server", "--mission", self.mission,
-                            "--listen", self.endpoint, "--db", str(self.db), "--command-timeout", "5"])
+                            "--listen", self.endpoint, "--db", str(self.db), "--command-timeout", "5", "-v"])
         self.server.wait_line("listening on")
         self.procs.append(self.server)
         return self.server
 
     def start_robots(self, *robots: str, delay: float = 0.0) -> Proc:
-        p = Proc([sys.executable, str(ROOT / "docs" / "examples" / "trivial_robots.py"), "--connect", self.endpoint, "--delay", str(delay), *robots])
+        p = Proc([sys.executable, str(ROOT / "docs" / "examples" / "trivial_robots.py"), "--connect", self.endpoint, "--delay", str(delay), "-v", *robots])
         for r in robots:
             p.wait_line(f"ready {r.split(':')[0]}")
         self.procs.append(p)
