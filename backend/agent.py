@@ -414,6 +414,7 @@ class RobotAgent:
         self._tasks: list[asyncio.Task[None]] = []
         self._server_up = False
         self._registered = False
+        self._closing = False
         self._in_range = True
         self._register_wake: asyncio.Event | None = None
         self._flush_wake: asyncio.Event | None = None
@@ -516,6 +517,7 @@ class RobotAgent:
             raise RuntimeError(f"agent {self.name} is already started")
         self._loop = asyncio.get_running_loop()
         self._loop_thread = threading.get_ident()
+        self._closing = False
         self._register_wake = asyncio.Event()
         self._flush_wake = asyncio.Event()
         self._registered_evt = asyncio.Event()
@@ -561,9 +563,18 @@ class RobotAgent:
             self._active = None
             if act.task is not None:
                 tasks.append(act.task)
+        # The flag and the wake-ups end our loops even if a cancellation gets
+        # lost (Python 3.11's wait_for swallows one that races a completion).
+        self._closing = True
+        for event in (self._register_wake, self._flush_wake):
+            if event is not None:
+                event.set()
         for task in tasks:
             task.cancel()
-        await asyncio.gather(*tasks, return_exceptions=True)
+        if tasks:
+            _done, pending = await asyncio.wait(tasks, timeout=2.0)
+            if pending:
+                log.warning("%s: tasks still running at stop: %s", self.name, [t.get_name() for t in pending])
         self._tasks = []
         if self._outbox and self._registered and self._link_in_range():
             try:
@@ -624,7 +635,7 @@ class RobotAgent:
 
     async def _registrar(self) -> None:
         assert self._register_wake is not None
-        while True:
+        while not self._closing:
             await self._register_wake.wait()
             self._register_wake.clear()
             if not self._server_up or self._registered or not self._link_in_range():
@@ -707,7 +718,7 @@ class RobotAgent:
 
     async def _flusher(self) -> None:
         assert self._flush_wake is not None
-        while True:
+        while not self._closing:
             await self._flush_wake.wait()
             self._flush_wake.clear()
             if not self._outbox or not self._registered or not self._link_in_range():
@@ -806,7 +817,7 @@ class RobotAgent:
         period = 1.0 / self.telemetry_hz if self.telemetry_hz > 0 else None
         if period is None:
             return
-        while True:
+        while not self._closing:
             self._publish_telemetry()
             await asyncio.sleep(period)
 
@@ -814,7 +825,7 @@ class RobotAgent:
 
     async def _link_loop(self) -> None:
         """Poll the link model; act on range changes."""
-        while True:
+        while not self._closing:
             await asyncio.sleep(_LINK_POLL_S)
             now = self._link_in_range()
             if now == self._in_range:
@@ -1046,6 +1057,8 @@ class RobotAgent:
                 return
             if entry.barrier is not None:
                 await self._wait_barrier(act)
+                if act.aborted:
+                    return
                 start_info = f"barrier {entry.barrier.barrier}: all partners ready"
             retries = entry.skill.policies.retries
             while True:
@@ -1142,12 +1155,17 @@ class RobotAgent:
         session = self._session
         partners = sorted(p for p in info.partners if p != self.name)
         ready: set[str] = set()
+        met = [False]
         online: dict[str, bool | None] = dict.fromkeys(partners)  # None: not known yet
         changed = asyncio.Event()
 
         def on_ready(key: str, alive: bool) -> None:
             robot = key.rsplit("/", 1)[-1]
             (ready.add if alive else ready.discard)(robot)
+            # Judge in event order: a fast partner may start, finish and
+            # withdraw its token before this loop looks again; it was ready.
+            if all(p in ready for p in partners):
+                met[0] = True
             changed.set()
 
         def on_alive(robot: str, alive: bool, from_query: bool) -> None:
@@ -1182,7 +1200,7 @@ class RobotAgent:
         reported_offline: tuple[str, ...] | None = None
         while True:
             missing = [p for p in partners if p not in ready]
-            if not missing:
+            if met[0] or not missing:
                 return  # our token stays until the skill ends (see _release)
             offline = tuple(p for p in missing if online[p] is False)
             if offline:

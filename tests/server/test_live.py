@@ -173,6 +173,8 @@ def test_server_killed_and_restarted_loses_nothing(cluster):
         for robot, task in before.tasks.items():
             assert [s.id for s in m.tasks[robot]] == [s.id for s in task]
         assert status(m, h) == "running"
+        # the robot reconnects and registers again with its queue (reconciled)
+        await until(c, lambda m: c.robots["lru1"].online and c.robots["lru1"].since is not None, 20)
         await tell(c, "lru1", "release", {"id": h})
         await until(c, lambda m: status(m, h) == "success", 20)
 
