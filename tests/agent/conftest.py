@@ -1,0 +1,252 @@
+"""Fixtures for the robot agent SDK tests.
+
+A Zenoh router runs in a subprocess (the transport tests' helper, on a free
+loopback port). In the test process: a FAKE mission server (a client session
+with the register/report queryables and the server's liveliness token, which
+records what it receives and applies reports idempotently by seq) and the
+agents under test, all on the test's asyncio loop.
+
+`async def` tests are run here with `asyncio.run` (no pytest-asyncio needed).
+Waiting is always on events with a timeout (`Harness.until`), never on sleeps.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import importlib.util
+import inspect
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+import zenoh
+
+from backend.agent import RobotAgent
+from backend.model import Policies, SkillInstance, Status
+from backend.ops import Report
+from backend.protocol import (
+    BarrierInfo,
+    CommandReply,
+    Enqueue,
+    Keys,
+    Register,
+    RegisterReply,
+    ReportAck,
+    ReportBatch,
+    dumps,
+)
+from backend.transport import (
+    client_config,
+    close_session,
+    declare_token,
+    open_session,
+    query,
+    serve_async,
+)
+
+WAIT = 10.0  # upper bound for things that normally take milliseconds
+TEST_TIMEOUT = 60.0
+
+# Reuse the transport tests' router helper (tests/transport has no __init__.py,
+# so load its conftest by path; only the Router class is used).
+_spec = importlib.util.spec_from_file_location(
+    "_transport_test_helpers", Path(__file__).resolve().parents[1] / "transport" / "conftest.py"
+)
+assert _spec is not None and _spec.loader is not None
+_helpers = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_helpers)
+Router = _helpers.Router
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
+    """Run `async def` tests in a fresh event loop, with an overall timeout."""
+    if not inspect.iscoroutinefunction(pyfuncitem.obj):
+        return None
+    kwargs = {name: pyfuncitem.funcargs[name] for name in pyfuncitem._fixtureinfo.argnames}
+    asyncio.run(asyncio.wait_for(pyfuncitem.obj(**kwargs), TEST_TIMEOUT))
+    return True
+
+
+# ---------------------------------------------------------------- fake server
+
+
+class FakeServer:
+    """Stands in for the mission server: registration, reports, commands."""
+
+    def __init__(self, endpoint: str, changed: asyncio.Event):
+        self.endpoint = endpoint
+        self.changed = changed
+        self.session: zenoh.Session | None = None
+        self.token: zenoh.LivelinessToken | None = None
+        self.registrations: list[Register] = []
+        self.batches: list[ReportBatch] = []
+        self.applied: dict[str, list[Report]] = {}  # per robot, in applied order
+        self.last_seq: dict[str, int] = {}
+        self.gaps: list[str] = []  # a seq that did not follow the previous one
+
+    async def start(self) -> None:
+        self.session = open_session(client_config([self.endpoint]))
+        serve_async(self.session, Keys.register("*"), self._on_register)
+        serve_async(self.session, Keys.reports("*"), self._on_reports)
+        self.appear()
+
+    def appear(self) -> None:
+        assert self.session is not None
+        self.token = declare_token(self.session, Keys.SERVER_ALIVE)
+
+    def vanish(self) -> None:
+        if self.token is not None:
+            self.token.undeclare()
+            self.token = None
+
+    def close(self) -> None:
+        if self.session is not None:
+            close_session(self.session)
+
+    # -- what robots send -------------------------------------------------
+    def apply(self, robot: str, reports: list[Report]) -> None:
+        for r in reports:
+            assert r.robot == robot
+            last = self.last_seq.get(robot, 0)
+            if r.seq <= last:
+                continue  # idempotent: applied already
+            if self.applied.get(robot) and r.seq != last + 1:
+                self.gaps.append(f"{robot}: {last} -> {r.seq}")
+            self.applied.setdefault(robot, []).append(r)
+            self.last_seq[robot] = r.seq
+        self.changed.set()
+
+    async def _on_register(self, payload: bytes) -> bytes:
+        reg = Register.model_validate_json(payload)
+        self.registrations.append(reg)
+        self.apply(reg.manifest.name, reg.reports)
+        return dumps(RegisterReply(last_seq=self.last_seq.get(reg.manifest.name, 0)))
+
+    async def _on_reports(self, payload: bytes) -> bytes:
+        batch = ReportBatch.model_validate_json(payload)
+        self.batches.append(batch)
+        robot = batch.reports[0].robot
+        self.apply(robot, batch.reports)
+        return dumps(ReportAck(last_seq=self.last_seq.get(robot, 0)))
+
+    # -- commands -------------------------------------------------------------
+    async def command(self, robot: str, cmd: Any) -> CommandReply:
+        """Send a command; apply the reports of the reply first, like the server."""
+        assert self.session is not None
+        raw = await query(self.session, Keys.command(robot), dumps(cmd), timeout=WAIT)
+        reply = CommandReply.model_validate_json(raw)
+        self.apply(robot, reply.reports)
+        return reply
+
+    async def enqueue(self, robot: str, *skills: SkillInstance, front: bool = False,
+                      barriers: dict[str, BarrierInfo] | None = None) -> CommandReply:
+        return await self.command(
+            robot, Enqueue(skills=list(skills), front=front, barriers=barriers or {})
+        )
+
+    # -- inspection --------------------------------------------------------------
+    def trail(self, robot: str) -> list[tuple[str, str]]:
+        """(skill id, status) of every applied report of `robot`, in order."""
+        return [(r.id, r.status.value) for r in self.applied.get(robot, [])]
+
+    def has(self, robot: str, skill_id: str, status: Status, info: str | None = None) -> bool:
+        return any(
+            r.id == skill_id and r.status == status and (info is None or info in r.info)
+            for r in self.applied.get(robot, [])
+        )
+
+    def seqs(self, robot: str) -> list[int]:
+        return [r.seq for r in self.applied.get(robot, [])]
+
+
+# ---------------------------------------------------------------- harness
+
+
+class Harness:
+    """The fake server plus the agents of one test; `async with` closes all."""
+
+    def __init__(self, endpoint: str):
+        self.endpoint = endpoint
+        self.changed = asyncio.Event()
+        self.server = FakeServer(endpoint, self.changed)
+        self.agents: list[RobotAgent] = []
+        self.local: dict[str, list[Report]] = {}  # reports as agents made them
+
+    async def __aenter__(self) -> Harness:
+        await self.server.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        for agent in self.agents:
+            await agent.stop()
+        self.server.close()
+
+    def agent(self, name: str, robot_type: str = "rover", **kwargs: Any) -> RobotAgent:
+        agent = RobotAgent(name, robot_type, connect=[self.endpoint], **kwargs)
+        agent.report_listeners.append(self._on_local_report)
+        self.agents.append(agent)
+        return agent
+
+    def _on_local_report(self, report: Report) -> None:
+        self.local.setdefault(report.robot, []).append(report)
+        self.changed.set()
+
+    def made(self, robot: str, skill_id: str, status: Status, info: str | None = None) -> bool:
+        """Did `robot` make such a report (whether or not the server has it)?"""
+        return any(
+            r.id == skill_id and r.status == status and (info is None or info in r.info)
+            for r in self.local.get(robot, [])
+        )
+
+    async def until(self, predicate: Callable[[], bool], timeout: float = WAIT, what: str = "") -> None:
+        """Wait until `predicate()` holds; re-checked whenever a report is made or
+        received (every state change of interest produces one)."""
+        try:
+            async with asyncio.timeout(timeout):
+                while not predicate():
+                    self.changed.clear()
+                    await self.changed.wait()
+        except TimeoutError:
+            raise AssertionError(f"timed out waiting for {what or predicate}") from None
+
+    async def registered(self, *names: str, count: int = 1) -> None:
+        """Wait until each named agent registered (at least `count` times)."""
+        await self.until(
+            lambda: all(
+                sum(1 for r in self.server.registrations if r.manifest.name == n) >= count
+                for n in names
+            ),
+            what=f"registration of {names}",
+        )
+        for n in names:
+            await self._agent(n).wait_registered(WAIT)
+
+    def _agent(self, name: str) -> RobotAgent:
+        return next(a for a in reversed(self.agents) if a.name == name)
+
+
+def skill(sid: str, name: str = "work", *, retries: int = 0, **params: Any) -> SkillInstance:
+    return SkillInstance(
+        id=sid, skill=name, params=params, status=Status.IDLE,
+        policies=Policies(retries=retries),
+    )
+
+
+@pytest.fixture
+def router() -> Iterator[Any]:
+    r = Router()
+    yield r
+    r.proc.stop()
+
+
+@pytest.fixture
+def harness(router: Any) -> Iterator[Harness]:
+    """A Harness on the router; any session still open after the test is closed here."""
+    h = Harness(router.endpoint)
+    yield h
+    for agent in h.agents:
+        if agent._session is not None:
+            close_session(agent._session)
+    h.server.close()
