@@ -30,6 +30,7 @@ class Keys:
     EVENTS = f"{PREFIX}/server/events"  # publication: EventBatch, revisions consecutive
     FLEET = f"{PREFIX}/server/fleet"  # publication: FleetEvent
     ALERTS = f"{PREFIX}/server/alerts"  # publication: Alert
+    PING = f"{PREFIX}/server/ping"  # queryable: anything -> b"pong" (raw-transport baseline for benchmarks)
 
     @staticmethod
     def register(robot: str) -> str:  # queryable: Register -> RegisterReply

@@ -41,6 +41,7 @@ person naming robot, skill and reason).
 | `{p.Keys.EVENTS}` | publication | server | `EventBatch` (revisions consecutive) |
 | `{p.Keys.FLEET}` | publication | server | `FleetEvent` (presence, manifest) |
 | `{p.Keys.ALERTS}` | publication | server | `Alert` |
+| `{p.Keys.PING}` | queryable | server | anything → `pong` (raw-transport baseline of the benchmarks) |
 | `{p.Keys.register('ROBOT')}` | queryable | server | `Register` → `RegisterReply` |
 | `{p.Keys.reports('ROBOT')}` | queryable | server | `ReportBatch` → `ReportAck` |
 | `{p.Keys.alive('ROBOT')}` | liveliness token | robot | — |

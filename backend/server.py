@@ -68,6 +68,7 @@ from .transport import (
     declare_token,
     query,
     router_config,
+    serve,
     serve_async,
     watch_liveliness,
 )
@@ -169,6 +170,8 @@ class MissionServer:
             serve_async(s, Keys.register("*"), self._guard(self._handle_register)),
             serve_async(s, Keys.reports("*"), self._guard(self._handle_reports)),
             watch_liveliness(s, Keys.ALL_ALIVE, self._on_presence),
+            # trivial, answered on the Zenoh thread: the raw-transport baseline of benchmarks
+            serve(s, Keys.PING, lambda _payload: b"pong"),
         ]
         # declared last: robots (re)register when they see it
         self._entities.append(declare_token(s, Keys.SERVER_ALIVE))

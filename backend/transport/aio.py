@@ -157,10 +157,12 @@ def _start_get(
     on_done: Callable[[], object],
 ) -> None:
     # With a Callback handler `get` returns at once; `drop` runs after the last reply.
+    # indirect=False: the callbacks run on Zenoh's own thread instead of a new
+    # Python thread per query (~0.3 ms each); they only record and post.
     try:
         session.get(
             key,
-            Callback(collector.on_reply, on_done),
+            Callback(collector.on_reply, on_done, indirect=False),
             payload=payload,
             timeout=timeout,
             consolidation=zenoh.ConsolidationMode.NONE,
