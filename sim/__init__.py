@@ -1,0 +1,12 @@
+"""The simulated fleet: a Mars sample-return site and its robots, built on backend's robot agent SDK.
+
+- `worldfile`: world files (`missions/worlds/*.yaml`), validated by pydantic;
+- `world`: the site (numpy grids: terrain, explored area, coverage), objects, rules;
+- `pathing`: A* on the terrain grid, sweeps;
+- `skills`: the robots' skill handlers (every skill of missions/libraries/mars.yaml);
+- `fleet`: one RobotAgent per mission robot on one asyncio loop, map feed, status;
+- `mapfeed`: the map feed's wire models and codec (self-contained: pydantic + numpy);
+- `cli`: `missionctl sim` and `missionctl sim-status`.
+
+Never imports console or textual.
+"""

@@ -1,0 +1,234 @@
+"""`missionctl sim` and `missionctl sim-status` (plugged in through the
+`missionctl.commands` entry point; backend never imports this module).
+
+Exit codes: 0 ok, 1 refused/no simulator, 2 bad input, 3 server unreachable.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import logging
+import re
+import signal
+import sys
+import time
+from pathlib import Path
+
+EXIT_OK, EXIT_REFUSED, EXIT_BAD_INPUT, EXIT_UNREACHABLE = 0, 1, 2, 3
+
+_DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(ms|s|m|min)?\s*$")
+
+
+def parse_duration(text: str) -> float:
+    """'2s', '500ms', '1.5', '2m' -> seconds."""
+    m = _DURATION.match(text)
+    if not m:
+        raise argparse.ArgumentTypeError(f"not a duration: {text!r} (examples: 2s, 500ms, 1.5)")
+    value = float(m.group(1))
+    unit = m.group(2) or "s"
+    return value / 1000.0 if unit == "ms" else value * 60.0 if unit in ("m", "min") else value
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return value
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("sim", help="run the simulated fleet of a mission's site (Mars sample return)")
+    p.add_argument("--mission", metavar="FILE", required=True, help="mission file: which robots to simulate")
+    p.add_argument("--connect", metavar="ENDPOINT", action="append", help="Zenoh endpoint of the mission server (default tcp/127.0.0.1:7447); repeatable")
+    p.add_argument("--world", metavar="FILE", help="world file (default: worlds/mars.yaml next to the mission, else missions/worlds/mars.yaml)")
+    p.add_argument("--speed", type=_positive, default=1.0, metavar="X", help="sim time per wall time (1 = real time)")
+    p.add_argument("--seed", type=int, metavar="N", help="random seed (default: the world file's)")
+    p.add_argument("--link-delay", type=parse_duration, default=0.0, metavar="D", help="one-way delay between ground and robots, e.g. 2s or 500ms")
+    p.add_argument("--connect-timeout", type=float, default=10.0, metavar="S", help="keep trying to reach the server's router this long")
+    p.add_argument("--zenoh-config", metavar="FILE", help="JSON5 Zenoh config merged over ours (TLS, accounts)")
+    p.add_argument("--check", action="store_true", help="only validate the mission and world files, then exit")
+    p.add_argument("-v", "--verbose", action="store_true")
+    p.set_defaults(func=run)
+
+    s = sub.add_parser("sim-status", help="score, deliveries, exchanges and robots of a running simulator")
+    s.add_argument("--connect", metavar="ENDPOINT", action="append", help="Zenoh endpoint (default tcp/127.0.0.1:7447)")
+    s.add_argument("--json", action="store_true", help="print the SimStatus as JSON")
+    s.add_argument("--timeout", type=float, default=5.0, metavar="S")
+    s.set_defaults(func=run_status)
+
+
+# ---------------------------------------------------------------- sim
+
+
+def _load(args: argparse.Namespace):
+    from backend.files import FileProblems, load_mission
+
+    from .worldfile import default_world_for, load_world
+
+    try:
+        mission, library = load_mission(args.mission)
+    except FileProblems as e:
+        return None, e.issues
+    world_file = Path(args.world) if args.world else default_world_for(args.mission)
+    try:
+        world = load_world(world_file)
+    except FileProblems as e:
+        return None, e.issues
+    return (mission, library, world, world_file), []
+
+
+def run(args: argparse.Namespace) -> int:
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
+    )
+    loaded, issues = _load(args)
+    if loaded is None:
+        for issue in issues:
+            print(issue, file=sys.stderr)
+        return EXIT_BAD_INPUT
+    mission, library, world, world_file = loaded
+    extra = None
+    if args.zenoh_config:
+        from backend.transport import load_config_file
+
+        try:
+            extra = load_config_file(args.zenoh_config)
+        except (OSError, ValueError) as e:
+            print(f"missionctl sim: {args.zenoh_config}: {e}", file=sys.stderr)
+            return EXIT_BAD_INPUT
+    from .fleet import SimFleet
+    from .world import SimError
+
+    try:
+        fleet = SimFleet(
+            mission, library, world,
+            connect=args.connect or ["tcp/127.0.0.1:7447"],
+            speed=args.speed, seed=args.seed, link_delay=args.link_delay, zenoh_extra=extra,
+        )
+    except (SimError, ValueError) as e:
+        print(f"missionctl sim: {e}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    for warning in fleet.warnings:
+        print(f"missionctl sim: {warning}", file=sys.stderr)
+    if args.check:
+        print(f"{args.mission}: ok\n{world_file}: ok")
+        return EXIT_OK
+    return asyncio.run(_serve(fleet, args, world_file))
+
+
+async def _serve(fleet, args: argparse.Namespace, world_file: Path) -> int:
+    from backend.transport.session import TransportError, TransportUnreachable
+
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        loop.add_signal_handler(sig, stop.set)
+    deadline = time.monotonic() + max(0.0, args.connect_timeout)
+    while True:
+        try:
+            await fleet.start()
+            break
+        except TransportUnreachable as e:
+            if time.monotonic() >= deadline or stop.is_set():
+                print(f"missionctl sim: {e}", file=sys.stderr)
+                return EXIT_UNREACHABLE
+            try:
+                await asyncio.wait_for(stop.wait(), 0.5)
+            except TimeoutError:
+                pass
+        except TransportError as e:
+            print(f"missionctl sim: {e}", file=sys.stderr)
+            return EXIT_UNREACHABLE
+    try:
+        w = fleet.world
+        delay = f", link delay {fleet.link_delay:g} s" if fleet.link_delay else ""
+        print(
+            f"missionctl sim: world '{w.spec.name}' ({world_file}), seed {w.seed}, robots "
+            f"{', '.join(fleet.agents)}; speed {fleet.speed:g}x{delay}; connected to {', '.join(fleet.connect)}",
+            flush=True,
+        )
+        await stop.wait()
+    finally:
+        await fleet.stop()
+    return EXIT_OK
+
+
+# ---------------------------------------------------------------- sim-status
+
+
+def run_status(args: argparse.Namespace) -> int:
+    return asyncio.run(_status(args))
+
+
+async def _status(args: argparse.Namespace) -> int:
+    from backend import transport
+    from backend.transport.session import TransportUnreachable
+
+    from . import mapfeed as mf
+
+    endpoints = args.connect or ["tcp/127.0.0.1:7447"]
+    try:
+        session = await asyncio.to_thread(transport.open_session, transport.client_config(endpoints))
+    except TransportUnreachable as e:
+        print(f"missionctl sim-status: {e}", file=sys.stderr)
+        return EXIT_UNREACHABLE
+    try:
+        try:
+            raw = await transport.query(session, mf.KEY_STATUS, b"", timeout=args.timeout)
+        except transport.NoResponder:
+            print(f"missionctl sim-status: no simulator answers at {', '.join(endpoints)}", file=sys.stderr)
+            return EXIT_REFUSED
+        except transport.QueryFailed as e:
+            print(f"missionctl sim-status: {e}", file=sys.stderr)
+            return EXIT_REFUSED
+        status = mf.SimStatus.model_validate_json(raw)
+    finally:
+        await asyncio.to_thread(transport.close_session, session)
+    if args.json:
+        print(status.model_dump_json(indent=2))
+        return EXIT_OK
+    print(format_status(status))
+    return EXIT_OK
+
+
+def format_status(st) -> str:
+    lines = [
+        f"world {st.world} (seed {st.seed}), sim time {st.sim_time:.0f} s at {st.speed:g}x"
+        + (f", link delay {st.link_delay_s:g} s" if st.link_delay_s else ""),
+        f"score {st.score:g}: {len(st.delivered)} stone(s) delivered"
+        + ("".join(f"\n  {d.stone} ({d.rss}) {d.score:g} by {d.by} at {d.sim_time:.0f} s" for d in st.delivered)),
+        f"regions found: {', '.join(st.rss_found) or 'none'}; explored {st.explored:.1%} of the site",
+        "exchanges: " + ", ".join(f"{k} {v}" for k, v in sorted(st.exchanges.items())),
+        "robots:",
+    ]
+    for r in st.robots.values():
+        flags = []
+        if not r.in_range:
+            flags.append("OUT OF RANGE")
+        if r.airborne:
+            flags.append(f"airborne {r.z:.0f} m")
+        if r.docked:
+            flags.append("docked")
+        if r.box:
+            flags.append(f"carries {r.box}")
+        if r.stones:
+            flags.append(f"stones {', '.join(r.stones)}")
+        lines.append(
+            f"  {r.name:<8} {r.kind:<6} ({r.x:7.1f}, {r.y:7.1f})  battery {r.battery:4.0%}  link {r.link:.2f}  "
+            f"{r.activity or 'idle'}{'  [' + '; '.join(flags) + ']' if flags else ''}"
+        )
+        if r.result:
+            lines.append(f"           last: {r.result}")
+    if st.events:
+        lines.append("recent:")
+        lines += [f"  {e}" for e in st.events[-8:]]
+    return "\n".join(lines)
+
+
+def _dump(obj) -> str:  # pragma: no cover - debugging aid
+    return json.dumps(obj, indent=2, default=str)

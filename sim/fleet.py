@@ -1,0 +1,497 @@
+"""The simulated fleet: one RobotAgent per mission robot, all on one asyncio loop.
+
+    fleet = SimFleet(mission, library, world_spec, connect=["tcp/127.0.0.1:7447"], speed=50)
+    await fleet.start()
+    ...
+    await fleet.stop()
+
+Besides the agents it runs the world's background physics (charging at the
+lander, hovering drones), the map feed (deltas at most every `feed_period`
+wall seconds, snapshot queryable) and the sim status (queryable and live
+publication). See sim/mapfeed.py for the wire format.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import time
+from collections import Counter, deque
+from typing import Any
+
+from backend import transport
+from backend.agent import Link, RobotAgent
+from backend.library import Library
+from backend.model import Mission, Pose
+from backend.transport import QueryFailed
+
+from . import mapfeed as mf
+from .skills import RobotSkills
+from .world import SimError, SimRobot, World
+from .worldfile import WorldFile
+
+log = logging.getLogger(__name__)
+
+SIM_VERSION = "0.1.0"
+STATUS_MIN = 0.5  # wall seconds between status publications (when something changed)
+STATUS_MAX = 2.0  # ... and at least this often
+
+
+def step_for(speed: float) -> float:
+    """Sim seconds per skill step: ~50 ms of wall time, 0.25..5 s of sim time."""
+    return min(5.0, max(0.25, speed * 0.05))
+
+
+class SimLink(Link):
+    """The operator link of one simulated robot: coverage from the world grid."""
+
+    def __init__(self, world: World, robot: SimRobot, delay_s: float):
+        # no super().__init__: reachable/quality are computed here
+        self.world = world
+        self.robot = robot
+        self.delay_s = delay_s
+        self.reachable = True
+
+    def in_range(self) -> bool:
+        return self.world.in_range(self.robot)
+
+    @property
+    def quality(self) -> float:  # type: ignore[override]
+        return self.world.link_quality(self.robot.x, self.robot.y)
+
+
+class SimFleet:
+    def __init__(
+        self,
+        mission: Mission,
+        library: Library,
+        world_spec: WorldFile,
+        *,
+        connect: list[str],
+        speed: float = 1.0,
+        seed: int | None = None,
+        link_delay: float = 0.0,
+        telemetry_hz: float = 4.0,
+        feed_period: float = 0.5,
+        zenoh_extra: dict[str, Any] | None = None,
+    ):
+        if speed <= 0 or not math.isfinite(speed):
+            raise ValueError("the speed must be a positive number")
+        self.mission = mission
+        self.library = library
+        self.world = World(world_spec, seed=seed)
+        self.connect = list(connect)
+        self.speed = float(speed)
+        self.dt = step_for(self.speed)
+        self.link_delay = float(link_delay)
+        self.feed_period = feed_period
+        self.zenoh_extra = zenoh_extra
+        self.robot_seconds = 0.0
+        self.exchanges: Counter[str] = Counter(asks=0, tells=0, answered=0, unknown=0, unreachable=0)
+        self.exchange_log: deque[str] = deque(maxlen=30)
+        self.notes: dict[str, str] = {}
+        self.agents: dict[str, RobotAgent] = {}
+        self.feed_bytes = 0
+        self.status_bytes = 0
+        self._seq = 0
+        self._encoder: mf.TileEncoder | None = None
+        self._objects: dict[str, Any] | None = None
+        self._session = None
+        self._entities: list[Any] = []
+        self._delta_pub = None
+        self._status_pub = None
+        self._tasks: list[asyncio.Task[None]] = []
+        self._started_wall = 0.0
+        self.warnings: list[str] = []
+        for index, (name, spec) in enumerate(mission.robots.items()):
+            if spec.type not in self.world.models:
+                self.warnings.append(
+                    f"not simulating {name}: the world has no model for type '{spec.type}' "
+                    f"(it knows: {', '.join(sorted(self.world.models))}); it stays offline"
+                )
+                continue
+            robot = self.world.add_robot(name, spec.type, index=index)
+            self.agents[name] = self._make_agent(robot, telemetry_hz)
+        if not self.agents:
+            raise SimError("the mission has no robot this world can simulate")
+
+    # ------------------------------------------------------------ agents
+
+    def _make_agent(self, robot: SimRobot, telemetry_hz: float) -> RobotAgent:
+        rtype = self.library.robot_types.get(robot.type)
+        if rtype is None:
+            raise SimError(f"robot {robot.name}: type '{robot.type}' is not in the skill library")
+        m = robot.model
+        modules = {"missionctl-sim": SIM_VERSION, "nav": "1.0.0"}
+        for cap in m.capabilities:
+            modules[cap] = "1.0.0"
+        agent = RobotAgent(
+            robot.name,
+            robot.type,
+            connect=self.connect,
+            modules=modules,
+            properties={
+                "simulated": True,
+                "kind": m.kind,
+                "capabilities": list(m.capabilities),
+                "max_speed_mps": m.max_speed,
+                "sensor_range_m": m.sensor_range,
+            },
+            telemetry_hz=telemetry_hz,
+            zenoh_extra=self.zenoh_extra,
+        )
+        agent.time_scale = self.speed
+        agent.pose = lambda r=robot: Pose(x=round(r.x, 3), y=round(r.y, 3), z=round(r.z, 3), yaw=round(r.yaw, 4))
+        agent.battery = lambda r=robot: r.battery
+        agent.link = SimLink(self.world, robot, self.link_delay)
+        skills = RobotSkills(self, robot)
+        handlers = skills.handlers()
+        missing = [s for s in rtype.skills if s not in handlers]
+        if missing:
+            self.warnings.append(
+                f"{robot.name} offers no {', '.join(missing)} (the simulator has no such skill): "
+                "syncing them is refused"
+            )
+        for name in rtype.skills:
+            if name not in handlers:
+                continue
+            spec = self.library.skills.get(name)
+            version = spec.version if spec is not None else "1.0.0"
+            agent.add_skill(name, self._wrap(robot, name, handlers[name]), version=version)
+        self._world_handlers(agent, robot)
+        return agent
+
+    def _wrap(self, robot: SimRobot, name: str, fn: Any) -> Any:
+        defaults = {}
+        spec = self.library.skills.get(name)
+        if spec is not None:
+            defaults = {k: p.default for k, p in spec.params.items() if p.default is not None}
+
+        async def handler(ctx: Any, **params: Any) -> None:
+            robot.activity = name
+            robot.paused = lambda: ctx.paused
+            try:
+                await fn(ctx, **{**defaults, **params})
+            finally:
+                robot.activity = None
+                robot.paused = lambda: False
+
+        handler.__name__ = f"{robot.name}_{name}"
+        return handler
+
+    # ------------------------------------------------------------ world knowledge exchange
+
+    def _world_handlers(self, agent: RobotAgent, robot: SimRobot) -> None:
+        k = robot.knowledge
+        world = self.world
+
+        def reachable(sender: str) -> bool:
+            other = world.robots.get(sender)
+            return other is not None and world.can_talk(robot, other)
+
+        def ask_stone(data: dict[str, Any], sender: str) -> dict[str, Any] | None:
+            if not reachable(sender):
+                return None
+            x, y, radius = float(data.get("x", 0)), float(data.get("y", 0)), float(data.get("radius", 5))
+            cands = [s for s in k.stones.values()
+                     if s.get("state") in ("identified", "ground") and math.hypot(s["x"] - x, s["y"] - y) <= radius]
+            if not cands:
+                return None
+            return dict(min(cands, key=lambda s: (-(s.get("score") or 0), math.hypot(s["x"] - x, s["y"] - y))))
+
+        def ask_rss(data: dict[str, Any], sender: str) -> dict[str, Any] | None:
+            if not reachable(sender) or not k.rss:
+                return None
+            return {"regions": [dict(v) for v in k.rss.values()]}
+
+        def ask_box(data: dict[str, Any], sender: str) -> dict[str, Any] | None:
+            if not reachable(sender):
+                return None
+            info = k.boxes.get(str(data.get("box", "")))
+            return dict(info) if info is not None else None
+
+        def ask_pose(data: dict[str, Any], sender: str) -> dict[str, Any] | None:
+            if not reachable(sender):
+                return None
+            return {"x": round(robot.x, 2), "y": round(robot.y, 2), "yaw": round(robot.yaw, 3), "airborne": robot.airborne}
+
+        def ask_shelf(data: dict[str, Any], sender: str) -> dict[str, Any] | None:
+            if robot.kind != "static" or not reachable(sender):
+                return None
+            slots = {str(b.slot): b.name for b in world.boxes.values() if b.where == "shelf" and b.slot is not None}
+            return {"slots": slots}
+
+        def tell_box(data: dict[str, Any], sender: str) -> None:
+            if reachable(sender) and "box" in data:
+                k.boxes[str(data["box"])] = dict(data)
+
+        def tell_stone(data: dict[str, Any], sender: str) -> None:
+            if reachable(sender) and "id" in data:
+                k.stones[str(data["id"])] = dict(data)
+
+        def tell_rss(data: dict[str, Any], sender: str) -> None:
+            if reachable(sender) and "rss" in data:
+                k.rss[str(data["rss"])] = dict(data)
+
+        agent.on_ask("stone", ask_stone)
+        agent.on_ask("rss", ask_rss)
+        agent.on_ask("box", ask_box)
+        agent.on_ask("pose", ask_pose)
+        agent.on_ask("shelf", ask_shelf)
+        agent.on_tell("box", tell_box)
+        agent.on_tell("stone", tell_stone)
+        agent.on_tell("rss", tell_rss)
+
+    def _exchange(self, text: str) -> None:
+        self.exchange_log.append(f"[{self.world.clock:7.0f} s] {text}")
+
+    async def ask(self, sender: SimRobot, target: str, topic: str, data: dict[str, Any]) -> dict[str, Any] | None:
+        """`sender` asks `target` (through the SDK), if they can talk at all."""
+        other = self.world.robots.get(target)
+        agent = self.agents.get(sender.name)
+        if other is None or agent is None:
+            return None
+        if not self.world.can_talk(sender, other):
+            self.exchanges["unreachable"] += 1
+            self._exchange(f"{sender.name} cannot reach {target} to ask about {topic}")
+            return None
+        self.exchanges["asks"] += 1
+        answer = await agent.ask(target, topic, data)
+        self.exchanges["answered" if answer is not None else "unknown"] += 1
+        said = _brief(answer) if answer is not None else "unknown"
+        self._exchange(f"{sender.name} asked {target} about {topic}: {said}")
+        return answer
+
+    async def tell(self, sender: SimRobot, target: str, topic: str, data: dict[str, Any]) -> bool:
+        other = self.world.robots.get(target)
+        agent = self.agents.get(sender.name)
+        if other is None or agent is None:
+            return False
+        if not self.world.can_talk(sender, other):
+            self.exchanges["unreachable"] += 1
+            self._exchange(f"{sender.name} cannot reach {target} to tell about {topic}")
+            return False
+        self.exchanges["tells"] += 1
+        ok = await agent.tell(target, topic, data)
+        self._exchange(f"{sender.name} told {target} about {topic}: {_brief(data)}")
+        return ok
+
+    def note(self, robot: SimRobot, text: str) -> None:
+        """The outcome of a skill (the SDK's success report carries no text)."""
+        self.notes[robot.name] = text
+
+    # ------------------------------------------------------------ lifecycle
+
+    async def start(self) -> None:
+        cfg = transport.client_config(self.connect, extra=self.zenoh_extra)
+        self._session = await asyncio.to_thread(transport.open_session, cfg, what="the mission server's router")
+        try:
+            s = self._session
+            g = self.world.geom
+            self._encoder = mf.TileEncoder(
+                mf.MapMeta(world=self.world.spec.name, seed=self.world.seed, x0=g.x0, y0=g.y0, cell=g.cell,
+                           width=g.nx, height=g.ny)
+            )
+            self._encoder.delta(self.world.ground_layers())  # the snapshot's starting point (seq 0)
+            self._objects = self.world.ground_objects()
+            self._delta_pub = transport.declare_publisher(s, mf.KEY_MAP_DELTA)
+            self._status_pub = transport.declare_publisher(s, mf.KEY_STATUS_LIVE)
+            self._entities += [
+                transport.serve_async(s, mf.KEY_MAP_SNAPSHOT, self._on_snapshot),
+                transport.serve_async(s, mf.KEY_STATUS, self._on_status),
+            ]
+            self._started_wall = time.monotonic()
+            for agent in self.agents.values():
+                await agent.start()
+            self._tasks = [
+                asyncio.create_task(self._physics(), name="sim-physics"),
+                asyncio.create_task(self._feed(), name="sim-feed"),
+                asyncio.create_task(self._status_loop(), name="sim-status"),
+            ]
+        except BaseException:
+            await self.stop()
+            raise
+
+    async def stop(self) -> None:
+        tasks, self._tasks = self._tasks, []
+        for t in tasks:
+            t.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        for agent in self.agents.values():
+            try:
+                await agent.stop()
+            except Exception:
+                log.exception("stopping %s failed", agent.name)
+        session, self._session = self._session, None
+        self._entities.clear()
+        self._delta_pub = self._status_pub = None
+        if session is not None:
+            await asyncio.to_thread(transport.close_session, session)
+
+    async def __aenter__(self) -> SimFleet:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.stop()
+
+    # ------------------------------------------------------------ background physics
+
+    async def _physics(self) -> None:
+        """Idle robots: charge at the lander; hovering drones drain. Link uplink."""
+        loop = asyncio.get_running_loop()
+        last = loop.time()
+        w = self.world
+        while True:
+            await asyncio.sleep(0.1)
+            now = loop.time()
+            dt = (now - last) * self.speed
+            last = now
+            w.clock += dt
+            for r in w.robots.values():
+                if r.activity is not None and not r.paused():
+                    continue
+                if r.kind == "drone" and r.airborne:
+                    r.battery = max(0.0, r.battery - w.flight_energy(r, dt))
+                    if r.usable <= 0.0:
+                        r.airborne, r.z = False, 0.0
+                        w.log(f"{r.name} made an emergency landing at ({r.x:.1f}, {r.y:.1f}): battery at the reserve while hovering")
+                elif w.docked(r):
+                    w.charge(r, dt)
+            w.pump(now, self.link_delay)
+
+    # ------------------------------------------------------------ map feed
+
+    def _map_delta(self) -> mf.MapDelta | None:
+        assert self._encoder is not None
+        tiles = self._encoder.delta(self.world.ground_layers())
+        objects = self.world.ground_objects()
+        changed = objects != self._objects
+        if not tiles and not changed:
+            return None
+        self._objects = objects
+        self._seq += 1
+        return mf.MapDelta(
+            seq=self._seq,
+            sim_time=round(self.world.clock, 2),
+            tiles=tiles,
+            objects=_objects_model(objects) if changed else None,
+        )
+
+    async def _feed(self) -> None:
+        while True:
+            await asyncio.sleep(self.feed_period)
+            delta = self._map_delta()
+            if delta is not None and self._delta_pub is not None:
+                payload = mf.dump(delta)
+                self.feed_bytes += len(payload)
+                self._delta_pub.put(payload)
+
+    def snapshot(self) -> mf.MapSnapshot:
+        assert self._encoder is not None and self._objects is not None
+        return mf.MapSnapshot(
+            meta=self._encoder.meta,
+            seq=self._seq,
+            sim_time=round(self.world.clock, 2),
+            tiles=self._encoder.full(),
+            objects=_objects_model(self._objects),
+        )
+
+    async def _on_snapshot(self, payload: bytes) -> bytes:
+        return mf.dump(self.snapshot())
+
+    # ------------------------------------------------------------ status
+
+    def status(self) -> mf.SimStatus:
+        w = self.world
+        robots = {}
+        for r in w.robots.values():
+            robots[r.name] = mf.RobotStatus(
+                name=r.name, type=r.type, kind=r.kind,
+                x=round(r.x, 2), y=round(r.y, 2), z=round(r.z, 2), yaw=round(r.yaw, 3),
+                battery=round(min(1.0, max(0.0, r.battery)), 4),
+                in_range=w.in_range(r), link=round(w.link_quality(r.x, r.y), 3),
+                airborne=r.airborne, docked=w.docked(r), box=r.box, stones=list(r.stones),
+                activity=r.activity, result=self.notes.get(r.name, ""),
+                odometer_m=round(r.odometer, 1), sim_seconds=round(r.sim_seconds, 1),
+                knows={"rss": len(r.knowledge.rss), "stones": len(r.knowledge.stones), "boxes": len(r.knowledge.boxes)},
+            )
+        return mf.SimStatus(
+            world=w.spec.name,
+            seed=w.seed,
+            speed=self.speed,
+            link_delay_s=self.link_delay,
+            sim_time=round(w.clock, 1),
+            score=round(w.score, 4),
+            delivered=[mf.Delivery(**d) for d in w.delivered],
+            exchanges=dict(self.exchanges),
+            exchange_log=list(self.exchange_log)[-10:],
+            rss_found=sorted(n for n, r in w.rss.items() if r.found_by),
+            explored=round(w.explored_fraction(), 4),
+            robots=robots,
+            events=list(w.events)[-15:],
+        )
+
+    def _digest(self) -> tuple[Any, ...]:
+        w = self.world
+        return (
+            round(w.score, 6),
+            len(w.delivered),
+            tuple(sorted(self.exchanges.items())),
+            tuple(sorted(n for n, r in w.rss.items() if r.found_by)),
+            len(w.events),
+            tuple(
+                (r.name, w.in_range(r), r.activity, round(r.battery * 20), r.airborne, w.docked(r), r.box, tuple(r.stones))
+                for r in w.robots.values()
+            ),
+        )
+
+    async def _on_status(self, payload: bytes) -> bytes:
+        return mf.dump(self.status())
+
+    async def _status_loop(self) -> None:
+        """Publish the status when it changed (at most every `STATUS_MIN` s)
+        and at least every `STATUS_MAX` s."""
+        last_digest: tuple[Any, ...] | None = None
+        last_put = 0.0
+        loop = asyncio.get_running_loop()
+        while True:
+            await asyncio.sleep(STATUS_MIN)
+            digest = self._digest()
+            now = loop.time()
+            if digest != last_digest or now - last_put >= STATUS_MAX:
+                last_digest, last_put = digest, now
+                if self._status_pub is not None:
+                    payload = mf.dump(self.status())
+                    self.status_bytes += len(payload)
+                    self._status_pub.put(payload)
+
+
+def _objects_model(objects: dict[str, Any]) -> mf.MapObjects:
+    return mf.MapObjects(
+        lander=mf.LanderItem(**objects["lander"]),
+        boxes=[mf.BoxItem(**b) for b in objects["boxes"]],
+        rss=[mf.RssItem(**{k: v for k, v in r.items() if k in mf.RssItem.model_fields}) for r in objects["rss"]],
+        stones=[mf.StoneItem(**s) for s in objects["stones"] if s.get("state") != "hidden"],
+    )
+
+
+def _brief(data: dict[str, Any] | None) -> str:
+    if not data:
+        return "-"
+    if "id" in data:
+        return f"{data['id']} at ({data.get('x', 0):.1f}, {data.get('y', 0):.1f}) {data.get('state', '')}".strip()
+    if "box" in data:
+        return f"{data['box']} {data.get('where', '')}".strip()
+    if "slots" in data:
+        return "shelf " + (", ".join(f"{k}: {v}" for k, v in sorted(data["slots"].items())) or "empty")
+    return ", ".join(sorted(data))[:60]
+
+
+async def query_status(session: Any, timeout: float = 5.0) -> mf.SimStatus:
+    raw = await transport.query(session, mf.KEY_STATUS, b"", timeout=timeout)
+    return mf.SimStatus.model_validate_json(raw)
+
+
+__all__ = ["SimFleet", "SimLink", "query_status", "step_for", "QueryFailed"]

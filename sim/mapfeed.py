@@ -1,0 +1,326 @@
+"""Map feed of the simulated site: wire models, keys, tile codec and a mirror.
+
+Self-contained on purpose (pydantic + numpy only, no other import from this
+project): a console may use these models without importing the simulator,
+and they can move to `backend` unchanged.
+
+Key space (all JSON from the models below):
+
+    mc/v1/sim/map/snapshot   queryable  -> MapSnapshot (late joiners)
+    mc/v1/sim/map/delta      publication: MapDelta, seq consecutive, at most ~2 Hz
+    mc/v1/sim/status         queryable  -> SimStatus (score, deliveries, exchanges, robots)
+    mc/v1/sim/status/live    publication: SimStatus, on change and at least every second
+
+Grids are cut into `tile` x `tile` cells; a tile is sent as base64(zlib(raw
+uint8 bytes, row-major)) and only when it changed. Rows go south to north
+(row 0 at `y0`), columns west to east (column 0 at `x0`). Layers:
+
+- `terrain`: 0 unknown (not explored yet), 1 free, 2 slow (sand), 3 impassable;
+- `coverage`: 0 no link, 1..255 link quality.
+
+Robot poses are not in the feed: they ride on the robots' telemetry.
+
+A late joiner subscribes to the deltas first, then queries the snapshot, and
+applies deltas whose seq follows the snapshot's (`MapMirror` does this; a gap
+means: query the snapshot again).
+"""
+
+from __future__ import annotations
+
+import base64
+import zlib
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+FEED_VERSION = 1
+PREFIX = "mc/v1/sim"
+KEY_MAP_SNAPSHOT = f"{PREFIX}/map/snapshot"
+KEY_MAP_DELTA = f"{PREFIX}/map/delta"
+KEY_STATUS = f"{PREFIX}/status"
+KEY_STATUS_LIVE = f"{PREFIX}/status/live"
+
+LAYERS = ("terrain", "coverage")
+T_UNKNOWN, T_FREE, T_SLOW, T_ROCK = 0, 1, 2, 3
+
+
+class _Wire(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+# ---------------------------------------------------------------- map
+
+
+class MapMeta(_Wire):
+    version: int = FEED_VERSION
+    world: str
+    seed: int
+    x0: float = Field(description="west edge of column 0, metres")
+    y0: float = Field(description="south edge of row 0, metres")
+    cell: float = Field(description="cell size, metres")
+    width: int = Field(description="columns")
+    height: int = Field(description="rows")
+    tile: int = 16
+    layers: list[str] = Field(default_factory=lambda: list(LAYERS))
+
+
+class Tile(_Wire):
+    layer: Literal["terrain", "coverage"]
+    tx: int = Field(ge=0, description="tile column")
+    ty: int = Field(ge=0, description="tile row")
+    data: str = Field(description="base64(zlib(uint8 cells, row-major))")
+
+
+class LanderItem(_Wire):
+    x: float
+    y: float
+    pad_radius: float
+    comm_radius: float
+
+
+class BoxItem(_Wire):
+    box: str
+    kind: str
+    where: Literal["shelf", "storage", "ground", "carried"]
+    slot: int | None = None
+    x: float
+    y: float
+    holder: str | None = None
+    on: bool = False
+
+
+class RssItem(_Wire):
+    rss: str
+    x: float
+    y: float
+    radius: float
+    top_score: float | None = Field(None, description="known once LRU1 imaged it with its science camera")
+
+
+class StoneItem(_Wire):
+    id: str
+    rss: str
+    x: float
+    y: float
+    score: float | None = None
+    state: Literal["identified", "carried", "ground", "delivered"]
+    holder: str | None = None
+
+
+class MapObjects(_Wire):
+    lander: LanderItem
+    boxes: list[BoxItem] = Field(default_factory=list)
+    rss: list[RssItem] = Field(default_factory=list, description="discovered regions (as reported to the ground)")
+    stones: list[StoneItem] = Field(default_factory=list, description="identified stones")
+
+
+class MapDelta(_Wire):
+    seq: int = Field(ge=1, description="consecutive; a gap means: fetch the snapshot")
+    sim_time: float
+    tiles: list[Tile] = Field(default_factory=list)
+    objects: MapObjects | None = Field(None, description="all objects, when any changed")
+
+
+class MapSnapshot(_Wire):
+    meta: MapMeta
+    seq: int = Field(ge=0, description="the last delta included")
+    sim_time: float
+    tiles: list[Tile] = Field(description="every tile of every layer")
+    objects: MapObjects
+
+
+# ---------------------------------------------------------------- status
+
+
+class RobotStatus(_Wire):
+    name: str
+    type: str
+    kind: Literal["rover", "drone", "static"]
+    x: float
+    y: float
+    z: float = 0.0
+    yaw: float = 0.0
+    battery: float
+    in_range: bool
+    link: float
+    airborne: bool = False
+    docked: bool = False
+    box: str | None = None
+    stones: list[str] = Field(default_factory=list)
+    activity: str | None = None
+    result: str = Field("", description="outcome of its last skill, e.g. 'identified RSS-A-s1 ..., score 1'")
+    odometer_m: float = 0.0
+    sim_seconds: float = Field(0.0, description="robot time stepped by its skills")
+    knows: dict[str, int] = Field(default_factory=dict, description="rss/stones/boxes in its own world model")
+
+
+class Delivery(_Wire):
+    stone: str
+    rss: str
+    score: float
+    by: str
+    sim_time: float
+
+
+class SimStatus(_Wire):
+    version: int = FEED_VERSION
+    world: str
+    seed: int
+    speed: float
+    link_delay_s: float = 0.0
+    sim_time: float
+    score: float
+    delivered: list[Delivery] = Field(default_factory=list)
+    exchanges: dict[str, int] = Field(default_factory=dict, description="robot-to-robot asks/tells")
+    exchange_log: list[str] = Field(default_factory=list, description="the latest exchanges")
+    rss_found: list[str] = Field(default_factory=list, description="regions any robot discovered")
+    explored: float = Field(0.0, description="fraction of the site explored (truth)")
+    robots: dict[str, RobotStatus] = Field(default_factory=dict)
+    events: list[str] = Field(default_factory=list, description="the referee's latest log lines")
+
+
+# ---------------------------------------------------------------- tiles
+
+
+def encode_tile(cells: np.ndarray) -> str:
+    return base64.b64encode(zlib.compress(np.ascontiguousarray(cells, dtype=np.uint8).tobytes(), 6)).decode("ascii")
+
+
+def decode_tile(data: str, shape: tuple[int, int]) -> np.ndarray:
+    raw = zlib.decompress(base64.b64decode(data))
+    if len(raw) != shape[0] * shape[1]:
+        raise ValueError(f"tile holds {len(raw)} cells, expected {shape[0]}x{shape[1]}")
+    return np.frombuffer(raw, dtype=np.uint8).reshape(shape).copy()
+
+
+def tile_shape(meta: MapMeta, tx: int, ty: int) -> tuple[int, int]:
+    """Edge tiles are smaller when the grid is not a multiple of the tile size."""
+    return min(meta.tile, meta.height - ty * meta.tile), min(meta.tile, meta.width - tx * meta.tile)
+
+
+def changed_tiles(old: np.ndarray | None, new: np.ndarray, tile: int) -> list[tuple[int, int]]:
+    """(tx, ty) of the tiles where `new` differs from `old` (all when old is None)."""
+    h, w = new.shape
+    nty, ntx = -(-h // tile), -(-w // tile)
+    if old is None:
+        return [(tx, ty) for ty in range(nty) for tx in range(ntx)]
+    diff = old != new
+    ph, pw = nty * tile - h, ntx * tile - w
+    if ph or pw:
+        diff = np.pad(diff, ((0, ph), (0, pw)))
+    per_tile = diff.reshape(nty, tile, ntx, tile).any(axis=(1, 3))
+    ty, tx = np.nonzero(per_tile)
+    return [(int(a), int(b)) for a, b in zip(tx, ty, strict=True)]
+
+
+class TileEncoder:
+    """Sender side: remembers what was sent, encodes only the changed tiles."""
+
+    def __init__(self, meta: MapMeta):
+        self.meta = meta
+        self.sent: dict[str, np.ndarray] = {}
+
+    def delta(self, layers: dict[str, np.ndarray]) -> list[Tile]:
+        out: list[Tile] = []
+        t = self.meta.tile
+        for name in self.meta.layers:
+            grid = layers[name]
+            for tx, ty in changed_tiles(self.sent.get(name), grid, t):
+                cells = grid[ty * t:(ty + 1) * t, tx * t:(tx + 1) * t]
+                out.append(Tile(layer=name, tx=tx, ty=ty, data=encode_tile(cells)))  # type: ignore[arg-type]
+            self.sent[name] = grid.copy()
+        return out
+
+    def full(self) -> list[Tile]:
+        """Every tile of what was sent so far (for snapshots)."""
+        out: list[Tile] = []
+        t = self.meta.tile
+        for name in self.meta.layers:
+            grid = self.sent.get(name)
+            if grid is None:
+                grid = np.zeros((self.meta.height, self.meta.width), dtype=np.uint8)
+            for tx, ty in changed_tiles(None, grid, t):
+                cells = grid[ty * t:(ty + 1) * t, tx * t:(tx + 1) * t]
+                out.append(Tile(layer=name, tx=tx, ty=ty, data=encode_tile(cells)))  # type: ignore[arg-type]
+        return out
+
+
+class MapMirror:
+    """Receiver side (a console): the map from a snapshot plus deltas.
+
+        mirror = MapMirror()
+        mirror.apply_snapshot(MapSnapshot.model_validate_json(raw))
+        ok = mirror.apply_delta(MapDelta.model_validate_json(raw))  # False: gap, re-query the snapshot
+        terrain = mirror.layers["terrain"]  # numpy uint8 (rows south->north)
+    """
+
+    def __init__(self) -> None:
+        self.meta: MapMeta | None = None
+        self.seq = -1
+        self.sim_time = 0.0
+        self.layers: dict[str, np.ndarray] = {}
+        self.objects: MapObjects | None = None
+        self._early: list[MapDelta] = []  # deltas received before the snapshot
+
+    @property
+    def ready(self) -> bool:
+        return self.meta is not None
+
+    def _apply_tiles(self, tiles: list[Tile]) -> None:
+        assert self.meta is not None
+        t = self.meta.tile
+        for tile in tiles:
+            grid = self.layers.get(tile.layer)
+            if grid is None:
+                continue
+            shape = tile_shape(self.meta, tile.tx, tile.ty)
+            if shape[0] <= 0 or shape[1] <= 0:
+                raise ValueError(f"tile ({tile.tx}, {tile.ty}) lies outside the {self.meta.width}x{self.meta.height} grid")
+            grid[tile.ty * t:tile.ty * t + shape[0], tile.tx * t:tile.tx * t + shape[1]] = decode_tile(tile.data, shape)
+
+    def apply_snapshot(self, snap: MapSnapshot) -> None:
+        self.meta = snap.meta
+        self.layers = {n: np.zeros((snap.meta.height, snap.meta.width), dtype=np.uint8) for n in snap.meta.layers}
+        self._apply_tiles(snap.tiles)
+        self.seq = snap.seq
+        self.sim_time = snap.sim_time
+        self.objects = snap.objects
+        early, self._early = self._early, []
+        for d in sorted(early, key=lambda d: d.seq):
+            if d.seq > self.seq:
+                self.apply_delta(d)
+
+    def apply_delta(self, delta: MapDelta) -> bool:
+        """Apply a delta; False when one was missed (query the snapshot again)."""
+        if self.meta is None:
+            self._early.append(delta)
+            return True
+        if delta.seq <= self.seq:
+            return True  # already in the snapshot
+        if delta.seq != self.seq + 1:
+            return False
+        self._apply_tiles(delta.tiles)
+        self.seq = delta.seq
+        self.sim_time = delta.sim_time
+        if delta.objects is not None:
+            self.objects = delta.objects
+        return True
+
+    def cell_of(self, x: float, y: float) -> tuple[int, int] | None:
+        """(row, col) of a site position, or None outside the map."""
+        if self.meta is None:
+            return None
+        j = int((x - self.meta.x0) // self.meta.cell)
+        i = int((y - self.meta.y0) // self.meta.cell)
+        if 0 <= i < self.meta.height and 0 <= j < self.meta.width:
+            return i, j
+        return None
+
+
+def dump(model: _Wire) -> bytes:
+    return model.model_dump_json().encode()
+
+
+def parse(kind: type[_Wire], payload: bytes | str) -> Any:
+    return kind.model_validate_json(payload)

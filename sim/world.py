@@ -1,0 +1,554 @@
+"""The simulated Mars sample-return site: grids (numpy), objects, robots' physics.
+
+Pure state and rules: no Zenoh, no asyncio. The fleet (sim/fleet.py) steps
+robots through it from skill handlers.
+
+Truth and ground view: the world holds the truth (every explored cell, every
+RSS and stone). What the operator sees (the map feed) is the *ground view*:
+what robots sent over the link. A robot out of communication coverage keeps
+what it learns in its outbox; it reaches the ground once the robot is back in
+range (after the link delay).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .pathing import FREE, ROCK, SLOW, GridGeom, NoPath, line_max, plan
+from .worldfile import RobotModel, RobotStart, WorldFile
+
+# what the map feed's terrain layer says about a cell
+T_UNKNOWN, T_FREE, T_SLOW, T_ROCK = 0, 1, 2, 3
+
+DEFAULT_MODELS: dict[str, RobotModel] = {
+    "lru_science": RobotModel(kind="rover", capabilities=["science_camera", "stereo_camera"]),
+    "lru_manipulator": RobotModel(
+        kind="rover", capabilities=["manipulator", "stereo_camera"], carry_stones=1, carry_stones_in_box=4
+    ),
+    "drone": RobotModel(
+        kind="drone", capabilities=["stereo_camera"], speed=2.0, max_speed=5.0, sensor_range=20.0,
+        nav_range=8.0, charge_per_minute=0.5,
+    ),
+    "lander": RobotModel(kind="static"),
+}
+
+
+class SimError(Exception):
+    """A rule of the world refused something; the message is a sentence."""
+
+
+# ---------------------------------------------------------------- objects
+
+
+@dataclass
+class RssState:
+    name: str
+    x: float
+    y: float
+    radius: float
+    max_score: float
+    stones: list[str] = field(default_factory=list)
+    found_by: set[str] = field(default_factory=set)
+
+
+@dataclass
+class Stone:
+    id: str
+    rss: str
+    x: float
+    y: float
+    score: float | None = None  # set when identified
+    state: str = "hidden"  # hidden | identified | carried | ground | delivered
+    holder: str | None = None
+    identified_by: tuple[str, ...] = ()
+
+    def public(self) -> dict[str, Any]:
+        return {"id": self.id, "rss": self.rss, "x": round(self.x, 2), "y": round(self.y, 2),
+                "score": self.score, "state": self.state, "holder": self.holder}
+
+
+@dataclass
+class BoxState:
+    name: str
+    kind: str
+    where: str  # shelf | storage | ground | carried
+    slot: int | None = None
+    x: float = 0.0
+    y: float = 0.0
+    holder: str | None = None
+    on: bool = False  # a deployed Wi-Fi box
+
+    def public(self) -> dict[str, Any]:
+        return {"box": self.name, "kind": self.kind, "where": self.where, "slot": self.slot,
+                "x": round(self.x, 2), "y": round(self.y, 2), "holder": self.holder, "on": self.on}
+
+
+@dataclass
+class Knowledge:
+    """What one robot knows about the world (its own world model)."""
+
+    rss: dict[str, dict[str, Any]] = field(default_factory=dict)
+    stones: dict[str, dict[str, Any]] = field(default_factory=dict)
+    boxes: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+
+@dataclass
+class SimRobot:
+    name: str
+    type: str
+    model: RobotModel
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+    yaw: float = 0.0
+    battery: float = 1.0
+    airborne: bool = False
+    activity: str | None = None  # skill being executed
+    paused: Callable[[], bool] = lambda: False
+    box: str | None = None  # carried payload box
+    stones: list[str] = field(default_factory=list)  # carried stones
+    knowledge: Knowledge = field(default_factory=Knowledge)
+    odometer: float = 0.0
+    sim_seconds: float = 0.0  # robot time stepped by skills
+    # uplink to the ground: what waits for coverage, and what is on its way
+    outbox: list[Callable[[], None]] = field(default_factory=list)
+    in_flight: list[tuple[float, Callable[[], None]]] = field(default_factory=list)
+    pending_cells: np.ndarray | None = None  # explored, not yet sent
+
+    @property
+    def kind(self) -> str:
+        return self.model.kind
+
+    def has(self, capability: str) -> bool:
+        return capability in self.model.capabilities
+
+    @property
+    def usable(self) -> float:
+        return max(0.0, self.battery - self.model.reserve)
+
+    def pose_tuple(self) -> tuple[float, float]:
+        return self.x, self.y
+
+
+def _fmt(x: float, y: float) -> str:
+    return f"({x:.1f}, {y:.1f})"
+
+
+# ---------------------------------------------------------------- the world
+
+
+class World:
+    def __init__(self, spec: WorldFile, *, seed: int | None = None):
+        self.spec = spec
+        self.seed = spec.seed if seed is None else int(seed)
+        s = spec.site
+        nx = int(math.ceil((s.x_max - s.x_min) / s.cell - 1e-9))
+        ny = int(math.ceil((s.y_max - s.y_min) / s.cell - 1e-9))
+        self.geom = GridGeom(s.x_min, s.y_min, s.cell, nx, ny)
+        self.models = {**DEFAULT_MODELS, **spec.models}
+        rng = np.random.default_rng(self.seed)
+        self.terrain = self._generate_terrain(rng)
+        shape = self.geom.shape
+        self.explored = np.zeros(shape, dtype=bool)  # truth: seen by any robot
+        self.ground_explored = np.zeros(shape, dtype=bool)  # what the operator has
+        self.coverage = np.zeros(shape, dtype=np.float32)  # link quality 0..1
+        self.rss: dict[str, RssState] = {}
+        self.stones: dict[str, Stone] = {}
+        self._place_rss(rng)
+        self.boxes: dict[str, BoxState] = {}
+        for name, b in spec.boxes.items():
+            self.boxes[name] = BoxState(
+                name, b.kind, b.at, b.slot if b.at == "shelf" else None,
+                b.x if b.x is not None else spec.lander.x, b.y if b.y is not None else spec.lander.y,
+            )
+        self.recompute_coverage()
+        self.robots: dict[str, SimRobot] = {}
+        # scoring and referee's log
+        self.score = 0.0
+        self.delivered: list[dict[str, Any]] = []
+        self.events: deque[str] = deque(maxlen=40)
+        self.clock = 0.0  # sim seconds (advanced by the fleet)
+        # ground view of objects (what robots reported over the link)
+        self.ground_rss: dict[str, dict[str, Any]] = {}
+        self.ground_stones: dict[str, dict[str, Any]] = {}
+        self.ground_boxes: dict[str, dict[str, Any]] = {n: b.public() for n, b in self.boxes.items()}
+        self.objects_version = 0
+        self.slow_cost = 1.0 / spec.terrain.slow_factor
+
+    # ------------------------------------------------------------ generation
+
+    def _keep_clear(self) -> list[tuple[float, float, float]]:
+        sp = self.spec
+        out = [(c.x, c.y, c.r) for c in sp.terrain.keep_clear]
+        out.append((sp.lander.x, sp.lander.y, sp.lander.pad_radius + 8.0))
+        out += [(r.x, r.y, r.radius + 2.0) for r in sp.rss]
+        out += [(r.x, r.y, 4.0) for r in sp.robots.values()]
+        out += [(b.x, b.y, 3.0) for b in sp.boxes.values() if b.x is not None and b.y is not None]
+        return out
+
+    def _generate_terrain(self, rng: np.random.Generator) -> np.ndarray:
+        g = self.geom
+        t = np.full(g.shape, FREE, dtype=np.uint8)
+        clear = self._keep_clear()
+        s = self.spec.site
+
+        def scatter(count: int, radius: tuple[float, float], code: int) -> None:
+            for _ in range(count):
+                for _try in range(30):
+                    x = float(rng.uniform(s.x_min, s.x_max))
+                    y = float(rng.uniform(s.y_min, s.y_max))
+                    r = float(rng.uniform(*radius))
+                    if all(math.hypot(x - cx, y - cy) > r + cr for cx, cy, cr in clear):
+                        break
+                else:
+                    continue
+                # a blob: one to three overlapping discs
+                for k in range(int(rng.integers(1, 4))):
+                    ox, oy = (rng.normal(0, r * 0.5, 2) if k else (0.0, 0.0))
+                    rr = r * (1.0 if k == 0 else float(rng.uniform(0.5, 0.9)))
+                    rows, cols, mask = g.disk(x + float(ox), y + float(oy), rr)
+                    sub = t[rows, cols]
+                    if code == SLOW:
+                        sub[mask & (sub == FREE)] = SLOW
+                    else:
+                        sub[mask] = code
+
+        scatter(self.spec.terrain.rock_fields.count, self.spec.terrain.rock_fields.radius, ROCK)
+        scatter(self.spec.terrain.sand_patches.count, self.spec.terrain.sand_patches.radius, SLOW)
+        codes = {"free": FREE, "slow": SLOW, "impassable": ROCK}
+        for f in self.spec.terrain.features:
+            if f.circle is not None:
+                rows, cols, mask = g.disk(f.circle.x, f.circle.y, f.circle.r)
+                t[rows, cols][mask] = codes[f.kind]
+            else:
+                assert f.polygon is not None
+                t[g.polygon_mask([(p.x, p.y) for p in f.polygon])] = codes[f.kind]
+        # the lander's surroundings are always drivable
+        rows, cols, mask = g.disk(self.spec.lander.x, self.spec.lander.y, self.spec.lander.pad_radius + 3.0)
+        t[rows, cols][mask] = FREE
+        self._connect(t, clear)
+        return t
+
+    def _reachable(self, t: np.ndarray) -> np.ndarray:
+        """Cells reachable from the lander (4-connected flood fill, numpy)."""
+        passable = t != ROCK
+        reach = np.zeros_like(passable)
+        reach[self.geom.cell_of(self.spec.lander.x, self.spec.lander.y)] = True
+        while True:
+            grown = reach.copy()
+            grown[1:, :] |= reach[:-1, :]
+            grown[:-1, :] |= reach[1:, :]
+            grown[:, 1:] |= reach[:, :-1]
+            grown[:, :-1] |= reach[:, 1:]
+            grown &= passable
+            if (grown == reach).all():
+                return reach
+            reach = grown
+
+    def _connect(self, t: np.ndarray, clear: list[tuple[float, float, float]]) -> None:
+        """Carve corridors to enclosed places that must be reachable; pockets
+        nobody needs become rock (the map has no unreachable islands)."""
+        g = self.geom
+        reach = self._reachable(t)
+        lx, ly = self.spec.lander.x, self.spec.lander.y
+        carved = False
+        for cx, cy, _r in clear:
+            if not g.inside(cx, cy):
+                continue
+            if not reach[g.cell_of(cx, cy)]:
+                rows, cols, mask = g.disk(cx, cy, 1.0)
+                t[rows, cols][mask] = FREE
+                n = int(math.hypot(cx - lx, cy - ly) / (g.cell * 0.5)) + 2
+                for k in range(n + 1):
+                    f = k / n
+                    i, j = g.cell_of(cx + (lx - cx) * f, cy + (ly - cy) * f)
+                    if t[i, j] == ROCK:
+                        t[max(i - 1, 0):i + 2, max(j - 1, 0):j + 2][
+                            t[max(i - 1, 0):i + 2, max(j - 1, 0):j + 2] == ROCK
+                        ] = SLOW
+                carved = True
+        if carved:
+            reach = self._reachable(t)
+        t[(t != ROCK) & ~reach] = ROCK
+
+    def _place_rss(self, rng: np.random.Generator) -> None:
+        g = self.geom
+        for r in self.spec.rss:
+            state = RssState(r.name, r.x, r.y, r.radius, r.max_score)
+            for k in range(r.stones):
+                for _try in range(50):
+                    ang = float(rng.uniform(0, 2 * math.pi))
+                    dist = r.radius * math.sqrt(float(rng.uniform(0, 1)))
+                    x, y = r.x + dist * math.cos(ang), r.y + dist * math.sin(ang)
+                    if g.inside(x, y) and self.terrain[g.cell_of(x, y)] != ROCK:
+                        break
+                sid = f"{r.name}-s{k + 1}"
+                self.stones[sid] = Stone(sid, r.name, round(x, 2), round(y, 2))
+                state.stones.append(sid)
+            self.rss[r.name] = state
+
+    # ------------------------------------------------------------ robots
+
+    def add_robot(self, name: str, robot_type: str, start: RobotStart | None = None, index: int = 0) -> SimRobot:
+        model = self.models.get(robot_type)
+        if model is None:
+            raise SimError(
+                f"robot {name}: the world has no model for type '{robot_type}' "
+                f"(it knows: {', '.join(sorted(self.models))})"
+            )
+        if start is None:
+            start = self.spec.robots.get(name)
+        if start is None:
+            start = self._spawn(index)
+        robot = SimRobot(name, robot_type, model, x=start.x, y=start.y, yaw=start.yaw, battery=start.battery)
+        robot.pending_cells = np.zeros(self.geom.shape, dtype=bool)
+        if model.kind == "static":
+            robot.battery = 1.0
+        # every robot starts knowing the lander's boxes (it is the shared landmark)
+        robot.knowledge.boxes = {n: b.public() for n, b in self.boxes.items() if b.where in ("shelf", "ground")}
+        self.robots[name] = robot
+        return robot
+
+    def _spawn(self, index: int) -> RobotStart:
+        """Start poses for robots the world file does not place: rings around the lander."""
+        lx, ly = self.spec.lander.x, self.spec.lander.y
+        ring, k = 0, index
+        while k >= 8 * (ring + 1):
+            k -= 8 * (ring + 1)
+            ring += 1
+        n = 8 * (ring + 1)
+        r = 8.0 + 3.0 * ring
+        ang = 2 * math.pi * k / n
+        x, y = lx + r * math.cos(ang), ly + r * math.sin(ang)
+        return RobotStart(x=round(x, 2), y=round(y, 2), yaw=round(ang, 3))
+
+    def log(self, text: str) -> None:
+        self.events.append(f"[{self.clock:7.0f} s] {text}")
+
+    # ------------------------------------------------------------ queries
+
+    def terrain_at(self, x: float, y: float) -> int:
+        if not self.geom.inside(x, y):
+            return ROCK
+        return int(self.terrain[self.geom.cell_of(x, y)])
+
+    def dist_to_lander(self, x: float, y: float) -> float:
+        return math.hypot(x - self.spec.lander.x, y - self.spec.lander.y)
+
+    def at_lander(self, robot: SimRobot, margin: float = 0.0) -> bool:
+        return self.dist_to_lander(robot.x, robot.y) <= self.spec.lander.pad_radius + margin
+
+    def docked(self, robot: SimRobot) -> bool:
+        """Charging position: at the lander (a drone: landed on the pad)."""
+        if robot.kind == "static":
+            return False
+        if robot.kind == "drone" and robot.airborne:
+            return False
+        return self.at_lander(robot)
+
+    def link_quality(self, x: float, y: float) -> float:
+        if not self.geom.inside(x, y):
+            return 0.0
+        return float(self.coverage[self.geom.cell_of(x, y)])
+
+    def in_range(self, robot: SimRobot) -> bool:
+        return self.link_quality(robot.x, robot.y) > 0.0
+
+    def can_talk(self, a: SimRobot, b: SimRobot) -> bool:
+        """Robots talk through the network when both are covered, or directly when close."""
+        if self.in_range(a) and self.in_range(b):
+            return True
+        return math.hypot(a.x - b.x, a.y - b.y) <= self.spec.comms.direct_range
+
+    def rss_near(self, x: float, y: float, margin: float) -> RssState | None:
+        best, best_d = None, math.inf
+        for r in self.rss.values():
+            d = math.hypot(x - r.x, y - r.y) - r.radius
+            if d <= margin and d < best_d:
+                best, best_d = r, d
+        return best
+
+    def explored_fraction(self, mask: np.ndarray | None = None, *, ground: bool = False) -> float:
+        grid = self.ground_explored if ground else self.explored
+        if mask is None:
+            return float(grid.mean())
+        total = int(mask.sum())
+        return float((grid & mask).sum()) / total if total else 1.0
+
+    # ------------------------------------------------------------ coverage
+
+    def recompute_coverage(self) -> None:
+        """Quality = 1 - 0.8 (d/R)^2 inside each source's radius. A Wi-Fi box
+        relays only when it stands inside coverage already (a chain from the lander)."""
+        g = self.geom
+        cov = np.zeros(g.shape, dtype=np.float32)
+        lander = self.spec.lander
+
+        def add(x: float, y: float, r: float) -> None:
+            rows, cols = g.window(x, y, r)
+            dx = g.xs[cols] - x
+            dy = g.ys[rows] - y
+            d2 = dy[:, None] ** 2 + dx[None, :] ** 2
+            q = np.where(d2 <= r * r, 1.0 - 0.8 * d2 / (r * r), 0.0).astype(np.float32)
+            np.maximum(cov[rows, cols], q, out=cov[rows, cols])
+
+        add(lander.x, lander.y, lander.comm_radius)
+        pending = [b for b in self.boxes.values() if b.on and b.where == "ground"]
+        linked = True
+        while pending and linked:
+            linked = False
+            for b in list(pending):
+                if g.inside(b.x, b.y) and cov[g.cell_of(b.x, b.y)] > 0:
+                    add(b.x, b.y, self.spec.comms.wifi_range)
+                    pending.remove(b)
+                    linked = True
+        self.coverage = cov
+
+    # ------------------------------------------------------------ uplink (robot -> ground)
+
+    def uplink(self, robot: SimRobot, fn: Callable[[], None]) -> None:
+        """Send something to the ground: it arrives once the robot is in range
+        (plus the link delay); see `pump`."""
+        robot.outbox.append(fn)
+
+    def pump(self, now: float, delay: float) -> bool:
+        """Move what in-range robots have to send onto the link; deliver what
+        has arrived. `now` and `delay` in wall seconds. True if anything arrived."""
+        arrived = False
+        for robot in self.robots.values():
+            if self.in_range(robot):
+                assert robot.pending_cells is not None
+                if robot.pending_cells.any():
+                    cells = np.flatnonzero(robot.pending_cells)
+                    robot.pending_cells[:] = False
+                    robot.outbox.append(lambda c=cells: self._ground_cells(c))
+                if robot.outbox:
+                    robot.in_flight += [(now + delay, fn) for fn in robot.outbox]
+                    robot.outbox = []
+            if robot.in_flight:
+                due = [fn for t, fn in robot.in_flight if t <= now]
+                if due:
+                    robot.in_flight = [(t, fn) for t, fn in robot.in_flight if t > now]
+                    for fn in due:
+                        fn()
+                    arrived = True
+        return arrived
+
+    def _ground_cells(self, cells: np.ndarray) -> None:
+        self.ground_explored.ravel()[cells] = True
+
+    def _ground_object(self, kind: str, key: str, value: dict[str, Any] | None) -> None:
+        table = {"rss": self.ground_rss, "stone": self.ground_stones, "box": self.ground_boxes}[kind]
+        if value is None:
+            table.pop(key, None)
+        else:
+            table[key] = dict(value)
+        self.objects_version += 1
+
+    def tell_ground(self, robot: SimRobot, kind: str, key: str, value: dict[str, Any] | None) -> None:
+        value = dict(value) if value is not None else None
+        self.uplink(robot, lambda: self._ground_object(kind, key, value))
+
+    # ------------------------------------------------------------ sensing
+
+    def reveal(self, robot: SimRobot, r: float) -> int:
+        """Map the cells within r of the robot; returns how many were new (truth)."""
+        if r <= 0:
+            return 0
+        rows, cols, mask = self.geom.disk(robot.x, robot.y, r)
+        sub = self.explored[rows, cols]
+        new = int((mask & ~sub).sum())
+        sub |= mask
+        assert robot.pending_cells is not None
+        robot.pending_cells[rows, cols] |= mask & ~self.ground_explored[rows, cols]
+        return new
+
+    def discover(self, robot: SimRobot, r: float) -> list[str]:
+        """RSSs the robot's sensors reach (within r of any part of the region)."""
+        found = []
+        for rss in self.rss.values():
+            if robot.name in rss.found_by:
+                continue
+            if math.hypot(robot.x - rss.x, robot.y - rss.y) <= r + rss.radius * 0.5:
+                rss.found_by.add(robot.name)
+                info = {"rss": rss.name, "x": rss.x, "y": rss.y, "radius": rss.radius, "top_score": None}
+                known = robot.knowledge.rss.get(rss.name)
+                if known is not None:
+                    info["top_score"] = known.get("top_score")
+                robot.knowledge.rss[rss.name] = info
+                self.tell_ground(robot, "rss", rss.name, info)
+                self.log(f"{robot.name} discovered {rss.name} at {_fmt(rss.x, rss.y)}")
+                found.append(rss.name)
+        return found
+
+    # ------------------------------------------------------------ energy
+
+    def drive_energy(self, robot: SimRobot, distance: float, code: int) -> float:
+        factor = self.spec.terrain.slow_energy if code == SLOW else 1.0
+        return distance * factor / robot.model.metres_per_battery
+
+    def work_energy(self, robot: SimRobot, dt: float, load: float = 1.0) -> float:
+        return dt * robot.model.work_per_hour * load / 3600.0
+
+    def flight_energy(self, robot: SimRobot, dt: float) -> float:
+        return dt / robot.model.flight_s_per_battery
+
+    def charge(self, robot: SimRobot, dt: float, up_to: float = 1.0) -> None:
+        if robot.battery < up_to:
+            robot.battery = min(up_to, robot.battery + dt * robot.model.charge_per_minute / 60.0)
+
+    # ------------------------------------------------------------ planning
+
+    def plan_route(self, robot: SimRobot, goal: tuple[float, float]) -> list[tuple[float, float]]:
+        """Waypoints for a rover (terrain-aware) or a drone (straight)."""
+        start = (robot.x, robot.y)
+        g = self.geom
+        if robot.kind == "drone":
+            if not g.inside(*goal):
+                raise SimError(f"the goal {_fmt(*goal)} is outside the site")
+            return [start, goal]
+        if g.inside(*goal) and self.terrain[g.cell_of(*goal)] == ROCK:
+            raise SimError(f"the goal {_fmt(*goal)} lies in impassable terrain (rocks)")
+        try:
+            return plan(self.terrain, g, start, goal, self.slow_cost)
+        except NoPath as e:
+            raise SimError(f"no route from {_fmt(*start)} to {_fmt(*goal)}: {e}") from None
+
+    def nearest_free(self, x: float, y: float, max_r: float = 10.0) -> tuple[float, float] | None:
+        """Nearest passable cell centre to (x, y) within max_r, or None."""
+        if self.geom.inside(x, y) and self.terrain[self.geom.cell_of(x, y)] != ROCK:
+            return x, y
+        rows, cols, mask = self.geom.disk(x, y, max_r)
+        ok = mask & (self.terrain[rows, cols] != ROCK)
+        if not ok.any():
+            return None
+        ii, jj = np.nonzero(ok)
+        xs = self.geom.xs[cols][jj]
+        ys = self.geom.ys[rows][ii]
+        k = int(np.argmin((xs - x) ** 2 + (ys - y) ** 2))
+        return float(xs[k]), float(ys[k])
+
+    def straight_clear(self, a: tuple[float, float], b: tuple[float, float]) -> bool:
+        return line_max(self.terrain, self.geom, a, b) < ROCK
+
+    # ------------------------------------------------------------ layers for the map feed
+
+    def ground_layers(self) -> dict[str, np.ndarray]:
+        terrain = np.where(self.ground_explored, self.terrain + 1, T_UNKNOWN).astype(np.uint8)
+        cov = np.where(self.coverage > 0, np.maximum(1, np.rint(self.coverage * 255)), 0).astype(np.uint8)
+        return {"terrain": terrain, "coverage": cov}
+
+    def ground_objects(self) -> dict[str, Any]:
+        lander = self.spec.lander
+        return {
+            "lander": {"x": lander.x, "y": lander.y, "pad_radius": lander.pad_radius, "comm_radius": lander.comm_radius},
+            "boxes": [dict(v) for _k, v in sorted(self.ground_boxes.items())],
+            "rss": [dict(v) for _k, v in sorted(self.ground_rss.items())],
+            "stones": [dict(v) for _k, v in sorted(self.ground_stones.items())],
+        }

@@ -1,0 +1,359 @@
+"""Pure tests of the simulated world, its skills and the map-feed codec (no Zenoh)."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import re
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+import pytest
+
+from backend.agent import SkillFailed
+from backend.files import FileProblems
+from backend.model import Pose, Position
+from sim import mapfeed as mf
+from sim.pathing import ROCK, Follower, lawnmower, segment_cells
+from sim.skills import RobotSkills
+from sim.world import World
+from sim.worldfile import load_world, parse_world
+
+from .conftest import WORLD
+
+
+@pytest.fixture(scope="module")
+def spec():
+    return load_world(WORLD)
+
+
+@pytest.fixture
+def world(spec) -> World:
+    return World(spec, seed=1)
+
+
+# ---------------------------------------------------------------- world file
+
+
+def test_default_world_is_valid_and_deterministic(spec) -> None:
+    a, b, c = World(spec, seed=1), World(spec, seed=1), World(spec, seed=2)
+    assert np.array_equal(a.terrain, b.terrain)
+    assert [(s.id, s.x, s.y) for s in a.stones.values()] == [(s.id, s.x, s.y) for s in b.stones.values()]
+    assert not np.array_equal(a.terrain, c.terrain)
+    assert [(s.x, s.y) for s in a.stones.values()] != [(s.x, s.y) for s in c.stones.values()]
+    # a few hundred metres, some slow and some impassable ground
+    assert a.geom.x1 - a.geom.x0 >= 200
+    counts = np.bincount(a.terrain.ravel(), minlength=3)
+    assert counts[1] > 0 and counts[2] > 0
+
+
+def test_pilot_scenario_layout(world: World) -> None:
+    """An RSS at POI-A inside ROI-east and coverage; the best ones far in the bottom right."""
+    rss_a = world.rss_near(42.0, 18.0, 3.0)
+    assert rss_a is not None and rss_a.name == "RSS-A"
+    assert 30 <= rss_a.x <= 80 and 0 <= rss_a.y <= 40  # ROI-east
+    assert world.link_quality(42.0, 18.0) > 0
+    best = max(world.rss.values(), key=lambda r: r.max_score)
+    assert best.x > 100 and best.y < -50
+    assert world.link_quality(best.x, best.y) == 0  # far: needs Wi-Fi boxes or comes back to report
+    assert sorted(r.max_score for r in world.rss.values())[-2:] == [1.6, 2.0]
+    # every RSS and stone is reachable by a rover
+    for stone in world.stones.values():
+        assert world.terrain_at(stone.x, stone.y) != ROCK
+
+
+def test_world_file_errors_point_at_line_and_field(tmp_path: Path) -> None:
+    text = (
+        "format: missionctl/world@1\n"
+        "name: broken\n"
+        "rss:\n"
+        "  - {name: RSS-A, x: 10, y: 10, radius: 5, max_score: -1}\n"
+        "  - {name: RSS-A, x: 900, y: 10, max_score: 1}\n"
+        "boxes:\n"
+        "  sample_box: {kind: sample, at: shelf}\n"
+    )
+    with pytest.raises(FileProblems) as exc:
+        parse_world(text, "w.yaml")
+    lines = [str(i) for i in exc.value.issues]
+    assert any(ln.startswith("w.yaml:4:") and "rss[0].max_score" in ln for ln in lines), lines
+    assert any(ln.startswith("w.yaml:7:") and "boxes.sample_box" in ln and "slot" in ln for ln in lines), lines
+    # semantic checks run on a structurally valid file
+    ok = text.replace("max_score: -1", "max_score: 1").replace("at: shelf}", "at: shelf, slot: 1}")
+    with pytest.raises(FileProblems) as exc:
+        parse_world(ok, "w.yaml")
+    lines = [str(i) for i in exc.value.issues]
+    assert any(ln.startswith("w.yaml:5:") and "duplicate region name 'RSS-A'" in ln for ln in lines), lines
+    assert any("outside the site" in ln for ln in lines), lines
+    bad_yaml = tmp_path / "bad.yaml"
+    bad_yaml.write_text("format: [\n")
+    with pytest.raises(FileProblems) as exc:
+        load_world(bad_yaml)
+    assert str(exc.value.issues[0]).startswith(f"{bad_yaml}:")
+
+
+# ---------------------------------------------------------------- coverage, exploration, ground view
+
+
+def test_coverage_grows_with_a_wifi_box_inside_coverage_only(world: World) -> None:
+    before = float((world.coverage > 0).mean())
+    assert world.link_quality(85.0, 0.0) == 0
+    far = world.boxes["wifi_box_2"]
+    far.where, far.x, far.y, far.on = "ground", 150.0, 150.0, True
+    world.recompute_coverage()
+    assert float((world.coverage > 0).mean()) == pytest.approx(before)  # nothing relays it
+    box = world.boxes["wifi_box_1"]
+    box.where, box.x, box.y, box.on = "ground", 50.0, 0.0, True
+    world.recompute_coverage()
+    after = float((world.coverage > 0).mean())
+    assert after > before
+    assert world.link_quality(85.0, 0.0) > 0
+    # a chain: a box inside the extended coverage relays further
+    far.x, far.y = 92.0, 0.0
+    world.recompute_coverage()
+    assert world.link_quality(130.0, 0.0) > 0
+
+
+def test_exploration_reveals_rss_and_reaches_the_ground_only_in_range(world: World) -> None:
+    near = world.add_robot("lru1", "lru_science")
+    near.x, near.y = 44.0, 20.0  # at RSS-A, inside coverage
+    far = world.add_robot("ardea", "drone")
+    far.x, far.y, far.airborne = -32.0, 70.0, True  # over RSS-C, out of coverage
+    assert world.in_range(near) and not world.in_range(far)
+    assert not world.can_talk(near, far)  # no coverage out there, and too far for direct radio
+    for r in (near, far):
+        assert world.reveal(r, 10.0) > 0
+    assert world.discover(near, 10.0) == ["RSS-A"]
+    assert world.discover(far, 10.0) == ["RSS-C"]
+    assert "RSS-A" in near.knowledge.rss and "RSS-C" not in near.knowledge.rss
+    assert world.pump(now=0.0, delay=0.0)
+    assert set(world.ground_rss) == {"RSS-A"}  # RSS-C waits aboard ardea
+    i, j = world.geom.cell_of(-32.0, 70.0)
+    assert world.explored[i, j] and not world.ground_explored[i, j]
+    far.x, far.y = -20.0, 75.0
+    near.x, near.y = -20.0, 60.0  # out of coverage too, but 15 m apart: direct radio
+    assert not world.in_range(near) and world.can_talk(near, far)
+    near.x, near.y = 44.0, 20.0
+    far.x, far.y = 5.0, 5.0  # back in coverage
+    world.pump(now=1.0, delay=2.0)  # on its way: a 2 s link delay
+    assert "RSS-C" not in world.ground_rss
+    world.pump(now=3.5, delay=2.0)
+    assert set(world.ground_rss) == {"RSS-A", "RSS-C"}
+    assert world.ground_explored[i, j]
+    layers = world.ground_layers()
+    assert layers["terrain"][i, j] == world.terrain[i, j] + 1
+    assert layers["terrain"][world.geom.cell_of(-150.0, -150.0)] == mf.T_UNKNOWN
+
+
+def test_path_avoids_impassable_cells(world: World) -> None:
+    rover = world.add_robot("lru1", "lru_science")
+    start = world.nearest_free(45.0, -38.0)
+    goal = world.nearest_free(80.0, -38.0)
+    assert start and goal
+    rover.x, rover.y = start
+    route = world.plan_route(rover, goal)
+    assert not world.straight_clear(start, goal)  # the crater lies between
+    for a, b in zip(route, route[1:], strict=False):
+        rows, cols = segment_cells(world.geom, a[0], a[1], b[0], b[1])
+        assert (world.terrain[rows, cols] != ROCK).all()
+    f = Follower(route)
+    assert f.total > math.dist(start, goal) + 5
+    with pytest.raises(Exception, match="impassable"):
+        world.plan_route(rover, (62.0, -38.0))  # the crater floor
+
+
+def test_lawnmower_covers_the_polygon() -> None:
+    poly = [(30.0, 0.0), (80.0, 0.0), (80.0, 40.0), (30.0, 40.0)]
+    pts = lawnmower(poly, spacing=16.0, start=(42.0, 18.0))
+    assert len(pts) == 6
+    assert all(30 <= x <= 80 and 0 <= y <= 40 for x, y in pts)
+
+
+# ---------------------------------------------------------------- skills without Zenoh
+
+
+class FakeCtx:
+    def __init__(self) -> None:
+        self.paused = False
+        self.progress_calls: list[tuple[float, str, float | None]] = []
+
+    async def sleep(self, seconds: float) -> None:
+        await asyncio.sleep(0)
+
+    def progress(self, fraction: float, info: str = "", eta_s: float | None = None) -> None:
+        assert 0.0 <= fraction <= 1.0
+        self.progress_calls.append((fraction, info, eta_s))
+
+
+def fake_fleet(world: World) -> Any:
+    async def ask(sender, target, topic, data):
+        return None
+
+    async def tell(sender, target, topic, data):
+        return False
+
+    return SimpleNamespace(world=world, dt=5.0, robot_seconds=0.0, note=lambda r, t: None, ask=ask, tell=tell)
+
+
+def run(coro) -> Any:
+    return asyncio.run(coro)
+
+
+def test_battery_drains_with_distance_and_an_empty_battery_fails_with_the_distance(world: World) -> None:
+    rover = world.add_robot("lru1", "lru_science")
+    rover.x, rover.y, rover.battery = 4.0, 3.0, 1.0
+    skills = RobotSkills(fake_fleet(world), rover)
+    ctx = FakeCtx()
+    run(skills.drive_to(ctx, goal=Pose(x=40.0, y=3.0), speed=0.5))
+    used = 1.0 - rover.battery
+    assert math.hypot(rover.x - 40.0, rover.y - 3.0) <= 0.5
+    assert 35 / 1000 <= used <= 45 / 1000  # ~1000 m per battery, plus electronics
+    assert ctx.progress_calls[-1][0] == 1.0 and ctx.progress_calls[len(ctx.progress_calls) // 2][2] > 0
+    rover.battery = 0.08  # 3 % above the reserve: about 30 m
+    with pytest.raises(SkillFailed) as exc:
+        run(skills.drive_to(FakeCtx(), goal=Pose(x=40.0, y=-50.0)))
+    m = re.search(r"battery empty after (\d+) m of (\d+) m", exc.value.reason)
+    assert m and "recharge at the lander" in exc.value.reason, exc.value.reason
+    done, total = int(m.group(1)), int(m.group(2))
+    assert 20 <= done <= 32 and total > 45
+    assert rover.battery == pytest.approx(rover.model.reserve)
+    # recharging uses the reserve to get home, then charges
+    run(skills.recharge(FakeCtx(), target_level=0.9))
+    assert world.at_lander(rover) and rover.battery >= 0.9
+
+
+def test_drone_refuses_a_flight_longer_than_its_battery_and_recharges_on_the_pad(world: World) -> None:
+    drone = world.add_robot("ardea", "drone")
+    drone.x, drone.y, drone.battery = -2.0, 2.0, 0.3
+    skills = RobotSkills(fake_fleet(world), drone)
+    with pytest.raises(SkillFailed, match="take off first"):
+        run(skills.fly_to(FakeCtx(), goal=Pose(x=20.0, y=0.0)))
+    run(skills.takeoff(FakeCtx(), altitude=5.0))
+    assert drone.airborne and drone.z == 5.0
+    with pytest.raises(SkillFailed) as exc:
+        run(skills.fly_to(FakeCtx(), goal=Pose(x=150.0, y=-150.0)))
+    assert "refused before the flight" in exc.value.reason
+    assert drone.airborne and math.hypot(drone.x + 2, drone.y - 2) < 1  # it did not move
+    run(skills.fly_to(FakeCtx(), goal=Pose(x=30.0, y=0.0)))
+    assert drone.battery < 0.3
+    run(skills.land(FakeCtx(), where="lander_pad"))
+    assert not drone.airborne and world.docked(drone)
+    low = drone.battery
+    world.charge(drone, 60.0)
+    assert drone.battery == pytest.approx(low + drone.model.charge_per_minute)
+
+
+def test_outcomes_hardly_depend_on_the_step_size(spec) -> None:
+    """The sim speed only changes the step: a survey ends at (nearly) the same place."""
+    ends = []
+    for dt in (0.25, 5.0):
+        world = World(spec, seed=1)
+        rover = world.add_robot("lru1", "lru_science")
+        fleet = fake_fleet(world)
+        fleet.dt = dt
+        skills = RobotSkills(fleet, rover)
+        run(skills.drive_to(FakeCtx(), goal=Pose(x=42.0, y=18.0)))
+        t0 = rover.sim_seconds
+        area = [Position(x=30, y=0), Position(x=80, y=0), Position(x=80, y=40), Position(x=30, y=40)]
+        run(skills.explore(FakeCtx(), area=area, max_duration=150))
+        assert rover.sim_seconds - t0 == pytest.approx(150.0)
+        ends.append((rover.x, rover.y, int(world.explored.sum()), rover.battery))
+    (x1, y1, c1, b1), (x2, y2, c2, b2) = ends
+    assert math.hypot(x1 - x2, y1 - y2) < 2.5
+    assert abs(c1 - c2) <= 0.02 * c1 and abs(b1 - b2) < 0.002
+
+
+def test_identify_alone_gives_the_minimum_and_together_the_top_score(world: World) -> None:
+    lru1 = world.add_robot("lru1", "lru_science")
+    lru2 = world.add_robot("lru2", "lru_manipulator")
+    lru1.x, lru1.y = 42.0, 18.0
+    lru2.x, lru2.y = 43.0, 18.0
+    fleet = fake_fleet(world)
+    s1, s2 = RobotSkills(fleet, lru1), RobotSkills(fleet, lru2)
+    run(s2.identify_stone(FakeCtx(), target=Position(x=42.0, y=18.0)))
+    alone = [s for s in world.stones.values() if s.state == "identified"]
+    assert [s.score for s in alone] == [0.1]
+    lru2.activity = "identify_stone"  # the partner works on it at the same time (a barrier)
+    lru1.activity = "identify_stone"
+    run(s1.identify_stone(FakeCtx(), target=Position(x=42.0, y=18.0), partner="lru2"))
+    top = [s for s in world.stones.values() if s.state == "identified" and s.score == 1.0]
+    assert len(top) == 1 and top[0].identified_by == ("lru1", "lru2")
+    with pytest.raises(SkillFailed, match="no region ideal for sampling stones"):
+        run(s1.identify_stone(FakeCtx(), target=Position(x=-10.0, y=-10.0)))
+
+
+def test_science_image_reveals_the_top_score(world: World) -> None:
+    lru1 = world.add_robot("lru1", "lru_science")
+    lru1.x, lru1.y = 40.0, 18.0
+    run(RobotSkills(fake_fleet(world), lru1).take_science_image(FakeCtx(), target=Pose(x=45.0, y=21.0)))
+    assert lru1.knowledge.rss["RSS-A"]["top_score"] == 1.0
+    world.pump(0.0, 0.0)
+    assert world.ground_rss["RSS-A"]["top_score"] == 1.0
+
+
+# ---------------------------------------------------------------- map feed codec
+
+
+def _meta(h: int, w: int, tile: int = 16) -> mf.MapMeta:
+    return mf.MapMeta(world="t", seed=1, x0=0.0, y0=0.0, cell=1.0, width=w, height=h, tile=tile)
+
+
+def test_tiles_round_trip_and_only_changed_tiles_are_sent() -> None:
+    rng = np.random.default_rng(3)
+    h, w = 40, 50  # not multiples of 16: edge tiles are smaller
+    terrain = rng.integers(0, 4, (h, w)).astype(np.uint8)
+    coverage = np.zeros((h, w), dtype=np.uint8)
+    enc = mf.TileEncoder(_meta(h, w))
+    first = enc.delta({"terrain": terrain, "coverage": coverage})
+    assert len(first) == 2 * 3 * 4  # every tile of both layers
+    assert enc.delta({"terrain": terrain, "coverage": coverage}) == []  # nothing changed
+    mirror = mf.MapMirror()
+    mirror.apply_snapshot(mf.MapSnapshot(meta=enc.meta, seq=0, sim_time=0.0, tiles=enc.full(),
+                                         objects=mf.MapObjects(lander=mf.LanderItem(x=0, y=0, pad_radius=5, comm_radius=60))))
+    assert np.array_equal(mirror.layers["terrain"], terrain)
+    t2 = terrain.copy()
+    t2[0, 0] = (t2[0, 0] + 1) % 4  # tile (0, 0)
+    t2[39, 49] = (t2[39, 49] + 1) % 4  # the corner tile (3, 2), 8x2 cells
+    c2 = coverage.copy()
+    c2[20, 20] = 200  # tile (1, 1)
+    tiles = enc.delta({"terrain": t2, "coverage": c2})
+    assert sorted((t.layer, t.tx, t.ty) for t in tiles) == [("coverage", 1, 1), ("terrain", 0, 0), ("terrain", 3, 2)]
+    delta = mf.MapDelta(seq=1, sim_time=1.0, tiles=tiles)
+    wire = mf.MapDelta.model_validate_json(mf.dump(delta))
+    assert mirror.apply_delta(wire)
+    assert np.array_equal(mirror.layers["terrain"], t2) and np.array_equal(mirror.layers["coverage"], c2)
+    assert mirror.apply_delta(wire)  # a duplicate is ignored
+    assert not mirror.apply_delta(mf.MapDelta(seq=3, sim_time=2.0))  # a gap: re-query the snapshot
+    # a changed tile compresses well: the delta is far smaller than the grid
+    assert len(mf.dump(delta)) < h * w
+
+
+def test_mirror_keeps_deltas_that_arrive_before_the_snapshot() -> None:
+    grid = np.zeros((16, 16), dtype=np.uint8)
+    enc = mf.TileEncoder(_meta(16, 16))
+    enc.delta({"terrain": grid, "coverage": grid})
+    lander = mf.LanderItem(x=0, y=0, pad_radius=5, comm_radius=60)
+    snap = mf.MapSnapshot(meta=enc.meta, seq=4, sim_time=0.0, tiles=enc.full(), objects=mf.MapObjects(lander=lander))
+    g2 = grid.copy()
+    g2[3, 3] = 2
+    d5 = mf.MapDelta(seq=5, sim_time=1.0, tiles=enc.delta({"terrain": g2, "coverage": grid}),
+                     objects=mf.MapObjects(lander=lander, rss=[mf.RssItem(rss="RSS-A", x=1, y=2, radius=3)]))
+    mirror = mf.MapMirror()
+    assert mirror.apply_delta(d5) and not mirror.ready
+    mirror.apply_snapshot(snap)
+    assert mirror.seq == 5 and mirror.layers["terrain"][3, 3] == 2
+    assert mirror.objects is not None and mirror.objects.rss[0].rss == "RSS-A"
+    assert mirror.cell_of(3.5, 3.5) == (3, 3) and mirror.cell_of(-1, 0) is None
+    with pytest.raises(ValueError):
+        mf.decode_tile(mf.encode_tile(np.zeros((4, 4), dtype=np.uint8)), (5, 5))
+
+
+def test_mapfeed_is_self_contained() -> None:
+    """The wire models may move to backend: pydantic + numpy + stdlib only."""
+    import ast
+
+    tree = ast.parse(Path(mf.__file__).read_text())
+    mods = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    mods |= {n.module.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module and n.level == 0}
+    assert mods <= {"__future__", "base64", "zlib", "typing", "numpy", "pydantic"}, mods
