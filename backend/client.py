@@ -114,6 +114,7 @@ class MissionClient:
         self._entities: list[Any] = []
         self._loop: asyncio.AbstractEventLoop | None = None
         self._pending: list[ev.EventBatch] = []  # events arriving during a resync
+        self._pending_fleet: list[RobotInfo] = []  # presence changes arriving during a resync
         self._syncing = False
         self._resync_task: asyncio.Task | None = None
         self._ids = itertools.count(1)
@@ -203,6 +204,10 @@ class MissionClient:
                 )
             self.mission, self.library = snap.mission, snap.library
             self.robots = dict(snap.robots)
+            # a presence change that arrived while the snapshot was in flight is newer
+            for info in self._pending_fleet:
+                self.robots[info.name] = info
+            self._pending_fleet = []
             self.server_id = snap.server_id
             pending, self._pending = self._pending, []
             for batch in pending:
@@ -269,6 +274,8 @@ class MissionClient:
         self._post(self._got_fleet, info)
 
     def _got_fleet(self, info: RobotInfo) -> None:
+        if self._syncing:
+            self._pending_fleet.append(info)
         self.robots[info.name] = info
         self._emit("fleet", info)
 
