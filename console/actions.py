@@ -1,0 +1,94 @@
+"""Every operator action in one table: key, footer label, help text, group.
+
+Key bindings, the footer, the help screen and the command palette are all
+generated from this table, so they cannot disagree. Each action has a stable
+binding id ("mission.<name>") that users remap in their config file:
+
+    [keymap]
+    "mission.sync" = "S"
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from textual.binding import Binding
+
+
+@dataclass(frozen=True)
+class Action:
+    name: str  # action_<name> on the mission screen
+    key: str  # default key(s), comma separated
+    label: str  # short footer label
+    description: str  # help screen / palette
+    group: str
+    footer: bool = False  # shown in the footer (the rest: help screen and palette)
+
+    @property
+    def binding_id(self) -> str:
+        return f"mission.{self.name}"
+
+
+ACTIONS: list[Action] = [
+    # editing the plan
+    Action("add", "a", "Add", "Add a skill to the robot's plan after the cursor (picker with fuzzy filter)", "Plan", True),
+    Action("edit", "enter,e", "Edit", "Edit the selected skill's parameters", "Plan"),
+    Action("delete", "d,delete", "Delete", "Delete the selected idle skill (asks first)", "Plan", True),
+    Action("move_up", "shift+up,K", "Up", "Move the selected idle skill up in the plan", "Plan"),
+    Action("move_down", "shift+down,J", "Down", "Move the selected idle skill down in the plan", "Plan"),
+    Action("undo", "ctrl+z", "Undo", "Undo your last edit of the plan", "Plan"),
+    Action("redo", "ctrl+y", "Redo", "Redo what you undid", "Plan"),
+    # synchronization
+    Action("sync", "s", "Sync", "Synchronize the robot's plan down to the cursor (send it to the robot)", "Synchronization", True),
+    Action("unsync", "u", "Unsync", "Take back queued skills from the cursor to the end", "Synchronization", True),
+    Action("mark", "space", "Mark", "Mark/unmark a skill for a barrier (one per robot)", "Synchronization"),
+    Action("barrier", "b", "Barrier", "Make a barrier of the marked skills", "Synchronization", True),
+    Action("unbarrier", "B", "Unbarrier", "Remove the barrier of the selected skill", "Synchronization"),
+    Action("retry", "t", "Retry", "Retry the selected failed skill (new attempt right after it)", "Synchronization"),
+    # execution
+    Action("run", "r", "Run", "Run (or resume) the selected robot", "Execution", True),
+    Action("pause", "p", "Pause", "Pause the selected robot", "Execution", True),
+    Action("stop", "x", "Stop", "Stop the selected robot's active skill (it returns to the queue)", "Execution", True),
+    Action("reset", "z", "Reset", "Reset the selected robot: stop and unsynchronize everything queued (asks first)", "Execution"),
+    Action("run_all", "R", "Run all", "Run (or resume) all robots", "Execution"),
+    Action("pause_all", "P", "Pause all", "Pause all robots", "Execution"),
+    Action("stop_all", "X", "Stop all", "Stop all robots", "Execution"),
+    Action("reset_all", "Z", "Reset all", "Reset all robots (asks first)", "Execution"),
+    # mission files and view
+    Action("save", "ctrl+s", "Save", "Save the mission to a YAML file", "Mission"),
+    Action("load", "ctrl+o", "Load", "Load a mission from a YAML file (replaces the plan)", "Mission"),
+    Action("toggle_static", "v", "Static robots", "Expand/collapse the static robots' columns", "View"),
+]
+
+BY_NAME = {a.name: a for a in ACTIONS}
+
+# actions that need a skill/robot under the cursor and apply to the server
+MUTATING = {a.name for a in ACTIONS} - {"edit", "save", "toggle_static", "mark"}
+
+
+def mission_bindings() -> list[Binding]:
+    return [
+        Binding(a.key, a.name, a.label, show=a.footer, id=a.binding_id, tooltip=a.description)
+        for a in ACTIONS
+    ]
+
+
+APP_KEYS: list[tuple[str, str, str]] = [
+    ("f1, ?", "Help", "This help screen"),
+    ("ctrl+p", "Commands", "Command palette: every action, searchable"),
+    ("tab", "Focus", "Move between the schedule and the parameter editor"),
+    ("escape", "Back", "Back to the schedule / close a dialog"),
+    ("ctrl+q", "Quit", "Quit (closes the connection to the server)"),
+]
+
+NAV_KEYS: list[tuple[str, str, str]] = [
+    ("↑ ↓", "Skill", "Previous / next skill in the robot's column"),
+    ("← →", "Robot", "Previous / next robot column"),
+    ("home end", "Ends", "First / last skill of the column"),
+    ("pgup pgdn", "Page", "Scroll a page"),
+]
+
+EDITOR_KEYS: list[tuple[str, str, str]] = [
+    ("ctrl+s", "Apply", "Apply the edited parameters (in the editor)"),
+    ("ctrl+r", "Revert", "Discard your changes (in the editor)"),
+]

@@ -1,0 +1,93 @@
+"""The live connection: `backend.client.MissionClient` -> console messages.
+
+The client calls its listeners on the asyncio loop (the app's loop); each
+callback only posts a message, so nothing here ever blocks the UI. Operations
+go through `submit`, awaited in workers by the app.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+from backend.client import MissionClient
+from backend.events import EventBatch
+from backend.protocol import Alert, OpReply, RobotInfo, StateSnapshot, Telemetry
+
+from .messages import (
+    AlertReceived,
+    ConnectionChanged,
+    EventsApplied,
+    FleetChanged,
+    StateLoaded,
+    TelemetryChanged,
+)
+
+
+class Backend(Protocol):
+    """What the console needs to change the mission (the client, or a test double)."""
+
+    async def submit(self, op: Any, *, expected_revision: int | None = None) -> OpReply: ...
+
+
+class ClientBridge:
+    def __init__(self, app: Any, endpoint: str, *, user: str = "", client_id: str | None = None) -> None:
+        self.app = app
+        self.endpoint = endpoint
+        self.user = user
+        self.client_id = client_id
+        self.client: MissionClient | None = None
+
+    async def connect(self) -> None:
+        """Connect (raises backend.client.ClientError with a sentence)."""
+        await self.close()
+        client = MissionClient(self.endpoint, user=self.user, client_id=self.client_id)
+        client.add_listener(self._on_client)
+        self.client = client
+        try:
+            await client.connect()
+        except BaseException:
+            self.client = None
+            raise
+
+    async def close(self) -> None:
+        client, self.client = self.client, None
+        if client is not None:
+            await client.close()
+
+    def close_now(self) -> None:
+        """Synchronous close for the last moment (after the app loop ended)."""
+        client, self.client = self.client, None
+        if client is not None and client.session is not None:
+            from backend.transport import close_session
+
+            session, client.session = client.session, None
+            close_session(session)
+
+    async def submit(self, op: Any, *, expected_revision: int | None = None) -> OpReply:
+        if self.client is None:
+            from backend.client import ClientError
+
+            raise ClientError("not connected to the mission server")
+        return await self.client.submit(op, expected_revision=expected_revision)
+
+    # -- client callbacks (on the loop) -> messages ----------------------------------------
+    def _on_client(self, kind: str, payload: Any) -> None:
+        c = self.client
+        post = self.app.post_message
+        if kind == "state" and c is not None and c.mission is not None and c.library is not None:
+            snap: StateSnapshot = payload
+            post(StateLoaded(c.mission, c.library, dict(c.robots), snap.server_id))
+        elif kind == "events" and c is not None:
+            batch: EventBatch = payload
+            post(EventsApplied(batch, c.mission))
+        elif kind == "fleet":
+            info: RobotInfo = payload
+            post(FleetChanged(info))
+        elif kind == "telemetry":
+            t: Telemetry = payload
+            post(TelemetryChanged(t))
+        elif kind == "alert":
+            a: Alert = payload
+            post(AlertReceived(a))
+        elif kind == "connection":
+            post(ConnectionChanged(str(payload), endpoint=self.endpoint))

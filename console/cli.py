@@ -1,0 +1,98 @@
+"""`missionctl console` and `missionctl demo` (plugged into backend's CLI
+through the `missionctl.commands` entry-point group)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+EXIT_OK, EXIT_BAD_INPUT, EXIT_UNREACHABLE = 0, 2, 3
+DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    c = sub.add_parser("console", help="the operator console (terminal UI) for a running mission server")
+    c.add_argument("--connect", metavar="ENDPOINT", default=DEFAULT_CONNECT, help=f"Zenoh endpoint of the server (default {DEFAULT_CONNECT})")
+    c.add_argument("--user", metavar="U", default="", help="operator name recorded with every change")
+    c.add_argument("--theme", metavar="T", help="theme name (default: the config file's, else missionctl-dark)")
+    c.add_argument("--config", metavar="FILE", help="settings file (default ~/.config/missionctl/config.toml or .yaml)")
+    c.set_defaults(func=run_console)
+
+    d = sub.add_parser("demo", help="server + simulated fleet + console on loopback; quitting stops everything")
+    d.add_argument("--mission", metavar="FILE", help="mission to run (default missions/mars_sample_return.yaml)")
+    d.add_argument("--speed", metavar="X", type=float, default=1.0, help="sim time per real time (default 1)")
+    d.add_argument("--user", metavar="U", default="", help="operator name")
+    d.add_argument("--theme", metavar="T")
+    d.add_argument("--config", metavar="FILE")
+    d.set_defaults(func=run_demo)
+
+
+def _known_binding_ids() -> set[str]:
+    from .actions import ACTIONS
+
+    return {a.binding_id for a in ACTIONS} | {"app.help", "app.quit", "editor.apply", "editor.revert", "editor.leave"}
+
+
+def _run_app(app) -> int:
+    try:
+        result = app.run()
+    finally:
+        if app.bridge is not None:
+            app.bridge.close_now()  # never leave a Zenoh session open at exit (it hangs)
+    code = app.return_code
+    if code is None:
+        code = result if isinstance(result, int) else EXIT_OK
+    return int(code)
+
+
+def run_console(args: argparse.Namespace) -> int:
+    from .app import MissionApp
+    from .config import load_config
+
+    cfg = load_config(args.config, known_ids=_known_binding_ids())
+    app = MissionApp(connect=args.connect, user=args.user, theme=args.theme, config=cfg)
+    return _run_app(app)
+
+
+def run_demo(args: argparse.Namespace) -> int:
+    from .app import MissionApp
+    from .config import load_config
+    from .demo import DEFAULT_MISSION, DemoError, DemoProcesses
+
+    if args.speed <= 0:
+        print("missionctl demo: --speed must be positive", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    mission = args.mission or str(DEFAULT_MISSION)
+    print(f"missionctl demo: starting the mission server for {mission} …", file=sys.stderr, flush=True)
+    procs = DemoProcesses(mission, speed=args.speed)
+    try:
+        procs.start()
+    except DemoError as e:
+        procs.stop()
+        print(f"missionctl demo: {e}", file=sys.stderr)
+        return EXIT_BAD_INPUT if "no such" in str(e) else EXIT_UNREACHABLE
+    except BaseException:
+        procs.stop()
+        raise
+    try:
+        cfg = load_config(args.config, known_ids=_known_binding_ids())
+
+        class DemoApp(MissionApp):
+            def on_mount(self) -> None:
+                super().on_mount()
+                self._sim_reported = False
+                self.set_interval(2.0, self._check_children)
+
+            def _check_children(self) -> None:
+                problem = procs.sim_problem()
+                if problem and not self._sim_reported:
+                    self._sim_reported = True
+                    self.notify(problem, title="Simulated fleet", severity="error", timeout=15)
+                if procs.server is not None and procs.server.poll() is not None and not getattr(self, "_server_reported", False):
+                    self._server_reported = True
+                    self.notify(f"the demo's mission server stopped (exit code {procs.server.returncode})", title="Server", severity="error", timeout=15)
+
+        app = DemoApp(connect=procs.endpoint, user=args.user, theme=args.theme, config=cfg, notices=procs.notices)
+        return _run_app(app)
+    finally:
+        procs.stop()

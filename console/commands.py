@@ -1,0 +1,47 @@
+"""Command palette entries for every operator action (ctrl+p).
+
+Each entry says its key, and when it does not apply to the current
+selection, why; choosing such an entry explains instead of acting.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import Any
+
+from textual.command import DiscoveryHit, Hit, Hits, Provider
+
+from .actions import ACTIONS
+
+
+class MissionCommands(Provider):
+    def _screen(self) -> Any:
+        return getattr(self.app, "mission_screen", None)
+
+    def _entries(self):
+        screen = self._screen()
+        if screen is None:
+            return
+        keys = getattr(self.app, "action_keys", lambda: {})()
+        for a in ACTIONS:
+            why = screen.why_disabled(a.name)
+            key = keys.get(a.name, a.key)
+            help_text = f"{key} · {a.description}" + (f" — does not apply now: {why}" if why else "")
+            yield a, help_text, partial(self._run, a.name)
+
+    async def _run(self, name: str) -> None:
+        screen = self._screen()
+        if screen is not None:
+            await screen.run_named(name)
+
+    async def discover(self) -> Hits:
+        for a, help_text, run in self._entries():
+            yield DiscoveryHit(f"Mission: {a.label}", run, help=help_text)
+
+    async def search(self, query: str) -> Hits:
+        matcher = self.matcher(query)
+        for a, help_text, run in self._entries():
+            text = f"Mission: {a.label}"
+            score = max(matcher.match(text), matcher.match(a.description) * 0.5)
+            if score > 0:
+                yield Hit(score, matcher.highlight(text), run, text=text, help=help_text)

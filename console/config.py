@@ -1,0 +1,78 @@
+"""The user's console settings: ~/.config/missionctl/config.toml (or .yaml).
+
+    theme = "missionctl-dark"
+    [keymap]
+    "mission.sync" = "S"          # binding id -> key(s), comma separated
+    "mission.delete" = "d,ctrl+d"
+
+`MISSIONCTL_CONFIG` or `--config` point elsewhere. A broken file never stops
+the console: its problems are shown as a notification and defaults apply.
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+
+@dataclass
+class ConsoleConfig:
+    theme: str | None = None
+    keymap: dict[str, str] = field(default_factory=dict)
+    path: Path | None = None
+    problems: list[str] = field(default_factory=list)
+
+
+def default_path() -> Path:
+    env = os.environ.get("MISSIONCTL_CONFIG")
+    if env:
+        return Path(env)
+    base = Path(os.environ.get("XDG_CONFIG_HOME") or Path.home() / ".config") / "missionctl"
+    for name in ("config.toml", "config.yaml", "config.yml"):
+        if (base / name).exists():
+            return base / name
+    return base / "config.toml"
+
+
+def load_config(path: str | Path | None = None, known_ids: set[str] | None = None) -> ConsoleConfig:
+    p = Path(path) if path else default_path()
+    cfg = ConsoleConfig(path=p)
+    if not p.exists():
+        if path:  # asked for explicitly
+            cfg.problems.append(f"{p}: no such file; using defaults")
+        return cfg
+    try:
+        text = p.read_text(encoding="utf-8")
+        data = tomllib.loads(text) if p.suffix == ".toml" else yaml.safe_load(text) or {}
+    except (OSError, tomllib.TOMLDecodeError, yaml.YAMLError) as e:
+        cfg.problems.append(f"{p}: cannot read it ({str(e).splitlines()[0]}); using defaults")
+        return cfg
+    if not isinstance(data, dict):
+        cfg.problems.append(f"{p}: expected a table of settings; using defaults")
+        return cfg
+    theme = data.get("theme")
+    if theme is not None:
+        if isinstance(theme, str):
+            cfg.theme = theme
+        else:
+            cfg.problems.append(f"{p}: theme: expected a theme name")
+    keymap = data.get("keymap", {})
+    if not isinstance(keymap, dict):
+        cfg.problems.append(f"{p}: keymap: expected a table of binding id = key")
+        keymap = {}
+    for bid, keys in keymap.items():
+        if not isinstance(keys, str) or not keys.strip():
+            cfg.problems.append(f"{p}: keymap.{bid}: expected keys as a string, like \"ctrl+s\"")
+            continue
+        if known_ids is not None and bid not in known_ids:
+            cfg.problems.append(f"{p}: keymap: unknown binding id '{bid}' (ids: {', '.join(sorted(known_ids))})")
+            continue
+        cfg.keymap[bid] = keys
+    for key in data:
+        if key not in ("theme", "keymap"):
+            cfg.problems.append(f"{p}: unknown setting '{key}' (settings: theme, keymap)")
+    return cfg

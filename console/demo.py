@@ -1,0 +1,145 @@
+"""`missionctl demo`: server + simulated fleet + console on loopback.
+
+The server and the sim run as subprocesses (started before this process
+opens any Zenoh session: never fork after Zenoh is open). Quitting the
+console — or any error — stops them: terminate, then kill after a timeout.
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import IO
+
+from backend.transport import free_port, loopback_endpoint
+
+DEFAULT_MISSION = Path(__file__).resolve().parents[1] / "missions" / "mars_sample_return.yaml"
+READY_MARK = "listening on"
+
+
+class DemoError(Exception):
+    """The demo could not start; `str()` says why (with the server's words)."""
+
+
+def _tail(path: Path, lines: int = 8) -> str:
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return ""
+    return "\n".join(text.strip().splitlines()[-lines:])
+
+
+def sim_available(python: str = sys.executable) -> bool:
+    """Whether `missionctl sim` is installed (another package plugs it in)."""
+    try:
+        r = subprocess.run([python, "-m", "backend.cli", "sim", "--help"], capture_output=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    return r.returncode == 0
+
+
+class DemoProcesses:
+    """The server (and the sim when available) as child processes."""
+
+    def __init__(self, mission: str | Path = DEFAULT_MISSION, *, speed: float = 1.0, python: str = sys.executable, workdir: str | Path | None = None, with_sim: bool | None = None):
+        self.mission = Path(mission).resolve()
+        self.speed = speed
+        self.python = python
+        self._own_dir = workdir is None
+        self.workdir = Path(workdir) if workdir else Path(tempfile.mkdtemp(prefix="missionctl-demo-"))
+        self.with_sim = with_sim
+        self.endpoint = ""
+        self.server: subprocess.Popen | None = None
+        self.sim: subprocess.Popen | None = None
+        self.notices: list[str] = []
+        self._logs: list[IO] = []
+
+    @property
+    def server_log(self) -> Path:
+        return self.workdir / "server.log"
+
+    @property
+    def sim_log(self) -> Path:
+        return self.workdir / "sim.log"
+
+    def _spawn(self, args: list[str], log: Path) -> subprocess.Popen:
+        f = open(log, "w", encoding="utf-8")  # noqa: SIM115 (closed in stop())
+        self._logs.append(f)
+        return subprocess.Popen([self.python, "-m", "backend.cli", *args], stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+
+    def start(self, timeout: float = 30.0) -> None:
+        if not self.mission.is_file():
+            raise DemoError(f"{self.mission}: no such mission file")
+        want_sim = sim_available(self.python) if self.with_sim is None else self.with_sim
+        for attempt in range(3):  # the free port may be taken meanwhile
+            self.endpoint = loopback_endpoint(free_port())
+            db = self.workdir / f"demo-{attempt}.db"
+            self.server = self._spawn(["server", "--mission", str(self.mission), "--listen", self.endpoint, "--db", str(db)], self.server_log)
+            if self._wait_ready(timeout):
+                break
+            code = self.server.poll()
+            tail = _tail(self.server_log)
+            self._stop_one(self.server)
+            if code is not None and "address" in tail.lower() and "use" in tail.lower():
+                continue
+            raise DemoError(f"the mission server did not start{' (exit code ' + str(code) + ')' if code is not None else ' in time'}:\n{tail}")
+        else:
+            raise DemoError("no free loopback port for the mission server")
+        if want_sim:
+            self.sim = self._spawn(["sim", "--mission", str(self.mission), "--connect", self.endpoint, "--speed", f"{self.speed:g}"], self.sim_log)
+        else:
+            self.notices.append("the simulated fleet is unavailable (`missionctl sim` is not installed): robots stay offline; the plan can still be edited")
+
+    def _wait_ready(self, timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.server is None or self.server.poll() is not None:
+                return False
+            try:
+                if READY_MARK in self.server_log.read_text(encoding="utf-8", errors="replace"):
+                    return True
+            except OSError:
+                pass
+            time.sleep(0.05)  # polling a child's log: there is nothing to wait on
+        return False
+
+    def sim_problem(self) -> str | None:
+        """If the sim ended: why (its last lines)."""
+        if self.sim is None or self.sim.poll() is None:
+            return None
+        return f"the simulated fleet stopped (exit code {self.sim.returncode}): {_tail(self.sim_log, 3)}"
+
+    @staticmethod
+    def _stop_one(p: subprocess.Popen | None, timeout: float = 5.0) -> None:
+        if p is None or p.poll() is not None:
+            return
+        p.terminate()
+        try:
+            p.wait(timeout)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait(timeout)
+
+    def stop(self) -> None:
+        self._stop_one(self.sim)
+        self._stop_one(self.server)
+        for f in self._logs:
+            f.close()
+        self._logs.clear()
+        if self._own_dir:
+            shutil.rmtree(self.workdir, ignore_errors=True)
+
+    def __enter__(self) -> DemoProcesses:
+        try:
+            self.start()
+        except BaseException:
+            self.stop()
+            raise
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()

@@ -1,0 +1,296 @@
+"""Modal dialogs: confirm, file path prompt, skill picker, help, unreachable."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from rich.text import Text
+from textual import on
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical, VerticalScroll
+from textual.fuzzy import Matcher
+from textual.screen import ModalScreen, Screen
+from textual.widgets import Button, Footer, Input, Label, OptionList, Static
+from textual.widgets.option_list import Option
+
+from backend.library import Library
+
+from .actions import ACTIONS, APP_KEYS, EDITOR_KEYS, NAV_KEYS
+from .model import GLYPHS, STATUS_WORDS
+from .params import settle_cursors
+
+
+class ConfirmScreen(ModalScreen[bool]):
+    """Yes/no. Enter or y confirms, escape or n cancels."""
+
+    BINDINGS = [
+        Binding("y", "answer(True)", "Yes"),
+        Binding("n,escape", "answer(False)", "No"),
+    ]
+
+    DEFAULT_CSS = """
+    ConfirmScreen { align: center middle; }
+    ConfirmScreen > Vertical { width: 64; max-width: 95%; height: auto; border: thick $warning; background: $surface; padding: 1 2; }
+    ConfirmScreen .question { margin: 0 0 1 0; }
+    ConfirmScreen Horizontal { height: auto; align: right middle; }
+    ConfirmScreen Button { margin: 0 0 0 2; }
+    """
+
+    def __init__(self, question: str, yes: str = "Yes") -> None:
+        super().__init__()
+        self.question = question
+        self.yes = yes
+
+    def compose(self) -> ComposeResult:
+        with Vertical():
+            yield Static(self.question, classes="question")
+            with Horizontal():
+                yield Button(f"{self.yes} (y)", id="yes", variant="error")
+                yield Button("Cancel (n)", id="no")
+
+    def on_mount(self) -> None:
+        self.query_one("#no", Button).focus()
+
+    @on(Button.Pressed)
+    def _pressed(self, event: Button.Pressed) -> None:
+        self.dismiss(event.button.id == "yes")
+
+    def action_answer(self, yes: bool) -> None:
+        self.dismiss(yes)
+
+
+class PathPrompt(ModalScreen[str | None]):
+    """Asks for a file path (save / load a mission)."""
+
+    BINDINGS = [Binding("escape", "cancel", "Cancel")]
+
+    DEFAULT_CSS = """
+    PathPrompt { align: center middle; }
+    PathPrompt > Vertical { width: 76; max-width: 95%; height: auto; border: thick $primary; background: $surface; padding: 1 2; }
+    PathPrompt .hint { color: $text-muted; }
+    PathPrompt .error { color: $error; }
+    """
+
+    def __init__(self, title: str, default: str, *, must_exist: bool = False) -> None:
+        super().__init__()
+        self.title_text = title
+        self.default = default
+        self.must_exist = must_exist
+
+    def compose(self) -> ComposeResult:
+        with Vertical():
+            yield Label(self.title_text)
+            yield Input(self.default, id="path")
+            yield Static("enter: ok · escape: cancel", classes="hint")
+            yield Static("", id="error", classes="error")
+
+    def on_mount(self) -> None:
+        settle_cursors(self)
+        self.query_one(Input).focus()
+
+    @on(Input.Submitted)
+    def _submitted(self, event: Input.Submitted) -> None:
+        path = event.value.strip()
+        if not path:
+            self.query_one("#error", Static).update("give a file path")
+            return
+        p = Path(path).expanduser()
+        if self.must_exist and not p.is_file():
+            self.query_one("#error", Static).update(f"{p}: no such file")
+            return
+        if not self.must_exist and not p.parent.exists():
+            self.query_one("#error", Static).update(f"{p.parent}: no such folder")
+            return
+        self.dismiss(str(p))
+
+    def action_cancel(self) -> None:
+        self.dismiss(None)
+
+
+class SkillPicker(ModalScreen[str | None]):
+    """Pick one of the robot's skills: type to filter (fuzzy), enter to add."""
+
+    BINDINGS = [
+        Binding("escape", "cancel", "Cancel"),
+        Binding("down", "move(1)", "Next", show=False),
+        Binding("up", "move(-1)", "Previous", show=False),
+    ]
+
+    DEFAULT_CSS = """
+    SkillPicker { align: center middle; }
+    SkillPicker > Vertical { width: 80; max-width: 96%; height: 80%; max-height: 26; border: thick $primary; background: $surface; padding: 0 1; }
+    SkillPicker OptionList { height: 1fr; }
+    SkillPicker .hint { color: $text-muted; }
+    """
+
+    def __init__(self, robot: str, skills: list[str], library: Library, where: str) -> None:
+        super().__init__()
+        self.robot = robot
+        self.skills = skills
+        self.library = library
+        self.where = where
+
+    def compose(self) -> ComposeResult:
+        with Vertical():
+            yield Label(Text.assemble(("Add a skill to ", ""), (self.robot, "bold"), (f" — {self.where}", "dim")))
+            yield Input(placeholder="type to filter…", id="filter")
+            yield OptionList(id="skills")
+            yield Static("enter: add · ↑↓: choose · escape: cancel", classes="hint")
+
+    def on_mount(self) -> None:
+        settle_cursors(self)
+        self._fill("")
+        self.query_one(Input).focus()
+
+    def _option(self, name: str, matcher: Matcher | None) -> Option:
+        spec = self.library.skills.get(name)
+        desc = spec.description if spec else ""
+        title = matcher.highlight(name) if matcher else Text(name)
+        prompt = Text.assemble(title if isinstance(title, Text) else Text(str(title)), "\n", (f"  {desc}", "dim"))
+        return Option(prompt, id=name)
+
+    def _fill(self, query: str) -> None:
+        ol = self.query_one(OptionList)
+        ol.clear_options()
+        if query:
+            matcher = Matcher(query)
+            scored = []
+            for name in self.skills:
+                spec = self.library.skills.get(name)
+                score = max(matcher.match(name), 0.5 * matcher.match(spec.description if spec else ""))
+                if score > 0:
+                    scored.append((score, name))
+            names = [n for _, n in sorted(scored, key=lambda x: -x[0])]
+        else:
+            matcher = None
+            names = list(self.skills)
+        ol.add_options([self._option(n, matcher) for n in names])
+        if names:
+            ol.highlighted = 0
+
+    @on(Input.Changed, "#filter")
+    def _filter(self, event: Input.Changed) -> None:
+        self._fill(event.value)
+
+    @on(Input.Submitted, "#filter")
+    def _submit(self) -> None:
+        ol = self.query_one(OptionList)
+        if ol.highlighted is not None and ol.option_count:
+            self.dismiss(ol.get_option_at_index(ol.highlighted).id)
+
+    @on(OptionList.OptionSelected)
+    def _selected(self, event: OptionList.OptionSelected) -> None:
+        self.dismiss(event.option.id)
+
+    def action_move(self, step: int) -> None:
+        ol = self.query_one(OptionList)
+        if not ol.option_count:
+            return
+        cur = ol.highlighted if ol.highlighted is not None else -step
+        ol.highlighted = min(max(cur + step, 0), ol.option_count - 1)
+
+    def action_cancel(self) -> None:
+        self.dismiss(None)
+
+
+class HelpScreen(ModalScreen[None]):
+    """The key map (with the user's remappings) and the status legend."""
+
+    BINDINGS = [Binding("escape,q,f1,question_mark", "close", "Close")]
+
+    DEFAULT_CSS = """
+    HelpScreen { align: center middle; }
+    HelpScreen > VerticalScroll { width: 96; max-width: 100%; height: 100%; max-height: 100%; border: thick $primary; background: $surface; padding: 0 1; }
+    """
+
+    def __init__(self, keys: dict[str, str]) -> None:
+        super().__init__()
+        self.keys = keys  # action name -> current key display
+
+    def compose(self) -> ComposeResult:
+        with VerticalScroll():
+            yield Static(self._text(), id="help-text")
+
+    def _text(self) -> Text:
+        t = Text()
+        t.append("missionctl — operator console", style="bold")
+        t.append("   (escape closes; keys can be remapped: see the end)\n\n", style="dim")
+
+        def row(key: str, label: str, desc: str) -> None:
+            t.append(f"  {key:<16}", style="bold")
+            t.append(f"{label:<14}", style="")
+            t.append(f"{desc}\n", style="dim")
+
+        t.append("Navigation\n", style="bold underline")
+        for k, label, d in NAV_KEYS:
+            row(k, label, d)
+        groups: dict[str, list] = {}
+        for a in ACTIONS:
+            groups.setdefault(a.group, []).append(a)
+        for group, actions in groups.items():
+            t.append(f"\n{group}\n", style="bold underline")
+            for a in actions:
+                row(self.keys.get(a.name, a.key).replace(",", " / "), a.label, a.description)
+        t.append("\nParameter editor\n", style="bold underline")
+        for k, label, d in EDITOR_KEYS:
+            row(k, label, d)
+        t.append("\nApp\n", style="bold underline")
+        for k, label, d in APP_KEYS:
+            row(k, label, d)
+        t.append("\nStatuses\n", style="bold underline")
+        for status, glyph in GLYPHS.items():
+            t.append(f"  {glyph}  ", style="bold")
+            t.append(f"{status.value:<18}", style="")
+            t.append(f"{STATUS_WORDS[status]}\n", style="dim")
+        t.append("  [b1]", style="bold")
+        t.append("  barrier tag: partner skills wait for each other\n", style="dim")
+        t.append("  +   ", style="bold")
+        t.append("  marked for a new barrier (space)\n", style="dim")
+        t.append("\nRemapping keys\n", style="bold underline")
+        t.append('  ~/.config/missionctl/config.toml:  [keymap]  "mission.sync" = "S"\n', style="dim")
+        t.append("  binding ids: " + ", ".join(a.binding_id for a in ACTIONS) + "\n", style="dim")
+        return t
+
+    def action_close(self) -> None:
+        self.dismiss(None)
+
+
+class UnreachableScreen(Screen[str]):
+    """The server cannot be reached: one clear message, retry or quit."""
+
+    BINDINGS = [
+        Binding("r", "retry", "Retry", priority=True),
+        Binding("q", "quit_app", "Quit", priority=True),
+    ]
+
+    DEFAULT_CSS = """
+    UnreachableScreen { align: center middle; }
+    UnreachableScreen > Vertical { width: 80; max-width: 96%; height: auto; border: heavy $error; padding: 1 2; background: $surface; }
+    UnreachableScreen .head { text-style: bold; color: $error; }
+    UnreachableScreen .detail { margin: 1 0; }
+    UnreachableScreen .hint { color: $text-muted; }
+    """
+
+    def __init__(self, endpoint: str, message: str) -> None:
+        super().__init__()
+        self.endpoint = endpoint
+        self.message = message
+
+    def compose(self) -> ComposeResult:
+        with Vertical():
+            yield Static(f"Cannot reach the mission server at {self.endpoint}", classes="head")
+            yield Static(self.message, classes="detail", id="unreachable-detail")
+            yield Static(
+                "Is `missionctl server` running there? Check the endpoint (--connect), "
+                "the network and, across machines, TLS and credentials.",
+                classes="hint",
+            )
+            yield Static("r: retry   q: quit", classes="hint")
+        yield Footer()
+
+    def action_retry(self) -> None:
+        self.dismiss("retry")
+
+    def action_quit_app(self) -> None:
+        self.dismiss("quit")

@@ -1,0 +1,504 @@
+"""The parameter editor: one typed input per parameter of the selected skill.
+
+bool: switch; int/float: number input with unit and bounds in the label;
+str: text; enum: a choice; pose: six fields, position: three; area, list and
+dict: YAML text; marker: a choice of markers of the allowed kinds; robot: a
+choice of the mission's robots. Pose, position and area parameters can also
+be bound to a marker. Values are checked as you type with the same checks the
+server runs (`backend.library.check_value`); the server's refusal for a
+parameter appears next to that field. Read-only, with the reason, when the
+skill is not idle.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any
+
+import yaml
+from rich.text import Text
+from textual import on
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical, VerticalScroll
+from textual.message import Message
+from textual.widgets import Button, Input, Label, Select, Static, Switch, TextArea
+
+from backend.library import POSE_FIELDS, POSITION_FIELDS, ParamSpec, check_value, normalize_value
+from backend.model import SkillInstance
+
+from .model import GLYPHS, STATUS_CSS, ConsoleModel, fmt_number
+
+TYPED = "\x00typed"  # the bind choice meaning "no marker: a typed value"
+BINDABLE_KINDS = {"pose": ("pose", "position"), "position": ("pose", "position"), "area": ("area",)}
+YAML_TYPES = ("area", "list", "dict")
+
+
+def settle_cursors(root: Any) -> None:
+    """No blinking cursors when the app asks for none (deterministic snapshots)."""
+    if not getattr(root.app, "cursor_blink", True):
+        for w in root.query("Input, TextArea"):
+            w.cursor_blink = False
+
+
+def yaml_text(value: Any) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, list) and value and all(isinstance(x, dict) for x in value):
+        return "\n".join("- " + yaml.safe_dump(x, default_flow_style=True, sort_keys=False).strip() for x in value)
+    return yaml.safe_dump(value, default_flow_style=False, sort_keys=False, allow_unicode=True).strip()
+
+
+def spec_hint(spec: ParamSpec) -> str:
+    """type, unit and bounds: 'float m/s 0.1..1'."""
+    parts = [spec.type]
+    if spec.unit:
+        parts.append(spec.unit)
+    if spec.min is not None or spec.max is not None:
+        lo = f"{spec.min:g}" if spec.min is not None else ""
+        hi = f"{spec.max:g}" if spec.max is not None else ""
+        parts.append(f"{lo}..{hi}")
+    if spec.type == "marker" and spec.marker_kinds:
+        parts.append("/".join(spec.marker_kinds))
+    if spec.is_required:
+        parts.append("required")
+    return " ".join(parts)
+
+
+class ParamEditor(VerticalScroll):
+    """Edits one skill. Posts `ApplyRequested` with only what changed."""
+
+    BINDINGS = [
+        Binding("ctrl+s", "apply", "Apply", id="editor.apply"),
+        Binding("ctrl+r", "revert", "Revert", id="editor.revert"),
+        Binding("escape", "leave", "Back", id="editor.leave"),
+    ]
+
+    DEFAULT_CSS = """
+    ParamEditor { padding: 0 1; }
+    ParamEditor .title { text-style: bold; }
+    ParamEditor .skill-desc { color: $text-muted; }
+    ParamEditor .readonly { color: $warning; text-style: bold; margin: 1 0 0 0; }
+    ParamEditor .server-error { color: $error; text-style: bold; margin: 1 0 0 0; }
+    ParamEditor .stale { color: $warning; }
+    ParamEditor .param { height: auto; margin: 1 0 0 0; }
+    ParamEditor .plabel { height: 1; text-wrap: nowrap; text-overflow: ellipsis; }
+    ParamEditor .pdesc { color: $text-muted; height: auto; }
+    ParamEditor .perror { color: $error; text-style: bold; height: auto; }
+    ParamEditor .-empty { display: none; }
+    ParamEditor .fields { height: 1; }
+    ParamEditor .fields Label { width: auto; padding: 0 1 0 0; color: $text-muted; }
+    ParamEditor .fields Input { width: 1fr; margin: 0 1 0 0; }
+    ParamEditor Input { height: 1; }
+    ParamEditor Switch { width: auto; height: 1; border: none; padding: 0; }
+    ParamEditor Switch:focus { border: none; background-tint: $foreground 15%; }
+    ParamEditor .fields .switch-value { padding: 0 0 0 1; color: $text; }
+    ParamEditor TextArea { height: 4; }
+    ParamEditor Select { width: 100%; }
+    ParamEditor .bind { margin: 0 0 0 0; }
+    ParamEditor .buttons { height: 3; margin: 1 0 0 0; }
+    ParamEditor .buttons Button { margin: 0 1 0 0; min-width: 12; }
+    ParamEditor .empty { color: $text-muted; margin: 1 0; }
+    """
+
+    class ApplyRequested(Message):
+        def __init__(self, skill_id: str, label: str | None, params: dict[str, Any], bindings: dict[str, str | None], base_revision: int) -> None:
+            super().__init__()
+            self.skill_id = skill_id
+            self.label = label
+            self.params = params
+            self.bindings = bindings
+            self.base_revision = base_revision
+
+    class Left(Message):
+        """The operator left the editor (escape)."""
+
+    def __init__(self, model: ConsoleModel, *, id: str | None = None) -> None:
+        super().__init__(id=id)
+        self.model = model
+        self.skill_id: str | None = None
+        self.loaded_rev = -1
+        self.base_revision = 0
+        self.errors: dict[str, str] = {}
+        self.server_error = ""
+        self.stale_note = ""
+        self.can_focus = False
+        self._load_lock = asyncio.Lock()
+
+    # -- what is shown ------------------------------------------------------------------
+    def _skill(self) -> tuple[str, SkillInstance] | None:
+        found = self.model.find(self.skill_id)
+        return (found[0], found[2]) if found else None
+
+    def _spec(self, skill: SkillInstance):
+        lib = self.model.library
+        return lib.skills.get(skill.skill) if lib else None
+
+    @property
+    def read_only_reason(self) -> str | None:
+        if self.skill_id is None:
+            return "no skill selected"
+        return self.model.read_only_reason(self.skill_id)
+
+    async def show_skill(self, skill_id: str | None, *, force: bool = False) -> None:
+        """Load a skill (serialized: the app and the screen both call this,
+        from different message pumps, and two rebuilds must not interleave)."""
+        async with self._load_lock:
+            await self._show_skill(skill_id, force=force)
+
+    async def _show_skill(self, skill_id: str | None, *, force: bool = False) -> None:
+        found = self.model.find(skill_id)
+        rev = found[2].rev if found else -1
+        if not force and skill_id == self.skill_id and rev == self.loaded_rev:
+            return
+        if skill_id != self.skill_id:
+            self.errors = {}
+            self.server_error = ""
+        self.skill_id = skill_id
+        self.loaded_rev = rev
+        self.stale_note = ""
+        self.base_revision = self.model.mission.revision if self.model.mission else 0
+        had_focus = self.focus_within()
+        await self.recompose()
+        settle_cursors(self)
+        self._validate_all()
+        if had_focus:  # the focused field was rebuilt: keep the operator in the editor
+            self.focus_first()
+
+    def focus_within(self) -> bool:
+        focused = self.screen.focused if self.is_attached else None
+        return focused is not None and self in focused.ancestors_with_self
+
+    def focus_first(self) -> None:
+        for w in self.query("Input, Switch, Select, TextArea, Button"):
+            if w.focusable:
+                self.screen.set_focus(w)
+                return
+        self.can_focus = True
+        self.screen.set_focus(self)
+
+    async def model_changed(self) -> None:
+        """The mission changed: reload unless the operator has unapplied changes."""
+        found = self.model.find(self.skill_id)
+        if found is None:
+            if self.skill_id is not None:
+                await self.show_skill(None)
+            return
+        s = found[2]
+        ro_changed = (self.read_only_reason is None) != self._was_editable
+        if s.rev != self.loaded_rev or ro_changed:
+            if self.is_dirty() and not ro_changed:
+                self.stale_note = f"{s.id} was changed by someone else (revision {s.rev}): revert to see it; applying will be refused as stale"
+                self._set_static("#stale", self.stale_note)
+            else:
+                await self.show_skill(self.skill_id, force=True)
+
+    def compose(self) -> ComposeResult:
+        found = self._skill()
+        self._was_editable = False
+        if found is None:
+            yield Static("Select a skill in the schedule to see and edit its parameters.", classes="empty")
+            return
+        robot, s = found
+        spec = self._spec(s)
+        ro = self.read_only_reason
+        self._was_editable = ro is None
+        title = Text()
+        title.append(f"{GLYPHS[s.status]} ", style="bold")
+        title.append(f"{s.id}", style="bold")
+        title.append(f"  {s.skill} on {robot}")
+        if s.attempt > 1:
+            title.append(f"  attempt {s.attempt}")
+        yield Static(title, classes=f"title status-{STATUS_CSS[s.status]}")
+        if spec is not None and spec.description:
+            yield Static(spec.description, classes="skill-desc")
+        if ro:
+            yield Static(f"read-only: {ro}", id="readonly", classes="readonly")
+        yield Static(self.server_error, id="server-error", classes="server-error" + ("" if self.server_error else " -empty"))
+        yield Static(self.stale_note, id="stale", classes="stale" + ("" if self.stale_note else " -empty"))
+        with Vertical(classes="param", id="param-label"):
+            yield Label(Text.assemble(("label", "bold"), ("  text", "dim")), classes="plabel")
+            yield Input(s.label, id="f-label", compact=True, disabled=ro is not None, placeholder=s.skill)
+        if spec is None:
+            yield Static(f"skill '{s.skill}' is not in the library", classes="perror")
+            return
+        for name, pspec in spec.params.items():
+            with Vertical(classes="param", id=f"param-{name}"):
+                yield Label(
+                    Text.assemble((name, "bold"), ("  " + spec_hint(pspec), "dim")),
+                    classes="plabel",
+                )
+                yield from self._inputs(name, pspec, s, disabled=ro is not None)
+                if pspec.description:
+                    yield Static(pspec.description, classes="pdesc")
+                err = self.errors.get(name, "")
+                yield Static(err, id=f"err-{name}", classes="perror" + ("" if err else " -empty"))
+        if ro is None:
+            with Horizontal(classes="buttons"):
+                yield Button("Apply ^s", id="apply", variant="primary", compact=True)
+                yield Button("Revert ^r", id="revert", compact=True)
+
+    def _inputs(self, name: str, spec: ParamSpec, s: SkillInstance, *, disabled: bool) -> ComposeResult:
+        value = s.params.get(name)
+        bound = s.bindings.get(name)
+        t = spec.type
+        m = self.model.mission
+        if t in BINDABLE_KINDS and m is not None:
+            kinds = BINDABLE_KINDS[t]
+            options = [("typed value", TYPED)] + [
+                (f"@{mk}  ({marker.kind})", mk) for mk, marker in m.markers.items() if marker.kind in kinds
+            ]
+            if bound and bound not in m.markers:
+                options.append((f"@{bound} (missing)", bound))
+            yield Select(options, value=bound or TYPED, allow_blank=False, id=f"bind-{name}", compact=True, disabled=disabled, classes="bind")
+            disabled = disabled or bool(bound)
+        if t == "bool":
+            with Horizontal(classes="fields"):
+                yield Switch(bool(value), id=f"f-{name}", disabled=disabled)
+                yield Label("yes" if value else "no", id=f"v-{name}", classes="switch-value")
+        elif t in ("int", "float", "str"):
+            text = "" if value is None else (fmt_number(value) if t != "str" else str(value))
+            kind = {"int": "integer", "float": "number", "str": "text"}[t]
+            yield Input(text, id=f"f-{name}", type=kind, compact=True, disabled=disabled, placeholder=t)
+        elif t in ("pose", "position"):
+            fields = POSE_FIELDS if t == "pose" else POSITION_FIELDS
+            v = value if isinstance(value, dict) else {}
+            rows = [fields[:3], fields[3:]] if t == "pose" else [fields]
+            for row in rows:
+                with Horizontal(classes="fields"):
+                    for f in row:
+                        yield Label(f)
+                        yield Input(fmt_number(float(v.get(f, 0.0))), id=f"f-{name}-{f}", type="number", compact=True, disabled=disabled)
+        elif t in YAML_TYPES:
+            ta = TextArea(yaml_text(value), id=f"f-{name}", compact=True, disabled=disabled, soft_wrap=True, tab_behavior="focus")
+            yield ta
+        elif t in ("enum", "marker", "robot"):
+            if t == "enum":
+                choices = list(spec.choices or [])
+            elif t == "marker":
+                markers = m.markers if m else {}
+                choices = [mk for mk, marker in markers.items() if not spec.marker_kinds or marker.kind in spec.marker_kinds]
+            else:
+                choices = list(m.robots) if m else []
+            if isinstance(value, str) and value not in choices:
+                choices.append(value)
+            yield Select(
+                [(c, c) for c in choices],
+                value=value if value in choices else Select.NULL,
+                allow_blank=True,
+                prompt="(default)" if not spec.is_required else "choose…",
+                id=f"f-{name}",
+                compact=True,
+                disabled=disabled,
+            )
+        else:
+            yield Static(f"unsupported type {t}", classes="perror")
+
+    # -- reading values -------------------------------------------------------------------
+    def _read(self, name: str, spec: ParamSpec) -> tuple[Any, str | None]:
+        """(value, problem) of one parameter as typed; value None = unset."""
+        t = spec.type
+        try:
+            if t == "bool":
+                return self.query_one(f"#f-{name}", Switch).value, None
+            if t in ("int", "float", "str"):
+                raw = self.query_one(f"#f-{name}", Input).value
+                if t == "str":
+                    return raw, None
+                raw = raw.strip()
+                if not raw:
+                    return None, None
+                try:
+                    return (int(raw) if t == "int" else float(raw)), None
+                except ValueError:
+                    return None, f"expected {'an integer' if t == 'int' else 'a number'}, got '{raw}'"
+            if t in ("pose", "position"):
+                fields = POSE_FIELDS if t == "pose" else POSITION_FIELDS
+                out: dict[str, float] = {}
+                for f in fields:
+                    raw = self.query_one(f"#f-{name}-{f}", Input).value.strip()
+                    try:
+                        out[f] = float(raw) if raw else 0.0
+                    except ValueError:
+                        return None, f"{f}: expected a number, got '{raw}'"
+                return out, None
+            if t in YAML_TYPES:
+                raw = self.query_one(f"#f-{name}", TextArea).text
+                if not raw.strip():
+                    return None, None
+                try:
+                    return yaml.safe_load(raw), None
+                except yaml.YAMLError as e:
+                    mark = getattr(e, "problem_mark", None)
+                    where = f" (line {mark.line + 1})" if mark is not None else ""
+                    problem = getattr(e, "problem", None) or "cannot be read"
+                    return None, f"not valid YAML{where}: {problem}"
+            if t in ("enum", "marker", "robot"):
+                v = self.query_one(f"#f-{name}", Select).value
+                return (None if v is Select.NULL else v), None
+        except Exception as e:  # the widgets are being rebuilt
+            return None, f"cannot read the field ({type(e).__name__})"
+        return None, f"unsupported type {t}"
+
+    def _binding(self, name: str) -> str | None:
+        try:
+            v = self.query_one(f"#bind-{name}", Select).value
+        except Exception:
+            return None
+        return None if v in (TYPED, Select.NULL) else str(v)
+
+    def collect(self) -> tuple[str | None, dict[str, Any], dict[str, str | None], dict[str, str]]:
+        """(label change, params changed, bindings changed, problems per parameter)."""
+        found = self._skill()
+        if found is None:
+            return None, {}, {}, {}
+        robot, s = found
+        spec = self._spec(s)
+        problems: dict[str, str] = {}
+        params: dict[str, Any] = {}
+        bindings: dict[str, str | None] = {}
+        try:
+            label = self.query_one("#f-label", Input).value
+        except Exception:
+            label = s.label
+        label_change = label if label != s.label else None
+        if spec is None:
+            return label_change, params, bindings, problems
+        m = self.model.mission
+        for name, pspec in spec.params.items():
+            bound = self._binding(name) if pspec.type in BINDABLE_KINDS else None
+            old_bound = s.bindings.get(name)
+            if bound is not None:
+                if bound != old_bound:
+                    bindings[name] = bound
+                continue
+            value, problem = self._read(name, pspec)
+            if problem:
+                problems[name] = problem
+                continue
+            if value is None:
+                if pspec.is_required:
+                    problems[name] = f"missing required {pspec.type} parameter '{name}'"
+                    continue
+                if name in s.params and (pspec.default is None or s.params[name] != normalize_value(pspec, pspec.default)):
+                    params[name] = None  # back to the default
+                continue
+            found_problems = check_value(pspec, value, markers=m.markers if m else None, robots=set(m.robots) if m else None)
+            if found_problems:
+                rel, msg = found_problems[0]
+                where = ".".join(str(x) for x in rel)
+                problems[name] = f"{where}: {msg}" if where else msg
+                continue
+            norm = normalize_value(pspec, value)
+            if old_bound is not None:
+                bindings[name] = None
+                params[name] = norm
+            elif s.params.get(name) != norm:
+                params[name] = norm
+        return label_change, params, bindings, problems
+
+    def is_dirty(self) -> bool:
+        if self._skill() is None or self.read_only_reason is not None:
+            return False
+        label, params, bindings, problems = self.collect()
+        return bool(label is not None or params or bindings or problems)
+
+    # -- messages next to fields --------------------------------------------------------------
+    def _set_static(self, selector: str, text: str) -> None:
+        try:
+            w = self.query_one(selector, Static)
+        except Exception:
+            return
+        w.update(text)
+        w.set_class(not text, "-empty")
+
+    def show_param_error(self, param: str | None, message: str) -> None:
+        """A refusal from the server: next to its field, else on top."""
+        if param and self.query(f"#err-{param}"):
+            self.errors[param] = message
+            self._set_static(f"#err-{param}", message)
+        else:
+            self.server_error = message
+            self._set_static("#server-error", message)
+
+    def clear_server_errors(self) -> None:
+        self.server_error = ""
+        self._set_static("#server-error", "")
+
+    def _validate_all(self) -> None:
+        if self._skill() is None or self.read_only_reason is not None:
+            return
+        _, _, _, problems = self.collect()
+        spec = self._spec(self._skill()[1])
+        for name in spec.params if spec else []:
+            msg = problems.get(name) or self.errors.get(name, "")
+            self._set_static(f"#err-{name}", msg)
+
+    def _field_changed(self, widget_id: str | None) -> None:
+        if not widget_id or self.skill_id is None:
+            return
+        name = widget_id.removeprefix("f-").removeprefix("bind-")
+        found = self._skill()
+        spec = self._spec(found[1]) if found else None
+        if spec is None:
+            return
+        for pname in spec.params:
+            if name == pname or name.startswith(pname + "-"):
+                self.errors.pop(pname, None)  # a server message is about the old value
+                break
+        if widget_id.startswith("bind-"):
+            self._sync_bound_fields(name)
+        for sw in self.query(f"#f-{name}").results(Switch):  # the value in words, not only colour
+            self._set_static(f"#v-{name}", "yes" if sw.value else "no")
+        self._validate_all()
+
+    def _sync_bound_fields(self, name: str) -> None:
+        bound = self._binding(name)
+        for w in self.query(f"#param-{name} Input, #param-{name} TextArea"):
+            w.disabled = bound is not None or self.read_only_reason is not None
+
+    @on(Input.Changed)
+    @on(Switch.Changed)
+    @on(Select.Changed)
+    @on(TextArea.Changed)
+    def _on_field(self, event: Message) -> None:
+        control = getattr(event, "control", None)
+        self._field_changed(getattr(control, "id", None))
+
+    @on(Button.Pressed, "#apply")
+    def _apply_pressed(self) -> None:
+        self.action_apply()
+
+    @on(Button.Pressed, "#revert")
+    async def _revert_pressed(self) -> None:
+        await self.action_revert()
+
+    # -- actions ---------------------------------------------------------------------------------
+    def action_apply(self) -> None:
+        found = self._skill()
+        if found is None:
+            return
+        ro = self.read_only_reason
+        if ro is not None:
+            self.app.notify(ro, title="Read-only", severity="warning")
+            return
+        label, params, bindings, problems = self.collect()
+        if problems:
+            for name, msg in problems.items():
+                self._set_static(f"#err-{name}", msg)
+            first = next(iter(problems))
+            self.app.notify(f"{found[1].id}, parameter {first}: {problems[first]}", title="Not applied", severity="error")
+            return
+        if label is None and not params and not bindings:
+            self.app.notify("nothing changed", timeout=2)
+            return
+        self.clear_server_errors()
+        self.post_message(self.ApplyRequested(found[1].id, label, params, bindings, self.base_revision))
+
+    async def action_revert(self) -> None:
+        self.errors = {}
+        self.server_error = ""
+        await self.show_skill(self.skill_id, force=True)
+
+    def action_leave(self) -> None:
+        self.post_message(self.Left())

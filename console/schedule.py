@@ -1,0 +1,608 @@
+"""The schedule panel: a column per robot, synchronized section on top, the
+unsynchronized plan below a divider that runs across all columns.
+
+One Line-API widget (`ScrollView.render_line`) draws it: only the visible
+lines are rendered, there is no widget per row, and a change to one robot's
+list re-lays out only that robot's column. Column headers stay on top while
+the rows scroll; columns scroll horizontally when they do not fit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from rich.cells import cell_len, set_cell_size
+from rich.segment import Segment
+from rich.style import Style
+from textual import events
+from textual.binding import Binding
+from textual.geometry import Region, Size
+from textual.message import Message
+from textual.scroll_view import ScrollView
+from textual.strip import Strip
+
+from backend.model import ACTIVE, Status
+
+from .model import (
+    GLYPHS,
+    STATUS_CSS,
+    ConsoleModel,
+    fmt_clock,
+    fmt_duration,
+    param_summary,
+    skill_title,
+)
+
+HEADER_H = 4
+STATIC_W = 16
+MIN_W = 24
+MAX_W = 46
+
+
+@dataclass
+class Column:
+    robot: str
+    static: bool
+    x: int = 0
+    width: int = MIN_W
+    # synchronized section: (index in the task, "row" | "progress")
+    sync: list[tuple[int, str]] = field(default_factory=list)
+    idle: list[int] = field(default_factory=list)
+    ids: list[str] = field(default_factory=list)
+    line_of: dict[str, int] = field(default_factory=dict)  # filled by the layout
+
+
+def _fit(text: str, width: int) -> str:
+    """Exactly `width` cells: truncated with an ellipsis, or padded."""
+    if width <= 0:
+        return ""
+    if cell_len(text) > width:
+        return set_cell_size(text, width - 1) + "…"
+    return set_cell_size(text, width)
+
+
+class ScheduleView(ScrollView, can_focus=True):
+    """Draws the schedule from a `ConsoleModel`; posts `CursorMoved`."""
+
+    COMPONENT_CLASSES = {
+        *(f"schedule--{c}" for c in STATUS_CSS.values()),
+        "schedule--cursor",
+        "schedule--cursor-blur",
+        "schedule--robot",
+        "schedule--online",
+        "schedule--offline",
+        "schedule--unknown",
+        "schedule--dim",
+        "schedule--divider",
+        "schedule--tag",
+        "schedule--mark",
+        "schedule--progress",
+        "schedule--battery-low",
+        "schedule--rule",
+    }
+
+    DEFAULT_CSS = """
+    ScheduleView {
+        background: $background;
+        scrollbar-size: 1 1;
+    }
+    ScheduleView > .schedule--idle { color: $status-idle; }
+    ScheduleView > .schedule--idle-synchronized { color: $status-idle-synchronized; }
+    ScheduleView > .schedule--synchwaiting { color: $status-synchwaiting; }
+    ScheduleView > .schedule--running { color: $status-running; text-style: bold; }
+    ScheduleView > .schedule--paused { color: $status-paused; text-style: bold; }
+    ScheduleView > .schedule--success { color: $status-success; }
+    ScheduleView > .schedule--failure { color: $status-failure; text-style: bold; }
+    ScheduleView > .schedule--cursor { background: $primary 60%; }
+    ScheduleView > .schedule--cursor-blur { background: $primary 25%; }
+    ScheduleView > .schedule--robot { color: $text; text-style: bold; }
+    ScheduleView > .schedule--online { color: $presence-online; }
+    ScheduleView > .schedule--offline { color: $presence-offline; text-style: bold; }
+    ScheduleView > .schedule--unknown { color: $presence-unknown; }
+    ScheduleView > .schedule--dim { color: $text-muted; }
+    ScheduleView > .schedule--divider { color: $divider; }
+    ScheduleView > .schedule--tag { color: $barrier-tag; text-style: bold; }
+    ScheduleView > .schedule--mark { color: $mark; text-style: bold; }
+    ScheduleView > .schedule--progress { color: $progress-bar; }
+    ScheduleView > .schedule--battery-low { color: $battery-low; text-style: bold; }
+    ScheduleView > .schedule--rule { color: $primary; }
+    """
+
+    BINDINGS = [
+        Binding("up", "cursor(0, -1)", "Up", show=False),
+        Binding("down", "cursor(0, 1)", "Down", show=False),
+        Binding("left", "cursor(-1, 0)", "Left", show=False),
+        Binding("right", "cursor(1, 0)", "Right", show=False),
+        Binding("home", "cursor_end(-1)", "First", show=False),
+        Binding("end", "cursor_end(1)", "Last", show=False),
+        Binding("pageup", "cursor_page(-1)", "Page up", show=False),
+        Binding("pagedown", "cursor_page(1)", "Page down", show=False),
+    ]
+
+    class CursorMoved(Message):
+        def __init__(self, robot: str | None, skill_id: str | None) -> None:
+            super().__init__()
+            self.robot = robot
+            self.skill_id = skill_id
+
+    def __init__(self, model: ConsoleModel, *, id: str | None = None) -> None:
+        super().__init__(id=id)
+        self.model = model
+        self.columns: list[Column] = []
+        self._col_index: dict[str, int] = {}
+        self.sync_h = 1
+        self.total_lines = 3
+        self.cursor_col = 0
+        self.cursor_id: str | None = None
+        self.marks: list[str] = []
+        self.expand_static = False
+        self._summary_cache: dict[tuple[str, int], str] = {}
+        self._last_width = -1
+
+    # -- model -> layout -----------------------------------------------------------
+    @property
+    def cursor_robot(self) -> str | None:
+        if 0 <= self.cursor_col < len(self.columns):
+            return self.columns[self.cursor_col].robot
+        return None
+
+    def _build_column(self, robot: str, static: bool) -> Column:
+        col = Column(robot=robot, static=static)
+        task = self.model.task(robot)
+        for i, s in enumerate(task):
+            col.ids.append(s.id)
+            if s.status == Status.IDLE:
+                col.idle.append(i)
+            else:
+                col.sync.append((i, "row"))
+                if s.status in ACTIVE or (s.status == Status.FAILURE and s.status_info):
+                    col.sync.append((i, "progress"))
+        return col
+
+    def rebuild(self, robots: set[str] | None = None) -> None:
+        """Re-lay out the columns of `robots` (all when None) and repaint."""
+        order = self.model.robot_order()
+        if robots is None or [c.robot for c in self.columns] != order:
+            self.columns = [self._build_column(r, self.model.robot_kind(r) == "static") for r in order]
+            self._col_index = {c.robot: i for i, c in enumerate(self.columns)}
+            if len(self._summary_cache) > 50_000:
+                self._summary_cache.clear()
+        else:
+            before = (self.sync_h, self.total_lines)
+            changed = []
+            for r in robots:
+                i = self._col_index.get(r)
+                if i is not None:
+                    self.columns[i] = self._build_column(r, self.columns[i].static)
+                    changed.append(self.columns[i])
+            self._relayout(changed)
+            if (self.sync_h, self.total_lines) == before and self.cursor_id in self.columns[self.cursor_col].line_of:
+                # only these columns changed: repaint just their strips
+                self.refresh_robots(robots)
+                return
+            self._keep_cursor()
+            self.refresh()
+            return
+        self._relayout()
+        self._keep_cursor()
+        self.refresh()
+
+    def refresh_robots(self, robots: set[str] | list[str]) -> None:
+        """Repaint the columns of these robots (their visible part) only."""
+        sx = int(self.scroll_x)
+        for r in robots:
+            i = self._col_index.get(r)
+            if i is None:
+                continue
+            col = self.columns[i]
+            self.refresh(Region(col.x - sx, 0, col.width + 1, self.size.height))
+
+    def _relayout(self, only: list[Column] | None = None) -> None:
+        sync_h = max([1, *(len(c.sync) for c in self.columns)])
+        idle_h = max([1, *(len(c.idle) for c in self.columns)])
+        if sync_h != self.sync_h:
+            only = None  # every column's plan rows move
+        self.sync_h = sync_h
+        self.total_lines = self.sync_h + 1 + idle_h
+        self._place_columns()
+        for c in self.columns if only is None else only:
+            c.line_of = {}
+            for line, (i, kind) in enumerate(c.sync):
+                if kind == "row":
+                    c.line_of[c.ids[i]] = line
+            for k, i in enumerate(c.idle):
+                c.line_of[c.ids[i]] = self.sync_h + 1 + k
+
+    def _place_columns(self) -> None:
+        avail = max(self.scrollable_content_region.width, 20) if self.is_mounted else 80
+        self._last_width = avail
+        statics = [c for c in self.columns if c.static]
+        dyn = [c for c in self.columns if not c.static]
+        static_w = STATIC_W if not self.expand_static else MIN_W + 6
+        if dyn:
+            w = (avail + 1 - len(statics) * (static_w + 1)) // len(dyn) - 1
+            w = max(MIN_W, min(MAX_W, w))
+        else:
+            w = MAX_W
+        x = 0
+        for c in self.columns:
+            c.x = x
+            c.width = static_w if c.static else w
+            x += c.width + 1
+        size = Size(max(x - 1, 1), HEADER_H + self.total_lines)
+        if size != self.virtual_size:
+            self.virtual_size = size
+
+    def on_resize(self, event: events.Resize) -> None:
+        if self.scrollable_content_region.width != self._last_width:
+            self._relayout()
+            self._scroll_cursor_visible()
+            self.refresh()
+
+    # -- cursor -----------------------------------------------------------------
+    def _keep_cursor(self) -> None:
+        if not self.columns:
+            self.cursor_col, self.cursor_id = 0, None
+            return
+        self.cursor_col = min(max(self.cursor_col, 0), len(self.columns) - 1)
+        col = self.columns[self.cursor_col]
+        if self.cursor_id is not None and self.cursor_id in col.line_of:
+            return
+        # the skill moved to another robot's column? (not possible today) or was deleted
+        if self.cursor_id is not None:
+            owner = self.model.owner(self.cursor_id)
+            if owner is not None and owner in self._col_index:
+                self.cursor_col = self._col_index[owner]
+                return
+        self.cursor_id = col.ids[0] if col.ids else None
+        if self.cursor_id is not None:
+            # prefer the first unsynchronized skill, else the active one, else the last
+            first_idle = col.ids[col.idle[0]] if col.idle else None
+            self.cursor_id = first_idle or col.ids[-1]
+        self._post_cursor()
+
+    def _post_cursor(self) -> None:
+        self.post_message(self.CursorMoved(self.cursor_robot, self.cursor_id))
+
+    def select(self, skill_id: str | None = None, robot: str | None = None) -> None:
+        """Put the cursor on a skill (or a robot's column)."""
+        if skill_id is not None:
+            owner = self.model.owner(skill_id)
+            if owner is None or owner not in self._col_index:
+                return
+            self.cursor_col = self._col_index[owner]
+            self.cursor_id = skill_id
+        elif robot is not None and robot in self._col_index:
+            self.cursor_col = self._col_index[robot]
+            col = self.columns[self.cursor_col]
+            self.cursor_id = None
+            if col.ids:
+                self.cursor_id = col.ids[col.idle[0]] if col.idle else col.ids[-1]
+        self._scroll_cursor_visible()
+        self.refresh()
+        self._post_cursor()
+
+    def _cursor_line(self) -> int:
+        if not self.columns:
+            return 0
+        col = self.columns[self.cursor_col]
+        if self.cursor_id is None:
+            return 0
+        return col.line_of.get(self.cursor_id, 0)
+
+    def _scroll_cursor_visible(self) -> None:
+        if not self.columns:
+            return
+        region = self.scrollable_content_region
+        col = self.columns[self.cursor_col]
+        x = self.scroll_x
+        if col.x < x:
+            x = col.x
+        elif col.x + col.width > x + region.width:
+            x = col.x + col.width - region.width
+        line = self._cursor_line()
+        rows = max(1, region.height - HEADER_H)
+        y = self.scroll_y
+        if line < y:
+            y = line
+        elif line >= y + rows:
+            y = line - rows + 1
+        if line <= self.sync_h and self.sync_h < rows and y > 0 and line - y < 2:
+            y = max(0, line - 1)
+        self.scroll_to(x=x, y=y, animate=False, immediate=True)
+
+    def action_cursor(self, dx: int, dy: int) -> None:
+        if not self.columns:
+            return
+        if dx:
+            line = self._cursor_line()
+            self.cursor_col = min(max(self.cursor_col + dx, 0), len(self.columns) - 1)
+            col = self.columns[self.cursor_col]
+            if col.line_of:
+                self.cursor_id = min(col.line_of, key=lambda sid: (abs(col.line_of[sid] - line), col.line_of[sid]))
+            else:
+                self.cursor_id = None
+        elif dy:
+            col = self.columns[self.cursor_col]
+            if not col.ids:
+                return
+            i = col.ids.index(self.cursor_id) if self.cursor_id in col.ids else 0
+            self.cursor_id = col.ids[min(max(i + dy, 0), len(col.ids) - 1)]
+        self._scroll_cursor_visible()
+        self.refresh()
+        self._post_cursor()
+
+    def action_cursor_end(self, direction: int) -> None:
+        if not self.columns:
+            return
+        col = self.columns[self.cursor_col]
+        if col.ids:
+            self.cursor_id = col.ids[0] if direction < 0 else col.ids[-1]
+        self._scroll_cursor_visible()
+        self.refresh()
+        self._post_cursor()
+
+    def action_cursor_page(self, direction: int) -> None:
+        rows = max(1, self.scrollable_content_region.height - HEADER_H - 1)
+        if not self.columns:
+            return
+        col = self.columns[self.cursor_col]
+        if not col.ids:
+            return
+        i = col.ids.index(self.cursor_id) if self.cursor_id in col.ids else 0
+        self.cursor_id = col.ids[min(max(i + direction * rows, 0), len(col.ids) - 1)]
+        self._scroll_cursor_visible()
+        self.refresh()
+        self._post_cursor()
+
+    def toggle_mark(self, skill_id: str) -> bool:
+        if skill_id in self.marks:
+            self.marks.remove(skill_id)
+            marked = False
+        else:
+            # one skill per robot: a new mark replaces that robot's previous one
+            owner = self.model.owner(skill_id)
+            self.marks = [m for m in self.marks if self.model.owner(m) != owner]
+            self.marks.append(skill_id)
+            marked = True
+        self.refresh()
+        return marked
+
+    def clear_marks(self) -> None:
+        self.marks = []
+        self.refresh()
+
+    def set_expand_static(self, expand: bool) -> None:
+        self.expand_static = expand
+        self._relayout()
+        self._scroll_cursor_visible()
+        self.refresh()
+
+    def on_click(self, event: events.Click) -> None:
+        x = int(self.scroll_x) + event.x
+        for i, col in enumerate(self.columns):
+            if col.x <= x < col.x + col.width + 1:
+                self.cursor_col = i
+                if event.y < HEADER_H:
+                    self.cursor_id = col.ids[col.idle[0]] if col.idle else (col.ids[-1] if col.ids else None)
+                else:
+                    line = int(self.scroll_y) + event.y - HEADER_H
+                    hit = [sid for sid, ln in col.line_of.items() if ln == line]
+                    if hit:
+                        self.cursor_id = hit[0]
+                self.refresh()
+                self._post_cursor()
+                break
+
+    # -- rendering ----------------------------------------------------------------
+    def _styles(self) -> dict[str, Style]:
+        key = (self.app.theme, self.has_focus)
+        cached = getattr(self, "_style_cache", None)
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        get = self.get_component_rich_style
+        out = {name.removeprefix("schedule--"): get(name) for name in self.COMPONENT_CLASSES}
+        out["base"] = self.rich_style
+        self._style_cache = (key, out)
+        return out
+
+    def notify_style_update(self) -> None:
+        self._style_cache = None
+        super().notify_style_update()
+
+    def render_line(self, y: int) -> Strip:
+        width = self.size.width
+        scroll_x, scroll_y = int(self.scroll_x), int(self.scroll_y)
+        st = self._styles()
+        base = st["base"]
+        if not self.columns:
+            if y == 1:
+                msg = "  no mission yet — waiting for the server…" if self.model.mission is None else "  this mission has no robots"
+                return Strip([Segment(_fit(msg, width), st["dim"])]).crop_extend(0, width, base)
+            return Strip.blank(width, base)
+        x0, x1 = scroll_x, scroll_x + width
+        segs: list[Segment] = []
+        line = scroll_y + y - HEADER_H
+        start: int | None = None  # x of the first visible column: only those are drawn
+        for ci, col in enumerate(self.columns):
+            if col.x + col.width + 1 <= x0 or col.x >= x1:
+                continue
+            if start is None:
+                start = col.x
+            if y < HEADER_H:
+                segs.extend(self._header_segments(col, y, st))
+            else:
+                segs.extend(self._content_segments(ci, col, line, st))
+            if y == HEADER_H - 1:
+                segs.append(Segment("┼", st["rule"]))
+            else:
+                segs.append(Segment("│", st["divider"]))
+        start = start or 0
+        return Strip(segs).crop_extend(x0 - start, x1 - start, base)
+
+    # header: name + presence / battery + link / activity / rule
+    def _header_segments(self, col: Column, y: int, st: dict[str, Style]) -> list[Segment]:
+        w = col.width
+        m = self.model
+        robot = col.robot
+        info = m.robots.get(robot)
+        t = m.telemetry.get(robot)
+        if y == 0:
+            if info is None:
+                pres, pst = "? unknown", st["unknown"]
+            elif info.online:
+                pres, pst = "● online", st["online"]
+            elif info.since is not None:
+                clock = fmt_clock(info.since)
+                fits = [p for p in (f"✕ offline since {clock}", f"✕ offline {clock}") if cell_len(robot) + 1 + cell_len(p) <= w]
+                pres = fits[0] if fits else f"✕ off {clock}"
+                pst = st["offline"]
+            else:
+                pres, pst = "✕ offline", st["offline"]
+            if col.static and not self.expand_static:
+                pres = "●" if info is not None and info.online else "✕"
+            name_w = max(1, w - cell_len(pres) - 1)
+            return [Segment(_fit(robot, name_w), st["robot"]), Segment(" ", st["base"]), Segment(_fit(pres, w - name_w - 1), pst)]
+        if y == 1:
+            if col.static and not self.expand_static:
+                return [Segment(_fit("static", w), st["dim"])]
+            if t is None:
+                return [Segment(_fit("bat –  link –", w), st["dim"])]
+            bat = f"bat {int(round(t.battery * 100))}%"
+            link = f"link {int(round(t.link * 100))}%" if t.in_range else "link: out of range"
+            bst = st["battery-low"] if t.battery < 0.2 else st["base"]
+            lst = st["offline"] if not t.in_range else st["base"]
+            return [Segment(bat, bst), Segment("  ", st["base"]), Segment(_fit(link, max(0, w - cell_len(bat) - 2)), lst)]
+        if y == 2:
+            if col.static and not self.expand_static:
+                n = len(col.ids)
+                return [Segment(_fit(f"{n} skill{'s' if n != 1 else ''}", w), st["dim"])]
+            return [Segment(_fit(m.activity_text(robot), w), st["dim"])]
+        selected = self.columns[self.cursor_col] is col if self.columns else False
+        return [Segment(("━" if selected else "─") * w, st["rule"])]
+
+    def _content_segments(self, ci: int, col: Column, line: int, st: dict[str, Style]) -> list[Segment]:
+        w = col.width
+        task = self.model.task(col.robot)
+        if line < 0 or line >= self.total_lines:
+            return [Segment(" " * w, st["base"])]
+        if line < self.sync_h:
+            if line < len(col.sync):
+                i, kind = col.sync[line]
+                if i < len(task):
+                    s = task[i]
+                    if kind == "row":
+                        return self._skill_segments(ci, col, s, st)
+                    return self._progress_segments(col, s, st)
+            if line == 0 and not col.sync:
+                hint = "  nothing on the robot" if not col.static or self.expand_static else "  –"
+                return [Segment(_fit(hint, w), st["dim"])]
+            return [Segment(" " * w, st["base"])]
+        if line == self.sync_h:
+            label = " plan " if not col.static or self.expand_static else ""
+            text = "┄┄" + label + "┄" * max(0, w - 2 - len(label))
+            return [Segment(text[:w], st["divider"])]
+        k = line - self.sync_h - 1
+        if k < len(col.idle):
+            i = col.idle[k]
+            if i < len(task):
+                return self._skill_segments(ci, col, task[i], st)
+        if k == 0 and not col.idle:
+            hint = "  empty plan" if not col.static or self.expand_static else "  –"
+            return [Segment(_fit(hint, w), st["dim"])]
+        return [Segment(" " * w, st["base"])]
+
+    def _summary(self, s) -> str:
+        key = (s.id, s.rev)
+        text = self._summary_cache.get(key)
+        if text is None:
+            text = param_summary(s, self.model.library)
+            self._summary_cache[key] = text
+        return text
+
+    def _skill_segments(self, ci: int, col: Column, s, st: dict[str, Style]) -> list[Segment]:
+        w = col.width
+        css = STATUS_CSS[s.status]
+        sst = st[css]
+        marked = s.id in self.marks
+        selected = ci == self.cursor_col and s.id == self.cursor_id
+        bid = self.model.barrier_of(s.id)
+        tag = f"[{bid}]" if bid else ""
+        title = skill_title(s) + (f" #{s.attempt}" if s.attempt > 1 else "")
+        extra = self._summary(s) if not col.static or self.expand_static else ""
+        room = w - 2 - (cell_len(tag) + 1 if tag else 0)
+        segs: list[Segment] = [
+            Segment("+" if marked else " ", st["mark"] if marked else st["base"]),
+            Segment(GLYPHS[s.status], sst),
+        ]
+        body = " " + title
+        if cell_len(body) >= room:
+            segs.append(Segment(_fit(body, room), sst))
+        else:
+            segs.append(Segment(body, sst))
+            rest = room - cell_len(body)
+            if extra and rest > 2:
+                segs.append(Segment(_fit(" " + extra, rest), st["dim"]))
+            else:
+                segs.append(Segment(" " * rest, st["base"]))
+        if tag:
+            segs.append(Segment(" ", st["base"]))
+            segs.append(Segment(tag, st["tag"]))
+        if selected:
+            cur = st["cursor"] if self.has_focus else st["cursor-blur"]
+            segs = [Segment(seg.text, (seg.style or Style()) + cur) for seg in segs]
+        return segs
+
+    def _progress_segments(self, col: Column, s, st: dict[str, Style]) -> list[Segment]:
+        w = col.width
+        t = self.model.telemetry.get(col.robot)
+        has = t is not None and t.skill == s.id
+        if s.status == Status.FAILURE:
+            return [Segment(_fit("   ↳ " + s.status_info, w), st["failure"])]
+        if s.status == Status.SYNCHWAITING:
+            waiting = self._barrier_wait_text(s)
+            return [Segment(_fit("   " + waiting, w), st["synchwaiting"])]
+        pct = t.progress if has and t.progress is not None else None
+        if s.status == Status.PAUSED:
+            text = "   paused" + (f" at {int(pct * 100)}%" if pct is not None else "")
+            if s.status_info:
+                text += f" · {s.status_info}"
+            return [Segment(_fit(text, w), st["paused"])]
+        if pct is None:
+            text = "   running" + (f" · {s.status_info}" if s.status_info else "")
+            return [Segment(_fit(text, w), st["dim"])]
+        eta = f" ETA {fmt_duration(t.eta_s)}" if t.eta_s is not None else ""
+        label = f" {int(pct * 100):3d}%{eta}"
+        bar_w = max(4, w - 3 - cell_len(label) - 2)
+        filled = int(round(pct * bar_w))
+        return [
+            Segment("   ▕", st["dim"]),
+            Segment("█" * filled, st["progress"]),
+            Segment("░" * (bar_w - filled), st["dim"]),
+            Segment("▏", st["dim"]),
+            Segment(_fit(label, w - 3 - bar_w - 2), st["base"]),
+        ]
+
+    def _barrier_wait_text(self, s) -> str:
+        """What a robot waiting at a barrier waits for; offline partners first."""
+        m = self.model
+        bid = m.barrier_of(s.id)
+        if bid is None or m.mission is None:
+            return s.status_info or "waiting at a barrier"
+        offline: list[str] = []
+        waiting: list[str] = []
+        for sid in m.mission.barriers[bid].skills:
+            robot = m.owner(sid)
+            if sid == s.id or robot is None:
+                continue
+            info = m.robots.get(robot)
+            found = m.find(sid)
+            if info is None or not info.online:
+                offline.append(f"{robot} OFFLINE" + (f" {fmt_clock(info.since)}" if info and info.since else ""))
+            elif found and found[2].status != Status.SYNCHWAITING:
+                waiting.append(robot)
+        if offline:
+            return f"{bid}: " + ", ".join(offline)
+        if waiting:
+            return f"{bid}: waiting for " + ", ".join(waiting)
+        return f"{bid}: all partners ready"

@@ -1,0 +1,579 @@
+"""The mission screen: schedule panel, parameter editor, control keys.
+
+Layout (wide): top bar / schedule | parameter editor / status line / footer.
+Below 100 columns the editor is shown instead of the schedule while editing
+(enter / e opens it, escape returns). Part 2 adds the map, fleet and event-log
+screens as further app modes next to this one.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from rich.text import Text
+from textual import events, on, work
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal
+from textual.screen import Screen
+from textual.widgets import Footer, Input, Select, Static, Switch, TextArea
+
+from backend.library import ParamSpec
+from backend.model import Status
+from backend.ops import (
+    AddBarrier,
+    AddSkill,
+    Control,
+    DeleteSkills,
+    EditSkill,
+    LoadMission,
+    MoveSkill,
+    Redo,
+    RemoveBarrier,
+    Retry,
+    Sync,
+    Undo,
+    Unsync,
+)
+
+from .actions import BY_NAME, mission_bindings
+from .dialogs import ConfirmScreen, PathPrompt, SkillPicker
+from .model import CONNECTED, ConsoleModel
+from .params import ParamEditor
+from .schedule import ScheduleView
+
+if TYPE_CHECKING:
+    from .app import MissionApp
+
+NARROW = 100
+
+
+def default_params(spec_params: dict[str, ParamSpec], model: ConsoleModel, robot: str) -> tuple[dict[str, Any], dict[str, str]]:
+    """Values for the required parameters without a default, so a new skill is
+    valid at once (then edited): the robot's position, the first fitting
+    marker, the first choice, the lower bound."""
+    params: dict[str, Any] = {}
+    bindings: dict[str, str] = {}
+    tel = model.telemetry.get(robot)
+    pose = tel.pose.model_dump() if tel is not None else {"x": 0.0, "y": 0.0, "z": 0.0, "roll": 0.0, "pitch": 0.0, "yaw": 0.0}
+    markers = model.mission.markers if model.mission else {}
+    robots = list(model.mission.robots) if model.mission else []
+    for name, p in spec_params.items():
+        if not p.is_required or p.default is not None:
+            continue
+        t = p.type
+        if t == "pose":
+            params[name] = dict(pose)
+        elif t == "position":
+            params[name] = {k: pose[k] for k in ("x", "y", "z")}
+        elif t == "area":
+            area = [m for m, mk in markers.items() if mk.kind == "area"]
+            if area:
+                bindings[name] = area[0]
+            else:
+                x, y = pose["x"], pose["y"]
+                params[name] = [{"x": x - 5, "y": y - 5, "z": 0.0}, {"x": x + 5, "y": y - 5, "z": 0.0}, {"x": x + 5, "y": y + 5, "z": 0.0}, {"x": x - 5, "y": y + 5, "z": 0.0}]
+        elif t == "enum" and p.choices:
+            params[name] = p.choices[0]
+        elif t == "marker":
+            fit = [m for m, mk in markers.items() if not p.marker_kinds or mk.kind in p.marker_kinds]
+            if fit:
+                params[name] = fit[0]
+        elif t == "robot":
+            others = [r for r in robots if r != robot] or robots
+            if others:
+                params[name] = others[0]
+        elif t == "bool":
+            params[name] = False
+        elif t in ("int", "float"):
+            v = p.min if p.min is not None else 0
+            if p.max is not None:
+                v = min(v, p.max)
+            params[name] = int(v) if t == "int" else float(v)
+        elif t == "str":
+            params[name] = ""
+        elif t == "list":
+            params[name] = []
+        elif t == "dict":
+            params[name] = {}
+    return params, bindings
+
+
+class TopBar(Static):
+    DEFAULT_CSS = """
+    TopBar { height: 1; background: $panel; color: $text; padding: 0 1; }
+    TopBar.-reconnecting { background: $warning 40%; }
+    TopBar.-unreachable, TopBar.-offline { background: $error 30%; }
+    """
+
+
+class StatusLine(Static):
+    DEFAULT_CSS = """
+    StatusLine { height: 1; padding: 0 1; background: $surface; color: $text-muted; text-wrap: nowrap; text-overflow: ellipsis; }
+    StatusLine.-error { color: $error; text-style: bold; }
+    StatusLine.-warning { color: $warning; }
+    StatusLine.-ok { color: $success; }
+    """
+
+
+class MissionScreen(Screen):
+    BINDINGS = [
+        *mission_bindings(),
+        Binding("f1,question_mark", "help", "Help", id="app.help"),
+        Binding("escape", "clear_marks", "Clear marks", show=False),
+    ]
+
+    DEFAULT_CSS = """
+    MissionScreen #main { height: 1fr; }
+    MissionScreen ScheduleView { width: 1fr; height: 100%; }
+    MissionScreen ParamEditor { width: 50; height: 100%; border-left: vkey $primary 50%; background: $surface; }
+    MissionScreen ParamEditor:focus-within { border-left: vkey $primary; }
+    MissionScreen.-narrow ParamEditor { display: none; }
+    MissionScreen.-narrow.-editing ParamEditor { display: block; width: 100%; border-left: none; }
+    MissionScreen.-narrow.-editing ScheduleView { display: none; }
+    """
+
+    def __init__(self, model: ConsoleModel) -> None:
+        super().__init__()
+        self.model = model
+        self.pending_select: str | None = None
+        # kept as attributes: messages may arrive while the screen is being torn down
+        self._topbar = TopBar(id="topbar")
+        self._schedule = ScheduleView(model, id="schedule")
+        self._editor = ParamEditor(model, id="editor")
+        self._status = StatusLine("", id="status")
+        self.edit_after_select = False
+        self.message = ""
+
+    @property
+    def mission_app(self) -> MissionApp:
+        return self.app  # type: ignore[return-value]
+
+    def compose(self) -> ComposeResult:
+        yield self._topbar
+        with Horizontal(id="main"):
+            yield self._schedule
+            yield self._editor
+        yield self._status
+        yield Footer()
+
+    @property
+    def schedule(self) -> ScheduleView:
+        return self._schedule
+
+    @property
+    def editor(self) -> ParamEditor:
+        return self._editor
+
+    def on_mount(self) -> None:
+        self.set_class(self.app.size.width < NARROW, "-narrow")
+        self.schedule.focus()
+        self.update_top()
+        self.schedule.rebuild()
+
+    def on_resize(self, event: events.Resize) -> None:
+        narrow = event.size.width < NARROW
+        if narrow != self.has_class("-narrow"):
+            self.set_class(narrow, "-narrow")
+            if not narrow:
+                self.remove_class("-editing")
+                self.run_worker(self.editor.show_skill(self.schedule.cursor_id), group="editor", exclusive=True)
+
+    @property
+    def editor_visible(self) -> bool:
+        return not self.has_class("-narrow") or self.has_class("-editing")
+
+    # -- the model changed ------------------------------------------------------------------
+    async def model_changed(self, robots: set[str] | None) -> None:
+        self.schedule.rebuild(robots)
+        self.schedule.marks = [m for m in self.schedule.marks if self.model.owner(m) is not None]
+        if self.pending_select and self.model.owner(self.pending_select):
+            sid, self.pending_select = self.pending_select, None
+            self.schedule.select(sid)
+            if self.edit_after_select:
+                self.call_after_refresh(self._edit_selected)
+        self.update_top()
+        self.refresh_availability()
+        if self.editor_visible:
+            if self.editor.skill_id != self.schedule.cursor_id:
+                await self.editor.show_skill(self.schedule.cursor_id)
+            else:
+                await self.editor.model_changed()
+
+    async def connection_changed(self) -> None:
+        self.update_top()
+        self.refresh_availability()
+        if self.editor_visible:
+            await self.editor.model_changed()
+
+    def robot_changed(self, robot: str) -> None:
+        self.schedule.refresh()  # partners' columns show it too (barriers)
+        self.refresh_availability()
+
+    def telemetry_changed(self, robot: str) -> None:
+        self.schedule.refresh_robots([robot])
+
+    def update_top(self) -> None:
+        m = self.model
+        t = Text()
+        t.append("missionctl", style="bold")
+        if m.mission is not None:
+            t.append(f"  {m.mission.name}", style="bold")
+            t.append(f"  rev {m.mission.revision}", style="dim")
+        state = m.connection
+        glyph = {"connected": "●", "reconnecting": "⟳", "connecting": "…", "unreachable": "✕", "offline": "○"}.get(state, "?")
+        t.append(f"   {glyph} {state}")
+        if m.endpoint:
+            t.append(f" {m.endpoint}", style="dim")
+        if m.connection_detail and state != CONNECTED:
+            t.append(f" — {m.connection_detail}", style="dim")
+        if self.schedule.marks:
+            t.append(f"   marked: {', '.join(self.schedule.marks)}", style="bold")
+        bar = self._topbar
+        if t.plain == getattr(bar, "shown", None):
+            return
+        bar.shown = t.plain
+        bar.update(t, layout=False)
+        for c in ("reconnecting", "unreachable", "offline", "connecting", "connected"):
+            bar.set_class(state == c, f"-{c}")
+
+    def say(self, text: str, severity: str = "info") -> None:
+        """The status line: the last outcome, refusal or explanation."""
+        self.message = text
+        line = self._status
+        line.update(text, layout=False)
+        for c in ("error", "warning", "ok"):
+            line.set_class(severity == c, f"-{c}")
+
+    # -- selection -----------------------------------------------------------------------------------
+    @on(ScheduleView.CursorMoved)
+    async def _cursor_moved(self, event: ScheduleView.CursorMoved) -> None:
+        self.refresh_availability()
+        if self.editor_visible:
+            await self.editor.show_skill(event.skill_id)
+
+    def selection(self) -> tuple[str | None, str | None]:
+        return self.schedule.cursor_robot, self.schedule.cursor_id
+
+    def refresh_availability(self) -> None:
+        """Refresh the footer only when what applies changed (it rebuilds its keys)."""
+        sig = (tuple(self.why_disabled(a) is None for a in BY_NAME), self.model.connection)
+        if sig != getattr(self, "_availability", None):
+            self._availability = sig
+            self.refresh_bindings()
+
+    def why_disabled(self, action: str) -> str | None:
+        if action not in BY_NAME:
+            return None
+        robot, sid = self.selection()
+        return self.model.why_not(action, robot, sid, self.schedule.marks)
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        if action in BY_NAME and action != "toggle_static":
+            return None if self.why_disabled(action) else True
+        return True
+
+    def explain(self, action: str) -> bool:
+        """Say why an action does not apply; True if it does not."""
+        why = self.why_disabled(action)
+        if why:
+            label = BY_NAME[action].label if action in BY_NAME else action
+            self.say(f"{label}: {why}", "warning")
+            self.app.notify(why, title=f"{label} does not apply", severity="warning", timeout=4)
+            return True
+        return False
+
+    def on_key(self, event: events.Key) -> None:
+        """A key of a disabled action: say why instead of doing nothing."""
+        ab = self.active_bindings.get(event.key)
+        if ab is not None and not ab.enabled and ab.node is self:
+            self.explain(ab.binding.action)
+            event.stop()
+            event.prevent_default()
+
+    async def run_named(self, action: str) -> None:
+        """From the command palette: run it, or say why not."""
+        if not self.explain(action):
+            await self.run_action(action)
+
+    # -- submitting -----------------------------------------------------------------------------------
+    def submit(self, op: Any, what: str, **kw: Any) -> None:
+        self.mission_app.submit(op, what, **kw)
+
+    # -- actions: plan ----------------------------------------------------------------------------------
+    def action_help(self) -> None:
+        self.mission_app.action_help()
+
+    def action_clear_marks(self) -> None:
+        if self.schedule.marks:
+            self.schedule.clear_marks()
+            self.update_top()
+            self.refresh_availability()
+            self.say("marks cleared")
+
+    def action_toggle_static(self) -> None:
+        self.schedule.set_expand_static(not self.schedule.expand_static)
+
+    @work(group="dialog")
+    async def action_add(self) -> None:
+        robot, sid = self.selection()
+        if robot is None or self.model.library is None:
+            return
+        found = self.model.find(sid)
+        task = self.model.task(robot)
+        idle = [s.id for s in task if s.status == Status.IDLE]
+        if found and found[2].status == Status.IDLE:
+            at, where = idle.index(found[2].id) + 1, f"after {found[2].id}"
+        else:
+            at, where = 0, "at the head of the plan"
+        skills = self.model.skills_of(robot)
+        choice = await self.app.push_screen_wait(SkillPicker(robot, skills, self.model.library, where))
+        if not choice:
+            return
+        spec = self.model.library.skills[choice]
+        params, bindings = default_params(spec.params, self.model, robot)
+        op = AddSkill(robot=robot, skill=choice, params=params, bindings=bindings, at=at)
+
+        def added(reply: Any) -> None:
+            new = reply.value.get("id")
+            if not new:
+                return
+            self.say(f"added {new} ({choice}) to {robot} {where}: set its parameters, then ctrl+s", "ok")
+            self.edit_after_select = True
+            if self.model.owner(new):
+                self.schedule.select(new)
+                self.call_after_refresh(self._edit_selected)
+            else:
+                self.pending_select = new  # selected (and edited) when its event arrives
+
+        self.submit(op, f"add {choice} to {robot}", robot=robot, on_ok=added)
+
+    async def action_edit(self) -> None:
+        if self.has_class("-narrow"):
+            self.add_class("-editing")
+        await self.editor.show_skill(self.schedule.cursor_id)
+        self.editor.focus_first()
+
+    async def _edit_selected(self) -> None:
+        if self.edit_after_select:
+            self.edit_after_select = False
+            await self.action_edit()
+
+    @on(ParamEditor.Left)
+    def _editor_left(self) -> None:
+        self.remove_class("-editing")
+        self.editor.can_focus = False
+        self.schedule.focus()
+
+    @on(ParamEditor.ApplyRequested)
+    def _apply(self, event: ParamEditor.ApplyRequested) -> None:
+        op = EditSkill(id=event.skill_id, label=event.label, params=event.params, bindings=event.bindings)
+        robot = self.model.owner(event.skill_id)
+        changed = ", ".join([*event.params, *event.bindings] + (["label"] if event.label is not None else []))
+
+        def refused(reply: Any) -> None:
+            if reply.skill in (None, event.skill_id) and self.editor.skill_id == event.skill_id:
+                self.editor.show_param_error(reply.param, reply.message)
+
+        def ok(reply: Any) -> None:
+            self.say(f"{event.skill_id}: applied {changed}", "ok")
+
+        self.submit(op, f"edit {event.skill_id}", robot=robot, skill=event.skill_id, expected_revision=event.base_revision, on_ok=ok, on_refused=refused)
+
+    @work(group="dialog")
+    async def action_delete(self) -> None:
+        robot, sid = self.selection()
+        found = self.model.find(sid)
+        if found is None:
+            return
+        s = found[2]
+        bid = self.model.barrier_of(s.id)
+        extra = f" It leaves barrier {bid}." if bid else ""
+        if not await self.app.push_screen_wait(ConfirmScreen(f"Delete {s.display()} from {robot}'s plan?{extra}", yes="Delete")):
+            self.say("delete cancelled")
+            return
+        self.submit(DeleteSkills(ids=[s.id]), f"delete {s.id}", robot=robot, skill=s.id)
+
+    def _move(self, step: int) -> None:
+        robot, sid = self.selection()
+        if robot is None or sid is None:
+            return
+        idle = [s.id for s in self.model.task(robot) if s.status == Status.IDLE]
+        if sid not in idle:
+            return
+        index = idle.index(sid) + step
+        self.submit(MoveSkill(id=sid, index=index), f"move {sid} {'up' if step < 0 else 'down'}", robot=robot, skill=sid)
+
+    def action_move_up(self) -> None:
+        self._move(-1)
+
+    def action_move_down(self) -> None:
+        self._move(1)
+
+    def action_undo(self) -> None:
+        self.submit(Undo(), "undo", on_ok=lambda r: self.say(f"undone: {r.value.get('undone', 'last edit')}", "ok"))
+
+    def action_redo(self) -> None:
+        self.submit(Redo(), "redo", on_ok=lambda r: self.say(f"redone: {r.value.get('redone', 'edit')}", "ok"))
+
+    # -- actions: synchronization -----------------------------------------------------------------------
+    def action_sync(self) -> None:
+        robot, sid = self.selection()
+        if robot is None or sid is None:
+            return
+        self.submit(Sync(robot=robot, through=sid), f"sync {robot} through {sid}", robot=robot, skill=sid,
+                    on_ok=lambda r: self.say(f"{robot}: synchronized {', '.join(r.value.get('synchronized', []))}", "ok"))
+
+    def action_unsync(self) -> None:
+        robot, sid = self.selection()
+        if robot is None or sid is None:
+            return
+
+        def ok(r: Any) -> None:
+            back = r.value.get("unsynchronized", [])
+            kept = r.value.get("kept", [])
+            msg = f"{robot}: took back {', '.join(back) or 'nothing'}"
+            if kept:
+                msg += f"; {', '.join(kept)} had already started and stays on the robot"
+            self.say(msg, "warning" if kept else "ok")
+
+        self.submit(Unsync(robot=robot, from_id=sid), f"unsync {robot} from {sid}", robot=robot, skill=sid, on_ok=ok)
+
+    def action_mark(self) -> None:
+        robot, sid = self.selection()
+        if sid is None:
+            return
+        marked = self.schedule.toggle_mark(sid)
+        self.update_top()
+        self.refresh_availability()
+        n = len(self.schedule.marks)
+        self.say(f"{'marked' if marked else 'unmarked'} {sid}; {n} marked" + (" — b makes the barrier" if n >= 2 else " — mark a skill of another robot"))
+
+    def action_barrier(self) -> None:
+        ids = list(self.schedule.marks)
+
+        def ok(r: Any) -> None:
+            self.schedule.clear_marks()
+            self.update_top()
+            self.say(f"barrier {r.value.get('barrier', '')}: {', '.join(ids)} start together", "ok")
+
+        self.submit(AddBarrier(ids=ids), f"barrier {', '.join(ids)}", on_ok=ok)
+
+    def action_unbarrier(self) -> None:
+        robot, sid = self.selection()
+        bid = self.model.barrier_of(sid) if sid else None
+        if bid is None:
+            return
+        self.submit(RemoveBarrier(barrier=bid), f"remove barrier {bid}", robot=robot, skill=sid, on_ok=lambda r: self.say(f"barrier {bid} removed", "ok"))
+
+    def action_retry(self) -> None:
+        robot, sid = self.selection()
+        if sid is None:
+            return
+        self.submit(Retry(id=sid), f"retry {sid}", robot=robot, skill=sid, on_ok=lambda r: self.say(f"{robot}: {r.value.get('id', '')} queued right after {sid} (run to start it)", "ok"))
+
+    # -- actions: execution -------------------------------------------------------------------------------
+    def _control(self, op: str, robot: str | None) -> None:
+        who = robot or "all robots"
+
+        def ok(r: Any) -> None:
+            notes = "; ".join(r.notes)
+            self.say(f"{op} {who}: ok" + (f" — {notes}" if notes else ""), "warning" if notes else "ok")
+            for n in r.notes:
+                self.app.notify(n, title=f"{op}: partly applied", severity="warning")
+
+        self.submit(Control(op=op, robot=robot), f"{op} {who}", robot=robot, on_ok=ok)
+
+    def action_run(self) -> None:
+        self._control("run", self.schedule.cursor_robot)
+
+    def action_pause(self) -> None:
+        self._control("pause", self.schedule.cursor_robot)
+
+    def action_stop(self) -> None:
+        self._control("stop", self.schedule.cursor_robot)
+
+    @work(group="dialog")
+    async def action_reset(self) -> None:
+        robot = self.schedule.cursor_robot
+        if robot and await self.app.push_screen_wait(ConfirmScreen(f"Reset {robot}? Its active skill stops and everything queued returns to the plan.", yes="Reset")):
+            self._control("reset", robot)
+
+    def action_run_all(self) -> None:
+        self._control("run", None)
+
+    def action_pause_all(self) -> None:
+        self._control("pause", None)
+
+    def action_stop_all(self) -> None:
+        self._control("stop", None)
+
+    @work(group="dialog")
+    async def action_reset_all(self) -> None:
+        if await self.app.push_screen_wait(ConfirmScreen("Reset ALL robots? Active skills stop and everything queued returns to the plan.", yes="Reset all")):
+            self._control("reset", None)
+
+    # -- actions: files ------------------------------------------------------------------------------------
+    @work(group="dialog")
+    async def action_save(self) -> None:
+        m, lib = self.model.mission, self.model.library
+        if m is None or lib is None:
+            return
+        default = self.mission_app.last_path or f"{m.name.lower().replace(' ', '_')}.yaml"
+        path = await self.app.push_screen_wait(PathPrompt("Save the mission to (YAML):", default))
+        if not path:
+            return
+        try:
+            note = await asyncio.to_thread(save_with_library, m, lib, Path(path))
+        except OSError as e:
+            self.say(f"cannot save {path}: {e.strerror or e}", "error")
+            self.app.notify(f"{path}: {e.strerror or e}", title="Not saved", severity="error")
+            return
+        self.mission_app.last_path = path
+        self.say(f"saved {path} (revision {m.revision})" + (f"; {note}" if note else ""), "ok")
+
+    @work(group="dialog")
+    async def action_load(self) -> None:
+        path = await self.app.push_screen_wait(PathPrompt("Load a mission from (YAML):", self.mission_app.last_path or "", must_exist=True))
+        if not path:
+            return
+        from backend.files import FileProblems, load_mission
+
+        try:
+            mission, _lib = await asyncio.to_thread(load_mission, path)
+        except FileProblems as e:
+            first = str(e.issues[0]) if e.issues else str(e)
+            more = f" (and {len(e.issues) - 1} more)" if len(e.issues) > 1 else ""
+            self.say(f"cannot load: {first}{more}", "error")
+            self.app.notify(first + more, title="Mission file invalid", severity="error")
+            return
+        except OSError as e:
+            self.say(f"cannot load {path}: {e.strerror or e}", "error")
+            return
+        if not await self.app.push_screen_wait(ConfirmScreen(f"Replace the mission with {path} ('{mission.name}')? The current plan is replaced for every operator.", yes="Replace")):
+            return
+        self.mission_app.last_path = path
+        self.submit(LoadMission(mission=mission), f"load {path}", on_ok=lambda r: self.say(f"loaded {path}: '{mission.name}'", "ok"))
+
+    # -- widgets inside the editor must not trigger schedule keys ----------------------------------------
+    def is_typing(self) -> bool:
+        f = self.focused
+        return isinstance(f, Input | TextArea | Select | Switch)
+
+
+def save_with_library(mission: Any, library: Any, path: Path) -> str:
+    """Save the mission; if its library reference does not resolve from the
+    new place, write the library beside it and point there."""
+    from backend import yamlio
+    from backend.files import library_path, save_mission
+
+    lib_file = library_path(path, mission.library)
+    if lib_file.exists():
+        save_mission(mission, path)
+        return ""
+    beside = path.with_name(path.stem + ".library.yaml")
+    beside.write_text(yamlio.dump(library.model_dump(mode="json", exclude_defaults=True) | {"format": library.format}), encoding="utf-8")
+    save_mission(mission, path, library_file=beside)
+    return f"its skill library written to {beside.name}"

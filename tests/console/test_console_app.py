@@ -1,0 +1,407 @@
+"""The console's screens, driven with Textual's pilot, state injected offline.
+
+Each test asserts on what the terminal shows (robot names, skill labels,
+statuses, reasons), so an app that fails to start cannot pass.
+"""
+
+from __future__ import annotations
+
+from console_state import (
+    MARS_FLEET,
+    TUTORIAL,
+    Builder,
+    EngineBackend,
+    inject,
+    make_app,
+    mars_mid_execution,
+    mars_telemetry,
+    screen_text,
+    wait_exit,
+    wait_until,
+)
+
+from backend.client import OperationRefused
+from backend.model import Status
+from backend.protocol import ErrorReply, OpReply
+from backend.transport import free_port, loopback_endpoint
+from console.config import ConsoleConfig
+from console.dialogs import HelpScreen, SkillPicker, UnreachableScreen
+from console.messages import ConnectionChanged, FleetChanged
+from console.params import ParamEditor
+from console.schedule import ScheduleView
+
+WIDE = (150, 42)
+
+
+def status_line(app) -> str:
+    return str(app.mission_screen.message)
+
+
+async def test_before_any_state_the_schedule_says_it_waits():
+    app = make_app()
+    async with app.run_test(size=(100, 24)) as pilot:
+        await pilot.pause()
+        text = screen_text(app)
+        assert "no mission yet" in text
+        assert "missionctl" in text
+
+
+async def test_mars_mid_execution_shows_every_status_barrier_progress_and_presence():
+    app = make_app()
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
+        text = screen_text(app)
+        for robot in ("lru1", "lru2", "ardea", "lander"):
+            assert robot in text
+        for label in ("drive to POI-A", "explore east plain", "take sample box", "survey the ridge", "land on the lander", "recharge"):
+            assert label in text, label
+        for glyph in ("✓", "✗", "▶", "‖", "◷", "●", "○"):
+            assert glyph in text, glyph
+        assert text.count("[b1]") == 2  # on both partners
+        assert "45%" in text and "ETA 2m12s" in text  # running skill, from telemetry
+        assert "offline 10:42:07" in text  # ardea, from the injected timestamp
+        assert "bat 82%" in text and "link 90%" in text
+        assert "battery below 15%" in text  # the failure's reason
+        assert "b1: waiting for lru1" in text  # the waiting robot's barrier
+        assert "Mars sample return" in text and "connected" in text
+        # sections: the divider runs across the columns
+        assert "plan" in text
+
+
+async def test_cursor_selects_a_skill_and_the_editor_follows():
+    app = make_app()
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
+        view = app.screen.query_one(ScheduleView)
+        assert view.cursor_robot == "lru1" and view.cursor_id == "lru1-4"  # first of the plan
+        await pilot.press("down")
+        assert view.cursor_id == "lru1-5"
+        await pilot.press("right")
+        assert view.cursor_robot == "lru2"
+        await pilot.press("home")
+        assert view.cursor_id == "lru2-1"
+        await pilot.pause()
+        assert "lru2-1" in screen_text(app) and "pick_payload_box on lru2" in screen_text(app)
+
+
+async def test_read_only_editor_says_why():
+    app = make_app()
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
+        app.screen.query_one(ScheduleView).select("lru1-2")
+        await pilot.pause()
+        assert "read-only: lru1-2 is running on lru1" in screen_text(app)
+        banner = str(app.screen.query_one("#readonly").render())
+        assert banner == "read-only: lru1-2 is running on lru1: only idle skills can be edited; unsynchronize it first"
+        editor = app.screen.query_one(ParamEditor)
+        assert all(w.disabled for w in editor.query("Input, Select, Switch, TextArea"))
+        app.screen.query_one(ScheduleView).select("lru1-1")
+        await pilot.pause()
+        assert "finished skills are the execution log" in str(app.screen.query_one("#readonly").render())
+
+
+async def test_actions_that_do_not_apply_say_why():
+    app = make_app(backend=EngineBackend(Builder()))
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
+        screen = app.mission_screen
+        screen.schedule.select("lru1-2")  # running
+        await pilot.pause()
+        assert screen.check_action("delete", ()) is None  # greyed out in the footer
+        await pilot.press("d")
+        assert "only idle skills can be deleted" in status_line(app)
+        await pilot.press("r")
+        assert "lru1 is already executing lru1-2" in status_line(app)
+        await pilot.press("u")
+        assert "only queued (idle_synchronized) skills can be unsynchronized" in status_line(app)
+        await pilot.press("b")
+        assert "mark one idle skill on each of at least two robots" in status_line(app)
+        screen.schedule.select("ardea-3")  # ardea is offline
+        await pilot.pause()
+        await pilot.press("x")
+        assert "ardea is offline since 10:42:07" in status_line(app)
+
+
+async def test_add_with_picker_then_edit_with_inline_validation_then_apply():
+    b = Builder(TUTORIAL)
+    backend = EngineBackend(b)
+    app = make_app(backend=backend)
+    backend.app = app
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, online={"lru1": True, "lru2": True})
+        screen = app.mission_screen
+        screen.schedule.select("lru1-2")
+        await pilot.pause()
+        await pilot.press("a")
+        await wait_until(pilot, lambda: isinstance(app.screen, SkillPicker), what="the skill picker")
+        assert "take_science_image" in screen_text(app)
+        await pilot.press("r", "e", "c", "h")
+        await pilot.pause()
+        assert "Return to the lander and recharge" in screen_text(app)  # descriptions shown
+        await pilot.press("enter")
+        await wait_until(pilot, lambda: any(s.skill == "recharge" for s in b.mission.tasks["lru1"]), what="the skill added")
+        new = b.mission.tasks["lru1"][-1]
+        assert new.id == "lru1-3" and new.status == Status.IDLE
+        await wait_until(pilot, lambda: screen.editor.skill_id == new.id and app.focused is not None and screen.editor in app.focused.ancestors_with_self, what="editor focused on the new skill")
+        field = screen.editor.query_one("#f-target_level")
+        field.value = "2"
+        await pilot.pause()
+        assert "2.0 is above the maximum 1" in screen_text(app)  # inline, before sending
+        await pilot.press("ctrl+s")
+        await pilot.pause()
+        assert b.mission.find(new.id)[2].params["target_level"] == 0.95  # not sent
+        field.value = "0.5"
+        await pilot.pause()
+        assert "above the maximum" not in screen_text(app)
+        await pilot.press("ctrl+s")
+        await wait_until(pilot, lambda: b.mission.find(new.id)[2].params["target_level"] == 0.5, what="the edit applied")
+        await wait_until(pilot, lambda: "applied target_level" in status_line(app), what="status line")
+
+
+async def test_server_refusal_for_a_parameter_appears_next_to_the_field():
+    class Refusing:
+        async def submit(self, op, *, expected_revision=None) -> OpReply:
+            raise OperationRefused(ErrorReply(code="bad_param", message="lru1, skill lru1-4 (take_science_image), parameter filter: the camera has no such filter today", robot="lru1", skill="lru1-4", param="filter"))
+
+    app = make_app(backend=Refusing())
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
+        screen = app.mission_screen
+        screen.schedule.select("lru1-4")
+        await pilot.pause()
+        screen.editor.query_one("#f-label").value = "a new label"
+        await pilot.pause()
+        screen.editor.action_apply()
+        await wait_until(pilot, lambda: "no such filter today" in screen.editor.errors.get("filter", ""), what="the refusal next to the field")
+        text = screen_text(app)
+        assert "the camera has no such filter today" in text
+        assert "[lru1 · lru1-4]" in status_line(app)  # robot, skill and reason
+        assert "edit lru1-4 refused" in status_line(app)
+
+
+async def test_barrier_from_marks_across_robots():
+    b = mars_mid_execution()
+    backend = EngineBackend(b)
+    app = make_app(backend=backend)
+    backend.app = app
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, telemetry=mars_telemetry())
+        screen = app.mission_screen
+        screen.schedule.select("lru1-5")
+        await pilot.pause()
+        await pilot.press("space")
+        assert screen.check_action("barrier", ()) is None  # one robot only
+        screen.schedule.select("lru2-5")
+        await pilot.pause()
+        await pilot.press("space")
+        assert "marked: lru1-5, lru2-5" in screen_text(app)
+        await pilot.press("b")
+        await wait_until(pilot, lambda: "b2" in b.mission.barriers, what="barrier b2")
+        assert b.mission.barriers["b2"].skills == ["lru1-5", "lru2-5"]
+        await wait_until(pilot, lambda: screen_text(app).count("[b2]") == 2, what="tags on both partners")
+        # remove it again
+        await pilot.press("B")
+        await wait_until(pilot, lambda: "b2" not in b.mission.barriers, what="barrier removed")
+
+
+async def test_sync_unsync_delete_move_and_retry_offline():
+    b = mars_mid_execution()
+    backend = EngineBackend(b)
+    app = make_app(backend=backend)
+    backend.app = app
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, telemetry=mars_telemetry())
+        screen = app.mission_screen
+        screen.schedule.select("lru2-5")
+        await pilot.pause()
+        await pilot.press("s")
+        await wait_until(pilot, lambda: b.mission.find("lru2-5")[2].status == Status.IDLE_SYNCHRONIZED, what="sync")
+        await pilot.press("u")
+        await wait_until(pilot, lambda: b.mission.find("lru2-5")[2].status == Status.IDLE, what="unsync")
+        await pilot.press("shift+down")
+        await wait_until(pilot, lambda: [s.id for s in b.mission.tasks["lru2"]][-1] == "lru2-5", what="moved down")
+        await pilot.press("d")
+        await wait_until(pilot, lambda: "Delete lru2-5" in screen_text(app), what="confirmation")
+        await pilot.press("y")
+        await wait_until(pilot, lambda: b.mission.find("lru2-5") is None, what="deleted")
+        # retry needs a failed skill and no active one: stop ardea's paused skill first
+        b.report("ardea", "ardea-3", "idle_synchronized")
+        from console_state import fleet
+
+        from console.messages import StateLoaded
+
+        app.post_message(StateLoaded(b.snapshot(), b.library, fleet(MARS_FLEET | {"ardea": True})))
+        await pilot.pause()
+        screen.schedule.select("ardea-2")
+        await pilot.pause()
+        await pilot.press("t")
+        await wait_until(pilot, lambda: b.mission.find("ardea-2.2") is not None, what="retry")
+        assert b.mission.find("ardea-2.2")[2].status == Status.IDLE_SYNCHRONIZED
+        await wait_until(pilot, lambda: "#2" in screen_text(app), what="attempt shown")
+
+
+async def test_help_screen_lists_the_keys_and_the_legend():
+    app = make_app(config=ConsoleConfig(keymap={"mission.sync": "S"}))
+    async with app.run_test(size=(110, 60)) as pilot:
+        await inject(app, pilot, mars_mid_execution())
+        await pilot.press("f1")
+        await wait_until(pilot, lambda: isinstance(app.screen, HelpScreen), what="help")
+        text = screen_text(app)
+        assert "Synchronization" in text and "Execution" in text
+        assert "S               Sync" in text  # the remapped key
+        assert "d / delete" in text
+        full = str(app.screen.query_one("#help-text").render())  # scrolls: the legend is further down
+        assert "waiting at barrier" in full and "◷" in full and "mission.sync" in full
+        await pilot.press("escape")
+        await wait_until(pilot, lambda: not isinstance(app.screen, HelpScreen), what="help closed")
+        await pilot.press("question_mark")
+        await wait_until(pilot, lambda: isinstance(app.screen, HelpScreen), what="help again")
+
+
+async def test_remapped_key_runs_the_action():
+    b = mars_mid_execution()
+    backend = EngineBackend(b)
+    app = make_app(backend=backend, config=ConsoleConfig(keymap={"mission.sync": "S"}))
+    backend.app = app
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, telemetry=mars_telemetry())
+        app.mission_screen.schedule.select("lru1-4")
+        await pilot.pause()
+        await pilot.press("s")  # no longer bound
+        await pilot.pause()
+        assert b.mission.find("lru1-4")[2].status == Status.IDLE
+        await pilot.press("S")
+        await wait_until(pilot, lambda: b.mission.find("lru1-4")[2].status == Status.IDLE_SYNCHRONIZED, what="sync with S")
+
+
+async def test_command_palette_has_every_action_and_says_what_does_not_apply():
+    from console.actions import ACTIONS
+    from console.commands import MissionCommands
+
+    app = make_app()
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
+        app.mission_screen.schedule.select("lru1-2")
+        await pilot.pause()
+        provider = MissionCommands(app.screen)
+        hits = [h async for h in provider.discover()]
+        assert {str(h.display) for h in hits} == {f"Mission: {a.label}" for a in ACTIONS}
+        found = {h.text: h for h in [h async for h in provider.search("delete")]}
+        assert "does not apply now: lru1-2 is running on lru1" in found["Mission: Delete"].help
+        assert max(found.values(), key=lambda h: h.score).text == "Mission: Delete"
+        await pilot.press("ctrl+p")
+        await pilot.pause()
+        await pilot.press(*"unsync")
+        await wait_until(pilot, lambda: "Mission: Unsync" in screen_text(app), what="palette entry")
+
+
+async def test_unreachable_server_is_one_clear_screen_with_retry_and_quit():
+    endpoint = loopback_endpoint(free_port())  # nobody listens there
+    app = make_app(connect=endpoint)
+    async with app.run_test(size=(100, 24)) as pilot:
+        await wait_until(pilot, lambda: f"Cannot reach the mission server at {endpoint}" in screen_text(app), timeout=20, what="unreachable screen")
+        text = screen_text(app)
+        assert isinstance(app.screen, UnreachableScreen)
+        assert "r: retry" in text and "Traceback" not in text
+        first = app.screen
+        await pilot.press("r")
+        await wait_until(pilot, lambda: app.screen is not first and isinstance(app.screen, UnreachableScreen), timeout=20, what="unreachable again")
+        assert app.screen.active_bindings["q"].binding.action == "quit_app"
+        app.screen.action_quit_app()  # what q does (pressing it ends the app under the pilot)
+        await wait_exit(app)
+    assert app.return_code == 3
+
+
+async def test_reconnecting_disables_changes_and_says_so():
+    app = make_app(backend=EngineBackend(Builder()))
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
+        app.post_message(ConnectionChanged("reconnecting", endpoint="tcp/127.0.0.1:7447"))
+        await pilot.pause()
+        text = screen_text(app)
+        assert "⟳ reconnecting" in text
+        await pilot.press("a")
+        assert "not connected to the mission server (reconnecting)" in status_line(app)
+        app.post_message(ConnectionChanged("connected", endpoint="tcp/127.0.0.1:7447"))
+        await pilot.pause()
+        assert "reconnected" in status_line(app)
+
+
+async def test_robot_going_offline_shows_in_its_header_and_to_its_barrier_partner():
+    from console_state import T0
+
+    from backend.protocol import RobotInfo
+
+    app = make_app()
+    async with app.run_test(size=(200, 40)) as pilot:
+        await inject(app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
+        assert "b1: waiting for lru1" in screen_text(app)  # lru2 waits for lru1 at b1
+        app.post_message(FleetChanged(RobotInfo(name="lru1", online=False, since=T0.replace(minute=50))))
+        await pilot.pause()
+        text = screen_text(app)
+        assert "✕ offline since 10:50:07" in text  # lru1 header
+        assert "b1: lru1 OFFLINE 10:50:07" in text  # in lru2's column, under its waiting skill
+
+
+async def test_80x24_is_usable_schedule_then_editor():
+    app = make_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        await inject(app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
+        screen = app.mission_screen
+        assert screen.has_class("-narrow")
+        text = screen_text(app)
+        assert "lru1" in text and "lru2" in text and "drive to POI-A" in text
+        await pilot.press("right", "right")  # ardea: scrolls horizontally
+        await pilot.pause()
+        assert "ardea" in screen_text(app)
+        await pilot.press("left", "left", "enter")
+        await pilot.pause()
+        assert screen.has_class("-editing")
+        assert " on lru1" in screen_text(app) and "label" in screen_text(app)
+        await pilot.press("escape")
+        await pilot.pause()
+        assert not screen.has_class("-editing")
+        assert "drive to POI-A" in screen_text(app)
+
+
+async def test_save_then_load_a_mission_file_and_undo(tmp_path):
+    from backend.files import load_mission
+    from console.dialogs import ConfirmScreen, PathPrompt
+
+    b = Builder(TUTORIAL)
+    backend = EngineBackend(b)
+    app = make_app(backend=backend)
+    backend.app = app
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, online={"lru1": True, "lru2": True})
+        # undo / redo of one's own edit
+        app.mission_screen.schedule.select("lru2-2")
+        await pilot.pause()
+        await pilot.press("d")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="confirm")
+        await pilot.press("y")
+        await wait_until(pilot, lambda: b.mission.find("lru2-2") is None, what="deleted")
+        await pilot.press("ctrl+z")
+        await wait_until(pilot, lambda: b.mission.find("lru2-2") is not None, what="undone")
+        await wait_until(pilot, lambda: "undone" in status_line(app), what="said")
+        # save: the library is written beside the file when the reference does not resolve
+        target = tmp_path / "saved.yaml"
+        await pilot.press("ctrl+s")
+        await wait_until(pilot, lambda: isinstance(app.screen, PathPrompt), what="path prompt")
+        app.screen.query_one("Input").value = str(target)
+        await pilot.press("enter")
+        await wait_until(pilot, lambda: target.exists(), what="file saved")
+        await wait_until(pilot, lambda: "saved" in status_line(app), what="said")
+        mission, _ = load_mission(target)  # a valid mission file
+        assert [s.id for s in mission.tasks["lru2"]] == ["lru2-1", "lru2-2"]
+        # load it back (replaces the plan, after a confirmation)
+        text = target.read_text().replace("drive next to POI-A", "drive beside POI-A")
+        target.write_text(text)
+        await pilot.press("ctrl+o")
+        await wait_until(pilot, lambda: isinstance(app.screen, PathPrompt), what="path prompt")
+        app.screen.query_one("Input").value = str(target)
+        await pilot.press("enter")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="confirm replace")
+        await pilot.press("y")
+        await wait_until(pilot, lambda: b.mission.find("lru2-1")[2].label == "drive beside POI-A", what="loaded on the server")
+        await wait_until(pilot, lambda: "drive beside POI-A" in screen_text(app), what="shown")

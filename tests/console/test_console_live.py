@@ -1,0 +1,305 @@
+"""End-to-end: the console against a REAL mission server (subprocess) with
+robot agents (subprocess, backend.agent.RobotAgent), driven with keys."""
+
+from __future__ import annotations
+
+import os
+import pty
+import select
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+from console_live import ROOT, Live
+from console_state import TUTORIAL, make_app, screen_text, wait_until
+
+from backend.model import Status
+from console.dialogs import SkillPicker
+
+SIZE = (150, 40)
+SLOW = 30.0  # bound for things that take well under a second normally
+
+
+@pytest.fixture
+def live(tmp_path):
+    env = Live(tmp_path, TUTORIAL)
+    env.start_server()
+    try:
+        yield env
+    finally:
+        env.close()
+
+
+def skill(app, sid):
+    found = app.model.find(sid)
+    return found[2] if found else None
+
+
+def status(app, sid):
+    s = skill(app, sid)
+    return s.status if s else None
+
+
+async def connected(app, pilot, *online: str) -> None:
+    await wait_until(pilot, lambda: app.model.connected and app.model.mission is not None, SLOW, "connected with state")
+    for r in online:
+        await wait_until(pilot, lambda r=r: app.model.is_online(r), SLOW, f"{r} online")
+
+
+async def pick(app, pilot, sid: str) -> None:
+    app.mission_screen.schedule.select(sid)
+    app.mission_screen.schedule.focus()
+    await pilot.pause()
+
+
+async def test_add_edit_sync_run_success(live):
+    live.start_robots()
+    app = make_app(connect=live.endpoint, user="op1")
+    async with app.run_test(size=SIZE) as pilot:
+        await connected(app, pilot, "lru1", "lru2")
+        assert "lru1" in screen_text(app) and "● online" in screen_text(app)
+        await pick(app, pilot, "lru1-2")
+        await pilot.press("a")
+        await wait_until(pilot, lambda: isinstance(app.screen, SkillPicker), SLOW, "picker")
+        await pilot.press(*"recharge", "enter")
+        await wait_until(pilot, lambda: skill(app, "lru1-3") is not None, SLOW, "lru1-3 added")
+        assert skill(app, "lru1-3").skill == "recharge"
+        editor = app.mission_screen.editor
+        await wait_until(pilot, lambda: editor.skill_id == "lru1-3" and editor.query("#f-target_level"), SLOW, "editor on lru1-3")
+        editor.query_one("#f-target_level").value = "0.6"
+        editor.query_one("#f-label").value = "top up"
+        await pilot.pause()
+        await pilot.press("ctrl+s")
+        await wait_until(pilot, lambda: skill(app, "lru1-3").params.get("target_level") == 0.6, SLOW, "edit applied on the server")
+        assert skill(app, "lru1-3").label == "top up"
+        await pilot.press("escape")
+        await pick(app, pilot, "lru1-3")
+        await pilot.press("s")
+        await wait_until(pilot, lambda: all(status(app, f"lru1-{i}") == Status.IDLE_SYNCHRONIZED for i in (1, 2, 3)), SLOW, "synchronized")
+        await pilot.press("r")
+        await wait_until(pilot, lambda: all(status(app, f"lru1-{i}") == Status.SUCCESS for i in (1, 2, 3)), SLOW, "all succeeded")
+        await pilot.pause()
+        text = screen_text(app)
+        assert "✓ drive to POI-A" in text and "✓ top up" in text
+
+
+async def test_unsync_takes_queued_skills_back(live):
+    live.start_robots()
+    app = make_app(connect=live.endpoint)
+    async with app.run_test(size=SIZE) as pilot:
+        await connected(app, pilot, "lru1", "lru2")
+        await pick(app, pilot, "lru2-2")
+        await pilot.press("s")
+        await wait_until(pilot, lambda: status(app, "lru2-2") == Status.IDLE_SYNCHRONIZED, SLOW, "synchronized")
+        await pick(app, pilot, "lru2-1")
+        await pilot.press("u")
+        await wait_until(pilot, lambda: status(app, "lru2-1") == Status.IDLE and status(app, "lru2-2") == Status.IDLE, SLOW, "back in the plan")
+        await wait_until(pilot, lambda: "took back lru2-1, lru2-2" in app.mission_screen.message, SLOW, "status line")
+
+
+async def test_failure_then_retry(live):
+    live.start_robots()
+    app = make_app(connect=live.endpoint)
+    async with app.run_test(size=SIZE) as pilot:
+        await connected(app, pilot, "lru1")
+        await pick(app, pilot, "lru1-1")
+        editor = app.mission_screen.editor
+        await wait_until(pilot, lambda: editor.skill_id == "lru1-1" and editor.query("#f-label"), SLOW, "editor")
+        editor.query_one("#f-label").value = "drive [fail]"
+        await pilot.pause()
+        editor.action_apply()
+        await wait_until(pilot, lambda: skill(app, "lru1-1").label == "drive [fail]", SLOW, "label applied")
+        await pick(app, pilot, "lru1-1")
+        await pilot.press("s")
+        await wait_until(pilot, lambda: status(app, "lru1-1") == Status.IDLE_SYNCHRONIZED, SLOW, "synchronized")
+        await pilot.press("r")
+        await wait_until(pilot, lambda: status(app, "lru1-1") == Status.FAILURE, SLOW, "failed")
+        await wait_until(pilot, lambda: "simulated failure of drive_to" in screen_text(app), SLOW, "the reason on screen")
+        await pick(app, pilot, "lru1-1")
+        await pilot.press("t")
+        await wait_until(pilot, lambda: status(app, "lru1-1.2") == Status.IDLE_SYNCHRONIZED, SLOW, "retry queued")
+        await pilot.press("r")
+        await wait_until(pilot, lambda: status(app, "lru1-1.2") == Status.SUCCESS, SLOW, "retry succeeded")
+        assert status(app, "lru1-1") == Status.FAILURE  # the log keeps the failed attempt
+        await pilot.pause()
+        assert "#2" in screen_text(app)
+
+
+async def test_barrier_across_two_robots(live):
+    live.start_robots()
+    app = make_app(connect=live.endpoint)
+    async with app.run_test(size=SIZE) as pilot:
+        await connected(app, pilot, "lru1", "lru2")
+        await pick(app, pilot, "lru1-1")
+        await pilot.press("space")
+        await pick(app, pilot, "lru2-1")
+        await pilot.press("space", "b")
+        await wait_until(pilot, lambda: app.model.barrier_of("lru1-1") is not None, SLOW, "barrier made")
+        bid = app.model.barrier_of("lru1-1")
+        assert app.model.barrier_of("lru2-1") == bid
+        await pilot.pause()
+        assert screen_text(app).count(f"[{bid}]") == 2
+        await pick(app, pilot, "lru1-1")
+        await pilot.press("s")
+        await pick(app, pilot, "lru2-1")
+        await pilot.press("s")
+        await wait_until(pilot, lambda: status(app, "lru1-1") == status(app, "lru2-1") == Status.IDLE_SYNCHRONIZED, SLOW, "both synchronized")
+        await pilot.press("R")  # run all
+        await wait_until(pilot, lambda: status(app, "lru1-1") == status(app, "lru2-1") == Status.SUCCESS, SLOW, "both ran")
+
+
+async def test_a_second_console_sees_the_first_ones_edit(live):
+    one = make_app(connect=live.endpoint, user="op1")
+    two = make_app(connect=live.endpoint, user="op2")
+    async with one.run_test(size=SIZE) as p1, two.run_test(size=SIZE) as p2:
+        await connected(one, p1)
+        await connected(two, p2)
+        await pick(one, p1, "lru2-2")
+        editor = one.mission_screen.editor
+        await wait_until(p1, lambda: editor.skill_id == "lru2-2" and editor.query("#f-search_radius"), SLOW, "editor")
+        editor.query_one("#f-search_radius").value = "4.5"
+        await p1.pause()
+        editor.action_apply()
+        await wait_until(p2, lambda: skill(two, "lru2-2") is not None and skill(two, "lru2-2").params.get("search_radius") == 4.5, SLOW, "the other console sees it")
+        await pick(two, p2, "lru2-2")
+        await wait_until(p2, lambda: two.mission_screen.editor.query("#f-search_radius") and two.mission_screen.editor.query_one("#f-search_radius").value == "4.5", SLOW, "shown in its editor")
+
+
+async def test_robot_killed_shows_offline(live):
+    live.start_robots()
+    app = make_app(connect=live.endpoint)
+    async with app.run_test(size=SIZE) as pilot:
+        await connected(app, pilot, "lru1", "lru2")
+        live.kill_robots()
+        await wait_until(pilot, lambda: not app.model.is_online("lru1") and not app.model.is_online("lru2"), SLOW, "offline")
+        await wait_until(pilot, lambda: screen_text(app).count("✕ offline") == 2, SLOW, "offline in both headers")
+        await pick(app, pilot, "lru1-1")
+        await pilot.press("s")
+        assert "lru1 is offline since" in app.mission_screen.message  # sync disabled, with the reason
+
+
+async def test_server_restart_console_resyncs(live):
+    app = make_app(connect=live.endpoint)
+    async with app.run_test(size=SIZE) as pilot:
+        await connected(app, pilot)
+        await pick(app, pilot, "lru1-2")
+        editor = app.mission_screen.editor
+        await wait_until(pilot, lambda: editor.skill_id == "lru1-2" and editor.query("#f-label"), SLOW, "editor")
+        editor.query_one("#f-label").value = "look closer"
+        await pilot.pause()
+        editor.action_apply()
+        await wait_until(pilot, lambda: skill(app, "lru1-2").label == "look closer", SLOW, "edit applied")
+        revision = app.model.mission.revision
+        live.stop_server()
+        await wait_until(pilot, lambda: app.model.connection == "reconnecting", SLOW, "reconnecting")
+        await wait_until(pilot, lambda: "reconnecting" in screen_text(app), SLOW, "reconnecting shown")
+        live.start_server()
+        await wait_until(pilot, lambda: app.model.connection == "connected", SLOW, "reconnected")
+        await wait_until(pilot, lambda: "resynchronized" in app.mission_screen.message, SLOW, "resync said")
+        assert app.model.mission.revision == revision and skill(app, "lru1-2").label == "look closer"
+        # and it works: a new edit goes through
+        editor.query_one("#f-label").value = "look closer again"
+        await pilot.pause()
+        editor.action_apply()
+        await wait_until(pilot, lambda: skill(app, "lru1-2").label == "look closer again", SLOW, "edit after restart")
+
+
+def _drain_until_exit(fd: int, p: subprocess.Popen, timeout: float) -> int | None:
+    """Keep reading the terminal (a full pty blocks the app's writes) until it exits."""
+    deadline = time.monotonic() + timeout
+    while p.poll() is None and time.monotonic() < deadline:
+        ready, _, _ = select.select([fd], [], [], 0.1)
+        if ready:
+            try:
+                if not os.read(fd, 65536):
+                    break
+            except OSError:
+                break
+    try:
+        return p.wait(max(0.1, deadline - time.monotonic()))
+    except subprocess.TimeoutExpired:
+        return None
+
+
+def _read_until(fd: int, needle: bytes, timeout: float) -> bytes:
+    out = b""
+    deadline = time.monotonic() + timeout
+    while needle not in out and time.monotonic() < deadline:
+        ready, _, _ = select.select([fd], [], [], 0.2)
+        if ready:
+            try:
+                chunk = os.read(fd, 65536)
+            except OSError:
+                break
+            if not chunk:
+                break
+            out += chunk
+    return out
+
+
+@pytest.mark.parametrize("how", ["sighup", "ctrl+q"])
+def test_console_process_exits_cleanly_on_hangup_and_ctrl_q(live, how):
+    """In a real terminal (a pty): SIGHUP (the SSH link dropped) or ctrl+q
+    ends the process promptly, closing its Zenoh session (no exit hang)."""
+    master, slave = pty.openpty()
+    env = {**os.environ, "TERM": "xterm-256color", "COLUMNS": "100", "LINES": "30", "MISSIONCTL_CONFIG": "/nonexistent.toml"}
+    p = subprocess.Popen([sys.executable, "-m", "backend.cli", "console", "--connect", live.endpoint], stdin=slave, stdout=slave, stderr=slave, cwd=ROOT, env=env, start_new_session=True)
+    os.close(slave)
+    try:
+        out = _read_until(master, b"Tutorial", 30)
+        assert b"Tutorial" in out, out[-2000:]
+        if how == "sighup":
+            p.send_signal(signal.SIGHUP)
+        else:
+            os.write(master, b"\x11")
+        code = _drain_until_exit(master, p, 15)
+        assert code in (0, -signal.SIGHUP), code
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait(10)
+        os.close(master)
+
+
+def test_demo_starts_server_and_console_and_stops_everything(tmp_path):
+    """`missionctl demo` in a pty: the console shows the Mars mission; ctrl+q
+    stops the console, the server and the sim (no process left behind)."""
+    master, slave = pty.openpty()
+    env = {**os.environ, "TERM": "xterm-256color", "TMPDIR": str(tmp_path), "MISSIONCTL_CONFIG": "/nonexistent.toml"}
+    p = subprocess.Popen([sys.executable, "-m", "backend.cli", "demo", "--speed", "5"], stdin=slave, stdout=slave, stderr=slave, cwd=ROOT, env=env, start_new_session=True)
+    os.close(slave)
+    try:
+        out = _read_until(master, b"Mars sample return", 60)
+        assert b"Mars sample return" in out, out[-3000:]
+        children = _processes_mentioning(str(tmp_path))
+        assert children, "the demo's server was not found among the processes"
+        os.write(master, b"\x11")
+        assert _drain_until_exit(master, p, 30) == 0
+        deadline = time.monotonic() + 10
+        while _processes_mentioning(str(tmp_path)) and time.monotonic() < deadline:
+            time.sleep(0.1)  # the children were terminated; the kernel reaps them
+        assert not _processes_mentioning(str(tmp_path))
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait(10)
+        os.close(master)
+
+
+def _processes_mentioning(text: str) -> list[int]:
+    pids = []
+    for d in os.listdir("/proc"):
+        if not d.isdigit():
+            continue
+        try:
+            with open(f"/proc/{d}/cmdline", "rb") as f:
+                cmd = f.read().decode(errors="replace")
+            with open(f"/proc/{d}/stat") as f:
+                state = f.read().split(")")[-1].split()[0]
+        except OSError:
+            continue
+        if text in cmd and state != "Z":
+            pids.append(int(d))
+    return pids
