@@ -197,6 +197,20 @@ def test_async_query_does_not_block_the_loop(router: Any, open_client) -> None:
     assert ticks >= 10  # ~50 expected; 1 if the query had blocked the loop
 
 
+def wait_for_queryables(session: Any, key: str, count: int = 1, timeout: float = WAIT) -> None:
+    """Queryables declared on another client reach us through the router:
+    wait until `count` of them match `key` (a querier's matching listener)."""
+    querier = session.declare_querier(key)
+    matched = threading.Event()
+    listener = querier.declare_matching_listener(lambda status: matched.set() if status.matching else None)
+    try:
+        if not querier.matching_status.matching:
+            assert matched.wait(timeout), f"no queryable on {key} within {timeout}s"
+    finally:
+        listener.undeclare()
+        querier.undeclare()
+
+
 def test_serve_async_and_query_all_between_clients(router: Any, open_client) -> None:
     server = open_client(router.endpoint)
     other = open_client(router.endpoint)
@@ -214,6 +228,8 @@ def test_serve_async_and_query_all_between_clients(router: Any, open_client) -> 
             return b"r1:" + payload
 
         serve_async(server, "robots/r1/ping", handler)
+        await asyncio.to_thread(wait_for_queryables, caller, "robots/r1/ping")
+        await asyncio.to_thread(wait_for_queryables, caller, "robots/r2/ping")
         assert await query(caller, "robots/r1/ping", b"hi", timeout=WAIT) == b"r1:hi"
         with pytest.raises(QueryError, match="r1 refuses"):
             await query(caller, "robots/r1/ping", b"no", timeout=WAIT)
