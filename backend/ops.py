@@ -8,7 +8,7 @@ validated by `backend.rules.Engine`; these models are also the protocol.
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, Union
 
 from pydantic import Field
 
@@ -221,60 +221,18 @@ class Report(Strict):
     at: datetime | None = None
 
 
-OperatorOp = Annotated[
-    AddSkill
-    | DeleteSkills
-    | MoveSkill
-    | EditSkill
-    | Sync
-    | Unsync
-    | Control
-    | Retry
-    | AddBarrier
-    | RemoveBarrier
-    | MarkerAdd
-    | MarkerMove
-    | MarkerRename
-    | MarkerDelete
-    | LoadMission
-    | NewMission
-    | Undo
-    | Redo,
-    Field(discriminator="op"),
-]
+_OPERATOR = (
+    AddSkill, DeleteSkills, MoveSkill, EditSkill, Sync, Unsync, Control, Retry,
+    AddBarrier, RemoveBarrier, MarkerAdd, MarkerMove, MarkerRename, MarkerDelete,
+    LoadMission, NewMission, Undo, Redo,
+)
+_INTERNAL = (RestoreSkills, SetSkill, RestoreBarrier, RestoreMarker)
+_ROBOT = (SyncAck, UnsyncDone, RetryAck, Reconcile, Report)
 
-RobotOp = Annotated[SyncAck | UnsyncDone | RetryAck | Reconcile | Report, Field(discriminator="op")]
-
-AnyOp = Annotated[
-    AddSkill
-    | DeleteSkills
-    | MoveSkill
-    | EditSkill
-    | Sync
-    | Unsync
-    | Control
-    | Retry
-    | AddBarrier
-    | RemoveBarrier
-    | MarkerAdd
-    | MarkerMove
-    | MarkerRename
-    | MarkerDelete
-    | LoadMission
-    | NewMission
-    | Undo
-    | Redo
-    | RestoreSkills
-    | SetSkill
-    | RestoreBarrier
-    | RestoreMarker
-    | SyncAck
-    | UnsyncDone
-    | RetryAck
-    | Reconcile
-    | Report,
-    Field(discriminator="op"),
-]
+# what clients may send; what robots' answers become; everything the engine applies
+OperatorOp = Annotated[Union[_OPERATOR], Field(discriminator="op")]  # noqa: UP007
+RobotOp = Annotated[Union[_ROBOT], Field(discriminator="op")]  # noqa: UP007
+AnyOp = Annotated[Union[_OPERATOR + _INTERNAL + _ROBOT], Field(discriminator="op")]  # noqa: UP007
 
 # operations that change the unsynchronized plan and can be undone
 UNDOABLE = (

@@ -17,7 +17,6 @@ import yaml
 from .helpers import (
     CTL_CMD,
     LIBRARY,
-    ROBOTS_SCRIPT,
     ROOT,
     Robots,
     Server,
@@ -401,8 +400,6 @@ def test_watch_human_lines(endpoint):
 
 @pytest.fixture
 def robots(endpoint):
-    if not ROBOTS_SCRIPT.exists():
-        pytest.skip("docs/examples/trivial_robots.py is not there")
     r = Robots(endpoint, "lru1:lru_science", "lru2:lru_manipulator")
     try:
         until(endpoint, lambda st: all(x["online"] for x in st["robots"].values()), what="robots online")
