@@ -57,7 +57,6 @@ from typing import Any
 
 import zenoh
 from pydantic import TypeAdapter, ValidationError
-from zenoh.handlers import Callback
 
 from . import transport
 from .model import Pose, Position, SkillInstance, Status
@@ -98,6 +97,8 @@ _POSITION_KEYS = frozenset(Position.model_fields)
 _LINK_POLL_S = 0.05
 # Retry delay for registration and report flushes that found nobody.
 _RETRY_S = 0.5
+# A barrier partner whose presence token has not shown up by then is offline.
+_PRESENCE_GRACE_S = 1.0
 
 
 # ---------------------------------------------------------------- outcomes
@@ -396,7 +397,7 @@ class RobotAgent:
         # reports
         self._seq = 0
         self._outbox: list[Report] = []
-        self._acked_evt = asyncio.Event()  # set whenever an ack removed reports
+        self._acked_evt: asyncio.Event | None = None  # set whenever an ack removed reports
 
         # telemetry fields
         self._mode = "idle"
@@ -486,6 +487,8 @@ class RobotAgent:
     async def wait_acknowledged(self, timeout: float | None = None) -> None:
         """Return once the server acknowledged every report made so far
         (TimeoutError after `timeout` seconds)."""
+        if self._acked_evt is None:
+            raise RuntimeError(f"agent {self.name} is not started")
         async with asyncio.timeout(timeout):
             while self._outbox:
                 self._acked_evt.clear()
@@ -521,6 +524,7 @@ class RobotAgent:
         self._register_wake = asyncio.Event()
         self._flush_wake = asyncio.Event()
         self._registered_evt = asyncio.Event()
+        self._acked_evt = asyncio.Event()
         self._in_range = self._link_in_range()
         config = transport.client_config(self.connect, lease_ms=self.lease_ms, extra=self.zenoh_extra)
         session = transport.open_session(config, what=f"the router (for robot {self.name})")
@@ -537,6 +541,11 @@ class RobotAgent:
                 asyncio.create_task(self._telemetry_loop(), name=f"{self.name}-telemetry"),
                 asyncio.create_task(self._link_loop(), name=f"{self.name}-link"),
             ]
+            self._entities.append(
+                transport.transport_events(
+                    session, lambda change: self._post(self._on_router_link, change), history=False
+                )
+            )
             # Last: this may (re)register at once.
             self._entities.append(
                 transport.watch_liveliness(
@@ -616,6 +625,14 @@ class RobotAgent:
             await asyncio.sleep(delay)  # models the one-way link delay
 
     # ------------------------------------------------------------ server presence & registration
+
+    def _on_router_link(self, change: transport.TransportChange) -> None:
+        # Zenoh reconnects by itself; the server's token then reappears and we
+        # register again. Logged because commands fail meanwhile.
+        if change.connected:
+            log.info("%s: connected to %s %s", self.name, change.whatami, change.zid)
+        else:
+            log.warning("%s: lost the link to %s %s; reconnecting", self.name, change.whatami, change.zid)
 
     def _on_server(self, alive: bool) -> None:
         self._server_up = alive
@@ -709,7 +726,7 @@ class RobotAgent:
     def _ack(self, last_seq: int) -> None:
         before = len(self._outbox)
         self._outbox = [r for r in self._outbox if r.seq > last_seq]
-        if len(self._outbox) < before:
+        if len(self._outbox) < before and self._acked_evt is not None:
             self._acked_evt.set()
 
     def _wake_flush(self) -> None:
@@ -763,7 +780,9 @@ class RobotAgent:
 
     def _update_mode(self) -> None:
         if self._active is not None:
-            self._mode = self._active.entry.status.value
+            status = self._active.entry.status
+            # just taken from the queue, not reported yet: "starting"
+            self._mode = "starting" if status == Status.IDLE_SYNCHRONIZED else status.value
         elif self._queue:
             self._mode = "running" if self._run_enabled else "halted"
         else:
@@ -1002,6 +1021,7 @@ class RobotAgent:
         self._active = act
         self._progress = None
         self._eta = None
+        self._update_mode()
         act.task = asyncio.get_running_loop().create_task(self._execute(act), name=f"{self.name}-{entry.id}")
 
     def _stop_active(self, info: str) -> _Entry:
@@ -1168,13 +1188,21 @@ class RobotAgent:
                 met[0] = True
             changed.set()
 
-        def on_alive(robot: str, alive: bool, from_query: bool) -> None:
-            # the subscriber is authoritative; the query only fills the unknown
-            if from_query and online[robot] is not None:
-                return
+        def on_alive(robot: str, alive: bool) -> None:
             online[robot] = alive
             changed.set()
 
+        def presence_deadline() -> None:
+            # The subscriber's history reports a present token within
+            # milliseconds but never says "absent": no token by now = offline.
+            for p in partners:
+                if online[p] is None:
+                    online[p] = False
+            changed.set()
+
+        if not partners:
+            return  # a barrier of one robot: nothing to wait for
+        self._report(act.entry, Status.SYNCHWAITING, "waiting for " + ", ".join(partners))
         # Order matters (race-free): subscribe to the partners' ready tokens
         # (with history) BEFORE declaring ours. A partner starts only after it
         # saw our token, and withdraws its own only after starting; so its
@@ -1192,51 +1220,34 @@ class RobotAgent:
         for p in partners:
             act.barrier_entities.append(
                 transport.watch_liveliness(
-                    session, Keys.alive(p), lambda _k, alive, p=p: self._post(on_alive, p, alive, False)
+                    session, Keys.alive(p), lambda _k, alive, p=p: self._post(on_alive, p, alive)
                 )
             )
-            self._query_presence(p, lambda alive, p=p: self._post(on_alive, p, alive, True))
-
-        reported_offline: tuple[str, ...] | None = None
-        while True:
-            missing = [p for p in partners if p not in ready]
-            if met[0] or not missing:
-                return  # our token stays until the skill ends (see _release)
-            offline = tuple(p for p in missing if online[p] is False)
-            if offline:
-                text = "waiting for " + ", ".join(f"{p} (offline)" for p in offline)
-            else:
-                text = "waiting for " + ", ".join(missing)
-            # Report when entering and whenever a partner goes offline or comes
-            # back; other changes only update telemetry (no report flood).
-            if offline != reported_offline:
-                self._report(act.entry, Status.SYNCHWAITING, text)
-                reported_offline = offline
-            elif text != self._info:
-                self._info = text
-                self._publish_telemetry()
-            # all state changes happen on this loop: clearing here loses nothing
-            changed.clear()
-            await changed.wait()
-
-    def _query_presence(self, robot: str, on_result: Callable[[bool], object]) -> None:
-        """Ask once whether `robot`'s alive token exists (the subscriber's
-        history does not tell when "none" is final; this query does)."""
-        assert self._session is not None
-        found = [False]
-
-        def on_reply(reply: zenoh.Reply) -> None:
-            if reply.ok is not None:
-                found[0] = True
-
+        deadline = asyncio.get_running_loop().call_later(_PRESENCE_GRACE_S, presence_deadline)
         try:
-            self._session.liveliness().get(
-                Keys.alive(robot),
-                Callback(on_reply, lambda: on_result(found[0])),
-                timeout=self.request_timeout,
-            )
-        except zenoh.ZError:
-            log.exception("%s: cannot query the presence of %s", self.name, robot)
+            reported_offline: tuple[str, ...] = ()
+            while True:
+                missing = [p for p in partners if p not in ready]
+                if met[0] or not missing:
+                    return  # our token stays until the skill ends (see _release)
+                offline = tuple(p for p in missing if online[p] is False)
+                if offline:
+                    text = "waiting for " + ", ".join(f"{p} (offline)" for p in offline)
+                else:
+                    text = "waiting for " + ", ".join(missing)
+                # Report again whenever a partner goes offline or comes back;
+                # other changes only update telemetry (no report flood).
+                if offline != reported_offline:
+                    self._report(act.entry, Status.SYNCHWAITING, text)
+                    reported_offline = offline
+                elif text != self._info:
+                    self._info = text
+                    self._publish_telemetry()
+                # all state changes happen on this loop: clearing here loses nothing
+                changed.clear()
+                await changed.wait()
+        finally:
+            deadline.cancel()
 
     # ------------------------------------------------------------ world
 

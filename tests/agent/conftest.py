@@ -15,6 +15,7 @@ from __future__ import annotations
 import asyncio
 import importlib.util
 import inspect
+import secrets
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -108,7 +109,8 @@ class FakeServer:
     # -- what robots send -------------------------------------------------
     def apply(self, robot: str, reports: list[Report]) -> None:
         for r in reports:
-            assert r.robot == robot
+            if r.robot != robot:
+                continue  # not ours (the fake server does not check senders)
             last = self.last_seq.get(robot, 0)
             if r.seq <= last:
                 continue  # idempotent: applied already
@@ -157,6 +159,9 @@ class FakeServer:
             for r in self.applied.get(robot, [])
         )
 
+    def registrations_of(self, robot: str) -> list[Register]:
+        return [r for r in self.registrations if r.manifest.name == robot]
+
     def seqs(self, robot: str) -> list[int]:
         return [r.seq for r in self.applied.get(robot, [])]
 
@@ -165,10 +170,16 @@ class FakeServer:
 
 
 class Harness:
-    """The fake server plus the agents of one test; `async with` closes all."""
+    """The fake server plus the agents of one test; `async with` closes all.
+
+    Robot names carry a per-test tag (`name("lru1")` -> "lru1-3fa9c2"): a
+    stray robot process of some other run that reconnects to a reused
+    loopback port then cannot answer for our robots.
+    """
 
     def __init__(self, endpoint: str):
         self.endpoint = endpoint
+        self.tag = secrets.token_hex(3)
         self.changed = asyncio.Event()
         self.server = FakeServer(endpoint, self.changed)
         self.agents: list[RobotAgent] = []
@@ -182,6 +193,12 @@ class Harness:
         for agent in self.agents:
             await agent.stop()
         self.server.close()
+
+    def name(self, base: str) -> str:
+        return f"{base}-{self.tag}"
+
+    def names(self, *bases: str) -> tuple[str, ...]:
+        return tuple(self.name(b) for b in bases)
 
     def agent(self, name: str, robot_type: str = "rover", **kwargs: Any) -> RobotAgent:
         agent = RobotAgent(name, robot_type, connect=[self.endpoint], **kwargs)
@@ -215,7 +232,7 @@ class Harness:
         """Wait until each named agent registered (at least `count` times)."""
         await self.until(
             lambda: all(
-                sum(1 for r in self.server.registrations if r.manifest.name == n) >= count
+                len(self.server.registrations_of(n)) >= count
                 for n in names
             ),
             what=f"registration of {names}",
