@@ -36,11 +36,29 @@ lists, dicts) is passed as it came. A `dict` parameter that happens to look
 like a position would be converted too: register the skill with `raw=True` to
 get plain values, and use `ctx.params` / `ctx.pose(name)` / `ctx.position(name)`.
 
+Behaviour an integrator can rely on:
+
+- The agent starts halted; `run` puts it in run mode, where it executes its
+  queue head to tail and stays in run mode when the queue drains (skills
+  synchronized later start at once). A failure, `pause`, `stop` or `reset`
+  leaves run mode. `run` on a paused skill resumes it.
+- `pause` applies to a running skill (reported `paused`); the handler keeps
+  going until its next `ctx.checkpoint()` / `ctx.sleep()` / `ctx.check()`,
+  where it waits. `pause` while waiting at a barrier is refused (the status
+  table has no synchwaiting -> paused): stop instead.
+- `stop` cancels the handler at once (an async handler gets CancelledError at
+  its current await; a thread handler gets `SkillStopped` from its next
+  `ctx.check()`/`ctx.progress()`), reports `idle_synchronized` and puts the
+  skill back at the head of the queue; the next `run` starts it afresh.
+- Autonomous retries stay `running` with `attempt` + 1 (failure is final).
+- Reports are numbered from 1 per agent run, or after the server's
+  `RegisterReply.last_seq` when that is higher (a restarted robot).
+
 Threading: every state change runs on the asyncio loop that called `start()`.
 Zenoh callbacks only post to that loop. Synchronous handlers run in a daemon
 worker thread (so a handler that ignores stop cannot hang interpreter exit);
 they may call `ctx.progress()` and `ctx.check()` (blocks while paused, raises
-`SkillStopped` once stopped). Asynchronous handlers are cancelled on stop.
+`SkillStopped` once stopped). World ask/tell handlers run on the loop.
 """
 
 from __future__ import annotations

@@ -77,15 +77,15 @@ class Cluster:
     def start_server(self) -> Proc:
         self.server = Proc([sys.executable, "-m", "backend.cli", "server", "--mission", self.mission,
                             "--listen", self.endpoint, "--db", str(self.db), "--command-timeout", "5", "-v"])
-        self.server.wait_line("listening on")
         self.procs.append(self.server)
+        self.server.wait_line("listening on")
         return self.server
 
     def start_robots(self, *robots: str, delay: float = 0.0) -> Proc:
         p = Proc([sys.executable, str(ROOT / "docs" / "examples" / "trivial_robots.py"), "--connect", self.endpoint, "--delay", str(delay), "-v", *robots])
+        self.procs.append(p)  # before waiting: stopped in teardown even if never ready
         for r in robots:
             p.wait_line(f"ready {r.split(':')[0]}")
-        self.procs.append(p)
         return p
 
     def stop(self) -> None:
