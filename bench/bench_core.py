@@ -327,7 +327,7 @@ def table(ops: dict[str, Any], big: dict[str, Any]) -> str:
          f"reopen replaying all {ops['full_replay_batches']:,} batches from the base snapshot: {ops['full_replay_s'] * 1e3:.0f} ms"),
         ("Save 10,000-skill mission (YAML)", f"{big['save_ms']:.0f} ms", f"20 robots x 500 drive_to skills, {big['file_bytes'] / 1e6:.1f} MB file"),
         ("Load 10,000-skill mission (YAML)", f"{big['load_ms']:.0f} ms",
-         "parse (pure-Python PyYAML, with line/column marks), validate every parameter against the library"),
+         "parse (PyYAML with libyaml, keeping line/column marks), validate every parameter against the library"),
         ("Snapshot 10,000-skill mission", f"{big['snapshot_ms']:.0f} ms", "one SQLite transaction"),
         ("Robot report on 10,000-skill mission", f"{big['big_report_engine_ms'] + big['big_report_journal_ms']:.2f} ms",
          f"engine {big['big_report_engine_ms']:.2f} ms (linear skill lookups) + journal {big['big_report_journal_ms']:.2f} ms"),
