@@ -26,12 +26,13 @@ import asyncio
 import json
 import os
 import platform
-import re
 import statistics
 import subprocess
 import sys
 import time
 from pathlib import Path
+
+from report import write_section
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -223,16 +224,6 @@ def table(results: dict) -> str:
     )
 
 
-def write_section(path: Path, text: str) -> None:
-    old = path.read_text(encoding="utf-8") if path.exists() else "# Performance\n\n"
-    pattern = re.compile(r"^## Console\n.*?(?=^## |\Z)", re.S | re.M)
-    if pattern.search(old):
-        new = pattern.sub(lambda _m: text + "\n", old, count=1)
-    else:
-        new = old.rstrip("\n") + "\n\n" + text
-    path.write_text(new.rstrip("\n") + "\n", encoding="utf-8")
-
-
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--variant", choices=["schedule", "datatable"], help=argparse.SUPPRESS)
@@ -247,7 +238,7 @@ def main() -> int:
     text = table(results)
     print(text)
     if args.write:
-        write_section(Path(args.write), text)
+        write_section(Path(args.write), "## Console", text)
         print(f"wrote the '## Console' section of {args.write}")
     return 0
 

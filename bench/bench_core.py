@@ -21,9 +21,6 @@ from __future__ import annotations
 
 import argparse
 import gc
-import os
-import platform
-import re
 import statistics
 import sys
 import tempfile
@@ -36,6 +33,8 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
+
+from report import machine, write_section  # noqa: E402
 
 from backend.files import load_library, load_mission, save_mission  # noqa: E402
 from backend.journal import Entry, Journal  # noqa: E402
@@ -299,18 +298,6 @@ def bench_big_mission(tmp: Path) -> dict[str, Any]:
 # -- report --------------------------------------------------------------------------------
 
 
-def machine() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, {platform.system()} {platform.release()}"
-
-
 def table(ops: dict[str, Any], big: dict[str, Any]) -> str:
     e_rate = N_OPS / ops["engine_s"]
     j_rate = N_OPS / ops["journal_s"]
@@ -339,13 +326,6 @@ def table(ops: dict[str, Any], big: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-INTRO = """# Performance
-
-Measured by the benchmark scripts in `bench/`; each section says how to
-reproduce it, on which machine and when.
-"""
-
-
 def section(body: str) -> str:
     date = datetime.now(UTC).strftime("%Y-%m-%d")
     return (
@@ -360,17 +340,6 @@ def section(body: str) -> str:
     )
 
 
-def write_section(path: Path, text: str) -> None:
-    old = path.read_text(encoding="utf-8") if path.exists() else INTRO
-    pattern = re.compile(r"^## Mission core\n.*?(?=^## |\Z)", re.S | re.M)
-    if pattern.search(old):
-        new = pattern.sub(lambda _: text + "\n", old, count=1)
-    else:
-        new = old.rstrip("\n") + "\n\n" + text
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(new.rstrip("\n") + "\n", encoding="utf-8")
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--write", metavar="FILE", help="write/update the '## Mission core' section of FILE")
@@ -382,7 +351,7 @@ def main(argv: list[str] | None = None) -> int:
     body = table(ops, big)
     print(body)
     if args.write:
-        write_section(Path(args.write), section(body))
+        write_section(Path(args.write), "## Mission core", section(body))
         print(f"\nwrote the '## Mission core' section of {args.write}")
     return 0
 

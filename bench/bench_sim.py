@@ -32,8 +32,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import os
-import platform
-import re
 import shutil
 import statistics
 import subprocess
@@ -50,6 +48,8 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
+
+from report import machine, write_section  # noqa: E402
 
 from backend import transport  # noqa: E402
 from backend.client import MissionClient  # noqa: E402
@@ -264,18 +264,6 @@ async def run_case(tmp: Path, mission: Path, world: Path, speed: float, window: 
 # ---------------------------------------------------------------- report
 
 
-def machine() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, Linux {platform.release()}"
-
-
 def table(results: dict[str, list[dict[str, Any]]]) -> str:
     lines = [
         SECTION,
@@ -326,13 +314,6 @@ def table(results: dict[str, list[dict[str, Any]]]) -> str:
     return "\n".join(lines)
 
 
-def write_section(path: Path, text: str) -> None:
-    old = path.read_text() if path.exists() else "# Performance\n"
-    pattern = re.compile(rf"^{re.escape(SECTION)}\n.*?(?=^## |\Z)", re.S | re.M)
-    new = pattern.sub(lambda _m: text.rstrip("\n") + "\n\n", old) if pattern.search(old) else old.rstrip("\n") + "\n\n" + text
-    path.write_text(new.rstrip("\n") + "\n")
-
-
 async def main_async(args: argparse.Namespace) -> dict[str, list[dict[str, Any]]]:
     window = 4.0 if args.quick else 8.0
     warmup = 1.5 if args.quick else 2.0
@@ -363,7 +344,7 @@ def main() -> int:
     text = table(results)
     print(text)
     if args.write:
-        write_section(Path(args.write), text)
+        write_section(Path(args.write), SECTION, text)
         print(f"wrote {args.write}", file=sys.stderr)
     return 0
 

@@ -42,7 +42,6 @@ import importlib.metadata
 import json
 import math
 import os
-import platform
 import re
 import signal
 import statistics
@@ -63,6 +62,8 @@ ROOT = Path(__file__).resolve().parents[1]
 for p in (ROOT, ROOT / "bench"):
     if str(p) not in sys.path:
         sys.path.insert(0, str(p))
+
+from report import machine, write_section  # noqa: E402
 
 from backend.client import MissionClient  # noqa: E402
 from backend.files import load_library, mission_to_yaml  # noqa: E402
@@ -566,20 +567,6 @@ async def bench_wire(tmp: Path) -> dict[str, Any]:
 # -- report ---------------------------------------------------------------------------------------
 
 
-def machine() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    zv = importlib.metadata.version("eclipse-zenoh")
-    return (f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, "
-            f"eclipse-zenoh {zv}, {platform.system()} {platform.release()}")
-
-
 def verdict(ok: bool) -> str:
     return "PASS" if ok else "MISS"
 
@@ -696,13 +683,6 @@ timestamps around the op queryable; 2026-11-21, same machine; not re-measured by
   different transport binding, not a tweak."""
 
 
-INTRO = """# Performance
-
-Measured by the benchmark scripts in `bench/`; each section says how to
-reproduce it, on which machine and when.
-"""
-
-
 def section(body: str, elapsed: float, load: tuple[float, float, float]) -> str:
     date = datetime.now(UTC).strftime("%Y-%m-%d")
     return (
@@ -711,21 +691,10 @@ def section(body: str, elapsed: float, load: tuple[float, float, float]) -> str:
         "each figure against the raw Zenoh transport measured in the same run "
         "(the server's trivial `mc/v1/server/ping` queryable, raw puts).\n\n"
         "Reproduce: `.venv/bin/python bench/bench_transport.py --write docs/performance.md`\n\n"
-        f"Machine: {machine()}. Date: {date}. Whole run: {elapsed:.0f} s; load average before it "
+        f"Machine: {machine('eclipse-zenoh ' + importlib.metadata.version('eclipse-zenoh'))}. Date: {date}. Whole run: {elapsed:.0f} s; load average before it "
         f"{load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} (other work on the machine skews the figures).\n\n"
         f"{body}\n"
     )
-
-
-def write_section(path: Path, text: str) -> None:
-    old = path.read_text(encoding="utf-8") if path.exists() else INTRO
-    pattern = re.compile(rf"^## {re.escape(SECTION)}\n.*?(?=^## |\Z)", re.S | re.M)
-    if pattern.search(old):
-        new = pattern.sub(lambda _: text + "\n", old, count=1)
-    else:
-        new = old.rstrip("\n") + "\n\n" + text
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(new.rstrip("\n") + "\n", encoding="utf-8")
 
 
 async def run_all(args: argparse.Namespace) -> tuple[dict, dict, dict, dict]:
@@ -773,7 +742,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\n{len(misses)} target(s) missed{': ' + '; '.join(misses) if misses else ''}. Whole run: {elapsed:.0f} s; "
           f"load average before it {load[0]:.2f}.")
     if args.write:
-        write_section(Path(args.write), section(body, elapsed, load))
+        write_section(Path(args.write), f"## {SECTION}", section(body, elapsed, load))
         print(f"\nwrote the '## {SECTION}' section of {args.write}")
     return 0
 
