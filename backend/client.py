@@ -154,6 +154,17 @@ class MissionClient:
             await asyncio.to_thread(close_session, session)
         self.connected = False
 
+    def close_now(self) -> None:
+        """Blocking close, for when no event loop runs any more (e.g. after an
+        app's loop ended): an open session would keep the process from exiting."""
+        if self._resync_task is not None and not self._resync_task.done():
+            self._resync_task.cancel()
+        session, self.session = self.session, None
+        self._entities.clear()
+        if session is not None:
+            close_session(session)
+        self.connected = False
+
     async def __aenter__(self) -> MissionClient:
         await self.connect()
         return self

@@ -304,7 +304,9 @@ class MissionServer:
         except QueryError as e:
             try:
                 err = ErrorReply.model_validate_json(e.payload)
-                raise Refusal(err.code, f"{robot}: {err.message}", robot=robot) from None
+                # name the robot once: its own sentence may already start with its name
+                text = err.message if err.message.startswith(robot) else f"{robot}: {err.message}"
+                raise Refusal(err.code, text, robot=robot) from None
             except ValidationError:
                 raise Refusal("robot_error", f"{robot} refused: {e.payload.decode(errors='replace')}", robot=robot) from None
         except QueryTimeout:

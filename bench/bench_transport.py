@@ -680,7 +680,14 @@ timestamps around the op queryable; 2026-11-21, same machine; not re-measured by
 - A ratio of 1.5x the raw query (~0.25-0.3 ms here) is below what one asyncio hop on each side
   costs in this Python process model (the bridge alone, without the per-query thread, is
   already ~1.3-1.8x raw); reaching it would take answering operations on the Zenoh thread or a
-  different transport binding, not a tweak."""
+  different transport binding, not a tweak.
+- Experiment (2026-11-22, not applied): answering `EditSkill` on the op queryable's Zenoh thread
+  (the coroutine driven to completion there, no hop to the event loop) took a blocking raw-op
+  round trip from 0.73 to 0.61-0.66 ms, 12-17 %, i.e. still ~3.5x the raw query. The rest is
+  Python work spread over the server's threads (rules ~50 µs, journal ~30 µs, pydantic parse and
+  dumps ~15 µs, each ~2-3x slower under load on 2 cores) plus Zenoh's own Python callbacks. We kept
+  one event loop owning all mission state (no lock shared with Zenoh threads) rather than trade it
+  for that gain; on this hardware the 1.5x target is below the floor of a CPython server."""
 
 
 def section(body: str, elapsed: float, load: tuple[float, float, float]) -> str:

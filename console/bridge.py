@@ -57,11 +57,8 @@ class ClientBridge:
     def close_now(self) -> None:
         """Synchronous close for the last moment (after the app loop ended)."""
         client, self.client = self.client, None
-        if client is not None and client.session is not None:
-            from backend.transport import close_session
-
-            session, client.session = client.session, None
-            close_session(session)
+        if client is not None:
+            client.close_now()
 
     async def submit(self, op: Any, *, expected_revision: int | None = None) -> OpReply:
         if self.client is None:

@@ -224,3 +224,27 @@ def test_a_second_client_sees_the_first_ones_edit(cluster):
         assert m.find("lru2-1")[2].params["goal"]["x"] == 7
 
     drive(cluster, scenario, clients=2)
+
+
+CLOSE_NOW = """
+import asyncio, sys
+from backend.client import MissionClient
+client = MissionClient(sys.argv[1])
+async def main():
+    await client.connect()
+    print("revision", client.revision, flush=True)
+asyncio.run(main())  # the loop is gone; the session is still open
+client.close_now()
+print("closed", client.session is None, flush=True)
+"""
+
+
+def test_close_now_lets_a_process_exit_after_its_loop_ended(cluster):
+    import subprocess
+    import sys
+
+    # a Zenoh session left open keeps a process from exiting: close_now is the way out
+    # once no event loop runs any more (the console closes with it at the last moment)
+    p = subprocess.run([sys.executable, "-c", CLOSE_NOW, cluster.endpoint], capture_output=True, text=True, timeout=30)
+    assert p.returncode == 0, p.stderr
+    assert "closed True" in p.stdout and "revision" in p.stdout

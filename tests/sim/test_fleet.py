@@ -163,6 +163,7 @@ async def test_robot_out_of_coverage_cannot_be_reached_and_reports_arrive_after_
         with pytest.raises(OperationRefused) as exc:
             await client.submit(Sync(robot="lru1", through="lru1-1"))
         assert "out of communication range" in str(exc.value) and "lru1" in str(exc.value)
+        assert "lru1: lru1" not in str(exc.value)  # the robot is named once
         assert status_of(client.mission, "lru1-1") == "idle"  # nothing changed
         assert status_of(client.mission, back) == "idle_synchronized"  # its reports wait aboard
         with pytest.raises(OperationRefused, match="out of communication range"):
