@@ -10,7 +10,8 @@
         while not arrived():
             await ctx.sleep(0.1)                  # honours pause/stop, sim time
             ctx.progress(done_fraction(), eta_s=remaining_s())
-        # return None/True: success; raise SkillFailed("why") or return Failure("why")
+        # return None/True: success; Success("what was found"): success with a result
+        # text (the report's info); raise SkillFailed("why") or return Failure("why")
 
     async with agent:                            # start() ... stop()
         await forever()
@@ -139,6 +140,14 @@ class SkillStopped(asyncio.CancelledError):
 
 
 @dataclass(frozen=True)
+class Success:
+    """Return `Success("what came out")` from a handler: success, with a result
+    text the operator sees as the skill's status information."""
+
+    info: str = ""
+
+
+@dataclass(frozen=True)
 class Failure:
     """Return `Failure("reason")` from a handler instead of raising SkillFailed."""
 
@@ -199,6 +208,7 @@ class _Active:
     # barrier resources (withdrawn when the skill ends or is stopped)
     barrier_entities: list[Any] = field(default_factory=list)
     barrier_token: zenoh.LivelinessToken | None = None
+    result_info: str = ""  # a handler's Success text, reported with `success`
 
     def __post_init__(self) -> None:
         self.resumed.set()
@@ -1111,7 +1121,7 @@ class RobotAgent:
                 if act.aborted:
                     return
                 if reason is None:
-                    self._finish(act, Status.SUCCESS, "")
+                    self._finish(act, Status.SUCCESS, act.result_info)
                     return
                 if entry.retries_used >= retries:
                     self._finish(act, Status.FAILURE, reason)
@@ -1180,6 +1190,8 @@ class RobotAgent:
             return f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
         if isinstance(result, Failure):
             return result.reason
+        if isinstance(result, Success) and purpose == "skill":
+            act.result_info = result.info
         if result is False:
             return "the handler returned False"
         return None

@@ -168,11 +168,11 @@ class SimFleet:
         if spec is not None:
             defaults = {k: p.default for k, p in spec.params.items() if p.default is not None}
 
-        async def handler(ctx: Any, **params: Any) -> None:
+        async def handler(ctx: Any, **params: Any) -> Any:
             robot.activity = name
             robot.paused = lambda: ctx.paused
             try:
-                await fn(ctx, **{**defaults, **params})
+                return await fn(ctx, **{**defaults, **params})  # a Success carries the result text
             finally:
                 robot.activity = None
                 robot.paused = lambda: False

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from backend.agent import SkillContext, SkillFailed
+from backend.agent import SkillContext, SkillFailed, Success
 
 from .pathing import ROCK, SLOW, Follower, lawnmower
 from .world import SimError, SimRobot, Stone, _fmt
@@ -349,7 +349,7 @@ class RobotSkills:
     # ------------------------------------------------------------ science
 
     async def take_science_image(self, ctx: SkillContext, target: Any = None, filter: str = "multispectral",
-                                 camera: Any = None, **_: Any) -> None:
+                                 camera: Any = None, **_: Any) -> Success:
         r, w = self.robot, self.world
         if not r.has("science_camera"):
             raise self.fail(f"{r.name} has no science camera")
@@ -379,6 +379,7 @@ class RobotSkills:
             w.tell_ground(r, "rss", rss.name, info)
         self.fleet.note(r, msg)
         ctx.progress(1.0, msg, eta_s=0.0)
+        return Success(msg)
 
     # ------------------------------------------------------------ stones
 
@@ -417,7 +418,7 @@ class RobotSkills:
         self.world.tell_ground(self.robot, "stone", info["id"], info)
 
     async def identify_stone(self, ctx: SkillContext, target: Any = None, search_radius: float = 3.0,
-                             partner: str | None = None, **_: Any) -> None:
+                             partner: str | None = None, **_: Any) -> Success:
         r, w = self.robot, self.world
         tx, ty = _xy(target)
         duration = 120.0
@@ -497,6 +498,7 @@ class RobotSkills:
         msg = f"identified {stone.id} at {_fmt(stone.x, stone.y)}, score {stone.score:g}, {how}"
         self.fleet.note(r, msg)
         ctx.progress(1.0, msg, eta_s=0.0)
+        return Success(msg)
 
     def _capacity(self) -> int:
         r = self.robot

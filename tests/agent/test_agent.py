@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from backend.agent import Failure, RobotAgent, SkillFailed, SkillStopped
+from backend.agent import Failure, RobotAgent, SkillFailed, SkillStopped, Success
 from backend.model import Policies, Pose, Position, SkillInstance, Status
 from backend.protocol import (
     BarrierInfo,
@@ -294,15 +294,20 @@ async def test_failure_halts_then_run_continues_and_exceptions_are_failures(harn
         async def ok(ctx):
             return True
 
+        @a.skill("found", version="1.0.0")
+        def found(ctx):
+            return Success("stone s7, score 0.9")
+
         await a.start()
         await h.registered(lru1)
         await h.server.enqueue(
-            lru1, skill("f1", "stuck"), skill("f2", "buggy"), skill("f3", "soft"), skill("k1", "ok")
+            lru1, skill("f1", "stuck"), skill("f2", "buggy"), skill("f3", "soft"), skill("k1", "ok"),
+            skill("k2", "found"),
         )
         await h.server.command(lru1, Run())
         await h.until(lambda: h.server.has(lru1, "f1", S.FAILURE), what="f1 failure")
         assert h.server.applied[lru1][-1].info == "wheel stuck in sand"
-        assert a.active is None and a.queue == ["f2", "f3", "k1"]  # halted
+        assert a.active is None and a.queue == ["f2", "f3", "k1", "k2"]  # halted
 
         await h.server.command(lru1, Run())  # continue with the next
         await h.until(lambda: h.server.has(lru1, "f2", S.FAILURE), what="f2 failure")
@@ -311,6 +316,10 @@ async def test_failure_halts_then_run_continues_and_exceptions_are_failures(harn
         await h.until(lambda: h.server.has(lru1, "f3", S.FAILURE, "no stone here"), what="f3")
         await h.server.command(lru1, Run())
         await h.until(lambda: h.server.has(lru1, "k1", S.SUCCESS), what="k1 success")
+        k1 = [r for r in h.server.applied[lru1] if r.id == "k1" and r.status == S.SUCCESS]
+        assert [r.info for r in k1] == [""]  # plain success: no result text
+        # the queue went on (run mode stays after a success); Success carries a result text
+        await h.until(lambda: h.server.has(lru1, "k2", S.SUCCESS, "stone s7, score 0.9"), what="k2 success with text")
         assert not h.server.gaps
 
 

@@ -75,6 +75,9 @@ async def test_scripted_operator_plays_the_pilot_mission(stack: Stack) -> None:
         m = client.mission
         failed = [(s.id, s.status_info) for t in m.tasks.values() for s in t if s.status.value == "failure"]
         assert not failed, failed
+        # handlers' results reach the operator as the success's status information
+        identified = [s.status_info for t in m.tasks.values() for s in t if s.skill == "identify_stone"]
+        assert identified and all(i.startswith("identified RSS-A-s") for i in identified), identified
         status = await watch.until(lambda s: s.score >= 1.0, 10, "the score")
         # deterministic for seed 1: the stone nearest POI-A in RSS-A, top score 1.0
         assert [(d.stone, d.score, d.by) for d in status.delivered] == [("RSS-A-s1", 1.0, "lru2")]
