@@ -161,8 +161,10 @@ class Link:
     """The operator link as the robot sees it. No-op by default (always in range).
 
     A simulator sets `reachable` (or overrides `in_range`), `delay_s` (one-way
-    delay applied before each command is handled and before each report
-    flush) and `quality` (0..1, shown in telemetry).
+    delay applied before each command is handled, before each report flush
+    and to each telemetry message) and `quality` (0..1, shown in telemetry).
+    Override `can_reach(robot)` to model robot-to-robot links: an ask/tell to
+    a robot it cannot reach is not sent and counts as failed.
     """
 
     def __init__(self, *, reachable: bool = True, delay_s: float = 0.0, quality: float = 1.0):
@@ -172,6 +174,9 @@ class Link:
 
     def in_range(self) -> bool:
         return self.reachable
+
+    def can_reach(self, robot: str) -> bool:
+        return True
 
 
 # ---------------------------------------------------------------- execution state
@@ -412,7 +417,9 @@ class RobotAgent:
         self._handlers: dict[str, _Handler] = {}
         self._ask_handlers: dict[str, Callable[..., Any]] = {}
         self._tell_handlers: dict[str, Callable[..., Any]] = {}
-        self.world_stats = {"asks_sent": 0, "tells_sent": 0, "asks_received": 0, "tells_received": 0}
+        # asks/tells that got no answer (unknown robot, out of reach, timeout) count as failed
+        self.world_stats = {"asks_sent": 0, "tells_sent": 0, "asks_failed": 0, "tells_failed": 0,
+                            "asks_received": 0, "tells_received": 0}
         # called with every Report as it is made (simulator, logs, tests)
         self.report_listeners: list[Callable[[Report], object]] = []
 
@@ -855,8 +862,20 @@ class RobotAgent:
     def _publish_telemetry(self) -> None:
         if self._publisher is None or not self._link_in_range():
             return  # out of range: the operator cannot hear us
+        payload = dumps(self.telemetry())
+        delay = float(getattr(self.link, "delay_s", 0.0) or 0.0)
+        if delay > 0 and self._loop is not None:
+            # the ground sees the robot as it was one link delay ago
+            self._loop.call_later(delay, self._put_telemetry, payload)
+        else:
+            self._put_telemetry(payload)
+
+    def _put_telemetry(self, payload: bytes) -> None:
+        publisher = self._publisher
+        if publisher is None:
+            return  # stopped meanwhile
         try:
-            self._publisher.put(dumps(self.telemetry()))
+            publisher.put(payload)
         except Exception:
             log.exception("%s: cannot publish telemetry", self.name)
 
@@ -1306,6 +1325,14 @@ class RobotAgent:
             raise RuntimeError(f"agent {self.name} is not started")
         msg = WorldMessage(kind=kind, sender=self.name, topic=topic, data=dict(data or {}))  # type: ignore[arg-type]
         try:
+            reachable = bool(self.link.can_reach(robot)) if hasattr(self.link, "can_reach") else True
+        except Exception:
+            log.exception("%s: link.can_reach(%s) failed; assuming reachable", self.name, robot)
+            reachable = True
+        if not reachable:
+            log.info("%s: %s %s/%s not sent: %s is out of reach", self.name, kind, robot, topic, robot)
+            return None
+        try:
             raw = await transport.query(self._session, Keys.world(robot), dumps(msg), timeout=self.request_timeout)
             return WorldReply.model_validate_json(raw)
         except (transport.QueryFailed, transport.TransportError, ValidationError) as exc:
@@ -1316,12 +1343,16 @@ class RobotAgent:
         """Ask `robot` about `topic`; its answer, or None (unknown / unreachable)."""
         self.world_stats["asks_sent"] += 1
         reply = await self._world_query(robot, "ask", topic, data)
+        if reply is None:
+            self.world_stats["asks_failed"] += 1
         return reply.data if reply is not None and reply.known else None
 
     async def tell(self, robot: str, topic: str, data: dict[str, Any] | None = None) -> bool:
         """Tell `robot` something; True when it was delivered to a handler."""
         self.world_stats["tells_sent"] += 1
         reply = await self._world_query(robot, "tell", topic, data)
+        if reply is None:
+            self.world_stats["tells_failed"] += 1
         return reply is not None and reply.known
 
 

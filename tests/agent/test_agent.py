@@ -8,6 +8,7 @@ come (`never`).
 from __future__ import annotations
 
 import asyncio
+from datetime import UTC, datetime
 import sys
 import threading
 import time
@@ -195,6 +196,21 @@ async def test_telemetry_is_published(harness: Harness) -> None:
         assert (t.robot, t.pose, t.battery, t.link, t.in_range) == (
             lru1, Pose(x=1.5, y=-2.0, yaw=0.25), 0.8, 0.6, True,
         )
+
+
+async def test_telemetry_arrives_one_link_delay_late(harness: Harness) -> None:
+    async with harness as h:
+        lru1 = h.name("lru1")
+        a = h.agent(lru1, telemetry_hz=20.0)
+        a.link.delay_s = 0.4
+        _sub, samples = subscribe_to_queue(h.server.session, Keys.telemetry(lru1))
+        await a.start()
+        async with asyncio.timeout(WAIT):
+            raw = await samples.get()
+        received = datetime.now(UTC)
+        t = Telemetry.model_validate_json(raw.payload)
+        # stamped when measured, delivered after the one-way delay
+        assert (received - t.at).total_seconds() >= 0.35
 
 
 async def test_pause_and_resume(harness: Harness) -> None:
@@ -650,8 +666,35 @@ async def test_ask_and_tell_between_agents_are_counted(harness: Harness) -> None
             "nobody": None,
         }
         assert told == [({"at": [1, 2]}, lru2)]
-        assert b.world_stats == {"asks_sent": 3, "tells_sent": 1, "asks_received": 0, "tells_received": 0}
-        assert a.world_stats == {"asks_sent": 0, "tells_sent": 0, "asks_received": 2, "tells_received": 1}
+        assert b.world_stats == {"asks_sent": 3, "tells_sent": 1, "asks_failed": 1, "tells_failed": 0,
+                                 "asks_received": 0, "tells_received": 0}
+        assert a.world_stats == {"asks_sent": 0, "tells_sent": 0, "asks_failed": 0, "tells_failed": 0,
+                                 "asks_received": 2, "tells_received": 1}
+
+
+async def test_a_robot_out_of_reach_is_not_asked(harness: Harness) -> None:
+    async with harness as h:
+        lru1, lru2 = h.names("lru1", "lru2")
+        a, b = h.agent(lru1), h.agent(lru2)
+        a.on_ask("stone", lambda data, sender: {"x": 1.0})
+        a.on_tell("box", lambda data, sender: None)
+        b.link.can_reach = lambda robot: robot != lru1  # e.g. a ridge between them
+        answers: dict[str, object] = {}
+
+        @b.skill("fetch", version="1.0.0")
+        async def fetch(ctx):
+            answers["stone"] = await ctx.ask(lru1, "stone")
+            answers["told"] = await ctx.tell(lru1, "box", {})
+
+        await a.start()
+        await b.start()
+        await h.registered(lru1, lru2)
+        await h.server.enqueue(lru2, skill("f1", "fetch"))
+        await h.server.command(lru2, Run())
+        await h.until(lambda: h.server.has(lru2, "f1", S.SUCCESS), what="fetch done")
+        assert answers == {"stone": None, "told": False}
+        assert (b.world_stats["asks_failed"], b.world_stats["tells_failed"]) == (1, 1)
+        assert (a.world_stats["asks_received"], a.world_stats["tells_received"]) == (0, 0)  # never sent
 
 
 # ---------------------------------------------------------------- shutdown
