@@ -8,10 +8,10 @@ come (`never`).
 from __future__ import annotations
 
 import asyncio
-from datetime import UTC, datetime
 import sys
 import threading
 import time
+from datetime import UTC, datetime
 from pathlib import Path
 
 import pytest
