@@ -192,6 +192,9 @@ class Journal:
         self.load_info = LoadInfo()
         row = conn.execute("SELECT max(revision) FROM snapshots").fetchone()
         self._snapshot_rev: int | None = row[0]
+        # the last revision, kept in memory after the first look (this object is
+        # the journal's only writer): saves two SELECTs per appended operation
+        self._last_rev: int | None = self._last(conn)
 
     # -- opening and closing -----------------------------------------------------
     @classmethod
@@ -334,7 +337,7 @@ class Journal:
             conn = self.conn
             conn.execute("BEGIN IMMEDIATE")
             try:
-                last = self._last(conn)
+                last = self._last_rev
                 if last is None:
                     raise ValueError(
                         "the journal has no base mission: store a snapshot(mission) before appending batches"
@@ -355,6 +358,7 @@ class Journal:
             except BaseException:
                 _rollback(conn)
                 raise
+            self._last_rev = last
         return len(rows)
 
     def record(
@@ -393,7 +397,7 @@ class Journal:
             conn = self.conn
             conn.execute("BEGIN IMMEDIATE")
             try:
-                last = self._last(conn)
+                last = self._last_rev
                 if last is not None and rev > last:
                     raise ValueError(
                         f"cannot snapshot revision {rev}: the journal ends at revision {last}; "
@@ -411,6 +415,7 @@ class Journal:
                 raise
             if self._snapshot_rev is None or rev >= self._snapshot_rev:
                 self._snapshot_rev = rev
+            self._last_rev = rev if last is None else max(last, rev)
 
     def maybe_snapshot(self, mission: Mission) -> bool:
         """Snapshot when `snapshot_every` batches were appended since the last
