@@ -17,7 +17,7 @@ import pytest
 from backend import transport
 from backend.client import OperationRefused
 from backend.ops import AddSkill, Control, EditSkill, Sync
-from sim import mapfeed as mf
+from backend import mapfeed as mf
 
 from .conftest import ROOT, Stack, connect, skill, status_of, world_file
 
