@@ -537,7 +537,7 @@ class MapView(Widget, can_focus=True):
             for name, mk in mission.markers.items():
                 if mk.kind == "area":
                     ov.polygon([(p.x, p.y) for p in mk.area], f"map-marker-{use.get(name, 'unused')}")
-        for robot, sid, x, y, st in skill_goals(model):
+        for _robot, sid, x, y, st in skill_goals(model):
             label = sid if sid == self.selected_skill else ""
             ov.point(f"goal:{sid}", x, y, GOAL_GLYPH, f"status-{STATUS_CSS[st]}", label, "map-goal")
         if objects is not None:
