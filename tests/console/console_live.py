@@ -88,6 +88,12 @@ class Live:
         self.robots = Proc([sys.executable, str(HERE / "console_robots.py"), self.endpoint, str(LIBRARY), *specs])
         self.robots.wait_line("ready")
 
+    def start_sim(self, speed: float = 50.0) -> None:
+        """The simulated fleet of the mission's site (instead of start_robots)."""
+        self.robots = Proc([sys.executable, "-m", "backend.cli", "sim", "--mission", str(self.mission), "--connect", self.endpoint,
+                            "--speed", f"{speed:g}", "--seed", "1"], env={"PYTHONUNBUFFERED": "1"})
+        self.robots.wait_line("missionctl sim: world")
+
     def kill_robots(self) -> None:
         if self.robots is not None:
             self.robots.stop(signal.SIGKILL)
