@@ -10,7 +10,8 @@ the snapshot, then apply the deltas that follow it. A gap in `seq`, or a
 delta of another feed run (the simulator restarted), queries the snapshot
 again; deltas arriving meanwhile are kept and applied after it. Nobody
 answering the snapshot query is normal (no simulator running): the state is
-then "none" and the first delta that arrives later triggers the query.
+then "none", and the query is repeated every `retry` seconds (an idle
+simulator publishes no deltas) or as soon as a delta arrives.
 
 Zenoh callbacks only parse and hand over to the asyncio loop; the mirror is
 changed, and `on_update` called, on the loop only.
@@ -32,6 +33,7 @@ from .transport import NoResponder, QueryFailed, QueryTimeout, query, subscribe
 log = logging.getLogger(__name__)
 
 WAITING, LIVE, NONE = "waiting", "live", "none"
+RETRY_S = 2.0
 
 
 @dataclass
@@ -47,10 +49,12 @@ class MapUpdate:
 
 
 class MapFeed:
-    def __init__(self, session: Any, on_update: Callable[[MapUpdate], None], *, timeout: float = 5.0) -> None:
+    def __init__(self, session: Any, on_update: Callable[[MapUpdate], None], *, timeout: float = 5.0, retry: float = RETRY_S) -> None:
         self.session = session
         self.on_update = on_update
         self.timeout = timeout
+        self.retry = retry
+        self._retry_handle: asyncio.TimerHandle | None = None
         self.mirror = MapMirror()
         self.state = WAITING
         self.bytes_received = 0  # payload bytes of deltas and snapshots
@@ -69,6 +73,8 @@ class MapFeed:
 
     def close(self) -> None:
         self._closed = True
+        if self._retry_handle is not None:
+            self._retry_handle.cancel()
         if self._task is not None:
             self._task.cancel()
         sub, self._sub = self._sub, None
@@ -86,9 +92,12 @@ class MapFeed:
             try:
                 raw = await query(self.session, KEY_MAP_SNAPSHOT, b"", self.timeout)
             except (NoResponder, QueryTimeout, QueryFailed) as e:
+                if self.state != NONE:
+                    self._emit(MapUpdate("none", detail=str(e) or type(e).__name__))
                 self.state = NONE
                 self._pending.clear()
-                self._emit(MapUpdate("none", detail=str(e) or type(e).__name__))
+                if not self._closed and self._loop is not None:
+                    self._retry_handle = self._loop.call_later(self.retry, self._schedule_resync)
                 return
             self.bytes_received += len(raw)
             try:

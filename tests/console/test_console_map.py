@@ -166,9 +166,11 @@ class FakeFeed:
     def __init__(self, snap: mf.MapSnapshot | None):
         self.snap = snap
         self.queries = 0
+        self.asked = asyncio.Event()
 
     async def query(self, session, key, payload, timeout):
         self.queries += 1
+        self.asked.set()
         if self.snap is None:
             raise mapfollow.NoResponder("no simulator")
         return mf.dump(self.snap)
@@ -210,14 +212,17 @@ async def test_follower_applies_deltas_and_resyncs_on_a_gap(monkeypatch):
     feed.close()
 
 
-async def test_follower_without_a_sim_waits_for_the_first_delta(monkeypatch):
+async def test_follower_without_a_sim_asks_again_and_on_the_first_delta(monkeypatch):
     fake = FakeFeed(None)
     monkeypatch.setattr(mapfollow, "query", fake.query)
     monkeypatch.setattr(mapfollow, "subscribe", fake.subscribe)
     updates: list[MapUpdate] = []
-    feed = MapFeed(object(), updates.append)
+    feed = MapFeed(object(), updates.append, retry=0.01)
     await feed.start()
     assert feed.state == "none" and updates[-1].kind == "none"
+    fake.asked.clear()
+    await asyncio.wait_for(fake.asked.wait(), 5)  # an idle sim sends no deltas: asked again
+    assert fake.queries >= 2 and [u.kind for u in updates] == ["none"]  # said once
     fake.snap = mars_snapshot(seq=3)
     feed.got_delta(_delta(4))  # the sim started: query it, keep this delta
     await asyncio.wait_for(feed._task, 5)
