@@ -3,7 +3,6 @@ agents or the simulated fleet (subprocesses), driven with keys."""
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 from console_live import Live
