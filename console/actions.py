@@ -111,7 +111,7 @@ APP_KEYS: list[tuple[str, str, str]] = [
 ]
 
 NAV_KEYS: list[tuple[str, str, str]] = [
-    ("arrows", "Map cursor", "On the map: move the cursor (it pans at the edge); ctrl+arrows: 8 cells"),
+    ("arrows", "Map cursor", "On the map: move the cursor (ctrl+arrows: 8 cells)"),
     ("↑ ↓", "Skill", "Previous / next skill in the robot's column"),
     ("← →", "Robot", "Previous / next robot column"),
     ("home end", "Ends", "First / last skill of the column"),
