@@ -97,7 +97,7 @@ class MapFeed:
                 self.state = NONE
                 self._pending.clear()
                 if not self._closed and self._loop is not None:
-                    self._retry_handle = self._loop.call_later(self.retry, self._schedule_resync)
+                    self._retry_handle = self._loop.call_later(self.retry, self._retry)
                 return
             self.bytes_received += len(raw)
             try:
@@ -117,6 +117,10 @@ class MapFeed:
             self._emit(MapUpdate("snapshot", objects=True))
         finally:
             self._syncing = False
+
+    def _retry(self) -> None:
+        if self.state == NONE:  # a delta may have brought the feed meanwhile
+            self._schedule_resync()
 
     def _schedule_resync(self) -> None:
         if self._closed or self._syncing or (self._task is not None and not self._task.done()):

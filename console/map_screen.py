@@ -196,7 +196,7 @@ class MapScreen(Screen):
 
     def on_resize(self, event: events.Resize) -> None:
         self._apply_legend()
-        if self.view.mirror is None or not self.view.mirror.ready:
+        if not self.view.fitted and (self.view.mirror is None or not self.view.mirror.ready):
             self.call_after_refresh(self.view.fit_known)
 
     def on_screen_resume(self) -> None:
@@ -331,8 +331,8 @@ class MapScreen(Screen):
         if self.view.mirror is None or not self.view.mirror.ready:
             self.say("no map yet: nothing to fit", "warning")
             return
+        self.view.follow = None
         self.view.fit()
-        self.view.redraw_all()
         self.update_info()
 
     def _pan(self, dx: int, dy: int) -> None:

@@ -206,14 +206,22 @@ class Overlay:
             self._labels.append((col + 2, row, label, label_var))
 
     def place_labels(self) -> None:
-        """Labels after all glyphs, the most important (drawn last) first; a
-        label stops where it would cover a glyph or an earlier label."""
+        """Labels after all glyphs, the most important (drawn last) first.
+        A label goes right of its glyph, else left, above or below, wherever
+        it covers no glyph and no earlier label; else right, cut short."""
         for col, row, text, var in reversed(self._labels):
-            taken = self.cells.get(row, {})
-            for i, c in enumerate(text):
-                if col + i in taken:
+            n = len(text)
+            spots = [(col, row), (col - n - 3, row), (col - 2 - n // 2, row - 1), (col - 2 - n // 2, row + 1)]
+            for c0, r0 in spots:
+                if 0 <= r0 < self.vp.h and c0 >= 0 and c0 + n <= self.vp.w and not any(c0 + i in self.cells.get(r0, {}) for i in range(n)):
                     break
-                self.put(col + i, row, c, var, label=True)
+            else:
+                c0, r0 = col, row
+            taken = self.cells.get(r0, {})
+            for i, c in enumerate(text):
+                if c0 + i in taken:
+                    break
+                self.put(c0 + i, r0, c, var, label=True)
         self._labels.clear()
 
     def cursor(self, x: float, y: float, arrow: str) -> None:
@@ -379,8 +387,8 @@ class MapView(Widget, can_focus=True):
     # -- state in -------------------------------------------------------------------------------
     def set_mirror(self, mirror: MapMirror | None) -> None:
         self.mirror = mirror
-        if mirror is not None and mirror.ready and not self.fitted and self.size.width > 0:
-            self.fit()
+        if mirror is not None and mirror.ready and not self.fitted:
+            self.fit_known()
         self._index_columns()
         self.redraw_all()
 
@@ -430,7 +438,7 @@ class MapView(Widget, can_focus=True):
     def on_resize(self, event: events.Resize) -> None:
         self.vp.w, self.vp.h = max(1, event.size.width), max(1, event.size.height)
         if not self.fitted and self.mirror is not None and self.mirror.ready:
-            self.fit()
+            self.fit_known()
         self._index_columns()
         self.redraw_all()
         self.post_message(self.CursorMoved())
@@ -440,16 +448,11 @@ class MapView(Widget, can_focus=True):
         m = self.mirror.meta if self.mirror is not None else None
         if m is None:
             return
-        wm, hm = m.width * m.cell, m.height * m.cell
-        self.vp.cx, self.vp.cy = m.x0 + wm / 2, m.y0 + hm / 2
-        self.vp.mpp = max(wm / max(1, self.vp.w), hm / max(1, 2 * self.vp.h), MIN_MPP)
-        self.fitted = True
-        if self.cursor == (0.0, 0.0):
-            self.cursor = (self.vp.cx, self.vp.cy)
-        self._index_columns()
+        self._fit_box(m.x0, m.x0 + m.width * m.cell, m.y0, m.y0 + m.height * m.cell, pad=1.0)
 
     def fit_known(self) -> None:
-        """Without a map: zoom and centre on what is known (markers, robots)."""
+        """Zoom and centre on what is known: robots, markers, the lander and
+        the explored area (the whole site is mostly unknown at first)."""
         pts: list[tuple[float, float]] = [(t.pose.x, t.pose.y) for t in self.model.telemetry.values()]
         m = self.model.mission
         for mk in m.markers.values() if m is not None else []:
@@ -459,12 +462,28 @@ class MapView(Widget, can_focus=True):
                 pts.append((mk.position.x, mk.position.y))
             else:
                 pts += [(p.x, p.y) for p in mk.area]
-        if not pts or self.size.width == 0:
+        mirror = self.mirror
+        if mirror is not None and mirror.meta is not None:
+            g = mirror.meta
+            if mirror.objects is not None:
+                pts.append((mirror.objects.lander.x, mirror.objects.lander.y))
+            rows, cols = np.nonzero(mirror.layers["terrain"] != T_UNKNOWN)
+            if len(rows):
+                pts += [(g.x0 + cols.min() * g.cell, g.y0 + rows.min() * g.cell),
+                        (g.x0 + (cols.max() + 1) * g.cell, g.y0 + (rows.max() + 1) * g.cell)]
+        if not pts:
+            self.fit()
             return
         xs, ys = [p[0] for p in pts], [p[1] for p in pts]
-        wm, hm = (max(xs) - min(xs)) * 1.2 + 10, (max(ys) - min(ys)) * 1.2 + 10
-        self.vp.cx, self.vp.cy = (max(xs) + min(xs)) / 2, (max(ys) + min(ys)) / 2
+        self._fit_box(min(xs), max(xs), min(ys), max(ys), pad=1.2)
+
+    def _fit_box(self, x0: float, x1: float, y0: float, y1: float, pad: float) -> None:
+        if self.size.width == 0:
+            return  # not laid out yet: fitted on the first resize
+        wm, hm = max(x1 - x0, 20.0) * pad, max(y1 - y0, 20.0) * pad
+        self.vp.cx, self.vp.cy = (x0 + x1) / 2, (y0 + y1) / 2
         self.vp.mpp = min(MAX_MPP, max(wm / max(1, self.vp.w), hm / max(1, 2 * self.vp.h), MIN_MPP))
+        self.fitted = self.mirror is not None and self.mirror.ready  # without a map: fit again when it comes
         self._index_columns()
         self.redraw_all()
 
