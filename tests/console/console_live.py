@@ -11,6 +11,8 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from backend.transport import free_port, loopback_endpoint
@@ -103,3 +105,14 @@ class Live:
         if self.robots is not None:
             self.robots.stop()
         self.stop_server()
+
+
+@contextmanager
+def running(tmp: Path, mission: Path) -> Iterator[Live]:
+    """A started mission server (robots added by the test), closed at the end."""
+    env = Live(tmp, mission)
+    env.start_server()
+    try:
+        yield env
+    finally:
+        env.close()

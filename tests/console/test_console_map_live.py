@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from console_live import Live
+from console_live import running
 from console_state import MARS, TUTORIAL, make_app, screen_text, wait_until
 
 from backend import mapfeed as mf
@@ -24,22 +24,14 @@ def skill(app, sid):
 
 @pytest.fixture
 def live(tmp_path):
-    env = Live(tmp_path, TUTORIAL)
-    env.start_server()
-    try:
+    with running(tmp_path, TUTORIAL) as env:
         yield env
-    finally:
-        env.close()
 
 
 @pytest.fixture
 def live_sim(tmp_path):
-    env = Live(tmp_path, MARS)
-    env.start_server()
-    try:
+    with running(tmp_path, MARS) as env:
         yield env
-    finally:
-        env.close()
 
 
 async def to_schedule_and_select(app, pilot, sid):
@@ -124,7 +116,7 @@ async def test_follow_a_robot_and_the_mirror_matches_the_sim(live_sim):
         session = app.bridge.client.session
         for _attempt in range(20):
             snap = mf.MapSnapshot.model_validate_json(await transport.query(session, mf.KEY_MAP_SNAPSHOT, b"", 10.0))
-            await wait_until(pilot, lambda: feed.mirror.seq >= snap.seq, SLOW, "mirror caught up")
+            await wait_until(pilot, lambda snap=snap: feed.mirror.seq >= snap.seq, SLOW, "mirror caught up")
             if feed.mirror.seq == snap.seq:
                 break
         assert feed.mirror.seq == snap.seq
