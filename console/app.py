@@ -205,7 +205,7 @@ class MissionApp(App[int]):
         robots = self.model.apply(message.batch, message.mission)
         if self._screen_live() and robots != set():
             await self.mission_screen.model_changed(robots)
-        if self._map_live() and robots != set():
+        if self._map_live():  # marker events change no robot's column but the map
             self.map_screen.model_changed()
 
     def on_fleet_changed(self, message: FleetChanged) -> None:

@@ -13,6 +13,7 @@ from console_state import (
     EngineBackend,
     inject,
     make_app,
+    mars_mid_execution,
     mars_telemetry,
     screen_text,
     wait_until,
@@ -243,3 +244,63 @@ def test_robot_status_glyph_follows_the_active_skill(status):
     m.load(b.snapshot(), b.library, fleet({"lru1": True, "lru2": False}))
     assert robot_status(m, "lru1") == ("▶", "status-running")
     assert robot_status(m, "lru2") == ("✕", "presence-offline")
+
+
+async def test_pick_pose_rename_delete_and_a_refusal_on_the_status_line():
+    b = mars_mid_execution()
+    app = make_app()
+    app.backend = EngineBackend(b, app)
+    async with app.run_test(size=SIZE) as pilot:
+        await inject(app, pilot, b, telemetry=mars_telemetry())
+        app.post_message(map_message())
+        app.mission_screen.schedule.select("lru2-5")  # drive_to, goal typed
+        await pilot.press("f3")
+        await wait_until(pilot, lambda: isinstance(app.screen, MapScreen), 10, "map")
+        screen = app.screen
+        screen.view.set_cursor(-12.0, 7.0)
+        await pilot.press("right_square_bracket", "right_square_bracket")  # heading -30°
+        await pilot.press("p")
+        await wait_until(pilot, lambda: app.model.find("lru2-5")[2].params["goal"]["x"] == -12.0, 10, "goal picked")
+        goal = app.model.find("lru2-5")[2].params["goal"]
+        assert goal["y"] == 7.0 and math.isclose(goal["yaw"], math.radians(-30) % (2 * math.pi), abs_tol=1e-3)
+        assert "lru2-5: goal = (-12, 7) heading 330°" in screen.message
+        # POI-A is used by lru1-3, which is on the robot: the server refuses its deletion
+        screen.select_marker("POI-A")
+        await pilot.press("d")
+        await wait_until(pilot, lambda: type(app.screen).__name__ == "ConfirmScreen", 10, "confirm")
+        await pilot.press("y")
+        await wait_until(pilot, lambda: "refused" in screen.message, 10, "refusal shown")
+        assert "POI-A" in screen.message and "POI-A" in app.model.mission.markers
+        # WIFI-1 is unused: rename it, then delete it
+        screen.select_marker("WIFI-1")
+        await pilot.press("r")
+        await wait_until(pilot, lambda: app.screen.query("#name"), 10, "rename prompt")
+        app.screen.query_one("#name").value = "RELAY"
+        await pilot.press("enter")
+        await wait_until(pilot, lambda: "RELAY" in app.model.mission.markers and "WIFI-1" not in app.model.mission.markers, 10, "renamed")
+        assert screen.view.selected_marker == "RELAY"
+        await pilot.press("d")
+        await wait_until(pilot, lambda: type(app.screen).__name__ == "ConfirmScreen", 10, "confirm")
+        await pilot.press("y")
+        await wait_until(pilot, lambda: "RELAY" not in app.model.mission.markers, 10, "deleted")
+        await pilot.pause()
+        assert "RELAY" not in "\n".join(screen_text(app).splitlines()[1:-4])  # gone from the map
+        assert "deleted marker RELAY" in screen.message
+
+
+async def test_zoom_and_pan_move_the_view():
+    app = make_app()
+    async with app.run_test(size=SIZE) as pilot:
+        await open_map(app, pilot)
+        view = app.screen.view
+        mpp, cx, cy = view.vp.mpp, view.vp.cx, view.vp.cy
+        await pilot.press("plus")
+        assert view.vp.mpp == mpp / 2
+        await pilot.press("minus", "minus")
+        assert view.vp.mpp == mpp * 2
+        await pilot.press("shift+right")
+        assert view.vp.cx > cx and view.vp.cy == cy
+        await pilot.press("shift+up")
+        assert view.vp.cy > cy
+        await pilot.press("0")
+        assert view.vp.mpp >= mpp  # the whole site
