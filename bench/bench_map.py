@@ -11,8 +11,10 @@
 2. Bytes received from the map feed by one follower (backend.mapfollow,
    what the console uses) while all robots explore: mission server and
    `missionctl sim` at a fixed speed as subprocesses on loopback; lru1
-   explores ROI-east, lru2 ROI-east too, ardea takes off and surveys
-   ROI-north. Reported per wall second and per simulated second.
+   drives to POI-A and explores ROI-east, lru2 explores ROI-east too, ardea
+   takes off and surveys ROI-north; measured over --sim-seconds of sim time
+   (from the run, by the deltas' sim clock), while they all still work.
+   Reported per wall second and per simulated second.
 """
 
 from __future__ import annotations
@@ -100,7 +102,7 @@ async def redraw() -> dict[str, float]:
     return out
 
 
-async def feed_bytes(speed: float, seconds: float) -> dict[str, float]:
+async def feed_bytes(speed: float, sim_seconds: float) -> dict[str, float]:
     from backend.client import MissionClient
     from backend.mapfollow import MapFeed
     from backend.ops import AddSkill, Control, Sync
@@ -129,13 +131,20 @@ async def feed_bytes(speed: float, seconds: float) -> dict[str, float]:
             await client.submit(Sync(robot="lru1", through="lru1-2"))
             await client.submit(Sync(robot="lru2", through=lru2_explore))
             await client.submit(Sync(robot="ardea", through="ardea-2"))
-            feed = MapFeed(client.session, lambda u: None)
+            changed = asyncio.Event()
+            feed = MapFeed(client.session, lambda u: changed.set())
             await feed.start()
             start_bytes, start_sim = feed.bytes_received, feed.mirror.sim_time
             start_seq = feed.mirror.seq
             await client.submit(Control(op="run"))
             t = time.perf_counter()
-            await asyncio.sleep(seconds)  # the measurement window (not synchronisation)
+            deadline = t + 4 * sim_seconds / speed + 30
+            while feed.mirror.sim_time - start_sim < sim_seconds and time.perf_counter() < deadline:
+                changed.clear()
+                try:
+                    await asyncio.wait_for(changed.wait(), max(0.1, deadline - time.perf_counter()))
+                except TimeoutError:
+                    break
             wall = time.perf_counter() - t
             got = feed.bytes_received - start_bytes
             sim_s = feed.mirror.sim_time - start_sim
@@ -179,10 +188,10 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--write", type=Path)
     ap.add_argument("--speed", type=float, default=10.0)
-    ap.add_argument("--seconds", type=float, default=20.0)
+    ap.add_argument("--sim-seconds", type=float, default=150.0, help="simulated seconds to measure the feed over")
     args = ap.parse_args()
     r = asyncio.run(redraw())
-    f = asyncio.run(feed_bytes(args.speed, args.seconds))
+    f = asyncio.run(feed_bytes(args.speed, args.sim_seconds))
     text = section(r, f)
     if args.write:
         write_section(args.write, "## Map", text)

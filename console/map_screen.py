@@ -27,8 +27,10 @@ from .dialogs import ConfirmScreen
 from .mapview import (
     AREA_GLYPH,
     BOX_GLYPH,
+    FOLLOW_GLYPH,
     GOAL_GLYPH,
     LANDER_GLYPH,
+    NO_LINK_GLYPH,
     POSE_ARROWS,
     POSITION_GLYPH,
     ROBOT_ARROWS,
@@ -67,6 +69,8 @@ def legend_text(colours: dict[str, str] | None = None) -> Text:
     for st in (Status.RUNNING, Status.PAUSED, Status.SYNCHWAITING, Status.FAILURE, Status.IDLE_SYNCHRONIZED, Status.IDLE):
         row(GLYPHS[st], fg(f"status-{STATUS_CSS[st]}"), f"  {STATUS_WORDS[st]}")
     row("✕", fg("presence-offline"), "  offline")
+    row(NO_LINK_GLYPH, fg("presence-offline"), "  out of comms range")
+    row(FOLLOW_GLYPH, "bold", "  followed (f)")
     row(POSE_ARROWS[0], "bold", "pose marker")
     row(POSITION_GLYPH, "bold", "position marker")
     row(AREA_GLYPH, "bold", "area marker")

@@ -52,6 +52,8 @@ RSS_GLYPH = "◎"
 STONE_GLYPH = "•"
 GOAL_GLYPH = "×"
 OFFLINE_GLYPH = "✕"
+NO_LINK_GLYPH = "⊘"  # out of comms range
+FOLLOW_GLYPH = "⌖"
 
 GROUND_VARS = {T_UNKNOWN: "map-unknown", T_FREE: "map-free", T_SLOW: "map-sand", T_ROCK: "map-rock"}
 COVERAGE_TINT = 0.35
@@ -236,10 +238,13 @@ class Overlay:
             self.pixels.setdefault(py, {})[px] = var
 
     def line(self, a: tuple[float, float], b: tuple[float, float], var: str) -> None:
-        (x0, y0), (x1, y1) = self.vp.to_pixel(*a), self.vp.to_pixel(*b)
-        n = max(abs(x1 - x0), abs(y1 - y0), 1)
-        if n > 4 * (self.vp.w + 2 * self.vp.h):  # far outside: not worth drawing
+        """Pixels of a segment, clipped to the view first (zoomed in, a long
+        edge would otherwise cost a pixel step per metre off screen)."""
+        clipped = clip_segment(self.vp.to_pixel(*a), self.vp.to_pixel(*b), self.vp.w, 2 * self.vp.h)
+        if clipped is None:
             return
+        (x0, y0), (x1, y1) = clipped
+        n = max(abs(round(x1) - round(x0)), abs(round(y1) - round(y0)), 1)
         for k in range(n + 1):
             self.pixel(round(x0 + (x1 - x0) * k / n), round(y0 + (y1 - y0) * k / n), var)
 
@@ -262,6 +267,26 @@ class Overlay:
             tuple(sorted(self.pixels.get(2 * row, {}).items())),
             tuple(sorted(self.pixels.get(2 * row + 1, {}).items())),
         )
+
+
+def clip_segment(a: tuple[float, float], b: tuple[float, float], w: int, h: int) -> tuple[tuple[float, float], tuple[float, float]] | None:
+    """The part of segment a-b inside [-1, w] x [-1, h] (Liang-Barsky), or None."""
+    (x0, y0), (x1, y1) = a, b
+    dx, dy = x1 - x0, y1 - y0
+    t0, t1 = 0.0, 1.0
+    for p, q in ((-dx, x0 + 1), (dx, w - x0), (-dy, y0 + 1), (dy, h - y0)):
+        if p == 0:
+            if q < 0:
+                return None
+            continue
+        t = q / p
+        if p < 0:
+            t0 = max(t0, t)
+        else:
+            t1 = min(t1, t)
+        if t0 > t1:
+            return None
+    return (x0 + t0 * dx, y0 + t0 * dy), (x0 + t1 * dx, y0 + t1 * dy)
 
 
 def robot_status(model: ConsoleModel, robot: str) -> tuple[str, str]:
@@ -592,7 +617,7 @@ class MapView(Widget, can_focus=True):
                 continue
             glyph, var = robot_status(model, robot)
             arrow = heading_glyph(t.pose.yaw, ROBOT_ARROWS)
-            name = f"{robot} {glyph}" + (" ⌖" if self.follow == robot else "")
+            name = f"{robot} {glyph}" + (f" {NO_LINK_GLYPH}" if not t.in_range else "") + (f" {FOLLOW_GLYPH}" if self.follow == robot else "")
             ov.point(f"robot:{robot}", t.pose.x, t.pose.y, arrow, var, name, var)
         ov.place_labels()
         ov.cursor(self.cursor[0], self.cursor[1], heading_glyph(self.heading, POSE_ARROWS))

@@ -304,3 +304,13 @@ async def test_zoom_and_pan_move_the_view():
         assert view.vp.cy > cy
         await pilot.press("0")
         assert view.vp.mpp >= mpp  # the whole site
+
+
+def test_segments_are_clipped_to_the_view():
+    from console.mapview import clip_segment
+
+    (a, b) = clip_segment((-100, 5), (200, 5), 120, 80)
+    assert a == pytest.approx((-1.0, 5.0)) and b == pytest.approx((120.0, 5.0))
+    assert clip_segment((-100, -5), (-50, -5), 120, 80) is None
+    (a, b) = clip_segment((10, 10), (20, 30), 120, 80)
+    assert a == (10, 10) and b == (20, 30)  # inside: unchanged
