@@ -53,7 +53,7 @@ STONE_GLYPH = "•"
 GOAL_GLYPH = "×"
 OFFLINE_GLYPH = "✕"
 NO_LINK_GLYPH = "⊘"  # out of comms range
-FOLLOW_GLYPH = "⌖"
+FOLLOW_GLYPH = "⊙"
 
 GROUND_VARS = {T_UNKNOWN: "map-unknown", T_FREE: "map-free", T_SLOW: "map-sand", T_ROCK: "map-rock"}
 COVERAGE_TINT = 0.35
