@@ -158,6 +158,7 @@ class MapScreen(Screen):
         Binding("ctrl+left", "cursor(-8, 0)", show=False),
         Binding("ctrl+right", "cursor(8, 0)", show=False),
         Binding("f1,question_mark", "help", "Help", id="app.help"),
+        Binding("escape", "app.show_mission", "Schedule", show=False),  # "back to the schedule" (help: App keys)
     ]
     DEFAULT_CSS = """
     MapScreen #map-main { height: 1fr; }

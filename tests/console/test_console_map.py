@@ -59,6 +59,8 @@ async def test_map_shows_robots_markers_objects_and_legend():
         assert isinstance(app.screen, MapScreen)
         await pilot.press("f2")
         assert isinstance(app.screen, MissionScreen)
+        await pilot.press("f3", "escape")
+        assert isinstance(app.screen, MissionScreen)
 
 
 async def test_without_a_feed_the_map_says_so_and_still_shows_robots_and_markers():
