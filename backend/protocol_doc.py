@@ -12,6 +12,7 @@ import sys
 
 from pydantic import TypeAdapter
 
+from . import mapfeed as mf
 from . import protocol as p
 from .events import EventBatch
 from .ops import OperatorOp, Report
@@ -49,6 +50,10 @@ person naming robot, skill and reason).
 | `{p.Keys.telemetry('ROBOT')}` | publication | robot | `Telemetry` |
 | `{p.Keys.world('ROBOT')}` | queryable | robot | `WorldMessage` → `WorldReply` |
 | `{p.Keys.barrier_ready('BARRIER', 'ROBOT')}` | liveliness token | robot | — (present while waiting at a barrier) |
+| `{mf.KEY_MAP_SNAPSHOT}` | queryable | simulator | anything → `MapSnapshot` |
+| `{mf.KEY_MAP_DELTA}` | publication | simulator | `MapDelta` (`seq` consecutive, at most ~2 Hz) |
+| `{mf.KEY_STATUS}` | queryable | simulator | anything → `SimStatus` |
+| `{mf.KEY_STATUS_LIVE}` | publication | simulator | `SimStatus` (on change, at least every 2 s) |
 
 Publications are declared with congestion control `BLOCK` (state must not be
 dropped). Events are small: one `EventBatch` per applied operation, never a
@@ -157,6 +162,21 @@ and watches its partners' `{p.Keys.alive('ROBOT')}` tokens. When every partner's
 ready token is present, it reports `running`. While a partner is offline it
 reports `synchwaiting` again with info "waiting for ROBOT (offline)".
 
+### Map feed (simulator → consoles)
+The site as grids cut into `tile` × `tile` cells (`MapMeta`); a tile is
+`base64(zlib(uint8 cells, row-major))`, rows south to north from `y0`,
+columns west to east from `x0`. Layers: `terrain` (0 unknown, 1 free,
+2 slow, 3 impassable) and `coverage` (0 no link, 1..255 link quality).
+Objects (lander, payload boxes, discovered regions, identified stones) ride
+along whole when any changed. Robot poses are not in the feed: they come
+with the robots' telemetry.
+1. Subscribe to `{mf.KEY_MAP_DELTA}`, then query `{mf.KEY_MAP_SNAPSHOT}`
+   (no reply: no simulator is running; query again when a delta arrives).
+2. Apply buffered deltas whose `seq` is greater than the snapshot's, then
+   each delta with `seq == current + 1` and the same `feed`.
+3. A larger `seq` (a gap) or another `feed` (the simulator restarted): query
+   the snapshot again. (`backend.mapfollow.MapFeed` does all of this.)
+
 ### World knowledge (robot to robot)
 `WorldMessage{{kind: ask|tell, sender, topic, data}}` to
 `{p.Keys.world('ROBOT')}`; the answer is a `WorldReply{{known, data}}`.
@@ -184,6 +204,9 @@ MODELS = [
     ("WorldMessage", p.WorldMessage),
     ("WorldReply", p.WorldReply),
     ("Operations (the `op` of a Request)", OperatorOp),
+    ("MapSnapshot", mf.MapSnapshot),
+    ("MapDelta", mf.MapDelta),
+    ("SimStatus", mf.SimStatus),
 ]
 
 

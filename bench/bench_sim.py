@@ -51,10 +51,10 @@ if str(ROOT) not in sys.path:
 
 from report import machine, write_section  # noqa: E402
 
+from backend import mapfeed as mf  # noqa: E402
 from backend import transport  # noqa: E402
 from backend.client import MissionClient  # noqa: E402
 from backend.ops import AddSkill, Control, Sync  # noqa: E402
-from sim import mapfeed as mf  # noqa: E402
 
 MISSION = ROOT / "missions" / "mars_sample_return.yaml"
 LIBRARY = ROOT / "missions" / "libraries" / "mars.yaml"

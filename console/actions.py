@@ -23,10 +23,11 @@ class Action:
     description: str  # help screen / palette
     group: str
     footer: bool = False  # shown in the footer (the rest: help screen and palette)
+    scope: str = "mission"  # the screen that binds it: "mission", "map", or "app" (every screen)
 
     @property
     def binding_id(self) -> str:
-        return f"mission.{self.name}"
+        return f"{self.scope}.{self.name.removeprefix(self.scope + '_')}"
 
 
 ACTIONS: list[Action] = [
@@ -58,19 +59,47 @@ ACTIONS: list[Action] = [
     Action("save", "ctrl+s", "Save", "Save the mission to a YAML file", "Mission"),
     Action("load", "ctrl+o", "Load", "Load a mission from a YAML file (replaces the plan)", "Mission"),
     Action("toggle_static", "v", "Static robots", "Expand/collapse the static robots' columns", "View"),
+    # screens (app modes)
+    Action("show_mission", "f2,1", "Schedule", "Show the schedule (mission screen)", "Screens", scope="app"),
+    Action("show_map", "f3,2", "Map", "Show the map of the site", "Screens", scope="app"),
+    # the map screen
+    Action("map_zoom_in", "plus,equals_sign", "Zoom+", "Zoom in", "Map", True, scope="map"),
+    Action("map_zoom_out", "minus", "Zoom-", "Zoom out", "Map", True, scope="map"),
+    Action("map_fit", "0,home", "Fit", "Zoom out to the whole site", "Map", scope="map"),
+    Action("map_pan_left", "shift+left,H", "Pan left", "Pan the view west", "Map", scope="map"),
+    Action("map_pan_right", "shift+right,L", "Pan right", "Pan the view east", "Map", scope="map"),
+    Action("map_pan_up", "shift+up,K", "Pan up", "Pan the view north", "Map", scope="map"),
+    Action("map_pan_down", "shift+down,J", "Pan down", "Pan the view south", "Map", scope="map"),
+    Action("map_centre", "c", "Centre", "Centre the view on the cursor", "Map", scope="map"),
+    Action("map_follow", "f", "Follow", "Follow a robot (again: the next one; after the last: stop)", "Map", True, scope="map"),
+    Action("map_turn_left", "left_square_bracket", "Turn left", "Turn the cursor's heading 15° counter-clockwise", "Map", scope="map"),
+    Action("map_turn_right", "right_square_bracket", "Turn right", "Turn the cursor's heading 15° clockwise", "Map", scope="map"),
+    Action("map_next_marker", "n,tab", "Next marker", "Select the next marker (the cursor jumps to it)", "Map", scope="map"),
+    Action("map_add_marker", "a", "Add marker", "Add a marker (pose, position or area) at the cursor", "Map", True, scope="map"),
+    Action("map_move_marker", "m", "Move marker", "Move the selected marker to the cursor (a pose takes the cursor's heading)", "Map", True, scope="map"),
+    Action("map_rename_marker", "r", "Rename", "Rename the selected marker", "Map", scope="map"),
+    Action("map_delete_marker", "d,delete", "Delete marker", "Delete the selected marker (asks first)", "Map", scope="map"),
+    Action("map_bind", "b", "Bind", "Bind the selected marker to a fitting parameter of the schedule's selected skill", "Map", True, scope="map"),
+    Action("map_pick", "p", "Pick pose", "Set the selected skill's pose/position parameter to the cursor (position + heading)", "Map", True, scope="map"),
+    Action("map_legend", "l", "Legend", "Show/hide the legend", "Map", scope="map"),
 ]
 
 BY_NAME = {a.name: a for a in ACTIONS}
 
 # actions that need a skill/robot under the cursor and apply to the server
-MUTATING = {a.name for a in ACTIONS} - {"edit", "save", "toggle_static", "mark"}
+MUTATING = {a.name for a in ACTIONS if a.scope == "mission"} - {"edit", "save", "toggle_static", "mark"}
 
 
-def mission_bindings() -> list[Binding]:
+def bindings(scope: str = "mission") -> list[Binding]:
     return [
         Binding(a.key, a.name, a.label, show=a.footer, id=a.binding_id, tooltip=a.description)
         for a in ACTIONS
+        if a.scope == scope
     ]
+
+
+def mission_bindings() -> list[Binding]:
+    return bindings("mission")
 
 
 APP_KEYS: list[tuple[str, str, str]] = [
@@ -82,6 +111,7 @@ APP_KEYS: list[tuple[str, str, str]] = [
 ]
 
 NAV_KEYS: list[tuple[str, str, str]] = [
+    ("arrows", "Map cursor", "On the map: move the cursor (ctrl+arrows: 8 cells)"),
     ("↑ ↓", "Skill", "Previous / next skill in the robot's column"),
     ("← →", "Robot", "Previous / next robot column"),
     ("home end", "Ends", "First / last skill of the column"),

@@ -22,16 +22,18 @@ from textual.screen import Screen
 from backend.client import ClientError, OperationRefused
 from backend.protocol import ErrorReply
 
-from .actions import ACTIONS
+from .actions import ACTIONS, bindings
 from .bridge import Backend, ClientBridge
 from .commands import MissionCommands
 from .config import ConsoleConfig
 from .dialogs import HelpScreen, UnreachableScreen
+from .map_screen import MapScreen
 from .messages import (
     AlertReceived,
     ConnectionChanged,
     EventsApplied,
     FleetChanged,
+    MapChanged,
     StateLoaded,
     TelemetryChanged,
 )
@@ -56,6 +58,7 @@ class MissionApp(App[int]):
     COMMANDS = App.COMMANDS | {MissionCommands}
     BINDINGS = [
         Binding("ctrl+q", "quit", "Quit", priority=True, id="app.quit"),
+        *bindings("app"),
     ]
     CSS = """
     Screen { background: $background; }
@@ -88,6 +91,10 @@ class MissionApp(App[int]):
         self.bridge = ClientBridge(self, connect, user=user, client_id=client_id) if connect else None
         self.backend: Backend | None = backend or self.bridge
         self.mission_screen: MissionScreen | None = None
+        self.map_screen: MapScreen | None = None
+        self.map_feed: tuple[object, object] | None = None  # the latest (mirror, update) of the map feed
+        self.add_mode("mission", self.get_default_screen)  # the default mode's screen exists already
+        self.add_mode("map", self._make_map_screen)
         self.last_path: str | None = None
         self._connection_closed = False
         self.exit_code = 0
@@ -99,6 +106,21 @@ class MissionApp(App[int]):
     def get_default_screen(self) -> Screen:
         self.mission_screen = MissionScreen(self.model)
         return self.mission_screen
+
+    def _make_map_screen(self) -> Screen:
+        self.map_screen = MapScreen(self.model)
+        if self.map_feed is not None:
+            self.map_screen.map_changed(*self.map_feed)
+        return self.map_screen
+
+    async def action_show_map(self) -> None:
+        await self.switch_mode("map")
+
+    async def action_show_mission(self) -> None:
+        await self.switch_mode("mission")
+
+    def _map_live(self) -> bool:
+        return self.map_screen is not None and self.map_screen.is_mounted and self._running and self.return_code is None
 
     def action_keys(self) -> dict[str, str]:
         """Action name -> its key(s) now (the user's keymap applied)."""
@@ -176,21 +198,34 @@ class MissionApp(App[int]):
         gc.freeze()
         if self._screen_live():
             await self.mission_screen.model_changed(None)
+        if self._map_live():
+            self.map_screen.model_changed()
 
     async def on_events_applied(self, message: EventsApplied) -> None:
         robots = self.model.apply(message.batch, message.mission)
         if self._screen_live() and robots != set():
             await self.mission_screen.model_changed(robots)
+        if self._map_live():  # marker events change no robot's column but the map
+            self.map_screen.model_changed()
 
     def on_fleet_changed(self, message: FleetChanged) -> None:
         self.model.set_robot(message.info)
         if self._screen_live():
             self.mission_screen.robot_changed(message.info.name)
+        if self._map_live():
+            self.map_screen.fleet_changed()
 
     def on_telemetry_changed(self, message: TelemetryChanged) -> None:
         self.model.set_telemetry(message.telemetry)
         if self._screen_live():
             self.mission_screen.telemetry_changed(message.telemetry.robot)
+        if self._map_live():
+            self.map_screen.telemetry_changed(message.telemetry.robot)
+
+    def on_map_changed(self, message: MapChanged) -> None:
+        self.map_feed = (message.mirror, message.update)
+        if self._map_live():
+            self.map_screen.map_changed(message.mirror, message.update)
 
     async def on_connection_changed(self, message: ConnectionChanged) -> None:
         m = self.model
@@ -206,6 +241,8 @@ class MissionApp(App[int]):
             elif message.status == CONNECTED and previous == "reconnecting":
                 self.mission_screen.say(f"reconnected to {m.endpoint}: state resynchronized at revision {m.mission.revision if m.mission else '?'}", "ok")
                 self.notify("reconnected; state resynchronized", title="Server", timeout=3)
+        if self._map_live():
+            self.map_screen.connection_changed()
         if message.status == UNREACHABLE and not isinstance(self.screen, UnreachableScreen):
             self.push_screen(UnreachableScreen(m.endpoint or "?", message.detail), self._unreachable_choice)
 
@@ -236,38 +273,38 @@ class MissionApp(App[int]):
         expected_revision: int | None = None,
         on_ok: Any = None,
         on_refused: Any = None,
+        say: Any = None,
     ) -> None:
         if self.backend is None:
             self.notify("not connected to a mission server", severity="error")
             return
         self.run_worker(
-            self._submit(op, what, robot, skill, expected_revision, on_ok, on_refused),
+            self._submit(op, what, robot, skill, expected_revision, on_ok, on_refused, say),
             group="ops",
             exit_on_error=False,
         )
 
-    async def _submit(self, op, what, robot, skill, expected_revision, on_ok, on_refused) -> None:
-        screen = self.mission_screen
-        if screen is not None:
-            screen.say(f"… {what}")
+    async def _submit(self, op, what, robot, skill, expected_revision, on_ok, on_refused, say=None) -> None:
+        if say is None and self.mission_screen is not None:
+            say = self.mission_screen.say  # or another screen's status line (the map's)
+        say = say or (lambda *a: None)
+        say(f"… {what}")
         try:
             reply = await self.backend.submit(op, expected_revision=expected_revision)
         except OperationRefused as e:
             text = refusal_text(e.reply, robot, skill)
-            if screen is not None:
-                screen.say(f"✗ {what} refused: {text}", "error")
+            say(f"✗ {what} refused: {text}", "error")
             self.notify(text, title=f"Refused: {what}", severity="error", timeout=8)
             if on_refused is not None:
                 on_refused(e.reply)
             return
         except ClientError as e:
-            if screen is not None:
-                screen.say(f"✗ {what}: {e}", "error")
+            say(f"✗ {what}: {e}", "error")
             self.notify(str(e), title=f"Failed: {what}", severity="error", timeout=8)
             return
         if on_ok is not None:
             on_ok(reply)
-        elif screen is not None:
-            screen.say(f"✓ {what}", "ok")
+        else:
+            say(f"✓ {what}", "ok")
         for note in reply.notes:
             self.notify(note, title=what, severity="warning", timeout=8)

@@ -11,6 +11,7 @@ from typing import Any, Protocol
 
 from backend.client import MissionClient
 from backend.events import EventBatch
+from backend.mapfollow import MapFeed, MapUpdate
 from backend.protocol import Alert, OpReply, RobotInfo, StateSnapshot, Telemetry
 
 from .messages import (
@@ -18,6 +19,7 @@ from .messages import (
     ConnectionChanged,
     EventsApplied,
     FleetChanged,
+    MapChanged,
     StateLoaded,
     TelemetryChanged,
 )
@@ -36,6 +38,7 @@ class ClientBridge:
         self.user = user
         self.client_id = client_id
         self.client: MissionClient | None = None
+        self.map_feed: MapFeed | None = None
 
     async def connect(self) -> None:
         """Connect (raises backend.client.ClientError with a sentence)."""
@@ -48,8 +51,26 @@ class ClientBridge:
         except BaseException:
             self.client = None
             raise
+        await self.follow_map()
+
+    async def follow_map(self) -> None:
+        """Follow the simulator's map feed on the client's session (nobody
+        answering is fine: the map screen then says there is no feed)."""
+        if self.client is None or self.client.session is None:
+            return
+        feed = MapFeed(self.client.session, self._on_map)
+        self.map_feed = feed
+        await feed.start()
+
+    def _on_map(self, update: MapUpdate) -> None:
+        feed = self.map_feed
+        if feed is not None:
+            self.app.post_message(MapChanged(feed.mirror, update))
 
     async def close(self) -> None:
+        feed, self.map_feed = self.map_feed, None
+        if feed is not None:
+            feed.close()
         client, self.client = self.client, None
         if client is not None:
             await client.close()

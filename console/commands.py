@@ -15,33 +15,39 @@ from .actions import ACTIONS
 
 
 class MissionCommands(Provider):
-    def _screen(self) -> Any:
+    def _screen(self, scope: str = "mission") -> Any:
+        if scope == "map":  # map actions: only while the map is shown
+            screen = getattr(self.app, "map_screen", None)
+            return screen if screen is not None and self.app.screen is screen else None
         return getattr(self.app, "mission_screen", None)
 
     def _entries(self):
-        screen = self._screen()
-        if screen is None:
-            return
         keys = getattr(self.app, "action_keys", lambda: {})()
         for a in ACTIONS:
-            why = screen.why_disabled(a.name)
+            if a.scope == "app":
+                yield a, f"{keys.get(a.name, a.key)} · {a.description}", partial(self.app.run_action, a.name)
+                continue
+            screen = self._screen(a.scope)
+            if screen is None:
+                continue
+            why = screen.why_disabled(a.name) if hasattr(screen, "why_disabled") else None
             key = keys.get(a.name, a.key)
             help_text = f"{key} · {a.description}" + (f" — does not apply now: {why}" if why else "")
-            yield a, help_text, partial(self._run, a.name)
+            yield a, help_text, partial(self._run, a.name, a.scope)
 
-    async def _run(self, name: str) -> None:
-        screen = self._screen()
+    async def _run(self, name: str, scope: str = "mission") -> None:
+        screen = self._screen(scope)
         if screen is not None:
             await screen.run_named(name)
 
     async def discover(self) -> Hits:
         for a, help_text, run in self._entries():
-            yield DiscoveryHit(f"Mission: {a.label}", run, help=help_text)
+            yield DiscoveryHit(f"{a.group if a.scope != 'mission' else 'Mission'}: {a.label}", run, help=help_text)
 
     async def search(self, query: str) -> Hits:
         matcher = self.matcher(query)
         for a, help_text, run in self._entries():
-            text = f"Mission: {a.label}"
+            text = f"{a.group if a.scope != 'mission' else 'Mission'}: {a.label}"
             score = max(matcher.match(text), matcher.match(a.description) * 0.5)
             if score > 0:
                 yield Hit(score, matcher.highlight(text), run, text=text, help=help_text)

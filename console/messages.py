@@ -7,6 +7,8 @@ and lets every screen be tested without a network.
 
 from __future__ import annotations
 
+from typing import Any
+
 from textual.message import Message
 
 from backend.events import EventBatch
@@ -62,3 +64,13 @@ class AlertReceived(Message):
     def __init__(self, alert: Alert) -> None:
         super().__init__()
         self.alert = alert
+
+
+class MapChanged(Message):
+    """The map feed changed: `mirror` is the follower's mirror (read it, never
+    change it), `update` says what changed (backend.mapfollow.MapUpdate)."""
+
+    def __init__(self, mirror: Any, update: Any) -> None:
+        super().__init__()
+        self.mirror = mirror
+        self.update = update

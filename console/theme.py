@@ -32,6 +32,28 @@ STATUS_DEFAULTS: dict[str, str] = {
     "battery-low": "#ff8700",
 }
 
+# The map (console/mapview.py): ground classes are cell backgrounds, the rest
+# glyph colours; each also has a glyph or pattern, so colour is never alone.
+MAP_DEFAULTS: dict[str, str] = {
+    "map-outside": "#0b0f14",
+    "map-unknown": "#262a30",
+    "map-free": "#6b5240",
+    "map-sand": "#8f7548",
+    "map-rock": "#3d3430",
+    "map-link": "#2e6f9e",  # coverage: blended into the ground colour
+    "map-lander": "#ffffff",
+    "map-box": "#d7d7af",
+    "map-rss": "#d787ff",
+    "map-stone": "#ffd700",
+    "map-marker-unused": "#a8b0bc",
+    "map-marker-bound": "#87d7ff",
+    "map-marker-active": "#ff8700",
+    "map-goal": "#87ffaf",
+    "map-cursor": "#ffff5f",
+    "map-label": "#eeeeee",
+}
+STATUS_DEFAULTS.update(MAP_DEFAULTS)
+
 MISSIONCTL_DARK = Theme(
     name=DEFAULT_THEME,
     primary="#3a7bd5",

@@ -4,8 +4,7 @@
 - `world`: the site (numpy grids: terrain, explored area, coverage), objects, rules;
 - `pathing`: A* on the terrain grid, sweeps;
 - `skills`: the robots' skill handlers (every skill of missions/libraries/mars.yaml);
-- `fleet`: one RobotAgent per mission robot on one asyncio loop, map feed, status;
-- `mapfeed`: the map feed's wire models and codec (self-contained: pydantic + numpy);
+- `fleet`: one RobotAgent per mission robot on one asyncio loop, map feed (wire models in backend.mapfeed), status;
 - `cli`: `missionctl sim` and `missionctl sim-status`.
 
 Never imports console or textual.

@@ -166,10 +166,9 @@ def run_status(args: argparse.Namespace) -> int:
 
 
 async def _status(args: argparse.Namespace) -> int:
+    from backend import mapfeed as mf
     from backend import transport
     from backend.transport.session import TransportUnreachable
-
-    from . import mapfeed as mf
 
     endpoints = args.connect or ["tcp/127.0.0.1:7447"]
     try:

@@ -8,7 +8,7 @@
 Besides the agents it runs the world's background physics (charging at the
 lander, hovering drones), the map feed (deltas at most every `feed_period`
 wall seconds, snapshot queryable) and the sim status (queryable and live
-publication). See sim/mapfeed.py for the wire format.
+publication). See backend/mapfeed.py for the wire format.
 """
 
 from __future__ import annotations
@@ -17,16 +17,17 @@ import asyncio
 import logging
 import math
 import time
+import uuid
 from collections import Counter, deque
 from typing import Any
 
+from backend import mapfeed as mf
 from backend import transport
 from backend.agent import Link, RobotAgent
 from backend.library import Library
 from backend.model import Mission, Pose
 from backend.transport import QueryFailed
 
-from . import mapfeed as mf
 from .skills import RobotSkills
 from .world import SimError, SimRobot, World
 from .worldfile import WorldFile
@@ -95,6 +96,7 @@ class SimFleet:
         self.feed_bytes = 0
         self.status_bytes = 0
         self._seq = 0
+        self.feed_id = uuid.uuid4().hex[:12]  # a restarted sim is a new feed: followers resync
         self._encoder: mf.TileEncoder | None = None
         self._objects: dict[str, Any] | None = None
         self._session = None
@@ -373,6 +375,7 @@ class SimFleet:
         self._objects = objects
         self._seq += 1
         return mf.MapDelta(
+            feed=self.feed_id,
             seq=self._seq,
             sim_time=round(self.world.clock, 2),
             tiles=tiles,
@@ -391,6 +394,7 @@ class SimFleet:
     def snapshot(self) -> mf.MapSnapshot:
         assert self._encoder is not None and self._objects is not None
         return mf.MapSnapshot(
+            feed=self.feed_id,
             meta=self._encoder.meta,
             seq=self._seq,
             sim_time=round(self.world.clock, 2),

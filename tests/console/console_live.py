@@ -11,6 +11,8 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from backend.transport import free_port, loopback_endpoint
@@ -88,6 +90,12 @@ class Live:
         self.robots = Proc([sys.executable, str(HERE / "console_robots.py"), self.endpoint, str(LIBRARY), *specs])
         self.robots.wait_line("ready")
 
+    def start_sim(self, speed: float = 50.0) -> None:
+        """The simulated fleet of the mission's site (instead of start_robots)."""
+        self.robots = Proc([sys.executable, "-m", "backend.cli", "sim", "--mission", str(self.mission), "--connect", self.endpoint,
+                            "--speed", f"{speed:g}", "--seed", "1"], env={"PYTHONUNBUFFERED": "1"})
+        self.robots.wait_line("missionctl sim: world")
+
     def kill_robots(self) -> None:
         if self.robots is not None:
             self.robots.stop(signal.SIGKILL)
@@ -97,3 +105,14 @@ class Live:
         if self.robots is not None:
             self.robots.stop()
         self.stop_server()
+
+
+@contextmanager
+def running(tmp: Path, mission: Path) -> Iterator[Live]:
+    """A started mission server (robots added by the test), closed at the end."""
+    env = Live(tmp, mission)
+    env.start_server()
+    try:
+        yield env
+    finally:
+        env.close()

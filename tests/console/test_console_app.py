@@ -285,7 +285,8 @@ async def test_command_palette_has_every_action_and_says_what_does_not_apply():
         await pilot.pause()
         provider = MissionCommands(app.screen)
         hits = [h async for h in provider.discover()]
-        assert {str(h.display) for h in hits} == {f"Mission: {a.label}" for a in ACTIONS}
+        # on the mission screen: its actions and the app's (screens); map actions only on the map
+        assert {str(h.display) for h in hits} == {f"Mission: {a.label}" for a in ACTIONS if a.scope == "mission"} | {f"Screens: {a.label}" for a in ACTIONS if a.scope == "app"}
         found = {h.text: h for h in [h async for h in provider.search("delete")]}
         assert "does not apply now: lru1-2 is running on lru1" in found["Mission: Delete"].help
         assert max(found.values(), key=lambda h: h.score).text == "Mission: Delete"
@@ -293,6 +294,10 @@ async def test_command_palette_has_every_action_and_says_what_does_not_apply():
         await pilot.pause()
         await pilot.press(*"unsync")
         await wait_until(pilot, lambda: "Mission: Unsync" in screen_text(app), what="palette entry")
+        await pilot.press("escape", "f3")
+        await pilot.pause()
+        on_map = {str(h.display) for h in [h async for h in MissionCommands(app.screen).discover()]}
+        assert {f"Map: {a.label}" for a in ACTIONS if a.scope == "map"} <= on_map
 
 
 async def test_unreachable_server_is_one_clear_screen_with_retry_and_quit():

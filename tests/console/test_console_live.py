@@ -12,7 +12,7 @@ import sys
 import time
 
 import pytest
-from console_live import ROOT, Live
+from console_live import ROOT, running
 from console_state import TUTORIAL, make_app, screen_text, wait_until
 
 from backend.model import Status
@@ -24,12 +24,8 @@ SLOW = 30.0  # bound for things that take well under a second normally
 
 @pytest.fixture
 def live(tmp_path):
-    env = Live(tmp_path, TUTORIAL)
-    env.start_server()
-    try:
+    with running(tmp_path, TUTORIAL) as env:
         yield env
-    finally:
-        env.close()
 
 
 def skill(app, sid):

@@ -141,3 +141,34 @@ def test_unreachable_server(snap_compare):
         assert "Cannot reach the mission server" in screen_text(pilot.app)
 
     assert snap_compare(make_app(), terminal_size=(90, 20), run_before=run_before)
+
+
+def _map_prepare(expect, *, zoom_in=False):
+    from map_state import map_message
+
+    b = mars_mid_execution()
+
+    async def run_before(pilot):
+        app = pilot.app
+        await inject(app, pilot, b, telemetry=mars_telemetry())
+        app.post_message(map_message())
+        app.mission_screen.schedule.select("lru2-5")  # its typed goal is labelled on the map
+        await pilot.pause()
+        await pilot.press("f3")
+        await pilot.pause()
+        if zoom_in:
+            await pilot.press("plus")
+        await pilot.pause()
+        text = screen_text(app)
+        for needle in expect:
+            assert needle in text, f"{needle!r} not on screen:\n{text}"
+
+    return run_before
+
+
+def test_map_robots_markers_explored_area(snap_compare):
+    assert snap_compare(make_app(), terminal_size=(120, 40), run_before=_map_prepare(("lru1 ▶", "lru2 ◷", "POI-B", "ROI-north", "Legend", "sampling region"), zoom_in=True))
+
+
+def test_map_80x24(snap_compare):
+    assert snap_compare(make_app(), terminal_size=(80, 24), run_before=_map_prepare(("lru1", "ROI-north", "cursor (")))

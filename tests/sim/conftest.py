@@ -24,10 +24,10 @@ from typing import Any
 import pytest
 import yaml
 
+from backend import mapfeed as mf
 from backend import transport
 from backend.client import MissionClient
 from backend.transport import free_port, loopback_endpoint
-from sim import mapfeed as mf
 
 ROOT = Path(__file__).resolve().parents[2]
 MISSION = ROOT / "missions" / "mars_sample_return.yaml"

@@ -12,10 +12,10 @@ from typing import Any
 import numpy as np
 import pytest
 
+from backend import mapfeed as mf
 from backend.agent import SkillFailed
 from backend.files import FileProblems
 from backend.model import Pose, Position
-from sim import mapfeed as mf
 from sim.pathing import ROCK, Follower, lawnmower, segment_cells
 from sim.skills import RobotSkills
 from sim.world import World
@@ -350,7 +350,7 @@ def test_mirror_keeps_deltas_that_arrive_before_the_snapshot() -> None:
 
 
 def test_mapfeed_is_self_contained() -> None:
-    """The wire models may move to backend: pydantic + numpy + stdlib only."""
+    """The wire models stay free of transport and sim: pydantic + numpy + stdlib only."""
     import ast
 
     tree = ast.parse(Path(mf.__file__).read_text())

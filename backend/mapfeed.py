@@ -1,8 +1,8 @@
-"""Map feed of the simulated site: wire models, keys, tile codec and a mirror.
+"""Map feed of a site: wire models, keys, tile codec and a mirror.
 
-Self-contained on purpose (pydantic + numpy only, no other import from this
-project): a console may use these models without importing the simulator,
-and they can move to `backend` unchanged.
+The simulator (sim.fleet) publishes it; consoles follow it through
+`backend.mapfollow.MapFeed`. Kept free of transport code (pydantic + numpy
+only) so any process can use the models and the codec.
 
 Key space (all JSON from the models below):
 
@@ -21,8 +21,8 @@ uint8 bytes, row-major)) and only when it changed. Rows go south to north
 Robot poses are not in the feed: they ride on the robots' telemetry.
 
 A late joiner subscribes to the deltas first, then queries the snapshot, and
-applies deltas whose seq follows the snapshot's (`MapMirror` does this; a gap
-means: query the snapshot again).
+applies deltas whose seq follows the snapshot's (`MapMirror` does this; a gap,
+or a delta of another `feed` run, means: query the snapshot again).
 """
 
 from __future__ import annotations
@@ -116,6 +116,7 @@ class MapObjects(_Wire):
 
 
 class MapDelta(_Wire):
+    feed: str = Field("", description="id of this run of the feed; another id means the publisher restarted: fetch the snapshot")
     seq: int = Field(ge=1, description="consecutive; a gap means: fetch the snapshot")
     sim_time: float
     tiles: list[Tile] = Field(default_factory=list)
@@ -123,6 +124,7 @@ class MapDelta(_Wire):
 
 
 class MapSnapshot(_Wire):
+    feed: str = Field("", description="id of this run of the feed (as in its deltas)")
     meta: MapMeta
     seq: int = Field(ge=0, description="the last delta included")
     sim_time: float
@@ -257,6 +259,7 @@ class MapMirror:
 
     def __init__(self) -> None:
         self.meta: MapMeta | None = None
+        self.feed = ""
         self.seq = -1
         self.sim_time = 0.0
         self.layers: dict[str, np.ndarray] = {}
@@ -281,6 +284,7 @@ class MapMirror:
 
     def apply_snapshot(self, snap: MapSnapshot) -> None:
         self.meta = snap.meta
+        self.feed = snap.feed
         self.layers = {n: np.zeros((snap.meta.height, snap.meta.width), dtype=np.uint8) for n in snap.meta.layers}
         self._apply_tiles(snap.tiles)
         self.seq = snap.seq
@@ -288,14 +292,17 @@ class MapMirror:
         self.objects = snap.objects
         early, self._early = self._early, []
         for d in sorted(early, key=lambda d: d.seq):
-            if d.seq > self.seq:
+            if d.seq > self.seq and d.feed == self.feed:
                 self.apply_delta(d)
 
     def apply_delta(self, delta: MapDelta) -> bool:
-        """Apply a delta; False when one was missed (query the snapshot again)."""
+        """Apply a delta; False when one was missed or the publisher restarted
+        (query the snapshot again)."""
         if self.meta is None:
             self._early.append(delta)
             return True
+        if delta.feed != self.feed:
+            return False
         if delta.seq <= self.seq:
             return True  # already in the snapshot
         if delta.seq != self.seq + 1:

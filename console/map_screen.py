@@ -1,0 +1,571 @@
+"""The map screen (app mode "map"): the site, robots, markers and goals.
+
+Layout: top bar / map | legend / info line (cursor, selection, feed) /
+status line / footer. Marker edits and parameter picks go through the same
+operations as everywhere (backend.ops via `app.submit`); the "selected
+skill" is the schedule's cursor on the mission screen.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+from rich.text import Text
+from textual import events, on, work
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical
+from textual.screen import ModalScreen, Screen
+from textual.widgets import Footer, Input, Label, Select, Static
+
+from backend.model import NAME_RE, AreaMarker, Pose, PoseMarker, Position, PositionMarker, Status
+from backend.ops import EditSkill, MarkerAdd, MarkerDelete, MarkerMove, MarkerRename
+
+from .actions import BY_NAME, bindings
+from .dialogs import ConfirmScreen
+from .mapview import (
+    AREA_GLYPH,
+    BOX_GLYPH,
+    FOLLOW_GLYPH,
+    GOAL_GLYPH,
+    LANDER_GLYPH,
+    NO_LINK_GLYPH,
+    POSE_ARROWS,
+    POSITION_GLYPH,
+    ROBOT_ARROWS,
+    RSS_GLYPH,
+    STONE_GLYPH,
+    MapView,
+    centroid,
+    marker_use,
+)
+from .model import CONNECTED, GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel
+from .screens import StatusLine, TopBar
+
+if TYPE_CHECKING:
+    from .app import MissionApp
+
+NO_FEED = "no map feed — is the simulator running?"
+TURN = math.radians(15)
+LEGEND_MIN_WIDTH = 100
+
+
+def legend_text(colours: dict[str, str] | None = None) -> Text:
+    """The legend; `colours` (theme variables) colour its glyphs like the map."""
+    c = colours or {}
+
+    def fg(var: str) -> str:
+        return f"bold {c[var]}" if var in c else "bold"
+
+    t = Text()
+
+    def row(glyph: str, style: str, what: str) -> None:
+        t.append(f" {glyph} ", style=style)
+        t.append(f"{what}\n")
+
+    t.append("Legend\n", style="bold")
+    row(ROBOT_ARROWS[0], "bold", "robot, heading")
+    for st in (Status.RUNNING, Status.PAUSED, Status.SYNCHWAITING, Status.FAILURE, Status.IDLE_SYNCHRONIZED, Status.IDLE):
+        row(GLYPHS[st], fg(f"status-{STATUS_CSS[st]}"), f"  {STATUS_WORDS[st]}")
+    row("✕", fg("presence-offline"), "  offline")
+    row(NO_LINK_GLYPH, fg("presence-offline"), "  out of comms range")
+    row(FOLLOW_GLYPH, "bold", "  followed (f)")
+    row(POSE_ARROWS[0], "bold", "pose marker")
+    row(POSITION_GLYPH, "bold", "position marker")
+    row(AREA_GLYPH, "bold", "area marker")
+    row("●", fg("map-marker-active"), "  used on a robot")
+    row("○", fg("map-marker-bound"), "  used by idle skill")
+    row(GOAL_GLYPH, fg("map-goal"), "goal of a skill")
+    row(LANDER_GLYPH, fg("map-lander"), "lander")
+    row(BOX_GLYPH, fg("map-box"), "payload box")
+    row(RSS_GLYPH, fg("map-rss"), "sampling region")
+    row(STONE_GLYPH, fg("map-stone"), "stone found")
+    row("·", f"on {c['map-unknown']}" if "map-unknown" in c else "", "unexplored")
+    row("~", f"on {c['map-sand']}" if "map-sand" in c else "", "sand (slow)")
+    row("▴", f"on {c['map-rock']}" if "map-rock" in c else "", "rock (impassable)")
+    row(" ", f"on {c['map-link']}" if "map-link" in c else "reverse", "in comms range")
+    row(POSE_ARROWS[0], f"bold {c['map-cursor']}" if "map-cursor" in c else "bold", "cursor (heading)")
+    return t
+
+
+class Legend(Static):
+    DEFAULT_CSS = """
+    Legend { width: 26; height: 100%; border-left: vkey $primary 50%; background: $surface; padding: 0 1; }
+    """
+
+
+class InfoLine(Static):
+    DEFAULT_CSS = """
+    InfoLine { height: 1; padding: 0 1; background: $panel; text-wrap: nowrap; text-overflow: ellipsis; }
+    InfoLine.-nofeed { color: $warning; }
+    """
+
+
+class MarkerPrompt(ModalScreen[tuple[str, str] | None]):
+    """Name (and kind) of a new marker; or a new name for one."""
+
+    BINDINGS = [Binding("escape", "cancel", "Cancel")]
+    DEFAULT_CSS = """
+    MarkerPrompt { align: center middle; }
+    MarkerPrompt > Vertical { width: 60; max-width: 95%; height: auto; border: thick $primary; background: $surface; padding: 1 2; }
+    MarkerPrompt .hint { color: $text-muted; }
+    MarkerPrompt .error { color: $error; }
+    """
+
+    def __init__(self, title: str, default: str, *, kinds: bool = True, kind: str = "pose") -> None:
+        super().__init__()
+        self.title_text = title
+        self.default = default
+        self.kinds = kinds
+        self.kind = kind
+
+    def compose(self) -> ComposeResult:
+        with Vertical():
+            yield Label(self.title_text)
+            yield Input(self.default, id="name")
+            if self.kinds:
+                yield Select([("pose (position + heading)", "pose"), ("position", "position"), ("area (square around the cursor)", "area")],
+                             value=self.kind, allow_blank=False, id="kind")
+            yield Static("enter: ok · escape: cancel", classes="hint")
+            yield Static("", id="error", classes="error")
+
+    def on_mount(self) -> None:
+        self.query_one(Input).focus()
+
+    @on(Input.Submitted)
+    def _submitted(self, event: Input.Submitted) -> None:
+        name = event.value.strip()
+        if not NAME_RE.match(name):
+            self.query_one("#error", Static).update("a name starts with a letter; then letters, digits, _ or -")
+            return
+        kind = str(self.query_one("#kind", Select).value) if self.kinds else ""
+        self.dismiss((name, kind))
+
+    def action_cancel(self) -> None:
+        self.dismiss(None)
+
+
+class MapScreen(Screen):
+    BINDINGS = [
+        *bindings("map"),
+        Binding("up", "cursor(0, -1)", "Up", show=False),
+        Binding("down", "cursor(0, 1)", "Down", show=False),
+        Binding("left", "cursor(-1, 0)", "Left", show=False),
+        Binding("right", "cursor(1, 0)", "Right", show=False),
+        Binding("ctrl+up", "cursor(0, -8)", show=False),
+        Binding("ctrl+down", "cursor(0, 8)", show=False),
+        Binding("ctrl+left", "cursor(-8, 0)", show=False),
+        Binding("ctrl+right", "cursor(8, 0)", show=False),
+        Binding("f1,question_mark", "help", "Help", id="app.help"),
+        Binding("escape", "app.show_mission", "Schedule", show=False),  # "back to the schedule" (help: App keys)
+    ]
+    DEFAULT_CSS = """
+    MapScreen #map-main { height: 1fr; }
+    MapScreen MapView { width: 1fr; height: 100%; }
+    MapScreen.-no-legend Legend { display: none; }
+    """
+
+    def __init__(self, model: ConsoleModel) -> None:
+        super().__init__()
+        self.model = model
+        self.feed_state = "waiting"  # waiting | live | none
+        self._topbar = TopBar(id="map-topbar")
+        self.view = MapView(model, id="map")
+        self._legend = Legend("", id="legend")
+        self._info = InfoLine("", id="map-info")
+        self._status = StatusLine("", id="map-status")
+        self.message = ""
+        self.legend_choice: bool | None = None  # None: by terminal width
+
+    @property
+    def mission_app(self) -> MissionApp:
+        return self.app  # type: ignore[return-value]
+
+    def compose(self) -> ComposeResult:
+        yield self._topbar
+        with Horizontal(id="map-main"):
+            yield self.view
+            yield self._legend
+        yield self._info
+        yield self._status
+        yield Footer()
+
+    def on_mount(self) -> None:
+        self._legend.update(legend_text(self.app.get_css_variables()))
+        self._apply_legend()
+        self.view.focus()
+        self.sync_selection()
+        self.update_top()
+        self.update_info()
+
+    def on_resize(self, event: events.Resize) -> None:
+        self._apply_legend()
+        if not self.view.fitted and (self.view.mirror is None or not self.view.mirror.ready):
+            self.call_after_refresh(self.view.fit_known)
+
+    def on_screen_resume(self) -> None:
+        self.sync_selection()
+        self.view.overlays_changed()
+        self.update_top()
+        self.update_info()
+
+    def _apply_legend(self) -> None:
+        show = self.legend_choice if self.legend_choice is not None else self.app.size.width >= LEGEND_MIN_WIDTH
+        self.set_class(not show, "-no-legend")
+
+    # -- state in (called by the app) ---------------------------------------------------------------
+    def map_changed(self, mirror: Any, update: Any) -> None:
+        kind = getattr(update, "kind", "snapshot")
+        if kind == "none":
+            self.feed_state = "none"
+            if self.view.mirror is not None and not self.view.mirror.ready:
+                self.view.set_mirror(None)
+        elif kind == "snapshot" or self.view.mirror is not mirror:
+            self.feed_state = "live"
+            self.view.set_mirror(mirror)
+        else:
+            self.feed_state = "live"
+            self.view.tiles_changed(update.tiles)
+            if update.objects:
+                self.view.overlays_changed()
+        self.update_info()
+
+    def model_changed(self) -> None:
+        self.sync_selection()
+        if self.view.selected_marker and (self.model.mission is None or self.view.selected_marker not in self.model.mission.markers):
+            self.view.selected_marker = None
+        self.view.overlays_changed()
+        self.update_top()
+        self.update_info()
+
+    def telemetry_changed(self, robot: str) -> None:
+        self.view.robot_moved(robot)
+        if self.view.follow == robot:
+            self.update_info()
+
+    def fleet_changed(self) -> None:
+        self.view.overlays_changed()
+
+    def connection_changed(self) -> None:
+        self.update_top()
+
+    def sync_selection(self) -> None:
+        ms = self.mission_app.mission_screen
+        sid = ms.schedule.cursor_id if ms is not None else None
+        if sid != self.view.selected_skill:
+            self.view.selected_skill = sid
+            self.view.overlays_changed()
+
+    # -- lines ------------------------------------------------------------------------------------------
+    def update_top(self) -> None:
+        m = self.model
+        t = Text()
+        t.append("missionctl map", style="bold")
+        if m.mission is not None:
+            t.append(f"  {m.mission.name}", style="bold")
+            t.append(f"  rev {m.mission.revision}", style="dim")
+        glyph = {"connected": "●", "reconnecting": "⟳", "connecting": "…", "unreachable": "✕", "offline": "○"}.get(m.connection, "?")
+        t.append(f"   {glyph} {m.connection}")
+        t.append("   F2 schedule", style="dim")
+        self._topbar.update(t, layout=False)
+
+    def update_info(self) -> None:
+        v = self.view
+        t = Text()
+        if self.feed_state == "none" or v.mirror is None or not v.mirror.ready:
+            t.append(NO_FEED if self.feed_state == "none" else "waiting for the map feed…", style="bold")
+            t.append("  ")
+        x, y = v.cursor
+        t.append(f"cursor ({x:.1f}, {y:.1f}) {math.degrees(v.heading):.0f}°")
+        t.append(f"  {v.vp.mpp:.2g} m/px", style="dim")
+        if v.follow:
+            t.append(f"  following {v.follow}", style="bold")
+        if v.selected_marker:
+            use = marker_use(self.model).get(v.selected_marker, "unused")
+            t.append(f"  marker {v.selected_marker} ({use})")
+        found = self.model.find(v.selected_skill)
+        if found is not None:
+            t.append(f"  skill {found[2].id} {found[2].skill} ({STATUS_WORDS[found[2].status]})", style="dim")
+        self._info.update(t, layout=False)
+        self._info.set_class(self.feed_state == "none", "-nofeed")
+
+    def say(self, text: str, severity: str = "info") -> None:
+        self.message = text
+        self._status.update(text, layout=False)
+        for c in ("error", "warning", "ok"):
+            self._status.set_class(severity == c, f"-{c}")
+
+    def submit(self, op: Any, what: str, **kw: Any) -> None:
+        self.mission_app.submit(op, what, say=self.say, **kw)
+
+    def _connected(self) -> bool:
+        if self.model.connection != CONNECTED:
+            self.say(f"not connected to the mission server ({self.model.connection}): markers cannot be changed now", "warning")
+            return False
+        return True
+
+    def _marker(self) -> Any:
+        name = self.view.selected_marker
+        m = self.model.mission
+        if name is None or m is None or name not in m.markers:
+            self.say("select a marker first: n selects the next one (the cursor jumps to it)", "warning")
+            return None
+        return m.markers[name]
+
+    # -- actions: view ------------------------------------------------------------------------------------
+    def action_help(self) -> None:
+        self.mission_app.action_help()
+
+    def action_cursor(self, dcol: int, drow: int) -> None:
+        self.view.move_cursor(dcol, drow)
+
+    @on(MapView.CursorMoved)
+    def _cursor_moved(self) -> None:
+        self.update_info()
+
+    def action_map_zoom_in(self) -> None:
+        self.view.zoom(0.5)
+        self.update_info()
+
+    def action_map_zoom_out(self) -> None:
+        self.view.zoom(2.0)
+        self.update_info()
+
+    def action_map_fit(self) -> None:
+        if self.view.mirror is None or not self.view.mirror.ready:
+            self.say("no map yet: nothing to fit", "warning")
+            return
+        self.view.follow = None
+        self.view.fit()
+        self.update_info()
+
+    def _pan(self, dx: int, dy: int) -> None:
+        self.view.follow = None
+        self.view.pan(dx * max(1, self.view.vp.w // 4), dy * max(1, self.view.vp.h // 4))
+        self.update_info()
+
+    def action_map_pan_left(self) -> None:
+        self._pan(-1, 0)
+
+    def action_map_pan_right(self) -> None:
+        self._pan(1, 0)
+
+    def action_map_pan_up(self) -> None:
+        self._pan(0, -1)
+
+    def action_map_pan_down(self) -> None:
+        self._pan(0, 1)
+
+    def action_map_centre(self) -> None:
+        self.view.follow = None
+        self.view.set_view(cx=self.view.cursor[0], cy=self.view.cursor[1])
+        self.update_info()
+
+    def action_map_follow(self) -> None:
+        robots = [r for r in self.model.robot_order() if self.model.robot_kind(r) != "static" and r in self.model.telemetry]
+        if not robots:
+            self.say("no robot position known yet (no telemetry): nothing to follow", "warning")
+            return
+        cur = self.view.follow
+        nxt = robots[(robots.index(cur) + 1)] if cur in robots and robots.index(cur) + 1 < len(robots) else (None if cur in robots else robots[0])
+        self.view.follow = nxt
+        if nxt is None:
+            self.say("stopped following")
+        else:
+            t = self.model.telemetry[nxt]
+            self.view.set_view(cx=t.pose.x, cy=t.pose.y)
+            self.say(f"following {nxt} (f: next robot; moving the view stops it)")
+        self.view.overlays_changed()
+        self.update_info()
+
+    def action_map_turn_left(self) -> None:
+        self.view.heading = (self.view.heading + TURN) % (2 * math.pi)
+        self.view.overlays_changed()
+        self.update_info()
+
+    def action_map_turn_right(self) -> None:
+        self.view.heading = (self.view.heading - TURN) % (2 * math.pi)
+        self.view.overlays_changed()
+        self.update_info()
+
+    def action_map_legend(self) -> None:
+        self.legend_choice = self.has_class("-no-legend")
+        self._apply_legend()
+
+    def action_map_next_marker(self) -> None:
+        m = self.model.mission
+        names = list(m.markers) if m is not None else []
+        if not names:
+            self.say("this mission has no markers: a adds one at the cursor", "warning")
+            return
+        cur = self.view.selected_marker
+        name = names[(names.index(cur) + 1) % len(names)] if cur in names else names[0]
+        self.select_marker(name)
+
+    def select_marker(self, name: str) -> None:
+        mk = self.model.mission.markers[name]
+        self.view.selected_marker = name
+        if mk.kind == "pose":
+            self.view.heading = mk.pose.yaw
+            x, y = mk.pose.x, mk.pose.y
+        elif mk.kind == "position":
+            x, y = mk.position.x, mk.position.y
+        else:
+            x, y = centroid([(p.x, p.y) for p in mk.area])
+        self.view.set_cursor(x, y)
+        self.say(f"marker {name} ({mk.kind}){': ' + mk.description if mk.description else ''}")
+        self.update_info()
+
+    # -- actions: markers -----------------------------------------------------------------------------------
+    def _free_name(self) -> str:
+        taken = set(self.model.mission.markers) if self.model.mission else set()
+        i = 1
+        while f"M{i}" in taken:
+            i += 1
+        return f"M{i}"
+
+    @work(group="dialog")
+    async def action_map_add_marker(self) -> None:
+        if not self._connected():
+            return
+        answer = await self.app.push_screen_wait(MarkerPrompt("New marker at the cursor — name:", self._free_name()))
+        if not answer:
+            return
+        name, kind = answer
+        x, y = (round(c, 1) for c in self.view.cursor)
+        if kind == "pose":
+            marker: Any = PoseMarker(pose=Pose(x=x, y=y, yaw=round(self.view.heading, 3)))
+        elif kind == "position":
+            marker = PositionMarker(position=Position(x=x, y=y))
+        else:
+            r = max(5.0, 4 * self.view.vp.mpp)
+            marker = AreaMarker(area=[Position(x=x - r, y=y - r), Position(x=x + r, y=y - r), Position(x=x + r, y=y + r), Position(x=x - r, y=y + r)])
+
+        def ok(reply: Any) -> None:
+            self.view.selected_marker = name
+            self.say(f"added {kind} marker {name} at ({x:g}, {y:g})", "ok")
+
+        self.submit(MarkerAdd(name=name, marker=marker), f"add marker {name}", on_ok=ok)
+
+    def move_value(self, mk: Any) -> Any:
+        x, y = (round(c, 1) for c in self.view.cursor)
+        if mk.kind == "pose":
+            return Pose(x=x, y=y, z=mk.pose.z, yaw=round(self.view.heading, 3))
+        if mk.kind == "position":
+            return Position(x=x, y=y, z=mk.position.z)
+        cx, cy = centroid([(p.x, p.y) for p in mk.area])
+        return [Position(x=round(p.x + x - cx, 2), y=round(p.y + y - cy, 2), z=p.z) for p in mk.area]
+
+    def action_map_move_marker(self) -> None:
+        mk = self._marker()
+        if mk is None or not self._connected():
+            return
+        name = self.view.selected_marker
+        followers = [s.id for task in self.model.mission.tasks.values() for s in task if s.status == Status.IDLE and name in s.bindings.values()]
+
+        def ok(reply: Any) -> None:
+            x, y = self.view.cursor
+            text = f"moved {name} to ({x:.1f}, {y:.1f})"
+            if followers:
+                text += f"; {', '.join(followers)} follow{'s' if len(followers) == 1 else ''}"
+            stale = reply.value.get("stale", [])
+            if stale:
+                text += f"; {', '.join(stale)} still use{'s' if len(stale) == 1 else ''} the old value — unsynchronize to update"
+            self.say(text, "warning" if stale else "ok")
+
+        self.submit(MarkerMove(name=name, value=self.move_value(mk)), f"move marker {name}", on_ok=ok)
+
+    @work(group="dialog")
+    async def action_map_rename_marker(self) -> None:
+        if self._marker() is None or not self._connected():
+            return
+        old = self.view.selected_marker
+        answer = await self.app.push_screen_wait(MarkerPrompt(f"Rename marker {old} to:", old, kinds=False))
+        if not answer or answer[0] == old:
+            return
+        new = answer[0]
+
+        def ok(reply: Any) -> None:
+            self.view.selected_marker = new
+            self.say(f"renamed {old} to {new}", "ok")
+
+        self.submit(MarkerRename(name=old, new_name=new), f"rename marker {old}", on_ok=ok)
+
+    @work(group="dialog")
+    async def action_map_delete_marker(self) -> None:
+        if self._marker() is None or not self._connected():
+            return
+        name = self.view.selected_marker
+        if not await self.app.push_screen_wait(ConfirmScreen(f"Delete marker {name}? Idle skills bound to it keep its value.", yes="Delete")):
+            self.say("delete cancelled")
+            return
+
+        def ok(reply: Any) -> None:
+            self.view.selected_marker = None
+            self.say(f"deleted marker {name}", "ok")
+
+        self.submit(MarkerDelete(name=name), f"delete marker {name}", on_ok=ok)
+
+    # -- actions: parameters of the selected skill ----------------------------------------------------------
+    def _skill(self) -> Any:
+        self.sync_selection()
+        found = self.model.find(self.view.selected_skill)
+        if found is None:
+            self.say("select a skill on the schedule first (F2), then come back (F3)", "warning")
+            return None
+        why = self.model.read_only_reason(found[2].id)
+        if why:
+            self.say(f"{found[2].id}: {why}", "warning")
+            return None
+        spec = self.model.library.skills.get(found[2].skill) if self.model.library else None
+        if spec is None:
+            self.say(f"{found[2].skill} is not in the skill library", "error")
+            return None
+        return found[0], found[2], spec
+
+    def action_map_bind(self) -> None:
+        mk = self._marker()
+        got = self._skill() if mk is not None else None
+        if got is None:
+            return
+        robot, s, spec = got
+        name = self.view.selected_marker
+        fits = [p for p, ps in spec.params.items() if ps.type == mk.kind]
+        names = [p for p, ps in spec.params.items() if ps.type == "marker" and (not ps.marker_kinds or mk.kind in ps.marker_kinds)]
+        if fits:
+            pname = next((p for p in fits if s.bindings.get(p) != name), fits[0])
+            op = EditSkill(id=s.id, bindings={pname: name})
+        elif names:
+            pname = names[0]
+            op = EditSkill(id=s.id, params={pname: name})
+        else:
+            kinds = ", ".join(f"{p} ({ps.type})" for p, ps in spec.params.items()) or "none"
+            self.say(f"{s.id} ({s.skill}) has no parameter for a {mk.kind} marker; its parameters: {kinds}", "warning")
+            return
+        self.submit(op, f"bind {s.id}.{pname} to {name}", robot=robot, skill=s.id,
+                    on_ok=lambda r: self.say(f"{s.id}: {pname} bound to marker {name}", "ok"))
+
+    def action_map_pick(self) -> None:
+        got = self._skill()
+        if got is None:
+            return
+        robot, s, spec = got
+        params = [(p, ps.type) for p, ps in spec.params.items() if ps.type in ("pose", "position")]
+        if not params:
+            self.say(f"{s.id} ({s.skill}) has no pose or position parameter", "warning")
+            return
+        pname, ptype = params[0]
+        x, y = (round(c, 1) for c in self.view.cursor)
+        value: dict[str, float] = {"x": x, "y": y, "z": 0.0}
+        if ptype == "pose":
+            value |= {"roll": 0.0, "pitch": 0.0, "yaw": round(self.view.heading, 3)}
+        where = f"({x:g}, {y:g})" + (f" heading {math.degrees(self.view.heading):.0f}°" if ptype == "pose" else "")
+        unbound = " (its marker binding is replaced)" if pname in s.bindings else ""
+        self.submit(EditSkill(id=s.id, params={pname: value}), f"set {s.id}.{pname}", robot=robot, skill=s.id,
+                    on_ok=lambda r: self.say(f"{s.id}: {pname} = {where}{unbound}", "ok"))
+
+    # -- disabled keys are explained, like on the mission screen -----------------------------------------------
+    async def run_named(self, action: str) -> None:
+        if action in BY_NAME:
+            await self.run_action(action)

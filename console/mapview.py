@@ -1,0 +1,666 @@
+"""The map widget: the site in text cells, two square "pixels" per cell.
+
+Each cell is a half-block: `▀` with the upper pixel as foreground colour and
+the lower one as background (a space when both are equal). Ground pixels
+come from the map feed's mirror (terrain class, coverage tint); shapes
+(area markers, regions) are drawn as pixels too; points (lander, boxes,
+stones, markers, goals, robots, the cursor) are glyphs with a label. Every
+ground class also has a glyph pattern, and every point a distinct glyph, so
+nothing depends on colour alone.
+
+Rendering is the Line API (`render_line`) with a cache of rendered rows.
+Overlays are recomputed as a dict row -> cells; a change (a robot moving, a
+marker edited) dirties only the rows whose overlay cells differ, and a map
+delta only the rows its tiles cover. Pan, zoom, resize and theme changes
+redraw everything.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from rich.color import Color as RichColor
+from rich.segment import Segment
+from rich.style import Style
+from textual import events
+from textual.color import Color
+from textual.geometry import Region
+from textual.message import Message
+from textual.strip import Strip
+from textual.widget import Widget
+
+from backend.mapfeed import T_FREE, T_ROCK, T_SLOW, T_UNKNOWN, MapMirror
+from backend.model import FINISHED, Status
+
+from .model import GLYPHS, STATUS_CSS, ConsoleModel
+
+UPPER_HALF = "▀"
+OUTSIDE = 8  # ground class of pixels outside the map (0..7: terrain + 4 if covered)
+
+# heading glyphs, counter-clockwise from east in 45° steps
+ROBOT_ARROWS = "▶◥▲◤◀◣▼◢"
+POSE_ARROWS = "→↗↑↖←↙↓↘"
+POSITION_GLYPH = "⊕"
+AREA_GLYPH = "◇"
+LANDER_GLYPH = "⌂"
+BOX_GLYPH = "▣"
+RSS_GLYPH = "◎"
+STONE_GLYPH = "•"
+GOAL_GLYPH = "×"
+OFFLINE_GLYPH = "✕"
+NO_LINK_GLYPH = "⊘"  # out of comms range
+FOLLOW_GLYPH = "⊙"
+
+GROUND_VARS = {T_UNKNOWN: "map-unknown", T_FREE: "map-free", T_SLOW: "map-sand", T_ROCK: "map-rock"}
+COVERAGE_TINT = 0.35
+MIN_MPP, MAX_MPP = 0.25, 64.0
+
+
+def heading_glyph(yaw: float, glyphs: str) -> str:
+    """One of 8 glyphs for a heading (radians, counter-clockwise from east)."""
+    return glyphs[round(yaw / (math.pi / 4)) % 8]
+
+
+# -- half-block rows (pure: unit-tested) -------------------------------------------------
+
+_style_cache: dict[tuple[Any, Any, bool], Style] = {}
+
+
+def _style(fg: RichColor | None, bg: RichColor | None, bold: bool = False) -> Style:
+    key = (fg, bg, bold)
+    st = _style_cache.get(key)
+    if st is None:
+        st = _style_cache[key] = Style(color=fg, bgcolor=bg, bold=bold or None)
+    return st
+
+
+def halfblock_row(
+    top: Sequence[Any],
+    bottom: Sequence[Any],
+    colours: Mapping[Any, RichColor],
+    glyphs: Mapping[int, tuple[str, RichColor, bool, RichColor | None]] | None = None,
+    pattern: Callable[[int, Any], str] | None = None,
+) -> list[Segment]:
+    """Segments of one text row from its two pixel rows.
+
+    `top[i]`/`bottom[i]` are colour keys of column i's upper and lower pixel;
+    a glyph (char, colour, bold, background or None) replaces column i's
+    half-block (by default on the upper pixel's colour); `pattern(i, key)` gives the character drawn where both
+    pixels are equal (" " for none). Runs of equal style are merged."""
+    segs: list[Segment] = []
+    text: list[str] = []
+    run: Style | None = None
+    glyphs = glyphs or {}
+    for i, (a, b) in enumerate(zip(top, bottom, strict=True)):
+        g = glyphs.get(i)
+        if g is not None:
+            ch, st = g[0], _style(g[1], g[3] or colours[a], g[2])
+        elif a == b:
+            ch = pattern(i, a) if pattern is not None else " "
+            st = _style(_pattern_fg(colours[a]) if ch != " " else None, colours[a])
+        else:
+            ch, st = UPPER_HALF, _style(colours[a], colours[b])
+        if st is not run:
+            if text:
+                segs.append(Segment("".join(text), run))
+            text, run = [], st
+        text.append(ch)
+    if text:
+        segs.append(Segment("".join(text), run))
+    return segs
+
+
+_pattern_cache: dict[RichColor, RichColor] = {}
+
+
+def _pattern_fg(bg: RichColor) -> RichColor:
+    """A texture colour: the ground colour, a little lighter."""
+    fg = _pattern_cache.get(bg)
+    if fg is None:
+        fg = _pattern_cache[bg] = Color.from_rich_color(bg).lighten(0.12).rich_color
+    return fg
+
+
+# -- the view's geometry ----------------------------------------------------------------------
+
+
+@dataclass
+class Viewport:
+    """Centre (metres), metres per pixel, size in cells (pixels: w x 2h)."""
+
+    cx: float = 0.0
+    cy: float = 0.0
+    mpp: float = 2.0
+    w: int = 80
+    h: int = 20
+
+    def px_x(self, px: np.ndarray | int) -> Any:
+        return self.cx + (px + 0.5 - self.w / 2) * self.mpp
+
+    def py_y(self, py: int) -> float:
+        return self.cy + (self.h - py - 0.5) * self.mpp
+
+    def to_pixel(self, x: float, y: float) -> tuple[int, int]:
+        return math.floor((x - self.cx) / self.mpp + self.w / 2), math.floor(self.h - (y - self.cy) / self.mpp)
+
+    def to_cell(self, x: float, y: float) -> tuple[int, int]:
+        px, py = self.to_pixel(x, y)
+        return px, py // 2
+
+    def cell_centre(self, col: int, row: int) -> tuple[float, float]:
+        """World position of a cell's centre (between its two pixels)."""
+        return float(self.px_x(col)), self.cy + (self.h - 2 * row - 1) * self.mpp
+
+
+def ground_classes(mirror: MapMirror | None, vp: Viewport, py: int, xs_index: np.ndarray | None) -> np.ndarray:
+    """Ground class (0..7, OUTSIDE) of every pixel of pixel row `py`."""
+    out = np.full(vp.w, OUTSIDE, dtype=np.int16)
+    if mirror is None or mirror.meta is None or xs_index is None:
+        return out
+    m = mirror.meta
+    iy = math.floor((vp.py_y(py) - m.y0) / m.cell)
+    if not 0 <= iy < m.height:
+        return out
+    valid = (xs_index >= 0) & (xs_index < m.width)
+    cols = xs_index[valid]
+    terrain = mirror.layers["terrain"][iy, cols].astype(np.int16)
+    cov = mirror.layers.get("coverage")
+    if cov is not None:
+        terrain = terrain + 4 * (cov[iy, cols] > 0)
+    out[valid] = terrain
+    return out
+
+
+# -- overlays ---------------------------------------------------------------------------------
+
+Cell = tuple[str, str, bool]  # glyph, colour variable, bold
+CURSOR_FG = "map-outside"  # the cursor cell is drawn reversed: this on map-cursor
+
+
+class Overlay:
+    """Glyph cells (row -> col -> Cell) and shape pixels (py -> px -> colour variable)."""
+
+    def __init__(self, vp: Viewport) -> None:
+        self.vp = vp
+        self.cells: dict[int, dict[int, Cell]] = {}
+        self.pixels: dict[int, dict[int, str]] = {}
+        self.where: dict[str, tuple[int, int]] = {}  # thing -> its cell (tests, clicks)
+        self.strong: set[tuple[int, int]] = set()  # cells holding a glyph (labels never cover them)
+        self._labels: list[tuple[int, int, str, str]] = []
+
+    def put(self, col: int, row: int, ch: str, var: str, bold: bool = False, *, label: bool = False) -> None:
+        if 0 <= col < self.vp.w and 0 <= row < self.vp.h:
+            if label and (col, row) in self.strong:
+                return
+            if not label:
+                self.strong.add((col, row))
+            self.cells.setdefault(row, {})[col] = (ch, var, bold)
+
+    def point(self, key: str, x: float, y: float, ch: str, var: str, label: str = "", label_var: str = "map-label", bold: bool = True) -> None:
+        col, row = self.vp.to_cell(x, y)
+        self.where[key] = (col, row)
+        self.put(col, row, ch, var, bold)
+        if label:
+            self._labels.append((col + 2, row, label, label_var))
+
+    def place_labels(self) -> None:
+        """Labels after all glyphs, the most important (drawn last) first.
+        A label goes right of its glyph, else left, above or below, wherever
+        it covers no glyph and no earlier label; else right, cut short."""
+        for col, row, text, var in reversed(self._labels):
+            n = len(text)
+            spots = [(col, row), (col - n - 3, row), (col - 2 - n // 2, row - 1), (col - 2 - n // 2, row + 1)]
+            for c0, r0 in spots:
+                if 0 <= r0 < self.vp.h and c0 >= 0 and c0 + n <= self.vp.w and not any(c0 + i in self.cells.get(r0, {}) for i in range(n)):
+                    break
+            else:
+                c0, r0 = col, row
+            taken = self.cells.get(r0, {})
+            for i, c in enumerate(text):
+                if c0 + i in taken:
+                    break
+                self.put(c0 + i, r0, c, var, label=True)
+        self._labels.clear()
+
+    def cursor(self, x: float, y: float, arrow: str) -> None:
+        """The cursor: the glyph under it (or the heading arrow), reversed."""
+        col, row = self.vp.to_cell(x, y)
+        self.where["cursor"] = (col, row)
+        under = self.cells.get(row, {}).get(col) if (col, row) in self.strong else None
+        self.put(col, row, under[0] if under else arrow, CURSOR_FG, True)
+
+    def pixel(self, px: int, py: int, var: str) -> None:
+        if 0 <= px < self.vp.w and 0 <= py < 2 * self.vp.h:
+            self.pixels.setdefault(py, {})[px] = var
+
+    def line(self, a: tuple[float, float], b: tuple[float, float], var: str) -> None:
+        """Pixels of a segment, clipped to the view first (zoomed in, a long
+        edge would otherwise cost a pixel step per metre off screen)."""
+        clipped = clip_segment(self.vp.to_pixel(*a), self.vp.to_pixel(*b), self.vp.w, 2 * self.vp.h)
+        if clipped is None:
+            return
+        (x0, y0), (x1, y1) = clipped
+        n = max(abs(round(x1) - round(x0)), abs(round(y1) - round(y0)), 1)
+        for k in range(n + 1):
+            self.pixel(round(x0 + (x1 - x0) * k / n), round(y0 + (y1 - y0) * k / n), var)
+
+    def polygon(self, pts: list[tuple[float, float]], var: str) -> None:
+        for i, p in enumerate(pts):
+            self.line(p, pts[(i + 1) % len(pts)], var)
+
+    def circle(self, x: float, y: float, r: float, var: str) -> None:
+        n = max(12, int(2 * math.pi * r / self.vp.mpp))
+        if n > 2000:
+            return
+        pts = [(x + r * math.cos(2 * math.pi * k / n), y + r * math.sin(2 * math.pi * k / n)) for k in range(n)]
+        for p in pts:
+            px, py = self.vp.to_pixel(*p)
+            self.pixel(px, py, var)
+
+    def row_signature(self, row: int) -> tuple:
+        return (
+            tuple(sorted(self.cells.get(row, {}).items())),
+            tuple(sorted(self.pixels.get(2 * row, {}).items())),
+            tuple(sorted(self.pixels.get(2 * row + 1, {}).items())),
+        )
+
+
+def clip_segment(a: tuple[float, float], b: tuple[float, float], w: int, h: int) -> tuple[tuple[float, float], tuple[float, float]] | None:
+    """The part of segment a-b inside [-1, w] x [-1, h] (Liang-Barsky), or None."""
+    (x0, y0), (x1, y1) = a, b
+    dx, dy = x1 - x0, y1 - y0
+    t0, t1 = 0.0, 1.0
+    for p, q in ((-dx, x0 + 1), (dx, w - x0), (-dy, y0 + 1), (dy, h - y0)):
+        if p == 0:
+            if q < 0:
+                return None
+            continue
+        t = q / p
+        if p < 0:
+            t0 = max(t0, t)
+        else:
+            t1 = min(t1, t)
+        if t0 > t1:
+            return None
+    return (x0 + t0 * dx, y0 + t0 * dy), (x0 + t1 * dx, y0 + t1 * dy)
+
+
+def robot_status(model: ConsoleModel, robot: str) -> tuple[str, str]:
+    """(glyph, colour variable) of what a robot is doing, for its map label."""
+    if not model.is_online(robot):
+        return OFFLINE_GLYPH, "presence-offline"
+    act, queued = model.robot_state(robot)
+    if act is not None:
+        st = act.status
+    else:
+        finished = [s for s in model.task(robot) if s.status in FINISHED]
+        if finished and finished[-1].status == Status.FAILURE:
+            st = Status.FAILURE  # halted after a failure: the operator decides
+        else:
+            st = Status.IDLE_SYNCHRONIZED if queued else Status.IDLE
+    return GLYPHS[st], f"status-{STATUS_CSS[st]}"
+
+
+def marker_use(model: ConsoleModel) -> dict[str, str]:
+    """marker -> 'active' (a skill on a robot uses it), 'bound' (idle skills
+    only) or 'unused'."""
+    m = model.mission
+    if m is None:
+        return {}
+    use = dict.fromkeys(m.markers, "unused")
+    for task in m.tasks.values():
+        for s in task:
+            if s.status in FINISHED:
+                continue
+            names = set(s.bindings.values()) | {v for v in s.params.values() if isinstance(v, str) and v in use}
+            for name in names:
+                if name in use:
+                    if s.status != Status.IDLE:
+                        use[name] = "active"
+                    elif use[name] == "unused":
+                        use[name] = "bound"
+    return use
+
+
+MARKER_USE_GLYPH = {"active": " ●", "bound": " ○", "unused": ""}
+
+
+def skill_goals(model: ConsoleModel) -> list[tuple[str, str, float, float, Status]]:
+    """(robot, skill id, x, y, status) of the pose/position parameters of
+    unfinished skills that are typed values (bound ones sit on their marker)."""
+    m, lib = model.mission, model.library
+    if m is None or lib is None:
+        return []
+    out = []
+    for robot, task in m.tasks.items():
+        for s in task:
+            if s.status in FINISHED:
+                continue
+            spec = lib.skills.get(s.skill)
+            if spec is None:
+                continue
+            for pname, p in spec.params.items():
+                v = s.params.get(pname)
+                if p.type in ("pose", "position") and pname not in s.bindings and isinstance(v, dict) and "x" in v and "y" in v:
+                    out.append((robot, s.id, float(v["x"]), float(v["y"]), s.status))
+    return out
+
+
+# -- the widget -------------------------------------------------------------------------------
+
+
+class MapView(Widget, can_focus=True):
+    """Draws the map of a `ConsoleModel` plus a map mirror; posts `CursorMoved`."""
+
+    DEFAULT_CSS = """
+    MapView { background: $background; }
+    """
+
+    class CursorMoved(Message):
+        pass
+
+    def __init__(self, model: ConsoleModel, *, id: str | None = None) -> None:
+        super().__init__(id=id)
+        self.model = model
+        self.mirror: MapMirror | None = None
+        self.vp = Viewport()
+        self.cursor = (0.0, 0.0)
+        self.heading = 0.0  # radians, for picked poses and new pose markers
+        self.follow: str | None = None
+        self.selected_marker: str | None = None
+        self.selected_skill: str | None = None
+        self.fitted = False
+        self._rows: dict[int, Strip] = {}
+        self._overlay = Overlay(self.vp)
+        self._colours: dict[Any, RichColor] = {}
+        self._colour_key: Any = None
+        self._xs_index: np.ndarray | None = None
+        self.rendered_rows = 0  # rows actually rendered (not from the cache): tests, benchmark
+
+    # -- colours ----------------------------------------------------------------------------
+    def _palette(self) -> dict[Any, RichColor]:
+        key = self.app.theme
+        if key == self._colour_key:
+            return self._colours
+        v = self.app.get_css_variables()
+
+        def col(name: str) -> Color:
+            return Color.parse(v.get(name, "#808080"))
+
+        link = col("map-link")
+        pal: dict[Any, RichColor] = {}
+        for t, name in GROUND_VARS.items():
+            base = col(name)
+            pal[t] = base.rich_color
+            pal[t + 4] = base.blend(link, COVERAGE_TINT).rich_color
+        pal[OUTSIDE] = col("map-outside").rich_color
+        for name, value in v.items():
+            if name.startswith(("map-", "status-", "presence-")):
+                pal[name] = Color.parse(value).rich_color
+        self._colours, self._colour_key = pal, key
+        return pal
+
+    def notify_style_update(self) -> None:
+        self._colour_key = None
+        self._rows.clear()
+        super().notify_style_update()
+
+    # -- state in -------------------------------------------------------------------------------
+    def set_mirror(self, mirror: MapMirror | None) -> None:
+        self.mirror = mirror
+        if mirror is not None and mirror.ready and not self.fitted:
+            self.fit_known()
+        self._index_columns()
+        self.redraw_all()
+
+    def tiles_changed(self, tiles: list[tuple[str, int, int]]) -> None:
+        """Repaint the rows that show these tiles."""
+        m = self.mirror.meta if self.mirror is not None else None
+        if m is None:
+            return
+        rows: set[int] = set()
+        for _layer, _tx, ty in tiles:
+            y_lo = m.y0 + ty * m.tile * m.cell
+            y_hi = y_lo + m.tile * m.cell
+            top = self.vp.to_pixel(0, y_hi)[1] // 2
+            bottom = self.vp.to_pixel(0, y_lo)[1] // 2
+            rows.update(range(max(0, top), min(self.vp.h - 1, bottom) + 1))
+        self._dirty(rows)
+
+    def overlays_changed(self) -> None:
+        """Recompute the glyphs; repaint only the rows whose glyphs differ."""
+        old = self._overlay
+        new = self._build_overlay()
+        self._overlay = new
+        rows = {r for r in set(old.cells) | set(new.cells) | {p // 2 for p in set(old.pixels) | set(new.pixels)}
+                if old.row_signature(r) != new.row_signature(r)}
+        self._dirty(rows)
+
+    def redraw_all(self) -> None:
+        self._overlay = self._build_overlay()
+        self._rows.clear()
+        self.refresh()
+
+    def _dirty(self, rows: set[int]) -> None:
+        w = self.size.width
+        for r in rows:
+            self._rows.pop(r, None)
+            self.refresh(Region(0, r, w, 1))
+
+    # -- view -------------------------------------------------------------------------------------
+    def _index_columns(self) -> None:
+        m = self.mirror.meta if self.mirror is not None else None
+        if m is None:
+            self._xs_index = None
+            return
+        xs = self.vp.px_x(np.arange(self.vp.w))
+        self._xs_index = np.floor((xs - m.x0) / m.cell).astype(np.int64)
+
+    def on_resize(self, event: events.Resize) -> None:
+        self.vp.w, self.vp.h = max(1, event.size.width), max(1, event.size.height)
+        if not self.fitted and self.mirror is not None and self.mirror.ready:
+            self.fit_known()
+        self._index_columns()
+        self.redraw_all()
+        self.post_message(self.CursorMoved())
+
+    def fit(self) -> None:
+        """Zoom and centre so the whole site fits."""
+        m = self.mirror.meta if self.mirror is not None else None
+        if m is None:
+            return
+        self._fit_box(m.x0, m.x0 + m.width * m.cell, m.y0, m.y0 + m.height * m.cell, pad=1.0)
+
+    def fit_known(self) -> None:
+        """Zoom and centre on what is known: robots, markers, the lander and
+        the explored area (the whole site is mostly unknown at first)."""
+        pts: list[tuple[float, float]] = [(t.pose.x, t.pose.y) for t in self.model.telemetry.values()]
+        m = self.model.mission
+        for mk in m.markers.values() if m is not None else []:
+            if mk.kind == "pose":
+                pts.append((mk.pose.x, mk.pose.y))
+            elif mk.kind == "position":
+                pts.append((mk.position.x, mk.position.y))
+            else:
+                pts += [(p.x, p.y) for p in mk.area]
+        mirror = self.mirror
+        if mirror is not None and mirror.meta is not None:
+            g = mirror.meta
+            if mirror.objects is not None:
+                pts.append((mirror.objects.lander.x, mirror.objects.lander.y))
+            rows, cols = np.nonzero(mirror.layers["terrain"] != T_UNKNOWN)
+            if len(rows):
+                pts += [(g.x0 + cols.min() * g.cell, g.y0 + rows.min() * g.cell),
+                        (g.x0 + (cols.max() + 1) * g.cell, g.y0 + (rows.max() + 1) * g.cell)]
+        if not pts:
+            self.fit()
+            return
+        xs, ys = [p[0] for p in pts], [p[1] for p in pts]
+        self._fit_box(min(xs), max(xs), min(ys), max(ys), pad=1.2)
+
+    def _fit_box(self, x0: float, x1: float, y0: float, y1: float, pad: float) -> None:
+        if self.size.width == 0:
+            return  # not laid out yet: fitted on the first resize
+        wm, hm = max(x1 - x0, 20.0) * pad, max(y1 - y0, 20.0) * pad
+        self.vp.cx, self.vp.cy = (x0 + x1) / 2, (y0 + y1) / 2
+        self.vp.mpp = min(MAX_MPP, max(wm / max(1, self.vp.w), hm / max(1, 2 * self.vp.h), MIN_MPP))
+        self.fitted = self.mirror is not None and self.mirror.ready  # without a map: fit again when it comes
+        self._index_columns()
+        self.redraw_all()
+
+    def set_view(self, cx: float | None = None, cy: float | None = None, mpp: float | None = None) -> None:
+        if cx is not None:
+            self.vp.cx = cx
+        if cy is not None:
+            self.vp.cy = cy
+        if mpp is not None:
+            self.vp.mpp = min(MAX_MPP, max(MIN_MPP, mpp))
+        self.fitted = True
+        self._index_columns()
+        self.redraw_all()
+
+    def zoom(self, factor: float) -> None:
+        self.set_view(mpp=self.vp.mpp * factor)
+        self.keep_cursor_visible(centre=False)
+
+    def pan(self, dx_cells: int, dy_cells: int) -> None:
+        self.set_view(cx=self.vp.cx + dx_cells * self.vp.mpp, cy=self.vp.cy - 2 * dy_cells * self.vp.mpp)
+
+    def centre_on(self, x: float, y: float) -> None:
+        """Centre the view (snapped to whole pixels, so a still view does not shimmer)."""
+        px, py = self.vp.to_pixel(x, y)
+        if (px, py) != (self.vp.w // 2, self.vp.h):
+            self.set_view(cx=x, cy=y)
+
+    def move_cursor(self, dcol: int, drow: int) -> None:
+        x, y = self.cursor
+        self.cursor = (x + dcol * self.vp.mpp, y - 2 * drow * self.vp.mpp)
+        self.keep_cursor_visible()
+        self.overlays_changed()
+        self.post_message(self.CursorMoved())
+
+    def set_cursor(self, x: float, y: float) -> None:
+        self.cursor = (x, y)
+        self.keep_cursor_visible()
+        self.overlays_changed()
+        self.post_message(self.CursorMoved())
+
+    def keep_cursor_visible(self, centre: bool = False) -> None:
+        col, row = self.vp.to_cell(*self.cursor)
+        if centre or not (0 <= col < self.vp.w and 0 <= row < self.vp.h):
+            if self.follow is not None:
+                self.follow = None  # the operator took the view
+            self.set_view(cx=self.cursor[0], cy=self.cursor[1])
+
+    def robot_moved(self, robot: str) -> None:
+        if self.follow == robot:
+            t = self.model.telemetry.get(robot)
+            if t is not None:
+                self.centre_on(t.pose.x, t.pose.y)
+        self.overlays_changed()
+
+    def on_click(self, event: events.Click) -> None:
+        self.set_cursor(*self.vp.cell_centre(event.x, event.y))
+
+    # -- overlays -----------------------------------------------------------------------------------
+    def _build_overlay(self) -> Overlay:
+        ov = Overlay(self.vp)
+        model = self.model
+        mission = model.mission
+        use = marker_use(model)
+        objects = self.mirror.objects if self.mirror is not None else None
+        # shapes first: glyphs go on top
+        if objects is not None:
+            for r in objects.rss:
+                ov.circle(r.x, r.y, r.radius, "map-rss")
+        if mission is not None:
+            for name, mk in mission.markers.items():
+                if mk.kind == "area":
+                    ov.polygon([(p.x, p.y) for p in mk.area], f"map-marker-{use.get(name, 'unused')}")
+        for _robot, sid, x, y, st in skill_goals(model):
+            label = sid if sid == self.selected_skill else ""
+            ov.point(f"goal:{sid}", x, y, GOAL_GLYPH, f"status-{STATUS_CSS[st]}", label, "map-goal")
+        if objects is not None:
+            lander = objects.lander
+            ov.point("lander", lander.x, lander.y, LANDER_GLYPH, "map-lander", "lander")
+            for r in objects.rss:
+                score = f" {r.top_score:g}" if r.top_score is not None else ""
+                ov.point(f"rss:{r.rss}", r.x, r.y, RSS_GLYPH, "map-rss", r.rss + score, "map-rss")
+            for b in objects.boxes:
+                if b.where == "ground":
+                    ov.point(f"box:{b.box}", b.x, b.y, BOX_GLYPH, "map-box", b.box + (" on" if b.on else ""), "map-box")
+            for s in objects.stones:
+                if s.state in ("identified", "ground"):
+                    ov.point(f"stone:{s.id}", s.x, s.y, STONE_GLYPH, "map-stone")
+        if mission is not None:
+            for name, mk in mission.markers.items():
+                var = f"map-marker-{use.get(name, 'unused')}"
+                label = name + MARKER_USE_GLYPH[use.get(name, "unused")]
+                if name == self.selected_marker:
+                    label = f"[{label}]"
+                if mk.kind == "pose":
+                    ov.point(f"marker:{name}", mk.pose.x, mk.pose.y, heading_glyph(mk.pose.yaw, POSE_ARROWS), var, label, var)
+                elif mk.kind == "position":
+                    ov.point(f"marker:{name}", mk.position.x, mk.position.y, POSITION_GLYPH, var, label, var)
+                else:
+                    cx, cy = centroid([(p.x, p.y) for p in mk.area])
+                    ov.point(f"marker:{name}", cx, cy, AREA_GLYPH, var, label, var)
+        for robot in model.robot_order():
+            if model.robot_kind(robot) == "static":
+                continue  # the lander is drawn from the feed
+            t = model.telemetry.get(robot)
+            if t is None:
+                continue
+            glyph, var = robot_status(model, robot)
+            arrow = heading_glyph(t.pose.yaw, ROBOT_ARROWS)
+            name = f"{robot} {glyph}" + (f" {NO_LINK_GLYPH}" if not t.in_range else "") + (f" {FOLLOW_GLYPH}" if self.follow == robot else "")
+            ov.point(f"robot:{robot}", t.pose.x, t.pose.y, arrow, var, name, var)
+        ov.place_labels()
+        ov.cursor(self.cursor[0], self.cursor[1], heading_glyph(self.heading, POSE_ARROWS))
+        return ov
+
+    # -- rendering ------------------------------------------------------------------------------------
+    def render_line(self, y: int) -> Strip:
+        strip = self._rows.get(y)
+        if strip is not None:
+            return strip
+        self.rendered_rows += 1
+        pal = self._palette()
+        vp = self.vp
+        w = self.size.width
+        top = ground_classes(self.mirror, vp, 2 * y, self._xs_index).tolist()
+        bottom = ground_classes(self.mirror, vp, 2 * y + 1, self._xs_index).tolist()
+        for py, keys in ((2 * y, top), (2 * y + 1, bottom)):
+            for px, var in self._overlay.pixels.get(py, {}).items():
+                if px < len(keys):
+                    keys[px] = var
+        glyphs = {
+            col: (ch, pal.get(var) or pal["map-label"], bold, pal["map-cursor"] if var == CURSOR_FG else None)
+            for col, (ch, var, bold) in self._overlay.cells.get(y, {}).items()
+        }
+        origin = round(vp.cx / vp.mpp) - vp.w // 2  # texture fixed to the ground, not the screen
+        strip = Strip(halfblock_row(top, bottom, pal, glyphs, lambda i, k: _texture(origin + i, y, k))).crop_extend(0, w, None)
+        self._rows[y] = strip
+        return strip
+
+
+def _texture(x: int, row: int, key: Any) -> str:
+    """Patterns where a whole cell is one ground class (colour is not alone)."""
+    if not isinstance(key, int):
+        return " "
+    t = key % 4 if key != OUTSIDE else -1
+    if t == T_UNKNOWN:
+        return "·" if (x + 2 * row) % 4 == 0 else " "
+    if t == T_ROCK:
+        return "▴"
+    if t == T_SLOW:
+        return "~" if (x + row) % 3 == 0 else " "
+    return " "
+
+
+def centroid(pts: list[tuple[float, float]]) -> tuple[float, float]:
+    return sum(p[0] for p in pts) / len(pts), sum(p[1] for p in pts) / len(pts)
