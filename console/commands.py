@@ -23,25 +23,34 @@ class MissionCommands(Provider):
         if screen is None:
             return
         keys = getattr(self.app, "action_keys", lambda: {})()
+        # the screen the palette was opened on (its own actions are offered too)
+        here = getattr(self.screen, "SCOPE", "mission") if self.screen is not screen else "mission"
         for a in ACTIONS:
-            why = screen.why_disabled(a.name)
+            if a.scope not in ("mission", "app", here):
+                continue
+            why = screen.why_disabled(a.name) if a.scope == "mission" else None
             key = keys.get(a.name, a.key)
             help_text = f"{key} · {a.description}" + (f" — does not apply now: {why}" if why else "")
-            yield a, help_text, partial(self._run, a.name)
+            yield a, help_text, partial(self._run, a)
 
-    async def _run(self, name: str) -> None:
-        screen = self._screen()
-        if screen is not None:
-            await screen.run_named(name)
+    async def _run(self, a) -> None:
+        if a.scope == "mission":
+            screen = self._screen()
+            if screen is not None:
+                await screen.run_named(a.name)
+        elif a.scope == "app":
+            await self.app.run_action(a.name)
+        else:
+            await self.screen.run_action(a.name)
 
     async def discover(self) -> Hits:
         for a, help_text, run in self._entries():
-            yield DiscoveryHit(f"Mission: {a.label}", run, help=help_text)
+            yield DiscoveryHit(a.palette_title, run, help=help_text)
 
     async def search(self, query: str) -> Hits:
         matcher = self.matcher(query)
         for a, help_text, run in self._entries():
-            text = f"Mission: {a.label}"
+            text = a.palette_title
             score = max(matcher.match(text), matcher.match(a.description) * 0.5)
             if score > 0:
                 yield Hit(score, matcher.highlight(text), run, text=text, help=help_text)

@@ -124,12 +124,13 @@ class SkillPicker(ModalScreen[str | None]):
     SkillPicker .hint { color: $text-muted; }
     """
 
-    def __init__(self, robot: str, skills: list[str], library: Library, where: str) -> None:
+    def __init__(self, robot: str, skills: list[str], library: Library, where: str, offered_by: dict[str, str] | None = None) -> None:
         super().__init__()
         self.robot = robot
         self.skills = skills
         self.library = library
         self.where = where
+        self.offered_by = offered_by or {}  # skill -> "also offered by: lru2"
 
     def compose(self) -> ComposeResult:
         with Vertical():
@@ -147,7 +148,8 @@ class SkillPicker(ModalScreen[str | None]):
         spec = self.library.skills.get(name)
         desc = spec.description if spec else ""
         title = matcher.highlight(name) if matcher else Text(name)
-        prompt = Text.assemble(title if isinstance(title, Text) else Text(str(title)), "\n", (f"  {desc}", "dim"))
+        others = self.offered_by.get(name)
+        prompt = Text.assemble(title if isinstance(title, Text) else Text(str(title)), (f"  · {others}" if others else "", "italic"), "\n", (f"  {desc}", "dim"))
         return Option(prompt, id=name)
 
     def _fill(self, query: str) -> None:

@@ -1,16 +1,14 @@
-"""The console's default theme and its status colour variables.
+"""The status colour variables every theme sets, and the default theme's name.
 
-Every colour that carries meaning is a theme variable, so a theme file (part
-2: themes/*.yaml, light, high-contrast, colour-blind-safe) only has to set
-them. The defaults are declared in `STATUS_DEFAULTS`, which the app returns
+Every colour that carries meaning is a theme variable, so a theme file
+(console/themes/*.yaml: dark, light, high-contrast, colour-blind-safe; loaded
+by console/themes.py) only has to set them. The defaults are declared in `STATUS_DEFAULTS`, which the app returns
 from `get_theme_variable_defaults()` so any theme (also Textual's own) parses.
 Colours are picked to stay distinct in 256 colours (over SSH COLORTERM is
 usually not forwarded); the status glyphs carry the meaning without colour.
 """
 
 from __future__ import annotations
-
-from textual.theme import Theme
 
 DEFAULT_THEME = "missionctl-dark"
 
@@ -31,19 +29,3 @@ STATUS_DEFAULTS: dict[str, str] = {
     "progress-bar": "#5fd7ff",
     "battery-low": "#ff8700",
 }
-
-MISSIONCTL_DARK = Theme(
-    name=DEFAULT_THEME,
-    primary="#3a7bd5",
-    secondary="#5f87af",
-    accent="#d787ff",
-    warning="#ffaf00",
-    error="#ff5f5f",
-    success="#5fd75f",
-    foreground="#dde3ea",
-    background="#121820",
-    surface="#1a222c",
-    panel="#24303c",
-    dark=True,
-    variables=dict(STATUS_DEFAULTS),
-)

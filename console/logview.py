@@ -1,0 +1,128 @@
+"""The event log screen: every operation (which console and user), robot
+report, refusal, failure and alert, newest last; filter by robot, kind and
+text; export what is shown to a JSON-lines file (ctrl+e). The console keeps
+the last `LOG_LIMIT` entries in memory."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from rich.text import Text
+from textual import on, work
+from textual.app import ComposeResult
+from textual.widgets import DataTable, Footer, Input, Static
+
+from .actions import bindings
+from .dialogs import PathPrompt
+from .eventlog import LOG_LIMIT, LogEntry, entry_matches
+from .model import fmt_clock
+from .views import ViewScreen
+
+KIND_VARS = {"failure": "status-failure", "refusal": "error", "alert": "warning", "report": "status-running", "operation": "secondary"}
+
+
+class EventLogScreen(ViewScreen):
+    SCOPE = "log"
+    TOPICS = ("log",)
+    BINDINGS = [*ViewScreen.BINDINGS, *bindings("log")]
+
+    DEFAULT_CSS = """
+    EventLogScreen #filter { height: 3; }
+    EventLogScreen DataTable { height: 1fr; }
+    EventLogScreen #log-hint { height: 1; padding: 0 1; color: $text-muted; }
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.query_text = ""
+        self.last_seq = 0  # newest entry in the table
+        self.rows: list[int] = []  # seqs shown, oldest first
+
+    def compose(self) -> ComposeResult:
+        yield self.title_bar
+        yield Input(placeholder="filter: robot:lru1 kind:failure words…  (kinds: operation report refusal failure alert)", id="filter")
+        yield DataTable(id="log", cursor_type="row")
+        yield Static(f"last {LOG_LIMIT:,} entries kept in memory · ctrl+e export shown entries (JSON lines) · F2 schedule", id="log-hint")
+        yield Footer()
+
+    def on_mount(self) -> None:
+        t = self.query_one(DataTable)
+        for label, key in (("Time", "at"), ("Kind", "kind"), ("Robot", "robot"), ("Who", "who"), ("What", "text")):
+            t.add_column(label, key=key)
+        self.start()
+        self.query_one(Input).focus()
+
+    @property
+    def log_(self):
+        return self.mission_app.event_log
+
+    def shown_entries(self) -> list[LogEntry]:
+        return self.log_.select(self.query_text)
+
+    def _cells(self, e: LogEntry) -> list:
+        who = f"{e.user}@{e.client}" if e.user else e.client
+        colour = self.colour(KIND_VARS.get(e.kind, ""), "")
+        # Text, not str: a str cell is parsed as markup ("[lru1] …" would vanish)
+        return [Text(fmt_clock(e.at)), Text(e.kind, style=colour), Text(", ".join(e.robots)), Text(who), Text(e.text)]
+
+    def _add(self, t: DataTable, entries: list[LogEntry]) -> None:
+        for e in entries:
+            t.add_row(*self._cells(e), key=str(e.seq))
+            self.rows.append(e.seq)
+        if entries:
+            self.last_seq = entries[-1].seq
+
+    def redraw(self) -> None:
+        if not self.ready:
+            return
+        t = self.query_one(DataTable)
+        with self.app.batch_update():
+            t.clear()
+            self.rows = []
+            self.last_seq = self.log_.seq
+            self._add(t, self.shown_entries())
+            t.move_cursor(row=max(0, t.row_count - 1))
+        self._title()
+
+    def update_view(self, topic: str, robot: str | None) -> None:
+        """New entries: append (and drop rows the bounded log forgot)."""
+        t = self.query_one(DataTable)
+        at_end = t.cursor_row >= t.row_count - 1
+        entries = self.log_.entries
+        new = [e for e in entries if e.seq > self.last_seq] if entries and entries[-1].seq > self.last_seq else []
+        self.last_seq = self.log_.seq
+        oldest = entries[0].seq if entries else 0
+        with self.app.batch_update():
+            while self.rows and self.rows[0] < oldest:
+                t.remove_row(str(self.rows.pop(0)))
+            self._add(t, [e for e in new if entry_matches(e, self.query_text)])
+            if at_end:
+                t.move_cursor(row=max(0, t.row_count - 1))
+        self._title()
+
+    def _title(self) -> None:
+        n = len(self.log_.entries)
+        shown = f" · {len(self.rows)} match '{self.query_text}'" if self.query_text else ""
+        self.set_title(("Event log", "bold"), f"  {n} entries{shown}")
+
+    @on(Input.Changed, "#filter")
+    def _filter(self, event: Input.Changed) -> None:
+        self.query_text = event.value.strip()
+        self.redraw()
+
+    @on(Input.Submitted, "#filter")
+    def _to_table(self) -> None:
+        self.query_one(DataTable).focus()
+
+    @work(group="dialog")
+    async def action_export(self) -> None:
+        entries = self.shown_entries()
+        path = await self.app.push_screen_wait(PathPrompt(f"Export {len(entries)} event-log entries (JSON lines) to", "missionctl-log.jsonl"))
+        if not path:
+            return
+        try:
+            n = self.log_.export(Path(path), entries)
+        except OSError as e:
+            self.app.notify(f"{path}: {e.strerror or e}", title="Export failed", severity="error")
+            return
+        self.app.notify(f"{n} entries written to {path}", title="Event log exported")
