@@ -77,7 +77,7 @@ ACTIONS: list[Action] = [
     Action("show_log", "f5,4", "Log", "Show the event log: operations, reports, refusals, failures, alerts", "Screens", True, "app"),
     Action("show_alerts", "f6,5", "Alerts", "Show the alert list (acknowledge alerts there)", "Screens", True, "app"),
     # screen-specific
-    Action("export", "ctrl+e", "Export", "Export the shown event-log entries to a JSON-lines file", "Event log", True, "log"),
+    Action("export", "ctrl+s", "Export", "Export the shown event-log entries to a JSON-lines file", "Event log", True, "log"),
     Action("ack", "enter,a", "Acknowledge", "Acknowledge the selected alert", "Alerts", True, "alerts"),
     Action("ack_all", "A", "Ack all", "Acknowledge every alert", "Alerts", True, "alerts"),
 ]

@@ -151,7 +151,7 @@ def _summary(batch: ev.EventBatch, model: ConsoleModel) -> tuple[list[str], list
             case ev.SkillChanged(id=sid, changes=ch):
                 robot(model.owner(sid))
                 status = ch.get("status")
-                parts.append(f"{sid} {status}" if status else f"{sid} {', '.join(sorted(ch))}")
+                parts.append(f"{sid} {status}" if status else f"{sid} {_changes(ch)}")
             case ev.BarrierSet(id=bid, barrier=b):
                 for sid in b.skills:
                     robot(model.owner(sid))
@@ -169,6 +169,15 @@ def _summary(batch: ev.EventBatch, model: ConsoleModel) -> tuple[list[str], list
     if len(parts) > 4:
         parts = parts[:4] + [f"… {len(parts) - 4} more"]
     return robots, parts
+
+
+def _changes(ch: dict) -> str:
+    """'label=find a stone, params' — short values shown, the rest named."""
+    out = []
+    for k in sorted(ch):
+        v = ch[k]
+        out.append(f"{k}={v}" if isinstance(v, str | int | float) and len(str(v)) <= 30 else k)
+    return ", ".join(out)
 
 
 def entry_matches(e: LogEntry, query: str) -> bool:

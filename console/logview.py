@@ -1,6 +1,6 @@
 """The event log screen: every operation (which console and user), robot
 report, refusal, failure and alert, newest last; filter by robot, kind and
-text; export what is shown to a JSON-lines file (ctrl+e). The console keeps
+text; export what is shown to a JSON-lines file (ctrl+s). The console keeps
 the last `LOG_LIMIT` entries in memory."""
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ class EventLogScreen(ViewScreen):
         yield self.title_bar
         yield Input(placeholder="filter: robot:lru1 kind:failure words…  (kinds: operation report refusal failure alert)", id="filter")
         yield DataTable(id="log", cursor_type="row")
-        yield Static(f"last {LOG_LIMIT:,} entries kept in memory · ctrl+e export shown entries (JSON lines) · F2 schedule", id="log-hint")
+        yield Static(f"last {LOG_LIMIT:,} entries kept in memory · ctrl+s export shown entries (JSON lines) · F2 schedule", id="log-hint")
         yield Footer()
 
     def on_mount(self) -> None:

@@ -12,11 +12,19 @@ from __future__ import annotations
 import os
 from functools import lru_cache
 from pathlib import Path
+from typing import Annotated
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+from rich.color import STANDARD_PALETTE, ColorSystem
 from rich.color import Color as RichColor
-from rich.color import ColorSystem
-from rich.color import STANDARD_PALETTE
 from rich.segment import Segment
 from rich.style import Style
 from textual.color import Color, ColorParseError
@@ -55,6 +63,9 @@ def _colour(v: str) -> str:
     return v
 
 
+Colour = Annotated[str, AfterValidator(_colour)]
+
+
 class ThemeFile(BaseModel):
     """One theme file."""
 
@@ -72,22 +83,12 @@ class ThemeFile(BaseModel):
     background: str | None = None
     surface: str | None = None
     panel: str | None = None
-    variables: dict[str, str] = Field(description="every key of STATUS_DEFAULTS, plus any extra")
+    variables: dict[str, Colour] = Field(description="every key of STATUS_DEFAULTS, plus any extra")
 
     @field_validator("primary", "secondary", "accent", "warning", "error", "success", "foreground", "background", "surface", "panel")
     @classmethod
     def _is_colour(cls, v: str | None) -> str | None:
         return None if v is None else _colour(v)
-
-    @field_validator("variables")
-    @classmethod
-    def _colours(cls, v: dict[str, str]) -> dict[str, str]:
-        for key, value in v.items():
-            try:
-                _colour(value)
-            except ValueError as e:
-                raise ValueError(f"{key}: {e}") from None
-        return v
 
     @model_validator(mode="after")
     def _complete(self) -> ThemeFile:
