@@ -252,7 +252,14 @@ async def awareness_scenario(app: Any, pilot: Any) -> Builder:
     low battery and out of range."""
     from backend.ops import EditSkill
     from backend.protocol import Alert
-    from console.messages import AlertReceived, ConnectionChanged, EventsApplied, FleetChanged, StateLoaded, TelemetryChanged
+    from console.messages import (
+        AlertReceived,
+        ConnectionChanged,
+        EventsApplied,
+        FleetChanged,
+        StateLoaded,
+        TelemetryChanged,
+    )
 
     pin_clock(app)
     b = Builder(MARS)

@@ -3,7 +3,16 @@ with keys (pilot) on injected state (console_state.awareness_scenario)."""
 
 from __future__ import annotations
 
-from console_state import MARS, Builder, awareness_scenario, inject, make_app, mars_fleet_with_manifests, screen_text, wait_until
+from console_state import (
+    MARS,
+    Builder,
+    awareness_scenario,
+    inject,
+    make_app,
+    mars_fleet_with_manifests,
+    screen_text,
+    wait_until,
+)
 
 from backend.protocol import RobotInfo
 from console.alertview import AlertScreen
