@@ -39,7 +39,7 @@ class AlertScreen(ViewScreen):
 
     def on_mount(self) -> None:
         t = self.query_one(DataTable)
-        for label, key in (("", "ack"), ("Time", "at"), ("Level", "level"), ("Kind", "kind"), ("Robot", "robot"), ("From", "source"), ("What", "message")):
+        for label, key in (("", "ack"), ("Time", "at"), ("Kind", "kind"), ("Robot", "robot"), ("What", "message"), ("Level", "level"), ("From", "source")):
             t.add_column(label, key=key)
         self.start()
         t.focus()
@@ -55,11 +55,11 @@ class AlertScreen(ViewScreen):
         return [
             Text("✓" if a.acknowledged else "●", style="dim" if a.acknowledged else f"bold {self.colour('warning')}"),
             Text(fmt_clock(a.at)),
-            level,
             Text(KIND_WORDS.get(a.kind, a.kind)),
             Text(a.robot or ""),
-            Text(a.source),
             Text(a.message + count, style=style or "dim"),
+            level,
+            Text(a.source),
         ]
 
     def redraw(self) -> None:

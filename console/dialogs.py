@@ -17,7 +17,7 @@ from textual.widgets.option_list import Option
 from backend.library import Library
 
 from .actions import ACTIONS, APP_KEYS, EDITOR_KEYS, NAV_KEYS
-from .model import GLYPHS, STATUS_WORDS
+from .model import GLYPHS, STATUS_CSS, STATUS_WORDS
 from .params import settle_cursors
 
 
@@ -241,9 +241,11 @@ class HelpScreen(ModalScreen[None]):
         for k, label, d in APP_KEYS:
             row(k, label, d)
         t.append("\nStatuses\n", style="bold underline")
+        colours = getattr(self.app, "theme_variables", {})
         for status, glyph in GLYPHS.items():
-            t.append(f"  {glyph}  ", style="bold")
-            t.append(f"{status.value:<18}", style="")
+            colour = colours.get(f"status-{STATUS_CSS[status]}", "")
+            t.append(f"  {glyph}  ", style=f"bold {colour}".strip())
+            t.append(f"{status.value:<18}", style=colour)
             t.append(f"{STATUS_WORDS[status]}\n", style="dim")
         t.append("  [b1]", style="bold")
         t.append("  barrier tag: partner skills wait for each other\n", style="dim")

@@ -29,6 +29,7 @@ class EventLogScreen(ViewScreen):
     DEFAULT_CSS = """
     EventLogScreen #filter { height: 3; }
     EventLogScreen DataTable { height: 1fr; }
+    EventLogScreen #entry { height: auto; max-height: 4; padding: 0 1; background: $surface; border-top: solid $primary 50%; }
     EventLogScreen #log-hint { height: 1; padding: 0 1; color: $text-muted; }
     """
 
@@ -42,12 +43,13 @@ class EventLogScreen(ViewScreen):
         yield self.title_bar
         yield Input(placeholder="filter: robot:lru1 kind:failure words…  (kinds: operation report refusal failure alert)", id="filter")
         yield DataTable(id="log", cursor_type="row")
+        yield Static("", id="entry")  # the selected entry in full (the table cuts at 80 columns)
         yield Static(f"last {LOG_LIMIT:,} entries kept in memory · ctrl+s export shown entries (JSON lines) · F2 schedule", id="log-hint")
         yield Footer()
 
     def on_mount(self) -> None:
         t = self.query_one(DataTable)
-        for label, key in (("Time", "at"), ("Kind", "kind"), ("Robot", "robot"), ("Who", "who"), ("What", "text")):
+        for label, key in (("Time", "at"), ("Kind", "kind"), ("Robot", "robot"), ("What", "text"), ("Who", "who")):
             t.add_column(label, key=key)
         self.start()
         self.query_one(Input).focus()
@@ -63,7 +65,7 @@ class EventLogScreen(ViewScreen):
         who = f"{e.user}@{e.client}" if e.user else e.client
         colour = self.colour(KIND_VARS.get(e.kind, ""), "")
         # Text, not str: a str cell is parsed as markup ("[lru1] …" would vanish)
-        return [Text(fmt_clock(e.at)), Text(e.kind, style=colour), Text(", ".join(e.robots)), Text(who), Text(e.text)]
+        return [Text(fmt_clock(e.at)), Text(e.kind, style=colour), Text(", ".join(e.robots)), Text(e.text), Text(who)]
 
     def _add(self, t: DataTable, entries: list[LogEntry]) -> None:
         for e in entries:
@@ -83,6 +85,7 @@ class EventLogScreen(ViewScreen):
             self._add(t, self.shown_entries())
             t.move_cursor(row=max(0, t.row_count - 1))
         self._title()
+        self._show_entry()
 
     def update_view(self, topic: str, robot: str | None) -> None:
         """New entries: append (and drop rows the bounded log forgot)."""
@@ -104,6 +107,25 @@ class EventLogScreen(ViewScreen):
         n = len(self.log_.entries)
         shown = f" · {len(self.rows)} match '{self.query_text}'" if self.query_text else ""
         self.set_title(("Event log", "bold"), f"  {n} entries{shown}")
+
+    @on(DataTable.RowHighlighted)
+    def _highlighted(self, event: DataTable.RowHighlighted) -> None:
+        self._show_entry()
+
+    def _show_entry(self) -> None:
+        t = self.query_one(DataTable)
+        box = self.query_one("#entry", Static)
+        if not self.rows or t.cursor_row >= len(self.rows):
+            box.update(Text("no entry matches the filter" if self.query_text else "nothing happened yet", style="dim"))
+            return
+        seq = self.rows[t.cursor_row]
+        e = next((x for x in self.log_.entries if x.seq == seq), None)
+        if e is None:
+            return
+        who = f"{e.user} on {e.client}" if e.user else e.client
+        out = Text.assemble((f"{fmt_clock(e.at)} {e.kind}", "bold"), f"  {', '.join(e.robots)}  " if e.robots else "  ", e.text)
+        out.append(f"\nby {who}" + (f" · op {e.op}" if e.op else "") + (f" · revision {e.revision}" if e.revision is not None else ""), style="dim")
+        box.update(out)
 
     @on(Input.Changed, "#filter")
     def _filter(self, event: Input.Changed) -> None:

@@ -220,6 +220,10 @@ class MissionScreen(Screen):
         m = self.model
         t = Text()
         t.append("missionctl", style="bold")
+        alerts = getattr(self.app, "alerts", None)
+        unacked = alerts.unacknowledged if alerts is not None else 0
+        if unacked:  # the badge, first so 80 columns show it: F6 lists them
+            t.append(f" ⚠ {unacked} alert{'s' if unacked > 1 else ''} (F6) ", style="bold reverse")
         if m.mission is not None:
             t.append(f"  {m.mission.name}", style="bold")
             t.append(f"  rev {m.mission.revision}", style="dim")
@@ -232,10 +236,6 @@ class MissionScreen(Screen):
             t.append(f" — {m.connection_detail}", style="dim")
         if self.schedule.marks:
             t.append(f"   marked: {', '.join(self.schedule.marks)}", style="bold")
-        alerts = getattr(self.app, "alerts", None)
-        unacked = alerts.unacknowledged if alerts is not None else 0
-        if unacked:  # the badge: F6 lists them
-            t.append(f"   ⚠ {unacked} alert{'s' if unacked > 1 else ''} (F6)", style="bold reverse")
         bar = self._topbar
         if t.plain == getattr(bar, "shown", None):
             return

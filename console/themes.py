@@ -1,4 +1,4 @@
-"""Theme files: console/themes/*.yaml (shipped) and <config dir>/themes/*.yaml (the user's).
+"""Theme files: themes/*.yaml (shipped) and <config dir>/themes/*.yaml (the user's).
 
 A theme file is validated by `ThemeFile`: a name, dark or light, Textual's
 base colours and every status/presence variable of `theme.STATUS_DEFAULTS`,
@@ -10,6 +10,7 @@ crash. A user theme with the name of a shipped one replaces it.
 from __future__ import annotations
 
 import os
+import sys
 from functools import lru_cache
 from pathlib import Path
 from typing import Annotated
@@ -36,7 +37,16 @@ from backend.files import pydantic_issues
 
 from .theme import STATUS_DEFAULTS
 
-SHIPPED_DIR = Path(__file__).resolve().parent / "themes"
+
+def _shipped_dir() -> Path:
+    """The repository's themes/ (next to missions/, found the same way); a
+    wheel install puts them in <prefix>/share/missionctl/themes (pyproject)."""
+    repo = Path(__file__).resolve().parents[1] / "themes"
+    installed = Path(sys.prefix) / "share" / "missionctl" / "themes"
+    return repo if repo.is_dir() or not installed.is_dir() else installed
+
+
+SHIPPED_DIR = _shipped_dir()
 
 # in 16 colours statuses get colours of the standard ANSI palette, one each for
 # the statuses that must not merge (the glyphs still carry the meaning)

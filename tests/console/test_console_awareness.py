@@ -25,7 +25,7 @@ from console.messages import FleetChanged, StateLoaded
 from console.screens import MissionScreen
 from console.themes import ANSI16_STATUS
 
-SIZE = (110, 30)
+SIZE = (130, 30)
 
 
 async def test_keys_switch_between_the_screens():
