@@ -5,6 +5,7 @@ the last `LOG_LIMIT` entries in memory."""
 
 from __future__ import annotations
 
+from itertools import takewhile
 from pathlib import Path
 
 from rich.text import Text
@@ -92,7 +93,8 @@ class EventLogScreen(ViewScreen):
         t = self.query_one(DataTable)
         at_end = t.cursor_row >= t.row_count - 1
         entries = self.log_.entries
-        new = [e for e in entries if e.seq > self.last_seq] if entries and entries[-1].seq > self.last_seq else []
+        # the new ones are at the end: walk back only over them
+        new = list(takewhile(lambda e: e.seq > self.last_seq, reversed(entries)))[::-1]
         self.last_seq = self.log_.seq
         oldest = entries[0].seq if entries else 0
         with self.app.batch_update():
