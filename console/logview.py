@@ -19,6 +19,8 @@ from .eventlog import LOG_LIMIT, LogEntry, entry_matches
 from .model import fmt_clock
 from .views import ViewScreen
 
+SHOW_LIMIT = 1_000  # rows in the table (a DataTable of 10k rows takes seconds to fill); export writes all matches
+
 KIND_VARS = {"failure": "status-failure", "refusal": "error", "alert": "warning", "report": "status-running", "operation": "secondary"}
 
 
@@ -39,6 +41,7 @@ class EventLogScreen(ViewScreen):
         self.query_text = ""
         self.last_seq = 0  # newest entry in the table
         self.rows: list[int] = []  # seqs shown, oldest first
+        self.matching = 0  # entries matching the filter (the table shows the last SHOW_LIMIT)
 
     def compose(self) -> ComposeResult:
         yield self.title_bar
@@ -83,7 +86,9 @@ class EventLogScreen(ViewScreen):
             t.clear()
             self.rows = []
             self.last_seq = self.log_.seq
-            self._add(t, self.shown_entries())
+            matching = self.shown_entries()
+            self.matching = len(matching)
+            self._add(t, matching[-SHOW_LIMIT:])
             t.move_cursor(row=max(0, t.row_count - 1))
         self._title()
         self._show_entry()
@@ -98,17 +103,28 @@ class EventLogScreen(ViewScreen):
         self.last_seq = self.log_.seq
         oldest = entries[0].seq if entries else 0
         with self.app.batch_update():
+            evicting = len(entries) == entries.maxlen
             while self.rows and self.rows[0] < oldest:
                 t.remove_row(str(self.rows.pop(0)))
-            self._add(t, [e for e in new if entry_matches(e, self.query_text)])
+            added = [e for e in new if entry_matches(e, self.query_text)]
+            if not self.query_text:
+                self.matching = len(entries)
+            elif evicting:  # forgotten entries may have matched: count again
+                self.matching = sum(1 for e in entries if entry_matches(e, self.query_text))
+            else:
+                self.matching += len(added)
+            self._add(t, added)
+            while len(self.rows) > SHOW_LIMIT:
+                t.remove_row(str(self.rows.pop(0)))
             if at_end:
                 t.move_cursor(row=max(0, t.row_count - 1))
         self._title()
 
     def _title(self) -> None:
         n = len(self.log_.entries)
-        shown = f" · {len(self.rows)} match '{self.query_text}'" if self.query_text else ""
-        self.set_title(("Event log", "bold"), f"  {n} entries{shown}")
+        shown = f" · {self.matching} match '{self.query_text}'" if self.query_text else ""
+        more = f" · showing the last {len(self.rows):,}" if len(self.rows) < self.matching else ""
+        self.set_title(("Event log", "bold"), f"  {n} entries{shown}{more}")
 
     @on(DataTable.RowHighlighted)
     def _highlighted(self, event: DataTable.RowHighlighted) -> None:

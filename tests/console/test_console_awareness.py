@@ -231,3 +231,26 @@ async def test_sixteen_colours_give_each_status_its_own_ansi_colour():
         app.theme = "missionctl-light"  # any theme: the statuses stay ANSI
         await pilot.pause()
         assert app.theme_variables["status-failure"] == ANSI16_STATUS["status-failure"]
+
+
+async def test_log_screen_shows_the_last_entries_of_a_long_log():
+    from console.logview import SHOW_LIMIT
+
+    app = make_app()
+    async with app.run_test(size=SIZE) as pilot:
+        await awareness_scenario(app, pilot)
+        app.event_log.entries = type(app.event_log.entries)(app.event_log.entries, maxlen=SHOW_LIMIT + 200)
+        for i in range(SHOW_LIMIT + 300):  # the log forgets its oldest 100 + scenario entries
+            app.event_log.add("report", f"▶ lru1-{i} running", app.clock(), robots=["lru1"])
+        await pilot.press("f5")
+        await wait_until(pilot, lambda: isinstance(app.screen, EventLogScreen), what="log")
+        screen = app.screen
+        assert len(screen.rows) == SHOW_LIMIT and screen.matching == SHOW_LIMIT + 200
+        assert f"showing the last {SHOW_LIMIT:,}" in screen_text(app)
+        app.event_log.add("refusal", "one more", app.clock(), robots=["lru2"])
+        app.awareness_signal.publish(("log", None))
+        await pilot.pause()
+        assert screen.rows[-1] == app.event_log.seq and len(screen.rows) == SHOW_LIMIT
+        assert screen.rows[0] >= app.event_log.entries[0].seq
+        await pilot.press(*"robot:lru2")
+        await wait_until(pilot, lambda: screen.matching == 1 and screen.rows == [app.event_log.seq], what="only the lru2 line left in the log")
