@@ -19,13 +19,9 @@ KIND_WORDS = {"failure": "failure", "offline": "offline", "out_of_range": "out o
 
 class AlertScreen(ViewScreen):
     SCOPE = "alerts"
+    COLUMNS = (("", "ack"), ("Time", "at"), ("Kind", "kind"), ("Robot", "robot"), ("What", "message"), ("Level", "level"), ("From", "source"))
     TOPICS = ("alerts",)
     BINDINGS = [*ViewScreen.BINDINGS, *bindings("alerts")]
-
-    DEFAULT_CSS = """
-    AlertScreen DataTable { height: 1fr; }
-    AlertScreen #alerts-hint { height: 1; padding: 0 1; color: $text-muted; }
-    """
 
     def __init__(self) -> None:
         super().__init__()
@@ -34,15 +30,8 @@ class AlertScreen(ViewScreen):
     def compose(self) -> ComposeResult:
         yield self.title_bar
         yield DataTable(id="alerts", cursor_type="row")
-        yield Static("enter/a acknowledge · A acknowledge all · F2 schedule · F5 event log", id="alerts-hint")
+        yield Static("enter/a acknowledge · A acknowledge all · F2 schedule · F5 event log", classes="hint")
         yield Footer()
-
-    def on_mount(self) -> None:
-        t = self.query_one(DataTable)
-        for label, key in (("", "ack"), ("Time", "at"), ("Kind", "kind"), ("Robot", "robot"), ("What", "message"), ("Level", "level"), ("From", "source")):
-            t.add_column(label, key=key)
-        self.start()
-        t.focus()
 
     @property
     def book(self):

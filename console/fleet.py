@@ -19,34 +19,20 @@ SPARK = 6  # samples shown per sparkline (the model keeps model.HISTORY)
 
 class FleetScreen(ViewScreen):
     SCOPE = "fleet"
+    COLUMNS = (("Robot", "robot"), ("Presence", "presence"), ("Type", "type"), ("Battery", "battery"), ("Link", "link"), ("Doing", "doing"), ("Last report", "report"))
     TOPICS = ("fleet",)
-
-    DEFAULT_CSS = """
-    FleetScreen #filter { height: 3; }
-    FleetScreen DataTable { height: 1fr; }
-    FleetScreen #detail { height: auto; max-height: 12; padding: 0 1; background: $surface; border-top: solid $primary 50%; }
-    FleetScreen #fleet-hint { height: 1; padding: 0 1; color: $text-muted; }
-    """
 
     def __init__(self) -> None:
         super().__init__()
-        self.query_text = ""
         self.shown: list[str] = []
 
     def compose(self) -> ComposeResult:
         yield self.title_bar
         yield Input(placeholder="filter by capability: pick_stone · type:lru · module:arm · prop:…", id="filter")
         yield DataTable(id="robots", cursor_type="row", zebra_stripes=False)
-        yield Static("", id="detail")
-        yield Static("type to filter · ↑↓ robot · tab to the table · F2 schedule", id="fleet-hint")
+        yield Static("", id="detail", classes="detail")
+        yield Static("type to filter · ↑↓ robot · tab to the table · F2 schedule", classes="hint")
         yield Footer()
-
-    def on_mount(self) -> None:
-        t = self.query_one(DataTable)
-        for label, key in (("Robot", "robot"), ("Presence", "presence"), ("Type", "type"), ("Battery", "battery"), ("Link", "link"), ("Doing", "doing"), ("Last report", "report")):
-            t.add_column(label, key=key)
-        self.start()
-        self.query_one(Input).focus()
 
     @property
     def model(self):
@@ -166,15 +152,6 @@ class FleetScreen(ViewScreen):
         detail.update(out)
 
     # -- events ---------------------------------------------------------------------------
-    @on(Input.Changed, "#filter")
-    def _filter(self, event: Input.Changed) -> None:
-        self.query_text = event.value.strip()
-        self.redraw()
-
-    @on(Input.Submitted, "#filter")
-    def _to_table(self) -> None:
-        self.query_one(DataTable).focus()
-
     @on(DataTable.RowHighlighted)
     def _highlighted(self) -> None:
         self._detail()

@@ -26,19 +26,12 @@ KIND_VARS = {"failure": "status-failure", "refusal": "error", "alert": "warning"
 
 class EventLogScreen(ViewScreen):
     SCOPE = "log"
+    COLUMNS = (("Time", "at"), ("Kind", "kind"), ("Robot", "robot"), ("What", "text"), ("Who", "who"))
     TOPICS = ("log",)
     BINDINGS = [*ViewScreen.BINDINGS, *bindings("log")]
 
-    DEFAULT_CSS = """
-    EventLogScreen #filter { height: 3; }
-    EventLogScreen DataTable { height: 1fr; }
-    EventLogScreen #entry { height: auto; max-height: 4; padding: 0 1; background: $surface; border-top: solid $primary 50%; }
-    EventLogScreen #log-hint { height: 1; padding: 0 1; color: $text-muted; }
-    """
-
     def __init__(self) -> None:
         super().__init__()
-        self.query_text = ""
         self.last_seq = 0  # newest entry in the table
         self.rows: list[int] = []  # seqs shown, oldest first
         self.matching = 0  # entries matching the filter (the table shows the last SHOW_LIMIT)
@@ -47,16 +40,9 @@ class EventLogScreen(ViewScreen):
         yield self.title_bar
         yield Input(placeholder="filter: robot:lru1 kind:failure words…  (kinds: operation report refusal failure alert)", id="filter")
         yield DataTable(id="log", cursor_type="row")
-        yield Static("", id="entry")  # the selected entry in full (the table cuts at 80 columns)
-        yield Static(f"last {LOG_LIMIT:,} entries kept in memory · ctrl+s export shown entries (JSON lines) · F2 schedule", id="log-hint")
+        yield Static("", id="entry", classes="detail")  # the selected entry in full (the table cuts at 80 columns)
+        yield Static(f"last {LOG_LIMIT:,} entries kept in memory · ctrl+s export shown entries (JSON lines) · F2 schedule", classes="hint")
         yield Footer()
-
-    def on_mount(self) -> None:
-        t = self.query_one(DataTable)
-        for label, key in (("Time", "at"), ("Kind", "kind"), ("Robot", "robot"), ("What", "text"), ("Who", "who")):
-            t.add_column(label, key=key)
-        self.start()
-        self.query_one(Input).focus()
 
     @property
     def log_(self):
@@ -144,15 +130,6 @@ class EventLogScreen(ViewScreen):
         out = Text.assemble((f"{fmt_clock(e.at)} {e.kind}", "bold"), f"  {', '.join(e.robots)}  " if e.robots else "  ", e.text)
         out.append(f"\nby {who}" + (f" · op {e.op}" if e.op else "") + (f" · revision {e.revision}" if e.revision is not None else ""), style="dim")
         box.update(out)
-
-    @on(Input.Changed, "#filter")
-    def _filter(self, event: Input.Changed) -> None:
-        self.query_text = event.value.strip()
-        self.redraw()
-
-    @on(Input.Submitted, "#filter")
-    def _to_table(self) -> None:
-        self.query_one(DataTable).focus()
 
     @work(group="dialog")
     async def action_export(self) -> None:
