@@ -3,6 +3,7 @@ with keys (pilot) on injected state (console_state.awareness_scenario)."""
 
 from __future__ import annotations
 
+import pytest
 from console_state import (
     MARS,
     Builder,
@@ -254,3 +255,55 @@ async def test_log_screen_shows_the_last_entries_of_a_long_log():
         assert screen.rows[0] >= app.event_log.entries[0].seq
         await pilot.press(*"robot:lru2")
         await wait_until(pilot, lambda: screen.matching == 1 and screen.rows == [app.event_log.seq], what="only the lru2 line left in the log")
+
+
+TERM_PROBE = """
+import sys
+from console.app import MissionApp
+
+class Probe(MissionApp):
+    def on_mount(self):
+        super().on_mount()
+        self.set_timer(0.2, lambda: self.exit(0))
+
+app = Probe()
+app.run()
+print(f"ansi16={app.ansi16} failure={app.theme_variables.get('status-failure')}", file=sys.stderr)
+"""
+
+
+@pytest.mark.parametrize(("term", "ansi16"), [("xterm", True), ("xterm-256color", False)])
+def test_a_16_colour_terminal_is_detected(term, ansi16):
+    """A real terminal (pty) with TERM=xterm and no COLORTERM, as over SSH."""
+    import os
+    import pty
+    import select
+    import subprocess
+    import sys
+    import time
+
+    from console_state import ROOT
+
+    env = {k: v for k, v in os.environ.items() if k not in ("COLORTERM", "TEXTUAL_COLOR_SYSTEM", "NO_COLOR")}
+    env["TERM"] = term
+    master, slave = pty.openpty()
+    p = subprocess.Popen([sys.executable, "-c", TERM_PROBE], stdin=slave, stdout=slave, stderr=subprocess.PIPE, env=env, cwd=ROOT)
+    os.close(slave)
+    deadline = time.monotonic() + 30
+    try:
+        while p.poll() is None and time.monotonic() < deadline:
+            if select.select([master], [], [], 0.2)[0]:
+                try:
+                    os.read(master, 65536)  # drain the screen output
+                except OSError:
+                    break
+        assert p.wait(max(0.1, deadline - time.monotonic())) == 0
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+        os.close(master)
+    report = p.stderr.read().decode(errors="replace")
+    p.stderr.close()
+    expected = ANSI16_STATUS["status-failure"] if ansi16 else "#ff5f5f"
+    assert f"ansi16={ansi16} failure={expected}" in report
