@@ -307,3 +307,19 @@ def test_a_16_colour_terminal_is_detected(term, ansi16):
     p.stderr.close()
     expected = ANSI16_STATUS["status-failure"] if ansi16 else "#ff5f5f"
     assert f"ansi16={ansi16} failure={expected}" in report
+
+
+async def test_screen_keys_are_remappable():
+    app = make_app(config=ConsoleConfig(keymap={"app.show_fleet": "f9", "alerts.ack_all": "ctrl+a"}))
+    async with app.run_test(size=SIZE) as pilot:
+        await awareness_scenario(app, pilot)
+        assert app.action_keys()["show_fleet"] == "f9"
+        await pilot.press("f4")  # no longer bound
+        await pilot.pause()
+        assert app.screen is app.mission_screen
+        await pilot.press("f9")
+        await wait_until(pilot, lambda: isinstance(app.screen, FleetScreen), what="fleet on f9")
+        await pilot.press("f6")
+        await wait_until(pilot, lambda: isinstance(app.screen, AlertScreen), what="alerts")
+        await pilot.press("ctrl+a")
+        await wait_until(pilot, lambda: app.alerts.unacknowledged == 0, what="all acknowledged with ctrl+a")
