@@ -323,3 +323,22 @@ async def test_screen_keys_are_remappable():
         await wait_until(pilot, lambda: isinstance(app.screen, AlertScreen), what="alerts")
         await pilot.press("ctrl+a")
         await wait_until(pilot, lambda: app.alerts.unacknowledged == 0, what="all acknowledged with ctrl+a")
+
+
+async def test_palette_offers_the_shown_screens_own_actions():
+    from console.commands import MissionCommands
+
+    app = make_app()
+    async with app.run_test(size=SIZE) as pilot:
+        await awareness_scenario(app, pilot)
+        await pilot.press("f5")
+        await wait_until(pilot, lambda: isinstance(app.screen, EventLogScreen), what="log")
+        titles = {str(h.display) for h in [h async for h in MissionCommands(app.screen).discover()]}
+        assert {"Event log: Export", "Screen: Alerts", "Mission: Sync"} <= titles
+        assert "Alerts: Ack all" not in titles  # that one belongs to the alert list
+        await pilot.press("ctrl+p")
+        await pilot.pause()
+        await pilot.press(*"export")
+        await wait_until(pilot, lambda: "Event log: Export" in screen_text(app), what="palette entry")
+        await pilot.press("enter")
+        await wait_until(pilot, lambda: isinstance(app.screen, PathPrompt), what="export prompt from the palette")
