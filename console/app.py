@@ -84,7 +84,6 @@ class MissionApp(App[int]):
         notices: list[str] | tuple[str, ...] = (),
         client_id: str | None = None,
         colors: int | None = None,
-        theme_dirs: list | None = None,
     ) -> None:
         super().__init__()
         self.config = config or ConsoleConfig()
@@ -95,7 +94,7 @@ class MissionApp(App[int]):
         self.ansi16 = False
         if colors == 16:
             self._use_16_colours()
-        themes, problems = load_themes(theme_dirs)
+        themes, problems = load_themes()
         self.notices.extend(problems)
         for t in themes.values():
             self.register_theme(t)
