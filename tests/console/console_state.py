@@ -299,6 +299,9 @@ async def awareness_scenario(app: Any, pilot: Any) -> Builder:
     post(AlertReceived(Alert(level="warning", kind="offline", robot="lander", message="robot lander went offline", at=T0)))
     post(TelemetryChanged(Telemetry(robot="lru1", battery=0.66, link=0.2, in_range=False, mode="executing", skill="lru1-1", at=T0)))
     post(TelemetryChanged(Telemetry(robot="lru2", battery=0.15, link=0.9, mode="idle", at=T0)))
-    await pilot.pause()
+    # every message handled (under load a pause or two is not enough)
+    await wait_until(pilot, lambda: len(app.event_log.entries) == 12 and len(app.alerts.alerts) == 5
+                     and app.alerts.alerts[-1].kind == "low_battery" and app.model.robots["lander"].online is False,
+                     what="the scenario's messages handled")
     await pilot.pause()
     return b
