@@ -7,6 +7,8 @@
 
 `MISSIONCTL_CONFIG` or `--config` point elsewhere. A broken file never stops
 the console: its problems are shown as a notification and defaults apply.
+A theme picked in the command palette is written back (`save_theme`), the
+rest of the file kept.
 """
 
 from __future__ import annotations
