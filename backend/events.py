@@ -97,7 +97,9 @@ class EventBatch(Strict):
 
     revision: int
     events: list[Event]
-    actor: str = ""
+    actor: str = Field(
+        "", description="who: 'user@client' when the request named a user, else the client id; the robot's name for its reports"
+    )
     op: str = ""
 
 

@@ -237,10 +237,10 @@ class MissionServer:
         self._commit(applied, op, client=client, request_id=request_id, actor=actor)
         return applied
 
-    def alert(self, message: str, *, level: str = "warning", robot: str | None = None, skill: str | None = None) -> None:
+    def alert(self, message: str, *, level: str = "warning", robot: str | None = None, skill: str | None = None, kind: str = "") -> None:
         log.warning("%s", message)
         if self._alerts_pub is not None:
-            a = Alert(level=level, robot=robot, skill=skill, message=message, at=_now())
+            a = Alert(level=level, kind=kind, robot=robot, skill=skill, message=message, at=_now())
             self._alerts_pub.put(dumps(a))
 
     # -- state ------------------------------------------------------------------
@@ -429,9 +429,9 @@ class MissionServer:
         if lost:
             try:
                 self._submit(Reconcile(robot=robot, lost=lost), actor=robot)
-                self.alert(f"{robot} no longer had {', '.join(lost)}: returned to the plan", robot=robot)
+                self.alert(f"{robot} no longer had {', '.join(lost)}: returned to the plan", robot=robot, kind="reconcile")
             except Refusal as r:
-                self.alert(f"cannot reconcile {robot}: {r.message}", level="error", robot=robot)
+                self.alert(f"cannot reconcile {robot}: {r.message}", level="error", robot=robot, kind="reconcile")
 
     def _apply_reports(self, robot: str, reports: list[Report]) -> list[ErrorReply]:
         refused = []
@@ -443,10 +443,10 @@ class MissionServer:
                 applied = self._submit(rep, actor=robot)
             except Refusal as r:
                 refused.append(ErrorReply(**r.to_dict()))
-                self.alert(f"report refused: {r.message}", level="error", robot=robot, skill=rep.id)
+                self.alert(f"report refused: {r.message}", level="error", robot=robot, skill=rep.id, kind="report_refused")
                 continue
             if not applied.duplicate and rep.status.value == "failure":
-                self.alert(f"{robot}: {rep.id} failed: {rep.info}", level="error", robot=robot, skill=rep.id)
+                self.alert(f"{robot}: {rep.id} failed: {rep.info}", level="error", robot=robot, skill=rep.id, kind="failure")
         return refused
 
     async def _handle_reports(self, payload: bytes) -> bytes:
@@ -478,7 +478,7 @@ class MissionServer:
         # online again once it registers (with its manifest and queue)
         if not alive:
             self._set_robot(info.model_copy(update={"online": False, "since": _now()}))
-            self.alert(f"robot {robot} went offline", robot=robot)
+            self.alert(f"robot {robot} went offline", robot=robot, kind="offline")
 
 
 def _reply(applied: Applied) -> bytes:

@@ -48,7 +48,7 @@ async def redraw() -> dict[str, float]:
     from backend.protocol import Telemetry
     from console.mapview import MapView
     from console.model import ConsoleModel
-    from console.theme import MISSIONCTL_DARK, STATUS_DEFAULTS
+    from console.theme import VARIABLE_DEFAULTS
 
     model = ConsoleModel()
     t0 = datetime(2026, 1, 1, tzinfo=UTC)
@@ -57,11 +57,9 @@ async def redraw() -> dict[str, float]:
 
     class Bench(App):
         def get_theme_variable_defaults(self):
-            return dict(STATUS_DEFAULTS)
+            return dict(VARIABLE_DEFAULTS)
 
         def compose(self):
-            self.register_theme(MISSIONCTL_DARK)
-            self.theme = MISSIONCTL_DARK.name
             yield MapView(model)
 
     app = Bench()

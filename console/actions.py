@@ -2,10 +2,15 @@
 
 Key bindings, the footer, the help screen and the command palette are all
 generated from this table, so they cannot disagree. Each action has a stable
-binding id ("mission.<name>") that users remap in their config file:
+binding id ("<scope>.<name>") that users remap in their config file:
 
     [keymap]
     "mission.sync" = "S"
+    "app.show_fleet" = "f4,3"
+
+The scope says where an action is bound: "mission" (the schedule screen,
+action_<name> there), "app" (every screen: switching screens), or one screen
+("map", "log", "alerts").
 """
 
 from __future__ import annotations
@@ -23,11 +28,19 @@ class Action:
     description: str  # help screen / palette
     group: str
     footer: bool = False  # shown in the footer (the rest: help screen and palette)
-    scope: str = "mission"  # the screen that binds it: "mission", "map", or "app" (every screen)
+    scope: str = "mission"
 
     @property
     def binding_id(self) -> str:
+        # "map.zoom_in" for map_zoom_in: the scope is not repeated
         return f"{self.scope}.{self.name.removeprefix(self.scope + '_')}"
+
+    @property
+    def palette_title(self) -> str:
+        return f"{SCOPE_TITLES.get(self.scope, self.scope.title())}: {self.label}"
+
+
+SCOPE_TITLES = {"mission": "Mission", "app": "Screen", "map": "Map", "log": "Event log", "alerts": "Alerts"}
 
 
 ACTIONS: list[Action] = [
@@ -60,8 +73,15 @@ ACTIONS: list[Action] = [
     Action("load", "ctrl+o", "Load", "Load a mission from a YAML file (replaces the plan)", "Mission"),
     Action("toggle_static", "v", "Static robots", "Expand/collapse the static robots' columns", "View"),
     # screens (app modes)
-    Action("show_mission", "f2,1", "Schedule", "Show the schedule (mission screen)", "Screens", scope="app"),
-    Action("show_map", "f3,2", "Map", "Show the map of the site", "Screens", scope="app"),
+    Action("show_mission", "f2,1", "Schedule", "Show the schedule (mission screen)", "Screens", True, "app"),
+    Action("show_map", "f3,2", "Map", "Show the map of the site", "Screens", True, "app"),
+    Action("show_fleet", "f4,3", "Fleet", "Show the fleet: presence, manifests, battery/link history; filter by capability", "Screens", True, "app"),
+    Action("show_log", "f5,4", "Log", "Show the event log: operations, reports, refusals, failures, alerts", "Screens", True, "app"),
+    Action("show_alerts", "f6,5", "Alerts", "Show the alert list (acknowledge alerts there)", "Screens", True, "app"),
+    # screen-specific
+    Action("export", "ctrl+s", "Export", "Export the shown event-log entries to a JSON-lines file", "Event log", True, "log"),
+    Action("ack", "enter,a", "Acknowledge", "Acknowledge the selected alert", "Alerts", True, "alerts"),
+    Action("ack_all", "A", "Ack all", "Acknowledge every alert", "Alerts", True, "alerts"),
     # the map screen
     Action("map_zoom_in", "plus,equals_sign", "Zoom+", "Zoom in", "Map", True, scope="map"),
     Action("map_zoom_out", "minus", "Zoom-", "Zoom out", "Map", True, scope="map"),
@@ -84,15 +104,19 @@ ACTIONS: list[Action] = [
     Action("map_legend", "l", "Legend", "Show/hide the legend", "Map", scope="map"),
 ]
 
-BY_NAME = {a.name: a for a in ACTIONS}
+# the mission screen's actions (the rest are bound elsewhere)
+BY_NAME = {a.name: a for a in ACTIONS if a.scope == "mission"}
 
 # actions that need a skill/robot under the cursor and apply to the server
-MUTATING = {a.name for a in ACTIONS if a.scope == "mission"} - {"edit", "save", "toggle_static", "mark"}
+MUTATING = set(BY_NAME) - {"edit", "save", "toggle_static", "mark"}
 
 
-def bindings(scope: str = "mission") -> list[Binding]:
+def bindings(scope: str = "mission", *, show: bool | None = None) -> list[Binding]:
+    """Bindings of one scope; `show` overrides the footer flag (app-wide keys
+    are bound twice: hidden on the app, shown by the part-2 screens)."""
     return [
-        Binding(a.key, a.name, a.label, show=a.footer, id=a.binding_id, tooltip=a.description)
+        Binding(a.key, f"app.{a.name}" if scope == "app" else a.name, a.label,
+                show=a.footer if show is None else show, id=a.binding_id, tooltip=a.description)
         for a in ACTIONS
         if a.scope == scope
     ]

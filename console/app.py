@@ -13,33 +13,41 @@ from __future__ import annotations
 import asyncio
 import gc
 import signal
+from collections.abc import Callable
+from datetime import UTC, datetime
 from typing import Any
 
 from textual.app import App
 from textual.binding import Binding
 from textual.screen import Screen
+from textual.signal import Signal
 
 from backend.client import ClientError, OperationRefused
 from backend.protocol import ErrorReply
 
 from .actions import ACTIONS, bindings
+from .alertview import AlertScreen
 from .bridge import Backend, ClientBridge
 from .commands import MissionCommands
-from .config import ConsoleConfig
+from .config import ConsoleConfig, save_theme
 from .dialogs import HelpScreen, UnreachableScreen
+from .eventlog import AlertBook, AlertEntry, EventLog
+from .fleet import FleetScreen
+from .logview import EventLogScreen
 from .map_screen import MapScreen
 from .messages import (
     AlertReceived,
     ConnectionChanged,
     EventsApplied,
-    FleetChanged,
     MapChanged,
+    FleetChanged,
     StateLoaded,
     TelemetryChanged,
 )
 from .model import CONNECTED, CONNECTING, OFFLINE, UNREACHABLE, ConsoleModel
 from .screens import MissionScreen
-from .theme import DEFAULT_THEME, MISSIONCTL_DARK, STATUS_DEFAULTS
+from .theme import DEFAULT_THEME, VARIABLE_DEFAULTS
+from .themes import ANSI16_STATUS, Downgrade16, load_themes
 
 EXIT_UNREACHABLE = 3
 
@@ -58,8 +66,10 @@ class MissionApp(App[int]):
     COMMANDS = App.COMMANDS | {MissionCommands}
     BINDINGS = [
         Binding("ctrl+q", "quit", "Quit", priority=True, id="app.quit"),
-        *bindings("app"),
+        *bindings("app", show=False),  # shown in the footers of the part-2 screens
     ]
+    # part-2 screens as app modes (F2/1 back to the schedule; F3/2 is the map's)
+    VIEW_MODES: dict[str, type[Screen]] = {"fleet": FleetScreen, "log": EventLogScreen, "alerts": AlertScreen}
     CSS = """
     Screen { background: $background; }
     Toast { max-width: 70; }
@@ -75,37 +85,79 @@ class MissionApp(App[int]):
         backend: Backend | None = None,
         notices: list[str] | tuple[str, ...] = (),
         client_id: str | None = None,
+        colors: int | None = None,
     ) -> None:
         super().__init__()
         self.config = config or ConsoleConfig()
         self.notices = [*notices, *self.config.problems]
         self.model = ConsoleModel(endpoint=connect or "")
-        self.register_theme(MISSIONCTL_DARK)
-        wanted = theme or self.config.theme or DEFAULT_THEME
+        # 16 colours (asked for, or a TERM=xterm terminal: see on_mount)
+        self.colour_count = colors
+        self.ansi16 = False
+        if colors == 16:
+            self._use_16_colours()
+        themes, problems = load_themes()
+        self.notices.extend(problems)
+        for t in themes.values():
+            self.register_theme(t)
+        default = DEFAULT_THEME if DEFAULT_THEME in self.available_themes else "textual-dark"
+        wanted = theme or self.config.theme or default
         if wanted not in self.available_themes:
-            self.notices.append(f"unknown theme '{wanted}' (themes: {', '.join(sorted(self.available_themes))}); using {DEFAULT_THEME}")
-            wanted = DEFAULT_THEME
+            self.notices.append(f"unknown theme '{wanted}' (themes: {', '.join(sorted(self.available_themes))}); using {default}")
+            wanted = default
         self.theme = wanted
+        # what the fleet, event-log and alert screens show; bounded (see eventlog.py)
+        self.event_log = EventLog()
+        self.alerts = AlertBook()
+        self.awareness_signal: Signal[tuple[str, str | None]] = Signal(self, "awareness")
+        self.clock: Callable[[], datetime] = lambda: datetime.now(UTC)  # tests pin it
+        self.bells = 0  # how often the bell rang (tests)
+        self.add_mode(self.DEFAULT_MODE, self.get_default_screen)
+        for mode, screen in self.VIEW_MODES.items():
+            self.add_mode(mode, screen)
+        self.map_screen: MapScreen | None = None
+        self.map_feed: tuple[object, object] | None = None  # the latest (mirror, update) of the map feed
+        self.add_mode("map", self._make_map_screen)
         if self.config.keymap:
             self.set_keymap(self.config.keymap)
         self.bridge = ClientBridge(self, connect, user=user, client_id=client_id) if connect else None
         self.backend: Backend | None = backend or self.bridge
         self.mission_screen: MissionScreen | None = None
-        self.map_screen: MapScreen | None = None
-        self.map_feed: tuple[object, object] | None = None  # the latest (mirror, update) of the map feed
-        self.add_mode("mission", self.get_default_screen)  # the default mode's screen exists already
-        self.add_mode("map", self._make_map_screen)
         self.last_path: str | None = None
         self._connection_closed = False
         self.exit_code = 0
 
     # -- theme and screens --------------------------------------------------------------
     def get_theme_variable_defaults(self) -> dict[str, str]:
-        return dict(STATUS_DEFAULTS)
+        return dict(VARIABLE_DEFAULTS)
 
-    def get_default_screen(self) -> Screen:
-        self.mission_screen = MissionScreen(self.model)
-        return self.mission_screen
+    def get_css_variables(self) -> dict[str, str]:
+        variables = super().get_css_variables()
+        if getattr(self, "ansi16", False):  # (called by App.__init__ before it is set)
+            variables.update(ANSI16_STATUS)
+            self.theme_variables = variables
+        return variables
+
+    def _use_16_colours(self) -> None:
+        """Statuses get one ANSI colour each (ANSI16_STATUS); everything is
+        drawn with the 16 standard colours, as the terminal would."""
+        self.ansi16 = True
+        self._filters.append(Downgrade16())
+
+    def _theme_picked(self, theme: Any) -> None:
+        """Remember a theme picked in the palette in the user's config file."""
+        path = self.config.path
+        if path is None or theme.name == self.config.theme:
+            return
+        problem = save_theme(path, theme.name)
+        if problem:
+            self.notify(problem, title="Settings", severity="warning")
+        else:
+            self.config.theme = theme.name
+
+    # -- screens (app modes) -------------------------------------------------------------
+    def action_show_mission(self) -> None:
+        self.switch_mode(self.DEFAULT_MODE)
 
     def _make_map_screen(self) -> Screen:
         self.map_screen = MapScreen(self.model)
@@ -113,14 +165,24 @@ class MissionApp(App[int]):
             self.map_screen.map_changed(*self.map_feed)
         return self.map_screen
 
-    async def action_show_map(self) -> None:
-        await self.switch_mode("map")
-
-    async def action_show_mission(self) -> None:
-        await self.switch_mode("mission")
+    def action_show_map(self) -> None:
+        self.switch_mode("map")
 
     def _map_live(self) -> bool:
         return self.map_screen is not None and self.map_screen.is_mounted and self._running and self.return_code is None
+
+    def action_show_fleet(self) -> None:
+        self.switch_mode("fleet")
+
+    def action_show_log(self) -> None:
+        self.switch_mode("log")
+
+    def action_show_alerts(self) -> None:
+        self.switch_mode("alerts")
+
+    def get_default_screen(self) -> Screen:
+        self.mission_screen = MissionScreen(self.model)
+        return self.mission_screen
 
     def action_keys(self) -> dict[str, str]:
         """Action name -> its key(s) now (the user's keymap applied)."""
@@ -142,6 +204,10 @@ class MissionApp(App[int]):
                     pass
         for n in self.notices:
             self.notify(n, title="Settings", severity="warning", timeout=10)
+        self.theme_changed_signal.subscribe(self, self._theme_picked)
+        if self.colour_count is None and not self.is_headless and self.console.color_system == "standard":
+            self._use_16_colours()
+            self.refresh_css()
         if self.bridge is not None:
             self.connect_now()
 
@@ -196,10 +262,12 @@ class MissionApp(App[int]):
         # a big mission is many long-lived objects: keep them out of the cyclic
         # GC's scans, which otherwise stall the UI for tens of milliseconds
         gc.freeze()
+        self.alerts.seed_fleet(self.model.robots)
         if self._screen_live():
             await self.mission_screen.model_changed(None)
         if self._map_live():
             self.map_screen.model_changed()
+        self.awareness_signal.publish(("fleet", None))
 
     async def on_events_applied(self, message: EventsApplied) -> None:
         robots = self.model.apply(message.batch, message.mission)
@@ -207,6 +275,11 @@ class MissionApp(App[int]):
             await self.mission_screen.model_changed(robots)
         if self._map_live():  # marker events change no robot's column but the map
             self.map_screen.model_changed()
+        entries = self.event_log.add_batch(message.batch, self.model, self.clock())
+        for a in self.alerts.from_batch(entries):
+            self.raise_alert(a)
+        self.awareness_signal.publish(("log", None))
+        self.awareness_signal.publish(("fleet", None))
 
     def on_fleet_changed(self, message: FleetChanged) -> None:
         self.model.set_robot(message.info)
@@ -214,6 +287,10 @@ class MissionApp(App[int]):
             self.mission_screen.robot_changed(message.info.name)
         if self._map_live():
             self.map_screen.fleet_changed()
+        a = self.alerts.from_fleet(message.info, self.clock())
+        if a is not None:
+            self.raise_alert(a)
+        self.awareness_signal.publish(("fleet", message.info.name))
 
     def on_telemetry_changed(self, message: TelemetryChanged) -> None:
         self.model.set_telemetry(message.telemetry)
@@ -221,6 +298,9 @@ class MissionApp(App[int]):
             self.mission_screen.telemetry_changed(message.telemetry.robot)
         if self._map_live():
             self.map_screen.telemetry_changed(message.telemetry.robot)
+        for a in self.alerts.from_telemetry(message.telemetry, self.clock()):
+            self.raise_alert(a)
+        self.awareness_signal.publish(("fleet", message.telemetry.robot))
 
     def on_map_changed(self, message: MapChanged) -> None:
         self.map_feed = (message.mirror, message.update)
@@ -255,12 +335,43 @@ class MissionApp(App[int]):
             self.run_worker(self.action_quit(), group="quit")
 
     def on_alert_received(self, message: AlertReceived) -> None:
-        a = message.alert
-        severity = {"error": "error", "warning": "warning"}.get(a.level, "information")
-        title = " · ".join(x for x in (a.robot, a.skill) if x) or "Alert"
-        self.notify(a.message, title=title, severity=severity, timeout=8 if a.level == "error" else 5)
+        """The server's alert; one the console raised itself already is merged."""
+        a = self.alerts.from_server(message.alert)
+        if a is not None:
+            self.raise_alert(a)
+        else:
+            self.awareness_signal.publish(("alerts", None))
+
+    # -- alerts -------------------------------------------------------------------------------
+    def raise_alert(self, a: AlertEntry, *, notify: bool = True) -> None:
+        """A new alert: log it, ring the bell, notify; the badge and list update."""
+        if a.kind not in ("failure", "refusal"):  # those are log lines already
+            self.event_log.add("alert", a.message, a.at, robots=[a.robot] if a.robot else [], skill=a.skill, client=a.source)
+        if a.level != "info":
+            self.ring()
+        if notify:
+            severity = {"error": "error", "warning": "warning"}.get(a.level, "information")
+            title = " · ".join(x for x in (a.robot, a.skill) if x) or "Alert"
+            self.notify(a.message, title=title, severity=severity, timeout=8 if a.level == "error" else 5)
         if self._screen_live() and a.level == "error":
             self.mission_screen.say(f"✗ {a.message}", "error")
+        self.alerts_changed()
+
+    def ring(self) -> None:
+        self.bells += 1
+        self.bell()
+
+    def acknowledge(self, alert_id: int | None) -> int:
+        n = self.alerts.acknowledge(alert_id)
+        if n:
+            self.alerts_changed()
+        return n
+
+    def alerts_changed(self) -> None:
+        if self._screen_live():
+            self.mission_screen.update_top()
+        self.awareness_signal.publish(("alerts", None))
+        self.awareness_signal.publish(("log", None))
 
     # -- operations --------------------------------------------------------------------------------
     def submit(
@@ -284,6 +395,22 @@ class MissionApp(App[int]):
             exit_on_error=False,
         )
 
+    def whoami(self) -> dict[str, str]:
+        """This console's client id and user, as the event log names them."""
+        b = self.bridge
+        client = b.client.client_id if b is not None and b.client is not None else "this console"
+        return {"client": client, "user": b.user if b is not None else ""}
+
+    def _refused(self, text: str, robot: str | None, skill: str | None) -> None:
+        """The console's own refusal: logged, an alert (already notified)."""
+        at = self.clock()
+        self.event_log.add("refusal", text, at, robots=[robot] if robot else [], skill=skill, **self.whoami())
+        a = self.alerts.add("refusal", text, at, robot=robot, skill=skill)
+        if a is not None:
+            self.raise_alert(a, notify=False)
+        else:
+            self.alerts_changed()
+
     async def _submit(self, op, what, robot, skill, expected_revision, on_ok, on_refused, say=None) -> None:
         if say is None and self.mission_screen is not None:
             say = self.mission_screen.say  # or another screen's status line (the map's)
@@ -295,12 +422,15 @@ class MissionApp(App[int]):
             text = refusal_text(e.reply, robot, skill)
             say(f"✗ {what} refused: {text}", "error")
             self.notify(text, title=f"Refused: {what}", severity="error", timeout=8)
+            self._refused(f"{what} refused: {text}", e.reply.robot or robot, e.reply.skill or skill)
             if on_refused is not None:
                 on_refused(e.reply)
             return
         except ClientError as e:
             say(f"✗ {what}: {e}", "error")
             self.notify(str(e), title=f"Failed: {what}", severity="error", timeout=8)
+            self.event_log.add("failure", f"{what}: {e}", self.clock(), robots=[robot] if robot else [], skill=skill, **self.whoami())
+            self.awareness_signal.publish(("log", None))
             return
         if on_ok is not None:
             on_ok(reply)

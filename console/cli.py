@@ -8,13 +8,18 @@ import sys
 
 EXIT_OK, EXIT_BAD_INPUT, EXIT_UNREACHABLE = 0, 2, 3
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
+THEME_HELP = (
+    "theme name: missionctl-dark (default), missionctl-light, missionctl-high-contrast, missionctl-colorblind, "
+    "or one of yours in ~/.config/missionctl/themes/*.yaml (default: the config file's; "
+    "a theme picked in the command palette is remembered there)"
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("console", help="the operator console (terminal UI) for a running mission server")
     c.add_argument("--connect", metavar="ENDPOINT", default=DEFAULT_CONNECT, help=f"Zenoh endpoint of the server (default {DEFAULT_CONNECT})")
     c.add_argument("--user", metavar="U", default="", help="operator name recorded with every change")
-    c.add_argument("--theme", metavar="T", help="theme name (default: the config file's, else missionctl-dark)")
+    c.add_argument("--theme", metavar="T", help=THEME_HELP)
     c.add_argument("--config", metavar="FILE", help="settings file (default ~/.config/missionctl/config.toml or .yaml)")
     c.set_defaults(func=run_console)
 
@@ -22,7 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--mission", metavar="FILE", help="mission to run (default missions/mars_sample_return.yaml)")
     d.add_argument("--speed", metavar="X", type=float, default=1.0, help="sim time per real time (default 1)")
     d.add_argument("--user", metavar="U", default="", help="operator name")
-    d.add_argument("--theme", metavar="T")
+    d.add_argument("--theme", metavar="T", help=THEME_HELP)
     d.add_argument("--config", metavar="FILE")
     d.set_defaults(func=run_demo)
 

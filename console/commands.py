@@ -15,39 +15,44 @@ from .actions import ACTIONS
 
 
 class MissionCommands(Provider):
-    def _screen(self, scope: str = "mission") -> Any:
-        if scope == "map":  # map actions: only while the map is shown
-            screen = getattr(self.app, "map_screen", None)
-            return screen if screen is not None and self.app.screen is screen else None
+    def _screen(self) -> Any:
         return getattr(self.app, "mission_screen", None)
 
     def _entries(self):
+        screen = self._screen()
+        if screen is None:
+            return
         keys = getattr(self.app, "action_keys", lambda: {})()
+        # the screen the palette was opened on (its own actions are offered too)
+        here = getattr(self.screen, "SCOPE", "mission") if self.screen is not screen else "mission"
         for a in ACTIONS:
-            if a.scope == "app":
-                yield a, f"{keys.get(a.name, a.key)} · {a.description}", partial(self.app.run_action, a.name)
+            if a.scope not in ("mission", "app", here):
                 continue
-            screen = self._screen(a.scope)
-            if screen is None:
-                continue
-            why = screen.why_disabled(a.name) if hasattr(screen, "why_disabled") else None
+            why = screen.why_disabled(a.name) if a.scope == "mission" else None
             key = keys.get(a.name, a.key)
             help_text = f"{key} · {a.description}" + (f" — does not apply now: {why}" if why else "")
-            yield a, help_text, partial(self._run, a.name, a.scope)
+            yield a, help_text, partial(self._run, a)
 
-    async def _run(self, name: str, scope: str = "mission") -> None:
-        screen = self._screen(scope)
-        if screen is not None:
-            await screen.run_named(name)
+    async def _run(self, a) -> None:
+        if a.scope == "mission":
+            screen = self._screen()
+            if screen is not None:
+                await screen.run_named(a.name)
+        elif a.scope == "app":
+            await self.app.run_action(a.name)
+        elif hasattr(self.screen, "run_named"):  # it explains what does not apply (the map)
+            await self.screen.run_named(a.name)
+        else:
+            await self.screen.run_action(a.name)
 
     async def discover(self) -> Hits:
         for a, help_text, run in self._entries():
-            yield DiscoveryHit(f"{a.group if a.scope != 'mission' else 'Mission'}: {a.label}", run, help=help_text)
+            yield DiscoveryHit(a.palette_title, run, help=help_text)
 
     async def search(self, query: str) -> Hits:
         matcher = self.matcher(query)
         for a, help_text, run in self._entries():
-            text = f"{a.group if a.scope != 'mission' else 'Mission'}: {a.label}"
+            text = a.palette_title
             score = max(matcher.match(text), matcher.match(a.description) * 0.5)
             if score > 0:
                 yield Hit(score, matcher.highlight(text), run, text=text, help=help_text)

@@ -7,11 +7,14 @@
 
 `MISSIONCTL_CONFIG` or `--config` point elsewhere. A broken file never stops
 the console: its problems are shown as a notification and defaults apply.
+A theme picked in the command palette is written back (`save_theme`), the
+rest of the file kept.
 """
 
 from __future__ import annotations
 
 import os
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -76,3 +79,34 @@ def load_config(path: str | Path | None = None, known_ids: set[str] | None = Non
         if key not in ("theme", "keymap"):
             cfg.problems.append(f"{p}: unknown setting '{key}' (settings: theme, keymap)")
     return cfg
+
+
+def save_theme(path: Path, theme: str) -> str | None:
+    """Remember the theme picked in the palette; keeps the rest of the file.
+    Returns a problem sentence, or None when saved."""
+    try:
+        text = path.read_text(encoding="utf-8") if path.exists() else ""
+        if path.suffix == ".toml":
+            line = f'theme = "{theme}"'
+            lines = text.splitlines()
+            # top-level keys come before the first [table]
+            end = next((i for i, x in enumerate(lines) if x.lstrip().startswith("[")), len(lines))
+            for i in range(end):
+                if re.match(r"\s*theme\s*=", lines[i]):
+                    lines[i] = line
+                    break
+            else:
+                lines.insert(0, line)
+            new = "\n".join(lines) + "\n"
+            tomllib.loads(new)  # never write a file we could not read back
+        else:
+            data = yaml.safe_load(text) or {} if text else {}
+            if not isinstance(data, dict):
+                return f"{path}: expected a table of settings; theme not saved"
+            data["theme"] = theme
+            new = yaml.safe_dump(data, sort_keys=False)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(new, encoding="utf-8")
+    except (OSError, tomllib.TOMLDecodeError, yaml.YAMLError) as e:
+        return f"{path}: cannot save the theme ({str(e).splitlines()[0]})"
+    return None

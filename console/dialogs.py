@@ -17,7 +17,7 @@ from textual.widgets.option_list import Option
 from backend.library import Library
 
 from .actions import ACTIONS, APP_KEYS, EDITOR_KEYS, NAV_KEYS
-from .model import GLYPHS, STATUS_WORDS
+from .model import GLYPHS, STATUS_CSS, STATUS_WORDS
 from .params import settle_cursors
 
 
@@ -124,12 +124,13 @@ class SkillPicker(ModalScreen[str | None]):
     SkillPicker .hint { color: $text-muted; }
     """
 
-    def __init__(self, robot: str, skills: list[str], library: Library, where: str) -> None:
+    def __init__(self, robot: str, skills: list[str], library: Library, where: str, offered_by: dict[str, str] | None = None) -> None:
         super().__init__()
         self.robot = robot
         self.skills = skills
         self.library = library
         self.where = where
+        self.offered_by = offered_by or {}  # skill -> "also offered by: lru2"
 
     def compose(self) -> ComposeResult:
         with Vertical():
@@ -147,7 +148,8 @@ class SkillPicker(ModalScreen[str | None]):
         spec = self.library.skills.get(name)
         desc = spec.description if spec else ""
         title = matcher.highlight(name) if matcher else Text(name)
-        prompt = Text.assemble(title if isinstance(title, Text) else Text(str(title)), "\n", (f"  {desc}", "dim"))
+        others = self.offered_by.get(name)
+        prompt = Text.assemble(title if isinstance(title, Text) else Text(str(title)), (f"  · {others}" if others else "", "italic"), "\n", (f"  {desc}", "dim"))
         return Option(prompt, id=name)
 
     def _fill(self, query: str) -> None:
@@ -239,9 +241,11 @@ class HelpScreen(ModalScreen[None]):
         for k, label, d in APP_KEYS:
             row(k, label, d)
         t.append("\nStatuses\n", style="bold underline")
+        colours = getattr(self.app, "theme_variables", {})
         for status, glyph in GLYPHS.items():
-            t.append(f"  {glyph}  ", style="bold")
-            t.append(f"{status.value:<18}", style="")
+            colour = colours.get(f"status-{STATUS_CSS[status]}", "")
+            t.append(f"  {glyph}  ", style=f"bold {colour}".strip())
+            t.append(f"{status.value:<18}", style=colour)
             t.append(f"{STATUS_WORDS[status]}\n", style="dim")
         t.append("  [b1]", style="bold")
         t.append("  barrier tag: partner skills wait for each other\n", style="dim")

@@ -22,7 +22,7 @@ from textual.widgets import Footer, Input, Label, Select, Static
 from backend.model import NAME_RE, AreaMarker, Pose, PoseMarker, Position, PositionMarker, Status
 from backend.ops import EditSkill, MarkerAdd, MarkerDelete, MarkerMove, MarkerRename
 
-from .actions import BY_NAME, bindings
+from .actions import ACTIONS, bindings
 from .dialogs import ConfirmScreen
 from .mapview import (
     AREA_GLYPH,
@@ -146,7 +146,11 @@ class MarkerPrompt(ModalScreen[tuple[str, str] | None]):
         self.dismiss(None)
 
 
+MAP_ACTIONS = {a.name for a in ACTIONS if a.scope == "map"}
+
+
 class MapScreen(Screen):
+    SCOPE = "map"  # its own palette entries (console/commands.py)
     BINDINGS = [
         *bindings("map"),
         Binding("up", "cursor(0, -1)", "Up", show=False),
@@ -567,5 +571,5 @@ class MapScreen(Screen):
 
     # -- disabled keys are explained, like on the mission screen -----------------------------------------------
     async def run_named(self, action: str) -> None:
-        if action in BY_NAME:
+        if action in MAP_ACTIONS:
             await self.run_action(action)

@@ -10,6 +10,7 @@ unit-tested without a terminal.
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any
@@ -44,6 +45,8 @@ STATUS_WORDS: dict[Status, str] = {
 
 # CSS-friendly names (theme variables $status-<name>, component classes)
 STATUS_CSS: dict[Status, str] = {s: s.value.replace("_", "-") for s in Status}
+
+HISTORY = 120  # telemetry samples kept per robot (bounded memory)
 
 CONNECTING, CONNECTED, RECONNECTING, UNREACHABLE, OFFLINE = (
     "connecting",
@@ -143,6 +146,8 @@ class ConsoleModel:
     _barrier_of: dict[str, str] = field(default_factory=dict)
     # robot -> (active skill, number queued), computed on demand
     _robot_state: dict[str, tuple[SkillInstance | None, int]] = field(default_factory=dict)
+    # robot -> the last HISTORY (battery, link) samples, for the fleet screen's sparklines
+    history: dict[str, deque[tuple[float, float]]] = field(default_factory=dict)
 
     # -- updates ------------------------------------------------------------------
     def load(self, mission: Mission, library: Library, robots: dict[str, RobotInfo] | None = None, server_id: str = "") -> None:
@@ -209,6 +214,10 @@ class ConsoleModel:
 
     def set_telemetry(self, t: Telemetry) -> None:
         self.telemetry[t.robot] = t
+        h = self.history.get(t.robot)
+        if h is None:
+            h = self.history[t.robot] = deque(maxlen=HISTORY)
+        h.append((t.battery, t.link))
 
     # -- lookups --------------------------------------------------------------------
     @property

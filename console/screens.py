@@ -39,6 +39,7 @@ from backend.ops import (
 )
 
 from .actions import BY_NAME, mission_bindings
+from .capability import also_offered_by
 from .dialogs import ConfirmScreen, PathPrompt, SkillPicker
 from .model import CONNECTED, ConsoleModel
 from .params import ParamEditor
@@ -219,6 +220,10 @@ class MissionScreen(Screen):
         m = self.model
         t = Text()
         t.append("missionctl", style="bold")
+        alerts = getattr(self.app, "alerts", None)
+        unacked = alerts.unacknowledged if alerts is not None else 0
+        if unacked:  # the badge, first so 80 columns show it: F6 lists them
+            t.append(f" ⚠ {unacked} alert{'s' if unacked > 1 else ''} (F6) ", style="bold reverse")
         if m.mission is not None:
             t.append(f"  {m.mission.name}", style="bold")
             t.append(f"  rev {m.mission.revision}", style="dim")
@@ -329,7 +334,8 @@ class MissionScreen(Screen):
         else:
             at, where = 0, "at the head of the plan"
         skills = self.model.skills_of(robot)
-        choice = await self.app.push_screen_wait(SkillPicker(robot, skills, self.model.library, where))
+        offered = {name: also_offered_by(self.model, name, robot) for name in skills}
+        choice = await self.app.push_screen_wait(SkillPicker(robot, skills, self.model.library, where, offered))
         if not choice:
             return
         spec = self.model.library.skills[choice]

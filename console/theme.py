@@ -1,16 +1,14 @@
-"""The console's default theme and its status colour variables.
+"""The status colour variables every theme sets, and the default theme's name.
 
-Every colour that carries meaning is a theme variable, so a theme file (part
-2: themes/*.yaml, light, high-contrast, colour-blind-safe) only has to set
-them. The defaults are declared in `STATUS_DEFAULTS`, which the app returns
+Every colour that carries meaning is a theme variable, so a theme file
+(themes/*.yaml: dark, light, high-contrast, colour-blind-safe; loaded
+by console/themes.py) only has to set them. The defaults are declared in `STATUS_DEFAULTS`, which the app returns
 from `get_theme_variable_defaults()` so any theme (also Textual's own) parses.
 Colours are picked to stay distinct in 256 colours (over SSH COLORTERM is
 usually not forwarded); the status glyphs carry the meaning without colour.
 """
 
 from __future__ import annotations
-
-from textual.theme import Theme
 
 DEFAULT_THEME = "missionctl-dark"
 
@@ -34,6 +32,7 @@ STATUS_DEFAULTS: dict[str, str] = {
 
 # The map (console/mapview.py): ground classes are cell backgrounds, the rest
 # glyph colours; each also has a glyph or pattern, so colour is never alone.
+# Defaults for every theme; a theme file may set them too (not required).
 MAP_DEFAULTS: dict[str, str] = {
     "map-outside": "#0b0f14",
     "map-unknown": "#262a30",
@@ -52,20 +51,6 @@ MAP_DEFAULTS: dict[str, str] = {
     "map-cursor": "#ffff5f",
     "map-label": "#eeeeee",
 }
-STATUS_DEFAULTS.update(MAP_DEFAULTS)
 
-MISSIONCTL_DARK = Theme(
-    name=DEFAULT_THEME,
-    primary="#3a7bd5",
-    secondary="#5f87af",
-    accent="#d787ff",
-    warning="#ffaf00",
-    error="#ff5f5f",
-    success="#5fd75f",
-    foreground="#dde3ea",
-    background="#121820",
-    surface="#1a222c",
-    panel="#24303c",
-    dark=True,
-    variables=dict(STATUS_DEFAULTS),
-)
+# what the app declares before any CSS is parsed (get_theme_variable_defaults)
+VARIABLE_DEFAULTS: dict[str, str] = {**STATUS_DEFAULTS, **MAP_DEFAULTS}

@@ -37,3 +37,4 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
 def _isolated_config(tmp_path, monkeypatch):
     """Never read the developer's own ~/.config/missionctl."""
     monkeypatch.setenv("MISSIONCTL_CONFIG", str(tmp_path / "no-config.toml"))
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "xdg"))  # nor its own themes

@@ -199,3 +199,109 @@ async def wait_exit(app: Any, timeout: float = 10.0) -> None:
         if _time.monotonic() > deadline:
             raise AssertionError("the app did not exit")
         await asyncio.sleep(0.02)
+
+
+# -- part 2: manifests, telemetry history, a pinned clock ----------------------------------
+
+
+def manifest(name: str, type_: str, skills: list[str], modules: dict[str, str], **props: Any):
+    from backend.protocol import Manifest, Module
+
+    return Manifest(name=name, type=type_, modules=[Module(name=m, version=v) for m, v in modules.items()],
+                    properties=props, skills=dict.fromkeys(skills, "1.0.0"))
+
+
+def mars_fleet_with_manifests() -> dict[str, RobotInfo]:
+    """lru1, lru2 and the lander registered (manifests); ardea offline, never registered."""
+    b = Builder(MARS)
+    lib = b.library
+    out = {
+        "lru1": RobotInfo(name="lru1", online=True, since=T0, manifest=manifest(
+            "lru1", "lru_science", lib.skills_of("lru_science"), {"nav": "2.1.0", "science_cam": "1.4.2"}, max_speed=1.0)),
+        "lru2": RobotInfo(name="lru2", online=True, since=T0, manifest=manifest(
+            "lru2", "lru_manipulator", lib.skills_of("lru_manipulator"), {"nav": "2.1.0", "arm": "0.9.3"}, payload_kg=5)),
+        "ardea": RobotInfo(name="ardea", online=False, since=T0),
+        "lander": RobotInfo(name="lander", online=True, since=T0, manifest=manifest(
+            "lander", "lander", lib.skills_of("lander"), {"shelf": "1.0.0"})),
+    }
+    return out
+
+
+def telemetry_series() -> list[Telemetry]:
+    """A few samples per robot, so the sparklines have a shape."""
+    out = []
+    for i in range(10):
+        out.append(Telemetry(robot="lru1", battery=0.95 - 0.03 * i, link=0.9 - 0.05 * (i % 4), mode="executing", skill="lru1-2", progress=0.45, at=T0))
+        out.append(Telemetry(robot="lru2", battery=0.70 - 0.02 * i, link=0.6 + 0.04 * i, mode="waiting at barrier", skill="lru2-3", at=T0))
+        out.append(Telemetry(robot="lander", battery=1.0, link=1.0, at=T0))
+    return out
+
+
+def pin_clock(app: Any) -> None:
+    """The event log and alerts stamp entries with app.clock(): make it fixed."""
+    app.clock = lambda: T0
+
+
+CONSOLE_A = "host-4711-a1b2c3"  # a client id, like MissionClient makes them
+
+
+async def awareness_scenario(app: Any, pilot: Any) -> Builder:
+    """A small history with every kind of log entry and alert, at T0:
+    an operator's edit and sync, robot reports (one failure, also alerted by
+    the server: merged), the console's own refusal, a robot going offline,
+    low battery and out of range."""
+    from backend.ops import EditSkill
+    from backend.protocol import Alert
+    from console.messages import (
+        AlertReceived,
+        ConnectionChanged,
+        EventsApplied,
+        FleetChanged,
+        StateLoaded,
+        TelemetryChanged,
+    )
+
+    pin_clock(app)
+    b = Builder(MARS)
+    post = app.post_message
+    post(ConnectionChanged("connected", endpoint="tcp/127.0.0.1:7447"))
+    post(StateLoaded(b.snapshot(), b.library, mars_fleet_with_manifests()))
+    for t in telemetry_series():
+        post(TelemetryChanged(t))
+    await pilot.pause()
+
+    def op(applied, actor: str, name: str) -> None:
+        post(EventsApplied(applied.batch(actor, name)))
+
+    e = b.engine
+    op(e.submit(EditSkill(id="lru2-2", label="find a good stone")), f"ada@{CONSOLE_A}", "edit")
+    for robot, through in (("lru1", "lru1-2"), ("lru2", "lru2-2")):
+        ids = [s.id for s in e.plan_sync(Sync(robot=robot, through=through))]
+        try:
+            op(e.submit(SyncAck(robot=robot, ids=ids)), f"ada@{CONSOLE_A}", "sync_ack")
+        finally:
+            e.release(robot, ids)
+    seq = {"lru1": 0, "lru2": 0}
+
+    def report(robot: str, sid: str, status: str, info: str = "") -> None:
+        seq[robot] += 1
+        op(e.submit(Report(robot=robot, seq=seq[robot], id=sid, status=status, info=info, at=T0)), robot, "report")
+
+    report("lru1", "lru1-1", "running")
+    report("lru2", "lru2-1", "running")
+    report("lru2", "lru2-1", "success")
+    report("lru2", "lru2-2", "running")
+    report("lru2", "lru2-2", "failure", "no stone in reach")
+    await pilot.pause()
+    post(AlertReceived(Alert(level="error", kind="failure", robot="lru2", skill="lru2-2", message="lru2: lru2-2 failed: no stone in reach", at=T0)))
+    app._refused("Run refused: [lru1] lru1 is already executing lru1-1 (running)", "lru1", None)
+    post(FleetChanged(RobotInfo(name="lander", online=False, since=T0)))
+    post(AlertReceived(Alert(level="warning", kind="offline", robot="lander", message="robot lander went offline", at=T0)))
+    post(TelemetryChanged(Telemetry(robot="lru1", battery=0.66, link=0.2, in_range=False, mode="executing", skill="lru1-1", at=T0)))
+    post(TelemetryChanged(Telemetry(robot="lru2", battery=0.15, link=0.9, mode="idle", at=T0)))
+    # every message handled (under load a pause or two is not enough)
+    await wait_until(pilot, lambda: len(app.event_log.entries) == 12 and len(app.alerts.alerts) == 5
+                     and app.alerts.alerts[-1].kind == "low_battery" and app.model.robots["lander"].online is False,
+                     what="the scenario's messages handled")
+    await pilot.pause()
+    return b

@@ -1,0 +1,82 @@
+"""The alert list: newest first, unacknowledged ones marked ● and bold;
+enter/a acknowledges the selected alert, A all of them. The count of
+unacknowledged alerts is the badge on the mission screen's top bar."""
+
+from __future__ import annotations
+
+from rich.text import Text
+from textual.app import ComposeResult
+from textual.widgets import DataTable, Footer, Static
+
+from .actions import bindings
+from .eventlog import AlertEntry
+from .model import fmt_clock
+from .views import ViewScreen
+
+LEVEL_VARS = {"error": "error", "warning": "warning", "info": "primary"}
+KIND_WORDS = {"failure": "failure", "offline": "offline", "out_of_range": "out of range", "low_battery": "low battery", "refusal": "refusal", "server": "server"}
+
+
+class AlertScreen(ViewScreen):
+    SCOPE = "alerts"
+    COLUMNS = (("", "ack"), ("Time", "at"), ("Kind", "kind"), ("Robot", "robot"), ("What", "message"), ("Level", "level"), ("From", "source"))
+    TOPICS = ("alerts",)
+    BINDINGS = [*ViewScreen.BINDINGS, *bindings("alerts")]
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.ids: list[int] = []
+
+    def compose(self) -> ComposeResult:
+        yield self.title_bar
+        yield DataTable(id="alerts", cursor_type="row")
+        yield Static("enter/a acknowledge · A acknowledge all · F2 schedule · F5 event log", classes="hint")
+        yield Footer()
+
+    @property
+    def book(self):
+        return self.mission_app.alerts
+
+    def _cells(self, a: AlertEntry) -> list:
+        style = "" if a.acknowledged else "bold"
+        level = Text(a.level, style=f"{style} {self.colour(LEVEL_VARS[a.level])}".strip())
+        count = f" (×{a.count})" if a.count > 1 else ""
+        return [
+            Text("✓" if a.acknowledged else "●", style="dim" if a.acknowledged else f"bold {self.colour('warning')}"),
+            Text(fmt_clock(a.at)),
+            Text(KIND_WORDS.get(a.kind, a.kind)),
+            Text(a.robot or ""),
+            Text(a.message + count, style=style or "dim"),
+            level,
+            Text(a.source),
+        ]
+
+    def redraw(self) -> None:
+        if not self.ready:
+            return
+        t = self.query_one(DataTable)
+        keep = t.cursor_row
+        alerts = list(reversed(self.book.alerts))
+        self.ids = [a.id for a in alerts]
+        with self.app.batch_update():
+            t.clear()
+            for a in alerts:
+                t.add_row(*self._cells(a), key=str(a.id))
+            if alerts:
+                t.move_cursor(row=min(keep, len(alerts) - 1))
+        n = self.book.unacknowledged
+        self.set_title(("Alerts", "bold"), f"  {n} unacknowledged of {len(alerts)}" if alerts else "  none")
+
+    def action_ack(self) -> None:
+        t = self.query_one(DataTable)
+        if not self.ids or t.cursor_row >= len(self.ids):
+            return
+        self.mission_app.acknowledge(self.ids[t.cursor_row])
+
+    def action_ack_all(self) -> None:
+        self.mission_app.acknowledge(None)
+
+    def on_data_table_row_selected(self, event: DataTable.RowSelected) -> None:
+        # enter on the table (the DataTable binds enter itself)
+        event.stop()
+        self.action_ack()

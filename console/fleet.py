@@ -1,0 +1,157 @@
+"""The fleet screen: every robot with presence, type, battery and link history
+(sparklines), what it is doing and its last report; the selected robot's
+manifest below (modules and versions, properties, skills). The filter finds
+robots by capability (see console/capability.py for the syntax)."""
+
+from __future__ import annotations
+
+from rich.text import Text
+from textual import on
+from textual.app import ComposeResult
+from textual.widgets import DataTable, Footer, Input, Static
+
+from .capability import fleet_order, last_report, matches, offered_skills, robot_type, sparkline
+from .model import fmt_clock
+from .views import ViewScreen
+
+SPARK = 6  # samples shown per sparkline (the model keeps model.HISTORY)
+
+
+class FleetScreen(ViewScreen):
+    SCOPE = "fleet"
+    COLUMNS = (("Robot", "robot"), ("Presence", "presence"), ("Type", "type"), ("Battery", "battery"), ("Link", "link"), ("Doing", "doing"), ("Last report", "report"))
+    TOPICS = ("fleet",)
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.shown: list[str] = []
+
+    def compose(self) -> ComposeResult:
+        yield self.title_bar
+        yield Input(placeholder="filter by capability: pick_stone · type:lru · module:arm · prop:…", id="filter")
+        yield DataTable(id="robots", cursor_type="row", zebra_stripes=False)
+        yield Static("", id="detail", classes="detail")
+        yield Static("type to filter · ↑↓ robot · tab to the table · F2 schedule", classes="hint")
+        yield Footer()
+
+    @property
+    def model(self):
+        return self.mission_app.model
+
+    # -- cells -------------------------------------------------------------------------
+    def _presence(self, robot: str) -> Text:
+        info = self.model.robots.get(robot)
+        if info is None:
+            return Text("? unknown", style=self.colour("presence-unknown"))
+        if info.online:
+            return Text("● online", style=self.colour("presence-online"))
+        since = f" {fmt_clock(info.since)}" if info.since else " (not seen)"
+        return Text(f"○ offline{since}", style=f"bold {self.colour('presence-offline')}")
+
+    def _level(self, robot: str, i: int, var: str | None) -> Text:
+        h = [x[i] for x in self.model.history.get(robot, ())]
+        if not h:
+            return Text("—", style="dim")
+        low = var is not None and h[-1] < 0.2
+        style = f"bold {self.colour(var)}" if low else ""
+        return Text(f"{sparkline(h, SPARK)} {int(round(h[-1] * 100)):3d}%", style=style)
+
+    def _row(self, robot: str) -> list:
+        return [
+            Text(robot, style="bold"),
+            self._presence(robot),
+            Text(robot_type(self.model, robot)),
+            self._level(robot, 0, "battery-low"),
+            self._level(robot, 1, None),
+            Text(self.model.activity_text(robot) if self.model.mission else ""),
+            Text(last_report(self.model, robot)),
+        ]
+
+    # -- drawing -------------------------------------------------------------------------
+    def redraw(self) -> None:
+        if not self.ready:
+            return
+        t = self.query_one(DataTable)
+        keep = t.cursor_row
+        self.shown = [r for r in fleet_order(self.model) if matches(self.model, r, self.query_text)]
+        with self.app.batch_update():
+            t.clear()
+            for r in self.shown:
+                t.add_row(*self._row(r), key=r)
+            if self.shown:
+                t.move_cursor(row=min(keep, len(self.shown) - 1))
+        self._title()
+        self._detail()
+
+    def update_view(self, topic: str, robot: str | None) -> None:
+        t = self.query_one(DataTable)
+        if robot is None or robot not in self.shown:
+            # a robot may now match or not (its manifest came), or the mission changed
+            if [r for r in fleet_order(self.model) if matches(self.model, r, self.query_text)] != self.shown:
+                self.redraw()
+                return
+            robots = self.shown if robot is None else []
+        else:
+            robots = [robot]
+        for r in robots:
+            for key, value in zip(("robot", "presence", "type", "battery", "link", "doing", "report"), self._row(r), strict=True):
+                t.update_cell(r, key, value)
+        self._title()
+        if self.selected in robots:
+            self._detail()
+
+    def _title(self) -> None:
+        n = len(fleet_order(self.model))
+        online = sum(1 for r in fleet_order(self.model) if self.model.is_online(r))
+        shown = f" · {len(self.shown)} match '{self.query_text}'" if self.query_text else ""
+        self.set_title(("Fleet", "bold"), f"  {n} robots, {online} online{shown}")
+
+    @property
+    def selected(self) -> str | None:
+        t = self.query_one(DataTable)
+        if not self.shown or t.cursor_row is None or t.cursor_row >= len(self.shown):
+            return None
+        return self.shown[t.cursor_row]
+
+    def _detail(self) -> None:
+        detail = self.query_one("#detail", Static)
+        r = self.selected
+        if r is None:
+            detail.update(Text("no robot matches the filter" if self.query_text else "no robots", style="dim"))
+            return
+        info = self.model.robots.get(r)
+        man = info.manifest if info else None
+        out = Text()
+        out.append(r, style="bold")
+        out.append(f"  {robot_type(self.model, r)}  ")
+        out.append_text(self._presence(r))
+        if info is not None and info.online and info.since:
+            out.append(f" since {fmt_clock(info.since)}")
+        out.append("\ndoing: ", style="bold")
+        out.append(self.model.activity_text(r) if self.model.mission else "—")
+        out.append(" · last report: ", style="bold")
+        out.append(last_report(self.model, r))
+        if man is None:
+            out.append("\nno manifest yet (never registered): skills from the library", style="dim")
+        else:
+            mods = ", ".join(f"{m.name} {m.version}" for m in man.modules) or "—"
+            props = ", ".join(f"{k}={v}" for k, v in man.properties.items()) or "—"
+            out.append("\nmodules: ", style="bold")
+            out.append(mods)
+            out.append("\nproperties: ", style="bold")
+            out.append(props)
+        out.append("\nskills: ", style="bold")
+        words = [w.partition(":")[2] if ":" in w else w for w in self.query_text.lower().split()]
+        for i, (name, version) in enumerate(sorted(offered_skills(self.model, r).items())):
+            if i:
+                out.append(", ")
+            hit = any(w and w in name.lower() for w in words)
+            out.append(name, style="bold reverse" if hit else "")
+            if version:
+                out.append(f" {version}", style="dim")
+        detail.update(out)
+
+    # -- events ---------------------------------------------------------------------------
+    @on(DataTable.RowHighlighted)
+    def _highlighted(self) -> None:
+        self._detail()

@@ -1,0 +1,110 @@
+"""What the part-2 screens (fleet, event log, alerts) share: a title bar, the
+screen-switching keys in the footer, and redrawing when the app says what
+they show changed (`MissionApp.awareness_signal`) — at once when shown,
+otherwise when shown next."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from rich.text import Text
+from textual import on
+from textual.app import ComposeResult
+from textual.screen import Screen
+from textual.widgets import DataTable, Input, Static
+
+from .actions import bindings
+
+if TYPE_CHECKING:
+    from .app import MissionApp
+
+
+class TitleBar(Static):
+    DEFAULT_CSS = """
+    TitleBar { height: 1; background: $panel; color: $text; padding: 0 1; }
+    """
+
+
+class ViewScreen(Screen):
+    """Layout: title bar, [#filter input], the DataTable (COLUMNS), [.detail], .hint, footer."""
+
+    SCOPE = ""  # the actions.py scope of this screen's own actions
+    TOPICS: tuple[str, ...] = ()  # which awareness changes it shows
+    COLUMNS: tuple[tuple[str, str], ...] = ()  # (label, key) of the table's columns
+    BINDINGS = bindings("app", show=True)
+
+    DEFAULT_CSS = """
+    ViewScreen #filter { height: 3; }
+    ViewScreen DataTable { height: 1fr; }
+    ViewScreen .detail { height: auto; max-height: 12; padding: 0 1; background: $surface; border-top: solid $primary 50%; }
+    ViewScreen .hint { height: 1; padding: 0 1; color: $text-muted; }
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._stale = False
+        self.ready = False
+        self.query_text = ""  # the #filter input's text, if the screen has one
+        self.title_bar = TitleBar(id="title")
+
+    @property
+    def mission_app(self) -> MissionApp:
+        return self.app  # type: ignore[return-value]
+
+    def on_mount(self) -> None:
+        table = self.query_one(DataTable)
+        for label, key in self.COLUMNS:
+            table.add_column(label, key=key)
+        self.start()
+        filters = self.query("#filter")
+        (filters.first() if filters else table).focus()
+
+    def start(self) -> None:
+        self.mission_app.awareness_signal.subscribe(self, self._changed)
+        self.app.theme_changed_signal.subscribe(self, lambda _t: self.redraw())
+        self.ready = True
+        self.redraw()
+
+    def _changed(self, change: Any) -> None:
+        topic, robot = change
+        if topic not in self.TOPICS:
+            return
+        if not self.ready:
+            return
+        if self.app.screen is self:
+            self.update_view(topic, robot)
+        else:
+            self._stale = True
+
+    def on_screen_resume(self) -> None:
+        if self._stale:
+            self._stale = False
+            self.redraw()
+
+    def colour(self, variable: str, fallback: str = "") -> str:
+        """A theme variable's colour for Rich text (tables cannot use $vars)."""
+        return self.app.theme_variables.get(variable, fallback)
+
+    def set_title(self, *parts: tuple[str, str] | str) -> None:
+        self.title_bar.update(Text.assemble(("missionctl", "bold"), "  ", *parts))
+
+    @on(Input.Changed, "#filter")
+    def _filter(self, event: Input.Changed) -> None:
+        self.query_text = event.value.strip()
+        self.redraw()
+
+    @on(Input.Submitted, "#filter")
+    def _to_table(self) -> None:
+        self.query_one(DataTable).focus()
+
+    # subclasses
+    def compose(self) -> ComposeResult:  # pragma: no cover - overridden
+        yield self.title_bar
+
+    def redraw(self) -> None:
+        """Everything again (filter or theme changed, shown after a while)."""
+
+    def update_view(self, topic: str, robot: str | None) -> None:
+        """Something of `topic` (about `robot`, None: anything) changed while
+        shown (default: redraw)."""
+        self.redraw()
