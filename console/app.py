@@ -39,8 +39,8 @@ from .messages import (
     AlertReceived,
     ConnectionChanged,
     EventsApplied,
-    MapChanged,
     FleetChanged,
+    MapChanged,
     StateLoaded,
     TelemetryChanged,
 )
