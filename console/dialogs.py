@@ -247,6 +247,8 @@ class HelpScreen(ModalScreen[None]):
         t.append("  barrier tag: partner skills wait for each other\n", style="dim")
         t.append("  +   ", style="bold")
         t.append("  marked for a new barrier (space)\n", style="dim")
+        t.append("  *label", style="bold")
+        t.append(" unapplied changes in the editor (kept per skill until applied or reverted)\n", style="dim")
         t.append("\nRemapping keys\n", style="bold underline")
         t.append('  ~/.config/missionctl/config.toml:  [keymap]  "mission.sync" = "S"\n', style="dim")
         t.append("  binding ids: " + ", ".join(a.binding_id for a in ACTIONS) + "\n", style="dim")

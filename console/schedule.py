@@ -135,6 +135,7 @@ class ScheduleView(ScrollView, can_focus=True):
         self.cursor_col = 0
         self.cursor_id: str | None = None
         self.marks: list[str] = []
+        self.drafts: frozenset[str] = frozenset()  # skills with unapplied edits (marked '*')
         self.expand_static = False
         self._summary_cache: dict[tuple[str, int], str] = {}
         self._last_width = -1
@@ -368,6 +369,11 @@ class ScheduleView(ScrollView, can_focus=True):
         self.refresh()
         return marked
 
+    def set_drafts(self, drafts: frozenset[str]) -> None:
+        if drafts != self.drafts:
+            self.drafts = drafts
+            self.refresh()
+
     def clear_marks(self) -> None:
         self.marks = []
         self.refresh()
@@ -528,7 +534,7 @@ class ScheduleView(ScrollView, can_focus=True):
         selected = ci == self.cursor_col and s.id == self.cursor_id
         bid = self.model.barrier_of(s.id)
         tag = f"[{bid}]" if bid else ""
-        title = skill_title(s) + (f" #{s.attempt}" if s.attempt > 1 else "")
+        title = ("*" if s.id in self.drafts else "") + skill_title(s) + (f" #{s.attempt}" if s.attempt > 1 else "")
         extra = self._summary(s) if not col.static or self.expand_static else ""
         room = w - 2 - (cell_len(tag) + 1 if tag else 0)
         segs: list[Segment] = [

@@ -201,6 +201,7 @@ class MissionScreen(Screen):
                 await self.editor.show_skill(self.schedule.cursor_id)
             else:
                 await self.editor.model_changed()
+        self.editor.prune_drafts()
 
     async def connection_changed(self) -> None:
         self.update_top()
@@ -367,11 +368,18 @@ class MissionScreen(Screen):
         self.editor.can_focus = False
         self.schedule.focus()
 
+    @on(ParamEditor.DraftsChanged)
+    def _drafts_changed(self, event: ParamEditor.DraftsChanged) -> None:
+        self.schedule.set_drafts(event.unapplied)
+        for text in event.discarded:
+            self.say(text, "warning")
+            self.app.notify(text, title="Unapplied changes discarded", severity="warning", timeout=8)
+
     @on(ParamEditor.ApplyRequested)
     def _apply(self, event: ParamEditor.ApplyRequested) -> None:
-        op = EditSkill(id=event.skill_id, label=event.label, params=event.params, bindings=event.bindings)
+        op = EditSkill(id=event.skill_id, label=event.label, params=event.params, bindings=event.bindings, policies=event.policies)
         robot = self.model.owner(event.skill_id)
-        changed = ", ".join([*event.params, *event.bindings] + (["label"] if event.label is not None else []))
+        changed = ", ".join([*event.params, *event.bindings] + (["label"] if event.label is not None else []) + (["policies"] if event.policies is not None else []))
 
         def refused(reply: Any) -> None:
             if reply.skill in (None, event.skill_id) and self.editor.skill_id == event.skill_id:

@@ -405,3 +405,128 @@ async def test_save_then_load_a_mission_file_and_undo(tmp_path):
         await pilot.press("y")
         await wait_until(pilot, lambda: b.mission.find("lru2-1")[2].label == "drive beside POI-A", what="loaded on the server")
         await wait_until(pilot, lambda: "drive beside POI-A" in screen_text(app), what="shown")
+
+
+async def test_policies_are_typed_inputs_validated_then_applied():
+    from backend.model import Policies
+
+    b = Builder(TUTORIAL)
+    backend = EngineBackend(b)
+    app = make_app(backend=backend)
+    backend.app = app
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, online={"lru1": True, "lru2": True})
+        screen = app.mission_screen
+        screen.schedule.select("lru2-1")
+        await pilot.pause()
+        text = screen_text(app)
+        assert "policies — applied by the robot itself" in text
+        assert "retries" in text and "pause out of comms" in text and "recharge below" in text
+        ed = screen.editor
+        ed.query_one("#pf-retries").value = "25"
+        ed.query_one("#pf-recharge_below").value = "1.5"
+        await pilot.pause()
+        assert "25: should be less than or equal to 20" in screen_text(app)
+        assert str(ed.query_one("#perr-recharge_below").render()) == "1.5: should be less than or equal to 1"
+        ed.action_apply()
+        await pilot.pause()
+        assert backend.ops == []  # nothing sent while invalid
+        ed.query_one("#pf-retries").value = "3"
+        ed.query_one("#pf-recharge_below").value = "0.2"
+        ed.query_one("#pf-pause_out_of_comms").value = True
+        await pilot.pause()
+        assert "should be" not in screen_text(app)
+        assert "unapplied changes: policies" in screen_text(app)
+        ed.action_apply()
+        await wait_until(pilot, lambda: b.mission.find("lru2-1")[2].policies == Policies(retries=3, pause_out_of_comms=True, recharge_below=0.2), what="policies applied")
+        await wait_until(pilot, lambda: "applied policies" in status_line(app), what="status line")
+        await wait_until(pilot, lambda: not ed.dirty and ed.query_one("#pf-retries").value == "3", what="reloaded")
+        # an empty recharge level means off
+        ed.query_one("#pf-recharge_below").value = ""
+        await wait_until(pilot, lambda: ed.dirty == ["policies"], what="the change seen")
+        ed.action_apply()
+        await wait_until(pilot, lambda: b.mission.find("lru2-1")[2].policies.recharge_below is None, what=f"recharge off (status: {status_line(app)})")
+        # read-only like the parameters once the skill is on the robot
+        b.sync("lru2", "lru2-1")
+        from console.messages import StateLoaded
+
+        app.post_message(StateLoaded(b.snapshot(), b.library, {}))
+        await wait_until(pilot, lambda: ed.query("#readonly"), what="read-only")
+        assert all(w.disabled for w in ed.query("#pf-retries, #pf-pause_out_of_comms, #pf-recharge_below"))
+
+
+async def test_unapplied_edits_are_kept_per_skill_when_the_cursor_moves():
+    b = Builder(TUTORIAL)
+    backend = EngineBackend(b)
+    app = make_app(backend=backend)
+    backend.app = app
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, online={"lru1": True, "lru2": True})
+        screen = app.mission_screen
+        screen.schedule.select("lru2-1")
+        await pilot.pause()
+        await pilot.press("enter")  # into the editor
+        await pilot.pause()
+        screen.editor.query_one("#f-label").value = "drive carefully"
+        screen.editor.query_one("#f-speed").value = "0.3"
+        await pilot.pause()
+        assert "unapplied changes: label, speed" in screen_text(app)
+        await pilot.press("escape", "down")  # back to the schedule, next skill
+        await pilot.pause()
+        assert screen.editor.skill_id == "lru2-2"
+        assert "*drive next to POI-A" in screen_text(app)  # the row says it has a draft
+        assert screen.editor.query_one("#f-label").value == "find a stone"
+        await pilot.press("up")
+        await pilot.pause()
+        assert screen.editor.query_one("#f-label").value == "drive carefully"
+        assert screen.editor.query_one("#f-speed").value == "0.3"
+        assert "unapplied changes: label, speed" in screen_text(app)
+        await pilot.press("enter", "ctrl+s")
+        await wait_until(pilot, lambda: b.mission.find("lru2-1")[2].label == "drive carefully", what="applied")
+        assert b.mission.find("lru2-1")[2].params["speed"] == 0.3
+        await wait_until(pilot, lambda: "*drive" not in screen_text(app) and not screen.editor.dirty, what="draft gone")
+
+
+async def test_a_draft_is_discarded_and_said_when_its_skill_leaves_idle():
+    b = Builder(TUTORIAL)
+    backend = EngineBackend(b)
+    app = make_app(backend=backend)
+    backend.app = app
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, online={"lru1": True, "lru2": True})
+        screen = app.mission_screen
+        screen.schedule.select("lru2-1")
+        await pilot.pause()
+        screen.editor.query_one("#f-label").value = "not yet"
+        await pilot.pause()
+        screen.schedule.select("lru2-2")
+        await pilot.pause()
+        assert "*drive next to POI-A" in screen_text(app)
+        await pilot.press("s")  # sync through lru2-2: lru2-1 goes to the robot
+        await wait_until(pilot, lambda: "discarded" in status_line(app), what="the draft dropped and said")
+        assert "lru2-1 is now queued on lru2: your unapplied changes to it (label) are discarded" in status_line(app)
+        assert "*drive" not in screen_text(app)
+        assert screen.editor.drafts == {}
+        # back on it: the skill as it is, read-only
+        screen.schedule.select("lru2-1")
+        await pilot.pause()
+        assert screen.editor.query_one("#f-label").value == "drive next to POI-A"
+
+
+async def test_a_draft_survives_a_lost_connection():
+    b = Builder(TUTORIAL)
+    app = make_app(backend=EngineBackend(b))
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, online={"lru1": True, "lru2": True})
+        screen = app.mission_screen
+        screen.schedule.select("lru2-1")
+        await pilot.pause()
+        screen.editor.query_one("#f-label").value = "kept"
+        await pilot.pause()
+        app.post_message(ConnectionChanged("reconnecting"))
+        await wait_until(pilot, lambda: screen.editor.query("#readonly"), what="read-only while reconnecting")
+        assert screen.editor.query_one("#f-label").value == "drive next to POI-A"
+        app.post_message(ConnectionChanged("connected"))
+        await wait_until(pilot, lambda: not screen.editor.query("#readonly"), what="editable again")
+        assert screen.editor.query_one("#f-label").value == "kept"
+        assert "unapplied changes: label" in screen_text(app)
