@@ -193,6 +193,11 @@ class ParamEditor(VerticalScroll):
             return "no skill selected"
         return self.model.read_only_reason(self.skill_id)
 
+    @property
+    def loading(self) -> bool:
+        """A skill is being (re)loaded: the fields are being rebuilt."""
+        return self._load_lock.locked()
+
     async def show_skill(self, skill_id: str | None, *, force: bool = False, discard: bool = False) -> None:
         """Load a skill (serialized: the app and the screen both call this,
         from different message pumps, and two rebuilds must not interleave).

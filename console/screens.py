@@ -38,7 +38,7 @@ from backend.ops import (
     Unsync,
 )
 
-from .actions import BY_NAME, mission_bindings
+from .actions import ACTIONS, BY_NAME, mission_bindings
 from .dialogs import ConfirmScreen, PathPrompt, SkillPicker
 from .model import CONNECTED, ConsoleModel
 from .params import ParamEditor
@@ -48,6 +48,7 @@ if TYPE_CHECKING:
     from .app import MissionApp
 
 NARROW = 100
+FOOTER_ACTIONS = [a.name for a in ACTIONS if a.footer]
 
 
 def default_params(spec_params: dict[str, ParamSpec], model: ConsoleModel, robot: str) -> tuple[dict[str, Any], dict[str, str]]:
@@ -214,7 +215,7 @@ class MissionScreen(Screen):
         self.refresh_availability()
 
     def telemetry_changed(self, robot: str) -> None:
-        self.schedule.refresh_robots([robot])
+        self.schedule.refresh_telemetry(robot)
 
     def update_top(self) -> None:
         m = self.model
@@ -259,8 +260,10 @@ class MissionScreen(Screen):
         return self.schedule.cursor_robot, self.schedule.cursor_id
 
     def refresh_availability(self) -> None:
-        """Refresh the footer only when what applies changed (it rebuilds its keys)."""
-        sig = (tuple(self.why_disabled(a) is None for a in BY_NAME), self.model.connection)
+        """Refresh the footer only when what it shows changed: it rebuilds its
+        keys and the screen's layout (tens of ms). Keys not in the footer are
+        checked when pressed (`check_action`), so they need no refresh."""
+        sig = (tuple(self.why_disabled(a) is None for a in FOOTER_ACTIONS), self.model.connection)
         if sig != getattr(self, "_availability", None):
             self._availability = sig
             self.refresh_bindings()

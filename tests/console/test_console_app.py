@@ -440,12 +440,13 @@ async def test_policies_are_typed_inputs_validated_then_applied():
         ed.action_apply()
         await wait_until(pilot, lambda: b.mission.find("lru2-1")[2].policies == Policies(retries=3, pause_out_of_comms=True, recharge_below=0.2), what="policies applied")
         await wait_until(pilot, lambda: "applied policies" in status_line(app), what="status line")
-        await wait_until(pilot, lambda: not ed.dirty and ed.query_one("#pf-retries").value == "3", what="reloaded")
+        await wait_until(pilot, lambda: ed.loaded_rev == b.mission.find("lru2-1")[2].rev and not ed.loading and not ed.dirty, what="reloaded")
+        assert ed.query_one("#pf-retries").value == "3"
         # an empty recharge level means off
         ed.query_one("#pf-recharge_below").value = ""
         await wait_until(pilot, lambda: ed.dirty == ["policies"], what="the change seen")
         ed.action_apply()
-        await wait_until(pilot, lambda: b.mission.find("lru2-1")[2].policies.recharge_below is None, what=f"recharge off (status: {status_line(app)})")
+        await wait_until(pilot, lambda: b.mission.find("lru2-1")[2].policies.recharge_below is None, what="recharge off")
         # read-only like the parameters once the skill is on the robot
         b.sync("lru2", "lru2-1")
         from console.messages import StateLoaded
@@ -530,3 +531,34 @@ async def test_a_draft_survives_a_lost_connection():
         await wait_until(pilot, lambda: not screen.editor.query("#readonly"), what="editable again")
         assert screen.editor.query_one("#f-label").value == "kept"
         assert "unapplied changes: label" in screen_text(app)
+
+
+async def test_status_changes_and_telemetry_repaint_the_lines_that_changed():
+    from backend.model import Pose
+    from backend.ops import Report
+    from backend.protocol import Telemetry
+    from console.messages import EventsApplied, TelemetryChanged
+    from console_state import T0
+
+    b = mars_mid_execution()
+    app = make_app()
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, telemetry=mars_telemetry())
+        assert "45%" in screen_text(app)
+        app.post_message(TelemetryChanged(Telemetry(robot="lru1", pose=Pose(x=21.0, y=8.0), battery=0.5, link=0.9, mode="executing", skill="lru1-2", progress=0.7, eta_s=60, at=T0)))
+        await pilot.pause()
+        text = screen_text(app)
+        assert "70%" in text and "ETA 1m00s" in text and "bat 50%" in text and "45%" not in text
+        seq = 100
+        for sid, status in (("lru1-2", "success"), ("lru1-3", "synchwaiting"), ("lru1-3", "running")):
+            seq += 1
+            applied = b.engine.submit(Report(robot="lru1", seq=seq, id=sid, status=status))
+            app.post_message(EventsApplied(applied.batch()))
+            await pilot.pause()
+        text = screen_text(app)
+        lru1 = [line.split("│")[0] for line in text.splitlines()]
+        assert any("✓ drive to POI-A" in line for line in lru1)
+        assert any("▶ identify stone" in line for line in lru1)  # the barrier skill now runs
+        assert "▶ lru1-3 running" in text  # header activity
+        assert not any("▶ explore east plain" in line for line in lru1)
+        assert screen_text(app) == text  # stable: nothing left half-painted
