@@ -3,6 +3,9 @@
 The server and the sim run as subprocesses (started before this process
 opens any Zenoh session: never fork after Zenoh is open). Quitting the
 console — or any error — stops them: terminate, then kill after a timeout.
+For a quick start, `launch()` only spawns the server (and the check whether
+the sim is installed); the caller loads the console meanwhile, then
+`wait_ready()` waits for the server and starts the sim.
 """
 
 from __future__ import annotations
@@ -33,13 +36,24 @@ def _tail(path: Path, lines: int = 8) -> str:
     return "\n".join(text.strip().splitlines()[-lines:])
 
 
-def sim_available(python: str = sys.executable) -> bool:
-    """Whether `missionctl sim` is installed (another package plugs it in)."""
+def sim_check(python: str = sys.executable) -> subprocess.Popen | None:
+    """Start checking whether `missionctl sim` is installed (another package
+    plugs it in): its --help runs; `sim_available` reads the answer."""
     try:
-        r = subprocess.run([python, "-m", "backend.cli", "sim", "--help"], capture_output=True, timeout=60)
-    except (OSError, subprocess.TimeoutExpired):
+        return subprocess.Popen([python, "-m", "backend.cli", "sim", "--help"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL)
+    except OSError:
+        return None
+
+
+def sim_available(check: subprocess.Popen | None) -> bool:
+    if check is None:
         return False
-    return r.returncode == 0
+    try:
+        return check.wait(60) == 0
+    except subprocess.TimeoutExpired:
+        check.kill()
+        check.wait()
+        return False
 
 
 class DemoProcesses:
@@ -56,6 +70,8 @@ class DemoProcesses:
         self.server: subprocess.Popen | None = None
         self.sim: subprocess.Popen | None = None
         self.notices: list[str] = []
+        self._sim_check: subprocess.Popen | None = None
+        self._attempt = 0
         self._logs: list[IO] = []
 
     @property
@@ -72,23 +88,37 @@ class DemoProcesses:
         return subprocess.Popen([self.python, "-m", "backend.cli", *args], stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
 
     def start(self, timeout: float = 30.0) -> None:
+        self.launch()
+        self.wait_ready(timeout)
+
+    def _spawn_server(self) -> None:
+        self.endpoint = loopback_endpoint(free_port())
+        db = self.workdir / f"demo-{self._attempt}.db"
+        self.server = self._spawn(["server", "--mission", str(self.mission), "--listen", self.endpoint, "--db", str(db)], self.server_log)
+
+    def launch(self) -> None:
+        """Spawn the server (and the sim check); returns at once."""
         if not self.mission.is_file():
             raise DemoError(f"{self.mission}: no such mission file")
-        want_sim = sim_available(self.python) if self.with_sim is None else self.with_sim
-        for attempt in range(3):  # the free port may be taken meanwhile
-            self.endpoint = loopback_endpoint(free_port())
-            db = self.workdir / f"demo-{attempt}.db"
-            self.server = self._spawn(["server", "--mission", str(self.mission), "--listen", self.endpoint, "--db", str(db)], self.server_log)
+        if self.with_sim is None:
+            self._sim_check = sim_check(self.python)
+        self._spawn_server()
+
+    def wait_ready(self, timeout: float = 30.0) -> None:
+        """Until the server listens (retrying on a port taken meanwhile); then start the sim."""
+        while True:
             if self._wait_ready(timeout):
                 break
             code = self.server.poll()
             tail = _tail(self.server_log)
             self._stop_one(self.server)
-            if code is not None and "address" in tail.lower() and "use" in tail.lower():
+            if code is not None and "address" in tail.lower() and "use" in tail.lower() and self._attempt < 2:
+                self._attempt += 1  # the free port was taken meanwhile
+                self._spawn_server()
                 continue
             raise DemoError(f"the mission server did not start{' (exit code ' + str(code) + ')' if code is not None else ' in time'}:\n{tail}")
-        else:
-            raise DemoError("no free loopback port for the mission server")
+        want_sim = sim_available(self._sim_check) if self.with_sim is None else self.with_sim
+        self._sim_check = None
         if want_sim:
             self.sim = self._spawn(["sim", "--mission", str(self.mission), "--connect", self.endpoint, "--speed", f"{self.speed:g}"], self.sim_log)
         else:
@@ -125,6 +155,7 @@ class DemoProcesses:
             p.wait(timeout)
 
     def stop(self) -> None:
+        self._stop_one(self._sim_check)
         self._stop_one(self.sim)
         self._stop_one(self.server)
         for f in self._logs:
