@@ -586,16 +586,17 @@ class ScheduleView(ScrollView, can_focus=True):
         selected = ci == self.cursor_col and s.id == self.cursor_id
         bid = self.model.barrier_of(s.id)
         tag = f"[{bid}]" if bid else ""
-        title = ("*" if s.id in self.drafts else "") + skill_title(s) + (f" #{s.attempt}" if s.attempt > 1 else "")
+        title = ("*" if s.id in self.drafts else "") + skill_title(s)
+        attempt = f" #{s.attempt}" if s.attempt > 1 else ""
         extra = self._summary(s) if not col.static or self.expand_static else ""
         room = w - 2 - (cell_len(tag) + 1 if tag else 0)
         segs: list[Segment] = [
             Segment("+" if marked else " ", st["mark"] if marked else st["base"]),
             Segment(GLYPHS[s.status], sst),
         ]
-        body = " " + title
-        if cell_len(body) >= room:
-            segs.append(Segment(_fit(body, room), sst))
+        body = " " + title + attempt
+        if cell_len(body) >= room:  # the label is cut, never the attempt number
+            segs.append(Segment(_fit(" " + title, room - len(attempt)) + attempt, sst))
         else:
             segs.append(Segment(body, sst))
             rest = room - cell_len(body)

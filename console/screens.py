@@ -145,6 +145,7 @@ class MissionScreen(Screen):
         self._schedule = ScheduleView(model, id="schedule")
         self._editor = ParamEditor(model, id="editor")
         self._status = StatusLine("", id="status")
+        self._footer = Footer()
         self.edit_after_select = False
         self.message = ""
 
@@ -158,7 +159,7 @@ class MissionScreen(Screen):
             yield self._schedule
             yield self._editor
         yield self._status
-        yield Footer()
+        yield self._footer
 
     @property
     def schedule(self) -> ScheduleView:
@@ -168,8 +169,15 @@ class MissionScreen(Screen):
     def editor(self) -> ParamEditor:
         return self._editor
 
+    def _set_narrow(self, narrow: bool) -> None:
+        self.set_class(narrow, "-narrow")
+        # at 80 columns the footer keys only fit compact and without the
+        # palette hint (ctrl+p is on the help screen): quit and help stay visible
+        self._footer.compact = narrow
+        self._footer.show_command_palette = not narrow
+
     def on_mount(self) -> None:
-        self.set_class(self.app.size.width < NARROW, "-narrow")
+        self._set_narrow(self.app.size.width < NARROW)
         self.schedule.focus()
         self.update_top()
         self.schedule.rebuild()
@@ -177,7 +185,7 @@ class MissionScreen(Screen):
     def on_resize(self, event: events.Resize) -> None:
         narrow = event.size.width < NARROW
         if narrow != self.has_class("-narrow"):
-            self.set_class(narrow, "-narrow")
+            self._set_narrow(narrow)
             if not narrow:
                 self.remove_class("-editing")
                 self.run_worker(self.editor.show_skill(self.schedule.cursor_id), group="editor", exclusive=True)

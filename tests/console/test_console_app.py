@@ -22,6 +22,7 @@ from console_state import (
 
 from backend.client import OperationRefused
 from backend.model import Status
+from backend.ops import Retry, RetryAck
 from backend.protocol import ErrorReply, OpReply
 from backend.transport import free_port, loopback_endpoint
 from console.config import ConsoleConfig
@@ -250,8 +251,10 @@ async def test_help_screen_lists_the_keys_and_the_legend():
         assert "Synchronization" in text and "Execution" in text
         assert "S               Sync" in text  # the remapped key
         assert "d / delete" in text
-        full = str(app.screen.query_one("#help-text").render())  # scrolls: the legend is further down
-        assert "waiting at barrier" in full and "◷" in full and "mission.sync" in full
+        app.screen.query_one("VerticalScroll").scroll_end(animate=False, immediate=True)  # the legend is further down
+        await pilot.pause()
+        end = screen_text(app)
+        assert "waiting at barrier" in end and "◷" in end and "mission.sync" in end and "unapplied changes" in end
         await pilot.press("escape")
         await wait_until(pilot, lambda: not isinstance(app.screen, HelpScreen), what="help closed")
         await pilot.press("question_mark")
@@ -562,3 +565,22 @@ async def test_status_changes_and_telemetry_repaint_the_lines_that_changed():
         assert "▶ lru1-3 running" in text  # header activity
         assert not any("▶ explore east plain" in line for line in lru1)
         assert screen_text(app) == text  # stable: nothing left half-painted
+
+
+async def test_a_long_label_is_cut_but_never_the_attempt_number():
+    from backend.ops import EditSkill
+
+    b = Builder()
+    b.engine.submit(EditSkill(id="ardea-1", label="take off from the lander pad"))
+    b.sync("ardea", "ardea-1")
+    b.report("ardea", "ardea-1", "running")
+    b.report("ardea", "ardea-1", "failure", "rotor check failed")
+    new = b.engine.plan_retry(Retry(id="ardea-1"))
+    b.engine.submit(RetryAck(robot="ardea", failed_id="ardea-1", skill=new))
+    b.engine.release("ardea")
+    app = make_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        await inject(app, pilot, b)
+        text = screen_text(app)
+        assert "✗ take off from the la…│" in text  # the first attempt, cut
+        assert "● take off from the… #2│" in text  # the retry: cut, with its attempt
