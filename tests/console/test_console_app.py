@@ -584,3 +584,27 @@ async def test_a_long_label_is_cut_but_never_the_attempt_number():
         text = screen_text(app)
         assert "✗ take off from the la…│" in text  # the first attempt, cut
         assert "● take off from the… #2│" in text  # the retry: cut, with its attempt
+
+
+async def test_quitting_with_unapplied_changes_asks_first():
+    from console.dialogs import ConfirmScreen
+
+    b = Builder(TUTORIAL)
+    app = make_app(backend=EngineBackend(b))
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, online={"lru1": True, "lru2": True})
+        app.mission_screen.schedule.select("lru2-1")
+        await pilot.pause()
+        app.mission_screen.editor.query_one("#f-label").value = "unsaved"
+        await pilot.pause()
+        await pilot.press("ctrl+q")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the question")
+        assert "Unapplied changes to lru2-1 are lost when you quit" in screen_text(app)
+        await pilot.press("n")
+        await wait_until(pilot, lambda: not isinstance(app.screen, ConfirmScreen), what="back")
+        assert app.return_code is None
+        await pilot.press("ctrl+q")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the question again")
+        await pilot.press("y")
+        await wait_exit(app)
+        assert app.return_code == 0
