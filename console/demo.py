@@ -3,18 +3,19 @@
 The server and the sim run as subprocesses (started before this process
 opens any Zenoh session: never fork after Zenoh is open). Quitting the
 console — or any error — stops them: terminate, then kill after a timeout.
-For a quick start, `launch()` only spawns the server (and the check whether
-the sim is installed); the caller loads the console meanwhile, then
-`wait_ready()` waits for the server and starts the sim.
+For a quick start, `launch()` only spawns the server; the caller loads the
+console meanwhile, then `wait_ready()` waits for the server and starts the sim.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import shutil
 import subprocess
 import sys
 import tempfile
 import time
+from importlib.metadata import entry_points
 from pathlib import Path
 from typing import IO
 
@@ -36,24 +37,12 @@ def _tail(path: Path, lines: int = 8) -> str:
     return "\n".join(text.strip().splitlines()[-lines:])
 
 
-def sim_check(python: str = sys.executable) -> subprocess.Popen | None:
-    """Start checking whether `missionctl sim` is installed (another package
-    plugs it in): its --help runs; `sim_available` reads the answer."""
-    try:
-        return subprocess.Popen([python, "-m", "backend.cli", "sim", "--help"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL)
-    except OSError:
-        return None
-
-
-def sim_available(check: subprocess.Popen | None) -> bool:
-    if check is None:
-        return False
-    try:
-        return check.wait(60) == 0
-    except subprocess.TimeoutExpired:
-        check.kill()
-        check.wait()
-        return False
+def sim_available() -> bool:
+    """Whether `missionctl sim` is installed (another package plugs it in),
+    from the package metadata: no process to start, nothing imported (a sim
+    that then fails to start is reported by the demo app)."""
+    plugged = any(ep.name == "sim" for ep in entry_points(group="missionctl.commands"))
+    return plugged and importlib.util.find_spec("sim") is not None
 
 
 class DemoProcesses:
@@ -70,7 +59,6 @@ class DemoProcesses:
         self.server: subprocess.Popen | None = None
         self.sim: subprocess.Popen | None = None
         self.notices: list[str] = []
-        self._sim_check: subprocess.Popen | None = None
         self._attempt = 0
         self._logs: list[IO] = []
 
@@ -100,8 +88,6 @@ class DemoProcesses:
         """Spawn the server (and the sim check); returns at once."""
         if not self.mission.is_file():
             raise DemoError(f"{self.mission}: no such mission file")
-        if self.with_sim is None:
-            self._sim_check = sim_check(self.python)
         self._spawn_server()
 
     def wait_ready(self, timeout: float = 30.0) -> None:
@@ -117,8 +103,7 @@ class DemoProcesses:
                 self._spawn_server()
                 continue
             raise DemoError(f"the mission server did not start{' (exit code ' + str(code) + ')' if code is not None else ' in time'}:\n{tail}")
-        want_sim = sim_available(self._sim_check) if self.with_sim is None else self.with_sim
-        self._sim_check = None
+        want_sim = sim_available() if self.with_sim is None else self.with_sim
         if want_sim:
             self.sim = self._spawn(["sim", "--mission", str(self.mission), "--connect", self.endpoint, "--speed", f"{self.speed:g}"], self.sim_log)
         else:
@@ -155,7 +140,6 @@ class DemoProcesses:
             p.wait(timeout)
 
     def stop(self) -> None:
-        self._stop_one(self._sim_check)
         self._stop_one(self.sim)
         self._stop_one(self.server)
         for f in self._logs:
