@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import yaml
+from pydantic import ValidationError
 from rich.text import Text
 from textual import on
 from textual.app import ComposeResult
@@ -33,8 +34,6 @@ from textual.message import Message
 from textual.widgets import Button, Input, Label, Select, Static, Switch, TextArea
 
 from backend.library import POSE_FIELDS, POSITION_FIELDS, ParamSpec, check_value, normalize_value
-from pydantic import ValidationError
-
 from backend.model import Policies, SkillInstance, Status
 
 from .model import GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel, fmt_number

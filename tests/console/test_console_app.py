@@ -11,6 +11,7 @@ from console_state import (
     TUTORIAL,
     Builder,
     EngineBackend,
+    engine_app,
     inject,
     make_app,
     mars_mid_execution,
@@ -125,9 +126,7 @@ async def test_actions_that_do_not_apply_say_why():
 
 async def test_add_with_picker_then_edit_with_inline_validation_then_apply():
     b = Builder(TUTORIAL)
-    backend = EngineBackend(b)
-    app = make_app(backend=backend)
-    backend.app = app
+    app, backend = engine_app(b)
     async with app.run_test(size=WIDE) as pilot:
         await inject(app, pilot, b, online={"lru1": True, "lru2": True})
         screen = app.mission_screen
@@ -182,9 +181,7 @@ async def test_server_refusal_for_a_parameter_appears_next_to_the_field():
 
 async def test_barrier_from_marks_across_robots():
     b = mars_mid_execution()
-    backend = EngineBackend(b)
-    app = make_app(backend=backend)
-    backend.app = app
+    app, backend = engine_app(b)
     async with app.run_test(size=WIDE) as pilot:
         await inject(app, pilot, b, telemetry=mars_telemetry())
         screen = app.mission_screen
@@ -207,9 +204,7 @@ async def test_barrier_from_marks_across_robots():
 
 async def test_sync_unsync_delete_move_and_retry_offline():
     b = mars_mid_execution()
-    backend = EngineBackend(b)
-    app = make_app(backend=backend)
-    backend.app = app
+    app, backend = engine_app(b)
     async with app.run_test(size=WIDE) as pilot:
         await inject(app, pilot, b, telemetry=mars_telemetry())
         screen = app.mission_screen
@@ -372,9 +367,7 @@ async def test_save_then_load_a_mission_file_and_undo(tmp_path):
     from console.dialogs import ConfirmScreen, PathPrompt
 
     b = Builder(TUTORIAL)
-    backend = EngineBackend(b)
-    app = make_app(backend=backend)
-    backend.app = app
+    app, backend = engine_app(b)
     async with app.run_test(size=WIDE) as pilot:
         await inject(app, pilot, b, online={"lru1": True, "lru2": True})
         # undo / redo of one's own edit
@@ -414,9 +407,7 @@ async def test_policies_are_typed_inputs_validated_then_applied():
     from backend.model import Policies
 
     b = Builder(TUTORIAL)
-    backend = EngineBackend(b)
-    app = make_app(backend=backend)
-    backend.app = app
+    app, backend = engine_app(b)
     async with app.run_test(size=WIDE) as pilot:
         await inject(app, pilot, b, online={"lru1": True, "lru2": True})
         screen = app.mission_screen
@@ -461,9 +452,7 @@ async def test_policies_are_typed_inputs_validated_then_applied():
 
 async def test_unapplied_edits_are_kept_per_skill_when_the_cursor_moves():
     b = Builder(TUTORIAL)
-    backend = EngineBackend(b)
-    app = make_app(backend=backend)
-    backend.app = app
+    app, backend = engine_app(b)
     async with app.run_test(size=WIDE) as pilot:
         await inject(app, pilot, b, online={"lru1": True, "lru2": True})
         screen = app.mission_screen
@@ -493,9 +482,7 @@ async def test_unapplied_edits_are_kept_per_skill_when_the_cursor_moves():
 
 async def test_a_draft_is_discarded_and_said_when_its_skill_leaves_idle():
     b = Builder(TUTORIAL)
-    backend = EngineBackend(b)
-    app = make_app(backend=backend)
-    backend.app = app
+    app, backend = engine_app(b)
     async with app.run_test(size=WIDE) as pilot:
         await inject(app, pilot, b, online={"lru1": True, "lru2": True})
         screen = app.mission_screen
@@ -537,11 +524,12 @@ async def test_a_draft_survives_a_lost_connection():
 
 
 async def test_status_changes_and_telemetry_repaint_the_lines_that_changed():
+    from console_state import T0
+
     from backend.model import Pose
     from backend.ops import Report
     from backend.protocol import Telemetry
     from console.messages import EventsApplied, TelemetryChanged
-    from console_state import T0
 
     b = mars_mid_execution()
     app = make_app()
