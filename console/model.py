@@ -118,7 +118,19 @@ def param_summary(skill: SkillInstance, library: Library | None) -> str:
             except Exception:
                 pass
         parts.append(f"{name}={fmt_value(pspec, value)}")
+    parts.extend(policy_marks(skill))
     return " ".join(parts)
+
+
+def policy_marks(skill: SkillInstance) -> list[str]:
+    """Short marks for the policies that are set: 'retry×2 pause-out-of-comms recharge<20%'."""
+    p = skill.policies
+    marks = [f"retry×{p.retries}"] if p.retries else []
+    if p.pause_out_of_comms:
+        marks.append("pause-out-of-comms")
+    if p.recharge_below is not None:
+        marks.append(f"recharge<{round(p.recharge_below * 100)}%")
+    return marks
 
 
 def skill_title(skill: SkillInstance) -> str:
