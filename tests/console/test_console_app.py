@@ -596,3 +596,27 @@ async def test_quitting_with_unapplied_changes_asks_first():
         await pilot.press("y")
         await wait_exit(app)
         assert app.return_code == 0
+
+
+async def test_at_80x24_a_draft_survives_leaving_the_editor_and_editing_another_skill():
+    b = Builder(TUTORIAL)
+    app, backend = engine_app(b)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await inject(app, pilot, b, online={"lru1": True, "lru2": True})
+        screen = app.mission_screen
+        screen.schedule.select("lru2-1")
+        await pilot.pause()
+        await pilot.press("enter", *"careful ")  # the label field has the focus
+        await pilot.pause()
+        assert "unapplied changes: label" in screen_text(app)
+        await pilot.press("escape", "down")
+        await pilot.pause()
+        assert "*drive next to POI-A" in screen_text(app)
+        await pilot.press("enter")  # edit lru2-2: lru2-1's changes become its draft
+        await wait_until(pilot, lambda: screen.editor.skill_id == "lru2-2" and not screen.editor.loading, what="lru2-2 in the editor")
+        assert screen.editor.drafts.keys() == {"lru2-1"}
+        await pilot.press("escape", "up", "enter")
+        await wait_until(pilot, lambda: screen.editor.skill_id == "lru2-1" and not screen.editor.loading, what="lru2-1 again")
+        assert screen.editor.query_one("#f-label").value.startswith("careful ")
+        await pilot.press("ctrl+s")
+        await wait_until(pilot, lambda: b.mission.find("lru2-1")[2].label.startswith("careful "), what="applied")
