@@ -200,6 +200,10 @@ class ConsoleModel:
                         reindex = True
                     else:
                         robots.add(r)
+                    bid = self._barrier_of.get(sid)
+                    if bid is not None and bid in self.mission.barriers:
+                        # partners waiting at the barrier show this skill's state
+                        robots.update(self._owner[x] for x in self.mission.barriers[bid].skills if x in self._owner)
                 case ev.BarrierSet() | ev.BarrierRemoved():
                     barriers = True
                 case ev.MissionReplaced():

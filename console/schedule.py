@@ -239,6 +239,8 @@ class ScheduleView(ScrollView, can_focus=True):
         self.refresh(Region(x, 0, w, HEADER_H - 1))  # presence, battery, activity
         changed = [line for line in self._visible_lines()
                    if self._line_key(old, line, old_sync_h) != self._line_key(new, line, self.sync_h)]
+        # progress lines also show telemetry and barrier partners' states
+        changed += [line for line, (_, kind) in enumerate(new.sync) if kind == "progress"]
         self._refresh_content_lines(x, w, changed)
 
     def _relayout(self, only: list[Column] | None = None) -> None:

@@ -620,3 +620,20 @@ async def test_at_80x24_a_draft_survives_leaving_the_editor_and_editing_another_
         assert screen.editor.query_one("#f-label").value.startswith("careful ")
         await pilot.press("ctrl+s")
         await wait_until(pilot, lambda: b.mission.find("lru2-1")[2].label.startswith("careful "), what="applied")
+
+
+async def test_a_partner_reaching_the_barrier_updates_the_waiting_robots_column():
+    from backend.ops import Report
+    from console.messages import EventsApplied
+
+    b = mars_mid_execution()
+    app = make_app()
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, telemetry=mars_telemetry())
+        assert "b1: waiting for lru1" in screen_text(app)
+        for seq, (sid, status) in enumerate((("lru1-2", "success"), ("lru1-3", "synchwaiting")), start=100):
+            app.post_message(EventsApplied(b.engine.submit(Report(robot="lru1", seq=seq, id=sid, status=status)).batch()))
+            await pilot.pause()
+        text = screen_text(app)
+        assert "b1: waiting for lru1" not in text
+        assert text.count("b1: all partners ready") == 2  # in both columns
