@@ -219,8 +219,10 @@ def table(results: dict) -> str:
         f"| CPU time of the process for the first render | {s['first_render_cpu_s'] * 1000:.0f} ms | {d['first_render_cpu_s'] * 1000:.0f} ms | |\n"
         f"| CPU time of the process for one status change, median | {s['status_change_cpu_ms']:.1f} ms | {d['status_change_cpu_ms']:.1f} ms | |\n"
         f"| resident memory after the first render (whole process) | {s['rss_mb']:.0f} MB | {d['rss_mb']:.0f} MB | <= 300 MB |\n\n"
-        "The status change re-lays out only the changed robot's column (500 rows) and repaints the visible "
-        "lines; the first render builds per-column row indexes (no widget per row) and renders the ~45 visible lines.\n"
+        "The status change re-lays out only the changed robot's column (500 rows) and repaints only the visible "
+        "lines that show something else (all visible lines when the longest synchronized section grows or "
+        "shrinks, as for the paused changes here: those make the worst case); the first render builds per-column "
+        "row indexes (no widget per row) and renders the ~45 visible lines.\n"
     )
 
 

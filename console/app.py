@@ -30,7 +30,7 @@ from .alertview import AlertScreen
 from .bridge import Backend, ClientBridge
 from .commands import MissionCommands
 from .config import ConsoleConfig, save_theme
-from .dialogs import HelpScreen, UnreachableScreen
+from .dialogs import ConfirmScreen, HelpScreen, UnreachableScreen
 from .eventlog import AlertBook, AlertEntry, EventLog
 from .fleet import FleetScreen
 from .logview import EventLogScreen
@@ -225,9 +225,30 @@ class MissionApp(App[int]):
 
     def _hang_up(self) -> None:
         """SIGHUP (the SSH link dropped) or SIGTERM: close the session, exit."""
-        self.run_worker(self.action_quit(), group="quit")
+        self.run_worker(self.quit_now(), group="quit")
 
     async def action_quit(self) -> None:
+        """Ctrl+Q: asks first when the editor holds unapplied changes."""
+        unapplied = self._unapplied()
+        if unapplied and not isinstance(self.screen, ConfirmScreen):
+            self.push_screen(
+                ConfirmScreen(f"Unapplied changes to {', '.join(unapplied)} are lost when you quit. Quit anyway?", yes="Quit"),
+                self._quit_confirmed,
+            )
+            return
+        await self.quit_now()
+
+    def _unapplied(self) -> list[str]:
+        s = self.mission_screen
+        if s is None or not s.is_mounted:
+            return []
+        return sorted(s.editor.drafts) + ([s.editor.skill_id] if s.editor.dirty and s.editor.skill_id else [])
+
+    def _quit_confirmed(self, yes: bool | None) -> None:
+        if yes:
+            self.run_worker(self.quit_now(), group="quit")
+
+    async def quit_now(self) -> None:
         await self.close_connection()
         self.exit(self.exit_code, return_code=self.exit_code)
 
@@ -332,7 +353,7 @@ class MissionApp(App[int]):
         else:
             self.model.connection = OFFLINE
             self.exit_code = EXIT_UNREACHABLE
-            self.run_worker(self.action_quit(), group="quit")
+            self.run_worker(self.quit_now(), group="quit")
 
     def on_alert_received(self, message: AlertReceived) -> None:
         """The server's alert; one the console raised itself already is merged."""

@@ -71,7 +71,11 @@ def run_demo(args: argparse.Namespace) -> int:
     print(f"missionctl demo: starting the mission server for {mission} …", file=sys.stderr, flush=True)
     procs = DemoProcesses(mission, speed=args.speed)
     try:
-        procs.start()
+        procs.launch()
+        # load the console (most of its start-up is imports) while the server starts
+        import console.screens  # noqa: F401
+
+        procs.wait_ready()
     except DemoError as e:
         procs.stop()
         print(f"missionctl demo: {e}", file=sys.stderr)

@@ -3,15 +3,19 @@
 The server and the sim run as subprocesses (started before this process
 opens any Zenoh session: never fork after Zenoh is open). Quitting the
 console — or any error — stops them: terminate, then kill after a timeout.
+For a quick start, `launch()` only spawns the server; the caller loads the
+console meanwhile, then `wait_ready()` waits for the server and starts the sim.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import shutil
 import subprocess
 import sys
 import tempfile
 import time
+from importlib.metadata import entry_points
 from pathlib import Path
 from typing import IO
 
@@ -33,13 +37,12 @@ def _tail(path: Path, lines: int = 8) -> str:
     return "\n".join(text.strip().splitlines()[-lines:])
 
 
-def sim_available(python: str = sys.executable) -> bool:
-    """Whether `missionctl sim` is installed (another package plugs it in)."""
-    try:
-        r = subprocess.run([python, "-m", "backend.cli", "sim", "--help"], capture_output=True, timeout=60)
-    except (OSError, subprocess.TimeoutExpired):
-        return False
-    return r.returncode == 0
+def sim_available() -> bool:
+    """Whether `missionctl sim` is installed (another package plugs it in),
+    from the package metadata: no process to start, nothing imported (a sim
+    that then fails to start is reported by the demo app)."""
+    plugged = any(ep.name == "sim" for ep in entry_points(group="missionctl.commands"))
+    return plugged and importlib.util.find_spec("sim") is not None
 
 
 class DemoProcesses:
@@ -56,6 +59,7 @@ class DemoProcesses:
         self.server: subprocess.Popen | None = None
         self.sim: subprocess.Popen | None = None
         self.notices: list[str] = []
+        self._attempt = 0
         self._logs: list[IO] = []
 
     @property
@@ -72,23 +76,34 @@ class DemoProcesses:
         return subprocess.Popen([self.python, "-m", "backend.cli", *args], stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
 
     def start(self, timeout: float = 30.0) -> None:
+        self.launch()
+        self.wait_ready(timeout)
+
+    def _spawn_server(self) -> None:
+        self.endpoint = loopback_endpoint(free_port())
+        db = self.workdir / f"demo-{self._attempt}.db"
+        self.server = self._spawn(["server", "--mission", str(self.mission), "--listen", self.endpoint, "--db", str(db)], self.server_log)
+
+    def launch(self) -> None:
+        """Spawn the server (and the sim check); returns at once."""
         if not self.mission.is_file():
             raise DemoError(f"{self.mission}: no such mission file")
-        want_sim = sim_available(self.python) if self.with_sim is None else self.with_sim
-        for attempt in range(3):  # the free port may be taken meanwhile
-            self.endpoint = loopback_endpoint(free_port())
-            db = self.workdir / f"demo-{attempt}.db"
-            self.server = self._spawn(["server", "--mission", str(self.mission), "--listen", self.endpoint, "--db", str(db)], self.server_log)
+        self._spawn_server()
+
+    def wait_ready(self, timeout: float = 30.0) -> None:
+        """Until the server listens (retrying on a port taken meanwhile); then start the sim."""
+        while True:
             if self._wait_ready(timeout):
                 break
             code = self.server.poll()
             tail = _tail(self.server_log)
             self._stop_one(self.server)
-            if code is not None and "address" in tail.lower() and "use" in tail.lower():
+            if code is not None and "address" in tail.lower() and "use" in tail.lower() and self._attempt < 2:
+                self._attempt += 1  # the free port was taken meanwhile
+                self._spawn_server()
                 continue
             raise DemoError(f"the mission server did not start{' (exit code ' + str(code) + ')' if code is not None else ' in time'}:\n{tail}")
-        else:
-            raise DemoError("no free loopback port for the mission server")
+        want_sim = sim_available() if self.with_sim is None else self.with_sim
         if want_sim:
             self.sim = self._spawn(["sim", "--mission", str(self.mission), "--connect", self.endpoint, "--speed", f"{self.speed:g}"], self.sim_log)
         else:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from rich.console import Group
+from rich.table import Table
 from rich.text import Text
 from textual import on
 from textual.app import ComposeResult
@@ -15,6 +17,7 @@ from textual.widgets import Button, Footer, Input, Label, OptionList, Static
 from textual.widgets.option_list import Option
 
 from backend.library import Library
+from backend.model import Status
 
 from .actions import ACTIONS, APP_KEYS, EDITOR_KEYS, NAV_KEYS
 from .model import GLYPHS, STATUS_CSS, STATUS_WORDS
@@ -214,47 +217,56 @@ class HelpScreen(ModalScreen[None]):
         with VerticalScroll():
             yield Static(self._text(), id="help-text")
 
-    def _text(self) -> Text:
-        t = Text()
-        t.append("missionctl — operator console", style="bold")
-        t.append("   (escape closes; keys can be remapped: see the end)\n\n", style="dim")
+    def _text(self) -> Group:
+        """Headings and key tables; descriptions wrap in their own column
+        (at 80 columns too), never under the keys."""
+        parts: list = []
 
-        def row(key: str, label: str, desc: str) -> None:
-            t.append(f"  {key:<16}", style="bold")
-            t.append(f"{label:<14}", style="")
-            t.append(f"{desc}\n", style="dim")
+        def heading(title: str) -> None:
+            parts.append(Text(f"\n{title}", style="bold underline"))
 
-        t.append("Navigation\n", style="bold underline")
-        for k, label, d in NAV_KEYS:
-            row(k, label, d)
+        def table(rows: list[tuple[str | Text, str | Text, str]], key_width: int = 16, label_width: int = 13) -> None:
+            grid = Table.grid(padding=(0, 1))
+            grid.add_column(min_width=key_width, no_wrap=True, style="bold")
+            grid.add_column(min_width=label_width, no_wrap=True)
+            grid.add_column(ratio=1, style="dim")
+            for key, label, desc in rows:
+                grid.add_row(Text(" ") + key if isinstance(key, Text) else " " + key, label, desc)
+            parts.append(grid)
+
+        intro = Text()
+        intro.append("missionctl — operator console", style="bold")
+        intro.append("   (escape closes; keys can be remapped: see the end)", style="dim")
+        parts.append(intro)
+        heading("Navigation")
+        table(NAV_KEYS)
         groups: dict[str, list] = {}
         for a in ACTIONS:
             groups.setdefault(a.group, []).append(a)
         for group, actions in groups.items():
-            t.append(f"\n{group}\n", style="bold underline")
-            for a in actions:
-                row(self.keys.get(a.name, a.key).replace(",", " / "), a.label, a.description)
-        t.append("\nParameter editor\n", style="bold underline")
-        for k, label, d in EDITOR_KEYS:
-            row(k, label, d)
-        t.append("\nApp\n", style="bold underline")
-        for k, label, d in APP_KEYS:
-            row(k, label, d)
-        t.append("\nStatuses\n", style="bold underline")
-        colours = getattr(self.app, "theme_variables", {})
-        for status, glyph in GLYPHS.items():
+            heading(group)
+            table([(self.keys.get(a.name, a.key).replace(",", " / "), a.label, a.description) for a in actions])
+        heading("Parameter editor")
+        table(EDITOR_KEYS)
+        heading("App")
+        table(APP_KEYS)
+        heading("Statuses")
+        colours = getattr(self.app, "theme_variables", {})  # the theme's status colours
+
+        def coloured(status: Status, text: str, bold: bool = False) -> Text:
             colour = colours.get(f"status-{STATUS_CSS[status]}", "")
-            t.append(f"  {glyph}  ", style=f"bold {colour}".strip())
-            t.append(f"{status.value:<18}", style=colour)
-            t.append(f"{STATUS_WORDS[status]}\n", style="dim")
-        t.append("  [b1]", style="bold")
-        t.append("  barrier tag: partner skills wait for each other\n", style="dim")
-        t.append("  +   ", style="bold")
-        t.append("  marked for a new barrier (space)\n", style="dim")
-        t.append("\nRemapping keys\n", style="bold underline")
-        t.append('  ~/.config/missionctl/config.toml:  [keymap]  "mission.sync" = "S"\n', style="dim")
-        t.append("  binding ids: " + ", ".join(a.binding_id for a in ACTIONS) + "\n", style="dim")
-        return t
+            return Text(text, style=f"{'bold ' if bold else ''}{colour}".strip())
+
+        table([(coloured(status, glyph, True), coloured(status, status.value), STATUS_WORDS[status]) for status, glyph in GLYPHS.items()], key_width=3, label_width=18)
+        table([
+            ("[b1]", "", "barrier tag: partner skills wait for each other"),
+            ("+", "", "marked for a new barrier (space)"),
+            ("*label", "", "unapplied changes in the editor (kept per skill until applied or reverted)"),
+        ], key_width=7, label_width=0)
+        heading("Remapping keys")
+        parts.append(Text('  ~/.config/missionctl/config.toml:  [keymap]  "mission.sync" = "S"\n'
+                          "  binding ids: " + ", ".join(a.binding_id for a in ACTIONS), style="dim"))
+        return Group(*parts)
 
     def action_close(self) -> None:
         self.dismiss(None)

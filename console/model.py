@@ -121,7 +121,19 @@ def param_summary(skill: SkillInstance, library: Library | None) -> str:
             except Exception:
                 pass
         parts.append(f"{name}={fmt_value(pspec, value)}")
+    parts.extend(policy_marks(skill))
     return " ".join(parts)
+
+
+def policy_marks(skill: SkillInstance) -> list[str]:
+    """Short marks for the policies that are set: 'retry×2 pause-out-of-comms recharge<20%'."""
+    p = skill.policies
+    marks = [f"retry×{p.retries}"] if p.retries else []
+    if p.pause_out_of_comms:
+        marks.append("pause-out-of-comms")
+    if p.recharge_below is not None:
+        marks.append(f"recharge<{round(p.recharge_below * 100)}%")
+    return marks
 
 
 def skill_title(skill: SkillInstance) -> str:
@@ -148,6 +160,7 @@ class ConsoleModel:
     _robot_state: dict[str, tuple[SkillInstance | None, int]] = field(default_factory=dict)
     # robot -> the last HISTORY (battery, link) samples, for the fleet screen's sparklines
     history: dict[str, deque[tuple[float, float]]] = field(default_factory=dict)
+    _last_find: tuple[tuple[str, int, int], tuple[str, int, SkillInstance]] | None = None
 
     # -- updates ------------------------------------------------------------------
     def load(self, mission: Mission, library: Library, robots: dict[str, RobotInfo] | None = None, server_id: str = "") -> None:
@@ -192,6 +205,10 @@ class ConsoleModel:
                         reindex = True
                     else:
                         robots.add(r)
+                    bid = self._barrier_of.get(sid)
+                    if bid is not None and bid in self.mission.barriers:
+                        # partners waiting at the barrier show this skill's state
+                        robots.update(self._owner[x] for x in self.mission.barriers[bid].skills if x in self._owner)
                 case ev.BarrierSet() | ev.BarrierRemoved():
                     barriers = True
                 case ev.MissionReplaced():
@@ -233,12 +250,18 @@ class ConsoleModel:
     def find(self, skill_id: str | None) -> tuple[str, int, SkillInstance] | None:
         if skill_id is None or self.mission is None:
             return None
+        # the footer asks about the same skill for every action after each
+        # change: remember the last answer for this mission revision
+        key = (skill_id, id(self.mission), self.mission.revision)
+        if self._last_find is not None and self._last_find[0] == key:
+            return self._last_find[1]
         robot = self._owner.get(skill_id)
         if robot is None:
             return None
         task = self.mission.tasks.get(robot, [])
         for i, s in enumerate(task):
             if s.id == skill_id:
+                self._last_find = (key, (robot, i, s))
                 return robot, i, s
         return None
 

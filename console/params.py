@@ -6,16 +6,25 @@ dict: YAML text; marker: a choice of markers of the allowed kinds; robot: a
 choice of the mission's robots. Pose, position and area parameters can also
 be bound to a marker. Values are checked as you type with the same checks the
 server runs (`backend.library.check_value`); the server's refusal for a
-parameter appears next to that field. Read-only, with the reason, when the
-skill is not idle.
+parameter appears next to that field. Below the parameters, the skill's
+policies (autonomous retries, pause out of comms range, recharge below a
+battery level), checked with the protocol's own model. Read-only, with the
+reason, when the skill is not idle.
+
+Unapplied changes are kept per skill as a draft when the cursor moves away
+(or the editor is rebuilt), and restored when the skill is shown again; the
+schedule marks such skills. A draft is dropped — and the operator told — when
+its skill leaves idle or is deleted; it survives a lost connection.
 """
 
 from __future__ import annotations
 
 import asyncio
+from dataclasses import dataclass
 from typing import Any
 
 import yaml
+from pydantic import ValidationError
 from rich.text import Text
 from textual import on
 from textual.app import ComposeResult
@@ -25,13 +34,41 @@ from textual.message import Message
 from textual.widgets import Button, Input, Label, Select, Static, Switch, TextArea
 
 from backend.library import POSE_FIELDS, POSITION_FIELDS, ParamSpec, check_value, normalize_value
-from backend.model import SkillInstance
+from backend.model import Policies, SkillInstance, Status
 
-from .model import GLYPHS, STATUS_CSS, ConsoleModel, fmt_number
+from .model import GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel, fmt_number
 
 TYPED = "\x00typed"  # the bind choice meaning "no marker: a typed value"
 BINDABLE_KINDS = {"pose": ("pose", "position"), "position": ("pose", "position"), "area": ("area",)}
 YAML_TYPES = ("area", "list", "dict")
+# policy -> (label, type hint); bounds and meaning come from backend.model.Policies
+POLICY_HINTS = {
+    "retries": ("retries", "int 0..20"),
+    "pause_out_of_comms": ("pause out of comms", "bool"),
+    "recharge_below": ("recharge below", "float 0..1, empty: off"),
+}
+INPUTS = "Input, Switch, Select, TextArea"
+
+
+@dataclass
+class Draft:
+    """Unapplied changes to a skill the editor does not show right now."""
+
+    values: dict[str, Any]  # widget id -> what was typed / chosen
+    rev: int  # the skill's revision when the editing started
+    base_revision: int  # the mission revision the changes were made against
+    changed: list[str]  # what differs (for messages)
+
+
+def widget_value(w: Any) -> Any:
+    return w.text if isinstance(w, TextArea) else w.value
+
+
+def set_widget_value(w: Any, value: Any) -> None:
+    if isinstance(w, TextArea):
+        w.text = value
+    else:
+        w.value = value
 
 
 def settle_cursors(root: Any) -> None:
@@ -81,6 +118,8 @@ class ParamEditor(VerticalScroll):
     ParamEditor .readonly { color: $warning; text-style: bold; margin: 1 0 0 0; }
     ParamEditor .server-error { color: $error; text-style: bold; margin: 1 0 0 0; }
     ParamEditor .stale { color: $warning; }
+    ParamEditor .dirty { color: $warning; text-style: bold; }
+    ParamEditor .section { text-style: bold underline; margin: 1 0 0 0; }
     ParamEditor .param { height: auto; margin: 1 0 0 0; }
     ParamEditor .plabel { height: 1; text-wrap: nowrap; text-overflow: ellipsis; }
     ParamEditor .pdesc { color: $text-muted; height: auto; }
@@ -102,13 +141,23 @@ class ParamEditor(VerticalScroll):
     """
 
     class ApplyRequested(Message):
-        def __init__(self, skill_id: str, label: str | None, params: dict[str, Any], bindings: dict[str, str | None], base_revision: int) -> None:
+        def __init__(self, skill_id: str, label: str | None, params: dict[str, Any], bindings: dict[str, str | None], base_revision: int, policies: Policies | None = None) -> None:
             super().__init__()
             self.skill_id = skill_id
             self.label = label
             self.params = params
             self.bindings = bindings
             self.base_revision = base_revision
+            self.policies = policies
+
+    class DraftsChanged(Message):
+        """Which skills have unapplied changes; `discarded`: sentences about
+        drafts dropped because their skill left idle or was deleted."""
+
+        def __init__(self, unapplied: frozenset[str], discarded: list[str]) -> None:
+            super().__init__()
+            self.unapplied = unapplied
+            self.discarded = discarded
 
     class Left(Message):
         """The operator left the editor (escape)."""
@@ -124,6 +173,9 @@ class ParamEditor(VerticalScroll):
         self.stale_note = ""
         self.can_focus = False
         self._load_lock = asyncio.Lock()
+        self.drafts: dict[str, Draft] = {}
+        self.dirty: list[str] = []  # what differs in the shown skill (empty: nothing)
+        self._unapplied: frozenset[str] = frozenset()
 
     # -- what is shown ------------------------------------------------------------------
     def _skill(self) -> tuple[str, SkillInstance] | None:
@@ -140,17 +192,34 @@ class ParamEditor(VerticalScroll):
             return "no skill selected"
         return self.model.read_only_reason(self.skill_id)
 
-    async def show_skill(self, skill_id: str | None, *, force: bool = False) -> None:
-        """Load a skill (serialized: the app and the screen both call this,
-        from different message pumps, and two rebuilds must not interleave)."""
-        async with self._load_lock:
-            await self._show_skill(skill_id, force=force)
+    @property
+    def loading(self) -> bool:
+        """A skill is being (re)loaded: the fields are being rebuilt."""
+        return self._load_lock.locked()
 
-    async def _show_skill(self, skill_id: str | None, *, force: bool = False) -> None:
+    async def show_skill(self, skill_id: str | None, *, force: bool = False, discard: bool = False) -> None:
+        """Load a skill (serialized: the app and the screen both call this,
+        from different message pumps, and two rebuilds must not interleave).
+        Unapplied changes of the skill shown so far are kept as its draft
+        unless `discard`."""
+        async with self._load_lock:
+            await self._show_skill(skill_id, force=force, discard=discard)
+
+    async def _show_skill(self, skill_id: str | None, *, force: bool = False, discard: bool = False) -> None:
         found = self.model.find(skill_id)
         rev = found[2].rev if found else -1
         if not force and skill_id == self.skill_id and rev == self.loaded_rev:
             return
+        if self.skill_id is not None:
+            if discard:
+                self.drafts.pop(self.skill_id, None)
+            elif self.dirty:
+                # against the skill as it is now (our own apply leaves nothing);
+                # a deleted skill keeps what was last seen, for the message
+                pending = self.changed_names(even_read_only=True) if self._skill() is not None else self.dirty
+                if pending:
+                    self.dirty = pending
+                    self.drafts[self.skill_id] = self._capture()
         if skill_id != self.skill_id:
             self.errors = {}
             self.server_error = ""
@@ -158,12 +227,66 @@ class ParamEditor(VerticalScroll):
         self.loaded_rev = rev
         self.stale_note = ""
         self.base_revision = self.model.mission.revision if self.model.mission else 0
+        self.dirty = []
         had_focus = self.focus_within()
+        draft = self.drafts.pop(skill_id, None) if skill_id is not None and self.read_only_reason is None else None
+        if draft is not None and draft.rev != rev:
+            self.stale_note = f"{skill_id} was changed by someone else since you started these changes (revision {rev}): revert to see it; applying will be refused as stale"
         await self.recompose()
         settle_cursors(self)
+        if draft is not None:
+            self._restore(draft)
         self._validate_all()
+        self._update_dirty()
         if had_focus:  # the focused field was rebuilt: keep the operator in the editor
             self.focus_first()
+
+    # -- drafts: unapplied changes per skill ---------------------------------------------
+    def _capture(self) -> Draft:
+        values = {w.id: widget_value(w) for w in self.query(INPUTS) if w.id}
+        return Draft(values=values, rev=self.loaded_rev, base_revision=self.base_revision, changed=list(self.dirty))
+
+    def _restore(self, draft: Draft) -> None:
+        self.base_revision = draft.base_revision
+        for w in self.query(INPUTS):
+            if w.id in draft.values:
+                try:
+                    set_widget_value(w, draft.values[w.id])
+                except Exception:  # e.g. a marker that no longer exists: keep the shown value
+                    pass
+        for name in [w.id.removeprefix("bind-") for w in self.query(Select) if w.id and w.id.startswith("bind-")]:
+            self._sync_bound_fields(name)
+
+    def prune_drafts(self) -> list[str]:
+        """Drop drafts whose skill was deleted or is no longer idle; say which."""
+        said: list[str] = []
+        for sid in list(self.drafts):
+            found = self.model.find(sid)
+            if found is not None and found[2].status == Status.IDLE:
+                continue
+            draft = self.drafts.pop(sid)
+            what = ", ".join(draft.changed) or "changes"
+            if found is None:
+                said.append(f"{sid} was deleted: your unapplied changes to it ({what}) are discarded")
+            else:
+                said.append(f"{sid} is now {STATUS_WORDS[found[2].status]} on {found[0]}: your unapplied changes to it ({what}) are discarded — only idle skills can be edited")
+        self._post_drafts(said)
+        return said
+
+    def _post_drafts(self, discarded: list[str] | None = None) -> None:
+        unapplied = frozenset(self.drafts) | ({self.skill_id} if self.dirty and self.skill_id else frozenset())
+        if unapplied != self._unapplied or discarded:
+            self._unapplied = frozenset(unapplied)
+            self.post_message(self.DraftsChanged(self._unapplied, list(discarded or [])))
+
+    def _update_dirty(self) -> None:
+        """Recompute what differs from the skill; show it; tell the screen."""
+        self.dirty = self.changed_names()
+        if self.dirty:
+            self._set_static("#dirty", f"unapplied changes: {', '.join(self.dirty)} — ctrl+s applies, ctrl+r reverts")
+        else:
+            self._set_static("#dirty", "")
+        self._post_drafts()
 
     def focus_within(self) -> bool:
         focused = self.screen.focused if self.is_attached else None
@@ -187,10 +310,10 @@ class ParamEditor(VerticalScroll):
         s = found[2]
         ro_changed = (self.read_only_reason is None) != self._was_editable
         if s.rev != self.loaded_rev or ro_changed:
-            if self.is_dirty() and not ro_changed:
+            if not ro_changed and self.is_dirty():  # against the new version: our own apply is not dirty
                 self.stale_note = f"{s.id} was changed by someone else (revision {s.rev}): revert to see it; applying will be refused as stale"
                 self._set_static("#stale", self.stale_note)
-            else:
+            else:  # unapplied changes become a draft: restored, or dropped (and said) if no longer idle
                 await self.show_skill(self.skill_id, force=True)
 
     def compose(self) -> ComposeResult:
@@ -216,6 +339,7 @@ class ParamEditor(VerticalScroll):
             yield Static(f"read-only: {ro}", id="readonly", classes="readonly")
         yield Static(self.server_error, id="server-error", classes="server-error" + ("" if self.server_error else " -empty"))
         yield Static(self.stale_note, id="stale", classes="stale" + ("" if self.stale_note else " -empty"))
+        yield Static("", id="dirty", classes="dirty -empty")
         with Vertical(classes="param", id="param-label"):
             yield Label(Text.assemble(("label", "bold"), ("  text", "dim")), classes="plabel")
             yield Input(s.label, id="f-label", compact=True, disabled=ro is not None, placeholder=s.skill)
@@ -233,10 +357,60 @@ class ParamEditor(VerticalScroll):
                     yield Static(pspec.description, classes="pdesc")
                 err = self.errors.get(name, "")
                 yield Static(err, id=f"err-{name}", classes="perror" + ("" if err else " -empty"))
+        yield from self._policy_inputs(s.policies, disabled=ro is not None)
         if ro is None:
             with Horizontal(classes="buttons"):
                 yield Button("Apply ^s", id="apply", variant="primary", compact=True)
                 yield Button("Revert ^r", id="revert", compact=True)
+
+    def _policy_inputs(self, p: Policies, *, disabled: bool) -> ComposeResult:
+        yield Static("policies — applied by the robot itself", classes="section")
+        fields = Policies.model_fields
+        for name, (label, hint) in POLICY_HINTS.items():
+            with Vertical(classes="param", id=f"policy-{name}"):
+                yield Label(Text.assemble((label, "bold"), ("  " + hint, "dim")), classes="plabel")
+                if name == "pause_out_of_comms":
+                    with Horizontal(classes="fields"):
+                        yield Switch(p.pause_out_of_comms, id=f"pf-{name}", disabled=disabled)
+                        yield Label("yes" if p.pause_out_of_comms else "no", id=f"pv-{name}", classes="switch-value")
+                elif name == "retries":
+                    yield Input(str(p.retries), id=f"pf-{name}", type="integer", compact=True, disabled=disabled, placeholder="0")
+                else:
+                    text = "" if p.recharge_below is None else fmt_number(p.recharge_below)
+                    yield Input(text, id=f"pf-{name}", type="number", compact=True, disabled=disabled, placeholder="off")
+                yield Static(fields[name].description or "", classes="pdesc")
+                yield Static("", id=f"perr-{name}", classes="perror -empty")
+
+    def read_policies(self) -> tuple[Policies | None, dict[str, str]]:
+        """The policies as typed (None if unreadable) and problems per policy."""
+        raw: dict[str, Any] = {}
+        problems: dict[str, str] = {}
+        try:
+            raw["pause_out_of_comms"] = self.query_one("#pf-pause_out_of_comms", Switch).value
+            retries = self.query_one("#pf-retries", Input).value.strip()
+            below = self.query_one("#pf-recharge_below", Input).value.strip()
+        except Exception:  # not composed (no skill, or being rebuilt)
+            return None, {}
+        try:
+            raw["retries"] = int(retries) if retries else 0
+        except ValueError:
+            problems["retries"] = f"expected an integer, got '{retries}'"
+        if below.lower() in ("", "off"):
+            raw["recharge_below"] = None
+        else:
+            try:
+                raw["recharge_below"] = float(below)
+            except ValueError:
+                problems["recharge_below"] = f"expected a number between 0 and 1 (empty: off), got '{below}'"
+        if problems:
+            return None, problems
+        try:  # the protocol's own model: the same bounds the server checks
+            return Policies(**raw), {}
+        except ValidationError as e:
+            for err in e.errors():
+                name = str(err["loc"][0]) if err["loc"] else "retries"
+                problems[name] = f"{err['input']!r}: {err['msg'].removeprefix('Input ')}"
+            return None, problems
 
     def _inputs(self, name: str, spec: ParamSpec, s: SkillInstance, *, disabled: bool) -> ComposeResult:
         value = s.params.get(name)
@@ -397,11 +571,27 @@ class ParamEditor(VerticalScroll):
                 params[name] = norm
         return label_change, params, bindings, problems
 
-    def is_dirty(self) -> bool:
-        if self._skill() is None or self.read_only_reason is not None:
-            return False
+    def policies_change(self) -> tuple[Policies | None, dict[str, str]]:
+        """(new policies if they changed, problems per policy)."""
+        found = self._skill()
+        if found is None:
+            return None, {}
+        policies, problems = self.read_policies()
+        return (policies if policies is not None and policies != found[1].policies else None), problems
+
+    def changed_names(self, *, even_read_only: bool = False) -> list[str]:
+        """What differs from the skill (including fields that do not read)."""
+        if self._skill() is None or (self.read_only_reason is not None and not even_read_only):
+            return []
         label, params, bindings, problems = self.collect()
-        return bool(label is not None or params or bindings or problems)
+        policies, policy_problems = self.policies_change()
+        names = (["label"] if label is not None else []) + list(dict.fromkeys([*params, *bindings, *problems]))
+        if policies is not None or policy_problems:
+            names.append("policies")
+        return names
+
+    def is_dirty(self) -> bool:
+        return bool(self.changed_names())
 
     # -- messages next to fields --------------------------------------------------------------
     def _set_static(self, selector: str, text: str) -> None:
@@ -433,9 +623,19 @@ class ParamEditor(VerticalScroll):
         for name in spec.params if spec else []:
             msg = problems.get(name) or self.errors.get(name, "")
             self._set_static(f"#err-{name}", msg)
+        _, policy_problems = self.read_policies()
+        for name in POLICY_HINTS:
+            self._set_static(f"#perr-{name}", policy_problems.get(name, ""))
 
     def _field_changed(self, widget_id: str | None) -> None:
         if not widget_id or self.skill_id is None:
+            return
+        if widget_id.startswith("pf-"):
+            name = widget_id.removeprefix("pf-")
+            for sw in self.query(f"#pf-{name}").results(Switch):
+                self._set_static(f"#pv-{name}", "yes" if sw.value else "no")
+            self._validate_all()
+            self._update_dirty()
             return
         name = widget_id.removeprefix("f-").removeprefix("bind-")
         found = self._skill()
@@ -451,6 +651,7 @@ class ParamEditor(VerticalScroll):
         for sw in self.query(f"#f-{name}").results(Switch):  # the value in words, not only colour
             self._set_static(f"#v-{name}", "yes" if sw.value else "no")
         self._validate_all()
+        self._update_dirty()
 
     def _sync_bound_fields(self, name: str) -> None:
         bound = self._binding(name)
@@ -483,22 +684,25 @@ class ParamEditor(VerticalScroll):
             self.app.notify(ro, title="Read-only", severity="warning")
             return
         label, params, bindings, problems = self.collect()
-        if problems:
+        policies, policy_problems = self.policies_change()
+        if problems or policy_problems:
             for name, msg in problems.items():
                 self._set_static(f"#err-{name}", msg)
-            first = next(iter(problems))
-            self.app.notify(f"{found[1].id}, parameter {first}: {problems[first]}", title="Not applied", severity="error")
+            for name, msg in policy_problems.items():
+                self._set_static(f"#perr-{name}", msg)
+            what, first = (("parameter", next(iter(problems))) if problems else ("policy", next(iter(policy_problems))))
+            self.app.notify(f"{found[1].id}, {what} {first}: {(problems or policy_problems)[first]}", title="Not applied", severity="error")
             return
-        if label is None and not params and not bindings:
+        if label is None and not params and not bindings and policies is None:
             self.app.notify("nothing changed", timeout=2)
             return
         self.clear_server_errors()
-        self.post_message(self.ApplyRequested(found[1].id, label, params, bindings, self.base_revision))
+        self.post_message(self.ApplyRequested(found[1].id, label, params, bindings, self.base_revision, policies))
 
     async def action_revert(self) -> None:
         self.errors = {}
         self.server_error = ""
-        await self.show_skill(self.skill_id, force=True)
+        await self.show_skill(self.skill_id, force=True, discard=True)
 
     def action_leave(self) -> None:
         self.post_message(self.Left())

@@ -3,7 +3,8 @@ unsynchronized plan below a divider that runs across all columns.
 
 One Line-API widget (`ScrollView.render_line`) draws it: only the visible
 lines are rendered, there is no widget per row, and a change to one robot's
-list re-lays out only that robot's column. Column headers stay on top while
+list re-lays out only that robot's column and repaints only the visible lines
+that show something else (telemetry: the header and progress lines). Column headers stay on top while
 the rows scroll; columns scroll horizontally when they do not fit.
 """
 
@@ -50,6 +51,10 @@ class Column:
     idle: list[int] = field(default_factory=list)
     ids: list[str] = field(default_factory=list)
     line_of: dict[str, int] = field(default_factory=dict)  # filled by the layout
+    # what each line of a section shows (id, kind, revision): comparing two
+    # builds tells which lines a change touched, so only those are repainted
+    sync_keys: list[tuple[str, str, int]] = field(default_factory=list)
+    idle_keys: list[tuple[str, int]] = field(default_factory=list)
 
 
 def _fit(text: str, width: int) -> str:
@@ -135,6 +140,7 @@ class ScheduleView(ScrollView, can_focus=True):
         self.cursor_col = 0
         self.cursor_id: str | None = None
         self.marks: list[str] = []
+        self.drafts: frozenset[str] = frozenset()  # skills with unapplied edits (marked '*')
         self.expand_static = False
         self._summary_cache: dict[tuple[str, int], str] = {}
         self._last_width = -1
@@ -153,10 +159,13 @@ class ScheduleView(ScrollView, can_focus=True):
             col.ids.append(s.id)
             if s.status == Status.IDLE:
                 col.idle.append(i)
+                col.idle_keys.append((s.id, s.rev))
             else:
                 col.sync.append((i, "row"))
+                col.sync_keys.append((s.id, "row", s.rev))
                 if s.status in ACTIVE or (s.status == Status.FAILURE and s.status_info):
                     col.sync.append((i, "progress"))
+                    col.sync_keys.append((s.id, "progress", s.rev))
         return col
 
     def rebuild(self, robots: set[str] | None = None) -> None:
@@ -169,16 +178,23 @@ class ScheduleView(ScrollView, can_focus=True):
                 self._summary_cache.clear()
         else:
             before = (self.sync_h, self.total_lines)
-            changed = []
+            changed: list[tuple[Column, Column]] = []
             for r in robots:
                 i = self._col_index.get(r)
                 if i is not None:
-                    self.columns[i] = self._build_column(r, self.columns[i].static)
-                    changed.append(self.columns[i])
-            self._relayout(changed)
-            if (self.sync_h, self.total_lines) == before and self.cursor_id in self.columns[self.cursor_col].line_of:
-                # only these columns changed: repaint just their strips
-                self.refresh_robots(robots)
+                    old = self.columns[i]
+                    self.columns[i] = self._build_column(r, old.static)
+                    changed.append((old, self.columns[i]))
+            self._relayout([new for _, new in changed])
+            if self.cursor_id in self.columns[self.cursor_col].line_of:
+                # repaint only the visible lines that show something else now:
+                # in the changed columns, and across all columns from the
+                # divider down when the synchronized section grew or shrank
+                for old, new in changed:
+                    self._refresh_changed_lines(old, new, before[0])
+                if self.sync_h != before[0]:
+                    start = min(self.sync_h, before[0])
+                    self._refresh_content_lines(0, self.size.width, range(start, max(self.total_lines, before[1])))
                 return
             self._keep_cursor()
             self.refresh()
@@ -187,15 +203,45 @@ class ScheduleView(ScrollView, can_focus=True):
         self._keep_cursor()
         self.refresh()
 
-    def refresh_robots(self, robots: set[str] | list[str]) -> None:
-        """Repaint the columns of these robots (their visible part) only."""
-        sx = int(self.scroll_x)
-        for r in robots:
-            i = self._col_index.get(r)
-            if i is None:
-                continue
-            col = self.columns[i]
-            self.refresh(Region(col.x - sx, 0, col.width + 1, self.size.height))
+    def refresh_telemetry(self, robot: str) -> None:
+        """New telemetry: only the header and the progress lines show it."""
+        i = self._col_index.get(robot)
+        if i is None:
+            return
+        col = self.columns[i]
+        x, w = col.x - int(self.scroll_x), col.width + 1
+        self.refresh(Region(x, 0, w, HEADER_H - 1))
+        self._refresh_content_lines(x, w, [line for line, (_, kind) in enumerate(col.sync) if kind == "progress"])
+
+    @staticmethod
+    def _line_key(col: Column, line: int, sync_h: int) -> object:
+        """What a content line of a column shows (compared, never drawn)."""
+        if line < sync_h:
+            return col.sync_keys[line] if line < len(col.sync_keys) else ("blank" if line or col.sync else "hint")
+        if line == sync_h:
+            return "divider"
+        k = line - sync_h - 1
+        return col.idle_keys[k] if k < len(col.idle_keys) else ("blank" if k or col.idle else "hint")
+
+    def _visible_lines(self) -> range:
+        sy = int(self.scroll_y)
+        return range(sy, sy + max(0, self.size.height - HEADER_H))
+
+    def _refresh_content_lines(self, x: int, width: int, lines: range | list[int]) -> None:
+        """Repaint these content lines (those visible) between x and x+width."""
+        visible = self._visible_lines()
+        ys = [HEADER_H + line - visible.start for line in lines if line in visible]
+        for y in ys:
+            self.refresh(Region(x, y, width, 1))
+
+    def _refresh_changed_lines(self, old: Column, new: Column, old_sync_h: int) -> None:
+        x, w = new.x - int(self.scroll_x), new.width + 1
+        self.refresh(Region(x, 0, w, HEADER_H - 1))  # presence, battery, activity
+        changed = [line for line in self._visible_lines()
+                   if self._line_key(old, line, old_sync_h) != self._line_key(new, line, self.sync_h)]
+        # progress lines also show telemetry and barrier partners' states
+        changed += [line for line, (_, kind) in enumerate(new.sync) if kind == "progress"]
+        self._refresh_content_lines(x, w, changed)
 
     def _relayout(self, only: list[Column] | None = None) -> None:
         sync_h = max([1, *(len(c.sync) for c in self.columns)])
@@ -230,7 +276,16 @@ class ScheduleView(ScrollView, can_focus=True):
             c.width = static_w if c.static else w
             x += c.width + 1
         size = Size(max(x - 1, 1), HEADER_H + self.total_lines)
-        if size != self.virtual_size:
+        old = self.virtual_size
+        if size == old:
+            return
+        if self.is_mounted and size.width == old.width and min(size.height, old.height) > self.size.height:
+            # only the scroll range grows or shrinks and the scrollbars stay as
+            # they are: update them without the screen's layout pass, which
+            # reflows every widget (the editor's too) for tens of ms
+            self.set_reactive(ScheduleView.virtual_size, size)
+            self._scroll_update(size)
+        else:
             self.virtual_size = size
 
     def on_resize(self, event: events.Resize) -> None:
@@ -367,6 +422,11 @@ class ScheduleView(ScrollView, can_focus=True):
             marked = True
         self.refresh()
         return marked
+
+    def set_drafts(self, drafts: frozenset[str]) -> None:
+        if drafts != self.drafts:
+            self.drafts = drafts
+            self.refresh()
 
     def clear_marks(self) -> None:
         self.marks = []
@@ -528,16 +588,17 @@ class ScheduleView(ScrollView, can_focus=True):
         selected = ci == self.cursor_col and s.id == self.cursor_id
         bid = self.model.barrier_of(s.id)
         tag = f"[{bid}]" if bid else ""
-        title = skill_title(s) + (f" #{s.attempt}" if s.attempt > 1 else "")
+        title = ("*" if s.id in self.drafts else "") + skill_title(s)
+        attempt = f" #{s.attempt}" if s.attempt > 1 else ""
         extra = self._summary(s) if not col.static or self.expand_static else ""
         room = w - 2 - (cell_len(tag) + 1 if tag else 0)
         segs: list[Segment] = [
             Segment("+" if marked else " ", st["mark"] if marked else st["base"]),
             Segment(GLYPHS[s.status], sst),
         ]
-        body = " " + title
-        if cell_len(body) >= room:
-            segs.append(Segment(_fit(body, room), sst))
+        body = " " + title + attempt
+        if cell_len(body) >= room:  # the label is cut, never the attempt number
+            segs.append(Segment(_fit(" " + title, room - len(attempt)) + attempt, sst))
         else:
             segs.append(Segment(body, sst))
             rest = room - cell_len(body)

@@ -38,7 +38,7 @@ from backend.ops import (
     Unsync,
 )
 
-from .actions import BY_NAME, mission_bindings
+from .actions import ACTIONS, BY_NAME, mission_bindings
 from .capability import also_offered_by
 from .dialogs import ConfirmScreen, PathPrompt, SkillPicker
 from .model import CONNECTED, ConsoleModel
@@ -49,6 +49,7 @@ if TYPE_CHECKING:
     from .app import MissionApp
 
 NARROW = 100
+FOOTER_ACTIONS = [a.name for a in ACTIONS if a.footer]
 
 
 def default_params(spec_params: dict[str, ParamSpec], model: ConsoleModel, robot: str) -> tuple[dict[str, Any], dict[str, str]]:
@@ -145,6 +146,7 @@ class MissionScreen(Screen):
         self._schedule = ScheduleView(model, id="schedule")
         self._editor = ParamEditor(model, id="editor")
         self._status = StatusLine("", id="status")
+        self._footer = Footer()
         self.edit_after_select = False
         self.message = ""
 
@@ -158,7 +160,7 @@ class MissionScreen(Screen):
             yield self._schedule
             yield self._editor
         yield self._status
-        yield Footer()
+        yield self._footer
 
     @property
     def schedule(self) -> ScheduleView:
@@ -168,8 +170,15 @@ class MissionScreen(Screen):
     def editor(self) -> ParamEditor:
         return self._editor
 
+    def _set_narrow(self, narrow: bool) -> None:
+        self.set_class(narrow, "-narrow")
+        # at 80 columns the footer keys only fit compact and without the
+        # palette hint (ctrl+p is on the help screen): quit and help stay visible
+        self._footer.compact = narrow
+        self._footer.show_command_palette = not narrow
+
     def on_mount(self) -> None:
-        self.set_class(self.app.size.width < NARROW, "-narrow")
+        self._set_narrow(self.app.size.width < NARROW)
         self.schedule.focus()
         self.update_top()
         self.schedule.rebuild()
@@ -177,7 +186,7 @@ class MissionScreen(Screen):
     def on_resize(self, event: events.Resize) -> None:
         narrow = event.size.width < NARROW
         if narrow != self.has_class("-narrow"):
-            self.set_class(narrow, "-narrow")
+            self._set_narrow(narrow)
             if not narrow:
                 self.remove_class("-editing")
                 self.run_worker(self.editor.show_skill(self.schedule.cursor_id), group="editor", exclusive=True)
@@ -202,6 +211,7 @@ class MissionScreen(Screen):
                 await self.editor.show_skill(self.schedule.cursor_id)
             else:
                 await self.editor.model_changed()
+        self.editor.prune_drafts()
 
     async def connection_changed(self) -> None:
         self.update_top()
@@ -214,7 +224,7 @@ class MissionScreen(Screen):
         self.refresh_availability()
 
     def telemetry_changed(self, robot: str) -> None:
-        self.schedule.refresh_robots([robot])
+        self.schedule.refresh_telemetry(robot)
 
     def update_top(self) -> None:
         m = self.model
@@ -263,8 +273,10 @@ class MissionScreen(Screen):
         return self.schedule.cursor_robot, self.schedule.cursor_id
 
     def refresh_availability(self) -> None:
-        """Refresh the footer only when what applies changed (it rebuilds its keys)."""
-        sig = (tuple(self.why_disabled(a) is None for a in BY_NAME), self.model.connection)
+        """Refresh the footer only when what it shows changed: it rebuilds its
+        keys and the screen's layout (tens of ms). Keys not in the footer are
+        checked when pressed (`check_action`), so they need no refresh."""
+        sig = (tuple(self.why_disabled(a) is None for a in FOOTER_ACTIONS), self.model.connection)
         if sig != getattr(self, "_availability", None):
             self._availability = sig
             self.refresh_bindings()
@@ -373,11 +385,18 @@ class MissionScreen(Screen):
         self.editor.can_focus = False
         self.schedule.focus()
 
+    @on(ParamEditor.DraftsChanged)
+    def _drafts_changed(self, event: ParamEditor.DraftsChanged) -> None:
+        self.schedule.set_drafts(event.unapplied)
+        for text in event.discarded:
+            self.say(text, "warning")
+            self.app.notify(text, title="Unapplied changes discarded", severity="warning", timeout=8)
+
     @on(ParamEditor.ApplyRequested)
     def _apply(self, event: ParamEditor.ApplyRequested) -> None:
-        op = EditSkill(id=event.skill_id, label=event.label, params=event.params, bindings=event.bindings)
+        op = EditSkill(id=event.skill_id, label=event.label, params=event.params, bindings=event.bindings, policies=event.policies)
         robot = self.model.owner(event.skill_id)
-        changed = ", ".join([*event.params, *event.bindings] + (["label"] if event.label is not None else []))
+        changed = ", ".join([*event.params, *event.bindings] + (["label"] if event.label is not None else []) + (["policies"] if event.policies is not None else []))
 
         def refused(reply: Any) -> None:
             if reply.skill in (None, event.skill_id) and self.editor.skill_id == event.skill_id:

@@ -158,6 +158,14 @@ def make_app(**kw: Any):
     return app
 
 
+def engine_app(builder: Builder) -> tuple[Any, EngineBackend]:
+    """A test app whose operations go to `builder`'s rules engine (and back)."""
+    backend = EngineBackend(builder)
+    app = make_app(backend=backend)
+    backend.app = app
+    return app, backend
+
+
 async def inject(app: Any, pilot: Any, builder: Builder | None, *, online: dict[str, bool] | None = None,
                  telemetry: list[Telemetry] | None = None, connection: str = "connected") -> None:
     """Post the messages the live connection would post; wait until shown."""

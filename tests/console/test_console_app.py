@@ -11,6 +11,7 @@ from console_state import (
     TUTORIAL,
     Builder,
     EngineBackend,
+    engine_app,
     inject,
     make_app,
     mars_mid_execution,
@@ -22,6 +23,7 @@ from console_state import (
 
 from backend.client import OperationRefused
 from backend.model import Status
+from backend.ops import Retry, RetryAck
 from backend.protocol import ErrorReply, OpReply
 from backend.transport import free_port, loopback_endpoint
 from console.config import ConsoleConfig
@@ -124,9 +126,7 @@ async def test_actions_that_do_not_apply_say_why():
 
 async def test_add_with_picker_then_edit_with_inline_validation_then_apply():
     b = Builder(TUTORIAL)
-    backend = EngineBackend(b)
-    app = make_app(backend=backend)
-    backend.app = app
+    app, backend = engine_app(b)
     async with app.run_test(size=WIDE) as pilot:
         await inject(app, pilot, b, online={"lru1": True, "lru2": True})
         screen = app.mission_screen
@@ -181,9 +181,7 @@ async def test_server_refusal_for_a_parameter_appears_next_to_the_field():
 
 async def test_barrier_from_marks_across_robots():
     b = mars_mid_execution()
-    backend = EngineBackend(b)
-    app = make_app(backend=backend)
-    backend.app = app
+    app, backend = engine_app(b)
     async with app.run_test(size=WIDE) as pilot:
         await inject(app, pilot, b, telemetry=mars_telemetry())
         screen = app.mission_screen
@@ -206,9 +204,7 @@ async def test_barrier_from_marks_across_robots():
 
 async def test_sync_unsync_delete_move_and_retry_offline():
     b = mars_mid_execution()
-    backend = EngineBackend(b)
-    app = make_app(backend=backend)
-    backend.app = app
+    app, backend = engine_app(b)
     async with app.run_test(size=WIDE) as pilot:
         await inject(app, pilot, b, telemetry=mars_telemetry())
         screen = app.mission_screen
@@ -250,8 +246,10 @@ async def test_help_screen_lists_the_keys_and_the_legend():
         assert "Synchronization" in text and "Execution" in text
         assert "S               Sync" in text  # the remapped key
         assert "d / delete" in text
-        full = str(app.screen.query_one("#help-text").render())  # scrolls: the legend is further down
-        assert "waiting at barrier" in full and "◷" in full and "mission.sync" in full
+        app.screen.query_one("VerticalScroll").scroll_end(animate=False, immediate=True)  # the legend is further down
+        await pilot.pause()
+        end = screen_text(app)
+        assert "waiting at barrier" in end and "◷" in end and "mission.sync" in end and "unapplied changes" in end
         await pilot.press("escape")
         await wait_until(pilot, lambda: not isinstance(app.screen, HelpScreen), what="help closed")
         await pilot.press("question_mark")
@@ -375,9 +373,7 @@ async def test_save_then_load_a_mission_file_and_undo(tmp_path):
     from console.dialogs import ConfirmScreen, PathPrompt
 
     b = Builder(TUTORIAL)
-    backend = EngineBackend(b)
-    app = make_app(backend=backend)
-    backend.app = app
+    app, backend = engine_app(b)
     async with app.run_test(size=WIDE) as pilot:
         await inject(app, pilot, b, online={"lru1": True, "lru2": True})
         # undo / redo of one's own edit
@@ -411,3 +407,239 @@ async def test_save_then_load_a_mission_file_and_undo(tmp_path):
         await pilot.press("y")
         await wait_until(pilot, lambda: b.mission.find("lru2-1")[2].label == "drive beside POI-A", what="loaded on the server")
         await wait_until(pilot, lambda: "drive beside POI-A" in screen_text(app), what="shown")
+
+
+async def test_policies_are_typed_inputs_validated_then_applied():
+    from backend.model import Policies
+
+    b = Builder(TUTORIAL)
+    app, backend = engine_app(b)
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, online={"lru1": True, "lru2": True})
+        screen = app.mission_screen
+        screen.schedule.select("lru2-1")
+        await pilot.pause()
+        text = screen_text(app)
+        assert "policies — applied by the robot itself" in text
+        assert "retries" in text and "pause out of comms" in text and "recharge below" in text
+        ed = screen.editor
+        ed.query_one("#pf-retries").value = "25"
+        ed.query_one("#pf-recharge_below").value = "1.5"
+        await pilot.pause()
+        assert "25: should be less than or equal to 20" in screen_text(app)
+        assert str(ed.query_one("#perr-recharge_below").render()) == "1.5: should be less than or equal to 1"
+        ed.action_apply()
+        await pilot.pause()
+        assert backend.ops == []  # nothing sent while invalid
+        ed.query_one("#pf-retries").value = "3"
+        ed.query_one("#pf-recharge_below").value = "0.2"
+        ed.query_one("#pf-pause_out_of_comms").value = True
+        await pilot.pause()
+        assert "should be" not in screen_text(app)
+        assert "unapplied changes: policies" in screen_text(app)
+        ed.action_apply()
+        await wait_until(pilot, lambda: b.mission.find("lru2-1")[2].policies == Policies(retries=3, pause_out_of_comms=True, recharge_below=0.2), what="policies applied")
+        await wait_until(pilot, lambda: "applied policies" in status_line(app), what="status line")
+        await wait_until(pilot, lambda: ed.loaded_rev == b.mission.find("lru2-1")[2].rev and not ed.loading and not ed.dirty, what="reloaded")
+        assert ed.query_one("#pf-retries").value == "3"
+        # an empty recharge level means off
+        ed.query_one("#pf-recharge_below").value = ""
+        await wait_until(pilot, lambda: ed.dirty == ["policies"], what="the change seen")
+        ed.action_apply()
+        await wait_until(pilot, lambda: b.mission.find("lru2-1")[2].policies.recharge_below is None, what="recharge off")
+        # read-only like the parameters once the skill is on the robot
+        b.sync("lru2", "lru2-1")
+        from console.messages import StateLoaded
+
+        app.post_message(StateLoaded(b.snapshot(), b.library, {}))
+        await wait_until(pilot, lambda: ed.query("#readonly"), what="read-only")
+        assert all(w.disabled for w in ed.query("#pf-retries, #pf-pause_out_of_comms, #pf-recharge_below"))
+
+
+async def test_unapplied_edits_are_kept_per_skill_when_the_cursor_moves():
+    b = Builder(TUTORIAL)
+    app, backend = engine_app(b)
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, online={"lru1": True, "lru2": True})
+        screen = app.mission_screen
+        screen.schedule.select("lru2-1")
+        await pilot.pause()
+        await pilot.press("enter")  # into the editor
+        await pilot.pause()
+        screen.editor.query_one("#f-label").value = "drive carefully"
+        screen.editor.query_one("#f-speed").value = "0.3"
+        await pilot.pause()
+        assert "unapplied changes: label, speed" in screen_text(app)
+        await pilot.press("escape", "down")  # back to the schedule, next skill
+        await pilot.pause()
+        assert screen.editor.skill_id == "lru2-2"
+        assert "*drive next to POI-A" in screen_text(app)  # the row says it has a draft
+        assert screen.editor.query_one("#f-label").value == "find a stone"
+        await pilot.press("up")
+        await pilot.pause()
+        assert screen.editor.query_one("#f-label").value == "drive carefully"
+        assert screen.editor.query_one("#f-speed").value == "0.3"
+        assert "unapplied changes: label, speed" in screen_text(app)
+        await pilot.press("enter", "ctrl+s")
+        await wait_until(pilot, lambda: b.mission.find("lru2-1")[2].label == "drive carefully", what="applied")
+        assert b.mission.find("lru2-1")[2].params["speed"] == 0.3
+        await wait_until(pilot, lambda: "*drive" not in screen_text(app) and not screen.editor.dirty, what="draft gone")
+
+
+async def test_a_draft_is_discarded_and_said_when_its_skill_leaves_idle():
+    b = Builder(TUTORIAL)
+    app, backend = engine_app(b)
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, online={"lru1": True, "lru2": True})
+        screen = app.mission_screen
+        screen.schedule.select("lru2-1")
+        await pilot.pause()
+        screen.editor.query_one("#f-label").value = "not yet"
+        await pilot.pause()
+        screen.schedule.select("lru2-2")
+        await pilot.pause()
+        assert "*drive next to POI-A" in screen_text(app)
+        await pilot.press("s")  # sync through lru2-2: lru2-1 goes to the robot
+        await wait_until(pilot, lambda: "discarded" in status_line(app), what="the draft dropped and said")
+        assert "lru2-1 is now queued on lru2: your unapplied changes to it (label) are discarded" in status_line(app)
+        assert "*drive" not in screen_text(app)
+        assert screen.editor.drafts == {}
+        # back on it: the skill as it is, read-only
+        screen.schedule.select("lru2-1")
+        await pilot.pause()
+        assert screen.editor.query_one("#f-label").value == "drive next to POI-A"
+
+
+async def test_a_draft_survives_a_lost_connection():
+    b = Builder(TUTORIAL)
+    app = make_app(backend=EngineBackend(b))
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, online={"lru1": True, "lru2": True})
+        screen = app.mission_screen
+        screen.schedule.select("lru2-1")
+        await pilot.pause()
+        screen.editor.query_one("#f-label").value = "kept"
+        await pilot.pause()
+        app.post_message(ConnectionChanged("reconnecting"))
+        await wait_until(pilot, lambda: screen.editor.query("#readonly"), what="read-only while reconnecting")
+        assert screen.editor.query_one("#f-label").value == "drive next to POI-A"
+        app.post_message(ConnectionChanged("connected"))
+        await wait_until(pilot, lambda: not screen.editor.query("#readonly"), what="editable again")
+        assert screen.editor.query_one("#f-label").value == "kept"
+        assert "unapplied changes: label" in screen_text(app)
+
+
+async def test_status_changes_and_telemetry_repaint_the_lines_that_changed():
+    from console_state import T0
+
+    from backend.model import Pose
+    from backend.ops import Report
+    from backend.protocol import Telemetry
+    from console.messages import EventsApplied, TelemetryChanged
+
+    b = mars_mid_execution()
+    app = make_app()
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, telemetry=mars_telemetry())
+        assert "45%" in screen_text(app)
+        app.post_message(TelemetryChanged(Telemetry(robot="lru1", pose=Pose(x=21.0, y=8.0), battery=0.5, link=0.9, mode="executing", skill="lru1-2", progress=0.7, eta_s=60, at=T0)))
+        await pilot.pause()
+        text = screen_text(app)
+        assert "70%" in text and "ETA 1m00s" in text and "bat 50%" in text and "45%" not in text
+        seq = 100
+        for sid, status in (("lru1-2", "success"), ("lru1-3", "synchwaiting"), ("lru1-3", "running")):
+            seq += 1
+            applied = b.engine.submit(Report(robot="lru1", seq=seq, id=sid, status=status))
+            app.post_message(EventsApplied(applied.batch()))
+            await pilot.pause()
+        text = screen_text(app)
+        lru1 = [line.split("│")[0] for line in text.splitlines()]
+        assert any("✓ drive to POI-A" in line for line in lru1)
+        assert any("▶ identify stone" in line for line in lru1)  # the barrier skill now runs
+        assert "▶ lru1-3 running" in text  # header activity
+        assert not any("▶ explore east plain" in line for line in lru1)
+        assert screen_text(app) == text  # stable: nothing left half-painted
+
+
+async def test_a_long_label_is_cut_but_never_the_attempt_number():
+    from backend.ops import EditSkill
+
+    b = Builder()
+    b.engine.submit(EditSkill(id="ardea-1", label="take off from the lander pad"))
+    b.sync("ardea", "ardea-1")
+    b.report("ardea", "ardea-1", "running")
+    b.report("ardea", "ardea-1", "failure", "rotor check failed")
+    new = b.engine.plan_retry(Retry(id="ardea-1"))
+    b.engine.submit(RetryAck(robot="ardea", failed_id="ardea-1", skill=new))
+    b.engine.release("ardea")
+    app = make_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        await inject(app, pilot, b)
+        text = screen_text(app)
+        assert "✗ take off from the la…│" in text  # the first attempt, cut
+        assert "● take off from the… #2│" in text  # the retry: cut, with its attempt
+
+
+async def test_quitting_with_unapplied_changes_asks_first():
+    from console.dialogs import ConfirmScreen
+
+    b = Builder(TUTORIAL)
+    app = make_app(backend=EngineBackend(b))
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, online={"lru1": True, "lru2": True})
+        app.mission_screen.schedule.select("lru2-1")
+        await pilot.pause()
+        app.mission_screen.editor.query_one("#f-label").value = "unsaved"
+        await pilot.pause()
+        await pilot.press("ctrl+q")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the question")
+        assert "Unapplied changes to lru2-1 are lost when you quit" in screen_text(app)
+        await pilot.press("n")
+        await wait_until(pilot, lambda: not isinstance(app.screen, ConfirmScreen), what="back")
+        assert app.return_code is None
+        await pilot.press("ctrl+q")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the question again")
+        await pilot.press("y")
+        await wait_exit(app)
+        assert app.return_code == 0
+
+
+async def test_at_80x24_a_draft_survives_leaving_the_editor_and_editing_another_skill():
+    b = Builder(TUTORIAL)
+    app, backend = engine_app(b)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await inject(app, pilot, b, online={"lru1": True, "lru2": True})
+        screen = app.mission_screen
+        screen.schedule.select("lru2-1")
+        await pilot.pause()
+        await pilot.press("enter", *"careful ")  # the label field has the focus
+        await pilot.pause()
+        assert "unapplied changes: label" in screen_text(app)
+        await pilot.press("escape", "down")
+        await pilot.pause()
+        assert "*drive next to POI-A" in screen_text(app)
+        await pilot.press("enter")  # edit lru2-2: lru2-1's changes become its draft
+        await wait_until(pilot, lambda: screen.editor.skill_id == "lru2-2" and not screen.editor.loading, what="lru2-2 in the editor")
+        assert screen.editor.drafts.keys() == {"lru2-1"}
+        await pilot.press("escape", "up", "enter")
+        await wait_until(pilot, lambda: screen.editor.skill_id == "lru2-1" and not screen.editor.loading, what="lru2-1 again")
+        assert screen.editor.query_one("#f-label").value.startswith("careful ")
+        await pilot.press("ctrl+s")
+        await wait_until(pilot, lambda: b.mission.find("lru2-1")[2].label.startswith("careful "), what="applied")
+
+
+async def test_a_partner_reaching_the_barrier_updates_the_waiting_robots_column():
+    from backend.ops import Report
+    from console.messages import EventsApplied
+
+    b = mars_mid_execution()
+    app = make_app()
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, telemetry=mars_telemetry())
+        assert "b1: waiting for lru1" in screen_text(app)
+        for seq, (sid, status) in enumerate((("lru1-2", "success"), ("lru1-3", "synchwaiting")), start=100):
+            app.post_message(EventsApplied(b.engine.submit(Report(robot="lru1", seq=seq, id=sid, status=status)).batch()))
+            await pilot.pause()
+        text = screen_text(app)
+        assert "b1: waiting for lru1" not in text
+        assert text.count("b1: all partners ready") == 2  # in both columns

@@ -6,7 +6,7 @@ from __future__ import annotations
 from console_state import MARS_FLEET, T0, TUTORIAL, Builder, fleet, mars_mid_execution
 
 from backend import events as ev
-from backend.model import Status
+from backend.model import Policies, Status
 from backend.ops import AddSkill
 from console.config import load_config
 from console.model import CONNECTED, RECONNECTING, ConsoleModel, fmt_duration, param_summary
@@ -26,6 +26,8 @@ def test_param_summary_shows_bindings_and_non_defaults_only():
     assert param_summary(b.mission.find("lru1-2")[2], lib) == "area@ROI-east max_duration=240s"
     assert param_summary(b.mission.find("lander-1")[2], lib) == "box=wifi_box_1 slot=2"
     assert param_summary(b.mission.find("lru2-5")[2], lib) == "goal=(2,0)"
+    s = b.mission.find("lru2-5")[2].model_copy(update={"policies": Policies(retries=2, pause_out_of_comms=True, recharge_below=0.2)})
+    assert param_summary(s, lib) == "goal=(2,0) retry×2 pause-out-of-comms recharge<20%"
 
 
 def test_presence_and_durations():

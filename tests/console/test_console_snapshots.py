@@ -98,6 +98,29 @@ def test_validation_error_next_to_the_field(snap_compare):
     )
 
 
+def test_editor_policies_with_errors_and_a_draft_on_another_skill(snap_compare):
+    async def after(pilot):
+        screen = pilot.app.mission_screen
+        screen.editor.query_one("#f-label").value = "drive, then wait"  # a draft on lru2-4...
+        await pilot.pause()
+        screen.schedule.select("lru2-5")  # ...kept when the cursor moves on
+        await pilot.pause()
+        editor = screen.editor
+        editor.query_one("#pf-retries").value = "25"
+        editor.query_one("#pf-pause_out_of_comms").value = True
+        editor.query_one("#pf-recharge_below").value = "0.25"
+        await pilot.pause()
+        editor.scroll_end(animate=False, immediate=True)
+        await pilot.pause()
+
+    assert snap_compare(
+        make_app(),
+        terminal_size=WIDE,
+        run_before=_prepare(Builder(MARS), select="lru2-4", after=after,
+                            expect=("*pick the stone", "*back to lander", "25: should be less than or equal to 20", "recharge below")),
+    )
+
+
 def test_read_only_running_skill_with_reason(snap_compare):
     assert snap_compare(
         make_app(),
