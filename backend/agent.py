@@ -77,6 +77,7 @@ import zenoh
 from pydantic import TypeAdapter, ValidationError
 
 from . import transport
+from .login import Login
 from .model import Pose, Position, SkillInstance, Status
 from .ops import Report
 from .protocol import (
@@ -382,6 +383,7 @@ class RobotAgent:
         zenoh_extra: dict[str, Any] | None = None,
         telemetry_hz: float = 2.0,
         request_timeout: float = 5.0,
+        login: Login | None = None,
     ):
         self.name = name
         self.robot_type = robot_type
@@ -389,7 +391,8 @@ class RobotAgent:
         self.modules = dict(modules or {})
         self.properties = dict(properties or {})
         self.lease_ms = lease_ms
-        self.zenoh_extra = zenoh_extra
+        # an account (robot role) and TLS files: see docs/security.md
+        self.zenoh_extra = {**(zenoh_extra or {}), **(login.zenoh_options() if login else {})}
         self.telemetry_hz = telemetry_hz
         self.request_timeout = request_timeout
 
