@@ -19,7 +19,8 @@ from textual.app import App
 from textual.binding import Binding
 from textual.screen import Screen
 
-from backend.client import ClientError, OperationRefused
+from backend.client import ClientError, LoginFailed, OperationRefused
+from backend.login import Login
 from backend.protocol import ErrorReply
 
 from .actions import ACTIONS
@@ -28,6 +29,7 @@ from .commands import MissionCommands
 from .config import ConsoleConfig
 from .dialogs import HelpScreen, UnreachableScreen
 from .messages import (
+    AccountKnown,
     AlertReceived,
     ConnectionChanged,
     EventsApplied,
@@ -72,6 +74,7 @@ class MissionApp(App[int]):
         backend: Backend | None = None,
         notices: list[str] | tuple[str, ...] = (),
         client_id: str | None = None,
+        login: Login | None = None,
     ) -> None:
         super().__init__()
         self.config = config or ConsoleConfig()
@@ -85,7 +88,8 @@ class MissionApp(App[int]):
         self.theme = wanted
         if self.config.keymap:
             self.set_keymap(self.config.keymap)
-        self.bridge = ClientBridge(self, connect, user=user, client_id=client_id) if connect else None
+        self.bridge = ClientBridge(self, connect, user=user, client_id=client_id, login=login) if connect else None
+        self.login_refused = ""  # set when the router refused the login: the CLI prints it, exit 3
         self.backend: Backend | None = backend or self.bridge
         self.mission_screen: MissionScreen | None = None
         self.last_path: str | None = None
@@ -160,6 +164,9 @@ class MissionApp(App[int]):
         self.post_message(ConnectionChanged(CONNECTING, endpoint=self.bridge.endpoint))
         try:
             await self.bridge.connect()
+        except LoginFailed as e:  # retrying cannot help: one line and exit code 3
+            self.login_refused = str(e)
+            self.exit(EXIT_UNREACHABLE, return_code=EXIT_UNREACHABLE)
         except ClientError as e:
             self.post_message(ConnectionChanged(UNREACHABLE, str(e), endpoint=self.bridge.endpoint))
         except Exception as e:  # never a traceback for a network problem
@@ -208,6 +215,11 @@ class MissionApp(App[int]):
                 self.notify("reconnected; state resynchronized", title="Server", timeout=3)
         if message.status == UNREACHABLE and not isinstance(self.screen, UnreachableScreen):
             self.push_screen(UnreachableScreen(m.endpoint or "?", message.detail), self._unreachable_choice)
+
+    async def on_account_known(self, message: AccountKnown) -> None:
+        self.model.read_only = message.read_only
+        if self._screen_live():
+            await self.mission_screen.connection_changed()  # top bar, actions, editor
 
     def _unreachable_choice(self, choice: str | None) -> None:
         if choice == "retry":

@@ -141,3 +141,21 @@ def test_unreachable_server(snap_compare):
         assert "Cannot reach the mission server" in screen_text(pilot.app)
 
     assert snap_compare(make_app(), terminal_size=(90, 20), run_before=run_before)
+
+
+def test_observer_account_read_only(snap_compare):
+    # logged in as an observer: the top bar says so, the editor and every change action give the reason
+    async def after(pilot):
+        from console.messages import AccountKnown
+
+        pilot.app.post_message(AccountKnown("read-only: logged in as observer watch"))
+        await pilot.pause()
+        await pilot.press("d")
+        await pilot.pause()
+
+    assert snap_compare(
+        make_app(),
+        terminal_size=WIDE,
+        run_before=_prepare(Builder(MARS), select="lru1-2", after=after,
+                            expect=("read-only: logged in as observer watch", "Delete: read-only: logged in as observer watch")),
+    )
