@@ -682,6 +682,15 @@ class RobotAgent:
                 await self._register_once()
             except asyncio.CancelledError:
                 raise
+            except transport.NoResponder:
+                # the server's token is there but its register queryable is not:
+                # the router's access control dropped the query
+                if not getattr(self, "_warned_unanswered", False):  # once, not every retry
+                    self._warned_unanswered = True
+                    log.warning("%s: the server is up but %s gets no answer: does the robot account "
+                                "(--user) list this robot? retrying", self.name, Keys.register(self.name))
+                assert self._loop is not None
+                self._loop.call_later(_RETRY_S, self._register_wake.set)
             except Exception as exc:
                 log.info("%s: registration failed (%s); retrying", self.name, exc)
                 assert self._loop is not None

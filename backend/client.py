@@ -21,6 +21,7 @@ from pydantic import ValidationError
 
 from . import events as ev
 from .library import Library
+from .login import Login
 from .model import Mission
 from .protocol import (
     PROTOCOL_VERSION,
@@ -47,7 +48,6 @@ from .transport import (
     transport_events,
     watch_liveliness,
 )
-from .login import Login
 from .transport.session import LoginRefused, TransportUnreachable, close_session, open_session
 
 log = logging.getLogger(__name__)

@@ -72,5 +72,9 @@ def login_from_args(args: argparse.Namespace) -> Login:
         if path and not Path(path).is_file():
             raise AccountsError(f"{opt} {path}: no such file")
     password = read_password(password_file) if password_file else ""
-    absolute = (lambda p: str(Path(p).resolve()) if p else None)
-    return Login(user=user, password=password, ca=absolute(getattr(args, "ca", None)), cert=absolute(cert), key=absolute(key))
+    return Login(user=user, password=password, ca=_absolute(getattr(args, "ca", None)), cert=_absolute(cert), key=_absolute(key))
+
+
+def _absolute(path: str | None) -> str | None:
+    # Zenoh reads the files later, maybe after a change of directory
+    return str(Path(path).resolve()) if path else None

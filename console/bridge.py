@@ -10,8 +10,8 @@ from __future__ import annotations
 from typing import Any, Protocol
 
 from backend.client import MissionClient
-from backend.login import Login
 from backend.events import EventBatch
+from backend.login import Login
 from backend.protocol import Alert, OpReply, RobotInfo, StateSnapshot, Telemetry
 
 from .messages import (

@@ -48,11 +48,11 @@ def _run_app(app) -> int:
 
 
 def run_console(args: argparse.Namespace) -> int:
-    from .app import MissionApp
-    from .config import load_config
-
     from backend.accounts import AccountsError
     from backend.login import login_from_args
+
+    from .app import MissionApp
+    from .config import load_config
 
     try:
         login = login_from_args(args)
@@ -74,7 +74,13 @@ def run_console(args: argparse.Namespace) -> int:
 def _login_refused(endpoint: str, login) -> str | None:
     """Open and close one session: the router's verdict on the login/TLS files.
     Anything else (server down…) is left to the app, which offers to retry."""
-    from backend.transport import LoginRefused, TransportError, client_config, close_session, open_session
+    from backend.transport import (
+        LoginRefused,
+        TransportError,
+        client_config,
+        close_session,
+        open_session,
+    )
 
     if not (login.logged_in or login.ca or login.cert):
         return None

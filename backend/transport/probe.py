@@ -65,7 +65,7 @@ def _tls_problem(config: zenoh.Config, sock: socket.socket, host: str, endpoint:
             tls.settimeout(0.3)
             try:
                 tls.recv(1)
-            except (TimeoutError, socket.timeout):
+            except TimeoutError:
                 pass
     except ssl.SSLCertVerificationError as e:
         fix = "give --ca FILE, the CA that signed it" if not ca else f"is {ca} the CA that signed it? does the certificate name {host}?"

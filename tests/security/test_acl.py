@@ -12,12 +12,13 @@ import queue
 from datetime import UTC, datetime
 
 import zenoh
-from conftest import raw_session
 
 from backend.events import EventBatch
 from backend.model import Pose
 from backend.ops import AddSkill, Report
 from backend.protocol import Keys, ReportAck, ReportBatch, Request, StateSnapshot, Telemetry, dumps
+
+from .helpers import raw_session
 
 TIMEOUT = 3.0
 

@@ -9,7 +9,7 @@ import os
 import subprocess
 import sys
 
-from conftest import CLI, ROBOTS_SCRIPT, ROOT, env
+from .helpers import CLI, ROBOTS_SCRIPT, ROOT, env
 
 EXIT_BAD_INPUT, EXIT_UNREACHABLE = 2, 3
 

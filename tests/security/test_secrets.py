@@ -10,7 +10,7 @@ import sys
 import time
 from pathlib import Path
 
-from conftest import CLI, ROBOTS_SCRIPT, ROOT, TUTORIAL, env
+from .helpers import CLI, ROBOTS_SCRIPT, ROOT, TUTORIAL, env
 
 
 class Bg:

@@ -10,7 +10,8 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from conftest import CLI, ROOT, SecureServer, ctl, env
+
+from .helpers import CLI, ROOT, SecureServer, ctl, env
 
 EXIT_UNREACHABLE = 3
 
