@@ -198,6 +198,12 @@ class MissionClient:
                     self._session(), Keys.STATE, dumps(StateRequest(client=self.client_id)), self.timeout
                 )
             except NoResponder:
+                if self.login.logged_in:  # the router's rules may have dropped the query
+                    raise ServerUnreachable(
+                        f"no mission server answers user {self.user} at {', '.join(self.endpoints)}: either none "
+                        "runs there, or this account may not read the mission (a robot account; under mutual "
+                        "TLS, a certificate not named after the account)"
+                    ) from None
                 raise ServerUnreachable(
                     f"no mission server answers at {', '.join(self.endpoints)} (a Zenoh router is there, "
                     "but no missionctl server)"

@@ -64,6 +64,7 @@ def test_mutual_tls_needs_a_client_certificate_named_after_the_account(tmp_path,
         # ops's password with watch's certificate: no subject of the rules matches, nothing is allowed
         r = ctl(server.endpoint, *accounts.login_args("ops"), *_client(pki, "watch"), "--timeout", "2", "add", "lru1", "recharge")
         assert r.returncode == EXIT_UNREACHABLE, r.stderr
+        assert "this account may not read the mission" in r.stderr
         r = server.ctl("ops", "state", "--json")
         assert [s["skill"] for s in json.loads(r.stdout)["tasks"]["lru1"]].count("recharge") == 1
     finally:
