@@ -190,6 +190,8 @@ def _watcher_rules(rid: str, user: str) -> list[dict[str, Any]]:
         _rule(f"{rid}-out", "egress", ["put", "delete"], _WATCH_SUBS),
         _rule(f"{rid}-out-r", "egress", ["reply"], queries),
         _rule(f"{rid}-out-l", "egress", ["liveliness_token"], _PRESENCE),
+        # where the queryables are (queriers' matching status)
+        _rule(f"{rid}-out-d", "egress", ["declare_queryable"], queries),
     ]
 
 
@@ -210,6 +212,11 @@ def _robot_rules(rid: str, robots: list[str]) -> list[dict[str, Any]]:
         _rule(f"{rid}-out-q", "egress", ["query"], [*own_queryables, *sim_serve]),
         _rule(f"{rid}-out-r", "egress", ["reply"], [*server_queries, *worlds]),
         _rule(f"{rid}-out-l", "egress", ["liveliness_token"], partners),
+        # a publisher sends only once it knows of a subscriber (write-side filtering);
+        # consoles subscribe with a wildcard, which a rule key must include
+        _rule(f"{rid}-out-d", "egress", ["declare_subscriber"],
+              [Keys.ALL_TELEMETRY, *(Keys.telemetry(r) for r in robots), *sim_pub]),
+        _rule(f"{rid}-out-dq", "egress", ["declare_queryable"], [*server_queries, *worlds]),
     ]
 
 

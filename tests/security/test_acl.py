@@ -9,6 +9,7 @@ real one after it on an ordered path and seeing only the real one arrive."""
 from __future__ import annotations
 
 import queue
+import time
 from datetime import UTC, datetime
 
 import zenoh
@@ -128,3 +129,20 @@ def test_robot_cannot_report_or_register_for_another_robot_nor_change_the_missio
         for key in (Keys.OP, Keys.op_as("rover1"), Keys.op_as("ops"), Keys.STATE):
             assert _replies(rover1, key, _add()) == [], key
         assert _revision(ops) == before
+
+
+def test_robots_ask_each_other_but_cannot_pose_as_another(server, accounts):
+    ep = server.endpoint
+    with raw_session(ep, accounts.login("rover1")) as rover1, raw_session(ep, accounts.login("rover2")) as rover2:
+        # the fake first: once `own` is reachable, the router has handled the fake's declaration (same link)
+        fake = rover1.declare_queryable(Keys.world("lru2"), lambda q: q.reply(Keys.world("lru2"), b"rover1 posing as lru2"))
+        own = rover1.declare_queryable(Keys.world("lru1"), lambda q: q.reply(Keys.world("lru1"), b"lru1 here"))
+        try:
+            deadline = time.monotonic() + 10
+            while not (answers := _replies(rover2, Keys.world("lru1"))):  # until the declaration has reached the router
+                assert time.monotonic() < deadline, "lru1's world queryable never became reachable"
+            assert answers == [(True, b"lru1 here")]
+            assert _replies(rover2, Keys.world("lru2")) == []
+        finally:
+            own.undeclare()
+            fake.undeclare()

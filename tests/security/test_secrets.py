@@ -5,12 +5,16 @@ robots work under their robot accounts."""
 from __future__ import annotations
 
 import json
+import queue
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-from .helpers import CLI, ROBOTS_SCRIPT, ROOT, TUTORIAL, env
+from backend.protocol import Keys
+from sim.mapfeed import KEY_MAP_DELTA, KEY_STATUS_LIVE
+
+from .helpers import CLI, ROBOTS_SCRIPT, ROOT, TUTORIAL, env, raw_session
 
 
 class Bg:
@@ -66,6 +70,9 @@ def test_no_password_in_arguments_logs_or_journal(tmp_path, server, accounts):
             assert r.returncode == 0, r.stderr
             outputs += [r.stdout, r.stderr]
         _until(server, lambda st: all(s["status"] == "success" for s in st["tasks"]["lru1"]), "lru1 done")
+        # the observer sees presence and telemetry (its rules cover what consoles read)
+        seen_by_watch = json.loads(server.ctl("watch", "robots", "--json").stdout)["robots"]["lru1"]
+        assert seen_by_watch["online"] and seen_by_watch["telemetry"] is not None
         refused = server.ctl("watch", "run", "lru1")
         outputs += [refused.stdout, refused.stderr]
         watch.wait_for("recharge")
@@ -99,6 +106,17 @@ def test_simulated_fleet_runs_under_a_robot_account(tmp_path, server, accounts):
             assert time.monotonic() < deadline, r.stdout
             time.sleep(0.1)
             r = server.ctl("ops", "robots", "--json")
+        # the simulator's live feeds and the robots' telemetry reach an observer
+        with raw_session(server.endpoint, accounts.login("watch")) as watch:
+            got: queue.Queue = queue.Queue()
+            subs = [watch.declare_subscriber(k, lambda s: got.put(str(s.key_expr)))
+                    for k in (KEY_STATUS_LIVE, KEY_MAP_DELTA, Keys.ALL_TELEMETRY)]
+            seen: set[str] = set()
+            deadline = time.monotonic() + 30
+            while not {KEY_STATUS_LIVE, Keys.telemetry("lru1"), Keys.telemetry("lru2")} <= seen:
+                seen.add(got.get(timeout=max(0.1, deadline - time.monotonic())))
+            for sub in subs:
+                sub.undeclare()
         status = subprocess.run([*CLI, "sim-status", "--connect", server.endpoint, *accounts.login_args("watch")],
                                 cwd=ROOT, env=env(), capture_output=True, text=True, timeout=30)
         assert status.returncode == 0, status.stderr
