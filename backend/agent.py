@@ -78,6 +78,7 @@ import zenoh
 from pydantic import TypeAdapter, ValidationError
 
 from . import transport
+from .login import Login
 from .model import Pose, Position, SkillInstance, Status
 from .ops import Report
 from .protocol import (
@@ -397,6 +398,7 @@ class RobotAgent:
         zenoh_extra: dict[str, Any] | None = None,
         telemetry_hz: float = 2.0,
         request_timeout: float = 5.0,
+        login: Login | None = None,
     ):
         self.name = name
         self.robot_type = robot_type
@@ -404,7 +406,8 @@ class RobotAgent:
         self.modules = dict(modules or {})
         self.properties = dict(properties or {})
         self.lease_ms = lease_ms
-        self.zenoh_extra = zenoh_extra
+        # an account (robot role) and TLS files: see docs/security.md
+        self.zenoh_extra = {**(zenoh_extra or {}), **(login.zenoh_options() if login else {})}
         self.telemetry_hz = telemetry_hz
         self.request_timeout = request_timeout
 
@@ -696,6 +699,15 @@ class RobotAgent:
                 await self._register_once()
             except asyncio.CancelledError:
                 raise
+            except transport.NoResponder:
+                # the server's token is there but its register queryable is not:
+                # the router's access control dropped the query
+                if not getattr(self, "_warned_unanswered", False):  # once, not every retry
+                    self._warned_unanswered = True
+                    log.warning("%s: the server is up but %s gets no answer: does the robot account "
+                                "(--user) list this robot? retrying", self.name, Keys.register(self.name))
+                assert self._loop is not None
+                self._loop.call_later(_RETRY_S, self._register_wake.set)
             except Exception as exc:
                 log.info("%s: registration failed (%s); retrying", self.name, exc)
                 assert self._loop is not None

@@ -73,6 +73,9 @@ def build_parser() -> argparse.ArgumentParser:
     from . import ctl
 
     ctl.register(sub)
+    from . import certs
+
+    certs.register(sub)
     for _name, register in _registrations():
         register(sub)
     return p

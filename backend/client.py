@@ -21,9 +21,11 @@ from pydantic import ValidationError
 
 from . import events as ev
 from .library import Library
+from .login import Login
 from .model import Mission
 from .protocol import (
     PROTOCOL_VERSION,
+    AccountInfo,
     Alert,
     ErrorReply,
     FleetEvent,
@@ -46,7 +48,7 @@ from .transport import (
     transport_events,
     watch_liveliness,
 )
-from .transport.session import TransportUnreachable, close_session, open_session
+from .transport.session import LoginRefused, TransportUnreachable, close_session, open_session
 
 log = logging.getLogger(__name__)
 
@@ -59,6 +61,10 @@ class ClientError(Exception):
 
 class ServerUnreachable(ClientError):
     pass
+
+
+class LoginFailed(ServerUnreachable):
+    """The router refused the login or the TLS handshake (the sentence says which)."""
 
 
 class ProtocolMismatch(ClientError):
@@ -96,11 +102,14 @@ class MissionClient:
         zenoh_extra: dict[str, Any] | None = None,
         timeout: float = DEFAULT_TIMEOUT,
         telemetry: bool = True,
+        login: Login | None = None,
     ):
         self.endpoints = [connect] if isinstance(connect, str) else list(connect)
         self.client_id = client_id or f"{os.uname().nodename}-{os.getpid()}-{uuid.uuid4().hex[:6]}"
-        self.user = user
-        self.zenoh_extra = zenoh_extra
+        self.login = login or Login()
+        self.user = self.login.user or user
+        self.zenoh_extra = {**(zenoh_extra or {}), **self.login.zenoh_options()}
+        self.account: AccountInfo | None = None  # known once logged in
         self.timeout = timeout
         self.want_telemetry = telemetry
         self.session: zenoh.Session | None = None
@@ -125,6 +134,8 @@ class MissionClient:
         cfg = client_config(self.endpoints, extra=self.zenoh_extra)
         try:
             self.session = await asyncio.to_thread(open_session, cfg)
+        except LoginRefused as e:
+            raise LoginFailed(str(e)) from None
         except TransportUnreachable as e:
             raise ServerUnreachable(str(e)) from None
         try:
@@ -136,6 +147,8 @@ class MissionClient:
             if self.want_telemetry:
                 self._entities.append(subscribe(s, Keys.ALL_TELEMETRY, self._on_telemetry))
             snap = await self.resync()
+            if self.login.logged_in:
+                self.account = await self._fetch_account()
             self._entities.append(
                 watch_liveliness(s, Keys.SERVER_ALIVE, self._on_server_alive, history=False)
             )
@@ -196,6 +209,12 @@ class MissionClient:
                     self._session(), Keys.STATE, dumps(StateRequest(client=self.client_id)), self.timeout
                 )
             except NoResponder:
+                if self.login.logged_in:  # the router's rules may have dropped the query
+                    raise ServerUnreachable(
+                        f"no mission server answers user {self.user} at {', '.join(self.endpoints)}: either none "
+                        "runs there, or this account may not read the mission (a robot account; under mutual "
+                        "TLS, a certificate not named after the account)"
+                    ) from None
                 raise ServerUnreachable(
                     f"no mission server answers at {', '.join(self.endpoints)} (a Zenoh router is there, "
                     "but no missionctl server)"
@@ -230,6 +249,21 @@ class MissionClient:
         self._emit("state", snap)
         self._emit("connection", "connected")
         return snap
+
+    async def _fetch_account(self) -> AccountInfo | None:
+        try:
+            raw = await query(self._session(), Keys.account(self.user), b"", self.timeout)
+            return AccountInfo.model_validate_json(raw)
+        except (NoResponder, QueryTimeout, QueryError, ValidationError):
+            return None  # an older server: no roles known, the router still enforces them
+
+    @property
+    def read_only(self) -> str | None:
+        """Why this client cannot change the mission (None: it can)."""
+        a = self.account
+        if a is not None and a.enforced and a.role != "operator":
+            return f"read-only: logged in as {a.role} {a.user}"
+        return None
 
     def _apply(self, batch: ev.EventBatch, *, emit: bool = True) -> None:
         assert self.mission is not None
@@ -341,6 +375,8 @@ class MissionClient:
         """Apply an operation on the server. Raises OperationRefused (with the
         server's code and sentence), OperationTimeout or ServerUnreachable.
         Retrying with the same `request_id` is safe: it is applied once."""
+        if self.read_only:  # the router would drop it unanswered: say why at once
+            raise OperationRefused(ErrorReply(code="read_only", message=self.read_only))
         req = Request(
             client=self.client_id,
             request_id=request_id or self.new_request_id(),
@@ -350,7 +386,9 @@ class MissionClient:
         )
         wait = timeout or self.timeout
         try:
-            raw = await query(self._session(), Keys.OP, dumps(req), wait)
+            # logged in: the user's own key, the only one the router lets it use
+            key = Keys.op_as(self.user) if self.account is not None else Keys.OP
+            raw = await query(self._session(), key, dumps(req), wait)
         except QueryError as e:
             raise OperationRefused(_error_reply(e.payload)) from None
         except QueryTimeout:

@@ -92,6 +92,9 @@ from datetime import date, datetime
 from pathlib import Path
 from typing import Any
 
+from .accounts import AccountsError
+from .login import add_login_arguments, login_from_args
+
 EXIT_OK, EXIT_REFUSED, EXIT_BAD_INPUT, EXIT_UNREACHABLE = 0, 1, 2, 3
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
@@ -338,6 +341,7 @@ def _common(p: argparse.ArgumentParser, *, top: bool) -> None:
                    help="refuse if what the operation touches changed after revision N")
     g.add_argument("--request-id", metavar="ID", default=d(None),
                    help="request id (default: a fresh one); reuse it to retry safely after a timeout")
+    add_login_arguments(p.add_argument_group("login and TLS (docs/security.md)"), suppress=not top)
 
 
 def _policies(p: argparse.ArgumentParser) -> None:
@@ -1109,6 +1113,10 @@ def _run(args: argparse.Namespace) -> int:
 
     endpoints = _endpoints(args)
     build_op(args)  # the command line alone: bad usage never needs a server
+    try:
+        login = login_from_args(args)
+    except AccountsError as e:
+        raise UsageError(str(e)) from None
     if args.op == "save":
         target = Path(args.file)
         if target.is_dir():
@@ -1116,7 +1124,7 @@ def _run(args: argparse.Namespace) -> int:
         if not target.resolve().parent.is_dir():
             raise UsageError(f"save: folder {target.parent} does not exist")
     try:
-        return asyncio.run(_session(args, endpoints))
+        return asyncio.run(_session(args, endpoints, login))
     except OperationRefused as e:
         r = e.reply
         return _fail(args, r.code, r.message, EXIT_REFUSED, lines=[f"missionctl: refused: {r.message}"],
@@ -1131,11 +1139,12 @@ def _run(args: argparse.Namespace) -> int:
         return _fail(args, "transport_error", str(e), EXIT_UNREACHABLE)
 
 
-async def _session(args: argparse.Namespace, endpoints: list[str]) -> int:
+async def _session(args: argparse.Namespace, endpoints: list[str], login: Any = None) -> int:
     from .client import MissionClient
 
     client = MissionClient(
         endpoints,
+        login=login,
         client_id=args.client_id or default_client_id(),
         timeout=args.timeout,
         telemetry=args.op == "robots",

@@ -33,6 +33,14 @@ class Keys:
     PING = f"{PREFIX}/server/ping"  # queryable: anything -> b"pong" (raw-transport baseline for benchmarks)
 
     @staticmethod
+    def op_as(user: str) -> str:  # queryable: Request -> OpReply | ErrorReply, from a logged-in user
+        return f"{PREFIX}/server/op/{user}"
+
+    @staticmethod
+    def account(user: str) -> str:  # queryable: anything -> AccountInfo
+        return f"{PREFIX}/server/account/{user}"
+
+    @staticmethod
     def register(robot: str) -> str:  # queryable: Register -> RegisterReply
         return f"{PREFIX}/server/register/{robot}"
 
@@ -103,6 +111,17 @@ class ErrorReply(Strict):
     robot: str | None = None
     skill: str | None = None
     param: str | None = None
+
+
+class AccountInfo(Strict):
+    """What the server knows of a logged-in user (answer on `Keys.account(user)`)."""
+
+    user: str
+    role: Literal["operator", "observer", "robot"]
+    robots: list[Name] = Field(default_factory=list, description="robot accounts: the robots they may act as")
+    enforced: bool = Field(
+        True, description="false: the server runs without accounts (anyone may do anything; role is nominal)"
+    )
 
 
 class StateRequest(Strict):

@@ -38,6 +38,8 @@ person naming robot, skill and reason).
 | --- | --- | --- | --- |
 | `{p.Keys.SERVER_ALIVE}` | liveliness token | server | — |
 | `{p.Keys.OP}` | queryable | server | `Request` → `OpReply` / `ErrorReply` |
+| `{p.Keys.op_as('USER')}` | queryable | server | the same, from a logged-in user (`Request.user` is replaced by `USER`) |
+| `{p.Keys.account('USER')}` | queryable | server | anything → `AccountInfo` (role of a logged-in user) |
 | `{p.Keys.STATE}` | queryable | server | `StateRequest` → `StateSnapshot` |
 | `{p.Keys.EVENTS}` | publication | server | `EventBatch` (revisions consecutive) |
 | `{p.Keys.FLEET}` | publication | server | `FleetEvent` (presence, manifest) |
@@ -93,6 +95,13 @@ same `(client, request_id)` is applied once: retry freely after a timeout.
 With `expected_revision`, the operation is refused (`stale`) if anything it
 touches changed after that revision. The reply is `OpReply{{revision, value,
 notes}}` or an `ErrorReply`.
+
+On a server with accounts (docs/security.md) the router's access-control
+rules allow an operator to query only `{p.Keys.op_as('USER')}` with its own
+user name, and nobody `{p.Keys.OP}`; the server records `USER` (taken from
+the key, not from `Request.user`) as who made the change. A client learns its
+role from `{p.Keys.account('USER')}` (an observer has no operation key: its
+queries get no reply at all, so clients refuse operations locally).
 
 ### Robot registration and reconciliation
 1. The robot connects, declares `{p.Keys.alive('ROBOT')}`, its command and
@@ -189,6 +198,7 @@ MODELS = [
     ("OpReply", p.OpReply),
     ("ErrorReply", p.ErrorReply),
     ("StateRequest", p.StateRequest),
+    ("AccountInfo", p.AccountInfo),
     ("StateSnapshot (mission and library: see `missionctl schema`)", None),
     ("EventBatch", EventBatch),
     ("FleetEvent", p.FleetEvent),

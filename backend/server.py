@@ -19,6 +19,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
+from .accounts import Accounts, acl_config, zenoh_dictionary
 from .events import EventBatch
 from .files import library_path, load_library, load_mission
 from .journal import Journal, remember_requests
@@ -37,6 +38,7 @@ from .ops import (
 )
 from .protocol import (
     PROTOCOL_VERSION,
+    AccountInfo,
     Alert,
     BarrierInfo,
     CommandReply,
@@ -97,12 +99,14 @@ class MissionServer:
         listen: list[str] | None = None,
         zenoh_extra: dict[str, Any] | None = None,
         command_timeout: float = 10.0,
+        accounts: Accounts | None = None,
     ):
         self.db = Path(db)
         self.mission_file = Path(mission_file) if mission_file else None
         self.listen = listen or ["tcp/127.0.0.1:7447"]
         self.zenoh_extra = zenoh_extra
         self.command_timeout = command_timeout
+        self.accounts = accounts  # None: no logins, anyone reaching the router may do anything
         self.server_id = uuid.uuid4().hex[:12]
         self.robots: dict[str, RobotInfo] = {}
         self.engine: Engine | None = None
@@ -154,9 +158,8 @@ class MissionServer:
     async def start(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._load()
-        cfg = router_config(self.listen, extra=self.zenoh_extra)
         try:
-            self._session = await asyncio.to_thread(open_session, cfg, what="the listen endpoint")
+            self._session = await self._open_router()
         except BaseException:
             self.journal.close()
             raise
@@ -167,14 +170,30 @@ class MissionServer:
         self._entities += [
             serve_async(s, Keys.OP, self._guard(self._handle_op)),
             serve_async(s, Keys.STATE, self._guard(self._handle_state)),
-            serve_async(s, Keys.register("*"), self._guard(self._handle_register)),
-            serve_async(s, Keys.reports("*"), self._guard(self._handle_reports)),
+            serve_async(s, Keys.op_as("*"), self._guard(self._handle_op), with_key=True),
+            serve_async(s, Keys.account("*"), self._guard(self._handle_account), with_key=True),
+            serve_async(s, Keys.register("*"), self._guard(self._handle_register), with_key=True),
+            serve_async(s, Keys.reports("*"), self._guard(self._handle_reports), with_key=True),
             watch_liveliness(s, Keys.ALL_ALIVE, self._on_presence),
             # trivial, answered on the Zenoh thread: the raw-transport baseline of benchmarks
             serve(s, Keys.PING, lambda _payload: b"pong"),
         ]
         # declared last: robots (re)register when they see it
         self._entities.append(declare_token(s, Keys.SERVER_ALIVE))
+
+    async def _open_router(self):
+        """The router session; with accounts, user/password logins and the
+        access-control rules of their roles (the dictionary file Zenoh reads
+        exists only while the session opens)."""
+        extra = dict(self.zenoh_extra or {})
+        if self.accounts is None:
+            return await asyncio.to_thread(open_session, router_config(self.listen, extra=extra), what="the listen endpoint")
+        mtls = bool(extra.get("transport/link/tls/enable_mtls"))
+        extra["access_control"] = acl_config(self.accounts, cert_names=mtls)
+        with zenoh_dictionary(self.accounts) as dictionary:
+            extra["transport/auth/usrpwd/dictionary_file"] = dictionary
+            cfg = router_config(self.listen, extra=extra)
+            return await asyncio.to_thread(open_session, cfg, what="the listen endpoint")
 
     async def stop(self) -> None:
         self._entities.clear()
@@ -203,12 +222,12 @@ class MissionServer:
         return self.engine.library
 
     # -- plumbing -------------------------------------------------------------
-    def _guard(self, handler: Callable[[bytes], Awaitable[bytes]]) -> Callable[[bytes], Awaitable[bytes]]:
+    def _guard(self, handler: Callable[..., Awaitable[bytes]]) -> Callable[..., Awaitable[bytes]]:
         """Bad input and refusals become an ErrorReply; nothing else escapes."""
 
-        async def run(payload: bytes) -> bytes:
+        async def run(*args: Any) -> bytes:
             try:
-                return await handler(payload)
+                return await handler(*args)
             except Refusal as r:
                 raise ReplyErr(dumps(ErrorReply(**r.to_dict()))) from None
             except ValidationError as e:
@@ -256,8 +275,23 @@ class MissionServer:
         return snap.model_dump_json().encode()
 
     # -- operations from consoles and ctl -------------------------------------------
-    async def _handle_op(self, payload: bytes) -> bytes:
+    async def _handle_account(self, payload: bytes, key: str) -> bytes:
+        user = key.rsplit("/", 1)[-1]
+        if self.accounts is None:
+            return dumps(AccountInfo(user=user, role="operator", enforced=False))
+        role = self.accounts.role(user)
+        if role is None:  # the router lets only `user` ask this: unreachable with accounts
+            raise Refusal("unknown_account", f"no account '{user}' on this server")
+        return dumps(AccountInfo(user=user, role=role, robots=self.accounts.robots(user)))
+
+    async def _handle_op(self, payload: bytes, key: str | None = None) -> bytes:
         req = Request.model_validate_json(payload)
+        if key is not None:  # op/{user}: the router's rules let only `user` send it
+            user = key.rsplit("/", 1)[-1]
+            role = self.accounts.role(user) if self.accounts is not None else "operator"
+            if role != "operator":  # the ACL refuses it first; this is the clean answer if it did not
+                raise Refusal("read_only", f"read-only: logged in as {role or 'unknown account'} {user}")
+            req = req.model_copy(update={"user": user})
         key = (req.client, req.request_id)
         if key in self._inflight:  # the same request retried while in progress
             return await asyncio.shield(self._inflight[key])
@@ -403,9 +437,11 @@ class MissionServer:
         if name not in self.mission.robots:
             raise Refusal("unknown_robot", f"robot '{name}' is not part of this mission (robots: {', '.join(self.mission.robots)})", robot=name)
 
-    async def _handle_register(self, payload: bytes) -> bytes:
+    async def _handle_register(self, payload: bytes, key: str) -> bytes:
         reg = Register.model_validate_json(payload)
         m = reg.manifest
+        if m.name != Keys.robot_of(key):  # the key is what the router's rules check
+            raise Refusal("bad_register", f"robot '{m.name}' cannot register on {key}", robot=m.name)
         if m.protocol != PROTOCOL_VERSION:
             return dumps(RegisterReply(accepted=False, reason=f"protocol {m.protocol} is not supported (server speaks {PROTOCOL_VERSION})"))
         if m.name not in self.mission.robots:
@@ -449,11 +485,13 @@ class MissionServer:
                 self.alert(f"{robot}: {rep.id} failed: {rep.info}", level="error", robot=robot, skill=rep.id, kind="failure")
         return refused
 
-    async def _handle_reports(self, payload: bytes) -> bytes:
+    async def _handle_reports(self, payload: bytes, key: str) -> bytes:
         batch = ReportBatch.model_validate_json(payload)
         robots = {r.robot for r in batch.reports}
         if len(robots) > 1:
             raise Refusal("bad_report", "a report batch comes from one robot")
+        if robots and robots != {Keys.robot_of(key)}:  # the key is what the router's rules check
+            raise Refusal("bad_report", f"{Keys.robot_of(key)} cannot report for {', '.join(robots)}")
         robot = robots.pop() if robots else ""
         if robot:
             self._robot_from(robot)

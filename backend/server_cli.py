@@ -9,6 +9,7 @@ import signal
 import sys
 from pathlib import Path
 
+from .accounts import AccountsError, load_accounts
 from .files import FileProblems
 from .journal import JournalError
 from .transport import load_config_file
@@ -23,6 +24,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--listen", metavar="ENDPOINT", action="append", help="Zenoh endpoint to listen on (default tcp/127.0.0.1:7447); repeatable")
     p.add_argument("--db", metavar="PATH", help="SQLite journal (default: MISSION.db next to the mission file)")
     p.add_argument("--zenoh-config", metavar="FILE", help="JSON5 Zenoh config merged over ours (TLS, accounts, ACL)")
+    g = p.add_argument_group("security (docs/security.md)")
+    g.add_argument("--accounts", metavar="FILE", help="accounts file: require a user/password login and enforce each account's role with Zenoh access control")
+    g.add_argument("--tls-cert", metavar="FILE", help="server certificate (PEM) for tls/ listen endpoints")
+    g.add_argument("--tls-key", metavar="FILE", help="private key of --tls-cert")
+    g.add_argument("--tls-ca", metavar="FILE", help="require client certificates signed by this CA (mutual TLS)")
     p.add_argument("--command-timeout", type=float, default=10.0, metavar="S", help="how long to wait for a robot to answer a command")
     p.add_argument("-v", "--verbose", action="store_true")
     p.set_defaults(func=run)
@@ -41,7 +47,13 @@ def run(args: argparse.Namespace) -> int:
     except (OSError, ValueError) as e:
         print(f"missionctl server: {args.zenoh_config}: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    server = MissionServer(db=db, mission_file=args.mission, listen=args.listen, zenoh_extra=extra, command_timeout=args.command_timeout)
+    try:
+        extra = {**(extra or {}), **_tls_options(args)}
+        accounts = load_accounts(args.accounts) if args.accounts else None
+    except (AccountsError, ValueError) as e:
+        print(f"missionctl server: {e}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    server = MissionServer(db=db, mission_file=args.mission, listen=args.listen, zenoh_extra=extra, command_timeout=args.command_timeout, accounts=accounts)
     try:
         return asyncio.run(_serve(server))
     except FileProblems as e:
@@ -56,6 +68,30 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_UNREACHABLE
 
 
+def _tls_options(args: argparse.Namespace) -> dict:
+    """Zenoh options for --tls-cert/--tls-key/--tls-ca; checks they fit --listen."""
+    tls_listen = any(e.startswith("tls/") for e in args.listen or [])
+    if not (args.tls_cert or args.tls_key or args.tls_ca):
+        if tls_listen:
+            raise ValueError("a tls/ endpoint needs --tls-cert FILE and --tls-key FILE (see missionctl certs)")
+        return {}
+    if not (args.tls_cert and args.tls_key):
+        raise ValueError("--tls-cert and --tls-key go together")
+    if not tls_listen:
+        raise ValueError("--tls-cert/--tls-key/--tls-ca need a tls/ endpoint in --listen (e.g. --listen tls/0.0.0.0:7447)")
+    for opt, path in (("--tls-cert", args.tls_cert), ("--tls-key", args.tls_key), ("--tls-ca", args.tls_ca)):
+        if path and not Path(path).is_file():
+            raise ValueError(f"{opt} {path}: no such file")
+    out = {
+        "transport/link/tls/listen_certificate": str(Path(args.tls_cert).resolve()),
+        "transport/link/tls/listen_private_key": str(Path(args.tls_key).resolve()),
+    }
+    if args.tls_ca:
+        out["transport/link/tls/root_ca_certificate"] = str(Path(args.tls_ca).resolve())
+        out["transport/link/tls/enable_mtls"] = True
+    return out
+
+
 async def _serve(server) -> int:
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
@@ -65,6 +101,9 @@ async def _serve(server) -> int:
     try:
         how = f"resumed from {server.db} at revision {server.mission.revision}" if server.resumed else f"started from {server.mission_file}, journal {server.db}"
         print(f"missionctl server: mission '{server.mission.name}' {how}; listening on {', '.join(server.listen)}", flush=True)
+        if server.accounts is not None:
+            roles = ", ".join(f"{u} ({a.role})" for u, a in sorted(server.accounts.table.accounts.items()))
+            print(f"missionctl server: logins required ({server.accounts.source}): {roles}", flush=True)
         await stop.wait()
     finally:
         await server.stop()

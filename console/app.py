@@ -22,7 +22,8 @@ from textual.binding import Binding
 from textual.screen import Screen
 from textual.signal import Signal
 
-from backend.client import ClientError, OperationRefused
+from backend.client import ClientError, LoginFailed, OperationRefused
+from backend.login import Login
 from backend.protocol import ErrorReply
 
 from .actions import ACTIONS, bindings
@@ -36,6 +37,7 @@ from .fleet import FleetScreen
 from .logview import EventLogScreen
 from .map_screen import MapScreen
 from .messages import (
+    AccountKnown,
     AlertReceived,
     ConnectionChanged,
     EventsApplied,
@@ -86,6 +88,7 @@ class MissionApp(App[int]):
         notices: list[str] | tuple[str, ...] = (),
         client_id: str | None = None,
         colors: int | None = None,
+        login: Login | None = None,
     ) -> None:
         super().__init__()
         self.config = config or ConsoleConfig()
@@ -120,7 +123,8 @@ class MissionApp(App[int]):
         self.add_mode("map", self._make_map_screen)
         if self.config.keymap:
             self.set_keymap(self.config.keymap)
-        self.bridge = ClientBridge(self, connect, user=user, client_id=client_id) if connect else None
+        self.bridge = ClientBridge(self, connect, user=user, client_id=client_id, login=login) if connect else None
+        self.login_refused = ""  # set when the router refused the login: the CLI prints it, exit 3
         self.backend: Backend | None = backend or self.bridge
         self.mission_screen: MissionScreen | None = None
         self.last_path: str | None = None
@@ -269,6 +273,9 @@ class MissionApp(App[int]):
         self.post_message(ConnectionChanged(CONNECTING, endpoint=self.bridge.endpoint))
         try:
             await self.bridge.connect()
+        except LoginFailed as e:  # retrying cannot help: one line and exit code 3
+            self.login_refused = str(e)
+            self.exit(EXIT_UNREACHABLE, return_code=EXIT_UNREACHABLE)
         except ClientError as e:
             self.post_message(ConnectionChanged(UNREACHABLE, str(e), endpoint=self.bridge.endpoint))
         except Exception as e:  # never a traceback for a network problem
@@ -346,6 +353,11 @@ class MissionApp(App[int]):
             self.map_screen.connection_changed()
         if message.status == UNREACHABLE and not isinstance(self.screen, UnreachableScreen):
             self.push_screen(UnreachableScreen(m.endpoint or "?", message.detail), self._unreachable_choice)
+
+    async def on_account_known(self, message: AccountKnown) -> None:
+        self.model.read_only = message.read_only
+        if self._screen_live():
+            await self.mission_screen.connection_changed()  # top bar, actions, editor
 
     def _unreachable_choice(self, choice: str | None) -> None:
         if choice == "retry":

@@ -11,10 +11,12 @@ from typing import Any, Protocol
 
 from backend.client import MissionClient
 from backend.events import EventBatch
+from backend.login import Login
 from backend.mapfollow import MapFeed, MapUpdate
 from backend.protocol import Alert, OpReply, RobotInfo, StateSnapshot, Telemetry
 
 from .messages import (
+    AccountKnown,
     AlertReceived,
     ConnectionChanged,
     EventsApplied,
@@ -32,18 +34,19 @@ class Backend(Protocol):
 
 
 class ClientBridge:
-    def __init__(self, app: Any, endpoint: str, *, user: str = "", client_id: str | None = None) -> None:
+    def __init__(self, app: Any, endpoint: str, *, user: str = "", client_id: str | None = None, login: Login | None = None) -> None:
         self.app = app
         self.endpoint = endpoint
         self.user = user
         self.client_id = client_id
+        self.login = login
         self.client: MissionClient | None = None
         self.map_feed: MapFeed | None = None
 
     async def connect(self) -> None:
         """Connect (raises backend.client.ClientError with a sentence)."""
         await self.close()
-        client = MissionClient(self.endpoint, user=self.user, client_id=self.client_id)
+        client = MissionClient(self.endpoint, user=self.user, client_id=self.client_id, login=self.login)
         client.add_listener(self._on_client)
         self.client = client
         try:
@@ -51,6 +54,7 @@ class ClientBridge:
         except BaseException:
             self.client = None
             raise
+        self.app.post_message(AccountKnown(client.read_only or ""))
         await self.follow_map()
 
     async def follow_map(self) -> None:

@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from backend.login import add_login_arguments
+
 EXIT_OK, EXIT_BAD_INPUT, EXIT_UNREACHABLE = 0, 2, 3
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 THEME_HELP = (
@@ -18,7 +20,7 @@ THEME_HELP = (
 def register(sub: argparse._SubParsersAction) -> None:
     c = sub.add_parser("console", help="the operator console (terminal UI) for a running mission server")
     c.add_argument("--connect", metavar="ENDPOINT", default=DEFAULT_CONNECT, help=f"Zenoh endpoint of the server (default {DEFAULT_CONNECT})")
-    c.add_argument("--user", metavar="U", default="", help="operator name recorded with every change")
+    add_login_arguments(c, user_help="account to log in as (with --password-file); without one, just the name recorded with every change")
     c.add_argument("--theme", metavar="T", help=THEME_HELP)
     c.add_argument("--config", metavar="FILE", help="settings file (default ~/.config/missionctl/config.toml or .yaml)")
     c.set_defaults(func=run_console)
@@ -51,12 +53,49 @@ def _run_app(app) -> int:
 
 
 def run_console(args: argparse.Namespace) -> int:
+    from backend.accounts import AccountsError
+    from backend.login import login_from_args
+
     from .app import MissionApp
     from .config import load_config
 
+    try:
+        login = login_from_args(args)
+    except AccountsError as e:
+        print(f"missionctl console: {e}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    refused = _login_refused(args.connect, login)
+    if refused:  # before the terminal UI takes the screen: one line, exit 3
+        print(f"missionctl console: {refused}", file=sys.stderr)
+        return EXIT_UNREACHABLE
     cfg = load_config(args.config, known_ids=_known_binding_ids())
-    app = MissionApp(connect=args.connect, user=args.user, theme=args.theme, config=cfg)
-    return _run_app(app)
+    app = MissionApp(connect=args.connect, user=args.user, theme=args.theme, config=cfg, login=login)
+    code = _run_app(app)
+    if app.login_refused:
+        print(f"missionctl console: {app.login_refused}", file=sys.stderr)
+    return code
+
+
+def _login_refused(endpoint: str, login) -> str | None:
+    """Open and close one session: the router's verdict on the login/TLS files.
+    Anything else (server down…) is left to the app, which offers to retry."""
+    from backend.transport import (
+        LoginRefused,
+        TransportError,
+        client_config,
+        close_session,
+        open_session,
+    )
+
+    if not (login.logged_in or login.ca or login.cert):
+        return None
+    try:
+        close_session(open_session(client_config([endpoint], extra=login.zenoh_options())))
+    except LoginRefused as e:
+        return str(e)
+    except (TransportError, ValueError):
+        pass
+    return None
 
 
 def run_demo(args: argparse.Namespace) -> int:

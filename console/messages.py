@@ -60,6 +60,15 @@ class ConnectionChanged(Message):
         self.endpoint = endpoint
 
 
+class AccountKnown(Message):
+    """The logged-in account's role is known; `read_only` says why this console
+    cannot change the mission ("" when it can)."""
+
+    def __init__(self, read_only: str = "") -> None:
+        super().__init__()
+        self.read_only = read_only
+
+
 class AlertReceived(Message):
     def __init__(self, alert: Alert) -> None:
         super().__init__()

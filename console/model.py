@@ -140,6 +140,9 @@ def skill_title(skill: SkillInstance) -> str:
     return skill.label or skill.skill
 
 
+# actions an observer (read-only account) may still use: they change nothing on the server
+_READ_ONLY_OK = frozenset({"save", "help", "edit", "mark", "toggle_static", "clear_marks"})
+
 # -- the model --------------------------------------------------------------------
 
 
@@ -153,6 +156,8 @@ class ConsoleModel:
     connection_detail: str = ""
     endpoint: str = ""
     server_id: str = ""
+    # why nothing can be changed from this console ("" when it can): an observer account
+    read_only: str = ""
     # skill id -> robot, skill id -> barrier id (kept in step with the mission)
     _owner: dict[str, str] = field(default_factory=dict)
     _barrier_of: dict[str, str] = field(default_factory=dict)
@@ -344,6 +349,8 @@ class ConsoleModel:
         if not self.connected and not offline_ok:
             detail = "reconnecting" if self.connection == RECONNECTING else self.connection
             return f"not connected to the mission server ({detail}): nothing can be changed now"
+        if self.read_only and action not in _READ_ONLY_OK:
+            return self.read_only
         found = self.find(skill_id)
         s = found[2] if found else None
         if action in ("add",):
@@ -446,6 +453,8 @@ class ConsoleModel:
         if found is None:
             return "the skill no longer exists"
         robot, _, s = found
+        if self.read_only:  # the editor says "read-only: <reason>" itself
+            return self.read_only.removeprefix("read-only: ")
         if s.status == Status.IDLE:
             if not self.connected:
                 return f"not connected to the mission server ({self.connection}): edits cannot be applied now"

@@ -244,6 +244,8 @@ class MissionScreen(Screen):
             t.append(f" {m.endpoint}", style="dim")
         if m.connection_detail and state != CONNECTED:
             t.append(f" — {m.connection_detail}", style="dim")
+        if m.read_only:
+            t.append(f"   {m.read_only}", style="bold")
         if self.schedule.marks:
             t.append(f"   marked: {', '.join(self.schedule.marks)}", style="bold")
         bar = self._topbar

@@ -16,6 +16,9 @@ import sys
 import time
 from pathlib import Path
 
+from backend.accounts import AccountsError
+from backend.login import add_login_arguments, login_from_args
+
 EXIT_OK, EXIT_REFUSED, EXIT_BAD_INPUT, EXIT_UNREACHABLE = 0, 1, 2, 3
 
 _DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(ms|s|m|min)?\s*$")
@@ -52,6 +55,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--connect-timeout", type=float, default=10.0, metavar="S", help="keep trying to reach the server's router this long")
     p.add_argument("--zenoh-config", metavar="FILE", help="JSON5 Zenoh config merged over ours (TLS, accounts)")
     p.add_argument("--check", action="store_true", help="only validate the mission and world files, then exit")
+    add_login_arguments(p.add_argument_group("login and TLS (docs/security.md): a robot account listing the simulated robots"))
     p.add_argument("-v", "--verbose", action="store_true")
     p.set_defaults(func=run)
 
@@ -59,6 +63,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--connect", metavar="ENDPOINT", action="append", help="Zenoh endpoint (default tcp/127.0.0.1:7447)")
     s.add_argument("--json", action="store_true", help="print the SimStatus as JSON")
     s.add_argument("--timeout", type=float, default=5.0, metavar="S")
+    add_login_arguments(s.add_argument_group("login and TLS (docs/security.md)"))
     s.set_defaults(func=run_status)
 
 
@@ -92,12 +97,16 @@ def run(args: argparse.Namespace) -> int:
             print(issue, file=sys.stderr)
         return EXIT_BAD_INPUT
     mission, library, world, world_file = loaded
-    extra = None
+    try:
+        extra = login_from_args(args).zenoh_options()
+    except AccountsError as e:
+        print(f"missionctl sim: {e}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     if args.zenoh_config:
         from backend.transport import load_config_file
 
         try:
-            extra = load_config_file(args.zenoh_config)
+            extra = {**load_config_file(args.zenoh_config), **extra}
         except (OSError, ValueError) as e:
             print(f"missionctl sim: {args.zenoh_config}: {e}", file=sys.stderr)
             return EXIT_BAD_INPUT
@@ -122,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 async def _serve(fleet, args: argparse.Namespace, world_file: Path) -> int:
-    from backend.transport.session import TransportError, TransportUnreachable
+    from backend.transport.session import LoginRefused, TransportError, TransportUnreachable
 
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
@@ -134,7 +143,7 @@ async def _serve(fleet, args: argparse.Namespace, world_file: Path) -> int:
             await fleet.start()
             break
         except TransportUnreachable as e:
-            if time.monotonic() >= deadline or stop.is_set():
+            if isinstance(e, LoginRefused) or time.monotonic() >= deadline or stop.is_set():
                 print(f"missionctl sim: {e}", file=sys.stderr)
                 return EXIT_UNREACHABLE
             try:
@@ -172,7 +181,12 @@ async def _status(args: argparse.Namespace) -> int:
 
     endpoints = args.connect or ["tcp/127.0.0.1:7447"]
     try:
-        session = await asyncio.to_thread(transport.open_session, transport.client_config(endpoints))
+        extra = login_from_args(args).zenoh_options()
+    except AccountsError as e:
+        print(f"missionctl sim-status: {e}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        session = await asyncio.to_thread(transport.open_session, transport.client_config(endpoints, extra=extra))
     except TransportUnreachable as e:
         print(f"missionctl sim-status: {e}", file=sys.stderr)
         return EXIT_UNREACHABLE

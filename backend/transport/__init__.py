@@ -40,6 +40,7 @@ from .config import (
 from .ports import free_port, loopback_endpoint
 from .session import (
     ListenFailed,
+    LoginRefused,
     TransportError,
     TransportUnreachable,
     clean_zenoh_message,
@@ -52,6 +53,7 @@ __all__ = [
     "DEFAULT_ENDPOINT",
     "DEFAULT_TIMEOUT",
     "ListenFailed",
+    "LoginRefused",
     "Message",
     "NoResponder",
     "QueryError",

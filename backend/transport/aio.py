@@ -321,20 +321,25 @@ def serve(
 def serve_async(
     session: zenoh.Session,
     key_expr: str,
-    handler: Callable[[bytes], Awaitable[bytes]],
+    handler: Callable[..., Awaitable[bytes]],
     loop: asyncio.AbstractEventLoop | None = None,
+    *,
+    with_key: bool = False,
 ) -> zenoh.Queryable[None]:
     """Like `serve`, but `handler` is a coroutine function run on `loop`.
 
     The Zenoh thread only schedules the coroutine, so queries are accepted
     concurrently and all handler code runs on the event loop's thread.
+    With `with_key`, the handler gets `(payload, key)`: the query's key (for
+    wildcard queryables whose key names the robot or user).
     """
     target = loop or asyncio.get_running_loop()
 
     async def run(query: zenoh.Query, payload: bytes) -> None:
         outcome: bytes | BaseException
         try:
-            outcome = _check_bytes(await handler(payload))
+            args = (payload, str(query.key_expr)) if with_key else (payload,)
+            outcome = _check_bytes(await handler(*args))
         except Refusal as exc:
             outcome = exc
         except Exception as exc:

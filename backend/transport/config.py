@@ -29,8 +29,9 @@ def set_option(config: zenoh.Config, path: str, value: Any) -> None:
     try:
         config.insert_json5(_key(path), json.dumps(value))
     except zenoh.ZError as exc:
+        shown = "(hidden)" if "password" in path else repr(value)  # never echo a secret
         raise ValueError(
-            f"invalid Zenoh config option {path!r} = {value!r}: {clean_zenoh_message(str(exc))}"
+            f"invalid Zenoh config option {path!r} = {shown}: {clean_zenoh_message(str(exc))}"
         ) from exc
 
 

@@ -32,6 +32,15 @@ class TransportUnreachable(TransportError, ConnectionError):
         super().__init__(f"cannot reach {what} at {where}: {detail}")
 
 
+class LoginRefused(TransportUnreachable):
+    """The router is there but refused us: credentials or TLS (see `probe.diagnose`)."""
+
+    def __init__(self, endpoints: list[str], message: str):
+        self.endpoints = list(endpoints)
+        self.detail = message
+        ConnectionError.__init__(self, message)
+
+
 class ListenFailed(TransportError):
     """A router could not listen on one of its endpoints (e.g. address in use)."""
 
@@ -67,6 +76,11 @@ def open_session(config: zenoh.Config, *, what: str = "the mission server") -> z
     except zenoh.ZError as exc:
         raw = str(exc)
         if "Unable to connect" in raw:
+            from .probe import diagnose
+
+            refusal = diagnose(config, _endpoints(config, "connect"))
+            if refusal is not None:
+                raise LoginRefused(_endpoints(config, "connect"), refusal) from exc
             raise TransportUnreachable(
                 _endpoints(config, "connect"), _UNREACHABLE_DETAIL, what=what
             ) from exc

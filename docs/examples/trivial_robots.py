@@ -4,6 +4,10 @@ SDK, used by the live tests and the README's three-terminal walk-through:
     python docs/examples/trivial_robots.py --connect tcp/127.0.0.1:7447 \
         lru1:lru_science lru2:lru_manipulator
 
+On a server with accounts add `--user ACCOUNT --password-file FILE` (a robot
+account listing these robots) and, for tls/ endpoints, `--ca FILE`
+(docs/security.md).
+
 Behaviour by skill label (so a test can script a robot from the plan):
   "hold"   runs until another robot or the test tells it topic "release"
            with {"id": skill id}, or until stopped;
@@ -20,7 +24,10 @@ import asyncio
 import signal
 import sys
 
+from backend.accounts import AccountsError
 from backend.agent import RobotAgent, SkillFailed
+from backend.login import Login, add_login_arguments, login_from_args
+from backend.transport import TransportUnreachable
 
 SKILLS = {
     "lru_science": ["drive_to", "explore", "take_science_image", "identify_stone", "recharge"],
@@ -29,9 +36,9 @@ SKILLS = {
 }
 
 
-def make_agent(name: str, rtype: str, connect: str, delay: float) -> RobotAgent:
+def make_agent(name: str, rtype: str, connect: str, delay: float, login: Login | None = None) -> RobotAgent:
     agent = RobotAgent(name, rtype, connect=[connect], modules={"base": "1.0.0"}, lease_ms=1000,
-                       telemetry_hz=5)
+                       telemetry_hz=5, login=login)
     agent.link.delay_s = delay
     released: set[str] = set()
     agent.on_tell("release", lambda data, sender: released.add(data.get("id", "")))
@@ -60,18 +67,32 @@ async def main(argv: list[str]) -> int:
     p.add_argument("--delay", type=float, default=0.0)
     p.add_argument("robots", nargs="+", metavar="NAME:TYPE")
     p.add_argument("-v", "--verbose", action="store_true", help="log the agents' activity")
+    add_login_arguments(p)
     args = p.parse_args(argv)
+    try:
+        login = login_from_args(args)
+    except AccountsError as e:
+        print(f"trivial_robots: {e}", file=sys.stderr)
+        return 2
     if args.verbose:
         import logging
 
         logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
-    agents = [make_agent(*r.split(":"), args.connect, args.delay) for r in args.robots]
+    agents = [make_agent(*r.split(":"), args.connect, args.delay, login) for r in args.robots]
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGTERM, signal.SIGINT):
         loop.add_signal_handler(sig, stop.set)
-    for a in agents:
-        await a.start()
+    started = []
+    try:
+        for a in agents:
+            await a.start()
+            started.append(a)
+    except TransportUnreachable as e:  # router down, or login/TLS refused: one line
+        print(f"trivial_robots: {e}", file=sys.stderr)
+        for a in started:
+            await a.stop()
+        return 3
     try:
         for a in agents:
             await a.wait_registered(timeout=20)

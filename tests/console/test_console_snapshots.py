@@ -195,3 +195,21 @@ def test_map_robots_markers_explored_area(snap_compare):
 
 def test_map_80x24(snap_compare):
     assert snap_compare(make_app(), terminal_size=(80, 24), run_before=_map_prepare(("lru1", "ROI-north", "cursor (")))
+
+
+def test_observer_account_read_only(snap_compare):
+    # logged in as an observer: the top bar says so, the editor and every change action give the reason
+    async def after(pilot):
+        from console.messages import AccountKnown
+
+        pilot.app.post_message(AccountKnown("read-only: logged in as observer watch"))
+        await pilot.pause()
+        await pilot.press("d")
+        await pilot.pause()
+
+    assert snap_compare(
+        make_app(),
+        terminal_size=WIDE,
+        run_before=_prepare(Builder(MARS), select="lru1-2", after=after,
+                            expect=("read-only: logged in as observer watch", "Delete: read-only: logged in as observer watch")),
+    )

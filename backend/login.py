@@ -1,0 +1,80 @@
+"""Client-side login and TLS options, shared by ctl, console, sim and robots.
+
+    --user U --password-file F      log in (the password is read from F, never
+                                    taken from the command line)
+    --ca FILE                       trust this CA for tls/ endpoints
+    --cert FILE --key FILE          client certificate (mutual TLS)
+
+`Login.zenoh_options()` turns them into Zenoh client config options. The
+password exists only in memory and in the Zenoh config; `repr(Login)` hides it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .accounts import USER_PATTERN, AccountsError, read_password
+
+
+@dataclass(frozen=True)
+class Login:
+    user: str = ""
+    password: str = field(default="", repr=False)
+    ca: str | None = None
+    cert: str | None = None
+    key: str | None = None
+
+    @property
+    def logged_in(self) -> bool:
+        return bool(self.user and self.password)
+
+    def zenoh_options(self) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        if self.logged_in:
+            out["transport/auth/usrpwd/user"] = self.user
+            out["transport/auth/usrpwd/password"] = self.password
+        if self.ca:
+            out["transport/link/tls/root_ca_certificate"] = self.ca
+        if self.cert and self.key:
+            out["transport/link/tls/enable_mtls"] = True
+            out["transport/link/tls/connect_certificate"] = self.cert
+            out["transport/link/tls/connect_private_key"] = self.key
+        return out
+
+
+def add_login_arguments(p: argparse.ArgumentParser | Any, *, user_help: str | None = None, suppress: bool = False) -> None:
+    """--user, --password-file, --ca, --cert, --key on a parser or argument group.
+    `suppress`: leave unset options out of the namespace (sub-command overrides)."""
+    d = (lambda v: argparse.SUPPRESS) if suppress else (lambda v: v)
+    p.add_argument("--user", metavar="USER", default=d(""), help=user_help or "account to log in as (with --password-file)")
+    p.add_argument("--password-file", metavar="FILE", default=d(None), help="file holding the account's password (mode 0600); never give a password on the command line")
+    p.add_argument("--ca", metavar="FILE", default=d(None), help="CA certificate that signed the server's (tls/ endpoints)")
+    p.add_argument("--cert", metavar="FILE", default=d(None), help="client certificate for mutual TLS (with --key)")
+    p.add_argument("--key", metavar="FILE", default=d(None), help="private key of --cert")
+
+
+def login_from_args(args: argparse.Namespace) -> Login:
+    """Read the password file; raises `AccountsError` (a sentence naming the file) on problems."""
+    user = getattr(args, "user", "") or ""
+    password_file = getattr(args, "password_file", None)
+    cert, key = getattr(args, "cert", None), getattr(args, "key", None)
+    if password_file and not user:
+        raise AccountsError("--password-file needs --user (the account it belongs to)")
+    if bool(cert) != bool(key):
+        raise AccountsError("--cert and --key go together (mutual TLS)")
+    if password_file and not re.match(USER_PATTERN, user):
+        raise AccountsError(f"--user {user!r}: account names use letters, digits, '.', '_', '-'")
+    for opt, path in (("--ca", getattr(args, "ca", None)), ("--cert", cert), ("--key", key)):
+        if path and not Path(path).is_file():
+            raise AccountsError(f"{opt} {path}: no such file")
+    password = read_password(password_file) if password_file else ""
+    return Login(user=user, password=password, ca=_absolute(getattr(args, "ca", None)), cert=_absolute(cert), key=_absolute(key))
+
+
+def _absolute(path: str | None) -> str | None:
+    # Zenoh reads the files later, maybe after a change of directory
+    return str(Path(path).resolve()) if path else None
