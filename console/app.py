@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import asyncio
 import gc
+import os
 import signal
+import threading
 from collections.abc import Callable
 from datetime import UTC, datetime
 from typing import Any
@@ -52,6 +54,21 @@ from .theme import DEFAULT_THEME, VARIABLE_DEFAULTS
 from .themes import ANSI16_STATUS, Downgrade16, load_themes
 
 EXIT_UNREACHABLE = 3
+HANG_UP_GRACE_S = 5.0  # after a hang-up, the longest a clean exit may take
+
+
+def _detach_terminal() -> None:
+    """Point stdin/stdout/stderr at /dev/null (the terminal hung up)."""
+    try:
+        null = os.open(os.devnull, os.O_RDWR)
+    except OSError:
+        return
+    for fd in (0, 1, 2):
+        try:
+            os.dup2(null, fd)
+        except OSError:
+            pass
+    os.close(null)
 
 
 def refusal_text(reply: ErrorReply, robot: str | None = None, skill: str | None = None) -> str:
@@ -129,6 +146,8 @@ class MissionApp(App[int]):
         self.mission_screen: MissionScreen | None = None
         self.last_path: str | None = None
         self._connection_closed = False
+        self._hanging_up = False
+        self.on_forced_exit: list[Callable[[], object]] = []  # run before a forced exit after a hang-up
         self.exit_code = 0
 
     # -- theme and screens --------------------------------------------------------------
@@ -203,7 +222,7 @@ class MissionApp(App[int]):
             loop = asyncio.get_running_loop()
             for sig in (signal.SIGHUP, signal.SIGTERM):
                 try:
-                    loop.add_signal_handler(sig, self._hang_up)
+                    loop.add_signal_handler(sig, self._hang_up, sig)
                 except (NotImplementedError, RuntimeError, ValueError):
                     pass
         for n in self.notices:
@@ -227,9 +246,31 @@ class MissionApp(App[int]):
                 except (NotImplementedError, RuntimeError, ValueError):
                     pass
 
-    def _hang_up(self) -> None:
-        """SIGHUP (the SSH link dropped) or SIGTERM: close the session, exit."""
+    def _hang_up(self, sig: int = signal.SIGTERM) -> None:
+        """SIGHUP (the SSH link dropped) or SIGTERM: close the session, exit.
+
+        After a hang-up the terminal is gone: a write to it kills Textual's
+        writer thread, and its next writes then wait forever (seen with
+        tmux kill-session). So output goes to /dev/null from here on, and a
+        watchdog ends the process (after `on_forced_exit` hooks, e.g. the
+        demo stopping its children) should the exit still hang."""
+        if self._hanging_up:
+            return
+        self._hanging_up = True
+        if sig == signal.SIGHUP:
+            _detach_terminal()
+        watchdog = threading.Timer(HANG_UP_GRACE_S, self._force_exit)
+        watchdog.daemon = True
+        watchdog.start()
         self.run_worker(self.quit_now(), group="quit")
+
+    def _force_exit(self) -> None:
+        for hook in self.on_forced_exit:
+            try:
+                hook()
+            except Exception:
+                pass
+        os._exit(self.exit_code)
 
     async def action_quit(self) -> None:
         """Ctrl+Q: asks first when the editor holds unapplied changes."""

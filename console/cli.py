@@ -141,6 +141,7 @@ def run_demo(args: argparse.Namespace) -> int:
                     self.notify(f"the demo's mission server stopped (exit code {procs.server.returncode})", title="Server", severity="error", timeout=15)
 
         app = DemoApp(connect=procs.endpoint, user=args.user, theme=args.theme, config=cfg, notices=procs.notices)
+        app.on_forced_exit.append(procs.stop)  # the children must not outlive a hung-up demo
         return _run_app(app)
     finally:
         procs.stop()

@@ -284,6 +284,43 @@ def test_demo_starts_server_and_console_and_stops_everything(tmp_path):
         os.close(master)
 
 
+# run a command with the pty on stdin as its controlling terminal, as a terminal
+# emulator or sshd does (then closing the master sends the kernel's SIGHUP)
+WITH_CONTROLLING_TTY = (
+    "import fcntl, os, sys, termios; os.setsid(); fcntl.ioctl(0, termios.TIOCSCTTY, 0); "
+    "os.execv(sys.executable, [sys.executable, *sys.argv[1:]])"
+)
+
+
+def test_demo_hung_up_terminal_stops_everything(tmp_path):
+    """The SSH link drops for real: the terminal goes away (writes to it fail)
+    and the kernel sends SIGHUP. The demo must still end, with its server and sim."""
+    master, slave = pty.openpty()
+    env = {**os.environ, "TERM": "xterm-256color", "TMPDIR": str(tmp_path), "MISSIONCTL_CONFIG": "/nonexistent.toml"}
+    p = subprocess.Popen([sys.executable, "-c", WITH_CONTROLLING_TTY, "-m", "backend.cli", "demo", "--speed", "5"],
+                         stdin=slave, stdout=slave, stderr=slave, cwd=ROOT, env=env)
+    os.close(slave)
+    try:
+        out = _read_until(master, b"Mars sample return", 60)
+        assert b"Mars sample return" in out, out[-3000:]
+        assert _processes_mentioning(str(tmp_path))
+        os.close(master)  # hang-up: SIGHUP, and every write to the terminal fails from now on
+        master = -1
+        p.wait(30)  # a clean exit, or the hang-up watchdog's (5 s)
+        deadline = time.monotonic() + 10
+        while _processes_mentioning(str(tmp_path)) and time.monotonic() < deadline:
+            time.sleep(0.1)  # the children were terminated; the kernel reaps them
+        assert not _processes_mentioning(str(tmp_path))
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait(10)
+        for pid in _processes_mentioning(str(tmp_path)):
+            os.kill(pid, signal.SIGKILL)
+        if master >= 0:
+            os.close(master)
+
+
 def _processes_mentioning(text: str) -> list[int]:
     pids = []
     for d in os.listdir("/proc"):

@@ -110,3 +110,15 @@ def test_config_keymap_theme_and_problems(tmp_path):
     broken = tmp_path / "broken.toml"
     broken.write_text("theme = ")
     assert "cannot read it" in load_config(broken).problems[0]
+
+
+def test_a_barrier_skill_changing_also_changes_its_partners_columns():
+    from backend.ops import Report
+
+    b = mars_mid_execution()
+    m = model_of(b)
+    # lru2-3 waits at b1 for lru1; lru1 finishes its current skill, then reaches lru1-3 (b1)
+    done = m.apply(b.engine.submit(Report(robot="lru1", seq=100, id="lru1-2", status="success")).batch())
+    assert done == {"lru1"}  # not a barrier skill: only its own column
+    ready = m.apply(b.engine.submit(Report(robot="lru1", seq=101, id="lru1-3", status="synchwaiting")).batch())
+    assert ready == {"lru1", "lru2"}  # lru2's column says what it waits for: redrawn too
