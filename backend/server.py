@@ -495,7 +495,11 @@ class MissionServer:
         robot = robots.pop() if robots else ""
         if robot:
             self._robot_from(robot)
-        refused = self._apply_reports(robot, batch.reports)
+        # after the robot's command in flight, if any: a robot in run mode starts
+        # a skill it was just sent and may report it before its reply to the
+        # enqueue arrives; applied before the SyncAck, `running` would be refused
+        async with self._lock(robot or "?"):
+            refused = self._apply_reports(robot, batch.reports)
         # refused reports are consumed too: the robot must not send them again
         last = max([self.mission.report_seqs.get(robot, 0), *(r.seq for r in batch.reports)])
         return dumps(ReportAck(last_seq=last, refused=refused))

@@ -9,6 +9,7 @@ import json
 import os
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -158,6 +159,13 @@ class Robots:
         if want:
             self.stop()
             raise AssertionError(f"robots {want} not ready; output:\n{''.join(self.lines)}")
+        # keep reading: a full pipe would block the robots' logging, and with it their event loop
+        threading.Thread(target=self._drain, daemon=True).start()
+
+    def _drain(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self.lines.append(line)
 
     def stop(self) -> None:
         if self.proc.poll() is None:
