@@ -31,7 +31,7 @@ class FleetScreen(ViewScreen):
         yield Input(placeholder="filter by capability: pick_stone · type:lru · module:arm · prop:…", id="filter")
         yield DataTable(id="robots", cursor_type="row", zebra_stripes=False)
         yield Static("", id="detail", classes="detail")
-        yield Static("type to filter · ↑↓ robot · tab to the table · F2 schedule", classes="hint")
+        yield Static("type to filter (escape: back to the list) · ↑↓ robot · F2 schedule", classes="hint")
         yield Footer()
 
     @property

@@ -8,7 +8,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from rich.text import Text
-from textual import on
+from textual import events, on
 from textual.app import ComposeResult
 from textual.screen import Screen
 from textual.widgets import DataTable, Input, Static
@@ -56,8 +56,8 @@ class ViewScreen(Screen):
         for label, key in self.COLUMNS:
             table.add_column(label, key=key)
         self.start()
-        filters = self.query("#filter")
-        (filters.first() if filters else table).focus()
+        # the table first, so the digit keys switch screens; typing starts the filter
+        table.focus()
 
     def start(self) -> None:
         self.mission_app.awareness_signal.subscribe(self, self._changed)
@@ -96,6 +96,26 @@ class ViewScreen(Screen):
     @on(Input.Submitted, "#filter")
     def _to_table(self) -> None:
         self.query_one(DataTable).focus()
+
+    def on_key(self, event: events.Key) -> None:
+        """Type to filter: a printable key the table does not use moves to the
+        filter with that character; escape there goes back to the table."""
+        filters = self.query("#filter")
+        if not filters:
+            return
+        field = filters.first(Input)
+        if field.has_focus:
+            if event.key == "escape":
+                event.stop()
+                self.query_one(DataTable).focus()
+            return
+        if event.key in self.app.active_bindings:
+            return  # a key with a meaning here (the digits: other screens)
+        if event.is_printable and event.character and not event.character.isspace():
+            event.stop()
+            field.select_on_focus = False  # else the next key replaces this one
+            field.focus()
+            field.insert_text_at_cursor(event.character)
 
     # subclasses
     def compose(self) -> ComposeResult:  # pragma: no cover - overridden

@@ -62,6 +62,21 @@ async def test_fleet_screen_shows_presence_manifest_history_and_activity():
         await wait_until(pilot, lambda: "never registered" in screen_text(app), what="ardea's detail")
 
 
+async def test_digits_switch_screens_until_typing_starts_the_filter():
+    app = make_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        await awareness_scenario(app, pilot)
+        await pilot.press("3")
+        await wait_until(pilot, lambda: isinstance(app.screen, FleetScreen), what="fleet")
+        fleet = app.screen
+        await pilot.press(*"lru2")  # a letter moves to the filter; then digits are text
+        field = fleet.query_one("#filter")
+        await wait_until(pilot, lambda: field.value == "lru2", what="typed into the filter")
+        assert field.has_focus and fleet.shown == ["lru2"]
+        await pilot.press("escape", "4")  # back on the table: digits switch screens again
+        await wait_until(pilot, lambda: isinstance(app.screen, EventLogScreen), what="log after 4")
+
+
 async def test_workflow_filter_the_fleet_by_capability():
     app = make_app()
     async with app.run_test(size=(80, 24)) as pilot:
