@@ -327,11 +327,21 @@ class MissionApp(App[int]):
         return self.mission_screen is not None and self.mission_screen.is_mounted and self._running and self.return_code is None
 
     async def on_state_loaded(self, message: StateLoaded) -> None:
+        previous = self.model.mission  # None on the first load; else a resync after a reconnect
+        before = {s.id: s.status.value for t in previous.tasks.values() for s in t} if previous is not None else {}
         self.model.load(message.mission, message.library, message.robots, message.server_id)
         # a big mission is many long-lived objects: keep them out of the cyclic
         # GC's scans, which otherwise stall the UI for tens of milliseconds
         gc.freeze()
-        self.alerts.seed_fleet(self.model.robots)
+        # what happened while the console was away alerts too
+        now = self.clock() if previous is not None else None
+        missed = self.alerts.seed_fleet(self.model.robots, now)
+        if now is not None:
+            missed += self.alerts.missed_failures(before, self.model.mission, now)
+        for a in missed:
+            if a.kind == "failure":  # no report of it reached this console: log it here
+                self.event_log.add("failure", a.message, a.at, robots=[a.robot] if a.robot else [], skill=a.skill)
+            self.raise_alert(a)
         if self._screen_live():
             await self.mission_screen.model_changed(None)
         if self._map_live():

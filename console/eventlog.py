@@ -26,6 +26,7 @@ from typing import Literal
 from pydantic import BaseModel
 
 from backend import events as ev
+from backend.model import Mission
 from backend.protocol import Alert, RobotInfo, Telemetry
 
 from .model import GLYPHS, STATUS_WORDS, ConsoleModel
@@ -281,7 +282,29 @@ class AlertBook:
                 out.append(a)
         return out
 
-    def seed_fleet(self, robots: dict[str, RobotInfo]) -> None:
-        """A full state: remember presence without alerting (not a change)."""
+    def seed_fleet(self, robots: dict[str, RobotInfo], at: datetime | None = None) -> list[AlertEntry]:
+        """A full state: remember presence. On the first one nothing is a
+        change; after a reconnect (`at` given) a robot seen online before and
+        offline now went offline while the console was away: an alert."""
+        out = []
         for name, info in robots.items():
+            was = self._online.get(name)
             self._online[name] = info.online
+            if at is not None and was and not info.online:
+                a = self.add("offline", f"robot {name} went offline", info.since or at, robot=name)
+                if a:
+                    out.append(a)
+        return out
+
+    def missed_failures(self, before: dict[str, str], mission: Mission, at: datetime) -> list[AlertEntry]:
+        """After a reconnect: skills that failed while the console was away
+        (`before`: skill id -> status it last knew)."""
+        out = []
+        for robot, task in mission.tasks.items():
+            for s in task:
+                if s.status.value == "failure" and before.get(s.id) != "failure":
+                    text = f"{robot}: {s.id} failure: {s.status_info}" if s.status_info else f"{robot}: {s.id} failed"
+                    a = self.add("failure", text, s.finished_at or at, level="error", robot=robot, skill=s.id)
+                    if a:
+                        out.append(a)
+        return out

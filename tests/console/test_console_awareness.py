@@ -357,3 +357,27 @@ async def test_palette_offers_the_shown_screens_own_actions():
         await wait_until(pilot, lambda: "Event log: Export" in screen_text(app), what="palette entry")
         await pilot.press("enter")
         await wait_until(pilot, lambda: isinstance(app.screen, PathPrompt), what="export prompt from the palette")
+
+
+async def test_what_happened_while_reconnecting_raises_alerts():
+    from console_state import MARS_FLEET, fleet, mars_mid_execution
+
+    from console.messages import StateLoaded
+
+    b = mars_mid_execution()
+    app = make_app()
+    async with app.run_test(size=SIZE) as pilot:
+        await inject(app, pilot, b)  # the first state: ardea offline and failed already, not news
+        assert app.bells == 0 and app.alerts.unacknowledged == 0
+        # the console was away; meanwhile lru1's skill failed and lru2 went offline
+        b.report("lru1", "lru1-2", "failure", "wheel stuck in sand")
+        app.post_message(StateLoaded(b.snapshot(), b.library, fleet({**MARS_FLEET, "lru2": False})))
+        await wait_until(pilot, lambda: app.alerts.unacknowledged == 2, what="two alerts")
+        kinds = {(a.kind, a.robot, a.skill) for a in app.alerts.alerts}
+        assert kinds == {("failure", "lru1", "lru1-2"), ("offline", "lru2", None)}
+        assert app.bells == 2
+        assert any(e.kind == "failure" and "wheel stuck in sand" in e.text for e in app.event_log.entries)
+        # the same state again (another resync): nothing new
+        app.post_message(StateLoaded(b.snapshot(), b.library, fleet({**MARS_FLEET, "lru2": False})))
+        await pilot.pause()
+        assert app.alerts.unacknowledged == 2 and app.bells == 2
