@@ -36,6 +36,18 @@ def env() -> dict[str, str]:
     return e
 
 
+
+def stop_process(proc: subprocess.Popen, timeout: float = 10.0) -> None:
+    """SIGTERM, then SIGKILL if it does not end within `timeout`."""
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
 class Accounts:
     """accounts.yaml + secrets/NAME.pw (mode 0600) in a temporary directory."""
 
@@ -110,13 +122,7 @@ class SecureServer:
         return ctl(self.endpoint, *login, *self.client_tls, *args)
 
     def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+        stop_process(self.proc)
         self.log.close()
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 from backend.mapfeed import KEY_MAP_DELTA, KEY_STATUS_LIVE
 from backend.protocol import Keys
 
-from .helpers import CLI, ROBOTS_SCRIPT, ROOT, TUTORIAL, env, raw_session
+from .helpers import CLI, ROBOTS_SCRIPT, ROOT, TUTORIAL, env, raw_session, stop_process
 
 
 class Bg:
@@ -37,13 +37,7 @@ class Bg:
         return Path(f"/proc/{pid}/cmdline").read_bytes() + Path(f"/proc/{pid}/environ").read_bytes()
 
     def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+        stop_process(self.proc)
         self.log.close()
 
 
