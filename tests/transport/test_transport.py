@@ -59,6 +59,16 @@ def test_router_config_is_loopback_only_and_timestamped() -> None:
     assert _get(config, "timestamping/enabled") is True
 
 
+BATCHING = "transport/link/tx/queue/batching/enabled"
+
+
+def test_server_sends_at_once_unless_its_config_file_says_otherwise() -> None:
+    # batching held an operation's reply back ~1 ms behind its event batch (p99 tail)
+    assert _get(router_config(["tcp/127.0.0.1:7447"]), BATCHING) is False
+    assert _get(router_config(["tcp/127.0.0.1:7447"], extra={BATCHING: True}), BATCHING) is True
+    assert _get(client_config(["tcp/127.0.0.1:7447"]), BATCHING) is True  # Zenoh's default
+
+
 def test_client_config_options_and_extra() -> None:
     plain = client_config(["tcp/127.0.0.1:7447"])
     assert _get(plain, "mode") == "client"
