@@ -150,6 +150,10 @@ def _faithful_serializer(model_cls: type[BaseModel]) -> pydantic_core.SchemaSeri
         return None
 
 
+_INSERT_BATCH = (
+    "INSERT INTO batches (revision, ts, actor, client, request_id, op, events) VALUES (?, ?, ?, ?, ?, ?, ?)"
+)
+
 _MISSION_JSON = _faithful_serializer(Mission)
 _BATCH_JSON = _faithful_serializer(EventBatch)
 
@@ -334,30 +338,29 @@ class Journal:
         if not rows:
             return 0
         with self._lock:
-            conn = self.conn
-            conn.execute("BEGIN IMMEDIATE")
-            try:
-                last = self._last_rev
-                if last is None:
-                    raise ValueError(
-                        "the journal has no base mission: store a snapshot(mission) before appending batches"
-                    )
-                for row in rows:
-                    if row[0] != last + 1:
-                        raise ValueError(
-                            f"batch revision {row[0]} does not follow the journal's last revision {last} "
-                            f"(expected {last + 1}): revisions are consecutive"
-                        )
-                    last = row[0]
-                conn.executemany(
-                    "INSERT INTO batches (revision, ts, actor, client, request_id, op, events) "
-                    "VALUES (?, ?, ?, ?, ?, ?, ?)",
-                    rows,
+            last = self._last_rev
+            if last is None:
+                raise ValueError(
+                    "the journal has no base mission: store a snapshot(mission) before appending batches"
                 )
-                conn.execute("COMMIT")
-            except BaseException:
-                _rollback(conn)
-                raise
+            for row in rows:
+                if row[0] != last + 1:
+                    raise ValueError(
+                        f"batch revision {row[0]} does not follow the journal's last revision {last} "
+                        f"(expected {last + 1}): revisions are consecutive"
+                    )
+                last = row[0]
+            conn = self.conn
+            if len(rows) == 1:  # one statement is its own transaction (autocommit)
+                conn.execute(_INSERT_BATCH, rows[0])
+            else:
+                conn.execute("BEGIN IMMEDIATE")
+                try:
+                    conn.executemany(_INSERT_BATCH, rows)
+                    conn.execute("COMMIT")
+                except BaseException:
+                    _rollback(conn)
+                    raise
             self._last_rev = last
         return len(rows)
 

@@ -14,6 +14,7 @@ the mission; the robot's answer (`SyncAck`, `UnsyncDone`, `RetryAck`,
 from __future__ import annotations
 
 from collections import OrderedDict
+from collections.abc import Container
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -119,8 +120,9 @@ class Engine:
         self.redo_stack: dict[str, list[tuple[Any, str, int]]] = {}
         # skill id -> parameter values sent with an in-flight sync
         self.sent: dict[str, dict[str, Any]] = {}
-        # client -> revisions its own edits made (undo may revert over them)
-        self.own_revs: dict[str, set[int]] = {}
+        # client -> revisions its own edits made (undo may revert over them),
+        # oldest first: a dict used as an ordered set, so trimming is O(1)
+        self.own_revs: dict[str, dict[int, None]] = {}
 
     # -- entry point -----------------------------------------------------
     def submit(
@@ -226,7 +228,7 @@ class Engine:
         if s.id in self.locked:
             raise Refusal("locked", f"cannot {doing} {s.display()} on {robot}: {self.locked[s.id]}", robot=robot, skill=s.id)
 
-    def check_fresh(self, op: Any, seen: int, mine: set[int] | frozenset[int] = frozenset()) -> None:
+    def check_fresh(self, op: Any, seen: int, mine: Container[int] = frozenset()) -> None:
         """Optimistic concurrency: refuse if what the operation touches changed
         after the revision the client saw (changes at revisions in `mine`, the
         client's own, do not count)."""
@@ -429,7 +431,12 @@ class Engine:
     def _op_set_skill(self, op: SetSkill, client: str):
         robot, _, s = self.skill(op.id)
         self._editable(robot, s, "edit")
-        params = self._check_params(robot, s.skill, op.params, op.bindings, skill_id=s.id)
+        if not op.bindings and not s.bindings and op.params == s.params:
+            # checked when they were set (e.g. only the label changes); bound
+            # ones are re-resolved below, as a marker may have moved since
+            params = s.params
+        else:
+            params = self._check_params(robot, s.skill, op.params, op.bindings, skill_id=s.id)
         changes: dict[str, Any] = {}
         if op.label != s.label:
             changes["label"] = op.label
@@ -661,10 +668,10 @@ class Engine:
 
     # -- undo / redo -------------------------------------------------------------
     def _mine(self, client: str, revision: int) -> None:
-        own = self.own_revs.setdefault(client, set())
-        own.add(revision)
+        own = self.own_revs.setdefault(client, {})
+        own[revision] = None  # revisions only grow: the first one is the oldest
         if len(own) > 4 * UNDO_DEPTH:
-            own.discard(min(own))
+            del own[next(iter(own))]
 
     def _push_undo(self, client: str, inverse: Any, what: str, revision: int) -> None:
         stack = self.undo_stack.setdefault(client, [])
