@@ -124,13 +124,13 @@ def ms(seconds: float) -> float:
 class Server:
     """`missionctl server` in a subprocess; output goes to a log file."""
 
-    def __init__(self, tmp: Path, name: str, mission: Path):
+    def __init__(self, tmp: Path, name: str, mission: Path, launcher: list[str] | None = None):
         self.endpoint = loopback_endpoint(free_port())
         self.log = tmp / f"{name}.log"
         self.db = tmp / f"{name}.db"
         self._out = open(self.log, "w")  # noqa: SIM115
         self.p = subprocess.Popen(
-            [sys.executable, "-m", "backend.cli", "server", "--mission", str(mission),
+            [*(launcher or [sys.executable, "-m", "backend.cli"]), "server", "--mission", str(mission),
              "--listen", self.endpoint, "--db", str(self.db)],
             cwd=ROOT, stdout=self._out, stderr=subprocess.STDOUT,
             env={**os.environ, "PYTHONUNBUFFERED": "1"},
