@@ -646,48 +646,32 @@ def table(rtt: dict[str, Any], tp: dict[str, Any], fan: dict[str, Any], wire: di
     return "\n".join(lines + details), misses
 
 
-PROFILE_NOTES = """Profile (py-spy on the server and client processes, cProfile of the server's handler in-process, and
-timestamps around the op queryable; 2026-11-21, same machine; not re-measured by this script):
+PROFILE_NOTES = """Analysis (not re-measured by this script; the stage-by-stage split of an operation is the
+next section, from `bench/trace_round_trip.py`):
 
-- Client, `backend/transport/aio.py:_start_get`: `session.get(..., zenoh.handlers.Callback(on_reply, on_done))`
-  uses zenoh's default `indirect=True`, which starts a new Python thread for every query;
-  `threading.Thread.start` waits for that thread to run. That is the gap between the raw query and
-  `backend.transport.query` above (~0.25-0.3 ms per query), and under 16 operations in flight it is
-  ~60 % of the client's event-loop thread (which is ~90 % busy): the sustained rate is bound by the
-  client, not the server. With `indirect=False` (experiment, not applied) one client reached
-  ~1,800 ops/s and a sequential operation ~1.1 ms instead of ~1.4 ms on the same run.
-- Server, per operation (median, sequential): 0.09 ms from the Zenoh thread to the coroutine
-  starting on the event loop (`transport/aio.py:serve_async` -> `run_coroutine_threadsafe`),
-  0.33 ms in `MissionServer._handle_op` (0.13 ms when run alone in-process; the rest is
-  contention for 2 cores and the GIL with the client and Zenoh threads), 0.10 ms in
-  `transport/aio.py:_respond` (`query.reply` + finalising the query). Inside the handler:
-  `server.py:MissionServer._commit` ~45 % (`journal.py:Journal.append_many`, one SQLite
-  transaction per operation, ~0.09 ms; `_events_pub.put` of the EventBatch ~0.04 ms),
-  `rules.py:Engine.submit` ~50 % (`_op_edit` -> `_op_set_skill` -> `_check_params`,
-  `events.apply_events` re-validating the changed `SkillInstance`, `_mine`), pydantic
-  `Request.model_validate_json` and `_reply` the rest. Under 16 in flight the server's
-  event-loop thread is ~57 % busy: `_commit` 46 %, `_respond` 24 %, `Engine.submit` 19 %.
-- Client, per operation besides the query: `Request` serialisation, `OpReply` parsing, and the
-  EventBatch of its own operation, which arrives together with the reply and is parsed by pydantic
-  on the subscriber thread (`client.py:MissionClient._on_events`) and applied on the loop
-  (`MissionClient._apply` -> `events.apply_events`), competing for the GIL with the reply.
-- Status fan-out: the server's report handler (`server.py:MissionServer._handle_reports`, 0.28 ms
-  alone in-process) is ~45 % journal (`journal.py:Journal.append_many`, including a `Journal._last`
-  SELECT per append) and ~35 % `rules.py:Engine.submit` (`_op_report`, `apply_events`); it publishes
-  before replying. In the receiving process the 10 sessions' Zenoh threads take the GIL one after
-  the other, each parsing the batch with pydantic in `client.py:MissionClient._on_events` before
-  handing it to the loop: hence the ~1 ms between the first and the last client.
-- A ratio of 1.5x the raw query (~0.25-0.3 ms here) is below what one asyncio hop on each side
-  costs in this Python process model (the bridge alone, without the per-query thread, is
-  already ~1.3-1.8x raw); reaching it would take answering operations on the Zenoh thread or a
-  different transport binding, not a tweak.
-- Experiment (2026-11-22, not applied): answering `EditSkill` on the op queryable's Zenoh thread
-  (the coroutine driven to completion there, no hop to the event loop) took a blocking raw-op
-  round trip from 0.73 to 0.61-0.66 ms, 12-17 %, i.e. still ~3.5x the raw query. The rest is
-  Python work spread over the server's threads (rules ~50 µs, journal ~30 µs, pydantic parse and
-  dumps ~15 µs, each ~2-3x slower under load on 2 cores) plus Zenoh's own Python callbacks. We kept
-  one event loop owning all mission state (no lock shared with Zenoh threads) rather than trade it
-  for that gain; on this hardware the 1.5x target is below the floor of a CPython server."""
+- Tail: with Zenoh's default tx batching, the server's router held an operation's reply, sent right
+  behind the operation's EventBatch on the same link, ~1 ms for 1-2 % of operations (the traced
+  "reply reaches the query callback" stage took ~1.0 ms in the slowest 2 %; `time_limit` 0 halved
+  that). The server now sends each message at once (`transport/config.py:router_config`): p99
+  2.0-2.2 ms -> 1.45-1.8 ms over a dozen runs on 2026-11-22; sustained operations ~2,750 ->
+  ~2,150/s (1,980-2,300 over those runs: at the target's edge on this machine). 16 in flight from
+  one client, whose event loop is the bottleneck: `session.get` there waits for the GIL against
+  the client's Zenoh threads, and without batching each reply and event is a message of its own.
+- Median: the raw query already includes one hand-over to a Python thread in the server (Zenoh
+  runs Python callbacks on threads of their own). An operation adds, besides the server's Python
+  work (~0.1 ms alone in-process, 2-3x that with both processes' threads sharing 2 cores): the
+  hand-over from the queryable's thread to the server's event loop (~0.1 ms), the client's own
+  EventBatch parsed and applied while its reply arrives, and the hand-over of the reply to the
+  client's event loop plus the coroutine's resumption (~0.15 ms).
+- Experiments not kept: answering operations on the queryable's Zenoh thread (no server event-loop
+  hop): 12-17 % faster, still ~3.5x; the reply callback settling the query at the first reply,
+  no `asyncio.wait_for`, the event subscriber on Zenoh's network thread, the queryables'
+  callbacks on the network thread, uvloop in the server, a shorter GIL switch interval, express
+  replies: none moved the median beyond run-to-run noise (~5 %). We keep one event loop owning
+  all mission state.
+- Why 1.5x is out of reach here: the next section measures the floor in the same run (raw query +
+  the handler alone in-process + one thread-to-loop hand-over, which any asyncio client needs, with
+  the journal written before the reply): ~1.6x before the two processes contend for 2 cores."""
 
 
 def section(body: str, elapsed: float, load: tuple[float, float, float]) -> str:
