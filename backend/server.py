@@ -452,8 +452,11 @@ class MissionServer:
         info = self.robots[m.name]
         info = info.model_copy(update={"manifest": m, "online": True, "since": info.since if info.online else _now()})
         self._set_robot(info)
-        self._apply_reports(m.name, reg.reports)
-        self._reconcile(m.name, {q.id for q in reg.queue})
+        # after a command in flight to this robot (see _handle_reports): its
+        # queue and reports may already hold what that command sent it
+        async with self._lock(m.name):
+            self._apply_reports(m.name, reg.reports)
+            self._reconcile(m.name, {q.id for q in reg.queue})
         return dumps(RegisterReply(accepted=True, last_seq=self.mission.report_seqs.get(m.name, 0)))
 
     def _reconcile(self, robot: str, robot_has: set[str]) -> None:
