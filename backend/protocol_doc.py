@@ -94,7 +94,9 @@ transitions (anything else is refused with `bad_report`):
 same `(client, request_id)` is applied once: retry freely after a timeout.
 With `expected_revision`, the operation is refused (`stale`) if anything it
 touches changed after that revision. The reply is `OpReply{{revision, value,
-notes}}` or an `ErrorReply`.
+notes}}` or an `ErrorReply`. The reply leaves before the operation's
+`EventBatch` (its `revision` is the reply's): a client that needs its own
+change in its copy of the mission waits for that batch.
 
 On a server with accounts (docs/security.md) the router's access-control
 rules allow an operator to query only `{p.Keys.op_as('USER')}` with its own

@@ -245,11 +245,22 @@ class MissionServer:
         assert self.journal is not None
         batch = EventBatch(revision=applied.revision, events=applied.events, actor=actor or client, op=op.op)
         self.journal.record(applied, op, actor=batch.actor, client=client, request_id=request_id, mission=self.mission)
-        self._events_pub.put(batch.model_dump_json().encode())
+        self._publish(self._events_pub, batch.model_dump_json().encode())
         if any(e.ev == "mission_replaced" for e in applied.events):
             for name in self.mission.robots:  # a loaded mission may name other robots
                 if name not in self.robots:
                     self._set_robot(RobotInfo(name=name))
+
+    def _publish(self, publisher: Any, payload: bytes) -> None:
+        """Sent once the request being handled has its reply: the reply and
+        the publications share the requester's link, and a reply queued behind
+        its own event batch waited for the requester to take in the batch
+        first. Publications keep their order (the loop runs callbacks FIFO)."""
+        self._loop.call_soon(self._put, publisher, payload)
+
+    def _put(self, publisher: Any, payload: bytes) -> None:
+        if self._session is not None:  # stopped meanwhile: the journal has it, clients resync
+            publisher.put(payload)
 
     def _submit(self, op: Any, *, client: str = "", request_id: str | None = None, actor: str = "", expected_revision: int | None = None) -> Applied:
         applied = self.engine.submit(op, client=client, request_id=request_id, expected_revision=expected_revision)
@@ -260,7 +271,7 @@ class MissionServer:
         log.warning("%s", message)
         if self._alerts_pub is not None:
             a = Alert(level=level, kind=kind, robot=robot, skill=skill, message=message, at=_now())
-            self._alerts_pub.put(dumps(a))
+            self._publish(self._alerts_pub, dumps(a))
 
     # -- state ------------------------------------------------------------------
     async def _handle_state(self, payload: bytes) -> bytes:
@@ -510,7 +521,7 @@ class MissionServer:
     def _set_robot(self, info: RobotInfo) -> None:
         self.robots[info.name] = info
         if self._fleet_pub is not None:
-            self._fleet_pub.put(dumps(FleetEvent(robot=info)))
+            self._publish(self._fleet_pub, dumps(FleetEvent(robot=info)))
 
     def _on_presence(self, key: str, alive: bool) -> None:
         if self._loop is not None and not self._loop.is_closed():
