@@ -99,8 +99,8 @@ ACTIONS: list[Action] = [
     Action("map_move_marker", "m", "Move marker", "Move the selected marker to the cursor (a pose takes the cursor's heading)", "Map", True, scope="map"),
     Action("map_rename_marker", "r", "Rename", "Rename the selected marker", "Map", scope="map"),
     Action("map_delete_marker", "d,delete", "Delete marker", "Delete the selected marker (asks first)", "Map", scope="map"),
-    Action("map_bind", "b", "Bind", "Bind the selected marker to a fitting parameter of the schedule's selected skill", "Map", True, scope="map"),
-    Action("map_pick", "p", "Pick pose", "Set the selected skill's pose/position parameter to the cursor (position + heading)", "Map", True, scope="map"),
+    Action("map_bind", "b", "Bind", "Bind the selected marker to a fitting parameter of the schedule's selected skill (several fit: choose one)", "Map", True, scope="map"),
+    Action("map_pick", "p", "Pick pose", "Set the selected skill's pose/position parameter to the cursor (position + heading; several: choose one)", "Map", True, scope="map"),
     Action("map_legend", "l", "Legend", "Show/hide the legend", "Map", scope="map"),
 ]
 

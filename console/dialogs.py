@@ -1,4 +1,4 @@
-"""Modal dialogs: confirm, file path prompt, skill picker, help, unreachable."""
+"""Modal dialogs: confirm, file path prompt, skill picker, choice list, help, unreachable."""
 
 from __future__ import annotations
 
@@ -194,6 +194,44 @@ class SkillPicker(ModalScreen[str | None]):
             return
         cur = ol.highlighted if ol.highlighted is not None else -step
         ol.highlighted = min(max(cur + step, 0), ol.option_count - 1)
+
+    def action_cancel(self) -> None:
+        self.dismiss(None)
+
+
+class ChoiceScreen(ModalScreen[str | None]):
+    """Choose one of a few rows: enter chooses (its id), escape cancels (None)."""
+
+    BINDINGS = [Binding("escape", "cancel", "Cancel")]
+
+    DEFAULT_CSS = """
+    ChoiceScreen { align: center middle; }
+    ChoiceScreen > Vertical { width: 72; max-width: 96%; height: auto; border: thick $primary; background: $surface; padding: 0 1; }
+    ChoiceScreen .question { margin: 0 0 1 0; }
+    ChoiceScreen OptionList { height: auto; max-height: 12; }
+    ChoiceScreen .hint { color: $text-muted; }
+    """
+
+    def __init__(self, question: str, rows: list[tuple[str, Text]], highlighted: int = 0) -> None:
+        super().__init__()
+        self.question = question
+        self.rows = rows  # (id, what the row shows)
+        self.highlighted = highlighted
+
+    def compose(self) -> ComposeResult:
+        with Vertical():
+            yield Label(Text(self.question), classes="question")
+            yield OptionList(*(Option(prompt, id=rid) for rid, prompt in self.rows), id="choices")
+            yield Static("enter: choose · ↑↓: move · escape: cancel", classes="hint")
+
+    def on_mount(self) -> None:
+        ol = self.query_one(OptionList)
+        ol.highlighted = self.highlighted
+        ol.focus()
+
+    @on(OptionList.OptionSelected)
+    def _selected(self, event: OptionList.OptionSelected) -> None:
+        self.dismiss(event.option.id)
 
     def action_cancel(self) -> None:
         self.dismiss(None)

@@ -23,7 +23,7 @@ from backend.model import NAME_RE, AreaMarker, Pose, PoseMarker, Position, Posit
 from backend.ops import EditSkill, MarkerAdd, MarkerDelete, MarkerMove, MarkerRename
 
 from .actions import ACTIONS, bindings
-from .dialogs import ConfirmScreen
+from .dialogs import ChoiceScreen, ConfirmScreen
 from .mapview import (
     AREA_GLYPH,
     BOX_GLYPH,
@@ -40,7 +40,7 @@ from .mapview import (
     centroid,
     marker_use,
 )
-from .model import CONNECTED, GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel
+from .model import CONNECTED, GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel, fmt_value
 from .screens import StatusLine, TopBar
 
 if TYPE_CHECKING:
@@ -87,6 +87,24 @@ def legend_text(colours: dict[str, str] | None = None) -> Text:
     row(" ", f"on {c['map-link']}" if "map-link" in c else "reverse", "in comms range")
     row(POSE_ARROWS[0], f"bold {c['map-cursor']}" if "map-cursor" in c else "bold", "cursor (heading)")
     return t
+
+
+def param_rows(spec: Any, s: Any, names: list[str]) -> list[tuple[str, Text]]:
+    """Rows for choosing among a skill's parameters: name, type and what it
+    holds now (@MARKER when bound to one), in aligned columns."""
+    wn = max(len(n) for n in names)
+    wt = max(len(spec.params[n].type) for n in names)
+    rows = []
+    for n in names:
+        ps = spec.params[n]
+        if n in s.bindings:
+            now = Text(f"@{s.bindings[n]}")
+        elif s.params.get(n) is not None:
+            now = Text(fmt_value(ps, s.params[n]))
+        else:
+            now = Text("not set", style="dim")
+        rows.append((n, Text.assemble((n.ljust(wn), "bold"), "  ", (ps.type.ljust(wt), "dim"), "  ", now)))
+    return rows
 
 
 class Legend(Static):
@@ -528,6 +546,25 @@ class MapScreen(Screen):
             return None
         return found[0], found[2], spec
 
+    def _choose(self, question: str, spec: Any, s: Any, names: list[str], then: Any, *, cancelled: str, highlighted: int = 0) -> None:
+        """`then(name)` at once when one parameter fits; when several do, the
+        operator picks one first (escape: nothing is sent)."""
+        if len(names) == 1:
+            then(names[0])
+            return
+
+        def chosen(pname: str | None) -> None:
+            if pname is None:
+                self.say(cancelled)
+                return
+            why = self.model.read_only_reason(s.id)  # it may have changed while the dialog was open
+            if why:
+                self.say(f"{s.id}: {why}", "warning")
+                return
+            then(pname)
+
+        self.app.push_screen(ChoiceScreen(question, param_rows(spec, s, names), highlighted), chosen)
+
     def action_map_bind(self) -> None:
         mk = self._marker()
         got = self._skill() if mk is not None else None
@@ -535,39 +572,50 @@ class MapScreen(Screen):
             return
         robot, s, spec = got
         name = self.view.selected_marker
+        # a parameter of the marker's kind is bound to it; a marker-typed one takes its name
         fits = [p for p, ps in spec.params.items() if ps.type == mk.kind]
         names = [p for p, ps in spec.params.items() if ps.type == "marker" and (not ps.marker_kinds or mk.kind in ps.marker_kinds)]
-        if fits:
-            pname = next((p for p in fits if s.bindings.get(p) != name), fits[0])
-            op = EditSkill(id=s.id, bindings={pname: name})
-        elif names:
-            pname = names[0]
-            op = EditSkill(id=s.id, params={pname: name})
-        else:
+        if not fits and not names:
             kinds = ", ".join(f"{p} ({ps.type})" for p, ps in spec.params.items()) or "none"
             self.say(f"{s.id} ({s.skill}) has no parameter for a {mk.kind} marker; its parameters: {kinds}", "warning")
             return
-        self.submit(op, f"bind {s.id}.{pname} to {name}", robot=robot, skill=s.id,
-                    on_ok=lambda r: self.say(f"{s.id}: {pname} bound to marker {name}", "ok"))
+
+        def bind(pname: str) -> None:
+            op = EditSkill(id=s.id, bindings={pname: name}) if pname in fits else EditSkill(id=s.id, params={pname: name})
+            self.submit(op, f"bind {s.id}.{pname} to {name}", robot=robot, skill=s.id,
+                        on_ok=lambda r: self.say(f"{s.id}: {pname} bound to marker {name}", "ok"))
+
+        def holds(p: str) -> bool:
+            return s.bindings.get(p) == name or (p in names and s.params.get(p) == name)
+
+        candidates = fits + names
+        first = next((i for i, p in enumerate(candidates) if not holds(p)), 0)  # the likely choice
+        self._choose(f"Bind {name} to which parameter of {s.id}?", spec, s, candidates, bind,
+                     highlighted=first, cancelled=f"bind cancelled: {s.id} unchanged")
 
     def action_map_pick(self) -> None:
         got = self._skill()
         if got is None:
             return
         robot, s, spec = got
-        params = [(p, ps.type) for p, ps in spec.params.items() if ps.type in ("pose", "position")]
+        params = [p for p, ps in spec.params.items() if ps.type in ("pose", "position")]
         if not params:
             self.say(f"{s.id} ({s.skill}) has no pose or position parameter", "warning")
             return
-        pname, ptype = params[0]
         x, y = (round(c, 1) for c in self.view.cursor)
-        value: dict[str, float] = {"x": x, "y": y, "z": 0.0}
-        if ptype == "pose":
-            value |= {"roll": 0.0, "pitch": 0.0, "yaw": round(self.view.heading, 3)}
-        where = f"({x:g}, {y:g})" + (f" heading {math.degrees(self.view.heading):.0f}°" if ptype == "pose" else "")
-        unbound = " (its marker binding is replaced)" if pname in s.bindings else ""
-        self.submit(EditSkill(id=s.id, params={pname: value}), f"set {s.id}.{pname}", robot=robot, skill=s.id,
-                    on_ok=lambda r: self.say(f"{s.id}: {pname} = {where}{unbound}", "ok"))
+
+        def pick(pname: str) -> None:
+            ptype = spec.params[pname].type
+            value: dict[str, float] = {"x": x, "y": y, "z": 0.0}
+            if ptype == "pose":
+                value |= {"roll": 0.0, "pitch": 0.0, "yaw": round(self.view.heading, 3)}
+            where = f"({x:g}, {y:g})" + (f" heading {math.degrees(self.view.heading):.0f}°" if ptype == "pose" else "")
+            unbound = " (its marker binding is replaced)" if pname in s.bindings else ""
+            self.submit(EditSkill(id=s.id, params={pname: value}), f"set {s.id}.{pname}", robot=robot, skill=s.id,
+                        on_ok=lambda r: self.say(f"{s.id}: {pname} = {where}{unbound}", "ok"))
+
+        self._choose(f"Set which parameter of {s.id} to the cursor ({x:g}, {y:g})?", spec, s, params, pick,
+                     cancelled=f"pick cancelled: {s.id} unchanged")
 
     # -- disabled keys are explained, like on the mission screen -----------------------------------------------
     async def run_named(self, action: str) -> None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 from console_state import (
     DATA,
     MARS,
+    T0,
     Builder,
     inject,
     make_app,
@@ -20,7 +21,9 @@ from console_state import (
     screen_text,
 )
 
+from backend.model import Pose
 from backend.ops import DeleteSkills
+from backend.protocol import Telemetry
 from console.dialogs import UnreachableScreen
 
 WIDE = (150, 40)
@@ -195,6 +198,36 @@ def test_map_robots_markers_explored_area(snap_compare):
 
 def test_map_80x24(snap_compare):
     assert snap_compare(make_app(), terminal_size=(80, 24), run_before=_map_prepare(("lru1", "ROI-north", "cursor (")))
+
+
+def test_map_parameter_chooser(snap_compare):
+    # b with a pose marker on a skill with two pose parameters: the list asks which one
+    from map_state import map_message
+
+    async def run_before(pilot):
+        app = pilot.app
+        await inject(app, pilot, Builder(DATA / "transport.yaml"), online={"lru1": True},
+                     telemetry=[Telemetry(robot="lru1", pose=Pose(x=10.0, y=5.0, yaw=0.5), battery=0.8, link=0.9, at=T0)])
+        app.post_message(map_message())
+        app.mission_screen.schedule.select("lru1-2")
+        await pilot.pause()
+        await pilot.press("f3")
+        await pilot.pause()
+        app.screen.select_marker("POI-A")
+        await pilot.pause()
+
+        def shows(*needles):  # screen_text: the top screen only
+            text = screen_text(app)
+            for needle in needles:
+                assert needle in text, f"{needle!r} not on screen:\n{text}"
+
+        shows("lru1", "POI-A", "DEPOT", "Legend")  # the map...
+        await pilot.press("b")
+        await pilot.pause()
+        await pilot.pause()
+        shows("Bind POI-A to which parameter of lru1-2?", "@POI-B", "(2,0)", "enter: choose")  # ...and the dialog over it
+
+    assert snap_compare(make_app(), terminal_size=(120, 40), run_before=run_before)
 
 
 def test_observer_account_read_only(snap_compare):
