@@ -19,6 +19,7 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import ModalScreen, Screen
 from textual.widgets import Footer, Input, Label, Select, Static
 
+from backend.library import marker_value
 from backend.model import NAME_RE, AreaMarker, Pose, PoseMarker, Position, PositionMarker, Status
 from backend.ops import EditSkill, MarkerAdd, MarkerDelete, MarkerMove, MarkerRename
 
@@ -572,8 +573,11 @@ class MapScreen(Screen):
             return
         robot, s, spec = got
         name = self.view.selected_marker
-        # a parameter of the marker's kind is bound to it; a marker-typed one takes its name
-        fits = [p for p, ps in spec.params.items() if ps.type == mk.kind]
+        # a parameter the marker can give a value (the server's own rule: a pose
+        # marker fits a position too), its own kind first, is bound to it; a
+        # marker-typed one takes its name
+        fits = sorted((p for p, ps in spec.params.items() if marker_value(ps, mk)[1] is None),
+                      key=lambda p: spec.params[p].type != mk.kind)
         names = [p for p, ps in spec.params.items() if ps.type == "marker" and (not ps.marker_kinds or mk.kind in ps.marker_kinds)]
         if not fits and not names:
             kinds = ", ".join(f"{p} ({ps.type})" for p, ps in spec.params.items()) or "none"

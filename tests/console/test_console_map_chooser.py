@@ -51,11 +51,13 @@ async def test_bind_asks_which_pose_parameter_and_binds_the_chosen_one():
         await pilot.press("b")
         ol = await chooser(app, pilot)
         assert "Bind POI-A to which parameter of lru1-2?" in screen_text(app)
-        # via (position), relay (position markers only) and speed do not take a pose marker
+        # the poses first; via (a position) takes a pose marker's x, y, z as the
+        # server does; relay (position markers only) and speed do not
         shown = rows(ol)
-        assert list(shown) == ["from", "to"]
+        assert list(shown) == ["from", "to", "via"]
         assert shown["from"].split() == ["from", "pose", "@POI-B"]
         assert shown["to"].split() == ["to", "pose", "(2,0)"]
+        assert shown["via"].split() == ["via", "position", "not", "set"]
         assert ol.highlighted == 0
         await pilot.press("down", "enter")
         await wait_until(pilot, lambda: skill(app).bindings.get("to") == "POI-A", 10, "to bound to POI-A")
@@ -78,7 +80,7 @@ async def test_bind_asks_which_pose_parameter_and_binds_the_chosen_one():
         assert skill(app).bindings == {"from": "POI-B", "to": "POI-A"}
 
 
-async def test_bind_a_position_marker_offers_its_kind_and_marker_parameters():
+async def test_bind_a_position_marker_offers_its_kind_first_then_poses_and_marker_parameters():
     app, backend = engine_app(Builder(TRANSPORT))
     async with app.run_test(size=SIZE) as pilot:
         screen = await open_map(app, pilot, backend.b, "lru1-2")
@@ -86,13 +88,26 @@ async def test_bind_a_position_marker_offers_its_kind_and_marker_parameters():
         await pilot.press("b")
         ol = await chooser(app, pilot)
         shown = rows(ol)
-        assert list(shown) == ["via", "relay"]
+        assert list(shown) == ["via", "from", "to", "relay"]
         assert shown["via"].split() == ["via", "position", "not", "set"]
         assert shown["relay"].split() == ["relay", "marker", "not", "set"]
-        await pilot.press("down", "enter")  # relay takes the marker's name
+        await pilot.press("down", "down", "down", "enter")  # relay takes the marker's name
         await wait_until(pilot, lambda: skill(app).params.get("relay") == "DEPOT", 10, "relay = DEPOT")
         assert backend.ops == [EditSkill(id="lru1-2", params={"relay": "DEPOT"})]
         assert "via" not in skill(app).bindings
+
+
+async def test_a_pose_marker_binds_a_position_parameter_like_the_server_allows():
+    app, backend = engine_app(Builder(DATA / "transport.yaml"))
+    async with app.run_test(size=SIZE) as pilot:
+        screen = await open_map(app, pilot, backend.b, "lru1-2")
+        screen.select_marker("POI-A")
+        await pilot.press("b")
+        await chooser(app, pilot)
+        await pilot.press("down", "down", "enter")  # via
+        await wait_until(pilot, lambda: skill(app).bindings.get("via") == "POI-A", 10, "via bound to POI-A")
+        assert backend.ops == [EditSkill(id="lru1-2", bindings={"via": "POI-A"})]
+        assert skill(app).params["via"] == {"x": 42.0, "y": 18.0, "z": 0.0}  # the pose's position
 
 
 async def test_one_fitting_parameter_binds_without_asking():
