@@ -91,6 +91,7 @@ class MissionApp(App[int]):
     VIEW_MODES: dict[str, type[Screen]] = {"fleet": FleetScreen, "log": EventLogScreen, "alerts": AlertScreen}
     CSS = """
     Screen { background: $background; }
+    ModalScreen { background: $background 60%; }  /* dialogs: the screen behind stays visible, dimmed */
     Toast { max-width: 70; }
     """
 
