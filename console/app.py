@@ -51,7 +51,7 @@ from .messages import (
 from .model import CONNECTED, CONNECTING, OFFLINE, UNREACHABLE, ConsoleModel
 from .screens import MissionScreen
 from .theme import DEFAULT_THEME, VARIABLE_DEFAULTS
-from .themes import ANSI16_STATUS, Downgrade16, load_themes
+from .themes import ANSI16_MAP, ANSI16_STATUS, Downgrade16, load_themes
 
 EXIT_UNREACHABLE = 3
 HANG_UP_GRACE_S = 5.0  # after a hang-up, the longest a clean exit may take
@@ -159,11 +159,13 @@ class MissionApp(App[int]):
         variables = super().get_css_variables()
         if getattr(self, "ansi16", False):  # (called by App.__init__ before it is set)
             variables.update(ANSI16_STATUS)
+            variables.update(ANSI16_MAP)
             self.theme_variables = variables
         return variables
 
     def _use_16_colours(self) -> None:
-        """Statuses get one ANSI colour each (ANSI16_STATUS); everything is
+        """Statuses get one ANSI colour each (ANSI16_STATUS), the map's ground
+        colours that stay apart (ANSI16_MAP); everything is
         drawn with the 16 standard colours, as the terminal would."""
         self.ansi16 = True
         self._filters.append(Downgrade16())

@@ -57,6 +57,16 @@ FOLLOW_GLYPH = "⊙"
 
 GROUND_VARS = {T_UNKNOWN: "map-unknown", T_FREE: "map-free", T_SLOW: "map-sand", T_ROCK: "map-rock"}
 COVERAGE_TINT = 0.35
+# In 16 colours a blend or a lightened texture falls back onto the colour it
+# came from: ground class -> (background in comms range, texture colour out
+# of range, texture colour in range); out of range the background is the
+# class's own variable (themes.ANSI16_MAP)
+GROUND16 = {
+    T_UNKNOWN: ("#000000", "#555555", "#5555ff"),
+    T_FREE: ("#555555", "#555555", "#555555"),
+    T_SLOW: ("#555555", "#ffff55", "#ffff55"),
+    T_ROCK: ("#000000", "#aaaaaa", "#5555ff"),
+}
 MIN_MPP, MAX_MPP = 0.25, 64.0
 
 
@@ -84,13 +94,15 @@ def halfblock_row(
     colours: Mapping[Any, RichColor],
     glyphs: Mapping[int, tuple[str, RichColor, bool, RichColor | None]] | None = None,
     pattern: Callable[[int, Any], str] | None = None,
+    textures: Mapping[Any, RichColor] | None = None,
 ) -> list[Segment]:
     """Segments of one text row from its two pixel rows.
 
     `top[i]`/`bottom[i]` are colour keys of column i's upper and lower pixel;
     a glyph (char, colour, bold, background or None) replaces column i's
     half-block (by default on the upper pixel's colour); `pattern(i, key)` gives the character drawn where both
-    pixels are equal (" " for none). Runs of equal style are merged."""
+    pixels are equal (" " for none), in `textures[key]` (default: the key's
+    colour, a little lighter). Runs of equal style are merged."""
     segs: list[Segment] = []
     text: list[str] = []
     run: Style | None = None
@@ -101,7 +113,8 @@ def halfblock_row(
             ch, st = g[0], _style(g[1], g[3] or colours[a], g[2])
         elif a == b:
             ch = pattern(i, a) if pattern is not None else " "
-            st = _style(_pattern_fg(colours[a]) if ch != " " else None, colours[a])
+            fg = None if ch == " " else (textures.get(a) if textures else None) or _pattern_fg(colours[a])
+            st = _style(fg, colours[a])
         else:
             ch, st = UPPER_HALF, _style(colours[a], colours[b])
         if st is not run:
@@ -377,6 +390,7 @@ class MapView(Widget, can_focus=True):
         self._rows: dict[int, Strip] = {}
         self._overlay = Overlay(self.vp)
         self._colours: dict[Any, RichColor] = {}
+        self._textures: dict[Any, RichColor] = {}  # ground key -> texture colour (16 colours only)
         self._colour_key: Any = None
         self._xs_index: np.ndarray | None = None
         self.rendered_rows = 0  # rows actually rendered (not from the cache): tests, benchmark
@@ -393,10 +407,15 @@ class MapView(Widget, can_focus=True):
 
         link = col("map-link")
         pal: dict[Any, RichColor] = {}
+        self._textures = {}
         for t, name in GROUND_VARS.items():
             base = col(name)
             pal[t] = base.rich_color
             pal[t + 4] = base.blend(link, COVERAGE_TINT).rich_color
+            if getattr(self.app, "ansi16", False):
+                covered, texture, covered_texture = (Color.parse(c).rich_color for c in GROUND16[t])
+                pal[t + 4] = covered
+                self._textures[t], self._textures[t + 4] = texture, covered_texture
         pal[OUTSIDE] = col("map-outside").rich_color
         for name, value in v.items():
             if name.startswith(("map-", "status-", "presence-")):
@@ -643,7 +662,7 @@ class MapView(Widget, can_focus=True):
             for col, (ch, var, bold) in self._overlay.cells.get(y, {}).items()
         }
         origin = round(vp.cx / vp.mpp) - vp.w // 2  # texture fixed to the ground, not the screen
-        strip = Strip(halfblock_row(top, bottom, pal, glyphs, lambda i, k: _texture(origin + i, y, k))).crop_extend(0, w, None)
+        strip = Strip(halfblock_row(top, bottom, pal, glyphs, lambda i, k: _texture(origin + i, y, k), self._textures)).crop_extend(0, w, None)
         self._rows[y] = strip
         return strip
 

@@ -64,6 +64,19 @@ ANSI16_STATUS: dict[str, str] = {
     "battery-low": "#ffff55",
 }
 
+# ...and the map's ground the standard colours it keeps apart: explored ground
+# is brown out of comms range and grey in it (as the blends of the 256-colour
+# defaults look), unexplored and rock are black; their textures (dots, ~, ▴,
+# console/mapview.py GROUND16) tell the classes on the same background apart
+ANSI16_MAP: dict[str, str] = {
+    "map-outside": "#000000",
+    "map-unknown": "#000000",
+    "map-free": "#aa5500",
+    "map-sand": "#aa5500",
+    "map-rock": "#000000",
+    "map-link": "#555555",  # the legend's "in comms range" swatch: explored ground in range
+}
+
 
 def _colour(v: str) -> str:
     try:

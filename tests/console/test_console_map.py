@@ -144,6 +144,30 @@ async def test_add_bind_move_marker_through_the_rules():
         assert "GOAL-1 ○" in screen_text(app)  # used by an idle skill
 
 
+@pytest.mark.parametrize("colors", [256, 16])
+async def test_ground_classes_stay_apart_in_256_and_16_colours(colors):
+    """What the terminal shows (16 colours: after the downgrade a TERM=xterm
+    terminal makes): explored ground differs from unexplored, in comms range
+    from out of it, and a texture differs from the ground it is drawn on."""
+    from console.mapview import T_FREE, T_ROCK, T_SLOW, T_UNKNOWN, MapView
+    from console.themes import _to16
+
+    app = make_app(colors=colors)
+    async with app.run_test(size=SIZE) as pilot:
+        await open_map(app, pilot)
+        view = app.screen.query_one(MapView)
+        pal = view._palette()
+        shown = (lambda c: _to16(c).triplet) if colors == 16 else (lambda c: c.triplet)
+        bg = {k: shown(pal[k]) for k in (T_UNKNOWN, T_FREE, T_SLOW, T_ROCK)}
+        bg |= {k + 4: shown(pal[k + 4]) for k in (T_UNKNOWN, T_FREE, T_SLOW, T_ROCK)}
+        assert bg[T_FREE] != bg[T_UNKNOWN] and bg[T_FREE + 4] != bg[T_UNKNOWN + 4]
+        assert bg[T_FREE] != bg[T_FREE + 4] and bg[T_UNKNOWN + 4] != bg[T_FREE]
+        for k in (T_UNKNOWN, T_SLOW, T_ROCK):  # the classes drawn with a texture
+            for key in (k, k + 4):
+                fg = [s.style.color for s in halfblock_row([key], [key], pal, pattern=lambda i, _k: "x", textures=view._textures)]
+                assert shown(fg[0]) != bg[key], f"texture of ground {key} invisible in {colors} colours"
+
+
 def test_halfblock_row_colours_and_merging():
     red, blue, white = RichColor.parse("#ff0000"), RichColor.parse("#0000ff"), RichColor.parse("#ffffff")
     pal = {0: red, 1: blue}

@@ -196,6 +196,13 @@ def test_map_robots_markers_explored_area(snap_compare):
     assert snap_compare(make_app(), terminal_size=(120, 40), run_before=_map_prepare(("lru1 ▶", "lru2 ◷", "POI-B", "ROI-north", "Legend", "sampling region"), zoom_in=True))
 
 
+def test_map_in_16_colours(snap_compare):
+    """Over SSH with TERM=xterm: explored area, coverage, markers and robots
+    still apart (each status has its own ANSI colour, glyphs carry meaning)."""
+    app = make_app(colors=16)
+    assert snap_compare(app, terminal_size=(120, 40), run_before=_map_prepare(("lru1 ▶", "lru2 ◷", "POI-B", "Legend"), zoom_in=True))
+
+
 def test_map_80x24(snap_compare):
     assert snap_compare(make_app(), terminal_size=(80, 24), run_before=_map_prepare(("lru1", "ROI-north", "cursor (")))
 
