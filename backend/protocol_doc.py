@@ -107,15 +107,24 @@ queries get no reply at all, so clients refuse operations locally).
 
 ### Robot registration and reconciliation
 1. The robot connects, declares `{p.Keys.alive('ROBOT')}`, its command and
-   world queryables, and watches `{p.Keys.SERVER_ALIVE}`.
+   world queryables, and watches `{p.Keys.SERVER_ALIVE}` (a liveliness
+   subscriber with history: the token may be there already).
 2. Whenever the server token appears (start, server restart), the robot
    queries `{p.Keys.register('ROBOT')}` with `Register{{manifest, queue,
-   reports}}`: its manifest (type, modules and skills with SemVer), its own
-   synchronized queue, and its unacknowledged reports.
+   reports}}`: its manifest (`name` is ROBOT, `type` the robot type the
+   mission gives it, `protocol` {p.PROTOCOL_VERSION}, modules and skills
+   with SemVer), its own synchronized queue, and its unacknowledged reports.
 3. The server applies the reports, then returns to the plan (`idle`) any skill
    it holds as synchronized to that robot that the robot does not have (it
-   restarted). The reply carries `last_seq`: the robot continues numbering
+   restarted; an `Alert` of kind `reconcile` names them, `RegisterReply.missing`
+   stays empty). The reply carries `last_seq`: the robot continues numbering
    after it.
+4. The robot is online (a `FleetEvent`) from an accepted registration until
+   its liveliness token disappears: the token alone does not make it online.
+   The server answers `RegisterReply{{accepted: false, reason}}` to another
+   protocol version, a robot the mission does not name, or a type other than
+   the mission's; register again when the server token reappears. A manifest
+   `name` other than the ROBOT of the key is refused (`bad_register`).
 
 ### Synchronize
 1. Operator: `op: sync {{robot, through?}}`.
@@ -145,7 +154,10 @@ execution and reports the status changes (`Report`, numbered per robot). Run
 on a paused robot resumes; after a failure, run continues with the next
 queued skill. Stop returns the active skill to `idle_synchronized` (the next
 run starts it from the beginning). Reset = stop + remove everything queued;
-its reply lists the removed ids, which return to the plan.
+its reply lists the removed ids, which return to the plan. A robot refuses a
+command with `CommandReply{{ok: false, reason}}` (the operator's refusal is
+`robot_refused` with that reason) or with a `reply_err` whose `ErrorReply`
+`code` reaches the operator.
 
 ### Reports
 Each status change is a `Report{{robot, seq, id, status, info, attempt, at}}`
@@ -154,6 +166,16 @@ queries `{p.Keys.reports('ROBOT')}` with `ReportBatch`; `ReportAck.last_seq` tel
 which it may drop. While out of reach the outbox grows and is flushed on
 return; a report the server already applied is ignored (idempotent). A
 refused report is acknowledged too (listed in `refused`) and raises an alert.
+`at` is when the change happened: the first `running` sets the skill's
+`started_at`, `success` or `failure` its `finished_at`.
+
+**Answer a command before waiting for anything from the server.** The server
+takes a robot's `ReportBatch` and `Register` only once its command in flight
+to that robot is answered: a robot that reports from its command handler and
+waits for the `ReportAck` before replying blocks both until the command times
+out (the operator is told `robot_timeout` although the robot acted). Status
+changes made while handling a command go in `CommandReply.reports`, or are
+sent after the reply.
 
 ### Failure and retry
 A failing skill becomes `failure` and the robot halts its queue. The
