@@ -202,7 +202,10 @@ class RegisterReply(Strict):
     last_seq: int = 0
     # skills the server holds as synchronized to this robot that the robot
     # does not know (it restarted): the robot may ask to have them again
-    missing: list[SkillId] = Field(default_factory=list)
+    missing: list[SkillId] = Field(
+        default_factory=list,
+        description="skills the server held as synchronized to this robot that its queue lacks: returned to the plan",
+    )
 
 
 class ReportBatch(Strict):

@@ -116,9 +116,9 @@ queries get no reply at all, so clients refuse operations locally).
    with SemVer), its own synchronized queue, and its unacknowledged reports.
 3. The server applies the reports, then returns to the plan (`idle`) any skill
    it holds as synchronized to that robot that the robot does not have (it
-   restarted; an `Alert` of kind `reconcile` names them, `RegisterReply.missing`
-   stays empty). The reply carries `last_seq`: the robot continues numbering
-   after it.
+   restarted; `RegisterReply.missing` and an `Alert` of kind `reconcile` name
+   them). The reply carries `last_seq`: the robot continues numbering after
+   it.
 4. The robot is online (a `FleetEvent`) from an accepted registration until
    its liveliness token disappears: the token alone does not make it online.
    The server answers `RegisterReply{{accepted: false, reason}}` to another

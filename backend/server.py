@@ -467,12 +467,12 @@ class MissionServer:
         # queue and reports may already hold what that command sent it
         async with self._lock(m.name):
             self._apply_reports(m.name, reg.reports)
-            self._reconcile(m.name, {q.id for q in reg.queue})
-        return dumps(RegisterReply(accepted=True, last_seq=self.mission.report_seqs.get(m.name, 0)))
+            lost = self._reconcile(m.name, {q.id for q in reg.queue})
+        return dumps(RegisterReply(accepted=True, last_seq=self.mission.report_seqs.get(m.name, 0), missing=lost))
 
-    def _reconcile(self, robot: str, robot_has: set[str]) -> None:
+    def _reconcile(self, robot: str, robot_has: set[str]) -> list[str]:
         """After a restart on either side: skills the mission holds as on the
-        robot but the robot does not have go back to the plan."""
+        robot but the robot does not have go back to the plan (returned)."""
         task = self.mission.tasks.get(robot, [])
         held = [s.id for s in task if s.status.value not in ("idle", "success", "failure")]
         lost = [sid for sid in held if sid not in robot_has]
@@ -482,6 +482,8 @@ class MissionServer:
                 self.alert(f"{robot} no longer had {', '.join(lost)}: returned to the plan", robot=robot, kind="reconcile")
             except Refusal as r:
                 self.alert(f"cannot reconcile {robot}: {r.message}", level="error", robot=robot, kind="reconcile")
+                return []
+        return lost
 
     def _apply_reports(self, robot: str, reports: list[Report]) -> list[ErrorReply]:
         refused = []

@@ -293,3 +293,22 @@ def test_a_robot_speaking_another_protocol_version_is_not_accepted(cluster, robo
         assert refused.value.code == "robot_offline"
 
     drive(cluster, scenario)
+
+
+def test_a_restarted_robot_is_told_which_skills_it_lost(cluster, robots):
+    first = robots()
+
+    async def scenario(c):
+        assert (await registered(first))["accepted"] is True
+        await online(c)
+        await c.submit(Sync(robot="lru1", through="lru1-1"))
+        await c.wait_for(lambda m: status(m, "lru1-1") == "idle_synchronized", 10)
+        first.close()  # the robot restarts: its queue is gone
+        await c.wait_for(lambda _m: not c.robots["lru1"].online, 10)
+        again = robots()
+        reply = await registered(again)
+        # registration 3.: what the server held for it goes back to the plan, and the robot is told
+        assert reply["accepted"] is True and reply["missing"] == ["lru1-1"]
+        await c.wait_for(lambda m: status(m, "lru1-1") == "idle", 10)
+
+    drive(cluster, scenario)
