@@ -134,8 +134,13 @@ queries get no reply at all, so clients refuse operations locally).
    skill id to its barrier and partner robots' skill ids).
 3. Robot: appends them to its queue, answers `CommandReply{{ids}}`.
 4. Server: marks them `idle_synchronized` (one `EventBatch`) and replies. No
-   answer (out of range, timeout, offline) → nothing changed, and the
+   answer (out of range, timeout, offline) → the mission is unchanged, and the
    refusal names the robot and why.
+5. A reply lost on its way back leaves the robot holding skills the mission
+   still shows unsynchronized; the operator synchronizes again. So a robot
+   answers an `Enqueue` of skills it holds already as if it had just queued
+   them (their ids in `ids`, not queued twice), and leaves out of `ids` those
+   it has already run.
 
 ### Unsynchronize, and the race with a starting robot
 1. Operator: `op: unsync {{robot, from_id?}}`: the queued skills from `from_id`

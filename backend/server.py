@@ -355,7 +355,8 @@ class MissionServer:
             except ValidationError:
                 raise Refusal("robot_error", f"{robot} refused: {e.payload.decode(errors='replace')}", robot=robot) from None
         except QueryTimeout:
-            raise Refusal("robot_timeout", f"{robot} did not answer within {self.command_timeout:g} s (out of reach?): nothing changed", robot=robot) from None
+            raise Refusal("robot_timeout", f"{robot} did not answer within {self.command_timeout:g} s (out of reach?): the mission is unchanged; "
+                          "if the robot got the command anyway, sending it again is safe", robot=robot) from None
         except NoResponder:
             raise Refusal("robot_offline", f"robot {robot} does not answer commands: nothing was sent", robot=robot) from None
         reply = CommandReply.model_validate_json(raw)

@@ -98,7 +98,7 @@ class ThirdPartyRobot:
 
     def _command(self, cmd: dict) -> dict | None:
         kind = cmd.get("cmd")
-        if kind == "enqueue":  # Synchronize, 3.: append (or put in front), answer the ids
+        if kind == "enqueue":  # Synchronize, 3. and 5.: append (or put in front) what is new, answer the ids
             ids = [s["id"] for s in cmd["skills"] if s["id"] not in self.done]
             new = [i for i in ids if i not in self.queue]
             self.enqueued += cmd["skills"]
