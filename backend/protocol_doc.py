@@ -218,6 +218,8 @@ with the robots' telemetry.
 ### World knowledge (robot to robot)
 `WorldMessage{{kind: ask|tell, sender, topic, data}}` to
 `{p.Keys.world('ROBOT')}`; the answer is a `WorldReply{{known, data}}`.
+Only robots (and tools such as `ctl`) query it; the server never does, so a
+robot that shares no knowledge may answer every ask with `known: false`.
 
 ## Messages (JSON Schema, generated)
 """

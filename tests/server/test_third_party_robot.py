@@ -312,3 +312,13 @@ def test_a_restarted_robot_is_told_which_skills_it_lost(cluster, robots):
         await c.wait_for(lambda m: status(m, "lru1-1") == "idle", 10)
 
     drive(cluster, scenario)
+
+
+def test_a_robot_registering_under_another_name_is_refused(cluster, robots):
+    robot = robots()  # lru1, registered as itself; its session now asks as another robot
+    manifest = {**robot.manifest, "name": "lru2"}  # on lru1's key (registration, 4.)
+    reply = [r for r in robot.session.get("mc/v1/server/register/lru1", timeout=5.0,
+                                          payload=json.dumps({"manifest": manifest, "queue": [], "reports": []}))]
+    [err] = [r.err for r in reply if r.err is not None]
+    refusal = json.loads(err.payload.to_bytes())  # an ErrorReply
+    assert refusal["code"] == "bad_register" and "lru2" in refusal["message"] and "lru1" in refusal["message"]
