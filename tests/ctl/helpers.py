@@ -107,17 +107,22 @@ def stop_process(proc: subprocess.Popen, timeout: float = 10.0) -> None:
 class Server:
     """`missionctl server` in a subprocess on a free loopback port."""
 
-    def __init__(self, tmp: Path, mission: Path = TUTORIAL):
+    def __init__(self, tmp: Path, mission: Path = TUTORIAL,
+                 command: Callable[[str, Path], list[str]] | None = None):
+        """`command(endpoint, db)`, if given, is the server's command line
+        (e.g. one taken from a document), to listen on `endpoint` with journal `db`."""
         from backend.transport import free_port, loopback_endpoint
 
         self.log_path = tmp / "server.log"
         for _attempt in range(3):  # another process may take the free port first
             self.endpoint = loopback_endpoint(free_port())
+            db = tmp / f"mission-{_attempt}.db"
+            argv = command(self.endpoint, db) if command else [
+                sys.executable, "-m", "backend.cli", "server", "--mission", str(mission),
+                "--listen", self.endpoint, "--db", str(db)]
             self.log = open(self.log_path, "w")  # noqa: SIM115 - closed in stop()
             self.proc = subprocess.Popen(
-                [sys.executable, "-m", "backend.cli", "server", "--mission", str(mission),
-                 "--listen", self.endpoint, "--db", str(tmp / f"mission-{_attempt}.db")],
-                cwd=ROOT, env=env(), stdout=self.log, stderr=subprocess.STDOUT, text=True,
+                argv, cwd=ROOT, env=env(), stdout=self.log, stderr=subprocess.STDOUT, text=True,
             )
             if self._wait_ready():
                 return
@@ -146,9 +151,11 @@ class Server:
 class Robots:
     """docs/examples/trivial_robots.py (robot agents with scripted handlers)."""
 
-    def __init__(self, endpoint: str, *robots: str):
+    def __init__(self, endpoint: str, *robots: str, command: list[str] | None = None):
+        """Robots NAME:TYPE; `command`, if given, is the command line that runs
+        them (e.g. one taken from a document), connecting to `endpoint`."""
         self.proc = subprocess.Popen(
-            [sys.executable, str(ROBOTS_SCRIPT), "--connect", endpoint, *robots],
+            command or [sys.executable, str(ROBOTS_SCRIPT), "--connect", endpoint, *robots],
             cwd=ROOT, env=env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
         )
         self.lines: list[str] = []
