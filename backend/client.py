@@ -14,6 +14,7 @@ import logging
 import os
 import uuid
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import zenoh
@@ -85,12 +86,27 @@ class OperationRefused(ClientError):
 Listener = Callable[[str, Any], None]
 
 
+@dataclass(frozen=True)
+class Malformed:
+    """A message this client could not read and ignored (the first from its key)."""
+
+    what: str  # "events", "fleet", "telemetry", "alert"
+    key: str
+    error: str  # the first validation error: "field.path: message"
+
+    def sentence(self) -> str:
+        return (f"{self.what} on {self.key} could not be read and is ignored: {self.error} "
+                f"(does its sender speak missionctl protocol {PROTOCOL_VERSION}? see docs/protocol.md)")
+
+
 class MissionClient:
     """One connection to a mission server.
 
     Listeners get `(kind, payload)` on the event loop: "state" (StateSnapshot
     after (re)sync), "events" (EventBatch), "fleet" (RobotInfo), "telemetry"
-    (Telemetry), "alert" (Alert), "connection" ("connected" | "reconnecting").
+    (Telemetry), "alert" (Alert), "connection" ("connected" | "reconnecting"),
+    "malformed" (Malformed: once per key, e.g. a third-party robot's telemetry
+    that does not match the protocol).
     """
 
     def __init__(
@@ -127,6 +143,7 @@ class MissionClient:
         self._syncing = False
         self._resync_task: asyncio.Task | None = None
         self._ids = itertools.count(1)
+        self._malformed_keys: set[tuple[str, str]] = set()  # (what, key) already reported
 
     # -- lifecycle ---------------------------------------------------------
     async def connect(self) -> StateSnapshot:
@@ -300,8 +317,8 @@ class MissionClient:
     def _on_events(self, msg: Any) -> None:
         try:
             batch = ev.EventBatch.model_validate_json(msg.payload)
-        except ValidationError:
-            log.warning("ignoring a malformed event batch on %s", msg.key)
+        except ValidationError as e:
+            self._malformed("events", msg.key, e)
             return
         self._post(self._got_batch, batch)
 
@@ -314,7 +331,8 @@ class MissionClient:
     def _on_fleet(self, msg: Any) -> None:
         try:
             info = FleetEvent.model_validate_json(msg.payload).robot
-        except ValidationError:
+        except ValidationError as e:
+            self._malformed("fleet", msg.key, e)
             return
         self._post(self._got_fleet, info)
 
@@ -327,7 +345,8 @@ class MissionClient:
     def _on_telemetry(self, msg: Any) -> None:
         try:
             t = Telemetry.model_validate_json(msg.payload)
-        except ValidationError:
+        except ValidationError as e:
+            self._malformed("telemetry", msg.key, e)
             return
         self._post(self._got_telemetry, t)
 
@@ -338,9 +357,21 @@ class MissionClient:
     def _on_alert(self, msg: Any) -> None:
         try:
             a = Alert.model_validate_json(msg.payload)
-        except ValidationError:
+        except ValidationError as e:
+            self._malformed("alert", msg.key, e)
             return
         self._post(self._emit, "alert", a)
+
+    def _malformed(self, what: str, key: str, e: ValidationError) -> None:
+        """Said once per key (a robot's telemetry comes several times a second)."""
+        if (what, key) in self._malformed_keys:
+            return
+        self._malformed_keys.add((what, key))
+        first = e.errors()[0]
+        where = ".".join(str(x) for x in first["loc"])
+        m = Malformed(what, key, f"{where}: {first['msg']}" if where else first["msg"])
+        log.warning("%s", m.sentence())
+        self._post(self._emit, "malformed", m)
 
     def _on_server_alive(self, key: str, alive: bool) -> None:
         self._post(self._server_presence, alive)

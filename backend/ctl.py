@@ -1019,6 +1019,8 @@ def watch_line(kind: str, payload: Any, as_json: bool) -> str | None:
             return json.dumps({"kind": "fleet", "robot": payload.model_dump(mode="json")})
         if kind == "alert":
             return json.dumps({"kind": "alert", **payload.model_dump(mode="json")})
+        if kind == "malformed":
+            return json.dumps({"kind": "malformed", "what": payload.what, "key": payload.key, "error": payload.error})
         if kind == "connection":
             return json.dumps({"kind": "connection", "state": payload})
         if kind == "state":
@@ -1033,6 +1035,8 @@ def watch_line(kind: str, payload: Any, as_json: bool) -> str | None:
     if kind == "alert":
         where = f" [{payload.robot}{'/' + payload.skill if payload.skill else ''}]" if payload.robot else ""
         return f"{payload.level}{where}: {payload.message}"
+    if kind == "malformed":
+        return f"unreadable {payload.what} on {payload.key} (ignored): {payload.error}"
     if kind == "connection":
         return f"connection: {payload}"
     if kind == "state":
@@ -1147,7 +1151,7 @@ async def _session(args: argparse.Namespace, endpoints: list[str], login: Any = 
         login=login,
         client_id=args.client_id or default_client_id(),
         timeout=args.timeout,
-        telemetry=args.op == "robots",
+        telemetry=args.op in ("robots", "watch"),  # watch: to say when a robot's telemetry is unreadable
     )
     async with client:
         if args.op == "state":

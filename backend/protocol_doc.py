@@ -32,6 +32,14 @@ Times are ISO 8601 with a zone. A refusal is always a Zenoh `reply_err` whose
 payload is an `ErrorReply` (`code` is stable, `message` is a sentence for a
 person naming robot, skill and reason).
 
+Every message is checked against its schema below (unknown fields are
+refused). The server answers a query it cannot read with `reply_err`
+(`code: bad_request`, naming the field); a publication nobody can answer
+(telemetry, say) is ignored by its readers, and missionctl's consoles raise
+an "unreadable message" alert naming the key and the field, once per key
+(`missionctl ctl watch` prints it too): the first place to look when a new
+robot's telemetry never shows.
+
 ## Key space
 
 | key | kind | who declares | payload |

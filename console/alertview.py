@@ -14,7 +14,7 @@ from .model import fmt_clock
 from .views import ViewScreen
 
 LEVEL_VARS = {"error": "error", "warning": "warning", "info": "primary"}
-KIND_WORDS = {"failure": "failure", "offline": "offline", "out_of_range": "out of range", "low_battery": "low battery", "refusal": "refusal", "server": "server"}
+KIND_WORDS = {"failure": "failure", "offline": "offline", "out_of_range": "out of range", "low_battery": "low battery", "refusal": "refusal", "server": "server", "malformed": "unreadable message"}
 
 
 class AlertScreen(ViewScreen):

@@ -45,6 +45,7 @@ from .messages import (
     EventsApplied,
     FleetChanged,
     MapChanged,
+    MessageUnreadable,
     StateLoaded,
     TelemetryChanged,
 )
@@ -428,6 +429,13 @@ class MissionApp(App[int]):
             self.raise_alert(a)
         else:
             self.awareness_signal.publish(("alerts", None))
+
+    def on_message_unreadable(self, message: MessageUnreadable) -> None:
+        """Someone on the network speaks another protocol: say so once (an
+        integrator bringing up a robot sees why its telemetry never shows)."""
+        a = self.alerts.add("malformed", message.text, self.clock(), robot=message.robot)
+        if a is not None:
+            self.raise_alert(a)
 
     # -- alerts -------------------------------------------------------------------------------
     def raise_alert(self, a: AlertEntry, *, notify: bool = True) -> None:

@@ -9,11 +9,11 @@ from __future__ import annotations
 
 from typing import Any, Protocol
 
-from backend.client import MissionClient
+from backend.client import Malformed, MissionClient
 from backend.events import EventBatch
 from backend.login import Login
 from backend.mapfollow import MapFeed, MapUpdate
-from backend.protocol import Alert, OpReply, RobotInfo, StateSnapshot, Telemetry
+from backend.protocol import Alert, Keys, OpReply, RobotInfo, StateSnapshot, Telemetry
 
 from .messages import (
     AccountKnown,
@@ -22,6 +22,7 @@ from .messages import (
     EventsApplied,
     FleetChanged,
     MapChanged,
+    MessageUnreadable,
     StateLoaded,
     TelemetryChanged,
 )
@@ -111,5 +112,9 @@ class ClientBridge:
         elif kind == "alert":
             a: Alert = payload
             post(AlertReceived(a))
+        elif kind == "malformed":
+            m: Malformed = payload
+            robot = Keys.robot_of(m.key) if "/robot/" in m.key else None
+            post(MessageUnreadable(m.what, m.key, m.sentence(), robot))
         elif kind == "connection":
             post(ConnectionChanged(str(payload), endpoint=self.endpoint))

@@ -38,7 +38,7 @@ LOW_BATTERY = 0.20
 
 Kind = Literal["operation", "report", "refusal", "failure", "alert"]
 KINDS: tuple[str, ...] = ("operation", "report", "refusal", "failure", "alert")
-AlertKind = Literal["failure", "offline", "out_of_range", "low_battery", "refusal", "server"]
+AlertKind = Literal["failure", "offline", "out_of_range", "low_battery", "refusal", "server", "malformed"]
 
 
 def split_actor(actor: str) -> tuple[str, str]:

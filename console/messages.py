@@ -75,6 +75,18 @@ class AlertReceived(Message):
         self.alert = alert
 
 
+class MessageUnreadable(Message):
+    """A message from the network the client library could not read (first
+    from its key): a robot or tool speaking another protocol, most likely."""
+
+    def __init__(self, what: str, key: str, text: str, robot: str | None) -> None:
+        super().__init__()
+        self.what = what
+        self.key = key
+        self.text = text
+        self.robot = robot
+
+
 class MapChanged(Message):
     """The map feed changed: `mirror` is the follower's mirror (read it, never
     change it), `update` says what changed (backend.mapfollow.MapUpdate)."""

@@ -381,3 +381,28 @@ async def test_what_happened_while_reconnecting_raises_alerts():
         app.post_message(StateLoaded(b.snapshot(), b.library, fleet({**MARS_FLEET, "lru2": False})))
         await pilot.pause()
         assert app.alerts.unacknowledged == 2 and app.bells == 2
+
+
+async def test_an_unreadable_message_raises_one_alert_naming_its_key_and_field():
+    """The client library reports a message it could not read (once per key);
+    the bridge makes it an alert of the robot whose key it came on."""
+    from backend.client import Malformed
+    from console.bridge import ClientBridge
+
+    app = make_app()
+    async with app.run_test(size=SIZE) as pilot:
+        await inject(app, pilot, Builder(MARS))
+        bridge = ClientBridge(app, "tcp/127.0.0.1:7447")
+        m = Malformed("telemetry", "mc/v1/robot/lru1/telemetry", "battery: Input should be less than or equal to 1")
+        bridge._on_client("malformed", m)
+        await wait_until(pilot, lambda: app.alerts.unacknowledged == 1, what="an alert")
+        [a] = app.alerts.alerts
+        assert (a.kind, a.robot, a.level) == ("malformed", "lru1", "warning")
+        assert "mc/v1/robot/lru1/telemetry" in a.message and "battery:" in a.message
+        await pilot.press("f6")
+        await wait_until(pilot, lambda: isinstance(app.screen, AlertScreen), what="alert list")
+        assert "unreadable message" in screen_text(app)
+        # the same again (another client session, say): merged, not a second alert
+        bridge._on_client("malformed", m)
+        await pilot.pause()
+        assert len(app.alerts.alerts) == 1

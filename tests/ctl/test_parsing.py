@@ -450,3 +450,15 @@ def test_describe_lines():
     assert dup.endswith("(this request had been applied already)")
     run_all = ops.Control(op="run")
     assert describe(run_all, OpReply(revision=3, value={"robots": {"lru1": "ok", "lru2": "lru2 is busy"}}), 3, None) == "run sent to lru1 at revision 3"
+
+
+def test_watch_says_which_message_was_unreadable():
+    from backend.client import Malformed
+    from backend.ctl import watch_line
+
+    m = Malformed("telemetry", "mc/v1/robot/lru1/telemetry", "battery: Input should be less than or equal to 1")
+    assert watch_line("malformed", m, False) == (
+        "unreadable telemetry on mc/v1/robot/lru1/telemetry (ignored): battery: Input should be less than or equal to 1")
+    assert json.loads(watch_line("malformed", m, True)) == {
+        "kind": "malformed", "what": "telemetry", "key": "mc/v1/robot/lru1/telemetry",
+        "error": "battery: Input should be less than or equal to 1"}
