@@ -344,6 +344,7 @@ class MapScreen(Screen):
         self.view.move_cursor(dcol, drow)
 
     @on(MapView.CursorMoved)
+    @on(MapView.Zoomed)
     def _cursor_moved(self) -> None:
         self.update_info()
 

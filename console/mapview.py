@@ -68,6 +68,7 @@ GROUND16 = {
     T_ROCK: ("#000000", "#aaaaaa", "#5555ff"),
 }
 MIN_MPP, MAX_MPP = 0.25, 64.0
+WHEEL_ZOOM = 0.7  # scale per wheel step (in); the keys' + and - halve and double
 
 
 def heading_glyph(yaw: float, glyphs: str) -> str:
@@ -376,6 +377,9 @@ class MapView(Widget, can_focus=True):
     class CursorMoved(Message):
         pass
 
+    class Zoomed(Message):
+        """The scale changed by the mouse wheel (the keys' zoom is the screen's)."""
+
     def __init__(self, model: ConsoleModel, *, id: str | None = None) -> None:
         super().__init__(id=id)
         self.model = model
@@ -545,6 +549,23 @@ class MapView(Widget, can_focus=True):
     def zoom(self, factor: float) -> None:
         self.set_view(mpp=self.vp.mpp * factor)
         self.keep_cursor_visible(centre=False)
+
+    def zoom_at(self, factor: float, col: int, row: int) -> None:
+        """Zoom keeping the ground under cell (col, row) there (the mouse's)."""
+        x, y = self.vp.cell_centre(col, row)
+        mpp = min(MAX_MPP, max(MIN_MPP, self.vp.mpp * factor))
+        k = mpp / self.vp.mpp
+        self.set_view(cx=x - (x - self.vp.cx) * k, cy=y - (y - self.vp.cy) * k, mpp=mpp)
+
+    def on_mouse_scroll_up(self, event: events.MouseScrollUp) -> None:
+        event.stop()
+        self.zoom_at(WHEEL_ZOOM, event.x, event.y)
+        self.post_message(self.Zoomed())
+
+    def on_mouse_scroll_down(self, event: events.MouseScrollDown) -> None:
+        event.stop()
+        self.zoom_at(1 / WHEEL_ZOOM, event.x, event.y)
+        self.post_message(self.Zoomed())
 
     def pan(self, dx_cells: int, dy_cells: int) -> None:
         self.set_view(cx=self.vp.cx + dx_cells * self.vp.mpp, cy=self.vp.cy - 2 * dy_cells * self.vp.mpp)

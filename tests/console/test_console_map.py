@@ -332,6 +332,32 @@ async def test_zoom_and_pan_move_the_view():
         assert view.vp.mpp >= mpp  # the whole site
 
 
+async def test_the_mouse_wheel_zooms_about_the_ground_under_the_mouse():
+    from textual import events
+
+    from console.mapview import WHEEL_ZOOM
+
+    app = make_app()
+    async with app.run_test(size=SIZE) as pilot:
+        await open_map(app, pilot)
+        view = app.screen.view
+        mpp = view.vp.mpp
+        col, row = 20, 8  # away from the centre: the view must shift to keep this ground here
+        x, y = view.vp.cell_centre(col, row)
+
+        def wheel(event_type):
+            view.post_message(event_type(view, col, row, 0, 0, 0, False, False, False))
+
+        wheel(events.MouseScrollUp)
+        await wait_until(pilot, lambda: view.vp.mpp != mpp, 10, "zoomed in")
+        assert math.isclose(view.vp.mpp, mpp * WHEEL_ZOOM)
+        x2, y2 = view.vp.cell_centre(col, row)
+        assert abs(x2 - x) <= view.vp.mpp and abs(y2 - y) <= view.vp.mpp  # the same ground under the mouse
+        await wait_until(pilot, lambda: f"{view.vp.mpp:.2g} m/px" in screen_text(app), 10, "the new scale shown")
+        wheel(events.MouseScrollDown)
+        await wait_until(pilot, lambda: math.isclose(view.vp.mpp, mpp), 10, "zoomed back out")
+
+
 def test_segments_are_clipped_to_the_view():
     from console.mapview import clip_segment
 
