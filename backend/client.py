@@ -38,6 +38,7 @@ from .protocol import (
     StateSnapshot,
     Telemetry,
     dumps,
+    first_error,
 )
 from .transport import (
     NoResponder,
@@ -367,9 +368,7 @@ class MissionClient:
         if (what, key) in self._malformed_keys:
             return
         self._malformed_keys.add((what, key))
-        first = e.errors()[0]
-        where = ".".join(str(x) for x in first["loc"])
-        m = Malformed(what, key, f"{where}: {first['msg']}" if where else first["msg"])
+        m = Malformed(what, key, first_error(e))
         log.warning("%s", m.sentence())
         self._post(self._emit, "malformed", m)
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
-from pydantic import Field
+from pydantic import Field, ValidationError
 
 from .events import EventBatch
 from .library import Library
@@ -300,6 +300,13 @@ Enqueue.model_rebuild()
 
 def dumps(model: Strict) -> bytes:
     return model.model_dump_json(exclude_none=False).encode()
+
+
+def first_error(e: ValidationError) -> str:
+    """What is wrong with a message, for a person: "field.path: message"."""
+    first = e.errors()[0]
+    where = ".".join(str(x) for x in first["loc"])
+    return f"{where}: {first['msg']}" if where else first["msg"]
 
 
 def event_batch_bytes(batch: EventBatch) -> bytes:

@@ -59,6 +59,7 @@ from .protocol import (
     StateSnapshot,
     Stop,
     dumps,
+    first_error,
 )
 from .protocol import Reset as ResetCmd
 from .rules import Applied, Engine, Refusal
@@ -231,9 +232,7 @@ class MissionServer:
             except Refusal as r:
                 raise ReplyErr(dumps(ErrorReply(**r.to_dict()))) from None
             except ValidationError as e:
-                first = e.errors()[0]
-                where = ".".join(str(x) for x in first["loc"])
-                msg = f"malformed request: {where}: {first['msg']}" if where else f"malformed request: {first['msg']}"
+                msg = f"malformed request: {first_error(e)}"
                 raise ReplyErr(dumps(ErrorReply(code="bad_request", message=msg))) from None
 
         return run
