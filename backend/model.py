@@ -47,6 +47,15 @@ class Status(StrEnum):
 FINISHED = frozenset({Status.SUCCESS, Status.FAILURE})
 ACTIVE = frozenset({Status.RUNNING, Status.PAUSED, Status.SYNCHWAITING})
 
+
+def how_to_change(status: Status) -> str:
+    """What an operator does to change a skill that is no longer idle."""
+    if status in FINISHED:
+        return "finished skills are the execution log and never change; add a new skill (or retry a failed one)"
+    if status in ACTIVE:
+        return "stop the robot (the skill goes back to its queue), then unsynchronize it"
+    return "unsynchronize it first"
+
 # Section rank: a robot's list must be sorted by it (finished log, at most one
 # active, queued, unsynchronized).
 SECTION_RANK: dict[Status, int] = {

@@ -29,6 +29,7 @@ from .model import (
     Mission,
     SkillInstance,
     Status,
+    how_to_change,
 )
 from .ops import (
     UNDOABLE,
@@ -221,7 +222,7 @@ class Engine:
             raise Refusal(
                 "not_idle",
                 f"cannot {doing} {s.display()} on {robot}: it is {s.status.value}; only idle "
-                "(unsynchronized) skills can change — unsynchronize it first",
+                f"(unsynchronized) skills can change — {how_to_change(s.status)}",
                 robot=robot,
                 skill=s.id,
             )
@@ -490,7 +491,7 @@ class Engine:
         for sid in b.skills:
             robot, _, s = self.skill(sid)
             if s.status != Status.IDLE and s.status not in FINISHED:
-                raise Refusal("not_idle", f"cannot remove barrier {op.barrier}: {s.display()} is {s.status.value} on {robot}; unsynchronize it first", robot=robot, skill=sid)
+                raise Refusal("not_idle", f"cannot remove barrier {op.barrier}: {s.display()} is {s.status.value} on {robot}; {how_to_change(s.status)}", robot=robot, skill=sid)
             if sid in self.locked:
                 raise Refusal("locked", f"cannot remove barrier {op.barrier}: {s.display()}: {self.locked[sid]}", robot=robot, skill=sid)
         return [ev.BarrierRemoved(id=op.barrier)], [], {}, RestoreBarrier(barrier=op.barrier, skills=list(b.skills))

@@ -17,7 +17,7 @@ from typing import Any
 
 from backend import events as ev
 from backend.library import Library, ParamSpec
-from backend.model import ACTIVE, FINISHED, Mission, SkillInstance, Status
+from backend.model import ACTIVE, FINISHED, Mission, SkillInstance, Status, how_to_change
 from backend.protocol import RobotInfo, Telemetry
 
 # -- statuses -------------------------------------------------------------------
@@ -409,7 +409,7 @@ class ConsoleModel:
             for sid in self.mission.barriers[bid].skills:
                 f = self.find(sid)
                 if f and f[2].status != Status.IDLE and f[2].status not in FINISHED:
-                    return f"barrier {bid}: {sid} is {STATUS_WORDS[f[2].status]} on {f[0]}; unsynchronize it first"
+                    return f"barrier {bid}: {sid} is {STATUS_WORDS[f[2].status]} on {f[0]}; {how_to_change(f[2].status)}"
             return None
         if action == "retry":
             if s is None:
@@ -444,8 +444,8 @@ class ConsoleModel:
     def _not_idle(self, robot: str, s: SkillInstance, rule: str) -> str:
         if s.status in FINISHED:
             word = "succeeded" if s.status == Status.SUCCESS else "failed"
-            return f"{s.id} {word} on {robot}: finished skills are the execution log and never change"
-        return f"{s.id} is {s.status.value} on {robot}: {rule}; unsynchronize it first"
+            return f"{s.id} {word} on {robot}: {how_to_change(s.status)}"
+        return f"{s.id} is {s.status.value} on {robot}: {rule}; {how_to_change(s.status)}"
 
     def read_only_reason(self, skill_id: str) -> str | None:
         """Why the parameter editor is read-only for this skill (None: editable)."""

@@ -94,7 +94,10 @@ async def test_read_only_editor_says_why():
         await pilot.pause()
         assert "read-only: lru1-2 is running on lru1" in screen_text(app)
         banner = str(app.screen.query_one("#readonly").render())
-        assert banner == "read-only: lru1-2 is running on lru1: only idle skills can be edited; unsynchronize it first"
+        assert banner == (
+            "read-only: lru1-2 is running on lru1: only idle skills can be edited; "
+            "stop the robot (the skill goes back to its queue), then unsynchronize it"
+        )
         editor = app.screen.query_one(ParamEditor)
         assert all(w.disabled for w in editor.query("Input, Select, Switch, TextArea"))
         app.screen.query_one(ScheduleView).select("lru1-1")

@@ -43,7 +43,10 @@ def test_robot_order_puts_static_robots_last():
 
 def test_why_not_names_robot_skill_and_reason():
     m = model_of(mars_mid_execution())
-    assert m.why_not("delete", "lru1", "lru1-2") == "lru1-2 is running on lru1: only idle skills can be deleted; unsynchronize it first"
+    assert m.why_not("delete", "lru1", "lru1-2") == (
+        "lru1-2 is running on lru1: only idle skills can be deleted; "
+        "stop the robot (the skill goes back to its queue), then unsynchronize it"
+    )
     assert "succeeded on lru1: finished skills are the execution log" in m.why_not("delete", "lru1", "lru1-1")
     assert m.why_not("delete", "lru1", "lru1-4") is None
     assert m.why_not("move_up", "lru1", "lru1-4") == "lru1-4 is already first in lru1's plan"
@@ -67,7 +70,11 @@ def test_why_not_names_robot_skill_and_reason():
 
 def test_read_only_reason_matches_the_brief():
     m = model_of(mars_mid_execution())
-    assert m.read_only_reason("lru1-2") == "lru1-2 is running on lru1: only idle skills can be edited; unsynchronize it first"
+    assert m.read_only_reason("lru1-2") == (
+        "lru1-2 is running on lru1: only idle skills can be edited; "
+        "stop the robot (the skill goes back to its queue), then unsynchronize it"
+    )
+    assert m.read_only_reason("lru1-3").endswith("lru1-3 is idle_synchronized on lru1: only idle skills can be edited; unsynchronize it first")
     assert m.read_only_reason("lru1-4") is None
 
 

@@ -306,17 +306,17 @@ class TestDelete:
         assert ids(engine, "lru2") == ["lru2-2"]
 
     @pytest.mark.parametrize(
-        "status",
+        ("status", "remedy"),
         [
-            Status.IDLE_SYNCHRONIZED,
-            Status.SYNCHWAITING,
-            Status.RUNNING,
-            Status.PAUSED,
-            Status.SUCCESS,
-            Status.FAILURE,
+            (Status.IDLE_SYNCHRONIZED, "unsynchronize it first"),
+            (Status.SYNCHWAITING, "stop the robot (the skill goes back to its queue), then unsynchronize it"),
+            (Status.RUNNING, "stop the robot"),
+            (Status.PAUSED, "stop the robot"),
+            (Status.SUCCESS, "the execution log and never change"),
+            (Status.FAILURE, "retry a failed one"),
         ],
     )
-    def test_non_idle_refused(self, engine, refused, bring, status):
+    def test_non_idle_refused_with_what_to_do(self, engine, refused, bring, status, remedy):
         bring(engine, "lru1", "lru1-1", status)
         refused(
             engine,
@@ -325,6 +325,7 @@ class TestDelete:
             "lru1-1",
             "lru1",
             status.value,
+            remedy,
             robot="lru1",
             skill="lru1-1",
         )
