@@ -988,15 +988,19 @@ def _event_text(e: Any) -> str | None:
     if kind == "skill_moved":
         return f"{e.id} moved to {e.index} on {e.robot}"
     if kind == "skill_changed":
-        ch = dict(e.changes)
+        # A status change stamps started_at/finished_at itself: not news.
+        ch = {k: v for k, v in e.changes.items() if k not in ("started_at", "finished_at", "rev")}
         parts = []
         if "status" in ch:
             parts.append(str(ch.pop("status")))
         if ch.get("status_info"):
             parts.append(f"({ch['status_info']})")
         ch.pop("status_info", None)
-        parts += sorted(ch)
-        return f"{e.id}: {' '.join(parts)}"
+        if "attempt" in ch:
+            parts.append(f"attempt {ch.pop('attempt')}")
+        if ch:
+            parts.append("changed " + ", ".join(sorted(ch)))
+        return f"{e.id}: {' '.join(parts) or 'timestamps'}"
     if kind == "barrier_set":
         return f"barrier {e.id} = {' + '.join(e.barrier.skills)}"
     if kind == "barrier_removed":

@@ -452,6 +452,21 @@ def test_describe_lines():
     assert describe(run_all, OpReply(revision=3, value={"robots": {"lru1": "ok", "lru2": "lru2 is busy"}}), 3, None) == "run sent to lru1 at revision 3"
 
 
+def test_watch_lines_say_the_status_and_what_an_edit_changed():
+    from backend import events as ev
+    from backend.ctl import watch_line
+
+    def line(*events):
+        return watch_line("events", ev.EventBatch(revision=9, events=list(events), actor="lru1", op="report"), False)
+
+    done = ev.SkillChanged(id="lru1-1", changes={"status": "success", "finished_at": "2026-11-22T07:00:00+00:00"})
+    assert line(ev.ReportSeq(robot="lru1", seq=4), done) == "r9 report by lru1: lru1-1: success"
+    failed = ev.SkillChanged(id="lru1-2", changes={"status": "failure", "status_info": "battery low", "attempt": 2})
+    assert line(failed) == "r9 report by lru1: lru1-2: failure (battery low) attempt 2"
+    edited = ev.SkillChanged(id="lru1-3", changes={"params": {"speed": 0.4}, "label": "slow"})
+    assert line(edited) == "r9 report by lru1: lru1-3: changed label, params"
+
+
 def test_watch_says_which_message_was_unreadable():
     from backend.client import Malformed
     from backend.ctl import watch_line
