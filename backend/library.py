@@ -328,7 +328,8 @@ def check_params(
             mname = bindings[name]
             marker = markers.get(mname)
             if marker is None:
-                problems.append(ParamProblem((name,), f"unknown marker '{mname}'"))
+                known = ", ".join(sorted(markers)) or "none"
+                problems.append(ParamProblem((name,), f"unknown marker '{mname}' (markers: {known})"))
                 continue
             value, why = marker_value(pspec, marker)
             if why:

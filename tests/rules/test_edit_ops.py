@@ -216,7 +216,7 @@ class TestAdd:
     @pytest.mark.parametrize(
         "skill_name, bindings, param, words",
         [
-            ("drive_to", {"goal": "NOWHERE"}, "goal", ["NOWHERE"]),
+            ("drive_to", {"goal": "NOWHERE"}, "goal", ["unknown marker 'NOWHERE' (markers: POI-A, ROI-1)"]),
             ("drive_to", {"goal": "ROI-1"}, "goal", ["ROI-1"]),  # area marker cannot give a pose
             ("explore", {"area": "POI-A"}, "area", ["POI-A"]),  # pose marker cannot give an area
             (
