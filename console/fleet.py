@@ -5,6 +5,8 @@ robots by capability (see console/capability.py for the syntax)."""
 
 from __future__ import annotations
 
+import json
+
 from rich.text import Text
 from textual import on
 from textual.app import ComposeResult
@@ -135,7 +137,7 @@ class FleetScreen(ViewScreen):
             out.append("\nno manifest yet (never registered): skills from the library", style="dim")
         else:
             mods = ", ".join(f"{m.name} {m.version}" for m in man.modules) or "—"
-            props = ", ".join(f"{k}={v}" for k, v in man.properties.items()) or "—"
+            props = ", ".join(f"{k}={_prop(v)}" for k, v in man.properties.items()) or "—"
             out.append("\nmodules: ", style="bold")
             out.append(mods)
             out.append("\nproperties: ", style="bold")
@@ -155,3 +157,8 @@ class FleetScreen(ViewScreen):
     @on(DataTable.RowHighlighted)
     def _highlighted(self) -> None:
         self._detail()
+
+
+def _prop(value: object) -> str:
+    """A manifest property as the robot sent it (JSON), as `ctl robots` shows it."""
+    return value if isinstance(value, str) else json.dumps(value, separators=(",", ":"), ensure_ascii=False)

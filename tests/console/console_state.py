@@ -225,7 +225,8 @@ def mars_fleet_with_manifests() -> dict[str, RobotInfo]:
     lib = b.library
     out = {
         "lru1": RobotInfo(name="lru1", online=True, since=T0, manifest=manifest(
-            "lru1", "lru_science", lib.skills_of("lru_science"), {"nav": "2.1.0", "science_cam": "1.4.2"}, max_speed=1.0)),
+            "lru1", "lru_science", lib.skills_of("lru_science"), {"nav": "2.1.0", "science_cam": "1.4.2"}, max_speed=1.0,
+            simulated=True, capabilities=["science_camera"])),
         "lru2": RobotInfo(name="lru2", online=True, since=T0, manifest=manifest(
             "lru2", "lru_manipulator", lib.skills_of("lru_manipulator"), {"nav": "2.1.0", "arm": "0.9.3"}, payload_kg=5)),
         "ardea": RobotInfo(name="ardea", online=False, since=T0),

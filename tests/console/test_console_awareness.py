@@ -52,7 +52,8 @@ async def test_fleet_screen_shows_presence_manifest_history_and_activity():
         assert any(ch in text for ch in "▁▂▃▄▅▆▇"), "battery/link sparklines"
         # the selected robot's manifest and what it does
         assert "modules: nav 2.1.0, science_cam 1.4.2" in text
-        assert "properties: max_speed=1.0" in text
+        # as the robot sent them (JSON), like `ctl robots`: not Python's True / ['...']
+        assert 'properties: max_speed=1.0, simulated=true, capabilities=["science_camera"]' in text
         assert "doing: ▶ lru1-1 running" in text
         assert "last report: ▶ lru1-1 running 10:42:07" in text
         # a robot that never registered
