@@ -24,7 +24,7 @@ from backend.ops import AddSkill, Control, Sync, Undo
 from backend.server import MissionServer
 from backend.transport import free_port, loopback_endpoint
 
-from .harness import ROOT, status
+from .harness import ROOT, Proc, status
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -210,3 +210,16 @@ def test_a_second_server_on_the_same_journal_is_refused(tmp_path):
     assert second.returncode == 2, second.stderr
     assert f"{db} is in use by another process" in second.stderr
     assert "Traceback" not in second.stderr
+
+
+def test_a_restart_on_a_journal_says_the_mission_file_was_not_read(tmp_path):
+    db = tmp_path / "m.db"
+    other = ROOT / "missions" / "mars_sample_return.yaml"
+    for mission, expect in ((TUTORIAL, "started from"), (other, f"{other} was not read")):
+        server = Proc([sys.executable, "-m", "backend.cli", "server", "--mission", str(mission), "--db", str(db),
+                       "--listen", loopback_endpoint(free_port())])
+        try:
+            server.wait_line(expect)
+            assert "mission 'Tutorial'" in server.output()
+        finally:
+            server.stop()
