@@ -149,7 +149,9 @@ class MissionClient:
     # -- lifecycle ---------------------------------------------------------
     async def connect(self) -> StateSnapshot:
         self._loop = asyncio.get_running_loop()
-        cfg = client_config(self.endpoints, extra=self.zenoh_extra)
+        # opening waits for the router as long as an operation would (Zenoh: 10 s)
+        extra = {"transport/unicast/open_timeout": max(1, round(self.timeout * 1000)), **self.zenoh_extra}
+        cfg = client_config(self.endpoints, extra=extra)
         try:
             self.session = await asyncio.to_thread(open_session, cfg)
         except LoginRefused as e:
