@@ -355,7 +355,7 @@ class MissionServer:
             if req.expected_revision is not None:
                 self.engine.check_fresh(op, req.expected_revision)
             try:
-                applied = await self._robot_op(op, actor)
+                applied = await self._robot_op(op, actor, req.client, req.request_id)
             except JournalFailed as f:
                 raise Refusal(f.code, f"{f.message}. The robot did get the {op.op} command: once the journal works, "
                               "compare `missionctl ctl state` with the robot and unsync or stop what differs") from None
@@ -409,8 +409,11 @@ class MissionServer:
             if _major(have) != _major(want):
                 raise Refusal("incompatible", f"{robot} implements {s.skill} {have}, the library needs {want} (major versions differ); {s.id} stays unsynchronized", robot=robot, skill=s.id)
 
-    async def _robot_op(self, op: Any, actor: str) -> Applied:
+    async def _robot_op(self, op: Any, actor: str, client: str = "", request_id: str | None = None) -> Applied:
+        """Send the operation to its robot(s); journal the acknowledgement with
+        the request id, so a retry after a server restart is a duplicate."""
         e = self.engine
+        req = {"client": client, "request_id": request_id, "actor": actor}
         if isinstance(op, Sync):
             async with self._lock(op.robot):
                 skills = e.plan_sync(op)
@@ -423,7 +426,7 @@ class MissionServer:
                         if partners:
                             barriers[s.id] = BarrierInfo(barrier=e.mission.barrier_of(s.id), partners=dict(partners))
                     await self._command(op.robot, Enqueue(skills=skills, barriers=barriers))
-                    return self._submit(SyncAck(robot=op.robot, ids=ids), actor=actor)
+                    return self._submit(SyncAck(robot=op.robot, ids=ids), **req)
                 finally:
                     e.release(op.robot, ids)
         if isinstance(op, Unsync):
@@ -431,7 +434,7 @@ class MissionServer:
                 ids = e.plan_unsync(op)
                 try:
                     reply = await self._command(op.robot, Dequeue(ids=ids))
-                    applied = self._submit(UnsyncDone(robot=op.robot, ids=reply.ids), actor=actor)
+                    applied = self._submit(UnsyncDone(robot=op.robot, ids=reply.ids), **req)
                 finally:
                     e.release(op.robot)
                 if reply.kept:
@@ -445,7 +448,7 @@ class MissionServer:
                 try:
                     self._check_manifest(robot, [new])
                     await self._command(robot, Enqueue(skills=[new], front=True))
-                    return self._submit(RetryAck(robot=robot, failed_id=op.id, skill=new), actor=actor)
+                    return self._submit(RetryAck(robot=robot, failed_id=op.id, skill=new), **req)
                 finally:
                     e.release(robot)
         # run / pause / stop / reset, for one robot or all

@@ -20,7 +20,7 @@ import pytest
 from backend.agent import RobotAgent
 from backend.client import MissionClient, OperationRefused
 from backend.journal import Journal, JournalError
-from backend.ops import AddSkill, Control, Sync, Undo
+from backend.ops import AddSkill, Control, Sync, Undo, Unsync
 from backend.server import MissionServer
 from backend.transport import free_port, loopback_endpoint
 
@@ -223,3 +223,45 @@ def test_a_restart_on_a_journal_says_the_mission_file_was_not_read(tmp_path):
             assert "mission 'Tutorial'" in server.output()
         finally:
             server.stop()
+
+
+def test_a_robot_operation_retried_after_a_server_restart_is_applied_once(tmp_path):
+    """The request id of sync/unsync/retry is journaled with the robot's
+    acknowledgement: a client whose reply was lost in the restart retries
+    and is told it was applied (not refused, not applied again)."""
+    db = tmp_path / "m.db"
+
+    async def scenario():
+        endpoint = loopback_endpoint(free_port())
+        server = new_server(db, endpoint)
+        await server.start()
+        agent = RobotAgent("lru1", "lru_science", connect=[endpoint], modules={"base": "1.0.0"}, lease_ms=1000)
+
+        async def handler(ctx, **params):
+            ctx.progress(1.0)
+
+        for skill in ("drive_to", "take_science_image"):
+            agent.add_skill(skill, handler, version="1.0.0", raw=True)
+        try:
+            async with MissionClient(endpoint, client_id="t") as client:
+                await agent.start()
+                await agent.wait_registered(timeout=WAIT)
+                synced = await client.submit(Sync(robot="lru1"), request_id="s1")
+                unsynced = await client.submit(Unsync(robot="lru1", from_id="lru1-2"), request_id="u1")
+        finally:
+            await agent.stop()
+            await server.stop()
+        endpoint = loopback_endpoint(free_port())
+        server = new_server(db, endpoint)
+        await server.start()
+        try:
+            async with MissionClient(endpoint, client_id="t") as client:
+                for op, rid, first in ((Sync(robot="lru1"), "s1", synced), (Unsync(robot="lru1", from_id="lru1-2"), "u1", unsynced)):
+                    again = await client.submit(op, request_id=rid)
+                    assert again.duplicate and again.revision == first.revision, (rid, again)
+                assert status(client.mission, "lru1-1") == "idle_synchronized"
+                assert status(client.mission, "lru1-2") == "idle"
+        finally:
+            await server.stop()
+
+    asyncio.run(asyncio.wait_for(scenario(), 90))
