@@ -1112,7 +1112,13 @@ def _endpoints(args: argparse.Namespace) -> list[str]:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from .client import OperationRefused, OperationTimeout, ProtocolMismatch, ServerUnreachable
+    from .client import (
+        MaybeApplied,
+        OperationRefused,
+        OperationTimeout,
+        ProtocolMismatch,
+        ServerUnreachable,
+    )
     from .transport import TransportError
 
     endpoints = _endpoints(args)
@@ -1133,6 +1139,12 @@ def _run(args: argparse.Namespace) -> int:
         r = e.reply
         return _fail(args, r.code, r.message, EXIT_REFUSED, lines=[f"missionctl: refused: {r.message}"],
                      extra={k: v for k, v in r.model_dump().items() if k not in ("ok", "code", "message") and v is not None})
+    except MaybeApplied as e:  # the request left: it may have been applied
+        retry = f"--request-id {e.request_id}" + (f" --client-id {args.client_id}" if args.client_id else "")
+        message = (f"{e.what}. Once the server answers, look with `missionctl ctl state`, or run the same command "
+                   f"again with {retry}: it is applied once (the reply says so if it had been)")
+        code = "timeout" if isinstance(e, OperationTimeout) else "unreachable"
+        return _fail(args, code, message, EXIT_UNREACHABLE, extra={"request_id": e.request_id, "maybe_applied": True})
     except ServerUnreachable as e:
         return _fail(args, "unreachable", str(e), EXIT_UNREACHABLE)
     except ProtocolMismatch as e:

@@ -1,7 +1,9 @@
-"""The journal cannot be written (disk full, locked by another program,
-deleted under the server): an operation or a robot report is refused and
-changes nothing, in memory or after a restart, and is applied once the
-journal works again. A second server on the same journal is refused.
+"""Failure paths of the server. The journal cannot be written (disk full,
+locked by another program, deleted under the server): an operation or a
+robot report is refused and changes nothing, in memory or after a restart,
+and is applied once the journal works again. A second server on the same
+journal is refused. A request whose reply is lost (server restarted or gone)
+can be retried with its request id and is applied once.
 
 The server runs in the test process (its journal's connection is replaced
 by one that fails like a full disk); the client and the robot agent are on
@@ -18,7 +20,7 @@ import threading
 import pytest
 
 from backend.agent import RobotAgent
-from backend.client import MissionClient, OperationRefused
+from backend.client import MissionClient, OperationRefused, ServerGone, ServerUnreachable
 from backend.journal import Journal, JournalError
 from backend.ops import AddSkill, Control, Sync, Undo, Unsync
 from backend.server import MissionServer
@@ -265,3 +267,29 @@ def test_a_robot_operation_retried_after_a_server_restart_is_applied_once(tmp_pa
             await server.stop()
 
     asyncio.run(asyncio.wait_for(scenario(), 90))
+
+
+def test_an_operation_nobody_answers_may_have_been_applied(tmp_path):
+    """The server goes away while a request is out: the error says it may
+    have been applied and carries the request id to retry with."""
+
+    async def scenario():
+        endpoint = loopback_endpoint(free_port())
+        server = new_server(tmp_path / "m.db", endpoint)
+        await server.start()
+        client = MissionClient(endpoint, client_id="t")
+        try:
+            await client.connect()
+            for q in server._entities:  # the operations queryable goes: as in a crash, no reply at all
+                if hasattr(q, "undeclare"):
+                    q.undeclare()
+            with pytest.raises(ServerGone) as gone:
+                await client.submit(drive_to(), request_id="lost-1")
+            assert isinstance(gone.value, ServerUnreachable)
+            assert gone.value.request_id == "lost-1"
+            assert "may have applied it" in str(gone.value) and "request id lost-1" in str(gone.value)
+        finally:
+            await client.close()
+            await server.stop()
+
+    asyncio.run(asyncio.wait_for(scenario(), 60))
