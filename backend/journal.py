@@ -273,7 +273,12 @@ class Journal:
             conn.close()
             os.close(lock_fd)
             raise JournalError(f"{p}: not a usable journal: {e}") from None
-        return cls(conn, p, snapshot_every=snapshot_every, keep_snapshots=keep_snapshots, lock_fd=lock_fd)
+        try:
+            return cls(conn, p, snapshot_every=snapshot_every, keep_snapshots=keep_snapshots, lock_fd=lock_fd)
+        except sqlite3.Error as e:  # its first reads
+            conn.close()
+            os.close(lock_fd)
+            raise _damaged(p, e) from None
 
     def close(self) -> None:
         with self._lock:
@@ -459,6 +464,14 @@ class Journal:
         (None, []) for an empty journal. The newest readable snapshot is the
         base; an unreadable one is skipped for an older one (see `load_info`).
         Raises JournalCorrupt rather than return a partial mission."""
+        try:
+            return self._load()
+        except sqlite3.Error as e:  # a damaged file (or pages of it)
+            with self._lock:
+                _rollback(self.conn)
+            raise _damaged(self.path, e) from None
+
+    def _load(self) -> tuple[Mission | None, list[tuple[str, str, int]]]:
         t0 = time.perf_counter()
         info = LoadInfo()
         with self._lock:
@@ -553,6 +566,13 @@ class Journal:
             if f.exists():
                 total += f.stat().st_size
         return total
+
+
+def _damaged(path: Path, e: sqlite3.Error) -> JournalCorrupt:
+    return JournalCorrupt(
+        f"{path}: the journal cannot be read ({e}); restore a copy of the file, "
+        "or start from the mission file with a new journal"
+    )
 
 
 def _identity(path: Path) -> tuple[int, int] | None:

@@ -146,7 +146,10 @@ class MissionServer:
                 lib_file = library_path(self.mission_file, mission.library)
                 journal.close()
                 journal = Journal.open(self.db, library=str(lib_file))
-                journal.snapshot(mission)
+                try:
+                    journal.snapshot(mission)
+                except sqlite3.Error as e:  # e.g. a full disk
+                    raise JournalError(f"{self.db}: cannot write the journal's first snapshot: {e}") from None
                 requests = []
         except BaseException:
             journal.close()

@@ -293,3 +293,15 @@ def test_an_operation_nobody_answers_may_have_been_applied(tmp_path):
             await server.stop()
 
     asyncio.run(asyncio.wait_for(scenario(), 60))
+
+
+def test_a_journal_that_cannot_take_its_first_snapshot_is_a_clear_error(tmp_path, monkeypatch):
+    def full(self, mission):
+        raise sqlite3.OperationalError("database or disk is full")
+
+    monkeypatch.setattr(Journal, "snapshot", full)
+    server = new_server(tmp_path / "m.db", loopback_endpoint(free_port()))
+    with pytest.raises(JournalError, match="cannot write the journal's first snapshot: database or disk is full"):
+        server._load()
+    assert server.journal is None
+    Journal.open(tmp_path / "m.db").close()  # closed again: not held "in use"
