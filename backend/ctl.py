@@ -1148,8 +1148,10 @@ def _run(args: argparse.Namespace) -> int:
         target = Path(args.file)
         if target.is_dir():
             raise UsageError(f"save: {args.file} is a directory")
-        if not target.resolve().parent.is_dir():
-            raise UsageError(f"save: folder {target.parent} does not exist")
+        parent = target.resolve().parent
+        if not parent.is_dir():
+            why = "is not a folder" if parent.exists() else "does not exist"
+            raise UsageError(f"save: {target.parent} {why}: nothing was written")
     try:
         return asyncio.run(_session(args, endpoints, login))
     except OperationRefused as e:

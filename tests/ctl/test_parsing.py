@@ -404,6 +404,11 @@ def test_save_into_missing_folder_exits_2(tmp_path, capsys):
     code = run(parse_args(["--connect", _nobody(), "save", str(tmp_path / "no" / "such" / "m.yaml")]))
     assert code == 2
     assert "does not exist" in capsys.readouterr().err
+    a_file = tmp_path / "plain.txt"
+    a_file.write_text("x")
+    code = run(parse_args(["--connect", _nobody(), "save", str(a_file / "m.yaml")]))
+    assert code == 2
+    assert f"save: {a_file} is not a folder" in capsys.readouterr().err
 
 
 def test_help_documents_everything():
