@@ -114,6 +114,36 @@ def test_an_operation_the_journal_cannot_take_is_refused_and_changes_nothing(tmp
     asyncio.run(asyncio.wait_for(scenario(), 90))
 
 
+def test_a_journal_locked_by_another_program_refuses_within_the_client_timeout(tmp_path):
+    """A real SQLite lock (say, the sqlite3 shell in a write transaction):
+    the server waits briefly for it, then refuses; the client hears the
+    refusal, not its own timeout."""
+    db = tmp_path / "m.db"
+
+    async def scenario():
+        endpoint = loopback_endpoint(free_port())
+        server = new_server(db, endpoint)
+        await server.start()
+        client = MissionClient(endpoint, client_id="t")
+        other = sqlite3.connect(db, isolation_level=None)
+        try:
+            await client.connect()
+            other.execute("BEGIN EXCLUSIVE")
+            with pytest.raises(OperationRefused) as refused:
+                await client.submit(drive_to("locked"), timeout=8)
+            assert refused.value.code == "journal_failed"
+            assert "locked" in str(refused.value) and "another program holds the file locked" in str(refused.value)
+            other.execute("ROLLBACK")
+            reply = await client.submit(drive_to("locked"))
+            assert reply.revision == 1
+        finally:
+            other.close()
+            await client.close()
+            await server.stop()
+
+    asyncio.run(asyncio.wait_for(scenario(), 60))
+
+
 def test_an_undo_the_journal_cannot_take_can_be_sent_again(tmp_path):
     async def scenario():
         endpoint = loopback_endpoint(free_port())
