@@ -19,8 +19,14 @@ EXIT_OK, EXIT_REFUSED, EXIT_BAD_INPUT, EXIT_UNREACHABLE = 0, 1, 2, 3
 
 
 class _Parser(argparse.ArgumentParser):
+    # `ctl --json`: a usage error is also a JSON object on stdout, like every
+    # other failure of ctl (set from the command line before parsing it)
+    json_errors = False
+
     def error(self, message: str):  # usage errors exit 2 without a traceback
         self.print_usage(sys.stderr)
+        if self.json_errors:
+            print(json.dumps({"ok": False, "code": "bad_input", "message": message}), flush=True)
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
 
 
@@ -94,6 +100,9 @@ def _registrations():
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
+    from .ctl import wants_json
+
+    _Parser.json_errors = wants_json(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help(sys.stderr)

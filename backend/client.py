@@ -61,6 +61,17 @@ class ClientError(Exception):
     """Base of what a client reports; `str()` is a sentence for a person."""
 
 
+class MaybeApplied(ClientError):
+    """Base of the errors after which an operation may have been applied
+    (its reply was lost): `what` says what happened, `request_id` is the id
+    to retry it with (the server applies it once)."""
+
+    def __init__(self, what: str, request_id: str):
+        super().__init__(f"{what} — retry with request id {request_id} to be safe (it is applied once)")
+        self.what = what
+        self.request_id = request_id
+
+
 class ServerUnreachable(ClientError):
     pass
 
@@ -73,8 +84,13 @@ class ProtocolMismatch(ClientError):
     pass
 
 
-class OperationTimeout(ClientError):
+class OperationTimeout(MaybeApplied):
     pass
+
+
+class ServerGone(MaybeApplied, ServerUnreachable):
+    """No server answered an operation: none was there, or it went away
+    while handling it (and may have applied it)."""
 
 
 class OperationRefused(ClientError):
@@ -149,7 +165,9 @@ class MissionClient:
     # -- lifecycle ---------------------------------------------------------
     async def connect(self) -> StateSnapshot:
         self._loop = asyncio.get_running_loop()
-        cfg = client_config(self.endpoints, extra=self.zenoh_extra)
+        # opening waits for the router as long as an operation would (Zenoh: 10 s)
+        extra = {"transport/unicast/open_timeout": max(1, round(self.timeout * 1000)), **self.zenoh_extra}
+        cfg = client_config(self.endpoints, extra=extra)
         try:
             self.session = await asyncio.to_thread(open_session, cfg)
         except LoginRefused as e:
@@ -423,11 +441,15 @@ class MissionClient:
             raise OperationRefused(_error_reply(e.payload)) from None
         except QueryTimeout:
             raise OperationTimeout(
-                f"the server did not answer '{op.op}' within {wait:g} s; it may still apply it — "
-                f"retry with request id {req.request_id} to be safe"
+                f"the server did not answer '{op.op}' within {wait:g} s; it may have applied it, or still apply it",
+                req.request_id,
             ) from None
         except NoResponder:
-            raise ServerUnreachable(f"no mission server answers at {', '.join(self.endpoints)}") from None
+            raise ServerGone(
+                f"no mission server answered '{op.op}' at {', '.join(self.endpoints)}; "
+                "if one was running, it may have applied it before it went away",
+                req.request_id,
+            ) from None
         reply = OpReply.model_validate_json(raw)
         return reply
 

@@ -67,8 +67,15 @@ Output
   stdout: for operations {"ok": true, "op", "revision", "value", "notes",
   "duplicate"}; `state --json` is the state itself ({"revision", "name",
   "library", "robots", "tasks", "barriers", "markers"}); `watch --json` prints
-  one object per line. Failures print one line on stderr and, with --json,
-  {"ok": false, "code", "message", ...} on stdout.
+  one object per line. Failures print on stderr (one line; a usage error
+  also the usage) and, with --json, exactly one {"ok": false, "code",
+  "message", ...} on stdout, usage errors included. "code" is bad_input or
+  bad_file (exit 2; bad_file lists "issues" as file:line:col), the server's
+  refusal (exit 1: stale, not_idle, unknown_skill, journal_failed, ..., with
+  "robot", "skill", "param" when known), or unreachable, timeout,
+  protocol_mismatch (exit 3). With "maybe_applied": true (a timeout, or a
+  server gone mid-request) the operation may have been applied: run it again
+  with --request-id REQUEST_ID (given in "request_id"), it is applied once.
 
 Exit codes: 0 ok, 1 refused by the server, 2 bad usage or input (nothing is
 sent), 3 server unreachable, not answering in time, or speaking another
@@ -484,9 +491,19 @@ def build_parser() -> argparse.ArgumentParser:
     return top
 
 
+def wants_json(argv: list[str]) -> bool:
+    """`missionctl ARGV...` is `ctl ... --json ...` (before any `--`)."""
+    if not argv or argv[0] != "ctl":
+        return False
+    args = argv[1:argv.index("--")] if "--" in argv else argv[1:]
+    return "--json" in args
+
+
 def parse_args(argv: list[str]) -> argparse.Namespace:
     """`missionctl ctl ARGV...` parsed (argparse errors exit 2)."""
-    return build_parser().parse_args(["ctl", *argv])
+    parser = build_parser()
+    type(parser).json_errors = wants_json(["ctl", *argv])
+    return parser.parse_args(["ctl", *argv])
 
 
 # ---------------------------------------------------------------- operations
@@ -1074,8 +1091,8 @@ def run(args: argparse.Namespace) -> int:
         except (AttributeError, ValueError):
             pass
     if not getattr(args, "op", None):
-        print("missionctl ctl: error: give an operation (missionctl ctl --help lists them)", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        return _fail(args, "bad_input", "give an operation (missionctl ctl --help lists them)", EXIT_BAD_INPUT,
+                     lines=["missionctl ctl: error: give an operation (missionctl ctl --help lists them)"])
     try:
         return _run(args)
     except UsageError as e:
@@ -1116,7 +1133,13 @@ def _endpoints(args: argparse.Namespace) -> list[str]:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from .client import OperationRefused, OperationTimeout, ProtocolMismatch, ServerUnreachable
+    from .client import (
+        MaybeApplied,
+        OperationRefused,
+        OperationTimeout,
+        ProtocolMismatch,
+        ServerUnreachable,
+    )
     from .transport import TransportError
 
     endpoints = _endpoints(args)
@@ -1129,14 +1152,22 @@ def _run(args: argparse.Namespace) -> int:
         target = Path(args.file)
         if target.is_dir():
             raise UsageError(f"save: {args.file} is a directory")
-        if not target.resolve().parent.is_dir():
-            raise UsageError(f"save: folder {target.parent} does not exist")
+        parent = target.resolve().parent
+        if not parent.is_dir():
+            why = "is not a folder" if parent.exists() else "does not exist"
+            raise UsageError(f"save: {target.parent} {why}: nothing was written")
     try:
         return asyncio.run(_session(args, endpoints, login))
     except OperationRefused as e:
         r = e.reply
         return _fail(args, r.code, r.message, EXIT_REFUSED, lines=[f"missionctl: refused: {r.message}"],
                      extra={k: v for k, v in r.model_dump().items() if k not in ("ok", "code", "message") and v is not None})
+    except MaybeApplied as e:  # the request left: it may have been applied
+        retry = f"--request-id {e.request_id}" + (f" --client-id {args.client_id}" if args.client_id else "")
+        message = (f"{e.what}. Once the server answers, look with `missionctl ctl state`, or run the same command "
+                   f"again with {retry}: it is applied once (the reply says so if it had been)")
+        code = "timeout" if isinstance(e, OperationTimeout) else "unreachable"
+        return _fail(args, code, message, EXIT_UNREACHABLE, extra={"request_id": e.request_id, "maybe_applied": True})
     except ServerUnreachable as e:
         return _fail(args, "unreachable", str(e), EXIT_UNREACHABLE)
     except ProtocolMismatch as e:

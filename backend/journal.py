@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import copy
 import json
+import os
 import sqlite3
 import threading
 import time
@@ -60,6 +61,10 @@ JOURNAL_FORMAT = "missionctl/journal@1"
 SNAPSHOT_EVERY = 500
 KEEP_SNAPSHOTS = 3
 REMEMBERED_REQUESTS = 10_000  # as many as the engine remembers
+# How long a write waits for a lock another program holds on the file. The
+# server's event loop waits with it: short, so the refusal reaches the client
+# well within its 10 s operation timeout.
+BUSY_TIMEOUT_S = 2.0
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (
@@ -187,9 +192,12 @@ class Journal:
         *,
         snapshot_every: int = SNAPSHOT_EVERY,
         keep_snapshots: int = KEEP_SNAPSHOTS,
+        lock_fd: int | None = None,
     ):
         self._conn: sqlite3.Connection | None = conn
         self.path = path
+        self._lock_fd = lock_fd
+        self._identity = _identity(path)
         self.snapshot_every = snapshot_every
         self.keep_snapshots = max(1, keep_snapshots)
         self._lock = threading.RLock()
@@ -216,9 +224,11 @@ class Journal:
         p = Path(path)
         if not p.parent.is_dir():
             raise JournalError(f"{p}: cannot open the journal: no such folder {p.parent}")
+        lock_fd = _lock_writer(p)
         try:
-            conn = sqlite3.connect(p, isolation_level=None, check_same_thread=False, timeout=10.0)
+            conn = sqlite3.connect(p, isolation_level=None, check_same_thread=False, timeout=BUSY_TIMEOUT_S)
         except sqlite3.Error as e:
+            os.close(lock_fd)
             raise JournalError(f"{p}: cannot open the journal: {e}") from None
         try:
             mode = conn.execute("PRAGMA journal_mode=WAL").fetchone()[0]
@@ -256,18 +266,28 @@ class Journal:
         except JournalError:
             _rollback(conn)
             conn.close()
+            os.close(lock_fd)
             raise
         except sqlite3.Error as e:
             _rollback(conn)
             conn.close()
+            os.close(lock_fd)
             raise JournalError(f"{p}: not a usable journal: {e}") from None
-        return cls(conn, p, snapshot_every=snapshot_every, keep_snapshots=keep_snapshots)
+        try:
+            return cls(conn, p, snapshot_every=snapshot_every, keep_snapshots=keep_snapshots, lock_fd=lock_fd)
+        except sqlite3.Error as e:  # its first reads
+            conn.close()
+            os.close(lock_fd)
+            raise _damaged(p, e) from None
 
     def close(self) -> None:
         with self._lock:
             if self._conn is not None:
                 self._conn.close()
                 self._conn = None
+            if self._lock_fd is not None:  # after SQLite's own descriptors: see _lock_writer
+                os.close(self._lock_fd)
+                self._lock_fd = None
 
     def __enter__(self) -> Journal:
         return self
@@ -280,6 +300,13 @@ class Journal:
         if self._conn is None:
             raise JournalError(f"{self.path}: the journal is closed")
         return self._conn
+
+    def _writable(self) -> sqlite3.Connection:
+        """The connection, once sure the file is still the one opened: SQLite
+        goes on writing into a deleted file, which a restart would not find."""
+        if _identity(self.path) != self._identity:
+            raise JournalError(f"{self.path} was deleted or replaced while open; what is written now would be lost at a restart")
+        return self.conn
 
     # -- metadata ------------------------------------------------------------------
     def meta(self) -> dict[str, str]:
@@ -350,7 +377,7 @@ class Journal:
                         f"(expected {last + 1}): revisions are consecutive"
                     )
                 last = row[0]
-            conn = self.conn
+            conn = self._writable()
             if len(rows) == 1:  # one statement is its own transaction (autocommit)
                 conn.execute(_INSERT_BATCH, rows[0])
             else:
@@ -397,7 +424,7 @@ class Journal:
         text = _dump(_MISSION_JSON, mission)
         rev = mission.revision
         with self._lock:
-            conn = self.conn
+            conn = self._writable()
             conn.execute("BEGIN IMMEDIATE")
             try:
                 last = self._last_rev
@@ -437,6 +464,14 @@ class Journal:
         (None, []) for an empty journal. The newest readable snapshot is the
         base; an unreadable one is skipped for an older one (see `load_info`).
         Raises JournalCorrupt rather than return a partial mission."""
+        try:
+            return self._load()
+        except sqlite3.Error as e:  # a damaged file (or pages of it)
+            with self._lock:
+                _rollback(self.conn)
+            raise _damaged(self.path, e) from None
+
+    def _load(self) -> tuple[Mission | None, list[tuple[str, str, int]]]:
         t0 = time.perf_counter()
         info = LoadInfo()
         with self._lock:
@@ -531,6 +566,46 @@ class Journal:
             if f.exists():
                 total += f.stat().st_size
         return total
+
+
+def _damaged(path: Path, e: sqlite3.Error) -> JournalCorrupt:
+    return JournalCorrupt(
+        f"{path}: the journal cannot be read ({e}); restore a copy of the file, "
+        "or start from the mission file with a new journal"
+    )
+
+
+def _identity(path: Path) -> tuple[int, int] | None:
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino
+
+
+def _lock_writer(p: Path) -> int:
+    """Take the file's one-writer lock (a second server on the same journal
+    would write the same revisions), or raise JournalError. A BSD lock
+    (flock): independent of SQLite's POSIX locks on the same file. The
+    descriptor must stay open while SQLite has the file: closing any
+    descriptor of a file drops the process's POSIX locks on it."""
+    try:
+        fd = os.open(p, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as e:
+        raise JournalError(f"{p}: cannot open the journal for writing: {e.strerror}") from None
+    try:
+        import fcntl
+    except ImportError:  # not a POSIX system: no guard
+        return fd
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        raise JournalError(
+            f"{p} is in use by another process (another missionctl server on this journal?): "
+            "stop it first, or give this one another --db"
+        ) from None
+    return fd
 
 
 def remember_requests(engine: Any, requests: Iterable[tuple[str, str, int]]) -> None:

@@ -172,7 +172,7 @@ class FleetEvent(Strict):
 class Alert(Strict):
     level: Literal["info", "warning", "error"] = "warning"
     kind: str = Field(
-        "", description="what happened: failure | offline | reconcile | report_refused ('' from older servers); consoles merge their own alerts of the same kind"
+        "", description="what happened: failure | offline | reconcile | report_refused | journal (the server cannot write its journal) ('' from older servers); consoles merge their own alerts of the same kind"
     )
     robot: str | None = None
     skill: str | None = None

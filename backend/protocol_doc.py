@@ -179,6 +179,11 @@ queries `{p.Keys.reports('ROBOT')}` with `ReportBatch`; `ReportAck.last_seq` tel
 which it may drop. While out of reach the outbox grows and is flushed on
 return; a report the server already applied is ignored (idempotent). A
 refused report is acknowledged too (listed in `refused`) and raises an alert.
+When the server cannot write its journal (disk full, file locked or deleted)
+it answers the whole batch with a `reply_err` (`journal_failed`) and applies
+none of what it could not journal: the robot keeps its outbox and sends it
+again (operations get the same refusal; an `Alert` of kind `journal` tells
+consoles once, and again when the journal works).
 `at` is when the change happened: the first `running` sets the skill's
 `started_at`, `success` or `failure` its `finished_at`.
 

@@ -14,7 +14,7 @@ the mission; the robot's answer (`SyncAck`, `UnsyncDone`, `RetryAck`,
 from __future__ import annotations
 
 from collections import OrderedDict
-from collections.abc import Container
+from collections.abc import Callable, Container
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -124,6 +124,9 @@ class Engine:
         # client -> revisions its own edits made (undo may revert over them),
         # oldest first: a dict used as an ordered set, so trimming is O(1)
         self.own_revs: dict[str, dict[int, None]] = {}
+        # called with each batch before it changes the mission (the server
+        # journals it there): if it raises, the operation changes nothing
+        self.before_apply: Callable[[ev.EventBatch], None] | None = None
 
     # -- entry point -----------------------------------------------------
     def submit(
@@ -168,6 +171,8 @@ class Engine:
             return Applied(self.mission.revision, [], notes, value)
         revision = self.mission.revision + 1
         batch = ev.EventBatch(revision=revision, events=events)
+        if self.before_apply is not None:
+            self.before_apply(batch)
         self.mission = ev.apply_events(self.mission, batch)
         return Applied(revision, events, notes, value)
 
@@ -693,7 +698,11 @@ class Engine:
                 raise Refusal("stale", f"another client changed it since ({r.message.split(' changed at')[0]})") from None
         except Refusal as r:
             raise Refusal(r.code, f"cannot {verb} {what} (dropped from your history): {r.message}", robot=r.robot, skill=r.skill) from None
-        applied = self._commit(events, notes, {**value, "undone" if verb == "undo" else "redone": what})
+        try:
+            applied = self._commit(events, notes, {**value, "undone" if verb == "undo" else "redone": what})
+        except Exception:  # not applied (the journal refused it): still to do
+            stack.append((inverse, what, made_at))
+            raise
         self._mine(client, applied.revision)
         if back is not None:
             target.setdefault(client, []).append((back, what, applied.revision))

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import sqlite3
 import uuid
 from collections.abc import Awaitable, Callable
 from datetime import UTC, datetime
@@ -22,7 +23,7 @@ from pydantic import ValidationError
 from .accounts import Accounts, acl_config, zenoh_dictionary
 from .events import EventBatch
 from .files import library_path, load_library, load_mission
-from .journal import Journal, remember_requests
+from .journal import Journal, JournalError, remember_requests
 from .library import Library
 from .model import Mission
 from .ops import (
@@ -122,6 +123,7 @@ class MissionServer:
         self._fleet_pub = None
         self._alerts_pub = None
         self._loop: asyncio.AbstractEventLoop | None = None
+        self._journal_failing = False
 
     # -- start / stop ---------------------------------------------------------
     def _load(self) -> None:
@@ -144,7 +146,10 @@ class MissionServer:
                 lib_file = library_path(self.mission_file, mission.library)
                 journal.close()
                 journal = Journal.open(self.db, library=str(lib_file))
-                journal.snapshot(mission)
+                try:
+                    journal.snapshot(mission)
+                except sqlite3.Error as e:  # e.g. a full disk
+                    raise JournalError(f"{self.db}: cannot write the journal's first snapshot: {e}") from None
                 requests = []
         except BaseException:
             journal.close()
@@ -237,13 +242,15 @@ class MissionServer:
 
         return run
 
-    def _commit(self, applied: Applied, op: Any, *, client: str = "", request_id: str | None = None, actor: str = "") -> None:
-        """Journal, then publish, an applied operation (nothing for no-ops)."""
+    def _commit(self, applied: Applied, op: Any, *, actor: str) -> None:
+        """Publish an applied (and journaled) operation; snapshot when due."""
         if applied.duplicate or not applied.events:
             return
-        assert self.journal is not None
-        batch = EventBatch(revision=applied.revision, events=applied.events, actor=actor or client, op=op.op)
-        self.journal.record(applied, op, actor=batch.actor, client=client, request_id=request_id, mission=self.mission)
+        try:
+            self.journal.maybe_snapshot(self.mission)
+        except (sqlite3.Error, OSError, JournalError) as e:  # the batches have it: only a slower restart
+            log.warning("%s: cannot store a snapshot (%s); will try again at the next operation", self.db, e)
+        batch = EventBatch(revision=applied.revision, events=applied.events, actor=actor, op=op.op)
         self._publish(self._events_pub, batch.model_dump_json().encode())
         if any(e.ev == "mission_replaced" for e in applied.events):
             for name in self.mission.robots:  # a loaded mission may name other robots
@@ -262,8 +269,31 @@ class MissionServer:
             publisher.put(payload)
 
     def _submit(self, op: Any, *, client: str = "", request_id: str | None = None, actor: str = "", expected_revision: int | None = None) -> Applied:
-        applied = self.engine.submit(op, client=client, request_id=request_id, expected_revision=expected_revision)
-        self._commit(applied, op, client=client, request_id=request_id, actor=actor)
+        """Apply an operation: journaled before it changes the mission, so one
+        the journal cannot take is refused (JournalFailed) and changes
+        nothing, in memory or at a restart; then published."""
+        who = actor or client
+
+        def journal(batch: EventBatch) -> None:
+            entry = EventBatch(revision=batch.revision, events=batch.events, actor=who)
+            try:
+                self.journal.append(entry, op_json=op.model_dump_json(), client=client, request_id=request_id)
+            except (sqlite3.Error, OSError, JournalError) as e:
+                failed = JournalFailed(self.db, e, op.op)
+                if not self._journal_failing:  # once, not at every retry of every robot
+                    self._journal_failing = True
+                    self.alert(failed.message, level="error", kind="journal")
+                raise failed from None
+            if self._journal_failing:
+                self._journal_failing = False
+                self.alert(f"the journal {self.db} can be written again", level="info", kind="journal")
+
+        self.engine.before_apply = journal
+        try:
+            applied = self.engine.submit(op, client=client, request_id=request_id, expected_revision=expected_revision)
+        finally:
+            self.engine.before_apply = None
+        self._commit(applied, op, actor=who)
         return applied
 
     def alert(self, message: str, *, level: str = "warning", robot: str | None = None, skill: str | None = None, kind: str = "") -> None:
@@ -327,7 +357,11 @@ class MissionServer:
         if isinstance(op, Sync | Unsync | Control | Retry):
             if req.expected_revision is not None:
                 self.engine.check_fresh(op, req.expected_revision)
-            applied = await self._robot_op(op, actor)
+            try:
+                applied = await self._robot_op(op, actor, req.client, req.request_id)
+            except JournalFailed as f:
+                raise Refusal(f.code, f"{f.message}. The robot did get the {op.op} command: once the journal works, "
+                              "compare `missionctl ctl state` with the robot and unsync or stop what differs") from None
             self.engine.remember(req.client, req.request_id, applied)
             return _reply(applied)
         applied = self._submit(op, client=req.client, request_id=req.request_id, actor=actor, expected_revision=req.expected_revision)
@@ -378,8 +412,11 @@ class MissionServer:
             if _major(have) != _major(want):
                 raise Refusal("incompatible", f"{robot} implements {s.skill} {have}, the library needs {want} (major versions differ); {s.id} stays unsynchronized", robot=robot, skill=s.id)
 
-    async def _robot_op(self, op: Any, actor: str) -> Applied:
+    async def _robot_op(self, op: Any, actor: str, client: str = "", request_id: str | None = None) -> Applied:
+        """Send the operation to its robot(s); journal the acknowledgement with
+        the request id, so a retry after a server restart is a duplicate."""
         e = self.engine
+        req = {"client": client, "request_id": request_id, "actor": actor}
         if isinstance(op, Sync):
             async with self._lock(op.robot):
                 skills = e.plan_sync(op)
@@ -392,7 +429,7 @@ class MissionServer:
                         if partners:
                             barriers[s.id] = BarrierInfo(barrier=e.mission.barrier_of(s.id), partners=dict(partners))
                     await self._command(op.robot, Enqueue(skills=skills, barriers=barriers))
-                    return self._submit(SyncAck(robot=op.robot, ids=ids), actor=actor)
+                    return self._submit(SyncAck(robot=op.robot, ids=ids), **req)
                 finally:
                     e.release(op.robot, ids)
         if isinstance(op, Unsync):
@@ -400,7 +437,7 @@ class MissionServer:
                 ids = e.plan_unsync(op)
                 try:
                     reply = await self._command(op.robot, Dequeue(ids=ids))
-                    applied = self._submit(UnsyncDone(robot=op.robot, ids=reply.ids), actor=actor)
+                    applied = self._submit(UnsyncDone(robot=op.robot, ids=reply.ids), **req)
                 finally:
                     e.release(op.robot)
                 if reply.kept:
@@ -414,7 +451,7 @@ class MissionServer:
                 try:
                     self._check_manifest(robot, [new])
                     await self._command(robot, Enqueue(skills=[new], front=True))
-                    return self._submit(RetryAck(robot=robot, failed_id=op.id, skill=new), actor=actor)
+                    return self._submit(RetryAck(robot=robot, failed_id=op.id, skill=new), **req)
                 finally:
                     e.release(robot)
         # run / pause / stop / reset, for one robot or all
@@ -480,6 +517,8 @@ class MissionServer:
             try:
                 self._submit(Reconcile(robot=robot, lost=lost), actor=robot)
                 self.alert(f"{robot} no longer had {', '.join(lost)}: returned to the plan", robot=robot, kind="reconcile")
+            except JournalFailed:
+                raise  # the registration fails: the robot registers again
             except Refusal as r:
                 self.alert(f"cannot reconcile {robot}: {r.message}", level="error", robot=robot, kind="reconcile")
                 return []
@@ -493,6 +532,8 @@ class MissionServer:
                 continue
             try:
                 applied = self._submit(rep, actor=robot)
+            except JournalFailed:
+                raise  # not consumed: the robot keeps it and sends it again
             except Refusal as r:
                 refused.append(ErrorReply(**r.to_dict()))
                 self.alert(f"report refused: {r.message}", level="error", robot=robot, skill=rep.id, kind="report_refused")
@@ -537,6 +578,26 @@ class MissionServer:
         if not alive:
             self._set_robot(info.model_copy(update={"online": False, "since": _now()}))
             self.alert(f"robot {robot} went offline", robot=robot, kind="offline")
+
+
+class JournalFailed(Refusal):
+    """The journal could not take an operation's batch: refused, nothing changed.
+    Never taken as a refusal of a robot's report (the robot must send it again)."""
+
+    def __init__(self, db: Path, error: BaseException, what: str):
+        why = str(error)
+        if isinstance(error, JournalError):  # the file is gone: a new journal is needed
+            why = why.removeprefix(f"{db} ")
+            todo = "save the mission (`missionctl ctl save FILE`) and restart the server with --mission FILE and a new --db"
+        elif "locked" in why or "busy" in why:
+            todo = "another program holds the file locked: close it, then send it again"
+        elif "full" in why:
+            todo = "free disk space, then send it again"
+        elif "readonly" in why or "read-only" in why or isinstance(error, PermissionError):
+            todo = "make the file writable, then send it again"
+        else:
+            todo = "check the disk and the file, then send it again"
+        super().__init__("journal_failed", f"the server could not write {what} to its journal {db} ({why}): the mission was not changed; {todo}")
 
 
 def _reply(applied: Applied) -> bytes:

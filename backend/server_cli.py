@@ -101,6 +101,9 @@ async def _serve(server) -> int:
     try:
         how = f"resumed from {server.db} at revision {server.mission.revision}" if server.resumed else f"started from {server.mission_file}, journal {server.db}"
         print(f"missionctl server: mission '{server.mission.name}' {how}; listening on {', '.join(server.listen)}", flush=True)
+        if server.resumed and server.mission_file is not None:  # a changed or other mission file is not read
+            print(f"missionctl server: {server.mission_file} was not read (the journal holds the mission); "
+                  "to start from it anew, give another --db", flush=True)
         if server.accounts is not None:
             roles = ", ".join(f"{u} ({a.role})" for u, a in sorted(server.accounts.table.accounts.items()))
             print(f"missionctl server: logins required ({server.accounts.source}): {roles}", flush=True)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import logging
 import re
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
@@ -15,6 +16,12 @@ log = logging.getLogger(__name__)
 _UNREACHABLE_DETAIL = (
     "no router accepted the connection (is it running? are the address, TLS settings "
     "and credentials right?)"
+)
+
+
+_SILENT_DETAIL = (
+    "something accepted the connection but did not answer within {s:g} s (a stopped or "
+    "overloaded server? a firewall dropping the connection?)"
 )
 
 
@@ -71,6 +78,7 @@ def open_session(config: zenoh.Config, *, what: str = "the mission server") -> z
     Raises `TransportUnreachable` (router down, wrong address, rejected
     credentials all look the same to Zenoh), `ListenFailed`, or `TransportError`.
     """
+    started = time.monotonic()
     try:
         return zenoh.open(config)
     except zenoh.ZError as exc:
@@ -78,6 +86,12 @@ def open_session(config: zenoh.Config, *, what: str = "the mission server") -> z
         if "Unable to connect" in raw:
             from .probe import diagnose
 
+            waited = time.monotonic() - started
+            if waited >= _open_timeout_s(config) / 2:
+                # a refused login or TLS handshake fails at once; a hung
+                # (SIGSTOPped, overloaded) router still accepts TCP, then is silent
+                detail = _SILENT_DETAIL.format(s=round(waited))
+                raise TransportUnreachable(_endpoints(config, "connect"), detail, what=what) from exc
             refusal = diagnose(config, _endpoints(config, "connect"))
             if refusal is not None:
                 raise LoginRefused(_endpoints(config, "connect"), refusal) from exc
@@ -87,6 +101,13 @@ def open_session(config: zenoh.Config, *, what: str = "the mission server") -> z
         if "listener" in raw:
             raise ListenFailed(_endpoints(config, "listen"), clean_zenoh_message(raw)) from exc
         raise TransportError(f"cannot open a Zenoh session: {clean_zenoh_message(raw)}") from exc
+
+
+def _open_timeout_s(config: zenoh.Config) -> float:
+    try:
+        return float(json.loads(config.get_json("transport/unicast/open_timeout"))) / 1000
+    except (zenoh.ZError, ValueError, TypeError):
+        return 10.0  # Zenoh's default
 
 
 def close_session(session: zenoh.Session) -> None:

@@ -355,6 +355,26 @@ def test_not_a_journal_is_a_clear_error(tmp_path):
         Journal.open(tmp_path / "missing" / "m.db")
 
 
+def test_a_damaged_database_file_is_a_clear_error_not_a_traceback(tmp_path):
+    """Pages of the file damaged (disk error, a bad copy): opening or loading
+    says so as a JournalCorrupt, never an sqlite3 exception (a traceback at
+    the server's start)."""
+    db = tmp_path / "m.db"
+    srv = Server(db)
+    srv.submit(AddSkill(robot="lru1", skill="recharge"))
+    srv.close()  # the last connection: the write-ahead log is folded into the file
+    con = sqlite3.connect(db)
+    page_size = con.execute("PRAGMA page_size").fetchone()[0]
+    (root,) = con.execute("SELECT rootpage FROM sqlite_master WHERE name = 'snapshots'").fetchone()
+    con.close()
+    data = bytearray(db.read_bytes())
+    start = (root - 1) * page_size
+    data[start:start + page_size] = b"\xab" * page_size
+    db.write_bytes(bytes(data))
+    with pytest.raises(JournalCorrupt, match="cannot be read .*malformed.*restore a copy"), Journal.open(db) as j:
+        j.load()
+
+
 def test_noops_and_duplicates_are_not_journaled(tmp_path):
     srv = Server(tmp_path / "m.db")
     a = srv.submit(AddSkill(robot="lru1", skill="recharge"), request_id="once")

@@ -9,6 +9,7 @@ import json
 import re
 import selectors
 import subprocess
+import sys
 import time
 
 import pytest
@@ -17,6 +18,7 @@ import yaml
 from .helpers import (
     CTL_CMD,
     LIBRARY,
+    ROBOTS_SCRIPT,
     ROOT,
     Robots,
     Server,
@@ -179,6 +181,29 @@ def test_request_id_applies_once(endpoint):
     # without --request-id every invocation is a new request, even with the same client id
     ok(endpoint, "add", "lru2", "recharge")
     assert [s["skill"] for s in state(endpoint)["tasks"]["lru2"]].count("recharge") == 2
+
+
+def test_a_timed_out_operation_says_how_to_apply_it_once(endpoint):
+    """A robot slower to answer than --timeout: the operation may still be
+    applied; the message names the --request-id to run it again with, and
+    running it again applies it once."""
+    slow = Robots(endpoint, "lru1:lru_science",
+                  command=[sys.executable, str(ROBOTS_SCRIPT), "--connect", endpoint, "--delay", "3", "lru1:lru_science"])
+    try:
+        until(endpoint, lambda st: st["robots"]["lru1"]["online"], what="lru1 online")
+        r = ctl(endpoint, "--json", "sync", "lru1", "--through", "lru1-1", "--timeout", "1", "--request-id", "slow-1")
+        assert r.returncode == 3, r
+        obj = json.loads(r.stdout)
+        assert obj["ok"] is False and obj["code"] == "timeout"
+        assert obj["request_id"] == "slow-1" and obj["maybe_applied"] is True
+        assert "run the same command again with --request-id slow-1 --client-id ctl-test: it is applied once" in r.stderr, r.stderr
+        assert "ctl state" in r.stderr and "Traceback" not in r.stderr
+        again = ok(endpoint, "sync", "lru1", "--through", "lru1-1", "--request-id", "slow-1", "--timeout", "20")
+        assert again.stdout.startswith("synchronized lru1-1 to lru1"), again.stdout
+        st = state(endpoint)
+        assert [s["status"] for s in st["tasks"]["lru1"]] == ["idle_synchronized", "idle"]
+    finally:
+        slow.stop()
 
 
 # ---------------------------------------------------------------- markers

@@ -4,6 +4,7 @@ the operation each sub-command builds."""
 from __future__ import annotations
 
 import json
+import subprocess
 
 import pytest
 
@@ -188,7 +189,26 @@ def test_argparse_errors_exit_2(argv, capsys):
     with pytest.raises(SystemExit) as e:
         parse_args(argv)
     assert e.value.code == 2
-    assert "error:" in capsys.readouterr().err
+    out, err = capsys.readouterr()
+    assert "error:" in err and out == ""
+    # with --json, a usage error is one JSON object on stdout like every other failure
+    with pytest.raises(SystemExit) as e:
+        parse_args([*argv, "--json"])
+    assert e.value.code == 2
+    out, err = capsys.readouterr()
+    obj = json.loads(out)
+    assert obj["ok"] is False and obj["code"] == "bad_input" and obj["message"] in err
+
+
+def test_json_usage_errors_from_the_command_line():
+    from .helpers import CTL_CMD, env
+
+    for argv in (["--json", "add", "lru1"], ["add", "lru1", "drive_to", "--at", "x", "--json"], ["--json"]):
+        r = subprocess.run([*CTL_CMD, *argv], cwd=ROOT, env=env(), capture_output=True, text=True, timeout=30)
+        assert r.returncode == 2, (argv, r)
+        obj = json.loads(r.stdout)
+        assert obj["ok"] is False and obj["code"] == "bad_input", (argv, obj)
+        assert obj["message"] in r.stderr and "Traceback" not in r.stderr
 
 
 # ---------------------------------------------------------------- operations
@@ -384,6 +404,11 @@ def test_save_into_missing_folder_exits_2(tmp_path, capsys):
     code = run(parse_args(["--connect", _nobody(), "save", str(tmp_path / "no" / "such" / "m.yaml")]))
     assert code == 2
     assert "does not exist" in capsys.readouterr().err
+    a_file = tmp_path / "plain.txt"
+    a_file.write_text("x")
+    code = run(parse_args(["--connect", _nobody(), "save", str(a_file / "m.yaml")]))
+    assert code == 2
+    assert f"save: {a_file} is not a folder" in capsys.readouterr().err
 
 
 def test_help_documents_everything():

@@ -4,6 +4,7 @@ once with one clear line, never a traceback."""
 from __future__ import annotations
 
 import json
+import socket
 import subprocess
 import sys
 import time
@@ -86,3 +87,18 @@ def _ctl_cmd():
     from .helpers import CTL_CMD
 
     return CTL_CMD
+
+
+def test_a_server_that_accepts_but_never_answers_is_not_a_login_problem():
+    """A stopped (SIGSTOP) or hung server: the kernel still accepts the TCP
+    connection, then nothing answers. Not 'the server requires an account',
+    and given up after --timeout rather than Zenoh's 10 s."""
+    with socket.socket() as silent:
+        silent.bind(("127.0.0.1", 0))
+        silent.listen(8)  # never accepted, never answered
+        endpoint = loopback_endpoint(silent.getsockname()[1])
+        r = ctl(endpoint, "--json", "state", "--timeout", "2", timeout=8)
+    assert r.returncode == 3, r
+    assert "did not answer within 2 s" in r.stderr and "stopped or overloaded" in r.stderr, r.stderr
+    assert "login" not in r.stderr and "account" not in r.stderr
+    assert json.loads(r.stdout)["code"] == "unreachable"
