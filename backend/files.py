@@ -524,5 +524,9 @@ def save_mission(m: Mission, path: str | FsPath, library_file: str | FsPath | No
         rel = os.path.relpath(FsPath(library_file).resolve(), p.resolve().parent)
         m = m.model_copy(update={"library": rel})
     tmp = p.with_name(p.name + ".tmp")
-    tmp.write_text(mission_to_yaml(m), encoding="utf-8")
-    tmp.replace(p)
+    try:
+        tmp.write_text(mission_to_yaml(m), encoding="utf-8")
+        tmp.replace(p)
+    except BaseException:
+        tmp.unlink(missing_ok=True)  # a full disk leaves no half-written .tmp behind
+        raise

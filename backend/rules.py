@@ -65,6 +65,7 @@ from .ops import (
 
 REMEMBERED_REQUESTS = 10_000
 UNDO_DEPTH = 100
+MAX_PROBLEMS = 5  # parameter problems named in one refusal
 
 
 class Refusal(Exception):
@@ -295,12 +296,13 @@ class Engine:
             markers=self.mission.markers, robots=set(self.mission.robots),
         )
         if problems:
+            # every problem: a missing parameter listed first must not hide a bad value
+            said = "; ".join(f"parameter {'.'.join(str(x) for x in q.path)}: {q.message}" for q in problems[:MAX_PROBLEMS])
+            more = f" (and {len(problems) - MAX_PROBLEMS} more)" if len(problems) > MAX_PROBLEMS else ""
             p = problems[0]
-            path = ".".join(str(x) for x in p.path)
-            more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
             raise Refusal(
                 "bad_param",
-                f"{robot}, skill {who}, parameter {path}: {p.message}{more}",
+                f"{robot}, skill {who}, {said}{more}",
                 robot=robot,
                 skill=skill_id,
                 param=str(p.path[0]) if p.path else None,

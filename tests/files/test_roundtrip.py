@@ -97,6 +97,15 @@ def test_save_is_stable(src: Path, tmp_path: Path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.yaml", "b.yaml"]  # no temp file left
 
 
+def test_a_failed_save_leaves_no_temporary_file(tmp_path: Path):
+    m, _ = load_mission(MISSIONS[0])
+    target = tmp_path / "mission.yaml"
+    target.mkdir()  # the final rename fails, after the temporary file was written
+    with pytest.raises(OSError):
+        save_mission(m, target)
+    assert [p.name for p in tmp_path.iterdir()] == ["mission.yaml"]
+
+
 @pytest.mark.parametrize("src", MISSIONS, ids=lambda p: p.name)
 def test_saved_yaml_is_readable(src: Path, tmp_path: Path):
     m, _ = load_mission(src)

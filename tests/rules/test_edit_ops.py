@@ -166,6 +166,11 @@ class TestAdd:
         )
         assert r.to_dict()["param"] == param
 
+    def test_every_parameter_problem_is_named(self, engine, refused):
+        # the missing goal comes first; the bad speed must not hide behind "(and 1 more)"
+        r = refused(engine, lambda: add(engine, skill="drive_to", params={"speed": "fast"}), "bad_param", robot="lru1", param="goal")
+        assert re.fullmatch(r"lru1, skill drive_to, parameter goal: [^;]+; parameter speed: [^;]*'fast'[^;]*", r.message), r.message
+
     @pytest.mark.parametrize(
         "slot, words", [(1.5, ["integer"]), (True, ["integer"]), (5, ["maximum"]), (0, ["minimum"])]
     )
