@@ -272,6 +272,10 @@ class Journal:
             _rollback(conn)
             conn.close()
             os.close(lock_fd)
+            if "locked" in str(e) or "busy" in str(e):
+                raise JournalError(
+                    f"{p}: the journal is locked by another program (an sqlite3 shell, a backup?): close it, then start again"
+                ) from None
             raise JournalError(f"{p}: not a usable journal: {e}") from None
         try:
             return cls(conn, p, snapshot_every=snapshot_every, keep_snapshots=keep_snapshots, lock_fd=lock_fd)

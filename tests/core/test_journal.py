@@ -355,6 +355,23 @@ def test_not_a_journal_is_a_clear_error(tmp_path):
         Journal.open(tmp_path / "missing" / "m.db")
 
 
+def test_a_journal_locked_by_another_program_at_open_says_so(tmp_path, monkeypatch):
+    monkeypatch.setattr(journal_mod, "BUSY_TIMEOUT_S", 0.05)
+    db = tmp_path / "m.db"
+    with Journal.open(db):
+        pass
+    other = sqlite3.connect(db, isolation_level=None)
+    other.execute("BEGIN EXCLUSIVE")  # e.g. an sqlite3 shell in the middle of a write
+    try:
+        with pytest.raises(JournalError, match="locked by another program .*close it, then start again"):
+            Journal.open(db)
+    finally:
+        other.execute("ROLLBACK")
+        other.close()
+    with Journal.open(db):  # and it opens once the other program let go
+        pass
+
+
 def test_a_damaged_database_file_is_a_clear_error_not_a_traceback(tmp_path):
     """Pages of the file damaged (disk error, a bad copy): opening or loading
     says so as a JournalCorrupt, never an sqlite3 exception (a traceback at
