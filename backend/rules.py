@@ -175,6 +175,9 @@ class Engine:
         if self.before_apply is not None:
             self.before_apply(batch)
         self.mission = ev.apply_events(self.mission, batch)
+        if any(isinstance(e, ev.MissionReplaced) for e in events):  # applied, not just asked: histories end
+            self.undo_stack.clear()
+            self.redo_stack.clear()
         return Applied(revision, events, notes, value)
 
     # -- lookups ---------------------------------------------------------
@@ -661,8 +664,6 @@ class Engine:
         new.report_seqs = dict(self.mission.report_seqs)
         for robot in new.robots:
             new.tasks.setdefault(robot, [])
-        self.undo_stack.clear()
-        self.redo_stack.clear()
         return [ev.MissionReplaced(mission=new)], [], {}, None
 
     def _op_new(self, op: NewMission, client: str):

@@ -550,6 +550,18 @@ class TestLoadNew:
         engine.submit(NewMission(), client="c2")
         refused(engine, lambda: undo(engine), "nothing_to_undo")
 
+    def test_a_load_that_was_not_applied_keeps_undo(self, engine):
+        add(engine)
+
+        def journal_full(batch):  # what the server's journal hook does on a full disk
+            raise Refusal("journal_failed", "disk full: the mission was not changed")
+
+        engine.before_apply = journal_full
+        with pytest.raises(Refusal):
+            engine.submit(NewMission(), client="c2")
+        engine.before_apply = None
+        assert undo(engine).value["undone"] == "add"
+
     def test_invalid_mission_refused(self, engine, refused):
         bad = Mission(
             library="libraries/mars.yaml",
