@@ -78,6 +78,7 @@ import zenoh
 from pydantic import TypeAdapter, ValidationError
 
 from . import transport
+from .library import VERSION_PATTERN
 from .login import Login
 from .model import Pose, Position, SkillInstance, Status
 from .ops import Report
@@ -109,7 +110,8 @@ from .protocol import (
 log = logging.getLogger(__name__)
 
 _COMMAND = TypeAdapter(Command)
-_SEMVER = re.compile(r"^\d+\.\d+\.\d+")
+_SEMVER = re.compile(VERSION_PATTERN)  # what a library's skill version may be
+_ENDPOINT = re.compile(r"^[a-z][a-z0-9\-]*/\S+$")  # PROTOCOL/ADDRESS, as ctl's --connect
 _POSE_KEYS = frozenset(Pose.model_fields)
 _POSITION_KEYS = frozenset(Position.model_fields)
 
@@ -130,6 +132,10 @@ class SkillFailed(Exception):
     def __init__(self, reason: str = "skill failed"):
         self.reason = reason
         super().__init__(reason)
+
+
+class RegistrationRefused(RuntimeError):
+    """`wait_registered()`: the server refused this robot (the message says why)."""
 
 
 class SkillStopped(asyncio.CancelledError):
@@ -391,7 +397,7 @@ class RobotAgent:
         name: str,
         robot_type: str,
         *,
-        connect: list[str],
+        connect: list[str] | str,
         modules: dict[str, str] | None = None,
         properties: dict[str, Any] | None = None,
         lease_ms: int = 1000,
@@ -402,7 +408,7 @@ class RobotAgent:
     ):
         self.name = name
         self.robot_type = robot_type
-        self.connect = list(connect)
+        self.connect = _endpoints(name, connect)
         self.modules = dict(modules or {})
         self.properties = dict(properties or {})
         self.lease_ms = lease_ms
@@ -459,7 +465,10 @@ class RobotAgent:
         self._flush_wake: asyncio.Event | None = None
         self._registered_evt: asyncio.Event | None = None
         self.last_register_reply: RegisterReply | None = None
+        self._refused: str | None = None  # the server's reason, while it refuses us
+        self._register_error = ""  # why the last registration attempt got no reply
         self.refused_reports: list[ErrorReply] = []
+        self._sources_failed: set[str] = set()  # telemetry sources already said to fail
 
     # ------------------------------------------------------------ registration API
 
@@ -469,6 +478,11 @@ class RobotAgent:
         """Decorator: `@agent.skill("drive_to", version="1.0.0")` registers a handler
         `handler(ctx, **params)` (function or coroutine). `raw=True` passes the
         parameter values unconverted."""
+        if not isinstance(name, str):  # `@agent.skill` without (): would register nothing
+            raise TypeError(
+                f"robot {self.name}: write @agent.skill(\"NAME\", version=\"1.0.0\"), with the skill's "
+                f"name, above {getattr(name, '__name__', name)!r}"
+            )
 
         def register(fn: Callable[..., Any]) -> Callable[..., Any]:
             self.add_skill(name, fn, version=version, raw=raw)
@@ -477,8 +491,21 @@ class RobotAgent:
         return register
 
     def add_skill(self, name: str, fn: Callable[..., Any], *, version: str = "1.0.0", raw: bool = False) -> None:
-        if not _SEMVER.match(version):
-            raise ValueError(f"skill {name}: version {version!r} is not SemVer (like 1.2.0)")
+        """Register `fn(ctx, **params)` as the handler of skill `name` (see `skill`).
+        Before `start()`: the manifest listing the skills is sent then."""
+        where = f"robot {self.name}, skill {name}"
+        if not isinstance(version, str) or not _SEMVER.match(version):
+            raise ValueError(f"{where}: version {version!r} is not SemVer (like 1.2.0)")
+        if not callable(fn):
+            raise TypeError(f"{where}: the handler must be a function or coroutine function, not {type(fn).__name__}")
+        if not _takes_ctx(fn):
+            raise TypeError(f"{where}: the handler must take the SkillContext as its first argument, "
+                            f"like def {getattr(fn, '__name__', 'handler')}(ctx, **params)")
+        if name in self._handlers:
+            raise ValueError(f"{where}: a handler is registered already "
+                             f"({getattr(self._handlers[name].fn, '__name__', '?')}); register each skill once")
+        if self._session is not None:
+            raise RuntimeError(f"{where}: register skills before start(); the manifest was sent without it")
         self._handlers[name] = _Handler(fn, version, raw)
 
     def on_ask(self, topic: str, fn: Callable[..., Any]) -> None:
@@ -533,12 +560,26 @@ class RobotAgent:
                 await self._acked_evt.wait()
 
     async def wait_registered(self, timeout: float | None = None) -> None:
-        """Return once the current server accepted our registration (TimeoutError
-        after `timeout` seconds)."""
+        """Return once the current server accepted our registration.
+
+        Raises `RegistrationRefused` (the server's reason: not in the mission,
+        another type, protocol) and `TimeoutError` after `timeout` seconds,
+        both with a message saying why."""
         if self._registered_evt is None:
-            raise RuntimeError(f"agent {self.name} is not started")
-        async with asyncio.timeout(timeout):
-            await self._registered_evt.wait()
+            raise RuntimeError(f"agent {self.name} is not started: call start() (or use async with) first")
+        try:
+            async with asyncio.timeout(timeout):
+                await self._registered_evt.wait()
+        except TimeoutError:
+            if not self._server_up:
+                why = f"no mission server is up behind {', '.join(self.connect)} (its presence token is missing)"
+            elif not self._link_in_range():
+                why = "the robot is out of communication range (agent.link)"
+            else:
+                why = f"the server did not accept the registration ({self._register_error or 'no answer yet'})"
+            raise TimeoutError(f"robot {self.name} not registered within {timeout:g} s: {why}") from None
+        if self._refused is not None and not self._registered:
+            raise RegistrationRefused(self._refused)
 
     # ------------------------------------------------------------ lifecycle
 
@@ -709,6 +750,7 @@ class RobotAgent:
                 assert self._loop is not None
                 self._loop.call_later(_RETRY_S, self._register_wake.set)
             except Exception as exc:
+                self._register_error = str(exc) or type(exc).__name__
                 log.info("%s: registration failed (%s); retrying", self.name, exc)
                 assert self._loop is not None
                 self._loop.call_later(_RETRY_S, self._register_wake.set)
@@ -724,7 +766,11 @@ class RobotAgent:
         self.last_register_reply = reply
         if not reply.accepted:
             log.error("%s: the server refused the registration: %s", self.name, reply.reason)
+            self._refused = f"the mission server refused robot {self.name}: {reply.reason}"
+            assert self._registered_evt is not None
+            self._registered_evt.set()  # wait_registered() raises it
             return  # tried again when the server (re)appears
+        self._refused = None
         if reply.last_seq > self._seq:
             # The server applied reports of a previous run of this robot with
             # higher numbers: ours would be ignored as duplicates. Renumber the
@@ -843,18 +889,33 @@ class RobotAgent:
         if info:
             self._info = info
 
+    def _source_failed(self, what: str, problem: str) -> None:
+        """A telemetry source of the integrator failed: said once per source
+        (it is read several times a second), the telemetry goes on without it."""
+        if what not in self._sources_failed:
+            self._sources_failed.add(what)
+            log.error("%s: %s; telemetry sends a default instead (said once)", self.name, problem, exc_info=True)
+
     def telemetry(self) -> Telemetry:
+        # An integrator's source must never break a command reply or a report
+        # (both publish telemetry): a bad value is replaced, and said once.
         try:
             pose = self.pose()
-        except Exception:
-            log.exception("%s: agent.pose() failed", self.name)
+            if not isinstance(pose, Pose):
+                pose = Pose.model_validate(pose)  # a dict of pose fields will do
+        except Exception as exc:
+            self._source_failed("pose", f"agent.pose() must return a backend.model.Pose: {type(exc).__name__}: {exc}")
             pose = Pose()
         try:
             battery = min(1.0, max(0.0, float(self.battery())))
-        except Exception:
-            log.exception("%s: agent.battery() failed", self.name)
+        except Exception as exc:
+            self._source_failed("battery", f"agent.battery() must return a number 0..1: {type(exc).__name__}: {exc}")
             battery = 0.0
-        quality = min(1.0, max(0.0, float(getattr(self.link, "quality", 1.0))))
+        try:
+            quality = min(1.0, max(0.0, float(getattr(self.link, "quality", 1.0))))
+        except Exception as exc:
+            self._source_failed("link", f"agent.link.quality must be a number 0..1: {type(exc).__name__}: {exc}")
+            quality = 0.0
         act = self._active
         in_range = self._link_in_range()
         return Telemetry(
@@ -1202,6 +1263,10 @@ class RobotAgent:
         raw_params = dict(act.entry.skill.params) if purpose == "skill" else {}
         params = raw_params if handler.raw else {k: _convert(v) for k, v in raw_params.items()}
         ctx = SkillContext(self, act, raw_params, purpose)
+        mismatch = _signature_problem(handler.fn, params)
+        if mismatch is not None:  # else a bare TypeError from inside the call
+            log.error("%s: skill %s (%s): %s", self.name, act.entry.id, name, mismatch)
+            return mismatch
         try:
             if handler.is_async:
                 result = await handler.fn(ctx, **params)
@@ -1218,6 +1283,8 @@ class RobotAgent:
             # without a stop): a failure, not a stop.
             return "the handler was cancelled"
         except Exception as exc:
+            # a bug in the handler: the operator gets one line, the robot's log the traceback
+            log.error("%s: the handler of %s (%s) raised", self.name, act.entry.id, name, exc_info=True)
             return f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
         if isinstance(result, Failure):
             return result.reason
@@ -1322,15 +1389,31 @@ class RobotAgent:
         if msg.kind == "ask":
             self.world_stats["asks_received"] += 1
             fn = self._ask_handlers.get(msg.topic)
-            data = await _maybe_await(fn(msg.data, msg.sender)) if fn is not None else None
+            data = await self._world_handler("on_ask", fn, msg) if fn is not None else None
             if data is None:
                 return dumps(WorldReply(known=False))
-            return dumps(WorldReply(known=True, data=dict(data)))
+            if not isinstance(data, dict):
+                raise self._world_refusal(
+                    msg, f"its on_ask handler returned a {type(data).__name__}; it must return a dict or None"
+                )
+            return dumps(WorldReply(known=True, data=data))
         self.world_stats["tells_received"] += 1
         fn = self._tell_handlers.get(msg.topic)
         if fn is not None:
-            await _maybe_await(fn(msg.data, msg.sender))
+            await self._world_handler("on_tell", fn, msg)
         return dumps(WorldReply(known=fn is not None))
+
+    async def _world_handler(self, kind: str, fn: Callable[..., Any], msg: WorldMessage) -> Any:
+        try:
+            return await _maybe_await(fn(msg.data, msg.sender))
+        except Exception as exc:
+            raise self._world_refusal(msg, f"its {kind} handler raised {type(exc).__name__}: {exc}", trace=True) from None
+
+    def _world_refusal(self, msg: WorldMessage, problem: str, trace: bool = False) -> transport.Refusal:
+        """Logged here; the asker's `ask`/`tell` fails (None/False) and its log says why."""
+        text = f"{self.name} cannot answer {msg.kind} {msg.topic!r} from {msg.sender}: {problem}"
+        log.error("%s", text, exc_info=trace)
+        return transport.Refusal(dumps(ErrorReply(code="robot_error", message=text, robot=self.name)))
 
     async def _world_query(self, robot: str, kind: str, topic: str, data: dict[str, Any] | None) -> WorldReply | None:
         if self._session is None:
@@ -1348,7 +1431,13 @@ class RobotAgent:
             raw = await transport.query(self._session, Keys.world(robot), dumps(msg), timeout=self.request_timeout)
             return WorldReply.model_validate_json(raw)
         except (transport.QueryFailed, transport.TransportError, ValidationError) as exc:
-            log.info("%s: %s %s/%s failed: %s", self.name, kind, robot, topic, exc)
+            why = str(exc)
+            if isinstance(exc, transport.QueryError):  # the robot's refusal: say its sentence
+                try:
+                    why = ErrorReply.model_validate_json(exc.payload).message
+                except ValidationError:
+                    pass
+            log.info("%s: %s %s/%s failed: %s", self.name, kind, robot, topic, why)
             return None
 
     async def ask(self, robot: str, topic: str, data: dict[str, Any] | None = None) -> dict[str, Any] | None:
@@ -1403,3 +1492,51 @@ def _in_daemon_thread(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Awai
 
     threading.Thread(target=run, name=f"skill-{getattr(fn, '__name__', 'handler')}", daemon=True).start()
     return future
+
+
+def _endpoints(robot: str, connect: list[str] | str) -> list[str]:
+    """The router endpoints, checked here: Zenoh's own complaint names neither
+    the robot nor the form it wants."""
+    endpoints = [connect] if isinstance(connect, str) else list(connect)
+    if not endpoints:
+        raise ValueError(f"robot {robot}: connect lists no endpoint; give the mission server's, like tcp/127.0.0.1:7447")
+    for e in endpoints:
+        if not isinstance(e, str) or not _ENDPOINT.match(e):
+            raise ValueError(f"robot {robot}: connect endpoint {e!r} is not PROTOCOL/ADDRESS, like tcp/127.0.0.1:7447")
+    return endpoints
+
+
+def _takes_ctx(fn: Callable[..., Any]) -> bool:
+    """Can `fn` be called with the SkillContext as its first positional argument?"""
+    try:
+        params = inspect.signature(fn).parameters.values()
+    except (TypeError, ValueError):  # no signature to read (some builtins): trust it
+        return True
+    return any(p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD, p.VAR_POSITIONAL) for p in params)
+
+
+def _signature_problem(fn: Callable[..., Any], params: dict[str, Any]) -> str | None:
+    """Why `fn(ctx, **params)` cannot be called, in the integrator's terms, or None."""
+    try:
+        sig = inspect.signature(fn)
+    except (TypeError, ValueError):
+        return None
+    name = getattr(fn, "__name__", "handler")
+    args = list(sig.parameters.values())
+    if any(p.kind == p.VAR_KEYWORD for p in args):
+        unexpected: list[str] = []
+    else:
+        accepted = {p.name for p in args[1:] if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
+        unexpected = [k for k in params if k not in accepted]
+    if unexpected:
+        return (f"handler {name}() does not accept parameter {', '.join(map(repr, unexpected))} sent by the server: "
+                f"add it to its signature (or take **params)")
+    missing = [
+        p.name for p in args[1:]
+        if p.default is p.empty and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) and p.name not in params
+    ]
+    if missing:
+        return (f"handler {name}() needs parameter {', '.join(map(repr, missing))}, which the server did not send "
+                f"(an optional parameter left unset, or not one of the skill's): give it a default, like "
+                f"{missing[0]}=None")
+    return None

@@ -86,6 +86,7 @@ class FakeServer:
         self.applied: dict[str, list[Report]] = {}  # per robot, in applied order
         self.last_seq: dict[str, int] = {}
         self.gaps: list[str] = []  # a seq that did not follow the previous one
+        self.refuse: str | None = None  # when set, registrations are refused with this reason
 
     async def start(self) -> None:
         self.session = open_session(client_config([self.endpoint]))
@@ -123,6 +124,8 @@ class FakeServer:
     async def _on_register(self, payload: bytes) -> bytes:
         reg = Register.model_validate_json(payload)
         self.registrations.append(reg)
+        if self.refuse is not None:
+            return dumps(RegisterReply(accepted=False, reason=self.refuse))
         self.apply(reg.manifest.name, reg.reports)
         return dumps(RegisterReply(last_seq=self.last_seq.get(reg.manifest.name, 0)))
 
