@@ -80,7 +80,7 @@ from pydantic import TypeAdapter, ValidationError
 from . import transport
 from .library import VERSION_PATTERN
 from .login import Login
-from .model import Pose, Position, SkillInstance, Status
+from .model import NAME_RE, Pose, Position, SkillInstance, Status
 from .ops import Report
 from .protocol import (
     BarrierInfo,
@@ -105,12 +105,14 @@ from .protocol import (
     WorldMessage,
     WorldReply,
     dumps,
+    first_error,
 )
 
 log = logging.getLogger(__name__)
 
 _COMMAND = TypeAdapter(Command)
 _SEMVER = re.compile(VERSION_PATTERN)  # what a library's skill version may be
+_MODULE_VERSION = re.compile(r"^\d+\.\d+\.\d+")  # as protocol.Module: a suffix like -rc1 may follow
 _ENDPOINT = re.compile(r"^[a-z][a-z0-9\-]*/\S+$")  # PROTOCOL/ADDRESS, as ctl's --connect
 _POSE_KEYS = frozenset(Pose.model_fields)
 _POSITION_KEYS = frozenset(Position.model_fields)
@@ -327,6 +329,13 @@ class SkillContext:
             # never block the event loop: an async handler must await checkpoint()
             if self._act.aborted:
                 raise SkillStopped()
+            if self._act.paused:
+                self.agent._say_once(
+                    f"check {self.skill.skill}",
+                    f"the coroutine handler of {self.skill.skill} calls ctx.check(), which cannot wait on the "
+                    f"event loop: it ignores the pause; use await ctx.checkpoint() or await ctx.sleep()",
+                    level=logging.WARNING,
+                )
             return
         while True:
             if self._act.aborted:
@@ -406,10 +415,16 @@ class RobotAgent:
         request_timeout: float = 5.0,
         login: Login | None = None,
     ):
+        _check_name("robot name", name)
+        _check_name(f"robot {name}: type", robot_type)
         self.name = name
         self.robot_type = robot_type
         self.connect = _endpoints(name, connect)
         self.modules = dict(modules or {})
+        for module, version in self.modules.items():
+            _check_name(f"robot {name}: module", module)
+            if not isinstance(version, str) or not _MODULE_VERSION.match(version):
+                raise ValueError(f"robot {name}: module {module} version {version!r} is not SemVer (like 2.1.0)")
         self.properties = dict(properties or {})
         self.lease_ms = lease_ms
         # an account (robot role) and TLS files: see docs/security.md
@@ -468,7 +483,8 @@ class RobotAgent:
         self._refused: str | None = None  # the server's reason, while it refuses us
         self._register_error = ""  # why the last registration attempt got no reply
         self.refused_reports: list[ErrorReply] = []
-        self._sources_failed: set[str] = set()  # telemetry sources already said to fail
+        self._manifest_bytes()  # what is wrong with it is said now, not by a registration retried forever
+        self._said: set[str] = set()  # keys of the mistakes logged once already
 
     # ------------------------------------------------------------ registration API
 
@@ -493,6 +509,7 @@ class RobotAgent:
     def add_skill(self, name: str, fn: Callable[..., Any], *, version: str = "1.0.0", raw: bool = False) -> None:
         """Register `fn(ctx, **params)` as the handler of skill `name` (see `skill`).
         Before `start()`: the manifest listing the skills is sent then."""
+        _check_name(f"robot {self.name}: skill name", name)
         where = f"robot {self.name}, skill {name}"
         if not isinstance(version, str) or not _SEMVER.match(version):
             raise ValueError(f"{where}: version {version!r} is not SemVer (like 1.2.0)")
@@ -525,6 +542,16 @@ class RobotAgent:
             properties=self.properties,
             skills={k: h.version for k, h in self._handlers.items()},
         )
+
+    def _manifest_bytes(self) -> bytes:
+        """The manifest as sent; ValueError naming the robot when it cannot be."""
+        try:
+            return dumps(self.manifest())
+        except ValidationError as exc:
+            raise ValueError(f"robot {self.name}: the manifest is not valid: {first_error(exc)}") from None
+        except Exception as exc:  # properties pydantic cannot write as JSON
+            raise ValueError(f"robot {self.name}: the manifest cannot be written as JSON "
+                             f"(properties must be JSON values): {exc}") from None
 
     # ------------------------------------------------------------ introspection
 
@@ -597,6 +624,7 @@ class RobotAgent:
         """
         if self._session is not None:
             raise RuntimeError(f"agent {self.name} is already started")
+        self._manifest_bytes()  # properties may have changed since the constructor
         self._loop = asyncio.get_running_loop()
         self._loop_thread = threading.get_ident()
         self._closing = False
@@ -889,12 +917,15 @@ class RobotAgent:
         if info:
             self._info = info
 
+    def _say_once(self, key: str, text: str, *, level: int = logging.ERROR, exc_info: bool = False) -> None:
+        """Log an integrator's mistake that would otherwise repeat several times a second."""
+        if key not in self._said:
+            self._said.add(key)
+            log.log(level, "%s: %s (said once)", self.name, text, exc_info=exc_info)
+
     def _source_failed(self, what: str, problem: str) -> None:
-        """A telemetry source of the integrator failed: said once per source
-        (it is read several times a second), the telemetry goes on without it."""
-        if what not in self._sources_failed:
-            self._sources_failed.add(what)
-            log.error("%s: %s; telemetry sends a default instead (said once)", self.name, problem, exc_info=True)
+        """A telemetry source failed: the telemetry goes on with a default."""
+        self._say_once(f"source {what}", f"{problem}; telemetry sends a default instead", exc_info=True)
 
     def telemetry(self) -> Telemetry:
         # An integrator's source must never break a command reply or a report
@@ -1222,6 +1253,8 @@ class RobotAgent:
                 # (failure is final, so it is never reported in between).
                 entry.retries_used += 1
                 entry.attempt += 1
+                # ctx.skill.attempt agrees with ctx.attempt and the reports
+                entry.skill = entry.skill.model_copy(update={"attempt": entry.attempt})
                 self._progress = None
                 start_info = f"retry {entry.retries_used}/{retries} after: {reason}"
         except asyncio.CancelledError:
@@ -1540,3 +1573,10 @@ def _signature_problem(fn: Callable[..., Any], params: dict[str, Any]) -> str | 
                 f"(an optional parameter left unset, or not one of the skill's): give it a default, like "
                 f"{missing[0]}=None")
     return None
+
+
+def _check_name(what: str, value: Any) -> None:
+    """Names travel in key expressions and the manifest: refuse a bad one now."""
+    if not isinstance(value, str) or not NAME_RE.match(value) or len(value) > 64:
+        raise ValueError(f"{what} {value!r} must start with a letter and hold only letters, digits, '_' "
+                         f"and '-' (at most 64)")

@@ -4,14 +4,15 @@ what to do, never a bare TypeError or a silently broken robot."""
 
 from __future__ import annotations
 
+import asyncio
 import logging
 
 import pytest
 
-from backend.agent import RegistrationRefused, RobotAgent
+from backend.agent import RegistrationRefused, RobotAgent, SkillFailed
 from backend.model import Pose
 from backend.model import Status as S
-from backend.protocol import Run
+from backend.protocol import Pause, Run
 
 from .conftest import Harness, skill
 
@@ -170,3 +171,69 @@ async def test_a_world_handler_that_fails_is_named_on_both_sides(harness: Harnes
         assert f"{lru1} cannot answer ask 'rss' from {lru2}: its on_ask handler returned a list; it must return a dict or None" in text
         # the asker's log carries the same sentence, not a JSON blob
         assert f"{lru2}: ask {lru1}/rss failed: {lru1} cannot answer ask 'rss'" in text
+
+
+def test_a_manifest_that_cannot_be_sent_is_refused_at_construction() -> None:
+    def agent(**kw: object) -> RobotAgent:
+        args: dict = {"name": "lru1", "robot_type": "rover", "connect": "tcp/127.0.0.1:7447", **kw}
+        return RobotAgent(**args)
+
+    with pytest.raises(ValueError, match=r"robot name 'lru 1' must start with a letter and hold only letters"):
+        agent(name="lru 1")
+    with pytest.raises(ValueError, match=r"robot lru1: type 'rover/2' must start with a letter"):
+        agent(robot_type="rover/2")
+    with pytest.raises(ValueError, match=r"robot lru1: module nav version '2.1' is not SemVer \(like 2.1.0\)"):
+        agent(modules={"nav": "2.1"})
+    with pytest.raises(ValueError, match=r"robot lru1: the manifest cannot be written as JSON \(properties must be JSON values\)"):
+        agent(properties={"arm": object()})
+    with pytest.raises(ValueError, match=r"robot lru1: skill name 'drive to' must start with a letter"):
+        agent().add_skill("drive to", lambda ctx: None)
+    assert agent(modules={"nav": "2.1.0-rc1"}).manifest().modules[0].version == "2.1.0-rc1"
+
+
+async def test_an_autonomous_retry_shows_in_ctx_skill_too(harness: Harness) -> None:
+    async with harness as h:
+        lru1 = h.name("lru1")
+        a = h.agent(lru1)
+        seen: list[tuple[int, int]] = []
+
+        @a.skill("grasp")
+        async def grasp(ctx):
+            seen.append((ctx.attempt, ctx.skill.attempt))
+            if ctx.attempt == 1:
+                raise SkillFailed("slipped")
+
+        await a.start()
+        await h.registered(lru1)
+        await h.server.enqueue(lru1, skill("g1", "grasp", retries=1))
+        await h.server.command(lru1, Run())
+        await h.until(lambda: h.server.has(lru1, "g1", S.SUCCESS), what="success")
+        assert seen == [(1, 1), (2, 2)]
+
+
+async def test_ctx_check_in_a_coroutine_warns_once_that_it_ignores_the_pause(
+    harness: Harness, caplog: pytest.LogCaptureFixture
+) -> None:
+    async with harness as h:
+        lru1 = h.name("lru1")
+        a = h.agent(lru1)
+        paused = asyncio.Event()
+        checked = asyncio.Event()
+
+        @a.skill("work")
+        async def work(ctx):
+            await paused.wait()
+            ctx.check()
+            ctx.check()
+            checked.set()
+
+        await a.start()
+        await h.registered(lru1)
+        await h.server.enqueue(lru1, skill("w1"))
+        await h.server.command(lru1, Run())
+        await h.until(lambda: h.made(lru1, "w1", S.RUNNING), what="running")
+        await h.server.command(lru1, Pause())
+        paused.set()
+        await asyncio.wait_for(checked.wait(), 10)
+        said = [r for r in caplog.records if "calls ctx.check(), which cannot wait" in r.getMessage()]
+        assert len(said) == 1 and "use await ctx.checkpoint()" in said[0].getMessage()
