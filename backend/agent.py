@@ -136,6 +136,11 @@ class SkillFailed(Exception):
         super().__init__(reason)
 
 
+class AlreadyConnected(RuntimeError):
+    """`start()`: another agent holds this robot's presence (a second process
+    of the same robot would execute every skill twice)."""
+
+
 class RegistrationRefused(RuntimeError):
     """`wait_registered()`: the server refused this robot (the message says why)."""
 
@@ -637,6 +642,13 @@ class RobotAgent:
         session = transport.open_session(config, what=f"the router (for robot {self.name})")
         self._session = session
         try:
+            # Before anything is declared: a second agent under this name would
+            # also answer the commands and run every skill a second time.
+            if await transport.present_tokens(session, Keys.alive(self.name), self.request_timeout):
+                raise AlreadyConnected(
+                    f"robot {self.name} is already connected (another process holds its presence): stop that one "
+                    f"first; a killed one is gone at once, a hung one after its lease ({self.lease_ms} ms)"
+                )
             # Queryables first: once the server sees our token, commands must work.
             self._entities.append(transport.serve_async(session, Keys.command(self.name), self._on_command))
             self._entities.append(transport.serve_async(session, Keys.world(self.name), self._on_world))

@@ -9,7 +9,7 @@ import logging
 
 import pytest
 
-from backend.agent import RegistrationRefused, RobotAgent, SkillFailed
+from backend.agent import AlreadyConnected, RegistrationRefused, RobotAgent, SkillFailed
 from backend.model import Pose
 from backend.model import Status as S
 from backend.protocol import Pause, Run
@@ -237,3 +237,16 @@ async def test_ctx_check_in_a_coroutine_warns_once_that_it_ignores_the_pause(
         await asyncio.wait_for(checked.wait(), 10)
         said = [r for r in caplog.records if "calls ctx.check(), which cannot wait" in r.getMessage()]
         assert len(said) == 1 and "use await ctx.checkpoint()" in said[0].getMessage()
+
+
+async def test_a_second_agent_under_the_same_name_is_refused_at_start(harness: Harness) -> None:
+    async with harness as h:
+        lru1 = h.name("lru1")
+        a, twin = h.agent(lru1), h.agent(lru1)
+        await a.start()
+        with pytest.raises(AlreadyConnected, match=f"robot {lru1} is already connected .* a hung one after its lease"):
+            await twin.start()
+        assert twin._session is None  # closed again: nothing of it stays declared
+        await a.stop()
+        await twin.start()  # the first one is gone: the name is free
+        await h.registered(lru1)
