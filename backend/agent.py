@@ -581,11 +581,14 @@ class RobotAgent:
     def registered(self) -> bool:
         return self._registered
 
+    def _not_started(self) -> RuntimeError:
+        return RuntimeError(f"agent {self.name} is not started: call start() (or use async with) first")
+
     async def wait_acknowledged(self, timeout: float | None = None) -> None:
         """Return once the server acknowledged every report made so far
         (TimeoutError after `timeout` seconds)."""
         if self._acked_evt is None:
-            raise RuntimeError(f"agent {self.name} is not started")
+            raise self._not_started()
         async with asyncio.timeout(timeout):
             while self._outbox:
                 self._acked_evt.clear()
@@ -598,7 +601,7 @@ class RobotAgent:
         another type, protocol) and `TimeoutError` after `timeout` seconds,
         both with a message saying why."""
         if self._registered_evt is None:
-            raise RuntimeError(f"agent {self.name} is not started: call start() (or use async with) first")
+            raise self._not_started()
         try:
             async with asyncio.timeout(timeout):
                 await self._registered_evt.wait()
@@ -689,7 +692,7 @@ class RobotAgent:
         if act is not None:
             self._release(act, abort=True)
             self._active = None
-            if act.task is not None:
+            if act.task is not None and act.task is not asyncio.current_task():
                 tasks.append(act.task)
         # The flag and the wake-ups end our loops even if a cancellation gets
         # lost (Python 3.11's wait_for swallows one that races a completion).
@@ -1204,7 +1207,9 @@ class RobotAgent:
             act.aborted = True
             act.resumed.set()  # wake waiters so they see the stop
             act.resumed_t.set()
-            if act.task is not None and not act.task.done():
+            # not the task we run in: a handler calling `await agent.stop()` would
+            # be cancelled inside stop(), before the session is closed
+            if act.task is not None and not act.task.done() and act.task is not asyncio.current_task():
                 act.task.cancel()
         for entity in act.barrier_entities:
             try:
@@ -1462,7 +1467,7 @@ class RobotAgent:
 
     async def _world_query(self, robot: str, kind: str, topic: str, data: dict[str, Any] | None) -> WorldReply | None:
         if self._session is None:
-            raise RuntimeError(f"agent {self.name} is not started")
+            raise self._not_started()
         msg = WorldMessage(kind=kind, sender=self.name, topic=topic, data=dict(data or {}))  # type: ignore[arg-type]
         try:
             reachable = bool(self.link.can_reach(robot)) if hasattr(self.link, "can_reach") else True

@@ -250,3 +250,22 @@ async def test_a_second_agent_under_the_same_name_is_refused_at_start(harness: H
         await a.stop()
         await twin.start()  # the first one is gone: the name is free
         await h.registered(lru1)
+
+
+async def test_a_handler_may_stop_its_own_agent(harness: Harness) -> None:
+    async with harness as h:
+        lru1 = h.name("lru1")
+        a = h.agent(lru1)
+        returned = asyncio.Event()
+
+        @a.skill("shutdown")
+        async def shutdown(ctx):
+            await a.stop()  # e.g. an emergency: the robot leaves the mission
+            returned.set()
+
+        await a.start()
+        await h.registered(lru1)
+        await h.server.enqueue(lru1, skill("x1", "shutdown"))
+        await h.server.command(lru1, Run())
+        await asyncio.wait_for(returned.wait(), 10)  # stop() was not cancelled half-way
+        assert a._session is None  # the session is closed: the process can exit
