@@ -312,6 +312,8 @@ class SkillContext:
         if self._act.aborted:
             raise SkillStopped()
         fraction = min(1.0, max(0.0, float(fraction)))
+        info = "" if info is None else str(info)  # it goes into telemetry, which checks its types
+        eta_s = None if eta_s is None else float(eta_s)
         if self._on_loop():
             self.agent._set_progress(self._act, fraction, info, eta_s)
         else:
@@ -533,11 +535,20 @@ class RobotAgent:
     def on_ask(self, topic: str, fn: Callable[..., Any]) -> None:
         """`fn(data, sender) -> dict | None` (or a coroutine) answers asks on
         `topic`; None means "unknown". Runs on the agent's loop: keep it short."""
-        self._ask_handlers[topic] = fn
+        self._add_world_handler("on_ask", self._ask_handlers, topic, fn)
 
     def on_tell(self, topic: str, fn: Callable[..., Any]) -> None:
         """`fn(data, sender)` (or a coroutine) receives tells on `topic`."""
-        self._tell_handlers[topic] = fn
+        self._add_world_handler("on_tell", self._tell_handlers, topic, fn)
+
+    def _add_world_handler(self, kind: str, table: dict[str, Callable[..., Any]], topic: str,
+                           fn: Callable[..., Any]) -> None:
+        where = f"robot {self.name}, {kind} {topic!r}"
+        if not callable(fn):
+            raise TypeError(f"{where}: the handler must be a function fn(data, sender), not {type(fn).__name__}")
+        if topic in table:
+            raise ValueError(f"{where}: a handler is registered already; register each topic once")
+        table[topic] = fn
 
     def manifest(self) -> Manifest:
         return Manifest(
@@ -737,8 +748,9 @@ class RobotAgent:
     def _link_in_range(self) -> bool:
         try:
             return bool(self.link.in_range())
-        except Exception:
-            log.exception("%s: link.in_range() failed; assuming in range", self.name)
+        except Exception as exc:  # polled 20 times a second: said once
+            self._say_once("link.in_range", f"agent.link.in_range() failed ({type(exc).__name__}: {exc}); "
+                           "assuming in range", exc_info=True)
             return True
 
     async def _delay(self) -> None:
@@ -1325,7 +1337,7 @@ class RobotAgent:
                 if inspect.isawaitable(result):  # a sync function returning a coroutine
                     result = await result
         except SkillFailed as exc:
-            return exc.reason or "skill failed"
+            return str(exc.reason) or "skill failed"
         except asyncio.CancelledError:
             if act.aborted or self._session is None:
                 raise
@@ -1337,9 +1349,9 @@ class RobotAgent:
             log.error("%s: the handler of %s (%s) raised", self.name, act.entry.id, name, exc_info=True)
             return f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
         if isinstance(result, Failure):
-            return result.reason
+            return str(result.reason) or "skill failed"
         if isinstance(result, Success) and purpose == "skill":
-            act.result_info = result.info
+            act.result_info = str(result.info)
         if result is False:
             return "the handler returned False"
         return None

@@ -9,7 +9,7 @@ import logging
 
 import pytest
 
-from backend.agent import AlreadyConnected, RegistrationRefused, RobotAgent, SkillFailed
+from backend.agent import AlreadyConnected, RegistrationRefused, RobotAgent, SkillFailed, Success
 from backend.model import Pose
 from backend.model import Status as S
 from backend.protocol import Pause, Run
@@ -269,3 +269,58 @@ async def test_a_handler_may_stop_its_own_agent(harness: Harness) -> None:
         await h.server.command(lru1, Run())
         await asyncio.wait_for(returned.wait(), 10)  # stop() was not cancelled half-way
         assert a._session is None  # the session is closed: the process can exit
+
+
+def test_world_handlers_are_registered_once_and_must_be_callable() -> None:
+    a = RobotAgent("r1", "rover", connect="tcp/127.0.0.1:7447")
+    a.on_ask("stone", lambda data, sender: None)
+    with pytest.raises(ValueError, match="robot r1, on_ask 'stone': a handler is registered already"):
+        a.on_ask("stone", lambda data, sender: None)
+    with pytest.raises(TypeError, match=r"robot r1, on_tell 'box': the handler must be a function fn\(data, sender\)"):
+        a.on_tell("box", {"x": 1})  # type: ignore[arg-type]
+
+
+async def test_odd_values_from_a_handler_reach_the_operator_as_text(harness: Harness) -> None:
+    async with harness as h:
+        lru1 = h.name("lru1")
+        a = h.agent(lru1)
+
+        @a.skill("count")
+        async def count(ctx):
+            ctx.progress(0.5, 42, eta_s=3)  # info and ETA go into telemetry, which checks types
+            assert a.telemetry().info == "42"
+            return Success(7)
+
+        @a.skill("fail")
+        async def fail(ctx):
+            raise SkillFailed(ValueError("arm fault 3"))  # type: ignore[arg-type]
+
+        await a.start()
+        await h.registered(lru1)
+        await h.server.enqueue(lru1, skill("c1", "count"), skill("f1", "fail"))
+        await h.server.command(lru1, Run())
+        await h.until(lambda: h.server.has(lru1, "f1", S.FAILURE), what="f1 failure")
+        assert h.server.has(lru1, "c1", S.SUCCESS, "7")
+        assert h.server.applied[lru1][-1].info == "arm fault 3"
+
+
+async def test_a_broken_link_model_is_said_once(harness: Harness, caplog: pytest.LogCaptureFixture) -> None:
+    async with harness as h:
+        lru1 = h.name("lru1")
+        a = h.agent(lru1)
+        polled = asyncio.Event()
+
+        class Radio:  # an integrator's link model without in_range()
+            quality = 0.7
+
+            def __getattr__(self, name: str) -> object:
+                polled.set()
+                raise AttributeError(name)
+
+        a.link = Radio()  # type: ignore[assignment]
+        await a.start()
+        await h.registered(lru1)  # assumed in range: it registers
+        await asyncio.wait_for(polled.wait(), 10)
+        await a.wait_acknowledged(10)
+        said = [r for r in caplog.records if "agent.link.in_range() failed" in r.getMessage()]
+        assert len(said) == 1
