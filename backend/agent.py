@@ -1,4 +1,5 @@
 """The robot-side SDK: connect a real or simulated robot to the mission server.
+The integrator's guide, with examples a test replays, is docs/robots.md.
 
     agent = RobotAgent("lru2", "rover", connect=["tcp/127.0.0.1:7447"],
                        modules={"nav": "2.1.0"})
@@ -14,7 +15,14 @@
         # text (the report's info); raise SkillFailed("why") or return Failure("why")
 
     async with agent:                            # start() ... stop()
+        await agent.wait_registered(timeout=30)  # RegistrationRefused: the server's reason
         await forever()
+
+Mistakes in setting an agent up (endpoint, names, versions, properties,
+handler signatures, a skill registered twice or after start(), a second
+process under the same robot name) raise at once with a sentence naming the
+robot and skill; a handler that does not fit the parameters it is sent fails
+the skill with a reason naming the parameter.
 
 What the agent does (the contract is backend/protocol.py):
 
