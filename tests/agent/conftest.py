@@ -35,6 +35,7 @@ from backend.protocol import (
     RegisterReply,
     ReportAck,
     ReportBatch,
+    Run,
     dumps,
 )
 from backend.transport import (
@@ -242,6 +243,17 @@ class Harness:
         )
         for n in names:
             await self._agent(n).wait_registered(WAIT)
+
+    async def start(self, *agents: RobotAgent) -> None:
+        """Start the agents and wait until each registered."""
+        for agent in agents:
+            await agent.start()
+        await self.registered(*(a.name for a in agents))
+
+    async def run(self, robot: str, *skills: SkillInstance) -> None:
+        """Synchronize `skills` to `robot` and put it in run mode."""
+        await self.server.enqueue(robot, *skills)
+        await self.server.command(robot, Run())
 
     def _agent(self, name: str) -> RobotAgent:
         return next(a for a in reversed(self.agents) if a.name == name)

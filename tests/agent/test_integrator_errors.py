@@ -83,11 +83,9 @@ async def test_handler_signatures_that_do_not_fit_the_parameters_fail_with_a_rea
         def identify(ctx, target, partner):
             return None
 
-        await a.start()
-        await h.registered(lru1)
-        await h.server.enqueue(lru1, skill("d1", "drive_to", goal={"x": 1.0}, speed=0.5),
-                               skill("i1", "identify", target="stone"))
-        await h.server.command(lru1, Run())
+        await h.start(a)
+        await h.run(lru1, skill("d1", "drive_to", goal={"x": 1.0}, speed=0.5),
+                    skill("i1", "identify", target="stone"))
         await h.until(lambda: h.server.has(lru1, "d1", S.FAILURE), what="d1 failure")
         assert h.server.applied[lru1][-1].info == (
             "handler drive_to() does not accept parameter 'speed' sent by the server: "
@@ -112,10 +110,8 @@ async def test_a_handler_bug_is_one_line_for_the_operator_and_a_traceback_in_the
         def work(ctx):
             return {}["missing"]
 
-        await a.start()
-        await h.registered(lru1)
-        await h.server.enqueue(lru1, skill("w1"))
-        await h.server.command(lru1, Run())
+        await h.start(a)
+        await h.run(lru1, skill("w1"))
         await h.until(lambda: h.server.has(lru1, "w1", S.FAILURE, "KeyError: 'missing'"), what="w1 failure")
         logged = [r for r in caplog.records if r.name == "backend.agent" and "the handler of w1 (work) raised" in r.getMessage()]
         assert logged and logged[0].exc_info is not None
@@ -132,8 +128,7 @@ async def test_a_bad_telemetry_source_does_not_break_commands(harness: Harness, 
         async def work(ctx):
             return None
 
-        await a.start()
-        await h.registered(lru1)
+        await h.start(a)
         reply = await h.server.enqueue(lru1, skill("w1"))  # its reply carries telemetry-making code
         assert reply.ok
         await h.server.command(lru1, Run())
@@ -159,11 +154,8 @@ async def test_a_world_handler_that_fails_is_named_on_both_sides(harness: Harnes
             answers["stone"] = await ctx.ask(lru1, "stone", {})
             answers["rss"] = await ctx.ask(lru1, "rss")
 
-        await a.start()
-        await b.start()
-        await h.registered(lru1, lru2)
-        await h.server.enqueue(lru2, skill("f1", "fetch"))
-        await h.server.command(lru2, Run())
+        await h.start(a, b)
+        await h.run(lru2, skill("f1", "fetch"))
         await h.until(lambda: h.server.has(lru2, "f1", S.SUCCESS), what="fetch done")
         assert answers == {"stone": None, "rss": None}
         text = "\n".join(r.getMessage() for r in caplog.records)
@@ -203,10 +195,8 @@ async def test_an_autonomous_retry_shows_in_ctx_skill_too(harness: Harness) -> N
             if ctx.attempt == 1:
                 raise SkillFailed("slipped")
 
-        await a.start()
-        await h.registered(lru1)
-        await h.server.enqueue(lru1, skill("g1", "grasp", retries=1))
-        await h.server.command(lru1, Run())
+        await h.start(a)
+        await h.run(lru1, skill("g1", "grasp", retries=1))
         await h.until(lambda: h.server.has(lru1, "g1", S.SUCCESS), what="success")
         assert seen == [(1, 1), (2, 2)]
 
@@ -227,10 +217,8 @@ async def test_ctx_check_in_a_coroutine_warns_once_that_it_ignores_the_pause(
             ctx.check()
             checked.set()
 
-        await a.start()
-        await h.registered(lru1)
-        await h.server.enqueue(lru1, skill("w1"))
-        await h.server.command(lru1, Run())
+        await h.start(a)
+        await h.run(lru1, skill("w1"))
         await h.until(lambda: h.made(lru1, "w1", S.RUNNING), what="running")
         await h.server.command(lru1, Pause())
         paused.set()
@@ -263,10 +251,8 @@ async def test_a_handler_may_stop_its_own_agent(harness: Harness) -> None:
             await a.stop()  # e.g. an emergency: the robot leaves the mission
             returned.set()
 
-        await a.start()
-        await h.registered(lru1)
-        await h.server.enqueue(lru1, skill("x1", "shutdown"))
-        await h.server.command(lru1, Run())
+        await h.start(a)
+        await h.run(lru1, skill("x1", "shutdown"))
         await asyncio.wait_for(returned.wait(), 10)  # stop() was not cancelled half-way
         assert a._session is None  # the session is closed: the process can exit
 
@@ -295,10 +281,8 @@ async def test_odd_values_from_a_handler_reach_the_operator_as_text(harness: Har
         async def fail(ctx):
             raise SkillFailed(ValueError("arm fault 3"))  # type: ignore[arg-type]
 
-        await a.start()
-        await h.registered(lru1)
-        await h.server.enqueue(lru1, skill("c1", "count"), skill("f1", "fail"))
-        await h.server.command(lru1, Run())
+        await h.start(a)
+        await h.run(lru1, skill("c1", "count"), skill("f1", "fail"))
         await h.until(lambda: h.server.has(lru1, "f1", S.FAILURE), what="f1 failure")
         assert h.server.has(lru1, "c1", S.SUCCESS, "7")
         assert h.server.applied[lru1][-1].info == "arm fault 3"
