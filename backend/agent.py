@@ -73,6 +73,7 @@ they may call `ctx.progress()` and `ctx.check()` (blocks while paused, raises
 from __future__ import annotations
 
 import asyncio
+import functools
 import inspect
 import logging
 import re
@@ -288,6 +289,24 @@ class _Handler:
 # ---------------------------------------------------------------- skill context
 
 
+def _coroutine_only(method: Callable[..., Any]) -> Callable[..., Any]:
+    """A SkillContext coroutine called from a plain-function handler's thread
+    would only make a coroutine object nobody awaits: no wait, no pause, no
+    answer. Say so instead."""
+
+    @functools.wraps(method)
+    def call(self: SkillContext, *args: Any, **kwargs: Any) -> Any:
+        if not self._on_loop():
+            raise RuntimeError(
+                f"ctx.{method.__name__}() is for coroutine handlers (async def); the handler of "
+                f"{self.skill.skill} is a plain function running in a thread: use ctx.check() between "
+                f"blocking steps, or make it a coroutine"
+            )
+        return method(self, *args, **kwargs)
+
+    return call
+
+
 class SkillContext:
     """What a handler gets as its first argument."""
 
@@ -328,6 +347,7 @@ class SkillContext:
             self.agent._post(self.agent._set_progress, self._act, fraction, info, eta_s)
 
     # -- pause / stop --------------------------------------------------------
+    @_coroutine_only
     async def checkpoint(self) -> None:
         """Return when not paused; raise `SkillStopped` if stopped."""
         while True:
@@ -360,6 +380,7 @@ class SkillContext:
                     raise SkillStopped()
                 return
 
+    @_coroutine_only
     async def sleep(self, seconds: float) -> None:
         """Sleep `seconds` of robot time (divided by `agent.time_scale`), not
         counting time spent paused; raises `SkillStopped` when stopped."""
@@ -402,9 +423,11 @@ class SkillContext:
         return [p if isinstance(p, Position) else Position(**p) for p in self.params[name]]
 
     # -- world -------------------------------------------------------------------
+    @_coroutine_only
     async def ask(self, robot: str, topic: str, data: dict[str, Any] | None = None) -> dict[str, Any] | None:
         return await self.agent.ask(robot, topic, data)
 
+    @_coroutine_only
     async def tell(self, robot: str, topic: str, data: dict[str, Any] | None = None) -> bool:
         return await self.agent.tell(robot, topic, data)
 

@@ -308,3 +308,21 @@ async def test_a_broken_link_model_is_said_once(harness: Harness, caplog: pytest
         await a.wait_acknowledged(10)
         said = [r for r in caplog.records if "agent.link.in_range() failed" in r.getMessage()]
         assert len(said) == 1
+
+
+async def test_the_context_coroutines_refuse_a_plain_function_handler(harness: Harness) -> None:
+    async with harness as h:
+        lru1 = h.name("lru1")
+        a = h.agent(lru1)
+
+        @a.skill("drill")
+        def drill(ctx):
+            ctx.sleep(0.5)  # forgot it is a coroutine: would neither wait nor honour a pause
+
+        await h.start(a)
+        await h.run(lru1, skill("d1", "drill"))
+        await h.until(lambda: h.server.has(lru1, "d1", S.FAILURE), what="d1 failure")
+        assert h.server.applied[lru1][-1].info == (
+            "RuntimeError: ctx.sleep() is for coroutine handlers (async def); the handler of drill is a "
+            "plain function running in a thread: use ctx.check() between blocking steps, or make it a coroutine"
+        )
