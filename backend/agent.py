@@ -1,4 +1,5 @@
 """The robot-side SDK: connect a real or simulated robot to the mission server.
+The integrator's guide, with examples a test replays, is docs/robots.md.
 
     agent = RobotAgent("lru2", "rover", connect=["tcp/127.0.0.1:7447"],
                        modules={"nav": "2.1.0"})
@@ -14,7 +15,14 @@
         # text (the report's info); raise SkillFailed("why") or return Failure("why")
 
     async with agent:                            # start() ... stop()
+        await agent.wait_registered(timeout=30)  # RegistrationRefused: the server's reason
         await forever()
+
+Mistakes in setting an agent up (endpoint, names, versions, properties,
+handler signatures, a skill registered twice or after start(), a second
+process under the same robot name) raise at once with a sentence naming the
+robot and skill; a handler that does not fit the parameters it is sent fails
+the skill with a reason naming the parameter.
 
 What the agent does (the contract is backend/protocol.py):
 
@@ -65,6 +73,7 @@ they may call `ctx.progress()` and `ctx.check()` (blocks while paused, raises
 from __future__ import annotations
 
 import asyncio
+import functools
 import inspect
 import logging
 import re
@@ -78,8 +87,9 @@ import zenoh
 from pydantic import TypeAdapter, ValidationError
 
 from . import transport
+from .library import VERSION_PATTERN
 from .login import Login
-from .model import Pose, Position, SkillInstance, Status
+from .model import NAME_RE, Pose, Position, SkillInstance, Status
 from .ops import Report
 from .protocol import (
     BarrierInfo,
@@ -104,12 +114,15 @@ from .protocol import (
     WorldMessage,
     WorldReply,
     dumps,
+    first_error,
 )
 
 log = logging.getLogger(__name__)
 
 _COMMAND = TypeAdapter(Command)
-_SEMVER = re.compile(r"^\d+\.\d+\.\d+")
+_SEMVER = re.compile(VERSION_PATTERN)  # what a library's skill version may be
+_MODULE_VERSION = re.compile(r"^\d+\.\d+\.\d+")  # as protocol.Module: a suffix like -rc1 may follow
+_ENDPOINT = re.compile(r"^[a-z][a-z0-9\-]*/\S+$")  # PROTOCOL/ADDRESS, as ctl's --connect
 _POSE_KEYS = frozenset(Pose.model_fields)
 _POSITION_KEYS = frozenset(Position.model_fields)
 
@@ -130,6 +143,15 @@ class SkillFailed(Exception):
     def __init__(self, reason: str = "skill failed"):
         self.reason = reason
         super().__init__(reason)
+
+
+class AlreadyConnected(RuntimeError):
+    """`start()`: another agent holds this robot's presence (a second process
+    of the same robot would execute every skill twice)."""
+
+
+class RegistrationRefused(RuntimeError):
+    """`wait_registered()`: the server refused this robot (the message says why)."""
 
 
 class SkillStopped(asyncio.CancelledError):
@@ -267,6 +289,24 @@ class _Handler:
 # ---------------------------------------------------------------- skill context
 
 
+def _coroutine_only(method: Callable[..., Any]) -> Callable[..., Any]:
+    """A SkillContext coroutine called from a plain-function handler's thread
+    would only make a coroutine object nobody awaits: no wait, no pause, no
+    answer. Say so instead."""
+
+    @functools.wraps(method)
+    def call(self: SkillContext, *args: Any, **kwargs: Any) -> Any:
+        if not self._on_loop():
+            raise RuntimeError(
+                f"ctx.{method.__name__}() is for coroutine handlers (async def); the handler of "
+                f"{self.skill.skill} is a plain function running in a thread: use ctx.check() between "
+                f"blocking steps, or make it a coroutine"
+            )
+        return method(self, *args, **kwargs)
+
+    return call
+
+
 class SkillContext:
     """What a handler gets as its first argument."""
 
@@ -299,12 +339,15 @@ class SkillContext:
         if self._act.aborted:
             raise SkillStopped()
         fraction = min(1.0, max(0.0, float(fraction)))
+        info = "" if info is None else str(info)  # it goes into telemetry, which checks its types
+        eta_s = None if eta_s is None else float(eta_s)
         if self._on_loop():
             self.agent._set_progress(self._act, fraction, info, eta_s)
         else:
             self.agent._post(self.agent._set_progress, self._act, fraction, info, eta_s)
 
     # -- pause / stop --------------------------------------------------------
+    @_coroutine_only
     async def checkpoint(self) -> None:
         """Return when not paused; raise `SkillStopped` if stopped."""
         while True:
@@ -321,6 +364,13 @@ class SkillContext:
             # never block the event loop: an async handler must await checkpoint()
             if self._act.aborted:
                 raise SkillStopped()
+            if self._act.paused:
+                self.agent._say_once(
+                    f"check {self.skill.skill}",
+                    f"the coroutine handler of {self.skill.skill} calls ctx.check(), which cannot wait on the "
+                    f"event loop: it ignores the pause; use await ctx.checkpoint() or await ctx.sleep()",
+                    level=logging.WARNING,
+                )
             return
         while True:
             if self._act.aborted:
@@ -330,6 +380,7 @@ class SkillContext:
                     raise SkillStopped()
                 return
 
+    @_coroutine_only
     async def sleep(self, seconds: float) -> None:
         """Sleep `seconds` of robot time (divided by `agent.time_scale`), not
         counting time spent paused; raises `SkillStopped` when stopped."""
@@ -372,9 +423,11 @@ class SkillContext:
         return [p if isinstance(p, Position) else Position(**p) for p in self.params[name]]
 
     # -- world -------------------------------------------------------------------
+    @_coroutine_only
     async def ask(self, robot: str, topic: str, data: dict[str, Any] | None = None) -> dict[str, Any] | None:
         return await self.agent.ask(robot, topic, data)
 
+    @_coroutine_only
     async def tell(self, robot: str, topic: str, data: dict[str, Any] | None = None) -> bool:
         return await self.agent.tell(robot, topic, data)
 
@@ -391,7 +444,7 @@ class RobotAgent:
         name: str,
         robot_type: str,
         *,
-        connect: list[str],
+        connect: list[str] | str,
         modules: dict[str, str] | None = None,
         properties: dict[str, Any] | None = None,
         lease_ms: int = 1000,
@@ -400,10 +453,16 @@ class RobotAgent:
         request_timeout: float = 5.0,
         login: Login | None = None,
     ):
+        _check_name("robot name", name)
+        _check_name(f"robot {name}: type", robot_type)
         self.name = name
         self.robot_type = robot_type
-        self.connect = list(connect)
+        self.connect = _endpoints(name, connect)
         self.modules = dict(modules or {})
+        for module, version in self.modules.items():
+            _check_name(f"robot {name}: module", module)
+            if not isinstance(version, str) or not _MODULE_VERSION.match(version):
+                raise ValueError(f"robot {name}: module {module} version {version!r} is not SemVer (like 2.1.0)")
         self.properties = dict(properties or {})
         self.lease_ms = lease_ms
         # an account (robot role) and TLS files: see docs/security.md
@@ -459,7 +518,11 @@ class RobotAgent:
         self._flush_wake: asyncio.Event | None = None
         self._registered_evt: asyncio.Event | None = None
         self.last_register_reply: RegisterReply | None = None
+        self._refused: str | None = None  # the server's reason, while it refuses us
+        self._register_error = ""  # why the last registration attempt got no reply
         self.refused_reports: list[ErrorReply] = []
+        self._manifest_bytes()  # what is wrong with it is said now, not by a registration retried forever
+        self._said: set[str] = set()  # keys of the mistakes logged once already
 
     # ------------------------------------------------------------ registration API
 
@@ -469,6 +532,11 @@ class RobotAgent:
         """Decorator: `@agent.skill("drive_to", version="1.0.0")` registers a handler
         `handler(ctx, **params)` (function or coroutine). `raw=True` passes the
         parameter values unconverted."""
+        if not isinstance(name, str):  # `@agent.skill` without (): would register nothing
+            raise TypeError(
+                f"robot {self.name}: write @agent.skill(\"NAME\", version=\"1.0.0\"), with the skill's "
+                f"name, above {getattr(name, '__name__', name)!r}"
+            )
 
         def register(fn: Callable[..., Any]) -> Callable[..., Any]:
             self.add_skill(name, fn, version=version, raw=raw)
@@ -477,18 +545,41 @@ class RobotAgent:
         return register
 
     def add_skill(self, name: str, fn: Callable[..., Any], *, version: str = "1.0.0", raw: bool = False) -> None:
-        if not _SEMVER.match(version):
-            raise ValueError(f"skill {name}: version {version!r} is not SemVer (like 1.2.0)")
+        """Register `fn(ctx, **params)` as the handler of skill `name` (see `skill`).
+        Before `start()`: the manifest listing the skills is sent then."""
+        _check_name(f"robot {self.name}: skill name", name)
+        where = f"robot {self.name}, skill {name}"
+        if not isinstance(version, str) or not _SEMVER.match(version):
+            raise ValueError(f"{where}: version {version!r} is not SemVer (like 1.2.0)")
+        if not callable(fn):
+            raise TypeError(f"{where}: the handler must be a function or coroutine function, not {type(fn).__name__}")
+        if not _takes_ctx(fn):
+            raise TypeError(f"{where}: the handler must take the SkillContext as its first argument, "
+                            f"like def {getattr(fn, '__name__', 'handler')}(ctx, **params)")
+        if name in self._handlers:
+            raise ValueError(f"{where}: a handler is registered already "
+                             f"({getattr(self._handlers[name].fn, '__name__', '?')}); register each skill once")
+        if self._session is not None:
+            raise RuntimeError(f"{where}: register skills before start(); the manifest was sent without it")
         self._handlers[name] = _Handler(fn, version, raw)
 
     def on_ask(self, topic: str, fn: Callable[..., Any]) -> None:
         """`fn(data, sender) -> dict | None` (or a coroutine) answers asks on
         `topic`; None means "unknown". Runs on the agent's loop: keep it short."""
-        self._ask_handlers[topic] = fn
+        self._add_world_handler("on_ask", self._ask_handlers, topic, fn)
 
     def on_tell(self, topic: str, fn: Callable[..., Any]) -> None:
         """`fn(data, sender)` (or a coroutine) receives tells on `topic`."""
-        self._tell_handlers[topic] = fn
+        self._add_world_handler("on_tell", self._tell_handlers, topic, fn)
+
+    def _add_world_handler(self, kind: str, table: dict[str, Callable[..., Any]], topic: str,
+                           fn: Callable[..., Any]) -> None:
+        where = f"robot {self.name}, {kind} {topic!r}"
+        if not callable(fn):
+            raise TypeError(f"{where}: the handler must be a function fn(data, sender), not {type(fn).__name__}")
+        if topic in table:
+            raise ValueError(f"{where}: a handler is registered already; register each topic once")
+        table[topic] = fn
 
     def manifest(self) -> Manifest:
         return Manifest(
@@ -498,6 +589,16 @@ class RobotAgent:
             properties=self.properties,
             skills={k: h.version for k, h in self._handlers.items()},
         )
+
+    def _manifest_bytes(self) -> bytes:
+        """The manifest as sent; ValueError naming the robot when it cannot be."""
+        try:
+            return dumps(self.manifest())
+        except ValidationError as exc:
+            raise ValueError(f"robot {self.name}: the manifest is not valid: {first_error(exc)}") from None
+        except Exception as exc:  # properties pydantic cannot write as JSON
+            raise ValueError(f"robot {self.name}: the manifest cannot be written as JSON "
+                             f"(properties must be JSON values): {exc}") from None
 
     # ------------------------------------------------------------ introspection
 
@@ -522,23 +623,40 @@ class RobotAgent:
     def registered(self) -> bool:
         return self._registered
 
+    def _not_started(self) -> RuntimeError:
+        return RuntimeError(f"agent {self.name} is not started: call start() (or use async with) first")
+
     async def wait_acknowledged(self, timeout: float | None = None) -> None:
         """Return once the server acknowledged every report made so far
         (TimeoutError after `timeout` seconds)."""
         if self._acked_evt is None:
-            raise RuntimeError(f"agent {self.name} is not started")
+            raise self._not_started()
         async with asyncio.timeout(timeout):
             while self._outbox:
                 self._acked_evt.clear()
                 await self._acked_evt.wait()
 
     async def wait_registered(self, timeout: float | None = None) -> None:
-        """Return once the current server accepted our registration (TimeoutError
-        after `timeout` seconds)."""
+        """Return once the current server accepted our registration.
+
+        Raises `RegistrationRefused` (the server's reason: not in the mission,
+        another type, protocol) and `TimeoutError` after `timeout` seconds,
+        both with a message saying why."""
         if self._registered_evt is None:
-            raise RuntimeError(f"agent {self.name} is not started")
-        async with asyncio.timeout(timeout):
-            await self._registered_evt.wait()
+            raise self._not_started()
+        try:
+            async with asyncio.timeout(timeout):
+                await self._registered_evt.wait()
+        except TimeoutError:
+            if not self._server_up:
+                why = f"no mission server is up behind {', '.join(self.connect)} (its presence token is missing)"
+            elif not self._link_in_range():
+                why = "the robot is out of communication range (agent.link)"
+            else:
+                why = f"the server did not accept the registration ({self._register_error or 'no answer yet'})"
+            raise TimeoutError(f"robot {self.name} not registered within {timeout:g} s: {why}") from None
+        if self._refused is not None and not self._registered:
+            raise RegistrationRefused(self._refused)
 
     # ------------------------------------------------------------ lifecycle
 
@@ -556,6 +674,7 @@ class RobotAgent:
         """
         if self._session is not None:
             raise RuntimeError(f"agent {self.name} is already started")
+        self._manifest_bytes()  # properties may have changed since the constructor
         self._loop = asyncio.get_running_loop()
         self._loop_thread = threading.get_ident()
         self._closing = False
@@ -568,6 +687,13 @@ class RobotAgent:
         session = transport.open_session(config, what=f"the router (for robot {self.name})")
         self._session = session
         try:
+            # Before anything is declared: a second agent under this name would
+            # also answer the commands and run every skill a second time.
+            if await transport.present_tokens(session, Keys.alive(self.name), self.request_timeout):
+                raise AlreadyConnected(
+                    f"robot {self.name} is already connected (another process holds its presence): stop that one "
+                    f"first; a killed one is gone at once, a hung one after its lease ({self.lease_ms} ms)"
+                )
             # Queryables first: once the server sees our token, commands must work.
             self._entities.append(transport.serve_async(session, Keys.command(self.name), self._on_command))
             self._entities.append(transport.serve_async(session, Keys.world(self.name), self._on_world))
@@ -608,7 +734,7 @@ class RobotAgent:
         if act is not None:
             self._release(act, abort=True)
             self._active = None
-            if act.task is not None:
+            if act.task is not None and act.task is not asyncio.current_task():
                 tasks.append(act.task)
         # The flag and the wake-ups end our loops even if a cancellation gets
         # lost (Python 3.11's wait_for swallows one that races a completion).
@@ -653,8 +779,9 @@ class RobotAgent:
     def _link_in_range(self) -> bool:
         try:
             return bool(self.link.in_range())
-        except Exception:
-            log.exception("%s: link.in_range() failed; assuming in range", self.name)
+        except Exception as exc:  # polled 20 times a second: said once
+            self._say_once("link.in_range", f"agent.link.in_range() failed ({type(exc).__name__}: {exc}); "
+                           "assuming in range", exc_info=True)
             return True
 
     async def _delay(self) -> None:
@@ -709,6 +836,7 @@ class RobotAgent:
                 assert self._loop is not None
                 self._loop.call_later(_RETRY_S, self._register_wake.set)
             except Exception as exc:
+                self._register_error = str(exc) or type(exc).__name__
                 log.info("%s: registration failed (%s); retrying", self.name, exc)
                 assert self._loop is not None
                 self._loop.call_later(_RETRY_S, self._register_wake.set)
@@ -724,7 +852,11 @@ class RobotAgent:
         self.last_register_reply = reply
         if not reply.accepted:
             log.error("%s: the server refused the registration: %s", self.name, reply.reason)
+            self._refused = f"the mission server refused robot {self.name}: {reply.reason}"
+            assert self._registered_evt is not None
+            self._registered_evt.set()  # wait_registered() raises it
             return  # tried again when the server (re)appears
+        self._refused = None
         if reply.last_seq > self._seq:
             # The server applied reports of a previous run of this robot with
             # higher numbers: ours would be ignored as duplicates. Renumber the
@@ -843,18 +975,36 @@ class RobotAgent:
         if info:
             self._info = info
 
+    def _say_once(self, key: str, text: str, *, level: int = logging.ERROR, exc_info: bool = False) -> None:
+        """Log an integrator's mistake that would otherwise repeat several times a second."""
+        if key not in self._said:
+            self._said.add(key)
+            log.log(level, "%s: %s (said once)", self.name, text, exc_info=exc_info)
+
+    def _source_failed(self, what: str, problem: str) -> None:
+        """A telemetry source failed: the telemetry goes on with a default."""
+        self._say_once(f"source {what}", f"{problem}; telemetry sends a default instead", exc_info=True)
+
     def telemetry(self) -> Telemetry:
+        # An integrator's source must never break a command reply or a report
+        # (both publish telemetry): a bad value is replaced, and said once.
         try:
             pose = self.pose()
-        except Exception:
-            log.exception("%s: agent.pose() failed", self.name)
+            if not isinstance(pose, Pose):
+                pose = Pose.model_validate(pose)  # a dict of pose fields will do
+        except Exception as exc:
+            self._source_failed("pose", f"agent.pose() must return a backend.model.Pose: {type(exc).__name__}: {exc}")
             pose = Pose()
         try:
             battery = min(1.0, max(0.0, float(self.battery())))
-        except Exception:
-            log.exception("%s: agent.battery() failed", self.name)
+        except Exception as exc:
+            self._source_failed("battery", f"agent.battery() must return a number 0..1: {type(exc).__name__}: {exc}")
             battery = 0.0
-        quality = min(1.0, max(0.0, float(getattr(self.link, "quality", 1.0))))
+        try:
+            quality = min(1.0, max(0.0, float(getattr(self.link, "quality", 1.0))))
+        except Exception as exc:
+            self._source_failed("link", f"agent.link.quality must be a number 0..1: {type(exc).__name__}: {exc}")
+            quality = 0.0
         act = self._active
         in_range = self._link_in_range()
         return Telemetry(
@@ -1100,7 +1250,9 @@ class RobotAgent:
             act.aborted = True
             act.resumed.set()  # wake waiters so they see the stop
             act.resumed_t.set()
-            if act.task is not None and not act.task.done():
+            # not the task we run in: a handler calling `await agent.stop()` would
+            # be cancelled inside stop(), before the session is closed
+            if act.task is not None and not act.task.done() and act.task is not asyncio.current_task():
                 act.task.cancel()
         for entity in act.barrier_entities:
             try:
@@ -1161,6 +1313,8 @@ class RobotAgent:
                 # (failure is final, so it is never reported in between).
                 entry.retries_used += 1
                 entry.attempt += 1
+                # ctx.skill.attempt agrees with ctx.attempt and the reports
+                entry.skill = entry.skill.model_copy(update={"attempt": entry.attempt})
                 self._progress = None
                 start_info = f"retry {entry.retries_used}/{retries} after: {reason}"
         except asyncio.CancelledError:
@@ -1202,6 +1356,10 @@ class RobotAgent:
         raw_params = dict(act.entry.skill.params) if purpose == "skill" else {}
         params = raw_params if handler.raw else {k: _convert(v) for k, v in raw_params.items()}
         ctx = SkillContext(self, act, raw_params, purpose)
+        mismatch = _signature_problem(handler.fn, params)
+        if mismatch is not None:  # else a bare TypeError from inside the call
+            log.error("%s: skill %s (%s): %s", self.name, act.entry.id, name, mismatch)
+            return mismatch
         try:
             if handler.is_async:
                 result = await handler.fn(ctx, **params)
@@ -1210,7 +1368,7 @@ class RobotAgent:
                 if inspect.isawaitable(result):  # a sync function returning a coroutine
                     result = await result
         except SkillFailed as exc:
-            return exc.reason or "skill failed"
+            return str(exc.reason) or "skill failed"
         except asyncio.CancelledError:
             if act.aborted or self._session is None:
                 raise
@@ -1218,11 +1376,13 @@ class RobotAgent:
             # without a stop): a failure, not a stop.
             return "the handler was cancelled"
         except Exception as exc:
+            # a bug in the handler: the operator gets one line, the robot's log the traceback
+            log.error("%s: the handler of %s (%s) raised", self.name, act.entry.id, name, exc_info=True)
             return f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
         if isinstance(result, Failure):
-            return result.reason
+            return str(result.reason) or "skill failed"
         if isinstance(result, Success) and purpose == "skill":
-            act.result_info = result.info
+            act.result_info = str(result.info)
         if result is False:
             return "the handler returned False"
         return None
@@ -1322,19 +1482,35 @@ class RobotAgent:
         if msg.kind == "ask":
             self.world_stats["asks_received"] += 1
             fn = self._ask_handlers.get(msg.topic)
-            data = await _maybe_await(fn(msg.data, msg.sender)) if fn is not None else None
+            data = await self._world_handler("on_ask", fn, msg) if fn is not None else None
             if data is None:
                 return dumps(WorldReply(known=False))
-            return dumps(WorldReply(known=True, data=dict(data)))
+            if not isinstance(data, dict):
+                raise self._world_refusal(
+                    msg, f"its on_ask handler returned a {type(data).__name__}; it must return a dict or None"
+                )
+            return dumps(WorldReply(known=True, data=data))
         self.world_stats["tells_received"] += 1
         fn = self._tell_handlers.get(msg.topic)
         if fn is not None:
-            await _maybe_await(fn(msg.data, msg.sender))
+            await self._world_handler("on_tell", fn, msg)
         return dumps(WorldReply(known=fn is not None))
+
+    async def _world_handler(self, kind: str, fn: Callable[..., Any], msg: WorldMessage) -> Any:
+        try:
+            return await _maybe_await(fn(msg.data, msg.sender))
+        except Exception as exc:
+            raise self._world_refusal(msg, f"its {kind} handler raised {type(exc).__name__}: {exc}", trace=True) from None
+
+    def _world_refusal(self, msg: WorldMessage, problem: str, trace: bool = False) -> transport.Refusal:
+        """Logged here; the asker's `ask`/`tell` fails (None/False) and its log says why."""
+        text = f"{self.name} cannot answer {msg.kind} {msg.topic!r} from {msg.sender}: {problem}"
+        log.error("%s", text, exc_info=trace)
+        return transport.Refusal(dumps(ErrorReply(code="robot_error", message=text, robot=self.name)))
 
     async def _world_query(self, robot: str, kind: str, topic: str, data: dict[str, Any] | None) -> WorldReply | None:
         if self._session is None:
-            raise RuntimeError(f"agent {self.name} is not started")
+            raise self._not_started()
         msg = WorldMessage(kind=kind, sender=self.name, topic=topic, data=dict(data or {}))  # type: ignore[arg-type]
         try:
             reachable = bool(self.link.can_reach(robot)) if hasattr(self.link, "can_reach") else True
@@ -1348,7 +1524,13 @@ class RobotAgent:
             raw = await transport.query(self._session, Keys.world(robot), dumps(msg), timeout=self.request_timeout)
             return WorldReply.model_validate_json(raw)
         except (transport.QueryFailed, transport.TransportError, ValidationError) as exc:
-            log.info("%s: %s %s/%s failed: %s", self.name, kind, robot, topic, exc)
+            why = str(exc)
+            if isinstance(exc, transport.QueryError):  # the robot's refusal: say its sentence
+                try:
+                    why = ErrorReply.model_validate_json(exc.payload).message
+                except ValidationError:
+                    pass
+            log.info("%s: %s %s/%s failed: %s", self.name, kind, robot, topic, why)
             return None
 
     async def ask(self, robot: str, topic: str, data: dict[str, Any] | None = None) -> dict[str, Any] | None:
@@ -1403,3 +1585,58 @@ def _in_daemon_thread(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Awai
 
     threading.Thread(target=run, name=f"skill-{getattr(fn, '__name__', 'handler')}", daemon=True).start()
     return future
+
+
+def _endpoints(robot: str, connect: list[str] | str) -> list[str]:
+    """The router endpoints, checked here: Zenoh's own complaint names neither
+    the robot nor the form it wants."""
+    endpoints = [connect] if isinstance(connect, str) else list(connect)
+    if not endpoints:
+        raise ValueError(f"robot {robot}: connect lists no endpoint; give the mission server's, like tcp/127.0.0.1:7447")
+    for e in endpoints:
+        if not isinstance(e, str) or not _ENDPOINT.match(e):
+            raise ValueError(f"robot {robot}: connect endpoint {e!r} is not PROTOCOL/ADDRESS, like tcp/127.0.0.1:7447")
+    return endpoints
+
+
+def _takes_ctx(fn: Callable[..., Any]) -> bool:
+    """Can `fn` be called with the SkillContext as its first positional argument?"""
+    try:
+        params = inspect.signature(fn).parameters.values()
+    except (TypeError, ValueError):  # no signature to read (some builtins): trust it
+        return True
+    return any(p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD, p.VAR_POSITIONAL) for p in params)
+
+
+def _signature_problem(fn: Callable[..., Any], params: dict[str, Any]) -> str | None:
+    """Why `fn(ctx, **params)` cannot be called, in the integrator's terms, or None."""
+    try:
+        sig = inspect.signature(fn)
+    except (TypeError, ValueError):
+        return None
+    name = getattr(fn, "__name__", "handler")
+    args = list(sig.parameters.values())
+    if any(p.kind == p.VAR_KEYWORD for p in args):
+        unexpected: list[str] = []
+    else:
+        accepted = {p.name for p in args[1:] if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
+        unexpected = [k for k in params if k not in accepted]
+    if unexpected:
+        return (f"handler {name}() does not accept parameter {', '.join(map(repr, unexpected))} sent by the server: "
+                f"add it to its signature (or take **params)")
+    missing = [
+        p.name for p in args[1:]
+        if p.default is p.empty and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) and p.name not in params
+    ]
+    if missing:
+        return (f"handler {name}() needs parameter {', '.join(map(repr, missing))}, which the server did not send "
+                f"(an optional parameter left unset, or not one of the skill's): give it a default, like "
+                f"{missing[0]}=None")
+    return None
+
+
+def _check_name(what: str, value: Any) -> None:
+    """Names travel in key expressions and the manifest: refuse a bad one now."""
+    if not isinstance(value, str) or not NAME_RE.match(value) or len(value) > 64:
+        raise ValueError(f"{what} {value!r} must start with a letter and hold only letters, digits, '_' "
+                         f"and '-' (at most 64)")

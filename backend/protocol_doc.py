@@ -24,7 +24,8 @@ to a missionctl mission server without reading our code. Transport is
 [Eclipse Zenoh](https://zenoh.io) 1.x; every payload is UTF-8 JSON of the
 models below. The mission server *is* the Zenoh router (default
 `tcp/127.0.0.1:7447`, multicast scouting off); robots and consoles connect to
-it in `client` mode.
+it in `client` mode. A robot written in Python does not need this document:
+it uses the robot agent SDK, see [robots.md](robots.md).
 
 Conventions: names of robots, markers and barriers match
 `^[A-Za-z][A-Za-z0-9_-]*$`; skill ids match `^[A-Za-z0-9][A-Za-z0-9_.-]*$`.

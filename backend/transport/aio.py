@@ -439,6 +439,33 @@ def watch_liveliness(
     return session.liveliness().declare_subscriber(key_expr, on_sample, history=history)
 
 
+async def present_tokens(session: zenoh.Session, key_expr: str, timeout: float = 2.0) -> list[str]:
+    """Keys of the liveliness tokens matching `key_expr` right now (one round
+    trip to the router; [] when there are none)."""
+    loop = asyncio.get_running_loop()
+    done = loop.create_future()
+    found: list[str] = []
+
+    def on_reply(reply: zenoh.Reply) -> None:
+        if reply.ok is not None:
+            found.append(str(reply.ok.key_expr))
+
+    def finish() -> None:
+        if not done.done():
+            done.set_result(None)
+
+    try:
+        session.liveliness().get(key_expr, Callback(on_reply, lambda: _post(loop, finish), indirect=False),
+                                 timeout=timeout)
+    except zenoh.ZError as exc:
+        raise TransportError(f"cannot ask for the tokens of {key_expr}: {exc}") from exc
+    try:
+        await asyncio.wait_for(done, timeout + _GRACE)
+    except TimeoutError:
+        raise QueryTimeout(key_expr, timeout) from None
+    return sorted(set(found))
+
+
 def transport_events(
     session: zenoh.Session,
     on_change: Callable[[TransportChange], object],

@@ -35,6 +35,7 @@ from backend.protocol import (
     RegisterReply,
     ReportAck,
     ReportBatch,
+    Run,
     dumps,
 )
 from backend.transport import (
@@ -86,6 +87,7 @@ class FakeServer:
         self.applied: dict[str, list[Report]] = {}  # per robot, in applied order
         self.last_seq: dict[str, int] = {}
         self.gaps: list[str] = []  # a seq that did not follow the previous one
+        self.refuse: str | None = None  # when set, registrations are refused with this reason
 
     async def start(self) -> None:
         self.session = open_session(client_config([self.endpoint]))
@@ -123,6 +125,8 @@ class FakeServer:
     async def _on_register(self, payload: bytes) -> bytes:
         reg = Register.model_validate_json(payload)
         self.registrations.append(reg)
+        if self.refuse is not None:
+            return dumps(RegisterReply(accepted=False, reason=self.refuse))
         self.apply(reg.manifest.name, reg.reports)
         return dumps(RegisterReply(last_seq=self.last_seq.get(reg.manifest.name, 0)))
 
@@ -239,6 +243,17 @@ class Harness:
         )
         for n in names:
             await self._agent(n).wait_registered(WAIT)
+
+    async def start(self, *agents: RobotAgent) -> None:
+        """Start the agents and wait until each registered."""
+        for agent in agents:
+            await agent.start()
+        await self.registered(*(a.name for a in agents))
+
+    async def run(self, robot: str, *skills: SkillInstance) -> None:
+        """Synchronize `skills` to `robot` and put it in run mode."""
+        await self.server.enqueue(robot, *skills)
+        await self.server.command(robot, Run())
 
     def _agent(self, name: str) -> RobotAgent:
         return next(a for a in reversed(self.agents) if a.name == name)
