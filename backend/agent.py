@@ -521,6 +521,8 @@ class RobotAgent:
         self._refused: str | None = None  # the server's reason, while it refuses us
         self._register_error = ""  # why the last registration attempt got no reply
         self.refused_reports: list[ErrorReply] = []
+        # the thread of the last plain-function handler, done once it returned
+        self._handler_thread: asyncio.Future[None] | None = None
         self._manifest_bytes()  # what is wrong with it is said now, not by a registration retried forever
         self._said: set[str] = set()  # keys of the mistakes logged once already
 
@@ -1360,11 +1362,20 @@ class RobotAgent:
         if mismatch is not None:  # else a bare TypeError from inside the call
             log.error("%s: skill %s (%s): %s", self.name, act.entry.id, name, mismatch)
             return mismatch
+        straggler = self._handler_thread
+        if straggler is not None and not straggler.done():
+            # A plain-function handler that ignored a stop still runs in its
+            # thread: two handlers would drive the robot at once.
+            log.warning("%s: the handler of the stopped skill has not returned (it never calls ctx.check()); "
+                        "%s waits for it before starting", self.name, act.entry.id)
+            self._set_progress(act, 0.0, "waiting for the stopped skill's handler to return", None)
+            await asyncio.shield(straggler)
         try:
             if handler.is_async:
                 result = await handler.fn(ctx, **params)
             else:
-                result = await _in_daemon_thread(handler.fn, ctx, **params)
+                result, self._handler_thread = _in_daemon_thread(handler.fn, ctx, **params)
+                result = await result
                 if inspect.isawaitable(result):  # a sync function returning a coroutine
                     result = await result
         except SkillFailed as exc:
@@ -1557,13 +1568,17 @@ async def _maybe_await(value: Any) -> Any:
     return await value if inspect.isawaitable(value) else value
 
 
-def _in_daemon_thread(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Awaitable[Any]:
+def _in_daemon_thread(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> tuple[Awaitable[Any], asyncio.Future[None]]:
     """Like asyncio.to_thread, but in a daemon thread: a sync handler that never
-    checks for stop keeps running, yet cannot keep the process from exiting."""
+    checks for stop keeps running, yet cannot keep the process from exiting.
+    Returns the result and a future done when the thread has returned (also
+    after the result was cancelled)."""
     loop = asyncio.get_running_loop()
     future: asyncio.Future[Any] = loop.create_future()
+    returned: asyncio.Future[None] = loop.create_future()
 
     def settle(ok: bool, value: Any) -> None:
+        returned.done() or returned.set_result(None)
         if future.done():
             return  # cancelled (stopped) meanwhile
         if ok:
@@ -1584,7 +1599,7 @@ def _in_daemon_thread(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Awai
             pass  # loop closed
 
     threading.Thread(target=run, name=f"skill-{getattr(fn, '__name__', 'handler')}", daemon=True).start()
-    return future
+    return future, returned
 
 
 def _endpoints(robot: str, connect: list[str] | str) -> list[str]:

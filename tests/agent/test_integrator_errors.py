@@ -6,13 +6,14 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import threading
 
 import pytest
 
 from backend.agent import AlreadyConnected, RegistrationRefused, RobotAgent, SkillFailed, Success
 from backend.model import Pose
 from backend.model import Status as S
-from backend.protocol import Pause, Run
+from backend.protocol import Pause, Run, Stop
 
 from .conftest import Harness, skill
 
@@ -326,3 +327,39 @@ async def test_the_context_coroutines_refuse_a_plain_function_handler(harness: H
             "RuntimeError: ctx.sleep() is for coroutine handlers (async def); the handler of drill is a "
             "plain function running in a thread: use ctx.check() between blocking steps, or make it a coroutine"
         )
+
+
+async def test_a_plain_handler_that_ignores_a_stop_is_waited_for_before_the_skill_runs_again(harness: Harness) -> None:
+    """Its thread cannot be cancelled: the next run must not start a second
+    handler driving the same robot while the first one still does."""
+    async with harness as h:
+        lru1 = h.name("lru1")
+        a = h.agent(lru1)
+        release = threading.Event()
+        started = [threading.Event(), threading.Event()]
+        lock = threading.Lock()
+        running = [0, 0]  # now, most at once
+
+        @a.skill("work")
+        def work(ctx):  # never calls ctx.check()
+            with lock:
+                running[0] += 1
+                running[1] = max(running[1], running[0])
+                n = sum(e.is_set() for e in started)
+            started[n].set()
+            if n == 0:
+                release.wait(30)
+            with lock:
+                running[0] -= 1
+
+        await h.start(a)
+        await h.run(lru1, skill("s1"))
+        await asyncio.to_thread(started[0].wait, 30)
+        assert (await h.server.command(lru1, Stop())).ok
+        await h.server.command(lru1, Run())
+        await h.until(lambda: sum(r.id == "s1" and r.status == S.RUNNING for r in h.local[lru1]) == 2, what="s1 running again")
+        assert a.telemetry().info == "waiting for the stopped skill's handler to return"
+        assert not started[1].is_set()
+        release.set()
+        await h.until(lambda: h.made(lru1, "s1", S.SUCCESS), what="s1 done")
+        assert started[1].is_set() and running[1] == 1
