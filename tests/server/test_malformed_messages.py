@@ -5,12 +5,13 @@ shows, and a 10 Hz stream does not flood anyone."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 from datetime import UTC, datetime
 
 from backend.client import Malformed
 from backend.protocol import Keys, Telemetry, dumps
-from backend.transport import client_config
+from backend.transport import client_config, wait_matching
 from backend.transport.session import close_session, open_session
 
 from .harness import drive
@@ -23,11 +24,14 @@ def test_unreadable_telemetry_is_said_once_with_its_field(cluster):
             seen: list[Malformed] = []
             c.add_listener(lambda kind, payload: seen.append(payload) if kind == "malformed" else None)
             key = Keys.telemetry("lru1")
+            pub = session.declare_publisher(key)
+            # a fresh session drops what it puts until it knows of the client's subscriber
+            assert await asyncio.to_thread(wait_matching, pub, 10), "the client's telemetry subscriber never showed"
             bad = {"robot": "lru1", "battery": 1.7, "at": datetime.now(UTC).isoformat()}
             for _ in range(3):  # a stream of them
-                session.put(key, json.dumps(bad))
+                pub.put(json.dumps(bad))
             # then a readable one from the same publisher: it arrives after them
-            session.put(key, dumps(Telemetry(robot="lru1", battery=0.5, at=datetime.now(UTC))))
+            pub.put(dumps(Telemetry(robot="lru1", battery=0.5, at=datetime.now(UTC))))
             await c.wait_for(lambda _m: "lru1" in c.telemetry, 10)
             assert c.telemetry["lru1"].battery == 0.5
             [m] = seen
