@@ -43,6 +43,7 @@ from .mapview import (
 )
 from .model import CONNECTED, GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel, fmt_value
 from .screens import StatusLine, TopBar
+from .select import SafeSelect
 
 if TYPE_CHECKING:
     from .app import MissionApp
@@ -144,7 +145,7 @@ class MarkerPrompt(ModalScreen[tuple[str, str] | None]):
             yield Label(self.title_text)
             yield Input(self.default, id="name")
             if self.kinds:
-                yield Select([("pose (position + heading)", "pose"), ("position", "position"), ("area (square around the cursor)", "area")],
+                yield SafeSelect([("pose (position + heading)", "pose"), ("position", "position"), ("area (square around the cursor)", "area")],
                              value=self.kind, allow_blank=False, id="kind")
             yield Static("enter: ok · escape: cancel", classes="hint")
             yield Static("", id="error", classes="error")

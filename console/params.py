@@ -37,6 +37,7 @@ from backend.library import POSE_FIELDS, POSITION_FIELDS, ParamSpec, check_value
 from backend.model import Policies, SkillInstance, Status
 
 from .model import GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel, fmt_number
+from .select import SafeSelect
 
 TYPED = "\x00typed"  # the bind choice meaning "no marker: a typed value"
 BINDABLE_KINDS = {"pose": ("pose", "position"), "position": ("pose", "position"), "area": ("area",)}
@@ -424,7 +425,7 @@ class ParamEditor(VerticalScroll):
             ]
             if bound and bound not in m.markers:
                 options.append((f"@{bound} (missing)", bound))
-            yield Select(options, value=bound or TYPED, allow_blank=False, id=f"bind-{name}", compact=True, disabled=disabled, classes="bind")
+            yield SafeSelect(options, value=bound or TYPED, allow_blank=False, id=f"bind-{name}", compact=True, disabled=disabled, classes="bind")
             disabled = disabled or bool(bound)
         if t == "bool":
             with Horizontal(classes="fields"):
@@ -456,7 +457,7 @@ class ParamEditor(VerticalScroll):
                 choices = list(m.robots) if m else []
             if isinstance(value, str) and value not in choices:
                 choices.append(value)
-            yield Select(
+            yield SafeSelect(
                 [(c, c) for c in choices],
                 value=value if value in choices else Select.NULL,
                 allow_blank=True,
