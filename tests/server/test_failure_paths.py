@@ -16,6 +16,7 @@ import sqlite3
 import subprocess
 import sys
 import threading
+from contextlib import asynccontextmanager
 
 import pytest
 
@@ -58,6 +59,22 @@ def new_server(db, endpoint: str) -> MissionServer:
     return MissionServer(db=db, mission_file=TUTORIAL, listen=[endpoint], command_timeout=5)
 
 
+@asynccontextmanager
+async def serving(db):
+    """A server on `db` (free loopback port) and a client connected to it,
+    both closed afterwards."""
+    endpoint = loopback_endpoint(free_port())
+    server = new_server(db, endpoint)
+    await server.start()
+    client = MissionClient(endpoint, client_id="t")
+    try:
+        await client.connect()
+        yield server, client
+    finally:
+        await client.close()
+        await server.stop()
+
+
 async def restarted(db) -> str:
     """The mission as a server restarted on `db` has it (JSON)."""
     server = new_server(db, loopback_endpoint(free_port()))
@@ -76,12 +93,7 @@ def test_an_operation_the_journal_cannot_take_is_refused_and_changes_nothing(tmp
     db = tmp_path / "m.db"
 
     async def scenario():
-        endpoint = loopback_endpoint(free_port())
-        server = new_server(db, endpoint)
-        await server.start()
-        client = MissionClient(endpoint, client_id="t")
-        try:
-            await client.connect()
+        async with serving(db) as (server, client):
             alerts = []
             client.add_listener(lambda kind, payload: alerts.append(payload) if kind == "alert" else None)
             before = server.mission.model_dump_json()
@@ -106,9 +118,6 @@ def test_an_operation_the_journal_cannot_take_is_refused_and_changes_nothing(tmp
             labels = [s.label for s in client.mission.tasks["lru1"]]
             assert labels.count("full") == 1
             now = server.mission.model_dump_json()
-        finally:
-            await client.close()
-            await server.stop()
         assert await restarted(db) == now
 
     asyncio.run(asyncio.wait_for(scenario(), 90))
@@ -121,37 +130,26 @@ def test_a_journal_locked_by_another_program_refuses_within_the_client_timeout(t
     db = tmp_path / "m.db"
 
     async def scenario():
-        endpoint = loopback_endpoint(free_port())
-        server = new_server(db, endpoint)
-        await server.start()
-        client = MissionClient(endpoint, client_id="t")
-        other = sqlite3.connect(db, isolation_level=None)
-        try:
-            await client.connect()
-            other.execute("BEGIN EXCLUSIVE")
-            with pytest.raises(OperationRefused) as refused:
-                await client.submit(drive_to("locked"), timeout=8)
-            assert refused.value.code == "journal_failed"
-            assert "locked" in str(refused.value) and "another program holds the file locked" in str(refused.value)
-            other.execute("ROLLBACK")
-            reply = await client.submit(drive_to("locked"))
-            assert reply.revision == 1
-        finally:
-            other.close()
-            await client.close()
-            await server.stop()
+        async with serving(db) as (_server, client):
+            other = sqlite3.connect(db, isolation_level=None)
+            try:
+                other.execute("BEGIN EXCLUSIVE")
+                with pytest.raises(OperationRefused) as refused:
+                    await client.submit(drive_to("locked"), timeout=8)
+                assert refused.value.code == "journal_failed"
+                assert "locked" in str(refused.value) and "another program holds the file locked" in str(refused.value)
+                other.execute("ROLLBACK")
+                reply = await client.submit(drive_to("locked"))
+                assert reply.revision == 1
+            finally:
+                other.close()
 
     asyncio.run(asyncio.wait_for(scenario(), 60))
 
 
 def test_an_undo_the_journal_cannot_take_can_be_sent_again(tmp_path):
     async def scenario():
-        endpoint = loopback_endpoint(free_port())
-        server = new_server(tmp_path / "m.db", endpoint)
-        await server.start()
-        client = MissionClient(endpoint, client_id="t")
-        try:
-            await client.connect()
+        async with serving(tmp_path / "m.db") as (server, client):
             await client.submit(drive_to("undo me"))
             real = server.journal._conn
             server.journal._conn = FullDisk(real)
@@ -161,9 +159,6 @@ def test_an_undo_the_journal_cannot_take_can_be_sent_again(tmp_path):
             reply = await client.submit(Undo())  # still in the history
             assert reply.revision == 2
             assert "undo me" not in [s.label for s in server.mission.tasks["lru1"]]
-        finally:
-            await client.close()
-            await server.stop()
 
     asyncio.run(asyncio.wait_for(scenario(), 60))
 
@@ -171,35 +166,28 @@ def test_an_undo_the_journal_cannot_take_can_be_sent_again(tmp_path):
 def test_a_robot_report_the_journal_cannot_take_is_kept_by_the_robot(tmp_path):
     db = tmp_path / "m.db"
 
+    async def handler(ctx, **params):
+        ctx.progress(1.0)
+
     async def scenario():
-        endpoint = loopback_endpoint(free_port())
-        server = new_server(db, endpoint)
-        await server.start()
-        client = MissionClient(endpoint, client_id="t")
-        agent = RobotAgent("lru1", "lru_science", connect=[endpoint], modules={"base": "1.0.0"}, lease_ms=1000)
-
-        async def handler(ctx, **params):
-            ctx.progress(1.0)
-
-        agent.add_skill("drive_to", handler, version="1.0.0", raw=True)
-        try:
-            await client.connect()
-            await agent.start()
-            await agent.wait_registered(timeout=WAIT)
-            await client.submit(Sync(robot="lru1", through="lru1-1"))
-            real = server.journal._conn
-            full = server.journal._conn = FullDisk(real)
-            await client.submit(Control(op="run", robot="lru1"))  # journals nothing
-            assert await asyncio.to_thread(full.tried.wait, WAIT), "the robot's report never reached the journal"
-            assert status(server.mission, "lru1-1") == "idle_synchronized"
-            server.journal._conn = real
-            await client.wait_for(lambda m: status(m, "lru1-1") == "success", WAIT)
-            assert full.refused >= 1
-            now = server.mission.model_dump_json()
-        finally:
-            await agent.stop()
-            await client.close()
-            await server.stop()
+        async with serving(db) as (server, client):
+            agent = RobotAgent("lru1", "lru_science", connect=server.listen, modules={"base": "1.0.0"}, lease_ms=1000)
+            agent.add_skill("drive_to", handler, version="1.0.0", raw=True)
+            try:
+                await agent.start()
+                await agent.wait_registered(timeout=WAIT)
+                await client.submit(Sync(robot="lru1", through="lru1-1"))
+                real = server.journal._conn
+                full = server.journal._conn = FullDisk(real)
+                await client.submit(Control(op="run", robot="lru1"))  # journals nothing
+                assert await asyncio.to_thread(full.tried.wait, WAIT), "the robot's report never reached the journal"
+                assert status(server.mission, "lru1-1") == "idle_synchronized"
+                server.journal._conn = real
+                await client.wait_for(lambda m: status(m, "lru1-1") == "success", WAIT)
+                assert full.refused >= 1
+                now = server.mission.model_dump_json()
+            finally:
+                await agent.stop()
         assert await restarted(db) == now
 
     asyncio.run(asyncio.wait_for(scenario(), 90))
@@ -209,12 +197,7 @@ def test_a_deleted_journal_is_noticed_before_writing_into_it(tmp_path):
     db = tmp_path / "m.db"
 
     async def scenario():
-        endpoint = loopback_endpoint(free_port())
-        server = new_server(db, endpoint)
-        await server.start()
-        client = MissionClient(endpoint, client_id="t")
-        try:
-            await client.connect()
+        async with serving(db) as (server, client):
             for f in tmp_path.glob("m.db*"):
                 f.unlink()
             with pytest.raises(OperationRefused) as refused:
@@ -222,9 +205,6 @@ def test_a_deleted_journal_is_noticed_before_writing_into_it(tmp_path):
             assert refused.value.code == "journal_failed"
             assert "deleted or replaced" in str(refused.value) and "missionctl ctl save" in str(refused.value)
             assert server.mission.revision == 0
-        finally:
-            await client.close()
-            await server.stop()
 
     asyncio.run(asyncio.wait_for(scenario(), 60))
 
@@ -304,12 +284,7 @@ def test_an_operation_nobody_answers_may_have_been_applied(tmp_path):
     have been applied and carries the request id to retry with."""
 
     async def scenario():
-        endpoint = loopback_endpoint(free_port())
-        server = new_server(tmp_path / "m.db", endpoint)
-        await server.start()
-        client = MissionClient(endpoint, client_id="t")
-        try:
-            await client.connect()
+        async with serving(tmp_path / "m.db") as (server, client):
             for q in server._entities:  # the operations queryable goes: as in a crash, no reply at all
                 if hasattr(q, "undeclare"):
                     q.undeclare()
@@ -318,9 +293,6 @@ def test_an_operation_nobody_answers_may_have_been_applied(tmp_path):
             assert isinstance(gone.value, ServerUnreachable)
             assert gone.value.request_id == "lost-1"
             assert "may have applied it" in str(gone.value) and "request id lost-1" in str(gone.value)
-        finally:
-            await client.close()
-            await server.stop()
 
     asyncio.run(asyncio.wait_for(scenario(), 60))
 
