@@ -18,7 +18,7 @@ from backend.events import EventBatch
 from backend.model import Pose
 from backend.ops import AddSkill, Report
 from backend.protocol import Keys, ReportAck, ReportBatch, Request, StateSnapshot, Telemetry, dumps
-from backend.transport import wait_matching
+from backend.transport import declare_publisher, wait_matching
 
 from .helpers import raw_session
 
@@ -103,7 +103,7 @@ def test_robot_publishes_only_its_own_telemetry(server, accounts):
             watch.put(Keys.telemetry("lru1"), _telemetry("lru1", "fake from observer"))
             _revision(watch)
             rover1.put(Keys.telemetry("lru2"), _telemetry("lru2", "fake from rover1"))
-            own = rover1.declare_publisher(Keys.telemetry("lru1"))
+            own = declare_publisher(rover1, Keys.telemetry("lru1"))  # blocks rather than drops
             # a session drops what it publishes until it knows of a subscriber
             assert wait_matching(own, 10), "rover1 never learned of the operator's subscription"
             own.put(_telemetry("lru1", "real"))

@@ -11,7 +11,7 @@ from datetime import UTC, datetime
 
 from backend.client import Malformed
 from backend.protocol import Keys, Telemetry, dumps
-from backend.transport import client_config, wait_matching
+from backend.transport import client_config, declare_publisher, wait_matching
 from backend.transport.session import close_session, open_session
 
 from .harness import drive
@@ -24,7 +24,7 @@ def test_unreadable_telemetry_is_said_once_with_its_field(cluster):
             seen: list[Malformed] = []
             c.add_listener(lambda kind, payload: seen.append(payload) if kind == "malformed" else None)
             key = Keys.telemetry("lru1")
-            pub = session.declare_publisher(key)
+            pub = declare_publisher(session, key)  # blocks rather than drops: the last one must arrive
             # a fresh session drops what it puts until it knows of the client's subscriber
             assert await asyncio.to_thread(wait_matching, pub, 10), "the client's telemetry subscriber never showed"
             bad = {"robot": "lru1", "battery": 1.7, "at": datetime.now(UTC).isoformat()}
