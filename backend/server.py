@@ -1,15 +1,17 @@
 """The mission server: a Zenoh router hosting the rules, the journal and the
 link to the robots.
 
-All mission state lives on one asyncio loop: Zenoh callbacks only schedule
-coroutines on it (transport.serve_async), so the engine is never touched from
-two threads. Operations involving a robot are serialized per robot and hold
-the skills they send locked until the robot answers.
+All mission state lives on one asyncio loop: Zenoh callbacks only hand
+queries to it (transport.serve_async), so the engine is never touched from
+two threads. An operation that needs no robot is applied and answered in the
+loop callback that received it; operations involving a robot are serialized
+per robot and hold the skills they send locked until the robot answers.
 """
 
 from __future__ import annotations
 
 import asyncio
+import inspect
 import logging
 import sqlite3
 import uuid
@@ -82,6 +84,8 @@ from .transport.session import close_session, open_session
 log = logging.getLogger(__name__)
 
 COMMANDS = {"run": Run, "pause": Pause, "stop": Stop, "reset": ResetCmd}
+# operations the server applies only once their robot answered
+ROBOT_OPS = (Sync, Unsync, Control, Retry)
 
 
 def _now() -> datetime:
@@ -228,19 +232,24 @@ class MissionServer:
         return self.engine.library
 
     # -- plumbing -------------------------------------------------------------
-    def _guard(self, handler: Callable[..., Awaitable[bytes]]) -> Callable[..., Awaitable[bytes]]:
-        """Bad input and refusals become an ErrorReply; nothing else escapes."""
+    def _guard(self, handler: Callable[..., bytes | Awaitable[bytes]]) -> Callable[..., bytes | Awaitable[bytes]]:
+        """Bad input and refusals become an ErrorReply; nothing else escapes.
+        The handler answers at once (bytes) or later (an awaitable)."""
 
-        async def run(*args: Any) -> bytes:
+        def run(*args: Any) -> bytes | Awaitable[bytes]:
             try:
-                return await handler(*args)
-            except Refusal as r:
-                raise ReplyErr(dumps(ErrorReply(**r.to_dict()))) from None
-            except ValidationError as e:
-                msg = f"malformed request: {first_error(e)}"
-                raise ReplyErr(dumps(ErrorReply(code="bad_request", message=msg))) from None
+                result = handler(*args)
+            except (Refusal, ValidationError) as e:
+                raise _error(e) from None
+            return self._guarded(result) if inspect.isawaitable(result) else result
 
         return run
+
+    async def _guarded(self, pending: Awaitable[bytes]) -> bytes:
+        try:
+            return await pending
+        except (Refusal, ValidationError) as e:
+            raise _error(e) from None
 
     def _commit(self, applied: Applied, op: Any, *, actor: str) -> None:
         """Publish an applied (and journaled) operation; snapshot when due."""
@@ -303,7 +312,7 @@ class MissionServer:
             self._publish(self._alerts_pub, dumps(a))
 
     # -- state ------------------------------------------------------------------
-    async def _handle_state(self, payload: bytes) -> bytes:
+    def _handle_state(self, payload: bytes) -> bytes:
         snap = StateSnapshot(
             protocol=PROTOCOL_VERSION,
             server_id=self.server_id,
@@ -315,7 +324,7 @@ class MissionServer:
         return snap.model_dump_json().encode()
 
     # -- operations from consoles and ctl -------------------------------------------
-    async def _handle_account(self, payload: bytes, key: str) -> bytes:
+    def _handle_account(self, payload: bytes, key: str) -> bytes:
         user = key.rsplit("/", 1)[-1]
         if self.accounts is None:
             return dumps(AccountInfo(user=user, role="operator", enforced=False))
@@ -324,7 +333,9 @@ class MissionServer:
             raise Refusal("unknown_account", f"no account '{user}' on this server")
         return dumps(AccountInfo(user=user, role=role, robots=self.accounts.robots(user)))
 
-    async def _handle_op(self, payload: bytes, key: str | None = None) -> bytes:
+    def _handle_op(self, payload: bytes, key: str | None = None) -> bytes | Awaitable[bytes]:
+        """An operation that needs no robot is applied and answered at once;
+        one that waits for a robot's answer is answered when it has it."""
         req = Request.model_validate_json(payload)
         if key is not None:  # op/{user}: the router's rules let only `user` send it
             user = key.rsplit("/", 1)[-1]
@@ -332,13 +343,24 @@ class MissionServer:
             if role != "operator":  # the ACL refuses it first; this is the clean answer if it did not
                 raise Refusal("read_only", f"read-only: logged in as {role or 'unknown account'} {user}")
             req = req.model_copy(update={"user": user})
+        done = self.engine.requests.get((req.client, req.request_id))
+        if done is not None:
+            return _reply(Applied(done.revision, [], done.notes, done.value, duplicate=True))
+        if not isinstance(req.op, ROBOT_OPS):
+            actor = f"{req.user}@{req.client}" if req.user else req.client
+            return _reply(self._submit(req.op, client=req.client, request_id=req.request_id, actor=actor,
+                                       expected_revision=req.expected_revision))
+        inflight = self._inflight.get((req.client, req.request_id))
+        if inflight is not None:  # the same request retried while its robot has not answered
+            return asyncio.shield(inflight)
+        return self._robot_request(req)
+
+    async def _robot_request(self, req: Request) -> bytes:
         key = (req.client, req.request_id)
-        if key in self._inflight:  # the same request retried while in progress
-            return await asyncio.shield(self._inflight[key])
         fut: asyncio.Future = self._loop.create_future()
         self._inflight[key] = fut
         try:
-            reply = await self._apply_request(req)
+            reply = await self._apply_robot_request(req)
             fut.set_result(reply)
             return reply
         except BaseException as e:
@@ -348,23 +370,17 @@ class MissionServer:
         finally:
             del self._inflight[key]
 
-    async def _apply_request(self, req: Request) -> bytes:
+    async def _apply_robot_request(self, req: Request) -> bytes:
         op = req.op
         actor = f"{req.user}@{req.client}" if req.user else req.client
-        done = self.engine.requests.get((req.client, req.request_id))
-        if done is not None:
-            return _reply(Applied(done.revision, [], done.notes, done.value, duplicate=True))
-        if isinstance(op, Sync | Unsync | Control | Retry):
-            if req.expected_revision is not None:
-                self.engine.check_fresh(op, req.expected_revision)
-            try:
-                applied = await self._robot_op(op, actor, req.client, req.request_id)
-            except JournalFailed as f:
-                raise Refusal(f.code, f"{f.message}. The robot did get the {op.op} command: once the journal works, "
-                              "compare `missionctl ctl state` with the robot and unsync or stop what differs") from None
-            self.engine.remember(req.client, req.request_id, applied)
-            return _reply(applied)
-        applied = self._submit(op, client=req.client, request_id=req.request_id, actor=actor, expected_revision=req.expected_revision)
+        if req.expected_revision is not None:
+            self.engine.check_fresh(op, req.expected_revision)
+        try:
+            applied = await self._robot_op(op, actor, req.client, req.request_id)
+        except JournalFailed as f:
+            raise Refusal(f.code, f"{f.message}. The robot did get the {op.op} command: once the journal works, "
+                          "compare `missionctl ctl state` with the robot and unsync or stop what differs") from None
+        self.engine.remember(req.client, req.request_id, applied)
         return _reply(applied)
 
     def _lock(self, robot: str) -> asyncio.Lock:
@@ -542,7 +558,7 @@ class MissionServer:
                 self.alert(f"{robot}: {rep.id} failed: {rep.info}", level="error", robot=robot, skill=rep.id, kind="failure")
         return refused
 
-    async def _handle_reports(self, payload: bytes, key: str) -> bytes:
+    def _handle_reports(self, payload: bytes, key: str) -> bytes | Awaitable[bytes]:
         batch = ReportBatch.model_validate_json(payload)
         robots = {r.robot for r in batch.reports}
         if len(robots) > 1:
@@ -555,8 +571,17 @@ class MissionServer:
         # after the robot's command in flight, if any: a robot in run mode starts
         # a skill it was just sent and may report it before its reply to the
         # enqueue arrives; applied before the SyncAck, `running` would be refused
-        async with self._lock(robot or "?"):
-            refused = self._apply_reports(robot, batch.reports)
+        lock = self._lock(robot or "?")
+        if lock.locked():
+            return self._reports_after_command(lock, robot, batch)
+        return self._ack_reports(robot, batch)  # nothing in flight: at once
+
+    async def _reports_after_command(self, lock: asyncio.Lock, robot: str, batch: ReportBatch) -> bytes:
+        async with lock:
+            return self._ack_reports(robot, batch)
+
+    def _ack_reports(self, robot: str, batch: ReportBatch) -> bytes:
+        refused = self._apply_reports(robot, batch.reports)
         # refused reports are consumed too: the robot must not send them again
         last = max([self.mission.report_seqs.get(robot, 0), *(r.seq for r in batch.reports)])
         return dumps(ReportAck(last_seq=last, refused=refused))
@@ -598,6 +623,12 @@ class JournalFailed(Refusal):
         else:
             todo = "check the disk and the file, then send it again"
         super().__init__("journal_failed", f"the server could not write {what} to its journal {db} ({why}): the mission was not changed; {todo}")
+
+
+def _error(e: Refusal | ValidationError) -> ReplyErr:
+    if isinstance(e, Refusal):
+        return ReplyErr(dumps(ErrorReply(**e.to_dict())))
+    return ReplyErr(dumps(ErrorReply(code="bad_request", message=f"malformed request: {first_error(e)}")))
 
 
 def _reply(applied: Applied) -> bytes:

@@ -62,7 +62,7 @@ def around(owner: object, name: str, before: str, after: str | None = None) -> N
 
 
 # the queryable's Zenoh-thread callback hands the operation to the event loop here
-around(asyncio, "run_coroutine_threadsafe", "s_query")
+around(aio, "hand_over", "s_query")
 around(MissionServer, "_handle_op", "s_handler", "s_handler_end")
 around(Journal, "append_many", "s_journal", "s_journal_end")
 around(aio, "_respond", "s_reply", "s_replied")

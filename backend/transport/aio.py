@@ -10,6 +10,7 @@ answered to the querier with `reply_err`.
 from __future__ import annotations
 
 import asyncio
+import inspect
 import logging
 import threading
 from collections.abc import Awaitable, Callable
@@ -321,42 +322,65 @@ def serve(
 def serve_async(
     session: zenoh.Session,
     key_expr: str,
-    handler: Callable[..., Awaitable[bytes]],
+    handler: Callable[..., bytes | Awaitable[bytes]],
     loop: asyncio.AbstractEventLoop | None = None,
     *,
     with_key: bool = False,
 ) -> zenoh.Queryable[None]:
-    """Like `serve`, but `handler` is a coroutine function run on `loop`.
+    """Like `serve`, but `handler` runs on `loop`'s thread.
 
-    The Zenoh thread only schedules the coroutine, so queries are accepted
-    concurrently and all handler code runs on the event loop's thread.
+    The Zenoh thread only hands the query over, so all handler code runs on
+    the event loop's thread. `handler` is a coroutine function, or a plain
+    function returning the answer (answered in the same loop callback, no
+    task) or an awaitable (run as a task, answered when it completes).
     With `with_key`, the handler gets `(payload, key)`: the query's key (for
     wildcard queryables whose key names the robot or user).
     """
     target = loop or asyncio.get_running_loop()
+    tasks: set[asyncio.Task] = set()  # the loop keeps only weak references to tasks
 
-    async def run(query: zenoh.Query, payload: bytes) -> None:
+    def failed(exc: Exception) -> BaseException:
+        if not isinstance(exc, Refusal):
+            log.error("queryable handler for %s failed", key_expr, exc_info=exc)
+        return exc
+
+    async def finish(query: zenoh.Query, pending: Awaitable[bytes]) -> None:
         outcome: bytes | BaseException
         try:
-            args = (payload, str(query.key_expr)) if with_key else (payload,)
-            outcome = _check_bytes(await handler(*args))
-        except Refusal as exc:
-            outcome = exc
+            outcome = _check_bytes(await pending)
         except Exception as exc:
-            log.exception("queryable handler for %s failed", key_expr)
-            outcome = exc
+            outcome = failed(exc)
+        _respond(query, _reply_key(key_expr, query), outcome)
+
+    def start(query: zenoh.Query, payload: bytes) -> None:
+        outcome: bytes | BaseException
+        try:
+            result = handler(*((payload, str(query.key_expr)) if with_key else (payload,)))
+            if inspect.isawaitable(result):
+                task = target.create_task(finish(query, result))
+                tasks.add(task)
+                task.add_done_callback(tasks.discard)
+                return
+            outcome = _check_bytes(result)
+        except Exception as exc:
+            outcome = failed(exc)
         _respond(query, _reply_key(key_expr, query), outcome)
 
     def on_query(query: zenoh.Query) -> None:
         payload = query.payload.to_bytes() if query.payload is not None else b""
-        coro = run(query, payload)
         try:
-            asyncio.run_coroutine_threadsafe(coro, target)
+            hand_over(target, start, query, payload)
         except RuntimeError:  # loop closed
-            coro.close()
             _respond(query, _reply_key(key_expr, query), RuntimeError("service is shutting down"))
 
     return session.declare_queryable(key_expr, on_query)
+
+
+def hand_over(loop: asyncio.AbstractEventLoop, fn: Callable[..., object], *args: Any) -> None:
+    """A queryable's Zenoh thread hands a query to the event loop: one loop
+    callback, no task unless the handler awaits (named for the benchmarks'
+    tracing)."""
+    loop.call_soon_threadsafe(fn, *args)
 
 
 # ---------------------------------------------------------------- pub/sub

@@ -253,6 +253,48 @@ def test_serve_async_and_query_all_between_clients(router: Any, open_client) -> 
     asyncio.run(scenario())
 
 
+def test_serve_async_plain_handler_answers_at_once_or_with_an_awaitable(router: Any, open_client) -> None:
+    server = open_client(router.endpoint)
+    caller = open_client(router.endpoint)
+
+    async def scenario() -> None:
+        loop_thread = threading.get_ident()
+        seen_threads: set[int] = set()
+
+        async def later(payload: bytes) -> bytes:
+            await asyncio.sleep(0)
+            return b"later:" + payload
+
+        def handler(payload: bytes) -> bytes | Any:
+            seen_threads.add(threading.get_ident())
+            if payload == b"no":
+                raise Refusal("plainly not")
+            if payload == b"bug":
+                raise KeyError("oops")
+            if payload == b"wrong":
+                return "not bytes"
+            if payload.startswith(b"wait"):
+                return later(payload)  # answered when it completes
+            return b"now:" + payload
+
+        serve_async(server, "svc/plain", handler)
+        await asyncio.to_thread(wait_for_queryables, caller, "svc/plain")
+        assert await query(caller, "svc/plain", b"hi", timeout=WAIT) == b"now:hi"
+        assert await query(caller, "svc/plain", b"wait1", timeout=WAIT) == b"later:wait1"
+        with pytest.raises(QueryError, match="plainly not"):
+            await query(caller, "svc/plain", b"no", timeout=WAIT)
+        with pytest.raises(QueryError, match="internal error .*KeyError"):
+            await query(caller, "svc/plain", b"bug", timeout=WAIT)
+        with pytest.raises(QueryError, match="returned str, expected bytes"):
+            await query(caller, "svc/plain", b"wrong", timeout=WAIT)
+        # concurrent queries whose answers wait are all answered
+        got = await asyncio.gather(*(query(caller, "svc/plain", f"wait{i}".encode(), timeout=WAIT) for i in range(20)))
+        assert got == [f"later:wait{i}".encode() for i in range(20)]
+        assert seen_threads == {loop_thread}  # every call ran on the event loop
+
+    asyncio.run(scenario())
+
+
 # ---------------------------------------------------------------- pub/sub
 
 
