@@ -132,21 +132,27 @@ def _from_zenoh_itself(reply: zenoh.Reply) -> bool:
 class _Collector:
     """Collects replies of one `session.get` (filled in a Zenoh thread)."""
 
-    def __init__(self) -> None:
+    def __init__(self, on_first: Callable[[], object] | None = None) -> None:
         self.replies: list[QueryReply] = []
         self.timed_out = False
+        # called after the first reply (or timeout): a single responder's
+        # answer need not wait for Zenoh to end the query
+        self._on_first = on_first
 
     def on_reply(self, reply: zenoh.Reply) -> None:
         sample = reply.ok
         if sample is not None:
             self.replies.append(QueryReply(str(sample.key_expr), sample.payload.to_bytes(), True))
-            return
-        err = reply.err
-        payload = err.payload.to_bytes() if err is not None else b""
-        if payload == b"Timeout" and _from_zenoh_itself(reply):
-            self.timed_out = True
         else:
-            self.replies.append(QueryReply("", payload, False))
+            err = reply.err
+            payload = err.payload.to_bytes() if err is not None else b""
+            if payload == b"Timeout" and _from_zenoh_itself(reply):
+                self.timed_out = True
+            else:
+                self.replies.append(QueryReply("", payload, False))
+        if self._on_first is not None:
+            on_first, self._on_first = self._on_first, None
+            on_first()
 
 
 def _start_get(
@@ -190,17 +196,20 @@ def _all(key: str, timeout: float, collector: _Collector) -> list[QueryReply]:
 
 
 async def _get_async(
-    session: zenoh.Session, key: str, payload: bytes | None, timeout: float
+    session: zenoh.Session, key: str, payload: bytes | None, timeout: float, *, single: bool = False
 ) -> _Collector:
     loop = asyncio.get_running_loop()
     done = loop.create_future()
-    collector = _Collector()
 
     def finish() -> None:
         if not done.done():
             done.set_result(None)
 
-    _start_get(session, key, payload, timeout, collector, lambda: _post(loop, finish))
+    def post_finish() -> None:
+        _post(loop, finish)
+
+    collector = _Collector(post_finish if single else None)
+    _start_get(session, key, payload, timeout, collector, post_finish)
     try:
         await asyncio.wait_for(done, timeout + _GRACE)
     except TimeoutError:
@@ -228,7 +237,7 @@ async def query(
     Raises `QueryError` (it answered with reply_err), `QueryTimeout`, or
     `NoResponder` (no queryable matches: this fails at once).
     """
-    return _single(key, timeout, await _get_async(session, key, payload, timeout))
+    return _single(key, timeout, await _get_async(session, key, payload, timeout, single=True))
 
 
 def query_sync(

@@ -295,6 +295,29 @@ def test_serve_async_plain_handler_answers_at_once_or_with_an_awaitable(router: 
     asyncio.run(scenario())
 
 
+def test_query_returns_the_answer_before_the_responder_ends_the_query(router: Any, open_client) -> None:
+    # a single responder's answer is used at once; Zenoh ends the query only
+    # when the responder drops it (here: once the caller has its answer)
+    server = open_client(router.endpoint)
+    caller = open_client(router.endpoint)
+    release = threading.Event()
+
+    def on_query(q: zenoh.Query) -> None:
+        q.reply("svc/slow-end", b"early")
+        threading.Thread(target=lambda: (release.wait(WAIT * 4), q.drop()), daemon=True).start()
+
+    server.declare_queryable("svc/slow-end", on_query)
+    wait_for_queryables(caller, "svc/slow-end")
+
+    async def scenario() -> bytes:
+        try:
+            return await asyncio.wait_for(query(caller, "svc/slow-end", timeout=WAIT * 4), WAIT)
+        finally:
+            release.set()
+
+    assert asyncio.run(scenario()) == b"early"
+
+
 # ---------------------------------------------------------------- pub/sub
 
 
