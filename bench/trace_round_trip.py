@@ -63,7 +63,7 @@ STAGES = {
     "c_events": "client: the EventBatch reaches the subscriber callback and is parsed",
     "c_applied": "client: the batch is applied to the mirror on the event loop",
     "c_reply": "client: the reply reaches the query callback (Zenoh thread)",
-    "c_done": "client: Zenoh ends the query (drop callback), posts to the event loop",
+    "c_posted": "client: the reply is recorded and handed to the event loop (the query's end comes later, unawaited)",
     "c_resumed": "client: the awaiting coroutine resumes on the event loop",
     "c_end": "client: OpReply parsed, submit() returns",
 }
@@ -77,7 +77,6 @@ def mark(tag: str) -> None:
 def wrap_client() -> None:
     start_get = aio._start_get
     on_reply = aio._Collector.on_reply
-    post = aio._post
     query = client_mod.query
     on_events = MissionClient._on_events
     got_batch = MissionClient._got_batch
@@ -88,12 +87,10 @@ def wrap_client() -> None:
 
     def traced_on_reply(self, reply):
         mark("c_reply")
-        return on_reply(self, reply)
-
-    def traced_post(loop, fn, *args):
-        if getattr(fn, "__name__", "") == "finish":
-            mark("c_done")
-        return post(loop, fn, *args)
+        try:
+            return on_reply(self, reply)
+        finally:
+            mark("c_posted")
 
     @functools.wraps(query)
     async def traced_query(*args, **kwargs):
@@ -112,7 +109,6 @@ def wrap_client() -> None:
 
     aio._start_get = traced_start_get
     aio._Collector.on_reply = traced_on_reply
-    aio._post = traced_post
     client_mod.query = traced_query
     MissionClient._on_events = traced_on_events
     MissionClient._got_batch = traced_got_batch

@@ -205,8 +205,15 @@ async def _get_async(
         if not done.done():
             done.set_result(None)
 
+    posted = False
+
     def post_finish() -> None:
-        _post(loop, finish)
+        # once: after a single responder's first reply, the query's end needs
+        # no wake-up of the loop (both run on the same Zenoh thread)
+        nonlocal posted
+        if not posted:
+            posted = True
+            _post(loop, finish)
 
     collector = _Collector(post_finish if single else None)
     _start_get(session, key, payload, timeout, collector, post_finish)
