@@ -22,7 +22,8 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from .accounts import Accounts, acl_config, zenoh_dictionary
+from .accounts import Accounts, zenoh_dictionary
+from .acl import acl_config
 from .events import EventBatch
 from .files import library_path, load_library, load_mission
 from .journal import Journal, JournalError, remember_requests
