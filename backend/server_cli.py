@@ -9,12 +9,6 @@ import signal
 import sys
 from pathlib import Path
 
-from .accounts import AccountsError, load_accounts
-from .files import FileProblems
-from .journal import JournalError
-from .transport import load_config_file
-from .transport.session import TransportError
-
 EXIT_BAD_INPUT, EXIT_UNREACHABLE = 2, 3
 
 
@@ -35,7 +29,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # imported here: every missionctl command builds this parser
+    from .accounts import AccountsError, load_accounts
+    from .files import FileProblems
+    from .journal import JournalError
     from .server import MissionServer
+    from .transport import load_config_file
+    from .transport.session import TransportError
 
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
     if not args.mission and not args.db:

@@ -102,3 +102,21 @@ def test_a_server_that_accepts_but_never_answers_is_not_a_login_problem():
     assert "did not answer within 2 s" in r.stderr and "stopped or overloaded" in r.stderr, r.stderr
     assert "login" not in r.stderr and "account" not in r.stderr
     assert json.loads(r.stdout)["code"] == "unreachable"
+
+
+def test_ctl_loads_only_what_a_client_needs():
+    # every scripted call pays for what it imports: no numpy (the sim's map
+    # feed), no server, journal or mission files, no console/sim plug-ins
+    code = (
+        "import sys\n"
+        "from backend.cli import main\n"
+        f"rc = main(['ctl', '--connect', {loopback_endpoint(free_port())!r}, 'state'])\n"
+        "print(rc, *sorted(m for m in sys.modules if m.split('.')[0] in {'numpy', 'backend', 'sim', 'console', 'textual', 'yaml'}))\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env(), capture_output=True, text=True, timeout=60)
+    rc, *loaded = r.stdout.split()
+    assert rc == "3", r.stderr  # nothing listens there: the client was used
+    assert "backend.client" in loaded
+    heavy = [m for m in loaded if m.split(".")[0] in {"numpy", "sim", "console", "textual", "yaml"}
+             or m in {"backend.server", "backend.journal", "backend.files", "backend.mapfeed", "backend.acl"}]
+    assert heavy == []
