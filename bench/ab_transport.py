@@ -1,0 +1,195 @@
+"""A/B of two versions of missionctl on the operation round trip (and throughput).
+
+    .venv/bin/python bench/ab_transport.py HEAD~3 HEAD            # two git revisions
+    .venv/bin/python bench/ab_transport.py /tmp/other-checkout .  # or two source trees
+    .venv/bin/python bench/ab_transport.py HEAD~1 HEAD --throughput 2
+
+This machine's speed drifts by 2-3x over a day (a shared VM), so a change is
+judged against the other version in the same run: each version gets its own
+server and client (processes started from its own tree, with this venv's
+Python and packages), and the two are measured in alternating blocks after a
+warm-up. Per version: raw query to PING and `MissionClient.submit(EditSkill)`
+round trips (medians, p99, ratio), or with --throughput S, operations per
+second with 16 in flight for S seconds per block.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+# -- the child: one client of one version's server, measuring a block per request --------------
+
+
+async def child(endpoint: str) -> None:
+    # this version's backend (PYTHONPATH); not bench_transport, which would
+    # put the tree this script lives in first on sys.path
+    from backend.client import MissionClient
+    from backend.ops import EditSkill
+    from backend.protocol import Keys
+
+    client = MissionClient(endpoint, client_id="ab")
+    await client.connect()
+    count = 0
+
+    async def op(skill: str = "lru1-1") -> float:
+        nonlocal count
+        count += 1
+        t = time.perf_counter()
+        await client.submit(EditSkill(id=skill, label=f"ab {count}"))
+        return time.perf_counter() - t
+
+    def ping() -> float:  # raw: a blocking Zenoh query, nothing of ours in between
+        t = time.perf_counter()
+        for reply in client.session.get(Keys.PING, payload=b"ping", timeout=5.0):
+            reply.ok.payload.to_bytes()
+        return time.perf_counter() - t
+
+    async def throughput(seconds: float, inflight: int = 16) -> float:
+        end = time.perf_counter() + seconds
+        done = 0
+
+        async def worker(w: int) -> None:
+            nonlocal done
+            while time.perf_counter() < end:
+                await op(("lru1-1", "lru1-2")[w % 2])
+                done += 1
+
+        t0 = time.perf_counter()
+        await asyncio.gather(*(worker(w) for w in range(inflight)))
+        return done / (time.perf_counter() - t0)
+
+    try:
+        for _ in range(200):  # warm-up
+            await op()
+            ping()
+        print("ready", flush=True)
+        loop = asyncio.get_running_loop()
+        while line := (await loop.run_in_executor(None, sys.stdin.readline)).strip():
+            kind, amount = line.split()
+            if kind == "throughput":
+                print(json.dumps({"throughput": await throughput(float(amount))}), flush=True)
+            else:
+                n = int(amount)
+                raw = [ping() for _ in range(n)]
+                ops = [await op() for _ in range(n)]
+                print(json.dumps({"raw": raw, "ops": ops}), flush=True)
+    finally:
+        await client.close()
+
+
+# -- the parent ------------------------------------------------------------------------------------
+
+
+def source_tree(spec: str, tmp: Path) -> tuple[Path, str]:
+    """A directory as it is, or a git revision checked out into a worktree."""
+    if Path(spec).is_dir():
+        return Path(spec).resolve(), spec
+    rev = subprocess.run(["git", "rev-parse", "--short", spec], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
+    tree = tmp / f"rev-{rev}"
+    subprocess.run(["git", "worktree", "add", "--detach", "-q", str(tree), rev], cwd=ROOT, check=True)
+    return tree, f"{spec} ({rev})"
+
+
+class Version:
+    def __init__(self, tree: Path, label: str, tmp: Path, index: int):
+        from backend.transport import free_port, loopback_endpoint
+
+        self.tree, self.label = tree, label
+        self.env = {**os.environ, "PYTHONPATH": str(tree), "PYTHONUNBUFFERED": "1"}
+        self.endpoint = loopback_endpoint(free_port())
+        self.log = tmp / f"server-{index}.log"
+        with open(self.log, "w") as out:
+            self.server = subprocess.Popen(
+                [sys.executable, "-m", "backend.cli", "server", "--mission", str(tree / "missions" / "tutorial.yaml"),
+                 "--listen", self.endpoint, "--db", str(tmp / f"ab-{index}.db")],
+                cwd=tree, env=self.env, stdout=out, stderr=subprocess.STDOUT)
+        deadline = time.monotonic() + 60
+        while "listening on" not in self.log.read_text():
+            if self.server.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"{label}: the server did not start:\n{self.log.read_text()}")
+            time.sleep(0.05)
+        self.client = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--child", self.endpoint],
+                                       cwd=tree, env=self.env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        if self.client.stdout.readline().strip() != "ready":
+            raise RuntimeError(f"{label}: the client did not start")
+        self.raw: list[float] = []
+        self.ops: list[float] = []
+        self.rates: list[float] = []
+
+    def block(self, request: str) -> None:
+        self.client.stdin.write(request + "\n")
+        self.client.stdin.flush()
+        got = json.loads(self.client.stdout.readline())
+        if "throughput" in got:
+            self.rates.append(got["throughput"])
+        else:
+            self.raw += got["raw"]
+            self.ops += got["ops"]
+
+    def stop(self) -> None:
+        if self.client.poll() is None:
+            self.client.stdin.write("\n")
+            self.client.stdin.flush()
+            self.client.wait(30)
+        self.server.terminate()
+        self.server.wait(30)
+
+    def report(self) -> str:
+        if self.rates:
+            return f"{self.label}: {statistics.median(self.rates):,.0f} ops/s median of {len(self.rates)} blocks"
+        raw, ops = statistics.median(self.raw), statistics.median(self.ops)
+        p99 = sorted(self.ops)[int(0.99 * (len(self.ops) - 1))]
+        return (f"{self.label}: raw {raw * 1e3:.3f} ms, operation {ops * 1e3:.3f} ms (p99 {p99 * 1e3:.3f} ms), "
+                f"ratio {ops / raw:.2f}x")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("a", nargs="?", help="git revision or source tree")
+    ap.add_argument("b", nargs="?", help="git revision or source tree")
+    ap.add_argument("--blocks", type=int, default=12, help="blocks per version, alternating (default 12)")
+    ap.add_argument("-n", type=int, default=200, help="round trips of each kind per block (default 200)")
+    ap.add_argument("--throughput", type=float, metavar="S", help="measure operations/s instead, S seconds per block")
+    ap.add_argument("--child", metavar="ENDPOINT", help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.child:
+        asyncio.run(child(args.child))
+        return 0
+    if not (args.a and args.b):
+        ap.error("give two git revisions or source trees")
+    with tempfile.TemporaryDirectory(prefix="ab-transport-") as d:
+        tmp = Path(d)
+        trees = [source_tree(spec, tmp) for spec in (args.a, args.b)]
+        versions: list[Version] = []
+        try:
+            for i, (tree, label) in enumerate(trees):
+                versions.append(Version(tree, label, tmp, i))
+            request = f"throughput {args.throughput}" if args.throughput else f"ops {args.n}"
+            for b in range(args.blocks):
+                for v in versions if b % 2 == 0 else versions[::-1]:
+                    v.block(request)
+            for v in versions:
+                print(v.report())
+        finally:
+            for v in versions:
+                v.stop()
+            for tree, _ in trees:
+                if tree.is_relative_to(tmp):
+                    subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=ROOT, check=False)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
