@@ -647,33 +647,42 @@ def table(rtt: dict[str, Any], tp: dict[str, Any], fan: dict[str, Any], wire: di
 
 
 PROFILE_NOTES = """Analysis (not re-measured by this script; the stage-by-stage split of an operation is the
-next section, from `bench/trace_round_trip.py`):
+next section, from `bench/trace_round_trip.py`; A/B figures from `bench/ab_transport.py`, which
+runs two versions side by side in alternating blocks, since this shared VM's speed drifts 2-3x
+over a day: the raw query took 0.21 ms on 2026-11-22 and 0.32-0.63 ms on 2026-11-23):
 
 - Tail: with Zenoh's default tx batching, the server's router held an operation's reply, sent right
   behind the operation's EventBatch on the same link, ~1 ms for 1-2 % of operations (the traced
   "reply reaches the query callback" stage took ~1.0 ms in the slowest 2 %; `time_limit` 0 halved
   that). The server now sends each message at once (`transport/config.py:router_config`): p99
   2.0-2.2 ms -> 1.45-1.8 ms over a dozen runs on 2026-11-22; sustained operations ~2,750 ->
-  ~2,150/s (1,980-2,300 over those runs: at the target's edge on this machine). 16 in flight from
-  one client, whose event loop is the bottleneck: `session.get` there waits for the GIL against
-  the client's Zenoh threads, and without batching each reply and event is a message of its own.
+  ~2,150/s. 16 in flight from one client, whose event loop is the bottleneck: `session.get` there
+  waits for the GIL against the client's Zenoh threads, and without batching each reply and event
+  is a message of its own. Batching on again, A/B on 2026-11-23 (the reply now goes before the
+  batch): no difference beyond noise in either median or throughput.
 - Median: the raw query already includes one hand-over to a Python thread in the server (Zenoh
-  runs Python callbacks on threads of their own). An operation adds, besides the server's Python
-  work (~0.1 ms alone in-process, 2-3x that with both processes' threads sharing 2 cores): the
-  hand-over from the queryable's thread to the server's event loop (~0.1 ms), the client's own
-  EventBatch parsed and applied while its reply is handed to its event loop, and that hand-over
-  plus the coroutine's resumption (~0.15 ms). Until 2026-11-22 the server published the batch
-  before replying, and the reply, behind it on the same link, waited while the client took the
-  batch in; replying first: median -7 %, p99 -13 % (3 interleaved runs each, same throughput).
-- Experiments not kept: answering operations on the queryable's Zenoh thread (no server event-loop
-  hop): 12-17 % faster, still ~3.5x; the reply callback settling the query at the first reply,
-  no `asyncio.wait_for`, the event subscriber on Zenoh's network thread, the queryables'
-  callbacks on the network thread, uvloop in the server, a shorter GIL switch interval, express
-  replies: none moved the median beyond run-to-run noise (~5 %). We keep one event loop owning
-  all mission state.
+  runs Python callbacks on threads of their own). An operation adds the server's Python work
+  (~0.1-0.18 ms alone in-process, 2-3x that with both processes' threads sharing 2 cores), the
+  hand-over from the queryable's thread to the server's event loop, the client's own EventBatch
+  parsed and applied while its reply is handed to its event loop, and that hand-over plus the
+  coroutine's resumption. On this VM every wake-up of a thread costs 40-110 µs.
+- Kept, A/B on 2026-11-23: the server answers an operation or report that waits for no robot in
+  the loop callback that receives it, instead of a task started through
+  `run_coroutine_threadsafe` (-7..10 %); the client settles a single responder's query at its first
+  reply instead of when Zenoh ends the query (-8 %). Together, 03912ba -> now: 3.06-3.11x ->
+  2.74-2.76x the raw query, 1,721 -> 1,884 operations/s (16 in flight). Earlier: replying before
+  publishing (median -7 %, p99 -13 %, 2026-11-22).
+- Measured and not kept: answering operations on the queryable's Python thread with no hop to the
+  event loop (a hack for the measurement: mission state would then need a lock shared by two
+  threads): -16 % (2.90x -> 2.44x), still far from 1.5x, so we keep one event loop owning all
+  mission state; a client that ignores its event stream: -9 % (2.82x -> 2.57x), which is what
+  keeping the mirror costs the requester; queryable or subscriber callbacks on Zenoh's network
+  thread (`indirect=False`): no change in the round trip, fan-out to 10 clients in one process
+  worse (3.5 -> 4.0-4.7 ms); earlier (2026-11-22): no `asyncio.wait_for`, uvloop in the server, a
+  shorter GIL switch interval, express replies: within noise (~5 %).
 - Why 1.5x is out of reach here: the next section measures the floor in the same run (raw query +
   the handler alone in-process + one thread-to-loop hand-over, which any asyncio client needs, with
-  the journal written before the reply): ~1.6x before the two processes contend for 2 cores."""
+  the journal written before the reply): 1.5-1.8x before the two processes contend for 2 cores."""
 
 
 def section(body: str, elapsed: float, load: tuple[float, float, float]) -> str:
