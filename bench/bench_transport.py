@@ -648,8 +648,10 @@ def table(rtt: dict[str, Any], tp: dict[str, Any], fan: dict[str, Any], wire: di
 
 PROFILE_NOTES = """Analysis (not re-measured by this script; the stage-by-stage split of an operation is the
 next section, from `bench/trace_round_trip.py`; A/B figures from `bench/ab_transport.py`, which
-runs two versions side by side in alternating blocks, since this shared VM's speed drifts 2-3x
-over a day: the raw query took 0.21 ms on 2026-11-22 and 0.32-0.63 ms on 2026-11-23):
+runs two versions side by side in alternating blocks: figures of different days come from
+different machines and states (the raw query took 0.21 ms on 2026-11-22 on an Intel Xeon VM and
+0.32-0.63 ms on 2026-11-23 on an AMD EPYC VM, raw puts to 10 sessions 0.54 and 0.9-1.5 ms), so the
+absolute targets pass or miss with the machine; the ratios and A/B figures carry over):
 
 - Tail: with Zenoh's default tx batching, the server's router held an operation's reply, sent right
   behind the operation's EventBatch on the same link, ~1 ms for 1-2 % of operations (the traced
