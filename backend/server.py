@@ -351,15 +351,17 @@ class MissionServer:
             actor = f"{req.user}@{req.client}" if req.user else req.client
             return _reply(self._submit(req.op, client=req.client, request_id=req.request_id, actor=actor,
                                        expected_revision=req.expected_revision))
-        inflight = self._inflight.get((req.client, req.request_id))
+        rid = (req.client, req.request_id)
+        inflight = self._inflight.get(rid)
         if inflight is not None:  # the same request retried while its robot has not answered
             return asyncio.shield(inflight)
-        return self._robot_request(req)
-
-    async def _robot_request(self, req: Request) -> bytes:
-        key = (req.client, req.request_id)
+        # registered now, not when the task starts: a retry handed over
+        # before that must find it
         fut: asyncio.Future = self._loop.create_future()
-        self._inflight[key] = fut
+        self._inflight[rid] = fut
+        return self._robot_request(req, fut)
+
+    async def _robot_request(self, req: Request, fut: asyncio.Future) -> bytes:
         try:
             reply = await self._apply_robot_request(req)
             fut.set_result(reply)
@@ -369,7 +371,7 @@ class MissionServer:
             fut.exception()  # retrieved: no "never retrieved" warning
             raise
         finally:
-            del self._inflight[key]
+            del self._inflight[(req.client, req.request_id)]
 
     async def _apply_robot_request(self, req: Request) -> bytes:
         op = req.op
@@ -559,7 +561,7 @@ class MissionServer:
                 self.alert(f"{robot}: {rep.id} failed: {rep.info}", level="error", robot=robot, skill=rep.id, kind="failure")
         return refused
 
-    def _handle_reports(self, payload: bytes, key: str) -> bytes | Awaitable[bytes]:
+    async def _handle_reports(self, payload: bytes, key: str) -> bytes:
         batch = ReportBatch.model_validate_json(payload)
         robots = {r.robot for r in batch.reports}
         if len(robots) > 1:
@@ -571,18 +573,12 @@ class MissionServer:
             self._robot_from(robot)
         # after the robot's command in flight, if any: a robot in run mode starts
         # a skill it was just sent and may report it before its reply to the
-        # enqueue arrives; applied before the SyncAck, `running` would be refused
-        lock = self._lock(robot or "?")
-        if lock.locked():
-            return self._reports_after_command(lock, robot, batch)
-        return self._ack_reports(robot, batch)  # nothing in flight: at once
-
-    async def _reports_after_command(self, lock: asyncio.Lock, robot: str, batch: ReportBatch) -> bytes:
-        async with lock:
-            return self._ack_reports(robot, batch)
-
-    def _ack_reports(self, robot: str, batch: ReportBatch) -> bytes:
-        refused = self._apply_reports(robot, batch.reports)
+        # enqueue arrives; applied before the SyncAck, `running` would be refused.
+        # Always through the lock, in arrival order with the robot's registration
+        # and other batches: a later sequence number applied first would make
+        # the earlier one a duplicate
+        async with self._lock(robot or "?"):
+            refused = self._apply_reports(robot, batch.reports)
         # refused reports are consumed too: the robot must not send them again
         last = max([self.mission.report_seqs.get(robot, 0), *(r.seq for r in batch.reports)])
         return dumps(ReportAck(last_seq=last, refused=refused))

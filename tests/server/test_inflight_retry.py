@@ -1,0 +1,91 @@
+"""A request retried while its robot has not answered yet (a client whose
+reply was lost, or two hand-overs in one pass of the server's event loop) is
+applied once: the robot gets one command, both askers the same reply."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+
+from backend.files import load_mission
+from backend.ops import Sync
+from backend.protocol import (
+    CommandReply,
+    Keys,
+    Manifest,
+    Module,
+    Register,
+    RegisterReply,
+    Request,
+    dumps,
+)
+from backend.server import MissionServer
+from backend.transport import (
+    client_config,
+    declare_token,
+    free_port,
+    loopback_endpoint,
+    query,
+    serve,
+)
+from backend.transport.session import close_session, open_session
+
+from .harness import ROOT
+
+TUTORIAL = ROOT / "missions" / "tutorial.yaml"
+
+
+class CountingRobot:
+    """Accepts every command and counts the enqueues."""
+
+    def __init__(self, endpoint: str, name: str):
+        self.name = name
+        self.enqueued: list[list[str]] = []
+        self.session = open_session(client_config([endpoint]))
+        self._entities = [declare_token(self.session, Keys.alive(name)),
+                          serve(self.session, Keys.command(name), self._on_command)]
+
+    def _on_command(self, payload: bytes) -> bytes:
+        cmd = json.loads(payload)
+        ids = [s["id"] for s in cmd.get("skills", [])] if cmd.get("cmd") == "enqueue" else []
+        if ids:
+            self.enqueued.append(ids)
+        return dumps(CommandReply(ids=ids))
+
+    async def register(self, rtype: str) -> None:
+        _, library = load_mission(TUTORIAL)
+        manifest = Manifest(name=self.name, type=rtype, modules=[Module(name="base", version="1.0.0")],
+                            skills={s: library.skills[s].version for s in library.skills_of(rtype)})
+        reply = RegisterReply.model_validate_json(
+            await query(self.session, Keys.register(self.name), dumps(Register(manifest=manifest)), 10.0))
+        assert reply.accepted, reply.reason
+
+    def close(self) -> None:
+        self._entities.clear()
+        close_session(self.session)
+
+
+def test_a_robot_request_handed_over_twice_before_the_robot_answers_is_applied_once(tmp_path):
+    async def scenario() -> None:
+        endpoint = loopback_endpoint(free_port())
+        server = MissionServer(db=tmp_path / "m.db", mission_file=TUTORIAL, listen=[endpoint])
+        await server.start()
+        robot = CountingRobot(endpoint, "lru1")
+        try:
+            await robot.register("lru_science")
+            payload = dumps(Request(client="c", request_id="sync-1", op=Sync(robot="lru1", through="lru1-1")))
+            # both handed over in the same pass of the loop, before either
+            # has sent its command: the second waits for the first
+            first, second = server._handle_op(payload), server._handle_op(payload)
+            replies = await asyncio.wait_for(asyncio.gather(first, second), 30)
+            assert robot.enqueued == [["lru1-1"]]
+            assert replies[0] == replies[1]
+            assert json.loads(replies[0])["value"]["synchronized"] == ["lru1-1"]
+            # and once answered, a retry is a duplicate, not a second command
+            again = json.loads(server._handle_op(payload))
+            assert again["duplicate"] is True and robot.enqueued == [["lru1-1"]]
+        finally:
+            robot.close()
+            await server.stop()
+
+    asyncio.run(scenario())
