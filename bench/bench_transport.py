@@ -668,7 +668,7 @@ absolute targets pass or miss with the machine; the ratios and A/B figures carry
   hand-over from the queryable's thread to the server's event loop, the client's own EventBatch
   parsed and applied while its reply is handed to its event loop, and that hand-over plus the
   coroutine's resumption. On this VM every wake-up of a thread costs 40-110 µs.
-- Kept, A/B on 2026-11-23: the server answers an operation or report that waits for no robot in
+- Kept, A/B on 2026-11-23: the server answers an operation that waits for no robot in
   the loop callback that receives it, instead of a task started through
   `run_coroutine_threadsafe` (-7..10 %); the client settles a single responder's query at its first
   reply instead of when Zenoh ends the query (-8 %). Together, 03912ba -> now: 3.06-3.11x ->
