@@ -671,9 +671,10 @@ absolute targets pass or miss with the machine; the ratios and A/B figures carry
 - Kept, A/B on 2026-11-23: the server answers an operation that waits for no robot in
   the loop callback that receives it, instead of a task started through
   `run_coroutine_threadsafe` (-7..10 %); the client settles a single responder's query at its first
-  reply instead of when Zenoh ends the query (-8 %). Together, 03912ba -> now: 3.06-3.11x ->
-  2.74-2.76x the raw query, 1,721 -> 1,884 operations/s (16 in flight). Earlier: replying before
-  publishing (median -7 %, p99 -13 %, 2026-11-22).
+  reply instead of when Zenoh ends the query (-8 %). Together, 03912ba -> now, four A/B runs:
+  3.00-3.11x -> 2.74-2.81x the raw query (operation -8..12 %), operations/s with 16 in flight
+  +9..12 % (1,541 -> 1,731 and 1,721 -> 1,884). Earlier: replying before publishing (median -7 %,
+  p99 -13 %, 2026-11-22).
 - Measured and not kept: answering operations on the queryable's Python thread with no hop to the
   event loop (a hack for the measurement: mission state would then need a lock shared by two
   threads): -16 % (2.90x -> 2.44x), still far from 1.5x, so we keep one event loop owning all
