@@ -5,6 +5,7 @@ teardown."""
 from __future__ import annotations
 
 import asyncio
+import json
 import os
 import signal
 import subprocess
@@ -13,8 +14,29 @@ import threading
 from pathlib import Path
 
 from backend.client import MissionClient
-from backend.protocol import Keys, WorldMessage, dumps
-from backend.transport import free_port, loopback_endpoint, query
+from backend.files import load_mission
+from backend.model import Status
+from backend.ops import Report
+from backend.protocol import (
+    CommandReply,
+    Keys,
+    Manifest,
+    Module,
+    QueueEntry,
+    Register,
+    RegisterReply,
+    WorldMessage,
+    dumps,
+)
+from backend.transport import (
+    client_config,
+    declare_token,
+    free_port,
+    loopback_endpoint,
+    query,
+    serve,
+)
+from backend.transport.session import close_session, open_session
 
 ROOT = Path(__file__).resolve().parents[2]
 HERE = Path(__file__).resolve().parent
@@ -93,6 +115,43 @@ class Cluster:
             p.stop()
 
 
+class RawRobot:
+    """A robot on a plain Zenoh session, without the SDK: its presence token,
+    a command queryable that accepts everything (`answer` says how), and a
+    registration offering the tutorial library's skills of its type."""
+
+    def __init__(self, endpoint: str, name: str):
+        self.name = name
+        self.rtype = ""
+        self.session = open_session(client_config([endpoint]))
+        self._entities = [declare_token(self.session, Keys.alive(name)),
+                          serve(self.session, Keys.command(name), self._on_command)]
+
+    def _on_command(self, payload: bytes) -> bytes:
+        cmd = json.loads(payload)
+        ids = [s["id"] for s in cmd.get("skills", [])] if cmd.get("cmd") == "enqueue" else []
+        return dumps(self.answer(ids))
+
+    def answer(self, enqueued: list[str]) -> CommandReply:
+        return CommandReply(ids=enqueued)
+
+    def registration(self, reports: list[Report] = (), queue: list[str] = ()) -> Register:
+        _, library = load_mission(ROOT / "missions" / "tutorial.yaml")
+        manifest = Manifest(name=self.name, type=self.rtype, modules=[Module(name="base", version="1.0.0")],
+                            skills={s: library.skills[s].version for s in library.skills_of(self.rtype)})
+        return Register(manifest=manifest, reports=list(reports), queue=[QueueEntry(id=i, status=Status.RUNNING) for i in queue])
+
+    async def register(self, rtype: str) -> None:
+        self.rtype = rtype
+        reply = RegisterReply.model_validate_json(
+            await query(self.session, Keys.register(self.name), dumps(self.registration()), 10.0))
+        assert reply.accepted, reply.reason
+
+    def close(self) -> None:
+        self._entities.clear()
+        close_session(self.session)
+
+
 def drive(cluster: Cluster, scenario, *, clients: int = 1, timeout: float = 90.0):
     """Run `scenario(*clients)` on a fresh event loop with connected clients
     (closed afterwards, whatever happens)."""
@@ -126,4 +185,4 @@ async def until(client: MissionClient, pred, timeout: float = 15.0):
     return await client.wait_for(pred, timeout)
 
 
-__all__ = ["Cluster", "Proc", "drive", "status", "tell", "until"]
+__all__ = ["Cluster", "Proc", "RawRobot", "drive", "status", "tell", "until"]

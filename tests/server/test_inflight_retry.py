@@ -7,62 +7,27 @@ from __future__ import annotations
 import asyncio
 import json
 
-from backend.files import load_mission
 from backend.ops import Sync
-from backend.protocol import (
-    CommandReply,
-    Keys,
-    Manifest,
-    Module,
-    Register,
-    RegisterReply,
-    Request,
-    dumps,
-)
+from backend.protocol import CommandReply, Request, dumps
 from backend.server import MissionServer
-from backend.transport import (
-    client_config,
-    declare_token,
-    free_port,
-    loopback_endpoint,
-    query,
-    serve,
-)
-from backend.transport.session import close_session, open_session
+from backend.transport import free_port, loopback_endpoint
 
-from .harness import ROOT
+from .harness import ROOT, RawRobot
 
 TUTORIAL = ROOT / "missions" / "tutorial.yaml"
 
 
-class CountingRobot:
+class CountingRobot(RawRobot):
     """Accepts every command and counts the enqueues."""
 
     def __init__(self, endpoint: str, name: str):
-        self.name = name
         self.enqueued: list[list[str]] = []
-        self.session = open_session(client_config([endpoint]))
-        self._entities = [declare_token(self.session, Keys.alive(name)),
-                          serve(self.session, Keys.command(name), self._on_command)]
+        super().__init__(endpoint, name)
 
-    def _on_command(self, payload: bytes) -> bytes:
-        cmd = json.loads(payload)
-        ids = [s["id"] for s in cmd.get("skills", [])] if cmd.get("cmd") == "enqueue" else []
-        if ids:
-            self.enqueued.append(ids)
-        return dumps(CommandReply(ids=ids))
-
-    async def register(self, rtype: str) -> None:
-        _, library = load_mission(TUTORIAL)
-        manifest = Manifest(name=self.name, type=rtype, modules=[Module(name="base", version="1.0.0")],
-                            skills={s: library.skills[s].version for s in library.skills_of(rtype)})
-        reply = RegisterReply.model_validate_json(
-            await query(self.session, Keys.register(self.name), dumps(Register(manifest=manifest)), 10.0))
-        assert reply.accepted, reply.reason
-
-    def close(self) -> None:
-        self._entities.clear()
-        close_session(self.session)
+    def answer(self, enqueued: list[str]) -> CommandReply:
+        if enqueued:
+            self.enqueued.append(enqueued)
+        return super().answer(enqueued)
 
 
 def test_a_robot_request_handed_over_twice_before_the_robot_answers_is_applied_once(tmp_path):
