@@ -132,12 +132,12 @@ def _from_zenoh_itself(reply: zenoh.Reply) -> bool:
 class _Collector:
     """Collects replies of one `session.get` (filled in a Zenoh thread)."""
 
-    def __init__(self, on_first: Callable[[], object] | None = None) -> None:
+    def __init__(self, settle: Callable[[], object] | None = None) -> None:
         self.replies: list[QueryReply] = []
         self.timed_out = False
-        # called after the first reply (or timeout): a single responder's
-        # answer need not wait for Zenoh to end the query
-        self._on_first = on_first
+        # called after each reply (or timeout): a single responder's answer
+        # need not wait for Zenoh to end the query
+        self._settle = settle
 
     def on_reply(self, reply: zenoh.Reply) -> None:
         sample = reply.ok
@@ -150,9 +150,8 @@ class _Collector:
                 self.timed_out = True
             else:
                 self.replies.append(QueryReply("", payload, False))
-        if self._on_first is not None:
-            on_first, self._on_first = self._on_first, None
-            on_first()
+        if self._settle is not None:
+            self._settle()
 
 
 def _start_get(
@@ -208,8 +207,8 @@ async def _get_async(
     posted = False
 
     def post_finish() -> None:
-        # once: after a single responder's first reply, the query's end needs
-        # no wake-up of the loop (both run on the same Zenoh thread)
+        # once: after a single responder's reply, further replies and the
+        # query's end need no wake-up of the loop (same Zenoh thread)
         nonlocal posted
         if not posted:
             posted = True
