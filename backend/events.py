@@ -104,11 +104,11 @@ class EventBatch(Strict):
 
 
 def _task_of(m: Mission, skill_id: str) -> tuple[list[SkillInstance], int]:
-    for task in m.tasks.values():
-        for i, s in enumerate(task):
-            if s.id == skill_id:
-                return task, i
-    raise KeyError(skill_id)
+    found = m.find(skill_id)
+    if found is None:
+        raise KeyError(skill_id)
+    robot, i, _ = found
+    return m.tasks[robot], i
 
 
 def _bump_counters(m: Mission, skill_id: str | None = None, barrier_id: str | None = None) -> None:

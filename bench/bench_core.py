@@ -317,7 +317,7 @@ def table(ops: dict[str, Any], big: dict[str, Any]) -> str:
          "parse (PyYAML with libyaml, keeping line/column marks), validate every parameter against the library"),
         ("Snapshot 10,000-skill mission", f"{big['snapshot_ms']:.0f} ms", "one SQLite transaction"),
         ("Robot report on 10,000-skill mission", f"{big['big_report_engine_ms'] + big['big_report_journal_ms']:.2f} ms",
-         f"engine {big['big_report_engine_ms']:.2f} ms (linear skill lookups) + journal {big['big_report_journal_ms']:.2f} ms"),
+         f"engine {big['big_report_engine_ms']:.2f} ms (skills found where last seen, `Mission.find`) + journal {big['big_report_journal_ms']:.2f} ms"),
         ("Journal reopen (10,000 skills)", f"{big['big_reopen_ms']:.0f} ms",
          f"snapshot + {big.get('big_replayed', 0)} batches replayed (the most before the next snapshot)"),
     ]
@@ -336,7 +336,12 @@ def section(body: str) -> str:
         f"{body}\n\n"
         "The journal runs SQLite in WAL mode with `synchronous=NORMAL`: a commit survives\n"
         "the process being killed (see `tests/core/test_crash_safety.py`), not a power\n"
-        "loss of the last commits.\n"
+        "loss of the last commits.\n\n"
+        "`Mission.find` remembers where it last saw each skill (checked at every use). Before\n"
+        "it scanned the mission: A/B on 2026-11-23, same machine, back to back, the robot\n"
+        "report on the 10,000-skill mission took 1.56 ms (engine 1.46 ms) and now 0.21 ms\n"
+        "(engine 0.15 ms); the 10,000-skill reopen 463 -> 189 ms; the engine alone on the\n"
+        "tutorial 6,591 -> 7,803 ops/s.\n"
     )
 
 
