@@ -221,9 +221,8 @@ class Mission(Strict):
                     return found
             del self._hints[skill_id]
         for robot, task in self.tasks.items():
-            for i, s in enumerate(task):
-                if s.id == skill_id:
-                    return self._rehint(robot, task, skill_id)
+            if any(s.id == skill_id for s in task):
+                return self._rehint(robot, task, skill_id)
         return None
 
     def _rehint(self, robot: str, task: list[SkillInstance], skill_id: str) -> tuple[str, int, SkillInstance] | None:
