@@ -713,6 +713,17 @@ absolute targets pass or miss with the machine; the ratios and A/B figures carry
   thread (`indirect=False`): no change in the round trip, fan-out to 10 clients in one process
   worse (3.5 -> 4.0-4.7 ms); earlier (2026-11-22): no `asyncio.wait_for`, uvloop in the server, a
   shorter GIL switch interval, express replies: within noise (~5 %).
+- Idle gaps, 2026-11-23: the fan-out's robot reports every ~12 ms, so each report meets threads
+  that have gone to sleep. Its acknowledgement took 0.66 ms back to back, 1.5 ms after 4 ms idle and
+  1.75 ms after 12 ms idle; an operation 12 ms after the previous one took 2.05-2.2 ms against a
+  raw query's 0.78-0.83 ms (2.6x; back to back in the same run 2.1-2.4x). Every hand-over between
+  threads (Zenoh's, the Python callback's, the event loop's) wakes a sleeping thread on this VM,
+  so a lone operation costs about twice one in a stream; the round-trip rows above measure a
+  stream, the fan-out rows lone reports.
+- 10,000-skill mission, 2026-11-23: a mirror found a changed skill by scanning the mission
+  (0.74 ms per event for the last robot's skill, 10 clients in one process one after the other):
+  fan-out from the last robot 30-34 ms; `Mission.find` now remembers where it saw each skill
+  (21 µs per event applied): 3.2-3.8 ms, against 2.6-2.8 ms on the tutorial.
 - Why 1.5x is out of reach here: the next section measures the floor in the same run (raw query +
   the handler alone in-process + one thread-to-loop hand-over, which any asyncio client needs, with
   the journal written before the reply): 1.5-1.8x before the two processes contend for 2 cores."""
