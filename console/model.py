@@ -165,7 +165,6 @@ class ConsoleModel:
     _robot_state: dict[str, tuple[SkillInstance | None, int]] = field(default_factory=dict)
     # robot -> the last HISTORY (battery, link) samples, for the fleet screen's sparklines
     history: dict[str, deque[tuple[float, float]]] = field(default_factory=dict)
-    _last_find: tuple[tuple[str, int, int], tuple[str, int, SkillInstance]] | None = None
 
     # -- updates ------------------------------------------------------------------
     def load(self, mission: Mission, library: Library, robots: dict[str, RobotInfo] | None = None, server_id: str = "") -> None:
@@ -255,20 +254,7 @@ class ConsoleModel:
     def find(self, skill_id: str | None) -> tuple[str, int, SkillInstance] | None:
         if skill_id is None or self.mission is None:
             return None
-        # the footer asks about the same skill for every action after each
-        # change: remember the last answer for this mission revision
-        key = (skill_id, id(self.mission), self.mission.revision)
-        if self._last_find is not None and self._last_find[0] == key:
-            return self._last_find[1]
-        robot = self._owner.get(skill_id)
-        if robot is None:
-            return None
-        task = self.mission.tasks.get(robot, [])
-        for i, s in enumerate(task):
-            if s.id == skill_id:
-                self._last_find = (key, (robot, i, s))
-                return robot, i, s
-        return None
+        return self.mission.find(skill_id)  # remembers where it saw each skill
 
     def task(self, robot: str) -> list[SkillInstance]:
         if self.mission is None:
