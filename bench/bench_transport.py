@@ -716,9 +716,12 @@ absolute targets pass or miss with the machine; the ratios and A/B figures carry
 - Idle gaps, 2026-11-23: the fan-out's robot reports every ~12 ms, so each report meets threads
   that have gone to sleep. Its acknowledgement took 0.66 ms back to back, 1.5 ms after 4 ms idle and
   1.75 ms after 12 ms idle; an operation 12 ms after the previous one took 2.05-2.2 ms against a
-  raw query's 0.78-0.83 ms (2.6x; back to back in the same run 2.1-2.4x). Every hand-over between
-  threads (Zenoh's, the Python callback's, the event loop's) wakes a sleeping thread on this VM,
-  so a lone operation costs about twice one in a stream; the round-trip rows above measure a
+  raw query's 0.78-0.83 ms (2.6x; back to back in the same run 2.1-2.4x). Traced in the server
+  (`bench/traced_server.py` around the report handler), after 12 ms idle against back to back:
+  the report reaches the Python callback after 535 vs 181 µs, the event loop 231 vs 95 µs later,
+  and the handler's own Python work (rules, journal, events) takes 674 vs 240 µs. Not only the
+  wake-ups of sleeping threads: all code runs ~3x slower on a CPU that has just been idle on this
+  VM. So a lone operation costs about twice one in a stream; the round-trip rows above measure a
   stream, the fan-out rows lone reports.
 - 10,000-skill mission, 2026-11-23: a mirror found a changed skill by scanning the mission
   (0.74 ms per event for the last robot's skill, 10 clients in one process one after the other):
