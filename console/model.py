@@ -252,9 +252,11 @@ class ConsoleModel:
         return self._barrier_of.get(skill_id)
 
     def find(self, skill_id: str | None) -> tuple[str, int, SkillInstance] | None:
-        if skill_id is None or self.mission is None:
+        # the owner index answers "no such skill" at once (a scan of the mission
+        # otherwise); Mission.find remembers where it saw the others
+        if skill_id is None or self.mission is None or skill_id not in self._owner:
             return None
-        return self.mission.find(skill_id)  # remembers where it saw each skill
+        return self.mission.find(skill_id)
 
     def task(self, robot: str) -> list[SkillInstance]:
         if self.mission is None:
