@@ -612,3 +612,70 @@ def test_robot_reports_cannot_rewrite_the_log_or_unsynchronized_skills(tmp_path,
         pass
     assert srv.engine.mission.find(sid)[2] == before
     srv.close()
+
+
+# -- checkpoints ----------------------------------------------------------------------------
+
+
+def _edits(srv: Server, n: int) -> None:
+    for i in range(n):
+        srv.submit(EditSkill(id="lru1-1", label=f"edit {i}"))
+
+
+def test_sqlite_checkpoints_inside_commits_unless_the_owner_takes_them_over(tmp_path):
+    # 700 operations write well over the 1,000 log pages at which SQLite
+    # checkpoints by itself, inside the commit that crosses them
+    own = Server(tmp_path / "own.db", snapshot_every=10_000)
+    _edits(own, 700)
+    busy, log_frames, copied = own.journal.checkpoint()
+    assert log_frames < 1000  # SQLite restarted its log after checkpointing on its own
+    own.close()
+
+    srv = Server(tmp_path / "m.db", snapshot_every=10_000)
+    srv.journal.checkpoint_in_background(every=300)
+    assert not srv.journal.checkpoint_due
+    _edits(srv, 700)
+    assert srv.journal.checkpoint_due
+    busy, log_frames, copied = srv.journal.checkpoint()
+    assert log_frames >= 1400 and copied == log_frames and busy == 0  # every page since the start
+    assert not srv.journal.checkpoint_due and srv.journal.checkpoints == 1
+    srv.close()
+
+
+def test_a_checkpoint_on_another_thread_loses_nothing_the_writer_commits(tmp_path):
+    import threading
+
+    srv = Server(tmp_path / "m.db", snapshot_every=10_000)
+    srv.journal.checkpoint_in_background(every=1)
+    stop = threading.Event()
+
+    def checkpoints() -> None:
+        while not stop.is_set():
+            srv.journal.checkpoint()
+
+    t = threading.Thread(target=checkpoints)
+    t.start()
+    try:
+        _edits(srv, 400)
+    finally:
+        stop.set()
+        t.join()
+    assert srv.journal.checkpoints > 1
+    expected = srv.engine.mission
+    srv.close()
+    mission, _, j = reopen(tmp_path / "m.db")
+    assert mission == expected and mission.revision == 400
+    j.close()
+
+
+def test_a_checkpoint_never_creates_a_journal_that_was_deleted(tmp_path):
+    db = tmp_path / "m.db"
+    srv = Server(db, snapshot_every=10_000)
+    srv.journal.checkpoint_in_background()
+    _edits(srv, 3)
+    for f in tmp_path.glob("m.db*"):
+        f.unlink()
+    with pytest.raises(JournalError, match="deleted or replaced"):
+        srv.journal.checkpoint()
+    assert not db.exists()
+    srv.close()

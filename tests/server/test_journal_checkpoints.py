@@ -1,0 +1,54 @@
+"""The server checkpoints its journal on a thread, not inside the commit of
+whichever operation fills SQLite's write-ahead log (an fsync that held that
+operation up for 4-17 ms), and loses nothing by it."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+
+from backend.client import MissionClient
+from backend.journal import Journal
+from backend.ops import EditSkill
+from backend.server import MissionServer
+from backend.transport import free_port, loopback_endpoint
+
+from .harness import ROOT
+
+TUTORIAL = ROOT / "missions" / "tutorial.yaml"
+
+
+def test_the_server_checkpoints_its_journal_off_the_event_loop(tmp_path):
+    async def scenario() -> None:
+        endpoint = loopback_endpoint(free_port())
+        server = MissionServer(db=tmp_path / "m.db", mission_file=TUTORIAL, listen=[endpoint])
+        await server.start()
+        client = MissionClient(endpoint, client_id="t")
+        try:
+            journal = server.journal
+            assert journal.conn.execute("PRAGMA wal_autocheckpoint").fetchone()[0] == 0
+            journal.checkpoint_every = 5
+            threads = set()
+            checkpoint = journal.checkpoint
+
+            def recorded() -> tuple[int, int, int]:
+                threads.add(threading.get_ident())
+                return checkpoint()
+
+            journal.checkpoint = recorded
+            await client.connect()
+            for i in range(12):
+                await client.submit(EditSkill(id="lru1-1", label=f"edit {i}"))
+                if server._checkpoint is not None:  # the one this operation started
+                    await server._checkpoint
+            assert journal.checkpoints == 2  # after the 5th and the 10th operation
+            assert threads and threading.get_ident() not in threads  # not the event loop's
+            revision = server.mission.revision
+        finally:
+            await client.close()
+            await server.stop()
+        with Journal.open(tmp_path / "m.db") as j:
+            mission, _ = j.load()
+        assert mission.revision == revision and mission.find("lru1-1")[2].label == "edit 11"
+
+    asyncio.run(scenario())
