@@ -10,7 +10,7 @@ version in the same run: each version gets its own
 server and client (processes started from its own tree, with this venv's
 Python and packages), and the two are measured in alternating blocks after a
 warm-up. Per version: raw query to PING and `MissionClient.submit(EditSkill)`
-round trips (medians, p99, ratio), or with --throughput S, operations per
+round trips (medians, p99, p99.9, max, ratio), or with --throughput S, operations per
 second with 16 in flight for S seconds per block.
 """
 
@@ -151,8 +151,11 @@ class Version:
         if self.rates:
             return f"{self.label}: {statistics.median(self.rates):,.0f} ops/s median of {len(self.rates)} blocks"
         raw, ops = statistics.median(self.raw), statistics.median(self.ops)
-        p99 = sorted(self.ops)[int(0.99 * (len(self.ops) - 1))]
-        return (f"{self.label}: raw {raw * 1e3:.3f} ms, operation {ops * 1e3:.3f} ms (p99 {p99 * 1e3:.3f} ms), "
+        ranked = sorted(self.ops)
+        p99, p999 = (ranked[int(q * (len(ranked) - 1))] for q in (0.99, 0.999))
+        over = sum(t > 0.003 for t in ranked)  # e.g. an fsync in the operation's path
+        return (f"{self.label}: raw {raw * 1e3:.3f} ms, operation {ops * 1e3:.3f} ms (p99 {p99 * 1e3:.3f} ms, "
+                f"p99.9 {p999 * 1e3:.2f} ms, max {ranked[-1] * 1e3:.2f} ms, {over} of {len(ranked)} over 3 ms), "
                 f"ratio {ops / raw:.2f}x")
 
 
