@@ -63,7 +63,7 @@ SNAPSHOT_EVERY = 500
 KEEP_SNAPSHOTS = 3
 # appended batches between checkpoints, when the owner runs them (see
 # Journal.checkpoint_in_background): a write-ahead log of a few MB at most
-CHECKPOINT_EVERY = 256
+CHECKPOINT_EVERY = 512
 REMEMBERED_REQUESTS = 10_000  # as many as the engine remembers
 # How long a write waits for a lock another program holds on the file. The
 # server's event loop waits with it: short, so the refusal reaches the client

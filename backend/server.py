@@ -286,7 +286,7 @@ class MissionServer:
         error = None if done.cancelled() else done.exception()
         if error is None:
             self._checkpoint_failing = False
-        elif not self._checkpoint_failing:  # once, not every 256 operations
+        elif not self._checkpoint_failing:  # once, not at every checkpoint
             self._checkpoint_failing = True
             log.warning("%s: cannot checkpoint the journal (%s); nothing is lost, its -wal file grows until "
                         "a checkpoint succeeds", self.db, error)
