@@ -726,11 +726,12 @@ absolute targets pass or miss with the machine; the ratios and A/B figures carry
 - Tail, 2026-11-23: SQLite checkpointed its write-ahead log inside the commit that filled it
   (1,000 pages, one operation in ~400) and waited for an fsync there, 4-17 ms, holding up the
   event loop and everything queued behind it. The journal's checkpoints now run on a thread
-  (every 256 batches, `Journal.checkpoint_in_background`). A/B (`ab_transport.py`, 10,000
-  operations per version, 4 runs): round trip p99.9 5.9-6.1 -> 2.9-3.7 ms, operations over
-  3 ms 28-35 -> 9-24 per 10,000; median +1..9 % (two runs of identical code differed by 0.5-3 %:
-  within noise or a small cost of the checkpoint's thread sharing the 2 cores); in-process
-  report handling p99.9 3.9-5.3 -> 0.5-0.66 ms.
+  (every 512 batches, `Journal.checkpoint_in_background`). A/B (`ab_transport.py`, 10,000
+  operations per version, both orders): round trip p99.9 5.3-5.6 -> 3.1-3.2 ms, operations over
+  3 ms 39-40 -> 12-15 per 10,000; median +0.6..2.8 % (two copies of the same code differed by
+  up to 3 %); operations/s with 16 in flight -3 % in both orders (2,305 -> 2,239, 2,301 ->
+  2,231): the checkpoint's copy and fsyncs now overlap the saturated pipeline on 2 cores. Kept:
+  no operation waits for an fsync. In-process report handling: p99.9 3.9-5.3 -> 0.5-0.66 ms.
 - 10,000-skill mission, 2026-11-23: a mirror found a changed skill by scanning the mission
   (0.74 ms per event for the last robot's skill, 10 clients in one process one after the other):
   fan-out from the last robot 30-34 ms; `Mission.find` now remembers where it saw each skill
