@@ -456,13 +456,21 @@ class OpGenerator:
 
 
 def main(argv: list[str]) -> int:
+    import threading
+
     from backend.journal import Journal
 
     db, seed, n = argv[0], int(argv[1]), int(argv[2])
     every = int(argv[3]) if len(argv) > 3 else 50
+    # "background": checkpoints on a thread, as the server runs them (often,
+    # so that kills land during them too); else SQLite's, inside commits
+    background = len(argv) > 4 and argv[4] == "background"
     engine = start_engine()
     out = sys.stdout
     with Journal.open(db, library=engine.mission.library, snapshot_every=every) as journal:
+        checkpointing: list[threading.Thread] = []
+        if background:
+            journal.checkpoint_in_background(every=16)
 
         def commit(st: Step) -> None:
             journal.append(
@@ -472,6 +480,9 @@ def main(argv: list[str]) -> int:
                 request_id=st.request_id,
             )
             journal.maybe_snapshot(engine.mission)
+            if journal.checkpoint_due and not any(t.is_alive() for t in checkpointing):
+                checkpointing[:] = [threading.Thread(target=journal.checkpoint, daemon=True)]
+                checkpointing[0].start()
             out.write(f"{st.applied.revision}\n")
             out.flush()
 
@@ -479,6 +490,8 @@ def main(argv: list[str]) -> int:
         gen = OpGenerator(engine, seed, on_step=commit)
         for _ in range(n):
             gen.step()
+        for t in checkpointing:
+            t.join()
     out.write("done\n")
     out.flush()
     return 0

@@ -4,7 +4,8 @@ comes back with a consistent mission equal to a prefix of what it applied.
 The worker (crash_worker.py, a subprocess: never a fork of the test process)
 applies a long deterministic stream of operations, one journal transaction
 each, snapshotting every 50 revisions, and prints each revision once it is
-committed. The test reads k lines (k random), kills the worker right away and
+committed. For half the seeds it checkpoints the journal on a thread every
+16 batches, as the server does (every 512), so kills land during those too. The test reads k lines (k random), kills the worker right away and
 reopens the journal. The kill moments are set by the worker's own output, not
 by sleeping.
 
@@ -36,6 +37,7 @@ from crash_worker import OpGenerator, mission_problems, start_engine  # noqa: E4
 WORKER = Path(__file__).with_name("crash_worker.py")
 ROOT = Path(__file__).resolve().parents[2]
 SEEDS = (101, 202, 303, 404)
+BACKGROUND_CHECKPOINTS = (202, 404)
 KILLS_PER_SEED = 6
 N_STEPS = 6000  # about 4,500 revisions: the worker is killed long before the end
 SNAPSHOT_EVERY = 50
@@ -47,7 +49,9 @@ def run_and_kill(db: Path, seed: int, k: int, err: Path) -> tuple[list[int], boo
     (also those still in the pipe), whether it finished, its return code."""
     with err.open("w") as errf:
         proc = subprocess.Popen(
-            [sys.executable, str(WORKER), str(db), str(seed), str(N_STEPS), str(SNAPSHOT_EVERY)],
+            [sys.executable, str(WORKER), str(db), str(seed), str(N_STEPS), str(SNAPSHOT_EVERY),
+             # half the seeds checkpoint on a thread as the server does, half leave it to SQLite
+             "background" if seed in BACKGROUND_CHECKPOINTS else "sqlite"],
             stdout=subprocess.PIPE,
             stderr=errf,
             stdin=subprocess.DEVNULL,
