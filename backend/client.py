@@ -21,6 +21,7 @@ import zenoh
 from pydantic import ValidationError
 
 from . import events as ev
+from .bulk import gc_paused
 from .library import Library
 from .login import Login
 from .model import Mission
@@ -258,7 +259,8 @@ class MissionClient:
             except QueryTimeout:
                 raise ServerUnreachable(f"the mission server at {', '.join(self.endpoints)} did not answer in {self.timeout:g} s") from None
             try:
-                snap = StateSnapshot.model_validate_json(raw)
+                with gc_paused():
+                    snap = StateSnapshot.model_validate_json(raw)
             except ValidationError:
                 raise ProtocolMismatch(
                     f"the server at {', '.join(self.endpoints)} speaks another protocol version "

@@ -16,6 +16,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from . import yamlio
+from .bulk import gc_paused
 from .library import LIBRARY_FORMAT, VERSION_PATTERN, Library, check_params
 from .model import (
     ID_PATTERN,
@@ -357,8 +358,9 @@ def library_path(mission_file: str | FsPath, library: str) -> FsPath:
 
 
 def load_mission(path: str | FsPath) -> tuple[Mission, Library]:
-    file, doc = _read(FsPath(path))
-    return _mission_from(file, doc)
+    with gc_paused():
+        file, doc = _read(FsPath(path))
+        return _mission_from(file, doc)
 
 
 def _mission_from(file: str, doc: yamlio.YamlDoc) -> tuple[Mission, Library]:
@@ -468,16 +470,17 @@ def _fill_counters(m: Mission) -> None:
 def validate_file(path: str | FsPath) -> list[Issue]:
     """All issues of one mission or library file (empty when valid)."""
     try:
-        file, doc = _read(FsPath(path))
-        kind = file_kind(doc.data)
-        if kind == "library":
-            _library_from(file, doc)
-        elif kind == "mission":
-            _mission_from(file, doc)
-        else:
-            return [
-                Issue(file, ("format",), f"not a missionctl file: set 'format: {MISSION_FORMAT}' or 'format: {LIBRARY_FORMAT}'", *doc.mark(("format",)))
-            ]
+        with gc_paused():
+            file, doc = _read(FsPath(path))
+            kind = file_kind(doc.data)
+            if kind == "library":
+                _library_from(file, doc)
+            elif kind == "mission":
+                _mission_from(file, doc)
+            else:
+                return [
+                    Issue(file, ("format",), f"not a missionctl file: set 'format: {MISSION_FORMAT}' or 'format: {LIBRARY_FORMAT}'", *doc.mark(("format",)))
+                ]
     except FileProblems as e:
         return e.issues
     return []

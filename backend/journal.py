@@ -55,6 +55,7 @@ from urllib.parse import quote
 import pydantic_core
 from pydantic import BaseModel, ValidationError
 
+from .bulk import gc_paused
 from .events import EventBatch, apply_events
 from .model import Mission
 
@@ -516,7 +517,8 @@ class Journal:
         base; an unreadable one is skipped for an older one (see `load_info`).
         Raises JournalCorrupt rather than return a partial mission."""
         try:
-            return self._load()
+            with gc_paused():
+                return self._load()
         except sqlite3.Error as e:  # a damaged file (or pages of it)
             with self._lock:
                 _rollback(self.conn)
