@@ -528,7 +528,9 @@ def save_mission(m: Mission, path: str | FsPath, library_file: str | FsPath | No
         m = m.model_copy(update={"library": rel})
     tmp = p.with_name(p.name + ".tmp")
     try:
-        tmp.write_text(mission_to_yaml(m), encoding="utf-8")
+        with gc_paused():  # the YAML is built from a dict of the whole mission
+            text = mission_to_yaml(m)
+        tmp.write_text(text, encoding="utf-8")
         tmp.replace(p)
     except BaseException:
         tmp.unlink(missing_ok=True)  # a full disk leaves no half-written .tmp behind
