@@ -732,6 +732,11 @@ absolute targets pass or miss with the machine; the ratios and A/B figures carry
   up to 3 %); operations/s with 16 in flight -3 % in both orders (2,305 -> 2,239, 2,301 ->
   2,231): the checkpoint's copy and fsyncs now overlap the saturated pipeline on 2 cores. Kept:
   no operation waits for an fsync. In-process report handling: p99.9 3.9-5.3 -> 0.5-0.66 ms.
+- Fan-out and the machine, 2026-11-23: the same code gave 2.6-2.95 ms (raw put 0.64-0.72 ms)
+  between 21:08 and 21:47 and 3.1-3.5 ms (raw put 0.82-0.93 ms) after 22:05; runs of the session's
+  first and last versions, alternated at 22:20: 3.12-3.35 and 3.22-3.47 ms, ratios 3.6-3.9x and
+  3.8-3.9x. The 3 ms target passes or misses with the host's load; the ratio to raw (3.4-4.4x)
+  is what changes follow.
 - 10,000-skill mission, 2026-11-23: a mirror found a changed skill by scanning the mission
   (0.74 ms per event for the last robot's skill, 10 clients in one process one after the other):
   fan-out from the last robot 30-34 ms; `Mission.find` now remembers where it saw each skill
