@@ -296,11 +296,11 @@ class Journal:
             raise _damaged(p, e) from None
 
     def close(self) -> None:
-        with self._ckpt_lock:  # after a checkpoint running on another thread
+        # after a checkpoint running on another thread; none starts after it
+        with self._ckpt_lock, self._lock:
             if self._ckpt_conn is not None:
                 self._ckpt_conn.close()
                 self._ckpt_conn = None
-        with self._lock:
             if self._conn is not None:
                 self._conn.close()
                 self._conn = None
@@ -433,6 +433,8 @@ class Journal:
         with self._lock:
             self._appended = 0
         with self._ckpt_lock:
+            if self._conn is None:
+                raise JournalError(f"{self.path}: the journal is closed")
             if _identity(self.path) != self._identity:
                 raise JournalError(f"{self.path} was deleted or replaced while open; nothing to checkpoint")
             if self._ckpt_conn is None:  # mode=rw: never create a file where the journal was

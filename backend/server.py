@@ -214,7 +214,7 @@ class MissionServer:
         session, self._session = self._session, None
         if session is not None:
             await asyncio.to_thread(close_session, session)
-        if self._checkpoint is not None:
+        while self._checkpoint is not None:  # the journal closes after it
             await asyncio.wait([self._checkpoint])
         if self.journal is not None:
             self.journal.close()

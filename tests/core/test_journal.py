@@ -679,3 +679,5 @@ def test_a_checkpoint_never_creates_a_journal_that_was_deleted(tmp_path):
         srv.journal.checkpoint()
     assert not db.exists()
     srv.close()
+    with pytest.raises(JournalError, match="closed"):  # a checkpoint that starts late opens nothing
+        srv.journal.checkpoint()
