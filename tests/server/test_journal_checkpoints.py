@@ -5,6 +5,8 @@ operation up for 4-17 ms), and loses nothing by it."""
 from __future__ import annotations
 
 import asyncio
+import logging
+import sqlite3
 import threading
 
 from backend.client import MissionClient
@@ -52,3 +54,42 @@ def test_the_server_checkpoints_its_journal_off_the_event_loop(tmp_path):
         assert mission.revision == revision and mission.find("lru1-1")[2].label == "edit 11"
 
     asyncio.run(scenario())
+
+
+def test_a_checkpoint_that_fails_is_said_once_and_loses_nothing(tmp_path, caplog):
+    async def scenario() -> None:
+        endpoint = loopback_endpoint(free_port())
+        server = MissionServer(db=tmp_path / "m.db", mission_file=TUTORIAL, listen=[endpoint])
+        await server.start()
+        client = MissionClient(endpoint, client_id="t")
+        try:
+            journal = server.journal
+            journal.checkpoint_every = 2
+            outcomes = iter([sqlite3.OperationalError("disk I/O error")] * 2 + [None] + [sqlite3.OperationalError("disk I/O error")])
+            real = journal.checkpoint
+
+            def flaky() -> tuple[int, int, int]:
+                failure = next(outcomes, None)
+                if failure is not None:
+                    raise failure
+                return real()
+
+            journal.checkpoint = flaky
+            await client.connect()
+            for i in range(8):
+                reply = await client.submit(EditSkill(id="lru1-1", label=f"edit {i}"))
+                assert reply.revision == i + 1
+                if server._checkpoint is not None:
+                    await asyncio.wait([server._checkpoint])
+        finally:
+            await client.close()
+            await server.stop()
+
+    with caplog.at_level(logging.WARNING, logger="backend.server"):
+        asyncio.run(scenario())
+    said = [r.getMessage() for r in caplog.records if "cannot checkpoint" in r.getMessage()]
+    # failed, failed (not said again), succeeded, failed (said again)
+    assert len(said) == 2 and "disk I/O error" in said[0] and "nothing is lost" in said[0]
+    with Journal.open(tmp_path / "m.db") as j:
+        mission, _ = j.load()
+    assert mission.revision == 8 and mission.find("lru1-1")[2].label == "edit 7"
