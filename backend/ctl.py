@@ -681,7 +681,7 @@ def build_op(args: argparse.Namespace, library: Any = None, mission: Any = None)
             except FileProblems as e:
                 raise FileInvalid(args.file, e.issues) from None
             args.loaded = loaded  # (mission, library): read the file once
-        return ops.LoadMission(mission=loaded[0].model_copy(deep=True))
+        return ops.LoadMission(mission=loaded[0].copy_deep())
     if name == "new":
         return _validated(ops.NewMission, "new", name=args.name)
     if name == "undo":

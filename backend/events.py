@@ -157,7 +157,7 @@ def apply_event(m: Mission, ev: Any, revision: int) -> Mission:
         case ReportSeq(robot=robot, seq=seq):
             m.report_seqs[robot] = seq
         case MissionReplaced(mission=new):
-            m = new.model_copy(deep=True)
+            m = new.copy_deep()
         case _:
             raise TypeError(f"unknown event {ev!r}")
     return m

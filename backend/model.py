@@ -15,6 +15,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr
 
+from .bulk import gc_paused
+
 MISSION_FORMAT = "missionctl/mission@1"
 
 # Names of robots, markers, skills and ids appear in keys (Zenoh, YAML, CLI):
@@ -234,6 +236,14 @@ class Mission(Strict):
             if s.id == skill_id:
                 found = (robot, i, s)
         return found
+
+    def copy_deep(self) -> Mission:
+        """A copy sharing nothing with this one, made through JSON in
+        pydantic's Rust code: `model_copy(deep=True)` walked a 10,000-skill
+        mission in Python for ~0.4 s (JSON keeps every value: the journal's
+        snapshots rely on it too)."""
+        with gc_paused():
+            return Mission.model_validate_json(self.model_dump_json())
 
     def barrier_of(self, skill_id: str) -> str | None:
         for bid, b in self.barriers.items():

@@ -641,7 +641,7 @@ class Engine:
         busy = self._busy_robots()
         if busy:
             raise Refusal("robots_busy", f"cannot replace the mission while {', '.join(busy)} hold synchronized skills; reset them first")
-        new = op.mission.model_copy(deep=True)
+        new = op.mission.copy_deep()
         resolve_shorthands(new, self.library)
         problems = check_mission(new, self.library)
         if problems:

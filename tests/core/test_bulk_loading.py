@@ -95,3 +95,21 @@ def test_a_mission_file_and_a_journal_load_without_collections(tmp_path):
     assert gc.isenabled()
     assert sum(len(t) for t in loaded.tasks.values()) == 1200
     assert restored == mission
+
+
+def test_a_deep_copy_equals_the_mission_and_shares_nothing_with_it():
+    from datetime import UTC, datetime
+
+    from backend.model import Status
+
+    m = big_mission(robots=2, per_robot=3)
+    s = m.tasks["rover1"][0]
+    s.status, s.started_at = Status.RUNNING, datetime(2030, 7, 1, 8, 0, 0, 123456, tzinfo=UTC)
+    s.params["speed"] = 0.1 + 0.2  # a float JSON must give back exactly
+    m.find("rover2-3")  # hints are not part of the copy's content
+    copy = m.copy_deep()
+    assert copy == m and copy.model_dump() == m.model_dump()
+    copy.tasks["rover1"][0].params["goal"]["x"] = 99
+    copy.tasks["rover2"].pop()
+    assert m.tasks["rover1"][0].params["goal"]["x"] == 1 and len(m.tasks["rover2"]) == 3
+    assert m.find("rover2-3") is not None and copy.find("rover2-3") is None
