@@ -1,6 +1,7 @@
 """Multi-process fixtures: a mission server and robot agents in subprocesses,
 clients in the test process; free loopback ports; everything stopped in
-teardown."""
+teardown. Also a server in the test process (`serving`), for tests that
+reach into it."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import signal
 import subprocess
 import sys
 import threading
+from contextlib import asynccontextmanager
 from pathlib import Path
 
 from backend.client import MissionClient
@@ -28,6 +30,7 @@ from backend.protocol import (
     WorldMessage,
     dumps,
 )
+from backend.server import MissionServer
 from backend.transport import (
     client_config,
     declare_token,
@@ -39,6 +42,28 @@ from backend.transport import (
 from backend.transport.session import close_session, open_session
 
 ROOT = Path(__file__).resolve().parents[2]
+TUTORIAL = ROOT / "missions" / "tutorial.yaml"
+
+
+def new_server(db, endpoint: str) -> MissionServer:
+    """A server in the test process on the tutorial mission."""
+    return MissionServer(db=db, mission_file=TUTORIAL, listen=[endpoint], command_timeout=5)
+
+
+@asynccontextmanager
+async def serving(db):
+    """A server in the test process on `db` (free loopback port) and a
+    client connected to it, both closed afterwards."""
+    endpoint = loopback_endpoint(free_port())
+    server = new_server(db, endpoint)
+    await server.start()
+    client = MissionClient(endpoint, client_id="t")
+    try:
+        await client.connect()
+        yield server, client
+    finally:
+        await client.close()
+        await server.stop()
 HERE = Path(__file__).resolve().parent
 
 

@@ -16,7 +16,6 @@ import sqlite3
 import subprocess
 import sys
 import threading
-from contextlib import asynccontextmanager
 
 import pytest
 
@@ -24,14 +23,12 @@ from backend.agent import RobotAgent
 from backend.client import MissionClient, OperationRefused, ServerGone, ServerUnreachable
 from backend.journal import Journal, JournalError
 from backend.ops import AddSkill, Control, Sync, Undo, Unsync
-from backend.server import MissionServer
 from backend.transport import free_port, loopback_endpoint
 
-from .harness import ROOT, Proc, status
+from .harness import ROOT, TUTORIAL, Proc, new_server, serving, status
 
 pytestmark = pytest.mark.timeout(120)
 
-TUTORIAL = ROOT / "missions" / "tutorial.yaml"
 WAIT = 15.0
 
 
@@ -54,25 +51,6 @@ class FullDisk:
     def __getattr__(self, name: str):
         return getattr(self.conn, name)
 
-
-def new_server(db, endpoint: str) -> MissionServer:
-    return MissionServer(db=db, mission_file=TUTORIAL, listen=[endpoint], command_timeout=5)
-
-
-@asynccontextmanager
-async def serving(db):
-    """A server on `db` (free loopback port) and a client connected to it,
-    both closed afterwards."""
-    endpoint = loopback_endpoint(free_port())
-    server = new_server(db, endpoint)
-    await server.start()
-    client = MissionClient(endpoint, client_id="t")
-    try:
-        await client.connect()
-        yield server, client
-    finally:
-        await client.close()
-        await server.stop()
 
 
 async def restarted(db) -> str:

@@ -12,9 +12,7 @@ from backend.protocol import CommandReply, Request, dumps
 from backend.server import MissionServer
 from backend.transport import free_port, loopback_endpoint
 
-from .harness import ROOT, RawRobot
-
-TUTORIAL = ROOT / "missions" / "tutorial.yaml"
+from .harness import TUTORIAL, RawRobot
 
 
 class CountingRobot(RawRobot):

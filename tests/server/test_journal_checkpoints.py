@@ -9,24 +9,15 @@ import logging
 import sqlite3
 import threading
 
-from backend.client import MissionClient
 from backend.journal import Journal
 from backend.ops import EditSkill
-from backend.server import MissionServer
-from backend.transport import free_port, loopback_endpoint
 
-from .harness import ROOT
-
-TUTORIAL = ROOT / "missions" / "tutorial.yaml"
+from .harness import serving
 
 
 def test_the_server_checkpoints_its_journal_off_the_event_loop(tmp_path):
     async def scenario() -> None:
-        endpoint = loopback_endpoint(free_port())
-        server = MissionServer(db=tmp_path / "m.db", mission_file=TUTORIAL, listen=[endpoint])
-        await server.start()
-        client = MissionClient(endpoint, client_id="t")
-        try:
+        async with serving(tmp_path / "m.db") as (server, client):
             journal = server.journal
             assert journal.conn.execute("PRAGMA wal_autocheckpoint").fetchone()[0] == 0
             journal.checkpoint_every = 5
@@ -38,7 +29,6 @@ def test_the_server_checkpoints_its_journal_off_the_event_loop(tmp_path):
                 return checkpoint()
 
             journal.checkpoint = recorded
-            await client.connect()
             for i in range(12):
                 await client.submit(EditSkill(id="lru1-1", label=f"edit {i}"))
                 if server._checkpoint is not None:  # the one this operation started
@@ -46,9 +36,6 @@ def test_the_server_checkpoints_its_journal_off_the_event_loop(tmp_path):
             assert journal.checkpoints == 2  # after the 5th and the 10th operation
             assert threads and threading.get_ident() not in threads  # not the event loop's
             revision = server.mission.revision
-        finally:
-            await client.close()
-            await server.stop()
         with Journal.open(tmp_path / "m.db") as j:
             mission, _ = j.load()
         assert mission.revision == revision and mission.find("lru1-1")[2].label == "edit 11"
@@ -58,11 +45,7 @@ def test_the_server_checkpoints_its_journal_off_the_event_loop(tmp_path):
 
 def test_a_checkpoint_that_fails_is_said_once_and_loses_nothing(tmp_path, caplog):
     async def scenario() -> None:
-        endpoint = loopback_endpoint(free_port())
-        server = MissionServer(db=tmp_path / "m.db", mission_file=TUTORIAL, listen=[endpoint])
-        await server.start()
-        client = MissionClient(endpoint, client_id="t")
-        try:
+        async with serving(tmp_path / "m.db") as (server, client):
             journal = server.journal
             journal.checkpoint_every = 2
             outcomes = iter([sqlite3.OperationalError("disk I/O error")] * 2 + [None] + [sqlite3.OperationalError("disk I/O error")])
@@ -75,15 +58,11 @@ def test_a_checkpoint_that_fails_is_said_once_and_loses_nothing(tmp_path, caplog
                 return real()
 
             journal.checkpoint = flaky
-            await client.connect()
             for i in range(8):
                 reply = await client.submit(EditSkill(id="lru1-1", label=f"edit {i}"))
                 assert reply.revision == i + 1
                 if server._checkpoint is not None:
                     await asyncio.wait([server._checkpoint])
-        finally:
-            await client.close()
-            await server.stop()
 
     with caplog.at_level(logging.WARNING, logger="backend.server"):
         asyncio.run(scenario())
