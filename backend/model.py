@@ -211,7 +211,8 @@ class Mission(Strict):
         """(robot, index, skill) of a skill id, or None. O(1) for a skill
         found before whose list has not moved it; else one robot's list;
         else (a new or unknown id) the whole mission, as a plain scan."""
-        hint = self._hints.get(skill_id)
+        hints = self._hint_map()
+        hint = hints.get(skill_id)
         if hint is not None:
             robot, i = hint
             task = self.tasks.get(robot)
@@ -221,15 +222,21 @@ class Mission(Strict):
                 found = self._rehint(robot, task, skill_id)  # moved within its list, or gone
                 if found is not None:
                     return found
-            del self._hints[skill_id]
+            del hints[skill_id]
         for robot, task in self.tasks.items():
             if any(s.id == skill_id for s in task):
                 return self._rehint(robot, task, skill_id)
         return None
 
+    def _hint_map(self) -> _Hints:
+        # `self._hints` goes through pydantic's __getattr__, which probes the
+        # attribute for a descriptor by raising and catching: ~7 us, 3 times
+        # per operation; the dict that holds private values is public API
+        return self.__pydantic_private__["_hints"]  # type: ignore[index]
+
     def _rehint(self, robot: str, task: list[SkillInstance], skill_id: str) -> tuple[str, int, SkillInstance] | None:
         """Note where each skill of one robot's list is; return the one asked for."""
-        hints = self._hints
+        hints = self._hint_map()
         found = None
         for i, s in enumerate(task):
             hints[s.id] = (robot, i)
