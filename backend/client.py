@@ -337,17 +337,18 @@ class MissionClient:
 
     def _on_events(self, msg: Any) -> None:
         try:
-            batch = ev.EventBatch.model_validate_json(msg.payload)
+            batches = ev.read_batches(msg.payload)
         except ValidationError as e:
             self._malformed("events", msg.key, e)
             return
-        self._post(self._got_batch, batch)
+        self._post(self._got_batches, batches)
 
-    def _got_batch(self, batch: ev.EventBatch) -> None:
-        if self._syncing or self.mission is None:
-            self._pending.append(batch)
-        else:
-            self._apply(batch)
+    def _got_batches(self, batches: list[ev.EventBatch]) -> None:
+        for batch in batches:
+            if self._syncing or self.mission is None:
+                self._pending.append(batch)
+            else:
+                self._apply(batch)
 
     def _on_fleet(self, msg: Any) -> None:
         try:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import Field
+from pydantic import Field, TypeAdapter
 
 from .model import Barrier, Marker, Mission, Name, SkillId, SkillInstance, Strict
 
@@ -101,6 +101,17 @@ class EventBatch(Strict):
         "", description="who: 'user@client' when the request named a user, else the client id; the robot's name for its reports"
     )
     op: str = ""
+
+
+_BATCHES = TypeAdapter(list[EventBatch])
+
+
+def read_batches(payload: bytes) -> list[EventBatch]:
+    """A message on the events key: one EventBatch, or a JSON array of
+    consecutive ones (operations the server handled in a row)."""
+    if payload.lstrip()[:1] == b"[":
+        return _BATCHES.validate_json(payload)
+    return [EventBatch.model_validate_json(payload)]
 
 
 def _task_of(m: Mission, skill_id: str) -> tuple[list[SkillInstance], int]:

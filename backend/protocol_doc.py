@@ -50,7 +50,7 @@ robot's telemetry never shows.
 | `{p.Keys.op_as('USER')}` | queryable | server | the same, from a logged-in user (`Request.user` is replaced by `USER`) |
 | `{p.Keys.account('USER')}` | queryable | server | anything → `AccountInfo` (role of a logged-in user) |
 | `{p.Keys.STATE}` | queryable | server | `StateRequest` → `StateSnapshot` |
-| `{p.Keys.EVENTS}` | publication | server | `EventBatch` (revisions consecutive) |
+| `{p.Keys.EVENTS}` | publication | server | `EventBatch`, or a JSON array of them (revisions consecutive) |
 | `{p.Keys.FLEET}` | publication | server | `FleetEvent` (presence, manifest) |
 | `{p.Keys.ALERTS}` | publication | server | `Alert` |
 | `{p.Keys.PING}` | queryable | server | anything → `pong` (raw-transport baseline of the benchmarks) |
@@ -69,6 +69,9 @@ robot's telemetry never shows.
 Publications are declared with congestion control `BLOCK` (state must not be
 dropped). Events are small: one `EventBatch` per applied operation, never a
 full-state dump (except `mission_replaced` when a whole mission is loaded).
+The batches of operations the server handled in a row (under load) share one
+message: a JSON array of `EventBatch`, in revision order; a lone operation's
+batch is a plain `EventBatch` object.
 
 ## Statuses
 
@@ -92,8 +95,10 @@ transitions (anything else is refused with `bad_report`):
 1. Subscribe to `{p.Keys.EVENTS}` (and `{p.Keys.FLEET}`, `{p.Keys.ALERTS}`, telemetry) first.
 2. Query `{p.Keys.STATE}`; apply the snapshot; then apply buffered batches
    whose `revision` is greater than the snapshot's.
-3. Apply each batch with `revision == current + 1`. A larger revision means a
-   gap: query the state again.
+3. Apply each batch with `revision == current + 1`, the batches of an array
+   in order. A larger revision means a gap: query the state again. (A reader
+   that cannot read arrays stays correct: it ignores the array, sees the next
+   batch as a gap and queries the state again.)
 4. When the server's liveliness token disappears, show "reconnecting"; when it
    (or the Zenoh link) comes back, query the state again. A new `server_id`
    means the server restarted (it resumed from its journal).

@@ -127,6 +127,7 @@ class MissionServer:
         self._events_pub = None
         self._fleet_pub = None
         self._alerts_pub = None
+        self._outbox: list[tuple[Any, bytes]] = []  # publications waiting for the next loop callback
         self._loop: asyncio.AbstractEventLoop | None = None
         self._journal_failing = False
         self._checkpoint: asyncio.Future | None = None  # the journal's, running on a thread
@@ -295,12 +296,29 @@ class MissionServer:
         """Sent once the request being handled has its reply: the reply and
         the publications share the requester's link, and a reply queued behind
         its own event batch waited for the requester to take in the batch
-        first. Publications keep their order (the loop runs callbacks FIFO)."""
-        self._loop.call_soon(self._put, publisher, payload)
+        first. Publications keep their order."""
+        if not self._outbox:
+            self._loop.call_soon(self._flush)
+        self._outbox.append((publisher, payload))
 
-    def _put(self, publisher: Any, payload: bytes) -> None:
-        if self._session is not None:  # stopped meanwhile: the journal has it, clients resync
+    def _flush(self) -> None:
+        """Send what the last loop callbacks published; event batches of
+        several operations handled in a row go out as one message (a JSON
+        array): each message costs every client a wake-up of two threads."""
+        out, self._outbox = self._outbox, []
+        if self._session is None:  # stopped meanwhile: the journal has it, clients resync
+            return
+        i = 0
+        while i < len(out):
+            publisher, payload = out[i]
+            j = i + 1
+            if publisher is self._events_pub:
+                while j < len(out) and out[j][0] is publisher:
+                    j += 1
+            if j - i > 1:
+                payload = b"[" + b",".join(p for _, p in out[i:j]) + b"]"
             publisher.put(payload)
+            i = j
 
     def _submit(self, op: Any, *, client: str = "", request_id: str | None = None, actor: str = "", expected_revision: int | None = None) -> Applied:
         """Apply an operation: journaled before it changes the mission, so one

@@ -79,7 +79,7 @@ def wrap_client() -> None:
     on_reply = aio._Collector.on_reply
     query = client_mod.query
     on_events = MissionClient._on_events
-    got_batch = MissionClient._got_batch
+    got_batches = MissionClient._got_batches
 
     def traced_start_get(*args, **kwargs):
         mark("c_query")
@@ -103,15 +103,15 @@ def wrap_client() -> None:
         mark("c_events")
         return on_events(self, msg)
 
-    def traced_got_batch(self, batch):
+    def traced_got_batches(self, batches):
         mark("c_applied")
-        return got_batch(self, batch)
+        return got_batches(self, batches)
 
     aio._start_get = traced_start_get
     aio._Collector.on_reply = traced_on_reply
     client_mod.query = traced_query
     MissionClient._on_events = traced_on_events
-    MissionClient._got_batch = traced_got_batch
+    MissionClient._got_batches = traced_got_batches
 
 
 def stage_table(marks: list[tuple[str, float]]) -> tuple[list[tuple[str, float, float, float, float]], list[float]]:

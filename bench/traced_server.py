@@ -66,7 +66,7 @@ around(aio, "hand_over", "s_query")
 around(MissionServer, "_handle_op", "s_handler", "s_handler_end")
 around(Journal, "append_many", "s_journal", "s_journal_end")
 around(aio, "_respond", "s_reply", "s_replied")
-around(MissionServer, "_put", "s_publish", "s_published")
+around(MissionServer, "_flush", "s_publish", "s_published")
 
 
 def _dump(path: str) -> None:
