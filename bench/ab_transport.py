@@ -1,8 +1,9 @@
-"""A/B of two versions of missionctl on the operation round trip (and throughput).
+"""A/B of two versions of missionctl on the operation round trip (throughput, robot reports).
 
     .venv/bin/python bench/ab_transport.py HEAD~3 HEAD            # two git revisions
     .venv/bin/python bench/ab_transport.py /tmp/other-checkout .  # or two source trees
     .venv/bin/python bench/ab_transport.py HEAD~1 HEAD --throughput 2
+    .venv/bin/python bench/ab_transport.py HEAD~1 HEAD --reports
 
 Speeds differ between machines and drift on a shared VM (the raw query took
 0.32-0.63 ms within one hour here), so a change is judged against the other
@@ -11,7 +12,9 @@ server and client (processes started from its own tree, with this venv's
 Python and packages), and the two are measured in alternating blocks after a
 warm-up. Per version: raw query to PING and `MissionClient.submit(EditSkill)`
 round trips (medians, p99, p99.9, max, ratio), or with --throughput S, operations per
-second with 16 in flight for S seconds per block.
+second with 16 in flight for S seconds per block, or with --reports, a robot's lone
+status reports (one every ~12 ms, as in bench_transport's fan-out): until the robot
+has its acknowledgement, and until the client's mirror has applied it.
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ async def child(endpoint: str) -> None:
     client = MissionClient(endpoint, client_id="ab")
     await client.connect()
     count = 0
+    robot = None
 
     async def op(skill: str = "lru1-1") -> float:
         nonlocal count
@@ -75,19 +79,104 @@ async def child(endpoint: str) -> None:
         for _ in range(200):  # warm-up
             await op()
             ping()
+        if "--reports" in sys.argv:
+            robot = await _Robot.start(endpoint, client)
         print("ready", flush=True)
         loop = asyncio.get_running_loop()
         while line := (await loop.run_in_executor(None, sys.stdin.readline)).strip():
             kind, amount = line.split()
             if kind == "throughput":
                 print(json.dumps({"throughput": await throughput(float(amount))}), flush=True)
+            elif kind == "reports":
+                acks, applied = await robot.block(client, int(amount))
+                print(json.dumps({"acks": acks, "applied": applied}), flush=True)
             else:
                 n = int(amount)
                 raw = [ping() for _ in range(n)]
                 ops = [await op() for _ in range(n)]
                 print(json.dumps({"raw": raw, "ops": ops}), flush=True)
     finally:
+        if robot is not None:
+            robot.close()
         await client.close()
+
+
+class _Robot:
+    """Robot lru2 as the server sees it (registered, accepting commands) on
+    a plain Zenoh session, reporting its synchronized skill lru2-1 running
+    and paused in turn with blocking queries, as bench_transport's fan-out."""
+
+    @classmethod
+    async def start(cls, endpoint: str, client) -> _Robot:
+        from backend.files import load_library
+        from backend.ops import Sync
+        from backend.protocol import (
+            CommandReply,
+            Keys,
+            Manifest,
+            Module,
+            Register,
+            RegisterReply,
+            dumps,
+        )
+        from backend.transport import client_config, declare_token, query, serve
+        from backend.transport.session import open_session
+
+        self = cls()
+        self.session = open_session(client_config([endpoint]))
+
+        def on_command(payload: bytes) -> bytes:
+            cmd = json.loads(payload)
+            return dumps(CommandReply(ok=True, ids=[s["id"] for s in cmd.get("skills", [])]))
+
+        self.entities = [declare_token(self.session, Keys.alive("lru2")), serve(self.session, Keys.command("lru2"), on_command)]
+        lib = load_library(Path.cwd() / "missions" / "libraries" / "mars.yaml")
+        manifest = Manifest(name="lru2", type="lru_manipulator", modules=[Module(name="base", version="1.0.0")],
+                            skills={s: lib.skills[s].version for s in lib.skills_of("lru_manipulator")})
+        reply = RegisterReply.model_validate_json(await query(self.session, Keys.register("lru2"), dumps(Register(manifest=manifest)), 60.0))
+        assert reply.accepted, reply.reason
+        self.seq = reply.last_seq
+        await client.submit(Sync(robot="lru2", through="lru2-1"))
+        self.running = False
+        await self.block(client, 30)  # warm-up
+        return self
+
+    async def block(self, client, n: int) -> tuple[list[float], list[float]]:
+        from datetime import UTC, datetime
+
+        from backend.model import Status
+        from backend.ops import Report
+        from backend.protocol import Keys, ReportBatch, dumps
+
+        applied_at: dict[int, float] = {}
+        client.add_listener(lambda kind, batch: applied_at.setdefault(batch.revision, time.perf_counter()) if kind == "events" else None)
+
+        def send(payload: bytes) -> float:
+            t = time.perf_counter()
+            for reply in self.session.get(Keys.reports("lru2"), payload=payload, timeout=30.0):
+                assert reply.ok is not None, reply.err.payload.to_bytes()
+            return t
+
+        acks, applied = [], []
+        for _ in range(n):
+            self.seq += 1
+            self.running = not self.running
+            status = Status.RUNNING if self.running else Status.PAUSED
+            payload = dumps(ReportBatch(reports=[Report(robot="lru2", seq=self.seq, id="lru2-1", status=status, at=datetime.now(UTC))]))
+            revision = client.revision + 1
+            t = await asyncio.to_thread(send, payload)
+            acks.append(time.perf_counter() - t)
+            await client.wait_for(lambda m, r=revision: m.revision >= r, 10)
+            applied.append(applied_at[revision] - t)
+            await asyncio.sleep(0.012)  # lone reports: the server's threads go idle in between
+        client._listeners.pop()
+        return acks, applied
+
+    def close(self) -> None:
+        from backend.transport.session import close_session
+
+        self.entities.clear()
+        close_session(self.session)
 
 
 # -- the parent ------------------------------------------------------------------------------------
@@ -104,7 +193,7 @@ def source_tree(spec: str, tmp: Path) -> tuple[Path, str]:
 
 
 class Version:
-    def __init__(self, tree: Path, label: str, tmp: Path, index: int):
+    def __init__(self, tree: Path, label: str, tmp: Path, index: int, child_args: tuple[str, ...] = ()):
         from backend.transport import free_port, loopback_endpoint
 
         self.tree, self.label = tree, label
@@ -121,13 +210,15 @@ class Version:
             if self.server.poll() is not None or time.monotonic() > deadline:
                 raise RuntimeError(f"{label}: the server did not start:\n{self.log.read_text()}")
             time.sleep(0.05)
-        self.client = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--child", self.endpoint],
+        self.client = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--child", self.endpoint, *child_args],
                                        cwd=tree, env=self.env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
         if self.client.stdout.readline().strip() != "ready":
             raise RuntimeError(f"{label}: the client did not start")
         self.raw: list[float] = []
         self.ops: list[float] = []
         self.rates: list[float] = []
+        self.acks: list[float] = []
+        self.applied: list[float] = []
 
     def block(self, request: str) -> None:
         self.client.stdin.write(request + "\n")
@@ -135,6 +226,9 @@ class Version:
         got = json.loads(self.client.stdout.readline())
         if "throughput" in got:
             self.rates.append(got["throughput"])
+        elif "acks" in got:
+            self.acks += got["acks"]
+            self.applied += got["applied"]
         else:
             self.raw += got["raw"]
             self.ops += got["ops"]
@@ -150,6 +244,10 @@ class Version:
     def report(self) -> str:
         if self.rates:
             return f"{self.label}: {statistics.median(self.rates):,.0f} ops/s median of {len(self.rates)} blocks"
+        if self.acks:
+            p99 = sorted(self.applied)[int(0.99 * (len(self.applied) - 1))]
+            return (f"{self.label}: {len(self.acks)} lone reports: acknowledged {statistics.median(self.acks) * 1e3:.3f} ms, "
+                    f"applied by the client {statistics.median(self.applied) * 1e3:.3f} ms (p99 {p99 * 1e3:.3f} ms) (medians)")
         raw, ops = statistics.median(self.raw), statistics.median(self.ops)
         ranked = sorted(self.ops)
         p99, p999 = (ranked[int(q * (len(ranked) - 1))] for q in (0.99, 0.999))
@@ -166,6 +264,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--blocks", type=int, default=12, help="blocks per version, alternating (default 12)")
     ap.add_argument("-n", type=int, default=200, help="round trips of each kind per block (default 200)")
     ap.add_argument("--throughput", type=float, metavar="S", help="measure operations/s instead, S seconds per block")
+    ap.add_argument("--reports", action="store_true", help="measure a robot's lone status reports instead (-n per block)")
     ap.add_argument("--child", metavar="ENDPOINT", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.child:
@@ -179,8 +278,9 @@ def main(argv: list[str] | None = None) -> int:
         versions: list[Version] = []
         try:
             for i, (tree, label) in enumerate(trees):
-                versions.append(Version(tree, label, tmp, i))
-            request = f"throughput {args.throughput}" if args.throughput else f"ops {args.n}"
+                versions.append(Version(tree, label, tmp, i, ("--reports",) if args.reports else ()))
+            request = (f"throughput {args.throughput}" if args.throughput else
+                       f"reports {args.n}" if args.reports else f"ops {args.n}")
             for b in range(args.blocks):
                 for v in versions if b % 2 == 0 else versions[::-1]:
                     v.block(request)
