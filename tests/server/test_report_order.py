@@ -5,6 +5,8 @@ queued on the ground while it ran on the robot)."""
 
 from __future__ import annotations
 
+import asyncio
+import inspect
 from datetime import UTC, datetime
 
 import zenoh
@@ -12,9 +14,9 @@ from zenoh.handlers import Callback
 
 from backend.model import Status
 from backend.ops import Report, Sync
-from backend.protocol import CommandReply, Keys, ReportBatch, dumps
+from backend.protocol import CommandReply, Keys, ReportAck, ReportBatch, dumps
 
-from .harness import RawRobot, drive, status
+from .harness import RawRobot, drive, serving, status
 
 
 class EagerRobot(RawRobot):
@@ -70,3 +72,44 @@ def test_a_registration_during_the_enqueue_waits_for_it(cluster):
         drive(cluster, scenario)
     finally:
         robot.close()
+
+
+def test_a_batch_arriving_as_the_robots_turn_passes_on_waits_for_those_ahead(tmp_path):
+    """A report batch is applied at once only when nobody holds or waits for
+    the robot's turn. Just after a command's turn ends, the batches that
+    waited for it go first: applied before them, a later batch's sequence
+    numbers would make theirs duplicates, and their reports would be lost."""
+
+    async def scenario() -> None:
+        async with serving(tmp_path / "m.db") as (server, client):
+            robot = RawRobot(server.listen[0], "lru1")
+            try:
+                await robot.register("lru_science")
+                await client.submit(Sync(robot="lru1", through="lru1-1"))
+
+                def batch(seq: int, status: Status) -> bytes:
+                    return dumps(ReportBatch(reports=[Report(robot="lru1", seq=seq, id="lru1-1", status=status,
+                                                             at=datetime.now(UTC))]))
+
+                key = Keys.reports("lru1")
+                start = server.mission.revision
+                turn = server._lock("lru1")
+                async with turn:  # as a command to lru1 in flight
+                    waiting = [server._handle_reports(batch(1, Status.RUNNING), key),
+                               server._handle_reports(batch(2, Status.PAUSED), key)]
+                    assert all(inspect.isawaitable(w) for w in waiting)
+                    tasks = [asyncio.ensure_future(w) for w in waiting]
+                    await asyncio.sleep(0)  # both now wait for the turn
+                # the turn is released; its next waiter has not run yet
+                late = server._handle_reports(batch(3, Status.RUNNING), key)
+                assert inspect.isawaitable(late)
+                acks = await asyncio.gather(*tasks, late)
+                assert [ReportAck.model_validate_json(a).refused for a in acks] == [[], [], []]
+                statuses = [e.changes["status"] for r in server.journal.records(after=start)
+                            for e in r.batch.events if e.ev == "skill_changed"]
+                assert statuses == ["running", "paused", "running"]  # all three, in sequence order
+                assert server.mission.report_seqs["lru1"] == 3
+            finally:
+                robot.close()
+
+    asyncio.run(scenario())
