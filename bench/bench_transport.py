@@ -745,6 +745,24 @@ absolute targets pass or miss with the machine; the ratios and A/B figures carry
   (0.74 ms per event for the last robot's skill, 10 clients in one process one after the other):
   fan-out from the last robot 30-34 ms; `Mission.find` now remembers where it saw each skill
   (21 µs per event applied): 3.2-3.8 ms, against 2.6-2.8 ms on the tutorial.
+- Sustained operations, 2026-11-23 (later): with 16 in flight the two processes kept 1.85-1.89
+  of the 2 cores busy: per operation ~390 µs of CPU in the client and ~430 µs in the server, of
+  which ~175 µs each in the kernel (thread wake-ups, locks, socket writes), and the server's
+  event loop spent ~140 µs per operation in `query.reply` and the query's end, ~36 µs of it on
+  the CPU: both release the GIL and wait to take it back from the Zenoh threads. Without the
+  event publications (a hack for the measurement) +23-28 % operations/s. Kept: the event batches
+  of operations handled in a row leave as one message (a JSON array; `_flush` in the server):
+  +13..21 % in four A/B runs (1,975-2,223 -> 2,332-2,700 ops/s), round trip unchanged.
+- Kept, 2026-11-23 (later): a report batch with nobody in or waiting for the robot's turn is
+  applied in the loop callback that received it instead of a task (`ab_transport.py --reports`,
+  lone reports: acknowledged -3..6 %); `Mission.find` read its hints through pydantic's
+  `__getattr__` (2.7 µs, 0.4 µs now; three per operation). The session's first and last versions
+  alternated (e0f63bc -> cb4b8c8): operations/s 1,945 -> 2,472 and 1,934 -> 2,410 (+24-27 %),
+  round trip 2.85-2.87x -> 2.75-2.77x the raw query, lone reports acknowledged 2.00 -> 1.95 ms.
+- Measured and not kept, 2026-11-23 (later): the op queryable's callback on Zenoh's network thread
+  (`indirect=False`): operations/s within noise; a declared `Querier` instead of `session.get`:
+  the same 396 µs per raw query; events parsed on the client's loop instead of the subscriber's
+  thread: round trip -2..4 %, operations/s -4 %.
 - Why 1.5x is out of reach here: the next section measures the floor in the same run (raw query +
   the handler alone in-process + one thread-to-loop hand-over, which any asyncio client needs, with
   the journal written before the reply): 1.5-1.8x before the two processes contend for 2 cores."""
