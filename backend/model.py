@@ -230,8 +230,8 @@ class Mission(Strict):
 
     def _hint_map(self) -> _Hints:
         # `self._hints` goes through pydantic's __getattr__, which probes the
-        # attribute for a descriptor by raising and catching: ~7 us, 3 times
-        # per operation; the dict that holds private values is public API
+        # attribute for a descriptor by raising and catching: 2.7 us against
+        # 0.4, 3 times per operation; the dict that holds private values is public API
         return self.__pydantic_private__["_hints"]  # type: ignore[index]
 
     def _rehint(self, robot: str, task: list[SkillInstance], skill_id: str) -> tuple[str, int, SkillInstance] | None:

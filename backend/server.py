@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import asyncio
 import inspect
+import itertools
 import logging
 import sqlite3
 import uuid
@@ -122,7 +123,7 @@ class MissionServer:
         self.resumed = False
         self._session = None
         self._entities: list[Any] = []
-        self._robot_locks: dict[str, RobotTurn] = {}
+        self._turns: dict[str, RobotTurn] = {}
         self._inflight: dict[tuple[str, str], asyncio.Future] = {}
         self._events_pub = None
         self._fleet_pub = None
@@ -308,17 +309,12 @@ class MissionServer:
         out, self._outbox = self._outbox, []
         if self._session is None:  # stopped meanwhile: the journal has it, clients resync
             return
-        i = 0
-        while i < len(out):
-            publisher, payload = out[i]
-            j = i + 1
-            if publisher is self._events_pub:
-                while j < len(out) and out[j][0] is publisher:
-                    j += 1
-            if j - i > 1:
-                payload = b"[" + b",".join(p for _, p in out[i:j]) + b"]"
-            publisher.put(payload)
-            i = j
+        for publisher, run in itertools.groupby(out, key=lambda entry: entry[0]):
+            payloads = [payload for _, payload in run]
+            if publisher is self._events_pub and len(payloads) > 1:
+                payloads = [b"[" + b",".join(payloads) + b"]"]
+            for payload in payloads:
+                publisher.put(payload)
 
     def _submit(self, op: Any, *, client: str = "", request_id: str | None = None, actor: str = "", expected_revision: int | None = None) -> Applied:
         """Apply an operation: journaled before it changes the mission, so one
@@ -428,10 +424,10 @@ class MissionServer:
         self.engine.remember(req.client, req.request_id, applied)
         return _reply(applied)
 
-    def _lock(self, robot: str) -> RobotTurn:
-        turn = self._robot_locks.get(robot)
+    def _turn(self, robot: str) -> RobotTurn:
+        turn = self._turns.get(robot)
         if turn is None:
-            turn = self._robot_locks[robot] = RobotTurn()
+            turn = self._turns[robot] = RobotTurn()
         return turn
 
     async def _command(self, robot: str, cmd: Any) -> CommandReply:
@@ -482,7 +478,7 @@ class MissionServer:
         e = self.engine
         req = {"client": client, "request_id": request_id, "actor": actor}
         if isinstance(op, Sync):
-            async with self._lock(op.robot):
+            async with self._turn(op.robot):
                 skills = e.plan_sync(op)
                 ids = [s.id for s in skills]
                 try:
@@ -497,7 +493,7 @@ class MissionServer:
                 finally:
                     e.release(op.robot, ids)
         if isinstance(op, Unsync):
-            async with self._lock(op.robot):
+            async with self._turn(op.robot):
                 ids = e.plan_unsync(op)
                 try:
                     reply = await self._command(op.robot, Dequeue(ids=ids))
@@ -510,7 +506,7 @@ class MissionServer:
                 return applied
         if isinstance(op, Retry):
             robot = e.mission.find(op.id)[0] if e.mission.find(op.id) else ""
-            async with self._lock(robot or "?"):
+            async with self._turn(robot or "?"):
                 new = e.plan_retry(op)
                 try:
                     self._check_manifest(robot, [new])
@@ -525,7 +521,7 @@ class MissionServer:
         try:
             for robot in robots:
                 try:
-                    async with self._lock(robot):
+                    async with self._turn(robot):
                         reply = await self._command(robot, COMMANDS[op.op]())
                         if op.op == "reset" and reply.ids:
                             last = self._submit(UnsyncDone(robot=robot, ids=reply.ids), actor=actor).revision
@@ -566,7 +562,7 @@ class MissionServer:
         self._set_robot(info)
         # after a command in flight to this robot (see _handle_reports): its
         # queue and reports may already hold what that command sent it
-        async with self._lock(m.name):
+        async with self._turn(m.name):
             self._apply_reports(m.name, reg.reports)
             lost = self._reconcile(m.name, {q.id for q in reg.queue})
         return dumps(RegisterReply(accepted=True, last_seq=self.mission.report_seqs.get(m.name, 0), missing=lost))
@@ -623,7 +619,7 @@ class MissionServer:
         # other batches: a later sequence number applied first would make the
         # earlier one a duplicate. With nobody in or waiting for the turn (the
         # usual case), at once: no task, ~4 % off a lone report's round trip
-        turn = self._lock(robot or "?")
+        turn = self._turn(robot or "?")
         if turn.free:
             return self._report_ack(robot, batch, self._apply_reports(robot, batch.reports))
         return self._reports_in_turn(turn, robot, batch)

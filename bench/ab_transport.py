@@ -149,7 +149,11 @@ class _Robot:
         from backend.protocol import Keys, ReportBatch, dumps
 
         applied_at: dict[int, float] = {}
-        client.add_listener(lambda kind, batch: applied_at.setdefault(batch.revision, time.perf_counter()) if kind == "events" else None)
+        def on_event(kind: str, batch) -> None:
+            if kind == "events":
+                applied_at.setdefault(batch.revision, time.perf_counter())
+
+        client.add_listener(on_event)
 
         def send(payload: bytes) -> float:
             t = time.perf_counter()
@@ -169,7 +173,7 @@ class _Robot:
             await client.wait_for(lambda m, r=revision: m.revision >= r, 10)
             applied.append(applied_at[revision] - t)
             await asyncio.sleep(0.012)  # lone reports: the server's threads go idle in between
-        client._listeners.pop()
+        client._listeners.remove(on_event)
         return acks, applied
 
     def close(self) -> None:

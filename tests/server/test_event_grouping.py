@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+from contextlib import asynccontextmanager
 
 import pytest
 from pydantic import ValidationError
@@ -42,7 +43,7 @@ class _Listener:
     async def next(self) -> tuple[str, bytes]:
         return await asyncio.wait_for(self.messages.get(), 10)
 
-    async def ready(self, server, client) -> None:
+    async def ready(self, client) -> None:
         """Until the server's router knows of our subscribers, puts skip us."""
         for i in range(100):
             await client.submit(EditSkill(id="lru1-2", label=f"probe {i}"))
@@ -57,54 +58,56 @@ class _Listener:
             self.messages.get_nowait()
 
 
+@asynccontextmanager
+async def listening(db):
+    """A server in this process, its client, and a listener it knows of."""
+    async with serving(db) as (server, client):
+        listener = _Listener(server.listen[0], asyncio.get_running_loop())
+        try:
+            await listener.ready(client)
+            yield server, client, listener
+        finally:
+            close_session(listener.session)
+
+
 def test_operations_handled_in_a_row_share_one_message_in_order(tmp_path):
     async def scenario() -> None:
-        async with serving(tmp_path / "m.db") as (server, client):
-            listener = _Listener(server.listen[0], asyncio.get_running_loop())
-            try:
-                await listener.ready(server, client)
-                start = server.mission.revision
-                # three operations in one loop callback, as when queries arrive together
-                for i in range(3):
-                    server._handle_op(_edit(f"r{i}", f"in a row {i}"))
-                key, payload = await listener.next()
-                assert key == Keys.EVENTS
-                assert payload.startswith(b"[")
-                batches = [EventBatch.model_validate(b) for b in json.loads(payload)]
-                assert [b.revision for b in batches] == [start + 1, start + 2, start + 3]
-                assert [b.events[0].changes["label"] for b in batches] == [f"in a row {i}" for i in range(3)]
-                # the client library applies the whole array
-                mission = await client.wait_for(lambda m: m.revision == start + 3)
-                assert mission.find("lru1-1")[2].label == "in a row 2"
-                # a lone operation's batch is a plain object
-                await client.submit(EditSkill(id="lru1-1", label="alone"))
-                key, payload = await listener.next()
-                assert key == Keys.EVENTS and payload.startswith(b"{")
-                assert EventBatch.model_validate_json(payload).revision == start + 4
-            finally:
-                close_session(listener.session)
+        async with listening(tmp_path / "m.db") as (server, client, listener):
+            start = server.mission.revision
+            # three operations in one loop callback, as when queries arrive together
+            for i in range(3):
+                server._handle_op(_edit(f"r{i}", f"in a row {i}"))
+            key, payload = await listener.next()
+            assert key == Keys.EVENTS
+            assert payload.startswith(b"[")
+            batches = [EventBatch.model_validate(b) for b in json.loads(payload)]
+            assert [b.revision for b in batches] == [start + 1, start + 2, start + 3]
+            assert [b.events[0].changes["label"] for b in batches] == [f"in a row {i}" for i in range(3)]
+            # the client library applies the whole array
+            mission = await client.wait_for(lambda m: m.revision == start + 3)
+            assert mission.find("lru1-1")[2].label == "in a row 2"
+            # a lone operation's batch is a plain object
+            await client.submit(EditSkill(id="lru1-1", label="alone"))
+            key, payload = await listener.next()
+            assert key == Keys.EVENTS and payload.startswith(b"{")
+            assert EventBatch.model_validate_json(payload).revision == start + 4
 
     asyncio.run(scenario())
 
 
 def test_grouping_never_moves_a_batch_past_another_keys_publication(tmp_path):
     async def scenario() -> None:
-        async with serving(tmp_path / "m.db") as (server, client):
-            listener = _Listener(server.listen[0], asyncio.get_running_loop())
-            try:
-                await listener.ready(server, client)
-                start = server.mission.revision
-                server._handle_op(_edit("a", "before the alert"))
-                server.alert("between the two", kind="test")
-                server._handle_op(_edit("b", "after the alert"))
-                server._handle_op(_edit("c", "after the alert too"))
-                got = [await listener.next() for _ in range(3)]
-                assert [key for key, _ in got] == [Keys.EVENTS, Keys.ALERTS, Keys.EVENTS]
-                assert [b.revision for b in read_batches(got[0][1])] == [start + 1]
-                assert Alert.model_validate_json(got[1][1]).message == "between the two"
-                assert [b.revision for b in read_batches(got[2][1])] == [start + 2, start + 3]
-            finally:
-                close_session(listener.session)
+        async with listening(tmp_path / "m.db") as (server, client, listener):
+            start = server.mission.revision
+            server._handle_op(_edit("a", "before the alert"))
+            server.alert("between the two", kind="test")
+            server._handle_op(_edit("b", "after the alert"))
+            server._handle_op(_edit("c", "after the alert too"))
+            got = [await listener.next() for _ in range(3)]
+            assert [key for key, _ in got] == [Keys.EVENTS, Keys.ALERTS, Keys.EVENTS]
+            assert [b.revision for b in read_batches(got[0][1])] == [start + 1]
+            assert Alert.model_validate_json(got[1][1]).message == "between the two"
+            assert [b.revision for b in read_batches(got[2][1])] == [start + 2, start + 3]
 
     asyncio.run(scenario())
 

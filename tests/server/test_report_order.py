@@ -93,7 +93,7 @@ def test_a_batch_arriving_as_the_robots_turn_passes_on_waits_for_those_ahead(tmp
 
                 key = Keys.reports("lru1")
                 start = server.mission.revision
-                turn = server._lock("lru1")
+                turn = server._turn("lru1")
                 async with turn:  # as a command to lru1 in flight
                     waiting = [server._handle_reports(batch(1, Status.RUNNING), key),
                                server._handle_reports(batch(2, Status.PAUSED), key)]
