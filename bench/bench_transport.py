@@ -763,6 +763,11 @@ absolute targets pass or miss with the machine; the ratios and A/B figures carry
   (`indirect=False`): operations/s within noise; a declared `Querier` instead of `session.get`:
   the same 396 µs per raw query; events parsed on the client's loop instead of the subscriber's
   thread: round trip -2..4 %, operations/s -4 %.
+- Measured and not kept, 2026-11-23 (session 8): fewer Zenoh runtime threads (`ZENOH_RUNTIME`, read when a
+  process opens its first session) in the server and client. `(rx: (worker_threads: 1))`: round
+  trip 2.71x -> 2.66x (0.877 -> 0.891 ms, within noise); every runtime handed over to `rx` with 2
+  workers: the raw query 0.33 -> 0.27 ms but the operation 0.89 -> 0.86 ms (3.2x), and a few
+  operations stalled 2.5 s; with 1 worker the client could not connect.
 - Why 1.5x is out of reach here: the next section measures the floor in the same run (raw query +
   the handler alone in-process + one thread-to-loop hand-over, which any asyncio client needs, with
   the journal written before the reply): 1.5-1.8x before the two processes contend for 2 cores."""
