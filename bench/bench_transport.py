@@ -767,7 +767,10 @@ absolute targets pass or miss with the machine; the ratios and A/B figures carry
   process opens its first session) in the server and client. `(rx: (worker_threads: 1))`: round
   trip 2.71x -> 2.66x (0.877 -> 0.891 ms, within noise); every runtime handed over to `rx` with 2
   workers: the raw query 0.33 -> 0.27 ms but the operation 0.89 -> 0.86 ms (3.2x), and a few
-  operations stalled 2.5 s; with 1 worker the client could not connect.
+  operations stalled 2.5 s; with 1 worker the client could not connect. Pinning the processes
+  (`taskset`, 1,500 of each, two rounds): server on core 0 and client on core 1 2.69-2.84x, both
+  unpinned 2.71-2.75x; both on core 0 made the raw query faster (0.22 ms) and operations slower
+  (4.2-4.5x).
 - Why 1.5x is out of reach here: the next section measures the floor in the same run (raw query +
   the handler alone in-process + one thread-to-loop hand-over, which any asyncio client needs, with
   the journal written before the reply): 1.5-1.8x before the two processes contend for 2 cores."""
