@@ -212,11 +212,17 @@ class Version:
         deadline = time.monotonic() + 60
         while "listening on" not in self.log.read_text():
             if self.server.poll() is not None or time.monotonic() > deadline:
+                self.server.kill()
                 raise RuntimeError(f"{label}: the server did not start:\n{self.log.read_text()}")
             time.sleep(0.05)
         self.client = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--child", self.endpoint, *child_args],
                                        cwd=tree, env=self.env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
         if self.client.stdout.readline().strip() != "ready":
+            # not in `versions` yet, so main's cleanup would leave both running
+            self.client.kill()
+            self.server.terminate()
+            self.client.wait(30)
+            self.server.wait(30)
             raise RuntimeError(f"{label}: the client did not start")
         self.raw: list[float] = []
         self.ops: list[float] = []
