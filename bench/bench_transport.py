@@ -696,8 +696,10 @@ absolute targets pass or miss with the machine; the ratios and A/B figures carry
   runs Python callbacks on threads of their own). An operation adds the server's Python work
   (~0.1-0.18 ms alone in-process, 2-3x that with both processes' threads sharing 2 cores), the
   hand-over from the queryable's thread to the server's event loop, the client's own EventBatch
-  parsed and applied while its reply is handed to its event loop, and that hand-over plus the
-  coroutine's resumption. On this VM every wake-up of a thread costs 40-110 µs.
+  (right behind the reply: its subscriber thread competes with the reply's for the client's GIL;
+  usually applied just after submit() returns, see the next section), and the reply's hand-over
+  to the client's event loop plus the coroutine's resumption. On this VM every wake-up of a
+  thread costs 40-110 µs.
 - Kept, A/B on 2026-11-23: the server answers an operation that waits for no robot in
   the loop callback that receives it, instead of a task started through
   `run_coroutine_threadsafe` (-7..10 %); the client settles a single responder's query at its first

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import bisect
 import functools
 import importlib.metadata
 import json
@@ -59,7 +60,8 @@ STAGES = {
     "s_journal_end": "server: journal append (SQLite, one transaction), before the mission changes",
     "s_reply": "server: events applied to the mission, EventBatch queued for after the reply, OpReply serialised",
     "s_replied": "server: query.reply and query finalised",
-    "s_published": "server: the EventBatch is published (next loop callback)",
+    "s_publish": "server: the next loop callback starts sending the queued EventBatch",
+    "s_published": "server: publisher.put returned (it sends at once, then waits to take the GIL back)",
     "c_events": "client: the EventBatch reaches the subscriber callback and is parsed",
     "c_applied": "client: the batch is applied to the mirror on the event loop",
     "c_reply": "client: the reply reaches the query callback (Zenoh thread)",
@@ -119,16 +121,27 @@ def stage_table(marks: list[tuple[str, float]]) -> tuple[list[tuple[str, float, 
     per stage, in order: (name, step median, step p99, step median over the
     slowest 2 % of operations, since-start median)."""
     windows: list[dict[str, float]] = []
+    batch_marks: dict[str, list[float]] = {"c_events": [], "c_applied": []}
     for tag, t in sorted(marks, key=lambda m: m[1]):
-        if tag == "c_start":
+        if tag in batch_marks:
+            batch_marks[tag].append(t)
+        elif tag == "c_start":
             windows.append({"c_start": t})
         elif windows and tag not in windows[-1]:
             windows[-1][tag] = t
-    # an EventBatch that came after submit() returned lands in the next window: drop it there
-    for w in windows:
-        for late in ("c_events", "c_applied"):
-            if late in w and w[late] < w.get("s_journal_end", float("inf")):
-                del w[late]
+    # an operation's own EventBatch is the first to reach the client after its
+    # journal append; it often comes after submit() returned, during the next
+    # operation (the reply usually arrives first), so it is matched by time
+    for w, nxt in zip(windows, [*windows[1:], {}]):
+        if "s_journal_end" not in w:
+            continue
+        i = bisect.bisect_left(batch_marks["c_events"], w["s_journal_end"])
+        if i == len(batch_marks["c_events"]) or batch_marks["c_events"][i] >= nxt.get("s_journal_end", float("inf")):
+            continue
+        w["c_events"] = batch_marks["c_events"][i]
+        j = bisect.bisect_left(batch_marks["c_applied"], w["c_events"])
+        if j < len(batch_marks["c_applied"]):
+            w["c_applied"] = batch_marks["c_applied"][j]
     complete = [w for w in windows if "c_end" in w]
     order = sorted((s for s in STAGES if any(s in w for w in complete)),
                    key=lambda s: statistics.median(w[s] - w["c_start"] for w in complete if s in w))
@@ -256,6 +269,14 @@ def report(raw: list[float], marks: list[tuple[str, float]], alone: list[float],
                  f"| **{ms(statistics.median(slow)):.3f} ms** | |")
     floor = raw_med + alone_med + wake_med
     lines += [
+        "",
+        "Rows are in the order of their median time since submit() started, each measured from the latest "
+        "earlier stage of the same operation; an operation's EventBatch is the first to reach the client after "
+        "its journal append. The two processes' stages overlap: `put` sends the batch at once, then waits to "
+        "take the GIL back from the server's Zenoh threads. The batch leaves right behind the reply but usually "
+        "reaches the client's Python after submit() has returned: its subscriber thread waits for the GIL "
+        "while the client takes in the reply, so the mirror shows an operation a little after submit() returns "
+        "(`wait_for` waits for it).",
         "",
         f"Floor, measured in the same run: the handler alone in-process (rules, journal, publication; no "
         f"client, nothing else running) {alone_med * 1e6:.0f} µs; one hand-over from another thread to an idle "
