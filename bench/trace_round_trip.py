@@ -132,7 +132,7 @@ def stage_table(marks: list[tuple[str, float]]) -> tuple[list[tuple[str, float, 
     # an operation's own EventBatch is the first to reach the client after its
     # journal append; it often comes after submit() returned, during the next
     # operation (the reply usually arrives first), so it is matched by time
-    for w, nxt in zip(windows, [*windows[1:], {}]):
+    for w, nxt in zip(windows, [*windows[1:], {}], strict=True):
         if "s_journal_end" not in w:
             continue
         i = bisect.bisect_left(batch_marks["c_events"], w["s_journal_end"])
