@@ -467,7 +467,9 @@ def main(argv: list[str]) -> int:
     background = len(argv) > 4 and argv[4] == "background"
     engine = start_engine()
     out = sys.stdout
-    with Journal.open(db, library=engine.mission.library, snapshot_every=every) as journal:
+    # snapshots every `every` batches whatever their size (snapshot_bytes=0):
+    # kills land in many of them, and a restart replays at most `every`
+    with Journal.open(db, library=engine.mission.library, snapshot_every=every, snapshot_bytes=0) as journal:
         checkpointing: list[threading.Thread] = []
         if background:
             journal.checkpoint_in_background(every=16)

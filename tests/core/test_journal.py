@@ -246,6 +246,51 @@ def test_a_restored_mission_keeps_working(tmp_path):
         assert again == engine.mission
 
 
+def test_a_snapshot_waits_until_the_batches_since_add_up_to_half_its_size(tmp_path):
+    """A big mission's snapshot costs tens of ms and MBs: after `snapshot_every`
+    batches it also waits until they add up to half its size (measured in the
+    file, so a reopened journal agrees)."""
+    mission, _ = load_mission(MISSION_FILE)
+    db = tmp_path / "m.db"
+    j = Journal.open(db, snapshot_every=10)
+    j.snapshot(mission)
+
+    def sizes() -> tuple[int, int]:
+        con = sqlite3.connect(db)
+        try:
+            snap = con.execute("SELECT length(mission) FROM snapshots ORDER BY revision DESC LIMIT 1").fetchone()[0]
+            since = con.execute("SELECT coalesce(sum(length(op) + length(events)), 0) FROM batches "
+                                "WHERE revision > (SELECT max(revision) FROM snapshots)").fetchone()[0]
+        finally:
+            con.close()
+        return snap, since
+
+    deferred = []
+    rev = mission.revision
+    while True:
+        rev += 1
+        j.append(EventBatch(revision=rev, events=[SkillChanged(id="lru1-1", changes={"status_info": "x" * 40})]),
+                 op_json="{}")
+        if rev == mission.revision + 15:  # reopened midway: the same sizes, from the file
+            j.close()
+            j = Journal.open(db, snapshot_every=10)
+            j.load()
+        snap, since = sizes()
+        want = rev - mission.revision >= 10 and since >= snap / 2
+        assert j.snapshot_due(rev) == want, (rev, since, snap)
+        if rev - mission.revision >= 10 and not want:
+            deferred.append(rev)
+        if want:
+            break
+    assert deferred and rev > mission.revision + 15, f"due at {rev}: after 10 batches or before the reopen"
+    assert j.maybe_snapshot(mission.model_copy(update={"revision": rev}))
+    assert j.snapshot_revisions()[-1] == rev and not j.snapshot_due(rev + 10)
+    j.close()
+    # with snapshot_bytes=0, every `snapshot_every` batches whatever their size
+    with Journal.open(db, snapshot_every=10, snapshot_bytes=0) as j0:
+        assert not j0.snapshot_due(rev + 9) and j0.snapshot_due(rev + 10)
+
+
 def test_snapshot_plus_replay_equals_full_replay(tmp_path):
     mission, library = load_mission(MISSION_FILE)
     engine = Engine(mission, library)
