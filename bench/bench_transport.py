@@ -765,7 +765,7 @@ absolute targets pass or miss with the machine; the ratios and A/B figures carry
   (`indirect=False`): operations/s within noise; a declared `Querier` instead of `session.get`:
   the same 396 µs per raw query; events parsed on the client's loop instead of the subscriber's
   thread: round trip -2..4 %, operations/s -4 %.
-- Measured and not kept, 2026-11-23 (session 8): fewer Zenoh runtime threads (`ZENOH_RUNTIME`, read when a
+- Measured and not kept, 2026-11-24: fewer Zenoh runtime threads (`ZENOH_RUNTIME`, read when a
   process opens its first session) in the server and client. `(rx: (worker_threads: 1))`: round
   trip 2.71x -> 2.66x (0.877 -> 0.891 ms, within noise); every runtime handed over to `rx` with 2
   workers: the raw query 0.33 -> 0.27 ms but the operation 0.89 -> 0.86 ms (3.2x), and a few
