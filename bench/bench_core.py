@@ -353,7 +353,7 @@ def section(body: str) -> str:
         "tutorial 6,591 -> 7,803 ops/s.\n\n"
         "Snapshots: after 500 batches, once they add up to half the size of the last snapshot\n"
         "(`Journal.snapshot_due`). Before 2026-11-24 every 500 batches whatever the mission's size: on the\n"
-        "10,000-skill mission that was a 4 MB snapshot (57-83 ms) per 500 reports, more than half of what a\n"
+        "10,000-skill mission that was a 4 MB snapshot (57-84 ms) per 500 reports, as much again as the\n"
         "report cost, and 8 KB written per report. A restart now replays at most half a snapshot's worth of\n"
         "batches (the reopen row).\n\n"
         "The server checkpoints its journal on a thread (`Journal.checkpoint_in_background`); this\n"
