@@ -5,9 +5,10 @@ robot acknowledgements and reports alike: they all go through
 `Engine.submit`), with the operation itself as JSON, who sent it and its
 request id. Every few hundred batches, once they add up to half the size of
 the last snapshot, it stores a snapshot of the whole mission. Restarting,
-`load()` takes the newest readable snapshot and replays the batches after it through `events.apply_events` — the same, only mutation
-path the engine uses — so the mission comes back exactly as it was after the
-last committed operation, never half of one.
+`load()` takes the newest readable snapshot and replays the batches after it
+through `events.apply_events` — the same, only mutation path the engine uses
+— so the mission comes back exactly as it was after the last committed
+operation, never half of one.
 
 Invariants:
 - batch revisions are consecutive (each is the previous one plus one); an
@@ -617,9 +618,11 @@ class Journal:
                 ).fetchall()
             finally:
                 conn.execute("COMMIT")
-            # snapshot policy counts from the snapshot actually usable
-            self._snapshot_rev = info.snapshot_revision
-            self._snapshot_size, self._since_snapshot = self._sizes(conn, self._snapshot_rev)
+            # snapshot policy counts from the snapshot actually usable (sized
+            # at open already when it is the newest: a 4 MB one is read to count)
+            if info.snapshot_revision != self._snapshot_rev:
+                self._snapshot_rev = info.snapshot_revision
+                self._snapshot_size, self._since_snapshot = self._sizes(conn, self._snapshot_rev)
         info.seconds = time.perf_counter() - t0
         self.load_info = info
         rows.reverse()

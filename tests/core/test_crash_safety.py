@@ -5,8 +5,9 @@ The worker (crash_worker.py, a subprocess: never a fork of the test process)
 applies a long deterministic stream of operations, one journal transaction
 each, snapshotting every 50 revisions, and prints each revision once it is
 committed. For half the seeds it checkpoints the journal on a thread every
-16 batches, as the server does (every 512), so kills land during those too. The test reads k lines (k random), kills the worker right away and
-reopens the journal. The kill moments are set by the worker's own output, not
+16 batches, as the server does (every 512), so kills land during those too.
+The test reads k lines (k random), kills the worker right away and reopens
+the journal. The kill moments are set by the worker's own output, not
 by sleeping.
 
 Checks after each kill:
