@@ -112,10 +112,14 @@ def _open_timeout_s(config: zenoh.Config) -> float:
 
 def close_session(session: zenoh.Session) -> None:
     """Close a session (idempotent). Must be called explicitly: a process whose
-    session still has callback subscribers open at interpreter exit never ends."""
+    session still has callback subscribers open at interpreter exit never ends.
+
+    Never asks `session.is_closed()` first: it waits for the session's lock
+    holding the GIL, while a liveliness query ending on Zenoh's thread runs its
+    done callback under that lock and waits for the GIL (a deadlock seen in a
+    robot refused at start). `close()` releases the GIL and may be repeated."""
     try:
-        if not session.is_closed():
-            session.close()
+        session.close()
     except zenoh.ZError:
         log.exception("error while closing the Zenoh session")
 

@@ -38,6 +38,7 @@ from backend.transport import (
     wait_matching,
     watch_liveliness,
 )
+from backend.transport.session import close_session
 
 WAIT = 5.0  # upper bound for events that normally take milliseconds
 
@@ -135,6 +136,31 @@ def test_process_with_subscriber_exits_promptly_after_close(router: Any, spawn) 
         pytest.fail("process with a closed session did not exit")
     assert proc.popen.returncode == 0
     assert proc.next_line() == "closed"
+
+
+class _IsClosedForbidden:
+    """A session whose `is_closed()` fails the test: called with the GIL held,
+    it can deadlock against a liveliness query's done callback."""
+
+    def __init__(self, session: zenoh.Session) -> None:
+        self.session = session
+        self.closes = 0
+
+    def is_closed(self) -> bool:
+        raise AssertionError("close_session asked is_closed()")
+
+    def close(self) -> None:
+        self.closes += 1
+        self.session.close()
+
+
+def test_close_session_closes_without_asking_is_closed_and_can_repeat(router: Any) -> None:
+    session = open_session(client_config([router.endpoint]))
+    wrapped = _IsClosedForbidden(session)
+    close_session(wrapped)  # type: ignore[arg-type]
+    close_session(wrapped)  # type: ignore[arg-type]  # a second close is harmless
+    assert wrapped.closes == 2
+    assert session.is_closed()  # no query can be running on a closed session
 
 
 # ---------------------------------------------------------------- queries
