@@ -505,7 +505,8 @@ class MissionServer:
                 applied.value["kept"] = list(reply.kept)
                 return applied
         if isinstance(op, Retry):
-            robot = e.mission.find(op.id)[0] if e.mission.find(op.id) else ""
+            found = e.mission.find(op.id)
+            robot = found[0] if found else ""
             async with self._turn(robot or "?"):
                 new = e.plan_retry(op)
                 try:
