@@ -42,6 +42,7 @@ from backend.transport import (
 from backend.transport.session import close_session, open_session
 
 ROOT = Path(__file__).resolve().parents[2]
+HERE = Path(__file__).resolve().parent
 TUTORIAL = ROOT / "missions" / "tutorial.yaml"
 
 
@@ -64,7 +65,6 @@ async def serving(db):
     finally:
         await client.close()
         await server.stop()
-HERE = Path(__file__).resolve().parent
 
 
 class Proc:

@@ -22,6 +22,7 @@ from backend.transport import (
     TransportChange,
     TransportUnreachable,
     client_config,
+    close_session,
     declare_publisher,
     free_port,
     load_config_file,
@@ -38,7 +39,6 @@ from backend.transport import (
     wait_matching,
     watch_liveliness,
 )
-from backend.transport.session import close_session
 
 WAIT = 5.0  # upper bound for events that normally take milliseconds
 
@@ -154,8 +154,8 @@ class _IsClosedForbidden:
         self.session.close()
 
 
-def test_close_session_closes_without_asking_is_closed_and_can_repeat(router: Any) -> None:
-    session = open_session(client_config([router.endpoint]))
+def test_close_session_closes_without_asking_is_closed_and_can_repeat(router: Any, open_client) -> None:
+    session = open_client(router.endpoint)  # closed in teardown too, should this test fail
     wrapped = _IsClosedForbidden(session)
     close_session(wrapped)  # type: ignore[arg-type]
     close_session(wrapped)  # type: ignore[arg-type]  # a second close is harmless
