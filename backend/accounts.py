@@ -29,7 +29,7 @@ from typing import Literal
 
 from pydantic import Field, ValidationError, field_validator
 
-from .model import Name, Strict
+from backend.model import Name, Strict
 
 Role = Literal["operator", "observer", "robot"]
 USER_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
@@ -119,7 +119,7 @@ def read_password(path: str | Path) -> str:
 
 
 def load_accounts(path: str | Path) -> Accounts:
-    from . import yamlio
+    from backend import yamlio
 
     p = Path(path)
     try:

@@ -86,12 +86,12 @@ from typing import Any
 import zenoh
 from pydantic import TypeAdapter, ValidationError
 
-from . import transport
-from .library import VERSION_PATTERN
-from .login import Login
-from .model import NAME_RE, Pose, Position, SkillInstance, Status
-from .ops import Report
-from .protocol import (
+from backend import transport
+from backend.library import VERSION_PATTERN
+from backend.login import Login
+from backend.model import NAME_RE, Pose, Position, SkillInstance, Status
+from backend.ops import Report
+from backend.protocol import (
     BarrierInfo,
     Command,
     CommandReply,

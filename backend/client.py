@@ -20,12 +20,12 @@ from typing import Any
 import zenoh
 from pydantic import ValidationError
 
-from . import events as ev
-from .bulk import gc_paused
-from .library import Library
-from .login import Login
-from .model import Mission
-from .protocol import (
+from backend import events as ev
+from backend.bulk import gc_paused
+from backend.library import Library
+from backend.login import Login
+from backend.model import Mission
+from backend.protocol import (
     PROTOCOL_VERSION,
     AccountInfo,
     Alert,
@@ -41,7 +41,7 @@ from .protocol import (
     dumps,
     first_error,
 )
-from .transport import (
+from backend.transport import (
     NoResponder,
     QueryError,
     QueryTimeout,
@@ -51,7 +51,12 @@ from .transport import (
     transport_events,
     watch_liveliness,
 )
-from .transport.session import LoginRefused, TransportUnreachable, close_session, open_session
+from backend.transport.session import (
+    LoginRefused,
+    TransportUnreachable,
+    close_session,
+    open_session,
+)
 
 log = logging.getLogger(__name__)
 

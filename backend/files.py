@@ -15,10 +15,10 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from . import yamlio
-from .bulk import gc_paused
-from .library import LIBRARY_FORMAT, VERSION_PATTERN, Library, check_params
-from .model import (
+from backend import yamlio
+from backend.bulk import gc_paused
+from backend.library import LIBRARY_FORMAT, VERSION_PATTERN, Library, check_params
+from backend.model import (
     ID_PATTERN,
     MISSION_FORMAT,
     NAME_PATTERN,

@@ -13,7 +13,7 @@ from typing import Any, Literal
 
 from pydantic import Field, model_validator
 
-from .model import (
+from backend.model import (
     AreaMarker,
     Name,
     Pose,

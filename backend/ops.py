@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal, Union
 
 from pydantic import Field
 
-from .model import (
+from backend.model import (
     AreaMarker,
     Barrier,
     Marker,

@@ -11,10 +11,10 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, ValidationError
 
-from .events import EventBatch
-from .library import Library
-from .model import Mission, Name, Pose, SkillId, SkillInstance, Status, Strict
-from .ops import OperatorOp, Report
+from backend.events import EventBatch
+from backend.library import Library
+from backend.model import Mission, Name, Pose, SkillId, SkillInstance, Status, Strict
+from backend.ops import OperatorOp, Report
 
 PROTOCOL_VERSION = 1
 PREFIX = f"mc/v{PROTOCOL_VERSION}"

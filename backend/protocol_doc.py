@@ -12,10 +12,10 @@ import sys
 
 from pydantic import TypeAdapter
 
-from . import mapfeed as mf
-from . import protocol as p
-from .events import EventBatch
-from .ops import OperatorOp, Report
+from backend import mapfeed as mf
+from backend import protocol as p
+from backend.events import EventBatch
+from backend.ops import OperatorOp, Report
 
 PROSE = f"""# missionctl protocol, version {p.PROTOCOL_VERSION}
 

@@ -18,10 +18,10 @@ from collections.abc import Callable, Container
 from dataclasses import dataclass, field
 from typing import Any
 
-from . import events as ev
-from .files import check_mission, resolve_shorthands
-from .library import Library, check_params
-from .model import (
+from backend import events as ev
+from backend.files import check_mission, resolve_shorthands
+from backend.library import Library, check_params
+from backend.model import (
     ACTIVE,
     FINISHED,
     TRANSITIONS,
@@ -31,7 +31,7 @@ from .model import (
     Status,
     how_to_change,
 )
-from .ops import (
+from backend.ops import (
     UNDOABLE,
     AddBarrier,
     AddSkill,
@@ -646,7 +646,7 @@ class Engine:
         problems = check_mission(new, self.library)
         if problems:
             path, msg = problems[0]
-            from .model import format_path
+            from backend.model import format_path
 
             raise Refusal("bad_mission", f"the mission is invalid at {format_path(path)}: {msg}")
         new.revision = self.mission.revision

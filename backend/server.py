@@ -23,14 +23,14 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from .accounts import Accounts, zenoh_dictionary
-from .acl import acl_config
-from .events import EventBatch
-from .files import library_path, load_library, load_mission
-from .journal import Journal, JournalError, remember_requests
-from .library import Library
-from .model import Mission
-from .ops import (
+from backend.accounts import Accounts, zenoh_dictionary
+from backend.acl import acl_config
+from backend.events import EventBatch
+from backend.files import library_path, load_library, load_mission
+from backend.journal import Journal, JournalError, remember_requests
+from backend.library import Library
+from backend.model import Mission
+from backend.ops import (
     Control,
     Reconcile,
     Report,
@@ -41,7 +41,7 @@ from .ops import (
     Unsync,
     UnsyncDone,
 )
-from .protocol import (
+from backend.protocol import (
     PROTOCOL_VERSION,
     AccountInfo,
     Alert,
@@ -66,9 +66,9 @@ from .protocol import (
     dumps,
     first_error,
 )
-from .protocol import Reset as ResetCmd
-from .rules import Applied, Engine, Refusal
-from .transport import (
+from backend.protocol import Reset as ResetCmd
+from backend.rules import Applied, Engine, Refusal
+from backend.transport import (
     NoResponder,
     QueryError,
     QueryTimeout,
@@ -80,8 +80,8 @@ from .transport import (
     serve_async,
     watch_liveliness,
 )
-from .transport import Refusal as ReplyErr
-from .transport.session import close_session, open_session
+from backend.transport import Refusal as ReplyErr
+from backend.transport.session import close_session, open_session
 
 log = logging.getLogger(__name__)
 

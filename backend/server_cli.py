@@ -30,12 +30,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # imported here: every missionctl command builds this parser
-    from .accounts import AccountsError, load_accounts
-    from .files import FileProblems
-    from .journal import JournalError
-    from .server import MissionServer
-    from .transport import load_config_file
-    from .transport.session import TransportError
+    from backend.accounts import AccountsError, load_accounts
+    from backend.files import FileProblems
+    from backend.journal import JournalError
+    from backend.server import MissionServer
+    from backend.transport import load_config_file
+    from backend.transport.session import TransportError
 
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
     if not args.mission and not args.db:

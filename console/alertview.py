@@ -8,10 +8,10 @@ from rich.text import Text
 from textual.app import ComposeResult
 from textual.widgets import DataTable, Footer, Static
 
-from .actions import bindings
-from .eventlog import AlertEntry
-from .model import fmt_clock
-from .views import ViewScreen
+from console.actions import bindings
+from console.eventlog import AlertEntry
+from console.model import fmt_clock
+from console.views import ViewScreen
 
 LEVEL_VARS = {"error": "error", "warning": "warning", "info": "primary"}
 KIND_WORDS = {"failure": "failure", "offline": "offline", "out_of_range": "out of range", "low_battery": "low battery", "refusal": "refusal", "server": "server", "malformed": "unreadable message"}

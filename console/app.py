@@ -27,18 +27,17 @@ from textual.signal import Signal
 from backend.client import ClientError, LoginFailed, OperationRefused
 from backend.login import Login
 from backend.protocol import ErrorReply
-
-from .actions import ACTIONS, bindings
-from .alertview import AlertScreen
-from .bridge import Backend, ClientBridge
-from .commands import MissionCommands
-from .config import ConsoleConfig, save_theme
-from .dialogs import ConfirmScreen, HelpScreen, UnreachableScreen
-from .eventlog import AlertBook, AlertEntry, EventLog
-from .fleet import FleetScreen
-from .logview import EventLogScreen
-from .map_screen import MapScreen
-from .messages import (
+from console.actions import ACTIONS, bindings
+from console.alertview import AlertScreen
+from console.bridge import Backend, ClientBridge
+from console.commands import MissionCommands
+from console.config import ConsoleConfig, save_theme
+from console.dialogs import ConfirmScreen, HelpScreen, UnreachableScreen
+from console.eventlog import AlertBook, AlertEntry, EventLog
+from console.fleet import FleetScreen
+from console.logview import EventLogScreen
+from console.map_screen import MapScreen
+from console.messages import (
     AccountKnown,
     AlertReceived,
     ConnectionChanged,
@@ -49,10 +48,10 @@ from .messages import (
     StateLoaded,
     TelemetryChanged,
 )
-from .model import CONNECTED, CONNECTING, OFFLINE, UNREACHABLE, ConsoleModel
-from .screens import MissionScreen
-from .theme import DEFAULT_THEME, VARIABLE_DEFAULTS
-from .themes import ANSI16_MAP, ANSI16_STATUS, Downgrade16, load_themes
+from console.model import CONNECTED, CONNECTING, OFFLINE, UNREACHABLE, ConsoleModel
+from console.screens import MissionScreen
+from console.theme import DEFAULT_THEME, VARIABLE_DEFAULTS
+from console.themes import ANSI16_MAP, ANSI16_STATUS, Downgrade16, load_themes
 
 EXIT_UNREACHABLE = 3
 HANG_UP_GRACE_S = 5.0  # after a hang-up, the longest a clean exit may take

@@ -14,8 +14,7 @@ from backend.events import EventBatch
 from backend.login import Login
 from backend.mapfollow import MapFeed, MapUpdate
 from backend.protocol import Alert, Keys, OpReply, RobotInfo, StateSnapshot, Telemetry
-
-from .messages import (
+from console.messages import (
     AccountKnown,
     AlertReceived,
     ConnectionChanged,

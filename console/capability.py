@@ -16,8 +16,7 @@ from __future__ import annotations
 from datetime import datetime
 
 from backend.model import Status
-
-from .model import GLYPHS, STATUS_WORDS, ConsoleModel, fmt_clock
+from console.model import GLYPHS, STATUS_WORDS, ConsoleModel, fmt_clock
 
 FIELDS = ("skill", "type", "module", "prop", "name")
 SPARKS = "▁▂▃▄▅▆▇█"

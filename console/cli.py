@@ -35,7 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _known_binding_ids() -> set[str]:
-    from .actions import ACTIONS
+    from console.actions import ACTIONS
 
     return {a.binding_id for a in ACTIONS} | {"app.help", "app.quit", "editor.apply", "editor.revert", "editor.leave"}
 
@@ -55,9 +55,8 @@ def _run_app(app) -> int:
 def run_console(args: argparse.Namespace) -> int:
     from backend.accounts import AccountsError
     from backend.login import login_from_args
-
-    from .app import MissionApp
-    from .config import load_config
+    from console.app import MissionApp
+    from console.config import load_config
 
     try:
         login = login_from_args(args)
@@ -99,9 +98,9 @@ def _login_refused(endpoint: str, login) -> str | None:
 
 
 def run_demo(args: argparse.Namespace) -> int:
-    from .app import MissionApp
-    from .config import load_config
-    from .demo import DEFAULT_MISSION, DemoError, DemoProcesses
+    from console.app import MissionApp
+    from console.config import load_config
+    from console.demo import DEFAULT_MISSION, DemoError, DemoProcesses
 
     if args.speed <= 0:
         print("missionctl demo: --speed must be positive", file=sys.stderr)

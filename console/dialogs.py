@@ -18,10 +18,9 @@ from textual.widgets.option_list import Option
 
 from backend.library import Library
 from backend.model import Status
-
-from .actions import ACTIONS, APP_KEYS, EDITOR_KEYS, NAV_KEYS
-from .model import GLYPHS, STATUS_CSS, STATUS_WORDS
-from .params import settle_cursors
+from console.actions import ACTIONS, APP_KEYS, EDITOR_KEYS, NAV_KEYS
+from console.model import GLYPHS, STATUS_CSS, STATUS_WORDS
+from console.params import settle_cursors
 
 
 class ConfirmScreen(ModalScreen[bool]):

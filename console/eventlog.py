@@ -28,8 +28,7 @@ from pydantic import BaseModel
 from backend import events as ev
 from backend.model import Mission
 from backend.protocol import Alert, RobotInfo, Telemetry
-
-from .model import GLYPHS, STATUS_WORDS, ConsoleModel
+from console.model import GLYPHS, STATUS_WORDS, ConsoleModel
 
 LOG_LIMIT = 10_000
 ALERT_LIMIT = 1_000

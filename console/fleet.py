@@ -12,9 +12,16 @@ from textual import on
 from textual.app import ComposeResult
 from textual.widgets import DataTable, Footer, Input, Static
 
-from .capability import fleet_order, last_report, matches, offered_skills, robot_type, sparkline
-from .model import fmt_clock
-from .views import ViewScreen
+from console.capability import (
+    fleet_order,
+    last_report,
+    matches,
+    offered_skills,
+    robot_type,
+    sparkline,
+)
+from console.model import fmt_clock
+from console.views import ViewScreen
 
 SPARK = 6  # samples shown per sparkline (the model keeps model.HISTORY)
 

@@ -13,11 +13,11 @@ from textual import on, work
 from textual.app import ComposeResult
 from textual.widgets import DataTable, Footer, Input, Static
 
-from .actions import bindings
-from .dialogs import PathPrompt
-from .eventlog import LOG_LIMIT, LogEntry, entry_matches
-from .model import fmt_clock
-from .views import ViewScreen
+from console.actions import bindings
+from console.dialogs import PathPrompt
+from console.eventlog import LOG_LIMIT, LogEntry, entry_matches
+from console.model import fmt_clock
+from console.views import ViewScreen
 
 SHOW_LIMIT = 1_000  # rows in the table (a DataTable of 10k rows takes seconds to fill); export writes all matches
 

@@ -22,10 +22,9 @@ from textual.widgets import Footer, Input, Label, Select, Static
 from backend.library import marker_value
 from backend.model import NAME_RE, AreaMarker, Pose, PoseMarker, Position, PositionMarker, Status
 from backend.ops import EditSkill, MarkerAdd, MarkerDelete, MarkerMove, MarkerRename
-
-from .actions import ACTIONS, bindings
-from .dialogs import ChoiceScreen, ConfirmScreen
-from .mapview import (
+from console.actions import ACTIONS, bindings
+from console.dialogs import ChoiceScreen, ConfirmScreen
+from console.mapview import (
     AREA_GLYPH,
     BOX_GLYPH,
     FOLLOW_GLYPH,
@@ -41,12 +40,12 @@ from .mapview import (
     centroid,
     marker_use,
 )
-from .model import CONNECTED, GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel, fmt_value
-from .screens import StatusLine, TopBar
-from .select import SafeSelect
+from console.model import CONNECTED, GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel, fmt_value
+from console.screens import StatusLine, TopBar
+from console.select import SafeSelect
 
 if TYPE_CHECKING:
-    from .app import MissionApp
+    from console.app import MissionApp
 
 NO_FEED = "no map feed — is the simulator running?"
 TURN = math.radians(15)

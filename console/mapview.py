@@ -35,8 +35,7 @@ from textual.widget import Widget
 
 from backend.mapfeed import T_FREE, T_ROCK, T_SLOW, T_UNKNOWN, MapMirror
 from backend.model import FINISHED, Status
-
-from .model import GLYPHS, STATUS_CSS, ConsoleModel
+from console.model import GLYPHS, STATUS_CSS, ConsoleModel
 
 UPPER_HALF = "▀"
 OUTSIDE = 8  # ground class of pixels outside the map (0..7: terrain + 4 if covered)

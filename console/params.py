@@ -35,9 +35,8 @@ from textual.widgets import Button, Input, Label, Select, Static, Switch, TextAr
 
 from backend.library import POSE_FIELDS, POSITION_FIELDS, ParamSpec, check_value, normalize_value
 from backend.model import Policies, SkillInstance, Status
-
-from .model import GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel, fmt_number
-from .select import SafeSelect
+from console.model import GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel, fmt_number
+from console.select import SafeSelect
 
 TYPED = "\x00typed"  # the bind choice meaning "no marker: a typed value"
 BINDABLE_KINDS = {"pose": ("pose", "position"), "position": ("pose", "position"), "area": ("area",)}

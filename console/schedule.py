@@ -23,8 +23,7 @@ from textual.scroll_view import ScrollView
 from textual.strip import Strip
 
 from backend.model import ACTIVE, Status
-
-from .model import (
+from console.model import (
     GLYPHS,
     STATUS_CSS,
     ConsoleModel,

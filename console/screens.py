@@ -37,16 +37,15 @@ from backend.ops import (
     Undo,
     Unsync,
 )
-
-from .actions import ACTIONS, BY_NAME, mission_bindings
-from .capability import also_offered_by
-from .dialogs import ConfirmScreen, PathPrompt, SkillPicker
-from .model import CONNECTED, ConsoleModel
-from .params import ParamEditor
-from .schedule import ScheduleView
+from console.actions import ACTIONS, BY_NAME, mission_bindings
+from console.capability import also_offered_by
+from console.dialogs import ConfirmScreen, PathPrompt, SkillPicker
+from console.model import CONNECTED, ConsoleModel
+from console.params import ParamEditor
+from console.schedule import ScheduleView
 
 if TYPE_CHECKING:
-    from .app import MissionApp
+    from console.app import MissionApp
 
 NARROW = 100
 FOOTER_ACTIONS = [a.name for a in ACTIONS if a.footer]

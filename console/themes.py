@@ -34,8 +34,7 @@ from textual.theme import Theme
 
 from backend import yamlio
 from backend.files import pydantic_issues
-
-from .theme import STATUS_DEFAULTS
+from console.theme import STATUS_DEFAULTS
 
 
 def _shipped_dir() -> Path:

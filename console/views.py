@@ -13,10 +13,10 @@ from textual.app import ComposeResult
 from textual.screen import Screen
 from textual.widgets import DataTable, Input, Static
 
-from .actions import bindings
+from console.actions import bindings
 
 if TYPE_CHECKING:
-    from .app import MissionApp
+    from console.app import MissionApp
 
 
 class TitleBar(Static):

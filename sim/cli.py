@@ -72,8 +72,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _load(args: argparse.Namespace):
     from backend.files import FileProblems, load_mission
-
-    from .worldfile import default_world_for, load_world
+    from sim.worldfile import default_world_for, load_world
 
     try:
         mission, library = load_mission(args.mission)
@@ -110,8 +109,8 @@ def run(args: argparse.Namespace) -> int:
         except (OSError, ValueError) as e:
             print(f"missionctl sim: {args.zenoh_config}: {e}", file=sys.stderr)
             return EXIT_BAD_INPUT
-    from .fleet import SimFleet
-    from .world import SimError
+    from sim.fleet import SimFleet
+    from sim.world import SimError
 
     try:
         fleet = SimFleet(

@@ -27,10 +27,9 @@ from backend.agent import Link, RobotAgent
 from backend.library import Library
 from backend.model import Mission, Pose
 from backend.transport import QueryFailed
-
-from .skills import RobotSkills
-from .world import SimError, SimRobot, World
-from .worldfile import WorldFile
+from sim.skills import RobotSkills
+from sim.world import SimError, SimRobot, World
+from sim.worldfile import WorldFile
 
 log = logging.getLogger(__name__)
 

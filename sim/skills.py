@@ -15,12 +15,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from backend.agent import SkillContext, SkillFailed, Success
-
-from .pathing import ROCK, SLOW, Follower, lawnmower
-from .world import SimError, SimRobot, Stone, _fmt
+from sim.pathing import ROCK, SLOW, Follower, lawnmower
+from sim.world import SimError, SimRobot, Stone, _fmt
 
 if TYPE_CHECKING:
-    from .fleet import SimFleet
+    from sim.fleet import SimFleet
 
 CLIMB_RATE = 1.0  # m/s, drone
 NEAR_TARGET = 5.0  # extra metres around a search radius that count as "at the target"

@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from .pathing import FREE, ROCK, SLOW, GridGeom, NoPath, line_max, plan
-from .worldfile import RobotModel, RobotStart, WorldFile
+from sim.pathing import FREE, ROCK, SLOW, GridGeom, NoPath, line_max, plan
+from sim.worldfile import RobotModel, RobotStart, WorldFile
 
 # what the map feed's terrain layer says about a cell
 T_UNKNOWN, T_FREE, T_SLOW, T_ROCK = 0, 1, 2, 3

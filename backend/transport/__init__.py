@@ -5,7 +5,7 @@ liveliness and link events, with asyncio bridges. See NOTES.md for the Zenoh
 1.10 facts this relies on.
 """
 
-from .aio import (
+from backend.transport.aio import (
     DEFAULT_TIMEOUT,
     Message,
     NoResponder,
@@ -30,7 +30,7 @@ from .aio import (
     wait_matching,
     watch_liveliness,
 )
-from .config import (
+from backend.transport.config import (
     DEFAULT_ENDPOINT,
     apply_options,
     client_config,
@@ -38,8 +38,8 @@ from .config import (
     router_config,
     set_option,
 )
-from .ports import free_port, loopback_endpoint
-from .session import (
+from backend.transport.ports import free_port, loopback_endpoint
+from backend.transport.session import (
     ListenFailed,
     LoginRefused,
     TransportError,

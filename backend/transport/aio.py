@@ -20,7 +20,7 @@ from typing import Any, Literal
 import zenoh
 from zenoh.handlers import Callback
 
-from .session import TransportError
+from backend.transport.session import TransportError
 
 log = logging.getLogger(__name__)
 

@@ -15,7 +15,7 @@ from typing import Any
 
 import zenoh
 
-from .session import clean_zenoh_message
+from backend.transport.session import clean_zenoh_message
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 

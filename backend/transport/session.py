@@ -84,7 +84,7 @@ def open_session(config: zenoh.Config, *, what: str = "the mission server") -> z
     except zenoh.ZError as exc:
         raw = str(exc)
         if "Unable to connect" in raw:
-            from .probe import diagnose
+            from backend.transport.probe import diagnose
 
             waited = time.monotonic() - started
             if waited >= _open_timeout_s(config) / 2:
