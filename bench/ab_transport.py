@@ -39,9 +39,9 @@ ROOT = Path(__file__).resolve().parents[1]
 async def child(endpoint: str) -> None:
     # this version's backend (PYTHONPATH); not bench_transport, which would
     # put the tree this script lives in first on sys.path
-    from backend.client import MissionClient
-    from backend.ops import EditSkill
-    from backend.protocol import Keys
+    from backend.client.client import MissionClient
+    from backend.core.ops import EditSkill
+    from backend.protocol.messages import Keys
 
     client = MissionClient(endpoint, client_id="ab")
     await client.connect()
@@ -108,9 +108,9 @@ class _Robot:
 
     @classmethod
     async def start(cls, endpoint: str, client) -> _Robot:
-        from backend.files import load_library
-        from backend.ops import Sync
-        from backend.protocol import (
+        from backend.core.ops import Sync
+        from backend.files.missions import load_library
+        from backend.protocol.messages import (
             CommandReply,
             Keys,
             Manifest,
@@ -144,9 +144,9 @@ class _Robot:
     async def block(self, client, n: int) -> tuple[list[float], list[float]]:
         from datetime import UTC, datetime
 
-        from backend.model import Status
-        from backend.ops import Report
-        from backend.protocol import Keys, ReportBatch, dumps
+        from backend.core.model import Status
+        from backend.core.ops import Report
+        from backend.protocol.messages import Keys, ReportBatch, dumps
 
         applied_at: dict[int, float] = {}
         def on_event(kind: str, batch) -> None:

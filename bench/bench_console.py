@@ -51,8 +51,8 @@ def rss_mb() -> float:
 
 
 def build_mission():
-    from backend.files import load_library
-    from backend.model import Barrier, Mission, RobotSpec, SkillInstance, Status
+    from backend.core.model import Barrier, Mission, RobotSpec, SkillInstance, Status
+    from backend.files.missions import load_library
 
     library = load_library(ROOT / "missions" / "libraries" / "mars.yaml")
     m = Mission(name="bench 10k", library="libraries/mars.yaml")
@@ -107,7 +107,7 @@ class FrameClock:
 
 
 async def run_schedule() -> dict:
-    from backend import events as ev
+    from backend.core import events as ev
     from console.app import MissionApp
     from console.messages import ConnectionChanged, EventsApplied, StateLoaded
 
@@ -150,7 +150,7 @@ async def run_datatable() -> dict:
     from textual.app import App, ComposeResult
     from textual.widgets import DataTable
 
-    from console.model import GLYPHS, param_summary
+    from console.state.model import GLYPHS, param_summary
 
     mission, library = build_mission()
 

@@ -1,4 +1,4 @@
-"""The console's event log at its bound (10,000 entries, console/eventlog.py):
+"""The console's event log at its bound (10,000 entries, console/state/eventlog.py):
 memory of the entries, the log screen's redraw (a filter keystroke) and one
 new entry while shown, against a 100-entry log measured in the same run.
 
@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from report import machine, write_section  # noqa: E402
 
-from console.eventlog import LOG_LIMIT, EventLog  # noqa: E402
+from console.state.eventlog import LOG_LIMIT, EventLog  # noqa: E402
 
 T0 = datetime(2026, 3, 14, 10, 42, 7, tzinfo=UTC)
 

@@ -36,10 +36,8 @@ if str(ROOT) not in sys.path:
 
 from report import machine, write_section  # noqa: E402
 
-from backend.files import load_library, load_mission, save_mission  # noqa: E402
-from backend.journal import Entry, Journal  # noqa: E402
-from backend.model import Mission, Pose, RobotSpec, SkillInstance, Status  # noqa: E402
-from backend.ops import (  # noqa: E402
+from backend.core.model import Mission, Pose, RobotSpec, SkillInstance, Status  # noqa: E402
+from backend.core.ops import (  # noqa: E402
     AddSkill,
     DeleteSkills,
     EditSkill,
@@ -49,7 +47,9 @@ from backend.ops import (  # noqa: E402
     Sync,
     SyncAck,
 )
-from backend.rules import Applied, Engine  # noqa: E402
+from backend.core.rules.engine import Applied, Engine  # noqa: E402
+from backend.files.missions import load_library, load_mission, save_mission  # noqa: E402
+from backend.server.journal import Entry, Journal  # noqa: E402
 
 MISSION_FILE = ROOT / "missions" / "mars_sample_return.yaml"
 LIBRARY_FILE = ROOT / "missions" / "libraries" / "mars.yaml"
@@ -361,7 +361,7 @@ def section(body: str) -> str:
         "The 10,000-skill snapshot, 8 in a row with a batch between (2026-11-23): 52-65 ms with\n"
         "SQLite's checkpoints, 32-34 ms (one of 45 and one of 50) with the server's.\n\n"
         "Loading, saving and reopening build or walk the whole mission without the cyclic garbage\n"
-        "collector (`backend/bulk.py`), which otherwise walked every live object again each time enough\n"
+        "collector (`backend/core/bulk.py`), which otherwise walked every live object again each time enough\n"
         "new ones were made. Same machine, back to back, 2026-11-23: load of the 10,000-skill file\n"
         "4.9 -> 2.2 s, its save 1.8-2.7 -> 1.2-1.5 s, its journal reopen 734 -> 158 ms (with the\n"
         "skill hints above). A whole mission is copied through JSON (`Mission.copy_deep`, in pydantic's\n"

@@ -3,12 +3,12 @@
     .venv/bin/python bench/bench_map.py                  # print the Markdown section
     .venv/bin/python bench/bench_map.py --write docs/performance.md
 
-1. Redraw cost of the map widget (console/mapview.py) for one robot moving
+1. Redraw cost of the map widget (console/widgets/mapview.py) for one robot moving
    on a 400x400-cell site at 120x40 cells, headless: the robot's telemetry
    changes, the overlays are rebuilt and every visible row is asked for
    (cached rows come from the row cache), against a full redraw of the same
    view (cache cleared, every row rendered) measured in the same run.
-2. Bytes received from the map feed by one follower (backend.mapfollow,
+2. Bytes received from the map feed by one follower (backend.client.mapfollow,
    what the console uses) while all robots explore: mission server and
    `missionctl sim` at a fixed speed as subprocesses on loopback; lru1
    drives to POI-A and explores ROI-east, lru2 explores ROI-east too, ardea
@@ -44,11 +44,11 @@ async def redraw() -> dict[str, float]:
     from map_state import mars_snapshot, mirror_of
     from textual.app import App
 
-    from backend.model import Pose
-    from backend.protocol import Telemetry
-    from console.mapview import MapView
-    from console.model import ConsoleModel
-    from console.theme import VARIABLE_DEFAULTS
+    from backend.core.model import Pose
+    from backend.protocol.messages import Telemetry
+    from console.state.model import ConsoleModel
+    from console.themes.variables import VARIABLE_DEFAULTS
+    from console.widgets.mapview import MapView
 
     model = ConsoleModel()
     t0 = datetime(2026, 1, 1, tzinfo=UTC)
@@ -101,9 +101,9 @@ async def redraw() -> dict[str, float]:
 
 
 async def feed_bytes(speed: float, sim_seconds: float) -> dict[str, float]:
-    from backend.client import MissionClient
-    from backend.mapfollow import MapFeed
-    from backend.ops import AddSkill, Control, Sync
+    from backend.client.client import MissionClient
+    from backend.client.mapfollow import MapFeed
+    from backend.core.ops import AddSkill, Control, Sync
     from backend.transport import free_port, loopback_endpoint
 
     endpoint = loopback_endpoint(free_port())
@@ -165,7 +165,7 @@ def section(r: dict[str, float], f: dict[str, float]) -> str:
     ratio = r["full_ms"] / r["move_ms"] if r["move_ms"] else float("nan")
     return f"""## Map
 
-The map widget (`console/mapview.py`, half-blocks, row cache) and the map feed as a console receives it.
+The map widget (`console/widgets/mapview.py`, half-blocks, row cache) and the map feed as a console receives it.
 
 Reproduce: `.venv/bin/python bench/bench_map.py --write docs/performance.md` ({datetime.now(UTC):%Y-%m-%d}; {machine()}).
 

@@ -34,12 +34,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from report import machine, write_section  # noqa: E402
 
-from backend.certs import make_certs  # noqa: E402
-from backend.client import MissionClient  # noqa: E402
-from backend.login import Login  # noqa: E402
-from backend.ops import EditSkill  # noqa: E402
-from backend.protocol import Keys  # noqa: E402
+from backend.client.client import MissionClient  # noqa: E402
+from backend.core.ops import EditSkill  # noqa: E402
+from backend.protocol.messages import Keys  # noqa: E402
+from backend.server.certs import make_certs  # noqa: E402
 from backend.transport import free_port  # noqa: E402
+from backend.transport.login import Login  # noqa: E402
 
 SECTION = "Security"
 TUTORIAL = ROOT / "missions" / "tutorial.yaml"

@@ -6,7 +6,7 @@
 
 Setup: the mission server and `missionctl sim` run as subprocesses on a
 loopback port, the sim pinned to one CPU core (`taskset -c 0`); this process
-drives them with backend.client.MissionClient and listens to the sim's feed.
+drives them with backend.client.client.MissionClient and listens to the sim's feed.
 For the speed, every mobile robot patrols across the site (drive_to/fly_to
 legs); for the map feed, every robot explores a large area of its own (drones
 after taking off). The benchmark world raises battery capacities so that no
@@ -51,10 +51,10 @@ if str(ROOT) not in sys.path:
 
 from report import machine, write_section  # noqa: E402
 
-from backend import mapfeed as mf  # noqa: E402
 from backend import transport  # noqa: E402
-from backend.client import MissionClient  # noqa: E402
-from backend.ops import AddSkill, Control, Sync  # noqa: E402
+from backend.client.client import MissionClient  # noqa: E402
+from backend.core.ops import AddSkill, Control, Sync  # noqa: E402
+from backend.protocol import mapfeed as mf  # noqa: E402
 
 MISSION = ROOT / "missions" / "mars_sample_return.yaml"
 LIBRARY = ROOT / "missions" / "libraries" / "mars.yaml"

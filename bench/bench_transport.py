@@ -65,11 +65,11 @@ for p in (ROOT, ROOT / "bench"):
 
 from report import machine, write_section  # noqa: E402
 
-from backend.client import MissionClient  # noqa: E402
-from backend.files import load_library, mission_to_yaml  # noqa: E402
-from backend.model import Status  # noqa: E402
-from backend.ops import EditSkill, Report, Sync  # noqa: E402
-from backend.protocol import (  # noqa: E402
+from backend.client.client import MissionClient  # noqa: E402
+from backend.core.model import Status  # noqa: E402
+from backend.core.ops import EditSkill, Report, Sync  # noqa: E402
+from backend.files.missions import load_library, mission_to_yaml  # noqa: E402
+from backend.protocol.messages import (  # noqa: E402
     PREFIX,
     CommandReply,
     Keys,

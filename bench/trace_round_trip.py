@@ -38,12 +38,12 @@ for p in (ROOT, ROOT / "bench"):
 from bench_transport import TUTORIAL, Server, ms, pct, raw_ping  # noqa: E402
 from report import machine, write_section  # noqa: E402
 
-import backend.client as client_mod  # noqa: E402
+import backend.client.client as client_mod  # noqa: E402
 import backend.transport.aio as aio  # noqa: E402
-from backend.client import MissionClient  # noqa: E402
-from backend.ops import EditSkill  # noqa: E402
-from backend.protocol import Request, dumps  # noqa: E402
-from backend.server import MissionServer  # noqa: E402
+from backend.client.client import MissionClient  # noqa: E402
+from backend.core.ops import EditSkill  # noqa: E402
+from backend.protocol.messages import Request, dumps  # noqa: E402
+from backend.server.server import MissionServer  # noqa: E402
 from backend.transport import free_port, loopback_endpoint  # noqa: E402
 
 SECTION = "Server and transport: where an operation's time goes"

@@ -22,9 +22,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import backend.transport.aio as aio  # noqa: E402
-from backend.cli import main  # noqa: E402
-from backend.journal import Journal  # noqa: E402
-from backend.server import MissionServer  # noqa: E402
+from backend.cli.main import main  # noqa: E402
+from backend.server.journal import Journal  # noqa: E402
+from backend.server.server import MissionServer  # noqa: E402
 
 MARKS: list[tuple[str, float]] = []
 

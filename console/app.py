@@ -24,19 +24,12 @@ from textual.binding import Binding
 from textual.screen import Screen
 from textual.signal import Signal
 
-from backend.client import ClientError, LoginFailed, OperationRefused
-from backend.login import Login
-from backend.protocol import ErrorReply
-from console.actions import ACTIONS, bindings
-from console.alertview import AlertScreen
+from backend.client.client import ClientError, LoginFailed, OperationRefused
+from backend.protocol.messages import ErrorReply
+from backend.transport.login import Login
 from console.bridge import Backend, ClientBridge
 from console.commands import MissionCommands
 from console.config import ConsoleConfig, save_theme
-from console.dialogs import ConfirmScreen, HelpScreen, UnreachableScreen
-from console.eventlog import AlertBook, AlertEntry, EventLog
-from console.fleet import FleetScreen
-from console.logview import EventLogScreen
-from console.map_screen import MapScreen
 from console.messages import (
     AccountKnown,
     AlertReceived,
@@ -48,10 +41,17 @@ from console.messages import (
     StateLoaded,
     TelemetryChanged,
 )
-from console.model import CONNECTED, CONNECTING, OFFLINE, UNREACHABLE, ConsoleModel
-from console.screens import MissionScreen
-from console.theme import DEFAULT_THEME, VARIABLE_DEFAULTS
-from console.themes import ANSI16_MAP, ANSI16_STATUS, Downgrade16, load_themes
+from console.screens.alerts import AlertScreen
+from console.screens.dialogs import ConfirmScreen, HelpScreen, UnreachableScreen
+from console.screens.fleet import FleetScreen
+from console.screens.log import EventLogScreen
+from console.screens.map import MapScreen
+from console.screens.mission import MissionScreen
+from console.state.actions import ACTIONS, bindings
+from console.state.eventlog import AlertBook, AlertEntry, EventLog
+from console.state.model import CONNECTED, CONNECTING, OFFLINE, UNREACHABLE, ConsoleModel
+from console.themes.loader import ANSI16_MAP, ANSI16_STATUS, Downgrade16, load_themes
+from console.themes.variables import DEFAULT_THEME, VARIABLE_DEFAULTS
 
 EXIT_UNREACHABLE = 3
 HANG_UP_GRACE_S = 5.0  # after a hang-up, the longest a clean exit may take

@@ -1,4 +1,4 @@
-"""The live connection: `backend.client.MissionClient` -> console messages.
+"""The live connection: `backend.client.client.MissionClient` -> console messages.
 
 The client calls its listeners on the asyncio loop (the app's loop); each
 callback only posts a message, so nothing here ever blocks the UI. Operations
@@ -9,11 +9,11 @@ from __future__ import annotations
 
 from typing import Any, Protocol
 
-from backend.client import Malformed, MissionClient
-from backend.events import EventBatch
-from backend.login import Login
-from backend.mapfollow import MapFeed, MapUpdate
-from backend.protocol import Alert, Keys, OpReply, RobotInfo, StateSnapshot, Telemetry
+from backend.client.client import Malformed, MissionClient
+from backend.client.mapfollow import MapFeed, MapUpdate
+from backend.core.events import EventBatch
+from backend.protocol.messages import Alert, Keys, OpReply, RobotInfo, StateSnapshot, Telemetry
+from backend.transport.login import Login
 from console.messages import (
     AccountKnown,
     AlertReceived,
@@ -44,7 +44,7 @@ class ClientBridge:
         self.map_feed: MapFeed | None = None
 
     async def connect(self) -> None:
-        """Connect (raises backend.client.ClientError with a sentence)."""
+        """Connect (raises backend.client.client.ClientError with a sentence)."""
         await self.close()
         client = MissionClient(self.endpoint, user=self.user, client_id=self.client_id, login=self.login)
         client.add_listener(self._on_client)
@@ -87,7 +87,7 @@ class ClientBridge:
 
     async def submit(self, op: Any, *, expected_revision: int | None = None) -> OpReply:
         if self.client is None:
-            from backend.client import ClientError
+            from backend.client.client import ClientError
 
             raise ClientError("not connected to the mission server")
         return await self.client.submit(op, expected_revision=expected_revision)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from backend.login import add_login_arguments
+from backend.transport.login import add_login_arguments
 
 EXIT_OK, EXIT_BAD_INPUT, EXIT_UNREACHABLE = 0, 2, 3
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
@@ -35,7 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _known_binding_ids() -> set[str]:
-    from console.actions import ACTIONS
+    from console.state.actions import ACTIONS
 
     return {a.binding_id for a in ACTIONS} | {"app.help", "app.quit", "editor.apply", "editor.revert", "editor.leave"}
 
@@ -53,8 +53,8 @@ def _run_app(app) -> int:
 
 
 def run_console(args: argparse.Namespace) -> int:
-    from backend.accounts import AccountsError
-    from backend.login import login_from_args
+    from backend.server.accounts import AccountsError
+    from backend.transport.login import login_from_args
     from console.app import MissionApp
     from console.config import load_config
 
@@ -111,7 +111,7 @@ def run_demo(args: argparse.Namespace) -> int:
     try:
         procs.launch()
         # load the console (most of its start-up is imports) while the server starts
-        import console.screens  # noqa: F401
+        import console.screens.mission  # noqa: F401
 
         procs.wait_ready()
     except DemoError as e:

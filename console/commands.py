@@ -11,7 +11,7 @@ from typing import Any
 
 from textual.command import DiscoveryHit, Hit, Hits, Provider
 
-from console.actions import ACTIONS
+from console.state.actions import ACTIONS
 
 
 class MissionCommands(Provider):

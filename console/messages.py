@@ -11,10 +11,10 @@ from typing import Any
 
 from textual.message import Message
 
-from backend.events import EventBatch
-from backend.library import Library
-from backend.model import Mission
-from backend.protocol import Alert, RobotInfo, Telemetry
+from backend.core.events import EventBatch
+from backend.core.library import Library
+from backend.core.model import Mission
+from backend.protocol.messages import Alert, RobotInfo, Telemetry
 
 
 class StateLoaded(Message):
@@ -89,7 +89,7 @@ class MessageUnreadable(Message):
 
 class MapChanged(Message):
     """The map feed changed: `mirror` is the follower's mirror (read it, never
-    change it), `update` says what changed (backend.mapfollow.MapUpdate)."""
+    change it), `update` says what changed (backend.client.mapfollow.MapUpdate)."""
 
     def __init__(self, mirror: Any, update: Any) -> None:
         super().__init__()

@@ -4,7 +4,7 @@
 - `world`: the site (numpy grids: terrain, explored area, coverage), objects, rules;
 - `pathing`: A* on the terrain grid, sweeps;
 - `skills`: the robots' skill handlers (every skill of missions/libraries/mars.yaml);
-- `fleet`: one RobotAgent per mission robot on one asyncio loop, map feed (wire models in backend.mapfeed), status;
+- `fleet`: one RobotAgent per mission robot on one asyncio loop, map feed (wire models in backend.protocol.mapfeed), status;
 - `cli`: `missionctl sim` and `missionctl sim-status`.
 
 Never imports console or textual.

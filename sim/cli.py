@@ -16,8 +16,8 @@ import sys
 import time
 from pathlib import Path
 
-from backend.accounts import AccountsError
-from backend.login import add_login_arguments, login_from_args
+from backend.server.accounts import AccountsError
+from backend.transport.login import add_login_arguments, login_from_args
 
 EXIT_OK, EXIT_REFUSED, EXIT_BAD_INPUT, EXIT_UNREACHABLE = 0, 1, 2, 3
 
@@ -71,7 +71,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _load(args: argparse.Namespace):
-    from backend.files import FileProblems, load_mission
+    from backend.files.missions import FileProblems, load_mission
     from sim.worldfile import default_world_for, load_world
 
     try:
@@ -174,8 +174,8 @@ def run_status(args: argparse.Namespace) -> int:
 
 
 async def _status(args: argparse.Namespace) -> int:
-    from backend import mapfeed as mf
     from backend import transport
+    from backend.protocol import mapfeed as mf
     from backend.transport.session import TransportUnreachable
 
     endpoints = args.connect or ["tcp/127.0.0.1:7447"]

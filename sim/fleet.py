@@ -8,7 +8,7 @@
 Besides the agents it runs the world's background physics (charging at the
 lander, hovering drones), the map feed (deltas at most every `feed_period`
 wall seconds, snapshot queryable) and the sim status (queryable and live
-publication). See backend/mapfeed.py for the wire format.
+publication). See backend/protocol/mapfeed.py for the wire format.
 """
 
 from __future__ import annotations
@@ -21,13 +21,13 @@ import uuid
 from collections import Counter, deque
 from typing import Any
 
-from backend import mapfeed as mf
 from backend import transport
 from backend.agent import Link, RobotAgent
-from backend.library import Library
-from backend.model import Mission, Pose
+from backend.core.library import Library
+from backend.core.model import Mission, Pose
+from backend.protocol import mapfeed as mf
 from backend.transport import QueryFailed
-from sim.skills import RobotSkills
+from sim.skills.base import RobotSkills
 from sim.world import SimError, SimRobot, World
 from sim.worldfile import WorldFile
 

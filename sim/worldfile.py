@@ -7,7 +7,7 @@ robot start poses. Everything random (rock fields, sand, stone positions) is
 drawn from `seed`, so a world is the same for the same file and seed.
 
 Problems are reported like the mission files': `file:line:col: path: message`
-(`FileProblems` with `Issue`s from backend.files).
+(`FileProblems` with `Issue`s from backend.files.missions).
 """
 
 from __future__ import annotations
@@ -17,9 +17,9 @@ from typing import Literal
 
 from pydantic import Field, ValidationError, model_validator
 
-from backend import yamlio
-from backend.files import FileProblems, Issue, duplicate_issues, pydantic_issues
-from backend.model import Name, Strict
+from backend.core.model import Name, Strict
+from backend.files import yamlio
+from backend.files.missions import FileProblems, Issue, duplicate_issues, pydantic_issues
 
 WORLD_FORMAT = "missionctl/world@1"
 

@@ -24,7 +24,7 @@ process under the same robot name) raise at once with a sentence naming the
 robot and skill; a handler that does not fit the parameters it is sent fails
 the skill with a reason naming the parameter.
 
-What the agent does (the contract is backend/protocol.py):
+What the agent does (the contract is backend/protocol/messages.py):
 
 - holds the liveliness token `Keys.alive(name)`, answers commands on
   `Keys.command(name)` and robot-to-robot world messages on `Keys.world(name)`,
@@ -87,11 +87,10 @@ import zenoh
 from pydantic import TypeAdapter, ValidationError
 
 from backend import transport
-from backend.library import VERSION_PATTERN
-from backend.login import Login
-from backend.model import NAME_RE, Pose, Position, SkillInstance, Status
-from backend.ops import Report
-from backend.protocol import (
+from backend.core.library import VERSION_PATTERN
+from backend.core.model import NAME_RE, Pose, Position, SkillInstance, Status
+from backend.core.ops import Report
+from backend.protocol.messages import (
     BarrierInfo,
     Command,
     CommandReply,
@@ -116,8 +115,9 @@ from backend.protocol import (
     dumps,
     first_error,
 )
+from backend.transport.login import Login
 
-log = logging.getLogger(__name__)
+log = logging.getLogger("backend.agent")  # the SDK's logger name is public (integrators configure it)
 
 _COMMAND = TypeAdapter(Command)
 _SEMVER = re.compile(VERSION_PATTERN)  # what a library's skill version may be
@@ -995,7 +995,7 @@ class RobotAgent:
             if not isinstance(pose, Pose):
                 pose = Pose.model_validate(pose)  # a dict of pose fields will do
         except Exception as exc:
-            self._source_failed("pose", f"agent.pose() must return a backend.model.Pose: {type(exc).__name__}: {exc}")
+            self._source_failed("pose", f"agent.pose() must return a backend.core.model.Pose: {type(exc).__name__}: {exc}")
             pose = Pose()
         try:
             battery = min(1.0, max(0.0, float(self.battery())))

@@ -30,7 +30,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from backend.files import validate_file
+    from backend.files.missions import validate_file
 
     bad = 0
     for f in args.files:
@@ -45,7 +45,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 
 def cmd_schema(args: argparse.Namespace) -> int:
-    from backend.schema import schemas
+    from backend.files.schema import schemas
 
     all_schemas = schemas()
     if args.kind != "all":
@@ -77,13 +77,13 @@ def build_parser(*, plugins: bool = True) -> argparse.ArgumentParser:
     s.add_argument("kind", nargs="?", choices=["all", "mission", "library"], default="all")
     s.set_defaults(func=cmd_schema)
 
-    from backend import server_cli
+    from backend.cli import server as server_cli
 
     server_cli.register(sub)
-    from backend import ctl
+    from backend.cli.ctl import session as ctl
 
     ctl.register(sub)
-    from backend import certs
+    from backend.server import certs
 
     certs.register(sub)
     for _name, register in _registrations() if plugins else []:
@@ -108,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     command = next((a for a in argv if not a.startswith("-")), None)
     parser = build_parser(plugins=command not in OWN_COMMANDS)
-    from backend.ctl import wants_json
+    from backend.cli.ctl.session import wants_json
 
     _Parser.json_errors = wants_json(argv)
     args = parser.parse_args(argv)

@@ -30,10 +30,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # imported here: every missionctl command builds this parser
-    from backend.accounts import AccountsError, load_accounts
-    from backend.files import FileProblems
-    from backend.journal import JournalError
-    from backend.server import MissionServer
+    from backend.files.missions import FileProblems
+    from backend.server.accounts import AccountsError, load_accounts
+    from backend.server.journal import JournalError
+    from backend.server.server import MissionServer
     from backend.transport import load_config_file
     from backend.transport.session import TransportError
 

@@ -20,12 +20,11 @@ from typing import Any
 import zenoh
 from pydantic import ValidationError
 
-from backend import events as ev
-from backend.bulk import gc_paused
-from backend.library import Library
-from backend.login import Login
-from backend.model import Mission
-from backend.protocol import (
+from backend.core import events as ev
+from backend.core.bulk import gc_paused
+from backend.core.library import Library
+from backend.core.model import Mission
+from backend.protocol.messages import (
     PROTOCOL_VERSION,
     AccountInfo,
     Alert,
@@ -51,6 +50,7 @@ from backend.transport import (
     transport_events,
     watch_liveliness,
 )
+from backend.transport.login import Login
 from backend.transport.session import (
     LoginRefused,
     TransportUnreachable,

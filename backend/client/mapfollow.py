@@ -27,7 +27,13 @@ from typing import Any, Literal
 
 from pydantic import ValidationError
 
-from backend.mapfeed import KEY_MAP_DELTA, KEY_MAP_SNAPSHOT, MapDelta, MapMirror, MapSnapshot
+from backend.protocol.mapfeed import (
+    KEY_MAP_DELTA,
+    KEY_MAP_SNAPSHOT,
+    MapDelta,
+    MapMirror,
+    MapSnapshot,
+)
 from backend.transport import NoResponder, QueryFailed, QueryTimeout, query, subscribe
 
 log = logging.getLogger(__name__)

@@ -11,7 +11,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, TypeAdapter
 
-from backend.model import Barrier, Marker, Mission, Name, SkillId, SkillInstance, Strict
+from backend.core.model import Barrier, Marker, Mission, Name, SkillId, SkillInstance, Strict
 
 
 class SkillAdded(Strict):

@@ -13,7 +13,7 @@ from typing import Any, Literal
 
 from pydantic import Field, model_validator
 
-from backend.model import (
+from backend.core.model import (
     AreaMarker,
     Name,
     Pose,

@@ -15,7 +15,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr
 
-from backend.bulk import gc_paused
+from backend.core.bulk import gc_paused
 
 MISSION_FORMAT = "missionctl/mission@1"
 

@@ -2,7 +2,7 @@
 
 Operator operations come from consoles and `ctl`; robot operations are the
 acknowledgements and reports of robot agents, applied by the server. Both are
-validated by `backend.rules.Engine`; these models are also the protocol.
+validated by `backend.core.rules.engine.Engine`; these models are also the protocol.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal, Union
 
 from pydantic import Field
 
-from backend.model import (
+from backend.core.model import (
     AreaMarker,
     Barrier,
     Marker,

@@ -15,10 +15,9 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from backend import yamlio
-from backend.bulk import gc_paused
-from backend.library import LIBRARY_FORMAT, VERSION_PATTERN, Library, check_params
-from backend.model import (
+from backend.core.bulk import gc_paused
+from backend.core.library import LIBRARY_FORMAT, VERSION_PATTERN, Library, check_params
+from backend.core.model import (
     ID_PATTERN,
     MISSION_FORMAT,
     NAME_PATTERN,
@@ -27,6 +26,7 @@ from backend.model import (
     format_path,
     section_problems,
 )
+from backend.files import yamlio
 
 Path = tuple[str | int, ...]
 

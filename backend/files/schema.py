@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from backend.library import Library
-from backend.model import Mission
+from backend.core.library import Library
+from backend.core.model import Mission
 
 SCHEMA_DIALECT = "https://json-schema.org/draft/2020-12/schema"
 

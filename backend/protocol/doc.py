@@ -2,7 +2,7 @@
 the protocol models (so the document cannot drift from the code; a test
 checks it is up to date).
 
-    python -m backend.protocol_doc > docs/protocol.md
+    python -m backend.protocol.doc > docs/protocol.md
 """
 
 from __future__ import annotations
@@ -12,10 +12,10 @@ import sys
 
 from pydantic import TypeAdapter
 
-from backend import mapfeed as mf
-from backend import protocol as p
-from backend.events import EventBatch
-from backend.ops import OperatorOp, Report
+from backend.core.events import EventBatch
+from backend.core.ops import OperatorOp, Report
+from backend.protocol import mapfeed as mf
+from backend.protocol import messages as p
 
 PROSE = f"""# missionctl protocol, version {p.PROTOCOL_VERSION}
 
@@ -232,7 +232,7 @@ with the robots' telemetry.
 2. Apply buffered deltas whose `seq` is greater than the snapshot's, then
    each delta with `seq == current + 1` and the same `feed`.
 3. A larger `seq` (a gap) or another `feed` (the simulator restarted): query
-   the snapshot again. (`backend.mapfollow.MapFeed` does all of this.)
+   the snapshot again. (`backend.client.mapfollow.MapFeed` does all of this.)
 
 ### World knowledge (robot to robot)
 `WorldMessage{{kind: ask|tell, sender, topic, data}}` to

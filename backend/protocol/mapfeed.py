@@ -1,7 +1,7 @@
 """Map feed of a site: wire models, keys, tile codec and a mirror.
 
 The simulator (sim.fleet) publishes it; consoles follow it through
-`backend.mapfollow.MapFeed`. Kept free of transport code (pydantic + numpy
+`backend.client.mapfollow.MapFeed`. Kept free of transport code (pydantic + numpy
 only) so any process can use the models and the codec.
 
 Key space (all JSON from the models below):

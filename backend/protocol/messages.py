@@ -11,10 +11,10 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, ValidationError
 
-from backend.events import EventBatch
-from backend.library import Library
-from backend.model import Mission, Name, Pose, SkillId, SkillInstance, Status, Strict
-from backend.ops import OperatorOp, Report
+from backend.core.events import EventBatch
+from backend.core.library import Library
+from backend.core.model import Mission, Name, Pose, SkillId, SkillInstance, Status, Strict
+from backend.core.ops import OperatorOp, Report
 
 PROTOCOL_VERSION = 1
 PREFIX = f"mc/v{PROTOCOL_VERSION}"

@@ -14,7 +14,7 @@ secrets: they must be readable by their owner only (like ssh keys). The
 router reads them through a dictionary file that exists only while the router
 session opens (`zenoh_dictionary`).
 
-Each account's role becomes access-control rules: `backend.acl`.
+Each account's role becomes access-control rules: `backend.server.acl`.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from typing import Literal
 
 from pydantic import Field, ValidationError, field_validator
 
-from backend.model import Name, Strict
+from backend.core.model import Name, Strict
 
 Role = Literal["operator", "observer", "robot"]
 USER_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
@@ -119,7 +119,7 @@ def read_password(path: str | Path) -> str:
 
 
 def load_accounts(path: str | Path) -> Accounts:
-    from backend import yamlio
+    from backend.files import yamlio
 
     p = Path(path)
     try:

@@ -15,9 +15,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from backend.accounts import Accounts
-from backend.mapfeed import KEY_MAP_DELTA, KEY_MAP_SNAPSHOT, KEY_STATUS, KEY_STATUS_LIVE
-from backend.protocol import Keys
+from backend.protocol.mapfeed import KEY_MAP_DELTA, KEY_MAP_SNAPSHOT, KEY_STATUS, KEY_STATUS_LIVE
+from backend.protocol.messages import Keys
+from backend.server.accounts import Accounts
 
 # what consoles read: (subscriptions, queries, liveliness)
 _WATCH_SUBS = [Keys.EVENTS, Keys.FLEET, Keys.ALERTS, Keys.ALL_TELEMETRY, KEY_MAP_DELTA, KEY_STATUS_LIVE]

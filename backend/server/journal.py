@@ -56,9 +56,9 @@ from urllib.parse import quote
 import pydantic_core
 from pydantic import BaseModel, ValidationError
 
-from backend.bulk import gc_paused
-from backend.events import EventBatch, apply_events
-from backend.model import Mission
+from backend.core.bulk import gc_paused
+from backend.core.events import EventBatch, apply_events
+from backend.core.model import Mission
 
 JOURNAL_FORMAT = "missionctl/journal@1"
 SNAPSHOT_EVERY = 500
@@ -703,7 +703,7 @@ def _lock_writer(p: Path) -> int:
 def remember_requests(engine: Any, requests: Iterable[tuple[str, str, int]]) -> None:
     """Teach a fresh engine the requests `load()` returned, so a client that
     retries a request applied before the restart gets the duplicate answer."""
-    from backend.rules import Applied
+    from backend.core.rules.engine import Applied
 
     for client, request_id, revision in requests:
         engine.remember(client, request_id, Applied(revision, duplicate=False))

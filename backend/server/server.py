@@ -23,14 +23,10 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from backend.accounts import Accounts, zenoh_dictionary
-from backend.acl import acl_config
-from backend.events import EventBatch
-from backend.files import library_path, load_library, load_mission
-from backend.journal import Journal, JournalError, remember_requests
-from backend.library import Library
-from backend.model import Mission
-from backend.ops import (
+from backend.core.events import EventBatch
+from backend.core.library import Library
+from backend.core.model import Mission
+from backend.core.ops import (
     Control,
     Reconcile,
     Report,
@@ -41,7 +37,9 @@ from backend.ops import (
     Unsync,
     UnsyncDone,
 )
-from backend.protocol import (
+from backend.core.rules.engine import Applied, Engine, Refusal
+from backend.files.missions import library_path, load_library, load_mission
+from backend.protocol.messages import (
     PROTOCOL_VERSION,
     AccountInfo,
     Alert,
@@ -66,8 +64,10 @@ from backend.protocol import (
     dumps,
     first_error,
 )
-from backend.protocol import Reset as ResetCmd
-from backend.rules import Applied, Engine, Refusal
+from backend.protocol.messages import Reset as ResetCmd
+from backend.server.accounts import Accounts, zenoh_dictionary
+from backend.server.acl import acl_config
+from backend.server.journal import Journal, JournalError, remember_requests
 from backend.transport import (
     NoResponder,
     QueryError,

@@ -8,10 +8,10 @@ from rich.text import Text
 from textual.app import ComposeResult
 from textual.widgets import DataTable, Footer, Static
 
-from console.actions import bindings
-from console.eventlog import AlertEntry
-from console.model import fmt_clock
-from console.views import ViewScreen
+from console.screens.base import ViewScreen
+from console.state.actions import bindings
+from console.state.eventlog import AlertEntry
+from console.state.model import fmt_clock
 
 LEVEL_VARS = {"error": "error", "warning": "warning", "info": "primary"}
 KIND_WORDS = {"failure": "failure", "offline": "offline", "out_of_range": "out of range", "low_battery": "low battery", "refusal": "refusal", "server": "server", "malformed": "unreadable message"}

@@ -13,7 +13,7 @@ from textual.app import ComposeResult
 from textual.screen import Screen
 from textual.widgets import DataTable, Input, Static
 
-from console.actions import bindings
+from console.state.actions import bindings
 
 if TYPE_CHECKING:
     from console.app import MissionApp

@@ -16,11 +16,11 @@ from textual.screen import ModalScreen, Screen
 from textual.widgets import Button, Footer, Input, Label, OptionList, Static
 from textual.widgets.option_list import Option
 
-from backend.library import Library
-from backend.model import Status
-from console.actions import ACTIONS, APP_KEYS, EDITOR_KEYS, NAV_KEYS
-from console.model import GLYPHS, STATUS_CSS, STATUS_WORDS
-from console.params import settle_cursors
+from backend.core.library import Library
+from backend.core.model import Status
+from console.state.actions import ACTIONS, APP_KEYS, EDITOR_KEYS, NAV_KEYS
+from console.state.model import GLYPHS, STATUS_CSS, STATUS_WORDS
+from console.widgets.param_editor import settle_cursors
 
 
 class ConfirmScreen(ModalScreen[bool]):

@@ -1,7 +1,7 @@
 """The fleet screen: every robot with presence, type, battery and link history
 (sparklines), what it is doing and its last report; the selected robot's
 manifest below (modules and versions, properties, skills). The filter finds
-robots by capability (see console/capability.py for the syntax)."""
+robots by capability (see console/state/capability.py for the syntax)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,8 @@ from textual import on
 from textual.app import ComposeResult
 from textual.widgets import DataTable, Footer, Input, Static
 
-from console.capability import (
+from console.screens.base import ViewScreen
+from console.state.capability import (
     fleet_order,
     last_report,
     matches,
@@ -20,8 +21,7 @@ from console.capability import (
     robot_type,
     sparkline,
 )
-from console.model import fmt_clock
-from console.views import ViewScreen
+from console.state.model import fmt_clock
 
 SPARK = 6  # samples shown per sparkline (the model keeps model.HISTORY)
 

@@ -13,11 +13,11 @@ from textual import on, work
 from textual.app import ComposeResult
 from textual.widgets import DataTable, Footer, Input, Static
 
-from console.actions import bindings
-from console.dialogs import PathPrompt
-from console.eventlog import LOG_LIMIT, LogEntry, entry_matches
-from console.model import fmt_clock
-from console.views import ViewScreen
+from console.screens.base import ViewScreen
+from console.screens.dialogs import PathPrompt
+from console.state.actions import bindings
+from console.state.eventlog import LOG_LIMIT, LogEntry, entry_matches
+from console.state.model import fmt_clock
 
 SHOW_LIMIT = 1_000  # rows in the table (a DataTable of 10k rows takes seconds to fill); export writes all matches
 

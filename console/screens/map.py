@@ -2,7 +2,7 @@
 
 Layout: top bar / map | legend / info line (cursor, selection, feed) /
 status line / footer. Marker edits and parameter picks go through the same
-operations as everywhere (backend.ops via `app.submit`); the "selected
+operations as everywhere (backend.core.ops via `app.submit`); the "selected
 skill" is the schedule's cursor on the mission screen.
 """
 
@@ -19,12 +19,22 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import ModalScreen, Screen
 from textual.widgets import Footer, Input, Label, Select, Static
 
-from backend.library import marker_value
-from backend.model import NAME_RE, AreaMarker, Pose, PoseMarker, Position, PositionMarker, Status
-from backend.ops import EditSkill, MarkerAdd, MarkerDelete, MarkerMove, MarkerRename
-from console.actions import ACTIONS, bindings
-from console.dialogs import ChoiceScreen, ConfirmScreen
-from console.mapview import (
+from backend.core.library import marker_value
+from backend.core.model import (
+    NAME_RE,
+    AreaMarker,
+    Pose,
+    PoseMarker,
+    Position,
+    PositionMarker,
+    Status,
+)
+from backend.core.ops import EditSkill, MarkerAdd, MarkerDelete, MarkerMove, MarkerRename
+from console.screens.dialogs import ChoiceScreen, ConfirmScreen
+from console.screens.mission import StatusLine, TopBar
+from console.state.actions import ACTIONS, bindings
+from console.state.model import CONNECTED, GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel, fmt_value
+from console.widgets.mapview import (
     AREA_GLYPH,
     BOX_GLYPH,
     FOLLOW_GLYPH,
@@ -40,9 +50,7 @@ from console.mapview import (
     centroid,
     marker_use,
 )
-from console.model import CONNECTED, GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel, fmt_value
-from console.screens import StatusLine, TopBar
-from console.select import SafeSelect
+from console.widgets.select import SafeSelect
 
 if TYPE_CHECKING:
     from console.app import MissionApp

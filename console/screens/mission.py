@@ -20,9 +20,9 @@ from textual.containers import Horizontal
 from textual.screen import Screen
 from textual.widgets import Footer, Input, Select, Static, Switch, TextArea
 
-from backend.library import ParamSpec
-from backend.model import Status
-from backend.ops import (
+from backend.core.library import ParamSpec
+from backend.core.model import Status
+from backend.core.ops import (
     AddBarrier,
     AddSkill,
     Control,
@@ -37,12 +37,12 @@ from backend.ops import (
     Undo,
     Unsync,
 )
-from console.actions import ACTIONS, BY_NAME, mission_bindings
-from console.capability import also_offered_by
-from console.dialogs import ConfirmScreen, PathPrompt, SkillPicker
-from console.model import CONNECTED, ConsoleModel
-from console.params import ParamEditor
-from console.schedule import ScheduleView
+from console.screens.dialogs import ConfirmScreen, PathPrompt, SkillPicker
+from console.state.actions import ACTIONS, BY_NAME, mission_bindings
+from console.state.capability import also_offered_by
+from console.state.model import CONNECTED, ConsoleModel
+from console.widgets.param_editor import ParamEditor
+from console.widgets.schedule import ScheduleView
 
 if TYPE_CHECKING:
     from console.app import MissionApp
@@ -565,7 +565,7 @@ class MissionScreen(Screen):
         path = await self.app.push_screen_wait(PathPrompt("Load a mission from (YAML):", self.mission_app.last_path or "", must_exist=True))
         if not path:
             return
-        from backend.files import FileProblems, load_mission
+        from backend.files.missions import FileProblems, load_mission
 
         try:
             mission, _lib = await asyncio.to_thread(load_mission, path)
@@ -592,8 +592,8 @@ class MissionScreen(Screen):
 def save_with_library(mission: Any, library: Any, path: Path) -> str:
     """Save the mission; if its library reference does not resolve from the
     new place, write the library beside it and point there."""
-    from backend import yamlio
-    from backend.files import library_path, save_mission
+    from backend.files import yamlio
+    from backend.files.missions import library_path, save_mission
 
     lib_file = library_path(path, mission.library)
     if lib_file.exists():

@@ -15,8 +15,8 @@ from __future__ import annotations
 
 from datetime import datetime
 
-from backend.model import Status
-from console.model import GLYPHS, STATUS_WORDS, ConsoleModel, fmt_clock
+from backend.core.model import Status
+from console.state.model import GLYPHS, STATUS_WORDS, ConsoleModel, fmt_clock
 
 FIELDS = ("skill", "type", "module", "prop", "name")
 SPARKS = "▁▂▃▄▅▆▇█"

@@ -25,10 +25,10 @@ from typing import Literal
 
 from pydantic import BaseModel
 
-from backend import events as ev
-from backend.model import Mission
-from backend.protocol import Alert, RobotInfo, Telemetry
-from console.model import GLYPHS, STATUS_WORDS, ConsoleModel
+from backend.core import events as ev
+from backend.core.model import Mission
+from backend.protocol.messages import Alert, RobotInfo, Telemetry
+from console.state.model import GLYPHS, STATUS_WORDS, ConsoleModel
 
 LOG_LIMIT = 10_000
 ALERT_LIMIT = 1_000

@@ -15,10 +15,10 @@ from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any
 
-from backend import events as ev
-from backend.library import Library, ParamSpec
-from backend.model import ACTIVE, FINISHED, Mission, SkillInstance, Status, how_to_change
-from backend.protocol import RobotInfo, Telemetry
+from backend.core import events as ev
+from backend.core.library import Library, ParamSpec
+from backend.core.model import ACTIVE, FINISHED, Mission, SkillInstance, Status, how_to_change
+from backend.protocol.messages import RobotInfo, Telemetry
 
 # -- statuses -------------------------------------------------------------------
 
@@ -114,7 +114,7 @@ def param_summary(skill: SkillInstance, library: Library | None) -> str:
         pspec = spec.params.get(name) if spec else None
         if pspec is not None and pspec.default is not None:
             try:
-                from backend.library import normalize_value
+                from backend.core.library import normalize_value
 
                 if normalize_value(pspec, pspec.default) == value:
                     continue

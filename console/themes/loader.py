@@ -32,15 +32,15 @@ from textual.color import Color, ColorParseError
 from textual.filter import LineFilter
 from textual.theme import Theme
 
-from backend import yamlio
-from backend.files import pydantic_issues
-from console.theme import STATUS_DEFAULTS
+from backend.files import yamlio
+from backend.files.missions import pydantic_issues
+from console.themes.variables import STATUS_DEFAULTS
 
 
 def _shipped_dir() -> Path:
     """The repository's themes/ (next to missions/, found the same way); a
     wheel install puts them in <prefix>/share/missionctl/themes (pyproject)."""
-    repo = Path(__file__).resolve().parents[1] / "themes"
+    repo = Path(__file__).resolve().parents[2] / "themes"
     installed = Path(sys.prefix) / "share" / "missionctl" / "themes"
     return repo if repo.is_dir() or not installed.is_dir() else installed
 
@@ -66,7 +66,7 @@ ANSI16_STATUS: dict[str, str] = {
 # ...and the map's ground the standard colours it keeps apart: explored ground
 # is brown out of comms range and grey in it (as the blends of the 256-colour
 # defaults look), unexplored and rock are black; their textures (dots, ~, ▴,
-# console/mapview.py GROUND16) tell the classes on the same background apart
+# console/widgets/mapview.py GROUND16) tell the classes on the same background apart
 ANSI16_MAP: dict[str, str] = {
     "map-outside": "#000000",
     "map-unknown": "#000000",

@@ -2,7 +2,7 @@
 
 Every colour that carries meaning is a theme variable, so a theme file
 (themes/*.yaml: dark, light, high-contrast, colour-blind-safe; loaded
-by console/themes.py) only has to set them. The defaults are declared in `STATUS_DEFAULTS`, which the app returns
+by console/themes/loader.py) only has to set them. The defaults are declared in `STATUS_DEFAULTS`, which the app returns
 from `get_theme_variable_defaults()` so any theme (also Textual's own) parses.
 Colours are picked to stay distinct in 256 colours (over SSH COLORTERM is
 usually not forwarded); the status glyphs carry the meaning without colour.
@@ -30,7 +30,7 @@ STATUS_DEFAULTS: dict[str, str] = {
     "battery-low": "#ff8700",
 }
 
-# The map (console/mapview.py): ground classes are cell backgrounds, the rest
+# The map (console/widgets/mapview.py): ground classes are cell backgrounds, the rest
 # glyph colours; each also has a glyph or pattern, so colour is never alone.
 # Defaults for every theme; a theme file may set them too (not required).
 MAP_DEFAULTS: dict[str, str] = {

@@ -33,9 +33,9 @@ from textual.message import Message
 from textual.strip import Strip
 from textual.widget import Widget
 
-from backend.mapfeed import T_FREE, T_ROCK, T_SLOW, T_UNKNOWN, MapMirror
-from backend.model import FINISHED, Status
-from console.model import GLYPHS, STATUS_CSS, ConsoleModel
+from backend.core.model import FINISHED, Status
+from backend.protocol.mapfeed import T_FREE, T_ROCK, T_SLOW, T_UNKNOWN, MapMirror
+from console.state.model import GLYPHS, STATUS_CSS, ConsoleModel
 
 UPPER_HALF = "▀"
 OUTSIDE = 8  # ground class of pixels outside the map (0..7: terrain + 4 if covered)

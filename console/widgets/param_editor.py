@@ -5,7 +5,7 @@ str: text; enum: a choice; pose: six fields, position: three; area, list and
 dict: YAML text; marker: a choice of markers of the allowed kinds; robot: a
 choice of the mission's robots. Pose, position and area parameters can also
 be bound to a marker. Values are checked as you type with the same checks the
-server runs (`backend.library.check_value`); the server's refusal for a
+server runs (`backend.core.library.check_value`); the server's refusal for a
 parameter appears next to that field. Below the parameters, the skill's
 policies (autonomous retries, pause out of comms range, recharge below a
 battery level), checked with the protocol's own model. Read-only, with the
@@ -33,15 +33,21 @@ from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.message import Message
 from textual.widgets import Button, Input, Label, Select, Static, Switch, TextArea
 
-from backend.library import POSE_FIELDS, POSITION_FIELDS, ParamSpec, check_value, normalize_value
-from backend.model import Policies, SkillInstance, Status
-from console.model import GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel, fmt_number
-from console.select import SafeSelect
+from backend.core.library import (
+    POSE_FIELDS,
+    POSITION_FIELDS,
+    ParamSpec,
+    check_value,
+    normalize_value,
+)
+from backend.core.model import Policies, SkillInstance, Status
+from console.state.model import GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel, fmt_number
+from console.widgets.select import SafeSelect
 
 TYPED = "\x00typed"  # the bind choice meaning "no marker: a typed value"
 BINDABLE_KINDS = {"pose": ("pose", "position"), "position": ("pose", "position"), "area": ("area",)}
 YAML_TYPES = ("area", "list", "dict")
-# policy -> (label, type hint); bounds and meaning come from backend.model.Policies
+# policy -> (label, type hint); bounds and meaning come from backend.core.model.Policies
 POLICY_HINTS = {
     "retries": ("retries", "int 0..20"),
     "pause_out_of_comms": ("pause out of comms", "bool"),

@@ -22,8 +22,8 @@ from textual.message import Message
 from textual.scroll_view import ScrollView
 from textual.strip import Strip
 
-from backend.model import ACTIVE, Status
-from console.model import (
+from backend.core.model import ACTIVE, Status
+from console.state.model import (
     GLYPHS,
     STATUS_CSS,
     ConsoleModel,

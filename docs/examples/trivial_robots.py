@@ -24,10 +24,10 @@ import asyncio
 import signal
 import sys
 
-from backend.accounts import AccountsError
 from backend.agent import RobotAgent, SkillFailed
-from backend.login import Login, add_login_arguments, login_from_args
+from backend.server.accounts import AccountsError
 from backend.transport import TransportUnreachable
+from backend.transport.login import Login, add_login_arguments, login_from_args
 
 SKILLS = {
     "lru_science": ["drive_to", "explore", "take_science_image", "identify_stone", "recharge"],

@@ -24,9 +24,9 @@ import pytest
 import zenoh
 
 from backend.agent import RobotAgent
-from backend.model import Policies, SkillInstance, Status
-from backend.ops import Report
-from backend.protocol import (
+from backend.core.model import Policies, SkillInstance, Status
+from backend.core.ops import Report
+from backend.protocol.messages import (
     BarrierInfo,
     CommandReply,
     Enqueue,

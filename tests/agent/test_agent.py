@@ -17,8 +17,8 @@ from pathlib import Path
 import pytest
 
 from backend.agent import Failure, RobotAgent, SkillFailed, SkillStopped, Success
-from backend.model import Policies, Pose, Position, SkillInstance, Status
-from backend.protocol import (
+from backend.core.model import Policies, Pose, Position, SkillInstance, Status
+from backend.protocol.messages import (
     BarrierInfo,
     Dequeue,
     ErrorReply,

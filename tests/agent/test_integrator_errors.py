@@ -11,9 +11,9 @@ import threading
 import pytest
 
 from backend.agent import AlreadyConnected, RegistrationRefused, RobotAgent, SkillFailed, Success
-from backend.model import Pose
-from backend.model import Status as S
-from backend.protocol import Pause, Run, Stop
+from backend.core.model import Pose
+from backend.core.model import Status as S
+from backend.protocol.messages import Pause, Run, Stop
 
 from .conftest import Harness, skill
 
@@ -137,7 +137,7 @@ async def test_a_bad_telemetry_source_does_not_break_commands(harness: Harness, 
         t = a.telemetry()
         assert (t.pose, t.link) == (Pose(), 0.0)
         said = [r.getMessage() for r in caplog.records if "telemetry sends a default instead" in r.getMessage()]
-        assert len([m for m in said if "agent.pose() must return a backend.model.Pose" in m]) == 1  # once
+        assert len([m for m in said if "agent.pose() must return a backend.core.model.Pose" in m]) == 1  # once
         assert len([m for m in said if "agent.link.quality must be a number" in m]) == 1
 
 

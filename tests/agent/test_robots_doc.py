@@ -20,9 +20,9 @@ from typing import Any
 
 import pytest
 
-from backend.client import MissionClient
-from backend.model import Policies, Pose
-from backend.ops import AddBarrier, AddSkill, Control, DeleteSkills, Retry, Sync
+from backend.client.client import MissionClient
+from backend.core.model import Policies, Pose
+from backend.core.ops import AddBarrier, AddSkill, Control, DeleteSkills, Retry, Sync
 
 ROOT = Path(__file__).resolve().parents[2]
 GUIDE = ROOT / "docs" / "robots.md"
@@ -44,7 +44,7 @@ def _load(relpath: str) -> Any:
 
 _server_harness = _load("server/harness.py")
 Cluster, Proc, status = _server_harness.Cluster, _server_harness.Proc, _server_harness.status
-ctl = _load("ctl/helpers.py").ctl
+ctl = _load("cli/helpers.py").ctl
 
 
 # ---------------------------------------------------------------- the guide

@@ -23,8 +23,8 @@ CTL_TIMEOUT = 30.0  # per ctl process; they normally take well under a second
 
 
 def _cli_has_ctl() -> bool:
-    """`missionctl ctl` once backend/cli.py registers it; `python -m backend.ctl` before."""
-    from backend.cli import build_parser
+    """`missionctl ctl` once backend/cli/main.py registers it; `python -m backend.cli.ctl.session` before."""
+    from backend.cli.main import build_parser
 
     for action in build_parser()._actions:
         if isinstance(action, argparse._SubParsersAction):
@@ -32,7 +32,7 @@ def _cli_has_ctl() -> bool:
     return False
 
 
-CTL_CMD = [sys.executable, "-m", "backend.cli", "ctl"] if _cli_has_ctl() else [sys.executable, "-m", "backend.ctl"]
+CTL_CMD = [sys.executable, "-m", "backend.cli", "ctl"] if _cli_has_ctl() else [sys.executable, "-m", "backend.cli.ctl.session"]
 
 
 def env() -> dict[str, str]:

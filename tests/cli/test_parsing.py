@@ -8,8 +8,7 @@ import subprocess
 
 import pytest
 
-from backend import ops
-from backend.ctl import (
+from backend.cli.ctl.session import (
     DEFAULT_CONNECT,
     FileInvalid,
     MarkerRef,
@@ -26,8 +25,9 @@ from backend.ctl import (
     run,
     short_value,
 )
-from backend.files import load_mission
-from backend.model import Policies
+from backend.core import ops
+from backend.core.model import Policies
+from backend.files.missions import load_mission
 from backend.transport import free_port, loopback_endpoint
 
 from .helpers import LIBRARY, ROOT, TUTORIAL
@@ -431,8 +431,8 @@ def test_help_documents_everything():
 def _fake_client(tutorial):
     from types import SimpleNamespace
 
-    from backend.model import Status
-    from backend.protocol import RobotInfo
+    from backend.core.model import Status
+    from backend.protocol.messages import RobotInfo
 
     mission, library = tutorial
     m = mission.model_copy(deep=True)
@@ -446,7 +446,7 @@ def _fake_client(tutorial):
 
 
 def test_state_text_and_json_without_server(tutorial):
-    from backend.ctl import state_json, state_text
+    from backend.cli.ctl.session import state_json, state_text
 
     client = _fake_client(tutorial)
     text = state_text(client, unicode=True)
@@ -464,8 +464,8 @@ def test_state_text_and_json_without_server(tutorial):
 
 
 def test_describe_lines():
-    from backend.ctl import describe
-    from backend.protocol import OpReply
+    from backend.cli.ctl.session import describe
+    from backend.protocol.messages import OpReply
 
     add = ops.AddSkill(robot="lru1", skill="drive_to")
     assert describe(add, OpReply(revision=12, value={"id": "lru1-7"}), 11, None) == "added lru1-7 (drive_to) to lru1 at revision 12"
@@ -478,8 +478,8 @@ def test_describe_lines():
 
 
 def test_watch_lines_say_the_status_and_what_an_edit_changed():
-    from backend import events as ev
-    from backend.ctl import watch_line
+    from backend.cli.ctl.session import watch_line
+    from backend.core import events as ev
 
     def line(*events):
         return watch_line("events", ev.EventBatch(revision=9, events=list(events), actor="lru1", op="report"), False)
@@ -493,8 +493,8 @@ def test_watch_lines_say_the_status_and_what_an_edit_changed():
 
 
 def test_watch_says_which_message_was_unreadable():
-    from backend.client import Malformed
-    from backend.ctl import watch_line
+    from backend.cli.ctl.session import watch_line
+    from backend.client.client import Malformed
 
     m = Malformed("telemetry", "mc/v1/robot/lru1/telemetry", "battery: Input should be less than or equal to 1")
     assert watch_line("malformed", m, False) == (

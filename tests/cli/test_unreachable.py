@@ -109,14 +109,14 @@ def test_ctl_loads_only_what_a_client_needs():
     # feed), no server, journal or mission files, no console/sim plug-ins
     code = (
         "import sys\n"
-        "from backend.cli import main\n"
+        "from backend.cli.main import main\n"
         f"rc = main(['ctl', '--connect', {loopback_endpoint(free_port())!r}, 'state'])\n"
         "print(rc, *sorted(m for m in sys.modules if m.split('.')[0] in {'numpy', 'backend', 'sim', 'console', 'textual', 'yaml'}))\n"
     )
     r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env(), capture_output=True, text=True, timeout=60)
     rc, *loaded = r.stdout.split()
     assert rc == "3", r.stderr  # nothing listens there: the client was used
-    assert "backend.client" in loaded
+    assert "backend.client.client" in loaded
     heavy = [m for m in loaded if m.split(".")[0] in {"numpy", "sim", "console", "textual", "yaml"}
-             or m in {"backend.server", "backend.journal", "backend.files", "backend.mapfeed", "backend.acl"}]
+             or m in {"backend.server.server", "backend.server.journal", "backend.files.missions", "backend.protocol.mapfeed", "backend.server.acl"}]
     assert heavy == []

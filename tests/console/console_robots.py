@@ -19,7 +19,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from backend.agent import Failure, RobotAgent  # noqa: E402
-from backend.files import load_library  # noqa: E402
+from backend.files.missions import load_library  # noqa: E402
 
 
 def make_handler(name: str):

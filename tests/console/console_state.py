@@ -7,13 +7,13 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from backend.client import OperationRefused
-from backend.files import load_mission
-from backend.library import Library
-from backend.model import Mission, Pose
-from backend.ops import Control, Report, Retry, RetryAck, Sync, SyncAck, Unsync, UnsyncDone
-from backend.protocol import ErrorReply, OpReply, RobotInfo, Telemetry
-from backend.rules import Engine, Refusal
+from backend.client.client import OperationRefused
+from backend.core.library import Library
+from backend.core.model import Mission, Pose
+from backend.core.ops import Control, Report, Retry, RetryAck, Sync, SyncAck, Unsync, UnsyncDone
+from backend.core.rules.engine import Engine, Refusal
+from backend.files.missions import load_mission
+from backend.protocol.messages import ErrorReply, OpReply, RobotInfo, Telemetry
 
 ROOT = Path(__file__).resolve().parents[2]
 MARS = ROOT / "missions" / "mars_sample_return.yaml"
@@ -213,7 +213,7 @@ async def wait_exit(app: Any, timeout: float = 10.0) -> None:
 
 
 def manifest(name: str, type_: str, skills: list[str], modules: dict[str, str], **props: Any):
-    from backend.protocol import Manifest, Module
+    from backend.protocol.messages import Manifest, Module
 
     return Manifest(name=name, type=type_, modules=[Module(name=m, version=v) for m, v in modules.items()],
                     properties=props, skills=dict.fromkeys(skills, "1.0.0"))
@@ -259,8 +259,8 @@ async def awareness_scenario(app: Any, pilot: Any) -> Builder:
     an operator's edit and sync, robot reports (one failure, also alerted by
     the server: merged), the console's own refusal, a robot going offline,
     low battery and out of range."""
-    from backend.ops import EditSkill
-    from backend.protocol import Alert
+    from backend.core.ops import EditSkill
+    from backend.protocol.messages import Alert
     from console.messages import (
         AlertReceived,
         ConnectionChanged,

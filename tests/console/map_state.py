@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from backend import mapfeed as mf
-from backend.mapfollow import MapUpdate
+from backend.client.mapfollow import MapUpdate
+from backend.protocol import mapfeed as mf
 
 
 def mars_snapshot(size: int = 160, cell: float = 2.0, seq: int = 3) -> mf.MapSnapshot:

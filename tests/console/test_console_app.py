@@ -21,16 +21,16 @@ from console_state import (
     wait_until,
 )
 
-from backend.client import OperationRefused
-from backend.model import Status
-from backend.ops import Retry, RetryAck
-from backend.protocol import ErrorReply, OpReply
+from backend.client.client import OperationRefused
+from backend.core.model import Status
+from backend.core.ops import Retry, RetryAck
+from backend.protocol.messages import ErrorReply, OpReply
 from backend.transport import free_port, loopback_endpoint
 from console.config import ConsoleConfig
-from console.dialogs import HelpScreen, SkillPicker, UnreachableScreen
 from console.messages import ConnectionChanged, FleetChanged
-from console.params import ParamEditor
-from console.schedule import ScheduleView
+from console.screens.dialogs import HelpScreen, SkillPicker, UnreachableScreen
+from console.widgets.param_editor import ParamEditor
+from console.widgets.schedule import ScheduleView
 
 WIDE = (150, 42)
 
@@ -276,8 +276,8 @@ async def test_remapped_key_runs_the_action():
 
 
 async def test_command_palette_has_every_action_and_says_what_does_not_apply():
-    from console.actions import ACTIONS
     from console.commands import MissionCommands
+    from console.state.actions import ACTIONS
 
     app = make_app()
     async with app.run_test(size=WIDE) as pilot:
@@ -337,7 +337,7 @@ async def test_reconnecting_disables_changes_and_says_so():
 async def test_robot_going_offline_shows_in_its_header_and_to_its_barrier_partner():
     from console_state import T0
 
-    from backend.protocol import RobotInfo
+    from backend.protocol.messages import RobotInfo
 
     app = make_app()
     async with app.run_test(size=(200, 40)) as pilot:
@@ -372,8 +372,8 @@ async def test_80x24_is_usable_schedule_then_editor():
 
 
 async def test_save_then_load_a_mission_file_and_undo(tmp_path):
-    from backend.files import load_mission
-    from console.dialogs import ConfirmScreen, PathPrompt
+    from backend.files.missions import load_mission
+    from console.screens.dialogs import ConfirmScreen, PathPrompt
 
     b = Builder(TUTORIAL)
     app, backend = engine_app(b)
@@ -413,7 +413,7 @@ async def test_save_then_load_a_mission_file_and_undo(tmp_path):
 
 
 async def test_policies_are_typed_inputs_validated_then_applied():
-    from backend.model import Policies
+    from backend.core.model import Policies
 
     b = Builder(TUTORIAL)
     app, backend = engine_app(b)
@@ -535,9 +535,9 @@ async def test_a_draft_survives_a_lost_connection():
 async def test_status_changes_and_telemetry_repaint_the_lines_that_changed():
     from console_state import T0
 
-    from backend.model import Pose
-    from backend.ops import Report
-    from backend.protocol import Telemetry
+    from backend.core.model import Pose
+    from backend.core.ops import Report
+    from backend.protocol.messages import Telemetry
     from console.messages import EventsApplied, TelemetryChanged
 
     b = mars_mid_execution()
@@ -565,7 +565,7 @@ async def test_status_changes_and_telemetry_repaint_the_lines_that_changed():
 
 
 async def test_a_long_label_is_cut_but_never_the_attempt_number():
-    from backend.ops import EditSkill
+    from backend.core.ops import EditSkill
 
     b = Builder()
     b.engine.submit(EditSkill(id="ardea-1", label="take off from the lander pad"))
@@ -584,7 +584,7 @@ async def test_a_long_label_is_cut_but_never_the_attempt_number():
 
 
 async def test_quitting_with_unapplied_changes_asks_first():
-    from console.dialogs import ConfirmScreen
+    from console.screens.dialogs import ConfirmScreen
 
     b = Builder(TUTORIAL)
     app = make_app(backend=EngineBackend(b))
@@ -632,7 +632,7 @@ async def test_at_80x24_a_draft_survives_leaving_the_editor_and_editing_another_
 
 
 async def test_a_partner_reaching_the_barrier_updates_the_waiting_robots_column():
-    from backend.ops import Report
+    from backend.core.ops import Report
     from console.messages import EventsApplied
 
     b = mars_mid_execution()

@@ -15,16 +15,16 @@ from console_state import (
     wait_until,
 )
 
-from backend.protocol import RobotInfo
-from console.alertview import AlertScreen
+from backend.protocol.messages import RobotInfo
 from console.config import ConsoleConfig, load_config
-from console.dialogs import PathPrompt, SkillPicker
-from console.eventlog import read_jsonl
-from console.fleet import FleetScreen
-from console.logview import EventLogScreen
 from console.messages import FleetChanged, StateLoaded
-from console.screens import MissionScreen
-from console.themes import ANSI16_STATUS
+from console.screens.alerts import AlertScreen
+from console.screens.dialogs import PathPrompt, SkillPicker
+from console.screens.fleet import FleetScreen
+from console.screens.log import EventLogScreen
+from console.screens.mission import MissionScreen
+from console.state.eventlog import read_jsonl
+from console.themes.loader import ANSI16_STATUS
 
 SIZE = (130, 30)
 
@@ -222,7 +222,7 @@ async def test_theme_option_and_palette_choice_remembered_in_the_config(tmp_path
 async def test_user_themes_and_a_broken_one_named_in_a_notice(tmp_path, monkeypatch):
     themes = tmp_path / "xdg" / "missionctl" / "themes"
     themes.mkdir(parents=True)
-    from console.themes import SHIPPED_DIR
+    from console.themes.loader import SHIPPED_DIR
 
     (themes / "mine.yaml").write_text((SHIPPED_DIR / "light.yaml").read_text().replace("missionctl-light", "my-light"))
     (themes / "broken.yaml").write_text("name: broken\ndark: maybe\nprimary: '#000000'\nvariables: {}\n")
@@ -251,7 +251,7 @@ async def test_sixteen_colours_give_each_status_its_own_ansi_colour():
 
 
 async def test_log_screen_shows_the_last_entries_of_a_long_log():
-    from console.logview import SHOW_LIMIT
+    from console.screens.log import SHOW_LIMIT
 
     app = make_app()
     async with app.run_test(size=SIZE) as pilot:
@@ -387,7 +387,7 @@ async def test_what_happened_while_reconnecting_raises_alerts():
 async def test_an_unreadable_message_raises_one_alert_naming_its_key_and_field():
     """The client library reports a message it could not read (once per key);
     the bridge makes it an alert of the robot whose key it came on."""
-    from backend.client import Malformed
+    from backend.client.client import Malformed
     from console.bridge import ClientBridge
 
     app = make_app()

@@ -7,14 +7,14 @@ from datetime import timedelta
 
 from console_state import MARS, T0, Builder, mars_fleet_with_manifests
 
-from backend.ops import Sync, SyncAck
-from backend.protocol import Alert, RobotInfo, Telemetry
-from console.capability import also_offered_by, filter_robots, robots_offering, sparkline
+from backend.core.ops import Sync, SyncAck
+from backend.protocol.messages import Alert, RobotInfo, Telemetry
 from console.config import load_config, save_theme
-from console.eventlog import AlertBook, EventLog, read_jsonl, split_actor
-from console.model import HISTORY, ConsoleModel
-from console.theme import STATUS_DEFAULTS
-from console.themes import SHIPPED_DIR, load_theme_file, load_themes
+from console.state.capability import also_offered_by, filter_robots, robots_offering, sparkline
+from console.state.eventlog import AlertBook, EventLog, read_jsonl, split_actor
+from console.state.model import HISTORY, ConsoleModel
+from console.themes.loader import SHIPPED_DIR, load_theme_file, load_themes
+from console.themes.variables import STATUS_DEFAULTS
 
 
 def mars_model() -> ConsoleModel:
@@ -97,7 +97,7 @@ def test_log_turns_batches_into_operations_and_reports():
     b.report("lru1", "lru1-1", "running")
     b.report("lru1", "lru1-1", "failure", "wheel stuck")
     # the two reports as the server would publish them
-    from backend import events as ev
+    from backend.core import events as ev
 
     fail = ev.EventBatch(revision=m.mission.revision + 1, events=[ev.SkillChanged(id="lru1-1", changes={"status": "failure", "status_info": "wheel stuck"})], actor="lru1", op="report")
     m.apply(fail)

@@ -17,7 +17,7 @@ from console_state import (
     screen_text,
 )
 
-from console.themes import SHIPPED_DIR, load_themes
+from console.themes.loader import SHIPPED_DIR, load_themes
 
 
 def _scenario(*keys: str, expect=()):

@@ -15,8 +15,8 @@ import pytest
 from console_live import ROOT, running
 from console_state import TUTORIAL, make_app, screen_text, wait_until
 
-from backend.model import Status
-from console.dialogs import SkillPicker
+from backend.core.model import Status
+from console.screens.dialogs import SkillPicker
 
 SIZE = (150, 40)
 SLOW = 30.0  # bound for things that take well under a second normally
@@ -377,7 +377,7 @@ async def test_workflow_injected_failure_raises_an_alert_that_is_acknowledged(li
         assert sync and sync[-1].user == "ada" and sync[-1].client == app.bridge.client.client_id
         assert any(e.kind == "failure" and e.skill == "lru1-1" for e in app.event_log.entries)
         await pilot.press("f6")
-        from console.alertview import AlertScreen
+        from console.screens.alerts import AlertScreen
 
         await wait_until(pilot, lambda: isinstance(app.screen, AlertScreen), SLOW, "alert list")
         assert "simulated failure of drive_to" in screen_text(app)

@@ -21,15 +21,15 @@ from console_state import (
 from map_state import map_message, mars_snapshot
 from rich.color import Color as RichColor
 
-from backend import mapfeed as mf
-from backend import mapfollow
-from backend.mapfollow import MapFeed, MapUpdate
-from backend.model import Pose, Status
-from backend.protocol import Telemetry
-from console.map_screen import NO_FEED, MapScreen
-from console.mapview import ROBOT_ARROWS, UPPER_HALF, halfblock_row, heading_glyph
+from backend.client import mapfollow
+from backend.client.mapfollow import MapFeed, MapUpdate
+from backend.core.model import Pose, Status
+from backend.protocol import mapfeed as mf
+from backend.protocol.messages import Telemetry
 from console.messages import MapChanged, TelemetryChanged
-from console.screens import MissionScreen
+from console.screens.map import NO_FEED, MapScreen
+from console.screens.mission import MissionScreen
+from console.widgets.mapview import ROBOT_ARROWS, UPPER_HALF, halfblock_row, heading_glyph
 
 SIZE = (120, 40)
 
@@ -149,8 +149,8 @@ async def test_ground_classes_stay_apart_in_256_and_16_colours(colors):
     """What the terminal shows (16 colours: after the downgrade a TERM=xterm
     terminal makes): explored ground differs from unexplored, in comms range
     from out of it, and a texture differs from the ground it is drawn on."""
-    from console.mapview import T_FREE, T_ROCK, T_SLOW, T_UNKNOWN, MapView
-    from console.themes import _to16
+    from console.themes.loader import _to16
+    from console.widgets.mapview import T_FREE, T_ROCK, T_SLOW, T_UNKNOWN, MapView
 
     app = make_app(colors=colors)
     async with app.run_test(size=SIZE) as pilot:
@@ -257,14 +257,14 @@ async def test_follower_without_a_sim_asks_again_and_on_the_first_delta(monkeypa
 
 @pytest.mark.parametrize("status", [Status.RUNNING])
 def test_robot_status_glyph_follows_the_active_skill(status):
-    from console.mapview import robot_status
+    from console.widgets.mapview import robot_status
 
     b = Builder(MARS)
     b.sync("lru1", "lru1-1")
     b.report("lru1", "lru1-1", status.value)
     from console_state import fleet
 
-    from console.model import ConsoleModel
+    from console.state.model import ConsoleModel
 
     m = ConsoleModel()
     m.load(b.snapshot(), b.library, fleet({"lru1": True, "lru2": False}))
@@ -335,7 +335,7 @@ async def test_zoom_and_pan_move_the_view():
 async def test_the_mouse_wheel_zooms_about_the_ground_under_the_mouse():
     from textual import events
 
-    from console.mapview import WHEEL_ZOOM
+    from console.widgets.mapview import WHEEL_ZOOM
 
     app = make_app()
     async with app.run_test(size=SIZE) as pilot:
@@ -359,7 +359,7 @@ async def test_the_mouse_wheel_zooms_about_the_ground_under_the_mouse():
 
 
 def test_segments_are_clipped_to_the_view():
-    from console.mapview import clip_segment
+    from console.widgets.mapview import clip_segment
 
     (a, b) = clip_segment((-100, 5), (200, 5), 120, 80)
     assert a == pytest.approx((-1.0, 5.0)) and b == pytest.approx((120.0, 5.0))

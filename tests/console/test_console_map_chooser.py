@@ -11,10 +11,10 @@ from console_state import DATA, Builder, engine_app, inject, screen_text, wait_u
 from map_state import map_message
 from textual.widgets import OptionList
 
-from backend.ops import EditSkill
-from console.dialogs import ChoiceScreen
-from console.map_screen import MapScreen
+from backend.core.ops import EditSkill
 from console.messages import AccountKnown
+from console.screens.dialogs import ChoiceScreen
+from console.screens.map import MapScreen
 
 TRANSPORT = DATA / "transport.yaml"  # lru1-2: transport(from @POI-B, to (2, 0), via, relay, speed)
 SIZE = (120, 40)

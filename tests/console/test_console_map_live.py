@@ -8,10 +8,10 @@ import pytest
 from console_live import running
 from console_state import MARS, TUTORIAL, make_app, screen_text, wait_until
 
-from backend import mapfeed as mf
 from backend import transport
-from backend.model import Status
-from console.map_screen import MapScreen
+from backend.core.model import Status
+from backend.protocol import mapfeed as mf
+from console.screens.map import MapScreen
 
 SIZE = (120, 40)
 SLOW = 30.0

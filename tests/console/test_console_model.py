@@ -5,12 +5,12 @@ from __future__ import annotations
 
 from console_state import MARS_FLEET, T0, TUTORIAL, Builder, fleet, mars_mid_execution
 
-from backend import events as ev
-from backend.model import Policies, Status
-from backend.ops import AddSkill
+from backend.core import events as ev
+from backend.core.model import Policies, Status
+from backend.core.ops import AddSkill
 from console.config import load_config
-from console.model import CONNECTED, RECONNECTING, ConsoleModel, fmt_duration, param_summary
-from console.screens import default_params
+from console.screens.mission import default_params
+from console.state.model import CONNECTED, RECONNECTING, ConsoleModel, fmt_duration, param_summary
 
 
 def model_of(b: Builder, online=MARS_FLEET) -> ConsoleModel:
@@ -92,7 +92,7 @@ def test_apply_reports_changed_columns_and_keeps_indexes():
 
 
 def test_default_params_make_a_valid_new_skill():
-    from backend.library import check_params
+    from backend.core.library import check_params
 
     b = Builder()
     m = model_of(b)
@@ -120,7 +120,7 @@ def test_config_keymap_theme_and_problems(tmp_path):
 
 
 def test_a_barrier_skill_changing_also_changes_its_partners_columns():
-    from backend.ops import Report
+    from backend.core.ops import Report
 
     b = mars_mid_execution()
     m = model_of(b)

@@ -1,4 +1,4 @@
-"""console.select.SafeSelect: a Select removed while its value changes (the
+"""console.widgets.select.SafeSelect: a Select removed while its value changes (the
 parameter editor rebuilding during a resync) must not end the console."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from textual.css.query import NoMatches
 from textual.widgets import Select
 from textual.widgets._select import SelectOverlay
 
-from console.select import SafeSelect
+from console.widgets.select import SafeSelect
 
 
 class OneSelect(App):

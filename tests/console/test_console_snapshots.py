@@ -21,10 +21,10 @@ from console_state import (
     screen_text,
 )
 
-from backend.model import Pose
-from backend.ops import DeleteSkills
-from backend.protocol import Telemetry
-from console.dialogs import UnreachableScreen
+from backend.core.model import Pose
+from backend.core.ops import DeleteSkills
+from backend.protocol.messages import Telemetry
+from console.screens.dialogs import UnreachableScreen
 
 WIDE = (150, 40)
 

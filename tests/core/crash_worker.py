@@ -31,10 +31,9 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from backend.files import load_mission  # noqa: E402
-from backend.library import Library  # noqa: E402
-from backend.model import Mission, Pose, Position, Status, section_problems  # noqa: E402
-from backend.ops import (  # noqa: E402
+from backend.core.library import Library  # noqa: E402
+from backend.core.model import Mission, Pose, Position, Status, section_problems  # noqa: E402
+from backend.core.ops import (  # noqa: E402
     AddBarrier,
     AddSkill,
     Control,
@@ -57,7 +56,8 @@ from backend.ops import (  # noqa: E402
     Unsync,
     UnsyncDone,
 )
-from backend.rules import Applied, Engine, Refusal  # noqa: E402
+from backend.core.rules.engine import Applied, Engine, Refusal  # noqa: E402
+from backend.files.missions import load_mission  # noqa: E402
 
 MISSION_FILE = ROOT / "missions" / "mars_sample_return.yaml"
 OPERATORS = ("alice", "bob")
@@ -458,7 +458,7 @@ class OpGenerator:
 def main(argv: list[str]) -> int:
     import threading
 
-    from backend.journal import Journal
+    from backend.server.journal import Journal
 
     db, seed, n = argv[0], int(argv[1]), int(argv[2])
     every = int(argv[3]) if len(argv) > 3 else 50

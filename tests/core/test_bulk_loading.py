@@ -11,10 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from backend.bulk import gc_paused
-from backend.files import load_mission, mission_to_yaml, save_mission, validate_file
-from backend.journal import Journal
-from backend.model import Mission, RobotSpec, SkillInstance
+from backend.core.bulk import gc_paused
+from backend.core.model import Mission, RobotSpec, SkillInstance
+from backend.files.missions import load_mission, mission_to_yaml, save_mission, validate_file
+from backend.server.journal import Journal
 
 ROOT = Path(__file__).resolve().parents[2]
 LIBRARY = ROOT / "missions" / "libraries" / "mars.yaml"
@@ -100,7 +100,7 @@ def test_a_mission_file_and_a_journal_load_without_collections(tmp_path):
 def test_a_deep_copy_equals_the_mission_and_shares_nothing_with_it():
     from datetime import UTC, datetime
 
-    from backend.model import Status
+    from backend.core.model import Status
 
     m = big_mission(robots=2, per_robot=3)
     s = m.tasks["rover1"][0]

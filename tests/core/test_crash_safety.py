@@ -28,9 +28,9 @@ import sys
 import time
 from pathlib import Path
 
-from backend.events import EventBatch
-from backend.journal import Journal
-from backend.model import Mission
+from backend.core.events import EventBatch
+from backend.core.model import Mission
+from backend.server.journal import Journal
 
 sys.path.insert(0, str(Path(__file__).parent))
 from crash_worker import OpGenerator, mission_problems, start_engine  # noqa: E402

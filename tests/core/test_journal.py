@@ -10,12 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from backend import journal as journal_mod
-from backend.events import EventBatch, SkillChanged
-from backend.files import load_mission
-from backend.journal import Entry, Journal, JournalCorrupt, JournalError, remember_requests
-from backend.model import Mission, Pose, PoseMarker, Position, Status
-from backend.ops import (
+from backend.core.events import EventBatch, SkillChanged
+from backend.core.model import Mission, Pose, PoseMarker, Position, Status
+from backend.core.ops import (
     AddBarrier,
     AddSkill,
     DeleteSkills,
@@ -37,7 +34,10 @@ from backend.ops import (
     Unsync,
     UnsyncDone,
 )
-from backend.rules import Engine, Refusal
+from backend.core.rules.engine import Engine, Refusal
+from backend.files.missions import load_mission
+from backend.server import journal as journal_mod
+from backend.server.journal import Entry, Journal, JournalCorrupt, JournalError, remember_requests
 
 sys.path.insert(0, str(Path(__file__).parent))
 from crash_worker import OpGenerator, mission_problems  # noqa: E402
@@ -629,7 +629,7 @@ def test_the_engine_refuses_non_finite_marker_coordinates(payload):
     number"); the same value reaching it through a marker must be refused too."""
     from pydantic import TypeAdapter, ValidationError
 
-    from backend.ops import AnyOp
+    from backend.core.ops import AnyOp
 
     mission, library = load_mission(MISSION_FILE)
     engine = Engine(mission, library)

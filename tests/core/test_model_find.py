@@ -7,7 +7,7 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from backend.model import Mission, RobotSpec, SkillInstance
+from backend.core.model import Mission, RobotSpec, SkillInstance
 
 
 def scan(m: Mission, skill_id: str) -> tuple[str, int, SkillInstance] | None:

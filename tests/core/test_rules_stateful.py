@@ -13,10 +13,9 @@ from hypothesis import HealthCheck, settings
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, rule
 
-from backend import events as ev
-from backend.files import load_mission
-from backend.model import FINISHED, Pose, Position, Status, section_problems
-from backend.ops import (
+from backend.core import events as ev
+from backend.core.model import FINISHED, Pose, Position, Status, section_problems
+from backend.core.ops import (
     AddBarrier,
     AddSkill,
     Control,
@@ -39,7 +38,8 @@ from backend.ops import (
     Unsync,
     UnsyncDone,
 )
-from backend.rules import Engine, Refusal
+from backend.core.rules.engine import Engine, Refusal
+from backend.files.missions import load_mission
 
 MISSION = Path(__file__).resolve().parents[2] / "missions" / "mars_sample_return.yaml"
 CLIENTS = ["c1", "c2"]

@@ -9,10 +9,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from backend.files import library_path, load_mission, save_mission, validate_file
-from backend.library import Library
-from backend.model import Mission, Policies, Pose, PoseMarker, Position, Status
-from backend.ops import (
+from backend.core.library import Library
+from backend.core.model import Mission, Policies, Pose, PoseMarker, Position, Status
+from backend.core.ops import (
     AddBarrier,
     AddSkill,
     EditSkill,
@@ -24,7 +23,8 @@ from backend.ops import (
     Sync,
     SyncAck,
 )
-from backend.rules import Engine
+from backend.core.rules.engine import Engine
+from backend.files.missions import library_path, load_mission, save_mission, validate_file
 
 REPO = Path(__file__).resolve().parents[2]
 MISSIONS = sorted(REPO.glob("missions/*.yaml"))

@@ -81,7 +81,7 @@ def test_schemas_are_valid_json_schema(schemas: dict):
 
 
 def test_schema_is_generated_from_the_models(schemas: dict):
-    from backend.schema import schemas as generate
+    from backend.files.schema import schemas as generate
 
     assert json.loads(json.dumps(generate())) == schemas
 
@@ -99,7 +99,7 @@ def test_shipped_library_matches_schema(path: Path, schemas: dict):
 
 
 def test_saved_mission_matches_schema(schemas: dict, tmp_path: Path):
-    from backend.files import library_path, load_mission, save_mission
+    from backend.files.missions import library_path, load_mission, save_mission
 
     src = MISSIONS[0]
     m, _ = load_mission(src)

@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from backend.files import validate_file
+from backend.files.missions import validate_file
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
@@ -239,7 +239,7 @@ def test_relative_file_names_are_printed_as_given():
 
 @pytest.mark.parametrize("name", CORPUS_FILES)
 def test_in_process_matches_expectations(name: str):
-    """backend.files.validate_file gives the same issues as the command line."""
+    """backend.files.missions.validate_file gives the same issues as the command line."""
     issues = validate_file(CORPUS / name)
     reported = []
     for i in issues:

@@ -12,8 +12,8 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-from backend.login import Login
 from backend.transport import client_config, close_session, free_port, open_session
+from backend.transport.login import Login
 
 ROOT = Path(__file__).resolve().parents[2]
 TUTORIAL = ROOT / "missions" / "tutorial.yaml"

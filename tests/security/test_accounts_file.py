@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from backend.accounts import AccountsError, load_accounts, zenoh_dictionary
-from backend.login import Login
+from backend.server.accounts import AccountsError, load_accounts, zenoh_dictionary
 from backend.transport import client_config, set_option
+from backend.transport.login import Login
 
 
 def _write(tmp: Path, body: str, password: str = "s3cret-pw", mode: int = 0o600) -> Path:

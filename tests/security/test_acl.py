@@ -14,10 +14,18 @@ from datetime import UTC, datetime
 
 import zenoh
 
-from backend.events import EventBatch
-from backend.model import Pose
-from backend.ops import AddSkill, Report
-from backend.protocol import Keys, ReportAck, ReportBatch, Request, StateSnapshot, Telemetry, dumps
+from backend.core.events import EventBatch
+from backend.core.model import Pose
+from backend.core.ops import AddSkill, Report
+from backend.protocol.messages import (
+    Keys,
+    ReportAck,
+    ReportBatch,
+    Request,
+    StateSnapshot,
+    Telemetry,
+    dumps,
+)
 from backend.transport import declare_publisher, wait_matching
 
 from .helpers import raw_session

@@ -6,8 +6,8 @@ from __future__ import annotations
 import asyncio
 import time
 
-from console.actions import ACTIONS, MUTATING
 from console.app import MissionApp
+from console.state.actions import ACTIONS, MUTATING
 
 SIZE = (140, 36)
 READ_ONLY = "read-only: logged in as observer watch"

@@ -15,11 +15,11 @@ import threading
 from contextlib import asynccontextmanager
 from pathlib import Path
 
-from backend.client import MissionClient
-from backend.files import load_mission
-from backend.model import Status
-from backend.ops import Report
-from backend.protocol import (
+from backend.client.client import MissionClient
+from backend.core.model import Status
+from backend.core.ops import Report
+from backend.files.missions import load_mission
+from backend.protocol.messages import (
     CommandReply,
     Keys,
     Manifest,
@@ -30,7 +30,7 @@ from backend.protocol import (
     WorldMessage,
     dumps,
 )
-from backend.server import MissionServer
+from backend.server.server import MissionServer
 from backend.transport import (
     client_config,
     declare_token,

@@ -13,9 +13,9 @@ import pytest
 from pydantic import ValidationError
 from zenoh.handlers import Callback
 
-from backend.events import EventBatch, SkillChanged, read_batches
-from backend.ops import EditSkill
-from backend.protocol import Alert, Keys, Request, dumps
+from backend.core.events import EventBatch, SkillChanged, read_batches
+from backend.core.ops import EditSkill
+from backend.protocol.messages import Alert, Keys, Request, dumps
 from backend.transport import client_config
 from backend.transport.session import close_session, open_session
 

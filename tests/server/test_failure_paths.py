@@ -20,9 +20,9 @@ import threading
 import pytest
 
 from backend.agent import RobotAgent
-from backend.client import MissionClient, OperationRefused, ServerGone, ServerUnreachable
-from backend.journal import Journal, JournalError
-from backend.ops import AddSkill, Control, Sync, Undo, Unsync
+from backend.client.client import MissionClient, OperationRefused, ServerGone, ServerUnreachable
+from backend.core.ops import AddSkill, Control, Sync, Undo, Unsync
+from backend.server.journal import Journal, JournalError
 from backend.transport import free_port, loopback_endpoint
 
 from .harness import ROOT, TUTORIAL, Proc, new_server, serving, status

@@ -7,9 +7,9 @@ from __future__ import annotations
 import asyncio
 import json
 
-from backend.ops import Sync
-from backend.protocol import CommandReply, Request, dumps
-from backend.server import MissionServer
+from backend.core.ops import Sync
+from backend.protocol.messages import CommandReply, Request, dumps
+from backend.server.server import MissionServer
 from backend.transport import free_port, loopback_endpoint
 
 from .harness import TUTORIAL, RawRobot

@@ -9,8 +9,8 @@ import logging
 import sqlite3
 import threading
 
-from backend.journal import Journal
-from backend.ops import EditSkill
+from backend.core.ops import EditSkill
+from backend.server.journal import Journal
 
 from .harness import serving
 
@@ -64,7 +64,7 @@ def test_a_checkpoint_that_fails_is_said_once_and_loses_nothing(tmp_path, caplog
                 if server._checkpoint is not None:
                     await asyncio.wait([server._checkpoint])
 
-    with caplog.at_level(logging.WARNING, logger="backend.server"):
+    with caplog.at_level(logging.WARNING, logger="backend.server.server"):
         asyncio.run(scenario())
     said = [r.getMessage() for r in caplog.records if "cannot checkpoint" in r.getMessage()]
     # failed, failed (not said again), succeeded, failed (said again)

@@ -7,9 +7,9 @@ import time
 
 import pytest
 
-from backend.client import OperationRefused
-from backend.model import Pose
-from backend.ops import AddBarrier, AddSkill, Control, EditSkill, Retry, Sync, Unsync
+from backend.client.client import OperationRefused
+from backend.core.model import Pose
+from backend.core.ops import AddBarrier, AddSkill, Control, EditSkill, Retry, Sync, Unsync
 
 from .harness import drive, status, tell, until
 
@@ -228,7 +228,7 @@ def test_a_second_client_sees_the_first_ones_edit(cluster):
 
 CLOSE_NOW = """
 import asyncio, sys
-from backend.client import MissionClient
+from backend.client.client import MissionClient
 client = MissionClient(sys.argv[1])
 async def main():
     await client.connect()

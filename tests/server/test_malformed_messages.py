@@ -9,8 +9,8 @@ import asyncio
 import json
 from datetime import UTC, datetime
 
-from backend.client import Malformed
-from backend.protocol import Keys, Telemetry, dumps
+from backend.client.client import Malformed
+from backend.protocol.messages import Keys, Telemetry, dumps
 from backend.transport import client_config, declare_publisher, wait_matching
 from backend.transport.session import close_session, open_session
 

@@ -2,13 +2,13 @@
 
 from pathlib import Path
 
-from backend.protocol_doc import render
+from backend.protocol.doc import render
 
 
 def test_protocol_doc_is_up_to_date():
     doc = Path(__file__).resolve().parents[2] / "docs" / "protocol.md"
     assert doc.read_text(encoding="utf-8") == render(), (
-        "docs/protocol.md is stale: run `python -m backend.protocol_doc > docs/protocol.md`"
+        "docs/protocol.md is stale: run `python -m backend.protocol.doc > docs/protocol.md`"
     )
 
 

@@ -9,8 +9,8 @@ import threading
 import zenoh
 from zenoh.handlers import Callback
 
-from backend.ops import EditSkill
-from backend.protocol import Keys, Request, dumps
+from backend.core.ops import EditSkill
+from backend.protocol.messages import Keys, Request, dumps
 from backend.transport import client_config
 from backend.transport.session import close_session, open_session
 

@@ -12,9 +12,9 @@ from datetime import UTC, datetime
 import zenoh
 from zenoh.handlers import Callback
 
-from backend.model import Status
-from backend.ops import Report, Sync
-from backend.protocol import CommandReply, Keys, ReportAck, ReportBatch, dumps
+from backend.core.model import Status
+from backend.core.ops import Report, Sync
+from backend.protocol.messages import CommandReply, Keys, ReportAck, ReportBatch, dumps
 
 from .harness import RawRobot, drive, serving, status
 

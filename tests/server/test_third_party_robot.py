@@ -16,8 +16,8 @@ from datetime import UTC, datetime
 import pytest
 import zenoh
 
-from backend.client import OperationRefused
-from backend.ops import Control, Sync
+from backend.client.client import OperationRefused
+from backend.core.ops import Control, Sync
 from backend.transport.session import close_session
 
 from .harness import drive, status

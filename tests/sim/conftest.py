@@ -2,7 +2,7 @@
 
 Integration tests run the real mission server and `missionctl sim` as
 subprocesses on a free loopback port and drive them with
-backend.client.MissionClient. Waiting is always on state (the client's
+backend.client.client.MissionClient. Waiting is always on state (the client's
 mirror, the sim's live status publication), never on sleeps.
 
 `async def` tests run with `asyncio.run` (no pytest-asyncio needed).
@@ -24,9 +24,9 @@ from typing import Any
 import pytest
 import yaml
 
-from backend import mapfeed as mf
 from backend import transport
-from backend.client import MissionClient
+from backend.client.client import MissionClient
+from backend.protocol import mapfeed as mf
 from backend.transport import free_port, loopback_endpoint
 
 ROOT = Path(__file__).resolve().parents[2]

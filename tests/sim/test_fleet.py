@@ -1,5 +1,5 @@
 """The simulated fleet against the real mission server (both as subprocesses),
-driven by a scripted operator through backend.client.MissionClient."""
+driven by a scripted operator through backend.client.client.MissionClient."""
 
 from __future__ import annotations
 
@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from backend import mapfeed as mf
 from backend import transport
-from backend.client import OperationRefused
-from backend.ops import AddSkill, Control, EditSkill, Sync
+from backend.client.client import OperationRefused
+from backend.core.ops import AddSkill, Control, EditSkill, Sync
+from backend.protocol import mapfeed as mf
 
 from .conftest import ROOT, Stack, connect, skill, status_of, world_file
 

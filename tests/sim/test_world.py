@@ -12,12 +12,12 @@ from typing import Any
 import numpy as np
 import pytest
 
-from backend import mapfeed as mf
 from backend.agent import SkillFailed
-from backend.files import FileProblems
-from backend.model import Pose, Position
+from backend.core.model import Pose, Position
+from backend.files.missions import FileProblems
+from backend.protocol import mapfeed as mf
 from sim.pathing import ROCK, Follower, lawnmower, segment_cells
-from sim.skills import RobotSkills
+from sim.skills.base import RobotSkills
 from sim.world import World
 from sim.worldfile import load_world, parse_world
 

@@ -99,8 +99,8 @@ from datetime import date, datetime
 from pathlib import Path
 from typing import Any
 
-from backend.accounts import AccountsError
-from backend.login import add_login_arguments, login_from_args
+from backend.server.accounts import AccountsError
+from backend.transport.login import add_login_arguments, login_from_args
 
 EXIT_OK, EXIT_REFUSED, EXIT_BAD_INPUT, EXIT_UNREACHABLE = 0, 1, 2, 3
 
@@ -480,9 +480,9 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """A stand-alone `missionctl` parser with only `ctl` (tests, `python -m backend.ctl`)."""
+    """A stand-alone `missionctl` parser with only `ctl` (tests, `python -m backend.cli.ctl.session`)."""
     try:
-        from backend.cli import _Parser as parser_class
+        from backend.cli.main import _Parser as parser_class
     except ImportError:  # pragma: no cover
         parser_class = argparse.ArgumentParser
     top = parser_class(prog="missionctl")
@@ -581,8 +581,8 @@ def build_op(args: argparse.Namespace, library: Any = None, mission: Any = None)
     checked; with them, `@MARKER` values are resolved by parameter type and
     edits keep the policies they do not name. Raises UsageError / FileInvalid.
     """
-    from backend import ops
-    from backend.model import AreaMarker, Policies, Pose, PoseMarker, Position, PositionMarker
+    from backend.core import ops
+    from backend.core.model import AreaMarker, Policies, Pose, PoseMarker, Position, PositionMarker
 
     name = args.op
     if name in ("state", "robots", "watch", "save", None):
@@ -672,7 +672,7 @@ def build_op(args: argparse.Namespace, library: Any = None, mission: Any = None)
             return _validated(ops.MarkerRename, "marker rename", name=args.name, new_name=args.new_name)
         return _validated(ops.MarkerDelete, "marker delete", name=args.name)
     if name == "load":
-        from backend.files import FileProblems, load_mission
+        from backend.files.missions import FileProblems, load_mission
 
         loaded = getattr(args, "loaded", None)
         if loaded is None:
@@ -744,7 +744,7 @@ def _differs_from_default(library: Any, skill: str, name: str, value: Any) -> bo
     pspec = spec.params.get(name) if spec else None
     if pspec is None or pspec.default is None:
         return True
-    from backend.library import normalize_value
+    from backend.core.library import normalize_value
 
     try:
         return normalize_value(pspec, pspec.default) != value
@@ -1133,7 +1133,7 @@ def _endpoints(args: argparse.Namespace) -> list[str]:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from backend.client import (
+    from backend.client.client import (
         MaybeApplied,
         OperationRefused,
         OperationTimeout,
@@ -1179,7 +1179,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 async def _session(args: argparse.Namespace, endpoints: list[str], login: Any = None) -> int:
-    from backend.client import MissionClient
+    from backend.client.client import MissionClient
 
     client = MissionClient(
         endpoints,
@@ -1265,7 +1265,7 @@ def _session_free(m: Any) -> Any:
 
 
 def _save(client: Any, args: argparse.Namespace) -> int:
-    from backend.files import FileProblems, library_path, load_library, save_mission
+    from backend.files.missions import FileProblems, library_path, load_library, save_mission
 
     m = _session_free(client.mission)
     target = Path(args.file)
@@ -1330,7 +1330,7 @@ async def _operation(client: Any, args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """`python -m backend.ctl OP ...` is `missionctl ctl OP ...`."""
+    """`python -m backend.cli.ctl.session OP ...` is `missionctl ctl OP ...`."""
     args = parse_args(list(sys.argv[1:] if argv is None else argv))
     try:
         return run(args)

@@ -18,10 +18,9 @@ from collections.abc import Callable, Container
 from dataclasses import dataclass, field
 from typing import Any
 
-from backend import events as ev
-from backend.files import check_mission, resolve_shorthands
-from backend.library import Library, check_params
-from backend.model import (
+from backend.core import events as ev
+from backend.core.library import Library, check_params
+from backend.core.model import (
     ACTIVE,
     FINISHED,
     TRANSITIONS,
@@ -31,7 +30,7 @@ from backend.model import (
     Status,
     how_to_change,
 )
-from backend.ops import (
+from backend.core.ops import (
     UNDOABLE,
     AddBarrier,
     AddSkill,
@@ -62,6 +61,7 @@ from backend.ops import (
     Unsync,
     UnsyncDone,
 )
+from backend.files.missions import check_mission, resolve_shorthands
 
 REMEMBERED_REQUESTS = 10_000
 UNDO_DEPTH = 100
@@ -646,7 +646,7 @@ class Engine:
         problems = check_mission(new, self.library)
         if problems:
             path, msg = problems[0]
-            from backend.model import format_path
+            from backend.core.model import format_path
 
             raise Refusal("bad_mission", f"the mission is invalid at {format_path(path)}: {msg}")
         new.revision = self.mission.revision

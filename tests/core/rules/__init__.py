@@ -1,1 +1,1 @@
-"""Unit tests of the pure operation rules (backend.rules.Engine)."""
+"""Unit tests of the pure operation rules (backend.core.rules.engine.Engine)."""

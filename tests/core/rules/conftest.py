@@ -1,4 +1,4 @@
-"""Fixtures and helpers for the operation-rules tests (`backend.rules.Engine`).
+"""Fixtures and helpers for the operation-rules tests (`backend.core.rules.engine.Engine`).
 
 Every engine made through the `engine` / `make_engine` fixtures is checked
 after the test: each robot's list keeps the section order, skill ids are
@@ -19,12 +19,12 @@ from typing import Any
 
 import pytest
 
-from backend.files import check_mission, load_mission
-from backend.model import RobotSpec, Status, section_problems
-from backend.ops import Report, Sync, SyncAck
-from backend.rules import Applied, Engine, Refusal
+from backend.core.model import RobotSpec, Status, section_problems
+from backend.core.ops import Report, Sync, SyncAck
+from backend.core.rules.engine import Applied, Engine, Refusal
+from backend.files.missions import check_mission, load_mission
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 TUTORIAL = ROOT / "missions" / "tutorial.yaml"
 SAMPLE_RETURN = ROOT / "missions" / "mars_sample_return.yaml"
 
@@ -197,7 +197,7 @@ def three_robot_engine() -> Engine:
     mission.robots["lander"] = RobotSpec(type="lander")
     mission.tasks["lander"] = []
     engine = Engine(mission, library)
-    from backend.ops import AddSkill
+    from backend.core.ops import AddSkill
 
     added = engine.submit(AddSkill(robot="ardea", skill="takeoff", label="lift off"))
     assert check_mission(engine.mission.model_copy(deep=True), library, fill=False) == []

@@ -11,8 +11,8 @@ import re
 
 import pytest
 
-from backend.model import ID_PATTERN, Policies, Status
-from backend.ops import (
+from backend.core.model import ID_PATTERN, Policies, Status
+from backend.core.ops import (
     AddBarrier,
     AddSkill,
     DeleteSkills,

@@ -6,8 +6,8 @@ from datetime import UTC, datetime, timedelta
 
 import pytest
 
-from backend.model import Policies, Status
-from backend.ops import AddSkill, Control, Report, Retry, RetryAck, Sync, Unsync, UnsyncDone
+from backend.core.model import Policies, Status
+from backend.core.ops import AddSkill, Control, Report, Retry, RetryAck, Sync, Unsync, UnsyncDone
 
 S = Status
 

@@ -1,8 +1,8 @@
 """Parameters of type `marker` name a marker by value: renames follow them,
 and a marker still named by a skill cannot be deleted."""
 
-from backend.model import AreaMarker, Position
-from backend.ops import AddSkill, MarkerAdd, MarkerDelete, MarkerRename
+from backend.core.model import AreaMarker, Position
+from backend.core.ops import AddSkill, MarkerAdd, MarkerDelete, MarkerRename
 
 AREA = AreaMarker(area=[Position(x=0), Position(x=5), Position(x=5, y=5)])
 

@@ -5,9 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from backend.files import load_mission
-from backend.model import Mission, Pose, SkillInstance, Status
-from backend.ops import (
+from backend.core.model import Mission, Pose, SkillInstance, Status
+from backend.core.ops import (
     AddBarrier,
     AddSkill,
     DeleteSkills,
@@ -27,7 +26,8 @@ from backend.ops import (
     Unsync,
     UnsyncDone,
 )
-from backend.rules import Refusal
+from backend.core.rules.engine import Refusal
+from backend.files.missions import load_mission
 
 from .conftest import SAMPLE_RETURN, TUTORIAL, invariant_problems
 

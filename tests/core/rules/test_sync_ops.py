@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import pytest
 
-from backend.model import Status
-from backend.ops import (
+from backend.core.model import Status
+from backend.core.ops import (
     AddBarrier,
     AddSkill,
     Control,

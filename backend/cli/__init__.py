@@ -1,0 +1,1 @@
+"""`missionctl` command line: one module per subcommand (`main` builds the parser)."""

@@ -1,0 +1,1 @@
+"""`missionctl ctl`: every mission operation, scriptable against a running server."""

@@ -1,0 +1,1 @@
+"""The wire protocol: key space, messages, the map feed and the document generated from them."""

@@ -1,0 +1,1 @@
+"""The console screens and dialogs. They post messages; none imports the app."""

@@ -1,0 +1,1 @@
+"""What the console knows and derives from it: no Textual here."""

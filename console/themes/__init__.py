@@ -1,0 +1,1 @@
+"""Theme files (YAML) and the theme variables the CSS uses."""
