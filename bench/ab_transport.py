@@ -129,11 +129,22 @@ class _Robot:
             cmd = json.loads(payload)
             return dumps(CommandReply(ok=True, ids=[s["id"] for s in cmd.get("skills", [])]))
 
-        self.entities = [declare_token(self.session, Keys.alive("lru2")), serve(self.session, Keys.command("lru2"), on_command)]
+        self.entities = [
+            declare_token(self.session, Keys.alive("lru2")),
+            serve(self.session, Keys.command("lru2"), on_command),
+        ]
         lib = load_library(Path.cwd() / "missions" / "libraries" / "mars.yaml")
-        manifest = Manifest(name="lru2", type="lru_manipulator", modules=[Module(name="base", version="1.0.0")],
-                            skills={s: lib.skills[s].version for s in lib.skills_of("lru_manipulator")})
-        reply = RegisterReply.model_validate_json(await query(self.session, Keys.register("lru2"), dumps(Register(manifest=manifest)), 60.0))
+        manifest = Manifest(
+            name="lru2",
+            type="lru_manipulator",
+            modules=[Module(name="base", version="1.0.0")],
+            skills={s: lib.skills[s].version for s in lib.skills_of("lru_manipulator")},
+        )
+        reply = RegisterReply.model_validate_json(
+            await query(
+                self.session, Keys.register("lru2"), dumps(Register(manifest=manifest)), 60.0
+            )
+        )
         assert reply.accepted, reply.reason
         self.seq = reply.last_seq
         await client.submit(Sync(robot="lru2", through="lru2-1"))
@@ -149,6 +160,7 @@ class _Robot:
         from backend.protocol.messages import Keys, ReportBatch, dumps
 
         applied_at: dict[int, float] = {}
+
         def on_event(kind: str, batch) -> None:
             if kind == "events":
                 applied_at.setdefault(batch.revision, time.perf_counter())
@@ -166,7 +178,19 @@ class _Robot:
             self.seq += 1
             self.running = not self.running
             status = Status.RUNNING if self.running else Status.PAUSED
-            payload = dumps(ReportBatch(reports=[Report(robot="lru2", seq=self.seq, id="lru2-1", status=status, at=datetime.now(UTC))]))
+            payload = dumps(
+                ReportBatch(
+                    reports=[
+                        Report(
+                            robot="lru2",
+                            seq=self.seq,
+                            id="lru2-1",
+                            status=status,
+                            at=datetime.now(UTC),
+                        )
+                    ]
+                )
+            )
             revision = client.revision + 1
             t = await asyncio.to_thread(send, payload)
             acks.append(time.perf_counter() - t)
@@ -190,14 +214,20 @@ def source_tree(spec: str, tmp: Path) -> tuple[Path, str]:
     """A directory as it is, or a git revision checked out into a worktree."""
     if Path(spec).is_dir():
         return Path(spec).resolve(), spec
-    rev = subprocess.run(["git", "rev-parse", "--short", spec], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
+    rev = subprocess.run(
+        ["git", "rev-parse", "--short", spec], cwd=ROOT, capture_output=True, text=True, check=True
+    ).stdout.strip()
     tree = tmp / f"rev-{rev}"
-    subprocess.run(["git", "worktree", "add", "--detach", "-q", str(tree), rev], cwd=ROOT, check=True)
+    subprocess.run(
+        ["git", "worktree", "add", "--detach", "-q", str(tree), rev], cwd=ROOT, check=True
+    )
     return tree, f"{spec} ({rev})"
 
 
 class Version:
-    def __init__(self, tree: Path, label: str, tmp: Path, index: int, child_args: tuple[str, ...] = ()):
+    def __init__(
+        self, tree: Path, label: str, tmp: Path, index: int, child_args: tuple[str, ...] = ()
+    ):
         from backend.transport import free_port, loopback_endpoint
 
         self.tree, self.label = tree, label
@@ -206,17 +236,37 @@ class Version:
         self.log = tmp / f"server-{index}.log"
         with open(self.log, "w") as out:
             self.server = subprocess.Popen(
-                [sys.executable, "-m", "backend.cli", "server", "--mission", str(tree / "missions" / "tutorial.yaml"),
-                 "--listen", self.endpoint, "--db", str(tmp / f"ab-{index}.db")],
-                cwd=tree, env=self.env, stdout=out, stderr=subprocess.STDOUT)
+                [
+                    sys.executable,
+                    "-m",
+                    "backend.cli",
+                    "server",
+                    "--mission",
+                    str(tree / "missions" / "tutorial.yaml"),
+                    "--listen",
+                    self.endpoint,
+                    "--db",
+                    str(tmp / f"ab-{index}.db"),
+                ],
+                cwd=tree,
+                env=self.env,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+            )
         deadline = time.monotonic() + 60
         while "listening on" not in self.log.read_text():
             if self.server.poll() is not None or time.monotonic() > deadline:
                 self.server.kill()
                 raise RuntimeError(f"{label}: the server did not start:\n{self.log.read_text()}")
             time.sleep(0.05)
-        self.client = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--child", self.endpoint, *child_args],
-                                       cwd=tree, env=self.env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        self.client = subprocess.Popen(
+            [sys.executable, str(Path(__file__).resolve()), "--child", self.endpoint, *child_args],
+            cwd=tree,
+            env=self.env,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
         if self.client.stdout.readline().strip() != "ready":
             # not in `versions` yet, so main's cleanup would leave both running
             self.client.kill()
@@ -256,25 +306,42 @@ class Version:
             return f"{self.label}: {statistics.median(self.rates):,.0f} ops/s median of {len(self.rates)} blocks"
         if self.acks:
             p99 = sorted(self.applied)[int(0.99 * (len(self.applied) - 1))]
-            return (f"{self.label}: {len(self.acks)} lone reports: acknowledged {statistics.median(self.acks) * 1e3:.3f} ms, "
-                    f"applied by the client {statistics.median(self.applied) * 1e3:.3f} ms (p99 {p99 * 1e3:.3f} ms) (medians)")
+            return (
+                f"{self.label}: {len(self.acks)} lone reports: acknowledged {statistics.median(self.acks) * 1e3:.3f} ms, "
+                f"applied by the client {statistics.median(self.applied) * 1e3:.3f} ms (p99 {p99 * 1e3:.3f} ms) (medians)"
+            )
         raw, ops = statistics.median(self.raw), statistics.median(self.ops)
         ranked = sorted(self.ops)
         p99, p999 = (ranked[int(q * (len(ranked) - 1))] for q in (0.99, 0.999))
         over = sum(t > 0.003 for t in ranked)  # e.g. an fsync in the operation's path
-        return (f"{self.label}: raw {raw * 1e3:.3f} ms, operation {ops * 1e3:.3f} ms (p99 {p99 * 1e3:.3f} ms, "
-                f"p99.9 {p999 * 1e3:.2f} ms, max {ranked[-1] * 1e3:.2f} ms, {over} of {len(ranked)} over 3 ms), "
-                f"ratio {ops / raw:.2f}x")
+        return (
+            f"{self.label}: raw {raw * 1e3:.3f} ms, operation {ops * 1e3:.3f} ms (p99 {p99 * 1e3:.3f} ms, "
+            f"p99.9 {p999 * 1e3:.2f} ms, max {ranked[-1] * 1e3:.2f} ms, {over} of {len(ranked)} over 3 ms), "
+            f"ratio {ops / raw:.2f}x"
+        )
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("a", nargs="?", help="git revision or source tree")
     ap.add_argument("b", nargs="?", help="git revision or source tree")
-    ap.add_argument("--blocks", type=int, default=12, help="blocks per version, alternating (default 12)")
-    ap.add_argument("-n", type=int, default=200, help="round trips of each kind per block (default 200)")
-    ap.add_argument("--throughput", type=float, metavar="S", help="measure operations/s instead, S seconds per block")
-    ap.add_argument("--reports", action="store_true", help="measure a robot's lone status reports instead (-n per block)")
+    ap.add_argument(
+        "--blocks", type=int, default=12, help="blocks per version, alternating (default 12)"
+    )
+    ap.add_argument(
+        "-n", type=int, default=200, help="round trips of each kind per block (default 200)"
+    )
+    ap.add_argument(
+        "--throughput",
+        type=float,
+        metavar="S",
+        help="measure operations/s instead, S seconds per block",
+    )
+    ap.add_argument(
+        "--reports",
+        action="store_true",
+        help="measure a robot's lone status reports instead (-n per block)",
+    )
     ap.add_argument("--child", metavar="ENDPOINT", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.child:
@@ -288,9 +355,16 @@ def main(argv: list[str] | None = None) -> int:
         versions: list[Version] = []
         try:
             for i, (tree, label) in enumerate(trees):
-                versions.append(Version(tree, label, tmp, i, ("--reports",) if args.reports else ()))
-            request = (f"throughput {args.throughput}" if args.throughput else
-                       f"reports {args.n}" if args.reports else f"ops {args.n}")
+                versions.append(
+                    Version(tree, label, tmp, i, ("--reports",) if args.reports else ())
+                )
+            request = (
+                f"throughput {args.throughput}"
+                if args.throughput
+                else f"reports {args.n}"
+                if args.reports
+                else f"ops {args.n}"
+            )
             for b in range(args.blocks):
                 for v in versions if b % 2 == 0 else versions[::-1]:
                     v.block(request)
@@ -301,7 +375,9 @@ def main(argv: list[str] | None = None) -> int:
                 v.stop()
             for tree, _ in trees:
                 if tree.is_relative_to(tmp):
-                    subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=ROOT, check=False)
+                    subprocess.run(
+                        ["git", "worktree", "remove", "--force", str(tree)], cwd=ROOT, check=False
+                    )
     return 0
 
 

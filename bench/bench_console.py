@@ -69,12 +69,31 @@ def build_mission():
                 st = Status.IDLE_SYNCHRONIZED
             else:
                 st = Status.IDLE
-            task.append(SkillInstance(id=f"{name}-{i + 1}", skill="drive_to", label=f"waypoint {i + 1}",
-                                      params={"goal": {"x": float(i), "y": float(r), "z": 0.0, "roll": 0.0, "pitch": 0.0, "yaw": 0.0}, "speed": 0.5, "tolerance": 0.5},
-                                      status=st))
+            task.append(
+                SkillInstance(
+                    id=f"{name}-{i + 1}",
+                    skill="drive_to",
+                    label=f"waypoint {i + 1}",
+                    params={
+                        "goal": {
+                            "x": float(i),
+                            "y": float(r),
+                            "z": 0.0,
+                            "roll": 0.0,
+                            "pitch": 0.0,
+                            "yaw": 0.0,
+                        },
+                        "speed": 0.5,
+                        "tolerance": 0.5,
+                    },
+                    status=st,
+                )
+            )
         m.tasks[name] = task
     for k in range(10):
-        m.barriers[f"b{k + 1}"] = Barrier(skills=[f"r{2 * k:02d}-{400 + k}", f"r{2 * k + 1:02d}-{400 + k}"])
+        m.barriers[f"b{k + 1}"] = Barrier(
+            skills=[f"r{2 * k:02d}-{400 + k}", f"r{2 * k + 1:02d}-{400 + k}"]
+        )
     return m, library
 
 
@@ -122,7 +141,9 @@ async def run_schedule() -> dict:
         screen = app.mission_screen
         t0, c0 = time.perf_counter(), time.process_time()
         app.post_message(StateLoaded(mission, library, {}))
-        out["first_render_s"] = await clock.next_frame(t0, lambda: len(screen.schedule.columns) == ROBOTS)
+        out["first_render_s"] = await clock.next_frame(
+            t0, lambda: len(screen.schedule.columns) == ROBOTS
+        )
         out["first_render_cpu_s"] = time.process_time() - c0
         await pilot.pause()
         out["rss_mb"] = rss_mb()
@@ -133,11 +154,20 @@ async def run_schedule() -> dict:
             robot = f"r{k % 4:02d}"  # visible columns
             sid = f"{robot}-{202 + k // 4}"
             rev += 1
-            batch = ev.EventBatch(revision=rev, events=[ev.SkillChanged(id=sid, changes={"status": "paused" if k % 2 else "failure"})])
+            batch = ev.EventBatch(
+                revision=rev,
+                events=[
+                    ev.SkillChanged(id=sid, changes={"status": "paused" if k % 2 else "failure"})
+                ],
+            )
             await pilot.pause()
             t, c = time.perf_counter(), time.process_time()
             app.post_message(EventsApplied(batch))
-            times.append(await clock.next_frame(t, lambda sid=sid: app.model.find(sid)[2].status.value != "idle_synchronized"))
+            times.append(
+                await clock.next_frame(
+                    t, lambda sid=sid: app.model.find(sid)[2].status.value != "idle_synchronized"
+                )
+            )
             cpu.append(time.process_time() - c)
         out["status_change_ms"] = statistics.median(times) * 1000
         out["status_change_cpu_ms"] = statistics.median(cpu) * 1000
@@ -170,10 +200,20 @@ async def run_datatable() -> dict:
         rows = []
         for robot, task in mission.tasks.items():
             for s in task:
-                rows.append((robot, s.id, f"{GLYPHS[s.status]} {s.status.value}", s.label, param_summary(s, library)))
+                rows.append(
+                    (
+                        robot,
+                        s.id,
+                        f"{GLYPHS[s.status]} {s.status.value}",
+                        s.label,
+                        param_summary(s, library),
+                    )
+                )
         table.add_rows(rows)
         keys = list(table.rows)
-        out["first_render_s"] = await clock.next_frame(t0, lambda: table.row_count == ROBOTS * PER_ROBOT)
+        out["first_render_s"] = await clock.next_frame(
+            t0, lambda: table.row_count == ROBOTS * PER_ROBOT
+        )
         out["first_render_cpu_s"] = time.process_time() - c0
         await pilot.pause()
         out["rss_mb"] = rss_mb()
@@ -192,7 +232,13 @@ async def run_datatable() -> dict:
 
 
 def run_variant(name: str) -> dict:
-    out = subprocess.run([sys.executable, __file__, "--variant", name], capture_output=True, text=True, cwd=ROOT, timeout=600)
+    out = subprocess.run(
+        [sys.executable, __file__, "--variant", name],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=600,
+    )
     if out.returncode != 0:
         raise SystemExit(f"variant {name} failed:\n{out.stderr[-3000:]}")
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -227,7 +273,9 @@ def table(results: dict) -> str:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--variant", choices=["schedule", "datatable"], help=argparse.SUPPRESS)
     ap.add_argument("--write", metavar="FILE", help="write/update the '## Console' section of FILE")
     args = ap.parse_args()

@@ -29,7 +29,16 @@ T0 = datetime(2026, 3, 14, 10, 42, 7, tzinfo=UTC)
 
 def fill(log: EventLog, n: int) -> None:
     for i in range(n):
-        log.add("report", f"▶ lru{i % 20}-{i} running", T0, robots=[f"lru{i % 20}"], skill=f"lru{i % 20}-{i}", client=f"lru{i % 20}", op="report", revision=i)
+        log.add(
+            "report",
+            f"▶ lru{i % 20}-{i} running",
+            T0,
+            robots=[f"lru{i % 20}"],
+            skill=f"lru{i % 20}-{i}",
+            client=f"lru{i % 20}",
+            op="report",
+            revision=i,
+        )
 
 
 def memory(n: int) -> float:
@@ -67,8 +76,12 @@ async def screen_times(n: int, repeats: int = 5) -> tuple[float, float]:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--write", metavar="FILE", help="replace the '## Console event log' section of FILE")
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument(
+        "--write", metavar="FILE", help="replace the '## Console event log' section of FILE"
+    )
     args = ap.parse_args()
     base_n = 100
     mem_full, mem_base = memory(LOG_LIMIT), memory(base_n)
@@ -80,7 +93,7 @@ def main() -> int:
 
 The event log keeps the last {LOG_LIMIT:,} entries in memory; its screen shows the last 1,000 matching ones (a `DataTable` of 10,000 rows took 2.7 s to fill on this machine). Headless at 120x40, median of 5.
 
-Reproduce: `.venv/bin/python bench/bench_console_log.py --write docs/performance.md` ({time.strftime('%Y-%m-%d')}, {machine(f'textual {textual.__version__}')}).
+Reproduce: `.venv/bin/python bench/bench_console_log.py --write docs/performance.md` ({time.strftime("%Y-%m-%d")}, {machine(f"textual {textual.__version__}")}).
 
 | measure | {LOG_LIMIT:,} entries | {base_n} entries (baseline) | ratio |
 | --- | ---: | ---: | ---: |

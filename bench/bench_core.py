@@ -91,13 +91,31 @@ def workload(engine: Engine, n_ops: int, on_applied: OnApplied | None = None) ->
         cycle += 1
         for robot, skill in robots.items():
             x, y = (cycle * 7 % 160) - 80.0, (cycle * 13 % 160) - 80.0
-            a = submit(AddSkill(robot=robot, skill=skill, label=f"leg {cycle}", params={"goal": {"x": x, "y": y}}), "alice")
-            b = submit(AddSkill(robot=robot, skill=skill, params={"goal": {"x": y, "y": x, "yaw": 0.5}}), "bob")
+            a = submit(
+                AddSkill(
+                    robot=robot,
+                    skill=skill,
+                    label=f"leg {cycle}",
+                    params={"goal": {"x": x, "y": y}},
+                ),
+                "alice",
+            )
+            b = submit(
+                AddSkill(robot=robot, skill=skill, params={"goal": {"x": y, "y": x, "yaw": 0.5}}),
+                "bob",
+            )
             if a is None or b is None:
                 break
             submit(MoveSkill(id=b.value["id"], index=0), "bob")
             submit(DeleteSkills(ids=[a.value["id"]]), "alice")
-            submit(EditSkill(id=b.value["id"], label=f"survey {cycle}", params={"speed": 0.5 + cycle % 5 / 10}), "bob")
+            submit(
+                EditSkill(
+                    id=b.value["id"],
+                    label=f"survey {cycle}",
+                    params={"speed": 0.5 + cycle % 5 / 10},
+                ),
+                "bob",
+            )
             if count >= n_ops:
                 break
             ids = [s.id for s in engine.plan_sync(Sync(robot=robot, through=b.value["id"]))]
@@ -110,7 +128,10 @@ def workload(engine: Engine, n_ops: int, on_applied: OnApplied | None = None) ->
                 for status in (Status.RUNNING, Status.SUCCESS):
                     seqs[robot] = seqs.get(robot, 0) + 1
                     at = T0 + timedelta(seconds=seqs[robot])
-                    submit(Report(robot=robot, seq=seqs[robot], id=sid, status=status, at=at), f"robot:{robot}")
+                    submit(
+                        Report(robot=robot, seq=seqs[robot], id=sid, status=status, at=at),
+                        f"robot:{robot}",
+                    )
         if cycle % 20 == 0:
             submit(MarkerMove(name="POI-A", value=Pose(x=40 + cycle % 7, y=18)), "alice")
     return count
@@ -143,7 +164,9 @@ def bench_operations(tmp: Path) -> dict[str, Any]:
         journal.snapshot(engine.mission)
         payload = 0
 
-        def commit(op: Any, applied: Applied, client: str, rid: str, journal=journal, engine=engine) -> None:
+        def commit(
+            op: Any, applied: Applied, client: str, rid: str, journal=journal, engine=engine
+        ) -> None:
             journal.record(applied, op, client=client, request_id=rid, mission=engine.mission)
 
         t = time.perf_counter()
@@ -202,10 +225,18 @@ def big_mission(robots: int = 20, per_robot: int = 500) -> Mission:
         task = []
         for j in range(per_robot):
             status = (
-                Status.SUCCESS if j < 100 else Status.RUNNING if j == 100 else Status.IDLE_SYNCHRONIZED if j <= 150 else Status.IDLE
+                Status.SUCCESS
+                if j < 100
+                else Status.RUNNING
+                if j == 100
+                else Status.IDLE_SYNCHRONIZED
+                if j <= 150
+                else Status.IDLE
             )
             params = {
-                "goal": Pose(x=(j * 3.7 + r) % 200 - 100, y=(j * 5.3 - r) % 200 - 100, yaw=(j % 63) / 10).model_dump(),
+                "goal": Pose(
+                    x=(j * 3.7 + r) % 200 - 100, y=(j * 5.3 - r) % 200 - 100, yaw=(j % 63) / 10
+                ).model_dump(),
                 "speed": 0.1 + (j % 10) / 11,
                 "tolerance": 0.1 + (j % 49) / 10,
             }
@@ -242,7 +273,9 @@ def bench_big_mission(tmp: Path) -> dict[str, Any]:
     out["skills"] = sum(len(t) for t in m.tasks.values())
     path = tmp / "missions" / "big.yaml"
     path.parent.mkdir(parents=True, exist_ok=True)
-    out["save_ms"] = median_ms(lambda mission=m: save_mission(mission, path, library_file=LIBRARY_FILE), repeat=3)
+    out["save_ms"] = median_ms(
+        lambda mission=m: save_mission(mission, path, library_file=LIBRARY_FILE), repeat=3
+    )
     out["file_bytes"] = path.stat().st_size
     loaded: list[Mission] = []
     out["load_ms"] = median_ms(lambda: loaded.append(load_mission(path)[0]), repeat=2)
@@ -272,7 +305,9 @@ def bench_big_mission(tmp: Path) -> dict[str, Any]:
         else:
             sid, status = task[queued].id, Status.RUNNING
         seqs[robot] = seqs.get(robot, 0) + 1
-        op = Report(robot=robot, seq=seqs[robot], id=sid, status=status, at=T0 + timedelta(seconds=n))
+        op = Report(
+            robot=robot, seq=seqs[robot], id=sid, status=status, at=T0 + timedelta(seconds=n)
+        )
         t = time.perf_counter()
         applied = engine.submit(op, client=f"robot:{robot}")
         t_engine += time.perf_counter() - t
@@ -308,27 +343,63 @@ def table(ops: dict[str, Any], big: dict[str, Any]) -> str:
     e_rate = N_OPS / ops["engine_s"]
     j_rate = N_OPS / ops["journal_s"]
     rows = [
-        ("Operations, engine alone", f"{e_rate:,.0f} ops/s", f"{N_OPS:,} operations, {ops['engine_s'] * 1e6 / N_OPS:.0f} µs/op"),
-        ("Operations, engine + journal", f"{j_rate:,.0f} ops/s",
-         f"{ops['journal_s'] * 1e6 / N_OPS:.0f} µs/op; {j_rate / e_rate:.2f}x the engine alone; one SQLite transaction per op"),
-        ("Journal size", f"{ops['journal_bytes'] / N_OPS:,.0f} bytes/op",
-         f"{ops['journal_bytes'] / 1e6:.1f} MB on disk incl. snapshots (the server's policy, below); events + op JSON {ops['payload_bytes'] / N_OPS:,.0f} bytes/op"),
-        ("Journal reopen (10,000 ops)", f"{ops['reopen_ms']:.0f} ms",
-         f"newest snapshot + {ops['reopen_replayed']} batches replayed; mission of {ops['final_skills']:,} skills"),
-        ("Journal bulk append", f"{N_OPS / ops['bulk_append_s']:,.0f} batches/s", "`append_many`: 10,000 batches in one transaction"),
-        ("Journal full replay", f"{ops['full_replay_batches'] / ops['full_replay_s']:,.0f} batches/s",
-         f"reopen replaying all {ops['full_replay_batches']:,} batches from the base snapshot: {ops['full_replay_s'] * 1e3:.0f} ms"),
-        ("Save 10,000-skill mission (YAML)", f"{big['save_ms']:.0f} ms", f"20 robots x 500 drive_to skills, {big['file_bytes'] / 1e6:.1f} MB file"),
-        ("Load 10,000-skill mission (YAML)", f"{big['load_ms']:.0f} ms",
-         "parse (PyYAML with libyaml, keeping line/column marks), validate every parameter against the library"),
+        (
+            "Operations, engine alone",
+            f"{e_rate:,.0f} ops/s",
+            f"{N_OPS:,} operations, {ops['engine_s'] * 1e6 / N_OPS:.0f} µs/op",
+        ),
+        (
+            "Operations, engine + journal",
+            f"{j_rate:,.0f} ops/s",
+            f"{ops['journal_s'] * 1e6 / N_OPS:.0f} µs/op; {j_rate / e_rate:.2f}x the engine alone; one SQLite transaction per op",
+        ),
+        (
+            "Journal size",
+            f"{ops['journal_bytes'] / N_OPS:,.0f} bytes/op",
+            f"{ops['journal_bytes'] / 1e6:.1f} MB on disk incl. snapshots (the server's policy, below); events + op JSON {ops['payload_bytes'] / N_OPS:,.0f} bytes/op",
+        ),
+        (
+            "Journal reopen (10,000 ops)",
+            f"{ops['reopen_ms']:.0f} ms",
+            f"newest snapshot + {ops['reopen_replayed']} batches replayed; mission of {ops['final_skills']:,} skills",
+        ),
+        (
+            "Journal bulk append",
+            f"{N_OPS / ops['bulk_append_s']:,.0f} batches/s",
+            "`append_many`: 10,000 batches in one transaction",
+        ),
+        (
+            "Journal full replay",
+            f"{ops['full_replay_batches'] / ops['full_replay_s']:,.0f} batches/s",
+            f"reopen replaying all {ops['full_replay_batches']:,} batches from the base snapshot: {ops['full_replay_s'] * 1e3:.0f} ms",
+        ),
+        (
+            "Save 10,000-skill mission (YAML)",
+            f"{big['save_ms']:.0f} ms",
+            f"20 robots x 500 drive_to skills, {big['file_bytes'] / 1e6:.1f} MB file",
+        ),
+        (
+            "Load 10,000-skill mission (YAML)",
+            f"{big['load_ms']:.0f} ms",
+            "parse (PyYAML with libyaml, keeping line/column marks), validate every parameter against the library",
+        ),
         ("Snapshot 10,000-skill mission", f"{big['snapshot_ms']:.0f} ms", "one SQLite transaction"),
-        ("Robot report on 10,000-skill mission", f"{big['big_report_engine_ms'] + big['big_report_journal_ms']:.2f} ms",
-         f"engine {big['big_report_engine_ms']:.2f} ms (skills found where last seen, `Mission.find`) + journal {big['big_report_journal_ms']:.2f} ms"),
-        ("Snapshot per report, 10,000-skill mission", f"{big['snapshot_ms'] / big['big_until_snapshot']:.3f} ms",
-         f"one snapshot every {big['big_until_snapshot']:,} reports (500 and half the snapshot's size); "
-         f"{big['snapshot_ms'] / 500:.3f} ms with one every 500"),
-        ("Journal reopen (10,000 skills)", f"{big['big_reopen_ms']:.0f} ms",
-         f"snapshot + {big.get('big_replayed', 0):,} batches replayed (the most before the next snapshot)"),
+        (
+            "Robot report on 10,000-skill mission",
+            f"{big['big_report_engine_ms'] + big['big_report_journal_ms']:.2f} ms",
+            f"engine {big['big_report_engine_ms']:.2f} ms (skills found where last seen, `Mission.find`) + journal {big['big_report_journal_ms']:.2f} ms",
+        ),
+        (
+            "Snapshot per report, 10,000-skill mission",
+            f"{big['snapshot_ms'] / big['big_until_snapshot']:.3f} ms",
+            f"one snapshot every {big['big_until_snapshot']:,} reports (500 and half the snapshot's size); "
+            f"{big['snapshot_ms'] / 500:.3f} ms with one every 500",
+        ),
+        (
+            "Journal reopen (10,000 skills)",
+            f"{big['big_reopen_ms']:.0f} ms",
+            f"snapshot + {big.get('big_replayed', 0):,} batches replayed (the most before the next snapshot)",
+        ),
     ]
     lines = ["| Measure | Result | Notes |", "|---|---|---|"]
     lines += [f"| {a} | {b} | {c} |" for a, b, c in rows]
@@ -374,7 +445,9 @@ def section(body: str) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--write", metavar="FILE", help="write/update the '## Mission core' section of FILE")
+    ap.add_argument(
+        "--write", metavar="FILE", help="write/update the '## Mission core' section of FILE"
+    )
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)

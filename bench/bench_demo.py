@@ -82,10 +82,14 @@ class PtyRun:
     def __init__(self, argv: list[str]):
         self.master, slave = os.openpty()
         fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", SIZE[1], SIZE[0], 0, 0))
-        env = dict(os.environ, TERM="xterm-256color", COLORTERM="truecolor", TEXTUAL_ANIMATIONS="none")
+        env = dict(
+            os.environ, TERM="xterm-256color", COLORTERM="truecolor", TEXTUAL_ANIMATIONS="none"
+        )
         env.pop("TEXTUAL", None)
         self.t0 = time.perf_counter()
-        self.proc = subprocess.Popen(argv, stdin=slave, stdout=slave, stderr=slave, env=env, cwd=ROOT, start_new_session=True)
+        self.proc = subprocess.Popen(
+            argv, stdin=slave, stdout=slave, stderr=slave, env=env, cwd=ROOT, start_new_session=True
+        )
         os.close(slave)
         self.raw = b""
 
@@ -98,7 +102,9 @@ class PtyRun:
         while True:
             remaining = deadline - time.perf_counter()
             if remaining <= 0:
-                raise TimeoutError(f"{marks} not painted after {timeout:g} s; output:\n{self.text()[-2000:]}")
+                raise TimeoutError(
+                    f"{marks} not painted after {timeout:g} s; output:\n{self.text()[-2000:]}"
+                )
             ready, _, _ = select.select([self.master], [], [], remaining)
             if ready:
                 try:
@@ -106,7 +112,9 @@ class PtyRun:
                 except OSError:  # the child closed the terminal
                     chunk = b""
                 if not chunk:
-                    raise RuntimeError(f"exited before painting {marks} (code {self.proc.poll()}):\n{self.text()[-2000:]}")
+                    raise RuntimeError(
+                        f"exited before painting {marks} (code {self.proc.poll()}):\n{self.text()[-2000:]}"
+                    )
                 self.raw += chunk
                 if all(m in self.text() for m in marks):
                     return time.perf_counter() - self.t0
@@ -146,7 +154,9 @@ class PtyRun:
         return code, left
 
 
-def measure(argv: list[str], marks: tuple[str, ...], timeout: float) -> tuple[float, int | None, list[int]]:
+def measure(
+    argv: list[str], marks: tuple[str, ...], timeout: float
+) -> tuple[float, int | None, list[int]]:
     run = PtyRun(argv)
     try:
         seconds = run.wait_for(marks, timeout)
@@ -159,9 +169,13 @@ def measure(argv: list[str], marks: tuple[str, ...], timeout: float) -> tuple[fl
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--runs", type=int, default=RUNS)
-    ap.add_argument("--write", metavar="FILE", help="write/update the '## Demo start-up' section of FILE")
+    ap.add_argument(
+        "--write", metavar="FILE", help="write/update the '## Demo start-up' section of FILE"
+    )
     args = ap.parse_args()
     demo, bare, problems = [], [], []
     for _ in range(args.runs):  # interleaved, so both see the same machine load
@@ -182,7 +196,8 @@ def main() -> int:
         "Ctrl+Q and checked to leave no process behind.\n\n"
         f"Reproduce: `.venv/bin/python bench/bench_demo.py --write docs/performance.md`\n\n"
         f"Machine: {machine()}. Date: {time.strftime('%Y-%m-%d')}. Load average while measuring: {load:.1f}.\n\n"
-        "| Measure | Median of %d | Min | Max | Target |\n|---|---|---|---|---|\n" % args.runs
+        "| Measure | Median of %d | Min | Max | Target |\n|---|---|---|---|---|\n"
+        % args.runs
         + f"| `missionctl demo` launch to first paint of the mission | {d:.2f} s | {min(demo):.2f} s | {max(demo):.2f} s | <= 2 s |\n"
         + f"| Bare Textual app launch to first paint (baseline) | {b:.2f} s | {min(bare):.2f} s | {max(bare):.2f} s | |\n"
         + f"| Ratio demo / baseline | {d / b:.1f}x | | | |\n"

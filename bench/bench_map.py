@@ -82,7 +82,11 @@ async def redraw() -> dict[str, float]:
         moves, fulls, rows = [], [], []
         for i in range(MOVES):
             a = i * 2 * math.pi / MOVES
-            model.telemetry["lru1"] = Telemetry(robot="lru1", pose=Pose(x=30 * math.cos(a), y=15 * math.sin(a), yaw=a + math.pi / 2), at=t0)
+            model.telemetry["lru1"] = Telemetry(
+                robot="lru1",
+                pose=Pose(x=30 * math.cos(a), y=15 * math.sin(a), yaw=a + math.pi / 2),
+                at=t0,
+            )
             before = view.rendered_rows
             s = time.perf_counter()
             view.robot_moved("lru1")
@@ -110,21 +114,55 @@ async def feed_bytes(speed: float, sim_seconds: float) -> dict[str, float]:
     mission = ROOT / "missions" / "mars_sample_return.yaml"
     db = Path("/tmp") / f"bench-map-{time.time_ns()}.db"
     py = sys.executable
-    server = subprocess.Popen([py, "-m", "backend.cli", "server", "--mission", str(mission), "--listen", endpoint, "--db", str(db)],
-                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    server = subprocess.Popen(
+        [
+            py,
+            "-m",
+            "backend.cli",
+            "server",
+            "--mission",
+            str(mission),
+            "--listen",
+            endpoint,
+            "--db",
+            str(db),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     sim = None
     try:
         for line in server.stdout:  # type: ignore[union-attr]
             if "listening on" in line:
                 break
-        sim = subprocess.Popen([py, "-m", "backend.cli", "sim", "--mission", str(mission), "--connect", endpoint, "--speed", f"{speed:g}", "--seed", "1"],
-                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        sim = subprocess.Popen(
+            [
+                py,
+                "-m",
+                "backend.cli",
+                "sim",
+                "--mission",
+                str(mission),
+                "--connect",
+                endpoint,
+                "--speed",
+                f"{speed:g}",
+                "--seed",
+                "1",
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
         for line in sim.stdout:  # type: ignore[union-attr]
             if "missionctl sim: world" in line:
                 break
         async with MissionClient(endpoint) as client:
             await client.wait_for(lambda m: all(client.robots[r].online for r in m.robots), 30)
-            reply = await client.submit(AddSkill(robot="lru2", skill="explore", bindings={"area": "ROI-east"}, at=0))
+            reply = await client.submit(
+                AddSkill(robot="lru2", skill="explore", bindings={"area": "ROI-east"}, at=0)
+            )
             lru2_explore = reply.value["id"]
             await client.submit(Sync(robot="lru1", through="lru1-2"))
             await client.submit(Sync(robot="lru2", through=lru2_explore))
@@ -158,7 +196,14 @@ async def feed_bytes(speed: float, sim_seconds: float) -> dict[str, float]:
                 except subprocess.TimeoutExpired:
                     p.kill()
         db.unlink(missing_ok=True)
-    return {"bytes": got, "wall": wall, "sim": sim_s, "deltas": deltas, "resyncs": resyncs, "speed": speed}
+    return {
+        "bytes": got,
+        "wall": wall,
+        "sim": sim_s,
+        "deltas": deltas,
+        "resyncs": resyncs,
+        "speed": speed,
+    }
 
 
 def section(r: dict[str, float], f: dict[str, float]) -> str:
@@ -171,8 +216,8 @@ Reproduce: `.venv/bin/python bench/bench_map.py --write docs/performance.md` ({d
 
 | measure | value | baseline (same run) | ratio |
 | --- | ---: | ---: | ---: |
-| one robot moves on a 400x400-cell site, 120x40 cells: overlays rebuilt + all rows asked, median of {MOVES} | {r['move_ms']:.2f} ms ({r['rows']:.0f} of {r['height']:.0f} rows rendered) | full redraw of the same view: {r['full_ms']:.2f} ms | **{ratio:.1f}x** less |
-| map feed while all robots explore (sim at {f['speed']:g}x, {f['wall']:.0f} s wall = {f['sim']:.0f} s sim) | {f['bytes'] / f['wall']:,.0f} B/s wall | {f['bytes'] / max(f['sim'], 1e-9):,.0f} B per sim-second | {f['deltas']:.0f} deltas, {f['resyncs']:.0f} snapshot(s) |
+| one robot moves on a 400x400-cell site, 120x40 cells: overlays rebuilt + all rows asked, median of {MOVES} | {r["move_ms"]:.2f} ms ({r["rows"]:.0f} of {r["height"]:.0f} rows rendered) | full redraw of the same view: {r["full_ms"]:.2f} ms | **{ratio:.1f}x** less |
+| map feed while all robots explore (sim at {f["speed"]:g}x, {f["wall"]:.0f} s wall = {f["sim"]:.0f} s sim) | {f["bytes"] / f["wall"]:,.0f} B/s wall | {f["bytes"] / max(f["sim"], 1e-9):,.0f} B per sim-second | {f["deltas"]:.0f} deltas, {f["resyncs"]:.0f} snapshot(s) |
 
 The move cost is the overlay rebuild (every robot, marker, goal and object; a dict diff per row) plus
 re-rendering the rows whose overlay changed (the robot's old and new row); the other rows come from
@@ -186,7 +231,12 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--write", type=Path)
     ap.add_argument("--speed", type=float, default=10.0)
-    ap.add_argument("--sim-seconds", type=float, default=150.0, help="simulated seconds to measure the feed over")
+    ap.add_argument(
+        "--sim-seconds",
+        type=float,
+        default=150.0,
+        help="simulated seconds to measure the feed over",
+    )
     args = ap.parse_args()
     r = asyncio.run(redraw())
     f = asyncio.run(feed_bytes(args.speed, args.sim_seconds))

@@ -51,9 +51,23 @@ class Server:
         self.log = tmp / f"{name}.log"
         self._out = open(self.log, "w")  # noqa: SIM115 - closed in stop()
         self.p = subprocess.Popen(
-            [sys.executable, "-m", "backend.cli", "server", "--mission", str(TUTORIAL), "--listen", self.endpoint,
-             "--db", str(tmp / f"{name}.db"), *extra],
-            cwd=ROOT, stdout=self._out, stderr=subprocess.STDOUT, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+            [
+                sys.executable,
+                "-m",
+                "backend.cli",
+                "server",
+                "--mission",
+                str(TUTORIAL),
+                "--listen",
+                self.endpoint,
+                "--db",
+                str(tmp / f"{name}.db"),
+                *extra,
+            ],
+            cwd=ROOT,
+            stdout=self._out,
+            stderr=subprocess.STDOUT,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"},
         )
         deadline = time.monotonic() + 30
         while "listening on" not in self.log.read_text():
@@ -74,9 +88,17 @@ def setup(tmp: Path) -> tuple[dict[str, Server], dict[str, Login]]:
     pw.write_text("bench-password\n")
     os.chmod(pw, 0o600)
     (tmp / "accounts.yaml").write_text(
-        "format: missionctl/accounts@1\naccounts:\n  ops: {role: operator, password_file: ops.pw}\n")
+        "format: missionctl/accounts@1\naccounts:\n  ops: {role: operator, password_file: ops.pw}\n"
+    )
     accounts = ["--accounts", str(tmp / "accounts.yaml")]
-    tls = ["--tls-cert", str(pki / "server.pem"), "--tls-key", str(pki / "server.key"), "--tls-ca", str(pki / "ca.pem")]
+    tls = [
+        "--tls-cert",
+        str(pki / "server.pem"),
+        "--tls-key",
+        str(pki / "server.key"),
+        "--tls-ca",
+        str(pki / "ca.pem"),
+    ]
     servers = {
         "open": Server(tmp, "open", "tcp", []),
         "accounts": Server(tmp, "accounts", "tcp", accounts),
@@ -85,17 +107,28 @@ def setup(tmp: Path) -> tuple[dict[str, Server], dict[str, Login]]:
     logins = {
         "open": Login(),
         "accounts": Login(user="ops", password="bench-password"),
-        "accounts + mutual TLS": Login(user="ops", password="bench-password", ca=str(pki / "ca.pem"),
-                                       cert=str(pki / "client-ops.pem"), key=str(pki / "client-ops.key")),
+        "accounts + mutual TLS": Login(
+            user="ops",
+            password="bench-password",
+            ca=str(pki / "ca.pem"),
+            cert=str(pki / "client-ops.pem"),
+            key=str(pki / "client-ops.key"),
+        ),
     }
     return servers, logins
 
 
-async def measure(servers: dict[str, Server], logins: dict[str, Login], n: int, blocks: int) -> dict[str, dict[str, list[float]]]:
-    out: dict[str, dict[str, list[float]]] = {k: {"connect": [], "op": [], "ping": []} for k in servers}
+async def measure(
+    servers: dict[str, Server], logins: dict[str, Login], n: int, blocks: int
+) -> dict[str, dict[str, list[float]]]:
+    out: dict[str, dict[str, list[float]]] = {
+        k: {"connect": [], "op": [], "ping": []} for k in servers
+    }
     clients = {}
     for name, s in servers.items():
-        clients[name] = MissionClient(s.endpoint, login=logins[name], telemetry=False, client_id=f"bench-{name}")
+        clients[name] = MissionClient(
+            s.endpoint, login=logins[name], telemetry=False, client_id=f"bench-{name}"
+        )
         await clients[name].connect()
     try:
         for block in range(blocks + 1):  # block 0 is the warm-up
@@ -126,8 +159,10 @@ async def measure(servers: dict[str, Server], logins: dict[str, Login], n: int, 
 
 def table(results: dict[str, dict[str, list[float]]]) -> str:
     base = {k: statistics.median(v) for k, v in results["open"].items()}
-    rows = ["| server | connect (median) | operation round trip (median, p99) | raw query to PING (median) |",
-            "| --- | --- | --- | --- |"]
+    rows = [
+        "| server | connect (median) | operation round trip (median, p99) | raw query to PING (median) |",
+        "| --- | --- | --- | --- |",
+    ]
     for name, r in results.items():
         med = {k: statistics.median(v) for k, v in r.items()}
         p99 = sorted(r["op"])[int(0.99 * (len(r["op"]) - 1))]
@@ -155,12 +190,14 @@ def main() -> int:
     body = table(results)
     print(body)
     if args.write:
-        text = (f"## {SECTION}\n\nWhat logins, access-control rules and mutual TLS cost "
-                f"(`.venv/bin/python bench/bench_security.py -n {args.n} --blocks {args.blocks}`; ratios against "
-                f"the open server in the same run, {args.blocks} interleaved blocks of {args.n} after a warm-up; "
-                f"{machine('eclipse-zenoh 1.10.2')}; {time.strftime('%Y-%m-%d')}). Connecting with a login "
-                f"includes one more query (the account's role); the medians of the other columns are the "
-                f"per-message cost of the router's rules and of TLS.\n\n{body}\n")
+        text = (
+            f"## {SECTION}\n\nWhat logins, access-control rules and mutual TLS cost "
+            f"(`.venv/bin/python bench/bench_security.py -n {args.n} --blocks {args.blocks}`; ratios against "
+            f"the open server in the same run, {args.blocks} interleaved blocks of {args.n} after a warm-up; "
+            f"{machine('eclipse-zenoh 1.10.2')}; {time.strftime('%Y-%m-%d')}). Connecting with a login "
+            f"includes one more query (the account's role); the medians of the other columns are the "
+            f"per-message cost of the router's rules and of TLS.\n\n{body}\n"
+        )
         write_section(Path(args.write), f"## {SECTION}", text)
         print(f"wrote the '## {SECTION}' section of {args.write}")
     return 0

@@ -79,8 +79,13 @@ def bench_world(tmp: Path) -> Path:
 def big_mission(tmp: Path, n: int) -> Path:
     types = ["lru_science", "lru_manipulator", "drone"]
     robots = {f"r{i:02d}": {"type": types[i % 3]} for i in range(n)}
-    data = {"format": "missionctl/mission@1", "name": f"{n} robots", "library": str(LIBRARY),
-            "robots": robots, "tasks": {r: [] for r in robots}}
+    data = {
+        "format": "missionctl/mission@1",
+        "name": f"{n} robots",
+        "library": str(LIBRARY),
+        "robots": robots,
+        "tasks": {r: [] for r in robots},
+    }
     out = tmp / f"mission-{n}.yaml"
     out.write_text(yaml.safe_dump(data, sort_keys=False))
     return out
@@ -113,7 +118,14 @@ def areas_for(index: int) -> list[list[dict[str, float]]]:
     out = []
     for k in range(4):
         x0, y0 = quads[(index + k) % 4]
-        out.append([{"x": x0, "y": y0}, {"x": x0 + 150, "y": y0}, {"x": x0 + 150, "y": y0 + 150}, {"x": x0, "y": y0 + 150}])
+        out.append(
+            [
+                {"x": x0, "y": y0},
+                {"x": x0 + 150, "y": y0},
+                {"x": x0 + 150, "y": y0 + 150},
+                {"x": x0, "y": y0 + 150},
+            ]
+        )
     return out
 
 
@@ -123,8 +135,15 @@ def areas_for(index: int) -> list[list[dict[str, float]]]:
 class Proc:
     def __init__(self, args: list[str], log: Path):
         self.log = open(log, "w")
-        self.p = subprocess.Popen(args, cwd=ROOT, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                  stderr=subprocess.STDOUT, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        self.p = subprocess.Popen(
+            args,
+            cwd=ROOT,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        )
         self.lines: list[str] = []
         self.cond = threading.Condition()
         threading.Thread(target=self._read, daemon=True).start()
@@ -141,7 +160,9 @@ class Proc:
 
     def wait_line(self, text: str, timeout: float = 60.0) -> None:
         with self.cond:
-            if not self.cond.wait_for(lambda: any(text in ln for ln in self.lines) or self.p.poll() is not None, timeout):
+            if not self.cond.wait_for(
+                lambda: any(text in ln for ln in self.lines) or self.p.poll() is not None, timeout
+            ):
                 raise RuntimeError(f"timed out waiting for {text!r}")
             if not any(text in ln for ln in self.lines):
                 raise RuntimeError(f"process ended: {''.join(self.lines[-10:])}")
@@ -165,12 +186,32 @@ class Proc:
 # ---------------------------------------------------------------- one run
 
 
-async def run_case(tmp: Path, mission: Path, world: Path, speed: float, window: float, warmup: float,
-                   workload: str = "patrol") -> dict[str, Any]:
+async def run_case(
+    tmp: Path,
+    mission: Path,
+    world: Path,
+    speed: float,
+    window: float,
+    warmup: float,
+    workload: str = "patrol",
+) -> dict[str, Any]:
     port = transport.free_port()
     endpoint = transport.loopback_endpoint(port)
-    server = Proc([sys.executable, "-m", "backend.cli", "server", "--mission", str(mission), "--listen", endpoint,
-                   "--db", str(tmp / f"bench-{port}.db")], tmp / f"server-{port}.log")
+    server = Proc(
+        [
+            sys.executable,
+            "-m",
+            "backend.cli",
+            "server",
+            "--mission",
+            str(mission),
+            "--listen",
+            endpoint,
+            "--db",
+            str(tmp / f"bench-{port}.db"),
+        ],
+        tmp / f"server-{port}.log",
+    )
     sim: Proc | None = None
     client: MissionClient | None = None
     try:
@@ -178,13 +219,34 @@ async def run_case(tmp: Path, mission: Path, world: Path, speed: float, window: 
         client = MissionClient(endpoint, telemetry=False)
         await client.connect()
         pin = ["taskset", "-c", "0"] if shutil.which("taskset") else []
-        sim = Proc(pin + [sys.executable, "-m", "backend.cli", "sim", "--mission", str(mission), "--world", str(world),
-                          "--connect", endpoint, "--speed", f"{speed:g}", "--seed", "1"], tmp / f"sim-{port}.log")
+        sim = Proc(
+            pin
+            + [
+                sys.executable,
+                "-m",
+                "backend.cli",
+                "sim",
+                "--mission",
+                str(mission),
+                "--world",
+                str(world),
+                "--connect",
+                endpoint,
+                "--speed",
+                f"{speed:g}",
+                "--seed",
+                "1",
+            ],
+            tmp / f"sim-{port}.log",
+        )
         sim.wait_line("missionctl sim: world")
         await client.wait_for(lambda m: all(client.robots[r].online for r in m.robots), 60)
         assert client.mission is not None and client.library is not None
-        robots = [r for r, spec in client.mission.robots.items()
-                  if client.library.robot_types[spec.type].kind == "dynamic"]
+        robots = [
+            r
+            for r, spec in client.mission.robots.items()
+            if client.library.robot_types[spec.type].kind == "dynamic"
+        ]
         for i, r in enumerate(robots):
             plan: list[tuple[str, dict[str, Any]]] = []
             skills = client.library.robot_types[client.mission.robots[r].type].skills
@@ -195,9 +257,11 @@ async def run_case(tmp: Path, mission: Path, world: Path, speed: float, window: 
             else:  # patrol: back and forth across the site
                 a, b = PATROL[i % len(PATROL)], PATROL[(i + len(PATROL) // 2) % len(PATROL)]
                 for leg in range(LEGS_FEW if len(robots) <= 10 else LEGS_MANY):
-                    x, y = (b if leg % 2 == 0 else a)
+                    x, y = b if leg % 2 == 0 else a
                     if "fly_to" in skills:
-                        plan.append(("fly_to", {"goal": {"x": x, "y": y}, "speed": 0.5, "altitude": 3.0}))
+                        plan.append(
+                            ("fly_to", {"goal": {"x": x, "y": y}, "speed": 0.5, "altitude": 3.0})
+                        )
                     else:
                         plan.append(("drive_to", {"goal": {"x": x, "y": y}}))
             last = ""
@@ -218,13 +282,17 @@ async def run_case(tmp: Path, mission: Path, world: Path, speed: float, window: 
         def on_status(msg: transport.Message) -> None:
             status_bytes[0] += len(msg.payload)
 
-        subs = [transport.subscribe(client.session, mf.KEY_MAP_DELTA, on_delta),
-                transport.subscribe(client.session, mf.KEY_STATUS_LIVE, on_status)]
+        subs = [
+            transport.subscribe(client.session, mf.KEY_MAP_DELTA, on_delta),
+            transport.subscribe(client.session, mf.KEY_STATUS_LIVE, on_status),
+        ]
         await client.submit(Control(op="run"))
         await asyncio.sleep(warmup)  # a benchmark may sleep: it measures over wall time
 
         async def status() -> mf.SimStatus:
-            return mf.SimStatus.model_validate_json(await transport.query(client.session, mf.KEY_STATUS, b"", timeout=30))
+            return mf.SimStatus.model_validate_json(
+                await transport.query(client.session, mf.KEY_STATUS, b"", timeout=30)
+            )
 
         s0, t0, c0 = await status(), time.monotonic(), sim.cpu_seconds()
         b0, d0, k0, st0 = feed["bytes"], feed["deltas"], feed["tiles"], status_bytes[0]
@@ -239,7 +307,7 @@ async def run_case(tmp: Path, mission: Path, world: Path, speed: float, window: 
             sub.undeclare()
         return {
             "robots": len(client.mission.robots),
-        "mobile": len(robots),
+            "mobile": len(robots),
             "speed": speed,
             "busy": len(busy),
             "factor": statistics.mean(factors) if factors else 0.0,
@@ -322,22 +390,36 @@ async def main_async(args: argparse.Namespace) -> dict[str, list[dict[str, Any]]
         tmp = Path(d)
         world = bench_world(tmp)
         fifty = big_mission(tmp, 50)
-        cases = [(MISSION, s) for s in ((50, 1000, 10000) if args.quick else (1, 50, 200, 1000, 10000))]
+        cases = [
+            (MISSION, s) for s in ((50, 1000, 10000) if args.quick else (1, 50, 200, 1000, 10000))
+        ]
         cases += [(fifty, s) for s in ((50, 1000) if args.quick else (50, 200, 1000, 10000))]
         for mission, speed in cases:
             r = await run_case(tmp, mission, world, speed, window, warmup)
-            print(f"  speed: {r['robots']} robots at {speed:g}x -> {r['factor']:,.0f}x (cpu {r['cpu']:.0%})", file=sys.stderr)
+            print(
+                f"  speed: {r['robots']} robots at {speed:g}x -> {r['factor']:,.0f}x (cpu {r['cpu']:.0%})",
+                file=sys.stderr,
+            )
             results["speed"].append(r)
         for mission, speed in [(MISSION, 1), (MISSION, 10), (fifty, 1)]:
-            r = await run_case(tmp, mission, world, speed, window * (2 if speed == 1 else 1), warmup, "explore")
-            print(f"  feed: {r['robots']} robots at {speed:g}x -> {r['feed_bps']:,.0f} B/s", file=sys.stderr)
+            r = await run_case(
+                tmp, mission, world, speed, window * (2 if speed == 1 else 1), warmup, "explore"
+            )
+            print(
+                f"  feed: {r['robots']} robots at {speed:g}x -> {r['feed_bps']:,.0f} B/s",
+                file=sys.stderr,
+            )
             results["feed"].append(r)
     return results
 
 
 def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--write", metavar="FILE", help="replace the '## Simulated fleet' section of FILE")
+    p = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    p.add_argument(
+        "--write", metavar="FILE", help="replace the '## Simulated fleet' section of FILE"
+    )
     p.add_argument("--quick", action="store_true", help="shorter windows, fewer speeds")
     args = p.parse_args()
     results = asyncio.run(main_async(args))

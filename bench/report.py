@@ -25,8 +25,13 @@ def machine(*extra: str) -> str:
                 break
     except OSError:
         pass
-    parts = [cpu, f"{os.cpu_count()} cores", f"Python {platform.python_version()}", *extra,
-             f"{platform.system()} {platform.release()}"]
+    parts = [
+        cpu,
+        f"{os.cpu_count()} cores",
+        f"Python {platform.python_version()}",
+        *extra,
+        f"{platform.system()} {platform.release()}",
+    ]
     return ", ".join(parts)
 
 

@@ -116,7 +116,9 @@ def wrap_client() -> None:
     MissionClient._got_batches = traced_got_batches
 
 
-def stage_table(marks: list[tuple[str, float]]) -> tuple[list[tuple[str, float, float, float, float]], list[float]]:
+def stage_table(
+    marks: list[tuple[str, float]],
+) -> tuple[list[tuple[str, float, float, float, float]], list[float]]:
     """Split the merged marks into one window per operation (from its c_start);
     per stage, in order: (name, step median, step p99, step median over the
     slowest 2 % of operations, since-start median)."""
@@ -136,16 +138,20 @@ def stage_table(marks: list[tuple[str, float]]) -> tuple[list[tuple[str, float, 
         if "s_journal_end" not in w:
             continue
         i = bisect.bisect_left(batch_marks["c_events"], w["s_journal_end"])
-        if i == len(batch_marks["c_events"]) or batch_marks["c_events"][i] >= nxt.get("s_journal_end", float("inf")):
+        if i == len(batch_marks["c_events"]) or batch_marks["c_events"][i] >= nxt.get(
+            "s_journal_end", float("inf")
+        ):
             continue
         w["c_events"] = batch_marks["c_events"][i]
         j = bisect.bisect_left(batch_marks["c_applied"], w["c_events"])
         if j < len(batch_marks["c_applied"]):
             w["c_applied"] = batch_marks["c_applied"][j]
     complete = [w for w in windows if "c_end" in w]
-    order = sorted((s for s in STAGES if any(s in w for w in complete)),
-                   key=lambda s: statistics.median(w[s] - w["c_start"] for w in complete if s in w))
-    slow = sorted(complete, key=lambda w: w["c_end"] - w["c_start"])[-max(1, len(complete) // 50):]
+    order = sorted(
+        (s for s in STAGES if any(s in w for w in complete)),
+        key=lambda s: statistics.median(w[s] - w["c_start"] for w in complete if s in w),
+    )
+    slow = sorted(complete, key=lambda w: w["c_end"] - w["c_start"])[-max(1, len(complete) // 50) :]
 
     def steps_of(ws: list[dict[str, float]], i: int) -> list[float]:
         out = []
@@ -162,7 +168,15 @@ def stage_table(marks: list[tuple[str, float]]) -> tuple[list[tuple[str, float, 
     for i, stage in enumerate(order):
         steps = steps_of(complete, i)
         since = [w[stage] - w["c_start"] for w in complete if stage in w]
-        rows.append((stage, statistics.median(steps), pct(steps, 0.99), statistics.median(steps_of(slow, i)), statistics.median(since)))
+        rows.append(
+            (
+                stage,
+                statistics.median(steps),
+                pct(steps, 0.99),
+                statistics.median(steps_of(slow, i)),
+                statistics.median(since),
+            )
+        )
     totals = [w["c_end"] - w["c_start"] for w in complete]
     return rows, totals
 
@@ -174,7 +188,12 @@ async def traced_round_trips(n: int) -> tuple[list[float], list[tuple[str, float
     with tempfile.TemporaryDirectory(prefix="trace-rtt-") as d:
         tmp = Path(d)
         trace_file = tmp / "server-trace.json"
-        server = Server(tmp, "traced", TUTORIAL, launcher=[sys.executable, str(ROOT / "bench" / "traced_server.py"), str(trace_file)])
+        server = Server(
+            tmp,
+            "traced",
+            TUTORIAL,
+            launcher=[sys.executable, str(ROOT / "bench" / "traced_server.py"), str(trace_file)],
+        )
         try:
             server.wait_ready(60)
             client = MissionClient(server.endpoint, client_id="trace")
@@ -206,11 +225,20 @@ async def handler_alone(n: int) -> list[float]:
     """`MissionServer._handle_op` for the same operation with the server in
     this process and nothing else running: the Python work an operation needs."""
     with tempfile.TemporaryDirectory(prefix="trace-rtt-") as d:
-        srv = MissionServer(db=Path(d) / "alone.db", mission_file=TUTORIAL, listen=[loopback_endpoint(free_port())])
+        srv = MissionServer(
+            db=Path(d) / "alone.db", mission_file=TUTORIAL, listen=[loopback_endpoint(free_port())]
+        )
         await srv.start()
         try:
+
             def request(i: int) -> bytes:
-                return dumps(Request(client="alone", request_id=f"r{i}", op=EditSkill(id="lru1-1", label=f"alone {i}")))
+                return dumps(
+                    Request(
+                        client="alone",
+                        request_id=f"r{i}",
+                        op=EditSkill(id="lru1-1", label=f"alone {i}"),
+                    )
+                )
 
             for i in range(300):
                 srv._handle_op(request(i))  # answered at once: it needs no robot
@@ -253,10 +281,16 @@ def loop_wakeups(n: int) -> list[float]:
     return out
 
 
-def report(raw: list[float], marks: list[tuple[str, float]], alone: list[float], wake: list[float]) -> str:
+def report(
+    raw: list[float], marks: list[tuple[str, float]], alone: list[float], wake: list[float]
+) -> str:
     rows, totals = stage_table(marks)
-    raw_med, alone_med, wake_med = statistics.median(raw), statistics.median(alone), statistics.median(wake)
-    slow = sorted(totals)[-max(1, len(totals) // 50):]
+    raw_med, alone_med, wake_med = (
+        statistics.median(raw),
+        statistics.median(alone),
+        statistics.median(wake),
+    )
+    slow = sorted(totals)[-max(1, len(totals) // 50) :]
     lines = [
         f"{len(totals)} `EditSkill` operations, traced; raw query to PING in the same run: median {ms(raw_med):.3f} ms.",
         "",
@@ -264,9 +298,13 @@ def report(raw: list[float], marks: list[tuple[str, float]], alone: list[float],
         "|---|---|---|---|---|",
     ]
     for stage, med, p99, tail, since in rows:
-        lines.append(f"| {STAGES[stage]} | {med * 1e6:.0f} µs | {p99 * 1e6:.0f} µs | {tail * 1e6:.0f} µs | {since * 1e6:.0f} µs |")
-    lines.append(f"| **whole operation (traced)** | **{ms(statistics.median(totals)):.3f} ms** | **{ms(pct(totals, 0.99)):.3f} ms** "
-                 f"| **{ms(statistics.median(slow)):.3f} ms** | |")
+        lines.append(
+            f"| {STAGES[stage]} | {med * 1e6:.0f} µs | {p99 * 1e6:.0f} µs | {tail * 1e6:.0f} µs | {since * 1e6:.0f} µs |"
+        )
+    lines.append(
+        f"| **whole operation (traced)** | **{ms(statistics.median(totals)):.3f} ms** | **{ms(pct(totals, 0.99)):.3f} ms** "
+        f"| **{ms(statistics.median(slow)):.3f} ms** | |"
+    )
     floor = raw_med + alone_med + wake_med
     lines += [
         "",
@@ -291,7 +329,9 @@ def report(raw: list[float], marks: list[tuple[str, float]], alone: list[float],
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("-n", type=int, default=2500, help="traced operations (default 2500)")
-    ap.add_argument("--write", metavar="FILE", help=f"write/update the '## {SECTION}' section of FILE")
+    ap.add_argument(
+        "--write", metavar="FILE", help=f"write/update the '## {SECTION}' section of FILE"
+    )
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     raw, marks = asyncio.run(traced_round_trips(args.n))

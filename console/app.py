@@ -88,7 +88,11 @@ class MissionApp(App[int]):
         *bindings("app", show=False),  # shown in the footers of the part-2 screens
     ]
     # part-2 screens as app modes (F2/1 back to the schedule; F3/2 is the map's)
-    VIEW_MODES: dict[str, type[Screen]] = {"fleet": FleetScreen, "log": EventLogScreen, "alerts": AlertScreen}
+    VIEW_MODES: dict[str, type[Screen]] = {
+        "fleet": FleetScreen,
+        "log": EventLogScreen,
+        "alerts": AlertScreen,
+    }
     CSS = """
     Screen { background: $background; }
     ModalScreen { background: $background 60%; }  /* dialogs: the screen behind stays visible, dimmed */
@@ -124,7 +128,9 @@ class MissionApp(App[int]):
         default = DEFAULT_THEME if DEFAULT_THEME in self.available_themes else "textual-dark"
         wanted = theme or self.config.theme or default
         if wanted not in self.available_themes:
-            self.notices.append(f"unknown theme '{wanted}' (themes: {', '.join(sorted(self.available_themes))}); using {default}")
+            self.notices.append(
+                f"unknown theme '{wanted}' (themes: {', '.join(sorted(self.available_themes))}); using {default}"
+            )
             wanted = default
         self.theme = wanted
         # what the fleet, event-log and alert screens show; bounded (see eventlog.py)
@@ -137,18 +143,26 @@ class MissionApp(App[int]):
         for mode, screen in self.VIEW_MODES.items():
             self.add_mode(mode, screen)
         self.map_screen: MapScreen | None = None
-        self.map_feed: tuple[object, object] | None = None  # the latest (mirror, update) of the map feed
+        self.map_feed: tuple[object, object] | None = (
+            None  # the latest (mirror, update) of the map feed
+        )
         self.add_mode("map", self._make_map_screen)
         if self.config.keymap:
             self.set_keymap(self.config.keymap)
-        self.bridge = ClientBridge(self, connect, user=user, client_id=client_id, login=login) if connect else None
+        self.bridge = (
+            ClientBridge(self, connect, user=user, client_id=client_id, login=login)
+            if connect
+            else None
+        )
         self.login_refused = ""  # set when the router refused the login: the CLI prints it, exit 3
         self.backend: Backend | None = backend or self.bridge
         self.mission_screen: MissionScreen | None = None
         self.last_path: str | None = None
         self._connection_closed = False
         self._hanging_up = False
-        self.on_forced_exit: list[Callable[[], object]] = []  # run before a forced exit after a hang-up
+        self.on_forced_exit: list[
+            Callable[[], object]
+        ] = []  # run before a forced exit after a hang-up
         self.exit_code = 0
 
     # -- theme and screens --------------------------------------------------------------
@@ -195,7 +209,12 @@ class MissionApp(App[int]):
         self.switch_mode("map")
 
     def _map_live(self) -> bool:
-        return self.map_screen is not None and self.map_screen.is_mounted and self._running and self.return_code is None
+        return (
+            self.map_screen is not None
+            and self.map_screen.is_mounted
+            and self._running
+            and self.return_code is None
+        )
 
     def action_show_fleet(self) -> None:
         self.switch_mode("fleet")
@@ -231,7 +250,11 @@ class MissionApp(App[int]):
         for n in self.notices:
             self.notify(n, title="Settings", severity="warning", timeout=10)
         self.theme_changed_signal.subscribe(self, self._theme_picked)
-        if self.colour_count is None and not self.is_headless and self.console.color_system == "standard":
+        if (
+            self.colour_count is None
+            and not self.is_headless
+            and self.console.color_system == "standard"
+        ):
             self._use_16_colours()
             self.refresh_css()
         if self.bridge is not None:
@@ -280,7 +303,10 @@ class MissionApp(App[int]):
         unapplied = self._unapplied()
         if unapplied and not isinstance(self.screen, ConfirmScreen):
             self.push_screen(
-                ConfirmScreen(f"Unapplied changes to {', '.join(unapplied)} are lost when you quit. Quit anyway?", yes="Quit"),
+                ConfirmScreen(
+                    f"Unapplied changes to {', '.join(unapplied)} are lost when you quit. Quit anyway?",
+                    yes="Quit",
+                ),
                 self._quit_confirmed,
             )
             return
@@ -290,7 +316,9 @@ class MissionApp(App[int]):
         s = self.mission_screen
         if s is None or not s.is_mounted:
             return []
-        return sorted(s.editor.drafts) + ([s.editor.skill_id] if s.editor.dirty and s.editor.skill_id else [])
+        return sorted(s.editor.drafts) + (
+            [s.editor.skill_id] if s.editor.dirty and s.editor.skill_id else []
+        )
 
     def _quit_confirmed(self, yes: bool | None) -> None:
         if yes:
@@ -323,15 +351,28 @@ class MissionApp(App[int]):
         except ClientError as e:
             self.post_message(ConnectionChanged(UNREACHABLE, str(e), endpoint=self.bridge.endpoint))
         except Exception as e:  # never a traceback for a network problem
-            self.post_message(ConnectionChanged(UNREACHABLE, f"{type(e).__name__}: {e}", endpoint=self.bridge.endpoint))
+            self.post_message(
+                ConnectionChanged(
+                    UNREACHABLE, f"{type(e).__name__}: {e}", endpoint=self.bridge.endpoint
+                )
+            )
 
     # -- state comes in as messages --------------------------------------------------------------
     def _screen_live(self) -> bool:
-        return self.mission_screen is not None and self.mission_screen.is_mounted and self._running and self.return_code is None
+        return (
+            self.mission_screen is not None
+            and self.mission_screen.is_mounted
+            and self._running
+            and self.return_code is None
+        )
 
     async def on_state_loaded(self, message: StateLoaded) -> None:
         previous = self.model.mission  # None on the first load; else a resync after a reconnect
-        before = {s.id: s.status.value for t in previous.tasks.values() for s in t} if previous is not None else {}
+        before = (
+            {s.id: s.status.value for t in previous.tasks.values() for s in t}
+            if previous is not None
+            else {}
+        )
         self.model.load(message.mission, message.library, message.robots, message.server_id)
         # a big mission is many long-lived objects: keep them out of the cyclic
         # GC's scans, which otherwise stall the UI for tens of milliseconds
@@ -343,7 +384,9 @@ class MissionApp(App[int]):
             missed += self.alerts.missed_failures(before, self.model.mission, now)
         for a in missed:
             if a.kind == "failure":  # no report of it reached this console: log it here
-                self.event_log.add("failure", a.message, a.at, robots=[a.robot] if a.robot else [], skill=a.skill)
+                self.event_log.add(
+                    "failure", a.message, a.at, robots=[a.robot] if a.robot else [], skill=a.skill
+                )
             self.raise_alert(a)
         if self._screen_live():
             await self.mission_screen.model_changed(None)
@@ -399,14 +442,22 @@ class MissionApp(App[int]):
         if self._screen_live():
             await self.mission_screen.connection_changed()
             if message.status == "reconnecting":
-                self.mission_screen.say(f"connection to {m.endpoint} lost — reconnecting (the server may be restarting)…", "warning")
+                self.mission_screen.say(
+                    f"connection to {m.endpoint} lost — reconnecting (the server may be restarting)…",
+                    "warning",
+                )
             elif message.status == CONNECTED and previous == "reconnecting":
-                self.mission_screen.say(f"reconnected to {m.endpoint}: state resynchronized at revision {m.mission.revision if m.mission else '?'}", "ok")
+                self.mission_screen.say(
+                    f"reconnected to {m.endpoint}: state resynchronized at revision {m.mission.revision if m.mission else '?'}",
+                    "ok",
+                )
                 self.notify("reconnected; state resynchronized", title="Server", timeout=3)
         if self._map_live():
             self.map_screen.connection_changed()
         if message.status == UNREACHABLE and not isinstance(self.screen, UnreachableScreen):
-            self.push_screen(UnreachableScreen(m.endpoint or "?", message.detail), self._unreachable_choice)
+            self.push_screen(
+                UnreachableScreen(m.endpoint or "?", message.detail), self._unreachable_choice
+            )
 
     async def on_account_known(self, message: AccountKnown) -> None:
         self.model.read_only = message.read_only
@@ -440,13 +491,22 @@ class MissionApp(App[int]):
     def raise_alert(self, a: AlertEntry, *, notify: bool = True) -> None:
         """A new alert: log it, ring the bell, notify; the badge and list update."""
         if a.kind not in ("failure", "refusal"):  # those are log lines already
-            self.event_log.add("alert", a.message, a.at, robots=[a.robot] if a.robot else [], skill=a.skill, client=a.source)
+            self.event_log.add(
+                "alert",
+                a.message,
+                a.at,
+                robots=[a.robot] if a.robot else [],
+                skill=a.skill,
+                client=a.source,
+            )
         if a.level != "info":
             self.ring()
         if notify:
             severity = {"error": "error", "warning": "warning"}.get(a.level, "information")
             title = " · ".join(x for x in (a.robot, a.skill) if x) or "Alert"
-            self.notify(a.message, title=title, severity=severity, timeout=8 if a.level == "error" else 5)
+            self.notify(
+                a.message, title=title, severity=severity, timeout=8 if a.level == "error" else 5
+            )
         if self._screen_live() and a.level == "error":
             self.mission_screen.say(f"✗ {a.message}", "error")
         self.alerts_changed()
@@ -498,14 +558,18 @@ class MissionApp(App[int]):
     def _refused(self, text: str, robot: str | None, skill: str | None) -> None:
         """The console's own refusal: logged, an alert (already notified)."""
         at = self.clock()
-        self.event_log.add("refusal", text, at, robots=[robot] if robot else [], skill=skill, **self.whoami())
+        self.event_log.add(
+            "refusal", text, at, robots=[robot] if robot else [], skill=skill, **self.whoami()
+        )
         a = self.alerts.add("refusal", text, at, robot=robot, skill=skill)
         if a is not None:
             self.raise_alert(a, notify=False)
         else:
             self.alerts_changed()
 
-    async def _submit(self, op, what, robot, skill, expected_revision, on_ok, on_refused, say=None) -> None:
+    async def _submit(
+        self, op, what, robot, skill, expected_revision, on_ok, on_refused, say=None
+    ) -> None:
         if say is None and self.mission_screen is not None:
             say = self.mission_screen.say  # or another screen's status line (the map's)
         say = say or (lambda *a: None)
@@ -523,7 +587,14 @@ class MissionApp(App[int]):
         except ClientError as e:
             say(f"✗ {what}: {e}", "error")
             self.notify(str(e), title=f"Failed: {what}", severity="error", timeout=8)
-            self.event_log.add("failure", f"{what}: {e}", self.clock(), robots=[robot] if robot else [], skill=skill, **self.whoami())
+            self.event_log.add(
+                "failure",
+                f"{what}: {e}",
+                self.clock(),
+                robots=[robot] if robot else [],
+                skill=skill,
+                **self.whoami(),
+            )
             self.awareness_signal.publish(("log", None))
             return
         if on_ok is not None:

@@ -34,7 +34,15 @@ class Backend(Protocol):
 
 
 class ClientBridge:
-    def __init__(self, app: Any, endpoint: str, *, user: str = "", client_id: str | None = None, login: Login | None = None) -> None:
+    def __init__(
+        self,
+        app: Any,
+        endpoint: str,
+        *,
+        user: str = "",
+        client_id: str | None = None,
+        login: Login | None = None,
+    ) -> None:
         self.app = app
         self.endpoint = endpoint
         self.user = user
@@ -46,7 +54,9 @@ class ClientBridge:
     async def connect(self) -> None:
         """Connect (raises backend.client.client.ClientError with a sentence)."""
         await self.close()
-        client = MissionClient(self.endpoint, user=self.user, client_id=self.client_id, login=self.login)
+        client = MissionClient(
+            self.endpoint, user=self.user, client_id=self.client_id, login=self.login
+        )
         client.add_listener(self._on_client)
         self.client = client
         try:

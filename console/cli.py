@@ -18,16 +18,38 @@ THEME_HELP = (
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    c = sub.add_parser("console", help="the operator console (terminal UI) for a running mission server")
-    c.add_argument("--connect", metavar="ENDPOINT", default=DEFAULT_CONNECT, help=f"Zenoh endpoint of the server (default {DEFAULT_CONNECT})")
-    add_login_arguments(c, user_help="account to log in as (with --password-file); without one, just the name recorded with every change")
+    c = sub.add_parser(
+        "console", help="the operator console (terminal UI) for a running mission server"
+    )
+    c.add_argument(
+        "--connect",
+        metavar="ENDPOINT",
+        default=DEFAULT_CONNECT,
+        help=f"Zenoh endpoint of the server (default {DEFAULT_CONNECT})",
+    )
+    add_login_arguments(
+        c,
+        user_help="account to log in as (with --password-file); without one, just the name recorded with every change",
+    )
     c.add_argument("--theme", metavar="T", help=THEME_HELP)
-    c.add_argument("--config", metavar="FILE", help="settings file (default ~/.config/missionctl/config.toml or .yaml)")
+    c.add_argument(
+        "--config",
+        metavar="FILE",
+        help="settings file (default ~/.config/missionctl/config.toml or .yaml)",
+    )
     c.set_defaults(func=run_console)
 
-    d = sub.add_parser("demo", help="server + simulated fleet + console on loopback; quitting stops everything")
-    d.add_argument("--mission", metavar="FILE", help="mission to run (default missions/mars_sample_return.yaml)")
-    d.add_argument("--speed", metavar="X", type=float, default=1.0, help="sim time per real time (default 1)")
+    d = sub.add_parser(
+        "demo", help="server + simulated fleet + console on loopback; quitting stops everything"
+    )
+    d.add_argument(
+        "--mission",
+        metavar="FILE",
+        help="mission to run (default missions/mars_sample_return.yaml)",
+    )
+    d.add_argument(
+        "--speed", metavar="X", type=float, default=1.0, help="sim time per real time (default 1)"
+    )
     d.add_argument("--user", metavar="U", default="", help="operator name")
     d.add_argument("--theme", metavar="T", help=THEME_HELP)
     d.add_argument("--config", metavar="FILE")
@@ -37,7 +59,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _known_binding_ids() -> set[str]:
     from console.state.actions import ACTIONS
 
-    return {a.binding_id for a in ACTIONS} | {"app.help", "app.quit", "editor.apply", "editor.revert", "editor.leave"}
+    return {a.binding_id for a in ACTIONS} | {
+        "app.help",
+        "app.quit",
+        "editor.apply",
+        "editor.revert",
+        "editor.leave",
+    }
 
 
 def _run_app(app) -> int:
@@ -68,7 +96,9 @@ def run_console(args: argparse.Namespace) -> int:
         print(f"missionctl console: {refused}", file=sys.stderr)
         return EXIT_UNREACHABLE
     cfg = load_config(args.config, known_ids=_known_binding_ids())
-    app = MissionApp(connect=args.connect, user=args.user, theme=args.theme, config=cfg, login=login)
+    app = MissionApp(
+        connect=args.connect, user=args.user, theme=args.theme, config=cfg, login=login
+    )
     code = _run_app(app)
     if app.login_refused:
         print(f"missionctl console: {app.login_refused}", file=sys.stderr)
@@ -106,7 +136,9 @@ def run_demo(args: argparse.Namespace) -> int:
         print("missionctl demo: --speed must be positive", file=sys.stderr)
         return EXIT_BAD_INPUT
     mission = args.mission or str(DEFAULT_MISSION)
-    print(f"missionctl demo: starting the mission server for {mission} …", file=sys.stderr, flush=True)
+    print(
+        f"missionctl demo: starting the mission server for {mission} …", file=sys.stderr, flush=True
+    )
     procs = DemoProcesses(mission, speed=args.speed)
     try:
         procs.launch()
@@ -135,11 +167,26 @@ def run_demo(args: argparse.Namespace) -> int:
                 if problem and not self._sim_reported:
                     self._sim_reported = True
                     self.notify(problem, title="Simulated fleet", severity="error", timeout=15)
-                if procs.server is not None and procs.server.poll() is not None and not getattr(self, "_server_reported", False):
+                if (
+                    procs.server is not None
+                    and procs.server.poll() is not None
+                    and not getattr(self, "_server_reported", False)
+                ):
                     self._server_reported = True
-                    self.notify(f"the demo's mission server stopped (exit code {procs.server.returncode})", title="Server", severity="error", timeout=15)
+                    self.notify(
+                        f"the demo's mission server stopped (exit code {procs.server.returncode})",
+                        title="Server",
+                        severity="error",
+                        timeout=15,
+                    )
 
-        app = DemoApp(connect=procs.endpoint, user=args.user, theme=args.theme, config=cfg, notices=procs.notices)
+        app = DemoApp(
+            connect=procs.endpoint,
+            user=args.user,
+            theme=args.theme,
+            config=cfg,
+            notices=procs.notices,
+        )
         app.on_forced_exit.append(procs.stop)  # the children must not outlive a hung-up demo
         return _run_app(app)
     finally:

@@ -30,7 +30,9 @@ class MissionCommands(Provider):
                 continue
             why = screen.why_disabled(a.name) if a.scope == "mission" else None
             key = keys.get(a.name, a.key)
-            help_text = f"{key} · {a.description}" + (f" — does not apply now: {why}" if why else "")
+            help_text = f"{key} · {a.description}" + (
+                f" — does not apply now: {why}" if why else ""
+            )
             yield a, help_text, partial(self._run, a)
 
     async def _run(self, a) -> None:

@@ -69,10 +69,12 @@ def load_config(path: str | Path | None = None, known_ids: set[str] | None = Non
         keymap = {}
     for bid, keys in keymap.items():
         if not isinstance(keys, str) or not keys.strip():
-            cfg.problems.append(f"{p}: keymap.{bid}: expected keys as a string, like \"ctrl+s\"")
+            cfg.problems.append(f'{p}: keymap.{bid}: expected keys as a string, like "ctrl+s"')
             continue
         if known_ids is not None and bid not in known_ids:
-            cfg.problems.append(f"{p}: keymap: unknown binding id '{bid}' (ids: {', '.join(sorted(known_ids))})")
+            cfg.problems.append(
+                f"{p}: keymap: unknown binding id '{bid}' (ids: {', '.join(sorted(known_ids))})"
+            )
             continue
         cfg.keymap[bid] = keys
     for key in data:

@@ -48,12 +48,22 @@ def sim_available() -> bool:
 class DemoProcesses:
     """The server (and the sim when available) as child processes."""
 
-    def __init__(self, mission: str | Path = DEFAULT_MISSION, *, speed: float = 1.0, python: str = sys.executable, workdir: str | Path | None = None, with_sim: bool | None = None):
+    def __init__(
+        self,
+        mission: str | Path = DEFAULT_MISSION,
+        *,
+        speed: float = 1.0,
+        python: str = sys.executable,
+        workdir: str | Path | None = None,
+        with_sim: bool | None = None,
+    ):
         self.mission = Path(mission).resolve()
         self.speed = speed
         self.python = python
         self._own_dir = workdir is None
-        self.workdir = Path(workdir) if workdir else Path(tempfile.mkdtemp(prefix="missionctl-demo-"))
+        self.workdir = (
+            Path(workdir) if workdir else Path(tempfile.mkdtemp(prefix="missionctl-demo-"))
+        )
         self.with_sim = with_sim
         self.endpoint = ""
         self.server: subprocess.Popen | None = None
@@ -73,7 +83,12 @@ class DemoProcesses:
     def _spawn(self, args: list[str], log: Path) -> subprocess.Popen:
         f = open(log, "w", encoding="utf-8")  # noqa: SIM115 (closed in stop())
         self._logs.append(f)
-        return subprocess.Popen([self.python, "-m", "backend.cli", *args], stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        return subprocess.Popen(
+            [self.python, "-m", "backend.cli", *args],
+            stdout=f,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+        )
 
     def start(self, timeout: float = 30.0) -> None:
         self.launch()
@@ -82,7 +97,10 @@ class DemoProcesses:
     def _spawn_server(self) -> None:
         self.endpoint = loopback_endpoint(free_port())
         db = self.workdir / f"demo-{self._attempt}.db"
-        self.server = self._spawn(["server", "--mission", str(self.mission), "--listen", self.endpoint, "--db", str(db)], self.server_log)
+        self.server = self._spawn(
+            ["server", "--mission", str(self.mission), "--listen", self.endpoint, "--db", str(db)],
+            self.server_log,
+        )
 
     def launch(self) -> None:
         """Spawn the server (and the sim check); returns at once."""
@@ -98,16 +116,36 @@ class DemoProcesses:
             code = self.server.poll()
             tail = _tail(self.server_log)
             self._stop_one(self.server)
-            if code is not None and "address" in tail.lower() and "use" in tail.lower() and self._attempt < 2:
+            if (
+                code is not None
+                and "address" in tail.lower()
+                and "use" in tail.lower()
+                and self._attempt < 2
+            ):
                 self._attempt += 1  # the free port was taken meanwhile
                 self._spawn_server()
                 continue
-            raise DemoError(f"the mission server did not start{' (exit code ' + str(code) + ')' if code is not None else ' in time'}:\n{tail}")
+            raise DemoError(
+                f"the mission server did not start{' (exit code ' + str(code) + ')' if code is not None else ' in time'}:\n{tail}"
+            )
         want_sim = sim_available() if self.with_sim is None else self.with_sim
         if want_sim:
-            self.sim = self._spawn(["sim", "--mission", str(self.mission), "--connect", self.endpoint, "--speed", f"{self.speed:g}"], self.sim_log)
+            self.sim = self._spawn(
+                [
+                    "sim",
+                    "--mission",
+                    str(self.mission),
+                    "--connect",
+                    self.endpoint,
+                    "--speed",
+                    f"{self.speed:g}",
+                ],
+                self.sim_log,
+            )
         else:
-            self.notices.append("the simulated fleet is unavailable (`missionctl sim` is not installed): robots stay offline; the plan can still be edited")
+            self.notices.append(
+                "the simulated fleet is unavailable (`missionctl sim` is not installed): robots stay offline; the plan can still be edited"
+            )
 
     def _wait_ready(self, timeout: float) -> bool:
         deadline = time.monotonic() + timeout

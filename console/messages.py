@@ -20,7 +20,13 @@ from backend.protocol.messages import Alert, RobotInfo, Telemetry
 class StateLoaded(Message):
     """A full state: first connection, a resync after a gap or a server restart."""
 
-    def __init__(self, mission: Mission, library: Library, robots: dict[str, RobotInfo] | None = None, server_id: str = "") -> None:
+    def __init__(
+        self,
+        mission: Mission,
+        library: Library,
+        robots: dict[str, RobotInfo] | None = None,
+        server_id: str = "",
+    ) -> None:
         super().__init__()
         self.mission = mission
         self.library = library

@@ -45,22 +45,68 @@ def _positive(text: str) -> float:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("sim", help="run the simulated fleet of a mission's site (Mars sample return)")
-    p.add_argument("--mission", metavar="FILE", required=True, help="mission file: which robots to simulate")
-    p.add_argument("--connect", metavar="ENDPOINT", action="append", help="Zenoh endpoint of the mission server (default tcp/127.0.0.1:7447); repeatable")
-    p.add_argument("--world", metavar="FILE", help="world file (default: worlds/mars.yaml next to the mission, else missions/worlds/mars.yaml)")
-    p.add_argument("--speed", type=_positive, default=1.0, metavar="X", help="sim time per wall time (1 = real time)")
+    p = sub.add_parser(
+        "sim", help="run the simulated fleet of a mission's site (Mars sample return)"
+    )
+    p.add_argument(
+        "--mission", metavar="FILE", required=True, help="mission file: which robots to simulate"
+    )
+    p.add_argument(
+        "--connect",
+        metavar="ENDPOINT",
+        action="append",
+        help="Zenoh endpoint of the mission server (default tcp/127.0.0.1:7447); repeatable",
+    )
+    p.add_argument(
+        "--world",
+        metavar="FILE",
+        help="world file (default: worlds/mars.yaml next to the mission, else missions/worlds/mars.yaml)",
+    )
+    p.add_argument(
+        "--speed",
+        type=_positive,
+        default=1.0,
+        metavar="X",
+        help="sim time per wall time (1 = real time)",
+    )
     p.add_argument("--seed", type=int, metavar="N", help="random seed (default: the world file's)")
-    p.add_argument("--link-delay", type=parse_duration, default=0.0, metavar="D", help="one-way delay between ground and robots, e.g. 2s or 500ms")
-    p.add_argument("--connect-timeout", type=float, default=10.0, metavar="S", help="keep trying to reach the server's router this long")
-    p.add_argument("--zenoh-config", metavar="FILE", help="JSON5 Zenoh config merged over ours (TLS, accounts)")
-    p.add_argument("--check", action="store_true", help="only validate the mission and world files, then exit")
-    add_login_arguments(p.add_argument_group("login and TLS (docs/security.md): a robot account listing the simulated robots"))
+    p.add_argument(
+        "--link-delay",
+        type=parse_duration,
+        default=0.0,
+        metavar="D",
+        help="one-way delay between ground and robots, e.g. 2s or 500ms",
+    )
+    p.add_argument(
+        "--connect-timeout",
+        type=float,
+        default=10.0,
+        metavar="S",
+        help="keep trying to reach the server's router this long",
+    )
+    p.add_argument(
+        "--zenoh-config", metavar="FILE", help="JSON5 Zenoh config merged over ours (TLS, accounts)"
+    )
+    p.add_argument(
+        "--check", action="store_true", help="only validate the mission and world files, then exit"
+    )
+    add_login_arguments(
+        p.add_argument_group(
+            "login and TLS (docs/security.md): a robot account listing the simulated robots"
+        )
+    )
     p.add_argument("-v", "--verbose", action="store_true")
     p.set_defaults(func=run)
 
-    s = sub.add_parser("sim-status", help="score, deliveries, exchanges and robots of a running simulator")
-    s.add_argument("--connect", metavar="ENDPOINT", action="append", help="Zenoh endpoint (default tcp/127.0.0.1:7447)")
+    s = sub.add_parser(
+        "sim-status", help="score, deliveries, exchanges and robots of a running simulator"
+    )
+    s.add_argument(
+        "--connect",
+        metavar="ENDPOINT",
+        action="append",
+        help="Zenoh endpoint (default tcp/127.0.0.1:7447)",
+    )
     s.add_argument("--json", action="store_true", help="print the SimStatus as JSON")
     s.add_argument("--timeout", type=float, default=5.0, metavar="S")
     add_login_arguments(s.add_argument_group("login and TLS (docs/security.md)"))
@@ -88,7 +134,8 @@ def _load(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     logging.basicConfig(
-        level=logging.INFO if args.verbose else logging.WARNING, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
+        level=logging.INFO if args.verbose else logging.WARNING,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
     loaded, issues = _load(args)
     if loaded is None:
@@ -114,9 +161,14 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         fleet = SimFleet(
-            mission, library, world,
+            mission,
+            library,
+            world,
             connect=args.connect or ["tcp/127.0.0.1:7447"],
-            speed=args.speed, seed=args.seed, link_delay=args.link_delay, zenoh_extra=extra,
+            speed=args.speed,
+            seed=args.seed,
+            link_delay=args.link_delay,
+            zenoh_extra=extra,
         )
     except (SimError, ValueError) as e:
         print(f"missionctl sim: {e}", file=sys.stderr)
@@ -185,7 +237,9 @@ async def _status(args: argparse.Namespace) -> int:
         print(f"missionctl sim-status: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
     try:
-        session = await asyncio.to_thread(transport.open_session, transport.client_config(endpoints, extra=extra))
+        session = await asyncio.to_thread(
+            transport.open_session, transport.client_config(endpoints, extra=extra)
+        )
     except TransportUnreachable as e:
         print(f"missionctl sim-status: {e}", file=sys.stderr)
         return EXIT_UNREACHABLE
@@ -193,7 +247,10 @@ async def _status(args: argparse.Namespace) -> int:
         try:
             raw = await transport.query(session, mf.KEY_STATUS, b"", timeout=args.timeout)
         except transport.NoResponder:
-            print(f"missionctl sim-status: no simulator answers at {', '.join(endpoints)}", file=sys.stderr)
+            print(
+                f"missionctl sim-status: no simulator answers at {', '.join(endpoints)}",
+                file=sys.stderr,
+            )
             return EXIT_REFUSED
         except transport.QueryFailed as e:
             print(f"missionctl sim-status: {e}", file=sys.stderr)
@@ -213,7 +270,12 @@ def format_status(st) -> str:
         f"world {st.world} (seed {st.seed}), sim time {st.sim_time:.0f} s at {st.speed:g}x"
         + (f", link delay {st.link_delay_s:g} s" if st.link_delay_s else ""),
         f"score {st.score:g}: {len(st.delivered)} stone(s) delivered"
-        + ("".join(f"\n  {d.stone} ({d.rss}) {d.score:g} by {d.by} at {d.sim_time:.0f} s" for d in st.delivered)),
+        + (
+            "".join(
+                f"\n  {d.stone} ({d.rss}) {d.score:g} by {d.by} at {d.sim_time:.0f} s"
+                for d in st.delivered
+            )
+        ),
         f"regions found: {', '.join(st.rss_found) or 'none'}; explored {st.explored:.1%} of the site",
         "exchanges: " + ", ".join(f"{k} {v}" for k, v in sorted(st.exchanges.items())),
         "robots:",

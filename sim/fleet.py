@@ -88,7 +88,9 @@ class SimFleet:
         self.feed_period = feed_period
         self.zenoh_extra = zenoh_extra
         self.robot_seconds = 0.0
-        self.exchanges: Counter[str] = Counter(asks=0, tells=0, answered=0, unknown=0, unreachable=0)
+        self.exchanges: Counter[str] = Counter(
+            asks=0, tells=0, answered=0, unknown=0, unreachable=0
+        )
         self.exchange_log: deque[str] = deque(maxlen=30)
         self.notes: dict[str, str] = {}
         self.agents: dict[str, RobotAgent] = {}
@@ -143,7 +145,9 @@ class SimFleet:
             zenoh_extra=self.zenoh_extra,
         )
         agent.time_scale = self.speed
-        agent.pose = lambda r=robot: Pose(x=round(r.x, 3), y=round(r.y, 3), z=round(r.z, 3), yaw=round(r.yaw, 4))
+        agent.pose = lambda r=robot: Pose(
+            x=round(r.x, 3), y=round(r.y, 3), z=round(r.z, 3), yaw=round(r.yaw, 4)
+        )
         agent.battery = lambda r=robot: r.battery
         agent.link = SimLink(self.world, robot, self.link_delay)
         skills = RobotSkills(self, robot)
@@ -194,12 +198,25 @@ class SimFleet:
         def ask_stone(data: dict[str, Any], sender: str) -> dict[str, Any] | None:
             if not reachable(sender):
                 return None
-            x, y, radius = float(data.get("x", 0)), float(data.get("y", 0)), float(data.get("radius", 5))
-            cands = [s for s in k.stones.values()
-                     if s.get("state") in ("identified", "ground") and math.hypot(s["x"] - x, s["y"] - y) <= radius]
+            x, y, radius = (
+                float(data.get("x", 0)),
+                float(data.get("y", 0)),
+                float(data.get("radius", 5)),
+            )
+            cands = [
+                s
+                for s in k.stones.values()
+                if s.get("state") in ("identified", "ground")
+                and math.hypot(s["x"] - x, s["y"] - y) <= radius
+            ]
             if not cands:
                 return None
-            return dict(min(cands, key=lambda s: (-(s.get("score") or 0), math.hypot(s["x"] - x, s["y"] - y))))
+            return dict(
+                min(
+                    cands,
+                    key=lambda s: (-(s.get("score") or 0), math.hypot(s["x"] - x, s["y"] - y)),
+                )
+            )
 
         def ask_rss(data: dict[str, Any], sender: str) -> dict[str, Any] | None:
             if not reachable(sender) or not k.rss:
@@ -215,12 +232,21 @@ class SimFleet:
         def ask_pose(data: dict[str, Any], sender: str) -> dict[str, Any] | None:
             if not reachable(sender):
                 return None
-            return {"x": round(robot.x, 2), "y": round(robot.y, 2), "yaw": round(robot.yaw, 3), "airborne": robot.airborne}
+            return {
+                "x": round(robot.x, 2),
+                "y": round(robot.y, 2),
+                "yaw": round(robot.yaw, 3),
+                "airborne": robot.airborne,
+            }
 
         def ask_shelf(data: dict[str, Any], sender: str) -> dict[str, Any] | None:
             if robot.kind != "static" or not reachable(sender):
                 return None
-            slots = {str(b.slot): b.name for b in world.boxes.values() if b.where == "shelf" and b.slot is not None}
+            slots = {
+                str(b.slot): b.name
+                for b in world.boxes.values()
+                if b.where == "shelf" and b.slot is not None
+            }
             return {"slots": slots}
 
         def tell_box(data: dict[str, Any], sender: str) -> None:
@@ -247,7 +273,9 @@ class SimFleet:
     def _exchange(self, text: str) -> None:
         self.exchange_log.append(f"[{self.world.clock:7.0f} s] {text}")
 
-    async def ask(self, sender: SimRobot, target: str, topic: str, data: dict[str, Any]) -> dict[str, Any] | None:
+    async def ask(
+        self, sender: SimRobot, target: str, topic: str, data: dict[str, Any]
+    ) -> dict[str, Any] | None:
         """`sender` asks `target` (through the SDK), if they can talk at all."""
         other = self.world.robots.get(target)
         agent = self.agents.get(sender.name)
@@ -286,13 +314,22 @@ class SimFleet:
 
     async def start(self) -> None:
         cfg = transport.client_config(self.connect, extra=self.zenoh_extra)
-        self._session = await asyncio.to_thread(transport.open_session, cfg, what="the mission server's router")
+        self._session = await asyncio.to_thread(
+            transport.open_session, cfg, what="the mission server's router"
+        )
         try:
             s = self._session
             g = self.world.geom
             self._encoder = mf.TileEncoder(
-                mf.MapMeta(world=self.world.spec.name, seed=self.world.seed, x0=g.x0, y0=g.y0, cell=g.cell,
-                           width=g.nx, height=g.ny)
+                mf.MapMeta(
+                    world=self.world.spec.name,
+                    seed=self.world.seed,
+                    x0=g.x0,
+                    y0=g.y0,
+                    cell=g.cell,
+                    width=g.nx,
+                    height=g.ny,
+                )
             )
             self._encoder.delta(self.world.ground_layers())  # the snapshot's starting point (seq 0)
             self._objects = self.world.ground_objects()
@@ -357,7 +394,9 @@ class SimFleet:
                     r.battery = max(0.0, r.battery - w.flight_energy(r, dt))
                     if r.usable <= 0.0:
                         r.airborne, r.z = False, 0.0
-                        w.log(f"{r.name} made an emergency landing at ({r.x:.1f}, {r.y:.1f}): battery at the reserve while hovering")
+                        w.log(
+                            f"{r.name} made an emergency landing at ({r.x:.1f}, {r.y:.1f}): battery at the reserve while hovering"
+                        )
                 elif w.docked(r):
                     w.charge(r, dt)
             w.pump(now, self.link_delay)
@@ -411,14 +450,29 @@ class SimFleet:
         robots = {}
         for r in w.robots.values():
             robots[r.name] = mf.RobotStatus(
-                name=r.name, type=r.type, kind=r.kind,
-                x=round(r.x, 2), y=round(r.y, 2), z=round(r.z, 2), yaw=round(r.yaw, 3),
+                name=r.name,
+                type=r.type,
+                kind=r.kind,
+                x=round(r.x, 2),
+                y=round(r.y, 2),
+                z=round(r.z, 2),
+                yaw=round(r.yaw, 3),
                 battery=round(min(1.0, max(0.0, r.battery)), 4),
-                in_range=w.in_range(r), link=round(w.link_quality(r.x, r.y), 3),
-                airborne=r.airborne, docked=w.docked(r), box=r.box, stones=list(r.stones),
-                activity=r.activity, result=self.notes.get(r.name, ""),
-                odometer_m=round(r.odometer, 1), sim_seconds=round(r.sim_seconds, 1),
-                knows={"rss": len(r.knowledge.rss), "stones": len(r.knowledge.stones), "boxes": len(r.knowledge.boxes)},
+                in_range=w.in_range(r),
+                link=round(w.link_quality(r.x, r.y), 3),
+                airborne=r.airborne,
+                docked=w.docked(r),
+                box=r.box,
+                stones=list(r.stones),
+                activity=r.activity,
+                result=self.notes.get(r.name, ""),
+                odometer_m=round(r.odometer, 1),
+                sim_seconds=round(r.sim_seconds, 1),
+                knows={
+                    "rss": len(r.knowledge.rss),
+                    "stones": len(r.knowledge.stones),
+                    "boxes": len(r.knowledge.boxes),
+                },
             )
         return mf.SimStatus(
             world=w.spec.name,
@@ -445,7 +499,16 @@ class SimFleet:
             tuple(sorted(n for n, r in w.rss.items() if r.found_by)),
             len(w.events),
             tuple(
-                (r.name, w.in_range(r), r.activity, round(r.battery * 20), r.airborne, w.docked(r), r.box, tuple(r.stones))
+                (
+                    r.name,
+                    w.in_range(r),
+                    r.activity,
+                    round(r.battery * 20),
+                    r.airborne,
+                    w.docked(r),
+                    r.box,
+                    tuple(r.stones),
+                )
                 for r in w.robots.values()
             ),
         )
@@ -475,7 +538,10 @@ def _objects_model(objects: dict[str, Any]) -> mf.MapObjects:
     return mf.MapObjects(
         lander=mf.LanderItem(**objects["lander"]),
         boxes=[mf.BoxItem(**b) for b in objects["boxes"]],
-        rss=[mf.RssItem(**{k: v for k, v in r.items() if k in mf.RssItem.model_fields}) for r in objects["rss"]],
+        rss=[
+            mf.RssItem(**{k: v for k, v in r.items() if k in mf.RssItem.model_fields})
+            for r in objects["rss"]
+        ],
         stones=[mf.StoneItem(**s) for s in objects["stones"] if s.get("state") != "hidden"],
     )
 
@@ -488,7 +554,9 @@ def _brief(data: dict[str, Any] | None) -> str:
     if "box" in data:
         return f"{data['box']} {data.get('where', '')}".strip()
     if "slots" in data:
-        return "shelf " + (", ".join(f"{k}: {v}" for k, v in sorted(data["slots"].items())) or "empty")
+        return "shelf " + (
+            ", ".join(f"{k}: {v}" for k, v in sorted(data["slots"].items())) or "empty"
+        )
     return ", ".join(sorted(data))[:60]
 
 

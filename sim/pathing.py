@@ -22,7 +22,13 @@ class GridGeom:
     """Maps site coordinates (metres) to grid cells and back."""
 
     def __init__(self, x0: float, y0: float, cell: float, nx: int, ny: int):
-        self.x0, self.y0, self.cell, self.nx, self.ny = float(x0), float(y0), float(cell), int(nx), int(ny)
+        self.x0, self.y0, self.cell, self.nx, self.ny = (
+            float(x0),
+            float(y0),
+            float(cell),
+            int(nx),
+            int(ny),
+        )
         self.x1 = self.x0 + self.nx * self.cell
         self.y1 = self.y0 + self.ny * self.cell
         # cell centres
@@ -78,7 +84,9 @@ class GridGeom:
         return inside
 
 
-def segment_cells(geom: GridGeom, x0: float, y0: float, x1: float, y1: float) -> tuple[np.ndarray, np.ndarray]:
+def segment_cells(
+    geom: GridGeom, x0: float, y0: float, x1: float, y1: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Rows and columns of the cells a straight segment passes (sampled at half a cell)."""
     length = math.hypot(x1 - x0, y1 - y0)
     n = max(2, int(length / (geom.cell * 0.5)) + 2)
@@ -90,7 +98,9 @@ def segment_cells(geom: GridGeom, x0: float, y0: float, x1: float, y1: float) ->
     return rows, cols
 
 
-def line_max(terrain: np.ndarray, geom: GridGeom, a: tuple[float, float], b: tuple[float, float]) -> int:
+def line_max(
+    terrain: np.ndarray, geom: GridGeom, a: tuple[float, float], b: tuple[float, float]
+) -> int:
     """Worst terrain code along the segment a-b."""
     rows, cols = segment_cells(geom, a[0], a[1], b[0], b[1])
     return int(terrain[rows, cols].max())
@@ -100,7 +110,9 @@ class NoPath(Exception):
     pass
 
 
-def astar(terrain: np.ndarray, start: tuple[int, int], goal: tuple[int, int], slow_cost: float) -> list[tuple[int, int]]:
+def astar(
+    terrain: np.ndarray, start: tuple[int, int], goal: tuple[int, int], slow_cost: float
+) -> list[tuple[int, int]]:
     """Cheapest 8-connected cell path (time-based costs: free 1, slow `slow_cost`,
     rock impassable; no corner cutting past rocks). Raises NoPath."""
     ny, nx = terrain.shape
@@ -248,7 +260,9 @@ def plan(
 
 
 def path_length(points: Sequence[tuple[float, float]]) -> float:
-    return sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(points, points[1:], strict=False))
+    return sum(
+        math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(points, points[1:], strict=False)
+    )
 
 
 class Follower:

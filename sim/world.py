@@ -29,11 +29,19 @@ T_UNKNOWN, T_FREE, T_SLOW, T_ROCK = 0, 1, 2, 3
 DEFAULT_MODELS: dict[str, RobotModel] = {
     "lru_science": RobotModel(kind="rover", capabilities=["science_camera", "stereo_camera"]),
     "lru_manipulator": RobotModel(
-        kind="rover", capabilities=["manipulator", "stereo_camera"], carry_stones=1, carry_stones_in_box=4
+        kind="rover",
+        capabilities=["manipulator", "stereo_camera"],
+        carry_stones=1,
+        carry_stones_in_box=4,
     ),
     "drone": RobotModel(
-        kind="drone", capabilities=["stereo_camera"], speed=2.0, max_speed=5.0, sensor_range=20.0,
-        nav_range=8.0, charge_per_minute=0.5,
+        kind="drone",
+        capabilities=["stereo_camera"],
+        speed=2.0,
+        max_speed=5.0,
+        sensor_range=20.0,
+        nav_range=8.0,
+        charge_per_minute=0.5,
     ),
     "lander": RobotModel(kind="static"),
 }
@@ -69,8 +77,15 @@ class Stone:
     identified_by: tuple[str, ...] = ()
 
     def public(self) -> dict[str, Any]:
-        return {"id": self.id, "rss": self.rss, "x": round(self.x, 2), "y": round(self.y, 2),
-                "score": self.score, "state": self.state, "holder": self.holder}
+        return {
+            "id": self.id,
+            "rss": self.rss,
+            "x": round(self.x, 2),
+            "y": round(self.y, 2),
+            "score": self.score,
+            "state": self.state,
+            "holder": self.holder,
+        }
 
 
 @dataclass
@@ -85,8 +100,16 @@ class BoxState:
     on: bool = False  # a deployed Wi-Fi box
 
     def public(self) -> dict[str, Any]:
-        return {"box": self.name, "kind": self.kind, "where": self.where, "slot": self.slot,
-                "x": round(self.x, 2), "y": round(self.y, 2), "holder": self.holder, "on": self.on}
+        return {
+            "box": self.name,
+            "kind": self.kind,
+            "where": self.where,
+            "slot": self.slot,
+            "x": round(self.x, 2),
+            "y": round(self.y, 2),
+            "holder": self.holder,
+            "on": self.on,
+        }
 
 
 @dataclass
@@ -164,8 +187,12 @@ class World:
         self.boxes: dict[str, BoxState] = {}
         for name, b in spec.boxes.items():
             self.boxes[name] = BoxState(
-                name, b.kind, b.at, b.slot if b.at == "shelf" else None,
-                b.x if b.x is not None else spec.lander.x, b.y if b.y is not None else spec.lander.y,
+                name,
+                b.kind,
+                b.at,
+                b.slot if b.at == "shelf" else None,
+                b.x if b.x is not None else spec.lander.x,
+                b.y if b.y is not None else spec.lander.y,
             )
         self.recompute_coverage()
         self.robots: dict[str, SimRobot] = {}
@@ -177,7 +204,9 @@ class World:
         # ground view of objects (what robots reported over the link)
         self.ground_rss: dict[str, dict[str, Any]] = {}
         self.ground_stones: dict[str, dict[str, Any]] = {}
-        self.ground_boxes: dict[str, dict[str, Any]] = {n: b.public() for n, b in self.boxes.items()}
+        self.ground_boxes: dict[str, dict[str, Any]] = {
+            n: b.public() for n, b in self.boxes.items()
+        }
         self.objects_version = 0
         self.slow_cost = 1.0 / spec.terrain.slow_factor
 
@@ -210,7 +239,7 @@ class World:
                     continue
                 # a blob: one to three overlapping discs
                 for k in range(int(rng.integers(1, 4))):
-                    ox, oy = (rng.normal(0, r * 0.5, 2) if k else (0.0, 0.0))
+                    ox, oy = rng.normal(0, r * 0.5, 2) if k else (0.0, 0.0)
                     rr = r * (1.0 if k == 0 else float(rng.uniform(0.5, 0.9)))
                     rows, cols, mask = g.disk(x + float(ox), y + float(oy), rr)
                     sub = t[rows, cols]
@@ -230,7 +259,9 @@ class World:
                 assert f.polygon is not None
                 t[g.polygon_mask([(p.x, p.y) for p in f.polygon])] = codes[f.kind]
         # the lander's surroundings are always drivable
-        rows, cols, mask = g.disk(self.spec.lander.x, self.spec.lander.y, self.spec.lander.pad_radius + 3.0)
+        rows, cols, mask = g.disk(
+            self.spec.lander.x, self.spec.lander.y, self.spec.lander.pad_radius + 3.0
+        )
         t[rows, cols][mask] = FREE
         self._connect(t, clear)
         return t
@@ -269,8 +300,8 @@ class World:
                     f = k / n
                     i, j = g.cell_of(cx + (lx - cx) * f, cy + (ly - cy) * f)
                     if t[i, j] == ROCK:
-                        t[max(i - 1, 0):i + 2, max(j - 1, 0):j + 2][
-                            t[max(i - 1, 0):i + 2, max(j - 1, 0):j + 2] == ROCK
+                        t[max(i - 1, 0) : i + 2, max(j - 1, 0) : j + 2][
+                            t[max(i - 1, 0) : i + 2, max(j - 1, 0) : j + 2] == ROCK
                         ] = SLOW
                 carved = True
         if carved:
@@ -295,7 +326,9 @@ class World:
 
     # ------------------------------------------------------------ robots
 
-    def add_robot(self, name: str, robot_type: str, start: RobotStart | None = None, index: int = 0) -> SimRobot:
+    def add_robot(
+        self, name: str, robot_type: str, start: RobotStart | None = None, index: int = 0
+    ) -> SimRobot:
         model = self.models.get(robot_type)
         if model is None:
             raise SimError(
@@ -306,12 +339,16 @@ class World:
             start = self.spec.robots.get(name)
         if start is None:
             start = self._spawn(index)
-        robot = SimRobot(name, robot_type, model, x=start.x, y=start.y, yaw=start.yaw, battery=start.battery)
+        robot = SimRobot(
+            name, robot_type, model, x=start.x, y=start.y, yaw=start.yaw, battery=start.battery
+        )
         robot.pending_cells = np.zeros(self.geom.shape, dtype=bool)
         if model.kind == "static":
             robot.battery = 1.0
         # every robot starts knowing the lander's boxes (it is the shared landmark)
-        robot.knowledge.boxes = {n: b.public() for n, b in self.boxes.items() if b.where in ("shelf", "ground")}
+        robot.knowledge.boxes = {
+            n: b.public() for n, b in self.boxes.items() if b.where in ("shelf", "ground")
+        }
         self.robots[name] = robot
         return robot
 
@@ -444,14 +481,18 @@ class World:
         self.ground_explored.ravel()[cells] = True
 
     def _ground_object(self, kind: str, key: str, value: dict[str, Any] | None) -> None:
-        table = {"rss": self.ground_rss, "stone": self.ground_stones, "box": self.ground_boxes}[kind]
+        table = {"rss": self.ground_rss, "stone": self.ground_stones, "box": self.ground_boxes}[
+            kind
+        ]
         if value is None:
             table.pop(key, None)
         else:
             table[key] = dict(value)
         self.objects_version += 1
 
-    def tell_ground(self, robot: SimRobot, kind: str, key: str, value: dict[str, Any] | None) -> None:
+    def tell_ground(
+        self, robot: SimRobot, kind: str, key: str, value: dict[str, Any] | None
+    ) -> None:
         value = dict(value) if value is not None else None
         self.uplink(robot, lambda: self._ground_object(kind, key, value))
 
@@ -477,7 +518,13 @@ class World:
                 continue
             if math.hypot(robot.x - rss.x, robot.y - rss.y) <= r + rss.radius * 0.5:
                 rss.found_by.add(robot.name)
-                info = {"rss": rss.name, "x": rss.x, "y": rss.y, "radius": rss.radius, "top_score": None}
+                info = {
+                    "rss": rss.name,
+                    "x": rss.x,
+                    "y": rss.y,
+                    "radius": rss.radius,
+                    "top_score": None,
+                }
                 known = robot.knowledge.rss.get(rss.name)
                 if known is not None:
                     info["top_score"] = known.get("top_score")
@@ -541,13 +588,20 @@ class World:
 
     def ground_layers(self) -> dict[str, np.ndarray]:
         terrain = np.where(self.ground_explored, self.terrain + 1, T_UNKNOWN).astype(np.uint8)
-        cov = np.where(self.coverage > 0, np.maximum(1, np.rint(self.coverage * 255)), 0).astype(np.uint8)
+        cov = np.where(self.coverage > 0, np.maximum(1, np.rint(self.coverage * 255)), 0).astype(
+            np.uint8
+        )
         return {"terrain": terrain, "coverage": cov}
 
     def ground_objects(self) -> dict[str, Any]:
         lander = self.spec.lander
         return {
-            "lander": {"x": lander.x, "y": lander.y, "pad_radius": lander.pad_radius, "comm_radius": lander.comm_radius},
+            "lander": {
+                "x": lander.x,
+                "y": lander.y,
+                "pad_radius": lander.pad_radius,
+                "comm_radius": lander.comm_radius,
+            },
             "boxes": [dict(v) for _k, v in sorted(self.ground_boxes.items())],
             "rss": [dict(v) for _k, v in sorted(self.ground_rss.items())],
             "stones": [dict(v) for _k, v in sorted(self.ground_stones.items())],

@@ -39,14 +39,18 @@ class Site(Strict):
             raise ValueError("the site is empty: x_max/y_max must be greater than x_min/y_min")
         cells = ((self.x_max - self.x_min) / self.cell) * ((self.y_max - self.y_min) / self.cell)
         if cells > 4_000_000:
-            raise ValueError(f"the grid would have {cells:,.0f} cells (at most 4,000,000): use a larger cell")
+            raise ValueError(
+                f"the grid would have {cells:,.0f} cells (at most 4,000,000): use a larger cell"
+            )
         return self
 
 
 class Lander(Strict):
     x: float = 0.0
     y: float = 0.0
-    pad_radius: float = Field(5.0, gt=0, description="robots this close are at the lander (dock, shelf, pad)")
+    pad_radius: float = Field(
+        5.0, gt=0, description="robots this close are at the lander (dock, shelf, pad)"
+    )
     comm_radius: float = Field(60.0, gt=0, description="radius of the lander's Wi-Fi coverage")
     shelf_slots: int = Field(4, ge=1, le=16)
 
@@ -94,8 +98,12 @@ class Scatter(Strict):
 class Terrain(Strict):
     rock_fields: Scatter = Field(default_factory=lambda: Scatter(count=30, radius=(3.0, 8.0)))
     sand_patches: Scatter = Field(default_factory=lambda: Scatter(count=25, radius=(6.0, 16.0)))
-    slow_factor: float = Field(0.4, gt=0.0, le=1.0, description="speed factor on slow (sandy) cells")
-    slow_energy: float = Field(1.8, ge=1.0, le=10.0, description="energy factor per metre on slow cells")
+    slow_factor: float = Field(
+        0.4, gt=0.0, le=1.0, description="speed factor on slow (sandy) cells"
+    )
+    slow_energy: float = Field(
+        1.8, ge=1.0, le=10.0, description="energy factor per metre on slow cells"
+    )
     features: list[Feature] = Field(default_factory=list)
     keep_clear: list[Circle] = Field(
         default_factory=list,
@@ -135,18 +143,37 @@ class RobotModel(Strict):
 
     kind: Literal["rover", "drone", "static"]
     description: str = ""
-    capabilities: list[str] = Field(default_factory=list, description="science_camera, manipulator, ...")
+    capabilities: list[str] = Field(
+        default_factory=list, description="science_camera, manipulator, ..."
+    )
     speed: float = Field(0.5, gt=0, le=30, description="default cruise speed, m/s")
     max_speed: float = Field(1.0, gt=0, le=30)
-    sensor_range: float = Field(10.0, gt=0, le=200, description="explore sensor range, m (drone: per m of altitude x 4, capped)")
+    sensor_range: float = Field(
+        10.0,
+        gt=0,
+        le=200,
+        description="explore sensor range, m (drone: per m of altitude x 4, capped)",
+    )
     nav_range: float = Field(4.0, ge=0, le=50, description="terrain mapped while driving, m")
-    metres_per_battery: float = Field(1000.0, gt=0, description="rover: metres on free ground per full battery")
-    flight_s_per_battery: float = Field(600.0, gt=0, description="drone: seconds airborne per full battery")
-    work_per_hour: float = Field(0.3, ge=0, le=10, description="battery fraction per hour of work (arm, camera, computing)")
-    charge_per_minute: float = Field(0.25, gt=0, le=10, description="battery fraction per minute at the lander")
-    reserve: float = Field(0.05, ge=0, lt=0.5, description="battery kept back: 'empty' means down to this")
+    metres_per_battery: float = Field(
+        1000.0, gt=0, description="rover: metres on free ground per full battery"
+    )
+    flight_s_per_battery: float = Field(
+        600.0, gt=0, description="drone: seconds airborne per full battery"
+    )
+    work_per_hour: float = Field(
+        0.3, ge=0, le=10, description="battery fraction per hour of work (arm, camera, computing)"
+    )
+    charge_per_minute: float = Field(
+        0.25, gt=0, le=10, description="battery fraction per minute at the lander"
+    )
+    reserve: float = Field(
+        0.05, ge=0, lt=0.5, description="battery kept back: 'empty' means down to this"
+    )
     carry_stones: int = Field(0, ge=0, le=10, description="stones held without a sample box")
-    carry_stones_in_box: int = Field(0, ge=0, le=50, description="stones held in a carried sample box")
+    carry_stones_in_box: int = Field(
+        0, ge=0, le=50, description="stones held in a carried sample box"
+    )
 
 
 class RobotStart(Strict):
@@ -158,12 +185,18 @@ class RobotStart(Strict):
 
 class Comms(Strict):
     wifi_range: float = Field(45.0, gt=0, description="coverage radius of a deployed Wi-Fi box")
-    direct_range: float = Field(30.0, ge=0, description="robots this close talk to each other without coverage")
+    direct_range: float = Field(
+        30.0, ge=0, description="robots this close talk to each other without coverage"
+    )
 
 
 class Scoring(Strict):
-    min_score: float = Field(0.1, gt=0, description="score of a stone identified without LRU1 and LRU2 together")
-    collab_range: float = Field(12.0, gt=0, description="both identifiers within this distance of the target")
+    min_score: float = Field(
+        0.1, gt=0, description="score of a stone identified without LRU1 and LRU2 together"
+    )
+    collab_range: float = Field(
+        12.0, gt=0, description="both identifiers within this distance of the target"
+    )
 
 
 class WorldFile(Strict):
@@ -191,7 +224,9 @@ def check_world(w: WorldFile) -> list[tuple[tuple[str | int, ...], str]]:
     out: list[tuple[tuple[str | int, ...], str]] = []
     s = w.site
     if not _inside(s, w.lander.x, w.lander.y):
-        out.append((("lander",), f"the lander ({w.lander.x:g}, {w.lander.y:g}) is outside the site"))
+        out.append(
+            (("lander",), f"the lander ({w.lander.x:g}, {w.lander.y:g}) is outside the site")
+        )
     names: set[str] = set()
     for i, r in enumerate(w.rss):
         if r.name in names:
@@ -203,15 +238,27 @@ def check_world(w: WorldFile) -> list[tuple[tuple[str | int, ...], str]]:
     for name, b in w.boxes.items():
         if b.at == "shelf" and b.slot is not None:
             if b.slot > w.lander.shelf_slots:
-                out.append((("boxes", name, "slot"), f"slot {b.slot} does not exist (the shelf has {w.lander.shelf_slots})"))
+                out.append(
+                    (
+                        ("boxes", name, "slot"),
+                        f"slot {b.slot} does not exist (the shelf has {w.lander.shelf_slots})",
+                    )
+                )
             elif b.slot in slots:
-                out.append((("boxes", name, "slot"), f"slot {b.slot} already holds {slots[b.slot]}"))
+                out.append(
+                    (("boxes", name, "slot"), f"slot {b.slot} already holds {slots[b.slot]}")
+                )
             slots[b.slot] = name
         if b.at == "ground" and b.x is not None and b.y is not None and not _inside(s, b.x, b.y):
             out.append((("boxes", name), "the box lies outside the site"))
     for name, m in w.models.items():
         if m.speed > m.max_speed:
-            out.append((("models", name, "speed"), f"cruise speed {m.speed:g} is above max_speed {m.max_speed:g}"))
+            out.append(
+                (
+                    ("models", name, "speed"),
+                    f"cruise speed {m.speed:g} is above max_speed {m.max_speed:g}",
+                )
+            )
     for name, r in w.robots.items():
         if not _inside(s, r.x, r.y):
             out.append((("robots", name), f"start ({r.x:g}, {r.y:g}) is outside the site"))
@@ -225,7 +272,9 @@ def parse_world(text: str, file: str = "<world>") -> WorldFile:
     except yamlio.YamlSyntaxError as e:
         raise FileProblems([Issue(file, e.path, e.message, e.line, e.col)]) from None
     if not isinstance(doc.data, dict):
-        raise FileProblems([Issue(file, (), "expected a YAML mapping at the top of the file", 1, 1)])
+        raise FileProblems(
+            [Issue(file, (), "expected a YAML mapping at the top of the file", 1, 1)]
+        )
     issues = duplicate_issues(file, doc)
     try:
         world = WorldFile.model_validate(doc.data)
@@ -248,7 +297,9 @@ def load_world(path: str | Path) -> WorldFile:
     except IsADirectoryError:
         raise FileProblems([Issue(str(p), (), "is a directory, not a file")]) from None
     except UnicodeDecodeError as e:
-        raise FileProblems([Issue(str(p), (), f"not UTF-8 text ({e.reason} at byte {e.start})")]) from None
+        raise FileProblems(
+            [Issue(str(p), (), f"not UTF-8 text ({e.reason} at byte {e.start})")]
+        ) from None
     except OSError as e:
         raise FileProblems([Issue(str(p), (), f"cannot read: {e.strerror}")]) from None
     return parse_world(text, str(p))

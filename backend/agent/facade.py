@@ -117,7 +117,9 @@ from backend.protocol.messages import (
 )
 from backend.transport.login import Login
 
-log = logging.getLogger("backend.agent")  # the SDK's logger name is public (integrators configure it)
+log = logging.getLogger(
+    "backend.agent"
+)  # the SDK's logger name is public (integrators configure it)
 
 _COMMAND = TypeAdapter(Command)
 _SEMVER = re.compile(VERSION_PATTERN)  # what a library's skill version may be
@@ -310,7 +312,9 @@ def _coroutine_only(method: Callable[..., Any]) -> Callable[..., Any]:
 class SkillContext:
     """What a handler gets as its first argument."""
 
-    def __init__(self, agent: RobotAgent, act: _Active, params: dict[str, Any], purpose: str = "skill"):
+    def __init__(
+        self, agent: RobotAgent, act: _Active, params: dict[str, Any], purpose: str = "skill"
+    ):
         self.agent = agent
         self._act = act
         self.skill: SkillInstance = act.entry.skill
@@ -424,7 +428,9 @@ class SkillContext:
 
     # -- world -------------------------------------------------------------------
     @_coroutine_only
-    async def ask(self, robot: str, topic: str, data: dict[str, Any] | None = None) -> dict[str, Any] | None:
+    async def ask(
+        self, robot: str, topic: str, data: dict[str, Any] | None = None
+    ) -> dict[str, Any] | None:
         return await self.agent.ask(robot, topic, data)
 
     @_coroutine_only
@@ -462,7 +468,9 @@ class RobotAgent:
         for module, version in self.modules.items():
             _check_name(f"robot {name}: module", module)
             if not isinstance(version, str) or not _MODULE_VERSION.match(version):
-                raise ValueError(f"robot {name}: module {module} version {version!r} is not SemVer (like 2.1.0)")
+                raise ValueError(
+                    f"robot {name}: module {module} version {version!r} is not SemVer (like 2.1.0)"
+                )
         self.properties = dict(properties or {})
         self.lease_ms = lease_ms
         # an account (robot role) and TLS files: see docs/security.md
@@ -480,8 +488,14 @@ class RobotAgent:
         self._ask_handlers: dict[str, Callable[..., Any]] = {}
         self._tell_handlers: dict[str, Callable[..., Any]] = {}
         # asks/tells that got no answer (unknown robot, out of reach, timeout) count as failed
-        self.world_stats = {"asks_sent": 0, "tells_sent": 0, "asks_failed": 0, "tells_failed": 0,
-                            "asks_received": 0, "tells_received": 0}
+        self.world_stats = {
+            "asks_sent": 0,
+            "tells_sent": 0,
+            "asks_failed": 0,
+            "tells_failed": 0,
+            "asks_received": 0,
+            "tells_received": 0,
+        }
         # called with every Report as it is made (simulator, logs, tests)
         self.report_listeners: list[Callable[[Report], object]] = []
 
@@ -536,7 +550,7 @@ class RobotAgent:
         parameter values unconverted."""
         if not isinstance(name, str):  # `@agent.skill` without (): would register nothing
             raise TypeError(
-                f"robot {self.name}: write @agent.skill(\"NAME\", version=\"1.0.0\"), with the skill's "
+                f'robot {self.name}: write @agent.skill("NAME", version="1.0.0"), with the skill\'s '
                 f"name, above {getattr(name, '__name__', name)!r}"
             )
 
@@ -546,7 +560,9 @@ class RobotAgent:
 
         return register
 
-    def add_skill(self, name: str, fn: Callable[..., Any], *, version: str = "1.0.0", raw: bool = False) -> None:
+    def add_skill(
+        self, name: str, fn: Callable[..., Any], *, version: str = "1.0.0", raw: bool = False
+    ) -> None:
         """Register `fn(ctx, **params)` as the handler of skill `name` (see `skill`).
         Before `start()`: the manifest listing the skills is sent then."""
         _check_name(f"robot {self.name}: skill name", name)
@@ -554,15 +570,23 @@ class RobotAgent:
         if not isinstance(version, str) or not _SEMVER.match(version):
             raise ValueError(f"{where}: version {version!r} is not SemVer (like 1.2.0)")
         if not callable(fn):
-            raise TypeError(f"{where}: the handler must be a function or coroutine function, not {type(fn).__name__}")
+            raise TypeError(
+                f"{where}: the handler must be a function or coroutine function, not {type(fn).__name__}"
+            )
         if not _takes_ctx(fn):
-            raise TypeError(f"{where}: the handler must take the SkillContext as its first argument, "
-                            f"like def {getattr(fn, '__name__', 'handler')}(ctx, **params)")
+            raise TypeError(
+                f"{where}: the handler must take the SkillContext as its first argument, "
+                f"like def {getattr(fn, '__name__', 'handler')}(ctx, **params)"
+            )
         if name in self._handlers:
-            raise ValueError(f"{where}: a handler is registered already "
-                             f"({getattr(self._handlers[name].fn, '__name__', '?')}); register each skill once")
+            raise ValueError(
+                f"{where}: a handler is registered already "
+                f"({getattr(self._handlers[name].fn, '__name__', '?')}); register each skill once"
+            )
         if self._session is not None:
-            raise RuntimeError(f"{where}: register skills before start(); the manifest was sent without it")
+            raise RuntimeError(
+                f"{where}: register skills before start(); the manifest was sent without it"
+            )
         self._handlers[name] = _Handler(fn, version, raw)
 
     def on_ask(self, topic: str, fn: Callable[..., Any]) -> None:
@@ -574,11 +598,14 @@ class RobotAgent:
         """`fn(data, sender)` (or a coroutine) receives tells on `topic`."""
         self._add_world_handler("on_tell", self._tell_handlers, topic, fn)
 
-    def _add_world_handler(self, kind: str, table: dict[str, Callable[..., Any]], topic: str,
-                           fn: Callable[..., Any]) -> None:
+    def _add_world_handler(
+        self, kind: str, table: dict[str, Callable[..., Any]], topic: str, fn: Callable[..., Any]
+    ) -> None:
         where = f"robot {self.name}, {kind} {topic!r}"
         if not callable(fn):
-            raise TypeError(f"{where}: the handler must be a function fn(data, sender), not {type(fn).__name__}")
+            raise TypeError(
+                f"{where}: the handler must be a function fn(data, sender), not {type(fn).__name__}"
+            )
         if topic in table:
             raise ValueError(f"{where}: a handler is registered already; register each topic once")
         table[topic] = fn
@@ -597,10 +624,14 @@ class RobotAgent:
         try:
             return dumps(self.manifest())
         except ValidationError as exc:
-            raise ValueError(f"robot {self.name}: the manifest is not valid: {first_error(exc)}") from None
+            raise ValueError(
+                f"robot {self.name}: the manifest is not valid: {first_error(exc)}"
+            ) from None
         except Exception as exc:  # properties pydantic cannot write as JSON
-            raise ValueError(f"robot {self.name}: the manifest cannot be written as JSON "
-                             f"(properties must be JSON values): {exc}") from None
+            raise ValueError(
+                f"robot {self.name}: the manifest cannot be written as JSON "
+                f"(properties must be JSON values): {exc}"
+            ) from None
 
     # ------------------------------------------------------------ introspection
 
@@ -626,7 +657,9 @@ class RobotAgent:
         return self._registered
 
     def _not_started(self) -> RuntimeError:
-        return RuntimeError(f"agent {self.name} is not started: call start() (or use async with) first")
+        return RuntimeError(
+            f"agent {self.name} is not started: call start() (or use async with) first"
+        )
 
     async def wait_acknowledged(self, timeout: float | None = None) -> None:
         """Return once the server acknowledged every report made so far
@@ -656,7 +689,9 @@ class RobotAgent:
                 why = "the robot is out of communication range (agent.link)"
             else:
                 why = f"the server did not accept the registration ({self._register_error or 'no answer yet'})"
-            raise TimeoutError(f"robot {self.name} not registered within {timeout:g} s: {why}") from None
+            raise TimeoutError(
+                f"robot {self.name} not registered within {timeout:g} s: {why}"
+            ) from None
         if self._refused is not None and not self._registered:
             raise RegistrationRefused(self._refused)
 
@@ -685,7 +720,9 @@ class RobotAgent:
         self._registered_evt = asyncio.Event()
         self._acked_evt = asyncio.Event()
         self._in_range = self._link_in_range()
-        config = transport.client_config(self.connect, lease_ms=self.lease_ms, extra=self.zenoh_extra)
+        config = transport.client_config(
+            self.connect, lease_ms=self.lease_ms, extra=self.zenoh_extra
+        )
         session = transport.open_session(config, what=f"the router (for robot {self.name})")
         self._session = session
         try:
@@ -697,8 +734,12 @@ class RobotAgent:
                     f"first; a killed one is gone at once, a hung one after its lease ({self.lease_ms} ms)"
                 )
             # Queryables first: once the server sees our token, commands must work.
-            self._entities.append(transport.serve_async(session, Keys.command(self.name), self._on_command))
-            self._entities.append(transport.serve_async(session, Keys.world(self.name), self._on_world))
+            self._entities.append(
+                transport.serve_async(session, Keys.command(self.name), self._on_command)
+            )
+            self._entities.append(
+                transport.serve_async(session, Keys.world(self.name), self._on_world)
+            )
             self._publisher = transport.declare_publisher(session, Keys.telemetry(self.name))
             self._token = transport.declare_token(session, Keys.alive(self.name))
             self._tasks = [
@@ -715,7 +756,9 @@ class RobotAgent:
             # Last: this may (re)register at once.
             self._entities.append(
                 transport.watch_liveliness(
-                    session, Keys.SERVER_ALIVE, lambda _key, alive: self._post(self._on_server, alive)
+                    session,
+                    Keys.SERVER_ALIVE,
+                    lambda _key, alive: self._post(self._on_server, alive),
                 )
             )
         except BaseException:
@@ -749,7 +792,11 @@ class RobotAgent:
         if tasks:
             _done, pending = await asyncio.wait(tasks, timeout=2.0)
             if pending:
-                log.warning("%s: tasks still running at stop: %s", self.name, [t.get_name() for t in pending])
+                log.warning(
+                    "%s: tasks still running at stop: %s",
+                    self.name,
+                    [t.get_name() for t in pending],
+                )
         self._tasks = []
         if self._outbox and self._registered and self._link_in_range():
             try:
@@ -782,8 +829,11 @@ class RobotAgent:
         try:
             return bool(self.link.in_range())
         except Exception as exc:  # polled 20 times a second: said once
-            self._say_once("link.in_range", f"agent.link.in_range() failed ({type(exc).__name__}: {exc}); "
-                           "assuming in range", exc_info=True)
+            self._say_once(
+                "link.in_range",
+                f"agent.link.in_range() failed ({type(exc).__name__}: {exc}); assuming in range",
+                exc_info=True,
+            )
             return True
 
     async def _delay(self) -> None:
@@ -799,7 +849,9 @@ class RobotAgent:
         if change.connected:
             log.info("%s: connected to %s %s", self.name, change.whatami, change.zid)
         else:
-            log.warning("%s: lost the link to %s %s; reconnecting", self.name, change.whatami, change.zid)
+            log.warning(
+                "%s: lost the link to %s %s; reconnecting", self.name, change.whatami, change.zid
+            )
 
     def _on_server(self, alive: bool) -> None:
         self._server_up = alive
@@ -833,8 +885,12 @@ class RobotAgent:
                 # the router's access control dropped the query
                 if not getattr(self, "_warned_unanswered", False):  # once, not every retry
                     self._warned_unanswered = True
-                    log.warning("%s: the server is up but %s gets no answer: does the robot account "
-                                "(--user) list this robot? retrying", self.name, Keys.register(self.name))
+                    log.warning(
+                        "%s: the server is up but %s gets no answer: does the robot account "
+                        "(--user) list this robot? retrying",
+                        self.name,
+                        Keys.register(self.name),
+                    )
                 assert self._loop is not None
                 self._loop.call_later(_RETRY_S, self._register_wake.set)
             except Exception as exc:
@@ -846,7 +902,9 @@ class RobotAgent:
     async def _register_once(self) -> None:
         assert self._session is not None
         await self._delay()
-        request = Register(manifest=self.manifest(), queue=self._queue_entries(), reports=list(self._outbox))
+        request = Register(
+            manifest=self.manifest(), queue=self._queue_entries(), reports=list(self._outbox)
+        )
         raw = await transport.query(
             self._session, Keys.register(self.name), dumps(request), timeout=self.request_timeout
         )
@@ -865,13 +923,16 @@ class RobotAgent:
             # unacknowledged ones after it (none of them can have been applied,
             # as the server never saw a number this high from us).
             self._outbox = [
-                r.model_copy(update={"seq": reply.last_seq + 1 + i}) for i, r in enumerate(self._outbox)
+                r.model_copy(update={"seq": reply.last_seq + 1 + i})
+                for i, r in enumerate(self._outbox)
             ]
             self._seq = reply.last_seq + len(self._outbox)
         else:
             self._ack(reply.last_seq)
         if reply.missing:
-            log.warning("%s: the server holds skills this robot does not know: %s", self.name, reply.missing)
+            log.warning(
+                "%s: the server holds skills this robot does not know: %s", self.name, reply.missing
+            )
         self._registered = True
         assert self._registered_evt is not None
         self._registered_evt.set()
@@ -977,7 +1038,9 @@ class RobotAgent:
         if info:
             self._info = info
 
-    def _say_once(self, key: str, text: str, *, level: int = logging.ERROR, exc_info: bool = False) -> None:
+    def _say_once(
+        self, key: str, text: str, *, level: int = logging.ERROR, exc_info: bool = False
+    ) -> None:
         """Log an integrator's mistake that would otherwise repeat several times a second."""
         if key not in self._said:
             self._said.add(key)
@@ -985,7 +1048,9 @@ class RobotAgent:
 
     def _source_failed(self, what: str, problem: str) -> None:
         """A telemetry source failed: the telemetry goes on with a default."""
-        self._say_once(f"source {what}", f"{problem}; telemetry sends a default instead", exc_info=True)
+        self._say_once(
+            f"source {what}", f"{problem}; telemetry sends a default instead", exc_info=True
+        )
 
     def telemetry(self) -> Telemetry:
         # An integrator's source must never break a command reply or a report
@@ -995,17 +1060,24 @@ class RobotAgent:
             if not isinstance(pose, Pose):
                 pose = Pose.model_validate(pose)  # a dict of pose fields will do
         except Exception as exc:
-            self._source_failed("pose", f"agent.pose() must return a backend.core.model.Pose: {type(exc).__name__}: {exc}")
+            self._source_failed(
+                "pose",
+                f"agent.pose() must return a backend.core.model.Pose: {type(exc).__name__}: {exc}",
+            )
             pose = Pose()
         try:
             battery = min(1.0, max(0.0, float(self.battery())))
         except Exception as exc:
-            self._source_failed("battery", f"agent.battery() must return a number 0..1: {type(exc).__name__}: {exc}")
+            self._source_failed(
+                "battery", f"agent.battery() must return a number 0..1: {type(exc).__name__}: {exc}"
+            )
             battery = 0.0
         try:
             quality = min(1.0, max(0.0, float(getattr(self.link, "quality", 1.0))))
         except Exception as exc:
-            self._source_failed("link", f"agent.link.quality must be a number 0..1: {type(exc).__name__}: {exc}")
+            self._source_failed(
+                "link", f"agent.link.quality must be a number 0..1: {type(exc).__name__}: {exc}"
+            )
             quality = 0.0
         act = self._active
         in_range = self._link_in_range()
@@ -1099,7 +1171,13 @@ class RobotAgent:
             cmd = _COMMAND.validate_json(payload)
         except ValidationError as exc:
             raise transport.Refusal(
-                dumps(ErrorReply(code="bad_request", message=f"{self.name} cannot read the command: {exc}", robot=self.name))
+                dumps(
+                    ErrorReply(
+                        code="bad_request",
+                        message=f"{self.name} cannot read the command: {exc}",
+                        robot=self.name,
+                    )
+                )
             ) from None
         # Everything below is synchronous: no other command or skill step
         # interleaves, and the reply carries every report made so far.
@@ -1116,7 +1194,9 @@ class RobotAgent:
         elif isinstance(cmd, Reset):
             reply = self._cmd_reset()
         else:  # pragma: no cover - the discriminated union is exhaustive
-            raise transport.Refusal(dumps(ErrorReply(code="bad_request", message="unknown command")))
+            raise transport.Refusal(
+                dumps(ErrorReply(code="bad_request", message="unknown command"))
+            )
         self._update_mode()
         self._publish_telemetry()
         reply.reports = list(self._outbox)
@@ -1166,7 +1246,11 @@ class RobotAgent:
         self._queue = [e for e in self._queue if e.id not in wanted]
         # Started meanwhile (active or finished): the unsync race; the server
         # learns their status from the reports attached to this reply.
-        kept = [i for i in cmd.ids if i in self._done or (self._active is not None and self._active.entry.id == i)]
+        kept = [
+            i
+            for i in cmd.ids
+            if i in self._done or (self._active is not None and self._active.entry.id == i)
+        ]
         # Ids we never had cannot run either: report them as removed.
         removed += [i for i in cmd.ids if i not in removed and i not in kept]
         return CommandReply(ids=removed, kept=kept)
@@ -1182,7 +1266,9 @@ class RobotAgent:
             return CommandReply()
         if act is None and not self._queue:
             # Stays in run mode: skills synchronized later start at once.
-            return CommandReply(reason=f"{self.name} has nothing queued; it will run what is synchronized next")
+            return CommandReply(
+                reason=f"{self.name} has nothing queued; it will run what is synchronized next"
+            )
         self._kick()
         return CommandReply()
 
@@ -1225,7 +1311,12 @@ class RobotAgent:
 
     def _kick(self) -> None:
         """Start the next queued skill if running and idle."""
-        if not self._run_enabled or self._active is not None or not self._queue or self._session is None:
+        if (
+            not self._run_enabled
+            or self._active is not None
+            or not self._queue
+            or self._session is None
+        ):
             return
         entry = self._queue.pop(0)
         act = _Active(entry)
@@ -1233,7 +1324,9 @@ class RobotAgent:
         self._progress = None
         self._eta = None
         self._update_mode()
-        act.task = asyncio.get_running_loop().create_task(self._execute(act), name=f"{self.name}-{entry.id}")
+        act.task = asyncio.get_running_loop().create_task(
+            self._execute(act), name=f"{self.name}-{entry.id}"
+        )
 
     def _stop_active(self, info: str) -> _Entry:
         """Stop the active skill now (synchronously): handler cancelled, barrier
@@ -1254,7 +1347,11 @@ class RobotAgent:
             act.resumed_t.set()
             # not the task we run in: a handler calling `await agent.stop()` would
             # be cancelled inside stop(), before the session is closed
-            if act.task is not None and not act.task.done() and act.task is not asyncio.current_task():
+            if (
+                act.task is not None
+                and not act.task.done()
+                and act.task is not asyncio.current_task()
+            ):
                 act.task.cancel()
         for entity in act.barrier_entities:
             try:
@@ -1332,7 +1429,11 @@ class RobotAgent:
         """policies.recharge_below: run the `recharge` handler first when the
         battery is low. Returns a failure reason, or None."""
         threshold = act.entry.skill.policies.recharge_below
-        if threshold is None or "recharge" not in self._handlers or act.entry.skill.skill == "recharge":
+        if (
+            threshold is None
+            or "recharge" not in self._handlers
+            or act.entry.skill.skill == "recharge"
+        ):
             return None
         try:
             level = float(self.battery())
@@ -1344,7 +1445,9 @@ class RobotAgent:
         # Report it under the skill's own status: synchwaiting for a barrier skill
         # (it is not ready yet), running otherwise.
         status = Status.SYNCHWAITING if act.entry.barrier is not None else Status.RUNNING
-        self._report(act.entry, status, f"recharging first: battery {level:.0%} below {threshold:.0%}")
+        self._report(
+            act.entry, status, f"recharging first: battery {level:.0%} below {threshold:.0%}"
+        )
         reason = await self._call_handler(act, purpose="recharge")
         if reason is not None:
             return f"recharge before the skill failed: {reason}"
@@ -1366,8 +1469,12 @@ class RobotAgent:
         if straggler is not None and not straggler.done():
             # A plain-function handler that ignored a stop still runs in its
             # thread: two handlers would drive the robot at once.
-            log.warning("%s: the handler of the stopped skill has not returned (it never calls ctx.check()); "
-                        "%s waits for it before starting", self.name, act.entry.id)
+            log.warning(
+                "%s: the handler of the stopped skill has not returned (it never calls ctx.check()); "
+                "%s waits for it before starting",
+                self.name,
+                act.entry.id,
+            )
             self._set_progress(act, 0.0, "waiting for the stopped skill's handler to return", None)
             await asyncio.shield(straggler)
         try:
@@ -1388,7 +1495,9 @@ class RobotAgent:
             return "the handler was cancelled"
         except Exception as exc:
             # a bug in the handler: the operator gets one line, the robot's log the traceback
-            log.error("%s: the handler of %s (%s) raised", self.name, act.entry.id, name, exc_info=True)
+            log.error(
+                "%s: the handler of %s (%s) raised", self.name, act.entry.id, name, exc_info=True
+            )
             return f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
         if isinstance(result, Failure):
             return str(result.reason) or "skill failed"
@@ -1448,7 +1557,9 @@ class RobotAgent:
                 lambda key, alive: self._post(on_ready, key, alive),
             )
         )
-        act.barrier_token = transport.declare_token(session, Keys.barrier_ready(info.barrier, self.name))
+        act.barrier_token = transport.declare_token(
+            session, Keys.barrier_ready(info.barrier, self.name)
+        )
         for p in partners:
             act.barrier_entities.append(
                 transport.watch_liveliness(
@@ -1488,7 +1599,12 @@ class RobotAgent:
             msg = WorldMessage.model_validate_json(payload)
         except ValidationError as exc:
             raise transport.Refusal(
-                dumps(ErrorReply(code="bad_request", message=f"{self.name} cannot read the world message: {exc}"))
+                dumps(
+                    ErrorReply(
+                        code="bad_request",
+                        message=f"{self.name} cannot read the world message: {exc}",
+                    )
+                )
             ) from None
         if msg.kind == "ask":
             self.world_stats["asks_received"] += 1
@@ -1498,7 +1614,8 @@ class RobotAgent:
                 return dumps(WorldReply(known=False))
             if not isinstance(data, dict):
                 raise self._world_refusal(
-                    msg, f"its on_ask handler returned a {type(data).__name__}; it must return a dict or None"
+                    msg,
+                    f"its on_ask handler returned a {type(data).__name__}; it must return a dict or None",
                 )
             return dumps(WorldReply(known=True, data=data))
         self.world_stats["tells_received"] += 1
@@ -1511,28 +1628,42 @@ class RobotAgent:
         try:
             return await _maybe_await(fn(msg.data, msg.sender))
         except Exception as exc:
-            raise self._world_refusal(msg, f"its {kind} handler raised {type(exc).__name__}: {exc}", trace=True) from None
+            raise self._world_refusal(
+                msg, f"its {kind} handler raised {type(exc).__name__}: {exc}", trace=True
+            ) from None
 
-    def _world_refusal(self, msg: WorldMessage, problem: str, trace: bool = False) -> transport.Refusal:
+    def _world_refusal(
+        self, msg: WorldMessage, problem: str, trace: bool = False
+    ) -> transport.Refusal:
         """Logged here; the asker's `ask`/`tell` fails (None/False) and its log says why."""
         text = f"{self.name} cannot answer {msg.kind} {msg.topic!r} from {msg.sender}: {problem}"
         log.error("%s", text, exc_info=trace)
-        return transport.Refusal(dumps(ErrorReply(code="robot_error", message=text, robot=self.name)))
+        return transport.Refusal(
+            dumps(ErrorReply(code="robot_error", message=text, robot=self.name))
+        )
 
-    async def _world_query(self, robot: str, kind: str, topic: str, data: dict[str, Any] | None) -> WorldReply | None:
+    async def _world_query(
+        self, robot: str, kind: str, topic: str, data: dict[str, Any] | None
+    ) -> WorldReply | None:
         if self._session is None:
             raise self._not_started()
         msg = WorldMessage(kind=kind, sender=self.name, topic=topic, data=dict(data or {}))  # type: ignore[arg-type]
         try:
-            reachable = bool(self.link.can_reach(robot)) if hasattr(self.link, "can_reach") else True
+            reachable = (
+                bool(self.link.can_reach(robot)) if hasattr(self.link, "can_reach") else True
+            )
         except Exception:
             log.exception("%s: link.can_reach(%s) failed; assuming reachable", self.name, robot)
             reachable = True
         if not reachable:
-            log.info("%s: %s %s/%s not sent: %s is out of reach", self.name, kind, robot, topic, robot)
+            log.info(
+                "%s: %s %s/%s not sent: %s is out of reach", self.name, kind, robot, topic, robot
+            )
             return None
         try:
-            raw = await transport.query(self._session, Keys.world(robot), dumps(msg), timeout=self.request_timeout)
+            raw = await transport.query(
+                self._session, Keys.world(robot), dumps(msg), timeout=self.request_timeout
+            )
             return WorldReply.model_validate_json(raw)
         except (transport.QueryFailed, transport.TransportError, ValidationError) as exc:
             why = str(exc)
@@ -1544,7 +1675,9 @@ class RobotAgent:
             log.info("%s: %s %s/%s failed: %s", self.name, kind, robot, topic, why)
             return None
 
-    async def ask(self, robot: str, topic: str, data: dict[str, Any] | None = None) -> dict[str, Any] | None:
+    async def ask(
+        self, robot: str, topic: str, data: dict[str, Any] | None = None
+    ) -> dict[str, Any] | None:
         """Ask `robot` about `topic`; its answer, or None (unknown / unreachable)."""
         self.world_stats["asks_sent"] += 1
         reply = await self._world_query(robot, "ask", topic, data)
@@ -1568,7 +1701,9 @@ async def _maybe_await(value: Any) -> Any:
     return await value if inspect.isawaitable(value) else value
 
 
-def _in_daemon_thread(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> tuple[Awaitable[Any], asyncio.Future[None]]:
+def _in_daemon_thread(
+    fn: Callable[..., Any], *args: Any, **kwargs: Any
+) -> tuple[Awaitable[Any], asyncio.Future[None]]:
     """Like asyncio.to_thread, but in a daemon thread: a sync handler that never
     checks for stop keeps running, yet cannot keep the process from exiting.
     Returns the result and a future done when the thread has returned (also
@@ -1598,7 +1733,9 @@ def _in_daemon_thread(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> tupl
         except RuntimeError:
             pass  # loop closed
 
-    threading.Thread(target=run, name=f"skill-{getattr(fn, '__name__', 'handler')}", daemon=True).start()
+    threading.Thread(
+        target=run, name=f"skill-{getattr(fn, '__name__', 'handler')}", daemon=True
+    ).start()
     return future, returned
 
 
@@ -1607,10 +1744,14 @@ def _endpoints(robot: str, connect: list[str] | str) -> list[str]:
     the robot nor the form it wants."""
     endpoints = [connect] if isinstance(connect, str) else list(connect)
     if not endpoints:
-        raise ValueError(f"robot {robot}: connect lists no endpoint; give the mission server's, like tcp/127.0.0.1:7447")
+        raise ValueError(
+            f"robot {robot}: connect lists no endpoint; give the mission server's, like tcp/127.0.0.1:7447"
+        )
     for e in endpoints:
         if not isinstance(e, str) or not _ENDPOINT.match(e):
-            raise ValueError(f"robot {robot}: connect endpoint {e!r} is not PROTOCOL/ADDRESS, like tcp/127.0.0.1:7447")
+            raise ValueError(
+                f"robot {robot}: connect endpoint {e!r} is not PROTOCOL/ADDRESS, like tcp/127.0.0.1:7447"
+            )
     return endpoints
 
 
@@ -1620,7 +1761,9 @@ def _takes_ctx(fn: Callable[..., Any]) -> bool:
         params = inspect.signature(fn).parameters.values()
     except (TypeError, ValueError):  # no signature to read (some builtins): trust it
         return True
-    return any(p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD, p.VAR_POSITIONAL) for p in params)
+    return any(
+        p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD, p.VAR_POSITIONAL) for p in params
+    )
 
 
 def _signature_problem(fn: Callable[..., Any], params: dict[str, Any]) -> str | None:
@@ -1637,21 +1780,30 @@ def _signature_problem(fn: Callable[..., Any], params: dict[str, Any]) -> str | 
         accepted = {p.name for p in args[1:] if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
         unexpected = [k for k in params if k not in accepted]
     if unexpected:
-        return (f"handler {name}() does not accept parameter {', '.join(map(repr, unexpected))} sent by the server: "
-                f"add it to its signature (or take **params)")
+        return (
+            f"handler {name}() does not accept parameter {', '.join(map(repr, unexpected))} sent by the server: "
+            f"add it to its signature (or take **params)"
+        )
     missing = [
-        p.name for p in args[1:]
-        if p.default is p.empty and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) and p.name not in params
+        p.name
+        for p in args[1:]
+        if p.default is p.empty
+        and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+        and p.name not in params
     ]
     if missing:
-        return (f"handler {name}() needs parameter {', '.join(map(repr, missing))}, which the server did not send "
-                f"(an optional parameter left unset, or not one of the skill's): give it a default, like "
-                f"{missing[0]}=None")
+        return (
+            f"handler {name}() needs parameter {', '.join(map(repr, missing))}, which the server did not send "
+            f"(an optional parameter left unset, or not one of the skill's): give it a default, like "
+            f"{missing[0]}=None"
+        )
     return None
 
 
 def _check_name(what: str, value: Any) -> None:
     """Names travel in key expressions and the manifest: refuse a bad one now."""
     if not isinstance(value, str) or not NAME_RE.match(value) or len(value) > 64:
-        raise ValueError(f"{what} {value!r} must start with a letter and hold only letters, digits, '_' "
-                         f"and '-' (at most 64)")
+        raise ValueError(
+            f"{what} {value!r} must start with a letter and hold only letters, digits, '_' "
+            f"and '-' (at most 64)"
+        )

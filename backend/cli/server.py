@@ -13,17 +13,50 @@ EXIT_BAD_INPUT, EXIT_UNREACHABLE = 2, 3
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("server", help="run the mission server (a Zenoh router on loopback by default)")
-    p.add_argument("--mission", metavar="FILE", help="mission to start from (ignored when --db already holds one)")
-    p.add_argument("--listen", metavar="ENDPOINT", action="append", help="Zenoh endpoint to listen on (default tcp/127.0.0.1:7447); repeatable")
-    p.add_argument("--db", metavar="PATH", help="SQLite journal (default: MISSION.db next to the mission file)")
-    p.add_argument("--zenoh-config", metavar="FILE", help="JSON5 Zenoh config merged over ours (TLS, accounts, ACL)")
+    p = sub.add_parser(
+        "server", help="run the mission server (a Zenoh router on loopback by default)"
+    )
+    p.add_argument(
+        "--mission",
+        metavar="FILE",
+        help="mission to start from (ignored when --db already holds one)",
+    )
+    p.add_argument(
+        "--listen",
+        metavar="ENDPOINT",
+        action="append",
+        help="Zenoh endpoint to listen on (default tcp/127.0.0.1:7447); repeatable",
+    )
+    p.add_argument(
+        "--db", metavar="PATH", help="SQLite journal (default: MISSION.db next to the mission file)"
+    )
+    p.add_argument(
+        "--zenoh-config",
+        metavar="FILE",
+        help="JSON5 Zenoh config merged over ours (TLS, accounts, ACL)",
+    )
     g = p.add_argument_group("security (docs/security.md)")
-    g.add_argument("--accounts", metavar="FILE", help="accounts file: require a user/password login and enforce each account's role with Zenoh access control")
-    g.add_argument("--tls-cert", metavar="FILE", help="server certificate (PEM) for tls/ listen endpoints")
+    g.add_argument(
+        "--accounts",
+        metavar="FILE",
+        help="accounts file: require a user/password login and enforce each account's role with Zenoh access control",
+    )
+    g.add_argument(
+        "--tls-cert", metavar="FILE", help="server certificate (PEM) for tls/ listen endpoints"
+    )
     g.add_argument("--tls-key", metavar="FILE", help="private key of --tls-cert")
-    g.add_argument("--tls-ca", metavar="FILE", help="require client certificates signed by this CA (mutual TLS)")
-    p.add_argument("--command-timeout", type=float, default=10.0, metavar="S", help="how long to wait for a robot to answer a command")
+    g.add_argument(
+        "--tls-ca",
+        metavar="FILE",
+        help="require client certificates signed by this CA (mutual TLS)",
+    )
+    p.add_argument(
+        "--command-timeout",
+        type=float,
+        default=10.0,
+        metavar="S",
+        help="how long to wait for a robot to answer a command",
+    )
     p.add_argument("-v", "--verbose", action="store_true")
     p.set_defaults(func=run)
 
@@ -37,7 +70,10 @@ def run(args: argparse.Namespace) -> int:
     from backend.transport import load_config_file
     from backend.transport.session import TransportError
 
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING,
+        format="%(asctime)s %(levelname)s %(message)s",
+    )
     if not args.mission and not args.db:
         print("missionctl server: give --mission FILE (and optionally --db PATH)", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -53,7 +89,14 @@ def run(args: argparse.Namespace) -> int:
     except (AccountsError, ValueError) as e:
         print(f"missionctl server: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    server = MissionServer(db=db, mission_file=args.mission, listen=args.listen, zenoh_extra=extra, command_timeout=args.command_timeout, accounts=accounts)
+    server = MissionServer(
+        db=db,
+        mission_file=args.mission,
+        listen=args.listen,
+        zenoh_extra=extra,
+        command_timeout=args.command_timeout,
+        accounts=accounts,
+    )
     try:
         return asyncio.run(_serve(server))
     except FileProblems as e:
@@ -73,13 +116,21 @@ def _tls_options(args: argparse.Namespace) -> dict:
     tls_listen = any(e.startswith("tls/") for e in args.listen or [])
     if not (args.tls_cert or args.tls_key or args.tls_ca):
         if tls_listen:
-            raise ValueError("a tls/ endpoint needs --tls-cert FILE and --tls-key FILE (see missionctl certs)")
+            raise ValueError(
+                "a tls/ endpoint needs --tls-cert FILE and --tls-key FILE (see missionctl certs)"
+            )
         return {}
     if not (args.tls_cert and args.tls_key):
         raise ValueError("--tls-cert and --tls-key go together")
     if not tls_listen:
-        raise ValueError("--tls-cert/--tls-key/--tls-ca need a tls/ endpoint in --listen (e.g. --listen tls/0.0.0.0:7447)")
-    for opt, path in (("--tls-cert", args.tls_cert), ("--tls-key", args.tls_key), ("--tls-ca", args.tls_ca)):
+        raise ValueError(
+            "--tls-cert/--tls-key/--tls-ca need a tls/ endpoint in --listen (e.g. --listen tls/0.0.0.0:7447)"
+        )
+    for opt, path in (
+        ("--tls-cert", args.tls_cert),
+        ("--tls-key", args.tls_key),
+        ("--tls-ca", args.tls_ca),
+    ):
         if path and not Path(path).is_file():
             raise ValueError(f"{opt} {path}: no such file")
     out = {
@@ -99,14 +150,31 @@ async def _serve(server) -> int:
         loop.add_signal_handler(sig, stop.set)
     await server.start()
     try:
-        how = f"resumed from {server.db} at revision {server.mission.revision}" if server.resumed else f"started from {server.mission_file}, journal {server.db}"
-        print(f"missionctl server: mission '{server.mission.name}' {how}; listening on {', '.join(server.listen)}", flush=True)
-        if server.resumed and server.mission_file is not None:  # a changed or other mission file is not read
-            print(f"missionctl server: {server.mission_file} was not read (the journal holds the mission); "
-                  "to start from it anew, give another --db", flush=True)
+        how = (
+            f"resumed from {server.db} at revision {server.mission.revision}"
+            if server.resumed
+            else f"started from {server.mission_file}, journal {server.db}"
+        )
+        print(
+            f"missionctl server: mission '{server.mission.name}' {how}; listening on {', '.join(server.listen)}",
+            flush=True,
+        )
+        if (
+            server.resumed and server.mission_file is not None
+        ):  # a changed or other mission file is not read
+            print(
+                f"missionctl server: {server.mission_file} was not read (the journal holds the mission); "
+                "to start from it anew, give another --db",
+                flush=True,
+            )
         if server.accounts is not None:
-            roles = ", ".join(f"{u} ({a.role})" for u, a in sorted(server.accounts.table.accounts.items()))
-            print(f"missionctl server: logins required ({server.accounts.source}): {roles}", flush=True)
+            roles = ", ".join(
+                f"{u} ({a.role})" for u, a in sorted(server.accounts.table.accounts.items())
+            )
+            print(
+                f"missionctl server: logins required ({server.accounts.source}): {roles}",
+                flush=True,
+            )
         await stop.wait()
     finally:
         await server.stop()

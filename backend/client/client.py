@@ -73,7 +73,9 @@ class MaybeApplied(ClientError):
     to retry it with (the server applies it once)."""
 
     def __init__(self, what: str, request_id: str):
-        super().__init__(f"{what} — retry with request id {request_id} to be safe (it is applied once)")
+        super().__init__(
+            f"{what} — retry with request id {request_id} to be safe (it is applied once)"
+        )
         self.what = what
         self.request_id = request_id
 
@@ -118,8 +120,10 @@ class Malformed:
     error: str  # the first validation error: "field.path: message"
 
     def sentence(self) -> str:
-        return (f"{self.what} on {self.key} could not be read and is ignored: {self.error} "
-                f"(does its sender speak missionctl protocol {PROTOCOL_VERSION}? see docs/protocol.md)")
+        return (
+            f"{self.what} on {self.key} could not be read and is ignored: {self.error} "
+            f"(does its sender speak missionctl protocol {PROTOCOL_VERSION}? see docs/protocol.md)"
+        )
 
 
 class MissionClient:
@@ -172,7 +176,10 @@ class MissionClient:
     async def connect(self) -> StateSnapshot:
         self._loop = asyncio.get_running_loop()
         # opening waits for the router as long as an operation would (Zenoh: 10 s)
-        extra = {"transport/unicast/open_timeout": max(1, round(self.timeout * 1000)), **self.zenoh_extra}
+        extra = {
+            "transport/unicast/open_timeout": max(1, round(self.timeout * 1000)),
+            **self.zenoh_extra,
+        }
         cfg = client_config(self.endpoints, extra=extra)
         try:
             self.session = await asyncio.to_thread(open_session, cfg)
@@ -248,7 +255,10 @@ class MissionClient:
         try:
             try:
                 raw = await query(
-                    self._session(), Keys.STATE, dumps(StateRequest(client=self.client_id)), self.timeout
+                    self._session(),
+                    Keys.STATE,
+                    dumps(StateRequest(client=self.client_id)),
+                    self.timeout,
                 )
             except NoResponder:
                 if self.login.logged_in:  # the router's rules may have dropped the query
@@ -262,7 +272,9 @@ class MissionClient:
                     "but no missionctl server)"
                 ) from None
             except QueryTimeout:
-                raise ServerUnreachable(f"the mission server at {', '.join(self.endpoints)} did not answer in {self.timeout:g} s") from None
+                raise ServerUnreachable(
+                    f"the mission server at {', '.join(self.endpoints)} did not answer in {self.timeout:g} s"
+                ) from None
             try:
                 with gc_paused():
                     snap = StateSnapshot.model_validate_json(raw)
@@ -461,7 +473,9 @@ class MissionClient:
         reply = OpReply.model_validate_json(raw)
         return reply
 
-    async def wait_for(self, predicate: Callable[[Mission], bool], timeout: float = 10.0) -> Mission:
+    async def wait_for(
+        self, predicate: Callable[[Mission], bool], timeout: float = 10.0
+    ) -> Mission:
         """Wait until the mirrored mission satisfies `predicate`."""
         done = asyncio.Event()
 

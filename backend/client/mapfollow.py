@@ -55,7 +55,14 @@ class MapUpdate:
 
 
 class MapFeed:
-    def __init__(self, session: Any, on_update: Callable[[MapUpdate], None], *, timeout: float = 5.0, retry: float = RETRY_S) -> None:
+    def __init__(
+        self,
+        session: Any,
+        on_update: Callable[[MapUpdate], None],
+        *,
+        timeout: float = 5.0,
+        retry: float = RETRY_S,
+    ) -> None:
         self.session = session
         self.on_update = on_update
         self.timeout = timeout

@@ -243,7 +243,9 @@ def check_value(
             return [((), f"unknown marker '{v}' (markers: {', '.join(sorted(markers)) or 'none'})")]
         m = markers.get(v) if markers is not None else None
         if m is not None and spec.marker_kinds and m.kind not in spec.marker_kinds:
-            return [((), f"marker '{v}' is a {m.kind} marker; expected {'/'.join(spec.marker_kinds)}")]
+            return [
+                ((), f"marker '{v}' is a {m.kind} marker; expected {'/'.join(spec.marker_kinds)}")
+            ]
         return []
     if t == "robot":
         if not isinstance(v, str):
@@ -312,24 +314,34 @@ def check_params(
     if spec is None:
         offered = ", ".join(rt.skills) or "none"
         return params, [
-            ParamProblem((), f"robot type '{robot_type}' has no skill '{skill}' (it offers: {offered})")
+            ParamProblem(
+                (), f"robot type '{robot_type}' has no skill '{skill}' (it offers: {offered})"
+            )
         ]
     problems: list[ParamProblem] = []
     out: dict[str, Any] = {}
     for name in params:
         if name not in spec.params:
             known = ", ".join(spec.params) or "none"
-            problems.append(ParamProblem((name,), f"skill '{skill}' has no parameter '{name}' (parameters: {known})"))
+            problems.append(
+                ParamProblem(
+                    (name,), f"skill '{skill}' has no parameter '{name}' (parameters: {known})"
+                )
+            )
     for name in bindings:
         if name not in spec.params:
-            problems.append(ParamProblem((name,), f"cannot bind unknown parameter '{name}' of skill '{skill}'"))
+            problems.append(
+                ParamProblem((name,), f"cannot bind unknown parameter '{name}' of skill '{skill}'")
+            )
     for name, pspec in spec.params.items():
         if name in bindings:
             mname = bindings[name]
             marker = markers.get(mname)
             if marker is None:
                 known = ", ".join(sorted(markers)) or "none"
-                problems.append(ParamProblem((name,), f"unknown marker '{mname}' (markers: {known})"))
+                problems.append(
+                    ParamProblem((name,), f"unknown marker '{mname}' (markers: {known})")
+                )
                 continue
             value, why = marker_value(pspec, marker)
             if why:

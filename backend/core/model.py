@@ -58,6 +58,7 @@ def how_to_change(status: Status) -> str:
         return "stop the robot (the skill goes back to its queue), then unsynchronize it"
     return "unsynchronize it first"
 
+
 # Section rank: a robot's list must be sorted by it (finished log, at most one
 # active, queued, unsynchronized).
 SECTION_RANK: dict[Status, int] = {
@@ -73,12 +74,8 @@ SECTION_RANK: dict[Status, int] = {
 # Status changes a robot may report (the server enforces this table).
 TRANSITIONS: dict[Status, frozenset[Status]] = {
     Status.IDLE: frozenset(),  # leaves idle only through a sync acknowledgement
-    Status.IDLE_SYNCHRONIZED: frozenset(
-        {Status.SYNCHWAITING, Status.RUNNING, Status.FAILURE}
-    ),
-    Status.SYNCHWAITING: frozenset(
-        {Status.RUNNING, Status.IDLE_SYNCHRONIZED, Status.FAILURE}
-    ),
+    Status.IDLE_SYNCHRONIZED: frozenset({Status.SYNCHWAITING, Status.RUNNING, Status.FAILURE}),
+    Status.SYNCHWAITING: frozenset({Status.RUNNING, Status.IDLE_SYNCHRONIZED, Status.FAILURE}),
     Status.RUNNING: frozenset(
         {Status.PAUSED, Status.SUCCESS, Status.FAILURE, Status.IDLE_SYNCHRONIZED}
     ),
@@ -234,7 +231,9 @@ class Mission(Strict):
         # 0.4, 3 times per operation; the dict that holds private values is public API
         return self.__pydantic_private__["_hints"]  # type: ignore[index]
 
-    def _rehint(self, robot: str, task: list[SkillInstance], skill_id: str) -> tuple[str, int, SkillInstance] | None:
+    def _rehint(
+        self, robot: str, task: list[SkillInstance], skill_id: str
+    ) -> tuple[str, int, SkillInstance] | None:
         """Note where each skill of one robot's list is; return the one asked for."""
         hints = self._hint_map()
         found = None
@@ -279,7 +278,10 @@ def section_problems(task: list[SkillInstance]) -> list[tuple[int, str]]:
             )
         elif s.status in ACTIVE and active is not None:
             problems.append(
-                (i, f"second active skill: '{task[active].id}' is already {task[active].status.value}")
+                (
+                    i,
+                    f"second active skill: '{task[active].id}' is already {task[active].status.value}",
+                )
             )
         if s.status in ACTIVE and active is None:
             active = i

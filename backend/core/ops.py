@@ -40,7 +40,9 @@ class AddSkill(Strict):
     params: dict[str, Any] = Field(default_factory=dict)
     bindings: dict[str, Name] = Field(default_factory=dict)
     policies: Policies | None = None
-    at: int | None = Field(None, description="index within the unsynchronized section; end if omitted")
+    at: int | None = Field(
+        None, description="index within the unsynchronized section; end if omitted"
+    )
 
 
 class DeleteSkills(Strict):
@@ -68,13 +70,17 @@ class EditSkill(Strict):
 class Sync(Strict):
     op: Literal["sync"] = "sync"
     robot: Name
-    through: SkillId | None = Field(None, description="last skill to synchronize; all idle if omitted")
+    through: SkillId | None = Field(
+        None, description="last skill to synchronize; all idle if omitted"
+    )
 
 
 class Unsync(Strict):
     op: Literal["unsync"] = "unsync"
     robot: Name
-    from_id: SkillId | None = Field(None, description="first queued skill to take back; all if omitted")
+    from_id: SkillId | None = Field(
+        None, description="first queued skill to take back; all if omitted"
+    )
 
 
 class Control(Strict):
@@ -168,7 +174,9 @@ class RestoreMarker(Strict):
     op: Literal["restore_marker"] = "restore_marker"
     name: Name
     marker: Marker
-    bindings: list[tuple[SkillId, str]] = Field(default_factory=list, description="(skill, parameter) to bind again")
+    bindings: list[tuple[SkillId, str]] = Field(
+        default_factory=list, description="(skill, parameter) to bind again"
+    )
 
 
 class RestoreBarrier(Strict):
@@ -222,9 +230,24 @@ class Report(Strict):
 
 
 _OPERATOR = (
-    AddSkill, DeleteSkills, MoveSkill, EditSkill, Sync, Unsync, Control, Retry,
-    AddBarrier, RemoveBarrier, MarkerAdd, MarkerMove, MarkerRename, MarkerDelete,
-    LoadMission, NewMission, Undo, Redo,
+    AddSkill,
+    DeleteSkills,
+    MoveSkill,
+    EditSkill,
+    Sync,
+    Unsync,
+    Control,
+    Retry,
+    AddBarrier,
+    RemoveBarrier,
+    MarkerAdd,
+    MarkerMove,
+    MarkerRename,
+    MarkerDelete,
+    LoadMission,
+    NewMission,
+    Undo,
+    Redo,
 )
 _INTERNAL = (RestoreSkills, SetSkill, RestoreBarrier, RestoreMarker)
 _ROBOT = (SyncAck, UnsyncDone, RetryAck, Reconcile, Report)

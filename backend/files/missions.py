@@ -174,7 +174,12 @@ def check_library(lib: Library) -> list[tuple[Path, str]]:
         seen = set()
         for i, s in enumerate(rt.skills):
             if s not in lib.skills:
-                out.append((("robot_types", tname, "skills", i), f"unknown skill '{s}' (not defined under 'skills')"))
+                out.append(
+                    (
+                        ("robot_types", tname, "skills", i),
+                        f"unknown skill '{s}' (not defined under 'skills')",
+                    )
+                )
             if s in seen:
                 out.append((("robot_types", tname, "skills", i), f"skill '{s}' is listed twice"))
             seen.add(s)
@@ -187,14 +192,21 @@ def check_library(lib: Library) -> list[tuple[Path, str]]:
         if d.goal_param is not None:
             p = spec.params.get(d.goal_param)
             if p is None or p.type not in ("pose", "position"):
-                out.append(((
-                    "skills", sname, "duration", "goal_param"),
-                    f"'{d.goal_param}' is not a pose or position parameter of '{sname}'",
-                ))
+                out.append(
+                    (
+                        ("skills", sname, "duration", "goal_param"),
+                        f"'{d.goal_param}' is not a pose or position parameter of '{sname}'",
+                    )
+                )
         for pname in d.per_param_s:
             p = spec.params.get(pname)
             if p is None or p.type not in ("int", "float"):
-                out.append((("skills", sname, "duration", "per_param_s", pname), f"'{pname}' is not a numeric parameter of '{sname}'"))
+                out.append(
+                    (
+                        ("skills", sname, "duration", "per_param_s", pname),
+                        f"'{pname}' is not a numeric parameter of '{sname}'",
+                    )
+                )
     return out
 
 
@@ -223,34 +235,64 @@ def check_mission(m: Mission, lib: Library, *, fill: bool = True) -> list[tuple[
     for name, spec in m.robots.items():
         if spec.type not in lib.robot_types:
             known = ", ".join(lib.robot_types) or "none"
-            out.append((("robots", name, "type"), f"unknown robot type '{spec.type}' (library types: {known})"))
+            out.append(
+                (
+                    ("robots", name, "type"),
+                    f"unknown robot type '{spec.type}' (library types: {known})",
+                )
+            )
     ids: dict[str, Path] = {}
     for robot, task in m.tasks.items():
         if robot not in m.robots:
-            out.append((("tasks", robot), f"tasks for unknown robot '{robot}' (robots: {', '.join(sorted(robots)) or 'none'})"))
+            out.append(
+                (
+                    ("tasks", robot),
+                    f"tasks for unknown robot '{robot}' (robots: {', '.join(sorted(robots)) or 'none'})",
+                )
+            )
             continue
         rtype = m.robots[robot].type
         for i, s in enumerate(task):
             here: Path = ("tasks", robot, i)
             if s.id in ids:
-                out.append(((*here, "id"), f"duplicate skill id '{s.id}' (first used at {format_path(ids[s.id])})"))
+                out.append(
+                    (
+                        (*here, "id"),
+                        f"duplicate skill id '{s.id}' (first used at {format_path(ids[s.id])})",
+                    )
+                )
             else:
                 ids[s.id] = here
             if rtype not in lib.robot_types:
                 continue
             if lib.skill_for(rtype, s.skill) is None:
                 offered = ", ".join(lib.skills_of(rtype)) or "none"
-                out.append(((*here, "skill"), f"robot '{robot}' ({rtype}) has no skill '{s.skill}' (it offers: {offered})"))
+                out.append(
+                    (
+                        (*here, "skill"),
+                        f"robot '{robot}' ({rtype}) has no skill '{s.skill}' (it offers: {offered})",
+                    )
+                )
                 continue
             # a skill on a robot (or in the log) keeps the values it was sent
             # with: its bindings are history, never re-applied
             idle = s.status == Status.IDLE
             params, problems = check_params(
-                lib, rtype, s.skill, s.params, s.bindings if idle else {},
-                markers=m.markers, robots=robots, fill_defaults=idle,
+                lib,
+                rtype,
+                s.skill,
+                s.params,
+                s.bindings if idle else {},
+                markers=m.markers,
+                robots=robots,
+                fill_defaults=idle,
             )
             for p in problems:
-                base = "bindings" if p.path and p.path[0] in s.bindings and p.path[0] not in s.params else "params"
+                base = (
+                    "bindings"
+                    if p.path and p.path[0] in s.bindings and p.path[0] not in s.params
+                    else "params"
+                )
                 out.append(((*here, base, *p.path), p.message))
             if not problems and fill:
                 s.params = params
@@ -270,7 +312,12 @@ def check_mission(m: Mission, lib: Library, *, fill: bool = True) -> list[tuple[
                 continue
             robot = found[0]
             if robot in robots_in:
-                out.append((where, f"skills '{robots_in[robot]}' and '{sid}' both belong to robot '{robot}'; a barrier has one skill per robot"))
+                out.append(
+                    (
+                        where,
+                        f"skills '{robots_in[robot]}' and '{sid}' both belong to robot '{robot}'; a barrier has one skill per robot",
+                    )
+                )
             robots_in[robot] = sid
             if sid in owner:
                 out.append((where, f"skill '{sid}' is already in barrier '{owner[sid]}'"))
@@ -292,7 +339,9 @@ def _read(path: FsPath) -> tuple[str, yamlio.YamlDoc]:
     except IsADirectoryError:
         raise FileProblems([Issue(file, (), "is a directory, not a file")]) from None
     except UnicodeDecodeError as e:
-        raise FileProblems([Issue(file, (), f"not UTF-8 text ({e.reason} at byte {e.start})")]) from None
+        raise FileProblems(
+            [Issue(file, (), f"not UTF-8 text ({e.reason} at byte {e.start})")]
+        ) from None
     except OSError as e:
         raise FileProblems([Issue(file, (), f"cannot read: {e.strerror}")]) from None
     try:
@@ -300,7 +349,9 @@ def _read(path: FsPath) -> tuple[str, yamlio.YamlDoc]:
     except yamlio.YamlSyntaxError as e:
         raise FileProblems([Issue(file, e.path, e.message, e.line, e.col)]) from None
     if not isinstance(doc.data, dict):
-        raise FileProblems([Issue(file, (), "expected a YAML mapping at the top of the file", 1, 1)])
+        raise FileProblems(
+            [Issue(file, (), "expected a YAML mapping at the top of the file", 1, 1)]
+        )
     return file, doc
 
 
@@ -324,7 +375,9 @@ def load_library(path: str | FsPath) -> Library:
     return _library_from(file, doc)
 
 
-def _validated(model: type, file: str, doc: yamlio.YamlDoc, salvage: _Salvage) -> tuple[Any, list[Issue]]:
+def _validated(
+    model: type, file: str, doc: yamlio.YamlDoc, salvage: _Salvage
+) -> tuple[Any, list[Issue]]:
     """Validate the structure; on errors, validate what is left without the
     broken entries so one run reports every problem of the file."""
     issues = duplicate_issues(file, doc)
@@ -343,7 +396,11 @@ def _sorted(issues: list[Issue]) -> list[Issue]:
 
 
 def _library_from(file: str, doc: yamlio.YamlDoc) -> Library:
-    salvage = _Salvage(doc.data, entries=(("skills",), ("skills", "*", "params"), ("robot_types",)), required=("format",))
+    salvage = _Salvage(
+        doc.data,
+        entries=(("skills",), ("skills", "*", "params"), ("robot_types",)),
+        required=("format",),
+    )
     lib, issues = _validated(Library, file, doc, salvage)
     for path, msg in check_library(lib):
         if not salvage.explains(msg):
@@ -364,13 +421,20 @@ def load_mission(path: str | FsPath) -> tuple[Mission, Library]:
 
 
 def _mission_from(file: str, doc: yamlio.YamlDoc) -> tuple[Mission, Library]:
-    salvage = _Salvage(doc.data, entries=(("markers",), ("robots",), ("barriers",)), required=("format", "library"))
+    salvage = _Salvage(
+        doc.data, entries=(("markers",), ("robots",), ("barriers",)), required=("format", "library")
+    )
     m, issues = _validated(Mission, file, doc, salvage)
     lib_file = library_path(file, m.library)
     try:
         lib = load_library(lib_file)
     except FileProblems as e:
-        head = _located(file, doc, ("library",), f"library '{m.library}' cannot be loaded ({len(e.issues)} problem(s) listed below)")
+        head = _located(
+            file,
+            doc,
+            ("library",),
+            f"library '{m.library}' cannot be loaded ({len(e.issues)} problem(s) listed below)",
+        )
         raise FileProblems([*_sorted([*issues, head]), *e.issues]) from None
     resolve_shorthands(m, lib)
     for path, msg in check_mission(m, lib):
@@ -432,7 +496,9 @@ class _Salvage:
     def _entry(self, data: Any, p: Path) -> tuple[dict, Any] | None:
         """The mapping holding the deepest droppable entry on path `p`."""
         for pattern in sorted(self.entries, key=len, reverse=True):
-            if len(p) > len(pattern) and all(a == "*" or a == b for a, b in zip(pattern, p, strict=False)):
+            if len(p) > len(pattern) and all(
+                a == "*" or a == b for a, b in zip(pattern, p, strict=False)
+            ):
                 cur = data
                 for seg in p[: len(pattern)]:
                     cur = cur.get(seg) if isinstance(cur, dict) else None
@@ -449,7 +515,12 @@ class _Salvage:
         ) or any(f"tasks for unknown robot '{name}'" in message for name in self.dropped)
 
     def original(self, path: Path) -> Path:
-        if len(path) >= 3 and path[0] == "tasks" and isinstance(path[2], int) and path[1] in self.kept:
+        if (
+            len(path) >= 3
+            and path[0] == "tasks"
+            and isinstance(path[2], int)
+            and path[1] in self.kept
+        ):
             return (*path[:2], self.kept[path[1]][path[2]], *path[3:])
         return path
 
@@ -479,7 +550,12 @@ def validate_file(path: str | FsPath) -> list[Issue]:
                 _mission_from(file, doc)
             else:
                 return [
-                    Issue(file, ("format",), f"not a missionctl file: set 'format: {MISSION_FORMAT}' or 'format: {LIBRARY_FORMAT}'", *doc.mark(("format",)))
+                    Issue(
+                        file,
+                        ("format",),
+                        f"not a missionctl file: set 'format: {MISSION_FORMAT}' or 'format: {LIBRARY_FORMAT}'",
+                        *doc.mark(("format",)),
+                    )
                 ]
     except FileProblems as e:
         return e.issues
@@ -512,7 +588,17 @@ def mission_to_data(m: Mission) -> dict[str, Any]:
     data["robots"] = {n: _drop(r, {"description": ""}) for n, r in data["robots"].items()}
     data["markers"] = {n: _drop(mk, {"description": ""}) for n, mk in data["markers"].items()}
     data["tasks"] = {r: [_drop(s, _SKILL_DEFAULTS) for s in t] for r, t in data["tasks"].items()}
-    return _drop(data, {"task_revs": {}, "marker_revs": {}, "report_seqs": {}, "next_skill": 1, "next_barrier": 1, "barriers": {}})
+    return _drop(
+        data,
+        {
+            "task_revs": {},
+            "marker_revs": {},
+            "report_seqs": {},
+            "next_skill": 1,
+            "next_barrier": 1,
+            "barriers": {},
+        },
+    )
 
 
 def mission_to_yaml(m: Mission) -> str:

@@ -36,7 +36,9 @@ def _close_pattern_keys(node: Any) -> None:
 def schemas() -> dict[str, dict[str, Any]]:
     return {
         "mission": _schema(
-            Mission, "missionctl mission file", {"revision", "task_revs", "marker_revs", "report_seqs", "next_skill", "next_barrier"}
+            Mission,
+            "missionctl mission file",
+            {"revision", "task_revs", "marker_revs", "report_seqs", "next_skill", "next_barrier"},
         ),
         "library": _schema(Library, "missionctl skill library file", set()),
     }

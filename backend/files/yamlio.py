@@ -73,12 +73,18 @@ def _walk(loader: Any, node: yaml.Node, path: Path, doc: YamlDoc, above: set[int
     doc.marks.setdefault(path, _pos(node))
     if id(node) in above:  # an alias of one of its own ancestors
         line, col = _pos(node)
-        raise YamlSyntaxError(line, col, "recursive YAML alias: a value cannot contain itself", path[:-1])
+        raise YamlSyntaxError(
+            line, col, "recursive YAML alias: a value cannot contain itself", path[:-1]
+        )
     above = above | {id(node)}
     if isinstance(node, yaml.MappingNode):
         seen: set[Any] = set()
         for knode, vnode in node.value:
-            key = loader.construct_object(knode, deep=True) if isinstance(knode, yaml.ScalarNode) else None
+            key = (
+                loader.construct_object(knode, deep=True)
+                if isinstance(knode, yaml.ScalarNode)
+                else None
+            )
             # keys are named as written; a number key is not a list index
             key = key if isinstance(key, str) else str(key)
             sub = (*path, key)
@@ -99,9 +105,11 @@ class _Dumper(_BaseDumper):
 
 def _repr_dict(dumper: Any, data: dict) -> yaml.Node:
     # small mappings of scalars (poses, positions) read best on one line
-    flow = 0 < len(data) <= 6 and all(
-        isinstance(v, int | float | str | bool) or v is None for v in data.values()
-    ) and all(isinstance(k, str) and k in _FLOW_KEYS for k in data)
+    flow = (
+        0 < len(data) <= 6
+        and all(isinstance(v, int | float | str | bool) or v is None for v in data.values())
+        and all(isinstance(k, str) and k in _FLOW_KEYS for k in data)
+    )
     return dumper.represent_mapping("tag:yaml.org,2002:map", data, flow_style=flow)
 
 
@@ -119,5 +127,10 @@ _Dumper.add_representer(str, _repr_str)
 
 def dump(data: Any) -> str:
     return yaml.dump(
-        data, Dumper=_Dumper, sort_keys=False, allow_unicode=True, default_flow_style=False, width=100
+        data,
+        Dumper=_Dumper,
+        sort_keys=False,
+        allow_unicode=True,
+        default_flow_style=False,
+        width=100,
     )

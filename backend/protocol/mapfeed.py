@@ -95,7 +95,9 @@ class RssItem(_Wire):
     x: float
     y: float
     radius: float
-    top_score: float | None = Field(None, description="known once LRU1 imaged it with its science camera")
+    top_score: float | None = Field(
+        None, description="known once LRU1 imaged it with its science camera"
+    )
 
 
 class StoneItem(_Wire):
@@ -111,12 +113,17 @@ class StoneItem(_Wire):
 class MapObjects(_Wire):
     lander: LanderItem
     boxes: list[BoxItem] = Field(default_factory=list)
-    rss: list[RssItem] = Field(default_factory=list, description="discovered regions (as reported to the ground)")
+    rss: list[RssItem] = Field(
+        default_factory=list, description="discovered regions (as reported to the ground)"
+    )
     stones: list[StoneItem] = Field(default_factory=list, description="identified stones")
 
 
 class MapDelta(_Wire):
-    feed: str = Field("", description="id of this run of the feed; another id means the publisher restarted: fetch the snapshot")
+    feed: str = Field(
+        "",
+        description="id of this run of the feed; another id means the publisher restarted: fetch the snapshot",
+    )
     seq: int = Field(ge=1, description="consecutive; a gap means: fetch the snapshot")
     sim_time: float
     tiles: list[Tile] = Field(default_factory=list)
@@ -151,10 +158,14 @@ class RobotStatus(_Wire):
     box: str | None = None
     stones: list[str] = Field(default_factory=list)
     activity: str | None = None
-    result: str = Field("", description="outcome of its last skill, e.g. 'identified RSS-A-s1 ..., score 1'")
+    result: str = Field(
+        "", description="outcome of its last skill, e.g. 'identified RSS-A-s1 ..., score 1'"
+    )
     odometer_m: float = 0.0
     sim_seconds: float = Field(0.0, description="robot time stepped by its skills")
-    knows: dict[str, int] = Field(default_factory=dict, description="rss/stones/boxes in its own world model")
+    knows: dict[str, int] = Field(
+        default_factory=dict, description="rss/stones/boxes in its own world model"
+    )
 
 
 class Delivery(_Wire):
@@ -186,7 +197,9 @@ class SimStatus(_Wire):
 
 
 def encode_tile(cells: np.ndarray) -> str:
-    return base64.b64encode(zlib.compress(np.ascontiguousarray(cells, dtype=np.uint8).tobytes(), 6)).decode("ascii")
+    return base64.b64encode(
+        zlib.compress(np.ascontiguousarray(cells, dtype=np.uint8).tobytes(), 6)
+    ).decode("ascii")
 
 
 def decode_tile(data: str, shape: tuple[int, int]) -> np.ndarray:
@@ -229,7 +242,7 @@ class TileEncoder:
         for name in self.meta.layers:
             grid = layers[name]
             for tx, ty in changed_tiles(self.sent.get(name), grid, t):
-                cells = grid[ty * t:(ty + 1) * t, tx * t:(tx + 1) * t]
+                cells = grid[ty * t : (ty + 1) * t, tx * t : (tx + 1) * t]
                 out.append(Tile(layer=name, tx=tx, ty=ty, data=encode_tile(cells)))  # type: ignore[arg-type]
             self.sent[name] = grid.copy()
         return out
@@ -243,7 +256,7 @@ class TileEncoder:
             if grid is None:
                 grid = np.zeros((self.meta.height, self.meta.width), dtype=np.uint8)
             for tx, ty in changed_tiles(None, grid, t):
-                cells = grid[ty * t:(ty + 1) * t, tx * t:(tx + 1) * t]
+                cells = grid[ty * t : (ty + 1) * t, tx * t : (tx + 1) * t]
                 out.append(Tile(layer=name, tx=tx, ty=ty, data=encode_tile(cells)))  # type: ignore[arg-type]
         return out
 
@@ -251,10 +264,10 @@ class TileEncoder:
 class MapMirror:
     """Receiver side (a console): the map from a snapshot plus deltas.
 
-        mirror = MapMirror()
-        mirror.apply_snapshot(MapSnapshot.model_validate_json(raw))
-        ok = mirror.apply_delta(MapDelta.model_validate_json(raw))  # False: gap, re-query the snapshot
-        terrain = mirror.layers["terrain"]  # numpy uint8 (rows south->north)
+    mirror = MapMirror()
+    mirror.apply_snapshot(MapSnapshot.model_validate_json(raw))
+    ok = mirror.apply_delta(MapDelta.model_validate_json(raw))  # False: gap, re-query the snapshot
+    terrain = mirror.layers["terrain"]  # numpy uint8 (rows south->north)
     """
 
     def __init__(self) -> None:
@@ -279,13 +292,20 @@ class MapMirror:
                 continue
             shape = tile_shape(self.meta, tile.tx, tile.ty)
             if shape[0] <= 0 or shape[1] <= 0:
-                raise ValueError(f"tile ({tile.tx}, {tile.ty}) lies outside the {self.meta.width}x{self.meta.height} grid")
-            grid[tile.ty * t:tile.ty * t + shape[0], tile.tx * t:tile.tx * t + shape[1]] = decode_tile(tile.data, shape)
+                raise ValueError(
+                    f"tile ({tile.tx}, {tile.ty}) lies outside the {self.meta.width}x{self.meta.height} grid"
+                )
+            grid[tile.ty * t : tile.ty * t + shape[0], tile.tx * t : tile.tx * t + shape[1]] = (
+                decode_tile(tile.data, shape)
+            )
 
     def apply_snapshot(self, snap: MapSnapshot) -> None:
         self.meta = snap.meta
         self.feed = snap.feed
-        self.layers = {n: np.zeros((snap.meta.height, snap.meta.width), dtype=np.uint8) for n in snap.meta.layers}
+        self.layers = {
+            n: np.zeros((snap.meta.height, snap.meta.width), dtype=np.uint8)
+            for n in snap.meta.layers
+        }
         self._apply_tiles(snap.tiles)
         self.seq = snap.seq
         self.sim_time = snap.sim_time

@@ -33,7 +33,9 @@ class Keys:
     PING = f"{PREFIX}/server/ping"  # queryable: anything -> b"pong" (raw-transport baseline for benchmarks)
 
     @staticmethod
-    def op_as(user: str) -> str:  # queryable: Request -> OpReply | ErrorReply, from a logged-in user
+    def op_as(
+        user: str,
+    ) -> str:  # queryable: Request -> OpReply | ErrorReply, from a logged-in user
         return f"{PREFIX}/server/op/{user}"
 
     @staticmethod
@@ -89,7 +91,8 @@ class Request(Strict):
     request_id: str = Field(description="unique per client; a retried request is applied once")
     user: str = ""
     expected_revision: int | None = Field(
-        None, description="revision the client saw; a change to what the op touches after it is refused"
+        None,
+        description="revision the client saw; a change to what the op touches after it is refused",
     )
     op: OperatorOp
 
@@ -118,9 +121,12 @@ class AccountInfo(Strict):
 
     user: str
     role: Literal["operator", "observer", "robot"]
-    robots: list[Name] = Field(default_factory=list, description="robot accounts: the robots they may act as")
+    robots: list[Name] = Field(
+        default_factory=list, description="robot accounts: the robots they may act as"
+    )
     enforced: bool = Field(
-        True, description="false: the server runs without accounts (anyone may do anything; role is nominal)"
+        True,
+        description="false: the server runs without accounts (anyone may do anything; role is nominal)",
     )
 
 
@@ -172,7 +178,8 @@ class FleetEvent(Strict):
 class Alert(Strict):
     level: Literal["info", "warning", "error"] = "warning"
     kind: str = Field(
-        "", description="what happened: failure | offline | reconcile | report_refused | journal (the server cannot write its journal) ('' from older servers); consoles merge their own alerts of the same kind"
+        "",
+        description="what happened: failure | offline | reconcile | report_refused | journal (the server cannot write its journal) ('' from older servers); consoles merge their own alerts of the same kind",
     )
     robot: str | None = None
     skill: str | None = None
@@ -275,7 +282,9 @@ class CommandReply(Strict):
     ok: bool = True
     reason: str = ""
     ids: list[SkillId] = Field(default_factory=list, description="enqueued or removed skills")
-    kept: list[SkillId] = Field(default_factory=list, description="asked to remove but already started")
+    kept: list[SkillId] = Field(
+        default_factory=list, description="asked to remove but already started"
+    )
     # reports made before answering, so the server sees them first
     reports: list[Report] = Field(default_factory=list)
 

@@ -41,8 +41,12 @@ class AccountsError(ValueError):
 
 class Account(Strict):
     role: Role
-    password_file: str = Field(description="file holding the password (one line); relative to the accounts file; mode 0600")
-    robots: list[Name] = Field(default_factory=list, description="robot role: the robots this account may act as")
+    password_file: str = Field(
+        description="file holding the password (one line); relative to the accounts file; mode 0600"
+    )
+    robots: list[Name] = Field(
+        default_factory=list, description="robot role: the robots this account may act as"
+    )
 
     @field_validator("robots")
     @classmethod
@@ -63,9 +67,13 @@ class AccountsFile(Strict):
 
         for user, acc in v.items():
             if not re.match(USER_PATTERN, user):
-                raise ValueError(f"account name {user!r}: use letters, digits, '.', '_', '-' (at most 64)")
+                raise ValueError(
+                    f"account name {user!r}: use letters, digits, '.', '_', '-' (at most 64)"
+                )
             if acc.role == "robot" and not acc.robots:
-                raise ValueError(f"account {user!r}: a robot account lists its robots (robots: [NAME, ...])")
+                raise ValueError(
+                    f"account {user!r}: a robot account lists its robots (robots: [NAME, ...])"
+                )
             if acc.role != "robot" and acc.robots:
                 raise ValueError(f"account {user!r}: only robot accounts list robots")
         if not v:
@@ -97,7 +105,9 @@ def check_private(path: Path, what: str = "password file") -> None:
     """Refuse a secret that other users can read (as ssh does with keys)."""
     mode = path.stat().st_mode
     if mode & (stat.S_IRWXG | stat.S_IRWXO):
-        raise AccountsError(f"{path}: this {what} is readable by other users; run: chmod 600 {path}")
+        raise AccountsError(
+            f"{path}: this {what} is readable by other users; run: chmod 600 {path}"
+        )
 
 
 def read_password(path: str | Path) -> str:
@@ -137,9 +147,15 @@ def load_accounts(path: str | Path) -> Accounts:
         loc = tuple(first["loc"])
         line, col = doc.mark(loc)
         where = ".".join(str(x) for x in loc)
-        raise AccountsError(f"{p}:{line}:{col}: {where + ': ' if where else ''}{first['msg']}") from None
+        raise AccountsError(
+            f"{p}:{line}:{col}: {where + ': ' if where else ''}{first['msg']}"
+        ) from None
     passwords = {
-        user: read_password((p.parent / acc.password_file) if not Path(acc.password_file).is_absolute() else acc.password_file)
+        user: read_password(
+            (p.parent / acc.password_file)
+            if not Path(acc.password_file).is_absolute()
+            else acc.password_file
+        )
         for user, acc in table.accounts.items()
     }
     return Accounts(p, table, passwords)

@@ -20,13 +20,26 @@ from backend.protocol.messages import Keys
 from backend.server.accounts import Accounts
 
 # what consoles read: (subscriptions, queries, liveliness)
-_WATCH_SUBS = [Keys.EVENTS, Keys.FLEET, Keys.ALERTS, Keys.ALL_TELEMETRY, KEY_MAP_DELTA, KEY_STATUS_LIVE]
+_WATCH_SUBS = [
+    Keys.EVENTS,
+    Keys.FLEET,
+    Keys.ALERTS,
+    Keys.ALL_TELEMETRY,
+    KEY_MAP_DELTA,
+    KEY_STATUS_LIVE,
+]
 _WATCH_QUERIES = [Keys.STATE, Keys.PING, KEY_MAP_SNAPSHOT, KEY_STATUS]
 _PRESENCE = [Keys.SERVER_ALIVE, Keys.ALL_ALIVE]
 
 
 def _rule(rid: str, flow: str, messages: list[str], keys: list[str]) -> dict[str, Any]:
-    return {"id": rid, "permission": "allow", "flows": [flow], "messages": messages, "key_exprs": keys}
+    return {
+        "id": rid,
+        "permission": "allow",
+        "flows": [flow],
+        "messages": messages,
+        "key_exprs": keys,
+    }
 
 
 def _watcher_rules(rid: str, user: str) -> list[dict[str, Any]]:
@@ -34,7 +47,12 @@ def _watcher_rules(rid: str, user: str) -> list[dict[str, Any]]:
     return [
         _rule(f"{rid}-in", "ingress", ["declare_subscriber"], _WATCH_SUBS),
         _rule(f"{rid}-in-q", "ingress", ["query"], queries),
-        _rule(f"{rid}-in-l", "ingress", ["declare_liveliness_subscriber", "liveliness_query"], _PRESENCE),
+        _rule(
+            f"{rid}-in-l",
+            "ingress",
+            ["declare_liveliness_subscriber", "liveliness_query"],
+            _PRESENCE,
+        ),
         _rule(f"{rid}-out", "egress", ["put", "delete"], _WATCH_SUBS),
         _rule(f"{rid}-out-r", "egress", ["reply"], queries),
         _rule(f"{rid}-out-l", "egress", ["liveliness_token"], _PRESENCE),
@@ -53,17 +71,33 @@ def _robot_rules(rid: str, robots: list[str]) -> list[dict[str, Any]]:
     sim_serve = [KEY_MAP_SNAPSHOT, KEY_STATUS]
     return [
         _rule(f"{rid}-in-q", "ingress", ["query"], [*server_queries, *worlds]),
-        _rule(f"{rid}-in-serve", "ingress", ["declare_queryable", "reply"], [*own_queryables, *sim_serve]),
-        _rule(f"{rid}-in-pub", "ingress", ["put"], [*(Keys.telemetry(r) for r in robots), *sim_pub]),
+        _rule(
+            f"{rid}-in-serve",
+            "ingress",
+            ["declare_queryable", "reply"],
+            [*own_queryables, *sim_serve],
+        ),
+        _rule(
+            f"{rid}-in-pub", "ingress", ["put"], [*(Keys.telemetry(r) for r in robots), *sim_pub]
+        ),
         _rule(f"{rid}-in-tok", "ingress", ["liveliness_token"], own_tokens),
-        _rule(f"{rid}-in-l", "ingress", ["declare_liveliness_subscriber", "liveliness_query"], partners),
+        _rule(
+            f"{rid}-in-l",
+            "ingress",
+            ["declare_liveliness_subscriber", "liveliness_query"],
+            partners,
+        ),
         _rule(f"{rid}-out-q", "egress", ["query"], [*own_queryables, *sim_serve]),
         _rule(f"{rid}-out-r", "egress", ["reply"], [*server_queries, *worlds]),
         _rule(f"{rid}-out-l", "egress", ["liveliness_token"], partners),
         # a publisher sends only once it knows of a subscriber (write-side filtering);
         # consoles subscribe with a wildcard, which a rule key must include
-        _rule(f"{rid}-out-d", "egress", ["declare_subscriber"],
-              [Keys.ALL_TELEMETRY, *(Keys.telemetry(r) for r in robots), *sim_pub]),
+        _rule(
+            f"{rid}-out-d",
+            "egress",
+            ["declare_subscriber"],
+            [Keys.ALL_TELEMETRY, *(Keys.telemetry(r) for r in robots), *sim_pub],
+        ),
         _rule(f"{rid}-out-dq", "egress", ["declare_queryable"], [*server_queries, *worlds]),
     ]
 
@@ -91,5 +125,13 @@ def acl_config(accounts: Accounts, *, cert_names: bool = False) -> dict[str, Any
             subject["cert_common_names"] = [user]
         rules += own
         subjects.append(subject)
-        policies.append({"id": f"{rid}-policy", "rules": [r["id"] for r in own], "subjects": [subject["id"]]})
-    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects, "policies": policies}
+        policies.append(
+            {"id": f"{rid}-policy", "rules": [r["id"] for r in own], "subjects": [subject["id"]]}
+        )
+    return {
+        "enabled": True,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    }

@@ -32,27 +32,49 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("dir", metavar="DIR", help="directory to write into (created)")
     p.add_argument(
-        "--server-name", metavar="NAME", action="append",
+        "--server-name",
+        metavar="NAME",
+        action="append",
         help="DNS name or IP address clients use to reach the server; repeatable "
         "(default: localhost and 127.0.0.1). Given, the server certificate is (re)made.",
     )
-    p.add_argument("--client", metavar="NAME", action="append", default=[], help="make a client certificate with this common name; repeatable")
-    p.add_argument("--days", type=int, default=365, metavar="N", help="validity of new certificates (default 365)")
+    p.add_argument(
+        "--client",
+        metavar="NAME",
+        action="append",
+        default=[],
+        help="make a client certificate with this common name; repeatable",
+    )
+    p.add_argument(
+        "--days",
+        type=int,
+        default=365,
+        metavar="N",
+        help="validity of new certificates (default 365)",
+    )
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     bad = [n for n in args.client if not _NAME.match(n)]
     if bad:
-        print(f"missionctl certs: invalid client name(s) {', '.join(map(repr, bad))}: use letters, digits, '.', '_', '-'", file=sys.stderr)
+        print(
+            f"missionctl certs: invalid client name(s) {', '.join(map(repr, bad))}: use letters, digits, '.', '_', '-'",
+            file=sys.stderr,
+        )
         return EXIT_BAD_INPUT
     if args.days < 1:
         print("missionctl certs: --days must be at least 1", file=sys.stderr)
         return EXIT_BAD_INPUT
     try:
-        written = make_certs(Path(args.dir), server_names=args.server_name, clients=args.client, days=args.days)
+        written = make_certs(
+            Path(args.dir), server_names=args.server_name, clients=args.client, days=args.days
+        )
     except ImportError:
-        print("missionctl certs: needs the 'cryptography' package (pip install cryptography)", file=sys.stderr)
+        print(
+            "missionctl certs: needs the 'cryptography' package (pip install cryptography)",
+            file=sys.stderr,
+        )
         return EXIT_BAD_INPUT
     except (OSError, ValueError) as e:
         print(f"missionctl certs: {e}", file=sys.stderr)
@@ -85,7 +107,9 @@ def make_certs(
         written += _write(cert, key, server_pem, directory / "server.key")
     for name in clients:
         cert, key = _make_leaf(name, [], ca_cert, ca_key, days, server=False)
-        written += _write(cert, key, directory / f"client-{name}.pem", directory / f"client-{name}.key")
+        written += _write(
+            cert, key, directory / f"client-{name}.pem", directory / f"client-{name}.key"
+        )
     return written
 
 
@@ -102,10 +126,12 @@ def _name(common_name: str):
     from cryptography import x509
     from cryptography.x509.oid import NameOID
 
-    return x509.Name([
-        x509.NameAttribute(NameOID.ORGANIZATION_NAME, "missionctl"),
-        x509.NameAttribute(NameOID.COMMON_NAME, common_name),
-    ])
+    return x509.Name(
+        [
+            x509.NameAttribute(NameOID.ORGANIZATION_NAME, "missionctl"),
+            x509.NameAttribute(NameOID.COMMON_NAME, common_name),
+        ]
+    )
 
 
 def _builder(subject, issuer, public_key, days: int):
@@ -133,9 +159,17 @@ def _make_ca(days: int):
         _builder(name, name, key.public_key(), days * 5)
         .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
         .add_extension(
-            x509.KeyUsage(digital_signature=True, key_cert_sign=True, crl_sign=True, content_commitment=False,
-                          key_encipherment=False, data_encipherment=False, key_agreement=False,
-                          encipher_only=False, decipher_only=False),
+            x509.KeyUsage(
+                digital_signature=True,
+                key_cert_sign=True,
+                crl_sign=True,
+                content_commitment=False,
+                key_encipherment=False,
+                data_encipherment=False,
+                key_agreement=False,
+                encipher_only=False,
+                decipher_only=False,
+            ),
             critical=True,
         )
         .add_extension(x509.SubjectKeyIdentifier.from_public_key(key.public_key()), critical=False)
@@ -154,7 +188,9 @@ def _make_leaf(common_name: str, names: list[str], ca_cert, ca_key, days: int, *
         _builder(_name(common_name), ca_cert.subject, key.public_key(), days)
         .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
         .add_extension(
-            x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH if server else ExtendedKeyUsageOID.CLIENT_AUTH]),
+            x509.ExtendedKeyUsage(
+                [ExtendedKeyUsageOID.SERVER_AUTH if server else ExtendedKeyUsageOID.CLIENT_AUTH]
+            ),
             critical=False,
         )
         .add_extension(
@@ -162,7 +198,9 @@ def _make_leaf(common_name: str, names: list[str], ca_cert, ca_key, days: int, *
         )
     )
     if names:  # clients need none: the verifier checks the chain, ACL reads the common name
-        builder = builder.add_extension(x509.SubjectAlternativeName([_san(n) for n in names]), critical=False)
+        builder = builder.add_extension(
+            x509.SubjectAlternativeName([_san(n) for n in names]), critical=False
+        )
     return builder.sign(ca_key, hashes.SHA256()), key
 
 
@@ -173,7 +211,9 @@ def _san(name: str):
         return x509.IPAddress(ipaddress.ip_address(name))
     except ValueError:
         if not re.match(r"^[A-Za-z0-9*][A-Za-z0-9.-]*$", name):
-            raise ValueError(f"--server-name {name!r} is neither a DNS name nor an IP address") from None
+            raise ValueError(
+                f"--server-name {name!r} is neither a DNS name nor an IP address"
+            ) from None
         return x509.DNSName(name)
 
 

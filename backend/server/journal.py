@@ -166,15 +166,17 @@ def _faithful_serializer(model_cls: type[BaseModel]) -> pydantic_core.SchemaSeri
         return None
 
 
-_INSERT_BATCH = (
-    "INSERT INTO batches (revision, ts, actor, client, request_id, op, events) VALUES (?, ?, ?, ?, ?, ?, ?)"
-)
+_INSERT_BATCH = "INSERT INTO batches (revision, ts, actor, client, request_id, op, events) VALUES (?, ?, ?, ?, ?, ?, ?)"
 
 _MISSION_JSON = _faithful_serializer(Mission)
 _BATCH_JSON = _faithful_serializer(EventBatch)
 
 
-def _dump(serializer: pydantic_core.SchemaSerializer | None, model: BaseModel, exclude: set[str] | None = None) -> str:
+def _dump(
+    serializer: pydantic_core.SchemaSerializer | None,
+    model: BaseModel,
+    exclude: set[str] | None = None,
+) -> str:
     if serializer is None:
         return model.model_dump_json(exclude=exclude)
     return serializer.to_json(model, exclude=exclude).decode()
@@ -235,13 +237,16 @@ class Journal:
         """Characters of the snapshot at `revision` and of the batches after it."""
         if revision is None:
             return 0, 0
-        row = conn.execute("SELECT length(mission) FROM snapshots WHERE revision = ?", (revision,)).fetchone()
+        row = conn.execute(
+            "SELECT length(mission) FROM snapshots WHERE revision = ?", (revision,)
+        ).fetchone()
         return (row[0] if row else 0), Journal._since(conn, revision)
 
     @staticmethod
     def _since(conn: sqlite3.Connection, revision: int) -> int:
         return conn.execute(
-            "SELECT coalesce(sum(length(op) + length(events)), 0) FROM batches WHERE revision > ?", (revision,)
+            "SELECT coalesce(sum(length(op) + length(events)), 0) FROM batches WHERE revision > ?",
+            (revision,),
         ).fetchone()[0]
 
     @classmethod
@@ -262,7 +267,9 @@ class Journal:
             raise JournalError(f"{p}: cannot open the journal: no such folder {p.parent}")
         lock_fd = _lock_writer(p)
         try:
-            conn = sqlite3.connect(p, isolation_level=None, check_same_thread=False, timeout=BUSY_TIMEOUT_S)
+            conn = sqlite3.connect(
+                p, isolation_level=None, check_same_thread=False, timeout=BUSY_TIMEOUT_S
+            )
         except sqlite3.Error as e:
             os.close(lock_fd)
             raise JournalError(f"{p}: cannot open the journal: {e}") from None
@@ -278,9 +285,13 @@ class Journal:
             # that too at the price of an fsync per operation.
             conn.execute("PRAGMA synchronous=NORMAL")
             conn.execute("BEGIN IMMEDIATE")
-            tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+            tables = {
+                r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")
+            }
             if tables and "meta" not in tables:
-                raise JournalError(f"{p}: an SQLite database, but not a missionctl journal (tables: {', '.join(sorted(tables))})")
+                raise JournalError(
+                    f"{p}: an SQLite database, but not a missionctl journal (tables: {', '.join(sorted(tables))})"
+                )
             for stmt in _SCHEMA.split(";"):
                 if stmt.strip():
                     conn.execute(stmt)
@@ -314,8 +325,14 @@ class Journal:
                 ) from None
             raise JournalError(f"{p}: not a usable journal: {e}") from None
         try:
-            return cls(conn, p, snapshot_every=snapshot_every, snapshot_bytes=snapshot_bytes,
-                       keep_snapshots=keep_snapshots, lock_fd=lock_fd)
+            return cls(
+                conn,
+                p,
+                snapshot_every=snapshot_every,
+                snapshot_bytes=snapshot_bytes,
+                keep_snapshots=keep_snapshots,
+                lock_fd=lock_fd,
+            )
         except sqlite3.Error as e:  # its first reads
             conn.close()
             os.close(lock_fd)
@@ -350,7 +367,9 @@ class Journal:
         """The connection, once sure the file is still the one opened: SQLite
         goes on writing into a deleted file, which a restart would not find."""
         if _identity(self.path) != self._identity:
-            raise JournalError(f"{self.path} was deleted or replaced while open; what is written now would be lost at a restart")
+            raise JournalError(
+                f"{self.path} was deleted or replaced while open; what is written now would be lost at a restart"
+            )
         return self.conn
 
     # -- metadata ------------------------------------------------------------------
@@ -378,7 +397,9 @@ class Journal:
 
     def snapshot_revisions(self) -> list[int]:
         with self._lock:
-            return [r for (r,) in self.conn.execute("SELECT revision FROM snapshots ORDER BY revision")]
+            return [
+                r for (r,) in self.conn.execute("SELECT revision FROM snapshots ORDER BY revision")
+            ]
 
     # -- writing -------------------------------------------------------------------
     def append(
@@ -463,12 +484,21 @@ class Journal:
             if self._conn is None:
                 raise JournalError(f"{self.path}: the journal is closed")
             if _identity(self.path) != self._identity:
-                raise JournalError(f"{self.path} was deleted or replaced while open; nothing to checkpoint")
+                raise JournalError(
+                    f"{self.path} was deleted or replaced while open; nothing to checkpoint"
+                )
             if self._ckpt_conn is None:  # mode=rw: never create a file where the journal was
                 uri = f"file:{quote(str(self.path.resolve()))}?mode=rw"
-                self._ckpt_conn = sqlite3.connect(uri, uri=True, isolation_level=None, check_same_thread=False,
-                                                  timeout=BUSY_TIMEOUT_S)
-            busy, log_frames, copied = self._ckpt_conn.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchone()
+                self._ckpt_conn = sqlite3.connect(
+                    uri,
+                    uri=True,
+                    isolation_level=None,
+                    check_same_thread=False,
+                    timeout=BUSY_TIMEOUT_S,
+                )
+            busy, log_frames, copied = self._ckpt_conn.execute(
+                "PRAGMA wal_checkpoint(PASSIVE)"
+            ).fetchone()
             self.checkpoints += 1
             return busy, log_frames, copied
 
@@ -514,7 +544,10 @@ class Journal:
                         f"cannot snapshot revision {rev}: the journal ends at revision {last}; "
                         "append the batches up to it first"
                     )
-                conn.execute("INSERT OR REPLACE INTO snapshots (revision, mission) VALUES (?, ?)", (rev, text))
+                conn.execute(
+                    "INSERT OR REPLACE INTO snapshots (revision, mission) VALUES (?, ?)",
+                    (rev, text),
+                )
                 conn.execute(
                     "DELETE FROM snapshots WHERE revision NOT IN "
                     "(SELECT revision FROM snapshots ORDER BY revision DESC LIMIT ?)",
@@ -534,7 +567,8 @@ class Journal:
         adding up to `snapshot_bytes` of its size (or no snapshot yet)."""
         base = self._snapshot_rev
         return base is None or (
-            revision - base >= self.snapshot_every and self._since_snapshot >= self.snapshot_bytes * self._snapshot_size
+            revision - base >= self.snapshot_every
+            and self._since_snapshot >= self.snapshot_bytes * self._snapshot_size
         )
 
     def maybe_snapshot(self, mission: Mission) -> bool:
@@ -567,14 +601,18 @@ class Journal:
             conn = self.conn
             conn.execute("BEGIN")  # one consistent read of snapshots and batches
             try:
-                snaps = conn.execute("SELECT revision FROM snapshots ORDER BY revision DESC").fetchall()
+                snaps = conn.execute(
+                    "SELECT revision FROM snapshots ORDER BY revision DESC"
+                ).fetchall()
                 n_batches = conn.execute("SELECT count(*) FROM batches").fetchone()[0]
                 if not snaps and not n_batches:
                     self.load_info = info
                     return None, []
                 mission: Mission | None = None
                 for (rev,) in snaps:
-                    (text,) = conn.execute("SELECT mission FROM snapshots WHERE revision = ?", (rev,)).fetchone()
+                    (text,) = conn.execute(
+                        "SELECT mission FROM snapshots WHERE revision = ?", (rev,)
+                    ).fetchone()
                     try:
                         m = Mission.model_validate_json(text)
                     except (ValidationError, ValueError, TypeError) as e:
@@ -608,7 +646,9 @@ class Journal:
                             raise ValueError(f"it says revision {batch.revision}")
                         mission = apply_events(mission, batch)
                     except (ValidationError, ValueError, KeyError, TypeError, IndexError) as e:
-                        raise JournalCorrupt(f"{self.path}: batch {rev} cannot be replayed: {_why(e)}") from None
+                        raise JournalCorrupt(
+                            f"{self.path}: batch {rev} cannot be replayed: {_why(e)}"
+                        ) from None
                     info.replayed += 1
                     expected += 1
                 rows = conn.execute(

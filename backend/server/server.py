@@ -128,7 +128,9 @@ class MissionServer:
         self._events_pub = None
         self._fleet_pub = None
         self._alerts_pub = None
-        self._outbox: list[tuple[Any, bytes]] = []  # publications waiting for the next loop callback
+        self._outbox: list[
+            tuple[Any, bytes]
+        ] = []  # publications waiting for the next loop callback
         self._loop: asyncio.AbstractEventLoop | None = None
         self._journal_failing = False
         self._checkpoint: asyncio.Future | None = None  # the journal's, running on a thread
@@ -145,12 +147,16 @@ class MissionServer:
                 if lib_file is None and self.mission_file is not None:
                     lib_file = library_path(self.mission_file, mission.library)
                 if lib_file is None:
-                    raise SystemExit(f"{self.db}: the journal does not say which skill library it uses")
+                    raise SystemExit(
+                        f"{self.db}: the journal does not say which skill library it uses"
+                    )
                 library = load_library(lib_file)
                 self.resumed = True
             else:
                 if self.mission_file is None:
-                    raise SystemExit(f"{self.db} is empty: give a mission file to start from (--mission FILE)")
+                    raise SystemExit(
+                        f"{self.db} is empty: give a mission file to start from (--mission FILE)"
+                    )
                 mission, library = load_mission(self.mission_file)
                 lib_file = library_path(self.mission_file, mission.library)
                 journal.close()
@@ -158,7 +164,9 @@ class MissionServer:
                 try:
                     journal.snapshot(mission)
                 except sqlite3.Error as e:  # e.g. a full disk
-                    raise JournalError(f"{self.db}: cannot write the journal's first snapshot: {e}") from None
+                    raise JournalError(
+                        f"{self.db}: cannot write the journal's first snapshot: {e}"
+                    ) from None
                 requests = []
         except BaseException:
             journal.close()
@@ -203,7 +211,9 @@ class MissionServer:
         exists only while the session opens)."""
         extra = dict(self.zenoh_extra or {})
         if self.accounts is None:
-            return await asyncio.to_thread(open_session, router_config(self.listen, extra=extra), what="the listen endpoint")
+            return await asyncio.to_thread(
+                open_session, router_config(self.listen, extra=extra), what="the listen endpoint"
+            )
         mtls = bool(extra.get("transport/link/tls/enable_mtls"))
         extra["access_control"] = acl_config(self.accounts, cert_names=mtls)
         with zenoh_dictionary(self.accounts) as dictionary:
@@ -240,7 +250,9 @@ class MissionServer:
         return self.engine.library
 
     # -- plumbing -------------------------------------------------------------
-    def _guard(self, handler: Callable[..., bytes | Awaitable[bytes]]) -> Callable[..., bytes | Awaitable[bytes]]:
+    def _guard(
+        self, handler: Callable[..., bytes | Awaitable[bytes]]
+    ) -> Callable[..., bytes | Awaitable[bytes]]:
         """Bad input and refusals become an ErrorReply; nothing else escapes.
         The handler answers at once (bytes) or later (an awaitable)."""
 
@@ -265,8 +277,14 @@ class MissionServer:
             return
         try:
             self.journal.maybe_snapshot(self.mission)
-        except (sqlite3.Error, OSError, JournalError) as e:  # the batches have it: only a slower restart
-            log.warning("%s: cannot store a snapshot (%s); will try again at the next operation", self.db, e)
+        except (
+            sqlite3.Error,
+            OSError,
+            JournalError,
+        ) as e:  # the batches have it: only a slower restart
+            log.warning(
+                "%s: cannot store a snapshot (%s); will try again at the next operation", self.db, e
+            )
         self._maybe_checkpoint()
         batch = EventBatch(revision=applied.revision, events=applied.events, actor=actor, op=op.op)
         self._publish(self._events_pub, batch.model_dump_json().encode())
@@ -290,8 +308,12 @@ class MissionServer:
             self._checkpoint_failing = False
         elif not self._checkpoint_failing:  # once, not at every checkpoint
             self._checkpoint_failing = True
-            log.warning("%s: cannot checkpoint the journal (%s); nothing is lost, its -wal file grows until "
-                        "a checkpoint succeeds", self.db, error)
+            log.warning(
+                "%s: cannot checkpoint the journal (%s); nothing is lost, its -wal file grows until "
+                "a checkpoint succeeds",
+                self.db,
+                error,
+            )
 
     def _publish(self, publisher: Any, payload: bytes) -> None:
         """Sent once the request being handled has its reply: the reply and
@@ -316,7 +338,15 @@ class MissionServer:
             for payload in payloads:
                 publisher.put(payload)
 
-    def _submit(self, op: Any, *, client: str = "", request_id: str | None = None, actor: str = "", expected_revision: int | None = None) -> Applied:
+    def _submit(
+        self,
+        op: Any,
+        *,
+        client: str = "",
+        request_id: str | None = None,
+        actor: str = "",
+        expected_revision: int | None = None,
+    ) -> Applied:
         """Apply an operation: journaled before it changes the mission, so one
         the journal cannot take is refused (JournalFailed) and changes
         nothing, in memory or at a restart; then published."""
@@ -325,7 +355,9 @@ class MissionServer:
         def journal(batch: EventBatch) -> None:
             entry = EventBatch(revision=batch.revision, events=batch.events, actor=who)
             try:
-                self.journal.append(entry, op_json=op.model_dump_json(), client=client, request_id=request_id)
+                self.journal.append(
+                    entry, op_json=op.model_dump_json(), client=client, request_id=request_id
+                )
             except (sqlite3.Error, OSError, JournalError) as e:
                 failed = JournalFailed(self.db, e, op.op)
                 if not self._journal_failing:  # once, not at every retry of every robot
@@ -334,17 +366,29 @@ class MissionServer:
                 raise failed from None
             if self._journal_failing:
                 self._journal_failing = False
-                self.alert(f"the journal {self.db} can be written again", level="info", kind="journal")
+                self.alert(
+                    f"the journal {self.db} can be written again", level="info", kind="journal"
+                )
 
         self.engine.before_apply = journal
         try:
-            applied = self.engine.submit(op, client=client, request_id=request_id, expected_revision=expected_revision)
+            applied = self.engine.submit(
+                op, client=client, request_id=request_id, expected_revision=expected_revision
+            )
         finally:
             self.engine.before_apply = None
         self._commit(applied, op, actor=who)
         return applied
 
-    def alert(self, message: str, *, level: str = "warning", robot: str | None = None, skill: str | None = None, kind: str = "") -> None:
+    def alert(
+        self,
+        message: str,
+        *,
+        level: str = "warning",
+        robot: str | None = None,
+        skill: str | None = None,
+        kind: str = "",
+    ) -> None:
         log.warning("%s", message)
         if self._alerts_pub is not None:
             a = Alert(level=level, kind=kind, robot=robot, skill=skill, message=message, at=_now())
@@ -379,16 +423,27 @@ class MissionServer:
         if key is not None:  # op/{user}: the router's rules let only `user` send it
             user = key.rsplit("/", 1)[-1]
             role = self.accounts.role(user) if self.accounts is not None else "operator"
-            if role != "operator":  # the ACL refuses it first; this is the clean answer if it did not
-                raise Refusal("read_only", f"read-only: logged in as {role or 'unknown account'} {user}")
+            if (
+                role != "operator"
+            ):  # the ACL refuses it first; this is the clean answer if it did not
+                raise Refusal(
+                    "read_only", f"read-only: logged in as {role or 'unknown account'} {user}"
+                )
             req = req.model_copy(update={"user": user})
         done = self.engine.requests.get((req.client, req.request_id))
         if done is not None:
             return _reply(Applied(done.revision, [], done.notes, done.value, duplicate=True))
         if not isinstance(req.op, ROBOT_OPS):
             actor = f"{req.user}@{req.client}" if req.user else req.client
-            return _reply(self._submit(req.op, client=req.client, request_id=req.request_id, actor=actor,
-                                       expected_revision=req.expected_revision))
+            return _reply(
+                self._submit(
+                    req.op,
+                    client=req.client,
+                    request_id=req.request_id,
+                    actor=actor,
+                    expected_revision=req.expected_revision,
+                )
+            )
         rid = (req.client, req.request_id)
         inflight = self._inflight.get(rid)
         if inflight is not None:  # the same request retried while its robot has not answered
@@ -419,8 +474,11 @@ class MissionServer:
         try:
             applied = await self._robot_op(op, actor, req.client, req.request_id)
         except JournalFailed as f:
-            raise Refusal(f.code, f"{f.message}. The robot did get the {op.op} command: once the journal works, "
-                          "compare `missionctl ctl state` with the robot and unsync or stop what differs") from None
+            raise Refusal(
+                f.code,
+                f"{f.message}. The robot did get the {op.op} command: once the journal works, "
+                "compare `missionctl ctl state` with the robot and unsync or stop what differs",
+            ) from None
         self.engine.remember(req.client, req.request_id, applied)
         return _reply(applied)
 
@@ -436,7 +494,11 @@ class MissionServer:
         info = self.robots.get(robot)
         if info is None or not info.online:
             since = f" since {info.since:%H:%M:%S}" if info and info.since else ""
-            raise Refusal("robot_offline", f"robot {robot} is not connected{since}: nothing was sent", robot=robot)
+            raise Refusal(
+                "robot_offline",
+                f"robot {robot} is not connected{since}: nothing was sent",
+                robot=robot,
+            )
         try:
             raw = await query(self._session, Keys.command(robot), dumps(cmd), self.command_timeout)
         except QueryError as e:
@@ -446,12 +508,24 @@ class MissionServer:
                 text = err.message if err.message.startswith(robot) else f"{robot}: {err.message}"
                 raise Refusal(err.code, text, robot=robot) from None
             except ValidationError:
-                raise Refusal("robot_error", f"{robot} refused: {e.payload.decode(errors='replace')}", robot=robot) from None
+                raise Refusal(
+                    "robot_error",
+                    f"{robot} refused: {e.payload.decode(errors='replace')}",
+                    robot=robot,
+                ) from None
         except QueryTimeout:
-            raise Refusal("robot_timeout", f"{robot} did not answer within {self.command_timeout:g} s (out of reach?): the mission is unchanged; "
-                          "if the robot got the command anyway, sending it again is safe", robot=robot) from None
+            raise Refusal(
+                "robot_timeout",
+                f"{robot} did not answer within {self.command_timeout:g} s (out of reach?): the mission is unchanged; "
+                "if the robot got the command anyway, sending it again is safe",
+                robot=robot,
+            ) from None
         except NoResponder:
-            raise Refusal("robot_offline", f"robot {robot} does not answer commands: nothing was sent", robot=robot) from None
+            raise Refusal(
+                "robot_offline",
+                f"robot {robot} does not answer commands: nothing was sent",
+                robot=robot,
+            ) from None
         reply = CommandReply.model_validate_json(raw)
         self._apply_reports(robot, reply.reports)
         if not reply.ok:
@@ -461,18 +535,38 @@ class MissionServer:
     def _check_manifest(self, robot: str, skills: list[Any]) -> None:
         info = self.robots[robot]
         if not info.online or info.manifest is None:
-            since = f" (offline since {info.since:%H:%M:%S})" if info.since else " (not seen since the server started)"
-            raise Refusal("robot_offline", f"robot {robot} is not connected{since}: nothing was sent", robot=robot)
+            since = (
+                f" (offline since {info.since:%H:%M:%S})"
+                if info.since
+                else " (not seen since the server started)"
+            )
+            raise Refusal(
+                "robot_offline",
+                f"robot {robot} is not connected{since}: nothing was sent",
+                robot=robot,
+            )
         manifest = info.manifest
         for s in skills:
             have = manifest.skills.get(s.skill)
             want = self.library.skills[s.skill].version
             if have is None:
-                raise Refusal("incompatible", f"{robot} does not offer skill '{s.skill}' (its manifest lists: {', '.join(manifest.skills) or 'none'}); {s.id} stays unsynchronized", robot=robot, skill=s.id)
+                raise Refusal(
+                    "incompatible",
+                    f"{robot} does not offer skill '{s.skill}' (its manifest lists: {', '.join(manifest.skills) or 'none'}); {s.id} stays unsynchronized",
+                    robot=robot,
+                    skill=s.id,
+                )
             if _major(have) != _major(want):
-                raise Refusal("incompatible", f"{robot} implements {s.skill} {have}, the library needs {want} (major versions differ); {s.id} stays unsynchronized", robot=robot, skill=s.id)
+                raise Refusal(
+                    "incompatible",
+                    f"{robot} implements {s.skill} {have}, the library needs {want} (major versions differ); {s.id} stays unsynchronized",
+                    robot=robot,
+                    skill=s.id,
+                )
 
-    async def _robot_op(self, op: Any, actor: str, client: str = "", request_id: str | None = None) -> Applied:
+    async def _robot_op(
+        self, op: Any, actor: str, client: str = "", request_id: str | None = None
+    ) -> Applied:
         """Send the operation to its robot(s); journal the acknowledgement with
         the request id, so a retry after a server restart is a duplicate."""
         e = self.engine
@@ -487,7 +581,9 @@ class MissionServer:
                     for s in skills:
                         partners = e.barrier_partners(s.id)
                         if partners:
-                            barriers[s.id] = BarrierInfo(barrier=e.mission.barrier_of(s.id), partners=dict(partners))
+                            barriers[s.id] = BarrierInfo(
+                                barrier=e.mission.barrier_of(s.id), partners=dict(partners)
+                            )
                     await self._command(op.robot, Enqueue(skills=skills, barriers=barriers))
                     return self._submit(SyncAck(robot=op.robot, ids=ids), **req)
                 finally:
@@ -501,7 +597,9 @@ class MissionServer:
                 finally:
                     e.release(op.robot)
                 if reply.kept:
-                    applied.notes.append(f"{op.robot} had already started {', '.join(reply.kept)}: it stays synchronized")
+                    applied.notes.append(
+                        f"{op.robot} had already started {', '.join(reply.kept)}: it stays synchronized"
+                    )
                 applied.value["kept"] = list(reply.kept)
                 return applied
         if isinstance(op, Retry):
@@ -525,7 +623,9 @@ class MissionServer:
                     async with self._turn(robot):
                         reply = await self._command(robot, COMMANDS[op.op]())
                         if op.op == "reset" and reply.ids:
-                            last = self._submit(UnsyncDone(robot=robot, ids=reply.ids), actor=actor).revision
+                            last = self._submit(
+                                UnsyncDone(robot=robot, ids=reply.ids), actor=actor
+                            ).revision
                     results[robot] = "ok"
                 except Refusal as r:
                     if op.robot is not None:
@@ -537,36 +637,64 @@ class MissionServer:
                     e.release(robot)
         failed = {r: m for r, m in results.items() if m != "ok"}
         if failed and len(failed) == len(results):
-            raise Refusal("robot_unreachable", f"{op.op} reached no robot: " + "; ".join(failed.values()))
+            raise Refusal(
+                "robot_unreachable", f"{op.op} reached no robot: " + "; ".join(failed.values())
+            )
         notes = [f"{op.op} not applied: {m}" for m in failed.values()]
         return Applied(max(last, e.mission.revision), [], notes, {"robots": results})
 
     # -- robots ------------------------------------------------------------------------
     def _robot_from(self, name: str) -> None:
         if name not in self.mission.robots:
-            raise Refusal("unknown_robot", f"robot '{name}' is not part of this mission (robots: {', '.join(self.mission.robots)})", robot=name)
+            raise Refusal(
+                "unknown_robot",
+                f"robot '{name}' is not part of this mission (robots: {', '.join(self.mission.robots)})",
+                robot=name,
+            )
 
     async def _handle_register(self, payload: bytes, key: str) -> bytes:
         reg = Register.model_validate_json(payload)
         m = reg.manifest
         if m.name != Keys.robot_of(key):  # the key is what the router's rules check
-            raise Refusal("bad_register", f"robot '{m.name}' cannot register on {key}", robot=m.name)
+            raise Refusal(
+                "bad_register", f"robot '{m.name}' cannot register on {key}", robot=m.name
+            )
         if m.protocol != PROTOCOL_VERSION:
-            return dumps(RegisterReply(accepted=False, reason=f"protocol {m.protocol} is not supported (server speaks {PROTOCOL_VERSION})"))
+            return dumps(
+                RegisterReply(
+                    accepted=False,
+                    reason=f"protocol {m.protocol} is not supported (server speaks {PROTOCOL_VERSION})",
+                )
+            )
         if m.name not in self.mission.robots:
-            return dumps(RegisterReply(accepted=False, reason=f"robot '{m.name}' is not part of this mission"))
+            return dumps(
+                RegisterReply(
+                    accepted=False, reason=f"robot '{m.name}' is not part of this mission"
+                )
+            )
         expected = self.mission.robots[m.name].type
         if m.type != expected:
-            return dumps(RegisterReply(accepted=False, reason=f"robot '{m.name}' is a {expected} in this mission, not a {m.type}"))
+            return dumps(
+                RegisterReply(
+                    accepted=False,
+                    reason=f"robot '{m.name}' is a {expected} in this mission, not a {m.type}",
+                )
+            )
         info = self.robots[m.name]
-        info = info.model_copy(update={"manifest": m, "online": True, "since": info.since if info.online else _now()})
+        info = info.model_copy(
+            update={"manifest": m, "online": True, "since": info.since if info.online else _now()}
+        )
         self._set_robot(info)
         # after a command in flight to this robot (see _handle_reports): its
         # queue and reports may already hold what that command sent it
         async with self._turn(m.name):
             self._apply_reports(m.name, reg.reports)
             lost = self._reconcile(m.name, {q.id for q in reg.queue})
-        return dumps(RegisterReply(accepted=True, last_seq=self.mission.report_seqs.get(m.name, 0), missing=lost))
+        return dumps(
+            RegisterReply(
+                accepted=True, last_seq=self.mission.report_seqs.get(m.name, 0), missing=lost
+            )
+        )
 
     def _reconcile(self, robot: str, robot_has: set[str]) -> list[str]:
         """After a restart on either side: skills the mission holds as on the
@@ -577,11 +705,20 @@ class MissionServer:
         if lost:
             try:
                 self._submit(Reconcile(robot=robot, lost=lost), actor=robot)
-                self.alert(f"{robot} no longer had {', '.join(lost)}: returned to the plan", robot=robot, kind="reconcile")
+                self.alert(
+                    f"{robot} no longer had {', '.join(lost)}: returned to the plan",
+                    robot=robot,
+                    kind="reconcile",
+                )
             except JournalFailed:
                 raise  # the registration fails: the robot registers again
             except Refusal as r:
-                self.alert(f"cannot reconcile {robot}: {r.message}", level="error", robot=robot, kind="reconcile")
+                self.alert(
+                    f"cannot reconcile {robot}: {r.message}",
+                    level="error",
+                    robot=robot,
+                    kind="reconcile",
+                )
                 return []
         return lost
 
@@ -589,7 +726,13 @@ class MissionServer:
         refused = []
         for rep in sorted(reports, key=lambda r: r.seq):
             if rep.robot != robot:
-                refused.append(ErrorReply(code="bad_report", message=f"{robot} cannot report for {rep.robot}", robot=robot))
+                refused.append(
+                    ErrorReply(
+                        code="bad_report",
+                        message=f"{robot} cannot report for {rep.robot}",
+                        robot=robot,
+                    )
+                )
                 continue
             try:
                 applied = self._submit(rep, actor=robot)
@@ -597,10 +740,22 @@ class MissionServer:
                 raise  # not consumed: the robot keeps it and sends it again
             except Refusal as r:
                 refused.append(ErrorReply(**r.to_dict()))
-                self.alert(f"report refused: {r.message}", level="error", robot=robot, skill=rep.id, kind="report_refused")
+                self.alert(
+                    f"report refused: {r.message}",
+                    level="error",
+                    robot=robot,
+                    skill=rep.id,
+                    kind="report_refused",
+                )
                 continue
             if not applied.duplicate and rep.status.value == "failure":
-                self.alert(f"{robot}: {rep.id} failed: {rep.info}", level="error", robot=robot, skill=rep.id, kind="failure")
+                self.alert(
+                    f"{robot}: {rep.id} failed: {rep.info}",
+                    level="error",
+                    robot=robot,
+                    skill=rep.id,
+                    kind="failure",
+                )
         return refused
 
     def _handle_reports(self, payload: bytes, key: str) -> bytes | Awaitable[bytes]:
@@ -609,7 +764,9 @@ class MissionServer:
         if len(robots) > 1:
             raise Refusal("bad_report", "a report batch comes from one robot")
         if robots and robots != {Keys.robot_of(key)}:  # the key is what the router's rules check
-            raise Refusal("bad_report", f"{Keys.robot_of(key)} cannot report for {', '.join(robots)}")
+            raise Refusal(
+                "bad_report", f"{Keys.robot_of(key)} cannot report for {', '.join(robots)}"
+            )
         robot = robots.pop() if robots else ""
         if robot:
             self._robot_from(robot)
@@ -697,14 +854,26 @@ class JournalFailed(Refusal):
             todo = "make the file writable, then send it again"
         else:
             todo = "check the disk and the file, then send it again"
-        super().__init__("journal_failed", f"the server could not write {what} to its journal {db} ({why}): the mission was not changed; {todo}")
+        super().__init__(
+            "journal_failed",
+            f"the server could not write {what} to its journal {db} ({why}): the mission was not changed; {todo}",
+        )
 
 
 def _error(e: Refusal | ValidationError) -> ReplyErr:
     if isinstance(e, Refusal):
         return ReplyErr(dumps(ErrorReply(**e.to_dict())))
-    return ReplyErr(dumps(ErrorReply(code="bad_request", message=f"malformed request: {first_error(e)}")))
+    return ReplyErr(
+        dumps(ErrorReply(code="bad_request", message=f"malformed request: {first_error(e)}"))
+    )
 
 
 def _reply(applied: Applied) -> bytes:
-    return dumps(OpReply(revision=applied.revision, value=applied.value, notes=applied.notes, duplicate=applied.duplicate))
+    return dumps(
+        OpReply(
+            revision=applied.revision,
+            value=applied.value,
+            notes=applied.notes,
+            duplicate=applied.duplicate,
+        )
+    )

@@ -497,7 +497,9 @@ async def present_tokens(session: zenoh.Session, key_expr: str, timeout: float =
         # a Python thread of its own (indirect): Zenoh ends a liveliness query
         # holding the session's lock, and a callback run there waits for the
         # GIL (see NOTES.md, "Deadlock"); this runs once per robot start
-        session.liveliness().get(key_expr, Callback(on_reply, lambda: _post(loop, finish)), timeout=timeout)
+        session.liveliness().get(
+            key_expr, Callback(on_reply, lambda: _post(loop, finish)), timeout=timeout
+        )
     except zenoh.ZError as exc:
         raise TransportError(f"cannot ask for the tokens of {key_expr}: {exc}") from exc
     try:

@@ -46,14 +46,36 @@ class Login:
         return out
 
 
-def add_login_arguments(p: argparse.ArgumentParser | Any, *, user_help: str | None = None, suppress: bool = False) -> None:
+def add_login_arguments(
+    p: argparse.ArgumentParser | Any, *, user_help: str | None = None, suppress: bool = False
+) -> None:
     """--user, --password-file, --ca, --cert, --key on a parser or argument group.
     `suppress`: leave unset options out of the namespace (sub-command overrides)."""
     d = (lambda v: argparse.SUPPRESS) if suppress else (lambda v: v)
-    p.add_argument("--user", metavar="USER", default=d(""), help=user_help or "account to log in as (with --password-file)")
-    p.add_argument("--password-file", metavar="FILE", default=d(None), help="file holding the account's password (mode 0600); never give a password on the command line")
-    p.add_argument("--ca", metavar="FILE", default=d(None), help="CA certificate that signed the server's (tls/ endpoints)")
-    p.add_argument("--cert", metavar="FILE", default=d(None), help="client certificate for mutual TLS (with --key)")
+    p.add_argument(
+        "--user",
+        metavar="USER",
+        default=d(""),
+        help=user_help or "account to log in as (with --password-file)",
+    )
+    p.add_argument(
+        "--password-file",
+        metavar="FILE",
+        default=d(None),
+        help="file holding the account's password (mode 0600); never give a password on the command line",
+    )
+    p.add_argument(
+        "--ca",
+        metavar="FILE",
+        default=d(None),
+        help="CA certificate that signed the server's (tls/ endpoints)",
+    )
+    p.add_argument(
+        "--cert",
+        metavar="FILE",
+        default=d(None),
+        help="client certificate for mutual TLS (with --key)",
+    )
     p.add_argument("--key", metavar="FILE", default=d(None), help="private key of --cert")
 
 
@@ -72,7 +94,13 @@ def login_from_args(args: argparse.Namespace) -> Login:
         if path and not Path(path).is_file():
             raise AccountsError(f"{opt} {path}: no such file")
     password = read_password(password_file) if password_file else ""
-    return Login(user=user, password=password, ca=_absolute(getattr(args, "ca", None)), cert=_absolute(cert), key=_absolute(key))
+    return Login(
+        user=user,
+        password=password,
+        ca=_absolute(getattr(args, "ca", None)),
+        cert=_absolute(cert),
+        key=_absolute(key),
+    )
 
 
 def _absolute(path: str | None) -> str | None:

@@ -44,7 +44,9 @@ def diagnose(config: zenoh.Config, endpoints: list[str]) -> str | None:
                 if problem:
                     return problem
         if user:
-            return f"login refused for user {user} at {endpoint} (wrong password or no such account)"
+            return (
+                f"login refused for user {user} at {endpoint} (wrong password or no such account)"
+            )
         return f"login refused at {endpoint}: the server requires an account (give --user and --password-file)"
     return None
 
@@ -68,8 +70,14 @@ def _tls_problem(config: zenoh.Config, sock: socket.socket, host: str, endpoint:
             except TimeoutError:
                 pass
     except ssl.SSLCertVerificationError as e:
-        fix = "give --ca FILE, the CA that signed it" if not ca else f"is {ca} the CA that signed it? does the certificate name {host}?"
-        return f"TLS: the server certificate at {endpoint} is not trusted ({e.verify_message}); {fix}"
+        fix = (
+            "give --ca FILE, the CA that signed it"
+            if not ca
+            else f"is {ca} the CA that signed it? does the certificate name {host}?"
+        )
+        return (
+            f"TLS: the server certificate at {endpoint} is not trusted ({e.verify_message}); {fix}"
+        )
     except ssl.SSLError as e:
         reason = (e.reason or str(e)).replace("_", " ").lower()
         if "certificate required" in reason:

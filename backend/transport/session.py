@@ -91,7 +91,9 @@ def open_session(config: zenoh.Config, *, what: str = "the mission server") -> z
                 # a refused login or TLS handshake fails at once; a hung
                 # (SIGSTOPped, overloaded) router still accepts TCP, then is silent
                 detail = _SILENT_DETAIL.format(s=round(waited))
-                raise TransportUnreachable(_endpoints(config, "connect"), detail, what=what) from exc
+                raise TransportUnreachable(
+                    _endpoints(config, "connect"), detail, what=what
+                ) from exc
             refusal = diagnose(config, _endpoints(config, "connect"))
             if refusal is not None:
                 raise LoginRefused(_endpoints(config, "connect"), refusal) from exc

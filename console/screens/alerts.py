@@ -14,12 +14,28 @@ from console.state.eventlog import AlertEntry
 from console.state.model import fmt_clock
 
 LEVEL_VARS = {"error": "error", "warning": "warning", "info": "primary"}
-KIND_WORDS = {"failure": "failure", "offline": "offline", "out_of_range": "out of range", "low_battery": "low battery", "refusal": "refusal", "server": "server", "malformed": "unreadable message"}
+KIND_WORDS = {
+    "failure": "failure",
+    "offline": "offline",
+    "out_of_range": "out of range",
+    "low_battery": "low battery",
+    "refusal": "refusal",
+    "server": "server",
+    "malformed": "unreadable message",
+}
 
 
 class AlertScreen(ViewScreen):
     SCOPE = "alerts"
-    COLUMNS = (("", "ack"), ("Time", "at"), ("Kind", "kind"), ("Robot", "robot"), ("What", "message"), ("Level", "level"), ("From", "source"))
+    COLUMNS = (
+        ("", "ack"),
+        ("Time", "at"),
+        ("Kind", "kind"),
+        ("Robot", "robot"),
+        ("What", "message"),
+        ("Level", "level"),
+        ("From", "source"),
+    )
     TOPICS = ("alerts",)
     BINDINGS = [*ViewScreen.BINDINGS, *bindings("alerts")]
 
@@ -30,7 +46,9 @@ class AlertScreen(ViewScreen):
     def compose(self) -> ComposeResult:
         yield self.title_bar
         yield DataTable(id="alerts", cursor_type="row")
-        yield Static("enter/a acknowledge · A acknowledge all · F2 schedule · F5 event log", classes="hint")
+        yield Static(
+            "enter/a acknowledge · A acknowledge all · F2 schedule · F5 event log", classes="hint"
+        )
         yield Footer()
 
     @property
@@ -42,7 +60,10 @@ class AlertScreen(ViewScreen):
         level = Text(a.level, style=f"{style} {self.colour(LEVEL_VARS[a.level])}".strip())
         count = f" (×{a.count})" if a.count > 1 else ""
         return [
-            Text("✓" if a.acknowledged else "●", style="dim" if a.acknowledged else f"bold {self.colour('warning')}"),
+            Text(
+                "✓" if a.acknowledged else "●",
+                style="dim" if a.acknowledged else f"bold {self.colour('warning')}",
+            ),
             Text(fmt_clock(a.at)),
             Text(KIND_WORDS.get(a.kind, a.kind)),
             Text(a.robot or ""),
@@ -65,7 +86,9 @@ class AlertScreen(ViewScreen):
             if alerts:
                 t.move_cursor(row=min(keep, len(alerts) - 1))
         n = self.book.unacknowledged
-        self.set_title(("Alerts", "bold"), f"  {n} unacknowledged of {len(alerts)}" if alerts else "  none")
+        self.set_title(
+            ("Alerts", "bold"), f"  {n} unacknowledged of {len(alerts)}" if alerts else "  none"
+        )
 
     def action_ack(self) -> None:
         t = self.query_one(DataTable)

@@ -126,7 +126,14 @@ class SkillPicker(ModalScreen[str | None]):
     SkillPicker .hint { color: $text-muted; }
     """
 
-    def __init__(self, robot: str, skills: list[str], library: Library, where: str, offered_by: dict[str, str] | None = None) -> None:
+    def __init__(
+        self,
+        robot: str,
+        skills: list[str],
+        library: Library,
+        where: str,
+        offered_by: dict[str, str] | None = None,
+    ) -> None:
         super().__init__()
         self.robot = robot
         self.skills = skills
@@ -136,7 +143,11 @@ class SkillPicker(ModalScreen[str | None]):
 
     def compose(self) -> ComposeResult:
         with Vertical():
-            yield Label(Text.assemble(("Add a skill to ", ""), (self.robot, "bold"), (f" — {self.where}", "dim")))
+            yield Label(
+                Text.assemble(
+                    ("Add a skill to ", ""), (self.robot, "bold"), (f" — {self.where}", "dim")
+                )
+            )
             yield Input(placeholder="type to filter…", id="filter")
             yield OptionList(id="skills")
             yield Static("enter: add · ↑↓: choose · escape: cancel", classes="hint")
@@ -151,7 +162,12 @@ class SkillPicker(ModalScreen[str | None]):
         desc = spec.description if spec else ""
         title = matcher.highlight(name) if matcher else Text(name)
         others = self.offered_by.get(name)
-        prompt = Text.assemble(title if isinstance(title, Text) else Text(str(title)), (f"  · {others}" if others else "", "italic"), "\n", (f"  {desc}", "dim"))
+        prompt = Text.assemble(
+            title if isinstance(title, Text) else Text(str(title)),
+            (f"  · {others}" if others else "", "italic"),
+            "\n",
+            (f"  {desc}", "dim"),
+        )
         return Option(prompt, id=name)
 
     def _fill(self, query: str) -> None:
@@ -162,7 +178,9 @@ class SkillPicker(ModalScreen[str | None]):
             scored = []
             for name in self.skills:
                 spec = self.library.skills.get(name)
-                score = max(matcher.match(name), 0.5 * matcher.match(spec.description if spec else ""))
+                score = max(
+                    matcher.match(name), 0.5 * matcher.match(spec.description if spec else "")
+                )
                 if score > 0:
                     scored.append((score, name))
             names = [n for _, n in sorted(scored, key=lambda x: -x[0])]
@@ -262,7 +280,11 @@ class HelpScreen(ModalScreen[None]):
         def heading(title: str) -> None:
             parts.append(Text(f"\n{title}", style="bold underline"))
 
-        def table(rows: list[tuple[str | Text, str | Text, str]], key_width: int = 16, label_width: int = 13) -> None:
+        def table(
+            rows: list[tuple[str | Text, str | Text, str]],
+            key_width: int = 16,
+            label_width: int = 13,
+        ) -> None:
             grid = Table.grid(padding=(0, 1))
             grid.add_column(min_width=key_width, no_wrap=True, style="bold")
             grid.add_column(min_width=label_width, no_wrap=True)
@@ -282,7 +304,12 @@ class HelpScreen(ModalScreen[None]):
             groups.setdefault(a.group, []).append(a)
         for group, actions in groups.items():
             heading(group)
-            table([(self.keys.get(a.name, a.key).replace(",", " / "), a.label, a.description) for a in actions])
+            table(
+                [
+                    (self.keys.get(a.name, a.key).replace(",", " / "), a.label, a.description)
+                    for a in actions
+                ]
+            )
         heading("Parameter editor")
         table(EDITOR_KEYS)
         heading("App")
@@ -294,15 +321,39 @@ class HelpScreen(ModalScreen[None]):
             colour = colours.get(f"status-{STATUS_CSS[status]}", "")
             return Text(text, style=f"{'bold ' if bold else ''}{colour}".strip())
 
-        table([(coloured(status, glyph, True), coloured(status, status.value), STATUS_WORDS[status]) for status, glyph in GLYPHS.items()], key_width=3, label_width=18)
-        table([
-            ("[b1]", "", "barrier tag: partner skills wait for each other"),
-            ("+", "", "marked for a new barrier (space)"),
-            ("*label", "", "unapplied changes in the editor (kept per skill until applied or reverted)"),
-        ], key_width=7, label_width=0)
+        table(
+            [
+                (
+                    coloured(status, glyph, True),
+                    coloured(status, status.value),
+                    STATUS_WORDS[status],
+                )
+                for status, glyph in GLYPHS.items()
+            ],
+            key_width=3,
+            label_width=18,
+        )
+        table(
+            [
+                ("[b1]", "", "barrier tag: partner skills wait for each other"),
+                ("+", "", "marked for a new barrier (space)"),
+                (
+                    "*label",
+                    "",
+                    "unapplied changes in the editor (kept per skill until applied or reverted)",
+                ),
+            ],
+            key_width=7,
+            label_width=0,
+        )
         heading("Remapping keys")
-        parts.append(Text('  ~/.config/missionctl/config.toml:  [keymap]  "mission.sync" = "S"\n'
-                          "  binding ids: " + ", ".join(a.binding_id for a in ACTIONS), style="dim"))
+        parts.append(
+            Text(
+                '  ~/.config/missionctl/config.toml:  [keymap]  "mission.sync" = "S"\n'
+                "  binding ids: " + ", ".join(a.binding_id for a in ACTIONS),
+                style="dim",
+            )
+        )
         return Group(*parts)
 
     def action_close(self) -> None:

@@ -28,7 +28,15 @@ SPARK = 6  # samples shown per sparkline (the model keeps model.HISTORY)
 
 class FleetScreen(ViewScreen):
     SCOPE = "fleet"
-    COLUMNS = (("Robot", "robot"), ("Presence", "presence"), ("Type", "type"), ("Battery", "battery"), ("Link", "link"), ("Doing", "doing"), ("Last report", "report"))
+    COLUMNS = (
+        ("Robot", "robot"),
+        ("Presence", "presence"),
+        ("Type", "type"),
+        ("Battery", "battery"),
+        ("Link", "link"),
+        ("Doing", "doing"),
+        ("Last report", "report"),
+    )
     TOPICS = ("fleet",)
 
     def __init__(self) -> None:
@@ -37,10 +45,15 @@ class FleetScreen(ViewScreen):
 
     def compose(self) -> ComposeResult:
         yield self.title_bar
-        yield Input(placeholder="filter by capability: pick_stone · type:lru · module:arm · prop:…", id="filter")
+        yield Input(
+            placeholder="filter by capability: pick_stone · type:lru · module:arm · prop:…",
+            id="filter",
+        )
         yield DataTable(id="robots", cursor_type="row", zebra_stripes=False)
         yield Static("", id="detail", classes="detail")
-        yield Static("type to filter (escape: back to the list) · ↑↓ robot · F2 schedule", classes="hint")
+        yield Static(
+            "type to filter (escape: back to the list) · ↑↓ robot · F2 schedule", classes="hint"
+        )
         yield Footer()
 
     @property
@@ -96,14 +109,20 @@ class FleetScreen(ViewScreen):
         t = self.query_one(DataTable)
         if robot is None or robot not in self.shown:
             # a robot may now match or not (its manifest came), or the mission changed
-            if [r for r in fleet_order(self.model) if matches(self.model, r, self.query_text)] != self.shown:
+            if [
+                r for r in fleet_order(self.model) if matches(self.model, r, self.query_text)
+            ] != self.shown:
                 self.redraw()
                 return
             robots = self.shown if robot is None else []
         else:
             robots = [robot]
         for r in robots:
-            for key, value in zip(("robot", "presence", "type", "battery", "link", "doing", "report"), self._row(r), strict=True):
+            for key, value in zip(
+                ("robot", "presence", "type", "battery", "link", "doing", "report"),
+                self._row(r),
+                strict=True,
+            ):
                 t.update_cell(r, key, value)
         self._title()
         if self.selected in robots:
@@ -126,7 +145,9 @@ class FleetScreen(ViewScreen):
         detail = self.query_one("#detail", Static)
         r = self.selected
         if r is None:
-            detail.update(Text("no robot matches the filter" if self.query_text else "no robots", style="dim"))
+            detail.update(
+                Text("no robot matches the filter" if self.query_text else "no robots", style="dim")
+            )
             return
         info = self.model.robots.get(r)
         man = info.manifest if info else None
@@ -168,4 +189,8 @@ class FleetScreen(ViewScreen):
 
 def _prop(value: object) -> str:
     """A manifest property as the robot sent it (JSON), as `ctl robots` shows it."""
-    return value if isinstance(value, str) else json.dumps(value, separators=(",", ":"), ensure_ascii=False)
+    return (
+        value
+        if isinstance(value, str)
+        else json.dumps(value, separators=(",", ":"), ensure_ascii=False)
+    )

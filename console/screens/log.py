@@ -21,12 +21,24 @@ from console.state.model import fmt_clock
 
 SHOW_LIMIT = 1_000  # rows in the table (a DataTable of 10k rows takes seconds to fill); export writes all matches
 
-KIND_VARS = {"failure": "status-failure", "refusal": "error", "alert": "warning", "report": "status-running", "operation": "secondary"}
+KIND_VARS = {
+    "failure": "status-failure",
+    "refusal": "error",
+    "alert": "warning",
+    "report": "status-running",
+    "operation": "secondary",
+}
 
 
 class EventLogScreen(ViewScreen):
     SCOPE = "log"
-    COLUMNS = (("Time", "at"), ("Kind", "kind"), ("Robot", "robot"), ("What", "text"), ("Who", "who"))
+    COLUMNS = (
+        ("Time", "at"),
+        ("Kind", "kind"),
+        ("Robot", "robot"),
+        ("What", "text"),
+        ("Who", "who"),
+    )
     TOPICS = ("log",)
     BINDINGS = [*ViewScreen.BINDINGS, *bindings("log")]
 
@@ -38,10 +50,18 @@ class EventLogScreen(ViewScreen):
 
     def compose(self) -> ComposeResult:
         yield self.title_bar
-        yield Input(placeholder="filter: robot:lru1 kind:failure words…  (kinds: operation report refusal failure alert)", id="filter")
+        yield Input(
+            placeholder="filter: robot:lru1 kind:failure words…  (kinds: operation report refusal failure alert)",
+            id="filter",
+        )
         yield DataTable(id="log", cursor_type="row")
-        yield Static("", id="entry", classes="detail")  # the selected entry in full (the table cuts at 80 columns)
-        yield Static(f"last {LOG_LIMIT:,} entries kept in memory · ctrl+s export shown entries (JSON lines) · F2 schedule", classes="hint")
+        yield Static(
+            "", id="entry", classes="detail"
+        )  # the selected entry in full (the table cuts at 80 columns)
+        yield Static(
+            f"last {LOG_LIMIT:,} entries kept in memory · ctrl+s export shown entries (JSON lines) · F2 schedule",
+            classes="hint",
+        )
         yield Footer()
 
     @property
@@ -55,7 +75,13 @@ class EventLogScreen(ViewScreen):
         who = f"{e.user}@{e.client}" if e.user else e.client
         colour = self.colour(KIND_VARS.get(e.kind, ""), "")
         # Text, not str: a str cell is parsed as markup ("[lru1] …" would vanish)
-        return [Text(fmt_clock(e.at)), Text(e.kind, style=colour), Text(", ".join(e.robots)), Text(e.text), Text(who)]
+        return [
+            Text(fmt_clock(e.at)),
+            Text(e.kind, style=colour),
+            Text(", ".join(e.robots)),
+            Text(e.text),
+            Text(who),
+        ]
 
     def _add(self, t: DataTable, entries: list[LogEntry]) -> None:
         for e in entries:
@@ -120,21 +146,39 @@ class EventLogScreen(ViewScreen):
         t = self.query_one(DataTable)
         box = self.query_one("#entry", Static)
         if not self.rows or t.cursor_row >= len(self.rows):
-            box.update(Text("no entry matches the filter" if self.query_text else "nothing happened yet", style="dim"))
+            box.update(
+                Text(
+                    "no entry matches the filter" if self.query_text else "nothing happened yet",
+                    style="dim",
+                )
+            )
             return
         seq = self.rows[t.cursor_row]
         e = next((x for x in self.log_.entries if x.seq == seq), None)
         if e is None:
             return
         who = f"{e.user} on {e.client}" if e.user else e.client
-        out = Text.assemble((f"{fmt_clock(e.at)} {e.kind}", "bold"), f"  {', '.join(e.robots)}  " if e.robots else "  ", e.text)
-        out.append(f"\nby {who}" + (f" · op {e.op}" if e.op else "") + (f" · revision {e.revision}" if e.revision is not None else ""), style="dim")
+        out = Text.assemble(
+            (f"{fmt_clock(e.at)} {e.kind}", "bold"),
+            f"  {', '.join(e.robots)}  " if e.robots else "  ",
+            e.text,
+        )
+        out.append(
+            f"\nby {who}"
+            + (f" · op {e.op}" if e.op else "")
+            + (f" · revision {e.revision}" if e.revision is not None else ""),
+            style="dim",
+        )
         box.update(out)
 
     @work(group="dialog")
     async def action_export(self) -> None:
         entries = self.shown_entries()
-        path = await self.app.push_screen_wait(PathPrompt(f"Export {len(entries)} event-log entries (JSON lines) to", "missionctl-log.jsonl"))
+        path = await self.app.push_screen_wait(
+            PathPrompt(
+                f"Export {len(entries)} event-log entries (JSON lines) to", "missionctl-log.jsonl"
+            )
+        )
         if not path:
             return
         try:

@@ -75,7 +75,14 @@ def legend_text(colours: dict[str, str] | None = None) -> Text:
 
     t.append("Legend\n", style="bold")
     row(ROBOT_ARROWS[0], "bold", "robot, heading")
-    for st in (Status.RUNNING, Status.PAUSED, Status.SYNCHWAITING, Status.FAILURE, Status.IDLE_SYNCHRONIZED, Status.IDLE):
+    for st in (
+        Status.RUNNING,
+        Status.PAUSED,
+        Status.SYNCHWAITING,
+        Status.FAILURE,
+        Status.IDLE_SYNCHRONIZED,
+        Status.IDLE,
+    ):
         row(GLYPHS[st], fg(f"status-{STATUS_CSS[st]}"), f"  {STATUS_WORDS[st]}")
     row("✕", fg("presence-offline"), "  offline")
     row(NO_LINK_GLYPH, fg("presence-offline"), "  out of comms range")
@@ -94,7 +101,11 @@ def legend_text(colours: dict[str, str] | None = None) -> Text:
     row("~", f"on {c['map-sand']}" if "map-sand" in c else "", "sand (slow)")
     row("▴", f"on {c['map-rock']}" if "map-rock" in c else "", "rock (impassable)")
     row(" ", f"on {c['map-link']}" if "map-link" in c else "reverse", "in comms range")
-    row(POSE_ARROWS[0], f"bold {c['map-cursor']}" if "map-cursor" in c else "bold", "cursor (heading)")
+    row(
+        POSE_ARROWS[0],
+        f"bold {c['map-cursor']}" if "map-cursor" in c else "bold",
+        "cursor (heading)",
+    )
     return t
 
 
@@ -112,7 +123,9 @@ def param_rows(spec: Any, s: Any, names: list[str]) -> list[tuple[str, Text]]:
             now = Text(fmt_value(ps, s.params[n]))
         else:
             now = Text("not set", style="dim")
-        rows.append((n, Text.assemble((n.ljust(wn), "bold"), "  ", (ps.type.ljust(wt), "dim"), "  ", now)))
+        rows.append(
+            (n, Text.assemble((n.ljust(wn), "bold"), "  ", (ps.type.ljust(wt), "dim"), "  ", now))
+        )
     return rows
 
 
@@ -152,8 +165,16 @@ class MarkerPrompt(ModalScreen[tuple[str, str] | None]):
             yield Label(self.title_text)
             yield Input(self.default, id="name")
             if self.kinds:
-                yield SafeSelect([("pose (position + heading)", "pose"), ("position", "position"), ("area (square around the cursor)", "area")],
-                             value=self.kind, allow_blank=False, id="kind")
+                yield SafeSelect(
+                    [
+                        ("pose (position + heading)", "pose"),
+                        ("position", "position"),
+                        ("area (square around the cursor)", "area"),
+                    ],
+                    value=self.kind,
+                    allow_blank=False,
+                    id="kind",
+                )
             yield Static("enter: ok · escape: cancel", classes="hint")
             yield Static("", id="error", classes="error")
 
@@ -164,7 +185,9 @@ class MarkerPrompt(ModalScreen[tuple[str, str] | None]):
     def _submitted(self, event: Input.Submitted) -> None:
         name = event.value.strip()
         if not NAME_RE.match(name):
-            self.query_one("#error", Static).update("a name starts with a letter; then letters, digits, _ or -")
+            self.query_one("#error", Static).update(
+                "a name starts with a letter; then letters, digits, _ or -"
+            )
             return
         kind = str(self.query_one("#kind", Select).value) if self.kinds else ""
         self.dismiss((name, kind))
@@ -189,7 +212,9 @@ class MapScreen(Screen):
         Binding("ctrl+left", "cursor(-8, 0)", show=False),
         Binding("ctrl+right", "cursor(8, 0)", show=False),
         Binding("f1,question_mark", "help", "Help", id="app.help"),
-        Binding("escape", "app.show_mission", "Schedule", show=False),  # "back to the schedule" (help: App keys)
+        Binding(
+            "escape", "app.show_mission", "Schedule", show=False
+        ),  # "back to the schedule" (help: App keys)
     ]
     DEFAULT_CSS = """
     MapScreen #map-main { height: 1fr; }
@@ -242,7 +267,11 @@ class MapScreen(Screen):
         self.update_info()
 
     def _apply_legend(self) -> None:
-        show = self.legend_choice if self.legend_choice is not None else self.app.size.width >= LEGEND_MIN_WIDTH
+        show = (
+            self.legend_choice
+            if self.legend_choice is not None
+            else self.app.size.width >= LEGEND_MIN_WIDTH
+        )
         self.set_class(not show, "-no-legend")
 
     # -- state in (called by the app) ---------------------------------------------------------------
@@ -264,7 +293,10 @@ class MapScreen(Screen):
 
     def model_changed(self) -> None:
         self.sync_selection()
-        if self.view.selected_marker and (self.model.mission is None or self.view.selected_marker not in self.model.mission.markers):
+        if self.view.selected_marker and (
+            self.model.mission is None
+            or self.view.selected_marker not in self.model.mission.markers
+        ):
             self.view.selected_marker = None
         self.view.overlays_changed()
         self.update_top()
@@ -296,7 +328,13 @@ class MapScreen(Screen):
         if m.mission is not None:
             t.append(f"  {m.mission.name}", style="bold")
             t.append(f"  rev {m.mission.revision}", style="dim")
-        glyph = {"connected": "●", "reconnecting": "⟳", "connecting": "…", "unreachable": "✕", "offline": "○"}.get(m.connection, "?")
+        glyph = {
+            "connected": "●",
+            "reconnecting": "⟳",
+            "connecting": "…",
+            "unreachable": "✕",
+            "offline": "○",
+        }.get(m.connection, "?")
         t.append(f"   {glyph} {m.connection}")
         t.append("   F2 schedule", style="dim")
         self._topbar.update(t, layout=False)
@@ -305,7 +343,9 @@ class MapScreen(Screen):
         v = self.view
         t = Text()
         if self.feed_state == "none" or v.mirror is None or not v.mirror.ready:
-            t.append(NO_FEED if self.feed_state == "none" else "waiting for the map feed…", style="bold")
+            t.append(
+                NO_FEED if self.feed_state == "none" else "waiting for the map feed…", style="bold"
+            )
             t.append("  ")
         x, y = v.cursor
         t.append(f"cursor ({x:.1f}, {y:.1f}) {math.degrees(v.heading):.0f}°")
@@ -317,7 +357,10 @@ class MapScreen(Screen):
             t.append(f"  marker {v.selected_marker} ({use})")
         found = self.model.find(v.selected_skill)
         if found is not None:
-            t.append(f"  skill {found[2].id} {found[2].skill} ({STATUS_WORDS[found[2].status]})", style="dim")
+            t.append(
+                f"  skill {found[2].id} {found[2].skill} ({STATUS_WORDS[found[2].status]})",
+                style="dim",
+            )
         self._info.update(t, layout=False)
         self._info.set_class(self.feed_state == "none", "-nofeed")
 
@@ -332,7 +375,10 @@ class MapScreen(Screen):
 
     def _connected(self) -> bool:
         if self.model.connection != CONNECTED:
-            self.say(f"not connected to the mission server ({self.model.connection}): markers cannot be changed now", "warning")
+            self.say(
+                f"not connected to the mission server ({self.model.connection}): markers cannot be changed now",
+                "warning",
+            )
             return False
         return True
 
@@ -340,7 +386,9 @@ class MapScreen(Screen):
         name = self.view.selected_marker
         m = self.model.mission
         if name is None or m is None or name not in m.markers:
-            self.say("select a marker first: n selects the next one (the cursor jumps to it)", "warning")
+            self.say(
+                "select a marker first: n selects the next one (the cursor jumps to it)", "warning"
+            )
             return None
         return m.markers[name]
 
@@ -395,12 +443,20 @@ class MapScreen(Screen):
         self.update_info()
 
     def action_map_follow(self) -> None:
-        robots = [r for r in self.model.robot_order() if self.model.robot_kind(r) != "static" and r in self.model.telemetry]
+        robots = [
+            r
+            for r in self.model.robot_order()
+            if self.model.robot_kind(r) != "static" and r in self.model.telemetry
+        ]
         if not robots:
             self.say("no robot position known yet (no telemetry): nothing to follow", "warning")
             return
         cur = self.view.follow
-        nxt = robots[(robots.index(cur) + 1)] if cur in robots and robots.index(cur) + 1 < len(robots) else (None if cur in robots else robots[0])
+        nxt = (
+            robots[(robots.index(cur) + 1)]
+            if cur in robots and robots.index(cur) + 1 < len(robots)
+            else (None if cur in robots else robots[0])
+        )
         self.view.follow = nxt
         if nxt is None:
             self.say("stopped following")
@@ -461,7 +517,9 @@ class MapScreen(Screen):
     async def action_map_add_marker(self) -> None:
         if not self._connected():
             return
-        answer = await self.app.push_screen_wait(MarkerPrompt("New marker at the cursor — name:", self._free_name()))
+        answer = await self.app.push_screen_wait(
+            MarkerPrompt("New marker at the cursor — name:", self._free_name())
+        )
         if not answer:
             return
         name, kind = answer
@@ -472,7 +530,14 @@ class MapScreen(Screen):
             marker = PositionMarker(position=Position(x=x, y=y))
         else:
             r = max(5.0, 4 * self.view.vp.mpp)
-            marker = AreaMarker(area=[Position(x=x - r, y=y - r), Position(x=x + r, y=y - r), Position(x=x + r, y=y + r), Position(x=x - r, y=y + r)])
+            marker = AreaMarker(
+                area=[
+                    Position(x=x - r, y=y - r),
+                    Position(x=x + r, y=y - r),
+                    Position(x=x + r, y=y + r),
+                    Position(x=x - r, y=y + r),
+                ]
+            )
 
         def ok(reply: Any) -> None:
             self.view.selected_marker = name
@@ -487,14 +552,21 @@ class MapScreen(Screen):
         if mk.kind == "position":
             return Position(x=x, y=y, z=mk.position.z)
         cx, cy = centroid([(p.x, p.y) for p in mk.area])
-        return [Position(x=round(p.x + x - cx, 2), y=round(p.y + y - cy, 2), z=p.z) for p in mk.area]
+        return [
+            Position(x=round(p.x + x - cx, 2), y=round(p.y + y - cy, 2), z=p.z) for p in mk.area
+        ]
 
     def action_map_move_marker(self) -> None:
         mk = self._marker()
         if mk is None or not self._connected():
             return
         name = self.view.selected_marker
-        followers = [s.id for task in self.model.mission.tasks.values() for s in task if s.status == Status.IDLE and name in s.bindings.values()]
+        followers = [
+            s.id
+            for task in self.model.mission.tasks.values()
+            for s in task
+            if s.status == Status.IDLE and name in s.bindings.values()
+        ]
 
         def ok(reply: Any) -> None:
             x, y = self.view.cursor
@@ -506,14 +578,18 @@ class MapScreen(Screen):
                 text += f"; {', '.join(stale)} still use{'s' if len(stale) == 1 else ''} the old value — unsynchronize to update"
             self.say(text, "warning" if stale else "ok")
 
-        self.submit(MarkerMove(name=name, value=self.move_value(mk)), f"move marker {name}", on_ok=ok)
+        self.submit(
+            MarkerMove(name=name, value=self.move_value(mk)), f"move marker {name}", on_ok=ok
+        )
 
     @work(group="dialog")
     async def action_map_rename_marker(self) -> None:
         if self._marker() is None or not self._connected():
             return
         old = self.view.selected_marker
-        answer = await self.app.push_screen_wait(MarkerPrompt(f"Rename marker {old} to:", old, kinds=False))
+        answer = await self.app.push_screen_wait(
+            MarkerPrompt(f"Rename marker {old} to:", old, kinds=False)
+        )
         if not answer or answer[0] == old:
             return
         new = answer[0]
@@ -529,7 +605,11 @@ class MapScreen(Screen):
         if self._marker() is None or not self._connected():
             return
         name = self.view.selected_marker
-        if not await self.app.push_screen_wait(ConfirmScreen(f"Delete marker {name}? Idle skills bound to it keep its value.", yes="Delete")):
+        if not await self.app.push_screen_wait(
+            ConfirmScreen(
+                f"Delete marker {name}? Idle skills bound to it keep its value.", yes="Delete"
+            )
+        ):
             self.say("delete cancelled")
             return
 
@@ -556,7 +636,17 @@ class MapScreen(Screen):
             return None
         return found[0], found[2], spec
 
-    def _choose(self, question: str, spec: Any, s: Any, names: list[str], then: Any, *, cancelled: str, highlighted: int = 0) -> None:
+    def _choose(
+        self,
+        question: str,
+        spec: Any,
+        s: Any,
+        names: list[str],
+        then: Any,
+        *,
+        cancelled: str,
+        highlighted: int = 0,
+    ) -> None:
         """`then(name)` at once when one parameter fits; when several do, the
         operator picks one first (escape: nothing is sent)."""
         if len(names) == 1:
@@ -573,7 +663,9 @@ class MapScreen(Screen):
                 return
             then(pname)
 
-        self.app.push_screen(ChoiceScreen(question, param_rows(spec, s, names), highlighted), chosen)
+        self.app.push_screen(
+            ChoiceScreen(question, param_rows(spec, s, names), highlighted), chosen
+        )
 
     def action_map_bind(self) -> None:
         mk = self._marker()
@@ -585,26 +677,51 @@ class MapScreen(Screen):
         # a parameter the marker can give a value (the server's own rule: a pose
         # marker fits a position too), its own kind first, is bound to it; a
         # marker-typed one takes its name
-        fits = sorted((p for p, ps in spec.params.items() if marker_value(ps, mk)[1] is None),
-                      key=lambda p: spec.params[p].type != mk.kind)
-        names = [p for p, ps in spec.params.items() if ps.type == "marker" and (not ps.marker_kinds or mk.kind in ps.marker_kinds)]
+        fits = sorted(
+            (p for p, ps in spec.params.items() if marker_value(ps, mk)[1] is None),
+            key=lambda p: spec.params[p].type != mk.kind,
+        )
+        names = [
+            p
+            for p, ps in spec.params.items()
+            if ps.type == "marker" and (not ps.marker_kinds or mk.kind in ps.marker_kinds)
+        ]
         if not fits and not names:
             kinds = ", ".join(f"{p} ({ps.type})" for p, ps in spec.params.items()) or "none"
-            self.say(f"{s.id} ({s.skill}) has no parameter for a {mk.kind} marker; its parameters: {kinds}", "warning")
+            self.say(
+                f"{s.id} ({s.skill}) has no parameter for a {mk.kind} marker; its parameters: {kinds}",
+                "warning",
+            )
             return
 
         def bind(pname: str) -> None:
-            op = EditSkill(id=s.id, bindings={pname: name}) if pname in fits else EditSkill(id=s.id, params={pname: name})
-            self.submit(op, f"bind {s.id}.{pname} to {name}", robot=robot, skill=s.id,
-                        on_ok=lambda r: self.say(f"{s.id}: {pname} bound to marker {name}", "ok"))
+            op = (
+                EditSkill(id=s.id, bindings={pname: name})
+                if pname in fits
+                else EditSkill(id=s.id, params={pname: name})
+            )
+            self.submit(
+                op,
+                f"bind {s.id}.{pname} to {name}",
+                robot=robot,
+                skill=s.id,
+                on_ok=lambda r: self.say(f"{s.id}: {pname} bound to marker {name}", "ok"),
+            )
 
         def holds(p: str) -> bool:
             return s.bindings.get(p) == name or (p in names and s.params.get(p) == name)
 
         candidates = fits + names
         first = next((i for i, p in enumerate(candidates) if not holds(p)), 0)  # the likely choice
-        self._choose(f"Bind {name} to which parameter of {s.id}?", spec, s, candidates, bind,
-                     highlighted=first, cancelled=f"bind cancelled: {s.id} unchanged")
+        self._choose(
+            f"Bind {name} to which parameter of {s.id}?",
+            spec,
+            s,
+            candidates,
+            bind,
+            highlighted=first,
+            cancelled=f"bind cancelled: {s.id} unchanged",
+        )
 
     def action_map_pick(self) -> None:
         got = self._skill()
@@ -622,13 +739,26 @@ class MapScreen(Screen):
             value: dict[str, float] = {"x": x, "y": y, "z": 0.0}
             if ptype == "pose":
                 value |= {"roll": 0.0, "pitch": 0.0, "yaw": round(self.view.heading, 3)}
-            where = f"({x:g}, {y:g})" + (f" heading {math.degrees(self.view.heading):.0f}°" if ptype == "pose" else "")
+            where = f"({x:g}, {y:g})" + (
+                f" heading {math.degrees(self.view.heading):.0f}°" if ptype == "pose" else ""
+            )
             unbound = " (its marker binding is replaced)" if pname in s.bindings else ""
-            self.submit(EditSkill(id=s.id, params={pname: value}), f"set {s.id}.{pname}", robot=robot, skill=s.id,
-                        on_ok=lambda r: self.say(f"{s.id}: {pname} = {where}{unbound}", "ok"))
+            self.submit(
+                EditSkill(id=s.id, params={pname: value}),
+                f"set {s.id}.{pname}",
+                robot=robot,
+                skill=s.id,
+                on_ok=lambda r: self.say(f"{s.id}: {pname} = {where}{unbound}", "ok"),
+            )
 
-        self._choose(f"Set which parameter of {s.id} to the cursor ({x:g}, {y:g})?", spec, s, params, pick,
-                     cancelled=f"pick cancelled: {s.id} unchanged")
+        self._choose(
+            f"Set which parameter of {s.id} to the cursor ({x:g}, {y:g})?",
+            spec,
+            s,
+            params,
+            pick,
+            cancelled=f"pick cancelled: {s.id} unchanged",
+        )
 
     # -- disabled keys are explained, like on the mission screen -----------------------------------------------
     async def run_named(self, action: str) -> None:

@@ -51,14 +51,20 @@ NARROW = 100
 FOOTER_ACTIONS = [a.name for a in ACTIONS if a.footer]
 
 
-def default_params(spec_params: dict[str, ParamSpec], model: ConsoleModel, robot: str) -> tuple[dict[str, Any], dict[str, str]]:
+def default_params(
+    spec_params: dict[str, ParamSpec], model: ConsoleModel, robot: str
+) -> tuple[dict[str, Any], dict[str, str]]:
     """Values for the required parameters without a default, so a new skill is
     valid at once (then edited): the robot's position, the first fitting
     marker, the first choice, the lower bound."""
     params: dict[str, Any] = {}
     bindings: dict[str, str] = {}
     tel = model.telemetry.get(robot)
-    pose = tel.pose.model_dump() if tel is not None else {"x": 0.0, "y": 0.0, "z": 0.0, "roll": 0.0, "pitch": 0.0, "yaw": 0.0}
+    pose = (
+        tel.pose.model_dump()
+        if tel is not None
+        else {"x": 0.0, "y": 0.0, "z": 0.0, "roll": 0.0, "pitch": 0.0, "yaw": 0.0}
+    )
     markers = model.mission.markers if model.mission else {}
     robots = list(model.mission.robots) if model.mission else []
     for name, p in spec_params.items():
@@ -75,11 +81,18 @@ def default_params(spec_params: dict[str, ParamSpec], model: ConsoleModel, robot
                 bindings[name] = area[0]
             else:
                 x, y = pose["x"], pose["y"]
-                params[name] = [{"x": x - 5, "y": y - 5, "z": 0.0}, {"x": x + 5, "y": y - 5, "z": 0.0}, {"x": x + 5, "y": y + 5, "z": 0.0}, {"x": x - 5, "y": y + 5, "z": 0.0}]
+                params[name] = [
+                    {"x": x - 5, "y": y - 5, "z": 0.0},
+                    {"x": x + 5, "y": y - 5, "z": 0.0},
+                    {"x": x + 5, "y": y + 5, "z": 0.0},
+                    {"x": x - 5, "y": y + 5, "z": 0.0},
+                ]
         elif t == "enum" and p.choices:
             params[name] = p.choices[0]
         elif t == "marker":
-            fit = [m for m, mk in markers.items() if not p.marker_kinds or mk.kind in p.marker_kinds]
+            fit = [
+                m for m, mk in markers.items() if not p.marker_kinds or mk.kind in p.marker_kinds
+            ]
             if fit:
                 params[name] = fit[0]
         elif t == "robot":
@@ -188,7 +201,9 @@ class MissionScreen(Screen):
             self._set_narrow(narrow)
             if not narrow:
                 self.remove_class("-editing")
-                self.run_worker(self.editor.show_skill(self.schedule.cursor_id), group="editor", exclusive=True)
+                self.run_worker(
+                    self.editor.show_skill(self.schedule.cursor_id), group="editor", exclusive=True
+                )
 
     @property
     def editor_visible(self) -> bool:
@@ -237,7 +252,13 @@ class MissionScreen(Screen):
             t.append(f"  {m.mission.name}", style="bold")
             t.append(f"  rev {m.mission.revision}", style="dim")
         state = m.connection
-        glyph = {"connected": "●", "reconnecting": "⟳", "connecting": "…", "unreachable": "✕", "offline": "○"}.get(state, "?")
+        glyph = {
+            "connected": "●",
+            "reconnecting": "⟳",
+            "connecting": "…",
+            "unreachable": "✕",
+            "offline": "○",
+        }.get(state, "?")
         t.append(f"   {glyph} {state}")
         if m.endpoint:
             t.append(f" {m.endpoint}", style="dim")
@@ -348,7 +369,9 @@ class MissionScreen(Screen):
             at, where = 0, "at the head of the plan"
         skills = self.model.skills_of(robot)
         offered = {name: also_offered_by(self.model, name, robot) for name in skills}
-        choice = await self.app.push_screen_wait(SkillPicker(robot, skills, self.model.library, where, offered))
+        choice = await self.app.push_screen_wait(
+            SkillPicker(robot, skills, self.model.library, where, offered)
+        )
         if not choice:
             return
         spec = self.model.library.skills[choice]
@@ -359,7 +382,9 @@ class MissionScreen(Screen):
             new = reply.value.get("id")
             if not new:
                 return
-            self.say(f"added {new} ({choice}) to {robot} {where}: set its parameters, then ctrl+s", "ok")
+            self.say(
+                f"added {new} ({choice}) to {robot} {where}: set its parameters, then ctrl+s", "ok"
+            )
             self.edit_after_select = True
             if self.model.owner(new):
                 self.schedule.select(new)
@@ -391,13 +416,25 @@ class MissionScreen(Screen):
         self.schedule.set_drafts(event.unapplied)
         for text in event.discarded:
             self.say(text, "warning")
-            self.app.notify(text, title="Unapplied changes discarded", severity="warning", timeout=8)
+            self.app.notify(
+                text, title="Unapplied changes discarded", severity="warning", timeout=8
+            )
 
     @on(ParamEditor.ApplyRequested)
     def _apply(self, event: ParamEditor.ApplyRequested) -> None:
-        op = EditSkill(id=event.skill_id, label=event.label, params=event.params, bindings=event.bindings, policies=event.policies)
+        op = EditSkill(
+            id=event.skill_id,
+            label=event.label,
+            params=event.params,
+            bindings=event.bindings,
+            policies=event.policies,
+        )
         robot = self.model.owner(event.skill_id)
-        changed = ", ".join([*event.params, *event.bindings] + (["label"] if event.label is not None else []) + (["policies"] if event.policies is not None else []))
+        changed = ", ".join(
+            [*event.params, *event.bindings]
+            + (["label"] if event.label is not None else [])
+            + (["policies"] if event.policies is not None else [])
+        )
 
         def refused(reply: Any) -> None:
             if reply.skill in (None, event.skill_id) and self.editor.skill_id == event.skill_id:
@@ -406,7 +443,15 @@ class MissionScreen(Screen):
         def ok(reply: Any) -> None:
             self.say(f"{event.skill_id}: applied {changed}", "ok")
 
-        self.submit(op, f"edit {event.skill_id}", robot=robot, skill=event.skill_id, expected_revision=event.base_revision, on_ok=ok, on_refused=refused)
+        self.submit(
+            op,
+            f"edit {event.skill_id}",
+            robot=robot,
+            skill=event.skill_id,
+            expected_revision=event.base_revision,
+            on_ok=ok,
+            on_refused=refused,
+        )
 
     @work(group="dialog")
     async def action_delete(self) -> None:
@@ -417,7 +462,9 @@ class MissionScreen(Screen):
         s = found[2]
         bid = self.model.barrier_of(s.id)
         extra = f" It leaves barrier {bid}." if bid else ""
-        if not await self.app.push_screen_wait(ConfirmScreen(f"Delete {s.display()} from {robot}'s plan?{extra}", yes="Delete")):
+        if not await self.app.push_screen_wait(
+            ConfirmScreen(f"Delete {s.display()} from {robot}'s plan?{extra}", yes="Delete")
+        ):
             self.say("delete cancelled")
             return
         self.submit(DeleteSkills(ids=[s.id]), f"delete {s.id}", robot=robot, skill=s.id)
@@ -430,7 +477,12 @@ class MissionScreen(Screen):
         if sid not in idle:
             return
         index = idle.index(sid) + step
-        self.submit(MoveSkill(id=sid, index=index), f"move {sid} {'up' if step < 0 else 'down'}", robot=robot, skill=sid)
+        self.submit(
+            MoveSkill(id=sid, index=index),
+            f"move {sid} {'up' if step < 0 else 'down'}",
+            robot=robot,
+            skill=sid,
+        )
 
     def action_move_up(self) -> None:
         self._move(-1)
@@ -439,18 +491,33 @@ class MissionScreen(Screen):
         self._move(1)
 
     def action_undo(self) -> None:
-        self.submit(Undo(), "undo", on_ok=lambda r: self.say(f"undone: {r.value.get('undone', 'last edit')}", "ok"))
+        self.submit(
+            Undo(),
+            "undo",
+            on_ok=lambda r: self.say(f"undone: {r.value.get('undone', 'last edit')}", "ok"),
+        )
 
     def action_redo(self) -> None:
-        self.submit(Redo(), "redo", on_ok=lambda r: self.say(f"redone: {r.value.get('redone', 'edit')}", "ok"))
+        self.submit(
+            Redo(),
+            "redo",
+            on_ok=lambda r: self.say(f"redone: {r.value.get('redone', 'edit')}", "ok"),
+        )
 
     # -- actions: synchronization -----------------------------------------------------------------------
     def action_sync(self) -> None:
         robot, sid = self.selection()
         if robot is None or sid is None:
             return
-        self.submit(Sync(robot=robot, through=sid), f"sync {robot} through {sid}", robot=robot, skill=sid,
-                    on_ok=lambda r: self.say(f"{robot}: synchronized {', '.join(r.value.get('synchronized', []))}", "ok"))
+        self.submit(
+            Sync(robot=robot, through=sid),
+            f"sync {robot} through {sid}",
+            robot=robot,
+            skill=sid,
+            on_ok=lambda r: self.say(
+                f"{robot}: synchronized {', '.join(r.value.get('synchronized', []))}", "ok"
+            ),
+        )
 
     def action_unsync(self) -> None:
         robot, sid = self.selection()
@@ -465,7 +532,13 @@ class MissionScreen(Screen):
                 msg += f"; {', '.join(kept)} had already started and stays on the robot"
             self.say(msg, "warning" if kept else "ok")
 
-        self.submit(Unsync(robot=robot, from_id=sid), f"unsync {robot} from {sid}", robot=robot, skill=sid, on_ok=ok)
+        self.submit(
+            Unsync(robot=robot, from_id=sid),
+            f"unsync {robot} from {sid}",
+            robot=robot,
+            skill=sid,
+            on_ok=ok,
+        )
 
     def action_mark(self) -> None:
         robot, sid = self.selection()
@@ -475,7 +548,10 @@ class MissionScreen(Screen):
         self.update_top()
         self.refresh_availability()
         n = len(self.schedule.marks)
-        self.say(f"{'marked' if marked else 'unmarked'} {sid}; {n} marked" + (" — b makes the barrier" if n >= 2 else " — mark a skill of another robot"))
+        self.say(
+            f"{'marked' if marked else 'unmarked'} {sid}; {n} marked"
+            + (" — b makes the barrier" if n >= 2 else " — mark a skill of another robot")
+        )
 
     def action_barrier(self) -> None:
         ids = list(self.schedule.marks)
@@ -492,13 +568,27 @@ class MissionScreen(Screen):
         bid = self.model.barrier_of(sid) if sid else None
         if bid is None:
             return
-        self.submit(RemoveBarrier(barrier=bid), f"remove barrier {bid}", robot=robot, skill=sid, on_ok=lambda r: self.say(f"barrier {bid} removed", "ok"))
+        self.submit(
+            RemoveBarrier(barrier=bid),
+            f"remove barrier {bid}",
+            robot=robot,
+            skill=sid,
+            on_ok=lambda r: self.say(f"barrier {bid} removed", "ok"),
+        )
 
     def action_retry(self) -> None:
         robot, sid = self.selection()
         if sid is None:
             return
-        self.submit(Retry(id=sid), f"retry {sid}", robot=robot, skill=sid, on_ok=lambda r: self.say(f"{robot}: {r.value.get('id', '')} queued right after {sid} (run to start it)", "ok"))
+        self.submit(
+            Retry(id=sid),
+            f"retry {sid}",
+            robot=robot,
+            skill=sid,
+            on_ok=lambda r: self.say(
+                f"{robot}: {r.value.get('id', '')} queued right after {sid} (run to start it)", "ok"
+            ),
+        )
 
     # -- actions: execution -------------------------------------------------------------------------------
     def _control(self, op: str, robot: str | None) -> None:
@@ -506,7 +596,9 @@ class MissionScreen(Screen):
 
         def ok(r: Any) -> None:
             notes = "; ".join(r.notes)
-            self.say(f"{op} {who}: ok" + (f" — {notes}" if notes else ""), "warning" if notes else "ok")
+            self.say(
+                f"{op} {who}: ok" + (f" — {notes}" if notes else ""), "warning" if notes else "ok"
+            )
             for n in r.notes:
                 self.app.notify(n, title=f"{op}: partly applied", severity="warning")
 
@@ -524,7 +616,12 @@ class MissionScreen(Screen):
     @work(group="dialog")
     async def action_reset(self) -> None:
         robot = self.schedule.cursor_robot
-        if robot and await self.app.push_screen_wait(ConfirmScreen(f"Reset {robot}? Its active skill stops and everything queued returns to the plan.", yes="Reset")):
+        if robot and await self.app.push_screen_wait(
+            ConfirmScreen(
+                f"Reset {robot}? Its active skill stops and everything queued returns to the plan.",
+                yes="Reset",
+            )
+        ):
             self._control("reset", robot)
 
     def action_run_all(self) -> None:
@@ -538,7 +635,12 @@ class MissionScreen(Screen):
 
     @work(group="dialog")
     async def action_reset_all(self) -> None:
-        if await self.app.push_screen_wait(ConfirmScreen("Reset ALL robots? Active skills stop and everything queued returns to the plan.", yes="Reset all")):
+        if await self.app.push_screen_wait(
+            ConfirmScreen(
+                "Reset ALL robots? Active skills stop and everything queued returns to the plan.",
+                yes="Reset all",
+            )
+        ):
             self._control("reset", None)
 
     # -- actions: files ------------------------------------------------------------------------------------
@@ -562,7 +664,11 @@ class MissionScreen(Screen):
 
     @work(group="dialog")
     async def action_load(self) -> None:
-        path = await self.app.push_screen_wait(PathPrompt("Load a mission from (YAML):", self.mission_app.last_path or "", must_exist=True))
+        path = await self.app.push_screen_wait(
+            PathPrompt(
+                "Load a mission from (YAML):", self.mission_app.last_path or "", must_exist=True
+            )
+        )
         if not path:
             return
         from backend.files.missions import FileProblems, load_mission
@@ -578,10 +684,19 @@ class MissionScreen(Screen):
         except OSError as e:
             self.say(f"cannot load {path}: {e.strerror or e}", "error")
             return
-        if not await self.app.push_screen_wait(ConfirmScreen(f"Replace the mission with {path} ('{mission.name}')? The current plan is replaced for every operator.", yes="Replace")):
+        if not await self.app.push_screen_wait(
+            ConfirmScreen(
+                f"Replace the mission with {path} ('{mission.name}')? The current plan is replaced for every operator.",
+                yes="Replace",
+            )
+        ):
             return
         self.mission_app.last_path = path
-        self.submit(LoadMission(mission=mission), f"load {path}", on_ok=lambda r: self.say(f"loaded {path}: '{mission.name}'", "ok"))
+        self.submit(
+            LoadMission(mission=mission),
+            f"load {path}",
+            on_ok=lambda r: self.say(f"loaded {path}: '{mission.name}'", "ok"),
+        )
 
     # -- widgets inside the editor must not trigger schedule keys ----------------------------------------
     def is_typing(self) -> bool:
@@ -600,6 +715,11 @@ def save_with_library(mission: Any, library: Any, path: Path) -> str:
         save_mission(mission, path)
         return ""
     beside = path.with_name(path.stem + ".library.yaml")
-    beside.write_text(yamlio.dump(library.model_dump(mode="json", exclude_defaults=True) | {"format": library.format}), encoding="utf-8")
+    beside.write_text(
+        yamlio.dump(
+            library.model_dump(mode="json", exclude_defaults=True) | {"format": library.format}
+        ),
+        encoding="utf-8",
+    )
     save_mission(mission, path, library_file=beside)
     return f"its skill library written to {beside.name}"

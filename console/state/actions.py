@@ -40,47 +40,153 @@ class Action:
         return f"{SCOPE_TITLES.get(self.scope, self.scope.title())}: {self.label}"
 
 
-SCOPE_TITLES = {"mission": "Mission", "app": "Screen", "map": "Map", "log": "Event log", "alerts": "Alerts"}
+SCOPE_TITLES = {
+    "mission": "Mission",
+    "app": "Screen",
+    "map": "Map",
+    "log": "Event log",
+    "alerts": "Alerts",
+}
 
 
 ACTIONS: list[Action] = [
     # editing the plan
-    Action("add", "a", "Add", "Add a skill to the robot's plan after the cursor (picker with fuzzy filter)", "Plan", True),
+    Action(
+        "add",
+        "a",
+        "Add",
+        "Add a skill to the robot's plan after the cursor (picker with fuzzy filter)",
+        "Plan",
+        True,
+    ),
     Action("edit", "enter,e", "Edit", "Edit the selected skill's parameters", "Plan"),
-    Action("delete", "d,delete", "Delete", "Delete the selected idle skill (asks first)", "Plan", True),
+    Action(
+        "delete", "d,delete", "Delete", "Delete the selected idle skill (asks first)", "Plan", True
+    ),
     Action("move_up", "shift+up,K", "Up", "Move the selected idle skill up in the plan", "Plan"),
-    Action("move_down", "shift+down,J", "Down", "Move the selected idle skill down in the plan", "Plan"),
+    Action(
+        "move_down", "shift+down,J", "Down", "Move the selected idle skill down in the plan", "Plan"
+    ),
     Action("undo", "ctrl+z", "Undo", "Undo your last edit of the plan", "Plan"),
     Action("redo", "ctrl+y", "Redo", "Redo what you undid", "Plan"),
     # synchronization
-    Action("sync", "s", "Sync", "Synchronize the robot's plan down to the cursor (send it to the robot)", "Synchronization", True),
-    Action("unsync", "u", "Unsync", "Take back queued skills from the cursor to the end", "Synchronization", True),
-    Action("mark", "space", "Mark", "Mark/unmark a skill for a barrier (one per robot)", "Synchronization"),
-    Action("barrier", "b", "Barrier", "Make a barrier of the marked skills", "Synchronization", True),
-    Action("unbarrier", "B", "Unbarrier", "Remove the barrier of the selected skill", "Synchronization"),
-    Action("retry", "t", "Retry", "Retry the selected failed skill (new attempt right after it)", "Synchronization"),
+    Action(
+        "sync",
+        "s",
+        "Sync",
+        "Synchronize the robot's plan down to the cursor (send it to the robot)",
+        "Synchronization",
+        True,
+    ),
+    Action(
+        "unsync",
+        "u",
+        "Unsync",
+        "Take back queued skills from the cursor to the end",
+        "Synchronization",
+        True,
+    ),
+    Action(
+        "mark",
+        "space",
+        "Mark",
+        "Mark/unmark a skill for a barrier (one per robot)",
+        "Synchronization",
+    ),
+    Action(
+        "barrier", "b", "Barrier", "Make a barrier of the marked skills", "Synchronization", True
+    ),
+    Action(
+        "unbarrier", "B", "Unbarrier", "Remove the barrier of the selected skill", "Synchronization"
+    ),
+    Action(
+        "retry",
+        "t",
+        "Retry",
+        "Retry the selected failed skill (new attempt right after it)",
+        "Synchronization",
+    ),
     # execution
     Action("run", "r", "Run", "Run (or resume) the selected robot", "Execution", True),
     Action("pause", "p", "Pause", "Pause the selected robot", "Execution", True),
-    Action("stop", "x", "Stop", "Stop the selected robot's active skill (it returns to the queue)", "Execution", True),
-    Action("reset", "z", "Reset", "Reset the selected robot: stop and unsynchronize everything queued (asks first)", "Execution"),
+    Action(
+        "stop",
+        "x",
+        "Stop",
+        "Stop the selected robot's active skill (it returns to the queue)",
+        "Execution",
+        True,
+    ),
+    Action(
+        "reset",
+        "z",
+        "Reset",
+        "Reset the selected robot: stop and unsynchronize everything queued (asks first)",
+        "Execution",
+    ),
     Action("run_all", "R", "Run all", "Run (or resume) all robots", "Execution"),
     Action("pause_all", "P", "Pause all", "Pause all robots", "Execution"),
     Action("stop_all", "X", "Stop all", "Stop all robots", "Execution"),
     Action("reset_all", "Z", "Reset all", "Reset all robots (asks first)", "Execution"),
     # mission files and view
     Action("save", "ctrl+s", "Save", "Save the mission to a YAML file", "Mission"),
-    Action("load", "ctrl+o", "Load", "Load a mission from a YAML file (replaces the plan)", "Mission"),
-    Action("toggle_static", "v", "Static robots", "Expand/collapse the static robots' columns", "View"),
+    Action(
+        "load", "ctrl+o", "Load", "Load a mission from a YAML file (replaces the plan)", "Mission"
+    ),
+    Action(
+        "toggle_static", "v", "Static robots", "Expand/collapse the static robots' columns", "View"
+    ),
     # screens (app modes)
-    Action("show_mission", "f2,1", "Schedule", "Show the schedule (mission screen)", "Screens", True, "app"),
+    Action(
+        "show_mission",
+        "f2,1",
+        "Schedule",
+        "Show the schedule (mission screen)",
+        "Screens",
+        True,
+        "app",
+    ),
     Action("show_map", "f3,2", "Map", "Show the map of the site", "Screens", True, "app"),
-    Action("show_fleet", "f4,3", "Fleet", "Show the fleet: presence, manifests, battery/link history; filter by capability", "Screens", True, "app"),
-    Action("show_log", "f5,4", "Log", "Show the event log: operations, reports, refusals, failures, alerts", "Screens", True, "app"),
-    Action("show_alerts", "f6,5", "Alerts", "Show the alert list (acknowledge alerts there)", "Screens", True, "app"),
+    Action(
+        "show_fleet",
+        "f4,3",
+        "Fleet",
+        "Show the fleet: presence, manifests, battery/link history; filter by capability",
+        "Screens",
+        True,
+        "app",
+    ),
+    Action(
+        "show_log",
+        "f5,4",
+        "Log",
+        "Show the event log: operations, reports, refusals, failures, alerts",
+        "Screens",
+        True,
+        "app",
+    ),
+    Action(
+        "show_alerts",
+        "f6,5",
+        "Alerts",
+        "Show the alert list (acknowledge alerts there)",
+        "Screens",
+        True,
+        "app",
+    ),
     # screen-specific
-    Action("export", "ctrl+s", "Export", "Export the shown event-log entries to a JSON-lines file", "Event log", True, "log"),
-    Action("ack", "enter,a", "Acknowledge", "Acknowledge the selected alert", "Alerts", True, "alerts"),
+    Action(
+        "export",
+        "ctrl+s",
+        "Export",
+        "Export the shown event-log entries to a JSON-lines file",
+        "Event log",
+        True,
+        "log",
+    ),
+    Action(
+        "ack", "enter,a", "Acknowledge", "Acknowledge the selected alert", "Alerts", True, "alerts"
+    ),
     Action("ack_all", "A", "Ack all", "Acknowledge every alert", "Alerts", True, "alerts"),
     # the map screen
     Action("map_zoom_in", "plus,equals_sign", "Zoom+", "Zoom in", "Map", True, scope="map"),
@@ -91,16 +197,84 @@ ACTIONS: list[Action] = [
     Action("map_pan_up", "shift+up,K", "Pan up", "Pan the view north", "Map", scope="map"),
     Action("map_pan_down", "shift+down,J", "Pan down", "Pan the view south", "Map", scope="map"),
     Action("map_centre", "c", "Centre", "Centre the view on the cursor", "Map", scope="map"),
-    Action("map_follow", "f", "Follow", "Follow a robot (again: the next one; after the last: stop)", "Map", True, scope="map"),
-    Action("map_turn_left", "left_square_bracket", "Turn left", "Turn the cursor's heading 15° counter-clockwise", "Map", scope="map"),
-    Action("map_turn_right", "right_square_bracket", "Turn right", "Turn the cursor's heading 15° clockwise", "Map", scope="map"),
-    Action("map_next_marker", "n,tab", "Next marker", "Select the next marker (the cursor jumps to it)", "Map", scope="map"),
-    Action("map_add_marker", "a", "Add marker", "Add a marker (pose, position or area) at the cursor", "Map", True, scope="map"),
-    Action("map_move_marker", "m", "Move marker", "Move the selected marker to the cursor (a pose takes the cursor's heading)", "Map", True, scope="map"),
+    Action(
+        "map_follow",
+        "f",
+        "Follow",
+        "Follow a robot (again: the next one; after the last: stop)",
+        "Map",
+        True,
+        scope="map",
+    ),
+    Action(
+        "map_turn_left",
+        "left_square_bracket",
+        "Turn left",
+        "Turn the cursor's heading 15° counter-clockwise",
+        "Map",
+        scope="map",
+    ),
+    Action(
+        "map_turn_right",
+        "right_square_bracket",
+        "Turn right",
+        "Turn the cursor's heading 15° clockwise",
+        "Map",
+        scope="map",
+    ),
+    Action(
+        "map_next_marker",
+        "n,tab",
+        "Next marker",
+        "Select the next marker (the cursor jumps to it)",
+        "Map",
+        scope="map",
+    ),
+    Action(
+        "map_add_marker",
+        "a",
+        "Add marker",
+        "Add a marker (pose, position or area) at the cursor",
+        "Map",
+        True,
+        scope="map",
+    ),
+    Action(
+        "map_move_marker",
+        "m",
+        "Move marker",
+        "Move the selected marker to the cursor (a pose takes the cursor's heading)",
+        "Map",
+        True,
+        scope="map",
+    ),
     Action("map_rename_marker", "r", "Rename", "Rename the selected marker", "Map", scope="map"),
-    Action("map_delete_marker", "d,delete", "Delete marker", "Delete the selected marker (asks first)", "Map", scope="map"),
-    Action("map_bind", "b", "Bind", "Bind the selected marker to a fitting parameter of the schedule's selected skill (several fit: choose one)", "Map", True, scope="map"),
-    Action("map_pick", "p", "Pick pose", "Set the selected skill's pose/position parameter to the cursor (position + heading; several: choose one)", "Map", True, scope="map"),
+    Action(
+        "map_delete_marker",
+        "d,delete",
+        "Delete marker",
+        "Delete the selected marker (asks first)",
+        "Map",
+        scope="map",
+    ),
+    Action(
+        "map_bind",
+        "b",
+        "Bind",
+        "Bind the selected marker to a fitting parameter of the schedule's selected skill (several fit: choose one)",
+        "Map",
+        True,
+        scope="map",
+    ),
+    Action(
+        "map_pick",
+        "p",
+        "Pick pose",
+        "Set the selected skill's pose/position parameter to the cursor (position + heading; several: choose one)",
+        "Map",
+        True,
+        scope="map",
+    ),
     Action("map_legend", "l", "Legend", "Show/hide the legend", "Map", scope="map"),
 ]
 
@@ -115,8 +289,14 @@ def bindings(scope: str = "mission", *, show: bool | None = None) -> list[Bindin
     """Bindings of one scope; `show` overrides the footer flag (app-wide keys
     are bound twice: hidden on the app, shown by the part-2 screens)."""
     return [
-        Binding(a.key, f"app.{a.name}" if scope == "app" else a.name, a.label,
-                show=a.footer if show is None else show, id=a.binding_id, tooltip=a.description)
+        Binding(
+            a.key,
+            f"app.{a.name}" if scope == "app" else a.name,
+            a.label,
+            show=a.footer if show is None else show,
+            id=a.binding_id,
+            tooltip=a.description,
+        )
         for a in ACTIONS
         if a.scope == scope
     ]

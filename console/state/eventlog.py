@@ -37,7 +37,9 @@ LOW_BATTERY = 0.20
 
 Kind = Literal["operation", "report", "refusal", "failure", "alert"]
 KINDS: tuple[str, ...] = ("operation", "report", "refusal", "failure", "alert")
-AlertKind = Literal["failure", "offline", "out_of_range", "low_battery", "refusal", "server", "malformed"]
+AlertKind = Literal[
+    "failure", "offline", "out_of_range", "low_battery", "refusal", "server", "malformed"
+]
 
 
 def split_actor(actor: str) -> tuple[str, str]:
@@ -101,16 +103,49 @@ class EventLog:
                     status = e.changes["status"]
                     robot = model.owner(e.id) or client
                     info = e.changes.get("status_info") or ""
-                    word = next((STATUS_WORDS[s] for s in STATUS_WORDS if s.value == status), status)
+                    word = next(
+                        (STATUS_WORDS[s] for s in STATUS_WORDS if s.value == status), status
+                    )
                     glyph = next((GLYPHS[s] for s in GLYPHS if s.value == status), "·")
                     kind = "failure" if status == "failure" else "report"
                     text = f"{glyph} {e.id} {word}" + (f": {info}" if info else "")
-                    out.append(self.add(kind, text, at, robots=[robot], skill=e.id, client=client, user=user, op=batch.op, revision=batch.revision))
+                    out.append(
+                        self.add(
+                            kind,
+                            text,
+                            at,
+                            robots=[robot],
+                            skill=e.id,
+                            client=client,
+                            user=user,
+                            op=batch.op,
+                            revision=batch.revision,
+                        )
+                    )
             return out
         robots, parts = _summary(batch, model)
         text = f"{batch.op or 'change'}" + (f": {'; '.join(parts)}" if parts else "")
-        skill = next((e.id for e in batch.events if isinstance(e, ev.SkillChanged | ev.SkillRemoved | ev.SkillMoved)), None)
-        out.append(self.add("operation", text, at, robots=robots, skill=skill, client=client, user=user, op=batch.op, revision=batch.revision))
+        skill = next(
+            (
+                e.id
+                for e in batch.events
+                if isinstance(e, ev.SkillChanged | ev.SkillRemoved | ev.SkillMoved)
+            ),
+            None,
+        )
+        out.append(
+            self.add(
+                "operation",
+                text,
+                at,
+                robots=robots,
+                skill=skill,
+                client=client,
+                user=user,
+                op=batch.op,
+                revision=batch.revision,
+            )
+        )
         return out
 
     def select(self, query: str) -> list[LogEntry]:
@@ -126,7 +161,11 @@ class EventLog:
 
 
 def read_jsonl(path: Path) -> list[LogEntry]:
-    return [LogEntry.model_validate(json.loads(line)) for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]
+    return [
+        LogEntry.model_validate(json.loads(line))
+        for line in path.read_text(encoding="utf-8").splitlines()
+        if line.strip()
+    ]
 
 
 def _summary(batch: ev.EventBatch, model: ConsoleModel) -> tuple[list[str], list[str]]:
@@ -191,7 +230,9 @@ def entry_matches(e: LogEntry, query: str) -> bool:
             if not e.kind.startswith(value):
                 return False
         else:
-            hay = " ".join([e.text, e.kind, *e.robots, e.skill or "", e.client, e.user, e.op]).lower()
+            hay = " ".join(
+                [e.text, e.kind, *e.robots, e.skill or "", e.client, e.user, e.op]
+            ).lower()
             if word not in hay:
                 return False
     return True
@@ -213,11 +254,25 @@ class AlertBook:
     def unacknowledged(self) -> int:
         return sum(1 for a in self.alerts if not a.acknowledged)
 
-    def add(self, kind: str, message: str, at: datetime, *, level: str = "warning", robot: str | None = None,
-            skill: str | None = None, source: str = "console") -> AlertEntry | None:
+    def add(
+        self,
+        kind: str,
+        message: str,
+        at: datetime,
+        *,
+        level: str = "warning",
+        robot: str | None = None,
+        skill: str | None = None,
+        source: str = "console",
+    ) -> AlertEntry | None:
         """A new alert, or None when it merged into an alert of the same situation."""
         for a in reversed(self.alerts):
-            if a.kind == kind and a.robot == robot and a.skill == skill and abs(a.at - at) <= MERGE_WINDOW:
+            if (
+                a.kind == kind
+                and a.robot == robot
+                and a.skill == skill
+                and abs(a.at - at) <= MERGE_WINDOW
+            ):
                 if kind == "refusal" and a.message != message:
                     continue
                 if a.source != source:
@@ -227,7 +282,16 @@ class AlertBook:
                 else:
                     a.count += 1
                 return None
-        a = AlertEntry(id=self.next_id, at=at, level=level, kind=kind, robot=robot, skill=skill, message=message, source=source)
+        a = AlertEntry(
+            id=self.next_id,
+            at=at,
+            level=level,
+            kind=kind,
+            robot=robot,
+            skill=skill,
+            message=message,
+            source=source,
+        )
         self.next_id += 1
         self.alerts.append(a)
         return a
@@ -243,15 +307,26 @@ class AlertBook:
 
     # -- what the console derives itself ------------------------------------------------
     def from_server(self, a: Alert) -> AlertEntry | None:
-        kind = {"failure": "failure", "offline": "offline"}.get(getattr(a, "kind", "") or "", "server")
-        return self.add(kind, a.message, a.at, level=a.level, robot=a.robot, skill=a.skill, source="server")
+        kind = {"failure": "failure", "offline": "offline"}.get(
+            getattr(a, "kind", "") or "", "server"
+        )
+        return self.add(
+            kind, a.message, a.at, level=a.level, robot=a.robot, skill=a.skill, source="server"
+        )
 
     def from_batch(self, entries: list[LogEntry]) -> list[AlertEntry]:
         out = []
         for e in entries:
             if e.kind == "failure":
                 robot = e.robots[0] if e.robots else None
-                a = self.add("failure", f"{robot}: {e.text.removeprefix('✗ ')}", e.at, level="error", robot=robot, skill=e.skill)
+                a = self.add(
+                    "failure",
+                    f"{robot}: {e.text.removeprefix('✗ ')}",
+                    e.at,
+                    level="error",
+                    robot=robot,
+                    skill=e.skill,
+                )
                 if a:
                     out.append(a)
         return out
@@ -260,7 +335,9 @@ class AlertBook:
         was = self._online.get(info.name)
         self._online[info.name] = info.online
         if was and not info.online:
-            return self.add("offline", f"robot {info.name} went offline", info.since or at, robot=info.name)
+            return self.add(
+                "offline", f"robot {info.name} went offline", info.since or at, robot=info.name
+            )
         return None
 
     def from_telemetry(self, t: Telemetry, at: datetime) -> list[AlertEntry]:
@@ -276,12 +353,19 @@ class AlertBook:
         was_low = self._low.get(r, False)
         self._low[r] = low
         if low and not was_low:  # once per crossing; re-armed when back above
-            a = self.add("low_battery", f"{r}: battery low ({int(t.battery * 100)} % < {int(LOW_BATTERY * 100)} %)", at, robot=r)
+            a = self.add(
+                "low_battery",
+                f"{r}: battery low ({int(t.battery * 100)} % < {int(LOW_BATTERY * 100)} %)",
+                at,
+                robot=r,
+            )
             if a:
                 out.append(a)
         return out
 
-    def seed_fleet(self, robots: dict[str, RobotInfo], at: datetime | None = None) -> list[AlertEntry]:
+    def seed_fleet(
+        self, robots: dict[str, RobotInfo], at: datetime | None = None
+    ) -> list[AlertEntry]:
         """A full state: remember presence. On the first one nothing is a
         change; after a reconnect (`at` given) a robot seen online before and
         offline now went offline while the console was away: an alert."""
@@ -295,15 +379,23 @@ class AlertBook:
                     out.append(a)
         return out
 
-    def missed_failures(self, before: dict[str, str], mission: Mission, at: datetime) -> list[AlertEntry]:
+    def missed_failures(
+        self, before: dict[str, str], mission: Mission, at: datetime
+    ) -> list[AlertEntry]:
         """After a reconnect: skills that failed while the console was away
         (`before`: skill id -> status it last knew)."""
         out = []
         for robot, task in mission.tasks.items():
             for s in task:
                 if s.status.value == "failure" and before.get(s.id) != "failure":
-                    text = f"{robot}: {s.id} failure: {s.status_info}" if s.status_info else f"{robot}: {s.id} failed"
-                    a = self.add("failure", text, s.finished_at or at, level="error", robot=robot, skill=s.id)
+                    text = (
+                        f"{robot}: {s.id} failure: {s.status_info}"
+                        if s.status_info
+                        else f"{robot}: {s.id} failed"
+                    )
+                    a = self.add(
+                        "failure", text, s.finished_at or at, level="error", robot=robot, skill=s.id
+                    )
                     if a:
                         out.append(a)
         return out

@@ -88,8 +88,10 @@ def fmt_number(v: Any) -> str:
 def fmt_value(spec: ParamSpec | None, v: Any) -> str:
     """A short, one-line rendering of a parameter value."""
     t = spec.type if spec else None
-    if isinstance(v, dict) and t in ("pose", "position") or (
-        isinstance(v, dict) and set(v) <= {"x", "y", "z", "roll", "pitch", "yaw"} and v
+    if (
+        isinstance(v, dict)
+        and t in ("pose", "position")
+        or (isinstance(v, dict) and set(v) <= {"x", "y", "z", "roll", "pitch", "yaw"} and v)
     ):
         return "(" + ",".join(fmt_number(v.get(k, 0.0)) for k in ("x", "y")) + ")"
     if t == "area" and isinstance(v, list):
@@ -97,8 +99,17 @@ def fmt_value(spec: ParamSpec | None, v: Any) -> str:
     if isinstance(v, list):
         return "[" + ",".join(fmt_number(x) for x in v[:3]) + ("…" if len(v) > 3 else "") + "]"
     if isinstance(v, dict):
-        return "{" + ",".join(f"{k}:{fmt_number(x)}" for k, x in list(v.items())[:2]) + ("…" if len(v) > 2 else "") + "}"
-    unit = spec.unit if spec and spec.unit and isinstance(v, int | float) and not isinstance(v, bool) else ""
+        return (
+            "{"
+            + ",".join(f"{k}:{fmt_number(x)}" for k, x in list(v.items())[:2])
+            + ("…" if len(v) > 2 else "")
+            + "}"
+        )
+    unit = (
+        spec.unit
+        if spec and spec.unit and isinstance(v, int | float) and not isinstance(v, bool)
+        else ""
+    )
     return f"{fmt_number(v)}{unit}"
 
 
@@ -167,7 +178,13 @@ class ConsoleModel:
     history: dict[str, deque[tuple[float, float]]] = field(default_factory=dict)
 
     # -- updates ------------------------------------------------------------------
-    def load(self, mission: Mission, library: Library, robots: dict[str, RobotInfo] | None = None, server_id: str = "") -> None:
+    def load(
+        self,
+        mission: Mission,
+        library: Library,
+        robots: dict[str, RobotInfo] | None = None,
+        server_id: str = "",
+    ) -> None:
         self.mission = mission
         self.library = library
         if robots is not None:
@@ -181,7 +198,9 @@ class ConsoleModel:
         self._robot_state.clear()
         m = self.mission
         self._owner = {s.id: r for r, task in m.tasks.items() for s in task} if m else {}
-        self._barrier_of = {sid: bid for bid, b in m.barriers.items() for sid in b.skills} if m else {}
+        self._barrier_of = (
+            {sid: bid for bid, b in m.barriers.items() for sid in b.skills} if m else {}
+        )
 
     def apply(self, batch: ev.EventBatch, mission: Mission | None = None) -> set[str] | None:
         """Take an event batch. `mission` given: the client applied it already
@@ -212,7 +231,11 @@ class ConsoleModel:
                     bid = self._barrier_of.get(sid)
                     if bid is not None and bid in self.mission.barriers:
                         # partners waiting at the barrier show this skill's state
-                        robots.update(self._owner[x] for x in self.mission.barriers[bid].skills if x in self._owner)
+                        robots.update(
+                            self._owner[x]
+                            for x in self.mission.barriers[bid].skills
+                            if x in self._owner
+                        )
                 case ev.BarrierSet() | ev.BarrierRemoved():
                     barriers = True
                 case ev.MissionReplaced():
@@ -275,7 +298,9 @@ class ConsoleModel:
         if self.mission is None:
             return []
         names = list(self.mission.robots)
-        return [r for r in names if self.robot_kind(r) == "dynamic"] + [r for r in names if self.robot_kind(r) == "static"]
+        return [r for r in names if self.robot_kind(r) == "dynamic"] + [
+            r for r in names if self.robot_kind(r) == "static"
+        ]
 
     def skills_of(self, robot: str) -> list[str]:
         if self.mission is None or self.library is None:
@@ -319,17 +344,28 @@ class ConsoleModel:
         if act is not None:
             t = self.telemetry.get(robot)
             extra = ""
-            if t is not None and t.skill == act.id and t.progress is not None and act.status == Status.RUNNING:
+            if (
+                t is not None
+                and t.skill == act.id
+                and t.progress is not None
+                and act.status == Status.RUNNING
+            ):
                 extra = f" {int(t.progress * 100)}%"
             return f"{GLYPHS[act.status]} {act.id} {STATUS_WORDS[act.status]}{extra}"
         t = self.telemetry.get(robot)
         mode = t.mode if t is not None else ""
         if queued:
-            return f"halted · {queued} queued" if not mode or mode == "idle" else f"{mode} · {queued} queued"
+            return (
+                f"halted · {queued} queued"
+                if not mode or mode == "idle"
+                else f"{mode} · {queued} queued"
+            )
         return mode or "idle"
 
     # -- why an action does not apply (None: it applies) -----------------------------------
-    def why_not(self, action: str, robot: str | None, skill_id: str | None, marks: list[str] | None = None) -> str | None:
+    def why_not(
+        self, action: str, robot: str | None, skill_id: str | None, marks: list[str] | None = None
+    ) -> str | None:
         marks = marks or []
         if self.mission is None:
             return "no mission loaded yet"
@@ -451,7 +487,9 @@ class ConsoleModel:
 
     def _why_not_barrier(self, marks: list[str]) -> str | None:
         if len(marks) < 2:
-            return "mark one idle skill on each of at least two robots (space), then make the barrier"
+            return (
+                "mark one idle skill on each of at least two robots (space), then make the barrier"
+            )
         robots: dict[str, str] = {}
         for sid in marks:
             f = self.find(sid)
@@ -461,7 +499,9 @@ class ConsoleModel:
             if s.status != Status.IDLE:
                 return f"{sid} is {STATUS_WORDS[s.status]} on {r}: barriers join idle skills"
             if r in robots:
-                return f"{robots[r]} and {sid} both belong to {r}: a barrier takes one skill per robot"
+                return (
+                    f"{robots[r]} and {sid} both belong to {r}: a barrier takes one skill per robot"
+                )
             robots[r] = sid
             bid = self.barrier_of(sid)
             if bid is not None:
@@ -480,11 +520,21 @@ class ConsoleModel:
             else:
                 why = None if queued else f"{robot} has nothing to run: synchronize skills first"
         elif action == "pause":
-            why = None if act is not None and act.status == Status.RUNNING else f"{robot} has no running skill to pause"
+            why = (
+                None
+                if act is not None and act.status == Status.RUNNING
+                else f"{robot} has no running skill to pause"
+            )
         elif action == "stop":
-            why = None if act is not None else f"{robot} has no running, paused or waiting skill to stop"
+            why = (
+                None
+                if act is not None
+                else f"{robot} has no running, paused or waiting skill to stop"
+            )
         else:
-            why = None if act is not None or queued else f"{robot} has nothing synchronized to reset"
+            why = (
+                None if act is not None or queued else f"{robot} has nothing synchronized to reset"
+            )
         if why is None and not self.is_online(robot):
             why = f"{robot} is {self.presence_text(robot)}"
         return why

@@ -93,7 +93,9 @@ class ThemeFile(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    name: str = Field(min_length=1, description="the name shown in the palette and given to --theme")
+    name: str = Field(
+        min_length=1, description="the name shown in the palette and given to --theme"
+    )
     dark: bool = True
     primary: str
     secondary: str | None = None
@@ -107,7 +109,18 @@ class ThemeFile(BaseModel):
     panel: str | None = None
     variables: dict[str, Colour] = Field(description="every key of STATUS_DEFAULTS, plus any extra")
 
-    @field_validator("primary", "secondary", "accent", "warning", "error", "success", "foreground", "background", "surface", "panel")
+    @field_validator(
+        "primary",
+        "secondary",
+        "accent",
+        "warning",
+        "error",
+        "success",
+        "foreground",
+        "background",
+        "surface",
+        "panel",
+    )
     @classmethod
     def _is_colour(cls, v: str | None) -> str | None:
         return None if v is None else _colour(v)
@@ -116,7 +129,9 @@ class ThemeFile(BaseModel):
     def _complete(self) -> ThemeFile:
         missing = [k for k in STATUS_DEFAULTS if k not in self.variables]
         if missing:
-            raise ValueError(f"variables: missing {', '.join(missing)} (every status/presence colour must be set)")
+            raise ValueError(
+                f"variables: missing {', '.join(missing)} (every status/presence colour must be set)"
+            )
         return self
 
     def to_theme(self) -> Theme:
@@ -139,7 +154,9 @@ def load_theme_file(path: Path) -> tuple[Theme | None, list[str]]:
     except yamlio.YamlSyntaxError as e:
         return None, [f"{file}:{e.line}: {e.message}; theme skipped"]
     if not isinstance(doc.data, dict):
-        return None, [f"{file}:1: expected a mapping (name, dark, primary, …, variables); theme skipped"]
+        return None, [
+            f"{file}:1: expected a mapping (name, dark, primary, …, variables); theme skipped"
+        ]
     try:
         tf = ThemeFile.model_validate(doc.data)
     except ValidationError as e:
@@ -181,4 +198,7 @@ class Downgrade16(LineFilter):
     so a snapshot shows what such a terminal shows (and the app can check it)."""
 
     def apply(self, segments: list[Segment], background: Color) -> list[Segment]:
-        return [Segment(s.text, _style16(s.style), s.control) if s.style is not None else s for s in segments]
+        return [
+            Segment(s.text, _style16(s.style), s.control) if s.style is not None else s
+            for s in segments
+        ]

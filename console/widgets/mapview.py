@@ -113,7 +113,11 @@ def halfblock_row(
             ch, st = g[0], _style(g[1], g[3] or colours[a], g[2])
         elif a == b:
             ch = pattern(i, a) if pattern is not None else " "
-            fg = None if ch == " " else (textures.get(a) if textures else None) or _pattern_fg(colours[a])
+            fg = (
+                None
+                if ch == " "
+                else (textures.get(a) if textures else None) or _pattern_fg(colours[a])
+            )
             st = _style(fg, colours[a])
         else:
             ch, st = UPPER_HALF, _style(colours[a], colours[b])
@@ -158,7 +162,9 @@ class Viewport:
         return self.cy + (self.h - py - 0.5) * self.mpp
 
     def to_pixel(self, x: float, y: float) -> tuple[int, int]:
-        return math.floor((x - self.cx) / self.mpp + self.w / 2), math.floor(self.h - (y - self.cy) / self.mpp)
+        return math.floor((x - self.cx) / self.mpp + self.w / 2), math.floor(
+            self.h - (y - self.cy) / self.mpp
+        )
 
     def to_cell(self, x: float, y: float) -> tuple[int, int]:
         px, py = self.to_pixel(x, y)
@@ -169,7 +175,9 @@ class Viewport:
         return float(self.px_x(col)), self.cy + (self.h - 2 * row - 1) * self.mpp
 
 
-def ground_classes(mirror: MapMirror | None, vp: Viewport, py: int, xs_index: np.ndarray | None) -> np.ndarray:
+def ground_classes(
+    mirror: MapMirror | None, vp: Viewport, py: int, xs_index: np.ndarray | None
+) -> np.ndarray:
     """Ground class (0..7, OUTSIDE) of every pixel of pixel row `py`."""
     out = np.full(vp.w, OUTSIDE, dtype=np.int16)
     if mirror is None or mirror.meta is None or xs_index is None:
@@ -205,7 +213,9 @@ class Overlay:
         self.strong: set[tuple[int, int]] = set()  # cells holding a glyph (labels never cover them)
         self._labels: list[tuple[int, int, str, str]] = []
 
-    def put(self, col: int, row: int, ch: str, var: str, bold: bool = False, *, label: bool = False) -> None:
+    def put(
+        self, col: int, row: int, ch: str, var: str, bold: bool = False, *, label: bool = False
+    ) -> None:
         if 0 <= col < self.vp.w and 0 <= row < self.vp.h:
             if label and (col, row) in self.strong:
                 return
@@ -213,7 +223,17 @@ class Overlay:
                 self.strong.add((col, row))
             self.cells.setdefault(row, {})[col] = (ch, var, bold)
 
-    def point(self, key: str, x: float, y: float, ch: str, var: str, label: str = "", label_var: str = "map-label", bold: bool = True) -> None:
+    def point(
+        self,
+        key: str,
+        x: float,
+        y: float,
+        ch: str,
+        var: str,
+        label: str = "",
+        label_var: str = "map-label",
+        bold: bool = True,
+    ) -> None:
         col, row = self.vp.to_cell(x, y)
         self.where[key] = (col, row)
         self.put(col, row, ch, var, bold)
@@ -226,9 +246,19 @@ class Overlay:
         it covers no glyph and no earlier label; else right, cut short."""
         for col, row, text, var in reversed(self._labels):
             n = len(text)
-            spots = [(col, row), (col - n - 3, row), (col - 2 - n // 2, row - 1), (col - 2 - n // 2, row + 1)]
+            spots = [
+                (col, row),
+                (col - n - 3, row),
+                (col - 2 - n // 2, row - 1),
+                (col - 2 - n // 2, row + 1),
+            ]
             for c0, r0 in spots:
-                if 0 <= r0 < self.vp.h and c0 >= 0 and c0 + n <= self.vp.w and not any(c0 + i in self.cells.get(r0, {}) for i in range(n)):
+                if (
+                    0 <= r0 < self.vp.h
+                    and c0 >= 0
+                    and c0 + n <= self.vp.w
+                    and not any(c0 + i in self.cells.get(r0, {}) for i in range(n))
+                ):
                     break
             else:
                 c0, r0 = col, row
@@ -269,7 +299,10 @@ class Overlay:
         n = max(12, int(2 * math.pi * r / self.vp.mpp))
         if n > 2000:
             return
-        pts = [(x + r * math.cos(2 * math.pi * k / n), y + r * math.sin(2 * math.pi * k / n)) for k in range(n)]
+        pts = [
+            (x + r * math.cos(2 * math.pi * k / n), y + r * math.sin(2 * math.pi * k / n))
+            for k in range(n)
+        ]
         for p in pts:
             px, py = self.vp.to_pixel(*p)
             self.pixel(px, py, var)
@@ -282,7 +315,9 @@ class Overlay:
         )
 
 
-def clip_segment(a: tuple[float, float], b: tuple[float, float], w: int, h: int) -> tuple[tuple[float, float], tuple[float, float]] | None:
+def clip_segment(
+    a: tuple[float, float], b: tuple[float, float], w: int, h: int
+) -> tuple[tuple[float, float], tuple[float, float]] | None:
     """The part of segment a-b inside [-1, w] x [-1, h] (Liang-Barsky), or None."""
     (x0, y0), (x1, y1) = a, b
     dx, dy = x1 - x0, y1 - y0
@@ -329,7 +364,9 @@ def marker_use(model: ConsoleModel) -> dict[str, str]:
         for s in task:
             if s.status in FINISHED:
                 continue
-            names = set(s.bindings.values()) | {v for v in s.params.values() if isinstance(v, str) and v in use}
+            names = set(s.bindings.values()) | {
+                v for v in s.params.values() if isinstance(v, str) and v in use
+            }
             for name in names:
                 if name in use:
                     if s.status != Status.IDLE:
@@ -358,7 +395,13 @@ def skill_goals(model: ConsoleModel) -> list[tuple[str, str, float, float, Statu
                 continue
             for pname, p in spec.params.items():
                 v = s.params.get(pname)
-                if p.type in ("pose", "position") and pname not in s.bindings and isinstance(v, dict) and "x" in v and "y" in v:
+                if (
+                    p.type in ("pose", "position")
+                    and pname not in s.bindings
+                    and isinstance(v, dict)
+                    and "x" in v
+                    and "y" in v
+                ):
                     out.append((robot, s.id, float(v["x"]), float(v["y"]), s.status))
     return out
 
@@ -458,8 +501,13 @@ class MapView(Widget, can_focus=True):
         old = self._overlay
         new = self._build_overlay()
         self._overlay = new
-        rows = {r for r in set(old.cells) | set(new.cells) | {p // 2 for p in set(old.pixels) | set(new.pixels)}
-                if old.row_signature(r) != new.row_signature(r)}
+        rows = {
+            r
+            for r in set(old.cells)
+            | set(new.cells)
+            | {p // 2 for p in set(old.pixels) | set(new.pixels)}
+            if old.row_signature(r) != new.row_signature(r)
+        }
         self._dirty(rows)
 
     def redraw_all(self) -> None:
@@ -500,7 +548,9 @@ class MapView(Widget, can_focus=True):
     def fit_known(self) -> None:
         """Zoom and centre on what is known: robots, markers, the lander and
         the explored area (the whole site is mostly unknown at first)."""
-        pts: list[tuple[float, float]] = [(t.pose.x, t.pose.y) for t in self.model.telemetry.values()]
+        pts: list[tuple[float, float]] = [
+            (t.pose.x, t.pose.y) for t in self.model.telemetry.values()
+        ]
         m = self.model.mission
         for mk in m.markers.values() if m is not None else []:
             if mk.kind == "pose":
@@ -516,8 +566,10 @@ class MapView(Widget, can_focus=True):
                 pts.append((mirror.objects.lander.x, mirror.objects.lander.y))
             rows, cols = np.nonzero(mirror.layers["terrain"] != T_UNKNOWN)
             if len(rows):
-                pts += [(g.x0 + cols.min() * g.cell, g.y0 + rows.min() * g.cell),
-                        (g.x0 + (cols.max() + 1) * g.cell, g.y0 + (rows.max() + 1) * g.cell)]
+                pts += [
+                    (g.x0 + cols.min() * g.cell, g.y0 + rows.min() * g.cell),
+                    (g.x0 + (cols.max() + 1) * g.cell, g.y0 + (rows.max() + 1) * g.cell),
+                ]
         if not pts:
             self.fit()
             return
@@ -530,11 +582,15 @@ class MapView(Widget, can_focus=True):
         wm, hm = max(x1 - x0, 20.0) * pad, max(y1 - y0, 20.0) * pad
         self.vp.cx, self.vp.cy = (x0 + x1) / 2, (y0 + y1) / 2
         self.vp.mpp = min(MAX_MPP, max(wm / max(1, self.vp.w), hm / max(1, 2 * self.vp.h), MIN_MPP))
-        self.fitted = self.mirror is not None and self.mirror.ready  # without a map: fit again when it comes
+        self.fitted = (
+            self.mirror is not None and self.mirror.ready
+        )  # without a map: fit again when it comes
         self._index_columns()
         self.redraw_all()
 
-    def set_view(self, cx: float | None = None, cy: float | None = None, mpp: float | None = None) -> None:
+    def set_view(
+        self, cx: float | None = None, cy: float | None = None, mpp: float | None = None
+    ) -> None:
         if cx is not None:
             self.vp.cx = cx
         if cy is not None:
@@ -567,7 +623,9 @@ class MapView(Widget, can_focus=True):
         self.post_message(self.Zoomed())
 
     def pan(self, dx_cells: int, dy_cells: int) -> None:
-        self.set_view(cx=self.vp.cx + dx_cells * self.vp.mpp, cy=self.vp.cy - 2 * dy_cells * self.vp.mpp)
+        self.set_view(
+            cx=self.vp.cx + dx_cells * self.vp.mpp, cy=self.vp.cy - 2 * dy_cells * self.vp.mpp
+        )
 
     def centre_on(self, x: float, y: float) -> None:
         """Centre the view (snapped to whole pixels, so a still view does not shimmer)."""
@@ -619,7 +677,9 @@ class MapView(Widget, can_focus=True):
         if mission is not None:
             for name, mk in mission.markers.items():
                 if mk.kind == "area":
-                    ov.polygon([(p.x, p.y) for p in mk.area], f"map-marker-{use.get(name, 'unused')}")
+                    ov.polygon(
+                        [(p.x, p.y) for p in mk.area], f"map-marker-{use.get(name, 'unused')}"
+                    )
         for _robot, sid, x, y, st in skill_goals(model):
             label = sid if sid == self.selected_skill else ""
             ov.point(f"goal:{sid}", x, y, GOAL_GLYPH, f"status-{STATUS_CSS[st]}", label, "map-goal")
@@ -631,7 +691,15 @@ class MapView(Widget, can_focus=True):
                 ov.point(f"rss:{r.rss}", r.x, r.y, RSS_GLYPH, "map-rss", r.rss + score, "map-rss")
             for b in objects.boxes:
                 if b.where == "ground":
-                    ov.point(f"box:{b.box}", b.x, b.y, BOX_GLYPH, "map-box", b.box + (" on" if b.on else ""), "map-box")
+                    ov.point(
+                        f"box:{b.box}",
+                        b.x,
+                        b.y,
+                        BOX_GLYPH,
+                        "map-box",
+                        b.box + (" on" if b.on else ""),
+                        "map-box",
+                    )
             for s in objects.stones:
                 if s.state in ("identified", "ground"):
                     ov.point(f"stone:{s.id}", s.x, s.y, STONE_GLYPH, "map-stone")
@@ -642,9 +710,25 @@ class MapView(Widget, can_focus=True):
                 if name == self.selected_marker:
                     label = f"[{label}]"
                 if mk.kind == "pose":
-                    ov.point(f"marker:{name}", mk.pose.x, mk.pose.y, heading_glyph(mk.pose.yaw, POSE_ARROWS), var, label, var)
+                    ov.point(
+                        f"marker:{name}",
+                        mk.pose.x,
+                        mk.pose.y,
+                        heading_glyph(mk.pose.yaw, POSE_ARROWS),
+                        var,
+                        label,
+                        var,
+                    )
                 elif mk.kind == "position":
-                    ov.point(f"marker:{name}", mk.position.x, mk.position.y, POSITION_GLYPH, var, label, var)
+                    ov.point(
+                        f"marker:{name}",
+                        mk.position.x,
+                        mk.position.y,
+                        POSITION_GLYPH,
+                        var,
+                        label,
+                        var,
+                    )
                 else:
                     cx, cy = centroid([(p.x, p.y) for p in mk.area])
                     ov.point(f"marker:{name}", cx, cy, AREA_GLYPH, var, label, var)
@@ -656,7 +740,11 @@ class MapView(Widget, can_focus=True):
                 continue
             glyph, var = robot_status(model, robot)
             arrow = heading_glyph(t.pose.yaw, ROBOT_ARROWS)
-            name = f"{robot} {glyph}" + (f" {NO_LINK_GLYPH}" if not t.in_range else "") + (f" {FOLLOW_GLYPH}" if self.follow == robot else "")
+            name = (
+                f"{robot} {glyph}"
+                + (f" {NO_LINK_GLYPH}" if not t.in_range else "")
+                + (f" {FOLLOW_GLYPH}" if self.follow == robot else "")
+            )
             ov.point(f"robot:{robot}", t.pose.x, t.pose.y, arrow, var, name, var)
         ov.place_labels()
         ov.cursor(self.cursor[0], self.cursor[1], heading_glyph(self.heading, POSE_ARROWS))
@@ -678,11 +766,20 @@ class MapView(Widget, can_focus=True):
                 if px < len(keys):
                     keys[px] = var
         glyphs = {
-            col: (ch, pal.get(var) or pal["map-label"], bold, pal["map-cursor"] if var == CURSOR_FG else None)
+            col: (
+                ch,
+                pal.get(var) or pal["map-label"],
+                bold,
+                pal["map-cursor"] if var == CURSOR_FG else None,
+            )
             for col, (ch, var, bold) in self._overlay.cells.get(y, {}).items()
         }
         origin = round(vp.cx / vp.mpp) - vp.w // 2  # texture fixed to the ground, not the screen
-        strip = Strip(halfblock_row(top, bottom, pal, glyphs, lambda i, k: _texture(origin + i, y, k), self._textures)).crop_extend(0, w, None)
+        strip = Strip(
+            halfblock_row(
+                top, bottom, pal, glyphs, lambda i, k: _texture(origin + i, y, k), self._textures
+            )
+        ).crop_extend(0, w, None)
         self._rows[y] = strip
         return strip
 

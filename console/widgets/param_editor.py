@@ -88,8 +88,13 @@ def yaml_text(value: Any) -> str:
     if value is None:
         return ""
     if isinstance(value, list) and value and all(isinstance(x, dict) for x in value):
-        return "\n".join("- " + yaml.safe_dump(x, default_flow_style=True, sort_keys=False).strip() for x in value)
-    return yaml.safe_dump(value, default_flow_style=False, sort_keys=False, allow_unicode=True).strip()
+        return "\n".join(
+            "- " + yaml.safe_dump(x, default_flow_style=True, sort_keys=False).strip()
+            for x in value
+        )
+    return yaml.safe_dump(
+        value, default_flow_style=False, sort_keys=False, allow_unicode=True
+    ).strip()
 
 
 def spec_hint(spec: ParamSpec) -> str:
@@ -147,7 +152,15 @@ class ParamEditor(VerticalScroll):
     """
 
     class ApplyRequested(Message):
-        def __init__(self, skill_id: str, label: str | None, params: dict[str, Any], bindings: dict[str, str | None], base_revision: int, policies: Policies | None = None) -> None:
+        def __init__(
+            self,
+            skill_id: str,
+            label: str | None,
+            params: dict[str, Any],
+            bindings: dict[str, str | None],
+            base_revision: int,
+            policies: Policies | None = None,
+        ) -> None:
             super().__init__()
             self.skill_id = skill_id
             self.label = label
@@ -203,7 +216,9 @@ class ParamEditor(VerticalScroll):
         """A skill is being (re)loaded: the fields are being rebuilt."""
         return self._load_lock.locked()
 
-    async def show_skill(self, skill_id: str | None, *, force: bool = False, discard: bool = False) -> None:
+    async def show_skill(
+        self, skill_id: str | None, *, force: bool = False, discard: bool = False
+    ) -> None:
         """Load a skill (serialized: the app and the screen both call this,
         from different message pumps, and two rebuilds must not interleave).
         Unapplied changes of the skill shown so far are kept as its draft
@@ -211,7 +226,9 @@ class ParamEditor(VerticalScroll):
         async with self._load_lock:
             await self._show_skill(skill_id, force=force, discard=discard)
 
-    async def _show_skill(self, skill_id: str | None, *, force: bool = False, discard: bool = False) -> None:
+    async def _show_skill(
+        self, skill_id: str | None, *, force: bool = False, discard: bool = False
+    ) -> None:
         found = self.model.find(skill_id)
         rev = found[2].rev if found else -1
         if not force and skill_id == self.skill_id and rev == self.loaded_rev:
@@ -222,7 +239,11 @@ class ParamEditor(VerticalScroll):
             elif self.dirty:
                 # against the skill as it is now (our own apply leaves nothing);
                 # a deleted skill keeps what was last seen, for the message
-                pending = self.changed_names(even_read_only=True) if self._skill() is not None else self.dirty
+                pending = (
+                    self.changed_names(even_read_only=True)
+                    if self._skill() is not None
+                    else self.dirty
+                )
                 if pending:
                     self.dirty = pending
                     self.drafts[self.skill_id] = self._capture()
@@ -235,7 +256,11 @@ class ParamEditor(VerticalScroll):
         self.base_revision = self.model.mission.revision if self.model.mission else 0
         self.dirty = []
         had_focus = self.focus_within()
-        draft = self.drafts.pop(skill_id, None) if skill_id is not None and self.read_only_reason is None else None
+        draft = (
+            self.drafts.pop(skill_id, None)
+            if skill_id is not None and self.read_only_reason is None
+            else None
+        )
         if draft is not None and draft.rev != rev:
             self.stale_note = f"{skill_id} was changed by someone else since you started these changes (revision {rev}): revert to see it; applying will be refused as stale"
         await self.recompose()
@@ -250,7 +275,12 @@ class ParamEditor(VerticalScroll):
     # -- drafts: unapplied changes per skill ---------------------------------------------
     def _capture(self) -> Draft:
         values = {w.id: widget_value(w) for w in self.query(INPUTS) if w.id}
-        return Draft(values=values, rev=self.loaded_rev, base_revision=self.base_revision, changed=list(self.dirty))
+        return Draft(
+            values=values,
+            rev=self.loaded_rev,
+            base_revision=self.base_revision,
+            changed=list(self.dirty),
+        )
 
     def _restore(self, draft: Draft) -> None:
         self.base_revision = draft.base_revision
@@ -260,7 +290,11 @@ class ParamEditor(VerticalScroll):
                     set_widget_value(w, draft.values[w.id])
                 except Exception:  # e.g. a marker that no longer exists: keep the shown value
                     pass
-        for name in [w.id.removeprefix("bind-") for w in self.query(Select) if w.id and w.id.startswith("bind-")]:
+        for name in [
+            w.id.removeprefix("bind-")
+            for w in self.query(Select)
+            if w.id and w.id.startswith("bind-")
+        ]:
             self._sync_bound_fields(name)
 
     def prune_drafts(self) -> list[str]:
@@ -273,14 +307,20 @@ class ParamEditor(VerticalScroll):
             draft = self.drafts.pop(sid)
             what = ", ".join(draft.changed) or "changes"
             if found is None:
-                said.append(f"{sid} was deleted: your unapplied changes to it ({what}) are discarded")
+                said.append(
+                    f"{sid} was deleted: your unapplied changes to it ({what}) are discarded"
+                )
             else:
-                said.append(f"{sid} is now {STATUS_WORDS[found[2].status]} on {found[0]}: your unapplied changes to it ({what}) are discarded — only idle skills can be edited")
+                said.append(
+                    f"{sid} is now {STATUS_WORDS[found[2].status]} on {found[0]}: your unapplied changes to it ({what}) are discarded — only idle skills can be edited"
+                )
         self._post_drafts(said)
         return said
 
     def _post_drafts(self, discarded: list[str] | None = None) -> None:
-        unapplied = frozenset(self.drafts) | ({self.skill_id} if self.dirty and self.skill_id else frozenset())
+        unapplied = frozenset(self.drafts) | (
+            {self.skill_id} if self.dirty and self.skill_id else frozenset()
+        )
         if unapplied != self._unapplied or discarded:
             self._unapplied = frozenset(unapplied)
             self.post_message(self.DraftsChanged(self._unapplied, list(discarded or [])))
@@ -289,7 +329,10 @@ class ParamEditor(VerticalScroll):
         """Recompute what differs from the skill; show it; tell the screen."""
         self.dirty = self.changed_names()
         if self.dirty:
-            self._set_static("#dirty", f"unapplied changes: {', '.join(self.dirty)} — ctrl+s applies, ctrl+r reverts")
+            self._set_static(
+                "#dirty",
+                f"unapplied changes: {', '.join(self.dirty)} — ctrl+s applies, ctrl+r reverts",
+            )
         else:
             self._set_static("#dirty", "")
         self._post_drafts()
@@ -316,7 +359,9 @@ class ParamEditor(VerticalScroll):
         s = found[2]
         ro_changed = (self.read_only_reason is None) != self._was_editable
         if s.rev != self.loaded_rev or ro_changed:
-            if not ro_changed and self.is_dirty():  # against the new version: our own apply is not dirty
+            if (
+                not ro_changed and self.is_dirty()
+            ):  # against the new version: our own apply is not dirty
                 self.stale_note = f"{s.id} was changed by someone else (revision {s.rev}): revert to see it; applying will be refused as stale"
                 self._set_static("#stale", self.stale_note)
             else:  # unapplied changes become a draft: restored, or dropped (and said) if no longer idle
@@ -326,7 +371,9 @@ class ParamEditor(VerticalScroll):
         found = self._skill()
         self._was_editable = False
         if found is None:
-            yield Static("Select a skill in the schedule to see and edit its parameters.", classes="empty")
+            yield Static(
+                "Select a skill in the schedule to see and edit its parameters.", classes="empty"
+            )
             return
         robot, s = found
         spec = self._spec(s)
@@ -343,12 +390,20 @@ class ParamEditor(VerticalScroll):
             yield Static(spec.description, classes="skill-desc")
         if ro:
             yield Static(f"read-only: {ro}", id="readonly", classes="readonly")
-        yield Static(self.server_error, id="server-error", classes="server-error" + ("" if self.server_error else " -empty"))
-        yield Static(self.stale_note, id="stale", classes="stale" + ("" if self.stale_note else " -empty"))
+        yield Static(
+            self.server_error,
+            id="server-error",
+            classes="server-error" + ("" if self.server_error else " -empty"),
+        )
+        yield Static(
+            self.stale_note, id="stale", classes="stale" + ("" if self.stale_note else " -empty")
+        )
         yield Static("", id="dirty", classes="dirty -empty")
         with Vertical(classes="param", id="param-label"):
             yield Label(Text.assemble(("label", "bold"), ("  text", "dim")), classes="plabel")
-            yield Input(s.label, id="f-label", compact=True, disabled=ro is not None, placeholder=s.skill)
+            yield Input(
+                s.label, id="f-label", compact=True, disabled=ro is not None, placeholder=s.skill
+            )
         if spec is None:
             yield Static(f"skill '{s.skill}' is not in the library", classes="perror")
             return
@@ -378,12 +433,30 @@ class ParamEditor(VerticalScroll):
                 if name == "pause_out_of_comms":
                     with Horizontal(classes="fields"):
                         yield Switch(p.pause_out_of_comms, id=f"pf-{name}", disabled=disabled)
-                        yield Label("yes" if p.pause_out_of_comms else "no", id=f"pv-{name}", classes="switch-value")
+                        yield Label(
+                            "yes" if p.pause_out_of_comms else "no",
+                            id=f"pv-{name}",
+                            classes="switch-value",
+                        )
                 elif name == "retries":
-                    yield Input(str(p.retries), id=f"pf-{name}", type="integer", compact=True, disabled=disabled, placeholder="0")
+                    yield Input(
+                        str(p.retries),
+                        id=f"pf-{name}",
+                        type="integer",
+                        compact=True,
+                        disabled=disabled,
+                        placeholder="0",
+                    )
                 else:
                     text = "" if p.recharge_below is None else fmt_number(p.recharge_below)
-                    yield Input(text, id=f"pf-{name}", type="number", compact=True, disabled=disabled, placeholder="off")
+                    yield Input(
+                        text,
+                        id=f"pf-{name}",
+                        type="number",
+                        compact=True,
+                        disabled=disabled,
+                        placeholder="off",
+                    )
                 yield Static(fields[name].description or "", classes="pdesc")
                 yield Static("", id=f"perr-{name}", classes="perror -empty")
 
@@ -407,7 +480,9 @@ class ParamEditor(VerticalScroll):
             try:
                 raw["recharge_below"] = float(below)
             except ValueError:
-                problems["recharge_below"] = f"expected a number between 0 and 1 (empty: off), got '{below}'"
+                problems["recharge_below"] = (
+                    f"expected a number between 0 and 1 (empty: off), got '{below}'"
+                )
         if problems:
             return None, problems
         try:  # the protocol's own model: the same bounds the server checks
@@ -418,7 +493,9 @@ class ParamEditor(VerticalScroll):
                 problems[name] = f"{err['input']!r}: {err['msg'].removeprefix('Input ')}"
             return None, problems
 
-    def _inputs(self, name: str, spec: ParamSpec, s: SkillInstance, *, disabled: bool) -> ComposeResult:
+    def _inputs(
+        self, name: str, spec: ParamSpec, s: SkillInstance, *, disabled: bool
+    ) -> ComposeResult:
         value = s.params.get(name)
         bound = s.bindings.get(name)
         t = spec.type
@@ -426,11 +503,21 @@ class ParamEditor(VerticalScroll):
         if t in BINDABLE_KINDS and m is not None:
             kinds = BINDABLE_KINDS[t]
             options = [("typed value", TYPED)] + [
-                (f"@{mk}  ({marker.kind})", mk) for mk, marker in m.markers.items() if marker.kind in kinds
+                (f"@{mk}  ({marker.kind})", mk)
+                for mk, marker in m.markers.items()
+                if marker.kind in kinds
             ]
             if bound and bound not in m.markers:
                 options.append((f"@{bound} (missing)", bound))
-            yield SafeSelect(options, value=bound or TYPED, allow_blank=False, id=f"bind-{name}", compact=True, disabled=disabled, classes="bind")
+            yield SafeSelect(
+                options,
+                value=bound or TYPED,
+                allow_blank=False,
+                id=f"bind-{name}",
+                compact=True,
+                disabled=disabled,
+                classes="bind",
+            )
             disabled = disabled or bool(bound)
         if t == "bool":
             with Horizontal(classes="fields"):
@@ -439,7 +526,9 @@ class ParamEditor(VerticalScroll):
         elif t in ("int", "float", "str"):
             text = "" if value is None else (fmt_number(value) if t != "str" else str(value))
             kind = {"int": "integer", "float": "number", "str": "text"}[t]
-            yield Input(text, id=f"f-{name}", type=kind, compact=True, disabled=disabled, placeholder=t)
+            yield Input(
+                text, id=f"f-{name}", type=kind, compact=True, disabled=disabled, placeholder=t
+            )
         elif t in ("pose", "position"):
             fields = POSE_FIELDS if t == "pose" else POSITION_FIELDS
             v = value if isinstance(value, dict) else {}
@@ -448,16 +537,33 @@ class ParamEditor(VerticalScroll):
                 with Horizontal(classes="fields"):
                     for f in row:
                         yield Label(f)
-                        yield Input(fmt_number(float(v.get(f, 0.0))), id=f"f-{name}-{f}", type="number", compact=True, disabled=disabled)
+                        yield Input(
+                            fmt_number(float(v.get(f, 0.0))),
+                            id=f"f-{name}-{f}",
+                            type="number",
+                            compact=True,
+                            disabled=disabled,
+                        )
         elif t in YAML_TYPES:
-            ta = TextArea(yaml_text(value), id=f"f-{name}", compact=True, disabled=disabled, soft_wrap=True, tab_behavior="focus")
+            ta = TextArea(
+                yaml_text(value),
+                id=f"f-{name}",
+                compact=True,
+                disabled=disabled,
+                soft_wrap=True,
+                tab_behavior="focus",
+            )
             yield ta
         elif t in ("enum", "marker", "robot"):
             if t == "enum":
                 choices = list(spec.choices or [])
             elif t == "marker":
                 markers = m.markers if m else {}
-                choices = [mk for mk, marker in markers.items() if not spec.marker_kinds or marker.kind in spec.marker_kinds]
+                choices = [
+                    mk
+                    for mk, marker in markers.items()
+                    if not spec.marker_kinds or marker.kind in spec.marker_kinds
+                ]
             else:
                 choices = list(m.robots) if m else []
             if isinstance(value, str) and value not in choices:
@@ -491,7 +597,10 @@ class ParamEditor(VerticalScroll):
                 try:
                     return (int(raw) if t == "int" else float(raw)), None
                 except ValueError:
-                    return None, f"expected {'an integer' if t == 'int' else 'a number'}, got '{raw}'"
+                    return (
+                        None,
+                        f"expected {'an integer' if t == 'int' else 'a number'}, got '{raw}'",
+                    )
             if t in ("pose", "position"):
                 fields = POSE_FIELDS if t == "pose" else POSITION_FIELDS
                 out: dict[str, float] = {}
@@ -560,10 +669,14 @@ class ParamEditor(VerticalScroll):
                 if pspec.is_required:
                     problems[name] = f"missing required {pspec.type} parameter '{name}'"
                     continue
-                if name in s.params and (pspec.default is None or s.params[name] != normalize_value(pspec, pspec.default)):
+                if name in s.params and (
+                    pspec.default is None or s.params[name] != normalize_value(pspec, pspec.default)
+                ):
                     params[name] = None  # back to the default
                 continue
-            found_problems = check_value(pspec, value, markers=m.markers if m else None, robots=set(m.robots) if m else None)
+            found_problems = check_value(
+                pspec, value, markers=m.markers if m else None, robots=set(m.robots) if m else None
+            )
             if found_problems:
                 rel, msg = found_problems[0]
                 where = ".".join(str(x) for x in rel)
@@ -583,7 +696,9 @@ class ParamEditor(VerticalScroll):
         if found is None:
             return None, {}
         policies, problems = self.read_policies()
-        return (policies if policies is not None and policies != found[1].policies else None), problems
+        return (
+            policies if policies is not None and policies != found[1].policies else None
+        ), problems
 
     def changed_names(self, *, even_read_only: bool = False) -> list[str]:
         """What differs from the skill (including fields that do not read)."""
@@ -591,7 +706,9 @@ class ParamEditor(VerticalScroll):
             return []
         label, params, bindings, problems = self.collect()
         policies, policy_problems = self.policies_change()
-        names = (["label"] if label is not None else []) + list(dict.fromkeys([*params, *bindings, *problems]))
+        names = (["label"] if label is not None else []) + list(
+            dict.fromkeys([*params, *bindings, *problems])
+        )
         if policies is not None or policy_problems:
             names.append("policies")
         return names
@@ -696,14 +813,24 @@ class ParamEditor(VerticalScroll):
                 self._set_static(f"#err-{name}", msg)
             for name, msg in policy_problems.items():
                 self._set_static(f"#perr-{name}", msg)
-            what, first = (("parameter", next(iter(problems))) if problems else ("policy", next(iter(policy_problems))))
-            self.app.notify(f"{found[1].id}, {what} {first}: {(problems or policy_problems)[first]}", title="Not applied", severity="error")
+            what, first = (
+                ("parameter", next(iter(problems)))
+                if problems
+                else ("policy", next(iter(policy_problems)))
+            )
+            self.app.notify(
+                f"{found[1].id}, {what} {first}: {(problems or policy_problems)[first]}",
+                title="Not applied",
+                severity="error",
+            )
             return
         if label is None and not params and not bindings and policies is None:
             self.app.notify("nothing changed", timeout=2)
             return
         self.clear_server_errors()
-        self.post_message(self.ApplyRequested(found[1].id, label, params, bindings, self.base_revision, policies))
+        self.post_message(
+            self.ApplyRequested(found[1].id, label, params, bindings, self.base_revision, policies)
+        )
 
     async def action_revert(self) -> None:
         self.errors = {}

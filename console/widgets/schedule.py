@@ -171,7 +171,9 @@ class ScheduleView(ScrollView, can_focus=True):
         """Re-lay out the columns of `robots` (all when None) and repaint."""
         order = self.model.robot_order()
         if robots is None or [c.robot for c in self.columns] != order:
-            self.columns = [self._build_column(r, self.model.robot_kind(r) == "static") for r in order]
+            self.columns = [
+                self._build_column(r, self.model.robot_kind(r) == "static") for r in order
+            ]
             self._col_index = {c.robot: i for i, c in enumerate(self.columns)}
             if len(self._summary_cache) > 50_000:
                 self._summary_cache.clear()
@@ -193,7 +195,9 @@ class ScheduleView(ScrollView, can_focus=True):
                     self._refresh_changed_lines(old, new, before[0])
                 if self.sync_h != before[0]:
                     start = min(self.sync_h, before[0])
-                    self._refresh_content_lines(0, self.size.width, range(start, max(self.total_lines, before[1])))
+                    self._refresh_content_lines(
+                        0, self.size.width, range(start, max(self.total_lines, before[1]))
+                    )
                 return
             self._keep_cursor()
             self.refresh()
@@ -210,17 +214,25 @@ class ScheduleView(ScrollView, can_focus=True):
         col = self.columns[i]
         x, w = col.x - int(self.scroll_x), col.width + 1
         self.refresh(Region(x, 0, w, HEADER_H - 1))
-        self._refresh_content_lines(x, w, [line for line, (_, kind) in enumerate(col.sync) if kind == "progress"])
+        self._refresh_content_lines(
+            x, w, [line for line, (_, kind) in enumerate(col.sync) if kind == "progress"]
+        )
 
     @staticmethod
     def _line_key(col: Column, line: int, sync_h: int) -> object:
         """What a content line of a column shows (compared, never drawn)."""
         if line < sync_h:
-            return col.sync_keys[line] if line < len(col.sync_keys) else ("blank" if line or col.sync else "hint")
+            return (
+                col.sync_keys[line]
+                if line < len(col.sync_keys)
+                else ("blank" if line or col.sync else "hint")
+            )
         if line == sync_h:
             return "divider"
         k = line - sync_h - 1
-        return col.idle_keys[k] if k < len(col.idle_keys) else ("blank" if k or col.idle else "hint")
+        return (
+            col.idle_keys[k] if k < len(col.idle_keys) else ("blank" if k or col.idle else "hint")
+        )
 
     def _visible_lines(self) -> range:
         sy = int(self.scroll_y)
@@ -236,8 +248,11 @@ class ScheduleView(ScrollView, can_focus=True):
     def _refresh_changed_lines(self, old: Column, new: Column, old_sync_h: int) -> None:
         x, w = new.x - int(self.scroll_x), new.width + 1
         self.refresh(Region(x, 0, w, HEADER_H - 1))  # presence, battery, activity
-        changed = [line for line in self._visible_lines()
-                   if self._line_key(old, line, old_sync_h) != self._line_key(new, line, self.sync_h)]
+        changed = [
+            line
+            for line in self._visible_lines()
+            if self._line_key(old, line, old_sync_h) != self._line_key(new, line, self.sync_h)
+        ]
         # progress lines also show telemetry and barrier partners' states
         changed += [line for line, (_, kind) in enumerate(new.sync) if kind == "progress"]
         self._refresh_content_lines(x, w, changed)
@@ -278,7 +293,11 @@ class ScheduleView(ScrollView, can_focus=True):
         old = self.virtual_size
         if size == old:
             return
-        if self.is_mounted and size.width == old.width and min(size.height, old.height) > self.size.height:
+        if (
+            self.is_mounted
+            and size.width == old.width
+            and min(size.height, old.height) > self.size.height
+        ):
             # only the scroll range grows or shrinks and the scrollbars stay as
             # they are: update them without the screen's layout pass, which
             # reflows every widget (the editor's too) for tens of ms
@@ -373,7 +392,9 @@ class ScheduleView(ScrollView, can_focus=True):
             self.cursor_col = min(max(self.cursor_col + dx, 0), len(self.columns) - 1)
             col = self.columns[self.cursor_col]
             if col.line_of:
-                self.cursor_id = min(col.line_of, key=lambda sid: (abs(col.line_of[sid] - line), col.line_of[sid]))
+                self.cursor_id = min(
+                    col.line_of, key=lambda sid: (abs(col.line_of[sid] - line), col.line_of[sid])
+                )
             else:
                 self.cursor_id = None
         elif dy:
@@ -443,7 +464,9 @@ class ScheduleView(ScrollView, can_focus=True):
             if col.x <= x < col.x + col.width + 1:
                 self.cursor_col = i
                 if event.y < HEADER_H:
-                    self.cursor_id = col.ids[col.idle[0]] if col.idle else (col.ids[-1] if col.ids else None)
+                    self.cursor_id = (
+                        col.ids[col.idle[0]] if col.idle else (col.ids[-1] if col.ids else None)
+                    )
                 else:
                     line = int(self.scroll_y) + event.y - HEADER_H
                     hit = [sid for sid, ln in col.line_of.items() if ln == line]
@@ -476,7 +499,11 @@ class ScheduleView(ScrollView, can_focus=True):
         base = st["base"]
         if not self.columns:
             if y == 1:
-                msg = "  no mission yet — waiting for the server…" if self.model.mission is None else "  this mission has no robots"
+                msg = (
+                    "  no mission yet — waiting for the server…"
+                    if self.model.mission is None
+                    else "  this mission has no robots"
+                )
                 return Strip([Segment(_fit(msg, width), st["dim"])]).crop_extend(0, width, base)
             return Strip.blank(width, base)
         x0, x1 = scroll_x, scroll_x + width
@@ -513,7 +540,11 @@ class ScheduleView(ScrollView, can_focus=True):
                 pres, pst = "● online", st["online"]
             elif info.since is not None:
                 clock = fmt_clock(info.since)
-                fits = [p for p in (f"✕ offline since {clock}", f"✕ offline {clock}") if cell_len(robot) + 1 + cell_len(p) <= w]
+                fits = [
+                    p
+                    for p in (f"✕ offline since {clock}", f"✕ offline {clock}")
+                    if cell_len(robot) + 1 + cell_len(p) <= w
+                ]
                 pres = fits[0] if fits else f"✕ off {clock}"
                 pst = st["offline"]
             else:
@@ -521,7 +552,11 @@ class ScheduleView(ScrollView, can_focus=True):
             if col.static and not self.expand_static:
                 pres = "●" if info is not None and info.online else "✕"
             name_w = max(1, w - cell_len(pres) - 1)
-            return [Segment(_fit(robot, name_w), st["robot"]), Segment(" ", st["base"]), Segment(_fit(pres, w - name_w - 1), pst)]
+            return [
+                Segment(_fit(robot, name_w), st["robot"]),
+                Segment(" ", st["base"]),
+                Segment(_fit(pres, w - name_w - 1), pst),
+            ]
         if y == 1:
             if col.static and not self.expand_static:
                 return [Segment(_fit("static", w), st["dim"])]
@@ -531,7 +566,11 @@ class ScheduleView(ScrollView, can_focus=True):
             link = f"link {int(round(t.link * 100))}%" if t.in_range else "link: out of range"
             bst = st["battery-low"] if t.battery < 0.2 else st["base"]
             lst = st["offline"] if not t.in_range else st["base"]
-            return [Segment(bat, bst), Segment("  ", st["base"]), Segment(_fit(link, max(0, w - cell_len(bat) - 2)), lst)]
+            return [
+                Segment(bat, bst),
+                Segment("  ", st["base"]),
+                Segment(_fit(link, max(0, w - cell_len(bat) - 2)), lst),
+            ]
         if y == 2:
             if col.static and not self.expand_static:
                 n = len(col.ids)
@@ -540,7 +579,9 @@ class ScheduleView(ScrollView, can_focus=True):
         selected = self.columns[self.cursor_col] is col if self.columns else False
         return [Segment(("━" if selected else "─") * w, st["rule"])]
 
-    def _content_segments(self, ci: int, col: Column, line: int, st: dict[str, Style]) -> list[Segment]:
+    def _content_segments(
+        self, ci: int, col: Column, line: int, st: dict[str, Style]
+    ) -> list[Segment]:
         w = col.width
         task = self.model.task(col.robot)
         if line < 0 or line >= self.total_lines:
@@ -658,7 +699,10 @@ class ScheduleView(ScrollView, can_focus=True):
             info = m.robots.get(robot)
             found = m.find(sid)
             if info is None or not info.online:
-                offline.append(f"{robot} OFFLINE" + (f" {fmt_clock(info.since)}" if info and info.since else ""))
+                offline.append(
+                    f"{robot} OFFLINE"
+                    + (f" {fmt_clock(info.since)}" if info and info.since else "")
+                )
             elif found and found[2].status != Status.SYNCHWAITING:
                 waiting.append(robot)
         if offline:

@@ -31,14 +31,32 @@ from backend.transport.login import Login, add_login_arguments, login_from_args
 
 SKILLS = {
     "lru_science": ["drive_to", "explore", "take_science_image", "identify_stone", "recharge"],
-    "lru_manipulator": ["drive_to", "explore", "identify_stone", "pick_stone", "drop_stone",
-                        "pick_payload_box", "place_payload_box", "deploy_wifi_box", "recharge"],
+    "lru_manipulator": [
+        "drive_to",
+        "explore",
+        "identify_stone",
+        "pick_stone",
+        "drop_stone",
+        "pick_payload_box",
+        "place_payload_box",
+        "deploy_wifi_box",
+        "recharge",
+    ],
 }
 
 
-def make_agent(name: str, rtype: str, connect: str, delay: float, login: Login | None = None) -> RobotAgent:
-    agent = RobotAgent(name, rtype, connect=[connect], modules={"base": "1.0.0"}, lease_ms=1000,
-                       telemetry_hz=5, login=login)
+def make_agent(
+    name: str, rtype: str, connect: str, delay: float, login: Login | None = None
+) -> RobotAgent:
+    agent = RobotAgent(
+        name,
+        rtype,
+        connect=[connect],
+        modules={"base": "1.0.0"},
+        lease_ms=1000,
+        telemetry_hz=5,
+        login=login,
+    )
     agent.link.delay_s = delay
     released: set[str] = set()
     agent.on_tell("release", lambda data, sender: released.add(data.get("id", "")))

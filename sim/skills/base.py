@@ -108,9 +108,17 @@ class RobotSkills:
             r.battery -= self.world.work_energy(r, dt, load)
         r.battery = max(0.0, r.battery)
 
-    async def work(self, ctx: SkillContext, seconds: float, what: str, *, load: float = 1.0,
-                   frac0: float = 0.0, frac1: float = 1.0,
-                   until: Callable[[], bool] | None = None) -> None:
+    async def work(
+        self,
+        ctx: SkillContext,
+        seconds: float,
+        what: str,
+        *,
+        load: float = 1.0,
+        frac0: float = 0.0,
+        frac1: float = 1.0,
+        until: Callable[[], bool] | None = None,
+    ) -> None:
         """Stationary work for `seconds` (sim), progress frac0..frac1. `until()` ends it early."""
         r = self.robot
         done = 0.0
@@ -123,7 +131,9 @@ class RobotSkills:
             self.drain_idle(dt, load)
             if r.usable <= 0.0:
                 self.emergency_landing()
-                raise self.fail(f"battery empty while {what} ({_pct(r.battery)} left); recharge at the lander")
+                raise self.fail(
+                    f"battery empty while {what} ({_pct(r.battery)} left); recharge at the lander"
+                )
             frac = frac0 + (frac1 - frac0) * done / seconds
             ctx.progress(frac, what, eta_s=(seconds - done) + self.rest_eta)
         if until is not None:
@@ -136,18 +146,30 @@ class RobotSkills:
         if r.kind == "drone" and r.airborne:
             r.airborne = False
             r.z = 0.0
-            self.world.log(f"{r.name} made an emergency landing at {_fmt(r.x, r.y)}: battery at the reserve")
+            self.world.log(
+                f"{r.name} made an emergency landing at {_fmt(r.x, r.y)}: battery at the reserve"
+            )
 
     # ------------------------------------------------------------ moving
 
-    async def move(self, ctx: SkillContext, goal: tuple[float, float], speed: float, *,
-                   tolerance: float = 0.5, sense: float = 0.0, discover: bool = False,
-                   allow_reserve: bool = False, what: str = "driving",
-                   frac0: float = 0.0, frac1: float = 1.0,
-                   stop_when: Callable[[], bool] | None = None,
-                   empty: Callable[[float, float], str] | None = None,
-                   report: Callable[[], None] | None = None,
-                   budget: Callable[[], float] | None = None) -> float:
+    async def move(
+        self,
+        ctx: SkillContext,
+        goal: tuple[float, float],
+        speed: float,
+        *,
+        tolerance: float = 0.5,
+        sense: float = 0.0,
+        discover: bool = False,
+        allow_reserve: bool = False,
+        what: str = "driving",
+        frac0: float = 0.0,
+        frac1: float = 1.0,
+        stop_when: Callable[[], bool] | None = None,
+        empty: Callable[[float, float], str] | None = None,
+        report: Callable[[], None] | None = None,
+        budget: Callable[[], float] | None = None,
+    ) -> float:
         """Drive (rover, along the terrain) or fly (drone, straight) to `goal`.
         Returns metres moved. Raises SkillFailed when the battery runs out."""
         r, w = self.robot, self.world
@@ -229,13 +251,21 @@ class RobotSkills:
 
     # ------------------------------------------------------------ drive_to
 
-    async def drive_to(self, ctx: SkillContext, goal: Any = None, speed: float = 0.5,
-                       tolerance: float = 0.5, **_: Any) -> None:
+    async def drive_to(
+        self,
+        ctx: SkillContext,
+        goal: Any = None,
+        speed: float = 0.5,
+        tolerance: float = 0.5,
+        **_: Any,
+    ) -> None:
         self.need_kind("rover", skill="drive")
         r = self.robot
         gx, gy = _xy(goal)
         speed = self.check_speed(speed)
-        await self.move(ctx, (gx, gy), speed, tolerance=tolerance, what=f"driving to {_fmt(gx, gy)}")
+        await self.move(
+            ctx, (gx, gy), speed, tolerance=tolerance, what=f"driving to {_fmt(gx, gy)}"
+        )
         yaw = _yaw(goal)
         if yaw is not None and self.dist(gx, gy) <= max(tolerance, 1.0):
             r.yaw = yaw
@@ -249,8 +279,15 @@ class RobotSkills:
             return max(8.0, min(40.0, r.model.sensor_range * max(r.z, 1.0) / 5.0))
         return r.model.sensor_range
 
-    async def explore(self, ctx: SkillContext, area: Any = None, max_duration: float = 300.0,
-                      return_to_start: bool = False, sensors: Any = None, **_: Any) -> None:
+    async def explore(
+        self,
+        ctx: SkillContext,
+        area: Any = None,
+        max_duration: float = 300.0,
+        return_to_start: bool = False,
+        sensors: Any = None,
+        **_: Any,
+    ) -> None:
         r, w = self.robot, self.world
         self.need_kind("rover", "drone", skill="explore")
         if r.kind == "drone" and not r.airborne:
@@ -261,15 +298,22 @@ class RobotSkills:
         known = set(r.model.capabilities) | {"stereo_camera"}
         for s in sensors or []:
             if str(s) not in known:
-                raise self.fail(f"{r.name} has no sensor '{s}' (it has: {', '.join(sorted(known))})")
+                raise self.fail(
+                    f"{r.name} has no sensor '{s}' (it has: {', '.join(sorted(known))})"
+                )
         rng = self.sensor_range()
         full = w.geom.polygon_mask(poly)
         if r.kind != "drone":
             full &= w.terrain != ROCK
         if not full.any():
-            raise self.fail("the area holds no cell this robot can map (too small, or all impassable)")
+            raise self.fail(
+                "the area holds no cell this robot can map (too small, or all impassable)"
+            )
         rows_i, cols_j = np.nonzero(full)
-        win = (slice(int(rows_i.min()), int(rows_i.max()) + 1), slice(int(cols_j.min()), int(cols_j.max()) + 1))
+        win = (
+            slice(int(rows_i.min()), int(rows_i.max()) + 1),
+            slice(int(cols_j.min()), int(cols_j.max()) + 1),
+        )
         mask = full[win]
         cells = int(mask.sum())
         cache = [-1.0, 0.0]  # sim seconds when computed, fraction
@@ -297,13 +341,18 @@ class RobotSkills:
         def drone_must_return() -> bool:
             if r.kind != "drone":
                 return False
-            need = (w.dist_to_lander(r.x, r.y) / r.model.speed + 40.0) / r.model.flight_s_per_battery
+            need = (
+                w.dist_to_lander(r.x, r.y) / r.model.speed + 40.0
+            ) / r.model.flight_s_per_battery
             return r.usable <= need
 
         def report() -> None:
             f = frac()
-            ctx.progress(min(0.99, max(elapsed() / max_duration, f)), f"exploring: {_pct(f)} mapped",
-                         eta_s=max(0.0, max_duration - elapsed()))
+            ctx.progress(
+                min(0.99, max(elapsed() / max_duration, f)),
+                f"exploring: {_pct(f)} mapped",
+                eta_s=max(0.0, max_duration - elapsed()),
+            )
 
         reason_low = ""
         w.reveal(r, rng)
@@ -323,9 +372,18 @@ class RobotSkills:
                 return frac() >= 0.995 or out_of_time() or drone_must_return()
 
             try:
-                await self.move(ctx, target, speed, tolerance=1.0, sense=rng, discover=True,
-                                what="exploring", stop_when=stop_when, report=report,
-                                budget=lambda: max_duration - elapsed() - back_time())
+                await self.move(
+                    ctx,
+                    target,
+                    speed,
+                    tolerance=1.0,
+                    sense=rng,
+                    discover=True,
+                    what="exploring",
+                    stop_when=stop_when,
+                    report=report,
+                    budget=lambda: max_duration - elapsed() - back_time(),
+                )
             except SkillFailed:
                 if r.usable <= 0:
                     raise
@@ -333,10 +391,14 @@ class RobotSkills:
         if drone_must_return():
             reason_low = "battery"
         if return_to_start and self.dist(*start) > 1.0:
-            await self.move(ctx, start, speed, tolerance=1.0, sense=rng, discover=True, what="returning")
+            await self.move(
+                ctx, start, speed, tolerance=1.0, sense=rng, discover=True, what="returning"
+            )
         found = list(r.knowledge.rss)[found_before:]
         summary = f"explored {_pct(frac())} of the area in {elapsed():.0f} s"
-        summary += f"; found {', '.join(found)}" if found else "; no new region ideal for sampling stones"
+        summary += (
+            f"; found {', '.join(found)}" if found else "; no new region ideal for sampling stones"
+        )
         if reason_low:
             raise self.fail(
                 f"stopped exploring: {summary}; {r.name} needs its remaining {_pct(r.battery)} battery "
@@ -347,15 +409,23 @@ class RobotSkills:
 
     # ------------------------------------------------------------ science
 
-    async def take_science_image(self, ctx: SkillContext, target: Any = None, filter: str = "multispectral",
-                                 camera: Any = None, **_: Any) -> Success:
+    async def take_science_image(
+        self,
+        ctx: SkillContext,
+        target: Any = None,
+        filter: str = "multispectral",
+        camera: Any = None,
+        **_: Any,
+    ) -> Success:
         r, w = self.robot, self.world
         if not r.has("science_camera"):
             raise self.fail(f"{r.name} has no science camera")
         tx, ty = _xy(target)
         d = self.dist(tx, ty)
         if d > CAMERA_RANGE:
-            raise self.fail(f"the target {_fmt(tx, ty)} is {d:.0f} m away; the science camera sees {CAMERA_RANGE:.0f} m: drive closer")
+            raise self.fail(
+                f"the target {_fmt(tx, ty)} is {d:.0f} m away; the science camera sees {CAMERA_RANGE:.0f} m: drive closer"
+            )
         if r.kind == "rover":
             r.yaw = math.atan2(ty - r.y, tx - r.x) if d > 0.1 else r.yaw
         await self.work(ctx, 60.0, f"imaging {_fmt(tx, ty)} ({filter})", load=1.5)
@@ -363,7 +433,12 @@ class RobotSkills:
         if rss is None:
             msg = f"no region ideal for sampling stones at {_fmt(tx, ty)}"
         else:
-            info = r.knowledge.rss.get(rss.name) or {"rss": rss.name, "x": rss.x, "y": rss.y, "radius": rss.radius}
+            info = r.knowledge.rss.get(rss.name) or {
+                "rss": rss.name,
+                "x": rss.x,
+                "y": rss.y,
+                "radius": rss.radius,
+            }
             if r.name not in rss.found_by:
                 rss.found_by.add(r.name)
                 w.log(f"{r.name} discovered {rss.name} at {_fmt(rss.x, rss.y)}")
@@ -399,7 +474,9 @@ class RobotSkills:
         rng = self.world.spec.scoring.collab_range
         return math.hypot(other.x - tx, other.y - ty) <= rng and self.dist(tx, ty) <= rng
 
-    def _identify(self, rss_name: str, tx: float, ty: float, score: float, by: tuple[str, ...]) -> Stone:
+    def _identify(
+        self, rss_name: str, tx: float, ty: float, score: float, by: tuple[str, ...]
+    ) -> Stone:
         w = self.world
         hidden = [w.stones[s] for s in w.rss[rss_name].stones if w.stones[s].state == "hidden"]
         if not hidden:
@@ -416,8 +493,14 @@ class RobotSkills:
         self.robot.knowledge.stones[info["id"]] = dict(info)
         self.world.tell_ground(self.robot, "stone", info["id"], info)
 
-    async def identify_stone(self, ctx: SkillContext, target: Any = None, search_radius: float = 3.0,
-                             partner: str | None = None, **_: Any) -> Success:
+    async def identify_stone(
+        self,
+        ctx: SkillContext,
+        target: Any = None,
+        search_radius: float = 3.0,
+        partner: str | None = None,
+        **_: Any,
+    ) -> Success:
         r, w = self.robot, self.world
         tx, ty = _xy(target)
         duration = 120.0
@@ -428,19 +511,32 @@ class RobotSkills:
                 self._near_target(tx, ty, search_radius, "search centre")
             self.rest_eta = duration
             try:
-                await self.move(ctx, (tx, ty), r.model.speed, tolerance=max(1.0, search_radius * 0.5),
-                                what="going to the search centre", frac1=0.3)
+                await self.move(
+                    ctx,
+                    (tx, ty),
+                    r.model.speed,
+                    tolerance=max(1.0, search_radius * 0.5),
+                    what="going to the search centre",
+                    frac1=0.3,
+                )
             finally:
                 self.rest_eta = 0.0
             f0 = 0.3
         rss = w.rss_near(tx, ty, search_radius)
         if rss is None:
             await self.work(ctx, duration * 0.3, "searching for stones", frac0=f0)
-            raise self.fail(f"no region ideal for sampling stones within {search_radius:g} m of {_fmt(tx, ty)}: nothing to identify here")
+            raise self.fail(
+                f"no region ideal for sampling stones within {search_radius:g} m of {_fmt(tx, ty)}: nothing to identify here"
+            )
         if r.name not in rss.found_by:
             rss.found_by.add(r.name)
-            info = {"rss": rss.name, "x": rss.x, "y": rss.y, "radius": rss.radius,
-                    "top_score": (r.knowledge.rss.get(rss.name) or {}).get("top_score")}
+            info = {
+                "rss": rss.name,
+                "x": rss.x,
+                "y": rss.y,
+                "radius": rss.radius,
+                "top_score": (r.knowledge.rss.get(rss.name) or {}).get("top_score"),
+            }
             r.knowledge.rss[rss.name] = info
             w.tell_ground(r, "rss", rss.name, info)
             w.log(f"{r.name} discovered {rss.name} at {_fmt(rss.x, rss.y)}")
@@ -453,24 +549,64 @@ class RobotSkills:
 
         if r.has("science_camera"):
             # The science camera picks the stone; with the manipulator next to it, the best one.
-            await self.work(ctx, duration * 0.8, "identifying stones (science camera)", frac0=at(0), frac1=at(0.8))
+            await self.work(
+                ctx,
+                duration * 0.8,
+                "identifying stones (science camera)",
+                frac0=at(0),
+                frac1=at(0.8),
+            )
             waited = 0.0
-            while (other is not None and other.has("manipulator") and other.activity == "identify_stone"
-                   and not self._collaborating(partner, tx, ty, "manipulator") and waited < PARTNER_WAIT):
-                await self.work(ctx, self.dt, f"waiting for {partner} to reach the search centre", frac0=at(0.8), frac1=at(0.8))
+            while (
+                other is not None
+                and other.has("manipulator")
+                and other.activity == "identify_stone"
+                and not self._collaborating(partner, tx, ty, "manipulator")
+                and waited < PARTNER_WAIT
+            ):
+                await self.work(
+                    ctx,
+                    self.dt,
+                    f"waiting for {partner} to reach the search centre",
+                    frac0=at(0.8),
+                    frac1=at(0.8),
+                )
                 waited += self.dt
             collab = self._collaborating(partner, tx, ty, "manipulator")
-            stone = self._identify(rss.name, tx, ty, rss.max_score if collab else min_score,
-                                   (r.name, partner) if collab and partner else (r.name,))
-            await self.work(ctx, duration * 0.2, "identifying stones (science camera)", frac0=at(0.8), frac1=at(1.0))
-            how = f"with {partner}" if collab else "alone (only a low-score stone without the manipulator)"
+            stone = self._identify(
+                rss.name,
+                tx,
+                ty,
+                rss.max_score if collab else min_score,
+                (r.name, partner) if collab and partner else (r.name,),
+            )
+            await self.work(
+                ctx,
+                duration * 0.2,
+                "identifying stones (science camera)",
+                frac0=at(0.8),
+                frac1=at(1.0),
+            )
+            how = (
+                f"with {partner}"
+                if collab
+                else "alone (only a low-score stone without the manipulator)"
+            )
         elif other is not None and other.has("science_camera"):
             # LRU2 asks LRU1 which stone it identified (polling while LRU1 works on it)
-            await self.work(ctx, duration * 0.85, f"identifying stones with {partner}", frac0=at(0), frac1=at(0.85))
+            await self.work(
+                ctx,
+                duration * 0.85,
+                f"identifying stones with {partner}",
+                frac0=at(0),
+                frac1=at(0.85),
+            )
             answer: dict[str, Any] | None = None
             waited = 0.0
             while True:
-                answer = await self.fleet.ask(r, other.name, "stone", {"x": tx, "y": ty, "radius": search_radius + rss.radius})
+                answer = await self.fleet.ask(
+                    r, other.name, "stone", {"x": tx, "y": ty, "radius": search_radius + rss.radius}
+                )
                 if answer is not None and answer.get("state") == "identified":
                     break
                 answer = None
@@ -478,7 +614,13 @@ class RobotSkills:
                 if waited >= (PARTNER_WAIT if busy else duration * 0.15):
                     break
                 step = min(ASK_PERIOD, PARTNER_WAIT - waited)
-                await self.work(ctx, step, f"waiting for {partner} to point out the stone", frac0=at(0.85), frac1=at(0.85))
+                await self.work(
+                    ctx,
+                    step,
+                    f"waiting for {partner} to point out the stone",
+                    frac0=at(0.85),
+                    frac1=at(0.85),
+                )
                 waited += step
             if answer is not None:
                 self._learn_stone(answer)
@@ -489,7 +631,9 @@ class RobotSkills:
             else:
                 stone = self._identify(rss.name, tx, ty, min_score, (r.name,))
                 how = f"alone ({partner} did not point out a stone)"
-            await self.work(ctx, duration * 0.15, "locating the stone", frac0=at(0.85), frac1=at(1.0))
+            await self.work(
+                ctx, duration * 0.15, "locating the stone", frac0=at(0.85), frac1=at(1.0)
+            )
         else:
             await self.work(ctx, duration, "identifying stones", frac0=at(0), frac1=at(1.0))
             stone = self._identify(rss.name, tx, ty, min_score, (r.name,))
@@ -505,7 +649,9 @@ class RobotSkills:
             return r.model.carry_stones_in_box
         return r.model.carry_stones
 
-    async def pick_stone(self, ctx: SkillContext, target: Any = None, region: str | None = None, **_: Any) -> None:
+    async def pick_stone(
+        self, ctx: SkillContext, target: Any = None, region: str | None = None, **_: Any
+    ) -> None:
         r, w = self.robot, self.world
         if not r.has("manipulator"):
             raise self.fail(f"{r.name} has no arm to pick stones")
@@ -519,11 +665,19 @@ class RobotSkills:
         radius = 6.0
 
         def known() -> dict[str, Any] | None:
-            cands = [s for s in r.knowledge.stones.values()
-                     if s.get("state") in ("identified", "ground") and math.hypot(s["x"] - tx, s["y"] - ty) <= radius]
+            cands = [
+                s
+                for s in r.knowledge.stones.values()
+                if s.get("state") in ("identified", "ground")
+                and math.hypot(s["x"] - tx, s["y"] - ty) <= radius
+            ]
             if region:
                 cands = [s for s in cands if s.get("rss") == region] or cands
-            return min(cands, key=lambda s: (-(s.get("score") or 0), math.hypot(s["x"] - tx, s["y"] - ty)), default=None)
+            return min(
+                cands,
+                key=lambda s: (-(s.get("score") or 0), math.hypot(s["x"] - tx, s["y"] - ty)),
+                default=None,
+            )
 
         info = known()
         asked: list[str] = []
@@ -534,25 +688,39 @@ class RobotSkills:
             )
             for other in order:
                 asked.append(other.name)
-                answer = await self.fleet.ask(r, other.name, "stone", {"x": tx, "y": ty, "radius": radius})
+                answer = await self.fleet.ask(
+                    r, other.name, "stone", {"x": tx, "y": ty, "radius": radius}
+                )
                 if answer is not None and answer.get("state") in ("identified", "ground"):
                     r.knowledge.stones[answer["id"]] = dict(answer)
                     info = answer
                     break
         if info is None:
             who = f" (asked {', '.join(asked)}: none knew one)" if asked else ""
-            raise self.fail(f"{r.name} knows no identified stone within {radius:g} m of {_fmt(tx, ty)}{who}: identify one first")
+            raise self.fail(
+                f"{r.name} knows no identified stone within {radius:g} m of {_fmt(tx, ty)}{who}: identify one first"
+            )
         stone = w.stones[info["id"]]
         if stone.state not in ("identified", "ground"):
             r.knowledge.stones[stone.id] = stone.public()
-            raise self.fail(f"{stone.id} is no longer there ({stone.state}{' by ' + stone.holder if stone.holder else ''})")
+            raise self.fail(
+                f"{stone.id} is no longer there ({stone.state}{' by ' + stone.holder if stone.holder else ''})"
+            )
         d = self.dist(stone.x, stone.y)
         if d > APPROACH:
-            raise self.fail(f"{stone.id} lies {d:.0f} m away at {_fmt(stone.x, stone.y)}: drive there first (within {APPROACH:g} m)")
+            raise self.fail(
+                f"{stone.id} lies {d:.0f} m away at {_fmt(stone.x, stone.y)}: drive there first (within {APPROACH:g} m)"
+            )
         self.rest_eta = 90.0
         try:
-            await self.move(ctx, (stone.x, stone.y), min(0.3, r.model.max_speed), tolerance=1.2,
-                            what=f"approaching {stone.id}", frac1=0.1)
+            await self.move(
+                ctx,
+                (stone.x, stone.y),
+                min(0.3, r.model.max_speed),
+                tolerance=1.2,
+                what=f"approaching {stone.id}",
+                frac1=0.1,
+            )
         finally:
             self.rest_eta = 0.0
         await self.work(ctx, 90.0, f"picking {stone.id}", load=2.0, frac0=0.1)
@@ -569,7 +737,9 @@ class RobotSkills:
         self.fleet.note(r, msg)
         ctx.progress(1.0, msg, eta_s=0.0)
 
-    async def drop_stone(self, ctx: SkillContext, into: str = "lander_sample_box", **_: Any) -> None:
+    async def drop_stone(
+        self, ctx: SkillContext, into: str = "lander_sample_box", **_: Any
+    ) -> None:
         r, w = self.robot, self.world
         if not r.has("manipulator"):
             raise self.fail(f"{r.name} has no arm")
@@ -578,7 +748,9 @@ class RobotSkills:
         if into == "lander_sample_box":
             if not w.at_lander(r, 3.0):
                 d = w.dist_to_lander(r.x, r.y)
-                raise self.fail(f"{r.name} is {d:.0f} m from the lander: drive there first (within {w.spec.lander.pad_radius + 3:g} m)")
+                raise self.fail(
+                    f"{r.name} is {d:.0f} m from the lander: drive there first (within {w.spec.lander.pad_radius + 3:g} m)"
+                )
             await self.work(ctx, 60.0, "dropping into the lander's sample box", load=1.5)
             gained = 0.0
             for sid in list(r.stones):
@@ -586,8 +758,15 @@ class RobotSkills:
                 stone.state, stone.holder = "delivered", None
                 w.score = round(w.score + (stone.score or 0.0), 6)
                 gained += stone.score or 0.0
-                w.delivered.append({"stone": sid, "rss": stone.rss, "score": stone.score or 0.0, "by": r.name,
-                                    "sim_time": round(w.clock, 1)})
+                w.delivered.append(
+                    {
+                        "stone": sid,
+                        "rss": stone.rss,
+                        "score": stone.score or 0.0,
+                        "by": r.name,
+                        "sim_time": round(w.clock, 1),
+                    }
+                )
                 self._learn_stone(stone.public())
                 w.log(f"{r.name} delivered {sid}: +{stone.score:g}, score {w.score:g}")
             n = len(r.stones)
@@ -597,7 +776,12 @@ class RobotSkills:
             await self.work(ctx, 60.0, "putting the stone down", load=1.5)
             sid = r.stones.pop()
             stone = w.stones[sid]
-            stone.state, stone.holder, stone.x, stone.y = "ground", None, round(r.x, 2), round(r.y, 2)
+            stone.state, stone.holder, stone.x, stone.y = (
+                "ground",
+                None,
+                round(r.x, 2),
+                round(r.y, 2),
+            )
             self._learn_stone(stone.public())
             for other in stone.identified_by:
                 if other != r.name:
@@ -619,19 +803,26 @@ class RobotSkills:
             if other != r.name:
                 await self.fleet.tell(r, other, "box", info)
 
-    async def _take_box(self, ctx: SkillContext, box: str, seconds: float, frac0: float = 0.0,
-                        frac1: float = 1.0) -> None:
+    async def _take_box(
+        self, ctx: SkillContext, box: str, seconds: float, frac0: float = 0.0, frac1: float = 1.0
+    ) -> None:
         r, w = self.robot, self.world
         if box not in w.boxes:
-            raise self.fail(f"there is no payload box '{box}' on this site (boxes: {', '.join(sorted(w.boxes))})")
+            raise self.fail(
+                f"there is no payload box '{box}' on this site (boxes: {', '.join(sorted(w.boxes))})"
+            )
         if r.box is not None:
             raise self.fail(f"{r.name} already carries {r.box}: place it first")
         b = w.boxes[box]
         landers = [o for o in w.robots.values() if o.type == "lander" or o.kind == "static"]
-        if b.where in ("shelf", "storage") or (r.knowledge.boxes.get(box, {}).get("where") == "shelf"):
+        if b.where in ("shelf", "storage") or (
+            r.knowledge.boxes.get(box, {}).get("where") == "shelf"
+        ):
             if not w.at_lander(r, 3.0):
                 d = w.dist_to_lander(r.x, r.y)
-                raise self.fail(f"the shelf is on the lander, {d:.0f} m away: drive there first (within {w.spec.lander.pad_radius + 3:g} m)")
+                raise self.fail(
+                    f"the shelf is on the lander, {d:.0f} m away: drive there first (within {w.spec.lander.pad_radius + 3:g} m)"
+                )
             shelf = None
             for lander in landers:
                 shelf = await self.fleet.ask(r, lander.name, "shelf", {})
@@ -643,11 +834,21 @@ class RobotSkills:
                     if info.get("where") == "shelf" and n not in slots.values():
                         r.knowledge.boxes.pop(n)
                 for slot, n in slots.items():
-                    r.knowledge.boxes[n] = {**w.boxes[n].public(), "where": "shelf", "slot": int(slot)}
+                    r.knowledge.boxes[n] = {
+                        **w.boxes[n].public(),
+                        "where": "shelf",
+                        "slot": int(slot),
+                    }
                 if box not in slots.values():
                     listing = ", ".join(f"{s}: {n}" for s, n in sorted(slots.items())) or "empty"
-                    hint = " (it is inside the lander: shelve it with the lander's load_box)" if b.where == "storage" else ""
-                    raise self.fail(f"the lander says {box} is not on its shelf (shelf: {listing}){hint}")
+                    hint = (
+                        " (it is inside the lander: shelve it with the lander's load_box)"
+                        if b.where == "storage"
+                        else ""
+                    )
+                    raise self.fail(
+                        f"the lander says {box} is not on its shelf (shelf: {listing}){hint}"
+                    )
             elif b.where != "shelf":
                 raise self.fail(f"{box} is not on the lander's shelf")
         elif b.where == "carried":
@@ -664,14 +865,28 @@ class RobotSkills:
                         info = answer
                         break
             if info is None or info.get("where") != "ground":
-                raise self.fail(f"{r.name} does not know where {box} is (nobody it can reach told it)")
+                raise self.fail(
+                    f"{r.name} does not know where {box} is (nobody it can reach told it)"
+                )
             if math.hypot(b.x - info["x"], b.y - info["y"]) > 1.0:
-                raise self.fail(f"{box} is not where {r.name} believed ({_fmt(info['x'], info['y'])})")
+                raise self.fail(
+                    f"{box} is not where {r.name} believed ({_fmt(info['x'], info['y'])})"
+                )
             if self.dist(b.x, b.y) > APPROACH:
-                raise self.fail(f"{box} lies {self.dist(b.x, b.y):.0f} m away at {_fmt(b.x, b.y)}: drive there first")
+                raise self.fail(
+                    f"{box} lies {self.dist(b.x, b.y):.0f} m away at {_fmt(b.x, b.y)}: drive there first"
+                )
             self.rest_eta = seconds
             try:
-                await self.move(ctx, (b.x, b.y), 0.3, tolerance=1.2, what=f"approaching {box}", frac0=frac0, frac1=frac0)
+                await self.move(
+                    ctx,
+                    (b.x, b.y),
+                    0.3,
+                    tolerance=1.2,
+                    what=f"approaching {box}",
+                    frac0=frac0,
+                    frac1=frac0,
+                )
             finally:
                 self.rest_eta = 0.0
         await self.work(ctx, seconds, f"picking {box}", load=2.0, frac0=frac0, frac1=frac1)
@@ -710,14 +925,20 @@ class RobotSkills:
         b.where, b.slot, b.x, b.y = "ground", None, round(r.x, 2), round(r.y, 2)
         return f"placed {box} at {_fmt(b.x, b.y)}"
 
-    async def place_payload_box(self, ctx: SkillContext, box: str = "", goal: Any = None, **_: Any) -> None:
+    async def place_payload_box(
+        self, ctx: SkillContext, box: str = "", goal: Any = None, **_: Any
+    ) -> None:
         r = self.robot
         if r.box != box:
-            raise self.fail(f"{r.name} does not carry {box}" + (f" (it carries {r.box})" if r.box else ""))
+            raise self.fail(
+                f"{r.name} does not carry {box}" + (f" (it carries {r.box})" if r.box else "")
+            )
         gx, gy = _xy(goal)
         self.rest_eta = 60.0
         try:
-            await self.move(ctx, (gx, gy), r.model.speed, tolerance=1.0, what=f"carrying {box}", frac1=0.7)
+            await self.move(
+                ctx, (gx, gy), r.model.speed, tolerance=1.0, what=f"carrying {box}", frac1=0.7
+            )
         finally:
             self.rest_eta = 0.0
         await self.work(ctx, 60.0, f"placing {box}", load=2.0, frac0=0.7)
@@ -727,7 +948,9 @@ class RobotSkills:
         self.fleet.note(r, msg)
         ctx.progress(1.0, msg, eta_s=0.0)
 
-    async def deploy_wifi_box(self, ctx: SkillContext, box: str = "wifi_box_1", goal: Any = None, **_: Any) -> None:
+    async def deploy_wifi_box(
+        self, ctx: SkillContext, box: str = "wifi_box_1", goal: Any = None, **_: Any
+    ) -> None:
         r, w = self.robot, self.world
         if not r.has("manipulator"):
             raise self.fail(f"{r.name} has no arm to carry payload boxes")
@@ -738,7 +961,15 @@ class RobotSkills:
             await self._take_box(ctx, box, 60.0, frac1=0.2)
         self.rest_eta = 90.0
         try:
-            await self.move(ctx, (gx, gy), r.model.speed, tolerance=1.0, what=f"carrying {box}", frac0=0.2, frac1=0.7)
+            await self.move(
+                ctx,
+                (gx, gy),
+                r.model.speed,
+                tolerance=1.0,
+                what=f"carrying {box}",
+                frac0=0.2,
+                frac1=0.7,
+            )
         finally:
             self.rest_eta = 0.0
         await self.work(ctx, 60.0, f"placing {box}", load=2.0, frac0=0.7, frac1=0.9)
@@ -781,19 +1012,32 @@ class RobotSkills:
 
             def empty(done: float, total: float) -> str:
                 left = w.dist_to_lander(r.x, r.y)
-                return (f"battery empty {left:.0f} m from the lander (drove {done:.0f} of {total:.0f} m): "
-                        f"{r.name} is stranded")
+                return (
+                    f"battery empty {left:.0f} m from the lander (drove {done:.0f} of {total:.0f} m): "
+                    f"{r.name} is stranded"
+                )
 
-            await self.move(ctx, free, r.model.speed, tolerance=0.5, allow_reserve=True,
-                            what="returning to the lander", frac1=0.3, empty=empty)
+            await self.move(
+                ctx,
+                free,
+                r.model.speed,
+                tolerance=0.5,
+                allow_reserve=True,
+                what="returning to the lander",
+                frac1=0.3,
+                empty=empty,
+            )
         start = r.battery
         while r.battery < target_level - 1e-9:
             dt = await self.tick(ctx)
             w.charge(r, dt, up_to=target_level)
             span = max(target_level - start, 1e-9)
             rate = r.model.charge_per_minute / 60.0
-            ctx.progress(0.35 + 0.65 * (r.battery - start) / span, f"charging: {_pct(r.battery)}",
-                         eta_s=(target_level - r.battery) / rate)
+            ctx.progress(
+                0.35 + 0.65 * (r.battery - start) / span,
+                f"charging: {_pct(r.battery)}",
+                eta_s=(target_level - r.battery) / rate,
+            )
         msg = f"battery {_pct(r.battery)}"
         self.fleet.note(r, f"recharged: {msg}")
         ctx.progress(1.0, msg, eta_s=0.0)
@@ -804,7 +1048,9 @@ class RobotSkills:
         if self.robot.kind != "drone":
             raise self.fail(f"{self.robot.name} cannot {skill}: it is not a drone")
 
-    async def _climb(self, ctx: SkillContext, altitude: float, frac0: float = 0.0, frac1: float = 1.0) -> None:
+    async def _climb(
+        self, ctx: SkillContext, altitude: float, frac0: float = 0.0, frac1: float = 1.0
+    ) -> None:
         r = self.robot
         seconds = abs(altitude - r.z) / CLIMB_RATE + 5.0
         z0 = r.z
@@ -815,7 +1061,11 @@ class RobotSkills:
             done += dt
             r.battery = max(0.0, r.battery - self.world.flight_energy(r, dt))
             r.z = z0 + (altitude - z0) * min(1.0, done / seconds)
-            ctx.progress(frac0 + (frac1 - frac0) * done / seconds, f"altitude {r.z:.1f} m", eta_s=seconds - done)
+            ctx.progress(
+                frac0 + (frac1 - frac0) * done / seconds,
+                f"altitude {r.z:.1f} m",
+                eta_s=seconds - done,
+            )
         r.z = altitude
 
     async def _descend(self, ctx: SkillContext, frac0: float = 0.0, frac1: float = 1.0) -> None:
@@ -828,22 +1078,42 @@ class RobotSkills:
         r, w = self.robot, self.world
 
         def empty(done: float, total: float) -> str:
-            return (f"battery at the reserve after {done:.0f} m of {total:.0f} m back to the lander: "
-                    f"{r.name} made an emergency landing at {_fmt(r.x, r.y)}")
+            return (
+                f"battery at the reserve after {done:.0f} m of {total:.0f} m back to the lander: "
+                f"{r.name} made an emergency landing at {_fmt(r.x, r.y)}"
+            )
 
-        await self.move(ctx, (w.spec.lander.x, w.spec.lander.y), r.model.speed, tolerance=0.3,
-                        allow_reserve=True, what="flying to the lander pad", frac0=frac0, frac1=frac1, empty=empty)
+        await self.move(
+            ctx,
+            (w.spec.lander.x, w.spec.lander.y),
+            r.model.speed,
+            tolerance=0.3,
+            allow_reserve=True,
+            what="flying to the lander pad",
+            frac0=frac0,
+            frac1=frac1,
+            empty=empty,
+        )
 
     async def takeoff(self, ctx: SkillContext, altitude: float = 5.0, **_: Any) -> None:
         self._need_drone("take off")
         r = self.robot
         if not r.airborne and r.usable < 0.05:
-            raise self.fail(f"battery {_pct(r.battery)} is too low to take off (reserve {_pct(r.model.reserve)}); recharge first")
+            raise self.fail(
+                f"battery {_pct(r.battery)} is too low to take off (reserve {_pct(r.model.reserve)}); recharge first"
+            )
         r.airborne = True
         await self._climb(ctx, float(altitude))
         ctx.progress(1.0, f"hovering at {r.z:.0f} m", eta_s=0.0)
 
-    async def fly_to(self, ctx: SkillContext, goal: Any = None, altitude: float = 5.0, speed: float = 2.0, **_: Any) -> None:
+    async def fly_to(
+        self,
+        ctx: SkillContext,
+        goal: Any = None,
+        altitude: float = 5.0,
+        speed: float = 2.0,
+        **_: Any,
+    ) -> None:
         self._need_drone("fly")
         r, w = self.robot, self.world
         if not r.airborne:
@@ -865,11 +1135,21 @@ class RobotSkills:
             await self._climb(ctx, float(altitude), frac1=0.05)
 
         def empty(done: float, total: float) -> str:
-            return (f"battery at the reserve after {done:.0f} m of {total:.0f} m: "
-                    f"{r.name} made an emergency landing at {_fmt(r.x, r.y)}")
+            return (
+                f"battery at the reserve after {done:.0f} m of {total:.0f} m: "
+                f"{r.name} made an emergency landing at {_fmt(r.x, r.y)}"
+            )
 
-        await self.move(ctx, (gx, gy), speed, tolerance=0.3, what=f"flying to {_fmt(gx, gy)}",
-                        frac0=0.05, sense=max(r.model.nav_range, self.sensor_range() * 0.5), empty=empty)
+        await self.move(
+            ctx,
+            (gx, gy),
+            speed,
+            tolerance=0.3,
+            what=f"flying to {_fmt(gx, gy)}",
+            frac0=0.05,
+            sense=max(r.model.nav_range, self.sensor_range() * 0.5),
+            empty=empty,
+        )
         yaw = _yaw(goal)
         if yaw is not None:
             r.yaw = yaw
@@ -882,7 +1162,9 @@ class RobotSkills:
             if where == "here" or w.at_lander(r):
                 ctx.progress(1.0, "already on the ground", eta_s=0.0)
                 return
-            raise self.fail(f"{r.name} is on the ground {w.dist_to_lander(r.x, r.y):.0f} m from the lander pad: take off first")
+            raise self.fail(
+                f"{r.name} is on the ground {w.dist_to_lander(r.x, r.y):.0f} m from the lander pad: take off first"
+            )
         if where == "lander_pad":
             await self._fly_home(ctx, frac1=0.7)
             await self._descend(ctx, frac0=0.7)
@@ -900,7 +1182,9 @@ class RobotSkills:
         if r.kind != "static":
             raise self.fail(f"{r.name} has no shelf")
         if box not in w.boxes:
-            raise self.fail(f"there is no payload box '{box}' (boxes: {', '.join(sorted(w.boxes))})")
+            raise self.fail(
+                f"there is no payload box '{box}' (boxes: {', '.join(sorted(w.boxes))})"
+            )
         b = w.boxes[box]
         slot = int(slot)
         if not 1 <= slot <= w.spec.lander.shelf_slots:
@@ -909,13 +1193,19 @@ class RobotSkills:
         if holder is not None and holder.name != box:
             raise self.fail(f"slot {slot} holds {holder.name}: choose another slot")
         if b.where not in ("storage", "shelf"):
-            where = f"carried by {b.holder}" if b.where == "carried" else f"on the ground at {_fmt(b.x, b.y)}"
+            where = (
+                f"carried by {b.holder}"
+                if b.where == "carried"
+                else f"on the ground at {_fmt(b.x, b.y)}"
+            )
             raise self.fail(f"{box} is not in the lander ({where})")
         if b.where == "shelf" and b.slot == slot:
             ctx.progress(1.0, f"{box} is on slot {slot} already", eta_s=0.0)
             return
         await self.work(ctx, 60.0, f"loading {box} onto slot {slot}")
-        if b.where not in ("storage", "shelf") or any(o.where == "shelf" and o.slot == slot and o.name != box for o in w.boxes.values()):
+        if b.where not in ("storage", "shelf") or any(
+            o.where == "shelf" and o.slot == slot and o.name != box for o in w.boxes.values()
+        ):
             raise self.fail(f"the shelf changed meanwhile: {box} not loaded")
         b.where, b.slot = "shelf", slot
         r.knowledge.boxes[box] = b.public()

@@ -146,8 +146,13 @@ class FakeServer:
         self.apply(robot, reply.reports)
         return reply
 
-    async def enqueue(self, robot: str, *skills: SkillInstance, front: bool = False,
-                      barriers: dict[str, BarrierInfo] | None = None) -> CommandReply:
+    async def enqueue(
+        self,
+        robot: str,
+        *skills: SkillInstance,
+        front: bool = False,
+        barriers: dict[str, BarrierInfo] | None = None,
+    ) -> CommandReply:
         return await self.command(
             robot, Enqueue(skills=list(skills), front=front, barriers=barriers or {})
         )
@@ -221,7 +226,9 @@ class Harness:
             for r in self.local.get(robot, [])
         )
 
-    async def until(self, predicate: Callable[[], bool], timeout: float = WAIT, what: str = "") -> None:
+    async def until(
+        self, predicate: Callable[[], bool], timeout: float = WAIT, what: str = ""
+    ) -> None:
         """Wait until `predicate()` holds; re-checked whenever a report is made or
         received (every state change of interest produces one)."""
         try:
@@ -235,10 +242,7 @@ class Harness:
     async def registered(self, *names: str, count: int = 1) -> None:
         """Wait until each named agent registered (at least `count` times)."""
         await self.until(
-            lambda: all(
-                len(self.server.registrations_of(n)) >= count
-                for n in names
-            ),
+            lambda: all(len(self.server.registrations_of(n)) >= count for n in names),
             what=f"registration of {names}",
         )
         for n in names:
@@ -261,7 +265,10 @@ class Harness:
 
 def skill(sid: str, name: str = "work", *, retries: int = 0, **params: Any) -> SkillInstance:
     return SkillInstance(
-        id=sid, skill=name, params=params, status=Status.IDLE,
+        id=sid,
+        skill=name,
+        params=params,
+        status=Status.IDLE,
         policies=Policies(retries=retries),
     )
 

@@ -74,7 +74,9 @@ async def test_registers_with_manifest_and_again_after_server_restart(harness: H
     async with harness as h:
         lru1 = h.name("lru1")
         h.server.last_seq[lru1] = 41  # reports of a previous run of this robot
-        a = h.agent(lru1, "rover", modules={"nav": "2.1.0", "arm": "0.3.1"}, properties={"camera": True})
+        a = h.agent(
+            lru1, "rover", modules={"nav": "2.1.0", "arm": "0.3.1"}, properties={"camera": True}
+        )
 
         @a.skill("drive_to", version="1.2.0")
         async def drive_to(ctx, goal):
@@ -131,7 +133,11 @@ async def test_enqueue_run_success_with_typed_params_and_consecutive_seqs(harnes
         await a.start()
         await h.registered(lru1)
         goal = {"x": 1.0, "y": 2.0, "z": 0.0, "roll": 0.0, "pitch": 0.0, "yaw": 0.5}
-        area = [{"x": 0.0, "y": 0.0, "z": 0.0}, {"x": 1.0, "y": 0.0, "z": 0.0}, {"x": 0.0, "y": 1.0, "z": 0.0}]
+        area = [
+            {"x": 0.0, "y": 0.0, "z": 0.0},
+            {"x": 1.0, "y": 0.0, "z": 0.0},
+            {"x": 0.0, "y": 1.0, "z": 0.0},
+        ]
         reply = await h.server.enqueue(
             lru1,
             skill("s1", "drive_to", goal=goal, region=area, poi="stone1", n=3, speed=0.5),
@@ -144,7 +150,10 @@ async def test_enqueue_run_success_with_typed_params_and_consecutive_seqs(harnes
         await h.server.command(lru1, Run())
         await h.until(lambda: h.server.has(lru1, "s2", S.SUCCESS), what="s2 success")
         assert h.server.trail(lru1) == [
-            ("s1", "running"), ("s1", "success"), ("s2", "running"), ("s2", "success"),
+            ("s1", "running"),
+            ("s1", "success"),
+            ("s2", "running"),
+            ("s2", "success"),
         ]
         assert h.server.seqs(lru1) == [1, 2, 3, 4] and not h.server.gaps
         params = got["s1"]
@@ -156,7 +165,9 @@ async def test_enqueue_run_success_with_typed_params_and_consecutive_seqs(harnes
         assert a.pending_reports == []
 
 
-async def test_enqueue_is_idempotent_refuses_unknown_skills_and_front_goes_first(harness: Harness) -> None:
+async def test_enqueue_is_idempotent_refuses_unknown_skills_and_front_goes_first(
+    harness: Harness,
+) -> None:
     async with harness as h:
         lru1 = h.name("lru1")
         a = h.agent(lru1)
@@ -194,7 +205,11 @@ async def test_telemetry_is_published(harness: Harness) -> None:
                 if t.skill == "s1" and t.mode == "running":
                     break
         assert (t.robot, t.pose, t.battery, t.link, t.in_range) == (
-            lru1, Pose(x=1.5, y=-2.0, yaw=0.25), 0.8, 0.6, True,
+            lru1,
+            Pose(x=1.5, y=-2.0, yaw=0.25),
+            0.8,
+            0.6,
+            True,
         )
 
 
@@ -244,7 +259,10 @@ async def test_pause_and_resume(harness: Harness) -> None:
         await h.until(lambda: h.server.has(lru1, "s1", S.SUCCESS), what="success")
         assert passed.is_set()
         assert h.server.trail(lru1) == [
-            ("s1", "running"), ("s1", "paused"), ("s1", "running"), ("s1", "success"),
+            ("s1", "running"),
+            ("s1", "paused"),
+            ("s1", "running"),
+            ("s1", "success"),
         ]
 
 
@@ -283,13 +301,19 @@ async def test_stop_returns_to_queue_and_run_restarts_from_the_beginning(harness
         await h.until(lambda: h.server.has(lru1, "s2", S.SUCCESS), what="s2 success")
         assert calls == [1, 2, 3]  # s1 from the beginning, then s2
         assert h.server.trail(lru1) == [
-            ("s1", "running"), ("s1", "idle_synchronized"),
-            ("s1", "running"), ("s1", "success"), ("s2", "running"), ("s2", "success"),
+            ("s1", "running"),
+            ("s1", "idle_synchronized"),
+            ("s1", "running"),
+            ("s1", "success"),
+            ("s2", "running"),
+            ("s2", "success"),
         ]
         assert h.server.seqs(lru1) == list(range(1, 7))
 
 
-async def test_failure_halts_then_run_continues_and_exceptions_are_failures(harness: Harness) -> None:
+async def test_failure_halts_then_run_continues_and_exceptions_are_failures(
+    harness: Harness,
+) -> None:
     async with harness as h:
         lru1 = h.name("lru1")
         a = h.agent(lru1)
@@ -317,7 +341,11 @@ async def test_failure_halts_then_run_continues_and_exceptions_are_failures(harn
         await a.start()
         await h.registered(lru1)
         await h.server.enqueue(
-            lru1, skill("f1", "stuck"), skill("f2", "buggy"), skill("f3", "soft"), skill("k1", "ok"),
+            lru1,
+            skill("f1", "stuck"),
+            skill("f2", "buggy"),
+            skill("f3", "soft"),
+            skill("k1", "ok"),
             skill("k2", "found"),
         )
         await h.server.command(lru1, Run())
@@ -335,7 +363,10 @@ async def test_failure_halts_then_run_continues_and_exceptions_are_failures(harn
         k1 = [r for r in h.server.applied[lru1] if r.id == "k1" and r.status == S.SUCCESS]
         assert [r.info for r in k1] == [""]  # plain success: no result text
         # the queue went on (run mode stays after a success); Success carries a result text
-        await h.until(lambda: h.server.has(lru1, "k2", S.SUCCESS, "stone s7, score 0.9"), what="k2 success with text")
+        await h.until(
+            lambda: h.server.has(lru1, "k2", S.SUCCESS, "stone s7, score 0.9"),
+            what="k2 success with text",
+        )
         assert not h.server.gaps
 
 
@@ -481,13 +512,18 @@ async def test_out_of_range_refuses_commands_and_queues_reports(harness: Harness
         await h.until(lambda: h.made(lru1, "s2", S.SUCCESS), what="s2 success")
         assert not h.server.has(lru1, "s1", S.SUCCESS)
         assert [(r.id, r.status) for r in a.pending_reports] == [
-            ("s1", S.SUCCESS), ("s2", S.RUNNING), ("s2", S.SUCCESS),
+            ("s1", S.SUCCESS),
+            ("s2", S.RUNNING),
+            ("s2", S.SUCCESS),
         ]
 
         a.link.reachable = True  # back in range: flushed, nothing lost, in order
         await h.until(lambda: h.server.has(lru1, "s2", S.SUCCESS), what="flush")
         assert h.server.trail(lru1) == [
-            ("s1", "running"), ("s1", "success"), ("s2", "running"), ("s2", "success"),
+            ("s1", "running"),
+            ("s1", "success"),
+            ("s2", "running"),
+            ("s2", "success"),
         ]
         assert h.server.seqs(lru1) == [1, 2, 3, 4] and not h.server.gaps
         reply = await h.server.command(lru1, Pause())  # reachable again
@@ -510,7 +546,9 @@ async def test_pause_out_of_comms_policy_and_recharge_policy(harness: Harness) -
 
         await a.start()
         await h.registered(lru1)
-        s1 = SkillInstance(id="s1", skill="work", policies=Policies(recharge_below=0.3, pause_out_of_comms=True))
+        s1 = SkillInstance(
+            id="s1", skill="work", policies=Policies(recharge_below=0.3, pause_out_of_comms=True)
+        )
         await h.server.enqueue(lru1, s1)
         await h.server.command(lru1, Run())
         await asyncio.wait_for(started["s1"].wait(), WAIT)
@@ -518,23 +556,33 @@ async def test_pause_out_of_comms_policy_and_recharge_policy(harness: Harness) -
         assert h.made(lru1, "s1", S.RUNNING, "recharging first: battery 10% below 30%")
 
         a.link.reachable = False
-        await h.until(lambda: h.made(lru1, "s1", S.PAUSED, "out of communication range"), what="auto pause")
+        await h.until(
+            lambda: h.made(lru1, "s1", S.PAUSED, "out of communication range"), what="auto pause"
+        )
         gates["s1"].set()  # it would finish, but it is held at its checkpoint
         a.link.reachable = True
         await h.until(lambda: h.server.has(lru1, "s1", S.SUCCESS), what="success")
         assert h.server.trail(lru1) == [
-            ("s1", "running"), ("s1", "running"), ("s1", "paused"), ("s1", "running"), ("s1", "success"),
+            ("s1", "running"),
+            ("s1", "running"),
+            ("s1", "paused"),
+            ("s1", "running"),
+            ("s1", "success"),
         ]
 
 
 # ---------------------------------------------------------------- barriers
 
 
-def barrier_skill(sid: str, partner: str, partner_skill: str) -> tuple[SkillInstance, dict[str, BarrierInfo]]:
+def barrier_skill(
+    sid: str, partner: str, partner_skill: str
+) -> tuple[SkillInstance, dict[str, BarrierInfo]]:
     return skill(sid, "meet"), {sid: BarrierInfo(barrier="b1", partners={partner: partner_skill})}
 
 
-def meet_handler(agent: RobotAgent, started: dict[str, float], events: dict[str, asyncio.Event]) -> None:
+def meet_handler(
+    agent: RobotAgent, started: dict[str, float], events: dict[str, asyncio.Event]
+) -> None:
     @agent.skill("meet", version="1.0.0")
     async def meet(ctx):
         started[agent.name] = time.monotonic()
@@ -551,7 +599,11 @@ async def test_barrier_neither_starts_before_both_are_ready(harness: Harness) ->
         for agent in (a, b):
             meet_handler(agent, started, events)
             agent.report_listeners.append(
-                lambda r: waiting_at.setdefault(r.robot, time.monotonic()) if r.status == S.SYNCHWAITING else None
+                lambda r: (
+                    waiting_at.setdefault(r.robot, time.monotonic())
+                    if r.status == S.SYNCHWAITING
+                    else None
+                )
             )
         await a.start()
         await b.start()
@@ -560,7 +612,9 @@ async def test_barrier_neither_starts_before_both_are_ready(harness: Harness) ->
         m1, bar1 = barrier_skill("m1", lru2, "m2")
         await h.server.enqueue(lru1, m1, barriers=bar1)
         await h.server.command(lru1, Run())
-        await h.until(lambda: h.made(lru1, "m1", S.SYNCHWAITING, f"waiting for {lru2}"), what="lru1 waits")
+        await h.until(
+            lambda: h.made(lru1, "m1", S.SYNCHWAITING, f"waiting for {lru2}"), what="lru1 waits"
+        )
         await never(events[lru1])  # lru1 does not start alone
 
         m2, bar2 = barrier_skill("m2", lru1, "m1")
@@ -574,7 +628,11 @@ async def test_barrier_neither_starts_before_both_are_ready(harness: Harness) ->
             what="both succeed",
         )
         for robot, sid in ((lru1, "m1"), (lru2, "m2")):
-            assert h.server.trail(robot) == [(sid, "synchwaiting"), (sid, "running"), (sid, "success")]
+            assert h.server.trail(robot) == [
+                (sid, "synchwaiting"),
+                (sid, "running"),
+                (sid, "success"),
+            ]
 
 
 async def test_barrier_partner_offline_and_stop_withdraws_readiness(harness: Harness) -> None:
@@ -592,7 +650,9 @@ async def test_barrier_partner_offline_and_stop_withdraws_readiness(harness: Har
         m1, bar1 = barrier_skill("m1", lru2, "m2")
         await h.server.enqueue(lru1, m1, barriers=bar1)
         await h.server.command(lru1, Run())
-        await h.until(lambda: h.server.has(lru1, "m1", S.SYNCHWAITING, f"waiting for {lru2}"), what="waits")
+        await h.until(
+            lambda: h.server.has(lru1, "m1", S.SYNCHWAITING, f"waiting for {lru2}"), what="waits"
+        )
 
         await b.stop()  # the partner goes offline (session closed)
         await h.until(
@@ -613,7 +673,9 @@ async def test_barrier_partner_offline_and_stop_withdraws_readiness(harness: Har
         m2, bar2 = barrier_skill("m2", lru1, "m1")
         await h.server.enqueue(lru2, m2, barriers=bar2)
         await h.server.command(lru2, Run())
-        await h.until(lambda: h.made(lru2, "m2", S.SYNCHWAITING, f"waiting for {lru1}"), what="lru2 waits")
+        await h.until(
+            lambda: h.made(lru2, "m2", S.SYNCHWAITING, f"waiting for {lru1}"), what="lru2 waits"
+        )
         await never(events[lru2])
 
         await h.server.command(lru1, Run())  # lru1 comes to the barrier again: both start
@@ -635,7 +697,10 @@ async def test_ask_and_tell_between_agents_are_counted(harness: Harness) -> None
         told: list[tuple[dict, str]] = []
         got_tell = asyncio.Event()
 
-        a.on_ask("stone", lambda data, sender: {"x": 3.0, "y": 4.0, "region": data["region"], "for": sender})
+        a.on_ask(
+            "stone",
+            lambda data, sender: {"x": 3.0, "y": 4.0, "region": data["region"], "for": sender},
+        )
 
         async def on_box(data, sender):
             told.append((data, sender))
@@ -666,10 +731,22 @@ async def test_ask_and_tell_between_agents_are_counted(harness: Harness) -> None
             "nobody": None,
         }
         assert told == [({"at": [1, 2]}, lru2)]
-        assert b.world_stats == {"asks_sent": 3, "tells_sent": 1, "asks_failed": 1, "tells_failed": 0,
-                                 "asks_received": 0, "tells_received": 0}
-        assert a.world_stats == {"asks_sent": 0, "tells_sent": 0, "asks_failed": 0, "tells_failed": 0,
-                                 "asks_received": 2, "tells_received": 1}
+        assert b.world_stats == {
+            "asks_sent": 3,
+            "tells_sent": 1,
+            "asks_failed": 1,
+            "tells_failed": 0,
+            "asks_received": 0,
+            "tells_received": 0,
+        }
+        assert a.world_stats == {
+            "asks_sent": 0,
+            "tells_sent": 0,
+            "asks_failed": 0,
+            "tells_failed": 0,
+            "asks_received": 2,
+            "tells_received": 1,
+        }
 
 
 async def test_a_robot_out_of_reach_is_not_asked(harness: Harness) -> None:
@@ -694,7 +771,10 @@ async def test_a_robot_out_of_reach_is_not_asked(harness: Harness) -> None:
         await h.until(lambda: h.server.has(lru2, "f1", S.SUCCESS), what="fetch done")
         assert answers == {"stone": None, "told": False}
         assert (b.world_stats["asks_failed"], b.world_stats["tells_failed"]) == (1, 1)
-        assert (a.world_stats["asks_received"], a.world_stats["tells_received"]) == (0, 0)  # never sent
+        assert (a.world_stats["asks_received"], a.world_stats["tells_received"]) == (
+            0,
+            0,
+        )  # never sent
 
 
 # ---------------------------------------------------------------- shutdown
@@ -726,8 +806,13 @@ async def test_agent_process_exits_promptly_after_stop(harness: Harness) -> None
     async with harness as h:
         lru9 = h.name("lru9")
         proc = await asyncio.create_subprocess_exec(
-            sys.executable, "-c", AGENT_SCRIPT.format(root=str(ROOT)), h.endpoint, lru9,
-            stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
+            sys.executable,
+            "-c",
+            AGENT_SCRIPT.format(root=str(ROOT)),
+            h.endpoint,
+            lru9,
+            stdin=asyncio.subprocess.PIPE,
+            stdout=asyncio.subprocess.PIPE,
         )
         try:
             assert proc.stdin is not None and proc.stdout is not None

@@ -20,7 +20,10 @@ from .conftest import Harness, skill
 
 def test_connect_takes_one_endpoint_or_a_list_and_names_a_bad_one() -> None:
     assert RobotAgent("r1", "rover", connect="tcp/127.0.0.1:7447").connect == ["tcp/127.0.0.1:7447"]
-    with pytest.raises(ValueError, match=r"robot r1: connect endpoint 'localhost:7447' is not PROTOCOL/ADDRESS, like tcp/"):
+    with pytest.raises(
+        ValueError,
+        match=r"robot r1: connect endpoint 'localhost:7447' is not PROTOCOL/ADDRESS, like tcp/",
+    ):
         RobotAgent("r1", "rover", connect=["localhost:7447"])
     with pytest.raises(ValueError, match="robot r1: connect lists no endpoint"):
         RobotAgent("r1", "rover", connect=[])
@@ -30,19 +33,29 @@ def test_skill_registration_mistakes_are_refused_with_the_skill_named() -> None:
     a = RobotAgent("r1", "rover", connect="tcp/127.0.0.1:7447")
     with pytest.raises(TypeError, match="robot r1, skill scan: the handler must be a function"):
         a.add_skill("scan", "scan_handler")  # type: ignore[arg-type]
-    with pytest.raises(TypeError, match=r"robot r1, skill scan: the handler must take the SkillContext .* def scan\(ctx"):
+    with pytest.raises(
+        TypeError,
+        match=r"robot r1, skill scan: the handler must take the SkillContext .* def scan\(ctx",
+    ):
+
         def scan() -> None: ...
+
         a.add_skill("scan", scan)
     with pytest.raises(ValueError, match="robot r1, skill scan: version '1.0' is not SemVer"):
         a.add_skill("scan", lambda ctx: None, version="1.0")
-    with pytest.raises(TypeError, match=r'write @agent.skill\("NAME", version="1.0.0"\).* above \'drive\''):
+    with pytest.raises(
+        TypeError, match=r'write @agent.skill\("NAME", version="1.0.0"\).* above \'drive\''
+    ):
+
         @a.skill  # type: ignore[arg-type]
         def drive(ctx): ...
 
     @a.skill("scan", version="1.0.0")
     def first(ctx): ...
 
-    with pytest.raises(ValueError, match=r"robot r1, skill scan: a handler is registered already \(first\)"):
+    with pytest.raises(
+        ValueError, match=r"robot r1, skill scan: a handler is registered already \(first\)"
+    ):
         a.add_skill("scan", lambda ctx: None)
     assert a.manifest().skills == {"scan": "1.0.0"}
 
@@ -61,17 +74,25 @@ async def test_wait_registered_says_why(harness: Harness) -> None:
         h.server.refuse = f"robot '{lru1}' is not part of this mission"
         a = h.agent(lru1)
         await a.start()
-        with pytest.raises(RegistrationRefused, match=f"the mission server refused robot {lru1}: robot '{lru1}' is not part"):
+        with pytest.raises(
+            RegistrationRefused,
+            match=f"the mission server refused robot {lru1}: robot '{lru1}' is not part",
+        ):
             await a.wait_registered(10)
 
         h.server.vanish()  # no server up: a timeout that says so
         b = h.agent(lru2)
         await b.start()
-        with pytest.raises(TimeoutError, match=f"robot {lru2} not registered within 0.3 s: no mission server is up behind tcp/"):
+        with pytest.raises(
+            TimeoutError,
+            match=f"robot {lru2} not registered within 0.3 s: no mission server is up behind tcp/",
+        ):
             await b.wait_registered(0.3)
 
 
-async def test_handler_signatures_that_do_not_fit_the_parameters_fail_with_a_reason(harness: Harness) -> None:
+async def test_handler_signatures_that_do_not_fit_the_parameters_fail_with_a_reason(
+    harness: Harness,
+) -> None:
     async with harness as h:
         lru1 = h.name("lru1")
         a = h.agent(lru1)
@@ -85,8 +106,11 @@ async def test_handler_signatures_that_do_not_fit_the_parameters_fail_with_a_rea
             return None
 
         await h.start(a)
-        await h.run(lru1, skill("d1", "drive_to", goal={"x": 1.0}, speed=0.5),
-                    skill("i1", "identify", target="stone"))
+        await h.run(
+            lru1,
+            skill("d1", "drive_to", goal={"x": 1.0}, speed=0.5),
+            skill("i1", "identify", target="stone"),
+        )
         await h.until(lambda: h.server.has(lru1, "d1", S.FAILURE), what="d1 failure")
         assert h.server.applied[lru1][-1].info == (
             "handler drive_to() does not accept parameter 'speed' sent by the server: "
@@ -113,12 +137,20 @@ async def test_a_handler_bug_is_one_line_for_the_operator_and_a_traceback_in_the
 
         await h.start(a)
         await h.run(lru1, skill("w1"))
-        await h.until(lambda: h.server.has(lru1, "w1", S.FAILURE, "KeyError: 'missing'"), what="w1 failure")
-        logged = [r for r in caplog.records if r.name == "backend.agent" and "the handler of w1 (work) raised" in r.getMessage()]
+        await h.until(
+            lambda: h.server.has(lru1, "w1", S.FAILURE, "KeyError: 'missing'"), what="w1 failure"
+        )
+        logged = [
+            r
+            for r in caplog.records
+            if r.name == "backend.agent" and "the handler of w1 (work) raised" in r.getMessage()
+        ]
         assert logged and logged[0].exc_info is not None
 
 
-async def test_a_bad_telemetry_source_does_not_break_commands(harness: Harness, caplog: pytest.LogCaptureFixture) -> None:
+async def test_a_bad_telemetry_source_does_not_break_commands(
+    harness: Harness, caplog: pytest.LogCaptureFixture
+) -> None:
     async with harness as h:
         lru1 = h.name("lru1")
         a = h.agent(lru1, telemetry_hz=20.0)
@@ -136,12 +168,20 @@ async def test_a_bad_telemetry_source_does_not_break_commands(harness: Harness, 
         await h.until(lambda: h.server.has(lru1, "w1", S.SUCCESS), what="w1 success")
         t = a.telemetry()
         assert (t.pose, t.link) == (Pose(), 0.0)
-        said = [r.getMessage() for r in caplog.records if "telemetry sends a default instead" in r.getMessage()]
-        assert len([m for m in said if "agent.pose() must return a backend.core.model.Pose" in m]) == 1  # once
+        said = [
+            r.getMessage()
+            for r in caplog.records
+            if "telemetry sends a default instead" in r.getMessage()
+        ]
+        assert (
+            len([m for m in said if "agent.pose() must return a backend.core.model.Pose" in m]) == 1
+        )  # once
         assert len([m for m in said if "agent.link.quality must be a number" in m]) == 1
 
 
-async def test_a_world_handler_that_fails_is_named_on_both_sides(harness: Harness, caplog: pytest.LogCaptureFixture) -> None:
+async def test_a_world_handler_that_fails_is_named_on_both_sides(
+    harness: Harness, caplog: pytest.LogCaptureFixture
+) -> None:
     caplog.set_level(logging.INFO, logger="backend.agent")
     async with harness as h:
         lru1, lru2 = h.names("lru1", "lru2")
@@ -160,8 +200,14 @@ async def test_a_world_handler_that_fails_is_named_on_both_sides(harness: Harnes
         await h.until(lambda: h.server.has(lru2, "f1", S.SUCCESS), what="fetch done")
         assert answers == {"stone": None, "rss": None}
         text = "\n".join(r.getMessage() for r in caplog.records)
-        assert f"{lru1} cannot answer ask 'stone' from {lru2}: its on_ask handler raised KeyError: 'id'" in text
-        assert f"{lru1} cannot answer ask 'rss' from {lru2}: its on_ask handler returned a list; it must return a dict or None" in text
+        assert (
+            f"{lru1} cannot answer ask 'stone' from {lru2}: its on_ask handler raised KeyError: 'id'"
+            in text
+        )
+        assert (
+            f"{lru1} cannot answer ask 'rss' from {lru2}: its on_ask handler returned a list; it must return a dict or None"
+            in text
+        )
         # the asker's log carries the same sentence, not a JSON blob
         assert f"{lru2}: ask {lru1}/rss failed: {lru1} cannot answer ask 'rss'" in text
 
@@ -171,15 +217,24 @@ def test_a_manifest_that_cannot_be_sent_is_refused_at_construction() -> None:
         args: dict = {"name": "lru1", "robot_type": "rover", "connect": "tcp/127.0.0.1:7447", **kw}
         return RobotAgent(**args)
 
-    with pytest.raises(ValueError, match=r"robot name 'lru 1' must start with a letter and hold only letters"):
+    with pytest.raises(
+        ValueError, match=r"robot name 'lru 1' must start with a letter and hold only letters"
+    ):
         agent(name="lru 1")
     with pytest.raises(ValueError, match=r"robot lru1: type 'rover/2' must start with a letter"):
         agent(robot_type="rover/2")
-    with pytest.raises(ValueError, match=r"robot lru1: module nav version '2.1' is not SemVer \(like 2.1.0\)"):
+    with pytest.raises(
+        ValueError, match=r"robot lru1: module nav version '2.1' is not SemVer \(like 2.1.0\)"
+    ):
         agent(modules={"nav": "2.1"})
-    with pytest.raises(ValueError, match=r"robot lru1: the manifest cannot be written as JSON \(properties must be JSON values\)"):
+    with pytest.raises(
+        ValueError,
+        match=r"robot lru1: the manifest cannot be written as JSON \(properties must be JSON values\)",
+    ):
         agent(properties={"arm": object()})
-    with pytest.raises(ValueError, match=r"robot lru1: skill name 'drive to' must start with a letter"):
+    with pytest.raises(
+        ValueError, match=r"robot lru1: skill name 'drive to' must start with a letter"
+    ):
         agent().add_skill("drive to", lambda ctx: None)
     assert agent(modules={"nav": "2.1.0-rc1"}).manifest().modules[0].version == "2.1.0-rc1"
 
@@ -224,7 +279,9 @@ async def test_ctx_check_in_a_coroutine_warns_once_that_it_ignores_the_pause(
         await h.server.command(lru1, Pause())
         paused.set()
         await asyncio.wait_for(checked.wait(), 10)
-        said = [r for r in caplog.records if "calls ctx.check(), which cannot wait" in r.getMessage()]
+        said = [
+            r for r in caplog.records if "calls ctx.check(), which cannot wait" in r.getMessage()
+        ]
         assert len(said) == 1 and "use await ctx.checkpoint()" in said[0].getMessage()
 
 
@@ -233,7 +290,10 @@ async def test_a_second_agent_under_the_same_name_is_refused_at_start(harness: H
         lru1 = h.name("lru1")
         a, twin = h.agent(lru1), h.agent(lru1)
         await a.start()
-        with pytest.raises(AlreadyConnected, match=f"robot {lru1} is already connected .* a hung one after its lease"):
+        with pytest.raises(
+            AlreadyConnected,
+            match=f"robot {lru1} is already connected .* a hung one after its lease",
+        ):
             await twin.start()
         assert twin._session is None  # closed again: nothing of it stays declared
         await a.stop()
@@ -261,9 +321,14 @@ async def test_a_handler_may_stop_its_own_agent(harness: Harness) -> None:
 def test_world_handlers_are_registered_once_and_must_be_callable() -> None:
     a = RobotAgent("r1", "rover", connect="tcp/127.0.0.1:7447")
     a.on_ask("stone", lambda data, sender: None)
-    with pytest.raises(ValueError, match="robot r1, on_ask 'stone': a handler is registered already"):
+    with pytest.raises(
+        ValueError, match="robot r1, on_ask 'stone': a handler is registered already"
+    ):
         a.on_ask("stone", lambda data, sender: None)
-    with pytest.raises(TypeError, match=r"robot r1, on_tell 'box': the handler must be a function fn\(data, sender\)"):
+    with pytest.raises(
+        TypeError,
+        match=r"robot r1, on_tell 'box': the handler must be a function fn\(data, sender\)",
+    ):
         a.on_tell("box", {"x": 1})  # type: ignore[arg-type]
 
 
@@ -289,7 +354,9 @@ async def test_odd_values_from_a_handler_reach_the_operator_as_text(harness: Har
         assert h.server.applied[lru1][-1].info == "arm fault 3"
 
 
-async def test_a_broken_link_model_is_said_once(harness: Harness, caplog: pytest.LogCaptureFixture) -> None:
+async def test_a_broken_link_model_is_said_once(
+    harness: Harness, caplog: pytest.LogCaptureFixture
+) -> None:
     async with harness as h:
         lru1 = h.name("lru1")
         a = h.agent(lru1)
@@ -329,7 +396,9 @@ async def test_the_context_coroutines_refuse_a_plain_function_handler(harness: H
         )
 
 
-async def test_a_plain_handler_that_ignores_a_stop_is_waited_for_before_the_skill_runs_again(harness: Harness) -> None:
+async def test_a_plain_handler_that_ignores_a_stop_is_waited_for_before_the_skill_runs_again(
+    harness: Harness,
+) -> None:
     """Its thread cannot be cancelled: the next run must not start a second
     handler driving the same robot while the first one still does."""
     async with harness as h:
@@ -357,7 +426,10 @@ async def test_a_plain_handler_that_ignores_a_stop_is_waited_for_before_the_skil
         await asyncio.to_thread(started[0].wait, 30)
         assert (await h.server.command(lru1, Stop())).ok
         await h.server.command(lru1, Run())
-        await h.until(lambda: sum(r.id == "s1" and r.status == S.RUNNING for r in h.local[lru1]) == 2, what="s1 running again")
+        await h.until(
+            lambda: sum(r.id == "s1" and r.status == S.RUNNING for r in h.local[lru1]) == 2,
+            what="s1 running again",
+        )
         assert a.telemetry().info == "waiting for the stopped skill's handler to return"
         assert not started[1].is_set()
         release.set()

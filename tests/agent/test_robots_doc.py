@@ -35,7 +35,9 @@ pytestmark = pytest.mark.timeout(180)
 
 def _load(relpath: str) -> Any:
     """A helper module of another test directory (tests/ is not a package)."""
-    spec = importlib.util.spec_from_file_location(f"_doc_helpers_{Path(relpath).stem}", ROOT / "tests" / relpath)
+    spec = importlib.util.spec_from_file_location(
+        f"_doc_helpers_{Path(relpath).stem}", ROOT / "tests" / relpath
+    )
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -52,9 +54,13 @@ ctl = _load("cli/helpers.py").ctl
 
 def replayed_blocks() -> dict[str, str]:
     text = GUIDE.read_text()
-    found = dict(re.findall(r"<!-- replayed: ([\w-]+) -->\n```python\n(.*?)^```", text, re.M | re.S))
+    found = dict(
+        re.findall(r"<!-- replayed: ([\w-]+) -->\n```python\n(.*?)^```", text, re.M | re.S)
+    )
     missing = [n for n in EXAMPLES if n not in found]
-    assert not missing, f"docs/robots.md lost its replayed example(s) {missing} (marked <!-- replayed: NAME -->)"
+    assert not missing, (
+        f"docs/robots.md lost its replayed example(s) {missing} (marked <!-- replayed: NAME -->)"
+    )
     return found
 
 
@@ -84,8 +90,14 @@ def cluster(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Any:
     c.stop()
 
 
-def robot(cluster: Any, tmp_path: Path, example: str, *argv: str, edit: Callable[[str], str] = str,
-          ready: str | None = None) -> Proc:
+def robot(
+    cluster: Any,
+    tmp_path: Path,
+    example: str,
+    *argv: str,
+    edit: Callable[[str], str] = str,
+    ready: str | None = None,
+) -> Proc:
     """Run the guide's example as a robot process; wait for its "ready NAME"."""
     code = edit(replayed_blocks()[example].replace(GUIDE_ENDPOINT, cluster.endpoint))
     path = tmp_path / f"{example.replace('-', '_')}.py"
@@ -123,7 +135,9 @@ class Telemetry:
             self.count += 1
             self.tick.set()
 
-    async def until(self, robot: str, pred: Callable[[Any], bool], what: str, timeout: float = WAIT) -> Any:
+    async def until(
+        self, robot: str, pred: Callable[[Any], bool], what: str, timeout: float = WAIT
+    ) -> Any:
         try:
             async with asyncio.timeout(timeout):
                 while True:
@@ -133,7 +147,9 @@ class Telemetry:
                     self.tick.clear()
                     await self.tick.wait()
         except TimeoutError:
-            raise AssertionError(f"{what}: not within {timeout}s; last telemetry {self.client.telemetry.get(robot)}") from None
+            raise AssertionError(
+                f"{what}: not within {timeout}s; last telemetry {self.client.telemetry.get(robot)}"
+            ) from None
 
     async def next_samples(self, robot: str, n: int) -> list[Any]:
         """The next `n` samples of `robot` (as the client sees them)."""
@@ -185,9 +201,16 @@ def test_first_robot_gets_typed_values_and_exits_cleanly(cluster: Any, tmp_path:
     async def scenario(c: MissionClient) -> None:
         manifest = c.robots["lru1"].manifest
         assert manifest is not None
-        assert {(m.name, m.version) for m in manifest.modules} == {("nav", "2.1.0"), ("camera", "1.0.3")}
+        assert {(m.name, m.version) for m in manifest.modules} == {
+            ("nav", "2.1.0"),
+            ("camera", "1.0.3"),
+        }
         assert manifest.properties == {"camera": "multispectral"}
-        assert manifest.skills == {"drive_to": "1.0.0", "explore": "1.0.0", "take_science_image": "1.0.0"}
+        assert manifest.skills == {
+            "drive_to": "1.0.0",
+            "explore": "1.0.0",
+            "take_science_image": "1.0.0",
+        }
         area = [{"x": 0, "y": 0}, {"x": 4, "y": 0}, {"x": 4, "y": 3}]
         e = await added(c, add("lru1", "explore", params={"area": area}))
         await c.submit(Sync(robot="lru1"))
@@ -196,7 +219,10 @@ def test_first_robot_gets_typed_values_and_exits_cleanly(cluster: Any, tmp_path:
         # typed: a Pose from the marker POI-A, the float default; raw: a dict,
         # the enum as a string, the dict default; an area as Positions
         assert info(m, "lru1-1") == "arrived at (10, 5) at 0.5 m/s"
-        assert info(m, "lru1-2") == "multispectral image of (10, 5) at 20 ms, bound to {'target': 'POI-A'}"
+        assert (
+            info(m, "lru1-2")
+            == "multispectral image of (10, 5) at 20 ms, bound to {'target': 'POI-A'}"
+        )
         assert info(m, e) == "explored 3 corners, x 0..4 m, with stereo_camera"
 
     drive(cluster, scenario)
@@ -204,7 +230,9 @@ def test_first_robot_gets_typed_values_and_exits_cleanly(cluster: Any, tmp_path:
     assert proc.p.returncode == 0, proc.output()
 
 
-def test_a_robot_outside_the_mission_is_refused_with_the_reason(cluster: Any, tmp_path: Path) -> None:
+def test_a_robot_outside_the_mission_is_refused_with_the_reason(
+    cluster: Any, tmp_path: Path
+) -> None:
     proc = robot(cluster, tmp_path, "versions", edit=lambda code: code.replace('"lru2"', '"lru7"'))
     line = proc.wait_line("RegistrationRefused: ")
     assert "the mission server refused robot lru7: robot 'lru7' is not part of this mission" in line
@@ -217,8 +245,10 @@ def test_incompatible_major_version_is_refused_at_sync(cluster: Any, tmp_path: P
     assert r.returncode == 0, r.stderr
     r = ctl(cluster.endpoint, "sync", "lru2")
     assert r.returncode == 1, r.stdout + r.stderr
-    promised = ("lru2 implements identify_stone 2.0.0, the library needs 1.0.0 (major versions "
-                "differ); lru2-2 stays unsynchronized")
+    promised = (
+        "lru2 implements identify_stone 2.0.0, the library needs 1.0.0 (major versions "
+        "differ); lru2-2 stays unsynchronized"
+    )
     assert promised in flat(GUIDE.read_text())
     assert promised in flat(r.stderr), r.stderr
 
@@ -226,7 +256,9 @@ def test_incompatible_major_version_is_refused_at_sync(cluster: Any, tmp_path: P
 # ---------------------------------------------------------------- sections 2 and 3
 
 
-def test_handlers_progress_pause_stop_failure_retry_and_server_loss(cluster: Any, tmp_path: Path) -> None:
+def test_handlers_progress_pause_stop_failure_retry_and_server_loss(
+    cluster: Any, tmp_path: Path
+) -> None:
     proc = robot(cluster, tmp_path, "handlers", ready="ready lru1")
 
     async def scenario(c: MissionClient) -> None:
@@ -251,13 +283,20 @@ def test_handlers_progress_pause_stop_failure_retry_and_server_loss(cluster: Any
         # stop: back to the queue, halted; run starts it from the beginning
         s = await added(c, add("lru1", "drive_to", params={"goal": {"x": 3, "y": 0}, "speed": 1.0}))
         await c.submit(Sync(robot="lru1"))  # still in run mode: it starts at once
-        await tel.until("lru1", lambda t: t.skill == s and (t.progress or 0) > 0, "progress of the second drive")
+        await tel.until(
+            "lru1", lambda t: t.skill == s and (t.progress or 0) > 0, "progress of the second drive"
+        )
         await c.submit(Control(op="stop", robot="lru1"))
         await until(c, lambda m: status(m, s) == "idle_synchronized")
         await tel.until("lru1", lambda t: t.mode == "halted" and t.skill is None, "halted")
         await c.submit(Control(op="run", robot="lru1"))
         await until(c, lambda m: status(m, s) == "success")
-        assert [r.split()[0] for r in reports(proc, s)] == ["running", "idle_synchronized", "running", "success"]
+        assert [r.split()[0] for r in reports(proc, s)] == [
+            "running",
+            "idle_synchronized",
+            "running",
+            "success",
+        ]
 
         # a plain function, then a failure halts the queue; retry runs attempt 2
         f = await added(c, add("lru1", "identify_stone", params={"target": {"x": 1, "y": 1}}))
@@ -276,8 +315,15 @@ def test_handlers_progress_pause_stop_failure_retry_and_server_loss(cluster: Any
         assert info(m, n) == "10 bands of (1, 2)"
 
         # a retry policy: the robot retries by itself, staying running
-        g = await added(c, add("lru1", "identify_stone", params={"target": {"x": 1, "y": 1}},
-                               policies=Policies(retries=1)))
+        g = await added(
+            c,
+            add(
+                "lru1",
+                "identify_stone",
+                params={"target": {"x": 1, "y": 1}},
+                policies=Policies(retries=1),
+            ),
+        )
         await c.submit(Sync(robot="lru1"))
         m = await until(c, lambda m: status(m, g) == "success")
         assert m.find(g)[2].attempt == 2
@@ -296,7 +342,11 @@ def test_handlers_progress_pause_stop_failure_retry_and_server_loss(cluster: Any
         await asyncio.to_thread(proc.wait_line, f" {k} success ")
         cluster.start_server()
         await until(c, lambda m: c.connected and status(m, k) == "success", 30)
-        seqs = [int(line.split()[1]) for line in proc.output().splitlines() if line.startswith("report ")]
+        seqs = [
+            int(line.split()[1])
+            for line in proc.output().splitlines()
+            if line.startswith("report ")
+        ]
         assert seqs == list(range(1, len(seqs) + 1))  # numbered per robot, no gaps
 
     drive(cluster, scenario)
@@ -313,7 +363,10 @@ def test_pair_telemetry_barrier_offline_partner_and_ask(cluster: Any, tmp_path: 
         tel = Telemetry(c)
         t = await tel.until("lru1", lambda t: t.pose == Pose(x=1.0, y=2.0, yaw=0.5), "lru1's pose")
         assert (t.battery, t.link, t.mode) == (0.9, 0.8, "idle")
-        assert c.robots["lru2"].manifest.skills == {"identify_stone": "1.0.0", "pick_stone": "1.0.0"}
+        assert c.robots["lru2"].manifest.skills == {
+            "identify_stone": "1.0.0",
+            "pick_stone": "1.0.0",
+        }
         await c.submit(DeleteSkills(ids=["lru1-1", "lru1-2", "lru2-1", "lru2-2"]))
 
         p = await added(c, add("lru1", "identify_stone", params={"target": {"x": 1, "y": 1}}))
@@ -328,7 +381,9 @@ def test_pair_telemetry_barrier_offline_partner_and_ask(cluster: Any, tmp_path: 
         lru2.kill()  # the partner goes away: the waiting robot says so
         # lru1 sees the token go on its own, so its report may reach the
         # client before or after the server's presence event: wait for both
-        m = await until(c, lambda m: info(m, p) == "waiting for lru2 (offline)" and not c.robots["lru2"].online)
+        m = await until(
+            c, lambda m: info(m, p) == "waiting for lru2 (offline)" and not c.robots["lru2"].online
+        )
         assert status(m, p) == "synchwaiting"
 
         # back, without its queue: its skill returns to the plan (RegisterReply.missing)
@@ -346,4 +401,3 @@ def test_pair_telemetry_barrier_offline_partner_and_ask(cluster: Any, tmp_path: 
         assert info(m, k) == "picked s1 at (1.5, 1) as lru1 said"
 
     drive(cluster, scenario)
-

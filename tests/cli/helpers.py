@@ -32,7 +32,11 @@ def _cli_has_ctl() -> bool:
     return False
 
 
-CTL_CMD = [sys.executable, "-m", "backend.cli", "ctl"] if _cli_has_ctl() else [sys.executable, "-m", "backend.cli.ctl.session"]
+CTL_CMD = (
+    [sys.executable, "-m", "backend.cli", "ctl"]
+    if _cli_has_ctl()
+    else [sys.executable, "-m", "backend.cli.ctl.session"]
+)
 
 
 def env() -> dict[str, str]:
@@ -41,18 +45,27 @@ def env() -> dict[str, str]:
     return e
 
 
-def ctl(endpoint: str | None, *args: str, client_id: str | None = "ctl-test", timeout: float = CTL_TIMEOUT) -> subprocess.CompletedProcess:
+def ctl(
+    endpoint: str | None,
+    *args: str,
+    client_id: str | None = "ctl-test",
+    timeout: float = CTL_TIMEOUT,
+) -> subprocess.CompletedProcess:
     cmd = list(CTL_CMD)
     if endpoint is not None:
         cmd += ["--connect", endpoint]
     if client_id is not None:
         cmd += ["--client-id", client_id]
-    return subprocess.run([*cmd, *args], cwd=ROOT, env=env(), capture_output=True, text=True, timeout=timeout)
+    return subprocess.run(
+        [*cmd, *args], cwd=ROOT, env=env(), capture_output=True, text=True, timeout=timeout
+    )
 
 
 def ok(endpoint: str, *args: str, **kw: Any) -> subprocess.CompletedProcess:
     r = ctl(endpoint, *args, **kw)
-    assert r.returncode == 0, f"ctl {' '.join(args)} -> {r.returncode}\nstdout: {r.stdout}\nstderr: {r.stderr}"
+    assert r.returncode == 0, (
+        f"ctl {' '.join(args)} -> {r.returncode}\nstdout: {r.stdout}\nstderr: {r.stderr}"
+    )
     assert "Traceback" not in r.stderr
     return r
 
@@ -68,7 +81,9 @@ def state(endpoint: str) -> dict:
     return ok_json(endpoint, "state")
 
 
-def until(endpoint: str, pred: Callable[[dict], bool], timeout: float = 20.0, what: str = "condition") -> dict:
+def until(
+    endpoint: str, pred: Callable[[dict], bool], timeout: float = 20.0, what: str = "condition"
+) -> dict:
     """Poll `state --json` until `pred(state)` holds (bounded by `timeout`)."""
     deadline = time.monotonic() + timeout
     last: dict = {}
@@ -77,7 +92,9 @@ def until(endpoint: str, pred: Callable[[dict], bool], timeout: float = 20.0, wh
         if pred(last):
             return last
         time.sleep(0.1)
-    raise AssertionError(f"{what} not reached within {timeout}s; last state tasks: {json.dumps(last.get('tasks'), indent=1)}")
+    raise AssertionError(
+        f"{what} not reached within {timeout}s; last state tasks: {json.dumps(last.get('tasks'), indent=1)}"
+    )
 
 
 def skill(st: dict, sid: str) -> dict:
@@ -90,7 +107,6 @@ def skill(st: dict, sid: str) -> dict:
 
 def ids(st: dict, robot: str) -> list[str]:
     return [s["id"] for s in st["tasks"][robot]]
-
 
 
 def stop_process(proc: subprocess.Popen, timeout: float = 10.0) -> None:
@@ -107,8 +123,12 @@ def stop_process(proc: subprocess.Popen, timeout: float = 10.0) -> None:
 class Server:
     """`missionctl server` in a subprocess on a free loopback port."""
 
-    def __init__(self, tmp: Path, mission: Path = TUTORIAL,
-                 command: Callable[[str, Path], list[str]] | None = None):
+    def __init__(
+        self,
+        tmp: Path,
+        mission: Path = TUTORIAL,
+        command: Callable[[str, Path], list[str]] | None = None,
+    ):
         """`command(endpoint, db)`, if given, is the server's command line
         (e.g. one taken from a document), to listen on `endpoint` with journal `db`."""
         from backend.transport import free_port, loopback_endpoint
@@ -117,12 +137,30 @@ class Server:
         for _attempt in range(3):  # another process may take the free port first
             self.endpoint = loopback_endpoint(free_port())
             db = tmp / f"mission-{_attempt}.db"
-            argv = command(self.endpoint, db) if command else [
-                sys.executable, "-m", "backend.cli", "server", "--mission", str(mission),
-                "--listen", self.endpoint, "--db", str(db)]
+            argv = (
+                command(self.endpoint, db)
+                if command
+                else [
+                    sys.executable,
+                    "-m",
+                    "backend.cli",
+                    "server",
+                    "--mission",
+                    str(mission),
+                    "--listen",
+                    self.endpoint,
+                    "--db",
+                    str(db),
+                ]
+            )
             self.log = open(self.log_path, "w")  # noqa: SIM115 - closed in stop()
             self.proc = subprocess.Popen(
-                argv, cwd=ROOT, env=env(), stdout=self.log, stderr=subprocess.STDOUT, text=True,
+                argv,
+                cwd=ROOT,
+                env=env(),
+                stdout=self.log,
+                stderr=subprocess.STDOUT,
+                text=True,
             )
             if self._wait_ready():
                 return
@@ -156,7 +194,11 @@ class Robots:
         them (e.g. one taken from a document), connecting to `endpoint`."""
         self.proc = subprocess.Popen(
             command or [sys.executable, str(ROBOTS_SCRIPT), "--connect", endpoint, *robots],
-            cwd=ROOT, env=env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+            cwd=ROOT,
+            env=env(),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
         )
         self.lines: list[str] = []
         want = {r.split(":")[0] for r in robots}

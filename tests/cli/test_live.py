@@ -49,7 +49,9 @@ def endpoint(server):
 
 def refused(endpoint: str, *args: str, **kw) -> subprocess.CompletedProcess:
     r = ctl(endpoint, *args, **kw)
-    assert r.returncode == 1, f"ctl {' '.join(args)} -> {r.returncode}\nstdout: {r.stdout}\nstderr: {r.stderr}"
+    assert r.returncode == 1, (
+        f"ctl {' '.join(args)} -> {r.returncode}\nstdout: {r.stdout}\nstderr: {r.stderr}"
+    )
     assert r.stderr.startswith("missionctl: refused: "), r.stderr
     assert "Traceback" not in r.stderr
     return r
@@ -68,18 +70,48 @@ def test_state_json_structure(endpoint):
     assert {"since", "kind", "in_mission"} <= set(lru1)
     assert ids(st, "lru1") == ["lru1-1", "lru1-2"] and ids(st, "lru2") == ["lru2-1", "lru2-2"]
     s = st["tasks"]["lru1"][0]
-    assert {"id", "skill", "label", "status", "status_info", "attempt", "params", "bindings"} <= set(s)
-    assert (s["skill"], s["label"], s["status"], s["attempt"]) == ("drive_to", "drive to POI-A", "idle", 1)
+    assert {
+        "id",
+        "skill",
+        "label",
+        "status",
+        "status_info",
+        "attempt",
+        "params",
+        "bindings",
+    } <= set(s)
+    assert (s["skill"], s["label"], s["status"], s["attempt"]) == (
+        "drive_to",
+        "drive to POI-A",
+        "idle",
+        1,
+    )
     assert s["bindings"] == {"goal": "POI-A"}
-    assert s["params"]["goal"] == {"x": 10.0, "y": 5.0, "z": 0.0, "roll": 0.0, "pitch": 0.0, "yaw": 0.0}
+    assert s["params"]["goal"] == {
+        "x": 10.0,
+        "y": 5.0,
+        "z": 0.0,
+        "roll": 0.0,
+        "pitch": 0.0,
+        "yaw": 0.0,
+    }
     assert s["params"]["speed"] == 0.5  # the library default, filled in
     assert st["barriers"] == {}
     assert st["markers"]["POI-A"]["kind"] == "pose" and st["markers"]["POI-A"]["pose"]["x"] == 10.0
 
     text = ok(endpoint, "state").stdout
     assert f"revision {st['revision']}" in text
-    for needle in ("lru1 (lru_science)", "lru1-1", "drive to POI-A", "drive_to", "goal=@POI-A",
-                   "lru2-1", "goal=(9,4)", "POI-A", "barriers: none"):
+    for needle in (
+        "lru1 (lru_science)",
+        "lru1-1",
+        "drive to POI-A",
+        "drive_to",
+        "goal=@POI-A",
+        "lru2-1",
+        "goal=(9,4)",
+        "POI-A",
+        "barriers: none",
+    ):
         assert needle in text, needle
     only = ok_json(endpoint, "state", "lru2")
     assert set(only["tasks"]) == {"lru2"}
@@ -91,15 +123,32 @@ def test_state_json_structure(endpoint):
 
 
 def test_add_edit_move_delete_barrier_undo_redo(endpoint):
-    r = ok_json(endpoint, "add", "lru1", "drive_to", "--param", "goal={x: 3, y: 4, yaw: 0.5}",
-                "--label", "drive out", "--param", "speed=0.4")
+    r = ok_json(
+        endpoint,
+        "add",
+        "lru1",
+        "drive_to",
+        "--param",
+        "goal={x: 3, y: 4, yaw: 0.5}",
+        "--label",
+        "drive out",
+        "--param",
+        "speed=0.4",
+    )
     assert r["ok"] is True and r["op"] == "add" and r["notes"] == []
     a = r["value"]["id"]
     st = state(endpoint)
     assert st["revision"] == r["revision"]
     s = skill(st, a)
     assert (s["skill"], s["label"], s["status"]) == ("drive_to", "drive out", "idle")
-    assert s["params"]["goal"] == {"x": 3.0, "y": 4.0, "z": 0.0, "roll": 0.0, "pitch": 0.0, "yaw": 0.5}
+    assert s["params"]["goal"] == {
+        "x": 3.0,
+        "y": 4.0,
+        "z": 0.0,
+        "roll": 0.0,
+        "pitch": 0.0,
+        "yaw": 0.5,
+    }
     assert s["params"]["speed"] == 0.4 and s["bindings"] == {}
     assert ids(st, "lru1")[-1] == a
 
@@ -113,7 +162,17 @@ def test_add_edit_move_delete_barrier_undo_redo(endpoint):
     assert skill(st, b)["params"]["goal"]["x"] == 10.0
 
     # edit: label, value, policies (unnamed ones are kept)
-    ok(endpoint, "edit", a, "--label", "drive further", "--param", "goal={x: 6, y: 8}", "--retries", "2")
+    ok(
+        endpoint,
+        "edit",
+        a,
+        "--label",
+        "drive further",
+        "--param",
+        "goal={x: 6, y: 8}",
+        "--retries",
+        "2",
+    )
     ok(endpoint, "edit", a, "--recharge-below", "0.25")
     s = skill(state(endpoint), a)
     assert s["label"] == "drive further" and s["params"]["goal"]["x"] == 6.0
@@ -165,7 +224,9 @@ def test_add_edit_move_delete_barrier_undo_redo(endpoint):
 def test_expect_revision_refuses_stale_edits(endpoint):
     seen = state(endpoint)["revision"]
     ok(endpoint, "edit", "lru1-1", "--label", "first", "--expect-revision", str(seen))
-    r = ctl(endpoint, "--json", "edit", "lru1-1", "--label", "second", "--expect-revision", str(seen))
+    r = ctl(
+        endpoint, "--json", "edit", "lru1-1", "--label", "second", "--expect-revision", str(seen)
+    )
     assert r.returncode == 1
     obj = json.loads(r.stdout)
     assert obj["ok"] is False and obj["code"] == "stale" and "lru1-1" in obj["message"]
@@ -176,7 +237,9 @@ def test_expect_revision_refuses_stale_edits(endpoint):
 def test_request_id_applies_once(endpoint):
     r1 = ok_json(endpoint, "add", "lru2", "recharge", "--request-id", "retry-me-1")
     r2 = ok_json(endpoint, "add", "lru2", "recharge", "--request-id", "retry-me-1")
-    assert r2["duplicate"] is True and r2["value"] == r1["value"] and r2["revision"] == r1["revision"]
+    assert (
+        r2["duplicate"] is True and r2["value"] == r1["value"] and r2["revision"] == r1["revision"]
+    )
     assert [s["skill"] for s in state(endpoint)["tasks"]["lru2"]].count("recharge") == 1
     # without --request-id every invocation is a new request, even with the same client id
     ok(endpoint, "add", "lru2", "recharge")
@@ -187,18 +250,53 @@ def test_a_timed_out_operation_says_how_to_apply_it_once(endpoint):
     """A robot slower to answer than --timeout: the operation may still be
     applied; the message names the --request-id to run it again with, and
     running it again applies it once."""
-    slow = Robots(endpoint, "lru1:lru_science",
-                  command=[sys.executable, str(ROBOTS_SCRIPT), "--connect", endpoint, "--delay", "3", "lru1:lru_science"])
+    slow = Robots(
+        endpoint,
+        "lru1:lru_science",
+        command=[
+            sys.executable,
+            str(ROBOTS_SCRIPT),
+            "--connect",
+            endpoint,
+            "--delay",
+            "3",
+            "lru1:lru_science",
+        ],
+    )
     try:
         until(endpoint, lambda st: st["robots"]["lru1"]["online"], what="lru1 online")
-        r = ctl(endpoint, "--json", "sync", "lru1", "--through", "lru1-1", "--timeout", "1", "--request-id", "slow-1")
+        r = ctl(
+            endpoint,
+            "--json",
+            "sync",
+            "lru1",
+            "--through",
+            "lru1-1",
+            "--timeout",
+            "1",
+            "--request-id",
+            "slow-1",
+        )
         assert r.returncode == 3, r
         obj = json.loads(r.stdout)
         assert obj["ok"] is False and obj["code"] == "timeout"
         assert obj["request_id"] == "slow-1" and obj["maybe_applied"] is True
-        assert "run the same command again with --request-id slow-1 --client-id ctl-test: it is applied once" in r.stderr, r.stderr
+        assert (
+            "run the same command again with --request-id slow-1 --client-id ctl-test: it is applied once"
+            in r.stderr
+        ), r.stderr
         assert "ctl state" in r.stderr and "Traceback" not in r.stderr
-        again = ok(endpoint, "sync", "lru1", "--through", "lru1-1", "--request-id", "slow-1", "--timeout", "20")
+        again = ok(
+            endpoint,
+            "sync",
+            "lru1",
+            "--through",
+            "lru1-1",
+            "--request-id",
+            "slow-1",
+            "--timeout",
+            "20",
+        )
         assert again.stdout.startswith("synchronized lru1-1 to lru1"), again.stdout
         st = state(endpoint)
         assert [s["status"] for s in st["tasks"]["lru1"]] == ["idle_synchronized", "idle"]
@@ -210,7 +308,16 @@ def test_a_timed_out_operation_says_how_to_apply_it_once(endpoint):
 
 
 def test_markers_and_bindings(endpoint):
-    ok(endpoint, "marker", "add", "ROI-1", "--area", "0,0 6,0 6,6 0,6", "--description", "sampling region")
+    ok(
+        endpoint,
+        "marker",
+        "add",
+        "ROI-1",
+        "--area",
+        "0,0 6,0 6,6 0,6",
+        "--description",
+        "sampling region",
+    )
     ok(endpoint, "marker", "add", "P1", "--pose", "1,1,0,0,0,1.5")
     out = ok(endpoint, "marker", "add", "W1", "--position=-2,3").stdout
     assert out.startswith("added marker W1 (position) at revision")
@@ -220,11 +327,29 @@ def test_markers_and_bindings(endpoint):
     assert st["markers"]["W1"]["position"] == {"x": -2.0, "y": 3.0, "z": 0.0}
 
     # @MARKER: a position parameter is bound, a marker parameter names the marker
-    p = ok_json(endpoint, "add", "lru2", "pick_stone", "--param", "target=@POI-A", "--param", "region=@ROI-1")["value"]["id"]
+    p = ok_json(
+        endpoint,
+        "add",
+        "lru2",
+        "pick_stone",
+        "--param",
+        "target=@POI-A",
+        "--param",
+        "region=@ROI-1",
+    )["value"]["id"]
     s = skill(state(endpoint), p)
     assert s["bindings"] == {"target": "POI-A"} and s["params"]["region"] == "ROI-1"
     assert s["params"]["target"] == {"x": 10.0, "y": 5.0, "z": 0.0}
-    r = refused(endpoint, "add", "lru2", "pick_stone", "--param", "target=@POI-A", "--param", "region=@POI-A")
+    r = refused(
+        endpoint,
+        "add",
+        "lru2",
+        "pick_stone",
+        "--param",
+        "target=@POI-A",
+        "--param",
+        "region=@POI-A",
+    )
     assert "region" in r.stderr and "area" in r.stderr
 
     # moving a marker moves the idle skills bound to it
@@ -234,7 +359,14 @@ def test_markers_and_bindings(endpoint):
     assert skill(st, p)["params"]["target"] == {"x": 12.0, "y": 7.0, "z": 0.0}
     # --position on a pose marker keeps its orientation
     ok(endpoint, "marker", "move", "P1", "--position", "2,2")
-    assert state(endpoint)["markers"]["P1"]["pose"] == {"x": 2.0, "y": 2.0, "z": 0.0, "roll": 0.0, "pitch": 0.0, "yaw": 1.5}
+    assert state(endpoint)["markers"]["P1"]["pose"] == {
+        "x": 2.0,
+        "y": 2.0,
+        "z": 0.0,
+        "roll": 0.0,
+        "pitch": 0.0,
+        "yaw": 1.5,
+    }
     r = refused(endpoint, "marker", "move", "ROI-1", "--position", "1,1")
     assert "ROI-1" in r.stderr and "area" in r.stderr
 
@@ -282,7 +414,12 @@ def test_refusals_name_robot_and_skill(endpoint):
     r = ctl(endpoint, "--json", "edit", "lru2-1", "--param", "tolerance=99")
     assert r.returncode == 1
     obj = json.loads(r.stdout)
-    assert obj["ok"] is False and obj["code"] == "bad_param" and obj["robot"] == "lru2" and obj["param"] == "tolerance"
+    assert (
+        obj["ok"] is False
+        and obj["code"] == "bad_param"
+        and obj["robot"] == "lru2"
+        and obj["param"] == "tolerance"
+    )
     assert obj["message"] in r.stderr
     assert state(endpoint)["revision"] == before  # nothing changed
 
@@ -319,9 +456,29 @@ def test_bad_usage_exits_2_and_sends_nothing(endpoint):
 
 
 def test_save_load_round_trip(endpoint, tmp_path):
-    ok(endpoint, "add", "lru1", "drive_to", "--param", "goal={x: 1, y: 2, yaw: 0.3}", "--label", "extra", "--retries", "1")
+    ok(
+        endpoint,
+        "add",
+        "lru1",
+        "drive_to",
+        "--param",
+        "goal={x: 1, y: 2, yaw: 0.3}",
+        "--label",
+        "extra",
+        "--retries",
+        "1",
+    )
     ok(endpoint, "marker", "add", "ROI-1", "--area", "0,0 6,0 6,6")
-    ok(endpoint, "add", "lru2", "pick_stone", "--param", "target=@POI-A", "--param", "region=@ROI-1")
+    ok(
+        endpoint,
+        "add",
+        "lru2",
+        "pick_stone",
+        "--param",
+        "target=@POI-A",
+        "--param",
+        "region=@ROI-1",
+    )
     ok(endpoint, "barrier", "lru1-2", "lru2-2")
     before = state(endpoint)
 
@@ -330,15 +487,26 @@ def test_save_load_round_trip(endpoint, tmp_path):
     assert r["ok"] is True and r["value"]["file"] == str(out)
     data = yaml.safe_load(out.read_text())
     assert (out.parent / data["library"]).resolve() == LIBRARY.resolve()
-    v = subprocess.run([*CTL_CMD[:-1], "validate", str(out)] if CTL_CMD[-1] == "ctl" else
-                       [CTL_CMD[0], "-m", "backend.cli", "validate", str(out)],
-                       cwd=ROOT, env=env(), capture_output=True, text=True, timeout=30)
+    v = subprocess.run(
+        [*CTL_CMD[:-1], "validate", str(out)]
+        if CTL_CMD[-1] == "ctl"
+        else [CTL_CMD[0], "-m", "backend.cli", "validate", str(out)],
+        cwd=ROOT,
+        env=env(),
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     assert v.returncode == 0, v.stderr
 
     out2 = ok(endpoint, "new", "scratch").stdout
     assert out2.startswith("started a new mission 'scratch'")
     st = state(endpoint)
-    assert st["name"] == "scratch" and all(t == [] for t in st["tasks"].values()) and st["barriers"] == {}
+    assert (
+        st["name"] == "scratch"
+        and all(t == [] for t in st["tasks"].values())
+        and st["barriers"] == {}
+    )
 
     out3 = ok(endpoint, "load", str(out)).stdout
     assert out3.startswith("loaded mission 'Tutorial' (2 robots, 6 skills) at revision")
@@ -382,8 +550,14 @@ def test_load_invalid_file_exits_2(endpoint, tmp_path):
 
 
 def test_watch_prints_each_change(endpoint):
-    p = subprocess.Popen([*CTL_CMD, "--connect", endpoint, "watch", "--json", "--count", "2"], cwd=ROOT, env=env(),
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    p = subprocess.Popen(
+        [*CTL_CMD, "--connect", endpoint, "watch", "--json", "--count", "2"],
+        cwd=ROOT,
+        env=env(),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         sel = selectors.DefaultSelector()
         sel.register(p.stderr, selectors.EVENT_READ)
@@ -401,13 +575,22 @@ def test_watch_prints_each_change(endpoint):
     lines = [json.loads(x) for x in out.strip().splitlines()]
     assert [x["kind"] for x in lines] == ["events", "events"]
     assert [x["op"] for x in lines] == ["add", "marker_add"]
-    assert lines[0]["events"][0]["ev"] == "skill_added" and lines[0]["events"][0]["skill"]["label"] == "w1"
+    assert (
+        lines[0]["events"][0]["ev"] == "skill_added"
+        and lines[0]["events"][0]["skill"]["label"] == "w1"
+    )
     assert lines[1]["revision"] == lines[0]["revision"] + 1
 
 
 def test_watch_human_lines(endpoint):
-    p = subprocess.Popen([*CTL_CMD, "--connect", endpoint, "watch", "--count", "1"], cwd=ROOT, env=env(),
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    p = subprocess.Popen(
+        [*CTL_CMD, "--connect", endpoint, "watch", "--count", "1"],
+        cwd=ROOT,
+        env=env(),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert p.stderr.readline().startswith("watching")
         ok(endpoint, "delete", "lru2-2")
@@ -427,7 +610,11 @@ def test_watch_human_lines(endpoint):
 def robots(endpoint):
     r = Robots(endpoint, "lru1:lru_science", "lru2:lru_manipulator")
     try:
-        until(endpoint, lambda st: all(x["online"] for x in st["robots"].values()), what="robots online")
+        until(
+            endpoint,
+            lambda st: all(x["online"] for x in st["robots"].values()),
+            what="robots online",
+        )
         yield r
     finally:
         r.stop()
@@ -441,7 +628,9 @@ def test_robot_operations(endpoint, robots):
     info = ok_json(endpoint, "robots")
     lru1 = info["robots"]["lru1"]
     assert lru1["online"] is True and lru1["type"] == "lru_science"
-    assert "drive_to" in lru1["manifest"]["skills"] and lru1["manifest"]["modules"] == [{"name": "base", "version": "1.0.0"}]
+    assert "drive_to" in lru1["manifest"]["skills"] and lru1["manifest"]["modules"] == [
+        {"name": "base", "version": "1.0.0"}
+    ]
     assert lru1["telemetry"] is not None and 0.0 <= lru1["telemetry"]["battery"] <= 1.0
     text = ok(endpoint, "robots").stdout
     assert "lru1 (lru_science)" in text and "online since" in text and "modules: base 1.0.0" in text
@@ -453,9 +642,14 @@ def test_robot_operations(endpoint, robots):
     # moving a marker: the idle skill follows, the queued one is named in a note
     out = ok(endpoint, "marker", "move", "POI-A", "--pose", "11,5").stdout.splitlines()
     assert out[0].startswith("moved marker POI-A at revision")
-    assert any(line.startswith("note: ") and "lru1-1" in line and "old value" in line for line in out[1:]), out
+    assert any(
+        line.startswith("note: ") and "lru1-1" in line and "old value" in line for line in out[1:]
+    ), out
     st = state(endpoint)
-    assert skill(st, "lru1-1")["params"]["goal"]["x"] == 10.0 and skill(st, "lru1-2")["params"]["target"]["x"] == 11.0
+    assert (
+        skill(st, "lru1-1")["params"]["goal"]["x"] == 10.0
+        and skill(st, "lru1-2")["params"]["target"]["x"] == 11.0
+    )
     r = ok_json(endpoint, "marker", "move", "POI-A", "--pose", "10,5")
     assert r["value"]["stale"] == ["lru1-1"] and len(r["notes"]) == 1
     r = ok_json(endpoint, "sync", "lru1")
@@ -479,13 +673,18 @@ def test_robot_operations(endpoint, robots):
     ok(endpoint, "sync", "lru1")
     st = until(endpoint, lambda st: skill(st, f)["status"] == "failure", what="failure")
     assert skill(st, f)["status_info"] == "asked to fail"
-    assert "✗" in ok(endpoint, "state", "lru1").stdout or "x" in ok(endpoint, "state", "lru1").stdout
+    assert (
+        "✗" in ok(endpoint, "state", "lru1").stdout or "x" in ok(endpoint, "state", "lru1").stdout
+    )
     out = ok(endpoint, "retry", f).stdout
     m = re.match(rf"retrying {f} as ({re.escape(f)}\.2) at revision", out)
     assert m, out
     st = state(endpoint)
     assert ids(st, "lru1")[-2:] == [f, m.group(1)]
-    assert skill(st, m.group(1))["attempt"] == 2 and skill(st, m.group(1))["status"] == "idle_synchronized"
+    assert (
+        skill(st, m.group(1))["attempt"] == 2
+        and skill(st, m.group(1))["status"] == "idle_synchronized"
+    )
 
     # pause / run (resume) / stop / reset on a skill that holds
     refused(endpoint, "pause", "lru2")  # nothing running

@@ -66,7 +66,11 @@ def op_of(argv: list[str], tutorial=None):
         ("goal={x: 3, y: 4, yaw: 0}", "goal", {"x": 3, "y": 4, "yaw": 0}),
         ("camera={exposure_ms: 20, gain: 1.5}", "camera", {"exposure_ms": 20, "gain": 1.5}),
         ("sensors=[stereo_camera, lidar]", "sensors", ["stereo_camera", "lidar"]),
-        ("area=[{x: 0, y: 0}, {x: 1, y: 0}, {x: 1, y: 1}]", "area", [{"x": 0, "y": 0}, {"x": 1, "y": 0}, {"x": 1, "y": 1}]),
+        (
+            "area=[{x: 0, y: 0}, {x: 1, y: 0}, {x: 1, y: 1}]",
+            "area",
+            [{"x": 0, "y": 0}, {"x": 1, "y": 0}, {"x": 1, "y": 1}],
+        ),
         ("goal=@POI-A", "goal", MarkerRef("POI-A")),
         ('goal="@POI-A"', "goal", MarkerRef("POI-A")),
         (" goal =@POI-A", "goal", MarkerRef("POI-A")),
@@ -112,13 +116,28 @@ def test_param_given_twice():
 
 def test_geometry():
     assert parse_pose("1,2") == {"x": 1, "y": 2}
-    assert parse_pose("1,2,3,0.1,0.2,0.3") == {"x": 1, "y": 2, "z": 3, "roll": 0.1, "pitch": 0.2, "yaw": 0.3}
+    assert parse_pose("1,2,3,0.1,0.2,0.3") == {
+        "x": 1,
+        "y": 2,
+        "z": 3,
+        "roll": 0.1,
+        "pitch": 0.2,
+        "yaw": 0.3,
+    }
     assert parse_pose("{x: 1, y: 2, yaw: 1.5}") == {"x": 1, "y": 2, "yaw": 1.5}
     assert parse_pose("-1, 2.5") == {"x": -1, "y": 2.5}
     assert parse_position("1,2,3") == {"x": 1, "y": 2, "z": 3}
     assert parse_area("0,0 5,0 5,5") == [{"x": 0, "y": 0}, {"x": 5, "y": 0}, {"x": 5, "y": 5}]
-    assert parse_area("0,0;5,0;5,5,1") == [{"x": 0, "y": 0}, {"x": 5, "y": 0}, {"x": 5, "y": 5, "z": 1}]
-    assert parse_area("[[0, 0], {x: 5, y: 0}, [5, 5]]") == [{"x": 0, "y": 0}, {"x": 5, "y": 0}, {"x": 5, "y": 5}]
+    assert parse_area("0,0;5,0;5,5,1") == [
+        {"x": 0, "y": 0},
+        {"x": 5, "y": 0},
+        {"x": 5, "y": 5, "z": 1},
+    ]
+    assert parse_area("[[0, 0], {x: 5, y: 0}, [5, 5]]") == [
+        {"x": 0, "y": 0},
+        {"x": 5, "y": 0},
+        {"x": 5, "y": 5},
+    ]
     for bad, needle in [
         (lambda: parse_pose("1"), "2 to 6"),
         (lambda: parse_pose("1,2,3,4,5,6,7"), "2 to 6"),
@@ -135,8 +154,14 @@ def test_geometry():
 
 
 def test_short_value():
-    assert short_value({"x": 9.0, "y": 4.0, "z": 0.0, "roll": 0.0, "pitch": 0.0, "yaw": 0.0}) == "(9,4)"
-    assert short_value({"x": 1.0, "y": 2.0, "z": 0.0, "roll": 0.0, "pitch": 0.0, "yaw": 1.5}) == "(1,2 yaw=1.5)"
+    assert (
+        short_value({"x": 9.0, "y": 4.0, "z": 0.0, "roll": 0.0, "pitch": 0.0, "yaw": 0.0})
+        == "(9,4)"
+    )
+    assert (
+        short_value({"x": 1.0, "y": 2.0, "z": 0.0, "roll": 0.0, "pitch": 0.0, "yaw": 1.5})
+        == "(1,2 yaw=1.5)"
+    )
     assert short_value([{"x": 0, "y": 0}] * 4) == "[4 points]"
     assert short_value("near_infrared") == "near_infrared"
     assert short_value("two words") == '"two words"'
@@ -152,9 +177,23 @@ def test_common_options_before_or_after_op(monkeypatch):
     assert a.json is False and a.connect is None and a.timeout == 10.0 and a.client_id is None
     assert parse_args(["--json", "state"]).json is True
     assert parse_args(["state", "--json"]).json is True
-    a = parse_args(["--connect", "tcp/127.0.0.1:1", "--timeout", "2", "add", "lru1", "recharge", "--client-id", "me"])
+    a = parse_args(
+        [
+            "--connect",
+            "tcp/127.0.0.1:1",
+            "--timeout",
+            "2",
+            "add",
+            "lru1",
+            "recharge",
+            "--client-id",
+            "me",
+        ]
+    )
     assert a.connect == ["tcp/127.0.0.1:1"] and a.timeout == 2.0 and a.client_id == "me"
-    assert parse_args(["add", "lru1", "recharge", "--connect", "tcp/127.0.0.1:2"]).connect == ["tcp/127.0.0.1:2"]
+    assert parse_args(["add", "lru1", "recharge", "--connect", "tcp/127.0.0.1:2"]).connect == [
+        "tcp/127.0.0.1:2"
+    ]
     assert parse_args(["edit", "x", "--label", "y", "--expect-revision", "4"]).expect_revision == 4
     assert parse_args(["marker", "delete", "M", "--json"]).json is True
     assert default_endpoints() == [DEFAULT_CONNECT]
@@ -203,8 +242,14 @@ def test_argparse_errors_exit_2(argv, capsys):
 def test_json_usage_errors_from_the_command_line():
     from .helpers import CTL_CMD, env
 
-    for argv in (["--json", "add", "lru1"], ["add", "lru1", "drive_to", "--at", "x", "--json"], ["--json"]):
-        r = subprocess.run([*CTL_CMD, *argv], cwd=ROOT, env=env(), capture_output=True, text=True, timeout=30)
+    for argv in (
+        ["--json", "add", "lru1"],
+        ["add", "lru1", "drive_to", "--at", "x", "--json"],
+        ["--json"],
+    ):
+        r = subprocess.run(
+            [*CTL_CMD, *argv], cwd=ROOT, env=env(), capture_output=True, text=True, timeout=30
+        )
         assert r.returncode == 2, (argv, r)
         obj = json.loads(r.stdout)
         assert obj["ok"] is False and obj["code"] == "bad_input", (argv, obj)
@@ -215,12 +260,34 @@ def test_json_usage_errors_from_the_command_line():
 
 
 def test_add(tutorial):
-    op = op_of(["add", "lru1", "drive_to", "--param", "goal={x: 3, y: 4, yaw: 0}", "--param", "speed=0.4",
-                "--label", "drive out", "--at", "1"], tutorial)
-    assert op == ops.AddSkill(robot="lru1", skill="drive_to", label="drive out",
-                              params={"goal": {"x": 3, "y": 4, "yaw": 0}, "speed": 0.4}, at=1)
+    op = op_of(
+        [
+            "add",
+            "lru1",
+            "drive_to",
+            "--param",
+            "goal={x: 3, y: 4, yaw: 0}",
+            "--param",
+            "speed=0.4",
+            "--label",
+            "drive out",
+            "--at",
+            "1",
+        ],
+        tutorial,
+    )
+    assert op == ops.AddSkill(
+        robot="lru1",
+        skill="drive_to",
+        label="drive out",
+        params={"goal": {"x": 3, "y": 4, "yaw": 0}, "speed": 0.4},
+        at=1,
+    )
     # @MARKER: a pose parameter is bound; a marker parameter names the marker
-    op = op_of(["add", "lru2", "pick_stone", "--param", "target=@POI-A", "--param", "region=@ROI-1"], tutorial)
+    op = op_of(
+        ["add", "lru2", "pick_stone", "--param", "target=@POI-A", "--param", "region=@ROI-1"],
+        tutorial,
+    )
     assert op.params == {"region": "ROI-1"} and op.bindings == {"target": "POI-A"}
     # other parameter types keep the text (as in mission files); without a
     # library the reference is a binding (the server names what is wrong)
@@ -228,7 +295,19 @@ def test_add(tutorial):
     assert op.params == {"sensors": "@lidar"} and op.bindings == {}
     op = op_of(["add", "lru2", "pick_stone", "--param", "region=@ROI-1"])
     assert op.bindings == {"region": "ROI-1"}
-    op = op_of(["add", "lru1", "recharge", "--retries", "3", "--pause-out-of-comms", "--recharge-below", "0.2"], tutorial)
+    op = op_of(
+        [
+            "add",
+            "lru1",
+            "recharge",
+            "--retries",
+            "3",
+            "--pause-out-of-comms",
+            "--recharge-below",
+            "0.2",
+        ],
+        tutorial,
+    )
     assert op.policies == Policies(retries=3, pause_out_of_comms=True, recharge_below=0.2)
     assert op_of(["add", "lru1", "recharge"], tutorial).policies is None
 
@@ -247,8 +326,13 @@ def test_add_bad_input(tutorial):
 
 def test_edit(tutorial):
     mission, _ = tutorial
-    op = op_of(["edit", "lru1-1", "--label", "new", "--param", "speed=0.7", "--param", "goal=@POI-A"], tutorial)
-    assert op == ops.EditSkill(id="lru1-1", label="new", params={"speed": 0.7}, bindings={"goal": "POI-A"})
+    op = op_of(
+        ["edit", "lru1-1", "--label", "new", "--param", "speed=0.7", "--param", "goal=@POI-A"],
+        tutorial,
+    )
+    assert op == ops.EditSkill(
+        id="lru1-1", label="new", params={"speed": 0.7}, bindings={"goal": "POI-A"}
+    )
     op = op_of(["edit", "lru1-1", "--unbind", "goal"], tutorial)
     assert op.bindings == {"goal": None} and op.params == {} and op.label is None
     # unnamed policies are kept from the skill as it is
@@ -310,7 +394,9 @@ def test_operation_usage_errors(tutorial):
 
 
 def test_markers(tutorial):
-    op = op_of(["marker", "add", "P1", "--pose", "1,2,0,0,0,1.5", "--description", "a rock"], tutorial)
+    op = op_of(
+        ["marker", "add", "P1", "--pose", "1,2,0,0,0,1.5", "--description", "a rock"], tutorial
+    )
     assert op.op == "marker_add" and op.marker.kind == "pose" and op.marker.pose.yaw == 1.5
     assert op.marker.description == "a rock"
     op = op_of(["marker", "add", "P2", "--pose=-3,4"], tutorial)
@@ -331,7 +417,9 @@ def test_markers(tutorial):
         assert (op.value.x, op.value.y, op.value.yaw) == (3, 4, 0.7)
     finally:
         mission.markers["POI-A"].pose.yaw = 0.0
-    assert op_of(["marker", "rename", "POI-A", "POI-B"], tutorial) == ops.MarkerRename(name="POI-A", new_name="POI-B")
+    assert op_of(["marker", "rename", "POI-A", "POI-B"], tutorial) == ops.MarkerRename(
+        name="POI-A", new_name="POI-B"
+    )
     assert op_of(["marker", "delete", "POI-A"], tutorial) == ops.MarkerDelete(name="POI-A")
 
 
@@ -340,7 +428,9 @@ def test_load(tmp_path):
     assert op.op == "load" and op.mission.name == "Tutorial"
     assert op.mission.tasks["lru1"][0].bindings == {"goal": "POI-A"}  # "@POI-A" in the file
     bad = tmp_path / "bad.yaml"
-    bad.write_text(f"format: missionctl/mission@1\nlibrary: {LIBRARY}\nrobots:\n  lru1: {{type: hovercraft}}\n")
+    bad.write_text(
+        f"format: missionctl/mission@1\nlibrary: {LIBRARY}\nrobots:\n  lru1: {{type: hovercraft}}\n"
+    )
     with pytest.raises(FileInvalid) as e:
         op_of(["load", str(bad)])
     assert any("hovercraft" in str(i) and f"{bad}:4:" in str(i) for i in e.value.issues)
@@ -377,7 +467,11 @@ def test_bad_usage_exits_2_before_connecting(argv, needle, capsys):
 
 
 def test_bad_usage_json(capsys):
-    code = run(parse_args(["--connect", _nobody(), "--json", "add", "lru1", "drive_to", "--param", "speed"]))
+    code = run(
+        parse_args(
+            ["--connect", _nobody(), "--json", "add", "lru1", "drive_to", "--param", "speed"]
+        )
+    )
     out, err = capsys.readouterr()
     assert code == 2
     obj = json.loads(out)
@@ -401,7 +495,9 @@ def test_bad_endpoint_exits_2(capsys):
 
 
 def test_save_into_missing_folder_exits_2(tmp_path, capsys):
-    code = run(parse_args(["--connect", _nobody(), "save", str(tmp_path / "no" / "such" / "m.yaml")]))
+    code = run(
+        parse_args(["--connect", _nobody(), "save", str(tmp_path / "no" / "such" / "m.yaml")])
+    )
     assert code == 2
     assert "does not exist" in capsys.readouterr().err
     a_file = tmp_path / "plain.txt"
@@ -419,8 +515,16 @@ def test_help_documents_everything():
     with contextlib.redirect_stdout(buf), pytest.raises(SystemExit):
         parse_args(["--help"])
     text = buf.getvalue()
-    for needle in ("--param NAME=VALUE", "@MARKER", "Exit codes", "--expect-revision", "MISSIONCTL_CONNECT",
-                   "marker add", "watch", "--json"):
+    for needle in (
+        "--param NAME=VALUE",
+        "@MARKER",
+        "Exit codes",
+        "--expect-revision",
+        "MISSIONCTL_CONNECT",
+        "marker add",
+        "watch",
+        "--json",
+    ):
         assert needle in text, needle
     assert ROOT.exists()
 
@@ -441,8 +545,15 @@ def _fake_client(tutorial):
     m.tasks["lru1"][1].status_info = "imaging"
     m.tasks["lru2"][0].attempt = 2
     robots = {"lru1": RobotInfo(name="lru1", online=True), "lru2": RobotInfo(name="lru2")}
-    return SimpleNamespace(mission=m, library=library, robots=robots, telemetry={}, endpoints=["tcp/127.0.0.1:1"],
-                           server_id="s1", revision=m.revision)
+    return SimpleNamespace(
+        mission=m,
+        library=library,
+        robots=robots,
+        telemetry={},
+        endpoints=["tcp/127.0.0.1:1"],
+        server_id="s1",
+        revision=m.revision,
+    )
 
 
 def test_state_text_and_json_without_server(tutorial):
@@ -459,7 +570,10 @@ def test_state_text_and_json_without_server(tutorial):
     assert "lru1-1" not in only and "lru2-1" in only
     data = state_json(client)
     json.dumps(data)  # plain JSON
-    assert data["tasks"]["lru1"][1]["status"] == "running" and data["tasks"]["lru1"][1]["status_info"] == "imaging"
+    assert (
+        data["tasks"]["lru1"][1]["status"] == "running"
+        and data["tasks"]["lru1"][1]["status_info"] == "imaging"
+    )
     assert data["robots"]["lru1"]["online"] is True and data["robots"]["lru2"]["online"] is False
 
 
@@ -468,13 +582,24 @@ def test_describe_lines():
     from backend.protocol.messages import OpReply
 
     add = ops.AddSkill(robot="lru1", skill="drive_to")
-    assert describe(add, OpReply(revision=12, value={"id": "lru1-7"}), 11, None) == "added lru1-7 (drive_to) to lru1 at revision 12"
+    assert (
+        describe(add, OpReply(revision=12, value={"id": "lru1-7"}), 11, None)
+        == "added lru1-7 (drive_to) to lru1 at revision 12"
+    )
     edit = ops.EditSkill(id="lru1-7", label="x")
     assert "nothing changed" in describe(edit, OpReply(revision=12), 12, None)
     dup = describe(add, OpReply(revision=12, value={"id": "lru1-7"}, duplicate=True), 12, None)
     assert dup.endswith("(this request had been applied already)")
     run_all = ops.Control(op="run")
-    assert describe(run_all, OpReply(revision=3, value={"robots": {"lru1": "ok", "lru2": "lru2 is busy"}}), 3, None) == "run sent to lru1 at revision 3"
+    assert (
+        describe(
+            run_all,
+            OpReply(revision=3, value={"robots": {"lru1": "ok", "lru2": "lru2 is busy"}}),
+            3,
+            None,
+        )
+        == "run sent to lru1 at revision 3"
+    )
 
 
 def test_watch_lines_say_the_status_and_what_an_edit_changed():
@@ -482,11 +607,19 @@ def test_watch_lines_say_the_status_and_what_an_edit_changed():
     from backend.core import events as ev
 
     def line(*events):
-        return watch_line("events", ev.EventBatch(revision=9, events=list(events), actor="lru1", op="report"), False)
+        return watch_line(
+            "events",
+            ev.EventBatch(revision=9, events=list(events), actor="lru1", op="report"),
+            False,
+        )
 
-    done = ev.SkillChanged(id="lru1-1", changes={"status": "success", "finished_at": "2026-11-22T07:00:00+00:00"})
+    done = ev.SkillChanged(
+        id="lru1-1", changes={"status": "success", "finished_at": "2026-11-22T07:00:00+00:00"}
+    )
     assert line(ev.ReportSeq(robot="lru1", seq=4), done) == "r9 report by lru1: lru1-1: success"
-    failed = ev.SkillChanged(id="lru1-2", changes={"status": "failure", "status_info": "battery low", "attempt": 2})
+    failed = ev.SkillChanged(
+        id="lru1-2", changes={"status": "failure", "status_info": "battery low", "attempt": 2}
+    )
     assert line(failed) == "r9 report by lru1: lru1-2: failure (battery low) attempt 2"
     edited = ev.SkillChanged(id="lru1-3", changes={"params": {"speed": 0.4}, "label": "slow"})
     assert line(edited) == "r9 report by lru1: lru1-3: changed label, params"
@@ -496,9 +629,17 @@ def test_watch_says_which_message_was_unreadable():
     from backend.cli.ctl.session import watch_line
     from backend.client.client import Malformed
 
-    m = Malformed("telemetry", "mc/v1/robot/lru1/telemetry", "battery: Input should be less than or equal to 1")
+    m = Malformed(
+        "telemetry",
+        "mc/v1/robot/lru1/telemetry",
+        "battery: Input should be less than or equal to 1",
+    )
     assert watch_line("malformed", m, False) == (
-        "unreadable telemetry on mc/v1/robot/lru1/telemetry (ignored): battery: Input should be less than or equal to 1")
+        "unreadable telemetry on mc/v1/robot/lru1/telemetry (ignored): battery: Input should be less than or equal to 1"
+    )
     assert json.loads(watch_line("malformed", m, True)) == {
-        "kind": "malformed", "what": "telemetry", "key": "mc/v1/robot/lru1/telemetry",
-        "error": "battery: Input should be less than or equal to 1"}
+        "kind": "malformed",
+        "what": "telemetry",
+        "key": "mc/v1/robot/lru1/telemetry",
+        "error": "battery: Input should be less than or equal to 1",
+    }

@@ -36,7 +36,13 @@ def test_unreachable_json_and_operations():
     assert obj == {"ok": False, "code": "unreachable", "message": obj["message"]}
     assert endpoint in obj["message"]
     assert "cannot reach the mission server" in r.stderr and "Traceback" not in r.stderr
-    for args in (["sync", "lru1"], ["run", "--all"], ["robots"], ["watch", "--count", "1"], ["save", "/tmp/x.yaml"]):
+    for args in (
+        ["sync", "lru1"],
+        ["run", "--all"],
+        ["robots"],
+        ["watch", "--count", "1"],
+        ["save", "/tmp/x.yaml"],
+    ):
         r = ctl(endpoint, *args)
         assert r.returncode == 3, (args, r)
         assert r.stderr.startswith("missionctl: cannot reach the mission server"), (args, r.stderr)
@@ -44,8 +50,14 @@ def test_unreachable_json_and_operations():
 
 def test_default_endpoint_from_environment():
     endpoint = loopback_endpoint(free_port())
-    r = subprocess.run([*_ctl_cmd(), "state"], cwd=ROOT, env={**env(), "MISSIONCTL_CONNECT": endpoint},
-                       capture_output=True, text=True, timeout=30)
+    r = subprocess.run(
+        [*_ctl_cmd(), "state"],
+        cwd=ROOT,
+        env={**env(), "MISSIONCTL_CONNECT": endpoint},
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     assert r.returncode == 3
     assert endpoint in r.stderr
 
@@ -63,8 +75,15 @@ def test_router_without_mission_server_exits_3():
     """A Zenoh router answers, but no missionctl server behind it."""
     for _ in range(3):
         endpoint = loopback_endpoint(free_port())
-        router = subprocess.Popen([sys.executable, "-c", _ROUTER, endpoint], cwd=ROOT, env=env(),
-                                  stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        router = subprocess.Popen(
+            [sys.executable, "-c", _ROUTER, endpoint],
+            cwd=ROOT,
+            env=env(),
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         try:
             if router.stdout.readline().strip() != "ready":
                 continue  # the port was taken meanwhile
@@ -113,10 +132,28 @@ def test_ctl_loads_only_what_a_client_needs():
         f"rc = main(['ctl', '--connect', {loopback_endpoint(free_port())!r}, 'state'])\n"
         "print(rc, *sorted(m for m in sys.modules if m.split('.')[0] in {'numpy', 'backend', 'sim', 'console', 'textual', 'yaml'}))\n"
     )
-    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env(), capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=ROOT,
+        env=env(),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     rc, *loaded = r.stdout.split()
     assert rc == "3", r.stderr  # nothing listens there: the client was used
     assert "backend.client.client" in loaded
-    heavy = [m for m in loaded if m.split(".")[0] in {"numpy", "sim", "console", "textual", "yaml"}
-             or m in {"backend.server.server", "backend.server.journal", "backend.files.missions", "backend.protocol.mapfeed", "backend.server.acl"}]
+    heavy = [
+        m
+        for m in loaded
+        if m.split(".")[0] in {"numpy", "sim", "console", "textual", "yaml"}
+        or m
+        in {
+            "backend.server.server",
+            "backend.server.journal",
+            "backend.files.missions",
+            "backend.protocol.mapfeed",
+            "backend.server.acl",
+        }
+    ]
     assert heavy == []

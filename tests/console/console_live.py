@@ -27,15 +27,23 @@ class Proc:
         self.args = args
         self.output: list[str] = []
         self.p = subprocess.Popen(
-            args, cwd=cwd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-            text=True, bufsize=1, env={**os.environ, **(env or {})},
+            args,
+            cwd=cwd,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            bufsize=1,
+            env={**os.environ, **(env or {})},
         )
 
     def wait_line(self, needle: str, timeout: float = 30.0) -> str:
         deadline = time.monotonic() + timeout
         assert self.p.stdout is not None
         while time.monotonic() < deadline:
-            ready, _, _ = select.select([self.p.stdout], [], [], max(0.0, deadline - time.monotonic()))
+            ready, _, _ = select.select(
+                [self.p.stdout], [], [], max(0.0, deadline - time.monotonic())
+            )
             if not ready:
                 break
             line = self.p.stdout.readline()
@@ -44,7 +52,9 @@ class Proc:
             self.output.append(line)
             if needle in line:
                 return line
-        raise AssertionError(f"{self.args[3:5]}: no line with {needle!r} within {timeout:g} s; output:\n{''.join(self.output)}")
+        raise AssertionError(
+            f"{self.args[3:5]}: no line with {needle!r} within {timeout:g} s; output:\n{''.join(self.output)}"
+        )
 
     def stop(self, sig: int = signal.SIGTERM, timeout: float = 10.0) -> int | None:
         if self.p.poll() is None:
@@ -77,7 +87,20 @@ class Live:
         self.robots: Proc | None = None
 
     def start_server(self) -> None:
-        self.server = Proc([sys.executable, "-m", "backend.cli", "server", "--mission", str(self.mission), "--listen", self.endpoint, "--db", str(self.db)])
+        self.server = Proc(
+            [
+                sys.executable,
+                "-m",
+                "backend.cli",
+                "server",
+                "--mission",
+                str(self.mission),
+                "--listen",
+                self.endpoint,
+                "--db",
+                str(self.db),
+            ]
+        )
         self.server.wait_line("listening on")
 
     def stop_server(self) -> None:
@@ -87,13 +110,30 @@ class Live:
 
     def start_robots(self, *specs: str) -> None:
         specs = specs or ("lru1:lru_science", "lru2:lru_manipulator")
-        self.robots = Proc([sys.executable, str(HERE / "console_robots.py"), self.endpoint, str(LIBRARY), *specs])
+        self.robots = Proc(
+            [sys.executable, str(HERE / "console_robots.py"), self.endpoint, str(LIBRARY), *specs]
+        )
         self.robots.wait_line("ready")
 
     def start_sim(self, speed: float = 50.0) -> None:
         """The simulated fleet of the mission's site (instead of start_robots)."""
-        self.robots = Proc([sys.executable, "-m", "backend.cli", "sim", "--mission", str(self.mission), "--connect", self.endpoint,
-                            "--speed", f"{speed:g}", "--seed", "1"], env={"PYTHONUNBUFFERED": "1"})
+        self.robots = Proc(
+            [
+                sys.executable,
+                "-m",
+                "backend.cli",
+                "sim",
+                "--mission",
+                str(self.mission),
+                "--connect",
+                self.endpoint,
+                "--speed",
+                f"{speed:g}",
+                "--seed",
+                "1",
+            ],
+            env={"PYTHONUNBUFFERED": "1"},
+        )
         self.robots.wait_line("missionctl sim: world")
 
     def kill_robots(self) -> None:

@@ -49,11 +49,20 @@ async def main(endpoint: str, library_file: str, specs: list[str]) -> int:
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGTERM, signal.SIGINT):
         loop.add_signal_handler(sig, stop.set)
-    loop.add_reader(sys.stdin.fileno(), lambda: stop.set() if not sys.stdin.buffer.read1(1) else None)
+    loop.add_reader(
+        sys.stdin.fileno(), lambda: stop.set() if not sys.stdin.buffer.read1(1) else None
+    )
     try:
         for spec in specs:
             name, rtype = spec.split(":")
-            agent = RobotAgent(name, rtype, connect=[endpoint], modules={"test": "1.0.0"}, lease_ms=1000, telemetry_hz=5)
+            agent = RobotAgent(
+                name,
+                rtype,
+                connect=[endpoint],
+                modules={"test": "1.0.0"},
+                lease_ms=1000,
+                telemetry_hz=5,
+            )
             for skill in library.skills_of(rtype):
                 agent.add_skill(skill, make_handler(skill), version=library.skills[skill].version)
             await agent.start()

@@ -49,7 +49,9 @@ class Builder:
 
     def report(self, robot: str, sid: str, status: str, info: str = "") -> None:
         self.seqs[robot] = self.seqs.get(robot, 0) + 1
-        self.engine.submit(Report(robot=robot, seq=self.seqs[robot], id=sid, status=status, info=info, at=T0))
+        self.engine.submit(
+            Report(robot=robot, seq=self.seqs[robot], id=sid, status=status, info=info, at=T0)
+        )
 
     def snapshot(self) -> Mission:
         return self.mission.model_copy(deep=True)
@@ -87,8 +89,26 @@ MARS_FLEET = {"lru1": True, "lru2": True, "ardea": False, "lander": True}
 
 def mars_telemetry() -> list[Telemetry]:
     return [
-        Telemetry(robot="lru1", pose=Pose(x=20.0, y=8.0), battery=0.82, link=0.9, mode="executing", skill="lru1-2", progress=0.45, eta_s=132, at=T0),
-        Telemetry(robot="lru2", pose=Pose(x=40.0, y=17.0), battery=0.64, link=0.75, mode="waiting at barrier", skill="lru2-3", at=T0),
+        Telemetry(
+            robot="lru1",
+            pose=Pose(x=20.0, y=8.0),
+            battery=0.82,
+            link=0.9,
+            mode="executing",
+            skill="lru1-2",
+            progress=0.45,
+            eta_s=132,
+            at=T0,
+        ),
+        Telemetry(
+            robot="lru2",
+            pose=Pose(x=40.0, y=17.0),
+            battery=0.64,
+            link=0.75,
+            mode="waiting at barrier",
+            skill="lru2-3",
+            at=T0,
+        ),
         Telemetry(robot="lander", battery=1.0, link=1.0, mode="idle", at=T0),
     ]
 
@@ -136,7 +156,9 @@ class EngineBackend:
                 robots = e.plan_control(op)
                 for r in robots:
                     e.release(r)
-                return OpReply(revision=e.mission.revision, value={"robots": dict.fromkeys(robots, "ok")})
+                return OpReply(
+                    revision=e.mission.revision, value={"robots": dict.fromkeys(robots, "ok")}
+                )
             else:
                 applied = e.submit(op, client="console", expected_revision=expected_revision)
         except Refusal as r:
@@ -166,14 +188,27 @@ def engine_app(builder: Builder) -> tuple[Any, EngineBackend]:
     return app, backend
 
 
-async def inject(app: Any, pilot: Any, builder: Builder | None, *, online: dict[str, bool] | None = None,
-                 telemetry: list[Telemetry] | None = None, connection: str = "connected") -> None:
+async def inject(
+    app: Any,
+    pilot: Any,
+    builder: Builder | None,
+    *,
+    online: dict[str, bool] | None = None,
+    telemetry: list[Telemetry] | None = None,
+    connection: str = "connected",
+) -> None:
     """Post the messages the live connection would post; wait until shown."""
     from console.messages import ConnectionChanged, StateLoaded, TelemetryChanged
 
     app.post_message(ConnectionChanged(connection, endpoint="tcp/127.0.0.1:7447"))
     if builder is not None:
-        app.post_message(StateLoaded(builder.snapshot(), builder.library, fleet(online if online is not None else MARS_FLEET)))
+        app.post_message(
+            StateLoaded(
+                builder.snapshot(),
+                builder.library,
+                fleet(online if online is not None else MARS_FLEET),
+            )
+        )
     for t in telemetry or []:
         app.post_message(TelemetryChanged(t))
     await pilot.pause()
@@ -186,14 +221,18 @@ def screen_text(app: Any) -> str:
     return "\n".join("".join(seg.text for seg in strip) for strip in strips)
 
 
-async def wait_until(pilot: Any, predicate: Any, timeout: float = 10.0, what: str = "condition") -> None:
+async def wait_until(
+    pilot: Any, predicate: Any, timeout: float = 10.0, what: str = "condition"
+) -> None:
     """Let the app run until `predicate()` holds (bounded): no sleeps as sync."""
     import time as _time
 
     deadline = _time.monotonic() + timeout
     while not predicate():
         if _time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout:g} s waiting for {what} (focused: {pilot.app.focused!r})\n--- screen ---\n{screen_text(pilot.app)}")
+            raise AssertionError(
+                f"timed out after {timeout:g} s waiting for {what} (focused: {pilot.app.focused!r})\n--- screen ---\n{screen_text(pilot.app)}"
+            )
         await pilot.pause(0.02)
 
 
@@ -215,8 +254,13 @@ async def wait_exit(app: Any, timeout: float = 10.0) -> None:
 def manifest(name: str, type_: str, skills: list[str], modules: dict[str, str], **props: Any):
     from backend.protocol.messages import Manifest, Module
 
-    return Manifest(name=name, type=type_, modules=[Module(name=m, version=v) for m, v in modules.items()],
-                    properties=props, skills=dict.fromkeys(skills, "1.0.0"))
+    return Manifest(
+        name=name,
+        type=type_,
+        modules=[Module(name=m, version=v) for m, v in modules.items()],
+        properties=props,
+        skills=dict.fromkeys(skills, "1.0.0"),
+    )
 
 
 def mars_fleet_with_manifests() -> dict[str, RobotInfo]:
@@ -224,14 +268,39 @@ def mars_fleet_with_manifests() -> dict[str, RobotInfo]:
     b = Builder(MARS)
     lib = b.library
     out = {
-        "lru1": RobotInfo(name="lru1", online=True, since=T0, manifest=manifest(
-            "lru1", "lru_science", lib.skills_of("lru_science"), {"nav": "2.1.0", "science_cam": "1.4.2"}, max_speed=1.0,
-            simulated=True, capabilities=["science_camera"])),
-        "lru2": RobotInfo(name="lru2", online=True, since=T0, manifest=manifest(
-            "lru2", "lru_manipulator", lib.skills_of("lru_manipulator"), {"nav": "2.1.0", "arm": "0.9.3"}, payload_kg=5)),
+        "lru1": RobotInfo(
+            name="lru1",
+            online=True,
+            since=T0,
+            manifest=manifest(
+                "lru1",
+                "lru_science",
+                lib.skills_of("lru_science"),
+                {"nav": "2.1.0", "science_cam": "1.4.2"},
+                max_speed=1.0,
+                simulated=True,
+                capabilities=["science_camera"],
+            ),
+        ),
+        "lru2": RobotInfo(
+            name="lru2",
+            online=True,
+            since=T0,
+            manifest=manifest(
+                "lru2",
+                "lru_manipulator",
+                lib.skills_of("lru_manipulator"),
+                {"nav": "2.1.0", "arm": "0.9.3"},
+                payload_kg=5,
+            ),
+        ),
         "ardea": RobotInfo(name="ardea", online=False, since=T0),
-        "lander": RobotInfo(name="lander", online=True, since=T0, manifest=manifest(
-            "lander", "lander", lib.skills_of("lander"), {"shelf": "1.0.0"})),
+        "lander": RobotInfo(
+            name="lander",
+            online=True,
+            since=T0,
+            manifest=manifest("lander", "lander", lib.skills_of("lander"), {"shelf": "1.0.0"}),
+        ),
     }
     return out
 
@@ -240,8 +309,27 @@ def telemetry_series() -> list[Telemetry]:
     """A few samples per robot, so the sparklines have a shape."""
     out = []
     for i in range(10):
-        out.append(Telemetry(robot="lru1", battery=0.95 - 0.03 * i, link=0.9 - 0.05 * (i % 4), mode="executing", skill="lru1-2", progress=0.45, at=T0))
-        out.append(Telemetry(robot="lru2", battery=0.70 - 0.02 * i, link=0.6 + 0.04 * i, mode="waiting at barrier", skill="lru2-3", at=T0))
+        out.append(
+            Telemetry(
+                robot="lru1",
+                battery=0.95 - 0.03 * i,
+                link=0.9 - 0.05 * (i % 4),
+                mode="executing",
+                skill="lru1-2",
+                progress=0.45,
+                at=T0,
+            )
+        )
+        out.append(
+            Telemetry(
+                robot="lru2",
+                battery=0.70 - 0.02 * i,
+                link=0.6 + 0.04 * i,
+                mode="waiting at barrier",
+                skill="lru2-3",
+                at=T0,
+            )
+        )
         out.append(Telemetry(robot="lander", battery=1.0, link=1.0, at=T0))
     return out
 
@@ -294,7 +382,11 @@ async def awareness_scenario(app: Any, pilot: Any) -> Builder:
 
     def report(robot: str, sid: str, status: str, info: str = "") -> None:
         seq[robot] += 1
-        op(e.submit(Report(robot=robot, seq=seq[robot], id=sid, status=status, info=info, at=T0)), robot, "report")
+        op(
+            e.submit(Report(robot=robot, seq=seq[robot], id=sid, status=status, info=info, at=T0)),
+            robot,
+            "report",
+        )
 
     report("lru1", "lru1-1", "running")
     report("lru2", "lru2-1", "running")
@@ -302,15 +394,55 @@ async def awareness_scenario(app: Any, pilot: Any) -> Builder:
     report("lru2", "lru2-2", "running")
     report("lru2", "lru2-2", "failure", "no stone in reach")
     await pilot.pause()
-    post(AlertReceived(Alert(level="error", kind="failure", robot="lru2", skill="lru2-2", message="lru2: lru2-2 failed: no stone in reach", at=T0)))
+    post(
+        AlertReceived(
+            Alert(
+                level="error",
+                kind="failure",
+                robot="lru2",
+                skill="lru2-2",
+                message="lru2: lru2-2 failed: no stone in reach",
+                at=T0,
+            )
+        )
+    )
     app._refused("Run refused: [lru1] lru1 is already executing lru1-1 (running)", "lru1", None)
     post(FleetChanged(RobotInfo(name="lander", online=False, since=T0)))
-    post(AlertReceived(Alert(level="warning", kind="offline", robot="lander", message="robot lander went offline", at=T0)))
-    post(TelemetryChanged(Telemetry(robot="lru1", battery=0.66, link=0.2, in_range=False, mode="executing", skill="lru1-1", at=T0)))
+    post(
+        AlertReceived(
+            Alert(
+                level="warning",
+                kind="offline",
+                robot="lander",
+                message="robot lander went offline",
+                at=T0,
+            )
+        )
+    )
+    post(
+        TelemetryChanged(
+            Telemetry(
+                robot="lru1",
+                battery=0.66,
+                link=0.2,
+                in_range=False,
+                mode="executing",
+                skill="lru1-1",
+                at=T0,
+            )
+        )
+    )
     post(TelemetryChanged(Telemetry(robot="lru2", battery=0.15, link=0.9, mode="idle", at=T0)))
     # every message handled (under load a pause or two is not enough)
-    await wait_until(pilot, lambda: len(app.event_log.entries) == 12 and len(app.alerts.alerts) == 5
-                     and app.alerts.alerts[-1].kind == "low_battery" and app.model.robots["lander"].online is False,
-                     what="the scenario's messages handled")
+    await wait_until(
+        pilot,
+        lambda: (
+            len(app.event_log.entries) == 12
+            and len(app.alerts.alerts) == 5
+            and app.alerts.alerts[-1].kind == "low_battery"
+            and app.model.robots["lander"].online is False
+        ),
+        what="the scenario's messages handled",
+    )
     await pilot.pause()
     return b

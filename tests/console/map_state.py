@@ -33,9 +33,13 @@ def mars_snapshot(size: int = 160, cell: float = 2.0, seq: int = 3) -> mf.MapSna
             mf.BoxItem(box="wifi_box_1", kind="wifi", where="ground", x=25, y=-12, on=True),
         ],
         rss=[mf.RssItem(rss="RSS-A", x=45, y=21, radius=7, top_score=1.0)],
-        stones=[mf.StoneItem(id="RSS-A-s1", rss="RSS-A", x=47, y=23, score=1.0, state="identified")],
+        stones=[
+            mf.StoneItem(id="RSS-A-s1", rss="RSS-A", x=47, y=23, score=1.0, state="identified")
+        ],
     )
-    return mf.MapSnapshot(feed="test", meta=meta, seq=seq, sim_time=120.0, tiles=enc.full(), objects=objects)
+    return mf.MapSnapshot(
+        feed="test", meta=meta, seq=seq, sim_time=120.0, tiles=enc.full(), objects=objects
+    )
 
 
 def mirror_of(snap: mf.MapSnapshot) -> mf.MapMirror:

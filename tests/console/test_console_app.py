@@ -55,7 +55,14 @@ async def test_mars_mid_execution_shows_every_status_barrier_progress_and_presen
         text = screen_text(app)
         for robot in ("lru1", "lru2", "ardea", "lander"):
             assert robot in text
-        for label in ("drive to POI-A", "explore east plain", "take sample box", "survey the ridge", "land on the lander", "recharge"):
+        for label in (
+            "drive to POI-A",
+            "explore east plain",
+            "take sample box",
+            "survey the ridge",
+            "land on the lander",
+            "recharge",
+        ):
             assert label in text, label
         for glyph in ("✓", "✗", "▶", "‖", "◷", "●", "○"):
             assert glyph in text, glyph
@@ -102,7 +109,9 @@ async def test_read_only_editor_says_why():
         assert all(w.disabled for w in editor.query("Input, Select, Switch, TextArea"))
         app.screen.query_one(ScheduleView).select("lru1-1")
         await pilot.pause()
-        assert "finished skills are the execution log" in str(app.screen.query_one("#readonly").render())
+        assert "finished skills are the execution log" in str(
+            app.screen.query_one("#readonly").render()
+        )
 
 
 async def test_actions_that_do_not_apply_say_why():
@@ -136,16 +145,30 @@ async def test_add_with_picker_then_edit_with_inline_validation_then_apply():
         screen.schedule.select("lru1-2")
         await pilot.pause()
         await pilot.press("a")
-        await wait_until(pilot, lambda: isinstance(app.screen, SkillPicker), what="the skill picker")
+        await wait_until(
+            pilot, lambda: isinstance(app.screen, SkillPicker), what="the skill picker"
+        )
         assert "take_science_image" in screen_text(app)
         await pilot.press("r", "e", "c", "h")
         await pilot.pause()
         assert "Return to the lander and recharge" in screen_text(app)  # descriptions shown
         await pilot.press("enter")
-        await wait_until(pilot, lambda: any(s.skill == "recharge" for s in b.mission.tasks["lru1"]), what="the skill added")
+        await wait_until(
+            pilot,
+            lambda: any(s.skill == "recharge" for s in b.mission.tasks["lru1"]),
+            what="the skill added",
+        )
         new = b.mission.tasks["lru1"][-1]
         assert new.id == "lru1-3" and new.status == Status.IDLE
-        await wait_until(pilot, lambda: screen.editor.skill_id == new.id and app.focused is not None and screen.editor in app.focused.ancestors_with_self, what="editor focused on the new skill")
+        await wait_until(
+            pilot,
+            lambda: (
+                screen.editor.skill_id == new.id
+                and app.focused is not None
+                and screen.editor in app.focused.ancestors_with_self
+            ),
+            what="editor focused on the new skill",
+        )
         field = screen.editor.query_one("#f-target_level")
         field.value = "2"
         await pilot.pause()
@@ -157,14 +180,28 @@ async def test_add_with_picker_then_edit_with_inline_validation_then_apply():
         await pilot.pause()
         assert "above the maximum" not in screen_text(app)
         await pilot.press("ctrl+s")
-        await wait_until(pilot, lambda: b.mission.find(new.id)[2].params["target_level"] == 0.5, what="the edit applied")
-        await wait_until(pilot, lambda: "applied target_level" in status_line(app), what="status line")
+        await wait_until(
+            pilot,
+            lambda: b.mission.find(new.id)[2].params["target_level"] == 0.5,
+            what="the edit applied",
+        )
+        await wait_until(
+            pilot, lambda: "applied target_level" in status_line(app), what="status line"
+        )
 
 
 async def test_server_refusal_for_a_parameter_appears_next_to_the_field():
     class Refusing:
         async def submit(self, op, *, expected_revision=None) -> OpReply:
-            raise OperationRefused(ErrorReply(code="bad_param", message="lru1, skill lru1-4 (take_science_image), parameter filter: the camera has no such filter today", robot="lru1", skill="lru1-4", param="filter"))
+            raise OperationRefused(
+                ErrorReply(
+                    code="bad_param",
+                    message="lru1, skill lru1-4 (take_science_image), parameter filter: the camera has no such filter today",
+                    robot="lru1",
+                    skill="lru1-4",
+                    param="filter",
+                )
+            )
 
     app = make_app(backend=Refusing())
     async with app.run_test(size=WIDE) as pilot:
@@ -175,7 +212,11 @@ async def test_server_refusal_for_a_parameter_appears_next_to_the_field():
         screen.editor.query_one("#f-label").value = "a new label"
         await pilot.pause()
         screen.editor.action_apply()
-        await wait_until(pilot, lambda: "no such filter today" in screen.editor.errors.get("filter", ""), what="the refusal next to the field")
+        await wait_until(
+            pilot,
+            lambda: "no such filter today" in screen.editor.errors.get("filter", ""),
+            what="the refusal next to the field",
+        )
         text = screen_text(app)
         assert "the camera has no such filter today" in text
         assert "[lru1 · lru1-4]" in status_line(app)  # robot, skill and reason
@@ -199,7 +240,9 @@ async def test_barrier_from_marks_across_robots():
         await pilot.press("b")
         await wait_until(pilot, lambda: "b2" in b.mission.barriers, what="barrier b2")
         assert b.mission.barriers["b2"].skills == ["lru1-5", "lru2-5"]
-        await wait_until(pilot, lambda: screen_text(app).count("[b2]") == 2, what="tags on both partners")
+        await wait_until(
+            pilot, lambda: screen_text(app).count("[b2]") == 2, what="tags on both partners"
+        )
         # remove it again
         await pilot.press("B")
         await wait_until(pilot, lambda: "b2" not in b.mission.barriers, what="barrier removed")
@@ -214,11 +257,21 @@ async def test_sync_unsync_delete_move_and_retry_offline():
         screen.schedule.select("lru2-5")
         await pilot.pause()
         await pilot.press("s")
-        await wait_until(pilot, lambda: b.mission.find("lru2-5")[2].status == Status.IDLE_SYNCHRONIZED, what="sync")
+        await wait_until(
+            pilot,
+            lambda: b.mission.find("lru2-5")[2].status == Status.IDLE_SYNCHRONIZED,
+            what="sync",
+        )
         await pilot.press("u")
-        await wait_until(pilot, lambda: b.mission.find("lru2-5")[2].status == Status.IDLE, what="unsync")
+        await wait_until(
+            pilot, lambda: b.mission.find("lru2-5")[2].status == Status.IDLE, what="unsync"
+        )
         await pilot.press("shift+down")
-        await wait_until(pilot, lambda: [s.id for s in b.mission.tasks["lru2"]][-1] == "lru2-5", what="moved down")
+        await wait_until(
+            pilot,
+            lambda: [s.id for s in b.mission.tasks["lru2"]][-1] == "lru2-5",
+            what="moved down",
+        )
         await pilot.press("d")
         await wait_until(pilot, lambda: "Delete lru2-5" in screen_text(app), what="confirmation")
         await pilot.press("y")
@@ -249,10 +302,17 @@ async def test_help_screen_lists_the_keys_and_the_legend():
         assert "Synchronization" in text and "Execution" in text
         assert "S               Sync" in text  # the remapped key
         assert "d / delete" in text
-        app.screen.query_one("VerticalScroll").scroll_end(animate=False, immediate=True)  # the legend is further down
+        app.screen.query_one("VerticalScroll").scroll_end(
+            animate=False, immediate=True
+        )  # the legend is further down
         await pilot.pause()
         end = screen_text(app)
-        assert "waiting at barrier" in end and "◷" in end and "mission.sync" in end and "unapplied changes" in end
+        assert (
+            "waiting at barrier" in end
+            and "◷" in end
+            and "mission.sync" in end
+            and "unapplied changes" in end
+        )
         await pilot.press("escape")
         await wait_until(pilot, lambda: not isinstance(app.screen, HelpScreen), what="help closed")
         await pilot.press("question_mark")
@@ -272,7 +332,11 @@ async def test_remapped_key_runs_the_action():
         await pilot.pause()
         assert b.mission.find("lru1-4")[2].status == Status.IDLE
         await pilot.press("S")
-        await wait_until(pilot, lambda: b.mission.find("lru1-4")[2].status == Status.IDLE_SYNCHRONIZED, what="sync with S")
+        await wait_until(
+            pilot,
+            lambda: b.mission.find("lru1-4")[2].status == Status.IDLE_SYNCHRONIZED,
+            what="sync with S",
+        )
 
 
 async def test_command_palette_has_every_action_and_says_what_does_not_apply():
@@ -287,7 +351,9 @@ async def test_command_palette_has_every_action_and_says_what_does_not_apply():
         provider = MissionCommands(app.screen)
         hits = [h async for h in provider.discover()]
         # the schedule's actions and the screen switches; the other screens' own actions are offered there
-        assert {str(h.display) for h in hits} == {a.palette_title for a in ACTIONS if a.scope in ("mission", "app")}
+        assert {str(h.display) for h in hits} == {
+            a.palette_title for a in ACTIONS if a.scope in ("mission", "app")
+        }
         assert "Screen: Fleet" in {str(h.display) for h in hits}
         found = {h.text: h for h in [h async for h in provider.search("delete")]}
         assert "does not apply now: lru1-2 is running on lru1" in found["Mission: Delete"].help
@@ -306,13 +372,23 @@ async def test_unreachable_server_is_one_clear_screen_with_retry_and_quit():
     endpoint = loopback_endpoint(free_port())  # nobody listens there
     app = make_app(connect=endpoint)
     async with app.run_test(size=(100, 24)) as pilot:
-        await wait_until(pilot, lambda: f"Cannot reach the mission server at {endpoint}" in screen_text(app), timeout=20, what="unreachable screen")
+        await wait_until(
+            pilot,
+            lambda: f"Cannot reach the mission server at {endpoint}" in screen_text(app),
+            timeout=20,
+            what="unreachable screen",
+        )
         text = screen_text(app)
         assert isinstance(app.screen, UnreachableScreen)
         assert "r: retry" in text and "Traceback" not in text
         first = app.screen
         await pilot.press("r")
-        await wait_until(pilot, lambda: app.screen is not first and isinstance(app.screen, UnreachableScreen), timeout=20, what="unreachable again")
+        await wait_until(
+            pilot,
+            lambda: app.screen is not first and isinstance(app.screen, UnreachableScreen),
+            timeout=20,
+            what="unreachable again",
+        )
         assert app.screen.active_bindings["q"].binding.action == "quit_app"
         app.screen.action_quit_app()  # what q does (pressing it ends the app under the pilot)
         await wait_exit(app)
@@ -343,7 +419,9 @@ async def test_robot_going_offline_shows_in_its_header_and_to_its_barrier_partne
     async with app.run_test(size=(200, 40)) as pilot:
         await inject(app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
         assert "b1: waiting for lru1" in screen_text(app)  # lru2 waits for lru1 at b1
-        app.post_message(FleetChanged(RobotInfo(name="lru1", online=False, since=T0.replace(minute=50))))
+        app.post_message(
+            FleetChanged(RobotInfo(name="lru1", online=False, since=T0.replace(minute=50)))
+        )
         await pilot.pause()
         text = screen_text(app)
         assert "✕ offline since 10:50:07" in text  # lru1 header
@@ -406,9 +484,15 @@ async def test_save_then_load_a_mission_file_and_undo(tmp_path):
         await wait_until(pilot, lambda: isinstance(app.screen, PathPrompt), what="path prompt")
         app.screen.query_one("Input").value = str(target)
         await pilot.press("enter")
-        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="confirm replace")
+        await wait_until(
+            pilot, lambda: isinstance(app.screen, ConfirmScreen), what="confirm replace"
+        )
         await pilot.press("y")
-        await wait_until(pilot, lambda: b.mission.find("lru2-1")[2].label == "drive beside POI-A", what="loaded on the server")
+        await wait_until(
+            pilot,
+            lambda: b.mission.find("lru2-1")[2].label == "drive beside POI-A",
+            what="loaded on the server",
+        )
         await wait_until(pilot, lambda: "drive beside POI-A" in screen_text(app), what="shown")
 
 
@@ -430,7 +514,10 @@ async def test_policies_are_typed_inputs_validated_then_applied():
         ed.query_one("#pf-recharge_below").value = "1.5"
         await pilot.pause()
         assert "25: should be less than or equal to 20" in screen_text(app)
-        assert str(ed.query_one("#perr-recharge_below").render()) == "1.5: should be less than or equal to 1"
+        assert (
+            str(ed.query_one("#perr-recharge_below").render())
+            == "1.5: should be less than or equal to 1"
+        )
         ed.action_apply()
         await pilot.pause()
         assert backend.ops == []  # nothing sent while invalid
@@ -441,22 +528,41 @@ async def test_policies_are_typed_inputs_validated_then_applied():
         assert "should be" not in screen_text(app)
         assert "unapplied changes: policies" in screen_text(app)
         ed.action_apply()
-        await wait_until(pilot, lambda: b.mission.find("lru2-1")[2].policies == Policies(retries=3, pause_out_of_comms=True, recharge_below=0.2), what="policies applied")
+        await wait_until(
+            pilot,
+            lambda: (
+                b.mission.find("lru2-1")[2].policies
+                == Policies(retries=3, pause_out_of_comms=True, recharge_below=0.2)
+            ),
+            what="policies applied",
+        )
         await wait_until(pilot, lambda: "applied policies" in status_line(app), what="status line")
-        await wait_until(pilot, lambda: ed.loaded_rev == b.mission.find("lru2-1")[2].rev and not ed.loading and not ed.dirty, what="reloaded")
+        await wait_until(
+            pilot,
+            lambda: (
+                ed.loaded_rev == b.mission.find("lru2-1")[2].rev and not ed.loading and not ed.dirty
+            ),
+            what="reloaded",
+        )
         assert ed.query_one("#pf-retries").value == "3"
         # an empty recharge level means off
         ed.query_one("#pf-recharge_below").value = ""
         await wait_until(pilot, lambda: ed.dirty == ["policies"], what="the change seen")
         ed.action_apply()
-        await wait_until(pilot, lambda: b.mission.find("lru2-1")[2].policies.recharge_below is None, what="recharge off")
+        await wait_until(
+            pilot,
+            lambda: b.mission.find("lru2-1")[2].policies.recharge_below is None,
+            what="recharge off",
+        )
         # read-only like the parameters once the skill is on the robot
         b.sync("lru2", "lru2-1")
         from console.messages import StateLoaded
 
         app.post_message(StateLoaded(b.snapshot(), b.library, {}))
         await wait_until(pilot, lambda: ed.query("#readonly"), what="read-only")
-        assert all(w.disabled for w in ed.query("#pf-retries, #pf-pause_out_of_comms, #pf-recharge_below"))
+        assert all(
+            w.disabled for w in ed.query("#pf-retries, #pf-pause_out_of_comms, #pf-recharge_below")
+        )
 
 
 async def test_unapplied_edits_are_kept_per_skill_when_the_cursor_moves():
@@ -484,9 +590,15 @@ async def test_unapplied_edits_are_kept_per_skill_when_the_cursor_moves():
         assert screen.editor.query_one("#f-speed").value == "0.3"
         assert "unapplied changes: label, speed" in screen_text(app)
         await pilot.press("enter", "ctrl+s")
-        await wait_until(pilot, lambda: b.mission.find("lru2-1")[2].label == "drive carefully", what="applied")
+        await wait_until(
+            pilot, lambda: b.mission.find("lru2-1")[2].label == "drive carefully", what="applied"
+        )
         assert b.mission.find("lru2-1")[2].params["speed"] == 0.3
-        await wait_until(pilot, lambda: "*drive" not in screen_text(app) and not screen.editor.dirty, what="draft gone")
+        await wait_until(
+            pilot,
+            lambda: "*drive" not in screen_text(app) and not screen.editor.dirty,
+            what="draft gone",
+        )
 
 
 async def test_a_draft_is_discarded_and_said_when_its_skill_leaves_idle():
@@ -503,8 +615,13 @@ async def test_a_draft_is_discarded_and_said_when_its_skill_leaves_idle():
         await pilot.pause()
         assert "*drive next to POI-A" in screen_text(app)
         await pilot.press("s")  # sync through lru2-2: lru2-1 goes to the robot
-        await wait_until(pilot, lambda: "discarded" in status_line(app), what="the draft dropped and said")
-        assert "lru2-1 is now queued on lru2: your unapplied changes to it (label) are discarded" in status_line(app)
+        await wait_until(
+            pilot, lambda: "discarded" in status_line(app), what="the draft dropped and said"
+        )
+        assert (
+            "lru2-1 is now queued on lru2: your unapplied changes to it (label) are discarded"
+            in status_line(app)
+        )
         assert "*drive" not in screen_text(app)
         assert screen.editor.drafts == {}
         # back on it: the skill as it is, read-only
@@ -524,7 +641,9 @@ async def test_a_draft_survives_a_lost_connection():
         screen.editor.query_one("#f-label").value = "kept"
         await pilot.pause()
         app.post_message(ConnectionChanged("reconnecting"))
-        await wait_until(pilot, lambda: screen.editor.query("#readonly"), what="read-only while reconnecting")
+        await wait_until(
+            pilot, lambda: screen.editor.query("#readonly"), what="read-only while reconnecting"
+        )
         assert screen.editor.query_one("#f-label").value == "drive next to POI-A"
         app.post_message(ConnectionChanged("connected"))
         await wait_until(pilot, lambda: not screen.editor.query("#readonly"), what="editable again")
@@ -545,12 +664,30 @@ async def test_status_changes_and_telemetry_repaint_the_lines_that_changed():
     async with app.run_test(size=WIDE) as pilot:
         await inject(app, pilot, b, telemetry=mars_telemetry())
         assert "45%" in screen_text(app)
-        app.post_message(TelemetryChanged(Telemetry(robot="lru1", pose=Pose(x=21.0, y=8.0), battery=0.5, link=0.9, mode="executing", skill="lru1-2", progress=0.7, eta_s=60, at=T0)))
+        app.post_message(
+            TelemetryChanged(
+                Telemetry(
+                    robot="lru1",
+                    pose=Pose(x=21.0, y=8.0),
+                    battery=0.5,
+                    link=0.9,
+                    mode="executing",
+                    skill="lru1-2",
+                    progress=0.7,
+                    eta_s=60,
+                    at=T0,
+                )
+            )
+        )
         await pilot.pause()
         text = screen_text(app)
         assert "70%" in text and "ETA 1m00s" in text and "bat 50%" in text and "45%" not in text
         seq = 100
-        for sid, status in (("lru1-2", "success"), ("lru1-3", "synchwaiting"), ("lru1-3", "running")):
+        for sid, status in (
+            ("lru1-2", "success"),
+            ("lru1-3", "synchwaiting"),
+            ("lru1-3", "running"),
+        ):
             seq += 1
             applied = b.engine.submit(Report(robot="lru1", seq=seq, id=sid, status=status))
             app.post_message(EventsApplied(applied.batch()))
@@ -601,7 +738,9 @@ async def test_quitting_with_unapplied_changes_asks_first():
         await wait_until(pilot, lambda: not isinstance(app.screen, ConfirmScreen), what="back")
         assert app.return_code is None
         await pilot.press("ctrl+q")
-        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the question again")
+        await wait_until(
+            pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the question again"
+        )
         await pilot.press("y")
         await wait_exit(app)
         assert app.return_code == 0
@@ -622,13 +761,23 @@ async def test_at_80x24_a_draft_survives_leaving_the_editor_and_editing_another_
         await pilot.pause()
         assert "*drive next to POI-A" in screen_text(app)
         await pilot.press("enter")  # edit lru2-2: lru2-1's changes become its draft
-        await wait_until(pilot, lambda: screen.editor.skill_id == "lru2-2" and not screen.editor.loading, what="lru2-2 in the editor")
+        await wait_until(
+            pilot,
+            lambda: screen.editor.skill_id == "lru2-2" and not screen.editor.loading,
+            what="lru2-2 in the editor",
+        )
         assert screen.editor.drafts.keys() == {"lru2-1"}
         await pilot.press("escape", "up", "enter")
-        await wait_until(pilot, lambda: screen.editor.skill_id == "lru2-1" and not screen.editor.loading, what="lru2-1 again")
+        await wait_until(
+            pilot,
+            lambda: screen.editor.skill_id == "lru2-1" and not screen.editor.loading,
+            what="lru2-1 again",
+        )
         assert screen.editor.query_one("#f-label").value.startswith("careful ")
         await pilot.press("ctrl+s")
-        await wait_until(pilot, lambda: b.mission.find("lru2-1")[2].label.startswith("careful "), what="applied")
+        await wait_until(
+            pilot, lambda: b.mission.find("lru2-1")[2].label.startswith("careful "), what="applied"
+        )
 
 
 async def test_a_partner_reaching_the_barrier_updates_the_waiting_robots_column():
@@ -640,8 +789,14 @@ async def test_a_partner_reaching_the_barrier_updates_the_waiting_robots_column(
     async with app.run_test(size=WIDE) as pilot:
         await inject(app, pilot, b, telemetry=mars_telemetry())
         assert "b1: waiting for lru1" in screen_text(app)
-        for seq, (sid, status) in enumerate((("lru1-2", "success"), ("lru1-3", "synchwaiting")), start=100):
-            app.post_message(EventsApplied(b.engine.submit(Report(robot="lru1", seq=seq, id=sid, status=status)).batch()))
+        for seq, (sid, status) in enumerate(
+            (("lru1-2", "success"), ("lru1-3", "synchwaiting")), start=100
+        ):
+            app.post_message(
+                EventsApplied(
+                    b.engine.submit(Report(robot="lru1", seq=seq, id=sid, status=status)).batch()
+                )
+            )
             await pilot.pause()
         text = screen_text(app)
         assert "b1: waiting for lru1" not in text

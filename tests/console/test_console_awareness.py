@@ -33,9 +33,24 @@ async def test_keys_switch_between_the_screens():
     app = make_app()
     async with app.run_test(size=SIZE) as pilot:
         await awareness_scenario(app, pilot)
-        for key, screen in (("3", FleetScreen), ("f5", EventLogScreen), ("f6", AlertScreen), ("f2", MissionScreen), ("f4", FleetScreen), ("f2", MissionScreen), ("4", EventLogScreen), ("f2", MissionScreen), ("5", AlertScreen), ("f2", MissionScreen)):
+        for key, screen in (
+            ("3", FleetScreen),
+            ("f5", EventLogScreen),
+            ("f6", AlertScreen),
+            ("f2", MissionScreen),
+            ("f4", FleetScreen),
+            ("f2", MissionScreen),
+            ("4", EventLogScreen),
+            ("f2", MissionScreen),
+            ("5", AlertScreen),
+            ("f2", MissionScreen),
+        ):
             await pilot.press(key)
-            await wait_until(pilot, lambda screen=screen: isinstance(app.screen, screen), what=f"{screen.__name__} after {key}")
+            await wait_until(
+                pilot,
+                lambda screen=screen: isinstance(app.screen, screen),
+                what=f"{screen.__name__} after {key}",
+            )
         assert app.screen is app.mission_screen  # the same schedule screen, not a new one
 
 
@@ -60,7 +75,9 @@ async def test_fleet_screen_shows_presence_manifest_history_and_activity():
         table = app.screen.query_one("DataTable")
         table.focus()
         await pilot.press("down", "down")
-        await wait_until(pilot, lambda: "never registered" in screen_text(app), what="ardea's detail")
+        await wait_until(
+            pilot, lambda: "never registered" in screen_text(app), what="ardea's detail"
+        )
 
 
 async def test_digits_switch_screens_until_typing_starts_the_filter():
@@ -86,7 +103,9 @@ async def test_workflow_filter_the_fleet_by_capability():
         await wait_until(pilot, lambda: isinstance(app.screen, FleetScreen), what="fleet")
         screen = app.screen
         await pilot.press(*"pick_stone")
-        await wait_until(pilot, lambda: screen.shown == ["lru2"], what="only lru2 offers pick_stone")
+        await wait_until(
+            pilot, lambda: screen.shown == ["lru2"], what="only lru2 offers pick_stone"
+        )
         text = screen_text(app)
         assert "1 match 'pick_stone'" in text and "lru1 " not in text
         assert "modules: nav 2.1.0, arm 0.9.3" in text  # lru2's detail follows the filter
@@ -96,7 +115,11 @@ async def test_workflow_filter_the_fleet_by_capability():
         await wait_until(pilot, lambda: screen.shown == ["lru1", "lru2"], what="the two LRUs")
         await pilot.press("ctrl+u")  # clear the input, then a capability nobody has
         await pilot.press(*"teleport")
-        await wait_until(pilot, lambda: "no robot matches the filter" in screen_text(app), what="empty result explained")
+        await wait_until(
+            pilot,
+            lambda: "no robot matches the filter" in screen_text(app),
+            what="empty result explained",
+        )
         # a robot that registers later with the capability appears while filtered
         await pilot.press("ctrl+u")
         await pilot.press(*"module:arm")
@@ -114,7 +137,11 @@ async def test_skill_picker_says_which_other_robots_offer_a_skill():
         await pilot.press("a")
         await wait_until(pilot, lambda: isinstance(app.screen, SkillPicker), what="picker")
         await pilot.press(*"identify")
-        await wait_until(pilot, lambda: "also offered by: lru2" in screen_text(app), what="who else offers identify_stone")
+        await wait_until(
+            pilot,
+            lambda: "also offered by: lru2" in screen_text(app),
+            what="who else offers identify_stone",
+        )
 
 
 async def test_event_log_lists_operations_reports_refusals_failures_and_alerts():
@@ -124,8 +151,17 @@ async def test_event_log_lists_operations_reports_refusals_failures_and_alerts()
         await pilot.press("f5")
         await wait_until(pilot, lambda: isinstance(app.screen, EventLogScreen), what="log")
         text = screen_text(app)
-        for needle in ("ada@host-4711-a1b2c3", "edit: lru2-2 label=find a good stone", "sync_ack", "▶ lru1-1 running", "✗ lru2-2 failure: no stone in reach",
-                       "Run refused: [lru1] lru1 is already executing", "robot lander went offline", "battery low", "last 10,000 entries"):
+        for needle in (
+            "ada@host-4711-a1b2c3",
+            "edit: lru2-2 label=find a good stone",
+            "sync_ack",
+            "▶ lru1-1 running",
+            "✗ lru2-2 failure: no stone in reach",
+            "Run refused: [lru1] lru1 is already executing",
+            "robot lander went offline",
+            "battery low",
+            "last 10,000 entries",
+        ):
             assert needle in text, needle
         kinds = {e.kind for e in app.event_log.entries}
         assert kinds == {"operation", "report", "failure", "refusal", "alert"}
@@ -134,16 +170,24 @@ async def test_event_log_lists_operations_reports_refusals_failures_and_alerts()
         await wait_until(pilot, lambda: len(screen.rows) == 1, what="one failure")
         await pilot.press("ctrl+u")
         await pilot.press(*"robot:lander")
-        await wait_until(pilot, lambda: len(screen.rows) == 1 and "went offline" in screen_text(app), what="lander's line")
+        await wait_until(
+            pilot,
+            lambda: len(screen.rows) == 1 and "went offline" in screen_text(app),
+            what="lander's line",
+        )
         await pilot.press("ctrl+u")
         await pilot.press(*"lru2-2")
-        await wait_until(pilot, lambda: len(screen.rows) == 4, what="text filter")  # edit, sync, running, failure
+        await wait_until(
+            pilot, lambda: len(screen.rows) == 4, what="text filter"
+        )  # edit, sync, running, failure
         # new entries appear while the log is shown (filtered)
         n = len(screen.rows)
         app.post_message(FleetChanged(RobotInfo(name="lru2", online=False)))
         app.post_message(FleetChanged(RobotInfo(name="lru2", online=False)))
         await pilot.press("ctrl+u")
-        await wait_until(pilot, lambda: "robot lru2 went offline" in screen_text(app), what="live entry")
+        await wait_until(
+            pilot, lambda: "robot lru2 went offline" in screen_text(app), what="live entry"
+        )
         assert len(screen.rows) > n
 
 
@@ -155,14 +199,20 @@ async def test_export_the_log_to_json_lines(tmp_path):
         await wait_until(pilot, lambda: isinstance(app.screen, EventLogScreen), what="log")
         log_screen = app.screen
         await pilot.press(*"robot:lru2")
-        await wait_until(pilot, lambda: len(log_screen.rows) == len(app.event_log.select("robot:lru2")), what="filtered")
+        await wait_until(
+            pilot,
+            lambda: len(log_screen.rows) == len(app.event_log.select("robot:lru2")),
+            what="filtered",
+        )
         await pilot.press("ctrl+s")
         await wait_until(pilot, lambda: isinstance(app.screen, PathPrompt), what="path prompt")
         target = tmp_path / "lru2.jsonl"
         prompt = app.screen.query_one("Input")
         prompt.value = str(target)
         await pilot.press("enter")
-        await wait_until(pilot, lambda: target.exists() and app.screen is log_screen, what="exported")
+        await wait_until(
+            pilot, lambda: target.exists() and app.screen is log_screen, what="exported"
+        )
         back = read_jsonl(target)
         assert back == app.event_log.select("robot:lru2") and len(back) >= 5
         assert all("lru2" in e.robots for e in back)
@@ -182,7 +232,15 @@ async def test_alerts_badge_list_and_acknowledge():
         await wait_until(pilot, lambda: isinstance(app.screen, AlertScreen), what="alert list")
         text = screen_text(app)
         assert "5 unacknowledged of 5" in text
-        for needle in ("low battery", "out of range", "offline", "refusal", "failure", "no stone in reach", "both"):
+        for needle in (
+            "low battery",
+            "out of range",
+            "offline",
+            "refusal",
+            "failure",
+            "no stone in reach",
+            "both",
+        ):
             assert needle in text, needle
         await pilot.press("enter")  # the newest: low battery
         await wait_until(pilot, lambda: app.alerts.unacknowledged == 4, what="one acknowledged")
@@ -204,14 +262,24 @@ async def test_theme_option_and_palette_choice_remembered_in_the_config(tmp_path
         await pilot.press("ctrl+p")
         await pilot.pause()
         await pilot.press(*"theme")
-        await wait_until(pilot, lambda: "Change theme" in screen_text(app) or "Theme" in screen_text(app), what="theme command")
+        await wait_until(
+            pilot,
+            lambda: "Change theme" in screen_text(app) or "Theme" in screen_text(app),
+            what="theme command",
+        )
         await pilot.press("enter")
-        await wait_until(pilot, lambda: "Search for themes" in screen_text(app), what="theme palette")
+        await wait_until(
+            pilot, lambda: "Search for themes" in screen_text(app), what="theme palette"
+        )
         await pilot.press(*"missionctl-light")
-        await wait_until(pilot, lambda: "missionctl-light" in screen_text(app), what="light theme offered")
+        await wait_until(
+            pilot, lambda: "missionctl-light" in screen_text(app), what="light theme offered"
+        )
         await pilot.press("enter")
         await wait_until(pilot, lambda: app.theme == "missionctl-light", what="theme changed")
-        await wait_until(pilot, lambda: load_config(path).theme == "missionctl-light", what="theme saved")
+        await wait_until(
+            pilot, lambda: load_config(path).theme == "missionctl-light", what="theme saved"
+        )
     cfg = load_config(path)
     assert cfg.keymap == {"mission.sync": "S"} and cfg.problems == []
     app2 = make_app(config=cfg)
@@ -224,8 +292,12 @@ async def test_user_themes_and_a_broken_one_named_in_a_notice(tmp_path, monkeypa
     themes.mkdir(parents=True)
     from console.themes.loader import SHIPPED_DIR
 
-    (themes / "mine.yaml").write_text((SHIPPED_DIR / "light.yaml").read_text().replace("missionctl-light", "my-light"))
-    (themes / "broken.yaml").write_text("name: broken\ndark: maybe\nprimary: '#000000'\nvariables: {}\n")
+    (themes / "mine.yaml").write_text(
+        (SHIPPED_DIR / "light.yaml").read_text().replace("missionctl-light", "my-light")
+    )
+    (themes / "broken.yaml").write_text(
+        "name: broken\ndark: maybe\nprimary: '#000000'\nvariables: {}\n"
+    )
     monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "xdg"))
     app = make_app(config=ConsoleConfig(theme="my-light"))
     async with app.run_test(size=SIZE) as pilot:
@@ -241,7 +313,15 @@ async def test_sixteen_colours_give_each_status_its_own_ansi_colour():
     async with app.run_test(size=SIZE) as pilot:
         await inject(app, pilot, Builder(MARS))
         assert app.ansi16
-        statuses = ["status-idle", "status-idle-synchronized", "status-synchwaiting", "status-running", "status-paused", "status-success", "status-failure"]
+        statuses = [
+            "status-idle",
+            "status-idle-synchronized",
+            "status-synchwaiting",
+            "status-running",
+            "status-paused",
+            "status-success",
+            "status-failure",
+        ]
         colours = [app.theme_variables[s] for s in statuses]
         assert colours == [ANSI16_STATUS[s] for s in statuses]
         assert len(set(colours)) == len(statuses)  # none merge
@@ -256,7 +336,9 @@ async def test_log_screen_shows_the_last_entries_of_a_long_log():
     app = make_app()
     async with app.run_test(size=SIZE) as pilot:
         await awareness_scenario(app, pilot)
-        app.event_log.entries = type(app.event_log.entries)(app.event_log.entries, maxlen=SHOW_LIMIT + 200)
+        app.event_log.entries = type(app.event_log.entries)(
+            app.event_log.entries, maxlen=SHOW_LIMIT + 200
+        )
         for i in range(SHOW_LIMIT + 300):  # the log forgets its oldest 100 + scenario entries
             app.event_log.add("report", f"▶ lru1-{i} running", app.clock(), robots=["lru1"])
         await pilot.press("f5")
@@ -270,7 +352,11 @@ async def test_log_screen_shows_the_last_entries_of_a_long_log():
         assert screen.rows[-1] == app.event_log.seq and len(screen.rows) == SHOW_LIMIT
         assert screen.rows[0] >= app.event_log.entries[0].seq
         await pilot.press(*"robot:lru2")
-        await wait_until(pilot, lambda: screen.matching == 1 and screen.rows == [app.event_log.seq], what="only the lru2 line left in the log")
+        await wait_until(
+            pilot,
+            lambda: screen.matching == 1 and screen.rows == [app.event_log.seq],
+            what="only the lru2 line left in the log",
+        )
 
 
 TERM_PROBE = """
@@ -300,10 +386,21 @@ def test_a_16_colour_terminal_is_detected(term, ansi16):
 
     from console_state import ROOT
 
-    env = {k: v for k, v in os.environ.items() if k not in ("COLORTERM", "TEXTUAL_COLOR_SYSTEM", "NO_COLOR")}
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("COLORTERM", "TEXTUAL_COLOR_SYSTEM", "NO_COLOR")
+    }
     env["TERM"] = term
     master, slave = pty.openpty()
-    p = subprocess.Popen([sys.executable, "-c", TERM_PROBE], stdin=slave, stdout=slave, stderr=subprocess.PIPE, env=env, cwd=ROOT)
+    p = subprocess.Popen(
+        [sys.executable, "-c", TERM_PROBE],
+        stdin=slave,
+        stdout=slave,
+        stderr=subprocess.PIPE,
+        env=env,
+        cwd=ROOT,
+    )
     os.close(slave)
     deadline = time.monotonic() + 30
     try:
@@ -326,7 +423,9 @@ def test_a_16_colour_terminal_is_detected(term, ansi16):
 
 
 async def test_screen_keys_are_remappable():
-    app = make_app(config=ConsoleConfig(keymap={"app.show_fleet": "f9", "alerts.ack_all": "ctrl+a"}))
+    app = make_app(
+        config=ConsoleConfig(keymap={"app.show_fleet": "f9", "alerts.ack_all": "ctrl+a"})
+    )
     async with app.run_test(size=SIZE) as pilot:
         await awareness_scenario(app, pilot)
         assert app.action_keys()["show_fleet"] == "f9"
@@ -338,7 +437,9 @@ async def test_screen_keys_are_remappable():
         await pilot.press("f6")
         await wait_until(pilot, lambda: isinstance(app.screen, AlertScreen), what="alerts")
         await pilot.press("ctrl+a")
-        await wait_until(pilot, lambda: app.alerts.unacknowledged == 0, what="all acknowledged with ctrl+a")
+        await wait_until(
+            pilot, lambda: app.alerts.unacknowledged == 0, what="all acknowledged with ctrl+a"
+        )
 
 
 async def test_palette_offers_the_shown_screens_own_actions():
@@ -355,9 +456,13 @@ async def test_palette_offers_the_shown_screens_own_actions():
         await pilot.press("ctrl+p")
         await pilot.pause()
         await pilot.press(*"export")
-        await wait_until(pilot, lambda: "Event log: Export" in screen_text(app), what="palette entry")
+        await wait_until(
+            pilot, lambda: "Event log: Export" in screen_text(app), what="palette entry"
+        )
         await pilot.press("enter")
-        await wait_until(pilot, lambda: isinstance(app.screen, PathPrompt), what="export prompt from the palette")
+        await wait_until(
+            pilot, lambda: isinstance(app.screen, PathPrompt), what="export prompt from the palette"
+        )
 
 
 async def test_what_happened_while_reconnecting_raises_alerts():
@@ -377,7 +482,9 @@ async def test_what_happened_while_reconnecting_raises_alerts():
         kinds = {(a.kind, a.robot, a.skill) for a in app.alerts.alerts}
         assert kinds == {("failure", "lru1", "lru1-2"), ("offline", "lru2", None)}
         assert app.bells == 2
-        assert any(e.kind == "failure" and "wheel stuck in sand" in e.text for e in app.event_log.entries)
+        assert any(
+            e.kind == "failure" and "wheel stuck in sand" in e.text for e in app.event_log.entries
+        )
         # the same state again (another resync): nothing new
         app.post_message(StateLoaded(b.snapshot(), b.library, fleet({**MARS_FLEET, "lru2": False})))
         await pilot.pause()
@@ -394,7 +501,11 @@ async def test_an_unreadable_message_raises_one_alert_naming_its_key_and_field()
     async with app.run_test(size=SIZE) as pilot:
         await inject(app, pilot, Builder(MARS))
         bridge = ClientBridge(app, "tcp/127.0.0.1:7447")
-        m = Malformed("telemetry", "mc/v1/robot/lru1/telemetry", "battery: Input should be less than or equal to 1")
+        m = Malformed(
+            "telemetry",
+            "mc/v1/robot/lru1/telemetry",
+            "battery: Input should be less than or equal to 1",
+        )
         bridge._on_client("malformed", m)
         await wait_until(pilot, lambda: app.alerts.unacknowledged == 1, what="an alert")
         [a] = app.alerts.alerts

@@ -44,7 +44,9 @@ def test_a_manifest_decides_over_the_library():
     info = m.robots["lru1"]
     # lru1 registered with a manifest without take_science_image (its camera module is missing)
     skills = {k: v for k, v in info.manifest.skills.items() if k != "take_science_image"}
-    m.set_robot(info.model_copy(update={"manifest": info.manifest.model_copy(update={"skills": skills})}))
+    m.set_robot(
+        info.model_copy(update={"manifest": info.manifest.model_copy(update={"skills": skills})})
+    )
     assert robots_offering(m, "take_science_image") == []
     # ardea never registered: the library's drone type says what it can do
     assert robots_offering(m, "fly_to") == ["ardea"]
@@ -92,14 +94,29 @@ def test_log_turns_batches_into_operations_and_reports():
     batch = applied.batch("ada@host-1-abc", "sync_ack")
     m.apply(batch)
     (op,) = log.add_batch(batch, m, T0)
-    assert (op.kind, op.user, op.client, op.robots, op.revision) == ("operation", "ada", "host-1-abc", ["lru1"], batch.revision)
+    assert (op.kind, op.user, op.client, op.robots, op.revision) == (
+        "operation",
+        "ada",
+        "host-1-abc",
+        ["lru1"],
+        batch.revision,
+    )
     assert "lru1-1 idle_synchronized" in op.text
     b.report("lru1", "lru1-1", "running")
     b.report("lru1", "lru1-1", "failure", "wheel stuck")
     # the two reports as the server would publish them
     from backend.core import events as ev
 
-    fail = ev.EventBatch(revision=m.mission.revision + 1, events=[ev.SkillChanged(id="lru1-1", changes={"status": "failure", "status_info": "wheel stuck"})], actor="lru1", op="report")
+    fail = ev.EventBatch(
+        revision=m.mission.revision + 1,
+        events=[
+            ev.SkillChanged(
+                id="lru1-1", changes={"status": "failure", "status_info": "wheel stuck"}
+            )
+        ],
+        actor="lru1",
+        op="report",
+    )
     m.apply(fail)
     (rep,) = log.add_batch(fail, m, T0)
     assert (rep.kind, rep.robots, rep.skill, rep.client) == ("failure", ["lru1"], "lru1-1", "lru1")
@@ -131,14 +148,31 @@ def tel(robot: str, battery: float = 1.0, in_range: bool = True) -> Telemetry:
 def test_low_battery_once_per_crossing_and_out_of_range_once_per_loss():
     book = AlertBook()
     kinds = []
-    for battery, in_range in ((0.5, True), (0.15, True), (0.10, False), (0.12, False), (0.5, True), (0.1, False)):
-        kinds += [a.kind for a in book.from_telemetry(tel("lru1", battery, in_range), T0 + timedelta(minutes=len(kinds) * 5))]
+    for battery, in_range in (
+        (0.5, True),
+        (0.15, True),
+        (0.10, False),
+        (0.12, False),
+        (0.5, True),
+        (0.1, False),
+    ):
+        kinds += [
+            a.kind
+            for a in book.from_telemetry(
+                tel("lru1", battery, in_range), T0 + timedelta(minutes=len(kinds) * 5)
+            )
+        ]
     assert kinds == ["low_battery", "out_of_range", "out_of_range", "low_battery"]
 
 
 def test_offline_only_on_a_change_not_at_load():
     book = AlertBook()
-    book.seed_fleet({"ardea": RobotInfo(name="ardea", online=False), "lru1": RobotInfo(name="lru1", online=True)})
+    book.seed_fleet(
+        {
+            "ardea": RobotInfo(name="ardea", online=False),
+            "lru1": RobotInfo(name="lru1", online=True),
+        }
+    )
     assert book.from_fleet(RobotInfo(name="ardea", online=False, since=T0), T0) is None
     a = book.from_fleet(RobotInfo(name="lru1", online=False, since=T0), T0)
     assert a is not None and (a.kind, a.robot) == ("offline", "lru1")
@@ -146,12 +180,24 @@ def test_offline_only_on_a_change_not_at_load():
 
 def test_server_alert_of_a_situation_the_console_saw_is_merged():
     book = AlertBook()
-    mine = book.add("failure", "lru1: ✗ lru1-1 failure", T0, level="error", robot="lru1", skill="lru1-1")
-    theirs = Alert(level="error", kind="failure", robot="lru1", skill="lru1-1", message="lru1: lru1-1 failed: wheel stuck", at=T0 + timedelta(seconds=1))
+    mine = book.add(
+        "failure", "lru1: ✗ lru1-1 failure", T0, level="error", robot="lru1", skill="lru1-1"
+    )
+    theirs = Alert(
+        level="error",
+        kind="failure",
+        robot="lru1",
+        skill="lru1-1",
+        message="lru1: lru1-1 failed: wheel stuck",
+        at=T0 + timedelta(seconds=1),
+    )
     assert book.from_server(theirs) is None
     assert len(book.alerts) == 1 and mine.source == "both"
     # another attempt's failure is a new alert; an old server's alert (no kind) is its own
-    assert book.add("failure", "lru1-1.2 failed", T0, level="error", robot="lru1", skill="lru1-1.2") is not None
+    assert (
+        book.add("failure", "lru1-1.2 failed", T0, level="error", robot="lru1", skill="lru1-1.2")
+        is not None
+    )
     assert book.from_server(Alert(robot="lru1", message="something else", at=T0)).kind == "server"
     assert book.unacknowledged == 3
     assert book.acknowledge(mine.id) == 1 and book.unacknowledged == 2
@@ -163,7 +209,10 @@ def test_repeated_refusal_counts_instead_of_piling_up():
     assert book.add("refusal", "Run refused: busy", T0, robot="lru1") is not None
     assert book.add("refusal", "Run refused: busy", T0 + timedelta(seconds=5), robot="lru1") is None
     assert book.alerts[0].count == 2
-    assert book.add("refusal", "Run refused: busy", T0 + timedelta(minutes=5), robot="lru1") is not None
+    assert (
+        book.add("refusal", "Run refused: busy", T0 + timedelta(minutes=5), robot="lru1")
+        is not None
+    )
 
 
 # -- themes ------------------------------------------------------------------------------------------
@@ -172,7 +221,12 @@ def test_repeated_refusal_counts_instead_of_piling_up():
 def test_shipped_themes_load_and_set_every_status_colour():
     themes, problems = load_themes([SHIPPED_DIR])
     assert problems == []
-    assert {"missionctl-dark", "missionctl-light", "missionctl-high-contrast", "missionctl-colorblind"} <= set(themes)
+    assert {
+        "missionctl-dark",
+        "missionctl-light",
+        "missionctl-high-contrast",
+        "missionctl-colorblind",
+    } <= set(themes)
     for t in themes.values():
         assert set(STATUS_DEFAULTS) <= set(t.variables), t.name
     assert themes["missionctl-light"].dark is False
@@ -181,8 +235,14 @@ def test_shipped_themes_load_and_set_every_status_colour():
 def test_broken_theme_files_are_skipped_with_file_and_line(tmp_path):
     good = (SHIPPED_DIR / "dark.yaml").read_text().replace("missionctl-dark", "mine")
     (tmp_path / "mine.yaml").write_text(good)
-    (tmp_path / "bad-colour.yaml").write_text(good.replace("name: mine", "name: bad").replace('status-failure: "#ff5f5f"', 'status-failure: "reddish"'))
-    (tmp_path / "missing.yaml").write_text(good.replace("name: mine", "name: missing").replace('  status-running: "#5fd7ff"\n', ""))
+    (tmp_path / "bad-colour.yaml").write_text(
+        good.replace("name: mine", "name: bad").replace(
+            'status-failure: "#ff5f5f"', 'status-failure: "reddish"'
+        )
+    )
+    (tmp_path / "missing.yaml").write_text(
+        good.replace("name: mine", "name: missing").replace('  status-running: "#5fd7ff"\n', "")
+    )
     (tmp_path / "syntax.yaml").write_text("name: x\nprimary: [unclosed\n")
     themes, problems = load_themes([tmp_path])
     assert set(themes) == {"mine"}
@@ -192,7 +252,11 @@ def test_broken_theme_files_are_skipped_with_file_and_line(tmp_path):
     syntax = next(p for p in problems if "syntax.yaml" in p)
     assert syntax.startswith(f"{tmp_path / 'syntax.yaml'}:") and "theme skipped" in syntax
     # the line of the bad value
-    bad_line = next(i for i, line in enumerate((tmp_path / "bad-colour.yaml").read_text().splitlines(), 1) if "reddish" in line)
+    bad_line = next(
+        i
+        for i, line in enumerate((tmp_path / "bad-colour.yaml").read_text().splitlines(), 1)
+        if "reddish" in line
+    )
     assert any(f"bad-colour.yaml:{bad_line}:" in p for p in problems)
 
 
@@ -200,7 +264,9 @@ def test_a_theme_file_that_is_not_a_mapping(tmp_path):
     p = tmp_path / "list.yaml"
     p.write_text("- a\n- b\n")
     theme, problems = load_theme_file(p)
-    assert theme is None and problems == [f"{p}:1: expected a mapping (name, dark, primary, …, variables); theme skipped"]
+    assert theme is None and problems == [
+        f"{p}:1: expected a mapping (name, dark, primary, …, variables); theme skipped"
+    ]
 
 
 def test_theme_saved_in_toml_and_yaml_config_keeping_the_rest(tmp_path):

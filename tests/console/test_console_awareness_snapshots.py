@@ -38,19 +38,41 @@ def _scenario(*keys: str, expect=()):
 
 
 def test_fleet_screen(snap_compare):
-    assert snap_compare(make_app(), terminal_size=(110, 30), run_before=_scenario("f4", expect=("4 robots, 2 online", "lru_manipulator", "modules: nav 2.1.0")))
+    assert snap_compare(
+        make_app(),
+        terminal_size=(110, 30),
+        run_before=_scenario(
+            "f4", expect=("4 robots, 2 online", "lru_manipulator", "modules: nav 2.1.0")
+        ),
+    )
 
 
 def test_fleet_filtered_by_capability_80x24(snap_compare):
-    assert snap_compare(make_app(), terminal_size=(80, 24), run_before=_scenario("f4", *"pick_stone", expect=("1 match 'pick_stone'", "arm 0.9.3")))
+    assert snap_compare(
+        make_app(),
+        terminal_size=(80, 24),
+        run_before=_scenario("f4", *"pick_stone", expect=("1 match 'pick_stone'", "arm 0.9.3")),
+    )
 
 
 def test_event_log(snap_compare):
-    assert snap_compare(make_app(), terminal_size=(130, 30), run_before=_scenario("f5", expect=("ada@host-4711-a1b2c3", "✗ lru2-2 failure", "Run refused: [lru1]")))
+    assert snap_compare(
+        make_app(),
+        terminal_size=(130, 30),
+        run_before=_scenario(
+            "f5", expect=("ada@host-4711-a1b2c3", "✗ lru2-2 failure", "Run refused: [lru1]")
+        ),
+    )
 
 
 def test_alert_list(snap_compare):
-    assert snap_compare(make_app(), terminal_size=(120, 24), run_before=_scenario("f6", "down", "enter", expect=("4 unacknowledged of 5", "low battery", "both")))
+    assert snap_compare(
+        make_app(),
+        terminal_size=(120, 24),
+        run_before=_scenario(
+            "f6", "down", "enter", expect=("4 unacknowledged of 5", "low battery", "both")
+        ),
+    )
 
 
 def _schedule(expect=("[b1]", "45%", "✗", "‖", "◷")):
@@ -78,4 +100,6 @@ def test_schedule_in_16_colours(snap_compare):
 
 
 def test_alert_badge_on_the_schedule_80x24(snap_compare):
-    assert snap_compare(make_app(), terminal_size=(80, 24), run_before=_scenario(expect=("⚠ 5 alerts (F6)", "lru1")))
+    assert snap_compare(
+        make_app(), terminal_size=(80, 24), run_before=_scenario(expect=("⚠ 5 alerts (F6)", "lru1"))
+    )

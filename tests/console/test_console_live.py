@@ -39,7 +39,12 @@ def status(app, sid):
 
 
 async def connected(app, pilot, *online: str) -> None:
-    await wait_until(pilot, lambda: app.model.connected and app.model.mission is not None, SLOW, "connected with state")
+    await wait_until(
+        pilot,
+        lambda: app.model.connected and app.model.mission is not None,
+        SLOW,
+        "connected with state",
+    )
     for r in online:
         await wait_until(pilot, lambda r=r: app.model.is_online(r), SLOW, f"{r} online")
 
@@ -63,19 +68,39 @@ async def test_add_edit_sync_run_success(live):
         await wait_until(pilot, lambda: skill(app, "lru1-3") is not None, SLOW, "lru1-3 added")
         assert skill(app, "lru1-3").skill == "recharge"
         editor = app.mission_screen.editor
-        await wait_until(pilot, lambda: editor.skill_id == "lru1-3" and editor.query("#f-target_level"), SLOW, "editor on lru1-3")
+        await wait_until(
+            pilot,
+            lambda: editor.skill_id == "lru1-3" and editor.query("#f-target_level"),
+            SLOW,
+            "editor on lru1-3",
+        )
         editor.query_one("#f-target_level").value = "0.6"
         editor.query_one("#f-label").value = "top up"
         await pilot.pause()
         await pilot.press("ctrl+s")
-        await wait_until(pilot, lambda: skill(app, "lru1-3").params.get("target_level") == 0.6, SLOW, "edit applied on the server")
+        await wait_until(
+            pilot,
+            lambda: skill(app, "lru1-3").params.get("target_level") == 0.6,
+            SLOW,
+            "edit applied on the server",
+        )
         assert skill(app, "lru1-3").label == "top up"
         await pilot.press("escape")
         await pick(app, pilot, "lru1-3")
         await pilot.press("s")
-        await wait_until(pilot, lambda: all(status(app, f"lru1-{i}") == Status.IDLE_SYNCHRONIZED for i in (1, 2, 3)), SLOW, "synchronized")
+        await wait_until(
+            pilot,
+            lambda: all(status(app, f"lru1-{i}") == Status.IDLE_SYNCHRONIZED for i in (1, 2, 3)),
+            SLOW,
+            "synchronized",
+        )
         await pilot.press("r")
-        await wait_until(pilot, lambda: all(status(app, f"lru1-{i}") == Status.SUCCESS for i in (1, 2, 3)), SLOW, "all succeeded")
+        await wait_until(
+            pilot,
+            lambda: all(status(app, f"lru1-{i}") == Status.SUCCESS for i in (1, 2, 3)),
+            SLOW,
+            "all succeeded",
+        )
         await pilot.pause()
         text = screen_text(app)
         assert "✓ drive to POI-A" in text and "✓ top up" in text
@@ -88,11 +113,23 @@ async def test_unsync_takes_queued_skills_back(live):
         await connected(app, pilot, "lru1", "lru2")
         await pick(app, pilot, "lru2-2")
         await pilot.press("s")
-        await wait_until(pilot, lambda: status(app, "lru2-2") == Status.IDLE_SYNCHRONIZED, SLOW, "synchronized")
+        await wait_until(
+            pilot, lambda: status(app, "lru2-2") == Status.IDLE_SYNCHRONIZED, SLOW, "synchronized"
+        )
         await pick(app, pilot, "lru2-1")
         await pilot.press("u")
-        await wait_until(pilot, lambda: status(app, "lru2-1") == Status.IDLE and status(app, "lru2-2") == Status.IDLE, SLOW, "back in the plan")
-        await wait_until(pilot, lambda: "took back lru2-1, lru2-2" in app.mission_screen.message, SLOW, "status line")
+        await wait_until(
+            pilot,
+            lambda: status(app, "lru2-1") == Status.IDLE and status(app, "lru2-2") == Status.IDLE,
+            SLOW,
+            "back in the plan",
+        )
+        await wait_until(
+            pilot,
+            lambda: "took back lru2-1, lru2-2" in app.mission_screen.message,
+            SLOW,
+            "status line",
+        )
 
 
 async def test_failure_then_retry(live):
@@ -102,22 +139,37 @@ async def test_failure_then_retry(live):
         await connected(app, pilot, "lru1")
         await pick(app, pilot, "lru1-1")
         editor = app.mission_screen.editor
-        await wait_until(pilot, lambda: editor.skill_id == "lru1-1" and editor.query("#f-label"), SLOW, "editor")
+        await wait_until(
+            pilot, lambda: editor.skill_id == "lru1-1" and editor.query("#f-label"), SLOW, "editor"
+        )
         editor.query_one("#f-label").value = "drive [fail]"
         await pilot.pause()
         editor.action_apply()
-        await wait_until(pilot, lambda: skill(app, "lru1-1").label == "drive [fail]", SLOW, "label applied")
+        await wait_until(
+            pilot, lambda: skill(app, "lru1-1").label == "drive [fail]", SLOW, "label applied"
+        )
         await pick(app, pilot, "lru1-1")
         await pilot.press("s")
-        await wait_until(pilot, lambda: status(app, "lru1-1") == Status.IDLE_SYNCHRONIZED, SLOW, "synchronized")
+        await wait_until(
+            pilot, lambda: status(app, "lru1-1") == Status.IDLE_SYNCHRONIZED, SLOW, "synchronized"
+        )
         await pilot.press("r")
         await wait_until(pilot, lambda: status(app, "lru1-1") == Status.FAILURE, SLOW, "failed")
-        await wait_until(pilot, lambda: "simulated failure of drive_to" in screen_text(app), SLOW, "the reason on screen")
+        await wait_until(
+            pilot,
+            lambda: "simulated failure of drive_to" in screen_text(app),
+            SLOW,
+            "the reason on screen",
+        )
         await pick(app, pilot, "lru1-1")
         await pilot.press("t")
-        await wait_until(pilot, lambda: status(app, "lru1-1.2") == Status.IDLE_SYNCHRONIZED, SLOW, "retry queued")
+        await wait_until(
+            pilot, lambda: status(app, "lru1-1.2") == Status.IDLE_SYNCHRONIZED, SLOW, "retry queued"
+        )
         await pilot.press("r")
-        await wait_until(pilot, lambda: status(app, "lru1-1.2") == Status.SUCCESS, SLOW, "retry succeeded")
+        await wait_until(
+            pilot, lambda: status(app, "lru1-1.2") == Status.SUCCESS, SLOW, "retry succeeded"
+        )
         assert status(app, "lru1-1") == Status.FAILURE  # the log keeps the failed attempt
         await pilot.pause()
         assert "#2" in screen_text(app)
@@ -132,7 +184,9 @@ async def test_barrier_across_two_robots(live):
         await pilot.press("space")
         await pick(app, pilot, "lru2-1")
         await pilot.press("space", "b")
-        await wait_until(pilot, lambda: app.model.barrier_of("lru1-1") is not None, SLOW, "barrier made")
+        await wait_until(
+            pilot, lambda: app.model.barrier_of("lru1-1") is not None, SLOW, "barrier made"
+        )
         bid = app.model.barrier_of("lru1-1")
         assert app.model.barrier_of("lru2-1") == bid
         await pilot.pause()
@@ -141,9 +195,19 @@ async def test_barrier_across_two_robots(live):
         await pilot.press("s")
         await pick(app, pilot, "lru2-1")
         await pilot.press("s")
-        await wait_until(pilot, lambda: status(app, "lru1-1") == status(app, "lru2-1") == Status.IDLE_SYNCHRONIZED, SLOW, "both synchronized")
+        await wait_until(
+            pilot,
+            lambda: status(app, "lru1-1") == status(app, "lru2-1") == Status.IDLE_SYNCHRONIZED,
+            SLOW,
+            "both synchronized",
+        )
         await pilot.press("R")  # run all
-        await wait_until(pilot, lambda: status(app, "lru1-1") == status(app, "lru2-1") == Status.SUCCESS, SLOW, "both ran")
+        await wait_until(
+            pilot,
+            lambda: status(app, "lru1-1") == status(app, "lru2-1") == Status.SUCCESS,
+            SLOW,
+            "both ran",
+        )
 
 
 async def test_a_second_console_sees_the_first_ones_edit(live):
@@ -154,13 +218,34 @@ async def test_a_second_console_sees_the_first_ones_edit(live):
         await connected(two, p2)
         await pick(one, p1, "lru2-2")
         editor = one.mission_screen.editor
-        await wait_until(p1, lambda: editor.skill_id == "lru2-2" and editor.query("#f-search_radius"), SLOW, "editor")
+        await wait_until(
+            p1,
+            lambda: editor.skill_id == "lru2-2" and editor.query("#f-search_radius"),
+            SLOW,
+            "editor",
+        )
         editor.query_one("#f-search_radius").value = "4.5"
         await p1.pause()
         editor.action_apply()
-        await wait_until(p2, lambda: skill(two, "lru2-2") is not None and skill(two, "lru2-2").params.get("search_radius") == 4.5, SLOW, "the other console sees it")
+        await wait_until(
+            p2,
+            lambda: (
+                skill(two, "lru2-2") is not None
+                and skill(two, "lru2-2").params.get("search_radius") == 4.5
+            ),
+            SLOW,
+            "the other console sees it",
+        )
         await pick(two, p2, "lru2-2")
-        await wait_until(p2, lambda: two.mission_screen.editor.query("#f-search_radius") and two.mission_screen.editor.query_one("#f-search_radius").value == "4.5", SLOW, "shown in its editor")
+        await wait_until(
+            p2,
+            lambda: (
+                two.mission_screen.editor.query("#f-search_radius")
+                and two.mission_screen.editor.query_one("#f-search_radius").value == "4.5"
+            ),
+            SLOW,
+            "shown in its editor",
+        )
 
 
 async def test_robot_killed_shows_offline(live):
@@ -169,11 +254,20 @@ async def test_robot_killed_shows_offline(live):
     async with app.run_test(size=SIZE) as pilot:
         await connected(app, pilot, "lru1", "lru2")
         live.kill_robots()
-        await wait_until(pilot, lambda: not app.model.is_online("lru1") and not app.model.is_online("lru2"), SLOW, "offline")
-        await wait_until(pilot, lambda: screen_text(app).count("✕ offline") == 2, SLOW, "offline in both headers")
+        await wait_until(
+            pilot,
+            lambda: not app.model.is_online("lru1") and not app.model.is_online("lru2"),
+            SLOW,
+            "offline",
+        )
+        await wait_until(
+            pilot, lambda: screen_text(app).count("✕ offline") == 2, SLOW, "offline in both headers"
+        )
         await pick(app, pilot, "lru1-1")
         await pilot.press("s")
-        assert "lru1 is offline since" in app.mission_screen.message  # sync disabled, with the reason
+        assert (
+            "lru1 is offline since" in app.mission_screen.message
+        )  # sync disabled, with the reason
 
 
 async def test_server_restart_console_resyncs(live):
@@ -182,24 +276,41 @@ async def test_server_restart_console_resyncs(live):
         await connected(app, pilot)
         await pick(app, pilot, "lru1-2")
         editor = app.mission_screen.editor
-        await wait_until(pilot, lambda: editor.skill_id == "lru1-2" and editor.query("#f-label"), SLOW, "editor")
+        await wait_until(
+            pilot, lambda: editor.skill_id == "lru1-2" and editor.query("#f-label"), SLOW, "editor"
+        )
         editor.query_one("#f-label").value = "look closer"
         await pilot.pause()
         editor.action_apply()
-        await wait_until(pilot, lambda: skill(app, "lru1-2").label == "look closer", SLOW, "edit applied")
+        await wait_until(
+            pilot, lambda: skill(app, "lru1-2").label == "look closer", SLOW, "edit applied"
+        )
         revision = app.model.mission.revision
         live.stop_server()
-        await wait_until(pilot, lambda: app.model.connection == "reconnecting", SLOW, "reconnecting")
-        await wait_until(pilot, lambda: "reconnecting" in screen_text(app), SLOW, "reconnecting shown")
+        await wait_until(
+            pilot, lambda: app.model.connection == "reconnecting", SLOW, "reconnecting"
+        )
+        await wait_until(
+            pilot, lambda: "reconnecting" in screen_text(app), SLOW, "reconnecting shown"
+        )
         live.start_server()
         await wait_until(pilot, lambda: app.model.connection == "connected", SLOW, "reconnected")
-        await wait_until(pilot, lambda: "resynchronized" in app.mission_screen.message, SLOW, "resync said")
-        assert app.model.mission.revision == revision and skill(app, "lru1-2").label == "look closer"
+        await wait_until(
+            pilot, lambda: "resynchronized" in app.mission_screen.message, SLOW, "resync said"
+        )
+        assert (
+            app.model.mission.revision == revision and skill(app, "lru1-2").label == "look closer"
+        )
         # and it works: a new edit goes through
         editor.query_one("#f-label").value = "look closer again"
         await pilot.pause()
         editor.action_apply()
-        await wait_until(pilot, lambda: skill(app, "lru1-2").label == "look closer again", SLOW, "edit after restart")
+        await wait_until(
+            pilot,
+            lambda: skill(app, "lru1-2").label == "look closer again",
+            SLOW,
+            "edit after restart",
+        )
 
 
 def _drain_until_exit(fd: int, p: subprocess.Popen, timeout: float) -> int | None:
@@ -240,8 +351,22 @@ def test_console_process_exits_cleanly_on_hangup_and_ctrl_q(live, how):
     """In a real terminal (a pty): SIGHUP (the SSH link dropped) or ctrl+q
     ends the process promptly, closing its Zenoh session (no exit hang)."""
     master, slave = pty.openpty()
-    env = {**os.environ, "TERM": "xterm-256color", "COLUMNS": "100", "LINES": "30", "MISSIONCTL_CONFIG": "/nonexistent.toml"}
-    p = subprocess.Popen([sys.executable, "-m", "backend.cli", "console", "--connect", live.endpoint], stdin=slave, stdout=slave, stderr=slave, cwd=ROOT, env=env, start_new_session=True)
+    env = {
+        **os.environ,
+        "TERM": "xterm-256color",
+        "COLUMNS": "100",
+        "LINES": "30",
+        "MISSIONCTL_CONFIG": "/nonexistent.toml",
+    }
+    p = subprocess.Popen(
+        [sys.executable, "-m", "backend.cli", "console", "--connect", live.endpoint],
+        stdin=slave,
+        stdout=slave,
+        stderr=slave,
+        cwd=ROOT,
+        env=env,
+        start_new_session=True,
+    )
     os.close(slave)
     try:
         out = _read_until(master, b"Tutorial", 30)
@@ -263,8 +388,21 @@ def test_demo_starts_server_and_console_and_stops_everything(tmp_path):
     """`missionctl demo` in a pty: the console shows the Mars mission; ctrl+q
     stops the console, the server and the sim (no process left behind)."""
     master, slave = pty.openpty()
-    env = {**os.environ, "TERM": "xterm-256color", "TMPDIR": str(tmp_path), "MISSIONCTL_CONFIG": "/nonexistent.toml"}
-    p = subprocess.Popen([sys.executable, "-m", "backend.cli", "demo", "--speed", "5"], stdin=slave, stdout=slave, stderr=slave, cwd=ROOT, env=env, start_new_session=True)
+    env = {
+        **os.environ,
+        "TERM": "xterm-256color",
+        "TMPDIR": str(tmp_path),
+        "MISSIONCTL_CONFIG": "/nonexistent.toml",
+    }
+    p = subprocess.Popen(
+        [sys.executable, "-m", "backend.cli", "demo", "--speed", "5"],
+        stdin=slave,
+        stdout=slave,
+        stderr=slave,
+        cwd=ROOT,
+        env=env,
+        start_new_session=True,
+    )
     os.close(slave)
     try:
         out = _read_until(master, b"Mars sample return", 60)
@@ -296,9 +434,20 @@ def test_demo_hung_up_terminal_stops_everything(tmp_path):
     """The SSH link drops for real: the terminal goes away (writes to it fail)
     and the kernel sends SIGHUP. The demo must still end, with its server and sim."""
     master, slave = pty.openpty()
-    env = {**os.environ, "TERM": "xterm-256color", "TMPDIR": str(tmp_path), "MISSIONCTL_CONFIG": "/nonexistent.toml"}
-    p = subprocess.Popen([sys.executable, "-c", WITH_CONTROLLING_TTY, "-m", "backend.cli", "demo", "--speed", "5"],
-                         stdin=slave, stdout=slave, stderr=slave, cwd=ROOT, env=env)
+    env = {
+        **os.environ,
+        "TERM": "xterm-256color",
+        "TMPDIR": str(tmp_path),
+        "MISSIONCTL_CONFIG": "/nonexistent.toml",
+    }
+    p = subprocess.Popen(
+        [sys.executable, "-c", WITH_CONTROLLING_TTY, "-m", "backend.cli", "demo", "--speed", "5"],
+        stdin=slave,
+        stdout=slave,
+        stderr=slave,
+        cwd=ROOT,
+        env=env,
+    )
     os.close(slave)
     try:
         out = _read_until(master, b"Mars sample return", 60)
@@ -352,22 +501,41 @@ async def test_workflow_injected_failure_raises_an_alert_that_is_acknowledged(li
         screen.schedule.select("lru1-1")
         await pilot.pause()
         editor = screen.editor
-        await wait_until(pilot, lambda: editor.skill_id == "lru1-1" and editor.query("#f-label"), SLOW, "editor")
+        await wait_until(
+            pilot, lambda: editor.skill_id == "lru1-1" and editor.query("#f-label"), SLOW, "editor"
+        )
         editor.query_one("#f-label").value = "drive [fail]"
         await pilot.pause()
         editor.action_apply()
-        await wait_until(pilot, lambda: app.model.find("lru1-1")[2].label == "drive [fail]", SLOW, "label applied")
+        await wait_until(
+            pilot,
+            lambda: app.model.find("lru1-1")[2].label == "drive [fail]",
+            SLOW,
+            "label applied",
+        )
         screen.schedule.select("lru1-1")
         screen.schedule.focus()
         await pilot.pause()
         bells = app.bells
         await pilot.press("s")
-        await wait_until(pilot, lambda: status(app, "lru1-1") == Status.IDLE_SYNCHRONIZED, SLOW, "synchronized")
+        await wait_until(
+            pilot, lambda: status(app, "lru1-1") == Status.IDLE_SYNCHRONIZED, SLOW, "synchronized"
+        )
         await pilot.press("r")
         await wait_until(pilot, lambda: status(app, "lru1-1") == Status.FAILURE, SLOW, "failed")
-        await wait_until(pilot, lambda: any(a.kind == "failure" for a in app.alerts.alerts), SLOW, "failure alert")
+        await wait_until(
+            pilot,
+            lambda: any(a.kind == "failure" for a in app.alerts.alerts),
+            SLOW,
+            "failure alert",
+        )
         # the server's alert about the same failure arrives too: merged, not a second alert
-        await wait_until(pilot, lambda: [a.source for a in app.alerts.alerts if a.kind == "failure"] == ["both"], SLOW, "server alert merged")
+        await wait_until(
+            pilot,
+            lambda: [a.source for a in app.alerts.alerts if a.kind == "failure"] == ["both"],
+            SLOW,
+            "server alert merged",
+        )
         failure = [a for a in app.alerts.alerts if a.kind == "failure"]
         assert len(failure) == 1 and failure[0].skill == "lru1-1" and failure[0].level == "error"
         assert app.bells == bells + 1  # one bell for one failure
@@ -385,5 +553,7 @@ async def test_workflow_injected_failure_raises_an_alert_that_is_acknowledged(li
         await wait_until(pilot, lambda: app.alerts.unacknowledged == 0, SLOW, "acknowledged")
         assert "0 unacknowledged of 1" in screen_text(app)
         await pilot.press("f2")
-        await wait_until(pilot, lambda: app.screen is app.mission_screen, SLOW, "back to the schedule")
+        await wait_until(
+            pilot, lambda: app.screen is app.mission_screen, SLOW, "back to the schedule"
+        )
         assert "⚠" not in screen_text(app).splitlines()[0]

@@ -48,7 +48,18 @@ async def test_map_shows_robots_markers_objects_and_legend():
     async with app.run_test(size=SIZE) as pilot:
         await open_map(app, pilot)
         text = screen_text(app)
-        for needle in ("lru1", "lru2", "POI-B", "ROI-north", "WIFI-1", "◎", "wifi_box_1 on", "Legend", "sampling region", "cursor ("):
+        for needle in (
+            "lru1",
+            "lru2",
+            "POI-B",
+            "ROI-north",
+            "WIFI-1",
+            "◎",
+            "wifi_box_1 on",
+            "Legend",
+            "sampling region",
+            "cursor (",
+        ):
             assert needle in text, f"{needle!r} not on the map:\n{text}"
         assert NO_FEED not in text
         # lru1 has a queued/idle plan and is online: its label carries the idle glyph
@@ -86,7 +97,9 @@ async def test_robot_moving_redraws_only_its_rows():
         before = view.rendered_rows
         row_before = view._overlay.where["robot:lru1"][1]
         t = mars_telemetry()[0]
-        app.post_message(TelemetryChanged(t.model_copy(update={"pose": Pose(x=20.0, y=-30.0, yaw=math.pi / 2)})))
+        app.post_message(
+            TelemetryChanged(t.model_copy(update={"pose": Pose(x=20.0, y=-30.0, yaw=math.pi / 2)}))
+        )
         await pilot.pause()
         await pilot.pause()
         row_after = view._overlay.where["robot:lru1"][1]
@@ -106,8 +119,17 @@ async def test_follow_keeps_the_robot_centred():
         await pilot.press("f")
         assert view.follow == "lru1"
         for x, y in ((30.0, 5.0), (60.0, -20.0)):
-            app.post_message(TelemetryChanged(Telemetry(robot="lru1", pose=Pose(x=x, y=y), at=mars_telemetry()[0].at)))
-            await wait_until(pilot, lambda x=x, y=y: (view.vp.cx, view.vp.cy) == (x, y), 10, "view centred on lru1")
+            app.post_message(
+                TelemetryChanged(
+                    Telemetry(robot="lru1", pose=Pose(x=x, y=y), at=mars_telemetry()[0].at)
+                )
+            )
+            await wait_until(
+                pilot,
+                lambda x=x, y=y: (view.vp.cx, view.vp.cy) == (x, y),
+                10,
+                "view centred on lru1",
+            )
         col, row = view._overlay.where["robot:lru1"]
         assert abs(col - view.vp.w // 2) <= 1 and abs(row - view.vp.h // 2) <= 1
         assert "following lru1" in screen_text(app)
@@ -135,10 +157,17 @@ async def test_add_bind_move_marker_through_the_rules():
         assert app.model.mission.markers["GOAL-1"].pose.x == 10.0
         screen.select_marker("GOAL-1")
         await pilot.press("b")
-        await wait_until(pilot, lambda: app.model.find("lru2-5")[2].bindings.get("goal") == "GOAL-1", 10, "bound")
+        await wait_until(
+            pilot, lambda: app.model.find("lru2-5")[2].bindings.get("goal") == "GOAL-1", 10, "bound"
+        )
         screen.view.set_cursor(14.0, -24.0)
         await pilot.press("m")
-        await wait_until(pilot, lambda: app.model.find("lru2-5")[2].params["goal"]["x"] == 14.0, 10, "idle skill follows")
+        await wait_until(
+            pilot,
+            lambda: app.model.find("lru2-5")[2].params["goal"]["x"] == 14.0,
+            10,
+            "idle skill follows",
+        )
         assert "lru2-5 follows" in screen.message
         await pilot.pause()
         assert "GOAL-1 ○" in screen_text(app)  # used by an idle skill
@@ -164,12 +193,23 @@ async def test_ground_classes_stay_apart_in_256_and_16_colours(colors):
         assert bg[T_FREE] != bg[T_FREE + 4] and bg[T_UNKNOWN + 4] != bg[T_FREE]
         for k in (T_UNKNOWN, T_SLOW, T_ROCK):  # the classes drawn with a texture
             for key in (k, k + 4):
-                fg = [s.style.color for s in halfblock_row([key], [key], pal, pattern=lambda i, _k: "x", textures=view._textures)]
-                assert shown(fg[0]) != bg[key], f"texture of ground {key} invisible in {colors} colours"
+                fg = [
+                    s.style.color
+                    for s in halfblock_row(
+                        [key], [key], pal, pattern=lambda i, _k: "x", textures=view._textures
+                    )
+                ]
+                assert shown(fg[0]) != bg[key], (
+                    f"texture of ground {key} invisible in {colors} colours"
+                )
 
 
 def test_halfblock_row_colours_and_merging():
-    red, blue, white = RichColor.parse("#ff0000"), RichColor.parse("#0000ff"), RichColor.parse("#ffffff")
+    red, blue, white = (
+        RichColor.parse("#ff0000"),
+        RichColor.parse("#0000ff"),
+        RichColor.parse("#ffffff"),
+    )
     pal = {0: red, 1: blue}
     segs = halfblock_row([0, 0, 0, 1], [0, 0, 1, 1], pal)
     assert "".join(s.text for s in segs) == "  " + UPPER_HALF + " "
@@ -177,7 +217,12 @@ def test_halfblock_row_colours_and_merging():
     assert segs[1].style.color == red and segs[1].style.bgcolor == blue  # upper = fg, lower = bg
     assert segs[2].style.bgcolor == blue
     glyph = halfblock_row([1, 1], [1, 0], pal, {1: ("▲", white, True, None)})
-    assert glyph[1].text == "▲" and glyph[1].style.color == white and glyph[1].style.bgcolor == blue and glyph[1].style.bold
+    assert (
+        glyph[1].text == "▲"
+        and glyph[1].style.color == white
+        and glyph[1].style.bgcolor == blue
+        and glyph[1].style.bold
+    )
     patterned = halfblock_row([0, 0], [0, 0], pal, pattern=lambda i, k: "·" if i == 1 else " ")
     assert "".join(s.text for s in patterned) == " ·"
 
@@ -208,7 +253,12 @@ def _delta(seq: int, feed: str = "test", value: int = 3) -> mf.MapDelta:
     import numpy as np
 
     cells = np.full((16, 16), value, dtype=np.uint8)
-    return mf.MapDelta(feed=feed, seq=seq, sim_time=float(seq), tiles=[mf.Tile(layer="terrain", tx=0, ty=0, data=mf.encode_tile(cells))])
+    return mf.MapDelta(
+        feed=feed,
+        seq=seq,
+        sim_time=float(seq),
+        tiles=[mf.Tile(layer="terrain", tx=0, ty=0, data=mf.encode_tile(cells))],
+    )
 
 
 async def test_follower_applies_deltas_and_resyncs_on_a_gap(monkeypatch):
@@ -286,9 +336,16 @@ async def test_pick_pose_rename_delete_and_a_refusal_on_the_status_line():
         screen.view.set_cursor(-12.0, 7.0)
         await pilot.press("right_square_bracket", "right_square_bracket")  # heading -30°
         await pilot.press("p")
-        await wait_until(pilot, lambda: app.model.find("lru2-5")[2].params["goal"]["x"] == -12.0, 10, "goal picked")
+        await wait_until(
+            pilot,
+            lambda: app.model.find("lru2-5")[2].params["goal"]["x"] == -12.0,
+            10,
+            "goal picked",
+        )
         goal = app.model.find("lru2-5")[2].params["goal"]
-        assert goal["y"] == 7.0 and math.isclose(goal["yaw"], math.radians(-30) % (2 * math.pi), abs_tol=1e-3)
+        assert goal["y"] == 7.0 and math.isclose(
+            goal["yaw"], math.radians(-30) % (2 * math.pi), abs_tol=1e-3
+        )
         assert "lru2-5: goal = (-12, 7) heading 330°" in screen.message
         # POI-A is used by lru1-3, which is on the robot: the server refuses its deletion
         screen.select_marker("POI-A")
@@ -303,7 +360,14 @@ async def test_pick_pose_rename_delete_and_a_refusal_on_the_status_line():
         await wait_until(pilot, lambda: app.screen.query("#name"), 10, "rename prompt")
         app.screen.query_one("#name").value = "RELAY"
         await pilot.press("enter")
-        await wait_until(pilot, lambda: "RELAY" in app.model.mission.markers and "WIFI-1" not in app.model.mission.markers, 10, "renamed")
+        await wait_until(
+            pilot,
+            lambda: (
+                "RELAY" in app.model.mission.markers and "WIFI-1" not in app.model.mission.markers
+            ),
+            10,
+            "renamed",
+        )
         assert screen.view.selected_marker == "RELAY"
         await pilot.press("d")
         await wait_until(pilot, lambda: type(app.screen).__name__ == "ConfirmScreen", 10, "confirm")
@@ -352,8 +416,12 @@ async def test_the_mouse_wheel_zooms_about_the_ground_under_the_mouse():
         await wait_until(pilot, lambda: view.vp.mpp != mpp, 10, "zoomed in")
         assert math.isclose(view.vp.mpp, mpp * WHEEL_ZOOM)
         x2, y2 = view.vp.cell_centre(col, row)
-        assert abs(x2 - x) <= view.vp.mpp and abs(y2 - y) <= view.vp.mpp  # the same ground under the mouse
-        await wait_until(pilot, lambda: f"{view.vp.mpp:.2g} m/px" in screen_text(app), 10, "the new scale shown")
+        assert (
+            abs(x2 - x) <= view.vp.mpp and abs(y2 - y) <= view.vp.mpp
+        )  # the same ground under the mouse
+        await wait_until(
+            pilot, lambda: f"{view.vp.mpp:.2g} m/px" in screen_text(app), 10, "the new scale shown"
+        )
         wheel(events.MouseScrollDown)
         await wait_until(pilot, lambda: math.isclose(view.vp.mpp, mpp), 10, "zoomed back out")
 

@@ -30,7 +30,9 @@ async def open_map(app, pilot, b: Builder, skill: str) -> MapScreen:
 
 
 async def chooser(app, pilot) -> OptionList:
-    await wait_until(pilot, lambda: isinstance(app.screen, ChoiceScreen), 10, "the parameter chooser")
+    await wait_until(
+        pilot, lambda: isinstance(app.screen, ChoiceScreen), 10, "the parameter chooser"
+    )
     await pilot.pause()
     return app.screen.query_one(OptionList)
 
@@ -60,12 +62,19 @@ async def test_bind_asks_which_pose_parameter_and_binds_the_chosen_one():
         assert shown["via"].split() == ["via", "position", "not", "set"]
         assert ol.highlighted == 0
         await pilot.press("down", "enter")
-        await wait_until(pilot, lambda: skill(app).bindings.get("to") == "POI-A", 10, "to bound to POI-A")
+        await wait_until(
+            pilot, lambda: skill(app).bindings.get("to") == "POI-A", 10, "to bound to POI-A"
+        )
         assert backend.ops == [EditSkill(id="lru1-2", bindings={"to": "POI-A"})]
         assert skill(app).bindings == {"from": "POI-B", "to": "POI-A"}
         assert skill(app).params["to"]["x"] == 42.0
         assert isinstance(app.screen, MapScreen)
-        await wait_until(pilot, lambda: "lru1-2: to bound to marker POI-A" in screen.message, 10, "the status line")
+        await wait_until(
+            pilot,
+            lambda: "lru1-2: to bound to marker POI-A" in screen.message,
+            10,
+            "the status line",
+        )
 
         # POI-B already fills from: the list starts on to; escape sends nothing
         screen.select_marker("POI-B")
@@ -92,7 +101,9 @@ async def test_bind_a_position_marker_offers_its_kind_first_then_poses_and_marke
         assert shown["via"].split() == ["via", "position", "not", "set"]
         assert shown["relay"].split() == ["relay", "marker", "not", "set"]
         await pilot.press("down", "down", "down", "enter")  # relay takes the marker's name
-        await wait_until(pilot, lambda: skill(app).params.get("relay") == "DEPOT", 10, "relay = DEPOT")
+        await wait_until(
+            pilot, lambda: skill(app).params.get("relay") == "DEPOT", 10, "relay = DEPOT"
+        )
         assert backend.ops == [EditSkill(id="lru1-2", params={"relay": "DEPOT"})]
         assert "via" not in skill(app).bindings
 
@@ -105,7 +116,9 @@ async def test_a_pose_marker_binds_a_position_parameter_like_the_server_allows()
         await pilot.press("b")
         await chooser(app, pilot)
         await pilot.press("down", "down", "enter")  # via
-        await wait_until(pilot, lambda: skill(app).bindings.get("via") == "POI-A", 10, "via bound to POI-A")
+        await wait_until(
+            pilot, lambda: skill(app).bindings.get("via") == "POI-A", 10, "via bound to POI-A"
+        )
         assert backend.ops == [EditSkill(id="lru1-2", bindings={"via": "POI-A"})]
         assert skill(app).params["via"] == {"x": 42.0, "y": 18.0, "z": 0.0}  # the pose's position
 
@@ -116,7 +129,9 @@ async def test_one_fitting_parameter_binds_without_asking():
         screen = await open_map(app, pilot, backend.b, "lru1-1")  # drive_to: goal only
         screen.select_marker("POI-A")
         await pilot.press("b")
-        await wait_until(pilot, lambda: skill(app, "lru1-1").bindings.get("goal") == "POI-A", 10, "goal bound")
+        await wait_until(
+            pilot, lambda: skill(app, "lru1-1").bindings.get("goal") == "POI-A", 10, "goal bound"
+        )
         assert backend.ops == [EditSkill(id="lru1-1", bindings={"goal": "POI-A"})]
         assert not any(isinstance(s, ChoiceScreen) for s in app.screen_stack)
 
@@ -134,17 +149,26 @@ async def test_pick_asks_which_parameter_and_sets_the_chosen_one_to_the_cursor()
         await pilot.press("down", "enter")
         await wait_until(pilot, lambda: skill(app).params["to"]["x"] == 12.0, 10, "to picked")
         to = skill(app).params["to"]
-        assert to["y"] == -6.0 and math.isclose(to["yaw"], math.radians(-30) % (2 * math.pi), abs_tol=1e-3)
+        assert to["y"] == -6.0 and math.isclose(
+            to["yaw"], math.radians(-30) % (2 * math.pi), abs_tol=1e-3
+        )
         assert skill(app).bindings == {"from": "POI-B"}  # from untouched
         assert [op.params for op in backend.ops] == [{"to": to}]
-        await wait_until(pilot, lambda: "lru1-2: to = (12, -6) heading 330°" in screen.message, 10, "the status line")
+        await wait_until(
+            pilot,
+            lambda: "lru1-2: to = (12, -6) heading 330°" in screen.message,
+            10,
+            "the status line",
+        )
 
         # a position parameter takes no heading
         await pilot.press("p")
         await chooser(app, pilot)
         await pilot.press("down", "down", "enter")
         await wait_until(pilot, lambda: "via" in skill(app).params, 10, "via picked")
-        assert backend.ops[-1] == EditSkill(id="lru1-2", params={"via": {"x": 12.0, "y": -6.0, "z": 0.0}})
+        assert backend.ops[-1] == EditSkill(
+            id="lru1-2", params={"via": {"x": 12.0, "y": -6.0, "z": 0.0}}
+        )
 
         # escape: nothing sent
         await pilot.press("p")

@@ -51,14 +51,22 @@ def _prepare(builder, *, select=None, online=None, telemetry=None, after=None, e
 def test_empty_mission(snap_compare):
     b = Builder(MARS)
     b.engine.submit(DeleteSkills(ids=sorted(b.mission.all_ids())))
-    assert snap_compare(make_app(), terminal_size=(110, 24), run_before=_prepare(b, expect=("lru1", "ardea", "nothing on the robot", "empty plan")))
+    assert snap_compare(
+        make_app(),
+        terminal_size=(110, 24),
+        run_before=_prepare(b, expect=("lru1", "ardea", "nothing on the robot", "empty plan")),
+    )
 
 
 def test_mars_mid_execution_every_status_and_a_barrier(snap_compare):
     assert snap_compare(
         make_app(),
         terminal_size=WIDE,
-        run_before=_prepare(mars_mid_execution(), telemetry=mars_telemetry(), expect=("[b1]", "45%", "✗", "‖", "◷", "offline 10:42:07")),
+        run_before=_prepare(
+            mars_mid_execution(),
+            telemetry=mars_telemetry(),
+            expect=("[b1]", "45%", "✗", "‖", "◷", "offline 10:42:07"),
+        ),
     )
 
 
@@ -68,23 +76,59 @@ def test_editor_every_parameter_type(snap_compare):
     assert snap_compare(
         make_app(),
         terminal_size=(130, 80),
-        run_before=_prepare(b, online={"rover1": True, "rover2": True}, select="rover1-1",
-                            expect=("enabled", "samples", "speed", "note", "sensors", "camera", "goal", "target", "region", "filter", "landmark", "partner", "layered, reddish")),
+        run_before=_prepare(
+            b,
+            online={"rover1": True, "rover2": True},
+            select="rover1-1",
+            expect=(
+                "enabled",
+                "samples",
+                "speed",
+                "note",
+                "sensors",
+                "camera",
+                "goal",
+                "target",
+                "region",
+                "filter",
+                "landmark",
+                "partner",
+                "layered, reddish",
+            ),
+        ),
     )
 
 
 def test_editor_explore_area_bound_to_a_marker(snap_compare):
     # area (bound to ROI-east), float with unit and bounds, bool, list
-    assert snap_compare(make_app(), terminal_size=WIDE, run_before=_prepare(Builder(MARS), select="lru1-2", expect=("@ROI-east", "max_duration", "return_to_start", "sensors")))
+    assert snap_compare(
+        make_app(),
+        terminal_size=WIDE,
+        run_before=_prepare(
+            Builder(MARS),
+            select="lru1-2",
+            expect=("@ROI-east", "max_duration", "return_to_start", "sensors"),
+        ),
+    )
 
 
 def test_editor_pick_stone_marker_and_position(snap_compare):
-    assert snap_compare(make_app(), terminal_size=WIDE, run_before=_prepare(Builder(MARS), select="lru2-4", expect=("region", "marker area", "target")))
+    assert snap_compare(
+        make_app(),
+        terminal_size=WIDE,
+        run_before=_prepare(
+            Builder(MARS), select="lru2-4", expect=("region", "marker area", "target")
+        ),
+    )
 
 
 def test_editor_static_robot_enum_and_int(snap_compare):
     # the lander (a static robot, collapsed at the end) and its load_box: enum, int with bounds
-    assert snap_compare(make_app(), terminal_size=WIDE, run_before=_prepare(Builder(MARS), select="lander-1", expect=("slot", "int 1..4", "box")))
+    assert snap_compare(
+        make_app(),
+        terminal_size=WIDE,
+        run_before=_prepare(Builder(MARS), select="lander-1", expect=("slot", "int 1..4", "box")),
+    )
 
 
 def test_validation_error_next_to_the_field(snap_compare):
@@ -97,7 +141,12 @@ def test_validation_error_next_to_the_field(snap_compare):
     assert snap_compare(
         make_app(),
         terminal_size=WIDE,
-        run_before=_prepare(Builder(MARS), select="lru2-5", after=after, expect=("7.5 m/s is above the maximum 1 m/s", "expected a number, got 'abc'")),
+        run_before=_prepare(
+            Builder(MARS),
+            select="lru2-5",
+            after=after,
+            expect=("7.5 m/s is above the maximum 1 m/s", "expected a number, got 'abc'"),
+        ),
     )
 
 
@@ -119,8 +168,17 @@ def test_editor_policies_with_errors_and_a_draft_on_another_skill(snap_compare):
     assert snap_compare(
         make_app(),
         terminal_size=WIDE,
-        run_before=_prepare(Builder(MARS), select="lru2-4", after=after,
-                            expect=("*pick the stone", "*back to lander", "25: should be less than or equal to 20", "recharge below")),
+        run_before=_prepare(
+            Builder(MARS),
+            select="lru2-4",
+            after=after,
+            expect=(
+                "*pick the stone",
+                "*back to lander",
+                "25: should be less than or equal to 20",
+                "recharge below",
+            ),
+        ),
     )
 
 
@@ -128,7 +186,12 @@ def test_read_only_running_skill_with_reason(snap_compare):
     assert snap_compare(
         make_app(),
         terminal_size=WIDE,
-        run_before=_prepare(mars_mid_execution(), telemetry=mars_telemetry(), select="lru1-2", expect=("read-only: lru1-2 is running on lru1",)),
+        run_before=_prepare(
+            mars_mid_execution(),
+            telemetry=mars_telemetry(),
+            select="lru1-2",
+            expect=("read-only: lru1-2 is running on lru1",),
+        ),
     )
 
 
@@ -137,14 +200,22 @@ def test_help_screen(snap_compare):
         await pilot.press("f1")
         await pilot.pause()
 
-    assert snap_compare(make_app(), terminal_size=(110, 50), run_before=_prepare(mars_mid_execution(), after=after, expect=("Navigation", "Synchronization", "Execution")))
+    assert snap_compare(
+        make_app(),
+        terminal_size=(110, 50),
+        run_before=_prepare(
+            mars_mid_execution(), after=after, expect=("Navigation", "Synchronization", "Execution")
+        ),
+    )
 
 
 def test_80x24_mid_execution(snap_compare):
     assert snap_compare(
         make_app(),
         terminal_size=(80, 24),
-        run_before=_prepare(mars_mid_execution(), telemetry=mars_telemetry(), expect=("lru1", "lru2", "[b1]")),
+        run_before=_prepare(
+            mars_mid_execution(), telemetry=mars_telemetry(), expect=("lru1", "lru2", "[b1]")
+        ),
     )
 
 
@@ -156,13 +227,24 @@ def test_80x24_editor(snap_compare):
     assert snap_compare(
         make_app(),
         terminal_size=(80, 24),
-        run_before=_prepare(mars_mid_execution(), telemetry=mars_telemetry(), select="lru1-4", after=after, expect=("take_science_image on lru1", "filter")),
+        run_before=_prepare(
+            mars_mid_execution(),
+            telemetry=mars_telemetry(),
+            select="lru1-4",
+            after=after,
+            expect=("take_science_image on lru1", "filter"),
+        ),
     )
 
 
 def test_unreachable_server(snap_compare):
     async def run_before(pilot):
-        pilot.app.push_screen(UnreachableScreen("tcp/127.0.0.1:7447", "the router at tcp/127.0.0.1:7447 cannot be reached (nothing listens there, or the connection was refused)"))
+        pilot.app.push_screen(
+            UnreachableScreen(
+                "tcp/127.0.0.1:7447",
+                "the router at tcp/127.0.0.1:7447 cannot be reached (nothing listens there, or the connection was refused)",
+            )
+        )
         await pilot.pause()
         assert "Cannot reach the mission server" in screen_text(pilot.app)
 
@@ -193,18 +275,32 @@ def _map_prepare(expect, *, zoom_in=False):
 
 
 def test_map_robots_markers_explored_area(snap_compare):
-    assert snap_compare(make_app(), terminal_size=(120, 40), run_before=_map_prepare(("lru1 ▶", "lru2 ◷", "POI-B", "ROI-north", "Legend", "sampling region"), zoom_in=True))
+    assert snap_compare(
+        make_app(),
+        terminal_size=(120, 40),
+        run_before=_map_prepare(
+            ("lru1 ▶", "lru2 ◷", "POI-B", "ROI-north", "Legend", "sampling region"), zoom_in=True
+        ),
+    )
 
 
 def test_map_in_16_colours(snap_compare):
     """Over SSH with TERM=xterm: explored area, coverage, markers and robots
     still apart (each status has its own ANSI colour, glyphs carry meaning)."""
     app = make_app(colors=16)
-    assert snap_compare(app, terminal_size=(120, 40), run_before=_map_prepare(("lru1 ▶", "lru2 ◷", "POI-B", "Legend"), zoom_in=True))
+    assert snap_compare(
+        app,
+        terminal_size=(120, 40),
+        run_before=_map_prepare(("lru1 ▶", "lru2 ◷", "POI-B", "Legend"), zoom_in=True),
+    )
 
 
 def test_map_80x24(snap_compare):
-    assert snap_compare(make_app(), terminal_size=(80, 24), run_before=_map_prepare(("lru1", "ROI-north", "cursor (")))
+    assert snap_compare(
+        make_app(),
+        terminal_size=(80, 24),
+        run_before=_map_prepare(("lru1", "ROI-north", "cursor (")),
+    )
 
 
 def test_map_parameter_chooser(snap_compare):
@@ -213,8 +309,17 @@ def test_map_parameter_chooser(snap_compare):
 
     async def run_before(pilot):
         app = pilot.app
-        await inject(app, pilot, Builder(DATA / "transport.yaml"), online={"lru1": True},
-                     telemetry=[Telemetry(robot="lru1", pose=Pose(x=10.0, y=5.0, yaw=0.5), battery=0.8, link=0.9, at=T0)])
+        await inject(
+            app,
+            pilot,
+            Builder(DATA / "transport.yaml"),
+            online={"lru1": True},
+            telemetry=[
+                Telemetry(
+                    robot="lru1", pose=Pose(x=10.0, y=5.0, yaw=0.5), battery=0.8, link=0.9, at=T0
+                )
+            ],
+        )
         app.post_message(map_message())
         app.mission_screen.schedule.select("lru1-2")
         await pilot.pause()
@@ -232,7 +337,9 @@ def test_map_parameter_chooser(snap_compare):
         await pilot.press("b")
         await pilot.pause()
         await pilot.pause()
-        shows("Bind POI-A to which parameter of lru1-2?", "@POI-B", "(2,0)", "enter: choose")  # ...and the dialog over it
+        shows(
+            "Bind POI-A to which parameter of lru1-2?", "@POI-B", "(2,0)", "enter: choose"
+        )  # ...and the dialog over it
 
     assert snap_compare(make_app(), terminal_size=(120, 40), run_before=run_before)
 
@@ -250,6 +357,13 @@ def test_observer_account_read_only(snap_compare):
     assert snap_compare(
         make_app(),
         terminal_size=WIDE,
-        run_before=_prepare(Builder(MARS), select="lru1-2", after=after,
-                            expect=("read-only: logged in as observer watch", "Delete: read-only: logged in as observer watch")),
+        run_before=_prepare(
+            Builder(MARS),
+            select="lru1-2",
+            after=after,
+            expect=(
+                "read-only: logged in as observer watch",
+                "Delete: read-only: logged in as observer watch",
+            ),
+        ),
     )

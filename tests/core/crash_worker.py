@@ -207,7 +207,11 @@ class OpGenerator:
         return None
 
     def marker_for(self, ptype: str) -> str | None:
-        kinds = {"pose": ("pose", "position"), "position": ("pose", "position"), "area": ("area",)}.get(ptype)
+        kinds = {
+            "pose": ("pose", "position"),
+            "position": ("pose", "position"),
+            "area": ("area",),
+        }.get(ptype)
         if not kinds:
             return None
         return self.pick(n for n, mk in self.m.markers.items() if mk.kind in kinds)
@@ -237,7 +241,12 @@ class OpGenerator:
         n_idle = len(self.idle(robot))
         at = None if self.rng.random() < 0.5 else self.rng.randint(0, n_idle)
         label = f"{skill} #{self.rng.randint(1, 999)}" if self.rng.random() < 0.7 else ""
-        self.submit(AddSkill(robot=robot, skill=skill, label=label, params=params, bindings=bindings, at=at), self.operator())
+        self.submit(
+            AddSkill(
+                robot=robot, skill=skill, label=label, params=params, bindings=bindings, at=at
+            ),
+            self.operator(),
+        )
 
     def act_edit(self) -> None:
         found = self.pick(self.idle())
@@ -261,7 +270,9 @@ class OpGenerator:
                 v = self.value_for(p.type, p)
                 if v is not None:
                     params[name] = v
-        self.submit(EditSkill(id=s.id, label=label, params=params, bindings=bindings), self.operator())
+        self.submit(
+            EditSkill(id=s.id, label=label, params=params, bindings=bindings), self.operator()
+        )
 
     def act_move(self) -> None:
         found = self.pick(self.idle())
@@ -269,7 +280,9 @@ class OpGenerator:
             return
         robot, s = found
         n_idle = len(self.idle(robot))
-        self.submit(MoveSkill(id=s.id, index=self.rng.randint(0, max(0, n_idle - 1))), self.operator())
+        self.submit(
+            MoveSkill(id=s.id, index=self.rng.randint(0, max(0, n_idle - 1))), self.operator()
+        )
 
     def act_delete(self) -> None:
         idle = self.idle()
@@ -306,10 +319,17 @@ class OpGenerator:
             name = self.rng.choice(names)
             kind = self.m.markers[name].kind
             raw = self.value_for(kind, None)
-            value = [Position(**p) for p in raw] if kind == "area" else (Pose(**raw) if kind == "pose" else Position(**raw))
+            value = (
+                [Position(**p) for p in raw]
+                if kind == "area"
+                else (Pose(**raw) if kind == "pose" else Position(**raw))
+            )
             self.submit(MarkerMove(name=name, value=value), self.operator())
         elif roll < 0.9:
-            self.submit(MarkerRename(name=self.rng.choice(names), new_name=f"M{self.rng.randint(1, 60)}"), self.operator())
+            self.submit(
+                MarkerRename(name=self.rng.choice(names), new_name=f"M{self.rng.randint(1, 60)}"),
+                self.operator(),
+            )
         else:
             self.submit(MarkerDelete(name=self.rng.choice(names)), self.operator())
 
@@ -341,16 +361,24 @@ class OpGenerator:
         self.submit(SyncAck(robot=robot, ids=ids), f"robot:{robot}")
         self.engine.release(robot, ids)
 
-    def report(self, robot: str, sid: str, status: Status, info: str = "", attempt: int | None = None) -> Applied | None:
+    def report(
+        self, robot: str, sid: str, status: Status, info: str = "", attempt: int | None = None
+    ) -> Applied | None:
         seq = self.m.report_seqs.get(robot, 0) + 1
         if self.rng.random() < 0.05 and seq > 1:
             seq -= 1  # a report sent twice: applied once
-        op = Report(robot=robot, seq=seq, id=sid, status=status, info=info, attempt=attempt, at=self.now())
+        op = Report(
+            robot=robot, seq=seq, id=sid, status=status, info=info, attempt=attempt, at=self.now()
+        )
         return self.submit(op, f"robot:{robot}")
 
     def act_report(self) -> None:
         robot = self.robot_with(
-            lambda t: any(s.status == Status.IDLE_SYNCHRONIZED or s.status in (Status.RUNNING, Status.PAUSED, Status.SYNCHWAITING) for s in t)
+            lambda t: any(
+                s.status == Status.IDLE_SYNCHRONIZED
+                or s.status in (Status.RUNNING, Status.PAUSED, Status.SYNCHWAITING)
+                for s in t
+            )
         )
         if robot is None:
             return
@@ -377,11 +405,23 @@ class OpGenerator:
             elif r < 0.95:
                 self.report(robot, act.id, Status.IDLE_SYNCHRONIZED, "stopped")
             else:  # an autonomous retry: running again as the next attempt
-                self.report(robot, act.id, Status.RUNNING, "autonomous retry", attempt=act.attempt + 1)
+                self.report(
+                    robot, act.id, Status.RUNNING, "autonomous retry", attempt=act.attempt + 1
+                )
         elif act.status == Status.PAUSED:
-            self.report(robot, act.id, Status.RUNNING if r < 0.7 else Status.IDLE_SYNCHRONIZED, "resumed" if r < 0.7 else "stopped")
+            self.report(
+                robot,
+                act.id,
+                Status.RUNNING if r < 0.7 else Status.IDLE_SYNCHRONIZED,
+                "resumed" if r < 0.7 else "stopped",
+            )
         else:  # synchwaiting
-            self.report(robot, act.id, Status.RUNNING if r < 0.8 else Status.FAILURE, "partners ready" if r < 0.8 else "partner lost")
+            self.report(
+                robot,
+                act.id,
+                Status.RUNNING if r < 0.8 else Status.FAILURE,
+                "partners ready" if r < 0.8 else "partner lost",
+            )
 
     def act_retry(self) -> None:
         failed = [(r, s) for r, t in self.m.tasks.items() for s in t if s.status == Status.FAILURE]
@@ -419,7 +459,9 @@ class OpGenerator:
         self.engine.release(robot)
 
     def act_reset(self) -> None:
-        robot = self.robot_with(lambda t: any(s.status not in (Status.IDLE, Status.SUCCESS, Status.FAILURE) for s in t))
+        robot = self.robot_with(
+            lambda t: any(s.status not in (Status.IDLE, Status.SUCCESS, Status.FAILURE) for s in t)
+        )
         if robot is None:
             return
         try:
@@ -434,9 +476,20 @@ class OpGenerator:
         self.engine.release(robot)
 
     ACTIONS = (
-        ("add", 16), ("edit", 8), ("move", 6), ("delete", 6), ("barrier", 5), ("unbarrier", 2),
-        ("marker", 6), ("undo", 5), ("new", 0.2), ("sync", 10), ("report", 24), ("retry", 5),
-        ("unsync", 4), ("reset", 1),
+        ("add", 16),
+        ("edit", 8),
+        ("move", 6),
+        ("delete", 6),
+        ("barrier", 5),
+        ("unbarrier", 2),
+        ("marker", 6),
+        ("undo", 5),
+        ("new", 0.2),
+        ("sync", 10),
+        ("report", 24),
+        ("retry", 5),
+        ("unsync", 4),
+        ("reset", 1),
     )
 
     def step(self) -> list[Step]:
@@ -469,7 +522,9 @@ def main(argv: list[str]) -> int:
     out = sys.stdout
     # snapshots every `every` batches whatever their size (snapshot_bytes=0):
     # kills land in many of them, and a restart replays at most `every`
-    with Journal.open(db, library=engine.mission.library, snapshot_every=every, snapshot_bytes=0) as journal:
+    with Journal.open(
+        db, library=engine.mission.library, snapshot_every=every, snapshot_bytes=0
+    ) as journal:
         checkpointing: list[threading.Thread] = []
         if background:
             journal.checkpoint_in_background(every=16)

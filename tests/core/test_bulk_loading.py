@@ -26,8 +26,12 @@ def big_mission(robots: int = 4, per_robot: int = 300) -> Mission:
         name = f"rover{r + 1}"
         m.robots[name] = RobotSpec(type="lru_manipulator")
         m.tasks[name] = [
-            SkillInstance(id=f"{name}-{j}", skill="drive_to", label=f"waypoint {j}",
-                          params={"goal": {"x": j % 50, "y": r, "yaw": 0.0}, "speed": 0.5})
+            SkillInstance(
+                id=f"{name}-{j}",
+                skill="drive_to",
+                label=f"waypoint {j}",
+                params={"goal": {"x": j % 50, "y": r, "yaw": 0.0}, "speed": 0.5},
+            )
             for j in range(1, per_robot + 1)
         ]
     m.next_skill = per_robot + 1

@@ -50,9 +50,16 @@ def run_and_kill(db: Path, seed: int, k: int, err: Path) -> tuple[list[int], boo
     (also those still in the pipe), whether it finished, its return code."""
     with err.open("w") as errf:
         proc = subprocess.Popen(
-            [sys.executable, str(WORKER), str(db), str(seed), str(N_STEPS), str(SNAPSHOT_EVERY),
-             # half the seeds checkpoint on a thread as the server does, half leave it to SQLite
-             "background" if seed in BACKGROUND_CHECKPOINTS else "sqlite"],
+            [
+                sys.executable,
+                str(WORKER),
+                str(db),
+                str(seed),
+                str(N_STEPS),
+                str(SNAPSHOT_EVERY),
+                # half the seeds checkpoint on a thread as the server does, half leave it to SQLite
+                "background" if seed in BACKGROUND_CHECKPOINTS else "sqlite",
+            ],
             stdout=subprocess.PIPE,
             stderr=errf,
             stdin=subprocess.DEVNULL,
@@ -88,7 +95,11 @@ def reference_states(seed: int, wanted: set[int]) -> dict[int, tuple[str, list, 
         rev = st.applied.revision
         requests.append((st.client, st.request_id, rev))
         if rev in wanted:
-            out[rev] = (engine.mission.model_dump_json(), list(requests), st.applied.batch(st.client).model_dump_json())
+            out[rev] = (
+                engine.mission.model_dump_json(),
+                list(requests),
+                st.applied.batch(st.client).model_dump_json(),
+            )
 
     gen = OpGenerator(engine, seed, on_step=capture)
     top = max(wanted)
@@ -107,7 +118,13 @@ def test_sigkill_at_random_moments_recovers_a_consistent_prefix(tmp_path):
     for seed in SEEDS:
         for i in range(KILLS_PER_SEED):
             # small k (before/around the first snapshots) as well as large ones
-            k = rng.choice((0, 1, 2)) if (n == 0) else rng.randint(1, 60) if i == 0 else rng.randint(1, MAX_LINES)
+            k = (
+                rng.choice((0, 1, 2))
+                if (n == 0)
+                else rng.randint(1, 60)
+                if i == 0
+                else rng.randint(1, MAX_LINES)
+            )
             db = tmp_path / f"s{seed}-{i}.db"
             err = tmp_path / f"s{seed}-{i}.err"
             printed, done, rc = run_and_kill(db, seed, k, err)
@@ -154,7 +171,9 @@ def test_sigkill_at_random_moments_recovers_a_consistent_prefix(tmp_path):
             want_json, want_requests, _ = ref[r]
             with Journal.open(db) as j:
                 mission, requests = j.load()
-                assert mission.model_dump_json() == want_json, f"seed {seed}, k={k}: revision {r} differs from the in-process run"
+                assert mission.model_dump_json() == want_json, (
+                    f"seed {seed}, k={k}: revision {r} differs from the in-process run"
+                )
                 assert mission == Mission.model_validate_json(want_json)
                 assert requests == want_requests
                 # the journal goes on after the crash: the next batch of the stream

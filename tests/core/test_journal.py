@@ -50,7 +50,9 @@ T0 = datetime(2030, 7, 1, 8, 0, tzinfo=UTC)
 class Server:
     """An engine whose applied operations are journaled, as the server does."""
 
-    def __init__(self, db: Path, *, snapshot_every: int = 500, mission: Mission | None = None, library=None):
+    def __init__(
+        self, db: Path, *, snapshot_every: int = 500, mission: Mission | None = None, library=None
+    ):
         if mission is None:
             mission, library = load_mission(MISSION_FILE)
         self.engine = Engine(mission, library)
@@ -78,8 +80,15 @@ class Server:
     def report(self, robot: str, sid: str, status: Status, info: str = "", **kw):
         self.seqs[robot] = self.seqs.get(robot, 0) + 1
         self.clock += 1
-        op = Report(robot=robot, seq=self.seqs[robot], id=sid, status=status, info=info,
-                    at=T0 + timedelta(seconds=30 * self.clock), **kw)
+        op = Report(
+            robot=robot,
+            seq=self.seqs[robot],
+            id=sid,
+            status=status,
+            info=info,
+            at=T0 + timedelta(seconds=30 * self.clock),
+            **kw,
+        )
         return self.submit(op, f"robot:{robot}")
 
     def close(self) -> None:
@@ -96,11 +105,25 @@ def run_scenario(srv: Server) -> dict[str, str]:
     """Every kind of operation an operator and the robots apply; returns the
     generated ids by role."""
     ids: dict[str, str] = {}
-    a = srv.submit(AddSkill(robot="lru1", skill="drive_to", label="to the crater",
-                            params={"goal": {"x": 12.5, "y": -3.0, "yaw": 1.2}, "speed": 0.8}))
+    a = srv.submit(
+        AddSkill(
+            robot="lru1",
+            skill="drive_to",
+            label="to the crater",
+            params={"goal": {"x": 12.5, "y": -3.0, "yaw": 1.2}, "speed": 0.8},
+        )
+    )
     ids["new1"] = a.value["id"]
-    a = srv.submit(AddSkill(robot="lru2", skill="explore", params={"max_duration": 120},
-                            bindings={"area": "ROI-east"}, at=0), "bob")
+    a = srv.submit(
+        AddSkill(
+            robot="lru2",
+            skill="explore",
+            params={"max_duration": 120},
+            bindings={"area": "ROI-east"},
+            at=0,
+        ),
+        "bob",
+    )
     ids["new2"] = a.value["id"]
     a = srv.submit(AddSkill(robot="ardea", skill="fly_to", params={"goal": {"x": 5, "y": 5}}, at=1))
     ids["new3"] = a.value["id"]
@@ -114,16 +137,25 @@ def run_scenario(srv: Server) -> dict[str, str]:
     a = srv.submit(AddBarrier(ids=["lru1-4", "ardea-3"]), "bob")
     srv.submit(RemoveBarrier(barrier=a.value["barrier"]), "bob")
     srv.submit(DeleteSkills(ids=["lander-1"]))  # leaves a two-robot barrier
-    srv.submit(MarkerAdd(name="CRATER", marker=PoseMarker(pose=Pose(x=70, y=-20, yaw=0.3), description="rim")))
+    srv.submit(
+        MarkerAdd(
+            name="CRATER", marker=PoseMarker(pose=Pose(x=70, y=-20, yaw=0.3), description="rim")
+        )
+    )
     srv.submit(EditSkill(id=ids["new1"], bindings={"goal": "CRATER"}))
     srv.submit(MarkerMove(name="CRATER", value=Pose(x=72, y=-21)))
-    srv.submit(MarkerMove(name="ROI-east", value=[Position(x=30), Position(x=90), Position(x=90, y=50)]), "bob")
+    srv.submit(
+        MarkerMove(name="ROI-east", value=[Position(x=30), Position(x=90), Position(x=90, y=50)]),
+        "bob",
+    )
     srv.submit(MarkerRename(name="POI-B", new_name="POI-ridge"))
     # synchronize, then the robots execute
     ids["lru1_synced"] = ",".join(srv.sync("lru1", "lru1-2"))
     srv.sync("lru2", "lru2-3")
     srv.sync("ardea")
-    srv.submit(MarkerMove(name="POI-A", value=Pose(x=40, y=20)))  # synchronized users keep the old value
+    srv.submit(
+        MarkerMove(name="POI-A", value=Pose(x=40, y=20))
+    )  # synchronized users keep the old value
     first = ids["new1"]
     srv.report("lru1", first, Status.RUNNING, "driving")
     srv.report("lru1", first, Status.PAUSED, "paused")
@@ -156,7 +188,9 @@ def run_scenario(srv: Server) -> dict[str, str]:
     srv.submit(Redo(), "bob")
     srv.submit(Undo(), "alice")  # the POI-A move
     # a report sent twice is applied once (and journaled once)
-    dup = Report(robot="lru1", seq=srv.seqs["lru1"], id=ids["retry"], status=Status.SUCCESS, info="arrived")
+    dup = Report(
+        robot="lru1", seq=srv.seqs["lru1"], id=ids["retry"], status=Status.SUCCESS, info="arrived"
+    )
     assert srv.engine.submit(dup, client="robot:lru1").duplicate
     return ids
 
@@ -166,14 +200,46 @@ def assert_same(a: Mission, b: Mission) -> None:
     assert a.revision == b.revision
     assert list(a.tasks) == list(b.tasks)
     for robot in b.tasks:
-        got = [(s.id, s.status, s.status_info, s.attempt, s.label, s.params, s.bindings, s.policies,
-                s.started_at, s.finished_at, s.rev) for s in a.tasks[robot]]
-        want = [(s.id, s.status, s.status_info, s.attempt, s.label, s.params, s.bindings, s.policies,
-                 s.started_at, s.finished_at, s.rev) for s in b.tasks[robot]]
+        got = [
+            (
+                s.id,
+                s.status,
+                s.status_info,
+                s.attempt,
+                s.label,
+                s.params,
+                s.bindings,
+                s.policies,
+                s.started_at,
+                s.finished_at,
+                s.rev,
+            )
+            for s in a.tasks[robot]
+        ]
+        want = [
+            (
+                s.id,
+                s.status,
+                s.status_info,
+                s.attempt,
+                s.label,
+                s.params,
+                s.bindings,
+                s.policies,
+                s.started_at,
+                s.finished_at,
+                s.rev,
+            )
+            for s in b.tasks[robot]
+        ]
         assert got == want, robot
     assert a.barriers == b.barriers
     assert a.markers == b.markers
-    assert (a.task_revs, a.marker_revs, a.report_seqs) == (b.task_revs, b.marker_revs, b.report_seqs)
+    assert (a.task_revs, a.marker_revs, a.report_seqs) == (
+        b.task_revs,
+        b.marker_revs,
+        b.report_seqs,
+    )
     assert (a.next_skill, a.next_barrier) == (b.next_skill, b.next_barrier)
     assert a.model_dump() == b.model_dump()
     assert a == b
@@ -204,7 +270,9 @@ def test_reopen_restores_the_mission_after_real_operations(tmp_path, snapshot_ev
 
     # the scenario did what it says: spot checks of the restored state
     lru1 = {s.id: s for s in mission.tasks["lru1"]}
-    assert lru1[ids["new1"]].status == Status.SUCCESS and lru1[ids["new1"]].bindings == {"goal": "CRATER"}
+    assert lru1[ids["new1"]].status == Status.SUCCESS and lru1[ids["new1"]].bindings == {
+        "goal": "CRATER"
+    }
     assert lru1[ids["new1"]].params["goal"]["x"] == 72.0
     assert lru1["lru1-1"].status == Status.FAILURE and lru1["lru1-1"].status_info == "wheel stuck"
     assert lru1[ids["retry"]].attempt == 2 and lru1[ids["retry"]].status == Status.SUCCESS
@@ -217,8 +285,17 @@ def test_reopen_restores_the_mission_after_real_operations(tmp_path, snapshot_ev
     assert [s.skill for s in mission.tasks["lru2"]][-1] == "recharge"  # redone
     assert mission.tasks["ardea"][0].status == Status.FAILURE
     assert {b: x.skills for b, x in mission.barriers.items()} == {
-        "b1": ["lru1-3", "lru2-3"], ids["barrier"]: ["lru1-5", "ardea-4"]}
-    assert set(mission.markers) == {"POI-A", "POI-ridge", "ROI-east", "ROI-north", "WIFI-1", "CRATER"}
+        "b1": ["lru1-3", "lru2-3"],
+        ids["barrier"]: ["lru1-5", "ardea-4"],
+    }
+    assert set(mission.markers) == {
+        "POI-A",
+        "POI-ridge",
+        "ROI-east",
+        "ROI-north",
+        "WIFI-1",
+        "CRATER",
+    }
     assert mission.markers["POI-A"].pose == Pose(x=42.0, y=18.0, yaw=0.4)  # the move was undone
     assert mission.report_seqs == {"lru1": 8, "lru2": 5, "ardea": 2}
     assert ",".join(s for s in ids["lru1_synced"].split(",")) == f"{ids['new1']},lru1-1,lru1-2"
@@ -236,9 +313,13 @@ def test_a_restored_mission_keeps_working(tmp_path):
     engine = Engine(mission, library)
     remember_requests(engine, requests)
     before = mission.revision
-    a = engine.submit(AddSkill(robot="lru1", skill="recharge"), client="alice", request_id="after-restart")
+    a = engine.submit(
+        AddSkill(robot="lru1", skill="recharge"), client="alice", request_id="after-restart"
+    )
     assert a.revision == before + 1
-    assert j.record(a, AddSkill(robot="lru1", skill="recharge"), client="alice", request_id="after-restart")
+    assert j.record(
+        a, AddSkill(robot="lru1", skill="recharge"), client="alice", request_id="after-restart"
+    )
     assert j.last_revision() == a.revision
     j.close()
     again, _, j = reopen(db)
@@ -258,9 +339,13 @@ def test_a_snapshot_waits_until_the_batches_since_add_up_to_half_its_size(tmp_pa
     def sizes() -> tuple[int, int]:
         con = sqlite3.connect(db)
         try:
-            snap = con.execute("SELECT length(mission) FROM snapshots ORDER BY revision DESC LIMIT 1").fetchone()[0]
-            since = con.execute("SELECT coalesce(sum(length(op) + length(events)), 0) FROM batches "
-                                "WHERE revision > (SELECT max(revision) FROM snapshots)").fetchone()[0]
+            snap = con.execute(
+                "SELECT length(mission) FROM snapshots ORDER BY revision DESC LIMIT 1"
+            ).fetchone()[0]
+            since = con.execute(
+                "SELECT coalesce(sum(length(op) + length(events)), 0) FROM batches "
+                "WHERE revision > (SELECT max(revision) FROM snapshots)"
+            ).fetchone()[0]
         finally:
             con.close()
         return snap, since
@@ -269,8 +354,12 @@ def test_a_snapshot_waits_until_the_batches_since_add_up_to_half_its_size(tmp_pa
     rev = mission.revision
     while True:
         rev += 1
-        j.append(EventBatch(revision=rev, events=[SkillChanged(id="lru1-1", changes={"status_info": "x" * 40})]),
-                 op_json="{}")
+        j.append(
+            EventBatch(
+                revision=rev, events=[SkillChanged(id="lru1-1", changes={"status_info": "x" * 40})]
+            ),
+            op_json="{}",
+        )
         if rev == mission.revision + 15:  # reopened midway: the same sizes, from the file
             j.close()
             j = Journal.open(db, snapshot_every=10)
@@ -282,7 +371,9 @@ def test_a_snapshot_waits_until_the_batches_since_add_up_to_half_its_size(tmp_pa
             deferred.append(rev)
         if want:
             break
-    assert deferred and rev > mission.revision + 15, f"due at {rev}: after 10 batches or before the reopen"
+    assert deferred and rev > mission.revision + 15, (
+        f"due at {rev}: after 10 batches or before the reopen"
+    )
     assert j.maybe_snapshot(mission.model_copy(update={"revision": rev}))
     assert j.snapshot_revisions()[-1] == rev and not j.snapshot_due(rev + 10)
     j.close()
@@ -302,7 +393,9 @@ def test_snapshot_plus_replay_equals_full_replay(tmp_path):
     def commit(st):
         batch = st.applied.batch(st.client)
         for j in (full, snap):
-            j.append(batch, op_json=st.op.model_dump_json(), client=st.client, request_id=st.request_id)
+            j.append(
+                batch, op_json=st.op.model_dump_json(), client=st.client, request_id=st.request_id
+            )
         snap.maybe_snapshot(engine.mission)
 
     gen = OpGenerator(engine, seed=7, on_step=commit)
@@ -395,7 +488,9 @@ def test_not_a_journal_is_a_clear_error(tmp_path):
     con.close()
     with pytest.raises(JournalError, match="not a missionctl journal"):
         Journal.open(foreign)
-    assert {r[0] for r in sqlite3.connect(foreign).execute("SELECT name FROM sqlite_master")} == {"people"}
+    assert {r[0] for r in sqlite3.connect(foreign).execute("SELECT name FROM sqlite_master")} == {
+        "people"
+    }
     with pytest.raises(JournalError, match="no such folder"):
         Journal.open(tmp_path / "missing" / "m.db")
 
@@ -408,7 +503,9 @@ def test_a_journal_locked_by_another_program_at_open_says_so(tmp_path, monkeypat
     other = sqlite3.connect(db, isolation_level=None)
     other.execute("BEGIN EXCLUSIVE")  # e.g. an sqlite3 shell in the middle of a write
     try:
-        with pytest.raises(JournalError, match="locked by another program .*close it, then start again"):
+        with pytest.raises(
+            JournalError, match="locked by another program .*close it, then start again"
+        ):
             Journal.open(db)
     finally:
         other.execute("ROLLBACK")
@@ -431,9 +528,12 @@ def test_a_damaged_database_file_is_a_clear_error_not_a_traceback(tmp_path):
     con.close()
     data = bytearray(db.read_bytes())
     start = (root - 1) * page_size
-    data[start:start + page_size] = b"\xab" * page_size
+    data[start : start + page_size] = b"\xab" * page_size
     db.write_bytes(bytes(data))
-    with pytest.raises(JournalCorrupt, match="cannot be read .*malformed.*restore a copy"), Journal.open(db) as j:
+    with (
+        pytest.raises(JournalCorrupt, match="cannot be read .*malformed.*restore a copy"),
+        Journal.open(db) as j,
+    ):
         j.load()
 
 
@@ -441,9 +541,13 @@ def test_noops_and_duplicates_are_not_journaled(tmp_path):
     srv = Server(tmp_path / "m.db")
     a = srv.submit(AddSkill(robot="lru1", skill="recharge"), request_id="once")
     rev = srv.journal.last_revision()
-    again = srv.engine.submit(AddSkill(robot="lru1", skill="recharge"), client="alice", request_id="once")
+    again = srv.engine.submit(
+        AddSkill(robot="lru1", skill="recharge"), client="alice", request_id="once"
+    )
     assert again.duplicate and again.revision == a.revision
-    assert not srv.journal.record(again, AddSkill(robot="lru1", skill="recharge"), client="alice", request_id="once")
+    assert not srv.journal.record(
+        again, AddSkill(robot="lru1", skill="recharge"), client="alice", request_id="once"
+    )
     noop = srv.engine.submit(MoveSkill(id="lru1-1", index=0))  # already first
     assert not noop.events
     assert not srv.journal.record(noop, MoveSkill(id="lru1-1", index=0))
@@ -460,7 +564,10 @@ def test_robot_reports_are_journaled_with_their_operation(tmp_path):
     assert [r.revision for r in records] == [1, 2, 3]
     assert [r.client for r in records] == ["robot:lru1"] * 3
     reports = [Report.model_validate_json(r.op) for r in records[1:]]
-    assert [(r.seq, r.status, r.info) for r in reports] == [(1, Status.RUNNING, "driving"), (2, Status.SUCCESS, "arrived")]
+    assert [(r.seq, r.status, r.info) for r in reports] == [
+        (1, Status.RUNNING, "driving"),
+        (2, Status.SUCCESS, "arrived"),
+    ]
     assert records[2].batch.op == records[2].op
     assert [r.revision for r in srv.journal.records(after=2)] == [3]
     srv.close()
@@ -497,8 +604,12 @@ def _journal_with_snapshots(tmp_path) -> tuple[Path, Mission]:
         j.snapshot(engine.mission)
 
         def commit(st):
-            j.append(st.applied.batch(st.client), op_json=st.op.model_dump_json(),
-                     client=st.client, request_id=st.request_id)
+            j.append(
+                st.applied.batch(st.client),
+                op_json=st.op.model_dump_json(),
+                client=st.client,
+                request_id=st.request_id,
+            )
             j.maybe_snapshot(engine.mission)
 
         gen = OpGenerator(engine, seed=3, on_step=commit)
@@ -517,7 +628,12 @@ def _sql(db: Path, statement: str, *args) -> None:
 
 @pytest.mark.parametrize(
     "damage",
-    ['{"format": "missionctl/mission@1", "robots": {', '{"library": 3}', "not json at all", "WRONG_REVISION"],
+    [
+        '{"format": "missionctl/mission@1", "robots": {',
+        '{"library": 3}',
+        "not json at all",
+        "WRONG_REVISION",
+    ],
 )
 def test_an_unreadable_newest_snapshot_falls_back_to_an_older_one(tmp_path, damage):
     db, want = _journal_with_snapshots(tmp_path)
@@ -525,7 +641,9 @@ def test_an_unreadable_newest_snapshot_falls_back_to_an_older_one(tmp_path, dama
         revs = j.snapshot_revisions()
     if damage == "WRONG_REVISION":
         old = Mission.model_validate_json(
-            sqlite3.connect(db).execute("SELECT mission FROM snapshots WHERE revision = ?", (revs[0],)).fetchone()[0]
+            sqlite3.connect(db)
+            .execute("SELECT mission FROM snapshots WHERE revision = ?", (revs[0],))
+            .fetchone()[0]
         )
         damage = old.model_dump_json()  # a readable mission, but of another revision
     _sql(db, "UPDATE snapshots SET mission = ? WHERE revision = ?", damage, revs[-1])
@@ -563,10 +681,16 @@ def test_no_readable_snapshot_or_a_damaged_batch_is_an_error_not_a_partial_missi
     with Journal.open(db2) as j:
         newest = j.snapshot_revisions()[-1]
     _sql(db2, "UPDATE batches SET events = '{\"revision\": 1' WHERE revision = ?", newest + 2)
-    with Journal.open(db2) as j, pytest.raises(JournalCorrupt, match=f"batch {newest + 2} cannot be replayed"):
+    with (
+        Journal.open(db2) as j,
+        pytest.raises(JournalCorrupt, match=f"batch {newest + 2} cannot be replayed"),
+    ):
         j.load()
     _sql(db2, "DELETE FROM batches WHERE revision = ?", newest + 2)
-    with Journal.open(db2) as j, pytest.raises(JournalCorrupt, match=f"batch {newest + 2} is missing"):
+    with (
+        Journal.open(db2) as j,
+        pytest.raises(JournalCorrupt, match=f"batch {newest + 2} is missing"),
+    ):
         j.load()
 
 
@@ -649,8 +773,15 @@ def test_robot_reports_cannot_rewrite_the_log_or_unsynchronized_skills(tmp_path,
     srv.report("lru1", "lru1-1", Status.SUCCESS, "arrived")
     sid, status = ("lru1-1", Status.SUCCESS) if target == "finished" else ("lru1-4", Status.IDLE)
     before = srv.engine.mission.find(sid)[2].model_copy()
-    op = Report(robot="lru1", seq=3, id=sid, status=status, info="rewritten", attempt=4,
-                at=T0 + timedelta(days=365))
+    op = Report(
+        robot="lru1",
+        seq=3,
+        id=sid,
+        status=status,
+        info="rewritten",
+        attempt=4,
+        at=T0 + timedelta(days=365),
+    )
     try:
         srv.engine.submit(op, client="robot:lru1")
     except Refusal:

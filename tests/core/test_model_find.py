@@ -22,7 +22,9 @@ def mission(per_robot: int = 4) -> Mission:
     m = Mission(library="lib.yaml")
     for r in ("a", "b", "c"):
         m.robots[r] = RobotSpec(type="t")
-        m.tasks[r] = [SkillInstance(id=f"{r}-{j}", skill="drive_to") for j in range(1, per_robot + 1)]
+        m.tasks[r] = [
+            SkillInstance(id=f"{r}-{j}", skill="drive_to") for j in range(1, per_robot + 1)
+        ]
     return m
 
 
@@ -81,4 +83,8 @@ def test_hints_change_neither_equality_nor_what_is_stored():
     copy.tasks["a"].pop(0)
     assert copy != untouched  # content still decides
     assert copy.find("a-2") == ("a", 0, copy.tasks["a"][0])
-    assert looked_up.find("a-1") == ("a", 0, looked_up.tasks["a"][0])  # the original's lists are its own
+    assert looked_up.find("a-1") == (
+        "a",
+        0,
+        looked_up.tasks["a"][0],
+    )  # the original's lists are its own

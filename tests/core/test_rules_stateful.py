@@ -86,13 +86,20 @@ class MissionMachine(RuleBasedStateMachine):
         return self.submit(Report(robot=robot, seq=self.seq[robot], id=sid, status=status, **kw))
 
     # -- operator edits -----------------------------------------------------
-    @rule(robot=st.sampled_from(["lru1", "lru2", "ardea", "lander"]), data=st.data(), client=st.sampled_from(CLIENTS))
+    @rule(
+        robot=st.sampled_from(["lru1", "lru2", "ardea", "lander"]),
+        data=st.data(),
+        client=st.sampled_from(CLIENTS),
+    )
     def add(self, robot, data, client):
         rtype = self.engine.mission.robots[robot].type
         skills = [s for s in self.engine.library.skills_of(rtype) if s in SIMPLE]
         skill = data.draw(st.sampled_from(skills))
         at = data.draw(st.none() | st.integers(0, 6))
-        self.submit(AddSkill(robot=robot, skill=skill, params=SIMPLE[skill], at=at, label="x"), client=client)
+        self.submit(
+            AddSkill(robot=robot, skill=skill, params=SIMPLE[skill], at=at, label="x"),
+            client=client,
+        )
 
     @precondition(lambda self: self.ids(Status.IDLE))
     @rule(data=st.data(), client=st.sampled_from(CLIENTS))
@@ -107,7 +114,12 @@ class MissionMachine(RuleBasedStateMachine):
         self.submit(MoveSkill(id=sid, index=index), client=client)
 
     @precondition(lambda self: self.ids(Status.IDLE, Status.IDLE_SYNCHRONIZED))
-    @rule(data=st.data(), label=st.text(max_size=5), client=st.sampled_from(CLIENTS), stale=st.booleans())
+    @rule(
+        data=st.data(),
+        label=st.text(max_size=5),
+        client=st.sampled_from(CLIENTS),
+        stale=st.booleans(),
+    )
     def edit(self, data, label, client, stale):
         sid = data.draw(st.sampled_from(self.ids(Status.IDLE, Status.IDLE_SYNCHRONIZED)))
         seen = self.engine.mission.revision - (3 if stale else 0)
@@ -116,7 +128,9 @@ class MissionMachine(RuleBasedStateMachine):
     @precondition(lambda self: len(self.ids(Status.IDLE)) >= 2)
     @rule(data=st.data(), client=st.sampled_from(CLIENTS))
     def barrier(self, data, client):
-        ids = data.draw(st.lists(st.sampled_from(self.ids(Status.IDLE)), min_size=2, max_size=3, unique=True))
+        ids = data.draw(
+            st.lists(st.sampled_from(self.ids(Status.IDLE)), min_size=2, max_size=3, unique=True)
+        )
         self.submit(AddBarrier(ids=ids), client=client)
 
     @precondition(lambda self: self.engine.mission.barriers)
@@ -125,11 +139,17 @@ class MissionMachine(RuleBasedStateMachine):
         bid = data.draw(st.sampled_from(sorted(self.engine.mission.barriers)))
         self.submit(RemoveBarrier(barrier=bid), client=client)
 
-    @rule(name=st.sampled_from(["M1", "M2", "POI-A", "WIFI-1"]), x=st.floats(-50, 50), op=st.integers(0, 3),
-          client=st.sampled_from(CLIENTS))
+    @rule(
+        name=st.sampled_from(["M1", "M2", "POI-A", "WIFI-1"]),
+        x=st.floats(-50, 50),
+        op=st.integers(0, 3),
+        client=st.sampled_from(CLIENTS),
+    )
     def marker(self, name, x, op, client):
         if op == 0:
-            self.submit(MarkerAdd(name=name, marker=PositionMarker(position=Position(x=x))), client=client)
+            self.submit(
+                MarkerAdd(name=name, marker=PositionMarker(position=Position(x=x))), client=client
+            )
         elif op == 1:
             kind = self.engine.mission.markers.get(name)
             value = Pose(x=x) if kind is None or kind.kind == "pose" else Position(x=x)
@@ -144,7 +164,11 @@ class MissionMachine(RuleBasedStateMachine):
         self.submit(Redo() if redo else Undo(), client=client)
 
     # -- robots -------------------------------------------------------------
-    @rule(robot=st.sampled_from(["lru1", "lru2", "ardea", "lander"]), data=st.data(), ack=st.booleans())
+    @rule(
+        robot=st.sampled_from(["lru1", "lru2", "ardea", "lander"]),
+        data=st.data(),
+        ack=st.booleans(),
+    )
     def sync(self, robot, data, ack):
         idle = [s.id for s in self.engine.mission.tasks[robot] if s.status == Status.IDLE]
         through = data.draw(st.sampled_from([None, *idle]))
@@ -158,7 +182,9 @@ class MissionMachine(RuleBasedStateMachine):
 
     @rule(robot=st.sampled_from(["lru1", "lru2", "ardea", "lander"]), race=st.booleans())
     def unsync(self, robot, race):
-        queued = [s for s in self.engine.mission.tasks[robot] if s.status == Status.IDLE_SYNCHRONIZED]
+        queued = [
+            s for s in self.engine.mission.tasks[robot] if s.status == Status.IDLE_SYNCHRONIZED
+        ]
         from_id = queued[-1].id if queued and race else None
         try:
             ids = self.engine.plan_unsync(Unsync(robot=robot, from_id=from_id))
@@ -166,15 +192,28 @@ class MissionMachine(RuleBasedStateMachine):
             return
         task = self.engine.mission.tasks[robot]
         first = self.engine.first_queued(task)
-        if race and self.engine.active(task) is None and first is not None and task[first].id == ids[0]:
+        if (
+            race
+            and self.engine.active(task) is None
+            and first is not None
+            and task[first].id == ids[0]
+        ):
             # the robot started the first skill before the request arrived
             self.report(robot, ids[0], Status.RUNNING)
             ids = ids[1:]
         self.submit(UnsyncDone(robot=robot, ids=ids))
         self.engine.release(robot)
 
-    @rule(robot=st.sampled_from(["lru1", "lru2", "ardea", "lander"]), outcomes=st.lists(st.sampled_from(
-        ["success", "failure", "paused", "stop", "running", "synchwaiting", "bogus"]), min_size=1, max_size=4))
+    @rule(
+        robot=st.sampled_from(["lru1", "lru2", "ardea", "lander"]),
+        outcomes=st.lists(
+            st.sampled_from(
+                ["success", "failure", "paused", "stop", "running", "synchwaiting", "bogus"]
+            ),
+            min_size=1,
+            max_size=4,
+        ),
+    )
     def execute(self, robot, outcomes):
         for outcome in outcomes:
             self.step_robot(robot, outcome)
@@ -191,8 +230,10 @@ class MissionMachine(RuleBasedStateMachine):
         status = {"stop": Status.IDLE_SYNCHRONIZED, "bogus": Status.IDLE}.get(outcome, outcome)
         self.report(robot, act.id, Status(status))
 
-    @rule(robot=st.sampled_from(["lru1", "lru2", "ardea", "lander", None]),
-          action=st.sampled_from(["run", "pause", "stop", "reset"]))
+    @rule(
+        robot=st.sampled_from(["lru1", "lru2", "ardea", "lander", None]),
+        action=st.sampled_from(["run", "pause", "stop", "reset"]),
+    )
     def control(self, robot, action):
         try:
             robots = self.engine.plan_control(Control(op=action, robot=robot))
@@ -220,7 +261,9 @@ class MissionMachine(RuleBasedStateMachine):
         if last:  # resend the last applied report number: applied once
             before = self.engine.mission.revision
             task = self.engine.mission.tasks[robot]
-            applied = self.submit(Report(robot=robot, seq=last, id=task[0].id if task else "x", status=Status.RUNNING))
+            applied = self.submit(
+                Report(robot=robot, seq=last, id=task[0].id if task else "x", status=Status.RUNNING)
+            )
             assert applied is None or (applied.duplicate and self.engine.mission.revision == before)
 
     # -- invariants ------------------------------------------------------------

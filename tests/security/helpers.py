@@ -36,7 +36,6 @@ def env() -> dict[str, str]:
     return e
 
 
-
 def stop_process(proc: subprocess.Popen, timeout: float = 10.0) -> None:
     """SIGTERM, then SIGKILL if it does not end within `timeout`."""
     if proc.poll() is None:
@@ -82,15 +81,28 @@ class Accounts:
 
 
 def ctl(endpoint: str, *args: str, timeout: float = 30.0) -> subprocess.CompletedProcess:
-    return subprocess.run([*CLI, "ctl", "--connect", endpoint, "--client-id", "sec-test", *args],
-                          cwd=ROOT, env=env(), capture_output=True, text=True, timeout=timeout)
+    return subprocess.run(
+        [*CLI, "ctl", "--connect", endpoint, "--client-id", "sec-test", *args],
+        cwd=ROOT,
+        env=env(),
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
 
 
 class SecureServer:
     """`missionctl server --accounts …` (plus `extra` options such as TLS)."""
 
-    def __init__(self, tmp: Path, accounts: Accounts, *, scheme: str = "tcp", extra: list[str] = (),
-                 client_tls: list[str] = ()):
+    def __init__(
+        self,
+        tmp: Path,
+        accounts: Accounts,
+        *,
+        scheme: str = "tcp",
+        extra: list[str] = (),
+        client_tls: list[str] = (),
+    ):
         self.accounts = accounts
         self.client_tls = list(client_tls)
         self.log_path = tmp / "server.log"
@@ -99,9 +111,25 @@ class SecureServer:
             self.endpoint = f"{scheme}/127.0.0.1:{free_port()}"
             self.log = open(self.log_path, "w")  # noqa: SIM115 - closed in stop()
             self.proc = subprocess.Popen(
-                [*CLI, "server", "--mission", str(TUTORIAL), "--listen", self.endpoint, "--db", str(self.db),
-                 "--accounts", str(accounts.file), "-v", *extra],
-                cwd=ROOT, env=env(), stdout=self.log, stderr=subprocess.STDOUT, text=True,
+                [
+                    *CLI,
+                    "server",
+                    "--mission",
+                    str(TUTORIAL),
+                    "--listen",
+                    self.endpoint,
+                    "--db",
+                    str(self.db),
+                    "--accounts",
+                    str(accounts.file),
+                    "-v",
+                    *extra,
+                ],
+                cwd=ROOT,
+                env=env(),
+                stdout=self.log,
+                stderr=subprocess.STDOUT,
+                text=True,
             )
             if self._wait_ready():
                 return

@@ -22,18 +22,34 @@ def _write(tmp: Path, body: str, password: str = "s3cret-pw", mode: int = 0o600)
 
 
 def test_loads_roles_and_robots(tmp_path):
-    acc = load_accounts(_write(tmp_path, "  ops: {role: operator, password_file: a.pw}\n  r: {role: robot, robots: [lru1], password_file: a.pw}\n"))
-    assert acc.role("ops") == "operator" and acc.robots("r") == ["lru1"] and acc.role("nobody") is None
+    acc = load_accounts(
+        _write(
+            tmp_path,
+            "  ops: {role: operator, password_file: a.pw}\n  r: {role: robot, robots: [lru1], password_file: a.pw}\n",
+        )
+    )
+    assert (
+        acc.role("ops") == "operator" and acc.robots("r") == ["lru1"] and acc.role("nobody") is None
+    )
     assert "s3cret-pw" not in repr(acc)
 
 
-@pytest.mark.parametrize("body, needle", [
-    ("  r: {role: robot, password_file: a.pw}\n", "a robot account lists its robots"),
-    ("  ops: {role: operator, robots: [lru1], password_file: a.pw}\n", "only robot accounts list robots"),
-    ("  'bad name': {role: operator, password_file: a.pw}\n", "account name 'bad name'"),
-    ("  ops: {role: operator, password_file: missing.pw}\n", "missing.pw: no such password file"),
-    ("  ops: {role: operator}\n", "accounts.ops.password_file"),
-])
+@pytest.mark.parametrize(
+    "body, needle",
+    [
+        ("  r: {role: robot, password_file: a.pw}\n", "a robot account lists its robots"),
+        (
+            "  ops: {role: operator, robots: [lru1], password_file: a.pw}\n",
+            "only robot accounts list robots",
+        ),
+        ("  'bad name': {role: operator, password_file: a.pw}\n", "account name 'bad name'"),
+        (
+            "  ops: {role: operator, password_file: missing.pw}\n",
+            "missing.pw: no such password file",
+        ),
+        ("  ops: {role: operator}\n", "accounts.ops.password_file"),
+    ],
+)
 def test_errors_say_what_and_where(tmp_path, body, needle):
     with pytest.raises(AccountsError) as e:
         load_accounts(_write(tmp_path, body))
@@ -43,9 +59,13 @@ def test_errors_say_what_and_where(tmp_path, body, needle):
 
 def test_password_files_must_be_private_and_clean(tmp_path):
     with pytest.raises(AccountsError, match="chmod 600"):
-        load_accounts(_write(tmp_path, "  ops: {role: operator, password_file: a.pw}\n", mode=0o640))
+        load_accounts(
+            _write(tmp_path, "  ops: {role: operator, password_file: a.pw}\n", mode=0o640)
+        )
     with pytest.raises(AccountsError, match="cannot contain ':'"):
-        load_accounts(_write(tmp_path, "  ops: {role: operator, password_file: a.pw}\n", password="a:b"))
+        load_accounts(
+            _write(tmp_path, "  ops: {role: operator, password_file: a.pw}\n", password="a:b")
+        )
 
 
 def test_the_zenoh_dictionary_is_private_and_removed(tmp_path):

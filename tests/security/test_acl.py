@@ -35,7 +35,9 @@ TIMEOUT = 3.0
 
 def _replies(session: zenoh.Session, key: str, payload: bytes = b"") -> list[tuple[bool, bytes]]:
     out = []
-    for reply in session.get(key, payload=payload, timeout=TIMEOUT, consolidation=zenoh.ConsolidationMode.NONE):
+    for reply in session.get(
+        key, payload=payload, timeout=TIMEOUT, consolidation=zenoh.ConsolidationMode.NONE
+    ):
         if reply.ok is not None:
             out.append((True, reply.ok.payload.to_bytes()))
         else:
@@ -44,19 +46,28 @@ def _replies(session: zenoh.Session, key: str, payload: bytes = b"") -> list[tup
 
 
 def _add(user_claim: str = "") -> bytes:
-    return dumps(Request(client="raw", request_id=datetime.now(UTC).isoformat(), user=user_claim,
-                         op=AddSkill(robot="lru1", skill="recharge", label="raw")))
+    return dumps(
+        Request(
+            client="raw",
+            request_id=datetime.now(UTC).isoformat(),
+            user=user_claim,
+            op=AddSkill(robot="lru1", skill="recharge", label="raw"),
+        )
+    )
 
 
 def _revision(session: zenoh.Session) -> int:
-    (ok, raw), = _replies(session, Keys.STATE)
+    ((ok, raw),) = _replies(session, Keys.STATE)
     assert ok
     return StateSnapshot.model_validate_json(raw).revision
 
 
 def test_observer_reads_state_but_the_router_drops_every_operation(server, accounts):
     ep = server.endpoint
-    with raw_session(ep, accounts.login("watch")) as watch, raw_session(ep, accounts.login("ops")) as ops:
+    with (
+        raw_session(ep, accounts.login("watch")) as watch,
+        raw_session(ep, accounts.login("ops")) as ops,
+    ):
         before = _revision(watch)  # reading works
         for key in (Keys.OP, Keys.op_as("watch"), Keys.op_as("ops")):
             assert _replies(watch, key, _add()) == [], f"{key} answered an observer"
@@ -66,7 +77,7 @@ def test_observer_reads_state_but_the_router_drops_every_operation(server, accou
         events: queue.Queue = queue.Queue()
         sub = ops.declare_subscriber(Keys.EVENTS, lambda s: events.put(s.payload.to_bytes()))
         try:
-            (ok, _raw), = _replies(ops, Keys.op_as("ops"), _add(user_claim="someone-else"))
+            ((ok, _raw),) = _replies(ops, Keys.op_as("ops"), _add(user_claim="someone-else"))
             assert ok
             batch = EventBatch.model_validate_json(events.get(timeout=10))
             assert batch.actor == "ops@raw"
@@ -79,16 +90,25 @@ def test_observer_reads_state_but_the_router_drops_every_operation(server, accou
 
 def test_observer_publications_are_not_delivered(server, accounts):
     ep = server.endpoint
-    with raw_session(ep, accounts.login("watch")) as watch, raw_session(ep, accounts.login("ops")) as ops:
+    with (
+        raw_session(ep, accounts.login("watch")) as watch,
+        raw_session(ep, accounts.login("ops")) as ops,
+    ):
         got: queue.Queue = queue.Queue()
         sub = ops.declare_subscriber(Keys.EVENTS, lambda s: got.put(s.payload.to_bytes()))
         try:
             _revision(ops)  # the subscription has reached the router
-            fake = EventBatch(revision=999, events=[], actor="watch", op="fake").model_dump_json().encode()
+            fake = (
+                EventBatch(revision=999, events=[], actor="watch", op="fake")
+                .model_dump_json()
+                .encode()
+            )
             watch.put(Keys.EVENTS, fake)
             watch.delete(Keys.EVENTS)
-            _revision(watch)  # a round trip on the observer's link: its put was routed (or dropped) before
-            (ok, _), = _replies(ops, Keys.op_as("ops"), _add())
+            _revision(
+                watch
+            )  # a round trip on the observer's link: its put was routed (or dropped) before
+            ((ok, _),) = _replies(ops, Keys.op_as("ops"), _add())
             assert ok
             first = EventBatch.model_validate_json(got.get(timeout=10))
             assert first.revision == 1 and first.actor != "watch"
@@ -97,15 +117,24 @@ def test_observer_publications_are_not_delivered(server, accounts):
 
 
 def _telemetry(robot: str, info: str) -> bytes:
-    return Telemetry(robot=robot, pose=Pose(), info=info, at=datetime.now(UTC)).model_dump_json().encode()
+    return (
+        Telemetry(robot=robot, pose=Pose(), info=info, at=datetime.now(UTC))
+        .model_dump_json()
+        .encode()
+    )
 
 
 def test_robot_publishes_only_its_own_telemetry(server, accounts):
     ep = server.endpoint
-    with (raw_session(ep, accounts.login("rover1")) as rover1, raw_session(ep, accounts.login("watch")) as watch,
-          raw_session(ep, accounts.login("ops")) as ops):
+    with (
+        raw_session(ep, accounts.login("rover1")) as rover1,
+        raw_session(ep, accounts.login("watch")) as watch,
+        raw_session(ep, accounts.login("ops")) as ops,
+    ):
         got: queue.Queue = queue.Queue()
-        sub = ops.declare_subscriber(Keys.ALL_TELEMETRY, lambda s: got.put((str(s.key_expr), s.payload.to_bytes())))
+        sub = ops.declare_subscriber(
+            Keys.ALL_TELEMETRY, lambda s: got.put((str(s.key_expr), s.payload.to_bytes()))
+        )
         try:
             _revision(ops)
             watch.put(Keys.telemetry("lru1"), _telemetry("lru1", "fake from observer"))
@@ -124,18 +153,21 @@ def test_robot_publishes_only_its_own_telemetry(server, accounts):
 
 def test_robot_cannot_report_or_register_for_another_robot_nor_change_the_mission(server, accounts):
     ep = server.endpoint
-    with raw_session(ep, accounts.login("rover1")) as rover1, raw_session(ep, accounts.login("ops")) as ops:
+    with (
+        raw_session(ep, accounts.login("rover1")) as rover1,
+        raw_session(ep, accounts.login("ops")) as ops,
+    ):
         before = _revision(ops)
         empty = dumps(ReportBatch(reports=[]))
         # control: its own report key answers
-        (ok, raw), = _replies(rover1, Keys.reports("lru1"), empty)
+        ((ok, raw),) = _replies(rover1, Keys.reports("lru1"), empty)
         assert ok and ReportAck.model_validate_json(raw).last_seq == 0
         # another robot's keys: the router drops the query
         report = Report(robot="lru2", seq=1, id="lru2-1", status="success")
         assert _replies(rover1, Keys.reports("lru2"), dumps(ReportBatch(reports=[report]))) == []
         assert _replies(rover1, Keys.register("lru2"), b"{}") == []
         # its own key carrying another robot's report: the server refuses it
-        (ok, raw), = _replies(rover1, Keys.reports("lru1"), dumps(ReportBatch(reports=[report])))
+        ((ok, raw),) = _replies(rover1, Keys.reports("lru1"), dumps(ReportBatch(reports=[report])))
         assert not ok and b"lru1 cannot report for lru2" in raw
         # operations and the state are not a robot's business
         for key in (Keys.OP, Keys.op_as("rover1"), Keys.op_as("ops"), Keys.STATE):
@@ -145,13 +177,22 @@ def test_robot_cannot_report_or_register_for_another_robot_nor_change_the_missio
 
 def test_robots_ask_each_other_but_cannot_pose_as_another(server, accounts):
     ep = server.endpoint
-    with raw_session(ep, accounts.login("rover1")) as rover1, raw_session(ep, accounts.login("rover2")) as rover2:
+    with (
+        raw_session(ep, accounts.login("rover1")) as rover1,
+        raw_session(ep, accounts.login("rover2")) as rover2,
+    ):
         # the fake first: once `own` is reachable, the router has handled the fake's declaration (same link)
-        fake = rover1.declare_queryable(Keys.world("lru2"), lambda q: q.reply(Keys.world("lru2"), b"rover1 posing as lru2"))
-        own = rover1.declare_queryable(Keys.world("lru1"), lambda q: q.reply(Keys.world("lru1"), b"lru1 here"))
+        fake = rover1.declare_queryable(
+            Keys.world("lru2"), lambda q: q.reply(Keys.world("lru2"), b"rover1 posing as lru2")
+        )
+        own = rover1.declare_queryable(
+            Keys.world("lru1"), lambda q: q.reply(Keys.world("lru1"), b"lru1 here")
+        )
         try:
             deadline = time.monotonic() + 10
-            while not (answers := _replies(rover2, Keys.world("lru1"))):  # until the declaration has reached the router
+            while not (
+                answers := _replies(rover2, Keys.world("lru1"))
+            ):  # until the declaration has reached the router
                 assert time.monotonic() < deadline, "lru1's world queryable never became reachable"
             assert answers == [(True, b"lru1 here")]
             assert _replies(rover2, Keys.world("lru2")) == []

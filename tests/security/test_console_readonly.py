@@ -36,19 +36,27 @@ def test_observer_console_is_read_only_and_says_why(server, accounts):
         app = _app(server, accounts, "watch")
         async with app.run_test(size=SIZE) as pilot:
             screen = app.mission_screen
-            await _until(pilot, lambda: app.model.read_only and app.model.mission is not None, "logged in")
+            await _until(
+                pilot, lambda: app.model.read_only and app.model.mission is not None, "logged in"
+            )
             assert READ_ONLY in _top(app)
             screen.schedule.select("lru1-1")
             await pilot.pause()
             changing = [a.name for a in ACTIONS if a.name in MUTATING]
             assert changing and all(screen.why_disabled(a) == READ_ONLY for a in changing)
-            assert app.model.read_only_reason("lru1-1") == "logged in as observer watch"  # the parameter editor too
+            assert (
+                app.model.read_only_reason("lru1-1") == "logged in as observer watch"
+            )  # the parameter editor too
             await pilot.press("d")  # a disabled key: the reason on the status line, nothing sent
             await _until(pilot, lambda: READ_ONLY in screen.message, "reason on the status line")
 
         ops = _app(server, accounts, "ops")
         async with ops.run_test(size=SIZE) as pilot:
-            await _until(pilot, lambda: ops.model.connection == "connected" and ops.model.mission is not None, "operator connected")
+            await _until(
+                pilot,
+                lambda: ops.model.connection == "connected" and ops.model.mission is not None,
+                "operator connected",
+            )
             await pilot.pause()
             assert ops.model.read_only == "" and "read-only" not in _top(ops)
             ops.mission_screen.schedule.select("lru1-1")

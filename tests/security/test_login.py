@@ -25,11 +25,15 @@ def test_wrong_password_is_refused_with_a_clear_line(server, accounts):
     bad = accounts.write_secret("bad.pw", "not-the-password")
     r = server.ctl(None, "--user", "ops", "--password-file", str(bad), "state")
     assert r.returncode == EXIT_UNREACHABLE
-    assert _one_line(r.stderr).startswith(f"missionctl: login refused for user ops at {server.endpoint}")
+    assert _one_line(r.stderr).startswith(
+        f"missionctl: login refused for user ops at {server.endpoint}"
+    )
 
 
 def test_unknown_user_and_missing_credentials_are_refused(server, accounts):
-    r = server.ctl(None, "--user", "mallory", "--password-file", str(accounts.pw_file("ops")), "state")
+    r = server.ctl(
+        None, "--user", "mallory", "--password-file", str(accounts.pw_file("ops")), "state"
+    )
     assert r.returncode == EXIT_UNREACHABLE
     assert f"login refused for user mallory at {server.endpoint}" in _one_line(r.stderr)
     r = server.ctl(None, "state")
@@ -43,8 +47,14 @@ def test_unreachable_is_not_reported_as_a_refused_login(accounts):
     from backend.transport import free_port
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"  # nothing listens
-    r = subprocess.run([*CLI, "ctl", "--connect", endpoint, *accounts.login_args("ops"), "state"],
-                       cwd=ROOT, env=env(), capture_output=True, text=True, timeout=30)
+    r = subprocess.run(
+        [*CLI, "ctl", "--connect", endpoint, *accounts.login_args("ops"), "state"],
+        cwd=ROOT,
+        env=env(),
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     assert r.returncode == EXIT_UNREACHABLE
     line = _one_line(r.stderr)
     assert "login refused" not in line and "cannot reach the mission server" in line
@@ -53,20 +63,48 @@ def test_unreachable_is_not_reported_as_a_refused_login(accounts):
 def test_console_cli_wrong_password_exits_3_with_one_line(server, accounts):
     bad = accounts.write_secret("bad.pw", "not-the-password")
     r = subprocess.run(
-        [*CLI, "console", "--connect", server.endpoint, "--user", "watch", "--password-file", str(bad)],
-        cwd=ROOT, env={**env(), "TERM": "xterm-256color"}, stdin=subprocess.DEVNULL,
-        capture_output=True, text=True, timeout=60,
+        [
+            *CLI,
+            "console",
+            "--connect",
+            server.endpoint,
+            "--user",
+            "watch",
+            "--password-file",
+            str(bad),
+        ],
+        cwd=ROOT,
+        env={**env(), "TERM": "xterm-256color"},
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert r.returncode == EXIT_UNREACHABLE, r.stderr
-    assert _one_line(r.stderr).startswith(f"missionctl console: login refused for user watch at {server.endpoint}")
+    assert _one_line(r.stderr).startswith(
+        f"missionctl console: login refused for user watch at {server.endpoint}"
+    )
 
 
 def test_robot_with_wrong_password_exits_3(server, accounts):
     bad = accounts.write_secret("bad.pw", "not-the-password")
     r = subprocess.run(
-        [sys.executable, str(ROBOTS_SCRIPT), "--connect", server.endpoint, "--user", "rover1",
-         "--password-file", str(bad), "lru1:lru_science"],
-        cwd=ROOT, env=env(), capture_output=True, text=True, timeout=60,
+        [
+            sys.executable,
+            str(ROBOTS_SCRIPT),
+            "--connect",
+            server.endpoint,
+            "--user",
+            "rover1",
+            "--password-file",
+            str(bad),
+            "lru1:lru_science",
+        ],
+        cwd=ROOT,
+        env=env(),
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert r.returncode == EXIT_UNREACHABLE
     assert f"login refused for user rover1 at {server.endpoint}" in _one_line(r.stderr)
@@ -97,7 +135,12 @@ def test_observer_reads_but_every_operation_is_refused(server):
     st = server.ctl("watch", "state", "--json")
     assert st.returncode == 0, st.stderr
     before = json.loads(st.stdout)["revision"]
-    for args in (["add", "lru1", "recharge"], ["run", "--all"], ["new", "x"], ["marker", "delete", "POI-A"]):
+    for args in (
+        ["add", "lru1", "recharge"],
+        ["run", "--all"],
+        ["new", "x"],
+        ["marker", "delete", "POI-A"],
+    ):
         r = server.ctl("watch", *args)
         assert r.returncode == 1, (args, r.stderr)
         assert _one_line(r.stderr) == "missionctl: refused: read-only: logged in as observer watch"
@@ -106,10 +149,28 @@ def test_observer_reads_but_every_operation_is_refused(server):
 
 def test_accounts_file_errors_name_file_line_and_field(tmp_path):
     bad = tmp_path / "accounts.yaml"
-    bad.write_text("format: missionctl/accounts@1\naccounts:\n  ops: {role: admin, password_file: x.pw}\n")
-    r = subprocess.run([*CLI, "server", "--mission", str(ROOT / "missions" / "tutorial.yaml"), "--db", str(tmp_path / "m.db"),
-                        "--listen", "tcp/127.0.0.1:1", "--accounts", str(bad)],
-                       cwd=ROOT, env=env(), capture_output=True, text=True, timeout=30)
+    bad.write_text(
+        "format: missionctl/accounts@1\naccounts:\n  ops: {role: admin, password_file: x.pw}\n"
+    )
+    r = subprocess.run(
+        [
+            *CLI,
+            "server",
+            "--mission",
+            str(ROOT / "missions" / "tutorial.yaml"),
+            "--db",
+            str(tmp_path / "m.db"),
+            "--listen",
+            "tcp/127.0.0.1:1",
+            "--accounts",
+            str(bad),
+        ],
+        cwd=ROOT,
+        env=env(),
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     assert r.returncode == EXIT_BAD_INPUT
     line = _one_line(r.stderr)
     assert f"{bad}:3:" in line and "accounts.ops.role" in line

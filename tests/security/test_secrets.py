@@ -23,7 +23,9 @@ class Bg:
     def __init__(self, args: list[str], log: Path):
         self.log_path = log
         self.log = open(log, "w")  # noqa: SIM115 - closed in stop()
-        self.proc = subprocess.Popen(args, cwd=ROOT, env=env(), stdout=self.log, stderr=subprocess.STDOUT, text=True)
+        self.proc = subprocess.Popen(
+            args, cwd=ROOT, env=env(), stdout=self.log, stderr=subprocess.STDOUT, text=True
+        )
 
     def wait_for(self, needle: str, timeout: float = 30.0) -> None:
         deadline = time.monotonic() + timeout
@@ -53,9 +55,22 @@ def _until(server, pred, what: str, timeout: float = 30.0) -> dict:
 
 def test_no_password_in_arguments_logs_or_journal(tmp_path, server, accounts):
     ep = server.endpoint
-    robots = Bg([sys.executable, str(ROBOTS_SCRIPT), "--connect", ep, "-v", *accounts.login_args("rover1"), "lru1:lru_science"],
-                tmp_path / "robots.log")
-    watch = Bg([*CLI, "ctl", "--connect", ep, *accounts.login_args("watch"), "watch"], tmp_path / "watch.log")
+    robots = Bg(
+        [
+            sys.executable,
+            str(ROBOTS_SCRIPT),
+            "--connect",
+            ep,
+            "-v",
+            *accounts.login_args("rover1"),
+            "lru1:lru_science",
+        ],
+        tmp_path / "robots.log",
+    )
+    watch = Bg(
+        [*CLI, "ctl", "--connect", ep, *accounts.login_args("watch"), "watch"],
+        tmp_path / "watch.log",
+    )
     outputs: list[str] = []
     try:
         robots.wait_for("ready lru1")
@@ -63,7 +78,11 @@ def test_no_password_in_arguments_logs_or_journal(tmp_path, server, accounts):
             r = server.ctl("ops", *args)
             assert r.returncode == 0, r.stderr
             outputs += [r.stdout, r.stderr]
-        _until(server, lambda st: all(s["status"] == "success" for s in st["tasks"]["lru1"]), "lru1 done")
+        _until(
+            server,
+            lambda st: all(s["status"] == "success" for s in st["tasks"]["lru1"]),
+            "lru1 done",
+        )
         # the observer sees presence and telemetry (its rules cover what consoles read)
         seen_by_watch = json.loads(server.ctl("watch", "robots", "--json").stdout)["robots"]["lru1"]
         assert seen_by_watch["online"] and seen_by_watch["telemetry"] is not None
@@ -71,12 +90,22 @@ def test_no_password_in_arguments_logs_or_journal(tmp_path, server, accounts):
         outputs += [refused.stdout, refused.stderr]
         watch.wait_for("recharge")
         seen = server.proc.pid, robots.proc_files(), watch.proc_files()
-        args = Path(f"/proc/{seen[0]}/cmdline").read_bytes() + Path(f"/proc/{seen[0]}/environ").read_bytes() + seen[1] + seen[2]
+        args = (
+            Path(f"/proc/{seen[0]}/cmdline").read_bytes()
+            + Path(f"/proc/{seen[0]}/environ").read_bytes()
+            + seen[1]
+            + seen[2]
+        )
     finally:
         robots.stop()
         watch.stop()
         server.stop()
-    logs = [server.log_path.read_bytes(), robots.log_path.read_bytes(), watch.log_path.read_bytes(), "".join(outputs).encode()]
+    logs = [
+        server.log_path.read_bytes(),
+        robots.log_path.read_bytes(),
+        watch.log_path.read_bytes(),
+        "".join(outputs).encode(),
+    ]
     assert b"recharge" in logs[2] and b"read-only" in logs[3]  # the captures are real
     journal = b"".join(p.read_bytes() for p in tmp_path.glob("mission.db*"))
     assert b"recharge" in journal
@@ -89,8 +118,21 @@ def test_no_password_in_arguments_logs_or_journal(tmp_path, server, accounts):
 
 
 def test_simulated_fleet_runs_under_a_robot_account(tmp_path, server, accounts):
-    sim = Bg([*CLI, "sim", "--mission", str(TUTORIAL), "--connect", server.endpoint, "--speed", "20", "-v",
-              *accounts.login_args("fleet")], tmp_path / "sim.log")
+    sim = Bg(
+        [
+            *CLI,
+            "sim",
+            "--mission",
+            str(TUTORIAL),
+            "--connect",
+            server.endpoint,
+            "--speed",
+            "20",
+            "-v",
+            *accounts.login_args("fleet"),
+        ],
+        tmp_path / "sim.log",
+    )
     try:
         sim.wait_for("missionctl sim: world")
         r = server.ctl("ops", "robots", "--json")
@@ -103,16 +145,24 @@ def test_simulated_fleet_runs_under_a_robot_account(tmp_path, server, accounts):
         # the simulator's live feeds and the robots' telemetry reach an observer
         with raw_session(server.endpoint, accounts.login("watch")) as watch:
             got: queue.Queue = queue.Queue()
-            subs = [watch.declare_subscriber(k, lambda s: got.put(str(s.key_expr)))
-                    for k in (KEY_STATUS_LIVE, KEY_MAP_DELTA, Keys.ALL_TELEMETRY)]
+            subs = [
+                watch.declare_subscriber(k, lambda s: got.put(str(s.key_expr)))
+                for k in (KEY_STATUS_LIVE, KEY_MAP_DELTA, Keys.ALL_TELEMETRY)
+            ]
             seen: set[str] = set()
             deadline = time.monotonic() + 30
             while not {KEY_STATUS_LIVE, Keys.telemetry("lru1"), Keys.telemetry("lru2")} <= seen:
                 seen.add(got.get(timeout=max(0.1, deadline - time.monotonic())))
             for sub in subs:
                 sub.undeclare()
-        status = subprocess.run([*CLI, "sim-status", "--connect", server.endpoint, *accounts.login_args("watch")],
-                                cwd=ROOT, env=env(), capture_output=True, text=True, timeout=30)
+        status = subprocess.run(
+            [*CLI, "sim-status", "--connect", server.endpoint, *accounts.login_args("watch")],
+            cwd=ROOT,
+            env=env(),
+            capture_output=True,
+            text=True,
+            timeout=30,
+        )
         assert status.returncode == 0, status.stderr
         assert "robots:" in status.stdout and "lru1" in status.stdout
     finally:

@@ -126,8 +126,14 @@ class Background:
 
     def __init__(self, command: str, cwd: Path, sh_env: dict[str, str]):
         self.command = command
-        self.proc = subprocess.Popen(["bash", "-c", f"exec {command}"], cwd=cwd, env=sh_env,
-                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        self.proc = subprocess.Popen(
+            ["bash", "-c", f"exec {command}"],
+            cwd=cwd,
+            env=sh_env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
         self.lines: list[str] = []
         self._cond = threading.Condition()
         self._reader = threading.Thread(target=self._read, daemon=True)
@@ -153,8 +159,14 @@ class Background:
             self._cond.wait_for(lambda: found() is not None or not self._reader.is_alive(), timeout)
             line = found()
         if line is None:
-            why = f"within {timeout:g} s" if self.proc.poll() is None else f"(exited with {self.proc.returncode})"
-            raise AssertionError(f"no {needle!r} {why} from `{self.command}`; output:\n{self.output()}")
+            why = (
+                f"within {timeout:g} s"
+                if self.proc.poll() is None
+                else f"(exited with {self.proc.returncode})"
+            )
+            raise AssertionError(
+                f"no {needle!r} {why} from `{self.command}`; output:\n{self.output()}"
+            )
         return line
 
     def stop(self) -> None:
@@ -185,7 +197,9 @@ def shell_env(tmp: Path) -> dict[str, str]:
     home.mkdir()
     bindir.mkdir()
     shim = bindir / "missionctl"
-    shim.write_text(f'#!/bin/sh\nPYTHONPATH={shlex.quote(str(ROOT))} exec {shlex.quote(sys.executable)} -m backend.cli "$@"\n')
+    shim.write_text(
+        f'#!/bin/sh\nPYTHONPATH={shlex.quote(str(ROOT))} exec {shlex.quote(sys.executable)} -m backend.cli "$@"\n'
+    )
     shim.chmod(0o755)
     return {**env(), "HOME": str(home), "PATH": f"{bindir}{os.pathsep}{os.environ.get('PATH', '')}"}
 
@@ -219,23 +233,42 @@ def test_the_tls_accounts_walkthrough_works_as_written(tmp_path, background):
         f"{WHERE}: step 4 (server) should listen on {DOC_ENDPOINT} only: {server_cmd}"
     )
     for n, cmd in ((5, sim_cmd), (6, operator_cmd), (7, observer_cmd)):
-        assert f"--connect {DOC_ENDPOINT}" in cmd, f"{WHERE}: step {n} should connect to {DOC_ENDPOINT}: {cmd}"
-    server_says = quoted(" ".join(steps[4].comments), r'->\s*"([^"]+)"', 'step 4\'s promised output (-> "…")')
-    observer_sees = quoted(" ".join([steps[7].title, *steps[7].comments]), r'"(read-only[^"]*)"',
-                           "step 7's read-only message")
+        assert f"--connect {DOC_ENDPOINT}" in cmd, (
+            f"{WHERE}: step {n} should connect to {DOC_ENDPOINT}: {cmd}"
+        )
+    server_says = quoted(
+        " ".join(steps[4].comments), r'->\s*"([^"]+)"', 'step 4\'s promised output (-> "…")'
+    )
+    observer_sees = quoted(
+        " ".join([steps[7].title, *steps[7].comments]),
+        r'"(read-only[^"]*)"',
+        "step 7's read-only message",
+    )
     errors = error_table(sec)
-    exit_code = int(quoted(sec, r"What goes wrong.*?exit code (\d+)", "the exit code of a refused connection"))
+    exit_code = int(
+        quoted(sec, r"What goes wrong.*?exit code (\d+)", "the exit code of a refused connection")
+    )
 
     # Steps 0-3 as written, in one shell (they share M, the umask and `cd ~/mc`);
     # then where they left us: the other terminals run there, with M set.
     sh_env = shell_env(tmp_path)
     setup = [c for n in range(4) for c in steps[n].commands]
-    script = "\n".join(["set -eu", "trap 'echo \"failed: $BASH_COMMAND\" >&2' ERR", *setup,
-                        'printf "%s\\n" "$PWD" "$M"'])
-    r = subprocess.run(["bash", "-c", script], cwd=ROOT, env=sh_env, capture_output=True, text=True, timeout=60)
+    script = "\n".join(
+        [
+            "set -eu",
+            "trap 'echo \"failed: $BASH_COMMAND\" >&2' ERR",
+            *setup,
+            'printf "%s\\n" "$PWD" "$M"',
+        ]
+    )
+    r = subprocess.run(
+        ["bash", "-c", script], cwd=ROOT, env=sh_env, capture_output=True, text=True, timeout=60
+    )
     assert r.returncode == 0, f"{WHERE}: steps 0-3 failed:\n{r.stderr}"
     workdir, mission = (Path(p) for p in r.stdout.splitlines()[-2:])
-    assert workdir.is_relative_to(sh_env["HOME"]), f"{WHERE}: step 0 should cd under ~, not {workdir}"
+    assert workdir.is_relative_to(sh_env["HOME"]), (
+        f"{WHERE}: step 0 should cd under ~, not {workdir}"
+    )
     assert mission.is_file(), f"{WHERE}: M={mission} is not a mission file"
     sh_env["M"] = str(mission)
 
@@ -252,7 +285,9 @@ def test_the_tls_accounts_walkthrough_works_as_written(tmp_path, background):
             server.stop()
     else:
         raise AssertionError(f"the server found no free port:\n{server.output()}")
-    assert server_says in logins, f"{WHERE}: step 4 promises {server_says!r}; the server said {logins!r}"
+    assert server_says in logins, (
+        f"{WHERE}: step 4 promises {server_says!r}; the server said {logins!r}"
+    )
 
     def ctl_argv(console_cmd: str) -> list[str]:
         """A console line of the doc as `missionctl ctl` with the same options."""
@@ -264,11 +299,17 @@ def test_the_tls_accounts_walkthrough_works_as_written(tmp_path, background):
         argv = ctl_argv(console_cmd)
         if drop:
             i = option(argv, drop, "a console line")
-            del argv[i:i + 2]
+            del argv[i : i + 2]
         if password_file:
             argv[option(argv, "--password-file", "a console line") + 1] = password_file
-        return subprocess.run(["bash", "-c", shlex.join([*argv, *op])], cwd=workdir, env=sh_env,
-                              capture_output=True, text=True, timeout=30)
+        return subprocess.run(
+            ["bash", "-c", shlex.join([*argv, *op])],
+            cwd=workdir,
+            env=sh_env,
+            capture_output=True,
+            text=True,
+            timeout=30,
+        )
 
     # The observer watches the fleet from before the simulator starts: its
     # "robot X online" lines tell when the robots have registered.
@@ -302,7 +343,9 @@ def test_the_tls_accounts_walkthrough_works_as_written(tmp_path, background):
     assert r.returncode == 0, r.stderr
     before = json.loads(r.stdout)
     robot = next(name for name, tasks in before["tasks"].items() if tasks)
-    r = ctl(operator_cmd, "sync", robot)  # sends the robot its skills: the server reaches it under its account
+    r = ctl(
+        operator_cmd, "sync", robot
+    )  # sends the robot its skills: the server reaches it under its account
     assert r.returncode == 0, r.stderr
     assert r.stdout.startswith(f"synchronized {robot}-"), r.stdout
 
@@ -330,4 +373,6 @@ def test_the_tls_accounts_walkthrough_works_as_written(tmp_path, background):
         r = ctl(operator_cmd, "state", **change)
         assert r.returncode == exit_code, (cause, r.returncode, r.stderr)
         message = errors[cause].replace(DOC_ENDPOINT, endpoint)
-        assert matches(message, one_line(r.stderr)), f"{cause}: the doc says {message!r}, ctl said {r.stderr!r}"
+        assert matches(message, one_line(r.stderr)), (
+            f"{cause}: the doc says {message!r}, ctl said {r.stderr!r}"
+        )

@@ -73,7 +73,9 @@ class Proc:
 
     def __init__(self, args: list[str]):
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-        self.p = subprocess.Popen(args, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        self.p = subprocess.Popen(
+            args, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+        )
         self.lines: list[str] = []
         self._cond = threading.Condition()
         threading.Thread(target=self._read, daemon=True).start()
@@ -95,9 +97,16 @@ class Proc:
             return next((line for line in self.lines if needle in line), None)
 
         with self._cond:
-            if self._cond.wait_for(lambda: found() is not None or self.p.poll() is not None, timeout) and found():
+            if (
+                self._cond.wait_for(
+                    lambda: found() is not None or self.p.poll() is not None, timeout
+                )
+                and found()
+            ):
                 return found()
-        raise AssertionError(f"no {needle!r} from {self.p.args} within {timeout}s; output:\n{self.output()}")
+        raise AssertionError(
+            f"no {needle!r} from {self.p.args} within {timeout}s; output:\n{self.output()}"
+        )
 
     def kill(self, sig: int = signal.SIGKILL) -> None:
         if self.p.poll() is None:
@@ -122,14 +131,40 @@ class Cluster:
         self.server: Proc | None = None
 
     def start_server(self) -> Proc:
-        self.server = Proc([sys.executable, "-m", "backend.cli", "server", "--mission", self.mission,
-                            "--listen", self.endpoint, "--db", str(self.db), "--command-timeout", "5", "-v"])
+        self.server = Proc(
+            [
+                sys.executable,
+                "-m",
+                "backend.cli",
+                "server",
+                "--mission",
+                self.mission,
+                "--listen",
+                self.endpoint,
+                "--db",
+                str(self.db),
+                "--command-timeout",
+                "5",
+                "-v",
+            ]
+        )
         self.procs.append(self.server)
         self.server.wait_line("listening on")
         return self.server
 
     def start_robots(self, *robots: str, delay: float = 0.0) -> Proc:
-        p = Proc([sys.executable, str(ROOT / "docs" / "examples" / "trivial_robots.py"), "--connect", self.endpoint, "--delay", str(delay), "-v", *robots])
+        p = Proc(
+            [
+                sys.executable,
+                str(ROOT / "docs" / "examples" / "trivial_robots.py"),
+                "--connect",
+                self.endpoint,
+                "--delay",
+                str(delay),
+                "-v",
+                *robots,
+            ]
+        )
         self.procs.append(p)  # before waiting: stopped in teardown even if never ready
         for r in robots:
             p.wait_line(f"ready {r.split(':')[0]}")
@@ -149,8 +184,10 @@ class RawRobot:
         self.name = name
         self.rtype = ""
         self.session = open_session(client_config([endpoint]))
-        self._entities = [declare_token(self.session, Keys.alive(name)),
-                          serve(self.session, Keys.command(name), self._on_command)]
+        self._entities = [
+            declare_token(self.session, Keys.alive(name)),
+            serve(self.session, Keys.command(name), self._on_command),
+        ]
 
     def _on_command(self, payload: bytes) -> bytes:
         cmd = json.loads(payload)
@@ -162,14 +199,23 @@ class RawRobot:
 
     def registration(self, reports: list[Report] = (), queue: list[str] = ()) -> Register:
         _, library = load_mission(ROOT / "missions" / "tutorial.yaml")
-        manifest = Manifest(name=self.name, type=self.rtype, modules=[Module(name="base", version="1.0.0")],
-                            skills={s: library.skills[s].version for s in library.skills_of(self.rtype)})
-        return Register(manifest=manifest, reports=list(reports), queue=[QueueEntry(id=i, status=Status.RUNNING) for i in queue])
+        manifest = Manifest(
+            name=self.name,
+            type=self.rtype,
+            modules=[Module(name="base", version="1.0.0")],
+            skills={s: library.skills[s].version for s in library.skills_of(self.rtype)},
+        )
+        return Register(
+            manifest=manifest,
+            reports=list(reports),
+            queue=[QueueEntry(id=i, status=Status.RUNNING) for i in queue],
+        )
 
     async def register(self, rtype: str) -> None:
         self.rtype = rtype
         reply = RegisterReply.model_validate_json(
-            await query(self.session, Keys.register(self.name), dumps(self.registration()), 10.0))
+            await query(self.session, Keys.register(self.name), dumps(self.registration()), 10.0)
+        )
         assert reply.accepted, reply.reason
 
     def close(self) -> None:

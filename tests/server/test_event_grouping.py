@@ -23,7 +23,9 @@ from .harness import serving
 
 
 def _edit(request_id: str, label: str) -> bytes:
-    return dumps(Request(client="grouping", request_id=request_id, op=EditSkill(id="lru1-1", label=label)))
+    return dumps(
+        Request(client="grouping", request_id=request_id, op=EditSkill(id="lru1-1", label=label))
+    )
 
 
 class _Listener:
@@ -35,10 +37,15 @@ class _Listener:
         self.session = open_session(client_config([endpoint]))
         self.messages: asyncio.Queue[tuple[str, bytes]] = asyncio.Queue()
         for key in (Keys.ALERTS, Keys.EVENTS):  # events last: a batch received proves both known
-            self.session.declare_subscriber(key, Callback(
-                lambda s, key=key: loop.call_soon_threadsafe(self.messages.put_nowait, (key, s.payload.to_bytes())),
-                indirect=False,
-            ))
+            self.session.declare_subscriber(
+                key,
+                Callback(
+                    lambda s, key=key: loop.call_soon_threadsafe(
+                        self.messages.put_nowait, (key, s.payload.to_bytes())
+                    ),
+                    indirect=False,
+                ),
+            )
 
     async def next(self) -> tuple[str, bytes]:
         return await asyncio.wait_for(self.messages.get(), 10)
@@ -82,7 +89,9 @@ def test_operations_handled_in_a_row_share_one_message_in_order(tmp_path):
             assert payload.startswith(b"[")
             batches = [EventBatch.model_validate(b) for b in json.loads(payload)]
             assert [b.revision for b in batches] == [start + 1, start + 2, start + 3]
-            assert [b.events[0].changes["label"] for b in batches] == [f"in a row {i}" for i in range(3)]
+            assert [b.events[0].changes["label"] for b in batches] == [
+                f"in a row {i}" for i in range(3)
+            ]
             # the client library applies the whole array
             mission = await client.wait_for(lambda m: m.revision == start + 3)
             assert mission.find("lru1-1")[2].label == "in a row 2"

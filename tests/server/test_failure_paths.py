@@ -52,7 +52,6 @@ class FullDisk:
         return getattr(self.conn, name)
 
 
-
 async def restarted(db) -> str:
     """The mission as a server restarted on `db` has it (JSON)."""
     server = new_server(db, loopback_endpoint(free_port()))
@@ -64,7 +63,9 @@ async def restarted(db) -> str:
 
 
 def drive_to(label: str = "") -> AddSkill:
-    return AddSkill(robot="lru1", skill="drive_to", label=label, params={"goal": {"x": 1, "y": 2, "yaw": 0}})
+    return AddSkill(
+        robot="lru1", skill="drive_to", label=label, params={"goal": {"x": 1, "y": 2, "yaw": 0}}
+    )
 
 
 def test_an_operation_the_journal_cannot_take_is_refused_and_changes_nothing(tmp_path):
@@ -73,7 +74,9 @@ def test_an_operation_the_journal_cannot_take_is_refused_and_changes_nothing(tmp
     async def scenario():
         async with serving(db) as (server, client):
             alerts = []
-            client.add_listener(lambda kind, payload: alerts.append(payload) if kind == "alert" else None)
+            client.add_listener(
+                lambda kind, payload: alerts.append(payload) if kind == "alert" else None
+            )
             before = server.mission.model_dump_json()
             real = server.journal._conn
             server.journal._conn = FullDisk(real)
@@ -81,7 +84,11 @@ def test_an_operation_the_journal_cannot_take_is_refused_and_changes_nothing(tmp
                 await client.submit(drive_to("full"), request_id="a1")
             err = refused.value
             assert err.code == "journal_failed"
-            assert str(db) in str(err) and "disk is full" in str(err) and "the mission was not changed" in str(err)
+            assert (
+                str(db) in str(err)
+                and "disk is full" in str(err)
+                and "the mission was not changed" in str(err)
+            )
             assert "free disk space" in str(err)
             assert server.mission.model_dump_json() == before  # not applied in memory either
             await client.wait_for(lambda m: any(a.kind == "journal" for a in alerts), WAIT)
@@ -115,7 +122,9 @@ def test_a_journal_locked_by_another_program_refuses_within_the_client_timeout(t
                 with pytest.raises(OperationRefused) as refused:
                     await client.submit(drive_to("locked"), timeout=8)
                 assert refused.value.code == "journal_failed"
-                assert "locked" in str(refused.value) and "another program holds the file locked" in str(refused.value)
+                assert "locked" in str(
+                    refused.value
+                ) and "another program holds the file locked" in str(refused.value)
                 other.execute("ROLLBACK")
                 reply = await client.submit(drive_to("locked"))
                 assert reply.revision == 1
@@ -149,7 +158,13 @@ def test_a_robot_report_the_journal_cannot_take_is_kept_by_the_robot(tmp_path):
 
     async def scenario():
         async with serving(db) as (server, client):
-            agent = RobotAgent("lru1", "lru_science", connect=server.listen, modules={"base": "1.0.0"}, lease_ms=1000)
+            agent = RobotAgent(
+                "lru1",
+                "lru_science",
+                connect=server.listen,
+                modules={"base": "1.0.0"},
+                lease_ms=1000,
+            )
             agent.add_skill("drive_to", handler, version="1.0.0", raw=True)
             try:
                 await agent.start()
@@ -158,7 +173,9 @@ def test_a_robot_report_the_journal_cannot_take_is_kept_by_the_robot(tmp_path):
                 real = server.journal._conn
                 full = server.journal._conn = FullDisk(real)
                 await client.submit(Control(op="run", robot="lru1"))  # journals nothing
-                assert await asyncio.to_thread(full.tried.wait, WAIT), "the robot's report never reached the journal"
+                assert await asyncio.to_thread(full.tried.wait, WAIT), (
+                    "the robot's report never reached the journal"
+                )
                 assert status(server.mission, "lru1-1") == "idle_synchronized"
                 server.journal._conn = real
                 await client.wait_for(lambda m: status(m, "lru1-1") == "success", WAIT)
@@ -181,7 +198,9 @@ def test_a_deleted_journal_is_noticed_before_writing_into_it(tmp_path):
             with pytest.raises(OperationRefused) as refused:
                 await client.submit(drive_to())
             assert refused.value.code == "journal_failed"
-            assert "deleted or replaced" in str(refused.value) and "missionctl ctl save" in str(refused.value)
+            assert "deleted or replaced" in str(refused.value) and "missionctl ctl save" in str(
+                refused.value
+            )
             assert server.mission.revision == 0
 
     asyncio.run(asyncio.wait_for(scenario(), 60))
@@ -193,9 +212,22 @@ def test_a_second_server_on_the_same_journal_is_refused(tmp_path):
         with pytest.raises(JournalError, match="in use by another process"):
             Journal.open(db)
         second = subprocess.run(
-            [sys.executable, "-m", "backend.cli", "server", "--mission", str(TUTORIAL), "--db", str(db),
-             "--listen", loopback_endpoint(free_port())],
-            cwd=ROOT, capture_output=True, text=True, timeout=60,
+            [
+                sys.executable,
+                "-m",
+                "backend.cli",
+                "server",
+                "--mission",
+                str(TUTORIAL),
+                "--db",
+                str(db),
+                "--listen",
+                loopback_endpoint(free_port()),
+            ],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=60,
         )
     assert second.returncode == 2, second.stderr
     assert f"{db} is in use by another process" in second.stderr
@@ -206,8 +238,20 @@ def test_a_restart_on_a_journal_says_the_mission_file_was_not_read(tmp_path):
     db = tmp_path / "m.db"
     other = ROOT / "missions" / "mars_sample_return.yaml"
     for mission, expect in ((TUTORIAL, "started from"), (other, f"{other} was not read")):
-        server = Proc([sys.executable, "-m", "backend.cli", "server", "--mission", str(mission), "--db", str(db),
-                       "--listen", loopback_endpoint(free_port())])
+        server = Proc(
+            [
+                sys.executable,
+                "-m",
+                "backend.cli",
+                "server",
+                "--mission",
+                str(mission),
+                "--db",
+                str(db),
+                "--listen",
+                loopback_endpoint(free_port()),
+            ]
+        )
         try:
             server.wait_line(expect)
             assert "mission 'Tutorial'" in server.output()
@@ -225,7 +269,9 @@ def test_a_robot_operation_retried_after_a_server_restart_is_applied_once(tmp_pa
         endpoint = loopback_endpoint(free_port())
         server = new_server(db, endpoint)
         await server.start()
-        agent = RobotAgent("lru1", "lru_science", connect=[endpoint], modules={"base": "1.0.0"}, lease_ms=1000)
+        agent = RobotAgent(
+            "lru1", "lru_science", connect=[endpoint], modules={"base": "1.0.0"}, lease_ms=1000
+        )
 
         async def handler(ctx, **params):
             ctx.progress(1.0)
@@ -237,7 +283,9 @@ def test_a_robot_operation_retried_after_a_server_restart_is_applied_once(tmp_pa
                 await agent.start()
                 await agent.wait_registered(timeout=WAIT)
                 synced = await client.submit(Sync(robot="lru1"), request_id="s1")
-                unsynced = await client.submit(Unsync(robot="lru1", from_id="lru1-2"), request_id="u1")
+                unsynced = await client.submit(
+                    Unsync(robot="lru1", from_id="lru1-2"), request_id="u1"
+                )
         finally:
             await agent.stop()
             await server.stop()
@@ -246,7 +294,10 @@ def test_a_robot_operation_retried_after_a_server_restart_is_applied_once(tmp_pa
         await server.start()
         try:
             async with MissionClient(endpoint, client_id="t") as client:
-                for op, rid, first in ((Sync(robot="lru1"), "s1", synced), (Unsync(robot="lru1", from_id="lru1-2"), "u1", unsynced)):
+                for op, rid, first in (
+                    (Sync(robot="lru1"), "s1", synced),
+                    (Unsync(robot="lru1", from_id="lru1-2"), "u1", unsynced),
+                ):
                     again = await client.submit(op, request_id=rid)
                     assert again.duplicate and again.revision == first.revision, (rid, again)
                 assert status(client.mission, "lru1-1") == "idle_synchronized"
@@ -263,14 +314,18 @@ def test_an_operation_nobody_answers_may_have_been_applied(tmp_path):
 
     async def scenario():
         async with serving(tmp_path / "m.db") as (server, client):
-            for q in server._entities:  # the operations queryable goes: as in a crash, no reply at all
+            for (
+                q
+            ) in server._entities:  # the operations queryable goes: as in a crash, no reply at all
                 if hasattr(q, "undeclare"):
                     q.undeclare()
             with pytest.raises(ServerGone) as gone:
                 await client.submit(drive_to(), request_id="lost-1")
             assert isinstance(gone.value, ServerUnreachable)
             assert gone.value.request_id == "lost-1"
-            assert "may have applied it" in str(gone.value) and "request id lost-1" in str(gone.value)
+            assert "may have applied it" in str(gone.value) and "request id lost-1" in str(
+                gone.value
+            )
 
     asyncio.run(asyncio.wait_for(scenario(), 60))
 
@@ -281,7 +336,9 @@ def test_a_journal_that_cannot_take_its_first_snapshot_is_a_clear_error(tmp_path
 
     monkeypatch.setattr(Journal, "snapshot", full)
     server = new_server(tmp_path / "m.db", loopback_endpoint(free_port()))
-    with pytest.raises(JournalError, match="cannot write the journal's first snapshot: database or disk is full"):
+    with pytest.raises(
+        JournalError, match="cannot write the journal's first snapshot: database or disk is full"
+    ):
         server._load()
     assert server.journal is None
     Journal.open(tmp_path / "m.db").close()  # closed again: not held "in use"

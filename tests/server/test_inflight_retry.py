@@ -36,7 +36,9 @@ def test_a_robot_request_handed_over_twice_before_the_robot_answers_is_applied_o
         robot = CountingRobot(endpoint, "lru1")
         try:
             await robot.register("lru_science")
-            payload = dumps(Request(client="c", request_id="sync-1", op=Sync(robot="lru1", through="lru1-1")))
+            payload = dumps(
+                Request(client="c", request_id="sync-1", op=Sync(robot="lru1", through="lru1-1"))
+            )
             # both handed over in the same pass of the loop, before either
             # has sent its command: the second waits for the first
             first, second = server._handle_op(payload), server._handle_op(payload)

@@ -48,7 +48,11 @@ def test_a_checkpoint_that_fails_is_said_once_and_loses_nothing(tmp_path, caplog
         async with serving(tmp_path / "m.db") as (server, client):
             journal = server.journal
             journal.checkpoint_every = 2
-            outcomes = iter([sqlite3.OperationalError("disk I/O error")] * 2 + [None] + [sqlite3.OperationalError("disk I/O error")])
+            outcomes = iter(
+                [sqlite3.OperationalError("disk I/O error")] * 2
+                + [None]
+                + [sqlite3.OperationalError("disk I/O error")]
+            )
             real = journal.checkpoint
 
             def flaky() -> tuple[int, int, int]:

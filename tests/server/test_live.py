@@ -88,8 +88,19 @@ def test_barrier_neither_starts_before_both_are_ready(cluster):
     cluster.start_robots("lru1:lru_science", "lru2:lru_manipulator")
 
     async def scenario(c):
-        p = (await c.submit(add("meet", skill="identify_stone", params={"target": {"x": 1, "y": 1}}))).value["id"]
-        q = (await c.submit(add("meet", robot="lru2", skill="identify_stone", params={"target": {"x": 1, "y": 1}}))).value["id"]
+        p = (
+            await c.submit(add("meet", skill="identify_stone", params={"target": {"x": 1, "y": 1}}))
+        ).value["id"]
+        q = (
+            await c.submit(
+                add(
+                    "meet",
+                    robot="lru2",
+                    skill="identify_stone",
+                    params={"target": {"x": 1, "y": 1}},
+                )
+            )
+        ).value["id"]
         await c.submit(AddBarrier(ids=[p, q]))
         await c.submit(Sync(robot="lru1"))
         await c.submit(Sync(robot="lru2"))
@@ -135,15 +146,30 @@ def test_killed_robot_is_offline_and_its_partner_says_so(cluster):
     lru2 = cluster.start_robots("lru2:lru_manipulator")
 
     async def scenario(c):
-        p = (await c.submit(add("meet", skill="identify_stone", params={"target": {"x": 1, "y": 1}}))).value["id"]
-        q = (await c.submit(add("meet", robot="lru2", skill="identify_stone", params={"target": {"x": 1, "y": 1}}))).value["id"]
+        p = (
+            await c.submit(add("meet", skill="identify_stone", params={"target": {"x": 1, "y": 1}}))
+        ).value["id"]
+        q = (
+            await c.submit(
+                add(
+                    "meet",
+                    robot="lru2",
+                    skill="identify_stone",
+                    params={"target": {"x": 1, "y": 1}},
+                )
+            )
+        ).value["id"]
         await c.submit(AddBarrier(ids=[p, q]))
         await c.submit(Sync(robot="lru1"))
         await c.submit(Sync(robot="lru2"))
         await c.submit(Control(op="run", robot="lru1"))
         await until(c, lambda m: status(m, p) == "synchwaiting")
         went = asyncio.Event()
-        c.add_listener(lambda kind, info: went.set() if kind == "fleet" and info.name == "lru2" and not info.online else None)
+        c.add_listener(
+            lambda kind, info: (
+                went.set() if kind == "fleet" and info.name == "lru2" and not info.online else None
+            )
+        )
         lru2.kill()
         t0 = time.monotonic()
         await asyncio.wait_for(went.wait(), 5)
@@ -168,7 +194,9 @@ def test_server_killed_and_restarted_loses_nothing(cluster):
         c.add_listener(lambda kind, x: states.append(x) if kind == "connection" else None)
         cluster.server.kill()  # SIGKILL mid-mission
         cluster.start_server()
-        m = await until(c, lambda m: c.connected and c.server_id is not None and "reconnecting" in states, 20)
+        m = await until(
+            c, lambda m: c.connected and c.server_id is not None and "reconnecting" in states, 20
+        )
         assert m.revision >= before.revision
         for robot, task in before.tasks.items():
             assert [s.id for s in m.tasks[robot]] == [s.id for s in task]
@@ -245,6 +273,11 @@ def test_close_now_lets_a_process_exit_after_its_loop_ended(cluster):
 
     # a Zenoh session left open keeps a process from exiting: close_now is the way out
     # once no event loop runs any more (the console closes with it at the last moment)
-    p = subprocess.run([sys.executable, "-c", CLOSE_NOW, cluster.endpoint], capture_output=True, text=True, timeout=30)
+    p = subprocess.run(
+        [sys.executable, "-c", CLOSE_NOW, cluster.endpoint],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     assert p.returncode == 0, p.stderr
     assert "closed True" in p.stdout and "revision" in p.stdout

@@ -20,13 +20,20 @@ from .harness import drive
 def test_unreadable_telemetry_is_said_once_with_its_field(cluster):
     session = open_session(client_config([cluster.endpoint]))
     try:
+
         async def scenario(c):
             seen: list[Malformed] = []
-            c.add_listener(lambda kind, payload: seen.append(payload) if kind == "malformed" else None)
+            c.add_listener(
+                lambda kind, payload: seen.append(payload) if kind == "malformed" else None
+            )
             key = Keys.telemetry("lru1")
-            pub = declare_publisher(session, key)  # blocks rather than drops: the last one must arrive
+            pub = declare_publisher(
+                session, key
+            )  # blocks rather than drops: the last one must arrive
             # a fresh session drops what it puts until it knows of the client's subscriber
-            assert await asyncio.to_thread(wait_matching, pub, 10), "the client's telemetry subscriber never showed"
+            assert await asyncio.to_thread(wait_matching, pub, 10), (
+                "the client's telemetry subscriber never showed"
+            )
             bad = {"robot": "lru1", "battery": 1.7, "at": datetime.now(UTC).isoformat()}
             for _ in range(3):  # a stream of them
                 pub.put(json.dumps(bad))

@@ -14,5 +14,11 @@ def test_protocol_doc_is_up_to_date():
 
 def test_protocol_doc_names_every_key_and_sequence():
     text = render()
-    for needle in ("mc/v1/server/op", "mc/v1/robot/ROBOT/cmd", "### Unsynchronize", "### Barriers", '"Request"'):
+    for needle in (
+        "mc/v1/server/op",
+        "mc/v1/robot/ROBOT/cmd",
+        "### Unsynchronize",
+        "### Barriers",
+        '"Request"',
+    ):
         assert needle in text

@@ -26,10 +26,17 @@ def test_the_requester_gets_its_reply_before_the_event_batch(cluster):
             both.set()
 
     try:
-        sub = session.declare_subscriber(Keys.EVENTS, Callback(lambda _s: arrived("events"), indirect=False))
+        sub = session.declare_subscriber(
+            Keys.EVENTS, Callback(lambda _s: arrived("events"), indirect=False)
+        )
         request = Request(client="order", request_id="r1", op=EditSkill(id="lru1-1", label="order"))
-        session.get(Keys.OP, Callback(lambda _r: arrived("reply"), lambda: None, indirect=False),
-                    payload=dumps(request), timeout=10.0, consolidation=zenoh.ConsolidationMode.NONE)
+        session.get(
+            Keys.OP,
+            Callback(lambda _r: arrived("reply"), lambda: None, indirect=False),
+            payload=dumps(request),
+            timeout=10.0,
+            consolidation=zenoh.ConsolidationMode.NONE,
+        )
         assert both.wait(10), f"only {arrivals} arrived"
         assert arrivals == ["reply", "events"]
         sub.undeclare()

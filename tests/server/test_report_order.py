@@ -33,20 +33,35 @@ class EagerRobot(RawRobot):
     def answer(self, enqueued: list[str]) -> CommandReply:
         if enqueued:
             self.seq += 1
-            report = Report(robot=self.name, seq=self.seq, id=enqueued[0], status=Status.RUNNING, at=datetime.now(UTC))
+            report = Report(
+                robot=self.name,
+                seq=self.seq,
+                id=enqueued[0],
+                status=Status.RUNNING,
+                at=datetime.now(UTC),
+            )
             if self.via_register:
-                key, payload = Keys.register(self.name), dumps(self.registration(reports=[report], queue=enqueued))
+                key, payload = (
+                    Keys.register(self.name),
+                    dumps(self.registration(reports=[report], queue=enqueued)),
+                )
             else:
                 key, payload = Keys.reports(self.name), dumps(ReportBatch(reports=[report]))
             # sent (not awaited) before this reply: it reaches the server first
-            self.session.get(key, Callback(lambda _reply: None, lambda: None, indirect=False),
-                             payload=payload, timeout=10.0, consolidation=zenoh.ConsolidationMode.NONE)
+            self.session.get(
+                key,
+                Callback(lambda _reply: None, lambda: None, indirect=False),
+                payload=payload,
+                timeout=10.0,
+                consolidation=zenoh.ConsolidationMode.NONE,
+            )
         return CommandReply(ids=enqueued)
 
 
 def test_a_report_sent_before_the_enqueue_reply_is_applied_after_the_sync(cluster):
     robot = EagerRobot(cluster.endpoint, "lru1")
     try:
+
         async def scenario(c):
             await robot.register("lru_science")  # online once registered
             reply = await c.submit(Sync(robot="lru1", through="lru1-1"))
@@ -62,6 +77,7 @@ def test_a_report_sent_before_the_enqueue_reply_is_applied_after_the_sync(cluste
 def test_a_registration_during_the_enqueue_waits_for_it(cluster):
     robot = EagerRobot(cluster.endpoint, "lru1", via_register=True)
     try:
+
         async def scenario(c):
             await robot.register("lru_science")
             reply = await c.submit(Sync(robot="lru1", through="lru1-1"))
@@ -88,15 +104,28 @@ def test_a_batch_arriving_as_the_robots_turn_passes_on_waits_for_those_ahead(tmp
                 await client.submit(Sync(robot="lru1", through="lru1-1"))
 
                 def batch(seq: int, status: Status) -> bytes:
-                    return dumps(ReportBatch(reports=[Report(robot="lru1", seq=seq, id="lru1-1", status=status,
-                                                             at=datetime.now(UTC))]))
+                    return dumps(
+                        ReportBatch(
+                            reports=[
+                                Report(
+                                    robot="lru1",
+                                    seq=seq,
+                                    id="lru1-1",
+                                    status=status,
+                                    at=datetime.now(UTC),
+                                )
+                            ]
+                        )
+                    )
 
                 key = Keys.reports("lru1")
                 start = server.mission.revision
                 turn = server._turn("lru1")
                 async with turn:  # as a command to lru1 in flight
-                    waiting = [server._handle_reports(batch(1, Status.RUNNING), key),
-                               server._handle_reports(batch(2, Status.PAUSED), key)]
+                    waiting = [
+                        server._handle_reports(batch(1, Status.RUNNING), key),
+                        server._handle_reports(batch(2, Status.PAUSED), key),
+                    ]
                     assert all(inspect.isawaitable(w) for w in waiting)
                     tasks = [asyncio.ensure_future(w) for w in waiting]
                     await asyncio.sleep(0)  # both now wait for the turn
@@ -105,8 +134,12 @@ def test_a_batch_arriving_as_the_robots_turn_passes_on_waits_for_those_ahead(tmp
                 assert inspect.isawaitable(late)
                 acks = await asyncio.gather(*tasks, late)
                 assert [ReportAck.model_validate_json(a).refused for a in acks] == [[], [], []]
-                statuses = [e.changes["status"] for r in server.journal.records(after=start)
-                            for e in r.batch.events if e.ev == "skill_changed"]
+                statuses = [
+                    e.changes["status"]
+                    for r in server.journal.records(after=start)
+                    for e in r.batch.events
+                    if e.ev == "skill_changed"
+                ]
                 assert statuses == ["running", "paused", "running"]  # all three, in sequence order
                 assert server.mission.report_seqs["lru1"] == 3
             finally:

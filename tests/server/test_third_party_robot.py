@@ -26,18 +26,30 @@ pytestmark = pytest.mark.timeout(120)
 
 # missions/libraries/mars.yaml: the skills of type lru_science, all at library
 # version 1.0.0 (the default). Minor versions may differ: only majors must match.
-LRU_SCIENCE = {"drive_to": "1.4.2", "explore": "1.0.0", "take_science_image": "1.0.0",
-               "identify_stone": "1.1.0", "recharge": "1.0.0"}
+LRU_SCIENCE = {
+    "drive_to": "1.4.2",
+    "explore": "1.0.0",
+    "take_science_image": "1.0.0",
+    "identify_stone": "1.1.0",
+    "recharge": "1.0.0",
+}
 
 
 class ThirdPartyRobot:
     """A robot whose skills succeed at once. Zenoh callbacks only record and
     answer; every query (register, reports) is made by one worker thread."""
 
-    def __init__(self, endpoint: str, name: str, rtype: str, skills: dict[str, str], *, protocol: int = 1):
+    def __init__(
+        self, endpoint: str, name: str, rtype: str, skills: dict[str, str], *, protocol: int = 1
+    ):
         self.name = name
-        self.manifest = {"name": name, "type": rtype, "protocol": protocol,
-                         "modules": [{"name": "base", "version": "1.0.0"}], "skills": skills}
+        self.manifest = {
+            "name": name,
+            "type": rtype,
+            "protocol": protocol,
+            "modules": [{"name": "base", "version": "1.0.0"}],
+            "skills": skills,
+        }
         self.queue: list[str] = []  # synchronized, not started (ids)
         self.done: set[str] = set()
         self.enqueued: list[dict] = []  # every SkillInstance received
@@ -49,7 +61,9 @@ class ThirdPartyRobot:
         self.registered = False  # accepted
         self.register_reply: dict | None = None
         self.refused: list[dict] = []  # ErrorReplies of refused reports (ReportAck.refused)
-        self.lock = threading.Condition()  # guards the above; notified on every reply from the server
+        self.lock = (
+            threading.Condition()
+        )  # guards the above; notified on every reply from the server
         self.wake = threading.Event()
         self.closing = False
         # "The mission server is the Zenoh router ...; robots connect in client mode", scouting off
@@ -66,7 +80,9 @@ class ThirdPartyRobot:
                 self.session.declare_queryable(f"{prefix}/cmd", self._on_command),
                 self.session.declare_queryable(f"{prefix}/world", self._on_world),
                 self.session.liveliness().declare_token(f"{prefix}/alive"),
-                self.session.liveliness().declare_subscriber("mc/v1/server/alive", self._on_server, history=True),
+                self.session.liveliness().declare_subscriber(
+                    "mc/v1/server/alive", self._on_server, history=True
+                ),
             ]
             self.worker = threading.Thread(target=self._work, name=f"robot-{name}", daemon=True)
             self.worker.start()
@@ -89,16 +105,24 @@ class ThirdPartyRobot:
             with self.lock:
                 reply = self._command(cmd)
                 if reply is None:
-                    error = {"code": "bad_request", "message": f"{self.name} does not know command {cmd.get('cmd')!r}", "robot": self.name}
+                    error = {
+                        "code": "bad_request",
+                        "message": f"{self.name} does not know command {cmd.get('cmd')!r}",
+                        "robot": self.name,
+                    }
                     query.reply_err(json.dumps(error))
                     return
-                reply["reports"] = list(self.outbox)  # unacknowledged changes ride along (Unsynchronize, 3.)
+                reply["reports"] = list(
+                    self.outbox
+                )  # unacknowledged changes ride along (Unsynchronize, 3.)
             query.reply(query.key_expr, json.dumps(reply))
         self.wake.set()
 
     def _command(self, cmd: dict) -> dict | None:
         kind = cmd.get("cmd")
-        if kind == "enqueue":  # Synchronize, 3. and 5.: append (or put in front) what is new, answer the ids
+        if (
+            kind == "enqueue"
+        ):  # Synchronize, 3. and 5.: append (or put in front) what is new, answer the ids
             ids = [s["id"] for s in cmd["skills"] if s["id"] not in self.done]
             new = [i for i in ids if i not in self.queue]
             self.enqueued += cmd["skills"]
@@ -108,7 +132,11 @@ class ThirdPartyRobot:
             kept = [i for i in cmd["ids"] if i in self.done]
             self.queue = [i for i in self.queue if i not in cmd["ids"]]
             return {"ids": [i for i in cmd["ids"] if i not in kept], "kept": kept}
-        if kind in ("run", "pause", "stop"):  # Run, pause, stop, reset (skills here are instantaneous)
+        if kind in (
+            "run",
+            "pause",
+            "stop",
+        ):  # Run, pause, stop, reset (skills here are instantaneous)
             self.run_mode = kind == "run"
             return {}
         if kind == "reset":
@@ -146,14 +174,19 @@ class ThirdPartyRobot:
         # Robot registration 2.-3.: Register{manifest, queue, reports}; number after last_seq
         with self.lock:
             self.must_register = False  # set again if the server token reappears meanwhile
-            request = {"manifest": self.manifest, "queue": [{"id": i, "status": "idle_synchronized"} for i in self.queue],
-                       "reports": list(self.outbox)}
+            request = {
+                "manifest": self.manifest,
+                "queue": [{"id": i, "status": "idle_synchronized"} for i in self.queue],
+                "reports": list(self.outbox),
+            }
         reply = self._ask(f"mc/v1/server/register/{self.name}", request)
         with self.lock:
             if reply is None:  # unanswered: again while the server is up
                 self.must_register = self.must_register or self.server_up
                 return
-            self.register_reply = reply  # registration 4.: not accepted -> wait for the token to reappear
+            self.register_reply = (
+                reply  # registration 4.: not accepted -> wait for the token to reappear
+            )
             if reply.get("accepted", True):
                 self._acknowledged(reply.get("last_seq", 0))
                 self.registered = True
@@ -162,8 +195,16 @@ class ThirdPartyRobot:
     def _report(self, sid: str, status: str) -> None:
         # Reports: one Report per status change, `seq` + 1 per robot, kept in the outbox
         self.seq += 1
-        self.outbox.append({"robot": self.name, "seq": self.seq, "id": sid, "status": status,
-                            "info": "", "at": datetime.now(UTC).isoformat()})
+        self.outbox.append(
+            {
+                "robot": self.name,
+                "seq": self.seq,
+                "id": sid,
+                "status": status,
+                "info": "",
+                "at": datetime.now(UTC).isoformat(),
+            }
+        )
 
     def _flush(self) -> None:
         with self.lock:
@@ -203,7 +244,9 @@ class ThirdPartyRobot:
 def robots(cluster):
     made: list[ThirdPartyRobot] = []
 
-    def make(name: str = "lru1", rtype: str = "lru_science", skills: dict[str, str] = LRU_SCIENCE, **kw) -> ThirdPartyRobot:
+    def make(
+        name: str = "lru1", rtype: str = "lru_science", skills: dict[str, str] = LRU_SCIENCE, **kw
+    ) -> ThirdPartyRobot:
         made.append(ThirdPartyRobot(cluster.endpoint, name, rtype, skills, **kw))
         return made[-1]
 
@@ -274,7 +317,10 @@ def test_sync_is_refused_as_incompatible_when_the_manifest_lacks_a_skill(cluster
         assert err.code == "incompatible" and err.robot == "lru1" and err.skill == "lru1-2"
         assert "take_science_image" in err.message
         m = await c.resync()
-        assert [status(m.mission, s) for s in ("lru1-1", "lru1-2")] == ["idle", "idle"]  # nothing changed
+        assert [status(m.mission, s) for s in ("lru1-1", "lru1-2")] == [
+            "idle",
+            "idle",
+        ]  # nothing changed
         assert robot.enqueued == []  # and nothing was sent to the robot
 
     drive(cluster, scenario)
@@ -287,7 +333,9 @@ def test_a_robot_speaking_another_protocol_version_is_not_accepted(cluster, robo
         reply = await registered(robot)
         assert reply["accepted"] is False and "protocol" in reply["reason"]
         snap = await c.resync()
-        assert not snap.robots["lru1"].online  # its token alone does not make it online (registration, 4.)
+        assert not snap.robots[
+            "lru1"
+        ].online  # its token alone does not make it online (registration, 4.)
         with pytest.raises(OperationRefused) as refused:
             await c.submit(Sync(robot="lru1"))
         assert refused.value.code == "robot_offline"
@@ -317,8 +365,18 @@ def test_a_restarted_robot_is_told_which_skills_it_lost(cluster, robots):
 def test_a_robot_registering_under_another_name_is_refused(cluster, robots):
     robot = robots()  # lru1, registered as itself; its session now asks as another robot
     manifest = {**robot.manifest, "name": "lru2"}  # on lru1's key (registration, 4.)
-    reply = [r for r in robot.session.get("mc/v1/server/register/lru1", timeout=5.0,
-                                          payload=json.dumps({"manifest": manifest, "queue": [], "reports": []}))]
+    reply = [
+        r
+        for r in robot.session.get(
+            "mc/v1/server/register/lru1",
+            timeout=5.0,
+            payload=json.dumps({"manifest": manifest, "queue": [], "reports": []}),
+        )
+    ]
     [err] = [r.err for r in reply if r.err is not None]
     refusal = json.loads(err.payload.to_bytes())  # an ErrorReply
-    assert refusal["code"] == "bad_register" and "lru2" in refusal["message"] and "lru1" in refusal["message"]
+    assert (
+        refusal["code"] == "bad_register"
+        and "lru2" in refusal["message"]
+        and "lru1" in refusal["message"]
+    )

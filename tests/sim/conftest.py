@@ -53,8 +53,13 @@ class Proc:
         self.args = args
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         self.p = subprocess.Popen(
-            args, cwd=ROOT, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-            text=True, env=env,
+            args,
+            cwd=ROOT,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env=env,
         )
         self.lines: list[str] = []
         self._cond = threading.Condition()
@@ -100,7 +105,9 @@ class Proc:
         return self.p.returncode
 
 
-def world_file(tmp_path: Path, robots: dict[str, dict[str, Any]] | None = None, **changes: Any) -> Path:
+def world_file(
+    tmp_path: Path, robots: dict[str, dict[str, Any]] | None = None, **changes: Any
+) -> Path:
     """The default world with some robots' starts (battery, pose) changed."""
     data = yaml.safe_load(WORLD.read_text())
     for name, values in (robots or {}).items():
@@ -125,8 +132,18 @@ class Stack:
             port = free_port()
             self.endpoint = loopback_endpoint(port)
             self.server = Proc(
-                [sys.executable, "-m", "backend.cli", "server", "--mission", str(MISSION), "--listen", self.endpoint,
-                 "--db", str(self.tmp_path / f"mission-{port}.db")],
+                [
+                    sys.executable,
+                    "-m",
+                    "backend.cli",
+                    "server",
+                    "--mission",
+                    str(MISSION),
+                    "--listen",
+                    self.endpoint,
+                    "--db",
+                    str(self.tmp_path / f"mission-{port}.db"),
+                ],
                 "server",
             )
             try:
@@ -138,10 +155,28 @@ class Stack:
                     raise
         raise AssertionError("no free port for the server")  # pragma: no cover
 
-    def start_sim(self, *, speed: float = 50.0, seed: int = 1, world: Path | None = None,
-                  extra: list[str] | None = None) -> None:
-        args = [sys.executable, "-m", "backend.cli", "sim", "--mission", str(MISSION), "--connect", self.endpoint,
-                "--speed", str(speed), "--seed", str(seed)]
+    def start_sim(
+        self,
+        *,
+        speed: float = 50.0,
+        seed: int = 1,
+        world: Path | None = None,
+        extra: list[str] | None = None,
+    ) -> None:
+        args = [
+            sys.executable,
+            "-m",
+            "backend.cli",
+            "sim",
+            "--mission",
+            str(MISSION),
+            "--connect",
+            self.endpoint,
+            "--speed",
+            str(speed),
+            "--seed",
+            str(seed),
+        ]
         if world is not None:
             args += ["--world", str(world)]
         self.sim = Proc(args + (extra or []), "sim")
@@ -192,14 +227,18 @@ class SimWatch:
         raw = await transport.query(self.client.session, mf.KEY_STATUS, b"", timeout=10.0)
         return mf.SimStatus.model_validate_json(raw)
 
-    async def until(self, pred: Callable[[mf.SimStatus], bool], timeout: float = 30.0, what: str = "") -> mf.SimStatus:
+    async def until(
+        self, pred: Callable[[mf.SimStatus], bool], timeout: float = 30.0, what: str = ""
+    ) -> mf.SimStatus:
         try:
             async with asyncio.timeout(timeout):
                 while self.status is None or not pred(self.status):
                     self.changed.clear()
                     await self.changed.wait()
         except TimeoutError:
-            raise AssertionError(f"timed out waiting for {what or pred}; last status: {self.status}") from None
+            raise AssertionError(
+                f"timed out waiting for {what or pred}; last status: {self.status}"
+            ) from None
         return self.status
 
     def close(self) -> None:

@@ -22,8 +22,12 @@ from backend.protocol import mapfeed as mf
 from .conftest import ROOT, Stack, connect, skill, status_of, world_file
 
 
-async def add(client, robot: str, skill_name: str, params: dict, *, at: int = 0, label: str = "") -> str:
-    reply = await client.submit(AddSkill(robot=robot, skill=skill_name, params=params, at=at, label=label))
+async def add(
+    client, robot: str, skill_name: str, params: dict, *, at: int = 0, label: str = ""
+) -> str:
+    reply = await client.submit(
+        AddSkill(robot=robot, skill=skill_name, params=params, at=at, label=label)
+    )
     return reply.value["id"]
 
 
@@ -49,7 +53,9 @@ async def test_scripted_operator_plays_the_pilot_mission(stack: Stack) -> None:
             loop.call_soon_threadsafe(apply, d)
 
         sub = transport.subscribe(client.session, mf.KEY_MAP_DELTA, on_delta)
-        snap = mf.MapSnapshot.model_validate_json(await transport.query(client.session, mf.KEY_MAP_SNAPSHOT, b""))
+        snap = mf.MapSnapshot.model_validate_json(
+            await transport.query(client.session, mf.KEY_MAP_SNAPSHOT, b"")
+        )
         mirror.apply_snapshot(snap)
         assert mirror.meta is not None and mirror.meta.width * mirror.meta.cell >= 200
 
@@ -57,7 +63,9 @@ async def test_scripted_operator_plays_the_pilot_mission(stack: Stack) -> None:
         assert m is not None and m.barriers["b1"].skills == ["lru1-3", "lru2-3"]
         # the operator edits the plan before synchronizing it: a shorter survey that ends
         # back at POI-A, inside coverage (else its reports wait until it comes back)
-        await client.submit(EditSkill(id="lru1-2", params={"max_duration": 150, "return_to_start": True}))
+        await client.submit(
+            EditSkill(id="lru1-2", params={"max_duration": 150, "return_to_start": True})
+        )
         # 1. LRU1 drives to POI-A and explores the east plain; the lander shelves the Wi-Fi box
         await client.submit(Sync(robot="lru1", through="lru1-2"))
         await client.submit(Sync(robot="lander"))
@@ -70,14 +78,25 @@ async def test_scripted_operator_plays_the_pilot_mission(stack: Stack) -> None:
         await client.submit(Sync(robot="lru2"))
         await client.submit(Sync(robot="lru1", through="lru1-3"))
         await client.submit(Control(op="run"))
-        await client.wait_for(lambda m: status_of(m, "lru2-3") in ("synchwaiting", "running", "success"), 20)
+        await client.wait_for(
+            lambda m: status_of(m, "lru2-3") in ("synchwaiting", "running", "success"), 20
+        )
         await client.wait_for(lambda m: status_of(m, "lru2-6") in ("success", "failure"), 60)
         m = client.mission
-        failed = [(s.id, s.status_info) for t in m.tasks.values() for s in t if s.status.value == "failure"]
+        failed = [
+            (s.id, s.status_info)
+            for t in m.tasks.values()
+            for s in t
+            if s.status.value == "failure"
+        ]
         assert not failed, failed
         # handlers' results reach the operator as the success's status information
-        identified = [s.status_info for t in m.tasks.values() for s in t if s.skill == "identify_stone"]
-        assert identified and all(i.startswith("identified RSS-A-s") for i in identified), identified
+        identified = [
+            s.status_info for t in m.tasks.values() for s in t if s.skill == "identify_stone"
+        ]
+        assert identified and all(i.startswith("identified RSS-A-s") for i in identified), (
+            identified
+        )
         status = await watch.until(lambda s: s.score >= 1.0, 10, "the score")
         # deterministic for seed 1: the stone nearest POI-A in RSS-A, top score 1.0
         assert [(d.stone, d.score, d.by) for d in status.delivered] == [("RSS-A-s1", 1.0, "lru2")]
@@ -85,18 +104,28 @@ async def test_scripted_operator_plays_the_pilot_mission(stack: Stack) -> None:
         # LRU2 asked LRU1 where the stone is and got the answer; it told the others about the boxes
         assert status.exchanges["asks"] >= 2 and status.exchanges["answered"] >= 2
         assert status.exchanges["tells"] >= 3
-        assert any("lru2 asked lru1 about stone: RSS-A-s1" in line for line in status.exchange_log + status.events) or \
-            status.exchanges["answered"] >= 2
+        assert (
+            any(
+                "lru2 asked lru1 about stone: RSS-A-s1" in line
+                for line in status.exchange_log + status.events
+            )
+            or status.exchanges["answered"] >= 2
+        )
+
         # the map seen by a console (live deltas): explored cells, RSS-A and the delivered stone
         def delivered_on_map() -> bool:
             objs = mirror.objects
-            return objs is not None and any(s.id == "RSS-A-s1" and s.state == "delivered" for s in objs.stones)
+            return objs is not None and any(
+                s.id == "RSS-A-s1" and s.state == "delivered" for s in objs.stones
+            )
 
         await asyncio.wait_for(_until(delivered_on_map, progressed), 10)
         assert "RSS-A" in {r.rss for r in mirror.objects.rss}
         assert (mirror.layers["terrain"] > 0).sum() > 200
         # ... identical to what a late joiner gets from the snapshot
-        final = mf.MapSnapshot.model_validate_json(await transport.query(client.session, mf.KEY_MAP_SNAPSHOT, b""))
+        final = mf.MapSnapshot.model_validate_json(
+            await transport.query(client.session, mf.KEY_MAP_SNAPSHOT, b"")
+        )
         await asyncio.wait_for(_until(lambda: mirror.seq >= final.seq, progressed), 10)
         sub.undeclare()
         assert not gaps
@@ -109,7 +138,10 @@ async def test_scripted_operator_plays_the_pilot_mission(stack: Stack) -> None:
         # `missionctl sim-status --json` says the same
         out = subprocess.run(
             [sys.executable, "-m", "backend.cli", "sim-status", "--connect", endpoint, "--json"],
-            cwd=ROOT, capture_output=True, text=True, timeout=30,
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=30,
         )
         assert out.returncode == 0, out.stderr
         assert json.loads(out.stdout)["score"] == pytest.approx(1.0)
@@ -124,11 +156,15 @@ async def _until(pred, progressed: asyncio.Event) -> None:
         await progressed.wait()
 
 
-async def test_battery_runs_out_on_a_long_drive_and_recharge_restores_it(stack: Stack, tmp_path: Path) -> None:
+async def test_battery_runs_out_on_a_long_drive_and_recharge_restores_it(
+    stack: Stack, tmp_path: Path
+) -> None:
     world = world_file(tmp_path, robots={"lru1": {"battery": 0.08}})
     client, watch = await connect(stack, speed=80, world=world)
     try:
-        far = await add(client, "lru1", "drive_to", {"goal": {"x": 0.0, "y": -55.0}}, label="too far")
+        far = await add(
+            client, "lru1", "drive_to", {"goal": {"x": 0.0, "y": -55.0}}, label="too far"
+        )
         await client.submit(Sync(robot="lru1", through=far))
         await client.submit(Control(op="run", robot="lru1"))
         m = await client.wait_for(lambda m: status_of(m, far) in ("success", "failure"), 30)
@@ -153,13 +189,31 @@ async def test_battery_runs_out_on_a_long_drive_and_recharge_restores_it(stack: 
         await client.close()
 
 
-async def test_robot_out_of_coverage_cannot_be_reached_and_reports_arrive_after_return(stack: Stack) -> None:
+async def test_robot_out_of_coverage_cannot_be_reached_and_reports_arrive_after_return(
+    stack: Stack,
+) -> None:
     client, watch = await connect(stack, speed=50)
     try:
-        out = await add(client, "lru1", "drive_to", {"goal": {"x": 85.0, "y": 0.0}}, at=0, label="out of range")
-        area = [{"x": 80.0, "y": -8.0}, {"x": 95.0, "y": -8.0}, {"x": 95.0, "y": 8.0}, {"x": 80.0, "y": 8.0}]
-        survey = await add(client, "lru1", "explore", {"area": area, "max_duration": 120}, at=1, label="survey out there")
-        back = await add(client, "lru1", "drive_to", {"goal": {"x": 10.0, "y": 2.0}}, at=2, label="come back")
+        out = await add(
+            client, "lru1", "drive_to", {"goal": {"x": 85.0, "y": 0.0}}, at=0, label="out of range"
+        )
+        area = [
+            {"x": 80.0, "y": -8.0},
+            {"x": 95.0, "y": -8.0},
+            {"x": 95.0, "y": 8.0},
+            {"x": 80.0, "y": 8.0},
+        ]
+        survey = await add(
+            client,
+            "lru1",
+            "explore",
+            {"area": area, "max_duration": 120},
+            at=1,
+            label="survey out there",
+        )
+        back = await add(
+            client, "lru1", "drive_to", {"goal": {"x": 10.0, "y": 2.0}}, at=2, label="come back"
+        )
         await client.submit(Sync(robot="lru1", through=back))
         await client.submit(Control(op="run", robot="lru1"))
         await watch.until(lambda s: not s.robots["lru1"].in_range, 30, "lru1 out of range")
@@ -176,7 +230,9 @@ async def test_robot_out_of_coverage_cannot_be_reached_and_reports_arrive_after_
         assert [status_of(m, i) for i in (out, survey, back)] == ["success", "success", "success"]
         assert m.report_seqs["lru1"] == 6  # running + success of each: nothing lost, nothing twice
         # what it mapped out there reached the ground view once it was back
-        snap = mf.MapSnapshot.model_validate_json(await transport.query(client.session, mf.KEY_MAP_SNAPSHOT, b""))
+        snap = mf.MapSnapshot.model_validate_json(
+            await transport.query(client.session, mf.KEY_MAP_SNAPSHOT, b"")
+        )
         mirror = mf.MapMirror()
         mirror.apply_snapshot(snap)
         cell = mirror.cell_of(88.0, 0.0)
@@ -188,17 +244,23 @@ async def test_robot_out_of_coverage_cannot_be_reached_and_reports_arrive_after_
         await client.close()
 
 
-async def test_drone_flight_longer_than_its_battery_fails_safely_and_landing_recharges(stack: Stack, tmp_path: Path) -> None:
+async def test_drone_flight_longer_than_its_battery_fails_safely_and_landing_recharges(
+    stack: Stack, tmp_path: Path
+) -> None:
     world = world_file(tmp_path, robots={"ardea": {"battery": 0.3}})
     client, watch = await connect(stack, speed=80, world=world)
     try:
-        fly = await add(client, "ardea", "fly_to", {"goal": {"x": 150.0, "y": -150.0}}, at=1, label="too far")
+        fly = await add(
+            client, "ardea", "fly_to", {"goal": {"x": 150.0, "y": -150.0}}, at=1, label="too far"
+        )
         await client.submit(Sync(robot="ardea", through=fly))
         await client.submit(Control(op="run", robot="ardea"))
         m = await client.wait_for(lambda m: status_of(m, fly) in ("success", "failure"), 30)
         assert status_of(m, "ardea-1") == "success"
         s = skill(m, fly)
-        assert s.status.value == "failure" and "refused before the flight" in s.status_info, s.status_info
+        assert s.status.value == "failure" and "refused before the flight" in s.status_info, (
+            s.status_info
+        )
         st = await watch.query()
         assert st.robots["ardea"].airborne  # still hovering safely near the lander
         assert st.robots["ardea"].battery > 0.2
@@ -206,7 +268,11 @@ async def test_drone_flight_longer_than_its_battery_fails_safely_and_landing_rec
         await client.submit(Sync(robot="ardea", through=land))
         await client.submit(Control(op="run", robot="ardea"))
         await client.wait_for(lambda m: status_of(m, land) == "success", 30)
-        st = await watch.until(lambda s: s.robots["ardea"].docked and s.robots["ardea"].battery >= 0.9, 30, "charging on the pad")
+        st = await watch.until(
+            lambda s: s.robots["ardea"].docked and s.robots["ardea"].battery >= 0.9,
+            30,
+            "charging on the pad",
+        )
         assert not st.robots["ardea"].airborne
     finally:
         watch.close()
@@ -224,6 +290,7 @@ async def test_pause_stop_and_run_restarts_the_skill(stack: Stack) -> None:
             def pred(_m) -> bool:
                 t = client.telemetry.get("lru1")
                 return t is not None and t.skill == drive and (t.progress or 0) >= minimum
+
             return pred
 
         await client.wait_for(telemetry_progress(0.2), 20)
@@ -233,7 +300,10 @@ async def test_pause_stop_and_run_restarts_the_skill(stack: Stack) -> None:
         paused_at = (await watch.query()).robots["lru1"]
         # several telemetry samples later it has not moved
         seen = await _telemetry_samples(client, "lru1", 4)  # the first may have been on its way
-        assert all(abs(t.pose.x - paused_at.x) < 0.01 and abs(t.pose.y - paused_at.y) < 0.01 for t in seen[1:])
+        assert all(
+            abs(t.pose.x - paused_at.x) < 0.01 and abs(t.pose.y - paused_at.y) < 0.01
+            for t in seen[1:]
+        )
         assert (await watch.query()).robots["lru1"].odometer_m == paused_at.odometer_m
         await client.submit(Control(op="run", robot="lru1"))  # resume
         await client.wait_for(lambda m: status_of(m, drive) == "running", 10)
@@ -250,6 +320,7 @@ async def test_pause_stop_and_run_restarts_the_skill(stack: Stack) -> None:
             t = client.telemetry.get("lru1")
             total = _total_metres(t.info) if t is not None and t.skill == drive else None
             return total is not None and total < total_first * 0.6
+
         await client.wait_for(restarted, 10)
         await client.wait_for(lambda m: status_of(m, drive) == "success", 30)
         st = await watch.query()
@@ -309,13 +380,25 @@ def test_sim_exits_cleanly_on_signals(stack: Stack, sig: int) -> None:
 def test_sim_reports_bad_files_and_unreachable_server(tmp_path: Path) -> None:
     bad = tmp_path / "world.yaml"
     bad.write_text("format: missionctl/world@1\nrss:\n  - {name: X, x: 0, y: 0}\n")
-    base = [sys.executable, "-m", "backend.cli", "sim", "--mission", str(ROOT / "missions" / "mars_sample_return.yaml")]
-    out = subprocess.run(base + ["--world", str(bad)], cwd=ROOT, capture_output=True, text=True, timeout=30)
+    base = [
+        sys.executable,
+        "-m",
+        "backend.cli",
+        "sim",
+        "--mission",
+        str(ROOT / "missions" / "mars_sample_return.yaml"),
+    ]
+    out = subprocess.run(
+        base + ["--world", str(bad)], cwd=ROOT, capture_output=True, text=True, timeout=30
+    )
     assert out.returncode == 2
     assert f"{bad}:3:" in out.stderr and "max_score" in out.stderr and "Traceback" not in out.stderr
     port = transport.free_port()
     out = subprocess.run(
         base + ["--connect", transport.loopback_endpoint(port), "--connect-timeout", "0"],
-        cwd=ROOT, capture_output=True, text=True, timeout=30,
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=30,
     )
     assert out.returncode == 3 and "cannot reach" in out.stderr, out.stderr

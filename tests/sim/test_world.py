@@ -40,7 +40,9 @@ def world(spec) -> World:
 def test_default_world_is_valid_and_deterministic(spec) -> None:
     a, b, c = World(spec, seed=1), World(spec, seed=1), World(spec, seed=2)
     assert np.array_equal(a.terrain, b.terrain)
-    assert [(s.id, s.x, s.y) for s in a.stones.values()] == [(s.id, s.x, s.y) for s in b.stones.values()]
+    assert [(s.id, s.x, s.y) for s in a.stones.values()] == [
+        (s.id, s.x, s.y) for s in b.stones.values()
+    ]
     assert not np.array_equal(a.terrain, c.terrain)
     assert [(s.x, s.y) for s in a.stones.values()] != [(s.x, s.y) for s in c.stones.values()]
     # a few hundred metres, some slow and some impassable ground
@@ -78,13 +80,17 @@ def test_world_file_errors_point_at_line_and_field(tmp_path: Path) -> None:
         parse_world(text, "w.yaml")
     lines = [str(i) for i in exc.value.issues]
     assert any(ln.startswith("w.yaml:4:") and "rss[0].max_score" in ln for ln in lines), lines
-    assert any(ln.startswith("w.yaml:7:") and "boxes.sample_box" in ln and "slot" in ln for ln in lines), lines
+    assert any(
+        ln.startswith("w.yaml:7:") and "boxes.sample_box" in ln and "slot" in ln for ln in lines
+    ), lines
     # semantic checks run on a structurally valid file
     ok = text.replace("max_score: -1", "max_score: 1").replace("at: shelf}", "at: shelf, slot: 1}")
     with pytest.raises(FileProblems) as exc:
         parse_world(ok, "w.yaml")
     lines = [str(i) for i in exc.value.issues]
-    assert any(ln.startswith("w.yaml:5:") and "duplicate region name 'RSS-A'" in ln for ln in lines), lines
+    assert any(
+        ln.startswith("w.yaml:5:") and "duplicate region name 'RSS-A'" in ln for ln in lines
+    ), lines
     assert any("outside the site" in ln for ln in lines), lines
     bad_yaml = tmp_path / "bad.yaml"
     bad_yaml.write_text("format: [\n")
@@ -193,14 +199,18 @@ def fake_fleet(world: World) -> Any:
     async def tell(sender, target, topic, data):
         return False
 
-    return SimpleNamespace(world=world, dt=5.0, robot_seconds=0.0, note=lambda r, t: None, ask=ask, tell=tell)
+    return SimpleNamespace(
+        world=world, dt=5.0, robot_seconds=0.0, note=lambda r, t: None, ask=ask, tell=tell
+    )
 
 
 def run(coro) -> Any:
     return asyncio.run(coro)
 
 
-def test_battery_drains_with_distance_and_an_empty_battery_fails_with_the_distance(world: World) -> None:
+def test_battery_drains_with_distance_and_an_empty_battery_fails_with_the_distance(
+    world: World,
+) -> None:
     rover = world.add_robot("lru1", "lru_science")
     rover.x, rover.y, rover.battery = 4.0, 3.0, 1.0
     skills = RobotSkills(fake_fleet(world), rover)
@@ -209,7 +219,9 @@ def test_battery_drains_with_distance_and_an_empty_battery_fails_with_the_distan
     used = 1.0 - rover.battery
     assert math.hypot(rover.x - 40.0, rover.y - 3.0) <= 0.5
     assert 35 / 1000 <= used <= 45 / 1000  # ~1000 m per battery, plus electronics
-    assert ctx.progress_calls[-1][0] == 1.0 and ctx.progress_calls[len(ctx.progress_calls) // 2][2] > 0
+    assert (
+        ctx.progress_calls[-1][0] == 1.0 and ctx.progress_calls[len(ctx.progress_calls) // 2][2] > 0
+    )
     rover.battery = 0.08  # 3 % above the reserve: about 30 m
     with pytest.raises(SkillFailed) as exc:
         run(skills.drive_to(FakeCtx(), goal=Pose(x=40.0, y=-50.0)))
@@ -223,7 +235,9 @@ def test_battery_drains_with_distance_and_an_empty_battery_fails_with_the_distan
     assert world.at_lander(rover) and rover.battery >= 0.9
 
 
-def test_drone_refuses_a_flight_longer_than_its_battery_and_recharges_on_the_pad(world: World) -> None:
+def test_drone_refuses_a_flight_longer_than_its_battery_and_recharges_on_the_pad(
+    world: World,
+) -> None:
     drone = world.add_robot("ardea", "drone")
     drone.x, drone.y, drone.battery = -2.0, 2.0, 0.3
     skills = RobotSkills(fake_fleet(world), drone)
@@ -255,7 +269,12 @@ def test_outcomes_hardly_depend_on_the_step_size(spec) -> None:
         skills = RobotSkills(fleet, rover)
         run(skills.drive_to(FakeCtx(), goal=Pose(x=42.0, y=18.0)))
         t0 = rover.sim_seconds
-        area = [Position(x=30, y=0), Position(x=80, y=0), Position(x=80, y=40), Position(x=30, y=40)]
+        area = [
+            Position(x=30, y=0),
+            Position(x=80, y=0),
+            Position(x=80, y=40),
+            Position(x=30, y=40),
+        ]
         run(skills.explore(FakeCtx(), area=area, max_duration=150))
         assert rover.sim_seconds - t0 == pytest.approx(150.0)
         ends.append((rover.x, rover.y, int(world.explored.sum()), rover.battery))
@@ -286,7 +305,11 @@ def test_identify_alone_gives_the_minimum_and_together_the_top_score(world: Worl
 def test_science_image_reveals_the_top_score(world: World) -> None:
     lru1 = world.add_robot("lru1", "lru_science")
     lru1.x, lru1.y = 40.0, 18.0
-    run(RobotSkills(fake_fleet(world), lru1).take_science_image(FakeCtx(), target=Pose(x=45.0, y=21.0)))
+    run(
+        RobotSkills(fake_fleet(world), lru1).take_science_image(
+            FakeCtx(), target=Pose(x=45.0, y=21.0)
+        )
+    )
     assert lru1.knowledge.rss["RSS-A"]["top_score"] == 1.0
     world.pump(0.0, 0.0)
     assert world.ground_rss["RSS-A"]["top_score"] == 1.0
@@ -309,8 +332,15 @@ def test_tiles_round_trip_and_only_changed_tiles_are_sent() -> None:
     assert len(first) == 2 * 3 * 4  # every tile of both layers
     assert enc.delta({"terrain": terrain, "coverage": coverage}) == []  # nothing changed
     mirror = mf.MapMirror()
-    mirror.apply_snapshot(mf.MapSnapshot(meta=enc.meta, seq=0, sim_time=0.0, tiles=enc.full(),
-                                         objects=mf.MapObjects(lander=mf.LanderItem(x=0, y=0, pad_radius=5, comm_radius=60))))
+    mirror.apply_snapshot(
+        mf.MapSnapshot(
+            meta=enc.meta,
+            seq=0,
+            sim_time=0.0,
+            tiles=enc.full(),
+            objects=mf.MapObjects(lander=mf.LanderItem(x=0, y=0, pad_radius=5, comm_radius=60)),
+        )
+    )
     assert np.array_equal(mirror.layers["terrain"], terrain)
     t2 = terrain.copy()
     t2[0, 0] = (t2[0, 0] + 1) % 4  # tile (0, 0)
@@ -318,11 +348,17 @@ def test_tiles_round_trip_and_only_changed_tiles_are_sent() -> None:
     c2 = coverage.copy()
     c2[20, 20] = 200  # tile (1, 1)
     tiles = enc.delta({"terrain": t2, "coverage": c2})
-    assert sorted((t.layer, t.tx, t.ty) for t in tiles) == [("coverage", 1, 1), ("terrain", 0, 0), ("terrain", 3, 2)]
+    assert sorted((t.layer, t.tx, t.ty) for t in tiles) == [
+        ("coverage", 1, 1),
+        ("terrain", 0, 0),
+        ("terrain", 3, 2),
+    ]
     delta = mf.MapDelta(seq=1, sim_time=1.0, tiles=tiles)
     wire = mf.MapDelta.model_validate_json(mf.dump(delta))
     assert mirror.apply_delta(wire)
-    assert np.array_equal(mirror.layers["terrain"], t2) and np.array_equal(mirror.layers["coverage"], c2)
+    assert np.array_equal(mirror.layers["terrain"], t2) and np.array_equal(
+        mirror.layers["coverage"], c2
+    )
     assert mirror.apply_delta(wire)  # a duplicate is ignored
     assert not mirror.apply_delta(mf.MapDelta(seq=3, sim_time=2.0))  # a gap: re-query the snapshot
     # a changed tile compresses well: the delta is far smaller than the grid
@@ -334,11 +370,17 @@ def test_mirror_keeps_deltas_that_arrive_before_the_snapshot() -> None:
     enc = mf.TileEncoder(_meta(16, 16))
     enc.delta({"terrain": grid, "coverage": grid})
     lander = mf.LanderItem(x=0, y=0, pad_radius=5, comm_radius=60)
-    snap = mf.MapSnapshot(meta=enc.meta, seq=4, sim_time=0.0, tiles=enc.full(), objects=mf.MapObjects(lander=lander))
+    snap = mf.MapSnapshot(
+        meta=enc.meta, seq=4, sim_time=0.0, tiles=enc.full(), objects=mf.MapObjects(lander=lander)
+    )
     g2 = grid.copy()
     g2[3, 3] = 2
-    d5 = mf.MapDelta(seq=5, sim_time=1.0, tiles=enc.delta({"terrain": g2, "coverage": grid}),
-                     objects=mf.MapObjects(lander=lander, rss=[mf.RssItem(rss="RSS-A", x=1, y=2, radius=3)]))
+    d5 = mf.MapDelta(
+        seq=5,
+        sim_time=1.0,
+        tiles=enc.delta({"terrain": g2, "coverage": grid}),
+        objects=mf.MapObjects(lander=lander, rss=[mf.RssItem(rss="RSS-A", x=1, y=2, radius=3)]),
+    )
     mirror = mf.MapMirror()
     assert mirror.apply_delta(d5) and not mirror.ready
     mirror.apply_snapshot(snap)
@@ -354,6 +396,12 @@ def test_mapfeed_is_self_contained() -> None:
     import ast
 
     tree = ast.parse(Path(mf.__file__).read_text())
-    mods = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
-    mods |= {n.module.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module and n.level == 0}
+    mods = {
+        a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names
+    }
+    mods |= {
+        n.module.split(".")[0]
+        for n in ast.walk(tree)
+        if isinstance(n, ast.ImportFrom) and n.module and n.level == 0
+    }
     assert mods <= {"__future__", "base64", "zlib", "typing", "numpy", "pydantic"}, mods

@@ -154,7 +154,9 @@ class _IsClosedForbidden:
         self.session.close()
 
 
-def test_close_session_closes_without_asking_is_closed_and_can_repeat(router: Any, open_client) -> None:
+def test_close_session_closes_without_asking_is_closed_and_can_repeat(
+    router: Any, open_client
+) -> None:
     session = open_client(router.endpoint)  # closed in teardown too, should this test fail
     wrapped = _IsClosedForbidden(session)
     close_session(wrapped)  # type: ignore[arg-type]
@@ -238,7 +240,9 @@ def wait_for_queryables(session: Any, key: str, count: int = 1, timeout: float =
     wait until `count` of them match `key` (a querier's matching listener)."""
     querier = session.declare_querier(key)
     matched = threading.Event()
-    listener = querier.declare_matching_listener(lambda status: matched.set() if status.matching else None)
+    listener = querier.declare_matching_listener(
+        lambda status: matched.set() if status.matching else None
+    )
     try:
         if not querier.matching_status.matching:
             assert matched.wait(timeout), f"no queryable on {key} within {timeout}s"
@@ -279,7 +283,9 @@ def test_serve_async_and_query_all_between_clients(router: Any, open_client) -> 
     asyncio.run(scenario())
 
 
-def test_serve_async_plain_handler_answers_at_once_or_with_an_awaitable(router: Any, open_client) -> None:
+def test_serve_async_plain_handler_answers_at_once_or_with_an_awaitable(
+    router: Any, open_client
+) -> None:
     server = open_client(router.endpoint)
     caller = open_client(router.endpoint)
 
@@ -314,14 +320,18 @@ def test_serve_async_plain_handler_answers_at_once_or_with_an_awaitable(router: 
         with pytest.raises(QueryError, match="returned str, expected bytes"):
             await query(caller, "svc/plain", b"wrong", timeout=WAIT)
         # concurrent queries whose answers wait are all answered
-        got = await asyncio.gather(*(query(caller, "svc/plain", f"wait{i}".encode(), timeout=WAIT) for i in range(20)))
+        got = await asyncio.gather(
+            *(query(caller, "svc/plain", f"wait{i}".encode(), timeout=WAIT) for i in range(20))
+        )
         assert got == [f"later:wait{i}".encode() for i in range(20)]
         assert seen_threads == {loop_thread}  # every call ran on the event loop
 
     asyncio.run(scenario())
 
 
-def test_query_returns_the_answer_before_the_responder_ends_the_query(router: Any, open_client) -> None:
+def test_query_returns_the_answer_before_the_responder_ends_the_query(
+    router: Any, open_client
+) -> None:
     # a single responder's answer is used at once; Zenoh ends the query only
     # when the responder drops it (here: once the caller has its answer)
     server = open_client(router.endpoint)

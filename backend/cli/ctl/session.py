@@ -157,7 +157,9 @@ def default_endpoints() -> list[str]:
 
 def _check_name(value: str, what: str) -> str:
     if not _NAME_RE.match(value or ""):
-        raise UsageError(f"{what}: {value!r} is not a valid name (letters, digits, '_' and '-', starting with a letter)")
+        raise UsageError(
+            f"{what}: {value!r} is not a valid name (letters, digits, '_' and '-', starting with a letter)"
+        )
     return value
 
 
@@ -181,7 +183,9 @@ def parse_param(text: str) -> tuple[str, Any]:
     name, sep, raw = text.partition("=")
     name = name.strip()
     if not sep or not name:
-        raise UsageError(f"--param {text!r}: expected NAME=VALUE (e.g. --param speed=0.5 or --param goal=@POI-A)")
+        raise UsageError(
+            f"--param {text!r}: expected NAME=VALUE (e.g. --param speed=0.5 or --param goal=@POI-A)"
+        )
     if not _NAME_RE.match(name):
         raise UsageError(f"--param {text!r}: {name!r} is not a parameter name")
     stripped = raw.strip()
@@ -196,7 +200,9 @@ def parse_param(text: str) -> tuple[str, Any]:
             hint = f"; quote the whole argument for the shell: --param '{name}={{x: 3, y: 4}}'"
         elif ":" in stripped:
             hint = f"; write a mapping in braces: --param '{name}={{x: 3, y: 4}}'"
-        raise UsageError(f"--param {name}: {raw!r} is not a valid YAML value ({why}){hint}") from None
+        raise UsageError(
+            f"--param {name}: {raw!r} is not a valid YAML value ({why}){hint}"
+        ) from None
     if isinstance(value, dict | list) and stripped[:1] not in "{[":
         raise UsageError(
             f"--param {name}: {raw!r} reads as a YAML block {'mapping' if isinstance(value, dict) else 'list'}; "
@@ -240,7 +246,9 @@ def _mapping(text: str, what: str, fields: tuple[str, ...]) -> dict[str, float]:
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as e:
-        raise UsageError(f"{what}: {text!r} is not a valid YAML mapping ({getattr(e, 'problem', e)})") from None
+        raise UsageError(
+            f"{what}: {text!r} is not a valid YAML mapping ({getattr(e, 'problem', e)})"
+        ) from None
     if not isinstance(data, dict):
         raise UsageError(f"{what}: expected a mapping like {{x: 1, y: 2}}, got {text!r}")
     out = {}
@@ -277,7 +285,9 @@ def parse_area(text: str) -> list[dict[str, float]]:
         try:
             data = yaml.safe_load(stripped)
         except yaml.YAMLError as e:
-            raise UsageError(f"--area: {text!r} is not a valid YAML list ({getattr(e, 'problem', e)})") from None
+            raise UsageError(
+                f"--area: {text!r} is not a valid YAML list ({getattr(e, 'problem', e)})"
+            ) from None
         if not isinstance(data, list):
             raise UsageError(f"--area: expected a list of positions, got {text!r}")
         points = []
@@ -287,12 +297,16 @@ def parse_area(text: str) -> list[dict[str, float]]:
             elif isinstance(p, list):
                 points.append(parse_position(",".join(str(v) for v in p), f"--area point {i + 1}"))
             else:
-                raise UsageError(f"--area point {i + 1}: expected [x, y] or {{x: .., y: ..}}, got {p!r}")
+                raise UsageError(
+                    f"--area point {i + 1}: expected [x, y] or {{x: .., y: ..}}, got {p!r}"
+                )
     else:
         chunks = [c for c in re.split(r"[;\s]+", stripped) if c]
         points = [parse_position(c, f"--area point {i + 1}") for i, c in enumerate(chunks)]
     if len(points) < 3:
-        raise UsageError(f"--area: a polygon needs at least 3 points, got {len(points)} (write \"x,y x,y x,y\")")
+        raise UsageError(
+            f'--area: a polygon needs at least 3 points, got {len(points)} (write "x,y x,y x,y")'
+        )
     return points
 
 
@@ -302,9 +316,13 @@ def _recharge(text: str) -> float | None:
     try:
         v = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a battery fraction 0..1 or 'off', got {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"expected a battery fraction 0..1 or 'off', got {text!r}"
+        ) from None
     if not (0.0 <= v <= 1.0):
-        raise argparse.ArgumentTypeError(f"expected a battery fraction between 0 and 1, got {text!r}")
+        raise argparse.ArgumentTypeError(
+            f"expected a battery fraction between 0 and 1, got {text!r}"
+        )
     return v
 
 
@@ -336,34 +354,79 @@ def _common(p: argparse.ArgumentParser, *, top: bool) -> None:
     d = (lambda v: v) if top else (lambda v: argparse.SUPPRESS)
     g = p.add_argument_group("connection and output")
     g.add_argument(
-        "--connect", action="append", metavar="ENDPOINT", default=d(None),
+        "--connect",
+        action="append",
+        metavar="ENDPOINT",
+        default=d(None),
         help=f"mission server endpoint (default: $MISSIONCTL_CONNECT or {DEFAULT_CONNECT}); repeatable",
     )
-    g.add_argument("--json", action="store_true", default=d(False), help="print one JSON object (watch: one per line)")
-    g.add_argument("--timeout", type=_positive_float, metavar="S", default=d(DEFAULT_TIMEOUT),
-                   help=f"seconds to wait for the server (default {DEFAULT_TIMEOUT:g})")
-    g.add_argument("--client-id", metavar="ID", default=d(None),
-                   help="client id (default: $MISSIONCTL_CLIENT_ID or ctl-USER@HOST; undo/redo are per client id)")
-    g.add_argument("--expect-revision", type=_nonneg_int, metavar="N", default=d(None),
-                   help="refuse if what the operation touches changed after revision N")
-    g.add_argument("--request-id", metavar="ID", default=d(None),
-                   help="request id (default: a fresh one); reuse it to retry safely after a timeout")
+    g.add_argument(
+        "--json",
+        action="store_true",
+        default=d(False),
+        help="print one JSON object (watch: one per line)",
+    )
+    g.add_argument(
+        "--timeout",
+        type=_positive_float,
+        metavar="S",
+        default=d(DEFAULT_TIMEOUT),
+        help=f"seconds to wait for the server (default {DEFAULT_TIMEOUT:g})",
+    )
+    g.add_argument(
+        "--client-id",
+        metavar="ID",
+        default=d(None),
+        help="client id (default: $MISSIONCTL_CLIENT_ID or ctl-USER@HOST; undo/redo are per client id)",
+    )
+    g.add_argument(
+        "--expect-revision",
+        type=_nonneg_int,
+        metavar="N",
+        default=d(None),
+        help="refuse if what the operation touches changed after revision N",
+    )
+    g.add_argument(
+        "--request-id",
+        metavar="ID",
+        default=d(None),
+        help="request id (default: a fresh one); reuse it to retry safely after a timeout",
+    )
     add_login_arguments(p.add_argument_group("login and TLS (docs/security.md)"), suppress=not top)
 
 
 def _policies(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("policies")
-    g.add_argument("--retries", type=_nonneg_int, metavar="N", help="autonomous retries after a failure (0..20)")
-    g.add_argument("--pause-out-of-comms", dest="pause_out_of_comms", action="store_const", const=True,
-                   help="pause while out of communication range")
-    g.add_argument("--no-pause-out-of-comms", dest="pause_out_of_comms", action="store_const", const=False)
-    g.add_argument("--recharge-below", type=_recharge, metavar="F", default=argparse.SUPPRESS,
-                   help="return to recharge below this battery fraction (0..1, or 'off')")
+    g.add_argument(
+        "--retries",
+        type=_nonneg_int,
+        metavar="N",
+        help="autonomous retries after a failure (0..20)",
+    )
+    g.add_argument(
+        "--pause-out-of-comms",
+        dest="pause_out_of_comms",
+        action="store_const",
+        const=True,
+        help="pause while out of communication range",
+    )
+    g.add_argument(
+        "--no-pause-out-of-comms", dest="pause_out_of_comms", action="store_const", const=False
+    )
+    g.add_argument(
+        "--recharge-below",
+        type=_recharge,
+        metavar="F",
+        default=argparse.SUPPRESS,
+        help="return to recharge below this battery fraction (0..1, or 'off')",
+    )
 
 
 def _geometry(p: argparse.ArgumentParser) -> None:
     g = p.add_mutually_exclusive_group(required=True)
-    g.add_argument("--pose", metavar="P", help="x,y[,z[,roll,pitch,yaw]] or '{x: 1, y: 2, yaw: 0.5}'")
+    g.add_argument(
+        "--pose", metavar="P", help="x,y[,z[,roll,pitch,yaw]] or '{x: 1, y: 2, yaw: 0.5}'"
+    )
     g.add_argument("--position", metavar="P", help="x,y[,z] or '{x: 1, y: 2}'")
     g.add_argument("--area", metavar="A", help='polygon "x,y x,y x,y ..." (3 points or more)')
 
@@ -392,9 +455,16 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     a = op("add", "add a skill to a robot's unsynchronized section")
     a.add_argument("robot", metavar="ROBOT")
     a.add_argument("skill", metavar="SKILL")
-    a.add_argument("--param", action="append", metavar="NAME=VALUE", help="parameter value (YAML) or @MARKER")
+    a.add_argument(
+        "--param", action="append", metavar="NAME=VALUE", help="parameter value (YAML) or @MARKER"
+    )
     a.add_argument("--label", metavar="TEXT")
-    a.add_argument("--at", type=int, metavar="INDEX", help="position in the unsynchronized section (default: end)")
+    a.add_argument(
+        "--at",
+        type=int,
+        metavar="INDEX",
+        help="position in the unsynchronized section (default: end)",
+    )
     _policies(a)
 
     d = op("delete", "delete idle skills")
@@ -407,8 +477,15 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     e = op("edit", "change the label, parameters, bindings or policies of an idle skill")
     e.add_argument("id", metavar="ID")
     e.add_argument("--label", metavar="TEXT")
-    e.add_argument("--param", action="append", metavar="NAME=VALUE", help="parameter value (YAML) or @MARKER")
-    e.add_argument("--unbind", action="append", metavar="NAME", help="drop a parameter's marker binding (keeps its value)")
+    e.add_argument(
+        "--param", action="append", metavar="NAME=VALUE", help="parameter value (YAML) or @MARKER"
+    )
+    e.add_argument(
+        "--unbind",
+        action="append",
+        metavar="NAME",
+        help="drop a parameter's marker binding (keeps its value)",
+    )
     _policies(e)
 
     sy = op("sync", "send a robot its unsynchronized skills (all, or through ID)")
@@ -462,9 +539,12 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
 
     sv = op("save", "write the mission to a YAML file")
     sv.add_argument("file", metavar="FILE")
-    sv.add_argument("--library", metavar="PATH",
-                    help="the skill library file to reference, written relative to FILE "
-                    "(default: the server's reference, as is)")
+    sv.add_argument(
+        "--library",
+        metavar="PATH",
+        help="the skill library file to reference, written relative to FILE "
+        "(default: the server's reference, as is)",
+    )
 
     n = op("new", "start an empty mission with the same robots")
     n.add_argument("name", nargs="?", default="mission", metavar="NAME")
@@ -495,7 +575,7 @@ def wants_json(argv: list[str]) -> bool:
     """`missionctl ARGV...` is `ctl ... --json ...` (before any `--`)."""
     if not argv or argv[0] != "ctl":
         return False
-    args = argv[1:argv.index("--")] if "--" in argv else argv[1:]
+    args = argv[1 : argv.index("--")] if "--" in argv else argv[1:]
     return "--json" in args
 
 
@@ -592,11 +672,22 @@ def build_op(args: argparse.Namespace, library: Any = None, mission: Any = None)
     if name == "add":
         _check_name(args.robot, "ROBOT")
         _check_name(args.skill, "SKILL")
-        params, bindings = _resolve(parse_params(args.param), library, mission, args.robot, args.skill)
+        params, bindings = _resolve(
+            parse_params(args.param), library, mission, args.robot, args.skill
+        )
         given = _given_policies(args)
         policies = _validated(Policies, "policies", **given) if given else None
-        return _validated(ops.AddSkill, "add", robot=args.robot, skill=args.skill, label=args.label or "",
-                          params=params, bindings=bindings, policies=policies, at=args.at)
+        return _validated(
+            ops.AddSkill,
+            "add",
+            robot=args.robot,
+            skill=args.skill,
+            label=args.label or "",
+            params=params,
+            bindings=bindings,
+            policies=policies,
+            at=args.at,
+        )
     if name == "delete":
         return _validated(ops.DeleteSkills, "delete", ids=args.ids)
     if name == "move":
@@ -612,7 +703,9 @@ def build_op(args: argparse.Namespace, library: Any = None, mission: Any = None)
                 raise UsageError(f"--unbind {u} and --param {u}=... contradict each other")
         given = _given_policies(args)
         if args.label is None and not parsed and not unbind and not given:
-            raise UsageError("edit: nothing to change (give --label, --param, --unbind or a policy option)")
+            raise UsageError(
+                "edit: nothing to change (give --label, --param, --unbind or a policy option)"
+            )
         found = mission.find(args.id) if mission is not None else None
         robot, skill = (found[0], found[2].skill) if found else (None, None)
         params, bindings = _resolve(parsed, library, mission, robot, skill)
@@ -621,8 +714,15 @@ def build_op(args: argparse.Namespace, library: Any = None, mission: Any = None)
         if given:
             base = found[2].policies.model_dump() if found else {}
             policies = _validated(Policies, "policies", **{**base, **given})
-        return _validated(ops.EditSkill, "edit", id=args.id, label=args.label, params=params,
-                          bindings=all_bindings, policies=policies)
+        return _validated(
+            ops.EditSkill,
+            "edit",
+            id=args.id,
+            label=args.label,
+            params=params,
+            bindings=all_bindings,
+            policies=policies,
+        )
     if name == "sync":
         _check_name(args.robot, "ROBOT")
         return _validated(ops.Sync, "sync", robot=args.robot, through=args.through)
@@ -652,7 +752,9 @@ def build_op(args: argparse.Namespace, library: Any = None, mission: Any = None)
             elif kind == "position":
                 marker = PositionMarker(position=Position(**value), description=args.description)
             else:
-                marker = AreaMarker(area=[Position(**p) for p in value], description=args.description)
+                marker = AreaMarker(
+                    area=[Position(**p) for p in value], description=args.description
+                )
             return _validated(ops.MarkerAdd, "marker add", name=args.name, marker=marker)
         if args.marker_op == "move":
             kind, value = _geometry_value(args)
@@ -669,7 +771,9 @@ def build_op(args: argparse.Namespace, library: Any = None, mission: Any = None)
             return _validated(ops.MarkerMove, "marker move", name=args.name, value=new)
         if args.marker_op == "rename":
             _check_name(args.new_name, "NEW_NAME")
-            return _validated(ops.MarkerRename, "marker rename", name=args.name, new_name=args.new_name)
+            return _validated(
+                ops.MarkerRename, "marker rename", name=args.name, new_name=args.new_name
+            )
         return _validated(ops.MarkerDelete, "marker delete", name=args.name)
     if name == "load":
         from backend.files.missions import FileProblems, load_mission
@@ -724,11 +828,20 @@ def _num(v: Any) -> str:
 
 def short_value(v: Any, limit: int = 40) -> str:
     """A compact rendering of a parameter value for one line of `state`."""
-    if isinstance(v, dict) and v and set(v) <= set(POSE_FIELDS) and all(isinstance(x, int | float) for x in v.values()):
+    if (
+        isinstance(v, dict)
+        and v
+        and set(v) <= set(POSE_FIELDS)
+        and all(isinstance(x, int | float) for x in v.values())
+    ):
         text = f"({_num(v.get('x', 0))},{_num(v.get('y', 0))}"
         extra = [f"{k}={_num(v[k])}" for k in ("z", "roll", "pitch", "yaw") if v.get(k)]
         text += (" " + " ".join(extra) if extra else "") + ")"
-    elif isinstance(v, list) and v and all(isinstance(p, dict) and set(p) <= set(POSITION_FIELDS) for p in v):
+    elif (
+        isinstance(v, list)
+        and v
+        and all(isinstance(p, dict) and set(p) <= set(POSITION_FIELDS) for p in v)
+    ):
         text = f"[{len(v)} points]"
     elif isinstance(v, str):
         text = v if v and re.fullmatch(r"[\w.\-@/]+", v) else json.dumps(v, ensure_ascii=False)
@@ -779,7 +892,11 @@ def _presence(info: Any) -> str:
         return "not registered"
     if info.online:
         return f"online since {_time(info.since)}" if info.since else "online"
-    return f"offline since {_time(info.since)}" if info.since else "offline (not seen since the server started)"
+    return (
+        f"offline since {_time(info.since)}"
+        if info.since
+        else "offline (not seen since the server started)"
+    )
 
 
 def _marker_text(mk: Any) -> str:
@@ -788,7 +905,9 @@ def _marker_text(mk: Any) -> str:
     elif mk.kind == "position":
         text = "position " + short_value(mk.position.model_dump())
     else:
-        pts = " ".join(f"{_num(p.x)},{_num(p.y)}" + (f",{_num(p.z)}" if p.z else "") for p in mk.area)
+        pts = " ".join(
+            f"{_num(p.x)},{_num(p.y)}" + (f",{_num(p.z)}" if p.z else "") for p in mk.area
+        )
         text = f"area {pts}"
     return text + (f"  {mk.description}" if mk.description else "")
 
@@ -847,7 +966,9 @@ def state_json(client: Any, only: list[str] | None = None) -> dict[str, Any]:
 def state_text(client: Any, only: list[str] | None = None, unicode: bool = True) -> str:
     m, lib = client.mission, client.library
     dash = "—" if unicode else "-"
-    lines = [f"mission '{m.name}' at revision {m.revision} (library '{lib.name}', {', '.join(client.endpoints)})"]
+    lines = [
+        f"mission '{m.name}' at revision {m.revision} (library '{lib.name}', {', '.join(client.endpoints)})"
+    ]
     robots = list(m.robots) + [r for r in m.tasks if r not in m.robots]
     for robot in robots:
         if only and robot not in only:
@@ -855,7 +976,9 @@ def state_text(client: Any, only: list[str] | None = None, unicode: bool = True)
         spec = m.robots.get(robot)
         rtype = spec.type if spec else "?"
         kind = lib.robot_types[rtype].kind if rtype in lib.robot_types else ""
-        lines.append(f"{robot} ({rtype}{', ' + kind if kind == 'static' else ''}) {dash} {_presence(client.robots.get(robot))}")
+        lines.append(
+            f"{robot} ({rtype}{', ' + kind if kind == 'static' else ''}) {dash} {_presence(client.robots.get(robot))}"
+        )
         task = m.tasks.get(robot, [])
         if not task:
             lines.append("  (no skills)")
@@ -885,7 +1008,10 @@ def state_text(client: Any, only: list[str] | None = None, unicode: bool = True)
                 line += f"  {dash} {s.status_info}"
             lines.append(line.rstrip())
     if m.barriers:
-        lines.append("barriers: " + "; ".join(f"{bid} = {' + '.join(b.skills)}" for bid, b in m.barriers.items()))
+        lines.append(
+            "barriers: "
+            + "; ".join(f"{bid} = {' + '.join(b.skills)}" for bid, b in m.barriers.items())
+        )
     else:
         lines.append("barriers: none")
     if m.markers:
@@ -927,7 +1053,10 @@ def robots_text(client: Any) -> str:
             lines.append(f"  modules: {mods}")
             lines.append(f"  skills:  {skills}")
             if man["properties"]:
-                lines.append("  properties: " + ", ".join(f"{k}={short_value(v)}" for k, v in man["properties"].items()))
+                lines.append(
+                    "  properties: "
+                    + ", ".join(f"{k}={short_value(v)}" for k, v in man["properties"].items())
+                )
         else:
             lines.append("  (no manifest: never registered with this server)")
     return "\n".join(lines)
@@ -951,9 +1080,17 @@ def describe(op: Any, reply: Any, before: int, mission: Any) -> str:
     elif name == "move":
         found = mission.find(op.id) if mission is not None else None
         where = f" of {found[0]}'s unsynchronized section" if found else ""
-        text = f"moved {op.id} to position {op.index}{where} {at}" if changed else f"{op.id} is already at position {op.index}; nothing changed (revision {rev})"
+        text = (
+            f"moved {op.id} to position {op.index}{where} {at}"
+            if changed
+            else f"{op.id} is already at position {op.index}; nothing changed (revision {rev})"
+        )
     elif name == "edit":
-        text = f"edited {op.id} {at}" if changed else f"{op.id} already had these values; nothing changed (revision {rev})"
+        text = (
+            f"edited {op.id} {at}"
+            if changed
+            else f"{op.id} already had these values; nothing changed (revision {rev})"
+        )
     elif name == "sync":
         text = f"synchronized {_ids(v.get('synchronized', []))} to {op.robot} {at}"
     elif name == "unsync":
@@ -973,7 +1110,11 @@ def describe(op: Any, reply: Any, before: int, mission: Any) -> str:
     elif name == "marker_add":
         text = f"added marker {op.name} ({op.marker.kind}) {at}"
     elif name == "marker_move":
-        text = f"moved marker {op.name} {at}" if changed else f"marker {op.name} is already there; nothing changed (revision {rev})"
+        text = (
+            f"moved marker {op.name} {at}"
+            if changed
+            else f"marker {op.name} is already there; nothing changed (revision {rev})"
+        )
     elif name == "marker_rename":
         text = f"renamed marker {op.name} to {op.new_name} {at}"
     elif name == "marker_delete":
@@ -1041,11 +1182,20 @@ def watch_line(kind: str, payload: Any, as_json: bool) -> str | None:
         if kind == "alert":
             return json.dumps({"kind": "alert", **payload.model_dump(mode="json")})
         if kind == "malformed":
-            return json.dumps({"kind": "malformed", "what": payload.what, "key": payload.key, "error": payload.error})
+            return json.dumps(
+                {
+                    "kind": "malformed",
+                    "what": payload.what,
+                    "key": payload.key,
+                    "error": payload.error,
+                }
+            )
         if kind == "connection":
             return json.dumps({"kind": "connection", "state": payload})
         if kind == "state":
-            return json.dumps({"kind": "resync", "revision": payload.revision, "server_id": payload.server_id})
+            return json.dumps(
+                {"kind": "resync", "revision": payload.revision, "server_id": payload.server_id}
+            )
         return None
     if kind == "events":
         parts = [t for t in (_event_text(e) for e in payload.events) if t]
@@ -1054,7 +1204,11 @@ def watch_line(kind: str, payload: Any, as_json: bool) -> str | None:
     if kind == "fleet":
         return f"robot {payload.name} {_presence(payload)}"
     if kind == "alert":
-        where = f" [{payload.robot}{'/' + payload.skill if payload.skill else ''}]" if payload.robot else ""
+        where = (
+            f" [{payload.robot}{'/' + payload.skill if payload.skill else ''}]"
+            if payload.robot
+            else ""
+        )
         return f"{payload.level}{where}: {payload.message}"
     if kind == "malformed":
         return f"unreadable {payload.what} on {payload.key} (ignored): {payload.error}"
@@ -1072,8 +1226,15 @@ def _print_json(obj: Any) -> None:
     print(json.dumps(obj, ensure_ascii=False, default=str), flush=True)
 
 
-def _fail(args: argparse.Namespace, code: str, message: str, exit_code: int, *, extra: dict | None = None,
-          lines: list[str] | None = None) -> int:
+def _fail(
+    args: argparse.Namespace,
+    code: str,
+    message: str,
+    exit_code: int,
+    *,
+    extra: dict | None = None,
+    lines: list[str] | None = None,
+) -> int:
     """A failure: one line (or the given lines) on stderr, and with --json
     {"ok": false, "code", "message", ...} on stdout."""
     for line in lines or [f"missionctl: {message}"]:
@@ -1091,15 +1252,28 @@ def run(args: argparse.Namespace) -> int:
         except (AttributeError, ValueError):
             pass
     if not getattr(args, "op", None):
-        return _fail(args, "bad_input", "give an operation (missionctl ctl --help lists them)", EXIT_BAD_INPUT,
-                     lines=["missionctl ctl: error: give an operation (missionctl ctl --help lists them)"])
+        return _fail(
+            args,
+            "bad_input",
+            "give an operation (missionctl ctl --help lists them)",
+            EXIT_BAD_INPUT,
+            lines=["missionctl ctl: error: give an operation (missionctl ctl --help lists them)"],
+        )
     try:
         return _run(args)
     except UsageError as e:
-        return _fail(args, "bad_input", str(e), EXIT_BAD_INPUT, lines=[f"missionctl ctl: error: {e}"])
+        return _fail(
+            args, "bad_input", str(e), EXIT_BAD_INPUT, lines=[f"missionctl ctl: error: {e}"]
+        )
     except FileInvalid as e:
-        return _fail(args, "bad_file", str(e), EXIT_BAD_INPUT,
-                     extra={"issues": [str(i) for i in e.issues]}, lines=[str(i) for i in e.issues])
+        return _fail(
+            args,
+            "bad_file",
+            str(e),
+            EXIT_BAD_INPUT,
+            extra={"issues": [str(i) for i in e.issues]},
+            lines=[str(i) for i in e.issues],
+        )
     except KeyboardInterrupt:
         return EXIT_OK if args.op == "watch" else 130
     except BrokenPipeError:
@@ -1111,8 +1285,12 @@ def run(args: argparse.Namespace) -> int:
     except Exception as e:  # never a traceback for a person
         if os.environ.get("MISSIONCTL_DEBUG"):
             raise
-        return _fail(args, "internal_error", f"unexpected error: {type(e).__name__}: {e} "
-                     "(MISSIONCTL_DEBUG=1 shows the traceback)", EXIT_REFUSED)
+        return _fail(
+            args,
+            "internal_error",
+            f"unexpected error: {type(e).__name__}: {e} (MISSIONCTL_DEBUG=1 shows the traceback)",
+            EXIT_REFUSED,
+        )
 
 
 def _endpoints(args: argparse.Namespace) -> list[str]:
@@ -1160,14 +1338,34 @@ def _run(args: argparse.Namespace) -> int:
         return asyncio.run(_session(args, endpoints, login))
     except OperationRefused as e:
         r = e.reply
-        return _fail(args, r.code, r.message, EXIT_REFUSED, lines=[f"missionctl: refused: {r.message}"],
-                     extra={k: v for k, v in r.model_dump().items() if k not in ("ok", "code", "message") and v is not None})
+        return _fail(
+            args,
+            r.code,
+            r.message,
+            EXIT_REFUSED,
+            lines=[f"missionctl: refused: {r.message}"],
+            extra={
+                k: v
+                for k, v in r.model_dump().items()
+                if k not in ("ok", "code", "message") and v is not None
+            },
+        )
     except MaybeApplied as e:  # the request left: it may have been applied
-        retry = f"--request-id {e.request_id}" + (f" --client-id {args.client_id}" if args.client_id else "")
-        message = (f"{e.what}. Once the server answers, look with `missionctl ctl state`, or run the same command "
-                   f"again with {retry}: it is applied once (the reply says so if it had been)")
+        retry = f"--request-id {e.request_id}" + (
+            f" --client-id {args.client_id}" if args.client_id else ""
+        )
+        message = (
+            f"{e.what}. Once the server answers, look with `missionctl ctl state`, or run the same command "
+            f"again with {retry}: it is applied once (the reply says so if it had been)"
+        )
         code = "timeout" if isinstance(e, OperationTimeout) else "unreachable"
-        return _fail(args, code, message, EXIT_UNREACHABLE, extra={"request_id": e.request_id, "maybe_applied": True})
+        return _fail(
+            args,
+            code,
+            message,
+            EXIT_UNREACHABLE,
+            extra={"request_id": e.request_id, "maybe_applied": True},
+        )
     except ServerUnreachable as e:
         return _fail(args, "unreachable", str(e), EXIT_UNREACHABLE)
     except ProtocolMismatch as e:
@@ -1186,7 +1384,8 @@ async def _session(args: argparse.Namespace, endpoints: list[str], login: Any = 
         login=login,
         client_id=args.client_id or default_client_id(),
         timeout=args.timeout,
-        telemetry=args.op in ("robots", "watch"),  # watch: to say when a robot's telemetry is unreadable
+        telemetry=args.op
+        in ("robots", "watch"),  # watch: to say when a robot's telemetry is unreadable
     )
     async with client:
         if args.op == "state":
@@ -1261,7 +1460,9 @@ def _session_free(m: Any) -> Any:
     """The mission without the server's concurrency bookkeeping (per-skill and
     per-list revisions, report sequence numbers): a file is a plan and a log."""
     tasks = {r: [s.model_copy(update={"rev": 0}) for s in t] for r, t in m.tasks.items()}
-    return m.model_copy(update={"tasks": tasks, "task_revs": {}, "marker_revs": {}, "report_seqs": {}})
+    return m.model_copy(
+        update={"tasks": tasks, "task_revs": {}, "marker_revs": {}, "report_seqs": {}}
+    )
 
 
 def _save(client: Any, args: argparse.Namespace) -> int:
@@ -1295,10 +1496,21 @@ def _save(client: Any, args: argparse.Namespace) -> int:
     if args.library:
         written = os.path.relpath(Path(args.library).resolve(), target.resolve().parent)
     if args.json:
-        _print_json({"ok": True, "op": "save", "revision": m.revision, "value": {"file": str(target), "library": written},
-                     "notes": notes, "duplicate": False})
+        _print_json(
+            {
+                "ok": True,
+                "op": "save",
+                "revision": m.revision,
+                "value": {"file": str(target), "library": written},
+                "notes": notes,
+                "duplicate": False,
+            }
+        )
     else:
-        print(f"saved mission '{m.name}' at revision {m.revision} to {target} (library: {written})", flush=True)
+        print(
+            f"saved mission '{m.name}' at revision {m.revision} to {target} (library: {written})",
+            flush=True,
+        )
         for n in notes:
             print(f"note: {n}", flush=True)
     return EXIT_OK
@@ -1320,8 +1532,16 @@ async def _operation(client: Any, args: argparse.Namespace) -> int:
     notes += list(reply.notes)
     mission = client.mission
     if args.json:
-        _print_json({"ok": True, "op": op.op, "revision": reply.revision, "value": reply.value,
-                     "notes": notes, "duplicate": reply.duplicate})
+        _print_json(
+            {
+                "ok": True,
+                "op": op.op,
+                "revision": reply.revision,
+                "value": reply.value,
+                "notes": notes,
+                "duplicate": reply.duplicate,
+            }
+        )
     else:
         print(describe(op, reply, before, mission), flush=True)
         for n in notes:

@@ -175,7 +175,9 @@ class Engine:
         if self.before_apply is not None:
             self.before_apply(batch)
         self.mission = ev.apply_events(self.mission, batch)
-        if any(isinstance(e, ev.MissionReplaced) for e in events):  # applied, not just asked: histories end
+        if any(
+            isinstance(e, ev.MissionReplaced) for e in events
+        ):  # applied, not just asked: histories end
             self.undo_stack.clear()
             self.redo_stack.clear()
         return Applied(revision, events, notes, value)
@@ -185,13 +187,19 @@ class Engine:
         spec = self.mission.robots.get(robot)
         if spec is None:
             known = ", ".join(self.mission.robots) or "none"
-            raise Refusal("unknown_robot", f"no robot '{robot}' in this mission (robots: {known})", robot=robot)
+            raise Refusal(
+                "unknown_robot",
+                f"no robot '{robot}' in this mission (robots: {known})",
+                robot=robot,
+            )
         return spec.type
 
     def skill(self, skill_id: str) -> tuple[str, int, SkillInstance]:
         found = self.mission.find(skill_id)
         if found is None:
-            raise Refusal("unknown_skill", f"no skill with id '{skill_id}' in this mission", skill=skill_id)
+            raise Refusal(
+                "unknown_skill", f"no skill with id '{skill_id}' in this mission", skill=skill_id
+            )
         return found
 
     def task(self, robot: str) -> list[SkillInstance]:
@@ -224,7 +232,11 @@ class Engine:
         section until the robot answers: nothing may be put before them."""
         locked_after = [s.id for s in task[index:] if s.id in self.locked]
         if locked_after:
-            raise Refusal("locked", f"cannot place a skill before {', '.join(locked_after)}: being synchronized to {robot}", robot=robot)
+            raise Refusal(
+                "locked",
+                f"cannot place a skill before {', '.join(locked_after)}: being synchronized to {robot}",
+                robot=robot,
+            )
 
     def _editable(self, robot: str, s: SkillInstance, doing: str) -> None:
         if s.status != Status.IDLE:
@@ -236,7 +248,12 @@ class Engine:
                 skill=s.id,
             )
         if s.id in self.locked:
-            raise Refusal("locked", f"cannot {doing} {s.display()} on {robot}: {self.locked[s.id]}", robot=robot, skill=s.id)
+            raise Refusal(
+                "locked",
+                f"cannot {doing} {s.display()} on {robot}: {self.locked[s.id]}",
+                robot=robot,
+                skill=s.id,
+            )
 
     def check_fresh(self, op: Any, seen: int, mine: Container[int] = frozenset()) -> None:
         """Optimistic concurrency: refuse if what the operation touches changed
@@ -273,7 +290,12 @@ class Engine:
             case RemoveBarrier(barrier=bid):
                 for sid in m.barriers[bid].skills if bid in m.barriers else []:
                     skill_rev(sid)
-            case MarkerMove(name=n) | MarkerRename(name=n) | MarkerDelete(name=n) | RestoreMarker(name=n):
+            case (
+                MarkerMove(name=n)
+                | MarkerRename(name=n)
+                | MarkerDelete(name=n)
+                | RestoreMarker(name=n)
+            ):
                 revs.append((m.marker_revs.get(n, 0), f"marker {n}"))
         for rev, what in revs:
             if rev > seen and rev not in mine:
@@ -284,7 +306,9 @@ class Engine:
                 )
 
     # -- editing the unsynchronized section -------------------------------
-    def _check_params(self, robot: str, skill: str, params: dict, bindings: dict, skill_id: str | None = None):
+    def _check_params(
+        self, robot: str, skill: str, params: dict, bindings: dict, skill_id: str | None = None
+    ):
         rtype = self.robot_type(robot)
         who = f"{skill_id} ({skill})" if skill_id else skill
         if self.library.skill_for(rtype, skill) is None:
@@ -295,13 +319,25 @@ class Engine:
                 robot=robot,
             )
         out, problems = check_params(
-            self.library, rtype, skill, params, bindings,
-            markers=self.mission.markers, robots=set(self.mission.robots),
+            self.library,
+            rtype,
+            skill,
+            params,
+            bindings,
+            markers=self.mission.markers,
+            robots=set(self.mission.robots),
         )
         if problems:
             # every problem: a missing parameter listed first must not hide a bad value
-            said = "; ".join(f"parameter {'.'.join(str(x) for x in q.path)}: {q.message}" for q in problems[:MAX_PROBLEMS])
-            more = f" (and {len(problems) - MAX_PROBLEMS} more)" if len(problems) > MAX_PROBLEMS else ""
+            said = "; ".join(
+                f"parameter {'.'.join(str(x) for x in q.path)}: {q.message}"
+                for q in problems[:MAX_PROBLEMS]
+            )
+            more = (
+                f" (and {len(problems) - MAX_PROBLEMS} more)"
+                if len(problems) > MAX_PROBLEMS
+                else ""
+            )
             p = problems[0]
             raise Refusal(
                 "bad_param",
@@ -319,15 +355,25 @@ class Engine:
         n_idle = len(task) - start
         at = n_idle if op.at is None else op.at
         if not 0 <= at <= n_idle:
-            raise Refusal("bad_index", f"position {at} is outside {op.robot}'s unsynchronized section (0..{n_idle})", robot=op.robot)
+            raise Refusal(
+                "bad_index",
+                f"position {at} is outside {op.robot}'s unsynchronized section (0..{n_idle})",
+                robot=op.robot,
+            )
         self._outside_locked(op.robot, task, start + at)
         n = self.mission.next_skill
-        while self.mission.find(f"{op.robot}-{n}") is not None:  # ids from files may use any numbers
+        while (
+            self.mission.find(f"{op.robot}-{n}") is not None
+        ):  # ids from files may use any numbers
             n += 1
         sid = f"{op.robot}-{n}"
         skill = SkillInstance(
-            id=sid, skill=op.skill, label=op.label, params=params,
-            bindings=dict(op.bindings), policies=op.policies or SkillInstance.model_fields["policies"].default_factory(),
+            id=sid,
+            skill=op.skill,
+            label=op.label,
+            params=params,
+            bindings=dict(op.bindings),
+            policies=op.policies or SkillInstance.model_fields["policies"].default_factory(),
         )
         events = [ev.SkillAdded(robot=op.robot, index=start + at, skill=skill)]
         return events, [], {"id": sid}, DeleteSkills(ids=[sid])
@@ -365,7 +411,9 @@ class Engine:
         # remove from the highest index down so the recorded indices stay valid to restore
         for it in sorted(items, key=lambda it: (it.robot, -it.index)):
             events.insert(0, ev.SkillRemoved(robot=it.robot, id=it.skill.id))
-        restore = RestoreSkills(items=sorted(items, key=lambda it: (it.robot, it.index)), barriers=barriers_before)
+        restore = RestoreSkills(
+            items=sorted(items, key=lambda it: (it.robot, it.index)), barriers=barriers_before
+        )
         return events, restore
 
     def _op_delete(self, op: DeleteSkills, client: str):
@@ -387,10 +435,14 @@ class Engine:
             sizes[it.robot] += 1
             bindings = {k: v for k, v in it.skill.bindings.items() if v in self.mission.markers}
             try:  # markers may have moved since: take their current values
-                params = self._check_params(it.robot, it.skill.skill, it.skill.params, bindings, skill_id=it.skill.id)
+                params = self._check_params(
+                    it.robot, it.skill.skill, it.skill.params, bindings, skill_id=it.skill.id
+                )
             except Refusal:
                 params, bindings = it.skill.params, {}
-            skill = it.skill.model_copy(update={"status": Status.IDLE, "params": params, "bindings": bindings})
+            skill = it.skill.model_copy(
+                update={"status": Status.IDLE, "params": params, "bindings": bindings}
+            )
             events.append(ev.SkillAdded(robot=it.robot, index=idx, skill=skill))
         restored = {it.skill.id for it in op.items}
         for bid, b in op.barriers.items():
@@ -400,7 +452,12 @@ class Engine:
                 robot, _, partner = self.skill(sid)
                 other = self.mission.barrier_of(sid)
                 if partner.status != Status.IDLE or other not in (None, bid):
-                    raise Refusal("barrier_invalid", f"cannot restore barrier {bid}: its partner {partner.display()} on {robot} has changed since", robot=robot, skill=sid)
+                    raise Refusal(
+                        "barrier_invalid",
+                        f"cannot restore barrier {bid}: its partner {partner.display()} on {robot} has changed since",
+                        robot=robot,
+                        skill=sid,
+                    )
             events.append(ev.BarrierSet(id=bid, barrier=b))
         return events, [], {}, DeleteSkills(ids=[it.skill.id for it in op.items])
 
@@ -411,11 +468,21 @@ class Engine:
         start = self.first_idle(task)
         n_idle = len(task) - start
         if not 0 <= op.index < n_idle:
-            raise Refusal("bad_index", f"position {op.index} is outside {robot}'s unsynchronized section (0..{n_idle - 1})", robot=robot, skill=op.id)
+            raise Refusal(
+                "bad_index",
+                f"position {op.index} is outside {robot}'s unsynchronized section (0..{n_idle - 1})",
+                robot=robot,
+                skill=op.id,
+            )
         if start + op.index == i:
             return [], [], {}, None
         self._outside_locked(robot, task, min(start + op.index, i))
-        return [ev.SkillMoved(robot=robot, id=op.id, index=start + op.index)], [], {}, MoveSkill(id=op.id, index=i - start)
+        return (
+            [ev.SkillMoved(robot=robot, id=op.id, index=start + op.index)],
+            [],
+            {},
+            MoveSkill(id=op.id, index=i - start),
+        )
 
     def _op_edit(self, op: EditSkill, client: str):
         robot, _, s = self.skill(op.id)
@@ -459,7 +526,9 @@ class Engine:
             changes["policies"] = op.policies.model_dump()
         if not changes:
             return [], [], {}, None
-        old = SetSkill(id=s.id, label=s.label, params=s.params, bindings=s.bindings, policies=s.policies)
+        old = SetSkill(
+            id=s.id, label=s.label, params=s.params, bindings=s.bindings, policies=s.policies
+        )
         return [ev.SkillChanged(id=s.id, changes=changes)], [], {}, old
 
     # -- barriers ----------------------------------------------------------
@@ -469,22 +538,47 @@ class Engine:
         for sid in op.ids:
             robot, _, s = self.skill(sid)
             if s.status != Status.IDLE:
-                raise Refusal("not_idle", f"cannot put {s.display()} on {robot} in a barrier: it is {s.status.value}; barriers join idle skills", robot=robot, skill=sid)
+                raise Refusal(
+                    "not_idle",
+                    f"cannot put {s.display()} on {robot} in a barrier: it is {s.status.value}; barriers join idle skills",
+                    robot=robot,
+                    skill=sid,
+                )
             if sid in self.locked:
-                raise Refusal("locked", f"cannot put {s.display()} in a barrier: {self.locked[sid]}", robot=robot, skill=sid)
+                raise Refusal(
+                    "locked",
+                    f"cannot put {s.display()} in a barrier: {self.locked[sid]}",
+                    robot=robot,
+                    skill=sid,
+                )
             if robot in robots:
-                raise Refusal("barrier_invalid", f"skills {robots[robot]} and {sid} both belong to {robot}; a barrier takes one skill per robot", robot=robot, skill=sid)
+                raise Refusal(
+                    "barrier_invalid",
+                    f"skills {robots[robot]} and {sid} both belong to {robot}; a barrier takes one skill per robot",
+                    robot=robot,
+                    skill=sid,
+                )
             robots[robot] = sid
             other = m.barrier_of(sid)
             if other is not None:
-                raise Refusal("barrier_invalid", f"{s.display()} on {robot} is already in barrier {other}", robot=robot, skill=sid)
+                raise Refusal(
+                    "barrier_invalid",
+                    f"{s.display()} on {robot} is already in barrier {other}",
+                    robot=robot,
+                    skill=sid,
+                )
         if len(robots) < 2:
             raise Refusal("barrier_invalid", "a barrier needs skills of at least two robots")
         n = m.next_barrier
         while f"b{n}" in m.barriers:
             n += 1
         bid = f"b{n}"
-        return [ev.BarrierSet(id=bid, barrier=Barrier(skills=list(op.ids)))], [], {"barrier": bid}, RemoveBarrier(barrier=bid)
+        return (
+            [ev.BarrierSet(id=bid, barrier=Barrier(skills=list(op.ids)))],
+            [],
+            {"barrier": bid},
+            RemoveBarrier(barrier=bid),
+        )
 
     def _op_restore_barrier(self, op: RestoreBarrier, client: str):
         if op.barrier in self.mission.barriers:
@@ -501,10 +595,25 @@ class Engine:
         for sid in b.skills:
             robot, _, s = self.skill(sid)
             if s.status != Status.IDLE and s.status not in FINISHED:
-                raise Refusal("not_idle", f"cannot remove barrier {op.barrier}: {s.display()} is {s.status.value} on {robot}; {how_to_change(s.status)}", robot=robot, skill=sid)
+                raise Refusal(
+                    "not_idle",
+                    f"cannot remove barrier {op.barrier}: {s.display()} is {s.status.value} on {robot}; {how_to_change(s.status)}",
+                    robot=robot,
+                    skill=sid,
+                )
             if sid in self.locked:
-                raise Refusal("locked", f"cannot remove barrier {op.barrier}: {s.display()}: {self.locked[sid]}", robot=robot, skill=sid)
-        return [ev.BarrierRemoved(id=op.barrier)], [], {}, RestoreBarrier(barrier=op.barrier, skills=list(b.skills))
+                raise Refusal(
+                    "locked",
+                    f"cannot remove barrier {op.barrier}: {s.display()}: {self.locked[sid]}",
+                    robot=robot,
+                    skill=sid,
+                )
+        return (
+            [ev.BarrierRemoved(id=op.barrier)],
+            [],
+            {},
+            RestoreBarrier(barrier=op.barrier, skills=list(b.skills)),
+        )
 
     # -- markers -------------------------------------------------------------
     def _marker(self, name: str):
@@ -531,7 +640,9 @@ class Engine:
         value = op.value
         if (old.kind == "area") != isinstance(value, list):
             need = "a polygon (a list of positions)" if old.kind == "area" else f"a {old.kind}"
-            raise Refusal("bad_marker", f"marker '{op.name}' is a {old.kind} marker: move it to {need}")
+            raise Refusal(
+                "bad_marker", f"marker '{op.name}' is a {old.kind} marker: move it to {need}"
+            )
         data = old.model_dump()
         if old.kind == "area":
             data["area"] = [p.model_dump() for p in value]
@@ -586,29 +697,50 @@ class Engine:
         events: list = [ev.MarkerSet(name=op.new_name, marker=mk), ev.MarkerRemoved(name=op.name)]
         for robot, s, pname in self._named(op.name):
             if s.status != Status.IDLE:
-                raise Refusal("marker_in_use", f"cannot rename marker '{op.name}': {s.display()} on {robot} is {s.status.value} and names it in '{pname}'", robot=robot, skill=s.id)
-            events.append(ev.SkillChanged(id=s.id, changes={"params": {**s.params, pname: op.new_name}}))
+                raise Refusal(
+                    "marker_in_use",
+                    f"cannot rename marker '{op.name}': {s.display()} on {robot} is {s.status.value} and names it in '{pname}'",
+                    robot=robot,
+                    skill=s.id,
+                )
+            events.append(
+                ev.SkillChanged(id=s.id, changes={"params": {**s.params, pname: op.new_name}})
+            )
         # a binding names where a value came from, not the value: follow the
         # rename on the plan and the queue; the execution log stays as it ran
         for _, s, pname in self._bound(op.name):
             if s.status in FINISHED:
                 continue
-            events.append(ev.SkillChanged(id=s.id, changes={"bindings": {**s.bindings, pname: op.new_name}}))
+            events.append(
+                ev.SkillChanged(id=s.id, changes={"bindings": {**s.bindings, pname: op.new_name}})
+            )
         return events, [], {}, MarkerRename(name=op.new_name, new_name=op.name)
 
     def _op_marker_delete(self, op: MarkerDelete, client: str):
         marker = self._marker(op.name)
         for robot, s, pname in self._named(op.name):
-            raise Refusal("marker_in_use", f"cannot delete marker '{op.name}': {s.display()} on {robot} names it in '{pname}'; change that first", robot=robot, skill=s.id)
+            raise Refusal(
+                "marker_in_use",
+                f"cannot delete marker '{op.name}': {s.display()} on {robot} names it in '{pname}'; change that first",
+                robot=robot,
+                skill=s.id,
+            )
         events: list = [ev.MarkerRemoved(name=op.name)]
         unbound: list[tuple[str, str]] = []
         for robot, s, pname in self._bound(op.name):
             if s.status in FINISHED:
                 continue  # the execution log keeps the name it ran with
             if s.status != Status.IDLE:
-                raise Refusal("marker_in_use", f"cannot delete marker '{op.name}': {s.display()} on {robot} is {s.status.value} and uses it for '{pname}'", robot=robot, skill=s.id)
+                raise Refusal(
+                    "marker_in_use",
+                    f"cannot delete marker '{op.name}': {s.display()} on {robot} is {s.status.value} and uses it for '{pname}'",
+                    robot=robot,
+                    skill=s.id,
+                )
             bindings = {k: v for k, v in s.bindings.items() if v != op.name}
-            events.append(ev.SkillChanged(id=s.id, changes={"bindings": bindings}))  # keeps its values
+            events.append(
+                ev.SkillChanged(id=s.id, changes={"bindings": bindings})
+            )  # keeps its values
             unbound.append((s.id, pname))
         return events, [], {}, RestoreMarker(name=op.name, marker=marker, bindings=unbound)
 
@@ -625,22 +757,34 @@ class Engine:
                 robot, _, s = found
                 bindings = {**s.bindings, pname: op.name}
                 params = self._check_params(robot, s.skill, s.params, bindings, skill_id=sid)
-                events.append(ev.SkillChanged(id=sid, changes={"bindings": bindings, "params": params}))
+                events.append(
+                    ev.SkillChanged(id=sid, changes={"bindings": bindings, "params": params})
+                )
         finally:
             del self.mission.markers[op.name]
         return events, [], {}, MarkerDelete(name=op.name)
 
     # -- whole missions ----------------------------------------------------------
     def _busy_robots(self) -> list[str]:
-        return [r for r, t in self.mission.tasks.items() if any(s.status not in FINISHED and s.status != Status.IDLE for s in t)]
+        return [
+            r
+            for r, t in self.mission.tasks.items()
+            if any(s.status not in FINISHED and s.status != Status.IDLE for s in t)
+        ]
 
     def _op_load(self, op: LoadMission, client: str):
         if self.pending:
             busy = ", ".join(f"{r} ({what})" for r, what in self.pending.items())
-            raise Refusal("robot_busy", f"cannot replace the mission while commands are in flight: {busy}; try again when they end")
+            raise Refusal(
+                "robot_busy",
+                f"cannot replace the mission while commands are in flight: {busy}; try again when they end",
+            )
         busy = self._busy_robots()
         if busy:
-            raise Refusal("robots_busy", f"cannot replace the mission while {', '.join(busy)} hold synchronized skills; reset them first")
+            raise Refusal(
+                "robots_busy",
+                f"cannot replace the mission while {', '.join(busy)} hold synchronized skills; reset them first",
+            )
         new = op.mission.copy_deep()
         resolve_shorthands(new, self.library)
         problems = check_mission(new, self.library)
@@ -650,7 +794,9 @@ class Engine:
 
             raise Refusal("bad_mission", f"the mission is invalid at {format_path(path)}: {msg}")
         new.revision = self.mission.revision
-        new.library = self.mission.library  # the server's library stays; the file's path was relative to it
+        new.library = (
+            self.mission.library
+        )  # the server's library stays; the file's path was relative to it
         # everything in the new mission counts as changed now (stale edits of
         # the old mission are refused)
         stamp = self.mission.revision + 1
@@ -691,18 +837,31 @@ class Engine:
     def _revert(self, op: Any, client: str, source: dict, target: dict, verb: str) -> Applied:
         stack = source.get(client) or []
         if not stack:
-            raise Refusal(f"nothing_to_{verb}", f"nothing to {verb} (only your own edits of unsynchronized skills, barriers and markers can be undone)")
+            raise Refusal(
+                f"nothing_to_{verb}",
+                f"nothing to {verb} (only your own edits of unsynchronized skills, barriers and markers can be undone)",
+            )
         inverse, what, made_at = stack.pop()
         try:
             events, notes, value, back = getattr(self, f"_op_{inverse.op}")(inverse, client)
             try:
                 self.check_fresh(inverse, made_at, self.own_revs.get(client, frozenset()))
             except Refusal as r:  # do not overwrite someone else's later edit
-                raise Refusal("stale", f"another client changed it since ({r.message.split(' changed at')[0]})") from None
+                raise Refusal(
+                    "stale",
+                    f"another client changed it since ({r.message.split(' changed at')[0]})",
+                ) from None
         except Refusal as r:
-            raise Refusal(r.code, f"cannot {verb} {what} (dropped from your history): {r.message}", robot=r.robot, skill=r.skill) from None
+            raise Refusal(
+                r.code,
+                f"cannot {verb} {what} (dropped from your history): {r.message}",
+                robot=r.robot,
+                skill=r.skill,
+            ) from None
         try:
-            applied = self._commit(events, notes, {**value, "undone" if verb == "undo" else "redone": what})
+            applied = self._commit(
+                events, notes, {**value, "undone" if verb == "undo" else "redone": what}
+            )
         except Exception:  # not applied (the journal refused it): still to do
             stack.append((inverse, what, made_at))
             raise
@@ -720,7 +879,11 @@ class Engine:
     # -- two-phase operations: plans ----------------------------------------------
     def _claim(self, robot: str, what: str) -> None:
         if robot in self.pending:
-            raise Refusal("robot_busy", f"{robot} is busy: {self.pending[robot]} is in progress; try again when it ends", robot=robot)
+            raise Refusal(
+                "robot_busy",
+                f"{robot} is busy: {self.pending[robot]} is in progress; try again when it ends",
+                robot=robot,
+            )
 
     def plan_sync(self, op: Sync) -> list[SkillInstance]:
         """Skills to send to the robot; they are locked until `release` or the
@@ -730,27 +893,52 @@ class Engine:
         start = self.first_idle(task)
         idle = task[start:]
         if not idle:
-            raise Refusal("nothing_to_sync", f"{op.robot} has no unsynchronized skill to synchronize", robot=op.robot)
+            raise Refusal(
+                "nothing_to_sync",
+                f"{op.robot} has no unsynchronized skill to synchronize",
+                robot=op.robot,
+            )
         if op.through is None:
             chosen = idle
         else:
             robot, i, s = self.skill(op.through)
             if robot != op.robot:
-                raise Refusal("wrong_robot", f"skill {s.display()} belongs to {robot}, not {op.robot}", robot=op.robot, skill=s.id)
+                raise Refusal(
+                    "wrong_robot",
+                    f"skill {s.display()} belongs to {robot}, not {op.robot}",
+                    robot=op.robot,
+                    skill=s.id,
+                )
             if s.status != Status.IDLE:
-                raise Refusal("not_idle", f"{s.display()} on {robot} is already {s.status.value}", robot=robot, skill=s.id)
+                raise Refusal(
+                    "not_idle",
+                    f"{s.display()} on {robot} is already {s.status.value}",
+                    robot=robot,
+                    skill=s.id,
+                )
             chosen = task[start : i + 1]
         for s in chosen:
             if s.id in self.locked:
-                raise Refusal("locked", f"{s.display()} on {op.robot}: {self.locked[s.id]}", robot=op.robot, skill=s.id)
+                raise Refusal(
+                    "locked",
+                    f"{s.display()} on {op.robot}: {self.locked[s.id]}",
+                    robot=op.robot,
+                    skill=s.id,
+                )
         # check against the current library and markers; bound values are
         # taken fresh from their markers as they leave
-        fresh = [self._check_params(op.robot, s.skill, s.params, s.bindings, skill_id=s.id) for s in chosen]
+        fresh = [
+            self._check_params(op.robot, s.skill, s.params, s.bindings, skill_id=s.id)
+            for s in chosen
+        ]
         for s, params in zip(chosen, fresh, strict=True):
             self.locked[s.id] = f"it is being synchronized to {op.robot}"
             self.sent[s.id] = params
         self.pending[op.robot] = "a sync"
-        return [s.model_copy(update={"params": p}, deep=True) for s, p in zip(chosen, fresh, strict=True)]
+        return [
+            s.model_copy(update={"params": p}, deep=True)
+            for s, p in zip(chosen, fresh, strict=True)
+        ]
 
     def barrier_partners(self, skill_id: str) -> list[tuple[str, str]]:
         """(robot, skill id) of the other members of a skill's barrier."""
@@ -770,13 +958,27 @@ class Engine:
         self._claim(op.robot, "unsync")
         queued = [s for s in task if s.status == Status.IDLE_SYNCHRONIZED]
         if not queued:
-            raise Refusal("nothing_to_unsync", f"{op.robot} has no queued (idle_synchronized) skill to unsynchronize", robot=op.robot)
+            raise Refusal(
+                "nothing_to_unsync",
+                f"{op.robot} has no queued (idle_synchronized) skill to unsynchronize",
+                robot=op.robot,
+            )
         if op.from_id is not None:
             robot, _, s = self.skill(op.from_id)
             if robot != op.robot:
-                raise Refusal("wrong_robot", f"skill {s.display()} belongs to {robot}, not {op.robot}", robot=op.robot, skill=s.id)
+                raise Refusal(
+                    "wrong_robot",
+                    f"skill {s.display()} belongs to {robot}, not {op.robot}",
+                    robot=op.robot,
+                    skill=s.id,
+                )
             if s.status != Status.IDLE_SYNCHRONIZED:
-                raise Refusal("not_queued", f"{s.display()} on {robot} is {s.status.value}; only queued (idle_synchronized) skills can be unsynchronized", robot=robot, skill=s.id)
+                raise Refusal(
+                    "not_queued",
+                    f"{s.display()} on {robot} is {s.status.value}; only queued (idle_synchronized) skills can be unsynchronized",
+                    robot=robot,
+                    skill=s.id,
+                )
             queued = queued[[q.id for q in queued].index(s.id) :]
         self.pending[op.robot] = "an unsync"
         return [s.id for s in queued]
@@ -815,31 +1017,67 @@ class Engine:
                 return f"{robot} is already executing {act.display()} ({act.status.value})"
             return None if queued else f"{robot} has nothing to run: synchronize skills first"
         if action == "pause":
-            return None if act is not None and act.status == Status.RUNNING else f"{robot} has no running skill to pause"
+            return (
+                None
+                if act is not None and act.status == Status.RUNNING
+                else f"{robot} has no running skill to pause"
+            )
         if action == "stop":
-            return None if act is not None else f"{robot} has no running, paused or waiting skill to stop"
+            return (
+                None
+                if act is not None
+                else f"{robot} has no running, paused or waiting skill to stop"
+            )
         if action == "reset":
-            return None if act is not None or queued else f"{robot} has nothing synchronized to reset"
+            return (
+                None if act is not None or queued else f"{robot} has nothing synchronized to reset"
+            )
         return f"unknown command {action}"
 
     def plan_retry(self, op: Retry) -> SkillInstance:
         robot, i, s = self.skill(op.id)
         if s.status != Status.FAILURE:
-            raise Refusal("cannot_retry", f"{s.display()} on {robot} is {s.status.value}; only a failed skill can be retried", robot=robot, skill=s.id)
+            raise Refusal(
+                "cannot_retry",
+                f"{s.display()} on {robot} is {s.status.value}; only a failed skill can be retried",
+                robot=robot,
+                skill=s.id,
+            )
         new_id = f"{s.id.split('.')[0]}.{s.attempt + 1}"
         if self.mission.find(new_id) is not None:
-            raise Refusal("cannot_retry", f"{s.display()} was already retried as {new_id}", robot=robot, skill=s.id)
+            raise Refusal(
+                "cannot_retry",
+                f"{s.display()} was already retried as {new_id}",
+                robot=robot,
+                skill=s.id,
+            )
         task = self.task(robot)
         if any(later.status in FINISHED for later in task[i + 1 :]):
-            raise Refusal("cannot_retry", f"{robot} has executed other skills since {s.display()} failed; add a new skill instead", robot=robot, skill=s.id)
+            raise Refusal(
+                "cannot_retry",
+                f"{robot} has executed other skills since {s.display()} failed; add a new skill instead",
+                robot=robot,
+                skill=s.id,
+            )
         act = self.active(task)
         if act is not None:
-            raise Refusal("cannot_retry", f"cannot retry {s.display()}: {robot} is executing {act.display()}; stop it first", robot=robot, skill=s.id)
+            raise Refusal(
+                "cannot_retry",
+                f"cannot retry {s.display()}: {robot} is executing {act.display()}; stop it first",
+                robot=robot,
+                skill=s.id,
+            )
         self._claim(robot, "retry")
         self.pending[robot] = "a retry"
         return SkillInstance(
-            id=new_id, skill=s.skill, label=s.label, params=s.params, bindings=s.bindings,
-            status=Status.IDLE_SYNCHRONIZED, attempt=s.attempt + 1, policies=s.policies,
+            id=new_id,
+            skill=s.skill,
+            label=s.label,
+            params=s.params,
+            bindings=s.bindings,
+            status=Status.IDLE_SYNCHRONIZED,
+            attempt=s.attempt + 1,
+            policies=s.policies,
         )
 
     def release(self, robot: str, ids: list[str] = ()) -> None:
@@ -855,12 +1093,20 @@ class Engine:
         start = self.first_idle(task)
         head = [s.id for s in task[start : start + len(op.ids)]]
         if head != list(op.ids):
-            raise Refusal("bad_report", f"{op.robot} acknowledged {op.ids}, but the head of its unsynchronized section is {head}", robot=op.robot)
+            raise Refusal(
+                "bad_report",
+                f"{op.robot} acknowledged {op.ids}, but the head of its unsynchronized section is {head}",
+                robot=op.robot,
+            )
         late = [sid for sid in op.ids if sid not in self.sent]
         if late:
             # the sync was given up (and the skill maybe edited since): the
             # robot's copy is not ours; reconciliation sorts it out
-            raise Refusal("bad_report", f"{op.robot} acknowledged {', '.join(late)}, which is not being synchronized", robot=op.robot)
+            raise Refusal(
+                "bad_report",
+                f"{op.robot} acknowledged {', '.join(late)}, which is not being synchronized",
+                robot=op.robot,
+            )
         events = []
         for s in task[start : start + len(op.ids)]:
             changes: dict[str, Any] = {"status": Status.IDLE_SYNCHRONIZED.value}
@@ -876,7 +1122,11 @@ class Engine:
         task = self.task(op.robot)
         queued = [s.id for s in task if s.status == Status.IDLE_SYNCHRONIZED]
         if op.ids and list(op.ids) != queued[-len(op.ids) :]:
-            raise Refusal("bad_report", f"{op.robot} removed {op.ids}, which is not the end of its queue {queued}", robot=op.robot)
+            raise Refusal(
+                "bad_report",
+                f"{op.robot} removed {op.ids}, which is not the end of its queue {queued}",
+                robot=op.robot,
+            )
         # the removed skills are the end of the queue: turning them idle puts
         # them, in order, at the head of the unsynchronized section
         events = []
@@ -885,7 +1135,9 @@ class Engine:
             changes: dict[str, Any] = {"status": Status.IDLE.value, "status_info": ""}
             if s.bindings:  # back in the plan: bound values follow their markers again
                 try:
-                    params = self._check_params(op.robot, s.skill, s.params, s.bindings, skill_id=sid)
+                    params = self._check_params(
+                        op.robot, s.skill, s.params, s.bindings, skill_id=sid
+                    )
                     if params != s.params:
                         changes["params"] = params
                 except Refusal:
@@ -896,7 +1148,11 @@ class Engine:
     def _op_retry_ack(self, op: RetryAck, client: str):
         robot, i, failed = self.skill(op.failed_id)
         if robot != op.robot or failed.status != Status.FAILURE:
-            raise Refusal("bad_report", f"{op.robot} acknowledged a retry of {op.failed_id}, which is not a failed skill of it", robot=op.robot)
+            raise Refusal(
+                "bad_report",
+                f"{op.robot} acknowledged a retry of {op.failed_id}, which is not a failed skill of it",
+                robot=op.robot,
+            )
         if self.mission.find(op.skill.id) is not None:
             raise Refusal("bad_report", f"skill {op.skill.id} exists already", robot=op.robot)
         skill = op.skill.model_copy(update={"status": Status.IDLE_SYNCHRONIZED})
@@ -909,38 +1165,84 @@ class Engine:
         synced = [s for s in task if s.status != Status.IDLE and s.status not in FINISHED]
         # only a tail of the synchronized section can be lost, the log never
         keep = [s for s in synced if s.id not in lost]
-        if any(s.id not in lost for s in synced[len(keep):]) or [s.id for s in synced[: len(keep)]] != [s.id for s in keep]:
-            raise Refusal("bad_report", f"{op.robot} lost {sorted(lost)}, which is not the end of its synchronized section", robot=op.robot)
+        if any(s.id not in lost for s in synced[len(keep) :]) or [
+            s.id for s in synced[: len(keep)]
+        ] != [s.id for s in keep]:
+            raise Refusal(
+                "bad_report",
+                f"{op.robot} lost {sorted(lost)}, which is not the end of its synchronized section",
+                robot=op.robot,
+            )
         events = [
-            ev.SkillChanged(id=s.id, changes={"status": Status.IDLE.value, "status_info": f"returned to the plan: {op.robot} no longer had it", "started_at": None})
-            for s in synced[len(keep):]
+            ev.SkillChanged(
+                id=s.id,
+                changes={
+                    "status": Status.IDLE.value,
+                    "status_info": f"returned to the plan: {op.robot} no longer had it",
+                    "started_at": None,
+                },
+            )
+            for s in synced[len(keep) :]
         ]
-        return events, [], {"unsynchronized": [s.id for s in synced[len(keep):]]}, None
+        return events, [], {"unsynchronized": [s.id for s in synced[len(keep) :]]}, None
 
     def _op_report(self, op: Report, client: str):
         m = self.mission
         last = m.report_seqs.get(op.robot, 0)
         if op.seq <= last:
-            return Applied(m.revision, [], [], {"ignored": f"report {op.seq} of {op.robot} was applied already"}, duplicate=True)
+            return Applied(
+                m.revision,
+                [],
+                [],
+                {"ignored": f"report {op.seq} of {op.robot} was applied already"},
+                duplicate=True,
+            )
         robot, i, s = self.skill(op.id)
         if robot != op.robot:
-            raise Refusal("bad_report", f"{op.robot} reported on {s.display()}, which belongs to {robot}", robot=op.robot, skill=s.id)
+            raise Refusal(
+                "bad_report",
+                f"{op.robot} reported on {s.display()}, which belongs to {robot}",
+                robot=op.robot,
+                skill=s.id,
+            )
         task = m.tasks[robot]
         new = op.status
-        restart = new == Status.RUNNING and s.status == Status.RUNNING and (op.attempt or 0) > s.attempt
+        restart = (
+            new == Status.RUNNING and s.status == Status.RUNNING and (op.attempt or 0) > s.attempt
+        )
         # an active skill may repeat its status with new information
         # ("waiting for lru2 (offline)"); the log and the queue may not
         same = new == s.status and s.status in ACTIVE
         if new not in TRANSITIONS[s.status] and not restart and not same:
-            raise Refusal("bad_report", f"{robot} reported {s.display()} going {s.status.value} -> {new.value}, which the transition table forbids", robot=robot, skill=s.id)
+            raise Refusal(
+                "bad_report",
+                f"{robot} reported {s.display()} going {s.status.value} -> {new.value}, which the transition table forbids",
+                robot=robot,
+                skill=s.id,
+            )
         if new in ACTIVE or new in FINISHED:
             act = self.active(task)
             if act is not None and act.id != s.id:
-                raise Refusal("bad_report", f"{robot} reported {s.display()} {new.value} while {act.display()} is {act.status.value}", robot=robot, skill=s.id)
+                raise Refusal(
+                    "bad_report",
+                    f"{robot} reported {s.display()} {new.value} while {act.display()} is {act.status.value}",
+                    robot=robot,
+                    skill=s.id,
+                )
             if s.status == Status.IDLE_SYNCHRONIZED and self.first_queued(task) != i:
-                raise Refusal("bad_report", f"{robot} started {s.display()} before the skills queued ahead of it", robot=robot, skill=s.id)
+                raise Refusal(
+                    "bad_report",
+                    f"{robot} started {s.display()} before the skills queued ahead of it",
+                    robot=robot,
+                    skill=s.id,
+                )
         if op.attempt is not None and op.attempt < s.attempt:
-            raise Refusal("bad_report", f"{robot} reported attempt {op.attempt} of {s.display()}, which is at attempt {s.attempt}", robot=robot, skill=s.id)
+            raise Refusal(
+                "bad_report",
+                f"{robot} reported attempt {op.attempt} of {s.display()}, which is at attempt {s.attempt}",
+                robot=robot,
+                skill=s.id,
+            )
         changes: dict[str, Any] = {}
         if new != s.status:
             changes["status"] = new.value

@@ -168,8 +168,17 @@ class TestAdd:
 
     def test_every_parameter_problem_is_named(self, engine, refused):
         # the missing goal comes first; the bad speed must not hide behind "(and 1 more)"
-        r = refused(engine, lambda: add(engine, skill="drive_to", params={"speed": "fast"}), "bad_param", robot="lru1", param="goal")
-        assert re.fullmatch(r"lru1, skill drive_to, parameter goal: [^;]+; parameter speed: [^;]*'fast'[^;]*", r.message), r.message
+        r = refused(
+            engine,
+            lambda: add(engine, skill="drive_to", params={"speed": "fast"}),
+            "bad_param",
+            robot="lru1",
+            param="goal",
+        )
+        assert re.fullmatch(
+            r"lru1, skill drive_to, parameter goal: [^;]+; parameter speed: [^;]*'fast'[^;]*",
+            r.message,
+        ), r.message
 
     @pytest.mark.parametrize(
         "slot, words", [(1.5, ["integer"]), (True, ["integer"]), (5, ["maximum"]), (0, ["minimum"])]
@@ -221,7 +230,12 @@ class TestAdd:
     @pytest.mark.parametrize(
         "skill_name, bindings, param, words",
         [
-            ("drive_to", {"goal": "NOWHERE"}, "goal", ["unknown marker 'NOWHERE' (markers: POI-A, ROI-1)"]),
+            (
+                "drive_to",
+                {"goal": "NOWHERE"},
+                "goal",
+                ["unknown marker 'NOWHERE' (markers: POI-A, ROI-1)"],
+            ),
             ("drive_to", {"goal": "ROI-1"}, "goal", ["ROI-1"]),  # area marker cannot give a pose
             ("explore", {"area": "POI-A"}, "area", ["POI-A"]),  # pose marker cannot give an area
             (
@@ -314,7 +328,10 @@ class TestDelete:
         ("status", "remedy"),
         [
             (Status.IDLE_SYNCHRONIZED, "unsynchronize it first"),
-            (Status.SYNCHWAITING, "stop the robot (the skill goes back to its queue), then unsynchronize it"),
+            (
+                Status.SYNCHWAITING,
+                "stop the robot (the skill goes back to its queue), then unsynchronize it",
+            ),
             (Status.RUNNING, "stop the robot"),
             (Status.PAUSED, "stop the robot"),
             (Status.SUCCESS, "the execution log and never change"),

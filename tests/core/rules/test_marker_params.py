@@ -10,7 +10,9 @@ AREA = AreaMarker(area=[Position(x=0), Position(x=5), Position(x=5, y=5)])
 def _pick_with_region(engine):
     engine.submit(MarkerAdd(name="ROI-1", marker=AREA))
     return engine.submit(
-        AddSkill(robot="lru2", skill="pick_stone", params={"target": {"x": 1, "y": 1}, "region": "ROI-1"})
+        AddSkill(
+            robot="lru2", skill="pick_stone", params={"target": {"x": 1, "y": 1}, "region": "ROI-1"}
+        )
     ).value["id"]
 
 
@@ -22,4 +24,6 @@ def test_rename_follows_marker_parameters(engine, skill):
 
 def test_delete_refused_while_a_skill_names_the_marker(engine, refused):
     sid = _pick_with_region(engine)
-    refused(engine, lambda: engine.submit(MarkerDelete(name="ROI-1")), "marker_in_use", sid, "region")
+    refused(
+        engine, lambda: engine.submit(MarkerDelete(name="ROI-1")), "marker_in_use", sid, "region"
+    )
