@@ -41,7 +41,7 @@ async def child(endpoint: str) -> None:
     # put the tree this script lives in first on sys.path
     from backend.client.client import MissionClient
     from backend.core.ops import EditSkill
-    from backend.protocol.messages import Keys
+    from backend.protocol.keys import Keys
 
     client = MissionClient(endpoint, client_id="ab")
     await client.connect()
@@ -110,9 +110,9 @@ class _Robot:
     async def start(cls, endpoint: str, client) -> _Robot:
         from backend.core.ops import Sync
         from backend.files.missions import load_library
+        from backend.protocol.keys import Keys
         from backend.protocol.messages import (
             CommandReply,
-            Keys,
             Manifest,
             Module,
             Register,
@@ -157,7 +157,8 @@ class _Robot:
 
         from backend.core.model import Status
         from backend.core.ops import Report
-        from backend.protocol.messages import Keys, ReportBatch, dumps
+        from backend.protocol.keys import Keys
+        from backend.protocol.messages import ReportBatch, dumps
 
         applied_at: dict[int, float] = {}
 

@@ -36,7 +36,7 @@ from report import machine, write_section  # noqa: E402
 
 from backend.client.client import MissionClient  # noqa: E402
 from backend.core.ops import EditSkill  # noqa: E402
-from backend.protocol.messages import Keys  # noqa: E402
+from backend.protocol.keys import Keys  # noqa: E402
 from backend.server.certs import make_certs  # noqa: E402
 from backend.transport import free_port  # noqa: E402
 from backend.transport.login import Login  # noqa: E402

@@ -69,10 +69,9 @@ from backend.client.client import MissionClient  # noqa: E402
 from backend.core.model import Status  # noqa: E402
 from backend.core.ops import EditSkill, Report, Sync  # noqa: E402
 from backend.files.missions import load_library, mission_to_yaml  # noqa: E402
+from backend.protocol.keys import PREFIX, Keys  # noqa: E402
 from backend.protocol.messages import (  # noqa: E402
-    PREFIX,
     CommandReply,
-    Keys,
     Manifest,
     Module,
     QueueEntry,

@@ -25,6 +25,7 @@ from textual.screen import Screen
 from textual.signal import Signal
 
 from backend.client.client import ClientError, LoginFailed, OperationRefused
+from backend.exit_codes import EXIT_UNREACHABLE
 from backend.protocol.messages import ErrorReply
 from backend.transport.login import Login
 from console.bridge import Backend, ClientBridge
@@ -53,7 +54,6 @@ from console.state.model import CONNECTED, CONNECTING, OFFLINE, UNREACHABLE, Con
 from console.themes.loader import ANSI16_MAP, ANSI16_STATUS, Downgrade16, load_themes
 from console.themes.variables import DEFAULT_THEME, VARIABLE_DEFAULTS
 
-EXIT_UNREACHABLE = 3
 HANG_UP_GRACE_S = 5.0  # after a hang-up, the longest a clean exit may take
 
 

@@ -12,7 +12,8 @@ from typing import Any, Protocol
 from backend.client.client import Malformed, MissionClient
 from backend.client.mapfollow import MapFeed, MapUpdate
 from backend.core.events import EventBatch
-from backend.protocol.messages import Alert, Keys, OpReply, RobotInfo, StateSnapshot, Telemetry
+from backend.protocol.keys import Keys
+from backend.protocol.messages import Alert, OpReply, RobotInfo, StateSnapshot, Telemetry
 from backend.transport.login import Login
 from console.messages import (
     AccountKnown,

@@ -6,9 +6,9 @@ from __future__ import annotations
 import argparse
 import sys
 
+from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK, EXIT_UNREACHABLE
 from backend.transport.login import add_login_arguments
 
-EXIT_OK, EXIT_BAD_INPUT, EXIT_UNREACHABLE = 0, 2, 3
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 THEME_HELP = (
     "theme name: missionctl-dark (default), missionctl-light, missionctl-high-contrast, missionctl-colorblind, "
@@ -81,7 +81,7 @@ def _run_app(app) -> int:
 
 
 def run_console(args: argparse.Namespace) -> int:
-    from backend.server.accounts import AccountsError
+    from backend.core.credentials import AccountsError
     from backend.transport.login import login_from_args
     from console.app import MissionApp
     from console.config import load_config

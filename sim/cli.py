@@ -16,10 +16,9 @@ import sys
 import time
 from pathlib import Path
 
-from backend.server.accounts import AccountsError
+from backend.core.credentials import AccountsError
+from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK, EXIT_REFUSED, EXIT_UNREACHABLE
 from backend.transport.login import add_login_arguments, login_from_args
-
-EXIT_OK, EXIT_REFUSED, EXIT_BAD_INPUT, EXIT_UNREACHABLE = 0, 1, 2, 3
 
 _DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(ms|s|m|min)?\s*$")
 
@@ -117,7 +116,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _load(args: argparse.Namespace):
-    from backend.files.missions import FileProblems, load_mission
+    from backend.files.diagnostics import FileProblems
+    from backend.files.missions import load_mission
     from sim.worldfile import default_world_for, load_world
 
     try:

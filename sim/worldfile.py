@@ -19,7 +19,7 @@ from pydantic import Field, ValidationError, model_validator
 
 from backend.core.model import Name, Strict
 from backend.files import yamlio
-from backend.files.missions import FileProblems, Issue, duplicate_issues, pydantic_issues
+from backend.files.diagnostics import FileProblems, Issue, duplicate_issues, pydantic_issues
 
 WORLD_FORMAT = "missionctl/world@1"
 

@@ -90,6 +90,7 @@ from backend import transport
 from backend.core.library import VERSION_PATTERN
 from backend.core.model import NAME_RE, Pose, Position, SkillInstance, Status
 from backend.core.ops import Report
+from backend.protocol.keys import Keys
 from backend.protocol.messages import (
     BarrierInfo,
     Command,
@@ -97,7 +98,6 @@ from backend.protocol.messages import (
     Dequeue,
     Enqueue,
     ErrorReply,
-    Keys,
     Manifest,
     Module,
     Pause,

@@ -14,7 +14,7 @@ import argparse
 import json
 import sys
 
-EXIT_OK, EXIT_REFUSED, EXIT_BAD_INPUT, EXIT_UNREACHABLE = 0, 1, 2, 3
+from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK
 
 
 class _Parser(argparse.ArgumentParser):

@@ -63,8 +63,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # imported here: every missionctl command builds this parser
-    from backend.files.missions import FileProblems
-    from backend.server.accounts import AccountsError, load_accounts
+    from backend.core.credentials import AccountsError
+    from backend.files.diagnostics import FileProblems
+    from backend.server.accounts import load_accounts
     from backend.server.journal import JournalError
     from backend.server.server import MissionServer
     from backend.transport import load_config_file

@@ -24,13 +24,12 @@ from backend.core import events as ev
 from backend.core.bulk import gc_paused
 from backend.core.library import Library
 from backend.core.model import Mission
+from backend.protocol.keys import PROTOCOL_VERSION, Keys
 from backend.protocol.messages import (
-    PROTOCOL_VERSION,
     AccountInfo,
     Alert,
     ErrorReply,
     FleetEvent,
-    Keys,
     OpReply,
     Request,
     RobotInfo,

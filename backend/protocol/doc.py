@@ -16,8 +16,9 @@ from backend.core.events import EventBatch
 from backend.core.ops import OperatorOp, Report
 from backend.protocol import mapfeed as mf
 from backend.protocol import messages as p
+from backend.protocol.keys import PROTOCOL_VERSION, Keys
 
-PROSE = f"""# missionctl protocol, version {p.PROTOCOL_VERSION}
+PROSE = f"""# missionctl protocol, version {PROTOCOL_VERSION}
 
 This is what a third party needs to connect a robot, a console or a script
 to a missionctl mission server without reading our code. Transport is
@@ -45,22 +46,22 @@ robot's telemetry never shows.
 
 | key | kind | who declares | payload |
 | --- | --- | --- | --- |
-| `{p.Keys.SERVER_ALIVE}` | liveliness token | server | — |
-| `{p.Keys.OP}` | queryable | server | `Request` → `OpReply` / `ErrorReply` |
-| `{p.Keys.op_as("USER")}` | queryable | server | the same, from a logged-in user (`Request.user` is replaced by `USER`) |
-| `{p.Keys.account("USER")}` | queryable | server | anything → `AccountInfo` (role of a logged-in user) |
-| `{p.Keys.STATE}` | queryable | server | `StateRequest` → `StateSnapshot` |
-| `{p.Keys.EVENTS}` | publication | server | `EventBatch`, or a JSON array of them (revisions consecutive) |
-| `{p.Keys.FLEET}` | publication | server | `FleetEvent` (presence, manifest) |
-| `{p.Keys.ALERTS}` | publication | server | `Alert` |
-| `{p.Keys.PING}` | queryable | server | anything → `pong` (raw-transport baseline of the benchmarks) |
-| `{p.Keys.register("ROBOT")}` | queryable | server | `Register` → `RegisterReply` |
-| `{p.Keys.reports("ROBOT")}` | queryable | server | `ReportBatch` → `ReportAck` |
-| `{p.Keys.alive("ROBOT")}` | liveliness token | robot | — |
-| `{p.Keys.command("ROBOT")}` | queryable | robot | `Command` → `CommandReply` / `ErrorReply` |
-| `{p.Keys.telemetry("ROBOT")}` | publication | robot | `Telemetry` |
-| `{p.Keys.world("ROBOT")}` | queryable | robot | `WorldMessage` → `WorldReply` |
-| `{p.Keys.barrier_ready("BARRIER", "ROBOT")}` | liveliness token | robot | — (present while waiting at a barrier) |
+| `{Keys.SERVER_ALIVE}` | liveliness token | server | — |
+| `{Keys.OP}` | queryable | server | `Request` → `OpReply` / `ErrorReply` |
+| `{Keys.op_as("USER")}` | queryable | server | the same, from a logged-in user (`Request.user` is replaced by `USER`) |
+| `{Keys.account("USER")}` | queryable | server | anything → `AccountInfo` (role of a logged-in user) |
+| `{Keys.STATE}` | queryable | server | `StateRequest` → `StateSnapshot` |
+| `{Keys.EVENTS}` | publication | server | `EventBatch`, or a JSON array of them (revisions consecutive) |
+| `{Keys.FLEET}` | publication | server | `FleetEvent` (presence, manifest) |
+| `{Keys.ALERTS}` | publication | server | `Alert` |
+| `{Keys.PING}` | queryable | server | anything → `pong` (raw-transport baseline of the benchmarks) |
+| `{Keys.register("ROBOT")}` | queryable | server | `Register` → `RegisterReply` |
+| `{Keys.reports("ROBOT")}` | queryable | server | `ReportBatch` → `ReportAck` |
+| `{Keys.alive("ROBOT")}` | liveliness token | robot | — |
+| `{Keys.command("ROBOT")}` | queryable | robot | `Command` → `CommandReply` / `ErrorReply` |
+| `{Keys.telemetry("ROBOT")}` | publication | robot | `Telemetry` |
+| `{Keys.world("ROBOT")}` | queryable | robot | `WorldMessage` → `WorldReply` |
+| `{Keys.barrier_ready("BARRIER", "ROBOT")}` | liveliness token | robot | — (present while waiting at a barrier) |
 | `{mf.KEY_MAP_SNAPSHOT}` | queryable | simulator | anything → `MapSnapshot` |
 | `{mf.KEY_MAP_DELTA}` | publication | simulator | `MapDelta` (`seq` consecutive, at most ~2 Hz) |
 | `{mf.KEY_STATUS}` | queryable | simulator | anything → `SimStatus` |
@@ -92,8 +93,8 @@ transitions (anything else is refused with `bad_report`):
 ## Sequences
 
 ### Late join and event stream (consoles, scripts)
-1. Subscribe to `{p.Keys.EVENTS}` (and `{p.Keys.FLEET}`, `{p.Keys.ALERTS}`, telemetry) first.
-2. Query `{p.Keys.STATE}`; apply the snapshot; then apply buffered batches
+1. Subscribe to `{Keys.EVENTS}` (and `{Keys.FLEET}`, `{Keys.ALERTS}`, telemetry) first.
+2. Query `{Keys.STATE}`; apply the snapshot; then apply buffered batches
    whose `revision` is greater than the snapshot's.
 3. Apply each batch with `revision == current + 1`, the batches of an array
    in order. A larger revision means a gap: query the state again. (A reader
@@ -104,7 +105,7 @@ transitions (anything else is refused with `bad_report`):
    means the server restarted (it resumed from its journal).
 
 ### An operation
-`Request{{client, request_id, expected_revision?, op}}` to `{p.Keys.OP}`. The
+`Request{{client, request_id, expected_revision?, op}}` to `{Keys.OP}`. The
 same `(client, request_id)` is applied once: retry freely after a timeout.
 With `expected_revision`, the operation is refused (`stale`) if anything it
 touches changed after that revision. The reply is `OpReply{{revision, value,
@@ -113,20 +114,20 @@ notes}}` or an `ErrorReply`. The reply leaves before the operation's
 change in its copy of the mission waits for that batch.
 
 On a server with accounts (docs/security.md) the router's access-control
-rules allow an operator to query only `{p.Keys.op_as("USER")}` with its own
-user name, and nobody `{p.Keys.OP}`; the server records `USER` (taken from
+rules allow an operator to query only `{Keys.op_as("USER")}` with its own
+user name, and nobody `{Keys.OP}`; the server records `USER` (taken from
 the key, not from `Request.user`) as who made the change. A client learns its
-role from `{p.Keys.account("USER")}` (an observer has no operation key: its
+role from `{Keys.account("USER")}` (an observer has no operation key: its
 queries get no reply at all, so clients refuse operations locally).
 
 ### Robot registration and reconciliation
-1. The robot connects, declares `{p.Keys.alive("ROBOT")}`, its command and
-   world queryables, and watches `{p.Keys.SERVER_ALIVE}` (a liveliness
+1. The robot connects, declares `{Keys.alive("ROBOT")}`, its command and
+   world queryables, and watches `{Keys.SERVER_ALIVE}` (a liveliness
    subscriber with history: the token may be there already).
 2. Whenever the server token appears (start, server restart), the robot
-   queries `{p.Keys.register("ROBOT")}` with `Register{{manifest, queue,
+   queries `{Keys.register("ROBOT")}` with `Register{{manifest, queue,
    reports}}`: its manifest (`name` is ROBOT, `type` the robot type the
-   mission gives it, `protocol` {p.PROTOCOL_VERSION}, modules and skills
+   mission gives it, `protocol` {PROTOCOL_VERSION}, modules and skills
    with SemVer), its own synchronized queue, and its unacknowledged reports.
 3. The server applies the reports, then returns to the plan (`idle`) any skill
    it holds as synchronized to that robot that the robot does not have (it
@@ -144,7 +145,7 @@ queries get no reply at all, so clients refuse operations locally).
 1. Operator: `op: sync {{robot, through?}}`.
 2. Server: checks the robot is online, offers every skill (by name) with the
    library's major version, locks the skills, and queries
-   `{p.Keys.command("ROBOT")}` with `Enqueue{{skills, barriers}}` (`barriers` maps a
+   `{Keys.command("ROBOT")}` with `Enqueue{{skills, barriers}}` (`barriers` maps a
    skill id to its barrier and partner robots' skill ids).
 3. Robot: appends them to its queue, answers `CommandReply{{ids}}`.
 4. Server: marks them `idle_synchronized` (one `EventBatch`) and replies. No
@@ -181,7 +182,7 @@ command with `CommandReply{{ok: false, reason}}` (the operator's refusal is
 ### Reports
 Each status change is a `Report{{robot, seq, id, status, info, attempt, at}}`
 with `seq` increasing by one per robot. The robot keeps them in an outbox and
-queries `{p.Keys.reports("ROBOT")}` with `ReportBatch`; `ReportAck.last_seq` tells
+queries `{Keys.reports("ROBOT")}` with `ReportBatch`; `ReportAck.last_seq` tells
 which it may drop. While out of reach the outbox grows and is flushed on
 return; a report the server already applied is ignored (idempotent). A
 refused report is acknowledged too (listed in `refused`) and raises an alert.
@@ -213,9 +214,9 @@ A skill with `policies.retries: N` is retried by the robot itself: it reports
 ### Barriers (robot to robot; the server is not in this loop)
 Each skill of a barrier reaches its robot with the partners' robot and skill
 ids. A robot reaching it reports `synchwaiting`, subscribes (with history) to
-the liveliness tokens `{p.Keys.barrier_ready("BARRIER", "*")}`, **then**
+the liveliness tokens `{Keys.barrier_ready("BARRIER", "*")}`, **then**
 declares its own token (in this order no robot can miss the last arrival),
-and watches its partners' `{p.Keys.alive("ROBOT")}` tokens. When every partner's
+and watches its partners' `{Keys.alive("ROBOT")}` tokens. When every partner's
 ready token is present, it reports `running`. While a partner is offline it
 reports `synchwaiting` again with info "waiting for ROBOT (offline)".
 
@@ -236,7 +237,7 @@ with the robots' telemetry.
 
 ### World knowledge (robot to robot)
 `WorldMessage{{kind: ask|tell, sender, topic, data}}` to
-`{p.Keys.world("ROBOT")}`; the answer is a `WorldReply{{known, data}}`.
+`{Keys.world("ROBOT")}`; the answer is a `WorldReply{{known, data}}`.
 Only robots (and tools such as `ctl`) query it; the server never does, so a
 robot that shares no knowledge may answer every ask with `known: false`.
 

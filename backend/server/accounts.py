@@ -20,7 +20,6 @@ Each account's role becomes access-control rules: `backend.server.acl`.
 from __future__ import annotations
 
 import os
-import stat
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -29,14 +28,8 @@ from typing import Literal
 
 from pydantic import Field, ValidationError, field_validator
 
+from backend.core.credentials import USER_PATTERN, AccountsError, Role, read_password
 from backend.core.model import Name, Strict
-
-Role = Literal["operator", "observer", "robot"]
-USER_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
-
-
-class AccountsError(ValueError):
-    """A problem with the accounts file or a password file; the text says what to do."""
 
 
 class Account(Strict):
@@ -99,33 +92,6 @@ class Accounts:
 
     def __repr__(self) -> str:  # never the passwords
         return f"Accounts({self.source}, {sorted(self.table.accounts)})"
-
-
-def check_private(path: Path, what: str = "password file") -> None:
-    """Refuse a secret that other users can read (as ssh does with keys)."""
-    mode = path.stat().st_mode
-    if mode & (stat.S_IRWXG | stat.S_IRWXO):
-        raise AccountsError(
-            f"{path}: this {what} is readable by other users; run: chmod 600 {path}"
-        )
-
-
-def read_password(path: str | Path) -> str:
-    """The first line of a private password file (errors name the file and the fix)."""
-    p = Path(path)
-    try:
-        check_private(p)
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise AccountsError(f"{p}: no such password file") from None
-    except OSError as e:
-        raise AccountsError(f"{p}: cannot read the password file: {e.strerror}") from None
-    password = text.splitlines()[0].strip() if text.strip() else ""
-    if not password:
-        raise AccountsError(f"{p}: the password file is empty")
-    if ":" in password:  # Zenoh's dictionary is user:password lines
-        raise AccountsError(f"{p}: a password cannot contain ':'")
-    return password
 
 
 def load_accounts(path: str | Path) -> Accounts:

@@ -15,8 +15,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from backend.protocol.keys import Keys
 from backend.protocol.mapfeed import KEY_MAP_DELTA, KEY_MAP_SNAPSHOT, KEY_STATUS, KEY_STATUS_LIVE
-from backend.protocol.messages import Keys
 from backend.server.accounts import Accounts
 
 # what consoles read: (subscriptions, queries, liveliness)

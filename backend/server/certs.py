@@ -19,7 +19,8 @@ import re
 import sys
 from pathlib import Path
 
-EXIT_OK, EXIT_BAD_INPUT = 0, 2
+from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK
+
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
 
 

@@ -39,8 +39,8 @@ from backend.core.ops import (
 )
 from backend.core.rules.engine import Applied, Engine, Refusal
 from backend.files.missions import library_path, load_library, load_mission
+from backend.protocol.keys import PROTOCOL_VERSION, Keys
 from backend.protocol.messages import (
-    PROTOCOL_VERSION,
     AccountInfo,
     Alert,
     BarrierInfo,
@@ -49,7 +49,6 @@ from backend.protocol.messages import (
     Enqueue,
     ErrorReply,
     FleetEvent,
-    Keys,
     OpReply,
     Pause,
     Register,

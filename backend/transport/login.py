@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from backend.server.accounts import USER_PATTERN, AccountsError, read_password
+from backend.core.credentials import USER_PATTERN, AccountsError, read_password
 
 
 @dataclass(frozen=True)

@@ -671,7 +671,8 @@ class MissionScreen(Screen):
         )
         if not path:
             return
-        from backend.files.missions import FileProblems, load_mission
+        from backend.files.diagnostics import FileProblems
+        from backend.files.missions import load_mission
 
         try:
             mission, _lib = await asyncio.to_thread(load_mission, path)

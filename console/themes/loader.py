@@ -33,7 +33,7 @@ from textual.filter import LineFilter
 from textual.theme import Theme
 
 from backend.files import yamlio
-from backend.files.missions import pydantic_issues
+from backend.files.diagnostics import pydantic_issues
 from console.themes.variables import STATUS_DEFAULTS
 
 

@@ -25,7 +25,7 @@ import signal
 import sys
 
 from backend.agent import RobotAgent, SkillFailed
-from backend.server.accounts import AccountsError
+from backend.core.credentials import AccountsError
 from backend.transport import TransportUnreachable
 from backend.transport.login import Login, add_login_arguments, login_from_args
 

@@ -26,11 +26,11 @@ import zenoh
 from backend.agent import RobotAgent
 from backend.core.model import Policies, SkillInstance, Status
 from backend.core.ops import Report
+from backend.protocol.keys import Keys
 from backend.protocol.messages import (
     BarrierInfo,
     CommandReply,
     Enqueue,
-    Keys,
     Register,
     RegisterReply,
     ReportAck,

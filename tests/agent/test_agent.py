@@ -18,11 +18,11 @@ import pytest
 
 from backend.agent import Failure, RobotAgent, SkillFailed, SkillStopped, Success
 from backend.core.model import Policies, Pose, Position, SkillInstance, Status
+from backend.protocol.keys import Keys
 from backend.protocol.messages import (
     BarrierInfo,
     Dequeue,
     ErrorReply,
-    Keys,
     Pause,
     Reset,
     Run,

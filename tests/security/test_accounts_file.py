@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from backend.server.accounts import AccountsError, load_accounts, zenoh_dictionary
+from backend.core.credentials import AccountsError
+from backend.server.accounts import load_accounts, zenoh_dictionary
 from backend.transport import client_config, set_option
 from backend.transport.login import Login
 

@@ -17,8 +17,8 @@ import zenoh
 from backend.core.events import EventBatch
 from backend.core.model import Pose
 from backend.core.ops import AddSkill, Report
+from backend.protocol.keys import Keys
 from backend.protocol.messages import (
-    Keys,
     ReportAck,
     ReportBatch,
     Request,

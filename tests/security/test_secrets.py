@@ -11,8 +11,8 @@ import sys
 import time
 from pathlib import Path
 
+from backend.protocol.keys import Keys
 from backend.protocol.mapfeed import KEY_MAP_DELTA, KEY_STATUS_LIVE
-from backend.protocol.messages import Keys
 
 from .helpers import CLI, ROBOTS_SCRIPT, ROOT, TUTORIAL, env, raw_session, stop_process
 

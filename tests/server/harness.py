@@ -19,9 +19,9 @@ from backend.client.client import MissionClient
 from backend.core.model import Status
 from backend.core.ops import Report
 from backend.files.missions import load_mission
+from backend.protocol.keys import Keys
 from backend.protocol.messages import (
     CommandReply,
-    Keys,
     Manifest,
     Module,
     QueueEntry,

@@ -15,7 +15,8 @@ from zenoh.handlers import Callback
 
 from backend.core.events import EventBatch, SkillChanged, read_batches
 from backend.core.ops import EditSkill
-from backend.protocol.messages import Alert, Keys, Request, dumps
+from backend.protocol.keys import Keys
+from backend.protocol.messages import Alert, Request, dumps
 from backend.transport import client_config
 from backend.transport.session import close_session, open_session
 

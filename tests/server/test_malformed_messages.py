@@ -10,7 +10,8 @@ import json
 from datetime import UTC, datetime
 
 from backend.client.client import Malformed
-from backend.protocol.messages import Keys, Telemetry, dumps
+from backend.protocol.keys import Keys
+from backend.protocol.messages import Telemetry, dumps
 from backend.transport import client_config, declare_publisher, wait_matching
 from backend.transport.session import close_session, open_session
 

@@ -10,7 +10,8 @@ import zenoh
 from zenoh.handlers import Callback
 
 from backend.core.ops import EditSkill
-from backend.protocol.messages import Keys, Request, dumps
+from backend.protocol.keys import Keys
+from backend.protocol.messages import Request, dumps
 from backend.transport import client_config
 from backend.transport.session import close_session, open_session
 

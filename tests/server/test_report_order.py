@@ -14,7 +14,8 @@ from zenoh.handlers import Callback
 
 from backend.core.model import Status
 from backend.core.ops import Report, Sync
-from backend.protocol.messages import CommandReply, Keys, ReportAck, ReportBatch, dumps
+from backend.protocol.keys import Keys
+from backend.protocol.messages import CommandReply, ReportAck, ReportBatch, dumps
 
 from .harness import RawRobot, drive, serving, status
 

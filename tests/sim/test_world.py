@@ -14,7 +14,7 @@ import pytest
 
 from backend.agent import SkillFailed
 from backend.core.model import Pose, Position
-from backend.files.missions import FileProblems
+from backend.files.diagnostics import FileProblems
 from backend.protocol import mapfeed as mf
 from sim.pathing import ROCK, Follower, lawnmower, segment_cells
 from sim.skills.base import RobotSkills

@@ -99,10 +99,9 @@ from datetime import date, datetime
 from pathlib import Path
 from typing import Any
 
-from backend.server.accounts import AccountsError
+from backend.core.credentials import AccountsError
+from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK, EXIT_REFUSED, EXIT_UNREACHABLE
 from backend.transport.login import add_login_arguments, login_from_args
-
-EXIT_OK, EXIT_REFUSED, EXIT_BAD_INPUT, EXIT_UNREACHABLE = 0, 1, 2, 3
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 DEFAULT_TIMEOUT = 10.0
@@ -776,7 +775,8 @@ def build_op(args: argparse.Namespace, library: Any = None, mission: Any = None)
             )
         return _validated(ops.MarkerDelete, "marker delete", name=args.name)
     if name == "load":
-        from backend.files.missions import FileProblems, load_mission
+        from backend.files.diagnostics import FileProblems
+        from backend.files.missions import load_mission
 
         loaded = getattr(args, "loaded", None)
         if loaded is None:
@@ -1466,7 +1466,8 @@ def _session_free(m: Any) -> Any:
 
 
 def _save(client: Any, args: argparse.Namespace) -> int:
-    from backend.files.missions import FileProblems, library_path, load_library, save_mission
+    from backend.files.diagnostics import FileProblems
+    from backend.files.missions import library_path, load_library, save_mission
 
     m = _session_free(client.mission)
     target = Path(args.file)

@@ -1,0 +1,73 @@
+"""The wire protocol's key space (Zenoh key expressions), versioned by PROTOCOL_VERSION.
+
+Documented for third parties in docs/protocol.md. Bump PROTOCOL_VERSION on any
+incompatible change of a key or of a message (backend.protocol.messages).
+"""
+
+from __future__ import annotations
+
+PROTOCOL_VERSION = 1
+PREFIX = f"mc/v{PROTOCOL_VERSION}"
+
+
+class Keys:
+    """The key space. `{robot}` is a robot name; `*` matches one chunk."""
+
+    # server side
+    SERVER_ALIVE = f"{PREFIX}/server/alive"  # liveliness token of the mission server
+    OP = f"{PREFIX}/server/op"  # queryable: Request -> OpReply | ErrorReply
+    STATE = f"{PREFIX}/server/state"  # queryable: StateRequest -> StateSnapshot
+    EVENTS = f"{PREFIX}/server/events"  # publication: EventBatch, revisions consecutive
+    FLEET = f"{PREFIX}/server/fleet"  # publication: FleetEvent
+    ALERTS = f"{PREFIX}/server/alerts"  # publication: Alert
+    PING = f"{PREFIX}/server/ping"  # queryable: anything -> b"pong" (raw-transport baseline for benchmarks)
+
+    @staticmethod
+    def op_as(
+        user: str,
+    ) -> str:  # queryable: Request -> OpReply | ErrorReply, from a logged-in user
+        return f"{PREFIX}/server/op/{user}"
+
+    @staticmethod
+    def account(user: str) -> str:  # queryable: anything -> AccountInfo
+        return f"{PREFIX}/server/account/{user}"
+
+    @staticmethod
+    def register(robot: str) -> str:  # queryable: Register -> RegisterReply
+        return f"{PREFIX}/server/register/{robot}"
+
+    @staticmethod
+    def reports(robot: str) -> str:  # queryable: ReportBatch -> ReportAck
+        return f"{PREFIX}/server/report/{robot}"
+
+    # robot side
+    @staticmethod
+    def alive(robot: str) -> str:  # liveliness token of a robot agent
+        return f"{PREFIX}/robot/{robot}/alive"
+
+    @staticmethod
+    def command(robot: str) -> str:  # queryable on the robot: Command -> CommandReply
+        return f"{PREFIX}/robot/{robot}/cmd"
+
+    @staticmethod
+    def telemetry(robot: str) -> str:  # publication: Telemetry
+        return f"{PREFIX}/robot/{robot}/telemetry"
+
+    @staticmethod
+    def world(robot: str) -> str:  # queryable on the robot: WorldMessage -> WorldReply
+        return f"{PREFIX}/robot/{robot}/world"
+
+    @staticmethod
+    def barrier_ready(barrier: str, robot: str) -> str:  # liveliness token while waiting
+        return f"{PREFIX}/barrier/{barrier}/ready/{robot}"
+
+    ALL_ALIVE = f"{PREFIX}/robot/*/alive"
+    ALL_TELEMETRY = f"{PREFIX}/robot/*/telemetry"
+
+    @staticmethod
+    def robot_of(key: str) -> str:
+        """Robot name in a `.../robot/{robot}/...` or `.../{robot}` key."""
+        parts = key.split("/")
+        if "robot" in parts:
+            return parts[parts.index("robot") + 1]
+        return parts[-1]
