@@ -166,7 +166,7 @@ class RobotSpec(Strict):
 
 
 class Barrier(Strict):
-    # distinct skills of distinct robots; checked by files.check_mission and the rules
+    # distinct skills of distinct robots; checked by core.checks.check_mission (files and rules)
     skills: list[SkillId] = Field(min_length=2)
 
 

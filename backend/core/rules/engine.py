@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from backend.core import events as ev
+from backend.core.checks import check_mission, resolve_shorthands
 from backend.core.library import Library, check_params
 from backend.core.model import (
     ACTIVE,
@@ -61,7 +62,6 @@ from backend.core.ops import (
     Unsync,
     UnsyncDone,
 )
-from backend.files.missions import check_mission, resolve_shorthands
 
 REMEMBERED_REQUESTS = 10_000
 UNDO_DEPTH = 100

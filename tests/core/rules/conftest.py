@@ -19,10 +19,11 @@ from typing import Any
 
 import pytest
 
+from backend.core.checks import check_mission
 from backend.core.model import RobotSpec, Status, section_problems
 from backend.core.ops import Report, Sync, SyncAck
 from backend.core.rules.engine import Applied, Engine, Refusal
-from backend.files.missions import check_mission, load_mission
+from backend.files.missions import load_mission
 
 ROOT = Path(__file__).resolve().parents[3]
 TUTORIAL = ROOT / "missions" / "tutorial.yaml"

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import pytest
 
+from backend.core.checks import check_mission
 from backend.core.model import Pose, Position, Status
 from backend.core.ops import (
     AddBarrier,
@@ -20,7 +21,6 @@ from backend.core.ops import (
     Unsync,
     UnsyncDone,
 )
-from backend.files.missions import check_mission
 
 S = Status
 POI_A = {"x": 10.0, "y": 5.0, "z": 0.0, "roll": 0.0, "pitch": 0.0, "yaw": 0.0}
