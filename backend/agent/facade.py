@@ -90,6 +90,7 @@ from backend import transport
 from backend.core.library import VERSION_PATTERN
 from backend.core.model import NAME_RE, Pose, Position, SkillInstance, Status
 from backend.core.ops import Report
+from backend.core.params import typed_by_shape
 from backend.protocol.keys import Keys
 from backend.protocol.messages import (
     BarrierInfo,
@@ -257,24 +258,6 @@ class _Active:
             self.pause_requested.clear()
             self.resumed.set()
             self.resumed_t.set()
-
-
-def _convert(value: Any) -> Any:
-    """Typed value by shape (see the module docstring)."""
-    if isinstance(value, dict):
-        keys = set(value)
-        if keys == _POSE_KEYS:
-            return Pose(**value)
-        if keys == _POSITION_KEYS:
-            return Position(**value)
-        return value
-    if (
-        isinstance(value, list)
-        and len(value) >= 3
-        and all(isinstance(p, dict) and set(p) == _POSITION_KEYS for p in value)
-    ):
-        return [Position(**p) for p in value]
-    return value
 
 
 @dataclass(frozen=True)
@@ -1459,7 +1442,9 @@ class RobotAgent:
         name = "recharge" if purpose == "recharge" else act.entry.skill.skill
         handler = self._handlers[name]
         raw_params = dict(act.entry.skill.params) if purpose == "skill" else {}
-        params = raw_params if handler.raw else {k: _convert(v) for k, v in raw_params.items()}
+        params = (
+            raw_params if handler.raw else {k: typed_by_shape(v) for k, v in raw_params.items()}
+        )
         ctx = SkillContext(self, act, raw_params, purpose)
         mismatch = _signature_problem(handler.fn, params)
         if mismatch is not None:  # else a bare TypeError from inside the call

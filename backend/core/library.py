@@ -1,6 +1,7 @@
 """Skill libraries: robot types, their skills and typed parameters.
 
-`check_params` is the one place where parameter values are validated, for
+What each kind of parameter accepts is in `backend.core.params` (one table).
+`check_params` is the one place where a skill's parameters are validated, for
 mission files and for live operations alike, so a value refused in a file is
 refused the same way from the console.
 """
@@ -13,15 +14,8 @@ from typing import Any, Literal
 
 from pydantic import Field, model_validator
 
-from backend.core.model import (
-    AreaMarker,
-    Name,
-    Pose,
-    PoseMarker,
-    Position,
-    PositionMarker,
-    Strict,
-)
+from backend.core.model import Name, Strict
+from backend.core.params import check_value, marker_value, normalize_value
 
 LIBRARY_FORMAT = "missionctl/library@1"
 VERSION_PATTERN = r"^\d+\.\d+\.\d+$"
@@ -40,9 +34,6 @@ ParamType = Literal[
     "marker",
     "robot",
 ]
-
-POSE_FIELDS = ("x", "y", "z", "roll", "pitch", "yaw")
-POSITION_FIELDS = ("x", "y", "z")
 
 
 class ParamSpec(Strict):
@@ -152,143 +143,6 @@ class Library(Strict):
 class ParamProblem:
     path: tuple[str | int, ...]  # relative to the params mapping
     message: str
-
-
-def _number(v: Any) -> bool:
-    return isinstance(v, int | float) and not isinstance(v, bool)
-
-
-def _check_fields(v: Any, fields: tuple[str, ...], what: str) -> list[tuple[tuple, str]]:
-    if not isinstance(v, dict):
-        return [((), f"expected a {what} mapping with {', '.join(fields)}, got {_kind(v)}")]
-    out: list[tuple[tuple, str]] = []
-    for k in v:
-        if k not in fields:
-            out.append(((k,), f"unknown {what} field '{k}' (fields: {', '.join(fields)})"))
-    for f in fields:
-        if f in v and not _number(v[f]):
-            out.append(((f,), f"expected a number, got {_kind(v[f])}"))
-        elif f in v and not math.isfinite(float(v[f])):
-            out.append(((f,), "expected a finite number"))
-    return out
-
-
-def _kind(v: Any) -> str:
-    if v is None:
-        return "nothing (null)"
-    if isinstance(v, bool):
-        return f"a boolean ({v})"
-    if isinstance(v, int):
-        return f"an integer ({v})"
-    if isinstance(v, float):
-        return f"a number ({v})"
-    if isinstance(v, str):
-        return f"a string ({v!r})"
-    if isinstance(v, list):
-        return "a list"
-    if isinstance(v, dict):
-        return "a mapping"
-    return type(v).__name__
-
-
-def check_value(
-    spec: ParamSpec, v: Any, *, markers: dict[str, Any] | None, robots: set[str] | None
-) -> list[tuple[tuple, str]]:
-    """Problems of one value against its spec: [(relative path, sentence)].
-
-    `markers`/`robots` None: references are not checked (library defaults).
-    """
-    t = spec.type
-    if t == "bool":
-        return [] if isinstance(v, bool) else [((), f"expected true or false, got {_kind(v)}")]
-    if t in ("int", "float"):
-        if t == "int" and not (isinstance(v, int) and not isinstance(v, bool)):
-            return [((), f"expected an integer, got {_kind(v)}")]
-        if t == "float" and not _number(v):
-            return [((), f"expected a number, got {_kind(v)}")]
-        if not math.isfinite(float(v)):
-            return [((), "expected a finite number")]
-        unit = f" {spec.unit}" if spec.unit else ""
-        if spec.min is not None and v < spec.min:
-            return [((), f"{v}{unit} is below the minimum {spec.min:g}{unit}")]
-        if spec.max is not None and v > spec.max:
-            return [((), f"{v}{unit} is above the maximum {spec.max:g}{unit}")]
-        return []
-    if t == "str":
-        return [] if isinstance(v, str) else [((), f"expected a string, got {_kind(v)}")]
-    if t == "list":
-        return [] if isinstance(v, list) else [((), f"expected a list, got {_kind(v)}")]
-    if t == "dict":
-        return [] if isinstance(v, dict) else [((), f"expected a mapping, got {_kind(v)}")]
-    if t == "pose":
-        return _check_fields(v, POSE_FIELDS, "pose")
-    if t == "position":
-        return _check_fields(v, POSITION_FIELDS, "position")
-    if t == "area":
-        if not isinstance(v, list) or len(v) < 3:
-            return [((), f"expected a polygon: a list of at least 3 positions, got {_kind(v)}")]
-        out: list[tuple[tuple, str]] = []
-        for i, p in enumerate(v):
-            out += [((i, *rel), msg) for rel, msg in _check_fields(p, POSITION_FIELDS, "position")]
-        return out
-    if t == "enum":
-        choices = spec.choices or []
-        if v not in choices:
-            return [((), f"{v!r} is not one of: {', '.join(choices)}")]
-        return []
-    if t == "marker":
-        if not isinstance(v, str):
-            return [((), f"expected a marker name, got {_kind(v)}")]
-        if markers is not None and v not in markers:
-            return [((), f"unknown marker '{v}' (markers: {', '.join(sorted(markers)) or 'none'})")]
-        m = markers.get(v) if markers is not None else None
-        if m is not None and spec.marker_kinds and m.kind not in spec.marker_kinds:
-            return [
-                ((), f"marker '{v}' is a {m.kind} marker; expected {'/'.join(spec.marker_kinds)}")
-            ]
-        return []
-    if t == "robot":
-        if not isinstance(v, str):
-            return [((), f"expected a robot name, got {_kind(v)}")]
-        if robots is not None and v not in robots:
-            return [((), f"unknown robot '{v}' (robots: {', '.join(sorted(robots))})")]
-        return []
-    return [((), f"unknown parameter type {t}")]
-
-
-def normalize_value(spec: ParamSpec, v: Any) -> Any:
-    """Canonical form of a valid value: full poses/positions, floats as floats."""
-    if spec.type == "pose":
-        return Pose(**v).model_dump()
-    if spec.type == "position":
-        return Position(**v).model_dump()
-    if spec.type == "area":
-        return [Position(**p).model_dump() for p in v]
-    if spec.type == "float":
-        return float(v)
-    return v
-
-
-def marker_value(spec: ParamSpec, marker: Any) -> tuple[Any, str | None]:
-    """Value a marker gives to a bound parameter, or (None, reason it cannot)."""
-    if spec.type == "pose":
-        if isinstance(marker, PoseMarker):
-            return marker.pose.model_dump(), None
-        if isinstance(marker, PositionMarker):
-            return Pose(**marker.position.model_dump()).model_dump(), None
-        return None, "an area marker cannot give a pose"
-    if spec.type == "position":
-        if isinstance(marker, PoseMarker):
-            p = marker.pose
-            return Position(x=p.x, y=p.y, z=p.z).model_dump(), None
-        if isinstance(marker, PositionMarker):
-            return marker.position.model_dump(), None
-        return None, "an area marker cannot give a position"
-    if spec.type == "area":
-        if isinstance(marker, AreaMarker):
-            return [p.model_dump() for p in marker.area], None
-        return None, f"a {marker.kind} marker cannot give an area"
-    return None, f"a {spec.type} parameter cannot be bound to a marker"
 
 
 def check_params(

@@ -19,7 +19,6 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import ModalScreen, Screen
 from textual.widgets import Footer, Input, Label, Select, Static
 
-from backend.core.library import marker_value
 from backend.core.model import (
     NAME_RE,
     AreaMarker,
@@ -30,6 +29,7 @@ from backend.core.model import (
     Status,
 )
 from backend.core.ops import EditSkill, MarkerAdd, MarkerDelete, MarkerMove, MarkerRename
+from backend.core.params import marker_value
 from console.screens.dialogs import ChoiceScreen, ConfirmScreen
 from console.screens.mission import StatusLine, TopBar
 from console.state.actions import ACTIONS, bindings

@@ -37,6 +37,7 @@ from backend.core.ops import (
     Undo,
     Unsync,
 )
+from backend.core.params import StartContext, starting_values
 from console.screens.dialogs import ConfirmScreen, PathPrompt, SkillPicker
 from console.state.actions import ACTIONS, BY_NAME, mission_bindings
 from console.state.capability import also_offered_by
@@ -55,64 +56,15 @@ def default_params(
     spec_params: dict[str, ParamSpec], model: ConsoleModel, robot: str
 ) -> tuple[dict[str, Any], dict[str, str]]:
     """Values for the required parameters without a default, so a new skill is
-    valid at once (then edited): the robot's position, the first fitting
-    marker, the first choice, the lower bound."""
-    params: dict[str, Any] = {}
-    bindings: dict[str, str] = {}
+    valid at once (then edited): see `backend.core.params.starting_values`."""
     tel = model.telemetry.get(robot)
-    pose = (
-        tel.pose.model_dump()
-        if tel is not None
-        else {"x": 0.0, "y": 0.0, "z": 0.0, "roll": 0.0, "pitch": 0.0, "yaw": 0.0}
+    ctx = StartContext(
+        robot=robot,
+        markers=model.mission.markers if model.mission else {},
+        robots=tuple(model.mission.robots) if model.mission else (),
+        **({"pose": tel.pose.model_dump()} if tel is not None else {}),
     )
-    markers = model.mission.markers if model.mission else {}
-    robots = list(model.mission.robots) if model.mission else []
-    for name, p in spec_params.items():
-        if not p.is_required or p.default is not None:
-            continue
-        t = p.type
-        if t == "pose":
-            params[name] = dict(pose)
-        elif t == "position":
-            params[name] = {k: pose[k] for k in ("x", "y", "z")}
-        elif t == "area":
-            area = [m for m, mk in markers.items() if mk.kind == "area"]
-            if area:
-                bindings[name] = area[0]
-            else:
-                x, y = pose["x"], pose["y"]
-                params[name] = [
-                    {"x": x - 5, "y": y - 5, "z": 0.0},
-                    {"x": x + 5, "y": y - 5, "z": 0.0},
-                    {"x": x + 5, "y": y + 5, "z": 0.0},
-                    {"x": x - 5, "y": y + 5, "z": 0.0},
-                ]
-        elif t == "enum" and p.choices:
-            params[name] = p.choices[0]
-        elif t == "marker":
-            fit = [
-                m for m, mk in markers.items() if not p.marker_kinds or mk.kind in p.marker_kinds
-            ]
-            if fit:
-                params[name] = fit[0]
-        elif t == "robot":
-            others = [r for r in robots if r != robot] or robots
-            if others:
-                params[name] = others[0]
-        elif t == "bool":
-            params[name] = False
-        elif t in ("int", "float"):
-            v = p.min if p.min is not None else 0
-            if p.max is not None:
-                v = min(v, p.max)
-            params[name] = int(v) if t == "int" else float(v)
-        elif t == "str":
-            params[name] = ""
-        elif t == "list":
-            params[name] = []
-        elif t == "dict":
-            params[name] = {}
-    return params, bindings
+    return starting_values(spec_params, ctx)
 
 
 class TopBar(Static):

@@ -125,7 +125,7 @@ def param_summary(skill: SkillInstance, library: Library | None) -> str:
         pspec = spec.params.get(name) if spec else None
         if pspec is not None and pspec.default is not None:
             try:
-                from backend.core.library import normalize_value
+                from backend.core.params import normalize_value
 
                 if normalize_value(pspec, pspec.default) == value:
                     continue

@@ -100,6 +100,7 @@ from pathlib import Path
 from typing import Any
 
 from backend.core.credentials import AccountsError
+from backend.core.params import POSE_FIELDS, POSITION_FIELDS
 from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK, EXIT_REFUSED, EXIT_UNREACHABLE
 from backend.transport.login import add_login_arguments, login_from_args
 
@@ -258,10 +259,6 @@ def _mapping(text: str, what: str, fields: tuple[str, ...]) -> dict[str, float]:
             raise UsageError(f"{what}: {k} must be a finite number, got {v!r}")
         out[k] = float(v)
     return out
-
-
-POSE_FIELDS = ("x", "y", "z", "roll", "pitch", "yaw")
-POSITION_FIELDS = ("x", "y", "z")
 
 
 def parse_pose(text: str) -> dict[str, float]:
@@ -857,7 +854,7 @@ def _differs_from_default(library: Any, skill: str, name: str, value: Any) -> bo
     pspec = spec.params.get(name) if spec else None
     if pspec is None or pspec.default is None:
         return True
-    from backend.core.library import normalize_value
+    from backend.core.params import normalize_value
 
     try:
         return normalize_value(pspec, pspec.default) != value

@@ -1,0 +1,73 @@
+"""The parameter-kind registry (backend.core.params): one entry per kind a
+library may name, and each entry's parts agree with each other."""
+
+import typing
+
+import pytest
+
+from backend.core.library import ParamSpec, ParamType
+from backend.core.model import AreaMarker, PoseMarker, Position, PositionMarker
+from backend.core.params import (
+    KINDS,
+    StartContext,
+    check_value,
+    marker_value,
+    normalize_value,
+    starting_values,
+    typed_by_shape,
+)
+
+MARKERS = {
+    "P": PoseMarker(kind="pose", pose={"x": 1, "y": 2}),
+    "Q": PositionMarker(kind="position", position={"x": 3, "y": 4}),
+    "A": AreaMarker(kind="area", area=[{"x": 0, "y": 0}, {"x": 1, "y": 0}, {"x": 1, "y": 1}]),
+}
+
+
+def spec(kind: str, **kw) -> ParamSpec:
+    if kind == "enum":
+        kw.setdefault("choices", ["low", "high"])
+    return ParamSpec(type=kind, **kw)
+
+
+def test_every_kind_a_library_may_name_has_an_entry():
+    assert set(KINDS) == set(typing.get_args(ParamType))
+
+
+@pytest.mark.parametrize("kind", sorted(typing.get_args(ParamType)))
+def test_a_starting_value_passes_the_kinds_own_check(kind):
+    ctx = StartContext(robot="lru1", markers=MARKERS, robots=("lru1", "lru2"))
+    params, bindings = starting_values({"p": spec(kind)}, ctx)
+    if "p" in bindings:  # bound: the marker must be able to give the value
+        assert marker_value(spec(kind), MARKERS[bindings["p"]])[1] is None
+    else:
+        assert check_value(spec(kind), params["p"], markers=MARKERS, robots={"lru1", "lru2"}) == []
+
+
+def test_starting_values_prefer_a_marker_for_an_area_and_another_robot():
+    ctx = StartContext(robot="lru1", markers=MARKERS, robots=("lru1", "lru2"))
+    params, bindings = starting_values({"a": spec("area"), "r": spec("robot")}, ctx)
+    assert bindings == {"a": "A"} and params == {"r": "lru2"}
+
+
+def test_a_parameter_with_a_default_gets_no_starting_value():
+    assert starting_values({"n": spec("int", default=3)}, StartContext(robot="x")) == ({}, {})
+
+
+def test_number_bounds_name_the_unit():
+    s = spec("float", min=0.1, max=1.0, unit="m/s")
+    assert check_value(s, 2, markers=None, robots=None) == [((), "2 m/s is above the maximum 1 m/s")]
+    assert normalize_value(s, 1) == 1.0 and isinstance(normalize_value(s, 1), float)
+
+
+def test_a_pose_marker_gives_a_position_and_an_area_marker_gives_no_pose():
+    assert marker_value(spec("position"), MARKERS["P"]) == ({"x": 1.0, "y": 2.0, "z": 0.0}, None)
+    assert marker_value(spec("pose"), MARKERS["A"]) == (None, "an area marker cannot give a pose")
+    assert marker_value(spec("int"), MARKERS["P"])[1] == "a int parameter cannot be bound to a marker"
+
+
+def test_handlers_get_typed_values_by_shape():
+    area = [{"x": 0.0, "y": 0.0, "z": 0.0}] * 3
+    assert typed_by_shape(area) == [Position()] * 3
+    assert typed_by_shape({"x": 1.0, "y": 2.0, "z": 0.0}) == Position(x=1, y=2)
+    assert typed_by_shape({"x": 1.0}) == {"x": 1.0}  # not a full position: as is
