@@ -6,7 +6,7 @@ with the register/report queryables and the server's liveliness token, which
 records what it receives and applies reports idempotently by seq) and the
 agents under test, all on the test's asyncio loop.
 
-`async def` tests are run here with `asyncio.run` (no pytest-asyncio needed).
+`async def` tests run with the shared runner (tests/conftest.py).
 Waiting is always on events with a timeout (`Harness.until`), never on sleeps.
 """
 
@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import asyncio
 import importlib.util
-import inspect
 import secrets
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -48,7 +47,6 @@ from backend.transport import (
 )
 
 WAIT = 10.0  # upper bound for things that normally take milliseconds
-TEST_TIMEOUT = 60.0
 
 # Reuse the transport tests' router helper (tests/transport has no __init__.py,
 # so load its conftest by path; only the Router class is used).
@@ -59,16 +57,6 @@ assert _spec is not None and _spec.loader is not None
 _helpers = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(_helpers)
 Router = _helpers.Router
-
-
-@pytest.hookimpl(tryfirst=True)
-def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
-    """Run `async def` tests in a fresh event loop, with an overall timeout."""
-    if not inspect.iscoroutinefunction(pyfuncitem.obj):
-        return None
-    kwargs = {name: pyfuncitem.funcargs[name] for name in pyfuncitem._fixtureinfo.argnames}
-    asyncio.run(asyncio.wait_for(pyfuncitem.obj(**kwargs), TEST_TIMEOUT))
-    return True
 
 
 # ---------------------------------------------------------------- fake server

@@ -5,14 +5,11 @@ Offline tests build mission states with the real rules engine
 clocks, no animations, no cursor blink — deterministic snapshots. Timestamps
 are shown in local time, so the tests pin TZ=UTC.
 
-`async def` tests run in a fresh event loop with an overall timeout (no
-pytest-asyncio needed), like tests/agent.
+`async def` tests run with the shared runner (tests/conftest.py).
 """
 
 from __future__ import annotations
 
-import asyncio
-import inspect
 import os
 import time
 
@@ -20,17 +17,6 @@ os.environ["TZ"] = "UTC"
 time.tzset()
 
 import pytest  # noqa: E402
-
-TEST_TIMEOUT = 120.0
-
-
-@pytest.hookimpl(tryfirst=True)
-def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
-    if not inspect.iscoroutinefunction(pyfuncitem.obj):
-        return None
-    kwargs = {name: pyfuncitem.funcargs[name] for name in pyfuncitem._fixtureinfo.argnames}
-    asyncio.run(asyncio.wait_for(pyfuncitem.obj(**kwargs), TEST_TIMEOUT))
-    return True
 
 
 @pytest.fixture(autouse=True)

@@ -56,14 +56,18 @@ def test_a_parameter_with_a_default_gets_no_starting_value():
 
 def test_number_bounds_name_the_unit():
     s = spec("float", min=0.1, max=1.0, unit="m/s")
-    assert check_value(s, 2, markers=None, robots=None) == [((), "2 m/s is above the maximum 1 m/s")]
+    assert check_value(s, 2, markers=None, robots=None) == [
+        ((), "2 m/s is above the maximum 1 m/s")
+    ]
     assert normalize_value(s, 1) == 1.0 and isinstance(normalize_value(s, 1), float)
 
 
 def test_a_pose_marker_gives_a_position_and_an_area_marker_gives_no_pose():
     assert marker_value(spec("position"), MARKERS["P"]) == ({"x": 1.0, "y": 2.0, "z": 0.0}, None)
     assert marker_value(spec("pose"), MARKERS["A"]) == (None, "an area marker cannot give a pose")
-    assert marker_value(spec("int"), MARKERS["P"])[1] == "a int parameter cannot be bound to a marker"
+    assert (
+        marker_value(spec("int"), MARKERS["P"])[1] == "a int parameter cannot be bound to a marker"
+    )
 
 
 def test_handlers_get_typed_values_by_shape():

@@ -5,13 +5,12 @@ subprocesses on a free loopback port and drive them with
 backend.client.client.MissionClient. Waiting is always on state (the client's
 mirror, the sim's live status publication), never on sleeps.
 
-`async def` tests run with `asyncio.run` (no pytest-asyncio needed).
+`async def` tests run with the shared runner (tests/conftest.py).
 """
 
 from __future__ import annotations
 
 import asyncio
-import inspect
 import os
 import signal
 import subprocess
@@ -32,17 +31,7 @@ from backend.transport import free_port, loopback_endpoint
 ROOT = Path(__file__).resolve().parents[2]
 MISSION = ROOT / "missions" / "mars_sample_return.yaml"
 WORLD = ROOT / "missions" / "worlds" / "mars.yaml"
-TEST_TIMEOUT = 90.0
 STARTUP = 20.0
-
-
-@pytest.hookimpl(tryfirst=True)
-def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
-    if not inspect.iscoroutinefunction(pyfuncitem.obj):
-        return None
-    kwargs = {name: pyfuncitem.funcargs[name] for name in pyfuncitem._fixtureinfo.argnames}
-    asyncio.run(asyncio.wait_for(pyfuncitem.obj(**kwargs), TEST_TIMEOUT))
-    return True
 
 
 class Proc:
