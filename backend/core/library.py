@@ -12,69 +12,13 @@ import math
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field
 
 from backend.core.model import Name, Strict
-from backend.core.params import check_value, marker_value, normalize_value
+from backend.core.params import ParamSpec, check_value, marker_value, normalize_value
 
 LIBRARY_FORMAT = "missionctl/library@1"
 VERSION_PATTERN = r"^\d+\.\d+\.\d+$"
-
-ParamType = Literal[
-    "bool",
-    "int",
-    "float",
-    "str",
-    "list",
-    "dict",
-    "pose",
-    "position",
-    "area",
-    "enum",
-    "marker",
-    "robot",
-]
-
-
-class ParamSpec(Strict):
-    type: ParamType
-    description: str = ""
-    default: Any = None
-    required: bool | None = Field(
-        None,
-        description="a value must be given; unset means: required when there is no default",
-    )
-    unit: str = ""
-    min: float | None = None
-    max: float | None = None
-    choices: list[str] | None = Field(None, description="allowed values of an enum")
-    marker_kinds: list[Literal["pose", "position", "area"]] | None = Field(
-        None, description="marker parameters: which kinds of marker may be chosen"
-    )
-
-    @model_validator(mode="after")
-    def _coherent(self) -> ParamSpec:
-        if self.type == "enum" and not self.choices:
-            raise ValueError("an enum parameter needs a non-empty 'choices' list")
-        if self.type != "enum" and self.choices is not None:
-            raise ValueError("'choices' only applies to enum parameters")
-        if (self.min is not None or self.max is not None) and self.type not in ("int", "float"):
-            raise ValueError("'min'/'max' only apply to int and float parameters")
-        if self.min is not None and self.max is not None and self.min > self.max:
-            raise ValueError(f"min {self.min} is greater than max {self.max}")
-        return self
-
-    def default_problem(self) -> str | None:
-        """Why the default does not fit the spec (checked with the library file,
-        so the error points at the default itself)."""
-        if self.default is None:
-            return None
-        problems = check_value(self, self.default, markers=None, robots=None)
-        return problems[0][1] if problems else None
-
-    @property
-    def is_required(self) -> bool:
-        return self.required if self.required is not None else self.default is None
 
 
 class DurationModel(Strict):

@@ -20,7 +20,6 @@ from textual.containers import Horizontal
 from textual.screen import Screen
 from textual.widgets import Footer, Input, Select, Static, Switch, TextArea
 
-from backend.core.library import ParamSpec
 from backend.core.model import Status
 from backend.core.ops import (
     AddBarrier,
@@ -37,7 +36,7 @@ from backend.core.ops import (
     Undo,
     Unsync,
 )
-from backend.core.params import StartContext, starting_values
+from backend.core.params import ParamSpec, StartContext, starting_values
 from console.screens.dialogs import ConfirmScreen, PathPrompt, SkillPicker
 from console.state.actions import ACTIONS, BY_NAME, mission_bindings
 from console.state.capability import also_offered_by

@@ -16,8 +16,9 @@ from datetime import datetime
 from typing import Any
 
 from backend.core import events as ev
-from backend.core.library import Library, ParamSpec
+from backend.core.library import Library
 from backend.core.model import ACTIVE, FINISHED, Mission, SkillInstance, Status, how_to_change
+from backend.core.params import ParamSpec
 from backend.protocol.messages import RobotInfo, Telemetry
 
 # -- statuses -------------------------------------------------------------------

@@ -33,9 +33,14 @@ from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.message import Message
 from textual.widgets import Button, Input, Label, Select, Static, Switch, TextArea
 
-from backend.core.library import ParamSpec
 from backend.core.model import Policies, SkillInstance, Status
-from backend.core.params import POSE_FIELDS, POSITION_FIELDS, check_value, normalize_value
+from backend.core.params import (
+    POSE_FIELDS,
+    POSITION_FIELDS,
+    ParamSpec,
+    check_value,
+    normalize_value,
+)
 from console.state.model import GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel, fmt_number
 from console.widgets.select import SafeSelect
 

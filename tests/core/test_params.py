@@ -5,10 +5,11 @@ import typing
 
 import pytest
 
-from backend.core.library import ParamSpec, ParamType
 from backend.core.model import AreaMarker, PoseMarker, Position, PositionMarker
 from backend.core.params import (
     KINDS,
+    ParamSpec,
+    ParamType,
     StartContext,
     check_value,
     marker_value,

@@ -1,0 +1,170 @@
+"""The layout's ratchets (ARCHITECTURE.md): checked on every run, so they only get better.
+
+- no import cycle between modules (every import counts: inside functions and
+  under TYPE_CHECKING too, since each still ties two modules together);
+- each package imports alone in a fresh interpreter;
+- no class over 500 lines;
+- the lists of known exceptions only shrink: an entry that no longer applies
+  fails the test until it is removed.
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import grimp
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("backend", "console", "sim")
+MAX_CLASS_LINES = 500
+
+# Classes still over the limit, each to be split (issue 18). May only shrink.
+KNOWN_LARGE_CLASSES: set[str] = {
+    "backend/agent/facade.py:RobotAgent",
+    "backend/core/rules/engine.py:Engine",
+    "backend/server/journal.py:Journal",
+    "backend/server/server.py:MissionServer",
+    "console/app.py:MissionApp",
+    "console/screens/map.py:MapScreen",
+    "console/screens/mission.py:MissionScreen",
+    "console/widgets/param_editor.py:ParamEditor",
+    "console/widgets/schedule.py:ScheduleView",
+    "sim/skills/base.py:RobotSkills",
+}
+
+# Import cycles still to be broken (issue 18), as sorted module lists. May only shrink.
+KNOWN_CYCLES: list[list[str]] = [
+    ["backend.cli.ctl.session", "backend.cli.main"],
+    [
+        "console.app",
+        "console.screens.alerts",
+        "console.screens.base",
+        "console.screens.fleet",
+        "console.screens.log",
+        "console.screens.map",
+        "console.screens.mission",
+    ],
+    ["sim.fleet", "sim.skills.base"],
+]
+
+# Files allowed over ruff's limits for now (pyproject: per-file-ignores). May only shrink.
+MAX_PER_FILE_IGNORES = 80
+
+
+def import_cycles() -> list[list[str]]:
+    """Strongly connected components of the module import graph (Tarjan)."""
+    graph = grimp.build_graph(*PACKAGES, cache_dir=None)  # no cache: always the files as they are
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    cycles: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph.find_modules_directly_imported_by(v):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                cycles.append(sorted(component))
+
+    sys.setrecursionlimit(max(sys.getrecursionlimit(), 10_000))
+    for module in sorted(graph.modules):
+        if module not in index:
+            visit(module)
+    return sorted(cycles)
+
+
+def test_no_import_cycle_beyond_the_known_ones():
+    found = import_cycles()
+    new = [c for c in found if c not in KNOWN_CYCLES]
+    gone = [c for c in KNOWN_CYCLES if c not in found]
+    assert not new, f"new import cycle(s): {new}"
+    assert not gone, f"cycle(s) broken: remove them from KNOWN_CYCLES: {gone}"
+
+
+def test_the_cycle_finder_sees_a_cycle(tmp_path, monkeypatch):
+    pkg = tmp_path / "cyc"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("from cyc import b\n")
+    (pkg / "b.py").write_text("def f():\n    from cyc import a\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setattr(sys.modules[__name__], "PACKAGES", ("cyc",))
+    assert import_cycles() == [["cyc.a", "cyc.b"]]
+
+
+def packages() -> list[str]:
+    out = []
+    for top in PACKAGES:
+        for init in sorted((ROOT / top).rglob("__init__.py")):
+            out.append(".".join(init.parent.relative_to(ROOT).parts))
+    return out
+
+
+@pytest.mark.parametrize("package", packages())
+def test_each_package_imports_alone(package):
+    code = f"import pkgutil, importlib, {package} as p\n" + (
+        "for m in pkgutil.iter_modules(p.__path__, p.__name__ + '.'):\n"
+        "    if not m.name.endswith('__main__'): importlib.import_module(m.name)\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr[-2000:]
+
+
+def large_classes() -> dict[str, int]:
+    out = {}
+    for top in PACKAGES:
+        for f in sorted((ROOT / top).rglob("*.py")):
+            tree = ast.parse(f.read_text(encoding="utf-8"))
+            for node in ast.walk(tree):
+                if isinstance(node, ast.ClassDef):
+                    lines = node.end_lineno - node.lineno + 1
+                    if lines > MAX_CLASS_LINES:
+                        out[f"{f.relative_to(ROOT)}:{node.name}"] = lines
+    return out
+
+
+def test_no_class_over_500_lines_beyond_the_known_ones():
+    found = large_classes()
+    new = {k: v for k, v in found.items() if k not in KNOWN_LARGE_CLASSES}
+    gone = KNOWN_LARGE_CLASSES - set(found)
+    assert not new, f"classes over {MAX_CLASS_LINES} lines: {new}"
+    assert not gone, f"now under the limit: remove from KNOWN_LARGE_CLASSES: {sorted(gone)}"
+
+
+def test_ruff_exceptions_only_shrink():
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    lint = config["tool"]["ruff"]["lint"]
+    assert lint["mccabe"]["max-complexity"] == 15
+    assert "E501" not in lint.get("ignore", []) and "C90" in lint["select"]
+    entries = sum(len(v) for v in lint.get("per-file-ignores", {}).values())
+    assert entries <= MAX_PER_FILE_IGNORES, "per-file ignores grew: fix the code instead"
+
+
+def test_ruff_format_and_lint_pass():
+    ruff = Path(sys.executable).with_name("ruff")
+    fmt = subprocess.run(
+        [str(ruff), "format", "--check", "."], cwd=ROOT, capture_output=True, text=True
+    )
+    assert fmt.returncode == 0, fmt.stdout + fmt.stderr
+    lint = subprocess.run([str(ruff), "check", "."], cwd=ROOT, capture_output=True, text=True)
+    assert lint.returncode == 0, lint.stdout + lint.stderr
