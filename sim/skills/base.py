@@ -10,16 +10,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from backend.agent import SkillContext, SkillFailed, Success
 from sim.pathing import ROCK, SLOW, Follower, lawnmower
+from sim.skills.host import SkillHost
 from sim.world import SimError, SimRobot, Stone, _fmt
-
-if TYPE_CHECKING:
-    from sim.fleet import SimFleet
 
 CLIMB_RATE = 1.0  # m/s, drone
 NEAR_TARGET = 5.0  # extra metres around a search radius that count as "at the target"
@@ -51,9 +49,9 @@ def _pct(x: float) -> str:
 class RobotSkills:
     """The handlers of one simulated robot."""
 
-    def __init__(self, fleet: SimFleet, robot: SimRobot):
-        self.fleet = fleet
-        self.world = fleet.world
+    def __init__(self, host: SkillHost, robot: SimRobot):
+        self.host = host
+        self.world = host.world
         self.robot = robot
 
     # ------------------------------------------------------------ plumbing
@@ -78,14 +76,14 @@ class RobotSkills:
 
     @property
     def dt(self) -> float:
-        return self.fleet.dt
+        return self.host.dt
 
     async def tick(self, ctx: SkillContext, dt: float | None = None) -> float:
         """Let `dt` sim seconds pass (pause/stop aware)."""
         dt = self.dt if dt is None else dt
         await ctx.sleep(dt)
         self.robot.sim_seconds += dt
-        self.fleet.robot_seconds += dt
+        self.host.robot_seconds += dt
         return dt
 
     def fail(self, reason: str) -> SkillFailed:
@@ -241,7 +239,7 @@ class RobotSkills:
         self.world.reveal(r, sense)
         if discover:
             for name in self.world.discover(r, sense):
-                self.fleet.note(r, f"found {name}")
+                self.host.note(r, f"found {name}")
 
     def check_speed(self, speed: float) -> float:
         m = self.robot.model
@@ -357,7 +355,7 @@ class RobotSkills:
         reason_low = ""
         w.reveal(r, rng)
         for name in w.discover(r, rng):
-            self.fleet.note(r, f"found {name}")
+            self.host.note(r, f"found {name}")
         for wp in lanes:
             if frac() >= 0.995 or out_of_time():
                 break
@@ -404,7 +402,7 @@ class RobotSkills:
                 f"stopped exploring: {summary}; {r.name} needs its remaining {_pct(r.battery)} battery "
                 "to fly back to the lander"
             )
-        self.fleet.note(r, summary)
+        self.host.note(r, summary)
         ctx.progress(1.0, summary, eta_s=0.0)
 
     # ------------------------------------------------------------ science
@@ -451,7 +449,7 @@ class RobotSkills:
                 w.log(f"{r.name} imaged {rss.name}: top stone score {rss.max_score:g}")
             r.knowledge.rss[rss.name] = info
             w.tell_ground(r, "rss", rss.name, info)
-        self.fleet.note(r, msg)
+        self.host.note(r, msg)
         ctx.progress(1.0, msg, eta_s=0.0)
         return Success(msg)
 
@@ -604,7 +602,7 @@ class RobotSkills:
             answer: dict[str, Any] | None = None
             waited = 0.0
             while True:
-                answer = await self.fleet.ask(
+                answer = await self.host.ask(
                     r, other.name, "stone", {"x": tx, "y": ty, "radius": search_radius + rss.radius}
                 )
                 if answer is not None and answer.get("state") == "identified":
@@ -639,7 +637,7 @@ class RobotSkills:
             stone = self._identify(rss.name, tx, ty, min_score, (r.name,))
             how = "alone (only a low-score stone without LRU1 and LRU2 together)"
         msg = f"identified {stone.id} at {_fmt(stone.x, stone.y)}, score {stone.score:g}, {how}"
-        self.fleet.note(r, msg)
+        self.host.note(r, msg)
         ctx.progress(1.0, msg, eta_s=0.0)
         return Success(msg)
 
@@ -688,7 +686,7 @@ class RobotSkills:
             )
             for other in order:
                 asked.append(other.name)
-                answer = await self.fleet.ask(
+                answer = await self.host.ask(
                     r, other.name, "stone", {"x": tx, "y": ty, "radius": radius}
                 )
                 if answer is not None and answer.get("state") in ("identified", "ground"):
@@ -732,9 +730,9 @@ class RobotSkills:
         w.log(f"{r.name} picked {stone.id} (score {stone.score:g})")
         for other in stone.identified_by:
             if other != r.name:
-                await self.fleet.tell(r, other, "stone", stone.public())
+                await self.host.tell(r, other, "stone", stone.public())
         msg = f"picked {stone.id} (score {stone.score:g}); carrying {len(r.stones)}/{cap}"
-        self.fleet.note(r, msg)
+        self.host.note(r, msg)
         ctx.progress(1.0, msg, eta_s=0.0)
 
     async def drop_stone(
@@ -785,10 +783,10 @@ class RobotSkills:
             self._learn_stone(stone.public())
             for other in stone.identified_by:
                 if other != r.name:
-                    await self.fleet.tell(r, other, "stone", stone.public())
+                    await self.host.tell(r, other, "stone", stone.public())
             msg = f"put {sid} down at {_fmt(stone.x, stone.y)}"
             w.log(f"{r.name} {msg}")
-        self.fleet.note(r, msg)
+        self.host.note(r, msg)
         ctx.progress(1.0, msg, eta_s=0.0)
 
     # ------------------------------------------------------------ payload boxes
@@ -801,7 +799,7 @@ class RobotSkills:
         w.tell_ground(r, "box", name, info)
         for other in sorted(w.robots):
             if other != r.name:
-                await self.fleet.tell(r, other, "box", info)
+                await self.host.tell(r, other, "box", info)
 
     async def _take_box(
         self, ctx: SkillContext, box: str, seconds: float, frac0: float = 0.0, frac1: float = 1.0
@@ -825,7 +823,7 @@ class RobotSkills:
                 )
             shelf = None
             for lander in landers:
-                shelf = await self.fleet.ask(r, lander.name, "shelf", {})
+                shelf = await self.host.ask(r, lander.name, "shelf", {})
                 if shelf is not None:
                     break
             slots = (shelf or {}).get("slots")
@@ -859,7 +857,7 @@ class RobotSkills:
                 for other in sorted(w.robots):
                     if other == r.name:
                         continue
-                    answer = await self.fleet.ask(r, other, "box", {"box": box})
+                    answer = await self.host.ask(r, other, "box", {"box": box})
                     if answer is not None:
                         r.knowledge.boxes[box] = dict(answer)
                         info = answer
@@ -906,7 +904,7 @@ class RobotSkills:
             raise self.fail(f"{self.robot.name} has no arm to carry payload boxes")
         await self._take_box(ctx, box, 120.0)
         msg = f"carrying {box}"
-        self.fleet.note(self.robot, f"picked {box}")
+        self.host.note(self.robot, f"picked {box}")
         ctx.progress(1.0, msg, eta_s=0.0)
 
     def _put_box(self, box: str, gx: float, gy: float) -> str:
@@ -945,7 +943,7 @@ class RobotSkills:
         msg = self._put_box(box, gx, gy)
         self.world.log(f"{r.name} {msg}")
         await self._box_moved(box)
-        self.fleet.note(r, msg)
+        self.host.note(r, msg)
         ctx.progress(1.0, msg, eta_s=0.0)
 
     async def deploy_wifi_box(
@@ -986,7 +984,7 @@ class RobotSkills:
             msg = f"{box} on at {_fmt(b.x, b.y)}, but no covered spot reaches it: coverage unchanged (place it inside coverage)"
         w.log(f"{r.name}: {msg}")
         await self._box_moved(box)
-        self.fleet.note(r, msg)
+        self.host.note(r, msg)
         ctx.progress(1.0, msg, eta_s=0.0)
 
     # ------------------------------------------------------------ energy
@@ -1039,7 +1037,7 @@ class RobotSkills:
                 eta_s=(target_level - r.battery) / rate,
             )
         msg = f"battery {_pct(r.battery)}"
-        self.fleet.note(r, f"recharged: {msg}")
+        self.host.note(r, f"recharged: {msg}")
         ctx.progress(1.0, msg, eta_s=0.0)
 
     # ------------------------------------------------------------ drone
@@ -1172,7 +1170,7 @@ class RobotSkills:
         else:
             await self._descend(ctx)
             msg = f"landed at {_fmt(r.x, r.y)}"
-        self.fleet.note(r, msg)
+        self.host.note(r, msg)
         ctx.progress(1.0, msg, eta_s=0.0)
 
     # ------------------------------------------------------------ lander
@@ -1213,7 +1211,7 @@ class RobotSkills:
         w.log(f"{r.name} shelved {box} on slot {slot}")
         for other in sorted(w.robots.values(), key=lambda o: o.name):
             if other.has("manipulator"):
-                await self.fleet.tell(r, other.name, "box", b.public())
+                await self.host.tell(r, other.name, "box", b.public())
         msg = f"{box} on slot {slot}"
-        self.fleet.note(r, msg)
+        self.host.note(r, msg)
         ctx.progress(1.0, msg, eta_s=0.0)
