@@ -27,7 +27,7 @@ from backend.core.library import Library
 from backend.core.model import Mission, Pose
 from backend.protocol import mapfeed as mf
 from backend.transport import QueryFailed
-from sim.skills.base import RobotSkills
+from sim.skills.registry import RobotSkills
 from sim.world import SimError, SimRobot, World
 from sim.worldfile import WorldFile
 

@@ -17,7 +17,7 @@ from backend.core.model import Pose, Position
 from backend.files.diagnostics import FileProblems
 from backend.protocol import mapfeed as mf
 from sim.pathing import ROCK, Follower, lawnmower, segment_cells
-from sim.skills.base import RobotSkills
+from sim.skills.registry import RobotSkills
 from sim.world import World
 from sim.worldfile import load_world, parse_world
 

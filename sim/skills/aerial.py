@@ -1,0 +1,97 @@
+"""takeoff, fly_to and land: the drone's flight."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from backend.agent import SkillContext
+from sim.skills.base import CLIMB_RATE, SkillBase, _pct, _xy, _yaw
+from sim.world import _fmt
+
+
+class AerialSkills(SkillBase):
+    """takeoff, fly_to and land handlers."""
+
+    def _need_drone(self, skill: str) -> None:
+        if self.robot.kind != "drone":
+            raise self.fail(f"{self.robot.name} cannot {skill}: it is not a drone")
+
+    async def takeoff(self, ctx: SkillContext, altitude: float = 5.0, **_: Any) -> None:
+        self._need_drone("take off")
+        r = self.robot
+        if not r.airborne and r.usable < 0.05:
+            raise self.fail(
+                f"battery {_pct(r.battery)} is too low to take off (reserve {_pct(r.model.reserve)}); recharge first"
+            )
+        r.airborne = True
+        await self._climb(ctx, float(altitude))
+        ctx.progress(1.0, f"hovering at {r.z:.0f} m", eta_s=0.0)
+
+    async def fly_to(
+        self,
+        ctx: SkillContext,
+        goal: Any = None,
+        altitude: float = 5.0,
+        speed: float = 2.0,
+        **_: Any,
+    ) -> None:
+        self._need_drone("fly")
+        r, w = self.robot, self.world
+        if not r.airborne:
+            raise self.fail(f"{r.name} is on the ground: take off first")
+        gx, gy = _xy(goal)
+        speed = self.check_speed(speed)
+        d = self.dist(gx, gy)
+        back = w.dist_to_lander(gx, gy)
+        need_s = d / speed + abs(altitude - r.z) / CLIMB_RATE + back / r.model.speed + 40.0
+        need = need_s / r.model.flight_s_per_battery
+        if need > r.usable:
+            reach = r.usable * r.model.flight_s_per_battery * speed
+            raise self.fail(
+                f"{r.name} cannot fly {d:.0f} m to {_fmt(gx, gy)} and back to the lander ({back:.0f} m): "
+                f"needs {_pct(need)} of a battery, has {_pct(r.usable)} above the {_pct(r.model.reserve)} reserve "
+                f"(about {reach:.0f} m); refused before the flight: land on the lander pad to recharge"
+            )
+        if abs(altitude - r.z) > 0.1:
+            await self._climb(ctx, float(altitude), frac1=0.05)
+
+        def empty(done: float, total: float) -> str:
+            return (
+                f"battery at the reserve after {done:.0f} m of {total:.0f} m: "
+                f"{r.name} made an emergency landing at {_fmt(r.x, r.y)}"
+            )
+
+        await self.move(
+            ctx,
+            (gx, gy),
+            speed,
+            tolerance=0.3,
+            what=f"flying to {_fmt(gx, gy)}",
+            frac0=0.05,
+            sense=max(r.model.nav_range, self.sensor_range() * 0.5),
+            empty=empty,
+        )
+        yaw = _yaw(goal)
+        if yaw is not None:
+            r.yaw = yaw
+        ctx.progress(1.0, f"hovering at {_fmt(r.x, r.y)}", eta_s=0.0)
+
+    async def land(self, ctx: SkillContext, where: str = "lander_pad", **_: Any) -> None:
+        self._need_drone("land")
+        r, w = self.robot, self.world
+        if not r.airborne:
+            if where == "here" or w.at_lander(r):
+                ctx.progress(1.0, "already on the ground", eta_s=0.0)
+                return
+            raise self.fail(
+                f"{r.name} is on the ground {w.dist_to_lander(r.x, r.y):.0f} m from the lander pad: take off first"
+            )
+        if where == "lander_pad":
+            await self._fly_home(ctx, frac1=0.7)
+            await self._descend(ctx, frac0=0.7)
+            msg = f"landed on the lander pad: charging from {_pct(r.battery)}"
+        else:
+            await self._descend(ctx)
+            msg = f"landed at {_fmt(r.x, r.y)}"
+        self.host.note(r, msg)
+        ctx.progress(1.0, msg, eta_s=0.0)

@@ -1,0 +1,401 @@
+"""pick_stone, drop_stone, payload boxes, the Wi-Fi box and the lander's load_box."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from backend.agent import SkillContext
+from sim.skills.base import SkillBase, _pct, _xy
+from sim.world import _fmt
+
+APPROACH = 8.0  # a stone/box this close is approached within the skill
+
+
+class ManipulationSkills(SkillBase):
+    """pick_stone, drop_stone, payload boxes, the Wi-Fi box and the lander's load_box. handlers."""
+
+    def _capacity(self) -> int:
+        r = self.robot
+        if r.box is not None and self.world.boxes[r.box].kind == "sample":
+            return r.model.carry_stones_in_box
+        return r.model.carry_stones
+
+    async def pick_stone(
+        self, ctx: SkillContext, target: Any = None, region: str | None = None, **_: Any
+    ) -> None:
+        r, w = self.robot, self.world
+        if not r.has("manipulator"):
+            raise self.fail(f"{r.name} has no arm to pick stones")
+        tx, ty = _xy(target)
+        cap = self._capacity()
+        if len(r.stones) >= cap:
+            raise self.fail(
+                f"{r.name} already carries {len(r.stones)} stone(s) (capacity {cap}"
+                f"{'' if r.box else '; carry a sample box for more'}): drop first"
+            )
+        radius = 6.0
+
+        def known() -> dict[str, Any] | None:
+            cands = [
+                s
+                for s in r.knowledge.stones.values()
+                if s.get("state") in ("identified", "ground")
+                and math.hypot(s["x"] - tx, s["y"] - ty) <= radius
+            ]
+            if region:
+                cands = [s for s in cands if s.get("rss") == region] or cands
+            return min(
+                cands,
+                key=lambda s: (-(s.get("score") or 0), math.hypot(s["x"] - tx, s["y"] - ty)),
+                default=None,
+            )
+
+        info = known()
+        asked: list[str] = []
+        if info is None:
+            order = sorted(
+                (o for o in w.robots.values() if o.name != r.name and o.kind != "static"),
+                key=lambda o: (not o.has("science_camera"), o.name),
+            )
+            for other in order:
+                asked.append(other.name)
+                answer = await self.host.ask(
+                    r, other.name, "stone", {"x": tx, "y": ty, "radius": radius}
+                )
+                if answer is not None and answer.get("state") in ("identified", "ground"):
+                    r.knowledge.stones[answer["id"]] = dict(answer)
+                    info = answer
+                    break
+        if info is None:
+            who = f" (asked {', '.join(asked)}: none knew one)" if asked else ""
+            raise self.fail(
+                f"{r.name} knows no identified stone within {radius:g} m of {_fmt(tx, ty)}{who}: identify one first"
+            )
+        stone = w.stones[info["id"]]
+        if stone.state not in ("identified", "ground"):
+            r.knowledge.stones[stone.id] = stone.public()
+            raise self.fail(
+                f"{stone.id} is no longer there ({stone.state}{' by ' + stone.holder if stone.holder else ''})"
+            )
+        d = self.dist(stone.x, stone.y)
+        if d > APPROACH:
+            raise self.fail(
+                f"{stone.id} lies {d:.0f} m away at {_fmt(stone.x, stone.y)}: drive there first (within {APPROACH:g} m)"
+            )
+        self.rest_eta = 90.0
+        try:
+            await self.move(
+                ctx,
+                (stone.x, stone.y),
+                min(0.3, r.model.max_speed),
+                tolerance=1.2,
+                what=f"approaching {stone.id}",
+                frac1=0.1,
+            )
+        finally:
+            self.rest_eta = 0.0
+        await self.work(ctx, 90.0, f"picking {stone.id}", load=2.0, frac0=0.1)
+        if stone.state not in ("identified", "ground"):
+            raise self.fail(f"{stone.id} was taken meanwhile by {stone.holder}")
+        stone.state, stone.holder = "carried", r.name
+        r.stones.append(stone.id)
+        self._learn_stone(stone.public())
+        w.log(f"{r.name} picked {stone.id} (score {stone.score:g})")
+        for other in stone.identified_by:
+            if other != r.name:
+                await self.host.tell(r, other, "stone", stone.public())
+        msg = f"picked {stone.id} (score {stone.score:g}); carrying {len(r.stones)}/{cap}"
+        self.host.note(r, msg)
+        ctx.progress(1.0, msg, eta_s=0.0)
+
+    async def drop_stone(
+        self, ctx: SkillContext, into: str = "lander_sample_box", **_: Any
+    ) -> None:
+        r, w = self.robot, self.world
+        if not r.has("manipulator"):
+            raise self.fail(f"{r.name} has no arm")
+        if not r.stones:
+            raise self.fail(f"{r.name} carries no stone")
+        if into == "lander_sample_box":
+            if not w.at_lander(r, 3.0):
+                d = w.dist_to_lander(r.x, r.y)
+                raise self.fail(
+                    f"{r.name} is {d:.0f} m from the lander: drive there first (within {w.spec.lander.pad_radius + 3:g} m)"
+                )
+            await self.work(ctx, 60.0, "dropping into the lander's sample box", load=1.5)
+            gained = 0.0
+            for sid in list(r.stones):
+                stone = w.stones[sid]
+                stone.state, stone.holder = "delivered", None
+                w.score = round(w.score + (stone.score or 0.0), 6)
+                gained += stone.score or 0.0
+                w.delivered.append(
+                    {
+                        "stone": sid,
+                        "rss": stone.rss,
+                        "score": stone.score or 0.0,
+                        "by": r.name,
+                        "sim_time": round(w.clock, 1),
+                    }
+                )
+                self._learn_stone(stone.public())
+                w.log(f"{r.name} delivered {sid}: +{stone.score:g}, score {w.score:g}")
+            n = len(r.stones)
+            r.stones.clear()
+            msg = f"delivered {n} stone(s): +{gained:g}; score {w.score:g}"
+        else:
+            await self.work(ctx, 60.0, "putting the stone down", load=1.5)
+            sid = r.stones.pop()
+            stone = w.stones[sid]
+            stone.state, stone.holder, stone.x, stone.y = (
+                "ground",
+                None,
+                round(r.x, 2),
+                round(r.y, 2),
+            )
+            self._learn_stone(stone.public())
+            for other in stone.identified_by:
+                if other != r.name:
+                    await self.host.tell(r, other, "stone", stone.public())
+            msg = f"put {sid} down at {_fmt(stone.x, stone.y)}"
+            w.log(f"{r.name} {msg}")
+        self.host.note(r, msg)
+        ctx.progress(1.0, msg, eta_s=0.0)
+
+    async def _box_moved(self, name: str) -> None:
+        """LRU2 tells the others where a box is now (their world models)."""
+        r, w = self.robot, self.world
+        info = w.boxes[name].public()
+        r.knowledge.boxes[name] = dict(info)
+        w.tell_ground(r, "box", name, info)
+        for other in sorted(w.robots):
+            if other != r.name:
+                await self.host.tell(r, other, "box", info)
+
+    async def _take_box(
+        self, ctx: SkillContext, box: str, seconds: float, frac0: float = 0.0, frac1: float = 1.0
+    ) -> None:
+        r, w = self.robot, self.world
+        if box not in w.boxes:
+            raise self.fail(
+                f"there is no payload box '{box}' on this site (boxes: {', '.join(sorted(w.boxes))})"
+            )
+        if r.box is not None:
+            raise self.fail(f"{r.name} already carries {r.box}: place it first")
+        b = w.boxes[box]
+        landers = [o for o in w.robots.values() if o.type == "lander" or o.kind == "static"]
+        if b.where in ("shelf", "storage") or (
+            r.knowledge.boxes.get(box, {}).get("where") == "shelf"
+        ):
+            if not w.at_lander(r, 3.0):
+                d = w.dist_to_lander(r.x, r.y)
+                raise self.fail(
+                    f"the shelf is on the lander, {d:.0f} m away: drive there first (within {w.spec.lander.pad_radius + 3:g} m)"
+                )
+            shelf = None
+            for lander in landers:
+                shelf = await self.host.ask(r, lander.name, "shelf", {})
+                if shelf is not None:
+                    break
+            slots = (shelf or {}).get("slots")
+            if slots is not None:
+                for n, info in list(r.knowledge.boxes.items()):
+                    if info.get("where") == "shelf" and n not in slots.values():
+                        r.knowledge.boxes.pop(n)
+                for slot, n in slots.items():
+                    r.knowledge.boxes[n] = {
+                        **w.boxes[n].public(),
+                        "where": "shelf",
+                        "slot": int(slot),
+                    }
+                if box not in slots.values():
+                    listing = ", ".join(f"{s}: {n}" for s, n in sorted(slots.items())) or "empty"
+                    hint = (
+                        " (it is inside the lander: shelve it with the lander's load_box)"
+                        if b.where == "storage"
+                        else ""
+                    )
+                    raise self.fail(
+                        f"the lander says {box} is not on its shelf (shelf: {listing}){hint}"
+                    )
+            elif b.where != "shelf":
+                raise self.fail(f"{box} is not on the lander's shelf")
+        elif b.where == "carried":
+            raise self.fail(f"{box} is carried by {b.holder}")
+        else:  # on the ground
+            info = r.knowledge.boxes.get(box)
+            if info is None or info.get("where") != "ground":
+                for other in sorted(w.robots):
+                    if other == r.name:
+                        continue
+                    answer = await self.host.ask(r, other, "box", {"box": box})
+                    if answer is not None:
+                        r.knowledge.boxes[box] = dict(answer)
+                        info = answer
+                        break
+            if info is None or info.get("where") != "ground":
+                raise self.fail(
+                    f"{r.name} does not know where {box} is (nobody it can reach told it)"
+                )
+            if math.hypot(b.x - info["x"], b.y - info["y"]) > 1.0:
+                raise self.fail(
+                    f"{box} is not where {r.name} believed ({_fmt(info['x'], info['y'])})"
+                )
+            if self.dist(b.x, b.y) > APPROACH:
+                raise self.fail(
+                    f"{box} lies {self.dist(b.x, b.y):.0f} m away at {_fmt(b.x, b.y)}: drive there first"
+                )
+            self.rest_eta = seconds
+            try:
+                await self.move(
+                    ctx,
+                    (b.x, b.y),
+                    0.3,
+                    tolerance=1.2,
+                    what=f"approaching {box}",
+                    frac0=frac0,
+                    frac1=frac0,
+                )
+            finally:
+                self.rest_eta = 0.0
+        await self.work(ctx, seconds, f"picking {box}", load=2.0, frac0=frac0, frac1=frac1)
+        if b.where == "carried":
+            raise self.fail(f"{box} was taken meanwhile by {b.holder}")
+        if b.where == "shelf":
+            for lander in landers:
+                lander.knowledge.boxes.pop(box, None)
+        b.where, b.holder, b.slot, b.on = "carried", r.name, None, False
+        r.box = box
+        w.recompute_coverage()
+        w.log(f"{r.name} picked {box}")
+        await self._box_moved(box)
+
+    async def pick_payload_box(self, ctx: SkillContext, box: str = "", **_: Any) -> None:
+        if not self.robot.has("manipulator"):
+            raise self.fail(f"{self.robot.name} has no arm to carry payload boxes")
+        await self._take_box(ctx, box, 120.0)
+        msg = f"carrying {box}"
+        self.host.note(self.robot, f"picked {box}")
+        ctx.progress(1.0, msg, eta_s=0.0)
+
+    def _put_box(self, box: str, gx: float, gy: float) -> str:
+        r, w = self.robot, self.world
+        b = w.boxes[box]
+        r.box = None
+        b.holder = None
+        used = {o.slot for o in w.boxes.values() if o.where == "shelf"}
+        free = [s for s in range(1, w.spec.lander.shelf_slots + 1) if s not in used]
+        if w.dist_to_lander(gx, gy) <= w.spec.lander.pad_radius and free:
+            b.where, b.slot, b.x, b.y = "shelf", free[0], w.spec.lander.x, w.spec.lander.y
+            for lander in w.robots.values():
+                if lander.kind == "static":
+                    lander.knowledge.boxes[box] = b.public()
+            return f"put {box} back on the lander's shelf (slot {free[0]})"
+        b.where, b.slot, b.x, b.y = "ground", None, round(r.x, 2), round(r.y, 2)
+        return f"placed {box} at {_fmt(b.x, b.y)}"
+
+    async def place_payload_box(
+        self, ctx: SkillContext, box: str = "", goal: Any = None, **_: Any
+    ) -> None:
+        r = self.robot
+        if r.box != box:
+            raise self.fail(
+                f"{r.name} does not carry {box}" + (f" (it carries {r.box})" if r.box else "")
+            )
+        gx, gy = _xy(goal)
+        self.rest_eta = 60.0
+        try:
+            await self.move(
+                ctx, (gx, gy), r.model.speed, tolerance=1.0, what=f"carrying {box}", frac1=0.7
+            )
+        finally:
+            self.rest_eta = 0.0
+        await self.work(ctx, 60.0, f"placing {box}", load=2.0, frac0=0.7)
+        msg = self._put_box(box, gx, gy)
+        self.world.log(f"{r.name} {msg}")
+        await self._box_moved(box)
+        self.host.note(r, msg)
+        ctx.progress(1.0, msg, eta_s=0.0)
+
+    async def deploy_wifi_box(
+        self, ctx: SkillContext, box: str = "wifi_box_1", goal: Any = None, **_: Any
+    ) -> None:
+        r, w = self.robot, self.world
+        if not r.has("manipulator"):
+            raise self.fail(f"{r.name} has no arm to carry payload boxes")
+        if box not in w.boxes or w.boxes[box].kind != "wifi":
+            raise self.fail(f"{box} is not a Wi-Fi box")
+        gx, gy = _xy(goal)
+        if r.box != box:
+            await self._take_box(ctx, box, 60.0, frac1=0.2)
+        self.rest_eta = 90.0
+        try:
+            await self.move(
+                ctx,
+                (gx, gy),
+                r.model.speed,
+                tolerance=1.0,
+                what=f"carrying {box}",
+                frac0=0.2,
+                frac1=0.7,
+            )
+        finally:
+            self.rest_eta = 0.0
+        await self.work(ctx, 60.0, f"placing {box}", load=2.0, frac0=0.7, frac1=0.9)
+        self._put_box(box, gx, gy)
+        b = w.boxes[box]
+        before = float((w.coverage > 0).mean())
+        await self.work(ctx, 30.0, f"switching {box} on", frac0=0.9)
+        b.on = b.where == "ground"
+        w.recompute_coverage()
+        after = float((w.coverage > 0).mean())
+        if after > before + 1e-9:
+            msg = f"{box} on at {_fmt(b.x, b.y)}: coverage {_pct(before)} -> {_pct(after)} of the site"
+        else:
+            msg = f"{box} on at {_fmt(b.x, b.y)}, but no covered spot reaches it: coverage unchanged (place it inside coverage)"
+        w.log(f"{r.name}: {msg}")
+        await self._box_moved(box)
+        self.host.note(r, msg)
+        ctx.progress(1.0, msg, eta_s=0.0)
+
+    async def load_box(self, ctx: SkillContext, box: str = "", slot: int = 1, **_: Any) -> None:
+        r, w = self.robot, self.world
+        if r.kind != "static":
+            raise self.fail(f"{r.name} has no shelf")
+        if box not in w.boxes:
+            raise self.fail(
+                f"there is no payload box '{box}' (boxes: {', '.join(sorted(w.boxes))})"
+            )
+        b = w.boxes[box]
+        slot = int(slot)
+        if not 1 <= slot <= w.spec.lander.shelf_slots:
+            raise self.fail(f"the shelf has slots 1..{w.spec.lander.shelf_slots}")
+        holder = next((o for o in w.boxes.values() if o.where == "shelf" and o.slot == slot), None)
+        if holder is not None and holder.name != box:
+            raise self.fail(f"slot {slot} holds {holder.name}: choose another slot")
+        if b.where not in ("storage", "shelf"):
+            where = (
+                f"carried by {b.holder}"
+                if b.where == "carried"
+                else f"on the ground at {_fmt(b.x, b.y)}"
+            )
+            raise self.fail(f"{box} is not in the lander ({where})")
+        if b.where == "shelf" and b.slot == slot:
+            ctx.progress(1.0, f"{box} is on slot {slot} already", eta_s=0.0)
+            return
+        await self.work(ctx, 60.0, f"loading {box} onto slot {slot}")
+        if b.where not in ("storage", "shelf") or any(
+            o.where == "shelf" and o.slot == slot and o.name != box for o in w.boxes.values()
+        ):
+            raise self.fail(f"the shelf changed meanwhile: {box} not loaded")
+        b.where, b.slot = "shelf", slot
+        r.knowledge.boxes[box] = b.public()
+        w.tell_ground(r, "box", box, b.public())
+        w.log(f"{r.name} shelved {box} on slot {slot}")
+        for other in sorted(w.robots.values(), key=lambda o: o.name):
+            if other.has("manipulator"):
+                await self.host.tell(r, other.name, "box", b.public())
+        msg = f"{box} on slot {slot}"
+        self.host.note(r, msg)
+        ctx.progress(1.0, msg, eta_s=0.0)

@@ -1,0 +1,63 @@
+"""recharge: back to the lander and charge."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from backend.agent import SkillContext
+from sim.skills.base import SkillBase, _pct
+
+
+class PowerSkills(SkillBase):
+    """recharge handlers."""
+
+    async def recharge(self, ctx: SkillContext, target_level: float = 0.95, **_: Any) -> None:
+        r, w = self.robot, self.world
+        self.need_kind("rover", "drone", skill="recharge")
+        target_level = min(1.0, max(0.0, float(target_level)))
+        if r.kind == "drone":
+            if not w.docked(r):
+                if not r.airborne:
+                    raise self.fail(
+                        f"{r.name} is on the ground {w.dist_to_lander(r.x, r.y):.0f} m from the lander pad: take off first"
+                    )
+                await self._fly_home(ctx, frac1=0.3)
+                await self._descend(ctx, frac0=0.3, frac1=0.35)
+        elif not w.at_lander(r):
+            d = w.dist_to_lander(r.x, r.y)
+            lx, ly = w.spec.lander.x, w.spec.lander.y
+            k = max(0.0, (w.spec.lander.pad_radius - 1.5) / d)
+            goal = (lx + (r.x - lx) * k, ly + (r.y - ly) * k)
+            free = w.nearest_free(*goal, max_r=w.spec.lander.pad_radius) or goal
+
+            def empty(done: float, total: float) -> str:
+                left = w.dist_to_lander(r.x, r.y)
+                return (
+                    f"battery empty {left:.0f} m from the lander (drove {done:.0f} of {total:.0f} m): "
+                    f"{r.name} is stranded"
+                )
+
+            await self.move(
+                ctx,
+                free,
+                r.model.speed,
+                tolerance=0.5,
+                allow_reserve=True,
+                what="returning to the lander",
+                frac1=0.3,
+                empty=empty,
+            )
+        start = r.battery
+        while r.battery < target_level - 1e-9:
+            dt = await self.tick(ctx)
+            w.charge(r, dt, up_to=target_level)
+            span = max(target_level - start, 1e-9)
+            rate = r.model.charge_per_minute / 60.0
+            ctx.progress(
+                0.35 + 0.65 * (r.battery - start) / span,
+                f"charging: {_pct(r.battery)}",
+                eta_s=(target_level - r.battery) / rate,
+            )
+        msg = f"battery {_pct(r.battery)}"
+        self.host.note(r, f"recharged: {msg}")
+        ctx.progress(1.0, msg, eta_s=0.0)
