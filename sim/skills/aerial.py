@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from backend.agent import SkillContext
-from sim.skills.base import CLIMB_RATE, SkillBase, _pct, _xy, _yaw
+from sim.skills.base import CLIMB_RATE, SkillBase, pct, xy, yaw_of
 from sim.world import _fmt
 
 
@@ -21,10 +21,10 @@ class AerialSkills(SkillBase):
         r = self.robot
         if not r.airborne and r.usable < 0.05:
             raise self.fail(
-                f"battery {_pct(r.battery)} is too low to take off (reserve {_pct(r.model.reserve)}); recharge first"
+                f"battery {pct(r.battery)} is too low to take off (reserve {pct(r.model.reserve)}); recharge first"
             )
         r.airborne = True
-        await self._climb(ctx, float(altitude))
+        await self.climb(ctx, float(altitude))
         ctx.progress(1.0, f"hovering at {r.z:.0f} m", eta_s=0.0)
 
     async def fly_to(
@@ -39,7 +39,7 @@ class AerialSkills(SkillBase):
         r, w = self.robot, self.world
         if not r.airborne:
             raise self.fail(f"{r.name} is on the ground: take off first")
-        gx, gy = _xy(goal)
+        gx, gy = xy(goal)
         speed = self.check_speed(speed)
         d = self.dist(gx, gy)
         back = w.dist_to_lander(gx, gy)
@@ -49,11 +49,11 @@ class AerialSkills(SkillBase):
             reach = r.usable * r.model.flight_s_per_battery * speed
             raise self.fail(
                 f"{r.name} cannot fly {d:.0f} m to {_fmt(gx, gy)} and back to the lander ({back:.0f} m): "
-                f"needs {_pct(need)} of a battery, has {_pct(r.usable)} above the {_pct(r.model.reserve)} reserve "
+                f"needs {pct(need)} of a battery, has {pct(r.usable)} above the {pct(r.model.reserve)} reserve "
                 f"(about {reach:.0f} m); refused before the flight: land on the lander pad to recharge"
             )
         if abs(altitude - r.z) > 0.1:
-            await self._climb(ctx, float(altitude), frac1=0.05)
+            await self.climb(ctx, float(altitude), frac1=0.05)
 
         def empty(done: float, total: float) -> str:
             return (
@@ -71,7 +71,7 @@ class AerialSkills(SkillBase):
             sense=max(r.model.nav_range, self.sensor_range() * 0.5),
             empty=empty,
         )
-        yaw = _yaw(goal)
+        yaw = yaw_of(goal)
         if yaw is not None:
             r.yaw = yaw
         ctx.progress(1.0, f"hovering at {_fmt(r.x, r.y)}", eta_s=0.0)
@@ -87,11 +87,11 @@ class AerialSkills(SkillBase):
                 f"{r.name} is on the ground {w.dist_to_lander(r.x, r.y):.0f} m from the lander pad: take off first"
             )
         if where == "lander_pad":
-            await self._fly_home(ctx, frac1=0.7)
-            await self._descend(ctx, frac0=0.7)
-            msg = f"landed on the lander pad: charging from {_pct(r.battery)}"
+            await self.fly_home(ctx, frac1=0.7)
+            await self.descend(ctx, frac0=0.7)
+            msg = f"landed on the lander pad: charging from {pct(r.battery)}"
         else:
-            await self._descend(ctx)
+            await self.descend(ctx)
             msg = f"landed at {_fmt(r.x, r.y)}"
         self.host.note(r, msg)
         ctx.progress(1.0, msg, eta_s=0.0)

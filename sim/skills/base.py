@@ -1,16 +1,19 @@
-"""Skill handlers of the simulated robots (every skill of missions/libraries/mars.yaml).
+"""The plumbing the skill handlers of a simulated robot share (sim/skills/<family>.py).
 
 Each handler steps its robot through the world in small sim-time steps
 (`ctx.sleep(dt)`: honours pause and stop, scaled by the sim speed), drains the
 battery with distance and work, reports progress with an ETA in robot (sim)
-seconds, and fails with a sentence saying what happened and what to do.
+seconds, and fails with a sentence saying what happened and what to do. Here:
+time (`tick`), stationary work, moving along a planned path and climbing,
+energy, failing, and the positions and percentages of parameters and messages.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, NoReturn
 
 from backend.agent import SkillContext, SkillFailed
 from sim.pathing import SLOW, Follower
@@ -20,7 +23,7 @@ from sim.world import SimError, SimRobot, _fmt
 CLIMB_RATE = 1.0  # m/s, drone
 
 
-def _xy(value: Any) -> tuple[float, float]:
+def xy(value: Any) -> tuple[float, float]:
     """(x, y) of a Pose, Position or mapping."""
     if value is None:
         raise SkillFailed("a position parameter is missing")
@@ -29,26 +32,45 @@ def _xy(value: Any) -> tuple[float, float]:
     return float(value.x), float(value.y)
 
 
-def _yaw(value: Any) -> float | None:
+def yaw_of(value: Any) -> float | None:
     if isinstance(value, dict):
         return float(value["yaw"]) if "yaw" in value else None
     return float(getattr(value, "yaw", 0.0)) if hasattr(value, "yaw") else None
 
 
-def _pct(x: float) -> str:
+def pct(x: float) -> str:
     return f"{x * 100:.0f}%"
+
+
+@dataclass
+class Leg:
+    """One `move`: the path, what it may spend, what it sees and how it reports."""
+
+    path: Follower
+    floor: float  # battery it may not use (the reserve, unless on the way to the lander)
+    sense: float  # metres around the robot mapped on the way
+    discover: bool  # look for regions ideal for sampling stones on the way
+    empty: Callable[[float, float], str] | None  # (done, total) m -> why the battery ran out
+    what: str
+    frac0: float
+    frac1: float
 
 
 class SkillBase:
     """The plumbing shared by the skill handlers of one simulated robot."""
+
+    rest_eta = 0.0  # sim seconds of the skill after the current phase (for the ETA)
 
     def __init__(self, host: SkillHost, robot: SimRobot):
         self.host = host
         self.world = host.world
         self.robot = robot
 
+    # ------------------------------------------------------------ time, energy, failing
+
     @property
     def dt(self) -> float:
+        """Sim seconds of one step."""
         return self.host.dt
 
     async def tick(self, ctx: SkillContext, dt: float | None = None) -> float:
@@ -88,14 +110,11 @@ class SkillBase:
         load: float = 1.0,
         frac0: float = 0.0,
         frac1: float = 1.0,
-        until: Callable[[], bool] | None = None,
     ) -> None:
-        """Stationary work for `seconds` (sim), progress frac0..frac1. `until()` ends it early."""
+        """Stationary work for `seconds` (sim), progress frac0..frac1."""
         r = self.robot
         done = 0.0
         while done < seconds - 1e-9:
-            if until is not None and until():
-                return
             dt = min(self.dt, seconds - done)
             await self.tick(ctx, dt)
             done += dt
@@ -103,14 +122,10 @@ class SkillBase:
             if r.usable <= 0.0:
                 self.emergency_landing()
                 raise self.fail(
-                    f"battery empty while {what} ({_pct(r.battery)} left); recharge at the lander"
+                    f"battery empty while {what} ({pct(r.battery)} left); recharge at the lander"
                 )
             frac = frac0 + (frac1 - frac0) * done / seconds
             ctx.progress(frac, what, eta_s=(seconds - done) + self.rest_eta)
-        if until is not None:
-            until()
-
-    rest_eta = 0.0  # sim seconds of the skill after the current phase (for the ETA)
 
     def emergency_landing(self) -> None:
         r = self.robot
@@ -120,6 +135,8 @@ class SkillBase:
             self.world.log(
                 f"{r.name} made an emergency landing at {_fmt(r.x, r.y)}: battery at the reserve"
             )
+
+    # ------------------------------------------------------------ moving
 
     async def move(
         self,
@@ -140,77 +157,131 @@ class SkillBase:
         budget: Callable[[], float] | None = None,
     ) -> float:
         """Drive (rover, along the terrain) or fly (drone, straight) to `goal`.
-        Returns metres moved. Raises SkillFailed when the battery runs out."""
-        r, w = self.robot, self.world
+        Returns metres moved. Raises SkillFailed when the battery runs out.
+
+        `stop_when()` ends the leg early, `budget()` caps a step's sim seconds,
+        `report()` replaces the progress report, `empty(done, total)` says why
+        the battery ran out."""
         if self.dist(*goal) <= tolerance:
             return 0.0
-        try:
-            route = w.plan_route(r, goal)
-        except SimError as e:
-            raise self.fail(str(e)) from None
-        f = Follower(route)
-        total = f.total
-        floor = 0.0 if allow_reserve else r.model.reserve
-        slow_factor = w.spec.terrain.slow_factor
-        sense = sense or r.model.nav_range
-        while not f.finished and f.remaining > tolerance:
+        r = self.robot
+        leg = Leg(
+            path=Follower(self._route(goal)),
+            floor=0.0 if allow_reserve else r.model.reserve,
+            sense=sense or r.model.nav_range,
+            discover=discover,
+            empty=empty,
+            what=what,
+            frac0=frac0,
+            frac1=frac1,
+        )
+        path = leg.path
+        while not path.finished and path.remaining > tolerance:
             if stop_when is not None and stop_when():
                 break
-            if r.kind == "drone":
-                v = speed
-                per_m = 0.0
-            else:
-                code = w.terrain_at(r.x, r.y)
-                v = speed * (slow_factor if code == SLOW else 1.0)
-                per_m = w.drive_energy(r, 1.0, code)
-            remaining = max(0.0, f.remaining - tolerance * 0.5)
-            # the last step of a leg takes only the time it needs
-            step = min(self.dt, remaining / max(v, 1e-6))
-            if budget is not None:  # end exactly on a time budget, whatever the step
-                step = min(step, budget())
+            v, per_m = self._pace(speed)
+            remaining = max(0.0, path.remaining - tolerance * 0.5)
+            step = self._step_time(remaining, v, budget)
             if step <= 1e-6:
                 break
             dt = await self.tick(ctx, step)
-            fixed = w.flight_energy(r, dt) if r.kind == "drone" else w.work_energy(r, dt)
-            want = min(v * dt, remaining)
-            spare = r.battery - floor
-            if want * per_m + fixed > spare:
-                # runs out during this step: go as far as the energy allows
-                if per_m > 0:
-                    can = max(0.0, (spare - fixed) / per_m)
-                else:
-                    can = want * max(0.0, spare) / fixed if fixed > 0 else want
-                moved = f.advance(min(can, want))
-                self._moved(f, moved, sense, discover)
-                r.battery = floor
-                self.emergency_landing()
-                if empty is not None:
-                    raise self.fail(empty(f.done, total))
-                raise self.fail(
-                    f"battery empty after {f.done:.0f} m of {total:.0f} m"
-                    f"{' (the reserve is kept to reach the lander)' if floor > 0 else ''}; recharge at the lander"
-                )
-            moved = f.advance(want)
-            r.battery = max(0.0, r.battery - moved * per_m - fixed)
-            self._moved(f, moved, sense, discover)
+            self._advance(leg, min(v * dt, remaining), per_m, self._upkeep(dt))
             if report is not None:
                 report()
-                continue
-            frac = frac0 + (frac1 - frac0) * (f.done / total if total > 0 else 1.0)
-            eta = f.remaining / max(v, 1e-6) + self.rest_eta
-            ctx.progress(frac, f"{what}: {f.done:.0f} of {total:.0f} m", eta_s=eta)
-        return f.done
+            else:
+                self._report_leg(ctx, leg, v)
+        return path.done
 
-    def _moved(self, f: Follower, moved: float, sense: float, discover: bool) -> None:
+    async def move_before(
+        self,
+        ctx: SkillContext,
+        rest_s: float,
+        goal: tuple[float, float],
+        speed: float,
+        **options: Any,
+    ) -> float:
+        """`move`, with `rest_s` sim seconds of the skill still to come (for the ETA)."""
+        self.rest_eta = rest_s
+        try:
+            return await self.move(ctx, goal, speed, **options)
+        finally:
+            self.rest_eta = 0.0
+
+    def _route(self, goal: tuple[float, float]) -> list[tuple[float, float]]:
+        try:
+            return self.world.plan_route(self.robot, goal)
+        except SimError as e:
+            raise self.fail(str(e)) from None
+
+    def _pace(self, speed: float) -> tuple[float, float]:
+        """Speed here (m/s) and energy per metre: a rover slows on slow ground and pays
+        by the metre; a drone flies at `speed` and pays by the second (`_upkeep`)."""
+        r, w = self.robot, self.world
+        if r.kind == "drone":
+            return speed, 0.0
+        code = w.terrain_at(r.x, r.y)
+        v = speed * (w.spec.terrain.slow_factor if code == SLOW else 1.0)
+        return v, w.drive_energy(r, 1.0, code)
+
+    def _step_time(self, remaining: float, v: float, budget: Callable[[], float] | None) -> float:
+        # the last step of a leg takes only the time it needs
+        step = min(self.dt, remaining / max(v, 1e-6))
+        if budget is not None:  # end exactly on a time budget, whatever the step
+            step = min(step, budget())
+        return step
+
+    def _upkeep(self, dt: float) -> float:
+        """Energy a moving robot spends by the second (a drone: all of its flight)."""
+        r, w = self.robot, self.world
+        return w.flight_energy(r, dt) if r.kind == "drone" else w.work_energy(r, dt)
+
+    def _advance(self, leg: Leg, want: float, per_m: float, fixed: float) -> None:
+        """One step of `want` metres, unless the battery runs out on the way."""
         r = self.robot
-        r.x, r.y = f.x, f.y
+        if want * per_m + fixed > r.battery - leg.floor:
+            self._run_dry(leg, want, per_m, fixed)
+        moved = leg.path.advance(want)
+        r.battery = max(0.0, r.battery - moved * per_m - fixed)
+        self._moved(leg, moved)
+
+    def _run_dry(self, leg: Leg, want: float, per_m: float, fixed: float) -> NoReturn:
+        """The battery runs out during this step: go as far as the energy allows, stop."""
+        r, path = self.robot, leg.path
+        spare = r.battery - leg.floor
+        if per_m > 0:
+            can = max(0.0, (spare - fixed) / per_m)
+        else:
+            can = want * max(0.0, spare) / fixed if fixed > 0 else want
+        self._moved(leg, path.advance(min(can, want)))
+        r.battery = leg.floor
+        self.emergency_landing()
+        if leg.empty is not None:
+            raise self.fail(leg.empty(path.done, path.total))
+        kept = " (the reserve is kept to reach the lander)" if leg.floor > 0 else ""
+        raise self.fail(
+            f"battery empty after {path.done:.0f} m of {path.total:.0f} m{kept}; "
+            "recharge at the lander"
+        )
+
+    def _moved(self, leg: Leg, moved: float) -> None:
+        r, path = self.robot, leg.path
+        r.x, r.y = path.x, path.y
         if moved > 0:
-            r.yaw = f.heading
+            r.yaw = path.heading
             r.odometer += moved
-        self.world.reveal(r, sense)
-        if discover:
-            for name in self.world.discover(r, sense):
+        self.world.reveal(r, leg.sense)
+        if leg.discover:
+            for name in self.world.discover(r, leg.sense):
                 self.host.note(r, f"found {name}")
+
+    def _report_leg(self, ctx: SkillContext, leg: Leg, v: float) -> None:
+        path = leg.path
+        total = path.total
+        frac = leg.frac0 + (leg.frac1 - leg.frac0) * (path.done / total if total > 0 else 1.0)
+        eta = path.remaining / max(v, 1e-6) + self.rest_eta
+        ctx.progress(frac, f"{leg.what}: {path.done:.0f} of {total:.0f} m", eta_s=eta)
+
+    # ------------------------------------------------------------ shared by families
 
     def check_speed(self, speed: float) -> float:
         m = self.robot.model
@@ -224,11 +295,13 @@ class SkillBase:
             return max(8.0, min(40.0, r.model.sensor_range * max(r.z, 1.0) / 5.0))
         return r.model.sensor_range
 
-    def _learn_stone(self, info: dict[str, Any]) -> None:
+    def learn_stone(self, info: dict[str, Any]) -> None:
         self.robot.knowledge.stones[info["id"]] = dict(info)
         self.world.tell_ground(self.robot, "stone", info["id"], info)
 
-    async def _climb(
+    # ------------------------------------------------------------ drone flight
+
+    async def climb(
         self, ctx: SkillContext, altitude: float, frac0: float = 0.0, frac1: float = 1.0
     ) -> None:
         r = self.robot
@@ -248,13 +321,13 @@ class SkillBase:
             )
         r.z = altitude
 
-    async def _descend(self, ctx: SkillContext, frac0: float = 0.0, frac1: float = 1.0) -> None:
+    async def descend(self, ctx: SkillContext, frac0: float = 0.0, frac1: float = 1.0) -> None:
         r = self.robot
-        await self._climb(ctx, 0.0, frac0, frac1)
+        await self.climb(ctx, 0.0, frac0, frac1)
         r.airborne = False
         r.z = 0.0
 
-    async def _fly_home(self, ctx: SkillContext, frac0: float = 0.0, frac1: float = 1.0) -> None:
+    async def fly_home(self, ctx: SkillContext, frac0: float = 0.0, frac1: float = 1.0) -> None:
         r, w = self.robot, self.world
 
         def empty(done: float, total: float) -> str:

@@ -6,7 +6,7 @@ import math
 from typing import Any
 
 from backend.agent import SkillContext
-from sim.skills.base import SkillBase, _pct, _xy
+from sim.skills.base import SkillBase, pct, xy
 from sim.world import _fmt
 
 APPROACH = 8.0  # a stone/box this close is approached within the skill
@@ -27,7 +27,7 @@ class ManipulationSkills(SkillBase):
         r, w = self.robot, self.world
         if not r.has("manipulator"):
             raise self.fail(f"{r.name} has no arm to pick stones")
-        tx, ty = _xy(target)
+        tx, ty = xy(target)
         cap = self._capacity()
         if len(r.stones) >= cap:
             raise self.fail(
@@ -100,7 +100,7 @@ class ManipulationSkills(SkillBase):
             raise self.fail(f"{stone.id} was taken meanwhile by {stone.holder}")
         stone.state, stone.holder = "carried", r.name
         r.stones.append(stone.id)
-        self._learn_stone(stone.public())
+        self.learn_stone(stone.public())
         w.log(f"{r.name} picked {stone.id} (score {stone.score:g})")
         for other in stone.identified_by:
             if other != r.name:
@@ -139,7 +139,7 @@ class ManipulationSkills(SkillBase):
                         "sim_time": round(w.clock, 1),
                     }
                 )
-                self._learn_stone(stone.public())
+                self.learn_stone(stone.public())
                 w.log(f"{r.name} delivered {sid}: +{stone.score:g}, score {w.score:g}")
             n = len(r.stones)
             r.stones.clear()
@@ -154,7 +154,7 @@ class ManipulationSkills(SkillBase):
                 round(r.x, 2),
                 round(r.y, 2),
             )
-            self._learn_stone(stone.public())
+            self.learn_stone(stone.public())
             for other in stone.identified_by:
                 if other != r.name:
                     await self.host.tell(r, other, "stone", stone.public())
@@ -303,7 +303,7 @@ class ManipulationSkills(SkillBase):
             raise self.fail(
                 f"{r.name} does not carry {box}" + (f" (it carries {r.box})" if r.box else "")
             )
-        gx, gy = _xy(goal)
+        gx, gy = xy(goal)
         self.rest_eta = 60.0
         try:
             await self.move(
@@ -326,7 +326,7 @@ class ManipulationSkills(SkillBase):
             raise self.fail(f"{r.name} has no arm to carry payload boxes")
         if box not in w.boxes or w.boxes[box].kind != "wifi":
             raise self.fail(f"{box} is not a Wi-Fi box")
-        gx, gy = _xy(goal)
+        gx, gy = xy(goal)
         if r.box != box:
             await self._take_box(ctx, box, 60.0, frac1=0.2)
         self.rest_eta = 90.0
@@ -351,7 +351,9 @@ class ManipulationSkills(SkillBase):
         w.recompute_coverage()
         after = float((w.coverage > 0).mean())
         if after > before + 1e-9:
-            msg = f"{box} on at {_fmt(b.x, b.y)}: coverage {_pct(before)} -> {_pct(after)} of the site"
+            msg = (
+                f"{box} on at {_fmt(b.x, b.y)}: coverage {pct(before)} -> {pct(after)} of the site"
+            )
         else:
             msg = f"{box} on at {_fmt(b.x, b.y)}, but no covered spot reaches it: coverage unchanged (place it inside coverage)"
         w.log(f"{r.name}: {msg}")

@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from backend.agent import SkillContext
-from sim.skills.base import SkillBase, _pct
+from sim.skills.base import SkillBase, pct
 
 
 class PowerSkills(SkillBase):
@@ -21,8 +21,8 @@ class PowerSkills(SkillBase):
                     raise self.fail(
                         f"{r.name} is on the ground {w.dist_to_lander(r.x, r.y):.0f} m from the lander pad: take off first"
                     )
-                await self._fly_home(ctx, frac1=0.3)
-                await self._descend(ctx, frac0=0.3, frac1=0.35)
+                await self.fly_home(ctx, frac1=0.3)
+                await self.descend(ctx, frac0=0.3, frac1=0.35)
         elif not w.at_lander(r):
             d = w.dist_to_lander(r.x, r.y)
             lx, ly = w.spec.lander.x, w.spec.lander.y
@@ -55,9 +55,9 @@ class PowerSkills(SkillBase):
             rate = r.model.charge_per_minute / 60.0
             ctx.progress(
                 0.35 + 0.65 * (r.battery - start) / span,
-                f"charging: {_pct(r.battery)}",
+                f"charging: {pct(r.battery)}",
                 eta_s=(target_level - r.battery) / rate,
             )
-        msg = f"battery {_pct(r.battery)}"
+        msg = f"battery {pct(r.battery)}"
         self.host.note(r, f"recharged: {msg}")
         ctx.progress(1.0, msg, eta_s=0.0)

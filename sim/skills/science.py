@@ -6,7 +6,7 @@ import math
 from typing import Any
 
 from backend.agent import SkillContext, Success
-from sim.skills.base import SkillBase, _xy
+from sim.skills.base import SkillBase, xy
 from sim.world import Stone, _fmt
 
 NEAR_TARGET = 5.0  # extra metres around a search radius that count as "at the target"
@@ -29,7 +29,7 @@ class ScienceSkills(SkillBase):
         r, w = self.robot, self.world
         if not r.has("science_camera"):
             raise self.fail(f"{r.name} has no science camera")
-        tx, ty = _xy(target)
+        tx, ty = xy(target)
         d = self.dist(tx, ty)
         if d > CAMERA_RANGE:
             raise self.fail(
@@ -92,7 +92,7 @@ class ScienceSkills(SkillBase):
         stone.score = score
         stone.state = "identified"
         stone.identified_by = by
-        self._learn_stone(stone.public())
+        self.learn_stone(stone.public())
         w.log(f"{' and '.join(by)} identified {stone.id} in {rss_name} (score {score:g})")
         return stone
 
@@ -105,7 +105,7 @@ class ScienceSkills(SkillBase):
         **_: Any,
     ) -> Success:
         r, w = self.robot, self.world
-        tx, ty = _xy(target)
+        tx, ty = xy(target)
         duration = 120.0
         f0 = 0.0
         if self.dist(tx, ty) > search_radius + NEAR_TARGET:
@@ -226,7 +226,7 @@ class ScienceSkills(SkillBase):
                 )
                 waited += step
             if answer is not None:
-                self._learn_stone(answer)
+                self.learn_stone(answer)
                 stone = w.stones[answer["id"]]
                 if r.name not in stone.identified_by:
                     stone.identified_by = (*stone.identified_by, r.name)
