@@ -3,20 +3,43 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 from backend.agent import SkillContext, Success
 from sim.skills.base import SkillBase, xy
-from sim.world import Stone, _fmt
+from sim.world import RssState, SimRobot, Stone, _fmt
 
 NEAR_TARGET = 5.0  # extra metres around a search radius that count as "at the target"
 CAMERA_RANGE = 15.0  # science camera
+IMAGE_RSS_MARGIN = 3.0  # metres around a region that an image of it may aim at
+IMAGING_S = 60.0  # sim seconds one science image takes
+IDENTIFY_S = 120.0  # sim seconds identifying takes, once at the search centre
 PARTNER_WAIT = 300.0  # sim seconds one identifier waits for the other
 ASK_PERIOD = 10.0  # sim seconds between asks while waiting for the partner
+CAMERA_WORK = "identifying stones (science camera)"
+
+
+@dataclass
+class Search:
+    """One identify_stone: where, in which region, with whom, and its share of the progress."""
+
+    x: float
+    y: float
+    radius: float
+    rss: RssState
+    partner: str | None
+    f0: float  # the progress going to the search centre took
+
+    def at(self, frac: float) -> float:
+        """The skill's progress at `frac` of the identification itself."""
+        return self.f0 + (1.0 - self.f0) * frac
 
 
 class ScienceSkills(SkillBase):
     """take_science_image and identify_stone handlers."""
+
+    # ------------------------------------------------------------ take_science_image
 
     async def take_science_image(
         self,
@@ -33,68 +56,45 @@ class ScienceSkills(SkillBase):
         d = self.dist(tx, ty)
         if d > CAMERA_RANGE:
             raise self.fail(
-                f"the target {_fmt(tx, ty)} is {d:.0f} m away; the science camera sees {CAMERA_RANGE:.0f} m: drive closer"
+                f"the target {_fmt(tx, ty)} is {d:.0f} m away; the science camera sees "
+                f"{CAMERA_RANGE:.0f} m: drive closer"
             )
         if r.kind == "rover":
             r.yaw = math.atan2(ty - r.y, tx - r.x) if d > 0.1 else r.yaw
-        await self.work(ctx, 60.0, f"imaging {_fmt(tx, ty)} ({filter})", load=1.5)
-        rss = w.rss_near(tx, ty, 3.0)
+        await self.work(ctx, IMAGING_S, f"imaging {_fmt(tx, ty)} ({filter})", load=1.5)
+        rss = w.rss_near(tx, ty, IMAGE_RSS_MARGIN)
         if rss is None:
             msg = f"no region ideal for sampling stones at {_fmt(tx, ty)}"
         else:
-            info = r.knowledge.rss.get(rss.name) or {
-                "rss": rss.name,
-                "x": rss.x,
-                "y": rss.y,
-                "radius": rss.radius,
-            }
-            if r.name not in rss.found_by:
-                rss.found_by.add(r.name)
-                w.log(f"{r.name} discovered {rss.name} at {_fmt(rss.x, rss.y)}")
-            if filter == "visible":
-                info.setdefault("top_score", None)
-                msg = f"{rss.name}: the visible filter cannot tell stone types; use multispectral"
-            else:
-                info["top_score"] = rss.max_score
-                msg = f"{rss.name}: top stone score {rss.max_score:g}"
-                w.log(f"{r.name} imaged {rss.name}: top stone score {rss.max_score:g}")
-            r.knowledge.rss[rss.name] = info
-            w.tell_ground(r, "rss", rss.name, info)
+            msg = self._imaged(rss, filter)
         self.host.note(r, msg)
         ctx.progress(1.0, msg, eta_s=0.0)
         return Success(msg)
 
-    def _near_target(self, tx: float, ty: float, radius: float, what: str) -> None:
-        d = self.dist(tx, ty)
-        if d > radius + NEAR_TARGET:
-            raise self.fail(
-                f"{self.robot.name} is {d:.0f} m from the {what} {_fmt(tx, ty)}: drive there first "
-                f"(within {radius + NEAR_TARGET:.0f} m)"
-            )
+    def _imaged(self, rss: RssState, filter: str) -> str:
+        """What an image of `rss` tells (the top score, unless the filter is `visible`)."""
+        r, w = self.robot, self.world
+        info = r.knowledge.rss.get(rss.name) or {
+            "rss": rss.name,
+            "x": rss.x,
+            "y": rss.y,
+            "radius": rss.radius,
+        }
+        if r.name not in rss.found_by:
+            rss.found_by.add(r.name)
+            w.log(f"{r.name} discovered {rss.name} at {_fmt(rss.x, rss.y)}")
+        if filter == "visible":
+            info.setdefault("top_score", None)
+            msg = f"{rss.name}: the visible filter cannot tell stone types; use multispectral"
+        else:
+            info["top_score"] = rss.max_score
+            msg = f"{rss.name}: top stone score {rss.max_score:g}"
+            w.log(f"{r.name} imaged {rss.name}: top stone score {rss.max_score:g}")
+        r.knowledge.rss[rss.name] = info
+        w.tell_ground(r, "rss", rss.name, info)
+        return msg
 
-    def _collaborating(self, partner: str | None, tx: float, ty: float, need: str) -> bool:
-        if not partner:
-            return False
-        other = self.world.robots.get(partner)
-        if other is None or not other.has(need) or other.activity != "identify_stone":
-            return False
-        rng = self.world.spec.scoring.collab_range
-        return math.hypot(other.x - tx, other.y - ty) <= rng and self.dist(tx, ty) <= rng
-
-    def _identify(
-        self, rss_name: str, tx: float, ty: float, score: float, by: tuple[str, ...]
-    ) -> Stone:
-        w = self.world
-        hidden = [w.stones[s] for s in w.rss[rss_name].stones if w.stones[s].state == "hidden"]
-        if not hidden:
-            raise self.fail(f"every stone of {rss_name} is identified already: try another region")
-        stone = min(hidden, key=lambda s: (math.hypot(s.x - tx, s.y - ty), s.id))
-        stone.score = score
-        stone.state = "identified"
-        stone.identified_by = by
-        self.learn_stone(stone.public())
-        w.log(f"{' and '.join(by)} identified {stone.id} in {rss_name} (score {score:g})")
-        return stone
+    # ------------------------------------------------------------ identify_stone
 
     async def identify_stone(
         self,
@@ -106,142 +106,191 @@ class ScienceSkills(SkillBase):
     ) -> Success:
         r, w = self.robot, self.world
         tx, ty = xy(target)
-        duration = 120.0
-        f0 = 0.0
-        if self.dist(tx, ty) > search_radius + NEAR_TARGET:
-            # go to the search centre first (part of the skill)
-            if r.kind != "rover":
-                self._near_target(tx, ty, search_radius, "search centre")
-            self.rest_eta = duration
-            try:
-                await self.move(
-                    ctx,
-                    (tx, ty),
-                    r.model.speed,
-                    tolerance=max(1.0, search_radius * 0.5),
-                    what="going to the search centre",
-                    frac1=0.3,
-                )
-            finally:
-                self.rest_eta = 0.0
-            f0 = 0.3
+        f0 = await self._reach_search_centre(ctx, tx, ty, search_radius)
         rss = w.rss_near(tx, ty, search_radius)
         if rss is None:
-            await self.work(ctx, duration * 0.3, "searching for stones", frac0=f0)
+            await self.work(ctx, IDENTIFY_S * 0.3, "searching for stones", frac0=f0)
             raise self.fail(
-                f"no region ideal for sampling stones within {search_radius:g} m of {_fmt(tx, ty)}: nothing to identify here"
+                f"no region ideal for sampling stones within {search_radius:g} m of "
+                f"{_fmt(tx, ty)}: nothing to identify here"
             )
-        if r.name not in rss.found_by:
-            rss.found_by.add(r.name)
-            info = {
-                "rss": rss.name,
-                "x": rss.x,
-                "y": rss.y,
-                "radius": rss.radius,
-                "top_score": (r.knowledge.rss.get(rss.name) or {}).get("top_score"),
-            }
-            r.knowledge.rss[rss.name] = info
-            w.tell_ground(r, "rss", rss.name, info)
-            w.log(f"{r.name} discovered {rss.name} at {_fmt(rss.x, rss.y)}")
-        min_score = w.spec.scoring.min_score
+        self._found_region(rss)
+        search = Search(tx, ty, search_radius, rss, partner, f0)
         other = w.robots.get(partner) if partner else None
-        span = 1.0 - f0
-
-        def at(frac: float) -> float:
-            return f0 + span * frac
-
         if r.has("science_camera"):
-            # The science camera picks the stone; with the manipulator next to it, the best one.
-            await self.work(
-                ctx,
-                duration * 0.8,
-                "identifying stones (science camera)",
-                frac0=at(0),
-                frac1=at(0.8),
-            )
-            waited = 0.0
-            while (
-                other is not None
-                and other.has("manipulator")
-                and other.activity == "identify_stone"
-                and not self._collaborating(partner, tx, ty, "manipulator")
-                and waited < PARTNER_WAIT
-            ):
-                await self.work(
-                    ctx,
-                    self.dt,
-                    f"waiting for {partner} to reach the search centre",
-                    frac0=at(0.8),
-                    frac1=at(0.8),
-                )
-                waited += self.dt
-            collab = self._collaborating(partner, tx, ty, "manipulator")
-            stone = self._identify(
-                rss.name,
-                tx,
-                ty,
-                rss.max_score if collab else min_score,
-                (r.name, partner) if collab and partner else (r.name,),
-            )
-            await self.work(
-                ctx,
-                duration * 0.2,
-                "identifying stones (science camera)",
-                frac0=at(0.8),
-                frac1=at(1.0),
-            )
-            how = (
-                f"with {partner}"
-                if collab
-                else "alone (only a low-score stone without the manipulator)"
-            )
+            stone, how = await self._identify_by_camera(ctx, search, other)
         elif other is not None and other.has("science_camera"):
-            # LRU2 asks LRU1 which stone it identified (polling while LRU1 works on it)
-            await self.work(
-                ctx,
-                duration * 0.85,
-                f"identifying stones with {partner}",
-                frac0=at(0),
-                frac1=at(0.85),
-            )
-            answer: dict[str, Any] | None = None
-            waited = 0.0
-            while True:
-                answer = await self.host.ask(
-                    r, other.name, "stone", {"x": tx, "y": ty, "radius": search_radius + rss.radius}
-                )
-                if answer is not None and answer.get("state") == "identified":
-                    break
-                answer = None
-                busy = other.activity == "identify_stone"
-                if waited >= (PARTNER_WAIT if busy else duration * 0.15):
-                    break
-                step = min(ASK_PERIOD, PARTNER_WAIT - waited)
-                await self.work(
-                    ctx,
-                    step,
-                    f"waiting for {partner} to point out the stone",
-                    frac0=at(0.85),
-                    frac1=at(0.85),
-                )
-                waited += step
-            if answer is not None:
-                self.learn_stone(answer)
-                stone = w.stones[answer["id"]]
-                if r.name not in stone.identified_by:
-                    stone.identified_by = (*stone.identified_by, r.name)
-                how = f"with {partner}: it told where the stone lies"
-            else:
-                stone = self._identify(rss.name, tx, ty, min_score, (r.name,))
-                how = f"alone ({partner} did not point out a stone)"
-            await self.work(
-                ctx, duration * 0.15, "locating the stone", frac0=at(0.85), frac1=at(1.0)
-            )
+            stone, how = await self._identify_asking(ctx, search, other)
         else:
-            await self.work(ctx, duration, "identifying stones", frac0=at(0), frac1=at(1.0))
-            stone = self._identify(rss.name, tx, ty, min_score, (r.name,))
+            await self.work(
+                ctx, IDENTIFY_S, "identifying stones", frac0=search.at(0), frac1=search.at(1.0)
+            )
+            stone = self._identify(rss.name, tx, ty, w.spec.scoring.min_score, (r.name,))
             how = "alone (only a low-score stone without LRU1 and LRU2 together)"
         msg = f"identified {stone.id} at {_fmt(stone.x, stone.y)}, score {stone.score:g}, {how}"
         self.host.note(r, msg)
         ctx.progress(1.0, msg, eta_s=0.0)
         return Success(msg)
+
+    async def _reach_search_centre(
+        self, ctx: SkillContext, tx: float, ty: float, radius: float
+    ) -> float:
+        """A rover far from the search centre goes there first (part of the skill).
+        Returns the share of the progress that took."""
+        r = self.robot
+        if self.dist(tx, ty) <= radius + NEAR_TARGET:
+            return 0.0
+        if r.kind != "rover":
+            self._near_target(tx, ty, radius, "search centre")
+        await self.move_before(
+            ctx,
+            IDENTIFY_S,
+            (tx, ty),
+            r.model.speed,
+            tolerance=max(1.0, radius * 0.5),
+            what="going to the search centre",
+            frac1=0.3,
+        )
+        return 0.3
+
+    def _found_region(self, rss: RssState) -> None:
+        """The robot's first visit to `rss`: it learns the region and tells the ground."""
+        r, w = self.robot, self.world
+        if r.name in rss.found_by:
+            return
+        rss.found_by.add(r.name)
+        info = {
+            "rss": rss.name,
+            "x": rss.x,
+            "y": rss.y,
+            "radius": rss.radius,
+            "top_score": (r.knowledge.rss.get(rss.name) or {}).get("top_score"),
+        }
+        r.knowledge.rss[rss.name] = info
+        w.tell_ground(r, "rss", rss.name, info)
+        w.log(f"{r.name} discovered {rss.name} at {_fmt(rss.x, rss.y)}")
+
+    async def _identify_by_camera(
+        self, ctx: SkillContext, s: Search, other: SimRobot | None
+    ) -> tuple[Stone, str]:
+        """The science camera picks the stone; with the manipulator next to it, the best one."""
+        r = self.robot
+        await self.work(ctx, IDENTIFY_S * 0.8, CAMERA_WORK, frac0=s.at(0), frac1=s.at(0.8))
+        waited = 0.0
+        while self._manipulator_coming(s, other) and waited < PARTNER_WAIT:
+            await self.work(
+                ctx,
+                self.dt,
+                f"waiting for {s.partner} to reach the search centre",
+                frac0=s.at(0.8),
+                frac1=s.at(0.8),
+            )
+            waited += self.dt
+        collab = self._collaborating(s.partner, s.x, s.y, "manipulator")
+        stone = self._identify(
+            s.rss.name,
+            s.x,
+            s.y,
+            s.rss.max_score if collab else self.world.spec.scoring.min_score,
+            (r.name, s.partner) if collab and s.partner else (r.name,),
+        )
+        await self.work(ctx, IDENTIFY_S * 0.2, CAMERA_WORK, frac0=s.at(0.8), frac1=s.at(1.0))
+        if collab:
+            return stone, f"with {s.partner}"
+        return stone, "alone (only a low-score stone without the manipulator)"
+
+    def _manipulator_coming(self, s: Search, other: SimRobot | None) -> bool:
+        """The partner with the manipulator works on this skill but is not here yet."""
+        return (
+            other is not None
+            and other.has("manipulator")
+            and other.activity == "identify_stone"
+            and not self._collaborating(s.partner, s.x, s.y, "manipulator")
+        )
+
+    async def _identify_asking(
+        self, ctx: SkillContext, s: Search, other: SimRobot
+    ) -> tuple[Stone, str]:
+        """LRU2 asks LRU1 which stone it identified (polling while LRU1 works on it)."""
+        r = self.robot
+        await self.work(
+            ctx,
+            IDENTIFY_S * 0.85,
+            f"identifying stones with {s.partner}",
+            frac0=s.at(0),
+            frac1=s.at(0.85),
+        )
+        answer = await self._ask_for_the_stone(ctx, s, other)
+        if answer is not None:
+            self.learn_stone(answer)
+            stone = self.world.stones[answer["id"]]
+            if r.name not in stone.identified_by:
+                stone.identified_by = (*stone.identified_by, r.name)
+            how = f"with {s.partner}: it told where the stone lies"
+        else:
+            min_score = self.world.spec.scoring.min_score
+            stone = self._identify(s.rss.name, s.x, s.y, min_score, (r.name,))
+            how = f"alone ({s.partner} did not point out a stone)"
+        await self.work(
+            ctx, IDENTIFY_S * 0.15, "locating the stone", frac0=s.at(0.85), frac1=s.at(1.0)
+        )
+        return stone, how
+
+    async def _ask_for_the_stone(
+        self, ctx: SkillContext, s: Search, other: SimRobot
+    ) -> dict[str, Any] | None:
+        """Ask `other` until it names a stone it identified, while it works on the skill."""
+        where = {"x": s.x, "y": s.y, "radius": s.radius + s.rss.radius}
+        waited = 0.0
+        while True:
+            answer = await self.host.ask(self.robot, other.name, "stone", where)
+            if answer is not None and answer.get("state") == "identified":
+                return answer
+            busy = other.activity == "identify_stone"
+            if waited >= (PARTNER_WAIT if busy else IDENTIFY_S * 0.15):
+                return None
+            step = min(ASK_PERIOD, PARTNER_WAIT - waited)
+            await self.work(
+                ctx,
+                step,
+                f"waiting for {s.partner} to point out the stone",
+                frac0=s.at(0.85),
+                frac1=s.at(0.85),
+            )
+            waited += step
+
+    # ------------------------------------------------------------ shared steps
+
+    def _near_target(self, tx: float, ty: float, radius: float, what: str) -> None:
+        d = self.dist(tx, ty)
+        if d > radius + NEAR_TARGET:
+            raise self.fail(
+                f"{self.robot.name} is {d:.0f} m from the {what} {_fmt(tx, ty)}: drive there first "
+                f"(within {radius + NEAR_TARGET:.0f} m)"
+            )
+
+    def _collaborating(self, partner: str | None, tx: float, ty: float, need: str) -> bool:
+        """`partner` (with `need`) identifies too, and both are near the search centre."""
+        if not partner:
+            return False
+        other = self.world.robots.get(partner)
+        if other is None or not other.has(need) or other.activity != "identify_stone":
+            return False
+        rng = self.world.spec.scoring.collab_range
+        return math.hypot(other.x - tx, other.y - ty) <= rng and self.dist(tx, ty) <= rng
+
+    def _identify(
+        self, rss_name: str, tx: float, ty: float, score: float, by: tuple[str, ...]
+    ) -> Stone:
+        """The hidden stone of the region nearest the search centre: identified now."""
+        w = self.world
+        hidden = [w.stones[s] for s in w.rss[rss_name].stones if w.stones[s].state == "hidden"]
+        if not hidden:
+            raise self.fail(f"every stone of {rss_name} is identified already: try another region")
+        stone = min(hidden, key=lambda s: (math.hypot(s.x - tx, s.y - ty), s.id))
+        stone.score = score
+        stone.state = "identified"
+        stone.identified_by = by
+        self.learn_stone(stone.public())
+        w.log(f"{' and '.join(by)} identified {stone.id} in {rss_name} (score {score:g})")
+        return stone
