@@ -7,19 +7,19 @@ from typing import Any
 
 from backend.agent import SkillContext
 from sim.skills.base import SkillBase, pct, xy
-from sim.world import _fmt
+from sim.world import BoxState, SimRobot, Stone, _fmt
 
 APPROACH = 8.0  # a stone/box this close is approached within the skill
+STONE_SEARCH = 6.0  # metres around pick_stone's target where a known stone counts
+LANDER_REACH = 3.0  # metres beyond the lander pad from which the arm reaches the lander
+PICKABLE = ("identified", "ground")  # states of a stone an arm can pick
 
 
 class ManipulationSkills(SkillBase):
-    """pick_stone, drop_stone, payload boxes, the Wi-Fi box and the lander's load_box. handlers."""
+    """pick_stone, drop_stone, the payload boxes (pick, place, deploy a Wi-Fi box) and
+    the lander's load_box."""
 
-    def _capacity(self) -> int:
-        r = self.robot
-        if r.box is not None and self.world.boxes[r.box].kind == "sample":
-            return r.model.carry_stones_in_box
-        return r.model.carry_stones
+    # ------------------------------------------------------------ stones
 
     async def pick_stone(
         self, ctx: SkillContext, target: Any = None, region: str | None = None, **_: Any
@@ -34,242 +34,165 @@ class ManipulationSkills(SkillBase):
                 f"{r.name} already carries {len(r.stones)} stone(s) (capacity {cap}"
                 f"{'' if r.box else '; carry a sample box for more'}): drop first"
             )
-        radius = 6.0
-
-        def known() -> dict[str, Any] | None:
-            cands = [
-                s
-                for s in r.knowledge.stones.values()
-                if s.get("state") in ("identified", "ground")
-                and math.hypot(s["x"] - tx, s["y"] - ty) <= radius
-            ]
-            if region:
-                cands = [s for s in cands if s.get("rss") == region] or cands
-            return min(
-                cands,
-                key=lambda s: (-(s.get("score") or 0), math.hypot(s["x"] - tx, s["y"] - ty)),
-                default=None,
-            )
-
-        info = known()
-        asked: list[str] = []
-        if info is None:
-            order = sorted(
-                (o for o in w.robots.values() if o.name != r.name and o.kind != "static"),
-                key=lambda o: (not o.has("science_camera"), o.name),
-            )
-            for other in order:
-                asked.append(other.name)
-                answer = await self.host.ask(
-                    r, other.name, "stone", {"x": tx, "y": ty, "radius": radius}
-                )
-                if answer is not None and answer.get("state") in ("identified", "ground"):
-                    r.knowledge.stones[answer["id"]] = dict(answer)
-                    info = answer
-                    break
-        if info is None:
-            who = f" (asked {', '.join(asked)}: none knew one)" if asked else ""
-            raise self.fail(
-                f"{r.name} knows no identified stone within {radius:g} m of {_fmt(tx, ty)}{who}: identify one first"
-            )
-        stone = w.stones[info["id"]]
-        if stone.state not in ("identified", "ground"):
-            r.knowledge.stones[stone.id] = stone.public()
-            raise self.fail(
-                f"{stone.id} is no longer there ({stone.state}{' by ' + stone.holder if stone.holder else ''})"
-            )
+        stone = await self._stone_to_pick(tx, ty, region)
         d = self.dist(stone.x, stone.y)
         if d > APPROACH:
             raise self.fail(
-                f"{stone.id} lies {d:.0f} m away at {_fmt(stone.x, stone.y)}: drive there first (within {APPROACH:g} m)"
+                f"{stone.id} lies {d:.0f} m away at {_fmt(stone.x, stone.y)}: drive there first "
+                f"(within {APPROACH:g} m)"
             )
-        self.rest_eta = 90.0
-        try:
-            await self.move(
-                ctx,
-                (stone.x, stone.y),
-                min(0.3, r.model.max_speed),
-                tolerance=1.2,
-                what=f"approaching {stone.id}",
-                frac1=0.1,
-            )
-        finally:
-            self.rest_eta = 0.0
-        await self.work(ctx, 90.0, f"picking {stone.id}", load=2.0, frac0=0.1)
-        if stone.state not in ("identified", "ground"):
+        picking_s = 90.0
+        await self.move_before(
+            ctx,
+            picking_s,
+            (stone.x, stone.y),
+            min(0.3, r.model.max_speed),
+            tolerance=1.2,
+            what=f"approaching {stone.id}",
+            frac1=0.1,
+        )
+        await self.work(ctx, picking_s, f"picking {stone.id}", load=2.0, frac0=0.1)
+        if stone.state not in PICKABLE:
             raise self.fail(f"{stone.id} was taken meanwhile by {stone.holder}")
         stone.state, stone.holder = "carried", r.name
         r.stones.append(stone.id)
         self.learn_stone(stone.public())
         w.log(f"{r.name} picked {stone.id} (score {stone.score:g})")
-        for other in stone.identified_by:
-            if other != r.name:
-                await self.host.tell(r, other, "stone", stone.public())
+        await self._tell_identifiers(stone)
         msg = f"picked {stone.id} (score {stone.score:g}); carrying {len(r.stones)}/{cap}"
         self.host.note(r, msg)
         ctx.progress(1.0, msg, eta_s=0.0)
 
+    def _capacity(self) -> int:
+        r = self.robot
+        if r.box is not None and self.world.boxes[r.box].kind == "sample":
+            return r.model.carry_stones_in_box
+        return r.model.carry_stones
+
+    async def _stone_to_pick(self, tx: float, ty: float, region: str | None) -> Stone:
+        """The stone near the target this robot knows of, or learns of by asking."""
+        r = self.robot
+        info = self._known_stone(tx, ty, region)
+        asked: list[str] = []
+        if info is None:
+            info, asked = await self._ask_for_a_stone(tx, ty)
+        if info is None:
+            who = f" (asked {', '.join(asked)}: none knew one)" if asked else ""
+            raise self.fail(
+                f"{r.name} knows no identified stone within {STONE_SEARCH:g} m of "
+                f"{_fmt(tx, ty)}{who}: identify one first"
+            )
+        stone = self.world.stones[info["id"]]
+        if stone.state not in PICKABLE:
+            r.knowledge.stones[stone.id] = stone.public()
+            by = f" by {stone.holder}" if stone.holder else ""
+            raise self.fail(f"{stone.id} is no longer there ({stone.state}{by})")
+        return stone
+
+    def _known_stone(self, tx: float, ty: float, region: str | None) -> dict[str, Any] | None:
+        """The best-scored pickable stone near the target in the robot's world model
+        (of `region` if it knows one there), the nearest among equals."""
+        cands = [
+            s
+            for s in self.robot.knowledge.stones.values()
+            if s.get("state") in PICKABLE and math.hypot(s["x"] - tx, s["y"] - ty) <= STONE_SEARCH
+        ]
+        if region:
+            cands = [s for s in cands if s.get("rss") == region] or cands
+        return min(
+            cands,
+            key=lambda s: (-(s.get("score") or 0), math.hypot(s["x"] - tx, s["y"] - ty)),
+            default=None,
+        )
+
+    async def _ask_for_a_stone(
+        self, tx: float, ty: float
+    ) -> tuple[dict[str, Any] | None, list[str]]:
+        """Ask the other mobile robots (science camera first) for a pickable stone near
+        the target: the first answer, and who was asked."""
+        r, w = self.robot, self.world
+        order = sorted(
+            (o for o in w.robots.values() if o.name != r.name and o.kind != "static"),
+            key=lambda o: (not o.has("science_camera"), o.name),
+        )
+        asked: list[str] = []
+        for other in order:
+            asked.append(other.name)
+            answer = await self.host.ask(
+                r, other.name, "stone", {"x": tx, "y": ty, "radius": STONE_SEARCH}
+            )
+            if answer is not None and answer.get("state") in PICKABLE:
+                r.knowledge.stones[answer["id"]] = dict(answer)
+                return answer, asked
+        return None, asked
+
+    async def _tell_identifiers(self, stone: Stone) -> None:
+        """The robots that identified `stone` learn where it is now."""
+        r = self.robot
+        for other in stone.identified_by:
+            if other != r.name:
+                await self.host.tell(r, other, "stone", stone.public())
+
     async def drop_stone(
         self, ctx: SkillContext, into: str = "lander_sample_box", **_: Any
     ) -> None:
-        r, w = self.robot, self.world
+        r = self.robot
         if not r.has("manipulator"):
             raise self.fail(f"{r.name} has no arm")
         if not r.stones:
             raise self.fail(f"{r.name} carries no stone")
         if into == "lander_sample_box":
-            if not w.at_lander(r, 3.0):
-                d = w.dist_to_lander(r.x, r.y)
-                raise self.fail(
-                    f"{r.name} is {d:.0f} m from the lander: drive there first (within {w.spec.lander.pad_radius + 3:g} m)"
-                )
-            await self.work(ctx, 60.0, "dropping into the lander's sample box", load=1.5)
-            gained = 0.0
-            for sid in list(r.stones):
-                stone = w.stones[sid]
-                stone.state, stone.holder = "delivered", None
-                w.score = round(w.score + (stone.score or 0.0), 6)
-                gained += stone.score or 0.0
-                w.delivered.append(
-                    {
-                        "stone": sid,
-                        "rss": stone.rss,
-                        "score": stone.score or 0.0,
-                        "by": r.name,
-                        "sim_time": round(w.clock, 1),
-                    }
-                )
-                self.learn_stone(stone.public())
-                w.log(f"{r.name} delivered {sid}: +{stone.score:g}, score {w.score:g}")
-            n = len(r.stones)
-            r.stones.clear()
-            msg = f"delivered {n} stone(s): +{gained:g}; score {w.score:g}"
+            msg = await self._deliver(ctx)
         else:
-            await self.work(ctx, 60.0, "putting the stone down", load=1.5)
-            sid = r.stones.pop()
-            stone = w.stones[sid]
-            stone.state, stone.holder, stone.x, stone.y = (
-                "ground",
-                None,
-                round(r.x, 2),
-                round(r.y, 2),
-            )
-            self.learn_stone(stone.public())
-            for other in stone.identified_by:
-                if other != r.name:
-                    await self.host.tell(r, other, "stone", stone.public())
-            msg = f"put {sid} down at {_fmt(stone.x, stone.y)}"
-            w.log(f"{r.name} {msg}")
+            msg = await self._put_stone_down(ctx)
         self.host.note(r, msg)
         ctx.progress(1.0, msg, eta_s=0.0)
 
-    async def _box_moved(self, name: str) -> None:
-        """LRU2 tells the others where a box is now (their world models)."""
+    async def _deliver(self, ctx: SkillContext) -> str:
+        """Every carried stone into the lander's sample box: each one scores."""
         r, w = self.robot, self.world
-        info = w.boxes[name].public()
-        r.knowledge.boxes[name] = dict(info)
-        w.tell_ground(r, "box", name, info)
-        for other in sorted(w.robots):
-            if other != r.name:
-                await self.host.tell(r, other, "box", info)
-
-    async def _take_box(
-        self, ctx: SkillContext, box: str, seconds: float, frac0: float = 0.0, frac1: float = 1.0
-    ) -> None:
-        r, w = self.robot, self.world
-        if box not in w.boxes:
+        if not w.at_lander(r, LANDER_REACH):
+            d = w.dist_to_lander(r.x, r.y)
             raise self.fail(
-                f"there is no payload box '{box}' on this site (boxes: {', '.join(sorted(w.boxes))})"
+                f"{r.name} is {d:.0f} m from the lander: drive there first "
+                f"(within {w.spec.lander.pad_radius + LANDER_REACH:g} m)"
             )
-        if r.box is not None:
-            raise self.fail(f"{r.name} already carries {r.box}: place it first")
-        b = w.boxes[box]
-        landers = [o for o in w.robots.values() if o.type == "lander" or o.kind == "static"]
-        if b.where in ("shelf", "storage") or (
-            r.knowledge.boxes.get(box, {}).get("where") == "shelf"
-        ):
-            if not w.at_lander(r, 3.0):
-                d = w.dist_to_lander(r.x, r.y)
-                raise self.fail(
-                    f"the shelf is on the lander, {d:.0f} m away: drive there first (within {w.spec.lander.pad_radius + 3:g} m)"
-                )
-            shelf = None
-            for lander in landers:
-                shelf = await self.host.ask(r, lander.name, "shelf", {})
-                if shelf is not None:
-                    break
-            slots = (shelf or {}).get("slots")
-            if slots is not None:
-                for n, info in list(r.knowledge.boxes.items()):
-                    if info.get("where") == "shelf" and n not in slots.values():
-                        r.knowledge.boxes.pop(n)
-                for slot, n in slots.items():
-                    r.knowledge.boxes[n] = {
-                        **w.boxes[n].public(),
-                        "where": "shelf",
-                        "slot": int(slot),
-                    }
-                if box not in slots.values():
-                    listing = ", ".join(f"{s}: {n}" for s, n in sorted(slots.items())) or "empty"
-                    hint = (
-                        " (it is inside the lander: shelve it with the lander's load_box)"
-                        if b.where == "storage"
-                        else ""
-                    )
-                    raise self.fail(
-                        f"the lander says {box} is not on its shelf (shelf: {listing}){hint}"
-                    )
-            elif b.where != "shelf":
-                raise self.fail(f"{box} is not on the lander's shelf")
-        elif b.where == "carried":
-            raise self.fail(f"{box} is carried by {b.holder}")
-        else:  # on the ground
-            info = r.knowledge.boxes.get(box)
-            if info is None or info.get("where") != "ground":
-                for other in sorted(w.robots):
-                    if other == r.name:
-                        continue
-                    answer = await self.host.ask(r, other, "box", {"box": box})
-                    if answer is not None:
-                        r.knowledge.boxes[box] = dict(answer)
-                        info = answer
-                        break
-            if info is None or info.get("where") != "ground":
-                raise self.fail(
-                    f"{r.name} does not know where {box} is (nobody it can reach told it)"
-                )
-            if math.hypot(b.x - info["x"], b.y - info["y"]) > 1.0:
-                raise self.fail(
-                    f"{box} is not where {r.name} believed ({_fmt(info['x'], info['y'])})"
-                )
-            if self.dist(b.x, b.y) > APPROACH:
-                raise self.fail(
-                    f"{box} lies {self.dist(b.x, b.y):.0f} m away at {_fmt(b.x, b.y)}: drive there first"
-                )
-            self.rest_eta = seconds
-            try:
-                await self.move(
-                    ctx,
-                    (b.x, b.y),
-                    0.3,
-                    tolerance=1.2,
-                    what=f"approaching {box}",
-                    frac0=frac0,
-                    frac1=frac0,
-                )
-            finally:
-                self.rest_eta = 0.0
-        await self.work(ctx, seconds, f"picking {box}", load=2.0, frac0=frac0, frac1=frac1)
-        if b.where == "carried":
-            raise self.fail(f"{box} was taken meanwhile by {b.holder}")
-        if b.where == "shelf":
-            for lander in landers:
-                lander.knowledge.boxes.pop(box, None)
-        b.where, b.holder, b.slot, b.on = "carried", r.name, None, False
-        r.box = box
-        w.recompute_coverage()
-        w.log(f"{r.name} picked {box}")
-        await self._box_moved(box)
+        await self.work(ctx, 60.0, "dropping into the lander's sample box", load=1.5)
+        gained = 0.0
+        for sid in list(r.stones):
+            stone = w.stones[sid]
+            stone.state, stone.holder = "delivered", None
+            w.score = round(w.score + (stone.score or 0.0), 6)
+            gained += stone.score or 0.0
+            w.delivered.append(
+                {
+                    "stone": sid,
+                    "rss": stone.rss,
+                    "score": stone.score or 0.0,
+                    "by": r.name,
+                    "sim_time": round(w.clock, 1),
+                }
+            )
+            self.learn_stone(stone.public())
+            w.log(f"{r.name} delivered {sid}: +{stone.score:g}, score {w.score:g}")
+        n = len(r.stones)
+        r.stones.clear()
+        return f"delivered {n} stone(s): +{gained:g}; score {w.score:g}"
+
+    async def _put_stone_down(self, ctx: SkillContext) -> str:
+        """The last stone picked onto the ground where the robot stands."""
+        r, w = self.robot, self.world
+        await self.work(ctx, 60.0, "putting the stone down", load=1.5)
+        sid = r.stones.pop()
+        stone = w.stones[sid]
+        stone.state, stone.holder, stone.x, stone.y = "ground", None, round(r.x, 2), round(r.y, 2)
+        self.learn_stone(stone.public())
+        await self._tell_identifiers(stone)
+        msg = f"put {sid} down at {_fmt(stone.x, stone.y)}"
+        w.log(f"{r.name} {msg}")
+        return msg
+
+    # ------------------------------------------------------------ payload boxes
 
     async def pick_payload_box(self, ctx: SkillContext, box: str = "", **_: Any) -> None:
         if not self.robot.has("manipulator"):
@@ -278,22 +201,6 @@ class ManipulationSkills(SkillBase):
         msg = f"carrying {box}"
         self.host.note(self.robot, f"picked {box}")
         ctx.progress(1.0, msg, eta_s=0.0)
-
-    def _put_box(self, box: str, gx: float, gy: float) -> str:
-        r, w = self.robot, self.world
-        b = w.boxes[box]
-        r.box = None
-        b.holder = None
-        used = {o.slot for o in w.boxes.values() if o.where == "shelf"}
-        free = [s for s in range(1, w.spec.lander.shelf_slots + 1) if s not in used]
-        if w.dist_to_lander(gx, gy) <= w.spec.lander.pad_radius and free:
-            b.where, b.slot, b.x, b.y = "shelf", free[0], w.spec.lander.x, w.spec.lander.y
-            for lander in w.robots.values():
-                if lander.kind == "static":
-                    lander.knowledge.boxes[box] = b.public()
-            return f"put {box} back on the lander's shelf (slot {free[0]})"
-        b.where, b.slot, b.x, b.y = "ground", None, round(r.x, 2), round(r.y, 2)
-        return f"placed {box} at {_fmt(b.x, b.y)}"
 
     async def place_payload_box(
         self, ctx: SkillContext, box: str = "", goal: Any = None, **_: Any
@@ -304,14 +211,17 @@ class ManipulationSkills(SkillBase):
                 f"{r.name} does not carry {box}" + (f" (it carries {r.box})" if r.box else "")
             )
         gx, gy = xy(goal)
-        self.rest_eta = 60.0
-        try:
-            await self.move(
-                ctx, (gx, gy), r.model.speed, tolerance=1.0, what=f"carrying {box}", frac1=0.7
-            )
-        finally:
-            self.rest_eta = 0.0
-        await self.work(ctx, 60.0, f"placing {box}", load=2.0, frac0=0.7)
+        placing_s = 60.0
+        await self.move_before(
+            ctx,
+            placing_s,
+            (gx, gy),
+            r.model.speed,
+            tolerance=1.0,
+            what=f"carrying {box}",
+            frac1=0.7,
+        )
+        await self.work(ctx, placing_s, f"placing {box}", load=2.0, frac0=0.7)
         msg = self._put_box(box, gx, gy)
         self.world.log(f"{r.name} {msg}")
         await self._box_moved(box)
@@ -329,39 +239,216 @@ class ManipulationSkills(SkillBase):
         gx, gy = xy(goal)
         if r.box != box:
             await self._take_box(ctx, box, 60.0, frac1=0.2)
-        self.rest_eta = 90.0
-        try:
-            await self.move(
-                ctx,
-                (gx, gy),
-                r.model.speed,
-                tolerance=1.0,
-                what=f"carrying {box}",
-                frac0=0.2,
-                frac1=0.7,
-            )
-        finally:
-            self.rest_eta = 0.0
+        await self.move_before(
+            ctx,
+            90.0,  # placing, then switching on
+            (gx, gy),
+            r.model.speed,
+            tolerance=1.0,
+            what=f"carrying {box}",
+            frac0=0.2,
+            frac1=0.7,
+        )
         await self.work(ctx, 60.0, f"placing {box}", load=2.0, frac0=0.7, frac1=0.9)
         self._put_box(box, gx, gy)
+        msg = await self._switch_on(ctx, box)
+        w.log(f"{r.name}: {msg}")
+        await self._box_moved(box)
+        self.host.note(r, msg)
+        ctx.progress(1.0, msg, eta_s=0.0)
+
+    async def _switch_on(self, ctx: SkillContext, box: str) -> str:
+        """A placed Wi-Fi box on the ground covers its range, if it is itself covered."""
+        w = self.world
         b = w.boxes[box]
         before = float((w.coverage > 0).mean())
         await self.work(ctx, 30.0, f"switching {box} on", frac0=0.9)
         b.on = b.where == "ground"
         w.recompute_coverage()
         after = float((w.coverage > 0).mean())
+        at = f"{box} on at {_fmt(b.x, b.y)}"
         if after > before + 1e-9:
-            msg = (
-                f"{box} on at {_fmt(b.x, b.y)}: coverage {pct(before)} -> {pct(after)} of the site"
+            return f"{at}: coverage {pct(before)} -> {pct(after)} of the site"
+        return (
+            f"{at}, but no covered spot reaches it: coverage unchanged (place it inside coverage)"
+        )
+
+    async def _take_box(
+        self, ctx: SkillContext, box: str, seconds: float, frac0: float = 0.0, frac1: float = 1.0
+    ) -> None:
+        """Pick `box` from the lander's shelf or the ground (approached within the skill)."""
+        r, w = self.robot, self.world
+        if box not in w.boxes:
+            raise self.fail(
+                f"there is no payload box '{box}' on this site "
+                f"(boxes: {', '.join(sorted(w.boxes))})"
             )
-        else:
-            msg = f"{box} on at {_fmt(b.x, b.y)}, but no covered spot reaches it: coverage unchanged (place it inside coverage)"
-        w.log(f"{r.name}: {msg}")
+        if r.box is not None:
+            raise self.fail(f"{r.name} already carries {r.box}: place it first")
+        b = w.boxes[box]
+        landers = [o for o in w.robots.values() if o.type == "lander" or o.kind == "static"]
+        believed_on_shelf = r.knowledge.boxes.get(box, {}).get("where") == "shelf"
+        if b.where in ("shelf", "storage") or believed_on_shelf:
+            await self._check_shelf(b, landers)
+        elif b.where == "carried":
+            raise self.fail(f"{box} is carried by {b.holder}")
+        else:  # on the ground
+            await self._approach_box(ctx, b, seconds, frac0)
+        await self.work(ctx, seconds, f"picking {box}", load=2.0, frac0=frac0, frac1=frac1)
+        if b.where == "carried":
+            raise self.fail(f"{box} was taken meanwhile by {b.holder}")
+        if b.where == "shelf":
+            for lander in landers:
+                lander.knowledge.boxes.pop(box, None)
+        b.where, b.holder, b.slot, b.on = "carried", r.name, None, False
+        r.box = box
+        w.recompute_coverage()
+        w.log(f"{r.name} picked {box}")
         await self._box_moved(box)
+
+    async def _check_shelf(self, b: BoxState, landers: list[SimRobot]) -> None:
+        """At the lander, the lander says `b` is on its shelf (the robot learns the shelf)."""
+        r, w = self.robot, self.world
+        if not w.at_lander(r, LANDER_REACH):
+            d = w.dist_to_lander(r.x, r.y)
+            raise self.fail(
+                f"the shelf is on the lander, {d:.0f} m away: drive there first "
+                f"(within {w.spec.lander.pad_radius + LANDER_REACH:g} m)"
+            )
+        slots = await self._ask_shelf(landers)
+        if slots is None:
+            if b.where != "shelf":
+                raise self.fail(f"{b.name} is not on the lander's shelf")
+            return
+        self._learn_shelf(slots)
+        if b.name not in slots.values():
+            listing = ", ".join(f"{s}: {n}" for s, n in sorted(slots.items())) or "empty"
+            hint = (
+                " (it is inside the lander: shelve it with the lander's load_box)"
+                if b.where == "storage"
+                else ""
+            )
+            raise self.fail(
+                f"the lander says {b.name} is not on its shelf (shelf: {listing}){hint}"
+            )
+
+    async def _ask_shelf(self, landers: list[SimRobot]) -> dict[str, str] | None:
+        """Slot -> box on the shelf, from the first lander that answers (None: none did)."""
+        shelf = None
+        for lander in landers:
+            shelf = await self.host.ask(self.robot, lander.name, "shelf", {})
+            if shelf is not None:
+                break
+        return (shelf or {}).get("slots")
+
+    def _learn_shelf(self, slots: dict[str, str]) -> None:
+        """The robot's world model follows the shelf the lander described."""
+        r, w = self.robot, self.world
+        for n, info in list(r.knowledge.boxes.items()):
+            if info.get("where") == "shelf" and n not in slots.values():
+                r.knowledge.boxes.pop(n)
+        for slot, n in slots.items():
+            r.knowledge.boxes[n] = {**w.boxes[n].public(), "where": "shelf", "slot": int(slot)}
+
+    async def _approach_box(
+        self, ctx: SkillContext, b: BoxState, seconds: float, frac0: float
+    ) -> None:
+        """Go to `b` on the ground, where the robot believes it is (asking others if it
+        does not know), if that is near."""
+        r = self.robot
+        info = await self._where_is(b.name)
+        if info is None or info.get("where") != "ground":
+            raise self.fail(
+                f"{r.name} does not know where {b.name} is (nobody it can reach told it)"
+            )
+        if math.hypot(b.x - info["x"], b.y - info["y"]) > 1.0:
+            raise self.fail(
+                f"{b.name} is not where {r.name} believed ({_fmt(info['x'], info['y'])})"
+            )
+        if self.dist(b.x, b.y) > APPROACH:
+            raise self.fail(
+                f"{b.name} lies {self.dist(b.x, b.y):.0f} m away at {_fmt(b.x, b.y)}: "
+                "drive there first"
+            )
+        await self.move_before(
+            ctx,
+            seconds,
+            (b.x, b.y),
+            0.3,
+            tolerance=1.2,
+            what=f"approaching {b.name}",
+            frac0=frac0,
+            frac1=frac0,
+        )
+
+    async def _where_is(self, box: str) -> dict[str, Any] | None:
+        """Where the robot believes `box` lies; not on the ground: the first other robot
+        that answers tells it."""
+        r = self.robot
+        info = r.knowledge.boxes.get(box)
+        if info is not None and info.get("where") == "ground":
+            return info
+        for other in sorted(self.world.robots):
+            if other == r.name:
+                continue
+            answer = await self.host.ask(r, other, "box", {"box": box})
+            if answer is not None:
+                r.knowledge.boxes[box] = dict(answer)
+                return answer
+        return info
+
+    def _put_box(self, box: str, gx: float, gy: float) -> str:
+        r, w = self.robot, self.world
+        b = w.boxes[box]
+        r.box = None
+        b.holder = None
+        used = {o.slot for o in w.boxes.values() if o.where == "shelf"}
+        free = [s for s in range(1, w.spec.lander.shelf_slots + 1) if s not in used]
+        if w.dist_to_lander(gx, gy) <= w.spec.lander.pad_radius and free:
+            b.where, b.slot, b.x, b.y = "shelf", free[0], w.spec.lander.x, w.spec.lander.y
+            for lander in w.robots.values():
+                if lander.kind == "static":
+                    lander.knowledge.boxes[box] = b.public()
+            return f"put {box} back on the lander's shelf (slot {free[0]})"
+        b.where, b.slot, b.x, b.y = "ground", None, round(r.x, 2), round(r.y, 2)
+        return f"placed {box} at {_fmt(b.x, b.y)}"
+
+    async def _box_moved(self, name: str) -> None:
+        """LRU2 tells the others where a box is now (their world models)."""
+        r, w = self.robot, self.world
+        info = w.boxes[name].public()
+        r.knowledge.boxes[name] = dict(info)
+        w.tell_ground(r, "box", name, info)
+        for other in sorted(w.robots):
+            if other != r.name:
+                await self.host.tell(r, other, "box", info)
+
+    # ------------------------------------------------------------ the lander's shelf
+
+    async def load_box(self, ctx: SkillContext, box: str = "", slot: int = 1, **_: Any) -> None:
+        r, w = self.robot, self.world
+        b, slot = self._loadable(box, slot)
+        if b.where == "shelf" and b.slot == slot:
+            ctx.progress(1.0, f"{box} is on slot {slot} already", eta_s=0.0)
+            return
+        await self.work(ctx, 60.0, f"loading {box} onto slot {slot}")
+        if b.where not in ("storage", "shelf") or any(
+            o.where == "shelf" and o.slot == slot and o.name != box for o in w.boxes.values()
+        ):
+            raise self.fail(f"the shelf changed meanwhile: {box} not loaded")
+        b.where, b.slot = "shelf", slot
+        r.knowledge.boxes[box] = b.public()
+        w.tell_ground(r, "box", box, b.public())
+        w.log(f"{r.name} shelved {box} on slot {slot}")
+        for other in sorted(w.robots.values(), key=lambda o: o.name):
+            if other.has("manipulator"):
+                await self.host.tell(r, other.name, "box", b.public())
+        msg = f"{box} on slot {slot}"
         self.host.note(r, msg)
         ctx.progress(1.0, msg, eta_s=0.0)
 
-    async def load_box(self, ctx: SkillContext, box: str = "", slot: int = 1, **_: Any) -> None:
+    def _loadable(self, box: str, slot: int) -> tuple[BoxState, int]:
+        """The box inside the lander and the free shelf slot it goes to, or why not."""
         r, w = self.robot, self.world
         if r.kind != "static":
             raise self.fail(f"{r.name} has no shelf")
@@ -383,21 +470,4 @@ class ManipulationSkills(SkillBase):
                 else f"on the ground at {_fmt(b.x, b.y)}"
             )
             raise self.fail(f"{box} is not in the lander ({where})")
-        if b.where == "shelf" and b.slot == slot:
-            ctx.progress(1.0, f"{box} is on slot {slot} already", eta_s=0.0)
-            return
-        await self.work(ctx, 60.0, f"loading {box} onto slot {slot}")
-        if b.where not in ("storage", "shelf") or any(
-            o.where == "shelf" and o.slot == slot and o.name != box for o in w.boxes.values()
-        ):
-            raise self.fail(f"the shelf changed meanwhile: {box} not loaded")
-        b.where, b.slot = "shelf", slot
-        r.knowledge.boxes[box] = b.public()
-        w.tell_ground(r, "box", box, b.public())
-        w.log(f"{r.name} shelved {box} on slot {slot}")
-        for other in sorted(w.robots.values(), key=lambda o: o.name):
-            if other.has("manipulator"):
-                await self.host.tell(r, other.name, "box", b.public())
-        msg = f"{box} on slot {slot}"
-        self.host.note(r, msg)
-        ctx.progress(1.0, msg, eta_s=0.0)
+        return b, slot
