@@ -5,8 +5,10 @@ from __future__ import annotations
 from typing import Any
 
 from backend.agent import SkillContext
-from sim.skills.base import CLIMB_RATE, SkillBase, pct, xy, yaw_of
+from sim.skills.base import CLIMB_RATE, DRONE_MARGIN_S, SkillBase, pct, xy, yaw_of
 from sim.world import _fmt
+
+MIN_TAKEOFF = 0.05  # battery above the reserve a drone needs to take off
 
 
 class AerialSkills(SkillBase):
@@ -19,9 +21,10 @@ class AerialSkills(SkillBase):
     async def takeoff(self, ctx: SkillContext, altitude: float = 5.0, **_: Any) -> None:
         self._need_drone("take off")
         r = self.robot
-        if not r.airborne and r.usable < 0.05:
+        if not r.airborne and r.usable < MIN_TAKEOFF:
             raise self.fail(
-                f"battery {pct(r.battery)} is too low to take off (reserve {pct(r.model.reserve)}); recharge first"
+                f"battery {pct(r.battery)} is too low to take off "
+                f"(reserve {pct(r.model.reserve)}); recharge first"
             )
         r.airborne = True
         await self.climb(ctx, float(altitude))
@@ -36,31 +39,14 @@ class AerialSkills(SkillBase):
         **_: Any,
     ) -> None:
         self._need_drone("fly")
-        r, w = self.robot, self.world
+        r = self.robot
         if not r.airborne:
             raise self.fail(f"{r.name} is on the ground: take off first")
         gx, gy = xy(goal)
         speed = self.check_speed(speed)
-        d = self.dist(gx, gy)
-        back = w.dist_to_lander(gx, gy)
-        need_s = d / speed + abs(altitude - r.z) / CLIMB_RATE + back / r.model.speed + 40.0
-        need = need_s / r.model.flight_s_per_battery
-        if need > r.usable:
-            reach = r.usable * r.model.flight_s_per_battery * speed
-            raise self.fail(
-                f"{r.name} cannot fly {d:.0f} m to {_fmt(gx, gy)} and back to the lander ({back:.0f} m): "
-                f"needs {pct(need)} of a battery, has {pct(r.usable)} above the {pct(r.model.reserve)} reserve "
-                f"(about {reach:.0f} m); refused before the flight: land on the lander pad to recharge"
-            )
+        self._check_range(gx, gy, altitude, speed)
         if abs(altitude - r.z) > 0.1:
             await self.climb(ctx, float(altitude), frac1=0.05)
-
-        def empty(done: float, total: float) -> str:
-            return (
-                f"battery at the reserve after {done:.0f} m of {total:.0f} m: "
-                f"{r.name} made an emergency landing at {_fmt(r.x, r.y)}"
-            )
-
         await self.move(
             ctx,
             (gx, gy),
@@ -69,12 +55,37 @@ class AerialSkills(SkillBase):
             what=f"flying to {_fmt(gx, gy)}",
             frac0=0.05,
             sense=max(r.model.nav_range, self.sensor_range() * 0.5),
-            empty=empty,
+            empty=self._landed_short,
         )
         yaw = yaw_of(goal)
         if yaw is not None:
             r.yaw = yaw
         ctx.progress(1.0, f"hovering at {_fmt(r.x, r.y)}", eta_s=0.0)
+
+    def _check_range(self, gx: float, gy: float, altitude: float, speed: float) -> None:
+        """Refuse a flight the battery cannot do there and back to the lander."""
+        r = self.robot
+        d = self.dist(gx, gy)
+        back = self.world.dist_to_lander(gx, gy)
+        need_s = (
+            d / speed + abs(altitude - r.z) / CLIMB_RATE + back / r.model.speed + DRONE_MARGIN_S
+        )
+        need = need_s / r.model.flight_s_per_battery
+        if need > r.usable:
+            reach = r.usable * r.model.flight_s_per_battery * speed
+            raise self.fail(
+                f"{r.name} cannot fly {d:.0f} m to {_fmt(gx, gy)} and back to the lander "
+                f"({back:.0f} m): needs {pct(need)} of a battery, has {pct(r.usable)} above "
+                f"the {pct(r.model.reserve)} reserve (about {reach:.0f} m); refused before "
+                "the flight: land on the lander pad to recharge"
+            )
+
+    def _landed_short(self, done: float, total: float) -> str:
+        r = self.robot
+        return (
+            f"battery at the reserve after {done:.0f} m of {total:.0f} m: "
+            f"{r.name} made an emergency landing at {_fmt(r.x, r.y)}"
+        )
 
     async def land(self, ctx: SkillContext, where: str = "lander_pad", **_: Any) -> None:
         self._need_drone("land")
@@ -83,9 +94,7 @@ class AerialSkills(SkillBase):
             if where == "here" or w.at_lander(r):
                 ctx.progress(1.0, "already on the ground", eta_s=0.0)
                 return
-            raise self.fail(
-                f"{r.name} is on the ground {w.dist_to_lander(r.x, r.y):.0f} m from the lander pad: take off first"
-            )
+            raise self.grounded_away()
         if where == "lander_pad":
             await self.fly_home(ctx, frac1=0.7)
             await self.descend(ctx, frac0=0.7)

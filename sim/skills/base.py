@@ -21,6 +21,7 @@ from sim.skills.host import SkillHost
 from sim.world import SimError, SimRobot, _fmt
 
 CLIMB_RATE = 1.0  # m/s, drone
+DRONE_MARGIN_S = 40.0  # flight seconds a drone keeps beyond its way back to the lander
 
 
 def xy(value: Any) -> tuple[float, float]:
@@ -320,6 +321,12 @@ class SkillBase:
                 eta_s=seconds - done,
             )
         r.z = altitude
+
+    def grounded_away(self) -> SkillFailed:
+        """A drone on the ground away from the pad: it must take off to get anywhere."""
+        r = self.robot
+        d = self.world.dist_to_lander(r.x, r.y)
+        return self.fail(f"{r.name} is on the ground {d:.0f} m from the lander pad: take off first")
 
     async def descend(self, ctx: SkillContext, frac0: float = 0.0, frac1: float = 1.0) -> None:
         r = self.robot

@@ -9,11 +9,10 @@ import numpy as np
 
 from backend.agent import SkillContext, SkillFailed
 from sim.pathing import ROCK, lawnmower
-from sim.skills.base import SkillBase, pct, xy, yaw_of
+from sim.skills.base import DRONE_MARGIN_S, SkillBase, pct, xy, yaw_of
 from sim.world import SimRobot, World, _fmt
 
 MAPPED = 0.995  # the share of the area's cells that counts as all of it
-DRONE_MARGIN_S = 40.0  # flight seconds a drone keeps beyond the way back to the lander
 
 
 class Survey:
