@@ -27,6 +27,7 @@ from backend.core.library import Library
 from backend.core.model import Mission, Pose
 from backend.protocol import mapfeed as mf
 from backend.transport import QueryFailed
+from sim.exchange import WorldExchange
 from sim.skills.registry import RobotSkills
 from sim.world import SimError, SimRobot, World
 from sim.worldfile import WorldFile
@@ -164,7 +165,7 @@ class SimFleet:
             spec = self.library.skills.get(name)
             version = spec.version if spec is not None else "1.0.0"
             agent.add_skill(name, self._wrap(robot, name, handlers[name]), version=version)
-        self._world_handlers(agent, robot)
+        WorldExchange(self.world, robot).register(agent)
         return agent
 
     def _wrap(self, robot: SimRobot, name: str, fn: Any) -> Any:
@@ -186,89 +187,6 @@ class SimFleet:
         return handler
 
     # ------------------------------------------------------------ world knowledge exchange
-
-    def _world_handlers(self, agent: RobotAgent, robot: SimRobot) -> None:
-        k = robot.knowledge
-        world = self.world
-
-        def reachable(sender: str) -> bool:
-            other = world.robots.get(sender)
-            return other is not None and world.can_talk(robot, other)
-
-        def ask_stone(data: dict[str, Any], sender: str) -> dict[str, Any] | None:
-            if not reachable(sender):
-                return None
-            x, y, radius = (
-                float(data.get("x", 0)),
-                float(data.get("y", 0)),
-                float(data.get("radius", 5)),
-            )
-            cands = [
-                s
-                for s in k.stones.values()
-                if s.get("state") in ("identified", "ground")
-                and math.hypot(s["x"] - x, s["y"] - y) <= radius
-            ]
-            if not cands:
-                return None
-            return dict(
-                min(
-                    cands,
-                    key=lambda s: (-(s.get("score") or 0), math.hypot(s["x"] - x, s["y"] - y)),
-                )
-            )
-
-        def ask_rss(data: dict[str, Any], sender: str) -> dict[str, Any] | None:
-            if not reachable(sender) or not k.rss:
-                return None
-            return {"regions": [dict(v) for v in k.rss.values()]}
-
-        def ask_box(data: dict[str, Any], sender: str) -> dict[str, Any] | None:
-            if not reachable(sender):
-                return None
-            info = k.boxes.get(str(data.get("box", "")))
-            return dict(info) if info is not None else None
-
-        def ask_pose(data: dict[str, Any], sender: str) -> dict[str, Any] | None:
-            if not reachable(sender):
-                return None
-            return {
-                "x": round(robot.x, 2),
-                "y": round(robot.y, 2),
-                "yaw": round(robot.yaw, 3),
-                "airborne": robot.airborne,
-            }
-
-        def ask_shelf(data: dict[str, Any], sender: str) -> dict[str, Any] | None:
-            if robot.kind != "static" or not reachable(sender):
-                return None
-            slots = {
-                str(b.slot): b.name
-                for b in world.boxes.values()
-                if b.where == "shelf" and b.slot is not None
-            }
-            return {"slots": slots}
-
-        def tell_box(data: dict[str, Any], sender: str) -> None:
-            if reachable(sender) and "box" in data:
-                k.boxes[str(data["box"])] = dict(data)
-
-        def tell_stone(data: dict[str, Any], sender: str) -> None:
-            if reachable(sender) and "id" in data:
-                k.stones[str(data["id"])] = dict(data)
-
-        def tell_rss(data: dict[str, Any], sender: str) -> None:
-            if reachable(sender) and "rss" in data:
-                k.rss[str(data["rss"])] = dict(data)
-
-        agent.on_ask("stone", ask_stone)
-        agent.on_ask("rss", ask_rss)
-        agent.on_ask("box", ask_box)
-        agent.on_ask("pose", ask_pose)
-        agent.on_ask("shelf", ask_shelf)
-        agent.on_tell("box", tell_box)
-        agent.on_tell("stone", tell_stone)
-        agent.on_tell("rss", tell_rss)
 
     def _exchange(self, text: str) -> None:
         self.exchange_log.append(f"[{self.world.clock:7.0f} s] {text}")
@@ -395,7 +313,8 @@ class SimFleet:
                     if r.usable <= 0.0:
                         r.airborne, r.z = False, 0.0
                         w.log(
-                            f"{r.name} made an emergency landing at ({r.x:.1f}, {r.y:.1f}): battery at the reserve while hovering"
+                            f"{r.name} made an emergency landing at ({r.x:.1f}, {r.y:.1f}): "
+                            "battery at the reserve while hovering"
                         )
                 elif w.docked(r):
                     w.charge(r, dt)
@@ -550,7 +469,8 @@ def _brief(data: dict[str, Any] | None) -> str:
     if not data:
         return "-"
     if "id" in data:
-        return f"{data['id']} at ({data.get('x', 0):.1f}, {data.get('y', 0):.1f}) {data.get('state', '')}".strip()
+        at = f"({data.get('x', 0):.1f}, {data.get('y', 0):.1f})"
+        return f"{data['id']} at {at} {data.get('state', '')}".strip()
     if "box" in data:
         return f"{data['box']} {data.get('where', '')}".strip()
     if "slots" in data:

@@ -1,0 +1,122 @@
+"""What a simulated robot answers when another robot asks or tells it about the world.
+
+Each robot answers from its own world model (`SimRobot.knowledge`), and only to
+robots it can talk to (`World.can_talk`); the fleet registers these handlers on
+the robot's agent (`RobotAgent.on_ask` / `on_tell`). The asking side is
+`SimFleet.ask` / `tell`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+from backend.agent import RobotAgent
+from sim.world import SimRobot, World
+
+Data = dict[str, Any]
+
+
+class WorldExchange:
+    """The ask and tell handlers of one robot, by topic."""
+
+    def __init__(self, world: World, robot: SimRobot):
+        self.world = world
+        self.robot = robot
+
+    def register(self, agent: RobotAgent) -> None:
+        for topic, answer in self.asks().items():
+            agent.on_ask(topic, answer)
+        for topic, receive in self.tells().items():
+            agent.on_tell(topic, receive)
+
+    def asks(self) -> dict[str, Callable[[Data, str], Data | None]]:
+        return {
+            "stone": self.ask_stone,
+            "rss": self.ask_rss,
+            "box": self.ask_box,
+            "pose": self.ask_pose,
+            "shelf": self.ask_shelf,
+        }
+
+    def tells(self) -> dict[str, Callable[[Data, str], None]]:
+        return {"box": self.tell_box, "stone": self.tell_stone, "rss": self.tell_rss}
+
+    def reachable(self, sender: str) -> bool:
+        other = self.world.robots.get(sender)
+        return other is not None and self.world.can_talk(self.robot, other)
+
+    # ------------------------------------------------------------ asks
+
+    def ask_stone(self, data: Data, sender: str) -> Data | None:
+        """The best-scored pickable stone it knows within `radius` of (x, y)."""
+        if not self.reachable(sender):
+            return None
+        x, y, radius = (
+            float(data.get("x", 0)),
+            float(data.get("y", 0)),
+            float(data.get("radius", 5)),
+        )
+        cands = [
+            s
+            for s in self.robot.knowledge.stones.values()
+            if s.get("state") in ("identified", "ground")
+            and math.hypot(s["x"] - x, s["y"] - y) <= radius
+        ]
+        if not cands:
+            return None
+        return dict(
+            min(
+                cands,
+                key=lambda s: (-(s.get("score") or 0), math.hypot(s["x"] - x, s["y"] - y)),
+            )
+        )
+
+    def ask_rss(self, data: Data, sender: str) -> Data | None:
+        rss = self.robot.knowledge.rss
+        if not self.reachable(sender) or not rss:
+            return None
+        return {"regions": [dict(v) for v in rss.values()]}
+
+    def ask_box(self, data: Data, sender: str) -> Data | None:
+        if not self.reachable(sender):
+            return None
+        info = self.robot.knowledge.boxes.get(str(data.get("box", "")))
+        return dict(info) if info is not None else None
+
+    def ask_pose(self, data: Data, sender: str) -> Data | None:
+        if not self.reachable(sender):
+            return None
+        r = self.robot
+        return {
+            "x": round(r.x, 2),
+            "y": round(r.y, 2),
+            "yaw": round(r.yaw, 3),
+            "airborne": r.airborne,
+        }
+
+    def ask_shelf(self, data: Data, sender: str) -> Data | None:
+        """Slot -> box on the shelf (the lander only: it sees its shelf)."""
+        if self.robot.kind != "static" or not self.reachable(sender):
+            return None
+        slots = {
+            str(b.slot): b.name
+            for b in self.world.boxes.values()
+            if b.where == "shelf" and b.slot is not None
+        }
+        return {"slots": slots}
+
+    # ------------------------------------------------------------ tells
+
+    def tell_box(self, data: Data, sender: str) -> None:
+        if self.reachable(sender) and "box" in data:
+            self.robot.knowledge.boxes[str(data["box"])] = dict(data)
+
+    def tell_stone(self, data: Data, sender: str) -> None:
+        if self.reachable(sender) and "id" in data:
+            self.robot.knowledge.stones[str(data["id"])] = dict(data)
+
+    def tell_rss(self, data: Data, sender: str) -> None:
+        if self.reachable(sender) and "rss" in data:
+            self.robot.knowledge.rss[str(data["rss"])] = dict(data)
