@@ -1,10 +1,13 @@
-"""The simulated fleet: a Mars sample-return site and its robots, built on backend's robot agent SDK.
+"""The simulated fleet: a Mars sample-return site and its robots, on backend's robot agent SDK.
 
 - `worldfile`: world files (`missions/worlds/*.yaml`), validated by pydantic;
 - `world`: the site (numpy grids: terrain, explored area, coverage), objects, rules;
 - `pathing`: A* on the terrain grid, sweeps;
-- `skills`: the robots' skill handlers (every skill of missions/libraries/mars.yaml);
-- `fleet`: one RobotAgent per mission robot on one asyncio loop, map feed (wire models in backend.protocol.mapfeed), status;
+- `skills/`: the robots' skill handlers (every skill of missions/libraries/mars.yaml), by
+  family, over the `SkillHost` protocol the fleet satisfies; `skills.registry` names them;
+- `exchange`: what a robot answers when another one asks or tells it about the world;
+- `fleet`: one RobotAgent per mission robot on one asyncio loop, map feed (wire models in
+  backend.protocol.mapfeed), status;
 - `cli`: `missionctl sim` and `missionctl sim-status`.
 
 Never imports console or textual.

@@ -59,7 +59,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--world",
         metavar="FILE",
-        help="world file (default: worlds/mars.yaml next to the mission, else missions/worlds/mars.yaml)",
+        help=(
+            "world file (default: worlds/mars.yaml next to the mission, "
+            "else missions/worlds/mars.yaml)"
+        ),
     )
     p.add_argument(
         "--speed",
@@ -209,7 +212,8 @@ async def _serve(fleet, args: argparse.Namespace, world_file: Path) -> int:
         delay = f", link delay {fleet.link_delay:g} s" if fleet.link_delay else ""
         print(
             f"missionctl sim: world '{w.spec.name}' ({world_file}), seed {w.seed}, robots "
-            f"{', '.join(fleet.agents)}; speed {fleet.speed:g}x{delay}; connected to {', '.join(fleet.connect)}",
+            f"{', '.join(fleet.agents)}; speed {fleet.speed:g}x{delay}; "
+            f"connected to {', '.join(fleet.connect)}",
             flush=True,
         )
         await stop.wait()
@@ -276,7 +280,8 @@ def format_status(st) -> str:
                 for d in st.delivered
             )
         ),
-        f"regions found: {', '.join(st.rss_found) or 'none'}; explored {st.explored:.1%} of the site",
+        f"regions found: {', '.join(st.rss_found) or 'none'}; "
+        f"explored {st.explored:.1%} of the site",
         "exchanges: " + ", ".join(f"{k} {v}" for k, v in sorted(st.exchanges.items())),
         "robots:",
     ]
@@ -293,7 +298,8 @@ def format_status(st) -> str:
         if r.stones:
             flags.append(f"stones {', '.join(r.stones)}")
         lines.append(
-            f"  {r.name:<8} {r.kind:<6} ({r.x:7.1f}, {r.y:7.1f})  battery {r.battery:4.0%}  link {r.link:.2f}  "
+            f"  {r.name:<8} {r.kind:<6} ({r.x:7.1f}, {r.y:7.1f})  "
+            f"battery {r.battery:4.0%}  link {r.link:.2f}  "
             f"{r.activity or 'idle'}{'  [' + '; '.join(flags) + ']' if flags else ''}"
         )
         if r.result:

@@ -107,7 +107,9 @@ class Terrain(Strict):
     features: list[Feature] = Field(default_factory=list)
     keep_clear: list[Circle] = Field(
         default_factory=list,
-        description="never covered by random rocks or sand (RSSs, the lander and start poses are added)",
+        description=(
+            "never covered by random rocks or sand (RSSs, the lander and start poses are added)"
+        ),
     )
 
 

@@ -1,1 +1,1 @@
-"""Tests of the simulated fleet (sim/): world, map feed, skills, and the fleet against a real server."""
+"""Tests of the simulated fleet (sim/): world, map feed, skills, the fleet against a server."""

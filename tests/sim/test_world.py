@@ -99,7 +99,7 @@ def test_world_file_errors_point_at_line_and_field(tmp_path: Path) -> None:
     assert str(exc.value.issues[0]).startswith(f"{bad_yaml}:")
 
 
-# ---------------------------------------------------------------- coverage, exploration, ground view
+# ------------------------------------------------------------ coverage, exploration, ground view
 
 
 def test_coverage_grows_with_a_wifi_box_inside_coverage_only(world: World) -> None:
