@@ -66,12 +66,10 @@ class WorldExchange:
         ]
         if not cands:
             return None
-        return dict(
-            min(
-                cands,
-                key=lambda s: (-(s.get("score") or 0), math.hypot(s["x"] - x, s["y"] - y)),
-            )
+        best: Data = min(
+            cands, key=lambda s: (-(s.get("score") or 0), math.hypot(s["x"] - x, s["y"] - y))
         )
+        return dict(best)
 
     def ask_rss(self, data: Data, sender: str) -> Data | None:
         rss = self.robot.knowledge.rss

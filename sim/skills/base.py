@@ -83,6 +83,7 @@ class SkillBase:
         return dt
 
     def fail(self, reason: str) -> SkillFailed:
+        """The failure to raise, its reason kept in the referee's log."""
         self.world.log(f"{self.robot.name}: {reason}")
         return SkillFailed(reason)
 
@@ -129,6 +130,7 @@ class SkillBase:
             ctx.progress(frac, what, eta_s=(seconds - done) + self.rest_eta)
 
     def emergency_landing(self) -> None:
+        """A drone in the air with its battery at the reserve comes down where it is."""
         r = self.robot
         if r.kind == "drone" and r.airborne:
             r.airborne = False
