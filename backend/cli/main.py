@@ -14,19 +14,8 @@ import argparse
 import json
 import sys
 
+from backend.cli.parser import Parser
 from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK
-
-
-class _Parser(argparse.ArgumentParser):
-    # `ctl --json`: a usage error is also a JSON object on stdout, like every
-    # other failure of ctl (set from the command line before parsing it)
-    json_errors = False
-
-    def error(self, message: str):  # usage errors exit 2 without a traceback
-        self.print_usage(sys.stderr)
-        if self.json_errors:
-            print(json.dumps({"ok": False, "code": "bad_input", "message": message}), flush=True)
-        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
@@ -62,11 +51,11 @@ OWN_COMMANDS = frozenset({"validate", "schema", "server", "ctl", "certs"})
 
 
 def build_parser(*, plugins: bool = True) -> argparse.ArgumentParser:
-    p = _Parser(
+    p = Parser(
         prog="missionctl",
         description="Mission operation console for heterogeneous robot teams.",
     )
-    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
 
     v = sub.add_parser("validate", help="check mission and skill-library files")
     v.add_argument("files", nargs="+", metavar="FILE")
@@ -110,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser(plugins=command not in OWN_COMMANDS)
     from backend.cli.ctl.session import wants_json
 
-    _Parser.json_errors = wants_json(argv)
+    Parser.json_errors = wants_json(argv)
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help(sys.stderr)

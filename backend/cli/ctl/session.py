@@ -99,6 +99,7 @@ from datetime import date, datetime
 from pathlib import Path
 from typing import Any
 
+from backend.cli.parser import Parser
 from backend.core.credentials import AccountsError
 from backend.core.params import POSE_FIELDS, POSITION_FIELDS
 from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK, EXIT_REFUSED, EXIT_UNREACHABLE
@@ -557,12 +558,8 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
 
 def build_parser() -> argparse.ArgumentParser:
     """A stand-alone `missionctl` parser with only `ctl` (tests, `python -m backend.cli.ctl.session`)."""
-    try:
-        from backend.cli.main import _Parser as parser_class
-    except ImportError:  # pragma: no cover
-        parser_class = argparse.ArgumentParser
-    top = parser_class(prog="missionctl")
-    sub = top.add_subparsers(dest="command", metavar="COMMAND", parser_class=parser_class)
+    top = Parser(prog="missionctl")
+    sub = top.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     register(sub)
     return top
 
