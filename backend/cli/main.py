@@ -72,7 +72,7 @@ def build_parser(*, plugins: bool = True) -> argparse.ArgumentParser:
     from backend.cli.ctl import session as ctl
 
     ctl.register(sub)
-    from backend.server import certs
+    from backend.cli import certs
 
     certs.register(sub)
     for _name, register in _registrations() if plugins else []:
