@@ -9,14 +9,15 @@ import argparse
 import re
 import sys
 from pathlib import Path
+from typing import Any
 
 from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
+def prepare_parser(subparsers: Any) -> argparse.ArgumentParser:
+    p = subparsers.add_parser(
         "certs",
         help="make a CA, a server certificate and client certificates for TLS endpoints",
         description="Writes DIR/ca.pem (+ ca.key), DIR/server.pem (+ server.key) and "
@@ -45,7 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help="validity of new certificates (default 365)",
     )
-    p.set_defaults(func=run)
+    return p
 
 
 def run(args: argparse.Namespace) -> int:

@@ -8,12 +8,13 @@ import logging
 import signal
 import sys
 from pathlib import Path
+from typing import Any
 
 EXIT_BAD_INPUT, EXIT_UNREACHABLE = 2, 3
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
+def prepare_parser(subparsers: Any) -> argparse.ArgumentParser:
+    p = subparsers.add_parser(
         "server", help="run the mission server (a Zenoh router on loopback by default)"
     )
     p.add_argument(
@@ -58,7 +59,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="how long to wait for a robot to answer a command",
     )
     p.add_argument("-v", "--verbose", action="store_true")
-    p.set_defaults(func=run)
+    return p
 
 
 def run(args: argparse.Namespace) -> int:

@@ -428,7 +428,7 @@ def _geometry(p: argparse.ArgumentParser) -> None:
     g.add_argument("--area", metavar="A", help='polygon "x,y x,y x,y ..." (3 points or more)')
 
 
-def register(subparsers: Any) -> argparse.ArgumentParser:
+def prepare_parser(subparsers: Any) -> argparse.ArgumentParser:
     """Add `ctl` to missionctl's sub-commands."""
     p = subparsers.add_parser(
         "ctl",
@@ -552,7 +552,6 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     w = op("watch", "print changes as they happen, one line each, until Ctrl-C")
     w.add_argument("--count", type=_nonneg_int, metavar="N", help="stop after N change batches")
 
-    p.set_defaults(func=run)
     return p
 
 
@@ -560,7 +559,7 @@ def build_parser() -> argparse.ArgumentParser:
     """A stand-alone `missionctl` parser with only `ctl` (tests, `python -m backend.cli.ctl.session`)."""
     top = Parser(prog="missionctl")
     sub = top.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
-    register(sub)
+    prepare_parser(sub)
     return top
 
 
