@@ -17,7 +17,7 @@ from typing import Any
 
 from backend.cli import certs, ctl, schema, server, validate
 from backend.cli.command import Command
-from backend.cli.ctl.session import wants_json
+from backend.cli.ctl.args import wants_json
 from backend.cli.parser import Parser
 from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK
 

@@ -27,7 +27,7 @@ from typing import Any
 
 import pytest
 
-from backend.cli.ctl.session import DEFAULT_CONNECT
+from backend.cli.ctl.args import DEFAULT_CONNECT
 
 from .helpers import CTL_TIMEOUT, ROOT, Robots, Server, env, ok_json, until
 
