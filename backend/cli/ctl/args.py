@@ -344,7 +344,7 @@ def prepare_parser(subparsers: Any) -> argparse.ArgumentParser:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """A stand-alone `missionctl` parser with only `ctl` (tests, `python -m backend.cli.ctl.session`)."""
+    """A stand-alone `missionctl` parser with only `ctl` (tests)."""
     top = Parser(prog="missionctl")
     sub = top.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     prepare_parser(sub)

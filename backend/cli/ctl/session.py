@@ -17,7 +17,7 @@ import uuid
 from pathlib import Path
 from typing import Any
 
-from backend.cli.ctl.args import DEFAULT_CONNECT, parse_args
+from backend.cli.ctl.args import DEFAULT_CONNECT
 from backend.cli.ctl.build import build_op
 from backend.cli.ctl.errors import FileInvalid, UsageError
 from backend.cli.ctl.render import (
@@ -382,16 +382,3 @@ async def _operation(client: Any, args: argparse.Namespace) -> int:
         for n in notes:
             print(f"note: {n}", flush=True)
     return EXIT_OK
-
-
-def main(argv: list[str] | None = None) -> int:
-    """`python -m backend.cli.ctl.session OP ...` is `missionctl ctl OP ...`."""
-    args = parse_args(list(sys.argv[1:] if argv is None else argv))
-    try:
-        return run(args)
-    except KeyboardInterrupt:
-        return 130
-
-
-if __name__ == "__main__":
-    sys.exit(main())
