@@ -18,7 +18,6 @@ from pathlib import Path
 from typing import Any
 
 from backend.cli.ctl.args import DEFAULT_CONNECT
-from backend.cli.ctl.build import build_op
 from backend.cli.ctl.errors import FileInvalid, UsageError
 from backend.cli.ctl.render import (
     describe,
@@ -145,6 +144,7 @@ def _endpoints(args: argparse.Namespace) -> list[str]:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from backend.cli.ctl.build import build_op
     from backend.client.client import (
         MaybeApplied,
         OperationRefused,
@@ -352,6 +352,8 @@ def _save(client: Any, args: argparse.Namespace) -> int:
 
 
 async def _operation(client: Any, args: argparse.Namespace) -> int:
+    from backend.cli.ctl.build import build_op
+
     notes: list[str] = []
     op = build_op(args, client.library, client.mission)
     if args.op == "load":
