@@ -14,6 +14,7 @@ import re
 import socket
 import sys
 import uuid
+from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
@@ -77,13 +78,26 @@ def _fail(
     return exit_code
 
 
-def run(args: argparse.Namespace) -> int:
-    """`missionctl ctl ...`: returns the exit code; never raises for bad input."""
-    for stream in (sys.stdout, sys.stderr):  # labels may hold what the terminal cannot show
+def _tolerant_output() -> None:
+    """Labels may hold what the terminal cannot show: replace, never fail."""
+    for stream in (sys.stdout, sys.stderr):
         try:
             stream.reconfigure(errors="replace")  # type: ignore[attr-defined]
         except (AttributeError, ValueError):
             pass
+
+
+def _quiet_broken_pipe() -> int:
+    try:  # the reader went away (`| head`): no complaint at exit
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except OSError:
+        pass
+    return EXIT_OK
+
+
+def run(args: argparse.Namespace) -> int:
+    """`missionctl ctl ...`: returns the exit code; never raises for bad input."""
+    _tolerant_output()
     if not getattr(args, "op", None):
         return _fail(
             args,
@@ -110,11 +124,7 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         return EXIT_OK if args.op == "watch" else 130
     except BrokenPipeError:
-        try:  # the reader went away (`| head`): no complaint at exit
-            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        except OSError:
-            pass
-        return EXIT_OK
+        return _quiet_broken_pipe()
     except Exception as e:  # never a traceback for a person
         if os.environ.get("MISSIONCTL_DEBUG"):
             raise
@@ -143,6 +153,17 @@ def _endpoints(args: argparse.Namespace) -> list[str]:
     return out
 
 
+def _check_save_target(args: argparse.Namespace) -> None:
+    """`save FILE`: a place it can be written to, checked before connecting."""
+    target = Path(args.file)
+    if target.is_dir():
+        raise UsageError(f"save: {args.file} is a directory")
+    parent = target.resolve().parent
+    if not parent.is_dir():
+        why = "is not a folder" if parent.exists() else "does not exist"
+        raise UsageError(f"save: {target.parent} {why}: nothing was written")
+
+
 def _run(args: argparse.Namespace) -> int:
     from backend.cli.ctl.build import build_op
     from backend.client.client import (
@@ -161,53 +182,63 @@ def _run(args: argparse.Namespace) -> int:
     except AccountsError as e:
         raise UsageError(str(e)) from None
     if args.op == "save":
-        target = Path(args.file)
-        if target.is_dir():
-            raise UsageError(f"save: {args.file} is a directory")
-        parent = target.resolve().parent
-        if not parent.is_dir():
-            why = "is not a folder" if parent.exists() else "does not exist"
-            raise UsageError(f"save: {target.parent} {why}: nothing was written")
+        _check_save_target(args)
     try:
         return asyncio.run(_session(args, endpoints, login))
     except OperationRefused as e:
-        r = e.reply
-        return _fail(
-            args,
-            r.code,
-            r.message,
-            EXIT_REFUSED,
-            lines=[f"missionctl: refused: {r.message}"],
-            extra={
-                k: v
-                for k, v in r.model_dump().items()
-                if k not in ("ok", "code", "message") and v is not None
-            },
-        )
+        return _refused(args, e.reply)
     except MaybeApplied as e:  # the request left: it may have been applied
-        retry = f"--request-id {e.request_id}" + (
-            f" --client-id {args.client_id}" if args.client_id else ""
-        )
-        message = (
-            f"{e.what}. Once the server answers, look with `missionctl ctl state`, or run the same command "
-            f"again with {retry}: it is applied once (the reply says so if it had been)"
-        )
-        code = "timeout" if isinstance(e, OperationTimeout) else "unreachable"
-        return _fail(
-            args,
-            code,
-            message,
-            EXIT_UNREACHABLE,
-            extra={"request_id": e.request_id, "maybe_applied": True},
-        )
-    except ServerUnreachable as e:
-        return _fail(args, "unreachable", str(e), EXIT_UNREACHABLE)
-    except ProtocolMismatch as e:
-        return _fail(args, "protocol_mismatch", str(e), EXIT_UNREACHABLE)
-    except OperationTimeout as e:
-        return _fail(args, "timeout", str(e), EXIT_UNREACHABLE)
-    except TransportError as e:
-        return _fail(args, "transport_error", str(e), EXIT_UNREACHABLE)
+        return _maybe_applied(args, e)
+    except (ServerUnreachable, ProtocolMismatch, OperationTimeout, TransportError) as e:
+        return _fail(args, _failure_code(e), str(e), EXIT_UNREACHABLE)
+
+
+def _refused(args: argparse.Namespace, r: Any) -> int:
+    """The server's refusal, with what it names (robot, skill, param) in --json."""
+    return _fail(
+        args,
+        r.code,
+        r.message,
+        EXIT_REFUSED,
+        lines=[f"missionctl: refused: {r.message}"],
+        extra={
+            k: v
+            for k, v in r.model_dump().items()
+            if k not in ("ok", "code", "message") and v is not None
+        },
+    )
+
+
+def _maybe_applied(args: argparse.Namespace, e: Any) -> int:
+    from backend.client.client import OperationTimeout
+
+    retry = f"--request-id {e.request_id}" + (
+        f" --client-id {args.client_id}" if args.client_id else ""
+    )
+    message = (
+        f"{e.what}. Once the server answers, look with `missionctl ctl state`, or run the "
+        f"same command again with {retry}: it is applied once (the reply says so if it had been)"
+    )
+    code = "timeout" if isinstance(e, OperationTimeout) else "unreachable"
+    return _fail(
+        args,
+        code,
+        message,
+        EXIT_UNREACHABLE,
+        extra={"request_id": e.request_id, "maybe_applied": True},
+    )
+
+
+def _failure_code(e: Exception) -> str:
+    """The --json code of a connection failure (exit 3), most specific first."""
+    from backend.client.client import OperationTimeout, ProtocolMismatch, ServerUnreachable
+
+    codes = (
+        (ServerUnreachable, "unreachable"),
+        (ProtocolMismatch, "protocol_mismatch"),
+        (OperationTimeout, "timeout"),
+    )
+    return next((code for cls, code in codes if isinstance(e, cls)), "transport_error")
 
 
 async def _session(args: argparse.Namespace, endpoints: list[str], login: Any = None) -> int:
@@ -218,22 +249,26 @@ async def _session(args: argparse.Namespace, endpoints: list[str], login: Any = 
         login=login,
         client_id=args.client_id or default_client_id(),
         timeout=args.timeout,
-        telemetry=args.op
-        in ("robots", "watch"),  # watch: to say when a robot's telemetry is unreadable
+        # watch: to say when a robot's telemetry is unreadable
+        telemetry=args.op in ("robots", "watch"),
     )
     async with client:
-        if args.op == "state":
-            return _state(client, args)
-        if args.op == "robots":
-            return await _robots(client, args)
-        if args.op == "watch":
-            return await _watch(client, args)
-        if args.op == "save":
-            return _save(client, args)
-        return await _operation(client, args)
+        return await VIEWS.get(args.op, _operation)(client, args)
 
 
-def _state(client: Any, args: argparse.Namespace) -> int:
+def _print_done(args: argparse.Namespace, line: Callable[[], str], **reply: Any) -> int:
+    """A success: `line()` and the notes, or with --json {"ok": true, "op",
+    "revision", "value", "notes", "duplicate"} (given in that order)."""
+    if args.json:
+        _print_json({"ok": True, **reply})
+    else:
+        print(line(), flush=True)
+        for n in reply["notes"]:
+            print(f"note: {n}", flush=True)
+    return EXIT_OK
+
+
+async def _state(client: Any, args: argparse.Namespace) -> int:
     only = list(args.robots or [])
     unknown = [r for r in only if r not in client.mission.robots and r not in client.robots]
     if unknown:
@@ -299,56 +334,62 @@ def _session_free(m: Any) -> Any:
     )
 
 
-def _save(client: Any, args: argparse.Namespace) -> int:
+def _library_note(client: Any, m: Any, target: Path) -> list[str]:
+    """A note when the library reference, as the server has it, does not lead
+    from `target`'s folder to the server's library."""
     from backend.files.diagnostics import FileProblems
-    from backend.files.missions import library_path, load_library, save_mission
+    from backend.files.missions import library_path, load_library
 
+    resolved = library_path(target, m.library)
+    try:
+        same = resolved.is_file() and load_library(resolved) == client.library
+    except FileProblems:
+        same = False
+    if same:
+        return []
+    return [
+        f"the library reference '{m.library}' is written as the server has it (relative to "
+        f"the mission file the server loaded); from {target.parent or '.'} it does not lead "
+        f"to the server's library '{client.library.name}'; pass --library PATH to set it"
+    ]
+
+
+def _write(client: Any, m: Any, target: Path, library: str | None) -> list[str]:
+    """Write the mission file; the notes to print."""
+    from backend.files.missions import save_mission
+
+    if not library:
+        notes = _library_note(client, m, target)
+        save_mission(m, target)
+        return notes
+    lib_file = Path(library)
+    if not lib_file.is_file():
+        raise UsageError(f"save --library: no such file {library}")
+    save_mission(m, target, library_file=lib_file)
+    return []
+
+
+async def _save(client: Any, args: argparse.Namespace) -> int:
     m = _session_free(client.mission)
     target = Path(args.file)
-    notes: list[str] = []
     try:
-        if args.library:
-            lib_file = Path(args.library)
-            if not lib_file.is_file():
-                raise UsageError(f"save --library: no such file {args.library}")
-            save_mission(m, target, library_file=lib_file)
-        else:
-            resolved = library_path(target, m.library)
-            try:
-                same = resolved.is_file() and load_library(resolved) == client.library
-            except FileProblems:
-                same = False
-            if not same:
-                notes.append(
-                    f"the library reference '{m.library}' is written as the server has it (relative to the "
-                    f"mission file the server loaded); from {target.parent or '.'} it does not lead to the server's "
-                    f"library '{client.library.name}'; pass --library PATH to set it"
-                )
-            save_mission(m, target)
+        notes = _write(client, m, target, args.library)
     except OSError as e:
         raise UsageError(f"save: cannot write {args.file}: {e.strerror or e}") from None
     written = m.library
     if args.library:
         written = os.path.relpath(Path(args.library).resolve(), target.resolve().parent)
-    if args.json:
-        _print_json(
-            {
-                "ok": True,
-                "op": "save",
-                "revision": m.revision,
-                "value": {"file": str(target), "library": written},
-                "notes": notes,
-                "duplicate": False,
-            }
-        )
-    else:
-        print(
-            f"saved mission '{m.name}' at revision {m.revision} to {target} (library: {written})",
-            flush=True,
-        )
-        for n in notes:
-            print(f"note: {n}", flush=True)
-    return EXIT_OK
+    return _print_done(
+        args,
+        lambda: (
+            f"saved mission '{m.name}' at revision {m.revision} to {target} (library: {written})"
+        ),
+        op="save",
+        revision=m.revision,
+        value={"file": str(target), "library": written},
+        notes=notes,
+        duplicate=False,
+    )
 
 
 async def _operation(client: Any, args: argparse.Namespace) -> int:
@@ -368,19 +409,22 @@ async def _operation(client: Any, args: argparse.Namespace) -> int:
     reply = await client.submit(op, expected_revision=args.expect_revision, request_id=request_id)
     notes += list(reply.notes)
     mission = client.mission
-    if args.json:
-        _print_json(
-            {
-                "ok": True,
-                "op": op.op,
-                "revision": reply.revision,
-                "value": reply.value,
-                "notes": notes,
-                "duplicate": reply.duplicate,
-            }
-        )
-    else:
-        print(describe(op, reply, before, mission), flush=True)
-        for n in notes:
-            print(f"note: {n}", flush=True)
-    return EXIT_OK
+    return _print_done(
+        args,
+        lambda: describe(op, reply, before, mission),
+        op=op.op,
+        revision=reply.revision,
+        value=reply.value,
+        notes=notes,
+        duplicate=reply.duplicate,
+    )
+
+
+# operations that read (or write a file) instead of submitting an operation;
+# every other one is built, submitted and described (_operation)
+VIEWS: dict[str, Callable[[Any, argparse.Namespace], Awaitable[int]]] = {
+    "state": _state,
+    "robots": _robots,
+    "watch": _watch,
+    "save": _save,
+}
