@@ -87,6 +87,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from collections.abc import Callable
 from typing import Any
 
 from backend.cli.parser import Parser
@@ -216,6 +217,165 @@ def _geometry(p: argparse.ArgumentParser) -> None:
     g.add_argument("--area", metavar="A", help='polygon "x,y x,y x,y ..." (3 points or more)')
 
 
+def _param_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--param", action="append", metavar="NAME=VALUE", help="parameter value (YAML) or @MARKER"
+    )
+
+
+# ---------------------------------------------------------------- one per operation
+
+
+def _nothing(p: argparse.ArgumentParser) -> None:
+    pass
+
+
+def _state(p: argparse.ArgumentParser) -> None:
+    p.add_argument("robots", nargs="*", metavar="ROBOT", help="only these robots")
+
+
+def _add(p: argparse.ArgumentParser) -> None:
+    p.add_argument("robot", metavar="ROBOT")
+    p.add_argument("skill", metavar="SKILL")
+    _param_option(p)
+    p.add_argument("--label", metavar="TEXT")
+    p.add_argument(
+        "--at",
+        type=int,
+        metavar="INDEX",
+        help="position in the unsynchronized section (default: end)",
+    )
+    _policies(p)
+
+
+def _ids(p: argparse.ArgumentParser) -> None:
+    p.add_argument("ids", nargs="+", metavar="ID")
+
+
+def _id(p: argparse.ArgumentParser) -> None:
+    p.add_argument("id", metavar="ID")
+
+
+def _move(p: argparse.ArgumentParser) -> None:
+    p.add_argument("id", metavar="ID")
+    p.add_argument("index", type=int, metavar="INDEX", help="0 = first unsynchronized skill")
+
+
+def _edit(p: argparse.ArgumentParser) -> None:
+    p.add_argument("id", metavar="ID")
+    p.add_argument("--label", metavar="TEXT")
+    _param_option(p)
+    p.add_argument(
+        "--unbind",
+        action="append",
+        metavar="NAME",
+        help="drop a parameter's marker binding (keeps its value)",
+    )
+    _policies(p)
+
+
+def _sync(p: argparse.ArgumentParser) -> None:
+    p.add_argument("robot", metavar="ROBOT")
+    p.add_argument("--through", metavar="ID", help="last skill to synchronize")
+
+
+def _unsync(p: argparse.ArgumentParser) -> None:
+    p.add_argument("robot", metavar="ROBOT")
+    p.add_argument("--from", dest="from_id", metavar="ID", help="first queued skill to take back")
+
+
+def _control(p: argparse.ArgumentParser) -> None:
+    p.add_argument("robot", nargs="?", metavar="ROBOT")
+    p.add_argument("--all", action="store_true", help="every robot")
+
+
+def _unbarrier(p: argparse.ArgumentParser) -> None:
+    p.add_argument("barrier", metavar="BARRIER_ID")
+
+
+def _marker_add(p: argparse.ArgumentParser) -> None:
+    _geometry(p)
+    p.add_argument("--description", default="", metavar="TEXT")
+
+
+def _marker_rename(p: argparse.ArgumentParser) -> None:
+    p.add_argument("new_name", metavar="NEW_NAME")
+
+
+Arguments = Callable[[argparse.ArgumentParser], None]
+
+# `marker ACTION NAME ...`: action -> (help, its arguments after NAME)
+MARKER_ACTIONS: dict[str, tuple[str, Arguments]] = {
+    "add": ("add a pose, position or area marker", _marker_add),
+    "move": (
+        "give a marker a new pose, position or area (idle bound skills follow)",
+        _geometry,
+    ),
+    "rename": ("rename a marker (bindings follow)", _marker_rename),
+    "delete": ("delete a marker (not while a synchronized skill uses it)", _nothing),
+}
+
+
+def _marker(p: argparse.ArgumentParser) -> None:
+    actions = p.add_subparsers(dest="marker_op", metavar="ACTION")
+    actions.required = True
+    for name, (help, arguments) in MARKER_ACTIONS.items():
+        sp = actions.add_parser(name, help=help, description=help)
+        _common(sp, top=False)
+        sp.add_argument("name", metavar="NAME")
+        arguments(sp)
+
+
+def _file(p: argparse.ArgumentParser) -> None:
+    p.add_argument("file", metavar="FILE")
+
+
+def _save(p: argparse.ArgumentParser) -> None:
+    p.add_argument("file", metavar="FILE")
+    p.add_argument(
+        "--library",
+        metavar="PATH",
+        help="the skill library file to reference, written relative to FILE "
+        "(default: the server's reference, as is)",
+    )
+
+
+def _new(p: argparse.ArgumentParser) -> None:
+    p.add_argument("name", nargs="?", default="mission", metavar="NAME")
+
+
+def _watch(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--count", type=_nonneg_int, metavar="N", help="stop after N change batches")
+
+
+# ctl's operations, in the order `ctl --help` lists them: name -> (help, its arguments).
+# Each also takes the common options (_common).
+OPERATIONS: dict[str, tuple[str, Arguments]] = {
+    "state": ("print the mission: robots, skills, barriers, markers, revision", _state),
+    "robots": ("robot presence, type, manifest and telemetry", _nothing),
+    "add": ("add a skill to a robot's unsynchronized section", _add),
+    "delete": ("delete idle skills", _ids),
+    "move": ("move an idle skill within its robot's unsynchronized section", _move),
+    "edit": ("change the label, parameters, bindings or policies of an idle skill", _edit),
+    "sync": ("send a robot its unsynchronized skills (all, or through ID)", _sync),
+    "unsync": ("take queued skills back from a robot (all, or from ID on)", _unsync),
+    "run": ("start or resume execution, on one robot or --all", _control),
+    "pause": ("pause the running skill, on one robot or --all", _control),
+    "stop": ("stop the active skill (it returns to the queue), on one robot or --all", _control),
+    "reset": ("stop and unsynchronize everything queued, on one robot or --all", _control),
+    "retry": ("retry a failed skill (a new attempt right after it)", _id),
+    "barrier": ("make idle skills of different robots start together", _ids),
+    "unbarrier": ("remove a barrier", _unbarrier),
+    "marker": ("add, move, rename or delete a marker", _marker),
+    "load": ("replace the mission with a mission file (validated here first)", _file),
+    "save": ("write the mission to a YAML file", _save),
+    "new": ("start an empty mission with the same robots", _new),
+    "undo": ("undo your last edit of the plan", _nothing),
+    "redo": ("redo what you undid last", _nothing),
+    "watch": ("print changes as they happen, one line each, until Ctrl-C", _watch),
+}
+
+
 def prepare_parser(subparsers: Any) -> argparse.ArgumentParser:
     """Add `ctl` to missionctl's sub-commands."""
     p = subparsers.add_parser(
@@ -226,120 +386,10 @@ def prepare_parser(subparsers: Any) -> argparse.ArgumentParser:
     )
     _common(p, top=True)
     ops = p.add_subparsers(dest="op", metavar="OP")
-
-    def op(name: str, help: str, **kw: Any) -> argparse.ArgumentParser:
-        sp = ops.add_parser(name, help=help, description=help, **kw)
+    for name, (help, arguments) in OPERATIONS.items():
+        sp = ops.add_parser(name, help=help, description=help)
         _common(sp, top=False)
-        return sp
-
-    s = op("state", "print the mission: robots, skills, barriers, markers, revision")
-    s.add_argument("robots", nargs="*", metavar="ROBOT", help="only these robots")
-
-    op("robots", "robot presence, type, manifest and telemetry")
-
-    a = op("add", "add a skill to a robot's unsynchronized section")
-    a.add_argument("robot", metavar="ROBOT")
-    a.add_argument("skill", metavar="SKILL")
-    a.add_argument(
-        "--param", action="append", metavar="NAME=VALUE", help="parameter value (YAML) or @MARKER"
-    )
-    a.add_argument("--label", metavar="TEXT")
-    a.add_argument(
-        "--at",
-        type=int,
-        metavar="INDEX",
-        help="position in the unsynchronized section (default: end)",
-    )
-    _policies(a)
-
-    d = op("delete", "delete idle skills")
-    d.add_argument("ids", nargs="+", metavar="ID")
-
-    m = op("move", "move an idle skill within its robot's unsynchronized section")
-    m.add_argument("id", metavar="ID")
-    m.add_argument("index", type=int, metavar="INDEX", help="0 = first unsynchronized skill")
-
-    e = op("edit", "change the label, parameters, bindings or policies of an idle skill")
-    e.add_argument("id", metavar="ID")
-    e.add_argument("--label", metavar="TEXT")
-    e.add_argument(
-        "--param", action="append", metavar="NAME=VALUE", help="parameter value (YAML) or @MARKER"
-    )
-    e.add_argument(
-        "--unbind",
-        action="append",
-        metavar="NAME",
-        help="drop a parameter's marker binding (keeps its value)",
-    )
-    _policies(e)
-
-    sy = op("sync", "send a robot its unsynchronized skills (all, or through ID)")
-    sy.add_argument("robot", metavar="ROBOT")
-    sy.add_argument("--through", metavar="ID", help="last skill to synchronize")
-
-    u = op("unsync", "take queued skills back from a robot (all, or from ID on)")
-    u.add_argument("robot", metavar="ROBOT")
-    u.add_argument("--from", dest="from_id", metavar="ID", help="first queued skill to take back")
-
-    for name, what in (
-        ("run", "start or resume execution"),
-        ("pause", "pause the running skill"),
-        ("stop", "stop the active skill (it returns to the queue)"),
-        ("reset", "stop and unsynchronize everything queued"),
-    ):
-        c = op(name, f"{what}, on one robot or --all")
-        c.add_argument("robot", nargs="?", metavar="ROBOT")
-        c.add_argument("--all", action="store_true", help="every robot")
-
-    r = op("retry", "retry a failed skill (a new attempt right after it)")
-    r.add_argument("id", metavar="ID")
-
-    b = op("barrier", "make idle skills of different robots start together")
-    b.add_argument("ids", nargs="+", metavar="ID")
-
-    ub = op("unbarrier", "remove a barrier")
-    ub.add_argument("barrier", metavar="BARRIER_ID")
-
-    mk = op("marker", "add, move, rename or delete a marker")
-    mops = mk.add_subparsers(dest="marker_op", metavar="ACTION")
-    mops.required = True
-
-    def mop(name: str, help: str) -> argparse.ArgumentParser:
-        sp = mops.add_parser(name, help=help, description=help)
-        _common(sp, top=False)
-        sp.add_argument("name", metavar="NAME")
-        return sp
-
-    ma = mop("add", "add a pose, position or area marker")
-    _geometry(ma)
-    ma.add_argument("--description", default="", metavar="TEXT")
-    mm = mop("move", "give a marker a new pose, position or area (idle bound skills follow)")
-    _geometry(mm)
-    mr = mop("rename", "rename a marker (bindings follow)")
-    mr.add_argument("new_name", metavar="NEW_NAME")
-    mop("delete", "delete a marker (not while a synchronized skill uses it)")
-
-    lo = op("load", "replace the mission with a mission file (validated here first)")
-    lo.add_argument("file", metavar="FILE")
-
-    sv = op("save", "write the mission to a YAML file")
-    sv.add_argument("file", metavar="FILE")
-    sv.add_argument(
-        "--library",
-        metavar="PATH",
-        help="the skill library file to reference, written relative to FILE "
-        "(default: the server's reference, as is)",
-    )
-
-    n = op("new", "start an empty mission with the same robots")
-    n.add_argument("name", nargs="?", default="mission", metavar="NAME")
-
-    op("undo", "undo your last edit of the plan")
-    op("redo", "redo what you undid last")
-
-    w = op("watch", "print changes as they happen, one line each, until Ctrl-C")
-    w.add_argument("--count", type=_nonneg_int, metavar="N", help="stop after N change batches")
-
+        arguments(sp)
     return p
 
 
