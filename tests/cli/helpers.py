@@ -78,7 +78,8 @@ def until(
             return last
         time.sleep(0.1)
     raise AssertionError(
-        f"{what} not reached within {timeout}s; last state tasks: {json.dumps(last.get('tasks'), indent=1)}"
+        f"{what} not reached within {timeout}s; "
+        f"last state tasks: {json.dumps(last.get('tasks'), indent=1)}"
     )
 
 

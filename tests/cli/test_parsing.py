@@ -434,7 +434,7 @@ def test_load(tmp_path):
         op_of(["load", str(tmp_path / "missing.yaml")])
 
 
-# ---------------------------------------------------------------- run(): exit codes without a server
+# ------------------------------------------------------- run(): exit codes without a server
 
 
 def _nobody() -> str:
@@ -631,7 +631,8 @@ def test_watch_says_which_message_was_unreadable():
         "battery: Input should be less than or equal to 1",
     )
     assert watch_line("malformed", m, False) == (
-        "unreadable telemetry on mc/v1/robot/lru1/telemetry (ignored): battery: Input should be less than or equal to 1"
+        "unreadable telemetry on mc/v1/robot/lru1/telemetry (ignored): "
+        "battery: Input should be less than or equal to 1"
     )
     assert json.loads(watch_line("malformed", m, True)) == {
         "kind": "malformed",

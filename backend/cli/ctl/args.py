@@ -144,7 +144,8 @@ def _common(p: argparse.ArgumentParser, *, top: bool) -> None:
         action="append",
         metavar="ENDPOINT",
         default=d(None),
-        help=f"mission server endpoint (default: $MISSIONCTL_CONNECT or {DEFAULT_CONNECT}); repeatable",
+        help=f"mission server endpoint (default: $MISSIONCTL_CONNECT or {DEFAULT_CONNECT}); "
+        "repeatable",
     )
     g.add_argument(
         "--json",
@@ -163,7 +164,8 @@ def _common(p: argparse.ArgumentParser, *, top: bool) -> None:
         "--client-id",
         metavar="ID",
         default=d(None),
-        help="client id (default: $MISSIONCTL_CLIENT_ID or ctl-USER@HOST; undo/redo are per client id)",
+        help="client id (default: $MISSIONCTL_CLIENT_ID or ctl-USER@HOST; "
+        "undo/redo are per client id)",
     )
     g.add_argument(
         "--expect-revision",

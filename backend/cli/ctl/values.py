@@ -25,7 +25,8 @@ class MarkerRef:
 def check_name(value: str, what: str) -> str:
     if not _NAME_RE.match(value or ""):
         raise UsageError(
-            f"{what}: {value!r} is not a valid name (letters, digits, '_' and '-', starting with a letter)"
+            f"{what}: {value!r} is not a valid name "
+            "(letters, digits, '_' and '-', starting with a letter)"
         )
     return value
 
@@ -72,8 +73,9 @@ def parse_param(text: str) -> tuple[str, Any]:
         ) from None
     if isinstance(value, dict | list) and stripped[:1] not in "{[":
         raise UsageError(
-            f"--param {name}: {raw!r} reads as a YAML block {'mapping' if isinstance(value, dict) else 'list'}; "
-            f"write mappings in braces ({{x: 3, y: 4}}) and lists in brackets ([a, b]), quoted for the shell"
+            f"--param {name}: {raw!r} reads as a YAML block "
+            f"{'mapping' if isinstance(value, dict) else 'list'}; write mappings in braces "
+            "({x: 3, y: 4}) and lists in brackets ([a, b]), quoted for the shell"
         )
     if isinstance(value, str) and value.startswith("@") and len(value) > 1:
         return name, MarkerRef(check_name(value[1:], f"--param {name}=@MARKER"))
