@@ -137,7 +137,7 @@ def _tls_options(args: argparse.Namespace) -> dict:
     ):
         if path and not Path(path).is_file():
             raise ValueError(f"{opt} {path}: no such file")
-    out = {
+    out: dict[str, str | bool] = {
         "transport/link/tls/listen_certificate": str(Path(args.tls_cert).resolve()),
         "transport/link/tls/listen_private_key": str(Path(args.tls_key).resolve()),
     }

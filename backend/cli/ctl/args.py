@@ -414,5 +414,5 @@ def wants_json(argv: list[str]) -> bool:
 def parse_args(argv: list[str]) -> argparse.Namespace:
     """`missionctl ctl ARGV...` parsed (argparse errors exit 2)."""
     parser = build_parser()
-    type(parser).json_errors = wants_json(["ctl", *argv])
+    Parser.json_errors = wants_json(["ctl", *argv])
     return parser.parse_args(["ctl", *argv])

@@ -82,7 +82,7 @@ def _tolerant_output() -> None:
     """Labels may hold what the terminal cannot show: replace, never fail."""
     for stream in (sys.stdout, sys.stderr):
         try:
-            stream.reconfigure(errors="replace")  # type: ignore[attr-defined]
+            stream.reconfigure(errors="replace")  # type: ignore[union-attr]
         except (AttributeError, ValueError):
             pass
 
