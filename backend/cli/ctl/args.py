@@ -96,7 +96,7 @@ from backend.transport.login import add_login_arguments
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 DEFAULT_TIMEOUT = 10.0
 
-CONTROL_OPS = ("run", "pause", "stop", "reset")
+CONTROL_OPS = ("run", "pause", "stop", "reset")  # on one robot or --all (see OPERATIONS)
 
 
 def _recharge(text: str) -> float | None:
