@@ -162,7 +162,9 @@ class _Robot:
 
         applied_at: dict[int, float] = {}
 
-        def on_event(kind: str, batch) -> None:
+        def on_event(*args) -> None:
+            # one typed event; a version before issue 18 calls with (kind, payload)
+            kind, batch = (args[0].kind, args[0].payload) if len(args) == 1 else args
             if kind == "events":
                 applied_at.setdefault(batch.revision, time.perf_counter())
 
@@ -198,7 +200,7 @@ class _Robot:
             await client.wait_for(lambda m, r=revision: m.revision >= r, 10)
             applied.append(applied_at[revision] - t)
             await asyncio.sleep(0.012)  # lone reports: the server's threads go idle in between
-        client._listeners.remove(on_event)
+        client._listeners.remove(on_event)  # no remove_listener before issue 18
         return acks, applied
 
     def close(self) -> None:

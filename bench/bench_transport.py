@@ -66,6 +66,7 @@ for p in (ROOT, ROOT / "bench"):
 from report import machine, write_section  # noqa: E402
 
 from backend.client.client import MissionClient  # noqa: E402
+from backend.client.events import BatchApplied  # noqa: E402
 from backend.core.model import Status  # noqa: E402
 from backend.core.ops import EditSkill, Report, Sync  # noqa: E402
 from backend.files.missions import load_library, mission_to_yaml  # noqa: E402
@@ -413,10 +414,10 @@ async def child_clients(endpoint: str, count: int) -> int:
             c._on_events = on_events  # bound by connect() when it subscribes
             await c.connect()
 
-            def on_event(kind: str, payload: Any, i: int = i) -> None:
-                if kind == "events":
+            def on_event(event: Any, i: int = i) -> None:
+                if isinstance(event, BatchApplied):
                     t = time.perf_counter()
-                    for e in payload.events:
+                    for e in event.batch.events:
                         if e.ev == "report_seq":
                             events.append((i, e.seq, t))
 

@@ -1433,7 +1433,7 @@ async def _robots(client: Any, args: argparse.Namespace) -> int:
 
 async def _watch(client: Any, args: argparse.Namespace) -> int:
     q: asyncio.Queue[tuple[str, Any]] = asyncio.Queue()
-    client.add_listener(lambda kind, payload: q.put_nowait((kind, payload)))
+    client.add_listener(lambda event: q.put_nowait((event.kind, event.payload)))
     print(
         f"watching mission '{client.mission.name}' at {', '.join(client.endpoints)} from revision "
         f"{client.revision}; Ctrl-C to stop",
