@@ -257,17 +257,19 @@ class MissionClient:
             except NoResponder:
                 if self.login.logged_in:  # the router's rules may have dropped the query
                     raise ServerUnreachable(
-                        f"no mission server answers user {self.user} at {', '.join(self.endpoints)}: either none "
-                        "runs there, or this account may not read the mission (a robot account; under mutual "
-                        "TLS, a certificate not named after the account)"
+                        f"no mission server answers user {self.user} at "
+                        f"{', '.join(self.endpoints)}: either none runs there, or this account "
+                        "may not read the mission (a robot account; under mutual TLS, a "
+                        "certificate not named after the account)"
                     ) from None
                 raise ServerUnreachable(
-                    f"no mission server answers at {', '.join(self.endpoints)} (a Zenoh router is there, "
-                    "but no missionctl server)"
+                    f"no mission server answers at {', '.join(self.endpoints)} "
+                    "(a Zenoh router is there, but no missionctl server)"
                 ) from None
             except QueryTimeout:
                 raise ServerUnreachable(
-                    f"the mission server at {', '.join(self.endpoints)} did not answer in {self.timeout:g} s"
+                    f"the mission server at {', '.join(self.endpoints)} did not answer "
+                    f"in {self.timeout:g} s"
                 ) from None
             try:
                 with gc_paused():
@@ -279,7 +281,8 @@ class MissionClient:
                 ) from None
             if snap.protocol != PROTOCOL_VERSION:
                 raise ProtocolMismatch(
-                    f"the server speaks protocol {snap.protocol}, this client {PROTOCOL_VERSION}; upgrade the older side"
+                    f"the server speaks protocol {snap.protocol}, this client "
+                    f"{PROTOCOL_VERSION}; upgrade the older side"
                 )
             self.mission, self.library = snap.mission, snap.library
             self.robots = dict(snap.robots)
@@ -455,7 +458,8 @@ class MissionClient:
             raise OperationRefused(_error_reply(e.payload)) from None
         except QueryTimeout:
             raise OperationTimeout(
-                f"the server did not answer '{op.op}' within {wait:g} s; it may have applied it, or still apply it",
+                f"the server did not answer '{op.op}' within {wait:g} s; "
+                "it may have applied it, or still apply it",
                 req.request_id,
             ) from None
         except NoResponder:

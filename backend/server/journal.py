@@ -154,7 +154,10 @@ def _faithful_serializer(model_cls: type[BaseModel]) -> pydantic_core.SchemaSeri
         return None
 
 
-_INSERT_BATCH = "INSERT INTO batches (revision, ts, actor, client, request_id, op, events) VALUES (?, ?, ?, ?, ?, ?, ?)"
+_INSERT_BATCH = (
+    "INSERT INTO batches (revision, ts, actor, client, request_id, op, events) "
+    "VALUES (?, ?, ?, ?, ?, ?, ?)"
+)
 
 _MISSION_JSON = _faithful_serializer(Mission)
 _BATCH_JSON = _faithful_serializer(EventBatch)
@@ -297,7 +300,8 @@ class Journal:
         goes on writing into a deleted file, which a restart would not find."""
         if identity(self.path) != self._identity:
             raise JournalError(
-                f"{self.path} was deleted or replaced while open; what is written now would be lost at a restart"
+                f"{self.path} was deleted or replaced while open; "
+                "what is written now would be lost at a restart"
             )
         return self.conn
 
@@ -363,13 +367,14 @@ class Journal:
             last = self._last_rev
             if last is None:
                 raise ValueError(
-                    "the journal has no base mission: store a snapshot(mission) before appending batches"
+                    "the journal has no base mission: "
+                    "store a snapshot(mission) before appending batches"
                 )
             for row in rows:
                 if row[0] != last + 1:
                     raise ValueError(
-                        f"batch revision {row[0]} does not follow the journal's last revision {last} "
-                        f"(expected {last + 1}): revisions are consecutive"
+                        f"batch revision {row[0]} does not follow the journal's last revision "
+                        f"{last} (expected {last + 1}): revisions are consecutive"
                     )
                 last = row[0]
             conn = self._writable()
@@ -601,7 +606,8 @@ class Journal:
         """Revision at which a request was applied, if it is journaled."""
         with self._lock:
             row = self.conn.execute(
-                "SELECT revision FROM batches WHERE client = ? AND request_id = ? ORDER BY revision DESC LIMIT 1",
+                "SELECT revision FROM batches WHERE client = ? AND request_id = ? "
+                "ORDER BY revision DESC LIMIT 1",
                 (client, request_id),
             ).fetchone()
         return None if row is None else row[0]
