@@ -351,12 +351,14 @@ def table(results: dict[str, list[dict[str, Any]]]) -> str:
         "s of sim time with `ctx.sleep`; when the requested speed is more than one core",
         "can simulate, the achieved factor is the sim's throughput.",
         "",
-        "| Robots (mobile) | Requested speed | Achieved speed (mean / slowest robot) | Sim CPU (one core) |",
+        "| Robots (mobile) | Requested speed | Achieved speed (mean / slowest robot) | Sim CPU "
+        "(one core) |",
         "|---|---|---|---|",
     ]
     for r in results["speed"]:
         lines.append(
-            f"| {r['robots']} ({r['mobile']}) | {r['speed']:g}x | {r['factor']:,.0f}x / {r['factor_min']:,.0f}x | {r['cpu'] * 100:.0f}% |"
+            f"| {r['robots']} ({r['mobile']}) | {r['speed']:g}x | {r['factor']:,.0f}x / "
+            f"{r['factor_min']:,.0f}x | {r['cpu'] * 100:.0f}% |"
         )
     lines += [
         "",
@@ -364,13 +366,15 @@ def table(results: dict[str, list[dict[str, Any]]]) -> str:
         "changed 16x16 tiles, zlib+base64, at most 2 Hz; robot poses ride on telemetry",
         "and are not counted):",
         "",
-        "| Robots | Speed | Map feed | Deltas/s | Tiles/s | Sim status (live) | Snapshot (late joiner) |",
+        "| Robots | Speed | Map feed | Deltas/s | Tiles/s | Sim status (live) | Snapshot (late "
+        "joiner) |",
         "|---|---|---|---|---|---|---|",
     ]
     for r in results["feed"]:
         lines.append(
-            f"| {r['robots']} | {r['speed']:g}x | {r['feed_bps'] / 1000:,.1f} kB/s | {r['deltas_ps']:.1f} | "
-            f"{r['tiles_ps']:.1f} | {r['status_bps'] / 1000:,.1f} kB/s | {r['snapshot_bytes'] / 1000:,.1f} kB |"
+            f"| {r['robots']} | {r['speed']:g}x | {r['feed_bps'] / 1000:,.1f} kB/s | "
+            f"{r['deltas_ps']:.1f} | {r['tiles_ps']:.1f} | {r['status_bps'] / 1000:,.1f} kB/s | "
+            f"{r['snapshot_bytes'] / 1000:,.1f} kB |"
         )
     lines += [
         "",
@@ -397,7 +401,8 @@ async def main_async(args: argparse.Namespace) -> dict[str, list[dict[str, Any]]
         for mission, speed in cases:
             r = await run_case(tmp, mission, world, speed, window, warmup)
             print(
-                f"  speed: {r['robots']} robots at {speed:g}x -> {r['factor']:,.0f}x (cpu {r['cpu']:.0%})",
+                f"  speed: {r['robots']} robots at {speed:g}x -> {r['factor']:,.0f}x (cpu "
+                f"{r['cpu']:.0%})",
                 file=sys.stderr,
             )
             results["speed"].append(r)

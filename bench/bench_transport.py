@@ -763,7 +763,8 @@ def table(
     row(
         f"Sustained operations ({tp['inflight']} in flight, journal on)",
         f"{tp['rate']:,.0f} ops/s",
-        f"{tp['raw_rate']:,.0f} raw queries/s to PING, {tp['inflight']} in flight ({tp['bridge_rate']:,.0f}/s through our asyncio bridge)",
+        f"{tp['raw_rate']:,.0f} raw queries/s to PING, {tp['inflight']} in flight "
+        f"({tp['bridge_rate']:,.0f}/s through our asyncio bridge)",
         f"{tp['rate'] / tp['raw_rate']:.2f}x",
         f">= {TARGETS['ops_per_s']:,}/s",
         tp["rate"] >= TARGETS["ops_per_s"],
@@ -774,50 +775,65 @@ def table(
     ]
     lines += ["| " + " | ".join(r) + " |" for r in rows]
     f1 = fan.get("1x10", next(iter(fan.values())))
+    reached = (
+        "every report reached all 10"
+        if not any(f["missing"] for f in fan.values())
+        else "SOME REPORTS DID NOT REACH ALL 10 CLIENTS"
+    )
     details = [
         "",
-        f"- Round trip: {rtt['n']:,} operations and {len(rtt['raw']):,} raw queries, interleaved in blocks after a warm-up of 300 each. "
-        f"`EditSkill` (new label each time) on the tutorial mission: the reply comes after the rules and the SQLite journal "
-        f"(one transaction); the EventBatch is published right after it. Raw query: `session.get` to `{Keys.PING}`, answered in the server process "
-        f"on its Zenoh thread; the same query through `backend.transport.query` (asyncio bridge, as the client library uses): "
+        f"- Round trip: {rtt['n']:,} operations and {len(rtt['raw']):,} raw queries, interleaved "
+        "in blocks after a warm-up of 300 each. `EditSkill` (new label each time) on the tutorial "
+        "mission: the reply comes after the rules and the SQLite journal (one transaction); the "
+        f"EventBatch is published right after it. Raw query: `session.get` to `{Keys.PING}`, "
+        "answered in the server process on its Zenoh thread; the same query through "
+        "`backend.transport.query` (asyncio bridge, as the client library uses): "
         f"{ms(aio_med):.3f} ms median.",
-        f"- Fan-out: {f1['n']} status reports per layout after 30 warm-up ones, one every ~12 ms, each measured from just before the "
-        f"robot's `ReportBatch` query until the last of 10 `MissionClient`s (separate processes from the server and the robot) "
-        f"applied it to its mirror ({'every report reached all 10' if not any(f['missing'] for f in fan.values()) else 'SOME REPORTS DID NOT REACH ALL 10 CLIENTS'}); the first of the 10 after {ms(f1['first_median']):.2f} ms (median, 1 process). "
-        f"The robot sends with a plain blocking `session.get` (no asyncio bridge on its side); its report is "
-        f"acknowledged after {ms(f1['ack_median']):.2f} ms (median; the server publishes the event right after it replies). "
-        f"Split (medians, 1 process): the EventBatch reaches the first client session's Zenoh thread after "
-        f"{ms(f1['first_arrival_median']):.2f} ms and the last one's after {ms(f1['last_arrival_median']):.2f} ms "
-        f"(server: validate the report, rules, journal, publish; then Zenoh and the GIL of the receiving process); "
-        f"parsing and applying it in the 10 mirrors takes the rest.",
-        f"- Wire bytes: {wire['skills']:,} skills (20 lru_manipulator robots x 500 drive_to); a running/paused `Report` of rover01 "
-        f"is {wire['report_bytes']:.0f} B on its way in and its `EventBatch` {wire['event_bytes']:.0f} B (max {wire['event_bytes_max']}) "
-        f"on its way out, JSON payload (Zenoh and TCP/IP headers come on top). The full snapshot a late joiner fetches is "
-        f"{wire['snapshot_bytes']:,} B ({wire['snapshot_ms']:.0f} ms to fetch; connecting a `MissionClient` with it: "
-        f"{wire['join_ms']:.0f} ms). The report is acknowledged after {wire['report_ack_ms']:.2f} ms on this mission. "
-        f"Example event: `{wire['event_example']}`",
-        f"- Fan-out on the 10,000-skill mission: as above with {fb['n']} reports, of {fb['robot']} (the last robot: "
-        f"before `Mission.find` remembered where skills are, each mirror scanned the whole mission for it); the report "
-        f"is acknowledged after {ms(fb['ack_median']):.2f} ms, the first of the 10 clients applied it after "
-        f"{ms(fb['first_median']):.2f} ms (medians){'' if not fb['missing'] else '; SOME REPORTS DID NOT REACH ALL 10 CLIENTS'}.",
-        f"- Throughput: {tp['n']:,} `EditSkill` operations in {tp['seconds']:.1f} s from one client, every one applied, journaled "
-        f"and published (checked by the revision), latency {ms(tp['lat_median']):.2f} ms median, {ms(tp['lat_p99']):.2f} ms p99.",
+        f"- Fan-out: {f1['n']} status reports per layout after 30 warm-up ones, one every ~12 ms, "
+        "each measured from just before the robot's `ReportBatch` query until the last of 10 "
+        "`MissionClient`s (separate processes from the server and the robot) applied it to its "
+        f"mirror ({reached}); the first of the 10 after {ms(f1['first_median']):.2f} ms (median, 1 "
+        "process). The robot sends with a plain blocking `session.get` (no asyncio bridge on its "
+        f"side); its report is acknowledged after {ms(f1['ack_median']):.2f} ms (median; the "
+        "server publishes the event right after it replies). Split (medians, 1 process): the "
+        "EventBatch reaches the first client session's Zenoh thread after "
+        f"{ms(f1['first_arrival_median']):.2f} ms and the last one's after "
+        f"{ms(f1['last_arrival_median']):.2f} ms (server: validate the report, rules, journal, "
+        "publish; then Zenoh and the GIL of the receiving process); parsing and applying it in "
+        "the 10 mirrors takes the rest.",
+        f"- Wire bytes: {wire['skills']:,} skills (20 lru_manipulator robots x 500 drive_to); a "
+        f"running/paused `Report` of rover01 is {wire['report_bytes']:.0f} B on its way in and its "
+        f"`EventBatch` {wire['event_bytes']:.0f} B (max {wire['event_bytes_max']}) on its way out, "
+        "JSON payload (Zenoh and TCP/IP headers come on top). The full snapshot a late joiner "
+        f"fetches is {wire['snapshot_bytes']:,} B ({wire['snapshot_ms']:.0f} ms to fetch; "
+        f"connecting a `MissionClient` with it: {wire['join_ms']:.0f} ms). The report is "
+        f"acknowledged after {wire['report_ack_ms']:.2f} ms on this mission. Example event: "
+        f"`{wire['event_example']}`",
+        f"- Fan-out on the 10,000-skill mission: as above with {fb['n']} reports, of {fb['robot']} "
+        "(the last robot: before `Mission.find` remembered where skills are, each mirror scanned "
+        f"the whole mission for it); the report is acknowledged after {ms(fb['ack_median']):.2f} "
+        f"ms, the first of the 10 clients applied it after {ms(fb['first_median']):.2f} ms "
+        f"(medians){'' if not fb['missing'] else '; SOME REPORTS DID NOT REACH ALL 10 CLIENTS'}.",
+        f"- Throughput: {tp['n']:,} `EditSkill` operations in {tp['seconds']:.1f} s from one "
+        "client, every one applied, journaled and published (checked by the revision), latency "
+        f"{ms(tp['lat_median']):.2f} ms median, {ms(tp['lat_p99']):.2f} ms p99.",
     ]
     direct_med = statistics.median(rtt["direct"])
     details += [
         "",
-        "Where the round-trip time goes, measured in this run: raw query "
-        f"{ms(raw_med):.3f} ms; the same through an asyncio bridge whose reply callback runs on the Zenoh "
-        f"thread (`Callback(..., indirect=False)`, in this script only) {ms(direct_med):.3f} ms; through "
-        f"`backend.transport.query` as the client library uses it {ms(aio_med):.3f} ms; a whole operation "
-        f"{ms(op_med):.3f} ms.",
+        f"Where the round-trip time goes, measured in this run: raw query {ms(raw_med):.3f} ms; "
+        "the same through an asyncio bridge whose reply callback runs on the Zenoh thread "
+        f"(`Callback(..., indirect=False)`, in this script only) {ms(direct_med):.3f} ms; through "
+        f"`backend.transport.query` as the client library uses it {ms(aio_med):.3f} ms; a whole "
+        f"operation {ms(op_med):.3f} ms.",
         "",
         PROFILE_NOTES,
     ]
     return "\n".join(lines + details), misses
 
 
-PROFILE_NOTES = """Analysis (not re-measured by this script; the stage-by-stage split of an operation is the
+PROFILE_NOTES = """\
+Analysis (not re-measured by this script; the stage-by-stage split of an operation is the
 next section, from `bench/trace_round_trip.py`; A/B figures from `bench/ab_transport.py`, which
 runs two versions side by side in alternating blocks: figures of different days come from
 different machines and states (the raw query took 0.21 ms on 2026-11-22 on an Intel Xeon VM and
@@ -924,11 +940,12 @@ def section(body: str, elapsed: float, load: tuple[float, float, float]) -> str:
     return (
         f"## {SECTION}\n\n"
         "Mission server (a subprocess, the Zenoh router), client library and a robot on loopback, "
-        "each figure against the raw Zenoh transport measured in the same run "
-        "(the server's trivial `mc/v1/server/ping` queryable, raw puts).\n\n"
+        "each figure against the raw Zenoh transport measured in the same run (the server's "
+        "trivial `mc/v1/server/ping` queryable, raw puts).\n\n"
         "Reproduce: `.venv/bin/python bench/bench_transport.py --write docs/performance.md`\n\n"
-        f"Machine: {machine('eclipse-zenoh ' + importlib.metadata.version('eclipse-zenoh'))}. Date: {date}. Whole run: {elapsed:.0f} s; load average before it "
-        f"{load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} (other work on the machine skews the figures).\n\n"
+        f"Machine: {machine('eclipse-zenoh ' + importlib.metadata.version('eclipse-zenoh'))}. "
+        f"Date: {date}. Whole run: {elapsed:.0f} s; load average before it {load[0]:.2f} / "
+        f"{load[1]:.2f} / {load[2]:.2f} (other work on the machine skews the figures).\n\n"
         f"{body}\n"
     )
 
@@ -984,8 +1001,9 @@ def main(argv: list[str] | None = None) -> int:
     body, misses = table(rtt, tp, fan, wire)
     print(body)
     print(
-        f"\n{len(misses)} target(s) missed{': ' + '; '.join(misses) if misses else ''}. Whole run: {elapsed:.0f} s; "
-        f"load average before it {load[0]:.2f}."
+        "\n"
+        f"{len(misses)} target(s) missed{': ' + '; '.join(misses) if misses else ''}. Whole run: "
+        f"{elapsed:.0f} s; load average before it {load[0]:.2f}."
     )
     if args.write:
         write_section(Path(args.write), f"## {SECTION}", section(body, elapsed, load))
