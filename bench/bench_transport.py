@@ -465,98 +465,144 @@ async def fanout(
     """`robot`, registered with `skill` in its queue, reports it `first`, then
     paused and running in turn; clients in subprocesses (one per entry of a
     layout) take them in."""
-    pub = declare_publisher(robot.session, RAW_FANOUT_KEY)
+    sender = FanoutSender(robot, skill, first)
     out: dict[str, Any] = {}
-    status = first
-    raw_id = 0
     for layout in layouts:
-        procs = []
-        for k, count in enumerate(layout):
-            err = open(tmp / f"fanout-{len(layout)}-{k}.log", "w")  # noqa: SIM115
-            p = await asyncio.create_subprocess_exec(
-                sys.executable,
-                str(Path(__file__).resolve()),
-                "--child-clients",
-                str(count),
-                "--connect",
-                endpoint,
-                stdin=asyncio.subprocess.PIPE,
-                stdout=asyncio.subprocess.PIPE,
-                stderr=err,
-                cwd=ROOT,
-                limit=1 << 24,
-            )
-            procs.append((p, err))
-        for p, _ in procs:
-            line = await asyncio.wait_for(p.stdout.readline(), 60)
-            assert line.strip() == b"ready", line
+        procs = await start_fanout_clients(endpoint, tmp, layout)
         await asyncio.sleep(0.3)
+        warm = 30
+        sent, raw_sent, acks = await sender.send(n, warm)
+        applied, received, arrived = await stop_fanout_clients(procs)
+        nclients = sum(layout)
+        out[f"{len(layout)}x{layout[0]}"] = {
+            "layout": layout,
+            **fanout_figures(nclients, sent, raw_sent, applied, received, arrived),
+            "ack_median": statistics.median(acks[warm:]),
+        }
+    return out
+
+
+class FanoutSender:
+    """The robot's side: a raw put, then a report (running and paused in
+    turn), every ~12 ms; the status and raw ids go on from layout to layout."""
+
+    def __init__(self, robot: FakeRobot, skill: str, first: Status) -> None:
+        self.robot = robot
+        self.skill = skill
+        self.status = first
+        self.raw_id = 0
+        self.pub = declare_publisher(robot.session, RAW_FANOUT_KEY)
+
+    async def send(
+        self, n: int, warm: int
+    ) -> tuple[dict[int, float], dict[int, float], list[float]]:
+        """`warm` + `n` of each; when the last `n` were sent (reports by
+        sequence number, raw puts by id) and every report's ack time."""
         sent: dict[int, float] = {}
         raw_sent: dict[int, float] = {}
         acks: list[float] = []
-        warm = 30
+        robot = self.robot
         for i in range(n + warm):
-            raw_id += 1
-            raw_sent[raw_id] = time.perf_counter()
-            pub.put(str(raw_id).encode())
+            self.raw_id += 1
+            raw_sent[self.raw_id] = time.perf_counter()
+            self.pub.put(str(self.raw_id).encode())
             await asyncio.sleep(0.004)
-            payload = robot.report_payload(skill, status)
-            status = Status.PAUSED if status == Status.RUNNING else Status.RUNNING
+            payload = robot.report_payload(self.skill, self.status)
+            self.status = Status.PAUSED if self.status == Status.RUNNING else Status.RUNNING
             t = time.perf_counter()
             robot.send_raw(payload)
             acks.append(time.perf_counter() - t)
             if i >= warm:
                 sent[robot.seq] = t
             else:
-                raw_sent.pop(raw_id)
+                raw_sent.pop(self.raw_id)
             await asyncio.sleep(0.008)
-        applied: dict[int, list[float]] = {}
-        received: dict[int, list[float]] = {}
-        arrived: dict[int, list[float]] = {}
-        nclients = sum(layout)
-        for p, err in procs:
-            p.stdin.write(b"stop\n")
-            await p.stdin.drain()
-            data = json.loads(await asyncio.wait_for(p.stdout.readline(), 30))
-            await p.wait()
-            err.close()
-            for _, seq, t in data["events"]:
-                applied.setdefault(seq, []).append(t)
-            for _, rid, t in data["raw"]:
-                received.setdefault(rid, []).append(t)
-            for _, seq, t in data["recv"]:
-                arrived.setdefault(seq, []).append(t)
-        last = [max(applied[s]) - t for s, t in sent.items() if len(applied.get(s, [])) == nclients]
-        first = [
-            min(applied[s]) - t for s, t in sent.items() if len(applied.get(s, [])) == nclients
-        ]
-        raw_last = [
-            max(received[r]) - t
-            for r, t in raw_sent.items()
-            if len(received.get(r, [])) == nclients
-        ]
-        complete = [
-            q
-            for q in sent
-            if len(applied.get(q, [])) == nclients and len(arrived.get(q, [])) == nclients
-        ]
-        first_arrival = [min(arrived[q]) - sent[q] for q in complete]
-        last_arrival = [max(arrived[q]) - sent[q] for q in complete]
-        missing = len(sent) - len(last)
-        out[f"{len(layout)}x{layout[0]}"] = {
-            "layout": layout,
-            "n": len(last),
-            "missing": missing,
-            "median": statistics.median(last),
-            "p99": pct(last, 0.99),
-            "first_median": statistics.median(first),
-            "first_arrival_median": statistics.median(first_arrival),
-            "last_arrival_median": statistics.median(last_arrival),
-            "raw_median": statistics.median(raw_last),
-            "raw_p99": pct(raw_last, 0.99),
-            "ack_median": statistics.median(acks[warm:]),
-        }
-    return out
+        return sent, raw_sent, acks
+
+
+async def start_fanout_clients(
+    endpoint: str, tmp: Path, layout: list[int]
+) -> list[tuple[Any, Any]]:
+    """One subprocess per entry of `layout`, with that many clients; once ready."""
+    procs = []
+    for k, count in enumerate(layout):
+        err = open(tmp / f"fanout-{len(layout)}-{k}.log", "w")  # noqa: SIM115
+        p = await asyncio.create_subprocess_exec(
+            sys.executable,
+            str(Path(__file__).resolve()),
+            "--child-clients",
+            str(count),
+            "--connect",
+            endpoint,
+            stdin=asyncio.subprocess.PIPE,
+            stdout=asyncio.subprocess.PIPE,
+            stderr=err,
+            cwd=ROOT,
+            limit=1 << 24,
+        )
+        procs.append((p, err))
+    for p, _ in procs:
+        line = await asyncio.wait_for(p.stdout.readline(), 60)
+        assert line.strip() == b"ready", line
+    return procs
+
+
+Times = dict[int, list[float]]
+
+
+async def stop_fanout_clients(procs: list[tuple[Any, Any]]) -> tuple[Times, Times, Times]:
+    """Stop the clients; when each applied each report (by sequence number),
+    received each raw put (by id) and got each report's batch (by sequence number)."""
+    applied: Times = {}
+    received: Times = {}
+    arrived: Times = {}
+    for p, err in procs:
+        p.stdin.write(b"stop\n")
+        await p.stdin.drain()
+        data = json.loads(await asyncio.wait_for(p.stdout.readline(), 30))
+        await p.wait()
+        err.close()
+        for _, seq, t in data["events"]:
+            applied.setdefault(seq, []).append(t)
+        for _, rid, t in data["raw"]:
+            received.setdefault(rid, []).append(t)
+        for _, seq, t in data["recv"]:
+            arrived.setdefault(seq, []).append(t)
+    return applied, received, arrived
+
+
+def fanout_figures(
+    nclients: int,
+    sent: dict[int, float],
+    raw_sent: dict[int, float],
+    applied: Times,
+    received: Times,
+    arrived: Times,
+) -> dict[str, Any]:
+    """Medians and p99s of what reached all `nclients` clients."""
+    last = [max(applied[s]) - t for s, t in sent.items() if len(applied.get(s, [])) == nclients]
+    first = [min(applied[s]) - t for s, t in sent.items() if len(applied.get(s, [])) == nclients]
+    raw_last = [
+        max(received[r]) - t for r, t in raw_sent.items() if len(received.get(r, [])) == nclients
+    ]
+    complete = [
+        q
+        for q in sent
+        if len(applied.get(q, [])) == nclients and len(arrived.get(q, [])) == nclients
+    ]
+    first_arrival = [min(arrived[q]) - sent[q] for q in complete]
+    last_arrival = [max(arrived[q]) - sent[q] for q in complete]
+    return {
+        "n": len(last),
+        "missing": len(sent) - len(last),
+        "median": statistics.median(last),
+        "p99": pct(last, 0.99),
+        "first_median": statistics.median(first),
+        "first_arrival_median": statistics.median(first_arrival),
+        "last_arrival_median": statistics.median(last_arrival),
+        "raw_median": statistics.median(raw_last),
+        "raw_p99": pct(raw_last, 0.99),
+    }
 
 
 # -- 3. wire bytes on a 10,000-skill mission -----------------------------------------------------

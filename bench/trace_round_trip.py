@@ -122,34 +122,10 @@ def wrap_client() -> None:
 def stage_table(
     marks: list[tuple[str, float]],
 ) -> tuple[list[tuple[str, float, float, float, float]], list[float]]:
-    """Split the merged marks into one window per operation (from its c_start);
-    per stage, in order: (name, step median, step p99, step median over the
-    slowest 2 % of operations, since-start median)."""
-    windows: list[dict[str, float]] = []
-    batch_marks: dict[str, list[float]] = {"c_events": [], "c_applied": []}
-    for tag, t in sorted(marks, key=lambda m: m[1]):
-        if tag in batch_marks:
-            batch_marks[tag].append(t)
-        elif tag == "c_start":
-            windows.append({"c_start": t})
-        elif windows and tag not in windows[-1]:
-            windows[-1][tag] = t
-    # an operation's own EventBatch is the first to reach the client after its
-    # journal append; it often comes after submit() returned, during the next
-    # operation (the reply usually arrives first), so it is matched by time
-    for w, nxt in zip(windows, [*windows[1:], {}], strict=True):
-        if "s_journal_end" not in w:
-            continue
-        i = bisect.bisect_left(batch_marks["c_events"], w["s_journal_end"])
-        if i == len(batch_marks["c_events"]) or batch_marks["c_events"][i] >= nxt.get(
-            "s_journal_end", float("inf")
-        ):
-            continue
-        w["c_events"] = batch_marks["c_events"][i]
-        j = bisect.bisect_left(batch_marks["c_applied"], w["c_events"])
-        if j < len(batch_marks["c_applied"]):
-            w["c_applied"] = batch_marks["c_applied"][j]
-    complete = [w for w in windows if "c_end" in w]
+    """Per stage of the operations in the merged marks, in order: (name, step
+    median, step p99, step median over the slowest 2 % of operations,
+    since-start median); and the operations' whole times."""
+    complete = [w for w in operation_windows(marks) if "c_end" in w]
     order = sorted(
         (s for s in STAGES if any(s in w for w in complete)),
         key=lambda s: statistics.median(w[s] - w["c_start"] for w in complete if s in w),
@@ -182,6 +158,40 @@ def stage_table(
         )
     totals = [w["c_end"] - w["c_start"] for w in complete]
     return rows, totals
+
+
+def operation_windows(marks: list[tuple[str, float]]) -> list[dict[str, float]]:
+    """Split the merged marks into one window per operation (from its c_start)."""
+    windows: list[dict[str, float]] = []
+    batch_marks: dict[str, list[float]] = {"c_events": [], "c_applied": []}
+    for tag, t in sorted(marks, key=lambda m: m[1]):
+        if tag in batch_marks:
+            batch_marks[tag].append(t)
+        elif tag == "c_start":
+            windows.append({"c_start": t})
+        elif windows and tag not in windows[-1]:
+            windows[-1][tag] = t
+    match_batches(windows, batch_marks)
+    return windows
+
+
+def match_batches(windows: list[dict[str, float]], batch_marks: dict[str, list[float]]) -> None:
+    """Add to each operation's window when its EventBatch reached the client."""
+    # an operation's own EventBatch is the first to reach the client after its
+    # journal append; it often comes after submit() returned, during the next
+    # operation (the reply usually arrives first), so it is matched by time
+    for w, nxt in zip(windows, [*windows[1:], {}], strict=True):
+        if "s_journal_end" not in w:
+            continue
+        i = bisect.bisect_left(batch_marks["c_events"], w["s_journal_end"])
+        if i == len(batch_marks["c_events"]) or batch_marks["c_events"][i] >= nxt.get(
+            "s_journal_end", float("inf")
+        ):
+            continue
+        w["c_events"] = batch_marks["c_events"][i]
+        j = bisect.bisect_left(batch_marks["c_applied"], w["c_events"])
+        if j < len(batch_marks["c_applied"]):
+            w["c_applied"] = batch_marks["c_applied"][j]
 
 
 async def traced_round_trips(n: int) -> tuple[list[float], list[tuple[str, float]]]:
