@@ -162,7 +162,9 @@ class _Robot:
 
         applied_at: dict[int, float] = {}
 
-        def on_event(kind: str, batch) -> None:
+        def on_event(*args) -> None:
+            # one typed event; a version before issue 18 calls with (kind, payload)
+            kind, batch = (args[0].kind, args[0].payload) if len(args) == 1 else args
             if kind == "events":
                 applied_at.setdefault(batch.revision, time.perf_counter())
 
@@ -198,7 +200,7 @@ class _Robot:
             await client.wait_for(lambda m, r=revision: m.revision >= r, 10)
             applied.append(applied_at[revision] - t)
             await asyncio.sleep(0.012)  # lone reports: the server's threads go idle in between
-        client._listeners.remove(on_event)
+        client._listeners.remove(on_event)  # no remove_listener before issue 18
         return acks, applied
 
     def close(self) -> None:
@@ -304,21 +306,23 @@ class Version:
 
     def report(self) -> str:
         if self.rates:
-            return f"{self.label}: {statistics.median(self.rates):,.0f} ops/s median of {len(self.rates)} blocks"
+            rate = statistics.median(self.rates)
+            return f"{self.label}: {rate:,.0f} ops/s median of {len(self.rates)} blocks"
         if self.acks:
             p99 = sorted(self.applied)[int(0.99 * (len(self.applied) - 1))]
             return (
-                f"{self.label}: {len(self.acks)} lone reports: acknowledged {statistics.median(self.acks) * 1e3:.3f} ms, "
-                f"applied by the client {statistics.median(self.applied) * 1e3:.3f} ms (p99 {p99 * 1e3:.3f} ms) (medians)"
+                f"{self.label}: {len(self.acks)} lone reports: acknowledged "
+                f"{statistics.median(self.acks) * 1e3:.3f} ms, applied by the client "
+                f"{statistics.median(self.applied) * 1e3:.3f} ms (p99 {p99 * 1e3:.3f} ms) (medians)"
             )
         raw, ops = statistics.median(self.raw), statistics.median(self.ops)
         ranked = sorted(self.ops)
         p99, p999 = (ranked[int(q * (len(ranked) - 1))] for q in (0.99, 0.999))
         over = sum(t > 0.003 for t in ranked)  # e.g. an fsync in the operation's path
         return (
-            f"{self.label}: raw {raw * 1e3:.3f} ms, operation {ops * 1e3:.3f} ms (p99 {p99 * 1e3:.3f} ms, "
-            f"p99.9 {p999 * 1e3:.2f} ms, max {ranked[-1] * 1e3:.2f} ms, {over} of {len(ranked)} over 3 ms), "
-            f"ratio {ops / raw:.2f}x"
+            f"{self.label}: raw {raw * 1e3:.3f} ms, operation {ops * 1e3:.3f} ms (p99 "
+            f"{p99 * 1e3:.3f} ms, p99.9 {p999 * 1e3:.2f} ms, max {ranked[-1] * 1e3:.2f} ms, {over} "
+            f"of {len(ranked)} over 3 ms), ratio {ops / raw:.2f}x"
         )
 
 

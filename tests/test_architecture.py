@@ -27,8 +27,6 @@ MAX_CLASS_LINES = 500
 KNOWN_LARGE_CLASSES: set[str] = {
     "backend/agent/facade.py:RobotAgent",
     "backend/core/rules/engine.py:Engine",
-    "backend/server/journal.py:Journal",
-    "backend/server/server.py:MissionServer",
     "console/app.py:MissionApp",
     "console/screens/map.py:MapScreen",
     "console/screens/mission.py:MissionScreen",

@@ -285,7 +285,7 @@ async def _robots(client: Any, args: argparse.Namespace) -> int:
     """Wait briefly for one telemetry sample of every online robot."""
     done = asyncio.Event()
 
-    def check(_kind: str = "", _payload: Any = None) -> None:
+    def check(_event: object = None) -> None:  # any client event may complete it
         online = [n for n, r in client.robots.items() if r.online]
         if all(n in client.telemetry for n in online):
             done.set()
@@ -305,7 +305,7 @@ async def _robots(client: Any, args: argparse.Namespace) -> int:
 
 async def _watch(client: Any, args: argparse.Namespace) -> int:
     q: asyncio.Queue[tuple[str, Any]] = asyncio.Queue()
-    client.add_listener(lambda kind, payload: q.put_nowait((kind, payload)))
+    client.add_listener(lambda event: q.put_nowait((event.kind, event.payload)))
     print(
         f"watching mission '{client.mission.name}' at {', '.join(client.endpoints)} from revision "
         f"{client.revision}; Ctrl-C to stop",
