@@ -81,6 +81,11 @@ class ParamSpec(Strict):
     def is_required(self) -> bool:
         return self.required if self.required is not None else self.default is None
 
+    @property
+    def kind(self) -> Kind:
+        """What this parameter's kind accepts and how it behaves (`KINDS`)."""
+        return KINDS[self.type]
+
 
 def describe(v: Any) -> str:
     """What a value is, for an error sentence ('a string ('x')')."""
@@ -137,6 +142,9 @@ class Kind:
     name: ClassVar[str]
     # marker kinds a parameter of this kind can be bound to (its value follows the marker)
     bindable_to: ClassVar[tuple[str, ...]] = ()
+    names_marker: ClassVar[bool] = False  # the value is a marker's name
+    numeric: ClassVar[bool] = False  # a number (a duration may grow with it)
+    goal: ClassVar[bool] = False  # a place to go to (a duration may grow with the distance)
 
     def check(
         self, spec: ParamSpec, v: Any, markers: Markers | None, robots: Collection[str] | None
@@ -195,6 +203,7 @@ class Dict(_Simple):
 
 class _Number(Kind):
     integer: ClassVar[bool]
+    numeric = True
 
     def check(self, spec, v, markers, robots):
         if self.integer and not (isinstance(v, int) and not isinstance(v, bool)):
@@ -231,6 +240,7 @@ class Float(_Number):
 class PoseKind(Kind):
     name = "pose"
     bindable_to = ("pose", "position")
+    goal = True
 
     def check(self, spec, v, markers, robots):
         return _check_fields(v, POSE_FIELDS, "pose")
@@ -255,6 +265,7 @@ class PoseKind(Kind):
 class PositionKind(Kind):
     name = "position"
     bindable_to = ("pose", "position")
+    goal = True
 
     def check(self, spec, v, markers, robots):
         return _check_fields(v, POSITION_FIELDS, "position")
@@ -325,6 +336,7 @@ class Enum(Kind):
 
 class MarkerRef(Kind):
     name = "marker"
+    names_marker = True
 
     def check(self, spec, v, markers, robots):
         if not isinstance(v, str):
