@@ -53,7 +53,10 @@ ACTIVE = frozenset({Status.RUNNING, Status.PAUSED, Status.SYNCHWAITING})
 def how_to_change(status: Status) -> str:
     """What an operator does to change a skill that is no longer idle."""
     if status in FINISHED:
-        return "finished skills are the execution log and never change; add a new skill (or retry a failed one)"
+        return (
+            "finished skills are the execution log and never change; "
+            "add a new skill (or retry a failed one)"
+        )
     if status in ACTIVE:
         return "stop the robot (the skill goes back to its queue), then unsynchronize it"
     return "unsynchronize it first"
@@ -280,7 +283,8 @@ def section_problems(task: list[SkillInstance]) -> list[tuple[int, str]]:
             problems.append(
                 (
                     i,
-                    f"second active skill: '{task[active].id}' is already {task[active].status.value}",
+                    f"second active skill: '{task[active].id}' is already "
+                    f"{task[active].status.value}",
                 )
             )
         if s.status in ACTIVE and active is None:

@@ -122,7 +122,8 @@ class MapObjects(_Wire):
 class MapDelta(_Wire):
     feed: str = Field(
         "",
-        description="id of this run of the feed; another id means the publisher restarted: fetch the snapshot",
+        description="id of this run of the feed; another id means the publisher restarted: "
+        "fetch the snapshot",
     )
     seq: int = Field(ge=1, description="consecutive; a gap means: fetch the snapshot")
     sim_time: float
@@ -293,7 +294,8 @@ class MapMirror:
             shape = tile_shape(self.meta, tile.tx, tile.ty)
             if shape[0] <= 0 or shape[1] <= 0:
                 raise ValueError(
-                    f"tile ({tile.tx}, {tile.ty}) lies outside the {self.meta.width}x{self.meta.height} grid"
+                    f"tile ({tile.tx}, {tile.ty}) lies outside the "
+                    f"{self.meta.width}x{self.meta.height} grid"
                 )
             grid[tile.ty * t : tile.ty * t + shape[0], tile.tx * t : tile.tx * t + shape[1]] = (
                 decode_tile(tile.data, shape)

@@ -51,7 +51,7 @@ def named(rules: Rules, name: str) -> Iterator[tuple[str, SkillInstance, str]]:
             if spec is None or s.status in FINISHED:
                 continue
             for pname, pspec in spec.params.items():
-                if pspec.type == "marker" and s.params.get(pname) == name:
+                if pspec.kind.names_marker and s.params.get(pname) == name:
                     yield robot, s, pname
 
 
