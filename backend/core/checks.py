@@ -118,8 +118,8 @@ def _task_problems(
     fill: bool,
 ) -> list[Problem]:
     if robot not in m.robots:
-        robots = ", ".join(sorted(m.robots)) or "none"
-        return [(("tasks", robot), f"tasks for unknown robot '{robot}' (robots: {robots})")]
+        known = ", ".join(sorted(m.robots)) or "none"
+        return [(("tasks", robot), f"tasks for unknown robot '{robot}' (robots: {known})")]
     rtype = m.robots[robot].type
     robots = set(m.robots)
     out: list[Problem] = []

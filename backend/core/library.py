@@ -10,14 +10,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any, Final, Literal
 
 from pydantic import Field
 
 from backend.core.model import Name, Strict
 from backend.core.params import ParamSpec, check_value, marker_value, normalize_value
 
-LIBRARY_FORMAT = "missionctl/library@1"
+LIBRARY_FORMAT: Final = "missionctl/library@1"
 VERSION_PATTERN = r"^\d+\.\d+\.\d+$"
 
 

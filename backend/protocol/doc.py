@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import sys
 from collections.abc import Sequence
+from typing import Any
 
 from pydantic import TypeAdapter
 
@@ -308,7 +309,7 @@ robot that shares no knowledge may answer every ask with `known: false`.
 """
 )
 
-MODELS = [
+MODELS: list[tuple[str, Any]] = [  # (title, model or union of models)
     ("Request", p.Request),
     ("OpReply", p.OpReply),
     ("ErrorReply", p.ErrorReply),
