@@ -4,13 +4,12 @@
 (docs/robots.md); the modules of this package are its parts.
 """
 
-from backend.agent.facade import (
+from backend.agent.facade import RobotAgent, SkillContext
+from backend.agent.link import Link
+from backend.agent.outcomes import (
     AlreadyConnected,
     Failure,
-    Link,
     RegistrationRefused,
-    RobotAgent,
-    SkillContext,
     SkillFailed,
     SkillStopped,
     Success,

@@ -87,6 +87,15 @@ import zenoh
 from pydantic import TypeAdapter, ValidationError
 
 from backend import transport
+from backend.agent.link import Link
+from backend.agent.outcomes import (
+    AlreadyConnected,
+    Failure,
+    RegistrationRefused,
+    SkillFailed,
+    SkillStopped,
+    Success,
+)
 from backend.core.library import VERSION_PATTERN
 from backend.core.model import NAME_RE, Pose, Position, SkillInstance, Status
 from backend.core.ops import Report
@@ -135,74 +144,6 @@ _LINK_POLL_S = 0.05
 _RETRY_S = 0.5
 # A barrier partner whose presence token has not shown up by then is offline.
 _PRESENCE_GRACE_S = 1.0
-
-
-# ---------------------------------------------------------------- outcomes
-
-
-class SkillFailed(Exception):
-    """Raise in a handler to end the skill with `failure` and this reason."""
-
-    def __init__(self, reason: str = "skill failed"):
-        self.reason = reason
-        super().__init__(reason)
-
-
-class AlreadyConnected(RuntimeError):
-    """`start()`: another agent holds this robot's presence (a second process
-    of the same robot would execute every skill twice)."""
-
-
-class RegistrationRefused(RuntimeError):
-    """`wait_registered()`: the server refused this robot (the message says why)."""
-
-
-class SkillStopped(asyncio.CancelledError):
-    """Raised by `ctx.check()` / `ctx.checkpoint()` once the skill was stopped.
-
-    A CancelledError (a BaseException), so `except Exception` in a handler
-    does not swallow it: a stop always ends the handler.
-    """
-
-
-@dataclass(frozen=True)
-class Success:
-    """Return `Success("what came out")` from a handler: success, with a result
-    text the operator sees as the skill's status information."""
-
-    info: str = ""
-
-
-@dataclass(frozen=True)
-class Failure:
-    """Return `Failure("reason")` from a handler instead of raising SkillFailed."""
-
-    reason: str = "skill failed"
-
-
-# ---------------------------------------------------------------- link model
-
-
-class Link:
-    """The operator link as the robot sees it. No-op by default (always in range).
-
-    A simulator sets `reachable` (or overrides `in_range`), `delay_s` (one-way
-    delay applied before each command is handled, before each report flush
-    and to each telemetry message) and `quality` (0..1, shown in telemetry).
-    Override `can_reach(robot)` to model robot-to-robot links: an ask/tell to
-    a robot it cannot reach is not sent and counts as failed.
-    """
-
-    def __init__(self, *, reachable: bool = True, delay_s: float = 0.0, quality: float = 1.0):
-        self.reachable = reachable
-        self.delay_s = delay_s
-        self.quality = quality
-
-    def in_range(self) -> bool:
-        return self.reachable
-
-    def can_reach(self, robot: str) -> bool:
-        return True
 
 
 # ---------------------------------------------------------------- execution state
