@@ -46,7 +46,7 @@ KNOWN_CYCLES: list[list[str]] = [
 ]
 
 # Files allowed over ruff's limits for now (pyproject: per-file-ignores). May only shrink.
-MAX_PER_FILE_IGNORES = 80
+MAX_PER_FILE_IGNORES = 24
 
 
 def import_cycles() -> list[list[str]]:
