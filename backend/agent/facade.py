@@ -24,16 +24,21 @@ process under the same robot name) raise at once with a sentence naming the
 robot and skill; a handler that does not fit the parameters it is sent fails
 the skill with a reason naming the parameter.
 
-What the agent does (the contract is backend/protocol/messages.py):
+What the agent does (the contract is docs/protocol.md, protocol 2):
 
-- holds the liveliness token `Keys.alive(name)`, answers commands on
-  `Keys.command(name)` and robot-to-robot world messages on `Keys.world(name)`,
-  publishes `Telemetry`;
-- watches the server's token and registers (`Register`: manifest, its queue,
-  unacknowledged reports) each time the server appears;
+- holds the liveliness token `Keys.alive(name, session)` (a fresh session
+  per start), takes commands on `Keys.uplink(name)` and robot-to-robot world
+  messages on `Keys.world(name)`, publishes `Telemetry`;
+- watches the server's token and registers (`Register`: manifest, session,
+  its queue, its unacknowledged downlink) each time the server appears, or
+  when the server no longer knows it; refused because another run of this
+  robot holds the name, it stands down (holds and runs nothing);
+- applies each command of its uplink once, in order, never past its expiry,
+  and answers what it actually did (`Answer`);
 - keeps its synchronized queue itself and executes it with the registered
-  handlers; every status change is a numbered `Report` kept in an outbox until
-  the server acknowledges it (also attached to every command reply);
+  handlers; every status change is a numbered `Report`; reports and answers
+  share one sequence in an outbox (the downlink) until the server
+  acknowledges them;
 - meets its partners at barriers directly through liveliness tokens.
 
 Parameters reach handlers converted by shape (the agent has no skill library;
@@ -60,8 +65,12 @@ Behaviour an integrator can rely on:
   `ctx.check()`/`ctx.progress()`), reports `idle_synchronized` and puts the
   skill back at the head of the queue; the next `run` starts it afresh.
 - Autonomous retries stay `running` with `attempt` + 1 (failure is final).
-- Reports are numbered from 1 per agent run, or after the server's
-  `RegisterReply.last_seq` when that is higher (a restarted robot).
+- Reports and answers are numbered from 1 per agent run, or after the
+  server's `RegisterReply.last_seq` when that is higher (a restarted robot).
+- `link.delay_s` (a simulator's model of a distant robot) delays each
+  command's processing, each downlink message and each telemetry sample by
+  that one-way delay; an answer therefore reaches the ground two delays after
+  its command left.
 
 Threading: every state change runs on the asyncio loop that called `start()`.
 Zenoh callbacks only post to that loop. Synchronous handlers run in a daemon
@@ -74,10 +83,9 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
-from typing import Any, Literal
+from typing import Any
 
 import zenoh
-from pydantic import TypeAdapter, ValidationError
 
 from backend import transport
 from backend.agent.execution import Executor
@@ -96,29 +104,19 @@ from backend.agent.registration import (
 )
 from backend.agent.runtime import Runtime, log
 from backend.agent.telemetry import TelemetryFeed
+from backend.agent.uplink import UplinkHandler
 from backend.agent.world import World
-from backend.core.model import Pose, Status
-from backend.core.ops import Report
+from backend.core.model import Dequeue, Enqueue, Pause, Pose, Reset, Run, Status, Stop
+from backend.core.ops import Answer, Report
 from backend.protocol.keys import Keys
 from backend.protocol.messages import (
-    Command,
-    CommandReply,
-    Dequeue,
-    Enqueue,
     ErrorReply,
     Manifest,
     Module,
-    Pause,
     RegisterReply,
-    Reset,
-    Run,
-    Stop,
     Telemetry,
-    dumps,
 )
 from backend.transport.login import Login
-
-_COMMAND = TypeAdapter(Command)
 
 # How often the link model is polled (it is a plain callable of the integrator).
 _LINK_POLL_S = 0.05
@@ -167,11 +165,31 @@ class RobotAgent:
         # the parts (every state change runs on the loop that called start())
         self._rt = Runtime(self)
         self._queue = SkillQueue(name, on_report=self._on_report)
-        self._outbox = Outbox(self._rt, registered=lambda: self._registrar.registered)
+        self._uplink = UplinkHandler(
+            self._rt,
+            dispatch=self._dispatch,
+            seq=self._queue.next_seq,
+            deliver=self._on_answer,
+            session=lambda: self._rt.session_id,
+            acked=lambda last: self._outbox.ack(last),
+        )
+        self._outbox = Outbox(
+            self._rt,
+            registered=lambda: self._registrar.registered,
+            session=lambda: self._rt.session_id,
+            uplink_applied=lambda: self._uplink.log.applied,
+            unregistered=lambda: self._registrar.must_register(),
+        )
         self._telemetry = TelemetryFeed(self._rt, self._queue)
         self._world = World(self._rt)
         self._registrar = Registrar(
-            self._rt, self._queue, self._outbox, self.manifest, lambda: self.connect
+            self._rt,
+            self._queue,
+            self._outbox,
+            self.manifest,
+            lambda: self.connect,
+            uplink_applied=lambda: self._uplink.log.applied,
+            taken=self._stand_down,
         )
         self._executor = Executor(self, self._rt, self._queue, self._telemetry)
         self.world_stats = self._world.stats
@@ -255,9 +273,19 @@ class RobotAgent:
         return active.entry.id, active.entry.status
 
     @property
-    def pending_reports(self) -> list[Report]:
-        """Reports not acknowledged by the server yet."""
+    def pending_reports(self) -> list[Report | Answer]:
+        """Downlink messages (reports, answers) not acknowledged by the server yet."""
         return list(self._outbox.reports)
+
+    @property
+    def session_id(self) -> str:
+        """This run of the agent ('' before start())."""
+        return self._rt.session_id
+
+    @property
+    def uplink_applied(self) -> int:
+        """The last uplink sequence number processed (each command once)."""
+        return self._uplink.log.applied
 
     @property
     def refused_reports(self) -> list[ErrorReply]:
@@ -325,6 +353,7 @@ class RobotAgent:
         self._rt.attach()
         self._registrar.attach()
         self._outbox.attach()
+        self._uplink.attach()
         self._in_range = self._rt.in_range()
         config = transport.client_config(
             self.connect, lease_ms=self.lease_ms, extra=self.zenoh_extra
@@ -341,16 +370,17 @@ class RobotAgent:
     def _declare(self, session: zenoh.Session) -> None:
         # Queryables first: once the server sees our token, commands must work.
         self._entities.append(
-            transport.serve_async(session, Keys.command(self.name), self._on_command)
+            transport.serve_async(session, Keys.uplink(self.name), self._uplink.on_uplink)
         )
         self._entities.append(
             transport.serve_async(session, Keys.world(self.name), self._world.on_message)
         )
         self._telemetry.publisher = transport.declare_publisher(session, Keys.telemetry(self.name))
-        self._token = transport.declare_token(session, Keys.alive(self.name))
+        self._token = transport.declare_token(session, Keys.alive(self.name, self._rt.session_id))
         self._tasks = [
             asyncio.create_task(self._registrar.run(), name=f"{self.name}-register"),
-            asyncio.create_task(self._outbox.run(), name=f"{self.name}-flush"),
+            asyncio.create_task(self._outbox.run(), name=f"{self.name}-downlink"),
+            asyncio.create_task(self._uplink.run(), name=f"{self.name}-uplink"),
             asyncio.create_task(
                 self._telemetry.run(self.telemetry_hz), name=f"{self.name}-telemetry"
             ),
@@ -458,37 +488,26 @@ class RobotAgent:
 
     # ------------------------------------------------------------ commands
 
-    async def _on_command(self, payload: bytes) -> bytes:
-        if not self._rt.in_range():
-            raise self._refusal("unreachable", f"{self.name} is out of communication range")
-        await self._rt.delay()
-        if not self._rt.in_range():
-            raise self._refusal("unreachable", f"{self.name} is out of communication range")
-        try:
-            cmd = _COMMAND.validate_json(payload)
-        except ValidationError as exc:
-            raise self._refusal(
-                "bad_request", f"{self.name} cannot read the command: {exc}"
-            ) from None
-        # Everything below is synchronous: no other command or skill step
-        # interleaves, and the reply carries every report made so far.
+    def _on_answer(self, answer: Answer) -> None:
+        self._outbox.add(answer)
+
+    def _dispatch(self, cmd: object) -> Change:
+        """Apply one command of the uplink to the queue and the execution.
+        Synchronous: no other command or skill step interleaves, and the
+        reports it makes come before its answer."""
         change = self._commands[type(cmd)](cmd)
         self._telemetry.update_mode()
         self._telemetry.publish()
-        return dumps(
-            CommandReply(
-                ok=change.ok,
-                reason=change.reason,
-                ids=change.queued + change.removed,  # a command does one or the other
-                kept=change.started,
-                reports=list(self._outbox.reports),
-            )
-        )
+        return change
 
-    def _refusal(
-        self, code: Literal["unreachable", "bad_request"], message: str
-    ) -> transport.Refusal:
-        return transport.Refusal(dumps(ErrorReply(code=code, message=message, robot=self.name)))
+    def _stand_down(self, reason: str) -> None:
+        """Another run of this robot holds its name: hold and run nothing."""
+        log.error("%s: standing down: %s", self.name, reason)
+        self._executor.abort()
+        self._queue.forget()
+        self._outbox.clear()
+        self._uplink.forget()
+        self._telemetry.update_mode()
 
     def _enqueue(self, cmd: Enqueue) -> Change:
         handlers = self._executor.handlers

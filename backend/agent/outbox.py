@@ -1,32 +1,55 @@
-"""The outbox: every report stays here until the server acknowledges it.
+"""The outbox: the robot's downlink. Its reports and its answers to commands
+share one sequence and stay here until the server acknowledges them.
 
-Reports made while out of reach or unregistered wait; they are flushed as a
-batch whenever there is something to send and the server can hear us, and
-also travel with every command reply and registration. The server applies
-them by sequence number, so sending one twice is harmless.
+Messages leave in sequence order as a `Downlink` whenever the server can
+hear us; each one only once the link delay has passed since it was made
+(`Link.delay_s`, the simulator's model of a distant robot). The server
+applies them strictly in order and acknowledges cumulatively (`last_seq`);
+it never skips a gap (`missing`: we send again from there). While out of
+reach or unregistered they wait; they also travel with every registration.
+With nothing to say, an empty `Downlink` goes out every `heartbeat_s`: the
+ground's "heard N s ago" and delay estimate.
 """
 
 from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
+from datetime import UTC, datetime, timedelta
 
 from backend import transport
 from backend.agent.runtime import RETRY_S, Runtime, log
-from backend.core.ops import Report
+from backend.core.ops import Answer, Report
 from backend.protocol.keys import Keys
-from backend.protocol.messages import ErrorReply, ReportAck, ReportBatch, dumps
+from backend.protocol.messages import MAX_BATCH, Downlink, DownlinkAck, ErrorReply, dumps
+
+Message = Report | Answer
+HEARTBEAT_S = 5.0  # until the server's RegisterReply says otherwise
 
 
 class Outbox:
-    """Unacknowledged reports, oldest first, and the task that flushes them."""
+    """Unacknowledged downlink messages, oldest first, and the task that sends them."""
 
-    def __init__(self, rt: Runtime, registered: Callable[[], bool]):
+    def __init__(
+        self,
+        rt: Runtime,
+        registered: Callable[[], bool],
+        session: Callable[[], str],
+        uplink_applied: Callable[[], int],
+        unregistered: Callable[[], None],
+    ):
         self.rt = rt
         self._registered = registered
-        self.reports: list[Report] = []
-        self.refused: list[ErrorReply] = []  # reports the server refused (its reasons)
-        self._acked: asyncio.Event | None = None  # set whenever an ack removed reports
+        self._session = session
+        self._uplink_applied = uplink_applied
+        self._unregistered = unregistered  # the server no longer knows us: register again
+        self.reports: list[Message] = []  # not acknowledged yet, in seq order
+        self._ready: dict[int, float] = {}  # seq -> loop time it may leave (made + delay)
+        self.refused: list[ErrorReply] = []  # messages the server refused (its reasons)
+        self.heartbeat_s = HEARTBEAT_S
+        self._last_sent: float | None = None
+        self._retry_at: float | None = None
+        self._acked: asyncio.Event | None = None  # set whenever an ack removed messages
         self._wake: asyncio.Event | None = None
 
     def attach(self) -> None:
@@ -34,22 +57,35 @@ class Outbox:
         self._acked = asyncio.Event()
         self._wake = asyncio.Event()
 
-    def add(self, report: Report) -> None:
-        self.reports.append(report)
+    def add(self, message: Message) -> None:
+        self.reports.append(message)
+        loop = self.rt.loop
+        self._ready[message.seq] = (loop.time() if loop else 0.0) + self.rt.delay_s()
+        self.wake()
 
     def ack(self, last_seq: int) -> None:
-        """The server applied every report up to `last_seq`."""
+        """The server applied every message up to `last_seq`."""
         before = len(self.reports)
-        self.reports = [r for r in self.reports if r.seq > last_seq]
+        self.reports = [m for m in self.reports if m.seq > last_seq]
+        for seq in [s for s in self._ready if s <= last_seq]:
+            del self._ready[seq]
         if len(self.reports) < before and self._acked is not None:
             self._acked.set()
 
-    def renumbered(self, reports: list[Report]) -> None:
-        """The same reports under new numbers (registration after a restart)."""
-        self.reports = reports
+    def renumbered(self, messages: list[Message]) -> None:
+        """The same messages under new numbers (registration after a restart)."""
+        loop = self.rt.loop
+        now = loop.time() if loop else 0.0
+        self.reports = messages
+        self._ready = {m.seq: now for m in messages}
+
+    def clear(self) -> None:
+        """Another run of this robot took over: nothing of ours will be applied."""
+        self.reports = []
+        self._ready = {}
 
     def wake(self) -> None:
-        """Try to send now (a new report, registered, back in range, stopping)."""
+        """Look again now (a new message, registered, back in range, stopping)."""
         if self._wake is not None:
             self._wake.set()
 
@@ -61,57 +97,108 @@ class Outbox:
                 self._acked.clear()
                 await self._acked.wait()
 
-    def _can_send(self) -> bool:
-        return bool(self.reports) and self._registered() and self.rt.in_range()
+    # ---------------------------------------------------------------- sending
+
+    def ready(self) -> list[Message]:
+        """The messages whose link delay has passed, in order (a prefix)."""
+        loop = self.rt.loop
+        now = loop.time() if loop else 0.0
+        out = []
+        for m in self.reports[:MAX_BATCH]:
+            if self._ready.get(m.seq, 0.0) > now:
+                break
+            out.append(m)
+        return out
+
+    def _due_in(self) -> float | None:
+        """Seconds until there is something to send (None: when woken)."""
+        loop = self.rt.loop
+        if loop is None or not self._registered() or not self.rt.in_range():
+            return None
+        now = loop.time()
+        times = [self._retry_at] if self._retry_at is not None else []
+        if self._retry_at is None:
+            if self.reports:
+                times.append(self._ready.get(self.reports[0].seq, now))
+            times.append((self._last_sent or now) + self.heartbeat_s)
+        return max(0.0, min(times) - now)
 
     async def run(self) -> None:
-        """Flush whenever woken, until the agent stops; retry while nobody answers."""
+        """Send whenever something is due, until the agent stops."""
         wake = self._wake
-        assert wake is not None
+        assert wake is not None and self.rt.loop is not None
         while not self.rt.closing:
-            await wake.wait()
-            wake.clear()
-            if not self._can_send():
-                continue  # registration / the link loop wakes us again
             try:
-                progressed = await self.flush_once()
+                await asyncio.wait_for(wake.wait(), self._due_in())
+            except TimeoutError:
+                pass
+            wake.clear()
+            if self.rt.closing or not self._registered() or not self.rt.in_range():
+                continue  # registration / the link loop wakes us again
+            now = self.rt.loop.time()
+            if self._retry_at is not None and now < self._retry_at:
+                continue
+            ready = self.ready()
+            heartbeat = self._last_sent is None or now - self._last_sent >= self.heartbeat_s
+            if not ready and not heartbeat:
+                continue
+            try:
+                again = await self.send(ready)
+                self._retry_at = None
             except asyncio.CancelledError:
                 raise
             except Exception as exc:
-                log.info("%s: report flush failed (%s); retrying", self.rt.name, exc)
-                progressed = False
-            if not self.reports:
-                continue
-            if progressed:
+                log.info("%s: downlink failed (%s); retrying", self.rt.name, exc)
+                self._retry_at = self.rt.loop.time() + RETRY_S
+                again = False
+            if again:
                 wake.set()
-            else:
-                assert self.rt.loop is not None
-                self.rt.loop.call_later(RETRY_S, wake.set)
 
     async def flush_before_stop(self) -> None:
         """Best effort, briefly: the agent is stopping."""
-        if self._can_send():
+        if self.reports and self._registered() and self.rt.in_range():
             try:
-                await asyncio.wait_for(self.flush_once(), 1.0)
+                await asyncio.wait_for(self.send(self.ready()), 1.0)
             except Exception:  # best effort only
                 pass
 
-    async def flush_once(self) -> bool:
-        """Send the outbox once; True when the ack removed something."""
-        assert self.rt.session is not None
-        await self.rt.delay()
-        if not self.rt.in_range() or not self.reports:
-            return False
-        raw = await transport.query(
-            self.rt.session,
-            Keys.reports(self.rt.name),
-            dumps(ReportBatch(reports=list(self.reports))),
-            timeout=self.rt.robot.request_timeout,
+    async def send(self, messages: list[Message]) -> bool:
+        """One Downlink; True when the server asks for more at once (a gap)."""
+        assert self.rt.session is not None and self.rt.loop is not None
+        self._last_sent = self.rt.loop.time()
+        downlink = Downlink(
+            robot=self.rt.name,
+            session=self._session(),
+            messages=messages,
+            uplink_applied=self._uplink_applied(),
+            # it left the robot one link delay before it reaches the ground
+            sent=datetime.now(UTC) - timedelta(seconds=self.rt.delay_s()),
         )
-        ack = ReportAck.model_validate_json(raw)
+        try:
+            raw = await transport.query(
+                self.rt.session,
+                Keys.downlink(self.rt.name),
+                dumps(downlink),
+                timeout=self.rt.robot.request_timeout,
+            )
+        except transport.QueryError as exc:
+            self._refused(exc.payload)
+            raise
+        ack = DownlinkAck.model_validate_json(raw)
         self.refused.extend(ack.refused)
         for refusal in ack.refused:
-            log.warning("%s: the server refused a report: %s", self.rt.name, refusal.message)
-        before = len(self.reports)
+            log.warning("%s: the server refused a message: %s", self.rt.name, refusal.message)
         self.ack(ack.last_seq)
-        return len(self.reports) < before
+        return bool(ack.missing) and bool(self.ready())
+
+    def _refused(self, payload: bytes) -> None:
+        try:
+            err = ErrorReply.model_validate_json(payload)
+        except ValueError:
+            return
+        if err.code == "not_registered":
+            self._unregistered()
+        else:
+            self.rt.say_once(
+                f"downlink {err.code}", f"the server refused the downlink: {err.message}"
+            )

@@ -22,9 +22,10 @@ from collections.abc import Callable, Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
-from backend.core.model import SkillInstance, Status
-from backend.core.ops import Report
-from backend.protocol.messages import BarrierInfo
+from backend.core.model import BarrierInfo, SkillInstance, Status
+from backend.core.ops import Answer, Report
+
+Msg = Report | Answer  # a downlink message
 
 
 def _now() -> datetime:
@@ -286,7 +287,20 @@ class SkillQueue:
         server sees the robot go offline)."""
         self.active = None
 
+    def forget(self) -> None:
+        """Another run of this robot took over: hold nothing, run nothing,
+        report nothing (the ground listens to the other one)."""
+        self.active = None
+        self._waiting = []
+        self.run_enabled = False
+
     # ------------------------------------------------------------ reports
+
+    def next_seq(self) -> int:
+        """The next downlink number (an answer to a command shares the
+        reports' sequence)."""
+        self.seq += 1
+        return self.seq
 
     def report(self, entry: Entry, status: Status, info: str = "") -> Report:
         """Record a status change of `entry` as the next numbered report."""
@@ -304,7 +318,7 @@ class SkillQueue:
         self.on_report(report)
         return report
 
-    def continue_after(self, last_seq: int, pending: list[Report]) -> list[Report] | None:
+    def continue_after(self, last_seq: int, pending: list[Msg]) -> list[Msg] | None:
         """The server applied reports up to `last_seq`. When that is higher than
         ours (a previous run of this robot), ours would be ignored as
         duplicates: the `pending` (unacknowledged) ones are renumbered after

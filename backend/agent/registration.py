@@ -9,6 +9,7 @@ import inspect
 import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from datetime import UTC, datetime, timedelta
 from typing import Any
 
 import zenoh
@@ -30,6 +31,9 @@ from backend.protocol.messages import (
     dumps,
     first_error,
 )
+
+# refused because another run of this robot holds the name: asked again this often
+TAKEN_RETRY_S = 5.0
 
 _SEMVER = re.compile(VERSION_PATTERN)  # what a library's skill version may be
 _MODULE_VERSION = re.compile(r"^\d+\.\d+\.\d+")  # as protocol.Module: a suffix like -rc1 may follow
@@ -175,12 +179,16 @@ class Registrar:
         outbox: Outbox,
         manifest: Callable[[], Manifest],
         connect: Callable[[], list[str]],
+        uplink_applied: Callable[[], int],
+        taken: Callable[[str], None],
     ):
         self.rt = rt
         self.queue = queue
         self.outbox = outbox
         self._manifest = manifest
         self._connect = connect
+        self._uplink_applied = uplink_applied
+        self._taken = taken  # another run of this robot holds the name: stand down
         self.server_up = False
         self.registered = False
         self.last_reply: RegisterReply | None = None
@@ -203,6 +211,17 @@ class Registrar:
         """The agent stopped."""
         self.registered = False
         self.server_up = False
+
+    def must_register(self) -> None:
+        """The server does not know us (any more): register again."""
+        if self.registered:
+            log.warning(
+                "%s: the server no longer knows this robot; registering again", self.rt.name
+            )
+        self.registered = False
+        if self._registered_evt is not None:
+            self._registered_evt.clear()
+        self.wake()
 
     def on_server(self, alive: bool) -> None:
         self.server_up = alive
@@ -269,17 +288,24 @@ class Registrar:
                 Keys.register(self.rt.name),
             )
 
-    def _retry_later(self) -> None:
+    def _retry_later(self, seconds: float = RETRY_S) -> None:
         assert self.rt.loop is not None and self._wake is not None
-        self.rt.loop.call_later(RETRY_S, self._wake.set)
+        self.rt.loop.call_later(seconds, self._wake.set)
 
     async def register_once(self) -> None:
         assert self.rt.session is not None
         await self.rt.delay()
         request = Register(
             manifest=self._manifest(),
-            queue=[QueueEntry(id=e.id, status=e.status) for e in self.queue.entries()],
-            reports=list(self.outbox.reports),
+            session=self.rt.session_id,
+            queue=[
+                QueueEntry(id=e.id, status=e.status, skill=e.skill.skill, params=e.skill.params)
+                for e in self.queue.entries()
+            ],
+            downlink=list(self.outbox.reports),
+            last_seq=self.queue.seq,
+            uplink_applied=self._uplink_applied(),
+            sent=datetime.now(UTC) - timedelta(seconds=self.rt.delay_s()),
         )
         raw = await transport.query(
             self.rt.session,
@@ -294,19 +320,24 @@ class Registrar:
             log.error("%s: the server refused the registration: %s", self.rt.name, reply.reason)
             self._refused = f"the mission server refused robot {self.rt.name}: {reply.reason}"
             self._registered_evt.set()  # wait_registered() raises it
-            return  # tried again when the server (re)appears
+            if reply.code == "taken":
+                self._taken(reply.reason)
+                self._retry_later(TAKEN_RETRY_S)  # ours again once the other one is gone
+            return  # else tried again when the server (re)appears
         self._refused = None
         renumbered = self.queue.continue_after(reply.last_seq, self.outbox.reports)
         if renumbered is not None:
             self.outbox.renumbered(renumbered)
         else:
             self.outbox.ack(reply.last_seq)
-        if reply.missing:
-            log.warning(
-                "%s: the server holds skills this robot does not know: %s",
-                self.rt.name,
-                reply.missing,
-            )
+        self.outbox.heartbeat_s = reply.heartbeat_s
+        for what, ids in (
+            ("returned to the plan (this robot no longer had them)", reply.missing),
+            ("adopted (this robot holds them; the mission had them unsynchronized)", reply.adopted),
+            ("asked back (the mission does not give them to this robot)", reply.dropped),
+        ):
+            if ids:
+                log.warning("%s: the server %s: %s", self.rt.name, what, ", ".join(ids))
         self.registered = True
         self._registered_evt.set()
         self.outbox.wake()

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import secrets
 import threading
 from collections.abc import Callable
 from typing import Any, Protocol
@@ -45,13 +46,15 @@ class Runtime:
         self.loop_thread: int | None = None
         self.session: zenoh.Session | None = None
         self.closing = False  # stop() ends the agent's loops
+        self.session_id = ""  # this run of the agent (its registration, its presence)
         self._said: set[str] = set()  # keys of the mistakes logged once already
 
     def attach(self) -> None:
-        """Bind to the running loop (start())."""
+        """Bind to the running loop (start()); a fresh session id."""
         self.loop = asyncio.get_running_loop()
         self.loop_thread = threading.get_ident()
         self.closing = False
+        self.session_id = secrets.token_hex(6)
 
     def post(self, fn: Callable[..., object], *args: Any) -> None:
         """Run `fn(*args)` on the agent's loop (from any thread, never blocks)."""

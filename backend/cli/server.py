@@ -10,6 +10,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from backend.cli.ctl.values import parse_duration
+
 EXIT_BAD_INPUT, EXIT_UNREACHABLE = 2, 3
 
 
@@ -53,11 +55,13 @@ def prepare_parser(subparsers: Any) -> argparse.ArgumentParser:
         help="require client certificates signed by this CA (mutual TLS)",
     )
     p.add_argument(
-        "--command-timeout",
-        type=float,
-        default=10.0,
-        metavar="S",
-        help="how long to wait for a robot to answer a command",
+        "--command-expiry",
+        type=parse_duration,
+        default=0.0,
+        metavar="D",
+        help="default expiry of commands to robots, e.g. 30m or 2h (a robot never applies a "
+        "command past its expiry; an operation may give its own with --expire); "
+        "default: never",
     )
     p.add_argument("-v", "--verbose", action="store_true")
     return p
@@ -97,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
         mission_file=args.mission,
         listen=args.listen,
         zenoh_extra=extra,
-        command_timeout=args.command_timeout,
+        command_expiry=args.command_expiry or None,
         accounts=accounts,
     )
     try:

@@ -7,6 +7,7 @@ simulator's map feed.
 
 from backend.client.client import (
     ClientError,
+    LinkStatus,
     LoginFailed,
     MaybeApplied,
     MissionClient,
@@ -33,6 +34,7 @@ __all__ = [
     "ClientError",
     "ClientEvent",
     "ConnectionState",
+    "LinkStatus",
     "LoginFailed",
     "Malformed",
     "MaybeApplied",

@@ -4,6 +4,15 @@ It keeps a mirror of the mission (snapshot + event stream through
 `events.apply_events`), detects gaps and resynchronizes, follows a server
 restart, tracks robot presence and telemetry, and submits operations. Every
 call is asyncio-friendly: Zenoh callbacks only hand data to the event loop.
+
+The robot link, for consoles and scripts (protocol 2): an operation on a
+robot returns once its command is queued (`OpReply.value["command"]`); the
+commands live in the mirrored mission (`mission.uplink`, per robot, with
+state, created / sent / expires / settled times), so every change of a
+command arrives as events like any other. `pending(robot)` lists the
+commands not settled yet, `wait_command(id)` waits for one to settle, and
+`link(robot)` says per robot its one-way delay, when the ground last heard
+from it and whether its state is stale (see `LinkStatus`).
 """
 
 from __future__ import annotations
@@ -14,6 +23,8 @@ import logging
 import os
 import uuid
 from collections.abc import Callable
+from dataclasses import dataclass
+from datetime import UTC, datetime
 from typing import Any
 
 import zenoh
@@ -33,7 +44,7 @@ from backend.client.events import (
 from backend.core import events as ev
 from backend.core.bulk import gc_paused
 from backend.core.library import Library
-from backend.core.model import Mission
+from backend.core.model import Mission, UplinkCommand
 from backend.protocol.keys import PROTOCOL_VERSION, Keys
 from backend.protocol.messages import (
     AccountInfo,
@@ -70,6 +81,35 @@ from backend.transport.session import (
 log = logging.getLogger(__name__)
 
 DEFAULT_TIMEOUT = 10.0
+
+
+# a robot silent this long (3 missed heartbeats) is shown as stale: its state is as last known
+STALE_AFTER_S = 15.0
+
+
+@dataclass(frozen=True)
+class LinkStatus:
+    """One robot's link as this client sees it.
+
+    - `delay_s`: the server's estimate of the one-way delay robot -> ground
+      (None until the robot sent something with a time stamp);
+    - `heard`: when the ground last heard from the robot (the server's
+      registration/downlink time, or this client's last telemetry sample,
+      whichever is later); `heard_age_s` how long ago, at `now`;
+    - `stale`: offline, out of reach, or silent for more than `STALE_AFTER_S`:
+      what the mission shows of it is its last known state, not live;
+    - `pending`: its commands not settled yet, oldest first; each has
+      `created`, `sent`, `expires` (ages: now - those).
+    """
+
+    robot: str
+    online: bool
+    delay_s: float | None
+    heard: datetime | None
+    heard_age_s: float | None
+    stale: bool
+    in_range: bool | None
+    pending: list[UplinkCommand]
 
 
 class ClientError(Exception):
@@ -151,6 +191,7 @@ class MissionClient:
         self.library: Library | None = None
         self.robots: dict[str, RobotInfo] = {}
         self.telemetry: dict[str, Telemetry] = {}
+        self.telemetry_heard: dict[str, datetime] = {}  # when this client got each robot's last
         self.server_id: str | None = None
         self.connected = False
         self._listeners: list[Listener] = []
@@ -388,6 +429,7 @@ class MissionClient:
 
     def _got_telemetry(self, t: Telemetry) -> None:
         self.telemetry[t.robot] = t
+        self.telemetry_heard[t.robot] = datetime.now(UTC)
         self._emit(TelemetryReceived(t))
 
     def _on_alert(self, msg: Any) -> None:
@@ -471,8 +513,50 @@ class MissionClient:
         reply = OpReply.model_validate_json(raw)
         return reply
 
+    # -- the robot link -----------------------------------------------------------------
+    def pending(self, robot: str | None = None) -> list[UplinkCommand]:
+        """Commands not settled yet (queued or sent), per robot in order."""
+        return self.mission.pending_commands(robot) if self.mission is not None else []
+
+    def link(self, robot: str, now: datetime | None = None) -> LinkStatus:
+        """The robot's link: delay, last heard, stale or live, pending commands."""
+        now = now or datetime.now(UTC)
+        info = self.robots.get(robot)
+        heard = info.heard if info is not None else None
+        mine = self.telemetry_heard.get(robot)
+        if mine is not None and (heard is None or mine > heard):
+            heard = mine
+        age = (now - heard).total_seconds() if heard is not None else None
+        t = self.telemetry.get(robot)
+        online = bool(info and info.online)
+        stale = not online or age is None or age > STALE_AFTER_S
+        return LinkStatus(
+            robot=robot,
+            online=online,
+            delay_s=info.delay_s if info is not None else None,
+            heard=heard,
+            heard_age_s=age,
+            stale=stale,
+            in_range=t.in_range if t is not None and not stale else None,
+            pending=self.pending(robot),
+        )
+
+    async def wait_command(self, command_id: int, timeout: float | None = None) -> UplinkCommand:
+        """Wait until command `command_id` is settled (acked, refused, expired
+        or cancelled) and return it; TimeoutError while it is still pending."""
+
+        def settled(m: Mission) -> bool:
+            c = m.command(command_id)
+            return c is None or not c.pending
+
+        m = await self.wait_for(settled, timeout)
+        c = m.command(command_id)
+        if c is None:
+            raise KeyError(f"no command {command_id} in this mission")
+        return c
+
     async def wait_for(
-        self, predicate: Callable[[Mission], bool], timeout: float = 10.0
+        self, predicate: Callable[[Mission], bool], timeout: float | None = 10.0
     ) -> Mission:
         """Wait until the mirrored mission satisfies `predicate`."""
         done = asyncio.Event()

@@ -11,7 +11,17 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, TypeAdapter
 
-from backend.core.model import Barrier, Marker, Mission, Name, SkillId, SkillInstance, Strict
+from backend.core.model import (
+    KEEP_SETTLED,
+    Barrier,
+    Marker,
+    Mission,
+    Name,
+    SkillId,
+    SkillInstance,
+    Strict,
+    UplinkCommand,
+)
 
 
 class SkillAdded(Strict):
@@ -72,6 +82,21 @@ class ReportSeq(Strict):
     seq: int
 
 
+class CommandQueued(Strict):
+    """A command joined its robot's uplink."""
+
+    ev: Literal["command_queued"] = "command_queued"
+    command: UplinkCommand
+
+
+class CommandChanged(Strict):
+    """Changed fields of one command (JSON values), e.g. {"state": "sent", "sent": "..."}."""
+
+    ev: Literal["command_changed"] = "command_changed"
+    id: int
+    changes: dict[str, Any]
+
+
 class MissionReplaced(Strict):
     ev: Literal["mission_replaced"] = "mission_replaced"
     mission: Mission
@@ -87,6 +112,8 @@ Event = Annotated[
     | MarkerSet
     | MarkerRemoved
     | ReportSeq
+    | CommandQueued
+    | CommandChanged
     | MissionReplaced,
     Field(discriminator="ev"),
 ]
@@ -133,6 +160,32 @@ def _bump_counters(m: Mission, skill_id: str | None = None, barrier_id: str | No
         m.next_barrier = max(m.next_barrier, int(barrier_id[1:]) + 1)
 
 
+def _queue_command(m: Mission, c: UplinkCommand) -> None:
+    m.uplink.setdefault(c.robot, []).append(c.model_copy(deep=True))
+    m.next_command = max(m.next_command, c.id + 1)
+    m.uplink_seqs[c.robot] = max(m.uplink_seqs.get(c.robot, 0), c.seq)
+
+
+def _change_command(m: Mission, command_id: int, changes: dict[str, Any]) -> None:
+    for cmds in m.uplink.values():
+        for i, c in enumerate(cmds):
+            if c.id == command_id:
+                data = c.model_dump()
+                data.update(changes)
+                cmds[i] = UplinkCommand.model_validate(data)
+                if not cmds[i].pending:
+                    _prune(cmds)
+                return
+    raise KeyError(f"command {command_id}")
+
+
+def _prune(cmds: list[UplinkCommand]) -> None:
+    """Keep the pending commands and the last KEEP_SETTLED settled ones."""
+    settled = [i for i, c in enumerate(cmds) if not c.pending]
+    for i in reversed(settled[:-KEEP_SETTLED] if len(settled) > KEEP_SETTLED else []):
+        del cmds[i]
+
+
 def apply_event(m: Mission, ev: Any, revision: int) -> Mission:
     """Apply one event in place (or return the replacement mission)."""
     match ev:
@@ -169,6 +222,10 @@ def apply_event(m: Mission, ev: Any, revision: int) -> Mission:
             m.marker_revs.pop(name, None)
         case ReportSeq(robot=robot, seq=seq):
             m.report_seqs[robot] = seq
+        case CommandQueued(command=c):
+            _queue_command(m, c)
+        case CommandChanged(id=cid, changes=changes):
+            _change_command(m, cid, changes)
         case MissionReplaced(mission=new):
             m = new.copy_deep()
         case _:

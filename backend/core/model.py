@@ -173,6 +173,119 @@ class Barrier(Strict):
     skills: list[SkillId] = Field(min_length=2)
 
 
+# -- the uplink: commands to robots -------------------------------------------
+
+
+class CommandState(StrEnum):
+    """Where a command to a robot stands. `queued`: certainly not on the robot
+    (never transmitted, or every transmission was refused); `sent`: it may be
+    on the robot; then the robot's answer settles it: `acked` (applied),
+    `refused`; or it never applies: `expired`, `cancelled`."""
+
+    QUEUED = "queued"
+    SENT = "sent"
+    ACKED = "acked"
+    REFUSED = "refused"
+    EXPIRED = "expired"
+    CANCELLED = "cancelled"
+
+
+PENDING = frozenset({CommandState.QUEUED, CommandState.SENT})
+
+
+class BarrierInfo(Strict):
+    """A synchronized skill's barrier: the partners' robot -> skill id."""
+
+    barrier: Name
+    partners: dict[Name, SkillId]
+
+
+class Enqueue(Strict):
+    """Queue these skills (at the head with `front`: a retry)."""
+
+    cmd: Literal["enqueue"] = "enqueue"
+    skills: list[SkillInstance] = Field(max_length=10_000)
+    barriers: dict[SkillId, BarrierInfo] = Field(
+        default_factory=dict, description="skill id -> its barrier and the partners to wait for"
+    )
+    front: bool = Field(False, description="put before the rest of the queue (retries)")
+
+
+class Dequeue(Strict):
+    """Remove these queued skills; those started meanwhile stay (`kept`)."""
+
+    cmd: Literal["dequeue"] = "dequeue"
+    ids: list[SkillId] = Field(max_length=10_000)
+
+
+class Run(Strict):
+    cmd: Literal["run"] = "run"
+
+
+class Pause(Strict):
+    cmd: Literal["pause"] = "pause"
+
+
+class Stop(Strict):
+    cmd: Literal["stop"] = "stop"
+
+
+class Reset(Strict):
+    cmd: Literal["reset"] = "reset"
+
+
+RobotCommand = Annotated[Enqueue | Dequeue | Run | Pause | Stop | Reset, Field(discriminator="cmd")]
+
+# what the operator asked for (`reconcile`: the server, to drop skills a robot
+# holds that the mission does not give it)
+CommandOp = Literal["sync", "unsync", "run", "pause", "stop", "reset", "retry", "reconcile"]
+
+
+class UplinkCommand(Strict):
+    """One entry of a robot's uplink: a command, its place in the robot's
+    sequence and where it stands. Changed only through events."""
+
+    id: int = Field(ge=1, description="command number, mission-wide ('command 17')")
+    robot: Name
+    seq: int = Field(ge=1, description="per robot; the robot applies each once, in this order")
+    op: CommandOp
+    command: RobotCommand
+    skills: list[SkillId] = Field(
+        default_factory=list,
+        description="the skills it concerns: sent (sync), to remove (unsync), failed and new "
+        "(retry); locked while it is pending",
+    )
+    state: CommandState = CommandState.QUEUED
+    created: datetime
+    sent: datetime | None = Field(None, description="first transmission that may have reached it")
+    expires: datetime | None = Field(None, description="the robot never applies it after this")
+    settled: datetime | None = Field(None, description="when it left queued/sent")
+    answered: datetime | None = Field(None, description="when the robot's answer arrived")
+    cancel_requested: bool = Field(
+        False, description="withdrawn while it may be on the robot: the robot's answer decides"
+    )
+    reason: str = Field("", description="why it was refused, expired or cancelled; robot's note")
+    done: list[SkillId] = Field(
+        default_factory=list, description="what the robot did: skills it queued or removed"
+    )
+    kept: list[SkillId] = Field(
+        default_factory=list, description="unsync/reset: skills it had started, so kept"
+    )
+
+    @property
+    def pending(self) -> bool:
+        return self.state in PENDING
+
+    def title(self) -> str:
+        """How messages name it: 'command 17 (sync lru1-4, lru1-5)'."""
+        what = f"{self.op} {', '.join(self.skills)}" if self.skills else self.op
+        return f"command {self.id} ({what})"
+
+
+# settled commands kept per robot (the pending ones are always kept)
+KEEP_SETTLED = 20
+
+
 class _Hints(dict[str, tuple[str, int]]):
     """skill id -> (robot, index) where it was last seen. Only a hint, checked
     at every use, so whatever changes a task list never makes it wrong; and
@@ -198,11 +311,17 @@ class Mission(Strict):
     # per-robot revision of the list's membership and order
     task_revs: dict[Name, int] = Field(default_factory=dict)
     marker_revs: dict[Name, int] = Field(default_factory=dict)
-    # highest report sequence number applied per robot (reports are idempotent)
+    # highest downlink sequence number applied per robot: the robot's reports
+    # and answers share one sequence, applied once each, in order
     report_seqs: dict[Name, int] = Field(default_factory=dict)
+    # per robot: its pending commands and the last settled ones, by seq
+    uplink: dict[Name, list[UplinkCommand]] = Field(default_factory=dict)
+    # highest uplink sequence number given out per robot
+    uplink_seqs: dict[Name, int] = Field(default_factory=dict)
     # counters for generated ids; persisted so ids are never reused
     next_skill: int = Field(1, ge=1)
     next_barrier: int = Field(1, ge=1)
+    next_command: int = Field(1, ge=1)
     # a 10,000-skill mission took ~0.6 ms per scan, and every status change needs one
     _hints: _Hints = PrivateAttr(default_factory=_Hints)
 
@@ -261,6 +380,21 @@ class Mission(Strict):
             if skill_id in b.skills:
                 return bid
         return None
+
+    def command(self, command_id: int) -> UplinkCommand | None:
+        for cmds in self.uplink.values():
+            for c in cmds:
+                if c.id == command_id:
+                    return c
+        return None
+
+    def command_by_seq(self, robot: str, seq: int) -> UplinkCommand | None:
+        return next((c for c in self.uplink.get(robot, []) if c.seq == seq), None)
+
+    def pending_commands(self, robot: str | None = None) -> list[UplinkCommand]:
+        """Commands not settled yet (queued or sent), per robot in seq order."""
+        lists = [self.uplink.get(robot, [])] if robot is not None else self.uplink.values()
+        return [c for cmds in lists for c in cmds if c.pending]
 
     def all_ids(self) -> set[str]:
         return {s.id for task in self.tasks.values() for s in task}

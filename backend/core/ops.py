@@ -15,6 +15,7 @@ from pydantic import Field
 from backend.core.model import (
     AreaMarker,
     Barrier,
+    CommandState,
     Marker,
     Mission,
     Name,
@@ -73,6 +74,13 @@ class Sync(Strict):
     through: SkillId | None = Field(
         None, description="last skill to synchronize; all idle if omitted"
     )
+    expire_s: float | None = Field(
+        None,
+        ge=0,
+        le=10 * 365 * 86400,
+        description="seconds until the command expires: the robot never applies it later "
+        "(omitted: the server's default; 0: never)",
+    )
 
 
 class Unsync(Strict):
@@ -81,16 +89,46 @@ class Unsync(Strict):
     from_id: SkillId | None = Field(
         None, description="first queued skill to take back; all if omitted"
     )
+    expire_s: float | None = Field(
+        None,
+        ge=0,
+        le=10 * 365 * 86400,
+        description="seconds until the command expires: the robot never applies it later "
+        "(omitted: the server's default; 0: never)",
+    )
 
 
 class Control(Strict):
     op: Literal["run", "pause", "stop", "reset"]
     robot: Name | None = Field(None, description="one robot, or every robot if omitted")
+    expire_s: float | None = Field(
+        None,
+        ge=0,
+        le=10 * 365 * 86400,
+        description="seconds until the command expires: the robot never applies it later "
+        "(omitted: the server's default; 0: never)",
+    )
 
 
 class Retry(Strict):
     op: Literal["retry"] = "retry"
     id: SkillId
+    expire_s: float | None = Field(
+        None,
+        ge=0,
+        le=10 * 365 * 86400,
+        description="seconds until the command expires: the robot never applies it later "
+        "(omitted: the server's default; 0: never)",
+    )
+
+
+class Cancel(Strict):
+    """Withdraw a pending command: final at once while it is certainly not on
+    the robot (queued); else a request the robot's answer settles."""
+
+    op: Literal["cancel"] = "cancel"
+    command: int = Field(ge=1, description="the command number")
+    undo: bool = Field(False, description="an undo of a sync: refused unless still queued")
 
 
 class AddBarrier(Strict):
@@ -207,13 +245,77 @@ class RetryAck(Strict):
     skill: SkillInstance
 
 
+class QueueEntry(Strict):
+    """A skill a robot holds (its registration lists them, the active one first)."""
+
+    id: SkillId
+    status: Status
+    skill: Name | None = Field(None, description="its skill name (lets the ground compare)")
+    params: dict[str, Any] | None = Field(None, description="its parameters, as the robot has them")
+
+
 class Reconcile(Strict):
-    """A robot (re)registered without skills the mission holds as synchronized
-    to it (it restarted): they return to the head of the plan, in order."""
+    """A robot (re)registered holding `queue`: the mission is made to agree
+    with it. Skills the mission holds as synchronized that the robot lacks
+    return to the plan; skills it holds that the mission has as idle are
+    adopted (synchronized again); skills the mission does not give it are
+    asked back (a `reconcile` command)."""
 
     op: Literal["reconcile"] = "reconcile"
     robot: Name
-    lost: list[SkillId]
+    queue: list[QueueEntry] = Field(max_length=10_000)
+
+
+class UplinkSent(Strict):
+    """Server: these queued commands were transmitted and may be on the robot."""
+
+    op: Literal["uplink_sent"] = "uplink_sent"
+    robot: Name
+    ids: list[int]
+    at: datetime
+
+
+class UplinkSettle(Strict):
+    """Server: these commands never reached the robot and never will:
+    expired, or cancelled (their cancel was asked while they were on their way)."""
+
+    op: Literal["uplink_settle"] = "uplink_settle"
+    robot: Name
+    ids: list[int]
+    state: Literal[CommandState.EXPIRED, CommandState.CANCELLED]
+    reason: str
+    at: datetime
+
+
+class DownlinkRefused(Strict):
+    """Server: a robot's downlink message `seq` was refused (its reason is
+    here and alerted): its number is used up, the sequence goes on."""
+
+    op: Literal["downlink_refused"] = "downlink_refused"
+    robot: Name
+    seq: int = Field(ge=1)
+    code: str
+    message: str
+
+
+class Answer(Strict):
+    """A robot's answer to a command of its uplink: what it actually did.
+    Numbered in the same sequence as its reports."""
+
+    op: Literal["answer"] = "answer"
+    robot: Name
+    seq: int = Field(ge=1, description="downlink sequence number (shared with reports)")
+    command: int = Field(ge=1, description="the command's uplink seq")
+    outcome: Literal["applied", "refused", "expired", "cancelled"]
+    reason: str = Field("", max_length=2000, description="why not applied, or a note")
+    queued: list[SkillId] = Field(default_factory=list, description="enqueue: the ids it holds")
+    removed: list[SkillId] = Field(
+        default_factory=list, description="dequeue/reset: the ids it removed"
+    )
+    kept: list[SkillId] = Field(
+        default_factory=list, description="dequeue: asked to remove, but started: kept"
+    )
+    at: datetime | None = None
 
 
 class Report(Strict):
@@ -224,7 +326,7 @@ class Report(Strict):
     seq: int = Field(ge=1)
     id: SkillId
     status: Status
-    info: str = ""
+    info: str = Field("", max_length=2000)
     attempt: int | None = Field(None, ge=1)
     at: datetime | None = None
 
@@ -239,6 +341,7 @@ OperatorOperation = (
     | Unsync
     | Control
     | Retry
+    | Cancel
     | AddBarrier
     | RemoveBarrier
     | MarkerAdd
@@ -251,17 +354,23 @@ OperatorOperation = (
     | Redo
 )
 InternalOperation = RestoreSkills | SetSkill | RestoreBarrier | RestoreMarker
-RobotOperation = SyncAck | UnsyncDone | RetryAck | Reconcile | Report
-Operation = OperatorOperation | InternalOperation | RobotOperation
+RobotOperation = SyncAck | UnsyncDone | RetryAck | Reconcile | Report | Answer
+# what the server applies for the uplink (never sent by clients or robots)
+LinkOperation = UplinkSent | UplinkSettle | DownlinkRefused
+Operation = OperatorOperation | InternalOperation | RobotOperation | LinkOperation
 
 # the same, as pydantic reads them (by their `op`)
 OperatorOp = Annotated[OperatorOperation, Field(discriminator="op")]
 RobotOp = Annotated[RobotOperation, Field(discriminator="op")]
 AnyOp = Annotated[Operation, Field(discriminator="op")]
+# what a robot sends on its downlink: its reports and its answers, one sequence
+DownlinkMessage = Annotated[Report | Answer, Field(discriminator="op")]
 
-# operations that change the unsynchronized plan and can be undone
+# operations that change the unsynchronized plan and can be undone (a sync:
+# while its command is still queued, its undo is a cancel)
 UNDOABLE = (
     AddSkill,
+    Sync,
     DeleteSkills,
     MoveSkill,
     EditSkill,

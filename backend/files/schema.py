@@ -38,7 +38,17 @@ def schemas() -> dict[str, dict[str, Any]]:
         "mission": _schema(
             Mission,
             "missionctl mission file",
-            {"revision", "task_revs", "marker_revs", "report_seqs", "next_skill", "next_barrier"},
+            {
+                "revision",
+                "task_revs",
+                "marker_revs",
+                "report_seqs",
+                "uplink",
+                "uplink_seqs",
+                "next_command",
+                "next_skill",
+                "next_barrier",
+            },
         ),
         "library": _schema(Library, "missionctl skill library file", set()),
     }

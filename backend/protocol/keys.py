@@ -6,12 +6,13 @@ incompatible change of a key or of a message (backend.protocol.messages).
 
 from __future__ import annotations
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 PREFIX = f"mc/v{PROTOCOL_VERSION}"
 
 
 class Keys:
-    """The key space. `{robot}` is a robot name; `*` matches one chunk."""
+    """The key space. `{robot}` is a robot name, `{session}` one run of a
+    robot agent; `*` matches one chunk."""
 
     # server side
     SERVER_ALIVE = f"{PREFIX}/server/alive"  # liveliness token of the mission server
@@ -38,17 +39,17 @@ class Keys:
         return f"{PREFIX}/server/register/{robot}"
 
     @staticmethod
-    def reports(robot: str) -> str:  # queryable: ReportBatch -> ReportAck
-        return f"{PREFIX}/server/report/{robot}"
+    def downlink(robot: str) -> str:  # queryable: Downlink -> DownlinkAck
+        return f"{PREFIX}/server/downlink/{robot}"
 
     # robot side
     @staticmethod
-    def alive(robot: str) -> str:  # liveliness token of a robot agent
-        return f"{PREFIX}/robot/{robot}/alive"
+    def alive(robot: str, session: str = "*") -> str:  # liveliness token of a robot agent
+        return f"{PREFIX}/robot/{robot}/alive/{session}"
 
     @staticmethod
-    def command(robot: str) -> str:  # queryable on the robot: Command -> CommandReply
-        return f"{PREFIX}/robot/{robot}/cmd"
+    def uplink(robot: str) -> str:  # queryable on the robot: Uplink -> UplinkReceipt
+        return f"{PREFIX}/robot/{robot}/uplink"
 
     @staticmethod
     def telemetry(robot: str) -> str:  # publication: Telemetry
@@ -62,13 +63,25 @@ class Keys:
     def barrier_ready(barrier: str, robot: str) -> str:  # liveliness token while waiting
         return f"{PREFIX}/barrier/{barrier}/ready/{robot}"
 
-    ALL_ALIVE = f"{PREFIX}/robot/*/alive"
+    ALL_ALIVE = f"{PREFIX}/robot/*/alive/*"
     ALL_TELEMETRY = f"{PREFIX}/robot/*/telemetry"
 
     @staticmethod
     def robot_of(key: str) -> str:
-        """Robot name in a `.../robot/{robot}/...` or `.../{robot}` key."""
+        """Robot name in a `PREFIX/robot/{robot}/...` key or a server key
+        ending in `/{robot}` (any robot name, `robot` too)."""
         parts = key.split("/")
-        if "robot" in parts:
-            return parts[parts.index("robot") + 1]
+        if len(parts) > 3 and parts[2] == "robot":
+            return parts[3]
         return parts[-1]
+
+    @staticmethod
+    def session_of(key: str) -> str:
+        """The session of a robot's liveliness token key."""
+        return key.rsplit("/", 1)[-1]
+
+    @staticmethod
+    def legacy(version: int) -> str:
+        """The server keys of an older protocol version (the server answers
+        there that it speaks another one)."""
+        return f"mc/v{version}/server/**"

@@ -6,10 +6,12 @@ only) so any process can use the models and the codec.
 
 Key space (all JSON from the models below):
 
-    mc/v1/sim/map/snapshot   queryable  -> MapSnapshot (late joiners)
-    mc/v1/sim/map/delta      publication: MapDelta, seq consecutive, at most ~2 Hz
-    mc/v1/sim/status         queryable  -> SimStatus (score, deliveries, exchanges, robots)
-    mc/v1/sim/status/live    publication: SimStatus, on change and at least every second
+    mc/v2/sim/map/snapshot   queryable  -> MapSnapshot (late joiners)
+    mc/v2/sim/map/delta      publication: MapDelta, seq consecutive, at most ~2 Hz
+    mc/v2/sim/status         queryable  -> SimStatus (score, deliveries, exchanges, robots)
+    mc/v2/sim/status/live    publication: SimStatus, on change and at least every second
+
+(under the protocol's prefix, `backend.protocol.keys.PREFIX`)
 
 Grids are cut into `tile` x `tile` cells; a tile is sent as base64(zlib(raw
 uint8 bytes, row-major)) and only when it changed. Rows go south to north
@@ -34,8 +36,10 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from backend.protocol.keys import PREFIX as PROTOCOL_PREFIX
+
 FEED_VERSION = 1
-PREFIX = "mc/v1/sim"
+PREFIX = f"{PROTOCOL_PREFIX}/sim"
 KEY_MAP_SNAPSHOT = f"{PREFIX}/map/snapshot"
 KEY_MAP_DELTA = f"{PREFIX}/map/delta"
 KEY_STATUS = f"{PREFIX}/status"

@@ -13,9 +13,44 @@ from pydantic import Field, ValidationError
 
 from backend.core.events import EventBatch
 from backend.core.library import Library
-from backend.core.model import Mission, Name, Pose, SkillId, SkillInstance, Status, Strict
-from backend.core.ops import OperatorOp, Report
+from backend.core.model import (
+    BarrierInfo,
+    Dequeue,
+    Enqueue,
+    Mission,
+    Name,
+    Pause,
+    Pose,
+    Reset,
+    RobotCommand,
+    Run,
+    SkillId,
+    Stop,
+    Strict,
+)
+from backend.core.ops import Answer, DownlinkMessage, OperatorOp, QueueEntry, Report
 from backend.protocol.keys import PROTOCOL_VERSION
+
+# the robot-facing models live in core (the uplink is part of the mission);
+# they are protocol messages too
+__all__ = [
+    "Answer",
+    "BarrierInfo",
+    "Dequeue",
+    "DownlinkMessage",
+    "Enqueue",
+    "Pause",
+    "QueueEntry",
+    "Report",
+    "Reset",
+    "RobotCommand",
+    "Run",
+    "Stop",
+]
+
+# a robot agent's run: letters, digits, '_' and '-'
+Session = Annotated[str, Field(pattern=r"^[A-Za-z0-9_\-]+$", min_length=1, max_length=64)]
+MAX_BATCH = 1000  # messages or commands in one Uplink, Downlink or Register
 
 # -- consoles and ctl -> server -------------------------------------------------
 
@@ -89,12 +124,24 @@ class Manifest(Strict):
 
 
 class RobotInfo(Strict):
-    """The server's view of a robot: presence and manifest."""
+    """The server's view of a robot: presence, manifest and its link."""
 
     name: Name
     online: bool = False
     since: datetime | None = Field(None, description="when it went online/offline")
     manifest: Manifest | None = None
+    session: str | None = Field(None, description="the registered run of its agent (the owner)")
+    heard: datetime | None = Field(
+        None,
+        description="when the server last heard from it (registration, downlink); published "
+        "at least every 10 s while it talks",
+    )
+    delay_s: float | None = Field(
+        None,
+        ge=0,
+        description="estimated one-way delay robot -> ground, from the `sent` times of its "
+        "messages (assumes synchronized clocks)",
+    )
 
 
 class StateSnapshot(Strict):
@@ -114,9 +161,10 @@ class Alert(Strict):
     level: Literal["info", "warning", "error"] = "warning"
     kind: str = Field(
         "",
-        description="what happened: failure | offline | reconcile | report_refused | journal "
-        "(the server cannot write its journal) ('' from older servers); "
-        "consoles merge their own alerts of the same kind",
+        description="what happened: failure | offline | reconcile | report_refused | command "
+        "(a robot refused a command, it expired, or was applied after the ground gave up on it) "
+        "| robot_error (a robot sent something wrong) | journal (the server cannot write its "
+        "journal); consoles merge their own alerts of the same kind",
     )
     robot: str | None = None
     skill: str | None = None
@@ -127,39 +175,74 @@ class Alert(Strict):
 # -- robots -> server -------------------------------------------------------------
 
 
-class QueueEntry(Strict):
-    id: SkillId
-    status: Status
-
-
 class Register(Strict):
+    """A robot agent's registration: who it is, what it holds, what it has
+    not delivered yet."""
+
     manifest: Manifest
+    session: Session = Field(description="this run of the agent: fresh at every start")
     queue: list[QueueEntry] = Field(
-        default_factory=list, description="the robot's own synchronized queue (active first)"
+        default_factory=list,
+        max_length=10_000,
+        description="the robot's own synchronized queue (active first)",
     )
-    reports: list[Report] = Field(default_factory=list, description="reports not yet acknowledged")
+    downlink: list[DownlinkMessage] = Field(
+        default_factory=list,
+        max_length=MAX_BATCH,
+        description="its downlink messages not acknowledged yet, in seq order",
+    )
+    last_seq: int = Field(0, ge=0, description="the last downlink seq it has made")
+    uplink_applied: int = Field(0, ge=0, description="the last uplink seq it has processed")
+    sent: datetime | None = Field(None, description="when it left the robot (robot's clock)")
 
 
 class RegisterReply(Strict):
     accepted: bool = True
+    code: Literal["", "protocol", "unknown_robot", "wrong_type", "taken"] = Field(
+        "", description="why it was not accepted (stable)"
+    )
     reason: str = ""
-    last_seq: int = 0
-    # skills the server holds as synchronized to this robot that the robot
-    # does not know (it restarted): the robot may ask to have them again
+    last_seq: int = Field(0, description="the ground applied its downlink up to here")
     missing: list[SkillId] = Field(
         default_factory=list,
         description="skills the server held as synchronized to this robot that its queue lacks: "
         "returned to the plan",
     )
+    adopted: list[SkillId] = Field(
+        default_factory=list,
+        description="skills it holds that the mission had as unsynchronized: synchronized again",
+    )
+    dropped: list[SkillId] = Field(
+        default_factory=list,
+        description="skills it holds that the mission does not give it: a command asks it to "
+        "drop them",
+    )
+    heartbeat_s: float = Field(5.0, description="send a Downlink at least this often")
 
 
-class ReportBatch(Strict):
-    reports: list[Report]
+class Downlink(Strict):
+    """Robot -> ground: its reports and answers, one contiguous sequence."""
+
+    robot: Name
+    session: Session
+    messages: list[DownlinkMessage] = Field(
+        default_factory=list,
+        max_length=MAX_BATCH,
+        description="not acknowledged yet, oldest first (empty: a heartbeat)",
+    )
+    uplink_applied: int = Field(0, ge=0, description="the last uplink seq it has processed")
+    sent: datetime = Field(description="when it left the robot (robot's clock)")
 
 
-class ReportAck(Strict):
-    last_seq: int
-    refused: list[ErrorReply] = Field(default_factory=list)
+class DownlinkAck(Strict):
+    last_seq: int = Field(description="every message up to this seq is applied: drop them")
+    missing: list[int] = Field(
+        default_factory=list,
+        description="[first, last] seqs missing before what was sent: send from last_seq + 1",
+    )
+    refused: list[ErrorReply] = Field(
+        default_factory=list, description="messages applied as refused (consumed, alerted)"
+    )
 
 
 class Telemetry(Strict):
@@ -179,52 +262,31 @@ class Telemetry(Strict):
 # -- server -> robot ------------------------------------------------------------------
 
 
-class Enqueue(Strict):
-    cmd: Literal["enqueue"] = "enqueue"
-    skills: list[SkillInstance]
-    # skill id -> partners (robot, skill id) it must wait for at a barrier
-    barriers: dict[SkillId, BarrierInfo] = Field(default_factory=dict)
-    front: bool = Field(False, description="put before the rest of the queue (retries)")
+class UplinkEntry(Strict):
+    """One command as the robot gets it."""
+
+    seq: int = Field(ge=1, description="apply once, in this order")
+    id: int = Field(ge=1, description="the command number the operator sees")
+    expires: datetime | None = Field(None, description="never apply it after this")
+    cancel: bool = Field(False, description="withdrawn: answer `cancelled` if not applied yet")
+    command: RobotCommand
 
 
-class BarrierInfo(Strict):
-    barrier: Name
-    partners: dict[Name, SkillId]
+class Uplink(Strict):
+    """Ground -> robot: every pending command of its uplink, in seq order."""
+
+    robot: Name
+    session: Session = Field(description="the registered session it is for")
+    commands: list[UplinkEntry] = Field(max_length=MAX_BATCH)
+    downlink_ack: int = Field(0, description="the ground applied its downlink up to here")
+    sent: datetime
 
 
-class Dequeue(Strict):
-    cmd: Literal["dequeue"] = "dequeue"
-    ids: list[SkillId]
+class UplinkReceipt(Strict):
+    """The robot got the Uplink (not: applied it; its answers come on the downlink)."""
 
-
-class Run(Strict):
-    cmd: Literal["run"] = "run"
-
-
-class Pause(Strict):
-    cmd: Literal["pause"] = "pause"
-
-
-class Stop(Strict):
-    cmd: Literal["stop"] = "stop"
-
-
-class Reset(Strict):
-    cmd: Literal["reset"] = "reset"
-
-
-Command = Annotated[Enqueue | Dequeue | Run | Pause | Stop | Reset, Field(discriminator="cmd")]
-
-
-class CommandReply(Strict):
-    ok: bool = True
-    reason: str = ""
-    ids: list[SkillId] = Field(default_factory=list, description="enqueued or removed skills")
-    kept: list[SkillId] = Field(
-        default_factory=list, description="asked to remove but already started"
-    )
-    # reports made before answering, so the server sees them first
-    reports: list[Report] = Field(default_factory=list)
+    session: Session
+    applied: int = Field(0, ge=0, description="the last uplink seq it has processed")
 
 
 # -- robot <-> robot ------------------------------------------------------------------
@@ -241,8 +303,6 @@ class WorldReply(Strict):
     known: bool = True
     data: dict[str, Any] = Field(default_factory=dict)
 
-
-Enqueue.model_rebuild()
 
 
 def dumps(model: Strict) -> bytes:

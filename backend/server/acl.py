@@ -3,11 +3,11 @@
 The router enforces them on every message, with everything not allowed denied:
 
 - operator: read everything consoles read, and submit operations — only on
-  its own operation key `mc/v1/server/op/{user}`, so the server knows who
+  its own operation key `mc/v2/server/op/{user}`, so the server knows who
   sent each operation (the ACL is what authenticates it);
 - observer: the same reads, no operation key at all;
-- robot: only its robots' keys (register, reports, telemetry, presence,
-  command and world queryables, barrier tokens), world queries to any robot,
+- robot: only its robots' keys (register, downlink, telemetry, presence,
+  uplink and world queryables, barrier tokens), world queries to any robot,
   presence of the server and of other robots; plus the simulator's feed.
 """
 
@@ -62,8 +62,8 @@ def _watcher_rules(rid: str, user: str) -> list[dict[str, Any]]:
 
 
 def _robot_rules(rid: str, robots: list[str]) -> list[dict[str, Any]]:
-    own_queryables = [k for r in robots for k in (Keys.command(r), Keys.world(r))]
-    server_queries = [k for r in robots for k in (Keys.register(r), Keys.reports(r))]
+    own_queryables = [k for r in robots for k in (Keys.uplink(r), Keys.world(r))]
+    server_queries = [k for r in robots for k in (Keys.register(r), Keys.downlink(r))]
     worlds = [Keys.world("*")]
     own_tokens = [k for r in robots for k in (Keys.alive(r), Keys.barrier_ready("*", r))]
     partners = [Keys.SERVER_ALIVE, Keys.ALL_ALIVE, Keys.barrier_ready("*", "*")]

@@ -1,70 +1,58 @@
-"""The server's link to its robots: registration, presence, the commands of
-robot operations and their replies, reports and their acknowledgements.
+"""The server's link to its robots: registration and ownership of a robot
+name, presence, the link's state (heard, delay), the uplink (commands,
+`uplink.UplinkSender`) and the downlink (reports and answers,
+`downlink.DownlinkApplier`).
 
-Everything robot-facing lives in `RobotLink`. The server gives it a host
-(`LinkHost`: the engine, journaled submission, alerts, fleet publication)
-and asks it for three things: declare its queryables on the session, apply
-a robot operation (`ROBOT_OPS`), and the robots' presence (`robots`).
+Nothing here waits for a robot on an operator's behalf: an operation on a
+robot is applied like any other (it queues a command in the mission, see
+`backend.core.rules.uplink`); the link then transmits it whenever the robot
+can hear it, and applies the robot's answer when it comes, minutes later
+if need be.
 
-One robot's commands, registrations and report batches take turns
-(`RobotTurn`): a command holds the skills it sends locked until the robot
-answers, and what the robot reported meanwhile is applied after it.
+The server gives the link a host (`LinkHost`: the engine, journaled
+submission, alerts, fleet publication) and asks it to declare its
+queryables, to check an operation before it is submitted (`prepare`), to
+act on what was applied (`applied`), and for the robots' presence (`robots`).
 """
 
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Awaitable, Callable, Iterable
+import json
+import logging
+from collections.abc import Callable, Iterable
 from datetime import UTC, datetime
-from typing import Any, NamedTuple, Protocol
+from typing import Any, Protocol
 
 from pydantic import ValidationError
 
-from backend.core.model import Mission
-from backend.core.ops import (
-    Control,
-    Reconcile,
-    Report,
-    Retry,
-    RetryAck,
-    Sync,
-    SyncAck,
-    Unsync,
-    UnsyncDone,
-)
+from backend.core import events as ev
+from backend.core.model import CommandState, Mission
+from backend.core.ops import Control, Reconcile, Retry, Sync, Unsync, UplinkSettle
 from backend.core.rules.engine import Applied, Engine, Refusal
 from backend.protocol.keys import PROTOCOL_VERSION, Keys
 from backend.protocol.messages import (
-    BarrierInfo,
-    CommandReply,
-    Dequeue,
-    Enqueue,
-    ErrorReply,
+    Downlink,
+    DownlinkAck,
     Manifest,
-    Pause,
     Register,
     RegisterReply,
-    ReportAck,
-    ReportBatch,
     RobotInfo,
-    Run,
-    Stop,
     dumps,
+    first_error,
 )
-from backend.protocol.messages import Reset as ResetCmd
+from backend.server.downlink import DownlinkApplier, raise_alerts
 from backend.server.refusals import Handler, JournalFailed
-from backend.transport import (
-    NoResponder,
-    QueryError,
-    QueryTimeout,
-    query,
-    serve_async,
-    watch_liveliness,
-)
+from backend.server.uplink import UplinkSender
+from backend.transport import Refusal as ReplyErr
+from backend.transport import serve_async, watch_liveliness
 
-COMMANDS = {"run": Run, "pause": Pause, "stop": Stop, "reset": ResetCmd}
-# operations the server applies only once their robot answered
-ROBOT_OPS = (Sync, Unsync, Control, Retry)
+log = logging.getLogger(__name__)
+
+HEARTBEAT_S = 5.0  # robots send a Downlink at least this often (RegisterReply says so)
+HEARD_PUBLISH_S = 10.0  # a robot's `heard` goes out at least this often while it talks
+TICK_S = 1.0  # expiry of queued commands is checked this often
+DELAY_SAMPLES = 8  # the delay estimate: the least of the last few samples
 
 
 def _now() -> datetime:
@@ -100,28 +88,20 @@ class LinkHost(Protocol):
     def publish_fleet(self, info: RobotInfo) -> None: ...
 
 
-class Origin(NamedTuple):
-    """Who asked for a robot operation: its acknowledgement is journaled with it."""
-
-    actor: str
-    client: str = ""
-    request_id: str | None = None
-
-
 class RobotLink:
-    def __init__(self, host: LinkHost, *, command_timeout: float) -> None:
+    def __init__(self, host: LinkHost, *, default_expiry_s: float | None = None) -> None:
         self._host = host
-        self.command_timeout = command_timeout
-        self.robots: dict[str, RobotInfo] = {}  # presence and manifest, by name
-        self._turns: dict[str, RobotTurn] = {}
+        self.default_expiry_s = default_expiry_s
+        self.robots: dict[str, RobotInfo] = {}  # presence, manifest, link state, by name
+        self.senders: dict[str, UplinkSender] = {}
+        self._tokens: dict[str, set[str]] = {}  # robot -> sessions whose token is present
+        self._delays: dict[str, list[float]] = {}
+        self._published_heard: dict[str, datetime] = {}
+        self._said: set[tuple[str, str]] = set()
+        self._downlink = DownlinkApplier(host)
         self._session: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._ops: dict[type, Callable[[Any, Origin], Awaitable[Applied]]] = {
-            Sync: self._sync,
-            Unsync: self._unsync,
-            Retry: self._retry,
-            Control: self._control,
-        }
+        self._tick: asyncio.Task[None] | None = None
 
     # -- the server's side ------------------------------------------------------------
     def declare(self, session: Any, guard: Callable[[Handler], Handler]) -> list[Any]:
@@ -129,13 +109,22 @@ class RobotLink:
         (on the event loop); `guard` turns refusals into error replies."""
         self._session = session
         self._loop = asyncio.get_running_loop()
+        for sender in self.senders.values():
+            sender.start()
+        self._tick = self._loop.create_task(self._housekeeping(), name="robot-link")
         return [
             serve_async(session, Keys.register("*"), guard(self._handle_register), with_key=True),
-            serve_async(session, Keys.reports("*"), guard(self._handle_reports), with_key=True),
+            serve_async(session, Keys.downlink("*"), guard(self._handle_downlink), with_key=True),
+            serve_async(session, Keys.legacy(1), _legacy, with_key=True),
             watch_liveliness(session, Keys.ALL_ALIVE, self._on_presence),
         ]
 
     def close(self) -> None:
+        for sender in self.senders.values():
+            sender.stop()
+        if self._tick is not None:
+            self._tick.cancel()
+            self._tick = None
         self._session = None
 
     def add_robots(self, names: Iterable[str]) -> None:
@@ -143,402 +132,326 @@ class RobotLink:
         for name in names:
             if name not in self.robots:
                 self._set_robot(RobotInfo(name=name))
-
-    async def apply(
-        self, op: Any, *, actor: str, client: str = "", request_id: str | None = None
-    ) -> Applied:
-        """Send a robot operation to its robot(s); journal the acknowledgement
-        with the request id, so a retry after a server restart is a duplicate."""
-        try:
-            return await self._ops[type(op)](op, Origin(actor, client, request_id))
-        except JournalFailed as f:
-            raise Refusal(
-                f.code,
-                f"{f.message}. The robot did get the {op.op} command: once the journal works, "
-                "compare `missionctl ctl state` with the robot and unsync or stop what differs",
-            ) from None
+            if name not in self.senders:
+                sender = self.senders[name] = UplinkSender(self, name)
+                if self._loop is not None:
+                    sender.start()
+                sender.kick()  # commands pending from before a restart
 
     @property
-    def _engine(self) -> Engine:
+    def engine(self) -> Engine:
         engine = self._host.engine
         assert engine is not None
         return engine
 
     @property
+    def session(self) -> Any:
+        return self._session
+
+    @property
     def _mission(self) -> Mission:
-        return self._engine.mission
+        return self.engine.mission
 
-    def _ack(self, op: Any, origin: Origin) -> Applied:
-        return self._host.submit(
-            op, client=origin.client, request_id=origin.request_id, actor=origin.actor
-        )
+    def submit(self, op: Any, *, actor: str) -> Applied:
+        applied = self._host.submit(op, actor=actor)
+        raise_alerts(self._host, applied)
+        return applied
 
-    # -- robot operations -------------------------------------------------------------
-    async def _sync(self, op: Sync, origin: Origin) -> Applied:
-        e = self._engine
-        async with self._turn(op.robot):
-            skills = e.plan_sync(op)
-            ids = [s.id for s in skills]
-            try:
-                self._check_manifest(op.robot, skills)
-                await self._command(
-                    op.robot, Enqueue(skills=skills, barriers=self._barriers(skills))
-                )
-                return self._ack(SyncAck(robot=op.robot, ids=ids), origin)
-            finally:
-                e.release(op.robot, ids)
+    # -- operations on robots -----------------------------------------------------------
+    def prepare(self, op: Any) -> Any:
+        """An operator's operation as it is submitted: robot operations get the
+        server's default expiry; a sync or retry is checked against the
+        robot's manifest (when it ever registered)."""
+        if isinstance(op, Sync | Unsync | Control | Retry) and op.expire_s is None:
+            if self.default_expiry_s:
+                op = op.model_copy(update={"expire_s": self.default_expiry_s})
+        if isinstance(op, Sync):
+            self._check_manifest(op.robot, self._sync_skills(op))
+        elif isinstance(op, Retry):
+            found = self._mission.find(op.id)
+            if found is not None:
+                self._check_manifest(found[0], [(found[2].id, found[2].skill)])
+        return op
 
-    def _barriers(self, skills: list[Any]) -> dict[str, BarrierInfo]:
-        """The barriers of the skills sent, with the partners the robot waits for."""
-        e = self._engine
-        barriers = {}
-        for s in skills:
-            partners = e.barrier_partners(s.id)
-            if partners:
-                barriers[s.id] = BarrierInfo(
-                    barrier=e.mission.barrier_of(s.id), partners=dict(partners)
-                )
-        return barriers
+    def _sync_skills(self, op: Sync) -> list[tuple[str, str]]:
+        """(id, skill) of the idle skills the sync would send."""
+        out = []
+        for s in self._mission.tasks.get(op.robot, []):
+            if s.status.value == "idle":
+                out.append((s.id, s.skill))
+                if s.id == op.through:
+                    break
+        return out
 
-    async def _unsync(self, op: Unsync, origin: Origin) -> Applied:
-        e = self._engine
-        async with self._turn(op.robot):
-            ids = e.plan_unsync(op)
-            try:
-                reply = await self._command(op.robot, Dequeue(ids=ids))
-                applied = self._ack(UnsyncDone(robot=op.robot, ids=reply.ids), origin)
-            finally:
-                e.release(op.robot)
-            if reply.kept:
-                applied.notes.append(
-                    f"{op.robot} had already started {', '.join(reply.kept)}: it stays synchronized"
-                )
-            applied.value["kept"] = list(reply.kept)
-            return applied
-
-    async def _retry(self, op: Retry, origin: Origin) -> Applied:
-        e = self._engine
-        found = e.mission.find(op.id)
-        robot = found[0] if found else ""
-        async with self._turn(robot or "?"):
-            new = e.plan_retry(op)
-            try:
-                self._check_manifest(robot, [new])
-                await self._command(robot, Enqueue(skills=[new], front=True))
-                return self._ack(RetryAck(robot=robot, failed_id=op.id, skill=new), origin)
-            finally:
-                e.release(robot)
-
-    async def _control(self, op: Control, origin: Origin) -> Applied:
-        """run / pause / stop / reset, for one robot or all."""
-        e = self._engine
-        robots = e.plan_control(op)
-        results: dict[str, str] = {}
-        last = e.mission.revision
-        try:
-            for robot in robots:
-                try:
-                    last = await self._control_one(robot, op, origin.actor, last)
-                    results[robot] = "ok"
-                except Refusal as r:
-                    if op.robot is not None:
-                        raise
-                    results[robot] = r.message
-        finally:
-            for robot in robots:
-                if op.op == "reset":
-                    e.release(robot)
-        failed = {r: m for r, m in results.items() if m != "ok"}
-        if failed and len(failed) == len(results):
-            raise Refusal(
-                "robot_unreachable", f"{op.op} reached no robot: " + "; ".join(failed.values())
-            )
-        notes = [f"{op.op} not applied: {m}" for m in failed.values()]
-        return Applied(max(last, e.mission.revision), [], notes, {"robots": results})
-
-    async def _control_one(self, robot: str, op: Control, actor: str, last: int) -> int:
-        """One robot's run/pause/stop/reset; returns the last revision (a
-        reset's robot gives back its queue: its skills return to the plan)."""
-        async with self._turn(robot):
-            reply = await self._command(robot, COMMANDS[op.op]())
-            if op.op == "reset" and reply.ids:
-                return self._host.submit(
-                    UnsyncDone(robot=robot, ids=reply.ids), actor=actor
-                ).revision
-        return last
-
-    # -- commands ---------------------------------------------------------------------
-    def _turn(self, robot: str) -> RobotTurn:
-        turn = self._turns.get(robot)
-        if turn is None:
-            turn = self._turns[robot] = RobotTurn()
-        return turn
-
-    async def _command(self, robot: str, cmd: Any) -> CommandReply:
-        """Send a command to a robot agent; refusals say which robot and why.
-        Reports the robot made before answering are applied first."""
+    def _check_manifest(self, robot: str, skills: list[tuple[str, str]]) -> None:
         info = self.robots.get(robot)
-        if info is None or not info.online:
-            since = f" since {info.since:%H:%M:%S}" if info and info.since else ""
-            raise Refusal(
-                "robot_offline",
-                f"robot {robot} is not connected{since}: nothing was sent",
-                robot=robot,
-            )
-        try:
-            raw = await query(self._session, Keys.command(robot), dumps(cmd), self.command_timeout)
-        except QueryError as e:
-            raise _refused(robot, e.payload) from None
-        except QueryTimeout:
-            raise Refusal(
-                "robot_timeout",
-                f"{robot} did not answer within {self.command_timeout:g} s (out of reach?): "
-                "the mission is unchanged; if the robot got the command anyway, sending it "
-                "again is safe",
-                robot=robot,
-            ) from None
-        except NoResponder:
-            raise Refusal(
-                "robot_offline",
-                f"robot {robot} does not answer commands: nothing was sent",
-                robot=robot,
-            ) from None
-        reply = CommandReply.model_validate_json(raw)
-        self._apply_reports(robot, reply.reports)
-        if not reply.ok:
-            raise Refusal("robot_refused", f"{robot} refused: {reply.reason}", robot=robot)
-        return reply
-
-    def _check_manifest(self, robot: str, skills: list[Any]) -> None:
-        info = self.robots[robot]
-        if not info.online or info.manifest is None:
-            since = (
-                f" (offline since {info.since:%H:%M:%S})"
-                if info.since
-                else " (not seen since the server started)"
-            )
-            raise Refusal(
-                "robot_offline",
-                f"robot {robot} is not connected{since}: nothing was sent",
-                robot=robot,
-            )
-        for s in skills:
-            why = _incompatible(
-                info.manifest, s.skill, self._engine.library.skills[s.skill].version
-            )
+        if info is None or info.manifest is None:
+            return  # never registered: it refuses what it cannot run
+        for sid, skill in skills:
+            spec = self.engine.library.skills.get(skill)
+            why = _incompatible(info.manifest, skill, spec.version) if spec else None
             if why:
                 raise Refusal(
                     "incompatible",
-                    f"{robot} {why}; {s.id} stays unsynchronized",
+                    f"{robot} {why}; {sid} stays unsynchronized (nothing was queued)",
                     robot=robot,
-                    skill=s.id,
+                    skill=sid,
                 )
 
-    # -- registration and reports ----------------------------------------------------
-    def _robot_from(self, name: str) -> None:
-        if name not in self._mission.robots:
-            raise Refusal(
-                "unknown_robot",
-                f"robot '{name}' is not part of this mission "
-                f"(robots: {', '.join(self._mission.robots)})",
-                robot=name,
-            )
+    def applied(self, events: list[Any]) -> None:
+        """After an applied operation: transmit what it added or withdrew."""
+        for e in events:
+            if isinstance(e, ev.CommandQueued):
+                self._kick(e.command.robot)
+            elif isinstance(e, ev.CommandChanged) and e.changes.get("cancel_requested"):
+                c = self._mission.command(e.id)
+                if c is not None:
+                    self._kick(c.robot)
+            elif isinstance(e, ev.MissionReplaced):
+                self.add_robots(self._mission.robots)
 
-    async def _handle_register(self, payload: bytes, key: str) -> bytes:
-        reg = Register.model_validate_json(payload)
+    def _kick(self, robot: str) -> None:
+        sender = self.senders.get(robot)
+        if sender is not None:
+            sender.kick()
+
+    # -- what the uplink senders ask ------------------------------------------------------
+    def owner(self, robot: str) -> str | None:
+        info = self.robots.get(robot)
+        return info.session if info is not None and info.online else None
+
+    def delay_of(self, robot: str) -> float | None:
+        info = self.robots.get(robot)
+        return info.delay_s if info is not None else None
+
+    def said_once(self, robot: str, what: str, message: str, level: str = "warning") -> None:
+        if (robot, what) in self._said:
+            return
+        self._said.add((robot, what))
+        self._host.alert(message, level=level, robot=robot, kind="robot_error")
+
+    # -- registration ----------------------------------------------------------------------
+    def _parse(self, model: Any, payload: bytes, robot: str, what: str) -> Any:
+        """A robot's message; one that cannot be read is the robot's fault."""
+        try:
+            return model.model_validate_json(payload)
+        except ValidationError as e:
+            message = (
+                f"{robot} sent a {what} that cannot be read ({first_error(e)}); see "
+                f"docs/protocol.md (protocol {PROTOCOL_VERSION})"
+            )
+            self.said_once(robot, f"bad {what}", message, "error")
+            raise Refusal("bad_message", message, robot=robot) from None
+
+    def _handle_register(self, payload: bytes, key: str) -> bytes:
+        robot = Keys.robot_of(key)
+        reg: Register = self._parse(Register, payload, robot, "registration")
         m = reg.manifest
-        if m.name != Keys.robot_of(key):  # the key is what the router's rules check
+        if m.name != robot:  # the key is what the router's rules check
             raise Refusal(
                 "bad_register", f"robot '{m.name}' cannot register on {key}", robot=m.name
             )
-        refused = self._not_registrable(m)
-        if refused:
-            return dumps(RegisterReply(accepted=False, reason=refused))
-        info = self.robots[m.name]
-        info = info.model_copy(
-            update={"manifest": m, "online": True, "since": info.since if info.online else _now()}
+        refused = self._not_registrable(m) or self._taken(robot, reg.session)
+        if refused is not None:
+            code, reason = refused
+            return dumps(RegisterReply(accepted=False, code=code, reason=reason))
+        progress = self._downlink.apply(robot, reg.downlink)
+        lost: list[str] = []
+        adopted: list[str] = []
+        dropped: list[str] = []
+        if progress.last_seq >= reg.last_seq:
+            value = self.submit(Reconcile(robot=robot, queue=reg.queue), actor=robot).value
+            lost, adopted, dropped = value["unsynchronized"], value["adopted"], value["dropped"]
+        else:
+            self._host.alert(
+                f"{robot} registered, but its messages {progress.last_seq + 1} to {reg.last_seq} "
+                "have not arrived: its queue is compared with the mission once they have",
+                robot=robot,
+                kind="reconcile",
+            )
+        info = self.robots[robot]
+        self._set_robot(
+            info.model_copy(
+                update={
+                    "manifest": m,
+                    "online": True,
+                    "session": reg.session,
+                    "since": info.since if info.online else _now(),
+                }
+            )
         )
-        self._set_robot(info)
-        # after a command in flight to this robot (see _handle_reports): its
-        # queue and reports may already hold what that command sent it
-        async with self._turn(m.name):
-            self._apply_reports(m.name, reg.reports)
-            lost = self._reconcile(m.name, {q.id for q in reg.queue})
+        self._heard(robot, reg.sent)
+        self._kick(robot)  # what it has not answered: again
         return dumps(
             RegisterReply(
-                accepted=True, last_seq=self._mission.report_seqs.get(m.name, 0), missing=lost
+                accepted=True,
+                last_seq=progress.last_seq,
+                missing=lost,
+                adopted=adopted,
+                dropped=dropped,
+                heartbeat_s=HEARTBEAT_S,
             )
         )
 
-    def _not_registrable(self, m: Manifest) -> str | None:
+    def _not_registrable(self, m: Manifest) -> tuple[str, str] | None:
         """Why a robot with manifest `m` cannot register (None: it can)."""
         if m.protocol != PROTOCOL_VERSION:
-            return f"protocol {m.protocol} is not supported (server speaks {PROTOCOL_VERSION})"
+            return "protocol", (
+                f"protocol {m.protocol} is not supported: this server speaks protocol "
+                f"{PROTOCOL_VERSION} (docs/protocol.md); upgrade the robot's side"
+            )
         if m.name not in self._mission.robots:
-            return f"robot '{m.name}' is not part of this mission"
+            return "unknown_robot", (
+                f"robot '{m.name}' is not part of this mission "
+                f"(robots: {', '.join(self._mission.robots)})"
+            )
         expected = self._mission.robots[m.name].type
         if m.type != expected:
-            return f"robot '{m.name}' is a {expected} in this mission, not a {m.type}"
+            return "wrong_type", f"robot '{m.name}' is a {expected} in this mission, not a {m.type}"
         return None
 
-    def _reconcile(self, robot: str, robot_has: set[str]) -> list[str]:
-        """After a restart on either side: skills the mission holds as on the
-        robot but the robot does not have go back to the plan (returned)."""
-        task = self._mission.tasks.get(robot, [])
-        held = [s.id for s in task if s.status.value not in ("idle", "success", "failure")]
-        lost = [sid for sid in held if sid not in robot_has]
-        if lost:
-            try:
-                self._host.submit(Reconcile(robot=robot, lost=lost), actor=robot)
-                self._host.alert(
-                    f"{robot} no longer had {', '.join(lost)}: returned to the plan",
-                    robot=robot,
-                    kind="reconcile",
-                )
-            except JournalFailed:
-                raise  # the registration fails: the robot registers again
-            except Refusal as r:
-                self._host.alert(
-                    f"cannot reconcile {robot}: {r.message}",
-                    level="error",
-                    robot=robot,
-                    kind="reconcile",
-                )
-                return []
-        return lost
+    def _taken(self, robot: str, session: str) -> tuple[str, str] | None:
+        """One owner per robot name: another live session holds it."""
+        info = self.robots.get(robot)
+        if info is None or not info.online or info.session in (None, session):
+            return None
+        since = f" since {info.since:%H:%M:%S}" if info.since else ""
+        return "taken", (
+            f"robot {robot} is connected already as another session ({info.session}, online"
+            f"{since}): a second process under this name would execute every skill twice; stop "
+            "one of them (a hung one loses the name once its lease expires)"
+        )
 
-    def _apply_reports(self, robot: str, reports: list[Report]) -> list[ErrorReply]:
-        refused = []
-        for rep in sorted(reports, key=lambda r: r.seq):
-            if rep.robot != robot:
-                refused.append(
-                    ErrorReply(
-                        code="bad_report",
-                        message=f"{robot} cannot report for {rep.robot}",
-                        robot=robot,
-                    )
-                )
-                continue
-            error = self._apply_report(robot, rep)
-            if error is not None:
-                refused.append(error)
-        return refused
-
-    def _apply_report(self, robot: str, rep: Report) -> ErrorReply | None:
-        """One report of `robot`'s; a refusal is returned (and alerted)."""
-        try:
-            applied = self._host.submit(rep, actor=robot)
-        except JournalFailed:
-            raise  # not consumed: the robot keeps it and sends it again
-        except Refusal as r:
-            self._host.alert(
-                f"report refused: {r.message}",
-                level="error",
-                robot=robot,
-                skill=rep.id,
-                kind="report_refused",
-            )
-            return ErrorReply(**r.to_dict())
-        if not applied.duplicate and rep.status.value == "failure":
-            self._host.alert(
-                f"{robot}: {rep.id} failed: {rep.info}",
-                level="error",
-                robot=robot,
-                skill=rep.id,
-                kind="failure",
-            )
-        return None
-
-    def _handle_reports(self, payload: bytes, key: str) -> bytes | Awaitable[bytes]:
-        batch = ReportBatch.model_validate_json(payload)
-        robots = {r.robot for r in batch.reports}
-        if len(robots) > 1:
-            raise Refusal("bad_report", "a report batch comes from one robot")
-        if robots and robots != {Keys.robot_of(key)}:  # the key is what the router's rules check
+    # -- the downlink --------------------------------------------------------------------------
+    def _handle_downlink(self, payload: bytes, key: str) -> bytes:
+        robot = Keys.robot_of(key)
+        dl: Downlink = self._parse(Downlink, payload, robot, "downlink")
+        others = {m.robot for m in dl.messages} | {dl.robot}
+        if others != {robot}:  # the key is what the router's rules check
+            message = f"{robot} cannot send messages of {', '.join(sorted(others - {robot}))}"
+            self.said_once(robot, "other robot", message, "error")
+            raise Refusal("bad_message", message, robot=robot)
+        info = self.robots.get(robot)
+        if info is None or not info.online or info.session != dl.session:
             raise Refusal(
-                "bad_report", f"{Keys.robot_of(key)} cannot report for {', '.join(robots)}"
+                "not_registered",
+                f"robot {robot} (session {dl.session}) is not registered with this server: "
+                "register first (nothing was applied)",
+                robot=robot,
             )
-        robot = robots.pop() if robots else ""
-        if robot:
-            self._robot_from(robot)
-        # after the robot's command in flight, if any: a robot in run mode starts
-        # a skill it was just sent and may report it before its reply to the
-        # enqueue arrives; applied before the SyncAck, `running` would be refused.
-        # Always in the robot's turn, in arrival order with its registration and
-        # other batches: a later sequence number applied first would make the
-        # earlier one a duplicate. With nobody in or waiting for the turn (the
-        # usual case), at once: no task, ~4 % off a lone report's round trip
-        turn = self._turn(robot or "?")
-        if turn.free:
-            return self._report_ack(robot, batch, self._apply_reports(robot, batch.reports))
-        return self._reports_in_turn(turn, robot, batch)
+        self._heard(robot, dl.sent)
+        progress = self._downlink.apply(robot, dl.messages)
+        if self._mission.pending_commands(robot):
+            queued = any(
+                c.state == CommandState.QUEUED for c in self._mission.pending_commands(robot)
+            )
+            if queued or dl.uplink_applied < self._mission.uplink_seqs.get(robot, 0):
+                self._kick(robot)  # it can hear us now
+        return dumps(
+            DownlinkAck(
+                last_seq=progress.last_seq, missing=progress.missing, refused=progress.refused
+            )
+        )
 
-    async def _reports_in_turn(self, turn: RobotTurn, robot: str, batch: ReportBatch) -> bytes:
-        async with turn:
-            refused = self._apply_reports(robot, batch.reports)
-        return self._report_ack(robot, batch, refused)
-
-    def _report_ack(self, robot: str, batch: ReportBatch, refused: list[ErrorReply]) -> bytes:
-        # refused reports are consumed too: the robot must not send them again
-        last = max([self._mission.report_seqs.get(robot, 0), *(r.seq for r in batch.reports)])
-        return dumps(ReportAck(last_seq=last, refused=refused))
+    def _heard(self, robot: str, sent: datetime | None) -> None:
+        """The robot spoke: when, and (from its `sent`) the one-way delay."""
+        info = self.robots.get(robot)
+        if info is None:
+            return
+        now = _now()
+        delay = info.delay_s
+        if sent is not None:
+            samples = self._delays.setdefault(robot, [])
+            samples.append(max(0.0, (now - sent).total_seconds()))
+            del samples[:-DELAY_SAMPLES]
+            delay = round(min(samples), 3)
+        moved = info.delay_s is None or (
+            delay is not None and abs(delay - info.delay_s) > max(0.2, 0.1 * info.delay_s)
+        )
+        last = self._published_heard.get(robot)
+        update = {"heard": now, "delay_s": delay}
+        if moved or last is None or (now - last).total_seconds() >= HEARD_PUBLISH_S:
+            self._set_robot(info.model_copy(update=update))
+        else:  # kept for snapshots; published with the next notable change
+            self.robots[robot] = info.model_copy(update=update)
 
     # -- presence ---------------------------------------------------------------------
     def _set_robot(self, info: RobotInfo) -> None:
         self.robots[info.name] = info
+        if info.heard is not None:
+            self._published_heard[info.name] = info.heard
         self._host.publish_fleet(info)
 
     def _on_presence(self, key: str, alive: bool) -> None:
         if self._loop is not None and not self._loop.is_closed():
-            self._loop.call_soon_threadsafe(self._presence, Keys.robot_of(key), alive)
+            robot, session = Keys.robot_of(key), Keys.session_of(key)
+            self._loop.call_soon_threadsafe(self._presence, robot, session, alive)
 
-    def _presence(self, robot: str, alive: bool) -> None:
+    def _presence(self, robot: str, session: str, alive: bool) -> None:
+        tokens = self._tokens.setdefault(robot, set())
+        (tokens.add if alive else tokens.discard)(session)
         info = self.robots.get(robot)
-        if info is None or info.online == alive:
+        # online once it registers (with its manifest and queue); offline when
+        # its registered session's token goes (another session's does not count)
+        if info is None or alive or not info.online or info.session != session:
             return
-        # online again once it registers (with its manifest and queue)
-        if not alive:
-            self._set_robot(info.model_copy(update={"online": False, "since": _now()}))
-            self._host.alert(f"robot {robot} went offline", robot=robot, kind="offline")
+        self._set_robot(info.model_copy(update={"online": False, "since": _now()}))
+        self._host.alert(f"robot {robot} went offline", robot=robot, kind="offline")
+
+    # -- housekeeping ------------------------------------------------------------------
+    async def _housekeeping(self) -> None:
+        while True:
+            await asyncio.sleep(TICK_S)
+            try:
+                self._expire()
+            except JournalFailed:
+                pass  # alerted by the server; tried again at the next tick
+            except Exception:  # a bug must not end the housekeeping
+                log.exception("robot link housekeeping failed")
+
+    def _expire(self) -> None:
+        """Queued commands (never on their way) whose expiry passed."""
+        now = _now()
+        transmitting = self.engine.transmitting
+        due: dict[str, list[int]] = {}
+        for c in self._mission.pending_commands():
+            if c.state == CommandState.QUEUED and c.expires is not None and c.expires <= now:
+                if c.id not in transmitting:
+                    due.setdefault(c.robot, []).append(c.id)
+        for robot, ids in due.items():
+            info = self.robots.get(robot)
+            where = (
+                "it was out of reach"
+                if info is not None and info.online
+                else f"{robot} was offline"
+                + (f" since {info.since:%H:%M:%S}" if info and info.since else "")
+            )
+            self.submit(
+                UplinkSettle(
+                    robot=robot,
+                    ids=ids,
+                    state=CommandState.EXPIRED,
+                    reason=f"expired before it could be sent ({where})",
+                    at=now,
+                ),
+                actor="server",
+            )
 
 
-class RobotTurn:
-    """One robot's turn: its commands, registrations and report batches, one
-    at a time in arrival order (`async with`). Unlike `asyncio.Lock.locked()`,
-    `free` is also False while a released turn's next waiter has not run yet."""
-
-    def __init__(self) -> None:
-        self._lock = asyncio.Lock()
-        self._users = 0  # in the turn or waiting for it
-
-    @property
-    def free(self) -> bool:
-        return self._users == 0
-
-    async def __aenter__(self) -> None:
-        self._users += 1
-        try:
-            await self._lock.acquire()
-        except BaseException:  # cancelled while waiting
-            self._users -= 1
-            raise
-
-    async def __aexit__(self, *exc: object) -> None:
-        self._lock.release()
-        self._users -= 1
+def _legacy(payload: bytes, key: str) -> bytes:
+    """A query of protocol 1: a registration is told so in its own format,
+    anything else gets an ErrorReply (protocol_mismatch)."""
+    message = (
+        f"this mission server speaks missionctl protocol {PROTOCOL_VERSION}, not 1 "
+        "(docs/protocol.md): upgrade the robot or client"
+    )
+    if "/server/register/" in key:
+        return json_bytes({"accepted": False, "reason": message, "last_seq": 0, "missing": []})
+    raise ReplyErr(json_bytes({"ok": False, "code": "protocol_mismatch", "message": message}))
 
 
-def _refused(robot: str, payload: bytes) -> Refusal:
-    """A robot's error reply to a command, as a refusal that names it once."""
-    try:
-        err = ErrorReply.model_validate_json(payload)
-    except ValidationError:
-        return Refusal(
-            "robot_error", f"{robot} refused: {payload.decode(errors='replace')}", robot=robot
-        )
-    # its own sentence may already start with its name
-    text = err.message if err.message.startswith(robot) else f"{robot}: {err.message}"
-    return Refusal(err.code, text, robot=robot)
+def json_bytes(obj: Any) -> bytes:
+    return json.dumps(obj).encode()
 
 
 def _incompatible(manifest: Manifest, skill: str, want: str) -> str | None:

@@ -3,11 +3,11 @@ link to the robots (`robots.RobotLink`).
 
 All mission state lives on one asyncio loop: Zenoh callbacks only hand
 queries to it (transport.serve_async), so the engine is never touched from
-two threads. An operation that needs no robot is applied and answered in the
-loop callback that received it; operations involving a robot go to the robot
-link, which serializes them per robot and holds the skills they send locked
-until the robot answers. Applied operations, presence changes and alerts are
-published here, after the reply of the request being handled.
+two threads. Every operation is applied and answered in the loop callback
+that received it: one on a robot queues a command in the robot's uplink,
+which the robot link transmits and whose answer it applies when it comes
+(nothing waits for a robot). Applied operations, presence changes and
+alerts are published here, after the reply of the request being handled.
 """
 
 from __future__ import annotations
@@ -17,7 +17,6 @@ import itertools
 import logging
 import sqlite3
 import uuid
-from collections.abc import Awaitable
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -42,7 +41,7 @@ from backend.server.accounts import Accounts, zenoh_dictionary
 from backend.server.acl import acl_config
 from backend.server.journal import Journal, JournalError, remember_requests
 from backend.server.refusals import JournalFailed, guard
-from backend.server.robots import ROBOT_OPS, RobotLink
+from backend.server.robots import RobotLink
 from backend.transport import (
     declare_publisher,
     declare_token,
@@ -67,24 +66,23 @@ class MissionServer:
         mission_file: str | Path | None = None,
         listen: list[str] | None = None,
         zenoh_extra: dict[str, Any] | None = None,
-        command_timeout: float = 10.0,
+        command_expiry: float | None = None,
         accounts: Accounts | None = None,
     ):
         self.db = Path(db)
         self.mission_file = Path(mission_file) if mission_file else None
         self.listen = listen or ["tcp/127.0.0.1:7447"]
         self.zenoh_extra = zenoh_extra
-        self.command_timeout = command_timeout
+        self.command_expiry = command_expiry  # seconds; None: commands never expire
         self.accounts = accounts  # None: no logins, anyone reaching the router may do anything
         self.server_id = uuid.uuid4().hex[:12]
-        self.robot_link = RobotLink(self, command_timeout=command_timeout)
+        self.robot_link = RobotLink(self, default_expiry_s=command_expiry)
         self.engine: Engine | None = None
         self.journal: Journal | None = None
         self.library_file: Path | None = None
         self.resumed = False
         self._session = None
         self._entities: list[Any] = []
-        self._inflight: dict[tuple[str, str], asyncio.Future] = {}
         self._events_pub = None
         self._fleet_pub = None
         self._alerts_pub = None
@@ -220,8 +218,7 @@ class MissionServer:
         self._maybe_checkpoint()
         batch = EventBatch(revision=applied.revision, events=applied.events, actor=actor, op=op.op)
         self._publish(self._events_pub, batch.model_dump_json().encode())
-        if any(e.ev == "mission_replaced" for e in applied.events):
-            self.robot_link.add_robots(self.mission.robots)  # a loaded mission may name others
+        self.robot_link.applied(applied.events)  # commands to transmit, robots a mission names
 
     def _maybe_checkpoint(self) -> None:
         """The journal's checkpoint (its log copied into the file, with an
@@ -351,9 +348,9 @@ class MissionServer:
             raise Refusal("unknown_account", f"no account '{user}' on this server")
         return dumps(AccountInfo(user=user, role=role, robots=self.accounts.robots(user)))
 
-    def _handle_op(self, payload: bytes, key: str | None = None) -> bytes | Awaitable[bytes]:
-        """An operation that needs no robot is applied and answered at once;
-        one that waits for a robot's answer is answered when it has it."""
+    def _handle_op(self, payload: bytes, key: str | None = None) -> bytes:
+        """Apply an operation and answer at once (one on a robot queues its
+        command: the robot's answer comes later, as events)."""
         req = Request.model_validate_json(payload)
         if key is not None:  # op/{user}: the router's rules let only `user` send it
             user = key.rsplit("/", 1)[-1]
@@ -367,48 +364,16 @@ class MissionServer:
         done = self.engine.requests.get((req.client, req.request_id))
         if done is not None:
             return _reply(Applied(done.revision, [], done.notes, done.value, duplicate=True))
-        if not isinstance(req.op, ROBOT_OPS):
-            actor = f"{req.user}@{req.client}" if req.user else req.client
-            return _reply(
-                self.submit(
-                    req.op,
-                    client=req.client,
-                    request_id=req.request_id,
-                    actor=actor,
-                    expected_revision=req.expected_revision,
-                )
-            )
-        rid = (req.client, req.request_id)
-        inflight = self._inflight.get(rid)
-        if inflight is not None:  # the same request retried while its robot has not answered
-            return asyncio.shield(inflight)
-        # registered now, not when the task starts: a retry handed over
-        # before that must find it
-        fut: asyncio.Future = self._loop.create_future()
-        self._inflight[rid] = fut
-        return self._robot_request(req, fut)
-
-    async def _robot_request(self, req: Request, fut: asyncio.Future) -> bytes:
-        try:
-            reply = await self._apply_robot_request(req)
-            fut.set_result(reply)
-            return reply
-        except BaseException as e:
-            fut.set_exception(e)
-            fut.exception()  # retrieved: no "never retrieved" warning
-            raise
-        finally:
-            del self._inflight[(req.client, req.request_id)]
-
-    async def _apply_robot_request(self, req: Request) -> bytes:
         actor = f"{req.user}@{req.client}" if req.user else req.client
-        if req.expected_revision is not None:
-            self.engine.check_fresh(req.op, req.expected_revision)
-        applied = await self.robot_link.apply(
-            req.op, actor=actor, client=req.client, request_id=req.request_id
+        return _reply(
+            self.submit(
+                self.robot_link.prepare(req.op),
+                client=req.client,
+                request_id=req.request_id,
+                actor=actor,
+                expected_revision=req.expected_revision,
+            )
         )
-        self.engine.remember(req.client, req.request_id, applied)
-        return _reply(applied)
 
 
 def _reply(applied: Applied) -> bytes:

@@ -18,10 +18,14 @@ Operations
   delete ID...
   move ID INDEX               INDEX within the unsynchronized section (0 = first)
   edit ID [--label TEXT] [--param NAME=VALUE]... [--unbind NAME]... [POLICY]
-  sync ROBOT [--through ID]
-  unsync ROBOT [--from ID]
-  run|pause|stop|reset (ROBOT | --all)
-  retry ID
+  sync ROBOT [--through ID]            [--expire D] [--wait [S]]
+  unsync ROBOT [--from ID]             [--expire D] [--wait [S]]
+  run|pause|stop|reset (ROBOT | --all) [--expire D] [--wait [S]]
+  retry ID                             [--expire D] [--wait [S]]
+  pending [ROBOT...]          commands to robots not settled yet: number,
+                              robot, what, state, age, expiry
+  cancel COMMAND [--wait [S]] withdraw a pending command (final while it is
+                              queued; once sent, the robot's answer decides)
   barrier ID ID...
   unbarrier BARRIER_ID
   marker add NAME (--pose P | --position P | --area A) [--description TEXT]
@@ -61,6 +65,17 @@ Connection and identity
   --expect-revision N refuses the operation if what it touches changed after
   revision N (optimistic concurrency).
 
+Commands to robots (protocol 2)
+  An operation on a robot never waits for the robot: it queues a command in
+  the robot's uplink and returns at once (`queued for lru1, command 17: sync
+  lru1-4, lru1-5`); the server sends it when the robot can hear it, minutes
+  later if need be, and the robot's answer (what it actually did) changes
+  the mission. --expire D (30m, 2h, 90s, never): the robot never applies it
+  later (default: the server's --command-expiry). --wait [S] waits up to S
+  seconds (default 600) for the robot's answer: exit 0 applied, 1 refused,
+  expired or cancelled, 3 not answered in time (the command stays pending:
+  `ctl pending`, `ctl cancel N`) or server unreachable.
+
 Output
   One line per success (`added lru1-7 (drive_to) to lru1 at revision 12`) and
   the server's notes as `note: ...`. With --json, exactly one JSON object on
@@ -97,6 +112,8 @@ DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 DEFAULT_TIMEOUT = 10.0
 
 CONTROL_OPS = ("run", "pause", "stop", "reset")  # on one robot or --all (see OPERATIONS)
+# operations that queue commands to robots (the robot's answer comes later: --wait)
+ROBOT_OPS = ("sync", "unsync", *CONTROL_OPS, "retry", "cancel")
 
 
 def _recharge(text: str) -> float | None:
@@ -123,6 +140,34 @@ def _nonneg_int(text: str) -> int:
     if v < 0:
         raise argparse.ArgumentTypeError(f"expected 0 or more, got {v}")
     return v
+
+
+DEFAULT_WAIT = 600.0  # --wait without a value: seconds
+
+
+def _duration(text: str) -> float:
+    from backend.cli.ctl.values import parse_duration
+
+    return parse_duration(text)
+
+
+def _wait_and_expire(p: argparse.ArgumentParser, *, expire: bool = True) -> None:
+    g = p.add_argument_group("the robot's answer")
+    g.add_argument(
+        "--wait",
+        nargs="?",
+        const=DEFAULT_WAIT,
+        type=_positive_float,
+        metavar="S",
+        help=f"wait up to S seconds (default {DEFAULT_WAIT:g}) for the robot's answer",
+    )
+    if expire:
+        g.add_argument(
+            "--expire",
+            type=_duration,
+            metavar="D",
+            help="the robot never applies it after D (30m, 2h, 90s; never); default: the server's",
+        )
 
 
 def _positive_float(text: str) -> float:
@@ -279,16 +324,39 @@ def _edit(p: argparse.ArgumentParser) -> None:
 def _sync(p: argparse.ArgumentParser) -> None:
     p.add_argument("robot", metavar="ROBOT")
     p.add_argument("--through", metavar="ID", help="last skill to synchronize")
+    _wait_and_expire(p)
 
 
 def _unsync(p: argparse.ArgumentParser) -> None:
     p.add_argument("robot", metavar="ROBOT")
     p.add_argument("--from", dest="from_id", metavar="ID", help="first queued skill to take back")
+    _wait_and_expire(p)
 
 
 def _control(p: argparse.ArgumentParser) -> None:
     p.add_argument("robot", nargs="?", metavar="ROBOT")
     p.add_argument("--all", action="store_true", help="every robot")
+    _wait_and_expire(p)
+
+
+def _retry(p: argparse.ArgumentParser) -> None:
+    _id(p)
+    _wait_and_expire(p)
+
+
+def _cancel(p: argparse.ArgumentParser) -> None:
+    p.add_argument("command", type=_command_number, metavar="COMMAND", help="its number")
+    _wait_and_expire(p, expire=False)
+
+
+def _command_number(text: str) -> int:
+    try:
+        v = int(text.removeprefix("command").strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a command number, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"command numbers start at 1, got {v}")
+    return v
 
 
 def _unbarrier(p: argparse.ArgumentParser) -> None:
@@ -365,7 +433,9 @@ OPERATIONS: dict[str, tuple[str, Arguments]] = {
     "pause": ("pause the running skill, on one robot or --all", _control),
     "stop": ("stop the active skill (it returns to the queue), on one robot or --all", _control),
     "reset": ("stop and unsynchronize everything queued, on one robot or --all", _control),
-    "retry": ("retry a failed skill (a new attempt right after it)", _id),
+    "retry": ("retry a failed skill (a new attempt right after it)", _retry),
+    "pending": ("commands to robots not settled yet (age, expiry)", _state),
+    "cancel": ("withdraw a pending command to a robot", _cancel),
     "barrier": ("make idle skills of different robots start together", _ids),
     "unbarrier": ("remove a barrier", _unbarrier),
     "marker": ("add, move, rename or delete a marker", _marker),

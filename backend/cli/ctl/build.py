@@ -97,7 +97,7 @@ def _validated(model: type, what: str, **fields: Any) -> Any:
 
 
 def _no_operation(args: argparse.Namespace, known: Known) -> None:
-    """state, robots, watch and save send no operation: only names are checked."""
+    """state, robots, pending, watch and save send no operation: only names are checked."""
     for r in getattr(args, "robots", None) or []:
         check_name(r, "ROBOT")
 
@@ -169,14 +169,19 @@ def _edit(args: argparse.Namespace, known: Known) -> Any:
     )
 
 
+def _expire(args: argparse.Namespace) -> dict[str, Any]:
+    """--expire D: seconds (0: never); not given: the server's default."""
+    return {} if getattr(args, "expire", None) is None else {"expire_s": args.expire}
+
+
 def _sync(args: argparse.Namespace, known: Known) -> Any:
     check_name(args.robot, "ROBOT")
-    return _validated(ops.Sync, "sync", robot=args.robot, through=args.through)
+    return _validated(ops.Sync, "sync", robot=args.robot, through=args.through, **_expire(args))
 
 
 def _unsync(args: argparse.Namespace, known: Known) -> Any:
     check_name(args.robot, "ROBOT")
-    return _validated(ops.Unsync, "unsync", robot=args.robot, from_id=args.from_id)
+    return _validated(ops.Unsync, "unsync", robot=args.robot, from_id=args.from_id, **_expire(args))
 
 
 def _control(args: argparse.Namespace, known: Known) -> Any:
@@ -185,11 +190,15 @@ def _control(args: argparse.Namespace, known: Known) -> Any:
         raise UsageError(f"{name}: give a ROBOT or --all (not both)")
     if args.robot is not None:
         check_name(args.robot, "ROBOT")
-    return _validated(ops.Control, name, op=name, robot=args.robot)
+    return _validated(ops.Control, name, op=name, robot=args.robot, **_expire(args))
 
 
 def _retry(args: argparse.Namespace, known: Known) -> Any:
-    return _validated(ops.Retry, "retry", id=args.id)
+    return _validated(ops.Retry, "retry", id=args.id, **_expire(args))
+
+
+def _cancel(args: argparse.Namespace, known: Known) -> Any:
+    return _validated(ops.Cancel, "cancel", command=args.command)
 
 
 def _barrier(args: argparse.Namespace, known: Known) -> Any:
@@ -290,7 +299,7 @@ def _redo(args: argparse.Namespace, known: Known) -> Any:
 
 # ctl's operation name -> its builder (None: `ctl` alone, refused before this)
 BUILDERS: dict[str | None, Builder] = {
-    **dict.fromkeys(("state", "robots", "watch", "save", None), _no_operation),
+    **dict.fromkeys(("state", "robots", "pending", "watch", "save", None), _no_operation),
     "add": _add,
     "delete": _delete,
     "move": _move,
@@ -299,6 +308,7 @@ BUILDERS: dict[str | None, Builder] = {
     "unsync": _unsync,
     **dict.fromkeys(CONTROL_OPS, _control),
     "retry": _retry,
+    "cancel": _cancel,
     "barrier": _barrier,
     "unbarrier": _unbarrier,
     "marker": _marker,
@@ -310,7 +320,7 @@ BUILDERS: dict[str | None, Builder] = {
 
 
 def build_op(args: argparse.Namespace, library: Any = None, mission: Any = None) -> Any:
-    """The operation `args` asks for (None for state/robots/watch/save).
+    """The operation `args` asks for (None for state/robots/pending/watch/save).
 
     Without `library`/`mission` (before connecting) only the command line is
     checked; with them, `@MARKER` values are resolved by parameter type and

@@ -11,7 +11,7 @@ import re
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
-from datetime import datetime
+from datetime import UTC, datetime
 from typing import Any
 
 from backend.cli.ctl.args import CONTROL_OPS
@@ -160,10 +160,79 @@ def _iso(t: datetime | None) -> str | None:
     return t.isoformat() if t else None
 
 
+def age_text(seconds: float | None) -> str:
+    """12 s, 4 min, 2 h 5 min."""
+    if seconds is None:
+        return "?"
+    s = max(0, round(seconds))
+    if s < 120:
+        return f"{s} s"
+    if s < 7200:
+        return f"{s // 60} min"
+    return f"{s // 3600} h {s % 3600 // 60} min"
+
+
+def _since(t: datetime | None, now: datetime) -> float | None:
+    return (now - t).total_seconds() if t is not None else None
+
+
+def command_line(c: Any, now: datetime) -> str:
+    """One pending (or settled) command: `17 lru1 sync lru1-1, lru1-2: sent 12 s ago ...`."""
+    what = f"{c.op} {', '.join(c.skills)}" if c.skills else c.op
+    if c.state.value == "queued":
+        when = f"queued {age_text(_since(c.created, now))} ago, not sent yet"
+    elif c.state.value == "sent":
+        when = f"sent {age_text(_since(c.sent, now))} ago, no answer yet"
+    else:
+        when = f"{c.state.value} {_time(c.settled)}" + (f": {c.reason}" if c.reason else "")
+    extra = []
+    if c.expires is not None and c.pending:
+        passed = " (passed)" if c.expires <= now else ""
+        extra.append(f"expires {_time(c.expires)}{passed}")
+    if c.cancel_requested and c.pending:
+        extra.append("cancel requested")
+    tail = f" [{'; '.join(extra)}]" if extra else ""
+    return f"command {c.id} to {c.robot} (seq {c.seq}): {what}: {when}{tail}"
+
+
+def command_json(c: Any, now: datetime) -> dict[str, Any]:
+    return {
+        **c.model_dump(mode="json", exclude={"command"}),
+        "age_s": _since(c.created, now),
+        "sent_age_s": _since(c.sent, now),
+    }
+
+
+def link_json(client: Any, name: str, now: datetime) -> dict[str, Any]:
+    ls = client.link(name, now)
+    return {
+        "delay_s": ls.delay_s,
+        "heard": _iso(ls.heard),
+        "heard_age_s": ls.heard_age_s,
+        "stale": ls.stale,
+        "pending": [c.id for c in ls.pending],
+    }
+
+
+def link_text(client: Any, name: str, now: datetime) -> str:
+    """`delay 2.0 s, heard 3 s ago, 2 pending` (+ `stale: last known state`)."""
+    ls = client.link(name, now)
+    parts = []
+    if ls.delay_s is not None:
+        parts.append(f"delay {ls.delay_s:.1f} s")
+    if ls.heard_age_s is not None:
+        parts.append(f"heard {age_text(ls.heard_age_s)} ago")
+    if ls.pending:
+        parts.append(f"{len(ls.pending)} pending")
+    if ls.stale and ls.online:
+        parts.append("stale: last known state")
+    return ", ".join(parts)
+
+
 # ---------------------------------------------------------------- state --json
 
 
-def _robot_json(client: Any, name: str) -> dict[str, Any]:
+def _robot_json(client: Any, name: str, now: datetime | None = None) -> dict[str, Any]:
     spec = client.mission.robots.get(name)
     info = client.robots.get(name)
     manifest = info.manifest if info else None
@@ -176,11 +245,14 @@ def _robot_json(client: Any, name: str) -> dict[str, Any]:
         "online": bool(info and info.online),
         "since": _iso(info.since) if info else None,
         "manifest": manifest.model_dump(mode="json") if manifest else None,
+        "link": link_json(client, name, now or datetime.now(UTC)),
     }
 
 
-def _skill_json(m: Any, s: Any) -> dict[str, Any]:
+def _skill_json(m: Any, s: Any, locks: dict[str, Any] | None = None) -> dict[str, Any]:
+    c = (locks or {}).get(s.id)
     return {
+        "uplink": {"command": c.id, "op": c.op, "state": c.state.value} if c else None,
         "id": s.id,
         "skill": s.skill,
         "label": s.label,
@@ -196,17 +268,36 @@ def _skill_json(m: Any, s: Any) -> dict[str, Any]:
     }
 
 
+def command_locks(m: Any) -> dict[str, Any]:
+    """Skill id -> the pending command it belongs to (uplinking, being unsynchronized)."""
+    out: dict[str, Any] = {}
+    for c in m.pending_commands():
+        if c.op in ("sync", "unsync", "retry"):
+            for sid in c.skills:
+                out.setdefault(sid, c)
+    return out
+
+
 def state_json(client: Any, only: list[str] | None = None) -> dict[str, Any]:
     m = client.mission
+    now = datetime.now(UTC)
     names = list(m.robots) + [r for r in client.robots if r not in m.robots]
+    locks = command_locks(m)
     return {
         "revision": m.revision,
         "name": m.name,
         "library": m.library,
         "server_id": client.server_id,
-        "robots": {n: _robot_json(client, n) for n in names if _shown(n, only)},
+        "robots": {n: _robot_json(client, n, now) for n in names if _shown(n, only)},
         "tasks": {
-            r: [_skill_json(m, s) for s in task] for r, task in m.tasks.items() if _shown(r, only)
+            r: [_skill_json(m, s, locks) for s in task]
+            for r, task in m.tasks.items()
+            if _shown(r, only)
+        },
+        "uplink": {
+            r: [command_json(c, now) for c in cmds]
+            for r, cmds in m.uplink.items()
+            if _shown(r, only)
         },
         "barriers": {bid: list(b.skills) for bid, b in m.barriers.items()},
         "markers": {n: mk.model_dump(mode="json") for n, mk in m.markers.items()},
@@ -227,9 +318,16 @@ def _policy_words(p: Any) -> list[str]:
     return words
 
 
-def _skill_line(s: Any, columns: str, lib: Any, dash: str) -> str:
-    """`columns`: glyph, id, label and skill already padded to the task's widths."""
+def _skill_line(s: Any, columns: str, lib: Any, dash: str, pending: Any = None) -> str:
+    """`columns`: glyph, id, label and skill already padded to the task's widths;
+    `pending`: (command, now) when a pending command concerns it."""
     parts = [columns]
+    if pending is not None:
+        c, now = pending
+        doing = {"sync": "uplinking", "retry": "retrying", "unsync": "unsynchronizing"}[c.op]
+        since = c.sent if c.sent is not None else c.created
+        verb = "sent" if c.sent is not None else "queued"
+        parts.append(f"({doing}: command {c.id}, {verb} {age_text(_since(since, now))} ago)")
     extra = short_params(s, lib)
     if extra:
         parts.append(extra)
@@ -245,6 +343,8 @@ def _skill_line(s: Any, columns: str, lib: Any, dash: str) -> str:
 def _task_lines(m: Any, task: list[Any], lib: Any, unicode: bool) -> list[str]:
     if not task:
         return ["  (no skills)"]
+    locks = command_locks(m)
+    now = datetime.now(UTC)
     dash = "—" if unicode else "-"
     ids = [s.id + (f" [{m.barrier_of(s.id)}]" if m.barrier_of(s.id) else "") for s in task]
     wid = max(len(i) for i in ids)
@@ -257,6 +357,7 @@ def _task_lines(m: Any, task: list[Any], lib: Any, unicode: bool) -> list[str]:
             f"{s.skill:<{wskill}}",
             lib,
             dash,
+            (locks[s.id], now) if s.id in locks else None,
         )
         for s, ident in zip(task, ids, strict=True)
     ]
@@ -269,8 +370,15 @@ def _robot_lines(client: Any, robot: str, unicode: bool) -> list[str]:
     kind = lib.robot_types[rtype].kind if rtype in lib.robot_types else ""
     static = ", " + kind if kind == "static" else ""
     dash = "—" if unicode else "-"
+    now = datetime.now(UTC)
+    link = link_text(client, robot, now)
     head = f"{robot} ({rtype}{static}) {dash} {_presence(client.robots.get(robot))}"
-    return [head, *_task_lines(m, m.tasks.get(robot, []), lib, unicode)]
+    pending = [f"  pending: {command_line(c, now)}" for c in m.pending_commands(robot)]
+    return [
+        head + (f"; {link}" if link else ""),
+        *_task_lines(m, m.tasks.get(robot, []), lib, unicode),
+        *pending,
+    ]
 
 
 def _barrier_line(m: Any) -> str:
@@ -346,9 +454,29 @@ def robots_text(client: Any) -> str:
         outside = ", not in the mission" if not r["in_mission"] else ""
         head = f"{name} ({r['type'] or '?'}{outside}): {_presence(client.robots.get(name))}"
         t = client.telemetry.get(name)
-        lines.append(head + (_telemetry_text(t) if t is not None else ""))
+        link = link_text(client, name, datetime.now(UTC))
+        lines.append(
+            head + (f"; {link}" if link else "") + (_telemetry_text(t) if t is not None else "")
+        )
         lines += _manifest_lines(r["manifest"])
     return "\n".join(lines)
+
+
+# ---------------------------------------------------------------- pending
+
+
+def pending_json(client: Any, only: list[str] | None = None) -> dict[str, Any]:
+    now = datetime.now(UTC)
+    cmds = [c for c in client.pending() if _shown(c.robot, only)]
+    return {"revision": client.revision, "pending": [command_json(c, now) for c in cmds]}
+
+
+def pending_text(client: Any, only: list[str] | None = None) -> str:
+    now = datetime.now(UTC)
+    cmds = [c for c in client.pending() if _shown(c.robot, only)]
+    if not cmds:
+        return "no pending commands" + (f" for {', '.join(only)}" if only else "")
+    return "\n".join(command_line(c, now) for c in cmds)
 
 
 # ---------------------------------------------------------------- describe
@@ -390,10 +518,34 @@ def _edited(o: Outcome) -> str:
     return f"edited {o.op.id} {o.at}"
 
 
+def _queued(o: Outcome, what: str) -> str:
+    v = o.value
+    expires = v.get("expires")
+    until = ""
+    if expires:
+        until = f" (expires {_time(datetime.fromisoformat(expires))})"
+    return (
+        f"queued for {v.get('robot', '?')}, command {v.get('command', '?')}: {what}{until} {o.at}"
+    )
+
+
 def _controlled(o: Outcome) -> str:
-    ok = [r for r, res in o.value.get("robots", {}).items() if res == "ok"]
-    target = ", ".join(ok) if ok else (o.op.robot or "all robots")
-    return f"{o.op.op} sent to {target} {o.at}"
+    commands = o.value.get("commands", {})
+    if len(commands) == 1 and o.op.robot is not None:
+        [(robot, cid)] = commands.items()
+        return f"queued for {robot}, command {cid}: {o.op.op} {o.at}"
+    queued = ", ".join(f"{r} (command {cid})" for r, cid in commands.items()) or "no robot"
+    return f"{o.op.op} queued for {queued} {o.at}"
+
+
+def _cancelled(o: Outcome) -> str:
+    v = o.value
+    if v.get("state") == "cancelled":
+        return f"cancelled command {o.op.command} to {v.get('robot', '?')} {o.at}"
+    return (
+        f"asked {v.get('robot', '?')} to cancel command {o.op.command} (it was sent: "
+        f"its answer says whether it was applied) {o.at}"
+    )
 
 
 def _marker_moved(o: Outcome) -> str:
@@ -414,15 +566,11 @@ DESCRIBE: dict[str, Callable[[Outcome], str]] = {
     "delete": lambda o: f"deleted {', '.join(o.op.ids)} {o.at}",
     "move": _moved,
     "edit": _edited,
-    "sync": lambda o: (
-        f"synchronized {_ids(o.value.get('synchronized', []))} to {o.op.robot} {o.at}"
-    ),
-    "unsync": lambda o: (
-        f"unsynchronized {_ids(o.value.get('unsynchronized', [])) or 'nothing'} "
-        f"from {o.op.robot} {o.at}"
-    ),
+    "sync": lambda o: _queued(o, f"sync {_ids(o.value.get('skills', []))}"),
+    "unsync": lambda o: _queued(o, f"unsync {_ids(o.value.get('skills', []))}"),
     **dict.fromkeys(CONTROL_OPS, _controlled),
-    "retry": lambda o: f"retrying {o.op.id} as {o.value.get('id', '?')} {o.at}",
+    "retry": lambda o: _queued(o, f"retry {o.op.id} as {o.value.get('id', '?')}"),
+    "cancel": _cancelled,
     "barrier": lambda o: (
         f"created barrier {o.value.get('barrier', '?')} ({', '.join(o.op.ids)}) {o.at}"
     ),
@@ -485,6 +633,16 @@ EVENT_TEXT: dict[str, Callable[[Any], str]] = {
     "marker_set": lambda e: f"marker {e.name}: {_marker_text(e.marker)}",
     "marker_removed": lambda e: f"marker {e.name} removed",
     "mission_replaced": _mission_replaced,
+    "command_queued": lambda e: (
+        f"command {e.command.id} queued for {e.command.robot}: {e.command.op}"
+        + (f" {', '.join(e.command.skills)}" if e.command.skills else "")
+    ),
+    "command_changed": lambda e: (
+        f"command {e.id}: "
+        + (str(e.changes["state"]) if "state" in e.changes else "cancel requested")
+        + (f" ({e.changes['reason']})" if e.changes.get("reason") else "")
+        + (f", did {', '.join(e.changes['done'])}" if e.changes.get("done") else "")
+    ),
 }
 
 

@@ -15,13 +15,17 @@ import socket
 import sys
 import uuid
 from collections.abc import Awaitable, Callable
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from backend.cli.ctl.args import DEFAULT_CONNECT
+from backend.cli.ctl.args import DEFAULT_CONNECT, ROBOT_OPS
 from backend.cli.ctl.errors import FileInvalid, UsageError
 from backend.cli.ctl.render import (
+    command_json,
     describe,
+    pending_json,
+    pending_text,
     robots_json,
     robots_text,
     state_json,
@@ -281,6 +285,21 @@ async def _state(client: Any, args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+async def _pending(client: Any, args: argparse.Namespace) -> int:
+    only = list(args.robots or [])
+    unknown = [r for r in only if r not in client.mission.robots]
+    if unknown:
+        known = ", ".join(client.mission.robots) or "none"
+        raise UsageError(
+            f"pending: no robot {', '.join(unknown)} in this mission (robots: {known})"
+        )
+    if args.json:
+        _print_json(pending_json(client, only or None))
+    else:
+        print(pending_text(client, only or None), flush=True)
+    return EXIT_OK
+
+
 async def _robots(client: Any, args: argparse.Namespace) -> int:
     """Wait briefly for one telemetry sample of every online robot."""
     done = asyncio.Event()
@@ -326,11 +345,19 @@ async def _watch(client: Any, args: argparse.Namespace) -> int:
 
 
 def _session_free(m: Any) -> Any:
-    """The mission without the server's concurrency bookkeeping (per-skill and
-    per-list revisions, report sequence numbers): a file is a plan and a log."""
+    """The mission without the server's bookkeeping (per-skill and per-list
+    revisions, the robots' sequence numbers, the uplink): a file is a plan and a log."""
     tasks = {r: [s.model_copy(update={"rev": 0}) for s in t] for r, t in m.tasks.items()}
     return m.model_copy(
-        update={"tasks": tasks, "task_revs": {}, "marker_revs": {}, "report_seqs": {}}
+        update={
+            "tasks": tasks,
+            "task_revs": {},
+            "marker_revs": {},
+            "report_seqs": {},
+            "uplink": {},
+            "uplink_seqs": {},
+            "next_command": 1,
+        }
     )
 
 
@@ -409,15 +436,73 @@ async def _operation(client: Any, args: argparse.Namespace) -> int:
     reply = await client.submit(op, expected_revision=args.expect_revision, request_id=request_id)
     notes += list(reply.notes)
     mission = client.mission
-    return _print_done(
-        args,
-        lambda: describe(op, reply, before, mission),
-        op=op.op,
-        revision=reply.revision,
-        value=reply.value,
-        notes=notes,
-        duplicate=reply.duplicate,
-    )
+    done = {
+        "op": op.op,
+        "revision": reply.revision,
+        "value": reply.value,
+        "notes": notes,
+        "duplicate": reply.duplicate,
+    }
+    wait = getattr(args, "wait", None) if args.op in ROBOT_OPS else None
+    if wait is None:
+        return _print_done(args, lambda: describe(op, reply, before, mission), **done)
+    if not args.json:
+        _print_done(args, lambda: describe(op, reply, before, mission), **done)
+    return await _wait_answers(client, args, _command_ids(reply.value), wait, done)
+
+
+def _command_ids(value: dict[str, Any]) -> list[int]:
+    if "commands" in value:
+        return [int(c) for c in value["commands"].values()]
+    return [int(value["command"])] if "command" in value else []
+
+
+async def _wait_answers(
+    client: Any, args: argparse.Namespace, ids: list[int], wait: float, done: dict[str, Any]
+) -> int:
+    """--wait: until each command is settled; exit 0 if every one was applied,
+    1 if one was refused, expired or cancelled, 3 if one is still pending."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + wait
+    settled = []
+    try:
+        for cid in ids:
+            settled.append(await client.wait_command(cid, max(0.0, deadline - loop.time())))
+    except TimeoutError:
+        pending = [c for c in (client.mission.command(i) for i in ids) if c and c.pending]
+        names = ", ".join(f"command {c.id} ({c.state.value})" for c in pending)
+        message = (
+            f"no answer from the robot within {wait:g} s: {names} stays pending "
+            f"(`missionctl ctl pending`, `missionctl ctl cancel N`)"
+        )
+        now = datetime.now(UTC)
+        return _fail(
+            args,
+            "pending",
+            message,
+            EXIT_UNREACHABLE,
+            extra={"answers": [command_json(c, now) for c in pending], **done},
+        )
+    now = datetime.now(UTC)
+    bad = [c for c in settled if c.state.value != "acked"]
+    if args.json:
+        _print_json({"ok": not bad, **done, "answers": [command_json(c, now) for c in settled]})
+    else:
+        for c in settled:
+            stream = sys.stderr if c.state.value != "acked" else sys.stdout
+            print(_answer_line(c), file=stream, flush=True)
+    return EXIT_REFUSED if bad else EXIT_OK
+
+
+def _answer_line(c: Any) -> str:
+    took = ""
+    if c.settled is not None:
+        took = f" after {(c.settled - c.created).total_seconds():.1f} s"
+    did = f": {', '.join(c.done)}" if c.done else ""
+    kept = f" (kept, already started: {', '.join(c.kept)})" if c.kept else ""
+    why = f": {c.reason}" if c.reason and c.state.value != "acked" else ""
+    verb = {"acked": "applied by", "refused": "refused by"}.get(c.state.value, f"{c.state.value},")
+    return f"command {c.id} {verb} {c.robot}{took}{did}{kept}{why}"
 
 
 # operations that read (or write a file) instead of submitting an operation;
@@ -425,6 +510,7 @@ async def _operation(client: Any, args: argparse.Namespace) -> int:
 VIEWS: dict[str, Callable[[Any, argparse.Namespace], Awaitable[int]]] = {
     "state": _state,
     "robots": _robots,
+    "pending": _pending,
     "watch": _watch,
     "save": _save,
 }

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from typing import Any, NamedTuple
 
 from backend.core import events as ev
@@ -89,12 +90,24 @@ class Rules:
     def __init__(self, mission: Mission, library: Library):
         self.mission = mission
         self.library = library
-        # skill id -> why it cannot be edited now (a sync is in flight)
-        self.locked: dict[str, str] = {}
-        # robot -> the command in flight to it (one at a time per robot)
+        # The direct path (plan_* ... release, for tools and tests; the
+        # server uses the uplink): skill id -> why it cannot be edited now,
+        # robot -> the command in flight to it, skill id -> values it sent
+        self.held: dict[str, str] = {}
         self.pending: dict[str, str] = {}
-        # skill id -> parameter values sent with an in-flight sync
         self.sent: dict[str, dict[str, Any]] = {}
+        # ids of commands being transmitted right now (the server's): they
+        # may reach the robot, so a cancel cannot be final yet
+        self.transmitting: set[int] = set()
+        self.clock: Callable[[], datetime] = lambda: datetime.now(UTC)
+
+    @property
+    def locked(self) -> dict[str, str]:
+        """Skill id -> why it cannot change now: a pending command concerns
+        it (the uplink), or a direct-path command is in flight."""
+        out = uplink_locks(self.mission)
+        out.update(self.held)
+        return out
 
     def robot_type(self, robot: str) -> str:
         spec = self.mission.robots.get(robot)
@@ -143,7 +156,8 @@ class Rules:
     def outside_locked(self, robot: str, task: list[SkillInstance], index: int) -> None:
         """Skills being synchronized stay at the head of the unsynchronized
         section until the robot answers: nothing may be put before them."""
-        locked_after = [s.id for s in task[index:] if s.id in self.locked]
+        locked = self.locked
+        locked_after = [s.id for s in task[index:] if s.id in locked]
         if locked_after:
             raise Refusal(
                 "locked",
@@ -161,10 +175,11 @@ class Rules:
                 robot=robot,
                 skill=s.id,
             )
-        if s.id in self.locked:
+        why = self.locked.get(s.id)
+        if why is not None:
             raise Refusal(
                 "locked",
-                f"cannot {doing} {s.display()} on {robot}: {self.locked[s.id]}",
+                f"cannot {doing} {s.display()} on {robot}: {why}",
                 robot=robot,
                 skill=s.id,
             )
@@ -200,6 +215,23 @@ class Rules:
             who = f"{skill_id} ({skill})" if skill_id else skill
             raise _bad_params(robot, who, skill_id, problems)
         return out
+
+
+def uplink_locks(m: Mission) -> dict[str, str]:
+    """Skill id -> why it is locked, for the skills of pending commands."""
+    out: dict[str, str] = {}
+    for c in m.pending_commands():
+        if c.op == "sync":
+            why = f"it is being synchronized to {c.robot} (command {c.id}, {c.state.value})"
+        elif c.op == "retry":
+            why = f"it is being retried on {c.robot} (command {c.id}, {c.state.value})"
+        elif c.op == "unsync":
+            why = f"it is being unsynchronized from {c.robot} (command {c.id}, {c.state.value})"
+        else:
+            continue
+        for sid in c.skills:
+            out.setdefault(sid, why)
+    return out
 
 
 def _bad_params(

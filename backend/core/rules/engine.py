@@ -10,10 +10,12 @@ family: `edit` (skills of the plan), `barriers`, `markers`, `execution` (the
 robots' answers and reports); whole missions (load, new) are here, with what
 the engine keeps per client: remembered requests and undo/redo histories.
 
-Operations that involve a robot are two-phase: `plan_sync`, `plan_unsync`,
-`plan_control` and `plan_retry` check and say what to send, without changing
-the mission; the robot's answer (`SyncAck`, `UnsyncDone`, `RetryAck`,
-`Report`) is then submitted like any operation (see `execution`).
+Operations that involve a robot (sync, unsync, run, pause, stop, reset,
+retry) add a command to the robot's uplink and return (`uplink`); the
+robot's answer and reports are submitted like any operation. Tools and tests
+that play the robot themselves may use the direct path instead: `plan_sync`,
+`plan_unsync`, `plan_control`, `plan_retry`, then `SyncAck`, `UnsyncDone`,
+`RetryAck`, and `release` (see `execution`).
 """
 
 from __future__ import annotations
@@ -49,7 +51,7 @@ from backend.core.ops import (
     Undo,
     Unsync,
 )
-from backend.core.rules import barriers, edit, execution, markers
+from backend.core.rules import barriers, edit, execution, markers, uplink
 from backend.core.rules.base import Applied, Change, Refusal, Rule, Rules
 
 __all__ = ["RULES", "Applied", "Engine", "Refusal"]
@@ -80,12 +82,15 @@ def load_mission(rules: Rules, op: LoadMission) -> Change:
 
 def _check_replaceable(rules: Rules) -> None:
     """Refused while a robot holds or is being sent part of the mission."""
-    if rules.pending:
-        busy = ", ".join(f"{r} ({what})" for r, what in rules.pending.items())
+    busy = [f"{r} ({what})" for r, what in rules.pending.items()] + [
+        f"{c.robot} ({c.title()}, {c.state.value})" for c in rules.mission.pending_commands()
+    ]
+    if busy:
+        busy_text = ", ".join(busy)
         raise Refusal(
             "robot_busy",
-            f"cannot replace the mission while commands are in flight: {busy}; "
-            "try again when they end",
+            f"cannot replace the mission while commands are in flight: {busy_text}; "
+            "try again when they end (or cancel them)",
         )
     held = [
         r
@@ -115,6 +120,10 @@ def _take_over(new: Mission, old: Mission) -> None:
     new.next_skill = max(new.next_skill, old.next_skill)
     new.next_barrier = max(new.next_barrier, old.next_barrier)
     new.report_seqs = dict(old.report_seqs)
+    # robots apply commands by their sequence numbers: they go on across missions
+    new.uplink = {r: [c.model_copy() for c in cmds] for r, cmds in old.uplink.items()}
+    new.uplink_seqs = dict(old.uplink_seqs)
+    new.next_command = max(new.next_command, old.next_command)
     for robot in new.robots:
         new.tasks.setdefault(robot, [])
 
@@ -136,6 +145,7 @@ RULES: dict[type[Any], Rule] = {
     **barriers.RULES,
     **markers.RULES,
     **execution.RULES,
+    **uplink.RULES,
     LoadMission: load_mission,
     NewMission: new_mission,
 }

@@ -1,6 +1,8 @@
-"""Execution: commands to robots and what the robots answer.
+"""Execution: the robots' reports, and the direct path of commands.
 
-A command to a robot is two-phase, one at a time per robot:
+The server sends commands through the uplink (`backend.core.rules.uplink`).
+The direct path here is for tools and tests that play the robot themselves:
+a command is two-phase, one at a time per robot:
 1. plan it: `plan_sync`, `plan_unsync`, `plan_control`, `plan_retry` check it
    and say what to send, without changing the mission. Planning claims the
    robot (`pending`) and, for a sync, locks the skills it sends;
@@ -8,9 +10,7 @@ A command to a robot is two-phase, one at a time per robot:
    `UnsyncDone`, `RetryAck` (rules `sync_ack`, `unsync_done`, `retry_ack`);
 3. `release` ends the command, whether the robot answered, refused or never
    answered; until then the robot takes no other command.
-A robot's `Report`s (status changes, numbered per robot) and `Reconcile` (it
-restarted without skills the mission holds as synchronized to it) come
-without a command.
+A robot's `Report`s (status changes, numbered per robot) come without a command.
 """
 
 from __future__ import annotations
@@ -22,7 +22,6 @@ from backend.core import events as ev
 from backend.core.model import ACTIVE, FINISHED, TRANSITIONS, SkillInstance, Status
 from backend.core.ops import (
     Control,
-    Reconcile,
     Report,
     Retry,
     RetryAck,
@@ -50,11 +49,11 @@ def release(rules: Rules, robot: str, ids: Iterable[str] = ()) -> None:
     """The command to `robot` ended (answered, refused or timed out)."""
     rules.pending.pop(robot, None)
     for sid in ids:
-        rules.locked.pop(sid, None)
+        rules.held.pop(sid, None)
         rules.sent.pop(sid, None)
 
 
-def _of_robot(rules: Rules, robot: str, skill_id: str) -> tuple[int, SkillInstance]:
+def of_robot(rules: Rules, robot: str, skill_id: str) -> tuple[int, SkillInstance]:
     """Index and skill `skill_id`, refused unless it is in `robot`'s list."""
     owner, i, s = rules.skill(skill_id)
     if owner != robot:
@@ -73,11 +72,12 @@ def plan_sync(rules: Rules, op: Sync) -> list[SkillInstance]:
     task = rules.task(op.robot)
     claim(rules, op.robot)
     chosen = _to_sync(rules, op, task)
+    locked = rules.locked
     for s in chosen:
-        if s.id in rules.locked:
+        if s.id in locked:
             raise Refusal(
                 "locked",
-                f"{s.display()} on {op.robot}: {rules.locked[s.id]}",
+                f"{s.display()} on {op.robot}: {locked[s.id]}",
                 robot=op.robot,
                 skill=s.id,
             )
@@ -87,7 +87,7 @@ def plan_sync(rules: Rules, op: Sync) -> list[SkillInstance]:
         rules.check_params(op.robot, s.skill, s.params, s.bindings, skill_id=s.id) for s in chosen
     ]
     for s, params in zip(chosen, fresh, strict=True):
-        rules.locked[s.id] = f"it is being synchronized to {op.robot}"
+        rules.held[s.id] = f"it is being synchronized to {op.robot}"
         rules.sent[s.id] = params
     rules.pending[op.robot] = "a sync"
     return [
@@ -107,7 +107,7 @@ def _to_sync(rules: Rules, op: Sync, task: list[SkillInstance]) -> list[SkillIns
         )
     if op.through is None:
         return idle
-    i, s = _of_robot(rules, op.robot, op.through)
+    i, s = of_robot(rules, op.robot, op.through)
     if s.status != Status.IDLE:
         raise Refusal(
             "not_idle",
@@ -130,7 +130,7 @@ def plan_unsync(rules: Rules, op: Unsync) -> list[str]:
             robot=op.robot,
         )
     if op.from_id is not None:
-        _, s = _of_robot(rules, op.robot, op.from_id)
+        _, s = of_robot(rules, op.robot, op.from_id)
         if s.status != Status.IDLE_SYNCHRONIZED:
             raise Refusal(
                 "not_queued",
@@ -203,20 +203,26 @@ _WHY_NOT: dict[str, Callable[[str, SkillInstance | None, bool], str | None]] = {
 }
 
 
+def why_not(action: str, robot: str, act: SkillInstance | None, queued: bool) -> str | None:
+    """Why `action` does not apply to `robot` (its active skill, whether it
+    has queued skills), or None when it does."""
+    rule = _WHY_NOT.get(action)
+    if rule is None:
+        return f"unknown command {action}"
+    return rule(robot, act, queued)
+
+
 def _control_refusal(
     rules: Rules, action: str, robot: str, task: list[SkillInstance]
 ) -> str | None:
-    why_not = _WHY_NOT.get(action)
-    if why_not is None:
-        return f"unknown command {action}"
-    return why_not(robot, rules.active(task), rules.first_queued(task) is not None)
+    return why_not(action, robot, rules.active(task), rules.first_queued(task) is not None)
 
 
 def plan_retry(rules: Rules, op: Retry) -> SkillInstance:
     """The new attempt of a failed skill, to send to its robot."""
     robot, i, s = rules.skill(op.id)
     new_id = f"{s.id.split('.')[0]}.{s.attempt + 1}"
-    _check_retriable(rules, robot, i, s, new_id)
+    check_retriable(rules, robot, i, s, new_id)
     claim(rules, robot)
     rules.pending[robot] = "a retry"
     return SkillInstance(
@@ -231,7 +237,7 @@ def plan_retry(rules: Rules, op: Retry) -> SkillInstance:
     )
 
 
-def _check_retriable(rules: Rules, robot: str, i: int, s: SkillInstance, new_id: str) -> None:
+def check_retriable(rules: Rules, robot: str, i: int, s: SkillInstance, new_id: str) -> None:
     if s.status != Status.FAILURE:
         raise Refusal(
             "cannot_retry",
@@ -295,7 +301,7 @@ def sync_ack(rules: Rules, op: SyncAck) -> Change:
             changes["params"] = rules.sent[s.id]  # what the robot holds
         events.append(ev.SkillChanged(id=s.id, changes=changes))
     for sid in op.ids:
-        rules.locked.pop(sid, None)
+        rules.held.pop(sid, None)
         rules.sent.pop(sid, None)
     return Change(events, [], {"synchronized": list(op.ids)}, None)
 
@@ -312,12 +318,12 @@ def unsync_done(rules: Rules, op: UnsyncDone) -> Change:
     # the removed skills are the end of the queue: turning them idle puts
     # them, in order, at the head of the unsynchronized section
     events: list[ev.Event] = [
-        ev.SkillChanged(id=sid, changes=_back_in_plan(rules, op.robot, sid)) for sid in op.ids
+        ev.SkillChanged(id=sid, changes=back_in_plan(rules, op.robot, sid)) for sid in op.ids
     ]
     return Change(events, [], {"unsynchronized": list(op.ids)}, None)
 
 
-def _back_in_plan(rules: Rules, robot: str, sid: str) -> dict[str, Any]:
+def back_in_plan(rules: Rules, robot: str, sid: str) -> dict[str, Any]:
     """The changes of a skill the robot gave back: idle again."""
     _, _, s = rules.skill(sid)
     changes: dict[str, Any] = {"status": Status.IDLE.value, "status_info": ""}
@@ -347,35 +353,6 @@ def retry_ack(rules: Rules, op: RetryAck) -> Change:
 
 
 # -- what robots tell without a command -------------------------------------------
-
-
-def reconcile(rules: Rules, op: Reconcile) -> Change:
-    task = rules.task(op.robot)
-    lost = set(op.lost)
-    synced = [s for s in task if s.status != Status.IDLE and s.status not in FINISHED]
-    # only a tail of the synchronized section can be lost, the log never
-    keep = [s for s in synced if s.id not in lost]
-    tail = synced[len(keep) :]
-    if any(s.id not in lost for s in tail) or [s.id for s in synced[: len(keep)]] != [
-        s.id for s in keep
-    ]:
-        raise Refusal(
-            "bad_report",
-            f"{op.robot} lost {sorted(lost)}, which is not the end of its synchronized section",
-            robot=op.robot,
-        )
-    events: list[ev.Event] = [
-        ev.SkillChanged(
-            id=s.id,
-            changes={
-                "status": Status.IDLE.value,
-                "status_info": f"returned to the plan: {op.robot} no longer had it",
-                "started_at": None,
-            },
-        )
-        for s in tail
-    ]
-    return Change(events, [], {"unsynchronized": [s.id for s in tail]}, None)
 
 
 def report(rules: Rules, op: Report) -> Change:
@@ -474,6 +451,5 @@ RULES: dict[type[Any], Rule] = {
     SyncAck: sync_ack,
     UnsyncDone: unsync_done,
     RetryAck: retry_ack,
-    Reconcile: reconcile,
     Report: report,
 }

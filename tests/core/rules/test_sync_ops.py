@@ -121,16 +121,22 @@ class TestPlanSync:
         (Sync(robot="lru1"), "plan_sync"),
         (Unsync(robot="lru1"), "plan_unsync"),
         (Control(op="run", robot="lru1"), "plan_control"),
-        (Control(op="pause"), "plan_control"),
-        (Retry(id="lru1-1"), "plan_retry"),
+        (Control(op="pause", robot="lru2"), "plan_control"),
     ],
-    ids=["sync", "unsync", "run", "pause", "retry"],
+    ids=["sync", "unsync", "run", "pause"],
 )
-def test_two_phase_operations_are_planned_not_submitted(engine, sync, refused, op, method):
-    """Submitting an operation that needs the robot is refused, naming the
-    engine method that plans it."""
+def test_submitted_robot_operations_queue_a_command_instead(engine, sync, report, op, method):
+    """Submitted (not planned), an operation on a robot adds a command to the
+    robot's uplink and changes no skill: the robot's answer will (protocol 2;
+    the direct path, planning, is for tools and tests that play the robot)."""
     sync(engine, "lru1", through="lru1-1")
-    refused(engine, lambda: engine.submit(op, client="c1"), "bad_request", method)
+    sync(engine, "lru2", through="lru2-1")
+    report(engine, "lru2", "lru2-1", "running")
+    tasks = engine.mission.model_dump(mode="json")["tasks"]
+    applied = engine.submit(op, client="c1")
+    assert engine.mission.model_dump(mode="json")["tasks"] == tasks
+    [command] = engine.mission.pending_commands()
+    assert command.op == op.op and applied.revision == engine.mission.revision
 
 
 class TestInFlight:

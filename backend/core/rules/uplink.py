@@ -1,0 +1,731 @@
+"""The uplink: commands to robots as entries of the mission, and the robots'
+answers.
+
+An operation on a robot (sync, unsync, run, pause, stop, reset, retry) does
+not wait for the robot: it adds a command to the robot's uplink
+(`CommandQueued`) and returns. Its skills are locked while it is pending
+(`base.uplink_locks`). The server transmits pending commands in order
+(`UplinkSent` once they may be on the robot) and gives up on the ones that
+expire before they could leave, or whose cancel was asked while they were on
+their way and never arrived (`UplinkSettle`). The robot answers each command
+once (`Answer`, numbered with its reports); what it says it did is what the
+mission shows: the ids it really queued or removed, never the request.
+
+`Reconcile` makes the mission agree with a robot's own queue when it
+registers (both ways). Every sentence an operator must see (a refusal by the
+robot, a command given up, a robot that applied a command the ground had
+given up on) is returned in the change's value under "alerts".
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Sequence
+from datetime import timedelta
+from typing import Any
+
+from backend.core import events as ev
+from backend.core.model import (
+    ACTIVE,
+    FINISHED,
+    BarrierInfo,
+    CommandOp,
+    CommandState,
+    Dequeue,
+    Enqueue,
+    Pause,
+    Reset,
+    RobotCommand,
+    Run,
+    SkillInstance,
+    Status,
+    Stop,
+    UplinkCommand,
+)
+from backend.core.ops import (
+    Answer,
+    Cancel,
+    Control,
+    DownlinkRefused,
+    QueueEntry,
+    Reconcile,
+    Retry,
+    Sync,
+    Unsync,
+    UplinkSent,
+    UplinkSettle,
+)
+from backend.core.rules import barriers
+from backend.core.rules.base import Change, Refusal, Rule, Rules, unchanged
+from backend.core.rules.execution import back_in_plan, check_retriable, of_robot, why_not
+
+Alert = dict[str, Any]
+
+# -- new commands -------------------------------------------------------------
+
+
+class _Maker:
+    """Numbers the commands one operation adds (ids and seqs go on from the mission's)."""
+
+    def __init__(self, rules: Rules, expire_s: float | None):
+        self.rules = rules
+        self.now = rules.clock()
+        self.expires = self.now + timedelta(seconds=expire_s) if expire_s else None
+        self.next_id = rules.mission.next_command
+        self.seqs: dict[str, int] = {}
+
+    def make(
+        self, robot: str, op: CommandOp, command: RobotCommand, skills: Iterable[str] = ()
+    ) -> UplinkCommand:
+        seq = self.seqs.get(robot, self.rules.mission.uplink_seqs.get(robot, 0)) + 1
+        self.seqs[robot] = seq
+        c = UplinkCommand(
+            id=self.next_id,
+            robot=robot,
+            seq=seq,
+            op=op,
+            command=command,
+            skills=list(skills),
+            created=self.now,
+            expires=self.expires,
+        )
+        self.next_id += 1
+        return c
+
+
+def _queued_value(c: UplinkCommand) -> dict[str, Any]:
+    return {
+        "command": c.id,
+        "robot": c.robot,
+        "seq": c.seq,
+        "state": c.state.value,
+        "skills": list(c.skills),
+        "expires": c.expires.isoformat() if c.expires else None,
+    }
+
+
+def sync(rules: Rules, op: Sync) -> Change:
+    """The idle head of the robot's unsynchronized section (through
+    `op.through`) goes to the robot; its skills are uplinking until it answers."""
+    task = rules.task(op.robot)
+    chosen = _to_send(rules, op, task)
+    fresh = [
+        rules.check_params(op.robot, s.skill, s.params, s.bindings, skill_id=s.id) for s in chosen
+    ]
+    skills = [
+        s.model_copy(update={"params": p}, deep=True) for s, p in zip(chosen, fresh, strict=True)
+    ]
+    infos: dict[str, BarrierInfo] = {}
+    for s in skills:
+        partners = barriers.barrier_partners(rules, s.id)
+        bid = rules.mission.barrier_of(s.id)
+        if partners and bid is not None:
+            infos[s.id] = BarrierInfo(barrier=bid, partners=dict(partners))
+    c = _Maker(rules, op.expire_s).make(
+        op.robot, "sync", Enqueue(skills=skills, barriers=infos), [s.id for s in skills]
+    )
+    return Change(
+        [ev.CommandQueued(command=c)],
+        [],
+        _queued_value(c),
+        Cancel(command=c.id, undo=True),
+    )
+
+
+def _to_send(rules: Rules, op: Sync, task: list[SkillInstance]) -> list[SkillInstance]:
+    """The idle skills after those already being synchronized, through `op.through`."""
+    locked = rules.locked
+    start = rules.first_idle(task)
+    while start < len(task) and task[start].id in locked:
+        start += 1  # uplinking: they stay at the head of the section
+    idle = task[start:]
+    if op.through is not None:
+        i, s = of_robot(rules, op.robot, op.through)
+        if s.status != Status.IDLE:
+            raise Refusal(
+                "not_idle",
+                f"{s.display()} on {op.robot} is already {s.status.value}",
+                robot=op.robot,
+                skill=s.id,
+            )
+        if s.id in locked:
+            raise Refusal("locked", f"{s.display()}: {locked[s.id]}", robot=op.robot, skill=s.id)
+        idle = task[start : i + 1]
+    if not idle:
+        busy = [s.id for s in task if s.status == Status.IDLE and s.id in locked]
+        more = f" ({', '.join(busy)} are being synchronized already)" if busy else ""
+        raise Refusal(
+            "nothing_to_sync",
+            f"{op.robot} has no unsynchronized skill to synchronize{more}",
+            robot=op.robot,
+        )
+    return idle
+
+
+def unsync(rules: Rules, op: Unsync) -> Change:
+    """Ask the robot to give back its queued skills from `op.from_id` (or all)."""
+    task = rules.task(op.robot)
+    locked = rules.locked
+    queued = [s for s in task if s.status == Status.IDLE_SYNCHRONIZED and s.id not in locked]
+    if op.from_id is not None:
+        _, s = of_robot(rules, op.robot, op.from_id)
+        if s.id in locked:
+            raise Refusal("locked", f"{s.display()}: {locked[s.id]}", robot=op.robot, skill=s.id)
+        if s.status != Status.IDLE_SYNCHRONIZED:
+            raise Refusal(
+                "not_queued",
+                f"{s.display()} on {op.robot} is {s.status.value}; only queued "
+                "(idle_synchronized) skills can be unsynchronized",
+                robot=op.robot,
+                skill=s.id,
+            )
+        queued = queued[[q.id for q in queued].index(s.id) :]
+    if not queued:
+        raise Refusal(
+            "nothing_to_unsync",
+            f"{op.robot} has no queued (idle_synchronized) skill to unsynchronize",
+            robot=op.robot,
+        )
+    ids = [s.id for s in queued]
+    c = _Maker(rules, op.expire_s).make(op.robot, "unsync", Dequeue(ids=ids), ids)
+    return Change([ev.CommandQueued(command=c)], [], _queued_value(c), None)
+
+
+_CONTROL: dict[str, Callable[[], RobotCommand]] = {
+    "run": Run,
+    "pause": Pause,
+    "stop": Stop,
+    "reset": Reset,
+}
+
+
+def control(rules: Rules, op: Control) -> Change:
+    """run / pause / stop / reset, for one robot or all it applies to."""
+    robots = [op.robot] if op.robot is not None else list(rules.mission.robots)
+    maker = _Maker(rules, op.expire_s)
+    events: list[ev.Event] = []
+    results: dict[str, str] = {}
+    commands: dict[str, int] = {}
+    for r in robots:
+        why = _why_not_now(rules, op.op, r)
+        if why is not None:
+            results[r] = why
+            continue
+        c = maker.make(r, op.op, _CONTROL[op.op]())
+        events.append(ev.CommandQueued(command=c))
+        results[r] = "queued"
+        commands[r] = c.id
+    if not events:
+        if op.robot is not None:
+            raise Refusal("not_applicable", results[op.robot], robot=op.robot)
+        raise Refusal(
+            "not_applicable", f"{op.op} applies to no robot: " + "; ".join(results.values())
+        )
+    notes = [f"{op.op} not sent: {why}" for why in results.values() if why != "queued"]
+    return Change(events, notes, {"robots": results, "commands": commands}, None)
+
+
+def _why_not_now(rules: Rules, action: str, robot: str) -> str | None:
+    """Why `action` does not apply to `robot`, judged on what the ground knows
+    plus its pending commands (the robot may have started a queued skill by
+    now: pause and stop apply while a run is pending)."""
+    task = rules.task(robot)
+    pending = {c.op for c in rules.mission.pending_commands(robot)}
+    act = rules.active(task)
+    queued = rules.first_queued(task) is not None
+    if action == "run" and act is None and not queued and pending & {"sync", "retry"}:
+        return None  # runs what the pending sync brings
+    if action in ("pause", "stop") and act is None and queued and "run" in pending:
+        return None
+    if action == "reset" and act is None and not queued and pending & {"sync", "retry"}:
+        return None
+    return why_not(action, robot, act, queued)
+
+
+def retry(rules: Rules, op: Retry) -> Change:
+    """A new attempt of a failed skill, sent to the front of its robot's queue;
+    it joins the mission (right after the failed one) once the robot has it."""
+    robot, i, s = rules.skill(op.id)
+    why = rules.locked.get(s.id)
+    if why is not None:
+        raise Refusal("cannot_retry", f"{s.display()}: {why}", robot=robot, skill=s.id)
+    new_id = f"{s.id.split('.')[0]}.{s.attempt + 1}"
+    check_retriable(rules, robot, i, s, new_id)
+    new = SkillInstance(
+        id=new_id,
+        skill=s.skill,
+        label=s.label,
+        params=s.params,
+        bindings=s.bindings,
+        status=Status.IDLE_SYNCHRONIZED,
+        attempt=s.attempt + 1,
+        policies=s.policies,
+    )
+    c = _Maker(rules, op.expire_s).make(
+        robot, "retry", Enqueue(skills=[new], front=True), [s.id, new_id]
+    )
+    return Change([ev.CommandQueued(command=c)], [], {**_queued_value(c), "id": new_id}, None)
+
+
+# -- withdrawing ----------------------------------------------------------------
+
+
+def cancel(rules: Rules, op: Cancel) -> Change:
+    c = rules.mission.command(op.command)
+    if c is None:
+        raise Refusal("unknown_command", f"no command {op.command} in this mission")
+    if not c.pending:
+        said = f": {c.reason}" if c.reason else ""
+        raise Refusal(
+            "not_pending",
+            f"{c.title()} to {c.robot} is {c.state.value} already{said}",
+            robot=c.robot,
+        )
+    now = rules.clock()
+    if c.state == CommandState.QUEUED and c.id not in rules.transmitting:
+        changes = {"state": "cancelled", "settled": now.isoformat(), "reason": "cancelled"}
+        value = {"command": c.id, "robot": c.robot, "state": "cancelled"}
+        return Change([ev.CommandChanged(id=c.id, changes=changes)], [], value, None)
+    if op.undo:
+        raise Refusal(
+            "cannot_undo",
+            f"{c.title()} may be on {c.robot} already (it was sent); "
+            f"`missionctl ctl cancel {c.id}` asks {c.robot} not to apply it",
+            robot=c.robot,
+        )
+    value = {"command": c.id, "robot": c.robot, "state": c.state.value, "cancel_requested": True}
+    note = (
+        f"{c.robot} may have {c.title()} already: it is cancelled unless {c.robot} applied "
+        "it first; its answer says which"
+    )
+    if c.cancel_requested:
+        return Change([], [note], value, None)
+    events: list[ev.Event] = [ev.CommandChanged(id=c.id, changes={"cancel_requested": True})]
+    return Change(events, [note], value, None)
+
+
+def uplink_sent(rules: Rules, op: UplinkSent) -> Change:
+    events: list[ev.Event] = []
+    for cid in op.ids:
+        c = rules.mission.command(cid)
+        if c is not None and c.state == CommandState.QUEUED:
+            changes = {"state": "sent", "sent": op.at.isoformat()}
+            events.append(ev.CommandChanged(id=cid, changes=changes))
+    return Change(events, [], {}, None) if events else unchanged()
+
+
+def uplink_settle(rules: Rules, op: UplinkSettle) -> Change:
+    """Commands that never left for the robot and never will."""
+    events: list[ev.Event] = []
+    alerts: list[Alert] = []
+    for cid in op.ids:
+        c = rules.mission.command(cid)
+        if c is None or c.state != CommandState.QUEUED or cid in rules.transmitting:
+            continue
+        changes = {"state": op.state.value, "settled": op.at.isoformat(), "reason": op.reason}
+        events.append(ev.CommandChanged(id=cid, changes=changes))
+        if op.state == CommandState.EXPIRED:
+            alerts.append(_alert(c, f"{c.title()} to {c.robot} {op.reason}{_released(c)}"))
+    return Change(events, [], {"alerts": alerts}, None) if events else unchanged()
+
+
+def _released(c: UplinkCommand) -> str:
+    if c.op == "sync":
+        return f"; {', '.join(c.skills)} are unsynchronized (idle) again"
+    if c.op == "unsync":
+        return f"; {', '.join(c.skills)} stay on {c.robot}"
+    return ""
+
+
+def _alert(c: UplinkCommand, message: str, level: str = "warning") -> Alert:
+    return {"message": message, "robot": c.robot, "level": level, "kind": "command"}
+
+
+# -- the robot's answers ----------------------------------------------------------
+
+
+_STATE = {
+    "applied": CommandState.ACKED,
+    "refused": CommandState.REFUSED,
+    "expired": CommandState.EXPIRED,
+    "cancelled": CommandState.CANCELLED,
+}
+
+
+class _Effects:
+    """What applying a command's answer changes: events, alerts, notes, and
+    the statuses and placements the robot's truth asks for."""
+
+    def __init__(self, rules: Rules, c: UplinkCommand, op: Answer):
+        self.rules, self.c, self.op = rules, c, op
+        self.robot = c.robot
+        self.task = rules.task(c.robot)
+        self.events: list[ev.Event] = []
+        self.alerts: list[Alert] = []
+        self.notes: list[str] = []
+        self.done: list[str] = []
+        self.late = c.state in (CommandState.CANCELLED, CommandState.EXPIRED)
+        self.drop: list[str] = []  # skills the robot holds that it must not: asked back
+
+    def alert(self, message: str, level: str = "warning") -> None:
+        self.alerts.append(_alert(self.c, message, level))
+
+    def skill(self, sid: str) -> SkillInstance | None:
+        found = self.rules.mission.find(sid)
+        return found[2] if found is not None and found[0] == self.robot else None
+
+
+def answer(rules: Rules, op: Answer) -> Change:
+    """A robot's answer: applied once, in its downlink order."""
+    last = rules.mission.report_seqs.get(op.robot, 0)
+    if op.seq <= last:
+        return Change([], [], {"ignored": f"answer {op.seq} was applied already"}, None, True)
+    rules.task(op.robot)
+    events: list[ev.Event] = [ev.ReportSeq(robot=op.robot, seq=op.seq)]
+    c = rules.mission.command_by_seq(op.robot, op.command)
+    if c is None or c.answered is not None:
+        what = "which is not in its uplink" if c is None else f"{c.title()}, answered already"
+        msg = f"{op.robot} answered command seq {op.command}, {what}: the answer is ignored"
+        alert = {"message": msg, "robot": op.robot, "level": "error", "kind": "robot_error"}
+        return Change(events, [], {"alerts": [alert]}, None)
+    fx = _Effects(rules, c, op)
+    state = _STATE[op.outcome]
+    if op.outcome == "applied":
+        _APPLIED[c.command.cmd](fx)
+        if fx.late:
+            fx.alert(
+                f"{op.robot} applied {c.title()} after the ground had given up on it "
+                f"({c.state.value}: {c.reason or 'no reason'}); the mission shows what it did"
+            )
+    elif not fx.late:
+        fx.alert(
+            f"{op.robot} {op.outcome} {c.title()}: {op.reason or 'no reason given'}{_released(c)}"
+        )
+    at = (op.at or rules.clock()).isoformat()
+    changes: dict[str, Any] = {
+        "state": state.value,
+        "settled": at,
+        "answered": at,
+        "reason": op.reason,
+    }
+    if c.sent is None:
+        changes["sent"] = at
+    if fx.done:
+        changes["done"] = fx.done
+    if op.kept:
+        changes["kept"] = [k for k in op.kept if k in c.skills]
+    events += fx.events
+    events.append(ev.CommandChanged(id=c.id, changes=changes))
+    if fx.drop:
+        events.append(_drop_command(rules, fx.robot, fx.drop, fx))
+    value = {"command": c.id, "state": state.value, "alerts": fx.alerts}
+    return Change(events, fx.notes, value, None)
+
+
+def _drop_command(rules: Rules, robot: str, ids: list[str], fx: _Effects) -> ev.Event:
+    c = _Maker(rules, None).make(robot, "reconcile", Dequeue(ids=ids), ids)
+    fx.alert(
+        f"{robot} holds {', '.join(ids)}, which the mission does not give it as queued: "
+        f"asked it to drop them (command {c.id})"
+    )
+    return ev.CommandQueued(command=c)
+
+
+def _enqueued(fx: _Effects) -> None:
+    cmd = fx.c.command
+    assert isinstance(cmd, Enqueue)
+    if cmd.front:
+        _retried(fx, cmd)
+        return
+    sent = {s.id: s for s in cmd.skills}
+    held: list[str] = []
+    for sid in fx.op.queued:
+        s = fx.skill(sid)
+        if sid not in sent:
+            fx.alert(
+                f"{fx.robot} says it queued {sid}, which {fx.c.title()} did not send: ignored",
+                "error",
+            )
+        elif s is None or s.status != Status.IDLE or (fx.late and _edited(s, sent[sid])):
+            fx.drop.append(sid)  # not ours to show as queued any more
+        else:
+            held.append(sid)
+    missing = [sid for sid in sent if sid not in fx.op.queued]
+    if missing and not fx.late:
+        why = f": {fx.op.reason}" if fx.op.reason else ""
+        fx.alert(
+            f"{fx.robot} did not queue {', '.join(missing)} ({fx.c.title()}){why}; "
+            "they are unsynchronized (idle) again"
+        )
+    status: dict[str, Status] = {}
+    for sid in held:
+        s = fx.skill(sid)
+        assert s is not None
+        changes: dict[str, Any] = {"status": Status.IDLE_SYNCHRONIZED.value}
+        if sent[sid].params != s.params:
+            changes["params"] = sent[sid].params  # what the robot holds
+        fx.events.append(ev.SkillChanged(id=sid, changes=changes))
+        status[sid] = Status.IDLE_SYNCHRONIZED
+    fx.events += _arrangement(fx.robot, fx.task, status, queued_last=held)
+    fx.done = held
+
+
+def _edited(s: SkillInstance, sent: SkillInstance) -> bool:
+    """Changed since it was sent (the command had been given up on)."""
+    return (s.skill, s.label, s.params, s.policies) != (
+        sent.skill,
+        sent.label,
+        sent.params,
+        sent.policies,
+    )
+
+
+def _retried(fx: _Effects, cmd: Enqueue) -> None:
+    new = cmd.skills[0]
+    failed_id = fx.c.skills[0] if fx.c.skills else ""
+    if new.id not in fx.op.queued:
+        if not fx.late:
+            fx.alert(
+                f"{fx.robot} did not queue the retry {new.id} of {failed_id}: "
+                f"{fx.op.reason or 'no reason given'}"
+            )
+        return
+    found = fx.rules.mission.find(failed_id)
+    if fx.rules.mission.find(new.id) is not None or found is None or found[0] != fx.robot:
+        fx.drop.append(new.id)
+        return
+    # at the head of the robot's queue: after the log and the active skill
+    index = next(
+        (k for k, s in enumerate(fx.task) if s.status not in FINISHED and s.status not in ACTIVE),
+        len(fx.task),
+    )
+    skill = new.model_copy(update={"status": Status.IDLE_SYNCHRONIZED})
+    fx.events.append(ev.SkillAdded(robot=fx.robot, index=index, skill=skill))
+    fx.done = [new.id]
+
+
+def _dequeued(fx: _Effects) -> None:
+    asked = set(fx.c.skills) if fx.c.op != "reset" else None
+    removed: list[str] = []
+    for sid in fx.op.removed:
+        s = fx.skill(sid)
+        if asked is not None and sid not in asked:
+            if fx.c.op != "reconcile":
+                fx.alert(
+                    f"{fx.robot} says it removed {sid}, which {fx.c.title()} did not ask "
+                    "for: ignored",
+                    "error",
+                )
+            continue
+        if s is None or s.status == Status.IDLE:
+            continue  # nothing the mission shows as on the robot
+        if s.status in FINISHED:
+            fx.alert(
+                f"{fx.robot} says it removed {sid}, which it had finished "
+                f"({s.status.value}): the log stays",
+                "error",
+            )
+            continue
+        removed.append(sid)
+    status: dict[str, Status] = {}
+    ordered = [s.id for s in fx.task if s.id in removed]
+    for sid in ordered:
+        changes = back_in_plan(fx.rules, fx.robot, sid)
+        changes["started_at"] = None
+        fx.events.append(ev.SkillChanged(id=sid, changes=changes))
+        status[sid] = Status.IDLE
+    fx.events += _arrangement(fx.robot, fx.task, status, idle_first=ordered)
+    fx.done = ordered
+    kept = [k for k in fx.op.kept if k in fx.c.skills]
+    if kept:
+        fx.notes.append(f"{fx.robot} had already started {', '.join(kept)}: it stays synchronized")
+
+
+def _controlled(fx: _Effects) -> None:
+    if fx.c.op == "reset":
+        _dequeued(fx)
+    elif fx.op.reason:
+        fx.notes.append(f"{fx.robot}: {fx.op.reason}")
+
+
+_APPLIED: dict[str, Callable[[_Effects], None]] = {
+    "enqueue": _enqueued,
+    "dequeue": _dequeued,
+    "run": _controlled,
+    "pause": _controlled,
+    "stop": _controlled,
+    "reset": _controlled,
+}
+
+
+# -- placing skills where their (new) statuses belong ---------------------------
+
+
+def _arrangement(
+    robot: str,
+    task: list[SkillInstance],
+    status: dict[str, Status],
+    *,
+    queued_last: Sequence[str] = (),
+    idle_first: Sequence[str] = (),
+    held_order: Sequence[str] = (),
+) -> list[ev.Event]:
+    """SkillMoved events putting `task` (with the statuses in `status`
+    overriding) in section order: the log, the active skill and the queue
+    (`held_order`: the robot's own order; `queued_last` at the end), then the
+    plan (`idle_first` at its head). Relative order is kept otherwise."""
+    last = {sid: k for k, sid in enumerate(queued_last)}
+    first = {sid: k for k, sid in enumerate(idle_first)}
+    held = {sid: k for k, sid in enumerate(held_order)}
+
+    def key(item: tuple[int, SkillInstance]) -> tuple[int, int, int]:
+        pos, s = item
+        st = status.get(s.id, s.status)
+        if st in FINISHED:
+            return (0, 0, pos)
+        if st == Status.IDLE:
+            return (3, 0, first[s.id]) if s.id in first else (3, 1, pos)
+        rank = 1 if st in ACTIVE else 2
+        if s.id in held:
+            return (rank, 0, held[s.id])
+        return (rank, 1, last[s.id]) if s.id in last else (rank, 0, pos)
+
+    target = [s.id for _, s in sorted(enumerate(task), key=key)]
+    current = [s.id for s in task]
+    events: list[ev.Event] = []
+    for index, sid in enumerate(target):
+        if current[index] != sid:
+            current.insert(index, current.pop(current.index(sid)))
+            events.append(ev.SkillMoved(robot=robot, id=sid, index=index))
+    return events
+
+
+# -- a robot's registration: agree with its own queue ---------------------------
+
+
+def reconcile(rules: Rules, op: Reconcile) -> Change:
+    robot = op.robot
+    task = rules.task(robot)
+    mine = {s.id: s for s in task}
+    uplinking = {
+        sid
+        for c in rules.mission.pending_commands(robot)
+        if c.op in ("sync", "retry")
+        for sid in c.skills
+    }
+    queue, alerts = _checked_queue(robot, op.queue)
+    holds = {e.id for e in queue}
+    held: list[QueueEntry] = []
+    adopted: list[str] = []
+    strays: list[str] = []
+    for e in queue:
+        s = mine.get(e.id)
+        if s is None or s.status in FINISHED or _differs(e, s):
+            strays.append(e.id)
+        elif e.id in uplinking:
+            continue  # the answer to its sync settles it
+        else:
+            if s.status == Status.IDLE:
+                adopted.append(e.id)
+            held.append(e)
+    lost = [
+        s.id
+        for s in task
+        if s.status != Status.IDLE and s.status not in FINISHED and s.id not in holds
+    ]
+    events: list[ev.Event] = []
+    status: dict[str, Status] = {}
+    for sid in lost:
+        changes = {
+            "status": Status.IDLE.value,
+            "status_info": f"returned to the plan: {robot} no longer had it",
+            "started_at": None,
+        }
+        events.append(ev.SkillChanged(id=sid, changes=changes))
+        status[sid] = Status.IDLE
+    for e in held:
+        if e.status != mine[e.id].status:
+            events.append(ev.SkillChanged(id=e.id, changes={"status": e.status.value}))
+        status[e.id] = e.status
+    events += _arrangement(robot, task, status, idle_first=lost, held_order=[e.id for e in held])
+    if lost:
+        alerts.append(
+            _robot_alert(
+                robot, f"{robot} no longer had {', '.join(lost)}: returned to the plan", "reconcile"
+            )
+        )
+    if adopted:
+        alerts.append(
+            _robot_alert(
+                robot,
+                f"{robot} holds {', '.join(adopted)}, which the mission had as unsynchronized: "
+                "shown as synchronized again (unsync to take them back)",
+                "reconcile",
+            )
+        )
+    value: dict[str, Any] = {"unsynchronized": lost, "adopted": adopted, "dropped": strays}
+    if strays:
+        c = _Maker(rules, None).make(robot, "reconcile", Dequeue(ids=strays), strays)
+        events.append(ev.CommandQueued(command=c))
+        alerts.append(
+            _robot_alert(
+                robot,
+                f"{robot} holds {', '.join(strays)}, which this mission does not give it (or not "
+                f"as it has them): asked it to drop them (command {c.id})",
+                "reconcile",
+            )
+        )
+    value["alerts"] = alerts
+    return Change(events, [], value, None)
+
+
+def _robot_alert(robot: str, message: str, kind: str, level: str = "warning") -> Alert:
+    return {"message": message, "robot": robot, "level": level, "kind": kind}
+
+
+def _checked_queue(robot: str, queue: list[QueueEntry]) -> tuple[list[QueueEntry], list[Alert]]:
+    """The robot's queue, active first; one that breaks that is read as all queued."""
+    seen: set[str] = set()
+    out = []
+    for e in queue:
+        if e.id not in seen:
+            seen.add(e.id)
+            out.append(e)
+    active = [k for k, e in enumerate(out) if e.status in ACTIVE]
+    wrong = [e for e in out if e.status in FINISHED or e.status == Status.IDLE]
+    if active in ([], [0]) and not wrong:
+        return out, []
+    fixed = [e.model_copy(update={"status": Status.IDLE_SYNCHRONIZED}) for e in out]
+    msg = (
+        f"{robot} registered a queue that is not an active skill followed by queued ones "
+        f"({', '.join(f'{e.id} {e.status.value}' for e in out)}): read as all queued"
+    )
+    return fixed, [_robot_alert(robot, msg, "robot_error", "error")]
+
+
+def _differs(e: QueueEntry, s: SkillInstance) -> bool:
+    """The robot's copy is another skill than the mission's (when it says)."""
+    if e.skill is not None and e.skill != s.skill:
+        return True
+    return s.status == Status.IDLE and e.params is not None and e.params != s.params
+
+
+def downlink_refused(rules: Rules, op: DownlinkRefused) -> Change:
+    """A refused message of a robot's downlink still uses up its number."""
+    if op.seq <= rules.mission.report_seqs.get(op.robot, 0):
+        return Change([], [], {}, None, True)
+    rules.task(op.robot)
+    return Change([ev.ReportSeq(robot=op.robot, seq=op.seq)], [], {}, None)
+
+
+RULES: dict[type[Any], Rule] = {
+    Sync: sync,
+    Unsync: unsync,
+    Control: control,
+    Retry: retry,
+    Cancel: cancel,
+    UplinkSent: uplink_sent,
+    UplinkSettle: uplink_settle,
+    Answer: answer,
+    Reconcile: reconcile,
+    DownlinkRefused: downlink_refused,
+}

@@ -1,0 +1,132 @@
+"""A robot's downlink on the ground: its reports and its answers to commands
+share one contiguous sequence, applied strictly in order, each once, and
+acknowledged cumulatively.
+
+A message numbered past a gap is never applied before the missing ones:
+the acknowledgement says what is missing (`DownlinkAck.missing`) and the
+robot sends again from its last acknowledged number (its outbox keeps
+everything not acknowledged). A message the rules refuse (an impossible
+status change, say) is consumed all the same: journaled as refused
+(`DownlinkRefused`), alerted, listed in the acknowledgement.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, NamedTuple, Protocol
+
+from backend.core.ops import Answer, DownlinkRefused, Report
+from backend.core.rules.engine import Applied, Engine, Refusal
+from backend.protocol.messages import ErrorReply
+from backend.server.refusals import JournalFailed
+
+
+class Host(Protocol):
+    engine: Engine | None
+
+    def submit(
+        self, op: Any, *, client: str = "", request_id: str | None = None, actor: str = ""
+    ) -> Applied: ...
+
+    def alert(
+        self,
+        message: str,
+        *,
+        level: str = "warning",
+        robot: str | None = None,
+        skill: str | None = None,
+        kind: str = "",
+    ) -> None: ...
+
+
+class Progress(NamedTuple):
+    """What one pass over a robot's messages did."""
+
+    last_seq: int  # applied up to here
+    missing: list[int]  # [first, last] of a gap before the next message, or []
+    refused: list[ErrorReply]
+
+
+def raise_alerts(host: Host, applied: Applied) -> None:
+    """The sentences a rule asked the operator to see (value "alerts")."""
+    for a in applied.value.pop("alerts", []) or []:
+        host.alert(
+            a["message"],
+            level=a.get("level", "warning"),
+            robot=a.get("robot"),
+            skill=a.get("skill"),
+            kind=a.get("kind", ""),
+        )
+
+
+class DownlinkApplier:
+    def __init__(self, host: Host):
+        self._host = host
+        self._gaps: dict[str, int] = {}  # robot -> first missing seq already alerted
+
+    def last_seq(self, robot: str) -> int:
+        engine = self._host.engine
+        assert engine is not None
+        return engine.mission.report_seqs.get(robot, 0)
+
+    def apply(self, robot: str, messages: Sequence[Report | Answer]) -> Progress:
+        """Apply `robot`'s messages in seq order, up to the first gap.
+        JournalFailed propagates: nothing after it is consumed, the robot
+        sends it again."""
+        last = self.last_seq(robot)
+        refused: list[ErrorReply] = []
+        for msg in sorted(messages, key=lambda m: m.seq):
+            if msg.seq <= last:
+                continue  # applied before: sent again
+            if msg.seq != last + 1:
+                self._gap(robot, last + 1, msg.seq - 1)
+                return Progress(last, [last + 1, msg.seq - 1], refused)
+            error = self._apply_one(robot, msg)
+            if error is not None:
+                refused.append(error)
+            last = msg.seq
+        self._gaps.pop(robot, None)
+        return Progress(last, [], refused)
+
+    def _gap(self, robot: str, first: int, upto: int) -> None:
+        if self._gaps.get(robot) == first:
+            return  # said once per gap
+        self._gaps[robot] = first
+        span = f"{first}" if first == upto else f"{first} to {upto}"
+        self._host.alert(
+            f"{robot} sent its downlink message {upto + 1} but not {span}: later messages "
+            "wait until it sends the missing ones (nothing is skipped)",
+            robot=robot,
+            kind="robot_error",
+        )
+
+    def _apply_one(self, robot: str, msg: Report | Answer) -> ErrorReply | None:
+        host = self._host
+        try:
+            applied = host.submit(msg, actor=robot)
+        except JournalFailed:
+            raise
+        except Refusal as r:
+            host.submit(
+                DownlinkRefused(robot=robot, seq=msg.seq, code=r.code, message=r.message),
+                actor=robot,
+            )
+            what = "report" if isinstance(msg, Report) else "answer"
+            host.alert(
+                f"{what} {msg.seq} of {robot} refused: {r.message}",
+                level="error",
+                robot=robot,
+                skill=msg.id if isinstance(msg, Report) else None,
+                kind="report_refused",
+            )
+            return ErrorReply(**r.to_dict())
+        raise_alerts(host, applied)
+        if isinstance(msg, Report) and not applied.duplicate and msg.status.value == "failure":
+            host.alert(
+                f"{robot}: {msg.id} failed: {msg.info}",
+                level="error",
+                robot=robot,
+                skill=msg.id,
+                kind="failure",
+            )
+        return None
