@@ -25,6 +25,7 @@ from backend.protocol.messages import MAX_BATCH, Downlink, DownlinkAck, ErrorRep
 
 Message = Report | Answer
 HEARTBEAT_S = 5.0  # until the server's RegisterReply says otherwise
+RANGE_POLL_S = 0.2  # out of range with messages waiting: look again this often
 
 
 class Outbox:
@@ -113,8 +114,12 @@ class Outbox:
     def _due_in(self) -> float | None:
         """Seconds until there is something to send (None: when woken)."""
         loop = self.rt.loop
-        if loop is None or not self._registered() or not self.rt.in_range():
+        if loop is None or not self._registered():
             return None
+        if not self.rt.in_range():
+            # looked at again soon: a stay out of range may be shorter than
+            # the link loop's poll, which would then not wake us
+            return RANGE_POLL_S if self.reports else None
         now = loop.time()
         times = [self._retry_at] if self._retry_at is not None else []
         if self._retry_at is None:

@@ -547,12 +547,13 @@ class MissionClient:
 
         def settled(m: Mission) -> bool:
             c = m.command(command_id)
-            return c is None or not c.pending
+            # not in the mirror yet (its event follows the reply), or long settled
+            return not c.pending if c is not None else command_id < m.next_command
 
         m = await self.wait_for(settled, timeout)
         c = m.command(command_id)
         if c is None:
-            raise KeyError(f"no command {command_id} in this mission")
+            raise KeyError(f"command {command_id} was settled long ago (no longer kept)")
         return c
 
     async def wait_for(

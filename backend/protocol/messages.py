@@ -304,7 +304,6 @@ class WorldReply(Strict):
     data: dict[str, Any] = Field(default_factory=dict)
 
 
-
 def dumps(model: Strict) -> bytes:
     return model.model_dump_json(exclude_none=False).encode()
 

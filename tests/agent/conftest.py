@@ -2,9 +2,10 @@
 
 A Zenoh router runs in a subprocess (the transport tests' helper, on a free
 loopback port). In the test process: a FAKE mission server (a client session
-with the register/report queryables and the server's liveliness token, which
-records what it receives and applies reports idempotently by seq) and the
-agents under test, all on the test's asyncio loop.
+with the register/downlink queryables and the server's liveliness token,
+which records what it receives, applies the downlink in order by seq and
+sends commands on the uplink) and the agents under test, all on the test's
+asyncio loop.
 
 `async def` tests run with the shared runner (tests/conftest.py).
 Waiting is always on events with a timeout (`Harness.until`), never on sleeps.
@@ -16,6 +17,8 @@ import asyncio
 import importlib.util
 import secrets
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -24,17 +27,19 @@ import zenoh
 
 from backend.agent import RobotAgent
 from backend.core.model import Policies, SkillInstance, Status
-from backend.core.ops import Report
+from backend.core.ops import Answer, Report
 from backend.protocol.keys import Keys
 from backend.protocol.messages import (
     BarrierInfo,
-    CommandReply,
+    Downlink,
+    DownlinkAck,
     Enqueue,
     Register,
     RegisterReply,
-    ReportAck,
-    ReportBatch,
     Run,
+    Uplink,
+    UplinkEntry,
+    UplinkReceipt,
     dumps,
 )
 from backend.transport import (
@@ -62,8 +67,34 @@ Router = _helpers.Router
 # ---------------------------------------------------------------- fake server
 
 
+@dataclass
+class Reply:
+    """A robot's answer to one command, with the reports it made since the
+    command was sent (in its downlink before the answer)."""
+
+    answer: Answer
+    reports: list[Report]
+
+    @property
+    def ok(self) -> bool:
+        return self.answer.outcome == "applied"
+
+    @property
+    def ids(self) -> list[str]:
+        return self.answer.queued + self.answer.removed
+
+    @property
+    def kept(self) -> list[str]:
+        return self.answer.kept
+
+    @property
+    def reason(self) -> str:
+        return self.answer.reason
+
+
 class FakeServer:
-    """Stands in for the mission server: registration, reports, commands."""
+    """Stands in for the mission server: registration, the downlink (applied
+    strictly in order, like the server), commands on the uplink."""
 
     def __init__(self, endpoint: str, changed: asyncio.Event):
         self.endpoint = endpoint
@@ -71,16 +102,21 @@ class FakeServer:
         self.session: zenoh.Session | None = None
         self.token: zenoh.LivelinessToken | None = None
         self.registrations: list[Register] = []
-        self.batches: list[ReportBatch] = []
+        self.batches: list[Downlink] = []
         self.applied: dict[str, list[Report]] = {}  # per robot, in applied order
+        self.answers: dict[str, list[Answer]] = {}
         self.last_seq: dict[str, int] = {}
         self.gaps: list[str] = []  # a seq that did not follow the previous one
         self.refuse: str | None = None  # when set, registrations are refused with this reason
+        self.refuse_code: str = "unknown_robot"
+        self.sessions: dict[str, str] = {}  # robot -> registered session
+        self.uplink_seq: dict[str, int] = {}
+        self.pending: dict[str, list[UplinkEntry]] = {}
 
     async def start(self) -> None:
         self.session = open_session(client_config([self.endpoint]))
         serve_async(self.session, Keys.register("*"), self._on_register)
-        serve_async(self.session, Keys.reports("*"), self._on_reports)
+        serve_async(self.session, Keys.downlink("*"), self._on_downlink)
         self.appear()
 
     def appear(self) -> None:
@@ -97,42 +133,78 @@ class FakeServer:
             close_session(self.session)
 
     # -- what robots send -------------------------------------------------
-    def apply(self, robot: str, reports: list[Report]) -> None:
-        for r in reports:
+    def apply(self, robot: str, messages: list[Report | Answer]) -> None:
+        for r in sorted(messages, key=lambda m: m.seq):
             if r.robot != robot:
                 continue  # not ours (the fake server does not check senders)
             last = self.last_seq.get(robot, 0)
             if r.seq <= last:
-                continue  # idempotent: applied already
-            if self.applied.get(robot) and r.seq != last + 1:
+                continue  # applied already
+            if r.seq != last + 1:
                 self.gaps.append(f"{robot}: {last} -> {r.seq}")
-            self.applied.setdefault(robot, []).append(r)
+                break  # never past a gap
+            if isinstance(r, Report):
+                self.applied.setdefault(robot, []).append(r)
+            else:
+                self.answers.setdefault(robot, []).append(r)
             self.last_seq[robot] = r.seq
         self.changed.set()
 
     async def _on_register(self, payload: bytes) -> bytes:
         reg = Register.model_validate_json(payload)
         self.registrations.append(reg)
+        self.changed.set()
         if self.refuse is not None:
-            return dumps(RegisterReply(accepted=False, reason=self.refuse))
-        self.apply(reg.manifest.name, reg.reports)
+            return dumps(RegisterReply(accepted=False, code=self.refuse_code, reason=self.refuse))
+        self.sessions[reg.manifest.name] = reg.session
+        self.apply(reg.manifest.name, reg.downlink)
         return dumps(RegisterReply(last_seq=self.last_seq.get(reg.manifest.name, 0)))
 
-    async def _on_reports(self, payload: bytes) -> bytes:
-        batch = ReportBatch.model_validate_json(payload)
-        self.batches.append(batch)
-        robot = batch.reports[0].robot
-        self.apply(robot, batch.reports)
-        return dumps(ReportAck(last_seq=self.last_seq.get(robot, 0)))
+    async def _on_downlink(self, payload: bytes) -> bytes:
+        dl = Downlink.model_validate_json(payload)
+        self.batches.append(dl)
+        self.apply(dl.robot, dl.messages)
+        return dumps(DownlinkAck(last_seq=self.last_seq.get(dl.robot, 0)))
 
     # -- commands -------------------------------------------------------------
-    async def command(self, robot: str, cmd: Any) -> CommandReply:
-        """Send a command; apply the reports of the reply first, like the server."""
+    async def send(self, robot: str, cmd: Any) -> int:
+        """Queue a command on `robot`'s uplink and transmit every pending one;
+        its seq."""
         assert self.session is not None
-        raw = await query(self.session, Keys.command(robot), dumps(cmd), timeout=WAIT)
-        reply = CommandReply.model_validate_json(raw)
-        self.apply(robot, reply.reports)
-        return reply
+        seq = self.uplink_seq[robot] = self.uplink_seq.get(robot, 0) + 1
+        self.pending.setdefault(robot, []).append(UplinkEntry(seq=seq, id=seq, command=cmd))
+        await self.transmit(robot)
+        return seq
+
+    async def transmit(self, robot: str) -> UplinkReceipt:
+        assert self.session is not None
+        up = Uplink(
+            robot=robot,
+            session=self.sessions[robot],
+            commands=self.pending.get(robot, []),
+            downlink_ack=self.last_seq.get(robot, 0),
+            sent=datetime.now(UTC),
+        )
+        raw = await query(self.session, Keys.uplink(robot), dumps(up), timeout=WAIT)
+        return UplinkReceipt.model_validate_json(raw)
+
+    async def command(self, robot: str, cmd: Any) -> Reply:
+        """Send a command and wait for the robot's answer (in its downlink order)."""
+        before = self.last_seq.get(robot, 0)
+        seq = await self.send(robot, cmd)
+        answer = await self.answer(robot, seq)
+        reports = [r for r in self.applied.get(robot, []) if before < r.seq < answer.seq]
+        return Reply(answer, reports)
+
+    async def answer(self, robot: str, seq: int) -> Answer:
+        async with asyncio.timeout(WAIT):
+            while True:
+                found = next((a for a in self.answers.get(robot, []) if a.command == seq), None)
+                if found is not None:
+                    self.pending[robot] = [e for e in self.pending[robot] if e.seq != seq]
+                    return found
+                self.changed.clear()
+                await self.changed.wait()
 
     async def enqueue(
         self,
@@ -140,7 +212,7 @@ class FakeServer:
         *skills: SkillInstance,
         front: bool = False,
         barriers: dict[str, BarrierInfo] | None = None,
-    ) -> CommandReply:
+    ) -> Reply:
         return await self.command(
             robot, Enqueue(skills=list(skills), front=front, barriers=barriers or {})
         )
@@ -160,7 +232,13 @@ class FakeServer:
         return [r for r in self.registrations if r.manifest.name == robot]
 
     def seqs(self, robot: str) -> list[int]:
+        """Downlink numbers of the applied reports (answers take numbers too)."""
         return [r.seq for r in self.applied.get(robot, [])]
+
+    def downlink(self, robot: str) -> list[int]:
+        """Downlink numbers of everything applied (reports and answers), in order."""
+        msgs = [*self.applied.get(robot, []), *self.answers.get(robot, [])]
+        return sorted(m.seq for m in msgs)
 
 
 # ---------------------------------------------------------------- harness

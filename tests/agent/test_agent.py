@@ -99,7 +99,8 @@ async def test_registers_with_manifest_and_again_after_server_restart(harness: H
         await h.server.enqueue(lru1, skill("d1", "drive_to", goal={"x": 1.0}))
         await h.server.command(lru1, Run())
         await h.until(lambda: h.server.has(lru1, "d1", S.SUCCESS), what="d1 success")
-        assert h.server.seqs(lru1) == [42, 43]
+        # the answers to the enqueue and the run are 42 and 43
+        assert h.server.seqs(lru1) == [44, 45] and h.server.downlink(lru1) == [42, 43, 44, 45]
 
         # the server restarts (its token goes and comes back): the agent
         # registers again, with its queue (halted first, else d2 would start:
@@ -155,7 +156,9 @@ async def test_enqueue_run_success_with_typed_params_and_consecutive_seqs(harnes
             ("s2", "running"),
             ("s2", "success"),
         ]
-        assert h.server.seqs(lru1) == [1, 2, 3, 4] and not h.server.gaps
+        # reports and answers share one sequence: answers 1, 2, then the reports
+        assert h.server.seqs(lru1) == [3, 4, 5, 6] and not h.server.gaps
+        assert h.server.downlink(lru1) == list(range(1, 7))
         params = got["s1"]
         assert params["goal"] == Pose(x=1.0, y=2.0, yaw=0.5)
         assert params["region"] == [Position(x=0.0), Position(x=1.0), Position(y=1.0)]
@@ -308,7 +311,8 @@ async def test_stop_returns_to_queue_and_run_restarts_from_the_beginning(harness
             ("s2", "running"),
             ("s2", "success"),
         ]
-        assert h.server.seqs(lru1) == list(range(1, 7))
+        assert h.server.downlink(lru1) == list(range(1, len(h.server.downlink(lru1)) + 1))
+        assert len(h.server.seqs(lru1)) == 6
 
 
 async def test_failure_halts_then_run_continues_and_exceptions_are_failures(
@@ -525,7 +529,9 @@ async def test_out_of_range_refuses_commands_and_queues_reports(harness: Harness
             ("s2", "running"),
             ("s2", "success"),
         ]
-        assert h.server.seqs(lru1) == [1, 2, 3, 4] and not h.server.gaps
+        # reports and answers share one sequence: answers 1, 2, then the reports
+        assert h.server.seqs(lru1) == [3, 4, 5, 6] and not h.server.gaps
+        assert h.server.downlink(lru1) == list(range(1, 7))
         reply = await h.server.command(lru1, Pause())  # reachable again
         assert reply.ok
 

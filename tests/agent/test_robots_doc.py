@@ -348,7 +348,9 @@ def test_handlers_progress_pause_stop_failure_retry_and_server_loss(
             for line in proc.output().splitlines()
             if line.startswith("report ")
         ]
-        assert seqs == list(range(1, len(seqs) + 1))  # numbered per robot, no gaps
+        # numbered per robot in one sequence with its answers to commands:
+        # increasing, each number once (the answers take the numbers between)
+        assert seqs == sorted(set(seqs)) and seqs[0] >= 1
 
     drive(cluster, scenario)
 

@@ -6,27 +6,31 @@ reach into it."""
 from __future__ import annotations
 
 import asyncio
-import json
 import os
 import signal
 import subprocess
 import sys
 import threading
 from contextlib import asynccontextmanager
+from datetime import UTC, datetime
 from pathlib import Path
 
 from backend.client.client import MissionClient
 from backend.core.model import Status
-from backend.core.ops import Report
+from backend.core.ops import Answer, Report
 from backend.files.missions import load_mission
 from backend.protocol.keys import Keys
 from backend.protocol.messages import (
-    CommandReply,
+    Downlink,
+    DownlinkAck,
     Manifest,
     Module,
     QueueEntry,
     Register,
     RegisterReply,
+    Uplink,
+    UplinkEntry,
+    UplinkReceipt,
     WorldMessage,
     dumps,
 )
@@ -37,7 +41,7 @@ from backend.transport import (
     free_port,
     loopback_endpoint,
     query,
-    serve,
+    serve_async,
 )
 from backend.transport.session import close_session, open_session
 
@@ -46,9 +50,9 @@ HERE = Path(__file__).resolve().parent
 TUTORIAL = ROOT / "missions" / "tutorial.yaml"
 
 
-def new_server(db, endpoint: str) -> MissionServer:
+def new_server(db, endpoint: str, **kw) -> MissionServer:
     """A server in the test process on the tutorial mission."""
-    return MissionServer(db=db, mission_file=TUTORIAL, listen=[endpoint], command_timeout=5)
+    return MissionServer(db=db, mission_file=TUTORIAL, listen=[endpoint], **kw)
 
 
 @asynccontextmanager
@@ -143,8 +147,6 @@ class Cluster:
                 self.endpoint,
                 "--db",
                 str(self.db),
-                "--command-timeout",
-                "5",
                 "-v",
             ]
         )
@@ -176,28 +178,74 @@ class Cluster:
 
 
 class RawRobot:
-    """A robot on a plain Zenoh session, without the SDK: its presence token,
-    a command queryable that accepts everything (`answer` says how), and a
-    registration offering the tutorial library's skills of its type."""
+    """A robot on a plain Zenoh session, without the SDK (protocol 2 models):
+    its presence token, an uplink queryable that processes each command once
+    in seq order (`answer` says what it did: by default everything asked),
+    `report()` for status changes, and a downlink it sends after each
+    command (`flush`). Declared by `register` (on the running loop)."""
 
-    def __init__(self, endpoint: str, name: str):
+    def __init__(self, endpoint: str, name: str, session: str = "raw1"):
         self.name = name
         self.rtype = ""
+        self.session_id = session
         self.session = open_session(client_config([endpoint]))
-        self._entities = [
-            declare_token(self.session, Keys.alive(name)),
-            serve(self.session, Keys.command(name), self._on_command),
-        ]
+        self.received: list[UplinkEntry] = []  # every command processed, in order
+        self.transmissions = 0  # Uplink queries received
+        self.applied = 0  # last uplink seq processed
+        self.seq = 0  # last downlink seq made
+        self.outbox: list[Report | Answer] = []
+        self.acks: list[DownlinkAck] = []
+        self.hold = False  # True: answers wait in the outbox (flush() sends them)
+        self._entities: list = []
+        self._tasks: set[asyncio.Task] = set()
 
-    def _on_command(self, payload: bytes) -> bytes:
-        cmd = json.loads(payload)
-        ids = [s["id"] for s in cmd.get("skills", [])] if cmd.get("cmd") == "enqueue" else []
-        return dumps(self.answer(ids))
+    def _on_uplink(self, payload: bytes) -> bytes:
+        up = Uplink.model_validate_json(payload)
+        self.transmissions += 1
+        for e in sorted(up.commands, key=lambda e: e.seq):
+            if e.seq <= self.applied:
+                continue
+            self.applied = e.seq
+            self.received.append(e)
+            self.seq += 1
+            self.outbox.append(self.answer(e, self.seq))
+        if not self.hold and self.outbox:
+            task = asyncio.get_running_loop().create_task(self.flush())
+            self._tasks.add(task)
+            task.add_done_callback(self._tasks.discard)
+        return dumps(UplinkReceipt(session=self.session_id, applied=self.applied))
 
-    def answer(self, enqueued: list[str]) -> CommandReply:
-        return CommandReply(ids=enqueued)
+    def answer(self, e: UplinkEntry, seq: int) -> Answer:
+        cmd = e.command
+        ids = [s.id for s in cmd.skills] if cmd.cmd == "enqueue" else []
+        removed = list(cmd.ids) if cmd.cmd == "dequeue" else []
+        return Answer(
+            robot=self.name, seq=seq, command=e.seq, outcome="applied", queued=ids, removed=removed
+        )
 
-    def registration(self, reports: list[Report] = (), queue: list[str] = ()) -> Register:
+    def report(self, skill_id: str, status: Status) -> Report:
+        self.seq += 1
+        r = Report(robot=self.name, seq=self.seq, id=skill_id, status=status, at=datetime.now(UTC))
+        self.outbox.append(r)
+        return r
+
+    async def flush(self, messages: list | None = None) -> DownlinkAck:
+        """Send the outbox (or `messages`) as one Downlink; drop what is acknowledged."""
+        dl = Downlink(
+            robot=self.name,
+            session=self.session_id,
+            messages=list(self.outbox if messages is None else messages),
+            uplink_applied=self.applied,
+            sent=datetime.now(UTC),
+        )
+        ack = DownlinkAck.model_validate_json(
+            await query(self.session, Keys.downlink(self.name), dumps(dl), 10.0)
+        )
+        self.acks.append(ack)
+        self.outbox = [m for m in self.outbox if m.seq > ack.last_seq]
+        return ack
+
+    def registration(self, queue: list[str] = ()) -> Register:
         _, library = load_mission(ROOT / "missions" / "tutorial.yaml")
         manifest = Manifest(
             name=self.name,
@@ -207,18 +255,32 @@ class RawRobot:
         )
         return Register(
             manifest=manifest,
-            reports=list(reports),
-            queue=[QueueEntry(id=i, status=Status.RUNNING) for i in queue],
+            session=self.session_id,
+            downlink=list(self.outbox),
+            last_seq=self.seq,
+            uplink_applied=self.applied,
+            queue=[QueueEntry(id=i, status=Status.IDLE_SYNCHRONIZED) for i in queue],
         )
 
-    async def register(self, rtype: str) -> None:
+    async def register(self, rtype: str, queue: list[str] = ()) -> RegisterReply:
         self.rtype = rtype
+        if not self._entities:
+            self._entities = [
+                declare_token(self.session, Keys.alive(self.name, self.session_id)),
+                serve_async(self.session, Keys.uplink(self.name), self._on_uplink),
+            ]
         reply = RegisterReply.model_validate_json(
-            await query(self.session, Keys.register(self.name), dumps(self.registration()), 10.0)
+            await query(
+                self.session, Keys.register(self.name), dumps(self.registration(queue)), 10.0
+            )
         )
         assert reply.accepted, reply.reason
+        self.outbox = [m for m in self.outbox if m.seq > reply.last_seq]
+        return reply
 
     def close(self) -> None:
+        for t in self._tasks:
+            t.cancel()
         self._entities.clear()
         close_session(self.session)
 

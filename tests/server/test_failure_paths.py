@@ -171,9 +171,11 @@ def test_a_robot_report_the_journal_cannot_take_is_kept_by_the_robot(tmp_path):
                 await agent.start()
                 await agent.wait_registered(timeout=WAIT)
                 await client.submit(Sync(robot="lru1", through="lru1-1"))
+                await client.wait_for(lambda m: status(m, "lru1-1") == "idle_synchronized", WAIT)
+                agent.link.delay_s = 0.3  # its answer and reports come after the disk is full
+                await client.submit(Control(op="run", robot="lru1"))
                 real = server.journal._conn
                 full = server.journal._conn = FullDisk(real)
-                await client.submit(Control(op="run", robot="lru1"))  # journals nothing
                 assert await asyncio.to_thread(full.tried.wait, WAIT), (
                     "the robot's report never reached the journal"
                 )
@@ -261,9 +263,9 @@ def test_a_restart_on_a_journal_says_the_mission_file_was_not_read(tmp_path):
 
 
 def test_a_robot_operation_retried_after_a_server_restart_is_applied_once(tmp_path):
-    """The request id of sync/unsync/retry is journaled with the robot's
-    acknowledgement: a client whose reply was lost in the restart retries
-    and is told it was applied (not refused, not applied again)."""
+    """The request id of sync/unsync/retry is journaled with the command it
+    queued: a client whose reply was lost in the restart retries and is told
+    it was applied (not refused, not queued again)."""
     db = tmp_path / "m.db"
 
     async def scenario():
@@ -284,9 +286,11 @@ def test_a_robot_operation_retried_after_a_server_restart_is_applied_once(tmp_pa
                 await agent.start()
                 await agent.wait_registered(timeout=WAIT)
                 synced = await client.submit(Sync(robot="lru1"), request_id="s1")
+                await client.wait_command(synced.value["command"], WAIT)
                 unsynced = await client.submit(
                     Unsync(robot="lru1", from_id="lru1-2"), request_id="u1"
                 )
+                await client.wait_command(unsynced.value["command"], WAIT)
         finally:
             await agent.stop()
             await server.stop()
@@ -301,6 +305,7 @@ def test_a_robot_operation_retried_after_a_server_restart_is_applied_once(tmp_pa
                 ):
                     again = await client.submit(op, request_id=rid)
                     assert again.duplicate and again.revision == first.revision, (rid, again)
+                assert [c.id for c in client.mission.uplink["lru1"]] == [1, 2]  # once each
                 assert status(client.mission, "lru1-1") == "idle_synchronized"
                 assert status(client.mission, "lru1-2") == "idle"
         finally:

@@ -10,7 +10,16 @@ import pytest
 from backend.client.client import OperationRefused
 from backend.client.events import ConnectionState, RobotChanged
 from backend.core.model import Pose
-from backend.core.ops import AddBarrier, AddSkill, Control, EditSkill, Retry, Sync, Unsync
+from backend.core.ops import (
+    AddBarrier,
+    AddSkill,
+    Cancel,
+    Control,
+    EditSkill,
+    Retry,
+    Sync,
+    Unsync,
+)
 
 from .harness import drive, status, tell, until
 
@@ -48,7 +57,9 @@ def test_unsync_before_start_returns_skills_in_order(cluster):
         await c.submit(Sync(robot="lru1"))
         await until(c, lambda m: status(m, "lru1-2") == "idle_synchronized")
         reply = await c.submit(Unsync(robot="lru1"))
-        assert reply.value["kept"] == []
+        done = await c.wait_command(reply.value["command"], 15)
+        assert done.state.value == "acked" and done.kept == []
+        assert done.done == ["lru1-1", "lru1-2"]
         m = await until(c, lambda m: status(m, "lru1-1") == "idle")
         assert [s.id for s in m.tasks["lru1"]] == ["lru1-1", "lru1-2"]
 
@@ -73,8 +84,9 @@ def test_unsync_while_the_robot_starts_the_same_skill(cluster):
         await until(c, lambda m: status(m, h) == "running")
         await tell(c, "lru1", "release", {"id": h})  # the robot starts A right away
         reply = await c.submit(Unsync(robot="lru1", from_id=a), timeout=15)
-        assert reply.value["kept"] == [a], reply
-        assert any(a in n and "already started" in n for n in reply.notes)
+        assert reply.value["state"] == "queued"  # returns before the robot answers
+        done = await c.wait_command(reply.value["command"], 15)
+        assert done.kept == [a] and done.done == [b], done  # the robot's truth
         m = await until(c, lambda m: status(m, b) == "idle")
         assert status(m, a) == "running"
         await tell(c, "lru1", "release", {"id": a})
@@ -237,13 +249,26 @@ def test_a_retried_request_is_applied_once(cluster):
     drive(cluster, scenario)
 
 
-def test_sync_to_an_absent_robot_changes_nothing(cluster):
+def test_sync_to_an_absent_robot_waits_for_it(cluster):
+    """A robot not connected gets its commands when it comes: the operator's
+    sync returns at once, its skills are uplinking meanwhile; a cancel of a
+    command that never left is final."""
+
     async def scenario(c):
-        before = c.mission.model_copy(deep=True)
-        with pytest.raises(OperationRefused) as refused:
-            await c.submit(Sync(robot="lru1"))
-        assert refused.value.code == "robot_offline" and "lru1" in str(refused.value)
-        assert c.mission == before
+        first = await c.submit(Sync(robot="lru1", through="lru1-1"))
+        assert first.value["state"] == "queued" and first.value["skills"] == ["lru1-1"]
+        await c.submit(Cancel(command=first.value["command"]))
+        m = await until(c, lambda m: m.command(first.value["command"]).state.value == "cancelled")
+        assert status(m, "lru1-1") == "idle" and c.pending("lru1") == []
+        again = await c.submit(Sync(robot="lru1"))
+        with pytest.raises(OperationRefused) as refused:  # uplinking skills are locked
+            await c.submit(EditSkill(id="lru1-1", label="changed"))
+        assert refused.value.code == "locked" and "command 2" in str(refused.value)
+        cluster.start_robots("lru1:lru_science")
+        done = await c.wait_command(again.value["command"], 20)
+        assert done.state.value == "acked" and done.done == ["lru1-1", "lru1-2"]
+        m = await until(c, lambda m: status(m, "lru1-2") == "idle_synchronized")
+        assert status(m, "lru1-1") == "idle_synchronized"
 
     drive(cluster, scenario)
 

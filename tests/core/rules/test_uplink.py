@@ -216,9 +216,7 @@ class TestWithdrawing:
     def test_expiry_before_sending_releases_the_skills(self, engine, status_of):
         engine.submit(Sync(robot="lru1", expire_s=5))
         applied = engine.submit(
-            UplinkSettle(
-                robot="lru1", ids=[1], state="expired", reason="expired unsent", at=T0
-            )
+            UplinkSettle(robot="lru1", ids=[1], state="expired", reason="expired unsent", at=T0)
         )
         assert cmd(engine, 1).state == CommandState.EXPIRED and engine.locked == {}
         assert "lru1-1, lru1-2 are unsynchronized" in applied.value["alerts"][0]["message"]
