@@ -1,8 +1,10 @@
-"""Writes docs/protocol.md: the prose below plus JSON Schemas generated from
-the protocol models (so the document cannot drift from the code; a test
-checks it is up to date).
+"""Writes docs/protocol.md (prose, tables, a worked trace) and the JSON
+Schemas of every message in docs/protocol/*.json, all generated from the
+protocol models, so the document cannot drift from the code (a test checks
+both are up to date).
 
-    python -m backend.protocol.doc > docs/protocol.md
+    python -m backend.protocol.doc            # writes docs/protocol.md and docs/protocol/
+    python -m backend.protocol.doc --check    # exit 1 if they are stale
 """
 
 from __future__ import annotations
@@ -10,15 +12,23 @@ from __future__ import annotations
 import json
 import sys
 from collections.abc import Sequence
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
 from typing import Any
 
 from pydantic import TypeAdapter
 
-from backend.core.events import EventBatch
-from backend.core.ops import OperatorOp, Report
+from backend.core.events import CommandChanged, CommandQueued, EventBatch, SkillAdded, SkillChanged
+from backend.core.events import ReportSeq as ReportSeqEvent
+from backend.core.model import Enqueue, Run, SkillInstance, Status, UplinkCommand
+from backend.core.ops import AddSkill, Answer, Control, OperatorOp, Report, Sync
 from backend.protocol import mapfeed as mf
 from backend.protocol import messages as p
+from backend.protocol import values as v
 from backend.protocol.keys import PROTOCOL_VERSION, Keys
+
+ROOT = Path(__file__).resolve().parents[2]
+SCHEMA_DIR = "protocol"  # beside protocol.md
 
 # the key space: (key, kind, who declares, payload)
 KEY_SPACE: list[tuple[str, str, str, str]] = [
@@ -43,7 +53,7 @@ KEY_SPACE: list[tuple[str, str, str, str]] = [
         "server",
         "`EventBatch`, or a JSON array of them (revisions consecutive)",
     ),
-    (f"`{Keys.FLEET}`", "publication", "server", "`FleetEvent` (presence, manifest)"),
+    (f"`{Keys.FLEET}`", "publication", "server", "`FleetEvent` (presence, manifest, link)"),
     (f"`{Keys.ALERTS}`", "publication", "server", "`Alert`"),
     (
         f"`{Keys.PING}`",
@@ -52,13 +62,18 @@ KEY_SPACE: list[tuple[str, str, str, str]] = [
         "anything → `pong` (raw-transport baseline of the benchmarks)",
     ),
     (f"`{Keys.register('ROBOT')}`", "queryable", "server", "`Register` → `RegisterReply`"),
-    (f"`{Keys.reports('ROBOT')}`", "queryable", "server", "`ReportBatch` → `ReportAck`"),
-    (f"`{Keys.alive('ROBOT')}`", "liveliness token", "robot", "—"),
+    (f"`{Keys.downlink('ROBOT')}`", "queryable", "server", "`Downlink` → `DownlinkAck`"),
     (
-        f"`{Keys.command('ROBOT')}`",
+        f"`{Keys.alive('ROBOT', 'SESSION')}`",
+        "liveliness token",
+        "robot",
+        "— (SESSION: the run of the agent that registered)",
+    ),
+    (
+        f"`{Keys.uplink('ROBOT')}`",
         "queryable",
         "robot",
-        "`Command` → `CommandReply` / `ErrorReply`",
+        "`Uplink` → `UplinkReceipt` / `ErrorReply`",
     ),
     (f"`{Keys.telemetry('ROBOT')}`", "publication", "robot", "`Telemetry`"),
     (f"`{Keys.world('ROBOT')}`", "queryable", "robot", "`WorldMessage` → `WorldReply`"),
@@ -66,7 +81,7 @@ KEY_SPACE: list[tuple[str, str, str, str]] = [
         f"`{Keys.barrier_ready('BARRIER', 'ROBOT')}`",
         "liveliness token",
         "robot",
-        "— (present while waiting at a barrier)",
+        "— (present while at a barrier, see Barriers)",
     ),
     (f"`{mf.KEY_MAP_SNAPSHOT}`", "queryable", "simulator", "anything → `MapSnapshot`"),
     (
@@ -99,6 +114,168 @@ REPORTED_TRANSITIONS: list[tuple[str, str]] = [
     ("`success`, `failure`", "nothing: they are the execution log"),
 ]
 
+# the robot's mode (Telemetry.mode): (mode, what it means, command -> next mode)
+MODES: list[tuple[str, str, str]] = [
+    ("`idle`", "nothing held, halted", "`enqueue` → `halted`; `run` → run mode, stays `idle`"),
+    (
+        "`halted`",
+        "skills queued, not executing (the start, and after pause/stop/reset/failure)",
+        "`run` → `starting`; `reset` → `idle`",
+    ),
+    (
+        "`starting`",
+        "run mode: the head of the queue was taken, its first report not made yet",
+        "→ `running` or `synchwaiting` (barrier) by itself",
+    ),
+    (
+        "`synchwaiting`",
+        "at a barrier, waiting for partners",
+        "all ready → `running`; `stop` → `halted` (skill back at the head); `pause` refused",
+    ),
+    (
+        "`running`",
+        "executing the active skill; in run mode it goes on with the next",
+        "`pause` → `paused`; `stop` → `halted`; `reset` → `idle`; "
+        "success → next skill (`starting`) or `idle`; failure → `halted`",
+    ),
+    (
+        "`paused`",
+        "the active skill holds at its next checkpoint",
+        "`run` → `running`; `stop` → `halted`; `reset` → `idle`",
+    ),
+]
+
+# every refusal code: (code, where it comes from, meaning and what to do)
+ERROR_CODES: list[tuple[str, str, str]] = [
+    ("bad_request", "server", "a request that cannot be read: the field is named"),
+    ("read_only", "server, clients", "an observer account (or a role without the operation key)"),
+    ("stale", "server", "what the operation touches changed after `expected_revision`: reload"),
+    ("journal_failed", "server", "the journal cannot be written: nothing changed; send it again"),
+    ("unknown_robot", "server", "no such robot in the mission"),
+    ("unknown_skill", "server", "no skill with that id"),
+    ("unknown_skill_type", "server", "the robot's type offers no such skill"),
+    ("bad_param", "server", "a parameter does not fit the library (named in `param`)"),
+    ("bad_index", "server", "a position outside the unsynchronized section"),
+    ("exists", "server", "an id or name in use already"),
+    ("not_idle", "server", "only idle (unsynchronized) skills can change"),
+    ("locked", "server", "a pending command concerns it (uplinking, being unsynchronized)"),
+    ("wrong_robot", "server", "the skill belongs to another robot"),
+    ("nothing_to_sync", "server", "no idle skill left to synchronize"),
+    ("nothing_to_unsync", "server", "no queued skill to take back"),
+    ("not_queued", "server", "only queued (idle_synchronized) skills can be unsynchronized"),
+    ("not_applicable", "server", "run/pause/stop/reset does not apply to the robot now (why)"),
+    ("cannot_retry", "server", "not a failed skill, retried already, or the robot moved on"),
+    ("incompatible", "server", "the robot's manifest lacks the skill or its major version"),
+    ("unknown_command", "server", "cancel: no such command number"),
+    ("not_pending", "server", "cancel: the command is settled already"),
+    ("cannot_undo", "server", "undo of a sync that was sent already: cancel it instead"),
+    ("nothing_to_undo", "server", "no edit of yours left to undo"),
+    ("nothing_to_redo", "server", "nothing undone to redo"),
+    ("barrier_invalid", "server", "a barrier needs idle skills of at least two robots"),
+    ("barrier_partner_synchronized", "server", "a partner skill is synchronized already"),
+    ("unknown_barrier", "server", "no such barrier"),
+    ("unknown_marker", "server", "no such marker"),
+    ("bad_marker", "server", "a marker value of the wrong kind"),
+    ("marker_in_use", "server", "a synchronized skill still uses the marker"),
+    ("bad_mission", "server", "load: the mission does not validate"),
+    ("robot_busy", "server", "load/new while commands are pending (or a direct-path command)"),
+    ("robots_busy", "server", "load/new while robots hold synchronized skills: reset them"),
+    ("unknown_account", "server", "account query for a user the server does not know"),
+    ("bad_message", "server", "a robot's message cannot be read, or names another robot"),
+    ("bad_register", "server", "a registration on another robot's key"),
+    ("not_registered", "server", "a downlink from a session that is not registered: register"),
+    ("bad_report", "server", "a report or answer the rules refuse (in `DownlinkAck.refused`)"),
+    ("protocol_mismatch", "server, clients", "the other side speaks another protocol version"),
+    ("unreachable", "robot", "out of communication range: the Uplink did not reach it"),
+    ("wrong_session", "robot", "an Uplink for another run of the robot: register first"),
+    ("robot_error", "robot", "a world ask/tell the robot's handler failed on"),
+    ("server_error", "clients", "an error reply that is not an ErrorReply"),
+]
+
+# RegisterReply.code
+REGISTER_CODES: list[tuple[str, str]] = [
+    ("protocol", "the manifest's `protocol` is not this server's"),
+    ("unknown_robot", "the mission has no robot of that name"),
+    ("wrong_type", "the mission gives that robot another type"),
+    ("taken", "another session holds the name and is online: stand down, ask again later"),
+]
+
+# fields a robot must get right: (message.field, rule)
+FIELD_RULES: list[tuple[str, str]] = [
+    (
+        "`Register.session`",
+        "fresh at every start of the robot's software; the same for its "
+        "presence token and every Downlink of that run",
+    ),
+    (
+        "`Register.queue`",
+        "what the robot holds, the active skill first; `skill` and `params` "
+        "let the ground tell its copy from another skill of the same id",
+    ),
+    ("`Register.downlink`", "every Report/Answer not acknowledged yet, in seq order"),
+    ("`Register.last_seq`", "the last downlink seq the robot has made (0: none)"),
+    ("`Register.uplink_applied`", "the last uplink seq the robot has processed (0: none)"),
+    (
+        "`Register.sent`, `Downlink.sent`",
+        "when the message left the robot, its clock; the "
+        "ground estimates the one-way delay from it (clocks must agree: NTP, spacecraft time)",
+    ),
+    (
+        "`RegisterReply.last_seq`",
+        "the ground applied the downlink up to here: drop those; if "
+        "it is higher than the robot's own last seq (a restart), number on after it",
+    ),
+    (
+        "`Downlink.messages`",
+        "the unacknowledged messages from the oldest, at most 1000; `seq` "
+        "consecutive: 1, 2, 3, ... per robot, one sequence for reports and answers",
+    ),
+    (
+        "`Downlink.uplink_applied`",
+        "the last uplink seq processed: the ground sends again what the robot has not processed",
+    ),
+    ("`DownlinkAck.last_seq`", "cumulative: drop every message up to it"),
+    (
+        "`DownlinkAck.missing`",
+        "[first, last] seqs the ground has not got before what you sent: "
+        "send again from `last_seq` + 1",
+    ),
+    ("`DownlinkAck.refused`", "messages applied as refused (consumed, alerted): do not resend"),
+    ("`Report.seq`", "the next downlink number; never reused"),
+    ("`Report.status`", "the new status, per the transition table"),
+    ("`Report.attempt`", "1, or higher for an autonomous retry; never lower than before"),
+    (
+        "`Report.at`",
+        "when the change happened (the first `running` sets `started_at`, "
+        "`success`/`failure` set `finished_at`)",
+    ),
+    ("`Answer.command`", "the uplink `seq` of the command answered (not its `id`)"),
+    (
+        "`Answer.outcome`",
+        "`applied`, `refused` (with `reason`), `expired` (processed after "
+        "`expires`), `cancelled` (`cancel` was set when it was processed)",
+    ),
+    (
+        "`Answer.queued`",
+        "enqueue: the ids the robot holds now (a subset of those sent; "
+        "ids it ran already are left out)",
+    ),
+    (
+        "`Answer.removed`",
+        "dequeue/reset: the ids it removed; `kept`: asked to remove, but started or finished: kept",
+    ),
+    (
+        "`Uplink.commands`",
+        "every pending command, in seq order; seqs may skip numbers (a "
+        "command withdrawn before it was ever sent)",
+    ),
+    ("`UplinkEntry.seq`", "process each once: ignore seq ≤ your last processed one"),
+    ("`UplinkEntry.expires`", "past it, answer `expired` instead of applying"),
+    ("`UplinkEntry.cancel`", "set: answer `cancelled` instead of applying"),
+    ("`Uplink.downlink_ack`", "same as `DownlinkAck.last_seq`: drop those messages"),
+    ("`UplinkReceipt.session`", "your session: the ground counts only its registered one's"),
+]
+
 
 def _table(head: tuple[str, ...], rows: Sequence[tuple[str, ...]]) -> str:
     """A markdown table."""
@@ -106,42 +283,310 @@ def _table(head: tuple[str, ...], rows: Sequence[tuple[str, ...]]) -> str:
     return "".join("| " + " | ".join(cells) + " |\n" for cells in lines)
 
 
-PROSE = (
-    f"""# missionctl protocol, version {PROTOCOL_VERSION}
+# -- the worked trace --------------------------------------------------------------
+
+T0 = datetime(2030, 6, 1, 12, 0, 0, tzinfo=UTC)
+D = 2.0  # one-way delay of the trace
+SESSION = "a1b2c3d4e5f6"
+
+
+def _t(seconds: float) -> datetime:
+    return T0 + timedelta(seconds=seconds)
+
+
+def _trace() -> list[tuple[float, str, str, Any]]:
+    """(ground time, who -> who, key, message) of add -> sync -> run -> report."""
+    goal = {"x": 12.0, "y": 3.0, "z": 0.0, "roll": 0.0, "pitch": 0.0, "yaw": 0.0}
+    skill = SkillInstance(
+        id="lru1-3", skill="drive_to", label="to the ridge", params={"goal": goal}
+    )
+    enqueue = Enqueue(skills=[skill])
+    cmd1 = UplinkCommand(
+        id=1, robot="lru1", seq=1, op="sync", command=enqueue, skills=["lru1-3"], created=_t(1)
+    )
+    cmd2 = UplinkCommand(id=2, robot="lru1", seq=2, op="run", command=Run(), created=_t(6))
+
+    def up(*cmds: UplinkCommand, at: float, ack: int) -> p.Uplink:
+        return p.Uplink(
+            robot="lru1",
+            session=SESSION,
+            commands=[p.UplinkEntry(seq=c.seq, id=c.id, command=c.command) for c in cmds],
+            downlink_ack=ack,
+            sent=_t(at),
+        )
+
+    def down(*msgs: Any, at: float, applied: int) -> p.Downlink:
+        return p.Downlink(
+            robot="lru1", session=SESSION, messages=list(msgs), uplink_applied=applied, sent=_t(at)
+        )
+
+    def changed(cid: int, **changes: Any) -> CommandChanged:
+        return CommandChanged(id=cid, changes=changes)
+
+    answer1 = Answer(robot="lru1", seq=1, command=1, outcome="applied", queued=["lru1-3"], at=_t(3))
+    answer2 = Answer(robot="lru1", seq=2, command=2, outcome="applied", at=_t(10))
+    running = Report(robot="lru1", seq=3, id="lru1-3", status=Status.RUNNING, at=_t(10))
+    success = Report(
+        robot="lru1", seq=4, id="lru1-3", status=Status.SUCCESS, info="arrived", at=_t(40)
+    )
+    op = "console -> server"
+    return [
+        (
+            0.0,
+            op,
+            Keys.OP,
+            p.Request(
+                client="console-1",
+                request_id="r1",
+                op=AddSkill(
+                    robot="lru1", skill="drive_to", label="to the ridge", params={"goal": goal}
+                ),
+            ),
+        ),
+        (0.0, "server -> console", "(reply)", p.OpReply(revision=1, value={"id": "lru1-3"})),
+        (
+            0.0,
+            "server -> all",
+            Keys.EVENTS,
+            EventBatch(
+                revision=1,
+                actor="console-1",
+                op="add",
+                events=[SkillAdded(robot="lru1", index=2, skill=skill)],
+            ),
+        ),
+        (
+            1.0,
+            op,
+            Keys.OP,
+            p.Request(client="console-1", request_id="r2", op=Sync(robot="lru1", through="lru1-3")),
+        ),
+        (
+            1.0,
+            "server -> console",
+            "(reply)",
+            p.OpReply(
+                revision=2,
+                value=v.Queued(
+                    command=1, robot="lru1", seq=1, state="queued", skills=["lru1-3"], expires=None
+                ).model_dump(mode="json"),
+            ),
+        ),
+        (
+            1.0,
+            "server -> all",
+            Keys.EVENTS,
+            EventBatch(
+                revision=2, actor="console-1", op="sync", events=[CommandQueued(command=cmd1)]
+            ),
+        ),
+        (1.0, "server -> robot", Keys.uplink("lru1"), up(cmd1, at=1.0, ack=0)),
+        (5.0, "robot -> server", "(reply)", p.UplinkReceipt(session=SESSION, applied=1)),
+        (
+            5.0,
+            "server -> all",
+            Keys.EVENTS,
+            EventBatch(
+                revision=3,
+                actor="server",
+                op="uplink_sent",
+                events=[changed(1, state="sent", sent=_t(5).isoformat())],
+            ),
+        ),
+        (5.0, "robot -> server", Keys.downlink("lru1"), down(answer1, at=3.0, applied=1)),
+        (5.0, "server -> robot", "(reply)", p.DownlinkAck(last_seq=1)),
+        (
+            5.0,
+            "server -> all",
+            Keys.EVENTS,
+            EventBatch(
+                revision=4,
+                actor="lru1",
+                op="answer",
+                events=[
+                    ReportSeqEvent(robot="lru1", seq=1),
+                    SkillChanged(id="lru1-3", changes={"status": "idle_synchronized"}),
+                    changed(
+                        1,
+                        state="acked",
+                        settled=_t(3).isoformat(),
+                        answered=_t(3).isoformat(),
+                        reason="",
+                        done=["lru1-3"],
+                    ),
+                ],
+            ),
+        ),
+        (
+            6.0,
+            op,
+            Keys.OP,
+            p.Request(client="console-1", request_id="r3", op=Control(op="run", robot="lru1")),
+        ),
+        (
+            6.0,
+            "server -> console",
+            "(reply)",
+            p.OpReply(
+                revision=5,
+                value=v.ControlQueued(robots={"lru1": "queued"}, commands={"lru1": 2}).model_dump(
+                    mode="json"
+                ),
+            ),
+        ),
+        (6.0, "server -> robot", Keys.uplink("lru1"), up(cmd2, at=6.0, ack=1)),
+        (
+            12.0,
+            "robot -> server",
+            Keys.downlink("lru1"),
+            down(answer2, running, at=10.0, applied=2),
+        ),
+        (12.0, "server -> robot", "(reply)", p.DownlinkAck(last_seq=3)),
+        (42.0, "robot -> server", Keys.downlink("lru1"), down(success, at=40.0, applied=2)),
+        (42.0, "server -> robot", "(reply)", p.DownlinkAck(last_seq=4)),
+    ]
+
+
+_TAGS = ("cmd", "ev", "op", "kind")  # discriminators: always shown
+
+
+def _slim(full: Any, slim: Any) -> Any:
+    """`slim` (defaults left out) with the discriminators of `full` put back."""
+    if isinstance(full, dict) and isinstance(slim, dict):
+        return {
+            k: _slim(full[k], slim[k]) if k in slim else full[k]
+            for k in full
+            if k in slim or k in _TAGS
+        }
+    if isinstance(full, list) and isinstance(slim, list):
+        return [_slim(f, s) for f, s in zip(full, slim, strict=True)]
+    return slim
+
+
+def _trace_text() -> str:
+    out = []
+    for at, who, key, msg in _trace():
+        shown = _slim(
+            msg.model_dump(mode="json"), msg.model_dump(mode="json", exclude_defaults=True)
+        )
+        data = json.dumps(shown, indent=1)
+        out.append(f"**t = {at:g} s**, {who}, `{key}`: `{type(msg).__name__}`\n")
+        out.append("```json\n" + data + "\n```\n")
+    return "\n".join(out)
+
+
+# -- the document --------------------------------------------------------------------
+
+# title -> model (or union): each gets docs/protocol/<file>.json
+SCHEMAS: list[tuple[str, str, Any]] = [
+    ("Request", "Request", p.Request),
+    ("OpReply", "OpReply", p.OpReply),
+    ("ErrorReply", "ErrorReply", p.ErrorReply),
+    ("StateRequest", "StateRequest", p.StateRequest),
+    ("StateSnapshot", "StateSnapshot", p.StateSnapshot),
+    ("AccountInfo", "AccountInfo", p.AccountInfo),
+    ("EventBatch", "EventBatch", EventBatch),
+    ("FleetEvent", "FleetEvent", p.FleetEvent),
+    ("Alert", "Alert", p.Alert),
+    ("Register", "Register", p.Register),
+    ("RegisterReply", "RegisterReply", p.RegisterReply),
+    ("Uplink", "Uplink", p.Uplink),
+    ("UplinkReceipt", "UplinkReceipt", p.UplinkReceipt),
+    ("Downlink", "Downlink", p.Downlink),
+    ("DownlinkAck", "DownlinkAck", p.DownlinkAck),
+    ("Report", "Report", Report),
+    ("Answer", "Answer", Answer),
+    ("Telemetry", "Telemetry", p.Telemetry),
+    ("WorldMessage", "WorldMessage", p.WorldMessage),
+    ("WorldReply", "WorldReply", p.WorldReply),
+    ("Operations (the `op` of a Request)", "operations", OperatorOp),
+    ("MapSnapshot", "MapSnapshot", mf.MapSnapshot),
+    ("MapDelta", "MapDelta", mf.MapDelta),
+    ("SimStatus", "SimStatus", mf.SimStatus),
+    *[(f"OpReply.value of `{op}`", f"value-{op}", model) for op, model in v.VALUES.items()],
+]
+
+
+def schemas() -> dict[str, str]:
+    """File name -> its JSON Schema text."""
+    out = {}
+    for _, name, model in SCHEMAS:
+        schema = TypeAdapter(model).json_schema()
+        out[f"{name}.json"] = json.dumps(schema, indent=1) + "\n"
+    return out
+
+
+def _appendix() -> str:
+    rows = [(title, f"[{name}.json]({SCHEMA_DIR}/{name}.json)") for title, name, _ in SCHEMAS]
+    return _table(("message", "schema"), rows)
+
+
+PROSE_1 = f"""# missionctl protocol, version {PROTOCOL_VERSION}
 
 This is what a third party needs to connect a robot, a console or a script
 to a missionctl mission server without reading our code. Transport is
 [Eclipse Zenoh](https://zenoh.io) 1.x; every payload is UTF-8 JSON of the
-models below. The mission server *is* the Zenoh router (default
-`tcp/127.0.0.1:7447`, multicast scouting off); robots and consoles connect to
-it in `client` mode. A robot written in Python does not need this document:
-it uses the robot agent SDK, see [robots.md](robots.md).
+models whose JSON Schemas are in [protocol/](protocol/) (listed at the end).
+The mission server *is* the Zenoh router (default `tcp/127.0.0.1:7447`);
+robots and consoles connect to it. A robot written in Python does not need
+this document: it uses the robot agent SDK, see [robots.md](robots.md).
+
+The ground may be minutes away from its robots, or out of their reach for a
+while. So nothing between ground and robot waits for an answer: every
+command to a robot is an entry of its **uplink**, sent until the robot has
+answered it, applied by the robot once; everything a robot says (its status
+reports and its answers to commands) is its **downlink**, one numbered
+sequence the ground applies strictly in order. What the robot says it did is
+what the mission shows.
+
+Version {PROTOCOL_VERSION} replaces version 1's synchronous robot commands. A version 1
+robot registering (on `mc/v1/server/register/ROBOT`) is answered `accepted:
+false` with a sentence saying so; any other version 1 query gets an
+`ErrorReply` with code `protocol_mismatch`.
 
 Conventions: names of robots, markers and barriers match
-`^[A-Za-z][A-Za-z0-9_-]*$`; skill ids match `^[A-Za-z0-9][A-Za-z0-9_.-]*$`.
+`^[A-Za-z][A-Za-z0-9_-]*$` (any such name: `robot` too); skill ids match
+`^[A-Za-z0-9][A-Za-z0-9_.-]*$`; sessions `^[A-Za-z0-9_-]+$` (at most 64).
 Times are ISO 8601 with a zone. A refusal is always a Zenoh `reply_err` whose
-payload is an `ErrorReply` (`code` is stable, `message` is a sentence for a
-person naming robot, skill and reason).
+payload is an `ErrorReply` (`code` is stable, see Error codes; `message` is a
+sentence for a person naming robot, skill and reason). Every message is
+checked against its schema (unknown fields are refused); the server answers
+a query it cannot read with `reply_err` (`bad_request` from a client,
+`bad_message` from a robot, naming the field, and an `Alert` naming the
+robot). A publication nobody can read (telemetry, say) is ignored by its
+readers; missionctl's consoles raise an "unreadable message" alert naming
+the key and the field, once per key (`missionctl ctl watch` prints it too).
 
-Every message is checked against its schema below (unknown fields are
-refused). The server answers a query it cannot read with `reply_err`
-(`code: bad_request`, naming the field); a publication nobody can answer
-(telemetry, say) is ignored by its readers, and missionctl's consoles raise
-an "unreadable message" alert naming the key and the field, once per key
-(`missionctl ctl watch` prints it too): the first place to look when a new
-robot's telemetry never shows.
+## Zenoh settings of a client (robot, console, script)
+
+- `mode`: `"client"`; `connect/endpoints`: the server's endpoints (e.g.
+  `["tcp/127.0.0.1:7447"]`); `listen/endpoints`: `[]`.
+- `scouting/multicast/enabled`: `false`, `scouting/gossip/enabled`: `false`,
+  `scouting/delay`: `0` (else opening waits ~500 ms).
+- `connect/timeout_ms`: default (opening fails at once when no router
+  answers: retry, or set `-1` to block until it answers). After a router
+  restart a client reconnects by itself (within about a second): robots
+  register again when the server's token reappears.
+- A robot: `transport/link/tx/lease` (ms) bounds how long a hung process
+  keeps its presence (missionctl's agent uses 1000; Zenoh's default is 10 s).
+  A robot name is owned by one session at a time (see Registration).
+- Queries: consolidation `NONE`, a timeout of a few seconds: every query
+  here is answered at once (nothing waits for the other side of a delayed
+  link); no answer means send again later.
+- Publications (telemetry): congestion control `BLOCK`.
+- Accounts and TLS: [security.md](security.md) (an operator queries only
+  `{Keys.op_as("USER")}`; a robot account only its robots' keys).
 
 ## Key space
 
 """
-    + _table(("key", "kind", "who declares", "payload"), KEY_SPACE)
-    + """
-Publications are declared with congestion control `BLOCK` (state must not be
-dropped). Events are small: one `EventBatch` per applied operation, never a
-full-state dump (except `mission_replaced` when a whole mission is loaded).
-The batches of operations the server handled in a row (under load) share one
-message: a JSON array of `EventBatch`, in revision order; a lone operation's
-batch is a plain `EventBatch` object.
+
+PROSE_2 = """
+The server's publications are declared with congestion control `BLOCK`.
+Events are small: one `EventBatch` per applied operation, never a full-state
+dump (except `mission_replaced` when a whole mission is loaded). The batches
+of operations the server handled in a row share one message: a JSON array of
+`EventBatch`, in revision order; a lone operation's batch is a plain object.
 
 ## Statuses
 
@@ -152,146 +597,280 @@ skill, queued skills, unsynchronized skills. Robots may report these
 transitions (anything else is refused with `bad_report`):
 
 """
-    + _table(("from", "to"), REPORTED_TRANSITIONS)
-    + f"""
-## Sequences
 
-### Late join and event stream (consoles, scripts)
-1. Subscribe to `{Keys.EVENTS}` (and `{Keys.FLEET}`, `{Keys.ALERTS}`, telemetry) first.
-2. Query `{Keys.STATE}`; apply the snapshot; then apply buffered batches
-   whose `revision` is greater than the snapshot's.
+PROSE_3 = f"""
+## The robot link
+
+### Sessions and one owner per name
+Each start of a robot's software is a new **session** (a random token, e.g.
+12 hex digits). The robot declares its presence token
+`{Keys.alive("ROBOT", "SESSION")}`, and every `Register`, `Downlink` and
+`UplinkReceipt` carries the session. A robot name has one owner: the session
+whose registration was accepted last. A registration of another session
+while the owner is online is refused (`RegisterReply.code` `taken`, with a
+sentence): that robot must not execute anything (it holds and runs nothing;
+missionctl's agent asks again every 5 s, so it takes over once the other one
+is gone). The owner is offline from when its presence token disappears
+(killed: at once; hung or cut off: after its lease) until it registers
+again: a session that lost its lease and comes back is told
+`not_registered` on its next `Downlink` and must register again (and is
+reconciled). Another session's token never changes the owner's presence.
+
+### Registration and reconciliation
+1. The robot connects, declares its uplink and world queryables, then its
+   presence token, and watches `{Keys.SERVER_ALIVE}` (liveliness subscriber
+   with history: the token may be there already).
+2. Whenever the server token appears (start, server restart), and whenever
+   the server answers `not_registered`, the robot queries
+   `{Keys.register("ROBOT")}` with `Register{{manifest, session, queue,
+   downlink, last_seq, uplink_applied, sent}}`: its manifest (`name` is
+   ROBOT, `type` the robot type the mission gives it, `protocol`
+   {PROTOCOL_VERSION}, modules and skills with SemVer), what it holds, and its
+   downlink messages not acknowledged yet.
+3. The server applies the `downlink` (in order, see The downlink); then, if
+   nothing is missing up to `last_seq`, makes the mission agree with the
+   robot's `queue`, both ways: skills the mission holds as synchronized to the
+   robot that it lacks go back to the plan (`missing`); skills it holds that
+   the mission has as unsynchronized (`idle`) become synchronized again with
+   the robot's status (`adopted`; not while a pending sync of them waits for
+   its answer, and not when `skill`/`params` show another copy); skills it
+   holds that the mission does not give it (unknown, another robot's,
+   finished, or a different copy) are asked back with a `reconcile` command
+   (`dropped`). Each case raises an `Alert` of kind `reconcile`.
+4. The reply carries `last_seq` (the robot drops what it acknowledges, and
+   numbers on after it when it is higher than its own: a restarted robot)
+   and `heartbeat_s`. The server then sends the robot every pending command.
+5. Refused (`accepted: false`): another protocol version (`protocol`), a
+   robot the mission does not name (`unknown_robot`), another type
+   (`wrong_type`), the name taken (`taken`). A manifest `name` other than the
+   ROBOT of the key is refused with `reply_err` (`bad_register`).
+
+### The uplink: commands, ground → robot
+An operation on a robot (sync, unsync, run, pause, stop, reset, retry) is
+applied at once by adding a **command** to the robot's uplink in the
+mission (`mission.uplink[ROBOT]`, every change an event): `id` (the number
+operators see, "command 17"), `seq` (its place in the robot's sequence),
+`op`, `command` (what the robot gets: `enqueue`, `dequeue`, `run`, `pause`,
+`stop`, `reset`), `skills`, `created`, `sent`, `expires`, `settled`, and its
+`state`:
+
+- `queued`: certainly not on the robot (never transmitted, or every
+  transmission was refused);
+- `sent`: transmitted, so it may be on the robot;
+- `acked` (the robot applied it), `refused` (the robot refused it, `reason`),
+  `expired`, `cancelled`: settled.
+
+The server queries `{Keys.uplink("ROBOT")}` with an `Uplink` holding **every
+pending command** of that robot in seq order, whenever there is one and the
+robot is registered: when a command is added or cancelled, when the robot
+registers or its downlink shows it can hear us again, after a refused or
+unanswered transmission (0.5 s, doubling up to 5 s), and again every 30 s
+(or three one-way delays) while a sent command has no answer.
+
+The robot answers the query **at once** with `UplinkReceipt{{session,
+applied}}` (or `reply_err` `unreachable` when out of range, `wrong_session`
+when the Uplink names another session) and processes the commands when they
+have arrived: in `seq` order, each exactly once. A command with a seq at or
+below the last one it processed is skipped (the server sends every pending
+command each time); a seq may be missing (a command withdrawn before it was
+ever sent: do not wait for it). For each processed command it makes an
+`Answer`, the next message of its downlink:
+
+- `cancel` set: `outcome: cancelled`, nothing applied;
+- past `expires` (its clock): `outcome: expired`, nothing applied;
+- else apply it and answer what it actually did: `applied` with `queued`
+  (enqueue: the ids it holds now, which may be fewer than sent), `removed`
+  and `kept` (dequeue: removed unless started; reset: everything), or
+  `refused` with a `reason` (e.g. no handler for a skill). Reports the
+  command causes (a stop's `idle_synchronized`) come before its answer.
+
+The ground applies the answer, never the request: enqueued ids become
+`idle_synchronized` (moved to the end of the queue, in the robot's order),
+the others go back to `idle` with an `Alert` (kind `command`) naming robot,
+command and reason; removed ids go back to `idle` at the head of the plan,
+in order; a retry's new attempt joins the mission right after the log and
+the active skill. While a command is pending, its skills are locked (a
+sync's: "uplinking", not editable, nothing placed before them; an unsync's:
+not asked back twice; a retry's failed skill: not retried twice).
+
+**Commands run on, in order.** Several commands may be pending for one
+robot: a run after a sync applies after the enqueue; a second sync sends the
+idle skills after those still uplinking.
+
+**Expiry.** `expires` (from `--expire` or the server's default) is when the
+robot must stop applying it. A queued command whose expiry passes is settled
+`expired` by the server (it never left; an `Alert` says so, its skills are
+editable again). A sent one is settled by the robot's answer.
+
+**Cancel** (`op: cancel {{command}}`): a queued command not being transmitted
+is `cancelled` at once (final: the robot never gets it). Otherwise (sent, or
+its transmission under way) it may be on the robot already: the command gets
+`cancel_requested` and goes out again with `cancel` set; the robot's answer
+says which way it went ("cancel requested" until then). If the transmission
+turns out not to have arrived, the server settles it `cancelled`. The undo
+of a sync cancels its command while it is queued, and is refused once sent.
+
+**A robot that applied a command the ground had given up on** (cancelled or
+expired, e.g. the robot got it in the instant the server stopped): its
+answer is the truth. Skills it queued that are still idle and unchanged
+become synchronized; others (edited, deleted) are asked back with a
+`reconcile` command; an `Alert` names robot, command and skills.
+
+### The downlink: reports and answers, robot → ground
+A robot's **reports** (`Report{{robot, seq, id, status, info, attempt, at}}`,
+one per status change) and its **answers** (`Answer{{robot, seq, command,
+outcome, reason, queued, removed, kept, at}}`) share **one sequence**: `seq`
+is 1, 2, 3, ... per robot (continued after `RegisterReply.last_seq` when
+that is higher). They stay in the robot's outbox until acknowledged, and go
+to `{Keys.downlink("ROBOT")}` as `Downlink{{robot, session, messages,
+uplink_applied, sent}}`, the oldest first. With nothing to say the robot
+sends an empty `Downlink` every `heartbeat_s` (5 s): the ground's "heard N s
+ago" and one-way delay estimate come from these (`sent`: when it left the
+robot, its clock).
+
+The server applies the messages strictly in `seq` order, each once: one at
+or below the last applied is skipped (sent again); one past a gap is **not**
+applied: `DownlinkAck.missing` names the gap and the robot sends again from
+`last_seq` + 1 (an `Alert` of kind `robot_error` names it once). A message
+the rules refuse (an impossible status change, say) is consumed all the
+same: journaled as refused, alerted (kind `report_refused`), listed in
+`DownlinkAck.refused`. The acknowledgement is cumulative (`last_seq`); the
+`Uplink` carries it too (`downlink_ack`). When the server cannot write its
+journal it answers `reply_err` (`journal_failed`) and applies nothing of what
+it could not journal: the robot keeps its outbox and sends it again.
+
+A `Downlink` from a session that is not the registered, online one is
+refused with `not_registered` (register again); one carrying another
+robot's messages with `bad_message`.
+
+**Answer a command before anything that waits for the server**: process it,
+put its answer in the outbox and reply to the Uplink query; never query the
+server from inside a query callback.
+
+### Rules for every field
+
+"""
+
+PROSE_4 = """
+### Run, pause, stop, reset, and the robot's mode
+The robot starts halted. `run` enters run mode: it executes its queue head to
+tail and stays in run mode when the queue drains (skills enqueued later start
+at once). Run on a paused skill resumes it; after a failure, run goes on
+with the next skill. `pause` pauses the running skill (`paused`), leaving run
+mode; refused at a barrier (the table has no `synchwaiting` → `paused`).
+`stop` returns the active skill to the head of the queue (`idle_synchronized`;
+the next run starts it from the beginning), leaving run mode. `reset` = stop
+and remove everything queued (its answer lists the removed ids, which return
+to the plan). A failure leaves run mode: the operator decides (retry, run to
+go on, unsync). The mode as telemetry shows it:
+
+"""
+
+PROSE_5 = f"""
+On the ground, run/pause/stop/reset are refused when they cannot apply to
+what the ground knows plus its pending commands (run with nothing queued nor
+being synchronized; pause or stop with nothing active, unless a run is
+pending: the robot may be executing by now). With `robot` omitted they go to
+every robot they apply to.
+
+### Failure and retry
+A failing skill becomes `failure` and the robot halts its queue. `op: retry
+{{id}}` queues an `enqueue` with `front: true` of the new attempt `ID.N`
+(attempt N, same parameters); once the robot has it, it joins the mission
+right after the failed one (which stays in the log). A skill with
+`policies.retries: N` is retried by the robot itself: it reports `running`
+again with `attempt` + 1 (never `failure` before its last attempt).
+
+### Barriers (robot to robot; the server is not in this loop)
+Each skill of a barrier reaches its robot with `Enqueue.barriers[skill id] =
+{{barrier, partners: {{robot: skill id}}}}`. A robot reaching it reports
+`synchwaiting`, subscribes (with history) to
+`{Keys.barrier_ready("BARRIER", "*")}`, **then** declares its own token
+`{Keys.barrier_ready("BARRIER", "ROBOT")}` (in this order no robot can miss
+the last arrival), and watches its partners' presence
+(`{Keys.alive("PARTNER", "*")}`). When every partner's ready token is present,
+it reports `running`. While a partner is offline it reports `synchwaiting`
+again with info "waiting for PARTNER (offline)".
+
+**Token lifetime**: declared when the robot reaches the barrier skill, held
+while the skill is waiting and running, withdrawn when the skill ends
+(success, failure), is stopped or reset, or the robot's session ends (the
+router drops it at once for a killed process, after its lease for a hung
+one). A partner that arrives while the others still run their barrier skill
+still sees their tokens and starts; one that arrives after they finished
+waits (the barrier is met by the robots at it together).
+
+### World knowledge (robot to robot)
+`WorldMessage{{kind: ask|tell, sender, topic, data}}` to
+`{Keys.world("ROBOT")}`; the answer is a `WorldReply{{known, data}}`. Only
+robots (and tools) query it; a robot that shares no knowledge may answer
+every ask with `known: false`.
+
+## Consoles and scripts
+
+### Late join and event stream
+1. Subscribe to `{Keys.EVENTS}` (and `{Keys.FLEET}`, `{Keys.ALERTS}`,
+   telemetry) first.
+2. Query `{Keys.STATE}` (`StateRequest`) for a `StateSnapshot`: the mission
+   (with every robot's uplink), the library, the robots (presence, manifest,
+   `session`, `heard`, `delay_s`). Apply it, then the buffered batches whose
+   `revision` is greater than the snapshot's.
 3. Apply each batch with `revision == current + 1`, the batches of an array
-   in order. A larger revision means a gap: query the state again. (A reader
-   that cannot read arrays stays correct: it ignores the array, sees the next
-   batch as a gap and queries the state again.)
-4. When the server's liveliness token disappears, show "reconnecting"; when it
-   (or the Zenoh link) comes back, query the state again. A new `server_id`
-   means the server restarted (it resumed from its journal).
+   in order. A larger revision means a gap: query the state again.
+4. When the server's token disappears, show "reconnecting"; when it (or the
+   Zenoh link) comes back, query the state again. A new `server_id` means
+   the server restarted (it resumed from its journal).
 
 ### An operation
 `Request{{client, request_id, expected_revision?, op}}` to `{Keys.OP}`. The
-same `(client, request_id)` is applied once: retry freely after a timeout.
-With `expected_revision`, the operation is refused (`stale`) if anything it
-touches changed after that revision. The reply is `OpReply{{revision, value,
-notes}}` or an `ErrorReply`. The reply leaves before the operation's
-`EventBatch` (its `revision` is the reply's): a client that needs its own
-change in its copy of the mission waits for that batch.
+same `(client, request_id)` is applied once: retry freely. With
+`expected_revision`, the operation is refused (`stale`) if anything it
+touches changed after that revision. The reply is `OpReply{{revision,
+value, notes}}` (the value per operation: see the appendix) or an
+`ErrorReply`; it leaves before the operation's `EventBatch`. An operation on
+a robot returns once its command is queued (`value.command`); its progress
+arrives as `command_changed` events (`sent`, then the robot's answer), and
+the skills change with the answer. On a server with accounts
+(docs/security.md) an operator may query only `{Keys.op_as("USER")}`.
 
-On a server with accounts (docs/security.md) the router's access-control
-rules allow an operator to query only `{Keys.op_as("USER")}` with its own
-user name, and nobody `{Keys.OP}`; the server records `USER` (taken from
-the key, not from `Request.user`) as who made the change. A client learns its
-role from `{Keys.account("USER")}` (an observer has no operation key: its
-queries get no reply at all, so clients refuse operations locally).
+### The link, as consoles show it
+Per robot: `RobotInfo.delay_s` (the one-way delay, least of the last 8
+`now − sent` of its messages; clocks must agree), `RobotInfo.heard` (when
+the server last heard from it; a `FleetEvent` carries it at least every
+10 s while the robot talks; a console also counts its telemetry), and the
+pending commands with their age (`now − created`, `now − sent`) and
+`expires`. A robot offline, out of range or silent for more than three
+heartbeats (15 s) is stale: show its last known state as such.
 
-### Robot registration and reconciliation
-1. The robot connects, declares `{Keys.alive("ROBOT")}`, its command and
-   world queryables, and watches `{Keys.SERVER_ALIVE}` (a liveliness
-   subscriber with history: the token may be there already).
-2. Whenever the server token appears (start, server restart), the robot
-   queries `{Keys.register("ROBOT")}` with `Register{{manifest, queue,
-   reports}}`: its manifest (`name` is ROBOT, `type` the robot type the
-   mission gives it, `protocol` {PROTOCOL_VERSION}, modules and skills
-   with SemVer), its own synchronized queue, and its unacknowledged reports.
-3. The server applies the reports, then returns to the plan (`idle`) any skill
-   it holds as synchronized to that robot that the robot does not have (it
-   restarted; `RegisterReply.missing` and an `Alert` of kind `reconcile` name
-   them). The reply carries `last_seq`: the robot continues numbering after
-   it.
-4. The robot is online (a `FleetEvent`) from an accepted registration until
-   its liveliness token disappears: the token alone does not make it online.
-   The server answers `RegisterReply{{accepted: false, reason}}` to another
-   protocol version, a robot the mission does not name, or a type other than
-   the mission's; register again when the server token reappears. A manifest
-   `name` other than the ROBOT of the key is refused (`bad_register`).
+## Error codes
 
-### Synchronize
-1. Operator: `op: sync {{robot, through?}}`.
-2. Server: checks the robot is online, offers every skill (by name) with the
-   library's major version, locks the skills, and queries
-   `{Keys.command("ROBOT")}` with `Enqueue{{skills, barriers}}` (`barriers` maps a
-   skill id to its barrier and partner robots' skill ids).
-3. Robot: appends them to its queue, answers `CommandReply{{ids}}`.
-4. Server: marks them `idle_synchronized` (one `EventBatch`) and replies. No
-   answer (out of range, timeout, offline) → the mission is unchanged, and the
-   refusal names the robot and why.
-5. A reply lost on its way back leaves the robot holding skills the mission
-   still shows unsynchronized; the operator synchronizes again. So a robot
-   answers an `Enqueue` of skills it holds already as if it had just queued
-   them (their ids in `ids`, not queued twice), and leaves out of `ids` those
-   it has already run.
+"""
 
-### Unsynchronize, and the race with a starting robot
-1. Operator: `op: unsync {{robot, from_id?}}`: the queued skills from `from_id`
-   to the end.
-2. Server → robot: `Dequeue{{ids}}`.
-3. Robot: removes those it has not started; answers `CommandReply{{ids:
-   removed, kept: started meanwhile, reports}}`. `reports` holds the status
-   changes it made and the server has not acknowledged yet (e.g. the skill it
-   just started): the server applies them **before** the removal, so the
-   started skill is `running` and the others return, in order, to the head of
-   the unsynchronized section. The reply to the operator names the kept ones.
+PROSE_6 = """
+`RegisterReply.code` when not accepted:
 
-### Run, pause, stop, reset
-Server → robot: `Run`, `Pause`, `Stop`, `Reset`. The robot changes its
-execution and reports the status changes (`Report`, numbered per robot). Run
-on a paused robot resumes; after a failure, run continues with the next
-queued skill. Stop returns the active skill to `idle_synchronized` (the next
-run starts it from the beginning). Reset = stop + remove everything queued;
-its reply lists the removed ids, which return to the plan. A robot refuses a
-command with `CommandReply{{ok: false, reason}}` (the operator's refusal is
-`robot_refused` with that reason) or with a `reply_err` whose `ErrorReply`
-`code` reaches the operator.
+"""
 
-### Reports
-Each status change is a `Report{{robot, seq, id, status, info, attempt, at}}`
-with `seq` increasing by one per robot. The robot keeps them in an outbox and
-queries `{Keys.reports("ROBOT")}` with `ReportBatch`; `ReportAck.last_seq` tells
-which it may drop. While out of reach the outbox grows and is flushed on
-return; a report the server already applied is ignored (idempotent). A
-refused report is acknowledged too (listed in `refused`) and raises an alert.
-When the server cannot write its journal (disk full, file locked or deleted)
-it answers the whole batch with a `reply_err` (`journal_failed`) and applies
-none of what it could not journal: the robot keeps its outbox and sends it
-again (operations get the same refusal; an `Alert` of kind `journal` tells
-consoles once, and again when the journal works).
-`at` is when the change happened: the first `running` sets the skill's
-`started_at`, `success` or `failure` its `finished_at`.
+PROSE_7 = f"""
+## A worked trace: add → sync → run → report, one-way delay {D:g} s
 
-**Answer a command before waiting for anything from the server.** The server
-takes a robot's `ReportBatch` and `Register` only once its command in flight
-to that robot is answered: a robot that reports from its command handler and
-waits for the `ReportAck` before replying blocks both until the command times
-out (the operator is told `robot_timeout` although the robot acted). Status
-changes made while handling a command go in `CommandReply.reports`, or are
-sent after the reply.
+A console adds a skill to `lru1` and synchronizes it, then runs the robot;
+the robot is {D:g} s away. Times are the ground's; the robot's messages say
+when they left it (`sent`), {D:g} s earlier. The console's operations return
+at once; the robot gets the enqueue at t = 3 s, answers, and its answer is
+on the ground at t = 5 s (2·D after the command left). Default fields are
+left out below.
 
-### Failure and retry
-A failing skill becomes `failure` and the robot halts its queue. The
-operator decides: `op: retry {{id}}` creates `ID.N` (attempt N, same
-parameters) which the server sends with `Enqueue{{front: true}}`; once
-acknowledged it is queued right after the failed one, which stays in the log.
-`op: run` continues with the next skill; `op: unsync` takes the rest back.
-A skill with `policies.retries: N` is retried by the robot itself: it reports
-`running` again with `attempt` + 1 (never `failure` before the last attempt).
+"""
 
-### Barriers (robot to robot; the server is not in this loop)
-Each skill of a barrier reaches its robot with the partners' robot and skill
-ids. A robot reaching it reports `synchwaiting`, subscribes (with history) to
-the liveliness tokens `{Keys.barrier_ready("BARRIER", "*")}`, **then**
-declares its own token (in this order no robot can miss the last arrival),
-and watches its partners' `{Keys.alive("ROBOT")}` tokens. When every partner's
-ready token is present, it reports `running`. While a partner is offline it
-reports `synchwaiting` again with info "waiting for ROBOT (offline)".
-
-### Map feed (simulator → consoles)
+PROSE_8 = f"""
+## Map feed (simulator → consoles)
 The site as grids cut into `tile` × `tile` cells (`MapMeta`); a tile is
 `base64(zlib(uint8 cells, row-major))`, rows south to north from `y0`,
 columns west to east from `x0`. Layers: `terrain` (0 unknown, 1 free,
 2 slow, 3 impassable) and `coverage` (0 no link, 1..255 link quality).
 Objects (lander, payload boxes, discovered regions, identified stones) ride
-along whole when any changed. Robot poses are not in the feed: they come
-with the robots' telemetry.
+along whole when any changed. Robot poses come with the robots' telemetry.
 1. Subscribe to `{mf.KEY_MAP_DELTA}`, then query `{mf.KEY_MAP_SNAPSHOT}`
    (no reply: no simulator is running; query again when a delta arrives).
 2. Apply buffered deltas whose `seq` is greater than the snapshot's, then
@@ -299,53 +878,70 @@ with the robots' telemetry.
 3. A larger `seq` (a gap) or another `feed` (the simulator restarted): query
    the snapshot again. (`backend.client.mapfollow.MapFeed` does all of this.)
 
-### World knowledge (robot to robot)
-`WorldMessage{{kind: ask|tell, sender, topic, data}}` to
-`{Keys.world("ROBOT")}`; the answer is a `WorldReply{{known, data}}`.
-Only robots (and tools such as `ctl`) query it; the server never does, so a
-robot that shares no knowledge may answer every ask with `known: false`.
+## Appendix: message schemas
 
-## Messages (JSON Schema, generated)
+JSON Schema (generated from the models) of every message and every
+`OpReply.value`, one file each in [protocol/](protocol/):
+
 """
-)
-
-MODELS: list[tuple[str, Any]] = [  # (title, model or union of models)
-    ("Request", p.Request),
-    ("OpReply", p.OpReply),
-    ("ErrorReply", p.ErrorReply),
-    ("StateRequest", p.StateRequest),
-    ("AccountInfo", p.AccountInfo),
-    ("StateSnapshot (mission and library: see `missionctl schema`)", None),
-    ("EventBatch", EventBatch),
-    ("FleetEvent", p.FleetEvent),
-    ("Alert", p.Alert),
-    ("Register", p.Register),
-    ("RegisterReply", p.RegisterReply),
-    ("Report", Report),
-    ("ReportBatch", p.ReportBatch),
-    ("ReportAck", p.ReportAck),
-    ("Command", p.Command),
-    ("CommandReply", p.CommandReply),
-    ("Telemetry", p.Telemetry),
-    ("WorldMessage", p.WorldMessage),
-    ("WorldReply", p.WorldReply),
-    ("Operations (the `op` of a Request)", OperatorOp),
-    ("MapSnapshot", mf.MapSnapshot),
-    ("MapDelta", mf.MapDelta),
-    ("SimStatus", mf.SimStatus),
-]
 
 
 def render() -> str:
-    out = [PROSE]
-    for title, model in MODELS:
-        out.append(f"\n### {title}\n")
-        if model is None:
-            continue
-        schema = TypeAdapter(model).json_schema()
-        out.append("```json\n" + json.dumps(schema, indent=1, sort_keys=False) + "\n```\n")
-    return "".join(out)
+    return "".join(
+        [
+            PROSE_1,
+            _table(("key", "kind", "who declares", "payload"), KEY_SPACE),
+            PROSE_2,
+            _table(("from", "to"), REPORTED_TRANSITIONS),
+            PROSE_3,
+            _table(("field", "rule"), FIELD_RULES),
+            PROSE_4,
+            _table(("mode", "meaning", "next"), MODES),
+            PROSE_5,
+            _table(("code", "from", "meaning"), ERROR_CODES),
+            PROSE_6,
+            _table(("code", "meaning"), REGISTER_CODES),
+            PROSE_7,
+            _trace_text(),
+            PROSE_8,
+            _appendix(),
+        ]
+    )
+
+
+def write(docs: Path) -> list[Path]:
+    """Write protocol.md and protocol/*.json under `docs`; the files that changed."""
+    wanted = {docs / "protocol.md": render()}
+    wanted |= {docs / SCHEMA_DIR / name: text for name, text in schemas().items()}
+    changed = []
+    for path, text in wanted.items():
+        if not path.exists() or path.read_text(encoding="utf-8") != text:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(text, encoding="utf-8")
+            changed.append(path)
+    return changed
+
+
+def stale(docs: Path) -> list[str]:
+    """What differs from what would be written (missing, changed, extra schema files)."""
+    out = []
+    if (docs / "protocol.md").read_text(encoding="utf-8") != render():
+        out.append("protocol.md")
+    want = schemas()
+    have = {f.name for f in (docs / SCHEMA_DIR).glob("*.json")}
+    for name, text in want.items():
+        f = docs / SCHEMA_DIR / name
+        if not f.exists() or f.read_text(encoding="utf-8") != text:
+            out.append(f"{SCHEMA_DIR}/{name}")
+    out += [f"{SCHEMA_DIR}/{n} (not generated)" for n in sorted(have - set(want))]
+    return out
 
 
 if __name__ == "__main__":
-    sys.stdout.write(render())
+    docs = ROOT / "docs"
+    if "--check" in sys.argv[1:]:
+        diff = stale(docs)
+        print("\n".join(diff) or "up to date")
+        sys.exit(1 if diff else 0)
+    for path in write(docs):
+        print(f"wrote {path.relative_to(ROOT)}")

@@ -1,24 +1,103 @@
-"""docs/protocol.md is generated from the protocol models: keep it current."""
+"""docs/protocol.md and docs/protocol/*.json are generated from the protocol
+models: keep them current, and keep what they promise true (every refusal
+code the code can raise is in the table; every operation's reply value fits
+its documented schema)."""
 
+import re
 from pathlib import Path
 
-from backend.protocol.doc import render
+import pytest
+
+from backend.core import ops
+from backend.core.model import Marker, Status
+from backend.core.rules.engine import Engine
+from backend.files.missions import load_mission
+from backend.protocol.doc import ERROR_CODES, render, stale
+from backend.protocol.values import VALUES, check_value
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_protocol_doc_is_up_to_date():
-    doc = Path(__file__).resolve().parents[2] / "docs" / "protocol.md"
-    assert doc.read_text(encoding="utf-8") == render(), (
-        "docs/protocol.md is stale: run `python -m backend.protocol.doc > docs/protocol.md`"
+    assert stale(ROOT / "docs") == [], (
+        "docs/protocol.md or docs/protocol/*.json is stale: run `python -m backend.protocol.doc`"
     )
 
 
-def test_protocol_doc_names_every_key_and_sequence():
+def test_protocol_doc_names_every_key_sequence_and_promise():
     text = render()
     for needle in (
-        "mc/v1/server/op",
-        "mc/v1/robot/ROBOT/cmd",
-        "### Unsynchronize",
+        "mc/v2/server/op",
+        "mc/v2/robot/ROBOT/uplink",
+        "mc/v2/server/downlink/ROBOT",
+        "mc/v2/robot/ROBOT/alive/SESSION",
+        "### The uplink",
+        "### The downlink",
+        "### Sessions and one owner per name",
         "### Barriers",
-        '"Request"',
+        "**Token lifetime**",
+        "## Zenoh settings of a client",
+        "## Error codes",
+        "## A worked trace",
+        "[StateSnapshot.json](protocol/StateSnapshot.json)",
+        "[value-sync.json](protocol/value-sync.json)",
     ):
-        assert needle in text
+        assert needle in text, needle
+
+
+def test_every_refusal_code_is_in_the_table():
+    documented = {code for code, _, _ in ERROR_CODES}
+    raised: set[str] = set()
+    for f in (ROOT / "backend").rglob("*.py"):
+        text = f.read_text(encoding="utf-8")
+        raised |= set(re.findall(r'Refusal\(\s*"([a-z_]+)"', text))
+        raised |= set(re.findall(r'ErrorReply\(\s*code="([a-z_]+)"', text))
+        raised |= set(re.findall(r'_refusal\(\s*"([a-z_]+)"', text))
+    raised |= {"nothing_to_undo", "nothing_to_redo", "journal_failed"}  # built from parts
+    assert raised - documented == set()
+
+
+def test_every_reply_value_fits_its_schema():
+    mission, library = load_mission(ROOT / "missions" / "tutorial.yaml")
+    e = Engine(mission, library)
+    seen: dict[str, dict] = {}
+
+    def do(op, client="c"):
+        applied = e.submit(op, client=client)
+        check_value(op.op, applied.value)
+        seen[op.op] = applied.value
+        return applied
+
+    added = do(ops.AddSkill(robot="lru1", skill="recharge")).value["id"]
+    do(ops.EditSkill(id=added, label="x"))
+    do(ops.MoveSkill(id=added, index=0))
+    do(ops.AddBarrier(ids=[added, "lru2-1"]))
+    do(ops.RemoveBarrier(barrier="b1"))
+    marker = Marker.__args__[0].__args__[0](pose={"x": 1, "y": 1})  # a PoseMarker
+    do(ops.MarkerAdd(name="M", marker=marker))
+    do(ops.MarkerMove(name="M", value={"x": 2, "y": 2, "z": 0, "roll": 0, "pitch": 0, "yaw": 0}))
+    do(ops.MarkerRename(name="M", new_name="N"))
+    do(ops.MarkerDelete(name="N"))
+    do(ops.DeleteSkills(ids=[added]))
+    do(ops.Undo())
+    do(ops.Redo())
+    sync = do(ops.Sync(robot="lru1")).value
+    do(ops.Cancel(command=sync["command"]))
+    sync = do(ops.Sync(robot="lru1", expire_s=60)).value
+    e.submit(
+        ops.Answer(
+            robot="lru1", seq=1, command=sync["seq"], outcome="applied", queued=["lru1-1", "lru1-2"]
+        )
+    )
+    do(ops.Control(op="run", robot="lru1"))
+    e.submit(ops.Report(robot="lru1", seq=2, id="lru1-1", status=Status.RUNNING))
+    do(ops.Control(op="pause", robot="lru1"))
+    do(ops.Control(op="stop", robot="lru1"))
+    do(ops.Unsync(robot="lru1", from_id="lru1-2"))
+    do(ops.Control(op="reset"))
+    e.submit(ops.Report(robot="lru1", seq=3, id="lru1-1", status=Status.FAILURE))
+    do(ops.Retry(id="lru1-1"))
+    missing = set(VALUES) - set(seen) - {"load", "new"}
+    assert missing == set()
+    with pytest.raises(Exception):
+        check_value("sync", {"command": 1})  # a value that does not fit is caught

@@ -1,0 +1,112 @@
+"""What `OpReply.value` holds for each operation (documented in
+docs/protocol.md; a test checks real replies against these models)."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any, Literal
+
+from pydantic import ConfigDict, Field
+
+from backend.core.model import Name, SkillId, Strict
+
+
+class Empty(Strict):
+    """No value: delete, move, edit, unbarrier, marker add/rename/delete, load, new."""
+
+
+class Added(Strict):
+    """add: the new skill's id."""
+
+    id: SkillId
+
+
+class BarrierMade(Strict):
+    """barrier: the new barrier's id."""
+
+    barrier: Name
+
+
+class MarkerMoved(Strict):
+    """marker_move: skills bound to the marker that keep the old value
+    (synchronized already: the robot has them as they were)."""
+
+    stale: list[SkillId]
+
+
+class Queued(Strict):
+    """sync, unsync: the command queued in the robot's uplink. The operation
+    returns here; the robot's answer comes later as events (`command_changed`)."""
+
+    command: int = Field(description="its number, mission-wide")
+    robot: Name
+    seq: int = Field(description="its place in the robot's uplink")
+    state: Literal["queued"]
+    skills: list[SkillId] = Field(description="sync: the skills sent; unsync: those asked back")
+    expires: datetime | None = Field(description="the robot never applies it later")
+
+
+class RetryQueued(Queued):
+    """retry: the command (skills: the failed one and the new attempt) and the
+    new attempt's id; it joins the mission when the robot has it."""
+
+    id: SkillId
+
+
+class ControlQueued(Strict):
+    """run, pause, stop, reset: per robot "queued" or why it does not apply
+    (for one robot, a refusal instead), and the commands queued."""
+
+    robots: dict[Name, str]
+    commands: dict[Name, int]
+
+
+class Cancelled(Strict):
+    """cancel: `cancelled` at once when the command had certainly not left;
+    else `queued`/`sent` with `cancel_requested` (the robot's answer decides)."""
+
+    command: int
+    robot: Name
+    state: Literal["queued", "sent", "cancelled"]
+    cancel_requested: bool = False
+
+
+class Reverted(Strict):
+    """undo / redo: what was undone or redone, plus the value of the operation
+    that reverted it (an undone sync is a cancel: see cancel)."""
+
+    model_config = ConfigDict(extra="allow")
+    undone: str | None = None
+    redone: str | None = None
+
+
+# the operation (`op`) -> the model of its reply's value
+VALUES: dict[str, type[Strict]] = {
+    "add": Added,
+    "delete": Empty,
+    "move": Empty,
+    "edit": Empty,
+    "sync": Queued,
+    "unsync": Queued,
+    "run": ControlQueued,
+    "pause": ControlQueued,
+    "stop": ControlQueued,
+    "reset": ControlQueued,
+    "retry": RetryQueued,
+    "cancel": Cancelled,
+    "barrier": BarrierMade,
+    "unbarrier": Empty,
+    "marker_add": Empty,
+    "marker_move": MarkerMoved,
+    "marker_rename": Empty,
+    "marker_delete": Empty,
+    "load": Empty,
+    "new": Empty,
+    "undo": Reverted,
+    "redo": Reverted,
+}
+
+
+def check_value(op: str, value: dict[str, Any]) -> Strict:
+    """The value of an `op` reply, validated (ValidationError if it does not fit)."""
+    return VALUES[op].model_validate(value)
