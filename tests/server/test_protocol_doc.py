@@ -7,6 +7,7 @@ import re
 from pathlib import Path
 
 import pytest
+from pydantic import ValidationError
 
 from backend.core import ops
 from backend.core.model import Marker, Status
@@ -99,5 +100,5 @@ def test_every_reply_value_fits_its_schema():
     do(ops.Retry(id="lru1-1"))
     missing = set(VALUES) - set(seen) - {"load", "new"}
     assert missing == set()
-    with pytest.raises(Exception):
+    with pytest.raises(ValidationError):
         check_value("sync", {"command": 1})  # a value that does not fit is caught
