@@ -36,10 +36,10 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from backend.protocol.keys import PREFIX as PROTOCOL_PREFIX
-
 FEED_VERSION = 1
-PREFIX = f"{PROTOCOL_PREFIX}/sim"
+# under the protocol's prefix (backend.protocol.keys.PREFIX; spelled out to
+# keep this module self-contained, tests/server/test_protocol_doc.py checks it)
+PREFIX = "mc/v2/sim"
 KEY_MAP_SNAPSHOT = f"{PREFIX}/map/snapshot"
 KEY_MAP_DELTA = f"{PREFIX}/map/delta"
 KEY_STATUS = f"{PREFIX}/status"

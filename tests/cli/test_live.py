@@ -246,10 +246,10 @@ def test_request_id_applies_once(endpoint):
     assert [s["skill"] for s in state(endpoint)["tasks"]["lru2"]].count("recharge") == 2
 
 
-def test_a_timed_out_operation_says_how_to_apply_it_once(endpoint):
-    """A robot slower to answer than --timeout: the operation may still be
-    applied; the message names the --request-id to run it again with, and
-    running it again applies it once."""
+def test_a_distant_robot_never_slows_ctl_and_wait_waits_for_its_answer(endpoint):
+    """A robot 3 s away: the operation returns at once (exit 0, "queued"),
+    --wait waits for the robot's answer, a --wait too short exits 3 with the
+    command still pending (listed by `ctl pending`)."""
     slow = Robots(
         endpoint,
         "lru1:lru_science",
@@ -265,41 +265,26 @@ def test_a_timed_out_operation_says_how_to_apply_it_once(endpoint):
     )
     try:
         until(endpoint, lambda st: st["robots"]["lru1"]["online"], what="lru1 online")
-        r = ctl(
-            endpoint,
-            "--json",
-            "sync",
-            "lru1",
-            "--through",
-            "lru1-1",
-            "--timeout",
-            "1",
-            "--request-id",
-            "slow-1",
-        )
+        t0 = time.monotonic()
+        out = ok(endpoint, "sync", "lru1", "--through", "lru1-1", "--timeout", "2").stdout
+        assert time.monotonic() - t0 < 5  # a ctl process, not the robot's 6 s round trip
+        assert out.startswith("queued for lru1, command 1: sync lru1-1 at revision"), out
+        r = ctl(endpoint, "--json", "sync", "lru1", "--wait", "1")
         assert r.returncode == 3, r
         obj = json.loads(r.stdout)
-        assert obj["ok"] is False and obj["code"] == "timeout"
-        assert obj["request_id"] == "slow-1" and obj["maybe_applied"] is True
-        assert (
-            "run the same command again with --request-id slow-1 --client-id ctl-test: "
-            "it is applied once" in r.stderr
-        ), r.stderr
-        assert "ctl state" in r.stderr and "Traceback" not in r.stderr
-        again = ok(
-            endpoint,
-            "sync",
-            "lru1",
-            "--through",
-            "lru1-1",
-            "--request-id",
-            "slow-1",
-            "--timeout",
-            "20",
-        )
-        assert again.stdout.startswith("synchronized lru1-1 to lru1"), again.stdout
-        st = state(endpoint)
-        assert [s["status"] for s in st["tasks"]["lru1"]] == ["idle_synchronized", "idle"]
+        assert obj["ok"] is False and obj["code"] == "pending"
+        assert obj["value"]["command"] == 2 and obj["answers"][0]["id"] == 2
+        assert "stays pending" in r.stderr and "ctl cancel" in r.stderr
+        listed = ok(endpoint, "pending").stdout
+        assert "command 2 to lru1 (seq 2): sync lru1-2" in listed, listed
+        r = ok(endpoint, "run", "lru1", "--wait", "20")
+        lines = r.stdout.splitlines()
+        assert lines[0].startswith("queued for lru1, command 3: run"), lines
+        assert re.match(r"command 3 applied by lru1 after [0-9.]+ s", lines[1]), lines
+        st = until(endpoint, lambda st: statuses(st, "lru1") == ["success", "success"], what="run")
+        assert st["uplink"]["lru1"][0]["state"] == "acked"
+        assert st["robots"]["lru1"]["link"]["delay_s"] >= 2.5  # the robot's 3 s, estimated
+        assert ok(endpoint, "pending").stdout.strip() == "no pending commands"
     finally:
         slow.stop()
 
@@ -424,14 +409,23 @@ def test_refusals_name_robot_and_skill(endpoint):
     assert state(endpoint)["revision"] == before  # nothing changed
 
 
-def test_sync_without_robot_agent_is_refused(endpoint):
-    r = refused(endpoint, "sync", "lru1")
-    assert "lru1" in r.stderr
-    assert "not connected" in r.stderr or "offline" in r.stderr
+def test_sync_without_robot_agent_is_queued_and_can_be_cancelled(endpoint):
+    """Protocol 2: a robot not connected gets its commands when it comes."""
+    out = ok(endpoint, "sync", "lru1").stdout
+    assert out.startswith("queued for lru1, command 1: sync lru1-1, lru1-2"), out
     st = state(endpoint)
-    assert all(s["status"] == "idle" for s in st["tasks"]["lru1"])  # nothing changed
-    r = ctl(endpoint, "--json", "sync", "lru2", "--through", "lru2-1")
-    assert r.returncode == 1 and json.loads(r.stdout)["code"] == "robot_offline"
+    assert all(s["status"] == "idle" for s in st["tasks"]["lru1"])  # not on the robot
+    assert [s["uplink"]["command"] for s in st["tasks"]["lru1"]] == [1, 1]
+    text = ok(endpoint, "state", "lru1").stdout
+    assert "(uplinking: command 1, queued" in text and "pending: command 1 to lru1" in text
+    refused(endpoint, "edit", "lru1-1", "--label", "x")  # uplinking: locked
+    out = ok(endpoint, "cancel", "1").stdout
+    assert out.startswith("cancelled command 1 to lru1"), out
+    r = refused(endpoint, "cancel", "1")
+    assert "cancelled already" in r.stderr
+    r = ctl(endpoint, "--json", "cancel", "99")
+    assert r.returncode == 1 and json.loads(r.stdout)["code"] == "unknown_command"
+    ok(endpoint, "edit", "lru1-1", "--label", "editable again")
 
 
 def test_bad_usage_exits_2_and_sends_nothing(endpoint):
@@ -637,8 +631,9 @@ def test_robot_operations(endpoint, robots):
     assert "lru1 (lru_science)" in text and "online since" in text and "modules: base 1.0.0" in text
 
     # sync through a skill, then the rest
-    out = ok(endpoint, "sync", "lru1", "--through", "lru1-1").stdout
-    assert out.startswith("synchronized lru1-1 to lru1 at revision")
+    out = ok(endpoint, "sync", "lru1", "--through", "lru1-1", "--wait", "20").stdout
+    assert out.startswith("queued for lru1, command 1: sync lru1-1 at revision"), out
+    assert "command 1 applied by lru1 after" in out and out.rstrip().endswith(": lru1-1")
     assert statuses(state(endpoint), "lru1") == ["idle_synchronized", "idle"]
     # moving a marker: the idle skill follows, the queued one is named in a note
     out = ok(endpoint, "marker", "move", "POI-A", "--pose", "11,5").stdout.splitlines()
@@ -653,19 +648,19 @@ def test_robot_operations(endpoint, robots):
     )
     r = ok_json(endpoint, "marker", "move", "POI-A", "--pose", "10,5")
     assert r["value"]["stale"] == ["lru1-1"] and len(r["notes"]) == 1
-    r = ok_json(endpoint, "sync", "lru1")
-    assert r["value"]["synchronized"] == ["lru1-2"]
+    r = ok_json(endpoint, "sync", "lru1", "--wait", "20")
+    assert r["value"]["skills"] == ["lru1-2"] and r["answers"][0]["done"] == ["lru1-2"]
     refused(endpoint, "edit", "lru1-1", "--label", "x")  # not idle any more
 
     # unsync from a queued skill
-    out = ok(endpoint, "unsync", "lru1", "--from", "lru1-2").stdout
-    assert out.startswith("unsynchronized lru1-2 from lru1")
+    out = ok(endpoint, "unsync", "lru1", "--from", "lru1-2", "--wait", "20").stdout
+    assert out.startswith("queued for lru1, command 3: unsync lru1-2"), out
     assert statuses(state(endpoint), "lru1") == ["idle_synchronized", "idle"]
 
     # run: everything synchronized succeeds
     ok(endpoint, "sync", "lru1")
     out = ok(endpoint, "run", "lru1").stdout
-    assert out.startswith("run sent to lru1")
+    assert out.startswith("queued for lru1, command 5: run"), out
     until(endpoint, lambda st: statuses(st, "lru1") == ["success", "success"], what="lru1 done")
 
     # a failure, then retry: a new attempt right after it
@@ -677,8 +672,8 @@ def test_robot_operations(endpoint, robots):
     assert (
         "✗" in ok(endpoint, "state", "lru1").stdout or "x" in ok(endpoint, "state", "lru1").stdout
     )
-    out = ok(endpoint, "retry", f).stdout
-    m = re.match(rf"retrying {f} as ({re.escape(f)}\.2) at revision", out)
+    out = ok(endpoint, "retry", f, "--wait", "20").stdout
+    m = re.match(rf"queued for lru1, command \d+: retry {f} as ({re.escape(f)}\.2)", out)
     assert m, out
     st = state(endpoint)
     assert ids(st, "lru1")[-2:] == [f, m.group(1)]
@@ -691,7 +686,7 @@ def test_robot_operations(endpoint, robots):
     refused(endpoint, "pause", "lru2")  # nothing running
     h = ok_json(endpoint, "add", "lru2", "recharge", "--label", "hold", "--at", "0")["value"]["id"]
     ok(endpoint, "sync", "lru2", "--through", h)
-    ok(endpoint, "run", "lru2")
+    ok(endpoint, "run", "lru2", "--expire", "10m")
     until(endpoint, lambda st: skill(st, h)["status"] == "running", what="running")
     ok(endpoint, "pause", "lru2")
     until(endpoint, lambda st: skill(st, h)["status"] == "paused", what="paused")
@@ -699,8 +694,8 @@ def test_robot_operations(endpoint, robots):
     until(endpoint, lambda st: skill(st, h)["status"] == "running", what="resumed")
     ok(endpoint, "stop", "lru2")
     until(endpoint, lambda st: skill(st, h)["status"] == "idle_synchronized", what="stopped")
-    r = ok_json(endpoint, "reset", "--all")
-    assert r["value"]["robots"].get("lru2") == "ok"
+    r = ok_json(endpoint, "reset", "--all", "--wait", "20")
+    assert r["value"]["robots"].get("lru2") == "queued" and r["ok"] is True
     st = until(endpoint, lambda st: skill(st, h)["status"] == "idle", what="reset")
     assert statuses(st, "lru2") == ["idle", "idle", "idle"]
 
@@ -708,9 +703,13 @@ def test_robot_operations(endpoint, robots):
 def test_robot_going_away_is_reported(endpoint, robots):
     robots.stop()
     until(endpoint, lambda st: not st["robots"]["lru1"]["online"], what="lru1 offline")
-    r = refused(endpoint, "sync", "lru1")
-    assert "lru1" in r.stderr and "not connected" in r.stderr
     assert "offline since" in ok(endpoint, "state").stdout
+    # a command for it waits; one that expires first is settled so, its skills released
+    r = ctl(endpoint, "sync", "lru1", "--expire", "1s", "--wait", "10")
+    assert r.returncode == 1, r
+    assert "expires" in r.stdout and "command 1 expired" in r.stderr, r
+    assert "before it could be sent (lru1 was offline" in r.stderr
+    assert statuses(state(endpoint), "lru1") == ["idle", "idle"]
 
 
 def test_many_invocations_exit_cleanly(endpoint):

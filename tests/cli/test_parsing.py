@@ -529,9 +529,11 @@ def test_help_documents_everything():
 
 
 def _fake_client(tutorial):
-    from types import SimpleNamespace
+    from datetime import UTC, datetime, timedelta
 
+    from backend.client.client import MissionClient
     from backend.core.model import Status
+    from backend.core.rules.engine import Engine
     from backend.protocol.messages import RobotInfo
 
     mission, library = tutorial
@@ -540,16 +542,20 @@ def _fake_client(tutorial):
     m.tasks["lru1"][1].status = Status.RUNNING
     m.tasks["lru1"][1].status_info = "imaging"
     m.tasks["lru2"][0].attempt = 2
-    robots = {"lru1": RobotInfo(name="lru1", online=True), "lru2": RobotInfo(name="lru2")}
-    return SimpleNamespace(
-        mission=m,
-        library=library,
-        robots=robots,
-        telemetry={},
-        endpoints=["tcp/127.0.0.1:1"],
-        server_id="s1",
-        revision=m.revision,
-    )
+    now = datetime.now(UTC)
+    robots = {
+        "lru1": RobotInfo(name="lru1", online=True, heard=now - timedelta(seconds=3), delay_s=2.0),
+        "lru2": RobotInfo(name="lru2"),
+    }
+    # a sync of lru2's idle skills, sent 12 s ago, not answered yet
+    e = Engine(m, library)
+    e.clock = lambda: now - timedelta(seconds=14)
+    cid = e.submit(ops.Sync(robot="lru2", expire_s=3600)).value["command"]
+    e.submit(ops.UplinkSent(robot="lru2", ids=[cid], at=now - timedelta(seconds=12)))
+    client = MissionClient("tcp/127.0.0.1:1")  # never connected: filled in here
+    client.mission, client.library, client.robots = e.mission, library, robots
+    client.server_id = "s1"
+    return client
 
 
 def test_state_text_and_json_without_server(tutorial):
@@ -571,6 +577,27 @@ def test_state_text_and_json_without_server(tutorial):
         and data["tasks"]["lru1"][1]["status_info"] == "imaging"
     )
     assert data["robots"]["lru1"]["online"] is True and data["robots"]["lru2"]["online"] is False
+    # the link: delay, heard, pending commands with age and expiry, uplinking skills
+    assert "lru1 (lru_science) — online; delay 2.0 s, heard 3 s ago" in text
+    assert "lru2-1" in text and "(uplinking: command 1, sent 12 s ago)" in text
+    assert "pending: command 1 to lru2 (seq 1): sync lru2-1, lru2-2: sent 12 s ago" in text
+    assert "[expires " in text
+    link = data["robots"]["lru1"]["link"]
+    assert link["delay_s"] == 2.0 and 2 < link["heard_age_s"] < 10 and link["stale"] is False
+    assert data["robots"]["lru2"]["link"]["pending"] == [1]
+    assert data["tasks"]["lru2"][0]["uplink"] == {"command": 1, "op": "sync", "state": "sent"}
+    [cmd] = data["uplink"]["lru2"]
+    assert cmd["state"] == "sent" and 11 < cmd["sent_age_s"] < 20 and cmd["expires"]
+
+
+def test_pending_lists_commands_with_age_and_expiry(tutorial):
+    from backend.cli.ctl.render import pending_json, pending_text
+
+    client = _fake_client(tutorial)
+    assert pending_text(client).startswith("command 1 to lru2 (seq 1): sync lru2-1, lru2-2")
+    assert pending_text(client, ["lru1"]) == "no pending commands for lru1"
+    [c] = pending_json(client)["pending"]
+    assert (c["id"], c["robot"], c["state"]) == (1, "lru2", "sent")
 
 
 def test_describe_lines():
@@ -587,15 +614,37 @@ def test_describe_lines():
     dup = describe(add, OpReply(revision=12, value={"id": "lru1-7"}, duplicate=True), 12, None)
     assert dup.endswith("(this request had been applied already)")
     run_all = ops.Control(op="run")
+    value = {
+        "robots": {"lru1": "queued", "lru2": "lru2 has nothing to run"},
+        "commands": {"lru1": 4},
+    }
     assert (
-        describe(
-            run_all,
-            OpReply(revision=3, value={"robots": {"lru1": "ok", "lru2": "lru2 is busy"}}),
-            3,
-            None,
-        )
-        == "run sent to lru1 at revision 3"
+        describe(run_all, OpReply(revision=3, value=value), 2, None)
+        == "run queued for lru1 (command 4) at revision 3"
     )
+    sync = ops.Sync(robot="lru1")
+    value = {
+        "command": 5,
+        "robot": "lru1",
+        "seq": 2,
+        "state": "queued",
+        "skills": ["a", "b"],
+        "expires": None,
+    }
+    assert (
+        describe(sync, OpReply(revision=4, value=value), 3, None)
+        == "queued for lru1, command 5: sync a, b at revision 4"
+    )
+    cancel = describe(
+        ops.Cancel(command=5),
+        OpReply(
+            revision=5,
+            value={"command": 5, "robot": "lru1", "state": "sent", "cancel_requested": True},
+        ),
+        4,
+        None,
+    )
+    assert cancel.startswith("asked lru1 to cancel command 5 (it was sent")
 
 
 def test_watch_lines_say_the_status_and_what_an_edit_changed():

@@ -263,7 +263,7 @@ PROMISES = [
     Promise(
         "retry {flaky}",
         comment=r"^(?P<retried>\S+) \(attempt (?P<attempt>\d+)\) succeeds, then both meet$",
-        printed=r"^retrying {flaky} as {retried} ",
+        printed=r"^queued for lru1, command \d+: retry {flaky} as {retried} ",
         condition=retried_then_met,
     ),
     Promise(
@@ -278,13 +278,13 @@ PROMISES = [
     Promise(
         "sync {robot}",
         comment=r'^(?P<robot>lru2) is still in run mode: it starts "(?P<hold>[^"]+)" at once$',
-        printed=r"^synchronized .* to {robot} ",
+        printed=r"^queued for {robot}, command \d+: sync ",
         condition=hold_started,
     ),
     Promise(
         "unsync {robot}",
         comment=r'^"(?P<later>[^"]+)" comes back to the plan; "(?P<hold>[^"]+)" stays$',
-        printed=r"^unsynchronized .* from {robot} ",
+        printed=r"^queued for {robot}, command \d+: unsync ",
         condition=later_back_hold_stays,
     ),
 ]

@@ -19,8 +19,7 @@ from backend.core.model import Pose
 from backend.core.ops import AddSkill, Report
 from backend.protocol.keys import Keys
 from backend.protocol.messages import (
-    ReportAck,
-    ReportBatch,
+    Downlink,
     Request,
     StateSnapshot,
     Telemetry,
@@ -158,17 +157,21 @@ def test_robot_cannot_report_or_register_for_another_robot_nor_change_the_missio
         raw_session(ep, accounts.login("ops")) as ops,
     ):
         before = _revision(ops)
-        empty = dumps(ReportBatch(reports=[]))
-        # control: its own report key answers
-        ((ok, raw),) = _replies(rover1, Keys.reports("lru1"), empty)
-        assert ok and ReportAck.model_validate_json(raw).last_seq == 0
+        def downlink(robot: str, *reports: Report) -> bytes:
+            return dumps(
+                Downlink(robot=robot, session="s1", messages=list(reports), sent=datetime.now(UTC))
+            )
+
+        # control: its own downlink key answers (it has not registered: the server says so)
+        ((ok, raw),) = _replies(rover1, Keys.downlink("lru1"), downlink("lru1"))
+        assert not ok and b"not_registered" in raw
         # another robot's keys: the router drops the query
         report = Report(robot="lru2", seq=1, id="lru2-1", status="success")
-        assert _replies(rover1, Keys.reports("lru2"), dumps(ReportBatch(reports=[report]))) == []
+        assert _replies(rover1, Keys.downlink("lru2"), downlink("lru2", report)) == []
         assert _replies(rover1, Keys.register("lru2"), b"{}") == []
         # its own key carrying another robot's report: the server refuses it
-        ((ok, raw),) = _replies(rover1, Keys.reports("lru1"), dumps(ReportBatch(reports=[report])))
-        assert not ok and b"lru1 cannot report for lru2" in raw
+        ((ok, raw),) = _replies(rover1, Keys.downlink("lru1"), downlink("lru1", report))
+        assert not ok and b"lru1 cannot send messages of lru2" in raw
         # operations and the state are not a robot's business
         for key in (Keys.OP, Keys.op_as("rover1"), Keys.op_as("ops"), Keys.STATE):
             assert _replies(rover1, key, _add()) == [], key

@@ -46,6 +46,13 @@ def test_protocol_doc_names_every_key_sequence_and_promise():
         assert needle in text, needle
 
 
+def test_the_map_feed_is_under_the_protocols_prefix():
+    from backend.protocol import mapfeed
+    from backend.protocol.keys import PREFIX
+
+    assert mapfeed.PREFIX == f"{PREFIX}/sim"
+
+
 def test_every_refusal_code_is_in_the_table():
     documented = {code for code, _, _ in ERROR_CODES}
     raised: set[str] = set()

@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 
 from backend import transport
-from backend.client.client import OperationRefused
 from backend.client.events import ClientEvent, TelemetryReceived
 from backend.core.ops import AddSkill, Control, EditSkill, Sync
 from backend.protocol import mapfeed as mf
@@ -218,18 +217,22 @@ async def test_robot_out_of_coverage_cannot_be_reached_and_reports_arrive_after_
         await client.submit(Sync(robot="lru1", through=back))
         await client.submit(Control(op="run", robot="lru1"))
         await watch.until(lambda s: not s.robots["lru1"].in_range, 30, "lru1 out of range")
-        with pytest.raises(OperationRefused) as exc:
-            await client.submit(Sync(robot="lru1", through="lru1-1"))
-        assert "out of communication range" in str(exc.value) and "lru1" in str(exc.value)
-        assert "lru1: lru1" not in str(exc.value)  # the robot is named once
-        assert status_of(client.mission, "lru1-1") == "idle"  # nothing changed
+        # protocol 2: the operator is not refused; the command waits in lru1's
+        # uplink (its skill "uplinking") until lru1 can hear the ground again
+        queued = await client.submit(Sync(robot="lru1", through="lru1-1"))
+        assert queued.value["state"] == "queued"
+        assert status_of(client.mission, "lru1-1") == "idle"  # not on the robot yet
         assert status_of(client.mission, back) == "idle_synchronized"  # its reports wait aboard
-        with pytest.raises(OperationRefused, match="out of communication range"):
-            await client.submit(Control(op="pause", robot="lru1"))
         await watch.until(lambda s: s.robots["lru1"].in_range, 30, "lru1 back in range")
         m = await client.wait_for(lambda m: status_of(m, back) in ("success", "failure"), 30)
         assert [status_of(m, i) for i in (out, survey, back)] == ["success", "success", "success"]
-        assert m.report_seqs["lru1"] == 6  # running + success of each: nothing lost, nothing twice
+        done = await client.wait_command(queued.value["command"], 30)  # delivered on return
+        assert done.state.value == "acked" and done.done == ["lru1-1"]
+        # 3 answers (sync, run, the sync sent on return) + running and success of
+        # each skill at least, in one sequence (lru1, still in run mode, may
+        # start lru1-1 at once)
+        m = client.mission
+        assert m.report_seqs["lru1"] >= 9 and status_of(m, "lru1-1") != "idle"
         # what it mapped out there reached the ground view once it was back
         snap = mf.MapSnapshot.model_validate_json(
             await transport.query(client.session, mf.KEY_MAP_SNAPSHOT, b"")
@@ -238,8 +241,6 @@ async def test_robot_out_of_coverage_cannot_be_reached_and_reports_arrive_after_
         mirror.apply_snapshot(snap)
         cell = mirror.cell_of(88.0, 0.0)
         assert cell is not None and mirror.layers["terrain"][cell] != mf.T_UNKNOWN
-        # back in range: the operator can synchronize again
-        await client.submit(Sync(robot="lru1", through="lru1-1"))
     finally:
         watch.close()
         await client.close()
@@ -356,8 +357,10 @@ async def test_link_delay_applies_between_ground_and_robots(stack: Stack) -> Non
     try:
         loop = asyncio.get_running_loop()
         t0 = loop.time()
-        await client.submit(Sync(robot="lander"))  # a command to the robot: one way delayed
-        assert loop.time() - t0 >= 0.4
+        reply = await client.submit(Sync(robot="lander"))  # queued: the operator never waits
+        assert loop.time() - t0 < 0.4
+        await client.wait_command(reply.value["command"], 5)  # the robot's answer: there and back
+        assert loop.time() - t0 >= 0.8
         await client.wait_for(lambda m: status_of(m, "lander-1") == "idle_synchronized", 5)
         t0 = loop.time()
         await client.submit(Control(op="run", robot="lander"))
