@@ -157,6 +157,7 @@ def test_robot_cannot_report_or_register_for_another_robot_nor_change_the_missio
         raw_session(ep, accounts.login("ops")) as ops,
     ):
         before = _revision(ops)
+
         def downlink(robot: str, *reports: Report) -> bytes:
             return dumps(
                 Downlink(robot=robot, session="s1", messages=list(reports), sent=datetime.now(UTC))
