@@ -465,9 +465,7 @@ class MissionScreen(Screen):
             f"sync {robot} through {sid}",
             robot=robot,
             skill=sid,
-            on_ok=lambda r: self.say(
-                f"{robot}: synchronized {', '.join(r.value.get('synchronized', []))}", "ok"
-            ),
+            on_ok=lambda r: self.say(_queued(robot, "sync", r.value), "ok"),
         )
 
     def action_unsync(self) -> None:
@@ -475,20 +473,12 @@ class MissionScreen(Screen):
         if robot is None or sid is None:
             return
 
-        def ok(r: Any) -> None:
-            back = r.value.get("unsynchronized", [])
-            kept = r.value.get("kept", [])
-            msg = f"{robot}: took back {', '.join(back) or 'nothing'}"
-            if kept:
-                msg += f"; {', '.join(kept)} had already started and stays on the robot"
-            self.say(msg, "warning" if kept else "ok")
-
         self.submit(
             Unsync(robot=robot, from_id=sid),
             f"unsync {robot} from {sid}",
             robot=robot,
             skill=sid,
-            on_ok=ok,
+            on_ok=lambda r: self.say(_queued(robot, "unsync", r.value), "ok"),
         )
 
     def action_mark(self) -> None:
@@ -675,3 +665,10 @@ def save_with_library(mission: Any, library: Any, path: Path) -> str:
     )
     save_mission(mission, path, library_file=beside)
     return f"its skill library written to {beside.name}"
+
+
+def _queued(robot: str, what: str, value: dict[str, Any]) -> str:
+    """Protocol 2: the operation returns once its command is queued for the
+    robot; the skills change when the robot answers."""
+    skills = ", ".join(value.get("skills", []))
+    return f"{robot}: {what} queued (command {value.get('command')}): {skills}"

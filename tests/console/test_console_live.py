@@ -126,7 +126,7 @@ async def test_unsync_takes_queued_skills_back(live):
         )
         await wait_until(
             pilot,
-            lambda: "took back lru2-1, lru2-2" in app.mission_screen.message,
+            lambda: "unsync queued (command 2): lru2-1, lru2-2" in app.mission_screen.message,
             SLOW,
             "status line",
         )
@@ -541,7 +541,7 @@ async def test_workflow_injected_failure_raises_an_alert_that_is_acknowledged(li
         assert app.bells == bells + 1  # one bell for one failure
         assert "⚠ 1 alert (F6)" in screen_text(app)
         # the log names who synchronized: this console's user and client id
-        sync = [e for e in app.event_log.entries if e.op == "sync_ack"]
+        sync = [e for e in app.event_log.entries if e.op == "sync"]  # queued by ada
         assert sync and sync[-1].user == "ada" and sync[-1].client == app.bridge.client.client_id
         assert any(e.kind == "failure" and e.skill == "lru1-1" for e in app.event_log.entries)
         await pilot.press("f6")

@@ -345,10 +345,11 @@ def test_the_tls_accounts_walkthrough_works_as_written(tmp_path, background):
     before = json.loads(r.stdout)
     robot = next(name for name, tasks in before["tasks"].items() if tasks)
     r = ctl(
-        operator_cmd, "sync", robot
+        operator_cmd, "sync", robot, "--wait", "30"
     )  # sends the robot its skills: the server reaches it under its account
     assert r.returncode == 0, r.stderr
-    assert r.stdout.startswith(f"synchronized {robot}-"), r.stdout
+    assert r.stdout.startswith(f"queued for {robot}, command 1: sync {robot}-"), r.stdout
+    assert f"command 1 applied by {robot} after" in r.stdout, r.stdout
 
     # Step 7, the observer: reads, and every change is refused with the doc's words.
     r = ctl(observer_cmd, "state", "--json")
