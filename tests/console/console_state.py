@@ -16,7 +16,7 @@ from backend.files.missions import load_mission
 from backend.protocol.messages import ErrorReply, OpReply, RobotInfo, Telemetry
 
 ROOT = Path(__file__).resolve().parents[2]
-MARS = ROOT / "missions" / "mars_sample_return.yaml"
+MARS = ROOT / "tests" / "data" / "mars_sample_return_v1.yaml"
 TUTORIAL = ROOT / "missions" / "tutorial.yaml"
 DATA = Path(__file__).resolve().parent / "data"
 T0 = datetime(2026, 3, 14, 10, 42, 7, tzinfo=UTC)

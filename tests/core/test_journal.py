@@ -43,7 +43,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from crash_worker import OpGenerator, mission_problems  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
-MISSION_FILE = ROOT / "missions" / "mars_sample_return.yaml"
+MISSION_FILE = ROOT / "tests" / "data" / "mars_sample_return_v1.yaml"
 T0 = datetime(2030, 7, 1, 8, 0, tzinfo=UTC)
 
 
