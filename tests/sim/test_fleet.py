@@ -173,7 +173,7 @@ async def test_battery_runs_out_on_a_long_drive_and_recharge_restores_it(
         found = re.search(r"battery empty after (\d+) m of (\d+) m", s.status_info)
         assert found and "recharge at the lander" in s.status_info, s.status_info
         assert 15 <= int(found.group(1)) < int(found.group(2))
-        st = await watch.query()
+        st = await watch.truth()
         assert st.robots["lru1"].battery == pytest.approx(0.05, abs=0.005)
         assert not st.robots["lru1"].docked
         # the operator decides: a recharge first
@@ -182,7 +182,7 @@ async def test_battery_runs_out_on_a_long_drive_and_recharge_restores_it(
         await client.submit(Control(op="run", robot="lru1"))
         await client.wait_for(lambda m: status_of(m, rc) in ("success", "failure"), 30)
         assert status_of(client.mission, rc) == "success", skill(client.mission, rc).status_info
-        st = await watch.query()
+        st = await watch.truth()
         assert st.robots["lru1"].battery >= 0.95 and st.robots["lru1"].docked
     finally:
         watch.close()
@@ -261,7 +261,7 @@ async def test_drone_flight_longer_than_its_battery_fails_safely_and_landing_rec
         assert s.status.value == "failure" and "refused before the flight" in s.status_info, (
             s.status_info
         )
-        st = await watch.query()
+        st = await watch.truth()
         assert st.robots["ardea"].airborne  # still hovering safely near the lander
         assert st.robots["ardea"].battery > 0.2
         land = await add(client, "ardea", "land", {"where": "lander_pad"}, at=0)
@@ -297,14 +297,14 @@ async def test_pause_stop_and_run_restarts_the_skill(stack: Stack) -> None:
         total_first = _total_metres(client.telemetry["lru1"].info)
         await client.submit(Control(op="pause", robot="lru1"))
         await client.wait_for(lambda m: status_of(m, drive) == "paused", 10)
-        paused_at = (await watch.query()).robots["lru1"]
+        paused_at = (await watch.truth()).robots["lru1"]
         # several telemetry samples later it has not moved
         seen = await _telemetry_samples(client, "lru1", 4)  # the first may have been on its way
         assert all(
             abs(t.pose.x - paused_at.x) < 0.01 and abs(t.pose.y - paused_at.y) < 0.01
             for t in seen[1:]
         )
-        assert (await watch.query()).robots["lru1"].odometer_m == paused_at.odometer_m
+        assert (await watch.truth()).robots["lru1"].odometer_m == paused_at.odometer_m
         await client.submit(Control(op="run", robot="lru1"))  # resume
         await client.wait_for(lambda m: status_of(m, drive) == "running", 10)
         await client.wait_for(telemetry_progress(0.5), 20)
@@ -323,7 +323,7 @@ async def test_pause_stop_and_run_restarts_the_skill(stack: Stack) -> None:
 
         await client.wait_for(restarted, 10)
         await client.wait_for(lambda m: status_of(m, drive) == "success", 30)
-        st = await watch.query()
+        st = await watch.truth()
         assert abs(st.robots["lru1"].x + 50.0) < 1.0 and abs(st.robots["lru1"].y + 30.0) < 1.0
     finally:
         watch.close()
