@@ -193,6 +193,7 @@ class SimRobot:
     sim_seconds: float = 0.0  # robot time stepped by skills
     result: str = ""  # the outcome of its last skill (reported with its state)
     paused_s: float = 0.0  # sim seconds its skills spent paused (the fleet counts them)
+    passed_coverage: bool = False  # moved through coverage since the last uplink (see pump)
     # uplink to the ground: what waits for coverage, and what is on its way
     outbox: list[Callable[[], None]] = field(default_factory=list)
     in_flight: list[tuple[float, Callable[[], None]]] = field(default_factory=list)
@@ -522,7 +523,9 @@ class World:
         `delay` in wall seconds. True if anything arrived."""
         arrived = False
         for robot in self.robots.values():
-            if self.in_range(robot):
+            # a robot that crossed covered ground between two pumps sent from there
+            passed, robot.passed_coverage = robot.passed_coverage, False
+            if self.in_range(robot) or passed:
                 assert robot.pending_cells is not None
                 if robot.pending_cells.any():
                     cells = np.flatnonzero(robot.pending_cells)

@@ -79,10 +79,20 @@ class SkillBase:
         return self.host.dt
 
     async def tick(self, ctx: SkillContext, dt: float | None = None) -> float:
-        """Let `dt` sim seconds pass (pause/stop aware), on the fleet's clock: a robot
-        that fell behind it (a busy machine) catches up instead of drifting behind."""
+        """Let `dt` sim seconds pass (pause/stop aware)."""
         dt = self.dt if dt is None else dt
-        r, now = self.robot, self.world.now()
+        await ctx.sleep(self._wait(ctx, dt))
+        self.robot.sim_seconds += dt
+        self.host.robot_seconds += dt
+        return dt
+
+    def _wait(self, ctx: SkillContext, dt: float) -> float:
+        """Sim seconds to sleep for a step of `dt`: steps keep to the fleet's clock, so a
+        robot that fell behind it (a busy machine) catches up instead of drifting."""
+        r, w = self.robot, self.world
+        if w.clock_source is None:  # no running clock (a test's host): just wait
+            return dt
+        now = w.now()
         if self._due is None or self._ctx is not ctx:
             self._due, self._ctx = now, ctx  # a new skill run starts on the clock
         else:
@@ -91,10 +101,7 @@ class SkillBase:
                 self._due = now
         self._paused_mark = r.paused_s
         self._due += dt
-        await ctx.sleep(max(0.0, self._due - now))
-        self.robot.sim_seconds += dt
-        self.host.robot_seconds += dt
-        return dt
+        return max(0.0, self._due - now)
 
     def fail(self, reason: str) -> SkillFailed:
         """The failure to raise, its reason kept in the referee's log."""
@@ -287,6 +294,8 @@ class SkillBase:
             r.yaw = path.heading
             r.odometer += moved
         self.world.reveal(r, leg.sense)
+        if self.world.in_range(r):
+            r.passed_coverage = True  # its news goes out at the next uplink
         if leg.discover:
             for name in self.world.discover(r, leg.sense):
                 self.host.note(r, f"found {name}")

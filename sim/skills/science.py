@@ -268,6 +268,8 @@ class ScienceSkills(SkillBase):
         other = self.world.robots.get(partner)
         if other is None or not other.has(need) or other.activity != "identify_stone":
             return False
+        if not self.world.can_talk(self.robot, other):
+            return False  # together means talking: through the network (or direct radio)
         rng = self.world.spec.scoring.collab_range
         return math.hypot(other.x - tx, other.y - ty) <= rng and self.dist(tx, ty) <= rng
 

@@ -32,8 +32,9 @@ async def add(
 
 
 async def test_scripted_operator_plays_the_pilot_mission(stack: Stack) -> None:
-    """Explore until an RSS is found, identify a stone with LRU1+LRU2 at a
-    barrier, pick it, bring it to the lander: the score reaches 1.0."""
+    """The opening mission: explore until an RSS is found, identify a stone with
+    LRU1+LRU2 at a barrier, pick it, bring it to the lander: the score reaches the
+    region's top score (RSS-A at POI-A, a poor region near the lander: 0.5)."""
     client, watch = await connect(stack, speed=100, seed=1)
     endpoint = stack.endpoint
     try:
@@ -97,19 +98,24 @@ async def test_scripted_operator_plays_the_pilot_mission(stack: Stack) -> None:
         assert identified and all(i.startswith("identified RSS-A-s") for i in identified), (
             identified
         )
-        status = await watch.until(lambda s: s.score >= 1.0, 10, "the score")
-        # deterministic for seed 1: the stone nearest POI-A in RSS-A, top score 1.0
-        assert [(d.stone, d.score, d.by) for d in status.delivered] == [("RSS-A-s1", 1.0, "lru2")]
-        assert status.score == pytest.approx(1.0)
+        status = await watch.until(lambda s: s.score >= 0.5, 10, "the score")
+        # deterministic for seed 1: the stone nearest POI-A in RSS-A, top score 0.5
+        assert [(d.stone, d.score, d.by) for d in status.delivered] == [("RSS-A-s1", 0.5, "lru2")]
+        assert status.score == pytest.approx(0.5)
+        # the results tell what happened
+        results = {s.skill: s.status_info for t in m.tasks.values() for s in t}
+        assert results["pick_stone"].startswith("picked RSS-A-s1 of RSS-A (score 0.5)")
+        assert results["drop_stone"] == "delivered RSS-A-s1 of RSS-A +0.5: +0.5; score 0.5"
         # LRU2 asked LRU1 where the stone is and got the answer; it told the others about the boxes
-        assert status.exchanges["asks"] >= 2 and status.exchanges["answered"] >= 2
-        assert status.exchanges["tells"] >= 3
+        truth = await watch.truth()
+        assert truth.exchanges["asks"] >= 2 and truth.exchanges["answered"] >= 2
+        assert truth.exchanges["tells"] >= 3
         assert (
             any(
                 "lru2 asked lru1 about stone: RSS-A-s1" in line
-                for line in status.exchange_log + status.events
+                for line in truth.exchange_log + truth.events
             )
-            or status.exchanges["answered"] >= 2
+            or truth.exchanges["answered"] >= 2
         )
 
         # the map seen by a console (live deltas): explored cells, RSS-A and the delivered stone
@@ -144,7 +150,7 @@ async def test_scripted_operator_plays_the_pilot_mission(stack: Stack) -> None:
             timeout=30,
         )
         assert out.returncode == 0, out.stderr
-        assert json.loads(out.stdout)["score"] == pytest.approx(1.0)
+        assert json.loads(out.stdout)["score"] == pytest.approx(0.5)
     finally:
         watch.close()
         await client.close()
@@ -159,7 +165,7 @@ async def _until(pred, progressed: asyncio.Event) -> None:
 async def test_battery_runs_out_on_a_long_drive_and_recharge_restores_it(
     stack: Stack, tmp_path: Path
 ) -> None:
-    world = world_file(tmp_path, robots={"lru1": {"battery": 0.08}})
+    world = world_file(tmp_path, robots={"lru1": {"battery": 0.10}})  # ~17 m above the reserve
     client, watch = await connect(stack, speed=80, world=world)
     try:
         far = await add(
@@ -172,7 +178,7 @@ async def test_battery_runs_out_on_a_long_drive_and_recharge_restores_it(
         assert s.status.value == "failure"
         found = re.search(r"battery empty after (\d+) m of (\d+) m", s.status_info)
         assert found and "recharge at the lander" in s.status_info, s.status_info
-        assert 15 <= int(found.group(1)) < int(found.group(2))
+        assert 12 <= int(found.group(1)) < int(found.group(2))
         st = await watch.truth()
         assert st.robots["lru1"].battery == pytest.approx(0.05, abs=0.005)
         assert not st.robots["lru1"].docked
