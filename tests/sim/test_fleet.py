@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import math
 import re
 import signal
 import subprocess
@@ -408,3 +409,76 @@ def test_sim_reports_bad_files_and_unreachable_server(tmp_path: Path) -> None:
         timeout=30,
     )
     assert out.returncode == 3 and "cannot reach" in out.stderr, out.stderr
+
+
+async def test_sim_status_shows_what_the_robots_reported_and_the_truth_only_when_asked(
+    stack: Stack,
+) -> None:
+    """LRU1 explores behind the ridge, out of coverage, and discovers RSS-C there: the
+    ground knows nothing of it (nor where LRU1 is now) until LRU1 is back in range;
+    `sim-status --truth` shows it at once, for evaluation."""
+    client, watch = await connect(stack, speed=50)
+    try:
+        beyond = [
+            {"x": -60.0, "y": 76.0},
+            {"x": 0.0, "y": 76.0},
+            {"x": 0.0, "y": 120.0},
+            {"x": -60.0, "y": 120.0},
+        ]
+        steps = [
+            ("drive_to", {"goal": {"x": -30.0, "y": 76.0}, "speed": 1.0}),
+            ("explore", {"area": beyond, "max_duration": 600}),
+            ("drive_to", {"goal": {"x": 5.0, "y": 5.0}, "speed": 1.0}),
+        ]
+        ids = [await add(client, "lru1", s, p, at=i) for i, (s, p) in enumerate(steps)]
+        await client.submit(Sync(robot="lru1", through=ids[-1]))
+        await client.submit(Control(op="run", robot="lru1"))
+
+        async def found_out_there() -> mf.SimTruth:
+            while True:  # evaluation: polling the truth is the test's privilege
+                truth = await watch.truth()
+                c = next(g for g in truth.regions if g.rss == "RSS-C")
+                if "lru1" in c.found_by and not truth.robots["lru1"].in_range:
+                    return truth
+                watch.changed.clear()
+                await asyncio.wait_for(watch.changed.wait(), 5)  # the next live status
+
+        truth = await asyncio.wait_for(found_out_there(), 60)
+        assert math.hypot(truth.robots["lru1"].x, truth.robots["lru1"].y) > 70
+        out = _sim_status(stack.endpoint, "--json")
+        ground = mf.SimStatus.model_validate_json(out)
+        assert ground.truth is None
+        assert "RSS-C" not in ground.rss_found  # it waits aboard lru1
+        heard = ground.robots["lru1"]
+        assert not heard.in_range and heard.heard_at is not None
+        assert heard.heard_at < ground.sim_time
+        assert math.hypot(heard.x, heard.y) <= 75  # where it was last heard, at the edge
+        assert ground.explored < truth.explored
+        text = _sim_status(stack.endpoint)
+        assert "RSS-C" not in text and "TRUTH" not in text and "OUT OF RANGE" in text
+        assert "as reported by the robots" in text and "sim time" in text
+        # everything the ground shows came from the robots: it is on the operator's map too
+        snap = mf.MapSnapshot.model_validate_json(
+            await transport.query(client.session, mf.KEY_MAP_SNAPSHOT, b"")
+        )
+        assert set(ground.rss_found) == {r.rss for r in snap.objects.rss}
+        assert ground.score == snap.objects.score == 0.0
+        told = _sim_status(stack.endpoint, "--truth")
+        assert "TRUTH" in told and "RSS-C" in told and "found by lru1" in told
+        # back in range, what it learnt reaches the ground
+        await watch.until(lambda s: "RSS-C" in s.rss_found, 60, "RSS-C reported")
+    finally:
+        watch.close()
+        await client.close()
+
+
+def _sim_status(endpoint: str, *args: str) -> str:
+    out = subprocess.run(
+        [sys.executable, "-m", "backend.cli", "sim-status", "--connect", endpoint, *args],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert out.returncode == 0, out.stderr
+    return out.stdout

@@ -16,6 +16,7 @@ from backend.agent import SkillFailed
 from backend.core.model import Pose, Position
 from backend.files.diagnostics import FileProblems
 from backend.protocol import mapfeed as mf
+from sim.exchange import WorldExchange
 from sim.pathing import ROCK, Follower, lawnmower, segment_cells
 from sim.skills.registry import RobotSkills
 from sim.world import World
@@ -324,6 +325,93 @@ def test_science_image_reveals_the_top_score(world: World) -> None:
     assert lru1.knowledge.rss["RSS-A"]["top_score"] == 0.5
     world.pump(0.0, 0.0)
     assert world.ground_rss["RSS-A"]["top_score"] == 0.5
+
+
+def exchanging_fleet(world: World) -> Any:
+    """A host whose asks and tells reach the other robot's world model (sim/exchange.py)."""
+
+    async def ask(sender, target, topic, data):
+        return WorldExchange(world, world.robots[target]).asks()[topic](data, sender.name)
+
+    async def tell(sender, target, topic, data):
+        WorldExchange(world, world.robots[target]).tells()[topic](data, sender.name)
+        return True
+
+    return SimpleNamespace(
+        world=world, dt=5.0, robot_seconds=0.0, note=lambda r, t: None, ask=ask, tell=tell
+    )
+
+
+def test_a_revealed_top_score_stays_when_another_robot_discovers_the_region(world: World) -> None:
+    lru1 = world.add_robot("lru1", "lru_science")
+    lru2 = world.add_robot("lru2", "lru_manipulator")
+    lru1.x, lru1.y = 22.0, 20.0
+    run(RobotSkills(fake_fleet(world), lru1).take_science_image(FakeCtx(), target=Pose(x=29, y=23)))
+    world.pump(0.0, 0.0)
+    assert world.ground_rss["RSS-A"]["top_score"] == 0.5
+    WorldExchange(world, lru2).tell_rss(lru1.knowledge.rss["RSS-A"], "lru1")
+    lru2.x, lru2.y = 29.0, 23.0
+    assert world.discover(lru2, 10.0) == ["RSS-A"]  # a later report, without the top score
+    world.pump(1.0, 0.0)
+    assert world.ground_rss["RSS-A"]["top_score"] == 0.5  # the map keeps it
+    assert lru2.knowledge.rss["RSS-A"]["top_score"] == 0.5  # and so does LRU2
+
+
+def test_identify_searches_only_within_its_radius_and_pick_the_whole_region(
+    world: World,
+) -> None:
+    """Seed 1: RSS-A's stones lie 4.4 and 4.8 m from its centre (29, 23)."""
+    lru1 = world.add_robot("lru1", "lru_science")
+    lru2 = world.add_robot("lru2", "lru_manipulator")
+    lru1.x, lru1.y, lru2.x, lru2.y = 29.0, 23.0, 29.5, 23.0
+    fleet = exchanging_fleet(world)
+    s1, s2 = RobotSkills(fleet, lru1), RobotSkills(fleet, lru2)
+    centre = Position(x=29.0, y=23.0)
+    with pytest.raises(SkillFailed, match=r"no stone to identify within 3 m of \(29.0, 23.0\)"):
+        run(s1.identify_stone(FakeCtx(), target=centre, search_radius=3.0))
+    assert all(s.state == "hidden" for s in world.stones.values())
+    lru1.activity = lru2.activity = "identify_stone"
+    run(s1.identify_stone(FakeCtx(), target=centre, search_radius=5.0, partner="lru2"))
+    run(s2.identify_stone(FakeCtx(), target=centre, search_radius=5.0, partner="lru1"))
+    lru1.activity = lru2.activity = None
+    stone = world.stones["RSS-A-s1"]
+    assert stone.state == "identified" and stone.score == 0.5
+    # aimed at the far side of the region, 8.8 m from the stone: it is still found
+    result = run(s2.pick_stone(FakeCtx(), target=Position(x=29.0, y=18.5)))
+    assert result.info == "picked RSS-A-s1 of RSS-A (score 0.5); carrying 1/2"
+
+
+def test_a_robot_trusts_its_own_newer_news_of_a_stone_over_a_partners_stale_one(
+    world: World,
+) -> None:
+    """LRU2 delivered a stone while LRU1 could not hear of it; later LRU1, asked, must not
+    send LRU2 back for it (it said 'identified' and LRU2 failed picks on 'delivered')."""
+    lru1 = world.add_robot("lru1", "lru_science")
+    lru2 = world.add_robot("lru2", "lru_manipulator")
+    lru1.x, lru1.y, lru2.x, lru2.y = 29.0, 23.0, 29.5, 23.0
+    fleet = exchanging_fleet(world)
+    s1, s2 = RobotSkills(fleet, lru1), RobotSkills(fleet, lru2)
+    centre = Position(x=29.0, y=23.0)
+    lru1.activity = lru2.activity = "identify_stone"
+    run(s1.identify_stone(FakeCtx(), target=centre, search_radius=6.0, partner="lru2"))
+    run(s2.identify_stone(FakeCtx(), target=centre, search_radius=6.0, partner="lru1"))
+    lru1.activity = lru2.activity = None
+    stale = dict(lru1.knowledge.stones["RSS-A-s1"])
+    run(s2.pick_stone(FakeCtx(), target=centre))
+    lru2.x, lru2.y = 2.0, 0.0
+    drop = run(s2.drop_stone(FakeCtx()))
+    assert drop.info == "delivered RSS-A-s1 of RSS-A +0.5: +0.5; score 0.5"
+    lru1.knowledge.stones["RSS-A-s1"] = stale  # it heard nothing of the pick nor the drop
+    lru2.x, lru2.y = 29.5, 23.0
+    with pytest.raises(SkillFailed) as exc:
+        run(s2.pick_stone(FakeCtx(), target=centre))
+    assert "knows no identified stone" in exc.value.reason, exc.value.reason
+    assert lru2.knowledge.stones["RSS-A-s1"]["state"] == "delivered"  # its own news stays
+    # told by the one that knows better, LRU1 learns; told stale news, nobody unlearns
+    WorldExchange(world, lru1).tell_stone(lru2.knowledge.stones["RSS-A-s1"], "lru2")
+    WorldExchange(world, lru2).tell_stone(stale, "lru1")
+    assert lru1.knowledge.stones["RSS-A-s1"]["state"] == "delivered"
+    assert lru2.knowledge.stones["RSS-A-s1"]["state"] == "delivered"
 
 
 # ---------------------------------------------------------------- map feed codec
