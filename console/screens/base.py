@@ -11,18 +11,13 @@ from rich.text import Text
 from textual import events, on
 from textual.app import ComposeResult
 from textual.screen import Screen
-from textual.widgets import DataTable, Input, Static
+from textual.widgets import DataTable, Input
 
 from console.state.actions import bindings
+from console.widgets.bars import TitleBar
 
 if TYPE_CHECKING:
     from console.app import MissionApp
-
-
-class TitleBar(Static):
-    DEFAULT_CSS = """
-    TitleBar { height: 1; background: $panel; color: $text; padding: 0 1; }
-    """
 
 
 class ViewScreen(Screen):

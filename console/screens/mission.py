@@ -18,7 +18,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal
 from textual.screen import Screen
-from textual.widgets import Footer, Input, Select, Static, Switch, TextArea
+from textual.widgets import Footer, Input, Select, Switch, TextArea
 
 from backend.core.model import Status
 from backend.core.ops import (
@@ -36,11 +36,12 @@ from backend.core.ops import (
     Undo,
     Unsync,
 )
-from backend.core.params import ParamSpec, StartContext, starting_values
 from console.screens.dialogs import ConfirmScreen, PathPrompt, SkillPicker
 from console.state.actions import ACTIONS, BY_NAME, mission_bindings
 from console.state.capability import also_offered_by
+from console.state.defaults import default_params
 from console.state.model import CONNECTED, ConsoleModel
+from console.widgets.bars import StatusLine, TopBar
 from console.widgets.param_editor import ParamEditor
 from console.widgets.schedule import ScheduleView
 
@@ -49,38 +50,6 @@ if TYPE_CHECKING:
 
 NARROW = 100
 FOOTER_ACTIONS = [a.name for a in ACTIONS if a.footer]
-
-
-def default_params(
-    spec_params: dict[str, ParamSpec], model: ConsoleModel, robot: str
-) -> tuple[dict[str, Any], dict[str, str]]:
-    """Values for the required parameters without a default, so a new skill is
-    valid at once (then edited): see `backend.core.params.starting_values`."""
-    tel = model.telemetry.get(robot)
-    ctx = StartContext(
-        robot=robot,
-        markers=model.mission.markers if model.mission else {},
-        robots=tuple(model.mission.robots) if model.mission else (),
-        **({"pose": tel.pose.model_dump()} if tel is not None else {}),
-    )
-    return starting_values(spec_params, ctx)
-
-
-class TopBar(Static):
-    DEFAULT_CSS = """
-    TopBar { height: 1; background: $panel; color: $text; padding: 0 1; }
-    TopBar.-reconnecting { background: $warning 40%; }
-    TopBar.-unreachable, TopBar.-offline { background: $error 30%; }
-    """
-
-
-class StatusLine(Static):
-    DEFAULT_CSS = """
-    StatusLine { height: 1; padding: 0 1; background: $surface; color: $text-muted; text-wrap: nowrap; text-overflow: ellipsis; }
-    StatusLine.-error { color: $error; text-style: bold; }
-    StatusLine.-warning { color: $warning; }
-    StatusLine.-ok { color: $success; }
-    """
 
 
 class MissionScreen(Screen):

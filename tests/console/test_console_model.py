@@ -9,7 +9,7 @@ from backend.core import events as ev
 from backend.core.model import Policies, Status
 from backend.core.ops import AddSkill
 from console.config import load_config
-from console.screens.mission import default_params
+from console.state.defaults import default_params
 from console.state.model import CONNECTED, RECONNECTING, ConsoleModel, fmt_duration, param_summary
 
 
