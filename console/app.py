@@ -28,6 +28,7 @@ from backend.client.client import ClientError, LoginFailed, OperationRefused
 from backend.exit_codes import EXIT_UNREACHABLE
 from backend.protocol.messages import ErrorReply
 from backend.transport.login import Login
+from console.bindings import bindings
 from console.bridge import Backend, ClientBridge
 from console.commands import MissionCommands
 from console.config import ConsoleConfig, save_theme
@@ -48,7 +49,7 @@ from console.screens.fleet import FleetScreen
 from console.screens.log import EventLogScreen
 from console.screens.map import MapScreen
 from console.screens.mission import MissionScreen
-from console.state.actions import ACTIONS, bindings
+from console.state.actions import ACTIONS
 from console.state.eventlog import AlertBook, AlertEntry, EventLog
 from console.state.model import CONNECTED, CONNECTING, OFFLINE, UNREACHABLE, ConsoleModel
 from console.themes.loader import ANSI16_MAP, ANSI16_STATUS, Downgrade16, load_themes

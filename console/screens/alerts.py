@@ -8,8 +8,8 @@ from rich.text import Text
 from textual.app import ComposeResult
 from textual.widgets import DataTable, Footer, Static
 
+from console.bindings import bindings
 from console.screens.base import ViewScreen
-from console.state.actions import bindings
 from console.state.eventlog import AlertEntry
 from console.state.model import fmt_clock
 

@@ -13,7 +13,7 @@ from textual.app import ComposeResult
 from textual.screen import Screen
 from textual.widgets import DataTable, Input
 
-from console.state.actions import bindings
+from console.bindings import bindings
 from console.widgets.bars import TitleBar
 
 if TYPE_CHECKING:

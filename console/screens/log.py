@@ -13,9 +13,9 @@ from textual import on, work
 from textual.app import ComposeResult
 from textual.widgets import DataTable, Footer, Input, Static
 
+from console.bindings import bindings
 from console.screens.base import ViewScreen
 from console.screens.dialogs import PathPrompt
-from console.state.actions import bindings
 from console.state.eventlog import LOG_LIMIT, LogEntry, entry_matches
 from console.state.model import fmt_clock
 

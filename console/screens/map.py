@@ -30,8 +30,9 @@ from backend.core.model import (
 )
 from backend.core.ops import EditSkill, MarkerAdd, MarkerDelete, MarkerMove, MarkerRename
 from backend.core.params import marker_value
+from console.bindings import bindings
 from console.screens.dialogs import ChoiceScreen, ConfirmScreen
-from console.state.actions import ACTIONS, bindings
+from console.state.actions import ACTIONS
 from console.state.model import CONNECTED, GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel, fmt_value
 from console.widgets.bars import StatusLine, TopBar
 from console.widgets.mapview import (

@@ -36,8 +36,9 @@ from backend.core.ops import (
     Undo,
     Unsync,
 )
+from console.bindings import mission_bindings
 from console.screens.dialogs import ConfirmScreen, PathPrompt, SkillPicker
-from console.state.actions import ACTIONS, BY_NAME, mission_bindings
+from console.state.actions import ACTIONS, BY_NAME
 from console.state.capability import also_offered_by
 from console.state.defaults import default_params
 from console.state.model import CONNECTED, ConsoleModel
