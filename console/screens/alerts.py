@@ -11,7 +11,7 @@ from textual.widgets import DataTable, Footer, Static
 from console.bindings import bindings
 from console.screens.base import ViewScreen
 from console.state.eventlog import AlertEntry
-from console.state.model import fmt_clock
+from console.state.text import fmt_clock
 
 LEVEL_VARS = {"error": "error", "warning": "warning", "info": "primary"}
 KIND_WORDS = {

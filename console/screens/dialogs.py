@@ -19,7 +19,7 @@ from textual.widgets.option_list import Option
 from backend.core.library import Library
 from backend.core.model import Status
 from console.state.actions import ACTIONS, APP_KEYS, EDITOR_KEYS, NAV_KEYS
-from console.state.model import GLYPHS, STATUS_CSS, STATUS_WORDS
+from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS
 from console.widgets.param_editor import settle_cursors
 
 

@@ -21,7 +21,7 @@ from console.state.capability import (
     robot_type,
     sparkline,
 )
-from console.state.model import fmt_clock
+from console.state.text import fmt_clock
 
 SPARK = 6  # samples shown per sparkline (the model keeps model.HISTORY)
 

@@ -17,7 +17,7 @@ from console.bindings import bindings
 from console.screens.base import ViewScreen
 from console.screens.dialogs import PathPrompt
 from console.state.eventlog import LOG_LIMIT, LogEntry, entry_matches
-from console.state.model import fmt_clock
+from console.state.text import fmt_clock
 
 SHOW_LIMIT = 1_000  # rows in the table (a DataTable of 10k rows takes seconds to fill); export writes all matches
 

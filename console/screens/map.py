@@ -33,7 +33,8 @@ from backend.core.params import marker_value
 from console.bindings import bindings
 from console.screens.dialogs import ChoiceScreen, ConfirmScreen
 from console.state.actions import ACTIONS
-from console.state.model import CONNECTED, GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel, fmt_value
+from console.state.model import CONNECTED, ConsoleModel
+from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS, fmt_value
 from console.widgets.bars import StatusLine, TopBar
 from console.widgets.mapview import (
     AREA_GLYPH,

@@ -35,7 +35,8 @@ from textual.widget import Widget
 
 from backend.core.model import FINISHED, Status
 from backend.protocol.mapfeed import T_FREE, T_ROCK, T_SLOW, T_UNKNOWN, MapMirror
-from console.state.model import GLYPHS, STATUS_CSS, ConsoleModel
+from console.state.model import ConsoleModel
+from console.state.text import GLYPHS, STATUS_CSS
 
 UPPER_HALF = "▀"
 OUTSIDE = 8  # ground class of pixels outside the map (0..7: terrain + 4 if covered)

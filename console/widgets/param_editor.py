@@ -41,7 +41,8 @@ from backend.core.params import (
     check_value,
     normalize_value,
 )
-from console.state.model import GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel, fmt_number
+from console.state.model import ConsoleModel
+from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS, fmt_number
 from console.widgets.select import SafeSelect
 
 TYPED = "\x00typed"  # the bind choice meaning "no marker: a typed value"

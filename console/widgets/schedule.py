@@ -23,10 +23,10 @@ from textual.scroll_view import ScrollView
 from textual.strip import Strip
 
 from backend.core.model import ACTIVE, Status
-from console.state.model import (
+from console.state.model import ConsoleModel
+from console.state.text import (
     GLYPHS,
     STATUS_CSS,
-    ConsoleModel,
     fmt_clock,
     fmt_duration,
     param_summary,

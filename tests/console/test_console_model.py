@@ -10,7 +10,8 @@ from backend.core.model import Policies, Status
 from backend.core.ops import AddSkill
 from console.config import load_config
 from console.state.defaults import default_params
-from console.state.model import CONNECTED, RECONNECTING, ConsoleModel, fmt_duration, param_summary
+from console.state.model import CONNECTED, RECONNECTING, ConsoleModel
+from console.state.text import fmt_duration, param_summary
 
 
 def model_of(b: Builder, online=MARS_FLEET) -> ConsoleModel:
