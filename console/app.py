@@ -19,6 +19,7 @@ from collections.abc import Callable
 from datetime import UTC, datetime
 from typing import Any
 
+from textual import on
 from textual.app import App
 from textual.binding import Binding
 from textual.screen import Screen
@@ -34,12 +35,15 @@ from console.commands import MissionCommands
 from console.config import ConsoleConfig, save_theme
 from console.messages import (
     AccountKnown,
+    AlertAcknowledged,
     AlertReceived,
     ConnectionChanged,
     EventsApplied,
     FleetChanged,
+    HelpRequested,
     MapChanged,
     MessageUnreadable,
+    OperationRequested,
     StateLoaded,
     TelemetryChanged,
 )
@@ -88,12 +92,6 @@ class MissionApp(App[int]):
         Binding("ctrl+q", "quit", "Quit", priority=True, id="app.quit"),
         *bindings("app", show=False),  # shown in the footers of the part-2 screens
     ]
-    # part-2 screens as app modes (F2/1 back to the schedule; F3/2 is the map's)
-    VIEW_MODES: dict[str, type[Screen]] = {
-        "fleet": FleetScreen,
-        "log": EventLogScreen,
-        "alerts": AlertScreen,
-    }
     CSS = """
     Screen { background: $background; }
     ModalScreen { background: $background 60%; }  /* dialogs: the screen behind stays visible, dimmed */
@@ -141,8 +139,12 @@ class MissionApp(App[int]):
         self.clock: Callable[[], datetime] = lambda: datetime.now(UTC)  # tests pin it
         self.bells = 0  # how often the bell rang (tests)
         self.add_mode(self.DEFAULT_MODE, self.get_default_screen)
-        for mode, screen in self.VIEW_MODES.items():
-            self.add_mode(mode, screen)
+        # part-2 screens as app modes (F2/1 back to the schedule; F3/2 is the map's),
+        # each handed the state it shows and the signal that says it changed
+        changes = self.awareness_signal
+        self.add_mode("fleet", lambda: FleetScreen(self.model, changes))
+        self.add_mode("log", lambda: EventLogScreen(self.event_log, changes))
+        self.add_mode("alerts", lambda: AlertScreen(self.alerts, changes))
         self.map_screen: MapScreen | None = None
         self.map_feed: tuple[object, object] | None = (
             None  # the latest (mirror, update) of the map feed
@@ -158,7 +160,6 @@ class MissionApp(App[int]):
         self.login_refused = ""  # set when the router refused the login: the CLI prints it, exit 3
         self.backend: Backend | None = backend or self.bridge
         self.mission_screen: MissionScreen | None = None
-        self.last_path: str | None = None
         self._connection_closed = False
         self._hanging_up = False
         self.on_forced_exit: list[
@@ -227,7 +228,7 @@ class MissionApp(App[int]):
         self.switch_mode("alerts")
 
     def get_default_screen(self) -> Screen:
-        self.mission_screen = MissionScreen(self.model)
+        self.mission_screen = MissionScreen(self.model, self.alerts)
         return self.mission_screen
 
     def action_keys(self) -> dict[str, str]:
@@ -238,6 +239,10 @@ class MissionApp(App[int]):
     def action_help(self) -> None:
         if not isinstance(self.screen, HelpScreen):
             self.push_screen(HelpScreen(self.action_keys()))
+
+    @on(HelpRequested)
+    def _help_requested(self) -> None:
+        self.action_help()
 
     # -- start / stop ---------------------------------------------------------------------
     def on_mount(self) -> None:
@@ -522,6 +527,10 @@ class MissionApp(App[int]):
             self.alerts_changed()
         return n
 
+    @on(AlertAcknowledged)
+    def _alert_acknowledged(self, message: AlertAcknowledged) -> None:
+        self.acknowledge(message.alert_id)
+
     def alerts_changed(self) -> None:
         if self._screen_live():
             self.mission_screen.update_top()
@@ -548,6 +557,19 @@ class MissionApp(App[int]):
             self._submit(op, what, robot, skill, expected_revision, on_ok, on_refused, say),
             group="ops",
             exit_on_error=False,
+        )
+
+    @on(OperationRequested)
+    def _operation_requested(self, m: OperationRequested) -> None:
+        self.submit(
+            m.op,
+            m.what,
+            robot=m.robot,
+            skill=m.skill,
+            expected_revision=m.expected_revision,
+            on_ok=m.on_ok,
+            on_refused=m.on_refused,
+            say=m.say,
         )
 
     def whoami(self) -> dict[str, str]:

@@ -10,6 +10,7 @@ import json
 from rich.text import Text
 from textual import on
 from textual.app import ComposeResult
+from textual.signal import Signal
 from textual.widgets import DataTable, Footer, Input, Static
 
 from console.screens.base import ViewScreen
@@ -21,6 +22,7 @@ from console.state.capability import (
     robot_type,
     sparkline,
 )
+from console.state.model import ConsoleModel
 from console.state.text import fmt_clock
 
 SPARK = 6  # samples shown per sparkline (the model keeps model.HISTORY)
@@ -39,8 +41,9 @@ class FleetScreen(ViewScreen):
     )
     TOPICS = ("fleet",)
 
-    def __init__(self) -> None:
-        super().__init__()
+    def __init__(self, model: ConsoleModel, changes: Signal[tuple[str, str | None]]) -> None:
+        super().__init__(changes)
+        self.model = model
         self.shown: list[str] = []
 
     def compose(self) -> ComposeResult:
@@ -55,10 +58,6 @@ class FleetScreen(ViewScreen):
             "type to filter (escape: back to the list) · ↑↓ robot · F2 schedule", classes="hint"
         )
         yield Footer()
-
-    @property
-    def model(self):
-        return self.mission_app.model
 
     # -- cells -------------------------------------------------------------------------
     def _presence(self, robot: str) -> Text:

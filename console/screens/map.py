@@ -9,7 +9,7 @@ skill" is the schedule's cursor on the mission screen.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from rich.text import Text
 from textual import events, on, work
@@ -31,6 +31,7 @@ from backend.core.model import (
 from backend.core.ops import EditSkill, MarkerAdd, MarkerDelete, MarkerMove, MarkerRename
 from backend.core.params import marker_value
 from console.bindings import bindings
+from console.messages import HelpRequested, OperationRequested
 from console.screens.dialogs import ChoiceScreen, ConfirmScreen
 from console.state.actions import ACTIONS
 from console.state.model import CONNECTED, ConsoleModel
@@ -53,9 +54,6 @@ from console.widgets.mapview import (
     marker_use,
 )
 from console.widgets.select import SafeSelect
-
-if TYPE_CHECKING:
-    from console.app import MissionApp
 
 NO_FEED = "no map feed — is the simulator running?"
 TURN = math.radians(15)
@@ -236,10 +234,6 @@ class MapScreen(Screen):
         self.message = ""
         self.legend_choice: bool | None = None  # None: by terminal width
 
-    @property
-    def mission_app(self) -> MissionApp:
-        return self.app  # type: ignore[return-value]
-
     def compose(self) -> ComposeResult:
         yield self._topbar
         with Horizontal(id="map-main"):
@@ -316,8 +310,7 @@ class MapScreen(Screen):
         self.update_top()
 
     def sync_selection(self) -> None:
-        ms = self.mission_app.mission_screen
-        sid = ms.schedule.cursor_id if ms is not None else None
+        sid = self.model.selection.skill  # the schedule's cursor
         if sid != self.view.selected_skill:
             self.view.selected_skill = sid
             self.view.overlays_changed()
@@ -373,7 +366,7 @@ class MapScreen(Screen):
             self._status.set_class(severity == c, f"-{c}")
 
     def submit(self, op: Any, what: str, **kw: Any) -> None:
-        self.mission_app.submit(op, what, say=self.say, **kw)
+        self.post_message(OperationRequested(op, what, say=self.say, **kw))
 
     def _connected(self) -> bool:
         if self.model.connection != CONNECTED:
@@ -396,7 +389,7 @@ class MapScreen(Screen):
 
     # -- actions: view ------------------------------------------------------------------------------------
     def action_help(self) -> None:
-        self.mission_app.action_help()
+        self.post_message(HelpRequested())
 
     def action_cursor(self, dcol: int, drow: int) -> None:
         self.view.move_cursor(dcol, drow)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import asyncio
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from rich.text import Text
 from textual import events, on, work
@@ -37,17 +37,16 @@ from backend.core.ops import (
     Unsync,
 )
 from console.bindings import mission_bindings
+from console.messages import HelpRequested, OperationRequested
 from console.screens.dialogs import ConfirmScreen, PathPrompt, SkillPicker
 from console.state.actions import ACTIONS, BY_NAME
 from console.state.capability import also_offered_by
 from console.state.defaults import default_params
+from console.state.eventlog import AlertBook
 from console.state.model import CONNECTED, ConsoleModel
 from console.widgets.bars import StatusLine, TopBar
 from console.widgets.param_editor import ParamEditor
 from console.widgets.schedule import ScheduleView
-
-if TYPE_CHECKING:
-    from console.app import MissionApp
 
 NARROW = 100
 FOOTER_ACTIONS = [a.name for a in ACTIONS if a.footer]
@@ -70,9 +69,11 @@ class MissionScreen(Screen):
     MissionScreen.-narrow.-editing ScheduleView { display: none; }
     """
 
-    def __init__(self, model: ConsoleModel) -> None:
+    def __init__(self, model: ConsoleModel, alerts: AlertBook | None = None) -> None:
         super().__init__()
         self.model = model
+        self.alerts = alerts  # its count of unacknowledged alerts is the top bar's badge
+        self.last_path: str | None = None  # of the last save or load: the next one's default
         self.pending_select: str | None = None
         # kept as attributes: messages may arrive while the screen is being torn down
         self._topbar = TopBar(id="topbar")
@@ -82,10 +83,6 @@ class MissionScreen(Screen):
         self._footer = Footer()
         self.edit_after_select = False
         self.message = ""
-
-    @property
-    def mission_app(self) -> MissionApp:
-        return self.app  # type: ignore[return-value]
 
     def compose(self) -> ComposeResult:
         yield self._topbar
@@ -165,8 +162,7 @@ class MissionScreen(Screen):
         m = self.model
         t = Text()
         t.append("missionctl", style="bold")
-        alerts = getattr(self.app, "alerts", None)
-        unacked = alerts.unacknowledged if alerts is not None else 0
+        unacked = self.alerts.unacknowledged if self.alerts is not None else 0
         if unacked:  # the badge, first so 80 columns show it: F6 lists them
             t.append(f" ⚠ {unacked} alert{'s' if unacked > 1 else ''} (F6) ", style="bold reverse")
         if m.mission is not None:
@@ -260,11 +256,12 @@ class MissionScreen(Screen):
 
     # -- submitting -----------------------------------------------------------------------------------
     def submit(self, op: Any, what: str, **kw: Any) -> None:
-        self.mission_app.submit(op, what, **kw)
+        """The app submits it (OperationRequested) and reports on the status line."""
+        self.post_message(OperationRequested(op, what, **kw))
 
     # -- actions: plan ----------------------------------------------------------------------------------
     def action_help(self) -> None:
-        self.mission_app.action_help()
+        self.post_message(HelpRequested())
 
     def action_clear_marks(self) -> None:
         if self.schedule.marks:
@@ -570,7 +567,7 @@ class MissionScreen(Screen):
         m, lib = self.model.mission, self.model.library
         if m is None or lib is None:
             return
-        default = self.mission_app.last_path or f"{m.name.lower().replace(' ', '_')}.yaml"
+        default = self.last_path or f"{m.name.lower().replace(' ', '_')}.yaml"
         path = await self.app.push_screen_wait(PathPrompt("Save the mission to (YAML):", default))
         if not path:
             return
@@ -580,15 +577,13 @@ class MissionScreen(Screen):
             self.say(f"cannot save {path}: {e.strerror or e}", "error")
             self.app.notify(f"{path}: {e.strerror or e}", title="Not saved", severity="error")
             return
-        self.mission_app.last_path = path
+        self.last_path = path
         self.say(f"saved {path} (revision {m.revision})" + (f"; {note}" if note else ""), "ok")
 
     @work(group="dialog")
     async def action_load(self) -> None:
         path = await self.app.push_screen_wait(
-            PathPrompt(
-                "Load a mission from (YAML):", self.mission_app.last_path or "", must_exist=True
-            )
+            PathPrompt("Load a mission from (YAML):", self.last_path or "", must_exist=True)
         )
         if not path:
             return
@@ -613,7 +608,7 @@ class MissionScreen(Screen):
             )
         ):
             return
-        self.mission_app.last_path = path
+        self.last_path = path
         self.submit(
             LoadMission(mission=mission),
             f"load {path}",

@@ -137,12 +137,29 @@ class ScheduleView(ScrollView, can_focus=True):
         self.sync_h = 1
         self.total_lines = 3
         self.cursor_col = 0
-        self.cursor_id: str | None = None
-        self.marks: list[str] = []
         self.drafts: frozenset[str] = frozenset()  # skills with unapplied edits (marked '*')
         self.expand_static = False
         self._summary_cache: dict[tuple[str, int], str] = {}
         self._last_width = -1
+
+    # -- the selection lives in the model (other screens act on it) ----------------
+    @property
+    def cursor_id(self) -> str | None:
+        """The skill under the cursor."""
+        return self.model.selection.skill
+
+    @cursor_id.setter
+    def cursor_id(self, skill_id: str | None) -> None:
+        self.model.selection.skill = skill_id
+
+    @property
+    def marks(self) -> list[str]:
+        """Skills marked for a new barrier (one per robot)."""
+        return self.model.selection.marks
+
+    @marks.setter
+    def marks(self, marks: list[str]) -> None:
+        self.model.selection.marks = marks
 
     # -- model -> layout -----------------------------------------------------------
     @property
