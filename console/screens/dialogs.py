@@ -1,4 +1,5 @@
-"""Modal dialogs: confirm, file path prompt, skill picker, choice list, help, unreachable."""
+"""Modal dialogs: confirm, file path prompt, skill picker, choice list, marker
+name, help, unreachable."""
 
 from __future__ import annotations
 
@@ -13,14 +14,15 @@ from textual.binding import Binding
 from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.fuzzy import Matcher
 from textual.screen import ModalScreen, Screen
-from textual.widgets import Button, Footer, Input, Label, OptionList, Static
+from textual.widgets import Button, Footer, Input, Label, OptionList, Select, Static
 from textual.widgets.option_list import Option
 
 from backend.core.library import Library
-from backend.core.model import Status
+from backend.core.model import NAME_RE, Status
 from console.state.actions import ACTIONS, APP_KEYS, EDITOR_KEYS, NAV_KEYS
 from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS
 from console.widgets.param_editor import settle_cursors
+from console.widgets.select import SafeSelect
 
 
 class ConfirmScreen(ModalScreen[bool]):
@@ -249,6 +251,60 @@ class ChoiceScreen(ModalScreen[str | None]):
     @on(OptionList.OptionSelected)
     def _selected(self, event: OptionList.OptionSelected) -> None:
         self.dismiss(event.option.id)
+
+    def action_cancel(self) -> None:
+        self.dismiss(None)
+
+
+class MarkerPrompt(ModalScreen[tuple[str, str] | None]):
+    """Name (and kind) of a new marker; or a new name for one."""
+
+    BINDINGS = [Binding("escape", "cancel", "Cancel")]
+    DEFAULT_CSS = """
+    MarkerPrompt { align: center middle; }
+    MarkerPrompt > Vertical { width: 60; max-width: 95%; height: auto; border: thick $primary; background: $surface; padding: 1 2; }
+    MarkerPrompt .hint { color: $text-muted; }
+    MarkerPrompt .error { color: $error; }
+    """
+
+    def __init__(self, title: str, default: str, *, kinds: bool = True, kind: str = "pose") -> None:
+        super().__init__()
+        self.title_text = title
+        self.default = default
+        self.kinds = kinds
+        self.kind = kind
+
+    def compose(self) -> ComposeResult:
+        with Vertical():
+            yield Label(self.title_text)
+            yield Input(self.default, id="name")
+            if self.kinds:
+                yield SafeSelect(
+                    [
+                        ("pose (position + heading)", "pose"),
+                        ("position", "position"),
+                        ("area (square around the cursor)", "area"),
+                    ],
+                    value=self.kind,
+                    allow_blank=False,
+                    id="kind",
+                )
+            yield Static("enter: ok · escape: cancel", classes="hint")
+            yield Static("", id="error", classes="error")
+
+    def on_mount(self) -> None:
+        self.query_one(Input).focus()
+
+    @on(Input.Submitted)
+    def _submitted(self, event: Input.Submitted) -> None:
+        name = event.value.strip()
+        if not NAME_RE.match(name):
+            self.query_one("#error", Static).update(
+                "a name starts with a letter; then letters, digits, _ or -"
+            )
+            return
+        kind = str(self.query_one("#kind", Select).value) if self.kinds else ""
+        self.dismiss((name, kind))
 
     def action_cancel(self) -> None:
         self.dismiss(None)

@@ -15,12 +15,11 @@ from rich.text import Text
 from textual import events, on, work
 from textual.app import ComposeResult
 from textual.binding import Binding
-from textual.containers import Horizontal, Vertical
-from textual.screen import ModalScreen, Screen
-from textual.widgets import Footer, Input, Label, Select, Static
+from textual.containers import Horizontal
+from textual.screen import Screen
+from textual.widgets import Footer, Static
 
 from backend.core.model import (
-    NAME_RE,
     AreaMarker,
     Pose,
     PoseMarker,
@@ -32,11 +31,11 @@ from backend.core.ops import EditSkill, MarkerAdd, MarkerDelete, MarkerMove, Mar
 from backend.core.params import marker_value
 from console.bindings import bindings
 from console.messages import HelpRequested, OperationRequested
-from console.screens.dialogs import ChoiceScreen, ConfirmScreen
+from console.screens.dialogs import ChoiceScreen, ConfirmScreen, MarkerPrompt
 from console.state.actions import ACTIONS
 from console.state.model import CONNECTED, ConsoleModel
 from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS, fmt_value
-from console.widgets.bars import StatusLine, TopBar
+from console.widgets.bars import InfoLine, StatusLine, TopBar
 from console.widgets.mapview import (
     AREA_GLYPH,
     BOX_GLYPH,
@@ -53,7 +52,6 @@ from console.widgets.mapview import (
     centroid,
     marker_use,
 )
-from console.widgets.select import SafeSelect
 
 NO_FEED = "no map feed — is the simulator running?"
 TURN = math.radians(15)
@@ -133,67 +131,6 @@ class Legend(Static):
     DEFAULT_CSS = """
     Legend { width: 26; height: 100%; border-left: vkey $primary 50%; background: $surface; padding: 0 1; }
     """
-
-
-class InfoLine(Static):
-    DEFAULT_CSS = """
-    InfoLine { height: 1; padding: 0 1; background: $panel; text-wrap: nowrap; text-overflow: ellipsis; }
-    InfoLine.-nofeed { color: $warning; }
-    """
-
-
-class MarkerPrompt(ModalScreen[tuple[str, str] | None]):
-    """Name (and kind) of a new marker; or a new name for one."""
-
-    BINDINGS = [Binding("escape", "cancel", "Cancel")]
-    DEFAULT_CSS = """
-    MarkerPrompt { align: center middle; }
-    MarkerPrompt > Vertical { width: 60; max-width: 95%; height: auto; border: thick $primary; background: $surface; padding: 1 2; }
-    MarkerPrompt .hint { color: $text-muted; }
-    MarkerPrompt .error { color: $error; }
-    """
-
-    def __init__(self, title: str, default: str, *, kinds: bool = True, kind: str = "pose") -> None:
-        super().__init__()
-        self.title_text = title
-        self.default = default
-        self.kinds = kinds
-        self.kind = kind
-
-    def compose(self) -> ComposeResult:
-        with Vertical():
-            yield Label(self.title_text)
-            yield Input(self.default, id="name")
-            if self.kinds:
-                yield SafeSelect(
-                    [
-                        ("pose (position + heading)", "pose"),
-                        ("position", "position"),
-                        ("area (square around the cursor)", "area"),
-                    ],
-                    value=self.kind,
-                    allow_blank=False,
-                    id="kind",
-                )
-            yield Static("enter: ok · escape: cancel", classes="hint")
-            yield Static("", id="error", classes="error")
-
-    def on_mount(self) -> None:
-        self.query_one(Input).focus()
-
-    @on(Input.Submitted)
-    def _submitted(self, event: Input.Submitted) -> None:
-        name = event.value.strip()
-        if not NAME_RE.match(name):
-            self.query_one("#error", Static).update(
-                "a name starts with a letter; then letters, digits, _ or -"
-            )
-            return
-        kind = str(self.query_one("#kind", Select).value) if self.kinds else ""
-        self.dismiss((name, kind))
-
-    def action_cancel(self) -> None:
-        self.dismiss(None)
 
 
 MAP_ACTIONS = {a.name for a in ACTIONS if a.scope == "map"}

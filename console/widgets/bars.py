@@ -1,5 +1,6 @@
 """One-line bars: the top bar (mission, revision, connection), the status
-line (the last outcome, refusal or explanation) and the part-2 screens' title bar."""
+line (the last outcome, refusal or explanation), the part-2 screens' title
+bar and the map's info line (cursor, selection, feed)."""
 
 from __future__ import annotations
 
@@ -26,4 +27,11 @@ class StatusLine(Static):
 class TitleBar(Static):
     DEFAULT_CSS = """
     TitleBar { height: 1; background: $panel; color: $text; padding: 0 1; }
+    """
+
+
+class InfoLine(Static):
+    DEFAULT_CSS = """
+    InfoLine { height: 1; padding: 0 1; background: $panel; text-wrap: nowrap; text-overflow: ellipsis; }
+    InfoLine.-nofeed { color: $warning; }
     """
