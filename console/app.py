@@ -17,6 +17,7 @@ import signal
 import threading
 from collections.abc import Callable
 from datetime import UTC, datetime
+from pathlib import Path
 from typing import Any
 
 from textual import on
@@ -59,6 +60,7 @@ from console.state.model import CONNECTED, CONNECTING, OFFLINE, UNREACHABLE, Con
 from console.themes.loader import ANSI16_MAP, ANSI16_STATUS, Downgrade16, load_themes
 from console.themes.variables import DEFAULT_THEME, VARIABLE_DEFAULTS
 
+HERE = Path(__file__).parent
 HANG_UP_GRACE_S = 5.0  # after a hang-up, the longest a clean exit may take
 
 
@@ -92,11 +94,12 @@ class MissionApp(App[int]):
         Binding("ctrl+q", "quit", "Quit", priority=True, id="app.quit"),
         *bindings("app", show=False),  # shown in the footers of the part-2 screens
     ]
-    CSS = """
-    Screen { background: $background; }
-    ModalScreen { background: $background 60%; }  /* dialogs: the screen behind stays visible, dimmed */
-    Toast { max-width: 70; }
-    """
+    # the app's look and its widgets' (each screen loads its own: CSS_PATH there);
+    # absolute, so a subclass defined elsewhere (tests) finds them too
+    CSS_PATH = [
+        HERE / "app.tcss",
+        *(HERE / "widgets" / f"{w}.tcss" for w in ("bars", "schedule", "param_editor", "mapview")),
+    ]
 
     def __init__(
         self,

@@ -5,6 +5,7 @@ screen with the state it shows) — at once when shown, otherwise when shown nex
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 from rich.text import Text
@@ -17,6 +18,9 @@ from textual.widgets import DataTable, Input
 from console.bindings import bindings
 from console.widgets.bars import TitleBar
 
+# this module's look (CSS_PATH); absolute, so a subclass defined elsewhere finds it too
+TCSS = Path(__file__).with_name("base.tcss")
+
 
 class ViewScreen(Screen):
     """Layout: title bar, [#filter input], the DataTable (COLUMNS), [.detail], .hint, footer."""
@@ -26,12 +30,7 @@ class ViewScreen(Screen):
     COLUMNS: tuple[tuple[str, str], ...] = ()  # (label, key) of the table's columns
     BINDINGS = bindings("app", show=True)
 
-    DEFAULT_CSS = """
-    ViewScreen #filter { height: 3; }
-    ViewScreen DataTable { height: 1fr; }
-    ViewScreen .detail { height: auto; max-height: 12; padding: 0 1; background: $surface; border-top: solid $primary 50%; }
-    ViewScreen .hint { height: 1; padding: 0 1; color: $text-muted; }
-    """
+    CSS_PATH = TCSS
 
     def __init__(self, changes: Signal[tuple[str, str | None]]) -> None:
         super().__init__()

@@ -9,6 +9,7 @@ skill" is the schedule's cursor on the mission screen.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 from rich.text import Text
@@ -52,6 +53,9 @@ from console.widgets.mapview import (
     centroid,
     marker_use,
 )
+
+# this module's look (CSS_PATH); absolute, so a subclass defined elsewhere finds it too
+TCSS = Path(__file__).with_name("map.tcss")
 
 NO_FEED = "no map feed — is the simulator running?"
 TURN = math.radians(15)
@@ -128,9 +132,7 @@ def param_rows(spec: Any, s: Any, names: list[str]) -> list[tuple[str, Text]]:
 
 
 class Legend(Static):
-    DEFAULT_CSS = """
-    Legend { width: 26; height: 100%; border-left: vkey $primary 50%; background: $surface; padding: 0 1; }
-    """
+    """The legend beside the map (hidden below LEGEND_MIN_WIDTH columns until toggled)."""
 
 
 MAP_ACTIONS = {a.name for a in ACTIONS if a.scope == "map"}
@@ -153,11 +155,7 @@ class MapScreen(Screen):
             "escape", "app.show_mission", "Schedule", show=False
         ),  # "back to the schedule" (help: App keys)
     ]
-    DEFAULT_CSS = """
-    MapScreen #map-main { height: 1fr; }
-    MapScreen MapView { width: 1fr; height: 100%; }
-    MapScreen.-no-legend Legend { display: none; }
-    """
+    CSS_PATH = TCSS
 
     def __init__(self, model: ConsoleModel) -> None:
         super().__init__()

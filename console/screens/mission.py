@@ -48,6 +48,9 @@ from console.widgets.bars import StatusLine, TopBar
 from console.widgets.param_editor import ParamEditor
 from console.widgets.schedule import ScheduleView
 
+# this module's look (CSS_PATH); absolute, so a subclass defined elsewhere finds it too
+TCSS = Path(__file__).with_name("mission.tcss")
+
 NARROW = 100
 FOOTER_ACTIONS = [a.name for a in ACTIONS if a.footer]
 
@@ -59,15 +62,7 @@ class MissionScreen(Screen):
         Binding("escape", "clear_marks", "Clear marks", show=False),
     ]
 
-    DEFAULT_CSS = """
-    MissionScreen #main { height: 1fr; }
-    MissionScreen ScheduleView { width: 1fr; height: 100%; }
-    MissionScreen ParamEditor { width: 50; height: 100%; border-left: vkey $primary 50%; background: $surface; }
-    MissionScreen ParamEditor:focus-within { border-left: vkey $primary; }
-    MissionScreen.-narrow ParamEditor { display: none; }
-    MissionScreen.-narrow.-editing ParamEditor { display: block; width: 100%; border-left: none; }
-    MissionScreen.-narrow.-editing ScheduleView { display: none; }
-    """
+    CSS_PATH = TCSS
 
     def __init__(self, model: ConsoleModel, alerts: AlertBook | None = None) -> None:
         super().__init__()

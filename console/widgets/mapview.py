@@ -411,11 +411,8 @@ def skill_goals(model: ConsoleModel) -> list[tuple[str, str, float, float, Statu
 
 
 class MapView(Widget, can_focus=True):
-    """Draws the map of a `ConsoleModel` plus a map mirror; posts `CursorMoved`."""
-
-    DEFAULT_CSS = """
-    MapView { background: $background; }
-    """
+    """Draws the map of a `ConsoleModel` plus a map mirror; posts `CursorMoved`.
+    Its look: mapview.tcss (loaded by the app)."""
 
     class CursorMoved(Message):
         pass

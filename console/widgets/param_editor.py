@@ -115,42 +115,14 @@ def spec_hint(spec: ParamSpec) -> str:
 
 
 class ParamEditor(VerticalScroll):
-    """Edits one skill. Posts `ApplyRequested` with only what changed."""
+    """Edits one skill. Posts `ApplyRequested` with only what changed.
+    Its look: param_editor.tcss (loaded by the app)."""
 
     BINDINGS = [
         Binding("ctrl+s", "apply", "Apply", id="editor.apply"),
         Binding("ctrl+r", "revert", "Revert", id="editor.revert"),
         Binding("escape", "leave", "Back", id="editor.leave"),
     ]
-
-    DEFAULT_CSS = """
-    ParamEditor { padding: 0 1; }
-    ParamEditor .title { text-style: bold; }
-    ParamEditor .skill-desc { color: $text-muted; }
-    ParamEditor .readonly { color: $warning; text-style: bold; margin: 1 0 0 0; }
-    ParamEditor .server-error { color: $error; text-style: bold; margin: 1 0 0 0; }
-    ParamEditor .stale { color: $warning; }
-    ParamEditor .dirty { color: $warning; text-style: bold; }
-    ParamEditor .section { text-style: bold underline; margin: 1 0 0 0; }
-    ParamEditor .param { height: auto; margin: 1 0 0 0; }
-    ParamEditor .plabel { height: 1; text-wrap: nowrap; text-overflow: ellipsis; }
-    ParamEditor .pdesc { color: $text-muted; height: auto; }
-    ParamEditor .perror { color: $error; text-style: bold; height: auto; }
-    ParamEditor .-empty { display: none; }
-    ParamEditor .fields { height: 1; }
-    ParamEditor .fields Label { width: auto; padding: 0 1 0 0; color: $text-muted; }
-    ParamEditor .fields Input { width: 1fr; margin: 0 1 0 0; }
-    ParamEditor Input { height: 1; }
-    ParamEditor Switch { width: auto; height: 1; border: none; padding: 0; }
-    ParamEditor Switch:focus { border: none; background-tint: $foreground 15%; }
-    ParamEditor .fields .switch-value { padding: 0 0 0 1; color: $text; }
-    ParamEditor TextArea { height: 4; }
-    ParamEditor Select { width: 100%; }
-    ParamEditor .bind { margin: 0 0 0 0; }
-    ParamEditor .buttons { height: 3; margin: 1 0 0 0; }
-    ParamEditor .buttons Button { margin: 0 1 0 0; min-width: 12; }
-    ParamEditor .empty { color: $text-muted; margin: 1 0; }
-    """
 
     class ApplyRequested(Message):
         def __init__(

@@ -66,7 +66,8 @@ def _fit(text: str, width: int) -> str:
 
 
 class ScheduleView(ScrollView, can_focus=True):
-    """Draws the schedule from a `ConsoleModel`; posts `CursorMoved`."""
+    """Draws the schedule from a `ConsoleModel`; posts `CursorMoved`.
+    Its look: schedule.tcss (loaded by the app; the status colours are theme variables)."""
 
     COMPONENT_CLASSES = {
         *(f"schedule--{c}" for c in STATUS_CSS.values()),
@@ -84,33 +85,6 @@ class ScheduleView(ScrollView, can_focus=True):
         "schedule--battery-low",
         "schedule--rule",
     }
-
-    DEFAULT_CSS = """
-    ScheduleView {
-        background: $background;
-        scrollbar-size: 1 1;
-    }
-    ScheduleView > .schedule--idle { color: $status-idle; }
-    ScheduleView > .schedule--idle-synchronized { color: $status-idle-synchronized; }
-    ScheduleView > .schedule--synchwaiting { color: $status-synchwaiting; }
-    ScheduleView > .schedule--running { color: $status-running; text-style: bold; }
-    ScheduleView > .schedule--paused { color: $status-paused; text-style: bold; }
-    ScheduleView > .schedule--success { color: $status-success; }
-    ScheduleView > .schedule--failure { color: $status-failure; text-style: bold; }
-    ScheduleView > .schedule--cursor { background: $primary 60%; }
-    ScheduleView > .schedule--cursor-blur { background: $primary 25%; }
-    ScheduleView > .schedule--robot { color: $text; text-style: bold; }
-    ScheduleView > .schedule--online { color: $presence-online; }
-    ScheduleView > .schedule--offline { color: $presence-offline; text-style: bold; }
-    ScheduleView > .schedule--unknown { color: $presence-unknown; }
-    ScheduleView > .schedule--dim { color: $text-muted; }
-    ScheduleView > .schedule--divider { color: $divider; }
-    ScheduleView > .schedule--tag { color: $barrier-tag; text-style: bold; }
-    ScheduleView > .schedule--mark { color: $mark; text-style: bold; }
-    ScheduleView > .schedule--progress { color: $progress-bar; }
-    ScheduleView > .schedule--battery-low { color: $battery-low; text-style: bold; }
-    ScheduleView > .schedule--rule { color: $primary; }
-    """
 
     BINDINGS = [
         Binding("up", "cursor(0, -1)", "Up", show=False),
