@@ -32,7 +32,6 @@ KNOWN_LARGE_CLASSES: set[str] = {
     "console/app.py:MissionApp",
     "console/screens/map.py:MapScreen",
     "console/screens/mission.py:MissionScreen",
-    "console/widgets/schedule.py:ScheduleView",
     "sim/skills/base.py:RobotSkills",
 }
 
