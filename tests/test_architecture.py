@@ -30,7 +30,6 @@ KNOWN_LARGE_CLASSES: set[str] = {
     "backend/server/journal.py:Journal",
     "backend/server/server.py:MissionServer",
     "console/app.py:MissionApp",
-    "console/screens/map.py:MapScreen",
     "console/screens/mission.py:MissionScreen",
     "sim/skills/base.py:RobotSkills",
 }

@@ -21,22 +21,26 @@ from textual.screen import Screen
 from textual.widgets import Footer, Static
 
 from backend.core.model import (
-    AreaMarker,
-    Pose,
-    PoseMarker,
-    Position,
-    PositionMarker,
     Status,
 )
 from backend.core.ops import EditSkill, MarkerAdd, MarkerDelete, MarkerMove, MarkerRename
-from backend.core.params import marker_value
 from console.bindings import bindings
 from console.messages import HelpRequested, OperationRequested
 from console.screens.dialogs import ChoiceScreen, ConfirmScreen, MarkerPrompt
 from console.state.actions import ACTIONS
+from console.state.markers import (
+    bind_choices,
+    followers,
+    free_name,
+    marker_point,
+    marker_use,
+    moved_value,
+    new_marker,
+    picked_value,
+)
 from console.state.model import CONNECTED, ConsoleModel
 from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS, fmt_value
-from console.widgets.bars import InfoLine, StatusLine, TopBar
+from console.widgets.bars import InfoLine, StatusLine, TopBar, connection_text
 from console.widgets.mapview import (
     AREA_GLYPH,
     BOX_GLYPH,
@@ -50,8 +54,6 @@ from console.widgets.mapview import (
     RSS_GLYPH,
     STONE_GLYPH,
     MapView,
-    centroid,
-    marker_use,
 )
 
 # this module's look (CSS_PATH); absolute, so a subclass defined elsewhere finds it too
@@ -131,6 +133,28 @@ def param_rows(spec: Any, s: Any, names: list[str]) -> list[tuple[str, Text]]:
     return rows
 
 
+def info_text(model: ConsoleModel, v: MapView, feed_state: str) -> Text:
+    """The info line: the feed (when not live), the cursor and scale, who is
+    followed, the selected marker and the schedule's selected skill."""
+    t = Text()
+    if feed_state == "none" or v.mirror is None or not v.mirror.ready:
+        t.append(NO_FEED if feed_state == "none" else "waiting for the map feed…", style="bold")
+        t.append("  ")
+    x, y = v.cursor
+    t.append(f"cursor ({x:.1f}, {y:.1f}) {math.degrees(v.heading):.0f}°")
+    t.append(f"  {v.vp.mpp:.2g} m/px", style="dim")
+    if v.follow:
+        t.append(f"  following {v.follow}", style="bold")
+    if v.selected_marker:
+        use = marker_use(model).get(v.selected_marker, "unused")
+        t.append(f"  marker {v.selected_marker} ({use})")
+    found = model.find(v.selected_skill)
+    if found is not None:
+        s = found[2]
+        t.append(f"  skill {s.id} {s.skill} ({STATUS_WORDS[s.status]})", style="dim")
+    return t
+
+
 class Legend(Static):
     """The legend beside the map (hidden below LEGEND_MIN_WIDTH columns until toggled)."""
 
@@ -205,7 +229,7 @@ class MapScreen(Screen):
         )
         self.set_class(not show, "-no-legend")
 
-    # -- state in (called by the app) ---------------------------------------------------------------
+    # -- state in (called by the app) --------------------------------------------------------------
     def map_changed(self, mirror: Any, update: Any) -> None:
         kind = getattr(update, "kind", "snapshot")
         if kind == "none":
@@ -250,7 +274,7 @@ class MapScreen(Screen):
             self.view.selected_skill = sid
             self.view.overlays_changed()
 
-    # -- lines ------------------------------------------------------------------------------------------
+    # -- lines -------------------------------------------------------------------------------------
     def update_top(self) -> None:
         m = self.model
         t = Text()
@@ -258,47 +282,17 @@ class MapScreen(Screen):
         if m.mission is not None:
             t.append(f"  {m.mission.name}", style="bold")
             t.append(f"  rev {m.mission.revision}", style="dim")
-        glyph = {
-            "connected": "●",
-            "reconnecting": "⟳",
-            "connecting": "…",
-            "unreachable": "✕",
-            "offline": "○",
-        }.get(m.connection, "?")
-        t.append(f"   {glyph} {m.connection}")
+        t.append(f"   {connection_text(m.connection)}")
         t.append("   F2 schedule", style="dim")
         self._topbar.update(t, layout=False)
 
     def update_info(self) -> None:
-        v = self.view
-        t = Text()
-        if self.feed_state == "none" or v.mirror is None or not v.mirror.ready:
-            t.append(
-                NO_FEED if self.feed_state == "none" else "waiting for the map feed…", style="bold"
-            )
-            t.append("  ")
-        x, y = v.cursor
-        t.append(f"cursor ({x:.1f}, {y:.1f}) {math.degrees(v.heading):.0f}°")
-        t.append(f"  {v.vp.mpp:.2g} m/px", style="dim")
-        if v.follow:
-            t.append(f"  following {v.follow}", style="bold")
-        if v.selected_marker:
-            use = marker_use(self.model).get(v.selected_marker, "unused")
-            t.append(f"  marker {v.selected_marker} ({use})")
-        found = self.model.find(v.selected_skill)
-        if found is not None:
-            t.append(
-                f"  skill {found[2].id} {found[2].skill} ({STATUS_WORDS[found[2].status]})",
-                style="dim",
-            )
-        self._info.update(t, layout=False)
+        self._info.update(info_text(self.model, self.view, self.feed_state), layout=False)
         self._info.set_class(self.feed_state == "none", "-nofeed")
 
     def say(self, text: str, severity: str = "info") -> None:
         self.message = text
-        self._status.update(text, layout=False)
-        for c in ("error", "warning", "ok"):
-            self._status.set_class(severity == c, f"-{c}")
+        self._status.show(text, severity)
 
     def submit(self, op: Any, what: str, **kw: Any) -> None:
         self.post_message(OperationRequested(op, what, say=self.say, **kw))
@@ -306,7 +300,8 @@ class MapScreen(Screen):
     def _connected(self) -> bool:
         if self.model.connection != CONNECTED:
             self.say(
-                f"not connected to the mission server ({self.model.connection}): markers cannot be changed now",
+                f"not connected to the mission server ({self.model.connection}): "
+                "markers cannot be changed now",
                 "warning",
             )
             return False
@@ -322,7 +317,7 @@ class MapScreen(Screen):
             return None
         return m.markers[name]
 
-    # -- actions: view ------------------------------------------------------------------------------------
+    # -- actions: view -----------------------------------------------------------------------------
     def action_help(self) -> None:
         self.post_message(HelpRequested())
 
@@ -381,12 +376,10 @@ class MapScreen(Screen):
         if not robots:
             self.say("no robot position known yet (no telemetry): nothing to follow", "warning")
             return
+        # the next robot; after the last one: nobody
         cur = self.view.follow
-        nxt = (
-            robots[(robots.index(cur) + 1)]
-            if cur in robots and robots.index(cur) + 1 < len(robots)
-            else (None if cur in robots else robots[0])
-        )
+        i = robots.index(cur) + 1 if cur in robots else 0
+        nxt = robots[i] if i < len(robots) else None
         self.view.follow = nxt
         if nxt is None:
             self.say("stopped following")
@@ -426,48 +419,24 @@ class MapScreen(Screen):
         self.view.selected_marker = name
         if mk.kind == "pose":
             self.view.heading = mk.pose.yaw
-            x, y = mk.pose.x, mk.pose.y
-        elif mk.kind == "position":
-            x, y = mk.position.x, mk.position.y
-        else:
-            x, y = centroid([(p.x, p.y) for p in mk.area])
-        self.view.set_cursor(x, y)
+        self.view.set_cursor(*marker_point(mk))
         self.say(f"marker {name} ({mk.kind}){': ' + mk.description if mk.description else ''}")
         self.update_info()
 
-    # -- actions: markers -----------------------------------------------------------------------------------
-    def _free_name(self) -> str:
-        taken = set(self.model.mission.markers) if self.model.mission else set()
-        i = 1
-        while f"M{i}" in taken:
-            i += 1
-        return f"M{i}"
+    # -- actions: markers ------------------------------------------------------------------
 
     @work(group="dialog")
     async def action_map_add_marker(self) -> None:
         if not self._connected():
             return
         answer = await self.app.push_screen_wait(
-            MarkerPrompt("New marker at the cursor — name:", self._free_name())
+            MarkerPrompt("New marker at the cursor — name:", free_name(self.model.mission))
         )
         if not answer:
             return
         name, kind = answer
         x, y = (round(c, 1) for c in self.view.cursor)
-        if kind == "pose":
-            marker: Any = PoseMarker(pose=Pose(x=x, y=y, yaw=round(self.view.heading, 3)))
-        elif kind == "position":
-            marker = PositionMarker(position=Position(x=x, y=y))
-        else:
-            r = max(5.0, 4 * self.view.vp.mpp)
-            marker = AreaMarker(
-                area=[
-                    Position(x=x - r, y=y - r),
-                    Position(x=x + r, y=y - r),
-                    Position(x=x + r, y=y + r),
-                    Position(x=x - r, y=y + r),
-                ]
-            )
+        marker = new_marker(kind, x, y, self.view.heading, self.view.vp.mpp)
 
         def ok(reply: Any) -> None:
             self.view.selected_marker = name
@@ -475,42 +444,29 @@ class MapScreen(Screen):
 
         self.submit(MarkerAdd(name=name, marker=marker), f"add marker {name}", on_ok=ok)
 
-    def move_value(self, mk: Any) -> Any:
-        x, y = (round(c, 1) for c in self.view.cursor)
-        if mk.kind == "pose":
-            return Pose(x=x, y=y, z=mk.pose.z, yaw=round(self.view.heading, 3))
-        if mk.kind == "position":
-            return Position(x=x, y=y, z=mk.position.z)
-        cx, cy = centroid([(p.x, p.y) for p in mk.area])
-        return [
-            Position(x=round(p.x + x - cx, 2), y=round(p.y + y - cy, 2), z=p.z) for p in mk.area
-        ]
-
     def action_map_move_marker(self) -> None:
         mk = self._marker()
         if mk is None or not self._connected():
             return
         name = self.view.selected_marker
-        followers = [
-            s.id
-            for task in self.model.mission.tasks.values()
-            for s in task
-            if s.status == Status.IDLE and name in s.bindings.values()
-        ]
+        following = followers(self.model.mission, name)
+        x, y = (round(c, 1) for c in self.view.cursor)
+        value = moved_value(mk, x, y, self.view.heading)
 
         def ok(reply: Any) -> None:
             x, y = self.view.cursor
             text = f"moved {name} to ({x:.1f}, {y:.1f})"
-            if followers:
-                text += f"; {', '.join(followers)} follow{'s' if len(followers) == 1 else ''}"
+            if following:
+                text += f"; {', '.join(following)} follow{'s' if len(following) == 1 else ''}"
             stale = reply.value.get("stale", [])
             if stale:
-                text += f"; {', '.join(stale)} still use{'s' if len(stale) == 1 else ''} the old value — unsynchronize to update"
+                text += (
+                    f"; {', '.join(stale)} still use{'s' if len(stale) == 1 else ''} "
+                    "the old value — unsynchronize to update"
+                )
             self.say(text, "warning" if stale else "ok")
 
-        self.submit(
-            MarkerMove(name=name, value=self.move_value(mk)), f"move marker {name}", on_ok=ok
-        )
+        self.submit(MarkerMove(name=name, value=value), f"move marker {name}", on_ok=ok)
 
     @work(group="dialog")
     async def action_map_rename_marker(self) -> None:
@@ -549,7 +505,7 @@ class MapScreen(Screen):
 
         self.submit(MarkerDelete(name=name), f"delete marker {name}", on_ok=ok)
 
-    # -- actions: parameters of the selected skill ----------------------------------------------------------
+    # -- actions: parameters of the selected skill -------------------------------------------------
     def _skill(self) -> Any:
         self.sync_selection()
         found = self.model.find(self.view.selected_skill)
@@ -604,22 +560,13 @@ class MapScreen(Screen):
             return
         robot, s, spec = got
         name = self.view.selected_marker
-        # a parameter the marker can give a value (the server's own rule: a pose
-        # marker fits a position too), its own kind first, is bound to it; a
-        # marker-typed one takes its name
-        fits = sorted(
-            (p for p, ps in spec.params.items() if marker_value(ps, mk)[1] is None),
-            key=lambda p: spec.params[p].type != mk.kind,
-        )
-        names = [
-            p
-            for p, ps in spec.params.items()
-            if ps.type == "marker" and (not ps.marker_kinds or mk.kind in ps.marker_kinds)
-        ]
+        # a parameter the marker can give a value is bound to it; a marker-typed one takes its name
+        fits, names = bind_choices(spec, mk)
         if not fits and not names:
             kinds = ", ".join(f"{p} ({ps.type})" for p, ps in spec.params.items()) or "none"
             self.say(
-                f"{s.id} ({s.skill}) has no parameter for a {mk.kind} marker; its parameters: {kinds}",
+                f"{s.id} ({s.skill}) has no parameter for a {mk.kind} marker; "
+                f"its parameters: {kinds}",
                 "warning",
             )
             return
@@ -666,9 +613,7 @@ class MapScreen(Screen):
 
         def pick(pname: str) -> None:
             ptype = spec.params[pname].type
-            value: dict[str, float] = {"x": x, "y": y, "z": 0.0}
-            if ptype == "pose":
-                value |= {"roll": 0.0, "pitch": 0.0, "yaw": round(self.view.heading, 3)}
+            value = picked_value(ptype, x, y, self.view.heading)
             where = f"({x:g}, {y:g})" + (
                 f" heading {math.degrees(self.view.heading):.0f}°" if ptype == "pose" else ""
             )
@@ -690,7 +635,7 @@ class MapScreen(Screen):
             cancelled=f"pick cancelled: {s.id} unchanged",
         )
 
-    # -- disabled keys are explained, like on the mission screen -----------------------------------------------
+    # -- disabled keys are explained, like on the mission screen -----------------------------------
     async def run_named(self, action: str) -> None:
         if action in MAP_ACTIONS:
             await self.run_action(action)

@@ -44,7 +44,7 @@ from console.state.capability import also_offered_by
 from console.state.defaults import default_params
 from console.state.eventlog import AlertBook
 from console.state.model import CONNECTED, ConsoleModel
-from console.widgets.bars import StatusLine, TopBar
+from console.widgets.bars import StatusLine, TopBar, connection_text
 from console.widgets.param_editor import ParamEditor
 from console.widgets.schedule import ScheduleView
 
@@ -164,14 +164,7 @@ class MissionScreen(Screen):
             t.append(f"  {m.mission.name}", style="bold")
             t.append(f"  rev {m.mission.revision}", style="dim")
         state = m.connection
-        glyph = {
-            "connected": "●",
-            "reconnecting": "⟳",
-            "connecting": "…",
-            "unreachable": "✕",
-            "offline": "○",
-        }.get(state, "?")
-        t.append(f"   {glyph} {state}")
+        t.append(f"   {connection_text(state)}")
         if m.endpoint:
             t.append(f" {m.endpoint}", style="dim")
         if m.connection_detail and state != CONNECTED:
@@ -191,12 +184,9 @@ class MissionScreen(Screen):
     def say(self, text: str, severity: str = "info") -> None:
         """The status line: the last outcome, refusal or explanation."""
         self.message = text
-        line = self._status
-        line.update(text, layout=False)
-        for c in ("error", "warning", "ok"):
-            line.set_class(severity == c, f"-{c}")
+        self._status.show(text, severity)
 
-    # -- selection -----------------------------------------------------------------------------------
+    # -- selection ---------------------------------------------------------------------------------
     @on(ScheduleView.CursorMoved)
     async def _cursor_moved(self, event: ScheduleView.CursorMoved) -> None:
         self.refresh_availability()
@@ -249,12 +239,12 @@ class MissionScreen(Screen):
         if not self.explain(action):
             await self.run_action(action)
 
-    # -- submitting -----------------------------------------------------------------------------------
+    # -- submitting --------------------------------------------------------------------------------
     def submit(self, op: Any, what: str, **kw: Any) -> None:
         """The app submits it (OperationRequested) and reports on the status line."""
         self.post_message(OperationRequested(op, what, **kw))
 
-    # -- actions: plan ----------------------------------------------------------------------------------
+    # -- actions: plan -----------------------------------------------------------------------------
     def action_help(self) -> None:
         self.post_message(HelpRequested())
 
@@ -417,7 +407,7 @@ class MissionScreen(Screen):
             on_ok=lambda r: self.say(f"redone: {r.value.get('redone', 'edit')}", "ok"),
         )
 
-    # -- actions: synchronization -----------------------------------------------------------------------
+    # -- actions: synchronization ------------------------------------------------------------------
     def action_sync(self) -> None:
         robot, sid = self.selection()
         if robot is None or sid is None:
@@ -503,7 +493,7 @@ class MissionScreen(Screen):
             ),
         )
 
-    # -- actions: execution -------------------------------------------------------------------------------
+    # -- actions: execution ------------------------------------------------------------------------
     def _control(self, op: str, robot: str | None) -> None:
         who = robot or "all robots"
 
@@ -556,7 +546,7 @@ class MissionScreen(Screen):
         ):
             self._control("reset", None)
 
-    # -- actions: files ------------------------------------------------------------------------------------
+    # -- actions: files ----------------------------------------------------------------------------
     @work(group="dialog")
     async def action_save(self) -> None:
         m, lib = self.model.mission, self.model.library
@@ -610,7 +600,7 @@ class MissionScreen(Screen):
             on_ok=lambda r: self.say(f"loaded {path}: '{mission.name}'", "ok"),
         )
 
-    # -- widgets inside the editor must not trigger schedule keys ----------------------------------------
+    # -- widgets inside the editor must not trigger schedule keys ----------------------------------
     def is_typing(self) -> bool:
         f = self.focused
         return isinstance(f, Input | TextArea | Select | Switch)

@@ -7,6 +7,20 @@ from __future__ import annotations
 
 from textual.widgets import Static
 
+# the connection's state, as a glyph (the word follows it)
+CONNECTION_GLYPHS = {
+    "connected": "●",
+    "reconnecting": "⟳",
+    "connecting": "…",
+    "unreachable": "✕",
+    "offline": "○",
+}
+
+
+def connection_text(state: str) -> str:
+    """'● connected', '⟳ reconnecting', …"""
+    return f"{CONNECTION_GLYPHS.get(state, '?')} {state}"
+
 
 class TopBar(Static):
     """Mission, revision and connection (styled by state: -reconnecting, -unreachable, …)."""
@@ -14,6 +28,11 @@ class TopBar(Static):
 
 class StatusLine(Static):
     """The last outcome, refusal or explanation (-error, -warning, -ok)."""
+
+    def show(self, text: str, severity: str = "info") -> None:
+        self.update(text, layout=False)
+        for c in ("error", "warning", "ok"):
+            self.set_class(severity == c, f"-{c}")
 
 
 class TitleBar(Static):
