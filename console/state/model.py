@@ -174,6 +174,15 @@ class ConsoleModel:
             return []
         return self.mission.tasks.get(robot, [])
 
+    def insertion_point(self, robot: str, skill_id: str | None) -> tuple[int, str]:
+        """Where a new skill goes in the robot's plan (index among its idle
+        skills, and in words): after the selected idle skill, else first."""
+        found = self.find(skill_id)
+        if found and found[2].status == Status.IDLE:
+            idle = [s.id for s in self.task(robot) if s.status == Status.IDLE]
+            return idle.index(found[2].id) + 1, f"after {found[2].id}"
+        return 0, "at the head of the plan"
+
     def robot_kind(self, robot: str) -> str:
         if self.mission is None or self.library is None:
             return "dynamic"

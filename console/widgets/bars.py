@@ -5,6 +5,7 @@ bars.tcss (loaded by the app)."""
 
 from __future__ import annotations
 
+from rich.text import Text
 from textual.widgets import Static
 
 # the connection's state, as a glyph (the word follows it)
@@ -24,6 +25,17 @@ def connection_text(state: str) -> str:
 
 class TopBar(Static):
     """Mission, revision and connection (styled by state: -reconnecting, -unreachable, …)."""
+
+    shown = ""  # the text shown (plain): an unchanged one is not drawn again
+
+    def show(self, text: Text, state: str) -> None:
+        """Show `text`, styled by the connection's `state` (-reconnecting, …)."""
+        if text.plain == self.shown:
+            return
+        self.shown = text.plain
+        self.update(text, layout=False)
+        for c in CONNECTION_GLYPHS:
+            self.set_class(state == c, f"-{c}")
 
 
 class StatusLine(Static):

@@ -32,6 +32,7 @@ from textual.message import Message
 from textual.widgets import Button, Input, Label, Select, Static, Switch, TextArea
 
 from backend.core.model import Mission, Policies, SkillInstance, Status
+from backend.core.ops import EditSkill
 from backend.core.params import ParamSpec, check_value, normalize_value
 from console.state.model import ConsoleModel
 from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS
@@ -126,6 +127,23 @@ class ParamEditor(VerticalScroll):
             self.bindings = bindings
             self.base_revision = base_revision
             self.policies = policies
+
+        def operation(self) -> EditSkill:
+            return EditSkill(
+                id=self.skill_id,
+                label=self.label,
+                params=self.params,
+                bindings=self.bindings,
+                policies=self.policies,
+            )
+
+        def changed(self) -> list[str]:
+            """What the operation changes (for the status line)."""
+            return (
+                [*self.params, *self.bindings]
+                + (["label"] if self.label is not None else [])
+                + (["policies"] if self.policies is not None else [])
+            )
 
     class DraftsChanged(Message):
         """Which skills have unapplied changes; `discarded`: sentences about
