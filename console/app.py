@@ -12,9 +12,7 @@ from __future__ import annotations
 
 import asyncio
 import gc
-import os
 import signal
-import threading
 from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
@@ -34,6 +32,13 @@ from console.bindings import bindings
 from console.bridge import Backend, ClientBridge
 from console.commands import MissionCommands
 from console.config import ConsoleConfig, save_theme
+from console.hangup import (
+    detach_terminal,
+    force_exit,
+    handle_signals,
+    start_watchdog,
+    unhandle_signals,
+)
 from console.messages import (
     AccountKnown,
     AlertAcknowledged,
@@ -57,25 +62,10 @@ from console.screens.mission import MissionScreen
 from console.state.actions import ACTIONS
 from console.state.eventlog import AlertBook, AlertEntry, EventLog
 from console.state.model import CONNECTED, CONNECTING, OFFLINE, UNREACHABLE, ConsoleModel
-from console.themes.loader import ANSI16_MAP, ANSI16_STATUS, Downgrade16, load_themes
-from console.themes.variables import DEFAULT_THEME, VARIABLE_DEFAULTS
+from console.themes.loader import ANSI16_MAP, ANSI16_STATUS, Downgrade16, choose_theme, load_themes
+from console.themes.variables import VARIABLE_DEFAULTS
 
 HERE = Path(__file__).parent
-HANG_UP_GRACE_S = 5.0  # after a hang-up, the longest a clean exit may take
-
-
-def _detach_terminal() -> None:
-    """Point stdin/stdout/stderr at /dev/null (the terminal hung up)."""
-    try:
-        null = os.open(os.devnull, os.O_RDWR)
-    except OSError:
-        return
-    for fd in (0, 1, 2):
-        try:
-            os.dup2(null, fd)
-        except OSError:
-            pass
-    os.close(null)
 
 
 def refusal_text(reply: ErrorReply, robot: str | None = None, skill: str | None = None) -> str:
@@ -98,7 +88,10 @@ class MissionApp(App[int]):
     # absolute, so a subclass defined elsewhere (tests) finds them too
     CSS_PATH = [
         HERE / "app.tcss",
-        *(HERE / "widgets" / f"{w}.tcss" for w in ("bars", "schedule", "param_editor", "mapview")),
+        HERE / "widgets" / "bars.tcss",
+        HERE / "widgets" / "schedule.tcss",
+        HERE / "widgets" / "param_editor.tcss",
+        HERE / "widgets" / "mapview.tcss",
     ]
 
     def __init__(
@@ -127,14 +120,9 @@ class MissionApp(App[int]):
         self.notices.extend(problems)
         for t in themes.values():
             self.register_theme(t)
-        default = DEFAULT_THEME if DEFAULT_THEME in self.available_themes else "textual-dark"
-        wanted = theme or self.config.theme or default
-        if wanted not in self.available_themes:
-            self.notices.append(
-                f"unknown theme '{wanted}' (themes: {', '.join(sorted(self.available_themes))}); using {default}"
-            )
-            wanted = default
-        self.theme = wanted
+        self.theme, notice = choose_theme(theme or self.config.theme, self.available_themes)
+        if notice:
+            self.notices.append(notice)
         # what the fleet, event-log and alert screens show; bounded (see eventlog.py)
         self.event_log = EventLog()
         self.alerts = AlertBook()
@@ -149,9 +137,7 @@ class MissionApp(App[int]):
         self.add_mode("log", lambda: EventLogScreen(self.event_log, changes))
         self.add_mode("alerts", lambda: AlertScreen(self.alerts, changes))
         self.map_screen: MapScreen | None = None
-        self.map_feed: tuple[object, object] | None = (
-            None  # the latest (mirror, update) of the map feed
-        )
+        self.map_feed: tuple[object, object] | None = None  # the latest (mirror, update)
         self.add_mode("map", self._make_map_screen)
         if self.config.keymap:
             self.set_keymap(self.config.keymap)
@@ -165,9 +151,7 @@ class MissionApp(App[int]):
         self.mission_screen: MissionScreen | None = None
         self._connection_closed = False
         self._hanging_up = False
-        self.on_forced_exit: list[
-            Callable[[], object]
-        ] = []  # run before a forced exit after a hang-up
+        self.on_forced_exit: list[Callable[[], object]] = []  # before a forced exit (hang-up)
         self.exit_code = 0
 
     # -- theme and screens --------------------------------------------------------------
@@ -250,12 +234,7 @@ class MissionApp(App[int]):
     # -- start / stop ---------------------------------------------------------------------
     def on_mount(self) -> None:
         if not self.is_headless:
-            loop = asyncio.get_running_loop()
-            for sig in (signal.SIGHUP, signal.SIGTERM):
-                try:
-                    loop.add_signal_handler(sig, self._hang_up, sig)
-                except (NotImplementedError, RuntimeError, ValueError):
-                    pass
+            handle_signals(asyncio.get_running_loop(), self._hang_up)
         for n in self.notices:
             self.notify(n, title="Settings", severity="warning", timeout=10)
         self.theme_changed_signal.subscribe(self, self._theme_picked)
@@ -274,38 +253,20 @@ class MissionApp(App[int]):
         Zenoh session — a process with an open session never exits."""
         await self.close_connection()
         if not self.is_headless:
-            loop = asyncio.get_running_loop()
-            for sig in (signal.SIGHUP, signal.SIGTERM):
-                try:
-                    loop.remove_signal_handler(sig)
-                except (NotImplementedError, RuntimeError, ValueError):
-                    pass
+            unhandle_signals(asyncio.get_running_loop())
 
     def _hang_up(self, sig: int = signal.SIGTERM) -> None:
-        """SIGHUP (the SSH link dropped) or SIGTERM: close the session, exit.
-
-        After a hang-up the terminal is gone: a write to it kills Textual's
-        writer thread, and its next writes then wait forever (seen with
-        tmux kill-session). So output goes to /dev/null from here on, and a
-        watchdog ends the process (after `on_forced_exit` hooks, e.g. the
-        demo stopping its children) should the exit still hang."""
+        """SIGHUP (the SSH link dropped) or SIGTERM: close the session, exit;
+        without the terminal after a hang-up, and with a watchdog that runs the
+        `on_forced_exit` hooks and ends the process should the exit hang
+        (console/hangup.py says why)."""
         if self._hanging_up:
             return
         self._hanging_up = True
         if sig == signal.SIGHUP:
-            _detach_terminal()
-        watchdog = threading.Timer(HANG_UP_GRACE_S, self._force_exit)
-        watchdog.daemon = True
-        watchdog.start()
+            detach_terminal()
+        start_watchdog(lambda: force_exit(self.on_forced_exit, self.exit_code))
         self.run_worker(self.quit_now(), group="quit")
-
-    def _force_exit(self) -> None:
-        for hook in self.on_forced_exit:
-            try:
-                hook()
-            except Exception:
-                pass
-        os._exit(self.exit_code)
 
     async def action_quit(self) -> None:
         """Ctrl+Q: asks first when the editor holds unapplied changes."""
@@ -313,7 +274,8 @@ class MissionApp(App[int]):
         if unapplied and not isinstance(self.screen, ConfirmScreen):
             self.push_screen(
                 ConfirmScreen(
-                    f"Unapplied changes to {', '.join(unapplied)} are lost when you quit. Quit anyway?",
+                    f"Unapplied changes to {', '.join(unapplied)} are lost when you quit. "
+                    "Quit anyway?",
                     yes="Quit",
                 ),
                 self._quit_confirmed,
@@ -452,12 +414,14 @@ class MissionApp(App[int]):
             await self.mission_screen.connection_changed()
             if message.status == "reconnecting":
                 self.mission_screen.say(
-                    f"connection to {m.endpoint} lost — reconnecting (the server may be restarting)…",
+                    f"connection to {m.endpoint} lost — reconnecting "
+                    "(the server may be restarting)…",
                     "warning",
                 )
             elif message.status == CONNECTED and previous == "reconnecting":
+                revision = m.mission.revision if m.mission else "?"
                 self.mission_screen.say(
-                    f"reconnected to {m.endpoint}: state resynchronized at revision {m.mission.revision if m.mission else '?'}",
+                    f"reconnected to {m.endpoint}: state resynchronized at revision {revision}",
                     "ok",
                 )
                 self.notify("reconnected; state resynchronized", title="Server", timeout=3)
@@ -540,40 +504,14 @@ class MissionApp(App[int]):
         self.awareness_signal.publish(("alerts", None))
         self.awareness_signal.publish(("log", None))
 
-    # -- operations --------------------------------------------------------------------------------
-    def submit(
-        self,
-        op: Any,
-        what: str,
-        *,
-        robot: str | None = None,
-        skill: str | None = None,
-        expected_revision: int | None = None,
-        on_ok: Any = None,
-        on_refused: Any = None,
-        say: Any = None,
-    ) -> None:
+    # -- operations ---------------------------------------------------------------------
+    @on(OperationRequested)
+    def submit(self, request: OperationRequested) -> None:
+        """Run a screen's operation in a worker: the UI never waits on the network."""
         if self.backend is None:
             self.notify("not connected to a mission server", severity="error")
             return
-        self.run_worker(
-            self._submit(op, what, robot, skill, expected_revision, on_ok, on_refused, say),
-            group="ops",
-            exit_on_error=False,
-        )
-
-    @on(OperationRequested)
-    def _operation_requested(self, m: OperationRequested) -> None:
-        self.submit(
-            m.op,
-            m.what,
-            robot=m.robot,
-            skill=m.skill,
-            expected_revision=m.expected_revision,
-            on_ok=m.on_ok,
-            on_refused=m.on_refused,
-            say=m.say,
-        )
+        self.run_worker(self._submit(request), group="ops", exit_on_error=False)
 
     def whoami(self) -> dict[str, str]:
         """This console's client id and user, as the event log names them."""
@@ -593,39 +531,42 @@ class MissionApp(App[int]):
         else:
             self.alerts_changed()
 
-    async def _submit(
-        self, op, what, robot, skill, expected_revision, on_ok, on_refused, say=None
-    ) -> None:
+    async def _submit(self, r: OperationRequested) -> None:
+        say = r.say
         if say is None and self.mission_screen is not None:
             say = self.mission_screen.say  # or another screen's status line (the map's)
         say = say or (lambda *a: None)
-        say(f"… {what}")
+        say(f"… {r.what}")
+        assert self.backend is not None
         try:
-            reply = await self.backend.submit(op, expected_revision=expected_revision)
+            reply = await self.backend.submit(r.op, expected_revision=r.expected_revision)
         except OperationRefused as e:
-            text = refusal_text(e.reply, robot, skill)
-            say(f"✗ {what} refused: {text}", "error")
-            self.notify(text, title=f"Refused: {what}", severity="error", timeout=8)
-            self._refused(f"{what} refused: {text}", e.reply.robot or robot, e.reply.skill or skill)
-            if on_refused is not None:
-                on_refused(e.reply)
+            self._operation_refused(r, say, e.reply)
             return
         except ClientError as e:
-            say(f"✗ {what}: {e}", "error")
-            self.notify(str(e), title=f"Failed: {what}", severity="error", timeout=8)
-            self.event_log.add(
-                "failure",
-                f"{what}: {e}",
-                self.clock(),
-                robots=[robot] if robot else [],
-                skill=skill,
-                **self.whoami(),
-            )
-            self.awareness_signal.publish(("log", None))
+            self._operation_failed(r, say, e)
             return
-        if on_ok is not None:
-            on_ok(reply)
+        if r.on_ok is not None:
+            r.on_ok(reply)
         else:
-            say(f"✓ {what}", "ok")
+            say(f"✓ {r.what}", "ok")
         for note in reply.notes:
-            self.notify(note, title=what, severity="warning", timeout=8)
+            self.notify(note, title=r.what, severity="warning", timeout=8)
+
+    def _operation_refused(self, r: OperationRequested, say: Any, reply: ErrorReply) -> None:
+        text = refusal_text(reply, r.robot, r.skill)
+        say(f"✗ {r.what} refused: {text}", "error")
+        self.notify(text, title=f"Refused: {r.what}", severity="error", timeout=8)
+        self._refused(f"{r.what} refused: {text}", reply.robot or r.robot, reply.skill or r.skill)
+        if r.on_refused is not None:
+            r.on_refused(reply)
+
+    def _operation_failed(self, r: OperationRequested, say: Any, e: ClientError) -> None:
+        say(f"✗ {r.what}: {e}", "error")
+        self.notify(str(e), title=f"Failed: {r.what}", severity="error", timeout=8)
+        robots = [r.robot] if r.robot else []
+        at = self.clock()
+        self.event_log.add(
+            "failure", f"{r.what}: {e}", at, robots=robots, skill=r.skill, **self.whoami()
+        )
+        self.awareness_signal.publish(("log", None))
