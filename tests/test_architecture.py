@@ -29,8 +29,6 @@ KNOWN_LARGE_CLASSES: set[str] = {
     "backend/core/rules/engine.py:Engine",
     "backend/server/journal.py:Journal",
     "backend/server/server.py:MissionServer",
-    "console/app.py:MissionApp",
-    "console/screens/mission.py:MissionScreen",
     "sim/skills/base.py:RobotSkills",
 }
 

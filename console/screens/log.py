@@ -20,7 +20,8 @@ from console.screens.dialogs import PathPrompt
 from console.state.eventlog import LOG_LIMIT, EventLog, LogEntry, entry_matches
 from console.state.text import fmt_clock
 
-SHOW_LIMIT = 1_000  # rows in the table (a DataTable of 10k rows takes seconds to fill); export writes all matches
+# rows in the table (a DataTable of 10k rows takes seconds to fill); export writes all matches
+SHOW_LIMIT = 1_000
 
 KIND_VARS = {
     "failure": "status-failure",
@@ -53,15 +54,18 @@ class EventLogScreen(ViewScreen):
     def compose(self) -> ComposeResult:
         yield self.title_bar
         yield Input(
-            placeholder="filter: robot:lru1 kind:failure words…  (kinds: operation report refusal failure alert)",
+            placeholder=(
+                "filter: robot:lru1 kind:failure words…  "
+                "(kinds: operation report refusal failure alert)"
+            ),
             id="filter",
         )
         yield DataTable(id="log", cursor_type="row")
+        # the selected entry in full (the table cuts at 80 columns)
+        yield Static("", id="entry", classes="detail")
         yield Static(
-            "", id="entry", classes="detail"
-        )  # the selected entry in full (the table cuts at 80 columns)
-        yield Static(
-            f"last {LOG_LIMIT:,} entries kept in memory · ctrl+s export shown entries (JSON lines) · F2 schedule",
+            f"last {LOG_LIMIT:,} entries kept in memory · "
+            "ctrl+s export shown entries (JSON lines) · F2 schedule",
             classes="hint",
         )
         yield Footer()

@@ -259,7 +259,8 @@ ACTIONS: list[Action] = [
         "map_bind",
         "b",
         "Bind",
-        "Bind the selected marker to a fitting parameter of the schedule's selected skill (several fit: choose one)",
+        "Bind the selected marker to a fitting parameter of the schedule's selected skill "
+        "(several fit: choose one)",
         "Map",
         True,
         scope="map",
@@ -268,7 +269,8 @@ ACTIONS: list[Action] = [
         "map_pick",
         "p",
         "Pick pose",
-        "Set the selected skill's pose/position parameter to the cursor (position + heading; several: choose one)",
+        "Set the selected skill's pose/position parameter to the cursor "
+        "(position + heading; several: choose one)",
         "Map",
         True,
         scope="map",

@@ -89,7 +89,8 @@ def test_read_only_reason_matches_the_brief():
         "stop the robot (the skill goes back to its queue), then unsynchronize it"
     )
     assert m.read_only_reason("lru1-3").endswith(
-        "lru1-3 is idle_synchronized on lru1: only idle skills can be edited; unsynchronize it first"
+        "lru1-3 is idle_synchronized on lru1: only idle skills can be edited; "
+        "unsynchronize it first"
     )
     assert m.read_only_reason("lru1-4") is None
 
