@@ -3,9 +3,11 @@
 State comes in as messages only (`console.messages`): the live connection
 (`ClientBridge`) posts them from client callbacks, tests post them directly.
 The app owns one `ConsoleModel`, updates it in the message handlers and tells
-the mission screen what changed. Operations run in workers, so the UI never
-waits on the network; their refusals name robot, skill and reason in a
-notification and on the status line.
+the screens what changed; it hands each screen the state it shows. Screens
+never import the app: they post requests (`OperationRequested`,
+`HelpRequested`, `AlertAcknowledged`) that the app handles. Operations run in
+workers, so the UI never waits on the network; their refusals name robot,
+skill and reason in a notification and on the status line.
 """
 
 from __future__ import annotations
