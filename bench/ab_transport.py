@@ -36,12 +36,26 @@ ROOT = Path(__file__).resolve().parents[1]
 # -- the child: one client of one version's server, measuring a block per request --------------
 
 
+def _either(new: str, old: str):
+    """A module by its name in this version's tree, or by its name before the
+    restructure (issue 18), so that trees from both sides of it can be compared.
+    Decided by the tree itself: the venv's editable install would also resolve
+    the new names for an old tree."""
+    import importlib
+    from pathlib import Path
+
+    import backend
+
+    layered = (Path(backend.__path__[0]) / "core").is_dir()
+    return importlib.import_module(new if layered else old)
+
+
 async def child(endpoint: str) -> None:
     # this version's backend (PYTHONPATH); not bench_transport, which would
     # put the tree this script lives in first on sys.path
-    from backend.client.client import MissionClient
-    from backend.core.ops import EditSkill
-    from backend.protocol.keys import Keys
+    MissionClient = _either("backend.client.client", "backend.client").MissionClient
+    EditSkill = _either("backend.core.ops", "backend.ops").EditSkill
+    Keys = _either("backend.protocol.keys", "backend.protocol").Keys
 
     client = MissionClient(endpoint, client_id="ab")
     await client.connect()
@@ -108,17 +122,12 @@ class _Robot:
 
     @classmethod
     async def start(cls, endpoint: str, client) -> _Robot:
-        from backend.core.ops import Sync
-        from backend.files.missions import load_library
-        from backend.protocol.keys import Keys
-        from backend.protocol.messages import (
-            CommandReply,
-            Manifest,
-            Module,
-            Register,
-            RegisterReply,
-            dumps,
-        )
+        Sync = _either("backend.core.ops", "backend.ops").Sync
+        load_library = _either("backend.files.missions", "backend.files").load_library
+        Keys = _either("backend.protocol.keys", "backend.protocol").Keys
+        m = _either("backend.protocol.messages", "backend.protocol")
+        CommandReply, Manifest, Module = m.CommandReply, m.Manifest, m.Module
+        Register, RegisterReply, dumps = m.Register, m.RegisterReply, m.dumps
         from backend.transport import client_config, declare_token, query, serve
         from backend.transport.session import open_session
 
@@ -155,14 +164,17 @@ class _Robot:
     async def block(self, client, n: int) -> tuple[list[float], list[float]]:
         from datetime import UTC, datetime
 
-        from backend.core.model import Status
-        from backend.core.ops import Report
-        from backend.protocol.keys import Keys
-        from backend.protocol.messages import ReportBatch, dumps
+        Status = _either("backend.core.model", "backend.model").Status
+        Report = _either("backend.core.ops", "backend.ops").Report
+        Keys = _either("backend.protocol.keys", "backend.protocol").Keys
+        m = _either("backend.protocol.messages", "backend.protocol")
+        ReportBatch, dumps = m.ReportBatch, m.dumps
 
         applied_at: dict[int, float] = {}
 
-        def on_event(kind: str, batch) -> None:
+        def on_event(*args) -> None:
+            # one typed event; a version before issue 18 calls with (kind, payload)
+            kind, batch = (args[0].kind, args[0].payload) if len(args) == 1 else args
             if kind == "events":
                 applied_at.setdefault(batch.revision, time.perf_counter())
 
@@ -198,7 +210,7 @@ class _Robot:
             await client.wait_for(lambda m, r=revision: m.revision >= r, 10)
             applied.append(applied_at[revision] - t)
             await asyncio.sleep(0.012)  # lone reports: the server's threads go idle in between
-        client._listeners.remove(on_event)
+        client._listeners.remove(on_event)  # no remove_listener before issue 18
         return acks, applied
 
     def close(self) -> None:
@@ -304,21 +316,23 @@ class Version:
 
     def report(self) -> str:
         if self.rates:
-            return f"{self.label}: {statistics.median(self.rates):,.0f} ops/s median of {len(self.rates)} blocks"
+            rate = statistics.median(self.rates)
+            return f"{self.label}: {rate:,.0f} ops/s median of {len(self.rates)} blocks"
         if self.acks:
             p99 = sorted(self.applied)[int(0.99 * (len(self.applied) - 1))]
             return (
-                f"{self.label}: {len(self.acks)} lone reports: acknowledged {statistics.median(self.acks) * 1e3:.3f} ms, "
-                f"applied by the client {statistics.median(self.applied) * 1e3:.3f} ms (p99 {p99 * 1e3:.3f} ms) (medians)"
+                f"{self.label}: {len(self.acks)} lone reports: acknowledged "
+                f"{statistics.median(self.acks) * 1e3:.3f} ms, applied by the client "
+                f"{statistics.median(self.applied) * 1e3:.3f} ms (p99 {p99 * 1e3:.3f} ms) (medians)"
             )
         raw, ops = statistics.median(self.raw), statistics.median(self.ops)
         ranked = sorted(self.ops)
         p99, p999 = (ranked[int(q * (len(ranked) - 1))] for q in (0.99, 0.999))
         over = sum(t > 0.003 for t in ranked)  # e.g. an fsync in the operation's path
         return (
-            f"{self.label}: raw {raw * 1e3:.3f} ms, operation {ops * 1e3:.3f} ms (p99 {p99 * 1e3:.3f} ms, "
-            f"p99.9 {p999 * 1e3:.2f} ms, max {ranked[-1] * 1e3:.2f} ms, {over} of {len(ranked)} over 3 ms), "
-            f"ratio {ops / raw:.2f}x"
+            f"{self.label}: raw {raw * 1e3:.3f} ms, operation {ops * 1e3:.3f} ms (p99 "
+            f"{p99 * 1e3:.3f} ms, p99.9 {p999 * 1e3:.2f} ms, max {ranked[-1] * 1e3:.2f} ms, {over} "
+            f"of {len(ranked)} over 3 ms), ratio {ops / raw:.2f}x"
         )
 
 

@@ -180,7 +180,7 @@ async def run_datatable() -> dict:
     from textual.app import App, ComposeResult
     from textual.widgets import DataTable
 
-    from console.state.model import GLYPHS, param_summary
+    from console.state.text import GLYPHS, param_summary
 
     mission, library = build_mission()
 
@@ -250,25 +250,34 @@ def table(results: dict) -> str:
     cpu = platform.processor() or platform.machine()
     return (
         "## Console\n\n"
-        f"The schedule panel (a Line-API `ScrollView` drawing only visible lines) against Textual's "
-        f"`DataTable` holding the same rows, for a {ROBOTS * PER_ROBOT:,}-skill mission ({ROBOTS} robots x {PER_ROBOT} "
-        f"skills: 200 done, 1 running, 99 queued, 200 planned each; 10 barriers), headless at {SIZE[0]}x{SIZE[1]}.\n\n"
+        "The schedule panel (a Line-API `ScrollView` drawing only visible lines) against "
+        f"Textual's `DataTable` holding the same rows, for a {ROBOTS * PER_ROBOT:,}-skill mission "
+        f"({ROBOTS} robots x {PER_ROBOT} skills: 200 done, 1 running, 99 queued, 200 planned each; "
+        f"10 barriers), headless at {SIZE[0]}x{SIZE[1]}.\n\n"
         "Reproduce: `.venv/bin/python bench/bench_console.py --write docs/performance.md` "
-        f"({time.strftime('%Y-%m-%d')}, Python {platform.python_version()}, {os.cpu_count()} cores, {cpu}; "
-        f"load average {results['load']:.1f} while measuring — other jobs shared the machine, so read the "
-        "latencies as upper bounds).\n\n"
+        f"({time.strftime('%Y-%m-%d')}, Python {platform.python_version()}, {os.cpu_count()} "
+        f"cores, {cpu}; load average {results['load']:.1f} while measuring — other jobs shared the "
+        "machine, so read the latencies as upper bounds).\n\n"
         "| measure | schedule panel | DataTable (baseline) | target |\n"
         "| --- | ---: | ---: | --- |\n"
-        f"| first full render (state posted -> frame written) | {s['first_render_s'] * 1000:.0f} ms | {d['first_render_s'] * 1000:.0f} ms | <= 1 s and >= 3x faster than DataTable: **{speedup:.1f}x** |\n"
-        f"| one status change (event posted -> frame written), median of {CHANGES} | {s['status_change_ms']:.1f} ms | {d['status_change_ms']:.1f} ms | <= 30 ms |\n"
-        f"| same, worst of {CHANGES} | {s['status_change_max_ms']:.1f} ms | {d['status_change_max_ms']:.1f} ms | |\n"
-        f"| CPU time of the process for the first render | {s['first_render_cpu_s'] * 1000:.0f} ms | {d['first_render_cpu_s'] * 1000:.0f} ms | |\n"
-        f"| CPU time of the process for one status change, median | {s['status_change_cpu_ms']:.1f} ms | {d['status_change_cpu_ms']:.1f} ms | |\n"
-        f"| resident memory after the first render (whole process) | {s['rss_mb']:.0f} MB | {d['rss_mb']:.0f} MB | <= 300 MB |\n\n"
-        "The status change re-lays out only the changed robot's column (500 rows) and repaints only the visible "
-        "lines that show something else (all visible lines when the longest synchronized section grows or "
-        "shrinks, as for the paused changes here: those make the worst case); the first render builds per-column "
-        "row indexes (no widget per row) and renders the ~45 visible lines.\n"
+        f"| first full render (state posted -> frame written) | {s['first_render_s'] * 1000:.0f} "
+        f"ms | {d['first_render_s'] * 1000:.0f} ms | <= 1 s and >= 3x faster than DataTable: "
+        f"**{speedup:.1f}x** |\n"
+        f"| one status change (event posted -> frame written), median of {CHANGES} | "
+        f"{s['status_change_ms']:.1f} ms | {d['status_change_ms']:.1f} ms | <= 30 ms |\n"
+        f"| same, worst of {CHANGES} | {s['status_change_max_ms']:.1f} ms | "
+        f"{d['status_change_max_ms']:.1f} ms | |\n"
+        f"| CPU time of the process for the first render | {s['first_render_cpu_s'] * 1000:.0f} ms "
+        f"| {d['first_render_cpu_s'] * 1000:.0f} ms | |\n"
+        "| CPU time of the process for one status change, median | "
+        f"{s['status_change_cpu_ms']:.1f} ms | {d['status_change_cpu_ms']:.1f} ms | |\n"
+        f"| resident memory after the first render (whole process) | {s['rss_mb']:.0f} MB | "
+        f"{d['rss_mb']:.0f} MB | <= 300 MB |\n\n"
+        "The status change re-lays out only the changed robot's column (500 rows) and repaints "
+        "only the visible lines that show something else (all visible lines when the longest "
+        "synchronized section grows or shrinks, as for the paused changes here: those make the "
+        "worst case); the first render builds per-column row indexes (no widget per row) and "
+        "renders the ~45 visible lines.\n"
     )
 
 

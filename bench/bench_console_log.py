@@ -91,15 +91,21 @@ def main() -> int:
 
     text = f"""## Console event log
 
-The event log keeps the last {LOG_LIMIT:,} entries in memory; its screen shows the last 1,000 matching ones (a `DataTable` of 10,000 rows took 2.7 s to fill on this machine). Headless at 120x40, median of 5.
+The event log keeps the last {LOG_LIMIT:,} entries in memory; its screen shows the last 1,000 \
+matching ones (a `DataTable` of 10,000 rows took 2.7 s to fill on this machine). Headless at \
+120x40, median of 5.
 
-Reproduce: `.venv/bin/python bench/bench_console_log.py --write docs/performance.md` ({time.strftime("%Y-%m-%d")}, {machine(f"textual {textual.__version__}")}).
+Reproduce: `.venv/bin/python bench/bench_console_log.py --write docs/performance.md` \
+({time.strftime("%Y-%m-%d")}, {machine(f"textual {textual.__version__}")}).
 
 | measure | {LOG_LIMIT:,} entries | {base_n} entries (baseline) | ratio |
 | --- | ---: | ---: | ---: |
-| memory of the entries (tracemalloc) | {mem_full:.1f} MB | {mem_base:.2f} MB | {mem_full / mem_base:.0f}x |
-| log screen redraw (a filter keystroke) | {redraw_full * 1000:.0f} ms | {redraw_base * 1000:.0f} ms | {redraw_full / redraw_base:.1f}x |
-| one new entry while the log is shown | {append_full * 1000:.1f} ms | {append_base * 1000:.1f} ms | {append_full / append_base:.1f}x |
+| memory of the entries (tracemalloc) | {mem_full:.1f} MB | {mem_base:.2f} MB | \
+{mem_full / mem_base:.0f}x |
+| log screen redraw (a filter keystroke) | {redraw_full * 1000:.0f} ms | \
+{redraw_base * 1000:.0f} ms | {redraw_full / redraw_base:.1f}x |
+| one new entry while the log is shown | {append_full * 1000:.1f} ms | \
+{append_base * 1000:.1f} ms | {append_full / append_base:.1f}x |
 """
     print(text)
     if args.write:

@@ -351,17 +351,20 @@ def table(ops: dict[str, Any], big: dict[str, Any]) -> str:
         (
             "Operations, engine + journal",
             f"{j_rate:,.0f} ops/s",
-            f"{ops['journal_s'] * 1e6 / N_OPS:.0f} µs/op; {j_rate / e_rate:.2f}x the engine alone; one SQLite transaction per op",
+            f"{ops['journal_s'] * 1e6 / N_OPS:.0f} µs/op; {j_rate / e_rate:.2f}x the engine alone; "
+            "one SQLite transaction per op",
         ),
         (
             "Journal size",
             f"{ops['journal_bytes'] / N_OPS:,.0f} bytes/op",
-            f"{ops['journal_bytes'] / 1e6:.1f} MB on disk incl. snapshots (the server's policy, below); events + op JSON {ops['payload_bytes'] / N_OPS:,.0f} bytes/op",
+            f"{ops['journal_bytes'] / 1e6:.1f} MB on disk incl. snapshots (the server's policy, "
+            f"below); events + op JSON {ops['payload_bytes'] / N_OPS:,.0f} bytes/op",
         ),
         (
             "Journal reopen (10,000 ops)",
             f"{ops['reopen_ms']:.0f} ms",
-            f"newest snapshot + {ops['reopen_replayed']} batches replayed; mission of {ops['final_skills']:,} skills",
+            f"newest snapshot + {ops['reopen_replayed']} batches replayed; mission of "
+            f"{ops['final_skills']:,} skills",
         ),
         (
             "Journal bulk append",
@@ -371,7 +374,8 @@ def table(ops: dict[str, Any], big: dict[str, Any]) -> str:
         (
             "Journal full replay",
             f"{ops['full_replay_batches'] / ops['full_replay_s']:,.0f} batches/s",
-            f"reopen replaying all {ops['full_replay_batches']:,} batches from the base snapshot: {ops['full_replay_s'] * 1e3:.0f} ms",
+            f"reopen replaying all {ops['full_replay_batches']:,} batches from the base snapshot: "
+            f"{ops['full_replay_s'] * 1e3:.0f} ms",
         ),
         (
             "Save 10,000-skill mission (YAML)",
@@ -381,24 +385,27 @@ def table(ops: dict[str, Any], big: dict[str, Any]) -> str:
         (
             "Load 10,000-skill mission (YAML)",
             f"{big['load_ms']:.0f} ms",
-            "parse (PyYAML with libyaml, keeping line/column marks), validate every parameter against the library",
+            "parse (PyYAML with libyaml, keeping line/column marks), validate every parameter "
+            "against the library",
         ),
         ("Snapshot 10,000-skill mission", f"{big['snapshot_ms']:.0f} ms", "one SQLite transaction"),
         (
             "Robot report on 10,000-skill mission",
             f"{big['big_report_engine_ms'] + big['big_report_journal_ms']:.2f} ms",
-            f"engine {big['big_report_engine_ms']:.2f} ms (skills found where last seen, `Mission.find`) + journal {big['big_report_journal_ms']:.2f} ms",
+            f"engine {big['big_report_engine_ms']:.2f} ms (skills found where last seen, "
+            f"`Mission.find`) + journal {big['big_report_journal_ms']:.2f} ms",
         ),
         (
             "Snapshot per report, 10,000-skill mission",
             f"{big['snapshot_ms'] / big['big_until_snapshot']:.3f} ms",
-            f"one snapshot every {big['big_until_snapshot']:,} reports (500 and half the snapshot's size); "
-            f"{big['snapshot_ms'] / 500:.3f} ms with one every 500",
+            f"one snapshot every {big['big_until_snapshot']:,} reports (500 and half the "
+            f"snapshot's size); {big['snapshot_ms'] / 500:.3f} ms with one every 500",
         ),
         (
             "Journal reopen (10,000 skills)",
             f"{big['big_reopen_ms']:.0f} ms",
-            f"snapshot + {big.get('big_replayed', 0):,} batches replayed (the most before the next snapshot)",
+            f"snapshot + {big.get('big_replayed', 0):,} batches replayed (the most before the next "
+            "snapshot)",
         ),
     ]
     lines = ["| Measure | Result | Notes |", "|---|---|---|"]
@@ -411,7 +418,7 @@ def section(body: str) -> str:
     return (
         "## Mission core\n\n"
         "Rules engine, SQLite journal and mission files, in-process (no transport).\n\n"
-        f"Reproduce: `.venv/bin/python bench/bench_core.py --write docs/performance.md`\n\n"
+        "Reproduce: `.venv/bin/python bench/bench_core.py --write docs/performance.md`\n\n"
         f"Machine: {machine()}. Date: {date}.\n\n"
         f"{body}\n\n"
         "The journal runs SQLite in WAL mode with `synchronous=NORMAL`: a commit survives\n"
@@ -423,22 +430,34 @@ def section(body: str) -> str:
         "(engine 0.15 ms); the 10,000-skill reopen 463 -> 189 ms; the engine alone on the\n"
         "tutorial 6,591 -> 7,803 ops/s.\n\n"
         "Snapshots: after 500 batches, once they add up to half the size of the last snapshot\n"
-        "(`Journal.snapshot_due`). Before 2026-11-24 every 500 batches whatever the mission's size: on the\n"
-        "10,000-skill mission that was a 4 MB snapshot (57-84 ms) per 500 reports, as much again as the\n"
-        "report cost, and 8 KB written per report. A restart now replays at most half a snapshot's worth of\n"
+        "(`Journal.snapshot_due`). Before 2026-11-24 every 500 batches whatever the mission's "
+        "size: on the\n"
+        "10,000-skill mission that was a 4 MB snapshot (57-84 ms) per 500 reports, as much again "
+        "as the\n"
+        "report cost, and 8 KB written per report. A restart now replays at most half a "
+        "snapshot's worth of\n"
         "batches (the reopen row).\n\n"
-        "The server checkpoints its journal on a thread (`Journal.checkpoint_in_background`); this\n"
-        "bench leaves checkpoints to SQLite, which runs them inside the commit that fills the log.\n"
+        "The server checkpoints its journal on a thread (`Journal.checkpoint_in_background`); "
+        "this\n"
+        "bench leaves checkpoints to SQLite, which runs them inside the commit that fills the "
+        "log.\n"
         "The 10,000-skill snapshot, 8 in a row with a batch between (2026-11-23): 52-65 ms with\n"
         "SQLite's checkpoints, 32-34 ms (one of 45 and one of 50) with the server's.\n\n"
-        "Loading, saving and reopening build or walk the whole mission without the cyclic garbage\n"
-        "collector (`backend/core/bulk.py`), which otherwise walked every live object again each time enough\n"
-        "new ones were made. Same machine, back to back, 2026-11-23: load of the 10,000-skill file\n"
+        "Loading, saving and reopening build or walk the whole mission without the cyclic "
+        "garbage\n"
+        "collector (`backend/core/bulk.py`), which otherwise walked every live object again each "
+        "time enough\n"
+        "new ones were made. Same machine, back to back, 2026-11-23: load of the 10,000-skill "
+        "file\n"
         "4.9 -> 2.2 s, its save 1.8-2.7 -> 1.2-1.5 s, its journal reopen 734 -> 158 ms (with the\n"
-        "skill hints above). A whole mission is copied through JSON (`Mission.copy_deep`, in pydantic's\n"
-        "Rust code) instead of `model_copy(deep=True)` (~0.4 s in Python for 10,000 skills): replacing\n"
-        "the mission with those 10,000 skills (`LoadMission`, server and client on loopback, A/B twice)\n"
-        "took 1.48-1.53 s until the reply and 2.0 s until the client's mirror had it, now 1.04-1.08\n"
+        "skill hints above). A whole mission is copied through JSON (`Mission.copy_deep`, in "
+        "pydantic's\n"
+        "Rust code) instead of `model_copy(deep=True)` (~0.4 s in Python for 10,000 skills): "
+        "replacing\n"
+        "the mission with those 10,000 skills (`LoadMission`, server and client on loopback, A/B "
+        "twice)\n"
+        "took 1.48-1.53 s until the reply and 2.0 s until the client's mirror had it, now "
+        "1.04-1.08\n"
         "and 1.38-1.39 s.\n"
     )
 

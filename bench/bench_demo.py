@@ -113,7 +113,8 @@ class PtyRun:
                     chunk = b""
                 if not chunk:
                     raise RuntimeError(
-                        f"exited before painting {marks} (code {self.proc.poll()}):\n{self.text()[-2000:]}"
+                        f"exited before painting {marks} (code {self.proc.poll()}):\n"
+                        f"{self.text()[-2000:]}"
                     )
                 self.raw += chunk
                 if all(m in self.text() for m in marks):
@@ -189,19 +190,25 @@ def main() -> int:
     load = os.getloadavg()[0]
     text = (
         "## Demo start-up\n\n"
-        "`missionctl demo` in a pseudo-terminal (80x24): from process start until the terminal shows the Mars "
-        "mission (robot `lru1` and its skill `drive to POI-A`), i.e. mission server started, simulated fleet "
-        "spawned, console connected, state loaded and painted. Baseline: a bare Textual app (one `Static`) until "
-        "its text is painted, measured the same way, interleaved in the same run. Each demo run is ended with "
-        "Ctrl+Q and checked to leave no process behind.\n\n"
-        f"Reproduce: `.venv/bin/python bench/bench_demo.py --write docs/performance.md`\n\n"
-        f"Machine: {machine()}. Date: {time.strftime('%Y-%m-%d')}. Load average while measuring: {load:.1f}.\n\n"
-        "| Measure | Median of %d | Min | Max | Target |\n|---|---|---|---|---|\n"
+        "`missionctl demo` in a pseudo-terminal (80x24): from process start until the terminal "
+        "shows the Mars mission (robot `lru1` and its skill `drive to POI-A`), i.e. mission "
+        "server started, simulated fleet spawned, console connected, state loaded and painted. "
+        "Baseline: a bare Textual app (one `Static`) until its text is painted, measured the same "
+        "way, interleaved in the same run. Each demo run is ended with Ctrl+Q and checked to "
+        "leave no process behind.\n\n"
+        "Reproduce: `.venv/bin/python bench/bench_demo.py --write docs/performance.md`\n\n"
+        f"Machine: {machine()}. Date: {time.strftime('%Y-%m-%d')}. Load average while measuring: "
+        f"{load:.1f}.\n\n"
+        "| Measure | Median of %d | Min | Max | Target |\n"
+        "|---|---|---|---|---|\n"
         % args.runs
-        + f"| `missionctl demo` launch to first paint of the mission | {d:.2f} s | {min(demo):.2f} s | {max(demo):.2f} s | <= 2 s |\n"
-        + f"| Bare Textual app launch to first paint (baseline) | {b:.2f} s | {min(bare):.2f} s | {max(bare):.2f} s | |\n"
+        + f"| `missionctl demo` launch to first paint of the mission | {d:.2f} s | {min(demo):.2f} "
+        f"s | {max(demo):.2f} s | <= 2 s |\n"
+        + f"| Bare Textual app launch to first paint (baseline) | {b:.2f} s | {min(bare):.2f} s | "
+        f"{max(bare):.2f} s | |\n"
         + f"| Ratio demo / baseline | {d / b:.1f}x | | | |\n"
-        + f"| Clean exit on Ctrl+Q (exit code 0, no process left) | {args.runs - len(problems)} of {args.runs} | | | all |\n"
+        + f"| Clean exit on Ctrl+Q (exit code 0, no process left) | {args.runs - len(problems)} of "
+        f"{args.runs} | | | all |\n"
     )
     print(text)
     for p in problems:

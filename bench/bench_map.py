@@ -210,16 +210,24 @@ def section(r: dict[str, float], f: dict[str, float]) -> str:
     ratio = r["full_ms"] / r["move_ms"] if r["move_ms"] else float("nan")
     return f"""## Map
 
-The map widget (`console/widgets/mapview.py`, half-blocks, row cache) and the map feed as a console receives it.
+The map widget (`console/widgets/mapview.py`, half-blocks, row cache) and the map feed as a \
+console receives it.
 
-Reproduce: `.venv/bin/python bench/bench_map.py --write docs/performance.md` ({datetime.now(UTC):%Y-%m-%d}; {machine()}).
+Reproduce: `.venv/bin/python bench/bench_map.py --write docs/performance.md` \
+({datetime.now(UTC):%Y-%m-%d}; {machine()}).
 
 | measure | value | baseline (same run) | ratio |
 | --- | ---: | ---: | ---: |
-| one robot moves on a 400x400-cell site, 120x40 cells: overlays rebuilt + all rows asked, median of {MOVES} | {r["move_ms"]:.2f} ms ({r["rows"]:.0f} of {r["height"]:.0f} rows rendered) | full redraw of the same view: {r["full_ms"]:.2f} ms | **{ratio:.1f}x** less |
-| map feed while all robots explore (sim at {f["speed"]:g}x, {f["wall"]:.0f} s wall = {f["sim"]:.0f} s sim) | {f["bytes"] / f["wall"]:,.0f} B/s wall | {f["bytes"] / max(f["sim"], 1e-9):,.0f} B per sim-second | {f["deltas"]:.0f} deltas, {f["resyncs"]:.0f} snapshot(s) |
+| one robot moves on a 400x400-cell site, 120x40 cells: overlays rebuilt + all rows asked, \
+median of {MOVES} | {r["move_ms"]:.2f} ms ({r["rows"]:.0f} of {r["height"]:.0f} rows rendered) | \
+full redraw of the same view: {r["full_ms"]:.2f} ms | **{ratio:.1f}x** less |
+| map feed while all robots explore (sim at {f["speed"]:g}x, {f["wall"]:.0f} s wall = \
+{f["sim"]:.0f} s sim) | {f["bytes"] / f["wall"]:,.0f} B/s wall | \
+{f["bytes"] / max(f["sim"], 1e-9):,.0f} B per sim-second | \
+{f["deltas"]:.0f} deltas, {f["resyncs"]:.0f} snapshot(s) |
 
-The move cost is the overlay rebuild (every robot, marker, goal and object; a dict diff per row) plus
+The move cost is the overlay rebuild (every robot, marker, goal and object; \
+a dict diff per row) plus
 re-rendering the rows whose overlay changed (the robot's old and new row); the other rows come from
 the cache. Textual's compositor then repaints only those rows' regions. The feed sends only changed
 16x16 tiles (zlib + base64 JSON) and the objects when they changed, at most every 0.5 s wall, so

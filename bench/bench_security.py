@@ -160,7 +160,8 @@ async def measure(
 def table(results: dict[str, dict[str, list[float]]]) -> str:
     base = {k: statistics.median(v) for k, v in results["open"].items()}
     rows = [
-        "| server | connect (median) | operation round trip (median, p99) | raw query to PING (median) |",
+        "| server | connect (median) | operation round trip (median, p99) | raw query to PING "
+        "(median) |",
         "| --- | --- | --- | --- |",
     ]
     for name, r in results.items():
@@ -191,12 +192,14 @@ def main() -> int:
     print(body)
     if args.write:
         text = (
-            f"## {SECTION}\n\nWhat logins, access-control rules and mutual TLS cost "
-            f"(`.venv/bin/python bench/bench_security.py -n {args.n} --blocks {args.blocks}`; ratios against "
-            f"the open server in the same run, {args.blocks} interleaved blocks of {args.n} after a warm-up; "
-            f"{machine('eclipse-zenoh 1.10.2')}; {time.strftime('%Y-%m-%d')}). Connecting with a login "
-            f"includes one more query (the account's role); the medians of the other columns are the "
-            f"per-message cost of the router's rules and of TLS.\n\n{body}\n"
+            f"## {SECTION}\n\n"
+            "What logins, access-control rules and mutual TLS cost (`.venv/bin/python "
+            f"bench/bench_security.py -n {args.n} --blocks {args.blocks}`; ratios against the open "
+            f"server in the same run, {args.blocks} interleaved blocks of {args.n} after a "
+            f"warm-up; {machine('eclipse-zenoh 1.10.2')}; {time.strftime('%Y-%m-%d')}). Connecting "
+            "with a login includes one more query (the account's role); the medians of the other "
+            "columns are the per-message cost of the router's rules and of TLS.\n\n"
+            f"{body}\n"
         )
         write_section(Path(args.write), f"## {SECTION}", text)
         print(f"wrote the '## {SECTION}' section of {args.write}")

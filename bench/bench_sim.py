@@ -248,86 +248,108 @@ async def run_case(
             if client.library.robot_types[spec.type].kind == "dynamic"
         ]
         for i, r in enumerate(robots):
-            plan: list[tuple[str, dict[str, Any]]] = []
             skills = client.library.robot_types[client.mission.robots[r].type].skills
-            if "takeoff" in skills:
-                plan.append(("takeoff", {"altitude": 3.0}))
-            if workload == "explore":
-                plan += [("explore", {"area": area, "max_duration": 3600}) for area in areas_for(i)]
-            else:  # patrol: back and forth across the site
-                a, b = PATROL[i % len(PATROL)], PATROL[(i + len(PATROL) // 2) % len(PATROL)]
-                for leg in range(LEGS_FEW if len(robots) <= 10 else LEGS_MANY):
-                    x, y = b if leg % 2 == 0 else a
-                    if "fly_to" in skills:
-                        plan.append(
-                            ("fly_to", {"goal": {"x": x, "y": y}, "speed": 0.5, "altitude": 3.0})
-                        )
-                    else:
-                        plan.append(("drive_to", {"goal": {"x": x, "y": y}}))
-            last = ""
-            for k, (name, params) in enumerate(plan):
-                # at the head of the plan: the pilot mission's own skills stay unsynchronized
-                reply = await client.submit(AddSkill(robot=r, skill=name, params=params, at=k))
-                last = reply.value["id"]
-            await client.submit(Sync(robot=r, through=last))
-        # the map feed, from the benchmark's side
-        feed = {"bytes": 0, "deltas": 0, "tiles": 0}
-        status_bytes = [0]
-
-        def on_delta(msg: transport.Message) -> None:
-            feed["bytes"] += len(msg.payload)
-            feed["deltas"] += 1
-            feed["tiles"] += msg.payload.count(b'"layer"')
-
-        def on_status(msg: transport.Message) -> None:
-            status_bytes[0] += len(msg.payload)
-
-        subs = [
-            transport.subscribe(client.session, mf.KEY_MAP_DELTA, on_delta),
-            transport.subscribe(client.session, mf.KEY_STATUS_LIVE, on_status),
-        ]
-        await client.submit(Control(op="run"))
-        await asyncio.sleep(warmup)  # a benchmark may sleep: it measures over wall time
-
-        async def status() -> mf.SimTruth:  # the robots as they are, not as last heard
-            raw = await transport.query(client.session, mf.KEY_STATUS, mf.TRUTH_QUERY, timeout=30)
-            truth = mf.SimStatus.model_validate_json(raw).truth
-            assert truth is not None
-            return truth
-
-        s0, t0, c0 = await status(), time.monotonic(), sim.cpu_seconds()
-        b0, d0, k0, st0 = feed["bytes"], feed["deltas"], feed["tiles"], status_bytes[0]
-        await asyncio.sleep(window)
-        s1, t1, c1 = await status(), time.monotonic(), sim.cpu_seconds()
-        b1, d1, k1, st1 = feed["bytes"], feed["deltas"], feed["tiles"], status_bytes[0]
-        wall = t1 - t0
-        busy = [r for r in robots if s0.robots[r].activity and s1.robots[r].activity]
-        factors = [(s1.robots[r].sim_seconds - s0.robots[r].sim_seconds) / wall for r in busy]
-        snap = await transport.query(client.session, mf.KEY_MAP_SNAPSHOT, b"", timeout=30)
-        for sub in subs:
-            sub.undeclare()
-        return {
-            "robots": len(client.mission.robots),
-            "mobile": len(robots),
-            "speed": speed,
-            "busy": len(busy),
-            "factor": statistics.mean(factors) if factors else 0.0,
-            "factor_min": min(factors) if factors else 0.0,
-            "cpu": (c1 - c0) / wall,
-            "feed_bps": (b1 - b0) / wall,
-            "deltas_ps": (d1 - d0) / wall,
-            "tiles_ps": (k1 - k0) / wall,
-            "status_bps": (st1 - st0) / wall,
-            "snapshot_bytes": len(snap),
-            "explored": s1.explored,
-            "wall": wall,
-        }
+            await send_plan(client, r, plan_for(i, skills, workload, len(robots)))
+        return await measure(client, sim, robots, speed, window, warmup)
     finally:
         if client is not None:
             await client.close()
         if sim is not None:
             sim.stop()
         server.stop()
+
+
+def plan_for(i: int, skills: Any, workload: str, n_mobile: int) -> list[tuple[str, dict[str, Any]]]:
+    """The skills the i-th mobile robot is given: exploring areas, or patrolling."""
+    plan: list[tuple[str, dict[str, Any]]] = []
+    if "takeoff" in skills:
+        plan.append(("takeoff", {"altitude": 3.0}))
+    if workload == "explore":
+        return plan + [("explore", {"area": area, "max_duration": 3600}) for area in areas_for(i)]
+    # patrol: back and forth across the site
+    a, b = PATROL[i % len(PATROL)], PATROL[(i + len(PATROL) // 2) % len(PATROL)]
+    for leg in range(LEGS_FEW if n_mobile <= 10 else LEGS_MANY):
+        x, y = b if leg % 2 == 0 else a
+        if "fly_to" in skills:
+            plan.append(("fly_to", {"goal": {"x": x, "y": y}, "speed": 0.5, "altitude": 3.0}))
+        else:
+            plan.append(("drive_to", {"goal": {"x": x, "y": y}}))
+    return plan
+
+
+async def send_plan(
+    client: MissionClient, robot: str, plan: list[tuple[str, dict[str, Any]]]
+) -> None:
+    last = ""
+    for k, (name, params) in enumerate(plan):
+        # at the head of the plan: the pilot mission's own skills stay unsynchronized
+        reply = await client.submit(AddSkill(robot=robot, skill=name, params=params, at=k))
+        last = reply.value["id"]
+    await client.submit(Sync(robot=robot, through=last))
+
+
+async def measure(
+    client: MissionClient,
+    sim: Proc,
+    robots: list[str],
+    speed: float,
+    window: float,
+    warmup: float,
+) -> dict[str, Any]:
+    """Run the mission; the sim's speed, CPU and map feed over `window` s after `warmup`."""
+    assert client.mission is not None
+    # the map feed, from the benchmark's side
+    feed = {"bytes": 0, "deltas": 0, "tiles": 0}
+    status_bytes = [0]
+
+    def on_delta(msg: transport.Message) -> None:
+        feed["bytes"] += len(msg.payload)
+        feed["deltas"] += 1
+        feed["tiles"] += msg.payload.count(b'"layer"')
+
+    def on_status(msg: transport.Message) -> None:
+        status_bytes[0] += len(msg.payload)
+
+    subs = [
+        transport.subscribe(client.session, mf.KEY_MAP_DELTA, on_delta),
+        transport.subscribe(client.session, mf.KEY_STATUS_LIVE, on_status),
+    ]
+    await client.submit(Control(op="run"))
+    await asyncio.sleep(warmup)  # a benchmark may sleep: it measures over wall time
+
+    async def status() -> mf.SimTruth:  # the robots as they are, not as last heard
+        raw = await transport.query(client.session, mf.KEY_STATUS, mf.TRUTH_QUERY, timeout=30)
+        truth = mf.SimStatus.model_validate_json(raw).truth
+        assert truth is not None
+        return truth
+
+    s0, t0, c0 = await status(), time.monotonic(), sim.cpu_seconds()
+    b0, d0, k0, st0 = feed["bytes"], feed["deltas"], feed["tiles"], status_bytes[0]
+    await asyncio.sleep(window)
+    s1, t1, c1 = await status(), time.monotonic(), sim.cpu_seconds()
+    b1, d1, k1, st1 = feed["bytes"], feed["deltas"], feed["tiles"], status_bytes[0]
+    wall = t1 - t0
+    busy = [r for r in robots if s0.robots[r].activity and s1.robots[r].activity]
+    factors = [(s1.robots[r].sim_seconds - s0.robots[r].sim_seconds) / wall for r in busy]
+    snap = await transport.query(client.session, mf.KEY_MAP_SNAPSHOT, b"", timeout=30)
+    for sub in subs:
+        sub.undeclare()
+    return {
+        "robots": len(client.mission.robots),
+        "mobile": len(robots),
+        "speed": speed,
+        "busy": len(busy),
+        "factor": statistics.mean(factors) if factors else 0.0,
+        "factor_min": min(factors) if factors else 0.0,
+        "cpu": (c1 - c0) / wall,
+        "feed_bps": (b1 - b0) / wall,
+        "deltas_ps": (d1 - d0) / wall,
+        "tiles_ps": (k1 - k0) / wall,
+        "status_bps": (st1 - st0) / wall,
+        "snapshot_bytes": len(snap),
+        "explored": s1.explored,
+        "wall": wall,
+    }
 
 
 # ---------------------------------------------------------------- report
@@ -352,12 +374,14 @@ def table(results: dict[str, list[dict[str, Any]]]) -> str:
         "s of sim time with `ctx.sleep`; when the requested speed is more than one core",
         "can simulate, the achieved factor is the sim's throughput.",
         "",
-        "| Robots (mobile) | Requested speed | Achieved speed (mean / slowest robot) | Sim CPU (one core) |",
+        "| Robots (mobile) | Requested speed | Achieved speed (mean / slowest robot) | Sim CPU "
+        "(one core) |",
         "|---|---|---|---|",
     ]
     for r in results["speed"]:
         lines.append(
-            f"| {r['robots']} ({r['mobile']}) | {r['speed']:g}x | {r['factor']:,.0f}x / {r['factor_min']:,.0f}x | {r['cpu'] * 100:.0f}% |"
+            f"| {r['robots']} ({r['mobile']}) | {r['speed']:g}x | {r['factor']:,.0f}x / "
+            f"{r['factor_min']:,.0f}x | {r['cpu'] * 100:.0f}% |"
         )
     lines += [
         "",
@@ -365,13 +389,15 @@ def table(results: dict[str, list[dict[str, Any]]]) -> str:
         "changed 16x16 tiles, zlib+base64, at most 2 Hz; robot poses ride on telemetry",
         "and are not counted):",
         "",
-        "| Robots | Speed | Map feed | Deltas/s | Tiles/s | Sim status (live) | Snapshot (late joiner) |",
+        "| Robots | Speed | Map feed | Deltas/s | Tiles/s | Sim status (live) | Snapshot (late "
+        "joiner) |",
         "|---|---|---|---|---|---|---|",
     ]
     for r in results["feed"]:
         lines.append(
-            f"| {r['robots']} | {r['speed']:g}x | {r['feed_bps'] / 1000:,.1f} kB/s | {r['deltas_ps']:.1f} | "
-            f"{r['tiles_ps']:.1f} | {r['status_bps'] / 1000:,.1f} kB/s | {r['snapshot_bytes'] / 1000:,.1f} kB |"
+            f"| {r['robots']} | {r['speed']:g}x | {r['feed_bps'] / 1000:,.1f} kB/s | "
+            f"{r['deltas_ps']:.1f} | {r['tiles_ps']:.1f} | {r['status_bps'] / 1000:,.1f} kB/s | "
+            f"{r['snapshot_bytes'] / 1000:,.1f} kB |"
         )
     lines += [
         "",
@@ -398,7 +424,8 @@ async def main_async(args: argparse.Namespace) -> dict[str, list[dict[str, Any]]
         for mission, speed in cases:
             r = await run_case(tmp, mission, world, speed, window, warmup)
             print(
-                f"  speed: {r['robots']} robots at {speed:g}x -> {r['factor']:,.0f}x (cpu {r['cpu']:.0%})",
+                f"  speed: {r['robots']} robots at {speed:g}x -> {r['factor']:,.0f}x (cpu "
+                f"{r['cpu']:.0%})",
                 file=sys.stderr,
             )
             results["speed"].append(r)

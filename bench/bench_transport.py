@@ -66,6 +66,7 @@ for p in (ROOT, ROOT / "bench"):
 from report import machine, write_section  # noqa: E402
 
 from backend.client.client import MissionClient  # noqa: E402
+from backend.client.events import BatchApplied  # noqa: E402
 from backend.core.model import Status  # noqa: E402
 from backend.core.ops import EditSkill, Report, Sync  # noqa: E402
 from backend.files.missions import load_library, mission_to_yaml  # noqa: E402
@@ -413,10 +414,10 @@ async def child_clients(endpoint: str, count: int) -> int:
             c._on_events = on_events  # bound by connect() when it subscribes
             await c.connect()
 
-            def on_event(kind: str, payload: Any, i: int = i) -> None:
-                if kind == "events":
+            def on_event(event: Any, i: int = i) -> None:
+                if isinstance(event, BatchApplied):
                     t = time.perf_counter()
-                    for e in payload.events:
+                    for e in event.batch.events:
                         if e.ev == "report_seq":
                             events.append((i, e.seq, t))
 
@@ -464,98 +465,144 @@ async def fanout(
     """`robot`, registered with `skill` in its queue, reports it `first`, then
     paused and running in turn; clients in subprocesses (one per entry of a
     layout) take them in."""
-    pub = declare_publisher(robot.session, RAW_FANOUT_KEY)
+    sender = FanoutSender(robot, skill, first)
     out: dict[str, Any] = {}
-    status = first
-    raw_id = 0
     for layout in layouts:
-        procs = []
-        for k, count in enumerate(layout):
-            err = open(tmp / f"fanout-{len(layout)}-{k}.log", "w")  # noqa: SIM115
-            p = await asyncio.create_subprocess_exec(
-                sys.executable,
-                str(Path(__file__).resolve()),
-                "--child-clients",
-                str(count),
-                "--connect",
-                endpoint,
-                stdin=asyncio.subprocess.PIPE,
-                stdout=asyncio.subprocess.PIPE,
-                stderr=err,
-                cwd=ROOT,
-                limit=1 << 24,
-            )
-            procs.append((p, err))
-        for p, _ in procs:
-            line = await asyncio.wait_for(p.stdout.readline(), 60)
-            assert line.strip() == b"ready", line
+        procs = await start_fanout_clients(endpoint, tmp, layout)
         await asyncio.sleep(0.3)
+        warm = 30
+        sent, raw_sent, acks = await sender.send(n, warm)
+        applied, received, arrived = await stop_fanout_clients(procs)
+        nclients = sum(layout)
+        out[f"{len(layout)}x{layout[0]}"] = {
+            "layout": layout,
+            **fanout_figures(nclients, sent, raw_sent, applied, received, arrived),
+            "ack_median": statistics.median(acks[warm:]),
+        }
+    return out
+
+
+class FanoutSender:
+    """The robot's side: a raw put, then a report (running and paused in
+    turn), every ~12 ms; the status and raw ids go on from layout to layout."""
+
+    def __init__(self, robot: FakeRobot, skill: str, first: Status) -> None:
+        self.robot = robot
+        self.skill = skill
+        self.status = first
+        self.raw_id = 0
+        self.pub = declare_publisher(robot.session, RAW_FANOUT_KEY)
+
+    async def send(
+        self, n: int, warm: int
+    ) -> tuple[dict[int, float], dict[int, float], list[float]]:
+        """`warm` + `n` of each; when the last `n` were sent (reports by
+        sequence number, raw puts by id) and every report's ack time."""
         sent: dict[int, float] = {}
         raw_sent: dict[int, float] = {}
         acks: list[float] = []
-        warm = 30
+        robot = self.robot
         for i in range(n + warm):
-            raw_id += 1
-            raw_sent[raw_id] = time.perf_counter()
-            pub.put(str(raw_id).encode())
+            self.raw_id += 1
+            raw_sent[self.raw_id] = time.perf_counter()
+            self.pub.put(str(self.raw_id).encode())
             await asyncio.sleep(0.004)
-            payload = robot.report_payload(skill, status)
-            status = Status.PAUSED if status == Status.RUNNING else Status.RUNNING
+            payload = robot.report_payload(self.skill, self.status)
+            self.status = Status.PAUSED if self.status == Status.RUNNING else Status.RUNNING
             t = time.perf_counter()
             robot.send_raw(payload)
             acks.append(time.perf_counter() - t)
             if i >= warm:
                 sent[robot.seq] = t
             else:
-                raw_sent.pop(raw_id)
+                raw_sent.pop(self.raw_id)
             await asyncio.sleep(0.008)
-        applied: dict[int, list[float]] = {}
-        received: dict[int, list[float]] = {}
-        arrived: dict[int, list[float]] = {}
-        nclients = sum(layout)
-        for p, err in procs:
-            p.stdin.write(b"stop\n")
-            await p.stdin.drain()
-            data = json.loads(await asyncio.wait_for(p.stdout.readline(), 30))
-            await p.wait()
-            err.close()
-            for _, seq, t in data["events"]:
-                applied.setdefault(seq, []).append(t)
-            for _, rid, t in data["raw"]:
-                received.setdefault(rid, []).append(t)
-            for _, seq, t in data["recv"]:
-                arrived.setdefault(seq, []).append(t)
-        last = [max(applied[s]) - t for s, t in sent.items() if len(applied.get(s, [])) == nclients]
-        first = [
-            min(applied[s]) - t for s, t in sent.items() if len(applied.get(s, [])) == nclients
-        ]
-        raw_last = [
-            max(received[r]) - t
-            for r, t in raw_sent.items()
-            if len(received.get(r, [])) == nclients
-        ]
-        complete = [
-            q
-            for q in sent
-            if len(applied.get(q, [])) == nclients and len(arrived.get(q, [])) == nclients
-        ]
-        first_arrival = [min(arrived[q]) - sent[q] for q in complete]
-        last_arrival = [max(arrived[q]) - sent[q] for q in complete]
-        missing = len(sent) - len(last)
-        out[f"{len(layout)}x{layout[0]}"] = {
-            "layout": layout,
-            "n": len(last),
-            "missing": missing,
-            "median": statistics.median(last),
-            "p99": pct(last, 0.99),
-            "first_median": statistics.median(first),
-            "first_arrival_median": statistics.median(first_arrival),
-            "last_arrival_median": statistics.median(last_arrival),
-            "raw_median": statistics.median(raw_last),
-            "raw_p99": pct(raw_last, 0.99),
-            "ack_median": statistics.median(acks[warm:]),
-        }
-    return out
+        return sent, raw_sent, acks
+
+
+async def start_fanout_clients(
+    endpoint: str, tmp: Path, layout: list[int]
+) -> list[tuple[Any, Any]]:
+    """One subprocess per entry of `layout`, with that many clients; once ready."""
+    procs = []
+    for k, count in enumerate(layout):
+        err = open(tmp / f"fanout-{len(layout)}-{k}.log", "w")  # noqa: SIM115
+        p = await asyncio.create_subprocess_exec(
+            sys.executable,
+            str(Path(__file__).resolve()),
+            "--child-clients",
+            str(count),
+            "--connect",
+            endpoint,
+            stdin=asyncio.subprocess.PIPE,
+            stdout=asyncio.subprocess.PIPE,
+            stderr=err,
+            cwd=ROOT,
+            limit=1 << 24,
+        )
+        procs.append((p, err))
+    for p, _ in procs:
+        line = await asyncio.wait_for(p.stdout.readline(), 60)
+        assert line.strip() == b"ready", line
+    return procs
+
+
+Times = dict[int, list[float]]
+
+
+async def stop_fanout_clients(procs: list[tuple[Any, Any]]) -> tuple[Times, Times, Times]:
+    """Stop the clients; when each applied each report (by sequence number),
+    received each raw put (by id) and got each report's batch (by sequence number)."""
+    applied: Times = {}
+    received: Times = {}
+    arrived: Times = {}
+    for p, err in procs:
+        p.stdin.write(b"stop\n")
+        await p.stdin.drain()
+        data = json.loads(await asyncio.wait_for(p.stdout.readline(), 30))
+        await p.wait()
+        err.close()
+        for _, seq, t in data["events"]:
+            applied.setdefault(seq, []).append(t)
+        for _, rid, t in data["raw"]:
+            received.setdefault(rid, []).append(t)
+        for _, seq, t in data["recv"]:
+            arrived.setdefault(seq, []).append(t)
+    return applied, received, arrived
+
+
+def fanout_figures(
+    nclients: int,
+    sent: dict[int, float],
+    raw_sent: dict[int, float],
+    applied: Times,
+    received: Times,
+    arrived: Times,
+) -> dict[str, Any]:
+    """Medians and p99s of what reached all `nclients` clients."""
+    last = [max(applied[s]) - t for s, t in sent.items() if len(applied.get(s, [])) == nclients]
+    first = [min(applied[s]) - t for s, t in sent.items() if len(applied.get(s, [])) == nclients]
+    raw_last = [
+        max(received[r]) - t for r, t in raw_sent.items() if len(received.get(r, [])) == nclients
+    ]
+    complete = [
+        q
+        for q in sent
+        if len(applied.get(q, [])) == nclients and len(arrived.get(q, [])) == nclients
+    ]
+    first_arrival = [min(arrived[q]) - sent[q] for q in complete]
+    last_arrival = [max(arrived[q]) - sent[q] for q in complete]
+    return {
+        "n": len(last),
+        "missing": len(sent) - len(last),
+        "median": statistics.median(last),
+        "p99": pct(last, 0.99),
+        "first_median": statistics.median(first),
+        "first_arrival_median": statistics.median(first_arrival),
+        "last_arrival_median": statistics.median(last_arrival),
+        "raw_median": statistics.median(raw_last),
+        "raw_p99": pct(raw_last, 0.99),
+    }
 
 
 # -- 3. wire bytes on a 10,000-skill mission -----------------------------------------------------
@@ -762,7 +809,8 @@ def table(
     row(
         f"Sustained operations ({tp['inflight']} in flight, journal on)",
         f"{tp['rate']:,.0f} ops/s",
-        f"{tp['raw_rate']:,.0f} raw queries/s to PING, {tp['inflight']} in flight ({tp['bridge_rate']:,.0f}/s through our asyncio bridge)",
+        f"{tp['raw_rate']:,.0f} raw queries/s to PING, {tp['inflight']} in flight "
+        f"({tp['bridge_rate']:,.0f}/s through our asyncio bridge)",
         f"{tp['rate'] / tp['raw_rate']:.2f}x",
         f">= {TARGETS['ops_per_s']:,}/s",
         tp["rate"] >= TARGETS["ops_per_s"],
@@ -773,50 +821,65 @@ def table(
     ]
     lines += ["| " + " | ".join(r) + " |" for r in rows]
     f1 = fan.get("1x10", next(iter(fan.values())))
+    reached = (
+        "every report reached all 10"
+        if not any(f["missing"] for f in fan.values())
+        else "SOME REPORTS DID NOT REACH ALL 10 CLIENTS"
+    )
     details = [
         "",
-        f"- Round trip: {rtt['n']:,} operations and {len(rtt['raw']):,} raw queries, interleaved in blocks after a warm-up of 300 each. "
-        f"`EditSkill` (new label each time) on the tutorial mission: the reply comes after the rules and the SQLite journal "
-        f"(one transaction); the EventBatch is published right after it. Raw query: `session.get` to `{Keys.PING}`, answered in the server process "
-        f"on its Zenoh thread; the same query through `backend.transport.query` (asyncio bridge, as the client library uses): "
+        f"- Round trip: {rtt['n']:,} operations and {len(rtt['raw']):,} raw queries, interleaved "
+        "in blocks after a warm-up of 300 each. `EditSkill` (new label each time) on the tutorial "
+        "mission: the reply comes after the rules and the SQLite journal (one transaction); the "
+        f"EventBatch is published right after it. Raw query: `session.get` to `{Keys.PING}`, "
+        "answered in the server process on its Zenoh thread; the same query through "
+        "`backend.transport.query` (asyncio bridge, as the client library uses): "
         f"{ms(aio_med):.3f} ms median.",
-        f"- Fan-out: {f1['n']} status reports per layout after 30 warm-up ones, one every ~12 ms, each measured from just before the "
-        f"robot's `ReportBatch` query until the last of 10 `MissionClient`s (separate processes from the server and the robot) "
-        f"applied it to its mirror ({'every report reached all 10' if not any(f['missing'] for f in fan.values()) else 'SOME REPORTS DID NOT REACH ALL 10 CLIENTS'}); the first of the 10 after {ms(f1['first_median']):.2f} ms (median, 1 process). "
-        f"The robot sends with a plain blocking `session.get` (no asyncio bridge on its side); its report is "
-        f"acknowledged after {ms(f1['ack_median']):.2f} ms (median; the server publishes the event right after it replies). "
-        f"Split (medians, 1 process): the EventBatch reaches the first client session's Zenoh thread after "
-        f"{ms(f1['first_arrival_median']):.2f} ms and the last one's after {ms(f1['last_arrival_median']):.2f} ms "
-        f"(server: validate the report, rules, journal, publish; then Zenoh and the GIL of the receiving process); "
-        f"parsing and applying it in the 10 mirrors takes the rest.",
-        f"- Wire bytes: {wire['skills']:,} skills (20 lru_manipulator robots x 500 drive_to); a running/paused `Report` of rover01 "
-        f"is {wire['report_bytes']:.0f} B on its way in and its `EventBatch` {wire['event_bytes']:.0f} B (max {wire['event_bytes_max']}) "
-        f"on its way out, JSON payload (Zenoh and TCP/IP headers come on top). The full snapshot a late joiner fetches is "
-        f"{wire['snapshot_bytes']:,} B ({wire['snapshot_ms']:.0f} ms to fetch; connecting a `MissionClient` with it: "
-        f"{wire['join_ms']:.0f} ms). The report is acknowledged after {wire['report_ack_ms']:.2f} ms on this mission. "
-        f"Example event: `{wire['event_example']}`",
-        f"- Fan-out on the 10,000-skill mission: as above with {fb['n']} reports, of {fb['robot']} (the last robot: "
-        f"before `Mission.find` remembered where skills are, each mirror scanned the whole mission for it); the report "
-        f"is acknowledged after {ms(fb['ack_median']):.2f} ms, the first of the 10 clients applied it after "
-        f"{ms(fb['first_median']):.2f} ms (medians){'' if not fb['missing'] else '; SOME REPORTS DID NOT REACH ALL 10 CLIENTS'}.",
-        f"- Throughput: {tp['n']:,} `EditSkill` operations in {tp['seconds']:.1f} s from one client, every one applied, journaled "
-        f"and published (checked by the revision), latency {ms(tp['lat_median']):.2f} ms median, {ms(tp['lat_p99']):.2f} ms p99.",
+        f"- Fan-out: {f1['n']} status reports per layout after 30 warm-up ones, one every ~12 ms, "
+        "each measured from just before the robot's `ReportBatch` query until the last of 10 "
+        "`MissionClient`s (separate processes from the server and the robot) applied it to its "
+        f"mirror ({reached}); the first of the 10 after {ms(f1['first_median']):.2f} ms (median, 1 "
+        "process). The robot sends with a plain blocking `session.get` (no asyncio bridge on its "
+        f"side); its report is acknowledged after {ms(f1['ack_median']):.2f} ms (median; the "
+        "server publishes the event right after it replies). Split (medians, 1 process): the "
+        "EventBatch reaches the first client session's Zenoh thread after "
+        f"{ms(f1['first_arrival_median']):.2f} ms and the last one's after "
+        f"{ms(f1['last_arrival_median']):.2f} ms (server: validate the report, rules, journal, "
+        "publish; then Zenoh and the GIL of the receiving process); parsing and applying it in "
+        "the 10 mirrors takes the rest.",
+        f"- Wire bytes: {wire['skills']:,} skills (20 lru_manipulator robots x 500 drive_to); a "
+        f"running/paused `Report` of rover01 is {wire['report_bytes']:.0f} B on its way in and its "
+        f"`EventBatch` {wire['event_bytes']:.0f} B (max {wire['event_bytes_max']}) on its way out, "
+        "JSON payload (Zenoh and TCP/IP headers come on top). The full snapshot a late joiner "
+        f"fetches is {wire['snapshot_bytes']:,} B ({wire['snapshot_ms']:.0f} ms to fetch; "
+        f"connecting a `MissionClient` with it: {wire['join_ms']:.0f} ms). The report is "
+        f"acknowledged after {wire['report_ack_ms']:.2f} ms on this mission. Example event: "
+        f"`{wire['event_example']}`",
+        f"- Fan-out on the 10,000-skill mission: as above with {fb['n']} reports, of {fb['robot']} "
+        "(the last robot: before `Mission.find` remembered where skills are, each mirror scanned "
+        f"the whole mission for it); the report is acknowledged after {ms(fb['ack_median']):.2f} "
+        f"ms, the first of the 10 clients applied it after {ms(fb['first_median']):.2f} ms "
+        f"(medians){'' if not fb['missing'] else '; SOME REPORTS DID NOT REACH ALL 10 CLIENTS'}.",
+        f"- Throughput: {tp['n']:,} `EditSkill` operations in {tp['seconds']:.1f} s from one "
+        "client, every one applied, journaled and published (checked by the revision), latency "
+        f"{ms(tp['lat_median']):.2f} ms median, {ms(tp['lat_p99']):.2f} ms p99.",
     ]
     direct_med = statistics.median(rtt["direct"])
     details += [
         "",
-        "Where the round-trip time goes, measured in this run: raw query "
-        f"{ms(raw_med):.3f} ms; the same through an asyncio bridge whose reply callback runs on the Zenoh "
-        f"thread (`Callback(..., indirect=False)`, in this script only) {ms(direct_med):.3f} ms; through "
-        f"`backend.transport.query` as the client library uses it {ms(aio_med):.3f} ms; a whole operation "
-        f"{ms(op_med):.3f} ms.",
+        f"Where the round-trip time goes, measured in this run: raw query {ms(raw_med):.3f} ms; "
+        "the same through an asyncio bridge whose reply callback runs on the Zenoh thread "
+        f"(`Callback(..., indirect=False)`, in this script only) {ms(direct_med):.3f} ms; through "
+        f"`backend.transport.query` as the client library uses it {ms(aio_med):.3f} ms; a whole "
+        f"operation {ms(op_med):.3f} ms.",
         "",
         PROFILE_NOTES,
     ]
     return "\n".join(lines + details), misses
 
 
-PROFILE_NOTES = """Analysis (not re-measured by this script; the stage-by-stage split of an operation is the
+PROFILE_NOTES = """\
+Analysis (not re-measured by this script; the stage-by-stage split of an operation is the
 next section, from `bench/trace_round_trip.py`; A/B figures from `bench/ab_transport.py`, which
 runs two versions side by side in alternating blocks: figures of different days come from
 different machines and states (the raw query took 0.21 ms on 2026-11-22 on an Intel Xeon VM and
@@ -923,11 +986,12 @@ def section(body: str, elapsed: float, load: tuple[float, float, float]) -> str:
     return (
         f"## {SECTION}\n\n"
         "Mission server (a subprocess, the Zenoh router), client library and a robot on loopback, "
-        "each figure against the raw Zenoh transport measured in the same run "
-        "(the server's trivial `mc/v1/server/ping` queryable, raw puts).\n\n"
+        "each figure against the raw Zenoh transport measured in the same run (the server's "
+        "trivial `mc/v1/server/ping` queryable, raw puts).\n\n"
         "Reproduce: `.venv/bin/python bench/bench_transport.py --write docs/performance.md`\n\n"
-        f"Machine: {machine('eclipse-zenoh ' + importlib.metadata.version('eclipse-zenoh'))}. Date: {date}. Whole run: {elapsed:.0f} s; load average before it "
-        f"{load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} (other work on the machine skews the figures).\n\n"
+        f"Machine: {machine('eclipse-zenoh ' + importlib.metadata.version('eclipse-zenoh'))}. "
+        f"Date: {date}. Whole run: {elapsed:.0f} s; load average before it {load[0]:.2f} / "
+        f"{load[1]:.2f} / {load[2]:.2f} (other work on the machine skews the figures).\n\n"
         f"{body}\n"
     )
 
@@ -983,8 +1047,9 @@ def main(argv: list[str] | None = None) -> int:
     body, misses = table(rtt, tp, fan, wire)
     print(body)
     print(
-        f"\n{len(misses)} target(s) missed{': ' + '; '.join(misses) if misses else ''}. Whole run: {elapsed:.0f} s; "
-        f"load average before it {load[0]:.2f}."
+        "\n"
+        f"{len(misses)} target(s) missed{': ' + '; '.join(misses) if misses else ''}. Whole run: "
+        f"{elapsed:.0f} s; load average before it {load[0]:.2f}."
     )
     if args.write:
         write_section(Path(args.write), f"## {SECTION}", section(body, elapsed, load))

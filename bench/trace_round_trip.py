@@ -58,14 +58,17 @@ STAGES = {
     "s_handler": "server: the event loop runs the handler (hop from the Zenoh thread)",
     "s_journal": "server: Request parsed, rules checked, events made (Engine.submit)",
     "s_journal_end": "server: journal append (SQLite, one transaction), before the mission changes",
-    "s_reply": "server: events applied to the mission, EventBatch queued for after the reply, OpReply serialised",
+    "s_reply": "server: events applied to the mission, EventBatch queued for after the reply, "
+    "OpReply serialised",
     "s_replied": "server: query.reply and query finalised",
     "s_publish": "server: the next loop callback starts sending the queued EventBatch",
-    "s_published": "server: publisher.put returned (it sends at once, then waits to take the GIL back)",
+    "s_published": "server: publisher.put returned (it sends at once, then waits to take the GIL "
+    "back)",
     "c_events": "client: the EventBatch reaches the subscriber callback and is parsed",
     "c_applied": "client: the batch is applied to the mirror on the event loop",
     "c_reply": "client: the reply reaches the query callback (Zenoh thread)",
-    "c_posted": "client: the reply is recorded and handed to the event loop (the query's end comes later, unawaited)",
+    "c_posted": "client: the reply is recorded and handed to the event loop (the query's end "
+    "comes later, unawaited)",
     "c_resumed": "client: the awaiting coroutine resumes on the event loop",
     "c_end": "client: OpReply parsed, submit() returns",
 }
@@ -119,34 +122,10 @@ def wrap_client() -> None:
 def stage_table(
     marks: list[tuple[str, float]],
 ) -> tuple[list[tuple[str, float, float, float, float]], list[float]]:
-    """Split the merged marks into one window per operation (from its c_start);
-    per stage, in order: (name, step median, step p99, step median over the
-    slowest 2 % of operations, since-start median)."""
-    windows: list[dict[str, float]] = []
-    batch_marks: dict[str, list[float]] = {"c_events": [], "c_applied": []}
-    for tag, t in sorted(marks, key=lambda m: m[1]):
-        if tag in batch_marks:
-            batch_marks[tag].append(t)
-        elif tag == "c_start":
-            windows.append({"c_start": t})
-        elif windows and tag not in windows[-1]:
-            windows[-1][tag] = t
-    # an operation's own EventBatch is the first to reach the client after its
-    # journal append; it often comes after submit() returned, during the next
-    # operation (the reply usually arrives first), so it is matched by time
-    for w, nxt in zip(windows, [*windows[1:], {}], strict=True):
-        if "s_journal_end" not in w:
-            continue
-        i = bisect.bisect_left(batch_marks["c_events"], w["s_journal_end"])
-        if i == len(batch_marks["c_events"]) or batch_marks["c_events"][i] >= nxt.get(
-            "s_journal_end", float("inf")
-        ):
-            continue
-        w["c_events"] = batch_marks["c_events"][i]
-        j = bisect.bisect_left(batch_marks["c_applied"], w["c_events"])
-        if j < len(batch_marks["c_applied"]):
-            w["c_applied"] = batch_marks["c_applied"][j]
-    complete = [w for w in windows if "c_end" in w]
+    """Per stage of the operations in the merged marks, in order: (name, step
+    median, step p99, step median over the slowest 2 % of operations,
+    since-start median); and the operations' whole times."""
+    complete = [w for w in operation_windows(marks) if "c_end" in w]
     order = sorted(
         (s for s in STAGES if any(s in w for w in complete)),
         key=lambda s: statistics.median(w[s] - w["c_start"] for w in complete if s in w),
@@ -179,6 +158,40 @@ def stage_table(
         )
     totals = [w["c_end"] - w["c_start"] for w in complete]
     return rows, totals
+
+
+def operation_windows(marks: list[tuple[str, float]]) -> list[dict[str, float]]:
+    """Split the merged marks into one window per operation (from its c_start)."""
+    windows: list[dict[str, float]] = []
+    batch_marks: dict[str, list[float]] = {"c_events": [], "c_applied": []}
+    for tag, t in sorted(marks, key=lambda m: m[1]):
+        if tag in batch_marks:
+            batch_marks[tag].append(t)
+        elif tag == "c_start":
+            windows.append({"c_start": t})
+        elif windows and tag not in windows[-1]:
+            windows[-1][tag] = t
+    match_batches(windows, batch_marks)
+    return windows
+
+
+def match_batches(windows: list[dict[str, float]], batch_marks: dict[str, list[float]]) -> None:
+    """Add to each operation's window when its EventBatch reached the client."""
+    # an operation's own EventBatch is the first to reach the client after its
+    # journal append; it often comes after submit() returned, during the next
+    # operation (the reply usually arrives first), so it is matched by time
+    for w, nxt in zip(windows, [*windows[1:], {}], strict=True):
+        if "s_journal_end" not in w:
+            continue
+        i = bisect.bisect_left(batch_marks["c_events"], w["s_journal_end"])
+        if i == len(batch_marks["c_events"]) or batch_marks["c_events"][i] >= nxt.get(
+            "s_journal_end", float("inf")
+        ):
+            continue
+        w["c_events"] = batch_marks["c_events"][i]
+        j = bisect.bisect_left(batch_marks["c_applied"], w["c_events"])
+        if j < len(batch_marks["c_applied"]):
+            w["c_applied"] = batch_marks["c_applied"][j]
 
 
 async def traced_round_trips(n: int) -> tuple[list[float], list[tuple[str, float]]]:
@@ -292,36 +305,41 @@ def report(
     )
     slow = sorted(totals)[-max(1, len(totals) // 50) :]
     lines = [
-        f"{len(totals)} `EditSkill` operations, traced; raw query to PING in the same run: median {ms(raw_med):.3f} ms.",
+        f"{len(totals)} `EditSkill` operations, traced; raw query to PING in the same run: median "
+        f"{ms(raw_med):.3f} ms.",
         "",
-        "| Stage (time since the previous one) | median | p99 | slowest 2 % of operations, median | since submit() started, median |",
+        "| Stage (time since the previous one) | median | p99 | slowest 2 % of operations, median "
+        "| since submit() started, median |",
         "|---|---|---|---|---|",
     ]
     for stage, med, p99, tail, since in rows:
         lines.append(
-            f"| {STAGES[stage]} | {med * 1e6:.0f} µs | {p99 * 1e6:.0f} µs | {tail * 1e6:.0f} µs | {since * 1e6:.0f} µs |"
+            f"| {STAGES[stage]} | {med * 1e6:.0f} µs | {p99 * 1e6:.0f} µs | {tail * 1e6:.0f} µs | "
+            f"{since * 1e6:.0f} µs |"
         )
     lines.append(
-        f"| **whole operation (traced)** | **{ms(statistics.median(totals)):.3f} ms** | **{ms(pct(totals, 0.99)):.3f} ms** "
-        f"| **{ms(statistics.median(slow)):.3f} ms** | |"
+        f"| **whole operation (traced)** | **{ms(statistics.median(totals)):.3f} ms** | "
+        f"**{ms(pct(totals, 0.99)):.3f} ms** | **{ms(statistics.median(slow)):.3f} ms** | |"
     )
     floor = raw_med + alone_med + wake_med
     lines += [
         "",
-        "Rows are in the order of their median time since submit() started, each measured from the latest "
-        "earlier stage of the same operation; an operation's EventBatch is the first to reach the client after "
-        "its journal append. The two processes' stages overlap: `put` sends the batch at once, then waits to "
-        "take the GIL back from the server's Zenoh threads. The batch leaves right behind the reply but usually "
-        "reaches the client's Python after submit() has returned: its subscriber thread waits for the GIL "
-        "while the client takes in the reply, so the mirror shows an operation a little after submit() returns "
+        "Rows are in the order of their median time since submit() started, each measured from "
+        "the latest earlier stage of the same operation; an operation's EventBatch is the first "
+        "to reach the client after its journal append. The two processes' stages overlap: `put` "
+        "sends the batch at once, then waits to take the GIL back from the server's Zenoh "
+        "threads. The batch leaves right behind the reply but usually reaches the client's Python "
+        "after submit() has returned: its subscriber thread waits for the GIL while the client "
+        "takes in the reply, so the mirror shows an operation a little after submit() returns "
         "(`wait_for` waits for it).",
         "",
-        f"Floor, measured in the same run: the handler alone in-process (rules, journal, publication; no "
-        f"client, nothing else running) {alone_med * 1e6:.0f} µs; one hand-over from another thread to an idle "
-        f"asyncio loop {wake_med * 1e6:.0f} µs. An asyncio client (the issue asks for one) needs at least one "
-        f"such hand-over, the journal must be written before the reply: raw query + handler + one hand-over = "
-        f"{ms(floor):.3f} ms = {floor / raw_med:.2f}x the raw query, against the 1.5x target "
-        f"({ms(1.5 * raw_med):.3f} ms), before any contention between the two processes' threads for 2 cores.",
+        "Floor, measured in the same run: the handler alone in-process (rules, journal, "
+        f"publication; no client, nothing else running) {alone_med * 1e6:.0f} µs; one hand-over "
+        f"from another thread to an idle asyncio loop {wake_med * 1e6:.0f} µs. An asyncio client "
+        "(the issue asks for one) needs at least one such hand-over, the journal must be written "
+        f"before the reply: raw query + handler + one hand-over = {ms(floor):.3f} ms = "
+        f"{floor / raw_med:.2f}x the raw query, against the 1.5x target ({ms(1.5 * raw_med):.3f} "
+        "ms), before any contention between the two processes' threads for 2 cores.",
     ]
     return "\n".join(lines)
 
@@ -343,12 +361,15 @@ def main(argv: list[str] | None = None) -> int:
         date = datetime.now(UTC).strftime("%Y-%m-%d")
         text = (
             f"## {SECTION}\n\n"
-            "Timestamps at each stage of `MissionClient.submit(EditSkill(label=...))`, one at a time, in both "
-            "processes (`bench/traced_server.py` is the real server with wrappers that record the time; "
-            "production code carries no tracing). Clocks: CLOCK_MONOTONIC, shared by the processes.\n\n"
-            "Reproduce: `.venv/bin/python bench/trace_round_trip.py --write docs/performance.md`\n\n"
-            f"Machine: {machine('eclipse-zenoh ' + importlib.metadata.version('eclipse-zenoh'))}. Date: {date}. "
-            f"Whole run: {time.perf_counter() - t0:.0f} s.\n\n{body}\n"
+            "Timestamps at each stage of `MissionClient.submit(EditSkill(label=...))`, one at a "
+            "time, in both processes (`bench/traced_server.py` is the real server with wrappers "
+            "that record the time; production code carries no tracing). Clocks: CLOCK_MONOTONIC, "
+            "shared by the processes.\n\n"
+            "Reproduce: `.venv/bin/python bench/trace_round_trip.py --write "
+            "docs/performance.md`\n\n"
+            f"Machine: {machine('eclipse-zenoh ' + importlib.metadata.version('eclipse-zenoh'))}. "
+            f"Date: {date}. Whole run: {time.perf_counter() - t0:.0f} s.\n\n"
+            f"{body}\n"
         )
         write_section(Path(args.write), f"## {SECTION}", text)
         print(f"\nwrote the '## {SECTION}' section of {args.write}")

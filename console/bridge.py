@@ -1,19 +1,29 @@
 """The live connection: `backend.client.client.MissionClient` -> console messages.
 
-The client calls its listeners on the asyncio loop (the app's loop); each
-callback only posts a message, so nothing here ever blocks the UI. Operations
-go through `submit`, awaited in workers by the app.
+The client calls its listeners on the asyncio loop (the app's loop) with a
+typed event (`backend.client.events`); each becomes one posted console
+message, so nothing here ever blocks the UI. Operations go through
+`submit`, awaited in workers by the app.
 """
 
 from __future__ import annotations
 
 from typing import Any, Protocol
 
-from backend.client.client import Malformed, MissionClient
+from backend.client.client import MissionClient
+from backend.client.events import (
+    AlertRaised,
+    BatchApplied,
+    ClientEvent,
+    ConnectionState,
+    Malformed,
+    RobotChanged,
+    StateSynced,
+    TelemetryReceived,
+)
 from backend.client.mapfollow import MapFeed, MapUpdate
-from backend.core.events import EventBatch
 from backend.protocol.keys import Keys
-from backend.protocol.messages import Alert, OpReply, RobotInfo, StateSnapshot, Telemetry
+from backend.protocol.messages import OpReply
 from backend.transport.login import Login
 from console.messages import (
     AccountKnown,
@@ -103,28 +113,25 @@ class ClientBridge:
             raise ClientError("not connected to the mission server")
         return await self.client.submit(op, expected_revision=expected_revision)
 
-    # -- client callbacks (on the loop) -> messages ----------------------------------------
-    def _on_client(self, kind: str, payload: Any) -> None:
+    # -- client events (on the loop) -> messages ----------------------------------------
+    def _on_client(self, event: ClientEvent) -> None:
         c = self.client
         post = self.app.post_message
-        if kind == "state" and c is not None and c.mission is not None and c.library is not None:
-            snap: StateSnapshot = payload
-            post(StateLoaded(c.mission, c.library, dict(c.robots), snap.server_id))
-        elif kind == "events" and c is not None:
-            batch: EventBatch = payload
-            post(EventsApplied(batch, c.mission))
-        elif kind == "fleet":
-            info: RobotInfo = payload
-            post(FleetChanged(info))
-        elif kind == "telemetry":
-            t: Telemetry = payload
-            post(TelemetryChanged(t))
-        elif kind == "alert":
-            a: Alert = payload
-            post(AlertReceived(a))
-        elif kind == "malformed":
-            m: Malformed = payload
-            robot = Keys.robot_of(m.key) if "/robot/" in m.key else None
-            post(MessageUnreadable(m.what, m.key, m.sentence(), robot))
-        elif kind == "connection":
-            post(ConnectionChanged(str(payload), endpoint=self.endpoint))
+        match event:
+            case StateSynced(snapshot=snap):
+                if c is not None and c.mission is not None and c.library is not None:
+                    post(StateLoaded(c.mission, c.library, dict(c.robots), snap.server_id))
+            case BatchApplied(batch=batch):
+                if c is not None:
+                    post(EventsApplied(batch, c.mission))
+            case RobotChanged(robot=info):
+                post(FleetChanged(info))
+            case TelemetryReceived(telemetry=t):
+                post(TelemetryChanged(t))
+            case AlertRaised(alert=a):
+                post(AlertReceived(a))
+            case Malformed():
+                robot = Keys.robot_of(event.key) if "/robot/" in event.key else None
+                post(MessageUnreadable(event.what, event.key, event.sentence(), robot))
+            case ConnectionState(state=state):
+                post(ConnectionChanged(state, endpoint=self.endpoint))

@@ -1,16 +1,24 @@
 """The robot-side SDK: connect a real or simulated robot to the mission server.
 
 `from backend.agent import RobotAgent, Success, ...` is the integrator's API
-(docs/robots.md); the modules of this package are its parts.
+(docs/robots.md); the modules of this package are its parts:
+
+- facade: RobotAgent, the API and the wiring of the parts below;
+- queue: the synchronized queue as a state machine (no transport, no asyncio);
+- execution: running the active skill's handler, its policies;
+- context: SkillContext, what a handler gets; outcomes: how it ends;
+- registration: manifest, presence, registering; outbox: reports until acked;
+- telemetry, barriers, world (robot-to-robot ask/tell);
+- link: the link model; runtime: the loop, session and link the parts share.
 """
 
-from backend.agent.facade import (
+from backend.agent.context import SkillContext
+from backend.agent.facade import RobotAgent
+from backend.agent.link import Link
+from backend.agent.outcomes import (
     AlreadyConnected,
     Failure,
-    Link,
     RegistrationRefused,
-    RobotAgent,
-    SkillContext,
     SkillFailed,
     SkillStopped,
     Success,

@@ -8,12 +8,13 @@ import logging
 import signal
 import sys
 from pathlib import Path
+from typing import Any
 
 EXIT_BAD_INPUT, EXIT_UNREACHABLE = 2, 3
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
+def prepare_parser(subparsers: Any) -> argparse.ArgumentParser:
+    p = subparsers.add_parser(
         "server", help="run the mission server (a Zenoh router on loopback by default)"
     )
     p.add_argument(
@@ -39,7 +40,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument(
         "--accounts",
         metavar="FILE",
-        help="accounts file: require a user/password login and enforce each account's role with Zenoh access control",
+        help="accounts file: require a user/password login and enforce each account's role "
+        "with Zenoh access control",
     )
     g.add_argument(
         "--tls-cert", metavar="FILE", help="server certificate (PEM) for tls/ listen endpoints"
@@ -58,7 +60,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="how long to wait for a robot to answer a command",
     )
     p.add_argument("-v", "--verbose", action="store_true")
-    p.set_defaults(func=run)
+    return p
 
 
 def run(args: argparse.Namespace) -> int:
@@ -125,7 +127,8 @@ def _tls_options(args: argparse.Namespace) -> dict:
         raise ValueError("--tls-cert and --tls-key go together")
     if not tls_listen:
         raise ValueError(
-            "--tls-cert/--tls-key/--tls-ca need a tls/ endpoint in --listen (e.g. --listen tls/0.0.0.0:7447)"
+            "--tls-cert/--tls-key/--tls-ca need a tls/ endpoint in --listen "
+            "(e.g. --listen tls/0.0.0.0:7447)"
         )
     for opt, path in (
         ("--tls-cert", args.tls_cert),
@@ -134,7 +137,7 @@ def _tls_options(args: argparse.Namespace) -> dict:
     ):
         if path and not Path(path).is_file():
             raise ValueError(f"{opt} {path}: no such file")
-    out = {
+    out: dict[str, str | bool] = {
         "transport/link/tls/listen_certificate": str(Path(args.tls_cert).resolve()),
         "transport/link/tls/listen_private_key": str(Path(args.tls_key).resolve()),
     }
@@ -157,15 +160,16 @@ async def _serve(server) -> int:
             else f"started from {server.mission_file}, journal {server.db}"
         )
         print(
-            f"missionctl server: mission '{server.mission.name}' {how}; listening on {', '.join(server.listen)}",
+            f"missionctl server: mission '{server.mission.name}' {how}; "
+            f"listening on {', '.join(server.listen)}",
             flush=True,
         )
         if (
             server.resumed and server.mission_file is not None
         ):  # a changed or other mission file is not read
             print(
-                f"missionctl server: {server.mission_file} was not read (the journal holds the mission); "
-                "to start from it anew, give another --db",
+                f"missionctl server: {server.mission_file} was not read "
+                "(the journal holds the mission); to start from it anew, give another --db",
                 flush=True,
             )
         if server.accounts is not None:

@@ -1,7 +1,8 @@
 """The client library: what consoles, `missionctl ctl` and scripts use to talk to the server.
 
-`from backend.client import MissionClient` is the scripting API; `mapfollow`
-follows the simulator's map feed.
+`from backend.client import MissionClient` is the scripting API; its listeners
+get the typed events of `events` (`ClientEvent`); `mapfollow` follows the
+simulator's map feed.
 """
 
 from backend.client.client import (
@@ -15,15 +16,33 @@ from backend.client.client import (
     ServerGone,
     ServerUnreachable,
 )
+from backend.client.events import (
+    AlertRaised,
+    BatchApplied,
+    ClientEvent,
+    ConnectionState,
+    Malformed,
+    RobotChanged,
+    StateSynced,
+    TelemetryReceived,
+)
 
 __all__ = [
+    "AlertRaised",
+    "BatchApplied",
     "ClientError",
+    "ClientEvent",
+    "ConnectionState",
     "LoginFailed",
+    "Malformed",
     "MaybeApplied",
     "MissionClient",
     "OperationRefused",
     "OperationTimeout",
     "ProtocolMismatch",
+    "RobotChanged",
     "ServerGone",
     "ServerUnreachable",
+    "StateSynced",
+    "TelemetryReceived",
 ]

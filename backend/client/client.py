@@ -14,12 +14,22 @@ import logging
 import os
 import uuid
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import zenoh
 from pydantic import ValidationError
 
+from backend.client.events import (
+    AlertRaised,
+    BatchApplied,
+    ClientEvent,
+    ConnectionState,
+    Listener,
+    Malformed,
+    RobotChanged,
+    StateSynced,
+    TelemetryReceived,
+)
 from backend.core import events as ev
 from backend.core.bulk import gc_paused
 from backend.core.library import Library
@@ -107,32 +117,14 @@ class OperationRefused(ClientError):
         self.code = reply.code
 
 
-Listener = Callable[[str, Any], None]
-
-
-@dataclass(frozen=True)
-class Malformed:
-    """A message this client could not read and ignored (the first from its key)."""
-
-    what: str  # "events", "fleet", "telemetry", "alert"
-    key: str
-    error: str  # the first validation error: "field.path: message"
-
-    def sentence(self) -> str:
-        return (
-            f"{self.what} on {self.key} could not be read and is ignored: {self.error} "
-            f"(does its sender speak missionctl protocol {PROTOCOL_VERSION}? see docs/protocol.md)"
-        )
-
-
 class MissionClient:
     """One connection to a mission server.
 
-    Listeners get `(kind, payload)` on the event loop: "state" (StateSnapshot
-    after (re)sync), "events" (EventBatch), "fleet" (RobotInfo), "telemetry"
-    (Telemetry), "alert" (Alert), "connection" ("connected" | "reconnecting"),
-    "malformed" (Malformed: once per key, e.g. a third-party robot's telemetry
-    that does not match the protocol).
+    Listeners get one `events.ClientEvent` at a time on the event loop:
+    StateSynced (after each (re)sync), BatchApplied, RobotChanged,
+    TelemetryReceived, AlertRaised, ConnectionState ("connected" |
+    "reconnecting"), Malformed (once per key, e.g. a third-party robot's
+    telemetry that does not match the protocol).
     """
 
     def __init__(
@@ -236,12 +228,15 @@ class MissionClient:
     def add_listener(self, fn: Listener) -> None:
         self._listeners.append(fn)
 
-    def _emit(self, kind: str, payload: Any) -> None:
+    def remove_listener(self, fn: Listener) -> None:
+        self._listeners.remove(fn)
+
+    def _emit(self, event: ClientEvent) -> None:
         for fn in list(self._listeners):
             try:
-                fn(kind, payload)
+                fn(event)
             except Exception:  # a listener's bug must not stop the stream
-                log.exception("client listener failed on %s", kind)
+                log.exception("client listener failed on %s", event.kind)
 
     # -- state -----------------------------------------------------------------
     @property
@@ -262,17 +257,19 @@ class MissionClient:
             except NoResponder:
                 if self.login.logged_in:  # the router's rules may have dropped the query
                     raise ServerUnreachable(
-                        f"no mission server answers user {self.user} at {', '.join(self.endpoints)}: either none "
-                        "runs there, or this account may not read the mission (a robot account; under mutual "
-                        "TLS, a certificate not named after the account)"
+                        f"no mission server answers user {self.user} at "
+                        f"{', '.join(self.endpoints)}: either none runs there, or this account "
+                        "may not read the mission (a robot account; under mutual TLS, a "
+                        "certificate not named after the account)"
                     ) from None
                 raise ServerUnreachable(
-                    f"no mission server answers at {', '.join(self.endpoints)} (a Zenoh router is there, "
-                    "but no missionctl server)"
+                    f"no mission server answers at {', '.join(self.endpoints)} "
+                    "(a Zenoh router is there, but no missionctl server)"
                 ) from None
             except QueryTimeout:
                 raise ServerUnreachable(
-                    f"the mission server at {', '.join(self.endpoints)} did not answer in {self.timeout:g} s"
+                    f"the mission server at {', '.join(self.endpoints)} did not answer "
+                    f"in {self.timeout:g} s"
                 ) from None
             try:
                 with gc_paused():
@@ -284,7 +281,8 @@ class MissionClient:
                 ) from None
             if snap.protocol != PROTOCOL_VERSION:
                 raise ProtocolMismatch(
-                    f"the server speaks protocol {snap.protocol}, this client {PROTOCOL_VERSION}; upgrade the older side"
+                    f"the server speaks protocol {snap.protocol}, this client "
+                    f"{PROTOCOL_VERSION}; upgrade the older side"
                 )
             self.mission, self.library = snap.mission, snap.library
             self.robots = dict(snap.robots)
@@ -300,8 +298,8 @@ class MissionClient:
         finally:
             self._syncing = False
         self.connected = True
-        self._emit("state", snap)
-        self._emit("connection", "connected")
+        self._emit(StateSynced(snap))
+        self._emit(ConnectionState("connected"))
         return snap
 
     async def _fetch_account(self) -> AccountInfo | None:
@@ -328,7 +326,7 @@ class MissionClient:
             return
         self.mission = ev.apply_events(self.mission, batch)
         if emit:
-            self._emit("events", batch)
+            self._emit(BatchApplied(batch))
 
     def _schedule_resync(self) -> None:
         if self._resync_task is None or self._resync_task.done():
@@ -378,7 +376,7 @@ class MissionClient:
         if self._syncing:
             self._pending_fleet.append(info)
         self.robots[info.name] = info
-        self._emit("fleet", info)
+        self._emit(RobotChanged(info))
 
     def _on_telemetry(self, msg: Any) -> None:
         try:
@@ -390,7 +388,7 @@ class MissionClient:
 
     def _got_telemetry(self, t: Telemetry) -> None:
         self.telemetry[t.robot] = t
-        self._emit("telemetry", t)
+        self._emit(TelemetryReceived(t))
 
     def _on_alert(self, msg: Any) -> None:
         try:
@@ -398,7 +396,7 @@ class MissionClient:
         except ValidationError as e:
             self._malformed("alert", msg.key, e)
             return
-        self._post(self._emit, "alert", a)
+        self._post(self._emit, AlertRaised(a))
 
     def _malformed(self, what: str, key: str, e: ValidationError) -> None:
         """Said once per key (a robot's telemetry comes several times a second)."""
@@ -407,7 +405,7 @@ class MissionClient:
         self._malformed_keys.add((what, key))
         m = Malformed(what, key, first_error(e))
         log.warning("%s", m.sentence())
-        self._post(self._emit, "malformed", m)
+        self._post(self._emit, m)
 
     def _on_server_alive(self, key: str, alive: bool) -> None:
         self._post(self._server_presence, alive)
@@ -420,7 +418,7 @@ class MissionClient:
             self._schedule_resync()
         elif self.connected:
             self.connected = False
-            self._emit("connection", "reconnecting")
+            self._emit(ConnectionState("reconnecting"))
 
     # -- operations --------------------------------------------------------------------
     def _session(self) -> zenoh.Session:
@@ -460,7 +458,8 @@ class MissionClient:
             raise OperationRefused(_error_reply(e.payload)) from None
         except QueryTimeout:
             raise OperationTimeout(
-                f"the server did not answer '{op.op}' within {wait:g} s; it may have applied it, or still apply it",
+                f"the server did not answer '{op.op}' within {wait:g} s; "
+                "it may have applied it, or still apply it",
                 req.request_id,
             ) from None
         except NoResponder:
@@ -478,16 +477,16 @@ class MissionClient:
         """Wait until the mirrored mission satisfies `predicate`."""
         done = asyncio.Event()
 
-        def check(kind: str, _payload: Any) -> None:
+        def check(_event: ClientEvent | None = None) -> None:
             if self.mission is not None and predicate(self.mission):
                 done.set()
 
         self.add_listener(check)
         try:
-            check("", None)
+            check()
             await asyncio.wait_for(done.wait(), timeout)
         finally:
-            self._listeners.remove(check)
+            self.remove_listener(check)
         assert self.mission is not None
         return self.mission
 

@@ -7,56 +7,70 @@ same things with the same sentences. Each problem is a (field path, message).
 
 from __future__ import annotations
 
-from backend.core.library import Library, check_params
-from backend.core.model import Mission, Status, format_path, section_problems
+from backend.core.library import Library, RobotType, SkillSpec, check_params
+from backend.core.model import Mission, SkillInstance, Status, format_path, section_problems
 
 Path = tuple[str | int, ...]
+Problem = tuple[Path, str]
 
 
-def check_library(lib: Library) -> list[tuple[Path, str]]:
-    out: list[tuple[Path, str]] = []
+def check_library(lib: Library) -> list[Problem]:
+    out: list[Problem] = []
     for tname, rt in lib.robot_types.items():
-        seen = set()
-        for i, s in enumerate(rt.skills):
-            if s not in lib.skills:
-                out.append(
-                    (
-                        ("robot_types", tname, "skills", i),
-                        f"unknown skill '{s}' (not defined under 'skills')",
-                    )
-                )
-            if s in seen:
-                out.append((("robot_types", tname, "skills", i), f"skill '{s}' is listed twice"))
-            seen.add(s)
+        out += _robot_type_problems(lib, tname, rt)
     for sname, spec in lib.skills.items():
-        for pname, pspec in spec.params.items():
-            why = pspec.default_problem()
-            if why:
-                out.append((("skills", sname, "params", pname, "default"), why))
-        d = spec.duration
-        if d.goal_param is not None:
-            p = spec.params.get(d.goal_param)
-            if p is None or p.type not in ("pose", "position"):
-                out.append(
-                    (
-                        ("skills", sname, "duration", "goal_param"),
-                        f"'{d.goal_param}' is not a pose or position parameter of '{sname}'",
-                    )
+        out += _skill_spec_problems(sname, spec)
+    return out
+
+
+def _robot_type_problems(lib: Library, tname: str, rt: RobotType) -> list[Problem]:
+    out: list[Problem] = []
+    seen = set()
+    for i, s in enumerate(rt.skills):
+        if s not in lib.skills:
+            out.append(
+                (
+                    ("robot_types", tname, "skills", i),
+                    f"unknown skill '{s}' (not defined under 'skills')",
                 )
-        for pname in d.per_param_s:
-            p = spec.params.get(pname)
-            if p is None or p.type not in ("int", "float"):
-                out.append(
-                    (
-                        ("skills", sname, "duration", "per_param_s", pname),
-                        f"'{pname}' is not a numeric parameter of '{sname}'",
-                    )
+            )
+        if s in seen:
+            out.append((("robot_types", tname, "skills", i), f"skill '{s}' is listed twice"))
+        seen.add(s)
+    return out
+
+
+def _skill_spec_problems(sname: str, spec: SkillSpec) -> list[Problem]:
+    out: list[Problem] = []
+    for pname, pspec in spec.params.items():
+        why = pspec.default_problem()
+        if why:
+            out.append((("skills", sname, "params", pname, "default"), why))
+    d = spec.duration
+    if d.goal_param is not None:
+        p = spec.params.get(d.goal_param)
+        if p is None or not p.kind.goal:
+            out.append(
+                (
+                    ("skills", sname, "duration", "goal_param"),
+                    f"'{d.goal_param}' is not a pose or position parameter of '{sname}'",
                 )
+            )
+    for pname in d.per_param_s:
+        p = spec.params.get(pname)
+        if p is None or not p.kind.numeric:
+            out.append(
+                (
+                    ("skills", sname, "duration", "per_param_s", pname),
+                    f"'{pname}' is not a numeric parameter of '{sname}'",
+                )
+            )
     return out
 
 
 def resolve_shorthands(m: Mission, lib: Library) -> None:
-    """`goal: "@POI-A"` in a file binds the parameter to marker POI-A."""
+    """`goal: "@POI-A"` in a file binds the parameter to marker POI-A (or,
+    for a marker parameter, names it)."""
     for robot, task in m.tasks.items():
         rtype = m.robots[robot].type if robot in m.robots else None
         for s in task:
@@ -65,111 +79,148 @@ def resolve_shorthands(m: Mission, lib: Library) -> None:
                 if not (isinstance(v, str) and v.startswith("@")):
                     continue
                 pspec = spec.params.get(name) if spec else None
-                if pspec is not None and pspec.type == "marker":
+                if pspec is not None and pspec.kind.names_marker:
                     s.params[name] = v[1:]
-                elif pspec is not None and pspec.type in ("pose", "position", "area"):
+                elif pspec is not None and pspec.kind.bindable_to:
                     s.bindings[name] = v[1:]
                     del s.params[name]
 
 
-def check_mission(m: Mission, lib: Library, *, fill: bool = True) -> list[tuple[Path, str]]:
+def check_mission(m: Mission, lib: Library, *, fill: bool = True) -> list[Problem]:
     """Every rule a mission must satisfy against its library. With `fill`,
     parameters are normalized and defaults filled in place."""
-    out: list[tuple[Path, str]] = []
-    robots = set(m.robots)
-    for name, spec in m.robots.items():
-        if spec.type not in lib.robot_types:
-            known = ", ".join(lib.robot_types) or "none"
-            out.append(
-                (
-                    ("robots", name, "type"),
-                    f"unknown robot type '{spec.type}' (library types: {known})",
-                )
-            )
-    ids: dict[str, Path] = {}
+    out = _robot_problems(m, lib)
+    ids: dict[str, Path] = {}  # skill id -> where it is first used
     for robot, task in m.tasks.items():
-        if robot not in m.robots:
+        out += _task_problems(m, lib, robot, task, ids, fill)
+    out += _barrier_problems(m)
+    return out
+
+
+def _robot_problems(m: Mission, lib: Library) -> list[Problem]:
+    known = ", ".join(lib.robot_types) or "none"
+    return [
+        (
+            ("robots", name, "type"),
+            f"unknown robot type '{spec.type}' (library types: {known})",
+        )
+        for name, spec in m.robots.items()
+        if spec.type not in lib.robot_types
+    ]
+
+
+def _task_problems(
+    m: Mission,
+    lib: Library,
+    robot: str,
+    task: list[SkillInstance],
+    ids: dict[str, Path],
+    fill: bool,
+) -> list[Problem]:
+    if robot not in m.robots:
+        known = ", ".join(sorted(m.robots)) or "none"
+        return [(("tasks", robot), f"tasks for unknown robot '{robot}' (robots: {known})")]
+    rtype = m.robots[robot].type
+    robots = set(m.robots)
+    out: list[Problem] = []
+    for i, s in enumerate(task):
+        here: Path = ("tasks", robot, i)
+        if s.id in ids:
             out.append(
                 (
-                    ("tasks", robot),
-                    f"tasks for unknown robot '{robot}' (robots: {', '.join(sorted(robots)) or 'none'})",
+                    (*here, "id"),
+                    f"duplicate skill id '{s.id}' (first used at {format_path(ids[s.id])})",
                 )
             )
-            continue
-        rtype = m.robots[robot].type
-        for i, s in enumerate(task):
-            here: Path = ("tasks", robot, i)
-            if s.id in ids:
-                out.append(
-                    (
-                        (*here, "id"),
-                        f"duplicate skill id '{s.id}' (first used at {format_path(ids[s.id])})",
-                    )
-                )
-            else:
-                ids[s.id] = here
-            if rtype not in lib.robot_types:
-                continue
-            if lib.skill_for(rtype, s.skill) is None:
-                offered = ", ".join(lib.skills_of(rtype)) or "none"
-                out.append(
-                    (
-                        (*here, "skill"),
-                        f"robot '{robot}' ({rtype}) has no skill '{s.skill}' (it offers: {offered})",
-                    )
-                )
-                continue
-            # a skill on a robot (or in the log) keeps the values it was sent
-            # with: its bindings are history, never re-applied
-            idle = s.status == Status.IDLE
-            params, problems = check_params(
-                lib,
-                rtype,
-                s.skill,
-                s.params,
-                s.bindings if idle else {},
-                markers=m.markers,
-                robots=robots,
-                fill_defaults=idle,
+        else:
+            ids[s.id] = here
+        if rtype in lib.robot_types:
+            out += _skill_problems(m, lib, robot, s, here, robots=robots, fill=fill)
+    for i, why in section_problems(task):
+        out.append((("tasks", robot, i, "status"), why))
+    return out
+
+
+def _skill_problems(
+    m: Mission,
+    lib: Library,
+    robot: str,
+    s: SkillInstance,
+    here: Path,
+    *,
+    robots: set[str],
+    fill: bool,
+) -> list[Problem]:
+    """A skill against its robot's type: offered, and its parameters valid."""
+    rtype = m.robots[robot].type
+    if lib.skill_for(rtype, s.skill) is None:
+        offered = ", ".join(lib.skills_of(rtype)) or "none"
+        return [
+            (
+                (*here, "skill"),
+                f"robot '{robot}' ({rtype}) has no skill '{s.skill}' (it offers: {offered})",
             )
-            for p in problems:
-                base = (
-                    "bindings"
-                    if p.path and p.path[0] in s.bindings and p.path[0] not in s.params
-                    else "params"
-                )
-                out.append(((*here, base, *p.path), p.message))
-            if not problems and fill:
-                s.params = params
-        for i, why in section_problems(task):
-            out.append((("tasks", robot, i, "status"), why))
-    owner: dict[str, str] = {}
+        ]
+    # a skill on a robot (or in the log) keeps the values it was sent
+    # with: its bindings are history, never re-applied
+    idle = s.status == Status.IDLE
+    params, problems = check_params(
+        lib,
+        rtype,
+        s.skill,
+        s.params,
+        s.bindings if idle else {},
+        markers=m.markers,
+        robots=robots,
+        fill_defaults=idle,
+    )
+    out: list[Problem] = []
+    for p in problems:
+        bound = bool(p.path) and p.path[0] in s.bindings and p.path[0] not in s.params
+        out.append(((*here, "bindings" if bound else "params", *p.path), p.message))
+    if not problems and fill:
+        s.params = params
+    return out
+
+
+def _barrier_problems(m: Mission) -> list[Problem]:
+    out: list[Problem] = []
+    owner: dict[str, str] = {}  # skill id -> its barrier
     for bid, b in m.barriers.items():
-        robots_in: dict[str, str] = {}
+        robots_in: dict[str, str] = {}  # robot -> its skill in this barrier
         for j, sid in enumerate(b.skills):
             where: Path = ("barriers", bid, "skills", j)
-            if sid in b.skills[:j]:
-                out.append((where, f"skill '{sid}' is listed twice"))
-                continue
-            found = m.find(sid)
-            if found is None:
-                out.append((where, f"unknown skill id '{sid}'"))
-                continue
-            robot = found[0]
-            if robot in robots_in:
-                out.append(
-                    (
-                        where,
-                        f"skills '{robots_in[robot]}' and '{sid}' both belong to robot '{robot}'; a barrier has one skill per robot",
-                    )
-                )
-            robots_in[robot] = sid
-            if sid in owner:
-                out.append((where, f"skill '{sid}' is already in barrier '{owner[sid]}'"))
-            owner[sid] = bid
+            found = _member_problems(m, bid, b.skills[:j], sid, robots_in, owner)
+            out += [(where, why) for why in found]
         if len(robots_in) < 2 and len(b.skills) >= 2 and all(m.find(s) for s in b.skills):
             out.append((("barriers", bid), "a barrier needs skills of at least two robots"))
     return out
 
 
-# -- loading ------------------------------------------------------------------
+def _member_problems(
+    m: Mission,
+    bid: str,
+    before: list[str],
+    sid: str,
+    robots_in: dict[str, str],
+    owner: dict[str, str],
+) -> list[str]:
+    """What is wrong with skill `sid` in barrier `bid`, after the skills
+    `before` it; notes its robot in `robots_in` and its barrier in `owner`."""
+    if sid in before:
+        return [f"skill '{sid}' is listed twice"]
+    found = m.find(sid)
+    if found is None:
+        return [f"unknown skill id '{sid}'"]
+    out: list[str] = []
+    robot = found[0]
+    if robot in robots_in:
+        out.append(
+            f"skills '{robots_in[robot]}' and '{sid}' both belong to robot '{robot}'; "
+            "a barrier has one skill per robot"
+        )
+    robots_in[robot] = sid
+    if sid in owner:
+        out.append(f"skill '{sid}' is already in barrier '{owner[sid]}'")
+    owner[sid] = bid
+    return out

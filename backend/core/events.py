@@ -99,7 +99,8 @@ class EventBatch(Strict):
     events: list[Event]
     actor: str = Field(
         "",
-        description="who: 'user@client' when the request named a user, else the client id; the robot's name for its reports",
+        description="who: 'user@client' when the request named a user, else the client id; "
+        "the robot's name for its reports",
     )
     op: str = ""
 

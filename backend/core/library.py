@@ -10,14 +10,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any, Final, Literal
 
 from pydantic import Field
 
 from backend.core.model import Name, Strict
 from backend.core.params import ParamSpec, check_value, marker_value, normalize_value
 
-LIBRARY_FORMAT = "missionctl/library@1"
+LIBRARY_FORMAT: Final = "missionctl/library@1"
 VERSION_PATTERN = r"^\d+\.\d+\.\d+$"
 
 
@@ -116,8 +116,22 @@ def check_params(
                 (), f"robot type '{robot_type}' has no skill '{skill}' (it offers: {offered})"
             )
         ]
-    problems: list[ParamProblem] = []
+    problems = _unknown_names(skill, spec, params, bindings)
     out: dict[str, Any] = {}
+    for name, pspec in spec.params.items():
+        if name in bindings:
+            problems += _take_bound(out, name, pspec, bindings[name], markers)
+        elif name not in params or params[name] is None:
+            problems += _take_default(out, name, pspec, fill_defaults)
+        else:
+            problems += _take_given(out, name, pspec, params[name], markers, robots)
+    return out, problems
+
+
+def _unknown_names(
+    skill: str, spec: SkillSpec, params: dict[str, Any], bindings: dict[str, str]
+) -> list[ParamProblem]:
+    problems: list[ParamProblem] = []
     for name in params:
         if name not in spec.params:
             known = ", ".join(spec.params) or "none"
@@ -131,34 +145,48 @@ def check_params(
             problems.append(
                 ParamProblem((name,), f"cannot bind unknown parameter '{name}' of skill '{skill}'")
             )
-    for name, pspec in spec.params.items():
-        if name in bindings:
-            mname = bindings[name]
-            marker = markers.get(mname)
-            if marker is None:
-                known = ", ".join(sorted(markers)) or "none"
-                problems.append(
-                    ParamProblem((name,), f"unknown marker '{mname}' (markers: {known})")
-                )
-                continue
-            value, why = marker_value(pspec, marker)
-            if why:
-                problems.append(ParamProblem((name,), f"cannot bind to marker '{mname}': {why}"))
-                continue
-            out[name] = value
-            continue
-        if name not in params or params[name] is None:
-            if pspec.default is not None and fill_defaults:
-                out[name] = normalize_value(pspec, pspec.default)
-            elif pspec.is_required:
-                unit = f" in {pspec.unit}" if pspec.unit else ""
-                problems.append(
-                    ParamProblem((name,), f"missing required {pspec.type} parameter '{name}'{unit}")
-                )
-            continue
-        found = check_value(pspec, params[name], markers=markers, robots=robots)
-        if found:
-            problems += [ParamProblem((name, *rel), msg) for rel, msg in found]
-        else:
-            out[name] = normalize_value(pspec, params[name])
-    return out, problems
+    return problems
+
+
+# Each of the three ways a parameter gets its value (bound to a marker, left
+# out, given) puts the value in `out` when there is one, and says what is wrong.
+
+
+def _take_bound(
+    out: dict[str, Any], name: str, pspec: ParamSpec, mname: str, markers: dict[str, Any]
+) -> list[ParamProblem]:
+    marker = markers.get(mname)
+    if marker is None:
+        known = ", ".join(sorted(markers)) or "none"
+        return [ParamProblem((name,), f"unknown marker '{mname}' (markers: {known})")]
+    value, why = marker_value(pspec, marker)
+    if why:
+        return [ParamProblem((name,), f"cannot bind to marker '{mname}': {why}")]
+    out[name] = value
+    return []
+
+
+def _take_default(
+    out: dict[str, Any], name: str, pspec: ParamSpec, fill_defaults: bool
+) -> list[ParamProblem]:
+    if pspec.default is not None and fill_defaults:
+        out[name] = normalize_value(pspec, pspec.default)
+    elif pspec.is_required:
+        unit = f" in {pspec.unit}" if pspec.unit else ""
+        return [ParamProblem((name,), f"missing required {pspec.type} parameter '{name}'{unit}")]
+    return []
+
+
+def _take_given(
+    out: dict[str, Any],
+    name: str,
+    pspec: ParamSpec,
+    value: Any,
+    markers: dict[str, Any],
+    robots: set[str],
+) -> list[ParamProblem]:
+    found = check_value(pspec, value, markers=markers, robots=robots)
+    if found:
+        return [ParamProblem((name, *rel), msg) for rel, msg in found]
+    out[name] = normalize_value(pspec, value)
+    return []

@@ -11,13 +11,13 @@ from __future__ import annotations
 import re
 from datetime import datetime
 from enum import StrEnum
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Final, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr
 
 from backend.core.bulk import gc_paused
 
-MISSION_FORMAT = "missionctl/mission@1"
+MISSION_FORMAT: Final = "missionctl/mission@1"
 
 # Names of robots, markers, skills and ids appear in keys (Zenoh, YAML, CLI):
 # keep them to a portable character set.
@@ -53,7 +53,10 @@ ACTIVE = frozenset({Status.RUNNING, Status.PAUSED, Status.SYNCHWAITING})
 def how_to_change(status: Status) -> str:
     """What an operator does to change a skill that is no longer idle."""
     if status in FINISHED:
-        return "finished skills are the execution log and never change; add a new skill (or retry a failed one)"
+        return (
+            "finished skills are the execution log and never change; "
+            "add a new skill (or retry a failed one)"
+        )
     if status in ACTIVE:
         return "stop the robot (the skill goes back to its queue), then unsynchronize it"
     return "unsynchronize it first"
@@ -170,7 +173,7 @@ class Barrier(Strict):
     skills: list[SkillId] = Field(min_length=2)
 
 
-class _Hints(dict):
+class _Hints(dict[str, tuple[str, int]]):
     """skill id -> (robot, index) where it was last seen. Only a hint, checked
     at every use, so whatever changes a task list never makes it wrong; and
     equal to any other, so two missions are equal when their content is."""
@@ -178,7 +181,7 @@ class _Hints(dict):
     def __eq__(self, other: object) -> bool:
         return isinstance(other, _Hints)
 
-    __hash__ = None  # type: ignore[assignment]
+    __hash__ = None
 
 
 class Mission(Strict):
@@ -229,7 +232,9 @@ class Mission(Strict):
         # `self._hints` goes through pydantic's __getattr__, which probes the
         # attribute for a descriptor by raising and catching: 2.7 us against
         # 0.4, 3 times per operation; the dict that holds private values is public API
-        return self.__pydantic_private__["_hints"]  # type: ignore[index]
+        # (never None here: pydantic sets it for every model with private attributes)
+        hints: _Hints = self.__pydantic_private__["_hints"]  # type: ignore[index]
+        return hints
 
     def _rehint(
         self, robot: str, task: list[SkillInstance], skill_id: str
@@ -280,7 +285,8 @@ def section_problems(task: list[SkillInstance]) -> list[tuple[int, str]]:
             problems.append(
                 (
                     i,
-                    f"second active skill: '{task[active].id}' is already {task[active].status.value}",
+                    f"second active skill: '{task[active].id}' is already "
+                    f"{task[active].status.value}",
                 )
             )
         if s.status in ACTIVE and active is None:

@@ -8,7 +8,7 @@ validated by `backend.core.rules.engine.Engine`; these models are also the proto
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, Literal
 
 from pydantic import Field
 
@@ -229,33 +229,35 @@ class Report(Strict):
     at: datetime | None = None
 
 
-_OPERATOR = (
-    AddSkill,
-    DeleteSkills,
-    MoveSkill,
-    EditSkill,
-    Sync,
-    Unsync,
-    Control,
-    Retry,
-    AddBarrier,
-    RemoveBarrier,
-    MarkerAdd,
-    MarkerMove,
-    MarkerRename,
-    MarkerDelete,
-    LoadMission,
-    NewMission,
-    Undo,
-    Redo,
-)
-_INTERNAL = (RestoreSkills, SetSkill, RestoreBarrier, RestoreMarker)
-_ROBOT = (SyncAck, UnsyncDone, RetryAck, Reconcile, Report)
-
 # what clients may send; what robots' answers become; everything the engine applies
-OperatorOp = Annotated[Union[_OPERATOR], Field(discriminator="op")]  # noqa: UP007
-RobotOp = Annotated[Union[_ROBOT], Field(discriminator="op")]  # noqa: UP007
-AnyOp = Annotated[Union[_OPERATOR + _INTERNAL + _ROBOT], Field(discriminator="op")]  # noqa: UP007
+OperatorOperation = (
+    AddSkill
+    | DeleteSkills
+    | MoveSkill
+    | EditSkill
+    | Sync
+    | Unsync
+    | Control
+    | Retry
+    | AddBarrier
+    | RemoveBarrier
+    | MarkerAdd
+    | MarkerMove
+    | MarkerRename
+    | MarkerDelete
+    | LoadMission
+    | NewMission
+    | Undo
+    | Redo
+)
+InternalOperation = RestoreSkills | SetSkill | RestoreBarrier | RestoreMarker
+RobotOperation = SyncAck | UnsyncDone | RetryAck | Reconcile | Report
+Operation = OperatorOperation | InternalOperation | RobotOperation
+
+# the same, as pydantic reads them (by their `op`)
+OperatorOp = Annotated[OperatorOperation, Field(discriminator="op")]
+RobotOp = Annotated[RobotOperation, Field(discriminator="op")]
+AnyOp = Annotated[Operation, Field(discriminator="op")]
 
 # operations that change the unsynchronized plan and can be undone
 UNDOABLE = (

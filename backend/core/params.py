@@ -81,6 +81,11 @@ class ParamSpec(Strict):
     def is_required(self) -> bool:
         return self.required if self.required is not None else self.default is None
 
+    @property
+    def kind(self) -> Kind:
+        """What this parameter's kind accepts and how it behaves (`KINDS`)."""
+        return KINDS[self.type]
+
 
 def describe(v: Any) -> str:
     """What a value is, for an error sentence ('a string ('x')')."""
@@ -137,6 +142,9 @@ class Kind:
     name: ClassVar[str]
     # marker kinds a parameter of this kind can be bound to (its value follows the marker)
     bindable_to: ClassVar[tuple[str, ...]] = ()
+    names_marker: ClassVar[bool] = False  # the value is a marker's name
+    numeric: ClassVar[bool] = False  # a number (a duration may grow with it)
+    goal: ClassVar[bool] = False  # a place to go to (a duration may grow with the distance)
 
     def check(
         self, spec: ParamSpec, v: Any, markers: Markers | None, robots: Collection[str] | None
@@ -168,12 +176,14 @@ class _Simple(Kind):
     expected: ClassVar[str]
     empty: ClassVar[Any]
 
-    def check(self, spec, v, markers, robots):
+    def check(
+        self, spec: ParamSpec, v: Any, markers: Markers | None, robots: Collection[str] | None
+    ) -> list[Problem]:
         if isinstance(v, self.types):
             return []
         return [((), f"expected {self.expected}, got {describe(v)}")]
 
-    def start(self, spec, ctx):
+    def start(self, spec: ParamSpec, ctx: StartContext) -> tuple[Any, str | None]:
         return (self.empty() if callable(self.empty) else self.empty), None
 
 
@@ -195,8 +205,11 @@ class Dict(_Simple):
 
 class _Number(Kind):
     integer: ClassVar[bool]
+    numeric = True
 
-    def check(self, spec, v, markers, robots):
+    def check(
+        self, spec: ParamSpec, v: Any, markers: Markers | None, robots: Collection[str] | None
+    ) -> list[Problem]:
         if self.integer and not (isinstance(v, int) and not isinstance(v, bool)):
             return [((), f"expected an integer, got {describe(v)}")]
         if not self.integer and not is_number(v):
@@ -210,7 +223,7 @@ class _Number(Kind):
             return [((), f"{v}{unit} is above the maximum {spec.max:g}{unit}")]
         return []
 
-    def start(self, spec, ctx):
+    def start(self, spec: ParamSpec, ctx: StartContext) -> tuple[Any, str | None]:
         v = spec.min if spec.min is not None else 0
         if spec.max is not None:
             v = min(v, spec.max)
@@ -224,45 +237,51 @@ class Int(_Number):
 class Float(_Number):
     name, integer = "float", False
 
-    def normalize(self, spec, v):
+    def normalize(self, spec: ParamSpec, v: Any) -> Any:
         return float(v)
 
 
 class PoseKind(Kind):
     name = "pose"
     bindable_to = ("pose", "position")
+    goal = True
 
-    def check(self, spec, v, markers, robots):
+    def check(
+        self, spec: ParamSpec, v: Any, markers: Markers | None, robots: Collection[str] | None
+    ) -> list[Problem]:
         return _check_fields(v, POSE_FIELDS, "pose")
 
-    def normalize(self, spec, v):
+    def normalize(self, spec: ParamSpec, v: Any) -> Any:
         return Pose(**v).model_dump()
 
-    def from_marker(self, spec, marker):
+    def from_marker(self, spec: ParamSpec, marker: Any) -> tuple[Any, str | None]:
         if isinstance(marker, PoseMarker):
             return marker.pose.model_dump(), None
         if isinstance(marker, PositionMarker):
             return Pose(**marker.position.model_dump()).model_dump(), None
         return None, "an area marker cannot give a pose"
 
-    def start(self, spec, ctx):
+    def start(self, spec: ParamSpec, ctx: StartContext) -> tuple[Any, str | None]:
         return dict(ctx.pose), None
 
-    def typed(self, v):
+    def typed(self, v: Any) -> Any:
         return Pose(**v)
 
 
 class PositionKind(Kind):
     name = "position"
     bindable_to = ("pose", "position")
+    goal = True
 
-    def check(self, spec, v, markers, robots):
+    def check(
+        self, spec: ParamSpec, v: Any, markers: Markers | None, robots: Collection[str] | None
+    ) -> list[Problem]:
         return _check_fields(v, POSITION_FIELDS, "position")
 
-    def normalize(self, spec, v):
+    def normalize(self, spec: ParamSpec, v: Any) -> Any:
         return Position(**v).model_dump()
 
-    def from_marker(self, spec, marker):
+    def from_marker(self, spec: ParamSpec, marker: Any) -> tuple[Any, str | None]:
         if isinstance(marker, PoseMarker):
             p = marker.pose
             return Position(x=p.x, y=p.y, z=p.z).model_dump(), None
@@ -270,10 +289,10 @@ class PositionKind(Kind):
             return marker.position.model_dump(), None
         return None, "an area marker cannot give a position"
 
-    def start(self, spec, ctx):
+    def start(self, spec: ParamSpec, ctx: StartContext) -> tuple[Any, str | None]:
         return {k: ctx.pose[k] for k in POSITION_FIELDS}, None
 
-    def typed(self, v):
+    def typed(self, v: Any) -> Any:
         return Position(**v)
 
 
@@ -282,7 +301,9 @@ class AreaKind(Kind):
     bindable_to = ("area",)
     START_HALF_SIDE = 5.0  # metres: the square a new area starts as, around the robot
 
-    def check(self, spec, v, markers, robots):
+    def check(
+        self, spec: ParamSpec, v: Any, markers: Markers | None, robots: Collection[str] | None
+    ) -> list[Problem]:
         if not isinstance(v, list) or len(v) < 3:
             return [((), f"expected a polygon: a list of at least 3 positions, got {describe(v)}")]
         out: list[Problem] = []
@@ -290,15 +311,15 @@ class AreaKind(Kind):
             out += [((i, *rel), msg) for rel, msg in _check_fields(p, POSITION_FIELDS, "position")]
         return out
 
-    def normalize(self, spec, v):
+    def normalize(self, spec: ParamSpec, v: Any) -> Any:
         return [Position(**p).model_dump() for p in v]
 
-    def from_marker(self, spec, marker):
+    def from_marker(self, spec: ParamSpec, marker: Any) -> tuple[Any, str | None]:
         if isinstance(marker, AreaMarker):
             return [p.model_dump() for p in marker.area], None
         return None, f"a {marker.kind} marker cannot give an area"
 
-    def start(self, spec, ctx):
+    def start(self, spec: ParamSpec, ctx: StartContext) -> tuple[Any, str | None]:
         areas = [m for m, mk in ctx.markers.items() if mk.kind == "area"]
         if areas:
             return None, areas[0]
@@ -306,27 +327,32 @@ class AreaKind(Kind):
         corners = ((-h, -h), (h, -h), (h, h), (-h, h))
         return [{"x": x + dx, "y": y + dy, "z": 0.0} for dx, dy in corners], None
 
-    def typed(self, v):
+    def typed(self, v: Any) -> Any:
         return [Position(**p) for p in v]
 
 
 class Enum(Kind):
     name = "enum"
 
-    def check(self, spec, v, markers, robots):
+    def check(
+        self, spec: ParamSpec, v: Any, markers: Markers | None, robots: Collection[str] | None
+    ) -> list[Problem]:
         choices = spec.choices or []
         if v not in choices:
             return [((), f"{v!r} is not one of: {', '.join(choices)}")]
         return []
 
-    def start(self, spec, ctx):
+    def start(self, spec: ParamSpec, ctx: StartContext) -> tuple[Any, str | None]:
         return (spec.choices[0] if spec.choices else None), None
 
 
 class MarkerRef(Kind):
     name = "marker"
+    names_marker = True
 
-    def check(self, spec, v, markers, robots):
+    def check(
+        self, spec: ParamSpec, v: Any, markers: Markers | None, robots: Collection[str] | None
+    ) -> list[Problem]:
         if not isinstance(v, str):
             return [((), f"expected a marker name, got {describe(v)}")]
         if markers is not None and v not in markers:
@@ -337,7 +363,7 @@ class MarkerRef(Kind):
             return [((), f"marker '{v}' is a {m.kind} marker; expected {kinds}")]
         return []
 
-    def start(self, spec, ctx):
+    def start(self, spec: ParamSpec, ctx: StartContext) -> tuple[Any, str | None]:
         fit = [
             m
             for m, mk in ctx.markers.items()
@@ -349,14 +375,16 @@ class MarkerRef(Kind):
 class RobotRef(Kind):
     name = "robot"
 
-    def check(self, spec, v, markers, robots):
+    def check(
+        self, spec: ParamSpec, v: Any, markers: Markers | None, robots: Collection[str] | None
+    ) -> list[Problem]:
         if not isinstance(v, str):
             return [((), f"expected a robot name, got {describe(v)}")]
         if robots is not None and v not in robots:
             return [((), f"unknown robot '{v}' (robots: {', '.join(sorted(robots))})")]
         return []
 
-    def start(self, spec, ctx):
+    def start(self, spec: ParamSpec, ctx: StartContext) -> tuple[Any, str | None]:
         others = [r for r in ctx.robots if r != ctx.robot] or list(ctx.robots)
         return (others[0] if others else None), None
 

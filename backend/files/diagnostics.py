@@ -101,7 +101,8 @@ def _sentence(err: dict) -> str:
     if t == "literal_error" and last == "format":
         return f"unsupported format {err.get('input')!r}; expected {err['ctx']['expected']}"
     if t == "union_tag_invalid":
-        return f"unknown kind {err['ctx'].get('tag')!r}; expected one of {err['ctx'].get('expected_tags')}"
+        tag, expected = err["ctx"].get("tag"), err["ctx"].get("expected_tags")
+        return f"unknown kind {tag!r}; expected one of {expected}"
     if t == "union_tag_not_found":
         return "missing field 'kind' (pose, position or area)"
     value = err.get("input")

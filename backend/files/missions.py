@@ -255,7 +255,8 @@ def validate_file(path: str | FsPath) -> list[Issue]:
                     Issue(
                         file,
                         ("format",),
-                        f"not a missionctl file: set 'format: {MISSION_FORMAT}' or 'format: {LIBRARY_FORMAT}'",
+                        f"not a missionctl file: set 'format: {MISSION_FORMAT}' "
+                        f"or 'format: {LIBRARY_FORMAT}'",
                         *doc.mark(("format",)),
                     )
                 ]

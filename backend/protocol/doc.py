@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import json
 import sys
+from collections.abc import Sequence
+from typing import Any
 
 from pydantic import TypeAdapter
 
@@ -18,7 +20,94 @@ from backend.protocol import mapfeed as mf
 from backend.protocol import messages as p
 from backend.protocol.keys import PROTOCOL_VERSION, Keys
 
-PROSE = f"""# missionctl protocol, version {PROTOCOL_VERSION}
+# the key space: (key, kind, who declares, payload)
+KEY_SPACE: list[tuple[str, str, str, str]] = [
+    (f"`{Keys.SERVER_ALIVE}`", "liveliness token", "server", "—"),
+    (f"`{Keys.OP}`", "queryable", "server", "`Request` → `OpReply` / `ErrorReply`"),
+    (
+        f"`{Keys.op_as('USER')}`",
+        "queryable",
+        "server",
+        "the same, from a logged-in user (`Request.user` is replaced by `USER`)",
+    ),
+    (
+        f"`{Keys.account('USER')}`",
+        "queryable",
+        "server",
+        "anything → `AccountInfo` (role of a logged-in user)",
+    ),
+    (f"`{Keys.STATE}`", "queryable", "server", "`StateRequest` → `StateSnapshot`"),
+    (
+        f"`{Keys.EVENTS}`",
+        "publication",
+        "server",
+        "`EventBatch`, or a JSON array of them (revisions consecutive)",
+    ),
+    (f"`{Keys.FLEET}`", "publication", "server", "`FleetEvent` (presence, manifest)"),
+    (f"`{Keys.ALERTS}`", "publication", "server", "`Alert`"),
+    (
+        f"`{Keys.PING}`",
+        "queryable",
+        "server",
+        "anything → `pong` (raw-transport baseline of the benchmarks)",
+    ),
+    (f"`{Keys.register('ROBOT')}`", "queryable", "server", "`Register` → `RegisterReply`"),
+    (f"`{Keys.reports('ROBOT')}`", "queryable", "server", "`ReportBatch` → `ReportAck`"),
+    (f"`{Keys.alive('ROBOT')}`", "liveliness token", "robot", "—"),
+    (
+        f"`{Keys.command('ROBOT')}`",
+        "queryable",
+        "robot",
+        "`Command` → `CommandReply` / `ErrorReply`",
+    ),
+    (f"`{Keys.telemetry('ROBOT')}`", "publication", "robot", "`Telemetry`"),
+    (f"`{Keys.world('ROBOT')}`", "queryable", "robot", "`WorldMessage` → `WorldReply`"),
+    (
+        f"`{Keys.barrier_ready('BARRIER', 'ROBOT')}`",
+        "liveliness token",
+        "robot",
+        "— (present while waiting at a barrier)",
+    ),
+    (f"`{mf.KEY_MAP_SNAPSHOT}`", "queryable", "simulator", "anything → `MapSnapshot`"),
+    (
+        f"`{mf.KEY_MAP_DELTA}`",
+        "publication",
+        "simulator",
+        "`MapDelta` (`seq` consecutive, at most ~2 Hz)",
+    ),
+    (f"`{mf.KEY_STATUS}`", "queryable", "simulator", "anything → `SimStatus`"),
+    (
+        f"`{mf.KEY_STATUS_LIVE}`",
+        "publication",
+        "simulator",
+        "`SimStatus` (on change, at least every 2 s)",
+    ),
+]
+
+# the status changes robots may report: (from, to)
+REPORTED_TRANSITIONS: list[tuple[str, str]] = [
+    ("`idle_synchronized`", "`synchwaiting`, `running`, `failure`"),
+    ("`synchwaiting`", "`running`, `idle_synchronized` (stopped), `failure`, itself with new info"),
+    (
+        "`running`",
+        (
+            "`paused`, `success`, `failure`, `idle_synchronized` (stopped), "
+            "itself with a higher `attempt` (autonomous retry)"
+        ),
+    ),
+    ("`paused`", "`running`, `idle_synchronized` (stopped), `failure`"),
+    ("`success`, `failure`", "nothing: they are the execution log"),
+]
+
+
+def _table(head: tuple[str, ...], rows: Sequence[tuple[str, ...]]) -> str:
+    """A markdown table."""
+    lines: list[tuple[str, ...]] = [head, tuple("---" for _ in head), *rows]
+    return "".join("| " + " | ".join(cells) + " |\n" for cells in lines)
+
+
+PROSE = (
+    f"""# missionctl protocol, version {PROTOCOL_VERSION}
 
 This is what a third party needs to connect a robot, a console or a script
 to a missionctl mission server without reading our code. Transport is
@@ -44,29 +133,9 @@ robot's telemetry never shows.
 
 ## Key space
 
-| key | kind | who declares | payload |
-| --- | --- | --- | --- |
-| `{Keys.SERVER_ALIVE}` | liveliness token | server | — |
-| `{Keys.OP}` | queryable | server | `Request` → `OpReply` / `ErrorReply` |
-| `{Keys.op_as("USER")}` | queryable | server | the same, from a logged-in user (`Request.user` is replaced by `USER`) |
-| `{Keys.account("USER")}` | queryable | server | anything → `AccountInfo` (role of a logged-in user) |
-| `{Keys.STATE}` | queryable | server | `StateRequest` → `StateSnapshot` |
-| `{Keys.EVENTS}` | publication | server | `EventBatch`, or a JSON array of them (revisions consecutive) |
-| `{Keys.FLEET}` | publication | server | `FleetEvent` (presence, manifest) |
-| `{Keys.ALERTS}` | publication | server | `Alert` |
-| `{Keys.PING}` | queryable | server | anything → `pong` (raw-transport baseline of the benchmarks) |
-| `{Keys.register("ROBOT")}` | queryable | server | `Register` → `RegisterReply` |
-| `{Keys.reports("ROBOT")}` | queryable | server | `ReportBatch` → `ReportAck` |
-| `{Keys.alive("ROBOT")}` | liveliness token | robot | — |
-| `{Keys.command("ROBOT")}` | queryable | robot | `Command` → `CommandReply` / `ErrorReply` |
-| `{Keys.telemetry("ROBOT")}` | publication | robot | `Telemetry` |
-| `{Keys.world("ROBOT")}` | queryable | robot | `WorldMessage` → `WorldReply` |
-| `{Keys.barrier_ready("BARRIER", "ROBOT")}` | liveliness token | robot | — (present while waiting at a barrier) |
-| `{mf.KEY_MAP_SNAPSHOT}` | queryable | simulator | anything → `MapSnapshot` |
-| `{mf.KEY_MAP_DELTA}` | publication | simulator | `MapDelta` (`seq` consecutive, at most ~2 Hz) |
-| `{mf.KEY_STATUS}` | queryable | simulator | anything → `SimStatus` |
-| `{mf.KEY_STATUS_LIVE}` | publication | simulator | `SimStatus` (on change, at least every 2 s) |
-
+"""
+    + _table(("key", "kind", "who declares", "payload"), KEY_SPACE)
+    + """
 Publications are declared with congestion control `BLOCK` (state must not be
 dropped). Events are small: one `EventBatch` per applied operation, never a
 full-state dump (except `mission_replaced` when a whole mission is loaded).
@@ -82,14 +151,9 @@ batch is a plain `EventBatch` object.
 skill, queued skills, unsynchronized skills. Robots may report these
 transitions (anything else is refused with `bad_report`):
 
-| from | to |
-| --- | --- |
-| `idle_synchronized` | `synchwaiting`, `running`, `failure` |
-| `synchwaiting` | `running`, `idle_synchronized` (stopped), `failure`, itself with new info |
-| `running` | `paused`, `success`, `failure`, `idle_synchronized` (stopped), itself with a higher `attempt` (autonomous retry) |
-| `paused` | `running`, `idle_synchronized` (stopped), `failure` |
-| `success`, `failure` | nothing: they are the execution log |
-
+"""
+    + _table(("from", "to"), REPORTED_TRANSITIONS)
+    + f"""
 ## Sequences
 
 ### Late join and event stream (consoles, scripts)
@@ -243,8 +307,9 @@ robot that shares no knowledge may answer every ask with `known: false`.
 
 ## Messages (JSON Schema, generated)
 """
+)
 
-MODELS = [
+MODELS: list[tuple[str, Any]] = [  # (title, model or union of models)
     ("Request", p.Request),
     ("OpReply", p.OpReply),
     ("ErrorReply", p.ErrorReply),

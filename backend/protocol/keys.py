@@ -20,7 +20,8 @@ class Keys:
     EVENTS = f"{PREFIX}/server/events"  # publication: EventBatch, revisions consecutive
     FLEET = f"{PREFIX}/server/fleet"  # publication: FleetEvent
     ALERTS = f"{PREFIX}/server/alerts"  # publication: Alert
-    PING = f"{PREFIX}/server/ping"  # queryable: anything -> b"pong" (raw-transport baseline for benchmarks)
+    # queryable: anything -> b"pong" (raw-transport baseline for benchmarks)
+    PING = f"{PREFIX}/server/ping"
 
     @staticmethod
     def op_as(

@@ -138,7 +138,8 @@ class MapObjects(_Wire):
 class MapDelta(_Wire):
     feed: str = Field(
         "",
-        description="id of this run of the feed; another id means the publisher restarted: fetch the snapshot",
+        description="id of this run of the feed; another id means the publisher restarted: "
+        "fetch the snapshot",
     )
     seq: int = Field(ge=1, description="consecutive; a gap means: fetch the snapshot")
     sim_time: float = Field(description="sim seconds since the simulator started")
@@ -295,6 +296,11 @@ def changed_tiles(old: np.ndarray | None, new: np.ndarray, tile: int) -> list[tu
     return [(int(a), int(b)) for a, b in zip(tx, ty, strict=True)]
 
 
+def _tile(layer: str, tx: int, ty: int, cells: np.ndarray) -> Tile:
+    # the meta's layer names are plain strings on the wire: checked here, at run time
+    return Tile.model_validate({"layer": layer, "tx": tx, "ty": ty, "data": encode_tile(cells)})
+
+
 class TileEncoder:
     """Sender side: remembers what was sent, encodes only the changed tiles."""
 
@@ -309,7 +315,7 @@ class TileEncoder:
             grid = layers[name]
             for tx, ty in changed_tiles(self.sent.get(name), grid, t):
                 cells = grid[ty * t : (ty + 1) * t, tx * t : (tx + 1) * t]
-                out.append(Tile(layer=name, tx=tx, ty=ty, data=encode_tile(cells)))  # type: ignore[arg-type]
+                out.append(_tile(name, tx, ty, cells))
             self.sent[name] = grid.copy()
         return out
 
@@ -323,7 +329,7 @@ class TileEncoder:
                 grid = np.zeros((self.meta.height, self.meta.width), dtype=np.uint8)
             for tx, ty in changed_tiles(None, grid, t):
                 cells = grid[ty * t : (ty + 1) * t, tx * t : (tx + 1) * t]
-                out.append(Tile(layer=name, tx=tx, ty=ty, data=encode_tile(cells)))  # type: ignore[arg-type]
+                out.append(_tile(name, tx, ty, cells))
         return out
 
 
@@ -359,7 +365,8 @@ class MapMirror:
             shape = tile_shape(self.meta, tile.tx, tile.ty)
             if shape[0] <= 0 or shape[1] <= 0:
                 raise ValueError(
-                    f"tile ({tile.tx}, {tile.ty}) lies outside the {self.meta.width}x{self.meta.height} grid"
+                    f"tile ({tile.tx}, {tile.ty}) lies outside the "
+                    f"{self.meta.width}x{self.meta.height} grid"
                 )
             grid[tile.ty * t : tile.ty * t + shape[0], tile.tx * t : tile.tx * t + shape[1]] = (
                 decode_tile(tile.data, shape)

@@ -60,7 +60,8 @@ class AccountInfo(Strict):
     )
     enforced: bool = Field(
         True,
-        description="false: the server runs without accounts (anyone may do anything; role is nominal)",
+        description="false: the server runs without accounts "
+        "(anyone may do anything; role is nominal)",
     )
 
 
@@ -113,7 +114,9 @@ class Alert(Strict):
     level: Literal["info", "warning", "error"] = "warning"
     kind: str = Field(
         "",
-        description="what happened: failure | offline | reconcile | report_refused | journal (the server cannot write its journal) ('' from older servers); consoles merge their own alerts of the same kind",
+        description="what happened: failure | offline | reconcile | report_refused | journal "
+        "(the server cannot write its journal) ('' from older servers); "
+        "consoles merge their own alerts of the same kind",
     )
     robot: str | None = None
     skill: str | None = None
@@ -145,7 +148,8 @@ class RegisterReply(Strict):
     # does not know (it restarted): the robot may ask to have them again
     missing: list[SkillId] = Field(
         default_factory=list,
-        description="skills the server held as synchronized to this robot that its queue lacks: returned to the plan",
+        description="skills the server held as synchronized to this robot that its queue lacks: "
+        "returned to the plan",
     )
 
 

@@ -1,4 +1,4 @@
-"""`missionctl certs`: a private CA, a server certificate and client certificates.
+"""The PKI of `missionctl certs`: a private CA, a server certificate and client certificates.
 
 Enough PKI for a test or a small field deployment: one CA signs the router's
 certificate (names and IP addresses it is reached by) and one certificate per
@@ -6,83 +6,17 @@ client (its common name is what Zenoh's access control sees as
 `cert_common_names` under mutual TLS). Keys are ECDSA P-256 in PKCS#8 PEM,
 written with mode 0600; certificates are PEM.
 
-Uses the `cryptography` package, imported only when the command runs.
+Uses the `cryptography` package, imported only when the command runs. The
+command line is backend/cli/certs.py.
 """
 
 from __future__ import annotations
 
-import argparse
 import datetime as dt
 import ipaddress
 import os
 import re
-import sys
 from pathlib import Path
-
-from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK
-
-_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "certs",
-        help="make a CA, a server certificate and client certificates for TLS endpoints",
-        description="Writes DIR/ca.pem (+ ca.key), DIR/server.pem (+ server.key) and DIR/client-NAME.pem "
-        "(+ .key) per --client. An existing DIR/ca.pem is reused, so clients can be added later.",
-    )
-    p.add_argument("dir", metavar="DIR", help="directory to write into (created)")
-    p.add_argument(
-        "--server-name",
-        metavar="NAME",
-        action="append",
-        help="DNS name or IP address clients use to reach the server; repeatable "
-        "(default: localhost and 127.0.0.1). Given, the server certificate is (re)made.",
-    )
-    p.add_argument(
-        "--client",
-        metavar="NAME",
-        action="append",
-        default=[],
-        help="make a client certificate with this common name; repeatable",
-    )
-    p.add_argument(
-        "--days",
-        type=int,
-        default=365,
-        metavar="N",
-        help="validity of new certificates (default 365)",
-    )
-    p.set_defaults(func=run)
-
-
-def run(args: argparse.Namespace) -> int:
-    bad = [n for n in args.client if not _NAME.match(n)]
-    if bad:
-        print(
-            f"missionctl certs: invalid client name(s) {', '.join(map(repr, bad))}: use letters, digits, '.', '_', '-'",
-            file=sys.stderr,
-        )
-        return EXIT_BAD_INPUT
-    if args.days < 1:
-        print("missionctl certs: --days must be at least 1", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    try:
-        written = make_certs(
-            Path(args.dir), server_names=args.server_name, clients=args.client, days=args.days
-        )
-    except ImportError:
-        print(
-            "missionctl certs: needs the 'cryptography' package (pip install cryptography)",
-            file=sys.stderr,
-        )
-        return EXIT_BAD_INPUT
-    except (OSError, ValueError) as e:
-        print(f"missionctl certs: {e}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    for path in written:
-        print(path)
-    return EXIT_OK
 
 
 def make_certs(

@@ -18,7 +18,7 @@ Invariants:
 - one transaction per `append` (or per `append_many`): after a crash the
   journal holds a prefix of what was appended, at batch boundaries.
 
-Tables:
+Tables (created by `journal_file`, which opens the file for its one writer):
   meta(key, value)                      format, library, created
   batches(revision PK, ts, actor, client, request_id, op, events)
   snapshots(revision PK, mission)       the last `keep_snapshots` only
@@ -48,7 +48,6 @@ import threading
 import time
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, NamedTuple
 from urllib.parse import quote
@@ -59,8 +58,27 @@ from pydantic import BaseModel, ValidationError
 from backend.core.bulk import gc_paused
 from backend.core.events import EventBatch, apply_events
 from backend.core.model import Mission
+from backend.server.journal_file import (
+    JOURNAL_FORMAT,
+    JournalCorrupt,
+    JournalError,
+    damaged,
+    identity,
+    open_database,
+    rollback,
+)
 
-JOURNAL_FORMAT = "missionctl/journal@1"
+__all__ = [
+    "JOURNAL_FORMAT",  # the file's, from journal_file
+    "Entry",
+    "Journal",
+    "JournalCorrupt",
+    "JournalError",
+    "LoadInfo",
+    "Record",
+    "remember_requests",
+]
+
 SNAPSHOT_EVERY = 500
 # ...and not before the batches since the newest snapshot add up to this
 # share of its size: a 10,000-skill mission's 4 MB snapshot (57-84 ms) every
@@ -76,36 +94,6 @@ REMEMBERED_REQUESTS = 10_000  # as many as the engine remembers
 # server's event loop waits with it: short, so the refusal reaches the client
 # well within its 10 s operation timeout.
 BUSY_TIMEOUT_S = 2.0
-
-_SCHEMA = """
-CREATE TABLE IF NOT EXISTS meta (
-    key   TEXT PRIMARY KEY,
-    value TEXT NOT NULL
-);
-CREATE TABLE IF NOT EXISTS batches (
-    revision   INTEGER PRIMARY KEY,
-    ts         REAL NOT NULL,
-    actor      TEXT NOT NULL DEFAULT '',
-    client     TEXT NOT NULL DEFAULT '',
-    request_id TEXT,
-    op         TEXT NOT NULL DEFAULT '',
-    events     TEXT NOT NULL
-);
-CREATE INDEX IF NOT EXISTS batches_request ON batches (client, request_id);
-CREATE TABLE IF NOT EXISTS snapshots (
-    revision INTEGER PRIMARY KEY,
-    mission  TEXT NOT NULL
-);
-"""
-
-
-class JournalError(Exception):
-    """The journal file cannot be used (not a journal, another format version)."""
-
-
-class JournalCorrupt(JournalError):
-    """The journal cannot give back a whole mission (no readable snapshot, a
-    damaged or missing batch). Nothing partial is ever returned."""
 
 
 class Entry(NamedTuple):
@@ -166,7 +154,10 @@ def _faithful_serializer(model_cls: type[BaseModel]) -> pydantic_core.SchemaSeri
         return None
 
 
-_INSERT_BATCH = "INSERT INTO batches (revision, ts, actor, client, request_id, op, events) VALUES (?, ?, ?, ?, ?, ?, ?)"
+_INSERT_BATCH = (
+    "INSERT INTO batches (revision, ts, actor, client, request_id, op, events) "
+    "VALUES (?, ?, ?, ?, ?, ?, ?)"
+)
 
 _MISSION_JSON = _faithful_serializer(Mission)
 _BATCH_JSON = _faithful_serializer(EventBatch)
@@ -211,7 +202,7 @@ class Journal:
         self._conn: sqlite3.Connection | None = conn
         self.path = path
         self._lock_fd = lock_fd
-        self._identity = _identity(path)
+        self._identity = identity(path)
         self.snapshot_every = snapshot_every
         self.snapshot_bytes = snapshot_bytes
         self.keep_snapshots = max(1, keep_snapshots)
@@ -263,67 +254,7 @@ class Journal:
         new journal (the skill library file the mission refers to); an
         existing journal keeps the one it has."""
         p = Path(path)
-        if not p.parent.is_dir():
-            raise JournalError(f"{p}: cannot open the journal: no such folder {p.parent}")
-        lock_fd = _lock_writer(p)
-        try:
-            conn = sqlite3.connect(
-                p, isolation_level=None, check_same_thread=False, timeout=BUSY_TIMEOUT_S
-            )
-        except sqlite3.Error as e:
-            os.close(lock_fd)
-            raise JournalError(f"{p}: cannot open the journal: {e}") from None
-        try:
-            mode = conn.execute("PRAGMA journal_mode=WAL").fetchone()[0]
-            if str(mode).lower() != "wal":
-                raise JournalError(f"{p}: SQLite refused write-ahead logging (journal_mode={mode})")
-            # WAL + synchronous=NORMAL: a commit is in the WAL file (the OS
-            # page cache) when COMMIT returns, so a killed process (SIGKILL,
-            # OOM, a crash) loses nothing it committed and never leaves half a
-            # transaction. Only a power loss or kernel crash may drop the last
-            # commits (never corrupt the file); synchronous=FULL would cover
-            # that too at the price of an fsync per operation.
-            conn.execute("PRAGMA synchronous=NORMAL")
-            conn.execute("BEGIN IMMEDIATE")
-            tables = {
-                r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")
-            }
-            if tables and "meta" not in tables:
-                raise JournalError(
-                    f"{p}: an SQLite database, but not a missionctl journal (tables: {', '.join(sorted(tables))})"
-                )
-            for stmt in _SCHEMA.split(";"):
-                if stmt.strip():
-                    conn.execute(stmt)
-            meta = dict(conn.execute("SELECT key, value FROM meta").fetchall())
-            if not meta:
-                now = datetime.now(UTC).isoformat(timespec="seconds")
-                conn.executemany(
-                    "INSERT INTO meta (key, value) VALUES (?, ?)",
-                    [("format", JOURNAL_FORMAT), ("library", library or ""), ("created", now)],
-                )
-            elif meta.get("format") != JOURNAL_FORMAT:
-                raise JournalError(
-                    f"{p}: journal format {meta.get('format')!r} is not supported "
-                    f"(this version reads {JOURNAL_FORMAT!r})"
-                )
-            elif library and not meta.get("library"):
-                conn.execute("UPDATE meta SET value = ? WHERE key = 'library'", (library,))
-            conn.execute("COMMIT")
-        except JournalError:
-            _rollback(conn)
-            conn.close()
-            os.close(lock_fd)
-            raise
-        except sqlite3.Error as e:
-            _rollback(conn)
-            conn.close()
-            os.close(lock_fd)
-            if "locked" in str(e) or "busy" in str(e):
-                raise JournalError(
-                    f"{p}: the journal is locked by another program (an sqlite3 shell, a backup?): close it, then start again"
-                ) from None
-            raise JournalError(f"{p}: not a usable journal: {e}") from None
+        conn, lock_fd = open_database(p, library=library, timeout=BUSY_TIMEOUT_S)
         try:
             return cls(
                 conn,
@@ -336,7 +267,7 @@ class Journal:
         except sqlite3.Error as e:  # its first reads
             conn.close()
             os.close(lock_fd)
-            raise _damaged(p, e) from None
+            raise damaged(p, e) from None
 
     def close(self) -> None:
         # after a checkpoint running on another thread; none starts after it
@@ -347,7 +278,8 @@ class Journal:
             if self._conn is not None:
                 self._conn.close()
                 self._conn = None
-            if self._lock_fd is not None:  # after SQLite's own descriptors: see _lock_writer
+            # after SQLite's own descriptors: see journal_file._lock_writer
+            if self._lock_fd is not None:
                 os.close(self._lock_fd)
                 self._lock_fd = None
 
@@ -366,9 +298,10 @@ class Journal:
     def _writable(self) -> sqlite3.Connection:
         """The connection, once sure the file is still the one opened: SQLite
         goes on writing into a deleted file, which a restart would not find."""
-        if _identity(self.path) != self._identity:
+        if identity(self.path) != self._identity:
             raise JournalError(
-                f"{self.path} was deleted or replaced while open; what is written now would be lost at a restart"
+                f"{self.path} was deleted or replaced while open; "
+                "what is written now would be lost at a restart"
             )
         return self.conn
 
@@ -434,13 +367,14 @@ class Journal:
             last = self._last_rev
             if last is None:
                 raise ValueError(
-                    "the journal has no base mission: store a snapshot(mission) before appending batches"
+                    "the journal has no base mission: "
+                    "store a snapshot(mission) before appending batches"
                 )
             for row in rows:
                 if row[0] != last + 1:
                     raise ValueError(
-                        f"batch revision {row[0]} does not follow the journal's last revision {last} "
-                        f"(expected {last + 1}): revisions are consecutive"
+                        f"batch revision {row[0]} does not follow the journal's last revision "
+                        f"{last} (expected {last + 1}): revisions are consecutive"
                     )
                 last = row[0]
             conn = self._writable()
@@ -452,7 +386,7 @@ class Journal:
                     conn.executemany(_INSERT_BATCH, rows)
                     conn.execute("COMMIT")
                 except BaseException:
-                    _rollback(conn)
+                    rollback(conn)
                     raise
             self._last_rev = last
             self._appended += len(rows)
@@ -483,7 +417,7 @@ class Journal:
         with self._ckpt_lock:
             if self._conn is None:
                 raise JournalError(f"{self.path}: the journal is closed")
-            if _identity(self.path) != self._identity:
+            if identity(self.path) != self._identity:
                 raise JournalError(
                     f"{self.path} was deleted or replaced while open; nothing to checkpoint"
                 )
@@ -555,7 +489,7 @@ class Journal:
                 )
                 conn.execute("COMMIT")
             except BaseException:
-                _rollback(conn)
+                rollback(conn)
                 raise
             if self._snapshot_rev is None or rev >= self._snapshot_rev:
                 self._snapshot_rev = rev
@@ -591,8 +525,8 @@ class Journal:
                 return self._load()
         except sqlite3.Error as e:  # a damaged file (or pages of it)
             with self._lock:
-                _rollback(self.conn)
-            raise _damaged(self.path, e) from None
+                rollback(self.conn)
+            raise damaged(self.path, e) from None
 
     def _load(self) -> tuple[Mission | None, list[tuple[str, str, int]]]:
         t0 = time.perf_counter()
@@ -672,7 +606,8 @@ class Journal:
         """Revision at which a request was applied, if it is journaled."""
         with self._lock:
             row = self.conn.execute(
-                "SELECT revision FROM batches WHERE client = ? AND request_id = ? ORDER BY revision DESC LIMIT 1",
+                "SELECT revision FROM batches WHERE client = ? AND request_id = ? "
+                "ORDER BY revision DESC LIMIT 1",
                 (client, request_id),
             ).fetchone()
         return None if row is None else row[0]
@@ -700,46 +635,6 @@ class Journal:
         return total
 
 
-def _damaged(path: Path, e: sqlite3.Error) -> JournalCorrupt:
-    return JournalCorrupt(
-        f"{path}: the journal cannot be read ({e}); restore a copy of the file, "
-        "or start from the mission file with a new journal"
-    )
-
-
-def _identity(path: Path) -> tuple[int, int] | None:
-    try:
-        st = os.stat(path)
-    except OSError:
-        return None
-    return st.st_dev, st.st_ino
-
-
-def _lock_writer(p: Path) -> int:
-    """Take the file's one-writer lock (a second server on the same journal
-    would write the same revisions), or raise JournalError. A BSD lock
-    (flock): independent of SQLite's POSIX locks on the same file. The
-    descriptor must stay open while SQLite has the file: closing any
-    descriptor of a file drops the process's POSIX locks on it."""
-    try:
-        fd = os.open(p, os.O_RDWR | os.O_CREAT, 0o644)
-    except OSError as e:
-        raise JournalError(f"{p}: cannot open the journal for writing: {e.strerror}") from None
-    try:
-        import fcntl
-    except ImportError:  # not a POSIX system: no guard
-        return fd
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
-        os.close(fd)
-        raise JournalError(
-            f"{p} is in use by another process (another missionctl server on this journal?): "
-            "stop it first, or give this one another --db"
-        ) from None
-    return fd
-
-
 def remember_requests(engine: Any, requests: Iterable[tuple[str, str, int]]) -> None:
     """Teach a fresh engine the requests `load()` returned, so a client that
     retries a request applied before the restart gets the duplicate answer."""
@@ -747,14 +642,6 @@ def remember_requests(engine: Any, requests: Iterable[tuple[str, str, int]]) -> 
 
     for client, request_id, revision in requests:
         engine.remember(client, request_id, Applied(revision, duplicate=False))
-
-
-def _rollback(conn: sqlite3.Connection) -> None:
-    if conn.in_transaction:
-        try:
-            conn.execute("ROLLBACK")
-        except sqlite3.Error:
-            pass
 
 
 def _why(e: BaseException) -> str:

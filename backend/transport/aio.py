@@ -289,9 +289,8 @@ def _respond(query: zenoh.Query, reply_key: str, outcome: bytes | BaseException)
             if isinstance(outcome, Refusal):
                 query.reply_err(outcome.payload)
             elif isinstance(outcome, BaseException):
-                query.reply_err(
-                    f"internal error while handling {reply_key}: {type(outcome).__name__}: {outcome}".encode()
-                )
+                why = f"{type(outcome).__name__}: {outcome}"
+                query.reply_err(f"internal error while handling {reply_key}: {why}".encode())
             else:
                 query.reply(reply_key, outcome)
         except Exception:

@@ -62,7 +62,8 @@ def add_login_arguments(
         "--password-file",
         metavar="FILE",
         default=d(None),
-        help="file holding the account's password (mode 0600); never give a password on the command line",
+        help="file holding the account's password (mode 0600); "
+        "never give a password on the command line",
     )
     p.add_argument(
         "--ca",

@@ -47,7 +47,10 @@ def diagnose(config: zenoh.Config, endpoints: list[str]) -> str | None:
             return (
                 f"login refused for user {user} at {endpoint} (wrong password or no such account)"
             )
-        return f"login refused at {endpoint}: the server requires an account (give --user and --password-file)"
+        return (
+            f"login refused at {endpoint}: the server requires an account "
+            "(give --user and --password-file)"
+        )
     return None
 
 
@@ -81,7 +84,10 @@ def _tls_problem(config: zenoh.Config, sock: socket.socket, host: str, endpoint:
     except ssl.SSLError as e:
         reason = (e.reason or str(e)).replace("_", " ").lower()
         if "certificate required" in reason:
-            return f"TLS: the server at {endpoint} requires a client certificate (mutual TLS): give --cert FILE --key FILE"
+            return (
+                f"TLS: the server at {endpoint} requires a client certificate (mutual TLS): "
+                "give --cert FILE --key FILE"
+            )
         return f"TLS handshake with {endpoint} failed: {reason}"
     except OSError:
         return None

@@ -201,12 +201,12 @@ async def test_a_world_handler_that_fails_is_named_on_both_sides(
         assert answers == {"stone": None, "rss": None}
         text = "\n".join(r.getMessage() for r in caplog.records)
         assert (
-            f"{lru1} cannot answer ask 'stone' from {lru2}: its on_ask handler raised KeyError: 'id'"
-            in text
+            f"{lru1} cannot answer ask 'stone' from {lru2}: its on_ask handler raised "
+            "KeyError: 'id'" in text
         )
         assert (
-            f"{lru1} cannot answer ask 'rss' from {lru2}: its on_ask handler returned a list; it must return a dict or None"
-            in text
+            f"{lru1} cannot answer ask 'rss' from {lru2}: its on_ask handler returned a list; "
+            "it must return a dict or None" in text
         )
         # the asker's log carries the same sentence, not a JSON blob
         assert f"{lru2}: ask {lru1}/rss failed: {lru1} cannot answer ask 'rss'" in text
@@ -229,7 +229,8 @@ def test_a_manifest_that_cannot_be_sent_is_refused_at_construction() -> None:
         agent(modules={"nav": "2.1"})
     with pytest.raises(
         ValueError,
-        match=r"robot lru1: the manifest cannot be written as JSON \(properties must be JSON values\)",
+        match=r"robot lru1: the manifest cannot be written as JSON "
+        r"\(properties must be JSON values\)",
     ):
         agent(properties={"arm": object()})
     with pytest.raises(
@@ -391,8 +392,9 @@ async def test_the_context_coroutines_refuse_a_plain_function_handler(harness: H
         await h.run(lru1, skill("d1", "drill"))
         await h.until(lambda: h.server.has(lru1, "d1", S.FAILURE), what="d1 failure")
         assert h.server.applied[lru1][-1].info == (
-            "RuntimeError: ctx.sleep() is for coroutine handlers (async def); the handler of drill is a "
-            "plain function running in a thread: use ctx.check() between blocking steps, or make it a coroutine"
+            "RuntimeError: ctx.sleep() is for coroutine handlers (async def); the handler of "
+            "drill is a plain function running in a thread: use ctx.check() between blocking "
+            "steps, or make it a coroutine"
         )
 
 

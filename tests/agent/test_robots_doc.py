@@ -21,6 +21,7 @@ from typing import Any
 import pytest
 
 from backend.client.client import MissionClient
+from backend.client.events import ClientEvent, TelemetryReceived
 from backend.core.model import Policies, Pose
 from backend.core.ops import AddBarrier, AddSkill, Control, DeleteSkills, Retry, Sync
 
@@ -130,8 +131,8 @@ class Telemetry:
         self.count = 0
         client.add_listener(self._on)
 
-    def _on(self, kind: str, _payload: Any) -> None:
-        if kind == "telemetry":
+    def _on(self, event: ClientEvent) -> None:
+        if isinstance(event, TelemetryReceived):
             self.count += 1
             self.tick.set()
 

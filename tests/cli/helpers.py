@@ -4,7 +4,6 @@ for through `state --json` with a deadline)."""
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import subprocess
@@ -22,21 +21,7 @@ ROBOTS_SCRIPT = ROOT / "docs" / "examples" / "trivial_robots.py"
 CTL_TIMEOUT = 30.0  # per ctl process; they normally take well under a second
 
 
-def _cli_has_ctl() -> bool:
-    """`missionctl ctl` once backend/cli/main.py registers it; `python -m backend.cli.ctl.session` before."""
-    from backend.cli.main import build_parser
-
-    for action in build_parser()._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            return "ctl" in action.choices
-    return False
-
-
-CTL_CMD = (
-    [sys.executable, "-m", "backend.cli", "ctl"]
-    if _cli_has_ctl()
-    else [sys.executable, "-m", "backend.cli.ctl.session"]
-)
+CTL_CMD = [sys.executable, "-m", "backend.cli", "ctl"]
 
 
 def env() -> dict[str, str]:
@@ -93,7 +78,8 @@ def until(
             return last
         time.sleep(0.1)
     raise AssertionError(
-        f"{what} not reached within {timeout}s; last state tasks: {json.dumps(last.get('tasks'), indent=1)}"
+        f"{what} not reached within {timeout}s; "
+        f"last state tasks: {json.dumps(last.get('tasks'), indent=1)}"
     )
 
 

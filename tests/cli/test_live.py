@@ -282,8 +282,8 @@ def test_a_timed_out_operation_says_how_to_apply_it_once(endpoint):
         assert obj["ok"] is False and obj["code"] == "timeout"
         assert obj["request_id"] == "slow-1" and obj["maybe_applied"] is True
         assert (
-            "run the same command again with --request-id slow-1 --client-id ctl-test: it is applied once"
-            in r.stderr
+            "run the same command again with --request-id slow-1 --client-id ctl-test: "
+            "it is applied once" in r.stderr
         ), r.stderr
         assert "ctl state" in r.stderr and "Traceback" not in r.stderr
         again = ok(
@@ -535,7 +535,8 @@ def test_load_invalid_file_exits_2(endpoint, tmp_path):
     before = state(endpoint)["revision"]
     bad = tmp_path / "bad.yaml"
     bad.write_text(
-        f"format: missionctl/mission@1\nlibrary: {LIBRARY}\nrobots:\n  lru1: {{type: lru_science}}\n"
+        f"format: missionctl/mission@1\nlibrary: {LIBRARY}\n"
+        "robots:\n  lru1: {type: lru_science}\n"
         "tasks:\n  lru1:\n    - {id: a-1, skill: drive_to, params: {goal: {x: 1, y: nope}}}\n"
     )
     r = ctl(endpoint, "load", str(bad))

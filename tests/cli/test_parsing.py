@@ -8,22 +8,18 @@ import subprocess
 
 import pytest
 
-from backend.cli.ctl.session import (
-    DEFAULT_CONNECT,
-    FileInvalid,
+from backend.cli.ctl.args import DEFAULT_CONNECT, parse_args
+from backend.cli.ctl.build import build_op
+from backend.cli.ctl.errors import FileInvalid, UsageError
+from backend.cli.ctl.render import short_value
+from backend.cli.ctl.session import default_client_id, default_endpoints, run
+from backend.cli.ctl.values import (
     MarkerRef,
-    UsageError,
-    build_op,
-    default_client_id,
-    default_endpoints,
     parse_area,
-    parse_args,
     parse_param,
     parse_params,
     parse_pose,
     parse_position,
-    run,
-    short_value,
 )
 from backend.core import ops
 from backend.core.model import Policies
@@ -438,7 +434,7 @@ def test_load(tmp_path):
         op_of(["load", str(tmp_path / "missing.yaml")])
 
 
-# ---------------------------------------------------------------- run(): exit codes without a server
+# ------------------------------------------------------- run(): exit codes without a server
 
 
 def _nobody() -> str:
@@ -557,7 +553,7 @@ def _fake_client(tutorial):
 
 
 def test_state_text_and_json_without_server(tutorial):
-    from backend.cli.ctl.session import state_json, state_text
+    from backend.cli.ctl.render import state_json, state_text
 
     client = _fake_client(tutorial)
     text = state_text(client, unicode=True)
@@ -578,7 +574,7 @@ def test_state_text_and_json_without_server(tutorial):
 
 
 def test_describe_lines():
-    from backend.cli.ctl.session import describe
+    from backend.cli.ctl.render import describe
     from backend.protocol.messages import OpReply
 
     add = ops.AddSkill(robot="lru1", skill="drive_to")
@@ -603,7 +599,7 @@ def test_describe_lines():
 
 
 def test_watch_lines_say_the_status_and_what_an_edit_changed():
-    from backend.cli.ctl.session import watch_line
+    from backend.cli.ctl.render import watch_line
     from backend.core import events as ev
 
     def line(*events):
@@ -626,7 +622,7 @@ def test_watch_lines_say_the_status_and_what_an_edit_changed():
 
 
 def test_watch_says_which_message_was_unreadable():
-    from backend.cli.ctl.session import watch_line
+    from backend.cli.ctl.render import watch_line
     from backend.client.client import Malformed
 
     m = Malformed(
@@ -635,7 +631,8 @@ def test_watch_says_which_message_was_unreadable():
         "battery: Input should be less than or equal to 1",
     )
     assert watch_line("malformed", m, False) == (
-        "unreadable telemetry on mc/v1/robot/lru1/telemetry (ignored): battery: Input should be less than or equal to 1"
+        "unreadable telemetry on mc/v1/robot/lru1/telemetry (ignored): "
+        "battery: Input should be less than or equal to 1"
     )
     assert json.loads(watch_line("malformed", m, True)) == {
         "kind": "malformed",

@@ -27,7 +27,7 @@ from typing import Any
 
 import pytest
 
-from backend.cli.ctl.session import DEFAULT_CONNECT
+from backend.cli.ctl.args import DEFAULT_CONNECT
 
 from .helpers import CTL_TIMEOUT, ROOT, Robots, Server, env, ok_json, until
 
@@ -379,7 +379,8 @@ def server_command(line: Line) -> Callable[[str, Path], list[str]]:
 def robots_command(line: Line) -> tuple[list[str], list[str]]:
     argv = line.commands[0]
     assert len(line.commands) == 1 and any(a.endswith("trivial_robots.py") for a in argv), (
-        f"{line.where()}: terminal 2 should be one `python docs/examples/trivial_robots.py …` command"
+        f"{line.where()}: terminal 2 should be one "
+        "`python docs/examples/trivial_robots.py …` command"
     )
     assert f"--connect {README_ENDPOINT}" in shlex.join(argv), (
         f"{line.where()}: the robots should connect to {README_ENDPOINT} (the test replaces it)"
@@ -450,7 +451,8 @@ class Run:
                 return view
             if time.monotonic() > deadline:
                 raise AssertionError(
-                    f"{line.where()}: the comment promises {line.comment!r}; not so within {WAIT:g} s: "
+                    f"{line.where()}: the comment promises {line.comment!r}; "
+                    f"not so within {WAIT:g} s: "
                     f"{'; '.join(unmet)}\nstatuses: {view.statuses()}{self.context()}"
                 )
             time.sleep(0.1)
@@ -525,7 +527,8 @@ def test_the_readme_walkthrough_works_as_written(tmp_path, processes):
                 else shown_statuses(out, line)
             )
             assert statuses == view.statuses(), (
-                f"{line.where()}: shows statuses {statuses}, the mission has {view.statuses()}\n{out}"
+                f"{line.where()}: shows statuses {statuses}, "
+                f"the mission has {view.statuses()}\n{out}"
             )
         if p and p.condition and not is_state:  # what the command leads to
             run.wait(line, p.condition)

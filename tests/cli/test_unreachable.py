@@ -130,7 +130,8 @@ def test_ctl_loads_only_what_a_client_needs():
         "import sys\n"
         "from backend.cli.main import main\n"
         f"rc = main(['ctl', '--connect', {loopback_endpoint(free_port())!r}, 'state'])\n"
-        "print(rc, *sorted(m for m in sys.modules if m.split('.')[0] in {'numpy', 'backend', 'sim', 'console', 'textual', 'yaml'}))\n"
+        "print(rc, *sorted(m for m in sys.modules if m.split('.')[0] in "
+        "{'numpy', 'backend', 'sim', 'console', 'textual', 'yaml'}))\n"
     )
     r = subprocess.run(
         [sys.executable, "-c", code],

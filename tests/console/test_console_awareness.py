@@ -506,7 +506,7 @@ async def test_an_unreadable_message_raises_one_alert_naming_its_key_and_field()
             "mc/v1/robot/lru1/telemetry",
             "battery: Input should be less than or equal to 1",
         )
-        bridge._on_client("malformed", m)
+        bridge._on_client(m)
         await wait_until(pilot, lambda: app.alerts.unacknowledged == 1, what="an alert")
         [a] = app.alerts.alerts
         assert (a.kind, a.robot, a.level) == ("malformed", "lru1", "warning")
@@ -515,6 +515,6 @@ async def test_an_unreadable_message_raises_one_alert_naming_its_key_and_field()
         await wait_until(pilot, lambda: isinstance(app.screen, AlertScreen), what="alert list")
         assert "unreadable message" in screen_text(app)
         # the same again (another client session, say): merged, not a second alert
-        bridge._on_client("malformed", m)
+        bridge._on_client(m)
         await pilot.pause()
         assert len(app.alerts.alerts) == 1

@@ -745,7 +745,8 @@ def test_only_the_last_requests_are_returned(tmp_path, monkeypatch):
     "payload",
     [
         '{"op": "marker_move", "name": "POI-A", "value": {"x": 1e309, "y": 0}}',
-        '{"op": "marker_add", "name": "BAD", "marker": {"kind": "position", "position": {"x": NaN}}}',
+        '{"op": "marker_add", "name": "BAD", '
+        '"marker": {"kind": "position", "position": {"x": NaN}}}',
     ],
 )
 def test_the_engine_refuses_non_finite_marker_coordinates(payload):

@@ -1,7 +1,7 @@
-"""Helpers of tests/security: a mission server with accounts (and optionally TLS) in a subprocess on a free
-loopback port, the accounts' password files, and raw Zenoh sessions logged in
-as an account. Readiness is polled with bounded retries; every process and
-session is stopped/closed in teardown."""
+"""Helpers of tests/security: a mission server with accounts (and optionally
+TLS) in a subprocess on a free loopback port, the accounts' password files,
+and raw Zenoh sessions logged in as an account. Readiness is polled with
+bounded retries; every process and session is stopped/closed in teardown."""
 
 from __future__ import annotations
 

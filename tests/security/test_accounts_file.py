@@ -26,7 +26,8 @@ def test_loads_roles_and_robots(tmp_path):
     acc = load_accounts(
         _write(
             tmp_path,
-            "  ops: {role: operator, password_file: a.pw}\n  r: {role: robot, robots: [lru1], password_file: a.pw}\n",
+            "  ops: {role: operator, password_file: a.pw}\n"
+            "  r: {role: robot, robots: [lru1], password_file: a.pw}\n",
         )
     )
     assert (

@@ -181,7 +181,8 @@ def test_robots_ask_each_other_but_cannot_pose_as_another(server, accounts):
         raw_session(ep, accounts.login("rover1")) as rover1,
         raw_session(ep, accounts.login("rover2")) as rover2,
     ):
-        # the fake first: once `own` is reachable, the router has handled the fake's declaration (same link)
+        # the fake first: once `own` is reachable, the router has handled the
+        # fake's declaration (same link)
         fake = rover1.declare_queryable(
             Keys.world("lru2"), lambda q: q.reply(Keys.world("lru2"), b"rover1 posing as lru2")
         )

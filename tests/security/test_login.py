@@ -39,7 +39,8 @@ def test_unknown_user_and_missing_credentials_are_refused(server, accounts):
     r = server.ctl(None, "state")
     assert r.returncode == EXIT_UNREACHABLE
     assert _one_line(r.stderr) == (
-        f"missionctl: login refused at {server.endpoint}: the server requires an account (give --user and --password-file)"
+        f"missionctl: login refused at {server.endpoint}: the server requires an account "
+        "(give --user and --password-file)"
     )
 
 

@@ -88,7 +88,8 @@ def test_mutual_tls_needs_a_client_certificate_named_after_the_account(tmp_path,
         )  # no client certificate
         assert r.returncode == EXIT_UNREACHABLE
         assert f"the server at {server.endpoint} requires a client certificate" in r.stderr
-        # ops's password with watch's certificate: no subject of the rules matches, nothing is allowed
+        # ops's password with watch's certificate: no subject of the rules
+        # matches, nothing is allowed
         r = ctl(
             server.endpoint,
             *accounts.login_args("ops"),

@@ -198,7 +198,8 @@ def shell_env(tmp: Path) -> dict[str, str]:
     bindir.mkdir()
     shim = bindir / "missionctl"
     shim.write_text(
-        f'#!/bin/sh\nPYTHONPATH={shlex.quote(str(ROOT))} exec {shlex.quote(sys.executable)} -m backend.cli "$@"\n'
+        f"#!/bin/sh\nPYTHONPATH={shlex.quote(str(ROOT))} "
+        f'exec {shlex.quote(sys.executable)} -m backend.cli "$@"\n'
     )
     shim.chmod(0o755)
     return {**env(), "HOME": str(home), "PATH": f"{bindir}{os.pathsep}{os.environ.get('PATH', '')}"}

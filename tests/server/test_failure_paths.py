@@ -21,6 +21,7 @@ import pytest
 
 from backend.agent import RobotAgent
 from backend.client.client import MissionClient, OperationRefused, ServerGone, ServerUnreachable
+from backend.client.events import AlertRaised
 from backend.core.ops import AddSkill, Control, Sync, Undo, Unsync
 from backend.server.journal import Journal, JournalError
 from backend.transport import free_port, loopback_endpoint
@@ -75,7 +76,7 @@ def test_an_operation_the_journal_cannot_take_is_refused_and_changes_nothing(tmp
         async with serving(db) as (server, client):
             alerts = []
             client.add_listener(
-                lambda kind, payload: alerts.append(payload) if kind == "alert" else None
+                lambda e: alerts.append(e.alert) if isinstance(e, AlertRaised) else None
             )
             before = server.mission.model_dump_json()
             real = server.journal._conn

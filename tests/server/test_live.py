@@ -8,6 +8,7 @@ import time
 import pytest
 
 from backend.client.client import OperationRefused
+from backend.client.events import ConnectionState, RobotChanged
 from backend.core.model import Pose
 from backend.core.ops import AddBarrier, AddSkill, Control, EditSkill, Retry, Sync, Unsync
 
@@ -166,8 +167,10 @@ def test_killed_robot_is_offline_and_its_partner_says_so(cluster):
         await until(c, lambda m: status(m, p) == "synchwaiting")
         went = asyncio.Event()
         c.add_listener(
-            lambda kind, info: (
-                went.set() if kind == "fleet" and info.name == "lru2" and not info.online else None
+            lambda e: (
+                went.set()
+                if isinstance(e, RobotChanged) and e.robot.name == "lru2" and not e.robot.online
+                else None
             )
         )
         lru2.kill()
@@ -191,7 +194,7 @@ def test_server_killed_and_restarted_loses_nothing(cluster):
         await until(c, lambda m: status(m, h) == "running")
         before = c.mission.model_copy(deep=True)
         states = []
-        c.add_listener(lambda kind, x: states.append(x) if kind == "connection" else None)
+        c.add_listener(lambda e: states.append(e.state) if isinstance(e, ConnectionState) else None)
         cluster.server.kill()  # SIGKILL mid-mission
         cluster.start_server()
         m = await until(

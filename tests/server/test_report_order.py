@@ -121,17 +121,17 @@ def test_a_batch_arriving_as_the_robots_turn_passes_on_waits_for_those_ahead(tmp
 
                 key = Keys.reports("lru1")
                 start = server.mission.revision
-                turn = server._turn("lru1")
+                turn = server.robot_link._turn("lru1")
                 async with turn:  # as a command to lru1 in flight
                     waiting = [
-                        server._handle_reports(batch(1, Status.RUNNING), key),
-                        server._handle_reports(batch(2, Status.PAUSED), key),
+                        server.robot_link._handle_reports(batch(1, Status.RUNNING), key),
+                        server.robot_link._handle_reports(batch(2, Status.PAUSED), key),
                     ]
                     assert all(inspect.isawaitable(w) for w in waiting)
                     tasks = [asyncio.ensure_future(w) for w in waiting]
                     await asyncio.sleep(0)  # both now wait for the turn
                 # the turn is released; its next waiter has not run yet
-                late = server._handle_reports(batch(3, Status.RUNNING), key)
+                late = server.robot_link._handle_reports(batch(3, Status.RUNNING), key)
                 assert inspect.isawaitable(late)
                 acks = await asyncio.gather(*tasks, late)
                 assert [ReportAck.model_validate_json(a).refused for a in acks] == [[], [], []]

@@ -17,6 +17,7 @@ import pytest
 
 from backend import transport
 from backend.client.client import OperationRefused
+from backend.client.events import ClientEvent, TelemetryReceived
 from backend.core.ops import AddSkill, Control, EditSkill, Sync
 from backend.protocol import mapfeed as mf
 
@@ -346,9 +347,9 @@ async def _telemetry_samples(client, robot: str, n: int) -> list:
     got: list = []
     done = asyncio.Event()
 
-    def listener(kind: str, payload) -> None:
-        if kind == "telemetry" and payload.robot == robot:
-            got.append(payload)
+    def listener(event: ClientEvent) -> None:
+        if isinstance(event, TelemetryReceived) and event.telemetry.robot == robot:
+            got.append(event.telemetry)
             if len(got) >= n:
                 done.set()
 

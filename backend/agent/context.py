@@ -1,0 +1,249 @@
+"""What a handler gets: the SkillContext, a view of one Execution of the
+active skill (its task, pause and stop state, barrier resources).
+
+Handlers run on the agent's loop (coroutines) or in a worker thread (plain
+functions): `progress` and `check` work from both; the coroutines
+(`checkpoint`, `sleep`, `ask`, `tell`) only on the loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import logging
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import zenoh
+
+from backend.agent.outcomes import SkillStopped
+from backend.agent.queue import Active, Entry
+from backend.agent.runtime import Runtime
+from backend.core.model import Pose, Position, SkillInstance
+
+_POSITION_KEYS = frozenset(Position.model_fields)
+
+
+@dataclass
+class Execution:
+    """One run of the queue's active skill and everything that must be
+    released when it ends."""
+
+    active: Active  # the queue's record: entry and pause reasons
+    task: asyncio.Task[None] | None = None
+    aborted: bool = False  # stopped/reset: the task must not touch agent state any more
+    # set while not paused; the asyncio one for coroutines, the threading one for threads
+    resumed: asyncio.Event = field(default_factory=asyncio.Event)
+    resumed_t: threading.Event = field(default_factory=threading.Event)
+    pause_requested: asyncio.Event = field(default_factory=asyncio.Event)
+    # barrier resources (withdrawn when the skill ends or is stopped)
+    barrier_entities: list[Any] = field(default_factory=list)
+    barrier_token: zenoh.LivelinessToken | None = None
+    result_info: str = ""  # a handler's Success text, reported with `success`
+
+    def __post_init__(self) -> None:
+        self.resumed.set()
+        self.resumed_t.set()
+
+    @property
+    def entry(self) -> Entry:
+        return self.active.entry
+
+    @property
+    def paused(self) -> bool:
+        return self.active.paused
+
+    def sync_pause_flags(self) -> None:
+        """The events follow the queue's pause reasons."""
+        if self.paused:
+            self.resumed.clear()
+            self.resumed_t.clear()
+            self.pause_requested.set()
+        else:
+            self.pause_requested.clear()
+            self.resumed.set()
+            self.resumed_t.set()
+
+    def release(self, *, abort: bool) -> None:
+        """Withdraw the barrier resources; `abort` also stops the handler."""
+        if abort:
+            self.aborted = True
+            self.resumed.set()  # wake waiters so they see the stop
+            self.resumed_t.set()
+            # not the task we run in: a handler calling `await agent.stop()` would
+            # be cancelled inside stop(), before the session is closed
+            task = self.task
+            if task is not None and not task.done() and task is not asyncio.current_task():
+                task.cancel()
+        for entity in self.barrier_entities:
+            try:
+                entity.undeclare()
+            except Exception:
+                pass
+        self.barrier_entities.clear()
+        if self.barrier_token is not None:
+            try:
+                self.barrier_token.undeclare()
+            except Exception:
+                pass
+            self.barrier_token = None
+
+
+class Host(Protocol):
+    """What a context needs of the agent (execution.Executor provides it)."""
+
+    agent: Any  # the RobotAgent: ctx.agent, its time_scale, ask and tell
+    rt: Runtime
+
+    def set_progress(
+        self, act: Execution, fraction: float, info: str, eta_s: float | None
+    ) -> None: ...
+
+
+def _coroutine_only(method: Callable[..., Any]) -> Callable[..., Any]:
+    """A SkillContext coroutine called from a plain-function handler's thread
+    would only make a coroutine object nobody awaits: no wait, no pause, no
+    answer. Say so instead."""
+
+    @functools.wraps(method)
+    def call(self: SkillContext, *args: Any, **kwargs: Any) -> Any:
+        if not self._on_loop():
+            raise RuntimeError(
+                f"ctx.{method.__name__}() is for coroutine handlers (async def); the handler of "
+                f"{self.skill.skill} is a plain function running in a thread: use ctx.check() "
+                f"between blocking steps, or make it a coroutine"
+            )
+        return method(self, *args, **kwargs)
+
+    return call
+
+
+class SkillContext:
+    """What a handler gets as its first argument."""
+
+    def __init__(self, host: Host, act: Execution, params: dict[str, Any], purpose: str = "skill"):
+        self.agent: Any = host.agent  # the RobotAgent
+        self._host = host
+        self._act = act
+        self.skill: SkillInstance = act.entry.skill
+        self.params: dict[str, Any] = params  # the raw values as sent by the server
+        self.attempt: int = act.entry.attempt
+        self.purpose = purpose  # "skill" or "recharge" (a recharge run before this skill)
+
+    # -- state -----------------------------------------------------------
+    @property
+    def stopped(self) -> bool:
+        return self._act.aborted
+
+    @property
+    def paused(self) -> bool:
+        return self._act.paused
+
+    def _on_loop(self) -> bool:
+        return self._host.rt.on_loop()
+
+    # -- progress ----------------------------------------------------------
+    def progress(self, fraction: float, info: str = "", eta_s: float | None = None) -> None:
+        """Report progress (0..1) for telemetry; callable from handler threads.
+
+        Raises `SkillStopped` once the skill was stopped (handy for sync loops).
+        """
+        if self._act.aborted:
+            raise SkillStopped()
+        fraction = min(1.0, max(0.0, float(fraction)))
+        info = "" if info is None else str(info)  # it goes into telemetry, which checks its types
+        eta_s = None if eta_s is None else float(eta_s)
+        if self._on_loop():
+            self._host.set_progress(self._act, fraction, info, eta_s)
+        else:
+            self._host.rt.post(self._host.set_progress, self._act, fraction, info, eta_s)
+
+    # -- pause / stop --------------------------------------------------------
+    @_coroutine_only
+    async def checkpoint(self) -> None:
+        """Return when not paused; raise `SkillStopped` if stopped."""
+        while True:
+            if self._act.aborted:
+                raise SkillStopped()
+            if not self._act.paused:
+                return
+            await self._act.resumed.wait()
+
+    def check(self) -> None:
+        """Synchronous checkpoint for handlers running in a thread: blocks while
+        paused, raises `SkillStopped` once stopped."""
+        if self._on_loop():
+            # never block the event loop: an async handler must await checkpoint()
+            if self._act.aborted:
+                raise SkillStopped()
+            if self._act.paused:
+                self._host.rt.say_once(
+                    f"check {self.skill.skill}",
+                    f"the coroutine handler of {self.skill.skill} calls ctx.check(), which cannot "
+                    f"wait on the event loop: it ignores the pause; use await ctx.checkpoint() or "
+                    f"await ctx.sleep()",
+                    level=logging.WARNING,
+                )
+            return
+        while True:
+            if self._act.aborted:
+                raise SkillStopped()
+            if self._act.resumed_t.wait(0.1):
+                if self._act.aborted:
+                    raise SkillStopped()
+                return
+
+    @_coroutine_only
+    async def sleep(self, seconds: float) -> None:
+        """Sleep `seconds` of robot time (divided by `agent.time_scale`), not
+        counting time spent paused; raises `SkillStopped` when stopped."""
+        scale = self.agent.time_scale if self.agent.time_scale > 0 else 1.0
+        remaining = max(0.0, float(seconds)) / scale
+        loop = asyncio.get_running_loop()
+        while True:
+            await self.checkpoint()
+            if remaining <= 0:
+                return
+            started = loop.time()
+            try:
+                # returns early when a pause is requested, else times out
+                await asyncio.wait_for(self._act.pause_requested.wait(), remaining)
+            except TimeoutError:
+                await self.checkpoint()
+                return
+            remaining -= loop.time() - started
+
+    # -- typed parameters ------------------------------------------------------
+    def pose(self, name: str) -> Pose:
+        """Parameter `name` as a Pose (a position gets zero orientation)."""
+        value = self.params[name]
+        if isinstance(value, Pose):
+            return value
+        if isinstance(value, Position):
+            return Pose(**value.model_dump())
+        return Pose(**value)
+
+    def position(self, name: str) -> Position:
+        """Parameter `name` as a Position (a pose loses its orientation)."""
+        value = self.params[name]
+        if isinstance(value, Position):
+            return value
+        if isinstance(value, Pose):
+            return Position(x=value.x, y=value.y, z=value.z)
+        return Position(**{k: value[k] for k in value if k in _POSITION_KEYS})
+
+    def area(self, name: str) -> list[Position]:
+        return [p if isinstance(p, Position) else Position(**p) for p in self.params[name]]
+
+    # -- world -------------------------------------------------------------------
+    @_coroutine_only
+    async def ask(
+        self, robot: str, topic: str, data: dict[str, Any] | None = None
+    ) -> dict[str, Any] | None:
+        return await self.agent.ask(robot, topic, data)
+
+    @_coroutine_only
+    async def tell(self, robot: str, topic: str, data: dict[str, Any] | None = None) -> bool:
+        return await self.agent.tell(robot, topic, data)

@@ -1,0 +1,81 @@
+"""`missionctl certs`: a private CA, a server certificate and client certificates.
+
+The command line only; the PKI itself is backend/server/certs.py (`make_certs`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from pathlib import Path
+from typing import Any
+
+from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK
+
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
+
+
+def prepare_parser(subparsers: Any) -> argparse.ArgumentParser:
+    p = subparsers.add_parser(
+        "certs",
+        help="make a CA, a server certificate and client certificates for TLS endpoints",
+        description="Writes DIR/ca.pem (+ ca.key), DIR/server.pem (+ server.key) and "
+        "DIR/client-NAME.pem (+ .key) per --client. An existing DIR/ca.pem is reused, "
+        "so clients can be added later.",
+    )
+    p.add_argument("dir", metavar="DIR", help="directory to write into (created)")
+    p.add_argument(
+        "--server-name",
+        metavar="NAME",
+        action="append",
+        help="DNS name or IP address clients use to reach the server; repeatable "
+        "(default: localhost and 127.0.0.1). Given, the server certificate is (re)made.",
+    )
+    p.add_argument(
+        "--client",
+        metavar="NAME",
+        action="append",
+        default=[],
+        help="make a client certificate with this common name; repeatable",
+    )
+    p.add_argument(
+        "--days",
+        type=int,
+        default=365,
+        metavar="N",
+        help="validity of new certificates (default 365)",
+    )
+    return p
+
+
+def run(args: argparse.Namespace) -> int:
+    from backend.server.certs import make_certs
+
+    bad = [n for n in args.client if not _NAME.match(n)]
+    if bad:
+        print(
+            f"missionctl certs: invalid client name(s) {', '.join(map(repr, bad))}: "
+            "use letters, digits, '.', '_', '-'",
+            file=sys.stderr,
+        )
+        return EXIT_BAD_INPUT
+    if args.days < 1:
+        print("missionctl certs: --days must be at least 1", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        written = make_certs(
+            Path(args.dir), server_names=args.server_name, clients=args.client, days=args.days
+        )
+    except ImportError:
+        print(
+            "missionctl certs: needs the 'cryptography' package (pip install cryptography)",
+            file=sys.stderr,
+        )
+        return EXIT_BAD_INPUT
+    except (OSError, ValueError) as e:
+        print(f"missionctl certs: {e}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    for path in written:
+        print(path)
+    return EXIT_OK

@@ -1,0 +1,418 @@
+"""`missionctl ctl`: every mission operation, scriptable against a running server.
+
+    missionctl ctl [--connect ENDPOINT] [--json] [--timeout S] [--client-id ID]
+                   [--expect-revision N] [--request-id ID] OP ...
+
+The common options may be given before or after OP. One invocation opens one
+connection (a `MissionClient`, subscribed to telemetry only for `robots`),
+does one thing and always closes the connection.
+
+Operations
+  state [ROBOT...]            the mission: per robot its skills (glyph, id,
+                              label, skill, parameters that differ from the
+                              library defaults), barriers, markers, revision
+  robots                      presence, type, manifest (modules, skills) and,
+                              when a robot publishes it within ~1 s, battery,
+                              link quality and activity
+  add ROBOT SKILL [--param NAME=VALUE]... [--label TEXT] [--at INDEX] [POLICY]
+  delete ID...
+  move ID INDEX               INDEX within the unsynchronized section (0 = first)
+  edit ID [--label TEXT] [--param NAME=VALUE]... [--unbind NAME]... [POLICY]
+  sync ROBOT [--through ID]
+  unsync ROBOT [--from ID]
+  run|pause|stop|reset (ROBOT | --all)
+  retry ID
+  barrier ID ID...
+  unbarrier BARRIER_ID
+  marker add NAME (--pose P | --position P | --area A) [--description TEXT]
+  marker move NAME (--pose P | --position P | --area A)
+  marker rename NAME NEW_NAME
+  marker delete NAME
+  load FILE                   validated here first (file:line:col issues, exit 2)
+  save FILE [--library PATH]
+  new [NAME]                  an empty mission with the same robots
+  undo | redo                 your own (same --client-id) edits of the plan
+  watch [--count N]           one line per change until Ctrl-C (or N batches)
+
+Parameter values (--param NAME=VALUE)
+  VALUE is a YAML scalar or flow YAML: `speed=0.4`, `filter=near_infrared`,
+  `goal={x: 3, y: 4, yaw: 0}` (quote it for the shell), `sensors=[lidar]`.
+  `NAME=@MARKER` binds a pose/position/area parameter to a marker (the value
+  follows the marker while the skill is idle); for a `marker` parameter it
+  names the marker. An empty VALUE (`speed=`) means the library default.
+  `--unbind NAME` (edit) keeps the current value but drops the binding.
+  POLICY: --retries N, --pause-out-of-comms / --no-pause-out-of-comms,
+  --recharge-below F (0..1, or `off`); on edit, unnamed policies are kept.
+
+Geometry
+  --pose x,y[,z[,roll,pitch,yaw]] or a flow mapping '{x: 1, y: 2, yaw: 1.57}'
+  --position x,y[,z] or '{x: 1, y: 2}'
+  --area "x,y x,y x,y ..." (at least 3 points; ';' also separates points)
+  A value starting with '-' must be attached: --pose=-3,4. `marker move` with
+  --position on a pose marker keeps the marker's orientation.
+
+Connection and identity
+  --connect defaults to $MISSIONCTL_CONNECT, else tcp/127.0.0.1:7447 (repeat
+  it, or separate endpoints with commas, to give several).
+  --client-id defaults to $MISSIONCTL_CLIENT_ID, else `ctl-USER@HOST`: stable
+  across invocations, so `ctl undo` undoes what the previous `ctl add` did.
+  Every request gets a fresh unique request id; after a timeout, retry with
+  `--request-id` (the id is in the message) and the server applies it once.
+  --expect-revision N refuses the operation if what it touches changed after
+  revision N (optimistic concurrency).
+
+Output
+  One line per success (`added lru1-7 (drive_to) to lru1 at revision 12`) and
+  the server's notes as `note: ...`. With --json, exactly one JSON object on
+  stdout: for operations {"ok": true, "op", "revision", "value", "notes",
+  "duplicate"}; `state --json` is the state itself ({"revision", "name",
+  "library", "robots", "tasks", "barriers", "markers"}); `watch --json` prints
+  one object per line. Failures print on stderr (one line; a usage error
+  also the usage) and, with --json, exactly one {"ok": false, "code",
+  "message", ...} on stdout, usage errors included. "code" is bad_input or
+  bad_file (exit 2; bad_file lists "issues" as file:line:col), the server's
+  refusal (exit 1: stale, not_idle, unknown_skill, journal_failed, ..., with
+  "robot", "skill", "param" when known), or unreachable, timeout,
+  protocol_mismatch (exit 3). With "maybe_applied": true (a timeout, or a
+  server gone mid-request) the operation may have been applied: run it again
+  with --request-id REQUEST_ID (given in "request_id"), it is applied once.
+
+Exit codes: 0 ok, 1 refused by the server, 2 bad usage or input (nothing is
+sent), 3 server unreachable, not answering in time, or speaking another
+protocol version. Never a traceback (MISSIONCTL_DEBUG=1 shows one for
+unexpected errors).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Callable
+from typing import Any
+
+from backend.cli.parser import Parser
+from backend.transport.login import add_login_arguments
+
+DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
+DEFAULT_TIMEOUT = 10.0
+
+CONTROL_OPS = ("run", "pause", "stop", "reset")  # on one robot or --all (see OPERATIONS)
+
+
+def _recharge(text: str) -> float | None:
+    if text.strip().lower() in ("off", "none", "no", "never"):
+        return None
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a battery fraction 0..1 or 'off', got {text!r}"
+        ) from None
+    if not (0.0 <= v <= 1.0):
+        raise argparse.ArgumentTypeError(
+            f"expected a battery fraction between 0 and 1, got {text!r}"
+        )
+    return v
+
+
+def _nonneg_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected 0 or more, got {v}")
+    return v
+
+
+def _positive_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
+    return v
+
+
+def _common(p: argparse.ArgumentParser, *, top: bool) -> None:
+    """Options accepted before and after OP (after OP they override)."""
+    d = (lambda v: v) if top else (lambda v: argparse.SUPPRESS)
+    g = p.add_argument_group("connection and output")
+    g.add_argument(
+        "--connect",
+        action="append",
+        metavar="ENDPOINT",
+        default=d(None),
+        help=f"mission server endpoint (default: $MISSIONCTL_CONNECT or {DEFAULT_CONNECT}); "
+        "repeatable",
+    )
+    g.add_argument(
+        "--json",
+        action="store_true",
+        default=d(False),
+        help="print one JSON object (watch: one per line)",
+    )
+    g.add_argument(
+        "--timeout",
+        type=_positive_float,
+        metavar="S",
+        default=d(DEFAULT_TIMEOUT),
+        help=f"seconds to wait for the server (default {DEFAULT_TIMEOUT:g})",
+    )
+    g.add_argument(
+        "--client-id",
+        metavar="ID",
+        default=d(None),
+        help="client id (default: $MISSIONCTL_CLIENT_ID or ctl-USER@HOST; "
+        "undo/redo are per client id)",
+    )
+    g.add_argument(
+        "--expect-revision",
+        type=_nonneg_int,
+        metavar="N",
+        default=d(None),
+        help="refuse if what the operation touches changed after revision N",
+    )
+    g.add_argument(
+        "--request-id",
+        metavar="ID",
+        default=d(None),
+        help="request id (default: a fresh one); reuse it to retry safely after a timeout",
+    )
+    add_login_arguments(p.add_argument_group("login and TLS (docs/security.md)"), suppress=not top)
+
+
+def _policies(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("policies")
+    g.add_argument(
+        "--retries",
+        type=_nonneg_int,
+        metavar="N",
+        help="autonomous retries after a failure (0..20)",
+    )
+    g.add_argument(
+        "--pause-out-of-comms",
+        dest="pause_out_of_comms",
+        action="store_const",
+        const=True,
+        help="pause while out of communication range",
+    )
+    g.add_argument(
+        "--no-pause-out-of-comms", dest="pause_out_of_comms", action="store_const", const=False
+    )
+    g.add_argument(
+        "--recharge-below",
+        type=_recharge,
+        metavar="F",
+        default=argparse.SUPPRESS,
+        help="return to recharge below this battery fraction (0..1, or 'off')",
+    )
+
+
+def _geometry(p: argparse.ArgumentParser) -> None:
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument(
+        "--pose", metavar="P", help="x,y[,z[,roll,pitch,yaw]] or '{x: 1, y: 2, yaw: 0.5}'"
+    )
+    g.add_argument("--position", metavar="P", help="x,y[,z] or '{x: 1, y: 2}'")
+    g.add_argument("--area", metavar="A", help='polygon "x,y x,y x,y ..." (3 points or more)')
+
+
+def _param_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--param", action="append", metavar="NAME=VALUE", help="parameter value (YAML) or @MARKER"
+    )
+
+
+# ---------------------------------------------------------------- one per operation
+
+
+def _nothing(p: argparse.ArgumentParser) -> None:
+    pass
+
+
+def _state(p: argparse.ArgumentParser) -> None:
+    p.add_argument("robots", nargs="*", metavar="ROBOT", help="only these robots")
+
+
+def _add(p: argparse.ArgumentParser) -> None:
+    p.add_argument("robot", metavar="ROBOT")
+    p.add_argument("skill", metavar="SKILL")
+    _param_option(p)
+    p.add_argument("--label", metavar="TEXT")
+    p.add_argument(
+        "--at",
+        type=int,
+        metavar="INDEX",
+        help="position in the unsynchronized section (default: end)",
+    )
+    _policies(p)
+
+
+def _ids(p: argparse.ArgumentParser) -> None:
+    p.add_argument("ids", nargs="+", metavar="ID")
+
+
+def _id(p: argparse.ArgumentParser) -> None:
+    p.add_argument("id", metavar="ID")
+
+
+def _move(p: argparse.ArgumentParser) -> None:
+    p.add_argument("id", metavar="ID")
+    p.add_argument("index", type=int, metavar="INDEX", help="0 = first unsynchronized skill")
+
+
+def _edit(p: argparse.ArgumentParser) -> None:
+    p.add_argument("id", metavar="ID")
+    p.add_argument("--label", metavar="TEXT")
+    _param_option(p)
+    p.add_argument(
+        "--unbind",
+        action="append",
+        metavar="NAME",
+        help="drop a parameter's marker binding (keeps its value)",
+    )
+    _policies(p)
+
+
+def _sync(p: argparse.ArgumentParser) -> None:
+    p.add_argument("robot", metavar="ROBOT")
+    p.add_argument("--through", metavar="ID", help="last skill to synchronize")
+
+
+def _unsync(p: argparse.ArgumentParser) -> None:
+    p.add_argument("robot", metavar="ROBOT")
+    p.add_argument("--from", dest="from_id", metavar="ID", help="first queued skill to take back")
+
+
+def _control(p: argparse.ArgumentParser) -> None:
+    p.add_argument("robot", nargs="?", metavar="ROBOT")
+    p.add_argument("--all", action="store_true", help="every robot")
+
+
+def _unbarrier(p: argparse.ArgumentParser) -> None:
+    p.add_argument("barrier", metavar="BARRIER_ID")
+
+
+def _marker_add(p: argparse.ArgumentParser) -> None:
+    _geometry(p)
+    p.add_argument("--description", default="", metavar="TEXT")
+
+
+def _marker_rename(p: argparse.ArgumentParser) -> None:
+    p.add_argument("new_name", metavar="NEW_NAME")
+
+
+Arguments = Callable[[argparse.ArgumentParser], None]
+
+# `marker ACTION NAME ...`: action -> (help, its arguments after NAME)
+MARKER_ACTIONS: dict[str, tuple[str, Arguments]] = {
+    "add": ("add a pose, position or area marker", _marker_add),
+    "move": (
+        "give a marker a new pose, position or area (idle bound skills follow)",
+        _geometry,
+    ),
+    "rename": ("rename a marker (bindings follow)", _marker_rename),
+    "delete": ("delete a marker (not while a synchronized skill uses it)", _nothing),
+}
+
+
+def _marker(p: argparse.ArgumentParser) -> None:
+    actions = p.add_subparsers(dest="marker_op", metavar="ACTION")
+    actions.required = True
+    for name, (help, arguments) in MARKER_ACTIONS.items():
+        sp = actions.add_parser(name, help=help, description=help)
+        _common(sp, top=False)
+        sp.add_argument("name", metavar="NAME")
+        arguments(sp)
+
+
+def _file(p: argparse.ArgumentParser) -> None:
+    p.add_argument("file", metavar="FILE")
+
+
+def _save(p: argparse.ArgumentParser) -> None:
+    p.add_argument("file", metavar="FILE")
+    p.add_argument(
+        "--library",
+        metavar="PATH",
+        help="the skill library file to reference, written relative to FILE "
+        "(default: the server's reference, as is)",
+    )
+
+
+def _new(p: argparse.ArgumentParser) -> None:
+    p.add_argument("name", nargs="?", default="mission", metavar="NAME")
+
+
+def _watch(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--count", type=_nonneg_int, metavar="N", help="stop after N change batches")
+
+
+# ctl's operations, in the order `ctl --help` lists them: name -> (help, its arguments).
+# Each also takes the common options (_common).
+OPERATIONS: dict[str, tuple[str, Arguments]] = {
+    "state": ("print the mission: robots, skills, barriers, markers, revision", _state),
+    "robots": ("robot presence, type, manifest and telemetry", _nothing),
+    "add": ("add a skill to a robot's unsynchronized section", _add),
+    "delete": ("delete idle skills", _ids),
+    "move": ("move an idle skill within its robot's unsynchronized section", _move),
+    "edit": ("change the label, parameters, bindings or policies of an idle skill", _edit),
+    "sync": ("send a robot its unsynchronized skills (all, or through ID)", _sync),
+    "unsync": ("take queued skills back from a robot (all, or from ID on)", _unsync),
+    "run": ("start or resume execution, on one robot or --all", _control),
+    "pause": ("pause the running skill, on one robot or --all", _control),
+    "stop": ("stop the active skill (it returns to the queue), on one robot or --all", _control),
+    "reset": ("stop and unsynchronize everything queued, on one robot or --all", _control),
+    "retry": ("retry a failed skill (a new attempt right after it)", _id),
+    "barrier": ("make idle skills of different robots start together", _ids),
+    "unbarrier": ("remove a barrier", _unbarrier),
+    "marker": ("add, move, rename or delete a marker", _marker),
+    "load": ("replace the mission with a mission file (validated here first)", _file),
+    "save": ("write the mission to a YAML file", _save),
+    "new": ("start an empty mission with the same robots", _new),
+    "undo": ("undo your last edit of the plan", _nothing),
+    "redo": ("redo what you undid last", _nothing),
+    "watch": ("print changes as they happen, one line each, until Ctrl-C", _watch),
+}
+
+
+def prepare_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Add `ctl` to missionctl's sub-commands."""
+    p = subparsers.add_parser(
+        "ctl",
+        help="run mission operations against a running server (scriptable, --json)",
+        description=__doc__.split("\n\n", 1)[1] if __doc__ else None,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    _common(p, top=True)
+    ops = p.add_subparsers(dest="op", metavar="OP")
+    for name, (help, arguments) in OPERATIONS.items():
+        sp = ops.add_parser(name, help=help, description=help)
+        _common(sp, top=False)
+        arguments(sp)
+    return p
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """A stand-alone `missionctl` parser with only `ctl` (tests)."""
+    top = Parser(prog="missionctl")
+    sub = top.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
+    prepare_parser(sub)
+    return top
+
+
+def wants_json(argv: list[str]) -> bool:
+    """`missionctl ARGV...` is `ctl ... --json ...` (before any `--`)."""
+    if not argv or argv[0] != "ctl":
+        return False
+    args = argv[1 : argv.index("--")] if "--" in argv else argv[1:]
+    return "--json" in args
+
+
+def parse_args(argv: list[str]) -> argparse.Namespace:
+    """`missionctl ctl ARGV...` parsed (argparse errors exit 2)."""
+    parser = build_parser()
+    Parser.json_errors = wants_json(["ctl", *argv])
+    return parser.parse_args(["ctl", *argv])

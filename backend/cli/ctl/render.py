@@ -1,0 +1,532 @@
+"""ctl's output: state, robots, watch lines and what an operation did, as text and JSON.
+
+Tables, not ladders: DESCRIBE (operation -> its one-line outcome), WATCH_TEXT
+and WATCH_JSON (client message kind -> a line), EVENT_TEXT (event -> a phrase).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Any
+
+from backend.cli.ctl.args import CONTROL_OPS
+from backend.core.params import POSE_FIELDS, POSITION_FIELDS
+
+_GLYPHS = {
+    "idle": ("○", "."),
+    "idle_synchronized": ("●", "o"),
+    "synchwaiting": ("⧗", "w"),
+    "running": ("▶", ">"),
+    "paused": ("‖", "|"),
+    "success": ("✓", "+"),
+    "failure": ("✗", "x"),
+}
+
+
+def unicode_ok() -> bool:
+    enc = getattr(sys.stdout, "encoding", None) or "ascii"
+    try:
+        ("".join(g for g, _ in _GLYPHS.values()) + "—").encode(enc)
+        return True
+    except (UnicodeEncodeError, LookupError):
+        return False
+
+
+def glyph(status: str, unicode: bool = True) -> str:
+    u, a = _GLYPHS.get(status, ("?", "?"))
+    return u if unicode else a
+
+
+def _num(v: Any) -> str:
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def _is_pose(v: Any) -> bool:
+    return (
+        isinstance(v, dict)
+        and bool(v)
+        and set(v) <= set(POSE_FIELDS)
+        and all(isinstance(x, int | float) for x in v.values())
+    )
+
+
+def _is_area(v: Any) -> bool:
+    return (
+        isinstance(v, list)
+        and bool(v)
+        and all(isinstance(p, dict) and set(p) <= set(POSITION_FIELDS) for p in v)
+    )
+
+
+def _pose_text(v: dict[str, Any]) -> str:
+    """(x,y) and the other fields that are not 0: `(3,4 yaw=1.57)`."""
+    extra = [f"{k}={_num(v[k])}" for k in ("z", "roll", "pitch", "yaw") if v.get(k)]
+    return (
+        f"({_num(v.get('x', 0))},{_num(v.get('y', 0))}"
+        + (" " + " ".join(extra) if extra else "")
+        + ")"
+    )
+
+
+def _str_text(v: str) -> str:
+    return v if v and re.fullmatch(r"[\w.\-@/]+", v) else json.dumps(v, ensure_ascii=False)
+
+
+def short_value(v: Any, limit: int = 40) -> str:
+    """A compact rendering of a parameter value for one line of `state`."""
+    if _is_pose(v):
+        text = _pose_text(v)
+    elif _is_area(v):
+        text = f"[{len(v)} points]"
+    elif isinstance(v, str):
+        text = _str_text(v)
+    else:
+        text = json.dumps(v, separators=(",", ":"), ensure_ascii=False)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _differs_from_default(library: Any, skill: str, name: str, value: Any) -> bool:
+    if library is None:
+        return True
+    spec = library.skills.get(skill)
+    pspec = spec.params.get(name) if spec else None
+    if pspec is None or pspec.default is None:
+        return True
+    from backend.core.params import normalize_value
+
+    try:
+        return normalize_value(pspec, pspec.default) != value
+    except Exception:
+        return True
+
+
+def short_params(s: Any, library: Any) -> str:
+    parts = []
+    for name, value in s.params.items():
+        if name in s.bindings:
+            parts.append(f"{name}=@{s.bindings[name]}")
+        elif _differs_from_default(library, s.skill, name, value):
+            parts.append(f"{name}={short_value(value)}")
+    for name, marker in s.bindings.items():
+        if name not in s.params:
+            parts.append(f"{name}=@{marker}")
+    return " ".join(parts)
+
+
+def _time(t: datetime | None) -> str:
+    if t is None:
+        return ""
+    try:
+        return t.astimezone().strftime("%H:%M:%S")
+    except (ValueError, OSError):
+        return t.strftime("%H:%M:%S")
+
+
+def _presence(info: Any) -> str:
+    if info is None:
+        return "not registered"
+    if info.online:
+        return f"online since {_time(info.since)}" if info.since else "online"
+    return (
+        f"offline since {_time(info.since)}"
+        if info.since
+        else "offline (not seen since the server started)"
+    )
+
+
+def _marker_text(mk: Any) -> str:
+    if mk.kind == "pose":
+        text = "pose " + short_value(mk.pose.model_dump())
+    elif mk.kind == "position":
+        text = "position " + short_value(mk.position.model_dump())
+    else:
+        pts = " ".join(
+            f"{_num(p.x)},{_num(p.y)}" + (f",{_num(p.z)}" if p.z else "") for p in mk.area
+        )
+        text = f"area {pts}"
+    return text + (f"  {mk.description}" if mk.description else "")
+
+
+def _shown(robot: str, only: list[str] | None) -> bool:
+    return not only or robot in only
+
+
+def _iso(t: datetime | None) -> str | None:
+    return t.isoformat() if t else None
+
+
+# ---------------------------------------------------------------- state --json
+
+
+def _robot_json(client: Any, name: str) -> dict[str, Any]:
+    spec = client.mission.robots.get(name)
+    info = client.robots.get(name)
+    manifest = info.manifest if info else None
+    rtype = spec.type if spec else (manifest.type if manifest else None)
+    rt = client.library.robot_types.get(rtype) if rtype else None
+    return {
+        "type": rtype,
+        "kind": rt.kind if rt else None,
+        "in_mission": spec is not None,
+        "online": bool(info and info.online),
+        "since": _iso(info.since) if info else None,
+        "manifest": manifest.model_dump(mode="json") if manifest else None,
+    }
+
+
+def _skill_json(m: Any, s: Any) -> dict[str, Any]:
+    return {
+        "id": s.id,
+        "skill": s.skill,
+        "label": s.label,
+        "status": s.status.value,
+        "status_info": s.status_info,
+        "attempt": s.attempt,
+        "params": s.params,
+        "bindings": s.bindings,
+        "policies": s.policies.model_dump(mode="json"),
+        "barrier": m.barrier_of(s.id),
+        "started_at": _iso(s.started_at),
+        "finished_at": _iso(s.finished_at),
+    }
+
+
+def state_json(client: Any, only: list[str] | None = None) -> dict[str, Any]:
+    m = client.mission
+    names = list(m.robots) + [r for r in client.robots if r not in m.robots]
+    return {
+        "revision": m.revision,
+        "name": m.name,
+        "library": m.library,
+        "server_id": client.server_id,
+        "robots": {n: _robot_json(client, n) for n in names if _shown(n, only)},
+        "tasks": {
+            r: [_skill_json(m, s) for s in task] for r, task in m.tasks.items() if _shown(r, only)
+        },
+        "barriers": {bid: list(b.skills) for bid, b in m.barriers.items()},
+        "markers": {n: mk.model_dump(mode="json") for n, mk in m.markers.items()},
+    }
+
+
+# ---------------------------------------------------------------- state (text)
+
+
+def _policy_words(p: Any) -> list[str]:
+    words = []
+    if p.retries:
+        words.append(f"retries={p.retries}")
+    if p.pause_out_of_comms:
+        words.append("pause-out-of-comms")
+    if p.recharge_below is not None:
+        words.append(f"recharge<{p.recharge_below:g}")
+    return words
+
+
+def _skill_line(s: Any, columns: str, lib: Any, dash: str) -> str:
+    """`columns`: glyph, id, label and skill already padded to the task's widths."""
+    parts = [columns]
+    extra = short_params(s, lib)
+    if extra:
+        parts.append(extra)
+    if s.attempt > 1:
+        parts.append(f"(attempt {s.attempt})")
+    if not s.policies.is_default():
+        parts.append("{" + " ".join(_policy_words(s.policies)) + "}")
+    if s.status_info:
+        parts.append(f"{dash} {s.status_info}")
+    return "  ".join(parts).rstrip()
+
+
+def _task_lines(m: Any, task: list[Any], lib: Any, unicode: bool) -> list[str]:
+    if not task:
+        return ["  (no skills)"]
+    dash = "—" if unicode else "-"
+    ids = [s.id + (f" [{m.barrier_of(s.id)}]" if m.barrier_of(s.id) else "") for s in task]
+    wid = max(len(i) for i in ids)
+    wlabel = max(len(s.label) for s in task)
+    wskill = max(len(s.skill) for s in task)
+    return [
+        _skill_line(
+            s,
+            f"  {glyph(s.status.value, unicode)} {ident:<{wid}}  {s.label:<{wlabel}}  "
+            f"{s.skill:<{wskill}}",
+            lib,
+            dash,
+        )
+        for s, ident in zip(task, ids, strict=True)
+    ]
+
+
+def _robot_lines(client: Any, robot: str, unicode: bool) -> list[str]:
+    m, lib = client.mission, client.library
+    spec = m.robots.get(robot)
+    rtype = spec.type if spec else "?"
+    kind = lib.robot_types[rtype].kind if rtype in lib.robot_types else ""
+    static = ", " + kind if kind == "static" else ""
+    dash = "—" if unicode else "-"
+    head = f"{robot} ({rtype}{static}) {dash} {_presence(client.robots.get(robot))}"
+    return [head, *_task_lines(m, m.tasks.get(robot, []), lib, unicode)]
+
+
+def _barrier_line(m: Any) -> str:
+    if not m.barriers:
+        return "barriers: none"
+    return "barriers: " + "; ".join(
+        f"{bid} = {' + '.join(b.skills)}" for bid, b in m.barriers.items()
+    )
+
+
+def _marker_lines(m: Any) -> list[str]:
+    if not m.markers:
+        return ["markers: none"]
+    w = max(len(n) for n in m.markers)
+    return ["markers:", *(f"  {n:<{w}}  {_marker_text(mk)}" for n, mk in m.markers.items())]
+
+
+def state_text(client: Any, only: list[str] | None = None, unicode: bool = True) -> str:
+    m, lib = client.mission, client.library
+    lines = [
+        f"mission '{m.name}' at revision {m.revision} "
+        f"(library '{lib.name}', {', '.join(client.endpoints)})"
+    ]
+    for robot in list(m.robots) + [r for r in m.tasks if r not in m.robots]:
+        if _shown(robot, only):
+            lines += _robot_lines(client, robot, unicode)
+    lines.append(_barrier_line(m))
+    lines += _marker_lines(m)
+    legend = ", ".join(f"{glyph(st, unicode)} {st}" for st in _GLYPHS)
+    lines.append(f"({legend})")
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------- robots
+
+
+def robots_json(client: Any) -> dict[str, Any]:
+    out = state_json(client)["robots"]
+    for name, entry in out.items():
+        t = client.telemetry.get(name)
+        entry["telemetry"] = t.model_dump(mode="json") if t else None
+    return {"revision": client.revision, "robots": out}
+
+
+def _telemetry_text(t: Any) -> str:
+    out_of_range = "" if t.in_range else " (out of range)"
+    text = f"; battery {t.battery:.0%}, link {t.link:.0%}{out_of_range}, {t.mode}"
+    if t.skill:
+        text += f" {t.skill}" + (f" {t.progress:.0%}" if t.progress is not None else "")
+    return text
+
+
+def _manifest_lines(man: dict[str, Any] | None) -> list[str]:
+    if not man:
+        return ["  (no manifest: never registered with this server)"]
+    mods = ", ".join(f"{x['name']} {x['version']}" for x in man["modules"]) or "none"
+    skills = ", ".join(f"{k} {v}" for k, v in man["skills"].items()) or "none"
+    lines = [f"  modules: {mods}", f"  skills:  {skills}"]
+    if man["properties"]:
+        lines.append(
+            "  properties: "
+            + ", ".join(f"{k}={short_value(v)}" for k, v in man["properties"].items())
+        )
+    return lines
+
+
+def robots_text(client: Any) -> str:
+    data = robots_json(client)["robots"]
+    if not data:
+        return "no robots"
+    lines = []
+    for name, r in data.items():
+        outside = ", not in the mission" if not r["in_mission"] else ""
+        head = f"{name} ({r['type'] or '?'}{outside}): {_presence(client.robots.get(name))}"
+        t = client.telemetry.get(name)
+        lines.append(head + (_telemetry_text(t) if t is not None else ""))
+        lines += _manifest_lines(r["manifest"])
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------- describe
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """An applied operation, as `describe` sees it."""
+
+    op: Any
+    value: dict[str, Any]
+    revision: int
+    changed: bool  # the revision moved (or the request had been applied before)
+    mission: Any  # the mission after it (None: unknown)
+
+    @property
+    def at(self) -> str:
+        return f"at revision {self.revision}"
+
+    def unchanged(self, what: str) -> str:
+        return f"{what}; nothing changed (revision {self.revision})"
+
+
+def _ids(v: Any) -> str:
+    return ", ".join(v) if isinstance(v, list) else str(v)
+
+
+def _moved(o: Outcome) -> str:
+    if not o.changed:
+        return o.unchanged(f"{o.op.id} is already at position {o.op.index}")
+    found = o.mission.find(o.op.id) if o.mission is not None else None
+    where = f" of {found[0]}'s unsynchronized section" if found else ""
+    return f"moved {o.op.id} to position {o.op.index}{where} {o.at}"
+
+
+def _edited(o: Outcome) -> str:
+    if not o.changed:
+        return o.unchanged(f"{o.op.id} already had these values")
+    return f"edited {o.op.id} {o.at}"
+
+
+def _controlled(o: Outcome) -> str:
+    ok = [r for r, res in o.value.get("robots", {}).items() if res == "ok"]
+    target = ", ".join(ok) if ok else (o.op.robot or "all robots")
+    return f"{o.op.op} sent to {target} {o.at}"
+
+
+def _marker_moved(o: Outcome) -> str:
+    if not o.changed:
+        return o.unchanged(f"marker {o.op.name} is already there")
+    return f"moved marker {o.op.name} {o.at}"
+
+
+def _loaded(o: Outcome) -> str:
+    m = o.op.mission
+    n = sum(len(t) for t in m.tasks.values())
+    return f"loaded mission '{m.name}' ({len(m.robots)} robots, {n} skills) {o.at}"
+
+
+# the protocol's operation name (`op.op`) -> one line saying what it did
+DESCRIBE: dict[str, Callable[[Outcome], str]] = {
+    "add": lambda o: f"added {o.value.get('id', '?')} ({o.op.skill}) to {o.op.robot} {o.at}",
+    "delete": lambda o: f"deleted {', '.join(o.op.ids)} {o.at}",
+    "move": _moved,
+    "edit": _edited,
+    "sync": lambda o: (
+        f"synchronized {_ids(o.value.get('synchronized', []))} to {o.op.robot} {o.at}"
+    ),
+    "unsync": lambda o: (
+        f"unsynchronized {_ids(o.value.get('unsynchronized', [])) or 'nothing'} "
+        f"from {o.op.robot} {o.at}"
+    ),
+    **dict.fromkeys(CONTROL_OPS, _controlled),
+    "retry": lambda o: f"retrying {o.op.id} as {o.value.get('id', '?')} {o.at}",
+    "barrier": lambda o: (
+        f"created barrier {o.value.get('barrier', '?')} ({', '.join(o.op.ids)}) {o.at}"
+    ),
+    "unbarrier": lambda o: f"removed barrier {o.op.barrier} {o.at}",
+    "marker_add": lambda o: f"added marker {o.op.name} ({o.op.marker.kind}) {o.at}",
+    "marker_move": _marker_moved,
+    "marker_rename": lambda o: f"renamed marker {o.op.name} to {o.op.new_name} {o.at}",
+    "marker_delete": lambda o: f"deleted marker {o.op.name} {o.at}",
+    "load": _loaded,
+    "new": lambda o: f"started a new mission '{o.op.name}' {o.at}",
+    "undo": lambda o: f"undid {o.value.get('undone', 'the last edit')} {o.at}",
+    "redo": lambda o: f"redid {o.value.get('redone', 'the last undone edit')} {o.at}",
+}
+
+
+def describe(op: Any, reply: Any, before: int, mission: Any) -> str:
+    """One line saying what an applied operation did."""
+    changed = reply.revision != before or reply.duplicate
+    outcome = Outcome(op, reply.value, reply.revision, changed, mission)
+    text = DESCRIBE.get(op.op, lambda o: f"{o.op.op} done {o.at}")(outcome)
+    if reply.duplicate:
+        text += " (this request had been applied already)"
+    return text
+
+
+# ---------------------------------------------------------------- watch
+
+
+def _skill_changed(e: Any) -> str:
+    # A status change stamps started_at/finished_at itself: not news.
+    ch = {k: v for k, v in e.changes.items() if k not in ("started_at", "finished_at", "rev")}
+    parts = []
+    if "status" in ch:
+        parts.append(str(ch.pop("status")))
+    if ch.get("status_info"):
+        parts.append(f"({ch['status_info']})")
+    ch.pop("status_info", None)
+    if "attempt" in ch:
+        parts.append(f"attempt {ch.pop('attempt')}")
+    if ch:
+        parts.append("changed " + ", ".join(sorted(ch)))
+    return f"{e.id}: {' '.join(parts) or 'timestamps'}"
+
+
+def _mission_replaced(e: Any) -> str:
+    n = sum(len(t) for t in e.mission.tasks.values())
+    return f"mission replaced: '{e.mission.name}' ({n} skills)"
+
+
+# event kind (`e.ev`) -> a phrase of a watch line (report_seq, bookkeeping: none)
+EVENT_TEXT: dict[str, Callable[[Any], str]] = {
+    "skill_added": lambda e: (
+        f"+{e.skill.id} {e.skill.skill} on {e.robot} at {e.index} ({e.skill.status.value})"
+    ),
+    "skill_removed": lambda e: f"-{e.id} from {e.robot}",
+    "skill_moved": lambda e: f"{e.id} moved to {e.index} on {e.robot}",
+    "skill_changed": _skill_changed,
+    "barrier_set": lambda e: f"barrier {e.id} = {' + '.join(e.barrier.skills)}",
+    "barrier_removed": lambda e: f"barrier {e.id} removed",
+    "marker_set": lambda e: f"marker {e.name}: {_marker_text(e.marker)}",
+    "marker_removed": lambda e: f"marker {e.name} removed",
+    "mission_replaced": _mission_replaced,
+}
+
+
+def _event_text(e: Any) -> str | None:
+    text = EVENT_TEXT.get(e.ev)
+    return text(e) if text else None
+
+
+def _events_text(batch: Any) -> str:
+    parts = [t for t in (_event_text(e) for e in batch.events) if t]
+    who = f" by {batch.actor}" if batch.actor else ""
+    return f"r{batch.revision} {batch.op or 'change'}{who}: {'; '.join(parts) or 'bookkeeping'}"
+
+
+def _alert_text(a: Any) -> str:
+    where = f" [{a.robot}{'/' + a.skill if a.skill else ''}]" if a.robot else ""
+    return f"{a.level}{where}: {a.message}"
+
+
+# the client's message kind -> a line of `watch` (telemetry and others: none)
+WATCH_TEXT: dict[str, Callable[[Any], str]] = {
+    "events": _events_text,
+    "fleet": lambda r: f"robot {r.name} {_presence(r)}",
+    "alert": _alert_text,
+    "malformed": lambda m: f"unreadable {m.what} on {m.key} (ignored): {m.error}",
+    "connection": lambda state: f"connection: {state}",
+    "state": lambda s: f"resynchronized at revision {s.revision} (server {s.server_id})",
+}
+
+WATCH_JSON: dict[str, Callable[[Any], dict[str, Any]]] = {
+    "events": lambda b: {"kind": "events", **b.model_dump(mode="json")},
+    "fleet": lambda r: {"kind": "fleet", "robot": r.model_dump(mode="json")},
+    "alert": lambda a: {"kind": "alert", **a.model_dump(mode="json")},
+    "malformed": lambda m: {"kind": "malformed", "what": m.what, "key": m.key, "error": m.error},
+    "connection": lambda state: {"kind": "connection", "state": state},
+    "state": lambda s: {"kind": "resync", "revision": s.revision, "server_id": s.server_id},
+}
+
+
+def watch_line(kind: str, payload: Any, as_json: bool) -> str | None:
+    if as_json:
+        obj = WATCH_JSON.get(kind)
+        return json.dumps(obj(payload)) if obj else None
+    text = WATCH_TEXT.get(kind)
+    return text(payload) if text else None

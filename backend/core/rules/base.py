@@ -1,0 +1,221 @@
+"""What every family of rules shares: the refusal, what a rule decides
+(`Change`), what an applied operation yields (`Applied`), and the state the
+rules read (`Rules`) with the lookups that refuse when something is missing.
+
+The families (edit, barriers, markers, execution) are functions of a `Rules`
+and an operation; `backend.core.rules.engine.Engine` is the `Rules` that
+dispatches operations to them and applies what they decide.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
+
+from backend.core import events as ev
+from backend.core.library import Library, ParamProblem, check_params
+from backend.core.model import ACTIVE, Mission, SkillInstance, Status, how_to_change
+from backend.core.ops import Operation
+
+MAX_PROBLEMS = 5  # parameter problems named in one refusal
+
+
+class Refusal(Exception):
+    """An operation that would break a rule. `code` is stable; `message` is a
+    sentence for a person."""
+
+    def __init__(
+        self,
+        code: str,
+        message: str,
+        *,
+        robot: str | None = None,
+        skill: str | None = None,
+        param: str | None = None,
+    ):
+        super().__init__(message)
+        self.code = code
+        self.message = message
+        self.robot = robot
+        self.skill = skill
+        self.param = param
+
+    def to_dict(self) -> dict[str, Any]:
+        d = {"code": self.code, "message": self.message}
+        for k in ("robot", "skill", "param"):
+            if getattr(self, k) is not None:
+                d[k] = getattr(self, k)
+        return d
+
+
+@dataclass
+class Applied:
+    revision: int
+    events: list[ev.Event] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)  # e.g. skills still using an old marker value
+    value: dict[str, Any] = field(default_factory=dict)  # e.g. {"id": "lru1-7"}
+    duplicate: bool = False  # a retried request, applied before
+
+    def batch(self, actor: str = "", op: str = "") -> ev.EventBatch:
+        return ev.EventBatch(revision=self.revision, events=self.events, actor=actor, op=op)
+
+
+class Change(NamedTuple):
+    """What a rule decided, not applied yet: the events, notes for the
+    operator, the value for the client, and the operation that reverts it
+    (None: it cannot be undone)."""
+
+    events: list[ev.Event]
+    notes: list[str]
+    value: dict[str, Any]
+    undo: Operation | None
+    duplicate: bool = False  # a robot's report applied before: nothing to do
+
+
+def unchanged() -> Change:
+    """A rule's answer when the operation changes nothing (no new revision)."""
+    return Change([], [], {}, None)
+
+
+# one rule: the state it reads and an operation of the type it is registered for
+Rule = Callable[["Rules", Any], Change]
+
+
+class Rules:
+    """The mission, its library and the bookkeeping of commands in flight to
+    robots; the lookups every family of rules uses."""
+
+    def __init__(self, mission: Mission, library: Library):
+        self.mission = mission
+        self.library = library
+        # skill id -> why it cannot be edited now (a sync is in flight)
+        self.locked: dict[str, str] = {}
+        # robot -> the command in flight to it (one at a time per robot)
+        self.pending: dict[str, str] = {}
+        # skill id -> parameter values sent with an in-flight sync
+        self.sent: dict[str, dict[str, Any]] = {}
+
+    def robot_type(self, robot: str) -> str:
+        spec = self.mission.robots.get(robot)
+        if spec is None:
+            known = ", ".join(self.mission.robots) or "none"
+            raise Refusal(
+                "unknown_robot",
+                f"no robot '{robot}' in this mission (robots: {known})",
+                robot=robot,
+            )
+        return spec.type
+
+    def skill(self, skill_id: str) -> tuple[str, int, SkillInstance]:
+        found = self.mission.find(skill_id)
+        if found is None:
+            raise Refusal(
+                "unknown_skill", f"no skill with id '{skill_id}' in this mission", skill=skill_id
+            )
+        return found
+
+    def task(self, robot: str) -> list[SkillInstance]:
+        self.robot_type(robot)
+        return self.mission.tasks.setdefault(robot, [])
+
+    @staticmethod
+    def first_idle(task: list[SkillInstance]) -> int:
+        for i, s in enumerate(task):
+            if s.status == Status.IDLE:
+                return i
+        return len(task)
+
+    @staticmethod
+    def first_queued(task: list[SkillInstance]) -> int | None:
+        for i, s in enumerate(task):
+            if s.status == Status.IDLE_SYNCHRONIZED:
+                return i
+        return None
+
+    @staticmethod
+    def active(task: list[SkillInstance]) -> SkillInstance | None:
+        for s in task:
+            if s.status in ACTIVE:
+                return s
+        return None
+
+    def outside_locked(self, robot: str, task: list[SkillInstance], index: int) -> None:
+        """Skills being synchronized stay at the head of the unsynchronized
+        section until the robot answers: nothing may be put before them."""
+        locked_after = [s.id for s in task[index:] if s.id in self.locked]
+        if locked_after:
+            raise Refusal(
+                "locked",
+                f"cannot place a skill before {', '.join(locked_after)}: "
+                f"being synchronized to {robot}",
+                robot=robot,
+            )
+
+    def editable(self, robot: str, s: SkillInstance, doing: str) -> None:
+        if s.status != Status.IDLE:
+            raise Refusal(
+                "not_idle",
+                f"cannot {doing} {s.display()} on {robot}: it is {s.status.value}; only idle "
+                f"(unsynchronized) skills can change — {how_to_change(s.status)}",
+                robot=robot,
+                skill=s.id,
+            )
+        if s.id in self.locked:
+            raise Refusal(
+                "locked",
+                f"cannot {doing} {s.display()} on {robot}: {self.locked[s.id]}",
+                robot=robot,
+                skill=s.id,
+            )
+
+    def check_params(
+        self,
+        robot: str,
+        skill: str,
+        params: dict[str, Any],
+        bindings: dict[str, str],
+        skill_id: str | None = None,
+    ) -> dict[str, Any]:
+        """The skill's parameters checked against the library and with bound
+        values taken from their markers; refused with every problem."""
+        rtype = self.robot_type(robot)
+        if self.library.skill_for(rtype, skill) is None:
+            offered = ", ".join(self.library.skills_of(rtype)) or "none"
+            raise Refusal(
+                "unknown_skill_type",
+                f"robot {robot} ({rtype}) has no skill '{skill}' (it offers: {offered})",
+                robot=robot,
+            )
+        out, problems = check_params(
+            self.library,
+            rtype,
+            skill,
+            params,
+            bindings,
+            markers=self.mission.markers,
+            robots=set(self.mission.robots),
+        )
+        if problems:
+            who = f"{skill_id} ({skill})" if skill_id else skill
+            raise _bad_params(robot, who, skill_id, problems)
+        return out
+
+
+def _bad_params(
+    robot: str, who: str, skill_id: str | None, problems: list[ParamProblem]
+) -> Refusal:
+    # every problem: a missing parameter listed first must not hide a bad value
+    said = "; ".join(
+        f"parameter {'.'.join(str(x) for x in q.path)}: {q.message}"
+        for q in problems[:MAX_PROBLEMS]
+    )
+    more = f" (and {len(problems) - MAX_PROBLEMS} more)" if len(problems) > MAX_PROBLEMS else ""
+    p = problems[0]
+    return Refusal(
+        "bad_param",
+        f"{robot}, skill {who}, {said}{more}",
+        robot=robot,
+        skill=skill_id,
+        param=str(p.path[0]) if p.path else None,
+    )

@@ -1,0 +1,479 @@
+"""Execution: commands to robots and what the robots answer.
+
+A command to a robot is two-phase, one at a time per robot:
+1. plan it: `plan_sync`, `plan_unsync`, `plan_control`, `plan_retry` check it
+   and say what to send, without changing the mission. Planning claims the
+   robot (`pending`) and, for a sync, locks the skills it sends;
+2. the robot's answer is an operation submitted like any other: `SyncAck`,
+   `UnsyncDone`, `RetryAck` (rules `sync_ack`, `unsync_done`, `retry_ack`);
+3. `release` ends the command, whether the robot answered, refused or never
+   answered; until then the robot takes no other command.
+A robot's `Report`s (status changes, numbered per robot) and `Reconcile` (it
+restarted without skills the mission holds as synchronized to it) come
+without a command.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from typing import Any
+
+from backend.core import events as ev
+from backend.core.model import ACTIVE, FINISHED, TRANSITIONS, SkillInstance, Status
+from backend.core.ops import (
+    Control,
+    Reconcile,
+    Report,
+    Retry,
+    RetryAck,
+    Sync,
+    SyncAck,
+    Unsync,
+    UnsyncDone,
+)
+from backend.core.rules.base import Change, Refusal, Rule, Rules
+
+# -- commands: claim, plan, release ---------------------------------------------
+
+
+def claim(rules: Rules, robot: str) -> None:
+    """Refused while another command to `robot` is in flight."""
+    if robot in rules.pending:
+        raise Refusal(
+            "robot_busy",
+            f"{robot} is busy: {rules.pending[robot]} is in progress; try again when it ends",
+            robot=robot,
+        )
+
+
+def release(rules: Rules, robot: str, ids: Iterable[str] = ()) -> None:
+    """The command to `robot` ended (answered, refused or timed out)."""
+    rules.pending.pop(robot, None)
+    for sid in ids:
+        rules.locked.pop(sid, None)
+        rules.sent.pop(sid, None)
+
+
+def _of_robot(rules: Rules, robot: str, skill_id: str) -> tuple[int, SkillInstance]:
+    """Index and skill `skill_id`, refused unless it is in `robot`'s list."""
+    owner, i, s = rules.skill(skill_id)
+    if owner != robot:
+        raise Refusal(
+            "wrong_robot",
+            f"skill {s.display()} belongs to {owner}, not {robot}",
+            robot=robot,
+            skill=s.id,
+        )
+    return i, s
+
+
+def plan_sync(rules: Rules, op: Sync) -> list[SkillInstance]:
+    """Skills to send to the robot; they are locked until `release` or the
+    robot's `SyncAck`."""
+    task = rules.task(op.robot)
+    claim(rules, op.robot)
+    chosen = _to_sync(rules, op, task)
+    for s in chosen:
+        if s.id in rules.locked:
+            raise Refusal(
+                "locked",
+                f"{s.display()} on {op.robot}: {rules.locked[s.id]}",
+                robot=op.robot,
+                skill=s.id,
+            )
+    # check against the current library and markers; bound values are
+    # taken fresh from their markers as they leave
+    fresh = [
+        rules.check_params(op.robot, s.skill, s.params, s.bindings, skill_id=s.id) for s in chosen
+    ]
+    for s, params in zip(chosen, fresh, strict=True):
+        rules.locked[s.id] = f"it is being synchronized to {op.robot}"
+        rules.sent[s.id] = params
+    rules.pending[op.robot] = "a sync"
+    return [
+        s.model_copy(update={"params": p}, deep=True) for s, p in zip(chosen, fresh, strict=True)
+    ]
+
+
+def _to_sync(rules: Rules, op: Sync, task: list[SkillInstance]) -> list[SkillInstance]:
+    """The head of the unsynchronized section, through `op.through` if given."""
+    start = rules.first_idle(task)
+    idle = task[start:]
+    if not idle:
+        raise Refusal(
+            "nothing_to_sync",
+            f"{op.robot} has no unsynchronized skill to synchronize",
+            robot=op.robot,
+        )
+    if op.through is None:
+        return idle
+    i, s = _of_robot(rules, op.robot, op.through)
+    if s.status != Status.IDLE:
+        raise Refusal(
+            "not_idle",
+            f"{s.display()} on {op.robot} is already {s.status.value}",
+            robot=op.robot,
+            skill=s.id,
+        )
+    return task[start : i + 1]
+
+
+def plan_unsync(rules: Rules, op: Unsync) -> list[str]:
+    """Queued skills to take back, from `op.from_id` (or all) to the end."""
+    task = rules.task(op.robot)
+    claim(rules, op.robot)
+    queued = [s for s in task if s.status == Status.IDLE_SYNCHRONIZED]
+    if not queued:
+        raise Refusal(
+            "nothing_to_unsync",
+            f"{op.robot} has no queued (idle_synchronized) skill to unsynchronize",
+            robot=op.robot,
+        )
+    if op.from_id is not None:
+        _, s = _of_robot(rules, op.robot, op.from_id)
+        if s.status != Status.IDLE_SYNCHRONIZED:
+            raise Refusal(
+                "not_queued",
+                f"{s.display()} on {op.robot} is {s.status.value}; only queued "
+                "(idle_synchronized) skills can be unsynchronized",
+                robot=op.robot,
+                skill=s.id,
+            )
+        queued = queued[[q.id for q in queued].index(s.id) :]
+    rules.pending[op.robot] = "an unsync"
+    return [s.id for s in queued]
+
+
+def plan_control(rules: Rules, op: Control) -> list[str]:
+    """Robots the command goes to; refused when it applies to none."""
+    robots = [op.robot] if op.robot is not None else list(rules.mission.robots)
+    reasons: list[str] = []
+    out: list[str] = []
+    for r in robots:
+        why = _control_refusal(rules, op.op, r, rules.task(r))
+        if why is None:
+            out.append(r)
+        else:
+            reasons.append(why)
+    if not out:
+        if op.robot is not None:
+            raise Refusal("not_applicable", reasons[0], robot=op.robot)
+        raise Refusal("not_applicable", f"{op.op} applies to no robot: " + "; ".join(reasons))
+    if op.op == "reset":  # the robot answers a reset: one command at a time
+        for r in out:
+            claim(rules, r)
+        for r in out:
+            rules.pending[r] = "a reset"
+    return out
+
+
+def _why_not_run(robot: str, act: SkillInstance | None, queued: bool) -> str | None:
+    if act is not None and act.status == Status.PAUSED:
+        return None
+    if act is not None:
+        return f"{robot} is already executing {act.display()} ({act.status.value})"
+    return None if queued else f"{robot} has nothing to run: synchronize skills first"
+
+
+def _why_not_pause(robot: str, act: SkillInstance | None, queued: bool) -> str | None:
+    if act is not None and act.status == Status.RUNNING:
+        return None
+    return f"{robot} has no running skill to pause"
+
+
+def _why_not_stop(robot: str, act: SkillInstance | None, queued: bool) -> str | None:
+    if act is not None:
+        return None
+    return f"{robot} has no running, paused or waiting skill to stop"
+
+
+def _why_not_reset(robot: str, act: SkillInstance | None, queued: bool) -> str | None:
+    if act is not None or queued:
+        return None
+    return f"{robot} has nothing synchronized to reset"
+
+
+# control command -> why it does not apply to a robot (given its active skill
+# and whether it has queued skills), or None when it does
+_WHY_NOT: dict[str, Callable[[str, SkillInstance | None, bool], str | None]] = {
+    "run": _why_not_run,
+    "pause": _why_not_pause,
+    "stop": _why_not_stop,
+    "reset": _why_not_reset,
+}
+
+
+def _control_refusal(
+    rules: Rules, action: str, robot: str, task: list[SkillInstance]
+) -> str | None:
+    why_not = _WHY_NOT.get(action)
+    if why_not is None:
+        return f"unknown command {action}"
+    return why_not(robot, rules.active(task), rules.first_queued(task) is not None)
+
+
+def plan_retry(rules: Rules, op: Retry) -> SkillInstance:
+    """The new attempt of a failed skill, to send to its robot."""
+    robot, i, s = rules.skill(op.id)
+    new_id = f"{s.id.split('.')[0]}.{s.attempt + 1}"
+    _check_retriable(rules, robot, i, s, new_id)
+    claim(rules, robot)
+    rules.pending[robot] = "a retry"
+    return SkillInstance(
+        id=new_id,
+        skill=s.skill,
+        label=s.label,
+        params=s.params,
+        bindings=s.bindings,
+        status=Status.IDLE_SYNCHRONIZED,
+        attempt=s.attempt + 1,
+        policies=s.policies,
+    )
+
+
+def _check_retriable(rules: Rules, robot: str, i: int, s: SkillInstance, new_id: str) -> None:
+    if s.status != Status.FAILURE:
+        raise Refusal(
+            "cannot_retry",
+            f"{s.display()} on {robot} is {s.status.value}; only a failed skill can be retried",
+            robot=robot,
+            skill=s.id,
+        )
+    if rules.mission.find(new_id) is not None:
+        raise Refusal(
+            "cannot_retry",
+            f"{s.display()} was already retried as {new_id}",
+            robot=robot,
+            skill=s.id,
+        )
+    task = rules.task(robot)
+    if any(later.status in FINISHED for later in task[i + 1 :]):
+        raise Refusal(
+            "cannot_retry",
+            f"{robot} has executed other skills since {s.display()} failed; "
+            "add a new skill instead",
+            robot=robot,
+            skill=s.id,
+        )
+    act = rules.active(task)
+    if act is not None:
+        raise Refusal(
+            "cannot_retry",
+            f"cannot retry {s.display()}: {robot} is executing {act.display()}; stop it first",
+            robot=robot,
+            skill=s.id,
+        )
+
+
+# -- the robots' answers to commands ---------------------------------------------
+
+
+def sync_ack(rules: Rules, op: SyncAck) -> Change:
+    task = rules.task(op.robot)
+    start = rules.first_idle(task)
+    head = [s.id for s in task[start : start + len(op.ids)]]
+    if head != list(op.ids):
+        raise Refusal(
+            "bad_report",
+            f"{op.robot} acknowledged {op.ids}, but the head of its unsynchronized section "
+            f"is {head}",
+            robot=op.robot,
+        )
+    late = [sid for sid in op.ids if sid not in rules.sent]
+    if late:
+        # the sync was given up (and the skill maybe edited since): the
+        # robot's copy is not ours; reconciliation sorts it out
+        raise Refusal(
+            "bad_report",
+            f"{op.robot} acknowledged {', '.join(late)}, which is not being synchronized",
+            robot=op.robot,
+        )
+    events: list[ev.Event] = []
+    for s in task[start : start + len(op.ids)]:
+        changes: dict[str, Any] = {"status": Status.IDLE_SYNCHRONIZED.value}
+        if rules.sent[s.id] != s.params:
+            changes["params"] = rules.sent[s.id]  # what the robot holds
+        events.append(ev.SkillChanged(id=s.id, changes=changes))
+    for sid in op.ids:
+        rules.locked.pop(sid, None)
+        rules.sent.pop(sid, None)
+    return Change(events, [], {"synchronized": list(op.ids)}, None)
+
+
+def unsync_done(rules: Rules, op: UnsyncDone) -> Change:
+    task = rules.task(op.robot)
+    queued = [s.id for s in task if s.status == Status.IDLE_SYNCHRONIZED]
+    if op.ids and list(op.ids) != queued[-len(op.ids) :]:
+        raise Refusal(
+            "bad_report",
+            f"{op.robot} removed {op.ids}, which is not the end of its queue {queued}",
+            robot=op.robot,
+        )
+    # the removed skills are the end of the queue: turning them idle puts
+    # them, in order, at the head of the unsynchronized section
+    events: list[ev.Event] = [
+        ev.SkillChanged(id=sid, changes=_back_in_plan(rules, op.robot, sid)) for sid in op.ids
+    ]
+    return Change(events, [], {"unsynchronized": list(op.ids)}, None)
+
+
+def _back_in_plan(rules: Rules, robot: str, sid: str) -> dict[str, Any]:
+    """The changes of a skill the robot gave back: idle again."""
+    _, _, s = rules.skill(sid)
+    changes: dict[str, Any] = {"status": Status.IDLE.value, "status_info": ""}
+    if s.bindings:  # back in the plan: bound values follow their markers again
+        try:
+            params = rules.check_params(robot, s.skill, s.params, s.bindings, skill_id=sid)
+            if params != s.params:
+                changes["params"] = params
+        except Refusal:
+            pass  # keeps its values; the operator sees the problem on the next edit
+    return changes
+
+
+def retry_ack(rules: Rules, op: RetryAck) -> Change:
+    robot, i, failed = rules.skill(op.failed_id)
+    if robot != op.robot or failed.status != Status.FAILURE:
+        raise Refusal(
+            "bad_report",
+            f"{op.robot} acknowledged a retry of {op.failed_id}, which is not a failed skill of it",
+            robot=op.robot,
+        )
+    if rules.mission.find(op.skill.id) is not None:
+        raise Refusal("bad_report", f"skill {op.skill.id} exists already", robot=op.robot)
+    skill = op.skill.model_copy(update={"status": Status.IDLE_SYNCHRONIZED})
+    events: list[ev.Event] = [ev.SkillAdded(robot=robot, index=i + 1, skill=skill)]
+    return Change(events, [], {"id": skill.id}, None)
+
+
+# -- what robots tell without a command -------------------------------------------
+
+
+def reconcile(rules: Rules, op: Reconcile) -> Change:
+    task = rules.task(op.robot)
+    lost = set(op.lost)
+    synced = [s for s in task if s.status != Status.IDLE and s.status not in FINISHED]
+    # only a tail of the synchronized section can be lost, the log never
+    keep = [s for s in synced if s.id not in lost]
+    tail = synced[len(keep) :]
+    if any(s.id not in lost for s in tail) or [s.id for s in synced[: len(keep)]] != [
+        s.id for s in keep
+    ]:
+        raise Refusal(
+            "bad_report",
+            f"{op.robot} lost {sorted(lost)}, which is not the end of its synchronized section",
+            robot=op.robot,
+        )
+    events: list[ev.Event] = [
+        ev.SkillChanged(
+            id=s.id,
+            changes={
+                "status": Status.IDLE.value,
+                "status_info": f"returned to the plan: {op.robot} no longer had it",
+                "started_at": None,
+            },
+        )
+        for s in tail
+    ]
+    return Change(events, [], {"unsynchronized": [s.id for s in tail]}, None)
+
+
+def report(rules: Rules, op: Report) -> Change:
+    """A robot's status change for one of its skills, applied once (by number)."""
+    last = rules.mission.report_seqs.get(op.robot, 0)
+    if op.seq <= last:
+        ignored = f"report {op.seq} of {op.robot} was applied already"
+        return Change([], [], {"ignored": ignored}, None, duplicate=True)
+    robot, i, s = rules.skill(op.id)
+    if robot != op.robot:
+        raise Refusal(
+            "bad_report",
+            f"{op.robot} reported on {s.display()}, which belongs to {robot}",
+            robot=op.robot,
+            skill=s.id,
+        )
+    _check_transition(robot, s, op)
+    _check_turn(rules, robot, i, s, op.status)
+    if op.attempt is not None and op.attempt < s.attempt:
+        raise Refusal(
+            "bad_report",
+            f"{robot} reported attempt {op.attempt} of {s.display()}, which is at attempt "
+            f"{s.attempt}",
+            robot=robot,
+            skill=s.id,
+        )
+    events: list[ev.Event] = [ev.ReportSeq(robot=robot, seq=op.seq)]
+    changes = _reported_changes(s, op)
+    if changes:
+        events.append(ev.SkillChanged(id=s.id, changes=changes))
+    return Change(events, [], {}, None)
+
+
+def _check_transition(robot: str, s: SkillInstance, op: Report) -> None:
+    """Refused unless the transition table allows the new status."""
+    new = op.status
+    restart = new == Status.RUNNING and s.status == Status.RUNNING and (op.attempt or 0) > s.attempt
+    # an active skill may repeat its status with new information
+    # ("waiting for lru2 (offline)"); the log and the queue may not
+    same = new == s.status and s.status in ACTIVE
+    if new not in TRANSITIONS[s.status] and not restart and not same:
+        raise Refusal(
+            "bad_report",
+            f"{robot} reported {s.display()} going {s.status.value} -> {new.value}, "
+            "which the transition table forbids",
+            robot=robot,
+            skill=s.id,
+        )
+
+
+def _check_turn(rules: Rules, robot: str, i: int, s: SkillInstance, new: Status) -> None:
+    """A skill executes (or ends) only when no other one is active and the
+    skills queued ahead of it are done."""
+    if new not in ACTIVE and new not in FINISHED:
+        return
+    task = rules.mission.tasks[robot]
+    act = rules.active(task)
+    if act is not None and act.id != s.id:
+        raise Refusal(
+            "bad_report",
+            f"{robot} reported {s.display()} {new.value} while {act.display()} is "
+            f"{act.status.value}",
+            robot=robot,
+            skill=s.id,
+        )
+    if s.status == Status.IDLE_SYNCHRONIZED and rules.first_queued(task) != i:
+        raise Refusal(
+            "bad_report",
+            f"{robot} started {s.display()} before the skills queued ahead of it",
+            robot=robot,
+            skill=s.id,
+        )
+
+
+def _reported_changes(s: SkillInstance, op: Report) -> dict[str, Any]:
+    """The skill's fields a report changes (JSON values)."""
+    new = op.status
+    changes: dict[str, Any] = {}
+    if new != s.status:
+        changes["status"] = new.value
+    if op.info != s.status_info:
+        changes["status_info"] = op.info
+    if op.attempt is not None and op.attempt != s.attempt:
+        changes["attempt"] = op.attempt
+    at = op.at.isoformat() if op.at else None
+    if new == Status.RUNNING and s.started_at is None and at:
+        changes["started_at"] = at
+    if new in FINISHED and at:
+        changes["finished_at"] = at
+    if new == Status.IDLE_SYNCHRONIZED:
+        changes["started_at"] = None  # stopped: the next run starts it from the beginning
+    return changes
+
+
+RULES: dict[type[Any], Rule] = {
+    SyncAck: sync_ack,
+    UnsyncDone: unsync_done,
+    RetryAck: retry_ack,
+    Reconcile: reconcile,
+    Report: report,
+}
