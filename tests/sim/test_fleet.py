@@ -18,7 +18,7 @@ import pytest
 from backend import transport
 from backend.client.client import OperationRefused
 from backend.client.events import ClientEvent, TelemetryReceived
-from backend.core.ops import AddSkill, Control, EditSkill, Sync
+from backend.core.ops import AddBarrier, AddSkill, Control, EditSkill, Sync
 from backend.protocol import mapfeed as mf
 
 from .conftest import ROOT, Stack, connect, skill, status_of, world_file
@@ -483,3 +483,47 @@ def _sim_status(endpoint: str, *args: str) -> str:
     )
     assert out.returncode == 0, out.stderr
     return out.stdout
+
+
+async def test_a_barrier_needs_a_link_between_the_partners(stack: Stack) -> None:
+    """LRU1 waits at its barrier beyond coverage, LRU2 at the lander: both are ready but
+    cannot talk (robots talk through the network only), so neither starts; LRU2, in
+    range, shows LRU1 as unreachable."""
+    client, watch = await connect(stack, speed=50)
+    try:
+        g = {"x": 54.0, "y": -84.0}  # RSS-G, out there
+        out = await add(client, "lru1", "drive_to", {"goal": {"x": 0.0, "y": -80.0}}, at=0)
+        a = await add(
+            client,
+            "lru1",
+            "identify_stone",
+            {"target": g, "search_radius": 6.0, "partner": "lru2"},
+            at=1,
+        )
+        b = await add(
+            client,
+            "lru2",
+            "identify_stone",
+            {"target": g, "search_radius": 6.0, "partner": "lru1"},
+            at=0,
+        )
+        await client.submit(AddBarrier(ids=[a, b]))
+        await client.submit(Sync(robot="lru1", through=a))
+        await client.submit(Sync(robot="lru2", through=b))
+        await client.submit(Control(op="run", robot="lru1"))
+        await client.submit(Control(op="run", robot="lru2"))
+        await watch.until(lambda s: not s.robots["lru1"].in_range, 30, "lru1 out of range")
+        m = await client.wait_for(lambda m: "lru1 (unreachable)" in skill(m, b).status_info, 30)
+        assert status_of(m, b) == "synchwaiting"
+        t0 = (await watch.query()).sim_time
+        await watch.until(lambda s: s.sim_time > t0 + 300, 30, "300 sim-seconds later")
+        assert status_of(client.mission, b) == "synchwaiting"  # still: no link, no start
+        assert status_of(client.mission, out) == "running"  # its success waits aboard lru1
+        truth = await watch.truth()
+        assert all(s.state == "hidden" for s in truth.stones)
+        assert truth.robots["lru1"].activity is None and truth.robots["lru2"].activity is None
+        await client.submit(Control(op="stop", robot="lru2"))
+        await client.wait_for(lambda m: status_of(m, b) == "idle_synchronized", 10)
+    finally:
+        watch.close()
+        await client.close()
