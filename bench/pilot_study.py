@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import re
 import statistics
 import sys
 import tempfile
@@ -121,14 +122,22 @@ def table(results: list[Result], strategies: list[str], seeds: list[int]) -> str
     return "\n".join(rows)
 
 
-def failures(results: list[Result]) -> str:
+def failures(results: list[Result], strategies: list[str]) -> str:
+    """Per strategy, the distinct reasons skills failed (numbers blanked) and in how
+    many runs."""
     out = []
-    for r in sorted(results, key=lambda r: (r.strategy, r.seed)):
-        for robot, skill, why in r.failures[:2]:
-            out.append(f"- {r.strategy}, seed {r.seed}: {robot} {skill}: {why}")
-        for x in r.refusals[:1]:
-            out.append(f"- {r.strategy}, seed {r.seed}: refused: {x}")
-    return "\n".join(out) or "- none"
+    for name in strategies:
+        runs = [r for r in results if r.strategy == name]
+        seen: dict[str, set[int]] = {}
+        for r in runs:
+            for robot, skill, why in r.failures:
+                key = f"{robot} {skill}: " + re.sub(r"\d+(\.\d+)?", "N", why)
+                seen.setdefault(key, set()).add(r.seed)
+        if not seen:
+            out.append(f"- {name}: no skill failed")
+        for key, seeds in seen.items():
+            out.append(f"- {name}: {key} ({len(seeds)}/{len(runs)} runs)")
+    return "\n".join(out)
 
 
 def section(results: list[Result], strategies: list[str], seeds: list[int], speed: float) -> str:
@@ -143,9 +152,9 @@ world (terrain and stone positions change with the seed; the regions do not), pl
 
 {table(results, strategies, seeds)}
 
-Why the strategies that fail did (first failures or refusals of each run):
+Skills that failed, per strategy:
 
-{failures(results)}
+{failures(results, strategies)}
 
 Measured on {date.today().isoformat()}: {machine()}.
 """

@@ -91,7 +91,7 @@ class Operator:
     async def start(self) -> None:
         assert self.client.session is not None
         self._sub = transport.subscribe(self.client.session, mf.KEY_STATUS_LIVE, self._on_status)
-        self.client.add_listener(lambda _kind, _payload: self.changed.set())
+        self.client.add_listener(lambda _event: self.changed.set())
         self.feed = MapFeed(self.client.session, self._on_map)
         await self.feed.start()
         raw = await transport.query(self.client.session, mf.KEY_STATUS, b"", timeout=10.0)

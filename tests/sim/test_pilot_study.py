@@ -68,9 +68,10 @@ async def test_ignoring_the_batteries_fails(stack: Stack) -> None:
 
 
 async def test_ignoring_the_coverage_fails(stack: Stack) -> None:
-    """The ideal plan without a Wi-Fi box: out there LRU1 and LRU2 cannot talk, so they
-    never identify a top-score stone together, and the operator cannot reach them."""
+    """The ideal plan without a Wi-Fi box: LRU1 out there and LRU2 cannot talk, so their
+    barrier never starts (LRU2, in range, shows LRU1 as unreachable): no top-score stone."""
     r = await run_strategy(stack, "ignoring_coverage", seed=5)
     assert r.score < BEST, _why(r)
     assert r.truth is not None
     assert not [s for s in r.truth.stones if s.score is not None and s.score > 0.1], _why(r)
+    assert any("(unreachable)" in line for line in r.skills), _why(r)
