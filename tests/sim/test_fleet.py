@@ -104,21 +104,7 @@ async def test_scripted_operator_plays_the_pilot_mission(stack: Stack) -> None:
         # deterministic for seed 1: the stone nearest POI-A in RSS-A, top score 0.5
         assert [(d.stone, d.score, d.by) for d in status.delivered] == [("RSS-A-s1", 0.5, "lru2")]
         assert status.score == pytest.approx(0.5)
-        # the results tell what happened
-        results = {s.skill: s.status_info for t in m.tasks.values() for s in t}
-        assert results["pick_stone"].startswith("picked RSS-A-s1 of RSS-A (score 0.5)")
-        assert results["drop_stone"] == "delivered RSS-A-s1 of RSS-A +0.5: +0.5; score 0.5"
-        # LRU2 asked LRU1 where the stone is and got the answer; it told the others about the boxes
-        truth = await watch.truth()
-        assert truth.exchanges["asks"] >= 2 and truth.exchanges["answered"] >= 2
-        assert truth.exchanges["tells"] >= 3
-        assert (
-            any(
-                "lru2 asked lru1 about stone: RSS-A-s1" in line
-                for line in truth.exchange_log + truth.events
-            )
-            or truth.exchanges["answered"] >= 2
-        )
+        _results_and_exchanges_of_the_opening_mission(m, await watch.truth())
 
         # the map seen by a console (live deltas): explored cells, RSS-A and the delivered stone
         def delivered_on_map() -> bool:
@@ -156,6 +142,23 @@ async def test_scripted_operator_plays_the_pilot_mission(stack: Stack) -> None:
     finally:
         watch.close()
         await client.close()
+
+
+def _results_and_exchanges_of_the_opening_mission(m, truth: mf.SimTruth) -> None:
+    # the results tell what happened
+    results = {s.skill: s.status_info for t in m.tasks.values() for s in t}
+    assert results["pick_stone"].startswith("picked RSS-A-s1 of RSS-A (score 0.5)")
+    assert results["drop_stone"] == "delivered RSS-A-s1 of RSS-A +0.5: +0.5; score 0.5"
+    # LRU2 asked LRU1 where the stone is and got the answer; it told the others about the boxes
+    assert truth.exchanges["asks"] >= 2 and truth.exchanges["answered"] >= 2
+    assert truth.exchanges["tells"] >= 3
+    assert (
+        any(
+            "lru2 asked lru1 about stone: RSS-A-s1" in line
+            for line in truth.exchange_log + truth.events
+        )
+        or truth.exchanges["answered"] >= 2
+    )
 
 
 async def _until(pred, progressed: asyncio.Event) -> None:
