@@ -259,7 +259,7 @@ async def test_drone_flight_longer_than_its_battery_fails_safely_and_landing_rec
     stack: Stack, tmp_path: Path
 ) -> None:
     world = world_file(tmp_path, robots={"ardea": {"battery": 0.3}})
-    client, watch = await connect(stack, speed=80, world=world)
+    client, watch = await connect(stack, speed=30, world=world)  # a hovering drone drains fast
     try:
         fly = await add(
             client, "ardea", "fly_to", {"goal": {"x": 150.0, "y": -150.0}}, at=1, label="too far"
