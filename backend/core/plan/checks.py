@@ -374,7 +374,7 @@ def _areas(ctx: CheckContext) -> Iterator[tuple[str, SkillInstance, str, list[Po
 
 def _flat_area(ctx: CheckContext) -> Iterator[Hit]:
     for robot, s, name, pts in _areas(ctx):
-        if area(pts) < MIN_AREA_M2:
+        if area(pts) < MIN_AREA_M2 and not self_intersecting(pts):
             yield Hit(
                 f"{s.id}/{name}",
                 f"{robot}: the area {name} of {s.display()} encloses {area(pts):.1f} m² (its "
@@ -386,7 +386,7 @@ def _flat_area(ctx: CheckContext) -> Iterator[Hit]:
 
 def _crossed_area(ctx: CheckContext) -> Iterator[Hit]:
     for robot, s, name, pts in _areas(ctx):
-        if area(pts) >= MIN_AREA_M2 and self_intersecting(pts):
+        if self_intersecting(pts):
             yield Hit(
                 f"{s.id}/{name}",
                 f"{robot}: the edges of the area {name} of {s.display()} cross each other; list "

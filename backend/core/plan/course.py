@@ -4,7 +4,8 @@ the clock are the forecast's).
 
 A course starts from the robot's last telemetry (position, battery, progress
 of the skill it executes); without telemetry, from where its last finished
-skill with a goal took it, at an assumed full battery. Legs are cached by
+skill with a goal took it (else from home, if known), at an assumed full
+battery. Legs are cached by
 skill object (`apply_events` replaces a skill object whenever it changes),
 start place and map version, so an event recomputes only what it touched.
 """
@@ -126,8 +127,8 @@ def walk(
     now = inputs.robots.get(robot)
     battery_model = rt.battery if rt is not None else None
     pos = now.position if now is not None else None
-    if pos is None:
-        pos = _last_place(library, robot_type, task)
+    if pos is None:  # where its last goal took it, else home (where robots start)
+        pos = _last_place(library, robot_type, task) or inputs.home_point()
     level: float | None = None
     assumed = False
     if battery_model is not None:

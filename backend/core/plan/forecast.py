@@ -21,7 +21,7 @@ or a telemetry sample recomputes only the robots it touched.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 
 from backend.core.library import Library
@@ -151,6 +151,16 @@ class Forecast:
     def critical_robot(self) -> str | None:
         f = self.skill(self.last) if self.last is not None else None
         return f.robot if f is not None else None
+
+    def summary(self, clock: Callable[[float], str]) -> str:
+        """The end in a line, "plan ends 15:42 · critical: lru2" (times by `clock`)."""
+        if self.end is None:
+            held = sorted(r.robot for r in self.robots.values() if r.blocked_at is not None)
+            stuck = ", ".join(sorted(self.barriers.stuck)) or "a barrier"
+            return f"plan never ends: {', '.join(held)} held at {stuck}"
+        critical = self.critical_robot
+        tail = f" · critical: {critical}" if critical is not None else ""
+        return f"plan ends {clock(self.end)}{tail}"
 
 
 def _skill(robot: str, track: Track, seg: Segment, i: int, speed: float) -> SkillForecast:

@@ -61,6 +61,15 @@ def _number(v: Any) -> float | None:
     return float(v) if isinstance(v, int | float) and not isinstance(v, bool) else None
 
 
+def _param(spec: SkillSpec, params: dict[str, Any], name: str) -> Any:
+    """A parameter's value, else its library default (a mission file fills
+    defaults in; a skill built by hand may not have)."""
+    if name in params:
+        return params[name]
+    p = spec.params.get(name)
+    return p.default if p is not None else None
+
+
 def _goal(spec: SkillSpec, params: dict[str, Any], home: Point | None) -> Point | None:
     d = spec.duration
     if d.goes_home(params):
@@ -87,7 +96,7 @@ def _travel(
 def _work_s(spec: SkillSpec, params: dict[str, Any]) -> float:
     total = spec.duration.base_s
     for name, factor in spec.duration.per_param_s.items():
-        v = _number(params.get(name))
+        v = _number(_param(spec, params, name))
         if v is not None:
             total += factor * v
     return total
@@ -95,7 +104,7 @@ def _work_s(spec: SkillSpec, params: dict[str, Any]) -> float:
 
 def _travel_s(spec: SkillSpec, rt: RobotType, params: dict[str, Any], metres: float) -> float:
     d = spec.duration
-    speed = _number(params.get(d.speed_param)) if d.speed_param else None
+    speed = _number(_param(spec, params, d.speed_param)) if d.speed_param else None
     if speed is None or speed <= 0:
         speed = rt.speed_mps
     if speed is not None and speed > 0:
@@ -150,7 +159,7 @@ def build_leg(
         end = centroid(area)
     else:
         end = start
-    charge_to = _number(params.get(d.charge_param)) if d.charge_param else None
+    charge_to = _number(_param(spec, params, d.charge_param)) if d.charge_param else None
     per_s, per_metre = spec.energy.rates(robot_type, rt.battery or NO_BATTERY)
     travel_out, work_out = _coverage(site, start if goal is not None else None, goal, end, area)
     return Leg(
