@@ -47,7 +47,8 @@ class DurationModel(Strict):
     area_param: str | None = Field(
         None,
         description="area parameter the skill works in: the robot is predicted to end at its "
-        "centre (and its comms coverage is checked over it)",
+        "centre, its comms coverage is checked over it, and a robot type with a survey rate "
+        "is done once it has mapped it (if that is sooner)",
     )
     per_param_s: dict[str, float] = Field(
         default_factory=dict, description="seconds per unit of a numeric parameter"
@@ -122,6 +123,13 @@ class RobotType(Strict):
     )
     flies: bool = Field(
         False, description="it flies: straight lines, and the ground's terrain does not matter"
+    )
+    survey_m2_per_s: float | None = Field(
+        None,
+        gt=0,
+        le=1e6,
+        description="area it maps per second (its sensor's swath times its speed), for skills "
+        "working in an area",
     )
     battery: BatteryModel | None = Field(
         None, description="battery model for predictions and plan checks; none: no battery"

@@ -98,6 +98,24 @@ def inside(p: Point, poly: Sequence[Point]) -> bool:
     return hit
 
 
+def to_polygon(p: Point, poly: Sequence[Point]) -> float:
+    """Distance from p to the polygon (0 inside)."""
+    if inside(p, poly):
+        return 0.0
+    best = math.inf
+    for i, a in enumerate(poly):
+        b = poly[(i + 1) % len(poly)]
+        dx, dy = b[0] - a[0], b[1] - a[1]
+        length2 = dx * dx + dy * dy
+        t = (
+            0.0
+            if length2 == 0
+            else max(0.0, min(1.0, ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / length2))
+        )
+        best = min(best, distance(p, (a[0] + t * dx, a[1] + t * dy)))
+    return best
+
+
 def along(a: Point, b: Point, step: float, most: int = 64) -> list[tuple[float, Point]]:
     """(fraction, point) every `step` metres from a to b, both ends included
     (at most `most` points)."""

@@ -22,7 +22,9 @@ from backend.core.plan.geometry import (
     point_of,
     polygon_of,
     samples,
+    to_polygon,
 )
+from backend.core.plan.geometry import area as polygon_area
 from backend.core.plan.inputs import SiteMap
 
 COVERAGE_STEP_M = 4.0  # metres between the points of a path asked about coverage
@@ -161,11 +163,15 @@ def build_leg(
         end = start
     charge_to = _number(_param(spec, params, d.charge_param)) if d.charge_param else None
     per_s, per_metre = spec.energy.rates(robot_type, rt.battery or NO_BATTERY)
+    work_s = _work_s(spec, params)
+    if area is not None and rt.survey_m2_per_s:  # done once mapped, if sooner
+        reach = to_polygon(start, area) / (rt.speed_mps or 1.0) if start is not None else 0.0
+        work_s = min(work_s, reach + polygon_area(area) / rt.survey_m2_per_s)
     travel_out, work_out = _coverage(site, start if goal is not None else None, goal, end, area)
     return Leg(
         travel_m=metres,
         travel_s=_travel_s(spec, rt, params, metres),
-        work_s=_work_s(spec, params),
+        work_s=work_s,
         goal=goal,
         end=end,
         no_route=no_route,

@@ -32,6 +32,7 @@ LIBRARY = Library.model_validate(
                 "skills": ["fly", "work", "charge", "survey"],
                 "speed_mps": 2.0,
                 "flies": True,
+                "survey_m2_per_s": 10.0,
                 "battery": {"reserve": 0.05, "margin": 0.2, "per_s": 0.001, "charge_per_s": 0.01},
             },
             "base": {"kind": "static", "skills": ["work"]},

@@ -138,7 +138,8 @@ def test_energy_uses_the_battery_in_telemetry_else_assumes_a_full_one():
     )
     (f,) = found(m, robots={"r1": RobotNow(at=T0, x=0, y=0, battery=0.3)}, rule="energy.empty")
     assert "no recharge planned" in f.message
-    m2 = mission({"d1": "drone"}, {"d1": [skill("d1-1", "survey", area=SQUARE, seconds=2000)]})
+    big = [{"x": x * 200, "y": y * 200} for x, y in ((0, 0), (1, 0), (1, 1), (0, 1))]
+    m2 = mission({"d1": "drone"}, {"d1": [skill("d1-1", "survey", area=big, seconds=2000)]})
     (f,) = found(m2, rule="energy.empty")  # 1000 s of flight per battery
     assert "assuming a full battery" in f.message
 

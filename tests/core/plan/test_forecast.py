@@ -263,3 +263,21 @@ def test_the_same_inputs_give_the_same_forecast(robots):
     a = forecast(m, LIBRARY, PlanInputs(now=T0, robots=robots))
     b = Forecaster(LIBRARY).forecast(m, PlanInputs(now=T0, robots=robots))
     assert a.skill("r1-1") == b.skill("r1-1")
+
+
+def test_an_area_skill_ends_once_mapped_for_a_robot_type_with_a_survey_rate():
+    square = [{"x": 0, "y": 0}, {"x": 10, "y": 0}, {"x": 10, "y": 10}, {"x": 0, "y": 10}]
+    m = mission(
+        {"d1": "drone", "d2": "drone", "r1": "rover"},
+        {
+            "d1": [skill("d1-1", "survey", "idle_synchronized", area=square, seconds=60)],
+            "d2": [skill("d2-1", "survey", "idle_synchronized", area=square, seconds=60)],
+            "r1": [skill("r1-1", "survey", "idle_synchronized", area=square, seconds=60)],
+        },
+    )
+    robots = {"d1": rover_at(5, 5), "d2": rover_at(-20, 5), "r1": rover_at(5, 5)}
+    fc = forecast(m, LIBRARY, PlanInputs(now=T0, robots=robots))
+    assert times(fc, "d1-1") == (0, 10)  # 100 m2 at 10 m2/s from inside
+    assert times(fc, "d2-1") == (0, 20)  # 20 m to its edge at 2 m/s first
+    assert times(fc, "r1-1") == (0, 60)  # no survey rate: its time parameter
+    assert fc.skill("d1-1").battery_end == pytest.approx(0.99)  # and only that long in the air
