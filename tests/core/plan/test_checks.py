@@ -304,3 +304,11 @@ def test_errors_come_before_warnings(rule):
     out = found(m)
     sev = [f.severity for f in out]
     assert sev == sorted(sev, key=lambda s: s != "error")
+
+
+def test_docs_plan_md_lists_every_rule_with_its_severity():
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[3] / "docs" / "plan.md").read_text()
+    for r in RULES:
+        assert f"| `{r.rule}` | {r.severity} |" in text, r.rule
