@@ -21,6 +21,7 @@ or a telemetry sample recomputes only the robots it touched.
 
 from __future__ import annotations
 
+import bisect
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 
@@ -131,6 +132,27 @@ class Forecast:
                 return None
             return _skill(robot, track, seg, i, self.speed)
         return None
+
+    def window(self, robot: str, t0: float, t1: float) -> Iterator[SkillForecast]:
+        """The robot's predicted skills overlapping [t0, t1], in order (what a
+        timeline shows: found by bisection, not by walking every skill)."""
+        track = self.tracks.get(robot)
+        if track is None:
+            return
+        c = track.course
+        for seg in track.segments[: track.laid]:
+            if seg.end < t0 or seg.start > t1:
+                continue
+            i = seg.first
+            if seg.kind != "active" and t0 > seg.start:
+                at = c.offsets[seg.first] + (t0 - seg.start) * self.speed
+                i = max(seg.first, bisect.bisect_right(c.offsets, at, seg.first, seg.last) - 1)
+            for k in range(i, seg.last):
+                f = self.skill(c.steps[k].skill.id)
+                if f is None or f.start > t1:
+                    break
+                if f.end >= t0:
+                    yield f
 
     def critical_path(self) -> list[str]:
         """Skill ids, first to last, of the chain that sets the mission's end."""

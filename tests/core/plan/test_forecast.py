@@ -281,3 +281,19 @@ def test_an_area_skill_ends_once_mapped_for_a_robot_type_with_a_survey_rate():
     assert times(fc, "d2-1") == (0, 20)  # 20 m to its edge at 2 m/s first
     assert times(fc, "r1-1") == (0, 60)  # no survey rate: its time parameter
     assert fc.skill("d1-1").battery_end == pytest.approx(0.99)  # and only that long in the air
+
+
+def test_a_window_of_time_yields_only_the_skills_in_it():
+    m = mission(
+        {"r1": "rover"},
+        {"r1": [skill(f"r1-{i}", "work", "idle_synchronized", seconds=10) for i in range(100)]},
+    )
+    fc = forecast(m, LIBRARY, PlanInputs(now=T0))
+    assert [f.id for f in fc.window("r1", T0 + 205, T0 + 231)] == [
+        "r1-20",
+        "r1-21",
+        "r1-22",
+        "r1-23",
+    ]
+    assert [f.id for f in fc.window("r1", T0 + 2000, T0 + 3000)] == []
+    assert [f.id for f in fc.window("nobody", T0, T0 + 10)] == []
