@@ -161,11 +161,10 @@ def _wait(cells: list[Cell], win: Window, bar: Bar) -> None:
 def _bar(cells: list[Cell], win: Window, bar: Bar, selected: bool, critical: bool) -> None:
     x0 = win.col(bar.start)
     x1 = max(x0 + 1, math.ceil((bar.end - win.t0) / win.dt))
-    styles: tuple[str, ...] = (STATUS_CSS[bar.status],)
+    # the selected bar is drawn in the cursor's colours (its glyph still says its status)
+    styles: tuple[str, ...] = ("cursor",) if selected else (STATUS_CSS[bar.status],)
     if critical:
         styles += ("critical",)
-    if selected:
-        styles += ("cursor",)
     # the label leaves the bar's last cell blank (if it has three or more): bars stay apart
     room = min(len(bar.label), x1 - x0 - 1 if x1 - x0 > 2 else x1 - x0)
     for x in range(max(0, x0), min(win.width, x1)):

@@ -16,7 +16,7 @@ from console_state import (
 )
 from map_state import map_message
 
-from backend.core.ops import AddBarrier, AddSkill, EditSkill
+from backend.core.ops import AddBarrier, AddSkill
 from backend.protocol.mapfeed import SimStatus
 
 ONLINE = {"lru1": True, "lru2": True, "ardea": True, "lander": True}
@@ -43,7 +43,16 @@ def risky_mars() -> Builder:
     far too long (its battery empties), lru2 ends out of coverage."""
     b = mars_mid_execution()
     e = b.engine
-    e.submit(EditSkill(id="ardea-4", params={"target_level": 0.95}))
+    big = [{"x": x, "y": y} for x, y in ((-150, 20), (150, 20), (150, 160), (-150, 160))]
+    e.submit(AddSkill(robot="ardea", skill="takeoff", label="off again"))
+    e.submit(
+        AddSkill(
+            robot="ardea",
+            skill="explore",
+            label="survey the north",
+            params={"area": big, "max_duration": 900},
+        )
+    )
     e.submit(
         AddSkill(
             robot="lru2",
