@@ -72,10 +72,10 @@ class TimelineScreen(Screen):
     def on_mount(self) -> None:
         self.changes.subscribe(self, self._changed)
         self.app.theme_changed_signal.subscribe(self, lambda _t: self.redraw())
-        self.call_after_refresh(self.redraw)
 
     def on_resize(self) -> None:
-        self.call_after_refresh(self.redraw)
+        if self.win is not None:  # the first draw comes with the screen's resume
+            self.call_after_refresh(self.redraw)
 
     def _changed(self, change: Any) -> None:
         if change[0] not in TOPICS:
@@ -87,7 +87,7 @@ class TimelineScreen(Screen):
 
     def on_screen_resume(self) -> None:
         self._stale = False
-        self.redraw()
+        self.call_after_refresh(self.redraw)  # once laid out: the lanes' width is known
 
     # -- drawing ----------------------------------------------------------------------------
     @property

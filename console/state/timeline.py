@@ -81,8 +81,18 @@ def _label(s: SkillInstance) -> str:
     return f"{GLYPHS[s.status]} {skill_title(s)}"
 
 
-def bars(mission: Mission, fc: Forecast | None, robot: str, t0: float, t1: float) -> list[Bar]:
-    """The robot's bars overlapping [t0, t1]: the log at its times, the rest predicted."""
+def bars(
+    mission: Mission,
+    fc: Forecast | None,
+    robot: str,
+    t0: float,
+    t1: float,
+    step: float = 0.0,
+    also: str | None = None,
+) -> list[Bar]:
+    """The robot's bars overlapping [t0, t1]: the log at its times, the rest
+    predicted; with `step` (seconds per cell) one predicted bar per cell at
+    most, and `also` (the selection) whatever the zoom."""
     task = mission.tasks.get(robot, [])
     out: list[Bar] = []
     for s in task:
@@ -95,9 +105,13 @@ def bars(mission: Mission, fc: Forecast | None, robot: str, t0: float, t1: float
             out.append(Bar(s.id, a, b, s.status, _label(s), a, None, ()))
     if fc is None:
         return out
-    by_id = {s.id: s for s in task if s.status not in FINISHED}
-    for f in fc.window(robot, t0, t1):
-        s = by_id.get(f.id)
+    shown = list(fc.window(robot, t0, t1, step))
+    picked = fc.skill(also) if also is not None else None
+    if picked is not None and picked.robot == robot and picked not in shown:
+        if picked.end >= t0 and picked.start <= t1:
+            shown.append(picked)
+    for f in shown:
+        s = f.skill
         if s is not None:
             out.append(
                 Bar(

@@ -58,6 +58,7 @@ class TimelineView(Widget):
         self.rows: list[list[tl.Cell]] = []  # what each line of the lanes area shows
         self.row_bars: dict[int, list[tl.Bar]] = {}  # lane line -> its bars (clicks)
         self.axis_rows: tuple[list[tl.Cell], list[tl.Cell]] = ([], [])
+        self._looks: dict[tuple[str, ...], Style] = {}  # style names -> their Rich style
 
     # -- geometry ------------------------------------------------------------------------
     @property
@@ -81,10 +82,14 @@ class TimelineView(Widget):
         now = fc.now if fc is not None else win.t0
         reach = now + plan.link_delay_s
         shown = order[top : top + self.lanes_shown]
-        lanes = {r: tl.bars(mission, fc, r, win.t0, win.t1) for r in shown} if mission else {}
+        sel = self.model.selection.skill
+        lanes = (
+            {r: tl.bars(mission, fc, r, win.t0, win.t1, win.dt, sel) for r in shown}
+            if mission
+            else {}
+        )
         critical = frozenset(fc.critical_path()) if fc is not None else frozenset()
         links = tl.links(lanes, shown, win)
-        sel = self.model.selection.skill
         self.rows, self.row_bars = [], {}
         for i, robot in enumerate(shown):
             self.row_bars[len(self.rows)] = lanes.get(robot, [])
@@ -95,19 +100,38 @@ class TimelineView(Widget):
         self.axis_rows = tl.axis(win, now)
         self.refresh()
 
-    def _style(self, names: tuple[str, ...], styles: dict[str, Style]) -> Style:
-        style = styles["base"]
-        for n in names:
-            style += styles[n]
-        return style
+    def notify_style_update(self) -> None:
+        self._looks = {}  # the theme changed
+        super().notify_style_update()
 
-    def _styles(self) -> dict[str, Style]:
-        out = {s: self.get_component_rich_style(f"timeline--{s}", partial=True) for s in STYLES}
-        out["base"] = self.rich_style
+    def _look(self, names: tuple[str, ...]) -> Style:
+        """The Rich style of a cell's style names (cached: a frame has few kinds of cell)."""
+        look = self._looks.get(names)
+        if look is None:
+            look = self.rich_style
+            for n in names:
+                look += self.get_component_rich_style(f"timeline--{n}", partial=True)
+            self._looks[names] = look
+        return look
+
+    def _segments(self, cells: list[tl.Cell]) -> list[Segment]:
+        """Runs of cells with the same styles, one segment each."""
+        out: list[Segment] = []
+        run: list[str] = []
+        names: tuple[str, ...] | None = None
+        for ch, own in cells:
+            if own != names and run:
+                out.append(Segment("".join(run), self._look(names or ())))
+                run = []
+            names = own
+            run.append(ch)
+        if run:
+            out.append(Segment("".join(run), self._look(names or ())))
         return out
 
     def render_line(self, y: int) -> Strip:
-        st = self._styles()
+        st = {"base": self._look(()), "name": self._look(("name",))}
+        st["name-selected"] = self._look(("name-selected",))
         w = self.size.width
         if y < AXIS_H:
             cells = self.axis_rows[y]
@@ -120,9 +144,8 @@ class TimelineView(Widget):
             name = self.order[self.top + k // 2] if k % 2 == 0 else ""
         owner = self.model.owner(self.model.selection.skill or "")
         nst = st["name-selected"] if name and name == owner else st["name"]
-        segs = [Segment(tl_name(name, self.name_w), st["base"] + nst)]
-        segs += [Segment(ch, self._style(names, st)) for ch, names in cells[: self.lanes_w]]
-        return Strip(Segment.simplify(segs)).adjust_cell_length(w, st["base"])
+        segs = [Segment(tl_name(name, self.name_w), nst), *self._segments(cells[: self.lanes_w])]
+        return Strip(segs).adjust_cell_length(w, st["base"])
 
     def on_click(self, event: events.Click) -> None:
         k = event.y - AXIS_H

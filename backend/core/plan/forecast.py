@@ -22,6 +22,7 @@ or a telemetry sample recomputes only the robots it touched.
 from __future__ import annotations
 
 import bisect
+import math
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 
@@ -47,6 +48,7 @@ class SkillForecast:
     battery_min: float | None
     battery_end: float | None
     out_of_coverage: tuple[Span, ...]  # wall-clock spans out of comms coverage
+    skill: SkillInstance = field(compare=False, repr=False)  # as the course saw it
 
     @property
     def wait_s(self) -> float:
@@ -133,9 +135,13 @@ class Forecast:
             return _skill(robot, track, seg, i, self.speed)
         return None
 
-    def window(self, robot: str, t0: float, t1: float) -> Iterator[SkillForecast]:
+    def window(
+        self, robot: str, t0: float, t1: float, step: float = 0.0
+    ) -> Iterator[SkillForecast]:
         """The robot's predicted skills overlapping [t0, t1], in order (what a
-        timeline shows: found by bisection, not by walking every skill)."""
+        timeline shows: found by bisection, not by walking every skill). With
+        `step` (seconds per cell of a drawing), at most one skill per cell:
+        the first that starts in it."""
         track = self.tracks.get(robot)
         if track is None:
             return
@@ -143,16 +149,28 @@ class Forecast:
         for seg in track.segments[: track.laid]:
             if seg.end < t0 or seg.start > t1:
                 continue
-            i = seg.first
+            k = seg.first
             if seg.kind != "active" and t0 > seg.start:
-                at = c.offsets[seg.first] + (t0 - seg.start) * self.speed
-                i = max(seg.first, bisect.bisect_right(c.offsets, at, seg.first, seg.last) - 1)
-            for k in range(i, seg.last):
-                f = self.skill(c.steps[k].skill.id)
-                if f is None or f.start > t1:
+                k = self._step_at(c, seg, t0, seg.first)
+            while k < seg.last:
+                sid = c.steps[k].skill.id
+                f = self._memo.get(sid)
+                if f is None:
+                    f = self._memo[sid] = _skill(robot, track, seg, k, self.speed)
+                if f.start > t1:
                     break
                 if f.end >= t0:
                     yield f
+                if step > 0 and seg.kind != "active":  # on to the next cell
+                    cell_end = t0 + (math.floor((f.start - t0) / step) + 1) * step
+                    k = max(k + 1, self._step_at(c, seg, cell_end, k + 1))
+                else:
+                    k += 1
+
+    def _step_at(self, c: Course, seg: Segment, t: float, lo: int) -> int:
+        """The first step of `seg` (from `lo`) still going at time t."""
+        at = c.offsets[seg.first] + (t - seg.start) * self.speed
+        return max(lo, bisect.bisect_right(c.offsets, at, lo, seg.last) - 1)
 
     def critical_path(self) -> list[str]:
         """Skill ids, first to last, of the chain that sets the mission's end."""
@@ -206,6 +224,7 @@ def _skill(robot: str, track: Track, seg: Segment, i: int, speed: float) -> Skil
         battery_min=step.battery_min,
         battery_end=step.battery_end,
         out_of_coverage=_spans(step, start, end, speed),
+        skill=step.skill,
     )
 
 
