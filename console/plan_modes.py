@@ -2,11 +2,13 @@
 and the timer that keeps the forecast and the checks current.
 
 A mixin of `MissionApp` (console/app.py), which calls `add_plan_modes` when
-it is made and `start_plan` when it is mounted. Every `PLAN_TICK_S` the
-plan (`ConsoleModel.plan`, console/state/plan.py) is refreshed from the
-model, the map feed's mirror and the simulator's status; when its forecast
-or findings changed, the app says so on its awareness signal ("plan") and
-the schedule redraws its check glyphs and what its sync allows.
+it is made and `start_plan` when it is mounted. After each change the app
+announces on its awareness signal (a state, events, telemetry), and every
+`PLAN_TICK_S` as the clock moves, the plan (`ConsoleModel.plan`,
+console/state/plan.py) is refreshed from the model, the map feed's mirror
+and the simulator's status; when its forecast or findings changed, the app
+says so ("plan") and the schedule redraws its check glyphs and what its
+sync allows.
 """
 
 from __future__ import annotations
@@ -33,8 +35,15 @@ class PlanModes:
         self.add_mode("checks", lambda: ChecksScreen(self.model, changes))
 
     def start_plan(self: Any) -> None:
+        # after every change the app announces (state, events, telemetry, fleet): at once,
+        # so what the schedule shows follows the messages in order; the timer moves the clock
+        self.awareness_signal.subscribe(self, self._plan_inputs_changed)
         self.refresh_plan()
         self.set_interval(PLAN_TICK_S, self.refresh_plan)
+
+    def _plan_inputs_changed(self: Any, change: tuple[str, str | None]) -> None:
+        if change[0] in ("fleet", "log"):
+            self.call_next(self.refresh_plan)
 
     def refresh_plan(self: Any, force: bool = False) -> None:
         """Recompute the plan's forecast and checks from what changed."""
