@@ -413,11 +413,13 @@ def image_spot(op: Operator, region: Region, start: XY) -> XY:
 
 
 async def survey_from_the_air(op: Operator, altitude: float = 10.0) -> list[str]:
-    """Ardea maps the whole site in one flight (at 10 m its camera sees 40 m), lands."""
+    """Ardea maps the whole site in one flight (at 10 m its camera sees 40 m: 427 s), lands.
+    The survey is capped at 480 s: the server's sync gate predicts the flight from the
+    library's drone model and refuses one that would empty the battery."""
     return await op.do(
         "ardea",
         ("takeoff", {"altitude": altitude}),
-        ("explore", {"area": op.site(), "max_duration": 560}),
+        ("explore", {"area": op.site(), "max_duration": 480}),
         ("land", {"where": "lander_pad"}),
     )
 
