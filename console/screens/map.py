@@ -79,6 +79,8 @@ def legend_text(colours: dict[str, str] | None = None) -> Text:
 
     t.append("Legend\n", style="bold")
     row(ROBOT_ARROWS[0], "bold", "robot, heading")
+    # the one heading convention (the editor, ctl and the info line use it too)
+    t.append("   heading: 0° east,\n   counter-clockwise\n", style="dim")
     for st in (
         Status.RUNNING,
         Status.PAUSED,

@@ -8,7 +8,7 @@ from typing import Any
 
 from backend.core.library import Library
 from backend.core.model import SkillInstance, Status
-from backend.core.params import ParamSpec
+from backend.core.params import POSE_FIELDS, ParamSpec, pose_text, value_text
 
 # -- statuses -------------------------------------------------------------------
 
@@ -66,14 +66,14 @@ def fmt_number(v: Any) -> str:
 
 
 def fmt_value(spec: ParamSpec | None, v: Any) -> str:
-    """A short, one-line rendering of a parameter value."""
+    """A short, one-line rendering of a parameter value (angles in degrees)."""
     t = spec.type if spec else None
     if (
         isinstance(v, dict)
         and t in ("pose", "position")
-        or (isinstance(v, dict) and set(v) <= {"x", "y", "z", "roll", "pitch", "yaw"} and v)
+        or (isinstance(v, dict) and set(v) <= set(POSE_FIELDS) and v)
     ):
-        return "(" + ",".join(fmt_number(v.get(k, 0.0)) for k in ("x", "y")) + ")"
+        return pose_text(v)  # (x,y) and what is not 0: (3,4 yaw=90°)
     if t == "area" and isinstance(v, list):
         return f"area[{len(v)}]"
     if isinstance(v, list):
@@ -85,12 +85,9 @@ def fmt_value(spec: ParamSpec | None, v: Any) -> str:
             + ("…" if len(v) > 2 else "")
             + "}"
         )
-    unit = (
-        spec.unit
-        if spec and spec.unit and isinstance(v, int | float) and not isinstance(v, bool)
-        else ""
-    )
-    return f"{fmt_number(v)}{unit}"
+    if spec is not None and isinstance(v, int | float) and not isinstance(v, bool):
+        return value_text(spec, v)  # with its unit; an angle in degrees
+    return fmt_number(v)
 
 
 def param_summary(skill: SkillInstance, library: Library | None) -> str:

@@ -1,4 +1,10 @@
-"""ctl's command-line values: `--param NAME=VALUE`, names, --pose/--position/--area."""
+"""ctl's command-line values: `--param NAME=VALUE`, names, --pose/--position/--area.
+
+Angles are typed in degrees, as ctl prints them: a bare number is degrees,
+`30deg` and `0.52rad` say their unit (backend.core.params.parse_angle); the
+wire keeps radians. `--pose`'s roll, pitch and yaw are angles; a `--param`
+is one when its spec says so (`param_value`, once the library is known).
+"""
 
 from __future__ import annotations
 
@@ -10,7 +16,14 @@ from datetime import date, datetime
 from typing import Any
 
 from backend.cli.ctl.errors import UsageError
-from backend.core.params import POSE_FIELDS, POSITION_FIELDS
+from backend.core.params import (
+    ANGLE_FIELDS,
+    POSE_FIELDS,
+    POSITION_FIELDS,
+    ParamSpec,
+    parse_angle,
+    value_from_text,
+)
 
 _NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_\-]*$")  # model.NAME_PATTERN (kept light to import)
 
@@ -82,6 +95,17 @@ def parse_param(text: str) -> tuple[str, Any]:
     return name, _plain(value, f"--param {name}")
 
 
+def param_value(name: str, value: Any, spec: ParamSpec | None) -> Any:
+    """A `--param` value as the wire carries it: angles typed in degrees (or
+    with their unit) become radians; unknown spec: as typed (the server checks)."""
+    if spec is None:
+        return value
+    wire, problem = value_from_text(spec, value)
+    if problem is not None:
+        raise UsageError(f"--param {name}: {problem}")
+    return wire
+
+
 def parse_params(items: list[str] | None) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for text in items or []:
@@ -124,16 +148,36 @@ def _mapping(text: str, what: str, fields: tuple[str, ...]) -> dict[str, float]:
     for k, v in data.items():
         if k not in fields:
             raise UsageError(f"{what}: unknown field {k!r} (fields: {', '.join(fields)})")
+        if k in ANGLE_FIELDS:
+            out[k] = _angle(v, f"{what}: {k}")
+            continue
         if not isinstance(v, int | float) or isinstance(v, bool) or not math.isfinite(v):
             raise UsageError(f"{what}: {k} must be a finite number, got {v!r}")
         out[k] = float(v)
     return out
 
 
+def _angle(v: Any, what: str) -> float:
+    """An angle typed on the command line -> radians (bare numbers are degrees)."""
+    rad, problem = parse_angle(v)
+    if rad is None:
+        raise UsageError(f"{what}: {problem}")
+    return rad
+
+
 def parse_pose(text: str) -> dict[str, float]:
+    """`x,y[,z[,roll,pitch,yaw]]` or `{x: 1, y: 2, yaw: 90}`; angles in degrees
+    unless they say `rad` (`yaw: 1.57rad`, `1,2,0,0,0,1.57rad`)."""
     if text.strip().startswith("{"):
         return _mapping(text, "--pose", POSE_FIELDS)
-    return dict(zip(POSE_FIELDS, _numbers(text, "--pose", 2, 6), strict=False))
+    parts = [p for p in re.split(r"[,\s]+", text.strip()) if p]
+    if not 2 <= len(parts) <= 6:
+        raise UsageError(f"--pose: expected 2 to 6 comma-separated numbers, got {text!r}")
+    coords = ",".join(parts[:3])
+    out = dict(zip(POSE_FIELDS, _numbers(coords, "--pose", 2, 3), strict=False))
+    for k, v in zip(ANGLE_FIELDS, parts[3:], strict=False):
+        out[k] = _angle(v, f"--pose: {k}")
+    return out
 
 
 def parse_position(text: str, what: str = "--position") -> dict[str, float]:
