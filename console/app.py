@@ -56,13 +56,14 @@ from console.messages import (
     TelemetryChanged,
 )
 from console.screens.alerts import AlertScreen
-from console.screens.dialogs import ConfirmScreen, HelpScreen, UnreachableScreen
+from console.screens.dialogs import HelpScreen, QuitScreen, UnreachableScreen
 from console.screens.fleet import FleetScreen
 from console.screens.log import EventLogScreen
 from console.screens.map import MapScreen
 from console.screens.mission import MissionScreen
 from console.state.actions import ACTIONS
 from console.state.eventlog import AlertBook, AlertEntry, EventLog
+from console.state.files import RecentFiles
 from console.state.model import CONNECTED, CONNECTING, OFFLINE, UNREACHABLE, ConsoleModel
 from console.themes.loader import ANSI16_MAP, ANSI16_STATUS, Downgrade16, choose_theme, load_themes
 from console.themes.variables import VARIABLE_DEFAULTS
@@ -108,9 +109,16 @@ class MissionApp(App[int]):
         client_id: str | None = None,
         colors: int | None = None,
         login: Login | None = None,
+        ask_before_quit: bool = True,
+        quitting_stops: str = "",
     ) -> None:
         super().__init__()
         self.config = config or ConsoleConfig()
+        # quitting asks when robots execute, commands wait or the plan is unsaved
+        # (--yes: never); `quitting_stops` says what else ends with the console (the demo)
+        self.ask_before_quit = ask_before_quit
+        self.quitting_stops = quitting_stops
+        self.recent = RecentFiles(self.config.recent_path)
         self.notices = [*notices, *self.config.problems]
         self.model = ConsoleModel(endpoint=connect or "")
         # 16 colours (asked for, or a TERM=xterm terminal: see on_mount)
@@ -217,7 +225,7 @@ class MissionApp(App[int]):
         self.switch_mode("alerts")
 
     def get_default_screen(self) -> Screen:
-        self.mission_screen = MissionScreen(self.model, self.alerts)
+        self.mission_screen = MissionScreen(self.model, self.alerts, self.recent)
         return self.mission_screen
 
     def action_keys(self) -> dict[str, str]:
@@ -271,19 +279,29 @@ class MissionApp(App[int]):
         self.run_worker(self.quit_now(), group="quit")
 
     async def action_quit(self) -> None:
-        """Ctrl+Q: asks first when the editor holds unapplied changes."""
-        unapplied = self._unapplied()
-        if unapplied and not isinstance(self.screen, ConfirmScreen):
-            self.push_screen(
-                ConfirmScreen(
-                    f"Unapplied changes to {', '.join(unapplied)} are lost when you quit. "
-                    "Quit anyway?",
-                    yes="Quit",
-                ),
-                self._quit_confirmed,
-            )
+        """Ctrl+Q: asks first when robots are executing, commands are not yet
+        acknowledged, the plan has unsaved edits or the editor unapplied
+        changes (`ask_before_quit` False: never)."""
+        if isinstance(self.screen, QuitScreen):
+            return  # it handles ctrl+q itself
+        risks = self.quit_risks() if self.ask_before_quit else []
+        if not risks:
+            await self.quit_now()
             return
-        await self.quit_now()
+        consequence = self.quitting_stops or (
+            "The server keeps the mission; the robots go on executing, watched by no one from here."
+        )
+        can_save = self.model.unsaved_edits > 0 and self._screen_live()
+        self.push_screen(QuitScreen(risks, consequence, can_save=can_save), self._quit_answered)
+
+    def quit_risks(self) -> list[str]:
+        """What quitting now walks away from (console/state/model.py), and
+        the editor's unapplied changes."""
+        risks = self.model.quit_risks()
+        unapplied = self._unapplied()
+        if unapplied:
+            risks.append(f"unapplied changes in the editor to {', '.join(unapplied)}")
+        return risks
 
     def _unapplied(self) -> list[str]:
         s = self.mission_screen
@@ -293,9 +311,15 @@ class MissionApp(App[int]):
             [s.editor.skill_id] if s.editor.dirty and s.editor.skill_id else []
         )
 
-    def _quit_confirmed(self, yes: bool | None) -> None:
-        if yes:
+    def _quit_answered(self, answer: str | None) -> None:
+        if answer == "quit":
             self.run_worker(self.quit_now(), group="quit")
+        elif answer == "save":
+            self.run_worker(self._save_then_quit(), group="quit")
+
+    async def _save_then_quit(self) -> None:
+        if self.mission_screen is not None and await self.mission_screen.save_mission():
+            await self.quit_now()
 
     async def quit_now(self) -> None:
         await self.close_connection()

@@ -41,6 +41,7 @@ from console.state.actions import ACTIONS, BY_NAME
 from console.state.capability import also_offered_by
 from console.state.defaults import default_params
 from console.state.eventlog import AlertBook
+from console.state.files import RecentFiles
 from console.state.model import CONNECTED, ConsoleModel
 from console.widgets.bars import StatusLine, TopBar, connection_text
 from console.widgets.param_editor import ParamEditor
@@ -83,10 +84,16 @@ class MissionScreen(MissionFiles, Screen):
 
     CSS_PATH = TCSS
 
-    def __init__(self, model: ConsoleModel, alerts: AlertBook | None = None) -> None:
+    def __init__(
+        self,
+        model: ConsoleModel,
+        alerts: AlertBook | None = None,
+        recent: RecentFiles | None = None,
+    ) -> None:
         super().__init__()
         self.model = model
         self.alerts = alerts  # its count of unacknowledged alerts is the top bar's badge
+        self.recent = recent or RecentFiles()  # saved and loaded files, newest first
         self.last_path: str | None = None  # of the last save or load: the next one's default
         self.pending_select: str | None = None
         # kept as attributes: messages may arrive while the screen is being torn down

@@ -33,6 +33,27 @@ CONNECTING, CONNECTED, RECONNECTING, UNREACHABLE, OFFLINE = (
 
 # -- the model --------------------------------------------------------------------
 
+PLAN_FIELDS = frozenset({"label", "params", "bindings", "policies"})
+
+
+def is_plan_edit(e: object) -> bool:
+    """An event that changes what a saved mission file holds (not a status)."""
+    match e:
+        case ev.SkillChanged(changes=changes):
+            return bool(PLAN_FIELDS & set(changes))
+        case (
+            ev.SkillAdded()
+            | ev.SkillRemoved()
+            | ev.SkillMoved()
+            | ev.BarrierSet()
+            | ev.BarrierRemoved()
+            | ev.MarkerSet()
+            | ev.MarkerRemoved()
+            | ev.MissionReplaced()
+        ):
+            return True
+    return False
+
 
 @dataclass
 class Selection:
@@ -64,6 +85,11 @@ class ConsoleModel:
     # robot -> the last HISTORY (battery, link) samples, for the fleet screen's sparklines
     history: dict[str, deque[tuple[float, float]]] = field(default_factory=dict)
     selection: Selection = field(default_factory=Selection)
+    # plan edits (anyone's) since this console loaded the state, saved or loaded a file
+    unsaved_edits: int = 0
+    # robot -> its commands not yet acknowledged, as sentences ("sync lru1-3, 2m10s old");
+    # empty until the robot link's state reaches the console (issue 19): quitting asks then
+    pending: dict[str, list[str]] = field(default_factory=dict)
 
     # -- updates ------------------------------------------------------------------
     def load(
@@ -96,12 +122,8 @@ class ConsoleModel:
         columns changed, or None when everything may have changed."""
         if self.mission is None:
             return None
-        if mission is not None:
-            self.mission = mission
-        else:
-            if batch.revision <= self.mission.revision:
-                return set()
-            self.mission = ev.apply_events(self.mission, batch)
+        if not self._take(batch, mission):
+            return set()
         robots: set[str] = set()
         reindex = False
         barriers = False
@@ -140,6 +162,42 @@ class ConsoleModel:
         if barriers:  # tags of partner rows in other columns change too
             return None
         return robots
+
+    def _take(self, batch: ev.EventBatch, mission: Mission | None) -> bool:
+        """The mission after `batch` (False: an old batch, nothing changed)."""
+        assert self.mission is not None
+        if mission is not None:
+            self.mission = mission
+        elif batch.revision <= self.mission.revision:
+            return False
+        else:
+            self.mission = ev.apply_events(self.mission, batch)
+        if any(is_plan_edit(e) for e in batch.events):
+            self.unsaved_edits += 1
+        return True
+
+    def mark_saved(self) -> None:
+        """The plan was just saved to (or loaded from) a file."""
+        self.unsaved_edits = 0
+
+    def quit_risks(self) -> list[str]:
+        """What quitting now would walk away from: robots executing, commands
+        not yet acknowledged, plan edits not saved to a file (sentences)."""
+        risks: list[str] = []
+        busy = []
+        for robot in self.robot_order():
+            act = self.robot_state(robot)[0]
+            if act is not None:
+                busy.append(f"{robot} is {STATUS_WORDS[act.status]} ({act.id})")
+        if busy:
+            risks.append("; ".join(busy))
+        waiting = [f"{r}: {', '.join(cmds)}" for r, cmds in self.pending.items() if cmds]
+        if waiting:
+            risks.append("commands not yet acknowledged — " + "; ".join(waiting))
+        if self.unsaved_edits:
+            n = self.unsaved_edits
+            risks.append(f"{n} plan edit{'s' if n > 1 else ''} not saved to a file")
+        return risks
 
     def set_robot(self, info: RobotInfo) -> None:
         self.robots[info.name] = info

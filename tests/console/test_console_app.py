@@ -723,7 +723,7 @@ async def test_a_long_label_is_cut_but_never_the_attempt_number():
 
 
 async def test_quitting_with_unapplied_changes_asks_first():
-    from console.screens.dialogs import ConfirmScreen
+    from console.screens.dialogs import QuitScreen
 
     b = Builder(TUTORIAL)
     app = make_app(backend=EngineBackend(b))
@@ -734,16 +734,16 @@ async def test_quitting_with_unapplied_changes_asks_first():
         app.mission_screen.editor.query_one("#f-label").value = "unsaved"
         await pilot.pause()
         await pilot.press("ctrl+q")
-        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the question")
-        assert "Unapplied changes to lru2-1 are lost when you quit" in screen_text(app)
+        await wait_until(pilot, lambda: isinstance(app.screen, QuitScreen), what="the question")
+        assert "unapplied changes in the editor to lru2-1" in screen_text(app)
         await pilot.press("n")
-        await wait_until(pilot, lambda: not isinstance(app.screen, ConfirmScreen), what="back")
+        await wait_until(pilot, lambda: not isinstance(app.screen, QuitScreen), what="back")
         assert app.return_code is None
         await pilot.press("ctrl+q")
         await wait_until(
-            pilot, lambda: isinstance(app.screen, ConfirmScreen), what="the question again"
+            pilot, lambda: isinstance(app.screen, QuitScreen), what="the question again"
         )
-        await pilot.press("y")
+        await pilot.press("q")
         await wait_exit(app)
         assert app.return_code == 0
 
