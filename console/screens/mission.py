@@ -1,9 +1,9 @@
 """The mission screen: schedule panel, parameter editor, control keys.
 
-Layout (wide): top bar / schedule | parameter editor / status line / footer.
-Below 100 columns the editor is shown instead of the schedule while editing
-(enter / e opens it, escape returns). Part 2 adds the map, fleet and event-log
-screens as further app modes next to this one.
+Layout: top bar / schedule | parameter editor / status line / footer. From
+100 columns the editor is a side panel beside the schedule; below, it is a
+toggle (enter / e opens it beside the schedule, escape closes it). Part 2
+adds the map, fleet and event-log screens as further app modes next to this one.
 """
 
 from __future__ import annotations

@@ -11,6 +11,7 @@ they do not fit. How each line of a column is drawn: schedule_lines.py.
 
 from __future__ import annotations
 
+from rich.cells import cell_len
 from rich.segment import Segment
 from textual import events
 from textual.binding import Binding
@@ -57,6 +58,7 @@ class ScheduleView(ScrollView, can_focus=True):
         "schedule--progress",
         "schedule--battery-low",
         "schedule--rule",
+        "schedule--more",
     }
 
     BINDINGS = [
@@ -465,7 +467,33 @@ class ScheduleView(ScrollView, can_focus=True):
             else:
                 segs.append(Segment("│", st["divider"]))
         start = start or 0
-        return Strip(segs).crop_extend(x0 - start, x1 - start, base)
+        strip = Strip(segs).crop_extend(x0 - start, x1 - start, base)
+        if y == HEADER_H - 1:  # on the rule under the headers, which hides nothing
+            strip = self._with_hidden_robots(strip, x0, x1, st)
+        return strip
+
+    def hidden_robots(self) -> tuple[int, int]:
+        """(columns cut or hidden on the left, on the right) of the view now."""
+        x0 = int(self.scroll_x)
+        x1 = x0 + self.scrollable_content_region.width
+        left = sum(1 for c in self.columns if c.x < x0)
+        right = sum(1 for c in self.columns if c.x + c.width > x1)
+        return left, right
+
+    def _with_hidden_robots(self, strip: Strip, x0: int, x1: int, st: Styles) -> Strip:
+        """The rule under the headers says how many robots are off to each
+        side ("← 1", "+2 robots →"): a scrollbar alone is easy to miss."""
+        left, right = self.hidden_robots()
+        width = x1 - x0
+        if right:
+            text = f" +{right} robot{'s' if right > 1 else ''} → " if width >= 40 else f" +{right}→"
+            n = cell_len(text)
+            strip = Strip.join([strip.crop(0, width - n), Strip([Segment(text, st["more"])])])
+        if left:
+            text = f" ← {left} " if width >= 40 else f"←{left}"
+            n = cell_len(text)
+            strip = Strip.join([Strip([Segment(text, st["more"])]), strip.crop(n, width)])
+        return strip
 
     def _header_segments(self, col: Column, y: int, st: Styles) -> list[Segment]:
         compact = col.static and not self.expand_static

@@ -20,7 +20,7 @@ from console.state.model import ConsoleModel
 from console.state.text import GLYPHS, STATUS_CSS, fmt_clock, fmt_duration, skill_title
 
 HEADER_H = 4  # name + presence / battery + link / activity / rule
-MIN_W = 24  # a dynamic robot's column, at least
+MIN_W = 18  # a dynamic robot's column, at least (at 80 columns 3 robots and a static one fit)
 
 Styles = dict[str, Style]  # component class without "schedule--" (and "base") -> style
 
@@ -69,6 +69,30 @@ def fit(text: str, width: int) -> str:
     if cell_len(text) > width:
         return set_cell_size(text, width - 1) + "…"
     return set_cell_size(text, width)
+
+
+def fit_middle(text: str, width: int) -> str:
+    """Exactly `width` cells, cut in the middle when too long: labels often
+    differ at the end ("drive to POI-A" / "drive to POI-B"), so both ends stay
+    ("explore…plain"); the editor shows the whole label."""
+    if width <= 0:
+        return ""
+    if cell_len(text) <= width:
+        return set_cell_size(text, width)
+    if width < 6:
+        return fit(text, width)
+    start = set_cell_size(text, (width - 1) // 2 + (width - 1) % 2).rstrip()
+    room = width - 1 - cell_len(start)
+    k = room
+    end = ""
+    while 0 < k < len(text) - len(start):  # the tail's room filled, no space first
+        end = text[-k:].lstrip()
+        if cell_len(end) >= room:
+            break
+        k += 1
+    while cell_len(end) > room:
+        end = end[1:]
+    return set_cell_size(start + "…" + end, width)
 
 
 # -- the header: a table of its lines ----------------------------------------------------
@@ -184,12 +208,12 @@ def skill_segments(
         Segment(GLYPHS[s.status], sst),
     ]
     body = " " + title + attempt
-    if cell_len(body) >= room:  # the label is cut, never the attempt number
-        segs.append(Segment(fit(" " + title, room - len(attempt)) + attempt, sst))
+    if cell_len(body) >= room:  # the label is cut in the middle, never the attempt number
+        segs.append(Segment(" " + fit_middle(title, room - 1 - len(attempt)) + attempt, sst))
     else:
         segs.append(Segment(body, sst))
         rest = room - cell_len(body)
-        if extra and rest > 2:
+        if extra and rest >= 8:  # a summary cut to a letter or two says nothing
             segs.append(Segment(fit(" " + extra, rest), st["dim"]))
         else:
             segs.append(Segment(" " * rest, st["base"]))
@@ -223,8 +247,13 @@ def progress_segments(
     if t is None or pct is None:
         text = "   running" + (f" · {s.status_info}" if s.status_info else "")
         return [Segment(fit(text, w), st["dim"])]
-    eta = f" ETA {fmt_duration(t.eta_s)}" if t.eta_s is not None else ""
-    label = f" {int(pct * 100):3d}%{eta}"
+    eta = fmt_duration(t.eta_s) if t.eta_s is not None else ""
+    # the longest label that leaves the bar 4 cells ("45% ETA 2m12s", "45% 2m12s", "45%")
+    labels = [f" {int(pct * 100):3d}%" + (f" ETA {eta}" if eta else "")]
+    if eta:
+        labels.append(f" {int(pct * 100)}% {eta}")
+    labels.append(f" {int(pct * 100)}%")
+    label = next((x for x in labels if w - 5 - cell_len(x) >= 4), labels[-1])
     bar_w = max(4, w - 3 - cell_len(label) - 2)
     filled = int(round(pct * bar_w))
     return [
