@@ -15,14 +15,16 @@ from __future__ import annotations
 import asyncio
 import gc
 import signal
+import threading
 from collections.abc import Callable
-from datetime import UTC, datetime
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
 from textual import on
 from textual.app import App
 from textual.binding import Binding
+from textual.notifications import Notification, SeverityLevel
 from textual.screen import Screen
 from textual.signal import Signal
 
@@ -65,10 +67,12 @@ from console.state.actions import ACTIONS
 from console.state.eventlog import AlertBook, AlertEntry, EventLog
 from console.state.files import RecentFiles
 from console.state.model import CONNECTED, CONNECTING, OFFLINE, UNREACHABLE, ConsoleModel
+from console.state.text import without_paths
 from console.themes.loader import ANSI16_MAP, ANSI16_STATUS, Downgrade16, choose_theme, load_themes
 from console.themes.variables import VARIABLE_DEFAULTS
 
 HERE = Path(__file__).parent
+MAX_TOASTS = 3  # notifications on screen at once (at 80x24 more cover the schedule)
 
 
 def refusal_text(reply: ErrorReply, robot: str | None = None, skill: str | None = None) -> str:
@@ -137,8 +141,9 @@ class MissionApp(App[int]):
         self.event_log = EventLog()
         self.alerts = AlertBook()
         self.awareness_signal: Signal[tuple[str, str | None]] = Signal(self, "awareness")
-        self.clock: Callable[[], datetime] = lambda: datetime.now(UTC)  # tests pin it
         self.bells = 0  # how often the bell rang (tests)
+        self._repeats: dict[str, int] = {}  # toast identity -> how many times it was said
+        self._folded: tuple[str, int] = ("", 0)  # the "N more" toast: identity, N
         self.add_mode(self.DEFAULT_MODE, self.get_default_screen)
         # part-2 screens as app modes (F2/1 back to the schedule; F3/2 is the map's),
         # each handed the state it shows and the signal that says it changed
@@ -163,6 +168,15 @@ class MissionApp(App[int]):
         self._hanging_up = False
         self.on_forced_exit: list[Callable[[], object]] = []  # before a forced exit (hang-up)
         self.exit_code = 0
+
+    @property
+    def clock(self) -> Callable[[], datetime]:
+        """Now, for the log, alerts and how old a robot's state is (tests pin it)."""
+        return self.model.clock
+
+    @clock.setter
+    def clock(self, clock: Callable[[], datetime]) -> None:
+        self.model.clock = clock
 
     # -- theme and screens --------------------------------------------------------------
     def get_theme_variable_defaults(self) -> dict[str, str]:
@@ -509,6 +523,61 @@ class MissionApp(App[int]):
         if self._screen_live() and a.level == "error":
             self.mission_screen.say(f"✗ {a.message}", "error")
         self.alerts_changed()
+
+    # -- notifications: one per situation, folded when they pile up ----------------------
+    def notify(
+        self,
+        message: str,
+        *,
+        title: str = "",
+        severity: SeverityLevel = "information",
+        timeout: float | None = None,
+        markup: bool = True,
+    ) -> None:
+        """A toast, but one per situation (the same title and severity
+        replace the earlier toast, counted: "(×3)"), at most MAX_TOASTS on
+        screen (the oldest fold into one "N more" toast: the alert list and
+        the event log keep them all), and no absolute file paths."""
+        message, title = without_paths(str(message)), without_paths(title)
+        if threading.get_ident() != self._thread_id:  # from another thread: as Textual does
+            super().notify(message, title=title, severity=severity, timeout=timeout, markup=markup)
+            return
+        live = list(self._notifications)  # (iterating drops the expired ones)
+        repeats = 1
+        for n in live:
+            if n.title == title and n.severity == severity and n.identity != self._folded[0]:
+                repeats += self._repeats.pop(n.identity, 1)
+                self._unnotify(n, refresh=False)
+        others = [n for n in self._notifications if n.identity != self._folded[0]]
+        if len(others) > MAX_TOASTS - 2:
+            self._fold(others[: len(others) - (MAX_TOASTS - 2)])
+        n = Notification(
+            message + (f" (×{repeats})" if repeats > 1 else ""),
+            title,
+            severity,
+            self.NOTIFICATION_TIMEOUT if timeout is None else timeout,
+            markup=markup,
+        )
+        self._repeats[n.identity] = repeats
+        self._notifications.add(n)
+        self._refresh_notifications()
+
+    def _fold(self, oldest: list[Notification]) -> None:
+        """Replace the oldest toasts (and an earlier fold) with one that counts them."""
+        folded_id, count = self._folded
+        if not any(n.identity == folded_id for n in self._notifications):
+            count = 0  # the earlier fold has expired
+        for n in list(self._notifications):
+            if n.identity == folded_id or n in oldest:
+                self._unnotify(n, refresh=False)
+        count += len(oldest)
+        fold = Notification(
+            f"{count} more — F6 lists the alerts, F5 the event log",
+            "Notifications folded",
+            timeout=10,
+        )
+        self._folded = (fold.identity, count)
+        self._notifications.add(fold)
 
     def ring(self) -> None:
         self.bells += 1

@@ -133,6 +133,20 @@ class MissionScreen(MissionFiles, Screen):
         self.schedule.focus()
         self.update_top()
         self.schedule.rebuild()
+        self._stale: frozenset[str] = frozenset()
+        # "as of 25s ago" counts up; a robot falling silent turns stale without a message
+        self.set_interval(1.0, self.freshness_tick)
+
+    def freshness_tick(self) -> None:
+        """Redraw what shows how old a robot's state is: all of it when a
+        robot turned stale or fresh, else the stale robots' headers."""
+        stale = frozenset(r for r in self.model.robot_order() if self.model.freshness(r).stale)
+        if stale != self._stale:
+            self._stale = stale
+            self.schedule.refresh()
+            return
+        for robot in stale:
+            self.schedule.refresh_telemetry(robot)
 
     def on_resize(self, event: events.Resize) -> None:
         narrow = event.size.width < NARROW

@@ -11,13 +11,16 @@ action does not apply), so it can be unit-tested without a terminal.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 
 from backend.core import events as ev
 from backend.core.library import Library
 from backend.core.model import ACTIVE, Mission, SkillInstance, Status
 from backend.protocol.messages import RobotInfo, Telemetry
 from console.state import availability
+from console.state.freshness import Freshness, freshness
 from console.state.text import GLYPHS, STATUS_WORDS, fmt_clock
 
 HISTORY = 120  # telemetry samples kept per robot (bounded memory)
@@ -34,6 +37,8 @@ CONNECTING, CONNECTED, RECONNECTING, UNREACHABLE, OFFLINE = (
 # -- the model --------------------------------------------------------------------
 
 PLAN_FIELDS = frozenset({"label", "params", "bindings", "policies"})
+# operations a robot's answer or report becomes (the robot was heard)
+ROBOT_OPS = frozenset({"report", "sync_ack", "unsync_done", "retry_ack", "reconcile"})
 
 
 def is_plan_edit(e: object) -> bool:
@@ -87,6 +92,9 @@ class ConsoleModel:
     selection: Selection = field(default_factory=Selection)
     # plan edits (anyone's) since this console loaded the state, saved or loaded a file
     unsaved_edits: int = 0
+    # robot -> when this console last heard it (telemetry, a report, presence back)
+    heard: dict[str, datetime] = field(default_factory=dict)
+    clock: Callable[[], datetime] = field(default=lambda: datetime.now(UTC))
     # robot -> its commands not yet acknowledged, as sentences ("sync lru1-3, 2m10s old");
     # empty until the robot link's state reaches the console (issue 19): quitting asks then
     pending: dict[str, list[str]] = field(default_factory=dict)
@@ -174,6 +182,12 @@ class ConsoleModel:
             self.mission = ev.apply_events(self.mission, batch)
         if any(is_plan_edit(e) for e in batch.events):
             self.unsaved_edits += 1
+        if batch.op in ROBOT_OPS:  # the robot spoke: it was alive then
+            now = self.clock()
+            for e in batch.events:
+                robot = self._owner.get(getattr(e, "id", ""), None) or getattr(e, "robot", None)
+                if isinstance(robot, str):
+                    self.heard[robot] = now
         return True
 
     def mark_saved(self) -> None:
@@ -201,9 +215,12 @@ class ConsoleModel:
 
     def set_robot(self, info: RobotInfo) -> None:
         self.robots[info.name] = info
+        if info.online:
+            self.heard[info.name] = self.clock()
 
     def set_telemetry(self, t: Telemetry) -> None:
         self.telemetry[t.robot] = t
+        self.heard[t.robot] = self.clock()
         h = self.history.get(t.robot)
         if h is None:
             h = self.history[t.robot] = deque(maxlen=HISTORY)
@@ -316,6 +333,10 @@ class ConsoleModel:
                 else f"{mode} · {queued} queued"
             )
         return mode or "idle"
+
+    def freshness(self, robot: str) -> Freshness:
+        """Whether what is shown of `robot` is live or its last known state."""
+        return freshness(self, robot, self.clock())
 
     # -- why an action does not apply (None: it applies): console/state/availability.py ----
     def why_not(

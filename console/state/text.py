@@ -3,6 +3,7 @@ one-line parameter summaries (Textual-free, so it is unit-tested without a termi
 
 from __future__ import annotations
 
+import re
 from datetime import datetime
 from typing import Any
 
@@ -126,3 +127,13 @@ def policy_marks(skill: SkillInstance) -> list[str]:
 
 def skill_title(skill: SkillInstance) -> str:
     return skill.label or skill.skill
+
+
+# an absolute file path (not the '/' of 'tcp/127.0.0.1:7447' or of '1/2')
+_ABSOLUTE_PATH = re.compile(r"(?<![\w.~:/])/(?:[\w.\-]+/)+([\w.\-]+)")
+
+
+def without_paths(text: str) -> str:
+    """A message for a notification: absolute file paths shortened to their
+    file name ('…/sim.log'), which is what tells an operator something."""
+    return _ABSOLUTE_PATH.sub(r"…/\1", text)

@@ -59,6 +59,8 @@ class ScheduleView(ScrollView, can_focus=True):
         "schedule--battery-low",
         "schedule--rule",
         "schedule--more",
+        "schedule--stale",
+        "schedule--stale-head",
     }
 
     BINDINGS = [
@@ -498,7 +500,8 @@ class ScheduleView(ScrollView, can_focus=True):
     def _header_segments(self, col: Column, y: int, st: Styles) -> list[Segment]:
         compact = col.static and not self.expand_static
         selected = y == HEADER_H - 1 and bool(self.columns) and self.columns[self.cursor_col] is col
-        return HEADER_LINES[y](Head(self.model, col, st, compact, selected))
+        fresh = self.model.freshness(col.robot)
+        return HEADER_LINES[y](Head(self.model, col, st, compact, selected, fresh))
 
     def _content_segments(self, ci: int, col: Column, line: int, st: Styles) -> list[Segment]:
         w = col.width
@@ -512,9 +515,11 @@ class ScheduleView(ScrollView, can_focus=True):
                     s = task[i]
                     if kind == "row":
                         return self._skill_segments(ci, col, s, st)
-                    return progress_segments(self.model, col, s, st)
+                    return progress_segments(
+                        self.model, col, s, st, self.model.freshness(col.robot)
+                    )
             if line == 0 and not col.sync:
-                hint = "  nothing on the robot" if not col.static or self.expand_static else "  –"
+                hint = "  nothing on robot" if not col.static or self.expand_static else "  –"
                 return [Segment(fit(hint, w), st["dim"])]
             return [Segment(" " * w, st["base"])]
         if line == self.sync_h:
@@ -542,6 +547,7 @@ class ScheduleView(ScrollView, can_focus=True):
     def _skill_segments(self, ci: int, col: Column, s: SkillInstance, st: Styles) -> list[Segment]:
         selected = ci == self.cursor_col and s.id == self.cursor_id
         bid = self.model.barrier_of(s.id)
+        stale = s.status != Status.IDLE and self.model.freshness(col.robot).stale
         return skill_segments(
             s,
             col.width,
@@ -551,4 +557,5 @@ class ScheduleView(ScrollView, can_focus=True):
             tag=f"[{bid}]" if bid else "",
             extra=self._summary(s) if not col.static or self.expand_static else "",
             cursor=(st["cursor"] if self.has_focus else st["cursor-blur"]) if selected else None,
+            stale=stale,
         )

@@ -16,6 +16,7 @@ from rich.segment import Segment
 from rich.style import Style
 
 from backend.core.model import SkillInstance, Status
+from console.state.freshness import FRESH, Freshness
 from console.state.model import ConsoleModel
 from console.state.text import GLYPHS, STATUS_CSS, fmt_clock, fmt_duration, skill_title
 
@@ -107,6 +108,7 @@ class Head:
     st: Styles
     compact: bool  # a static robot's narrow column (not expanded)
     selected: bool  # the cursor's column: its rule is heavy
+    fresh: Freshness = FRESH  # stale: the robot's last known state, drawn as such
 
 
 def _offline_since(robot: str, clock: str, width: int) -> str:
@@ -152,6 +154,9 @@ def _levels_line(h: Head) -> list[Segment]:
     t = h.model.telemetry.get(h.col.robot)
     if t is None:
         return [Segment(fit("bat –  link –", w), st["dim"])]
+    if h.fresh.stale:  # the last levels heard, not live ones
+        text = f"bat {int(round(t.battery * 100))}%  link {int(round(t.link * 100))}%"
+        return [Segment(fit(text, w), st["stale"])]
     bat = f"bat {int(round(t.battery * 100))}%"
     link = f"link {int(round(t.link * 100))}%" if t.in_range else "link: out of range"
     bst = st["battery-low"] if t.battery < 0.2 else st["base"]
@@ -166,8 +171,17 @@ def _levels_line(h: Head) -> list[Segment]:
 def _activity_line(h: Head) -> list[Segment]:
     if h.compact:
         n = len(h.col.ids)
+        if h.fresh.stale:
+            return [Segment(fit(h.fresh.as_of(), h.col.width), h.st["stale-head"])]
         return [Segment(fit(f"{n} skill{'s' if n != 1 else ''}", h.col.width), h.st["dim"])]
-    return [Segment(fit(h.model.activity_text(h.col.robot), h.col.width), h.st["dim"])]
+    activity = h.model.activity_text(h.col.robot)
+    if h.fresh.stale:  # what it was doing, as of when: first, so it is never cut
+        w = h.col.width
+        ago = h.fresh.ago()
+        as_of = fit(ago, w) if cell_len(ago) > w else ago
+        rest = fit(f": {activity}", w - cell_len(as_of))
+        return [Segment(as_of, h.st["stale-head"]), Segment(rest, h.st["stale"])]
+    return [Segment(fit(activity, h.col.width), h.st["dim"])]
 
 
 def _rule_line(h: Head) -> list[Segment]:
@@ -196,10 +210,12 @@ def skill_segments(
     tag: str,
     extra: str,
     cursor: Style | None,
+    stale: bool = False,
 ) -> list[Segment]:
     """A skill's row: mark, glyph, title (*: unapplied edits), attempt, the
-    parameter summary where it fits, the barrier tag; on `cursor`'s background."""
-    sst = st[STATUS_CSS[s.status]]
+    parameter summary where it fits, the barrier tag; on `cursor`'s background.
+    `stale`: a synchronized skill of a robot not heard lately (its last known status)."""
+    sst = st[STATUS_CSS[s.status]] + st["stale"] if stale else st[STATUS_CSS[s.status]]
     title = ("*" if draft else "") + skill_title(s)
     attempt = f" #{s.attempt}" if s.attempt > 1 else ""
     room = width - 2 - (cell_len(tag) + 1 if tag else 0)
@@ -226,13 +242,16 @@ def skill_segments(
 
 
 def progress_segments(
-    model: ConsoleModel, col: Column, s: SkillInstance, st: Styles
+    model: ConsoleModel, col: Column, s: SkillInstance, st: Styles, fresh: Freshness = FRESH
 ) -> list[Segment]:
     """The line under an active (or failed) skill: its progress bar and ETA,
-    why it paused or failed, what a barrier waits for."""
+    why it paused or failed, what a barrier waits for. A stale robot's bar
+    stops where it was last heard, without an ETA."""
     w = col.width
     t = model.telemetry.get(col.robot)
     has = t is not None and t.skill == s.id
+    if fresh.stale and s.status in (Status.RUNNING, Status.PAUSED):
+        return _stale_progress(t.progress if t is not None and has else None, w, st, fresh)
     if s.status == Status.FAILURE:
         return [Segment(fit("   ↳ " + s.status_info, w), st["failure"])]
     if s.status == Status.SYNCHWAITING:
@@ -262,6 +281,22 @@ def progress_segments(
         Segment("░" * (bar_w - filled), st["dim"]),
         Segment("▏", st["dim"]),
         Segment(fit(label, w - 3 - bar_w - 2), st["base"]),
+    ]
+
+
+def _stale_progress(pct: float | None, w: int, st: Styles, fresh: Freshness) -> list[Segment]:
+    """`▕██░░▏ 45% as of 25s ago`: the last known progress, stopped."""
+    as_of = fresh.as_of()
+    if pct is None:
+        return [Segment(fit(f"   {as_of}", w), st["stale"])]
+    label = f" {int(pct * 100)}% {as_of}"
+    bar_w = w - 5 - cell_len(label)
+    if bar_w < 4:
+        return [Segment(fit(f"   {int(pct * 100)}% {as_of}", w), st["stale"])]
+    filled = int(round(pct * bar_w))
+    return [
+        Segment("   ▕" + "█" * filled + "░" * (bar_w - filled) + "▏", st["stale"]),
+        Segment(fit(label, w - 5 - bar_w), st["stale-head"]),
     ]
 
 

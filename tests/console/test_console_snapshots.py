@@ -54,7 +54,7 @@ def test_empty_mission(snap_compare):
     assert snap_compare(
         make_app(),
         terminal_size=(110, 24),
-        run_before=_prepare(b, expect=("lru1", "ardea", "nothing on the robot", "empty plan")),
+        run_before=_prepare(b, expect=("lru1", "ardea", "nothing on robot", "empty plan")),
     )
 
 
