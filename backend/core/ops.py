@@ -93,6 +93,16 @@ class Retry(Strict):
     id: SkillId
 
 
+class RetryEdit(Strict):
+    """A failed skill's next attempt as an idle copy (same parameters,
+    bindings and policies, attempt + 1, id `ID.N`) at the head of its robot's
+    unsynchronized plan, to edit before it is synchronized; `retry` instead
+    queues the attempt on the robot at once."""
+
+    op: Literal["retry_edit"] = "retry_edit"
+    id: SkillId
+
+
 class AddBarrier(Strict):
     op: Literal["barrier"] = "barrier"
     ids: list[SkillId] = Field(min_length=2)
@@ -239,6 +249,7 @@ OperatorOperation = (
     | Unsync
     | Control
     | Retry
+    | RetryEdit
     | AddBarrier
     | RemoveBarrier
     | MarkerAdd
@@ -262,6 +273,7 @@ AnyOp = Annotated[Operation, Field(discriminator="op")]
 # operations that change the unsynchronized plan and can be undone
 UNDOABLE = (
     AddSkill,
+    RetryEdit,
     DeleteSkills,
     MoveSkill,
     EditSkill,
