@@ -15,7 +15,6 @@ from __future__ import annotations
 import asyncio
 import gc
 import signal
-import threading
 from collections.abc import Callable
 from datetime import datetime
 from pathlib import Path
@@ -24,7 +23,6 @@ from typing import Any
 from textual import on
 from textual.app import App
 from textual.binding import Binding
-from textual.notifications import Notification, SeverityLevel
 from textual.screen import Screen
 from textual.signal import Signal
 
@@ -57,8 +55,10 @@ from console.messages import (
     StateLoaded,
     TelemetryChanged,
 )
+from console.notifier import FoldingNotifications
+from console.quitting import QuitQuestion
 from console.screens.alerts import AlertScreen
-from console.screens.dialogs import HelpScreen, QuitScreen, UnreachableScreen
+from console.screens.dialogs import HelpScreen, UnreachableScreen
 from console.screens.fleet import FleetScreen
 from console.screens.log import EventLogScreen
 from console.screens.map import MapScreen
@@ -67,12 +67,10 @@ from console.state.actions import ACTIONS
 from console.state.eventlog import AlertBook, AlertEntry, EventLog
 from console.state.files import RecentFiles
 from console.state.model import CONNECTED, CONNECTING, OFFLINE, UNREACHABLE, ConsoleModel
-from console.state.text import without_paths
 from console.themes.loader import ANSI16_MAP, ANSI16_STATUS, Downgrade16, choose_theme, load_themes
 from console.themes.variables import VARIABLE_DEFAULTS
 
 HERE = Path(__file__).parent
-MAX_TOASTS = 3  # notifications on screen at once (at 80x24 more cover the schedule)
 
 
 def refusal_text(reply: ErrorReply, robot: str | None = None, skill: str | None = None) -> str:
@@ -82,7 +80,7 @@ def refusal_text(reply: ErrorReply, robot: str | None = None, skill: str | None 
     return f"{head}{reply.message}"
 
 
-class MissionApp(App[int]):
+class MissionApp(FoldingNotifications, QuitQuestion, App[int]):
     TITLE = "missionctl"
     cursor_blink = True  # tests turn it off for deterministic snapshots
     DEFAULT_MODE = "mission"
@@ -142,8 +140,6 @@ class MissionApp(App[int]):
         self.alerts = AlertBook()
         self.awareness_signal: Signal[tuple[str, str | None]] = Signal(self, "awareness")
         self.bells = 0  # how often the bell rang (tests)
-        self._repeats: dict[str, int] = {}  # toast identity -> how many times it was said
-        self._folded: tuple[str, int] = ("", 0)  # the "N more" toast: identity, N
         self.add_mode(self.DEFAULT_MODE, self.get_default_screen)
         # part-2 screens as app modes (F2/1 back to the schedule; F3/2 is the map's),
         # each handed the state it shows and the signal that says it changed
@@ -291,49 +287,6 @@ class MissionApp(App[int]):
             detach_terminal()
         start_watchdog(lambda: force_exit(self.on_forced_exit, self.exit_code))
         self.run_worker(self.quit_now(), group="quit")
-
-    async def action_quit(self) -> None:
-        """Ctrl+Q: asks first when robots are executing, commands are not yet
-        acknowledged, the plan has unsaved edits or the editor unapplied
-        changes (`ask_before_quit` False: never)."""
-        if isinstance(self.screen, QuitScreen):
-            return  # it handles ctrl+q itself
-        risks = self.quit_risks() if self.ask_before_quit else []
-        if not risks:
-            await self.quit_now()
-            return
-        consequence = self.quitting_stops or (
-            "The server keeps the mission; the robots go on executing, watched by no one from here."
-        )
-        can_save = self.model.unsaved_edits > 0 and self._screen_live()
-        self.push_screen(QuitScreen(risks, consequence, can_save=can_save), self._quit_answered)
-
-    def quit_risks(self) -> list[str]:
-        """What quitting now walks away from (console/state/model.py), and
-        the editor's unapplied changes."""
-        risks = self.model.quit_risks()
-        unapplied = self._unapplied()
-        if unapplied:
-            risks.append(f"unapplied changes in the editor to {', '.join(unapplied)}")
-        return risks
-
-    def _unapplied(self) -> list[str]:
-        s = self.mission_screen
-        if s is None or not s.is_mounted:
-            return []
-        return sorted(s.editor.drafts) + (
-            [s.editor.skill_id] if s.editor.dirty and s.editor.skill_id else []
-        )
-
-    def _quit_answered(self, answer: str | None) -> None:
-        if answer == "quit":
-            self.run_worker(self.quit_now(), group="quit")
-        elif answer == "save":
-            self.run_worker(self._save_then_quit(), group="quit")
-
-    async def _save_then_quit(self) -> None:
-        if self.mission_screen is not None and await self.mission_screen.save_mission():
-            await self.quit_now()
 
     async def quit_now(self) -> None:
         await self.close_connection()
@@ -523,61 +476,6 @@ class MissionApp(App[int]):
         if self._screen_live() and a.level == "error":
             self.mission_screen.say(f"✗ {a.message}", "error")
         self.alerts_changed()
-
-    # -- notifications: one per situation, folded when they pile up ----------------------
-    def notify(
-        self,
-        message: str,
-        *,
-        title: str = "",
-        severity: SeverityLevel = "information",
-        timeout: float | None = None,
-        markup: bool = True,
-    ) -> None:
-        """A toast, but one per situation (the same title and severity
-        replace the earlier toast, counted: "(×3)"), at most MAX_TOASTS on
-        screen (the oldest fold into one "N more" toast: the alert list and
-        the event log keep them all), and no absolute file paths."""
-        message, title = without_paths(str(message)), without_paths(title)
-        if threading.get_ident() != self._thread_id:  # from another thread: as Textual does
-            super().notify(message, title=title, severity=severity, timeout=timeout, markup=markup)
-            return
-        live = list(self._notifications)  # (iterating drops the expired ones)
-        repeats = 1
-        for n in live:
-            if n.title == title and n.severity == severity and n.identity != self._folded[0]:
-                repeats += self._repeats.pop(n.identity, 1)
-                self._unnotify(n, refresh=False)
-        others = [n for n in self._notifications if n.identity != self._folded[0]]
-        if len(others) > MAX_TOASTS - 2:
-            self._fold(others[: len(others) - (MAX_TOASTS - 2)])
-        n = Notification(
-            message + (f" (×{repeats})" if repeats > 1 else ""),
-            title,
-            severity,
-            self.NOTIFICATION_TIMEOUT if timeout is None else timeout,
-            markup=markup,
-        )
-        self._repeats[n.identity] = repeats
-        self._notifications.add(n)
-        self._refresh_notifications()
-
-    def _fold(self, oldest: list[Notification]) -> None:
-        """Replace the oldest toasts (and an earlier fold) with one that counts them."""
-        folded_id, count = self._folded
-        if not any(n.identity == folded_id for n in self._notifications):
-            count = 0  # the earlier fold has expired
-        for n in list(self._notifications):
-            if n.identity == folded_id or n in oldest:
-                self._unnotify(n, refresh=False)
-        count += len(oldest)
-        fold = Notification(
-            f"{count} more — F6 lists the alerts, F5 the event log",
-            "Notifications folded",
-            timeout=10,
-        )
-        self._folded = (fold.identity, count)
-        self._notifications.add(fold)
 
     def ring(self) -> None:
         self.bells += 1

@@ -11,7 +11,6 @@ they do not fit. How each line of a column is drawn: schedule_lines.py.
 
 from __future__ import annotations
 
-from rich.cells import cell_len
 from rich.segment import Segment
 from textual import events
 from textual.binding import Binding
@@ -30,9 +29,12 @@ from console.widgets.schedule_lines import (
     Column,
     Head,
     Styles,
+    click_hit,
     fit,
+    hidden_robots,
     progress_segments,
     skill_segments,
+    with_hidden_robots,
 )
 
 STATIC_W = 16
@@ -406,20 +408,12 @@ class ScheduleView(ScrollView, can_focus=True):
         self.refresh()
 
     def on_click(self, event: events.Click) -> None:
-        x = int(self.scroll_x) + event.x
-        for i, col in enumerate(self.columns):
-            if col.x <= x < col.x + col.width + 1:
-                self.cursor_col = i
-                if event.y < HEADER_H:
-                    self.cursor_id = col.resting_id()
-                else:
-                    line = int(self.scroll_y) + event.y - HEADER_H
-                    hit = [sid for sid, ln in col.line_of.items() if ln == line]
-                    if hit:
-                        self.cursor_id = hit[0]
-                self.refresh()
-                self._post_cursor()
-                break
+        hit = click_hit(self.columns, int(self.scroll_x) + event.x, event.y, int(self.scroll_y))
+        if hit is not None:
+            self.cursor_col, skill = hit
+            self.cursor_id = skill or self.cursor_id
+            self.refresh()
+            self._post_cursor()
 
     # -- rendering ----------------------------------------------------------------
     def _styles(self) -> Styles:
@@ -471,31 +465,13 @@ class ScheduleView(ScrollView, can_focus=True):
         start = start or 0
         strip = Strip(segs).crop_extend(x0 - start, x1 - start, base)
         if y == HEADER_H - 1:  # on the rule under the headers, which hides nothing
-            strip = self._with_hidden_robots(strip, x0, x1, st)
+            strip = with_hidden_robots(strip, self.hidden_robots(), x1 - x0, st["more"])
         return strip
 
     def hidden_robots(self) -> tuple[int, int]:
         """(columns cut or hidden on the left, on the right) of the view now."""
         x0 = int(self.scroll_x)
-        x1 = x0 + self.scrollable_content_region.width
-        left = sum(1 for c in self.columns if c.x < x0)
-        right = sum(1 for c in self.columns if c.x + c.width > x1)
-        return left, right
-
-    def _with_hidden_robots(self, strip: Strip, x0: int, x1: int, st: Styles) -> Strip:
-        """The rule under the headers says how many robots are off to each
-        side ("← 1", "+2 robots →"): a scrollbar alone is easy to miss."""
-        left, right = self.hidden_robots()
-        width = x1 - x0
-        if right:
-            text = f" +{right} robot{'s' if right > 1 else ''} → " if width >= 40 else f" +{right}→"
-            n = cell_len(text)
-            strip = Strip.join([strip.crop(0, width - n), Strip([Segment(text, st["more"])])])
-        if left:
-            text = f" ← {left} " if width >= 40 else f"←{left}"
-            n = cell_len(text)
-            strip = Strip.join([Strip([Segment(text, st["more"])]), strip.crop(n, width)])
-        return strip
+        return hidden_robots(self.columns, x0, x0 + self.scrollable_content_region.width)
 
     def _header_segments(self, col: Column, y: int, st: Styles) -> list[Segment]:
         compact = col.static and not self.expand_static

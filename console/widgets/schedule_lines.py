@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from rich.cells import cell_len, set_cell_size
 from rich.segment import Segment
 from rich.style import Style
+from textual.strip import Strip
 
 from backend.core.model import SkillInstance, Status
 from console.state.freshness import FRESH, Freshness
@@ -94,6 +95,41 @@ def fit_middle(text: str, width: int) -> str:
     while cell_len(end) > room:
         end = end[1:]
     return set_cell_size(start + "…" + end, width)
+
+
+def click_hit(
+    columns: list[Column], x: int, y: int, scroll_y: int
+) -> tuple[int, str | None] | None:
+    """(column, skill) a click at content x, screen row y hits: a header
+    gives the column's resting skill; None: no column there."""
+    for i, col in enumerate(columns):
+        if col.x <= x < col.x + col.width + 1:
+            if y < HEADER_H:
+                return i, col.resting_id()
+            line = scroll_y + y - HEADER_H
+            return i, next((sid for sid, ln in col.line_of.items() if ln == line), None)
+    return None
+
+
+def hidden_robots(columns: list[Column], x0: int, x1: int) -> tuple[int, int]:
+    """(columns cut or hidden left of x0, right of x1)."""
+    left = sum(1 for c in columns if c.x < x0)
+    right = sum(1 for c in columns if c.x + c.width > x1)
+    return left, right
+
+
+def with_hidden_robots(strip: Strip, hidden: tuple[int, int], width: int, style: Style) -> Strip:
+    """The rule under the headers says how many robots are off to each side
+    ("← 1", "+2 robots →"): a scrollbar alone is easy to miss."""
+    left, right = hidden
+    if right:
+        text = f" +{right} robot{'s' if right > 1 else ''} → " if width >= 40 else f" +{right}→"
+        n = cell_len(text)
+        strip = Strip.join([strip.crop(0, width - n), Strip([Segment(text, style)])])
+    if left:
+        text = f" ← {left} " if width >= 40 else f"←{left}"
+        strip = Strip.join([Strip([Segment(text, style)]), strip.crop(cell_len(text), width)])
+    return strip
 
 
 # -- the header: a table of its lines ----------------------------------------------------
