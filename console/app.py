@@ -34,6 +34,7 @@ from console.bindings import bindings
 from console.bridge import Backend, ClientBridge
 from console.commands import MissionCommands
 from console.config import ConsoleConfig, save_theme
+from console.escape import SplitEscape
 from console.hangup import (
     detach_terminal,
     force_exit,
@@ -80,7 +81,7 @@ def refusal_text(reply: ErrorReply, robot: str | None = None, skill: str | None 
     return f"{head}{reply.message}"
 
 
-class MissionApp(FoldingNotifications, QuitQuestion, App[int]):
+class MissionApp(SplitEscape, FoldingNotifications, QuitQuestion, App[int]):
     TITLE = "missionctl"
     cursor_blink = True  # tests turn it off for deterministic snapshots
     DEFAULT_MODE = "mission"
@@ -362,6 +363,7 @@ class MissionApp(FoldingNotifications, QuitQuestion, App[int]):
         robots = self.model.apply(message.batch, message.mission)
         if self._screen_live() and robots != set():
             await self.mission_screen.model_changed(robots)
+            self.mission_screen.batch_seen(message.batch)  # the cursor may follow an undo
         if self._map_live():  # marker events change no robot's column but the map
             self.map_screen.model_changed()
         entries = self.event_log.add_batch(message.batch, self.model, self.clock())

@@ -104,6 +104,9 @@ class ViewScreen(Screen):
             event.stop()
             field.select_on_focus = False  # else the next key replaces this one
             field.focus()
+            field.cursor_position = len(field.value)
+            if field.value and not field.value.endswith(" "):
+                field.insert_text_at_cursor(" ")  # a new word of the filter (all must match)
             field.insert_text_at_cursor(event.character)
 
     # subclasses

@@ -373,6 +373,74 @@ class SkillPicker(ModalScreen[str | None]):
         self.dismiss(None)
 
 
+class SkillSearch(ModalScreen[str | None]):
+    """`/`: type what you remember of a skill (id, label, skill, robot,
+    status, a parameter); enter jumps to the highlighted one."""
+
+    BINDINGS = [
+        Binding("escape", "cancel", "Cancel"),
+        Binding("down", "move(1)", "Next", show=False),
+        Binding("up", "move(-1)", "Previous", show=False),
+    ]
+
+    CSS_PATH = TCSS
+
+    def __init__(self, find: Callable[[str], list[tuple[str, str]]], query: str = "") -> None:
+        super().__init__()
+        self.find = find  # query -> [(skill id, one line about it)], best first
+        self.query_text = query
+
+    def compose(self) -> ComposeResult:
+        with Vertical():
+            yield Label("Find a skill: id, label, skill, robot, status or a parameter")
+            yield Input(self.query_text, placeholder="type to search…", id="query", compact=True)
+            yield OptionList(id="found")
+            yield Static("", id="count", classes="hint")
+            yield Static("enter: go to it · ↑↓: choose · escape: cancel", classes="hint")
+
+    def on_mount(self) -> None:
+        settle_cursors(self)
+        self._fill(self.query_text)
+        self.query_one(Input).focus()
+
+    def _fill(self, query: str) -> None:
+        found = self.find(query)
+        ol = self.query_one(OptionList)
+        ol.clear_options()
+        ol.add_options(
+            [Option(Text(text, no_wrap=True, overflow="ellipsis"), id=sid) for sid, text in found]
+        )
+        if found:
+            ol.highlighted = 0
+        n = len(found)
+        self.query_one("#count", Static).update(
+            f"{n} skill{'s' if n != 1 else ''}" if n else "no skill matches: fewer words?"
+        )
+
+    @on(Input.Changed, "#query")
+    def _changed(self, event: Input.Changed) -> None:
+        self._fill(event.value)
+
+    @on(Input.Submitted, "#query")
+    def _submit(self) -> None:
+        ol = self.query_one(OptionList)
+        if ol.highlighted is not None and ol.option_count:
+            self.dismiss(ol.get_option_at_index(ol.highlighted).id)
+
+    @on(OptionList.OptionSelected)
+    def _selected(self, event: OptionList.OptionSelected) -> None:
+        self.dismiss(event.option.id)
+
+    def action_move(self, step: int) -> None:
+        ol = self.query_one(OptionList)
+        if ol.option_count:
+            cur = ol.highlighted if ol.highlighted is not None else -step
+            ol.highlighted = min(max(cur + step, 0), ol.option_count - 1)
+
+    def action_cancel(self) -> None:
+        self.dismiss(None)
+
+
 class ChoiceScreen(ModalScreen[str | None]):
     """Choose one of a few rows: enter chooses (its id), escape cancels (None)."""
 

@@ -37,6 +37,7 @@ from console.state.markers import (
     moved_value,
     new_marker,
     picked_value,
+    relabel,
 )
 from console.state.model import CONNECTED, ConsoleModel
 from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS, fmt_value
@@ -574,17 +575,21 @@ class MapScreen(Screen):
             return
 
         def bind(pname: str) -> None:
+            # a label naming the marker bound before ("drive to POI-A") names the new one
+            before = s.bindings.get(pname) or (s.params.get(pname) if pname in names else None)
+            label = relabel(s.label, before if isinstance(before, str) else None, name)
             op = (
-                EditSkill(id=s.id, bindings={pname: name})
+                EditSkill(id=s.id, bindings={pname: name}, label=label)
                 if pname in fits
-                else EditSkill(id=s.id, params={pname: name})
+                else EditSkill(id=s.id, params={pname: name}, label=label)
             )
+            also = f"; label now '{label}'" if label is not None else ""
             self.submit(
                 op,
                 f"bind {s.id}.{pname} to {name}",
                 robot=robot,
                 skill=s.id,
-                on_ok=lambda r: self.say(f"{s.id}: {pname} bound to marker {name}", "ok"),
+                on_ok=lambda r: self.say(f"{s.id}: {pname} bound to marker {name}{also}", "ok"),
             )
 
         def holds(p: str) -> bool:

@@ -3,9 +3,10 @@ first, then the few that always do (no Textual here).
 
 Which actions come first depends on what is selected — an idle skill is
 edited and synchronized, a failed one retried, a running robot paused — so
-ORDER lists every mission action by how likely it is wanted next; those that
-apply now (availability.why_not is None) are shown in that order, then TAIL
-(find, save, palette, help, quit). What does not fit the terminal's width
+FIRST lists, per status of the selected skill, the actions most likely
+wanted next, and REST the others; those that apply now (availability.why_not
+is None) are shown in that order, then TAIL (find, save, palette, quit; help
+is F1, and in the palette). What does not fit the terminal's width
 is dropped from the end of the first part, never the tail: the palette
 (ctrl+p) lists every action, with why it does not apply.
 """
@@ -16,19 +17,29 @@ from dataclasses import dataclass
 
 from rich.cells import cell_len
 
+from backend.core.model import Status
 from console.state.actions import BY_NAME
 from console.state.availability import Facts, why_not
 
-# the mission screen's actions, most likely next first
-ORDER = (
+# the mission screen's actions, most likely next first, by the selected skill's status
+# (None: no skill selected); the rest follow in REST's order
+SKILL = ("edit", "duplicate", "add")
+ROBOT = ("run", "pause", "stop")
+FIRST: dict[Status | None, tuple[str, ...]] = {
+    Status.IDLE: ("edit", "sync", "add", "duplicate", "delete", "mark", "barrier", "move_up"),
+    Status.IDLE_SYNCHRONIZED: ("unsync", "run", *SKILL),
+    Status.RUNNING: ("pause", "stop", *SKILL),
+    Status.PAUSED: ("run", "stop", "reset", *SKILL),
+    Status.SYNCHWAITING: ("stop", "unbarrier", *SKILL),
+    Status.FAILURE: ("retry", "retry_edit", "run", "unsync", *SKILL),
+    Status.SUCCESS: SKILL,
+    None: ("add", *ROBOT),
+}
+REST = (
     "edit",
-    "retry",
-    "retry_edit",
     "sync",
     "unsync",
-    "run",
-    "pause",
-    "stop",
+    *ROBOT,
     "add",
     "duplicate",
     "delete",
@@ -68,7 +79,6 @@ TAIL = (
     FooterKey("search", "/", "Find"),
     FooterKey("save", "^s", "Save"),
     FooterKey("command_palette", "^p", "All keys"),
-    FooterKey("help", "f1", "Help"),
     FooterKey("quit", "^q", "Quit"),
 )
 
@@ -95,8 +105,10 @@ def context_keys(
     """Every action that applies to the selection now, most likely first
     (`keys`: action -> its key(s) with the user's keymap; else the table's)."""
     keys = keys or {}
+    found = facts.find(skill_id)
+    first = FIRST[found[2].status if found else None]
     out: list[FooterKey] = []
-    for name in ORDER:
+    for name in dict.fromkeys((*first, *REST)):
         a = BY_NAME.get(name)
         if a is None or why_not(facts, name, robot, skill_id, marks) is not None:
             continue

@@ -34,12 +34,14 @@ from textual.widgets import Button, Input, Label, Select, Static, Switch, TextAr
 from backend.core.model import Mission, Policies, SkillInstance, Status
 from backend.core.ops import EditSkill
 from backend.core.params import ParamSpec, check_value, normalize_value
+from console.state.markers import relabel
 from console.state.model import ConsoleModel
 from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS
 from console.widgets.param_inputs import (
     BINDABLE_KINDS,
     INPUTS,
     POLICY_HINTS,
+    TYPED,
     param_inputs,
     policy_inputs,
     read_binding,
@@ -105,7 +107,8 @@ class ParamEditor(VerticalScroll):
     Its look: param_editor.tcss (loaded by the app)."""
 
     BINDINGS = [
-        Binding("ctrl+s", "apply", "Apply", id="editor.apply"),
+        # enter in a field applies (Input.Submitted); ctrl+s is the mission's save everywhere
+        Binding("enter", "apply", "Apply", id="editor.apply"),
         Binding("ctrl+r", "revert", "Revert", id="editor.revert"),
         Binding("escape", "leave", "Back", id="editor.leave"),
     ]
@@ -138,11 +141,14 @@ class ParamEditor(VerticalScroll):
             )
 
         def changed(self) -> list[str]:
-            """What the operation changes (for the status line)."""
-            return (
-                [*self.params, *self.bindings]
-                + (["label"] if self.label is not None else [])
-                + (["policies"] if self.policies is not None else [])
+            """What the operation changes (for the status line), each once: a
+            typed value replacing a binding changes both for one parameter."""
+            return list(
+                dict.fromkeys(
+                    [*self.params, *self.bindings]
+                    + (["label"] if self.label is not None else [])
+                    + (["policies"] if self.policies is not None else [])
+                )
             )
 
     class DraftsChanged(Message):
@@ -171,6 +177,7 @@ class ParamEditor(VerticalScroll):
         self.drafts: dict[str, Draft] = {}
         self.dirty: list[str] = []  # what differs in the shown skill (empty: nothing)
         self._unapplied: frozenset[str] = frozenset()
+        self._choices: dict[str, str | None] = {}  # Select id -> the marker it showed
 
     # -- what is shown ------------------------------------------------------------------
     def _skill(self) -> tuple[str, SkillInstance] | None:
@@ -244,6 +251,11 @@ class ParamEditor(VerticalScroll):
             )
         await self.recompose()
         settle_cursors(self)
+        self._choices = {  # what each marker choice shows (a label may name it)
+            w.id: None if w.value in (TYPED, Select.NULL) else str(w.value)
+            for w in self.query(Select)
+            if w.id
+        }
         if draft is not None:
             self._restore(draft)
         self._validate_all()
@@ -311,7 +323,7 @@ class ParamEditor(VerticalScroll):
         if self.dirty:
             self._set_static(
                 "#dirty",
-                f"unapplied changes: {', '.join(self.dirty)} — ctrl+s applies, ctrl+r reverts",
+                f"unapplied changes: {', '.join(self.dirty)} — enter applies, ctrl+r reverts",
             )
         else:
             self._set_static("#dirty", "")
@@ -403,7 +415,7 @@ class ParamEditor(VerticalScroll):
         yield from policy_inputs(s.policies, disabled=ro is not None)
         if ro is None:
             with Horizontal(classes="buttons"):
-                yield Button("Apply ^s", id="apply", variant="primary", compact=True)
+                yield Button("Apply ⏎", id="apply", variant="primary", compact=True)
                 yield Button("Revert ^r", id="revert", compact=True)
 
     def collect(self) -> tuple[str | None, dict[str, Any], dict[str, str | None], dict[str, str]]:
@@ -525,12 +537,30 @@ class ParamEditor(VerticalScroll):
             if name == pname or name.startswith(pname + "-"):
                 self.errors.pop(pname, None)  # a server message is about the old value
                 break
+        if widget_id.startswith("bind-") or widget_id.startswith("f-"):
+            self._relabel(widget_id)
         if widget_id.startswith("bind-"):
             self._sync_bound_fields(name)
         for sw in self.query(f"#f-{name}").results(Switch):  # the value in words, not only colour
             self._set_static(f"#v-{name}", "yes" if sw.value else "no")
         self._validate_all()
         self._update_dirty()
+
+    def _relabel(self, widget_id: str) -> None:
+        """A marker chosen instead of another: a label naming the old marker
+        ("drive to POI-A") names the new one, in the label field (applied
+        with the rest, or reverted)."""
+        try:
+            select = self.query_one(f"#{widget_id}", Select)
+            label = self.query_one("#f-label", Input)
+        except Exception:
+            return  # not a choice (or being rebuilt)
+        chosen = None if select.value in (TYPED, Select.NULL) else str(select.value)
+        before = self._choices.get(widget_id)
+        self._choices[widget_id] = chosen
+        new = relabel(label.value, before, chosen)
+        if new is not None:
+            label.value = new
 
     def _sync_bound_fields(self, name: str) -> None:
         bound = read_binding(self, name)
@@ -547,6 +577,12 @@ class ParamEditor(VerticalScroll):
 
     @on(Button.Pressed, "#apply")
     def _apply_pressed(self) -> None:
+        self.action_apply()
+
+    @on(Input.Submitted)
+    def _field_submitted(self, event: Input.Submitted) -> None:
+        """Enter in a field applies the edits (as in a form)."""
+        event.stop()
         self.action_apply()
 
     @on(Button.Pressed, "#revert")

@@ -173,13 +173,13 @@ async def test_add_with_picker_then_edit_with_inline_validation_then_apply():
         field.value = "2"
         await pilot.pause()
         assert "2.0 is above the maximum 1" in screen_text(app)  # inline, before sending
-        await pilot.press("ctrl+s")
+        await pilot.press("enter")  # enter in a field applies
         await pilot.pause()
         assert b.mission.find(new.id)[2].params["target_level"] == 0.95  # not sent
         field.value = "0.5"
         await pilot.pause()
         assert "above the maximum" not in screen_text(app)
-        await pilot.press("ctrl+s")
+        await pilot.press("enter")  # enter in a field applies
         await wait_until(
             pilot,
             lambda: b.mission.find(new.id)[2].params["target_level"] == 0.5,
@@ -591,7 +591,7 @@ async def test_unapplied_edits_are_kept_per_skill_when_the_cursor_moves():
         assert screen.editor.query_one("#f-label").value == "drive carefully"
         assert screen.editor.query_one("#f-speed").value == "0.3"
         assert "unapplied changes: label, speed" in screen_text(app)
-        await pilot.press("enter", "ctrl+s")
+        await pilot.press("enter", "enter")  # open, apply
         await wait_until(
             pilot, lambda: b.mission.find("lru2-1")[2].label == "drive carefully", what="applied"
         )
@@ -777,7 +777,7 @@ async def test_at_80x24_a_draft_survives_leaving_the_editor_and_editing_another_
             what="lru2-1 again",
         )
         assert screen.editor.query_one("#f-label").value.startswith("careful ")
-        await pilot.press("ctrl+s")
+        await pilot.press("enter")  # enter in a field applies
         await wait_until(
             pilot, lambda: b.mission.find("lru2-1")[2].label.startswith("careful "), what="applied"
         )
