@@ -65,7 +65,7 @@ from console.screens.log import EventLogScreen
 from console.screens.map import MapScreen
 from console.screens.mission import MissionScreen
 from console.state.actions import ACTIONS
-from console.state.eventlog import AlertBook, AlertEntry, EventLog
+from console.state.eventlog import AlertBook, AlertEntry, EventLog, toast_text
 from console.state.files import RecentFiles
 from console.state.model import CONNECTED, CONNECTING, OFFLINE, UNREACHABLE, ConsoleModel
 from console.themes.loader import ANSI16_MAP, ANSI16_STATUS, Downgrade16, choose_theme, load_themes
@@ -471,9 +471,9 @@ class MissionApp(SplitEscape, FoldingNotifications, QuitQuestion, App[int]):
             self.ring()
         if notify:
             severity = {"error": "error", "warning": "warning"}.get(a.level, "information")
-            title = " · ".join(x for x in (a.robot, a.skill) if x) or "Alert"
+            title, text = toast_text(self.alerts, a)  # robots going offline together: one
             self.notify(
-                a.message, title=title, severity=severity, timeout=8 if a.level == "error" else 5
+                text, title=title, severity=severity, timeout=8 if a.level == "error" else 5
             )
         if self._screen_live() and a.level == "error":
             self.mission_screen.say(f"✗ {a.message}", "error")

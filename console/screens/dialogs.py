@@ -407,9 +407,14 @@ class SkillSearch(ModalScreen[str | None]):
         found = self.find(query)
         ol = self.query_one(OptionList)
         ol.clear_options()
-        ol.add_options(
-            [Option(Text(text, no_wrap=True, overflow="ellipsis"), id=sid) for sid, text in found]
-        )
+        width = max(20, (ol.size.width or self.app.size.width - 10) - 4)
+
+        def line(text: str) -> Text:  # one line each: the list is for choosing
+            t = Text(text)
+            t.truncate(width, overflow="ellipsis")
+            return t
+
+        ol.add_options([Option(line(text), id=sid) for sid, text in found])
         if found:
             ol.highlighted = 0
         n = len(found)

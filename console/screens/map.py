@@ -144,7 +144,7 @@ def info_text(model: ConsoleModel, v: MapView, feed_state: str) -> Text:
         t.append(NO_FEED if feed_state == "none" else "waiting for the map feed…", style="bold")
         t.append("  ")
     x, y = v.cursor
-    t.append(f"cursor ({x:.1f}, {y:.1f}) {math.degrees(v.heading):.0f}°")
+    t.append(f"cursor ({x:.1f}, {y:.1f}) heading {math.degrees(v.heading):.0f}°")
     t.append(f"  {v.vp.mpp:.2g} m/px", style="dim")
     if v.follow:
         t.append(f"  following {v.follow}", style="bold")
