@@ -30,7 +30,12 @@ class SplitEscape(App[int]):
         if isinstance(event, events.Key) and not event.is_forwarded:
             split = split_escape(event)
             if split is not None:
-                for key in split:
-                    await super().on_event(key)
+                escape, key = split
+                # the escape's binding runs now (a forwarded key's would run only
+                # after the next key reached the field it was meant to leave)
+                if not await self._check_bindings("escape", priority=True):
+                    if not await self._check_bindings("escape"):
+                        await super().on_event(escape)  # bound to nothing: as it came
+                await super().on_event(key)
                 return
         await super().on_event(event)

@@ -38,7 +38,7 @@ class QuitQuestion(App[int]):
         consequence = self.quitting_stops or (
             "The server keeps the mission; the robots go on executing, watched by no one from here."
         )
-        can_save = self.model.unsaved_edits > 0 and self._screen_live()
+        can_save = self.model.unsaved and self._screen_live()
         self.push_screen(QuitScreen(risks, consequence, can_save=can_save), self._quit_answered)
 
     def quit_risks(self) -> list[str]:

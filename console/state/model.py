@@ -10,6 +10,8 @@ action does not apply), so it can be unit-tested without a terminal.
 
 from __future__ import annotations
 
+import hashlib
+import json
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -36,28 +38,31 @@ CONNECTING, CONNECTED, RECONNECTING, UNREACHABLE, OFFLINE = (
 
 # -- the model --------------------------------------------------------------------
 
-PLAN_FIELDS = frozenset({"label", "params", "bindings", "policies"})
 # operations a robot's answer or report becomes (the robot was heard)
 ROBOT_OPS = frozenset({"report", "sync_ack", "unsync_done", "retry_ack", "reconcile"})
 
 
-def is_plan_edit(e: object) -> bool:
-    """An event that changes what a saved mission file holds (not a status)."""
-    match e:
-        case ev.SkillChanged(changes=changes):
-            return bool(PLAN_FIELDS & set(changes))
-        case (
-            ev.SkillAdded()
-            | ev.SkillRemoved()
-            | ev.SkillMoved()
-            | ev.BarrierSet()
-            | ev.BarrierRemoved()
-            | ev.MarkerSet()
-            | ev.MarkerRemoved()
-            | ev.MissionReplaced()
-        ):
-            return True
-    return False
+PLAN_FIELDS = {"id", "skill", "label", "params", "bindings", "policies"}  # a skill, as planned
+
+
+def plan_digest(mission: Mission) -> str:
+    """What a saved mission file holds of the plan, as a digest: skills
+    (without their statuses), barriers and markers — two plans with the
+    same digest save to the same file."""
+    plan = {
+        "tasks": {
+            robot: [
+                s.model_dump(
+                    mode="json", include={"id", "skill", "label", "params", "bindings", "policies"}
+                )
+                for s in task
+            ]
+            for robot, task in mission.tasks.items()
+        },
+        "barriers": {k: b.model_dump(mode="json") for k, b in mission.barriers.items()},
+        "markers": {k: m.model_dump(mode="json") for k, m in mission.markers.items()},
+    }
+    return hashlib.sha1(json.dumps(plan, sort_keys=True).encode()).hexdigest()
 
 
 @dataclass
@@ -90,8 +95,8 @@ class ConsoleModel:
     # robot -> the last HISTORY (battery, link) samples, for the fleet screen's sparklines
     history: dict[str, deque[tuple[float, float]]] = field(default_factory=dict)
     selection: Selection = field(default_factory=Selection)
-    # plan edits (anyone's) since this console loaded the state, saved or loaded a file
-    unsaved_edits: int = 0
+    # the plan as this console last saved or loaded it (or first got it): plan_digest
+    saved_digest: str = ""
     # robot -> when this console last heard it (telemetry, a report, presence back)
     heard: dict[str, datetime] = field(default_factory=dict)
     clock: Callable[[], datetime] = field(default=lambda: datetime.now(UTC))
@@ -107,8 +112,11 @@ class ConsoleModel:
         robots: dict[str, RobotInfo] | None = None,
         server_id: str = "",
     ) -> None:
+        first = self.mission is None
         self.mission = mission
         self.library = library
+        if first:  # what the server had: the plan from its file (the demo's), or journal
+            self.mark_saved()
         if robots is not None:
             self.robots = dict(robots)
         for name in mission.robots:
@@ -180,8 +188,6 @@ class ConsoleModel:
             return False
         else:
             self.mission = ev.apply_events(self.mission, batch)
-        if any(is_plan_edit(e) for e in batch.events):
-            self.unsaved_edits += 1
         if batch.op in ROBOT_OPS:  # the robot spoke: it was alive then
             now = self.clock()
             for e in batch.events:
@@ -192,7 +198,12 @@ class ConsoleModel:
 
     def mark_saved(self) -> None:
         """The plan was just saved to (or loaded from) a file."""
-        self.unsaved_edits = 0
+        self.saved_digest = plan_digest(self.mission) if self.mission is not None else ""
+
+    @property
+    def unsaved(self) -> bool:
+        """The plan differs from what was last saved or loaded (or first shown)."""
+        return self.mission is not None and plan_digest(self.mission) != self.saved_digest
 
     def quit_risks(self) -> list[str]:
         """What quitting now would walk away from: robots executing, commands
@@ -208,9 +219,8 @@ class ConsoleModel:
         waiting = [f"{r}: {', '.join(cmds)}" for r, cmds in self.pending.items() if cmds]
         if waiting:
             risks.append("commands not yet acknowledged — " + "; ".join(waiting))
-        if self.unsaved_edits:
-            n = self.unsaved_edits
-            risks.append(f"{n} plan edit{'s' if n > 1 else ''} not saved to a file")
+        if self.unsaved:
+            risks.append("the plan has changes not saved to a file")
         return risks
 
     def set_robot(self, info: RobotInfo) -> None:

@@ -630,4 +630,6 @@ class ParamEditor(VerticalScroll):
         await self.show_skill(self.skill_id, force=True, discard=True)
 
     def action_leave(self) -> None:
+        if self.focus_within():  # at once: a key typed right after escape is not the field's
+            self.screen.set_focus(None)
         self.post_message(self.Left())

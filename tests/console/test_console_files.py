@@ -234,11 +234,11 @@ async def test_quit_offers_to_save_an_edited_plan_first(tmp_path):
         await pilot.press("d")
         await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="delete?")
         await pilot.press("y")
-        await wait_until(pilot, lambda: app.model.unsaved_edits == 1, what="an unsaved edit")
+        await wait_until(pilot, lambda: app.model.unsaved, what="an unsaved edit")
         await pilot.press("ctrl+q")
         await wait_until(pilot, lambda: isinstance(app.screen, QuitScreen), what="question")
         await pilot.pause()
-        assert "1 plan edit not saved to a file" in screen_text(app)
+        assert "the plan has changes not saved to a file" in screen_text(app)
         await pilot.press("s")
         await wait_until(pilot, lambda: isinstance(app.screen, PathPrompt), what="save prompt")
         target = tmp_path / "kept.yaml"
