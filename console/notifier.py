@@ -60,6 +60,9 @@ class FoldingNotifications(App[int]):
             if n.identity == folded_id or n in oldest:
                 self._unnotify(n, refresh=False)
         count += len(oldest)
+        rest = list(self._notifications)  # shown after the fold (it is the oldest news)
+        for n in rest:
+            self._unnotify(n, refresh=False)
         fold = Notification(
             f"{count} more — F6 lists the alerts, F5 the event log",
             "Notifications folded",
@@ -67,6 +70,8 @@ class FoldingNotifications(App[int]):
         )
         self._folded = (fold.identity, count)
         self._notifications.add(fold)
+        for n in rest:
+            self._notifications.add(n)
 
     @property
     def _repeats(self) -> dict[str, int]:

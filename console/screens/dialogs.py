@@ -9,7 +9,7 @@ from pathlib import Path
 from rich.console import Group
 from rich.table import Table
 from rich.text import Text
-from textual import on
+from textual import events, on
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical, VerticalScroll
@@ -389,6 +389,7 @@ class SkillSearch(ModalScreen[str | None]):
         super().__init__()
         self.find = find  # query -> [(skill id, one line about it)], best first
         self.query_text = query
+        self.filled_for: str | None = None  # the query the list shows
 
     def compose(self) -> ComposeResult:
         with Vertical():
@@ -404,6 +405,7 @@ class SkillSearch(ModalScreen[str | None]):
         self.query_one(Input).focus()
 
     def _fill(self, query: str) -> None:
+        self.filled_for = query
         found = self.find(query)
         ol = self.query_one(OptionList)
         ol.clear_options()
@@ -428,6 +430,9 @@ class SkillSearch(ModalScreen[str | None]):
 
     @on(Input.Submitted, "#query")
     def _submit(self) -> None:
+        query = self.query_one("#query", Input).value
+        if query != self.filled_for:  # typed faster than the list followed
+            self._fill(query)
         ol = self.query_one(OptionList)
         if ol.highlighted is not None and ol.option_count:
             self.dismiss(ol.get_option_at_index(ol.highlighted).id)
@@ -441,6 +446,18 @@ class SkillSearch(ModalScreen[str | None]):
         if ol.option_count:
             cur = ol.highlighted if ol.highlighted is not None else -step
             ol.highlighted = min(max(cur + step, 0), ol.option_count - 1)
+
+    def on_key(self, event: events.Key) -> None:
+        """Keys typed before the query field has the focus are the query's."""
+        field = self.query_one("#query", Input)
+        if field.has_focus or not self.is_mounted:
+            return
+        if event.key == "enter":
+            event.stop()
+            self._submit()
+        elif event.is_printable and event.character:
+            event.stop()
+            field.insert_text_at_cursor(event.character)
 
     def action_cancel(self) -> None:
         self.dismiss(None)

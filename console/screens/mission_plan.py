@@ -8,8 +8,6 @@ from __future__ import annotations
 from collections import deque
 from typing import TYPE_CHECKING, Any
 
-from textual import work
-
 from backend.core import events as ev
 from backend.core.model import Status
 from backend.core.ops import AddSkill, Redo, RetryEdit, Undo
@@ -142,12 +140,14 @@ class PlanActions:
         self.submit(RetryEdit(id=sid), f"edit and retry {sid}", robot=robot, skill=sid, on_ok=ok)
 
     # -- finding a skill -----------------------------------------------------------------
-    @work(group="dialog")
-    async def action_search(self) -> None:
+    def action_search(self) -> None:
         def find(query: str) -> list[tuple[str, str]]:
             return [(m.skill_id, m.text) for m in search_skills(self.model, query)]
 
-        choice = await self.app.push_screen_wait(SkillSearch(find))
-        if choice:
-            self._go_to(choice)
-            self.say(f"{choice} selected")
+        def chosen(choice: str | None) -> None:
+            if choice:
+                self._go_to(choice)
+                self.say(f"{choice} selected")
+
+        # pushed at once (not from a worker): what is typed right after / is the query
+        self.app.push_screen(SkillSearch(find), chosen)

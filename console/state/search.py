@@ -41,7 +41,8 @@ def search_skills(model: ConsoleModel, query: str, limit: int = LIMIT) -> list[M
                 + 30 * title.lower().startswith(q)
                 + 10 * (q in title.lower())
             )
-            text = f"{GLYPHS[s.status]} {s.id}  {title}  — {robot}, {STATUS_WORDS[s.status]}"
+            what = title if title == s.skill else f"{title} ({s.skill})"
+            text = f"{GLYPHS[s.status]} {s.id}  {what}  — {robot}, {STATUS_WORDS[s.status]}"
             if params:
                 text += f"  {params}"
             found.append((-score, order, Match(s.id, robot, text, score)))

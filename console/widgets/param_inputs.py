@@ -165,26 +165,27 @@ def _coordinate_rows(kind: str) -> list[tuple[str, ...]]:
 
 
 def _coordinates(f: Field) -> ComposeResult:
-    v = f.value if isinstance(f.value, dict) else {}
+    """A pose's six fields, a position's three; empty when the parameter is
+    unset (an optional one: empty fields read back as unset, not as 0)."""
+    v = f.value if isinstance(f.value, dict) else None
     for row in _coordinate_rows(f.spec.type):
         with Horizontal(classes="fields"):
             for c in row:
+                x = float(v.get(c, 0.0)) if v is not None else None
                 if c in ANGLE_FIELDS:  # degrees, the unit in the label
                     yield Label(f"{c}°")
                     yield AngleInput(
-                        float(v.get(c, 0.0)),
-                        id=f"f-{f.name}-{c}",
-                        compact=True,
-                        disabled=f.disabled,
+                        x, id=f"f-{f.name}-{c}", compact=True, disabled=f.disabled, placeholder="–"
                     )
                     continue
                 yield Label(c)
                 yield Input(
-                    fmt_number(float(v.get(c, 0.0))),
+                    "" if x is None else fmt_number(x),
                     id=f"f-{f.name}-{c}",
                     type="number",
                     compact=True,
                     disabled=f.disabled,
+                    placeholder="–",
                 )
 
 
@@ -251,6 +252,11 @@ def _read_number(root: DOMNode, name: str, spec: ParamSpec) -> Reading:
 
 
 def _read_coordinates(root: DOMNode, name: str, spec: ParamSpec) -> Reading:
+    fields = [
+        root.query_one(f"#f-{name}-{c}", Input) for row in _coordinate_rows(spec.type) for c in row
+    ]
+    if not any(w.value.strip() for w in fields):
+        return None, None  # all empty: unset
     out: dict[str, float] = {}
     for row in _coordinate_rows(spec.type):
         for c in row:
