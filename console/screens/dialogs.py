@@ -21,6 +21,7 @@ from textual.widgets.option_list import Option
 from backend.core.library import Library
 from backend.core.model import NAME_RE, Status
 from console.state.actions import ACTIONS, APP_KEYS, EDITOR_KEYS, NAV_KEYS
+from console.state.context import help_keys
 from console.state.files import complete, completions, full_path, path_note, save_risks, shown_path
 from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS
 from console.widgets.param_editor import settle_cursors
@@ -89,9 +90,9 @@ class QuitScreen(ModalScreen[str | None]):
             yield Static(self.consequence, classes="question")
             with Horizontal():
                 if self.can_save:
-                    yield Button("Save, then quit (s)", id="save", variant="primary")
-                yield Button("Quit (q)", id="quit", variant="error")
-                yield Button("Stay (n)", id="stay")
+                    yield Button("Save, then quit (s)", id="save", variant="primary", compact=True)
+                yield Button("Quit (q)", id="quit", variant="error", compact=True)
+                yield Button("Stay (n)", id="stay", compact=True)
 
     def on_mount(self) -> None:
         self.query_one("#stay", Button).focus()
@@ -592,10 +593,7 @@ class HelpScreen(ModalScreen[None]):
         for group, actions in groups.items():
             heading(group)
             table(
-                [
-                    (self.keys.get(a.name, a.key).replace(",", " / "), a.label, a.description)
-                    for a in actions
-                ]
+                [(help_keys(self.keys.get(a.name, a.key)), a.label, a.description) for a in actions]
             )
         heading("Parameter editor")
         table(EDITOR_KEYS)

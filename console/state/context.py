@@ -95,6 +95,12 @@ def key_text(keys: str) -> str:
     return min(shown, key=cell_len) if shown else ""
 
 
+def help_keys(keys: str) -> str:
+    """An action's keys for the help screen: 'enter / e', '/' (not 'slash')."""
+    names = {"slash": "/", "question_mark": "?"}
+    return " / ".join(names.get(k.strip(), k.strip()) for k in keys.split(",") if k.strip())
+
+
 def context_keys(
     facts: Facts,
     robot: str | None,

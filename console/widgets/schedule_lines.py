@@ -149,10 +149,10 @@ class Head:
 
 def _offline_since(robot: str, clock: str, width: int) -> str:
     """The longest way to say since when a robot is offline that fits beside its name."""
-    for p in (f"✕ offline since {clock}", f"✕ offline {clock}"):
+    for p in (f"✕ offline since {clock}", f"✕ offline {clock}", f"✕ off {clock}", f"✕ {clock}"):
         if cell_len(robot) + 1 + cell_len(p) <= width:
             return p
-    return f"✕ off {clock}"
+    return "✕ off"
 
 
 def _presence(h: Head) -> tuple[str, Style]:

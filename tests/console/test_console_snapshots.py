@@ -232,7 +232,7 @@ def test_80x24_editor(snap_compare):
             telemetry=mars_telemetry(),
             select="lru1-4",
             after=after,
-            expect=("take_science_image on lru1", "filter"),
+            expect=("lru1-4  take_science_image on", "filter", "+2 robots →"),
         ),
     )
 
