@@ -14,6 +14,7 @@ from backend import transport
 from backend.agent.runtime import Runtime, log
 from backend.protocol.keys import Keys
 from backend.protocol.messages import ErrorReply, WorldMessage, WorldReply, dumps
+from backend.protocol.wire import parse
 
 
 class World:
@@ -48,7 +49,7 @@ class World:
     async def on_message(self, payload: bytes) -> bytes:
         """The queryable on `Keys.world(name)`: an ask or a tell from a partner."""
         try:
-            msg = WorldMessage.model_validate_json(payload)
+            msg = parse(WorldMessage, payload)
         except ValidationError as exc:
             raise transport.Refusal(
                 dumps(
