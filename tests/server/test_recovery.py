@@ -137,3 +137,22 @@ async def test_a_value_the_journal_cannot_read_back_is_refused_not_journaled(tmp
         assert srv.mission == before
         assert srv.journal.last_revision() == before.revision
         assert srv.submit(AddSkill(robot="lru1", skill="recharge")).revision == before.revision + 1
+
+
+def test_a_journal_from_before_replies_were_kept_opens_and_resumes(tmp_path):
+    """Its `batches` has no `reply` column (and there is no quarantine): both
+    are added when it is opened; its requests are remembered without replies."""
+    db = tmp_path / "old.db"
+    written_by_an_older_server(db)
+    with sqlite3.connect(db) as conn:
+        conn.execute("DELETE FROM batches WHERE revision > 2")
+        conn.execute("DROP TABLE quarantine")
+        conn.execute("ALTER TABLE batches DROP COLUMN reply")
+    with Journal.open(db) as j:
+        mission, requests = j.load()
+    assert mission.revision == 2
+    assert [(r.request_id, r.reply) for r in requests] == [("one", None), ("two", None)]
+    with sqlite3.connect(db) as conn:
+        columns = [row[1] for row in conn.execute("PRAGMA table_info(batches)")]
+        assert columns[-1] == "reply"
+        assert conn.execute("SELECT count(*) FROM quarantine").fetchone() == (0,)
