@@ -13,6 +13,7 @@ from backend.core.limits import (
     ELIDED,
     LIMITS,
     Limits,
+    MiB,
     brief,
     check_tree,
     echo,
@@ -98,3 +99,22 @@ def test_parameter_values_are_held_to_the_value_limits():
     )
     assert p.path == ("filter",) and "more than the limit of 10,000" in p.message
     assert len(p.message) < 200
+
+
+def test_the_readme_documents_these_limits():
+    """docs/protocol.md is generated from them; the README's table is written:
+    it must say the same numbers."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    table = readme[readme.index("## Limits, and a journal") :]
+    for row in (
+        f"| string | {LIMITS.text:,} characters |",
+        f"| list, mapping | {LIMITS.items:,} items, entries |",
+        f"| nesting | {LIMITS.depth} levels |",
+        f"| nesting of a parameter value | {LIMITS.value_depth} levels |",
+        f"| message | {LIMITS.payload // MiB} MiB |",
+        f"| file | {LIMITS.file // MiB} MiB |",
+        f"| YAML nodes | {LIMITS.yaml_nodes:,} |",
+        f"the first {LIMITS.echo} characters",
+        "--recover",
+    ):
+        assert row in table, row
