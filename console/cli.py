@@ -11,7 +11,8 @@ from backend.transport.login import add_login_arguments
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 THEME_HELP = (
-    "theme name: missionctl-dark (default), missionctl-light, missionctl-high-contrast, missionctl-colorblind, "
+    "theme name: missionctl-dark (default), missionctl-light, missionctl-high-contrast, "
+    "missionctl-colorblind, "
     "or one of yours in ~/.config/missionctl/themes/*.yaml (default: the config file's; "
     "a theme picked in the command palette is remembered there)"
 )
@@ -29,7 +30,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     add_login_arguments(
         c,
-        user_help="account to log in as (with --password-file); without one, just the name recorded with every change",
+        user_help=(
+            "account to log in as (with --password-file); "
+            "without one, just the name recorded with every change"
+        ),
     )
     c.add_argument("--theme", metavar="T", help=THEME_HELP)
     c.add_argument(

@@ -6,12 +6,14 @@ from __future__ import annotations
 
 from rich.text import Text
 from textual.app import ComposeResult
+from textual.signal import Signal
 from textual.widgets import DataTable, Footer, Static
 
+from console.bindings import bindings
+from console.messages import AlertAcknowledged
 from console.screens.base import ViewScreen
-from console.state.actions import bindings
-from console.state.eventlog import AlertEntry
-from console.state.model import fmt_clock
+from console.state.eventlog import AlertBook, AlertEntry
+from console.state.text import fmt_clock
 
 LEVEL_VARS = {"error": "error", "warning": "warning", "info": "primary"}
 KIND_WORDS = {
@@ -39,8 +41,9 @@ class AlertScreen(ViewScreen):
     TOPICS = ("alerts",)
     BINDINGS = [*ViewScreen.BINDINGS, *bindings("alerts")]
 
-    def __init__(self) -> None:
-        super().__init__()
+    def __init__(self, book: AlertBook, changes: Signal[tuple[str, str | None]]) -> None:
+        super().__init__(changes)
+        self.book = book
         self.ids: list[int] = []
 
     def compose(self) -> ComposeResult:
@@ -50,10 +53,6 @@ class AlertScreen(ViewScreen):
             "enter/a acknowledge · A acknowledge all · F2 schedule · F5 event log", classes="hint"
         )
         yield Footer()
-
-    @property
-    def book(self):
-        return self.mission_app.alerts
 
     def _cells(self, a: AlertEntry) -> list:
         style = "" if a.acknowledged else "bold"
@@ -94,10 +93,10 @@ class AlertScreen(ViewScreen):
         t = self.query_one(DataTable)
         if not self.ids or t.cursor_row >= len(self.ids):
             return
-        self.mission_app.acknowledge(self.ids[t.cursor_row])
+        self.post_message(AlertAcknowledged(self.ids[t.cursor_row]))
 
     def action_ack_all(self) -> None:
-        self.mission_app.acknowledge(None)
+        self.post_message(AlertAcknowledged(None))
 
     def on_data_table_row_selected(self, event: DataTable.RowSelected) -> None:
         # enter on the table (the DataTable binds enter itself)

@@ -1,4 +1,5 @@
-"""Modal dialogs: confirm, file path prompt, skill picker, choice list, help, unreachable."""
+"""Modal dialogs: confirm, file path prompt, skill picker, choice list, marker
+name, help, unreachable."""
 
 from __future__ import annotations
 
@@ -13,14 +14,18 @@ from textual.binding import Binding
 from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.fuzzy import Matcher
 from textual.screen import ModalScreen, Screen
-from textual.widgets import Button, Footer, Input, Label, OptionList, Static
+from textual.widgets import Button, Footer, Input, Label, OptionList, Select, Static
 from textual.widgets.option_list import Option
 
 from backend.core.library import Library
-from backend.core.model import Status
+from backend.core.model import NAME_RE, Status
 from console.state.actions import ACTIONS, APP_KEYS, EDITOR_KEYS, NAV_KEYS
-from console.state.model import GLYPHS, STATUS_CSS, STATUS_WORDS
+from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS
 from console.widgets.param_editor import settle_cursors
+from console.widgets.select import SafeSelect
+
+# this module's look (CSS_PATH); absolute, so a subclass defined elsewhere finds it too
+TCSS = Path(__file__).with_name("dialogs.tcss")
 
 
 class ConfirmScreen(ModalScreen[bool]):
@@ -31,13 +36,7 @@ class ConfirmScreen(ModalScreen[bool]):
         Binding("n,escape", "answer(False)", "No"),
     ]
 
-    DEFAULT_CSS = """
-    ConfirmScreen { align: center middle; }
-    ConfirmScreen > Vertical { width: 64; max-width: 95%; height: auto; border: thick $warning; background: $surface; padding: 1 2; }
-    ConfirmScreen .question { margin: 0 0 1 0; }
-    ConfirmScreen Horizontal { height: auto; align: right middle; }
-    ConfirmScreen Button { margin: 0 0 0 2; }
-    """
+    CSS_PATH = TCSS
 
     def __init__(self, question: str, yes: str = "Yes") -> None:
         super().__init__()
@@ -67,12 +66,7 @@ class PathPrompt(ModalScreen[str | None]):
 
     BINDINGS = [Binding("escape", "cancel", "Cancel")]
 
-    DEFAULT_CSS = """
-    PathPrompt { align: center middle; }
-    PathPrompt > Vertical { width: 76; max-width: 95%; height: auto; border: thick $primary; background: $surface; padding: 1 2; }
-    PathPrompt .hint { color: $text-muted; }
-    PathPrompt .error { color: $error; }
-    """
+    CSS_PATH = TCSS
 
     def __init__(self, title: str, default: str, *, must_exist: bool = False) -> None:
         super().__init__()
@@ -119,12 +113,7 @@ class SkillPicker(ModalScreen[str | None]):
         Binding("up", "move(-1)", "Previous", show=False),
     ]
 
-    DEFAULT_CSS = """
-    SkillPicker { align: center middle; }
-    SkillPicker > Vertical { width: 80; max-width: 96%; height: 80%; max-height: 26; border: thick $primary; background: $surface; padding: 0 1; }
-    SkillPicker OptionList { height: 1fr; }
-    SkillPicker .hint { color: $text-muted; }
-    """
+    CSS_PATH = TCSS
 
     def __init__(
         self,
@@ -221,13 +210,7 @@ class ChoiceScreen(ModalScreen[str | None]):
 
     BINDINGS = [Binding("escape", "cancel", "Cancel")]
 
-    DEFAULT_CSS = """
-    ChoiceScreen { align: center middle; }
-    ChoiceScreen > Vertical { width: 72; max-width: 96%; height: auto; border: thick $primary; background: $surface; padding: 0 1; }
-    ChoiceScreen .question { margin: 0 0 1 0; }
-    ChoiceScreen OptionList { height: auto; max-height: 12; }
-    ChoiceScreen .hint { color: $text-muted; }
-    """
+    CSS_PATH = TCSS
 
     def __init__(self, question: str, rows: list[tuple[str, Text]], highlighted: int = 0) -> None:
         super().__init__()
@@ -254,15 +237,61 @@ class ChoiceScreen(ModalScreen[str | None]):
         self.dismiss(None)
 
 
+class MarkerPrompt(ModalScreen[tuple[str, str] | None]):
+    """Name (and kind) of a new marker; or a new name for one."""
+
+    BINDINGS = [Binding("escape", "cancel", "Cancel")]
+    CSS_PATH = TCSS
+
+    def __init__(self, title: str, default: str, *, kinds: bool = True, kind: str = "pose") -> None:
+        super().__init__()
+        self.title_text = title
+        self.default = default
+        self.kinds = kinds
+        self.kind = kind
+
+    def compose(self) -> ComposeResult:
+        with Vertical():
+            yield Label(self.title_text)
+            yield Input(self.default, id="name")
+            if self.kinds:
+                yield SafeSelect(
+                    [
+                        ("pose (position + heading)", "pose"),
+                        ("position", "position"),
+                        ("area (square around the cursor)", "area"),
+                    ],
+                    value=self.kind,
+                    allow_blank=False,
+                    id="kind",
+                )
+            yield Static("enter: ok · escape: cancel", classes="hint")
+            yield Static("", id="error", classes="error")
+
+    def on_mount(self) -> None:
+        self.query_one(Input).focus()
+
+    @on(Input.Submitted)
+    def _submitted(self, event: Input.Submitted) -> None:
+        name = event.value.strip()
+        if not NAME_RE.match(name):
+            self.query_one("#error", Static).update(
+                "a name starts with a letter; then letters, digits, _ or -"
+            )
+            return
+        kind = str(self.query_one("#kind", Select).value) if self.kinds else ""
+        self.dismiss((name, kind))
+
+    def action_cancel(self) -> None:
+        self.dismiss(None)
+
+
 class HelpScreen(ModalScreen[None]):
     """The key map (with the user's remappings) and the status legend."""
 
     BINDINGS = [Binding("escape,q,f1,question_mark", "close", "Close")]
 
-    DEFAULT_CSS = """
-    HelpScreen { align: center middle; }
-    HelpScreen > VerticalScroll { width: 96; max-width: 100%; height: 100%; max-height: 100%; border: thick $primary; background: $surface; padding: 0 1; }
-    """
+    CSS_PATH = TCSS
 
     def __init__(self, keys: dict[str, str]) -> None:
         super().__init__()
@@ -368,13 +397,7 @@ class UnreachableScreen(Screen[str]):
         Binding("q", "quit_app", "Quit", priority=True),
     ]
 
-    DEFAULT_CSS = """
-    UnreachableScreen { align: center middle; }
-    UnreachableScreen > Vertical { width: 80; max-width: 96%; height: auto; border: heavy $error; padding: 1 2; background: $surface; }
-    UnreachableScreen .head { text-style: bold; color: $error; }
-    UnreachableScreen .detail { margin: 1 0; }
-    UnreachableScreen .hint { color: $text-muted; }
-    """
+    CSS_PATH = TCSS
 
     def __init__(self, endpoint: str, message: str) -> None:
         super().__init__()

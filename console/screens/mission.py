@@ -8,9 +8,8 @@ screens as further app modes next to this one.
 
 from __future__ import annotations
 
-import asyncio
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from rich.text import Text
 from textual import events, on, work
@@ -18,7 +17,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal
 from textual.screen import Screen
-from textual.widgets import Footer, Input, Select, Static, Switch, TextArea
+from textual.widgets import Footer
 
 from backend.core.model import Status
 from backend.core.ops import (
@@ -26,8 +25,6 @@ from backend.core.ops import (
     AddSkill,
     Control,
     DeleteSkills,
-    EditSkill,
-    LoadMission,
     MoveSkill,
     Redo,
     RemoveBarrier,
@@ -36,73 +33,61 @@ from backend.core.ops import (
     Undo,
     Unsync,
 )
-from backend.core.params import ParamSpec, StartContext, starting_values
-from console.screens.dialogs import ConfirmScreen, PathPrompt, SkillPicker
-from console.state.actions import ACTIONS, BY_NAME, mission_bindings
+from console.bindings import mission_bindings
+from console.messages import HelpRequested, OperationRequested
+from console.screens.dialogs import ConfirmScreen, SkillPicker
+from console.screens.mission_files import MissionFiles
+from console.state.actions import ACTIONS, BY_NAME
 from console.state.capability import also_offered_by
+from console.state.defaults import default_params
+from console.state.eventlog import AlertBook
 from console.state.model import CONNECTED, ConsoleModel
+from console.widgets.bars import StatusLine, TopBar, connection_text
 from console.widgets.param_editor import ParamEditor
 from console.widgets.schedule import ScheduleView
 
-if TYPE_CHECKING:
-    from console.app import MissionApp
+# this module's look (CSS_PATH); absolute, so a subclass defined elsewhere finds it too
+TCSS = Path(__file__).with_name("mission.tcss")
 
 NARROW = 100
 FOOTER_ACTIONS = [a.name for a in ACTIONS if a.footer]
 
 
-def default_params(
-    spec_params: dict[str, ParamSpec], model: ConsoleModel, robot: str
-) -> tuple[dict[str, Any], dict[str, str]]:
-    """Values for the required parameters without a default, so a new skill is
-    valid at once (then edited): see `backend.core.params.starting_values`."""
-    tel = model.telemetry.get(robot)
-    ctx = StartContext(
-        robot=robot,
-        markers=model.mission.markers if model.mission else {},
-        robots=tuple(model.mission.robots) if model.mission else (),
-        **({"pose": tel.pose.model_dump()} if tel is not None else {}),
-    )
-    return starting_values(spec_params, ctx)
+def top_text(m: ConsoleModel, unacked: int, marks: list[str]) -> Text:
+    """The top bar: alert badge, mission and revision, connection, read-only, marks."""
+    t = Text()
+    t.append("missionctl", style="bold")
+    if unacked:  # the badge, first so 80 columns show it: F6 lists them
+        t.append(f" ⚠ {unacked} alert{'s' if unacked > 1 else ''} (F6) ", style="bold reverse")
+    if m.mission is not None:
+        t.append(f"  {m.mission.name}", style="bold")
+        t.append(f"  rev {m.mission.revision}", style="dim")
+    t.append(f"   {connection_text(m.connection)}")
+    if m.endpoint:
+        t.append(f" {m.endpoint}", style="dim")
+    if m.connection_detail and m.connection != CONNECTED:
+        t.append(f" — {m.connection_detail}", style="dim")
+    if m.read_only:
+        t.append(f"   {m.read_only}", style="bold")
+    if marks:
+        t.append(f"   marked: {', '.join(marks)}", style="bold")
+    return t
 
 
-class TopBar(Static):
-    DEFAULT_CSS = """
-    TopBar { height: 1; background: $panel; color: $text; padding: 0 1; }
-    TopBar.-reconnecting { background: $warning 40%; }
-    TopBar.-unreachable, TopBar.-offline { background: $error 30%; }
-    """
-
-
-class StatusLine(Static):
-    DEFAULT_CSS = """
-    StatusLine { height: 1; padding: 0 1; background: $surface; color: $text-muted; text-wrap: nowrap; text-overflow: ellipsis; }
-    StatusLine.-error { color: $error; text-style: bold; }
-    StatusLine.-warning { color: $warning; }
-    StatusLine.-ok { color: $success; }
-    """
-
-
-class MissionScreen(Screen):
+class MissionScreen(MissionFiles, Screen):
     BINDINGS = [
         *mission_bindings(),
         Binding("f1,question_mark", "help", "Help", id="app.help"),
         Binding("escape", "clear_marks", "Clear marks", show=False),
     ]
 
-    DEFAULT_CSS = """
-    MissionScreen #main { height: 1fr; }
-    MissionScreen ScheduleView { width: 1fr; height: 100%; }
-    MissionScreen ParamEditor { width: 50; height: 100%; border-left: vkey $primary 50%; background: $surface; }
-    MissionScreen ParamEditor:focus-within { border-left: vkey $primary; }
-    MissionScreen.-narrow ParamEditor { display: none; }
-    MissionScreen.-narrow.-editing ParamEditor { display: block; width: 100%; border-left: none; }
-    MissionScreen.-narrow.-editing ScheduleView { display: none; }
-    """
+    CSS_PATH = TCSS
 
-    def __init__(self, model: ConsoleModel) -> None:
+    def __init__(self, model: ConsoleModel, alerts: AlertBook | None = None) -> None:
         super().__init__()
         self.model = model
+        self.alerts = alerts  # its count of unacknowledged alerts is the top bar's badge
+        self.last_path: str | None = None  # of the last save or load: the next one's default
         self.pending_select: str | None = None
         # kept as attributes: messages may arrive while the screen is being torn down
         self._topbar = TopBar(id="topbar")
@@ -112,10 +97,6 @@ class MissionScreen(Screen):
         self._footer = Footer()
         self.edit_after_select = False
         self.message = ""
-
-    @property
-    def mission_app(self) -> MissionApp:
-        return self.app  # type: ignore[return-value]
 
     def compose(self) -> ComposeResult:
         yield self._topbar
@@ -192,50 +173,16 @@ class MissionScreen(Screen):
         self.schedule.refresh_telemetry(robot)
 
     def update_top(self) -> None:
-        m = self.model
-        t = Text()
-        t.append("missionctl", style="bold")
-        alerts = getattr(self.app, "alerts", None)
-        unacked = alerts.unacknowledged if alerts is not None else 0
-        if unacked:  # the badge, first so 80 columns show it: F6 lists them
-            t.append(f" ⚠ {unacked} alert{'s' if unacked > 1 else ''} (F6) ", style="bold reverse")
-        if m.mission is not None:
-            t.append(f"  {m.mission.name}", style="bold")
-            t.append(f"  rev {m.mission.revision}", style="dim")
-        state = m.connection
-        glyph = {
-            "connected": "●",
-            "reconnecting": "⟳",
-            "connecting": "…",
-            "unreachable": "✕",
-            "offline": "○",
-        }.get(state, "?")
-        t.append(f"   {glyph} {state}")
-        if m.endpoint:
-            t.append(f" {m.endpoint}", style="dim")
-        if m.connection_detail and state != CONNECTED:
-            t.append(f" — {m.connection_detail}", style="dim")
-        if m.read_only:
-            t.append(f"   {m.read_only}", style="bold")
-        if self.schedule.marks:
-            t.append(f"   marked: {', '.join(self.schedule.marks)}", style="bold")
-        bar = self._topbar
-        if t.plain == getattr(bar, "shown", None):
-            return
-        bar.shown = t.plain
-        bar.update(t, layout=False)
-        for c in ("reconnecting", "unreachable", "offline", "connecting", "connected"):
-            bar.set_class(state == c, f"-{c}")
+        unacked = self.alerts.unacknowledged if self.alerts is not None else 0
+        text = top_text(self.model, unacked, self.schedule.marks)
+        self._topbar.show(text, self.model.connection)
 
     def say(self, text: str, severity: str = "info") -> None:
         """The status line: the last outcome, refusal or explanation."""
         self.message = text
-        line = self._status
-        line.update(text, layout=False)
-        for c in ("error", "warning", "ok"):
-            line.set_class(severity == c, f"-{c}")
+        self._status.show(text, severity)
 
-    # -- selection -----------------------------------------------------------------------------------
+    # -- selection ---------------------------------------------------------------------------------
     @on(ScheduleView.CursorMoved)
     async def _cursor_moved(self, event: ScheduleView.CursorMoved) -> None:
         self.refresh_availability()
@@ -288,13 +235,14 @@ class MissionScreen(Screen):
         if not self.explain(action):
             await self.run_action(action)
 
-    # -- submitting -----------------------------------------------------------------------------------
+    # -- submitting --------------------------------------------------------------------------------
     def submit(self, op: Any, what: str, **kw: Any) -> None:
-        self.mission_app.submit(op, what, **kw)
+        """The app submits it (OperationRequested) and reports on the status line."""
+        self.post_message(OperationRequested(op, what, **kw))
 
-    # -- actions: plan ----------------------------------------------------------------------------------
+    # -- actions: plan -----------------------------------------------------------------------------
     def action_help(self) -> None:
-        self.mission_app.action_help()
+        self.post_message(HelpRequested())
 
     def action_clear_marks(self) -> None:
         if self.schedule.marks:
@@ -311,13 +259,7 @@ class MissionScreen(Screen):
         robot, sid = self.selection()
         if robot is None or self.model.library is None:
             return
-        found = self.model.find(sid)
-        task = self.model.task(robot)
-        idle = [s.id for s in task if s.status == Status.IDLE]
-        if found and found[2].status == Status.IDLE:
-            at, where = idle.index(found[2].id) + 1, f"after {found[2].id}"
-        else:
-            at, where = 0, "at the head of the plan"
+        at, where = self.model.insertion_point(robot, sid)
         skills = self.model.skills_of(robot)
         offered = {name: also_offered_by(self.model, name, robot) for name in skills}
         choice = await self.app.push_screen_wait(
@@ -373,19 +315,8 @@ class MissionScreen(Screen):
 
     @on(ParamEditor.ApplyRequested)
     def _apply(self, event: ParamEditor.ApplyRequested) -> None:
-        op = EditSkill(
-            id=event.skill_id,
-            label=event.label,
-            params=event.params,
-            bindings=event.bindings,
-            policies=event.policies,
-        )
         robot = self.model.owner(event.skill_id)
-        changed = ", ".join(
-            [*event.params, *event.bindings]
-            + (["label"] if event.label is not None else [])
-            + (["policies"] if event.policies is not None else [])
-        )
+        changed = ", ".join(event.changed())
 
         def refused(reply: Any) -> None:
             if reply.skill in (None, event.skill_id) and self.editor.skill_id == event.skill_id:
@@ -395,7 +326,7 @@ class MissionScreen(Screen):
             self.say(f"{event.skill_id}: applied {changed}", "ok")
 
         self.submit(
-            op,
+            event.operation(),
             f"edit {event.skill_id}",
             robot=robot,
             skill=event.skill_id,
@@ -455,7 +386,7 @@ class MissionScreen(Screen):
             on_ok=lambda r: self.say(f"redone: {r.value.get('redone', 'edit')}", "ok"),
         )
 
-    # -- actions: synchronization -----------------------------------------------------------------------
+    # -- actions: synchronization ------------------------------------------------------------------
     def action_sync(self) -> None:
         robot, sid = self.selection()
         if robot is None or sid is None:
@@ -541,7 +472,7 @@ class MissionScreen(Screen):
             ),
         )
 
-    # -- actions: execution -------------------------------------------------------------------------------
+    # -- actions: execution ------------------------------------------------------------------------
     def _control(self, op: str, robot: str | None) -> None:
         who = robot or "all robots"
 
@@ -593,85 +524,3 @@ class MissionScreen(Screen):
             )
         ):
             self._control("reset", None)
-
-    # -- actions: files ------------------------------------------------------------------------------------
-    @work(group="dialog")
-    async def action_save(self) -> None:
-        m, lib = self.model.mission, self.model.library
-        if m is None or lib is None:
-            return
-        default = self.mission_app.last_path or f"{m.name.lower().replace(' ', '_')}.yaml"
-        path = await self.app.push_screen_wait(PathPrompt("Save the mission to (YAML):", default))
-        if not path:
-            return
-        try:
-            note = await asyncio.to_thread(save_with_library, m, lib, Path(path))
-        except OSError as e:
-            self.say(f"cannot save {path}: {e.strerror or e}", "error")
-            self.app.notify(f"{path}: {e.strerror or e}", title="Not saved", severity="error")
-            return
-        self.mission_app.last_path = path
-        self.say(f"saved {path} (revision {m.revision})" + (f"; {note}" if note else ""), "ok")
-
-    @work(group="dialog")
-    async def action_load(self) -> None:
-        path = await self.app.push_screen_wait(
-            PathPrompt(
-                "Load a mission from (YAML):", self.mission_app.last_path or "", must_exist=True
-            )
-        )
-        if not path:
-            return
-        from backend.files.diagnostics import FileProblems
-        from backend.files.missions import load_mission
-
-        try:
-            mission, _lib = await asyncio.to_thread(load_mission, path)
-        except FileProblems as e:
-            first = str(e.issues[0]) if e.issues else str(e)
-            more = f" (and {len(e.issues) - 1} more)" if len(e.issues) > 1 else ""
-            self.say(f"cannot load: {first}{more}", "error")
-            self.app.notify(first + more, title="Mission file invalid", severity="error")
-            return
-        except OSError as e:
-            self.say(f"cannot load {path}: {e.strerror or e}", "error")
-            return
-        if not await self.app.push_screen_wait(
-            ConfirmScreen(
-                f"Replace the mission with {path} ('{mission.name}')? The current plan is replaced for every operator.",
-                yes="Replace",
-            )
-        ):
-            return
-        self.mission_app.last_path = path
-        self.submit(
-            LoadMission(mission=mission),
-            f"load {path}",
-            on_ok=lambda r: self.say(f"loaded {path}: '{mission.name}'", "ok"),
-        )
-
-    # -- widgets inside the editor must not trigger schedule keys ----------------------------------------
-    def is_typing(self) -> bool:
-        f = self.focused
-        return isinstance(f, Input | TextArea | Select | Switch)
-
-
-def save_with_library(mission: Any, library: Any, path: Path) -> str:
-    """Save the mission; if its library reference does not resolve from the
-    new place, write the library beside it and point there."""
-    from backend.files import yamlio
-    from backend.files.missions import library_path, save_mission
-
-    lib_file = library_path(path, mission.library)
-    if lib_file.exists():
-        save_mission(mission, path)
-        return ""
-    beside = path.with_name(path.stem + ".library.yaml")
-    beside.write_text(
-        yamlio.dump(
-            library.model_dump(mode="json", exclude_defaults=True) | {"format": library.format}
-        ),
-        encoding="utf-8",
-    )
-    save_mission(mission, path, library_file=beside)
-    return f"its skill library written to {beside.name}"

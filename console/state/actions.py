@@ -1,8 +1,8 @@
 """Every operator action in one table: key, footer label, help text, group.
 
-Key bindings, the footer, the help screen and the command palette are all
-generated from this table, so they cannot disagree. Each action has a stable
-binding id ("<scope>.<name>") that users remap in their config file:
+Key bindings (console/bindings.py), the footer, the help screen and the
+command palette are all generated from this table, so they cannot disagree.
+Each action has a stable binding id ("<scope>.<name>") that users remap in their config file:
 
     [keymap]
     "mission.sync" = "S"
@@ -16,8 +16,6 @@ action_<name> there), "app" (every screen: switching screens), or one screen
 from __future__ import annotations
 
 from dataclasses import dataclass
-
-from textual.binding import Binding
 
 
 @dataclass(frozen=True)
@@ -261,7 +259,8 @@ ACTIONS: list[Action] = [
         "map_bind",
         "b",
         "Bind",
-        "Bind the selected marker to a fitting parameter of the schedule's selected skill (several fit: choose one)",
+        "Bind the selected marker to a fitting parameter of the schedule's selected skill "
+        "(several fit: choose one)",
         "Map",
         True,
         scope="map",
@@ -270,7 +269,8 @@ ACTIONS: list[Action] = [
         "map_pick",
         "p",
         "Pick pose",
-        "Set the selected skill's pose/position parameter to the cursor (position + heading; several: choose one)",
+        "Set the selected skill's pose/position parameter to the cursor "
+        "(position + heading; several: choose one)",
         "Map",
         True,
         scope="map",
@@ -283,27 +283,6 @@ BY_NAME = {a.name: a for a in ACTIONS if a.scope == "mission"}
 
 # actions that need a skill/robot under the cursor and apply to the server
 MUTATING = set(BY_NAME) - {"edit", "save", "toggle_static", "mark"}
-
-
-def bindings(scope: str = "mission", *, show: bool | None = None) -> list[Binding]:
-    """Bindings of one scope; `show` overrides the footer flag (app-wide keys
-    are bound twice: hidden on the app, shown by the part-2 screens)."""
-    return [
-        Binding(
-            a.key,
-            f"app.{a.name}" if scope == "app" else a.name,
-            a.label,
-            show=a.footer if show is None else show,
-            id=a.binding_id,
-            tooltip=a.description,
-        )
-        for a in ACTIONS
-        if a.scope == scope
-    ]
-
-
-def mission_bindings() -> list[Binding]:
-    return bindings("mission")
 
 
 APP_KEYS: list[tuple[str, str, str]] = [

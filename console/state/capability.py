@@ -16,7 +16,8 @@ from __future__ import annotations
 from datetime import datetime
 
 from backend.core.model import Status
-from console.state.model import GLYPHS, STATUS_WORDS, ConsoleModel, fmt_clock
+from console.state.model import ConsoleModel
+from console.state.text import GLYPHS, STATUS_WORDS, fmt_clock
 
 FIELDS = ("skill", "type", "module", "prop", "name")
 SPARKS = "▁▂▃▄▅▆▇█"

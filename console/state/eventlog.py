@@ -28,7 +28,8 @@ from pydantic import BaseModel
 from backend.core import events as ev
 from backend.core.model import Mission
 from backend.protocol.messages import Alert, RobotInfo, Telemetry
-from console.state.model import GLYPHS, STATUS_WORDS, ConsoleModel
+from console.state.model import ConsoleModel
+from console.state.text import GLYPHS, STATUS_WORDS
 
 LOG_LIMIT = 10_000
 ALERT_LIMIT = 1_000

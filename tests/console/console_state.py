@@ -231,7 +231,8 @@ async def wait_until(
     while not predicate():
         if _time.monotonic() > deadline:
             raise AssertionError(
-                f"timed out after {timeout:g} s waiting for {what} (focused: {pilot.app.focused!r})\n--- screen ---\n{screen_text(pilot.app)}"
+                f"timed out after {timeout:g} s waiting for {what} "
+                f"(focused: {pilot.app.focused!r})\n--- screen ---\n{screen_text(pilot.app)}"
             )
         await pilot.pause(0.02)
 

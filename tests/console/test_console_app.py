@@ -196,7 +196,8 @@ async def test_server_refusal_for_a_parameter_appears_next_to_the_field():
             raise OperationRefused(
                 ErrorReply(
                     code="bad_param",
-                    message="lru1, skill lru1-4 (take_science_image), parameter filter: the camera has no such filter today",
+                    message="lru1, skill lru1-4 (take_science_image), parameter filter: "
+                    "the camera has no such filter today",
                     robot="lru1",
                     skill="lru1-4",
                     param="filter",
@@ -350,7 +351,8 @@ async def test_command_palette_has_every_action_and_says_what_does_not_apply():
         await pilot.pause()
         provider = MissionCommands(app.screen)
         hits = [h async for h in provider.discover()]
-        # the schedule's actions and the screen switches; the other screens' own actions are offered there
+        # the schedule's actions and the screen switches; the other screens' own actions
+        # are offered there
         assert {str(h.display) for h in hits} == {
             a.palette_title for a in ACTIONS if a.scope in ("mission", "app")
         }

@@ -1,0 +1,55 @@
+"""One-line bars: the top bar (mission, revision, connection), the status
+line (the last outcome, refusal or explanation), the part-2 screens' title
+bar and the map's info line (cursor, selection, feed). Their look:
+bars.tcss (loaded by the app)."""
+
+from __future__ import annotations
+
+from rich.text import Text
+from textual.widgets import Static
+
+# the connection's state, as a glyph (the word follows it)
+CONNECTION_GLYPHS = {
+    "connected": "●",
+    "reconnecting": "⟳",
+    "connecting": "…",
+    "unreachable": "✕",
+    "offline": "○",
+}
+
+
+def connection_text(state: str) -> str:
+    """'● connected', '⟳ reconnecting', …"""
+    return f"{CONNECTION_GLYPHS.get(state, '?')} {state}"
+
+
+class TopBar(Static):
+    """Mission, revision and connection (styled by state: -reconnecting, -unreachable, …)."""
+
+    shown = ""  # the text shown (plain): an unchanged one is not drawn again
+
+    def show(self, text: Text, state: str) -> None:
+        """Show `text`, styled by the connection's `state` (-reconnecting, …)."""
+        if text.plain == self.shown:
+            return
+        self.shown = text.plain
+        self.update(text, layout=False)
+        for c in CONNECTION_GLYPHS:
+            self.set_class(state == c, f"-{c}")
+
+
+class StatusLine(Static):
+    """The last outcome, refusal or explanation (-error, -warning, -ok)."""
+
+    def show(self, text: str, severity: str = "info") -> None:
+        self.update(text, layout=False)
+        for c in ("error", "warning", "ok"):
+            self.set_class(severity == c, f"-{c}")
+
+
+class TitleBar(Static):
+    """The title of a part-2 screen (fleet, event log, alerts)."""
+
+
+class InfoLine(Static):
+    """The map's cursor, selection and feed (-nofeed when there is none)."""
