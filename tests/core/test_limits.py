@@ -118,3 +118,12 @@ def test_the_readme_documents_these_limits():
         "--recover",
     ):
         assert row in table, row
+
+
+def test_messages_name_a_skill_by_the_start_of_a_long_label():
+    """A label may be 10,000 characters: refusals and notes show its start."""
+    from backend.core.model import SkillInstance
+
+    s = SkillInstance(id="lru1-3", skill="recharge", label="y" * LIMITS.text)
+    assert s.display() == "lru1-3 (" + "y" * 60 + "…)"
+    assert SkillInstance(id="lru1-4", skill="recharge", label="short").display() == "lru1-4 (short)"
