@@ -11,14 +11,15 @@ the limit, echoing at most a short prefix of the value.
 
 from __future__ import annotations
 
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import pydantic_core
-from pydantic import BaseModel, ValidationError
+from pydantic import BaseModel, TypeAdapter, ValidationError
 
 from backend.core.limits import LIMITS, Limits, check_tree, show_path, too_big, too_deep
 
 M = TypeVar("M", bound=BaseModel)
+T = TypeVar("T")
 
 LIMIT_EXCEEDED = "limit_exceeded"  # the error type of a refusal by a limit
 
@@ -26,19 +27,41 @@ LIMIT_EXCEEDED = "limit_exceeded"  # the error type of a refusal by a limit
 def parse(model: type[M], payload: bytes | bytearray | str, limits: Limits = LIMITS) -> M:
     """The message `payload` as a `model`, or ValidationError: malformed, or
     over a limit (`is_limit`)."""
+    data = _within_limits(model.__name__, payload, limits)
+    if data is _NOT_JSON:
+        return model.model_validate_json(payload)  # not JSON: pydantic says where
+    return model.model_validate(data)
+
+
+def parse_as(
+    adapter: TypeAdapter[T], payload: bytes | bytearray | str, limits: Limits = LIMITS
+) -> T:
+    """`parse` for what is not one model (a union such as a robot's `Command`)."""
+    data = _within_limits("message", payload, limits)
+    if data is _NOT_JSON:
+        return adapter.validate_json(payload)
+    return adapter.validate_python(data)
+
+
+_NOT_JSON = object()
+
+
+def _within_limits(title: str, payload: bytes | bytearray | str, limits: Limits) -> Any:
+    """The payload's JSON, once held to the limits (ValidationError), or
+    _NOT_JSON when it is no JSON at all."""
     n = len(payload)
     if n > limits.payload:
-        raise limit_error(model.__name__, (), too_big(n, limits.payload, "a message"))
+        raise limit_error(title, (), too_big(n, limits.payload, "a message"))
     try:
         data = pydantic_core.from_json(payload, allow_inf_nan=False)
     except ValueError as e:
         if "recursion limit" in str(e):  # the reader's own bound (200 levels) is past ours
-            raise limit_error(model.__name__, (), too_deep(limits.depth)) from None
-        return model.model_validate_json(payload)  # not JSON: pydantic says where
+            raise limit_error(title, (), too_deep(limits.depth)) from None
+        return _NOT_JSON
     found = check_tree(data, depth=limits.depth, limits=limits)
     if found is not None:
-        raise limit_error(model.__name__, found.path, found.message)
-    return model.model_validate(data)
+        raise limit_error(title, found.path, found.message)
+    return data
 
 
 def limit_error(title: str, path: tuple[str | int, ...], message: str) -> ValidationError:

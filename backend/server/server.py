@@ -22,6 +22,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from pydantic_core import PydanticSerializationError
+
 from backend.core.events import EventBatch
 from backend.core.library import Library
 from backend.core.model import Mission
@@ -321,9 +323,11 @@ class MissionServer:
         def journal(batch: EventBatch) -> None:
             entry = EventBatch(revision=batch.revision, events=batch.events, actor=who)
             try:
-                self.journal.append(
-                    entry, op_json=op.model_dump_json(), client=client, request_id=request_id
-                )
+                op_json = op.model_dump_json()
+            except PydanticSerializationError:  # from code in this process: its batch says
+                op_json = op.op
+            try:
+                self.journal.append(entry, op_json=op_json, client=client, request_id=request_id)
             except NotReplayable as e:  # the value, not the journal: refused, nothing changed
                 raise Refusal(
                     "not_replayable",

@@ -142,6 +142,23 @@ def test_a_message_over_the_payload_limit_is_not_read():
     )
 
 
+def test_a_union_is_read_within_the_limits_too():
+    """`parse_as`: for a robot's commands (`Command`, a union of models)."""
+    from pydantic import TypeAdapter
+
+    from backend.protocol.messages import Command, Dequeue, first_error
+    from backend.protocol.wire import parse_as
+
+    commands = TypeAdapter(Command)
+    assert parse_as(commands, b'{"cmd": "dequeue", "ids": ["lru1-1"]}') == Dequeue(ids=["lru1-1"])
+    with pytest.raises(ValueError) as e:
+        parse_as(commands, json.dumps({"cmd": "dequeue", "ids": ["x" * 20_000]}))
+    assert is_limit(e.value) and first_error(e.value).startswith("ids[0]: 20,000 characters")
+    with pytest.raises(ValueError) as e:
+        parse_as(commands, b"not json")
+    assert not is_limit(e.value) and "Invalid JSON" in str(e.value)
+
+
 # -- the state key ---------------------------------------------------------------------
 
 

@@ -130,10 +130,12 @@ async def test_a_value_the_journal_cannot_read_back_is_refused_not_journaled(tmp
             skill="take_science_image",
             params={"target": {"x": 1, "y": 2}, "camera": {"v": (1, 2)}},
         )
-        with pytest.raises(Refusal) as e:
-            srv.submit(op, client="in-process")
-        assert e.value.code == "not_replayable"
-        assert "a restart could not replay it" in e.value.message
+        for bad in ((1, 2), "\ud800"):  # a tuple; a string JSON cannot carry
+            bad_op = op.model_copy(update={"params": {**op.params, "camera": {"v": bad}}})
+            with pytest.raises(Refusal) as e:
+                srv.submit(bad_op, client="in-process")
+            assert e.value.code == "not_replayable"
+            assert "a restart could not replay it" in e.value.message
         assert srv.mission == before
         assert srv.journal.last_revision() == before.revision
         assert srv.submit(AddSkill(robot="lru1", skill="recharge")).revision == before.revision + 1
