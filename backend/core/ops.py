@@ -15,6 +15,7 @@ from pydantic import Field
 from backend.core.model import (
     AreaMarker,
     Barrier,
+    CheckId,
     Marker,
     Mission,
     Name,
@@ -126,6 +127,20 @@ class MarkerRename(Strict):
 class MarkerDelete(Strict):
     op: Literal["marker_delete"] = "marker_delete"
     name: Name
+
+
+class Waive(Strict):
+    """Let skills with this plan check's finding be synchronized (errors
+    otherwise refuse the sync); given again, the reason is replaced."""
+
+    op: Literal["waive"] = "waive"
+    check: CheckId = Field(description="the finding's id, e.g. 'barrier.deadlock:b1+b2'")
+    reason: str = Field(min_length=1, max_length=500, description="why, for the log")
+
+
+class Unwaive(Strict):
+    op: Literal["unwaive"] = "unwaive"
+    check: CheckId
 
 
 class LoadMission(Strict):
@@ -245,6 +260,8 @@ OperatorOperation = (
     | MarkerMove
     | MarkerRename
     | MarkerDelete
+    | Waive
+    | Unwaive
     | LoadMission
     | NewMission
     | Undo
@@ -275,6 +292,8 @@ UNDOABLE = (
     SetSkill,
     RestoreBarrier,
     RestoreMarker,
+    Waive,
+    Unwaive,
 )
 
 MARKER_TYPES = {"pose": PoseMarker, "position": PositionMarker, "area": AreaMarker}

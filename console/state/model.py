@@ -18,6 +18,7 @@ from backend.core.library import Library
 from backend.core.model import ACTIVE, Mission, SkillInstance, Status
 from backend.protocol.messages import RobotInfo, Telemetry
 from console.state import availability
+from console.state.plan import PlanView
 from console.state.text import GLYPHS, STATUS_WORDS, fmt_clock
 
 HISTORY = 120  # telemetry samples kept per robot (bounded memory)
@@ -64,6 +65,8 @@ class ConsoleModel:
     # robot -> the last HISTORY (battery, link) samples, for the fleet screen's sparklines
     history: dict[str, deque[tuple[float, float]]] = field(default_factory=dict)
     selection: Selection = field(default_factory=Selection)
+    # the plan's forecast and checks (console/state/plan.py), refreshed by the app
+    plan: PlanView = field(default_factory=PlanView)
 
     # -- updates ------------------------------------------------------------------
     def load(
@@ -264,6 +267,10 @@ class ConsoleModel:
         self, action: str, robot: str | None, skill_id: str | None, marks: list[str] | None = None
     ) -> str | None:
         return availability.why_not(self, action, robot, skill_id, marks)
+
+    def plan_blocking(self, robot: str, skill_id: str) -> list[str]:
+        """Ids of the unwaived plan errors that refuse syncing `robot` through `skill_id`."""
+        return [f.id for f in self.plan.blocking(self.task(robot), skill_id)]
 
     def read_only_reason(self, skill_id: str) -> str | None:
         """Why the parameter editor is read-only for this skill (None: editable)."""
