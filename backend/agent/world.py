@@ -135,7 +135,7 @@ class World:
                 dumps(msg),
                 timeout=self.rt.robot.request_timeout,
             )
-            return WorldReply.model_validate_json(raw)
+            return parse(WorldReply, raw)  # a partner's answer: held to the limits too
         except (transport.QueryFailed, transport.TransportError, ValidationError) as exc:
             log.info("%s: %s %s/%s failed: %s", name, kind, robot, topic, _why(exc))
             return None
@@ -145,7 +145,7 @@ def _why(exc: Exception) -> str:
     """A failed query in words: a robot's refusal is said by its own sentence."""
     if isinstance(exc, transport.QueryError):
         try:
-            return ErrorReply.model_validate_json(exc.payload).message
+            return parse(ErrorReply, exc.payload).message
         except ValidationError:
             pass
     return str(exc)
