@@ -57,6 +57,7 @@ from console.messages import (
     TelemetryChanged,
 )
 from console.notifier import FoldingNotifications
+from console.plan_modes import PlanModes
 from console.quitting import QuitQuestion
 from console.screens.alerts import AlertScreen
 from console.screens.dialogs import HelpScreen, UnreachableScreen
@@ -81,7 +82,7 @@ def refusal_text(reply: ErrorReply, robot: str | None = None, skill: str | None 
     return f"{head}{reply.message}"
 
 
-class MissionApp(SplitEscape, FoldingNotifications, QuitQuestion, App[int]):
+class MissionApp(SplitEscape, FoldingNotifications, QuitQuestion, PlanModes, App[int]):
     TITLE = "missionctl"
     cursor_blink = True  # tests turn it off for deterministic snapshots
     DEFAULT_MODE = "mission"
@@ -151,6 +152,7 @@ class MissionApp(SplitEscape, FoldingNotifications, QuitQuestion, App[int]):
         self.map_screen: MapScreen | None = None
         self.map_feed: tuple[object, object] | None = None  # the latest (mirror, update)
         self.add_mode("map", self._make_map_screen)
+        self.add_plan_modes()  # timeline (F7) and checks (F8): console/plan_modes.py
         if self.config.keymap:
             self.set_keymap(self.config.keymap)
         self.bridge = (
@@ -268,6 +270,7 @@ class MissionApp(SplitEscape, FoldingNotifications, QuitQuestion, App[int]):
             self.refresh_css()
         if self.bridge is not None:
             self.connect_now()
+        self.start_plan()
 
     async def on_unmount(self) -> None:
         """However the app ends (quit, hang-up, a test's teardown): close the

@@ -11,7 +11,17 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, TypeAdapter
 
-from backend.core.model import Barrier, Marker, Mission, Name, SkillId, SkillInstance, Strict
+from backend.core.model import (
+    Barrier,
+    CheckId,
+    Marker,
+    Mission,
+    Name,
+    SkillId,
+    SkillInstance,
+    Strict,
+    Waiver,
+)
 
 
 class SkillAdded(Strict):
@@ -72,6 +82,17 @@ class ReportSeq(Strict):
     seq: int
 
 
+class WaiverSet(Strict):
+    ev: Literal["waiver_set"] = "waiver_set"
+    check: CheckId
+    waiver: Waiver
+
+
+class WaiverRemoved(Strict):
+    ev: Literal["waiver_removed"] = "waiver_removed"
+    check: CheckId
+
+
 class MissionReplaced(Strict):
     ev: Literal["mission_replaced"] = "mission_replaced"
     mission: Mission
@@ -87,6 +108,8 @@ Event = Annotated[
     | MarkerSet
     | MarkerRemoved
     | ReportSeq
+    | WaiverSet
+    | WaiverRemoved
     | MissionReplaced,
     Field(discriminator="ev"),
 ]
@@ -169,6 +192,10 @@ def apply_event(m: Mission, ev: Any, revision: int) -> Mission:
             m.marker_revs.pop(name, None)
         case ReportSeq(robot=robot, seq=seq):
             m.report_seqs[robot] = seq
+        case WaiverSet(check=check, waiver=w):
+            m.waivers[check] = w.model_copy(update={"revision": revision})
+        case WaiverRemoved(check=check):
+            m.waivers.pop(check, None)
         case MissionReplaced(mission=new):
             m = new.copy_deep()
         case _:

@@ -15,6 +15,7 @@ from pydantic import Field
 from backend.core.model import (
     AreaMarker,
     Barrier,
+    CheckId,
     Marker,
     Mission,
     Name,
@@ -138,6 +139,20 @@ class MarkerDelete(Strict):
     name: Name
 
 
+class Waive(Strict):
+    """Let skills with this plan check's finding be synchronized (errors
+    otherwise refuse the sync); given again, the reason is replaced."""
+
+    op: Literal["waive"] = "waive"
+    check: CheckId = Field(description="the finding's id, e.g. 'barrier.deadlock:b1+b2'")
+    reason: str = Field(min_length=1, max_length=500, description="why, for the log")
+
+
+class Unwaive(Strict):
+    op: Literal["unwaive"] = "unwaive"
+    check: CheckId
+
+
 class LoadMission(Strict):
     op: Literal["load"] = "load"
     mission: Mission
@@ -256,6 +271,8 @@ OperatorOperation = (
     | MarkerMove
     | MarkerRename
     | MarkerDelete
+    | Waive
+    | Unwaive
     | LoadMission
     | NewMission
     | Undo
@@ -287,6 +304,8 @@ UNDOABLE = (
     SetSkill,
     RestoreBarrier,
     RestoreMarker,
+    Waive,
+    Unwaive,
 )
 
 MARKER_TYPES = {"pose": PoseMarker, "position": PositionMarker, "area": AreaMarker}

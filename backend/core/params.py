@@ -23,6 +23,7 @@ from typing import Any, ClassVar, Literal
 
 from pydantic import Field, model_validator
 
+from backend.core.limits import echo, value_problem
 from backend.core.model import AreaMarker, Pose, PoseMarker, Position, PositionMarker, Strict
 
 POSE_FIELDS = ("x", "y", "z", "roll", "pitch", "yaw")
@@ -105,7 +106,7 @@ def describe(v: Any) -> str:
     if isinstance(v, float):
         return f"a number ({v})"
     if isinstance(v, str):
-        return f"a string ({v!r})"
+        return f"a string ({echo(v)})"
     if isinstance(v, list):
         return "a list"
     if isinstance(v, dict):
@@ -375,7 +376,8 @@ class Enum(Kind):
     ) -> list[Problem]:
         choices = spec.choices or []
         if v not in choices:
-            return [((), f"{v!r} is not one of: {', '.join(choices)}")]
+            what = echo(v) if isinstance(v, str) else describe(v)
+            return [((), f"{what} is not one of: {', '.join(choices)}")]
         return []
 
     def start(self, spec: ParamSpec, ctx: StartContext) -> tuple[Any, str | None]:
@@ -564,6 +566,9 @@ def check_value(
     kind = KINDS.get(spec.type)
     if kind is None:
         return [((), f"unknown parameter type {spec.type}")]
+    over = value_problem(v)  # a list or dict value holds anything: bound it first
+    if over is not None:
+        return [(over.path, over.message)]
     return kind.check(spec, v, markers, robots)
 
 

@@ -194,6 +194,17 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
     def telemetry_changed(self, robot: str) -> None:
         self.schedule.refresh_telemetry(robot)
 
+    def plan_changed(self) -> None:
+        """The plan checks' findings changed: the rows' glyphs and what sync allows."""
+        self.schedule.refresh()
+        self.refresh_availability()
+
+    def on_screen_resume(self) -> None:
+        """Back from the timeline or the checks: the cursor follows their selection."""
+        sid, cols = self.model.selection.skill, self.schedule.columns
+        if sid and cols and sid not in cols[self.schedule.cursor_col].line_of:
+            self.schedule.select(sid)
+
     def update_top(self) -> None:
         unacked = self.alerts.unacknowledged if self.alerts is not None else 0
         text = top_text(self.model, unacked, self.schedule.marks)

@@ -44,6 +44,8 @@ SCOPE_TITLES = {
     "map": "Map",
     "log": "Event log",
     "alerts": "Alerts",
+    "timeline": "Timeline",
+    "checks": "Plan checks",
 }
 
 
@@ -305,6 +307,73 @@ ACTIONS: list[Action] = [
         scope="map",
     ),
     Action("map_legend", "l", "Legend", "Show/hide the legend", "Map", scope="map"),
+    # the plan's timeline and checks (console/screens/timeline.py, checks.py); not in the
+    # footers of the other screens, which are full at 80 columns: help and palette list them
+    Action(
+        "show_timeline",
+        "f7,6",
+        "Timeline",
+        "Show the predicted timeline of the plan: bars per skill, barrier waits, coverage",
+        "Screens",
+        scope="app",
+    ),
+    Action(
+        "show_checks",
+        "f8,7",
+        "Checks",
+        "Show the plan checks (energy, coverage, barriers, terrain, parameters); waive there",
+        "Screens",
+        scope="app",
+    ),
+    *(
+        Action(f"timeline_{name}", key, label, text, "Timeline", footer, "timeline")
+        for name, key, label, text, footer in (
+            ("prev", "left,h", "◀", "Select the robot's previous skill", False),
+            ("next", "right,l", "▶", "Select the robot's next skill", False),
+            ("up", "up,k", "Up", "Select a skill of the robot above, at the same time", False),
+            (
+                "down",
+                "down,j",
+                "Down",
+                "Select a skill of the robot below, at the same time",
+                False,
+            ),
+            ("zoom_in", "plus,equals_sign", "Zoom+", "Zoom in (around the selection)", True),
+            ("zoom_out", "minus", "Zoom-", "Zoom out (around the selection)", True),
+            ("fit", "0,home", "Fit", "Show the whole plan, from now to its end", True),
+            ("now", "n", "Now", "Scroll to now", False),
+            ("earlier", "shift+left,less_than_sign", "Earlier", "Scroll back in time", False),
+            ("later", "shift+right,greater_than_sign", "Later", "Scroll on in time", False),
+            ("schedule", "enter", "Schedule", "Show the selected skill in the schedule", True),
+        )
+    ),
+    Action(
+        "checks_waive",
+        "w",
+        "Waive",
+        "Waive the selected finding, with a reason",
+        "Checks",
+        True,
+        "checks",
+    ),
+    Action(
+        "checks_unwaive",
+        "u",
+        "Unwaive",
+        "Withdraw the selected finding's waiver",
+        "Checks",
+        True,
+        "checks",
+    ),
+    Action(
+        "checks_schedule",
+        "enter",
+        "Schedule",
+        "Show the finding's skill in the schedule",
+        "Checks",
+        True,
+        "checks",
+    ),
 ]
 
 # the mission screen's actions (the rest are bound elsewhere)

@@ -43,6 +43,7 @@ class Facts(Protocol):
     def is_online(self, robot: str) -> bool: ...
     def presence_text(self, robot: str) -> str: ...
     def robot_state(self, robot: str) -> tuple[SkillInstance | None, int]: ...
+    def plan_blocking(self, robot: str, skill_id: str) -> list[str]: ...
 
 
 @dataclass(frozen=True)
@@ -169,6 +170,13 @@ def _sync(q: Selected) -> str | None:
         )
     if not q.facts.is_online(r):
         return f"{r} is {q.facts.presence_text(r)}: it cannot receive skills"
+    blocked = q.facts.plan_blocking(r, s.id)
+    if blocked:
+        more = f" and {len(blocked) - 2} more" if len(blocked) > 2 else ""
+        return (
+            f"unwaived plan error {', '.join(blocked[:2])}{more}: fix the plan, or waive "
+            "it with a reason on the checks screen (F8)"
+        )
     return None
 
 

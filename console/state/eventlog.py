@@ -18,10 +18,10 @@ from __future__ import annotations
 
 import json
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from datetime import datetime, timedelta
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from pydantic import BaseModel
 
@@ -169,6 +169,17 @@ def read_jsonl(path: Path) -> list[LogEntry]:
     ]
 
 
+# events that touch no robot's column -> their phrase in an operation's log line
+PHRASES: dict[type, Callable[[Any], str]] = {
+    ev.BarrierRemoved: lambda e: f"barrier {e.id} removed",
+    ev.MarkerSet: lambda e: f"marker {e.name}",
+    ev.MarkerRemoved: lambda e: f"marker {e.name} removed",
+    ev.MissionReplaced: lambda e: f"mission replaced by '{e.mission.name}'",
+    ev.WaiverSet: lambda e: f"waived {e.check}: {e.waiver.reason}",
+    ev.WaiverRemoved: lambda e: f"waiver of {e.check} withdrawn",
+}
+
+
 def _summary(batch: ev.EventBatch, model: ConsoleModel) -> tuple[list[str], list[str]]:
     robots: list[str] = []
     parts: list[str] = []
@@ -196,16 +207,10 @@ def _summary(batch: ev.EventBatch, model: ConsoleModel) -> tuple[list[str], list
                 for sid in b.skills:
                     robot(model.owner(sid))
                 parts.append(f"barrier {bid} ({', '.join(b.skills)})")
-            case ev.BarrierRemoved(id=bid):
-                parts.append(f"barrier {bid} removed")
-            case ev.MarkerSet(name=n):
-                parts.append(f"marker {n}")
-            case ev.MarkerRemoved(name=n):
-                parts.append(f"marker {n} removed")
-            case ev.MissionReplaced(mission=m):
-                parts.append(f"mission replaced by '{m.name}'")
             case _:
-                pass
+                phrase = PHRASES.get(type(e))
+                if phrase is not None:
+                    parts.append(phrase(e))
     if len(parts) > 4:
         parts = parts[:4] + [f"… {len(parts) - 4} more"]
     return robots, parts

@@ -23,6 +23,7 @@ from backend.core.model import ACTIVE, Mission, SkillInstance, Status
 from backend.protocol.messages import RobotInfo, Telemetry
 from console.state import availability
 from console.state.freshness import Freshness, freshness
+from console.state.plan import PlanView
 from console.state.text import GLYPHS, STATUS_WORDS, fmt_clock
 
 HISTORY = 120  # telemetry samples kept per robot (bounded memory)
@@ -103,6 +104,8 @@ class ConsoleModel:
     # robot -> its commands not yet acknowledged, as sentences ("sync lru1-3, 2m10s old");
     # empty until the robot link's state reaches the console (issue 19): quitting asks then
     pending: dict[str, list[str]] = field(default_factory=dict)
+    # the plan's forecast and checks (console/state/plan.py), refreshed by the app
+    plan: PlanView = field(default_factory=PlanView)
 
     # -- updates ------------------------------------------------------------------
     def load(
@@ -353,6 +356,10 @@ class ConsoleModel:
         self, action: str, robot: str | None, skill_id: str | None, marks: list[str] | None = None
     ) -> str | None:
         return availability.why_not(self, action, robot, skill_id, marks)
+
+    def plan_blocking(self, robot: str, skill_id: str) -> list[str]:
+        """Ids of the unwaived plan errors that refuse syncing `robot` through `skill_id`."""
+        return [f.id for f in self.plan.blocking(self.task(robot), skill_id)]
 
     def read_only_reason(self, skill_id: str) -> str | None:
         """Why the parameter editor is read-only for this skill (None: editable)."""

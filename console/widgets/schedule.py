@@ -63,6 +63,9 @@ class ScheduleView(ScrollView, can_focus=True):
         "schedule--more",
         "schedule--stale",
         "schedule--stale-head",
+        "schedule--check-error",  # plan checks' glyphs (console/state/plan.py)
+        "schedule--check-warning",
+        "schedule--check-waived",
     }
 
     BINDINGS = [
@@ -531,6 +534,7 @@ class ScheduleView(ScrollView, can_focus=True):
             marked=s.id in self.marks,
             draft=s.id in self.drafts,
             tag=f"[{bid}]" if bid else "",
+            check=self.model.plan.mark(s.id),
             extra=self._summary(s) if not col.static or self.expand_static else "",
             cursor=(st["cursor"] if self.has_focus else st["cursor-blur"]) if selected else None,
             stale=stale,

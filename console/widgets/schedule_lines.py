@@ -17,6 +17,7 @@ from rich.style import Style
 from textual.strip import Strip
 
 from backend.core.model import SkillInstance, Status
+from backend.core.plan.checks import Finding
 from console.state.freshness import FRESH, Freshness
 from console.state.model import ConsoleModel
 from console.state.text import GLYPHS, STATUS_CSS, fmt_clock, fmt_duration, skill_title
@@ -246,15 +247,19 @@ def skill_segments(
     tag: str,
     extra: str,
     cursor: Style | None,
+    check: Finding | None = None,
     stale: bool = False,
 ) -> list[Segment]:
     """A skill's row: mark, glyph, title (*: unapplied edits), attempt, the
-    parameter summary where it fits, the barrier tag; on `cursor`'s background.
-    `stale`: a synchronized skill of a robot not heard lately (its last known status)."""
+    parameter summary where it fits, the barrier tag, the plan checks' glyph
+    (✖ error, ⚠ warning, ≈ waived); on `cursor`'s background. `stale`: a
+    synchronized skill of a robot not heard lately (its last known status)."""
     sst = st[STATUS_CSS[s.status]] + st["stale"] if stale else st[STATUS_CSS[s.status]]
     title = ("*" if draft else "") + skill_title(s)
     attempt = f" #{s.attempt}" if s.attempt > 1 else ""
-    room = width - 2 - (cell_len(tag) + 1 if tag else 0)
+    if check is not None:
+        tag = f"{tag} " if tag else ""
+    room = width - 2 - (cell_len(tag) + 1 if tag else 0) - (1 if check is not None else 0)
     segs: list[Segment] = [
         Segment("+" if marked else " ", st["mark"] if marked else st["base"]),
         Segment(GLYPHS[s.status], sst),
@@ -272,9 +277,17 @@ def skill_segments(
     if tag:
         segs.append(Segment(" ", st["base"]))
         segs.append(Segment(tag, st["tag"]))
+    if check is not None:
+        segs.append(Segment(*_check_glyph(check, st)))
     if cursor is not None:
         segs = [Segment(seg.text, (seg.style or Style()) + cursor) for seg in segs]
     return segs
+
+
+def _check_glyph(f: Finding, st: Styles) -> tuple[str, Style]:
+    if f.waiver is not None:
+        return "≈", st["check-waived"]
+    return ("✖", st["check-error"]) if f.severity == "error" else ("⚠", st["check-warning"])
 
 
 def progress_segments(

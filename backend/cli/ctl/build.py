@@ -292,6 +292,7 @@ def _redo(args: argparse.Namespace, known: Known) -> Any:
 # ctl's operation name -> its builder (None: `ctl` alone, refused before this)
 BUILDERS: dict[str | None, Builder] = {
     **dict.fromkeys(("state", "robots", "watch", "save", None), _no_operation),
+    **dict.fromkeys(("check", "timeline"), _no_operation),
     "add": _add,
     "delete": _delete,
     "move": _move,
@@ -307,6 +308,10 @@ BUILDERS: dict[str | None, Builder] = {
     "new": _new,
     "undo": _undo,
     "redo": _redo,
+    "waive": lambda args, known: _validated(
+        ops.Waive, "waive", check=args.check, reason=args.reason.strip()
+    ),
+    "unwaive": lambda args, known: _validated(ops.Unwaive, "unwaive", check=args.check),
 }
 
 

@@ -213,6 +213,7 @@ def state_json(client: Any, only: list[str] | None = None) -> dict[str, Any]:
         },
         "barriers": {bid: list(b.skills) for bid, b in m.barriers.items()},
         "markers": {n: mk.model_dump(mode="json") for n, mk in m.markers.items()},
+        "waivers": {c: w.model_dump(mode="json") for c, w in m.waivers.items()},
     }
 
 
@@ -302,6 +303,7 @@ def state_text(client: Any, only: list[str] | None = None, unicode: bool = True)
             lines += _robot_lines(client, robot, unicode)
     lines.append(_barrier_line(m))
     lines += _marker_lines(m)
+    lines += [f"waived {c} at revision {w.revision}: {w.reason}" for c, w in m.waivers.items()]
     legend = ", ".join(f"{glyph(st, unicode)} {st}" for st in _GLYPHS)
     lines.append(f"({legend})")
     return "\n".join(lines)
@@ -438,6 +440,10 @@ DESCRIBE: dict[str, Callable[[Outcome], str]] = {
     "new": lambda o: f"started a new mission '{o.op.name}' {o.at}",
     "undo": lambda o: f"undid {o.value.get('undone', 'the last edit')} {o.at}",
     "redo": lambda o: f"redid {o.value.get('redone', 'the last undone edit')} {o.at}",
+    "waive": lambda o: (
+        f"waived {o.op.check} {o.at}" if o.changed else o.unchanged(f"{o.op.check} was waived")
+    ),
+    "unwaive": lambda o: f"withdrew the waiver of {o.op.check} {o.at}",
 }
 
 
@@ -488,6 +494,8 @@ EVENT_TEXT: dict[str, Callable[[Any], str]] = {
     "marker_set": lambda e: f"marker {e.name}: {_marker_text(e.marker)}",
     "marker_removed": lambda e: f"marker {e.name} removed",
     "mission_replaced": _mission_replaced,
+    "waiver_set": lambda e: f"waived {e.check}: {e.waiver.reason}",
+    "waiver_removed": lambda e: f"waiver of {e.check} withdrawn",
 }
 
 

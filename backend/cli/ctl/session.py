@@ -18,6 +18,7 @@ from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
+from backend.cli.ctl import plan
 from backend.cli.ctl.args import DEFAULT_CONNECT
 from backend.cli.ctl.errors import FileInvalid, UsageError
 from backend.cli.ctl.render import (
@@ -250,7 +251,7 @@ async def _session(args: argparse.Namespace, endpoints: list[str], login: Any = 
         client_id=args.client_id or default_client_id(),
         timeout=args.timeout,
         # watch: to say when a robot's telemetry is unreadable
-        telemetry=args.op in ("robots", "watch"),
+        telemetry=args.op in ("robots", "watch", "check", "timeline"),
     )
     async with client:
         return await VIEWS.get(args.op, _operation)(client, args)
@@ -427,4 +428,6 @@ VIEWS: dict[str, Callable[[Any, argparse.Namespace], Awaitable[int]]] = {
     "robots": _robots,
     "watch": _watch,
     "save": _save,
+    "check": plan.check,
+    "timeline": plan.timeline,
 }

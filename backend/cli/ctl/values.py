@@ -59,7 +59,8 @@ def _plain(value: Any, where: str) -> Any:
 
 def parse_param(text: str) -> tuple[str, Any]:
     """`NAME=VALUE` -> (name, value); VALUE is YAML, `@M` a MarkerRef."""
-    import yaml
+    from backend.core.limits import echo, show_path
+    from backend.files import yamlio
 
     name, sep, raw = text.partition("=")
     name = name.strip()
@@ -73,20 +74,25 @@ def parse_param(text: str) -> tuple[str, Any]:
     if stripped.startswith("@"):
         return name, MarkerRef(check_name(stripped[1:], f"--param {name}=@MARKER"))
     try:
-        value = yaml.safe_load(raw)
-    except yaml.YAMLError as e:
-        why = getattr(e, "problem", None) or str(e).splitlines()[0]
+        value = yamlio.load(raw).data  # within the file limits: an alias bomb is refused here
+    except yamlio.YamlSyntaxError as e:
+        if not e.message.startswith("YAML"):  # over a limit
+            where = show_path(e.path)
+            raise UsageError(
+                f"--param {name}: {f'{where}: ' if where else ''}{e.message}"
+            ) from None
+        why = e.message.removeprefix("YAML syntax error: ").splitlines()[0]
         hint = ""
         if stripped[:1] in "{[":
             hint = f"; quote the whole argument for the shell: --param '{name}={{x: 3, y: 4}}'"
         elif ":" in stripped:
             hint = f"; write a mapping in braces: --param '{name}={{x: 3, y: 4}}'"
         raise UsageError(
-            f"--param {name}: {raw!r} is not a valid YAML value ({why}){hint}"
+            f"--param {name}: {echo(raw)} is not a valid YAML value ({why}){hint}"
         ) from None
     if isinstance(value, dict | list) and stripped[:1] not in "{[":
         raise UsageError(
-            f"--param {name}: {raw!r} reads as a YAML block "
+            f"--param {name}: {echo(raw)} reads as a YAML block "
             f"{'mapping' if isinstance(value, dict) else 'list'}; write mappings in braces "
             "({x: 3, y: 4}) and lists in brackets ([a, b]), quoted for the shell"
         )
@@ -134,13 +140,14 @@ def _numbers(text: str, what: str, lo: int, hi: int) -> list[float]:
 
 
 def _mapping(text: str, what: str, fields: tuple[str, ...]) -> dict[str, float]:
-    import yaml
+    from backend.core.limits import echo
+    from backend.files import yamlio
 
     try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as e:
+        data = yamlio.load(text).data
+    except yamlio.YamlSyntaxError as e:
         raise UsageError(
-            f"{what}: {text!r} is not a valid YAML mapping ({getattr(e, 'problem', e)})"
+            f"{what}: {echo(text)} is not a valid YAML mapping ({e.message})"
         ) from None
     if not isinstance(data, dict):
         raise UsageError(f"{what}: expected a mapping like {{x: 1, y: 2}}, got {text!r}")
@@ -187,15 +194,16 @@ def parse_position(text: str, what: str = "--position") -> dict[str, float]:
 
 
 def parse_area(text: str) -> list[dict[str, float]]:
-    import yaml
+    from backend.core.limits import echo
+    from backend.files import yamlio
 
     stripped = text.strip()
     if stripped.startswith("["):
         try:
-            data = yaml.safe_load(stripped)
-        except yaml.YAMLError as e:
+            data = yamlio.load(stripped).data
+        except yamlio.YamlSyntaxError as e:
             raise UsageError(
-                f"--area: {text!r} is not a valid YAML list ({getattr(e, 'problem', e)})"
+                f"--area: {echo(text)} is not a valid YAML list ({e.message})"
             ) from None
         if not isinstance(data, list):
             raise UsageError(f"--area: expected a list of positions, got {text!r}")

@@ -7,8 +7,9 @@ bumps the revision by one.
 
 Each operation type has one rule (the registry `RULES`), in the module of its
 family: `edit` (skills of the plan), `barriers`, `markers`, `execution` (the
-robots' answers and reports); whole missions (load, new) are here, with what
-the engine keeps per client: remembered requests and undo/redo histories.
+robots' answers and reports), `waivers` (of plan checks); whole missions
+(load, new) are here, with what the engine keeps per client: remembered
+requests and undo/redo histories.
 
 Operations that involve a robot are two-phase: `plan_sync`, `plan_unsync`,
 `plan_control` and `plan_retry` check and say what to send, without changing
@@ -49,7 +50,7 @@ from backend.core.ops import (
     Undo,
     Unsync,
 )
-from backend.core.rules import barriers, edit, execution, markers
+from backend.core.rules import barriers, edit, execution, markers, waivers
 from backend.core.rules.base import Applied, Change, Refusal, Rule, Rules
 
 __all__ = ["RULES", "Applied", "Engine", "Refusal"]
@@ -136,6 +137,7 @@ RULES: dict[type[Any], Rule] = {
     **barriers.RULES,
     **markers.RULES,
     **execution.RULES,
+    **waivers.RULES,
     LoadMission: load_mission,
     NewMission: new_mission,
 }
