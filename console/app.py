@@ -16,7 +16,7 @@ import asyncio
 import gc
 import signal
 from collections.abc import Callable
-from datetime import UTC, datetime
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +34,7 @@ from console.bindings import bindings
 from console.bridge import Backend, ClientBridge
 from console.commands import MissionCommands
 from console.config import ConsoleConfig, save_theme
+from console.escape import SplitEscape
 from console.hangup import (
     detach_terminal,
     force_exit,
@@ -55,15 +56,18 @@ from console.messages import (
     StateLoaded,
     TelemetryChanged,
 )
+from console.notifier import FoldingNotifications
 from console.plan_modes import PlanModes
+from console.quitting import QuitQuestion
 from console.screens.alerts import AlertScreen
-from console.screens.dialogs import ConfirmScreen, HelpScreen, UnreachableScreen
+from console.screens.dialogs import HelpScreen, UnreachableScreen
 from console.screens.fleet import FleetScreen
 from console.screens.log import EventLogScreen
 from console.screens.map import MapScreen
 from console.screens.mission import MissionScreen
 from console.state.actions import ACTIONS
-from console.state.eventlog import AlertBook, AlertEntry, EventLog
+from console.state.eventlog import AlertBook, AlertEntry, EventLog, toast_text
+from console.state.files import RecentFiles
 from console.state.model import CONNECTED, CONNECTING, OFFLINE, UNREACHABLE, ConsoleModel
 from console.themes.loader import ANSI16_MAP, ANSI16_STATUS, Downgrade16, choose_theme, load_themes
 from console.themes.variables import VARIABLE_DEFAULTS
@@ -78,7 +82,7 @@ def refusal_text(reply: ErrorReply, robot: str | None = None, skill: str | None 
     return f"{head}{reply.message}"
 
 
-class MissionApp(PlanModes, App[int]):
+class MissionApp(SplitEscape, FoldingNotifications, QuitQuestion, PlanModes, App[int]):
     TITLE = "missionctl"
     cursor_blink = True  # tests turn it off for deterministic snapshots
     DEFAULT_MODE = "mission"
@@ -109,9 +113,16 @@ class MissionApp(PlanModes, App[int]):
         client_id: str | None = None,
         colors: int | None = None,
         login: Login | None = None,
+        ask_before_quit: bool = True,
+        quitting_stops: str = "",
     ) -> None:
         super().__init__()
         self.config = config or ConsoleConfig()
+        # quitting asks when robots execute, commands wait or the plan is unsaved
+        # (--yes: never); `quitting_stops` says what else ends with the console (the demo)
+        self.ask_before_quit = ask_before_quit
+        self.quitting_stops = quitting_stops
+        self.recent = RecentFiles(self.config.recent_path)
         self.notices = [*notices, *self.config.problems]
         self.model = ConsoleModel(endpoint=connect or "")
         # 16 colours (asked for, or a TERM=xterm terminal: see on_mount)
@@ -130,7 +141,6 @@ class MissionApp(PlanModes, App[int]):
         self.event_log = EventLog()
         self.alerts = AlertBook()
         self.awareness_signal: Signal[tuple[str, str | None]] = Signal(self, "awareness")
-        self.clock: Callable[[], datetime] = lambda: datetime.now(UTC)  # tests pin it
         self.bells = 0  # how often the bell rang (tests)
         self.add_mode(self.DEFAULT_MODE, self.get_default_screen)
         # part-2 screens as app modes (F2/1 back to the schedule; F3/2 is the map's),
@@ -157,6 +167,15 @@ class MissionApp(PlanModes, App[int]):
         self._hanging_up = False
         self.on_forced_exit: list[Callable[[], object]] = []  # before a forced exit (hang-up)
         self.exit_code = 0
+
+    @property
+    def clock(self) -> Callable[[], datetime]:
+        """Now, for the log, alerts and how old a robot's state is (tests pin it)."""
+        return self.model.clock
+
+    @clock.setter
+    def clock(self, clock: Callable[[], datetime]) -> None:
+        self.model.clock = clock
 
     # -- theme and screens --------------------------------------------------------------
     def get_theme_variable_defaults(self) -> dict[str, str]:
@@ -219,7 +238,7 @@ class MissionApp(PlanModes, App[int]):
         self.switch_mode("alerts")
 
     def get_default_screen(self) -> Screen:
-        self.mission_screen = MissionScreen(self.model, self.alerts)
+        self.mission_screen = MissionScreen(self.model, self.alerts, self.recent)
         return self.mission_screen
 
     def action_keys(self) -> dict[str, str]:
@@ -272,33 +291,6 @@ class MissionApp(PlanModes, App[int]):
             detach_terminal()
         start_watchdog(lambda: force_exit(self.on_forced_exit, self.exit_code))
         self.run_worker(self.quit_now(), group="quit")
-
-    async def action_quit(self) -> None:
-        """Ctrl+Q: asks first when the editor holds unapplied changes."""
-        unapplied = self._unapplied()
-        if unapplied and not isinstance(self.screen, ConfirmScreen):
-            self.push_screen(
-                ConfirmScreen(
-                    f"Unapplied changes to {', '.join(unapplied)} are lost when you quit. "
-                    "Quit anyway?",
-                    yes="Quit",
-                ),
-                self._quit_confirmed,
-            )
-            return
-        await self.quit_now()
-
-    def _unapplied(self) -> list[str]:
-        s = self.mission_screen
-        if s is None or not s.is_mounted:
-            return []
-        return sorted(s.editor.drafts) + (
-            [s.editor.skill_id] if s.editor.dirty and s.editor.skill_id else []
-        )
-
-    def _quit_confirmed(self, yes: bool | None) -> None:
-        if yes:
-            self.run_worker(self.quit_now(), group="quit")
 
     async def quit_now(self) -> None:
         await self.close_connection()
@@ -374,6 +366,7 @@ class MissionApp(PlanModes, App[int]):
         robots = self.model.apply(message.batch, message.mission)
         if self._screen_live() and robots != set():
             await self.mission_screen.model_changed(robots)
+            self.mission_screen.batch_seen(message.batch)  # the cursor may follow an undo
         if self._map_live():  # marker events change no robot's column but the map
             self.map_screen.model_changed()
         entries = self.event_log.add_batch(message.batch, self.model, self.clock())
@@ -481,9 +474,9 @@ class MissionApp(PlanModes, App[int]):
             self.ring()
         if notify:
             severity = {"error": "error", "warning": "warning"}.get(a.level, "information")
-            title = " · ".join(x for x in (a.robot, a.skill) if x) or "Alert"
+            title, text = toast_text(self.alerts, a)  # robots going offline together: one
             self.notify(
-                a.message, title=title, severity=severity, timeout=8 if a.level == "error" else 5
+                text, title=title, severity=severity, timeout=8 if a.level == "error" else 5
             )
         if self._screen_live() and a.level == "error":
             self.mission_screen.say(f"✗ {a.message}", "error")

@@ -161,11 +161,15 @@ class DemoProcesses:
         return False
 
     def sim_problem(self) -> str | None:
-        """If the sim ended: why (its last lines)."""
+        """If the sim ended: why, in a sentence (its log's last line when it
+        failed; the log itself is sim.log in the demo's folder)."""
         if self.sim is None or self.sim.poll() is None:
             return None
         code = self.sim.returncode
-        return f"the simulated fleet stopped (exit code {code}): {_tail(self.sim_log, 3)}"
+        if code < 0:
+            return f"the simulated fleet was stopped (signal {-code}): the robots are offline"
+        last = _tail(self.sim_log, 1)
+        return f"the simulated fleet stopped (exit code {code})" + (f": {last}" if last else "")
 
     @staticmethod
     def _stop_one(p: subprocess.Popen | None, timeout: float = 5.0) -> None:

@@ -193,6 +193,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 async def _serve(fleet, args: argparse.Namespace, world_file: Path) -> int:
+    from backend.agent import AlreadyConnected
     from backend.transport.session import LoginRefused, TransportError, TransportUnreachable
 
     stop = asyncio.Event()
@@ -215,6 +216,9 @@ async def _serve(fleet, args: argparse.Namespace, world_file: Path) -> int:
         except TransportError as e:
             print(f"missionctl sim: {e}", file=sys.stderr)
             return EXIT_UNREACHABLE
+        except AlreadyConnected as e:  # another sim (or robot) holds these robots
+            print(f"missionctl sim: {e}", file=sys.stderr)
+            return EXIT_REFUSED
     try:
         w = fleet.world
         delay = f", link delay {fleet.link_delay:g} s" if fleet.link_delay else ""

@@ -237,7 +237,33 @@ def _barrier_problems(m: Mission) -> list[Problem]:
             out += [(where, why) for why in found]
         if len(robots_in) < 2 and len(b.skills) >= 2 and all(m.find(s) for s in b.skills):
             out.append((("barriers", bid), "a barrier needs skills of at least two robots"))
+        out += _stranded(m, bid, b.skills)
     return out
+
+
+# Where a barrier's skills can be: `ctl barrier` joins idle skills, which are
+# then synchronized and wait at the barrier; all start together and finish.
+_BEFORE = frozenset({Status.IDLE, Status.IDLE_SYNCHRONIZED, Status.SYNCHWAITING})
+
+
+def _stranded(m: Mission, bid: str, ids: list[str]) -> list[Problem]:
+    """Skills of barrier `bid` still to start while a partner has started or
+    finished: they would wait for it forever (the live rules never make such
+    a barrier; a file must not either)."""
+    found = [(j, f[2]) for j, sid in enumerate(ids) if (f := m.find(sid)) is not None]
+    started = [s for _, s in found if s.status not in _BEFORE]
+    if not started:
+        return []
+    past = ", ".join(f"'{s.id}' is {s.status.value}" for s in started)
+    return [
+        (
+            ("barriers", bid, "skills", j),
+            f"'{s.id}' ({s.status.value}) would wait forever: its partner {past}; "
+            "a barrier joins skills that start together (idle ones, as `ctl barrier` does)",
+        )
+        for j, s in found
+        if s.status in _BEFORE
+    ]
 
 
 def _member_problems(

@@ -162,8 +162,10 @@ class SkillInstance(Strict):
     rev: int = Field(0, ge=0)
 
     def display(self) -> str:
-        """How messages name a skill: its id, with the label when it has one."""
-        return f"{self.id} ({self.label})" if self.label else f"{self.id} ({self.skill})"
+        """How messages name a skill: its id, with the label when it has one
+        (its start: a label may be thousands of characters long)."""
+        label = self.label if len(self.label) <= 60 else self.label[:60] + "…"
+        return f"{self.id} ({label})" if label else f"{self.id} ({self.skill})"
 
 
 class RobotSpec(Strict):

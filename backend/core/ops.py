@@ -94,6 +94,16 @@ class Retry(Strict):
     id: SkillId
 
 
+class RetryEdit(Strict):
+    """A failed skill's next attempt as an idle copy (same parameters,
+    bindings and policies, attempt + 1, id `ID.N`) at the head of its robot's
+    unsynchronized plan, to edit before it is synchronized; `retry` instead
+    queues the attempt on the robot at once."""
+
+    op: Literal["retry_edit"] = "retry_edit"
+    id: SkillId
+
+
 class AddBarrier(Strict):
     op: Literal["barrier"] = "barrier"
     ids: list[SkillId] = Field(min_length=2)
@@ -254,6 +264,7 @@ OperatorOperation = (
     | Unsync
     | Control
     | Retry
+    | RetryEdit
     | AddBarrier
     | RemoveBarrier
     | MarkerAdd
@@ -279,6 +290,7 @@ AnyOp = Annotated[Operation, Field(discriminator="op")]
 # operations that change the unsynchronized plan and can be undone
 UNDOABLE = (
     AddSkill,
+    RetryEdit,
     DeleteSkills,
     MoveSkill,
     EditSkill,

@@ -15,6 +15,7 @@ from typing import Any
 from pydantic import TypeAdapter
 
 from backend.core.events import EventBatch
+from backend.core.limits import LIMITS, MiB
 from backend.core.ops import OperatorOp, Report
 from backend.protocol import mapfeed as mf
 from backend.protocol import messages as p
@@ -36,7 +37,12 @@ KEY_SPACE: list[tuple[str, str, str, str]] = [
         "server",
         "anything → `AccountInfo` (role of a logged-in user)",
     ),
-    (f"`{Keys.STATE}`", "queryable", "server", "`StateRequest` → `StateSnapshot`"),
+    (
+        f"`{Keys.STATE}`",
+        "queryable",
+        "server",
+        "`StateRequest` (or nothing) → `StateSnapshot`; anything else: `bad_request`",
+    ),
     (
         f"`{Keys.EVENTS}`",
         "publication",
@@ -106,6 +112,28 @@ def _table(head: tuple[str, ...], rows: Sequence[tuple[str, ...]]) -> str:
     return "".join("| " + " | ".join(cells) + " |\n" for cells in lines)
 
 
+# the limits every receiver applies (backend/core/limits.py): (what, limit, to what)
+LIMIT_ROWS: list[tuple[str, str, str]] = [
+    ("message", f"{LIMITS.payload:,} bytes ({LIMITS.payload // MiB} MiB)", "one payload, any key"),
+    (
+        "nesting",
+        f"{LIMITS.depth} levels",
+        "objects and arrays in one message (`{}` is one level)",
+    ),
+    (
+        "string",
+        f"{LIMITS.text:,} characters",
+        "every string, object keys included (labels, `info`, parameter values...)",
+    ),
+    ("array, object", f"{LIMITS.items:,} items, entries", "every array and object"),
+    (
+        "parameter value",
+        f"{LIMITS.value_depth} levels",
+        "nesting inside one skill parameter's value (refused with `bad_param`)",
+    ),
+]
+
+
 PROSE = (
     f"""# missionctl protocol, version {PROTOCOL_VERSION}
 
@@ -130,6 +158,21 @@ refused). The server answers a query it cannot read with `reply_err`
 an "unreadable message" alert naming the key and the field, once per key
 (`missionctl ctl watch` prints it too): the first place to look when a new
 robot's telemetry never shows.
+
+### Limits
+Every receiver holds a message to these limits before it reads it (the
+mission server its queries, robots their world queries, consoles telemetry):
+
+"""
+    + _table(("what", "limit", "applies to"), LIMIT_ROWS)
+    + f"""
+A query over a limit is answered `reply_err` with `code: limit_exceeded` and a
+`message` naming the field path and the limit, with at most
+{LIMITS.echo} characters of the value (`op.label: 8,000,000 characters, more than
+the limit of {LIMITS.text:,} ('xxxx'…)`); nothing of it is applied. An operation
+whose change the server cannot journal and read back as it is (its journal
+must always replay) is refused with `code: not_replayable`, and nothing
+changes.
 
 ## Key space
 

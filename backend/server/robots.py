@@ -20,6 +20,7 @@ from typing import Any, NamedTuple, Protocol
 
 from pydantic import ValidationError
 
+from backend.core.limits import echo
 from backend.core.model import Mission
 from backend.core.ops import (
     Control,
@@ -52,6 +53,7 @@ from backend.protocol.messages import (
     dumps,
 )
 from backend.protocol.messages import Reset as ResetCmd
+from backend.protocol.wire import parse
 from backend.server.refusals import Handler, JournalFailed
 from backend.transport import (
     NoResponder,
@@ -303,7 +305,7 @@ class RobotLink:
                 f"robot {robot} does not answer commands: nothing was sent",
                 robot=robot,
             ) from None
-        reply = CommandReply.model_validate_json(raw)
+        reply = parse(CommandReply, raw)
         self._apply_reports(robot, reply.reports)
         if not reply.ok:
             raise Refusal("robot_refused", f"{robot} refused: {reply.reason}", robot=robot)
@@ -345,7 +347,7 @@ class RobotLink:
             )
 
     async def _handle_register(self, payload: bytes, key: str) -> bytes:
-        reg = Register.model_validate_json(payload)
+        reg = parse(Register, payload)
         m = reg.manifest
         if m.name != Keys.robot_of(key):  # the key is what the router's rules check
             raise Refusal(
@@ -450,7 +452,7 @@ class RobotLink:
         return None
 
     def _handle_reports(self, payload: bytes, key: str) -> bytes | Awaitable[bytes]:
-        batch = ReportBatch.model_validate_json(payload)
+        batch = parse(ReportBatch, payload)
         robots = {r.robot for r in batch.reports}
         if len(robots) > 1:
             raise Refusal("bad_report", "a report batch comes from one robot")
@@ -531,10 +533,10 @@ class RobotTurn:
 def _refused(robot: str, payload: bytes) -> Refusal:
     """A robot's error reply to a command, as a refusal that names it once."""
     try:
-        err = ErrorReply.model_validate_json(payload)
+        err = parse(ErrorReply, payload)
     except ValidationError:
         return Refusal(
-            "robot_error", f"{robot} refused: {payload.decode(errors='replace')}", robot=robot
+            "robot_error", f"{robot} refused: {echo(payload.decode(errors='replace'))}", robot=robot
         )
     # its own sentence may already start with its name
     text = err.message if err.message.startswith(robot) else f"{robot}: {err.message}"

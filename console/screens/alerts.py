@@ -1,6 +1,7 @@
 """The alert list: newest first, unacknowledged ones marked ● and bold;
-enter/a acknowledges the selected alert, A all of them. The count of
-unacknowledged alerts is the badge on the mission screen's top bar."""
+enter/a acknowledges the selected alert, A all of them; the selected
+alert's whole text below the list (a row is cut at 80 columns). The count
+of unacknowledged alerts is the badge on the mission screen's top bar."""
 
 from __future__ import annotations
 
@@ -49,6 +50,7 @@ class AlertScreen(ViewScreen):
     def compose(self) -> ComposeResult:
         yield self.title_bar
         yield DataTable(id="alerts", cursor_type="row")
+        yield Static("", id="alert-detail", classes="detail")
         yield Static(
             "enter/a acknowledge · A acknowledge all · F2 schedule · F5 event log", classes="hint"
         )
@@ -84,10 +86,31 @@ class AlertScreen(ViewScreen):
                 t.add_row(*self._cells(a), key=str(a.id))
             if alerts:
                 t.move_cursor(row=min(keep, len(alerts) - 1))
+        self._detail()
         n = self.book.unacknowledged
         self.set_title(
             ("Alerts", "bold"), f"  {n} unacknowledged of {len(alerts)}" if alerts else "  none"
         )
+
+    def _detail(self) -> None:
+        """The selected alert in full: when, what, about whom, from where."""
+        t = self.query_one(DataTable)
+        box = self.query_one("#alert-detail", Static)
+        by_id = {a.id: a for a in self.book.alerts}
+        a = by_id.get(self.ids[t.cursor_row]) if self.ids and t.cursor_row < len(self.ids) else None
+        if a is None:
+            box.update("")
+            return
+        about = " · ".join(x for x in (a.robot, a.skill) if x)
+        head = Text.assemble(
+            (f"{fmt_clock(a.at)}  {KIND_WORDS.get(a.kind, a.kind)}", "bold"),
+            f"  {about}" if about else "",
+            (f"  {a.level} · from {a.source}" + (f" · ×{a.count}" if a.count > 1 else ""), "dim"),
+        )
+        box.update(Text.assemble(head, "\n", a.message))
+
+    def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
+        self._detail()
 
     def action_ack(self) -> None:
         t = self.query_one(DataTable)

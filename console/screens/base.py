@@ -38,6 +38,7 @@ class ViewScreen(Screen):
         self._stale = False
         self.ready = False
         self.query_text = ""  # the #filter input's text, if the screen has one
+        self._typing = False  # typing from the table into the filter (one word so far)
         self.title_bar = TitleBar(id="title")
 
     def on_mount(self) -> None:
@@ -84,6 +85,7 @@ class ViewScreen(Screen):
 
     @on(Input.Submitted, "#filter")
     def _to_table(self) -> None:
+        self._typing = False
         self.query_one(DataTable).focus()
 
     def on_key(self, event: events.Key) -> None:
@@ -96,7 +98,7 @@ class ViewScreen(Screen):
         if field.has_focus:
             if event.key == "escape":
                 event.stop()
-                self.query_one(DataTable).focus()
+                self._to_table()
             return
         if event.key in self.app.active_bindings:
             return  # a key with a meaning here (the digits: other screens)
@@ -104,6 +106,11 @@ class ViewScreen(Screen):
             event.stop()
             field.select_on_focus = False  # else the next key replaces this one
             field.focus()
+            field.cursor_position = len(field.value)
+            if not self._typing and field.value and not field.value.endswith(" "):
+                field.insert_text_at_cursor(" ")  # a new word of the filter (all must match)
+            # keys typed before the focus moves come here too: one word until back at the table
+            self._typing = True
             field.insert_text_at_cursor(event.character)
 
     # subclasses

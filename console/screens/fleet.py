@@ -16,6 +16,7 @@ from textual.widgets import DataTable, Footer, Input, Static
 from backend.protocol.messages import RobotInfo
 from console.screens.base import ViewScreen
 from console.state.capability import (
+    filter_examples,
     fleet_order,
     last_report,
     matches,
@@ -49,10 +50,7 @@ class FleetScreen(ViewScreen):
 
     def compose(self) -> ComposeResult:
         yield self.title_bar
-        yield Input(
-            placeholder="filter by capability: pick_stone · type:lru · module:arm · prop:…",
-            id="filter",
-        )
+        yield Input(placeholder="filter by capability", id="filter")
         yield DataTable(id="robots", cursor_type="row", zebra_stripes=False)
         yield Static("", id="detail", classes="detail")
         yield Static(
@@ -104,6 +102,10 @@ class FleetScreen(ViewScreen):
                 t.move_cursor(row=min(keep, len(self.shown) - 1))
         self._title()
         self._detail()
+        # examples from this fleet, so each of them finds something
+        self.query_one(
+            "#filter", Input
+        ).placeholder = f"filter by capability: {filter_examples(self.model)}"
 
     def update_view(self, topic: str, robot: str | None) -> None:
         t = self.query_one(DataTable)

@@ -18,6 +18,7 @@ from console.bindings import bindings
 from console.screens.base import ViewScreen
 from console.screens.dialogs import PathPrompt
 from console.state.eventlog import LOG_LIMIT, EventLog, LogEntry, entry_matches
+from console.state.files import shown_path
 from console.state.text import fmt_clock
 
 # rows in the table (a DataTable of 10k rows takes seconds to fill); export writes all matches
@@ -178,14 +179,17 @@ class EventLogScreen(ViewScreen):
         entries = self.shown_entries()
         path = await self.app.push_screen_wait(
             PathPrompt(
-                f"Export {len(entries)} event-log entries (JSON lines) to", "missionctl-log.jsonl"
+                f"Export {len(entries)} event-log entries (JSON lines) to",
+                shown_path(Path.cwd() / "missionctl-log.jsonl"),
+                suffixes=(".jsonl",),
             )
         )
         if not path:
             return
+        where = shown_path(Path(path))
         try:
             n = self.log_.export(Path(path), entries)
         except OSError as e:
-            self.app.notify(f"{path}: {e.strerror or e}", title="Export failed", severity="error")
+            self.app.notify(f"{where}: {e.strerror or e}", title="Export failed", severity="error")
             return
-        self.app.notify(f"{n} entries written to {path}", title="Event log exported")
+        self.app.notify(f"{n} entries written to {where}", title="Event log exported")

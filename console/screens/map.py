@@ -37,6 +37,7 @@ from console.state.markers import (
     moved_value,
     new_marker,
     picked_value,
+    relabel,
 )
 from console.state.model import CONNECTED, ConsoleModel
 from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS, fmt_value
@@ -79,6 +80,8 @@ def legend_text(colours: dict[str, str] | None = None) -> Text:
 
     t.append("Legend\n", style="bold")
     row(ROBOT_ARROWS[0], "bold", "robot, heading")
+    # the one heading convention (the editor, ctl and the info line use it too)
+    t.append("   heading: 0° east,\n   counter-clockwise\n", style="dim")
     for st in (
         Status.RUNNING,
         Status.PAUSED,
@@ -141,7 +144,7 @@ def info_text(model: ConsoleModel, v: MapView, feed_state: str) -> Text:
         t.append(NO_FEED if feed_state == "none" else "waiting for the map feed…", style="bold")
         t.append("  ")
     x, y = v.cursor
-    t.append(f"cursor ({x:.1f}, {y:.1f}) {math.degrees(v.heading):.0f}°")
+    t.append(f"cursor ({x:.1f}, {y:.1f}) heading {math.degrees(v.heading):.0f}°")
     t.append(f"  {v.vp.mpp:.2g} m/px", style="dim")
     if v.follow:
         t.append(f"  following {v.follow}", style="bold")
@@ -572,17 +575,21 @@ class MapScreen(Screen):
             return
 
         def bind(pname: str) -> None:
+            # a label naming the marker bound before ("drive to POI-A") names the new one
+            before = s.bindings.get(pname) or (s.params.get(pname) if pname in names else None)
+            label = relabel(s.label, before if isinstance(before, str) else None, name)
             op = (
-                EditSkill(id=s.id, bindings={pname: name})
+                EditSkill(id=s.id, bindings={pname: name}, label=label)
                 if pname in fits
-                else EditSkill(id=s.id, params={pname: name})
+                else EditSkill(id=s.id, params={pname: name}, label=label)
             )
+            also = f"; label now '{label}'" if label is not None else ""
             self.submit(
                 op,
                 f"bind {s.id}.{pname} to {name}",
                 robot=robot,
                 skill=s.id,
-                on_ok=lambda r: self.say(f"{s.id}: {pname} bound to marker {name}", "ok"),
+                on_ok=lambda r: self.say(f"{s.id}: {pname} bound to marker {name}{also}", "ok"),
             )
 
         def holds(p: str) -> bool:

@@ -1,9 +1,9 @@
 """The mission screen: schedule panel, parameter editor, control keys.
 
-Layout (wide): top bar / schedule | parameter editor / status line / footer.
-Below 100 columns the editor is shown instead of the schedule while editing
-(enter / e opens it, escape returns). Part 2 adds the map, fleet and event-log
-screens as further app modes next to this one.
+Layout: top bar / schedule | parameter editor / status line / footer. From
+100 columns the editor is a side panel beside the schedule; below, it is a
+toggle (enter / e opens it beside the schedule, escape closes it). Part 2
+adds the map, fleet and event-log screens as further app modes next to this one.
 """
 
 from __future__ import annotations
@@ -17,7 +17,6 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal
 from textual.screen import Screen
-from textual.widgets import Footer
 
 from backend.core.model import Status
 from backend.core.ops import (
@@ -26,23 +25,24 @@ from backend.core.ops import (
     Control,
     DeleteSkills,
     MoveSkill,
-    Redo,
     RemoveBarrier,
     Retry,
     Sync,
-    Undo,
     Unsync,
 )
 from console.bindings import mission_bindings
 from console.messages import HelpRequested, OperationRequested
 from console.screens.dialogs import ConfirmScreen, SkillPicker
 from console.screens.mission_files import MissionFiles
-from console.state.actions import ACTIONS, BY_NAME
+from console.screens.mission_plan import PlanActions
+from console.state.actions import BY_NAME
 from console.state.capability import also_offered_by
+from console.state.context import FooterKey, context_keys, fit_footer
 from console.state.defaults import default_params
 from console.state.eventlog import AlertBook
+from console.state.files import RecentFiles
 from console.state.model import CONNECTED, ConsoleModel
-from console.widgets.bars import StatusLine, TopBar, connection_text
+from console.widgets.bars import KeyBar, StatusLine, TopBar, connection_text
 from console.widgets.param_editor import ParamEditor
 from console.widgets.schedule import ScheduleView
 
@@ -50,7 +50,12 @@ from console.widgets.schedule import ScheduleView
 TCSS = Path(__file__).with_name("mission.tcss")
 
 NARROW = 100
-FOOTER_ACTIONS = [a.name for a in ACTIONS if a.footer]
+# the footer while the editor has the focus (before the keys that always apply)
+EDITOR_FOOTER = (
+    FooterKey("apply", "⏎", "Apply"),
+    FooterKey("revert", "^r", "Revert"),
+    FooterKey("leave", "esc", "Close"),
+)
 
 
 def top_text(m: ConsoleModel, unacked: int, marks: list[str]) -> Text:
@@ -74,7 +79,7 @@ def top_text(m: ConsoleModel, unacked: int, marks: list[str]) -> Text:
     return t
 
 
-class MissionScreen(MissionFiles, Screen):
+class MissionScreen(MissionFiles, PlanActions, Screen):
     BINDINGS = [
         *mission_bindings(),
         Binding("f1,question_mark", "help", "Help", id="app.help"),
@@ -83,10 +88,16 @@ class MissionScreen(MissionFiles, Screen):
 
     CSS_PATH = TCSS
 
-    def __init__(self, model: ConsoleModel, alerts: AlertBook | None = None) -> None:
+    def __init__(
+        self,
+        model: ConsoleModel,
+        alerts: AlertBook | None = None,
+        recent: RecentFiles | None = None,
+    ) -> None:
         super().__init__()
         self.model = model
         self.alerts = alerts  # its count of unacknowledged alerts is the top bar's badge
+        self.recent = recent or RecentFiles()  # saved and loaded files, newest first
         self.last_path: str | None = None  # of the last save or load: the next one's default
         self.pending_select: str | None = None
         # kept as attributes: messages may arrive while the screen is being torn down
@@ -94,7 +105,7 @@ class MissionScreen(MissionFiles, Screen):
         self._schedule = ScheduleView(model, id="schedule")
         self._editor = ParamEditor(model, id="editor")
         self._status = StatusLine("", id="status")
-        self._footer = Footer()
+        self._footer = KeyBar("", id="keys")
         self.edit_after_select = False
         self.message = ""
 
@@ -116,18 +127,29 @@ class MissionScreen(MissionFiles, Screen):
 
     def _set_narrow(self, narrow: bool) -> None:
         self.set_class(narrow, "-narrow")
-        # at 80 columns the footer keys only fit compact and without the
-        # palette hint (ctrl+p is on the help screen): quit and help stay visible
-        self._footer.compact = narrow
-        self._footer.show_command_palette = not narrow
 
     def on_mount(self) -> None:
         self._set_narrow(self.app.size.width < NARROW)
         self.schedule.focus()
         self.update_top()
         self.schedule.rebuild()
+        self._stale: frozenset[str] = frozenset()
+        # "as of 25s ago" counts up; a robot falling silent turns stale without a message
+        self.set_interval(1.0, self.freshness_tick)
+
+    def freshness_tick(self) -> None:
+        """Redraw what shows how old a robot's state is: all of it when a
+        robot turned stale or fresh, else the stale robots' headers."""
+        stale = frozenset(r for r in self.model.robot_order() if self.model.freshness(r).stale)
+        if stale != self._stale:
+            self._stale = stale
+            self.schedule.refresh()
+            return
+        for robot in stale:
+            self.schedule.refresh_telemetry(robot)
 
     def on_resize(self, event: events.Resize) -> None:
+        self.update_keys()
         narrow = event.size.width < NARROW
         if narrow != self.has_class("-narrow"):
             self._set_narrow(narrow)
@@ -204,13 +226,45 @@ class MissionScreen(MissionFiles, Screen):
         return self.schedule.cursor_robot, self.schedule.cursor_id
 
     def refresh_availability(self) -> None:
-        """Refresh the footer only when what it shows changed: it rebuilds its
-        keys and the screen's layout (tens of ms). Keys not in the footer are
-        checked when pressed (`check_action`), so they need no refresh."""
-        sig = (tuple(self.why_disabled(a) is None for a in FOOTER_ACTIONS), self.model.connection)
-        if sig != getattr(self, "_availability", None):
-            self._availability = sig
-            self.refresh_bindings()
+        """The footer shows the keys that apply now (keys are checked again
+        when pressed: `check_action`)."""
+        self.update_keys()
+
+    def update_keys(self) -> None:
+        """The footer: the editor's keys while it has the focus, else the
+        keys that apply to the selection first (console/state/context.py)."""
+        if not self.is_mounted:
+            return
+        keys = getattr(self.app, "action_keys", dict)()
+        if self.editor.focus_within():
+            first = list(EDITOR_FOOTER)
+        else:
+            robot, sid = self.selection()
+            first = context_keys(self.model, robot, sid, self.schedule.marks, keys)
+        self._footer.show(fit_footer(first, self.size.width or self.app.size.width))
+
+    def on_descendant_focus(self, event: events.DescendantFocus) -> None:
+        self.update_keys()
+
+    def on_descendant_blur(self, event: events.DescendantBlur) -> None:
+        self.update_keys()
+
+    async def action_footer_key(self, action: str) -> None:
+        """A click on a key in the footer."""
+        if action in BY_NAME:
+            await self.run_named(action)
+        elif action == "command_palette":
+            self.app.action_command_palette()
+        elif action == "quit":
+            await self.app.run_action("quit")
+        elif action == "apply":
+            self.editor.action_apply()
+        elif action == "revert":
+            await self.editor.action_revert()
+        elif action == "leave":
+            self.editor.action_leave()
+        else:
+            await self.run_action(action)
 
     def why_disabled(self, action: str) -> str | None:
         if action not in BY_NAME:
@@ -382,20 +436,6 @@ class MissionScreen(MissionFiles, Screen):
 
     def action_move_down(self) -> None:
         self._move(1)
-
-    def action_undo(self) -> None:
-        self.submit(
-            Undo(),
-            "undo",
-            on_ok=lambda r: self.say(f"undone: {r.value.get('undone', 'last edit')}", "ok"),
-        )
-
-    def action_redo(self) -> None:
-        self.submit(
-            Redo(),
-            "redo",
-            on_ok=lambda r: self.say(f"redone: {r.value.get('redone', 'edit')}", "ok"),
-        )
 
     # -- actions: synchronization ------------------------------------------------------------------
     def action_sync(self) -> None:

@@ -59,7 +59,28 @@ ACTIONS: list[Action] = [
         "Plan",
         True,
     ),
-    Action("edit", "enter,e", "Edit", "Edit the selected skill's parameters", "Plan"),
+    Action(
+        "edit",
+        "enter,e",
+        "Edit",
+        "Edit the selected skill's parameters (below 100 columns: opens the editor beside "
+        "the schedule; escape closes it)",
+        "Plan",
+    ),
+    Action(
+        "duplicate",
+        "c",
+        "Duplicate",
+        "Duplicate the selected skill: an idle copy after it (or first in the plan)",
+        "Plan",
+    ),
+    Action(
+        "search",
+        "slash",
+        "Find",
+        "Find a skill by id, label, skill, robot or parameter and jump to it",
+        "Plan",
+    ),
     Action(
         "delete", "d,delete", "Delete", "Delete the selected idle skill (asks first)", "Plan", True
     ),
@@ -103,7 +124,15 @@ ACTIONS: list[Action] = [
         "retry",
         "t",
         "Retry",
-        "Retry the selected failed skill (new attempt right after it)",
+        "Retry the selected failed skill as it was (new attempt queued right after it)",
+        "Synchronization",
+    ),
+    Action(
+        "retry_edit",
+        "T",
+        "Edit+retry",
+        "Retry the selected failed skill after editing it: its next attempt, idle, first in "
+        "the plan (edit it, then sync)",
         "Synchronization",
     ),
     # execution
@@ -351,7 +380,7 @@ ACTIONS: list[Action] = [
 BY_NAME = {a.name: a for a in ACTIONS if a.scope == "mission"}
 
 # actions that need a skill/robot under the cursor and apply to the server
-MUTATING = set(BY_NAME) - {"edit", "save", "toggle_static", "mark"}
+MUTATING = set(BY_NAME) - {"edit", "save", "toggle_static", "mark", "search"}
 
 
 APP_KEYS: list[tuple[str, str, str]] = [
@@ -371,6 +400,8 @@ NAV_KEYS: list[tuple[str, str, str]] = [
 ]
 
 EDITOR_KEYS: list[tuple[str, str, str]] = [
-    ("ctrl+s", "Apply", "Apply the edited parameters (in the editor)"),
+    ("enter", "Apply", "Apply the edited parameters (enter in a field, or the Apply button)"),
     ("ctrl+r", "Revert", "Discard your changes (in the editor)"),
+    ("escape", "Close", "Back to the schedule (below 100 columns: closes the editor)"),
+    ("30 / 30deg / 0.5rad", "Angles", "Angles are typed in degrees (heading 0° east, ccw)"),
 ]

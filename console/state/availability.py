@@ -21,9 +21,9 @@ from console.state.text import STATUS_WORDS
 Found = tuple[str, int, SkillInstance]  # (robot, index in its task, skill)
 
 # actions that change nothing on the server: they apply while disconnected
-OFFLINE_OK = frozenset({"save", "help", "edit"})
+OFFLINE_OK = frozenset({"save", "help", "edit", "search"})
 # actions an observer (read-only account) may still use: they change nothing on the server
-READ_ONLY_OK = frozenset({"save", "help", "edit", "mark", "toggle_static", "clear_marks"})
+READ_ONLY_OK = frozenset({"save", "help", "edit", "mark", "toggle_static", "clear_marks", "search"})
 
 
 class Facts(Protocol):
@@ -260,6 +260,27 @@ def _retry(q: Selected) -> str | None:
     return None
 
 
+def _retry_edit(q: Selected) -> str | None:
+    if q.found is None:
+        return "select a failed skill"
+    _, _, s = q.found
+    if s.status != Status.FAILURE:
+        return f"{s.id} is {STATUS_WORDS[s.status]}: only a failed skill can be retried"
+    new_id = f"{s.id.split('.')[0]}.{s.attempt + 1}"
+    if q.facts.owner(new_id) is not None:
+        return f"{s.id} was already retried as {new_id}"
+    return None
+
+
+def _duplicate(q: Selected) -> str | None:
+    if q.found is None:
+        return "select a skill to duplicate"
+    robot, _, s = q.found
+    if s.skill not in q.facts.skills_of(robot):
+        return f"{robot} has no skill '{s.skill}' in the library"
+    return None
+
+
 # -- execution: what a robot can be asked, from (active skill, any queued) ---------------------
 
 
@@ -335,6 +356,8 @@ RULES: dict[str, Rule] = {
     "barrier": _barrier,
     "unbarrier": _unbarrier,
     "retry": _retry,
+    "retry_edit": _retry_edit,
+    "duplicate": _duplicate,
     **{verb: _control(verb) for verb in CONTROLS},
     **{f"{verb}_all": _control_all(verb) for verb in CONTROLS},
 }

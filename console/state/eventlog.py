@@ -405,3 +405,28 @@ class AlertBook:
                     if a:
                         out.append(a)
         return out
+
+
+TOAST_TOGETHER = timedelta(seconds=30)  # offline alerts this close are one situation
+
+
+def toast_text(book: AlertBook, a: AlertEntry) -> tuple[str, str]:
+    """(title, message) of the notification for alert `a`: robots going
+    offline together (the link, the sim or the site went down) are one
+    notification naming them all, each later one replacing it."""
+    if a.kind == "offline" and a.robot:
+        robots = list(
+            dict.fromkeys(
+                x.robot
+                for x in book.alerts
+                if x.kind == "offline"
+                and x.robot
+                and not x.acknowledged
+                and abs(x.at - a.at) <= TOAST_TOGETHER
+            )
+        )
+        if len(robots) > 1:
+            names = ", ".join(robots[:-1]) + f" and {robots[-1]}"
+            return "Robots offline", f"{names} went offline"
+        return "Robots offline", a.message
+    return " · ".join(x for x in (a.robot, a.skill) if x) or "Alert", a.message

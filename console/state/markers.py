@@ -4,6 +4,7 @@ marker fits, and which markers the plan uses. Textual-free."""
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 from backend.core.model import (
@@ -125,3 +126,14 @@ def marker_use(model: ConsoleModel) -> dict[str, str]:
                     elif use[name] == "unused":
                         use[name] = "bound"
     return use
+
+
+def relabel(label: str, old: str | None, new: str | None) -> str | None:
+    """A label that names marker `old` ("drive to POI-A"), naming `new`
+    instead; None when it does not name `old` (or nothing changes)."""
+    if not old or not new or old == new:
+        return None
+    pattern = re.compile(rf"(?<![\w-]){re.escape(old)}(?![\w-])")
+    if not pattern.search(label):
+        return None
+    return pattern.sub(new, label)

@@ -10,14 +10,19 @@ action does not apply), so it can be unit-tested without a terminal.
 
 from __future__ import annotations
 
+import hashlib
+import json
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 
 from backend.core import events as ev
 from backend.core.library import Library
 from backend.core.model import ACTIVE, Mission, SkillInstance, Status
 from backend.protocol.messages import RobotInfo, Telemetry
 from console.state import availability
+from console.state.freshness import Freshness, freshness
 from console.state.plan import PlanView
 from console.state.text import GLYPHS, STATUS_WORDS, fmt_clock
 
@@ -33,6 +38,32 @@ CONNECTING, CONNECTED, RECONNECTING, UNREACHABLE, OFFLINE = (
 
 
 # -- the model --------------------------------------------------------------------
+
+# operations a robot's answer or report becomes (the robot was heard)
+ROBOT_OPS = frozenset({"report", "sync_ack", "unsync_done", "retry_ack", "reconcile"})
+
+
+PLAN_FIELDS = {"id", "skill", "label", "params", "bindings", "policies"}  # a skill, as planned
+
+
+def plan_digest(mission: Mission) -> str:
+    """What a saved mission file holds of the plan, as a digest: skills
+    (without their statuses), barriers and markers — two plans with the
+    same digest save to the same file."""
+    plan = {
+        "tasks": {
+            robot: [
+                s.model_dump(
+                    mode="json", include={"id", "skill", "label", "params", "bindings", "policies"}
+                )
+                for s in task
+            ]
+            for robot, task in mission.tasks.items()
+        },
+        "barriers": {k: b.model_dump(mode="json") for k, b in mission.barriers.items()},
+        "markers": {k: m.model_dump(mode="json") for k, m in mission.markers.items()},
+    }
+    return hashlib.sha1(json.dumps(plan, sort_keys=True).encode()).hexdigest()
 
 
 @dataclass
@@ -65,6 +96,14 @@ class ConsoleModel:
     # robot -> the last HISTORY (battery, link) samples, for the fleet screen's sparklines
     history: dict[str, deque[tuple[float, float]]] = field(default_factory=dict)
     selection: Selection = field(default_factory=Selection)
+    # the plan as this console last saved or loaded it (or first got it): plan_digest
+    saved_digest: str = ""
+    # robot -> when this console last heard it (telemetry, a report, presence back)
+    heard: dict[str, datetime] = field(default_factory=dict)
+    clock: Callable[[], datetime] = field(default=lambda: datetime.now(UTC))
+    # robot -> its commands not yet acknowledged, as sentences ("sync lru1-3, 2m10s old");
+    # empty until the robot link's state reaches the console (issue 19): quitting asks then
+    pending: dict[str, list[str]] = field(default_factory=dict)
     # the plan's forecast and checks (console/state/plan.py), refreshed by the app
     plan: PlanView = field(default_factory=PlanView)
 
@@ -76,8 +115,11 @@ class ConsoleModel:
         robots: dict[str, RobotInfo] | None = None,
         server_id: str = "",
     ) -> None:
+        first = self.mission is None
         self.mission = mission
         self.library = library
+        if first:  # what the server had: the plan from its file (the demo's), or journal
+            self.mark_saved()
         if robots is not None:
             self.robots = dict(robots)
         for name in mission.robots:
@@ -99,12 +141,8 @@ class ConsoleModel:
         columns changed, or None when everything may have changed."""
         if self.mission is None:
             return None
-        if mission is not None:
-            self.mission = mission
-        else:
-            if batch.revision <= self.mission.revision:
-                return set()
-            self.mission = ev.apply_events(self.mission, batch)
+        if not self._take(batch, mission):
+            return set()
         robots: set[str] = set()
         reindex = False
         barriers = False
@@ -144,11 +182,58 @@ class ConsoleModel:
             return None
         return robots
 
+    def _take(self, batch: ev.EventBatch, mission: Mission | None) -> bool:
+        """The mission after `batch` (False: an old batch, nothing changed)."""
+        assert self.mission is not None
+        if mission is not None:
+            self.mission = mission
+        elif batch.revision <= self.mission.revision:
+            return False
+        else:
+            self.mission = ev.apply_events(self.mission, batch)
+        if batch.op in ROBOT_OPS:  # the robot spoke: it was alive then
+            now = self.clock()
+            for e in batch.events:
+                robot = self._owner.get(getattr(e, "id", ""), None) or getattr(e, "robot", None)
+                if isinstance(robot, str):
+                    self.heard[robot] = now
+        return True
+
+    def mark_saved(self) -> None:
+        """The plan was just saved to (or loaded from) a file."""
+        self.saved_digest = plan_digest(self.mission) if self.mission is not None else ""
+
+    @property
+    def unsaved(self) -> bool:
+        """The plan differs from what was last saved or loaded (or first shown)."""
+        return self.mission is not None and plan_digest(self.mission) != self.saved_digest
+
+    def quit_risks(self) -> list[str]:
+        """What quitting now would walk away from: robots executing, commands
+        not yet acknowledged, plan edits not saved to a file (sentences)."""
+        risks: list[str] = []
+        busy = []
+        for robot in self.robot_order():
+            act = self.robot_state(robot)[0]
+            if act is not None:
+                busy.append(f"{robot} is {STATUS_WORDS[act.status]} ({act.id})")
+        if busy:
+            risks.append("; ".join(busy))
+        waiting = [f"{r}: {', '.join(cmds)}" for r, cmds in self.pending.items() if cmds]
+        if waiting:
+            risks.append("commands not yet acknowledged — " + "; ".join(waiting))
+        if self.unsaved:
+            risks.append("the plan has changes not saved to a file")
+        return risks
+
     def set_robot(self, info: RobotInfo) -> None:
         self.robots[info.name] = info
+        if info.online:
+            self.heard[info.name] = self.clock()
 
     def set_telemetry(self, t: Telemetry) -> None:
         self.telemetry[t.robot] = t
+        self.heard[t.robot] = self.clock()
         h = self.history.get(t.robot)
         if h is None:
             h = self.history[t.robot] = deque(maxlen=HISTORY)
@@ -261,6 +346,10 @@ class ConsoleModel:
                 else f"{mode} · {queued} queued"
             )
         return mode or "idle"
+
+    def freshness(self, robot: str) -> Freshness:
+        """Whether what is shown of `robot` is live or its last known state."""
+        return freshness(self, robot, self.clock())
 
     # -- why an action does not apply (None: it applies): console/state/availability.py ----
     def why_not(

@@ -3,12 +3,13 @@ one-line parameter summaries (Textual-free, so it is unit-tested without a termi
 
 from __future__ import annotations
 
+import re
 from datetime import datetime
 from typing import Any
 
 from backend.core.library import Library
 from backend.core.model import SkillInstance, Status
-from backend.core.params import ParamSpec
+from backend.core.params import POSE_FIELDS, ParamSpec, pose_text, value_text
 
 # -- statuses -------------------------------------------------------------------
 
@@ -66,14 +67,14 @@ def fmt_number(v: Any) -> str:
 
 
 def fmt_value(spec: ParamSpec | None, v: Any) -> str:
-    """A short, one-line rendering of a parameter value."""
+    """A short, one-line rendering of a parameter value (angles in degrees)."""
     t = spec.type if spec else None
     if (
         isinstance(v, dict)
         and t in ("pose", "position")
-        or (isinstance(v, dict) and set(v) <= {"x", "y", "z", "roll", "pitch", "yaw"} and v)
+        or (isinstance(v, dict) and set(v) <= set(POSE_FIELDS) and v)
     ):
-        return "(" + ",".join(fmt_number(v.get(k, 0.0)) for k in ("x", "y")) + ")"
+        return pose_text(v)  # (x,y) and what is not 0: (3,4 yaw=90°)
     if t == "area" and isinstance(v, list):
         return f"area[{len(v)}]"
     if isinstance(v, list):
@@ -85,12 +86,9 @@ def fmt_value(spec: ParamSpec | None, v: Any) -> str:
             + ("…" if len(v) > 2 else "")
             + "}"
         )
-    unit = (
-        spec.unit
-        if spec and spec.unit and isinstance(v, int | float) and not isinstance(v, bool)
-        else ""
-    )
-    return f"{fmt_number(v)}{unit}"
+    if spec is not None and isinstance(v, int | float) and not isinstance(v, bool):
+        return value_text(spec, v)  # with its unit; an angle in degrees
+    return fmt_number(v)
 
 
 def param_summary(skill: SkillInstance, library: Library | None) -> str:
@@ -129,3 +127,13 @@ def policy_marks(skill: SkillInstance) -> list[str]:
 
 def skill_title(skill: SkillInstance) -> str:
     return skill.label or skill.skill
+
+
+# an absolute file path (not the '/' of 'tcp/127.0.0.1:7447' or of '1/2')
+_ABSOLUTE_PATH = re.compile(r"(?<![\w.~:/])/(?:[\w.\-]+/)+([\w.\-]+)")
+
+
+def without_paths(text: str) -> str:
+    """A message for a notification: absolute file paths shortened to their
+    file name ('…/sim.log'), which is what tells an operator something."""
+    return _ABSOLUTE_PATH.sub(r"…/\1", text)

@@ -20,7 +20,7 @@ its skill leaves idle or is deleted; it survives a lost connection.
 from __future__ import annotations
 
 import asyncio
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from rich.text import Text
@@ -31,19 +31,19 @@ from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.message import Message
 from textual.widgets import Button, Input, Label, Select, Static, Switch, TextArea
 
-from backend.core.model import Mission, Policies, SkillInstance, Status
+from backend.core.model import Policies, SkillInstance, Status
 from backend.core.ops import EditSkill
-from backend.core.params import ParamSpec, check_value, normalize_value
+from console.state.markers import relabel
 from console.state.model import ConsoleModel
 from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS
+from console.widgets.param_changes import ReadsEdits
 from console.widgets.param_inputs import (
-    BINDABLE_KINDS,
     INPUTS,
     POLICY_HINTS,
+    TYPED,
     param_inputs,
     policy_inputs,
     read_binding,
-    read_param,
     read_policies,
     set_widget_value,
     spec_hint,
@@ -68,44 +68,13 @@ def settle_cursors(root: Any) -> None:
             w.cursor_blink = False
 
 
-@dataclass
-class Changes:
-    """What differs from the skill: parameters (None: back to the default),
-    bindings (None: unbound) and the problems per parameter."""
-
-    params: dict[str, Any] = field(default_factory=dict)
-    bindings: dict[str, str | None] = field(default_factory=dict)
-    problems: dict[str, str] = field(default_factory=dict)
-
-    def unset(self, s: SkillInstance, name: str, spec: ParamSpec) -> None:
-        """The parameter's field is empty."""
-        if spec.is_required:
-            self.problems[name] = f"missing required {spec.type} parameter '{name}'"
-        elif name in s.params and (
-            spec.default is None or s.params[name] != normalize_value(spec, spec.default)
-        ):
-            self.params[name] = None  # back to the default
-
-
-def value_problem(spec: ParamSpec, value: Any, mission: Mission | None) -> str | None:
-    """The first problem the server's own check finds with a typed value."""
-    m = mission
-    found = check_value(
-        spec, value, markers=m.markers if m else None, robots=set(m.robots) if m else None
-    )
-    if not found:
-        return None
-    rel, msg = found[0]
-    where = ".".join(str(x) for x in rel)
-    return f"{where}: {msg}" if where else msg
-
-
-class ParamEditor(VerticalScroll):
+class ParamEditor(ReadsEdits, VerticalScroll):
     """Edits one skill. Posts `ApplyRequested` with only what changed.
     Its look: param_editor.tcss (loaded by the app)."""
 
     BINDINGS = [
-        Binding("ctrl+s", "apply", "Apply", id="editor.apply"),
+        # enter in a field applies (Input.Submitted); ctrl+s is the mission's save everywhere
+        Binding("enter", "apply", "Apply", id="editor.apply"),
         Binding("ctrl+r", "revert", "Revert", id="editor.revert"),
         Binding("escape", "leave", "Back", id="editor.leave"),
     ]
@@ -138,11 +107,14 @@ class ParamEditor(VerticalScroll):
             )
 
         def changed(self) -> list[str]:
-            """What the operation changes (for the status line)."""
-            return (
-                [*self.params, *self.bindings]
-                + (["label"] if self.label is not None else [])
-                + (["policies"] if self.policies is not None else [])
+            """What the operation changes (for the status line), each once: a
+            typed value replacing a binding changes both for one parameter."""
+            return list(
+                dict.fromkeys(
+                    [*self.params, *self.bindings]
+                    + (["label"] if self.label is not None else [])
+                    + (["policies"] if self.policies is not None else [])
+                )
             )
 
     class DraftsChanged(Message):
@@ -171,6 +143,7 @@ class ParamEditor(VerticalScroll):
         self.drafts: dict[str, Draft] = {}
         self.dirty: list[str] = []  # what differs in the shown skill (empty: nothing)
         self._unapplied: frozenset[str] = frozenset()
+        self._choices: dict[str, str | None] = {}  # Select id -> the marker it showed
 
     # -- what is shown ------------------------------------------------------------------
     def _skill(self) -> tuple[str, SkillInstance] | None:
@@ -244,6 +217,11 @@ class ParamEditor(VerticalScroll):
             )
         await self.recompose()
         settle_cursors(self)
+        self._choices = {  # what each marker choice shows (a label may name it)
+            w.id: None if w.value in (TYPED, Select.NULL) else str(w.value)
+            for w in self.query(Select)
+            if w.id
+        }
         if draft is not None:
             self._restore(draft)
         self._validate_all()
@@ -311,7 +289,7 @@ class ParamEditor(VerticalScroll):
         if self.dirty:
             self._set_static(
                 "#dirty",
-                f"unapplied changes: {', '.join(self.dirty)} — ctrl+s applies, ctrl+r reverts",
+                f"unapplied changes: {', '.join(self.dirty)} — enter applies, ctrl+r reverts",
             )
         else:
             self._set_static("#dirty", "")
@@ -403,74 +381,8 @@ class ParamEditor(VerticalScroll):
         yield from policy_inputs(s.policies, disabled=ro is not None)
         if ro is None:
             with Horizontal(classes="buttons"):
-                yield Button("Apply ^s", id="apply", variant="primary", compact=True)
+                yield Button("Apply ⏎", id="apply", variant="primary", compact=True)
                 yield Button("Revert ^r", id="revert", compact=True)
-
-    def collect(self) -> tuple[str | None, dict[str, Any], dict[str, str | None], dict[str, str]]:
-        """(label change, params changed, bindings changed, problems per parameter)."""
-        found = self._skill()
-        if found is None:
-            return None, {}, {}, {}
-        _, s = found
-        spec = self._spec(s)
-        try:
-            label = self.query_one("#f-label", Input).value
-        except Exception:
-            label = s.label
-        changes = Changes()
-        for name, pspec in spec.params.items() if spec is not None else ():
-            self._collect_param(changes, s, name, pspec)
-        label_change = label if label != s.label else None
-        return label_change, changes.params, changes.bindings, changes.problems
-
-    def _collect_param(self, ch: Changes, s: SkillInstance, name: str, pspec: ParamSpec) -> None:
-        """One parameter's change (or its problem), as typed or chosen."""
-        old_bound = s.bindings.get(name)
-        bound = read_binding(self, name) if pspec.type in BINDABLE_KINDS else None
-        if bound is not None:
-            if bound != old_bound:
-                ch.bindings[name] = bound
-            return
-        value, problem = read_param(self, name, pspec)
-        if problem is None and value is not None:
-            problem = value_problem(pspec, value, self.model.mission)
-        if problem is not None:
-            ch.problems[name] = problem
-        elif value is None:
-            ch.unset(s, name, pspec)
-        else:
-            norm = normalize_value(pspec, value)
-            if old_bound is not None:  # a typed value replaces the binding
-                ch.bindings[name] = None
-                ch.params[name] = norm
-            elif s.params.get(name) != norm:
-                ch.params[name] = norm
-
-    def policies_change(self) -> tuple[Policies | None, dict[str, str]]:
-        """(new policies if they changed, problems per policy)."""
-        found = self._skill()
-        if found is None:
-            return None, {}
-        policies, problems = read_policies(self)
-        return (
-            policies if policies is not None and policies != found[1].policies else None
-        ), problems
-
-    def changed_names(self, *, even_read_only: bool = False) -> list[str]:
-        """What differs from the skill (including fields that do not read)."""
-        if self._skill() is None or (self.read_only_reason is not None and not even_read_only):
-            return []
-        label, params, bindings, problems = self.collect()
-        policies, policy_problems = self.policies_change()
-        names = (["label"] if label is not None else []) + list(
-            dict.fromkeys([*params, *bindings, *problems])
-        )
-        if policies is not None or policy_problems:
-            names.append("policies")
-        return names
-
-    def is_dirty(self) -> bool:
-        return bool(self.changed_names())
 
     # -- messages next to fields --------------------------------------------------------------
     def _set_static(self, selector: str, text: str) -> None:
@@ -525,12 +437,30 @@ class ParamEditor(VerticalScroll):
             if name == pname or name.startswith(pname + "-"):
                 self.errors.pop(pname, None)  # a server message is about the old value
                 break
+        if widget_id.startswith("bind-") or widget_id.startswith("f-"):
+            self._relabel(widget_id)
         if widget_id.startswith("bind-"):
             self._sync_bound_fields(name)
         for sw in self.query(f"#f-{name}").results(Switch):  # the value in words, not only colour
             self._set_static(f"#v-{name}", "yes" if sw.value else "no")
         self._validate_all()
         self._update_dirty()
+
+    def _relabel(self, widget_id: str) -> None:
+        """A marker chosen instead of another: a label naming the old marker
+        ("drive to POI-A") names the new one, in the label field (applied
+        with the rest, or reverted)."""
+        try:
+            select = self.query_one(f"#{widget_id}", Select)
+            label = self.query_one("#f-label", Input)
+        except Exception:
+            return  # not a choice (or being rebuilt)
+        chosen = None if select.value in (TYPED, Select.NULL) else str(select.value)
+        before = self._choices.get(widget_id)
+        self._choices[widget_id] = chosen
+        new = relabel(label.value, before, chosen)
+        if new is not None:
+            label.value = new
 
     def _sync_bound_fields(self, name: str) -> None:
         bound = read_binding(self, name)
@@ -547,6 +477,12 @@ class ParamEditor(VerticalScroll):
 
     @on(Button.Pressed, "#apply")
     def _apply_pressed(self) -> None:
+        self.action_apply()
+
+    @on(Input.Submitted)
+    def _field_submitted(self, event: Input.Submitted) -> None:
+        """Enter in a field applies the edits (as in a form)."""
+        event.stop()
         self.action_apply()
 
     @on(Button.Pressed, "#revert")
@@ -594,4 +530,6 @@ class ParamEditor(VerticalScroll):
         await self.show_skill(self.skill_id, force=True, discard=True)
 
     def action_leave(self) -> None:
+        if self.focus_within():  # at once: a key typed right after escape is not the field's
+            self.screen.set_focus(None)
         self.post_message(self.Left())

@@ -7,6 +7,11 @@ marker and robot: a choice (of the spec's choices, the markers of the allowed
 kinds, the mission's robots). Pose, position and area parameters can also be
 bound to a marker (`bind_select`). Below them, the skill's policies.
 
+Angles (a pose's roll, pitch and yaw; a float in `rad`) are shown and typed in
+degrees, the unit in the label (`yaw°`); `0.5rad` and `30deg` say their unit
+(backend.core.params.parse_angle). A field left as shown keeps the exact
+value it showed (degrees are rounded for reading).
+
 Widget ids: `f-<param>` (`f-<param>-<field>` for coordinates), `v-<param>`
 (a switch's value in words), `bind-<param>`; policies `pf-`, `pv-`, `perr-`.
 Reading raises nothing: a value, or a sentence saying what is wrong.
@@ -27,7 +32,16 @@ from textual.dom import DOMNode
 from textual.widgets import Input, Label, Select, Static, Switch, TextArea
 
 from backend.core.model import Mission, Policies, SkillInstance
-from backend.core.params import POSE_FIELDS, POSITION_FIELDS, ParamSpec
+from backend.core.params import (
+    ANGLE_FIELDS,
+    POSE_FIELDS,
+    POSITION_FIELDS,
+    ParamSpec,
+    angle_number,
+    is_angle,
+    parse_angle,
+    shown_unit,
+)
 from console.state.text import fmt_number
 from console.widgets.select import SafeSelect
 
@@ -69,13 +83,17 @@ def yaml_text(value: Any) -> str:
 
 
 def spec_hint(spec: ParamSpec) -> str:
-    """type, unit and bounds: 'float m/s 0.1..1'."""
+    """type, unit and bounds: 'float m/s 0.1..1', 'float ° -180..180'."""
     parts = [spec.type]
-    if spec.unit:
-        parts.append(spec.unit)
+    if shown_unit(spec):
+        parts.append(shown_unit(spec))
+
+    def bound(b: float) -> str:
+        return angle_number(b) if is_angle(spec) else f"{b:g}"
+
     if spec.min is not None or spec.max is not None:
-        lo = f"{spec.min:g}" if spec.min is not None else ""
-        hi = f"{spec.max:g}" if spec.max is not None else ""
+        lo = bound(spec.min) if spec.min is not None else ""
+        hi = bound(spec.max) if spec.max is not None else ""
         parts.append(f"{lo}..{hi}")
     if spec.type == "marker" and spec.marker_kinds:
         parts.append("/".join(spec.marker_kinds))
@@ -107,9 +125,34 @@ def _switch(f: Field) -> ComposeResult:
 TEXT_TYPES = {"int": "integer", "float": "number", "str": "text"}  # kind -> Input type
 
 
+class AngleInput(Input):
+    """An angle in degrees (typed `30`, `30deg` or `0.52rad`); remembers the
+    value it was shown with, so a field left as shown keeps it exactly."""
+
+    def __init__(self, radians: float | None, **kw: Any) -> None:
+        self.shown = "" if radians is None else angle_number(radians)
+        self.original = radians
+        super().__init__(self.shown, **kw)
+
+    def radians(self) -> Reading:
+        """(radians, None), (None, None) when empty, or (None, what is wrong)."""
+        raw = self.value.strip()
+        if not raw:
+            return None, None
+        if raw == self.shown and self.original is not None:
+            return self.original, None
+        return parse_angle(raw)
+
+
 def _text(f: Field) -> ComposeResult:
     t = f.spec.type
     v = f.value
+    if is_angle(f.spec):
+        rad = float(v) if isinstance(v, int | float) and not isinstance(v, bool) else None
+        yield AngleInput(
+            rad, id=f"f-{f.name}", compact=True, disabled=f.disabled, placeholder="degrees"
+        )
+        return
     text = "" if v is None else (fmt_number(v) if t != "str" else str(v))
     yield Input(
         text, id=f"f-{f.name}", type=TEXT_TYPES[t], compact=True, disabled=f.disabled, placeholder=t
@@ -122,17 +165,27 @@ def _coordinate_rows(kind: str) -> list[tuple[str, ...]]:
 
 
 def _coordinates(f: Field) -> ComposeResult:
-    v = f.value if isinstance(f.value, dict) else {}
+    """A pose's six fields, a position's three; empty when the parameter is
+    unset (an optional one: empty fields read back as unset, not as 0)."""
+    v = f.value if isinstance(f.value, dict) else None
     for row in _coordinate_rows(f.spec.type):
         with Horizontal(classes="fields"):
             for c in row:
+                x = float(v.get(c, 0.0)) if v is not None else None
+                if c in ANGLE_FIELDS:  # degrees, the unit in the label
+                    yield Label(f"{c}°")
+                    yield AngleInput(
+                        x, id=f"f-{f.name}-{c}", compact=True, disabled=f.disabled, placeholder="–"
+                    )
+                    continue
                 yield Label(c)
                 yield Input(
-                    fmt_number(float(v.get(c, 0.0))),
+                    "" if x is None else fmt_number(x),
                     id=f"f-{f.name}-{c}",
                     type="number",
                     compact=True,
                     disabled=f.disabled,
+                    placeholder="–",
                 )
 
 
@@ -185,7 +238,10 @@ def _read_text(root: DOMNode, name: str, spec: ParamSpec) -> Reading:
 
 
 def _read_number(root: DOMNode, name: str, spec: ParamSpec) -> Reading:
-    raw = root.query_one(f"#f-{name}", Input).value.strip()
+    field = root.query_one(f"#f-{name}", Input)
+    if isinstance(field, AngleInput):
+        return field.radians()
+    raw = field.value.strip()
     if not raw:
         return None, None
     integer = spec.type == "int"
@@ -196,10 +252,22 @@ def _read_number(root: DOMNode, name: str, spec: ParamSpec) -> Reading:
 
 
 def _read_coordinates(root: DOMNode, name: str, spec: ParamSpec) -> Reading:
+    fields = [
+        root.query_one(f"#f-{name}-{c}", Input) for row in _coordinate_rows(spec.type) for c in row
+    ]
+    if not any(w.value.strip() for w in fields):
+        return None, None  # all empty: unset
     out: dict[str, float] = {}
     for row in _coordinate_rows(spec.type):
         for c in row:
-            raw = root.query_one(f"#f-{name}-{c}", Input).value.strip()
+            field = root.query_one(f"#f-{name}-{c}", Input)
+            if isinstance(field, AngleInput):
+                rad, problem = field.radians()
+                if problem is not None:
+                    return None, f"{c}: {problem}"
+                out[c] = rad if rad is not None else 0.0
+                continue
+            raw = field.value.strip()
             try:
                 out[c] = float(raw) if raw else 0.0
             except ValueError:

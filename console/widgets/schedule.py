@@ -29,9 +29,12 @@ from console.widgets.schedule_lines import (
     Column,
     Head,
     Styles,
+    click_hit,
     fit,
+    hidden_robots,
     progress_segments,
     skill_segments,
+    with_hidden_robots,
 )
 
 STATIC_W = 16
@@ -57,6 +60,9 @@ class ScheduleView(ScrollView, can_focus=True):
         "schedule--progress",
         "schedule--battery-low",
         "schedule--rule",
+        "schedule--more",
+        "schedule--stale",
+        "schedule--stale-head",
         "schedule--check-error",  # plan checks' glyphs (console/state/plan.py)
         "schedule--check-warning",
         "schedule--check-waived",
@@ -405,20 +411,12 @@ class ScheduleView(ScrollView, can_focus=True):
         self.refresh()
 
     def on_click(self, event: events.Click) -> None:
-        x = int(self.scroll_x) + event.x
-        for i, col in enumerate(self.columns):
-            if col.x <= x < col.x + col.width + 1:
-                self.cursor_col = i
-                if event.y < HEADER_H:
-                    self.cursor_id = col.resting_id()
-                else:
-                    line = int(self.scroll_y) + event.y - HEADER_H
-                    hit = [sid for sid, ln in col.line_of.items() if ln == line]
-                    if hit:
-                        self.cursor_id = hit[0]
-                self.refresh()
-                self._post_cursor()
-                break
+        hit = click_hit(self.columns, int(self.scroll_x) + event.x, event.y, int(self.scroll_y))
+        if hit is not None:
+            self.cursor_col, skill = hit
+            self.cursor_id = skill or self.cursor_id
+            self.refresh()
+            self._post_cursor()
 
     # -- rendering ----------------------------------------------------------------
     def _styles(self) -> Styles:
@@ -468,12 +466,21 @@ class ScheduleView(ScrollView, can_focus=True):
             else:
                 segs.append(Segment("│", st["divider"]))
         start = start or 0
-        return Strip(segs).crop_extend(x0 - start, x1 - start, base)
+        strip = Strip(segs).crop_extend(x0 - start, x1 - start, base)
+        if y == HEADER_H - 1:  # on the rule under the headers, which hides nothing
+            strip = with_hidden_robots(strip, self.hidden_robots(), x1 - x0, st["more"])
+        return strip
+
+    def hidden_robots(self) -> tuple[int, int]:
+        """(columns cut or hidden on the left, on the right) of the view now."""
+        x0 = int(self.scroll_x)
+        return hidden_robots(self.columns, x0, x0 + self.scrollable_content_region.width)
 
     def _header_segments(self, col: Column, y: int, st: Styles) -> list[Segment]:
         compact = col.static and not self.expand_static
         selected = y == HEADER_H - 1 and bool(self.columns) and self.columns[self.cursor_col] is col
-        return HEADER_LINES[y](Head(self.model, col, st, compact, selected))
+        fresh = self.model.freshness(col.robot)
+        return HEADER_LINES[y](Head(self.model, col, st, compact, selected, fresh))
 
     def _content_segments(self, ci: int, col: Column, line: int, st: Styles) -> list[Segment]:
         w = col.width
@@ -487,9 +494,11 @@ class ScheduleView(ScrollView, can_focus=True):
                     s = task[i]
                     if kind == "row":
                         return self._skill_segments(ci, col, s, st)
-                    return progress_segments(self.model, col, s, st)
+                    return progress_segments(
+                        self.model, col, s, st, self.model.freshness(col.robot)
+                    )
             if line == 0 and not col.sync:
-                hint = "  nothing on the robot" if not col.static or self.expand_static else "  –"
+                hint = "  nothing on robot" if not col.static or self.expand_static else "  –"
                 return [Segment(fit(hint, w), st["dim"])]
             return [Segment(" " * w, st["base"])]
         if line == self.sync_h:
@@ -517,6 +526,7 @@ class ScheduleView(ScrollView, can_focus=True):
     def _skill_segments(self, ci: int, col: Column, s: SkillInstance, st: Styles) -> list[Segment]:
         selected = ci == self.cursor_col and s.id == self.cursor_id
         bid = self.model.barrier_of(s.id)
+        stale = s.status != Status.IDLE and self.model.freshness(col.robot).stale
         return skill_segments(
             s,
             col.width,
@@ -527,4 +537,5 @@ class ScheduleView(ScrollView, can_focus=True):
             check=self.model.plan.mark(s.id),
             extra=self._summary(s) if not col.static or self.expand_static else "",
             cursor=(st["cursor"] if self.has_focus else st["cursor-blur"]) if selected else None,
+            stale=stale,
         )

@@ -14,14 +14,16 @@ from dataclasses import dataclass, field
 from rich.cells import cell_len, set_cell_size
 from rich.segment import Segment
 from rich.style import Style
+from textual.strip import Strip
 
 from backend.core.model import SkillInstance, Status
 from backend.core.plan.checks import Finding
+from console.state.freshness import FRESH, Freshness
 from console.state.model import ConsoleModel
 from console.state.text import GLYPHS, STATUS_CSS, fmt_clock, fmt_duration, skill_title
 
 HEADER_H = 4  # name + presence / battery + link / activity / rule
-MIN_W = 24  # a dynamic robot's column, at least
+MIN_W = 18  # a dynamic robot's column, at least (at 80 columns 3 robots and a static one fit)
 
 Styles = dict[str, Style]  # component class without "schedule--" (and "base") -> style
 
@@ -72,6 +74,65 @@ def fit(text: str, width: int) -> str:
     return set_cell_size(text, width)
 
 
+def fit_middle(text: str, width: int) -> str:
+    """Exactly `width` cells, cut in the middle when too long: labels often
+    differ at the end ("drive to POI-A" / "drive to POI-B"), so both ends stay
+    ("explore…plain"); the editor shows the whole label."""
+    if width <= 0:
+        return ""
+    if cell_len(text) <= width:
+        return set_cell_size(text, width)
+    if width < 6:
+        return fit(text, width)
+    start = set_cell_size(text, (width - 1) // 2 + (width - 1) % 2).rstrip()
+    room = width - 1 - cell_len(start)
+    k = room
+    end = ""
+    while 0 < k < len(text) - len(start):  # the tail's room filled, no space first
+        end = text[-k:].lstrip()
+        if cell_len(end) >= room:
+            break
+        k += 1
+    while cell_len(end) > room:
+        end = end[1:]
+    return set_cell_size(start + "…" + end, width)
+
+
+def click_hit(
+    columns: list[Column], x: int, y: int, scroll_y: int
+) -> tuple[int, str | None] | None:
+    """(column, skill) a click at content x, screen row y hits: a header
+    gives the column's resting skill; None: no column there."""
+    for i, col in enumerate(columns):
+        if col.x <= x < col.x + col.width + 1:
+            if y < HEADER_H:
+                return i, col.resting_id()
+            line = scroll_y + y - HEADER_H
+            return i, next((sid for sid, ln in col.line_of.items() if ln == line), None)
+    return None
+
+
+def hidden_robots(columns: list[Column], x0: int, x1: int) -> tuple[int, int]:
+    """(columns cut or hidden left of x0, right of x1)."""
+    left = sum(1 for c in columns if c.x < x0)
+    right = sum(1 for c in columns if c.x + c.width > x1)
+    return left, right
+
+
+def with_hidden_robots(strip: Strip, hidden: tuple[int, int], width: int, style: Style) -> Strip:
+    """The rule under the headers says how many robots are off to each side
+    ("← 1", "+2 robots →"): a scrollbar alone is easy to miss."""
+    left, right = hidden
+    if right:
+        text = f" +{right} robot{'s' if right > 1 else ''} → " if width >= 40 else f" +{right}→"
+        n = cell_len(text)
+        strip = Strip.join([strip.crop(0, width - n), Strip([Segment(text, style)])])
+    if left:
+        text = f" ← {left} " if width >= 40 else f"←{left}"
+        strip = Strip.join([Strip([Segment(text, style)]), strip.crop(cell_len(text), width)])
+    return strip
+
+
 # -- the header: a table of its lines ----------------------------------------------------
 
 
@@ -84,14 +145,15 @@ class Head:
     st: Styles
     compact: bool  # a static robot's narrow column (not expanded)
     selected: bool  # the cursor's column: its rule is heavy
+    fresh: Freshness = FRESH  # stale: the robot's last known state, drawn as such
 
 
 def _offline_since(robot: str, clock: str, width: int) -> str:
     """The longest way to say since when a robot is offline that fits beside its name."""
-    for p in (f"✕ offline since {clock}", f"✕ offline {clock}"):
+    for p in (f"✕ offline since {clock}", f"✕ offline {clock}", f"✕ off {clock}", f"✕ {clock}"):
         if cell_len(robot) + 1 + cell_len(p) <= width:
             return p
-    return f"✕ off {clock}"
+    return "✕ off"
 
 
 def _presence(h: Head) -> tuple[str, Style]:
@@ -129,6 +191,9 @@ def _levels_line(h: Head) -> list[Segment]:
     t = h.model.telemetry.get(h.col.robot)
     if t is None:
         return [Segment(fit("bat –  link –", w), st["dim"])]
+    if h.fresh.stale:  # the last levels heard, not live ones
+        text = f"bat {int(round(t.battery * 100))}%  link {int(round(t.link * 100))}%"
+        return [Segment(fit(text, w), st["stale"])]
     bat = f"bat {int(round(t.battery * 100))}%"
     link = f"link {int(round(t.link * 100))}%" if t.in_range else "link: out of range"
     bst = st["battery-low"] if t.battery < 0.2 else st["base"]
@@ -143,8 +208,17 @@ def _levels_line(h: Head) -> list[Segment]:
 def _activity_line(h: Head) -> list[Segment]:
     if h.compact:
         n = len(h.col.ids)
+        if h.fresh.stale:
+            return [Segment(fit(h.fresh.as_of(), h.col.width), h.st["stale-head"])]
         return [Segment(fit(f"{n} skill{'s' if n != 1 else ''}", h.col.width), h.st["dim"])]
-    return [Segment(fit(h.model.activity_text(h.col.robot), h.col.width), h.st["dim"])]
+    activity = h.model.activity_text(h.col.robot)
+    if h.fresh.stale:  # what it was doing, as of when: first, so it is never cut
+        w = h.col.width
+        ago = h.fresh.ago()
+        as_of = fit(ago, w) if cell_len(ago) > w else ago
+        rest = fit(f": {activity}", w - cell_len(as_of))
+        return [Segment(as_of, h.st["stale-head"]), Segment(rest, h.st["stale"])]
+    return [Segment(fit(activity, h.col.width), h.st["dim"])]
 
 
 def _rule_line(h: Head) -> list[Segment]:
@@ -174,11 +248,13 @@ def skill_segments(
     extra: str,
     cursor: Style | None,
     check: Finding | None = None,
+    stale: bool = False,
 ) -> list[Segment]:
     """A skill's row: mark, glyph, title (*: unapplied edits), attempt, the
     parameter summary where it fits, the barrier tag, the plan checks' glyph
-    (✖ error, ⚠ warning, ≈ waived); on `cursor`'s background."""
-    sst = st[STATUS_CSS[s.status]]
+    (✖ error, ⚠ warning, ≈ waived); on `cursor`'s background. `stale`: a
+    synchronized skill of a robot not heard lately (its last known status)."""
+    sst = st[STATUS_CSS[s.status]] + st["stale"] if stale else st[STATUS_CSS[s.status]]
     title = ("*" if draft else "") + skill_title(s)
     attempt = f" #{s.attempt}" if s.attempt > 1 else ""
     if check is not None:
@@ -189,12 +265,12 @@ def skill_segments(
         Segment(GLYPHS[s.status], sst),
     ]
     body = " " + title + attempt
-    if cell_len(body) >= room:  # the label is cut, never the attempt number
-        segs.append(Segment(fit(" " + title, room - len(attempt)) + attempt, sst))
+    if cell_len(body) >= room:  # the label is cut in the middle, never the attempt number
+        segs.append(Segment(" " + fit_middle(title, room - 1 - len(attempt)) + attempt, sst))
     else:
         segs.append(Segment(body, sst))
         rest = room - cell_len(body)
-        if extra and rest > 2:
+        if extra and rest >= 8:  # a summary cut to a letter or two says nothing
             segs.append(Segment(fit(" " + extra, rest), st["dim"]))
         else:
             segs.append(Segment(" " * rest, st["base"]))
@@ -215,13 +291,16 @@ def _check_glyph(f: Finding, st: Styles) -> tuple[str, Style]:
 
 
 def progress_segments(
-    model: ConsoleModel, col: Column, s: SkillInstance, st: Styles
+    model: ConsoleModel, col: Column, s: SkillInstance, st: Styles, fresh: Freshness = FRESH
 ) -> list[Segment]:
     """The line under an active (or failed) skill: its progress bar and ETA,
-    why it paused or failed, what a barrier waits for."""
+    why it paused or failed, what a barrier waits for. A stale robot's bar
+    stops where it was last heard, without an ETA."""
     w = col.width
     t = model.telemetry.get(col.robot)
     has = t is not None and t.skill == s.id
+    if fresh.stale and s.status in (Status.RUNNING, Status.PAUSED):
+        return _stale_progress(t.progress if t is not None and has else None, w, st, fresh)
     if s.status == Status.FAILURE:
         return [Segment(fit("   ↳ " + s.status_info, w), st["failure"])]
     if s.status == Status.SYNCHWAITING:
@@ -236,8 +315,13 @@ def progress_segments(
     if t is None or pct is None:
         text = "   running" + (f" · {s.status_info}" if s.status_info else "")
         return [Segment(fit(text, w), st["dim"])]
-    eta = f" ETA {fmt_duration(t.eta_s)}" if t.eta_s is not None else ""
-    label = f" {int(pct * 100):3d}%{eta}"
+    eta = fmt_duration(t.eta_s) if t.eta_s is not None else ""
+    # the longest label that leaves the bar 4 cells ("45% ETA 2m12s", "45% 2m12s", "45%")
+    labels = [f" {int(pct * 100):3d}%" + (f" ETA {eta}" if eta else "")]
+    if eta:
+        labels.append(f" {int(pct * 100)}% {eta}")
+    labels.append(f" {int(pct * 100)}%")
+    label = next((x for x in labels if w - 5 - cell_len(x) >= 4), labels[-1])
     bar_w = max(4, w - 3 - cell_len(label) - 2)
     filled = int(round(pct * bar_w))
     return [
@@ -246,6 +330,22 @@ def progress_segments(
         Segment("░" * (bar_w - filled), st["dim"]),
         Segment("▏", st["dim"]),
         Segment(fit(label, w - 3 - bar_w - 2), st["base"]),
+    ]
+
+
+def _stale_progress(pct: float | None, w: int, st: Styles, fresh: Freshness) -> list[Segment]:
+    """`▕██░░▏ 45% as of 25s ago`: the last known progress, stopped."""
+    as_of = fresh.as_of()
+    if pct is None:
+        return [Segment(fit(f"   {as_of}", w), st["stale"])]
+    label = f" {int(pct * 100)}% {as_of}"
+    bar_w = w - 5 - cell_len(label)
+    if bar_w < 4:
+        return [Segment(fit(f"   {int(pct * 100)}% {as_of}", w), st["stale"])]
+    filled = int(round(pct * bar_w))
+    return [
+        Segment("   ▕" + "█" * filled + "░" * (bar_w - filled) + "▏", st["stale"]),
+        Segment(fit(label, w - 5 - bar_w), st["stale-head"]),
     ]
 
 

@@ -171,12 +171,17 @@ class EngineBackend:
 
 
 def make_app(**kw: Any):
-    """A MissionApp for tests: no animations, no cursor blink."""
+    """A MissionApp for tests: no animations, no cursor blink; offline, its
+    clock at T0 (injected states are stamped T0: how old a robot's state is,
+    and so what the schedule shows, must not depend on when the test runs;
+    a live one keeps the real clock, as the server's stamps do)."""
     from console.app import MissionApp
 
     app = MissionApp(**kw)
     app.animation_level = "none"
     app.cursor_blink = False
+    if not kw.get("connect"):
+        app.clock = lambda: T0
     return app
 
 

@@ -9,7 +9,14 @@ from console.state.availability import OFFLINE_OK, READ_ONLY_OK, RULES
 
 def test_every_rule_belongs_to_an_action_of_the_mission_screen():
     assert set(RULES) <= set(BY_NAME)
-    assert set(BY_NAME) - set(RULES) == {"undo", "redo", "save", "load", "toggle_static"}
+    assert set(BY_NAME) - set(RULES) == {
+        "undo",
+        "redo",
+        "save",
+        "load",
+        "toggle_static",
+        "search",
+    }
 
 
 def test_what_applies_offline_also_applies_read_only():

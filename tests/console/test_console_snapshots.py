@@ -54,7 +54,7 @@ def test_empty_mission(snap_compare):
     assert snap_compare(
         make_app(),
         terminal_size=(110, 24),
-        run_before=_prepare(b, expect=("lru1", "ardea", "nothing on the robot", "empty plan")),
+        run_before=_prepare(b, expect=("lru1", "ardea", "nothing on robot", "empty plan")),
     )
 
 
@@ -232,7 +232,7 @@ def test_80x24_editor(snap_compare):
             telemetry=mars_telemetry(),
             select="lru1-4",
             after=after,
-            expect=("take_science_image on lru1", "filter"),
+            expect=("lru1-4  take_science_image on", "filter", "+2 robots →"),
         ),
     )
 

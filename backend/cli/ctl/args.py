@@ -53,7 +53,10 @@ Parameter values (--param NAME=VALUE)
   --recharge-below F (0..1, or `off`); on edit, unnamed policies are kept.
 
 Geometry
-  --pose x,y[,z[,roll,pitch,yaw]] or a flow mapping '{x: 1, y: 2, yaw: 1.57}'
+  --pose x,y[,z[,roll,pitch,yaw]] or a flow mapping '{x: 1, y: 2, yaw: 90}'
+  Angles (roll, pitch, yaw; a parameter in rad) are in degrees, as ctl prints
+  them (heading 0 = east, counter-clockwise); 30deg and 0.52rad say their
+  unit. Files and --json keep radians.
   --position x,y[,z] or '{x: 1, y: 2}'
   --area "x,y x,y x,y ..." (at least 3 points; ';' also separates points)
   A value starting with '-' must be attached: --pose=-3,4. `marker move` with
@@ -221,7 +224,9 @@ def _policies(p: argparse.ArgumentParser) -> None:
 def _geometry(p: argparse.ArgumentParser) -> None:
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument(
-        "--pose", metavar="P", help="x,y[,z[,roll,pitch,yaw]] or '{x: 1, y: 2, yaw: 0.5}'"
+        "--pose",
+        metavar="P",
+        help="x,y[,z[,roll,pitch,yaw]] or '{x: 1, y: 2, yaw: 90}' (angles in degrees, or 1.57rad)",
     )
     g.add_argument("--position", metavar="P", help="x,y[,z] or '{x: 1, y: 2}'")
     g.add_argument("--area", metavar="A", help='polygon "x,y x,y x,y ..." (3 points or more)')

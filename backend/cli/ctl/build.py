@@ -16,6 +16,7 @@ from backend.cli.ctl.errors import FileInvalid, UsageError
 from backend.cli.ctl.values import (
     MarkerRef,
     check_name,
+    param_value,
     parse_area,
     parse_params,
     parse_pose,
@@ -55,10 +56,10 @@ def _resolve(
     params: dict[str, Any] = {}
     bindings: dict[str, str] = {}
     for name, value in parsed.items():
-        if not isinstance(value, MarkerRef):
-            params[name] = value
-            continue
         pspec = _param_spec(library, mission, robot, skill, name)
+        if not isinstance(value, MarkerRef):
+            params[name] = param_value(name, value, pspec)  # angles: degrees -> radians
+            continue
         kind = KINDS.get(pspec.type) if pspec is not None else None
         if pspec is None or (kind is not None and kind.bindable_to):
             bindings[name] = value.name  # unknown: the server names the problem

@@ -15,7 +15,7 @@ from datetime import datetime
 from typing import Any
 
 from backend.cli.ctl.args import CONTROL_OPS
-from backend.core.params import POSE_FIELDS, POSITION_FIELDS
+from backend.core.params import POSE_FIELDS, POSITION_FIELDS, is_angle, pose_text, value_text
 
 _GLYPHS = {
     "idle": ("○", "."),
@@ -64,22 +64,20 @@ def _is_area(v: Any) -> bool:
 
 
 def _pose_text(v: dict[str, Any]) -> str:
-    """(x,y) and the other fields that are not 0: `(3,4 yaw=1.57)`."""
-    extra = [f"{k}={_num(v[k])}" for k in ("z", "roll", "pitch", "yaw") if v.get(k)]
-    return (
-        f"({_num(v.get('x', 0))},{_num(v.get('y', 0))}"
-        + (" " + " ".join(extra) if extra else "")
-        + ")"
-    )
+    """(x,y) and the other fields that are not 0, angles in degrees: `(3,4 yaw=90°)`."""
+    return pose_text(v)
 
 
 def _str_text(v: str) -> str:
     return v if v and re.fullmatch(r"[\w.\-@/]+", v) else json.dumps(v, ensure_ascii=False)
 
 
-def short_value(v: Any, limit: int = 40) -> str:
-    """A compact rendering of a parameter value for one line of `state`."""
-    if _is_pose(v):
+def short_value(v: Any, limit: int = 40, spec: Any = None) -> str:
+    """A compact rendering of a parameter value for one line of `state`
+    (with its spec: as a person reads it, angles in degrees)."""
+    if spec is not None and is_angle(spec) and isinstance(v, int | float):
+        text = value_text(spec, v)
+    elif _is_pose(v):
         text = _pose_text(v)
     elif _is_area(v):
         text = f"[{len(v)} points]"
@@ -105,13 +103,18 @@ def _differs_from_default(library: Any, skill: str, name: str, value: Any) -> bo
         return True
 
 
+def _spec_of(library: Any, skill: str, name: str) -> Any:
+    spec = library.skills.get(skill) if library is not None else None
+    return spec.params.get(name) if spec is not None else None
+
+
 def short_params(s: Any, library: Any) -> str:
     parts = []
     for name, value in s.params.items():
         if name in s.bindings:
             parts.append(f"{name}=@{s.bindings[name]}")
         elif _differs_from_default(library, s.skill, name, value):
-            parts.append(f"{name}={short_value(value)}")
+            parts.append(f"{name}={short_value(value, spec=_spec_of(library, s.skill, name))}")
     for name, marker in s.bindings.items():
         if name not in s.params:
             parts.append(f"{name}=@{marker}")
