@@ -36,12 +36,26 @@ ROOT = Path(__file__).resolve().parents[1]
 # -- the child: one client of one version's server, measuring a block per request --------------
 
 
+def _either(new: str, old: str):
+    """A module by its name in this version's tree, or by its name before the
+    restructure (issue 18), so that trees from both sides of it can be compared.
+    Decided by the tree itself: the venv's editable install would also resolve
+    the new names for an old tree."""
+    import importlib
+    from pathlib import Path
+
+    import backend
+
+    layered = (Path(backend.__path__[0]) / "core").is_dir()
+    return importlib.import_module(new if layered else old)
+
+
 async def child(endpoint: str) -> None:
     # this version's backend (PYTHONPATH); not bench_transport, which would
     # put the tree this script lives in first on sys.path
-    from backend.client.client import MissionClient
-    from backend.core.ops import EditSkill
-    from backend.protocol.keys import Keys
+    MissionClient = _either("backend.client.client", "backend.client").MissionClient
+    EditSkill = _either("backend.core.ops", "backend.ops").EditSkill
+    Keys = _either("backend.protocol.keys", "backend.protocol").Keys
 
     client = MissionClient(endpoint, client_id="ab")
     await client.connect()
@@ -108,17 +122,12 @@ class _Robot:
 
     @classmethod
     async def start(cls, endpoint: str, client) -> _Robot:
-        from backend.core.ops import Sync
-        from backend.files.missions import load_library
-        from backend.protocol.keys import Keys
-        from backend.protocol.messages import (
-            CommandReply,
-            Manifest,
-            Module,
-            Register,
-            RegisterReply,
-            dumps,
-        )
+        Sync = _either("backend.core.ops", "backend.ops").Sync
+        load_library = _either("backend.files.missions", "backend.files").load_library
+        Keys = _either("backend.protocol.keys", "backend.protocol").Keys
+        m = _either("backend.protocol.messages", "backend.protocol")
+        CommandReply, Manifest, Module = m.CommandReply, m.Manifest, m.Module
+        Register, RegisterReply, dumps = m.Register, m.RegisterReply, m.dumps
         from backend.transport import client_config, declare_token, query, serve
         from backend.transport.session import open_session
 
@@ -155,10 +164,11 @@ class _Robot:
     async def block(self, client, n: int) -> tuple[list[float], list[float]]:
         from datetime import UTC, datetime
 
-        from backend.core.model import Status
-        from backend.core.ops import Report
-        from backend.protocol.keys import Keys
-        from backend.protocol.messages import ReportBatch, dumps
+        Status = _either("backend.core.model", "backend.model").Status
+        Report = _either("backend.core.ops", "backend.ops").Report
+        Keys = _either("backend.protocol.keys", "backend.protocol").Keys
+        m = _either("backend.protocol.messages", "backend.protocol")
+        ReportBatch, dumps = m.ReportBatch, m.dumps
 
         applied_at: dict[int, float] = {}
 

@@ -180,7 +180,7 @@ async def run_datatable() -> dict:
     from textual.app import App, ComposeResult
     from textual.widgets import DataTable
 
-    from console.state.model import GLYPHS, param_summary
+    from console.state.text import GLYPHS, param_summary
 
     mission, library = build_mission()
 

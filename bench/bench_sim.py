@@ -317,10 +317,11 @@ async def measure(
     await client.submit(Control(op="run"))
     await asyncio.sleep(warmup)  # a benchmark may sleep: it measures over wall time
 
-    async def status() -> mf.SimStatus:
-        return mf.SimStatus.model_validate_json(
-            await transport.query(client.session, mf.KEY_STATUS, b"", timeout=30)
-        )
+    async def status() -> mf.SimTruth:  # the robots as they are, not as last heard
+        raw = await transport.query(client.session, mf.KEY_STATUS, mf.TRUTH_QUERY, timeout=30)
+        truth = mf.SimStatus.model_validate_json(raw).truth
+        assert truth is not None
+        return truth
 
     s0, t0, c0 = await status(), time.monotonic(), sim.cpu_seconds()
     b0, d0, k0, st0 = feed["bytes"], feed["deltas"], feed["tiles"], status_bytes[0]

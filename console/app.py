@@ -3,22 +3,24 @@
 State comes in as messages only (`console.messages`): the live connection
 (`ClientBridge`) posts them from client callbacks, tests post them directly.
 The app owns one `ConsoleModel`, updates it in the message handlers and tells
-the mission screen what changed. Operations run in workers, so the UI never
-waits on the network; their refusals name robot, skill and reason in a
-notification and on the status line.
+the screens what changed; it hands each screen the state it shows. Screens
+never import the app: they post requests (`OperationRequested`,
+`HelpRequested`, `AlertAcknowledged`) that the app handles. Operations run in
+workers, so the UI never waits on the network; their refusals name robot,
+skill and reason in a notification and on the status line.
 """
 
 from __future__ import annotations
 
 import asyncio
 import gc
-import os
 import signal
-import threading
 from collections.abc import Callable
-from datetime import UTC, datetime
+from datetime import datetime
+from pathlib import Path
 from typing import Any
 
+from textual import on
 from textual.app import App
 from textual.binding import Binding
 from textual.screen import Screen
@@ -28,47 +30,49 @@ from backend.client.client import ClientError, LoginFailed, OperationRefused
 from backend.exit_codes import EXIT_UNREACHABLE
 from backend.protocol.messages import ErrorReply
 from backend.transport.login import Login
+from console.bindings import bindings
 from console.bridge import Backend, ClientBridge
 from console.commands import MissionCommands
 from console.config import ConsoleConfig, save_theme
+from console.escape import SplitEscape
+from console.hangup import (
+    detach_terminal,
+    force_exit,
+    handle_signals,
+    start_watchdog,
+    unhandle_signals,
+)
 from console.messages import (
     AccountKnown,
+    AlertAcknowledged,
     AlertReceived,
     ConnectionChanged,
     EventsApplied,
     FleetChanged,
+    HelpRequested,
     MapChanged,
     MessageUnreadable,
+    OperationRequested,
     StateLoaded,
     TelemetryChanged,
 )
+from console.notifier import FoldingNotifications
+from console.plan_modes import PlanModes
+from console.quitting import QuitQuestion
 from console.screens.alerts import AlertScreen
-from console.screens.dialogs import ConfirmScreen, HelpScreen, UnreachableScreen
+from console.screens.dialogs import HelpScreen, UnreachableScreen
 from console.screens.fleet import FleetScreen
 from console.screens.log import EventLogScreen
 from console.screens.map import MapScreen
 from console.screens.mission import MissionScreen
-from console.state.actions import ACTIONS, bindings
-from console.state.eventlog import AlertBook, AlertEntry, EventLog
+from console.state.actions import ACTIONS
+from console.state.eventlog import AlertBook, AlertEntry, EventLog, toast_text
+from console.state.files import RecentFiles
 from console.state.model import CONNECTED, CONNECTING, OFFLINE, UNREACHABLE, ConsoleModel
-from console.themes.loader import ANSI16_MAP, ANSI16_STATUS, Downgrade16, load_themes
-from console.themes.variables import DEFAULT_THEME, VARIABLE_DEFAULTS
+from console.themes.loader import ANSI16_MAP, ANSI16_STATUS, Downgrade16, choose_theme, load_themes
+from console.themes.variables import VARIABLE_DEFAULTS
 
-HANG_UP_GRACE_S = 5.0  # after a hang-up, the longest a clean exit may take
-
-
-def _detach_terminal() -> None:
-    """Point stdin/stdout/stderr at /dev/null (the terminal hung up)."""
-    try:
-        null = os.open(os.devnull, os.O_RDWR)
-    except OSError:
-        return
-    for fd in (0, 1, 2):
-        try:
-            os.dup2(null, fd)
-        except OSError:
-            pass
-    os.close(null)
+HERE = Path(__file__).parent
 
 
 def refusal_text(reply: ErrorReply, robot: str | None = None, skill: str | None = None) -> str:
@@ -78,7 +82,7 @@ def refusal_text(reply: ErrorReply, robot: str | None = None, skill: str | None 
     return f"{head}{reply.message}"
 
 
-class MissionApp(App[int]):
+class MissionApp(SplitEscape, FoldingNotifications, QuitQuestion, PlanModes, App[int]):
     TITLE = "missionctl"
     cursor_blink = True  # tests turn it off for deterministic snapshots
     DEFAULT_MODE = "mission"
@@ -87,17 +91,15 @@ class MissionApp(App[int]):
         Binding("ctrl+q", "quit", "Quit", priority=True, id="app.quit"),
         *bindings("app", show=False),  # shown in the footers of the part-2 screens
     ]
-    # part-2 screens as app modes (F2/1 back to the schedule; F3/2 is the map's)
-    VIEW_MODES: dict[str, type[Screen]] = {
-        "fleet": FleetScreen,
-        "log": EventLogScreen,
-        "alerts": AlertScreen,
-    }
-    CSS = """
-    Screen { background: $background; }
-    ModalScreen { background: $background 60%; }  /* dialogs: the screen behind stays visible, dimmed */
-    Toast { max-width: 70; }
-    """
+    # the app's look and its widgets' (each screen loads its own: CSS_PATH there);
+    # absolute, so a subclass defined elsewhere (tests) finds them too
+    CSS_PATH = [
+        HERE / "app.tcss",
+        HERE / "widgets" / "bars.tcss",
+        HERE / "widgets" / "schedule.tcss",
+        HERE / "widgets" / "param_editor.tcss",
+        HERE / "widgets" / "mapview.tcss",
+    ]
 
     def __init__(
         self,
@@ -111,9 +113,16 @@ class MissionApp(App[int]):
         client_id: str | None = None,
         colors: int | None = None,
         login: Login | None = None,
+        ask_before_quit: bool = True,
+        quitting_stops: str = "",
     ) -> None:
         super().__init__()
         self.config = config or ConsoleConfig()
+        # quitting asks when robots execute, commands wait or the plan is unsaved
+        # (--yes: never); `quitting_stops` says what else ends with the console (the demo)
+        self.ask_before_quit = ask_before_quit
+        self.quitting_stops = quitting_stops
+        self.recent = RecentFiles(self.config.recent_path)
         self.notices = [*notices, *self.config.problems]
         self.model = ConsoleModel(endpoint=connect or "")
         # 16 colours (asked for, or a TERM=xterm terminal: see on_mount)
@@ -125,28 +134,25 @@ class MissionApp(App[int]):
         self.notices.extend(problems)
         for t in themes.values():
             self.register_theme(t)
-        default = DEFAULT_THEME if DEFAULT_THEME in self.available_themes else "textual-dark"
-        wanted = theme or self.config.theme or default
-        if wanted not in self.available_themes:
-            self.notices.append(
-                f"unknown theme '{wanted}' (themes: {', '.join(sorted(self.available_themes))}); using {default}"
-            )
-            wanted = default
-        self.theme = wanted
+        self.theme, notice = choose_theme(theme or self.config.theme, self.available_themes)
+        if notice:
+            self.notices.append(notice)
         # what the fleet, event-log and alert screens show; bounded (see eventlog.py)
         self.event_log = EventLog()
         self.alerts = AlertBook()
         self.awareness_signal: Signal[tuple[str, str | None]] = Signal(self, "awareness")
-        self.clock: Callable[[], datetime] = lambda: datetime.now(UTC)  # tests pin it
         self.bells = 0  # how often the bell rang (tests)
         self.add_mode(self.DEFAULT_MODE, self.get_default_screen)
-        for mode, screen in self.VIEW_MODES.items():
-            self.add_mode(mode, screen)
+        # part-2 screens as app modes (F2/1 back to the schedule; F3/2 is the map's),
+        # each handed the state it shows and the signal that says it changed
+        changes = self.awareness_signal
+        self.add_mode("fleet", lambda: FleetScreen(self.model, changes))
+        self.add_mode("log", lambda: EventLogScreen(self.event_log, changes))
+        self.add_mode("alerts", lambda: AlertScreen(self.alerts, changes))
         self.map_screen: MapScreen | None = None
-        self.map_feed: tuple[object, object] | None = (
-            None  # the latest (mirror, update) of the map feed
-        )
+        self.map_feed: tuple[object, object] | None = None  # the latest (mirror, update)
         self.add_mode("map", self._make_map_screen)
+        self.add_plan_modes()  # timeline (F7) and checks (F8): console/plan_modes.py
         if self.config.keymap:
             self.set_keymap(self.config.keymap)
         self.bridge = (
@@ -157,13 +163,19 @@ class MissionApp(App[int]):
         self.login_refused = ""  # set when the router refused the login: the CLI prints it, exit 3
         self.backend: Backend | None = backend or self.bridge
         self.mission_screen: MissionScreen | None = None
-        self.last_path: str | None = None
         self._connection_closed = False
         self._hanging_up = False
-        self.on_forced_exit: list[
-            Callable[[], object]
-        ] = []  # run before a forced exit after a hang-up
+        self.on_forced_exit: list[Callable[[], object]] = []  # before a forced exit (hang-up)
         self.exit_code = 0
+
+    @property
+    def clock(self) -> Callable[[], datetime]:
+        """Now, for the log, alerts and how old a robot's state is (tests pin it)."""
+        return self.model.clock
+
+    @clock.setter
+    def clock(self, clock: Callable[[], datetime]) -> None:
+        self.model.clock = clock
 
     # -- theme and screens --------------------------------------------------------------
     def get_theme_variable_defaults(self) -> dict[str, str]:
@@ -226,7 +238,7 @@ class MissionApp(App[int]):
         self.switch_mode("alerts")
 
     def get_default_screen(self) -> Screen:
-        self.mission_screen = MissionScreen(self.model)
+        self.mission_screen = MissionScreen(self.model, self.alerts, self.recent)
         return self.mission_screen
 
     def action_keys(self) -> dict[str, str]:
@@ -238,15 +250,14 @@ class MissionApp(App[int]):
         if not isinstance(self.screen, HelpScreen):
             self.push_screen(HelpScreen(self.action_keys()))
 
+    @on(HelpRequested)
+    def _help_requested(self) -> None:
+        self.action_help()
+
     # -- start / stop ---------------------------------------------------------------------
     def on_mount(self) -> None:
         if not self.is_headless:
-            loop = asyncio.get_running_loop()
-            for sig in (signal.SIGHUP, signal.SIGTERM):
-                try:
-                    loop.add_signal_handler(sig, self._hang_up, sig)
-                except (NotImplementedError, RuntimeError, ValueError):
-                    pass
+            handle_signals(asyncio.get_running_loop(), self._hang_up)
         for n in self.notices:
             self.notify(n, title="Settings", severity="warning", timeout=10)
         self.theme_changed_signal.subscribe(self, self._theme_picked)
@@ -259,70 +270,27 @@ class MissionApp(App[int]):
             self.refresh_css()
         if self.bridge is not None:
             self.connect_now()
+        self.start_plan()
 
     async def on_unmount(self) -> None:
         """However the app ends (quit, hang-up, a test's teardown): close the
         Zenoh session — a process with an open session never exits."""
         await self.close_connection()
         if not self.is_headless:
-            loop = asyncio.get_running_loop()
-            for sig in (signal.SIGHUP, signal.SIGTERM):
-                try:
-                    loop.remove_signal_handler(sig)
-                except (NotImplementedError, RuntimeError, ValueError):
-                    pass
+            unhandle_signals(asyncio.get_running_loop())
 
     def _hang_up(self, sig: int = signal.SIGTERM) -> None:
-        """SIGHUP (the SSH link dropped) or SIGTERM: close the session, exit.
-
-        After a hang-up the terminal is gone: a write to it kills Textual's
-        writer thread, and its next writes then wait forever (seen with
-        tmux kill-session). So output goes to /dev/null from here on, and a
-        watchdog ends the process (after `on_forced_exit` hooks, e.g. the
-        demo stopping its children) should the exit still hang."""
+        """SIGHUP (the SSH link dropped) or SIGTERM: close the session, exit;
+        without the terminal after a hang-up, and with a watchdog that runs the
+        `on_forced_exit` hooks and ends the process should the exit hang
+        (console/hangup.py says why)."""
         if self._hanging_up:
             return
         self._hanging_up = True
         if sig == signal.SIGHUP:
-            _detach_terminal()
-        watchdog = threading.Timer(HANG_UP_GRACE_S, self._force_exit)
-        watchdog.daemon = True
-        watchdog.start()
+            detach_terminal()
+        start_watchdog(lambda: force_exit(self.on_forced_exit, self.exit_code))
         self.run_worker(self.quit_now(), group="quit")
-
-    def _force_exit(self) -> None:
-        for hook in self.on_forced_exit:
-            try:
-                hook()
-            except Exception:
-                pass
-        os._exit(self.exit_code)
-
-    async def action_quit(self) -> None:
-        """Ctrl+Q: asks first when the editor holds unapplied changes."""
-        unapplied = self._unapplied()
-        if unapplied and not isinstance(self.screen, ConfirmScreen):
-            self.push_screen(
-                ConfirmScreen(
-                    f"Unapplied changes to {', '.join(unapplied)} are lost when you quit. Quit anyway?",
-                    yes="Quit",
-                ),
-                self._quit_confirmed,
-            )
-            return
-        await self.quit_now()
-
-    def _unapplied(self) -> list[str]:
-        s = self.mission_screen
-        if s is None or not s.is_mounted:
-            return []
-        return sorted(s.editor.drafts) + (
-            [s.editor.skill_id] if s.editor.dirty and s.editor.skill_id else []
-        )
-
-    def _quit_confirmed(self, yes: bool | None) -> None:
-        if yes:
-            self.run_worker(self.quit_now(), group="quit")
 
     async def quit_now(self) -> None:
         await self.close_connection()
@@ -398,6 +366,7 @@ class MissionApp(App[int]):
         robots = self.model.apply(message.batch, message.mission)
         if self._screen_live() and robots != set():
             await self.mission_screen.model_changed(robots)
+            self.mission_screen.batch_seen(message.batch)  # the cursor may follow an undo
         if self._map_live():  # marker events change no robot's column but the map
             self.map_screen.model_changed()
         entries = self.event_log.add_batch(message.batch, self.model, self.clock())
@@ -443,12 +412,14 @@ class MissionApp(App[int]):
             await self.mission_screen.connection_changed()
             if message.status == "reconnecting":
                 self.mission_screen.say(
-                    f"connection to {m.endpoint} lost — reconnecting (the server may be restarting)…",
+                    f"connection to {m.endpoint} lost — reconnecting "
+                    "(the server may be restarting)…",
                     "warning",
                 )
             elif message.status == CONNECTED and previous == "reconnecting":
+                revision = m.mission.revision if m.mission else "?"
                 self.mission_screen.say(
-                    f"reconnected to {m.endpoint}: state resynchronized at revision {m.mission.revision if m.mission else '?'}",
+                    f"reconnected to {m.endpoint}: state resynchronized at revision {revision}",
                     "ok",
                 )
                 self.notify("reconnected; state resynchronized", title="Server", timeout=3)
@@ -503,9 +474,9 @@ class MissionApp(App[int]):
             self.ring()
         if notify:
             severity = {"error": "error", "warning": "warning"}.get(a.level, "information")
-            title = " · ".join(x for x in (a.robot, a.skill) if x) or "Alert"
+            title, text = toast_text(self.alerts, a)  # robots going offline together: one
             self.notify(
-                a.message, title=title, severity=severity, timeout=8 if a.level == "error" else 5
+                text, title=title, severity=severity, timeout=8 if a.level == "error" else 5
             )
         if self._screen_live() and a.level == "error":
             self.mission_screen.say(f"✗ {a.message}", "error")
@@ -521,33 +492,24 @@ class MissionApp(App[int]):
             self.alerts_changed()
         return n
 
+    @on(AlertAcknowledged)
+    def _alert_acknowledged(self, message: AlertAcknowledged) -> None:
+        self.acknowledge(message.alert_id)
+
     def alerts_changed(self) -> None:
         if self._screen_live():
             self.mission_screen.update_top()
         self.awareness_signal.publish(("alerts", None))
         self.awareness_signal.publish(("log", None))
 
-    # -- operations --------------------------------------------------------------------------------
-    def submit(
-        self,
-        op: Any,
-        what: str,
-        *,
-        robot: str | None = None,
-        skill: str | None = None,
-        expected_revision: int | None = None,
-        on_ok: Any = None,
-        on_refused: Any = None,
-        say: Any = None,
-    ) -> None:
+    # -- operations ---------------------------------------------------------------------
+    @on(OperationRequested)
+    def submit(self, request: OperationRequested) -> None:
+        """Run a screen's operation in a worker: the UI never waits on the network."""
         if self.backend is None:
             self.notify("not connected to a mission server", severity="error")
             return
-        self.run_worker(
-            self._submit(op, what, robot, skill, expected_revision, on_ok, on_refused, say),
-            group="ops",
-            exit_on_error=False,
-        )
+        self.run_worker(self._submit(request), group="ops", exit_on_error=False)
 
     def whoami(self) -> dict[str, str]:
         """This console's client id and user, as the event log names them."""
@@ -567,39 +529,42 @@ class MissionApp(App[int]):
         else:
             self.alerts_changed()
 
-    async def _submit(
-        self, op, what, robot, skill, expected_revision, on_ok, on_refused, say=None
-    ) -> None:
+    async def _submit(self, r: OperationRequested) -> None:
+        say = r.say
         if say is None and self.mission_screen is not None:
             say = self.mission_screen.say  # or another screen's status line (the map's)
         say = say or (lambda *a: None)
-        say(f"… {what}")
+        say(f"… {r.what}")
+        assert self.backend is not None
         try:
-            reply = await self.backend.submit(op, expected_revision=expected_revision)
+            reply = await self.backend.submit(r.op, expected_revision=r.expected_revision)
         except OperationRefused as e:
-            text = refusal_text(e.reply, robot, skill)
-            say(f"✗ {what} refused: {text}", "error")
-            self.notify(text, title=f"Refused: {what}", severity="error", timeout=8)
-            self._refused(f"{what} refused: {text}", e.reply.robot or robot, e.reply.skill or skill)
-            if on_refused is not None:
-                on_refused(e.reply)
+            self._operation_refused(r, say, e.reply)
             return
         except ClientError as e:
-            say(f"✗ {what}: {e}", "error")
-            self.notify(str(e), title=f"Failed: {what}", severity="error", timeout=8)
-            self.event_log.add(
-                "failure",
-                f"{what}: {e}",
-                self.clock(),
-                robots=[robot] if robot else [],
-                skill=skill,
-                **self.whoami(),
-            )
-            self.awareness_signal.publish(("log", None))
+            self._operation_failed(r, say, e)
             return
-        if on_ok is not None:
-            on_ok(reply)
+        if r.on_ok is not None:
+            r.on_ok(reply)
         else:
-            say(f"✓ {what}", "ok")
+            say(f"✓ {r.what}", "ok")
         for note in reply.notes:
-            self.notify(note, title=what, severity="warning", timeout=8)
+            self.notify(note, title=r.what, severity="warning", timeout=8)
+
+    def _operation_refused(self, r: OperationRequested, say: Any, reply: ErrorReply) -> None:
+        text = refusal_text(reply, r.robot, r.skill)
+        say(f"✗ {r.what} refused: {text}", "error")
+        self.notify(text, title=f"Refused: {r.what}", severity="error", timeout=8)
+        self._refused(f"{r.what} refused: {text}", reply.robot or r.robot, reply.skill or r.skill)
+        if r.on_refused is not None:
+            r.on_refused(reply)
+
+    def _operation_failed(self, r: OperationRequested, say: Any, e: ClientError) -> None:
+        say(f"✗ {r.what}: {e}", "error")
+        self.notify(str(e), title=f"Failed: {r.what}", severity="error", timeout=8)
+        robots = [r.robot] if r.robot else []
+        at = self.clock()
+        self.event_log.add(
+            "failure", f"{r.what}: {e}", at, robots=robots, skill=r.skill, **self.whoami()
+        )
+        self.awareness_signal.publish(("log", None))

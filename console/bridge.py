@@ -23,7 +23,9 @@ from backend.client.events import (
 )
 from backend.client.mapfollow import MapFeed, MapUpdate
 from backend.protocol.keys import Keys
+from backend.protocol.mapfeed import KEY_STATUS_LIVE, SimStatus
 from backend.protocol.messages import OpReply
+from backend.transport import subscribe
 from backend.transport.login import Login
 from console.messages import (
     AccountKnown,
@@ -61,6 +63,8 @@ class ClientBridge:
         self.login = login
         self.client: MissionClient | None = None
         self.map_feed: MapFeed | None = None
+        self.sim_status: SimStatus | None = None  # the simulator's speed and link delay (plans)
+        self._status_sub: Any = None
 
     async def connect(self) -> None:
         """Connect (raises backend.client.client.ClientError with a sentence)."""
@@ -85,7 +89,14 @@ class ClientBridge:
             return
         feed = MapFeed(self.client.session, self._on_map)
         self.map_feed = feed
+        self._status_sub = subscribe(self.client.session, KEY_STATUS_LIVE, self._on_status)
         await feed.start()
+
+    def _on_status(self, msg: Any) -> None:  # a Zenoh thread: keep the latest, nothing else
+        try:
+            self.sim_status = SimStatus.model_validate_json(msg.payload)
+        except ValueError:
+            pass  # not a status of ours: the plan goes on without the sim's speed
 
     def _on_map(self, update: MapUpdate) -> None:
         feed = self.map_feed
@@ -93,6 +104,12 @@ class ClientBridge:
             self.app.post_message(MapChanged(feed.mirror, update))
 
     async def close(self) -> None:
+        sub, self._status_sub = self._status_sub, None
+        if sub is not None:
+            try:
+                sub.undeclare()
+            except Exception:  # the session may be closed already
+                pass
         feed, self.map_feed = self.map_feed, None
         if feed is not None:
             feed.close()

@@ -11,9 +11,20 @@ from backend.transport.login import add_login_arguments
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 THEME_HELP = (
-    "theme name: missionctl-dark (default), missionctl-light, missionctl-high-contrast, missionctl-colorblind, "
+    "theme name: missionctl-dark (default), missionctl-light, missionctl-high-contrast, "
+    "missionctl-colorblind, "
     "or one of yours in ~/.config/missionctl/themes/*.yaml (default: the config file's; "
     "a theme picked in the command palette is remembered there)"
+)
+
+
+YES_HELP = (
+    "quit without asking (for scripts); else ctrl+q asks while robots execute, commands "
+    "wait for a robot or the plan has edits not saved to a file"
+)
+DEMO_QUITS = (
+    "Quitting ends the demo: its mission server and simulated robots stop, and its journal "
+    "(in a temporary folder) is deleted — save the mission to keep the plan."
 )
 
 
@@ -29,7 +40,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     add_login_arguments(
         c,
-        user_help="account to log in as (with --password-file); without one, just the name recorded with every change",
+        user_help=(
+            "account to log in as (with --password-file); "
+            "without one, just the name recorded with every change"
+        ),
     )
     c.add_argument("--theme", metavar="T", help=THEME_HELP)
     c.add_argument(
@@ -37,6 +51,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="FILE",
         help="settings file (default ~/.config/missionctl/config.toml or .yaml)",
     )
+    c.add_argument("--yes", action="store_true", help=YES_HELP)
     c.set_defaults(func=run_console)
 
     d = sub.add_parser(
@@ -53,6 +68,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--user", metavar="U", default="", help="operator name")
     d.add_argument("--theme", metavar="T", help=THEME_HELP)
     d.add_argument("--config", metavar="FILE")
+    d.add_argument("--yes", action="store_true", help=YES_HELP)
     d.set_defaults(func=run_demo)
 
 
@@ -97,7 +113,12 @@ def run_console(args: argparse.Namespace) -> int:
         return EXIT_UNREACHABLE
     cfg = load_config(args.config, known_ids=_known_binding_ids())
     app = MissionApp(
-        connect=args.connect, user=args.user, theme=args.theme, config=cfg, login=login
+        connect=args.connect,
+        user=args.user,
+        theme=args.theme,
+        config=cfg,
+        login=login,
+        ask_before_quit=not args.yes,
     )
     code = _run_app(app)
     if app.login_refused:
@@ -186,6 +207,8 @@ def run_demo(args: argparse.Namespace) -> int:
             theme=args.theme,
             config=cfg,
             notices=procs.notices,
+            ask_before_quit=not args.yes,
+            quitting_stops=DEMO_QUITS,
         )
         app.on_forced_exit.append(procs.stop)  # the children must not outlive a hung-up demo
         return _run_app(app)

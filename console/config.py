@@ -28,6 +28,15 @@ class ConsoleConfig:
     keymap: dict[str, str] = field(default_factory=dict)
     path: Path | None = None
     problems: list[str] = field(default_factory=list)
+    # where the recent files are remembered (None: only while the console runs)
+    recent_path: Path | None = None
+
+
+def state_dir() -> Path:
+    """Where the console remembers things between runs (recent files):
+    $XDG_STATE_HOME/missionctl, else ~/.local/state/missionctl."""
+    base = os.environ.get("XDG_STATE_HOME") or Path.home() / ".local" / "state"
+    return Path(base) / "missionctl"
 
 
 def default_path() -> Path:
@@ -43,7 +52,7 @@ def default_path() -> Path:
 
 def load_config(path: str | Path | None = None, known_ids: set[str] | None = None) -> ConsoleConfig:
     p = Path(path) if path else default_path()
-    cfg = ConsoleConfig(path=p)
+    cfg = ConsoleConfig(path=p, recent_path=state_dir() / "recent.json")
     if not p.exists():
         if path:  # asked for explicitly
             cfg.problems.append(f"{p}: no such file; using defaults")

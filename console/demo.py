@@ -125,9 +125,8 @@ class DemoProcesses:
                 self._attempt += 1  # the free port was taken meanwhile
                 self._spawn_server()
                 continue
-            raise DemoError(
-                f"the mission server did not start{' (exit code ' + str(code) + ')' if code is not None else ' in time'}:\n{tail}"
-            )
+            how = f" (exit code {code})" if code is not None else " in time"
+            raise DemoError(f"the mission server did not start{how}:\n{tail}")
         want_sim = sim_available() if self.with_sim is None else self.with_sim
         if want_sim:
             self.sim = self._spawn(
@@ -144,7 +143,8 @@ class DemoProcesses:
             )
         else:
             self.notices.append(
-                "the simulated fleet is unavailable (`missionctl sim` is not installed): robots stay offline; the plan can still be edited"
+                "the simulated fleet is unavailable (`missionctl sim` is not installed): "
+                "robots stay offline; the plan can still be edited"
             )
 
     def _wait_ready(self, timeout: float) -> bool:
@@ -161,10 +161,15 @@ class DemoProcesses:
         return False
 
     def sim_problem(self) -> str | None:
-        """If the sim ended: why (its last lines)."""
+        """If the sim ended: why, in a sentence (its log's last line when it
+        failed; the log itself is sim.log in the demo's folder)."""
         if self.sim is None or self.sim.poll() is None:
             return None
-        return f"the simulated fleet stopped (exit code {self.sim.returncode}): {_tail(self.sim_log, 3)}"
+        code = self.sim.returncode
+        if code < 0:
+            return f"the simulated fleet was stopped (signal {-code}): the robots are offline"
+        last = _tail(self.sim_log, 1)
+        return f"the simulated fleet stopped (exit code {code})" + (f": {last}" if last else "")
 
     @staticmethod
     def _stop_one(p: subprocess.Popen | None, timeout: float = 5.0) -> None:

@@ -1,12 +1,16 @@
-"""The messages that bring state into the console.
+"""The console's messages: state coming in, and what the screens ask of the app.
 
-The live connection (`console.bridge`) turns client-library callbacks into
-these; tests post them directly, which is what makes snapshots deterministic
-and lets every screen be tested without a network.
+State in: the live connection (`console.bridge`) turns client-library
+callbacks into these; tests post them directly, which is what makes snapshots
+deterministic and lets every screen be tested without a network.
+
+Requests up (at the end): a screen never imports the app; it posts one of
+these and the app handles it (messages up, state down).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from textual.message import Message
@@ -101,3 +105,48 @@ class MapChanged(Message):
         super().__init__()
         self.mirror = mirror
         self.update = update
+
+
+# -- requests up: what a screen asks of the app -----------------------------------------
+
+
+class OperationRequested(Message):
+    """Submit `op` (in a worker: the UI never waits on the network). `what`
+    names it in the status line and notifications; `robot` and `skill` say
+    whom a refusal is about; `on_ok(reply)` / `on_refused(error_reply)` run
+    after; `say(text, severity)` is the status line to report on (None: the
+    mission screen's)."""
+
+    def __init__(
+        self,
+        op: Any,
+        what: str,
+        *,
+        robot: str | None = None,
+        skill: str | None = None,
+        expected_revision: int | None = None,
+        on_ok: Callable[[Any], object] | None = None,
+        on_refused: Callable[[Any], object] | None = None,
+        say: Callable[..., object] | None = None,
+    ) -> None:
+        super().__init__()
+        self.op = op
+        self.what = what
+        self.robot = robot
+        self.skill = skill
+        self.expected_revision = expected_revision
+        self.on_ok = on_ok
+        self.on_refused = on_refused
+        self.say = say
+
+
+class HelpRequested(Message):
+    """F1 / ?: show the key map (with the user's remappings)."""
+
+
+class AlertAcknowledged(Message):
+    """The operator acknowledged an alert (`alert_id` None: all of them)."""
+
+    def __init__(self, alert_id: int | None) -> None:
+        super().__init__()
+        self.alert_id = alert_id

@@ -101,7 +101,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
     s = sub.add_parser(
-        "sim-status", help="score, deliveries, exchanges and robots of a running simulator"
+        "sim-status",
+        help="score, sim clock, regions and robots of a running simulator, as the robots "
+        "reported them (--truth: the world as it is)",
     )
     s.add_argument(
         "--connect",
@@ -110,6 +112,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="Zenoh endpoint (default tcp/127.0.0.1:7447)",
     )
     s.add_argument("--json", action="store_true", help="print the SimStatus as JSON")
+    s.add_argument(
+        "--truth",
+        action="store_true",
+        help="also the world as it is (every region and stone, where robots really are, "
+        "robot-to-robot exchanges, the referee's log): for evaluation, not for operating",
+    )
     s.add_argument("--timeout", type=float, default=5.0, metavar="S")
     add_login_arguments(s.add_argument_group("login and TLS (docs/security.md)"))
     s.set_defaults(func=run_status)
@@ -185,6 +193,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 async def _serve(fleet, args: argparse.Namespace, world_file: Path) -> int:
+    from backend.agent import AlreadyConnected
     from backend.transport.session import LoginRefused, TransportError, TransportUnreachable
 
     stop = asyncio.Event()
@@ -207,6 +216,9 @@ async def _serve(fleet, args: argparse.Namespace, world_file: Path) -> int:
         except TransportError as e:
             print(f"missionctl sim: {e}", file=sys.stderr)
             return EXIT_UNREACHABLE
+        except AlreadyConnected as e:  # another sim (or robot) holds these robots
+            print(f"missionctl sim: {e}", file=sys.stderr)
+            return EXIT_REFUSED
     try:
         w = fleet.world
         delay = f", link delay {fleet.link_delay:g} s" if fleet.link_delay else ""
@@ -249,7 +261,8 @@ async def _status(args: argparse.Namespace) -> int:
         return EXIT_UNREACHABLE
     try:
         try:
-            raw = await transport.query(session, mf.KEY_STATUS, b"", timeout=args.timeout)
+            payload = mf.TRUTH_QUERY if args.truth else b""
+            raw = await transport.query(session, mf.KEY_STATUS, payload, timeout=args.timeout)
         except transport.NoResponder:
             print(
                 f"missionctl sim-status: no simulator answers at {', '.join(endpoints)}",
@@ -270,44 +283,82 @@ async def _status(args: argparse.Namespace) -> int:
 
 
 def format_status(st) -> str:
+    """The ground view (what the robots reported), then the truth if it is there."""
     lines = [
-        f"world {st.world} (seed {st.seed}), sim time {st.sim_time:.0f} s at {st.speed:g}x"
+        f"world {st.world} (seed {st.seed}), sim time {_clock(st.sim_time)} at {st.speed:g}x"
         + (f", link delay {st.link_delay_s:g} s" if st.link_delay_s else ""),
-        f"score {st.score:g}: {len(st.delivered)} stone(s) delivered"
-        + (
-            "".join(
-                f"\n  {d.stone} ({d.rss}) {d.score:g} by {d.by} at {d.sim_time:.0f} s"
-                for d in st.delivered
-            )
-        ),
-        f"regions found: {', '.join(st.rss_found) or 'none'}; "
-        f"explored {st.explored:.1%} of the site",
-        "exchanges: " + ", ".join(f"{k} {v}" for k, v in sorted(st.exchanges.items())),
-        "robots:",
+        "as reported by the robots:",
+        f"score {st.score:g}: {len(st.delivered)} stone(s) delivered",
+        *_deliveries(st.delivered),
+        "regions found: "
+        + (", ".join(_region(n, st.top_scores.get(n)) for n in st.rss_found) or "none")
+        + f"; explored {st.explored:.1%} of the site",
+        "robots (as last heard):",
     ]
     for r in st.robots.values():
-        flags = []
-        if not r.in_range:
-            flags.append("OUT OF RANGE")
-        if r.airborne:
-            flags.append(f"airborne {r.z:.0f} m")
-        if r.docked:
-            flags.append("docked")
-        if r.box:
-            flags.append(f"carries {r.box}")
-        if r.stones:
-            flags.append(f"stones {', '.join(r.stones)}")
-        lines.append(
-            f"  {r.name:<8} {r.kind:<6} ({r.x:7.1f}, {r.y:7.1f})  "
-            f"battery {r.battery:4.0%}  link {r.link:.2f}  "
-            f"{r.activity or 'idle'}{'  [' + '; '.join(flags) + ']' if flags else ''}"
-        )
-        if r.result:
-            lines.append(f"           last: {r.result}")
-    if st.events:
-        lines.append("recent:")
-        lines += [f"  {e}" for e in st.events[-8:]]
+        lines += _robot_lines(r, st.sim_time)
+    if st.truth is not None:
+        lines += _truth_lines(st.truth)
     return "\n".join(lines)
+
+
+def _clock(seconds: float) -> str:
+    return f"{seconds:.0f} s ({int(seconds // 60)}:{int(seconds % 60):02d})"
+
+
+def _deliveries(delivered) -> list[str]:
+    return [f"  {d.stone} ({d.rss}) {d.score:g} by {d.by} at {d.sim_time:.0f} s" for d in delivered]
+
+
+def _region(name: str, top: float | None) -> str:
+    return f"{name} (top {top:g})" if top is not None else name
+
+
+def _robot_lines(r, now: float) -> list[str]:
+    flags = []
+    if not r.in_range:
+        age = f", last heard {now - r.heard_at:.0f} s ago" if r.heard_at is not None else ""
+        flags.append(f"OUT OF RANGE{age}")
+    if r.airborne:
+        flags.append(f"airborne {r.z:.0f} m")
+    if r.docked:
+        flags.append("docked")
+    if r.box:
+        flags.append(f"carries {r.box}")
+    if r.stones:
+        flags.append(f"stones {', '.join(r.stones)}")
+    lines = [
+        f"  {r.name:<8} {r.kind:<6} ({r.x:7.1f}, {r.y:7.1f})  "
+        f"battery {r.battery:4.0%}  link {r.link:.2f}  "
+        f"{r.activity or 'idle'}{'  [' + '; '.join(flags) + ']' if flags else ''}"
+    ]
+    if r.result:
+        lines.append(f"           last: {r.result}")
+    return lines
+
+
+def _truth_lines(tr) -> list[str]:
+    lines = [
+        "TRUTH (for evaluation; the operator cannot know this):",
+        f"score {tr.score:g}: {len(tr.delivered)} stone(s) delivered",
+        *_deliveries(tr.delivered),
+        f"explored {tr.explored:.1%} of the site",
+        "regions:",
+    ]
+    for g in sorted(tr.regions, key=lambda g: -g.max_score):
+        found = f"found by {', '.join(g.found_by)}" if g.found_by else "not found"
+        lines.append(
+            f"  {g.rss:<6} ({g.x:6.1f}, {g.y:6.1f}) r {g.radius:g}  top {g.max_score:g}  "
+            f"{g.stones} stone(s) left  {found}"
+        )
+    lines.append("robots:")
+    for r in tr.robots.values():
+        lines += _robot_lines(r, r.heard_at or 0.0)
+    lines.append("exchanges: " + ", ".join(f"{k} {v}" for k, v in sorted(tr.exchanges.items())))
+    if tr.events:
+        lines.append("recent:")
+        lines += [f"  {e}" for e in tr.events[-8:]]
+    return lines
 
 
 def _dump(obj) -> str:  # pragma: no cover - debugging aid

@@ -50,7 +50,9 @@ class WorldExchange:
     # ------------------------------------------------------------ asks
 
     def ask_stone(self, data: Data, sender: str) -> Data | None:
-        """The best-scored pickable stone it knows within `radius` of (x, y)."""
+        """The best-scored pickable stone it knows within `radius` of (x, y), leaving out
+        those the asker knows to be gone (`exclude`: id -> version) unless its own news of
+        one is newer."""
         if not self.reachable(sender):
             return None
         x, y, radius = (
@@ -58,11 +60,13 @@ class WorldExchange:
             float(data.get("y", 0)),
             float(data.get("radius", 5)),
         )
+        exclude = data.get("exclude") or {}
         cands = [
             s
             for s in self.robot.knowledge.stones.values()
             if s.get("state") in ("identified", "ground")
             and math.hypot(s["x"] - x, s["y"] - y) <= radius
+            and int(s.get("v", 0)) > int(exclude.get(s["id"], -1))
         ]
         if not cands:
             return None
@@ -113,8 +117,8 @@ class WorldExchange:
 
     def tell_stone(self, data: Data, sender: str) -> None:
         if self.reachable(sender) and "id" in data:
-            self.robot.knowledge.stones[str(data["id"])] = dict(data)
+            self.robot.knowledge.learn_stone(data)  # unless its own news is newer
 
     def tell_rss(self, data: Data, sender: str) -> None:
         if self.reachable(sender) and "rss" in data:
-            self.robot.knowledge.rss[str(data["rss"])] = dict(data)
+            self.robot.knowledge.learn_rss(data)  # a revealed top score stays

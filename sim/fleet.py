@@ -14,6 +14,7 @@ publication). See backend/protocol/mapfeed.py for the wire format.
 from __future__ import annotations
 
 import asyncio
+import json
 import logging
 import math
 import time
@@ -29,6 +30,7 @@ from backend.protocol import mapfeed as mf
 from backend.transport import QueryFailed
 from sim.exchange import WorldExchange
 from sim.skills.registry import RobotSkills
+from sim.status import ground_status, truth
 from sim.world import SimError, SimRobot, World
 from sim.worldfile import WorldFile
 
@@ -56,6 +58,11 @@ class SimLink(Link):
 
     def in_range(self) -> bool:
         return self.world.in_range(self.robot)
+
+    def can_reach(self, robot: str) -> bool:
+        """Robot to robot: through the network when both are covered, or direct radio."""
+        other = self.world.robots.get(robot)
+        return other is not None and self.world.can_talk(self.robot, other)
 
     @property
     def quality(self) -> float:  # type: ignore[override]
@@ -107,6 +114,7 @@ class SimFleet:
         self._status_pub = None
         self._tasks: list[asyncio.Task[None]] = []
         self._started_wall = 0.0
+        self._clock_at = (0.0, 0.0)  # (wall, sim) the clock counts from
         self.warnings: list[str] = []
         for index, (name, spec) in enumerate(mission.robots.items()):
             if spec.type not in self.world.models:
@@ -189,7 +197,7 @@ class SimFleet:
     # ------------------------------------------------------------ world knowledge exchange
 
     def _exchange(self, text: str) -> None:
-        self.exchange_log.append(f"[{self.world.clock:7.0f} s] {text}")
+        self.exchange_log.append(f"[{self.world.now():7.0f} s] {text}")
 
     async def ask(
         self, sender: SimRobot, target: str, topic: str, data: dict[str, Any]
@@ -225,8 +233,9 @@ class SimFleet:
         return ok
 
     def note(self, robot: SimRobot, text: str) -> None:
-        """The outcome of a skill (the SDK's success report carries no text)."""
+        """The outcome of a skill: the robot reports it with its state (the ground view)."""
         self.notes[robot.name] = text
+        robot.result = text
 
     # ------------------------------------------------------------ lifecycle
 
@@ -258,6 +267,8 @@ class SimFleet:
                 transport.serve_async(s, mf.KEY_STATUS, self._on_status),
             ]
             self._started_wall = time.monotonic()
+            self._clock_at = (self._started_wall, self.world.clock)
+            self.world.clock_source = self.now
             for agent in self.agents.values():
                 await agent.start()
             self._tasks = [
@@ -294,20 +305,25 @@ class SimFleet:
 
     # ------------------------------------------------------------ background physics
 
+    def now(self) -> float:
+        """The sim clock: wall time since the start times the speed."""
+        wall, sim = self._clock_at
+        return sim + (time.monotonic() - wall) * self.speed
+
     async def _physics(self) -> None:
         """Idle robots: charge at the lander; hovering drones drain. Link uplink."""
         loop = asyncio.get_running_loop()
-        last = loop.time()
         w = self.world
         while True:
             await asyncio.sleep(0.1)
             now = loop.time()
-            dt = (now - last) * self.speed
-            last = now
-            w.clock += dt
+            clock = self.now()
+            dt, w.clock = clock - w.clock, clock
             for r in w.robots.values():
-                if r.activity is not None and not r.paused():
-                    continue
+                if r.activity is not None:
+                    if not r.paused():
+                        continue
+                    r.paused_s += dt
                 if r.kind == "drone" and r.airborne:
                     r.battery = max(0.0, r.battery - w.flight_energy(r, dt))
                     if r.usable <= 0.0:
@@ -334,7 +350,8 @@ class SimFleet:
         return mf.MapDelta(
             feed=self.feed_id,
             seq=self._seq,
-            sim_time=round(self.world.clock, 2),
+            sim_time=round(self.world.now(), 2),
+            speed=self.speed,
             tiles=tiles,
             objects=_objects_model(objects) if changed else None,
         )
@@ -354,7 +371,8 @@ class SimFleet:
             feed=self.feed_id,
             meta=self._encoder.meta,
             seq=self._seq,
-            sim_time=round(self.world.clock, 2),
+            sim_time=round(self.world.now(), 2),
+            speed=self.speed,
             tiles=self._encoder.full(),
             objects=_objects_model(self._objects),
         )
@@ -364,59 +382,20 @@ class SimFleet:
 
     # ------------------------------------------------------------ status
 
-    def status(self) -> mf.SimStatus:
-        w = self.world
-        robots = {}
-        for r in w.robots.values():
-            robots[r.name] = mf.RobotStatus(
-                name=r.name,
-                type=r.type,
-                kind=r.kind,
-                x=round(r.x, 2),
-                y=round(r.y, 2),
-                z=round(r.z, 2),
-                yaw=round(r.yaw, 3),
-                battery=round(min(1.0, max(0.0, r.battery)), 4),
-                in_range=w.in_range(r),
-                link=round(w.link_quality(r.x, r.y), 3),
-                airborne=r.airborne,
-                docked=w.docked(r),
-                box=r.box,
-                stones=list(r.stones),
-                activity=r.activity,
-                result=self.notes.get(r.name, ""),
-                odometer_m=round(r.odometer, 1),
-                sim_seconds=round(r.sim_seconds, 1),
-                knows={
-                    "rss": len(r.knowledge.rss),
-                    "stones": len(r.knowledge.stones),
-                    "boxes": len(r.knowledge.boxes),
-                },
-            )
-        return mf.SimStatus(
-            world=w.spec.name,
-            seed=w.seed,
-            speed=self.speed,
-            link_delay_s=self.link_delay,
-            sim_time=round(w.clock, 1),
-            score=round(w.score, 4),
-            delivered=[mf.Delivery(**d) for d in w.delivered],
-            exchanges=dict(self.exchanges),
-            exchange_log=list(self.exchange_log)[-10:],
-            rss_found=sorted(n for n, r in w.rss.items() if r.found_by),
-            explored=round(w.explored_fraction(), 4),
-            robots=robots,
-            events=list(w.events)[-15:],
-        )
+    def status(self, *, with_truth: bool = False) -> mf.SimStatus:
+        """The ground view (what robots reported); the truth as well if asked for."""
+        st = ground_status(self.world, speed=self.speed, link_delay=self.link_delay)
+        if with_truth:
+            st.truth = truth(self.world, exchanges=self.exchanges, exchange_log=self.exchange_log)
+        return st
 
     def _digest(self) -> tuple[Any, ...]:
+        """What a new live publication is sent for (ground view only)."""
         w = self.world
         return (
-            round(w.score, 6),
-            len(w.delivered),
-            tuple(sorted(self.exchanges.items())),
-            tuple(sorted(n for n, r in w.rss.items() if r.found_by)),
-            len(w.events),
+            w.ground_score,
+            len(w.ground_deliveries),
+            w.objects_version,
             tuple(
                 (
                     r.name,
@@ -427,13 +406,15 @@ class SimFleet:
                     w.docked(r),
                     r.box,
                     tuple(r.stones),
+                    r.result,
                 )
                 for r in w.robots.values()
+                if w.in_range(r)
             ),
         )
 
     async def _on_status(self, payload: bytes) -> bytes:
-        return mf.dump(self.status())
+        return mf.dump(self.status(with_truth=wants_truth(payload)))
 
     async def _status_loop(self) -> None:
         """Publish the status when it changed (at most every `STATUS_MIN` s)
@@ -461,8 +442,21 @@ def _objects_model(objects: dict[str, Any]) -> mf.MapObjects:
             mf.RssItem(**{k: v for k, v in r.items() if k in mf.RssItem.model_fields})
             for r in objects["rss"]
         ],
-        stones=[mf.StoneItem(**s) for s in objects["stones"] if s.get("state") != "hidden"],
+        stones=[
+            mf.StoneItem(**{k: v for k, v in s.items() if k in mf.StoneItem.model_fields})
+            for s in objects["stones"]
+            if s.get("state") != "hidden"
+        ],
+        score=objects["score"],
     )
+
+
+def wants_truth(payload: bytes) -> bool:
+    """A status query asking for the truth: the payload {"truth": true}."""
+    try:
+        return json.loads(payload or b"{}").get("truth") is True
+    except (ValueError, AttributeError):
+        return False
 
 
 def _brief(data: dict[str, Any] | None) -> str:
@@ -480,9 +474,12 @@ def _brief(data: dict[str, Any] | None) -> str:
     return ", ".join(sorted(data))[:60]
 
 
-async def query_status(session: Any, timeout: float = 5.0) -> mf.SimStatus:
-    raw = await transport.query(session, mf.KEY_STATUS, b"", timeout=timeout)
+async def query_status(
+    session: Any, timeout: float = 5.0, *, with_truth: bool = False
+) -> mf.SimStatus:
+    payload = mf.TRUTH_QUERY if with_truth else b""
+    raw = await transport.query(session, mf.KEY_STATUS, payload, timeout=timeout)
     return mf.SimStatus.model_validate_json(raw)
 
 
-__all__ = ["SimFleet", "SimLink", "query_status", "step_for", "QueryFailed"]
+__all__ = ["SimFleet", "SimLink", "query_status", "step_for", "wants_truth", "QueryFailed"]

@@ -64,6 +64,16 @@ class RssState:
     stones: list[str] = field(default_factory=list)
     found_by: set[str] = field(default_factory=set)
 
+    def sighting(self) -> dict[str, Any]:
+        """What a robot that sees the region learns (its top score takes a science image)."""
+        return {
+            "rss": self.name,
+            "x": self.x,
+            "y": self.y,
+            "radius": self.radius,
+            "top_score": None,
+        }
+
 
 @dataclass
 class Stone:
@@ -75,6 +85,7 @@ class Stone:
     state: str = "hidden"  # hidden | identified | carried | ground | delivered
     holder: str | None = None
     identified_by: tuple[str, ...] = ()
+    version: int = 0  # +1 at every change: of two reports about it, the higher is newer
 
     def public(self) -> dict[str, Any]:
         return {
@@ -85,7 +96,14 @@ class Stone:
             "score": self.score,
             "state": self.state,
             "holder": self.holder,
+            "v": self.version,
         }
+
+    def change(self, **values: Any) -> None:
+        """Set some fields; the stone's version goes up (reports of it are newer)."""
+        for k, v in values.items():
+            setattr(self, k, v)
+        self.version += 1
 
 
 @dataclass
@@ -112,6 +130,20 @@ class BoxState:
         }
 
 
+def merge_rss(old: dict[str, Any] | None, new: dict[str, Any]) -> dict[str, Any]:
+    """A region report over what was known: a top score once revealed stays (a later
+    report of the region without it, e.g. another robot discovering it, keeps it)."""
+    merged = {**(old or {}), **new}
+    if merged.get("top_score") is None and old is not None:
+        merged["top_score"] = old.get("top_score")
+    return merged
+
+
+def newer_stone(old: dict[str, Any] | None, new: dict[str, Any]) -> bool:
+    """Whether a stone report `new` is at least as recent as what was known (`old`)."""
+    return old is None or int(new.get("v", 0)) >= int(old.get("v", 0))
+
+
 @dataclass
 class Knowledge:
     """What one robot knows about the world (its own world model)."""
@@ -119,6 +151,26 @@ class Knowledge:
     rss: dict[str, dict[str, Any]] = field(default_factory=dict)
     stones: dict[str, dict[str, Any]] = field(default_factory=dict)
     boxes: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+    def learn_rss(self, info: dict[str, Any]) -> dict[str, Any]:
+        merged = merge_rss(self.rss.get(info["rss"]), info)
+        self.rss[info["rss"]] = merged
+        return merged
+
+    def learn_stone(self, info: dict[str, Any]) -> bool:
+        """Keep a stone report unless what the robot knows is newer; True if kept."""
+        if not newer_stone(self.stones.get(info["id"]), info):
+            return False
+        self.stones[info["id"]] = dict(info)
+        return True
+
+    def gone_stones(self) -> dict[str, int]:
+        """Stone id -> version, of the stones this robot knows cannot be picked any more."""
+        return {
+            sid: int(s.get("v", 0))
+            for sid, s in self.stones.items()
+            if s.get("state") not in ("identified", "ground")
+        }
 
 
 @dataclass
@@ -139,6 +191,9 @@ class SimRobot:
     knowledge: Knowledge = field(default_factory=Knowledge)
     odometer: float = 0.0
     sim_seconds: float = 0.0  # robot time stepped by skills
+    result: str = ""  # the outcome of its last skill (reported with its state)
+    paused_s: float = 0.0  # sim seconds its skills spent paused (the fleet counts them)
+    passed_coverage: bool = False  # moved through coverage since the last uplink (see pump)
     # uplink to the ground: what waits for coverage, and what is on its way
     outbox: list[Callable[[], None]] = field(default_factory=list)
     in_flight: list[tuple[float, Callable[[], None]]] = field(default_factory=list)
@@ -201,12 +256,16 @@ class World:
         self.delivered: list[dict[str, Any]] = []
         self.events: deque[str] = deque(maxlen=40)
         self.clock = 0.0  # sim seconds (advanced by the fleet)
+        # the fleet's clock between its updates of `clock` (None: `clock` is the time)
+        self.clock_source: Callable[[], float] | None = None
         # ground view of objects (what robots reported over the link)
         self.ground_rss: dict[str, dict[str, Any]] = {}
         self.ground_stones: dict[str, dict[str, Any]] = {}
         self.ground_boxes: dict[str, dict[str, Any]] = {
             n: b.public() for n, b in self.boxes.items()
         }
+        self.ground_deliveries: dict[str, dict[str, Any]] = {}  # stone id -> delivery
+        self.ground_robots: dict[str, dict[str, Any]] = {}  # name -> state as last heard
         self.objects_version = 0
         self.slow_cost = 1.0 / spec.terrain.slow_factor
 
@@ -365,8 +424,12 @@ class World:
         x, y = lx + r * math.cos(ang), ly + r * math.sin(ang)
         return RobotStart(x=round(x, 2), y=round(y, 2), yaw=round(ang, 3))
 
+    def now(self) -> float:
+        """Sim seconds since the start (the fleet's clock, exact between its updates)."""
+        return self.clock_source() if self.clock_source is not None else self.clock
+
     def log(self, text: str) -> None:
-        self.events.append(f"[{self.clock:7.0f} s] {text}")
+        self.events.append(f"[{self.now():7.0f} s] {text}")
 
     # ------------------------------------------------------------ queries
 
@@ -455,19 +518,23 @@ class World:
         robot.outbox.append(fn)
 
     def pump(self, now: float, delay: float) -> bool:
-        """Move what in-range robots have to send onto the link; deliver what
-        has arrived. `now` and `delay` in wall seconds. True if anything arrived."""
+        """Move what in-range robots have to send onto the link (and their state:
+        pose, battery, activity, last result); deliver what has arrived. `now` and
+        `delay` in wall seconds. True if anything arrived."""
         arrived = False
         for robot in self.robots.values():
-            if self.in_range(robot):
+            # a robot that crossed covered ground between two pumps sent from there
+            passed, robot.passed_coverage = robot.passed_coverage, False
+            if self.in_range(robot) or passed:
                 assert robot.pending_cells is not None
                 if robot.pending_cells.any():
                     cells = np.flatnonzero(robot.pending_cells)
                     robot.pending_cells[:] = False
                     robot.outbox.append(lambda c=cells: self._ground_cells(c))
-                if robot.outbox:
-                    robot.in_flight += [(now + delay, fn) for fn in robot.outbox]
-                    robot.outbox = []
+                state = self.robot_state(robot)
+                robot.outbox.append(lambda n=robot.name, s=state: self._ground_robot(n, s))
+                robot.in_flight += [(now + delay, fn) for fn in robot.outbox]
+                robot.outbox = []
             if robot.in_flight:
                 due = [fn for t, fn in robot.in_flight if t <= now]
                 if due:
@@ -480,15 +547,50 @@ class World:
     def _ground_cells(self, cells: np.ndarray) -> None:
         self.ground_explored.ravel()[cells] = True
 
+    def robot_state(self, robot: SimRobot) -> dict[str, Any]:
+        """What a robot reports about itself (the ground's record of it, once heard)."""
+        return {
+            "x": round(robot.x, 2),
+            "y": round(robot.y, 2),
+            "z": round(robot.z, 2),
+            "yaw": round(robot.yaw, 3),
+            "battery": round(min(1.0, max(0.0, robot.battery)), 4),
+            "link": round(self.link_quality(robot.x, robot.y), 3),
+            "airborne": robot.airborne,
+            "docked": self.docked(robot),
+            "box": robot.box,
+            "stones": list(robot.stones),
+            "activity": robot.activity,
+            "result": robot.result,
+            "odometer_m": round(robot.odometer, 1),
+            "sim_seconds": round(robot.sim_seconds, 1),
+            "heard_at": round(self.now(), 1),
+        }
+
+    def _ground_robot(self, name: str, state: dict[str, Any]) -> None:
+        self.ground_robots[name] = state
+
     def _ground_object(self, kind: str, key: str, value: dict[str, Any] | None) -> None:
-        table = {"rss": self.ground_rss, "stone": self.ground_stones, "box": self.ground_boxes}[
-            kind
-        ]
+        table = {
+            "rss": self.ground_rss,
+            "stone": self.ground_stones,
+            "box": self.ground_boxes,
+            "delivery": self.ground_deliveries,
+        }[kind]
         if value is None:
             table.pop(key, None)
+        elif kind == "rss":
+            table[key] = merge_rss(table.get(key), value)
+        elif kind == "stone" and not newer_stone(table.get(key), value):
+            return  # a robot's older news of the stone (e.g. back in range only now)
         else:
             table[key] = dict(value)
         self.objects_version += 1
+
+    @property
+    def ground_score(self) -> float:
+        """The score as the ground knows it: the deliveries robots reported."""
+        return round(sum(d["score"] for d in self.ground_deliveries.values()), 6)
 
     def tell_ground(
         self, robot: SimRobot, kind: str, key: str, value: dict[str, Any] | None
@@ -518,17 +620,7 @@ class World:
                 continue
             if math.hypot(robot.x - rss.x, robot.y - rss.y) <= r + rss.radius * 0.5:
                 rss.found_by.add(robot.name)
-                info = {
-                    "rss": rss.name,
-                    "x": rss.x,
-                    "y": rss.y,
-                    "radius": rss.radius,
-                    "top_score": None,
-                }
-                known = robot.knowledge.rss.get(rss.name)
-                if known is not None:
-                    info["top_score"] = known.get("top_score")
-                robot.knowledge.rss[rss.name] = info
+                info = robot.knowledge.learn_rss(rss.sighting())
                 self.tell_ground(robot, "rss", rss.name, info)
                 self.log(f"{robot.name} discovered {rss.name} at {_fmt(rss.x, rss.y)}")
                 found.append(rss.name)
@@ -605,4 +697,5 @@ class World:
             "boxes": [dict(v) for _k, v in sorted(self.ground_boxes.items())],
             "rss": [dict(v) for _k, v in sorted(self.ground_rss.items())],
             "stones": [dict(v) for _k, v in sorted(self.ground_stones.items())],
+            "score": self.ground_score,
         }

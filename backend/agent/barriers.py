@@ -1,6 +1,8 @@
 """Barriers: skills of several robots that start together. Each robot shows it
 is ready with a liveliness token `Keys.barrier_ready(barrier, robot)` and
 waits (synchwaiting) until every partner's token is there; no server involved.
+A partner the robot cannot reach (`Link.can_reach`, e.g. a simulated radio
+link) counts as not ready: it is shown as unreachable and looked at again.
 """
 
 from __future__ import annotations
@@ -15,13 +17,17 @@ from backend.protocol.keys import Keys
 
 # A barrier partner whose presence token has not shown up by then is offline.
 PRESENCE_GRACE_S = 1.0
+# How often a partner the robot cannot reach is looked at again (the link is polled).
+REACH_POLL_S = 0.1
 
 
 class _Meeting:
-    """What one wait knows of the partners: ready, online (None: not known yet)."""
+    """What one wait knows of the partners: ready, online (None: not known yet),
+    reachable (asked of the link model)."""
 
-    def __init__(self, partners: list[str]):
+    def __init__(self, partners: list[str], reachable: Callable[[str], bool]):
         self.partners = partners
+        self.reachable = reachable
         self.ready: set[str] = set()
         self.met = False
         self.online: dict[str, bool | None] = dict.fromkeys(partners)
@@ -32,7 +38,7 @@ class _Meeting:
         (self.ready.add if alive else self.ready.discard)(robot)
         # Judge in event order: a fast partner may start, finish and withdraw
         # its token before the wait looks again; it was ready.
-        if all(p in self.ready for p in self.partners):
+        if all(p in self.ready and self.reachable(p) for p in self.partners):
             self.met = True
         self.changed.set()
 
@@ -49,17 +55,40 @@ class _Meeting:
         self.changed.set()
 
     def missing(self) -> list[str]:
-        """The partners not ready yet; none once all were ready at one time."""
-        return [] if self.met else [p for p in self.partners if p not in self.ready]
+        """The partners not ready (or not reachable) yet; none once all were at one time."""
+        if self.met:
+            return []
+        return [p for p in self.partners if p not in self.ready or not self.reachable(p)]
 
     def offline(self, missing: list[str]) -> tuple[str, ...]:
         return tuple(p for p in missing if self.online[p] is False)
 
+    def unreachable(self, missing: list[str]) -> tuple[str, ...]:
+        return tuple(p for p in missing if self.online[p] is not False and not self.reachable(p))
 
-def _waiting_text(missing: list[str], offline: tuple[str, ...]) -> str:
-    if offline:
-        return "waiting for " + ", ".join(f"{p} (offline)" for p in offline)
+
+def _waiting_text(
+    missing: list[str], offline: tuple[str, ...], unreachable: tuple[str, ...] = ()
+) -> str:
+    if offline or unreachable:
+        return "waiting for " + ", ".join(
+            [f"{p} (offline)" for p in offline] + [f"{p} (unreachable)" for p in unreachable]
+        )
     return "waiting for " + ", ".join(missing)
+
+
+def _can_reach(rt: Runtime, robot: str) -> bool:
+    """The link model's answer; a link model that fails counts as reachable."""
+    link = rt.robot.link
+    try:
+        return bool(link.can_reach(robot)) if hasattr(link, "can_reach") else True
+    except Exception as exc:
+        rt.say_once(
+            "link.can_reach",
+            f"agent.link.can_reach() failed ({type(exc).__name__}: {exc}); assuming reachable",
+            exc_info=True,
+        )
+        return True
 
 
 async def wait_for_partners(
@@ -74,7 +103,7 @@ async def wait_for_partners(
     partners = sorted(p for p in info.partners if p != rt.name)
     if not partners:
         return  # a barrier of one robot: nothing to wait for
-    meeting = _Meeting(partners)
+    meeting = _Meeting(partners, lambda robot: _can_reach(rt, robot))
     report("waiting for " + ", ".join(partners))
     # Order matters (race-free): subscribe to the partners' ready tokens
     # (with history) BEFORE declaring ours. A partner starts only after it
@@ -108,17 +137,23 @@ async def wait_for_partners(
 async def _until_met(
     meeting: _Meeting, report: Callable[[str], object], show: Callable[[str], None]
 ) -> None:
-    reported_offline: tuple[str, ...] = ()
+    reported: tuple[tuple[str, ...], tuple[str, ...]] = ((), ())
     while missing := meeting.missing():
-        offline = meeting.offline(missing)
-        text = _waiting_text(missing, offline)
-        # Report again whenever a partner goes offline or comes back;
-        # other changes only update telemetry (no report flood).
-        if offline != reported_offline:
+        offline, unreachable = meeting.offline(missing), meeting.unreachable(missing)
+        text = _waiting_text(missing, offline, unreachable)
+        # Report again whenever a partner goes offline, out of reach or comes
+        # back; other changes only update telemetry (no report flood).
+        if (offline, unreachable) != reported:
             report(text)
-            reported_offline = offline
+            reported = (offline, unreachable)
         else:
             show(text)
         # all state changes happen on the loop: clearing here loses nothing
         meeting.changed.clear()
-        await meeting.changed.wait()
+        if unreachable:  # reachability is polled, not announced
+            try:
+                await asyncio.wait_for(meeting.changed.wait(), REACH_POLL_S)
+            except TimeoutError:
+                pass
+        else:
+            await meeting.changed.wait()

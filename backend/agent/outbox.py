@@ -22,6 +22,7 @@ from backend.agent.runtime import RETRY_S, Runtime, log
 from backend.core.ops import Answer, Report
 from backend.protocol.keys import Keys
 from backend.protocol.messages import MAX_BATCH, Downlink, DownlinkAck, ErrorReply, dumps
+from backend.protocol.wire import parse
 
 Message = Report | Answer
 HEARTBEAT_S = 5.0  # until the server's RegisterReply says otherwise
@@ -189,7 +190,7 @@ class Outbox:
         except transport.QueryError as exc:
             self._refused(exc.payload)
             raise
-        ack = DownlinkAck.model_validate_json(raw)
+        ack = parse(DownlinkAck, raw)
         self.refused.extend(ack.refused)
         for refusal in ack.refused:
             log.warning("%s: the server refused a message: %s", self.rt.name, refusal.message)
@@ -198,7 +199,7 @@ class Outbox:
 
     def _refused(self, payload: bytes) -> None:
         try:
-            err = ErrorReply.model_validate_json(payload)
+            err = parse(ErrorReply, payload)
         except ValueError:
             return
         if err.code == "not_registered":

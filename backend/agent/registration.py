@@ -31,6 +31,7 @@ from backend.protocol.messages import (
     dumps,
     first_error,
 )
+from backend.protocol.wire import parse
 
 # refused because another run of this robot holds the name: asked again this often
 TAKEN_RETRY_S = 5.0
@@ -313,7 +314,7 @@ class Registrar:
             dumps(request),
             timeout=self.rt.robot.request_timeout,
         )
-        reply = RegisterReply.model_validate_json(raw)
+        reply = parse(RegisterReply, raw)
         self.last_reply = reply
         assert self._registered_evt is not None
         if not reply.accepted:

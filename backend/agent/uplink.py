@@ -35,6 +35,7 @@ from backend.protocol.messages import (
     dumps,
     first_error,
 )
+from backend.protocol.wire import parse
 from backend.transport import Refusal
 
 Dispatch = Callable[[object], Change]  # a command -> what the robot did
@@ -126,7 +127,7 @@ class UplinkHandler:
         if not self.rt.in_range():
             raise self._refusal("unreachable", f"{self.rt.name} is out of communication range")
         try:
-            up = Uplink.model_validate_json(payload)
+            up = parse(Uplink, payload)
         except ValidationError as e:
             raise self._refusal(
                 "bad_message", f"{self.rt.name} cannot read the uplink: {first_error(e)}"

@@ -14,6 +14,7 @@ from backend import transport
 from backend.agent.runtime import Runtime, log
 from backend.protocol.keys import Keys
 from backend.protocol.messages import ErrorReply, WorldMessage, WorldReply, dumps
+from backend.protocol.wire import parse
 
 
 class World:
@@ -48,7 +49,7 @@ class World:
     async def on_message(self, payload: bytes) -> bytes:
         """The queryable on `Keys.world(name)`: an ask or a tell from a partner."""
         try:
-            msg = WorldMessage.model_validate_json(payload)
+            msg = parse(WorldMessage, payload)
         except ValidationError as exc:
             raise transport.Refusal(
                 dumps(
@@ -134,7 +135,7 @@ class World:
                 dumps(msg),
                 timeout=self.rt.robot.request_timeout,
             )
-            return WorldReply.model_validate_json(raw)
+            return parse(WorldReply, raw)  # a partner's answer: held to the limits too
         except (transport.QueryFailed, transport.TransportError, ValidationError) as exc:
             log.info("%s: %s %s/%s failed: %s", name, kind, robot, topic, _why(exc))
             return None
@@ -144,7 +145,7 @@ def _why(exc: Exception) -> str:
     """A failed query in words: a robot's refusal is said by its own sentence."""
     if isinstance(exc, transport.QueryError):
         try:
-            return ErrorReply.model_validate_json(exc.payload).message
+            return parse(ErrorReply, exc.payload).message
         except ValidationError:
             pass
     return str(exc)

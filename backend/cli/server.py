@@ -63,6 +63,12 @@ def prepare_parser(subparsers: Any) -> argparse.ArgumentParser:
         "command past its expiry; an operation may give its own with --expire); "
         "default: never",
     )
+    p.add_argument(
+        "--recover",
+        action="store_true",
+        help="when the journal holds a batch that cannot be replayed, start from the mission "
+        "before it; that batch and the later ones move to the journal's quarantine table",
+    )
     p.add_argument("-v", "--verbose", action="store_true")
     return p
 
@@ -72,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     from backend.core.credentials import AccountsError
     from backend.files.diagnostics import FileProblems
     from backend.server.accounts import load_accounts
-    from backend.server.journal import JournalError
+    from backend.server.journal import JournalError, NotReplayable, Unreplayable
     from backend.server.server import MissionServer
     from backend.transport import load_config_file
     from backend.transport.session import TransportError
@@ -103,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
         zenoh_extra=extra,
         command_expiry=args.command_expiry or None,
         accounts=accounts,
+        recover=args.recover,
     )
     try:
         return asyncio.run(_serve(server))
@@ -110,7 +117,17 @@ def run(args: argparse.Namespace) -> int:
         for issue in e.issues:
             print(issue, file=sys.stderr)
         return EXIT_BAD_INPUT
-    except JournalError as e:
+    except Unreplayable as e:  # written by an older version, or damaged: offer the recovery
+        after = f" and the {e.later} after it" if e.later else ""
+        print(
+            f"missionctl server: {e}\nmissionctl server: the mission up to revision "
+            f"{e.revision - 1} replays; to start from it, run again with --recover: "
+            f"batch {e.revision}{after} will be kept in the journal's quarantine table "
+            "(nothing is deleted)",
+            file=sys.stderr,
+        )
+        return EXIT_BAD_INPUT
+    except (JournalError, NotReplayable) as e:
         print(f"missionctl server: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except TransportError as e:
@@ -158,6 +175,8 @@ async def _serve(server) -> int:
         loop.add_signal_handler(sig, stop.set)
     await server.start()
     try:
+        if server.recovered:
+            print(f"missionctl server: {server.recovered}", flush=True)
         how = (
             f"resumed from {server.db} at revision {server.mission.revision}"
             if server.resumed

@@ -60,6 +60,7 @@ from backend.protocol.messages import (
     dumps,
     first_error,
 )
+from backend.protocol.wire import parse
 from backend.transport import (
     NoResponder,
     QueryError,
@@ -421,7 +422,7 @@ class MissionClient:
 
     def _on_telemetry(self, msg: Any) -> None:
         try:
-            t = Telemetry.model_validate_json(msg.payload)
+            t = parse(Telemetry, msg.payload)
         except ValidationError as e:
             self._malformed("telemetry", msg.key, e)
             return

@@ -20,6 +20,7 @@ def check_library(lib: Library) -> list[Problem]:
         out += _robot_type_problems(lib, tname, rt)
     for sname, spec in lib.skills.items():
         out += _skill_spec_problems(sname, spec)
+        out += _model_problems(lib, sname, spec)
     return out
 
 
@@ -63,6 +64,48 @@ def _skill_spec_problems(sname: str, spec: SkillSpec) -> list[Problem]:
                 (
                     ("skills", sname, "duration", "per_param_s", pname),
                     f"'{pname}' is not a numeric parameter of '{sname}'",
+                )
+            )
+    return out
+
+
+def _model_problems(lib: Library, sname: str, spec: SkillSpec) -> list[Problem]:
+    """The duration and energy models name parameters and robot types that exist."""
+    d = spec.duration
+    out: list[Problem] = []
+    for field, pname in (("speed_param", d.speed_param), ("charge_param", d.charge_param)):
+        p = spec.params.get(pname) if pname is not None else None
+        if pname is not None and (p is None or not p.kind.numeric):
+            out.append(
+                (
+                    ("skills", sname, "duration", field),
+                    f"'{pname}' is not a numeric parameter of '{sname}'",
+                )
+            )
+    a = spec.params.get(d.area_param) if d.area_param is not None else None
+    if d.area_param is not None and (a is None or a.type != "area"):
+        out.append(
+            (
+                ("skills", sname, "duration", "area_param"),
+                f"'{d.area_param}' is not an area parameter of '{sname}'",
+            )
+        )
+    if isinstance(d.to_home, dict):
+        for pname in d.to_home:
+            if pname not in spec.params:
+                out.append(
+                    (
+                        ("skills", sname, "duration", "to_home", pname),
+                        f"'{pname}' is not a parameter of '{sname}'",
+                    )
+                )
+    for tname in spec.energy.by_type:
+        if tname not in lib.robot_types:
+            known = ", ".join(lib.robot_types) or "none"
+            out.append(
+                (
+                    ("skills", sname, "energy", "by_type", tname),
+                    f"unknown robot type '{tname}' (library types: {known})",
                 )
             )
     return out
@@ -194,7 +237,33 @@ def _barrier_problems(m: Mission) -> list[Problem]:
             out += [(where, why) for why in found]
         if len(robots_in) < 2 and len(b.skills) >= 2 and all(m.find(s) for s in b.skills):
             out.append((("barriers", bid), "a barrier needs skills of at least two robots"))
+        out += _stranded(m, bid, b.skills)
     return out
+
+
+# Where a barrier's skills can be: `ctl barrier` joins idle skills, which are
+# then synchronized and wait at the barrier; all start together and finish.
+_BEFORE = frozenset({Status.IDLE, Status.IDLE_SYNCHRONIZED, Status.SYNCHWAITING})
+
+
+def _stranded(m: Mission, bid: str, ids: list[str]) -> list[Problem]:
+    """Skills of barrier `bid` still to start while a partner has started or
+    finished: they would wait for it forever (the live rules never make such
+    a barrier; a file must not either)."""
+    found = [(j, f[2]) for j, sid in enumerate(ids) if (f := m.find(sid)) is not None]
+    started = [s for _, s in found if s.status not in _BEFORE]
+    if not started:
+        return []
+    past = ", ".join(f"'{s.id}' is {s.status.value}" for s in started)
+    return [
+        (
+            ("barriers", bid, "skills", j),
+            f"'{s.id}' ({s.status.value}) would wait forever: its partner {past}; "
+            "a barrier joins skills that start together (idle ones, as `ctl barrier` does)",
+        )
+        for j, s in found
+        if s.status in _BEFORE
+    ]
 
 
 def _member_problems(

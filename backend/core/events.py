@@ -14,6 +14,7 @@ from pydantic import Field, TypeAdapter
 from backend.core.model import (
     KEEP_SETTLED,
     Barrier,
+    CheckId,
     Marker,
     Mission,
     Name,
@@ -21,6 +22,7 @@ from backend.core.model import (
     SkillInstance,
     Strict,
     UplinkCommand,
+    Waiver,
 )
 
 
@@ -97,6 +99,17 @@ class CommandChanged(Strict):
     changes: dict[str, Any]
 
 
+class WaiverSet(Strict):
+    ev: Literal["waiver_set"] = "waiver_set"
+    check: CheckId
+    waiver: Waiver
+
+
+class WaiverRemoved(Strict):
+    ev: Literal["waiver_removed"] = "waiver_removed"
+    check: CheckId
+
+
 class MissionReplaced(Strict):
     ev: Literal["mission_replaced"] = "mission_replaced"
     mission: Mission
@@ -114,6 +127,8 @@ Event = Annotated[
     | ReportSeq
     | CommandQueued
     | CommandChanged
+    | WaiverSet
+    | WaiverRemoved
     | MissionReplaced,
     Field(discriminator="ev"),
 ]
@@ -226,6 +241,10 @@ def apply_event(m: Mission, ev: Any, revision: int) -> Mission:
             _queue_command(m, c)
         case CommandChanged(id=cid, changes=changes):
             _change_command(m, cid, changes)
+        case WaiverSet(check=check, waiver=w):
+            m.waivers[check] = w.model_copy(update={"revision": revision})
+        case WaiverRemoved(check=check):
+            m.waivers.pop(check, None)
         case MissionReplaced(mission=new):
             m = new.copy_deep()
         case _:

@@ -8,7 +8,6 @@ refused the same way from the console.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any, Final, Literal
 
@@ -22,14 +21,84 @@ VERSION_PATTERN = r"^\d+\.\d+\.\d+$"
 
 
 class DurationModel(Strict):
-    """Expected duration: base + per metre travelled + per unit of parameters."""
+    """Expected duration of a skill, in robot seconds: base + travel + per
+    unit of parameters + charging. Travel is to the goal parameter (or home):
+    route length / speed when a speed is known (the speed parameter, else the
+    robot type's `speed_mps`), else `per_metre_s` per metre."""
 
     base_s: float = Field(10.0, ge=0)
-    per_metre_s: float = Field(0.0, ge=0, description="seconds per metre to the goal parameter")
+    per_metre_s: float = Field(
+        0.0, ge=0, description="seconds per metre to the goal, when no speed is known"
+    )
     goal_param: str | None = Field(None, description="pose/position parameter giving the goal")
+    speed_param: str | None = Field(
+        None, description="numeric parameter giving the travel speed, m/s"
+    )
+    to_home: bool | dict[Name, str | float | bool] = Field(
+        False,
+        description="the skill first travels home (the recharge station): always (true), or "
+        "when each named parameter has the given value (e.g. {where: lander_pad})",
+    )
+    charge_param: str | None = Field(
+        None,
+        description="numeric parameter giving the battery level (0..1) the skill charges to; "
+        "charging takes (level - battery) / the robot type's battery.charge_per_s",
+    )
+    area_param: str | None = Field(
+        None,
+        description="area parameter the skill works in: the robot is predicted to end at its "
+        "centre, its comms coverage is checked over it, and a robot type with a survey rate "
+        "is done once it has mapped it (if that is sooner)",
+    )
     per_param_s: dict[str, float] = Field(
         default_factory=dict, description="seconds per unit of a numeric parameter"
     )
+
+    def goes_home(self, params: dict[str, Any]) -> bool:
+        if isinstance(self.to_home, bool):
+            return self.to_home
+        return all(params.get(k) == v for k, v in self.to_home.items())
+
+
+class EnergyRates(Strict):
+    """Battery use as fractions of a full battery; unset: the robot type's."""
+
+    per_s: float | None = Field(None, ge=0, le=1, description="per second of the skill")
+    per_metre: float | None = Field(None, ge=0, le=1, description="per metre travelled")
+
+
+class EnergyModel(EnergyRates):
+    """A skill's battery use; `by_type` replaces the rates for some robot types
+    (a drone exploring flies, a rover drives)."""
+
+    by_type: dict[Name, EnergyRates] = Field(default_factory=dict)
+
+    def rates(self, robot_type: str, battery: BatteryModel) -> tuple[float, float]:
+        """(per second, per metre) for a robot of this type."""
+        mine = self.by_type.get(robot_type)
+        per_s = mine.per_s if mine is not None and mine.per_s is not None else self.per_s
+        per_m = (
+            mine.per_metre if mine is not None and mine.per_metre is not None else self.per_metre
+        )
+        return (
+            battery.per_s if per_s is None else per_s,
+            battery.per_metre if per_m is None else per_m,
+        )
+
+
+class BatteryModel(Strict):
+    """A robot type's battery, as fractions of a full one (plan checks and
+    predictions; the robot itself decides what it does)."""
+
+    reserve: float = Field(
+        0.05, ge=0, lt=1, description="the level the robot stops at: 'empty' means down to this"
+    )
+    margin: float = Field(
+        0.2, ge=0, le=1, description="plan checks warn when the battery is predicted below this"
+    )
+    per_s: float = Field(0.0, ge=0, le=1, description="use per second of any skill")
+    per_metre: float = Field(0.0, ge=0, le=1, description="use per metre travelled")
+    charge_per_s: float = Field(0.0, ge=0, le=1, description="charging rate at home, per second")
 
 
 class SkillSpec(Strict):
@@ -37,12 +106,34 @@ class SkillSpec(Strict):
     version: str = Field("1.0.0", pattern=VERSION_PATTERN)
     params: dict[Name, ParamSpec] = Field(default_factory=dict)
     duration: DurationModel = Field(default_factory=DurationModel)
+    energy: EnergyModel = Field(default_factory=EnergyModel)
+    needs_comms: bool = Field(
+        False,
+        description="the skill needs the operator's link while it runs (plan checks flag it "
+        "when it is planned out of comms coverage)",
+    )
 
 
 class RobotType(Strict):
     kind: Literal["dynamic", "static"] = "dynamic"
     description: str = ""
     skills: list[Name] = Field(default_factory=list)
+    speed_mps: float | None = Field(
+        None, gt=0, le=1000, description="cruise speed, m/s, for travel without a speed parameter"
+    )
+    flies: bool = Field(
+        False, description="it flies: straight lines, and the ground's terrain does not matter"
+    )
+    survey_m2_per_s: float | None = Field(
+        None,
+        gt=0,
+        le=1e6,
+        description="area it maps per second (its sensor's swath times its speed), for skills "
+        "working in an area",
+    )
+    battery: BatteryModel | None = Field(
+        None, description="battery model for predictions and plan checks; none: no battery"
+    )
 
 
 class Library(Strict):
@@ -59,25 +150,6 @@ class Library(Strict):
         if skill not in self.skills_of(robot_type):
             return None
         return self.skills.get(skill)
-
-    def expected_duration(
-        self, skill: str, params: dict[str, Any], start: tuple[float, float] | None = None
-    ) -> float:
-        spec = self.skills.get(skill)
-        if spec is None:
-            return 0.0
-        d = spec.duration
-        total = d.base_s
-        goal = params.get(d.goal_param) if d.goal_param else None
-        if start is not None and isinstance(goal, dict):
-            total += d.per_metre_s * math.hypot(
-                float(goal.get("x", 0)) - start[0], float(goal.get("y", 0)) - start[1]
-            )
-        for name, factor in d.per_param_s.items():
-            v = params.get(name)
-            if isinstance(v, int | float) and not isinstance(v, bool):
-                total += factor * float(v)
-        return total
 
 
 # -- parameter values --------------------------------------------------------

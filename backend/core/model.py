@@ -27,6 +27,9 @@ NAME_RE = re.compile(NAME_PATTERN)
 
 Name = Annotated[str, Field(pattern=NAME_PATTERN, max_length=64)]
 SkillId = Annotated[str, Field(pattern=ID_PATTERN, max_length=64)]
+# a plan check's finding: "rule:subject", e.g. "barrier.deadlock:b1+b2" (backend.core.plan.checks)
+CHECK_ID_PATTERN = r"^[a-z][a-z_]*\.[a-z][a-z_]*:[A-Za-z0-9][A-Za-z0-9_\-.+/]*$"
+CheckId = Annotated[str, Field(pattern=CHECK_ID_PATTERN, max_length=300)]
 
 
 class Strict(BaseModel):
@@ -159,8 +162,10 @@ class SkillInstance(Strict):
     rev: int = Field(0, ge=0)
 
     def display(self) -> str:
-        """How messages name a skill: its id, with the label when it has one."""
-        return f"{self.id} ({self.label})" if self.label else f"{self.id} ({self.skill})"
+        """How messages name a skill: its id, with the label when it has one
+        (its start: a label may be thousands of characters long)."""
+        label = self.label if len(self.label) <= 60 else self.label[:60] + "…"
+        return f"{self.id} ({label})" if label else f"{self.id} ({self.skill})"
 
 
 class RobotSpec(Strict):
@@ -286,6 +291,13 @@ class UplinkCommand(Strict):
 KEEP_SETTLED = 20
 
 
+class Waiver(Strict):
+    """An operator's decision to synchronize despite a plan check's finding."""
+
+    reason: str = Field(min_length=1, max_length=500)
+    revision: int = Field(0, ge=0, description="the revision it was given at")
+
+
 class _Hints(dict[str, tuple[str, int]]):
     """skill id -> (robot, index) where it was last seen. Only a hint, checked
     at every use, so whatever changes a task list never makes it wrong; and
@@ -308,6 +320,9 @@ class Mission(Strict):
     markers: dict[Name, Marker] = Field(default_factory=dict)
     tasks: dict[Name, list[SkillInstance]] = Field(default_factory=dict)
     barriers: dict[Name, Barrier] = Field(default_factory=dict)
+    waivers: dict[CheckId, Waiver] = Field(
+        default_factory=dict, description="plan check id -> the waiver that lets it be synchronized"
+    )
     # per-robot revision of the list's membership and order
     task_revs: dict[Name, int] = Field(default_factory=dict)
     marker_revs: dict[Name, int] = Field(default_factory=dict)

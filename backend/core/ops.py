@@ -15,6 +15,7 @@ from pydantic import Field
 from backend.core.model import (
     AreaMarker,
     Barrier,
+    CheckId,
     CommandState,
     Marker,
     Mission,
@@ -131,6 +132,16 @@ class Cancel(Strict):
     undo: bool = Field(False, description="an undo of a sync: refused unless still queued")
 
 
+class RetryEdit(Strict):
+    """A failed skill's next attempt as an idle copy (same parameters,
+    bindings and policies, attempt + 1, id `ID.N`) at the head of its robot's
+    unsynchronized plan, to edit before it is synchronized; `retry` instead
+    queues the attempt on the robot at once."""
+
+    op: Literal["retry_edit"] = "retry_edit"
+    id: SkillId
+
+
 class AddBarrier(Strict):
     op: Literal["barrier"] = "barrier"
     ids: list[SkillId] = Field(min_length=2)
@@ -164,6 +175,20 @@ class MarkerRename(Strict):
 class MarkerDelete(Strict):
     op: Literal["marker_delete"] = "marker_delete"
     name: Name
+
+
+class Waive(Strict):
+    """Let skills with this plan check's finding be synchronized (errors
+    otherwise refuse the sync); given again, the reason is replaced."""
+
+    op: Literal["waive"] = "waive"
+    check: CheckId = Field(description="the finding's id, e.g. 'barrier.deadlock:b1+b2'")
+    reason: str = Field(min_length=1, max_length=500, description="why, for the log")
+
+
+class Unwaive(Strict):
+    op: Literal["unwaive"] = "unwaive"
+    check: CheckId
 
 
 class LoadMission(Strict):
@@ -326,7 +351,7 @@ class Report(Strict):
     seq: int = Field(ge=1)
     id: SkillId
     status: Status
-    info: str = Field("", max_length=2000)
+    info: str = ""
     attempt: int | None = Field(None, ge=1)
     at: datetime | None = None
 
@@ -342,12 +367,15 @@ OperatorOperation = (
     | Control
     | Retry
     | Cancel
+    | RetryEdit
     | AddBarrier
     | RemoveBarrier
     | MarkerAdd
     | MarkerMove
     | MarkerRename
     | MarkerDelete
+    | Waive
+    | Unwaive
     | LoadMission
     | NewMission
     | Undo
@@ -371,6 +399,7 @@ DownlinkMessage = Annotated[Report | Answer, Field(discriminator="op")]
 UNDOABLE = (
     AddSkill,
     Sync,
+    RetryEdit,
     DeleteSkills,
     MoveSkill,
     EditSkill,
@@ -384,6 +413,8 @@ UNDOABLE = (
     SetSkill,
     RestoreBarrier,
     RestoreMarker,
+    Waive,
+    Unwaive,
 )
 
 MARKER_TYPES = {"pose": PoseMarker, "position": PositionMarker, "area": AreaMarker}

@@ -5,17 +5,25 @@ and the typed value a skill handler receives.
 Libraries, mission files, the rules, `ctl`, the robot agent and the console all
 ask this table (`KINDS[spec.type]`) instead of switching on the kind each on
 its own, so a kind behaves the same everywhere.
+
+What a person reads and types is also said here, once (`value_text`,
+`value_from_text`): angles — a pose's roll, pitch and yaw, a float whose unit
+is `rad` — are read and typed in degrees with the unit shown (`30°`; typed
+`30`, `30deg`, `30°` or `0.52rad`), while files and the wire keep radians.
+One heading convention everywhere: 0° east, counter-clockwise (90° north).
 """
 
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
 from pydantic import Field, model_validator
 
+from backend.core.limits import echo, value_problem
 from backend.core.model import AreaMarker, Pose, PoseMarker, Position, PositionMarker, Strict
 
 POSE_FIELDS = ("x", "y", "z", "roll", "pitch", "yaw")
@@ -98,7 +106,7 @@ def describe(v: Any) -> str:
     if isinstance(v, float):
         return f"a number ({v})"
     if isinstance(v, str):
-        return f"a string ({v!r})"
+        return f"a string ({echo(v)})"
     if isinstance(v, list):
         return "a list"
     if isinstance(v, dict):
@@ -168,6 +176,17 @@ class Kind:
         """The value as a skill handler receives it."""
         return v
 
+    def text(self, spec: ParamSpec, v: Any) -> str:
+        """The value as a person reads it (angles in degrees, unit shown)."""
+        unit = spec.unit if spec.unit and is_number(v) else ""
+        return f"{number_text(v)}{unit}" if is_number(v) else str(v)
+
+    def parse_text(self, spec: ParamSpec, v: Any) -> tuple[Any, str | None]:
+        """A value as a person typed it (text, or what YAML made of it) ->
+        (the wire's value, None) or (None, what is wrong): angles are read
+        in degrees unless they say `rad`. Other checks are `check`'s."""
+        return v, None
+
 
 class _Simple(Kind):
     """A kind checked by its Python type alone."""
@@ -216,11 +235,12 @@ class _Number(Kind):
             return [((), f"expected a number, got {describe(v)}")]
         if not math.isfinite(float(v)):
             return [((), "expected a finite number")]
-        unit = f" {spec.unit}" if spec.unit else ""
+        # a value as given (`2.0 m/s`), bounds short (`1 m/s`); angles in degrees
+        given = angle_text(v) if is_angle(spec) else f"{v}{' ' + spec.unit if spec.unit else ''}"
         if spec.min is not None and v < spec.min:
-            return [((), f"{v}{unit} is below the minimum {spec.min:g}{unit}")]
+            return [((), f"{given} is below the minimum {bound_text(spec, spec.min)}")]
         if spec.max is not None and v > spec.max:
-            return [((), f"{v}{unit} is above the maximum {spec.max:g}{unit}")]
+            return [((), f"{given} is above the maximum {bound_text(spec, spec.max)}")]
         return []
 
     def start(self, spec: ParamSpec, ctx: StartContext) -> tuple[Any, str | None]:
@@ -239,6 +259,14 @@ class Float(_Number):
 
     def normalize(self, spec: ParamSpec, v: Any) -> Any:
         return float(v)
+
+    def text(self, spec: ParamSpec, v: Any) -> str:
+        if is_angle(spec) and is_number(v):
+            return angle_text(v)
+        return super().text(spec, v)
+
+    def parse_text(self, spec: ParamSpec, v: Any) -> tuple[Any, str | None]:
+        return parse_angle(v) if is_angle(spec) else (v, None)
 
 
 class PoseKind(Kind):
@@ -267,6 +295,12 @@ class PoseKind(Kind):
     def typed(self, v: Any) -> Any:
         return Pose(**v)
 
+    def text(self, spec: ParamSpec, v: Any) -> str:
+        return pose_text(v) if isinstance(v, dict) else str(v)
+
+    def parse_text(self, spec: ParamSpec, v: Any) -> tuple[Any, str | None]:
+        return pose_from_text(v)
+
 
 class PositionKind(Kind):
     name = "position"
@@ -291,6 +325,9 @@ class PositionKind(Kind):
 
     def start(self, spec: ParamSpec, ctx: StartContext) -> tuple[Any, str | None]:
         return {k: ctx.pose[k] for k in POSITION_FIELDS}, None
+
+    def text(self, spec: ParamSpec, v: Any) -> str:
+        return pose_text(v) if isinstance(v, dict) else str(v)
 
     def typed(self, v: Any) -> Any:
         return Position(**v)
@@ -339,7 +376,8 @@ class Enum(Kind):
     ) -> list[Problem]:
         choices = spec.choices or []
         if v not in choices:
-            return [((), f"{v!r} is not one of: {', '.join(choices)}")]
+            what = echo(v) if isinstance(v, str) else describe(v)
+            return [((), f"{what} is not one of: {', '.join(choices)}")]
         return []
 
     def start(self, spec: ParamSpec, ctx: StartContext) -> tuple[Any, str | None]:
@@ -408,6 +446,116 @@ KINDS: dict[str, Kind] = {
 }
 
 
+# -- what a person reads and types ---------------------------------------------------
+
+ANGLE_UNITS = frozenset({"rad", "radian", "radians"})  # a float in one of these is an angle
+ANGLE_FIELDS = ("roll", "pitch", "yaw")  # a pose's angles
+DEGREE_DIGITS = 2  # degrees are shown to 0.01°: a value shown and typed back is the same
+HEADING_CONVENTION = "0° east, counter-clockwise (90° north)"
+_ANGLE_RE = re.compile(
+    r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(°|deg|degrees?|rad|radians?)?\s*$",
+    re.IGNORECASE,
+)
+
+
+def is_angle(spec: ParamSpec) -> bool:
+    """A float parameter in radians: read and typed in degrees."""
+    return spec.type == "float" and spec.unit.strip().lower() in ANGLE_UNITS
+
+
+def bound_text(spec: ParamSpec, v: float) -> str:
+    """A value or bound of a number parameter with its unit: `7.5 m/s`, `190°`."""
+    if is_angle(spec):
+        return angle_text(v)
+    return f"{v:g}{' ' + spec.unit if spec.unit else ''}"
+
+
+def shown_unit(spec: ParamSpec) -> str:
+    """The unit a person reads and types the parameter in (° for angles)."""
+    return "°" if is_angle(spec) else spec.unit
+
+
+def number_text(v: Any) -> str:
+    """A number as a person reads it: `2`, `0.5`, `1e+06`."""
+    if isinstance(v, bool) or not is_number(v):
+        return str(v)
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def degrees(rad: float) -> float:
+    """Radians -> degrees as shown (rounded to DEGREE_DIGITS, no -0)."""
+    d = round(math.degrees(rad), DEGREE_DIGITS)
+    return d + 0.0 if d else 0.0
+
+
+def angle_number(rad: float) -> str:
+    """An angle in degrees without the unit, for a field whose label says °: `22.92`."""
+    return f"{degrees(rad):g}"
+
+
+def angle_text(rad: float) -> str:
+    """An angle as a person reads it: `30°`, `-22.92°`."""
+    return f"{angle_number(rad)}°"
+
+
+def parse_angle(v: Any) -> tuple[float | None, str | None]:
+    """(radians, None) from what a person typed, or (None, what is wrong).
+    A bare number is in degrees (the unit shown); `30deg`, `30°` and
+    `0.52rad` say their unit."""
+    if is_number(v):
+        if not math.isfinite(float(v)):
+            return None, "expected a finite angle"
+        return math.radians(float(v)), None
+    if isinstance(v, str):
+        m = _ANGLE_RE.match(v)
+        if m:
+            number, unit = float(m.group(1)), (m.group(2) or "°").lower()
+            if not math.isfinite(number):
+                return None, "expected a finite angle"
+            return (number if unit.startswith("rad") else math.radians(number)), None
+    shown = v.strip() if isinstance(v, str) else describe(v)
+    return None, f"expected an angle in degrees (30, 30deg or 0.52rad), got {shown!r}"
+
+
+def pose_text(v: Mapping[str, Any]) -> str:
+    """`(3,4)` and the other fields that are not 0: `(3,4 z=1 yaw=90°)`."""
+    extra = [
+        f"{k}={angle_text(v[k]) if k in ANGLE_FIELDS else number_text(v[k])}"
+        for k in ("z", *ANGLE_FIELDS)
+        if is_number(v.get(k)) and v.get(k)
+    ]
+    xy = f"{number_text(v.get('x', 0))},{number_text(v.get('y', 0))}"
+    return f"({xy}{' ' + ' '.join(extra) if extra else ''})"
+
+
+def pose_from_text(v: Any) -> tuple[Any, str | None]:
+    """A pose mapping as typed: its roll, pitch and yaw in degrees (or with
+    their unit) -> radians; other fields as they are (`check` judges them)."""
+    if not isinstance(v, dict):
+        return v, None
+    out = dict(v)
+    for k in ANGLE_FIELDS:
+        if k in out:
+            rad, problem = parse_angle(out[k])
+            if problem is not None:
+                return None, f"{k}: {problem}"
+            out[k] = rad
+    return out, None
+
+
+def value_text(spec: ParamSpec, v: Any) -> str:
+    """A parameter's value as a person reads it (angles in degrees)."""
+    kind = KINDS.get(spec.type)
+    return kind.text(spec, v) if kind is not None else str(v)
+
+
+def value_from_text(spec: ParamSpec, v: Any) -> tuple[Any, str | None]:
+    """A parameter's value as a person typed it -> (wire value, None) or
+    (None, what is wrong): angles typed in degrees become radians."""
+    kind = KINDS.get(spec.type)
+    return kind.parse_text(spec, v) if kind is not None else (v, None)
+
+
 def check_value(
     spec: ParamSpec, v: Any, *, markers: Markers | None, robots: Collection[str] | None
 ) -> list[Problem]:
@@ -418,6 +566,9 @@ def check_value(
     kind = KINDS.get(spec.type)
     if kind is None:
         return [((), f"unknown parameter type {spec.type}")]
+    over = value_problem(v)  # a list or dict value holds anything: bound it first
+    if over is not None:
+        return [(over.path, over.message)]
     return kind.check(spec, v, markers, robots)
 
 

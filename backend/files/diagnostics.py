@@ -12,7 +12,8 @@ from typing import Any
 from pydantic import ValidationError
 
 from backend.core.library import VERSION_PATTERN
-from backend.core.model import ID_PATTERN, NAME_PATTERN, format_path
+from backend.core.limits import LIMITS, echo, show_path
+from backend.core.model import ID_PATTERN, NAME_PATTERN
 from backend.files import yamlio
 
 Path = tuple[str | int, ...]
@@ -27,7 +28,7 @@ class Issue:
     col: int = 1
 
     def __str__(self) -> str:
-        where = format_path(self.path)
+        where = show_path(self.path)
         field = f"{where}: " if where else ""
         return f"{self.file}:{self.line}:{self.col}: {field}{self.message}"
 
@@ -90,6 +91,21 @@ _PATTERNS = {
 }
 
 
+def _shown(value: Any) -> str:
+    """A value in a sentence: at most a short prefix of it (a refused value
+    may be megabytes long)."""
+    if isinstance(value, str):
+        return echo(value)
+    text = repr(value) if not isinstance(value, dict | list | tuple) or len(value) <= 6 else ""
+    if text and len(text) <= LIMITS.echo:
+        return text
+    if isinstance(value, dict):
+        return f"a mapping of {len(value):,} entries"
+    if isinstance(value, list | tuple):
+        return f"a list of {len(value):,} items"
+    return text[: LIMITS.echo] + "…"
+
+
 def _sentence(err: dict) -> str:
     t = err["type"]
     loc = err["loc"]
@@ -99,27 +115,27 @@ def _sentence(err: dict) -> str:
     if t == "extra_forbidden":
         return f"unknown field '{last}'"
     if t == "literal_error" and last == "format":
-        return f"unsupported format {err.get('input')!r}; expected {err['ctx']['expected']}"
+        return f"unsupported format {_shown(err.get('input'))}; expected {err['ctx']['expected']}"
     if t == "union_tag_invalid":
         tag, expected = err["ctx"].get("tag"), err["ctx"].get("expected_tags")
-        return f"unknown kind {tag!r}; expected one of {expected}"
+        return f"unknown kind {_shown(tag)}; expected one of {expected}"
     if t == "union_tag_not_found":
         return "missing field 'kind' (pose, position or area)"
-    value = err.get("input")
+    value = _shown(err.get("input"))
     ctx = err.get("ctx", {})
     if t in _EXPECTED:
-        return f"expected {_EXPECTED[t]}, got {value!r}"
+        return f"expected {_EXPECTED[t]}, got {value}"
     if t == "string_pattern_mismatch":
         pattern = ctx.get("pattern", "")
-        return f"{value!r} " + _PATTERNS.get(pattern, f"does not match {pattern}")
+        return f"{value} " + _PATTERNS.get(pattern, f"does not match {pattern}")
     if t in ("enum", "literal_error"):
-        return f"{value!r} is not one of: {ctx.get('expected')}"
+        return f"{value} is not one of: {ctx.get('expected')}"
     if t in ("greater_than_equal", "greater_than"):
         bound = ctx.get("ge", ctx.get("gt"))
-        return f"{value!r} is below the minimum {bound}"
+        return f"{value} is below the minimum {bound}"
     if t in ("less_than_equal", "less_than"):
         bound = ctx.get("le", ctx.get("lt"))
-        return f"{value!r} is above the maximum {bound}"
+        return f"{value} is above the maximum {bound}"
     if t == "too_short":
         if len(loc) >= 3 and loc[0] == "barriers" and loc[-1] == "skills":
             return "a barrier needs skills of at least two robots"

@@ -17,6 +17,7 @@ from pydantic import ValidationError
 from backend.core.bulk import gc_paused
 from backend.core.checks import check_library, check_mission, resolve_shorthands
 from backend.core.library import LIBRARY_FORMAT, Library
+from backend.core.limits import LIMITS, too_big
 from backend.core.model import (
     MISSION_FORMAT,
     Mission,
@@ -35,6 +36,10 @@ from backend.files.diagnostics import (
 def _read(path: FsPath) -> tuple[str, yamlio.YamlDoc]:
     file = str(path)
     try:
+        size = path.stat().st_size
+        if size > LIMITS.file and path.is_file():  # not read: it could be anything
+            message = too_big(size, LIMITS.file, "a file")
+            raise FileProblems([Issue(file, (), f"{message}; missionctl reads no larger ones")])
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise FileProblems([Issue(file, (), "no such file")]) from None
@@ -49,7 +54,9 @@ def _read(path: FsPath) -> tuple[str, yamlio.YamlDoc]:
     try:
         doc = yamlio.load(text)
     except yamlio.YamlSyntaxError as e:
-        raise FileProblems([Issue(file, e.path, e.message, e.line, e.col)]) from None
+        raise FileProblems(
+            [Issue(file, path, message, line, col) for line, col, message, path in e.problems]
+        ) from None
     if not isinstance(doc.data, dict):
         raise FileProblems(
             [Issue(file, (), "expected a YAML mapping at the top of the file", 1, 1)]
@@ -70,6 +77,38 @@ def file_kind(data: dict) -> str | None:
     if "robot_types" in data or "skills" in data:
         return "library"
     return None
+
+
+# fields only one kind of file has
+_FIELDS = {
+    "mission": ("library", "robots", "markers", "tasks", "barriers"),
+    "library": ("robot_types", "skills"),
+}
+_FORMATS = {"mission": MISSION_FORMAT, "library": LIBRARY_FORMAT}
+_NAMES = {"mission": "a mission", "library": "a skill library"}
+
+
+def _format_problem(file: str, doc: yamlio.YamlDoc, expected: str) -> FileProblems | None:
+    """A file read as the `expected` kind whose `format` names another kind,
+    or names one kind over the other's fields: one problem, said the same
+    whichever command reads the file (`validate` goes by the format; `server`
+    and `ctl load` expect a mission)."""
+    fmt = doc.data.get("format")
+    said = file_kind({"format": fmt}) if isinstance(fmt, str) else None
+    if said is None:
+        return None  # no format, or another one: the model says which it expects
+    has = {kind: [f for f in fields if f in doc.data] for kind, fields in _FIELDS.items()}
+    content = next((k for k in has if has[k] and not any(has[o] for o in has if o != k)), None)
+    if content is not None and content != said:
+        message = (
+            f"{fmt!r} is the format of {_NAMES[said]}, but this file has the fields of "
+            f"{_NAMES[content]} ({', '.join(has[content])}): set 'format: {_FORMATS[content]}'"
+        )
+    elif said != expected:
+        message = f"this is {_NAMES[said]} ({fmt!r}), not {_NAMES[expected]}"
+    else:
+        return None
+    return FileProblems([located(file, doc, ("format",), message)])
 
 
 def load_library(path: str | FsPath) -> Library:
@@ -98,6 +137,8 @@ def _sorted(issues: list[Issue]) -> list[Issue]:
 
 
 def _library_from(file: str, doc: yamlio.YamlDoc) -> Library:
+    if (wrong := _format_problem(file, doc, "library")) is not None:
+        raise wrong
     salvage = _Salvage(
         doc.data,
         entries=(("skills",), ("skills", "*", "params"), ("robot_types",)),
@@ -123,6 +164,8 @@ def load_mission(path: str | FsPath) -> tuple[Mission, Library]:
 
 
 def _mission_from(file: str, doc: yamlio.YamlDoc) -> tuple[Mission, Library]:
+    if (wrong := _format_problem(file, doc, "mission")) is not None:
+        raise wrong
     salvage = _Salvage(
         doc.data, entries=(("markers",), ("robots",), ("barriers",)), required=("format", "library")
     )

@@ -1,7 +1,9 @@
 """YAML in and out, remembering where every value came from.
 
 Loading keeps a map from field path to (line, column) so that every error
-about a file can say `file:line:col` and the field path.
+about a file can say `file:line:col` and the field path, and holds the file
+to the limits of `backend.core.limits` (size, nesting, strings, lists,
+mappings, alias expansion) before a document is built.
 """
 
 from __future__ import annotations
@@ -10,6 +12,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import yaml
+
+from backend.core.limits import LIMITS, Limits, brief, echo, too_deep, too_long
 
 Path = tuple[str | int, ...]
 
@@ -37,19 +41,38 @@ _BaseDumper = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 
 
 class YamlSyntaxError(Exception):
-    def __init__(self, line: int, col: int, message: str, path: Path = ()):
+    """A file that cannot be read as YAML, or breaks a limit: the first
+    problem, and in `problems` every one found, as (line, col, message, path)."""
+
+    def __init__(
+        self,
+        line: int,
+        col: int,
+        message: str,
+        path: Path = (),
+        more: tuple[tuple[int, int, str, Path], ...] = (),
+    ):
         super().__init__(message)
         self.line, self.col, self.message, self.path = line, col, message, path
+        self.problems = [(line, col, message, path), *more]
 
 
-def load(text: str) -> YamlDoc:
+def load(text: str, limits: Limits = LIMITS) -> YamlDoc:
+    """The document in `text` with the position of every field, or
+    YamlSyntaxError. Its size, nesting, strings, lists and mappings are
+    checked first, on the parser's events (aliases counted at every use, so
+    an "alias bomb" of a few hundred bytes is measured, never expanded)."""
+    if len(text) > limits.file:  # characters: at least as many bytes
+        raise YamlSyntaxError(1, 1, f"the file has more than the limit of {limits.file:,} bytes")
+    doc = YamlDoc(None)
     loader = _Loader(text)
     try:
+        _Scan(loader, doc, limits).run()
+        loader.dispose()
+        loader = _Loader(text)
         node = loader.get_single_node()
         if node is None:
             return YamlDoc(None, {(): (1, 1)})
-        doc = YamlDoc(None)
-        _walk(loader, node, (), doc, set())
         doc.data = loader.construct_document(node)
         return doc
     except yaml.MarkedYAMLError as e:
@@ -65,38 +88,201 @@ def load(text: str) -> YamlDoc:
         loader.dispose()
 
 
-def _pos(node: yaml.Node) -> tuple[int, int]:
-    return node.start_mark.line + 1, node.start_mark.column + 1
+def _pos(mark: Any) -> tuple[int, int]:
+    return mark.line + 1, mark.column + 1
 
 
-def _walk(loader: Any, node: yaml.Node, path: Path, doc: YamlDoc, above: set[int]) -> None:
-    doc.marks.setdefault(path, _pos(node))
-    if id(node) in above:  # an alias of one of its own ancestors
-        line, col = _pos(node)
-        raise YamlSyntaxError(
-            line, col, "recursive YAML alias: a value cannot contain itself", path[:-1]
-        )
-    above = above | {id(node)}
-    if isinstance(node, yaml.MappingNode):
-        seen: set[Any] = set()
-        for knode, vnode in node.value:
-            key = (
-                loader.construct_object(knode, deep=True)
-                if isinstance(knode, yaml.ScalarNode)
-                else None
+_STR_TAG = "tag:yaml.org,2002:str"
+_MAX_PROBLEMS = 20  # limit problems listed for one file before giving up on it
+
+
+@dataclass
+class _Frame:
+    """An open mapping or sequence of the event stream."""
+
+    path: Path
+    is_map: bool
+    anchor: str | None
+    nodes_before: int  # nodes counted before it opened
+    count: int = 0  # entries or items so far
+    key: str | None = None  # the key of the entry whose value comes next (mappings)
+    below: int = 0  # deepest nesting inside it (for an anchor's aliases)
+    seen: set[str] = field(default_factory=set)
+
+
+class _Scan:
+    """One pass over the parser's events (no document is built): the limits,
+    the position of every field and the duplicate keys. An alias adds the
+    size and depth its anchor had, so an alias bomb costs what its text does.
+    (Written for speed: a 10,000-skill file has 300,000 events.)"""
+
+    def __init__(self, loader: Any, doc: YamlDoc, limits: Limits):
+        self.loader, self.doc, self.limits = loader, doc, limits
+        self.stack: list[_Frame] = []
+        self.nodes = 0
+        # anchor -> (nodes, depth, key text when a scalar)
+        self.anchors: dict[str, tuple[int, int, str | None]] = {}
+        self.problems: list[tuple[int, int, str, Path]] = []
+        # first characters of plain scalars that may be something else than a string
+        self._maybe_typed = set(loader.yaml_implicit_resolvers)
+
+    def run(self) -> None:
+        get = self.loader.get_event
+        scalar, alias = yaml.ScalarEvent, yaml.AliasEvent
+        opening = (yaml.MappingStartEvent, yaml.SequenceStartEvent)
+        closing = (yaml.MappingEndEvent, yaml.SequenceEndEvent)
+        while True:
+            e = get()
+            kind = type(e)
+            if kind is scalar:
+                self._scalar(e)
+            elif kind in opening:
+                self._open(e)
+            elif kind in closing:
+                self._close()
+            elif kind is alias:
+                self._alias(e)
+            elif e is None or kind is yaml.StreamEndEvent:
+                break
+        if self.problems:
+            first, *more = sorted(self.problems)
+            raise YamlSyntaxError(first[0], first[1], first[2], first[3], tuple(more))
+
+    # -- events ----------------------------------------------------------------------
+    def _scalar(self, e: Any) -> None:
+        stack = self.stack
+        top = stack[-1] if stack else None
+        at_key = top is not None and top.is_map and top.key is None
+        if top is not None and at_key:
+            path = self._key(top, self._key_text(e), e)
+        else:
+            path = self._place(top, e)
+        if len(e.value) > self.limits.text:
+            what = too_long(len(e.value), self.limits)
+            shown = echo(e.value, self.limits)
+            if at_key:  # said of the mapping: the path would hold the key
+                self._problem(_pos(e.start_mark), path[:-1], f"a key of {what} ({shown})")
+            else:
+                self._problem(_pos(e.start_mark), path, f"{what} ({shown})")
+        if e.anchor is not None:
+            self.anchors[e.anchor] = (1, 0, self._key_text(e))
+        self.nodes += 1
+        if self.nodes > self.limits.yaml_nodes:
+            self._too_many_nodes(e, path)
+
+    def _alias(self, e: Any) -> None:
+        size, depth, text = self.anchors.get(e.anchor, (1, 0, None))
+        stack = self.stack
+        if any(f.anchor == e.anchor for f in stack):
+            raise YamlSyntaxError(
+                *_pos(e.start_mark),
+                "recursive YAML alias: a value cannot contain itself",
+                stack[-1].path,
             )
-            # keys are named as written; a number key is not a list index
-            key = key if isinstance(key, str) else str(key)
-            sub = (*path, key)
-            if key in seen:
-                doc.duplicates.append((sub, *_pos(knode)))
-            seen.add(key)
-            # an entry is found at its key: that is the line a person looks at
-            doc.marks[sub] = _pos(knode)
-            _walk(loader, vnode, sub, doc, above)  # setdefault keeps the key's position
-    elif isinstance(node, yaml.SequenceNode):
-        for i, item in enumerate(node.value):
-            _walk(loader, item, (*path, i), doc, above)
+        top = stack[-1] if stack else None
+        if top is not None and top.is_map and top.key is None:
+            path = self._key(top, "None" if text is None else text, e)
+        else:
+            path = self._place(top, e)
+        self.nodes += size
+        if self.nodes > self.limits.yaml_nodes:
+            self._too_many_nodes(e, path)
+        if top is not None:
+            top.below = max(top.below, depth)
+            if len(stack) + depth > self.limits.depth:
+                raise YamlSyntaxError(*_pos(e.start_mark), too_deep(self.limits.depth), brief(path))
+
+    def _open(self, e: Any) -> None:
+        top = self.stack[-1] if self.stack else None
+        if top is not None and top.is_map and top.key is None:
+            # a mapping or list as a key: the constructor refuses it later
+            path = self._key(top, "None", e)
+        else:
+            path = self._place(top, e)
+        if len(self.stack) >= self.limits.depth:
+            raise YamlSyntaxError(*_pos(e.start_mark), too_deep(self.limits.depth), brief(path))
+        self.nodes += 1
+        if self.nodes > self.limits.yaml_nodes:
+            self._too_many_nodes(e, path)
+        is_map = type(e) is yaml.MappingStartEvent
+        self.stack.append(_Frame(path, is_map, e.anchor, self.nodes - 1))
+
+    def _close(self) -> None:
+        done = self.stack.pop()
+        depth = done.below + 1
+        if self.stack:
+            top = self.stack[-1]
+            if depth > top.below:
+                top.below = depth
+        if done.anchor is not None:
+            self.anchors[done.anchor] = (self.nodes - done.nodes_before, depth, None)
+
+    # -- where a node goes -----------------------------------------------------------
+    def _key(self, top: _Frame, key: str, e: Any) -> Path:
+        """Event `e` starts the key `key` of mapping `top`: the entry's path."""
+        path = (*top.path, key)
+        pos = _pos(e.start_mark)
+        if key in top.seen:
+            self.doc.duplicates.append((path, *pos))
+        top.seen.add(key)
+        # an entry is found at its key: that is the line a person looks at
+        self.doc.marks[path] = pos
+        top.key = key
+        self._count(top)
+        return path
+
+    def _place(self, top: _Frame | None, e: Any) -> Path:
+        """Event `e` starts a value (of the entry whose key came last, of a
+        list, or the document): its path."""
+        if top is None:
+            path: Path = ()
+        elif top.is_map:
+            path = (*top.path, top.key if top.key is not None else "None")  # its key came first
+            top.key = None
+        else:
+            path = (*top.path, top.count)
+            self._count(top)
+        self.doc.marks.setdefault(path, _pos(e.start_mark))
+        return path
+
+    def _count(self, top: _Frame) -> None:
+        top.count += 1
+        if top.count == self.limits.items + 1:  # said once, at the mapping or list
+            what = "entries" if top.is_map else "items"
+            message = f"more than the limit of {self.limits.items:,} {what}"
+            self._problem(self.doc.mark(top.path), top.path, message)
+
+    def _key_text(self, e: Any) -> str:
+        """A scalar key as the document's data has it (`1` and `"1"` are both
+        '1'; keys are named as written, a number key is not a list index)."""
+        value = e.value
+        if e.tag is None and e.implicit[0]:
+            if value and value[0] not in self._maybe_typed:
+                return str(value)
+            tag = self.loader.resolve(yaml.ScalarNode, value, e.implicit)
+        else:
+            tag = e.tag or _STR_TAG
+        if tag == _STR_TAG:
+            return str(value)
+        try:
+            typed = self.loader.construct_object(yaml.ScalarNode(tag, value))
+        except yaml.YAMLError:
+            return str(value)  # the constructor says what is wrong with it later
+        return typed if isinstance(typed, str) else str(typed)
+
+    def _too_many_nodes(self, e: Any, path: Path) -> None:
+        raise YamlSyntaxError(
+            *_pos(e.start_mark),
+            f"the file expands to more than the limit of {self.limits.yaml_nodes:,} "
+            "YAML nodes (an alias counts each time it is used)",
+            brief(path),
+        )
+
+    def _problem(self, pos: tuple[int, int], path: Path, message: str) -> None:
+        self.problems.append((*pos, message, brief(path)))
+        if len(self.problems) >= _MAX_PROBLEMS:
+            first, *more = sorted(self.problems)
+            raise YamlSyntaxError(first[0], first[1], first[2], first[3], tuple(more))
 
 
 class _Dumper(_BaseDumper):

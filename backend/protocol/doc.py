@@ -20,6 +20,7 @@ from pydantic import TypeAdapter
 
 from backend.core.events import CommandChanged, CommandQueued, EventBatch, SkillAdded, SkillChanged
 from backend.core.events import ReportSeq as ReportSeqEvent
+from backend.core.limits import LIMITS, MiB
 from backend.core.model import Enqueue, Run, SkillInstance, Status, UplinkCommand
 from backend.core.ops import AddSkill, Answer, Control, OperatorOp, Report, Sync
 from backend.protocol import mapfeed as mf
@@ -46,7 +47,12 @@ KEY_SPACE: list[tuple[str, str, str, str]] = [
         "server",
         "anything → `AccountInfo` (role of a logged-in user)",
     ),
-    (f"`{Keys.STATE}`", "queryable", "server", "`StateRequest` → `StateSnapshot`"),
+    (
+        f"`{Keys.STATE}`",
+        "queryable",
+        "server",
+        "`StateRequest` (or nothing) → `StateSnapshot`; anything else: `bad_request`",
+    ),
     (
         f"`{Keys.EVENTS}`",
         "publication",
@@ -166,6 +172,9 @@ ERROR_CODES: list[tuple[str, str, str]] = [
     ("not_applicable", "server", "run/pause/stop/reset does not apply to the robot now (why)"),
     ("cannot_retry", "server", "not a failed skill, retried already, or the robot moved on"),
     ("incompatible", "server", "the robot's manifest lacks the skill or its major version"),
+    ("plan_errors", "server", "sync: unwaived plan check errors name skills it would send"),
+    ("unknown_check", "server", "waive: no plan check of that name"),
+    ("unknown_waiver", "server", "unwaive: no waiver for that check"),
     ("unknown_command", "server", "cancel: no such command number"),
     ("not_pending", "server", "cancel: the command is settled already"),
     ("cannot_undo", "server", "undo of a sync that was sent already: cancel it instead"),
@@ -181,6 +190,8 @@ ERROR_CODES: list[tuple[str, str, str]] = [
     ("robot_busy", "server", "load/new while commands are pending (or a direct-path command)"),
     ("robots_busy", "server", "load/new while robots hold synchronized skills: reset them"),
     ("unknown_account", "server", "account query for a user the server does not know"),
+    ("limit_exceeded", "server, robot", "a message over a limit (see Limits): nothing applied"),
+    ("not_replayable", "server", "a change the journal could not read back as it is: refused"),
     ("bad_message", "server", "a robot's message cannot be read, or names another robot"),
     ("bad_register", "server", "a registration on another robot's key"),
     ("not_registered", "server", "a downlink from a session that is not registered: register"),
@@ -521,6 +532,28 @@ def _appendix() -> str:
     return _table(("message", "schema"), rows)
 
 
+# the limits every receiver applies (backend/core/limits.py): (what, limit, to what)
+LIMIT_ROWS: list[tuple[str, str, str]] = [
+    ("message", f"{LIMITS.payload:,} bytes ({LIMITS.payload // MiB} MiB)", "one payload, any key"),
+    (
+        "nesting",
+        f"{LIMITS.depth} levels",
+        "objects and arrays in one message (`{}` is one level)",
+    ),
+    (
+        "string",
+        f"{LIMITS.text:,} characters",
+        "every string, object keys included (labels, `info`, parameter values...)",
+    ),
+    ("array, object", f"{LIMITS.items:,} items, entries", "every array and object"),
+    (
+        "parameter value",
+        f"{LIMITS.value_depth} levels",
+        "nesting inside one skill parameter's value (refused with `bad_param`)",
+    ),
+]
+
+
 PROSE_1 = f"""# missionctl protocol, version {PROTOCOL_VERSION}
 
 This is what a third party needs to connect a robot, a console or a script
@@ -576,6 +609,22 @@ the key and the field, once per key (`missionctl ctl watch` prints it too).
 - Publications (telemetry): congestion control `BLOCK`.
 - Accounts and TLS: [security.md](security.md) (an operator queries only
   `{Keys.op_as("USER")}`; a robot account only its robots' keys).
+
+### Limits
+Every receiver holds a message to these limits before it reads it (the
+mission server its queries and robots' downlinks, robots their uplink and
+world queries, consoles telemetry):
+
+"""
+
+PROSE_LIMITS = f"""
+A query over a limit is answered `reply_err` with `code: limit_exceeded` and a
+`message` naming the field path and the limit, with at most
+{LIMITS.echo} characters of the value (`op.label: 8,000,000 characters, more than
+the limit of {LIMITS.text:,} ('xxxx'…)`); nothing of it is applied. An operation
+whose change the server cannot journal and read back as it is (its journal
+must always replay) is refused with `code: not_replayable`, and nothing
+changes.
 
 ## Key space
 
@@ -890,6 +939,8 @@ def render() -> str:
     return "".join(
         [
             PROSE_1,
+            _table(("what", "limit", "applies to"), LIMIT_ROWS),
+            PROSE_LIMITS,
             _table(("key", "kind", "who declares", "payload"), KEY_SPACE),
             PROSE_2,
             _table(("from", "to"), REPORTED_TRANSITIONS),

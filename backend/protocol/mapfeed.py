@@ -8,10 +8,22 @@ Key space (all JSON from the models below):
 
     mc/v2/sim/map/snapshot   queryable  -> MapSnapshot (late joiners)
     mc/v2/sim/map/delta      publication: MapDelta, seq consecutive, at most ~2 Hz
-    mc/v2/sim/status         queryable  -> SimStatus (score, deliveries, exchanges, robots)
-    mc/v2/sim/status/live    publication: SimStatus, on change and at least every second
+    mc/v2/sim/status         queryable  -> SimStatus (score, deliveries, regions, robots)
+    mc/v2/sim/status/live    publication: SimStatus, on change and at least every 2 s
 
 (under the protocol's prefix, `backend.protocol.keys.PREFIX`)
+
+Two views of the world. Everything above is the *ground view*: what the robots
+reported over the link (regions discovered, top scores revealed, stones
+identified and delivered, the score, robots as last heard); a robot out of
+coverage keeps its news until it is back in range. The truth (every region and
+stone, where each robot really is, the referee's log) is only in
+`SimStatus.truth`, filled when the status query's payload is `{"truth": true}`
+(`missionctl sim-status --truth`, for evaluation); never in a publication.
+
+A console's score and clock line: `objects.score` (map feed) or `SimStatus.score`,
+`sim_time` of the latest delta, snapshot or status, and `speed` (sim seconds per
+wall second: the clock moves on between messages).
 
 Grids are cut into `tile` x `tile` cells; a tile is sent as base64(zlib(raw
 uint8 bytes, row-major)) and only when it changed. Rows go south to north
@@ -44,6 +56,7 @@ KEY_MAP_SNAPSHOT = f"{PREFIX}/map/snapshot"
 KEY_MAP_DELTA = f"{PREFIX}/map/delta"
 KEY_STATUS = f"{PREFIX}/status"
 KEY_STATUS_LIVE = f"{PREFIX}/status/live"
+TRUTH_QUERY = b'{"truth": true}'  # the status query's payload that asks for the truth too
 
 LAYERS = ("terrain", "coverage")
 T_UNKNOWN, T_FREE, T_SLOW, T_ROCK = 0, 1, 2, 3
@@ -121,6 +134,9 @@ class MapObjects(_Wire):
         default_factory=list, description="discovered regions (as reported to the ground)"
     )
     stones: list[StoneItem] = Field(default_factory=list, description="identified stones")
+    score: float = Field(
+        0.0, description="the score as reported: the sum of the delivered stones' scores"
+    )
 
 
 class MapDelta(_Wire):
@@ -130,7 +146,8 @@ class MapDelta(_Wire):
         "fetch the snapshot",
     )
     seq: int = Field(ge=1, description="consecutive; a gap means: fetch the snapshot")
-    sim_time: float
+    sim_time: float = Field(description="sim seconds since the simulator started")
+    speed: float = Field(1.0, description="sim seconds per wall second")
     tiles: list[Tile] = Field(default_factory=list)
     objects: MapObjects | None = Field(None, description="all objects, when any changed")
 
@@ -139,7 +156,8 @@ class MapSnapshot(_Wire):
     feed: str = Field("", description="id of this run of the feed (as in its deltas)")
     meta: MapMeta
     seq: int = Field(ge=0, description="the last delta included")
-    sim_time: float
+    sim_time: float = Field(description="sim seconds since the simulator started")
+    speed: float = Field(1.0, description="sim seconds per wall second")
     tiles: list[Tile] = Field(description="every tile of every layer")
     objects: MapObjects
 
@@ -148,6 +166,8 @@ class MapSnapshot(_Wire):
 
 
 class RobotStatus(_Wire):
+    """A robot as last heard (ground view), or as it is (in `SimTruth`)."""
+
     name: str
     type: str
     kind: Literal["rover", "drone", "static"]
@@ -156,8 +176,11 @@ class RobotStatus(_Wire):
     z: float = 0.0
     yaw: float = 0.0
     battery: float
-    in_range: bool
-    link: float
+    in_range: bool = Field(description="the ground hears it now")
+    link: float = Field(description="link quality where it was (0: no link)")
+    heard_at: float | None = Field(
+        None, description="sim time of the state shown (ground view: its last report)"
+    )
     airborne: bool = False
     docked: bool = False
     box: str | None = None
@@ -169,7 +192,7 @@ class RobotStatus(_Wire):
     odometer_m: float = 0.0
     sim_seconds: float = Field(0.0, description="robot time stepped by its skills")
     knows: dict[str, int] = Field(
-        default_factory=dict, description="rss/stones/boxes in its own world model"
+        default_factory=dict, description="rss/stones/boxes in its own world model (truth only)"
     )
 
 
@@ -181,21 +204,64 @@ class Delivery(_Wire):
     sim_time: float
 
 
+class RegionTruth(_Wire):
+    rss: str
+    x: float
+    y: float
+    radius: float
+    max_score: float
+    stones: int = Field(description="stones in the region not identified yet")
+    found_by: list[str] = Field(default_factory=list)
+
+
+class StoneTruth(_Wire):
+    id: str
+    rss: str
+    x: float
+    y: float
+    score: float | None = None
+    state: Literal["hidden", "identified", "carried", "ground", "delivered"]
+    holder: str | None = None
+
+
+class SimTruth(_Wire):
+    """The world as it is, for evaluation (`missionctl sim-status --truth`)."""
+
+    score: float
+    delivered: list[Delivery] = Field(default_factory=list)
+    regions: list[RegionTruth] = Field(default_factory=list)
+    stones: list[StoneTruth] = Field(default_factory=list, description="every stone")
+    explored: float = Field(0.0, description="fraction of the site explored by any robot")
+    robots: dict[str, RobotStatus] = Field(default_factory=dict)
+    exchanges: dict[str, int] = Field(default_factory=dict, description="robot-to-robot asks/tells")
+    exchange_log: list[str] = Field(default_factory=list, description="the latest exchanges")
+    events: list[str] = Field(default_factory=list, description="the referee's latest log lines")
+
+
 class SimStatus(_Wire):
+    """The ground view (what robots reported), plus the truth when asked for it."""
+
     version: int = FEED_VERSION
     world: str
     seed: int
-    speed: float
+    speed: float = Field(description="sim seconds per wall second")
     link_delay_s: float = 0.0
-    sim_time: float
-    score: float
-    delivered: list[Delivery] = Field(default_factory=list)
-    exchanges: dict[str, int] = Field(default_factory=dict, description="robot-to-robot asks/tells")
-    exchange_log: list[str] = Field(default_factory=list, description="the latest exchanges")
-    rss_found: list[str] = Field(default_factory=list, description="regions any robot discovered")
-    explored: float = Field(0.0, description="fraction of the site explored (truth)")
-    robots: dict[str, RobotStatus] = Field(default_factory=dict)
-    events: list[str] = Field(default_factory=list, description="the referee's latest log lines")
+    sim_time: float = Field(description="sim seconds since the simulator started")
+    score: float = Field(description="the delivered stones' scores, as reported")
+    delivered: list[Delivery] = Field(default_factory=list, description="as reported")
+    rss_found: list[str] = Field(
+        default_factory=list, description="regions the robots reported discovering"
+    )
+    top_scores: dict[str, float] = Field(
+        default_factory=dict, description="region -> top stone score a science image revealed"
+    )
+    explored: float = Field(0.0, description="fraction of the site explored, as reported")
+    robots: dict[str, RobotStatus] = Field(
+        default_factory=dict, description="robots as last heard (a robot never heard is absent)"
+    )
+    truth: SimTruth | None = Field(
+        None, description='only in a reply to the payload {"truth": true}'
+    )
 
 
 # ---------------------------------------------------------------- tiles

@@ -16,12 +16,18 @@ Invariants:
 - a journal starts with a snapshot (its base mission); batches are only
   accepted once there is one;
 - one transaction per `append` (or per `append_many`): after a crash the
-  journal holds a prefix of what was appended, at batch boundaries.
+  journal holds a prefix of what was appended, at batch boundaries;
+- what is journaled replays: a batch is serialized and read back to the same
+  events before it is stored, else refused (`NotReplayable`); a journal that
+  holds an unreplayable batch anyway (written by an older version) says
+  which (`Unreplayable`), and `quarantine_from` keeps everything before it.
 
 Tables (created by `journal_file`, which opens the file for its one writer):
   meta(key, value)                      format, library, created
-  batches(revision PK, ts, actor, client, request_id, op, events)
+  batches(revision PK, ts, actor, client, request_id, op, events, reply)
   snapshots(revision PK, mission)       the last `keep_snapshots` only
+  quarantine(id PK, at, reason, kind, revision, ts, actor, client,
+             request_id, op, content, reply)   moved aside by a recovery
   index batches_request on batches(client, request_id)
 
 Usage (a server):
@@ -36,6 +42,7 @@ Usage (a server):
         ...
         applied = engine.submit(op, client=c, request_id=r)
         journal.record(applied, op, client=c, request_id=r, mission=engine.mission)
+        journal.set_reply(applied.revision, applied.value, applied.notes)
 """
 
 from __future__ import annotations
@@ -62,9 +69,11 @@ from backend.server.journal_file import (
     JOURNAL_FORMAT,
     JournalCorrupt,
     JournalError,
+    Unreplayable,
     damaged,
     identity,
     open_database,
+    quarantine,
     rollback,
 )
 
@@ -75,7 +84,10 @@ __all__ = [
     "JournalCorrupt",
     "JournalError",
     "LoadInfo",
+    "NotReplayable",
     "Record",
+    "Remembered",
+    "Unreplayable",
     "remember_requests",
 ]
 
@@ -103,6 +115,22 @@ class Entry(NamedTuple):
     op_json: str = ""
     client: str = ""
     request_id: str | None = None
+    reply: str | None = None  # the request's reply (`_reply_text`), when known already
+
+
+class Remembered(NamedTuple):
+    """A journaled request (`load()`): a retry of it gets its reply again."""
+
+    client: str
+    request_id: str
+    revision: int
+    reply: dict[str, Any] | None = None  # {"value": ..., "notes": [...]}; None: not kept
+
+
+class NotReplayable(ValueError):
+    """A batch that would not read back as it is (nesting the JSON reader
+    refuses, a value JSON cannot carry): refused before it is journaled, so
+    the operation is refused and changes nothing."""
 
 
 class Record(NamedTuple):
@@ -155,8 +183,8 @@ def _faithful_serializer(model_cls: type[BaseModel]) -> pydantic_core.SchemaSeri
 
 
 _INSERT_BATCH = (
-    "INSERT INTO batches (revision, ts, actor, client, request_id, op, events) "
-    "VALUES (?, ?, ?, ?, ?, ?, ?)"
+    "INSERT INTO batches (revision, ts, actor, client, request_id, op, events, reply) "
+    "VALUES (?, ?, ?, ?, ?, ?, ?, ?)"
 )
 
 _MISSION_JSON = _faithful_serializer(Mission)
@@ -171,6 +199,29 @@ def _dump(
     if serializer is None:
         return model.model_dump_json(exclude=exclude)
     return serializer.to_json(model, exclude=exclude).decode()
+
+
+def _batch_text(b: EventBatch) -> str:
+    """The batch's events as the journal stores them, once read back to the
+    same events: whatever is journaled can be replayed."""
+    try:
+        text = _dump(_BATCH_JSON, b, exclude={"op"})
+        back = EventBatch.model_validate_json(text)
+    except (ValueError, TypeError, pydantic_core.PydanticSerializationError) as e:
+        raise NotReplayable(f"it cannot be stored and read back ({_why(e)})") from None
+    if back.events != b.events:
+        raise NotReplayable(
+            "it reads back differently (a value JSON cannot carry as it is: "
+            "not-a-number, a tuple, a key that is not a string?)"
+        )
+    return text
+
+
+def _reply_text(value: dict[str, Any], notes: list[str]) -> str | None:
+    try:
+        return pydantic_core.to_json({"value": value, "notes": notes}).decode()
+    except pydantic_core.PydanticSerializationError:
+        return None  # not kept: a retry is still recognized, without its value
 
 
 def _op_text(op: Any) -> str:
@@ -359,8 +410,8 @@ class Journal:
             if not b.events:
                 raise ValueError(f"batch {b.revision} has no events: no-ops are not journaled")
             op = e.op_json or b.op
-            events = _dump(_BATCH_JSON, b, exclude={"op"})
-            rows.append((b.revision, now, b.actor, e.client, e.request_id, op, events))
+            text = _batch_text(b)
+            rows.append((b.revision, now, b.actor, e.client, e.request_id, op, text, e.reply))
         if not rows:
             return 0
         with self._lock:
@@ -452,21 +503,33 @@ class Journal:
         when a batch was written."""
         if applied.duplicate or not applied.events:
             return False
-        self.append(
-            applied.batch(actor or client),
-            op_json=_op_text(op),
-            client=client,
-            request_id=request_id,
-        )
+        reply = _reply_text(applied.value, applied.notes) if request_id is not None else None
+        entry = Entry(applied.batch(actor or client), _op_text(op), client, request_id, reply)
+        self.append_many([entry])
         if mission is not None:
             self.maybe_snapshot(mission)
         return True
 
+    def set_reply(self, revision: int, value: dict[str, Any], notes: list[str]) -> None:
+        """Keep the reply of the request journaled at `revision`: a client
+        retrying it after a restart gets it again (`load`, `remember_requests`)."""
+        text = _reply_text(value, notes)
+        with self._lock:
+            self._writable().execute(
+                "UPDATE batches SET reply = ? WHERE revision = ?", (text, revision)
+            )
+
     def snapshot(self, mission: Mission) -> None:
         """Store the whole mission at its revision; keep the newest
         `keep_snapshots`. The mission must be the state after the journal's
-        batch of the same revision (or the journal's first, base mission)."""
+        batch of the same revision (or the journal's first, base mission,
+        which must read back: a restart starts from it)."""
         text = _dump(_MISSION_JSON, mission)
+        if self._snapshot_rev is None:
+            try:
+                Mission.model_validate_json(text)
+            except ValueError as e:
+                raise NotReplayable(f"the mission cannot be read back ({_why(e)})") from None
         rev = mission.revision
         with self._lock:
             conn = self._writable()
@@ -513,13 +576,15 @@ class Journal:
         return True
 
     # -- reading -------------------------------------------------------------------
-    def load(self) -> tuple[Mission | None, list[tuple[str, str, int]]]:
-        """The mission as of the last committed batch, and the (client,
-        request_id, revision) of the last requests, oldest first.
+    def load(self) -> tuple[Mission | None, list[Remembered]]:
+        """The mission as of the last committed batch, and the last requests
+        (`Remembered`: client, request_id, revision, reply), oldest first.
 
         (None, []) for an empty journal. The newest readable snapshot is the
         base; an unreadable one is skipped for an older one (see `load_info`).
-        Raises JournalCorrupt rather than return a partial mission."""
+        Raises JournalCorrupt rather than return a partial mission
+        (Unreplayable when a batch is missing or cannot be applied: see
+        `quarantine_from`)."""
         try:
             with gc_paused():
                 return self._load()
@@ -528,7 +593,7 @@ class Journal:
                 rollback(self.conn)
             raise damaged(self.path, e) from None
 
-    def _load(self) -> tuple[Mission | None, list[tuple[str, str, int]]]:
+    def _load(self) -> tuple[Mission | None, list[Remembered]]:
         t0 = time.perf_counter()
         info = LoadInfo()
         with self._lock:
@@ -563,31 +628,10 @@ class Journal:
                         raise JournalCorrupt(f"{self.path}: no snapshot can be read ({why})")
                     raise JournalCorrupt(f"{self.path}: batches without a base snapshot")
                 info.snapshot_revision = mission.revision
-                expected = mission.revision + 1
-                cur = conn.execute(
-                    "SELECT revision, events FROM batches WHERE revision > ? ORDER BY revision",
-                    (mission.revision,),
-                )
-                for rev, text in cur:
-                    if rev != expected:
-                        raise JournalCorrupt(
-                            f"{self.path}: batch {expected} is missing (the next one is {rev}); "
-                            f"cannot replay past revision {expected - 1}"
-                        )
-                    try:
-                        batch = EventBatch.model_validate_json(text)
-                        if batch.revision != rev:
-                            raise ValueError(f"it says revision {batch.revision}")
-                        mission = apply_events(mission, batch)
-                    except (ValidationError, ValueError, KeyError, TypeError, IndexError) as e:
-                        raise JournalCorrupt(
-                            f"{self.path}: batch {rev} cannot be replayed: {_why(e)}"
-                        ) from None
-                    info.replayed += 1
-                    expected += 1
+                mission = _replay(conn, self.path, mission, info)
                 rows = conn.execute(
-                    "SELECT client, request_id, revision FROM batches WHERE request_id IS NOT NULL "
-                    "ORDER BY revision DESC LIMIT ?",
+                    "SELECT client, request_id, revision, reply FROM batches "
+                    "WHERE request_id IS NOT NULL ORDER BY revision DESC LIMIT ?",
                     (REMEMBERED_REQUESTS,),
                 ).fetchall()
             finally:
@@ -600,7 +644,20 @@ class Journal:
         info.seconds = time.perf_counter() - t0
         self.load_info = info
         rows.reverse()
-        return mission, [(c, r, rev) for c, r, rev in rows]
+        return mission, [Remembered(c, r, rev, _reply(reply)) for c, r, rev, reply in rows]
+
+    def quarantine_from(self, revision: int, reason: str) -> tuple[int, int]:
+        """Keep the journal up to `revision - 1` (what `load` could replay
+        when it raised Unreplayable): the batches and snapshots from
+        `revision` on move to its quarantine table, where they stay. Returns
+        how many batches and snapshots moved."""
+        with self._lock:
+            moved = quarantine(self._writable(), revision, reason)
+            conn = self.conn
+            self._last_rev = self._last(conn)
+            self._snapshot_rev = conn.execute("SELECT max(revision) FROM snapshots").fetchone()[0]
+            self._snapshot_size, self._since_snapshot = self._sizes(conn, self._snapshot_rev)
+        return moved
 
     def request_revision(self, client: str, request_id: str) -> int | None:
         """Revision at which a request was applied, if it is journaled."""
@@ -635,13 +692,76 @@ class Journal:
         return total
 
 
-def remember_requests(engine: Any, requests: Iterable[tuple[str, str, int]]) -> None:
+def remember_requests(engine: Any, requests: Iterable[tuple[Any, ...]]) -> None:
     """Teach a fresh engine the requests `load()` returned, so a client that
-    retries a request applied before the restart gets the duplicate answer."""
+    retries a request applied before the restart gets the duplicate answer,
+    with the reply's value and notes when they were kept."""
     from backend.core.rules.engine import Applied
 
-    for client, request_id, revision in requests:
-        engine.remember(client, request_id, Applied(revision, duplicate=False))
+    for client, request_id, revision, *kept in requests:
+        reply = kept[0] if kept and kept[0] else {}
+        value, notes = reply.get("value", {}), reply.get("notes", [])
+        engine.remember(client, request_id, Applied(revision, [], notes, value, duplicate=False))
+
+
+def _reply(text: str | None) -> dict[str, Any] | None:
+    if not text:
+        return None
+    try:
+        reply = json.loads(text)
+    except ValueError:
+        return None
+    return reply if isinstance(reply, dict) else None
+
+
+def _replay(conn: sqlite3.Connection, path: Path, mission: Mission, info: LoadInfo) -> Mission:
+    """`mission` with the batches after its revision applied, in order; or
+    Unreplayable naming the first that is missing or cannot be applied."""
+    expected = mission.revision + 1
+    cur = conn.execute(
+        "SELECT revision, events, actor, op FROM batches WHERE revision > ? ORDER BY revision",
+        (mission.revision,),
+    )
+    for rev, text, actor, op in cur:
+        why = f"it is missing (the next one is {rev})" if rev != expected else None
+        if why is None:
+            try:
+                batch = EventBatch.model_validate_json(text)
+                if batch.revision != rev:
+                    raise ValueError(f"it says revision {batch.revision}")
+                mission = apply_events(mission, batch)
+                info.replayed += 1
+                expected += 1
+                continue
+            except (ValidationError, ValueError, KeyError, TypeError, IndexError) as e:
+                why = _why(e)
+        later = conn.execute(
+            "SELECT count(*) FROM batches WHERE revision > ?", (expected,)
+        ).fetchone()[0]
+        what = f"{_op_name(op)} by {actor}" if rev == expected and actor else ""
+        message = (
+            f"{path}: batch {expected} is missing (the next one is {rev}); "
+            f"cannot replay past revision {expected - 1}"
+            if rev != expected
+            else f"{path}: batch {expected}{f' ({what})' if what else ''} cannot be replayed: {why}"
+        )
+        raise Unreplayable(
+            message,
+            revision=expected,
+            why=why,
+            later=later,
+            what=what,
+        )
+    return mission
+
+
+def _op_name(op: str) -> str:
+    """The operation's name from its journaled JSON ('add', 'report')."""
+    try:
+        name = json.loads(op).get("op") if op.startswith("{") else op
+    except (ValueError, AttributeError):
+        name = None
+    return name if isinstance(name, str) and name else "an operation"
 
 
 def _why(e: BaseException) -> str:

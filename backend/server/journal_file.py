@@ -27,14 +27,31 @@ CREATE TABLE IF NOT EXISTS batches (
     client     TEXT NOT NULL DEFAULT '',
     request_id TEXT,
     op         TEXT NOT NULL DEFAULT '',
-    events     TEXT NOT NULL
+    events     TEXT NOT NULL,
+    reply      TEXT
 );
 CREATE INDEX IF NOT EXISTS batches_request ON batches (client, request_id);
 CREATE TABLE IF NOT EXISTS snapshots (
     revision INTEGER PRIMARY KEY,
     mission  TEXT NOT NULL
 );
+CREATE TABLE IF NOT EXISTS quarantine (
+    id         INTEGER PRIMARY KEY AUTOINCREMENT,
+    at         TEXT NOT NULL,
+    reason     TEXT NOT NULL,
+    kind       TEXT NOT NULL,
+    revision   INTEGER NOT NULL,
+    ts         REAL,
+    actor      TEXT,
+    client     TEXT,
+    request_id TEXT,
+    op         TEXT,
+    content    TEXT NOT NULL,
+    reply      TEXT
+);
 """
+# `batches.reply` came after journals were first written: added to theirs at open
+_ADDED_COLUMNS = (("batches", "reply", "TEXT"),)
 
 
 class JournalError(Exception):
@@ -44,6 +61,16 @@ class JournalError(Exception):
 class JournalCorrupt(JournalError):
     """The journal cannot give back a whole mission (no readable snapshot, a
     damaged or missing batch). Nothing partial is ever returned."""
+
+
+class Unreplayable(JournalCorrupt):
+    """Batch `revision` is missing or cannot be replayed; everything before it
+    can (`Journal.quarantine_from(revision)` keeps that and moves the rest
+    aside). `later`: how many batches follow it."""
+
+    def __init__(self, message: str, *, revision: int, why: str, later: int, what: str = ""):
+        super().__init__(message)
+        self.revision, self.why, self.later, self.what = revision, why, later, what
 
 
 def open_database(
@@ -98,6 +125,9 @@ def _prepare(conn: sqlite3.Connection, p: Path, library: str | None) -> None:
     for stmt in _SCHEMA.split(";"):
         if stmt.strip():
             conn.execute(stmt)
+    for table, column, kind in _ADDED_COLUMNS:
+        if column not in {row[1] for row in conn.execute(f"PRAGMA table_info({table})")}:
+            conn.execute(f"ALTER TABLE {table} ADD COLUMN {column} {kind}")
     _check_meta(conn, p, library)
     conn.execute("COMMIT")
 
@@ -118,6 +148,35 @@ def _check_meta(conn: sqlite3.Connection, p: Path, library: str | None) -> None:
         )
     elif library and not meta.get("library"):
         conn.execute("UPDATE meta SET value = ? WHERE key = 'library'", (library,))
+
+
+def quarantine(conn: sqlite3.Connection, revision: int, reason: str) -> tuple[int, int]:
+    """Move the batches and snapshots from `revision` on into the quarantine
+    table, in one transaction: the journal then ends at `revision - 1`, and
+    nothing is deleted (an operator can read them there). Returns how many
+    batches and snapshots moved."""
+    now = datetime.now(UTC).isoformat(timespec="seconds")
+    conn.execute("BEGIN IMMEDIATE")
+    try:
+        batches = conn.execute(
+            "INSERT INTO quarantine (at, reason, kind, revision, ts, actor, client, request_id, "
+            "op, content, reply) SELECT ?, ?, 'batch', revision, ts, actor, client, request_id, "
+            "op, events, reply FROM batches WHERE revision >= ? ORDER BY revision",
+            (now, reason, revision),
+        ).rowcount
+        snapshots = conn.execute(
+            "INSERT INTO quarantine (at, reason, kind, revision, content) "
+            "SELECT ?, ?, 'snapshot', revision, mission FROM snapshots WHERE revision >= ? "
+            "ORDER BY revision",
+            (now, reason, revision),
+        ).rowcount
+        conn.execute("DELETE FROM batches WHERE revision >= ?", (revision,))
+        conn.execute("DELETE FROM snapshots WHERE revision >= ?", (revision,))
+        conn.execute("COMMIT")
+    except BaseException:
+        rollback(conn)
+        raise
+    return batches, snapshots
 
 
 def _abandon(conn: sqlite3.Connection, lock_fd: int) -> None:

@@ -13,6 +13,7 @@ from pydantic import ValidationError
 
 from backend.core.rules.engine import Refusal
 from backend.protocol.messages import ErrorReply, dumps, first_error
+from backend.protocol.wire import LIMIT_EXCEEDED, is_limit
 from backend.server.journal import JournalError
 from backend.transport import Refusal as ReplyErr
 
@@ -43,6 +44,8 @@ async def _guarded(pending: Awaitable[bytes]) -> bytes:
 def _error(e: Refusal | ValidationError) -> ReplyErr:
     if isinstance(e, Refusal):
         return ReplyErr(dumps(ErrorReply(**e.to_dict())))
+    if is_limit(e):
+        return ReplyErr(dumps(ErrorReply(code=LIMIT_EXCEEDED, message=first_error(e))))
     return ReplyErr(
         dumps(ErrorReply(code="bad_request", message=f"malformed request: {first_error(e)}"))
     )

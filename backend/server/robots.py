@@ -41,6 +41,7 @@ from backend.protocol.messages import (
     dumps,
     first_error,
 )
+from backend.protocol.wire import LIMIT_EXCEEDED, is_limit, parse
 from backend.server.downlink import DownlinkApplier, raise_alerts
 from backend.server.refusals import Handler, JournalFailed
 from backend.server.uplink import UplinkSender
@@ -234,14 +235,19 @@ class RobotLink:
     def _parse(self, model: Any, payload: bytes, robot: str, what: str) -> Any:
         """A robot's message; one that cannot be read is the robot's fault."""
         try:
-            return model.model_validate_json(payload)
+            return parse(model, payload)  # within the limits (backend.core.limits)
         except ValidationError as e:
-            message = (
-                f"{robot} sent a {what} that cannot be read ({first_error(e)}); see "
-                f"docs/protocol.md (protocol {PROTOCOL_VERSION})"
-            )
+            if is_limit(e):  # the field's path first, as every limit refusal says it
+                message = f"{first_error(e)} (a {what} of {robot}; nothing of it was applied)"
+                code = LIMIT_EXCEEDED
+            else:
+                message = (
+                    f"{robot} sent a {what} that cannot be read ({first_error(e)}); see "
+                    f"docs/protocol.md (protocol {PROTOCOL_VERSION})"
+                )
+                code = "bad_message"
             self.said_once(robot, f"bad {what}", message, "error")
-            raise Refusal("bad_message", message, robot=robot) from None
+            raise Refusal(code, message, robot=robot) from None
 
     def _handle_register(self, payload: bytes, key: str) -> bytes:
         robot = Keys.robot_of(key)

@@ -21,6 +21,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from pydantic_core import PydanticSerializationError
+
 from backend.core.events import EventBatch
 from backend.core.library import Library
 from backend.core.model import Mission
@@ -34,12 +36,21 @@ from backend.protocol.messages import (
     OpReply,
     Request,
     RobotInfo,
+    StateRequest,
     StateSnapshot,
     dumps,
 )
+from backend.protocol.wire import parse
 from backend.server.accounts import Accounts, zenoh_dictionary
 from backend.server.acl import acl_config
-from backend.server.journal import Journal, JournalError, remember_requests
+from backend.server.journal import (
+    Journal,
+    JournalError,
+    NotReplayable,
+    Remembered,
+    Unreplayable,
+    remember_requests,
+)
 from backend.server.refusals import JournalFailed, guard
 from backend.server.robots import RobotLink
 from backend.transport import (
@@ -68,6 +79,7 @@ class MissionServer:
         zenoh_extra: dict[str, Any] | None = None,
         command_expiry: float | None = None,
         accounts: Accounts | None = None,
+        recover: bool = False,
     ):
         self.db = Path(db)
         self.mission_file = Path(mission_file) if mission_file else None
@@ -75,6 +87,10 @@ class MissionServer:
         self.zenoh_extra = zenoh_extra
         self.command_expiry = command_expiry  # seconds; None: commands never expire
         self.accounts = accounts  # None: no logins, anyone reaching the router may do anything
+        # a journal with a batch that cannot be replayed: keep what comes before it
+        # (the rest goes to its quarantine table) instead of refusing to start
+        self.recover = recover
+        self.recovered: str | None = None  # what the recovery did, for the operator
         self.server_id = uuid.uuid4().hex[:12]
         self.robot_link = RobotLink(self, default_expiry_s=command_expiry)
         self.engine: Engine | None = None
@@ -98,7 +114,7 @@ class MissionServer:
         """Resume from the journal, or start it from the mission file."""
         journal = Journal.open(self.db)
         try:
-            mission, requests = journal.load()
+            mission, requests = self._resume(journal)
             if mission is not None:
                 lib_file = Path(journal.library) if journal.library else None
                 if lib_file is None and self.mission_file is not None:
@@ -134,6 +150,28 @@ class MissionServer:
         self.engine = Engine(mission, library)
         remember_requests(self.engine, requests)
         self.robot_link.add_robots(mission.robots)
+
+    def _resume(self, journal: Journal) -> tuple[Mission | None, list[Remembered]]:
+        """The journal's mission; with `recover`, a journal that cannot be
+        replayed to its end gives what comes before the first batch that
+        cannot, and keeps that batch and the later ones in its quarantine."""
+        try:
+            return journal.load()
+        except Unreplayable as e:
+            if not self.recover:
+                raise
+            moved, snaps = journal.quarantine_from(e.revision, reason=e.why)
+            mission, requests = journal.load()
+            what = f" ({e.what})" if e.what else ""
+            kept = f"it and the {moved - 1} after it are" if moved > 1 else "it is"
+            snapshots = f" (with {snaps} snapshot(s) from it on)" if snaps else ""
+            self.recovered = (
+                f"recovered {self.db} at revision {e.revision - 1}: batch {e.revision}{what} "
+                f"cannot be replayed ({e.why}); {kept} kept{snapshots} in the journal's "
+                f"quarantine table: sqlite3 {self.db} 'SELECT * FROM quarantine'"
+            )
+            log.info("%s", self.recovered)
+            return mission, requests
 
     async def start(self) -> None:
         self._loop = asyncio.get_running_loop()
@@ -282,9 +320,17 @@ class MissionServer:
         def journal(batch: EventBatch) -> None:
             entry = EventBatch(revision=batch.revision, events=batch.events, actor=who)
             try:
-                self.journal.append(
-                    entry, op_json=op.model_dump_json(), client=client, request_id=request_id
-                )
+                op_json = op.model_dump_json()
+            except PydanticSerializationError:  # from code in this process: its batch says
+                op_json = op.op
+            try:
+                self.journal.append(entry, op_json=op_json, client=client, request_id=request_id)
+            except NotReplayable as e:  # the value, not the journal: refused, nothing changed
+                raise Refusal(
+                    "not_replayable",
+                    f"{op.op} refused: its change could not be journaled as it is, so a "
+                    f"restart could not replay it: {e}; nothing was changed",
+                ) from None
             except (sqlite3.Error, OSError, JournalError) as e:
                 failed = JournalFailed(self.db, e, op.op)
                 if not self._journal_failing:  # once, not at every retry of every robot
@@ -328,6 +374,8 @@ class MissionServer:
 
     # -- state ------------------------------------------------------------------
     def _handle_state(self, payload: bytes) -> bytes:
+        if payload:  # an empty query asks for the state too (a third party's first try)
+            parse(StateRequest, payload)  # anything else is answered `bad_request`
         snap = StateSnapshot(
             protocol=PROTOCOL_VERSION,
             server_id=self.server_id,
@@ -351,7 +399,7 @@ class MissionServer:
     def _handle_op(self, payload: bytes, key: str | None = None) -> bytes:
         """Apply an operation and answer at once (one on a robot queues its
         command: the robot's answer comes later, as events)."""
-        req = Request.model_validate_json(payload)
+        req = parse(Request, payload)
         if key is not None:  # op/{user}: the router's rules let only `user` send it
             user = key.rsplit("/", 1)[-1]
             role = self.accounts.role(user) if self.accounts is not None else "operator"
@@ -365,15 +413,27 @@ class MissionServer:
         if done is not None:
             return _reply(Applied(done.revision, [], done.notes, done.value, duplicate=True))
         actor = f"{req.user}@{req.client}" if req.user else req.client
-        return _reply(
-            self.submit(
-                self.robot_link.prepare(req.op),
-                client=req.client,
-                request_id=req.request_id,
-                actor=actor,
-                expected_revision=req.expected_revision,
-            )
+        applied = self.submit(
+            self.robot_link.prepare(req.op),
+            client=req.client,
+            request_id=req.request_id,
+            actor=actor,
+            expected_revision=req.expected_revision,
         )
+        self._keep_reply(applied)
+        return _reply(applied)
+
+    def _keep_reply(self, applied: Applied) -> None:
+        """Journal the reply of a request whose batch was journaled, so a
+        retry after a restart gets the same value (the new skill's id...)."""
+        if applied.duplicate or not applied.events or self.journal is None:
+            return
+        try:
+            self.journal.set_reply(applied.revision, applied.value, applied.notes)
+        except (sqlite3.Error, OSError, JournalError) as e:  # applied: only the reply is lost
+            log.warning(
+                "%s: cannot keep the reply of revision %s: %s", self.db, applied.revision, e
+            )
 
 
 def _reply(applied: Applied) -> bytes:

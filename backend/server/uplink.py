@@ -25,6 +25,7 @@ from typing import Any, Literal, Protocol
 
 from pydantic import ValidationError
 
+from backend.core.limits import echo
 from backend.core.model import CommandState, UplinkCommand
 from backend.core.ops import UplinkSent, UplinkSettle
 from backend.core.rules.engine import Applied, Engine
@@ -37,6 +38,7 @@ from backend.protocol.messages import (
     dumps,
     first_error,
 )
+from backend.protocol.wire import parse
 from backend.server.refusals import JournalFailed
 from backend.transport import QueryTimeout, TransportError, query_all
 
@@ -200,7 +202,7 @@ class UplinkSender:
                 self._refused(r.payload)
                 continue
             try:
-                receipt = UplinkReceipt.model_validate_json(r.payload)
+                receipt = parse(UplinkReceipt, r.payload)
             except ValidationError as e:
                 self.link.said_once(
                     self.robot,
@@ -217,9 +219,9 @@ class UplinkSender:
 
     def _refused(self, payload: bytes) -> None:
         try:
-            err = ErrorReply.model_validate_json(payload)
+            err = parse(ErrorReply, payload)
         except ValidationError:
-            text = payload.decode(errors="replace")[:200]
+            text = echo(payload.decode(errors="replace"))
             self.link.said_once(
                 self.robot, "refusal", f"{self.robot} refused its uplink: {text}", "error"
             )

@@ -1,17 +1,20 @@
 """The alert list: newest first, unacknowledged ones marked ● and bold;
-enter/a acknowledges the selected alert, A all of them. The count of
-unacknowledged alerts is the badge on the mission screen's top bar."""
+enter/a acknowledges the selected alert, A all of them; the selected
+alert's whole text below the list (a row is cut at 80 columns). The count
+of unacknowledged alerts is the badge on the mission screen's top bar."""
 
 from __future__ import annotations
 
 from rich.text import Text
 from textual.app import ComposeResult
+from textual.signal import Signal
 from textual.widgets import DataTable, Footer, Static
 
+from console.bindings import bindings
+from console.messages import AlertAcknowledged
 from console.screens.base import ViewScreen
-from console.state.actions import bindings
-from console.state.eventlog import AlertEntry
-from console.state.model import fmt_clock
+from console.state.eventlog import AlertBook, AlertEntry
+from console.state.text import fmt_clock
 
 LEVEL_VARS = {"error": "error", "warning": "warning", "info": "primary"}
 KIND_WORDS = {
@@ -39,21 +42,19 @@ class AlertScreen(ViewScreen):
     TOPICS = ("alerts",)
     BINDINGS = [*ViewScreen.BINDINGS, *bindings("alerts")]
 
-    def __init__(self) -> None:
-        super().__init__()
+    def __init__(self, book: AlertBook, changes: Signal[tuple[str, str | None]]) -> None:
+        super().__init__(changes)
+        self.book = book
         self.ids: list[int] = []
 
     def compose(self) -> ComposeResult:
         yield self.title_bar
         yield DataTable(id="alerts", cursor_type="row")
+        yield Static("", id="alert-detail", classes="detail")
         yield Static(
             "enter/a acknowledge · A acknowledge all · F2 schedule · F5 event log", classes="hint"
         )
         yield Footer()
-
-    @property
-    def book(self):
-        return self.mission_app.alerts
 
     def _cells(self, a: AlertEntry) -> list:
         style = "" if a.acknowledged else "bold"
@@ -85,19 +86,40 @@ class AlertScreen(ViewScreen):
                 t.add_row(*self._cells(a), key=str(a.id))
             if alerts:
                 t.move_cursor(row=min(keep, len(alerts) - 1))
+        self._detail()
         n = self.book.unacknowledged
         self.set_title(
             ("Alerts", "bold"), f"  {n} unacknowledged of {len(alerts)}" if alerts else "  none"
         )
 
+    def _detail(self) -> None:
+        """The selected alert in full: when, what, about whom, from where."""
+        t = self.query_one(DataTable)
+        box = self.query_one("#alert-detail", Static)
+        by_id = {a.id: a for a in self.book.alerts}
+        a = by_id.get(self.ids[t.cursor_row]) if self.ids and t.cursor_row < len(self.ids) else None
+        if a is None:
+            box.update("")
+            return
+        about = " · ".join(x for x in (a.robot, a.skill) if x)
+        head = Text.assemble(
+            (f"{fmt_clock(a.at)}  {KIND_WORDS.get(a.kind, a.kind)}", "bold"),
+            f"  {about}" if about else "",
+            (f"  {a.level} · from {a.source}" + (f" · ×{a.count}" if a.count > 1 else ""), "dim"),
+        )
+        box.update(Text.assemble(head, "\n", a.message))
+
+    def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
+        self._detail()
+
     def action_ack(self) -> None:
         t = self.query_one(DataTable)
         if not self.ids or t.cursor_row >= len(self.ids):
             return
-        self.mission_app.acknowledge(self.ids[t.cursor_row])
+        self.post_message(AlertAcknowledged(self.ids[t.cursor_row]))
 
     def action_ack_all(self) -> None:
-        self.mission_app.acknowledge(None)
+        self.post_message(AlertAcknowledged(None))
 
     def on_data_table_row_selected(self, event: DataTable.RowSelected) -> None:
         # enter on the table (the DataTable binds enter itself)

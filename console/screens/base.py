@@ -1,28 +1,25 @@
 """What the part-2 screens (fleet, event log, alerts) share: a title bar, the
 screen-switching keys in the footer, and redrawing when the app says what
-they show changed (`MissionApp.awareness_signal`) — at once when shown,
-otherwise when shown next."""
+they show changed (`changes`, the app's awareness signal, handed to the
+screen with the state it shows) — at once when shown, otherwise when shown next."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from pathlib import Path
+from typing import Any
 
 from rich.text import Text
 from textual import events, on
 from textual.app import ComposeResult
 from textual.screen import Screen
-from textual.widgets import DataTable, Input, Static
+from textual.signal import Signal
+from textual.widgets import DataTable, Input
 
-from console.state.actions import bindings
+from console.bindings import bindings
+from console.widgets.bars import TitleBar
 
-if TYPE_CHECKING:
-    from console.app import MissionApp
-
-
-class TitleBar(Static):
-    DEFAULT_CSS = """
-    TitleBar { height: 1; background: $panel; color: $text; padding: 0 1; }
-    """
+# this module's look (CSS_PATH); absolute, so a subclass defined elsewhere finds it too
+TCSS = Path(__file__).with_name("base.tcss")
 
 
 class ViewScreen(Screen):
@@ -33,23 +30,16 @@ class ViewScreen(Screen):
     COLUMNS: tuple[tuple[str, str], ...] = ()  # (label, key) of the table's columns
     BINDINGS = bindings("app", show=True)
 
-    DEFAULT_CSS = """
-    ViewScreen #filter { height: 3; }
-    ViewScreen DataTable { height: 1fr; }
-    ViewScreen .detail { height: auto; max-height: 12; padding: 0 1; background: $surface; border-top: solid $primary 50%; }
-    ViewScreen .hint { height: 1; padding: 0 1; color: $text-muted; }
-    """
+    CSS_PATH = TCSS
 
-    def __init__(self) -> None:
+    def __init__(self, changes: Signal[tuple[str, str | None]]) -> None:
         super().__init__()
+        self.changes = changes  # (topic, robot or None) of what changed
         self._stale = False
         self.ready = False
         self.query_text = ""  # the #filter input's text, if the screen has one
+        self._typing = False  # typing from the table into the filter (one word so far)
         self.title_bar = TitleBar(id="title")
-
-    @property
-    def mission_app(self) -> MissionApp:
-        return self.app  # type: ignore[return-value]
 
     def on_mount(self) -> None:
         table = self.query_one(DataTable)
@@ -60,7 +50,7 @@ class ViewScreen(Screen):
         table.focus()
 
     def start(self) -> None:
-        self.mission_app.awareness_signal.subscribe(self, self._changed)
+        self.changes.subscribe(self, self._changed)
         self.app.theme_changed_signal.subscribe(self, lambda _t: self.redraw())
         self.ready = True
         self.redraw()
@@ -95,6 +85,7 @@ class ViewScreen(Screen):
 
     @on(Input.Submitted, "#filter")
     def _to_table(self) -> None:
+        self._typing = False
         self.query_one(DataTable).focus()
 
     def on_key(self, event: events.Key) -> None:
@@ -107,7 +98,7 @@ class ViewScreen(Screen):
         if field.has_focus:
             if event.key == "escape":
                 event.stop()
-                self.query_one(DataTable).focus()
+                self._to_table()
             return
         if event.key in self.app.active_bindings:
             return  # a key with a meaning here (the digits: other screens)
@@ -115,6 +106,11 @@ class ViewScreen(Screen):
             event.stop()
             field.select_on_focus = False  # else the next key replaces this one
             field.focus()
+            field.cursor_position = len(field.value)
+            if not self._typing and field.value and not field.value.endswith(" "):
+                field.insert_text_at_cursor(" ")  # a new word of the filter (all must match)
+            # keys typed before the focus moves come here too: one word until back at the table
+            self._typing = True
             field.insert_text_at_cursor(event.character)
 
     # subclasses

@@ -10,10 +10,13 @@ import json
 from rich.text import Text
 from textual import on
 from textual.app import ComposeResult
+from textual.signal import Signal
 from textual.widgets import DataTable, Footer, Input, Static
 
+from backend.protocol.messages import RobotInfo
 from console.screens.base import ViewScreen
 from console.state.capability import (
+    filter_examples,
     fleet_order,
     last_report,
     matches,
@@ -21,7 +24,8 @@ from console.state.capability import (
     robot_type,
     sparkline,
 )
-from console.state.model import fmt_clock
+from console.state.model import ConsoleModel
+from console.state.text import fmt_clock
 
 SPARK = 6  # samples shown per sparkline (the model keeps model.HISTORY)
 
@@ -39,26 +43,20 @@ class FleetScreen(ViewScreen):
     )
     TOPICS = ("fleet",)
 
-    def __init__(self) -> None:
-        super().__init__()
+    def __init__(self, model: ConsoleModel, changes: Signal[tuple[str, str | None]]) -> None:
+        super().__init__(changes)
+        self.model = model
         self.shown: list[str] = []
 
     def compose(self) -> ComposeResult:
         yield self.title_bar
-        yield Input(
-            placeholder="filter by capability: pick_stone · type:lru · module:arm · prop:…",
-            id="filter",
-        )
+        yield Input(placeholder="filter by capability", id="filter")
         yield DataTable(id="robots", cursor_type="row", zebra_stripes=False)
         yield Static("", id="detail", classes="detail")
         yield Static(
             "type to filter (escape: back to the list) · ↑↓ robot · F2 schedule", classes="hint"
         )
         yield Footer()
-
-    @property
-    def model(self):
-        return self.mission_app.model
 
     # -- cells -------------------------------------------------------------------------
     def _presence(self, robot: str) -> Text:
@@ -104,6 +102,10 @@ class FleetScreen(ViewScreen):
                 t.move_cursor(row=min(keep, len(self.shown) - 1))
         self._title()
         self._detail()
+        # examples from this fleet, so each of them finds something
+        self.query_one(
+            "#filter", Input
+        ).placeholder = f"filter by capability: {filter_examples(self.model)}"
 
     def update_view(self, topic: str, robot: str | None) -> None:
         t = self.query_one(DataTable)
@@ -142,6 +144,7 @@ class FleetScreen(ViewScreen):
         return self.shown[t.cursor_row]
 
     def _detail(self) -> None:
+        """The selected robot in full: presence, activity, manifest, skills."""
         detail = self.query_one("#detail", Static)
         r = self.selected
         if r is None:
@@ -149,8 +152,15 @@ class FleetScreen(ViewScreen):
                 Text("no robot matches the filter" if self.query_text else "no robots", style="dim")
             )
             return
+        out = self._detail_head(r)
+        out.append_text(_manifest_text(self.model.robots.get(r)))
+        out.append("\nskills: ", style="bold")
+        out.append_text(_skills_text(offered_skills(self.model, r), self.query_text))
+        detail.update(out)
+
+    def _detail_head(self, r: str) -> Text:
+        """Name, type, presence (since when), what it does, its last report."""
         info = self.model.robots.get(r)
-        man = info.manifest if info else None
         out = Text()
         out.append(r, style="bold")
         out.append(f"  {robot_type(self.model, r)}  ")
@@ -161,25 +171,7 @@ class FleetScreen(ViewScreen):
         out.append(self.model.activity_text(r) if self.model.mission else "—")
         out.append(" · last report: ", style="bold")
         out.append(last_report(self.model, r))
-        if man is None:
-            out.append("\nno manifest yet (never registered): skills from the library", style="dim")
-        else:
-            mods = ", ".join(f"{m.name} {m.version}" for m in man.modules) or "—"
-            props = ", ".join(f"{k}={_prop(v)}" for k, v in man.properties.items()) or "—"
-            out.append("\nmodules: ", style="bold")
-            out.append(mods)
-            out.append("\nproperties: ", style="bold")
-            out.append(props)
-        out.append("\nskills: ", style="bold")
-        words = [w.partition(":")[2] if ":" in w else w for w in self.query_text.lower().split()]
-        for i, (name, version) in enumerate(sorted(offered_skills(self.model, r).items())):
-            if i:
-                out.append(", ")
-            hit = any(w and w in name.lower() for w in words)
-            out.append(name, style="bold reverse" if hit else "")
-            if version:
-                out.append(f" {version}", style="dim")
-        detail.update(out)
+        return out
 
     # -- events ---------------------------------------------------------------------------
     @on(DataTable.RowHighlighted)
@@ -194,3 +186,30 @@ def _prop(value: object) -> str:
         if isinstance(value, str)
         else json.dumps(value, separators=(",", ":"), ensure_ascii=False)
     )
+
+
+def _manifest_text(info: RobotInfo | None) -> Text:
+    """The manifest's modules (with versions) and properties, if the robot registered."""
+    man = info.manifest if info else None
+    if man is None:
+        return Text("\nno manifest yet (never registered): skills from the library", style="dim")
+    out = Text()
+    out.append("\nmodules: ", style="bold")
+    out.append(", ".join(f"{m.name} {m.version}" for m in man.modules) or "—")
+    out.append("\nproperties: ", style="bold")
+    out.append(", ".join(f"{k}={_prop(v)}" for k, v in man.properties.items()) or "—")
+    return out
+
+
+def _skills_text(skills: dict[str, str], query: str) -> Text:
+    """The skills offered (name and version), those the filter's words hit in reverse."""
+    words = [w.partition(":")[2] if ":" in w else w for w in query.lower().split()]
+    out = Text()
+    for i, (name, version) in enumerate(sorted(skills.items())):
+        if i:
+            out.append(", ")
+        hit = any(w and w in name.lower() for w in words)
+        out.append(name, style="bold reverse" if hit else "")
+        if version:
+            out.append(f" {version}", style="dim")
+    return out

@@ -11,15 +11,18 @@ from pathlib import Path
 from rich.text import Text
 from textual import on, work
 from textual.app import ComposeResult
+from textual.signal import Signal
 from textual.widgets import DataTable, Footer, Input, Static
 
+from console.bindings import bindings
 from console.screens.base import ViewScreen
 from console.screens.dialogs import PathPrompt
-from console.state.actions import bindings
-from console.state.eventlog import LOG_LIMIT, LogEntry, entry_matches
-from console.state.model import fmt_clock
+from console.state.eventlog import LOG_LIMIT, EventLog, LogEntry, entry_matches
+from console.state.files import shown_path
+from console.state.text import fmt_clock
 
-SHOW_LIMIT = 1_000  # rows in the table (a DataTable of 10k rows takes seconds to fill); export writes all matches
+# rows in the table (a DataTable of 10k rows takes seconds to fill); export writes all matches
+SHOW_LIMIT = 1_000
 
 KIND_VARS = {
     "failure": "status-failure",
@@ -42,8 +45,9 @@ class EventLogScreen(ViewScreen):
     TOPICS = ("log",)
     BINDINGS = [*ViewScreen.BINDINGS, *bindings("log")]
 
-    def __init__(self) -> None:
-        super().__init__()
+    def __init__(self, log: EventLog, changes: Signal[tuple[str, str | None]]) -> None:
+        super().__init__(changes)
+        self.log_ = log
         self.last_seq = 0  # newest entry in the table
         self.rows: list[int] = []  # seqs shown, oldest first
         self.matching = 0  # entries matching the filter (the table shows the last SHOW_LIMIT)
@@ -51,22 +55,21 @@ class EventLogScreen(ViewScreen):
     def compose(self) -> ComposeResult:
         yield self.title_bar
         yield Input(
-            placeholder="filter: robot:lru1 kind:failure words…  (kinds: operation report refusal failure alert)",
+            placeholder=(
+                "filter: robot:lru1 kind:failure words…  "
+                "(kinds: operation report refusal failure alert)"
+            ),
             id="filter",
         )
         yield DataTable(id="log", cursor_type="row")
+        # the selected entry in full (the table cuts at 80 columns)
+        yield Static("", id="entry", classes="detail")
         yield Static(
-            "", id="entry", classes="detail"
-        )  # the selected entry in full (the table cuts at 80 columns)
-        yield Static(
-            f"last {LOG_LIMIT:,} entries kept in memory · ctrl+s export shown entries (JSON lines) · F2 schedule",
+            f"last {LOG_LIMIT:,} entries kept in memory · "
+            "ctrl+s export shown entries (JSON lines) · F2 schedule",
             classes="hint",
         )
         yield Footer()
-
-    @property
-    def log_(self):
-        return self.mission_app.event_log
 
     def shown_entries(self) -> list[LogEntry]:
         return self.log_.select(self.query_text)
@@ -176,14 +179,17 @@ class EventLogScreen(ViewScreen):
         entries = self.shown_entries()
         path = await self.app.push_screen_wait(
             PathPrompt(
-                f"Export {len(entries)} event-log entries (JSON lines) to", "missionctl-log.jsonl"
+                f"Export {len(entries)} event-log entries (JSON lines) to",
+                shown_path(Path.cwd() / "missionctl-log.jsonl"),
+                suffixes=(".jsonl",),
             )
         )
         if not path:
             return
+        where = shown_path(Path(path))
         try:
             n = self.log_.export(Path(path), entries)
         except OSError as e:
-            self.app.notify(f"{path}: {e.strerror or e}", title="Export failed", severity="error")
+            self.app.notify(f"{where}: {e.strerror or e}", title="Export failed", severity="error")
             return
-        self.app.notify(f"{n} entries written to {path}", title="Event log exported")
+        self.app.notify(f"{n} entries written to {where}", title="Event log exported")

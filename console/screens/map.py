@@ -9,31 +9,39 @@ skill" is the schedule's cursor on the mission screen.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from pathlib import Path
+from typing import Any
 
 from rich.text import Text
 from textual import events, on, work
 from textual.app import ComposeResult
 from textual.binding import Binding
-from textual.containers import Horizontal, Vertical
-from textual.screen import ModalScreen, Screen
-from textual.widgets import Footer, Input, Label, Select, Static
+from textual.containers import Horizontal
+from textual.screen import Screen
+from textual.widgets import Footer, Static
 
 from backend.core.model import (
-    NAME_RE,
-    AreaMarker,
-    Pose,
-    PoseMarker,
-    Position,
-    PositionMarker,
     Status,
 )
 from backend.core.ops import EditSkill, MarkerAdd, MarkerDelete, MarkerMove, MarkerRename
-from backend.core.params import marker_value
-from console.screens.dialogs import ChoiceScreen, ConfirmScreen
-from console.screens.mission import StatusLine, TopBar
-from console.state.actions import ACTIONS, bindings
-from console.state.model import CONNECTED, GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel, fmt_value
+from console.bindings import bindings
+from console.messages import HelpRequested, OperationRequested
+from console.screens.dialogs import ChoiceScreen, ConfirmScreen, MarkerPrompt
+from console.state.actions import ACTIONS
+from console.state.markers import (
+    bind_choices,
+    followers,
+    free_name,
+    marker_point,
+    marker_use,
+    moved_value,
+    new_marker,
+    picked_value,
+    relabel,
+)
+from console.state.model import CONNECTED, ConsoleModel
+from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS, fmt_value
+from console.widgets.bars import InfoLine, StatusLine, TopBar, connection_text
 from console.widgets.mapview import (
     AREA_GLYPH,
     BOX_GLYPH,
@@ -47,13 +55,10 @@ from console.widgets.mapview import (
     RSS_GLYPH,
     STONE_GLYPH,
     MapView,
-    centroid,
-    marker_use,
 )
-from console.widgets.select import SafeSelect
 
-if TYPE_CHECKING:
-    from console.app import MissionApp
+# this module's look (CSS_PATH); absolute, so a subclass defined elsewhere finds it too
+TCSS = Path(__file__).with_name("map.tcss")
 
 NO_FEED = "no map feed — is the simulator running?"
 TURN = math.radians(15)
@@ -75,6 +80,8 @@ def legend_text(colours: dict[str, str] | None = None) -> Text:
 
     t.append("Legend\n", style="bold")
     row(ROBOT_ARROWS[0], "bold", "robot, heading")
+    # the one heading convention (the editor, ctl and the info line use it too)
+    t.append("   heading: 0° east,\n   counter-clockwise\n", style="dim")
     for st in (
         Status.RUNNING,
         Status.PAUSED,
@@ -129,71 +136,30 @@ def param_rows(spec: Any, s: Any, names: list[str]) -> list[tuple[str, Text]]:
     return rows
 
 
+def info_text(model: ConsoleModel, v: MapView, feed_state: str) -> Text:
+    """The info line: the feed (when not live), the cursor and scale, who is
+    followed, the selected marker and the schedule's selected skill."""
+    t = Text()
+    if feed_state == "none" or v.mirror is None or not v.mirror.ready:
+        t.append(NO_FEED if feed_state == "none" else "waiting for the map feed…", style="bold")
+        t.append("  ")
+    x, y = v.cursor
+    t.append(f"cursor ({x:.1f}, {y:.1f}) heading {math.degrees(v.heading):.0f}°")
+    t.append(f"  {v.vp.mpp:.2g} m/px", style="dim")
+    if v.follow:
+        t.append(f"  following {v.follow}", style="bold")
+    if v.selected_marker:
+        use = marker_use(model).get(v.selected_marker, "unused")
+        t.append(f"  marker {v.selected_marker} ({use})")
+    found = model.find(v.selected_skill)
+    if found is not None:
+        s = found[2]
+        t.append(f"  skill {s.id} {s.skill} ({STATUS_WORDS[s.status]})", style="dim")
+    return t
+
+
 class Legend(Static):
-    DEFAULT_CSS = """
-    Legend { width: 26; height: 100%; border-left: vkey $primary 50%; background: $surface; padding: 0 1; }
-    """
-
-
-class InfoLine(Static):
-    DEFAULT_CSS = """
-    InfoLine { height: 1; padding: 0 1; background: $panel; text-wrap: nowrap; text-overflow: ellipsis; }
-    InfoLine.-nofeed { color: $warning; }
-    """
-
-
-class MarkerPrompt(ModalScreen[tuple[str, str] | None]):
-    """Name (and kind) of a new marker; or a new name for one."""
-
-    BINDINGS = [Binding("escape", "cancel", "Cancel")]
-    DEFAULT_CSS = """
-    MarkerPrompt { align: center middle; }
-    MarkerPrompt > Vertical { width: 60; max-width: 95%; height: auto; border: thick $primary; background: $surface; padding: 1 2; }
-    MarkerPrompt .hint { color: $text-muted; }
-    MarkerPrompt .error { color: $error; }
-    """
-
-    def __init__(self, title: str, default: str, *, kinds: bool = True, kind: str = "pose") -> None:
-        super().__init__()
-        self.title_text = title
-        self.default = default
-        self.kinds = kinds
-        self.kind = kind
-
-    def compose(self) -> ComposeResult:
-        with Vertical():
-            yield Label(self.title_text)
-            yield Input(self.default, id="name")
-            if self.kinds:
-                yield SafeSelect(
-                    [
-                        ("pose (position + heading)", "pose"),
-                        ("position", "position"),
-                        ("area (square around the cursor)", "area"),
-                    ],
-                    value=self.kind,
-                    allow_blank=False,
-                    id="kind",
-                )
-            yield Static("enter: ok · escape: cancel", classes="hint")
-            yield Static("", id="error", classes="error")
-
-    def on_mount(self) -> None:
-        self.query_one(Input).focus()
-
-    @on(Input.Submitted)
-    def _submitted(self, event: Input.Submitted) -> None:
-        name = event.value.strip()
-        if not NAME_RE.match(name):
-            self.query_one("#error", Static).update(
-                "a name starts with a letter; then letters, digits, _ or -"
-            )
-            return
-        kind = str(self.query_one("#kind", Select).value) if self.kinds else ""
-        self.dismiss((name, kind))
-
-    def action_cancel(self) -> None:
-        self.dismiss(None)
+    """The legend beside the map (hidden below LEGEND_MIN_WIDTH columns until toggled)."""
 
 
 MAP_ACTIONS = {a.name for a in ACTIONS if a.scope == "map"}
@@ -216,11 +182,7 @@ class MapScreen(Screen):
             "escape", "app.show_mission", "Schedule", show=False
         ),  # "back to the schedule" (help: App keys)
     ]
-    DEFAULT_CSS = """
-    MapScreen #map-main { height: 1fr; }
-    MapScreen MapView { width: 1fr; height: 100%; }
-    MapScreen.-no-legend Legend { display: none; }
-    """
+    CSS_PATH = TCSS
 
     def __init__(self, model: ConsoleModel) -> None:
         super().__init__()
@@ -233,10 +195,6 @@ class MapScreen(Screen):
         self._status = StatusLine("", id="map-status")
         self.message = ""
         self.legend_choice: bool | None = None  # None: by terminal width
-
-    @property
-    def mission_app(self) -> MissionApp:
-        return self.app  # type: ignore[return-value]
 
     def compose(self) -> ComposeResult:
         yield self._topbar
@@ -274,7 +232,7 @@ class MapScreen(Screen):
         )
         self.set_class(not show, "-no-legend")
 
-    # -- state in (called by the app) ---------------------------------------------------------------
+    # -- state in (called by the app) --------------------------------------------------------------
     def map_changed(self, mirror: Any, update: Any) -> None:
         kind = getattr(update, "kind", "snapshot")
         if kind == "none":
@@ -314,13 +272,12 @@ class MapScreen(Screen):
         self.update_top()
 
     def sync_selection(self) -> None:
-        ms = self.mission_app.mission_screen
-        sid = ms.schedule.cursor_id if ms is not None else None
+        sid = self.model.selection.skill  # the schedule's cursor
         if sid != self.view.selected_skill:
             self.view.selected_skill = sid
             self.view.overlays_changed()
 
-    # -- lines ------------------------------------------------------------------------------------------
+    # -- lines -------------------------------------------------------------------------------------
     def update_top(self) -> None:
         m = self.model
         t = Text()
@@ -328,55 +285,26 @@ class MapScreen(Screen):
         if m.mission is not None:
             t.append(f"  {m.mission.name}", style="bold")
             t.append(f"  rev {m.mission.revision}", style="dim")
-        glyph = {
-            "connected": "●",
-            "reconnecting": "⟳",
-            "connecting": "…",
-            "unreachable": "✕",
-            "offline": "○",
-        }.get(m.connection, "?")
-        t.append(f"   {glyph} {m.connection}")
+        t.append(f"   {connection_text(m.connection)}")
         t.append("   F2 schedule", style="dim")
         self._topbar.update(t, layout=False)
 
     def update_info(self) -> None:
-        v = self.view
-        t = Text()
-        if self.feed_state == "none" or v.mirror is None or not v.mirror.ready:
-            t.append(
-                NO_FEED if self.feed_state == "none" else "waiting for the map feed…", style="bold"
-            )
-            t.append("  ")
-        x, y = v.cursor
-        t.append(f"cursor ({x:.1f}, {y:.1f}) {math.degrees(v.heading):.0f}°")
-        t.append(f"  {v.vp.mpp:.2g} m/px", style="dim")
-        if v.follow:
-            t.append(f"  following {v.follow}", style="bold")
-        if v.selected_marker:
-            use = marker_use(self.model).get(v.selected_marker, "unused")
-            t.append(f"  marker {v.selected_marker} ({use})")
-        found = self.model.find(v.selected_skill)
-        if found is not None:
-            t.append(
-                f"  skill {found[2].id} {found[2].skill} ({STATUS_WORDS[found[2].status]})",
-                style="dim",
-            )
-        self._info.update(t, layout=False)
+        self._info.update(info_text(self.model, self.view, self.feed_state), layout=False)
         self._info.set_class(self.feed_state == "none", "-nofeed")
 
     def say(self, text: str, severity: str = "info") -> None:
         self.message = text
-        self._status.update(text, layout=False)
-        for c in ("error", "warning", "ok"):
-            self._status.set_class(severity == c, f"-{c}")
+        self._status.show(text, severity)
 
     def submit(self, op: Any, what: str, **kw: Any) -> None:
-        self.mission_app.submit(op, what, say=self.say, **kw)
+        self.post_message(OperationRequested(op, what, say=self.say, **kw))
 
     def _connected(self) -> bool:
         if self.model.connection != CONNECTED:
             self.say(
-                f"not connected to the mission server ({self.model.connection}): markers cannot be changed now",
+                f"not connected to the mission server ({self.model.connection}): "
+                "markers cannot be changed now",
                 "warning",
             )
             return False
@@ -392,9 +320,9 @@ class MapScreen(Screen):
             return None
         return m.markers[name]
 
-    # -- actions: view ------------------------------------------------------------------------------------
+    # -- actions: view -----------------------------------------------------------------------------
     def action_help(self) -> None:
-        self.mission_app.action_help()
+        self.post_message(HelpRequested())
 
     def action_cursor(self, dcol: int, drow: int) -> None:
         self.view.move_cursor(dcol, drow)
@@ -451,12 +379,10 @@ class MapScreen(Screen):
         if not robots:
             self.say("no robot position known yet (no telemetry): nothing to follow", "warning")
             return
+        # the next robot; after the last one: nobody
         cur = self.view.follow
-        nxt = (
-            robots[(robots.index(cur) + 1)]
-            if cur in robots and robots.index(cur) + 1 < len(robots)
-            else (None if cur in robots else robots[0])
-        )
+        i = robots.index(cur) + 1 if cur in robots else 0
+        nxt = robots[i] if i < len(robots) else None
         self.view.follow = nxt
         if nxt is None:
             self.say("stopped following")
@@ -496,48 +422,24 @@ class MapScreen(Screen):
         self.view.selected_marker = name
         if mk.kind == "pose":
             self.view.heading = mk.pose.yaw
-            x, y = mk.pose.x, mk.pose.y
-        elif mk.kind == "position":
-            x, y = mk.position.x, mk.position.y
-        else:
-            x, y = centroid([(p.x, p.y) for p in mk.area])
-        self.view.set_cursor(x, y)
+        self.view.set_cursor(*marker_point(mk))
         self.say(f"marker {name} ({mk.kind}){': ' + mk.description if mk.description else ''}")
         self.update_info()
 
-    # -- actions: markers -----------------------------------------------------------------------------------
-    def _free_name(self) -> str:
-        taken = set(self.model.mission.markers) if self.model.mission else set()
-        i = 1
-        while f"M{i}" in taken:
-            i += 1
-        return f"M{i}"
+    # -- actions: markers ------------------------------------------------------------------
 
     @work(group="dialog")
     async def action_map_add_marker(self) -> None:
         if not self._connected():
             return
         answer = await self.app.push_screen_wait(
-            MarkerPrompt("New marker at the cursor — name:", self._free_name())
+            MarkerPrompt("New marker at the cursor — name:", free_name(self.model.mission))
         )
         if not answer:
             return
         name, kind = answer
         x, y = (round(c, 1) for c in self.view.cursor)
-        if kind == "pose":
-            marker: Any = PoseMarker(pose=Pose(x=x, y=y, yaw=round(self.view.heading, 3)))
-        elif kind == "position":
-            marker = PositionMarker(position=Position(x=x, y=y))
-        else:
-            r = max(5.0, 4 * self.view.vp.mpp)
-            marker = AreaMarker(
-                area=[
-                    Position(x=x - r, y=y - r),
-                    Position(x=x + r, y=y - r),
-                    Position(x=x + r, y=y + r),
-                    Position(x=x - r, y=y + r),
-                ]
-            )
+        marker = new_marker(kind, x, y, self.view.heading, self.view.vp.mpp)
 
         def ok(reply: Any) -> None:
             self.view.selected_marker = name
@@ -545,42 +447,29 @@ class MapScreen(Screen):
 
         self.submit(MarkerAdd(name=name, marker=marker), f"add marker {name}", on_ok=ok)
 
-    def move_value(self, mk: Any) -> Any:
-        x, y = (round(c, 1) for c in self.view.cursor)
-        if mk.kind == "pose":
-            return Pose(x=x, y=y, z=mk.pose.z, yaw=round(self.view.heading, 3))
-        if mk.kind == "position":
-            return Position(x=x, y=y, z=mk.position.z)
-        cx, cy = centroid([(p.x, p.y) for p in mk.area])
-        return [
-            Position(x=round(p.x + x - cx, 2), y=round(p.y + y - cy, 2), z=p.z) for p in mk.area
-        ]
-
     def action_map_move_marker(self) -> None:
         mk = self._marker()
         if mk is None or not self._connected():
             return
         name = self.view.selected_marker
-        followers = [
-            s.id
-            for task in self.model.mission.tasks.values()
-            for s in task
-            if s.status == Status.IDLE and name in s.bindings.values()
-        ]
+        following = followers(self.model.mission, name)
+        x, y = (round(c, 1) for c in self.view.cursor)
+        value = moved_value(mk, x, y, self.view.heading)
 
         def ok(reply: Any) -> None:
             x, y = self.view.cursor
             text = f"moved {name} to ({x:.1f}, {y:.1f})"
-            if followers:
-                text += f"; {', '.join(followers)} follow{'s' if len(followers) == 1 else ''}"
+            if following:
+                text += f"; {', '.join(following)} follow{'s' if len(following) == 1 else ''}"
             stale = reply.value.get("stale", [])
             if stale:
-                text += f"; {', '.join(stale)} still use{'s' if len(stale) == 1 else ''} the old value — unsynchronize to update"
+                text += (
+                    f"; {', '.join(stale)} still use{'s' if len(stale) == 1 else ''} "
+                    "the old value — unsynchronize to update"
+                )
             self.say(text, "warning" if stale else "ok")
 
-        self.submit(
-            MarkerMove(name=name, value=self.move_value(mk)), f"move marker {name}", on_ok=ok
-        )
+        self.submit(MarkerMove(name=name, value=value), f"move marker {name}", on_ok=ok)
 
     @work(group="dialog")
     async def action_map_rename_marker(self) -> None:
@@ -619,7 +508,7 @@ class MapScreen(Screen):
 
         self.submit(MarkerDelete(name=name), f"delete marker {name}", on_ok=ok)
 
-    # -- actions: parameters of the selected skill ----------------------------------------------------------
+    # -- actions: parameters of the selected skill -------------------------------------------------
     def _skill(self) -> Any:
         self.sync_selection()
         found = self.model.find(self.view.selected_skill)
@@ -674,38 +563,33 @@ class MapScreen(Screen):
             return
         robot, s, spec = got
         name = self.view.selected_marker
-        # a parameter the marker can give a value (the server's own rule: a pose
-        # marker fits a position too), its own kind first, is bound to it; a
-        # marker-typed one takes its name
-        fits = sorted(
-            (p for p, ps in spec.params.items() if marker_value(ps, mk)[1] is None),
-            key=lambda p: spec.params[p].type != mk.kind,
-        )
-        names = [
-            p
-            for p, ps in spec.params.items()
-            if ps.type == "marker" and (not ps.marker_kinds or mk.kind in ps.marker_kinds)
-        ]
+        # a parameter the marker can give a value is bound to it; a marker-typed one takes its name
+        fits, names = bind_choices(spec, mk)
         if not fits and not names:
             kinds = ", ".join(f"{p} ({ps.type})" for p, ps in spec.params.items()) or "none"
             self.say(
-                f"{s.id} ({s.skill}) has no parameter for a {mk.kind} marker; its parameters: {kinds}",
+                f"{s.id} ({s.skill}) has no parameter for a {mk.kind} marker; "
+                f"its parameters: {kinds}",
                 "warning",
             )
             return
 
         def bind(pname: str) -> None:
+            # a label naming the marker bound before ("drive to POI-A") names the new one
+            before = s.bindings.get(pname) or (s.params.get(pname) if pname in names else None)
+            label = relabel(s.label, before if isinstance(before, str) else None, name)
             op = (
-                EditSkill(id=s.id, bindings={pname: name})
+                EditSkill(id=s.id, bindings={pname: name}, label=label)
                 if pname in fits
-                else EditSkill(id=s.id, params={pname: name})
+                else EditSkill(id=s.id, params={pname: name}, label=label)
             )
+            also = f"; label now '{label}'" if label is not None else ""
             self.submit(
                 op,
                 f"bind {s.id}.{pname} to {name}",
                 robot=robot,
                 skill=s.id,
-                on_ok=lambda r: self.say(f"{s.id}: {pname} bound to marker {name}", "ok"),
+                on_ok=lambda r: self.say(f"{s.id}: {pname} bound to marker {name}{also}", "ok"),
             )
 
         def holds(p: str) -> bool:
@@ -736,9 +620,7 @@ class MapScreen(Screen):
 
         def pick(pname: str) -> None:
             ptype = spec.params[pname].type
-            value: dict[str, float] = {"x": x, "y": y, "z": 0.0}
-            if ptype == "pose":
-                value |= {"roll": 0.0, "pitch": 0.0, "yaw": round(self.view.heading, 3)}
+            value = picked_value(ptype, x, y, self.view.heading)
             where = f"({x:g}, {y:g})" + (
                 f" heading {math.degrees(self.view.heading):.0f}°" if ptype == "pose" else ""
             )
@@ -760,7 +642,7 @@ class MapScreen(Screen):
             cancelled=f"pick cancelled: {s.id} unchanged",
         )
 
-    # -- disabled keys are explained, like on the mission screen -----------------------------------------------
+    # -- disabled keys are explained, like on the mission screen -----------------------------------
     async def run_named(self, action: str) -> None:
         if action in MAP_ACTIONS:
             await self.run_action(action)

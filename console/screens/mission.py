@@ -1,16 +1,15 @@
 """The mission screen: schedule panel, parameter editor, control keys.
 
-Layout (wide): top bar / schedule | parameter editor / status line / footer.
-Below 100 columns the editor is shown instead of the schedule while editing
-(enter / e opens it, escape returns). Part 2 adds the map, fleet and event-log
-screens as further app modes next to this one.
+Layout: top bar / schedule | parameter editor / status line / footer. From
+100 columns the editor is a side panel beside the schedule; below, it is a
+toggle (enter / e opens it beside the schedule, escape closes it). Part 2
+adds the map, fleet and event-log screens as further app modes next to this one.
 """
 
 from __future__ import annotations
 
-import asyncio
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from rich.text import Text
 from textual import events, on, work
@@ -18,7 +17,6 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal
 from textual.screen import Screen
-from textual.widgets import Footer, Input, Select, Static, Switch, TextArea
 
 from backend.core.model import Status
 from backend.core.ops import (
@@ -26,96 +24,90 @@ from backend.core.ops import (
     AddSkill,
     Control,
     DeleteSkills,
-    EditSkill,
-    LoadMission,
     MoveSkill,
-    Redo,
     RemoveBarrier,
     Retry,
     Sync,
-    Undo,
     Unsync,
 )
-from backend.core.params import ParamSpec, StartContext, starting_values
-from console.screens.dialogs import ConfirmScreen, PathPrompt, SkillPicker
-from console.state.actions import ACTIONS, BY_NAME, mission_bindings
+from console.bindings import mission_bindings
+from console.messages import HelpRequested, OperationRequested
+from console.screens.dialogs import ConfirmScreen, SkillPicker
+from console.screens.mission_files import MissionFiles
+from console.screens.mission_plan import PlanActions
+from console.state.actions import BY_NAME
 from console.state.capability import also_offered_by
+from console.state.context import FooterKey, context_keys, fit_footer
+from console.state.defaults import default_params
+from console.state.eventlog import AlertBook
+from console.state.files import RecentFiles
 from console.state.model import CONNECTED, ConsoleModel
+from console.widgets.bars import KeyBar, StatusLine, TopBar, connection_text
 from console.widgets.param_editor import ParamEditor
 from console.widgets.schedule import ScheduleView
 
-if TYPE_CHECKING:
-    from console.app import MissionApp
+# this module's look (CSS_PATH); absolute, so a subclass defined elsewhere finds it too
+TCSS = Path(__file__).with_name("mission.tcss")
 
 NARROW = 100
-FOOTER_ACTIONS = [a.name for a in ACTIONS if a.footer]
+# the footer while the editor has the focus (before the keys that always apply)
+EDITOR_FOOTER = (
+    FooterKey("apply", "⏎", "Apply"),
+    FooterKey("revert", "^r", "Revert"),
+    FooterKey("leave", "esc", "Close"),
+)
 
 
-def default_params(
-    spec_params: dict[str, ParamSpec], model: ConsoleModel, robot: str
-) -> tuple[dict[str, Any], dict[str, str]]:
-    """Values for the required parameters without a default, so a new skill is
-    valid at once (then edited): see `backend.core.params.starting_values`."""
-    tel = model.telemetry.get(robot)
-    ctx = StartContext(
-        robot=robot,
-        markers=model.mission.markers if model.mission else {},
-        robots=tuple(model.mission.robots) if model.mission else (),
-        **({"pose": tel.pose.model_dump()} if tel is not None else {}),
-    )
-    return starting_values(spec_params, ctx)
+def top_text(m: ConsoleModel, unacked: int, marks: list[str]) -> Text:
+    """The top bar: alert badge, mission and revision, connection, read-only, marks."""
+    t = Text()
+    t.append("missionctl", style="bold")
+    if unacked:  # the badge, first so 80 columns show it: F6 lists them
+        t.append(f" ⚠ {unacked} alert{'s' if unacked > 1 else ''} (F6) ", style="bold reverse")
+    if m.mission is not None:
+        t.append(f"  {m.mission.name}", style="bold")
+        t.append(f"  rev {m.mission.revision}", style="dim")
+    t.append(f"   {connection_text(m.connection)}")
+    if m.endpoint:
+        t.append(f" {m.endpoint}", style="dim")
+    if m.connection_detail and m.connection != CONNECTED:
+        t.append(f" — {m.connection_detail}", style="dim")
+    if m.read_only:
+        t.append(f"   {m.read_only}", style="bold")
+    if marks:
+        t.append(f"   marked: {', '.join(marks)}", style="bold")
+    return t
 
 
-class TopBar(Static):
-    DEFAULT_CSS = """
-    TopBar { height: 1; background: $panel; color: $text; padding: 0 1; }
-    TopBar.-reconnecting { background: $warning 40%; }
-    TopBar.-unreachable, TopBar.-offline { background: $error 30%; }
-    """
-
-
-class StatusLine(Static):
-    DEFAULT_CSS = """
-    StatusLine { height: 1; padding: 0 1; background: $surface; color: $text-muted; text-wrap: nowrap; text-overflow: ellipsis; }
-    StatusLine.-error { color: $error; text-style: bold; }
-    StatusLine.-warning { color: $warning; }
-    StatusLine.-ok { color: $success; }
-    """
-
-
-class MissionScreen(Screen):
+class MissionScreen(MissionFiles, PlanActions, Screen):
     BINDINGS = [
         *mission_bindings(),
         Binding("f1,question_mark", "help", "Help", id="app.help"),
         Binding("escape", "clear_marks", "Clear marks", show=False),
     ]
 
-    DEFAULT_CSS = """
-    MissionScreen #main { height: 1fr; }
-    MissionScreen ScheduleView { width: 1fr; height: 100%; }
-    MissionScreen ParamEditor { width: 50; height: 100%; border-left: vkey $primary 50%; background: $surface; }
-    MissionScreen ParamEditor:focus-within { border-left: vkey $primary; }
-    MissionScreen.-narrow ParamEditor { display: none; }
-    MissionScreen.-narrow.-editing ParamEditor { display: block; width: 100%; border-left: none; }
-    MissionScreen.-narrow.-editing ScheduleView { display: none; }
-    """
+    CSS_PATH = TCSS
 
-    def __init__(self, model: ConsoleModel) -> None:
+    def __init__(
+        self,
+        model: ConsoleModel,
+        alerts: AlertBook | None = None,
+        recent: RecentFiles | None = None,
+    ) -> None:
         super().__init__()
         self.model = model
+        self.alerts = alerts  # its count of unacknowledged alerts is the top bar's badge
+        self.recent = recent or RecentFiles()  # saved and loaded files, newest first
+        self.last_path: str | None = None  # of the last save or load: the next one's default
         self.pending_select: str | None = None
         # kept as attributes: messages may arrive while the screen is being torn down
         self._topbar = TopBar(id="topbar")
         self._schedule = ScheduleView(model, id="schedule")
         self._editor = ParamEditor(model, id="editor")
         self._status = StatusLine("", id="status")
-        self._footer = Footer()
+        self._footer = KeyBar("", id="keys")
         self.edit_after_select = False
         self.message = ""
-
-    @property
-    def mission_app(self) -> MissionApp:
-        return self.app  # type: ignore[return-value]
 
     def compose(self) -> ComposeResult:
         yield self._topbar
@@ -135,18 +127,29 @@ class MissionScreen(Screen):
 
     def _set_narrow(self, narrow: bool) -> None:
         self.set_class(narrow, "-narrow")
-        # at 80 columns the footer keys only fit compact and without the
-        # palette hint (ctrl+p is on the help screen): quit and help stay visible
-        self._footer.compact = narrow
-        self._footer.show_command_palette = not narrow
 
     def on_mount(self) -> None:
         self._set_narrow(self.app.size.width < NARROW)
         self.schedule.focus()
         self.update_top()
         self.schedule.rebuild()
+        self._stale: frozenset[str] = frozenset()
+        # "as of 25s ago" counts up; a robot falling silent turns stale without a message
+        self.set_interval(1.0, self.freshness_tick)
+
+    def freshness_tick(self) -> None:
+        """Redraw what shows how old a robot's state is: all of it when a
+        robot turned stale or fresh, else the stale robots' headers."""
+        stale = frozenset(r for r in self.model.robot_order() if self.model.freshness(r).stale)
+        if stale != self._stale:
+            self._stale = stale
+            self.schedule.refresh()
+            return
+        for robot in stale:
+            self.schedule.refresh_telemetry(robot)
 
     def on_resize(self, event: events.Resize) -> None:
+        self.update_keys()
         narrow = event.size.width < NARROW
         if narrow != self.has_class("-narrow"):
             self._set_narrow(narrow)
@@ -191,51 +194,28 @@ class MissionScreen(Screen):
     def telemetry_changed(self, robot: str) -> None:
         self.schedule.refresh_telemetry(robot)
 
+    def plan_changed(self) -> None:
+        """The plan checks' findings changed: the rows' glyphs and what sync allows."""
+        self.schedule.refresh()
+        self.refresh_availability()
+
+    def on_screen_resume(self) -> None:
+        """Back from the timeline or the checks: the cursor follows their selection."""
+        sid, cols = self.model.selection.skill, self.schedule.columns
+        if sid and cols and sid not in cols[self.schedule.cursor_col].line_of:
+            self.schedule.select(sid)
+
     def update_top(self) -> None:
-        m = self.model
-        t = Text()
-        t.append("missionctl", style="bold")
-        alerts = getattr(self.app, "alerts", None)
-        unacked = alerts.unacknowledged if alerts is not None else 0
-        if unacked:  # the badge, first so 80 columns show it: F6 lists them
-            t.append(f" ⚠ {unacked} alert{'s' if unacked > 1 else ''} (F6) ", style="bold reverse")
-        if m.mission is not None:
-            t.append(f"  {m.mission.name}", style="bold")
-            t.append(f"  rev {m.mission.revision}", style="dim")
-        state = m.connection
-        glyph = {
-            "connected": "●",
-            "reconnecting": "⟳",
-            "connecting": "…",
-            "unreachable": "✕",
-            "offline": "○",
-        }.get(state, "?")
-        t.append(f"   {glyph} {state}")
-        if m.endpoint:
-            t.append(f" {m.endpoint}", style="dim")
-        if m.connection_detail and state != CONNECTED:
-            t.append(f" — {m.connection_detail}", style="dim")
-        if m.read_only:
-            t.append(f"   {m.read_only}", style="bold")
-        if self.schedule.marks:
-            t.append(f"   marked: {', '.join(self.schedule.marks)}", style="bold")
-        bar = self._topbar
-        if t.plain == getattr(bar, "shown", None):
-            return
-        bar.shown = t.plain
-        bar.update(t, layout=False)
-        for c in ("reconnecting", "unreachable", "offline", "connecting", "connected"):
-            bar.set_class(state == c, f"-{c}")
+        unacked = self.alerts.unacknowledged if self.alerts is not None else 0
+        text = top_text(self.model, unacked, self.schedule.marks)
+        self._topbar.show(text, self.model.connection)
 
     def say(self, text: str, severity: str = "info") -> None:
         """The status line: the last outcome, refusal or explanation."""
         self.message = text
-        line = self._status
-        line.update(text, layout=False)
-        for c in ("error", "warning", "ok"):
-            line.set_class(severity == c, f"-{c}")
+        self._status.show(text, severity)
 
-    # -- selection -----------------------------------------------------------------------------------
+    # -- selection ---------------------------------------------------------------------------------
     @on(ScheduleView.CursorMoved)
     async def _cursor_moved(self, event: ScheduleView.CursorMoved) -> None:
         self.refresh_availability()
@@ -246,13 +226,45 @@ class MissionScreen(Screen):
         return self.schedule.cursor_robot, self.schedule.cursor_id
 
     def refresh_availability(self) -> None:
-        """Refresh the footer only when what it shows changed: it rebuilds its
-        keys and the screen's layout (tens of ms). Keys not in the footer are
-        checked when pressed (`check_action`), so they need no refresh."""
-        sig = (tuple(self.why_disabled(a) is None for a in FOOTER_ACTIONS), self.model.connection)
-        if sig != getattr(self, "_availability", None):
-            self._availability = sig
-            self.refresh_bindings()
+        """The footer shows the keys that apply now (keys are checked again
+        when pressed: `check_action`)."""
+        self.update_keys()
+
+    def update_keys(self) -> None:
+        """The footer: the editor's keys while it has the focus, else the
+        keys that apply to the selection first (console/state/context.py)."""
+        if not self.is_mounted:
+            return
+        keys = getattr(self.app, "action_keys", dict)()
+        if self.editor.focus_within():
+            first = list(EDITOR_FOOTER)
+        else:
+            robot, sid = self.selection()
+            first = context_keys(self.model, robot, sid, self.schedule.marks, keys)
+        self._footer.show(fit_footer(first, self.size.width or self.app.size.width))
+
+    def on_descendant_focus(self, event: events.DescendantFocus) -> None:
+        self.update_keys()
+
+    def on_descendant_blur(self, event: events.DescendantBlur) -> None:
+        self.update_keys()
+
+    async def action_footer_key(self, action: str) -> None:
+        """A click on a key in the footer."""
+        if action in BY_NAME:
+            await self.run_named(action)
+        elif action == "command_palette":
+            self.app.action_command_palette()
+        elif action == "quit":
+            await self.app.run_action("quit")
+        elif action == "apply":
+            self.editor.action_apply()
+        elif action == "revert":
+            await self.editor.action_revert()
+        elif action == "leave":
+            self.editor.action_leave()
+        else:
+            await self.run_action(action)
 
     def why_disabled(self, action: str) -> str | None:
         if action not in BY_NAME:
@@ -288,13 +300,14 @@ class MissionScreen(Screen):
         if not self.explain(action):
             await self.run_action(action)
 
-    # -- submitting -----------------------------------------------------------------------------------
+    # -- submitting --------------------------------------------------------------------------------
     def submit(self, op: Any, what: str, **kw: Any) -> None:
-        self.mission_app.submit(op, what, **kw)
+        """The app submits it (OperationRequested) and reports on the status line."""
+        self.post_message(OperationRequested(op, what, **kw))
 
-    # -- actions: plan ----------------------------------------------------------------------------------
+    # -- actions: plan -----------------------------------------------------------------------------
     def action_help(self) -> None:
-        self.mission_app.action_help()
+        self.post_message(HelpRequested())
 
     def action_clear_marks(self) -> None:
         if self.schedule.marks:
@@ -311,13 +324,7 @@ class MissionScreen(Screen):
         robot, sid = self.selection()
         if robot is None or self.model.library is None:
             return
-        found = self.model.find(sid)
-        task = self.model.task(robot)
-        idle = [s.id for s in task if s.status == Status.IDLE]
-        if found and found[2].status == Status.IDLE:
-            at, where = idle.index(found[2].id) + 1, f"after {found[2].id}"
-        else:
-            at, where = 0, "at the head of the plan"
+        at, where = self.model.insertion_point(robot, sid)
         skills = self.model.skills_of(robot)
         offered = {name: also_offered_by(self.model, name, robot) for name in skills}
         choice = await self.app.push_screen_wait(
@@ -373,19 +380,8 @@ class MissionScreen(Screen):
 
     @on(ParamEditor.ApplyRequested)
     def _apply(self, event: ParamEditor.ApplyRequested) -> None:
-        op = EditSkill(
-            id=event.skill_id,
-            label=event.label,
-            params=event.params,
-            bindings=event.bindings,
-            policies=event.policies,
-        )
         robot = self.model.owner(event.skill_id)
-        changed = ", ".join(
-            [*event.params, *event.bindings]
-            + (["label"] if event.label is not None else [])
-            + (["policies"] if event.policies is not None else [])
-        )
+        changed = ", ".join(event.changed())
 
         def refused(reply: Any) -> None:
             if reply.skill in (None, event.skill_id) and self.editor.skill_id == event.skill_id:
@@ -395,7 +391,7 @@ class MissionScreen(Screen):
             self.say(f"{event.skill_id}: applied {changed}", "ok")
 
         self.submit(
-            op,
+            event.operation(),
             f"edit {event.skill_id}",
             robot=robot,
             skill=event.skill_id,
@@ -441,21 +437,7 @@ class MissionScreen(Screen):
     def action_move_down(self) -> None:
         self._move(1)
 
-    def action_undo(self) -> None:
-        self.submit(
-            Undo(),
-            "undo",
-            on_ok=lambda r: self.say(f"undone: {r.value.get('undone', 'last edit')}", "ok"),
-        )
-
-    def action_redo(self) -> None:
-        self.submit(
-            Redo(),
-            "redo",
-            on_ok=lambda r: self.say(f"redone: {r.value.get('redone', 'edit')}", "ok"),
-        )
-
-    # -- actions: synchronization -----------------------------------------------------------------------
+    # -- actions: synchronization ------------------------------------------------------------------
     def action_sync(self) -> None:
         robot, sid = self.selection()
         if robot is None or sid is None:
@@ -531,7 +513,7 @@ class MissionScreen(Screen):
             ),
         )
 
-    # -- actions: execution -------------------------------------------------------------------------------
+    # -- actions: execution ------------------------------------------------------------------------
     def _control(self, op: str, robot: str | None) -> None:
         who = robot or "all robots"
 
@@ -583,88 +565,6 @@ class MissionScreen(Screen):
             )
         ):
             self._control("reset", None)
-
-    # -- actions: files ------------------------------------------------------------------------------------
-    @work(group="dialog")
-    async def action_save(self) -> None:
-        m, lib = self.model.mission, self.model.library
-        if m is None or lib is None:
-            return
-        default = self.mission_app.last_path or f"{m.name.lower().replace(' ', '_')}.yaml"
-        path = await self.app.push_screen_wait(PathPrompt("Save the mission to (YAML):", default))
-        if not path:
-            return
-        try:
-            note = await asyncio.to_thread(save_with_library, m, lib, Path(path))
-        except OSError as e:
-            self.say(f"cannot save {path}: {e.strerror or e}", "error")
-            self.app.notify(f"{path}: {e.strerror or e}", title="Not saved", severity="error")
-            return
-        self.mission_app.last_path = path
-        self.say(f"saved {path} (revision {m.revision})" + (f"; {note}" if note else ""), "ok")
-
-    @work(group="dialog")
-    async def action_load(self) -> None:
-        path = await self.app.push_screen_wait(
-            PathPrompt(
-                "Load a mission from (YAML):", self.mission_app.last_path or "", must_exist=True
-            )
-        )
-        if not path:
-            return
-        from backend.files.diagnostics import FileProblems
-        from backend.files.missions import load_mission
-
-        try:
-            mission, _lib = await asyncio.to_thread(load_mission, path)
-        except FileProblems as e:
-            first = str(e.issues[0]) if e.issues else str(e)
-            more = f" (and {len(e.issues) - 1} more)" if len(e.issues) > 1 else ""
-            self.say(f"cannot load: {first}{more}", "error")
-            self.app.notify(first + more, title="Mission file invalid", severity="error")
-            return
-        except OSError as e:
-            self.say(f"cannot load {path}: {e.strerror or e}", "error")
-            return
-        if not await self.app.push_screen_wait(
-            ConfirmScreen(
-                f"Replace the mission with {path} ('{mission.name}')? The current plan is replaced for every operator.",
-                yes="Replace",
-            )
-        ):
-            return
-        self.mission_app.last_path = path
-        self.submit(
-            LoadMission(mission=mission),
-            f"load {path}",
-            on_ok=lambda r: self.say(f"loaded {path}: '{mission.name}'", "ok"),
-        )
-
-    # -- widgets inside the editor must not trigger schedule keys ----------------------------------------
-    def is_typing(self) -> bool:
-        f = self.focused
-        return isinstance(f, Input | TextArea | Select | Switch)
-
-
-def save_with_library(mission: Any, library: Any, path: Path) -> str:
-    """Save the mission; if its library reference does not resolve from the
-    new place, write the library beside it and point there."""
-    from backend.files import yamlio
-    from backend.files.missions import library_path, save_mission
-
-    lib_file = library_path(path, mission.library)
-    if lib_file.exists():
-        save_mission(mission, path)
-        return ""
-    beside = path.with_name(path.stem + ".library.yaml")
-    beside.write_text(
-        yamlio.dump(
-            library.model_dump(mode="json", exclude_defaults=True) | {"format": library.format}
-        ),
-        encoding="utf-8",
-    )
-    save_mission(mission, path, library_file=beside)
-    return f"its skill library written to {beside.name}"
 
 
 def _queued(robot: str, what: str, value: dict[str, Any]) -> str:

@@ -1,8 +1,8 @@
 """Every operator action in one table: key, footer label, help text, group.
 
-Key bindings, the footer, the help screen and the command palette are all
-generated from this table, so they cannot disagree. Each action has a stable
-binding id ("<scope>.<name>") that users remap in their config file:
+Key bindings (console/bindings.py), the footer, the help screen and the
+command palette are all generated from this table, so they cannot disagree.
+Each action has a stable binding id ("<scope>.<name>") that users remap in their config file:
 
     [keymap]
     "mission.sync" = "S"
@@ -16,8 +16,6 @@ action_<name> there), "app" (every screen: switching screens), or one screen
 from __future__ import annotations
 
 from dataclasses import dataclass
-
-from textual.binding import Binding
 
 
 @dataclass(frozen=True)
@@ -46,6 +44,8 @@ SCOPE_TITLES = {
     "map": "Map",
     "log": "Event log",
     "alerts": "Alerts",
+    "timeline": "Timeline",
+    "checks": "Plan checks",
 }
 
 
@@ -59,7 +59,28 @@ ACTIONS: list[Action] = [
         "Plan",
         True,
     ),
-    Action("edit", "enter,e", "Edit", "Edit the selected skill's parameters", "Plan"),
+    Action(
+        "edit",
+        "enter,e",
+        "Edit",
+        "Edit the selected skill's parameters (below 100 columns: opens the editor beside "
+        "the schedule; escape closes it)",
+        "Plan",
+    ),
+    Action(
+        "duplicate",
+        "c",
+        "Duplicate",
+        "Duplicate the selected skill: an idle copy after it (or first in the plan)",
+        "Plan",
+    ),
+    Action(
+        "search",
+        "slash",
+        "Find",
+        "Find a skill by id, label, skill, robot or parameter and jump to it",
+        "Plan",
+    ),
     Action(
         "delete", "d,delete", "Delete", "Delete the selected idle skill (asks first)", "Plan", True
     ),
@@ -103,7 +124,15 @@ ACTIONS: list[Action] = [
         "retry",
         "t",
         "Retry",
-        "Retry the selected failed skill (new attempt right after it)",
+        "Retry the selected failed skill as it was (new attempt queued right after it)",
+        "Synchronization",
+    ),
+    Action(
+        "retry_edit",
+        "T",
+        "Edit+retry",
+        "Retry the selected failed skill after editing it: its next attempt, idle, first in "
+        "the plan (edit it, then sync)",
         "Synchronization",
     ),
     # execution
@@ -261,7 +290,8 @@ ACTIONS: list[Action] = [
         "map_bind",
         "b",
         "Bind",
-        "Bind the selected marker to a fitting parameter of the schedule's selected skill (several fit: choose one)",
+        "Bind the selected marker to a fitting parameter of the schedule's selected skill "
+        "(several fit: choose one)",
         "Map",
         True,
         scope="map",
@@ -270,40 +300,87 @@ ACTIONS: list[Action] = [
         "map_pick",
         "p",
         "Pick pose",
-        "Set the selected skill's pose/position parameter to the cursor (position + heading; several: choose one)",
+        "Set the selected skill's pose/position parameter to the cursor "
+        "(position + heading; several: choose one)",
         "Map",
         True,
         scope="map",
     ),
     Action("map_legend", "l", "Legend", "Show/hide the legend", "Map", scope="map"),
+    # the plan's timeline and checks (console/screens/timeline.py, checks.py); not in the
+    # footers of the other screens, which are full at 80 columns: help and palette list them
+    Action(
+        "show_timeline",
+        "f7,6",
+        "Timeline",
+        "Show the predicted timeline of the plan: bars per skill, barrier waits, coverage",
+        "Screens",
+        scope="app",
+    ),
+    Action(
+        "show_checks",
+        "f8,7",
+        "Checks",
+        "Show the plan checks (energy, coverage, barriers, terrain, parameters); waive there",
+        "Screens",
+        scope="app",
+    ),
+    *(
+        Action(f"timeline_{name}", key, label, text, "Timeline", footer, "timeline")
+        for name, key, label, text, footer in (
+            ("prev", "left,h", "◀", "Select the robot's previous skill", False),
+            ("next", "right,l", "▶", "Select the robot's next skill", False),
+            ("up", "up,k", "Up", "Select a skill of the robot above, at the same time", False),
+            (
+                "down",
+                "down,j",
+                "Down",
+                "Select a skill of the robot below, at the same time",
+                False,
+            ),
+            ("zoom_in", "plus,equals_sign", "Zoom+", "Zoom in (around the selection)", True),
+            ("zoom_out", "minus", "Zoom-", "Zoom out (around the selection)", True),
+            ("fit", "0,home", "Fit", "Show the whole plan, from now to its end", True),
+            ("now", "n", "Now", "Scroll to now", False),
+            ("earlier", "shift+left,less_than_sign", "Earlier", "Scroll back in time", False),
+            ("later", "shift+right,greater_than_sign", "Later", "Scroll on in time", False),
+            ("schedule", "enter", "Schedule", "Show the selected skill in the schedule", True),
+        )
+    ),
+    Action(
+        "checks_waive",
+        "w",
+        "Waive",
+        "Waive the selected finding, with a reason",
+        "Checks",
+        True,
+        "checks",
+    ),
+    Action(
+        "checks_unwaive",
+        "u",
+        "Unwaive",
+        "Withdraw the selected finding's waiver",
+        "Checks",
+        True,
+        "checks",
+    ),
+    Action(
+        "checks_schedule",
+        "enter",
+        "Schedule",
+        "Show the finding's skill in the schedule",
+        "Checks",
+        True,
+        "checks",
+    ),
 ]
 
 # the mission screen's actions (the rest are bound elsewhere)
 BY_NAME = {a.name: a for a in ACTIONS if a.scope == "mission"}
 
 # actions that need a skill/robot under the cursor and apply to the server
-MUTATING = set(BY_NAME) - {"edit", "save", "toggle_static", "mark"}
-
-
-def bindings(scope: str = "mission", *, show: bool | None = None) -> list[Binding]:
-    """Bindings of one scope; `show` overrides the footer flag (app-wide keys
-    are bound twice: hidden on the app, shown by the part-2 screens)."""
-    return [
-        Binding(
-            a.key,
-            f"app.{a.name}" if scope == "app" else a.name,
-            a.label,
-            show=a.footer if show is None else show,
-            id=a.binding_id,
-            tooltip=a.description,
-        )
-        for a in ACTIONS
-        if a.scope == scope
-    ]
-
-
-def mission_bindings() -> list[Binding]:
-    return bindings("mission")
+MUTATING = set(BY_NAME) - {"edit", "save", "toggle_static", "mark", "search"}
 
 
 APP_KEYS: list[tuple[str, str, str]] = [
@@ -323,6 +400,8 @@ NAV_KEYS: list[tuple[str, str, str]] = [
 ]
 
 EDITOR_KEYS: list[tuple[str, str, str]] = [
-    ("ctrl+s", "Apply", "Apply the edited parameters (in the editor)"),
+    ("enter", "Apply", "Apply the edited parameters (enter in a field, or the Apply button)"),
     ("ctrl+r", "Revert", "Discard your changes (in the editor)"),
+    ("escape", "Close", "Back to the schedule (below 100 columns: closes the editor)"),
+    ("30 / 30deg / 0.5rad", "Angles", "Angles are typed in degrees (heading 0° east, ccw)"),
 ]

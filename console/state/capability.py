@@ -16,7 +16,8 @@ from __future__ import annotations
 from datetime import datetime
 
 from backend.core.model import Status
-from console.state.model import GLYPHS, STATUS_WORDS, ConsoleModel, fmt_clock
+from console.state.model import ConsoleModel
+from console.state.text import GLYPHS, STATUS_WORDS, fmt_clock
 
 FIELDS = ("skill", "type", "module", "prop", "name")
 SPARKS = "▁▂▃▄▅▆▇█"
@@ -62,6 +63,30 @@ def matches(model: ConsoleModel, robot: str, query: str) -> bool:
         if not any(value in x.lower() for x in pools):
             return False
     return True
+
+
+def filter_examples(model: ConsoleModel) -> str:
+    """Filter examples that match robots of this fleet (and not all of them,
+    where possible): what the filter's placeholder shows."""
+    robots = fleet_order(model)
+    facets = [_facets(model, r) for r in robots]
+
+    def pick(field: str) -> str | None:
+        values = [v for f in facets for v in f[field]]
+        telling = [v for v in values if sum(v in f[field] for f in facets) < len(facets)]
+        return (telling or values or [None])[0]
+
+    examples = []
+    for field, prefix in (
+        ("skill", ""),
+        ("type", "type:"),
+        ("module", "module:"),
+        ("prop", "prop:"),
+    ):
+        value = pick(field)
+        if value:
+            examples.append(prefix + value)
+    return " · ".join(examples) if examples else "skill · type:… · module:… · prop:…"
 
 
 def filter_robots(model: ConsoleModel, query: str) -> list[str]:

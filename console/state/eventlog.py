@@ -18,17 +18,18 @@ from __future__ import annotations
 
 import json
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from datetime import datetime, timedelta
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from pydantic import BaseModel
 
 from backend.core import events as ev
 from backend.core.model import Mission
 from backend.protocol.messages import Alert, RobotInfo, Telemetry
-from console.state.model import GLYPHS, STATUS_WORDS, ConsoleModel
+from console.state.model import ConsoleModel
+from console.state.text import GLYPHS, STATUS_WORDS
 
 LOG_LIMIT = 10_000
 ALERT_LIMIT = 1_000
@@ -168,6 +169,17 @@ def read_jsonl(path: Path) -> list[LogEntry]:
     ]
 
 
+# events that touch no robot's column -> their phrase in an operation's log line
+PHRASES: dict[type, Callable[[Any], str]] = {
+    ev.BarrierRemoved: lambda e: f"barrier {e.id} removed",
+    ev.MarkerSet: lambda e: f"marker {e.name}",
+    ev.MarkerRemoved: lambda e: f"marker {e.name} removed",
+    ev.MissionReplaced: lambda e: f"mission replaced by '{e.mission.name}'",
+    ev.WaiverSet: lambda e: f"waived {e.check}: {e.waiver.reason}",
+    ev.WaiverRemoved: lambda e: f"waiver of {e.check} withdrawn",
+}
+
+
 def _summary(batch: ev.EventBatch, model: ConsoleModel) -> tuple[list[str], list[str]]:
     robots: list[str] = []
     parts: list[str] = []
@@ -195,16 +207,10 @@ def _summary(batch: ev.EventBatch, model: ConsoleModel) -> tuple[list[str], list
                 for sid in b.skills:
                     robot(model.owner(sid))
                 parts.append(f"barrier {bid} ({', '.join(b.skills)})")
-            case ev.BarrierRemoved(id=bid):
-                parts.append(f"barrier {bid} removed")
-            case ev.MarkerSet(name=n):
-                parts.append(f"marker {n}")
-            case ev.MarkerRemoved(name=n):
-                parts.append(f"marker {n} removed")
-            case ev.MissionReplaced(mission=m):
-                parts.append(f"mission replaced by '{m.name}'")
             case _:
-                pass
+                phrase = PHRASES.get(type(e))
+                if phrase is not None:
+                    parts.append(phrase(e))
     if len(parts) > 4:
         parts = parts[:4] + [f"… {len(parts) - 4} more"]
     return robots, parts
@@ -399,3 +405,28 @@ class AlertBook:
                     if a:
                         out.append(a)
         return out
+
+
+TOAST_TOGETHER = timedelta(seconds=30)  # offline alerts this close are one situation
+
+
+def toast_text(book: AlertBook, a: AlertEntry) -> tuple[str, str]:
+    """(title, message) of the notification for alert `a`: robots going
+    offline together (the link, the sim or the site went down) are one
+    notification naming them all, each later one replacing it."""
+    if a.kind == "offline" and a.robot:
+        robots = list(
+            dict.fromkeys(
+                x.robot
+                for x in book.alerts
+                if x.kind == "offline"
+                and x.robot
+                and not x.acknowledged
+                and abs(x.at - a.at) <= TOAST_TOGETHER
+            )
+        )
+        if len(robots) > 1:
+            names = ", ".join(robots[:-1]) + f" and {robots[-1]}"
+            return "Robots offline", f"{names} went offline"
+        return "Robots offline", a.message
+    return " · ".join(x for x in (a.robot, a.skill) if x) or "Alert", a.message

@@ -3,49 +3,28 @@
 `ConsoleModel` holds the mirrored mission, the skill library, the fleet
 (presence, manifests), the latest telemetry per robot and the connection
 state. The app updates it from messages (`console.messages`) only, so tests
-can drive it without a network. Everything the screens show is derived here
-(glyphs, summaries, header texts, why an action does not apply), so it can be
-unit-tested without a terminal.
+can drive it without a network. What the screens show is derived here and
+beside it (console/state/text.py: glyphs, summaries; availability.py: why an
+action does not apply), so it can be unit-tested without a terminal.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from datetime import datetime
-from typing import Any
+from datetime import UTC, datetime
 
 from backend.core import events as ev
 from backend.core.library import Library
-from backend.core.model import ACTIVE, FINISHED, Mission, SkillInstance, Status, how_to_change
-from backend.core.params import ParamSpec
+from backend.core.model import ACTIVE, Mission, SkillInstance, Status
 from backend.protocol.messages import RobotInfo, Telemetry
-
-# -- statuses -------------------------------------------------------------------
-
-GLYPHS: dict[Status, str] = {
-    Status.SUCCESS: "✓",
-    Status.FAILURE: "✗",
-    Status.RUNNING: "▶",
-    Status.PAUSED: "‖",
-    Status.SYNCHWAITING: "◷",
-    Status.IDLE_SYNCHRONIZED: "●",
-    Status.IDLE: "○",
-}
-
-# short words for places where the full status does not fit
-STATUS_WORDS: dict[Status, str] = {
-    Status.SUCCESS: "success",
-    Status.FAILURE: "failure",
-    Status.RUNNING: "running",
-    Status.PAUSED: "paused",
-    Status.SYNCHWAITING: "waiting at barrier",
-    Status.IDLE_SYNCHRONIZED: "queued",
-    Status.IDLE: "idle",
-}
-
-# CSS-friendly names (theme variables $status-<name>, component classes)
-STATUS_CSS: dict[Status, str] = {s: s.value.replace("_", "-") for s in Status}
+from console.state import availability
+from console.state.freshness import Freshness, freshness
+from console.state.plan import PlanView
+from console.state.text import GLYPHS, STATUS_WORDS, fmt_clock
 
 HISTORY = 120  # telemetry samples kept per robot (bounded memory)
 
@@ -58,104 +37,43 @@ CONNECTING, CONNECTED, RECONNECTING, UNREACHABLE, OFFLINE = (
 )
 
 
-def fmt_clock(t: datetime | None) -> str:
-    """HH:MM:SS in local time (deterministic: from a timestamp, never `now`)."""
-    if t is None:
-        return "--:--:--"
-    if t.tzinfo is not None:
-        t = t.astimezone()
-    return t.strftime("%H:%M:%S")
-
-
-def fmt_duration(seconds: float | None) -> str:
-    if seconds is None:
-        return "?"
-    s = max(0, int(round(seconds)))
-    if s < 60:
-        return f"{s}s"
-    if s < 3600:
-        return f"{s // 60}m{s % 60:02d}s"
-    return f"{s // 3600}h{(s % 3600) // 60:02d}m"
-
-
-def fmt_number(v: Any) -> str:
-    if isinstance(v, bool):
-        return "yes" if v else "no"
-    if isinstance(v, float):
-        return f"{v:g}"
-    return str(v)
-
-
-def fmt_value(spec: ParamSpec | None, v: Any) -> str:
-    """A short, one-line rendering of a parameter value."""
-    t = spec.type if spec else None
-    if (
-        isinstance(v, dict)
-        and t in ("pose", "position")
-        or (isinstance(v, dict) and set(v) <= {"x", "y", "z", "roll", "pitch", "yaw"} and v)
-    ):
-        return "(" + ",".join(fmt_number(v.get(k, 0.0)) for k in ("x", "y")) + ")"
-    if t == "area" and isinstance(v, list):
-        return f"area[{len(v)}]"
-    if isinstance(v, list):
-        return "[" + ",".join(fmt_number(x) for x in v[:3]) + ("…" if len(v) > 3 else "") + "]"
-    if isinstance(v, dict):
-        return (
-            "{"
-            + ",".join(f"{k}:{fmt_number(x)}" for k, x in list(v.items())[:2])
-            + ("…" if len(v) > 2 else "")
-            + "}"
-        )
-    unit = (
-        spec.unit
-        if spec and spec.unit and isinstance(v, int | float) and not isinstance(v, bool)
-        else ""
-    )
-    return f"{fmt_number(v)}{unit}"
-
-
-def param_summary(skill: SkillInstance, library: Library | None) -> str:
-    """Bindings and the values that differ from the library defaults."""
-    spec = library.skills.get(skill.skill) if library else None
-    parts: list[str] = []
-    for name, marker in skill.bindings.items():
-        parts.append(f"{name}@{marker}")
-    for name, value in skill.params.items():
-        if name in skill.bindings:
-            continue
-        pspec = spec.params.get(name) if spec else None
-        if pspec is not None and pspec.default is not None:
-            try:
-                from backend.core.params import normalize_value
-
-                if normalize_value(pspec, pspec.default) == value:
-                    continue
-            except Exception:
-                pass
-        parts.append(f"{name}={fmt_value(pspec, value)}")
-    parts.extend(policy_marks(skill))
-    return " ".join(parts)
-
-
-def policy_marks(skill: SkillInstance) -> list[str]:
-    """Short marks for the policies that are set: 'retry×2 pause-out-of-comms recharge<20%'."""
-    p = skill.policies
-    marks = [f"retry×{p.retries}"] if p.retries else []
-    if p.pause_out_of_comms:
-        marks.append("pause-out-of-comms")
-    if p.recharge_below is not None:
-        marks.append(f"recharge<{round(p.recharge_below * 100)}%")
-    return marks
-
-
-def skill_title(skill: SkillInstance) -> str:
-    return skill.label or skill.skill
-
-
-# actions an observer (read-only account) may still use: they change nothing on the server
-_READ_ONLY_OK = frozenset({"save", "help", "edit", "mark", "toggle_static", "clear_marks"})
-
 # -- the model --------------------------------------------------------------------
+
+# operations a robot's answer or report becomes (the robot was heard)
+ROBOT_OPS = frozenset({"report", "sync_ack", "unsync_done", "retry_ack", "reconcile"})
+
+
+PLAN_FIELDS = {"id", "skill", "label", "params", "bindings", "policies"}  # a skill, as planned
+
+
+def plan_digest(mission: Mission) -> str:
+    """What a saved mission file holds of the plan, as a digest: skills
+    (without their statuses), barriers and markers — two plans with the
+    same digest save to the same file."""
+    plan = {
+        "tasks": {
+            robot: [
+                s.model_dump(
+                    mode="json", include={"id", "skill", "label", "params", "bindings", "policies"}
+                )
+                for s in task
+            ]
+            for robot, task in mission.tasks.items()
+        },
+        "barriers": {k: b.model_dump(mode="json") for k, b in mission.barriers.items()},
+        "markers": {k: m.model_dump(mode="json") for k, m in mission.markers.items()},
+    }
+    return hashlib.sha1(json.dumps(plan, sort_keys=True).encode()).hexdigest()
+
+
+@dataclass
+class Selection:
+    """The schedule's selection, which other screens act on too (the map binds
+    a marker to the selected skill): the skill under the schedule's cursor and
+    the skills marked for a new barrier. The schedule widget keeps it."""
+
+    skill: str | None = None
+    marks: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -177,6 +95,17 @@ class ConsoleModel:
     _robot_state: dict[str, tuple[SkillInstance | None, int]] = field(default_factory=dict)
     # robot -> the last HISTORY (battery, link) samples, for the fleet screen's sparklines
     history: dict[str, deque[tuple[float, float]]] = field(default_factory=dict)
+    selection: Selection = field(default_factory=Selection)
+    # the plan as this console last saved or loaded it (or first got it): plan_digest
+    saved_digest: str = ""
+    # robot -> when this console last heard it (telemetry, a report, presence back)
+    heard: dict[str, datetime] = field(default_factory=dict)
+    clock: Callable[[], datetime] = field(default=lambda: datetime.now(UTC))
+    # robot -> its commands not yet acknowledged, as sentences ("sync lru1-3, 2m10s old");
+    # empty until the robot link's state reaches the console (issue 19): quitting asks then
+    pending: dict[str, list[str]] = field(default_factory=dict)
+    # the plan's forecast and checks (console/state/plan.py), refreshed by the app
+    plan: PlanView = field(default_factory=PlanView)
 
     # -- updates ------------------------------------------------------------------
     def load(
@@ -186,8 +115,11 @@ class ConsoleModel:
         robots: dict[str, RobotInfo] | None = None,
         server_id: str = "",
     ) -> None:
+        first = self.mission is None
         self.mission = mission
         self.library = library
+        if first:  # what the server had: the plan from its file (the demo's), or journal
+            self.mark_saved()
         if robots is not None:
             self.robots = dict(robots)
         for name in mission.robots:
@@ -209,12 +141,8 @@ class ConsoleModel:
         columns changed, or None when everything may have changed."""
         if self.mission is None:
             return None
-        if mission is not None:
-            self.mission = mission
-        else:
-            if batch.revision <= self.mission.revision:
-                return set()
-            self.mission = ev.apply_events(self.mission, batch)
+        if not self._take(batch, mission):
+            return set()
         robots: set[str] = set()
         reindex = False
         barriers = False
@@ -254,11 +182,58 @@ class ConsoleModel:
             return None
         return robots
 
+    def _take(self, batch: ev.EventBatch, mission: Mission | None) -> bool:
+        """The mission after `batch` (False: an old batch, nothing changed)."""
+        assert self.mission is not None
+        if mission is not None:
+            self.mission = mission
+        elif batch.revision <= self.mission.revision:
+            return False
+        else:
+            self.mission = ev.apply_events(self.mission, batch)
+        if batch.op in ROBOT_OPS:  # the robot spoke: it was alive then
+            now = self.clock()
+            for e in batch.events:
+                robot = self._owner.get(getattr(e, "id", ""), None) or getattr(e, "robot", None)
+                if isinstance(robot, str):
+                    self.heard[robot] = now
+        return True
+
+    def mark_saved(self) -> None:
+        """The plan was just saved to (or loaded from) a file."""
+        self.saved_digest = plan_digest(self.mission) if self.mission is not None else ""
+
+    @property
+    def unsaved(self) -> bool:
+        """The plan differs from what was last saved or loaded (or first shown)."""
+        return self.mission is not None and plan_digest(self.mission) != self.saved_digest
+
+    def quit_risks(self) -> list[str]:
+        """What quitting now would walk away from: robots executing, commands
+        not yet acknowledged, plan edits not saved to a file (sentences)."""
+        risks: list[str] = []
+        busy = []
+        for robot in self.robot_order():
+            act = self.robot_state(robot)[0]
+            if act is not None:
+                busy.append(f"{robot} is {STATUS_WORDS[act.status]} ({act.id})")
+        if busy:
+            risks.append("; ".join(busy))
+        waiting = [f"{r}: {', '.join(cmds)}" for r, cmds in self.pending.items() if cmds]
+        if waiting:
+            risks.append("commands not yet acknowledged — " + "; ".join(waiting))
+        if self.unsaved:
+            risks.append("the plan has changes not saved to a file")
+        return risks
+
     def set_robot(self, info: RobotInfo) -> None:
         self.robots[info.name] = info
+        if info.online:
+            self.heard[info.name] = self.clock()
 
     def set_telemetry(self, t: Telemetry) -> None:
         self.telemetry[t.robot] = t
+        self.heard[t.robot] = self.clock()
         h = self.history.get(t.robot)
         if h is None:
             h = self.history[t.robot] = deque(maxlen=HISTORY)
@@ -286,6 +261,15 @@ class ConsoleModel:
         if self.mission is None:
             return []
         return self.mission.tasks.get(robot, [])
+
+    def insertion_point(self, robot: str, skill_id: str | None) -> tuple[int, str]:
+        """Where a new skill goes in the robot's plan (index among its idle
+        skills, and in words): after the selected idle skill, else first."""
+        found = self.find(skill_id)
+        if found and found[2].status == Status.IDLE:
+            idle = [s.id for s in self.task(robot) if s.status == Status.IDLE]
+            return idle.index(found[2].id) + 1, f"after {found[2].id}"
+        return 0, "at the head of the plan"
 
     def robot_kind(self, robot: str) -> str:
         if self.mission is None or self.library is None:
@@ -363,179 +347,20 @@ class ConsoleModel:
             )
         return mode or "idle"
 
-    # -- why an action does not apply (None: it applies) -----------------------------------
+    def freshness(self, robot: str) -> Freshness:
+        """Whether what is shown of `robot` is live or its last known state."""
+        return freshness(self, robot, self.clock())
+
+    # -- why an action does not apply (None: it applies): console/state/availability.py ----
     def why_not(
         self, action: str, robot: str | None, skill_id: str | None, marks: list[str] | None = None
     ) -> str | None:
-        marks = marks or []
-        if self.mission is None:
-            return "no mission loaded yet"
-        offline_ok = action in ("save", "help", "edit")
-        if not self.connected and not offline_ok:
-            detail = "reconnecting" if self.connection == RECONNECTING else self.connection
-            return f"not connected to the mission server ({detail}): nothing can be changed now"
-        if self.read_only and action not in _READ_ONLY_OK:
-            return self.read_only
-        found = self.find(skill_id)
-        s = found[2] if found else None
-        if action in ("add",):
-            if robot is None:
-                return "select a robot column first"
-            if not self.skills_of(robot):
-                return f"{robot} has no skills in the library"
-            return None
-        if action == "edit":
-            return None if s is not None else "select a skill first"
-        if action in ("delete", "move_up", "move_down"):
-            if s is None:
-                return "select a skill first"
-            verb = {"delete": "deleted", "move_up": "moved", "move_down": "moved"}[action]
-            if s.status != Status.IDLE:
-                return self._not_idle(found[0], s, f"only idle skills can be {verb}")
-            task = self.task(found[0])
-            idle = [x.id for x in task if x.status == Status.IDLE]
-            if action == "move_up" and idle and idle[0] == s.id:
-                return f"{s.id} is already first in {found[0]}'s plan"
-            if action == "move_down" and idle and idle[-1] == s.id:
-                return f"{s.id} is already last in {found[0]}'s plan"
-            return None
-        if action == "sync":
-            if s is None:
-                return "select the last skill to synchronize"
-            r = found[0]
-            if s.status != Status.IDLE:
-                return f"{s.id} is {STATUS_WORDS[s.status]} on {r}: synchronize through an idle (unsynchronized) skill"
-            if not self.is_online(r):
-                return f"{r} is {self.presence_text(r)}: it cannot receive skills"
-            return None
-        if action == "unsync":
-            if s is None:
-                return "select the first queued skill to take back"
-            r = found[0]
-            if s.status != Status.IDLE_SYNCHRONIZED:
-                return f"{s.id} is {STATUS_WORDS[s.status]} on {r}: only queued (idle_synchronized) skills can be unsynchronized"
-            if not self.is_online(r):
-                return f"{r} is {self.presence_text(r)}: it cannot be asked to give skills back"
-            return None
-        if action == "mark":
-            if s is None:
-                return "select a skill to mark"
-            if s.status != Status.IDLE and s.id not in marks:
-                return f"{s.id} is {STATUS_WORDS[s.status]}: barriers join idle skills only"
-            return None
-        if action == "barrier":
-            return self._why_not_barrier(marks)
-        if action == "unbarrier":
-            if s is None:
-                return "select a skill of the barrier to remove"
-            bid = self.barrier_of(s.id)
-            if bid is None:
-                return f"{s.id} is in no barrier"
-            for sid in self.mission.barriers[bid].skills:
-                f = self.find(sid)
-                if f and f[2].status != Status.IDLE and f[2].status not in FINISHED:
-                    return f"barrier {bid}: {sid} is {STATUS_WORDS[f[2].status]} on {f[0]}; {how_to_change(f[2].status)}"
-            return None
-        if action == "retry":
-            if s is None:
-                return "select a failed skill"
-            r, i, _ = found
-            if s.status != Status.FAILURE:
-                return f"{s.id} is {STATUS_WORDS[s.status]}: only a failed skill can be retried"
-            task = self.task(r)
-            new_id = f"{s.id.split('.')[0]}.{s.attempt + 1}"
-            if self.owner(new_id) is not None:
-                return f"{s.id} was already retried as {new_id}"
-            if any(x.status in FINISHED for x in task[i + 1 :]):
-                return f"{r} has executed other skills since {s.id} failed; add a new skill instead"
-            act = self.robot_state(r)[0]
-            if act is not None:
-                return f"{r} is executing {act.id}: stop it first"
-            if not self.is_online(r):
-                return f"{r} is {self.presence_text(r)}"
-            return None
-        if action in ("run", "pause", "stop", "reset"):
-            if robot is None:
-                return "select a robot column first"
-            return self._control_why(action, robot)
-        if action in ("run_all", "pause_all", "stop_all", "reset_all"):
-            verb = action.split("_")[0]
-            reasons = [self._control_why(verb, r) for r in self.mission.robots]
-            if all(reasons):
-                return f"{verb} applies to no robot: " + "; ".join(x for x in reasons if x)
-            return None
-        return None  # undo, redo, load, save: the server decides
+        return availability.why_not(self, action, robot, skill_id, marks)
 
-    def _not_idle(self, robot: str, s: SkillInstance, rule: str) -> str:
-        if s.status in FINISHED:
-            word = "succeeded" if s.status == Status.SUCCESS else "failed"
-            return f"{s.id} {word} on {robot}: {how_to_change(s.status)}"
-        return f"{s.id} is {s.status.value} on {robot}: {rule}; {how_to_change(s.status)}"
+    def plan_blocking(self, robot: str, skill_id: str) -> list[str]:
+        """Ids of the unwaived plan errors that refuse syncing `robot` through `skill_id`."""
+        return [f.id for f in self.plan.blocking(self.task(robot), skill_id)]
 
     def read_only_reason(self, skill_id: str) -> str | None:
         """Why the parameter editor is read-only for this skill (None: editable)."""
-        found = self.find(skill_id)
-        if found is None:
-            return "the skill no longer exists"
-        robot, _, s = found
-        if self.read_only:  # the editor says "read-only: <reason>" itself
-            return self.read_only.removeprefix("read-only: ")
-        if s.status == Status.IDLE:
-            if not self.connected:
-                return f"not connected to the mission server ({self.connection}): edits cannot be applied now"
-            return None
-        return self._not_idle(robot, s, "only idle skills can be edited")
-
-    def _why_not_barrier(self, marks: list[str]) -> str | None:
-        if len(marks) < 2:
-            return (
-                "mark one idle skill on each of at least two robots (space), then make the barrier"
-            )
-        robots: dict[str, str] = {}
-        for sid in marks:
-            f = self.find(sid)
-            if f is None:
-                return f"{sid} no longer exists"
-            r, _, s = f
-            if s.status != Status.IDLE:
-                return f"{sid} is {STATUS_WORDS[s.status]} on {r}: barriers join idle skills"
-            if r in robots:
-                return (
-                    f"{robots[r]} and {sid} both belong to {r}: a barrier takes one skill per robot"
-                )
-            robots[r] = sid
-            bid = self.barrier_of(sid)
-            if bid is not None:
-                return f"{sid} is already in barrier {bid}"
-        return None
-
-    def _control_why(self, action: str, robot: str) -> str | None:
-        act, n_queued = self.robot_state(robot)
-        queued = n_queued > 0
-        why: str | None
-        if action == "run":
-            if act is not None and act.status == Status.PAUSED:
-                why = None
-            elif act is not None:
-                why = f"{robot} is already executing {act.id} ({STATUS_WORDS[act.status]})"
-            else:
-                why = None if queued else f"{robot} has nothing to run: synchronize skills first"
-        elif action == "pause":
-            why = (
-                None
-                if act is not None and act.status == Status.RUNNING
-                else f"{robot} has no running skill to pause"
-            )
-        elif action == "stop":
-            why = (
-                None
-                if act is not None
-                else f"{robot} has no running, paused or waiting skill to stop"
-            )
-        else:
-            why = (
-                None if act is not None or queued else f"{robot} has nothing synchronized to reset"
-            )
-        if why is None and not self.is_online(robot):
-            why = f"{robot} is {self.presence_text(robot)}"
-        return why
+        return availability.read_only_reason(self, skill_id)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import sys
+from collections.abc import Iterable
 from functools import lru_cache
 from pathlib import Path
 from typing import Annotated
@@ -34,7 +35,7 @@ from textual.theme import Theme
 
 from backend.files import yamlio
 from backend.files.diagnostics import pydantic_issues
-from console.themes.variables import STATUS_DEFAULTS
+from console.themes.variables import DEFAULT_THEME, STATUS_DEFAULTS
 
 
 def _shipped_dir() -> Path:
@@ -130,7 +131,8 @@ class ThemeFile(BaseModel):
         missing = [k for k in STATUS_DEFAULTS if k not in self.variables]
         if missing:
             raise ValueError(
-                f"variables: missing {', '.join(missing)} (every status/presence colour must be set)"
+                f"variables: missing {', '.join(missing)} "
+                "(every status/presence colour must be set)"
             )
         return self
 
@@ -178,6 +180,20 @@ def load_themes(dirs: list[Path] | None = None) -> tuple[dict[str, Theme], list[
             if theme is not None:
                 themes[theme.name] = theme
     return themes, problems
+
+
+def choose_theme(wanted: str | None, available: Iterable[str]) -> tuple[str, str | None]:
+    """(the theme to use, a notice when the wanted one does not exist): the
+    default is missionctl-dark, or Textual's own dark theme without it."""
+    names = set(available)
+    default = DEFAULT_THEME if DEFAULT_THEME in names else "textual-dark"
+    wanted = wanted or default
+    if wanted in names:
+        return wanted, None
+    return (
+        default,
+        f"unknown theme '{wanted}' (themes: {', '.join(sorted(names))}); using {default}",
+    )
 
 
 @lru_cache(maxsize=1024)

@@ -1,9 +1,10 @@
 """The status colour variables every theme sets, and the default theme's name.
 
 Every colour that carries meaning is a theme variable, so a theme file
-(themes/*.yaml: dark, light, high-contrast, colour-blind-safe; loaded
-by console/themes/loader.py) only has to set them. The defaults are declared in `STATUS_DEFAULTS`, which the app returns
-from `get_theme_variable_defaults()` so any theme (also Textual's own) parses.
+(themes/*.yaml: dark, light, high-contrast, colour-blind-safe; loaded by
+console/themes/loader.py) only has to set them. The defaults are declared in
+`STATUS_DEFAULTS`, which the app returns from `get_theme_variable_defaults()`
+so any theme (also Textual's own) parses.
 Colours are picked to stay distinct in 256 colours (over SSH COLORTERM is
 usually not forwarded); the status glyphs carry the meaning without colour.
 """

@@ -1,1 +1,1 @@
-"""Widgets the screens are built from."""
+"""Widgets the screens are built from. They post messages; none imports the app."""

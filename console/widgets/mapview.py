@@ -35,7 +35,9 @@ from textual.widget import Widget
 
 from backend.core.model import FINISHED, Status
 from backend.protocol.mapfeed import T_FREE, T_ROCK, T_SLOW, T_UNKNOWN, MapMirror
-from console.state.model import GLYPHS, STATUS_CSS, ConsoleModel
+from console.state.markers import marker_point, marker_use
+from console.state.model import ConsoleModel
+from console.state.text import GLYPHS, STATUS_CSS
 
 UPPER_HALF = "▀"
 OUTSIDE = 8  # ground class of pixels outside the map (0..7: terrain + 4 if covered)
@@ -100,9 +102,10 @@ def halfblock_row(
 
     `top[i]`/`bottom[i]` are colour keys of column i's upper and lower pixel;
     a glyph (char, colour, bold, background or None) replaces column i's
-    half-block (by default on the upper pixel's colour); `pattern(i, key)` gives the character drawn where both
-    pixels are equal (" " for none), in `textures[key]` (default: the key's
-    colour, a little lighter). Runs of equal style are merged."""
+    half-block (by default on the upper pixel's colour); `pattern(i, key)`
+    gives the character drawn where both pixels are equal (" " for none), in
+    `textures[key]` (default: the key's colour, a little lighter). Runs of
+    equal style are merged."""
     segs: list[Segment] = []
     text: list[str] = []
     run: Style | None = None
@@ -353,29 +356,6 @@ def robot_status(model: ConsoleModel, robot: str) -> tuple[str, str]:
     return GLYPHS[st], f"status-{STATUS_CSS[st]}"
 
 
-def marker_use(model: ConsoleModel) -> dict[str, str]:
-    """marker -> 'active' (a skill on a robot uses it), 'bound' (idle skills
-    only) or 'unused'."""
-    m = model.mission
-    if m is None:
-        return {}
-    use = dict.fromkeys(m.markers, "unused")
-    for task in m.tasks.values():
-        for s in task:
-            if s.status in FINISHED:
-                continue
-            names = set(s.bindings.values()) | {
-                v for v in s.params.values() if isinstance(v, str) and v in use
-            }
-            for name in names:
-                if name in use:
-                    if s.status != Status.IDLE:
-                        use[name] = "active"
-                    elif use[name] == "unused":
-                        use[name] = "bound"
-    return use
-
-
 MARKER_USE_GLYPH = {"active": " ●", "bound": " ○", "unused": ""}
 
 
@@ -406,15 +386,80 @@ def skill_goals(model: ConsoleModel) -> list[tuple[str, str, float, float, Statu
     return out
 
 
+# -- what the overlay shows (MapView._build_overlay draws them in this order) --
+
+
+def draw_areas(ov: Overlay, mission: Any, use: dict[str, str]) -> None:
+    """Area markers' outlines, coloured by use."""
+    for name, mk in mission.markers.items():
+        if mk.kind == "area":
+            ov.polygon([(p.x, p.y) for p in mk.area], f"map-marker-{use.get(name, 'unused')}")
+
+
+def draw_goals(ov: Overlay, model: ConsoleModel, selected_skill: str | None) -> None:
+    """Typed pose/position parameters of unfinished skills (the selected one labelled)."""
+    for _robot, sid, x, y, st in skill_goals(model):
+        label = sid if sid == selected_skill else ""
+        ov.point(f"goal:{sid}", x, y, GOAL_GLYPH, f"status-{STATUS_CSS[st]}", label, "map-goal")
+
+
+def draw_objects(ov: Overlay, objects: Any) -> None:
+    """The map feed's objects: lander, sampling regions, boxes on the ground, stones."""
+    lander = objects.lander
+    ov.point("lander", lander.x, lander.y, LANDER_GLYPH, "map-lander", "lander")
+    for r in objects.rss:
+        score = f" {r.top_score:g}" if r.top_score is not None else ""
+        ov.point(f"rss:{r.rss}", r.x, r.y, RSS_GLYPH, "map-rss", r.rss + score, "map-rss")
+    for b in objects.boxes:
+        if b.where == "ground":
+            label = b.box + (" on" if b.on else "")
+            ov.point(f"box:{b.box}", b.x, b.y, BOX_GLYPH, "map-box", label, "map-box")
+    for s in objects.stones:
+        if s.state in ("identified", "ground"):
+            ov.point(f"stone:{s.id}", s.x, s.y, STONE_GLYPH, "map-stone")
+
+
+def marker_glyph(mk: Any) -> str:
+    if mk.kind == "pose":
+        return heading_glyph(mk.pose.yaw, POSE_ARROWS)
+    return POSITION_GLYPH if mk.kind == "position" else AREA_GLYPH
+
+
+def draw_markers(ov: Overlay, mission: Any, use: dict[str, str], selected: str | None) -> None:
+    """Every marker's glyph and name (with how it is used; [the selected one])."""
+    for name, mk in mission.markers.items():
+        var = f"map-marker-{use.get(name, 'unused')}"
+        label = name + MARKER_USE_GLYPH[use.get(name, "unused")]
+        if name == selected:
+            label = f"[{label}]"
+        x, y = marker_point(mk)
+        ov.point(f"marker:{name}", x, y, marker_glyph(mk), var, label, var)
+
+
+def draw_robots(ov: Overlay, model: ConsoleModel, follow: str | None) -> None:
+    """Robots with telemetry: heading arrow, name, what they do, out of range, followed."""
+    for robot in model.robot_order():
+        if model.robot_kind(robot) == "static":
+            continue  # the lander is drawn from the feed
+        t = model.telemetry.get(robot)
+        if t is None:
+            continue
+        glyph, var = robot_status(model, robot)
+        arrow = heading_glyph(t.pose.yaw, ROBOT_ARROWS)
+        name = (
+            f"{robot} {glyph}"
+            + (f" {NO_LINK_GLYPH}" if not t.in_range else "")
+            + (f" {FOLLOW_GLYPH}" if follow == robot else "")
+        )
+        ov.point(f"robot:{robot}", t.pose.x, t.pose.y, arrow, var, name, var)
+
+
 # -- the widget -------------------------------------------------------------------------------
 
 
 class MapView(Widget, can_focus=True):
-    """Draws the map of a `ConsoleModel` plus a map mirror; posts `CursorMoved`."""
-
-    DEFAULT_CSS = """
-    MapView { background: $background; }
-    """
+    """Draws the map of a `ConsoleModel` plus a map mirror; posts `CursorMoved`.
+    Its look: mapview.tcss (loaded by the app)."""
 
     class CursorMoved(Message):
         pass
@@ -663,94 +708,30 @@ class MapView(Widget, can_focus=True):
     def on_click(self, event: events.Click) -> None:
         self.set_cursor(*self.vp.cell_centre(event.x, event.y))
 
-    # -- overlays -----------------------------------------------------------------------------------
+    # -- overlays ----------------------------------------------------------------------------------
     def _build_overlay(self) -> Overlay:
+        """Everything drawn over the ground; the order sets what covers what
+        (shapes under glyphs) and whose labels go first (the last drawn)."""
         ov = Overlay(self.vp)
-        model = self.model
-        mission = model.mission
-        use = marker_use(model)
+        use = marker_use(self.model)
         objects = self.mirror.objects if self.mirror is not None else None
-        # shapes first: glyphs go on top
+        mission = self.model.mission
         if objects is not None:
             for r in objects.rss:
                 ov.circle(r.x, r.y, r.radius, "map-rss")
         if mission is not None:
-            for name, mk in mission.markers.items():
-                if mk.kind == "area":
-                    ov.polygon(
-                        [(p.x, p.y) for p in mk.area], f"map-marker-{use.get(name, 'unused')}"
-                    )
-        for _robot, sid, x, y, st in skill_goals(model):
-            label = sid if sid == self.selected_skill else ""
-            ov.point(f"goal:{sid}", x, y, GOAL_GLYPH, f"status-{STATUS_CSS[st]}", label, "map-goal")
+            draw_areas(ov, mission, use)
+        draw_goals(ov, self.model, self.selected_skill)
         if objects is not None:
-            lander = objects.lander
-            ov.point("lander", lander.x, lander.y, LANDER_GLYPH, "map-lander", "lander")
-            for r in objects.rss:
-                score = f" {r.top_score:g}" if r.top_score is not None else ""
-                ov.point(f"rss:{r.rss}", r.x, r.y, RSS_GLYPH, "map-rss", r.rss + score, "map-rss")
-            for b in objects.boxes:
-                if b.where == "ground":
-                    ov.point(
-                        f"box:{b.box}",
-                        b.x,
-                        b.y,
-                        BOX_GLYPH,
-                        "map-box",
-                        b.box + (" on" if b.on else ""),
-                        "map-box",
-                    )
-            for s in objects.stones:
-                if s.state in ("identified", "ground"):
-                    ov.point(f"stone:{s.id}", s.x, s.y, STONE_GLYPH, "map-stone")
+            draw_objects(ov, objects)
         if mission is not None:
-            for name, mk in mission.markers.items():
-                var = f"map-marker-{use.get(name, 'unused')}"
-                label = name + MARKER_USE_GLYPH[use.get(name, "unused")]
-                if name == self.selected_marker:
-                    label = f"[{label}]"
-                if mk.kind == "pose":
-                    ov.point(
-                        f"marker:{name}",
-                        mk.pose.x,
-                        mk.pose.y,
-                        heading_glyph(mk.pose.yaw, POSE_ARROWS),
-                        var,
-                        label,
-                        var,
-                    )
-                elif mk.kind == "position":
-                    ov.point(
-                        f"marker:{name}",
-                        mk.position.x,
-                        mk.position.y,
-                        POSITION_GLYPH,
-                        var,
-                        label,
-                        var,
-                    )
-                else:
-                    cx, cy = centroid([(p.x, p.y) for p in mk.area])
-                    ov.point(f"marker:{name}", cx, cy, AREA_GLYPH, var, label, var)
-        for robot in model.robot_order():
-            if model.robot_kind(robot) == "static":
-                continue  # the lander is drawn from the feed
-            t = model.telemetry.get(robot)
-            if t is None:
-                continue
-            glyph, var = robot_status(model, robot)
-            arrow = heading_glyph(t.pose.yaw, ROBOT_ARROWS)
-            name = (
-                f"{robot} {glyph}"
-                + (f" {NO_LINK_GLYPH}" if not t.in_range else "")
-                + (f" {FOLLOW_GLYPH}" if self.follow == robot else "")
-            )
-            ov.point(f"robot:{robot}", t.pose.x, t.pose.y, arrow, var, name, var)
+            draw_markers(ov, mission, use, self.selected_marker)
+        draw_robots(ov, self.model, self.follow)
         ov.place_labels()
         ov.cursor(self.cursor[0], self.cursor[1], heading_glyph(self.heading, POSE_ARROWS))
         return ov
 
-    # -- rendering ------------------------------------------------------------------------------------
+    # -- rendering ---------------------------------------------------------------------------------
     def render_line(self, y: int) -> Strip:
         strip = self._rows.get(y)
         if strip is not None:
@@ -796,7 +777,3 @@ def _texture(x: int, row: int, key: Any) -> str:
     if t == T_SLOW:
         return "~" if (x + row) % 3 == 0 else " "
     return " "
-
-
-def centroid(pts: list[tuple[float, float]]) -> tuple[float, float]:
-    return sum(p[0] for p in pts) / len(pts), sum(p[1] for p in pts) / len(pts)

@@ -23,8 +23,6 @@ import asyncio
 from dataclasses import dataclass
 from typing import Any
 
-import yaml
-from pydantic import ValidationError
 from rich.text import Text
 from textual import on
 from textual.app import ComposeResult
@@ -34,26 +32,23 @@ from textual.message import Message
 from textual.widgets import Button, Input, Label, Select, Static, Switch, TextArea
 
 from backend.core.model import Policies, SkillInstance, Status
-from backend.core.params import (
-    POSE_FIELDS,
-    POSITION_FIELDS,
-    ParamSpec,
-    check_value,
-    normalize_value,
+from backend.core.ops import EditSkill
+from console.state.markers import relabel
+from console.state.model import ConsoleModel
+from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS
+from console.widgets.param_changes import ReadsEdits
+from console.widgets.param_inputs import (
+    INPUTS,
+    POLICY_HINTS,
+    TYPED,
+    param_inputs,
+    policy_inputs,
+    read_binding,
+    read_policies,
+    set_widget_value,
+    spec_hint,
+    widget_value,
 )
-from console.state.model import GLYPHS, STATUS_CSS, STATUS_WORDS, ConsoleModel, fmt_number
-from console.widgets.select import SafeSelect
-
-TYPED = "\x00typed"  # the bind choice meaning "no marker: a typed value"
-BINDABLE_KINDS = {"pose": ("pose", "position"), "position": ("pose", "position"), "area": ("area",)}
-YAML_TYPES = ("area", "list", "dict")
-# policy -> (label, type hint); bounds and meaning come from backend.core.model.Policies
-POLICY_HINTS = {
-    "retries": ("retries", "int 0..20"),
-    "pause_out_of_comms": ("pause out of comms", "bool"),
-    "recharge_below": ("recharge below", "float 0..1, empty: off"),
-}
-INPUTS = "Input, Switch, Select, TextArea"
 
 
 @dataclass
@@ -66,17 +61,6 @@ class Draft:
     changed: list[str]  # what differs (for messages)
 
 
-def widget_value(w: Any) -> Any:
-    return w.text if isinstance(w, TextArea) else w.value
-
-
-def set_widget_value(w: Any, value: Any) -> None:
-    if isinstance(w, TextArea):
-        w.text = value
-    else:
-        w.value = value
-
-
 def settle_cursors(root: Any) -> None:
     """No blinking cursors when the app asks for none (deterministic snapshots)."""
     if not getattr(root.app, "cursor_blink", True):
@@ -84,72 +68,16 @@ def settle_cursors(root: Any) -> None:
             w.cursor_blink = False
 
 
-def yaml_text(value: Any) -> str:
-    if value is None:
-        return ""
-    if isinstance(value, list) and value and all(isinstance(x, dict) for x in value):
-        return "\n".join(
-            "- " + yaml.safe_dump(x, default_flow_style=True, sort_keys=False).strip()
-            for x in value
-        )
-    return yaml.safe_dump(
-        value, default_flow_style=False, sort_keys=False, allow_unicode=True
-    ).strip()
-
-
-def spec_hint(spec: ParamSpec) -> str:
-    """type, unit and bounds: 'float m/s 0.1..1'."""
-    parts = [spec.type]
-    if spec.unit:
-        parts.append(spec.unit)
-    if spec.min is not None or spec.max is not None:
-        lo = f"{spec.min:g}" if spec.min is not None else ""
-        hi = f"{spec.max:g}" if spec.max is not None else ""
-        parts.append(f"{lo}..{hi}")
-    if spec.type == "marker" and spec.marker_kinds:
-        parts.append("/".join(spec.marker_kinds))
-    if spec.is_required:
-        parts.append("required")
-    return " ".join(parts)
-
-
-class ParamEditor(VerticalScroll):
-    """Edits one skill. Posts `ApplyRequested` with only what changed."""
+class ParamEditor(ReadsEdits, VerticalScroll):
+    """Edits one skill. Posts `ApplyRequested` with only what changed.
+    Its look: param_editor.tcss (loaded by the app)."""
 
     BINDINGS = [
-        Binding("ctrl+s", "apply", "Apply", id="editor.apply"),
+        # enter in a field applies (Input.Submitted); ctrl+s is the mission's save everywhere
+        Binding("enter", "apply", "Apply", id="editor.apply"),
         Binding("ctrl+r", "revert", "Revert", id="editor.revert"),
         Binding("escape", "leave", "Back", id="editor.leave"),
     ]
-
-    DEFAULT_CSS = """
-    ParamEditor { padding: 0 1; }
-    ParamEditor .title { text-style: bold; }
-    ParamEditor .skill-desc { color: $text-muted; }
-    ParamEditor .readonly { color: $warning; text-style: bold; margin: 1 0 0 0; }
-    ParamEditor .server-error { color: $error; text-style: bold; margin: 1 0 0 0; }
-    ParamEditor .stale { color: $warning; }
-    ParamEditor .dirty { color: $warning; text-style: bold; }
-    ParamEditor .section { text-style: bold underline; margin: 1 0 0 0; }
-    ParamEditor .param { height: auto; margin: 1 0 0 0; }
-    ParamEditor .plabel { height: 1; text-wrap: nowrap; text-overflow: ellipsis; }
-    ParamEditor .pdesc { color: $text-muted; height: auto; }
-    ParamEditor .perror { color: $error; text-style: bold; height: auto; }
-    ParamEditor .-empty { display: none; }
-    ParamEditor .fields { height: 1; }
-    ParamEditor .fields Label { width: auto; padding: 0 1 0 0; color: $text-muted; }
-    ParamEditor .fields Input { width: 1fr; margin: 0 1 0 0; }
-    ParamEditor Input { height: 1; }
-    ParamEditor Switch { width: auto; height: 1; border: none; padding: 0; }
-    ParamEditor Switch:focus { border: none; background-tint: $foreground 15%; }
-    ParamEditor .fields .switch-value { padding: 0 0 0 1; color: $text; }
-    ParamEditor TextArea { height: 4; }
-    ParamEditor Select { width: 100%; }
-    ParamEditor .bind { margin: 0 0 0 0; }
-    ParamEditor .buttons { height: 3; margin: 1 0 0 0; }
-    ParamEditor .buttons Button { margin: 0 1 0 0; min-width: 12; }
-    ParamEditor .empty { color: $text-muted; margin: 1 0; }
-    """
 
     class ApplyRequested(Message):
         def __init__(
@@ -168,6 +96,26 @@ class ParamEditor(VerticalScroll):
             self.bindings = bindings
             self.base_revision = base_revision
             self.policies = policies
+
+        def operation(self) -> EditSkill:
+            return EditSkill(
+                id=self.skill_id,
+                label=self.label,
+                params=self.params,
+                bindings=self.bindings,
+                policies=self.policies,
+            )
+
+        def changed(self) -> list[str]:
+            """What the operation changes (for the status line), each once: a
+            typed value replacing a binding changes both for one parameter."""
+            return list(
+                dict.fromkeys(
+                    [*self.params, *self.bindings]
+                    + (["label"] if self.label is not None else [])
+                    + (["policies"] if self.policies is not None else [])
+                )
+            )
 
     class DraftsChanged(Message):
         """Which skills have unapplied changes; `discarded`: sentences about
@@ -195,6 +143,7 @@ class ParamEditor(VerticalScroll):
         self.drafts: dict[str, Draft] = {}
         self.dirty: list[str] = []  # what differs in the shown skill (empty: nothing)
         self._unapplied: frozenset[str] = frozenset()
+        self._choices: dict[str, str | None] = {}  # Select id -> the marker it showed
 
     # -- what is shown ------------------------------------------------------------------
     def _skill(self) -> tuple[str, SkillInstance] | None:
@@ -262,9 +211,17 @@ class ParamEditor(VerticalScroll):
             else None
         )
         if draft is not None and draft.rev != rev:
-            self.stale_note = f"{skill_id} was changed by someone else since you started these changes (revision {rev}): revert to see it; applying will be refused as stale"
+            self.stale_note = (
+                f"{skill_id} was changed by someone else since you started these changes "
+                f"(revision {rev}): revert to see it; applying will be refused as stale"
+            )
         await self.recompose()
         settle_cursors(self)
+        self._choices = {  # what each marker choice shows (a label may name it)
+            w.id: None if w.value in (TYPED, Select.NULL) else str(w.value)
+            for w in self.query(Select)
+            if w.id
+        }
         if draft is not None:
             self._restore(draft)
         self._validate_all()
@@ -312,7 +269,8 @@ class ParamEditor(VerticalScroll):
                 )
             else:
                 said.append(
-                    f"{sid} is now {STATUS_WORDS[found[2].status]} on {found[0]}: your unapplied changes to it ({what}) are discarded — only idle skills can be edited"
+                    f"{sid} is now {STATUS_WORDS[found[2].status]} on {found[0]}: your unapplied "
+                    f"changes to it ({what}) are discarded — only idle skills can be edited"
                 )
         self._post_drafts(said)
         return said
@@ -331,7 +289,7 @@ class ParamEditor(VerticalScroll):
         if self.dirty:
             self._set_static(
                 "#dirty",
-                f"unapplied changes: {', '.join(self.dirty)} — ctrl+s applies, ctrl+r reverts",
+                f"unapplied changes: {', '.join(self.dirty)} — enter applies, ctrl+r reverts",
             )
         else:
             self._set_static("#dirty", "")
@@ -359,12 +317,14 @@ class ParamEditor(VerticalScroll):
         s = found[2]
         ro_changed = (self.read_only_reason is None) != self._was_editable
         if s.rev != self.loaded_rev or ro_changed:
-            if (
-                not ro_changed and self.is_dirty()
-            ):  # against the new version: our own apply is not dirty
-                self.stale_note = f"{s.id} was changed by someone else (revision {s.rev}): revert to see it; applying will be refused as stale"
+            # dirty against the new version (our own apply leaves nothing dirty)
+            if not ro_changed and self.is_dirty():
+                self.stale_note = (
+                    f"{s.id} was changed by someone else (revision {s.rev}): revert to see it; "
+                    "applying will be refused as stale"
+                )
                 self._set_static("#stale", self.stale_note)
-            else:  # unapplied changes become a draft: restored, or dropped (and said) if no longer idle
+            else:  # unapplied changes become a draft: restored, or dropped (and said) if not idle
                 await self.show_skill(self.skill_id, force=True)
 
     def compose(self) -> ComposeResult:
@@ -413,308 +373,16 @@ class ParamEditor(VerticalScroll):
                     Text.assemble((name, "bold"), ("  " + spec_hint(pspec), "dim")),
                     classes="plabel",
                 )
-                yield from self._inputs(name, pspec, s, disabled=ro is not None)
+                yield from param_inputs(name, pspec, s, self.model.mission, disabled=ro is not None)
                 if pspec.description:
                     yield Static(pspec.description, classes="pdesc")
                 err = self.errors.get(name, "")
                 yield Static(err, id=f"err-{name}", classes="perror" + ("" if err else " -empty"))
-        yield from self._policy_inputs(s.policies, disabled=ro is not None)
+        yield from policy_inputs(s.policies, disabled=ro is not None)
         if ro is None:
             with Horizontal(classes="buttons"):
-                yield Button("Apply ^s", id="apply", variant="primary", compact=True)
+                yield Button("Apply ⏎", id="apply", variant="primary", compact=True)
                 yield Button("Revert ^r", id="revert", compact=True)
-
-    def _policy_inputs(self, p: Policies, *, disabled: bool) -> ComposeResult:
-        yield Static("policies — applied by the robot itself", classes="section")
-        fields = Policies.model_fields
-        for name, (label, hint) in POLICY_HINTS.items():
-            with Vertical(classes="param", id=f"policy-{name}"):
-                yield Label(Text.assemble((label, "bold"), ("  " + hint, "dim")), classes="plabel")
-                if name == "pause_out_of_comms":
-                    with Horizontal(classes="fields"):
-                        yield Switch(p.pause_out_of_comms, id=f"pf-{name}", disabled=disabled)
-                        yield Label(
-                            "yes" if p.pause_out_of_comms else "no",
-                            id=f"pv-{name}",
-                            classes="switch-value",
-                        )
-                elif name == "retries":
-                    yield Input(
-                        str(p.retries),
-                        id=f"pf-{name}",
-                        type="integer",
-                        compact=True,
-                        disabled=disabled,
-                        placeholder="0",
-                    )
-                else:
-                    text = "" if p.recharge_below is None else fmt_number(p.recharge_below)
-                    yield Input(
-                        text,
-                        id=f"pf-{name}",
-                        type="number",
-                        compact=True,
-                        disabled=disabled,
-                        placeholder="off",
-                    )
-                yield Static(fields[name].description or "", classes="pdesc")
-                yield Static("", id=f"perr-{name}", classes="perror -empty")
-
-    def read_policies(self) -> tuple[Policies | None, dict[str, str]]:
-        """The policies as typed (None if unreadable) and problems per policy."""
-        raw: dict[str, Any] = {}
-        problems: dict[str, str] = {}
-        try:
-            raw["pause_out_of_comms"] = self.query_one("#pf-pause_out_of_comms", Switch).value
-            retries = self.query_one("#pf-retries", Input).value.strip()
-            below = self.query_one("#pf-recharge_below", Input).value.strip()
-        except Exception:  # not composed (no skill, or being rebuilt)
-            return None, {}
-        try:
-            raw["retries"] = int(retries) if retries else 0
-        except ValueError:
-            problems["retries"] = f"expected an integer, got '{retries}'"
-        if below.lower() in ("", "off"):
-            raw["recharge_below"] = None
-        else:
-            try:
-                raw["recharge_below"] = float(below)
-            except ValueError:
-                problems["recharge_below"] = (
-                    f"expected a number between 0 and 1 (empty: off), got '{below}'"
-                )
-        if problems:
-            return None, problems
-        try:  # the protocol's own model: the same bounds the server checks
-            return Policies(**raw), {}
-        except ValidationError as e:
-            for err in e.errors():
-                name = str(err["loc"][0]) if err["loc"] else "retries"
-                problems[name] = f"{err['input']!r}: {err['msg'].removeprefix('Input ')}"
-            return None, problems
-
-    def _inputs(
-        self, name: str, spec: ParamSpec, s: SkillInstance, *, disabled: bool
-    ) -> ComposeResult:
-        value = s.params.get(name)
-        bound = s.bindings.get(name)
-        t = spec.type
-        m = self.model.mission
-        if t in BINDABLE_KINDS and m is not None:
-            kinds = BINDABLE_KINDS[t]
-            options = [("typed value", TYPED)] + [
-                (f"@{mk}  ({marker.kind})", mk)
-                for mk, marker in m.markers.items()
-                if marker.kind in kinds
-            ]
-            if bound and bound not in m.markers:
-                options.append((f"@{bound} (missing)", bound))
-            yield SafeSelect(
-                options,
-                value=bound or TYPED,
-                allow_blank=False,
-                id=f"bind-{name}",
-                compact=True,
-                disabled=disabled,
-                classes="bind",
-            )
-            disabled = disabled or bool(bound)
-        if t == "bool":
-            with Horizontal(classes="fields"):
-                yield Switch(bool(value), id=f"f-{name}", disabled=disabled)
-                yield Label("yes" if value else "no", id=f"v-{name}", classes="switch-value")
-        elif t in ("int", "float", "str"):
-            text = "" if value is None else (fmt_number(value) if t != "str" else str(value))
-            kind = {"int": "integer", "float": "number", "str": "text"}[t]
-            yield Input(
-                text, id=f"f-{name}", type=kind, compact=True, disabled=disabled, placeholder=t
-            )
-        elif t in ("pose", "position"):
-            fields = POSE_FIELDS if t == "pose" else POSITION_FIELDS
-            v = value if isinstance(value, dict) else {}
-            rows = [fields[:3], fields[3:]] if t == "pose" else [fields]
-            for row in rows:
-                with Horizontal(classes="fields"):
-                    for f in row:
-                        yield Label(f)
-                        yield Input(
-                            fmt_number(float(v.get(f, 0.0))),
-                            id=f"f-{name}-{f}",
-                            type="number",
-                            compact=True,
-                            disabled=disabled,
-                        )
-        elif t in YAML_TYPES:
-            ta = TextArea(
-                yaml_text(value),
-                id=f"f-{name}",
-                compact=True,
-                disabled=disabled,
-                soft_wrap=True,
-                tab_behavior="focus",
-            )
-            yield ta
-        elif t in ("enum", "marker", "robot"):
-            if t == "enum":
-                choices = list(spec.choices or [])
-            elif t == "marker":
-                markers = m.markers if m else {}
-                choices = [
-                    mk
-                    for mk, marker in markers.items()
-                    if not spec.marker_kinds or marker.kind in spec.marker_kinds
-                ]
-            else:
-                choices = list(m.robots) if m else []
-            if isinstance(value, str) and value not in choices:
-                choices.append(value)
-            yield SafeSelect(
-                [(c, c) for c in choices],
-                value=value if value in choices else Select.NULL,
-                allow_blank=True,
-                prompt="(default)" if not spec.is_required else "choose…",
-                id=f"f-{name}",
-                compact=True,
-                disabled=disabled,
-            )
-        else:
-            yield Static(f"unsupported type {t}", classes="perror")
-
-    # -- reading values -------------------------------------------------------------------
-    def _read(self, name: str, spec: ParamSpec) -> tuple[Any, str | None]:
-        """(value, problem) of one parameter as typed; value None = unset."""
-        t = spec.type
-        try:
-            if t == "bool":
-                return self.query_one(f"#f-{name}", Switch).value, None
-            if t in ("int", "float", "str"):
-                raw = self.query_one(f"#f-{name}", Input).value
-                if t == "str":
-                    return raw, None
-                raw = raw.strip()
-                if not raw:
-                    return None, None
-                try:
-                    return (int(raw) if t == "int" else float(raw)), None
-                except ValueError:
-                    return (
-                        None,
-                        f"expected {'an integer' if t == 'int' else 'a number'}, got '{raw}'",
-                    )
-            if t in ("pose", "position"):
-                fields = POSE_FIELDS if t == "pose" else POSITION_FIELDS
-                out: dict[str, float] = {}
-                for f in fields:
-                    raw = self.query_one(f"#f-{name}-{f}", Input).value.strip()
-                    try:
-                        out[f] = float(raw) if raw else 0.0
-                    except ValueError:
-                        return None, f"{f}: expected a number, got '{raw}'"
-                return out, None
-            if t in YAML_TYPES:
-                raw = self.query_one(f"#f-{name}", TextArea).text
-                if not raw.strip():
-                    return None, None
-                try:
-                    return yaml.safe_load(raw), None
-                except yaml.YAMLError as e:
-                    mark = getattr(e, "problem_mark", None)
-                    where = f" (line {mark.line + 1})" if mark is not None else ""
-                    problem = getattr(e, "problem", None) or "cannot be read"
-                    return None, f"not valid YAML{where}: {problem}"
-            if t in ("enum", "marker", "robot"):
-                v = self.query_one(f"#f-{name}", Select).value
-                return (None if v is Select.NULL else v), None
-        except Exception as e:  # the widgets are being rebuilt
-            return None, f"cannot read the field ({type(e).__name__})"
-        return None, f"unsupported type {t}"
-
-    def _binding(self, name: str) -> str | None:
-        try:
-            v = self.query_one(f"#bind-{name}", Select).value
-        except Exception:
-            return None
-        return None if v in (TYPED, Select.NULL) else str(v)
-
-    def collect(self) -> tuple[str | None, dict[str, Any], dict[str, str | None], dict[str, str]]:
-        """(label change, params changed, bindings changed, problems per parameter)."""
-        found = self._skill()
-        if found is None:
-            return None, {}, {}, {}
-        robot, s = found
-        spec = self._spec(s)
-        problems: dict[str, str] = {}
-        params: dict[str, Any] = {}
-        bindings: dict[str, str | None] = {}
-        try:
-            label = self.query_one("#f-label", Input).value
-        except Exception:
-            label = s.label
-        label_change = label if label != s.label else None
-        if spec is None:
-            return label_change, params, bindings, problems
-        m = self.model.mission
-        for name, pspec in spec.params.items():
-            bound = self._binding(name) if pspec.type in BINDABLE_KINDS else None
-            old_bound = s.bindings.get(name)
-            if bound is not None:
-                if bound != old_bound:
-                    bindings[name] = bound
-                continue
-            value, problem = self._read(name, pspec)
-            if problem:
-                problems[name] = problem
-                continue
-            if value is None:
-                if pspec.is_required:
-                    problems[name] = f"missing required {pspec.type} parameter '{name}'"
-                    continue
-                if name in s.params and (
-                    pspec.default is None or s.params[name] != normalize_value(pspec, pspec.default)
-                ):
-                    params[name] = None  # back to the default
-                continue
-            found_problems = check_value(
-                pspec, value, markers=m.markers if m else None, robots=set(m.robots) if m else None
-            )
-            if found_problems:
-                rel, msg = found_problems[0]
-                where = ".".join(str(x) for x in rel)
-                problems[name] = f"{where}: {msg}" if where else msg
-                continue
-            norm = normalize_value(pspec, value)
-            if old_bound is not None:
-                bindings[name] = None
-                params[name] = norm
-            elif s.params.get(name) != norm:
-                params[name] = norm
-        return label_change, params, bindings, problems
-
-    def policies_change(self) -> tuple[Policies | None, dict[str, str]]:
-        """(new policies if they changed, problems per policy)."""
-        found = self._skill()
-        if found is None:
-            return None, {}
-        policies, problems = self.read_policies()
-        return (
-            policies if policies is not None and policies != found[1].policies else None
-        ), problems
-
-    def changed_names(self, *, even_read_only: bool = False) -> list[str]:
-        """What differs from the skill (including fields that do not read)."""
-        if self._skill() is None or (self.read_only_reason is not None and not even_read_only):
-            return []
-        label, params, bindings, problems = self.collect()
-        policies, policy_problems = self.policies_change()
-        names = (["label"] if label is not None else []) + list(
-            dict.fromkeys([*params, *bindings, *problems])
-        )
-        if policies is not None or policy_problems:
-            names.append("policies")
-        return names
-
-    def is_dirty(self) -> bool:
-        return bool(self.changed_names())
 
     # -- messages next to fields --------------------------------------------------------------
     def _set_static(self, selector: str, text: str) -> None:
@@ -746,7 +414,7 @@ class ParamEditor(VerticalScroll):
         for name in spec.params if spec else []:
             msg = problems.get(name) or self.errors.get(name, "")
             self._set_static(f"#err-{name}", msg)
-        _, policy_problems = self.read_policies()
+        _, policy_problems = read_policies(self)
         for name in POLICY_HINTS:
             self._set_static(f"#perr-{name}", policy_problems.get(name, ""))
 
@@ -769,6 +437,8 @@ class ParamEditor(VerticalScroll):
             if name == pname or name.startswith(pname + "-"):
                 self.errors.pop(pname, None)  # a server message is about the old value
                 break
+        if widget_id.startswith("bind-") or widget_id.startswith("f-"):
+            self._relabel(widget_id)
         if widget_id.startswith("bind-"):
             self._sync_bound_fields(name)
         for sw in self.query(f"#f-{name}").results(Switch):  # the value in words, not only colour
@@ -776,8 +446,24 @@ class ParamEditor(VerticalScroll):
         self._validate_all()
         self._update_dirty()
 
+    def _relabel(self, widget_id: str) -> None:
+        """A marker chosen instead of another: a label naming the old marker
+        ("drive to POI-A") names the new one, in the label field (applied
+        with the rest, or reverted)."""
+        try:
+            select = self.query_one(f"#{widget_id}", Select)
+            label = self.query_one("#f-label", Input)
+        except Exception:
+            return  # not a choice (or being rebuilt)
+        chosen = None if select.value in (TYPED, Select.NULL) else str(select.value)
+        before = self._choices.get(widget_id)
+        self._choices[widget_id] = chosen
+        new = relabel(label.value, before, chosen)
+        if new is not None:
+            label.value = new
+
     def _sync_bound_fields(self, name: str) -> None:
-        bound = self._binding(name)
+        bound = read_binding(self, name)
         for w in self.query(f"#param-{name} Input, #param-{name} TextArea"):
             w.disabled = bound is not None or self.read_only_reason is not None
 
@@ -791,6 +477,12 @@ class ParamEditor(VerticalScroll):
 
     @on(Button.Pressed, "#apply")
     def _apply_pressed(self) -> None:
+        self.action_apply()
+
+    @on(Input.Submitted)
+    def _field_submitted(self, event: Input.Submitted) -> None:
+        """Enter in a field applies the edits (as in a form)."""
+        event.stop()
         self.action_apply()
 
     @on(Button.Pressed, "#revert")
@@ -838,4 +530,6 @@ class ParamEditor(VerticalScroll):
         await self.show_skill(self.skill_id, force=True, discard=True)
 
     def action_leave(self) -> None:
+        if self.focus_within():  # at once: a key typed right after escape is not the field's
+            self.screen.set_focus(None)
         self.post_message(self.Left())

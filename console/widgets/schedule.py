@@ -4,17 +4,14 @@ unsynchronized plan below a divider that runs across all columns.
 One Line-API widget (`ScrollView.render_line`) draws it: only the visible
 lines are rendered, there is no widget per row, and a change to one robot's
 list re-lays out only that robot's column and repaints only the visible lines
-that show something else (telemetry: the header and progress lines). Column headers stay on top while
-the rows scroll; columns scroll horizontally when they do not fit.
+that show something else (telemetry: the header and progress lines). Column
+headers stay on top while the rows scroll; columns scroll horizontally when
+they do not fit. How each line of a column is drawn: schedule_lines.py.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
-from rich.cells import cell_len, set_cell_size
 from rich.segment import Segment
-from rich.style import Style
 from textual import events
 from textual.binding import Binding
 from textual.geometry import Region, Size
@@ -22,51 +19,31 @@ from textual.message import Message
 from textual.scroll_view import ScrollView
 from textual.strip import Strip
 
-from backend.core.model import ACTIVE, Status
-from console.state.model import (
-    GLYPHS,
-    STATUS_CSS,
-    ConsoleModel,
-    fmt_clock,
-    fmt_duration,
-    param_summary,
-    skill_title,
+from backend.core.model import ACTIVE, SkillInstance, Status
+from console.state.model import ConsoleModel
+from console.state.text import STATUS_CSS, param_summary
+from console.widgets.schedule_lines import (
+    HEADER_H,
+    HEADER_LINES,
+    MIN_W,
+    Column,
+    Head,
+    Styles,
+    click_hit,
+    fit,
+    hidden_robots,
+    progress_segments,
+    skill_segments,
+    with_hidden_robots,
 )
 
-HEADER_H = 4
 STATIC_W = 16
-MIN_W = 24
 MAX_W = 46
 
 
-@dataclass
-class Column:
-    robot: str
-    static: bool
-    x: int = 0
-    width: int = MIN_W
-    # synchronized section: (index in the task, "row" | "progress")
-    sync: list[tuple[int, str]] = field(default_factory=list)
-    idle: list[int] = field(default_factory=list)
-    ids: list[str] = field(default_factory=list)
-    line_of: dict[str, int] = field(default_factory=dict)  # filled by the layout
-    # what each line of a section shows (id, kind, revision): comparing two
-    # builds tells which lines a change touched, so only those are repainted
-    sync_keys: list[tuple[str, str, int]] = field(default_factory=list)
-    idle_keys: list[tuple[str, int]] = field(default_factory=list)
-
-
-def _fit(text: str, width: int) -> str:
-    """Exactly `width` cells: truncated with an ellipsis, or padded."""
-    if width <= 0:
-        return ""
-    if cell_len(text) > width:
-        return set_cell_size(text, width - 1) + "…"
-    return set_cell_size(text, width)
-
-
 class ScheduleView(ScrollView, can_focus=True):
-    """Draws the schedule from a `ConsoleModel`; posts `CursorMoved`."""
+    """Draws the schedule from a `ConsoleModel`; posts `CursorMoved`.
+    Its look: schedule.tcss (loaded by the app; the status colours are theme variables)."""
 
     COMPONENT_CLASSES = {
         *(f"schedule--{c}" for c in STATUS_CSS.values()),
@@ -83,34 +60,13 @@ class ScheduleView(ScrollView, can_focus=True):
         "schedule--progress",
         "schedule--battery-low",
         "schedule--rule",
+        "schedule--more",
+        "schedule--stale",
+        "schedule--stale-head",
+        "schedule--check-error",  # plan checks' glyphs (console/state/plan.py)
+        "schedule--check-warning",
+        "schedule--check-waived",
     }
-
-    DEFAULT_CSS = """
-    ScheduleView {
-        background: $background;
-        scrollbar-size: 1 1;
-    }
-    ScheduleView > .schedule--idle { color: $status-idle; }
-    ScheduleView > .schedule--idle-synchronized { color: $status-idle-synchronized; }
-    ScheduleView > .schedule--synchwaiting { color: $status-synchwaiting; }
-    ScheduleView > .schedule--running { color: $status-running; text-style: bold; }
-    ScheduleView > .schedule--paused { color: $status-paused; text-style: bold; }
-    ScheduleView > .schedule--success { color: $status-success; }
-    ScheduleView > .schedule--failure { color: $status-failure; text-style: bold; }
-    ScheduleView > .schedule--cursor { background: $primary 60%; }
-    ScheduleView > .schedule--cursor-blur { background: $primary 25%; }
-    ScheduleView > .schedule--robot { color: $text; text-style: bold; }
-    ScheduleView > .schedule--online { color: $presence-online; }
-    ScheduleView > .schedule--offline { color: $presence-offline; text-style: bold; }
-    ScheduleView > .schedule--unknown { color: $presence-unknown; }
-    ScheduleView > .schedule--dim { color: $text-muted; }
-    ScheduleView > .schedule--divider { color: $divider; }
-    ScheduleView > .schedule--tag { color: $barrier-tag; text-style: bold; }
-    ScheduleView > .schedule--mark { color: $mark; text-style: bold; }
-    ScheduleView > .schedule--progress { color: $progress-bar; }
-    ScheduleView > .schedule--battery-low { color: $battery-low; text-style: bold; }
-    ScheduleView > .schedule--rule { color: $primary; }
-    """
 
     BINDINGS = [
         Binding("up", "cursor(0, -1)", "Up", show=False),
@@ -137,12 +93,29 @@ class ScheduleView(ScrollView, can_focus=True):
         self.sync_h = 1
         self.total_lines = 3
         self.cursor_col = 0
-        self.cursor_id: str | None = None
-        self.marks: list[str] = []
         self.drafts: frozenset[str] = frozenset()  # skills with unapplied edits (marked '*')
         self.expand_static = False
         self._summary_cache: dict[tuple[str, int], str] = {}
         self._last_width = -1
+
+    # -- the selection lives in the model (other screens act on it) ----------------
+    @property
+    def cursor_id(self) -> str | None:
+        """The skill under the cursor."""
+        return self.model.selection.skill
+
+    @cursor_id.setter
+    def cursor_id(self, skill_id: str | None) -> None:
+        self.model.selection.skill = skill_id
+
+    @property
+    def marks(self) -> list[str]:
+        """Skills marked for a new barrier (one per robot)."""
+        return self.model.selection.marks
+
+    @marks.setter
+    def marks(self, marks: list[str]) -> None:
+        self.model.selection.marks = marks
 
     # -- model -> layout -----------------------------------------------------------
     @property
@@ -218,22 +191,6 @@ class ScheduleView(ScrollView, can_focus=True):
             x, w, [line for line, (_, kind) in enumerate(col.sync) if kind == "progress"]
         )
 
-    @staticmethod
-    def _line_key(col: Column, line: int, sync_h: int) -> object:
-        """What a content line of a column shows (compared, never drawn)."""
-        if line < sync_h:
-            return (
-                col.sync_keys[line]
-                if line < len(col.sync_keys)
-                else ("blank" if line or col.sync else "hint")
-            )
-        if line == sync_h:
-            return "divider"
-        k = line - sync_h - 1
-        return (
-            col.idle_keys[k] if k < len(col.idle_keys) else ("blank" if k or col.idle else "hint")
-        )
-
     def _visible_lines(self) -> range:
         sy = int(self.scroll_y)
         return range(sy, sy + max(0, self.size.height - HEADER_H))
@@ -251,7 +208,7 @@ class ScheduleView(ScrollView, can_focus=True):
         changed = [
             line
             for line in self._visible_lines()
-            if self._line_key(old, line, old_sync_h) != self._line_key(new, line, self.sync_h)
+            if old.line_key(line, old_sync_h) != new.line_key(line, self.sync_h)
         ]
         # progress lines also show telemetry and barrier partners' states
         changed += [line for line, (_, kind) in enumerate(new.sync) if kind == "progress"]
@@ -327,11 +284,8 @@ class ScheduleView(ScrollView, can_focus=True):
             if owner is not None and owner in self._col_index:
                 self.cursor_col = self._col_index[owner]
                 return
-        self.cursor_id = col.ids[0] if col.ids else None
-        if self.cursor_id is not None:
-            # prefer the first unsynchronized skill, else the active one, else the last
-            first_idle = col.ids[col.idle[0]] if col.idle else None
-            self.cursor_id = first_idle or col.ids[-1]
+        # prefer the first unsynchronized skill, else the active one, else the last
+        self.cursor_id = col.resting_id()
         self._post_cursor()
 
     def _post_cursor(self) -> None:
@@ -348,9 +302,7 @@ class ScheduleView(ScrollView, can_focus=True):
         elif robot is not None and robot in self._col_index:
             self.cursor_col = self._col_index[robot]
             col = self.columns[self.cursor_col]
-            self.cursor_id = None
-            if col.ids:
-                self.cursor_id = col.ids[col.idle[0]] if col.idle else col.ids[-1]
+            self.cursor_id = col.resting_id()
         self._scroll_cursor_visible()
         self.refresh()
         self._post_cursor()
@@ -459,25 +411,15 @@ class ScheduleView(ScrollView, can_focus=True):
         self.refresh()
 
     def on_click(self, event: events.Click) -> None:
-        x = int(self.scroll_x) + event.x
-        for i, col in enumerate(self.columns):
-            if col.x <= x < col.x + col.width + 1:
-                self.cursor_col = i
-                if event.y < HEADER_H:
-                    self.cursor_id = (
-                        col.ids[col.idle[0]] if col.idle else (col.ids[-1] if col.ids else None)
-                    )
-                else:
-                    line = int(self.scroll_y) + event.y - HEADER_H
-                    hit = [sid for sid, ln in col.line_of.items() if ln == line]
-                    if hit:
-                        self.cursor_id = hit[0]
-                self.refresh()
-                self._post_cursor()
-                break
+        hit = click_hit(self.columns, int(self.scroll_x) + event.x, event.y, int(self.scroll_y))
+        if hit is not None:
+            self.cursor_col, skill = hit
+            self.cursor_id = skill or self.cursor_id
+            self.refresh()
+            self._post_cursor()
 
     # -- rendering ----------------------------------------------------------------
-    def _styles(self) -> dict[str, Style]:
+    def _styles(self) -> Styles:
         key = (self.app.theme, self.has_focus)
         cached = getattr(self, "_style_cache", None)
         if cached is not None and cached[0] == key:
@@ -504,7 +446,7 @@ class ScheduleView(ScrollView, can_focus=True):
                     if self.model.mission is None
                     else "  this mission has no robots"
                 )
-                return Strip([Segment(_fit(msg, width), st["dim"])]).crop_extend(0, width, base)
+                return Strip([Segment(fit(msg, width), st["dim"])]).crop_extend(0, width, base)
             return Strip.blank(width, base)
         x0, x1 = scroll_x, scroll_x + width
         segs: list[Segment] = []
@@ -524,64 +466,23 @@ class ScheduleView(ScrollView, can_focus=True):
             else:
                 segs.append(Segment("│", st["divider"]))
         start = start or 0
-        return Strip(segs).crop_extend(x0 - start, x1 - start, base)
+        strip = Strip(segs).crop_extend(x0 - start, x1 - start, base)
+        if y == HEADER_H - 1:  # on the rule under the headers, which hides nothing
+            strip = with_hidden_robots(strip, self.hidden_robots(), x1 - x0, st["more"])
+        return strip
 
-    # header: name + presence / battery + link / activity / rule
-    def _header_segments(self, col: Column, y: int, st: dict[str, Style]) -> list[Segment]:
-        w = col.width
-        m = self.model
-        robot = col.robot
-        info = m.robots.get(robot)
-        t = m.telemetry.get(robot)
-        if y == 0:
-            if info is None:
-                pres, pst = "? unknown", st["unknown"]
-            elif info.online:
-                pres, pst = "● online", st["online"]
-            elif info.since is not None:
-                clock = fmt_clock(info.since)
-                fits = [
-                    p
-                    for p in (f"✕ offline since {clock}", f"✕ offline {clock}")
-                    if cell_len(robot) + 1 + cell_len(p) <= w
-                ]
-                pres = fits[0] if fits else f"✕ off {clock}"
-                pst = st["offline"]
-            else:
-                pres, pst = "✕ offline", st["offline"]
-            if col.static and not self.expand_static:
-                pres = "●" if info is not None and info.online else "✕"
-            name_w = max(1, w - cell_len(pres) - 1)
-            return [
-                Segment(_fit(robot, name_w), st["robot"]),
-                Segment(" ", st["base"]),
-                Segment(_fit(pres, w - name_w - 1), pst),
-            ]
-        if y == 1:
-            if col.static and not self.expand_static:
-                return [Segment(_fit("static", w), st["dim"])]
-            if t is None:
-                return [Segment(_fit("bat –  link –", w), st["dim"])]
-            bat = f"bat {int(round(t.battery * 100))}%"
-            link = f"link {int(round(t.link * 100))}%" if t.in_range else "link: out of range"
-            bst = st["battery-low"] if t.battery < 0.2 else st["base"]
-            lst = st["offline"] if not t.in_range else st["base"]
-            return [
-                Segment(bat, bst),
-                Segment("  ", st["base"]),
-                Segment(_fit(link, max(0, w - cell_len(bat) - 2)), lst),
-            ]
-        if y == 2:
-            if col.static and not self.expand_static:
-                n = len(col.ids)
-                return [Segment(_fit(f"{n} skill{'s' if n != 1 else ''}", w), st["dim"])]
-            return [Segment(_fit(m.activity_text(robot), w), st["dim"])]
-        selected = self.columns[self.cursor_col] is col if self.columns else False
-        return [Segment(("━" if selected else "─") * w, st["rule"])]
+    def hidden_robots(self) -> tuple[int, int]:
+        """(columns cut or hidden on the left, on the right) of the view now."""
+        x0 = int(self.scroll_x)
+        return hidden_robots(self.columns, x0, x0 + self.scrollable_content_region.width)
 
-    def _content_segments(
-        self, ci: int, col: Column, line: int, st: dict[str, Style]
-    ) -> list[Segment]:
+    def _header_segments(self, col: Column, y: int, st: Styles) -> list[Segment]:
+        compact = col.static and not self.expand_static
+        selected = y == HEADER_H - 1 and bool(self.columns) and self.columns[self.cursor_col] is col
+        fresh = self.model.freshness(col.robot)
+        return HEADER_LINES[y](Head(self.model, col, st, compact, selected, fresh))
+
+    def _content_segments(self, ci: int, col: Column, line: int, st: Styles) -> list[Segment]:
         w = col.width
         task = self.model.task(col.robot)
         if line < 0 or line >= self.total_lines:
@@ -593,10 +494,12 @@ class ScheduleView(ScrollView, can_focus=True):
                     s = task[i]
                     if kind == "row":
                         return self._skill_segments(ci, col, s, st)
-                    return self._progress_segments(col, s, st)
+                    return progress_segments(
+                        self.model, col, s, st, self.model.freshness(col.robot)
+                    )
             if line == 0 and not col.sync:
-                hint = "  nothing on the robot" if not col.static or self.expand_static else "  –"
-                return [Segment(_fit(hint, w), st["dim"])]
+                hint = "  nothing on robot" if not col.static or self.expand_static else "  –"
+                return [Segment(fit(hint, w), st["dim"])]
             return [Segment(" " * w, st["base"])]
         if line == self.sync_h:
             label = " plan " if not col.static or self.expand_static else ""
@@ -609,7 +512,7 @@ class ScheduleView(ScrollView, can_focus=True):
                 return self._skill_segments(ci, col, task[i], st)
         if k == 0 and not col.idle:
             hint = "  empty plan" if not col.static or self.expand_static else "  –"
-            return [Segment(_fit(hint, w), st["dim"])]
+            return [Segment(fit(hint, w), st["dim"])]
         return [Segment(" " * w, st["base"])]
 
     def _summary(self, s) -> str:
@@ -620,93 +523,19 @@ class ScheduleView(ScrollView, can_focus=True):
             self._summary_cache[key] = text
         return text
 
-    def _skill_segments(self, ci: int, col: Column, s, st: dict[str, Style]) -> list[Segment]:
-        w = col.width
-        css = STATUS_CSS[s.status]
-        sst = st[css]
-        marked = s.id in self.marks
+    def _skill_segments(self, ci: int, col: Column, s: SkillInstance, st: Styles) -> list[Segment]:
         selected = ci == self.cursor_col and s.id == self.cursor_id
         bid = self.model.barrier_of(s.id)
-        tag = f"[{bid}]" if bid else ""
-        title = ("*" if s.id in self.drafts else "") + skill_title(s)
-        attempt = f" #{s.attempt}" if s.attempt > 1 else ""
-        extra = self._summary(s) if not col.static or self.expand_static else ""
-        room = w - 2 - (cell_len(tag) + 1 if tag else 0)
-        segs: list[Segment] = [
-            Segment("+" if marked else " ", st["mark"] if marked else st["base"]),
-            Segment(GLYPHS[s.status], sst),
-        ]
-        body = " " + title + attempt
-        if cell_len(body) >= room:  # the label is cut, never the attempt number
-            segs.append(Segment(_fit(" " + title, room - len(attempt)) + attempt, sst))
-        else:
-            segs.append(Segment(body, sst))
-            rest = room - cell_len(body)
-            if extra and rest > 2:
-                segs.append(Segment(_fit(" " + extra, rest), st["dim"]))
-            else:
-                segs.append(Segment(" " * rest, st["base"]))
-        if tag:
-            segs.append(Segment(" ", st["base"]))
-            segs.append(Segment(tag, st["tag"]))
-        if selected:
-            cur = st["cursor"] if self.has_focus else st["cursor-blur"]
-            segs = [Segment(seg.text, (seg.style or Style()) + cur) for seg in segs]
-        return segs
-
-    def _progress_segments(self, col: Column, s, st: dict[str, Style]) -> list[Segment]:
-        w = col.width
-        t = self.model.telemetry.get(col.robot)
-        has = t is not None and t.skill == s.id
-        if s.status == Status.FAILURE:
-            return [Segment(_fit("   ↳ " + s.status_info, w), st["failure"])]
-        if s.status == Status.SYNCHWAITING:
-            waiting = self._barrier_wait_text(s)
-            return [Segment(_fit("   " + waiting, w), st["synchwaiting"])]
-        pct = t.progress if has and t.progress is not None else None
-        if s.status == Status.PAUSED:
-            text = "   paused" + (f" at {int(pct * 100)}%" if pct is not None else "")
-            if s.status_info:
-                text += f" · {s.status_info}"
-            return [Segment(_fit(text, w), st["paused"])]
-        if pct is None:
-            text = "   running" + (f" · {s.status_info}" if s.status_info else "")
-            return [Segment(_fit(text, w), st["dim"])]
-        eta = f" ETA {fmt_duration(t.eta_s)}" if t.eta_s is not None else ""
-        label = f" {int(pct * 100):3d}%{eta}"
-        bar_w = max(4, w - 3 - cell_len(label) - 2)
-        filled = int(round(pct * bar_w))
-        return [
-            Segment("   ▕", st["dim"]),
-            Segment("█" * filled, st["progress"]),
-            Segment("░" * (bar_w - filled), st["dim"]),
-            Segment("▏", st["dim"]),
-            Segment(_fit(label, w - 3 - bar_w - 2), st["base"]),
-        ]
-
-    def _barrier_wait_text(self, s) -> str:
-        """What a robot waiting at a barrier waits for; offline partners first."""
-        m = self.model
-        bid = m.barrier_of(s.id)
-        if bid is None or m.mission is None:
-            return s.status_info or "waiting at a barrier"
-        offline: list[str] = []
-        waiting: list[str] = []
-        for sid in m.mission.barriers[bid].skills:
-            robot = m.owner(sid)
-            if sid == s.id or robot is None:
-                continue
-            info = m.robots.get(robot)
-            found = m.find(sid)
-            if info is None or not info.online:
-                offline.append(
-                    f"{robot} OFFLINE"
-                    + (f" {fmt_clock(info.since)}" if info and info.since else "")
-                )
-            elif found and found[2].status != Status.SYNCHWAITING:
-                waiting.append(robot)
-        if offline:
-            return f"{bid}: " + ", ".join(offline)
-        if waiting:
-            return f"{bid}: waiting for " + ", ".join(waiting)
-        return f"{bid}: all partners ready"
+        stale = s.status != Status.IDLE and self.model.freshness(col.robot).stale
+        return skill_segments(
+            s,
+            col.width,
+            st,
+            marked=s.id in self.marks,
+            draft=s.id in self.drafts,
+            tag=f"[{bid}]" if bid else "",
+            check=self.model.plan.mark(s.id),
+            extra=self._summary(s) if not col.static or self.expand_static else "",
+            cursor=(st["cursor"] if self.has_focus else st["cursor-blur"]) if selected else None,
+            stale=stale,
+        )

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from backend.agent import SkillContext
+from backend.agent import SkillContext, Success
 from sim.skills.base import CLIMB_RATE, DRONE_MARGIN_S, SkillBase, pct, xy, yaw_of
 from sim.world import _fmt
 
@@ -18,7 +18,7 @@ class AerialSkills(SkillBase):
         if self.robot.kind != "drone":
             raise self.fail(f"{self.robot.name} cannot {skill}: it is not a drone")
 
-    async def takeoff(self, ctx: SkillContext, altitude: float = 5.0, **_: Any) -> None:
+    async def takeoff(self, ctx: SkillContext, altitude: float = 5.0, **_: Any) -> Success:
         self._need_drone("take off")
         r = self.robot
         if not r.airborne and r.usable < MIN_TAKEOFF:
@@ -28,7 +28,7 @@ class AerialSkills(SkillBase):
             )
         r.airborne = True
         await self.climb(ctx, float(altitude))
-        ctx.progress(1.0, f"hovering at {r.z:.0f} m", eta_s=0.0)
+        return self.done(ctx, f"hovering at {r.z:.0f} m, battery {pct(r.battery)}")
 
     async def fly_to(
         self,
@@ -37,7 +37,7 @@ class AerialSkills(SkillBase):
         altitude: float = 5.0,
         speed: float = 2.0,
         **_: Any,
-    ) -> None:
+    ) -> Success:
         self._need_drone("fly")
         r = self.robot
         if not r.airborne:
@@ -60,7 +60,7 @@ class AerialSkills(SkillBase):
         yaw = yaw_of(goal)
         if yaw is not None:
             r.yaw = yaw
-        ctx.progress(1.0, f"hovering at {_fmt(r.x, r.y)}", eta_s=0.0)
+        return self.done(ctx, f"hovering at {_fmt(r.x, r.y)}, battery {pct(r.battery)}")
 
     def _check_range(self, gx: float, gy: float, altitude: float, speed: float) -> None:
         """Refuse a flight the battery cannot do there and back to the lander."""
@@ -87,13 +87,12 @@ class AerialSkills(SkillBase):
             f"{r.name} made an emergency landing at {_fmt(r.x, r.y)}"
         )
 
-    async def land(self, ctx: SkillContext, where: str = "lander_pad", **_: Any) -> None:
+    async def land(self, ctx: SkillContext, where: str = "lander_pad", **_: Any) -> Success:
         self._need_drone("land")
         r, w = self.robot, self.world
         if not r.airborne:
             if where == "here" or w.at_lander(r):
-                ctx.progress(1.0, "already on the ground", eta_s=0.0)
-                return
+                return self.done(ctx, "already on the ground")
             raise self.grounded_away()
         if where == "lander_pad":
             await self.fly_home(ctx, frac1=0.7)
@@ -102,5 +101,4 @@ class AerialSkills(SkillBase):
         else:
             await self.descend(ctx)
             msg = f"landed at {_fmt(r.x, r.y)}"
-        self.host.note(r, msg)
-        ctx.progress(1.0, msg, eta_s=0.0)
+        return self.done(ctx, msg)

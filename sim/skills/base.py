@@ -15,12 +15,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, NoReturn
 
-from backend.agent import SkillContext, SkillFailed
+from backend.agent import SkillContext, SkillFailed, Success
 from sim.pathing import SLOW, Follower
 from sim.skills.host import SkillHost
 from sim.world import SimError, SimRobot, _fmt
 
 CLIMB_RATE = 1.0  # m/s, drone
+RESYNC_S = 120.0  # sim seconds behind the clock past which a robot stops catching up
 DRONE_MARGIN_S = 40.0  # flight seconds a drone keeps beyond its way back to the lander
 
 
@@ -66,6 +67,9 @@ class SkillBase:
         self.host = host
         self.world = host.world
         self.robot = robot
+        self._due: float | None = None  # the clock time the current step ends at
+        self._ctx: SkillContext | None = None  # the skill run those steps belong to
+        self._paused_mark = 0.0  # robot.paused_s when the last step began
 
     # ------------------------------------------------------------ time, energy, failing
 
@@ -77,10 +81,27 @@ class SkillBase:
     async def tick(self, ctx: SkillContext, dt: float | None = None) -> float:
         """Let `dt` sim seconds pass (pause/stop aware)."""
         dt = self.dt if dt is None else dt
-        await ctx.sleep(dt)
+        await ctx.sleep(self._wait(ctx, dt))
         self.robot.sim_seconds += dt
         self.host.robot_seconds += dt
         return dt
+
+    def _wait(self, ctx: SkillContext, dt: float) -> float:
+        """Sim seconds to sleep for a step of `dt`: steps keep to the fleet's clock, so a
+        robot that fell behind it (a busy machine) catches up instead of drifting."""
+        r, w = self.robot, self.world
+        if w.clock_source is None:  # no running clock (a test's host): just wait
+            return dt
+        now = w.now()
+        if self._due is None or self._ctx is not ctx:
+            self._due, self._ctx = now, ctx  # a new skill run starts on the clock
+        else:
+            self._due += r.paused_s - self._paused_mark  # a pause moves the schedule
+            if now - self._due > RESYNC_S:
+                self._due = now
+        self._paused_mark = r.paused_s
+        self._due += dt
+        return max(0.0, self._due - now)
 
     def fail(self, reason: str) -> SkillFailed:
         """The failure to raise, its reason kept in the referee's log."""
@@ -273,6 +294,8 @@ class SkillBase:
             r.yaw = path.heading
             r.odometer += moved
         self.world.reveal(r, leg.sense)
+        if self.world.in_range(r):
+            r.passed_coverage = True  # its news goes out at the next uplink
         if leg.discover:
             for name in self.world.discover(r, leg.sense):
                 self.host.note(r, f"found {name}")
@@ -299,8 +322,15 @@ class SkillBase:
         return r.model.sensor_range
 
     def learn_stone(self, info: dict[str, Any]) -> None:
-        self.robot.knowledge.stones[info["id"]] = dict(info)
+        """The robot saw the stone (the truth, so the newest): it knows it and reports it."""
+        self.robot.knowledge.learn_stone(info)
         self.world.tell_ground(self.robot, "stone", info["id"], info)
+
+    def done(self, ctx: SkillContext, text: str) -> Success:
+        """The skill's result: kept for the status, reported as its outcome."""
+        self.host.note(self.robot, text)
+        ctx.progress(1.0, text, eta_s=0.0)
+        return Success(text)
 
     # ------------------------------------------------------------ drone flight
 

@@ -5,12 +5,13 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from backend.agent import SkillContext
+from backend.agent import SkillContext, Success
 from sim.skills.base import SkillBase, pct, xy
 from sim.world import BoxState, SimRobot, Stone, _fmt
 
 APPROACH = 8.0  # a stone/box this close is approached within the skill
-STONE_SEARCH = 6.0  # metres around pick_stone's target where a known stone counts
+STONE_SEARCH = 6.0  # metres around pick_stone's target where a known stone counts ...
+REGION_MARGIN = 2.0  # ... or, aimed inside a region the robot knows, the region and this
 LANDER_REACH = 3.0  # metres beyond the lander pad from which the arm reaches the lander
 PICKABLE = ("identified", "ground")  # states of a stone an arm can pick
 
@@ -23,7 +24,7 @@ class ManipulationSkills(SkillBase):
 
     async def pick_stone(
         self, ctx: SkillContext, target: Any = None, region: str | None = None, **_: Any
-    ) -> None:
+    ) -> Success:
         r, w = self.robot, self.world
         if not r.has("manipulator"):
             raise self.fail(f"{r.name} has no arm to pick stones")
@@ -54,14 +55,16 @@ class ManipulationSkills(SkillBase):
         await self.work(ctx, picking_s, f"picking {stone.id}", load=2.0, frac0=0.1)
         if stone.state not in PICKABLE:
             raise self.fail(f"{stone.id} was taken meanwhile by {stone.holder}")
-        stone.state, stone.holder = "carried", r.name
+        stone.change(state="carried", holder=r.name)
         r.stones.append(stone.id)
         self.learn_stone(stone.public())
         w.log(f"{r.name} picked {stone.id} (score {stone.score:g})")
         await self._tell_identifiers(stone)
-        msg = f"picked {stone.id} (score {stone.score:g}); carrying {len(r.stones)}/{cap}"
-        self.host.note(r, msg)
-        ctx.progress(1.0, msg, eta_s=0.0)
+        return self.done(
+            ctx,
+            f"picked {stone.id} of {stone.rss} (score {stone.score:g}); "
+            f"carrying {len(r.stones)}/{cap}",
+        )
 
     def _capacity(self) -> int:
         r = self.robot
@@ -72,30 +75,43 @@ class ManipulationSkills(SkillBase):
     async def _stone_to_pick(self, tx: float, ty: float, region: str | None) -> Stone:
         """The stone near the target this robot knows of, or learns of by asking."""
         r = self.robot
-        info = self._known_stone(tx, ty, region)
+        radius = self._pick_radius(tx, ty)
+        info = self._known_stone(tx, ty, radius, region)
         asked: list[str] = []
         if info is None:
-            info, asked = await self._ask_for_a_stone(tx, ty)
+            info, asked = await self._ask_for_a_stone(tx, ty, radius)
         if info is None:
             who = f" (asked {', '.join(asked)}: none knew one)" if asked else ""
             raise self.fail(
-                f"{r.name} knows no identified stone within {STONE_SEARCH:g} m of "
+                f"{r.name} knows no identified stone within {radius:g} m of "
                 f"{_fmt(tx, ty)}{who}: identify one first"
             )
         stone = self.world.stones[info["id"]]
         if stone.state not in PICKABLE:
-            r.knowledge.stones[stone.id] = stone.public()
+            self.learn_stone(stone.public())
             by = f" by {stone.holder}" if stone.holder else ""
             raise self.fail(f"{stone.id} is no longer there ({stone.state}{by})")
         return stone
 
-    def _known_stone(self, tx: float, ty: float, region: str | None) -> dict[str, Any] | None:
+    def _pick_radius(self, tx: float, ty: float) -> float:
+        """How far from the target a known stone counts: the whole region the target
+        lies in (as the robot knows it), at least STONE_SEARCH."""
+        radius = STONE_SEARCH
+        for rss in self.robot.knowledge.rss.values():
+            if math.hypot(rss["x"] - tx, rss["y"] - ty) <= rss["radius"]:
+                reach = math.hypot(rss["x"] - tx, rss["y"] - ty) + rss["radius"] + REGION_MARGIN
+                radius = max(radius, reach)
+        return radius
+
+    def _known_stone(
+        self, tx: float, ty: float, radius: float, region: str | None
+    ) -> dict[str, Any] | None:
         """The best-scored pickable stone near the target in the robot's world model
         (of `region` if it knows one there), the nearest among equals."""
         cands = [
             s
             for s in self.robot.knowledge.stones.values()
-            if s.get("state") in PICKABLE and math.hypot(s["x"] - tx, s["y"] - ty) <= STONE_SEARCH
+            if s.get("state") in PICKABLE and math.hypot(s["x"] - tx, s["y"] - ty) <= radius
         ]
         if region:
             cands = [s for s in cands if s.get("rss") == region] or cands
@@ -106,10 +122,10 @@ class ManipulationSkills(SkillBase):
         )
 
     async def _ask_for_a_stone(
-        self, tx: float, ty: float
+        self, tx: float, ty: float, radius: float
     ) -> tuple[dict[str, Any] | None, list[str]]:
         """Ask the other mobile robots (science camera first) for a pickable stone near
-        the target: the first answer, and who was asked."""
+        the target: the first answer newer than what this robot knows, and who was asked."""
         r, w = self.robot, self.world
         order = sorted(
             (o for o in w.robots.values() if o.name != r.name and o.kind != "static"),
@@ -118,12 +134,11 @@ class ManipulationSkills(SkillBase):
         asked: list[str] = []
         for other in order:
             asked.append(other.name)
-            answer = await self.host.ask(
-                r, other.name, "stone", {"x": tx, "y": ty, "radius": STONE_SEARCH}
-            )
+            where = {"x": tx, "y": ty, "radius": radius, "exclude": r.knowledge.gone_stones()}
+            answer = await self.host.ask(r, other.name, "stone", where)
             if answer is not None and answer.get("state") in PICKABLE:
-                r.knowledge.stones[answer["id"]] = dict(answer)
-                return answer, asked
+                if r.knowledge.learn_stone(answer):  # else its own news of the stone is newer
+                    return answer, asked
         return None, asked
 
     async def _tell_identifiers(self, stone: Stone) -> None:
@@ -135,7 +150,7 @@ class ManipulationSkills(SkillBase):
 
     async def drop_stone(
         self, ctx: SkillContext, into: str = "lander_sample_box", **_: Any
-    ) -> None:
+    ) -> Success:
         r = self.robot
         if not r.has("manipulator"):
             raise self.fail(f"{r.name} has no arm")
@@ -145,8 +160,7 @@ class ManipulationSkills(SkillBase):
             msg = await self._deliver(ctx)
         else:
             msg = await self._put_stone_down(ctx)
-        self.host.note(r, msg)
-        ctx.progress(1.0, msg, eta_s=0.0)
+        return self.done(ctx, msg)
 
     async def _deliver(self, ctx: SkillContext) -> str:
         """Every carried stone into the lander's sample box: each one scores."""
@@ -158,26 +172,28 @@ class ManipulationSkills(SkillBase):
                 f"(within {w.spec.lander.pad_radius + LANDER_REACH:g} m)"
             )
         await self.work(ctx, 60.0, "dropping into the lander's sample box", load=1.5)
-        gained = 0.0
+        parts = []
         for sid in list(r.stones):
             stone = w.stones[sid]
-            stone.state, stone.holder = "delivered", None
-            w.score = round(w.score + (stone.score or 0.0), 6)
-            gained += stone.score or 0.0
-            w.delivered.append(
-                {
-                    "stone": sid,
-                    "rss": stone.rss,
-                    "score": stone.score or 0.0,
-                    "by": r.name,
-                    "sim_time": round(w.clock, 1),
-                }
-            )
+            stone.change(state="delivered", holder=None)
+            score = stone.score or 0.0
+            w.score = round(w.score + score, 6)
+            delivery = {
+                "stone": sid,
+                "rss": stone.rss,
+                "score": score,
+                "by": r.name,
+                "sim_time": round(w.now(), 1),
+            }
+            w.delivered.append(delivery)
             self.learn_stone(stone.public())
-            w.log(f"{r.name} delivered {sid}: +{stone.score:g}, score {w.score:g}")
-        n = len(r.stones)
+            w.tell_ground(r, "delivery", sid, delivery)
+            w.log(f"{r.name} delivered {sid}: +{score:g}, score {w.score:g}")
+            parts.append(f"{sid} of {stone.rss} +{score:g}")
+            await self._tell_identifiers(stone)
         r.stones.clear()
-        return f"delivered {n} stone(s): +{gained:g}; score {w.score:g}"
+        gained = round(sum(d["score"] for d in w.delivered[-len(parts) :]), 6)
+        return f"delivered {', '.join(parts)}: +{gained:g}; score {w.score:g}"
 
     async def _put_stone_down(self, ctx: SkillContext) -> str:
         """The last stone picked onto the ground where the robot stands."""
@@ -185,7 +201,7 @@ class ManipulationSkills(SkillBase):
         await self.work(ctx, 60.0, "putting the stone down", load=1.5)
         sid = r.stones.pop()
         stone = w.stones[sid]
-        stone.state, stone.holder, stone.x, stone.y = "ground", None, round(r.x, 2), round(r.y, 2)
+        stone.change(state="ground", holder=None, x=round(r.x, 2), y=round(r.y, 2))
         self.learn_stone(stone.public())
         await self._tell_identifiers(stone)
         msg = f"put {sid} down at {_fmt(stone.x, stone.y)}"
@@ -194,17 +210,15 @@ class ManipulationSkills(SkillBase):
 
     # ------------------------------------------------------------ payload boxes
 
-    async def pick_payload_box(self, ctx: SkillContext, box: str = "", **_: Any) -> None:
+    async def pick_payload_box(self, ctx: SkillContext, box: str = "", **_: Any) -> Success:
         if not self.robot.has("manipulator"):
             raise self.fail(f"{self.robot.name} has no arm to carry payload boxes")
         await self._take_box(ctx, box, 120.0)
-        msg = f"carrying {box}"
-        self.host.note(self.robot, f"picked {box}")
-        ctx.progress(1.0, msg, eta_s=0.0)
+        return self.done(ctx, f"picked {box}: carrying it")
 
     async def place_payload_box(
         self, ctx: SkillContext, box: str = "", goal: Any = None, **_: Any
-    ) -> None:
+    ) -> Success:
         r = self.robot
         if r.box != box:
             raise self.fail(
@@ -225,12 +239,11 @@ class ManipulationSkills(SkillBase):
         msg = self._put_box(box, gx, gy)
         self.world.log(f"{r.name} {msg}")
         await self._box_moved(box)
-        self.host.note(r, msg)
-        ctx.progress(1.0, msg, eta_s=0.0)
+        return self.done(ctx, msg)
 
     async def deploy_wifi_box(
         self, ctx: SkillContext, box: str = "wifi_box_1", goal: Any = None, **_: Any
-    ) -> None:
+    ) -> Success:
         r, w = self.robot, self.world
         if not r.has("manipulator"):
             raise self.fail(f"{r.name} has no arm to carry payload boxes")
@@ -254,8 +267,7 @@ class ManipulationSkills(SkillBase):
         msg = await self._switch_on(ctx, box)
         w.log(f"{r.name}: {msg}")
         await self._box_moved(box)
-        self.host.note(r, msg)
-        ctx.progress(1.0, msg, eta_s=0.0)
+        return self.done(ctx, msg)
 
     async def _switch_on(self, ctx: SkillContext, box: str) -> str:
         """A placed Wi-Fi box on the ground covers its range, if it is itself covered."""
@@ -425,12 +437,11 @@ class ManipulationSkills(SkillBase):
 
     # ------------------------------------------------------------ the lander's shelf
 
-    async def load_box(self, ctx: SkillContext, box: str = "", slot: int = 1, **_: Any) -> None:
+    async def load_box(self, ctx: SkillContext, box: str = "", slot: int = 1, **_: Any) -> Success:
         r, w = self.robot, self.world
         b, slot = self._loadable(box, slot)
         if b.where == "shelf" and b.slot == slot:
-            ctx.progress(1.0, f"{box} is on slot {slot} already", eta_s=0.0)
-            return
+            return self.done(ctx, f"{box} is on slot {slot} already")
         await self.work(ctx, 60.0, f"loading {box} onto slot {slot}")
         if b.where not in ("storage", "shelf") or any(
             o.where == "shelf" and o.slot == slot and o.name != box for o in w.boxes.values()
@@ -443,9 +454,7 @@ class ManipulationSkills(SkillBase):
         for other in sorted(w.robots.values(), key=lambda o: o.name):
             if other.has("manipulator"):
                 await self.host.tell(r, other.name, "box", b.public())
-        msg = f"{box} on slot {slot}"
-        self.host.note(r, msg)
-        ctx.progress(1.0, msg, eta_s=0.0)
+        return self.done(ctx, f"{box} on the shelf, slot {slot}")
 
     def _loadable(self, box: str, slot: int) -> tuple[BoxState, int]:
         """The box inside the lander and the free shelf slot it goes to, or why not."""

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from backend.agent import SkillContext, SkillFailed
+from backend.agent import SkillContext, SkillFailed, Success
 from sim.pathing import ROCK, lawnmower
 from sim.skills.base import DRONE_MARGIN_S, SkillBase, pct, xy, yaw_of
 from sim.world import SimRobot, World, _fmt
@@ -99,7 +99,7 @@ class MobilitySkills(SkillBase):
         speed: float = 0.5,
         tolerance: float = 0.5,
         **_: Any,
-    ) -> None:
+    ) -> Success:
         self.need_kind("rover", skill="drive")
         r = self.robot
         gx, gy = xy(goal)
@@ -110,7 +110,7 @@ class MobilitySkills(SkillBase):
         yaw = yaw_of(goal)
         if yaw is not None and self.dist(gx, gy) <= max(tolerance, 1.0):
             r.yaw = yaw
-        ctx.progress(1.0, f"at {_fmt(r.x, r.y)}", eta_s=0.0)
+        return self.done(ctx, f"at {_fmt(r.x, r.y)}, battery {pct(r.battery)}")
 
     async def explore(
         self,
@@ -120,7 +120,7 @@ class MobilitySkills(SkillBase):
         return_to_start: bool = False,
         sensors: Any = None,
         **_: Any,
-    ) -> None:
+    ) -> Success:
         r = self.robot
         poly = self._area_to_explore(area, sensors)
         rng = self.sensor_range()
@@ -146,8 +146,7 @@ class MobilitySkills(SkillBase):
                 f"stopped exploring: {summary}; {r.name} needs its remaining "
                 f"{pct(r.battery)} battery to fly back to the lander"
             )
-        self.host.note(r, summary)
-        ctx.progress(1.0, summary, eta_s=0.0)
+        return self.done(ctx, summary)
 
     def _area_to_explore(self, area: Any, sensors: Any) -> list[tuple[float, float]]:
         """The area's corners, once the robot can explore it with these sensors."""

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from backend.agent import SkillContext
+from backend.agent import SkillContext, Success
 from sim.skills.base import SkillBase, pct
 
 PAD_INSIDE = 1.5  # metres inside the pad's edge a rover parks to charge
@@ -13,7 +13,7 @@ PAD_INSIDE = 1.5  # metres inside the pad's edge a rover parks to charge
 class PowerSkills(SkillBase):
     """recharge handlers."""
 
-    async def recharge(self, ctx: SkillContext, target_level: float = 0.95, **_: Any) -> None:
+    async def recharge(self, ctx: SkillContext, target_level: float = 0.95, **_: Any) -> Success:
         r, w = self.robot, self.world
         self.need_kind("rover", "drone", skill="recharge")
         target_level = min(1.0, max(0.0, float(target_level)))
@@ -23,9 +23,7 @@ class PowerSkills(SkillBase):
         elif not w.at_lander(r):
             await self._drive_to_lander(ctx)
         await self._charge(ctx, target_level)
-        msg = f"battery {pct(r.battery)}"
-        self.host.note(r, f"recharged: {msg}")
-        ctx.progress(1.0, msg, eta_s=0.0)
+        return self.done(ctx, f"recharged: battery {pct(r.battery)}")
 
     async def _fly_to_pad(self, ctx: SkillContext) -> None:
         if not self.robot.airborne:

@@ -8,7 +8,7 @@ from typing import Any
 
 from backend.agent import SkillContext, Success
 from sim.skills.base import SkillBase, xy
-from sim.world import RssState, SimRobot, Stone, _fmt
+from sim.world import RssState, SimRobot, Stone, _fmt, newer_stone
 
 NEAR_TARGET = 5.0  # extra metres around a search radius that count as "at the target"
 CAMERA_RANGE = 15.0  # science camera
@@ -67,19 +67,12 @@ class ScienceSkills(SkillBase):
             msg = f"no region ideal for sampling stones at {_fmt(tx, ty)}"
         else:
             msg = self._imaged(rss, filter)
-        self.host.note(r, msg)
-        ctx.progress(1.0, msg, eta_s=0.0)
-        return Success(msg)
+        return self.done(ctx, msg)
 
     def _imaged(self, rss: RssState, filter: str) -> str:
         """What an image of `rss` tells (the top score, unless the filter is `visible`)."""
         r, w = self.robot, self.world
-        info = r.knowledge.rss.get(rss.name) or {
-            "rss": rss.name,
-            "x": rss.x,
-            "y": rss.y,
-            "radius": rss.radius,
-        }
+        info = dict(r.knowledge.rss.get(rss.name) or rss.sighting())
         if r.name not in rss.found_by:
             rss.found_by.add(r.name)
             w.log(f"{r.name} discovered {rss.name} at {_fmt(rss.x, rss.y)}")
@@ -90,7 +83,7 @@ class ScienceSkills(SkillBase):
             info["top_score"] = rss.max_score
             msg = f"{rss.name}: top stone score {rss.max_score:g}"
             w.log(f"{r.name} imaged {rss.name}: top stone score {rss.max_score:g}")
-        r.knowledge.rss[rss.name] = info
+        info = r.knowledge.learn_rss(info)
         w.tell_ground(r, "rss", rss.name, info)
         return msg
 
@@ -125,12 +118,10 @@ class ScienceSkills(SkillBase):
             await self.work(
                 ctx, IDENTIFY_S, "identifying stones", frac0=search.at(0), frac1=search.at(1.0)
             )
-            stone = self._identify(rss.name, tx, ty, w.spec.scoring.min_score, (r.name,))
+            stone = self._identify(search, w.spec.scoring.min_score, (r.name,))
             how = "alone (only a low-score stone without LRU1 and LRU2 together)"
         msg = f"identified {stone.id} at {_fmt(stone.x, stone.y)}, score {stone.score:g}, {how}"
-        self.host.note(r, msg)
-        ctx.progress(1.0, msg, eta_s=0.0)
-        return Success(msg)
+        return self.done(ctx, msg)
 
     async def _reach_search_centre(
         self, ctx: SkillContext, tx: float, ty: float, radius: float
@@ -159,14 +150,7 @@ class ScienceSkills(SkillBase):
         if r.name in rss.found_by:
             return
         rss.found_by.add(r.name)
-        info = {
-            "rss": rss.name,
-            "x": rss.x,
-            "y": rss.y,
-            "radius": rss.radius,
-            "top_score": (r.knowledge.rss.get(rss.name) or {}).get("top_score"),
-        }
-        r.knowledge.rss[rss.name] = info
+        info = r.knowledge.learn_rss(rss.sighting())
         w.tell_ground(r, "rss", rss.name, info)
         w.log(f"{r.name} discovered {rss.name} at {_fmt(rss.x, rss.y)}")
 
@@ -188,9 +172,7 @@ class ScienceSkills(SkillBase):
             waited += self.dt
         collab = self._collaborating(s.partner, s.x, s.y, "manipulator")
         stone = self._identify(
-            s.rss.name,
-            s.x,
-            s.y,
+            s,
             s.rss.max_score if collab else self.world.spec.scoring.min_score,
             (r.name, s.partner) if collab and s.partner else (r.name,),
         )
@@ -222,14 +204,13 @@ class ScienceSkills(SkillBase):
         )
         answer = await self._ask_for_the_stone(ctx, s, other)
         if answer is not None:
-            self.learn_stone(answer)
+            r.knowledge.learn_stone(answer)
             stone = self.world.stones[answer["id"]]
             if r.name not in stone.identified_by:
                 stone.identified_by = (*stone.identified_by, r.name)
             how = f"with {s.partner}: it told where the stone lies"
         else:
-            min_score = self.world.spec.scoring.min_score
-            stone = self._identify(s.rss.name, s.x, s.y, min_score, (r.name,))
+            stone = self._identify(s, self.world.spec.scoring.min_score, (r.name,))
             how = f"alone ({s.partner} did not point out a stone)"
         await self.work(
             ctx, IDENTIFY_S * 0.15, "locating the stone", frac0=s.at(0.85), frac1=s.at(1.0)
@@ -239,12 +220,23 @@ class ScienceSkills(SkillBase):
     async def _ask_for_the_stone(
         self, ctx: SkillContext, s: Search, other: SimRobot
     ) -> dict[str, Any] | None:
-        """Ask `other` until it names a stone it identified, while it works on the skill."""
-        where = {"x": s.x, "y": s.y, "radius": s.radius + s.rss.radius}
+        """Ask `other` until it names a stone it identified, while it works on the skill
+        (not one this robot knows is gone: its own news of a stone beats older news)."""
+        r = self.robot
         waited = 0.0
         while True:
-            answer = await self.host.ask(self.robot, other.name, "stone", where)
-            if answer is not None and answer.get("state") == "identified":
+            where = {
+                "x": s.x,
+                "y": s.y,
+                "radius": s.radius,
+                "exclude": r.knowledge.gone_stones(),
+            }
+            answer = await self.host.ask(r, other.name, "stone", where)
+            if (
+                answer is not None
+                and answer.get("state") == "identified"
+                and newer_stone(r.knowledge.stones.get(answer["id"]), answer)
+            ):
                 return answer
             busy = other.activity == "identify_stone"
             if waited >= (PARTNER_WAIT if busy else IDENTIFY_S * 0.15):
@@ -276,21 +268,26 @@ class ScienceSkills(SkillBase):
         other = self.world.robots.get(partner)
         if other is None or not other.has(need) or other.activity != "identify_stone":
             return False
+        if not self.world.can_talk(self.robot, other):
+            return False  # together means talking: through the network (or direct radio)
         rng = self.world.spec.scoring.collab_range
         return math.hypot(other.x - tx, other.y - ty) <= rng and self.dist(tx, ty) <= rng
 
-    def _identify(
-        self, rss_name: str, tx: float, ty: float, score: float, by: tuple[str, ...]
-    ) -> Stone:
-        """The hidden stone of the region nearest the search centre: identified now."""
-        w = self.world
-        hidden = [w.stones[s] for s in w.rss[rss_name].stones if w.stones[s].state == "hidden"]
+    def _identify(self, s: Search, score: float, by: tuple[str, ...]) -> Stone:
+        """The hidden stone of the region nearest the search centre, within the search
+        radius: identified now."""
+        w, name = self.world, s.rss.name
+        hidden = [w.stones[k] for k in s.rss.stones if w.stones[k].state == "hidden"]
         if not hidden:
-            raise self.fail(f"every stone of {rss_name} is identified already: try another region")
-        stone = min(hidden, key=lambda s: (math.hypot(s.x - tx, s.y - ty), s.id))
-        stone.score = score
-        stone.state = "identified"
-        stone.identified_by = by
+            raise self.fail(f"every stone of {name} is identified already: try another region")
+        near = [k for k in hidden if math.hypot(k.x - s.x, k.y - s.y) <= s.radius]
+        if not near:
+            raise self.fail(
+                f"no stone to identify within {s.radius:g} m of {_fmt(s.x, s.y)} in {name}: "
+                "search wider (search_radius) or aim elsewhere in the region"
+            )
+        stone = min(near, key=lambda k: (math.hypot(k.x - s.x, k.y - s.y), k.id))
+        stone.change(score=score, state="identified", identified_by=by)
         self.learn_stone(stone.public())
-        w.log(f"{' and '.join(by)} identified {stone.id} in {rss_name} (score {score:g})")
+        w.log(f"{' and '.join(by)} identified {stone.id} in {name} (score {score:g})")
         return stone

@@ -129,7 +129,7 @@ def test_add_edit_move_delete_barrier_undo_redo(endpoint):
         "lru1",
         "drive_to",
         "--param",
-        "goal={x: 3, y: 4, yaw: 0.5}",
+        "goal={x: 3, y: 4, yaw: 0.5rad}",
         "--label",
         "drive out",
         "--param",
@@ -303,7 +303,7 @@ def test_markers_and_bindings(endpoint):
         "--description",
         "sampling region",
     )
-    ok(endpoint, "marker", "add", "P1", "--pose", "1,1,0,0,0,1.5")
+    ok(endpoint, "marker", "add", "P1", "--pose", "1,1,0,0,0,1.5rad")
     out = ok(endpoint, "marker", "add", "W1", "--position=-2,3").stdout
     assert out.startswith("added marker W1 (position) at revision")
     st = state(endpoint)
@@ -456,7 +456,7 @@ def test_save_load_round_trip(endpoint, tmp_path):
         "lru1",
         "drive_to",
         "--param",
-        "goal={x: 1, y: 2, yaw: 0.3}",
+        "goal={x: 1, y: 2, yaw: 0.3rad}",
         "--label",
         "extra",
         "--retries",

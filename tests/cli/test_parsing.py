@@ -4,6 +4,7 @@ the operation each sub-command builds."""
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 
 import pytest
@@ -112,15 +113,17 @@ def test_param_given_twice():
 
 def test_geometry():
     assert parse_pose("1,2") == {"x": 1, "y": 2}
-    assert parse_pose("1,2,3,0.1,0.2,0.3") == {
+    # angles in degrees, as ctl prints them; `rad` says radians
+    assert parse_pose("1,2,3,0.1rad,0.2rad,90") == {
         "x": 1,
         "y": 2,
         "z": 3,
         "roll": 0.1,
         "pitch": 0.2,
-        "yaw": 0.3,
+        "yaw": math.pi / 2,
     }
-    assert parse_pose("{x: 1, y: 2, yaw: 1.5}") == {"x": 1, "y": 2, "yaw": 1.5}
+    assert parse_pose("{x: 1, y: 2, yaw: 1.5rad}") == {"x": 1, "y": 2, "yaw": 1.5}
+    assert parse_pose("{x: 1, y: 2, yaw: 30deg}")["yaw"] == pytest.approx(math.pi / 6)
     assert parse_pose("-1, 2.5") == {"x": -1, "y": 2.5}
     assert parse_position("1,2,3") == {"x": 1, "y": 2, "z": 3}
     assert parse_area("0,0 5,0 5,5") == [{"x": 0, "y": 0}, {"x": 5, "y": 0}, {"x": 5, "y": 5}]
@@ -140,6 +143,7 @@ def test_geometry():
         (lambda: parse_pose("1,north"), "not a number"),
         (lambda: parse_pose("1,inf"), "finite"),
         (lambda: parse_pose("{x: 1, heading: 2}"), "unknown field 'heading'"),
+        (lambda: parse_pose("1,2,0,0,0,north"), "--pose: yaw: expected an angle in degrees"),
         (lambda: parse_position("1,2,3,4"), "2 to 3"),
         (lambda: parse_area("0,0 1,1"), "at least 3 points"),
         (lambda: parse_area("0,0 1,1 2"), "--area point 3"),
@@ -155,8 +159,8 @@ def test_short_value():
         == "(9,4)"
     )
     assert (
-        short_value({"x": 1.0, "y": 2.0, "z": 0.0, "roll": 0.0, "pitch": 0.0, "yaw": 1.5})
-        == "(1,2 yaw=1.5)"
+        short_value({"x": 1.0, "y": 2.0, "z": 0.0, "roll": 0.0, "pitch": 0.0, "yaw": math.pi / 2})
+        == "(1,2 yaw=90°)"  # angles as a person reads them: degrees, the unit shown
     )
     assert short_value([{"x": 0, "y": 0}] * 4) == "[4 points]"
     assert short_value("near_infrared") == "near_infrared"
@@ -389,9 +393,22 @@ def test_operation_usage_errors(tutorial):
         assert needle in str(e.value), argv
 
 
+def test_param_angles_are_typed_in_degrees(tutorial):
+    """A pose's roll/pitch/yaw reads as degrees, as ctl prints them; `rad`
+    and `deg` say their unit; the operation carries radians."""
+    op = op_of(["add", "lru1", "drive_to", "--param", "goal={x: 3, y: 4, yaw: 90}"], tutorial)
+    assert op.params["goal"]["yaw"] == pytest.approx(math.pi / 2)
+    op = op_of(["add", "lru1", "drive_to", "--param", "goal={x: 3, y: 4, yaw: 30deg}"], tutorial)
+    assert op.params["goal"]["yaw"] == pytest.approx(math.pi / 6)
+    op = op_of(["add", "lru1", "drive_to", "--param", "goal={x: 3, y: 4, yaw: 0.52rad}"], tutorial)
+    assert op.params["goal"]["yaw"] == 0.52
+    with pytest.raises(UsageError, match="--param goal: yaw: expected an angle in degrees"):
+        op_of(["add", "lru1", "drive_to", "--param", "goal={x: 3, y: 4, yaw: east}"], tutorial)
+
+
 def test_markers(tutorial):
     op = op_of(
-        ["marker", "add", "P1", "--pose", "1,2,0,0,0,1.5", "--description", "a rock"], tutorial
+        ["marker", "add", "P1", "--pose", "1,2,0,0,0,1.5rad", "--description", "a rock"], tutorial
     )
     assert op.op == "marker_add" and op.marker.kind == "pose" and op.marker.pose.yaw == 1.5
     assert op.marker.description == "a rock"
@@ -403,8 +420,8 @@ def test_markers(tutorial):
     assert op.marker.kind == "area" and len(op.marker.area) == 4
     op = op_of(["marker", "move", "R", "--area", "0,0 5,0 5,5"], tutorial)
     assert op.op == "marker_move" and len(op.value) == 3
-    op = op_of(["marker", "move", "POI-A", "--pose", "1,2,0,0,0,0.5"], tutorial)
-    assert op.value.yaw == 0.5
+    op = op_of(["marker", "move", "POI-A", "--pose", "1,2,0,0,0,90"], tutorial)
+    assert op.value.yaw == pytest.approx(math.pi / 2)  # degrees, as ctl prints them
     # --position on a pose marker keeps its orientation
     mission, _ = tutorial
     mission.markers["POI-A"].pose.yaw = 0.7

@@ -53,7 +53,8 @@ class Proc:
             if needle in line:
                 return line
         raise AssertionError(
-            f"{self.args[3:5]}: no line with {needle!r} within {timeout:g} s; output:\n{''.join(self.output)}"
+            f"{self.args[3:5]}: no line with {needle!r} within {timeout:g} s; "
+            f"output:\n{''.join(self.output)}"
         )
 
     def stop(self, sig: int = signal.SIGTERM, timeout: float = 10.0) -> int | None:

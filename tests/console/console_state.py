@@ -16,7 +16,7 @@ from backend.files.missions import load_mission
 from backend.protocol.messages import ErrorReply, OpReply, RobotInfo, Telemetry
 
 ROOT = Path(__file__).resolve().parents[2]
-MARS = ROOT / "missions" / "mars_sample_return.yaml"
+MARS = ROOT / "tests" / "data" / "mars_sample_return_v1.yaml"
 TUTORIAL = ROOT / "missions" / "tutorial.yaml"
 DATA = Path(__file__).resolve().parent / "data"
 T0 = datetime(2026, 3, 14, 10, 42, 7, tzinfo=UTC)
@@ -171,12 +171,17 @@ class EngineBackend:
 
 
 def make_app(**kw: Any):
-    """A MissionApp for tests: no animations, no cursor blink."""
+    """A MissionApp for tests: no animations, no cursor blink; offline, its
+    clock at T0 (injected states are stamped T0: how old a robot's state is,
+    and so what the schedule shows, must not depend on when the test runs;
+    a live one keeps the real clock, as the server's stamps do)."""
     from console.app import MissionApp
 
     app = MissionApp(**kw)
     app.animation_level = "none"
     app.cursor_blink = False
+    if not kw.get("connect"):
+        app.clock = lambda: T0
     return app
 
 
@@ -231,7 +236,8 @@ async def wait_until(
     while not predicate():
         if _time.monotonic() > deadline:
             raise AssertionError(
-                f"timed out after {timeout:g} s waiting for {what} (focused: {pilot.app.focused!r})\n--- screen ---\n{screen_text(pilot.app)}"
+                f"timed out after {timeout:g} s waiting for {what} "
+                f"(focused: {pilot.app.focused!r})\n--- screen ---\n{screen_text(pilot.app)}"
             )
         await pilot.pause(0.02)
 

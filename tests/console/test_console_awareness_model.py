@@ -215,7 +215,7 @@ def test_repeated_refusal_counts_instead_of_piling_up():
     )
 
 
-# -- themes ------------------------------------------------------------------------------------------
+# -- themes ----------------------------------------------------------------------------------------
 
 
 def test_shipped_themes_load_and_set_every_status_colour():

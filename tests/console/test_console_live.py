@@ -77,7 +77,7 @@ async def test_add_edit_sync_run_success(live):
         editor.query_one("#f-target_level").value = "0.6"
         editor.query_one("#f-label").value = "top up"
         await pilot.pause()
-        await pilot.press("ctrl+s")
+        await pilot.press("enter")  # enter in a field applies
         await wait_until(
             pilot,
             lambda: skill(app, "lru1-3").params.get("target_level") == 0.6,

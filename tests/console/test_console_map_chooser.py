@@ -132,7 +132,10 @@ async def test_one_fitting_parameter_binds_without_asking():
         await wait_until(
             pilot, lambda: skill(app, "lru1-1").bindings.get("goal") == "POI-A", 10, "goal bound"
         )
-        assert backend.ops == [EditSkill(id="lru1-1", bindings={"goal": "POI-A"})]
+        # its label named the marker it was bound to: it names the new one
+        assert backend.ops == [
+            EditSkill(id="lru1-1", bindings={"goal": "POI-A"}, label="drive to POI-A")
+        ]
         assert not any(isinstance(s, ChoiceScreen) for s in app.screen_stack)
 
 

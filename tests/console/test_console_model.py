@@ -9,8 +9,9 @@ from backend.core import events as ev
 from backend.core.model import Policies, Status
 from backend.core.ops import AddSkill
 from console.config import load_config
-from console.screens.mission import default_params
-from console.state.model import CONNECTED, RECONNECTING, ConsoleModel, fmt_duration, param_summary
+from console.state.defaults import default_params
+from console.state.model import CONNECTED, RECONNECTING, ConsoleModel
+from console.state.text import fmt_duration, param_summary
 
 
 def model_of(b: Builder, online=MARS_FLEET) -> ConsoleModel:
@@ -88,7 +89,8 @@ def test_read_only_reason_matches_the_brief():
         "stop the robot (the skill goes back to its queue), then unsynchronize it"
     )
     assert m.read_only_reason("lru1-3").endswith(
-        "lru1-3 is idle_synchronized on lru1: only idle skills can be edited; unsynchronize it first"
+        "lru1-3 is idle_synchronized on lru1: only idle skills can be edited; "
+        "unsynchronize it first"
     )
     assert m.read_only_reason("lru1-4") is None
 

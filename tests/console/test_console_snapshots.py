@@ -54,7 +54,7 @@ def test_empty_mission(snap_compare):
     assert snap_compare(
         make_app(),
         terminal_size=(110, 24),
-        run_before=_prepare(b, expect=("lru1", "ardea", "nothing on the robot", "empty plan")),
+        run_before=_prepare(b, expect=("lru1", "ardea", "nothing on robot", "empty plan")),
     )
 
 
@@ -232,7 +232,7 @@ def test_80x24_editor(snap_compare):
             telemetry=mars_telemetry(),
             select="lru1-4",
             after=after,
-            expect=("take_science_image on lru1", "filter"),
+            expect=("lru1-4  take_science_image on", "filter", "+2 robots →"),
         ),
     )
 
@@ -242,7 +242,8 @@ def test_unreachable_server(snap_compare):
         pilot.app.push_screen(
             UnreachableScreen(
                 "tcp/127.0.0.1:7447",
-                "the router at tcp/127.0.0.1:7447 cannot be reached (nothing listens there, or the connection was refused)",
+                "the router at tcp/127.0.0.1:7447 cannot be reached "
+                "(nothing listens there, or the connection was refused)",
             )
         )
         await pilot.pause()
@@ -345,7 +346,8 @@ def test_map_parameter_chooser(snap_compare):
 
 
 def test_observer_account_read_only(snap_compare):
-    # logged in as an observer: the top bar says so, the editor and every change action give the reason
+    # logged in as an observer: the top bar says so, the editor and every change action
+    # give the reason
     async def after(pilot):
         from console.messages import AccountKnown
 

@@ -59,7 +59,7 @@ from backend.core.ops import (  # noqa: E402
 from backend.core.rules.engine import Applied, Engine, Refusal  # noqa: E402
 from backend.files.missions import load_mission  # noqa: E402
 
-MISSION_FILE = ROOT / "missions" / "mars_sample_return.yaml"
+MISSION_FILE = ROOT / "tests" / "data" / "mars_sample_return_v1.yaml"
 OPERATORS = ("alice", "bob")
 T0 = datetime(2030, 7, 1, 8, 0, tzinfo=UTC)
 

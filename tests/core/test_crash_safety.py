@@ -175,7 +175,7 @@ def test_sigkill_at_random_moments_recovers_a_consistent_prefix(tmp_path):
                     f"seed {seed}, k={k}: revision {r} differs from the in-process run"
                 )
                 assert mission == Mission.model_validate_json(want_json)
-                assert requests == want_requests
+                assert [r[:3] for r in requests] == want_requests  # (client, id, revision)
                 # the journal goes on after the crash: the next batch of the stream
                 if r + 1 in ref:
                     nxt_json, _, batch_json = ref[r + 1]

@@ -1,6 +1,7 @@
 """The parameter-kind registry (backend.core.params): one entry per kind a
 library may name, and each entry's parts agree with each other."""
 
+import math
 import typing
 
 import pytest
@@ -76,3 +77,57 @@ def test_handlers_get_typed_values_by_shape():
     assert typed_by_shape(area) == [Position()] * 3
     assert typed_by_shape({"x": 1.0, "y": 2.0, "z": 0.0}) == Position(x=1, y=2)
     assert typed_by_shape({"x": 1.0}) == {"x": 1.0}  # not a full position: as is
+
+
+# -- what a person reads and types: angles in degrees ---------------------------------
+
+
+def test_angles_are_read_and_typed_in_degrees_and_stay_radians_on_the_wire():
+    from backend.core.params import (
+        angle_text,
+        is_angle,
+        parse_angle,
+        value_from_text,
+        value_text,
+    )
+
+    heading = ParamSpec(type="float", unit="rad", min=-math.pi, max=math.pi)
+    assert is_angle(heading) and not is_angle(ParamSpec(type="float", unit="m"))
+    # a bare number is in the unit shown (degrees); a unit says otherwise
+    for typed, rad in [
+        ("30", math.pi / 6),
+        (30, math.pi / 6),
+        ("30deg", math.pi / 6),
+        ("30 °", math.pi / 6),
+        ("-90 degrees", -math.pi / 2),
+        ("0.52rad", 0.52),
+        ("1e1deg", math.radians(10)),
+    ]:
+        value, problem = value_from_text(heading, typed)
+        assert problem is None and value == pytest.approx(rad), typed
+    # shown in degrees with the unit; what is shown, typed back, is the same angle
+    assert value_text(heading, math.pi / 6) == "30°"
+    for rad in (0.4, -2.5, 0.0, 1e-9, math.pi):
+        shown = angle_text(rad)
+        again, _ = parse_angle(shown)
+        assert angle_text(again) == shown
+    # bounds and errors in degrees too
+    assert check_value(heading, 4.0, markers=None, robots=None)[0][1] == (
+        "229.18° is above the maximum 180°"
+    )
+    for bad in ("east", "30 m", "", "nan", float("inf"), True, None):
+        value, problem = parse_angle(bad)
+        assert value is None and problem, bad
+
+
+def test_pose_angles_in_text_and_from_text():
+    from backend.core.params import value_from_text, value_text
+
+    pose = ParamSpec(type="pose")
+    assert value_text(pose, {"x": 1.0, "y": 2.0, "z": 0.0, "yaw": math.pi / 2}) == "(1,2 yaw=90°)"
+    wire, problem = value_from_text(pose, {"x": 1, "y": 2, "yaw": 45, "pitch": "0.1rad"})
+    assert problem is None
+    assert wire["yaw"] == pytest.approx(math.pi / 4) and wire["pitch"] == 0.1 and wire["x"] == 1
+    assert value_from_text(pose, {"yaw": "north"})[1].startswith("yaw: expected an angle")
+    # not an angle: as typed
+    assert value_from_text(ParamSpec(type="float", unit="m"), 30) == (30, None)

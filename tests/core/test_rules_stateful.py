@@ -41,7 +41,7 @@ from backend.core.ops import (
 from backend.core.rules.engine import Engine, Refusal
 from backend.files.missions import load_mission
 
-MISSION = Path(__file__).resolve().parents[2] / "missions" / "mars_sample_return.yaml"
+MISSION = Path(__file__).resolve().parents[2] / "tests" / "data" / "mars_sample_return_v1.yaml"
 CLIENTS = ["c1", "c2"]
 SIMPLE = {  # skill -> params that make it valid, per robot type
     "drive_to": {"goal": {"x": 3.0, "y": 4.0}},

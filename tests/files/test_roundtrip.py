@@ -133,7 +133,7 @@ def test_saved_yaml_is_readable(src: Path, tmp_path: Path):
 
 def test_saved_file_is_the_source_reordered_not_reinvented(tmp_path: Path):
     """Every robot, marker, skill and barrier of the source is in the saved file."""
-    src = REPO / "missions" / "mars_sample_return.yaml"
+    src = REPO / "tests" / "data" / "mars_sample_return_v1.yaml"
     source = yaml.safe_load(src.read_text())
     m, _ = load_mission(src)
     out = tmp_path / "m.yaml"
@@ -151,7 +151,7 @@ def test_saved_file_is_the_source_reordered_not_reinvented(tmp_path: Path):
 
 
 def _engine() -> tuple[Engine, Library]:
-    m, lib = load_mission(REPO / "missions" / "mars_sample_return.yaml")
+    m, lib = load_mission(REPO / "tests" / "data" / "mars_sample_return_v1.yaml")
     return Engine(m, lib), lib
 
 

@@ -212,9 +212,20 @@ class SimWatch:
         self.changed.set()
 
     async def query(self) -> mf.SimStatus:
+        """The ground view: what the robots reported."""
         assert self.client.session is not None
         raw = await transport.query(self.client.session, mf.KEY_STATUS, b"", timeout=10.0)
         return mf.SimStatus.model_validate_json(raw)
+
+    async def truth(self) -> mf.SimTruth:
+        """The world as it is (evaluation only: an operator's strategy never reads it)."""
+        assert self.client.session is not None
+        raw = await transport.query(
+            self.client.session, mf.KEY_STATUS, mf.TRUTH_QUERY, timeout=10.0
+        )
+        truth = mf.SimStatus.model_validate_json(raw).truth
+        assert truth is not None
+        return truth
 
     async def until(
         self, pred: Callable[[mf.SimStatus], bool], timeout: float = 30.0, what: str = ""

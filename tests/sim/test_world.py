@@ -16,6 +16,7 @@ from backend.agent import SkillFailed
 from backend.core.model import Pose, Position
 from backend.files.diagnostics import FileProblems
 from backend.protocol import mapfeed as mf
+from sim.exchange import WorldExchange
 from sim.pathing import ROCK, Follower, lawnmower, segment_cells
 from sim.skills.registry import RobotSkills
 from sim.world import World
@@ -52,15 +53,21 @@ def test_default_world_is_valid_and_deterministic(spec) -> None:
 
 
 def test_pilot_scenario_layout(world: World) -> None:
-    """An RSS at POI-A inside ROI-east and coverage; the best ones far in the bottom right."""
-    rss_a = world.rss_near(42.0, 18.0, 3.0)
-    assert rss_a is not None and rss_a.name == "RSS-A"
-    assert 30 <= rss_a.x <= 80 and 0 <= rss_a.y <= 40  # ROI-east
-    assert world.link_quality(42.0, 18.0) > 0
-    best = max(world.rss.values(), key=lambda r: r.max_score)
-    assert best.x > 100 and best.y < -50
-    assert world.link_quality(best.x, best.y) == 0  # far: needs Wi-Fi boxes or comes back to report
-    assert sorted(r.max_score for r in world.rss.values())[-2:] == [1.6, 2.0]
+    """The calibrated pilot study (docs/pilot-study.md): poor regions near the lander,
+    inside its coverage (one where the orbital hint POI-A points); the two most valuable
+    far away in the bottom right, out of coverage; few stones everywhere."""
+    rss_a = world.rss_near(29.0, 23.0, 3.0)  # POI-A
+    assert rss_a is not None and rss_a.name == "RSS-A" and rss_a.max_score <= 0.5
+    near = [r for r in world.rss.values() if world.link_quality(r.x, r.y) > 0]
+    assert {r.name for r in near} == {"RSS-A", "RSS-B"}
+    assert sum(r.max_score * len(r.stones) for r in near) < 1.8  # all of them: not the best
+    best = sorted(world.rss.values(), key=lambda r: -r.max_score)[:2]
+    assert [r.max_score for r in best] == [1.0, 0.9] and sum(r.max_score for r in best) >= 1.8
+    for r in best:
+        assert r.x > 50 and r.y < -30 and math.hypot(r.x, r.y) > 90  # bottom right, far
+        assert world.link_quality(r.x, r.y) == 0  # beyond coverage: a Wi-Fi box is needed
+    assert all(len(r.stones) <= 3 for r in world.rss.values())
+    assert world.spec.comms.direct_range == 0  # robots talk through the network only
     # every RSS and stone is reachable by a rover
     for stone in world.stones.values():
         assert world.terrain_at(stone.x, stone.y) != ROCK
@@ -121,11 +128,13 @@ def test_coverage_grows_with_a_wifi_box_inside_coverage_only(world: World) -> No
     assert world.link_quality(130.0, 0.0) > 0
 
 
-def test_exploration_reveals_rss_and_reaches_the_ground_only_in_range(world: World) -> None:
+def test_exploration_reveals_rss_and_reaches_the_ground_only_in_range(spec) -> None:
+    radio = spec.model_copy(update={"comms": spec.comms.model_copy(update={"direct_range": 30})})
+    world = World(radio, seed=1)  # robots with a direct radio besides the network
     near = world.add_robot("lru1", "lru_science")
-    near.x, near.y = 44.0, 20.0  # at RSS-A, inside coverage
+    near.x, near.y = 29.0, 25.0  # at RSS-A, inside coverage
     far = world.add_robot("ardea", "drone")
-    far.x, far.y, far.airborne = -32.0, 70.0, True  # over RSS-C, out of coverage
+    far.x, far.y, far.airborne = -32.0, 80.0, True  # over RSS-C, out of coverage
     assert world.in_range(near) and not world.in_range(far)
     assert not world.can_talk(near, far)  # no coverage out there, and too far for direct radio
     for r in (near, far):
@@ -135,12 +144,12 @@ def test_exploration_reveals_rss_and_reaches_the_ground_only_in_range(world: Wor
     assert "RSS-A" in near.knowledge.rss and "RSS-C" not in near.knowledge.rss
     assert world.pump(now=0.0, delay=0.0)
     assert set(world.ground_rss) == {"RSS-A"}  # RSS-C waits aboard ardea
-    i, j = world.geom.cell_of(-32.0, 70.0)
+    i, j = world.geom.cell_of(-32.0, 80.0)
     assert world.explored[i, j] and not world.ground_explored[i, j]
-    far.x, far.y = -20.0, 75.0
-    near.x, near.y = -20.0, 60.0  # out of coverage too, but 15 m apart: direct radio
+    far.x, far.y = -20.0, 85.0
+    near.x, near.y = -20.0, 72.0  # out of coverage too, but 13 m apart: direct radio
     assert not world.in_range(near) and world.can_talk(near, far)
-    near.x, near.y = 44.0, 20.0
+    near.x, near.y = 29.0, 25.0
     far.x, far.y = 5.0, 5.0  # back in coverage
     world.pump(now=1.0, delay=2.0)  # on its way: a 2 s link delay
     assert "RSS-C" not in world.ground_rss
@@ -154,8 +163,8 @@ def test_exploration_reveals_rss_and_reaches_the_ground_only_in_range(world: Wor
 
 def test_path_avoids_impassable_cells(world: World) -> None:
     rover = world.add_robot("lru1", "lru_science")
-    start = world.nearest_free(45.0, -38.0)
-    goal = world.nearest_free(80.0, -38.0)
+    start = world.nearest_free(45.0, 38.0)
+    goal = world.nearest_free(80.0, 38.0)
     assert start and goal
     rover.x, rover.y = start
     route = world.plan_route(rover, goal)
@@ -166,7 +175,7 @@ def test_path_avoids_impassable_cells(world: World) -> None:
     f = Follower(route)
     assert f.total > math.dist(start, goal) + 5
     with pytest.raises(Exception, match="impassable"):
-        world.plan_route(rover, (62.0, -38.0))  # the crater floor
+        world.plan_route(rover, (62.0, 38.0))  # the crater floor
 
 
 def test_lawnmower_covers_the_polygon() -> None:
@@ -218,13 +227,15 @@ def test_battery_drains_with_distance_and_an_empty_battery_fails_with_the_distan
     run(skills.drive_to(ctx, goal=Pose(x=40.0, y=3.0), speed=0.5))
     used = 1.0 - rover.battery
     assert math.hypot(rover.x - 40.0, rover.y - 3.0) <= 0.5
-    assert 35 / 1000 <= used <= 45 / 1000  # ~1000 m per battery, plus electronics
+    per_m = 1 / rover.model.metres_per_battery
+    assert 35 * per_m <= used <= 45 * per_m  # 350 m per battery, plus electronics
     assert (
         ctx.progress_calls[-1][0] == 1.0 and ctx.progress_calls[len(ctx.progress_calls) // 2][2] > 0
     )
-    rover.battery = 0.08  # 3 % above the reserve: about 30 m
+    rover.x, rover.y = 20.0, 3.0
+    rover.battery = 0.13  # 8 % above the reserve: about 28 m, past the lander
     with pytest.raises(SkillFailed) as exc:
-        run(skills.drive_to(FakeCtx(), goal=Pose(x=40.0, y=-50.0)))
+        run(skills.drive_to(FakeCtx(), goal=Pose(x=-45.0, y=3.0)))
     m = re.search(r"battery empty after (\d+) m of (\d+) m", exc.value.reason)
     assert m and "recharge at the lander" in exc.value.reason, exc.value.reason
     done, total = int(m.group(1)), int(m.group(2))
@@ -286,17 +297,18 @@ def test_outcomes_hardly_depend_on_the_step_size(spec) -> None:
 def test_identify_alone_gives_the_minimum_and_together_the_top_score(world: World) -> None:
     lru1 = world.add_robot("lru1", "lru_science")
     lru2 = world.add_robot("lru2", "lru_manipulator")
-    lru1.x, lru1.y = 42.0, 18.0
-    lru2.x, lru2.y = 43.0, 18.0
+    lru1.x, lru1.y = 29.0, 23.0
+    lru2.x, lru2.y = 30.0, 23.0
     fleet = fake_fleet(world)
     s1, s2 = RobotSkills(fleet, lru1), RobotSkills(fleet, lru2)
-    run(s2.identify_stone(FakeCtx(), target=Position(x=42.0, y=18.0)))
+    at = Position(x=29.0, y=23.0)
+    run(s2.identify_stone(FakeCtx(), target=at, search_radius=6.0))
     alone = [s for s in world.stones.values() if s.state == "identified"]
     assert [s.score for s in alone] == [0.1]
     lru2.activity = "identify_stone"  # the partner works on it at the same time (a barrier)
     lru1.activity = "identify_stone"
-    run(s1.identify_stone(FakeCtx(), target=Position(x=42.0, y=18.0), partner="lru2"))
-    top = [s for s in world.stones.values() if s.state == "identified" and s.score == 1.0]
+    run(s1.identify_stone(FakeCtx(), target=at, search_radius=6.0, partner="lru2"))
+    top = [s for s in world.stones.values() if s.state == "identified" and s.score == 0.5]
     assert len(top) == 1 and top[0].identified_by == ("lru1", "lru2")
     with pytest.raises(SkillFailed, match="no region ideal for sampling stones"):
         run(s1.identify_stone(FakeCtx(), target=Position(x=-10.0, y=-10.0)))
@@ -304,15 +316,102 @@ def test_identify_alone_gives_the_minimum_and_together_the_top_score(world: Worl
 
 def test_science_image_reveals_the_top_score(world: World) -> None:
     lru1 = world.add_robot("lru1", "lru_science")
-    lru1.x, lru1.y = 40.0, 18.0
+    lru1.x, lru1.y = 22.0, 20.0
     run(
         RobotSkills(fake_fleet(world), lru1).take_science_image(
-            FakeCtx(), target=Pose(x=45.0, y=21.0)
+            FakeCtx(), target=Pose(x=29.0, y=23.0)
         )
     )
-    assert lru1.knowledge.rss["RSS-A"]["top_score"] == 1.0
+    assert lru1.knowledge.rss["RSS-A"]["top_score"] == 0.5
     world.pump(0.0, 0.0)
-    assert world.ground_rss["RSS-A"]["top_score"] == 1.0
+    assert world.ground_rss["RSS-A"]["top_score"] == 0.5
+
+
+def exchanging_fleet(world: World) -> Any:
+    """A host whose asks and tells reach the other robot's world model (sim/exchange.py)."""
+
+    async def ask(sender, target, topic, data):
+        return WorldExchange(world, world.robots[target]).asks()[topic](data, sender.name)
+
+    async def tell(sender, target, topic, data):
+        WorldExchange(world, world.robots[target]).tells()[topic](data, sender.name)
+        return True
+
+    return SimpleNamespace(
+        world=world, dt=5.0, robot_seconds=0.0, note=lambda r, t: None, ask=ask, tell=tell
+    )
+
+
+def test_a_revealed_top_score_stays_when_another_robot_discovers_the_region(world: World) -> None:
+    lru1 = world.add_robot("lru1", "lru_science")
+    lru2 = world.add_robot("lru2", "lru_manipulator")
+    lru1.x, lru1.y = 22.0, 20.0
+    run(RobotSkills(fake_fleet(world), lru1).take_science_image(FakeCtx(), target=Pose(x=29, y=23)))
+    world.pump(0.0, 0.0)
+    assert world.ground_rss["RSS-A"]["top_score"] == 0.5
+    WorldExchange(world, lru2).tell_rss(lru1.knowledge.rss["RSS-A"], "lru1")
+    lru2.x, lru2.y = 29.0, 23.0
+    assert world.discover(lru2, 10.0) == ["RSS-A"]  # a later report, without the top score
+    world.pump(1.0, 0.0)
+    assert world.ground_rss["RSS-A"]["top_score"] == 0.5  # the map keeps it
+    assert lru2.knowledge.rss["RSS-A"]["top_score"] == 0.5  # and so does LRU2
+
+
+def test_identify_searches_only_within_its_radius_and_pick_the_whole_region(
+    world: World,
+) -> None:
+    """Seed 1: RSS-A's stones lie 4.4 and 4.8 m from its centre (29, 23)."""
+    lru1 = world.add_robot("lru1", "lru_science")
+    lru2 = world.add_robot("lru2", "lru_manipulator")
+    lru1.x, lru1.y, lru2.x, lru2.y = 29.0, 23.0, 29.5, 23.0
+    fleet = exchanging_fleet(world)
+    s1, s2 = RobotSkills(fleet, lru1), RobotSkills(fleet, lru2)
+    centre = Position(x=29.0, y=23.0)
+    with pytest.raises(SkillFailed, match=r"no stone to identify within 3 m of \(29.0, 23.0\)"):
+        run(s1.identify_stone(FakeCtx(), target=centre, search_radius=3.0))
+    assert all(s.state == "hidden" for s in world.stones.values())
+    lru1.activity = lru2.activity = "identify_stone"
+    run(s1.identify_stone(FakeCtx(), target=centre, search_radius=5.0, partner="lru2"))
+    run(s2.identify_stone(FakeCtx(), target=centre, search_radius=5.0, partner="lru1"))
+    lru1.activity = lru2.activity = None
+    stone = world.stones["RSS-A-s1"]
+    assert stone.state == "identified" and stone.score == 0.5
+    # aimed at the far side of the region, 8.8 m from the stone: it is still found
+    result = run(s2.pick_stone(FakeCtx(), target=Position(x=29.0, y=18.5)))
+    assert result.info == "picked RSS-A-s1 of RSS-A (score 0.5); carrying 1/2"
+
+
+def test_a_robot_trusts_its_own_newer_news_of_a_stone_over_a_partners_stale_one(
+    world: World,
+) -> None:
+    """LRU2 delivered a stone while LRU1 could not hear of it; later LRU1, asked, must not
+    send LRU2 back for it (it said 'identified' and LRU2 failed picks on 'delivered')."""
+    lru1 = world.add_robot("lru1", "lru_science")
+    lru2 = world.add_robot("lru2", "lru_manipulator")
+    lru1.x, lru1.y, lru2.x, lru2.y = 29.0, 23.0, 29.5, 23.0
+    fleet = exchanging_fleet(world)
+    s1, s2 = RobotSkills(fleet, lru1), RobotSkills(fleet, lru2)
+    centre = Position(x=29.0, y=23.0)
+    lru1.activity = lru2.activity = "identify_stone"
+    run(s1.identify_stone(FakeCtx(), target=centre, search_radius=6.0, partner="lru2"))
+    run(s2.identify_stone(FakeCtx(), target=centre, search_radius=6.0, partner="lru1"))
+    lru1.activity = lru2.activity = None
+    stale = dict(lru1.knowledge.stones["RSS-A-s1"])
+    run(s2.pick_stone(FakeCtx(), target=centre))
+    lru2.x, lru2.y = 2.0, 0.0
+    drop = run(s2.drop_stone(FakeCtx()))
+    assert drop.info == "delivered RSS-A-s1 of RSS-A +0.5: +0.5; score 0.5"
+    lru1.knowledge.stones["RSS-A-s1"] = stale  # it heard nothing of the pick nor the drop
+    lru2.x, lru2.y = 29.5, 23.0
+    with pytest.raises(SkillFailed) as exc:
+        run(s2.pick_stone(FakeCtx(), target=centre))
+    assert "knows no identified stone" in exc.value.reason, exc.value.reason
+    assert lru2.knowledge.stones["RSS-A-s1"]["state"] == "delivered"  # its own news stays
+    # told by the one that knows better, LRU1 learns; told stale news, nobody unlearns
+    WorldExchange(world, lru1).tell_stone(lru2.knowledge.stones["RSS-A-s1"], "lru2")
+    WorldExchange(world, lru2).tell_stone(stale, "lru1")
+    assert lru1.knowledge.stones["RSS-A-s1"]["state"] == "delivered"
+    assert lru2.knowledge.stones["RSS-A-s1"]["state"] == "delivered"
 
 
 # ---------------------------------------------------------------- map feed codec

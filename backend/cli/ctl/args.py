@@ -37,6 +37,14 @@ Operations
   new [NAME]                  an empty mission with the same robots
   undo | redo                 your own (same --client-id) edits of the plan
   watch [--count N]           one line per change until Ctrl-C (or N batches)
+  check [ROBOT...]            the plan checks (energy, coverage, barriers, terrain,
+                              parameters), computed with the robots' telemetry and
+                              the simulator's map when they answer; exit 1 while
+                              an error is not waived
+  waive CHECK_ID --reason TEXT   let a finding's skills be synchronized anyway
+  unwaive CHECK_ID            withdraw a waiver
+  timeline                    each skill's predicted start and end, barrier waits,
+                              battery, spans out of coverage, and the plan's end
 
 Parameter values (--param NAME=VALUE)
   VALUE is a YAML scalar or flow YAML: `speed=0.4`, `filter=near_infrared`,
@@ -49,7 +57,10 @@ Parameter values (--param NAME=VALUE)
   --recharge-below F (0..1, or `off`); on edit, unnamed policies are kept.
 
 Geometry
-  --pose x,y[,z[,roll,pitch,yaw]] or a flow mapping '{x: 1, y: 2, yaw: 1.57}'
+  --pose x,y[,z[,roll,pitch,yaw]] or a flow mapping '{x: 1, y: 2, yaw: 90}'
+  Angles (roll, pitch, yaw; a parameter in rad) are in degrees, as ctl prints
+  them (heading 0 = east, counter-clockwise); 30deg and 0.52rad say their
+  unit. Files and --json keep radians.
   --position x,y[,z] or '{x: 1, y: 2}'
   --area "x,y x,y x,y ..." (at least 3 points; ';' also separates points)
   A value starting with '-' must be attached: --pose=-3,4. `marker move` with
@@ -258,7 +269,9 @@ def _policies(p: argparse.ArgumentParser) -> None:
 def _geometry(p: argparse.ArgumentParser) -> None:
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument(
-        "--pose", metavar="P", help="x,y[,z[,roll,pitch,yaw]] or '{x: 1, y: 2, yaw: 0.5}'"
+        "--pose",
+        metavar="P",
+        help="x,y[,z[,roll,pitch,yaw]] or '{x: 1, y: 2, yaw: 90}' (angles in degrees, or 1.57rad)",
     )
     g.add_argument("--position", metavar="P", help="x,y[,z] or '{x: 1, y: 2}'")
     g.add_argument("--area", metavar="A", help='polygon "x,y x,y x,y ..." (3 points or more)')
@@ -414,6 +427,15 @@ def _new(p: argparse.ArgumentParser) -> None:
     p.add_argument("name", nargs="?", default="mission", metavar="NAME")
 
 
+def _check_id(p: argparse.ArgumentParser) -> None:
+    p.add_argument("check", metavar="CHECK_ID", help="a finding's id, as `ctl check` prints it")
+
+
+def _waive(p: argparse.ArgumentParser) -> None:
+    _check_id(p)
+    p.add_argument("--reason", required=True, metavar="TEXT", help="why (journaled, in every log)")
+
+
 def _watch(p: argparse.ArgumentParser) -> None:
     p.add_argument("--count", type=_nonneg_int, metavar="N", help="stop after N change batches")
 
@@ -445,6 +467,10 @@ OPERATIONS: dict[str, tuple[str, Arguments]] = {
     "undo": ("undo your last edit of the plan", _nothing),
     "redo": ("redo what you undid last", _nothing),
     "watch": ("print changes as they happen, one line each, until Ctrl-C", _watch),
+    "check": ("run the plan checks; exit 1 while an error is not waived", _state),
+    "waive": ("let the skills of a plan check's finding be synchronized anyway", _waive),
+    "unwaive": ("withdraw a waiver", _check_id),
+    "timeline": ("print the predicted timeline of the plan", _nothing),
 }
 
 

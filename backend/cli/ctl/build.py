@@ -16,6 +16,7 @@ from backend.cli.ctl.errors import FileInvalid, UsageError
 from backend.cli.ctl.values import (
     MarkerRef,
     check_name,
+    param_value,
     parse_area,
     parse_params,
     parse_pose,
@@ -55,10 +56,10 @@ def _resolve(
     params: dict[str, Any] = {}
     bindings: dict[str, str] = {}
     for name, value in parsed.items():
-        if not isinstance(value, MarkerRef):
-            params[name] = value
-            continue
         pspec = _param_spec(library, mission, robot, skill, name)
+        if not isinstance(value, MarkerRef):
+            params[name] = param_value(name, value, pspec)  # angles: degrees -> radians
+            continue
         kind = KINDS.get(pspec.type) if pspec is not None else None
         if pspec is None or (kind is not None and kind.bindable_to):
             bindings[name] = value.name  # unknown: the server names the problem
@@ -300,6 +301,7 @@ def _redo(args: argparse.Namespace, known: Known) -> Any:
 # ctl's operation name -> its builder (None: `ctl` alone, refused before this)
 BUILDERS: dict[str | None, Builder] = {
     **dict.fromkeys(("state", "robots", "pending", "watch", "save", None), _no_operation),
+    **dict.fromkeys(("check", "timeline"), _no_operation),
     "add": _add,
     "delete": _delete,
     "move": _move,
@@ -316,6 +318,10 @@ BUILDERS: dict[str | None, Builder] = {
     "new": _new,
     "undo": _undo,
     "redo": _redo,
+    "waive": lambda args, known: _validated(
+        ops.Waive, "waive", check=args.check, reason=args.reason.strip()
+    ),
+    "unwaive": lambda args, known: _validated(ops.Unwaive, "unwaive", check=args.check),
 }
 
 

@@ -15,7 +15,7 @@ from datetime import UTC, datetime
 from typing import Any
 
 from backend.cli.ctl.args import CONTROL_OPS
-from backend.core.params import POSE_FIELDS, POSITION_FIELDS
+from backend.core.params import POSE_FIELDS, POSITION_FIELDS, is_angle, pose_text, value_text
 
 _GLYPHS = {
     "idle": ("○", "."),
@@ -64,22 +64,20 @@ def _is_area(v: Any) -> bool:
 
 
 def _pose_text(v: dict[str, Any]) -> str:
-    """(x,y) and the other fields that are not 0: `(3,4 yaw=1.57)`."""
-    extra = [f"{k}={_num(v[k])}" for k in ("z", "roll", "pitch", "yaw") if v.get(k)]
-    return (
-        f"({_num(v.get('x', 0))},{_num(v.get('y', 0))}"
-        + (" " + " ".join(extra) if extra else "")
-        + ")"
-    )
+    """(x,y) and the other fields that are not 0, angles in degrees: `(3,4 yaw=90°)`."""
+    return pose_text(v)
 
 
 def _str_text(v: str) -> str:
     return v if v and re.fullmatch(r"[\w.\-@/]+", v) else json.dumps(v, ensure_ascii=False)
 
 
-def short_value(v: Any, limit: int = 40) -> str:
-    """A compact rendering of a parameter value for one line of `state`."""
-    if _is_pose(v):
+def short_value(v: Any, limit: int = 40, spec: Any = None) -> str:
+    """A compact rendering of a parameter value for one line of `state`
+    (with its spec: as a person reads it, angles in degrees)."""
+    if spec is not None and is_angle(spec) and isinstance(v, int | float):
+        text = value_text(spec, v)
+    elif _is_pose(v):
         text = _pose_text(v)
     elif _is_area(v):
         text = f"[{len(v)} points]"
@@ -105,13 +103,18 @@ def _differs_from_default(library: Any, skill: str, name: str, value: Any) -> bo
         return True
 
 
+def _spec_of(library: Any, skill: str, name: str) -> Any:
+    spec = library.skills.get(skill) if library is not None else None
+    return spec.params.get(name) if spec is not None else None
+
+
 def short_params(s: Any, library: Any) -> str:
     parts = []
     for name, value in s.params.items():
         if name in s.bindings:
             parts.append(f"{name}=@{s.bindings[name]}")
         elif _differs_from_default(library, s.skill, name, value):
-            parts.append(f"{name}={short_value(value)}")
+            parts.append(f"{name}={short_value(value, spec=_spec_of(library, s.skill, name))}")
     for name, marker in s.bindings.items():
         if name not in s.params:
             parts.append(f"{name}=@{marker}")
@@ -301,6 +304,7 @@ def state_json(client: Any, only: list[str] | None = None) -> dict[str, Any]:
         },
         "barriers": {bid: list(b.skills) for bid, b in m.barriers.items()},
         "markers": {n: mk.model_dump(mode="json") for n, mk in m.markers.items()},
+        "waivers": {c: w.model_dump(mode="json") for c, w in m.waivers.items()},
     }
 
 
@@ -407,6 +411,7 @@ def state_text(client: Any, only: list[str] | None = None, unicode: bool = True)
             lines += _robot_lines(client, robot, unicode)
     lines.append(_barrier_line(m))
     lines += _marker_lines(m)
+    lines += [f"waived {c} at revision {w.revision}: {w.reason}" for c, w in m.waivers.items()]
     legend = ", ".join(f"{glyph(st, unicode)} {st}" for st in _GLYPHS)
     lines.append(f"({legend})")
     return "\n".join(lines)
@@ -583,6 +588,10 @@ DESCRIBE: dict[str, Callable[[Outcome], str]] = {
     "new": lambda o: f"started a new mission '{o.op.name}' {o.at}",
     "undo": lambda o: f"undid {o.value.get('undone', 'the last edit')} {o.at}",
     "redo": lambda o: f"redid {o.value.get('redone', 'the last undone edit')} {o.at}",
+    "waive": lambda o: (
+        f"waived {o.op.check} {o.at}" if o.changed else o.unchanged(f"{o.op.check} was waived")
+    ),
+    "unwaive": lambda o: f"withdrew the waiver of {o.op.check} {o.at}",
 }
 
 
@@ -643,6 +652,8 @@ EVENT_TEXT: dict[str, Callable[[Any], str]] = {
         + (f" ({e.changes['reason']})" if e.changes.get("reason") else "")
         + (f", did {', '.join(e.changes['done'])}" if e.changes.get("done") else "")
     ),
+    "waiver_set": lambda e: f"waived {e.check}: {e.waiver.reason}",
+    "waiver_removed": lambda e: f"waiver of {e.check} withdrawn",
 }
 
 

@@ -19,6 +19,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from backend.cli.ctl import plan
 from backend.cli.ctl.args import DEFAULT_CONNECT, ROBOT_OPS
 from backend.cli.ctl.errors import FileInvalid, UsageError
 from backend.cli.ctl.render import (
@@ -254,7 +255,7 @@ async def _session(args: argparse.Namespace, endpoints: list[str], login: Any = 
         client_id=args.client_id or default_client_id(),
         timeout=args.timeout,
         # watch: to say when a robot's telemetry is unreadable
-        telemetry=args.op in ("robots", "watch"),
+        telemetry=args.op in ("robots", "watch", "check", "timeline"),
     )
     async with client:
         return await VIEWS.get(args.op, _operation)(client, args)
@@ -513,4 +514,6 @@ VIEWS: dict[str, Callable[[Any, argparse.Namespace], Awaitable[int]]] = {
     "pending": _pending,
     "watch": _watch,
     "save": _save,
+    "check": plan.check,
+    "timeline": plan.timeline,
 }

@@ -1,4 +1,10 @@
-"""ctl's command-line values: `--param NAME=VALUE`, names, --pose/--position/--area."""
+"""ctl's command-line values: `--param NAME=VALUE`, names, --pose/--position/--area.
+
+Angles are typed in degrees, as ctl prints them: a bare number is degrees,
+`30deg` and `0.52rad` say their unit (backend.core.params.parse_angle); the
+wire keeps radians. `--pose`'s roll, pitch and yaw are angles; a `--param`
+is one when its spec says so (`param_value`, once the library is known).
+"""
 
 from __future__ import annotations
 
@@ -10,7 +16,14 @@ from datetime import date, datetime
 from typing import Any
 
 from backend.cli.ctl.errors import UsageError
-from backend.core.params import POSE_FIELDS, POSITION_FIELDS
+from backend.core.params import (
+    ANGLE_FIELDS,
+    POSE_FIELDS,
+    POSITION_FIELDS,
+    ParamSpec,
+    parse_angle,
+    value_from_text,
+)
 
 _NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_\-]*$")  # model.NAME_PATTERN (kept light to import)
 _DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(ms|s|m|min|h|d)?\s*$")
@@ -63,7 +76,8 @@ def _plain(value: Any, where: str) -> Any:
 
 def parse_param(text: str) -> tuple[str, Any]:
     """`NAME=VALUE` -> (name, value); VALUE is YAML, `@M` a MarkerRef."""
-    import yaml
+    from backend.core.limits import echo, show_path
+    from backend.files import yamlio
 
     name, sep, raw = text.partition("=")
     name = name.strip()
@@ -77,26 +91,42 @@ def parse_param(text: str) -> tuple[str, Any]:
     if stripped.startswith("@"):
         return name, MarkerRef(check_name(stripped[1:], f"--param {name}=@MARKER"))
     try:
-        value = yaml.safe_load(raw)
-    except yaml.YAMLError as e:
-        why = getattr(e, "problem", None) or str(e).splitlines()[0]
+        value = yamlio.load(raw).data  # within the file limits: an alias bomb is refused here
+    except yamlio.YamlSyntaxError as e:
+        if not e.message.startswith("YAML"):  # over a limit
+            where = show_path(e.path)
+            raise UsageError(
+                f"--param {name}: {f'{where}: ' if where else ''}{e.message}"
+            ) from None
+        why = e.message.removeprefix("YAML syntax error: ").splitlines()[0]
         hint = ""
         if stripped[:1] in "{[":
             hint = f"; quote the whole argument for the shell: --param '{name}={{x: 3, y: 4}}'"
         elif ":" in stripped:
             hint = f"; write a mapping in braces: --param '{name}={{x: 3, y: 4}}'"
         raise UsageError(
-            f"--param {name}: {raw!r} is not a valid YAML value ({why}){hint}"
+            f"--param {name}: {echo(raw)} is not a valid YAML value ({why}){hint}"
         ) from None
     if isinstance(value, dict | list) and stripped[:1] not in "{[":
         raise UsageError(
-            f"--param {name}: {raw!r} reads as a YAML block "
+            f"--param {name}: {echo(raw)} reads as a YAML block "
             f"{'mapping' if isinstance(value, dict) else 'list'}; write mappings in braces "
             "({x: 3, y: 4}) and lists in brackets ([a, b]), quoted for the shell"
         )
     if isinstance(value, str) and value.startswith("@") and len(value) > 1:
         return name, MarkerRef(check_name(value[1:], f"--param {name}=@MARKER"))
     return name, _plain(value, f"--param {name}")
+
+
+def param_value(name: str, value: Any, spec: ParamSpec | None) -> Any:
+    """A `--param` value as the wire carries it: angles typed in degrees (or
+    with their unit) become radians; unknown spec: as typed (the server checks)."""
+    if spec is None:
+        return value
+    wire, problem = value_from_text(spec, value)
+    if problem is not None:
+        raise UsageError(f"--param {name}: {problem}")
+    return wire
 
 
 def parse_params(items: list[str] | None) -> dict[str, Any]:
@@ -127,13 +157,14 @@ def _numbers(text: str, what: str, lo: int, hi: int) -> list[float]:
 
 
 def _mapping(text: str, what: str, fields: tuple[str, ...]) -> dict[str, float]:
-    import yaml
+    from backend.core.limits import echo
+    from backend.files import yamlio
 
     try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as e:
+        data = yamlio.load(text).data
+    except yamlio.YamlSyntaxError as e:
         raise UsageError(
-            f"{what}: {text!r} is not a valid YAML mapping ({getattr(e, 'problem', e)})"
+            f"{what}: {echo(text)} is not a valid YAML mapping ({e.message})"
         ) from None
     if not isinstance(data, dict):
         raise UsageError(f"{what}: expected a mapping like {{x: 1, y: 2}}, got {text!r}")
@@ -141,16 +172,36 @@ def _mapping(text: str, what: str, fields: tuple[str, ...]) -> dict[str, float]:
     for k, v in data.items():
         if k not in fields:
             raise UsageError(f"{what}: unknown field {k!r} (fields: {', '.join(fields)})")
+        if k in ANGLE_FIELDS:
+            out[k] = _angle(v, f"{what}: {k}")
+            continue
         if not isinstance(v, int | float) or isinstance(v, bool) or not math.isfinite(v):
             raise UsageError(f"{what}: {k} must be a finite number, got {v!r}")
         out[k] = float(v)
     return out
 
 
+def _angle(v: Any, what: str) -> float:
+    """An angle typed on the command line -> radians (bare numbers are degrees)."""
+    rad, problem = parse_angle(v)
+    if rad is None:
+        raise UsageError(f"{what}: {problem}")
+    return rad
+
+
 def parse_pose(text: str) -> dict[str, float]:
+    """`x,y[,z[,roll,pitch,yaw]]` or `{x: 1, y: 2, yaw: 90}`; angles in degrees
+    unless they say `rad` (`yaw: 1.57rad`, `1,2,0,0,0,1.57rad`)."""
     if text.strip().startswith("{"):
         return _mapping(text, "--pose", POSE_FIELDS)
-    return dict(zip(POSE_FIELDS, _numbers(text, "--pose", 2, 6), strict=False))
+    parts = [p for p in re.split(r"[,\s]+", text.strip()) if p]
+    if not 2 <= len(parts) <= 6:
+        raise UsageError(f"--pose: expected 2 to 6 comma-separated numbers, got {text!r}")
+    coords = ",".join(parts[:3])
+    out = dict(zip(POSE_FIELDS, _numbers(coords, "--pose", 2, 3), strict=False))
+    for k, v in zip(ANGLE_FIELDS, parts[3:], strict=False):
+        out[k] = _angle(v, f"--pose: {k}")
+    return out
 
 
 def parse_position(text: str, what: str = "--position") -> dict[str, float]:
@@ -160,15 +211,16 @@ def parse_position(text: str, what: str = "--position") -> dict[str, float]:
 
 
 def parse_area(text: str) -> list[dict[str, float]]:
-    import yaml
+    from backend.core.limits import echo
+    from backend.files import yamlio
 
     stripped = text.strip()
     if stripped.startswith("["):
         try:
-            data = yaml.safe_load(stripped)
-        except yaml.YAMLError as e:
+            data = yamlio.load(stripped).data
+        except yamlio.YamlSyntaxError as e:
             raise UsageError(
-                f"--area: {text!r} is not a valid YAML list ({getattr(e, 'problem', e)})"
+                f"--area: {echo(text)} is not a valid YAML list ({e.message})"
             ) from None
         if not isinstance(data, list):
             raise UsageError(f"--area: expected a list of positions, got {text!r}")

@@ -16,6 +16,7 @@ from typing import Any, NamedTuple
 
 from backend.core import events as ev
 from backend.core.library import Library, ParamProblem, check_params
+from backend.core.limits import show_path
 from backend.core.model import ACTIVE, Mission, SkillInstance, Status, how_to_change
 from backend.core.ops import Operation
 
@@ -238,10 +239,7 @@ def _bad_params(
     robot: str, who: str, skill_id: str | None, problems: list[ParamProblem]
 ) -> Refusal:
     # every problem: a missing parameter listed first must not hide a bad value
-    said = "; ".join(
-        f"parameter {'.'.join(str(x) for x in q.path)}: {q.message}"
-        for q in problems[:MAX_PROBLEMS]
-    )
+    said = "; ".join(f"parameter {show_path(q.path)}: {q.message}" for q in problems[:MAX_PROBLEMS])
     more = f" (and {len(problems) - MAX_PROBLEMS} more)" if len(problems) > MAX_PROBLEMS else ""
     p = problems[0]
     return Refusal(

@@ -1,5 +1,6 @@
-"""Editing the unsynchronized section: add, delete, move and edit skills, and
-the internal operations that undo those (restore skills, set a skill)."""
+"""Editing the unsynchronized section: add, delete, move and edit skills, an
+editable retry of a failed skill, and the internal operations that undo
+those (restore skills, set a skill)."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from backend.core.ops import (
     MoveSkill,
     RestoreItem,
     RestoreSkills,
+    RetryEdit,
     SetSkill,
 )
 from backend.core.rules.base import Change, Refusal, Rule, Rules, unchanged
@@ -46,6 +48,44 @@ def add(rules: Rules, op: AddSkill) -> Change:
     )
     events: list[ev.Event] = [ev.SkillAdded(robot=op.robot, index=start + at, skill=skill)]
     return Change(events, [], {"id": sid}, DeleteSkills(ids=[sid]))
+
+
+def retry_edit(rules: Rules, op: RetryEdit) -> Change:
+    """The failed skill's next attempt, idle, first in its robot's plan: the
+    operator edits it, then synchronizes it (the failed one stays in the log)."""
+    robot, _, s = rules.skill(op.id)
+    if s.status != Status.FAILURE:
+        raise Refusal(
+            "cannot_retry",
+            f"{s.display()} on {robot} is {s.status.value}; only a failed skill can be retried",
+            robot=robot,
+            skill=s.id,
+        )
+    new_id = f"{s.id.split('.')[0]}.{s.attempt + 1}"
+    if rules.mission.find(new_id) is not None:
+        raise Refusal(
+            "cannot_retry",
+            f"{s.display()} was already retried as {new_id}",
+            robot=robot,
+            skill=s.id,
+        )
+    task = rules.task(robot)
+    start = rules.first_idle(task)
+    rules.outside_locked(robot, task, start)
+    # bound parameters take their markers' values now (a marker may have moved or gone)
+    bindings = {k: v for k, v in s.bindings.items() if v in rules.mission.markers}
+    params = rules.check_params(robot, s.skill, s.params, bindings, skill_id=new_id)
+    skill = SkillInstance(
+        id=new_id,
+        skill=s.skill,
+        label=s.label,
+        params=params,
+        bindings=bindings,
+        attempt=s.attempt + 1,
+        policies=s.policies,
+    )
+    events: list[ev.Event] = [ev.SkillAdded(robot=robot, index=start, skill=skill)]
+    return Change(events, [], {"id": new_id}, DeleteSkills(ids=[new_id]))
 
 
 def delete(rules: Rules, op: DeleteSkills) -> Change:
@@ -238,6 +278,7 @@ def set_skill(rules: Rules, op: SetSkill) -> Change:
 
 RULES: dict[type[Any], Rule] = {
     AddSkill: add,
+    RetryEdit: retry_edit,
     DeleteSkills: delete,
     RestoreSkills: restore_skills,
     MoveSkill: move,

@@ -7,8 +7,9 @@ bumps the revision by one.
 
 Each operation type has one rule (the registry `RULES`), in the module of its
 family: `edit` (skills of the plan), `barriers`, `markers`, `execution` (the
-robots' answers and reports); whole missions (load, new) are here, with what
-the engine keeps per client: remembered requests and undo/redo histories.
+robots' answers and reports), `waivers` (of plan checks); whole missions
+(load, new) are here, with what the engine keeps per client: remembered
+requests and undo/redo histories.
 
 Operations that involve a robot (sync, unsync, run, pause, stop, reset,
 retry) add a command to the robot's uplink and return (`uplink`); the
@@ -51,7 +52,7 @@ from backend.core.ops import (
     Undo,
     Unsync,
 )
-from backend.core.rules import barriers, edit, execution, markers, uplink
+from backend.core.rules import barriers, edit, execution, markers, uplink, waivers
 from backend.core.rules.base import Applied, Change, Refusal, Rule, Rules
 
 __all__ = ["RULES", "Applied", "Engine", "Refusal"]
@@ -146,6 +147,7 @@ RULES: dict[type[Any], Rule] = {
     **markers.RULES,
     **execution.RULES,
     **uplink.RULES,
+    **waivers.RULES,
     LoadMission: load_mission,
     NewMission: new_mission,
 }

@@ -30,6 +30,7 @@ from backend.core.ops import (
     Unsync,
     UnsyncDone,
 )
+from backend.core.plan.gate import check_sync
 from backend.core.rules.base import Change, Refusal, Rule, Rules
 
 # -- commands: claim, plan, release ---------------------------------------------
@@ -81,6 +82,7 @@ def plan_sync(rules: Rules, op: Sync) -> list[SkillInstance]:
                 robot=op.robot,
                 skill=s.id,
             )
+    check_sync(rules, op.robot, [s.id for s in chosen])  # unwaived plan errors stay on the ground
     # check against the current library and markers; bound values are
     # taken fresh from their markers as they leave
     fresh = [

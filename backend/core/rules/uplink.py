@@ -54,6 +54,7 @@ from backend.core.ops import (
     UplinkSent,
     UplinkSettle,
 )
+from backend.core.plan.gate import check_sync
 from backend.core.rules import barriers
 from backend.core.rules.base import Change, Refusal, Rule, Rules, unchanged
 from backend.core.rules.execution import back_in_plan, check_retriable, of_robot, why_not
@@ -108,6 +109,7 @@ def sync(rules: Rules, op: Sync) -> Change:
     `op.through`) goes to the robot; its skills are uplinking until it answers."""
     task = rules.task(op.robot)
     chosen = _to_send(rules, op, task)
+    check_sync(rules, op.robot, [s.id for s in chosen])  # unwaived plan errors stay on the ground
     fresh = [
         rules.check_params(op.robot, s.skill, s.params, s.bindings, skill_id=s.id) for s in chosen
     ]

@@ -27,7 +27,7 @@ from backend.files.missions import load_mission
 
 ROOT = Path(__file__).resolve().parents[3]
 TUTORIAL = ROOT / "missions" / "tutorial.yaml"
-SAMPLE_RETURN = ROOT / "missions" / "mars_sample_return.yaml"
+SAMPLE_RETURN = ROOT / "tests" / "data" / "mars_sample_return_v1.yaml"
 
 T0 = datetime(2030, 1, 1, 12, 0, 0, tzinfo=UTC)
 

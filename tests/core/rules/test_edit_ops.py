@@ -19,6 +19,7 @@ from backend.core.ops import (
     EditSkill,
     MarkerAdd,
     MoveSkill,
+    RetryEdit,
     Sync,
 )
 
@@ -660,3 +661,43 @@ class TestEdit:
             "unknown_skill",
             "nope-1",
         )
+
+
+# -- edit and retry: the next attempt, idle, to edit before it is synchronized -----------
+
+
+class TestRetryEdit:
+    def fail_first(self, engine, sync, report):
+        sync(engine, "lru1")
+        report(engine, "lru1", "lru1-1", Status.RUNNING)
+        report(engine, "lru1", "lru1-1", Status.FAILURE, info="wheel stuck")
+
+    def test_an_idle_copy_heads_the_plan_with_the_next_attempt(
+        self, engine, sync, report, ids, skill
+    ):
+        engine.submit(EditSkill(id="lru1-1", label="drive out", policies=Policies(retries=2)))
+        self.fail_first(engine, sync, report)
+        applied = engine.submit(RetryEdit(id="lru1-1"))
+        assert applied.value == {"id": "lru1-1.2"}
+        new, failed = skill(engine, "lru1-1.2"), skill(engine, "lru1-1")
+        assert (new.status, new.attempt, new.label) == (Status.IDLE, 2, "drive out")
+        assert (new.params, new.bindings, new.policies) == (
+            failed.params,
+            failed.bindings,
+            failed.policies,
+        )
+        assert failed.status == Status.FAILURE  # the log keeps the failed attempt
+        # the head of the unsynchronized section: after the queued lru1-2
+        assert ids(engine, "lru1") == ["lru1-1", "lru1-2", "lru1-1.2"]
+        # it is an ordinary idle skill: edited, then synchronized
+        engine.submit(EditSkill(id="lru1-1.2", params={"speed": 0.2}))
+        assert skill(engine, "lru1-1.2").params["speed"] == 0.2
+        # and undone like an add
+        engine.submit(DeleteSkills(ids=["lru1-1.2"]))
+        assert ids(engine, "lru1") == ["lru1-1", "lru1-2"]
+
+    def test_refused_unless_failed_and_not_yet_retried(self, engine, sync, report, refused):
+        refused(engine, lambda: engine.submit(RetryEdit(id="lru1-1")), "cannot_retry", "idle")
+        self.fail_first(engine, sync, report)
+        engine.submit(RetryEdit(id="lru1-1"))
+        refused(engine, lambda: engine.submit(RetryEdit(id="lru1-1")), "cannot_retry", "lru1-1.2")

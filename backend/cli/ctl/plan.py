@@ -1,0 +1,242 @@
+"""`ctl check` and `ctl timeline`: the plan's checks and predicted timeline,
+computed here from what a console sees (backend.core.plan): the mission and
+library, the robots' telemetry (waited for briefly), and the simulator's map
+and status when one answers. The same inputs give a console the same answers.
+
+    check [ROBOT...]   one line per finding (errors first), exit 1 while an
+                       error is not waived; --json: {"ok", "errors",
+                       "warnings", "waived", "findings": [...], "inputs"}
+    timeline           per robot its skills' predicted start and end, waits,
+                       battery and spans out of coverage, and the plan's end;
+                       --json: {"now", "end", "critical", "critical_robot",
+                       "robots": {...}} with ISO times
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import time
+from datetime import UTC, datetime
+from typing import Any
+
+from backend.core.plan.checks import Finding, run_checks
+from backend.core.plan.forecast import Forecast, Forecaster, SkillForecast
+from backend.core.plan.inputs import PlanInputs
+from backend.exit_codes import EXIT_OK, EXIT_REFUSED
+
+TELEMETRY_WAIT = 1.0  # seconds to wait for one sample of every online robot
+MARK = {"error": ("✖", "E"), "warning": ("⚠", "W")}
+
+
+def _print_json(obj: Any) -> None:
+    print(json.dumps(obj, ensure_ascii=False, default=str), flush=True)
+
+
+async def _wait_telemetry(client: Any) -> None:
+    done = asyncio.Event()
+
+    def check(_event: object = None) -> None:
+        online = [n for n, r in client.robots.items() if r.online]
+        if all(n in client.telemetry for n in online):
+            done.set()
+
+    client.add_listener(check)
+    check()
+    try:
+        await asyncio.wait_for(done.wait(), TELEMETRY_WAIT)
+    except TimeoutError:
+        pass  # a robot that publishes nothing: planned without its telemetry
+    finally:
+        client.remove_listener(check)
+
+
+async def gather(client: Any, timeout: float) -> PlanInputs:
+    # imported here: the map's mirror is numpy, which other ctl commands never load
+    from backend.client.planning import fetch_site, plan_inputs
+
+    await _wait_telemetry(client)
+    site, status = await fetch_site(client.session, min(timeout, 3.0))
+    return plan_inputs(time.time(), dict(client.telemetry), site, status)
+
+
+def _inputs_json(inputs: PlanInputs) -> dict[str, Any]:
+    return {
+        "telemetry": sorted(inputs.robots),
+        "site_map": inputs.site is not None,
+        "link_delay_s": inputs.link.one_way_s,
+        "speed": inputs.speed,
+    }
+
+
+def _inputs_text(inputs: PlanInputs) -> str:
+    tele = ", ".join(sorted(inputs.robots)) or "no robot"
+    site = (
+        "the site map" if inputs.site is not None else "no site map (coverage, terrain unchecked)"
+    )
+    return f"telemetry of {tele}; {site}; link delay {inputs.link.one_way_s:g} s"
+
+
+# -- check ---------------------------------------------------------------------------
+
+
+def _concerns(f: Finding, robots: list[str], owner: dict[str, str]) -> bool:
+    return not robots or f.robot in robots or any(owner.get(s) in robots for s in f.skills)
+
+
+def _finding_json(f: Finding) -> dict[str, Any]:
+    return {
+        "id": f.id,
+        "rule": f.rule,
+        "severity": f.severity,
+        "robot": f.robot,
+        "skills": list(f.skills),
+        "message": f.message,
+        "waiver": f.waiver.model_dump() if f.waiver is not None else None,
+    }
+
+
+def _finding_lines(f: Finding, unicode: bool) -> list[str]:
+    mark = MARK[f.severity][0 if unicode else 1]
+    lines = [f"{mark} {f.id}  {f.message}"]
+    if f.waiver is not None:
+        lines.append(f"  waived at revision {f.waiver.revision}: {f.waiver.reason}")
+    return lines
+
+
+async def check(client: Any, args: argparse.Namespace) -> int:
+    from backend.cli.ctl.render import unicode_ok
+
+    robots = list(args.robots or [])
+    inputs = await gather(client, args.timeout)
+    m = client.mission
+    owner = {s.id: r for r, t in m.tasks.items() for s in t}
+    found = [f for f in run_checks(m, client.library, inputs) if _concerns(f, robots, owner)]
+    errors = sum(f.severity == "error" for f in found)
+    waived = sum(f.waiver is not None for f in found)
+    blocking = sum(f.blocking for f in found)
+    if args.json:
+        _print_json(
+            {
+                "ok": blocking == 0,
+                "errors": errors,
+                "warnings": len(found) - errors,
+                "waived": waived,
+                "findings": [_finding_json(f) for f in found],
+                "inputs": _inputs_json(inputs),
+            }
+        )
+    else:
+        unicode = unicode_ok()
+        for f in found:
+            for line in _finding_lines(f, unicode):
+                print(line)
+        what = f"{errors} error(s) ({waived} waived), {len(found) - errors} warning(s)"
+        if not found:
+            what = "no findings: the plan passes every check"
+        print(f"{what} — checked with {_inputs_text(inputs)}", flush=True)
+    return EXIT_REFUSED if blocking else EXIT_OK
+
+
+# -- timeline ------------------------------------------------------------------------
+
+
+def _iso(t: float | None) -> str | None:
+    return datetime.fromtimestamp(t, UTC).isoformat() if t is not None else None
+
+
+def _clock(t: float) -> str:
+    return datetime.fromtimestamp(t).strftime("%H:%M:%S")
+
+
+def _span_s(s: float) -> str:
+    s = max(0.0, s)
+    return (
+        f"{int(s // 3600)}:{int(s % 3600 // 60):02d}:{int(s % 60):02d}"
+        if s >= 3600
+        else (f"{int(s // 60)}:{int(s % 60):02d}")
+    )
+
+
+def _skill_json(f: SkillForecast, s: Any) -> dict[str, Any]:
+    return {
+        "id": f.id,
+        "skill": s.skill,
+        "label": s.label,
+        "status": s.status.value,
+        "ready": _iso(f.ready),
+        "start": _iso(f.start),
+        "end": _iso(f.end),
+        "wait_s": round(f.wait_s, 3),
+        "barrier": f.barrier,
+        "battery_start": f.battery_start,
+        "battery_min": f.battery_min,
+        "battery_end": f.battery_end,
+        "out_of_coverage": [[_iso(a), _iso(b)] for a, b in f.out_of_coverage],
+    }
+
+
+def timeline_json(fc: Forecast, mission: Any) -> dict[str, Any]:
+    robots: dict[str, Any] = {}
+    for robot, r in fc.robots.items():
+        skills = {s.id: s for s in mission.tasks.get(robot, [])}
+        robots[robot] = {
+            "end": _iso(r.end),
+            "blocked_at": r.blocked_at,
+            "battery_end": r.battery_end,
+            "battery_assumed": r.battery_assumed,
+            "halted": r.halted,
+            "skills": [_skill_json(f, skills[f.id]) for f in fc.robot_skills(robot)],
+        }
+    return {
+        "now": _iso(fc.now),
+        "end": _iso(fc.end),
+        "summary": fc.summary(_clock),
+        "critical": fc.critical_path(),
+        "critical_robot": fc.critical_robot,
+        "robots": robots,
+    }
+
+
+def _pct(x: float | None) -> str:
+    return "?" if x is None else f"{x * 100:.0f}%"
+
+
+def _skill_line(f: SkillForecast, s: Any) -> str:
+    parts = [f"  {f.id:<12} {(s.label or s.skill)[:28]:<28} {_clock(f.start)} - {_clock(f.end)}"]
+    if f.wait_s > 0.5:
+        parts.append(f"waits {_span_s(f.wait_s)} at {f.barrier}")
+    if f.battery_end is not None:
+        parts.append(f"battery {_pct(f.battery_end)}")
+    for a, b in f.out_of_coverage:
+        parts.append(f"out of coverage {_clock(a)}-{_clock(b)}")
+    return "  ".join(parts)
+
+
+def timeline_text(fc: Forecast, mission: Any) -> str:
+    lines = [f"now {_clock(fc.now)} · {fc.summary(_clock)}"]
+    for robot, r in fc.robots.items():
+        skills = {s.id: s for s in mission.tasks.get(robot, [])}
+        rows = [_skill_line(f, skills[f.id]) for f in fc.robot_skills(robot)]
+        head = f"{robot}: ends {_clock(r.end)}" if r.end is not None else f"{robot}:"
+        if r.blocked_at is not None:
+            head += f" never: held at {r.blocked_at}"
+        elif not rows:
+            head += " nothing planned"
+        if r.battery_end is not None:
+            head += f", battery {_pct(r.battery_end)} at the end" + (
+                " (from an assumed full battery)" if r.battery_assumed else ""
+            )
+        lines += [head, *rows]
+    return "\n".join(lines)
+
+
+async def timeline(client: Any, args: argparse.Namespace) -> int:
+    inputs = await gather(client, args.timeout)
+    fc = Forecaster(client.library).forecast(client.mission, inputs)
+    if args.json:
+        _print_json(timeline_json(fc, client.mission))
+    else:
+        print(timeline_text(fc, client.mission), flush=True)
+    return EXIT_OK

@@ -1,0 +1,521 @@
+"""Plan checks: what would go wrong with the plan, before it goes up the link.
+
+Each check is a small rule in `RULES`: a stable rule name, a severity
+(warning or error) and a function yielding `Hit`s; a finding's id is
+`rule:subject` (skill ids, barrier ids, parameter names — stable across
+edits), which is what a waiver names. Rules that need the site map (coverage,
+terrain) say so and are skipped without one: the mission server has no map
+(and no telemetry), consoles and `ctl check` do.
+
+Errors block a sync of the skills they name unless waived (backend.core.plan.gate).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Collection, Iterator, Mapping
+from dataclasses import dataclass
+from typing import Literal, NamedTuple
+
+from backend.core.library import Library
+from backend.core.model import FINISHED, Mission, SkillInstance, Status, Waiver
+from backend.core.plan.course import Course, LegCache, Step, walk
+from backend.core.plan.forecast import Forecast
+from backend.core.plan.geometry import Point, area, point_of, self_intersecting
+from backend.core.plan.inputs import PlanInputs, SiteMap
+from backend.core.plan.order import BarrierAnalysis, analyse
+
+Severity = Literal["warning", "error"]
+MIN_AREA_M2 = 1.0  # an area smaller than this is a line or a point
+
+
+class Hit(NamedTuple):
+    subject: str  # what the finding is about, in its id
+    message: str
+    robot: str | None = None
+    skills: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class Finding:
+    id: str  # "<rule>:<subject>": what a waiver names
+    rule: str
+    severity: Severity
+    message: str
+    robot: str | None = None
+    skills: tuple[str, ...] = ()
+    waiver: Waiver | None = None
+
+    @property
+    def blocking(self) -> bool:
+        return self.severity == "error" and self.waiver is None
+
+
+@dataclass
+class CheckContext:
+    mission: Mission
+    library: Library
+    inputs: PlanInputs
+    courses: Mapping[str, Course]
+    barriers: BarrierAnalysis
+
+    @property
+    def site(self) -> SiteMap | None:
+        return self.inputs.site
+
+
+@dataclass(frozen=True)
+class CheckRule:
+    rule: str
+    severity: Severity
+    summary: str  # one line for a person (help, docs)
+    find: Callable[[CheckContext], Iterator[Hit]]
+    needs_site: bool = False
+
+
+def _pct(x: float) -> str:
+    return f"{x * 100:.0f}%"
+
+
+def _at(p: tuple[float, float] | None) -> str:
+    return "an unknown place" if p is None else f"({p[0]:.0f}, {p[1]:.0f})"
+
+
+# -- barriers ----------------------------------------------------------------------
+
+
+def _deadlocks(ctx: CheckContext) -> Iterator[Hit]:
+    b = ctx.barriers
+    for cycle in b.cycles:
+        waits = []
+        for waiting in cycle:
+            for holding in cycle:
+                robot = b.held_by.get((waiting, holding))
+                if robot is not None:
+                    waits.append(
+                        f"{robot} must pass {holding} ({b.skill_of(holding, robot)}) before it "
+                        f"reaches {waiting} ({b.skill_of(waiting, robot)})"
+                    )
+        skills = tuple(sid for bid in cycle for sid in b.pending[bid].values())
+        yield Hit(
+            "+".join(cycle),
+            f"barriers {', '.join(cycle)} can never be passed: {'; '.join(sorted(waits))}. "
+            "Reorder these skills or remove one of the barriers",
+            skills=skills,
+        )
+
+
+def _orphans(ctx: CheckContext) -> Iterator[Hit]:
+    b = ctx.barriers
+    for bid, gone in sorted(b.orphaned.items()):
+        waiting = ", ".join(f"{sid} ({r})" for r, sid in sorted(b.pending[bid].items()))
+        went = ", ".join(f"{sid} ({r})" for r, sid in gone)
+        yield Hit(
+            bid,
+            f"barrier {bid}: {waiting} would wait forever, since {went} already went through "
+            f"it; remove the barrier (ctl unbarrier {bid}) or take the waiting skill out of it",
+            skills=tuple(b.pending[bid].values()),
+        )
+
+
+# -- energy ------------------------------------------------------------------------
+
+
+def _segments(course: Course) -> Iterator[list[Step]]:
+    """The course cut after each skill that charges."""
+    seg: list[Step] = []
+    for step in course.steps:
+        seg.append(step)
+        if step.leg is not None and step.leg.charge_to is not None:
+            yield seg
+            seg = []
+    if seg:
+        yield seg
+
+
+def _energy(ctx: CheckContext, low: Callable[[Course, float], bool], what: str) -> Iterator[Hit]:
+    for robot, course in ctx.courses.items():
+        if course.battery is None:
+            continue
+        assumed = " (assuming a full battery now: no telemetry)" if course.battery_assumed else ""
+        for seg in _segments(course):
+            step = next(
+                (s for s in seg if s.battery_min is not None and low(course, s.battery_min)),
+                None,
+            )
+            if step is None or step.battery_min is None:
+                continue
+            recharge = seg[-1].leg is not None and seg[-1].leg.charge_to is not None
+            before = (
+                f"before {seg[-1].skill.id} recharges it"
+                if recharge
+                else "with no recharge planned"
+            )
+            yield Hit(
+                step.skill.id,
+                f"{robot}: battery predicted at {_pct(max(0.0, step.battery_min))} during "
+                f"{step.skill.display()}, {what} {before}{assumed}; add a recharge before "
+                "it, or make the skills before it shorter",
+                robot=robot,
+                skills=(step.skill.id,),
+            )
+
+
+def _empty(ctx: CheckContext) -> Iterator[Hit]:
+    def low(c: Course, level: float) -> bool:
+        return c.battery is not None and level < c.battery.reserve
+
+    yield from _energy(ctx, low, "below the reserve it stops at")
+
+
+def _margin(ctx: CheckContext) -> Iterator[Hit]:
+    def low(c: Course, level: float) -> bool:
+        b = c.battery
+        return b is not None and b.reserve <= level < b.margin
+
+    yield from _energy(ctx, low, "below the safety margin")
+
+
+# -- comms coverage ------------------------------------------------------------------
+
+
+def _needs_comms(ctx: CheckContext) -> Iterator[Hit]:
+    for robot, course in ctx.courses.items():
+        for step in course.steps:
+            leg = step.leg
+            if leg is None or not (leg.work_out or leg.travel_out):
+                continue
+            spec = ctx.library.skills.get(step.skill.skill)
+            why = (
+                "it needs the operator's link"
+                if spec is not None and spec.needs_comms
+                else "it pauses out of comms (its policy), so it would never go on"
+                if step.skill.policies.pause_out_of_comms
+                else None
+            )
+            if why is None:
+                continue
+            yield Hit(
+                step.skill.id,
+                f"{robot}: {step.skill.display()} is planned out of comms coverage at "
+                f"{_at(leg.end)}, and {why}; move it into coverage or deploy a Wi-Fi relay first",
+                robot=robot,
+                skills=(step.skill.id,),
+            )
+
+
+def _out(ctx: CheckContext, step: Step) -> bool:
+    site = ctx.site
+    end = step.leg.end if step.leg is not None else None
+    return site is not None and end is not None and site.covered(*end) is False
+
+
+def _stranded(ctx: CheckContext) -> Iterator[Hit]:
+    for robot, course in ctx.courses.items():
+        if not course.steps or course.robot_type is None or course.robot_type.kind == "static":
+            continue
+        last = course.steps[-1]
+        if _out(ctx, last):
+            yield Hit(
+                last.skill.id,
+                f"{robot}'s plan ends at {_at(last.leg.end if last.leg else None)}, out of comms "
+                f"coverage, after {last.skill.display()}, with nothing queued to bring it back: "
+                "the operator cannot reach it there; end the plan in coverage",
+                robot=robot,
+                skills=(last.skill.id,),
+            )
+
+
+def _cut_off(ctx: CheckContext) -> Iterator[Hit]:
+    for robot, course in ctx.courses.items():
+        synced = [s for s in course.steps if s.skill.status != Status.IDLE]
+        if not synced or len(synced) == len(course.steps) or not _out(ctx, synced[-1]):
+            continue
+        last = synced[-1]
+        yield Hit(
+            last.skill.id,
+            f"{robot} will be out of comms coverage after {last.skill.display()}, its last "
+            "synchronized skill: the skills planned after it cannot reach it there; synchronize "
+            "them before it leaves, or end its synchronized part in coverage",
+            robot=robot,
+            skills=(last.skill.id,),
+        )
+
+
+# -- terrain ---------------------------------------------------------------------------
+
+
+def _goals(ctx: CheckContext) -> Iterator[tuple[str, Step, str, tuple[float, float]]]:
+    """(robot, step, goal parameter, goal) of the rovers' skills that travel."""
+    for robot, course in ctx.courses.items():
+        rt = course.robot_type
+        if rt is None or rt.flies:
+            continue
+        for step in course.steps:
+            spec = ctx.library.skills.get(step.skill.skill)
+            if step.leg is None or step.leg.goal is None or spec is None:
+                continue
+            param = spec.duration.goal_param
+            if param is not None and not spec.duration.goes_home(step.skill.params):
+                yield robot, step, param, step.leg.goal
+
+
+def _impassable(ctx: CheckContext) -> Iterator[Hit]:
+    site = ctx.site
+    for robot, step, param, goal in _goals(ctx):
+        if site is not None and site.passable(*goal) is False:
+            yield Hit(
+                f"{step.skill.id}/{param}",
+                f"{robot}: {step.skill.display()} goes to {_at(goal)} ({param}), which is "
+                "impassable ground; move the goal",
+                robot=robot,
+                skills=(step.skill.id,),
+            )
+
+
+def _no_route(ctx: CheckContext) -> Iterator[Hit]:
+    site = ctx.site
+    for robot, step, param, goal in _goals(ctx):
+        assert step.leg is not None
+        if step.leg.no_route and site is not None and site.passable(*goal) is not False:
+            yield Hit(
+                f"{step.skill.id}/{param}",
+                f"{robot}: the map knows no route from {_at(step.start)} to {_at(goal)} "
+                f"({step.skill.display()}); move the goal or plan a way round",
+                robot=robot,
+                skills=(step.skill.id,),
+            )
+
+
+def _unexplored(ctx: CheckContext) -> Iterator[Hit]:
+    site = ctx.site
+    for robot, step, param, goal in _goals(ctx):
+        if site is not None and site.explored(*goal) is False and site.passable(*goal) is not False:
+            yield Hit(
+                f"{step.skill.id}/{param}",
+                f"{robot}: {step.skill.display()} goes to {_at(goal)} ({param}), which nobody "
+                "has explored yet: the way or the place may be impassable; explore it first",
+                robot=robot,
+                skills=(step.skill.id,),
+            )
+
+
+# -- parameters --------------------------------------------------------------------------
+
+
+def _kinds(ctx: CheckContext) -> dict[tuple[str, str], tuple[list[str], list[str]]]:
+    """(robot type, skill) -> (its robot parameters, its area parameters)."""
+    return {
+        (t, name): (
+            [n for n, p in spec.params.items() if p.type == "robot"],
+            [n for n, p in spec.params.items() if p.type == "area"],
+        )
+        for t, rt in ctx.library.robot_types.items()
+        for name in rt.skills
+        if (spec := ctx.library.skills.get(name)) is not None
+    }
+
+
+def _planned(ctx: CheckContext, which: int) -> Iterator[tuple[str, SkillInstance, str]]:
+    """(robot, skill, parameter) of the planned skills' robot (0) or area (1) parameters."""
+    kinds = _kinds(ctx)
+    for robot, course in ctx.courses.items():
+        spec = ctx.mission.robots.get(robot)
+        if spec is None:
+            continue
+        for step in course.steps:
+            found = kinds.get((spec.type, step.skill.skill))
+            for name in found[which] if found is not None else ():
+                yield robot, step.skill, name
+
+
+def _robot_params(ctx: CheckContext) -> Iterator[tuple[str, SkillInstance, str, str]]:
+    for robot, s, name in _planned(ctx, 0):
+        v = s.params.get(name)
+        if isinstance(v, str):
+            yield robot, s, name, v
+
+
+def _self_reference(ctx: CheckContext) -> Iterator[Hit]:
+    for robot, s, name, other in _robot_params(ctx):
+        if other == robot:
+            yield Hit(
+                f"{s.id}/{name}",
+                f"{robot}: {s.display()} names {robot} itself as its {name}; name another robot",
+                robot=robot,
+                skills=(s.id,),
+            )
+
+
+def _partner_apart(ctx: CheckContext) -> Iterator[Hit]:
+    member = {sid: b for b, ms in ctx.barriers.pending.items() for sid in ms.values()}
+    for robot, s, name, other in _robot_params(ctx):
+        if other == robot or other not in ctx.mission.robots:
+            continue
+        bid = member.get(s.id)
+        if bid is not None and other in ctx.barriers.pending[bid]:
+            continue
+        where = f"its barrier {bid} has none" if bid is not None else "it is in no barrier with one"
+        yield Hit(
+            f"{s.id}/{name}",
+            f"{robot}: {s.display()} names {other} as its {name}, but {where} of {other}'s "
+            "skills: they will not be there together; put both skills in a barrier",
+            robot=robot,
+            skills=(s.id,),
+        )
+
+
+def _areas(ctx: CheckContext) -> Iterator[tuple[str, SkillInstance, str, list[Point]]]:
+    for robot, s, name in _planned(ctx, 1):
+        v = s.params.get(name)
+        pts = [p for p in (point_of(q) for q in v) if p is not None] if isinstance(v, list) else []
+        if len(pts) >= 3:
+            yield robot, s, name, pts
+
+
+def _flat_area(ctx: CheckContext) -> Iterator[Hit]:
+    for robot, s, name, pts in _areas(ctx):
+        if area(pts) < MIN_AREA_M2 and not self_intersecting(pts):
+            yield Hit(
+                f"{s.id}/{name}",
+                f"{robot}: the area {name} of {s.display()} encloses {area(pts):.1f} m² (its "
+                "corners lie on a line or a point); give it corners around a region",
+                robot=robot,
+                skills=(s.id,),
+            )
+
+
+def _crossed_area(ctx: CheckContext) -> Iterator[Hit]:
+    for robot, s, name, pts in _areas(ctx):
+        if self_intersecting(pts):
+            yield Hit(
+                f"{s.id}/{name}",
+                f"{robot}: the edges of the area {name} of {s.display()} cross each other; list "
+                "its corners in order around it",
+                robot=robot,
+                skills=(s.id,),
+            )
+
+
+def _useless_charge(ctx: CheckContext) -> Iterator[Hit]:
+    for robot, course in ctx.courses.items():
+        for step in course.steps:
+            leg = step.leg
+            if leg is None or leg.charge_to is None or step.battery_min is None:
+                continue
+            if step.battery_min >= leg.charge_to and not course.battery_assumed:
+                yield Hit(
+                    step.skill.id,
+                    f"{robot}: {step.skill.display()} charges to {_pct(leg.charge_to)}, but the "
+                    f"battery is predicted at {_pct(step.battery_min)} by then: it will not "
+                    "charge; raise its level or drop it",
+                    robot=robot,
+                    skills=(step.skill.id,),
+                )
+
+
+RULES: tuple[CheckRule, ...] = (
+    CheckRule("barrier.deadlock", "error", "barriers whose robots wait for each other", _deadlocks),
+    CheckRule("barrier.orphaned", "error", "a barrier a partner already went through", _orphans),
+    CheckRule("energy.empty", "error", "battery below the reserve before a recharge", _empty),
+    CheckRule("energy.margin", "warning", "battery below the safety margin", _margin),
+    CheckRule(
+        "coverage.needs_comms",
+        "error",
+        "a skill needing the link planned out of comms coverage",
+        _needs_comms,
+        needs_site=True,
+    ),
+    CheckRule(
+        "coverage.stranded",
+        "warning",
+        "a plan ending out of comms coverage",
+        _stranded,
+        needs_site=True,
+    ),
+    CheckRule(
+        "coverage.cut_off",
+        "warning",
+        "the synchronized part ends out of coverage, more is planned after it",
+        _cut_off,
+        needs_site=True,
+    ),
+    CheckRule(
+        "terrain.impassable", "error", "a goal on impassable ground", _impassable, needs_site=True
+    ),
+    CheckRule("terrain.no_route", "error", "no route to a goal", _no_route, needs_site=True),
+    CheckRule(
+        "terrain.unexplored", "warning", "a goal on unexplored ground", _unexplored, needs_site=True
+    ),
+    CheckRule(
+        "params.self_reference", "error", "a robot parameter naming its own robot", _self_reference
+    ),
+    CheckRule(
+        "params.partner_apart",
+        "warning",
+        "a partner robot that is not in the skill's barrier",
+        _partner_apart,
+    ),
+    CheckRule("params.flat_area", "error", "an area with no surface", _flat_area),
+    CheckRule("params.crossed_area", "warning", "an area whose edges cross", _crossed_area),
+    CheckRule(
+        "params.useless_charge", "warning", "a recharge that will not charge", _useless_charge
+    ),
+)
+RULE_NAMES = frozenset(r.rule for r in RULES)
+
+
+def _courses(
+    mission: Mission, library: Library, inputs: PlanInputs, robots: Collection[str] | None
+) -> dict[str, Course]:
+    legs = LegCache()
+    out = {}
+    for robot, spec in mission.robots.items():
+        if robots is None or robot in robots:
+            task = mission.tasks.get(robot, [])
+            out[robot] = walk(library, robot, spec.type, task, inputs, legs)
+    return out
+
+
+def run_checks(
+    mission: Mission,
+    library: Library,
+    inputs: PlanInputs,
+    *,
+    forecast: Forecast | None = None,
+    robots: Collection[str] | None = None,
+) -> list[Finding]:
+    """Every finding, with its waiver; errors first. With a forecast, its
+    courses are used (a console keeps one); `robots` limits the per-robot
+    rules (barrier rules see every robot)."""
+    if forecast is not None:
+        courses: Mapping[str, Course] = forecast.courses
+        barriers = forecast.barriers
+    else:
+        courses = _courses(mission, library, inputs, robots)
+        barriers = analyse(mission)
+    if robots is not None:
+        courses = {r: c for r, c in courses.items() if r in robots}
+    ctx = CheckContext(mission, library, inputs, courses, barriers)
+    out: list[Finding] = []
+    for rule in RULES:
+        if rule.needs_site and inputs.site is None:
+            continue
+        for hit in rule.find(ctx):
+            fid = f"{rule.rule}:{hit.subject}"
+            out.append(
+                Finding(
+                    fid,
+                    rule.rule,
+                    rule.severity,
+                    hit.message,
+                    hit.robot,
+                    hit.skills,
+                    mission.waivers.get(fid),
+                )
+            )
+    out.sort(key=lambda f: (f.severity != "error", f.id))
+    return out
+
+
+def unfinished(mission: Mission) -> dict[str, list[SkillInstance]]:
+    return {r: [s for s in t if s.status not in FINISHED] for r, t in mission.tasks.items()}

@@ -1,0 +1,41 @@
+"""Escape, then a key, over a laggy link (mixed into the app).
+
+A terminal sends Alt+key as ESC followed by the key; Textual tells the two
+apart by time (ESCDELAY, 100 ms). Over SSH the operator's escape and next
+key often arrive together and read as Alt+key — which the console binds to
+nothing — so the escape was lost and the key typed into a field ("Esc, d"
+replaced a label with "d"). The console reads Alt+<printable key> as what
+the operator pressed: escape, then the key.
+"""
+
+from __future__ import annotations
+
+from textual import events
+from textual.app import App
+
+
+def split_escape(key: events.Key) -> tuple[events.Key, events.Key] | None:
+    """(escape, the key) for an Alt+<printable key>; None for any other key."""
+    if not key.key.startswith("alt+") or not key.character or len(key.character) != 1:
+        return None
+    if not key.character.isprintable():
+        return None
+    name = key.key.removeprefix("alt+").removeprefix("shift+")
+    plain = name.upper() if key.key.startswith("alt+shift+") else name
+    return events.Key("escape", "\x1b"), events.Key(plain, key.character)
+
+
+class SplitEscape(App[int]):
+    async def on_event(self, event: events.Event) -> None:
+        if isinstance(event, events.Key) and not event.is_forwarded:
+            split = split_escape(event)
+            if split is not None:
+                escape, key = split
+                # the escape's binding runs now (a forwarded key's would run only
+                # after the next key reached the field it was meant to leave)
+                if not await self._check_bindings("escape", priority=True):
+                    if not await self._check_bindings("escape"):
+                        await super().on_event(escape)  # bound to nothing: as it came
+                await super().on_event(key)
+                return
+        await super().on_event(event)

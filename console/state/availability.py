@@ -1,0 +1,363 @@
+"""Why an action does not apply to the selection (None: it applies).
+
+One small rule per action of the mission screen, in a table beside the
+actions table (console/state/actions.py); the footer greys out, the palette
+explains and a pressed key says the rule's sentence. Before any rule: a
+mission must be loaded, the console connected (but for a few offline
+actions) and allowed to change the mission (an observer account is not).
+Textual-free, and the model is only read (`Facts`), so every sentence is
+unit-tested without a terminal.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+from backend.core.model import FINISHED, Mission, SkillInstance, Status, how_to_change
+from console.state.text import STATUS_WORDS
+
+Found = tuple[str, int, SkillInstance]  # (robot, index in its task, skill)
+
+# actions that change nothing on the server: they apply while disconnected
+OFFLINE_OK = frozenset({"save", "help", "edit", "search"})
+# actions an observer (read-only account) may still use: they change nothing on the server
+READ_ONLY_OK = frozenset({"save", "help", "edit", "mark", "toggle_static", "clear_marks", "search"})
+
+
+class Facts(Protocol):
+    """What the rules read of the console's model (`ConsoleModel`)."""
+
+    mission: Mission | None
+    connection: str
+    read_only: str
+
+    @property
+    def connected(self) -> bool: ...
+    def find(self, skill_id: str | None) -> Found | None: ...
+    def task(self, robot: str) -> list[SkillInstance]: ...
+    def skills_of(self, robot: str) -> list[str]: ...
+    def owner(self, skill_id: str) -> str | None: ...
+    def barrier_of(self, skill_id: str) -> str | None: ...
+    def is_online(self, robot: str) -> bool: ...
+    def presence_text(self, robot: str) -> str: ...
+    def robot_state(self, robot: str) -> tuple[SkillInstance | None, int]: ...
+    def plan_blocking(self, robot: str, skill_id: str) -> list[str]: ...
+
+
+@dataclass(frozen=True)
+class Selected:
+    """The selection a rule judges: robot column, the skill found under the
+    cursor (None: no skill there), the skills marked for a barrier."""
+
+    facts: Facts
+    robot: str | None
+    found: Found | None
+    marks: list[str]
+
+    @property
+    def skill(self) -> SkillInstance | None:
+        return self.found[2] if self.found else None
+
+
+Rule = Callable[[Selected], str | None]
+
+
+def why_not(
+    facts: Facts,
+    action: str,
+    robot: str | None,
+    skill_id: str | None,
+    marks: list[str] | None = None,
+) -> str | None:
+    if facts.mission is None:
+        return "no mission loaded yet"
+    if not facts.connected and action not in OFFLINE_OK:
+        return (
+            f"not connected to the mission server ({facts.connection}): nothing can be changed now"
+        )
+    if facts.read_only and action not in READ_ONLY_OK:
+        return facts.read_only
+    rule = RULES.get(action)
+    if rule is None:
+        return None  # undo, redo, load, save: the server decides
+    return rule(Selected(facts, robot, facts.find(skill_id), marks or []))
+
+
+def read_only_reason(facts: Facts, skill_id: str) -> str | None:
+    """Why the parameter editor is read-only for this skill (None: editable)."""
+    found = facts.find(skill_id)
+    if found is None:
+        return "the skill no longer exists"
+    robot, _, s = found
+    if facts.read_only:  # the editor says "read-only: <reason>" itself
+        return facts.read_only.removeprefix("read-only: ")
+    if s.status == Status.IDLE:
+        if not facts.connected:
+            return (
+                f"not connected to the mission server ({facts.connection}): "
+                "edits cannot be applied now"
+            )
+        return None
+    return not_idle(robot, s, "only idle skills can be edited")
+
+
+def not_idle(robot: str, s: SkillInstance, rule: str) -> str:
+    """Why a skill that is not idle cannot be changed, and how to change it."""
+    if s.status in FINISHED:
+        word = "succeeded" if s.status == Status.SUCCESS else "failed"
+        return f"{s.id} {word} on {robot}: {how_to_change(s.status)}"
+    return f"{s.id} is {s.status.value} on {robot}: {rule}; {how_to_change(s.status)}"
+
+
+# -- the plan ----------------------------------------------------------------------------
+
+
+def _add(q: Selected) -> str | None:
+    if q.robot is None:
+        return "select a robot column first"
+    if not q.facts.skills_of(q.robot):
+        return f"{q.robot} has no skills in the library"
+    return None
+
+
+def _edit(q: Selected) -> str | None:
+    return None if q.skill is not None else "select a skill first"
+
+
+def _idle_skill(q: Selected, verb: str) -> str | None:
+    """A skill is selected and idle (only those are deleted or moved)."""
+    if q.found is None:
+        return "select a skill first"
+    robot, _, s = q.found
+    if s.status != Status.IDLE:
+        return not_idle(robot, s, f"only idle skills can be {verb}")
+    return None
+
+
+def _delete(q: Selected) -> str | None:
+    return _idle_skill(q, "deleted")
+
+
+def _move(end: int, word: str) -> Rule:
+    """Move up (end 0) or down (end -1): not past that end of the plan."""
+
+    def rule(q: Selected) -> str | None:
+        why = _idle_skill(q, "moved")
+        if why is not None or q.found is None:
+            return why
+        robot, _, s = q.found
+        idle = [x.id for x in q.facts.task(robot) if x.status == Status.IDLE]
+        if idle and idle[end] == s.id:
+            return f"{s.id} is already {word} in {robot}'s plan"
+        return None
+
+    return rule
+
+
+# -- synchronization ---------------------------------------------------------------------
+
+
+def _sync(q: Selected) -> str | None:
+    if q.found is None:
+        return "select the last skill to synchronize"
+    r, _, s = q.found
+    if s.status != Status.IDLE:
+        return (
+            f"{s.id} is {STATUS_WORDS[s.status]} on {r}: "
+            "synchronize through an idle (unsynchronized) skill"
+        )
+    if not q.facts.is_online(r):
+        return f"{r} is {q.facts.presence_text(r)}: it cannot receive skills"
+    blocked = q.facts.plan_blocking(r, s.id)
+    if blocked:
+        more = f" and {len(blocked) - 2} more" if len(blocked) > 2 else ""
+        return (
+            f"unwaived plan error {', '.join(blocked[:2])}{more}: fix the plan, or waive "
+            "it with a reason on the checks screen (F8)"
+        )
+    return None
+
+
+def _unsync(q: Selected) -> str | None:
+    if q.found is None:
+        return "select the first queued skill to take back"
+    r, _, s = q.found
+    if s.status != Status.IDLE_SYNCHRONIZED:
+        return (
+            f"{s.id} is {STATUS_WORDS[s.status]} on {r}: "
+            "only queued (idle_synchronized) skills can be unsynchronized"
+        )
+    if not q.facts.is_online(r):
+        return f"{r} is {q.facts.presence_text(r)}: it cannot be asked to give skills back"
+    return None
+
+
+def _mark(q: Selected) -> str | None:
+    s = q.skill
+    if s is None:
+        return "select a skill to mark"
+    if s.status != Status.IDLE and s.id not in q.marks:
+        return f"{s.id} is {STATUS_WORDS[s.status]}: barriers join idle skills only"
+    return None
+
+
+def _barrier(q: Selected) -> str | None:
+    if len(q.marks) < 2:
+        return "mark one idle skill on each of at least two robots (space), then make the barrier"
+    robots: dict[str, str] = {}
+    for sid in q.marks:
+        f = q.facts.find(sid)
+        if f is None:
+            return f"{sid} no longer exists"
+        r, _, s = f
+        if s.status != Status.IDLE:
+            return f"{sid} is {STATUS_WORDS[s.status]} on {r}: barriers join idle skills"
+        if r in robots:
+            return f"{robots[r]} and {sid} both belong to {r}: a barrier takes one skill per robot"
+        robots[r] = sid
+        bid = q.facts.barrier_of(sid)
+        if bid is not None:
+            return f"{sid} is already in barrier {bid}"
+    return None
+
+
+def _unbarrier(q: Selected) -> str | None:
+    s = q.skill
+    if s is None:
+        return "select a skill of the barrier to remove"
+    bid = q.facts.barrier_of(s.id)
+    if bid is None:
+        return f"{s.id} is in no barrier"
+    mission = q.facts.mission
+    for sid in mission.barriers[bid].skills if mission is not None else []:
+        f = q.facts.find(sid)
+        if f and f[2].status != Status.IDLE and f[2].status not in FINISHED:
+            status = f[2].status
+            return (
+                f"barrier {bid}: {sid} is {STATUS_WORDS[status]} on {f[0]}; {how_to_change(status)}"
+            )
+    return None
+
+
+def _retry(q: Selected) -> str | None:
+    if q.found is None:
+        return "select a failed skill"
+    r, i, s = q.found
+    if s.status != Status.FAILURE:
+        return f"{s.id} is {STATUS_WORDS[s.status]}: only a failed skill can be retried"
+    new_id = f"{s.id.split('.')[0]}.{s.attempt + 1}"
+    if q.facts.owner(new_id) is not None:
+        return f"{s.id} was already retried as {new_id}"
+    if any(x.status in FINISHED for x in q.facts.task(r)[i + 1 :]):
+        return f"{r} has executed other skills since {s.id} failed; add a new skill instead"
+    act = q.facts.robot_state(r)[0]
+    if act is not None:
+        return f"{r} is executing {act.id}: stop it first"
+    if not q.facts.is_online(r):
+        return f"{r} is {q.facts.presence_text(r)}"
+    return None
+
+
+def _retry_edit(q: Selected) -> str | None:
+    if q.found is None:
+        return "select a failed skill"
+    _, _, s = q.found
+    if s.status != Status.FAILURE:
+        return f"{s.id} is {STATUS_WORDS[s.status]}: only a failed skill can be retried"
+    new_id = f"{s.id.split('.')[0]}.{s.attempt + 1}"
+    if q.facts.owner(new_id) is not None:
+        return f"{s.id} was already retried as {new_id}"
+    return None
+
+
+def _duplicate(q: Selected) -> str | None:
+    if q.found is None:
+        return "select a skill to duplicate"
+    robot, _, s = q.found
+    if s.skill not in q.facts.skills_of(robot):
+        return f"{robot} has no skill '{s.skill}' in the library"
+    return None
+
+
+# -- execution: what a robot can be asked, from (active skill, any queued) ---------------------
+
+
+def _run_why(robot: str, act: SkillInstance | None, queued: bool) -> str | None:
+    if act is not None and act.status == Status.PAUSED:
+        return None
+    if act is not None:
+        return f"{robot} is already executing {act.id} ({STATUS_WORDS[act.status]})"
+    return None if queued else f"{robot} has nothing to run: synchronize skills first"
+
+
+def _pause_why(robot: str, act: SkillInstance | None, queued: bool) -> str | None:
+    if act is not None and act.status == Status.RUNNING:
+        return None
+    return f"{robot} has no running skill to pause"
+
+
+def _stop_why(robot: str, act: SkillInstance | None, queued: bool) -> str | None:
+    return None if act is not None else f"{robot} has no running, paused or waiting skill to stop"
+
+
+def _reset_why(robot: str, act: SkillInstance | None, queued: bool) -> str | None:
+    return None if act is not None or queued else f"{robot} has nothing synchronized to reset"
+
+
+CONTROLS: dict[str, Callable[[str, SkillInstance | None, bool], str | None]] = {
+    "run": _run_why,
+    "pause": _pause_why,
+    "stop": _stop_why,
+    "reset": _reset_why,
+}
+
+
+def control_why(facts: Facts, verb: str, robot: str) -> str | None:
+    """Why `verb` (run, pause, stop, reset) does not apply to `robot`."""
+    act, n_queued = facts.robot_state(robot)
+    why = CONTROLS[verb](robot, act, n_queued > 0)
+    if why is None and not facts.is_online(robot):
+        why = f"{robot} is {facts.presence_text(robot)}"
+    return why
+
+
+def _control(verb: str) -> Rule:
+    def rule(q: Selected) -> str | None:
+        if q.robot is None:
+            return "select a robot column first"
+        return control_why(q.facts, verb, q.robot)
+
+    return rule
+
+
+def _control_all(verb: str) -> Rule:
+    def rule(q: Selected) -> str | None:
+        robots = q.facts.mission.robots if q.facts.mission is not None else {}
+        reasons = [control_why(q.facts, verb, r) for r in robots]
+        if all(reasons):
+            return f"{verb} applies to no robot: " + "; ".join(x for x in reasons if x)
+        return None
+
+    return rule
+
+
+# action name -> its rule; the actions without one (undo, redo, load, save, ...) always apply
+RULES: dict[str, Rule] = {
+    "add": _add,
+    "edit": _edit,
+    "delete": _delete,
+    "move_up": _move(0, "first"),
+    "move_down": _move(-1, "last"),
+    "sync": _sync,
+    "unsync": _unsync,
+    "mark": _mark,
+    "barrier": _barrier,
+    "unbarrier": _unbarrier,
+    "retry": _retry,
+    "retry_edit": _retry_edit,
+    "duplicate": _duplicate,
+    **{verb: _control(verb) for verb in CONTROLS},
+    **{f"{verb}_all": _control_all(verb) for verb in CONTROLS},
+}

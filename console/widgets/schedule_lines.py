@@ -1,0 +1,376 @@
+"""The schedule's columns and how their lines are drawn (Rich segments).
+
+A `Column` is one robot's part of the schedule: which skill (or progress line)
+each of its lines shows. The functions here draw one line of a column from
+the model and the widget's styles; the widget (console/widgets/schedule.py)
+decides which lines to draw and where the cursor is.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from rich.cells import cell_len, set_cell_size
+from rich.segment import Segment
+from rich.style import Style
+from textual.strip import Strip
+
+from backend.core.model import SkillInstance, Status
+from backend.core.plan.checks import Finding
+from console.state.freshness import FRESH, Freshness
+from console.state.model import ConsoleModel
+from console.state.text import GLYPHS, STATUS_CSS, fmt_clock, fmt_duration, skill_title
+
+HEADER_H = 4  # name + presence / battery + link / activity / rule
+MIN_W = 18  # a dynamic robot's column, at least (at 80 columns 3 robots and a static one fit)
+
+Styles = dict[str, Style]  # component class without "schedule--" (and "base") -> style
+
+
+@dataclass
+class Column:
+    robot: str
+    static: bool
+    x: int = 0
+    width: int = MIN_W
+    # synchronized section: (index in the task, "row" | "progress")
+    sync: list[tuple[int, str]] = field(default_factory=list)
+    idle: list[int] = field(default_factory=list)
+    ids: list[str] = field(default_factory=list)
+    line_of: dict[str, int] = field(default_factory=dict)  # filled by the layout
+    # what each line of a section shows (id, kind, revision): comparing two
+    # builds tells which lines a change touched, so only those are repainted
+    sync_keys: list[tuple[str, str, int]] = field(default_factory=list)
+    idle_keys: list[tuple[str, int]] = field(default_factory=list)
+
+    def resting_id(self) -> str | None:
+        """Where the cursor goes in this column: the first unsynchronized
+        skill, else the last one (the active one), None when it has none."""
+        if self.idle:
+            return self.ids[self.idle[0]]
+        return self.ids[-1] if self.ids else None
+
+    def line_key(self, line: int, sync_h: int) -> object:
+        """What a content line shows (compared, never drawn)."""
+        if line < sync_h:
+            if line < len(self.sync_keys):
+                return self.sync_keys[line]
+            return "blank" if line or self.sync else "hint"
+        if line == sync_h:
+            return "divider"
+        k = line - sync_h - 1
+        if k < len(self.idle_keys):
+            return self.idle_keys[k]
+        return "blank" if k or self.idle else "hint"
+
+
+def fit(text: str, width: int) -> str:
+    """Exactly `width` cells: truncated with an ellipsis, or padded."""
+    if width <= 0:
+        return ""
+    if cell_len(text) > width:
+        return set_cell_size(text, width - 1) + "…"
+    return set_cell_size(text, width)
+
+
+def fit_middle(text: str, width: int) -> str:
+    """Exactly `width` cells, cut in the middle when too long: labels often
+    differ at the end ("drive to POI-A" / "drive to POI-B"), so both ends stay
+    ("explore…plain"); the editor shows the whole label."""
+    if width <= 0:
+        return ""
+    if cell_len(text) <= width:
+        return set_cell_size(text, width)
+    if width < 6:
+        return fit(text, width)
+    start = set_cell_size(text, (width - 1) // 2 + (width - 1) % 2).rstrip()
+    room = width - 1 - cell_len(start)
+    k = room
+    end = ""
+    while 0 < k < len(text) - len(start):  # the tail's room filled, no space first
+        end = text[-k:].lstrip()
+        if cell_len(end) >= room:
+            break
+        k += 1
+    while cell_len(end) > room:
+        end = end[1:]
+    return set_cell_size(start + "…" + end, width)
+
+
+def click_hit(
+    columns: list[Column], x: int, y: int, scroll_y: int
+) -> tuple[int, str | None] | None:
+    """(column, skill) a click at content x, screen row y hits: a header
+    gives the column's resting skill; None: no column there."""
+    for i, col in enumerate(columns):
+        if col.x <= x < col.x + col.width + 1:
+            if y < HEADER_H:
+                return i, col.resting_id()
+            line = scroll_y + y - HEADER_H
+            return i, next((sid for sid, ln in col.line_of.items() if ln == line), None)
+    return None
+
+
+def hidden_robots(columns: list[Column], x0: int, x1: int) -> tuple[int, int]:
+    """(columns cut or hidden left of x0, right of x1)."""
+    left = sum(1 for c in columns if c.x < x0)
+    right = sum(1 for c in columns if c.x + c.width > x1)
+    return left, right
+
+
+def with_hidden_robots(strip: Strip, hidden: tuple[int, int], width: int, style: Style) -> Strip:
+    """The rule under the headers says how many robots are off to each side
+    ("← 1", "+2 robots →"): a scrollbar alone is easy to miss."""
+    left, right = hidden
+    if right:
+        text = f" +{right} robot{'s' if right > 1 else ''} → " if width >= 40 else f" +{right}→"
+        n = cell_len(text)
+        strip = Strip.join([strip.crop(0, width - n), Strip([Segment(text, style)])])
+    if left:
+        text = f" ← {left} " if width >= 40 else f"←{left}"
+        strip = Strip.join([Strip([Segment(text, style)]), strip.crop(cell_len(text), width)])
+    return strip
+
+
+# -- the header: a table of its lines ----------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Head:
+    """What a column's header lines are drawn from."""
+
+    model: ConsoleModel
+    col: Column
+    st: Styles
+    compact: bool  # a static robot's narrow column (not expanded)
+    selected: bool  # the cursor's column: its rule is heavy
+    fresh: Freshness = FRESH  # stale: the robot's last known state, drawn as such
+
+
+def _offline_since(robot: str, clock: str, width: int) -> str:
+    """The longest way to say since when a robot is offline that fits beside its name."""
+    for p in (f"✕ offline since {clock}", f"✕ offline {clock}", f"✕ off {clock}", f"✕ {clock}"):
+        if cell_len(robot) + 1 + cell_len(p) <= width:
+            return p
+    return "✕ off"
+
+
+def _presence(h: Head) -> tuple[str, Style]:
+    """The robot's presence and its style (a compact column: only the glyph)."""
+    st = h.st
+    info = h.model.robots.get(h.col.robot)
+    if info is None:
+        pres, pst = "? unknown", st["unknown"]
+    elif info.online:
+        pres, pst = "● online", st["online"]
+    elif info.since is None:
+        pres, pst = "✕ offline", st["offline"]
+    else:
+        pres, pst = _offline_since(h.col.robot, fmt_clock(info.since), h.col.width), st["offline"]
+    if h.compact:
+        pres = "●" if info is not None and info.online else "✕"
+    return pres, pst
+
+
+def _name_line(h: Head) -> list[Segment]:
+    w = h.col.width
+    pres, pst = _presence(h)
+    name_w = max(1, w - cell_len(pres) - 1)
+    return [
+        Segment(fit(h.col.robot, name_w), h.st["robot"]),
+        Segment(" ", h.st["base"]),
+        Segment(fit(pres, w - name_w - 1), pst),
+    ]
+
+
+def _levels_line(h: Head) -> list[Segment]:
+    w, st = h.col.width, h.st
+    if h.compact:
+        return [Segment(fit("static", w), st["dim"])]
+    t = h.model.telemetry.get(h.col.robot)
+    if t is None:
+        return [Segment(fit("bat –  link –", w), st["dim"])]
+    if h.fresh.stale:  # the last levels heard, not live ones
+        text = f"bat {int(round(t.battery * 100))}%  link {int(round(t.link * 100))}%"
+        return [Segment(fit(text, w), st["stale"])]
+    bat = f"bat {int(round(t.battery * 100))}%"
+    link = f"link {int(round(t.link * 100))}%" if t.in_range else "link: out of range"
+    bst = st["battery-low"] if t.battery < 0.2 else st["base"]
+    lst = st["offline"] if not t.in_range else st["base"]
+    return [
+        Segment(bat, bst),
+        Segment("  ", st["base"]),
+        Segment(fit(link, max(0, w - cell_len(bat) - 2)), lst),
+    ]
+
+
+def _activity_line(h: Head) -> list[Segment]:
+    if h.compact:
+        n = len(h.col.ids)
+        if h.fresh.stale:
+            return [Segment(fit(h.fresh.as_of(), h.col.width), h.st["stale-head"])]
+        return [Segment(fit(f"{n} skill{'s' if n != 1 else ''}", h.col.width), h.st["dim"])]
+    activity = h.model.activity_text(h.col.robot)
+    if h.fresh.stale:  # what it was doing, as of when: first, so it is never cut
+        w = h.col.width
+        ago = h.fresh.ago()
+        as_of = fit(ago, w) if cell_len(ago) > w else ago
+        rest = fit(f": {activity}", w - cell_len(as_of))
+        return [Segment(as_of, h.st["stale-head"]), Segment(rest, h.st["stale"])]
+    return [Segment(fit(activity, h.col.width), h.st["dim"])]
+
+
+def _rule_line(h: Head) -> list[Segment]:
+    return [Segment(("━" if h.selected else "─") * h.col.width, h.st["rule"])]
+
+
+HEADER_LINES: tuple[Callable[[Head], list[Segment]], ...] = (
+    _name_line,
+    _levels_line,
+    _activity_line,
+    _rule_line,
+)
+assert len(HEADER_LINES) == HEADER_H
+
+
+# -- content lines ---------------------------------------------------------------------------
+
+
+def skill_segments(
+    s: SkillInstance,
+    width: int,
+    st: Styles,
+    *,
+    marked: bool,
+    draft: bool,
+    tag: str,
+    extra: str,
+    cursor: Style | None,
+    check: Finding | None = None,
+    stale: bool = False,
+) -> list[Segment]:
+    """A skill's row: mark, glyph, title (*: unapplied edits), attempt, the
+    parameter summary where it fits, the barrier tag, the plan checks' glyph
+    (✖ error, ⚠ warning, ≈ waived); on `cursor`'s background. `stale`: a
+    synchronized skill of a robot not heard lately (its last known status)."""
+    sst = st[STATUS_CSS[s.status]] + st["stale"] if stale else st[STATUS_CSS[s.status]]
+    title = ("*" if draft else "") + skill_title(s)
+    attempt = f" #{s.attempt}" if s.attempt > 1 else ""
+    if check is not None:
+        tag = f"{tag} " if tag else ""
+    room = width - 2 - (cell_len(tag) + 1 if tag else 0) - (1 if check is not None else 0)
+    segs: list[Segment] = [
+        Segment("+" if marked else " ", st["mark"] if marked else st["base"]),
+        Segment(GLYPHS[s.status], sst),
+    ]
+    body = " " + title + attempt
+    if cell_len(body) >= room:  # the label is cut in the middle, never the attempt number
+        segs.append(Segment(" " + fit_middle(title, room - 1 - len(attempt)) + attempt, sst))
+    else:
+        segs.append(Segment(body, sst))
+        rest = room - cell_len(body)
+        if extra and rest >= 8:  # a summary cut to a letter or two says nothing
+            segs.append(Segment(fit(" " + extra, rest), st["dim"]))
+        else:
+            segs.append(Segment(" " * rest, st["base"]))
+    if tag:
+        segs.append(Segment(" ", st["base"]))
+        segs.append(Segment(tag, st["tag"]))
+    if check is not None:
+        segs.append(Segment(*_check_glyph(check, st)))
+    if cursor is not None:
+        segs = [Segment(seg.text, (seg.style or Style()) + cursor) for seg in segs]
+    return segs
+
+
+def _check_glyph(f: Finding, st: Styles) -> tuple[str, Style]:
+    if f.waiver is not None:
+        return "≈", st["check-waived"]
+    return ("✖", st["check-error"]) if f.severity == "error" else ("⚠", st["check-warning"])
+
+
+def progress_segments(
+    model: ConsoleModel, col: Column, s: SkillInstance, st: Styles, fresh: Freshness = FRESH
+) -> list[Segment]:
+    """The line under an active (or failed) skill: its progress bar and ETA,
+    why it paused or failed, what a barrier waits for. A stale robot's bar
+    stops where it was last heard, without an ETA."""
+    w = col.width
+    t = model.telemetry.get(col.robot)
+    has = t is not None and t.skill == s.id
+    if fresh.stale and s.status in (Status.RUNNING, Status.PAUSED):
+        return _stale_progress(t.progress if t is not None and has else None, w, st, fresh)
+    if s.status == Status.FAILURE:
+        return [Segment(fit("   ↳ " + s.status_info, w), st["failure"])]
+    if s.status == Status.SYNCHWAITING:
+        waiting = barrier_wait_text(model, s)
+        return [Segment(fit("   " + waiting, w), st["synchwaiting"])]
+    pct = t.progress if t is not None and has and t.progress is not None else None
+    if s.status == Status.PAUSED:
+        text = "   paused" + (f" at {int(pct * 100)}%" if pct is not None else "")
+        if s.status_info:
+            text += f" · {s.status_info}"
+        return [Segment(fit(text, w), st["paused"])]
+    if t is None or pct is None:
+        text = "   running" + (f" · {s.status_info}" if s.status_info else "")
+        return [Segment(fit(text, w), st["dim"])]
+    eta = fmt_duration(t.eta_s) if t.eta_s is not None else ""
+    # the longest label that leaves the bar 4 cells ("45% ETA 2m12s", "45% 2m12s", "45%")
+    labels = [f" {int(pct * 100):3d}%" + (f" ETA {eta}" if eta else "")]
+    if eta:
+        labels.append(f" {int(pct * 100)}% {eta}")
+    labels.append(f" {int(pct * 100)}%")
+    label = next((x for x in labels if w - 5 - cell_len(x) >= 4), labels[-1])
+    bar_w = max(4, w - 3 - cell_len(label) - 2)
+    filled = int(round(pct * bar_w))
+    return [
+        Segment("   ▕", st["dim"]),
+        Segment("█" * filled, st["progress"]),
+        Segment("░" * (bar_w - filled), st["dim"]),
+        Segment("▏", st["dim"]),
+        Segment(fit(label, w - 3 - bar_w - 2), st["base"]),
+    ]
+
+
+def _stale_progress(pct: float | None, w: int, st: Styles, fresh: Freshness) -> list[Segment]:
+    """`▕██░░▏ 45% as of 25s ago`: the last known progress, stopped."""
+    as_of = fresh.as_of()
+    if pct is None:
+        return [Segment(fit(f"   {as_of}", w), st["stale"])]
+    label = f" {int(pct * 100)}% {as_of}"
+    bar_w = w - 5 - cell_len(label)
+    if bar_w < 4:
+        return [Segment(fit(f"   {int(pct * 100)}% {as_of}", w), st["stale"])]
+    filled = int(round(pct * bar_w))
+    return [
+        Segment("   ▕" + "█" * filled + "░" * (bar_w - filled) + "▏", st["stale"]),
+        Segment(fit(label, w - 5 - bar_w), st["stale-head"]),
+    ]
+
+
+def barrier_wait_text(model: ConsoleModel, s: SkillInstance) -> str:
+    """What a robot waiting at a barrier waits for; offline partners first."""
+    m = model
+    bid = m.barrier_of(s.id)
+    if bid is None or m.mission is None:
+        return s.status_info or "waiting at a barrier"
+    offline: list[str] = []
+    waiting: list[str] = []
+    for sid in m.mission.barriers[bid].skills:
+        robot = m.owner(sid)
+        if sid == s.id or robot is None:
+            continue
+        info = m.robots.get(robot)
+        found = m.find(sid)
+        if info is None or not info.online:
+            offline.append(
+                f"{robot} OFFLINE" + (f" {fmt_clock(info.since)}" if info and info.since else "")
+            )
+        elif found and found[2].status != Status.SYNCHWAITING:
+            waiting.append(robot)
+    if offline:
+        return f"{bid}: " + ", ".join(offline)
+    if waiting:
+        return f"{bid}: waiting for " + ", ".join(waiting)
+    return f"{bid}: all partners ready"
