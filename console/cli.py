@@ -65,11 +65,31 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument(
         "--speed", metavar="X", type=float, default=1.0, help="sim time per real time (default 1)"
     )
+    d.add_argument(
+        "--link-delay",
+        metavar="D",
+        type=_duration,
+        default=0.0,
+        help="one-way delay between ground and the simulated robots, in sim time "
+        "(e.g. 20s, 20m, 1.5h; passed to `missionctl sim --link-delay`)",
+    )
+    d.add_argument(
+        "--comms-window",
+        metavar="W",
+        help="contact only in windows, in sim time: OPEN/PERIOD[@OFFSET], e.g. 20m/2h "
+        "(passed to `missionctl sim --comms-window`)",
+    )
     d.add_argument("--user", metavar="U", default="", help="operator name")
     d.add_argument("--theme", metavar="T", help=THEME_HELP)
     d.add_argument("--config", metavar="FILE")
     d.add_argument("--yes", action="store_true", help=YES_HELP)
     d.set_defaults(func=run_demo)
+
+
+def _duration(text: str) -> float:
+    from backend.cli.ctl.values import parse_duration
+
+    return parse_duration(text)
 
 
 def _known_binding_ids() -> set[str]:
@@ -160,7 +180,12 @@ def run_demo(args: argparse.Namespace) -> int:
     print(
         f"missionctl demo: starting the mission server for {mission} …", file=sys.stderr, flush=True
     )
-    procs = DemoProcesses(mission, speed=args.speed)
+    procs = DemoProcesses(
+        mission,
+        speed=args.speed,
+        link_delay_s=args.link_delay,
+        comms_window=args.comms_window,
+    )
     try:
         procs.launch()
         # load the console (most of its start-up is imports) while the server starts

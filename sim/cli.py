@@ -10,7 +10,6 @@ import argparse
 import asyncio
 import json
 import logging
-import re
 import signal
 import sys
 import time
@@ -19,18 +18,7 @@ from pathlib import Path
 from backend.core.credentials import AccountsError
 from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK, EXIT_REFUSED, EXIT_UNREACHABLE
 from backend.transport.login import add_login_arguments, login_from_args
-
-_DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(ms|s|m|min)?\s*$")
-
-
-def parse_duration(text: str) -> float:
-    """'2s', '500ms', '1.5', '2m' -> seconds."""
-    m = _DURATION.match(text)
-    if not m:
-        raise argparse.ArgumentTypeError(f"not a duration: {text!r} (examples: 2s, 500ms, 1.5)")
-    value = float(m.group(1))
-    unit = m.group(2) or "s"
-    return value / 1000.0 if unit == "ms" else value * 60.0 if unit in ("m", "min") else value
+from sim.comms import DURATION_EXAMPLES, WINDOW_SYNTAX, parse_duration, parse_window
 
 
 def _positive(text: str) -> float:
@@ -77,7 +65,20 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=parse_duration,
         default=0.0,
         metavar="D",
-        help="one-way delay between ground and robots, e.g. 2s or 500ms",
+        help=(
+            "one-way delay between ground and robots, in sim time (at --speed 60, 20m is 20 s "
+            f"of wall time): {DURATION_EXAMPLES}"
+        ),
+    )
+    p.add_argument(
+        "--comms-window",
+        type=parse_window,
+        metavar="W",
+        help=(
+            f"contact with the ground only in windows, in sim time: {WINDOW_SYNTAX} (the first "
+            "window at the start, or at OFFSET). Out of a window no robot reaches the ground: "
+            "commands wait on the server, reports and the map feed wait aboard"
+        ),
     )
     p.add_argument(
         "--connect-timeout",
@@ -179,6 +180,7 @@ def run(args: argparse.Namespace) -> int:
             speed=args.speed,
             seed=args.seed,
             link_delay=args.link_delay,
+            comms_window=args.comms_window,
             zenoh_extra=extra,
         )
     except (SimError, ValueError) as e:
@@ -221,7 +223,9 @@ async def _serve(fleet, args: argparse.Namespace, world_file: Path) -> int:
             return EXIT_REFUSED
     try:
         w = fleet.world
-        delay = f", link delay {fleet.link_delay:g} s" if fleet.link_delay else ""
+        delay = f", link delay {fleet.link_delay:g} s (sim time)" if fleet.link_delay else ""
+        if fleet.comms_window is not None:
+            delay += f", comms windows: {fleet.comms_window.describe()}"
         print(
             f"missionctl sim: world '{w.spec.name}' ({world_file}), seed {w.seed}, robots "
             f"{', '.join(fleet.agents)}; speed {fleet.speed:g}x{delay}; "

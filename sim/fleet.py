@@ -28,6 +28,7 @@ from backend.core.library import Library
 from backend.core.model import Mission, Pose
 from backend.protocol import mapfeed as mf
 from backend.transport import QueryFailed
+from sim.comms import CommsWindow
 from sim.exchange import WorldExchange
 from sim.skills.registry import RobotSkills
 from sim.status import ground_status, truth
@@ -49,15 +50,20 @@ def step_for(speed: float) -> float:
 class SimLink(Link):
     """The operator link of one simulated robot: coverage from the world grid."""
 
-    def __init__(self, world: World, robot: SimRobot, delay_s: float):
+    def __init__(self, world: World, robot: SimRobot, fleet: SimFleet):
         # no super().__init__: reachable/quality are computed here
         self.world = world
         self.robot = robot
-        self.delay_s = delay_s
+        self.fleet = fleet
         self.reachable = True
 
+    @property
+    def delay_s(self) -> float:  # type: ignore[override]
+        """Wall seconds: the link delay is sim time."""
+        return self.fleet.link_delay / self.fleet.speed
+
     def in_range(self) -> bool:
-        return self.world.in_range(self.robot)
+        return self.fleet.ground_open() and self.world.in_range(self.robot)
 
     def can_reach(self, robot: str) -> bool:
         """Robot to robot: through the network when both are covered, or direct radio."""
@@ -80,6 +86,7 @@ class SimFleet:
         speed: float = 1.0,
         seed: int | None = None,
         link_delay: float = 0.0,
+        comms_window: CommsWindow | None = None,
         telemetry_hz: float = 4.0,
         feed_period: float = 0.5,
         zenoh_extra: dict[str, Any] | None = None,
@@ -92,7 +99,8 @@ class SimFleet:
         self.connect = list(connect)
         self.speed = float(speed)
         self.dt = step_for(self.speed)
-        self.link_delay = float(link_delay)
+        self.link_delay = float(link_delay)  # one way, sim seconds
+        self.comms_window = comms_window  # None: always in contact (coverage permitting)
         self.feed_period = feed_period
         self.zenoh_extra = zenoh_extra
         self.robot_seconds = 0.0
@@ -158,7 +166,7 @@ class SimFleet:
             x=round(r.x, 3), y=round(r.y, 3), z=round(r.z, 3), yaw=round(r.yaw, 4)
         )
         agent.battery = lambda r=robot: r.battery
-        agent.link = SimLink(self.world, robot, self.link_delay)
+        agent.link = SimLink(self.world, robot, self)
         skills = RobotSkills(self, robot)
         handlers = skills.handlers()
         missing = [s for s in rtype.skills if s not in handlers]
@@ -310,6 +318,10 @@ class SimFleet:
         wall, sim = self._clock_at
         return sim + (time.monotonic() - wall) * self.speed
 
+    def ground_open(self) -> bool:
+        """Is the ground in contact now (inside a comms window)?"""
+        return self.comms_window is None or self.comms_window.is_open(self.now())
+
     async def _physics(self) -> None:
         """Idle robots: charge at the lander; hovering drones drain. Link uplink."""
         loop = asyncio.get_running_loop()
@@ -334,7 +346,7 @@ class SimFleet:
                         )
                 elif w.docked(r):
                     w.charge(r, dt)
-            w.pump(now, self.link_delay)
+            w.pump(now, self.link_delay / self.speed, ground_open=self.ground_open())
 
     # ------------------------------------------------------------ map feed
 

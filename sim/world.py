@@ -517,15 +517,16 @@ class World:
         (plus the link delay); see `pump`."""
         robot.outbox.append(fn)
 
-    def pump(self, now: float, delay: float) -> bool:
+    def pump(self, now: float, delay: float, ground_open: bool = True) -> bool:
         """Move what in-range robots have to send onto the link (and their state:
         pose, battery, activity, last result); deliver what has arrived. `now` and
-        `delay` in wall seconds. True if anything arrived."""
+        `delay` in wall seconds; out of a comms window (`ground_open` False) nothing
+        leaves, what is on its way arrives. True if anything arrived."""
         arrived = False
         for robot in self.robots.values():
             # a robot that crossed covered ground between two pumps sent from there
             passed, robot.passed_coverage = robot.passed_coverage, False
-            if self.in_range(robot) or passed:
+            if ground_open and (self.in_range(robot) or passed):
                 assert robot.pending_cells is not None
                 if robot.pending_cells.any():
                     cells = np.flatnonzero(robot.pending_cells)

@@ -245,7 +245,7 @@ class SimStatus(_Wire):
     world: str
     seed: int
     speed: float = Field(description="sim seconds per wall second")
-    link_delay_s: float = 0.0
+    link_delay_s: float = Field(0.0, description="one-way ground link delay, sim seconds")
     sim_time: float = Field(description="sim seconds since the simulator started")
     score: float = Field(description="the delivered stones' scores, as reported")
     delivered: list[Delivery] = Field(default_factory=list, description="as reported")

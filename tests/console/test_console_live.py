@@ -385,8 +385,9 @@ def test_console_process_exits_cleanly_on_hangup_and_ctrl_q(live, how):
 
 
 def test_demo_starts_server_and_console_and_stops_everything(tmp_path):
-    """`missionctl demo` in a pty: the console shows the Mars mission; ctrl+q
-    stops the console, the server and the sim (no process left behind)."""
+    """`missionctl demo --link-delay 20s` in a pty: the console shows the Mars
+    mission, the sim runs with the delay; ctrl+q stops the console, the server
+    and the sim (no process left behind)."""
     master, slave = pty.openpty()
     env = {
         **os.environ,
@@ -395,7 +396,7 @@ def test_demo_starts_server_and_console_and_stops_everything(tmp_path):
         "MISSIONCTL_CONFIG": "/nonexistent.toml",
     }
     p = subprocess.Popen(
-        [sys.executable, "-m", "backend.cli", "demo", "--speed", "5"],
+        [sys.executable, "-m", "backend.cli", "demo", "--link-delay", "20s", "--speed", "5"],
         stdin=slave,
         stdout=slave,
         stderr=slave,
@@ -409,6 +410,8 @@ def test_demo_starts_server_and_console_and_stops_everything(tmp_path):
         assert b"Mars sample return" in out, out[-3000:]
         children = _processes_mentioning(str(tmp_path))
         assert children, "the demo's server was not found among the processes"
+        # its sim got the link delay (after its --speed: not the demo's own command line)
+        assert _processes_mentioning("--speed\x005\x00--link-delay\x0020s"), "no delayed sim"
         os.write(master, b"\x11")
         assert _drain_until_exit(master, p, 30) == 0
         deadline = time.monotonic() + 10

@@ -1,0 +1,86 @@
+"""The ground link's schedule in sim time: a one-way delay and comms windows.
+
+`--link-delay 20m` and `--comms-window 20m/2h` are sim time, like everything
+the simulator does, so a Mars-like link (minutes one way, a relay orbiter
+overhead 20 minutes every 2 hours) plays at sim speed: at `--speed 60` a
+20-minute delay is 20 s of wall time. Out of a window no robot can reach the
+ground nor the ground a robot: commands stay queued (or sent) on the server,
+reports wait in the robots' outboxes, the map feed waits aboard.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+from dataclasses import dataclass
+
+_DURATION = re.compile(r"^\s*([0-9]+(?:\.[0-9]+)?)\s*(ms|s|m|min|h)?\s*$")
+_UNIT_S = {"ms": 0.001, "s": 1.0, "m": 60.0, "min": 60.0, "h": 3600.0}
+
+DURATION_EXAMPLES = "500ms, 2s, 90s, 20m, 1.5h; a bare number is seconds"
+
+
+def parse_duration(text: str) -> float:
+    """'500ms', '90s', '20m', '1.5h', '2' (seconds) -> seconds (argparse `type`)."""
+    m = _DURATION.match(text)
+    if not m:
+        raise argparse.ArgumentTypeError(
+            f"not a duration: {text!r} (examples: {DURATION_EXAMPLES})"
+        )
+    return float(m.group(1)) * _UNIT_S[m.group(2) or "s"]
+
+
+@dataclass(frozen=True)
+class CommsWindow:
+    """Contact for `open_s` at the start of every `period_s` (sim seconds),
+    from sim time `offset_s` on: the window is open at sim time 0 unless an
+    offset puts the first one later."""
+
+    open_s: float
+    period_s: float
+    offset_s: float = 0.0
+
+    def is_open(self, sim_t: float) -> bool:
+        return (sim_t - self.offset_s) % self.period_s < self.open_s
+
+    def next_change(self, sim_t: float) -> float:
+        """The sim time at which the window next opens or closes."""
+        phase = (sim_t - self.offset_s) % self.period_s
+        start = sim_t - phase
+        return start + (self.open_s if phase < self.open_s else self.period_s)
+
+    def describe(self) -> str:
+        first = f", the first at {_show(self.offset_s)}" if self.offset_s else ""
+        return f"{_show(self.open_s)} of contact every {_show(self.period_s)} (sim time{first})"
+
+
+WINDOW_SYNTAX = "OPEN/PERIOD[@OFFSET], e.g. 20m/2h (20 min of contact every 2 h) or 20m/2h@1h"
+
+
+def parse_window(text: str) -> CommsWindow:
+    """'20m/2h' or '20m/2h@30m' -> CommsWindow (argparse `type`)."""
+    head, _, offset = text.partition("@")
+    opened, slash, period = head.partition("/")
+    if not slash:
+        raise argparse.ArgumentTypeError(f"not a comms window: {text!r} ({WINDOW_SYNTAX})")
+    try:
+        w = CommsWindow(
+            open_s=parse_duration(opened),
+            period_s=parse_duration(period),
+            offset_s=parse_duration(offset) if offset else 0.0,
+        )
+    except argparse.ArgumentTypeError as e:
+        raise argparse.ArgumentTypeError(f"comms window {text!r}: {e} ({WINDOW_SYNTAX})") from None
+    if not 0 < w.open_s < w.period_s:
+        raise argparse.ArgumentTypeError(
+            f"comms window {text!r}: the contact ({_show(w.open_s)}) must be longer than 0 and "
+            f"shorter than the period ({_show(w.period_s)})"
+        )
+    return w
+
+
+def _show(seconds: float) -> str:
+    for unit, size in (("h", 3600.0), ("min", 60.0)):
+        if seconds >= size and (seconds / size) == round(seconds / size, 2):
+            return f"{seconds / size:g} {unit}"
+    return f"{seconds:g} s"
