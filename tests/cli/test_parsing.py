@@ -607,6 +607,25 @@ def test_state_text_and_json_without_server(tutorial):
     assert cmd["state"] == "sent" and 11 < cmd["sent_age_s"] < 20 and cmd["expires"]
 
 
+def test_robots_show_delay_heard_and_pending_commands(tutorial):
+    from backend.cli.ctl.render import robots_json, robots_text
+
+    client = _fake_client(tutorial)
+    text = robots_text(client)
+    assert "lru1 (lru_science): online" in text and "delay 2.0 s, heard 3 s ago" in text
+    lines = text.splitlines()
+    at = next(i for i, line in enumerate(lines) if line.startswith("lru2 "))
+    pending = [line for line in lines[at:] if line.startswith("  pending: ")]
+    assert (
+        len(pending) == 1 and "command 1 to lru2 (seq 1): sync lru2-1, lru2-2: sent" in (pending[0])
+    )
+    assert "[expires " in pending[0]
+    data = robots_json(client)["robots"]
+    [cmd] = data["lru2"]["pending_commands"]
+    assert cmd["id"] == 1 and cmd["state"] == "sent" and 11 < cmd["sent_age_s"] < 20
+    assert data["lru1"]["pending_commands"] == [] and data["lru1"]["link"]["delay_s"] == 2.0
+
+
 def test_pending_lists_commands_with_age_and_expiry(tutorial):
     from backend.cli.ctl.render import pending_json, pending_text
 

@@ -422,9 +422,11 @@ def state_text(client: Any, only: list[str] | None = None, unicode: bool = True)
 
 def robots_json(client: Any) -> dict[str, Any]:
     out = state_json(client)["robots"]
+    now = datetime.now(UTC)
     for name, entry in out.items():
         t = client.telemetry.get(name)
         entry["telemetry"] = t.model_dump(mode="json") if t else None
+        entry["pending_commands"] = [command_json(c, now) for c in client.pending(name)]
     return {"revision": client.revision, "robots": out}
 
 
@@ -464,6 +466,8 @@ def robots_text(client: Any) -> str:
             head + (f"; {link}" if link else "") + (_telemetry_text(t) if t is not None else "")
         )
         lines += _manifest_lines(r["manifest"])
+        now = datetime.now(UTC)
+        lines += [f"  pending: {command_line(c, now)}" for c in client.pending(name)]
     return "\n".join(lines)
 
 
