@@ -7,7 +7,10 @@
 - queue: the synchronized queue as a state machine (no transport, no asyncio);
 - execution: running the active skill's handler, its policies;
 - context: SkillContext, what a handler gets; outcomes: how it ends;
-- registration: manifest, presence, registering; outbox: reports until acked;
+- registration: manifest, presence, registering (one session per name, the
+  server's reconciliation); uplink: the ground's commands, each applied once
+  by sequence number; outbox: the downlink (reports and answers, one
+  numbered sequence) until acknowledged;
 - telemetry, barriers, world (robot-to-robot ask/tell);
 - link: the link model; runtime: the loop, session and link the parts share.
 """
