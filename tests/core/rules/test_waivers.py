@@ -97,3 +97,16 @@ def test_waivers_replay_into_a_mirror_and_survive_a_mission_file_round_trip(engi
     assert mirror.waivers == engine.mission.waivers
     again = Mission.model_validate_json(engine.mission.model_dump_json())
     assert again.waivers[DEADLOCK].reason == "ok"
+
+
+def test_the_gate_refuses_a_sync_before_any_command_is_queued(engine, refused):
+    """Protocol 2's sync (a command on the robot's uplink) passes the same
+    gate: refused, nothing queued, nothing locked; waived, it is queued."""
+    crossed(engine)
+    before = engine.mission.revision
+    refused(engine, lambda: engine.submit(Sync(robot="lru1")), "plan_errors", DEADLOCK)
+    assert engine.mission.revision == before and not engine.mission.pending_commands("lru1")
+    engine.submit(Waive(check=DEADLOCK, reason="released by hand"))
+    queued = engine.submit(Sync(robot="lru1"))
+    assert queued.value["skills"] == ["lru1-1", "lru1-2"]
+    assert [c.id for c in engine.mission.pending_commands("lru1")] == [queued.value["command"]]
