@@ -13,8 +13,8 @@ and every figure is compared with a baseline measured in the same run:
    `Keys.PING` queryable, which answers b"pong" on the Zenoh thread of the
    same server process. Blocks of both are interleaved after a warm-up.
 2. Status fan-out: a fake robot (a plain Zenoh session in this process,
-   registered with a manifest) sends a status `Report` (`ReportBatch` query
-   to `Keys.reports(robot)`); the latency runs from just before the query is
+   registered with a manifest) sends a status `Report` (`Downlink` query
+   to `Keys.downlink(robot)`); the latency runs from just before the query is
    sent until the LAST of 10 `MissionClient`s (in client subprocesses) has
    applied the event to its mirrored mission. Clocks: `time.perf_counter`
    is CLOCK_MONOTONIC, shared by the processes of one machine. Baseline: a
@@ -68,17 +68,16 @@ from report import machine, write_section  # noqa: E402
 from backend.client.client import MissionClient  # noqa: E402
 from backend.client.events import BatchApplied  # noqa: E402
 from backend.core.model import Status  # noqa: E402
-from backend.core.ops import EditSkill, Report, Sync  # noqa: E402
+from backend.core.ops import EditSkill, Report  # noqa: E402
 from backend.files.missions import load_library, mission_to_yaml  # noqa: E402
 from backend.protocol.keys import PREFIX, Keys  # noqa: E402
 from backend.protocol.messages import (  # noqa: E402
-    CommandReply,
+    Downlink,
     Manifest,
     Module,
     QueueEntry,
     Register,
     RegisterReply,
-    ReportBatch,
     StateRequest,
     dumps,
 )
@@ -89,7 +88,6 @@ from backend.transport import (  # noqa: E402
     free_port,
     loopback_endpoint,
     query,
-    serve,
 )
 from backend.transport.session import close_session, open_session  # noqa: E402
 
@@ -220,22 +218,18 @@ def raw_pipelined(session: Any, seconds: float, inflight: int) -> float:
 
 
 class FakeRobot:
-    """A robot as the server sees it: registered with a manifest, answering
-    commands (accepts every enqueue), sending reports. A plain Zenoh session."""
+    """A robot as the server sees it (protocol 2): registered with a manifest
+    and its queue (the skills it holds: the ground adopts them, no command
+    needed), sending reports on its downlink. A plain Zenoh session."""
 
     def __init__(self, endpoint: str, name: str, rtype: str):
         self.name, self.rtype = name, rtype
         self.session = open_session(client_config([endpoint]))
+        self.session_id = f"bench-{name}"
         self.seq = 0
         self._entities: list[Any] = [
-            declare_token(self.session, Keys.alive(name)),
-            serve(self.session, Keys.command(name), self._on_command),
+            declare_token(self.session, Keys.alive(name, self.session_id)),
         ]
-
-    def _on_command(self, payload: bytes) -> bytes:
-        cmd = json.loads(payload)
-        ids = [s["id"] for s in cmd.get("skills", [])] if cmd.get("cmd") == "enqueue" else []
-        return dumps(CommandReply(ok=True, ids=ids))
 
     async def register(self, queue: list[QueueEntry] | None = None) -> None:
         lib = load_library(LIBRARY_FILE)
@@ -248,7 +242,7 @@ class FakeRobot:
         raw = await query(
             self.session,
             Keys.register(self.name),
-            dumps(Register(manifest=manifest, queue=queue or [])),
+            dumps(Register(manifest=manifest, session=self.session_id, queue=queue or [])),
             60.0,
         )
         reply = RegisterReply.model_validate_json(raw)
@@ -258,15 +252,16 @@ class FakeRobot:
 
     def report_payload(self, skill: str, status: Status) -> bytes:
         self.seq += 1
-        rep = Report(robot=self.name, seq=self.seq, id=skill, status=status, at=datetime.now(UTC))
-        return dumps(ReportBatch(reports=[rep]))
+        now = datetime.now(UTC)
+        rep = Report(robot=self.name, seq=self.seq, id=skill, status=status, at=now)
+        return dumps(Downlink(robot=self.name, session=self.session_id, messages=[rep], sent=now))
 
     async def send(self, payload: bytes) -> None:
-        await query(self.session, Keys.reports(self.name), payload, 30.0)
+        await query(self.session, Keys.downlink(self.name), payload, 30.0)
 
     def send_raw(self, payload: bytes) -> None:
         """Send with a plain blocking Zenoh query (no asyncio bridge on the robot's side)."""
-        for reply in self.session.get(Keys.reports(self.name), payload=payload, timeout=30.0):
+        for reply in self.session.get(Keys.downlink(self.name), payload=payload, timeout=30.0):
             if reply.ok is None:
                 raise RuntimeError(f"report refused: {reply.err.payload.to_bytes()!r}")
 
@@ -445,8 +440,8 @@ async def bench_fanout(
 ) -> dict[str, Any]:
     robot = FakeRobot(endpoint, "lru2", "lru_manipulator")
     try:
-        await robot.register()
-        await client.submit(Sync(robot="lru2", through="lru2-1"))
+        # it holds lru2-1 (the ground adopts it as synchronized)
+        await robot.register([QueueEntry(id="lru2-1", status=Status.IDLE_SYNCHRONIZED)])
         await client.close()  # not an 11th subscriber in the robot's process
         return await fanout(endpoint, robot, "lru2-1", tmp, n, layouts)
     finally:
@@ -836,7 +831,7 @@ def table(
         "`backend.transport.query` (asyncio bridge, as the client library uses): "
         f"{ms(aio_med):.3f} ms median.",
         f"- Fan-out: {f1['n']} status reports per layout after 30 warm-up ones, one every ~12 ms, "
-        "each measured from just before the robot's `ReportBatch` query until the last of 10 "
+        "each measured from just before the robot's `Downlink` query until the last of 10 "
         "`MissionClient`s (separate processes from the server and the robot) applied it to its "
         f"mirror ({reached}); the first of the 10 after {ms(f1['first_median']):.2f} ms (median, 1 "
         "process). The robot sends with a plain blocking `session.get` (no asyncio bridge on its "
