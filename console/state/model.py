@@ -24,6 +24,7 @@ from backend.protocol.messages import RobotInfo, Telemetry
 from console.state import availability
 from console.state.freshness import Freshness, freshness
 from console.state.plan import PlanView
+from console.state.site import SiteClock
 from console.state.text import GLYPHS, STATUS_WORDS, fmt_clock
 
 HISTORY = 120  # telemetry samples kept per robot (bounded memory)
@@ -106,6 +107,8 @@ class ConsoleModel:
     pending: dict[str, list[str]] = field(default_factory=dict)
     # the plan's forecast and checks (console/state/plan.py), refreshed by the app
     plan: PlanView = field(default_factory=PlanView)
+    # the simulator's score and clock from its map feed (None: no simulator)
+    site: SiteClock | None = None
 
     # -- updates ------------------------------------------------------------------
     def load(
