@@ -69,6 +69,7 @@ from console.state.actions import ACTIONS
 from console.state.eventlog import AlertBook, AlertEntry, EventLog, toast_text
 from console.state.files import RecentFiles
 from console.state.model import CONNECTED, CONNECTING, OFFLINE, UNREACHABLE, ConsoleModel
+from console.state.site import SiteClock
 from console.themes.loader import ANSI16_MAP, ANSI16_STATUS, Downgrade16, choose_theme, load_themes
 from console.themes.variables import VARIABLE_DEFAULTS
 
@@ -398,6 +399,17 @@ class MissionApp(SplitEscape, FoldingNotifications, QuitQuestion, PlanModes, App
 
     def on_map_changed(self, message: MapChanged) -> None:
         self.map_feed = (message.mirror, message.update)
+        objects = getattr(message.mirror, "objects", None)
+        if objects is not None:  # a simulator: its score and clock on the top bar
+            status = self.bridge.sim_status if self.bridge is not None else None
+            self.model.site = SiteClock(
+                objects.score,
+                message.mirror.sim_time,
+                self.model.clock(),
+                status.speed if status is not None else None,
+            )
+            if self._screen_live():
+                self.mission_screen.update_top()
         if self._map_live():
             self.map_screen.map_changed(message.mirror, message.update)
 

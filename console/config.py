@@ -21,6 +21,8 @@ from pathlib import Path
 
 import yaml
 
+from backend.files import yamlio
+
 
 @dataclass
 class ConsoleConfig:
@@ -59,8 +61,11 @@ def load_config(path: str | Path | None = None, known_ids: set[str] | None = Non
         return cfg
     try:
         text = p.read_text(encoding="utf-8")
-        data = tomllib.loads(text) if p.suffix == ".toml" else yaml.safe_load(text) or {}
-    except (OSError, tomllib.TOMLDecodeError, yaml.YAMLError) as e:
+        data = tomllib.loads(text) if p.suffix == ".toml" else yamlio.load(text).data or {}
+    except yamlio.YamlSyntaxError as e:
+        cfg.problems.append(f"{p}:{e.line}: cannot read it ({e.message}); using defaults")
+        return cfg
+    except (OSError, tomllib.TOMLDecodeError) as e:
         cfg.problems.append(f"{p}: cannot read it ({str(e).splitlines()[0]}); using defaults")
         return cfg
     if not isinstance(data, dict):
@@ -111,13 +116,15 @@ def save_theme(path: Path, theme: str) -> str | None:
             new = "\n".join(lines) + "\n"
             tomllib.loads(new)  # never write a file we could not read back
         else:
-            data = yaml.safe_load(text) or {} if text else {}
+            data = yamlio.load(text).data or {} if text else {}
             if not isinstance(data, dict):
                 return f"{path}: expected a table of settings; theme not saved"
             data["theme"] = theme
             new = yaml.safe_dump(data, sort_keys=False)
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(new, encoding="utf-8")
+    except yamlio.YamlSyntaxError as e:
+        return f"{path}:{e.line}: cannot save the theme ({e.message})"
     except (OSError, tomllib.TOMLDecodeError, yaml.YAMLError) as e:
         return f"{path}: cannot save the theme ({str(e).splitlines()[0]})"
     return None

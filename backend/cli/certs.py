@@ -73,7 +73,15 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return EXIT_BAD_INPUT
-    except (OSError, ValueError) as e:
+    except OSError as e:  # a folder that cannot be made or written: say which and why
+        where = e.filename or args.dir
+        print(
+            f"missionctl certs: cannot write into {where}: {e.strerror or e}; "
+            "choose a DIR you can create and write",
+            file=sys.stderr,
+        )
+        return EXIT_BAD_INPUT
+    except ValueError as e:
         print(f"missionctl certs: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
     for path in written:

@@ -42,6 +42,7 @@ from console.state.defaults import default_params
 from console.state.eventlog import AlertBook
 from console.state.files import RecentFiles
 from console.state.model import CONNECTED, ConsoleModel
+from console.state.site import site_text
 from console.widgets.bars import KeyBar, StatusLine, TopBar, connection_text
 from console.widgets.param_editor import ParamEditor
 from console.widgets.schedule import ScheduleView
@@ -64,6 +65,8 @@ def top_text(m: ConsoleModel, unacked: int, marks: list[str]) -> Text:
     t.append("missionctl", style="bold")
     if unacked:  # the badge, first so 80 columns show it: F6 lists them
         t.append(f" ⚠ {unacked} alert{'s' if unacked > 1 else ''} (F6) ", style="bold reverse")
+    if m.site is not None:  # the pilot study's score and clock, before what 80 columns cut
+        t.append(f"  {site_text(m.site, m.clock())}", style="bold")
     if m.mission is not None:
         t.append(f"  {m.mission.name}", style="bold")
         t.append(f"  rev {m.mission.revision}", style="dim")
@@ -140,6 +143,8 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
     def freshness_tick(self) -> None:
         """Redraw what shows how old a robot's state is: all of it when a
         robot turned stale or fresh, else the stale robots' headers."""
+        if self.model.site is not None:
+            self.update_top()  # the sim clock moves on between map messages
         stale = frozenset(r for r in self.model.robot_order() if self.model.freshness(r).stale)
         if stale != self._stale:
             self._stale = stale

@@ -11,7 +11,6 @@ action does not apply), so it can be unit-tested without a terminal.
 from __future__ import annotations
 
 import hashlib
-import json
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -24,6 +23,7 @@ from backend.protocol.messages import RobotInfo, Telemetry
 from console.state import availability
 from console.state.freshness import Freshness, freshness
 from console.state.plan import PlanView
+from console.state.site import SiteClock
 from console.state.text import GLYPHS, STATUS_WORDS, fmt_clock
 
 HISTORY = 120  # telemetry samples kept per robot (bounded memory)
@@ -44,26 +44,16 @@ ROBOT_OPS = frozenset({"report", "sync_ack", "unsync_done", "retry_ack", "reconc
 
 
 PLAN_FIELDS = {"id", "skill", "label", "params", "bindings", "policies"}  # a skill, as planned
+_PLAN = {"tasks": {"__all__": {"__all__": PLAN_FIELDS}}, "barriers": True, "markers": True}
 
 
 def plan_digest(mission: Mission) -> str:
     """What a saved mission file holds of the plan, as a digest: skills
     (without their statuses), barriers and markers — two plans with the
-    same digest save to the same file."""
-    plan = {
-        "tasks": {
-            robot: [
-                s.model_dump(
-                    mode="json", include={"id", "skill", "label", "params", "bindings", "policies"}
-                )
-                for s in task
-            ]
-            for robot, task in mission.tasks.items()
-        },
-        "barriers": {k: b.model_dump(mode="json") for k, b in mission.barriers.items()},
-        "markers": {k: m.model_dump(mode="json") for k, m in mission.markers.items()},
-    }
-    return hashlib.sha1(json.dumps(plan, sort_keys=True).encode()).hexdigest()
+    same digest save to the same file. One serializer call (pydantic's, in
+    Rust): per-skill dumps took 0.2 s of a 10,000-skill mission's first frame."""
+    raw = mission.model_dump_json(include=_PLAN)
+    return hashlib.sha1(raw.encode()).hexdigest()
 
 
 @dataclass
@@ -106,6 +96,8 @@ class ConsoleModel:
     pending: dict[str, list[str]] = field(default_factory=dict)
     # the plan's forecast and checks (console/state/plan.py), refreshed by the app
     plan: PlanView = field(default_factory=PlanView)
+    # the simulator's score and clock from its map feed (None: no simulator)
+    site: SiteClock | None = None
 
     # -- updates ------------------------------------------------------------------
     def load(

@@ -133,3 +133,19 @@ def test_certs_reuses_the_ca_and_refuses_bad_names(tmp_path, pki):
         timeout=60,
     )
     assert r.returncode == 2 and "invalid client name" in r.stderr
+
+
+def test_certs_into_a_folder_that_cannot_be_made_says_which_and_why(tmp_path):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    r = subprocess.run(
+        [*CLI, "certs", str(blocker / "pki")],
+        cwd=ROOT,
+        env=env(),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert r.returncode == 2
+    assert r.stderr.startswith(f"missionctl certs: cannot write into {blocker / 'pki'}: "), r.stderr
+    assert "choose a DIR" in r.stderr and "Traceback" not in r.stderr and "[Errno" not in r.stderr
