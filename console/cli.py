@@ -68,8 +68,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument(
         "--link-delay",
         metavar="D",
-        type=_duration,
-        default=0.0,
+        default=None,
         help="one-way delay between ground and the simulated robots, in sim time "
         "(e.g. 20s, 20m, 1.5h; passed to `missionctl sim --link-delay`)",
     )
@@ -84,12 +83,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--config", metavar="FILE")
     d.add_argument("--yes", action="store_true", help=YES_HELP)
     d.set_defaults(func=run_demo)
-
-
-def _duration(text: str) -> float:
-    from backend.cli.ctl.values import parse_duration
-
-    return parse_duration(text)
 
 
 def _known_binding_ids() -> set[str]:
@@ -183,7 +176,7 @@ def run_demo(args: argparse.Namespace) -> int:
     procs = DemoProcesses(
         mission,
         speed=args.speed,
-        link_delay_s=args.link_delay,
+        link_delay=args.link_delay,
         comms_window=args.comms_window,
     )
     try:

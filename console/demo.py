@@ -53,7 +53,7 @@ class DemoProcesses:
         mission: str | Path = DEFAULT_MISSION,
         *,
         speed: float = 1.0,
-        link_delay_s: float = 0.0,
+        link_delay: str | None = None,
         comms_window: str | None = None,
         python: str = sys.executable,
         workdir: str | Path | None = None,
@@ -61,7 +61,7 @@ class DemoProcesses:
     ):
         self.mission = Path(mission).resolve()
         self.speed = speed
-        self.link_delay_s = link_delay_s  # one way, sim seconds (the sim's --link-delay)
+        self.link_delay = link_delay  # the sim's --link-delay, as given (it checks it)
         self.comms_window = comms_window  # the sim's --comms-window, as given
         self.python = python
         self._own_dir = workdir is None
@@ -142,7 +142,7 @@ class DemoProcesses:
                     self.endpoint,
                     "--speed",
                     f"{self.speed:g}",
-                    *(["--link-delay", f"{self.link_delay_s:g}s"] if self.link_delay_s else []),
+                    *(["--link-delay", self.link_delay] if self.link_delay else []),
                     *(["--comms-window", self.comms_window] if self.comms_window else []),
                 ],
                 self.sim_log,
