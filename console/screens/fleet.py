@@ -15,6 +15,7 @@ from textual.widgets import DataTable, Footer, Input, Static
 
 from backend.protocol.messages import RobotInfo
 from console.screens.base import ViewScreen
+from console.state import link
 from console.state.capability import (
     filter_examples,
     fleet_order,
@@ -39,6 +40,7 @@ class FleetScreen(ViewScreen):
         ("Battery", "battery"),
         ("Link", "link"),
         ("Doing", "doing"),
+        ("Uplink", "uplink"),
         ("Last report", "report"),
     )
     TOPICS = ("fleet",)
@@ -76,6 +78,16 @@ class FleetScreen(ViewScreen):
         style = f"bold {self.colour(var)}" if low else ""
         return Text(f"{sparkline(h, SPARK)} {int(round(h[-1] * 100)):3d}%", style=style)
 
+    def _uplink(self, robot: str) -> Text:
+        """'⇡2 1m10s ⇄20s': commands waiting for the robot, its one-way delay."""
+        info = self.model.robots.get(robot)
+        words = [
+            link.pending_text(self.model.pending(robot), self.model.clock()),
+            link.delay_text(info.delay_s if info is not None else None),
+        ]
+        text = " ".join(w for w in words if w)
+        return Text(text or "—", style="" if text else "dim")
+
     def _row(self, robot: str) -> list:
         return [
             Text(robot, style="bold"),
@@ -84,6 +96,7 @@ class FleetScreen(ViewScreen):
             self._level(robot, 0, "battery-low"),
             self._level(robot, 1, None),
             Text(self.model.activity_text(robot) if self.model.mission else ""),
+            self._uplink(robot),
             Text(last_report(self.model, robot)),
         ]
 
@@ -121,7 +134,7 @@ class FleetScreen(ViewScreen):
             robots = [robot]
         for r in robots:
             for key, value in zip(
-                ("robot", "presence", "type", "battery", "link", "doing", "report"),
+                ("robot", "presence", "type", "battery", "link", "doing", "uplink", "report"),
                 self._row(r),
                 strict=True,
             ):
@@ -171,6 +184,8 @@ class FleetScreen(ViewScreen):
         out.append(self.model.activity_text(r) if self.model.mission else "—")
         out.append(" · last report: ", style="bold")
         out.append(last_report(self.model, r))
+        out.append("\nlink: ", style="bold")
+        out.append(link.link_text(self.model, r, self.model.clock()))
         return out
 
     # -- events ---------------------------------------------------------------------------

@@ -152,6 +152,9 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
             return
         for robot in stale:
             self.schedule.refresh_telemetry(robot)
+        for robot in self.model.robot_order():  # the ages of commands waiting for a robot
+            if self.model.pending(robot):
+                self.schedule.refresh_uplinking(robot)
 
     def on_resize(self, event: events.Resize) -> None:
         self.update_keys()

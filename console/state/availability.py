@@ -15,7 +15,15 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
-from backend.core.model import FINISHED, Mission, SkillInstance, Status, how_to_change
+from backend.core.model import (
+    FINISHED,
+    Mission,
+    SkillInstance,
+    Status,
+    UplinkCommand,
+    how_to_change,
+)
+from backend.core.rules.uplink import pending_allows
 from console.state.text import STATUS_WORDS
 
 Found = tuple[str, int, SkillInstance]  # (robot, index in its task, skill)
@@ -44,6 +52,8 @@ class Facts(Protocol):
     def presence_text(self, robot: str) -> str: ...
     def robot_state(self, robot: str) -> tuple[SkillInstance | None, int]: ...
     def plan_blocking(self, robot: str, skill_id: str) -> list[str]: ...
+    def pending(self, robot: str) -> list[UplinkCommand]: ...
+    def uplinking(self, skill_id: str) -> UplinkCommand | None: ...
 
 
 @dataclass(frozen=True)
@@ -94,6 +104,9 @@ def read_only_reason(facts: Facts, skill_id: str) -> str | None:
     if facts.read_only:  # the editor says "read-only: <reason>" itself
         return facts.read_only.removeprefix("read-only: ")
     if s.status == Status.IDLE:
+        c = facts.uplinking(s.id)
+        if c is not None:
+            return uplinking_why(c)
         if not facts.connected:
             return (
                 f"not connected to the mission server ({facts.connection}): "
@@ -101,6 +114,14 @@ def read_only_reason(facts: Facts, skill_id: str) -> str | None:
             )
         return None
     return not_idle(robot, s, "only idle skills can be edited")
+
+
+def uplinking_why(c: UplinkCommand) -> str:
+    """Why a skill a pending command concerns cannot change now."""
+    return (
+        f"{c.title()} to {c.robot} is waiting for the robot's answer: "
+        f"wait for it, or cancel the command (ctl cancel {c.id})"
+    )
 
 
 def not_idle(robot: str, s: SkillInstance, rule: str) -> str:
@@ -133,7 +154,8 @@ def _idle_skill(q: Selected, verb: str) -> str | None:
     robot, _, s = q.found
     if s.status != Status.IDLE:
         return not_idle(robot, s, f"only idle skills can be {verb}")
-    return None
+    c = q.facts.uplinking(s.id)
+    return uplinking_why(c) if c is not None else None
 
 
 def _delete(q: Selected) -> str | None:
@@ -168,8 +190,9 @@ def _sync(q: Selected) -> str | None:
             f"{s.id} is {STATUS_WORDS[s.status]} on {r}: "
             "synchronize through an idle (unsynchronized) skill"
         )
-    if not q.facts.is_online(r):
-        return f"{r} is {q.facts.presence_text(r)}: it cannot receive skills"
+    c = q.facts.uplinking(s.id)
+    if c is not None:
+        return uplinking_why(c)
     blocked = q.facts.plan_blocking(r, s.id)
     if blocked:
         more = f" and {len(blocked) - 2} more" if len(blocked) > 2 else ""
@@ -189,8 +212,6 @@ def _unsync(q: Selected) -> str | None:
             f"{s.id} is {STATUS_WORDS[s.status]} on {r}: "
             "only queued (idle_synchronized) skills can be unsynchronized"
         )
-    if not q.facts.is_online(r):
-        return f"{r} is {q.facts.presence_text(r)}: it cannot be asked to give skills back"
     return None
 
 
@@ -255,8 +276,6 @@ def _retry(q: Selected) -> str | None:
     act = q.facts.robot_state(r)[0]
     if act is not None:
         return f"{r} is executing {act.id}: stop it first"
-    if not q.facts.is_online(r):
-        return f"{r} is {q.facts.presence_text(r)}"
     return None
 
 
@@ -315,12 +334,14 @@ CONTROLS: dict[str, Callable[[str, SkillInstance | None, bool], str | None]] = {
 
 
 def control_why(facts: Facts, verb: str, robot: str) -> str | None:
-    """Why `verb` (run, pause, stop, reset) does not apply to `robot`."""
+    """Why `verb` (run, pause, stop, reset) does not apply to `robot`: what the
+    ground knows plus the robot's pending commands, as the server judges it.
+    An offline robot can be asked: the command waits for it (the uplink)."""
     act, n_queued = facts.robot_state(robot)
-    why = CONTROLS[verb](robot, act, n_queued > 0)
-    if why is None and not facts.is_online(robot):
-        why = f"{robot} is {facts.presence_text(robot)}"
-    return why
+    pending = {c.op for c in facts.pending(robot)}
+    if pending_allows(verb, act, n_queued > 0, pending):
+        return None
+    return CONTROLS[verb](robot, act, n_queued > 0)
 
 
 def _control(verb: str) -> Rule:

@@ -1,17 +1,17 @@
 """How fresh what the console knows of a robot is (no Textual here).
 
 The ground's view of a robot is its last report: when the robot is offline,
-or has stopped sending the telemetry it was sending, that view is the robot's
-*last known* state, not a live one. The schedule then draws it dimmed with
-"as of 25s ago", and progress and ETA stop (they are not extrapolated).
+has stopped sending the telemetry it was sending, or is so far away that
+what arrives is old, that view is the robot's *last known* state, not a live
+one. The schedule then draws it dimmed with "as of 25s ago", and progress and
+ETA stop (they are not extrapolated).
 
-Today this is judged from what the console itself sees: presence (liveliness),
-and when it last heard the robot (telemetry or a report, stamped on arrival
-with the console's clock — robot clocks may differ). The robot link's state
-(issue 19: one-way delay, last-heard time and pending commands per robot in
-the client) extends `freshness` where marked: a robot minutes away is stale
-by its delay even when its reports arrive in order, and its "as of" is the
-robot's time of the report, not its arrival.
+When it was last heard is the later of the console's own arrival stamps
+(telemetry, a report) and the server's (RobotInfo.heard: registration, any
+downlink message). A robot's estimated one-way delay (RobotInfo.delay_s) is
+added: what arrives now left the robot that long ago. A delay of
+`SILENT_AFTER_S` or more makes the robot stale even while its messages keep
+arriving in order ("delayed").
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ SILENT_AFTER_S = 10.0
 @dataclass(frozen=True)
 class Freshness:
     """`stale`: draw the robot's state as last known; `age_s`: since when
-    (None: never heard); `why`: "offline", "silent" or "" (fresh)."""
+    (None: never heard); `why`: "offline", "silent", "delayed" or "" (fresh)."""
 
     stale: bool = False
     age_s: float | None = None
@@ -63,14 +63,18 @@ def freshness(model: Heard, robot: str, now: datetime) -> Freshness:
     """How fresh the console's view of `robot` is at `now`."""
     info = model.robots.get(robot)
     heard = model.heard.get(robot)
-    # (issue 19 extends here: the link's last-heard time and one-way delay)
+    if info is not None and info.heard is not None and (heard is None or info.heard > heard):
+        heard = info.heard
+    delay = info.delay_s if info is not None and info.delay_s is not None else 0.0
     if info is not None and not info.online:
         since = heard or info.since
-        age = max(0.0, (now - since).total_seconds()) if since is not None else None
+        age = max(0.0, (now - since).total_seconds()) + delay if since is not None else None
         return Freshness(True, age, "offline")
     if heard is None:
         return FRESH
-    age = max(0.0, (now - heard).total_seconds())
-    if robot in model.telemetry and age > SILENT_AFTER_S:
+    age = max(0.0, (now - heard).total_seconds()) + delay
+    if robot in model.telemetry and age - delay > SILENT_AFTER_S:
         return Freshness(True, age, "silent")
+    if delay >= SILENT_AFTER_S:
+        return Freshness(True, age, "delayed")
     return Freshness(False, age, "")

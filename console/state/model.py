@@ -18,9 +18,9 @@ from datetime import UTC, datetime
 
 from backend.core import events as ev
 from backend.core.library import Library
-from backend.core.model import ACTIVE, Mission, SkillInstance, Status
+from backend.core.model import ACTIVE, Mission, SkillInstance, Status, UplinkCommand
 from backend.protocol.messages import RobotInfo, Telemetry
-from console.state import availability
+from console.state import availability, link
 from console.state.freshness import Freshness, freshness
 from console.state.plan import PlanView
 from console.state.site import SiteClock
@@ -40,7 +40,7 @@ CONNECTING, CONNECTED, RECONNECTING, UNREACHABLE, OFFLINE = (
 # -- the model --------------------------------------------------------------------
 
 # operations a robot's answer or report becomes (the robot was heard)
-ROBOT_OPS = frozenset({"report", "sync_ack", "unsync_done", "retry_ack", "reconcile"})
+ROBOT_OPS = frozenset({"report", "answer", "sync_ack", "unsync_done", "retry_ack", "reconcile"})
 
 
 PLAN_FIELDS = {"id", "skill", "label", "params", "bindings", "policies"}  # a skill, as planned
@@ -91,9 +91,8 @@ class ConsoleModel:
     # robot -> when this console last heard it (telemetry, a report, presence back)
     heard: dict[str, datetime] = field(default_factory=dict)
     clock: Callable[[], datetime] = field(default=lambda: datetime.now(UTC))
-    # robot -> its commands not yet acknowledged, as sentences ("sync lru1-3, 2m10s old");
-    # empty until the robot link's state reaches the console (issue 19): quitting asks then
-    pending: dict[str, list[str]] = field(default_factory=dict)
+    # skill id -> the pending command locking it, for the revision it was built at
+    _uplinking: tuple[int, dict[str, UplinkCommand]] = (-1, {})
     # the plan's forecast and checks (console/state/plan.py), refreshed by the app
     plan: PlanView = field(default_factory=PlanView)
     # the simulator's score and clock from its map feed (None: no simulator)
@@ -144,21 +143,16 @@ class ConsoleModel:
                     robots.add(r)
                     reindex = True
                 case ev.SkillChanged(id=sid):
-                    r = self._owner.get(sid)
-                    if r is None:
-                        reindex = True
-                    else:
-                        robots.add(r)
-                    bid = self._barrier_of.get(sid)
-                    if bid is not None and bid in self.mission.barriers:
-                        # partners waiting at the barrier show this skill's state
-                        robots.update(
-                            self._owner[x]
-                            for x in self.mission.barriers[bid].skills
-                            if x in self._owner
-                        )
+                    shown = self._shown_by(sid)
+                    reindex = reindex or shown is None
+                    robots.update(shown or ())
                 case ev.BarrierSet() | ev.BarrierRemoved():
                     barriers = True
+                case ev.CommandQueued(command=c):
+                    robots.add(c.robot)  # its skills show ⇡, its header the count
+                case ev.CommandChanged(id=cid):
+                    c = self.mission.command(cid)
+                    robots.update([c.robot] if c is not None else ())
                 case ev.MissionReplaced():
                     for name in self.mission.robots:
                         self.robots.setdefault(name, RobotInfo(name=name))
@@ -173,6 +167,22 @@ class ConsoleModel:
         if barriers:  # tags of partner rows in other columns change too
             return None
         return robots
+
+    def _shown_by(self, sid: str) -> set[str] | None:
+        """The columns that show skill `sid`'s state: its robot's and, at a
+        barrier, its partners' (they say what they wait for); None when the
+        skill is not indexed yet."""
+        assert self.mission is not None
+        r = self._owner.get(sid)
+        if r is None:
+            return None
+        out = {r}
+        bid = self._barrier_of.get(sid)
+        if bid is not None and bid in self.mission.barriers:
+            out.update(
+                self._owner[x] for x in self.mission.barriers[bid].skills if x in self._owner
+            )
+        return out
 
     def _take(self, batch: ev.EventBatch, mission: Mission | None) -> bool:
         """The mission after `batch` (False: an old batch, nothing changed)."""
@@ -211,7 +221,7 @@ class ConsoleModel:
                 busy.append(f"{robot} is {STATUS_WORDS[act.status]} ({act.id})")
         if busy:
             risks.append("; ".join(busy))
-        waiting = [f"{r}: {', '.join(cmds)}" for r, cmds in self.pending.items() if cmds]
+        waiting = link.risks(self.mission, self.clock())
         if waiting:
             risks.append("commands not yet acknowledged — " + "; ".join(waiting))
         if self.unsaved:
@@ -338,6 +348,17 @@ class ConsoleModel:
                 else f"{mode} · {queued} queued"
             )
         return mode or "idle"
+
+    def uplinking(self, sid: str) -> UplinkCommand | None:
+        """The pending command to a robot that locks skill `sid`, if any."""
+        rev = self.mission.revision if self.mission is not None else -1
+        if self._uplinking[0] != rev:
+            self._uplinking = (rev, link.uplinking(self.mission))
+        return self._uplinking[1].get(sid)
+
+    def pending(self, robot: str) -> list[UplinkCommand]:
+        """The robot's commands not settled yet, oldest first."""
+        return self.mission.pending_commands(robot) if self.mission is not None else []
 
     def freshness(self, robot: str) -> Freshness:
         """Whether what is shown of `robot` is live or its last known state."""

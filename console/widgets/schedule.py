@@ -19,7 +19,8 @@ from textual.message import Message
 from textual.scroll_view import ScrollView
 from textual.strip import Strip
 
-from backend.core.model import ACTIVE, SkillInstance, Status
+from backend.core.model import SkillInstance, Status
+from console.state import link
 from console.state.model import ConsoleModel
 from console.state.text import STATUS_CSS, param_summary
 from console.widgets.schedule_lines import (
@@ -29,6 +30,7 @@ from console.widgets.schedule_lines import (
     Column,
     Head,
     Styles,
+    build_column,
     click_hit,
     fit,
     hidden_robots,
@@ -124,28 +126,12 @@ class ScheduleView(ScrollView, can_focus=True):
             return self.columns[self.cursor_col].robot
         return None
 
-    def _build_column(self, robot: str, static: bool) -> Column:
-        col = Column(robot=robot, static=static)
-        task = self.model.task(robot)
-        for i, s in enumerate(task):
-            col.ids.append(s.id)
-            if s.status == Status.IDLE:
-                col.idle.append(i)
-                col.idle_keys.append((s.id, s.rev))
-            else:
-                col.sync.append((i, "row"))
-                col.sync_keys.append((s.id, "row", s.rev))
-                if s.status in ACTIVE or (s.status == Status.FAILURE and s.status_info):
-                    col.sync.append((i, "progress"))
-                    col.sync_keys.append((s.id, "progress", s.rev))
-        return col
-
     def rebuild(self, robots: set[str] | None = None) -> None:
         """Re-lay out the columns of `robots` (all when None) and repaint."""
         order = self.model.robot_order()
         if robots is None or [c.robot for c in self.columns] != order:
             self.columns = [
-                self._build_column(r, self.model.robot_kind(r) == "static") for r in order
+                build_column(self.model, r, self.model.robot_kind(r) == "static") for r in order
             ]
             self._col_index = {c.robot: i for i, c in enumerate(self.columns)}
             if len(self._summary_cache) > 50_000:
@@ -157,7 +143,7 @@ class ScheduleView(ScrollView, can_focus=True):
                 i = self._col_index.get(r)
                 if i is not None:
                     old = self.columns[i]
-                    self.columns[i] = self._build_column(r, old.static)
+                    self.columns[i] = build_column(self.model, r, old.static)
                     changed.append((old, self.columns[i]))
             self._relayout([new for _, new in changed])
             if self.cursor_id in self.columns[self.cursor_col].line_of:
@@ -178,6 +164,19 @@ class ScheduleView(ScrollView, can_focus=True):
         self._relayout()
         self._keep_cursor()
         self.refresh()
+
+    def refresh_uplinking(self, robot: str) -> None:
+        """A second passed: the header's and the rows' command ages."""
+        i = self._col_index.get(robot)
+        if i is None:
+            return
+        col = self.columns[i]
+        x, w = col.x - int(self.scroll_x), col.width + 1
+        self.refresh(Region(x, 0, w, HEADER_H - 1))
+        sync_h = self.sync_h
+        lines = [n for n, key in enumerate(col.sync_keys) if key[3]]
+        lines += [sync_h + 1 + k for k, key in enumerate(col.idle_keys) if key[2]]
+        self._refresh_content_lines(x, w, lines)
 
     def refresh_telemetry(self, robot: str) -> None:
         """New telemetry: only the header and the progress lines show it."""
@@ -527,6 +526,7 @@ class ScheduleView(ScrollView, can_focus=True):
         selected = ci == self.cursor_col and s.id == self.cursor_id
         bid = self.model.barrier_of(s.id)
         stale = s.status != Status.IDLE and self.model.freshness(col.robot).stale
+        c = self.model.uplinking(s.id)
         return skill_segments(
             s,
             col.width,
@@ -538,4 +538,5 @@ class ScheduleView(ScrollView, can_focus=True):
             extra=self._summary(s) if not col.static or self.expand_static else "",
             cursor=(st["cursor"] if self.has_focus else st["cursor-blur"]) if selected else None,
             stale=stale,
+            uplink=link.command_text(c, self.model.clock()) if c is not None else "",
         )

@@ -16,8 +16,9 @@ from rich.segment import Segment
 from rich.style import Style
 from textual.strip import Strip
 
-from backend.core.model import SkillInstance, Status
+from backend.core.model import ACTIVE, SkillInstance, Status
 from backend.core.plan.checks import Finding
+from console.state import link
 from console.state.freshness import FRESH, Freshness
 from console.state.model import ConsoleModel
 from console.state.text import GLYPHS, STATUS_CSS, fmt_clock, fmt_duration, skill_title
@@ -41,8 +42,9 @@ class Column:
     line_of: dict[str, int] = field(default_factory=dict)  # filled by the layout
     # what each line of a section shows (id, kind, revision): comparing two
     # builds tells which lines a change touched, so only those are repainted
-    sync_keys: list[tuple[str, str, int]] = field(default_factory=list)
-    idle_keys: list[tuple[str, int]] = field(default_factory=list)
+    # (the last: the pending command shown on the row, "" when none)
+    sync_keys: list[tuple[str, str, int, str]] = field(default_factory=list)
+    idle_keys: list[tuple[str, int, str]] = field(default_factory=list)
 
     def resting_id(self) -> str | None:
         """Where the cursor goes in this column: the first unsynchronized
@@ -63,6 +65,27 @@ class Column:
         if k < len(self.idle_keys):
             return self.idle_keys[k]
         return "blank" if k or self.idle else "hint"
+
+
+def build_column(model: ConsoleModel, robot: str, static: bool) -> Column:
+    """A robot's column: its synchronized section (a row per skill, and a
+    progress line under an active or failed one) and its plan, with the keys
+    that tell which lines a later build changed."""
+    col = Column(robot=robot, static=static)
+    for i, s in enumerate(model.task(robot)):
+        col.ids.append(s.id)
+        c = model.uplinking(s.id)
+        up = f"{c.id} {c.state}" if c is not None else ""  # its row shows the command
+        if s.status == Status.IDLE:
+            col.idle.append(i)
+            col.idle_keys.append((s.id, s.rev, up))
+        else:
+            col.sync.append((i, "row"))
+            col.sync_keys.append((s.id, "row", s.rev, up))
+            if s.status in ACTIVE or (s.status == Status.FAILURE and s.status_info):
+                col.sync.append((i, "progress"))
+                col.sync_keys.append((s.id, "progress", s.rev, ""))
+    return col
 
 
 def fit(text: str, width: int) -> str:
@@ -185,24 +208,65 @@ def _name_line(h: Head) -> list[Segment]:
 
 
 def _levels_line(h: Head) -> list[Segment]:
+    """Battery, the link's words (pending commands, delay), link quality:
+    as many as fit, in that order."""
     w, st = h.col.width, h.st
     if h.compact:
         return [Segment(fit("static", w), st["dim"])]
     t = h.model.telemetry.get(h.col.robot)
+    gap = st["base"]
     if t is None:
-        return [Segment(fit("bat –  link –", w), st["dim"])]
-    if h.fresh.stale:  # the last levels heard, not live ones
-        text = f"bat {int(round(t.battery * 100))}%  link {int(round(t.link * 100))}%"
-        return [Segment(fit(text, w), st["stale"])]
-    bat = f"bat {int(round(t.battery * 100))}%"
-    link = f"link {int(round(t.link * 100))}%" if t.in_range else "link: out of range"
-    bst = st["battery-low"] if t.battery < 0.2 else st["base"]
-    lst = st["offline"] if not t.in_range else st["base"]
-    return [
-        Segment(bat, bst),
-        Segment("  ", st["base"]),
-        Segment(fit(link, max(0, w - cell_len(bat) - 2)), lst),
-    ]
+        bat, link, gap = ("bat –", st["dim"]), ("link –", st["dim"]), st["dim"]
+    elif h.fresh.stale:  # the last levels heard, not live ones
+        bat = (f"bat {int(round(t.battery * 100))}%", st["stale"])
+        link = (f"link {int(round(t.link * 100))}%", st["stale"])
+        gap = st["stale"]
+    else:
+        bst = st["battery-low"] if t.battery < 0.2 else st["base"]
+        bat = (f"bat {int(round(t.battery * 100))}%", bst)
+        link = (
+            (f"link {int(round(t.link * 100))}%", st["base"])
+            if t.in_range
+            else ("link: out of range", st["offline"])
+        )
+    return _spread([bat, *_link_words(h), link], w, gap)
+
+
+def _link_words(h: Head) -> list[tuple[str, Style]]:
+    """'⇡2 1m10s' (commands waiting for the robot's answer), '⇄20s' (delay)."""
+    robot, st = h.col.robot, h.st
+    out = []
+    pending = link.pending_text(h.model.pending(robot), h.model.clock())
+    if pending:
+        out.append((pending, st["tag"]))
+    info = h.model.robots.get(robot)
+    delay = link.delay_text(info.delay_s if info is not None else None)
+    if delay:
+        out.append((delay, st["dim"]))
+    return out
+
+
+def _spread(parts: list[tuple[str, Style]], width: int, base: Style) -> list[Segment]:
+    """Parts two spaces apart, in order of importance: the last ones cut to
+    the room left (5 cells at least) or left out until the rest fits."""
+
+    def total(ps: list[tuple[str, Style]]) -> int:
+        return sum(cell_len(p) for p, _ in ps) + 2 * (len(ps) - 1)
+
+    shown = list(parts)
+    while len(shown) > 1 and total(shown) > width:
+        room = width - total(shown[:-1]) - 2
+        if room >= 5:
+            shown[-1] = (fit(shown[-1][0], room), shown[-1][1])
+            break
+        shown.pop()
+    segs: list[Segment] = []
+    for i, (text, style) in enumerate(shown):
+        if i:
+            segs.append(Segment("  ", base))
+        segs.append(Segment(fit(text, width) if cell_len(text) > width else text, style))
+    used = sum(cell_len(seg.text) for seg in segs)
+    return [*segs, Segment(" " * max(0, width - used), shown[-1][1])]
 
 
 def _activity_line(h: Head) -> list[Segment]:
@@ -249,11 +313,14 @@ def skill_segments(
     cursor: Style | None,
     check: Finding | None = None,
     stale: bool = False,
+    uplink: str = "",
 ) -> list[Segment]:
     """A skill's row: mark, glyph, title (*: unapplied edits), attempt, the
     parameter summary where it fits, the barrier tag, the plan checks' glyph
     (✖ error, ⚠ warning, ≈ waived); on `cursor`'s background. `stale`: a
-    synchronized skill of a robot not heard lately (its last known status)."""
+    synchronized skill of a robot not heard lately (its last known status).
+    `uplink`: a pending command concerns it ('sync #17 sent 40s'): ⇡ and that
+    text instead of the parameter summary."""
     sst = st[STATUS_CSS[s.status]] + st["stale"] if stale else st[STATUS_CSS[s.status]]
     title = ("*" if draft else "") + skill_title(s)
     attempt = f" #{s.attempt}" if s.attempt > 1 else ""
@@ -262,8 +329,9 @@ def skill_segments(
     room = width - 2 - (cell_len(tag) + 1 if tag else 0) - (1 if check is not None else 0)
     segs: list[Segment] = [
         Segment("+" if marked else " ", st["mark"] if marked else st["base"]),
-        Segment(GLYPHS[s.status], sst),
+        Segment(link.UPLINK_GLYPH, st["tag"]) if uplink else Segment(GLYPHS[s.status], sst),
     ]
+    extra = uplink or extra
     body = " " + title + attempt
     if cell_len(body) >= room:  # the label is cut in the middle, never the attempt number
         segs.append(Segment(" " + fit_middle(title, room - 1 - len(attempt)) + attempt, sst))

@@ -130,10 +130,10 @@ async def test_actions_that_do_not_apply_say_why():
         assert "only queued (idle_synchronized) skills can be unsynchronized" in status_line(app)
         await pilot.press("b")
         assert "mark one idle skill on each of at least two robots" in status_line(app)
-        screen.schedule.select("ardea-3")  # ardea is offline
-        await pilot.pause()
+        screen.schedule.select("ardea-3")  # ardea is offline: a command waits for it
         await pilot.press("x")
-        assert "ardea is offline since 10:42:07" in status_line(app)
+        await pilot.pause()
+        assert "stop ardea" in status_line(app) and "offline" not in status_line(app)
 
 
 async def test_add_with_picker_then_edit_with_inline_validation_then_apply():

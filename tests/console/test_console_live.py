@@ -264,10 +264,12 @@ async def test_robot_killed_shows_offline(live):
             pilot, lambda: screen_text(app).count("✕ offline") == 2, SLOW, "offline in both headers"
         )
         await pick(app, pilot, "lru1-1")
-        await pilot.press("s")
-        assert (
-            "lru1 is offline since" in app.mission_screen.message
-        )  # sync disabled, with the reason
+        await pilot.press("s")  # queued for the robot: it gets it when it is back
+        await wait_until(
+            pilot, lambda: "sync queued (command" in app.mission_screen.message, SLOW, "queued"
+        )
+        await wait_until(pilot, lambda: "⇡ " in screen_text(app), SLOW, "the skill uplinking")
+        assert "sync #1 " in screen_text(app)
 
 
 async def test_server_restart_console_resyncs(live):

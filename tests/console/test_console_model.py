@@ -63,7 +63,11 @@ def test_why_not_names_robot_skill_and_reason():
     assert m.why_not("retry", "ardea", "ardea-2") == "ardea is executing ardea-3: stop it first"
     assert m.why_not("run", "lru1", None) == "lru1 is already executing lru1-2 (running)"
     assert m.why_not("pause", "lru1", None) is None
-    assert m.why_not("run", "ardea", None) == f"ardea is offline since {T0:%H:%M:%S}"
+    # ardea is offline (paused): a run waits for it in its uplink, as the server queues it
+    assert m.why_not("run", "ardea", None) is None
+    assert m.why_not("run_all", None, None) is None  # ardea's run waits for it
+    m.robots["ardea"] = m.robots["ardea"].model_copy(update={"online": True})
+    m.mission.tasks["ardea"][2].status = Status.RUNNING  # ardea-3 resumed: none to run
     assert m.why_not("run_all", None, None).startswith(
         "run applies to no robot: lru1 is already executing lru1-2"
     )

@@ -20,6 +20,7 @@ from console_state import (
 )
 from textual import events
 
+from backend.core.model import Run, UplinkCommand
 from backend.core.ops import EditSkill
 from backend.protocol.messages import RobotInfo
 from console.escape import split_escape
@@ -166,8 +167,13 @@ def test_unsaved_means_the_plan_differs_from_what_was_saved_or_loaded():
     m2.mission.tasks["lru1"][1].status_info = "moving"
     assert not m2.unsaved
     assert m2.quit_risks()[0].startswith("lru1 is running (lru1-2); lru2 is waiting at barrier")
-    m2.pending["lru1"] = ["sync lru1-4, 2m old"]
-    assert "commands not yet acknowledged — lru1: sync lru1-4, 2m old" in m2.quit_risks()
+    m2.clock = lambda: T0 + timedelta(minutes=2)
+    m2.mission.uplink["lru1"] = [
+        UplinkCommand(
+            id=7, robot="lru1", seq=1, op="sync", command=Run(), skills=["lru1-4"], created=T0
+        )
+    ]
+    assert "commands not yet acknowledged — lru1: sync #7 queued 2m00s" in m2.quit_risks()
 
 
 # -- small things ----------------------------------------------------------------------------

@@ -20,6 +20,7 @@ given up on) is returned in the change's value under "alerts".
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Set as AbstractSet
 from datetime import timedelta
 from typing import Any
 
@@ -234,13 +235,24 @@ def _why_not_now(rules: Rules, action: str, robot: str) -> str | None:
     pending = {c.op for c in rules.mission.pending_commands(robot)}
     act = rules.active(task)
     queued = rules.first_queued(task) is not None
-    if action == "run" and act is None and not queued and pending & {"sync", "retry"}:
-        return None  # runs what the pending sync brings
-    if action in ("pause", "stop") and act is None and queued and "run" in pending:
-        return None
-    if action == "reset" and act is None and not queued and pending & {"sync", "retry"}:
+    if pending_allows(action, act, queued, pending):
         return None
     return why_not(action, robot, act, queued)
+
+
+def pending_allows(
+    action: str, act: SkillInstance | None, queued: bool, pending: AbstractSet[str]
+) -> bool:
+    """Whether `action` applies because of the robot's pending commands (ops),
+    though what the ground knows says not: run or reset what a pending sync
+    brings, pause or stop what a pending run may have started."""
+    if act is not None:
+        return False
+    if action in ("run", "reset"):
+        return not queued and bool(pending & {"sync", "retry"})
+    if action in ("pause", "stop"):
+        return queued and "run" in pending
+    return False
 
 
 def retry(rules: Rules, op: Retry) -> Change:

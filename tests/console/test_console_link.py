@@ -1,0 +1,172 @@
+"""The robot link on the console (issue 19): commands waiting for their robot
+(⇡ on the skills a pending sync carries, with the command's age; a count and
+the oldest age in the column's header), the robot's one-way delay (⇄), and a
+robot far enough away drawn as its last known state. State injected as
+messages, the clock pinned."""
+
+from __future__ import annotations
+
+from datetime import timedelta
+
+from console_state import (
+    MARS_FLEET,
+    T0,
+    inject,
+    make_app,
+    mars_mid_execution,
+    mars_telemetry,
+    screen_text,
+)
+
+from backend.core.model import CommandState
+from backend.core.ops import Sync
+from backend.protocol.messages import RobotInfo
+from console.messages import FleetChanged
+from console.state import link
+from console.state.freshness import SILENT_AFTER_S
+
+
+def _with_pending_sync():
+    """Mid-execution, then lru2 asked to take lru2-5 and lru2-6 (command queued at T0)."""
+    b = mars_mid_execution()
+    b.engine.clock = lambda: T0
+    applied = b.engine.submit(Sync(robot="lru2", through="lru2-6"))
+    assert applied.value["skills"] == ["lru2-5", "lru2-6"]
+    return b, applied.value["command"]
+
+
+def test_how_a_command_and_a_delay_are_said():
+    b, cid = _with_pending_sync()
+    c = b.mission.command(cid)
+    later = T0 + timedelta(seconds=40)
+    assert link.command_text(c, later) == f"sync #{cid} queued 40s"
+    sent = c.model_copy(update={"state": CommandState.SENT, "expires": T0 + timedelta(minutes=30)})
+    assert link.command_text(sent, later) == f"sync #{cid} sent 40s, expires in 29m20s"
+    assert link.pending_text([c, sent], later) == "⇡2 40s"
+    assert link.pending_text([], later) == ""
+    assert link.delay_text(0.2) == "" and link.delay_text(20) == "⇄20s"
+    assert link.delay_text(1200) == "⇄20m00s"
+    assert link.uplinking(b.mission) == {"lru2-5": c, "lru2-6": c}
+
+
+async def test_a_pending_sync_shows_on_its_skills_and_header_and_locks_them():
+    b, cid = _with_pending_sync()
+    app = make_app()
+    now = [T0 + timedelta(seconds=40)]  # the command was queued at T0
+    app.clock = lambda: now[0]
+    async with app.run_test(size=(200, 40)) as pilot:
+        await inject(app, pilot, b, telemetry=mars_telemetry())
+        text = screen_text(app)
+        assert "⇡ back to lander" in text and f"sync #{cid} queued 40s" in text, text
+        assert "⇡1 40s" in text  # lru2's header
+        m = app.model
+        assert m.why_not("delete", "lru2", "lru2-5").startswith(
+            f"command {cid} (sync lru2-5, lru2-6) to lru2 is waiting for the robot's answer"
+        )
+        assert "ctl cancel" in m.read_only_reason("lru2-6")
+        assert m.why_not("run", "lru1", None)  # lru1 runs lru1-2 already
+        assert "queued 40s" in m.quit_risks()[1]
+        now[0] += timedelta(seconds=5)  # the ages count up without a message
+        app.mission_screen.freshness_tick()
+        await pilot.pause()
+        assert "⇡1 45s" in screen_text(app) and f"sync #{cid} queued 45s" in screen_text(app)
+
+
+async def test_a_distant_robot_shows_its_delay_and_is_drawn_as_of_then():
+    b = mars_mid_execution()
+    app = make_app()
+    async with app.run_test(size=(120, 40)) as pilot:
+        await inject(app, pilot, b, telemetry=mars_telemetry())
+        far = RobotInfo(name="lru1", online=True, since=T0, heard=T0, delay_s=4.0)
+        app.post_message(FleetChanged(far))
+        await pilot.pause()
+        assert "⇄4s" in screen_text(app)
+        assert not app.model.freshness("lru1").stale  # 4 s: live enough
+        mars = RobotInfo(name="lru1", online=True, since=T0, heard=T0, delay_s=600.0)
+        app.post_message(FleetChanged(mars))
+        await pilot.pause()
+        fresh = app.model.freshness("lru1")
+        assert fresh.stale and fresh.why == "delayed" and fresh.age_s == 600.0
+        app.mission_screen.freshness_tick()
+        await pilot.pause()
+        assert "10m00s ago: ▶ lru1" in screen_text(app), screen_text(app)
+        assert "⇄10m00s" in screen_text(app)
+
+
+def test_the_server_hearing_a_robot_counts_as_heard():
+    b = mars_mid_execution()
+    from console_state import fleet
+
+    from console.state.model import ConsoleModel
+
+    m = ConsoleModel(clock=lambda: T0 + timedelta(seconds=SILENT_AFTER_S + 5))
+    m.load(b.snapshot(), b.library, fleet(MARS_FLEET))
+    for t in mars_telemetry():
+        m.set_telemetry(t)
+        m.heard[t.robot] = T0
+    assert m.freshness("lru1").why == "silent"  # the console heard nothing for 15 s
+    m.set_robot(RobotInfo(name="lru1", online=True, since=T0, heard=T0 + timedelta(seconds=14)))
+    assert not m.freshness("lru1").stale  # the server did, a second ago
+
+
+def test_pending_sync_and_delay_80x24(snap_compare):
+    b, _ = _with_pending_sync()
+
+    async def run(pilot):
+        app = pilot.app
+        now = T0 + timedelta(seconds=40)  # the command was queued at T0
+        app.clock = lambda: now
+        await inject(app, pilot, b, telemetry=mars_telemetry())
+        app.post_message(
+            FleetChanged(RobotInfo(name="lru2", online=True, since=T0, heard=now, delay_s=2.0))
+        )
+        await pilot.pause()
+        app.mission_screen.schedule.select("lru2-5")
+        app.mission_screen.freshness_tick()
+        await pilot.pause()
+        text = screen_text(app)
+        assert "⇡1 40s  ⇄2s" in text and "⇡ back to lander" in text, text
+        assert "s Sync" not in text  # it is being synchronized: nothing to sync there
+
+    assert snap_compare(make_app(), terminal_size=(80, 24), run_before=run)
+
+
+async def test_the_fleet_screen_lists_each_robots_commands_and_delay():
+    from console.screens.fleet import FleetScreen
+
+    b, cid = _with_pending_sync()
+    app = make_app()
+    now = T0 + timedelta(seconds=40)
+    app.clock = lambda: now
+    async with app.run_test(size=(120, 40)) as pilot:
+        await inject(app, pilot, b, telemetry=mars_telemetry())
+        far = RobotInfo(name="lru2", online=True, since=T0, heard=now, delay_s=20.0)
+        app.post_message(FleetChanged(far))
+        await pilot.press("f4")
+        await pilot.pause()
+        assert isinstance(app.screen, FleetScreen)
+        app.screen.query_one("DataTable").move_cursor(row=app.screen.shown.index("lru2"))
+        await pilot.pause()
+        text = screen_text(app)
+        assert "⇡1 40s ⇄20s" in text, text
+        assert (
+            f"link: one-way delay 20s · heard 0s ago · waiting for its answer: "
+            f"sync #{cid} queued 40s" in text
+        ), text
+
+
+def test_the_event_log_says_what_became_of_a_command():
+    from console_state import fleet
+
+    from console.state.eventlog import EventLog
+    from console.state.model import ConsoleModel
+
+    b = mars_mid_execution()
+    b.engine.clock = lambda: T0
+    m = ConsoleModel(clock=lambda: T0)
+    m.load(b.snapshot(), b.library, fleet(MARS_FLEET))
+    queued = b.engine.submit(Sync(robot="lru2", through="lru2-6")).batch()
+    m.apply(queued)
+    log = EventLog()
+    [entry] = log.add_batch(queued, m, T0)
+    assert "command 1 (sync lru2-5, lru2-6) queued for lru2" in entry.text, entry.text
