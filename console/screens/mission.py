@@ -527,8 +527,13 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
 
         def ok(r: Any) -> None:
             notes = "; ".join(r.notes)
+            commands = r.value.get("commands", {}) if isinstance(r.value, dict) else {}
+            # the robot's answer comes later (its skills then change): say what waits for it
+            queued = ", ".join(f"{rb} (command {c})" for rb, c in commands.items())
+            done = f"queued for {queued}" if queued else "ok"
             self.say(
-                f"{op} {who}: ok" + (f" — {notes}" if notes else ""), "warning" if notes else "ok"
+                f"{op} {who}: {done}" + (f" — {notes}" if notes else ""),
+                "warning" if notes else "ok",
             )
             for n in r.notes:
                 self.app.notify(n, title=f"{op}: partly applied", severity="warning")

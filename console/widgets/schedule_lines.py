@@ -248,7 +248,7 @@ def _link_words(h: Head) -> list[tuple[str, Style]]:
 
 def _spread(parts: list[tuple[str, Style]], width: int, base: Style) -> list[Segment]:
     """Parts two spaces apart, in order of importance: the last ones cut to
-    the room left (5 cells at least) or left out until the rest fits."""
+    the room left (8 cells at least: a word and its value) or left out until the rest fits."""
 
     def total(ps: list[tuple[str, Style]]) -> int:
         return sum(cell_len(p) for p, _ in ps) + 2 * (len(ps) - 1)
@@ -256,7 +256,7 @@ def _spread(parts: list[tuple[str, Style]], width: int, base: Style) -> list[Seg
     shown = list(parts)
     while len(shown) > 1 and total(shown) > width:
         room = width - total(shown[:-1]) - 2
-        if room >= 5:
+        if room >= 8:
             shown[-1] = (fit(shown[-1][0], room), shown[-1][1])
             break
         shown.pop()

@@ -97,6 +97,12 @@ async def test_add_edit_sync_run_success(live):
         await pilot.press("r")
         await wait_until(
             pilot,
+            lambda: "run lru1: queued for lru1 (command " in app.mission_screen.message,
+            SLOW,
+            "the run's command",
+        )
+        await wait_until(
+            pilot,
             lambda: all(status(app, f"lru1-{i}") == Status.SUCCESS for i in (1, 2, 3)),
             SLOW,
             "all succeeded",
