@@ -167,28 +167,28 @@ class ScheduleView(ScrollView, can_focus=True):
 
     def refresh_uplinking(self, robot: str) -> None:
         """A second passed: the header's and the rows' command ages."""
-        i = self._col_index.get(robot)
-        if i is None:
-            return
-        col = self.columns[i]
-        x, w = col.x - int(self.scroll_x), col.width + 1
-        self.refresh(Region(x, 0, w, HEADER_H - 1))
-        sync_h = self.sync_h
-        lines = [n for n, key in enumerate(col.sync_keys) if key[3]]
-        lines += [sync_h + 1 + k for k, key in enumerate(col.idle_keys) if key[2]]
-        self._refresh_content_lines(x, w, lines)
+        col = self.column_of(robot)
+        if col is not None:
+            lines = [n for n, key in enumerate(col.sync_keys) if key[3]]
+            lines += [self.sync_h + 1 + k for k, key in enumerate(col.idle_keys) if key[2]]
+            self._refresh_header_and(col, lines)
 
     def refresh_telemetry(self, robot: str) -> None:
         """New telemetry: only the header and the progress lines show it."""
+        col = self.column_of(robot)
+        if col is not None:
+            lines = [line for line, (_, kind) in enumerate(col.sync) if kind == "progress"]
+            self._refresh_header_and(col, lines)
+
+    def column_of(self, robot: str) -> Column | None:
         i = self._col_index.get(robot)
-        if i is None:
-            return
-        col = self.columns[i]
+        return self.columns[i] if i is not None else None
+
+    def _refresh_header_and(self, col: Column, lines: list[int]) -> None:
+        """Repaint a column's header and these content lines of it."""
         x, w = col.x - int(self.scroll_x), col.width + 1
         self.refresh(Region(x, 0, w, HEADER_H - 1))
-        self._refresh_content_lines(
-            x, w, [line for line, (_, kind) in enumerate(col.sync) if kind == "progress"]
-        )
+        self._refresh_content_lines(x, w, lines)
 
     def _visible_lines(self) -> range:
         sy = int(self.scroll_y)

@@ -133,17 +133,22 @@ def plan_unsync(rules: Rules, op: Unsync) -> list[str]:
         )
     if op.from_id is not None:
         _, s = of_robot(rules, op.robot, op.from_id)
-        if s.status != Status.IDLE_SYNCHRONIZED:
-            raise Refusal(
-                "not_queued",
-                f"{s.display()} on {op.robot} is {s.status.value}; only queued "
-                "(idle_synchronized) skills can be unsynchronized",
-                robot=op.robot,
-                skill=s.id,
-            )
-        queued = queued[[q.id for q in queued].index(s.id) :]
+        queued = queued_from(op.robot, s, queued)
     rules.pending[op.robot] = "an unsync"
     return [s.id for s in queued]
+
+
+def queued_from(robot: str, s: SkillInstance, queued: list[SkillInstance]) -> list[SkillInstance]:
+    """The robot's queued skills from `s` on (an unsync's `from`): `s` must be queued."""
+    if s.status != Status.IDLE_SYNCHRONIZED:
+        raise Refusal(
+            "not_queued",
+            f"{s.display()} on {robot} is {s.status.value}; only queued "
+            "(idle_synchronized) skills can be unsynchronized",
+            robot=robot,
+            skill=s.id,
+        )
+    return queued[[q.id for q in queued].index(s.id) :]
 
 
 def plan_control(rules: Rules, op: Control) -> list[str]:

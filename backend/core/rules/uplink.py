@@ -58,7 +58,13 @@ from backend.core.ops import (
 from backend.core.plan.gate import check_sync
 from backend.core.rules import barriers
 from backend.core.rules.base import Change, Refusal, Rule, Rules, unchanged
-from backend.core.rules.execution import back_in_plan, check_retriable, of_robot, why_not
+from backend.core.rules.execution import (
+    back_in_plan,
+    check_retriable,
+    of_robot,
+    queued_from,
+    why_not,
+)
 
 Alert = dict[str, Any]
 
@@ -173,15 +179,7 @@ def unsync(rules: Rules, op: Unsync) -> Change:
         _, s = of_robot(rules, op.robot, op.from_id)
         if s.id in locked:
             raise Refusal("locked", f"{s.display()}: {locked[s.id]}", robot=op.robot, skill=s.id)
-        if s.status != Status.IDLE_SYNCHRONIZED:
-            raise Refusal(
-                "not_queued",
-                f"{s.display()} on {op.robot} is {s.status.value}; only queued "
-                "(idle_synchronized) skills can be unsynchronized",
-                robot=op.robot,
-                skill=s.id,
-            )
-        queued = queued[[q.id for q in queued].index(s.id) :]
+        queued = queued_from(op.robot, s, queued)
     if not queued:
         raise Refusal(
             "nothing_to_unsync",
