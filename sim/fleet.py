@@ -396,7 +396,9 @@ class SimFleet:
 
     def status(self, *, with_truth: bool = False) -> mf.SimStatus:
         """The ground view (what robots reported); the truth as well if asked for."""
-        st = ground_status(self.world, speed=self.speed, link_delay=self.link_delay)
+        st = ground_status(
+            self.world, speed=self.speed, link_delay=self.link_delay, window=self.comms_window
+        )
         if with_truth:
             st.truth = truth(self.world, exchanges=self.exchanges, exchange_log=self.exchange_log)
         return st

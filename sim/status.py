@@ -14,13 +14,16 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from backend.protocol import mapfeed as mf
+from sim.comms import CommsWindow
 from sim.world import World
 
 RECENT_EVENTS = 15
 RECENT_EXCHANGES = 10
 
 
-def ground_status(world: World, *, speed: float, link_delay: float) -> mf.SimStatus:
+def ground_status(
+    world: World, *, speed: float, link_delay: float, window: CommsWindow | None = None
+) -> mf.SimStatus:
     w = world
     robots = {}
     for r in w.robots.values():
@@ -36,6 +39,13 @@ def ground_status(world: World, *, speed: float, link_delay: float) -> mf.SimSta
         seed=w.seed,
         speed=speed,
         link_delay_s=link_delay,
+        comms_window=(
+            mf.CommsWindowSpec(
+                open_s=window.open_s, period_s=window.period_s, offset_s=window.offset_s
+            )
+            if window is not None
+            else None
+        ),
         sim_time=round(w.now(), 1),
         score=w.ground_score,
         delivered=[mf.Delivery(**d) for d in deliveries],

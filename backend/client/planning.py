@@ -55,9 +55,29 @@ def robot_now(t: Telemetry) -> RobotNow:
     )
 
 
-def link_of(status: SimStatus | None) -> LinkModel:
-    """The simulator's one-way delay (wall seconds), as a link model."""
-    return LinkModel(one_way_s=status.link_delay_s if status is not None else 0.0)
+WINDOWS_AHEAD = 48  # contact windows a forecast looks ahead
+
+
+def link_of(status: SimStatus | None, now: float = 0.0) -> LinkModel:
+    """The simulator's link as the forecast's model, in wall seconds (the
+    forecast's clock): its one-way delay and, when it has comms windows, the
+    next `WINDOWS_AHEAD` of them from `now` (the status's sim time taken as now)."""
+    if status is None:
+        return LinkModel()
+    speed = status.speed if status.speed > 0 else 1.0
+    w = status.comms_window
+    windows: tuple[tuple[float, float], ...] = ()
+    if w is not None:
+        phase = (status.sim_time - w.offset_s) % w.period_s
+        first = status.sim_time - phase  # the current period's start, sim time
+        windows = tuple(
+            (
+                now + (first + k * w.period_s - status.sim_time) / speed,
+                now + (first + k * w.period_s + w.open_s - status.sim_time) / speed,
+            )
+            for k in range(WINDOWS_AHEAD)
+        )
+    return LinkModel(one_way_s=status.link_delay_s / speed, windows=windows)
 
 
 def plan_inputs(
@@ -71,7 +91,7 @@ def plan_inputs(
         now=now,
         robots={r: robot_now(t) for r, t in telemetry.items()},
         site=site if site is not None and site.mirror.ready else None,
-        link=link_of(status),
+        link=link_of(status, now),
         speed=status.speed if status is not None and status.speed > 0 else 1.0,
     )
 

@@ -238,6 +238,15 @@ class SimTruth(_Wire):
     events: list[str] = Field(default_factory=list, description="the referee's latest log lines")
 
 
+class CommsWindowSpec(_Wire):
+    """The ground link's contact: `open_s` at the start of every `period_s`,
+    from `offset_s` on (sim seconds since the simulator started)."""
+
+    open_s: float = Field(gt=0)
+    period_s: float = Field(gt=0)
+    offset_s: float = 0.0
+
+
 class SimStatus(_Wire):
     """The ground view (what robots reported), plus the truth when asked for it."""
 
@@ -246,6 +255,9 @@ class SimStatus(_Wire):
     seed: int
     speed: float = Field(description="sim seconds per wall second")
     link_delay_s: float = Field(0.0, description="one-way ground link delay, sim seconds")
+    comms_window: CommsWindowSpec | None = Field(
+        None, description="when the ground can reach the robots (None: always)"
+    )
     sim_time: float = Field(description="sim seconds since the simulator started")
     score: float = Field(description="the delivered stones' scores, as reported")
     delivered: list[Delivery] = Field(default_factory=list, description="as reported")

@@ -118,7 +118,9 @@ class PlanView:
     # -- what the screens ask ------------------------------------------------------------------
     @property
     def link_delay_s(self) -> float:
-        return self.status.link_delay_s if self.status is not None else 0.0
+        """The one-way delay in wall seconds (the timeline's clock; the sim's is sim time)."""
+        st = self.status
+        return st.link_delay_s / (st.speed if st.speed > 0 else 1.0) if st is not None else 0.0
 
     def mark(self, skill_id: str) -> Finding | None:
         return self.marks.get(skill_id)

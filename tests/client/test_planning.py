@@ -14,6 +14,7 @@ from backend.protocol.mapfeed import (
     T_FREE,
     T_ROCK,
     T_UNKNOWN,
+    CommsWindowSpec,
     LanderItem,
     MapDelta,
     MapMeta,
@@ -126,4 +127,15 @@ def test_telemetry_and_sim_status_become_plan_inputs():
         30.0,
     )
     status = SimStatus(world="w", seed=1, speed=4.0, link_delay_s=12.0, sim_time=0, score=0)
-    assert link_of(status).one_way_s == 12.0 and link_of(None).one_way_s == 0.0
+    # the sim's delay is sim time; the forecast's clock is the wall's
+    assert link_of(status).one_way_s == 3.0 and link_of(None).one_way_s == 0.0
+    assert link_of(status).windows == ()  # always in contact
+
+
+def test_the_sims_comms_windows_become_wall_times_from_now():
+    window = CommsWindowSpec(open_s=1200, period_s=7200)  # 20 min every 2 h, sim time
+    status = SimStatus(world="w", seed=1, speed=60.0, sim_time=1800, score=0, comms_window=window)
+    link = link_of(status, now=1000.0)  # 30 min in: the first window closed 10 min ago
+    assert link.windows[:2] == ((970.0, 990.0), (1090.0, 1110.0))  # wall s at 60x
+    assert link.reaches(1000.0) == 1090.0  # a command now waits for the next contact
+    assert link.reaches(1095.0) == 1095.0  # inside it: at once

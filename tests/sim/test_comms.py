@@ -73,3 +73,17 @@ def test_the_sim_link_follows_sim_time_and_the_window():
     assert link.in_range()
     fleet.open = False
     assert not link.in_range()
+
+
+def test_the_status_tells_the_ground_the_window_for_its_forecasts():
+    from sim.status import ground_status
+    from sim.world import World
+    from sim.worldfile import load_world
+    from tests.sim.conftest import WORLD
+
+    world = World(load_world(WORLD), seed=1)
+    st = ground_status(world, speed=60.0, link_delay=1200.0, window=parse_window("20m/2h@1h"))
+    assert (st.link_delay_s, st.speed) == (1200.0, 60.0)
+    w = st.comms_window
+    assert w is not None and (w.open_s, w.period_s, w.offset_s) == (1200, 7200, 3600)
+    assert ground_status(world, speed=1.0, link_delay=0.0).comms_window is None
