@@ -7,9 +7,10 @@ The mission server is a subprocess (`python -m backend.cli server`) on
 loopback, every figure against a baseline measured in the same run:
 
 1. Delay overhead. The tutorial's robots (docs/examples/trivial_robots.py,
-   a subprocess) with a one-way delay D of 0 and 2 s (`--delay`); an
-   operator client syncs one new skill at a time and a second client (its
-   own Zenoh session, in this process) sees the command acked in its mirror.
+   one subprocess each) on one server: lru1 with a one-way delay D of 0,
+   lru2 with 2 s (`--delay`); an operator client syncs one new skill at a
+   time, to each robot in turn, and a second client (its own Zenoh session,
+   in this process) sees the command acked in its mirror.
    Overhead = sync sent -> ack applied on the second client, minus 2*D, the
    median (target <= 5 ms); and the operator's call at D = 2 s against
    D = 0 (median return time, target <= 1.2x: it never waits for the robot).
@@ -81,7 +82,7 @@ TARGETS = {"overhead_ms": 5.0, "return_ratio": 1.2, "fleet_ratio": 4.0, "cpu": 0
 
 
 class Robots:
-    def __init__(self, endpoint: str, delay: float, log: Path):
+    def __init__(self, endpoint: str, delay: float, robot: str, log: Path):
         self._out = open(log, "w")  # noqa: SIM115
         self.p = subprocess.Popen(
             [
@@ -91,7 +92,7 @@ class Robots:
                 endpoint,
                 "--delay",
                 str(delay),
-                "lru1:lru_science",
+                robot,
             ],
             cwd=ROOT,
             stdout=self._out,
@@ -104,10 +105,24 @@ class Robots:
         self._out.close()
 
 
-async def delay_overhead(tmp: Path, delay: float, n: int) -> dict[str, Any]:
-    server = Server(tmp, f"delay-{delay:g}", TUTORIAL)
+async def sleep_lateness(delay: float, n: int) -> float:
+    """How late an asyncio sleep of `delay` wakes here (median): the SDK injects
+    a robot's delay with such sleeps, one per direction."""
+    late = []
+    for _ in range(n):
+        t = time.perf_counter()
+        await asyncio.sleep(delay)
+        late.append(time.perf_counter() - t - delay)
+    return statistics.median(late)
+
+
+async def delay_overhead(tmp: Path, delay: float, n: int) -> tuple[dict, dict]:
+    """One server; lru1 at D = 0 and lru2 at D = `delay`, synced in turn, so
+    both are measured against the same server process at the same time."""
+    server = Server(tmp, "delay", TUTORIAL)
     server.wait_ready(60)
-    robots = Robots(server.endpoint, delay, tmp / f"robots-{delay:g}.log")
+    near = Robots(server.endpoint, 0.0, "lru1:lru_science", tmp / "robots-near.log")
+    far = Robots(server.endpoint, delay, "lru2:lru_manipulator", tmp / "robots-far.log")
     operator = MissionClient(server.endpoint, client_id="bench-operator")
     observer = MissionClient(server.endpoint, client_id="bench-observer")
     acked: dict[int, float] = {}
@@ -119,34 +134,49 @@ async def delay_overhead(tmp: Path, delay: float, n: int) -> dict[str, Any]:
                 if e.ev == "command_changed" and e.changes.get("state") == "acked":
                     acked[e.id] = t
 
+    def online(m: Mission) -> bool:
+        return all(
+            observer.robots.get(r) is not None and observer.robots[r].online
+            for r in ("lru1", "lru2")
+        )
+
     try:
         await operator.connect()
         await observer.connect()
         observer.add_listener(on_event)
-        await observer.wait_for(
-            lambda m: observer.robots.get("lru1") is not None and observer.robots["lru1"].online, 60
-        )
-        returns, overheads = [], []
-        for i in range(n + 2):  # two warm-ups
-            sid = (await operator.submit(AddSkill(robot="lru1", skill="recharge"))).value["id"]
-            t0 = time.perf_counter()
-            reply = await operator.submit(Sync(robot="lru1", through=sid))
-            t_ret = time.perf_counter()
-            cid = reply.value["command"]
-            await observer.wait_for(lambda m, c=cid: c in acked, 10 + 4 * delay)
-            if i >= 2:
-                returns.append(t_ret - t0)
-                overheads.append(acked[cid] - t0 - 2 * delay)
-        return {
-            "n": n,
-            "return_median": statistics.median(returns),
-            "overhead_median": statistics.median(overheads),
-            "overhead_p90": pct(overheads, 0.9),
+        await observer.wait_for(online, 60)
+        runs: dict[str, dict[str, list[float]]] = {
+            r: {"returns": [], "overheads": []} for r in ("lru1", "lru2")
         }
+        for i in range(n + 2):  # two warm-ups
+            for robot, d in (("lru1", 0.0), ("lru2", delay)):
+                add = AddSkill(robot=robot, skill="recharge")
+                sid = (await operator.submit(add)).value["id"]
+                t0 = time.perf_counter()
+                reply = await operator.submit(Sync(robot=robot, through=sid))
+                t_ret = time.perf_counter()
+                cid = reply.value["command"]
+                await observer.wait_for(lambda m, c=cid: c in acked, 10 + 4 * d)
+                if i >= 2:
+                    runs[robot]["returns"].append(t_ret - t0)
+                    runs[robot]["overheads"].append(acked[cid] - t0 - 2 * d)
+        late = await sleep_lateness(delay, 5)
+
+        def summary(r: dict[str, list[float]]) -> dict[str, Any]:
+            return {
+                "n": n,
+                "return_median": statistics.median(r["returns"]),
+                "overhead_median": statistics.median(r["overheads"]),
+                "overhead_p90": pct(r["overheads"], 0.9),
+                "sleep_late": late,
+            }
+
+        return summary(runs["lru1"]), summary(runs["lru2"])
     finally:
         await operator.close()
         await observer.close()
-        robots.stop()
+        near.stop()
+        far.stop()
         server.stop()
 
 
@@ -414,12 +444,13 @@ def table(d0: dict, d2: dict, fleet: dict, delay: float) -> str:
         f"{fleet['reports']} reports in {fleet['seconds']:g} s, {fleet['complete']} reached all "
         f"{fleet['consoles']} consoles; medians {fleet['median'] * ms:.2f} ms (report) and "
         f"{fleet['raw_median'] * ms:.2f} ms (raw put).\n\n"
-        "With D > 0 the robot's delay is injected by the SDK (`agent.link.delay_s`): two "
-        "asyncio sleeps per round trip (the command, then the answer), each waking up to about "
-        "1 ms late (the event loop's timer resolution on this machine), counted in the overhead. "
-        "The operator's call does not wait for the robot at any D (it returns once the command "
-        "is journaled); its return time differs by a fraction of a millisecond between the two "
-        "runs (two server processes).\n"
+        "Both delays are measured against one server in the same run: lru1 at D = 0 and lru2 "
+        f"at D = {delay:g} s, synced in turn. With D > 0 the robot's delay is injected by the "
+        "SDK (`agent.link.delay_s`) with one asyncio sleep per direction; such a sleep of D "
+        f"wakes {d2['sleep_late'] * ms:.2f} ms late here (median, measured in this run), two of "
+        "them per round trip are counted in the overhead: the link's own overhead at D is the "
+        f"figure minus {2 * d2['sleep_late'] * ms:.2f} ms. The operator's call does not wait for "
+        "the robot at any D: it returns once the command is journaled.\n"
     )
     return out
 
@@ -442,8 +473,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="bench-link-") as d:
         tmp = Path(d)
-        d0 = asyncio.run(delay_overhead(tmp, 0.0, args.n))
-        d2 = asyncio.run(delay_overhead(tmp, args.delay, args.n))
+        d0, d2 = asyncio.run(delay_overhead(tmp, args.delay, args.n))
         fleet = asyncio.run(fleet_load(tmp, args.robots, args.hz, args.consoles, args.seconds))
     body = table(d0, d2, fleet, args.delay)
     given = " ".join(sys.argv[1:] if argv is None else argv)
