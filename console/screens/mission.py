@@ -35,6 +35,7 @@ from console.messages import HelpRequested, OperationRequested
 from console.screens.dialogs import ConfirmScreen, SkillPicker
 from console.screens.mission_files import MissionFiles
 from console.screens.mission_plan import PlanActions
+from console.state import link
 from console.state.actions import BY_NAME
 from console.state.capability import also_offered_by
 from console.state.context import FooterKey, context_keys, fit_footer
@@ -227,6 +228,12 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
     @on(ScheduleView.CursorMoved)
     async def _cursor_moved(self, event: ScheduleView.CursorMoved) -> None:
         self.refresh_availability()
+        c = self.model.uplinking(event.skill_id) if event.skill_id else None
+        if c is not None:  # its row may have no room for the command: the status line has
+            self.say(
+                f"{event.skill_id}: {link.command_text(c, self.model.clock())}, waiting "
+                f"for {c.robot}'s answer (ctl cancel {c.id} withdraws it)"
+            )
         if self.editor_visible:
             await self.editor.show_skill(event.skill_id)
 

@@ -126,6 +126,7 @@ def test_pending_sync_and_delay_80x24(snap_compare):
         await pilot.pause()
         text = screen_text(app)
         assert "⇡1 40s  ⇄2s" in text and "⇡ back to lander" in text, text
+        assert "lru2-5: sync #" in text and "queued 40s, waiting for lru2's answer" in text
         assert "s Sync" not in text  # it is being synchronized: nothing to sync there
 
     assert snap_compare(make_app(), terminal_size=(80, 24), run_before=run)
