@@ -230,10 +230,7 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
         self.refresh_availability()
         c = self.model.uplinking(event.skill_id) if event.skill_id else None
         if c is not None:  # its row may have no room for the command: the status line has
-            self.say(
-                f"{event.skill_id}: {link.command_text(c, self.model.clock())}, waiting "
-                f"for {c.robot}'s answer (ctl cancel {c.id} withdraws it)"
-            )
+            self.say(link.waiting_text(event.skill_id, c, self.model.clock()))
         if self.editor_visible:
             await self.editor.show_skill(event.skill_id)
 

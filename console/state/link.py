@@ -39,6 +39,14 @@ def command_text(c: UplinkCommand, now: datetime) -> str:
     return text
 
 
+def waiting_text(sid: str, c: UplinkCommand, now: datetime) -> str:
+    """The status line on an uplinking skill: its command and how to withdraw it."""
+    return (
+        f"{sid}: {command_text(c, now)}, waiting for {c.robot}'s answer "
+        f"(ctl cancel {c.id} withdraws it)"
+    )
+
+
 def pending_text(cmds: list[UplinkCommand], now: datetime) -> str:
     """A column header's word on a robot's pending commands: '⇡2 1m10s'
     (how many, the oldest one's age); '' when none."""
