@@ -167,6 +167,23 @@ class SkillInstance(Strict):
         label = self.label if len(self.label) <= 60 else self.label[:60] + "…"
         return f"{self.id} ({label})" if label else f"{self.id} ({self.skill})"
 
+    def retry_id(self) -> str:
+        """The id of its next attempt: lru1-4 -> lru1-4.2, lru1-4.2 -> lru1-4.3."""
+        return f"{self.id.split('.')[0]}.{self.attempt + 1}"
+
+    def next_attempt(self, status: Status = Status.IDLE) -> SkillInstance:
+        """Its next attempt: the same skill, parameters, bindings and policies."""
+        return SkillInstance(
+            id=self.retry_id(),
+            skill=self.skill,
+            label=self.label,
+            params=self.params,
+            bindings=self.bindings,
+            status=status,
+            attempt=self.attempt + 1,
+            policies=self.policies,
+        )
+
 
 class RobotSpec(Strict):
     type: Name

@@ -262,32 +262,28 @@ def _unbarrier(q: Selected) -> str | None:
     return None
 
 
-def _retry(q: Selected) -> str | None:
+def _failed_once(q: Selected) -> str | None:
+    """A failed skill is selected and has no next attempt yet."""
     if q.found is None:
         return "select a failed skill"
-    r, i, s = q.found
+    s = q.found[2]
     if s.status != Status.FAILURE:
         return f"{s.id} is {STATUS_WORDS[s.status]}: only a failed skill can be retried"
-    new_id = f"{s.id.split('.')[0]}.{s.attempt + 1}"
-    if q.facts.owner(new_id) is not None:
-        return f"{s.id} was already retried as {new_id}"
+    if q.facts.owner(s.retry_id()) is not None:
+        return f"{s.id} was already retried as {s.retry_id()}"
+    return None
+
+
+def _retry(q: Selected) -> str | None:
+    why = _failed_once(q)
+    if why is not None or q.found is None:
+        return why
+    r, i, s = q.found
     if any(x.status in FINISHED for x in q.facts.task(r)[i + 1 :]):
         return f"{r} has executed other skills since {s.id} failed; add a new skill instead"
     act = q.facts.robot_state(r)[0]
     if act is not None:
         return f"{r} is executing {act.id}: stop it first"
-    return None
-
-
-def _retry_edit(q: Selected) -> str | None:
-    if q.found is None:
-        return "select a failed skill"
-    _, _, s = q.found
-    if s.status != Status.FAILURE:
-        return f"{s.id} is {STATUS_WORDS[s.status]}: only a failed skill can be retried"
-    new_id = f"{s.id.split('.')[0]}.{s.attempt + 1}"
-    if q.facts.owner(new_id) is not None:
-        return f"{s.id} was already retried as {new_id}"
     return None
 
 
@@ -377,7 +373,7 @@ RULES: dict[str, Rule] = {
     "barrier": _barrier,
     "unbarrier": _unbarrier,
     "retry": _retry,
-    "retry_edit": _retry_edit,
+    "retry_edit": _failed_once,
     "duplicate": _duplicate,
     **{verb: _control(verb) for verb in CONTROLS},
     **{f"{verb}_all": _control_all(verb) for verb in CONTROLS},

@@ -19,6 +19,7 @@ from backend.core.ops import (
     SetSkill,
 )
 from backend.core.rules.base import Change, Refusal, Rule, Rules, unchanged
+from backend.core.rules.execution import check_failed_once
 
 
 def add(rules: Rules, op: AddSkill) -> Change:
@@ -54,36 +55,15 @@ def retry_edit(rules: Rules, op: RetryEdit) -> Change:
     """The failed skill's next attempt, idle, first in its robot's plan: the
     operator edits it, then synchronizes it (the failed one stays in the log)."""
     robot, _, s = rules.skill(op.id)
-    if s.status != Status.FAILURE:
-        raise Refusal(
-            "cannot_retry",
-            f"{s.display()} on {robot} is {s.status.value}; only a failed skill can be retried",
-            robot=robot,
-            skill=s.id,
-        )
-    new_id = f"{s.id.split('.')[0]}.{s.attempt + 1}"
-    if rules.mission.find(new_id) is not None:
-        raise Refusal(
-            "cannot_retry",
-            f"{s.display()} was already retried as {new_id}",
-            robot=robot,
-            skill=s.id,
-        )
+    check_failed_once(rules, robot, s)
+    new_id = s.retry_id()
     task = rules.task(robot)
     start = rules.first_idle(task)
     rules.outside_locked(robot, task, start)
     # bound parameters take their markers' values now (a marker may have moved or gone)
     bindings = {k: v for k, v in s.bindings.items() if v in rules.mission.markers}
     params = rules.check_params(robot, s.skill, s.params, bindings, skill_id=new_id)
-    skill = SkillInstance(
-        id=new_id,
-        skill=s.skill,
-        label=s.label,
-        params=params,
-        bindings=bindings,
-        attempt=s.attempt + 1,
-        policies=s.policies,
-    )
+    skill = s.next_attempt().model_copy(update={"params": params, "bindings": bindings})
     events: list[ev.Event] = [ev.SkillAdded(robot=robot, index=start, skill=skill)]
     return Change(events, [], {"id": new_id}, DeleteSkills(ids=[new_id]))
 

@@ -228,23 +228,14 @@ def _control_refusal(
 def plan_retry(rules: Rules, op: Retry) -> SkillInstance:
     """The new attempt of a failed skill, to send to its robot."""
     robot, i, s = rules.skill(op.id)
-    new_id = f"{s.id.split('.')[0]}.{s.attempt + 1}"
-    check_retriable(rules, robot, i, s, new_id)
+    check_retriable(rules, robot, i, s)
     claim(rules, robot)
     rules.pending[robot] = "a retry"
-    return SkillInstance(
-        id=new_id,
-        skill=s.skill,
-        label=s.label,
-        params=s.params,
-        bindings=s.bindings,
-        status=Status.IDLE_SYNCHRONIZED,
-        attempt=s.attempt + 1,
-        policies=s.policies,
-    )
+    return s.next_attempt(Status.IDLE_SYNCHRONIZED)
 
 
-def check_retriable(rules: Rules, robot: str, i: int, s: SkillInstance, new_id: str) -> None:
+def check_failed_once(rules: Rules, robot: str, s: SkillInstance) -> None:
+    """`s` failed and has no next attempt yet (a retry, or an edit and retry)."""
     if s.status != Status.FAILURE:
         raise Refusal(
             "cannot_retry",
@@ -252,13 +243,18 @@ def check_retriable(rules: Rules, robot: str, i: int, s: SkillInstance, new_id: 
             robot=robot,
             skill=s.id,
         )
-    if rules.mission.find(new_id) is not None:
+    if rules.mission.find(s.retry_id()) is not None:
         raise Refusal(
             "cannot_retry",
-            f"{s.display()} was already retried as {new_id}",
+            f"{s.display()} was already retried as {s.retry_id()}",
             robot=robot,
             skill=s.id,
         )
+
+
+def check_retriable(rules: Rules, robot: str, i: int, s: SkillInstance) -> None:
+    """A retry sent to the robot: `s` failed, was not retried, and nothing ran after it."""
+    check_failed_once(rules, robot, s)
     task = rules.task(robot)
     if any(later.status in FINISHED for later in task[i + 1 :]):
         raise Refusal(

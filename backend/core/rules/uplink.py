@@ -260,22 +260,12 @@ def retry(rules: Rules, op: Retry) -> Change:
     why = rules.locked.get(s.id)
     if why is not None:
         raise Refusal("cannot_retry", f"{s.display()}: {why}", robot=robot, skill=s.id)
-    new_id = f"{s.id.split('.')[0]}.{s.attempt + 1}"
-    check_retriable(rules, robot, i, s, new_id)
-    new = SkillInstance(
-        id=new_id,
-        skill=s.skill,
-        label=s.label,
-        params=s.params,
-        bindings=s.bindings,
-        status=Status.IDLE_SYNCHRONIZED,
-        attempt=s.attempt + 1,
-        policies=s.policies,
-    )
+    check_retriable(rules, robot, i, s)
+    new = s.next_attempt(Status.IDLE_SYNCHRONIZED)
     c = _Maker(rules, op.expire_s).make(
-        robot, "retry", Enqueue(skills=[new], front=True), [s.id, new_id]
+        robot, "retry", Enqueue(skills=[new], front=True), [s.id, new.id]
     )
-    return Change([ev.CommandQueued(command=c)], [], {**_queued_value(c), "id": new_id}, None)
+    return Change([ev.CommandQueued(command=c)], [], {**_queued_value(c), "id": new.id}, None)
 
 
 # -- withdrawing ----------------------------------------------------------------
