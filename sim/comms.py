@@ -11,23 +11,23 @@ reports wait in the robots' outboxes, the map feed waits aboard.
 from __future__ import annotations
 
 import argparse
-import re
 from dataclasses import dataclass
 
-_DURATION = re.compile(r"^\s*([0-9]+(?:\.[0-9]+)?)\s*(ms|s|m|min|h)?\s*$")
-_UNIT_S = {"ms": 0.001, "s": 1.0, "m": 60.0, "min": 60.0, "h": 3600.0}
+from backend.core.durations import duration_s
+
+SIM_UNITS = ("ms", "s", "m", "min", "h")
 
 DURATION_EXAMPLES = "500ms, 2s, 90s, 20m, 1.5h; a bare number is seconds"
 
 
 def parse_duration(text: str) -> float:
     """'500ms', '90s', '20m', '1.5h', '2' (seconds) -> seconds (argparse `type`)."""
-    m = _DURATION.match(text)
-    if not m:
+    seconds = duration_s(text, SIM_UNITS)
+    if seconds is None:
         raise argparse.ArgumentTypeError(
             f"not a duration: {text!r} (examples: {DURATION_EXAMPLES})"
         )
-    return float(m.group(1)) * _UNIT_S[m.group(2) or "s"]
+    return seconds
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,7 @@ from datetime import date, datetime
 from typing import Any
 
 from backend.cli.ctl.errors import UsageError
+from backend.core.durations import duration_s
 from backend.core.params import (
     ANGLE_FIELDS,
     POSE_FIELDS,
@@ -26,8 +27,6 @@ from backend.core.params import (
 )
 
 _NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_\-]*$")  # model.NAME_PATTERN (kept light to import)
-_DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(ms|s|m|min|h|d)?\s*$")
-_UNIT_S = {"ms": 0.001, "s": 1.0, "m": 60.0, "min": 60.0, "h": 3600.0, "d": 86400.0}
 
 
 def parse_duration(text: str) -> float:
@@ -37,12 +36,12 @@ def parse_duration(text: str) -> float:
 
     if text.strip().lower() in ("never", "none", "off"):
         return 0.0
-    m = _DURATION.match(text)
-    if not m:
+    seconds = duration_s(text)
+    if seconds is None:
         raise argparse.ArgumentTypeError(
             f"not a duration: {text!r} (examples: 30m, 2h, 90s, 500ms, never)"
         )
-    return float(m.group(1)) * _UNIT_S[m.group(2) or "s"]
+    return seconds
 
 
 @dataclass(frozen=True)
