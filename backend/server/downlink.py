@@ -22,11 +22,16 @@ from backend.server.refusals import JournalFailed
 
 
 class Host(Protocol):
+    """What the downlink needs from the server."""
+
     engine: Engine | None
 
     def submit(
         self, op: Any, *, client: str = "", request_id: str | None = None, actor: str = ""
-    ) -> Applied: ...
+    ) -> Applied:
+        """Apply an operation: journaled, then published (JournalFailed if
+        the journal cannot take it)."""
+        ...
 
     def alert(
         self,

@@ -42,7 +42,7 @@ from backend.protocol.messages import (
     first_error,
 )
 from backend.protocol.wire import LIMIT_EXCEEDED, is_limit, parse
-from backend.server.downlink import DownlinkApplier, raise_alerts
+from backend.server.downlink import DownlinkApplier, Host, raise_alerts
 from backend.server.refusals import Handler, JournalFailed
 from backend.server.uplink import UplinkSender
 from backend.transport import Refusal as ReplyErr
@@ -64,27 +64,9 @@ def _major(version: str) -> str:
     return version.split(".", 1)[0]
 
 
-class LinkHost(Protocol):
-    """What the robot link needs from the server."""
-
-    engine: Engine | None
-
-    def submit(
-        self, op: Any, *, client: str = "", request_id: str | None = None, actor: str = ""
-    ) -> Applied:
-        """Apply an operation: journaled, then published (JournalFailed if
-        the journal cannot take it)."""
-        ...
-
-    def alert(
-        self,
-        message: str,
-        *,
-        level: str = "warning",
-        robot: str | None = None,
-        skill: str | None = None,
-        kind: str = "",
-    ) -> None: ...
+class LinkHost(Host, Protocol):
+    """What the robot link needs from the server: what its downlinks need,
+    and publishing a robot's fleet entry."""
 
     def publish_fleet(self, info: RobotInfo) -> None: ...
 

@@ -34,10 +34,11 @@ def _print_json(obj: Any) -> None:
     print(json.dumps(obj, ensure_ascii=False, default=str), flush=True)
 
 
-async def _wait_telemetry(client: Any) -> None:
+async def wait_telemetry(client: Any) -> None:
+    """Wait briefly for one telemetry sample of every online robot."""
     done = asyncio.Event()
 
-    def check(_event: object = None) -> None:
+    def check(_event: object = None) -> None:  # any client event may complete it
         online = [n for n, r in client.robots.items() if r.online]
         if all(n in client.telemetry for n in online):
             done.set()
@@ -47,7 +48,7 @@ async def _wait_telemetry(client: Any) -> None:
     try:
         await asyncio.wait_for(done.wait(), TELEMETRY_WAIT)
     except TimeoutError:
-        pass  # a robot that publishes nothing: planned without its telemetry
+        pass  # a robot that publishes nothing: shown and planned without its telemetry
     finally:
         client.remove_listener(check)
 
@@ -56,7 +57,7 @@ async def gather(client: Any, timeout: float) -> PlanInputs:
     # imported here: the map's mirror is numpy, which other ctl commands never load
     from backend.client.planning import fetch_site, plan_inputs
 
-    await _wait_telemetry(client)
+    await wait_telemetry(client)
     site, status = await fetch_site(client.session, min(timeout, 3.0))
     return plan_inputs(time.time(), dict(client.telemetry), site, status)
 

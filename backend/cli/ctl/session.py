@@ -38,8 +38,6 @@ from backend.core.credentials import AccountsError
 from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK, EXIT_REFUSED, EXIT_UNREACHABLE
 from backend.transport.login import login_from_args
 
-TELEMETRY_WAIT = 1.0  # `robots`: how long to wait for one sample per online robot
-
 _ENDPOINT_RE = re.compile(r"^[a-z][a-z0-9\-]*/\S+$")
 
 
@@ -302,20 +300,7 @@ async def _pending(client: Any, args: argparse.Namespace) -> int:
 
 
 async def _robots(client: Any, args: argparse.Namespace) -> int:
-    """Wait briefly for one telemetry sample of every online robot."""
-    done = asyncio.Event()
-
-    def check(_event: object = None) -> None:  # any client event may complete it
-        online = [n for n, r in client.robots.items() if r.online]
-        if all(n in client.telemetry for n in online):
-            done.set()
-
-    client.add_listener(check)
-    check()
-    try:
-        await asyncio.wait_for(done.wait(), TELEMETRY_WAIT)
-    except TimeoutError:
-        pass  # a robot that publishes nothing: shown without telemetry
+    await plan.wait_telemetry(client)
     if args.json:
         _print_json(robots_json(client))
     else:
