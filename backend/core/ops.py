@@ -69,19 +69,25 @@ class EditSkill(Strict):
     policies: Policies | None = None
 
 
+# a command's expiry, on every operation that sends one to a robot
+ExpireS = Annotated[
+    float | None,
+    Field(
+        ge=0,
+        le=10 * 365 * 86400,
+        description="seconds until the command expires: the robot never applies it later "
+        "(omitted: the server's default; 0: never)",
+    ),
+]
+
+
 class Sync(Strict):
     op: Literal["sync"] = "sync"
     robot: Name
     through: SkillId | None = Field(
         None, description="last skill to synchronize; all idle if omitted"
     )
-    expire_s: float | None = Field(
-        None,
-        ge=0,
-        le=10 * 365 * 86400,
-        description="seconds until the command expires: the robot never applies it later "
-        "(omitted: the server's default; 0: never)",
-    )
+    expire_s: ExpireS = None
 
 
 class Unsync(Strict):
@@ -90,37 +96,19 @@ class Unsync(Strict):
     from_id: SkillId | None = Field(
         None, description="first queued skill to take back; all if omitted"
     )
-    expire_s: float | None = Field(
-        None,
-        ge=0,
-        le=10 * 365 * 86400,
-        description="seconds until the command expires: the robot never applies it later "
-        "(omitted: the server's default; 0: never)",
-    )
+    expire_s: ExpireS = None
 
 
 class Control(Strict):
     op: Literal["run", "pause", "stop", "reset"]
     robot: Name | None = Field(None, description="one robot, or every robot if omitted")
-    expire_s: float | None = Field(
-        None,
-        ge=0,
-        le=10 * 365 * 86400,
-        description="seconds until the command expires: the robot never applies it later "
-        "(omitted: the server's default; 0: never)",
-    )
+    expire_s: ExpireS = None
 
 
 class Retry(Strict):
     op: Literal["retry"] = "retry"
     id: SkillId
-    expire_s: float | None = Field(
-        None,
-        ge=0,
-        le=10 * 365 * 86400,
-        description="seconds until the command expires: the robot never applies it later "
-        "(omitted: the server's default; 0: never)",
-    )
+    expire_s: ExpireS = None
 
 
 class Cancel(Strict):
