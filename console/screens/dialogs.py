@@ -273,8 +273,9 @@ class PathPrompt(ModalScreen[str | None]):
         self.dismiss(None)
 
 
-class SkillPicker(ModalScreen[str | None]):
-    """Pick one of the robot's skills: type to filter (fuzzy), enter to add."""
+class ListChoice(ModalScreen[str | None]):
+    """A list to choose from: ↑↓ move, enter (`choose_highlighted`) or a
+    click chooses (the option's id), escape cancels (None)."""
 
     BINDINGS = [
         Binding("escape", "cancel", "Cancel"),
@@ -283,6 +284,27 @@ class SkillPicker(ModalScreen[str | None]):
     ]
 
     CSS_PATH = TCSS
+
+    def choose_highlighted(self) -> None:
+        ol = self.query_one(OptionList)
+        if ol.highlighted is not None and ol.option_count:
+            self.dismiss(ol.get_option_at_index(ol.highlighted).id)
+
+    def on_option_list_option_selected(self, event: OptionList.OptionSelected) -> None:
+        self.dismiss(event.option.id)
+
+    def action_move(self, step: int) -> None:
+        ol = self.query_one(OptionList)
+        if ol.option_count:
+            cur = ol.highlighted if ol.highlighted is not None else -step
+            ol.highlighted = min(max(cur + step, 0), ol.option_count - 1)
+
+    def action_cancel(self) -> None:
+        self.dismiss(None)
+
+
+class SkillPicker(ListChoice):
+    """Pick one of the robot's skills: type to filter (fuzzy), enter to add."""
 
     def __init__(
         self,
@@ -355,36 +377,12 @@ class SkillPicker(ModalScreen[str | None]):
 
     @on(Input.Submitted, "#filter")
     def _submit(self) -> None:
-        ol = self.query_one(OptionList)
-        if ol.highlighted is not None and ol.option_count:
-            self.dismiss(ol.get_option_at_index(ol.highlighted).id)
-
-    @on(OptionList.OptionSelected)
-    def _selected(self, event: OptionList.OptionSelected) -> None:
-        self.dismiss(event.option.id)
-
-    def action_move(self, step: int) -> None:
-        ol = self.query_one(OptionList)
-        if not ol.option_count:
-            return
-        cur = ol.highlighted if ol.highlighted is not None else -step
-        ol.highlighted = min(max(cur + step, 0), ol.option_count - 1)
-
-    def action_cancel(self) -> None:
-        self.dismiss(None)
+        self.choose_highlighted()
 
 
-class SkillSearch(ModalScreen[str | None]):
+class SkillSearch(ListChoice):
     """`/`: type what you remember of a skill (id, label, skill, robot,
     status, a parameter); enter jumps to the highlighted one."""
-
-    BINDINGS = [
-        Binding("escape", "cancel", "Cancel"),
-        Binding("down", "move(1)", "Next", show=False),
-        Binding("up", "move(-1)", "Previous", show=False),
-    ]
-
-    CSS_PATH = TCSS
 
     def __init__(self, find: Callable[[str], list[tuple[str, str]]], query: str = "") -> None:
         super().__init__()
@@ -434,19 +432,7 @@ class SkillSearch(ModalScreen[str | None]):
         query = self.query_one("#query", Input).value
         if query != self.filled_for:  # typed faster than the list followed
             self._fill(query)
-        ol = self.query_one(OptionList)
-        if ol.highlighted is not None and ol.option_count:
-            self.dismiss(ol.get_option_at_index(ol.highlighted).id)
-
-    @on(OptionList.OptionSelected)
-    def _selected(self, event: OptionList.OptionSelected) -> None:
-        self.dismiss(event.option.id)
-
-    def action_move(self, step: int) -> None:
-        ol = self.query_one(OptionList)
-        if ol.option_count:
-            cur = ol.highlighted if ol.highlighted is not None else -step
-            ol.highlighted = min(max(cur + step, 0), ol.option_count - 1)
+        self.choose_highlighted()
 
     def on_key(self, event: events.Key) -> None:
         """Keys typed before the query field has the focus are the query's."""
@@ -459,9 +445,6 @@ class SkillSearch(ModalScreen[str | None]):
         elif event.is_printable and event.character:
             event.stop()
             field.insert_text_at_cursor(event.character)
-
-    def action_cancel(self) -> None:
-        self.dismiss(None)
 
 
 class ChoiceScreen(ModalScreen[str | None]):
