@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
+from dataclasses import asdict
 from typing import Any
 
 from backend.protocol import mapfeed as mf
@@ -39,13 +40,7 @@ def ground_status(
         seed=w.seed,
         speed=speed,
         link_delay_s=link_delay,
-        comms_window=(
-            mf.CommsWindowSpec(
-                open_s=window.open_s, period_s=window.period_s, offset_s=window.offset_s
-            )
-            if window is not None
-            else None
-        ),
+        comms_window=mf.CommsWindowSpec(**asdict(window)) if window is not None else None,
         sim_time=round(w.now(), 1),
         score=w.ground_score,
         delivered=[mf.Delivery(**d) for d in deliveries],

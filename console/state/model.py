@@ -92,7 +92,7 @@ class ConsoleModel:
     heard: dict[str, datetime] = field(default_factory=dict)
     clock: Callable[[], datetime] = field(default=lambda: datetime.now(UTC))
     # skill id -> the pending command locking it, for the revision it was built at
-    _uplinking: tuple[int, dict[str, UplinkCommand]] = (-1, {})
+    _uplinking: tuple[int, dict[str, UplinkCommand]] = field(default_factory=lambda: (-1, {}))
     # the plan's forecast and checks (console/state/plan.py), refreshed by the app
     plan: PlanView = field(default_factory=PlanView)
     # the simulator's score and clock from its map feed (None: no simulator)
