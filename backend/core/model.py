@@ -428,6 +428,16 @@ class Mission(Strict):
         lists = [self.uplink.get(robot, [])] if robot is not None else self.uplink.values()
         return [c for cmds in lists for c in cmds if c.pending]
 
+    def command_locks(self) -> dict[str, UplinkCommand]:
+        """Skill id -> the pending command that concerns it (a sync, an unsync
+        or a retry; the oldest): the skill is locked until it settles."""
+        out: dict[str, UplinkCommand] = {}
+        for c in self.pending_commands():
+            if c.op in ("sync", "unsync", "retry"):
+                for sid in c.skills:
+                    out.setdefault(sid, c)
+        return out
+
     def all_ids(self) -> set[str]:
         return {s.id for task in self.tasks.values() for s in task}
 

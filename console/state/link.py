@@ -65,13 +65,7 @@ def delay_text(delay_s: float | None) -> str:
 
 def uplinking(mission: Mission | None) -> dict[str, UplinkCommand]:
     """skill id -> the pending command that locks it (the oldest)."""
-    out: dict[str, UplinkCommand] = {}
-    if mission is None:
-        return out
-    for c in mission.pending_commands():
-        for sid in c.skills:
-            out.setdefault(sid, c)
-    return out
+    return mission.command_locks() if mission is not None else {}
 
 
 def risks(mission: Mission | None, now: datetime) -> list[str]:

@@ -271,21 +271,11 @@ def _skill_json(m: Any, s: Any, locks: dict[str, Any] | None = None) -> dict[str
     }
 
 
-def command_locks(m: Any) -> dict[str, Any]:
-    """Skill id -> the pending command it belongs to (uplinking, being unsynchronized)."""
-    out: dict[str, Any] = {}
-    for c in m.pending_commands():
-        if c.op in ("sync", "unsync", "retry"):
-            for sid in c.skills:
-                out.setdefault(sid, c)
-    return out
-
-
 def state_json(client: Any, only: list[str] | None = None) -> dict[str, Any]:
     m = client.mission
     now = datetime.now(UTC)
     names = list(m.robots) + [r for r in client.robots if r not in m.robots]
-    locks = command_locks(m)
+    locks = m.command_locks()
     return {
         "revision": m.revision,
         "name": m.name,
@@ -347,7 +337,7 @@ def _skill_line(s: Any, columns: str, lib: Any, dash: str, pending: Any = None) 
 def _task_lines(m: Any, task: list[Any], lib: Any, unicode: bool) -> list[str]:
     if not task:
         return ["  (no skills)"]
-    locks = command_locks(m)
+    locks = m.command_locks()
     now = datetime.now(UTC)
     dash = "—" if unicode else "-"
     ids = [s.id + (f" [{m.barrier_of(s.id)}]" if m.barrier_of(s.id) else "") for s in task]

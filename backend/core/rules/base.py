@@ -220,19 +220,15 @@ class Rules:
 
 def uplink_locks(m: Mission) -> dict[str, str]:
     """Skill id -> why it is locked, for the skills of pending commands."""
-    out: dict[str, str] = {}
-    for c in m.pending_commands():
-        if c.op == "sync":
-            why = f"it is being synchronized to {c.robot} (command {c.id}, {c.state.value})"
-        elif c.op == "retry":
-            why = f"it is being retried on {c.robot} (command {c.id}, {c.state.value})"
-        elif c.op == "unsync":
-            why = f"it is being unsynchronized from {c.robot} (command {c.id}, {c.state.value})"
-        else:
-            continue
-        for sid in c.skills:
-            out.setdefault(sid, why)
-    return out
+    doing = {
+        "sync": "being synchronized to",
+        "retry": "being retried on",
+        "unsync": "being unsynchronized from",
+    }
+    return {
+        sid: f"it is {doing[c.op]} {c.robot} (command {c.id}, {c.state.value})"
+        for sid, c in m.command_locks().items()
+    }
 
 
 def _bad_params(
