@@ -1,0 +1,1 @@
+"""The map region: the site drawn in half-blocks (view)."""

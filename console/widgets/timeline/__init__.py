@@ -1,0 +1,1 @@
+"""The timeline region: per-robot lanes of the plan's forecast (view)."""
