@@ -3,7 +3,7 @@
     .venv/bin/python bench/bench_map.py                  # print the Markdown section
     .venv/bin/python bench/bench_map.py --write docs/performance.md
 
-1. Redraw cost of the map widget (console/widgets/mapview.py) for one robot moving
+1. Redraw cost of the map widget (console/widgets/map/view.py) for one robot moving
    on a 400x400-cell site at 120x40 cells, headless: the robot's telemetry
    changes, the overlays are rebuilt and every visible row is asked for
    (cached rows come from the row cache), against a full redraw of the same
@@ -48,7 +48,7 @@ async def redraw() -> dict[str, float]:
     from backend.protocol.messages import Telemetry
     from console.state.model import ConsoleModel
     from console.themes.variables import VARIABLE_DEFAULTS
-    from console.widgets.mapview import MapView
+    from console.widgets.map.view import MapView
 
     model = ConsoleModel()
     t0 = datetime(2026, 1, 1, tzinfo=UTC)
@@ -210,7 +210,7 @@ def section(r: dict[str, float], f: dict[str, float]) -> str:
     ratio = r["full_ms"] / r["move_ms"] if r["move_ms"] else float("nan")
     return f"""## Map
 
-The map widget (`console/widgets/mapview.py`, half-blocks, row cache) and the map feed as a \
+The map widget (`console/widgets/map/view.py`, half-blocks, row cache) and the map feed as a \
 console receives it.
 
 Reproduce: `.venv/bin/python bench/bench_map.py --write docs/performance.md` \

@@ -97,9 +97,9 @@ class MissionApp(SplitEscape, FoldingNotifications, QuitQuestion, PlanModes, App
     CSS_PATH = [
         HERE / "app.tcss",
         HERE / "widgets" / "bars.tcss",
-        HERE / "widgets" / "schedule.tcss",
-        HERE / "widgets" / "param_editor.tcss",
-        HERE / "widgets" / "mapview.tcss",
+        HERE / "widgets" / "schedule" / "schedule.tcss",
+        HERE / "widgets" / "editor" / "editor.tcss",
+        HERE / "widgets" / "map" / "map.tcss",
     ]
 
     def __init__(

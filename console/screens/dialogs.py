@@ -24,7 +24,7 @@ from console.state.actions import ACTIONS, APP_KEYS, EDITOR_KEYS, NAV_KEYS
 from console.state.context import help_keys
 from console.state.files import complete, completions, full_path, path_note, save_risks, shown_path
 from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS
-from console.widgets.param_editor import settle_cursors
+from console.widgets.editor.editor import settle_cursors
 from console.widgets.select import SafeSelect
 
 # this module's look (CSS_PATH); absolute, so a subclass defined elsewhere finds it too

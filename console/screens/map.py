@@ -42,7 +42,7 @@ from console.state.markers import (
 from console.state.model import CONNECTED, ConsoleModel
 from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS, fmt_value
 from console.widgets.bars import InfoLine, StatusLine, TopBar, connection_text
-from console.widgets.mapview import (
+from console.widgets.map.view import (
     AREA_GLYPH,
     BOX_GLYPH,
     FOLLOW_GLYPH,

@@ -45,8 +45,8 @@ from console.state.files import RecentFiles
 from console.state.model import CONNECTED, ConsoleModel
 from console.state.site import site_text
 from console.widgets.bars import KeyBar, StatusLine, TopBar, connection_text
-from console.widgets.param_editor import ParamEditor
-from console.widgets.schedule import ScheduleView
+from console.widgets.editor.editor import ParamEditor
+from console.widgets.schedule.view import ScheduleView
 
 # this module's look (CSS_PATH); absolute, so a subclass defined elsewhere finds it too
 TCSS = Path(__file__).with_name("mission.tcss")

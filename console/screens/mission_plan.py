@@ -18,7 +18,7 @@ from console.state.search import search_skills
 if TYPE_CHECKING:
     from textual.app import App
 
-    from console.widgets.schedule import ScheduleView
+    from console.widgets.schedule.view import ScheduleView
 
 
 class PlanActions:

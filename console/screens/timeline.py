@@ -26,11 +26,11 @@ from console.state import timeline as tl
 from console.state.model import ConsoleModel
 from console.state.text import fmt_clock
 from console.widgets.bars import TitleBar
-from console.widgets.timeline import TimelineView
+from console.widgets.timeline.view import TimelineView
 
 TCSS = [
     Path(__file__).with_name("timeline.tcss"),
-    Path(__file__).parents[1] / "widgets" / "timeline.tcss",
+    Path(__file__).parents[1] / "widgets" / "timeline" / "timeline.tcss",
 ]
 TOPICS = ("plan", "fleet")
 

@@ -67,7 +67,7 @@ ANSI16_STATUS: dict[str, str] = {
 # ...and the map's ground the standard colours it keeps apart: explored ground
 # is brown out of comms range and grey in it (as the blends of the 256-colour
 # defaults look), unexplored and rock are black; their textures (dots, ~, ▴,
-# console/widgets/mapview.py GROUND16) tell the classes on the same background apart
+# console/widgets/map/view.py GROUND16) tell the classes on the same background apart
 ANSI16_MAP: dict[str, str] = {
     "map-outside": "#000000",
     "map-unknown": "#000000",

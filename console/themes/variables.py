@@ -31,7 +31,7 @@ STATUS_DEFAULTS: dict[str, str] = {
     "battery-low": "#ff8700",
 }
 
-# The map (console/widgets/mapview.py): ground classes are cell backgrounds, the rest
+# The map (console/widgets/map/view.py): ground classes are cell backgrounds, the rest
 # glyph colours; each also has a glyph or pattern, so colour is never alone.
 # Defaults for every theme; a theme file may set them too (not required).
 MAP_DEFAULTS: dict[str, str] = {

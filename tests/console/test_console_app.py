@@ -29,8 +29,8 @@ from backend.transport import free_port, loopback_endpoint
 from console.config import ConsoleConfig
 from console.messages import ConnectionChanged, FleetChanged
 from console.screens.dialogs import HelpScreen, SkillPicker, UnreachableScreen
-from console.widgets.param_editor import ParamEditor
-from console.widgets.schedule import ScheduleView
+from console.widgets.editor.editor import ParamEditor
+from console.widgets.schedule.view import ScheduleView
 
 WIDE = (150, 42)
 

@@ -29,7 +29,7 @@ from backend.protocol.messages import Telemetry
 from console.messages import MapChanged, TelemetryChanged
 from console.screens.map import NO_FEED, MapScreen
 from console.screens.mission import MissionScreen
-from console.widgets.mapview import ROBOT_ARROWS, UPPER_HALF, halfblock_row, heading_glyph
+from console.widgets.map.view import ROBOT_ARROWS, UPPER_HALF, halfblock_row, heading_glyph
 
 SIZE = (120, 40)
 
@@ -179,7 +179,7 @@ async def test_ground_classes_stay_apart_in_256_and_16_colours(colors):
     terminal makes): explored ground differs from unexplored, in comms range
     from out of it, and a texture differs from the ground it is drawn on."""
     from console.themes.loader import _to16
-    from console.widgets.mapview import T_FREE, T_ROCK, T_SLOW, T_UNKNOWN, MapView
+    from console.widgets.map.view import T_FREE, T_ROCK, T_SLOW, T_UNKNOWN, MapView
 
     app = make_app(colors=colors)
     async with app.run_test(size=SIZE) as pilot:
@@ -307,7 +307,7 @@ async def test_follower_without_a_sim_asks_again_and_on_the_first_delta(monkeypa
 
 @pytest.mark.parametrize("status", [Status.RUNNING])
 def test_robot_status_glyph_follows_the_active_skill(status):
-    from console.widgets.mapview import robot_status
+    from console.widgets.map.view import robot_status
 
     b = Builder(MARS)
     b.sync("lru1", "lru1-1")
@@ -399,7 +399,7 @@ async def test_zoom_and_pan_move_the_view():
 async def test_the_mouse_wheel_zooms_about_the_ground_under_the_mouse():
     from textual import events
 
-    from console.widgets.mapview import WHEEL_ZOOM
+    from console.widgets.map.view import WHEEL_ZOOM
 
     app = make_app()
     async with app.run_test(size=SIZE) as pilot:
@@ -427,7 +427,7 @@ async def test_the_mouse_wheel_zooms_about_the_ground_under_the_mouse():
 
 
 def test_segments_are_clipped_to_the_view():
-    from console.widgets.mapview import clip_segment
+    from console.widgets.map.view import clip_segment
 
     (a, b) = clip_segment((-100, 5), (200, 5), 120, 80)
     assert a == pytest.approx((-1.0, 5.0)) and b == pytest.approx((120.0, 5.0))

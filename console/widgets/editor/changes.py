@@ -12,7 +12,7 @@ from textual.widgets import Input
 from backend.core.model import Mission, Policies, SkillInstance
 from backend.core.params import ParamSpec, check_value, normalize_value
 from console.state.model import ConsoleModel
-from console.widgets.param_inputs import BINDABLE_KINDS, read_binding, read_param, read_policies
+from console.widgets.editor.inputs import BINDABLE_KINDS, read_binding, read_param, read_policies
 
 
 @dataclass

@@ -36,8 +36,8 @@ from backend.core.ops import EditSkill
 from console.state.markers import relabel
 from console.state.model import ConsoleModel
 from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS
-from console.widgets.param_changes import ReadsEdits
-from console.widgets.param_inputs import (
+from console.widgets.editor.changes import ReadsEdits
+from console.widgets.editor.inputs import (
     INPUTS,
     POLICY_HINTS,
     TYPED,
@@ -70,7 +70,7 @@ def settle_cursors(root: Any) -> None:
 
 class ParamEditor(ReadsEdits, VerticalScroll):
     """Edits one skill. Posts `ApplyRequested` with only what changed.
-    Its look: param_editor.tcss (loaded by the app)."""
+    Its look: editor.tcss (loaded by the app)."""
 
     BINDINGS = [
         # enter in a field applies (Input.Submitted); ctrl+s is the mission's save everywhere

@@ -459,7 +459,7 @@ def draw_robots(ov: Overlay, model: ConsoleModel, follow: str | None) -> None:
 
 class MapView(Widget, can_focus=True):
     """Draws the map of a `ConsoleModel` plus a map mirror; posts `CursorMoved`.
-    Its look: mapview.tcss (loaded by the app)."""
+    Its look: map.tcss (loaded by the app)."""
 
     class CursorMoved(Message):
         pass

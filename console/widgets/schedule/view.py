@@ -6,7 +6,7 @@ lines are rendered, there is no widget per row, and a change to one robot's
 list re-lays out only that robot's column and repaints only the visible lines
 that show something else (telemetry: the header and progress lines). Column
 headers stay on top while the rows scroll; columns scroll horizontally when
-they do not fit. How each line of a column is drawn: schedule_lines.py.
+they do not fit. How each line of a column is drawn: lines.py.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from backend.core.model import SkillInstance, Status
 from console.state import link
 from console.state.model import ConsoleModel
 from console.state.text import STATUS_CSS, param_summary
-from console.widgets.schedule_lines import (
+from console.widgets.schedule.lines import (
     HEADER_H,
     HEADER_LINES,
     MIN_W,
