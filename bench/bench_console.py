@@ -156,9 +156,7 @@ async def run_schedule() -> dict:
             rev += 1
             batch = ev.EventBatch(
                 revision=rev,
-                events=[
-                    ev.SkillChanged(id=sid, changes={"status": "paused" if k % 2 else "failure"})
-                ],
+                events=[ev.SkillStatusChanged(id=sid, status="paused" if k % 2 else "failure")],
             )
             await pilot.pause()
             t, c = time.perf_counter(), time.process_time()

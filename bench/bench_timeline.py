@@ -73,7 +73,7 @@ async def run() -> dict[str, float]:
                 rev += 1
                 sid = f"r{k % 4:02d}-{202 + k}"
                 batch = ev.EventBatch(
-                    revision=rev, events=[ev.SkillChanged(id=sid, changes={"status": "paused"})]
+                    revision=rev, events=[ev.SkillStatusChanged(id=sid, status="paused")]
                 )
                 # the app's handler called as the message loop would (for both screens),
                 # then the plan timer's tick without waiting for it

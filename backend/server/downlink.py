@@ -15,6 +15,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any, NamedTuple, Protocol
 
+from backend.core.alerts import AlertKind, Level
 from backend.core.ops import Answer, DownlinkRefused, Report
 from backend.core.rules.engine import Applied, Engine, Refusal
 from backend.protocol.messages import ErrorReply
@@ -37,10 +38,11 @@ class Host(Protocol):
         self,
         message: str,
         *,
-        level: str = "warning",
+        kind: AlertKind,
+        level: Level = "warning",
         robot: str | None = None,
         skill: str | None = None,
-        kind: str = "",
+        command: int | None = None,
     ) -> None: ...
 
 
@@ -53,14 +55,10 @@ class Progress(NamedTuple):
 
 
 def raise_alerts(host: Host, applied: Applied) -> None:
-    """The sentences a rule asked the operator to see (value "alerts")."""
-    for a in applied.value.pop("alerts", []) or []:
+    """The alerts a rule raised (`Applied.alerts`)."""
+    for a in applied.alerts:
         host.alert(
-            a["message"],
-            level=a.get("level", "warning"),
-            robot=a.get("robot"),
-            skill=a.get("skill"),
-            kind=a.get("kind", ""),
+            a.message, level=a.level, robot=a.robot, skill=a.skill, kind=a.kind, command=a.command
         )
 
 
@@ -102,7 +100,7 @@ class DownlinkApplier:
             f"{robot} sent its downlink message {upto + 1} but not {span}: later messages "
             "wait until it sends the missing ones (nothing is skipped)",
             robot=robot,
-            kind="robot_error",
+            kind=AlertKind.ROBOT_ERROR,
         )
 
     def _apply_one(self, robot: str, msg: Report | Answer) -> ErrorReply | None:
@@ -122,7 +120,7 @@ class DownlinkApplier:
                 level="error",
                 robot=robot,
                 skill=msg.id if isinstance(msg, Report) else None,
-                kind="report_refused",
+                kind=AlertKind.REPORT_REFUSED,
             )
             return ErrorReply(**r.to_dict())
         raise_alerts(host, applied)
@@ -132,6 +130,6 @@ class DownlinkApplier:
                 level="error",
                 robot=robot,
                 skill=msg.id,
-                kind="failure",
+                kind=AlertKind.FAILURE,
             )
         return None

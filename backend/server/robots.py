@@ -27,6 +27,7 @@ from typing import Any, Protocol
 from pydantic import ValidationError
 
 from backend.core import events as ev
+from backend.core.alerts import AlertKind
 from backend.core.model import CommandState, Mission
 from backend.core.ops import Control, Reconcile, Retry, Sync, Unsync, UplinkSettle
 from backend.core.rules.engine import Applied, Engine, Refusal
@@ -186,7 +187,7 @@ class RobotLink:
         for e in events:
             if isinstance(e, ev.CommandQueued):
                 self._kick(e.command.robot)
-            elif isinstance(e, ev.CommandChanged) and e.changes.get("cancel_requested"):
+            elif isinstance(e, ev.CommandChanged) and e.cancel_requested:
                 c = self._mission.command(e.id)
                 if c is not None:
                     self._kick(c.robot)
@@ -211,7 +212,7 @@ class RobotLink:
         if (robot, what) in self._said:
             return
         self._said.add((robot, what))
-        self._host.alert(message, level=level, robot=robot, kind="robot_error")
+        self._host.alert(message, level=level, robot=robot, kind=AlertKind.ROBOT_ERROR)
 
     # -- registration ----------------------------------------------------------------------
     def _parse(self, model: Any, payload: bytes, robot: str, what: str) -> Any:
@@ -255,7 +256,7 @@ class RobotLink:
                 f"{robot} registered, but its messages {progress.last_seq + 1} to {reg.last_seq} "
                 "have not arrived: its queue is compared with the mission once they have",
                 robot=robot,
-                kind="reconcile",
+                kind=AlertKind.RECONCILE,
             )
         info = self.robots[robot]
         self._set_robot(
@@ -384,7 +385,7 @@ class RobotLink:
         if info is None or alive or not info.online or info.session != session:
             return
         self._set_robot(info.model_copy(update={"online": False, "since": _now()}))
-        self._host.alert(f"robot {robot} went offline", robot=robot, kind="offline")
+        self._host.alert(f"robot {robot} went offline", robot=robot, kind=AlertKind.OFFLINE)
 
     # -- housekeeping ------------------------------------------------------------------
     async def _housekeeping(self) -> None:

@@ -17,12 +17,14 @@ import itertools
 import logging
 import sqlite3
 import uuid
+from collections import deque
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 from pydantic_core import PydanticSerializationError
 
+from backend.core.alerts import AlertKind, Level
 from backend.core.events import EventBatch
 from backend.core.library import Library
 from backend.core.model import Mission
@@ -30,6 +32,7 @@ from backend.core.rules.engine import Applied, Engine, Refusal
 from backend.files.missions import library_path, load_library, load_mission
 from backend.protocol.keys import PROTOCOL_VERSION, Keys
 from backend.protocol.messages import (
+    ALERTS_KEPT,
     AccountInfo,
     Alert,
     FleetEvent,
@@ -38,6 +41,7 @@ from backend.protocol.messages import (
     RobotInfo,
     StateRequest,
     StateSnapshot,
+    Telemetry,
     dumps,
 )
 from backend.protocol.wire import parse
@@ -53,12 +57,14 @@ from backend.server.journal import (
 )
 from backend.server.refusals import JournalFailed, guard
 from backend.server.robots import RobotLink
+from backend.server.telemetry import TelemetryWatch
 from backend.transport import (
     declare_publisher,
     declare_token,
     router_config,
     serve,
     serve_async,
+    subscribe,
 )
 from backend.transport.session import close_session, open_session
 
@@ -102,6 +108,9 @@ class MissionServer:
         self._events_pub = None
         self._fleet_pub = None
         self._alerts_pub = None
+        self._alert_ids = itertools.count(1)
+        self.telemetry_watch = TelemetryWatch(self)
+        self.alerts: deque[Alert] = deque(maxlen=ALERTS_KEPT)  # the latest, for snapshots
         # publications waiting for the next loop callback
         self._outbox: list[tuple[Any, bytes]] = []
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -191,6 +200,7 @@ class MissionServer:
             serve_async(s, Keys.op_as("*"), guard(self._handle_op), with_key=True),
             serve_async(s, Keys.account("*"), guard(self._handle_account), with_key=True),
             *self.robot_link.declare(s, guard),
+            subscribe(s, Keys.ALL_TELEMETRY, self._on_telemetry),
             # trivial, answered on the Zenoh thread: the raw-transport baseline of benchmarks
             serve(s, Keys.PING, lambda _payload: b"pong"),
         ]
@@ -335,12 +345,14 @@ class MissionServer:
                 failed = JournalFailed(self.db, e, op.op)
                 if not self._journal_failing:  # once, not at every retry of every robot
                     self._journal_failing = True
-                    self.alert(failed.message, level="error", kind="journal")
+                    self.alert(failed.message, level="error", kind=AlertKind.JOURNAL)
                 raise failed from None
             if self._journal_failing:
                 self._journal_failing = False
                 self.alert(
-                    f"the journal {self.db} can be written again", level="info", kind="journal"
+                    f"the journal {self.db} can be written again",
+                    level="info",
+                    kind=AlertKind.JOURNAL,
                 )
 
         self.engine.before_apply = journal
@@ -357,15 +369,37 @@ class MissionServer:
         self,
         message: str,
         *,
-        level: str = "warning",
+        kind: AlertKind,
+        level: Level = "warning",
         robot: str | None = None,
         skill: str | None = None,
-        kind: str = "",
+        command: int | None = None,
     ) -> None:
+        """Raise an alert: logged, numbered, kept for state snapshots, published."""
         log.warning("%s", message)
+        a = Alert(
+            id=next(self._alert_ids),
+            level=level,
+            kind=kind,
+            robot=robot,
+            skill=skill,
+            command=command,
+            message=message,
+            at=_now(),
+        )
+        self.alerts.append(a)
         if self._alerts_pub is not None:
-            a = Alert(level=level, kind=kind, robot=robot, skill=skill, message=message, at=_now())
             self._publish(self._alerts_pub, dumps(a))
+
+    def _on_telemetry(self, msg: Any) -> None:
+        """A robot's sample (a Zenoh thread): its alerts are raised on the loop."""
+        try:
+            t = parse(Telemetry, msg.payload)
+        except ValueError:
+            return  # not readable: consoles say so (an unreadable-message alert of their own)
+        loop = self._loop
+        if loop is not None and not loop.is_closed():
+            loop.call_soon_threadsafe(self.telemetry_watch.took, t)
 
     def publish_fleet(self, info: RobotInfo) -> None:
         """A robot's presence or manifest changed (the robot link's news)."""
@@ -383,6 +417,7 @@ class MissionServer:
             mission=self.mission,
             library=self.library,
             robots=self.robot_link.robots,
+            alerts=list(self.alerts),
         )
         return snap.model_dump_json().encode()
 

@@ -15,6 +15,7 @@ from datetime import UTC, datetime
 from typing import Any, NamedTuple
 
 from backend.core import events as ev
+from backend.core.alerts import RaisedAlert
 from backend.core.library import Library, ParamProblem, check_params
 from backend.core.limits import show_path
 from backend.core.model import ACTIVE, Mission, SkillInstance, Status, how_to_change
@@ -58,6 +59,7 @@ class Applied:
     notes: list[str] = field(default_factory=list)  # e.g. skills still using an old marker value
     value: dict[str, Any] = field(default_factory=dict)  # e.g. {"id": "lru1-7"}
     duplicate: bool = False  # a retried request, applied before
+    alerts: list[RaisedAlert] = field(default_factory=list)  # for the server to raise
 
     def batch(self, actor: str = "", op: str = "") -> ev.EventBatch:
         return ev.EventBatch(revision=self.revision, events=self.events, actor=actor, op=op)
@@ -73,6 +75,7 @@ class Change(NamedTuple):
     value: dict[str, Any]
     undo: Operation | None
     duplicate: bool = False  # a robot's report applied before: nothing to do
+    alerts: tuple[RaisedAlert, ...] = ()  # what a person must see (the server raises them)
 
 
 def unchanged() -> Change:

@@ -234,6 +234,7 @@ class Engine(Rules):
     def _apply(self, op: Operation, client: str) -> Applied:
         change = rule_for(op)(self, op)
         applied = self._commit(change.events, change.notes, change.value, change.duplicate)
+        applied.alerts = list(change.alerts)
         if change.undo is not None and isinstance(op, UNDOABLE) and applied.events:
             self._push_undo(client, change.undo, op.op, applied.revision)
             self._mine(client, applied.revision)

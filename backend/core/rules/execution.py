@@ -299,10 +299,9 @@ def sync_ack(rules: Rules, op: SyncAck) -> Change:
         )
     events: list[ev.Event] = []
     for s in task[start : start + len(op.ids)]:
-        changes: dict[str, Any] = {"status": Status.IDLE_SYNCHRONIZED.value}
-        if rules.sent[s.id] != s.params:
-            changes["params"] = rules.sent[s.id]  # what the robot holds
-        events.append(ev.SkillChanged(id=s.id, changes=changes))
+        events.append(ev.SkillStatusChanged(id=s.id, status=Status.IDLE_SYNCHRONIZED))
+        if rules.sent[s.id] != s.params:  # what the robot holds
+            events.append(ev.SkillEdited(id=s.id, params=rules.sent[s.id]))
     for sid in op.ids:
         rules.held.pop(sid, None)
         rules.sent.pop(sid, None)
@@ -320,24 +319,22 @@ def unsync_done(rules: Rules, op: UnsyncDone) -> Change:
         )
     # the removed skills are the end of the queue: turning them idle puts
     # them, in order, at the head of the unsynchronized section
-    events: list[ev.Event] = [
-        ev.SkillChanged(id=sid, changes=back_in_plan(rules, op.robot, sid)) for sid in op.ids
-    ]
+    events = [e for sid in op.ids for e in back_in_plan(rules, op.robot, sid)]
     return Change(events, [], {"unsynchronized": list(op.ids)}, None)
 
 
-def back_in_plan(rules: Rules, robot: str, sid: str) -> dict[str, Any]:
-    """The changes of a skill the robot gave back: idle again."""
+def back_in_plan(rules: Rules, robot: str, sid: str) -> list[ev.Event]:
+    """The events of a skill the robot gave back: idle again."""
     _, _, s = rules.skill(sid)
-    changes: dict[str, Any] = {"status": Status.IDLE.value, "status_info": ""}
+    events: list[ev.Event] = [ev.SkillStatusChanged(id=sid, status=Status.IDLE, info="")]
     if s.bindings:  # back in the plan: bound values follow their markers again
         try:
             params = rules.check_params(robot, s.skill, s.params, s.bindings, skill_id=sid)
             if params != s.params:
-                changes["params"] = params
+                events.append(ev.SkillEdited(id=sid, params=params))
         except Refusal:
             pass  # keeps its values; the operator sees the problem on the next edit
-    return changes
+    return events
 
 
 def retry_ack(rules: Rules, op: RetryAck) -> Change:
@@ -383,9 +380,9 @@ def report(rules: Rules, op: Report) -> Change:
             skill=s.id,
         )
     events: list[ev.Event] = [ev.ReportSeq(robot=robot, seq=op.seq)]
-    changes = _reported_changes(s, op)
-    if changes:
-        events.append(ev.SkillChanged(id=s.id, changes=changes))
+    change = _reported_change(s, op)
+    if change is not None:
+        events.append(change)
     return Change(events, [], {}, None)
 
 
@@ -430,24 +427,16 @@ def _check_turn(rules: Rules, robot: str, i: int, s: SkillInstance, new: Status)
         )
 
 
-def _reported_changes(s: SkillInstance, op: Report) -> dict[str, Any]:
-    """The skill's fields a report changes (JSON values)."""
+def _reported_change(s: SkillInstance, op: Report) -> ev.SkillStatusChanged | None:
+    """What a report changes of the skill (None: nothing)."""
     new = op.status
-    changes: dict[str, Any] = {}
-    if new != s.status:
-        changes["status"] = new.value
-    if op.info != s.status_info:
-        changes["status_info"] = op.info
-    if op.attempt is not None and op.attempt != s.attempt:
-        changes["attempt"] = op.attempt
-    at = op.at.isoformat() if op.at else None
-    if new == Status.RUNNING and s.started_at is None and at:
-        changes["started_at"] = at
-    if new in FINISHED and at:
-        changes["finished_at"] = at
-    if new == Status.IDLE_SYNCHRONIZED:
-        changes["started_at"] = None  # stopped: the next run starts it from the beginning
-    return changes
+    info = op.info if op.info != s.status_info else None
+    attempt = op.attempt if op.attempt is not None and op.attempt != s.attempt else None
+    stamps = (new == Status.RUNNING and s.started_at is None) or new in FINISHED
+    at = op.at if stamps else None
+    if new == s.status and info is None and attempt is None and at is None:
+        return None
+    return ev.SkillStatusChanged(id=s.id, status=new, info=info, attempt=attempt, at=at)
 
 
 RULES: dict[type[Any], Rule] = {

@@ -14,7 +14,7 @@ mission shows: the ids it really queued or removed, never the request.
 `Reconcile` makes the mission agree with a robot's own queue when it
 registers (both ways). Every sentence an operator must see (a refusal by the
 robot, a command given up, a robot that applied a command the ground had
-given up on) is returned in the change's value under "alerts".
+given up on) is returned as the change's alerts (`Change.alerts`).
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from datetime import timedelta
 from typing import Any
 
 from backend.core import events as ev
+from backend.core.alerts import AlertKind, Level, RaisedAlert
 from backend.core.model import (
     ACTIVE,
     FINISHED,
@@ -65,8 +66,6 @@ from backend.core.rules.execution import (
     queued_from,
     why_not,
 )
-
-Alert = dict[str, Any]
 
 # -- new commands -------------------------------------------------------------
 
@@ -284,9 +283,11 @@ def cancel(rules: Rules, op: Cancel) -> Change:
         )
     now = rules.clock()
     if c.state == CommandState.QUEUED and c.id not in rules.transmitting:
-        changes = {"state": "cancelled", "settled": now.isoformat(), "reason": "cancelled"}
+        change = ev.CommandChanged(
+            id=c.id, state=CommandState.CANCELLED, settled=now, reason="cancelled"
+        )
         value = {"command": c.id, "robot": c.robot, "state": "cancelled"}
-        return Change([ev.CommandChanged(id=c.id, changes=changes)], [], value, None)
+        return Change([change], [], value, None)
     if op.undo:
         raise Refusal(
             "cannot_undo",
@@ -301,7 +302,7 @@ def cancel(rules: Rules, op: Cancel) -> Change:
     )
     if c.cancel_requested:
         return Change([], [note], value, None)
-    events: list[ev.Event] = [ev.CommandChanged(id=c.id, changes={"cancel_requested": True})]
+    events: list[ev.Event] = [ev.CommandChanged(id=c.id, cancel_requested=True)]
     return Change(events, [note], value, None)
 
 
@@ -310,24 +311,22 @@ def uplink_sent(rules: Rules, op: UplinkSent) -> Change:
     for cid in op.ids:
         c = rules.mission.command(cid)
         if c is not None and c.state == CommandState.QUEUED:
-            changes = {"state": "sent", "sent": op.at.isoformat()}
-            events.append(ev.CommandChanged(id=cid, changes=changes))
+            events.append(ev.CommandChanged(id=cid, state=CommandState.SENT, sent=op.at))
     return Change(events, [], {}, None) if events else unchanged()
 
 
 def uplink_settle(rules: Rules, op: UplinkSettle) -> Change:
     """Commands that never left for the robot and never will."""
     events: list[ev.Event] = []
-    alerts: list[Alert] = []
+    alerts: list[RaisedAlert] = []
     for cid in op.ids:
         c = rules.mission.command(cid)
         if c is None or c.state != CommandState.QUEUED or cid in rules.transmitting:
             continue
-        changes = {"state": op.state.value, "settled": op.at.isoformat(), "reason": op.reason}
-        events.append(ev.CommandChanged(id=cid, changes=changes))
+        events.append(ev.CommandChanged(id=cid, state=op.state, settled=op.at, reason=op.reason))
         if op.state == CommandState.EXPIRED:
             alerts.append(_alert(c, f"{c.title()} to {c.robot} {op.reason}{_released(c)}"))
-    return Change(events, [], {"alerts": alerts}, None) if events else unchanged()
+    return Change(events, [], {}, None, alerts=tuple(alerts)) if events else unchanged()
 
 
 def _released(c: UplinkCommand) -> str:
@@ -338,8 +337,10 @@ def _released(c: UplinkCommand) -> str:
     return ""
 
 
-def _alert(c: UplinkCommand, message: str, level: str = "warning") -> Alert:
-    return {"message": message, "robot": c.robot, "level": level, "kind": "command"}
+def _alert(c: UplinkCommand, message: str, level: Level = "warning") -> RaisedAlert:
+    return RaisedAlert(
+        message=message, robot=c.robot, command=c.id, level=level, kind=AlertKind.COMMAND
+    )
 
 
 # -- the robot's answers ----------------------------------------------------------
@@ -362,13 +363,13 @@ class _Effects:
         self.robot = c.robot
         self.task = rules.task(c.robot)
         self.events: list[ev.Event] = []
-        self.alerts: list[Alert] = []
+        self.alerts: list[RaisedAlert] = []
         self.notes: list[str] = []
         self.done: list[str] = []
         self.late = c.state in (CommandState.CANCELLED, CommandState.EXPIRED)
         self.drop: list[str] = []  # skills the robot holds that it must not: asked back
 
-    def alert(self, message: str, level: str = "warning") -> None:
+    def alert(self, message: str, level: Level = "warning") -> None:
         self.alerts.append(_alert(self.c, message, level))
 
     def skill(self, sid: str) -> SkillInstance | None:
@@ -387,8 +388,8 @@ def answer(rules: Rules, op: Answer) -> Change:
     if c is None or c.answered is not None:
         what = "which is not in its uplink" if c is None else f"{c.title()}, answered already"
         msg = f"{op.robot} answered command seq {op.command}, {what}: the answer is ignored"
-        alert = {"message": msg, "robot": op.robot, "level": "error", "kind": "robot_error"}
-        return Change(events, [], {"alerts": [alert]}, None)
+        alert = _robot_alert(op.robot, msg, AlertKind.ROBOT_ERROR, "error")
+        return Change(events, [], {}, None, alerts=(alert,))
     fx = _Effects(rules, c, op)
     state = _STATE[op.outcome]
     if op.outcome == "applied":
@@ -402,25 +403,24 @@ def answer(rules: Rules, op: Answer) -> Change:
         fx.alert(
             f"{op.robot} {op.outcome} {c.title()}: {op.reason or 'no reason given'}{_released(c)}"
         )
-    at = (op.at or rules.clock()).isoformat()
-    changes: dict[str, Any] = {
-        "state": state.value,
-        "settled": at,
-        "answered": at,
-        "reason": op.reason,
-    }
-    if c.sent is None:
-        changes["sent"] = at
-    if fx.done:
-        changes["done"] = fx.done
-    if op.kept:
-        changes["kept"] = [k for k in op.kept if k in c.skills]
+    at = op.at or rules.clock()
     events += fx.events
-    events.append(ev.CommandChanged(id=c.id, changes=changes))
+    events.append(
+        ev.CommandChanged(
+            id=c.id,
+            state=state,
+            settled=at,
+            answered=at,
+            reason=op.reason,
+            sent=at if c.sent is None else None,
+            done=fx.done or None,
+            kept=[k for k in op.kept if k in c.skills] if op.kept else None,
+        )
+    )
     if fx.drop:
         events.append(_drop_command(rules, fx.robot, fx.drop, fx))
-    value = {"command": c.id, "state": state.value, "alerts": fx.alerts}
-    return Change(events, fx.notes, value, None)
+    value = {"command": c.id, "state": state.value}
+    return Change(events, fx.notes, value, None, alerts=tuple(fx.alerts))
 
 
 def _drop_command(rules: Rules, robot: str, ids: list[str], fx: _Effects) -> ev.Event:
@@ -462,10 +462,9 @@ def _enqueued(fx: _Effects) -> None:
     for sid in held:
         s = fx.skill(sid)
         assert s is not None
-        changes: dict[str, Any] = {"status": Status.IDLE_SYNCHRONIZED.value}
-        if sent[sid].params != s.params:
-            changes["params"] = sent[sid].params  # what the robot holds
-        fx.events.append(ev.SkillChanged(id=sid, changes=changes))
+        fx.events.append(ev.SkillStatusChanged(id=sid, status=Status.IDLE_SYNCHRONIZED))
+        if sent[sid].params != s.params:  # what the robot holds
+            fx.events.append(ev.SkillEdited(id=sid, params=sent[sid].params))
         status[sid] = Status.IDLE_SYNCHRONIZED
     fx.events += _arrangement(fx.robot, fx.task, status, queued_last=held)
     fx.done = held
@@ -531,9 +530,7 @@ def _dequeued(fx: _Effects) -> None:
     status: dict[str, Status] = {}
     ordered = [s.id for s in fx.task if s.id in removed]
     for sid in ordered:
-        changes = back_in_plan(fx.rules, fx.robot, sid)
-        changes["started_at"] = None
-        fx.events.append(ev.SkillChanged(id=sid, changes=changes))
+        fx.events += back_in_plan(fx.rules, fx.robot, sid)  # (idle: started_at cleared)
         status[sid] = Status.IDLE
     fx.events += _arrangement(fx.robot, fx.task, status, idle_first=ordered)
     fx.done = ordered
@@ -637,22 +634,20 @@ def reconcile(rules: Rules, op: Reconcile) -> Change:
     events: list[ev.Event] = []
     status: dict[str, Status] = {}
     for sid in lost:
-        changes = {
-            "status": Status.IDLE.value,
-            "status_info": f"returned to the plan: {robot} no longer had it",
-            "started_at": None,
-        }
-        events.append(ev.SkillChanged(id=sid, changes=changes))
+        info = f"returned to the plan: {robot} no longer had it"
+        events.append(ev.SkillStatusChanged(id=sid, status=Status.IDLE, info=info))
         status[sid] = Status.IDLE
     for e in held:
         if e.status != mine[e.id].status:
-            events.append(ev.SkillChanged(id=e.id, changes={"status": e.status.value}))
+            events.append(ev.SkillStatusChanged(id=e.id, status=e.status))
         status[e.id] = e.status
     events += _arrangement(robot, task, status, idle_first=lost, held_order=[e.id for e in held])
     if lost:
         alerts.append(
             _robot_alert(
-                robot, f"{robot} no longer had {', '.join(lost)}: returned to the plan", "reconcile"
+                robot,
+                f"{robot} no longer had {', '.join(lost)}: returned to the plan",
+                AlertKind.RECONCILE,
             )
         )
     if adopted:
@@ -661,7 +656,7 @@ def reconcile(rules: Rules, op: Reconcile) -> Change:
                 robot,
                 f"{robot} holds {', '.join(adopted)}, which the mission had as unsynchronized: "
                 "shown as synchronized again (unsync to take them back)",
-                "reconcile",
+                AlertKind.RECONCILE,
             )
         )
     value: dict[str, Any] = {"unsynchronized": lost, "adopted": adopted, "dropped": strays}
@@ -673,18 +668,21 @@ def reconcile(rules: Rules, op: Reconcile) -> Change:
                 robot,
                 f"{robot} holds {', '.join(strays)}, which this mission does not give it (or not "
                 f"as it has them): asked it to drop them (command {c.id})",
-                "reconcile",
+                AlertKind.RECONCILE,
             )
         )
-    value["alerts"] = alerts
-    return Change(events, [], value, None)
+    return Change(events, [], value, None, alerts=tuple(alerts))
 
 
-def _robot_alert(robot: str, message: str, kind: str, level: str = "warning") -> Alert:
-    return {"message": message, "robot": robot, "level": level, "kind": kind}
+def _robot_alert(
+    robot: str, message: str, kind: AlertKind, level: Level = "warning"
+) -> RaisedAlert:
+    return RaisedAlert(message=message, robot=robot, level=level, kind=kind)
 
 
-def _checked_queue(robot: str, queue: list[QueueEntry]) -> tuple[list[QueueEntry], list[Alert]]:
+def _checked_queue(
+    robot: str, queue: list[QueueEntry]
+) -> tuple[list[QueueEntry], list[RaisedAlert]]:
     """The robot's queue, active first; one that breaks that is read as all queued."""
     seen: set[str] = set()
     out = []
@@ -701,7 +699,7 @@ def _checked_queue(robot: str, queue: list[QueueEntry]) -> tuple[list[QueueEntry
         f"{robot} registered a queue that is not an active skill followed by queued ones "
         f"({', '.join(f'{e.id} {e.status.value}' for e in out)}): read as all queued"
     )
-    return fixed, [_robot_alert(robot, msg, "robot_error", "error")]
+    return fixed, [_robot_alert(robot, msg, AlertKind.ROBOT_ERROR, "error")]
 
 
 def _differs(e: QueueEntry, s: SkillInstance) -> bool:
