@@ -605,27 +605,9 @@ def reconcile(rules: Rules, op: Reconcile) -> Change:
     robot = op.robot
     task = rules.task(robot)
     mine = {s.id: s for s in task}
-    uplinking = {
-        sid
-        for c in rules.mission.pending_commands(robot)
-        if c.op in ("sync", "retry")
-        for sid in c.skills
-    }
     queue, alerts = _checked_queue(robot, op.queue)
+    held, adopted, strays = _sorted_queue(rules, robot, mine, queue)
     holds = {e.id for e in queue}
-    held: list[QueueEntry] = []
-    adopted: list[str] = []
-    strays: list[str] = []
-    for e in queue:
-        s = mine.get(e.id)
-        if s is None or s.status in FINISHED or _differs(e, s):
-            strays.append(e.id)
-        elif e.id in uplinking:
-            continue  # the answer to its sync settles it
-        else:
-            if s.status == Status.IDLE:
-                adopted.append(e.id)
-            held.append(e)
     lost = [
         s.id
         for s in task
@@ -642,36 +624,51 @@ def reconcile(rules: Rules, op: Reconcile) -> Change:
             events.append(ev.SkillStatusChanged(id=e.id, status=e.status))
         status[e.id] = e.status
     events += _arrangement(robot, task, status, idle_first=lost, held_order=[e.id for e in held])
+    said = []
     if lost:
-        alerts.append(
-            _robot_alert(
-                robot,
-                f"{robot} no longer had {', '.join(lost)}: returned to the plan",
-                AlertKind.RECONCILE,
-            )
-        )
+        said.append(f"{robot} no longer had {', '.join(lost)}: returned to the plan")
     if adopted:
-        alerts.append(
-            _robot_alert(
-                robot,
-                f"{robot} holds {', '.join(adopted)}, which the mission had as unsynchronized: "
-                "shown as synchronized again (unsync to take them back)",
-                AlertKind.RECONCILE,
-            )
+        said.append(
+            f"{robot} holds {', '.join(adopted)}, which the mission had as unsynchronized: "
+            "shown as synchronized again (unsync to take them back)"
         )
-    value: dict[str, Any] = {"unsynchronized": lost, "adopted": adopted, "dropped": strays}
     if strays:
         c = _Maker(rules, None).make(robot, "reconcile", Dequeue(ids=strays), strays)
         events.append(ev.CommandQueued(command=c))
-        alerts.append(
-            _robot_alert(
-                robot,
-                f"{robot} holds {', '.join(strays)}, which this mission does not give it (or not "
-                f"as it has them): asked it to drop them (command {c.id})",
-                AlertKind.RECONCILE,
-            )
+        said.append(
+            f"{robot} holds {', '.join(strays)}, which this mission does not give it (or not "
+            f"as it has them): asked it to drop them (command {c.id})"
         )
+    alerts += [_robot_alert(robot, text, AlertKind.RECONCILE) for text in said]
+    value: dict[str, Any] = {"unsynchronized": lost, "adopted": adopted, "dropped": strays}
     return Change(events, [], value, None, alerts=tuple(alerts))
+
+
+def _sorted_queue(
+    rules: Rules, robot: str, mine: dict[str, SkillInstance], queue: list[QueueEntry]
+) -> tuple[list[QueueEntry], list[str], list[str]]:
+    """The robot's queue as the mission sees it: (entries it holds as the
+    mission has them, the ids of those the mission had as idle: adopted, the
+    ids of those it must drop: strays). One being synchronized is left to
+    the answer of its sync."""
+    uplinking = {
+        sid
+        for c in rules.mission.pending_commands(robot)
+        if c.op in ("sync", "retry")
+        for sid in c.skills
+    }
+    held: list[QueueEntry] = []
+    adopted: list[str] = []
+    strays: list[str] = []
+    for e in queue:
+        s = mine.get(e.id)
+        if s is None or s.status in FINISHED or _differs(e, s):
+            strays.append(e.id)
+        elif e.id not in uplinking:
+            if s.status == Status.IDLE:
+                adopted.append(e.id)
+            held.append(e)
+    return held, adopted, strays
 
 
 def _robot_alert(
