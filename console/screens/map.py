@@ -246,13 +246,14 @@ class MapScreen(Screen):
             self.map_changed(self.model.map_mirror, c.map_update)
         if c.about(Topic.MISSION):  # marker events change no robot's column but the map
             self.model_changed()
-        if c.about(Topic.TELEMETRY):
-            for robot in c.robots or ():
-                self.telemetry_changed(robot)
+        for robot in c.robots or () if c.about(Topic.TELEMETRY) else ():
+            self.view.robot_moved(robot)
+            if self.view.follow == robot:
+                self.update_info()
         if c.about(Topic.FLEET):
-            self.fleet_changed()
+            self.view.overlays_changed()
         if c.about(Topic.CONNECTION):
-            self.connection_changed()
+            self.update_top()
 
     def map_changed(self, mirror: Any, update: Any) -> None:
         kind = getattr(update, "kind", "snapshot")
@@ -280,17 +281,6 @@ class MapScreen(Screen):
         self.view.overlays_changed()
         self.update_top()
         self.update_info()
-
-    def telemetry_changed(self, robot: str) -> None:
-        self.view.robot_moved(robot)
-        if self.view.follow == robot:
-            self.update_info()
-
-    def fleet_changed(self) -> None:
-        self.view.overlays_changed()
-
-    def connection_changed(self) -> None:
-        self.update_top()
 
     def sync_selection(self) -> None:
         sid = self.model.selection.skill  # the schedule's cursor
@@ -320,8 +310,7 @@ class MapScreen(Screen):
 
     @work(group="ops", exit_on_error=False)
     async def submit(self, op: Any, what: str, *, on_ok: Any = None, **kw: Any) -> None:
-        """Submit `op` and await its outcome here (said on this screen's
-        status line); `on_ok(reply)` says what it did instead of "✓ what"."""
+        """Submit `op`, await its outcome here; `on_ok(reply)` says what it did."""
         done = "" if on_ok is not None else None
         outcome = await self.ops.submit(op, what, say=self.say, done=done, **kw)
         if outcome.reply is not None and on_ok is not None:
