@@ -1,5 +1,6 @@
-"""mypy, strict, on the core and the protocol (pyproject's [tool.mypy] says
-what and how), so the test command checks the types too."""
+"""mypy, strict, on the core, the protocol, the client library and the
+console's model (pyproject's [tool.mypy] says what and how), so the test
+command checks the types too."""
 
 from __future__ import annotations
 
