@@ -36,7 +36,6 @@ KNOWN_LARGE_CLASSES: set[str] = set()
 KNOWN_LARGE_CONSOLE_CLASSES: set[str] = {
     "console/screens/map.py:MapScreen",
     "console/widgets/editor/editor.py:ParamEditor",
-    "console/widgets/schedule/view.py:ScheduleView",
 }
 
 # Console classes still mixing in a class of the project (issue 27). May only shrink.
