@@ -9,7 +9,7 @@ themselves (their refusals, unreadable messages, their connection).
 from __future__ import annotations
 
 from enum import StrEnum
-from typing import Literal
+from typing import Literal, Protocol
 
 from pydantic import Field
 
@@ -58,3 +58,18 @@ class RaisedAlert(Strict):
     skill: SkillId | None = None
     command: int | None = Field(None, description="the command it is about, if any")
     message: str
+
+
+class Raises(Protocol):
+    """What raises an alert (the server; its parts are handed it)."""
+
+    def alert(
+        self,
+        message: str,
+        *,
+        kind: AlertKind,
+        level: Level = "warning",
+        robot: str | None = None,
+        skill: str | None = None,
+        command: int | None = None,
+    ) -> None: ...

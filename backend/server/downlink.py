@@ -15,15 +15,15 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any, NamedTuple, Protocol
 
-from backend.core.alerts import AlertKind, Level
+from backend.core.alerts import AlertKind, Raises
 from backend.core.ops import Answer, DownlinkRefused, Report
 from backend.core.rules.engine import Applied, Engine, Refusal
 from backend.protocol.messages import ErrorReply
 from backend.server.refusals import JournalFailed
 
 
-class Host(Protocol):
-    """What the downlink needs from the server."""
+class Host(Raises, Protocol):
+    """What the downlink needs from the server: its engine, `submit`, `alert`."""
 
     engine: Engine | None
 
@@ -33,17 +33,6 @@ class Host(Protocol):
         """Apply an operation: journaled, then published (JournalFailed if
         the journal cannot take it)."""
         ...
-
-    def alert(
-        self,
-        message: str,
-        *,
-        kind: AlertKind,
-        level: Level = "warning",
-        robot: str | None = None,
-        skill: str | None = None,
-        command: int | None = None,
-    ) -> None: ...
 
 
 class Progress(NamedTuple):

@@ -6,27 +6,12 @@ snapshot."""
 
 from __future__ import annotations
 
-from typing import Protocol
-
-from backend.core.alerts import LOW_BATTERY, AlertKind, Level
+from backend.core.alerts import LOW_BATTERY, AlertKind, Raises
 from backend.protocol.messages import Telemetry
 
 
-class Alerter(Protocol):
-    def alert(
-        self,
-        message: str,
-        *,
-        kind: AlertKind,
-        level: Level = "warning",
-        robot: str | None = None,
-        skill: str | None = None,
-        command: int | None = None,
-    ) -> None: ...
-
-
 class TelemetryWatch:
-    def __init__(self, host: Alerter) -> None:
+    def __init__(self, host: Raises) -> None:
         self._host = host
         self._in_range: dict[str, bool] = {}  # robot -> in range at its last sample
         self._low: dict[str, bool] = {}  # robot -> battery below LOW_BATTERY at its last sample

@@ -452,7 +452,7 @@ class MissionScreen(Screen):
         self.run.sync()
 
     def action_unsync(self) -> None:
-        self.run.unsync()
+        self.run.sync(undo=True)
 
     def action_retry(self) -> None:
         self.run.retry()

@@ -14,30 +14,21 @@ class RunActions:
     def __init__(self, screen: Any) -> None:
         self.screen = screen  # MissionScreen: selection, say, submit, app
 
-    def sync(self) -> None:
+    def sync(self, undo: bool = False) -> None:
+        """Synchronize the selected robot through the selected skill (`undo`:
+        unsynchronize it from there)."""
         s = self.screen
         robot, sid = s.selection()
         if robot is None or sid is None:
             return
+        op = Unsync(robot=robot, from_id=sid) if undo else Sync(robot=robot, through=sid)
+        what = "unsync" if undo else "sync"
         s.submit(
-            Sync(robot=robot, through=sid),
-            f"sync {robot} through {sid}",
+            op,
+            f"{what} {robot} {'from' if undo else 'through'} {sid}",
             robot=robot,
             skill=sid,
-            then=lambda r: s.say(_queued(robot, "sync", r.value), "ok"),
-        )
-
-    def unsync(self) -> None:
-        s = self.screen
-        robot, sid = s.selection()
-        if robot is None or sid is None:
-            return
-        s.submit(
-            Unsync(robot=robot, from_id=sid),
-            f"unsync {robot} from {sid}",
-            robot=robot,
-            skill=sid,
-            then=lambda r: s.say(_queued(robot, "unsync", r.value), "ok"),
+            then=lambda r: s.say(_queued(robot, what, r.value), "ok"),
         )
 
     def retry(self) -> None:
