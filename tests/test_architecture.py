@@ -33,9 +33,30 @@ KNOWN_CYCLES: list[list[str]] = []
 MAX_PER_FILE_IGNORES = 1  # only tests/** relative imports
 
 
+def package_imports(root: Path, packages: tuple[str, ...]) -> dict[str, set[str]]:
+    """module -> the packages it reads a name from (`from pkg import sub`).
+
+    grimp records such an import as one of `pkg.sub` only, but it runs and
+    reads `pkg/__init__.py` too: a package whose `__init__` imports the
+    importer back is a cycle."""
+    out: dict[str, set[str]] = {}
+    for top in packages:
+        for f in sorted((root / top).rglob("*.py")):
+            parts = f.relative_to(root).with_suffix("").parts
+            module = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+            for node in ast.walk(ast.parse(f.read_text(encoding="utf-8"))):
+                if isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                    init = root.joinpath(*node.module.split("."), "__init__.py")
+                    if node.module.split(".")[0] in packages and init.exists():
+                        if node.module != module:
+                            out.setdefault(module, set()).add(node.module)
+    return out
+
+
 def import_cycles() -> list[list[str]]:
     """Strongly connected components of the module import graph (Tarjan)."""
     graph = grimp.build_graph(*PACKAGES, cache_dir=None)  # no cache: always the files as they are
+    from_packages = package_imports(ROOT, PACKAGES)
     index: dict[str, int] = {}
     low: dict[str, int] = {}
     stack: list[str] = []
@@ -46,7 +67,7 @@ def import_cycles() -> list[list[str]]:
         index[v] = low[v] = len(index)
         stack.append(v)
         on_stack.add(v)
-        for w in graph.find_modules_directly_imported_by(v):
+        for w in graph.find_modules_directly_imported_by(v) | from_packages.get(v, set()):
             if w not in index:
                 visit(w)
                 low[v] = min(low[v], low[w])
@@ -87,6 +108,19 @@ def test_the_cycle_finder_sees_a_cycle(tmp_path, monkeypatch):
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.setattr(sys.modules[__name__], "PACKAGES", ("cyc",))
     assert import_cycles() == [["cyc.a", "cyc.b"]]
+
+
+def test_the_cycle_finder_sees_a_package_read_back(tmp_path, monkeypatch):
+    """`from cyc import b` in a module the package's __init__ imports runs that __init__."""
+    pkg = tmp_path / "cyc"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("from cyc.a import f\n")
+    (pkg / "a.py").write_text("from cyc import b\n\ndef f():\n    pass\n")
+    (pkg / "b.py").write_text("")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setattr(sys.modules[__name__], "PACKAGES", ("cyc",))
+    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
+    assert import_cycles() == [["cyc", "cyc.a"]]
 
 
 def packages() -> list[str]:
