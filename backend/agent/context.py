@@ -91,8 +91,8 @@ class Execution:
             self.barrier_token = None
 
 
-class Host(Protocol):
-    """What a context needs of the agent (execution.Executor provides it)."""
+class SkillRunner(Protocol):
+    """What a context needs of whoever runs its skill (execution.Executor)."""
 
     agent: Any  # the RobotAgent: ctx.agent, its time_scale, ask and tell
     rt: Runtime
@@ -123,7 +123,9 @@ def _coroutine_only(method: Callable[..., Any]) -> Callable[..., Any]:
 class SkillContext:
     """What a handler gets as its first argument."""
 
-    def __init__(self, host: Host, act: Execution, params: dict[str, Any], purpose: str = "skill"):
+    def __init__(
+        self, host: SkillRunner, act: Execution, params: dict[str, Any], purpose: str = "skill"
+    ):
         self.agent: Any = host.agent  # the RobotAgent
         self._host = host
         self._act = act

@@ -21,8 +21,9 @@ from backend.protocol.messages import ErrorReply
 from backend.server.refusals import JournalFailed
 
 
-class Host(Protocol):
-    """What the downlink needs from the server."""
+class Submitter(Protocol):
+    """What the downlink needs from the server: the engine, journaled
+    submission and alerts."""
 
     engine: Engine | None
 
@@ -52,7 +53,7 @@ class Progress(NamedTuple):
     refused: list[ErrorReply]
 
 
-def raise_alerts(host: Host, applied: Applied) -> None:
+def raise_alerts(host: Submitter, applied: Applied) -> None:
     """The sentences a rule asked the operator to see (value "alerts")."""
     for a in applied.value.pop("alerts", []) or []:
         host.alert(
@@ -65,7 +66,7 @@ def raise_alerts(host: Host, applied: Applied) -> None:
 
 
 class DownlinkApplier:
-    def __init__(self, host: Host):
+    def __init__(self, host: Submitter):
         self._host = host
         self._gaps: dict[str, int] = {}  # robot -> first missing seq already alerted
 

@@ -9,7 +9,7 @@ robot is applied like any other (it queues a command in the mission, see
 can hear it, and applies the robot's answer when it comes, minutes later
 if need be.
 
-The server gives the link a host (`LinkHost`: the engine, journaled
+The server gives the link a host (`LinkServer`: the engine, journaled
 submission, alerts, fleet publication) and asks it to declare its
 queryables, to check an operation before it is submitted (`prepare`), to
 act on what was applied (`applied`), and for the robots' presence (`robots`).
@@ -42,7 +42,7 @@ from backend.protocol.messages import (
     first_error,
 )
 from backend.protocol.wire import LIMIT_EXCEEDED, is_limit, parse
-from backend.server.downlink import DownlinkApplier, Host, raise_alerts
+from backend.server.downlink import DownlinkApplier, Submitter, raise_alerts
 from backend.server.refusals import Handler, JournalFailed
 from backend.server.uplink import UplinkSender
 from backend.transport import Refusal as ReplyErr
@@ -64,7 +64,7 @@ def _major(version: str) -> str:
     return version.split(".", 1)[0]
 
 
-class LinkHost(Host, Protocol):
+class LinkServer(Submitter, Protocol):
     """What the robot link needs from the server: what its downlinks need,
     and publishing a robot's fleet entry."""
 
@@ -72,7 +72,7 @@ class LinkHost(Host, Protocol):
 
 
 class RobotLink:
-    def __init__(self, host: LinkHost, *, default_expiry_s: float | None = None) -> None:
+    def __init__(self, host: LinkServer, *, default_expiry_s: float | None = None) -> None:
         self._host = host
         self.default_expiry_s = default_expiry_s
         self.robots: dict[str, RobotInfo] = {}  # presence, manifest, link state, by name
