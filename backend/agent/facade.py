@@ -102,9 +102,9 @@ from backend.agent.registration import (
     ensure_alone,
     manifest_bytes,
 )
-from backend.agent.runtime import Runtime, log
+from backend.agent.runtime import Runtime, Standing, log
 from backend.agent.telemetry import TelemetryFeed
-from backend.agent.uplink import UplinkHandler
+from backend.agent.uplink import CommandLog, UplinkHandler
 from backend.agent.world import World
 from backend.core.model import Dequeue, Enqueue, Pause, Pose, Reset, Run, Status, Stop
 from backend.core.ops import Answer, Report
@@ -162,33 +162,25 @@ class RobotAgent:
         # called with every Report as it is made (simulator, logs, tests)
         self.report_listeners: list[Callable[[Report], object]] = []
 
-        # the parts (every state change runs on the loop that called start())
+        # the parts, each built after what it uses (every state change runs on
+        # the loop that called start())
         self._rt = Runtime(self)
+        self._standing = Standing(name)
         self._queue = SkillQueue(name, on_report=self._on_report)
+        self._command_log = CommandLog(name)
+        self._outbox = Outbox(self._rt, self._standing, self._command_log)
         self._uplink = UplinkHandler(
-            self._rt,
-            dispatch=self._dispatch,
-            seq=self._queue.next_seq,
-            deliver=self._on_answer,
-            session=lambda: self._rt.session_id,
-            acked=lambda last: self._outbox.ack(last),
-        )
-        self._outbox = Outbox(
-            self._rt,
-            registered=lambda: self._registrar.registered,
-            session=lambda: self._rt.session_id,
-            uplink_applied=lambda: self._uplink.log.applied,
-            unregistered=lambda: self._registrar.must_register(),
+            self._rt, self._command_log, self._dispatch, self._queue.next_seq, self._outbox
         )
         self._telemetry = TelemetryFeed(self._rt, self._queue)
         self._world = World(self._rt)
         self._registrar = Registrar(
             self._rt,
+            self._standing,
             self._queue,
             self._outbox,
+            self._command_log,
             self.manifest,
-            lambda: self.connect,
-            uplink_applied=lambda: self._uplink.log.applied,
             taken=self._stand_down,
         )
         self._executor = Executor(self, self._rt, self._queue, self._telemetry)
@@ -351,7 +343,7 @@ class RobotAgent:
             raise RuntimeError(f"agent {self.name} is already started")
         manifest_bytes(self.name, self.manifest)  # properties may have changed since
         self._rt.attach()
-        self._registrar.attach()
+        self._standing.attach()
         self._outbox.attach()
         self._uplink.attach()
         self._in_range = self._rt.in_range()
@@ -417,7 +409,7 @@ class RobotAgent:
         # The flag and the wake-ups end our loops even if a cancellation gets
         # lost (Python 3.11's wait_for swallows one that races a completion).
         self._rt.closing = True
-        self._registrar.wake()
+        self._standing.wake()
         self._outbox.wake()
         await self._cancel(tasks)
         self._tasks = []
@@ -467,7 +459,7 @@ class RobotAgent:
             log.info("%s: %s communication range", self.name, "back in" if now else "out of")
             self._executor.apply_comms_policy()
             if now:
-                self._registrar.wake()
+                self._standing.wake()
                 self._outbox.wake()
                 self._telemetry.publish()
 
@@ -487,9 +479,6 @@ class RobotAgent:
         self._outbox.wake()
 
     # ------------------------------------------------------------ commands
-
-    def _on_answer(self, answer: Answer) -> None:
-        self._outbox.add(answer)
 
     def _dispatch(self, cmd: object) -> Change:
         """Apply one command of the uplink to the queue and the execution.

@@ -19,7 +19,8 @@ from backend import transport
 from backend.agent.outbox import Outbox
 from backend.agent.outcomes import AlreadyConnected, RegistrationRefused
 from backend.agent.queue import SkillQueue
-from backend.agent.runtime import RETRY_S, Runtime, log
+from backend.agent.runtime import RETRY_S, Runtime, Standing, log
+from backend.agent.uplink import CommandLog
 from backend.core.library import VERSION_PATTERN
 from backend.core.model import NAME_RE
 from backend.protocol.keys import Keys
@@ -176,80 +177,59 @@ class Registrar:
     def __init__(
         self,
         rt: Runtime,
+        standing: Standing,
         queue: SkillQueue,
         outbox: Outbox,
+        commands: CommandLog,
         manifest: Callable[[], Manifest],
-        connect: Callable[[], list[str]],
-        uplink_applied: Callable[[], int],
         taken: Callable[[str], None],
     ):
         self.rt = rt
+        self.standing = standing
         self.queue = queue
         self.outbox = outbox
+        self.commands = commands  # the uplink's processed commands (registration says how far)
         self._manifest = manifest
-        self._connect = connect
-        self._uplink_applied = uplink_applied
         self._taken = taken  # another run of this robot holds the name: stand down
-        self.server_up = False
-        self.registered = False
         self.last_reply: RegisterReply | None = None
         self._refused: str | None = None  # the server's reason, while it refuses us
         self._error = ""  # why the last registration attempt got no reply
         self._warned_unanswered = False
-        self._wake: asyncio.Event | None = None
-        self._registered_evt: asyncio.Event | None = None
 
-    def attach(self) -> None:
-        """Events on the running loop (start())."""
-        self._wake = asyncio.Event()
-        self._registered_evt = asyncio.Event()
-
-    def wake(self) -> None:
-        if self._wake is not None:
-            self._wake.set()
+    @property
+    def registered(self) -> bool:
+        return self.standing.registered
 
     def offline(self) -> None:
         """The agent stopped."""
-        self.registered = False
-        self.server_up = False
-
-    def must_register(self) -> None:
-        """The server does not know us (any more): register again."""
-        if self.registered:
-            log.warning(
-                "%s: the server no longer knows this robot; registering again", self.rt.name
-            )
-        self.registered = False
-        if self._registered_evt is not None:
-            self._registered_evt.clear()
-        self.wake()
+        self.standing.registered = False
+        self.standing.server_up = False
 
     def on_server(self, alive: bool) -> None:
-        self.server_up = alive
+        self.standing.server_up = alive
         # A (re)appearing server may be a new instance: always register again.
-        self.registered = False
-        if self._registered_evt is not None:
-            self._registered_evt.clear()
-        if alive and self._wake is not None:
-            self._wake.set()
+        self.standing.unregistered()
+        if alive:
+            self.standing.wake()
 
     async def wait_registered(self, timeout: float | None) -> None:
-        if self._registered_evt is None:
+        answered = self.standing.answered
+        if answered is None:
             raise self.rt.not_started()
         try:
             async with asyncio.timeout(timeout):
-                await self._registered_evt.wait()
+                await answered.wait()
         except TimeoutError:
             raise TimeoutError(
                 f"robot {self.rt.name} not registered within {timeout:g} s: {self._why_not()}"
             ) from None
-        if self._refused is not None and not self.registered:
+        if self._refused is not None and not self.standing.registered:
             raise RegistrationRefused(self._refused)
 
     def _why_not(self) -> str:
-        if not self.server_up:
+        if not self.standing.server_up:
             return (
-                f"no mission server is up behind {', '.join(self._connect())} "
+                f"no mission server is up behind {', '.join(self.rt.robot.connect)} "
                 f"(its presence token is missing)"
             )
         if not self.rt.in_range():
@@ -258,12 +238,9 @@ class Registrar:
 
     async def run(self) -> None:
         """Register whenever woken and due, until the agent stops."""
-        wake = self._wake
-        assert wake is not None
         while not self.rt.closing:
-            await wake.wait()
-            wake.clear()
-            if not self.server_up or self.registered or not self.rt.in_range():
+            await self.standing.woken()
+            if not self.standing.server_up or self.registered or not self.rt.in_range():
                 continue  # the link loop / server watcher wakes us again
             try:
                 await self.register_once()
@@ -290,8 +267,8 @@ class Registrar:
             )
 
     def _retry_later(self, seconds: float = RETRY_S) -> None:
-        assert self.rt.loop is not None and self._wake is not None
-        self.rt.loop.call_later(seconds, self._wake.set)
+        assert self.rt.loop is not None
+        self.rt.loop.call_later(seconds, self.standing.wake)
 
     async def register_once(self) -> None:
         assert self.rt.session is not None
@@ -305,7 +282,7 @@ class Registrar:
             ],
             downlink=list(self.outbox.reports),
             last_seq=self.queue.seq,
-            uplink_applied=self._uplink_applied(),
+            uplink_applied=self.commands.applied,
             sent=datetime.now(UTC) - timedelta(seconds=self.rt.delay_s()),
         )
         raw = await transport.query(
@@ -316,11 +293,12 @@ class Registrar:
         )
         reply = parse(RegisterReply, raw)
         self.last_reply = reply
-        assert self._registered_evt is not None
+        answered = self.standing.answered
+        assert answered is not None
         if not reply.accepted:
             log.error("%s: the server refused the registration: %s", self.rt.name, reply.reason)
             self._refused = f"the mission server refused robot {self.rt.name}: {reply.reason}"
-            self._registered_evt.set()  # wait_registered() raises it
+            answered.set()  # wait_registered() raises it
             if reply.code == "taken":
                 self._taken(reply.reason)
                 self._retry_later(TAKEN_RETRY_S)  # ours again once the other one is gone
@@ -339,6 +317,6 @@ class Registrar:
         ):
             if ids:
                 log.warning("%s: the server %s: %s", self.rt.name, what, ", ".join(ids))
-        self.registered = True
-        self._registered_evt.set()
+        self.standing.registered = True
+        answered.set()
         self.outbox.wake()
