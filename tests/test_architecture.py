@@ -4,6 +4,7 @@
   under TYPE_CHECKING too, since each still ties two modules together);
 - each package imports alone in a fresh interpreter;
 - no class over 500 lines;
+- no class name defined twice (a reader, a traceback or an import names one thing);
 - the lists of known exceptions only shrink: an entry that no longer applies
   fails the test until it is removed.
 """
@@ -160,6 +161,22 @@ def test_no_class_over_500_lines_beyond_the_known_ones():
     gone = KNOWN_LARGE_CLASSES - set(found)
     assert not new, f"classes over {MAX_CLASS_LINES} lines: {new}"
     assert not gone, f"now under the limit: remove from KNOWN_LARGE_CLASSES: {sorted(gone)}"
+
+
+def class_names() -> dict[str, list[str]]:
+    """Module-level class name -> the modules defining one."""
+    out: dict[str, list[str]] = {}
+    for top in PACKAGES:
+        for f in sorted((ROOT / top).rglob("*.py")):
+            for node in ast.parse(f.read_text(encoding="utf-8")).body:
+                if isinstance(node, ast.ClassDef):
+                    out.setdefault(node.name, []).append(str(f.relative_to(ROOT)))
+    return out
+
+
+def test_no_class_name_is_defined_twice():
+    twice = {name: files for name, files in class_names().items() if len(files) > 1}
+    assert not twice, f"one name, several classes: rename for what each is: {twice}"
 
 
 def test_ruff_exceptions_only_shrink():

@@ -19,7 +19,7 @@ from typing import Any, Protocol
 import zenoh
 
 from backend.agent.outcomes import SkillStopped
-from backend.agent.queue import Active, Entry
+from backend.agent.queue import Active, HeldSkill
 from backend.agent.runtime import Runtime
 from backend.core.model import Pose, Position, SkillInstance
 
@@ -48,7 +48,7 @@ class Execution:
         self.resumed_t.set()
 
     @property
-    def entry(self) -> Entry:
+    def entry(self) -> HeldSkill:
         return self.active.entry
 
     @property

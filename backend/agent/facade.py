@@ -91,7 +91,7 @@ from backend import transport
 from backend.agent.execution import Executor
 from backend.agent.link import Link
 from backend.agent.outbox import Outbox
-from backend.agent.queue import Change, SkillQueue
+from backend.agent.queue import Effect, SkillQueue
 from backend.agent.registration import (
     Handler,
     Registrar,
@@ -105,7 +105,7 @@ from backend.agent.registration import (
 from backend.agent.runtime import Runtime, Standing, log
 from backend.agent.telemetry import TelemetryFeed
 from backend.agent.uplink import CommandLog, UplinkHandler
-from backend.agent.world import World
+from backend.agent.world import Peers
 from backend.core.model import Dequeue, Enqueue, Pause, Pose, Reset, Run, Status, Stop
 from backend.core.ops import Answer, Report
 from backend.protocol.keys import Keys
@@ -173,7 +173,7 @@ class RobotAgent:
             self._rt, self._command_log, self._dispatch, self._queue.next_seq, self._outbox
         )
         self._telemetry = TelemetryFeed(self._rt, self._queue)
-        self._world = World(self._rt)
+        self._peers = Peers(self._rt)
         self._registrar = Registrar(
             self._rt,
             self._standing,
@@ -184,8 +184,8 @@ class RobotAgent:
             taken=self._stand_down,
         )
         self._executor = Executor(self, self._rt, self._queue, self._telemetry)
-        self.world_stats = self._world.stats
-        self._commands: dict[type, Callable[[Any], Change]] = {
+        self.world_stats = self._peers.stats
+        self._commands: dict[type, Callable[[Any], Effect]] = {
             Enqueue: self._enqueue,
             Dequeue: self._dequeue,
             Run: self._run,
@@ -234,11 +234,11 @@ class RobotAgent:
     def on_ask(self, topic: str, fn: Callable[..., Any]) -> None:
         """`fn(data, sender) -> dict | None` (or a coroutine) answers asks on
         `topic`; None means "unknown". Runs on the agent's loop: keep it short."""
-        self._world.add_handler("ask", topic, fn)
+        self._peers.add_handler("ask", topic, fn)
 
     def on_tell(self, topic: str, fn: Callable[..., Any]) -> None:
         """`fn(data, sender)` (or a coroutine) receives tells on `topic`."""
-        self._world.add_handler("tell", topic, fn)
+        self._peers.add_handler("tell", topic, fn)
 
     def manifest(self) -> Manifest:
         return Manifest(
@@ -319,11 +319,11 @@ class RobotAgent:
         self, robot: str, topic: str, data: dict[str, Any] | None = None
     ) -> dict[str, Any] | None:
         """Ask `robot` about `topic`; its answer, or None (unknown / unreachable)."""
-        return await self._world.ask(robot, topic, data)
+        return await self._peers.ask(robot, topic, data)
 
     async def tell(self, robot: str, topic: str, data: dict[str, Any] | None = None) -> bool:
         """Tell `robot` something; True when it was delivered to a handler."""
-        return await self._world.tell(robot, topic, data)
+        return await self._peers.tell(robot, topic, data)
 
     # ------------------------------------------------------------ lifecycle
 
@@ -365,7 +365,7 @@ class RobotAgent:
             transport.serve_async(session, Keys.uplink(self.name), self._uplink.on_uplink)
         )
         self._entities.append(
-            transport.serve_async(session, Keys.world(self.name), self._world.on_message)
+            transport.serve_async(session, Keys.world(self.name), self._peers.on_message)
         )
         self._telemetry.publisher = transport.declare_publisher(session, Keys.telemetry(self.name))
         self._token = transport.declare_token(session, Keys.alive(self.name, self._rt.session_id))
@@ -480,7 +480,7 @@ class RobotAgent:
 
     # ------------------------------------------------------------ commands
 
-    def _dispatch(self, cmd: object) -> Change:
+    def _dispatch(self, cmd: object) -> Effect:
         """Apply one command of the uplink to the queue and the execution.
         Synchronous: no other command or skill step interleaves, and the
         reports it makes come before its answer."""
@@ -498,31 +498,31 @@ class RobotAgent:
         self._uplink.forget()
         self._telemetry.update_mode()
 
-    def _enqueue(self, cmd: Enqueue) -> Change:
+    def _enqueue(self, cmd: Enqueue) -> Effect:
         handlers = self._executor.handlers
         change = self._queue.enqueue(cmd.skills, cmd.barriers, front=cmd.front, offered=handlers)
         if change.ok:
             self._executor.kick()
         return change
 
-    def _dequeue(self, cmd: Dequeue) -> Change:
+    def _dequeue(self, cmd: Dequeue) -> Effect:
         return self._queue.unsync(cmd.ids)
 
-    def _run(self, cmd: Run) -> Change:
+    def _run(self, cmd: Run) -> Effect:
         change = self._queue.run()
         self._executor.sync_pause()
         self._executor.kick()
         return change
 
-    def _pause(self, cmd: Pause) -> Change:
+    def _pause(self, cmd: Pause) -> Effect:
         change = self._queue.pause()
         self._executor.sync_pause()
         return change
 
-    def _stop(self, cmd: Stop) -> Change:
+    def _stop(self, cmd: Stop) -> Effect:
         self._executor.abort()
         return self._queue.stop()
 
-    def _reset(self, cmd: Reset) -> Change:
+    def _reset(self, cmd: Reset) -> Effect:
         self._executor.abort()
         return self._queue.reset()

@@ -25,7 +25,7 @@ from typing import Protocol
 
 from pydantic import ValidationError
 
-from backend.agent.queue import Change
+from backend.agent.queue import Effect
 from backend.agent.runtime import Runtime, log
 from backend.core.ops import Answer
 from backend.protocol.messages import (
@@ -37,9 +37,9 @@ from backend.protocol.messages import (
     first_error,
 )
 from backend.protocol.wire import parse
-from backend.transport import Refusal
+from backend.transport import ReplyError
 
-Dispatch = Callable[[object], Change]  # a command -> what the robot did
+Dispatch = Callable[[object], Effect]  # a command -> what the robot did
 
 
 class Answers(Protocol):
@@ -126,8 +126,8 @@ class UplinkHandler:
     def attach(self) -> None:
         self._wake = asyncio.Event()
 
-    def _refusal(self, code: str, message: str) -> Refusal:
-        return Refusal(dumps(ErrorReply(code=code, message=message, robot=self.rt.name)))
+    def _refusal(self, code: str, message: str) -> ReplyError:
+        return ReplyError(dumps(ErrorReply(code=code, message=message, robot=self.rt.name)))
 
     async def on_uplink(self, payload: bytes) -> bytes:
         """The queryable: a receipt at once; the commands wait their link delay."""

@@ -45,8 +45,7 @@ from backend.protocol.wire import LIMIT_EXCEEDED, is_limit, parse
 from backend.server.downlink import DownlinkApplier, Submitter, raise_alerts
 from backend.server.refusals import Handler, JournalFailed
 from backend.server.uplink import UplinkSender
-from backend.transport import Refusal as ReplyErr
-from backend.transport import serve_async, watch_liveliness
+from backend.transport import ReplyError, serve_async, watch_liveliness
 
 log = logging.getLogger(__name__)
 
@@ -435,7 +434,7 @@ def _legacy(payload: bytes, key: str) -> bytes:
     )
     if "/server/register/" in key:
         return json_bytes({"accepted": False, "reason": message, "last_seq": 0, "missing": []})
-    raise ReplyErr(json_bytes({"ok": False, "code": "protocol_mismatch", "message": message}))
+    raise ReplyError(json_bytes({"ok": False, "code": "protocol_mismatch", "message": message}))
 
 
 def json_bytes(obj: Any) -> bytes:

@@ -56,7 +56,7 @@ def _now() -> datetime:
     return datetime.now(UTC)
 
 
-class Link(Protocol):
+class LinkView(Protocol):
     """What a sender needs from the robot link."""
 
     @property
@@ -85,7 +85,7 @@ def entry(c: UplinkCommand) -> UplinkEntry:
 class UplinkSender:
     """One robot's transmitter (a task on the server's loop)."""
 
-    def __init__(self, link: Link, robot: str):
+    def __init__(self, link: LinkView, robot: str):
         self.link = link
         self.robot = robot
         self._wake = asyncio.Event()

@@ -45,7 +45,7 @@ def pct(x: float) -> str:
 
 
 @dataclass
-class Leg:
+class MoveLeg:
     """One `move`: the path, what it may spend, what it sees and how it reports."""
 
     path: Follower
@@ -189,7 +189,7 @@ class SkillBase:
         if self.dist(*goal) <= tolerance:
             return 0.0
         r = self.robot
-        leg = Leg(
+        leg = MoveLeg(
             path=Follower(self._route(goal)),
             floor=0.0 if allow_reserve else r.model.reserve,
             sense=sense or r.model.nav_range,
@@ -259,7 +259,7 @@ class SkillBase:
         r, w = self.robot, self.world
         return w.flight_energy(r, dt) if r.kind == "drone" else w.work_energy(r, dt)
 
-    def _advance(self, leg: Leg, want: float, per_m: float, fixed: float) -> None:
+    def _advance(self, leg: MoveLeg, want: float, per_m: float, fixed: float) -> None:
         """One step of `want` metres, unless the battery runs out on the way."""
         r = self.robot
         if want * per_m + fixed > r.battery - leg.floor:
@@ -268,7 +268,7 @@ class SkillBase:
         r.battery = max(0.0, r.battery - moved * per_m - fixed)
         self._moved(leg, moved)
 
-    def _run_dry(self, leg: Leg, want: float, per_m: float, fixed: float) -> NoReturn:
+    def _run_dry(self, leg: MoveLeg, want: float, per_m: float, fixed: float) -> NoReturn:
         """The battery runs out during this step: go as far as the energy allows, stop."""
         r, path = self.robot, leg.path
         spare = r.battery - leg.floor
@@ -287,7 +287,7 @@ class SkillBase:
             "recharge at the lander"
         )
 
-    def _moved(self, leg: Leg, moved: float) -> None:
+    def _moved(self, leg: MoveLeg, moved: float) -> None:
         r, path = self.robot, leg.path
         r.x, r.y = path.x, path.y
         if moved > 0:
@@ -300,7 +300,7 @@ class SkillBase:
             for name in self.world.discover(r, leg.sense):
                 self.host.note(r, f"found {name}")
 
-    def _report_leg(self, ctx: SkillContext, leg: Leg, v: float) -> None:
+    def _report_leg(self, ctx: SkillContext, leg: MoveLeg, v: float) -> None:
         path = leg.path
         total = path.total
         frac = leg.frac0 + (leg.frac1 - leg.frac0) * (path.done / total if total > 0 else 1.0)
