@@ -11,8 +11,8 @@ if need be.
 
 The server gives the link a host (`LinkServer`: the engine, journaled
 submission, alerts, fleet publication) and asks it to declare its
-queryables, to check an operation before it is submitted (`prepare`), to
-act on what was applied (`applied`), and for the robots' presence (`robots`).
+queryables, to act on what was applied (`applied`), and for the robots'
+presence (`robots`); the engine asks it what each robot offers (`offered`).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from datetime import UTC, datetime
 from typing import Any, Protocol
 
@@ -28,7 +28,7 @@ from pydantic import ValidationError
 
 from backend.core import events as ev
 from backend.core.model import CommandState, Mission
-from backend.core.ops import Control, Reconcile, Retry, Sync, Unsync, UplinkSettle
+from backend.core.ops import Reconcile, UplinkSettle
 from backend.core.rules.engine import Applied, Engine, Refusal
 from backend.protocol.keys import PROTOCOL_VERSION, Keys
 from backend.protocol.messages import (
@@ -59,10 +59,6 @@ def _now() -> datetime:
     return datetime.now(UTC)
 
 
-def _major(version: str) -> str:
-    return version.split(".", 1)[0]
-
-
 class LinkServer(Submitter, Protocol):
     """What the robot link needs from the server: what its downlinks need,
     and publishing a robot's fleet entry."""
@@ -71,9 +67,8 @@ class LinkServer(Submitter, Protocol):
 
 
 class RobotLink:
-    def __init__(self, host: LinkServer, *, default_expiry_s: float | None = None) -> None:
+    def __init__(self, host: LinkServer) -> None:
         self._host = host
-        self.default_expiry_s = default_expiry_s
         self.robots: dict[str, RobotInfo] = {}  # presence, manifest, link state, by name
         self.senders: dict[str, UplinkSender] = {}
         self._tokens: dict[str, set[str]] = {}  # robot -> sessions whose token is present
@@ -140,45 +135,12 @@ class RobotLink:
         return applied
 
     # -- operations on robots -----------------------------------------------------------
-    def prepare(self, op: Any) -> Any:
-        """An operator's operation as it is submitted: robot operations get the
-        server's default expiry; a sync or retry is checked against the
-        robot's manifest (when it ever registered)."""
-        if isinstance(op, Sync | Unsync | Control | Retry) and op.expire_s is None:
-            if self.default_expiry_s:
-                op = op.model_copy(update={"expire_s": self.default_expiry_s})
-        if isinstance(op, Sync):
-            self._check_manifest(op.robot, self._sync_skills(op))
-        elif isinstance(op, Retry):
-            found = self._mission.find(op.id)
-            if found is not None:
-                self._check_manifest(found[0], [(found[2].id, found[2].skill)])
-        return op
-
-    def _sync_skills(self, op: Sync) -> list[tuple[str, str]]:
-        """(id, skill) of the idle skills the sync would send."""
-        out = []
-        for s in self._mission.tasks.get(op.robot, []):
-            if s.status.value == "idle":
-                out.append((s.id, s.skill))
-                if s.id == op.through:
-                    break
-        return out
-
-    def _check_manifest(self, robot: str, skills: list[tuple[str, str]]) -> None:
+    def offered(self, robot: str) -> Mapping[str, str] | None:
+        """What `robot`'s manifest offers (skill -> version), as last registered;
+        None if it never registered. The rules check syncs and retries with it
+        (`backend.core.rules.engine.Offers`)."""
         info = self.robots.get(robot)
-        if info is None or info.manifest is None:
-            return  # never registered: it refuses what it cannot run
-        for sid, skill in skills:
-            spec = self.engine.library.skills.get(skill)
-            why = _incompatible(info.manifest, skill, spec.version) if spec else None
-            if why:
-                raise Refusal(
-                    "incompatible",
-                    f"{robot} {why}; {sid} stays unsynchronized (nothing was queued)",
-                    robot=robot,
-                    skill=sid,
-                )
+        return info.manifest.skills if info is not None and info.manifest is not None else None
 
     def applied(self, events: list[Any]) -> None:
         """After an applied operation: transmit what it added or withdrew."""
@@ -439,14 +401,3 @@ def _legacy(payload: bytes, key: str) -> bytes:
 
 def json_bytes(obj: Any) -> bytes:
     return json.dumps(obj).encode()
-
-
-def _incompatible(manifest: Manifest, skill: str, want: str) -> str | None:
-    """Why a robot with `manifest` cannot run `skill` at version `want`."""
-    have = manifest.skills.get(skill)
-    if have is None:
-        offered = ", ".join(manifest.skills) or "none"
-        return f"does not offer skill '{skill}' (its manifest lists: {offered})"
-    if _major(have) != _major(want):
-        return f"implements {skill} {have}, the library needs {want} (major versions differ)"
-    return None

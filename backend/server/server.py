@@ -92,7 +92,7 @@ class MissionServer:
         self.recover = recover
         self.recovered: str | None = None  # what the recovery did, for the operator
         self.server_id = uuid.uuid4().hex[:12]
-        self.robot_link = RobotLink(self, default_expiry_s=command_expiry)
+        self.robot_link = RobotLink(self)
         self.engine: Engine | None = None
         self.journal: Journal | None = None
         self.library_file: Path | None = None
@@ -147,7 +147,9 @@ class MissionServer:
         self.journal = journal
         journal.checkpoint_in_background()  # see _maybe_checkpoint
         self.library_file = lib_file
-        self.engine = Engine(mission, library)
+        self.engine = Engine(
+            mission, library, offers=self.robot_link, default_expiry_s=self.command_expiry
+        )
         remember_requests(self.engine, requests)
         self.robot_link.add_robots(mission.robots)
 
@@ -409,12 +411,9 @@ class MissionServer:
                     "read_only", f"read-only: logged in as {role or 'unknown account'} {user}"
                 )
             req = req.model_copy(update={"user": user})
-        done = self.engine.requests.get((req.client, req.request_id))
-        if done is not None:
-            return _reply(Applied(done.revision, [], done.notes, done.value, duplicate=True))
         actor = f"{req.user}@{req.client}" if req.user else req.client
         applied = self.submit(
-            self.robot_link.prepare(req.op),
+            req.op,
             client=req.client,
             request_id=req.request_id,
             actor=actor,

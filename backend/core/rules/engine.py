@@ -53,9 +53,9 @@ from backend.core.ops import (
     Unsync,
 )
 from backend.core.rules import barriers, edit, execution, markers, uplink, waivers
-from backend.core.rules.base import Applied, Change, Refusal, Rule, Rules
+from backend.core.rules.base import Applied, Change, Offers, Refusal, Rule, Rules
 
-__all__ = ["RULES", "Applied", "Engine", "Refusal"]
+__all__ = ["RULES", "Applied", "Engine", "Offers", "Refusal"]
 
 REMEMBERED_REQUESTS = 10_000
 UNDO_DEPTH = 100
@@ -192,8 +192,15 @@ class Engine(Rules):
     """The rules with what they need to be applied: the revision, the
     requests already answered and each client's undo and redo history."""
 
-    def __init__(self, mission: Mission, library: Library):
-        super().__init__(mission, library)
+    def __init__(
+        self,
+        mission: Mission,
+        library: Library,
+        *,
+        offers: Offers | None = None,
+        default_expiry_s: float | None = None,
+    ):
+        super().__init__(mission, library, offers=offers, default_expiry_s=default_expiry_s)
         self.requests: OrderedDict[tuple[str, str], Applied] = OrderedDict()
         # client -> [(operation that reverts, what it reverts, revision made at)]
         self.undo_stack: History = {}
@@ -280,7 +287,7 @@ class Engine(Rules):
     def plan_sync(self, op: Sync) -> list[SkillInstance]:
         """Skills to send to the robot; they are locked until `release` or the
         robot's `SyncAck`."""
-        return execution.plan_sync(self, op)
+        return execution.plan_sync(self, op, uplink.sync_skills)
 
     def plan_unsync(self, op: Unsync) -> list[str]:
         return execution.plan_unsync(self, op)
