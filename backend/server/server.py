@@ -21,8 +21,6 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from pydantic_core import PydanticSerializationError
-
 from backend.core.events import EventBatch
 from backend.core.library import Library
 from backend.core.model import Mission
@@ -46,12 +44,12 @@ from backend.server.acl import acl_config
 from backend.server.journal import (
     Journal,
     JournalError,
-    NotReplayable,
     Remembered,
     Unreplayable,
     remember_requests,
 )
-from backend.server.refusals import JournalFailed, guard
+from backend.server.recorder import JournalRecorder
+from backend.server.refusals import guard
 from backend.server.robots import RobotLink
 from backend.transport import (
     declare_publisher,
@@ -105,7 +103,6 @@ class MissionServer:
         # publications waiting for the next loop callback
         self._outbox: list[tuple[Any, bytes]] = []
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._journal_failing = False
         self._checkpoint: asyncio.Future | None = None  # the journal's, running on a thread
         self._checkpoint_failing = False
 
@@ -148,7 +145,11 @@ class MissionServer:
         journal.checkpoint_in_background()  # see _maybe_checkpoint
         self.library_file = lib_file
         self.engine = Engine(
-            mission, library, offers=self.robot_link, default_expiry_s=self.command_expiry
+            mission,
+            library,
+            recorder=JournalRecorder(journal, self.db, self),
+            offers=self.robot_link,
+            default_expiry_s=self.command_expiry,
         )
         remember_requests(self.engine, requests)
         self.robot_link.add_robots(mission.robots)
@@ -318,40 +319,13 @@ class MissionServer:
         the journal cannot take is refused (JournalFailed) and changes
         nothing, in memory or at a restart; then published."""
         who = actor or client
-
-        def journal(batch: EventBatch) -> None:
-            entry = EventBatch(revision=batch.revision, events=batch.events, actor=who)
-            try:
-                op_json = op.model_dump_json()
-            except PydanticSerializationError:  # from code in this process: its batch says
-                op_json = op.op
-            try:
-                self.journal.append(entry, op_json=op_json, client=client, request_id=request_id)
-            except NotReplayable as e:  # the value, not the journal: refused, nothing changed
-                raise Refusal(
-                    "not_replayable",
-                    f"{op.op} refused: its change could not be journaled as it is, so a "
-                    f"restart could not replay it: {e}; nothing was changed",
-                ) from None
-            except (sqlite3.Error, OSError, JournalError) as e:
-                failed = JournalFailed(self.db, e, op.op)
-                if not self._journal_failing:  # once, not at every retry of every robot
-                    self._journal_failing = True
-                    self.alert(failed.message, level="error", kind="journal")
-                raise failed from None
-            if self._journal_failing:
-                self._journal_failing = False
-                self.alert(
-                    f"the journal {self.db} can be written again", level="info", kind="journal"
-                )
-
-        self.engine.before_apply = journal
-        try:
-            applied = self.engine.submit(
-                op, client=client, request_id=request_id, expected_revision=expected_revision
-            )
-        finally:
-            self.engine.before_apply = None
+        applied = self.engine.submit(
+            op,
+            client=client,
+            request_id=request_id,
+            expected_revision=expected_revision,
+            actor=who,
+        )
         self._commit(applied, op, actor=who)
         return applied
 
