@@ -24,7 +24,7 @@ from backend.agent.registration import Handler
 from backend.agent.runtime import Runtime, log
 from backend.agent.telemetry import TelemetryFeed
 from backend.core.model import Status
-from backend.core.params import typed_by_shape
+from backend.core.params import typed_params
 
 
 @dataclass(frozen=True)
@@ -235,9 +235,8 @@ class Executor:
         name = "recharge" if purpose == "recharge" else act.entry.skill.skill
         handler = self.handlers[name]
         raw_params = dict(act.entry.skill.params) if purpose == "skill" else {}
-        params = (
-            raw_params if handler.raw else {k: typed_by_shape(v) for k, v in raw_params.items()}
-        )
+        kinds = act.entry.kinds if purpose == "skill" else {}
+        params = raw_params if handler.raw else typed_params(raw_params, kinds)
         ctx = SkillContext(self, act, raw_params, purpose)
         mismatch = signature_problem(handler.fn, params)
         if mismatch is not None:  # else a bare TypeError from inside the call

@@ -41,14 +41,14 @@ What the agent does (the contract is docs/protocol.md, protocol 2):
   acknowledges them;
 - meets its partners at barriers directly through liveliness tokens.
 
-Parameters reach handlers converted by shape (the agent has no skill library;
-the server sends normalized values): a mapping with exactly the pose fields
-x, y, z, roll, pitch, yaw becomes a `Pose`; one with exactly x, y, z a
-`Position`; a list of at least three such mappings (an area) a
+Parameters reach handlers typed by their kind, which the server sends with
+the values (`Enqueue.kinds`, the library's; the agent holds no library): a
+`pose` becomes a `Pose`, a `position` a `Position`, an `area` a
 `list[Position]`; everything else (marker/robot/str/enum as str, numbers,
-lists, dicts) is passed as it came. A `dict` parameter that happens to look
-like a position would be converted too: register the skill with `raw=True` to
-get plain values, and use `ctx.params` / `ctx.pose(name)` / `ctx.position(name)`.
+lists, dicts) is passed as it came, and a parameter left unset is None.
+Nothing is guessed from a value's shape. Register a skill with `raw=True` to
+get the values as sent, and use `ctx.params` / `ctx.pose(name)` /
+`ctx.position(name)`.
 
 Behaviour an integrator can rely on:
 
@@ -500,7 +500,9 @@ class RobotAgent:
 
     def _enqueue(self, cmd: Enqueue) -> Effect:
         handlers = self._executor.handlers
-        change = self._queue.enqueue(cmd.skills, cmd.barriers, front=cmd.front, offered=handlers)
+        change = self._queue.enqueue(
+            cmd.skills, cmd.barriers, front=cmd.front, offered=handlers, kinds=cmd.kinds
+        )
         if change.ok:
             self._executor.kick()
         return change

@@ -38,6 +38,8 @@ class HeldSkill:
 
     skill: SkillInstance
     barrier: BarrierInfo | None = None
+    # parameter -> its kind, as sent with the skill (Enqueue.kinds): how its handler gets it
+    kinds: Mapping[str, str] = field(default_factory=dict)
     status: Status = Status.IDLE_SYNCHRONIZED
     attempt: int = 1
     retries_used: int = 0
@@ -124,10 +126,12 @@ class SkillQueue:
         *,
         front: bool = False,
         offered: Collection[str],
+        kinds: Mapping[str, Mapping[str, str]] | None = None,
     ) -> Effect:
         """Queue `skills` (at the head when `front`: a retry the operator asked
-        for). Refused when one has no handler among `offered`. Sent again, it
-        changes nothing: ids queued already or finished are skipped."""
+        for), each with its parameters' kinds (`kinds`: skill name -> parameter
+        -> kind). Refused when one has no handler among `offered`. Sent again,
+        it changes nothing: ids queued already or finished are skipped."""
         skills = list(skills)
         unknown = sorted({s.skill for s in skills if s.skill not in offered})
         if unknown:
@@ -137,6 +141,7 @@ class SkillQueue:
                 f"(it offers: {', '.join(sorted(offered)) or 'none'})",
             )
         barriers = barriers or {}
+        kinds = kinds or {}
         new: list[HeldSkill] = []
         ids: list[str] = []
         for s in skills:
@@ -146,7 +151,14 @@ class SkillQueue:
             if self.holds(s.id) is not None or any(e.id == s.id for e in new):
                 continue  # a re-sent enqueue: it is queued already
             skill = s.model_copy(update={"status": Status.IDLE_SYNCHRONIZED})
-            new.append(HeldSkill(skill=skill, barrier=barriers.get(s.id), attempt=s.attempt))
+            new.append(
+                HeldSkill(
+                    skill=skill,
+                    barrier=barriers.get(s.id),
+                    kinds=kinds.get(s.skill, {}),
+                    attempt=s.attempt,
+                )
+            )
         self._waiting = new + self._waiting if front else self._waiting + new
         return Effect(queued=ids)
 

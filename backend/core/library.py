@@ -13,7 +13,7 @@ from typing import Any, Final, Literal
 
 from pydantic import Field
 
-from backend.core.model import Name, Strict
+from backend.core.model import Name, ParamType, Strict
 from backend.core.params import ParamSpec, check_value, marker_value, normalize_value
 
 LIBRARY_FORMAT: Final = "missionctl/library@1"
@@ -112,6 +112,10 @@ class SkillSpec(Strict):
         description="the skill needs the operator's link while it runs (plan checks flag it "
         "when it is planned out of comms coverage)",
     )
+
+    def kinds(self) -> dict[str, ParamType]:
+        """Parameter -> its kind: what travels with the values to the robot."""
+        return {name: p.type for name, p in self.params.items()}
 
 
 class RobotType(Strict):

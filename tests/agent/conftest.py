@@ -212,10 +212,12 @@ class FakeServer:
         *skills: SkillInstance,
         front: bool = False,
         barriers: dict[str, BarrierInfo] | None = None,
+        kinds: dict[str, dict[str, Any]] | None = None,
     ) -> Reply:
-        return await self.command(
-            robot, Enqueue(skills=list(skills), front=front, barriers=barriers or {})
+        enqueue = Enqueue(
+            skills=list(skills), front=front, barriers=barriers or {}, kinds=kinds or {}
         )
+        return await self.command(robot, enqueue)
 
     # -- inspection --------------------------------------------------------------
     def trail(self, robot: str) -> list[tuple[str, str]]:

@@ -117,7 +117,9 @@ async def test_registers_with_manifest_and_again_after_server_restart(harness: H
 # ---------------------------------------------------------------- execution
 
 
-async def test_enqueue_run_success_with_typed_params_and_consecutive_seqs(harness: Harness) -> None:
+async def test_enqueue_run_success_with_params_typed_by_kind_and_consecutive_seqs(
+    harness: Harness,
+) -> None:
     async with harness as h:
         lru1 = h.name("lru1")
         a = h.agent(lru1)
@@ -139,10 +141,12 @@ async def test_enqueue_run_success_with_typed_params_and_consecutive_seqs(harnes
             {"x": 1.0, "y": 0.0, "z": 0.0},
             {"x": 0.0, "y": 1.0, "z": 0.0},
         ]
+        kinds = {"goal": "pose", "region": "area", "poi": "marker", "n": "int", "speed": "float"}
         reply = await h.server.enqueue(
             lru1,
             skill("s1", "drive_to", goal=goal, region=area, poi="stone1", n=3, speed=0.5),
             skill("s2", "drive_to", goal=goal),
+            kinds={"drive_to": {**kinds, "shape": "dict"}},
         )
         assert reply.ok and reply.ids == ["s1", "s2"]
         # halted until `run`
@@ -163,6 +167,8 @@ async def test_enqueue_run_success_with_typed_params_and_consecutive_seqs(harnes
         assert params["goal"] == Pose(x=1.0, y=2.0, yaw=0.5)
         assert params["region"] == [Position(x=0.0), Position(x=1.0), Position(y=1.0)]
         assert (params["poi"], params["n"], params["speed"]) == ("stone1", 3, 0.5)
+        # every parameter arrives: one left unset is None
+        assert got["s2"]["region"] is None and got["s2"]["shape"] is None
         # every report was acknowledged
         await a.wait_acknowledged(WAIT)
         assert a.pending_reports == []

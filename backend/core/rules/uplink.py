@@ -34,6 +34,7 @@ from backend.core.model import (
     Dequeue,
     Enqueue,
     Mission,
+    ParamType,
     Pause,
     Reset,
     RobotCommand,
@@ -145,6 +146,12 @@ def _incompatible(offered: Mapping[str, str], skill: str, want: str) -> str | No
     return None
 
 
+def _kinds(rules: Rules, skills: Sequence[SkillInstance]) -> dict[str, dict[str, ParamType]]:
+    """The kind of each parameter of the skills sent: they travel with the values."""
+    lib = rules.library.skills
+    return {s.skill: lib[s.skill].kinds() for s in skills if s.skill in lib}
+
+
 def _queued_value(c: UplinkCommand) -> dict[str, Any]:
     return {
         "command": c.id,
@@ -176,7 +183,10 @@ def sync(rules: Rules, op: Sync) -> Change:
         if partners and bid is not None:
             infos[s.id] = BarrierInfo(barrier=bid, partners=dict(partners))
     c = _Maker(rules, _expiry(rules, op)).make(
-        op.robot, "sync", Enqueue(skills=skills, barriers=infos), [s.id for s in skills]
+        op.robot,
+        "sync",
+        Enqueue(skills=skills, barriers=infos, kinds=_kinds(rules, skills)),
+        [s.id for s in skills],
     )
     return Change(
         [ev.CommandQueued(command=c)],
@@ -318,7 +328,10 @@ def retry(rules: Rules, op: Retry) -> Change:
     check_retriable(rules, robot, i, s)
     new = s.next_attempt(Status.IDLE_SYNCHRONIZED)
     c = _Maker(rules, _expiry(rules, op)).make(
-        robot, "retry", Enqueue(skills=[new], front=True), [s.id, new.id]
+        robot,
+        "retry",
+        Enqueue(skills=[new], front=True, kinds=_kinds(rules, [new])),
+        [s.id, new.id],
     )
     return Change([ev.CommandQueued(command=c)], [], {**_queued_value(c), "id": new.id}, None)
 
