@@ -106,6 +106,7 @@ from backend.agent.runtime import Runtime, Standing, log
 from backend.agent.telemetry import TelemetryFeed
 from backend.agent.uplink import CommandLog, UplinkHandler
 from backend.agent.world import Peers
+from backend.core.library import SkillSignature
 from backend.core.model import Dequeue, Enqueue, Pause, Pose, Reset, Run, Status, Stop
 from backend.core.ops import Answer, Report
 from backend.protocol.keys import Keys
@@ -169,6 +170,8 @@ class RobotAgent:
         self._queue = SkillQueue(name, on_report=self._on_report)
         self._command_log = CommandLog(name)
         self._outbox = Outbox(self._rt, self._standing, self._command_log)
+        self._handlers: dict[str, Handler] = {}
+        self._signatures: dict[str, SkillSignature] = {}  # the library's, from registration
         self._uplink = UplinkHandler(
             self._rt, self._command_log, self._dispatch, self._queue.next_seq, self._outbox
         )
@@ -180,10 +183,14 @@ class RobotAgent:
             self._queue,
             self._outbox,
             self._command_log,
+            self._handlers,
+            self._signatures,
             self.manifest,
             taken=self._stand_down,
         )
-        self._executor = Executor(self, self._rt, self._queue, self._telemetry)
+        self._executor = Executor(
+            self, self._rt, self._queue, self._telemetry, self._handlers, self._signatures
+        )
         self.world_stats = self._peers.stats
         self._commands: dict[type, Callable[[Any], Effect]] = {
             Enqueue: self._enqueue,
@@ -227,9 +234,8 @@ class RobotAgent:
     ) -> None:
         """Register `fn(ctx, **params)` as the handler of skill `name` (see `skill`).
         Before `start()`: the manifest listing the skills is sent then."""
-        handlers = self._executor.handlers
         started = self._rt.session is not None
-        add_handler(handlers, self.name, name, Handler(fn, version, raw), started=started)
+        add_handler(self._handlers, self.name, name, Handler(fn, version, raw), started=started)
 
     def on_ask(self, topic: str, fn: Callable[..., Any]) -> None:
         """`fn(data, sender) -> dict | None` (or a coroutine) answers asks on
@@ -246,7 +252,7 @@ class RobotAgent:
             type=self.robot_type,
             modules=[Module(name=k, version=v) for k, v in self.modules.items()],
             properties=self.properties,
-            skills={k: h.version for k, h in self._executor.handlers.items()},
+            skills={k: h.version for k, h in self._handlers.items()},
         )
 
     # ------------------------------------------------------------ introspection
@@ -287,6 +293,13 @@ class RobotAgent:
     @property
     def registered(self) -> bool:
         return self._registrar.registered
+
+    @property
+    def handler_problems(self) -> list[str]:
+        """How the handlers differ from the library's signatures the server sent
+        at the last registration (each said once in the log): a sentence each
+        naming robot, skill and parameter; empty when they fit."""
+        return list(self._registrar.handler_problems)
 
     @property
     def last_register_reply(self) -> RegisterReply | None:
@@ -499,9 +512,8 @@ class RobotAgent:
         self._telemetry.update_mode()
 
     def _enqueue(self, cmd: Enqueue) -> Effect:
-        handlers = self._executor.handlers
         change = self._queue.enqueue(
-            cmd.skills, cmd.barriers, front=cmd.front, offered=handlers, kinds=cmd.kinds
+            cmd.skills, cmd.barriers, front=cmd.front, offered=self._handlers, kinds=cmd.kinds
         )
         if change.ok:
             self._executor.kick()

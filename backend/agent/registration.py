@@ -1,6 +1,8 @@
 """Registration: what the robot offers (its manifest and handlers, checked
-when the integrator declares them), its presence, and registering with each
-server that appears (again after every restart of either side)."""
+when the integrator declares them, and against the library's signatures
+each server sends when it accepts the robot), its presence, and
+registering with each server that appears (again after every restart of
+either side)."""
 
 from __future__ import annotations
 
@@ -21,7 +23,7 @@ from backend.agent.outcomes import AlreadyConnected, RegistrationRefused
 from backend.agent.queue import SkillQueue
 from backend.agent.runtime import RETRY_S, Runtime, Standing, log
 from backend.agent.uplink import CommandLog
-from backend.core.library import VERSION_PATTERN
+from backend.core.library import VERSION_PATTERN, SkillSignature
 from backend.core.model import NAME_RE
 from backend.protocol.keys import Keys
 from backend.protocol.messages import (
@@ -141,6 +143,41 @@ def _takes_ctx(fn: Callable[..., Any]) -> bool:
     )
 
 
+def handler_differences(robot: str, skill: str, handler: Handler, sig: SkillSignature) -> list[str]:
+    """How `handler`'s signature differs from the library's `sig`, a sentence
+    each naming robot, skill and parameter (none: it fits). A handler taking
+    **params accepts whatever comes: nothing to compare."""
+    try:
+        args = list(inspect.signature(handler.fn).parameters.values())[1:]  # after the context
+    except (TypeError, ValueError):
+        return []
+    if any(p.kind == p.VAR_KEYWORD for p in args):
+        return []
+    where = f"robot {robot}, skill {skill}: handler {getattr(handler.fn, '__name__', 'handler')}()"
+    named = {p.name: p for p in args if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
+    out = [
+        f"{where} has no parameter {name!r} ({kind} in the library): the skill fails when it "
+        f"runs; add it to the signature"
+        for name, kind in sig.params.items()
+        if name not in named
+    ]
+    for name, p in named.items():
+        if name not in sig.params:
+            known = ", ".join(sig.params) or "none"
+            out.append(
+                f"{where} takes {name!r}, which is not a parameter of {skill} in the library "
+                f"({known}): it never gets a value; remove it"
+            )
+        elif p.default is not p.empty:
+            given = sig.defaults.get(name)
+            library = f"the library's default is {given!r}" if given is not None else "no default"
+            out.append(
+                f"{where} gives {name!r} a default ({p.default!r}) it never uses: the server "
+                f"always sends it ({library}); remove the default"
+            )
+    return out
+
+
 def manifest_bytes(robot: str, manifest: Callable[[], Manifest]) -> bytes:
     """The manifest as sent; ValueError naming the robot when it cannot be."""
     try:
@@ -181,11 +218,18 @@ class Registrar:
         queue: SkillQueue,
         outbox: Outbox,
         commands: CommandLog,
+        handlers: Mapping[str, Handler],
+        signatures: dict[str, SkillSignature],
         manifest: Callable[[], Manifest],
         taken: Callable[[str], None],
     ):
         self.rt = rt
         self.standing = standing
+        self.handlers = handlers
+        # the library's signatures the server sent (the executor reads them too)
+        self.signatures = signatures
+        # how the handlers differ from them (said once each, in the log)
+        self.handler_problems: list[str] = []
         self.queue = queue
         self.outbox = outbox
         self.commands = commands  # the uplink's processed commands (registration says how far)
@@ -270,6 +314,21 @@ class Registrar:
         assert self.rt.loop is not None
         self.rt.loop.call_later(seconds, self.standing.wake)
 
+    def _take_signatures(self, skills: Mapping[str, SkillSignature]) -> None:
+        """The library as this server has it: compare the handlers with it."""
+        self.signatures.clear()
+        self.signatures.update(skills)
+        problems = [
+            problem
+            for name, handler in sorted(self.handlers.items())
+            if name in skills
+            for problem in handler_differences(self.rt.name, name, handler, skills[name])
+        ]
+        for problem in problems:
+            if problem not in self.handler_problems:
+                log.error("%s", problem)
+        self.handler_problems = problems
+
     async def register_once(self) -> None:
         assert self.rt.session is not None
         await self.rt.delay()
@@ -310,6 +369,7 @@ class Registrar:
         else:
             self.outbox.ack(reply.last_seq)
         self.outbox.heartbeat_s = reply.heartbeat_s
+        self._take_signatures(reply.skills)
         for what, ids in (
             ("returned to the plan (this robot no longer had them)", reply.missing),
             ("adopted (this robot holds them; the mission had them unsynchronized)", reply.adopted),

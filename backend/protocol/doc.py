@@ -816,6 +816,13 @@ marker's value in its parameter's kind. The server has checked every value
 and filled in every default of the library before the command leaves: a
 parameter listed in `kinds` but missing from `params` is an optional one
 left unset (null to a handler).
+
+Each accepted registration gives the robot the library's signature of each
+skill its manifest offers (`RegisterReply.skills[SKILL]`: each parameter's
+kind, the required ones, and the `defaults` the server fills in for one
+left out): compare the handlers with it once, and call a skill the robot
+runs on its own (a recharge before a skill, `policies.recharge_below`) with
+its `defaults`.
 """
 
 PROSE_4 = """

@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, ValidationError
 
 from backend.core.events import EventBatch
-from backend.core.library import Library
+from backend.core.library import Library, SkillSignature
 from backend.core.model import (
     BarrierInfo,
     Dequeue,
@@ -218,6 +218,12 @@ class RegisterReply(Strict):
         "drop them",
     )
     heartbeat_s: float = Field(5.0, description="send a Downlink at least this often")
+    skills: dict[Name, SkillSignature] = Field(
+        default_factory=dict,
+        description="the library's signature of each skill the manifest offers that the robot's "
+        "type has: check the handlers against it; a skill the robot runs on its own (a "
+        "recharge before a skill) is called with its `defaults`",
+    )
 
 
 class Downlink(Strict):

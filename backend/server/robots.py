@@ -27,6 +27,7 @@ from typing import Any, Protocol
 from pydantic import ValidationError
 
 from backend.core import events as ev
+from backend.core.library import SkillSignature
 from backend.core.model import CommandState, Mission
 from backend.core.ops import Reconcile, UplinkSettle
 from backend.core.rules.engine import Applied, Engine, Refusal
@@ -239,8 +240,18 @@ class RobotLink:
                 adopted=adopted,
                 dropped=dropped,
                 heartbeat_s=HEARTBEAT_S,
+                skills=self._signatures(m),
             )
         )
+
+    def _signatures(self, m: Manifest) -> dict[str, SkillSignature]:
+        """The library's signature of each skill the robot offers and its type has."""
+        library = self.engine.library
+        return {
+            name: library.skills[name].signature()
+            for name in library.skills_of(m.type)
+            if name in m.skills and name in library.skills
+        }
 
     def _not_registrable(self, m: Manifest) -> tuple[str, str] | None:
         """Why a robot with manifest `m` cannot register (None: it can)."""

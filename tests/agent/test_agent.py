@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 
 from backend.agent import Failure, RobotAgent, SkillFailed, SkillStopped, Success
+from backend.core.library import SkillSignature
 from backend.core.model import Policies, Pose, Position, SkillInstance, Status
 from backend.protocol.keys import Keys
 from backend.protocol.messages import (
@@ -549,11 +550,15 @@ async def test_pause_out_of_comms_policy_and_recharge_policy(harness: Harness) -
         level = [0.1]
         a.battery = lambda: level[0]
         started, gates = gated_handler(a)
-        recharges: list[str] = []
+        recharges: list[tuple[str, float]] = []
+        # the library's recharge, as the server sends it with the registration
+        h.server.signatures["recharge"] = SkillSignature(
+            params={"target_level": "float"}, defaults={"target_level": 0.95}
+        )
 
         @a.skill("recharge", version="1.0.0")
-        async def recharge(ctx):
-            recharges.append(ctx.skill.id)
+        async def recharge(ctx, target_level: float):
+            recharges.append((ctx.skill.id, target_level))
             level[0] = 1.0
 
         await a.start()
@@ -564,7 +569,7 @@ async def test_pause_out_of_comms_policy_and_recharge_policy(harness: Harness) -
         await h.server.enqueue(lru1, s1)
         await h.server.command(lru1, Run())
         await asyncio.wait_for(started["s1"].wait(), WAIT)
-        assert recharges == ["s1"]
+        assert recharges == [("s1", 0.95)]  # with the library's default, as the server sent it
         assert h.made(lru1, "s1", S.RUNNING, "recharging first: battery 10% below 30%")
 
         a.link.reachable = False
