@@ -14,6 +14,7 @@ publication). See backend/protocol/mapfeed.py for the wire format.
 from __future__ import annotations
 
 import asyncio
+import functools
 import json
 import logging
 import math
@@ -185,16 +186,16 @@ class SimFleet:
         return agent
 
     def _wrap(self, robot: SimRobot, name: str, fn: Any) -> Any:
-        defaults = {}
-        spec = self.library.skills.get(name)
-        if spec is not None:
-            defaults = {k: p.default for k, p in spec.params.items() if p.default is not None}
+        """The handler with the robot's activity kept for the world; its
+        signature is `fn`'s (`functools.wraps`), which the agent checks
+        against the library's."""
 
+        @functools.wraps(fn)
         async def handler(ctx: Any, **params: Any) -> Any:
             robot.activity = name
             robot.paused = lambda: ctx.paused
             try:
-                return await fn(ctx, **{**defaults, **params})  # a Success carries the result text
+                return await fn(ctx, **params)  # a Success carries the result text
             finally:
                 robot.activity = None
                 robot.paused = lambda: False

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any, NoReturn
 
 from backend.agent import SkillContext, SkillFailed, Success
+from backend.core.model import Pose, Position
 from sim.pathing import SLOW, Follower
 from sim.skills.host import SkillHost
 from sim.world import SimError, SimRobot, _fmt
@@ -25,19 +26,9 @@ RESYNC_S = 120.0  # sim seconds behind the clock past which a robot stops catchi
 DRONE_MARGIN_S = 40.0  # flight seconds a drone keeps beyond its way back to the lander
 
 
-def xy(value: Any) -> tuple[float, float]:
-    """(x, y) of a Pose, Position or mapping."""
-    if value is None:
-        raise SkillFailed("a position parameter is missing")
-    if isinstance(value, dict):
-        return float(value.get("x", 0.0)), float(value.get("y", 0.0))
+def xy(value: Pose | Position) -> tuple[float, float]:
+    """(x, y) of a pose or position parameter (typed by its kind: never a mapping)."""
     return float(value.x), float(value.y)
-
-
-def yaw_of(value: Any) -> float | None:
-    if isinstance(value, dict):
-        return float(value["yaw"]) if "yaw" in value else None
-    return float(getattr(value, "yaw", 0.0)) if hasattr(value, "yaw") else None
 
 
 def pct(x: float) -> str:

@@ -6,6 +6,7 @@ import math
 from typing import Any
 
 from backend.agent import SkillContext, Success
+from backend.core.model import Pose, Position
 from sim.skills.base import SkillBase, pct, xy
 from sim.world import BoxState, SimRobot, Stone, _fmt
 
@@ -22,9 +23,7 @@ class ManipulationSkills(SkillBase):
 
     # ------------------------------------------------------------ stones
 
-    async def pick_stone(
-        self, ctx: SkillContext, target: Any = None, region: str | None = None, **_: Any
-    ) -> Success:
+    async def pick_stone(self, ctx: SkillContext, target: Position, region: str | None) -> Success:
         r, w = self.robot, self.world
         if not r.has("manipulator"):
             raise self.fail(f"{r.name} has no arm to pick stones")
@@ -148,9 +147,7 @@ class ManipulationSkills(SkillBase):
             if other != r.name:
                 await self.host.tell(r, other, "stone", stone.public())
 
-    async def drop_stone(
-        self, ctx: SkillContext, into: str = "lander_sample_box", **_: Any
-    ) -> Success:
+    async def drop_stone(self, ctx: SkillContext, into: str) -> Success:
         r = self.robot
         if not r.has("manipulator"):
             raise self.fail(f"{r.name} has no arm")
@@ -210,15 +207,13 @@ class ManipulationSkills(SkillBase):
 
     # ------------------------------------------------------------ payload boxes
 
-    async def pick_payload_box(self, ctx: SkillContext, box: str = "", **_: Any) -> Success:
+    async def pick_payload_box(self, ctx: SkillContext, box: str) -> Success:
         if not self.robot.has("manipulator"):
             raise self.fail(f"{self.robot.name} has no arm to carry payload boxes")
         await self._take_box(ctx, box, 120.0)
         return self.done(ctx, f"picked {box}: carrying it")
 
-    async def place_payload_box(
-        self, ctx: SkillContext, box: str = "", goal: Any = None, **_: Any
-    ) -> Success:
+    async def place_payload_box(self, ctx: SkillContext, box: str, goal: Pose) -> Success:
         r = self.robot
         if r.box != box:
             raise self.fail(
@@ -241,9 +236,7 @@ class ManipulationSkills(SkillBase):
         await self._box_moved(box)
         return self.done(ctx, msg)
 
-    async def deploy_wifi_box(
-        self, ctx: SkillContext, box: str = "wifi_box_1", goal: Any = None, **_: Any
-    ) -> Success:
+    async def deploy_wifi_box(self, ctx: SkillContext, box: str, goal: Pose) -> Success:
         r, w = self.robot, self.world
         if not r.has("manipulator"):
             raise self.fail(f"{r.name} has no arm to carry payload boxes")
@@ -437,7 +430,7 @@ class ManipulationSkills(SkillBase):
 
     # ------------------------------------------------------------ the lander's shelf
 
-    async def load_box(self, ctx: SkillContext, box: str = "", slot: int = 1, **_: Any) -> Success:
+    async def load_box(self, ctx: SkillContext, box: str, slot: int) -> Success:
         r, w = self.robot, self.world
         b, slot = self._loadable(box, slot)
         if b.where == "shelf" and b.slot == slot:

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 from backend.agent import SkillContext, Success
 from sim.skills.base import SkillBase, pct
 
@@ -13,7 +11,7 @@ PAD_INSIDE = 1.5  # metres inside the pad's edge a rover parks to charge
 class PowerSkills(SkillBase):
     """recharge handlers."""
 
-    async def recharge(self, ctx: SkillContext, target_level: float = 0.95, **_: Any) -> Success:
+    async def recharge(self, ctx: SkillContext, target_level: float) -> Success:
         r, w = self.robot, self.world
         self.need_kind("rover", "drone", skill="recharge")
         target_level = min(1.0, max(0.0, float(target_level)))

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from backend.agent import SkillContext, Success
+from backend.core.model import Pose, Position
 from sim.skills.base import SkillBase, xy
 from sim.world import RssState, SimRobot, Stone, _fmt, newer_stone
 
@@ -42,12 +43,7 @@ class ScienceSkills(SkillBase):
     # ------------------------------------------------------------ take_science_image
 
     async def take_science_image(
-        self,
-        ctx: SkillContext,
-        target: Any = None,
-        filter: str = "multispectral",
-        camera: Any = None,
-        **_: Any,
+        self, ctx: SkillContext, target: Pose, filter: str, camera: dict[str, Any]
     ) -> Success:
         r, w = self.robot, self.world
         if not r.has("science_camera"):
@@ -90,12 +86,7 @@ class ScienceSkills(SkillBase):
     # ------------------------------------------------------------ identify_stone
 
     async def identify_stone(
-        self,
-        ctx: SkillContext,
-        target: Any = None,
-        search_radius: float = 3.0,
-        partner: str | None = None,
-        **_: Any,
+        self, ctx: SkillContext, target: Position, search_radius: float, partner: str | None
     ) -> Success:
         r, w = self.robot, self.world
         tx, ty = xy(target)
