@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from backend.agent import SkillContext, Success
 from backend.core.model import Pose
+from sim.objects import _fmt
 from sim.skills.base import CLIMB_RATE, DRONE_MARGIN_S, SkillBase, pct, xy
-from sim.world import _fmt
 
 MIN_TAKEOFF = 0.05  # battery above the reserve a drone needs to take off
 

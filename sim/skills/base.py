@@ -17,9 +17,11 @@ from typing import Any, NoReturn
 
 from backend.agent import SkillContext, SkillFailed, Success
 from backend.core.model import Pose, Position
+from sim.objects import _fmt
 from sim.pathing import SLOW, Follower
+from sim.robot import SimRobot
 from sim.skills.host import SkillHost
-from sim.world import SimError, SimRobot, _fmt
+from sim.world import SimError
 
 CLIMB_RATE = 1.0  # m/s, drone
 RESYNC_S = 120.0  # sim seconds behind the clock past which a robot stops catching up

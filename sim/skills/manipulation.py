@@ -7,8 +7,9 @@ from typing import Any
 
 from backend.agent import SkillContext, Success
 from backend.core.model import Pose, Position
+from sim.objects import BoxState, Stone, _fmt
+from sim.robot import SimRobot
 from sim.skills.base import SkillBase, pct, xy
-from sim.world import BoxState, SimRobot, Stone, _fmt
 
 APPROACH = 8.0  # a stone/box this close is approached within the skill
 STONE_SEARCH = 6.0  # metres around pick_stone's target where a known stone counts ...

@@ -8,9 +8,11 @@ import numpy as np
 
 from backend.agent import SkillContext, SkillFailed, Success
 from backend.core.model import Pose, Position
+from sim.objects import _fmt
 from sim.pathing import ROCK, lawnmower
+from sim.robot import SimRobot
 from sim.skills.base import DRONE_MARGIN_S, SkillBase, pct, xy
-from sim.world import SimRobot, World, _fmt
+from sim.world import World
 
 MAPPED = 0.995  # the share of the area's cells that counts as all of it
 

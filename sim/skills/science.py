@@ -8,8 +8,9 @@ from typing import Any
 
 from backend.agent import SkillContext, Success
 from backend.core.model import Pose, Position
+from sim.objects import RssState, Stone, _fmt, newer_stone
+from sim.robot import SimRobot
 from sim.skills.base import SkillBase, xy
-from sim.world import RssState, SimRobot, Stone, _fmt, newer_stone
 
 NEAR_TARGET = 5.0  # extra metres around a search radius that count as "at the target"
 CAMERA_RANGE = 15.0  # science camera

@@ -1,0 +1,73 @@
+"""A simulated robot: its model, where it is, its battery, what it carries and
+knows, and what waits aboard for the link to the ground."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from sim.objects import Knowledge
+from sim.worldfile import RobotModel
+
+DEFAULT_MODELS: dict[str, RobotModel] = {
+    "lru_science": RobotModel(kind="rover", capabilities=["science_camera", "stereo_camera"]),
+    "lru_manipulator": RobotModel(
+        kind="rover",
+        capabilities=["manipulator", "stereo_camera"],
+        carry_stones=1,
+        carry_stones_in_box=4,
+    ),
+    "drone": RobotModel(
+        kind="drone",
+        capabilities=["stereo_camera"],
+        speed=2.0,
+        max_speed=5.0,
+        sensor_range=20.0,
+        nav_range=8.0,
+        charge_per_minute=0.5,
+    ),
+    "lander": RobotModel(kind="static"),
+}
+
+
+@dataclass
+class SimRobot:
+    name: str
+    type: str
+    model: RobotModel
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+    yaw: float = 0.0
+    battery: float = 1.0
+    airborne: bool = False
+    activity: str | None = None  # skill being executed
+    paused: Callable[[], bool] = lambda: False
+    box: str | None = None  # carried payload box
+    stones: list[str] = field(default_factory=list)  # carried stones
+    knowledge: Knowledge = field(default_factory=Knowledge)
+    odometer: float = 0.0
+    sim_seconds: float = 0.0  # robot time stepped by skills
+    result: str = ""  # the outcome of its last skill (reported with its state)
+    paused_s: float = 0.0  # sim seconds its skills spent paused (the fleet counts them)
+    passed_coverage: bool = False  # moved through coverage since the last uplink (see pump)
+    # uplink to the ground: what waits for coverage, and what is on its way
+    outbox: list[Callable[[], None]] = field(default_factory=list)
+    in_flight: list[tuple[float, Callable[[], None]]] = field(default_factory=list)
+    pending_cells: np.ndarray | None = None  # explored, not yet sent
+
+    @property
+    def kind(self) -> str:
+        return self.model.kind
+
+    def has(self, capability: str) -> bool:
+        return capability in self.model.capabilities
+
+    @property
+    def usable(self) -> float:
+        return max(0.0, self.battery - self.model.reserve)
+
+    def pose_tuple(self) -> tuple[float, float]:
+        return self.x, self.y
