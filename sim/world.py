@@ -20,8 +20,9 @@ from typing import Any
 import numpy as np
 
 from sim.objects import BoxState, RssState, Stone, _fmt, merge_rss, newer_stone
-from sim.pathing import FREE, ROCK, SLOW, GridGeom, NoPath, line_max, plan
+from sim.pathing import ROCK, SLOW, GridGeom, NoPath, line_max, plan
 from sim.robot import DEFAULT_MODELS, SimRobot
+from sim.terrain import Terrain
 from sim.worldfile import RobotStart, WorldFile
 
 # what the map feed's terrain layer says about a cell
@@ -45,7 +46,7 @@ class World:
         self.geom = GridGeom(s.x_min, s.y_min, s.cell, nx, ny)
         self.models = {**DEFAULT_MODELS, **spec.models}
         rng = np.random.default_rng(self.seed)
-        self.terrain = self._generate_terrain(rng)
+        self.terrain = Terrain(spec, self.geom, rng).grid
         shape = self.geom.shape
         self.explored = np.zeros(shape, dtype=bool)  # truth: seen by any robot
         self.ground_explored = np.zeros(shape, dtype=bool)  # what the operator has
@@ -82,104 +83,6 @@ class World:
         self.ground_robots: dict[str, dict[str, Any]] = {}  # name -> state as last heard
         self.objects_version = 0
         self.slow_cost = 1.0 / spec.terrain.slow_factor
-
-    # ------------------------------------------------------------ generation
-
-    def _keep_clear(self) -> list[tuple[float, float, float]]:
-        sp = self.spec
-        out = [(c.x, c.y, c.r) for c in sp.terrain.keep_clear]
-        out.append((sp.lander.x, sp.lander.y, sp.lander.pad_radius + 8.0))
-        out += [(r.x, r.y, r.radius + 2.0) for r in sp.rss]
-        out += [(r.x, r.y, 4.0) for r in sp.robots.values()]
-        out += [(b.x, b.y, 3.0) for b in sp.boxes.values() if b.x is not None and b.y is not None]
-        return out
-
-    def _generate_terrain(self, rng: np.random.Generator) -> np.ndarray:
-        g = self.geom
-        t = np.full(g.shape, FREE, dtype=np.uint8)
-        clear = self._keep_clear()
-        s = self.spec.site
-
-        def scatter(count: int, radius: tuple[float, float], code: int) -> None:
-            for _ in range(count):
-                for _try in range(30):
-                    x = float(rng.uniform(s.x_min, s.x_max))
-                    y = float(rng.uniform(s.y_min, s.y_max))
-                    r = float(rng.uniform(*radius))
-                    if all(math.hypot(x - cx, y - cy) > r + cr for cx, cy, cr in clear):
-                        break
-                else:
-                    continue
-                # a blob: one to three overlapping discs
-                for k in range(int(rng.integers(1, 4))):
-                    ox, oy = rng.normal(0, r * 0.5, 2) if k else (0.0, 0.0)
-                    rr = r * (1.0 if k == 0 else float(rng.uniform(0.5, 0.9)))
-                    rows, cols, mask = g.disk(x + float(ox), y + float(oy), rr)
-                    sub = t[rows, cols]
-                    if code == SLOW:
-                        sub[mask & (sub == FREE)] = SLOW
-                    else:
-                        sub[mask] = code
-
-        scatter(self.spec.terrain.rock_fields.count, self.spec.terrain.rock_fields.radius, ROCK)
-        scatter(self.spec.terrain.sand_patches.count, self.spec.terrain.sand_patches.radius, SLOW)
-        codes = {"free": FREE, "slow": SLOW, "impassable": ROCK}
-        for f in self.spec.terrain.features:
-            if f.circle is not None:
-                rows, cols, mask = g.disk(f.circle.x, f.circle.y, f.circle.r)
-                t[rows, cols][mask] = codes[f.kind]
-            else:
-                assert f.polygon is not None
-                t[g.polygon_mask([(p.x, p.y) for p in f.polygon])] = codes[f.kind]
-        # the lander's surroundings are always drivable
-        rows, cols, mask = g.disk(
-            self.spec.lander.x, self.spec.lander.y, self.spec.lander.pad_radius + 3.0
-        )
-        t[rows, cols][mask] = FREE
-        self._connect(t, clear)
-        return t
-
-    def _reachable(self, t: np.ndarray) -> np.ndarray:
-        """Cells reachable from the lander (4-connected flood fill, numpy)."""
-        passable = t != ROCK
-        reach = np.zeros_like(passable)
-        reach[self.geom.cell_of(self.spec.lander.x, self.spec.lander.y)] = True
-        while True:
-            grown = reach.copy()
-            grown[1:, :] |= reach[:-1, :]
-            grown[:-1, :] |= reach[1:, :]
-            grown[:, 1:] |= reach[:, :-1]
-            grown[:, :-1] |= reach[:, 1:]
-            grown &= passable
-            if (grown == reach).all():
-                return reach
-            reach = grown
-
-    def _connect(self, t: np.ndarray, clear: list[tuple[float, float, float]]) -> None:
-        """Carve corridors to enclosed places that must be reachable; pockets
-        nobody needs become rock (the map has no unreachable islands)."""
-        g = self.geom
-        reach = self._reachable(t)
-        lx, ly = self.spec.lander.x, self.spec.lander.y
-        carved = False
-        for cx, cy, _r in clear:
-            if not g.inside(cx, cy):
-                continue
-            if not reach[g.cell_of(cx, cy)]:
-                rows, cols, mask = g.disk(cx, cy, 1.0)
-                t[rows, cols][mask] = FREE
-                n = int(math.hypot(cx - lx, cy - ly) / (g.cell * 0.5)) + 2
-                for k in range(n + 1):
-                    f = k / n
-                    i, j = g.cell_of(cx + (lx - cx) * f, cy + (ly - cy) * f)
-                    if t[i, j] == ROCK:
-                        t[max(i - 1, 0) : i + 2, max(j - 1, 0) : j + 2][
-                            t[max(i - 1, 0) : i + 2, max(j - 1, 0) : j + 2] == ROCK
-                        ] = SLOW
-                carved = True
-        if carved:
-            reach = self._reachable(t)
-        t[(t != ROCK) & ~reach] = ROCK
 
     def _place_rss(self, rng: np.random.Generator) -> None:
         g = self.geom

@@ -95,7 +95,7 @@ class Scatter(Strict):
         return self
 
 
-class Terrain(Strict):
+class TerrainSpec(Strict):
     rock_fields: Scatter = Field(default_factory=lambda: Scatter(count=30, radius=(3.0, 8.0)))
     sand_patches: Scatter = Field(default_factory=lambda: Scatter(count=25, radius=(6.0, 16.0)))
     slow_factor: float = Field(
@@ -208,7 +208,7 @@ class WorldFile(Strict):
     seed: int = Field(1, ge=0)
     site: Site = Field(default_factory=Site)
     lander: Lander = Field(default_factory=Lander)
-    terrain: Terrain = Field(default_factory=Terrain)
+    terrain: TerrainSpec = Field(default_factory=TerrainSpec)
     comms: Comms = Field(default_factory=Comms)
     scoring: Scoring = Field(default_factory=Scoring)
     rss: list[RSS] = Field(default_factory=list)
