@@ -168,8 +168,8 @@ def run(args: argparse.Namespace) -> int:
         except (OSError, ValueError) as e:
             print(f"missionctl sim: {args.zenoh_config}: {e}", file=sys.stderr)
             return EXIT_BAD_INPUT
+    from sim.errors import SimError
     from sim.fleet import SimFleet
-    from sim.world import SimError
 
     try:
         fleet = SimFleet(

@@ -30,11 +30,12 @@ from backend.core.model import Mission, Pose
 from backend.protocol import mapfeed as mf
 from backend.transport import QueryFailed
 from sim.comms import CommsWindow
+from sim.errors import SimError
 from sim.exchange import WorldExchange
 from sim.robot import SimRobot
 from sim.skills.registry import RobotSkills
 from sim.status import ground_status, truth
-from sim.world import SimError, World
+from sim.world import World
 from sim.worldfile import WorldFile
 
 log = logging.getLogger(__name__)

@@ -12,8 +12,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
-# terrain codes of the world's grid
-FREE, SLOW, ROCK = 0, 1, 2
+from backend.protocol.mapfeed import T_FREE, T_ROCK, T_SLOW
+
+# terrain codes of the world's grid: the map feed's, so the ground's layer is
+# the grid itself where it is known (0 is the feed's "unknown", never a cell's)
+FREE, SLOW, ROCK = T_FREE, T_SLOW, T_ROCK
 
 SQRT2 = math.sqrt(2.0)
 

@@ -1,5 +1,6 @@
-"""The site's terrain: free, slow (sand) and impassable ground on the grid,
-generated from the world file and the seed."""
+"""The site's terrain: free, slow (sand) and impassable ground on the grid
+(the map feed's codes, sim.pathing), generated from the world file and the
+seed; what a cell is, and routes across it."""
 
 from __future__ import annotations
 
@@ -7,15 +8,67 @@ import math
 
 import numpy as np
 
-from sim.pathing import FREE, ROCK, SLOW, GridGeom
+from sim.errors import SimError
+from sim.objects import _fmt
+from sim.pathing import FREE, ROCK, SLOW, GridGeom, NoPath, line_max, plan
 from sim.worldfile import WorldFile
 
 
 class Terrain:
+    """The grid of terrain codes and the questions asked of it."""
+
     def __init__(self, spec: WorldFile, geom: GridGeom, rng: np.random.Generator):
         self.spec = spec
         self.geom = geom
         self.grid = self._generate_terrain(rng)
+        self.slow_cost = 1.0 / spec.terrain.slow_factor  # a slow cell takes this long to cross
+
+    # ------------------------------------------------------------ queries
+
+    def at(self, x: float, y: float) -> int:
+        """The code at (x, y); outside the site: impassable."""
+        if not self.geom.inside(x, y):
+            return ROCK
+        return int(self.grid[self.geom.cell_of(x, y)])
+
+    def passable(self, x: float, y: float) -> bool:
+        return self.geom.inside(x, y) and self.grid[self.geom.cell_of(x, y)] != ROCK
+
+    def nearest_free(self, x: float, y: float, max_r: float = 10.0) -> tuple[float, float] | None:
+        """Nearest passable cell centre to (x, y) within max_r, or None."""
+        if self.passable(x, y):
+            return x, y
+        rows, cols, mask = self.geom.disk(x, y, max_r)
+        ok = mask & (self.grid[rows, cols] != ROCK)
+        if not ok.any():
+            return None
+        ii, jj = np.nonzero(ok)
+        xs = self.geom.xs[cols][jj]
+        ys = self.geom.ys[rows][ii]
+        k = int(np.argmin((xs - x) ** 2 + (ys - y) ** 2))
+        return float(xs[k]), float(ys[k])
+
+    def straight_clear(self, a: tuple[float, float], b: tuple[float, float]) -> bool:
+        return line_max(self.grid, self.geom, a, b) < ROCK
+
+    # ------------------------------------------------------------ routes
+
+    def route(
+        self, start: tuple[float, float], goal: tuple[float, float], *, flies: bool
+    ) -> list[tuple[float, float]]:
+        """Waypoints for a rover (terrain-aware) or a drone (straight); SimError
+        (a sentence) when there is none."""
+        g = self.geom
+        if flies:
+            if not g.inside(*goal):
+                raise SimError(f"the goal {_fmt(*goal)} is outside the site")
+            return [start, goal]
+        if g.inside(*goal) and self.grid[g.cell_of(*goal)] == ROCK:
+            raise SimError(f"the goal {_fmt(*goal)} lies in impassable terrain (rocks)")
+        try:
+            return plan(self.grid, g, start, goal, self.slow_cost)
+        except NoPath as e:
+            raise SimError(f"no route from {_fmt(*start)} to {_fmt(*goal)}: {e}") from None
 
     # ------------------------------------------------------------ generation
 

@@ -19,19 +19,13 @@ from typing import Any
 
 import numpy as np
 
+from backend.protocol import mapfeed as mf
+from sim.errors import SimError
 from sim.objects import BoxState, RssState, Stone, _fmt, merge_rss, newer_stone
-from sim.pathing import ROCK, SLOW, GridGeom, NoPath, line_max, plan
+from sim.pathing import SLOW, GridGeom
 from sim.robot import DEFAULT_MODELS, SimRobot
 from sim.terrain import Terrain
 from sim.worldfile import RobotStart, WorldFile
-
-# what the map feed's terrain layer says about a cell
-T_UNKNOWN, T_FREE, T_SLOW, T_ROCK = 0, 1, 2, 3
-
-
-class SimError(Exception):
-    """A rule of the world refused something; the message is a sentence."""
-
 
 # ---------------------------------------------------------------- the world
 
@@ -46,7 +40,7 @@ class World:
         self.geom = GridGeom(s.x_min, s.y_min, s.cell, nx, ny)
         self.models = {**DEFAULT_MODELS, **spec.models}
         rng = np.random.default_rng(self.seed)
-        self.terrain = Terrain(spec, self.geom, rng).grid
+        self.terrain = Terrain(spec, self.geom, rng)
         shape = self.geom.shape
         self.explored = np.zeros(shape, dtype=bool)  # truth: seen by any robot
         self.ground_explored = np.zeros(shape, dtype=bool)  # what the operator has
@@ -82,10 +76,8 @@ class World:
         self.ground_deliveries: dict[str, dict[str, Any]] = {}  # stone id -> delivery
         self.ground_robots: dict[str, dict[str, Any]] = {}  # name -> state as last heard
         self.objects_version = 0
-        self.slow_cost = 1.0 / spec.terrain.slow_factor
 
     def _place_rss(self, rng: np.random.Generator) -> None:
-        g = self.geom
         for r in self.spec.rss:
             state = RssState(r.name, r.x, r.y, r.radius, r.max_score)
             for k in range(r.stones):
@@ -93,7 +85,7 @@ class World:
                     ang = float(rng.uniform(0, 2 * math.pi))
                     dist = r.radius * math.sqrt(float(rng.uniform(0, 1)))
                     x, y = r.x + dist * math.cos(ang), r.y + dist * math.sin(ang)
-                    if g.inside(x, y) and self.terrain[g.cell_of(x, y)] != ROCK:
+                    if self.terrain.passable(x, y):
                         break
                 sid = f"{r.name}-s{k + 1}"
                 self.stones[sid] = Stone(sid, r.name, round(x, 2), round(y, 2))
@@ -149,11 +141,6 @@ class World:
         self.events.append(f"[{self.now():7.0f} s] {text}")
 
     # ------------------------------------------------------------ queries
-
-    def terrain_at(self, x: float, y: float) -> int:
-        if not self.geom.inside(x, y):
-            return ROCK
-        return int(self.terrain[self.geom.cell_of(x, y)])
 
     def dist_to_lander(self, x: float, y: float) -> float:
         return math.hypot(x - self.spec.lander.x, y - self.spec.lander.y)
@@ -360,44 +347,10 @@ class World:
         if robot.battery < up_to:
             robot.battery = min(up_to, robot.battery + dt * robot.model.charge_per_minute / 60.0)
 
-    # ------------------------------------------------------------ planning
-
-    def plan_route(self, robot: SimRobot, goal: tuple[float, float]) -> list[tuple[float, float]]:
-        """Waypoints for a rover (terrain-aware) or a drone (straight)."""
-        start = (robot.x, robot.y)
-        g = self.geom
-        if robot.kind == "drone":
-            if not g.inside(*goal):
-                raise SimError(f"the goal {_fmt(*goal)} is outside the site")
-            return [start, goal]
-        if g.inside(*goal) and self.terrain[g.cell_of(*goal)] == ROCK:
-            raise SimError(f"the goal {_fmt(*goal)} lies in impassable terrain (rocks)")
-        try:
-            return plan(self.terrain, g, start, goal, self.slow_cost)
-        except NoPath as e:
-            raise SimError(f"no route from {_fmt(*start)} to {_fmt(*goal)}: {e}") from None
-
-    def nearest_free(self, x: float, y: float, max_r: float = 10.0) -> tuple[float, float] | None:
-        """Nearest passable cell centre to (x, y) within max_r, or None."""
-        if self.geom.inside(x, y) and self.terrain[self.geom.cell_of(x, y)] != ROCK:
-            return x, y
-        rows, cols, mask = self.geom.disk(x, y, max_r)
-        ok = mask & (self.terrain[rows, cols] != ROCK)
-        if not ok.any():
-            return None
-        ii, jj = np.nonzero(ok)
-        xs = self.geom.xs[cols][jj]
-        ys = self.geom.ys[rows][ii]
-        k = int(np.argmin((xs - x) ** 2 + (ys - y) ** 2))
-        return float(xs[k]), float(ys[k])
-
-    def straight_clear(self, a: tuple[float, float], b: tuple[float, float]) -> bool:
-        return line_max(self.terrain, self.geom, a, b) < ROCK
-
     # ------------------------------------------------------------ layers for the map feed
 
     def ground_layers(self) -> dict[str, np.ndarray]:
-        terrain = np.where(self.ground_explored, self.terrain + 1, T_UNKNOWN).astype(np.uint8)
+        terrain = np.where(self.ground_explored, self.terrain.grid, mf.T_UNKNOWN).astype(np.uint8)
         cov = np.where(self.coverage > 0, np.maximum(1, np.rint(self.coverage * 255)), 0).astype(
             np.uint8
         )

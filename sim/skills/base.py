@@ -17,11 +17,11 @@ from typing import Any, NoReturn
 
 from backend.agent import SkillContext, SkillFailed, Success
 from backend.core.model import Pose, Position
+from sim.errors import SimError
 from sim.objects import _fmt
 from sim.pathing import SLOW, Follower
 from sim.robot import SimRobot
 from sim.skills.host import SkillHost
-from sim.world import SimError
 
 CLIMB_RATE = 1.0  # m/s, drone
 RESYNC_S = 120.0  # sim seconds behind the clock past which a robot stops catching up
@@ -226,7 +226,8 @@ class SkillBase:
 
     def _route(self, goal: tuple[float, float]) -> list[tuple[float, float]]:
         try:
-            return self.world.plan_route(self.robot, goal)
+            r = self.robot
+            return self.world.terrain.route((r.x, r.y), goal, flies=r.kind == "drone")
         except SimError as e:
             raise self.fail(str(e)) from None
 
@@ -236,7 +237,7 @@ class SkillBase:
         r, w = self.robot, self.world
         if r.kind == "drone":
             return speed, 0.0
-        code = w.terrain_at(r.x, r.y)
+        code = w.terrain.at(r.x, r.y)
         v = speed * (w.spec.terrain.slow_factor if code == SLOW else 1.0)
         return v, w.drive_energy(r, 1.0, code)
 

@@ -167,7 +167,7 @@ class MobilitySkills(SkillBase):
         w = self.world
         cells = w.geom.polygon_mask(poly)
         if self.robot.kind != "drone":
-            cells &= w.terrain != ROCK
+            cells &= w.terrain.grid != ROCK
         if not cells.any():
             raise self.fail(
                 "the area holds no cell this robot can map (too small, or all impassable)"
@@ -188,7 +188,7 @@ class MobilitySkills(SkillBase):
         for wp in lanes:
             if survey.done() or survey.drone_must_return():
                 break
-            target = wp if r.kind == "drone" else w.nearest_free(*wp, max_r=rng)
+            target = wp if r.kind == "drone" else w.terrain.nearest_free(*wp, max_r=rng)
             if target is None:
                 continue
             try:

@@ -36,7 +36,7 @@ class PowerSkills(SkillBase):
         lx, ly = w.spec.lander.x, w.spec.lander.y
         k = max(0.0, (w.spec.lander.pad_radius - PAD_INSIDE) / d)
         goal = (lx + (r.x - lx) * k, ly + (r.y - ly) * k)
-        free = w.nearest_free(*goal, max_r=w.spec.lander.pad_radius) or goal
+        free = w.terrain.nearest_free(*goal, max_r=w.spec.lander.pad_radius) or goal
         await self.move(
             ctx,
             free,

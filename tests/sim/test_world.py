@@ -47,16 +47,17 @@ def world(spec) -> World:
 
 def test_default_world_is_valid_and_deterministic(spec) -> None:
     a, b, c = World(spec, seed=1), World(spec, seed=1), World(spec, seed=2)
-    assert np.array_equal(a.terrain, b.terrain)
+    assert np.array_equal(a.terrain.grid, b.terrain.grid)
     assert [(s.id, s.x, s.y) for s in a.stones.values()] == [
         (s.id, s.x, s.y) for s in b.stones.values()
     ]
-    assert not np.array_equal(a.terrain, c.terrain)
+    assert not np.array_equal(a.terrain.grid, c.terrain.grid)
     assert [(s.x, s.y) for s in a.stones.values()] != [(s.x, s.y) for s in c.stones.values()]
     # a few hundred metres, some slow and some impassable ground
     assert a.geom.x1 - a.geom.x0 >= 200
-    counts = np.bincount(a.terrain.ravel(), minlength=3)
-    assert counts[1] > 0 and counts[2] > 0
+    counts = np.bincount(a.terrain.grid.ravel(), minlength=4)
+    assert counts[mf.T_SLOW] > 0 and counts[mf.T_ROCK] > 0
+    assert counts[mf.T_UNKNOWN] == 0  # the truth knows every cell
 
 
 def test_pilot_scenario_layout(world: World) -> None:
@@ -77,7 +78,7 @@ def test_pilot_scenario_layout(world: World) -> None:
     assert world.spec.comms.direct_range == 0  # robots talk through the network only
     # every RSS and stone is reachable by a rover
     for stone in world.stones.values():
-        assert world.terrain_at(stone.x, stone.y) != ROCK
+        assert world.terrain.at(stone.x, stone.y) != ROCK
 
 
 def test_world_file_errors_point_at_line_and_field(tmp_path: Path) -> None:
@@ -164,25 +165,25 @@ def test_exploration_reveals_rss_and_reaches_the_ground_only_in_range(spec) -> N
     assert set(world.ground_rss) == {"RSS-A", "RSS-C"}
     assert world.ground_explored[i, j]
     layers = world.ground_layers()
-    assert layers["terrain"][i, j] == world.terrain[i, j] + 1
+    assert layers["terrain"][i, j] == world.terrain.grid[i, j]  # the codes are the feed's
     assert layers["terrain"][world.geom.cell_of(-150.0, -150.0)] == mf.T_UNKNOWN
 
 
 def test_path_avoids_impassable_cells(world: World) -> None:
     rover = world.add_robot("lru1", "lru_science")
-    start = world.nearest_free(45.0, 38.0)
-    goal = world.nearest_free(80.0, 38.0)
+    start = world.terrain.nearest_free(45.0, 38.0)
+    goal = world.terrain.nearest_free(80.0, 38.0)
     assert start and goal
     rover.x, rover.y = start
-    route = world.plan_route(rover, goal)
-    assert not world.straight_clear(start, goal)  # the crater lies between
+    route = world.terrain.route(start, goal, flies=False)
+    assert not world.terrain.straight_clear(start, goal)  # the crater lies between
     for a, b in zip(route, route[1:], strict=False):
         rows, cols = segment_cells(world.geom, a[0], a[1], b[0], b[1])
-        assert (world.terrain[rows, cols] != ROCK).all()
+        assert (world.terrain.grid[rows, cols] != ROCK).all()
     f = Follower(route)
     assert f.total > math.dist(start, goal) + 5
     with pytest.raises(Exception, match="impassable"):
-        world.plan_route(rover, (62.0, 38.0))  # the crater floor
+        world.terrain.route((rover.x, rover.y), (62.0, 38.0), flies=False)  # the crater floor
 
 
 def test_lawnmower_covers_the_polygon() -> None:
