@@ -118,7 +118,7 @@ class SimFleet:
         self._seq = 0
         self.feed_id = uuid.uuid4().hex[:12]  # a restarted sim is a new feed: followers resync
         self._encoder: mf.TileEncoder | None = None
-        self._objects: dict[str, Any] | None = None
+        self._objects: mf.MapObjects | None = None
         self._session = None
         self._entities: list[Any] = []
         self._delta_pub = None
@@ -269,8 +269,8 @@ class SimFleet:
                     height=g.ny,
                 )
             )
-            self._encoder.delta(self.world.ground_layers())  # the snapshot's starting point (seq 0)
-            self._objects = self.world.ground_objects()
+            self._encoder.delta(self._layers())  # the snapshot's starting point (seq 0)
+            self._objects = self.world.ground.objects()
             self._delta_pub = transport.declare_publisher(s, mf.KEY_MAP_DELTA)
             self._status_pub = transport.declare_publisher(s, mf.KEY_STATUS_LIVE)
             self._entities += [
@@ -326,7 +326,7 @@ class SimFleet:
         return self.comms_window is None or self.comms_window.is_open(self.now())
 
     async def _physics(self) -> None:
-        """Idle robots: charge at the lander; hovering drones drain. Link uplink."""
+        """Idle robots: charge at the lander; hovering drones drain. The robots' downlinks."""
         loop = asyncio.get_running_loop()
         w = self.world
         while True:
@@ -349,14 +349,18 @@ class SimFleet:
                         )
                 elif w.docked(r):
                     w.charge(r, dt)
-            w.pump(now, self.link_delay / self.speed, ground_open=self.ground_open())
+            w.pump_downlink(now, self.link_delay / self.speed, ground_open=self.ground_open())
 
     # ------------------------------------------------------------ map feed
 
+    def _layers(self) -> dict[str, Any]:
+        """The map feed's layers as the ground knows them."""
+        return self.world.ground.layers(self.world.terrain.grid, self.world.coverage)
+
     def _map_delta(self) -> mf.MapDelta | None:
         assert self._encoder is not None
-        tiles = self._encoder.delta(self.world.ground_layers())
-        objects = self.world.ground_objects()
+        tiles = self._encoder.delta(self._layers())
+        objects = self.world.ground.objects()
         changed = objects != self._objects
         if not tiles and not changed:
             return None
@@ -368,7 +372,7 @@ class SimFleet:
             sim_time=round(self.world.now(), 2),
             speed=self.speed,
             tiles=tiles,
-            objects=_objects_model(objects) if changed else None,
+            objects=objects if changed else None,
         )
 
     async def _feed(self) -> None:
@@ -389,7 +393,7 @@ class SimFleet:
             sim_time=round(self.world.now(), 2),
             speed=self.speed,
             tiles=self._encoder.full(),
-            objects=_objects_model(self._objects),
+            objects=self._objects,
         )
 
     async def _on_snapshot(self, payload: bytes) -> bytes:
@@ -410,9 +414,9 @@ class SimFleet:
         """What a new live publication is sent for (ground view only)."""
         w = self.world
         return (
-            w.ground_score,
-            len(w.ground_deliveries),
-            w.objects_version,
+            w.ground.score,
+            len(w.ground.deliveries),
+            w.ground.version,
             tuple(
                 (
                     r.name,
@@ -449,23 +453,6 @@ class SimFleet:
                     payload = mf.dump(self.status())
                     self.status_bytes += len(payload)
                     self._status_pub.put(payload)
-
-
-def _objects_model(objects: dict[str, Any]) -> mf.MapObjects:
-    return mf.MapObjects(
-        lander=mf.LanderItem(**objects["lander"]),
-        boxes=[mf.BoxItem(**b) for b in objects["boxes"]],
-        rss=[
-            mf.RssItem(**{k: v for k, v in r.items() if k in mf.RssItem.model_fields})
-            for r in objects["rss"]
-        ],
-        stones=[
-            mf.StoneItem(**{k: v for k, v in s.items() if k in mf.StoneItem.model_fields})
-            for s in objects["stones"]
-            if s.get("state") != "hidden"
-        ],
-        score=objects["score"],
-    )
 
 
 def wants_truth(payload: bytes) -> bool:

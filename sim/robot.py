@@ -1,12 +1,10 @@
 """A simulated robot: its model, where it is, its battery, what it carries and
-knows, and what waits aboard for the link to the ground."""
+knows (what it has to tell the ground waits in sim/downlink.py)."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-
-import numpy as np
 
 from sim.objects import Knowledge
 from sim.worldfile import RobotModel
@@ -52,11 +50,6 @@ class SimRobot:
     sim_seconds: float = 0.0  # robot time stepped by skills
     result: str = ""  # the outcome of its last skill (reported with its state)
     paused_s: float = 0.0  # sim seconds its skills spent paused (the fleet counts them)
-    passed_coverage: bool = False  # moved through coverage since the last uplink (see pump)
-    # uplink to the ground: what waits for coverage, and what is on its way
-    outbox: list[Callable[[], None]] = field(default_factory=list)
-    in_flight: list[tuple[float, Callable[[], None]]] = field(default_factory=list)
-    pending_cells: np.ndarray | None = None  # explored, not yet sent
 
     @property
     def kind(self) -> str:

@@ -4,10 +4,12 @@ Pure state and rules: no Zenoh, no asyncio. The fleet (sim/fleet.py) steps
 robots through it from skill handlers.
 
 Truth and ground view: the world holds the truth (every explored cell, every
-RSS and stone). What the operator sees (the map feed) is the *ground view*:
-what robots sent over the link. A robot out of communication coverage keeps
-what it learns in its outbox; it reaches the ground once the robot is back in
-range (after the link delay).
+RSS and stone). What the operator sees (the map feed) is the *ground view*
+(sim/ground.py): what robots sent over their downlinks (sim/downlink.py). A
+robot out of communication coverage keeps what it learns aboard; it reaches
+the ground once the robot is back in range (after the link delay). Elsewhere:
+the terrain and routes (sim/terrain.py), the objects (sim/objects.py), a
+robot (sim/robot.py), energy (sim/energy.py).
 """
 
 from __future__ import annotations
@@ -20,8 +22,10 @@ from typing import Any
 import numpy as np
 
 from backend.protocol import mapfeed as mf
+from sim.downlink import DownlinkPump
 from sim.errors import SimError
-from sim.objects import BoxState, RssState, Stone, _fmt, merge_rss, newer_stone
+from sim.ground import GroundView, News, RegionSeen, RobotState, rss_item
+from sim.objects import BoxState, RssState, Stone, _fmt
 from sim.pathing import SLOW, GridGeom
 from sim.robot import DEFAULT_MODELS, SimRobot
 from sim.terrain import Terrain
@@ -43,7 +47,6 @@ class World:
         self.terrain = Terrain(spec, self.geom, rng)
         shape = self.geom.shape
         self.explored = np.zeros(shape, dtype=bool)  # truth: seen by any robot
-        self.ground_explored = np.zeros(shape, dtype=bool)  # what the operator has
         self.coverage = np.zeros(shape, dtype=np.float32)  # link quality 0..1
         self.rss: dict[str, RssState] = {}
         self.stones: dict[str, Stone] = {}
@@ -67,15 +70,19 @@ class World:
         self.clock = 0.0  # sim seconds (advanced by the fleet)
         # the fleet's clock between its updates of `clock` (None: `clock` is the time)
         self.clock_source: Callable[[], float] | None = None
-        # ground view of objects (what robots reported over the link)
-        self.ground_rss: dict[str, dict[str, Any]] = {}
-        self.ground_stones: dict[str, dict[str, Any]] = {}
-        self.ground_boxes: dict[str, dict[str, Any]] = {
-            n: b.public() for n, b in self.boxes.items()
-        }
-        self.ground_deliveries: dict[str, dict[str, Any]] = {}  # stone id -> delivery
-        self.ground_robots: dict[str, dict[str, Any]] = {}  # name -> state as last heard
-        self.objects_version = 0
+        lander = spec.lander
+        # what the ground knows: what robots sent over their downlinks
+        self.ground = GroundView(
+            shape,
+            self.boxes,
+            mf.LanderItem(
+                x=lander.x,
+                y=lander.y,
+                pad_radius=lander.pad_radius,
+                comm_radius=lander.comm_radius,
+            ),
+        )
+        self.downlink = DownlinkPump(self.ground, shape)
 
     def _place_rss(self, rng: np.random.Generator) -> None:
         for r in self.spec.rss:
@@ -110,7 +117,6 @@ class World:
         robot = SimRobot(
             name, robot_type, model, x=start.x, y=start.y, yaw=start.yaw, battery=start.battery
         )
-        robot.pending_cells = np.zeros(self.geom.shape, dtype=bool)
         if model.kind == "static":
             robot.battery = 1.0
         # every robot starts knowing the lander's boxes (it is the shared landmark)
@@ -179,7 +185,7 @@ class World:
         return best
 
     def explored_fraction(self, mask: np.ndarray | None = None, *, ground: bool = False) -> float:
-        grid = self.ground_explored if ground else self.explored
+        grid = self.ground.explored if ground else self.explored
         if mask is None:
             return float(grid.mean())
         total = int(mask.sum())
@@ -214,94 +220,42 @@ class World:
                     linked = True
         self.coverage = cov
 
-    # ------------------------------------------------------------ uplink (robot -> ground)
+    # ------------------------------------------------------------ downlink (robot -> ground)
 
-    def uplink(self, robot: SimRobot, fn: Callable[[], None]) -> None:
-        """Send something to the ground: it arrives once the robot is in range
-        (plus the link delay); see `pump`."""
-        robot.outbox.append(fn)
+    def tell_ground(self, robot: SimRobot, news: News) -> None:
+        """It reaches the ground once the robot can send (sim/downlink.py)."""
+        self.downlink.send(robot, news)
 
-    def pump(self, now: float, delay: float, ground_open: bool = True) -> bool:
-        """Move what in-range robots have to send onto the link (and their state:
-        pose, battery, activity, last result); deliver what has arrived. `now` and
-        `delay` in wall seconds; out of a comms window (`ground_open` False) nothing
-        leaves, what is on its way arrives. True if anything arrived."""
-        arrived = False
-        for robot in self.robots.values():
-            # a robot that crossed covered ground between two pumps sent from there
-            passed, robot.passed_coverage = robot.passed_coverage, False
-            if ground_open and (self.in_range(robot) or passed):
-                assert robot.pending_cells is not None
-                if robot.pending_cells.any():
-                    cells = np.flatnonzero(robot.pending_cells)
-                    robot.pending_cells[:] = False
-                    robot.outbox.append(lambda c=cells: self._ground_cells(c))
-                state = self.robot_state(robot)
-                robot.outbox.append(lambda n=robot.name, s=state: self._ground_robot(n, s))
-                robot.in_flight += [(now + delay, fn) for fn in robot.outbox]
-                robot.outbox = []
-            if robot.in_flight:
-                due = [fn for t, fn in robot.in_flight if t <= now]
-                if due:
-                    robot.in_flight = [(t, fn) for t, fn in robot.in_flight if t > now]
-                    for fn in due:
-                        fn()
-                    arrived = True
-        return arrived
+    def pump_downlink(self, now: float, delay: float, ground_open: bool = True) -> bool:
+        """Every robot's downlink (`DownlinkPump.pump`); True if anything arrived."""
+        return self.downlink.pump(
+            self.robots.values(),
+            now,
+            delay,
+            ground_open=ground_open,
+            in_range=self.in_range,
+            state_of=self.robot_state,
+        )
 
-    def _ground_cells(self, cells: np.ndarray) -> None:
-        self.ground_explored.ravel()[cells] = True
-
-    def robot_state(self, robot: SimRobot) -> dict[str, Any]:
+    def robot_state(self, robot: SimRobot) -> RobotState:
         """What a robot reports about itself (the ground's record of it, once heard)."""
-        return {
-            "x": round(robot.x, 2),
-            "y": round(robot.y, 2),
-            "z": round(robot.z, 2),
-            "yaw": round(robot.yaw, 3),
-            "battery": round(min(1.0, max(0.0, robot.battery)), 4),
-            "link": round(self.link_quality(robot.x, robot.y), 3),
-            "airborne": robot.airborne,
-            "docked": self.docked(robot),
-            "box": robot.box,
-            "stones": list(robot.stones),
-            "activity": robot.activity,
-            "result": robot.result,
-            "odometer_m": round(robot.odometer, 1),
-            "sim_seconds": round(robot.sim_seconds, 1),
-            "heard_at": round(self.now(), 1),
-        }
-
-    def _ground_robot(self, name: str, state: dict[str, Any]) -> None:
-        self.ground_robots[name] = state
-
-    def _ground_object(self, kind: str, key: str, value: dict[str, Any] | None) -> None:
-        table = {
-            "rss": self.ground_rss,
-            "stone": self.ground_stones,
-            "box": self.ground_boxes,
-            "delivery": self.ground_deliveries,
-        }[kind]
-        if value is None:
-            table.pop(key, None)
-        elif kind == "rss":
-            table[key] = merge_rss(table.get(key), value)
-        elif kind == "stone" and not newer_stone(table.get(key), value):
-            return  # a robot's older news of the stone (e.g. back in range only now)
-        else:
-            table[key] = dict(value)
-        self.objects_version += 1
-
-    @property
-    def ground_score(self) -> float:
-        """The score as the ground knows it: the deliveries robots reported."""
-        return round(sum(d["score"] for d in self.ground_deliveries.values()), 6)
-
-    def tell_ground(
-        self, robot: SimRobot, kind: str, key: str, value: dict[str, Any] | None
-    ) -> None:
-        value = dict(value) if value is not None else None
-        self.uplink(robot, lambda: self._ground_object(kind, key, value))
+        return RobotState(
+            x=round(robot.x, 2),
+            y=round(robot.y, 2),
+            z=round(robot.z, 2),
+            yaw=round(robot.yaw, 3),
+            battery=round(min(1.0, max(0.0, robot.battery)), 4),
+            link=round(self.link_quality(robot.x, robot.y), 3),
+            airborne=robot.airborne,
+            docked=self.docked(robot),
+            box=robot.box,
+            stones=list(robot.stones),
+            activity=robot.activity,
+            result=robot.result,
+            odometer_m=round(robot.odometer, 1),
+            sim_seconds=round(robot.sim_seconds, 1),
+            heard_at=round(self.now(), 1),
+        )
 
     # ------------------------------------------------------------ sensing
 
@@ -313,8 +267,7 @@ class World:
         sub = self.explored[rows, cols]
         new = int((mask & ~sub).sum())
         sub |= mask
-        assert robot.pending_cells is not None
-        robot.pending_cells[rows, cols] |= mask & ~self.ground_explored[rows, cols]
+        self.downlink.explored(robot, rows, cols, mask & ~self.ground.explored[rows, cols])
         return new
 
     def discover(self, robot: SimRobot, r: float) -> list[str]:
@@ -326,7 +279,7 @@ class World:
             if math.hypot(robot.x - rss.x, robot.y - rss.y) <= r + rss.radius * 0.5:
                 rss.found_by.add(robot.name)
                 info = robot.knowledge.learn_rss(rss.sighting())
-                self.tell_ground(robot, "rss", rss.name, info)
+                self.tell_ground(robot, RegionSeen(rss_item(info)))
                 self.log(f"{robot.name} discovered {rss.name} at {_fmt(rss.x, rss.y)}")
                 found.append(rss.name)
         return found
@@ -346,27 +299,3 @@ class World:
     def charge(self, robot: SimRobot, dt: float, up_to: float = 1.0) -> None:
         if robot.battery < up_to:
             robot.battery = min(up_to, robot.battery + dt * robot.model.charge_per_minute / 60.0)
-
-    # ------------------------------------------------------------ layers for the map feed
-
-    def ground_layers(self) -> dict[str, np.ndarray]:
-        terrain = np.where(self.ground_explored, self.terrain.grid, mf.T_UNKNOWN).astype(np.uint8)
-        cov = np.where(self.coverage > 0, np.maximum(1, np.rint(self.coverage * 255)), 0).astype(
-            np.uint8
-        )
-        return {"terrain": terrain, "coverage": cov}
-
-    def ground_objects(self) -> dict[str, Any]:
-        lander = self.spec.lander
-        return {
-            "lander": {
-                "x": lander.x,
-                "y": lander.y,
-                "pad_radius": lander.pad_radius,
-                "comm_radius": lander.comm_radius,
-            },
-            "boxes": [dict(v) for _k, v in sorted(self.ground_boxes.items())],
-            "rss": [dict(v) for _k, v in sorted(self.ground_rss.items())],
-            "stones": [dict(v) for _k, v in sorted(self.ground_stones.items())],
-            "score": self.ground_score,
-        }

@@ -18,6 +18,7 @@ from typing import Any, NoReturn
 from backend.agent import SkillContext, SkillFailed, Success
 from backend.core.model import Pose, Position
 from sim.errors import SimError
+from sim.ground import StoneReport, StoneSeen
 from sim.objects import _fmt
 from sim.pathing import SLOW, Follower
 from sim.robot import SimRobot
@@ -289,7 +290,7 @@ class SkillBase:
             r.odometer += moved
         self.world.reveal(r, leg.sense)
         if self.world.in_range(r):
-            r.passed_coverage = True  # its news goes out at the next uplink
+            self.world.downlink.crossed_coverage(r)  # its news goes out at the next pump
         if leg.discover:
             for name in self.world.discover(r, leg.sense):
                 self.host.note(r, f"found {name}")
@@ -318,7 +319,7 @@ class SkillBase:
     def learn_stone(self, info: dict[str, Any]) -> None:
         """The robot saw the stone (the truth, so the newest): it knows it and reports it."""
         self.robot.knowledge.learn_stone(info)
-        self.world.tell_ground(self.robot, "stone", info["id"], info)
+        self.world.tell_ground(self.robot, StoneSeen(StoneReport.of(info)))
 
     def done(self, ctx: SkillContext, text: str) -> Success:
         """The skill's result: kept for the status, reported as its outcome."""

@@ -7,6 +7,8 @@ from typing import Any
 
 from backend.agent import SkillContext, Success
 from backend.core.model import Pose, Position
+from backend.protocol import mapfeed as mf
+from sim.ground import BoxSeen, Delivered, box_item
 from sim.objects import BoxState, Stone, _fmt
 from sim.robot import SimRobot
 from sim.skills.base import SkillBase, pct, xy
@@ -185,7 +187,7 @@ class ManipulationSkills(SkillBase):
             }
             w.delivered.append(delivery)
             self.learn_stone(stone.public())
-            w.tell_ground(r, "delivery", sid, delivery)
+            w.tell_ground(r, Delivered(mf.Delivery(**delivery)))
             w.log(f"{r.name} delivered {sid}: +{score:g}, score {w.score:g}")
             parts.append(f"{sid} of {stone.rss} +{score:g}")
             await self._tell_identifiers(stone)
@@ -424,7 +426,7 @@ class ManipulationSkills(SkillBase):
         r, w = self.robot, self.world
         info = w.boxes[name].public()
         r.knowledge.boxes[name] = dict(info)
-        w.tell_ground(r, "box", name, info)
+        w.tell_ground(r, BoxSeen(box_item(info)))
         for other in sorted(w.robots):
             if other != r.name:
                 await self.host.tell(r, other, "box", info)
@@ -443,7 +445,7 @@ class ManipulationSkills(SkillBase):
             raise self.fail(f"the shelf changed meanwhile: {box} not loaded")
         b.where, b.slot = "shelf", slot
         r.knowledge.boxes[box] = b.public()
-        w.tell_ground(r, "box", box, b.public())
+        w.tell_ground(r, BoxSeen(box_item(b.public())))
         w.log(f"{r.name} shelved {box} on slot {slot}")
         for other in sorted(w.robots.values(), key=lambda o: o.name):
             if other.has("manipulator"):

@@ -8,6 +8,7 @@ from typing import Any
 
 from backend.agent import SkillContext, Success
 from backend.core.model import Pose, Position
+from sim.ground import RegionSeen, rss_item
 from sim.objects import RssState, Stone, _fmt, newer_stone
 from sim.robot import SimRobot
 from sim.skills.base import SkillBase, xy
@@ -81,7 +82,7 @@ class ScienceSkills(SkillBase):
             msg = f"{rss.name}: top stone score {rss.max_score:g}"
             w.log(f"{r.name} imaged {rss.name}: top stone score {rss.max_score:g}")
         info = r.knowledge.learn_rss(info)
-        w.tell_ground(r, "rss", rss.name, info)
+        w.tell_ground(r, RegionSeen(rss_item(info)))
         return msg
 
     # ------------------------------------------------------------ identify_stone
@@ -143,7 +144,7 @@ class ScienceSkills(SkillBase):
             return
         rss.found_by.add(r.name)
         info = r.knowledge.learn_rss(rss.sighting())
-        w.tell_ground(r, "rss", rss.name, info)
+        w.tell_ground(r, RegionSeen(rss_item(info)))
         w.log(f"{r.name} discovered {rss.name} at {_fmt(rss.x, rss.y)}")
 
     async def _identify_by_camera(

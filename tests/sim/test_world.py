@@ -150,21 +150,21 @@ def test_exploration_reveals_rss_and_reaches_the_ground_only_in_range(spec) -> N
     assert world.discover(near, 10.0) == ["RSS-A"]
     assert world.discover(far, 10.0) == ["RSS-C"]
     assert "RSS-A" in near.knowledge.rss and "RSS-C" not in near.knowledge.rss
-    assert world.pump(now=0.0, delay=0.0)
-    assert set(world.ground_rss) == {"RSS-A"}  # RSS-C waits aboard ardea
+    assert world.pump_downlink(now=0.0, delay=0.0)
+    assert set(world.ground.rss) == {"RSS-A"}  # RSS-C waits aboard ardea
     i, j = world.geom.cell_of(-32.0, 80.0)
-    assert world.explored[i, j] and not world.ground_explored[i, j]
+    assert world.explored[i, j] and not world.ground.explored[i, j]
     far.x, far.y = -20.0, 85.0
     near.x, near.y = -20.0, 72.0  # out of coverage too, but 13 m apart: direct radio
     assert not world.in_range(near) and world.can_talk(near, far)
     near.x, near.y = 29.0, 25.0
     far.x, far.y = 5.0, 5.0  # back in coverage
-    world.pump(now=1.0, delay=2.0)  # on its way: a 2 s link delay
-    assert "RSS-C" not in world.ground_rss
-    world.pump(now=3.5, delay=2.0)
-    assert set(world.ground_rss) == {"RSS-A", "RSS-C"}
-    assert world.ground_explored[i, j]
-    layers = world.ground_layers()
+    world.pump_downlink(now=1.0, delay=2.0)  # on its way: a 2 s link delay
+    assert "RSS-C" not in world.ground.rss
+    world.pump_downlink(now=3.5, delay=2.0)
+    assert set(world.ground.rss) == {"RSS-A", "RSS-C"}
+    assert world.ground.explored[i, j]
+    layers = world.ground.layers(world.terrain.grid, world.coverage)
     assert layers["terrain"][i, j] == world.terrain.grid[i, j]  # the codes are the feed's
     assert layers["terrain"][world.geom.cell_of(-150.0, -150.0)] == mf.T_UNKNOWN
 
@@ -354,8 +354,8 @@ def test_science_image_reveals_the_top_score(world: World) -> None:
     lru1.x, lru1.y = 22.0, 20.0
     call(RobotSkills(fake_fleet(world), lru1), "take_science_image", target=Pose(x=29.0, y=23.0))
     assert lru1.knowledge.rss["RSS-A"]["top_score"] == 0.5
-    world.pump(0.0, 0.0)
-    assert world.ground_rss["RSS-A"]["top_score"] == 0.5
+    world.pump_downlink(0.0, 0.0)
+    assert world.ground.rss["RSS-A"].top_score == 0.5
 
 
 def exchanging_fleet(world: World) -> Any:
@@ -378,13 +378,13 @@ def test_a_revealed_top_score_stays_when_another_robot_discovers_the_region(worl
     lru2 = world.add_robot("lru2", "lru_manipulator")
     lru1.x, lru1.y = 22.0, 20.0
     call(RobotSkills(fake_fleet(world), lru1), "take_science_image", target=Pose(x=29, y=23))
-    world.pump(0.0, 0.0)
-    assert world.ground_rss["RSS-A"]["top_score"] == 0.5
+    world.pump_downlink(0.0, 0.0)
+    assert world.ground.rss["RSS-A"].top_score == 0.5
     WorldExchange(world, lru2).tell_rss(lru1.knowledge.rss["RSS-A"], "lru1")
     lru2.x, lru2.y = 29.0, 23.0
     assert world.discover(lru2, 10.0) == ["RSS-A"]  # a later report, without the top score
-    world.pump(1.0, 0.0)
-    assert world.ground_rss["RSS-A"]["top_score"] == 0.5  # the map keeps it
+    world.pump_downlink(1.0, 0.0)
+    assert world.ground.rss["RSS-A"].top_score == 0.5  # the map keeps it
     assert lru2.knowledge.rss["RSS-A"]["top_score"] == 0.5  # and so does LRU2
 
 
