@@ -340,7 +340,7 @@ class SimFleet:
                         continue
                     r.paused_s += dt
                 if r.kind == "drone" and r.airborne:
-                    r.battery = max(0.0, r.battery - w.flight_energy(r, dt))
+                    r.battery = max(0.0, r.battery - r.flight_energy(dt))
                     if r.usable <= 0.0:
                         r.airborne, r.z = False, 0.0
                         w.log(
@@ -348,7 +348,7 @@ class SimFleet:
                             "battery at the reserve while hovering"
                         )
                 elif w.docked(r):
-                    w.charge(r, dt)
+                    r.charge(dt)
             w.pump_downlink(now, self.link_delay / self.speed, ground_open=self.ground_open())
 
     # ------------------------------------------------------------ map feed

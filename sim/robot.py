@@ -62,5 +62,21 @@ class SimRobot:
     def usable(self) -> float:
         return max(0.0, self.battery - self.model.reserve)
 
+    # energy, as fractions of a full battery (the model's rates)
+
+    def drive_energy(self, distance: float, factor: float = 1.0) -> float:
+        """Driving `distance` metres; `factor`: the ground's (sand costs more)."""
+        return distance * factor / self.model.metres_per_battery
+
+    def work_energy(self, dt: float, load: float = 1.0) -> float:
+        return dt * self.model.work_per_hour * load / 3600.0
+
+    def flight_energy(self, dt: float) -> float:
+        return dt / self.model.flight_s_per_battery
+
+    def charge(self, dt: float, up_to: float = 1.0) -> None:
+        if self.battery < up_to:
+            self.battery = min(up_to, self.battery + dt * self.model.charge_per_minute / 60.0)
+
     def pose_tuple(self) -> tuple[float, float]:
         return self.x, self.y

@@ -9,7 +9,7 @@ RSS and stone). What the operator sees (the map feed) is the *ground view*
 robot out of communication coverage keeps what it learns aboard; it reaches
 the ground once the robot is back in range (after the link delay). Elsewhere:
 the terrain and routes (sim/terrain.py), the objects (sim/objects.py), a
-robot (sim/robot.py), energy (sim/energy.py).
+robot and its energy (sim/robot.py).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from sim.downlink import DownlinkPump
 from sim.errors import SimError
 from sim.ground import GroundView, News, RegionSeen, RobotState, rss_item
 from sim.objects import BoxState, RssState, Stone, _fmt
-from sim.pathing import SLOW, GridGeom
+from sim.pathing import GridGeom
 from sim.robot import DEFAULT_MODELS, SimRobot
 from sim.terrain import Terrain
 from sim.worldfile import RobotStart, WorldFile
@@ -283,19 +283,3 @@ class World:
                 self.log(f"{robot.name} discovered {rss.name} at {_fmt(rss.x, rss.y)}")
                 found.append(rss.name)
         return found
-
-    # ------------------------------------------------------------ energy
-
-    def drive_energy(self, robot: SimRobot, distance: float, code: int) -> float:
-        factor = self.spec.terrain.slow_energy if code == SLOW else 1.0
-        return distance * factor / robot.model.metres_per_battery
-
-    def work_energy(self, robot: SimRobot, dt: float, load: float = 1.0) -> float:
-        return dt * robot.model.work_per_hour * load / 3600.0
-
-    def flight_energy(self, robot: SimRobot, dt: float) -> float:
-        return dt / robot.model.flight_s_per_battery
-
-    def charge(self, robot: SimRobot, dt: float, up_to: float = 1.0) -> None:
-        if robot.battery < up_to:
-            robot.battery = min(up_to, robot.battery + dt * robot.model.charge_per_minute / 60.0)

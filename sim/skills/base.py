@@ -113,9 +113,9 @@ class SkillBase:
         """Energy for dt seconds of work (a drone in the air: flight energy)."""
         r = self.robot
         if r.kind == "drone" and r.airborne:
-            r.battery -= self.world.flight_energy(r, dt)
+            r.battery -= r.flight_energy(dt)
         else:
-            r.battery -= self.world.work_energy(r, dt, load)
+            r.battery -= r.work_energy(dt, load)
         r.battery = max(0.0, r.battery)
 
     async def work(
@@ -238,9 +238,9 @@ class SkillBase:
         r, w = self.robot, self.world
         if r.kind == "drone":
             return speed, 0.0
-        code = w.terrain.at(r.x, r.y)
-        v = speed * (w.spec.terrain.slow_factor if code == SLOW else 1.0)
-        return v, w.drive_energy(r, 1.0, code)
+        slow = w.terrain.at(r.x, r.y) == SLOW
+        v = speed * (w.spec.terrain.slow_factor if slow else 1.0)
+        return v, r.drive_energy(1.0, w.spec.terrain.slow_energy if slow else 1.0)
 
     def _step_time(self, remaining: float, v: float, budget: Callable[[], float] | None) -> float:
         # the last step of a leg takes only the time it needs
@@ -251,8 +251,8 @@ class SkillBase:
 
     def _upkeep(self, dt: float) -> float:
         """Energy a moving robot spends by the second (a drone: all of its flight)."""
-        r, w = self.robot, self.world
-        return w.flight_energy(r, dt) if r.kind == "drone" else w.work_energy(r, dt)
+        r = self.robot
+        return r.flight_energy(dt) if r.kind == "drone" else r.work_energy(dt)
 
     def _advance(self, leg: MoveLeg, want: float, per_m: float, fixed: float) -> None:
         """One step of `want` metres, unless the battery runs out on the way."""
@@ -340,7 +340,7 @@ class SkillBase:
             dt = min(self.dt, seconds - done)
             await self.tick(ctx, dt)
             done += dt
-            r.battery = max(0.0, r.battery - self.world.flight_energy(r, dt))
+            r.battery = max(0.0, r.battery - r.flight_energy(dt))
             r.z = z0 + (altitude - z0) * min(1.0, done / seconds)
             ctx.progress(
                 frac0 + (frac1 - frac0) * done / seconds,

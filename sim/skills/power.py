@@ -57,11 +57,11 @@ class PowerSkills(SkillBase):
         )
 
     async def _charge(self, ctx: SkillContext, target_level: float) -> None:
-        r, w = self.robot, self.world
+        r = self.robot
         start = r.battery
         while r.battery < target_level - 1e-9:
             dt = await self.tick(ctx)
-            w.charge(r, dt, up_to=target_level)
+            r.charge(dt, up_to=target_level)
             span = max(target_level - start, 1e-9)
             rate = r.model.charge_per_minute / 60.0
             ctx.progress(

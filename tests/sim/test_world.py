@@ -300,7 +300,7 @@ def test_drone_refuses_a_flight_longer_than_its_battery_and_recharges_on_the_pad
     call(skills, "land", where="lander_pad")
     assert not drone.airborne and world.docked(drone)
     low = drone.battery
-    world.charge(drone, 60.0)
+    drone.charge(60.0)
     assert drone.battery == pytest.approx(low + drone.model.charge_per_minute)
 
 
