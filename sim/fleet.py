@@ -23,6 +23,8 @@ import uuid
 from collections import Counter, deque
 from typing import Any
 
+import zenoh
+
 from backend import transport
 from backend.agent import Link, RobotAgent
 from backend.core.library import Library
@@ -119,10 +121,10 @@ class SimFleet:
         self.feed_id = uuid.uuid4().hex[:12]  # a restarted sim is a new feed: followers resync
         self._encoder: mf.TileEncoder | None = None
         self._objects: mf.MapObjects | None = None
-        self._session = None
+        self._session: zenoh.Session | None = None
         self._entities: list[Any] = []
-        self._delta_pub = None
-        self._status_pub = None
+        self._delta_pub: zenoh.Publisher | None = None
+        self._status_pub: zenoh.Publisher | None = None
         self._tasks: list[asyncio.Task[None]] = []
         self._started_wall = 0.0
         self._clock_at = (0.0, 0.0)  # (wall, sim) the clock counts from
@@ -165,10 +167,16 @@ class SimFleet:
             zenoh_extra=self.zenoh_extra,
         )
         agent.time_scale = self.speed
-        agent.pose = lambda r=robot: Pose(
-            x=round(r.x, 3), y=round(r.y, 3), z=round(r.z, 3), yaw=round(r.yaw, 4)
-        )
-        agent.battery = lambda r=robot: r.battery
+
+        def pose() -> Pose:
+            r = robot
+            return Pose(x=round(r.x, 3), y=round(r.y, 3), z=round(r.z, 3), yaw=round(r.yaw, 4))
+
+        def battery() -> float:
+            return robot.battery
+
+        agent.pose = pose
+        agent.battery = battery
         agent.link = SimLink(self.world, robot, self)
         skills = RobotSkills(self, robot)
         handlers = skills.handlers()
@@ -252,11 +260,10 @@ class SimFleet:
 
     async def start(self) -> None:
         cfg = transport.client_config(self.connect, extra=self.zenoh_extra)
-        self._session = await asyncio.to_thread(
+        s = self._session = await asyncio.to_thread(
             transport.open_session, cfg, what="the mission server's router"
         )
         try:
-            s = self._session
             g = self.world.geom
             self._encoder = mf.TileEncoder(
                 mf.MapMeta(

@@ -7,7 +7,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from sim.objects import Knowledge
-from sim.worldfile import RobotModel
+from sim.worldfile import RobotKind, RobotModel
 
 DEFAULT_MODELS: dict[str, RobotModel] = {
     "lru_science": RobotModel(kind="rover", capabilities=["science_camera", "stereo_camera"]),
@@ -52,7 +52,7 @@ class SimRobot:
     paused_s: float = 0.0  # sim seconds its skills spent paused (the fleet counts them)
 
     @property
-    def kind(self) -> str:
+    def kind(self) -> RobotKind:
         return self.model.kind
 
     def has(self, capability: str) -> bool:

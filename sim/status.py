@@ -60,7 +60,7 @@ def truth(
     w = world
     return mf.SimTruth(
         score=round(w.score, 4),
-        delivered=[mf.Delivery(**d) for d in w.delivered],
+        delivered=list(w.delivered),
         regions=[
             mf.RegionTruth(
                 rss=r.name,

@@ -129,7 +129,7 @@ class Terrain:
     def _reachable(self, t: np.ndarray) -> np.ndarray:
         """Cells reachable from the lander (4-connected flood fill, numpy)."""
         passable = t != ROCK
-        reach = np.zeros_like(passable)
+        reach: np.ndarray = np.zeros_like(passable)
         reach[self.geom.cell_of(self.spec.lander.x, self.spec.lander.y)] = True
         while True:
             grown = reach.copy()

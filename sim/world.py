@@ -17,7 +17,6 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 
@@ -65,7 +64,7 @@ class World:
         self.robots: dict[str, SimRobot] = {}
         # scoring and referee's log
         self.score = 0.0
-        self.delivered: list[dict[str, Any]] = []
+        self.delivered: list[mf.Delivery] = []
         self.events: deque[str] = deque(maxlen=40)
         self.clock = 0.0  # sim seconds (advanced by the fleet)
         # the fleet's clock between its updates of `clock` (None: `clock` is the time)

@@ -13,7 +13,7 @@ Problems are reported like the mission files': `file:line:col: path: message`
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
+from typing import Final, Literal
 
 from pydantic import Field, ValidationError, model_validator
 
@@ -21,7 +21,8 @@ from backend.core.model import Name, Strict
 from backend.files import yamlio
 from backend.files.diagnostics import FileProblems, Issue, duplicate_issues, pydantic_issues
 
-WORLD_FORMAT = "missionctl/world@1"
+WORLD_FORMAT: Final = "missionctl/world@1"
+RobotKind = Literal["rover", "drone", "static"]
 
 BoxName = Name
 
@@ -143,7 +144,7 @@ class Box(Strict):
 class RobotModel(Strict):
     """Physical model of a robot type (by skill-library type name)."""
 
-    kind: Literal["rover", "drone", "static"]
+    kind: RobotKind
     description: str = ""
     capabilities: list[str] = Field(
         default_factory=list, description="science_camera, manipulator, ..."
@@ -261,9 +262,9 @@ def check_world(w: WorldFile) -> list[tuple[tuple[str | int, ...], str]]:
                     f"cruise speed {m.speed:g} is above max_speed {m.max_speed:g}",
                 )
             )
-    for name, r in w.robots.items():
-        if not _inside(s, r.x, r.y):
-            out.append((("robots", name), f"start ({r.x:g}, {r.y:g}) is outside the site"))
+    for name, start in w.robots.items():
+        if not _inside(s, start.x, start.y):
+            out.append((("robots", name), f"start ({start.x:g}, {start.y:g}) is outside the site"))
     return out
 
 

@@ -244,8 +244,10 @@ class SkillContext:
     async def ask(
         self, robot: str, topic: str, data: dict[str, Any] | None = None
     ) -> dict[str, Any] | None:
-        return await self.agent.ask(robot, topic, data)
+        answer: dict[str, Any] | None = await self.agent.ask(robot, topic, data)
+        return answer
 
     @_coroutine_only
     async def tell(self, robot: str, topic: str, data: dict[str, Any] | None = None) -> bool:
-        return await self.agent.tell(robot, topic, data)
+        delivered: bool = await self.agent.tell(robot, topic, data)
+        return delivered

@@ -307,7 +307,8 @@ def in_daemon_thread(
     returned: asyncio.Future[None] = loop.create_future()
 
     def settle(ok: bool, value: Any) -> None:
-        returned.done() or returned.set_result(None)
+        if not returned.done():
+            returned.set_result(None)
         if future.done():
             return  # cancelled (stopped) meanwhile
         if ok:

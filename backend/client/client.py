@@ -201,7 +201,7 @@ class MissionClient:
         self._pending: list[ev.EventBatch] = []  # events arriving during a resync
         self._pending_fleet: list[RobotInfo] = []  # presence changes arriving during a resync
         self._syncing = False
-        self._resync_task: asyncio.Task | None = None
+        self._resync_task: asyncio.Task[None] | None = None
         self._ids = itertools.count(1)
         self._malformed_keys: set[tuple[str, str]] = set()  # (what, key) already reported
 

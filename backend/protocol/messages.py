@@ -157,8 +157,11 @@ class FleetEvent(Strict):
     robot: RobotInfo
 
 
+AlertLevel = Literal["info", "warning", "error"]
+
+
 class Alert(Strict):
-    level: Literal["info", "warning", "error"] = "warning"
+    level: AlertLevel = "warning"
     kind: str = Field(
         "",
         description="what happened: failure | offline | reconcile | report_refused | command "
@@ -196,11 +199,13 @@ class Register(Strict):
     sent: datetime | None = Field(None, description="when it left the robot (robot's clock)")
 
 
+# why a registration was not accepted (stable)
+RegisterCode = Literal["", "protocol", "unknown_robot", "wrong_type", "taken"]
+
+
 class RegisterReply(Strict):
     accepted: bool = True
-    code: Literal["", "protocol", "unknown_robot", "wrong_type", "taken"] = Field(
-        "", description="why it was not accepted (stable)"
-    )
+    code: RegisterCode = Field("", description="why it was not accepted (stable)")
     reason: str = ""
     last_seq: int = Field(0, description="the ground applied its downlink up to here")
     missing: list[SkillId] = Field(

@@ -17,7 +17,7 @@ from typing import Any, NamedTuple, Protocol
 
 from backend.core.ops import Answer, DownlinkRefused, Report
 from backend.core.rules.engine import Applied, Engine, Refusal
-from backend.protocol.messages import ErrorReply
+from backend.protocol.messages import AlertLevel, ErrorReply
 from backend.server.refusals import JournalFailed
 
 
@@ -38,7 +38,7 @@ class Submitter(Protocol):
         self,
         message: str,
         *,
-        level: str = "warning",
+        level: AlertLevel = "warning",
         robot: str | None = None,
         skill: str | None = None,
         kind: str = "",

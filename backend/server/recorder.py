@@ -12,6 +12,7 @@ from pydantic_core import PydanticSerializationError
 
 from backend.core.events import EventBatch
 from backend.core.rules.engine import Origin, Refusal
+from backend.protocol.messages import AlertLevel
 from backend.server.journal import Journal, JournalError, NotReplayable
 from backend.server.refusals import JournalFailed
 
@@ -19,7 +20,7 @@ from backend.server.refusals import JournalFailed
 class Alerts(Protocol):
     """Where the operator hears that the journal fails, and that it recovered."""
 
-    def alert(self, message: str, *, level: str = "warning", kind: str = "") -> None: ...
+    def alert(self, message: str, *, level: AlertLevel = "warning", kind: str = "") -> None: ...
 
 
 class JournalRecorder:

@@ -33,10 +33,12 @@ from backend.core.ops import Reconcile, UplinkSettle
 from backend.core.rules.engine import Applied, Engine, Refusal
 from backend.protocol.keys import PROTOCOL_VERSION, Keys
 from backend.protocol.messages import (
+    AlertLevel,
     Downlink,
     DownlinkAck,
     Manifest,
     Register,
+    RegisterCode,
     RegisterReply,
     RobotInfo,
     dumps,
@@ -169,7 +171,7 @@ class RobotLink:
         info = self.robots.get(robot)
         return info.delay_s if info is not None else None
 
-    def said_once(self, robot: str, what: str, message: str, level: str = "warning") -> None:
+    def said_once(self, robot: str, what: str, message: str, level: AlertLevel = "warning") -> None:
         if (robot, what) in self._said:
             return
         self._said.add((robot, what))
@@ -253,7 +255,7 @@ class RobotLink:
             if name in m.skills and name in library.skills
         }
 
-    def _not_registrable(self, m: Manifest) -> tuple[str, str] | None:
+    def _not_registrable(self, m: Manifest) -> tuple[RegisterCode, str] | None:
         """Why a robot with manifest `m` cannot register (None: it can)."""
         if m.protocol != PROTOCOL_VERSION:
             return "protocol", (
@@ -270,7 +272,7 @@ class RobotLink:
             return "wrong_type", f"robot '{m.name}' is a {expected} in this mission, not a {m.type}"
         return None
 
-    def _taken(self, robot: str, session: str) -> tuple[str, str] | None:
+    def _taken(self, robot: str, session: str) -> tuple[RegisterCode, str] | None:
         """One owner per robot name: another live session holds it."""
         info = self.robots.get(robot)
         if info is None or not info.online or info.session in (None, session):

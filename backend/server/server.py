@@ -21,6 +21,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+import zenoh
+
 from backend.core.events import EventBatch
 from backend.core.library import Library
 from backend.core.model import Mission
@@ -30,6 +32,7 @@ from backend.protocol.keys import PROTOCOL_VERSION, Keys
 from backend.protocol.messages import (
     AccountInfo,
     Alert,
+    AlertLevel,
     FleetEvent,
     OpReply,
     Request,
@@ -95,15 +98,15 @@ class MissionServer:
         self.journal: Journal | None = None
         self.library_file: Path | None = None
         self.resumed = False
-        self._session = None
+        self._session: zenoh.Session | None = None
         self._entities: list[Any] = []
-        self._events_pub = None
-        self._fleet_pub = None
-        self._alerts_pub = None
+        self._events_pub: zenoh.Publisher | None = None
+        self._fleet_pub: zenoh.Publisher | None = None
+        self._alerts_pub: zenoh.Publisher | None = None
         # publications waiting for the next loop callback
         self._outbox: list[tuple[Any, bytes]] = []
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._checkpoint: asyncio.Future | None = None  # the journal's, running on a thread
+        self._checkpoint: asyncio.Future[Any] | None = None  # the journal's, on a thread
         self._checkpoint_failing = False
 
     # -- start / stop ---------------------------------------------------------
@@ -179,12 +182,12 @@ class MissionServer:
     async def start(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._load()
+        assert self.journal is not None
         try:
-            self._session = await self._open_router()
+            s = self._session = await self._open_router()
         except BaseException:
             self.journal.close()
             raise
-        s = self._session
         self._events_pub = declare_publisher(s, Keys.EVENTS)
         self._fleet_pub = declare_publisher(s, Keys.FLEET)
         self._alerts_pub = declare_publisher(s, Keys.ALERTS)
@@ -200,7 +203,7 @@ class MissionServer:
         # declared last: robots (re)register when they see it
         self._entities.append(declare_token(s, Keys.SERVER_ALIVE))
 
-    async def _open_router(self):
+    async def _open_router(self) -> zenoh.Session:
         """The router session; with accounts, user/password logins and the
         access-control rules of their roles (the dictionary file Zenoh reads
         exists only while the session opens)."""
@@ -250,6 +253,7 @@ class MissionServer:
         """Publish an applied (and journaled) operation; snapshot when due."""
         if applied.duplicate or not applied.events:
             return
+        assert self.journal is not None
         try:
             self.journal.maybe_snapshot(self.mission)
         except (sqlite3.Error, OSError, JournalError) as e:  # in the batches: a slower restart
@@ -265,11 +269,13 @@ class MissionServer:
         """The journal's checkpoint (its log copied into the file, with an
         fsync) runs on a thread: inside a commit it held up one operation
         in ~400 for 4-17 ms."""
-        if self._checkpoint is None and self.journal.checkpoint_due:
-            self._checkpoint = self._loop.run_in_executor(None, self.journal.checkpoint)
+        journal, loop = self.journal, self._loop
+        assert journal is not None and loop is not None
+        if self._checkpoint is None and journal.checkpoint_due:
+            self._checkpoint = loop.run_in_executor(None, journal.checkpoint)
             self._checkpoint.add_done_callback(self._checkpointed)
 
-    def _checkpointed(self, done: asyncio.Future) -> None:
+    def _checkpointed(self, done: asyncio.Future[Any]) -> None:
         self._checkpoint = None
         error = None if done.cancelled() else done.exception()
         if error is None:
@@ -289,6 +295,7 @@ class MissionServer:
         its own event batch waited for the requester to take in the batch
         first. Publications keep their order."""
         if not self._outbox:
+            assert self._loop is not None
             self._loop.call_soon(self._flush)
         self._outbox.append((publisher, payload))
 
@@ -319,6 +326,7 @@ class MissionServer:
         the journal cannot take is refused (JournalFailed) and changes
         nothing, in memory or at a restart; then published."""
         who = actor or client
+        assert self.engine is not None
         applied = self.engine.submit(
             op,
             client=client,
@@ -333,7 +341,7 @@ class MissionServer:
         self,
         message: str,
         *,
-        level: str = "warning",
+        level: AlertLevel = "warning",
         robot: str | None = None,
         skill: str | None = None,
         kind: str = "",

@@ -31,6 +31,7 @@ from backend.core.ops import UplinkSent, UplinkSettle
 from backend.core.rules.engine import Applied, Engine
 from backend.protocol.keys import Keys
 from backend.protocol.messages import (
+    AlertLevel,
     ErrorReply,
     Uplink,
     UplinkEntry,
@@ -73,7 +74,9 @@ class LinkView(Protocol):
 
     def submit(self, op: Any, *, actor: str) -> Applied: ...
 
-    def said_once(self, robot: str, what: str, message: str, level: str = "warning") -> None: ...
+    def said_once(
+        self, robot: str, what: str, message: str, level: AlertLevel = "warning"
+    ) -> None: ...
 
 
 def entry(c: UplinkCommand) -> UplinkEntry:

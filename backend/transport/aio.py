@@ -351,7 +351,7 @@ def serve_async(
     wildcard queryables whose key names the robot or user).
     """
     target = loop or asyncio.get_running_loop()
-    tasks: set[asyncio.Task] = set()  # the loop keeps only weak references to tasks
+    tasks: set[asyncio.Task[None]] = set()  # the loop keeps only weak references to tasks
 
     def failed(exc: Exception) -> BaseException:
         if not isinstance(exc, ReplyError):
@@ -423,8 +423,9 @@ def wait_matching(publisher: zenoh.Publisher, timeout: float) -> bool:
         lambda status: matched.set() if status.matching else None
     )
     try:
-        # matching_status is a MatchingStatus object, not a bool.
-        if publisher.matching_status.matching:
+        # matching_status is a MatchingStatus object, not a bool (whatever the stubs say)
+        status: Any = publisher.matching_status
+        if status.matching:
             return True
         return matched.wait(timeout)
     finally:

@@ -178,21 +178,17 @@ class ManipulationSkills(SkillBase):
             stone.change(state="delivered", holder=None)
             score = stone.score or 0.0
             w.score = round(w.score + score, 6)
-            delivery = {
-                "stone": sid,
-                "rss": stone.rss,
-                "score": score,
-                "by": r.name,
-                "sim_time": round(w.now(), 1),
-            }
+            delivery = mf.Delivery(
+                stone=sid, rss=stone.rss, score=score, by=r.name, sim_time=round(w.now(), 1)
+            )
             w.delivered.append(delivery)
             self.learn_stone(stone.public())
-            w.tell_ground(r, Delivered(mf.Delivery(**delivery)))
+            w.tell_ground(r, Delivered(delivery))
             w.log(f"{r.name} delivered {sid}: +{score:g}, score {w.score:g}")
             parts.append(f"{sid} of {stone.rss} +{score:g}")
             await self._tell_identifiers(stone)
         r.stones.clear()
-        gained = round(sum(d["score"] for d in w.delivered[-len(parts) :]), 6)
+        gained = round(sum(d.score for d in w.delivered[-len(parts) :]), 6)
         return f"delivered {', '.join(parts)}: +{gained:g}; score {w.score:g}"
 
     async def _put_stone_down(self, ctx: SkillContext) -> str:
