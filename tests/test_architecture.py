@@ -101,27 +101,27 @@ def test_no_import_cycle_beyond_the_known_ones():
     assert not gone, f"cycle(s) broken: remove them from KNOWN_CYCLES: {gone}"
 
 
-def test_the_cycle_finder_sees_a_cycle(tmp_path, monkeypatch):
+def _package(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, files: dict[str, str]) -> None:
+    """A package `cyc` of `files` (name -> text), the only one the finder reads."""
     pkg = tmp_path / "cyc"
     pkg.mkdir()
-    (pkg / "__init__.py").write_text("")
-    (pkg / "a.py").write_text("from cyc import b\n")
-    (pkg / "b.py").write_text("def f():\n    from cyc import a\n")
+    for name, text in files.items():
+        (pkg / name).write_text(text)
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.setattr(sys.modules[__name__], "PACKAGES", ("cyc",))
+    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
+
+
+def test_the_cycle_finder_sees_a_cycle(tmp_path, monkeypatch):
+    files = {"__init__.py": "", "a.py": "from cyc import b\n"}
+    _package(tmp_path, monkeypatch, {**files, "b.py": "def f():\n    from cyc import a\n"})
     assert import_cycles() == [["cyc.a", "cyc.b"]]
 
 
 def test_the_cycle_finder_sees_a_package_read_back(tmp_path, monkeypatch):
     """`from cyc import b` in a module the package's __init__ imports runs that __init__."""
-    pkg = tmp_path / "cyc"
-    pkg.mkdir()
-    (pkg / "__init__.py").write_text("from cyc.a import f\n")
-    (pkg / "a.py").write_text("from cyc import b\n\ndef f():\n    pass\n")
-    (pkg / "b.py").write_text("")
-    monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.setattr(sys.modules[__name__], "PACKAGES", ("cyc",))
-    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
+    files = {"__init__.py": "from cyc.a import f\n", "b.py": ""}
+    _package(tmp_path, monkeypatch, {**files, "a.py": "from cyc import b\n\ndef f():\n    pass\n"})
     assert import_cycles() == [["cyc", "cyc.a"]]
 
 
