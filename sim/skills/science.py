@@ -171,15 +171,45 @@ class ScienceSkills(SkillBase):
             )
             waited += self.dt
         collab = self._collaborating(s.partner, s.x, s.y, "manipulator")
-        stone = self._identify(
-            s,
-            s.rss.max_score if collab else self.world.spec.scoring.min_score,
-            (r.name, s.partner) if collab and s.partner else (r.name,),
-        )
+        earlier = await self._partners_stone(s)
+        if earlier is not None:  # the partners name one stone: never use up two
+            how = f"{s.partner} had identified it alone (only a low-score stone)"
+            stone = earlier
+        else:
+            stone = self._identify(
+                s,
+                s.rss.max_score if collab else self.world.spec.scoring.min_score,
+                (r.name, s.partner) if collab and s.partner else (r.name,),
+            )
+            how = (
+                f"with {s.partner}"
+                if collab
+                else "alone (only a low-score stone without the manipulator)"
+            )
         await self.work(ctx, IDENTIFY_S * 0.2, CAMERA_WORK, frac0=s.at(0.8), frac1=s.at(1.0))
-        if collab:
-            return stone, f"with {s.partner}"
-        return stone, "alone (only a low-score stone without the manipulator)"
+        return stone, how
+
+    async def _partners_stone(self, s: Search) -> Stone | None:
+        """The stone the partner already identified alone in this search (it gave up
+        waiting), if it tells which: the camera names that one too."""
+        r, w = self.robot, self.world
+        alone = {
+            k.id
+            for k in (w.stones[i] for i in s.rss.stones)
+            if k.state == "identified"
+            and k.identified_by == (s.partner,)
+            and math.hypot(k.x - s.x, k.y - s.y) <= s.radius
+        }
+        if not alone or s.partner is None:
+            return None
+        where = {"x": s.x, "y": s.y, "radius": s.radius, "exclude": r.knowledge.gone_stones()}
+        answer = await self.host.ask(r, s.partner, "stone", where)
+        if answer is None or answer.get("id") not in alone:
+            return None
+        r.knowledge.learn_stone(answer)
+        stone = w.stones[answer["id"]]
+        stone.identified_by = (*stone.identified_by, r.name)
+        return stone
 
     def _manipulator_coming(self, s: Search, other: SimRobot | None) -> bool:
         """The partner with the manipulator works on this skill but is not here yet."""
@@ -206,9 +236,15 @@ class ScienceSkills(SkillBase):
         if answer is not None:
             r.knowledge.learn_stone(answer)
             stone = self.world.stones[answer["id"]]
-            if r.name not in stone.identified_by:
+            together = r.name in stone.identified_by
+            if not together:
                 stone.identified_by = (*stone.identified_by, r.name)
-            how = f"with {s.partner}: it told where the stone lies"
+            how = (
+                f"with {s.partner}: it told where the stone lies"
+                if together
+                else f"{s.partner} had identified it alone (only a low-score stone) and told "
+                "where it lies"
+            )
         else:
             stone = self._identify(s, self.world.spec.scoring.min_score, (r.name,))
             how = f"alone ({s.partner} did not point out a stone)"
