@@ -480,6 +480,16 @@ async def test_sim_status_shows_what_the_robots_reported_and_the_truth_only_when
         await client.close()
 
 
+def _ctl(endpoint: str, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "backend.cli", "ctl", "--connect", endpoint, *args],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+
+
 def _sim_status(endpoint: str, *args: str) -> str:
     out = subprocess.run(
         [sys.executable, "-m", "backend.cli", "sim-status", "--connect", endpoint, *args],
@@ -514,7 +524,14 @@ async def test_a_barrier_needs_a_link_between_the_partners(stack: Stack) -> None
             {"target": g, "search_radius": 6.0, "partner": "lru1"},
             at=0,
         )
-        await client.submit(AddBarrier(ids=[a, b]))
+        bid = (await client.submit(AddBarrier(ids=[a, b]))).value["barrier"]
+        # the plan checks say so before it goes up (issue 35: no error, both rows stale)
+        check = await asyncio.to_thread(_ctl, stack.endpoint, "check", "--json")
+        assert check.returncode == 1, check.stderr
+        findings = {f["id"]: f for f in json.loads(check.stdout)["findings"]}
+        f = findings[f"coverage.barrier:{bid}"]
+        assert f["severity"] == "error" and "lru1 waits at (0, -80)" in f["message"], f
+        assert findings[f"coverage.partner:{a}/partner"]["severity"] == "warning"
         await client.submit(Sync(robot="lru1", through=a))
         await client.submit(Sync(robot="lru2", through=b))
         await client.submit(Control(op="run", robot="lru1"))
