@@ -100,8 +100,9 @@ def test_the_simulated_robots_declare_the_librarys_figures(library: Library) -> 
 
 
 def test_the_descriptions_quote_the_worlds_figures(library: Library, spec: WorldFile) -> None:
-    """What the console's skill picker and editor show: the figures a newcomer would
-    otherwise learn from failures."""
+    """What the console's skill picker and editor show (a skill's description, and each
+    parameter's next to its field): the figures a newcomer would otherwise learn from
+    failures."""
     models = World(spec).models
     lru1 = figures(spec, models["lru_science"])
     lru2 = figures(spec, models["lru_manipulator"])
@@ -130,7 +131,7 @@ def test_the_descriptions_quote_the_worlds_figures(library: Library, spec: World
             f"lander covers {lander['comm_range_m']:g} m",
         ],
         "drive_to": [
-            f"{spec.terrain.slow_factor * 100:g} % of its speed",
+            f"{spec.terrain.slow_factor * 100:g} % of the speed",
             f"{spec.terrain.slow_energy:g}x the energy",
         ],
         "fly_to": [f"{DRONE_MARGIN_S:g} s to spare"],
@@ -140,7 +141,8 @@ def test_the_descriptions_quote_the_worlds_figures(library: Library, spec: World
         ],
     }
     for skill, figs in quoted.items():
-        text = library.skills[skill].description
+        sk = library.skills[skill]
+        text = " ".join([sk.description, *(p.description for p in sk.params.values())])
         missing = [f for f in figs if f not in text]
         assert not missing, f"{skill}: {missing} not in {text!r}"
     assert f"sees {lru1['camera_range_m']:g} m" in library.robot_types["lru_science"].description
