@@ -20,7 +20,7 @@ import math
 from typing import Any
 
 from backend.core.library import Library, PropertyValue, RobotType
-from sim.skills.base import DRONE_RANGE, DRONE_RANGE_ALTITUDE
+from sim.skills.base import DRONE_RANGE_ALTITUDE, drone_range
 from sim.skills.manipulation import APPROACH, LANDER_REACH
 from sim.skills.mobility import LANE_SPACING
 from sim.skills.science import CAMERA_RANGE
@@ -31,12 +31,6 @@ REL_TOL = 0.01  # a library's rounded decimals (0.002857 for 1/350) are the same
 # than lane spacing x speed. A library's survey rate is right between these shares of it.
 SURVEY_SHARE = (0.6, 1.0)
 SURVEY_ALTITUDE = 10.0  # m: the altitude a drone's survey rate is stated for (takeoff's default)
-
-
-def drone_range(model: RobotModel, altitude: float) -> float:
-    """Metres a drone's camera maps around it at `altitude` (as the skills compute it)."""
-    low, high = DRONE_RANGE
-    return max(low, min(high, model.sensor_range * max(altitude, 1.0) / DRONE_RANGE_ALTITUDE))
 
 
 def figures(world: WorldFile, model: RobotModel) -> dict[str, PropertyValue]:

@@ -19,6 +19,7 @@ from backend.agent import SkillContext, SkillFailed, Success
 from sim.pathing import SLOW, Follower
 from sim.skills.host import SkillHost
 from sim.world import SimError, SimRobot, _fmt
+from sim.worldfile import RobotModel
 
 CLIMB_RATE = 1.0  # m/s, drone
 RESYNC_S = 120.0  # sim seconds behind the clock past which a robot stops catching up
@@ -27,6 +28,12 @@ DRONE_MARGIN_S = 40.0  # flight seconds a drone keeps beyond its way back to the
 # the altitude, within these bounds (m)
 DRONE_RANGE_ALTITUDE = 5.0
 DRONE_RANGE = (8.0, 40.0)
+
+
+def drone_range(model: RobotModel, altitude: float) -> float:
+    """Metres a drone's camera maps around it at `altitude`."""
+    low, high = DRONE_RANGE
+    return max(low, min(high, model.sensor_range * max(altitude, 1.0) / DRONE_RANGE_ALTITUDE))
 
 
 def xy(value: Any) -> tuple[float, float]:
@@ -322,8 +329,7 @@ class SkillBase:
     def sensor_range(self) -> float:
         r = self.robot
         if r.kind == "drone":
-            low, high = DRONE_RANGE
-            return max(low, min(high, r.model.sensor_range * max(r.z, 1.0) / DRONE_RANGE_ALTITUDE))
+            return drone_range(r.model, r.z)
         return r.model.sensor_range
 
     def learn_stone(self, info: dict[str, Any]) -> None:
