@@ -20,6 +20,7 @@ from backend.client.events import ClientEvent, TelemetryReceived
 from backend.core.ops import AddBarrier, AddSkill, Control, EditSkill, Sync
 from backend.protocol import mapfeed as mf
 
+from ..cli.helpers import ctl
 from .conftest import ROOT, Stack, connect, skill, status_of, world_file
 
 
@@ -480,16 +481,6 @@ async def test_sim_status_shows_what_the_robots_reported_and_the_truth_only_when
         await client.close()
 
 
-def _ctl(endpoint: str, *args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "backend.cli", "ctl", "--connect", endpoint, *args],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-
-
 def _sim_status(endpoint: str, *args: str) -> str:
     out = subprocess.run(
         [sys.executable, "-m", "backend.cli", "sim-status", "--connect", endpoint, *args],
@@ -526,7 +517,7 @@ async def test_a_barrier_needs_a_link_between_the_partners(stack: Stack) -> None
         )
         bid = (await client.submit(AddBarrier(ids=[a, b]))).value["barrier"]
         # the plan checks say so before it goes up (issue 35: no error, both rows stale)
-        check = await asyncio.to_thread(_ctl, stack.endpoint, "check", "--json")
+        check = await asyncio.to_thread(ctl, stack.endpoint, "check", "--json")
         assert check.returncode == 1, check.stderr
         findings = {f["id"]: f for f in json.loads(check.stdout)["findings"]}
         f = findings[f"coverage.barrier:{bid}"]
