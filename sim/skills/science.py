@@ -15,6 +15,9 @@ CAMERA_RANGE = 15.0  # science camera
 IMAGE_RSS_MARGIN = 3.0  # metres around a region that an image of it may aim at
 IMAGING_S = 60.0  # sim seconds one science image takes
 IDENTIFY_S = 120.0  # sim seconds identifying takes, once at the search centre
+# metres from the search centre a rover identifies from (it drives there first): the
+# stone it identifies, at most a region's radius from the centre, stays within reach
+IDENTIFY_AT = 2.0
 PARTNER_WAIT = 300.0  # sim seconds one identifier waits for the other
 ASK_PERIOD = 10.0  # sim seconds between asks while waiting for the partner
 CAMERA_WORK = "identifying stones (science camera)"
@@ -129,16 +132,17 @@ class ScienceSkills(SkillBase):
         """A rover far from the search centre goes there first (part of the skill).
         Returns the share of the progress that took."""
         r = self.robot
-        if self.dist(tx, ty) <= radius + NEAR_TARGET:
-            return 0.0
         if r.kind != "rover":
             self._near_target(tx, ty, radius, "search centre")
+            return 0.0
+        if self.dist(tx, ty) <= IDENTIFY_AT:
+            return 0.0
         await self.move_before(
             ctx,
             IDENTIFY_S,
             (tx, ty),
             r.model.speed,
-            tolerance=max(1.0, radius * 0.5),
+            tolerance=IDENTIFY_AT,
             what="going to the search centre",
             frac1=0.3,
         )
