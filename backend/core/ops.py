@@ -10,7 +10,7 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
-from pydantic import Field
+from pydantic import AwareDatetime, Field
 
 from backend.core.model import (
     AreaMarker,
@@ -328,7 +328,7 @@ class Answer(Strict):
     kept: list[SkillId] = Field(
         default_factory=list, description="dequeue: asked to remove, but started: kept"
     )
-    at: datetime | None = None
+    at: AwareDatetime | None = Field(None, description="when it was processed (robot's clock)")
 
 
 class Report(Strict):
@@ -341,7 +341,7 @@ class Report(Strict):
     status: Status
     info: str = ""
     attempt: int | None = Field(None, ge=1)
-    at: datetime | None = None
+    at: AwareDatetime | None = Field(None, description="when it changed (robot's clock)")
 
 
 # what clients may send; what robots' answers become; everything the engine applies

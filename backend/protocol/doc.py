@@ -153,7 +153,11 @@ MODES: list[tuple[str, str, str]] = [
 
 # every refusal code: (code, where it comes from, meaning and what to do)
 ERROR_CODES: list[tuple[str, str, str]] = [
-    ("bad_request", "server", "a request that cannot be read: the field is named"),
+    (
+        "bad_request",
+        "server, robot",
+        "a request (a world message) that cannot be read: the field is named",
+    ),
     ("read_only", "server, clients", "an observer account (or a role without the operation key)"),
     ("stale", "server", "what the operation touches changed after `expected_revision`: reload"),
     ("journal_failed", "server", "the journal cannot be written: nothing changed; send it again"),
@@ -192,7 +196,11 @@ ERROR_CODES: list[tuple[str, str, str]] = [
     ("unknown_account", "server", "account query for a user the server does not know"),
     ("limit_exceeded", "server, robot", "a message over a limit (see Limits): nothing applied"),
     ("not_replayable", "server", "a change the journal could not read back as it is: refused"),
-    ("bad_message", "server", "a robot's message cannot be read, or names another robot"),
+    (
+        "bad_message",
+        "server, robot",
+        "a message that cannot be read (the field is named), or a robot's naming another robot",
+    ),
     ("bad_register", "server", "a registration on another robot's key"),
     ("not_registered", "server", "a downlink from a session that is not registered: register"),
     ("bad_report", "server", "a report or answer the rules refuse (in `DownlinkAck.refused`)"),
@@ -789,8 +797,10 @@ journal it answers `reply_err` (`journal_failed`) and applies nothing of what
 it could not journal: the robot keeps its outbox and sends it again.
 
 A `Downlink` from a session that is not the registered, online one is
-refused with `not_registered` (register again); one carrying another
-robot's messages with `bad_message`.
+refused with `not_registered` (register again); one whose `robot` is another
+robot with `bad_message`. A message in it (or in a `Register.downlink`)
+naming another robot is consumed as refused, with `bad_message`: its number
+is used up, that robot is not touched.
 
 **Answer a command before anything that waits for the server**: process it,
 put its answer in the outbox and reply to the Uplink query; never query the

@@ -274,6 +274,7 @@ class RobotLink:
             RegisterReply(
                 accepted=True,
                 last_seq=progress.last_seq,
+                refused=progress.refused,
                 missing=lost,
                 adopted=adopted,
                 dropped=dropped,
@@ -314,9 +315,8 @@ class RobotLink:
     def _handle_downlink(self, payload: bytes, key: str) -> bytes:
         robot = Keys.robot_of(key)
         dl: Downlink = self._parse(Downlink, payload, robot, "downlink")
-        others = {m.robot for m in dl.messages} | {dl.robot}
-        if others != {robot}:  # the key is what the router's rules check
-            message = f"{robot} cannot send messages of {', '.join(sorted(others - {robot}))}"
+        if dl.robot != robot:  # the key is what the router's rules check
+            message = f"{robot} cannot send the downlink of {dl.robot}; nothing was applied"
             self.said_once(robot, "other robot", message, "error")
             raise Refusal("bad_message", message, robot=robot)
         info = self.robots.get(robot)

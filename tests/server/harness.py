@@ -229,15 +229,18 @@ class RawRobot:
         self.outbox.append(r)
         return r
 
-    async def flush(self, messages: list | None = None) -> DownlinkAck:
-        """Send the outbox (or `messages`) as one Downlink; drop what is acknowledged."""
-        dl = Downlink(
+    def downlink(self, messages: list) -> Downlink:
+        return Downlink(
             robot=self.name,
             session=self.session_id,
-            messages=list(self.outbox if messages is None else messages),
+            messages=list(messages),
             uplink_applied=self.applied,
             sent=datetime.now(UTC),
         )
+
+    async def flush(self, messages: list | None = None) -> DownlinkAck:
+        """Send the outbox (or `messages`) as one Downlink; drop what is acknowledged."""
+        dl = self.downlink(self.outbox if messages is None else messages)
         ack = DownlinkAck.model_validate_json(
             await query(self.session, Keys.downlink(self.name), dumps(dl), 10.0)
         )
