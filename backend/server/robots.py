@@ -39,9 +39,8 @@ from backend.protocol.messages import (
     RegisterReply,
     RobotInfo,
     dumps,
-    first_error,
 )
-from backend.protocol.wire import LIMIT_EXCEEDED, is_limit, parse
+from backend.protocol.wire import LIMIT_EXCEEDED, parse, unreadable
 from backend.server.downlink import DownlinkApplier, Host, raise_alerts
 from backend.server.refusals import Handler, JournalFailed
 from backend.server.uplink import UplinkSender
@@ -219,15 +218,9 @@ class RobotLink:
         try:
             return parse(model, payload)  # within the limits (backend.core.limits)
         except ValidationError as e:
-            if is_limit(e):  # the field's path first, as every limit refusal says it
-                message = f"{first_error(e)} (a {what} of {robot}; nothing of it was applied)"
-                code = LIMIT_EXCEEDED
-            else:
-                message = (
-                    f"{robot} sent a {what} that cannot be read ({first_error(e)}); see "
-                    f"docs/protocol.md (protocol {PROTOCOL_VERSION})"
-                )
-                code = "bad_message"
+            code, message = unreadable(e, f"a {what} of {robot}", "bad_message")
+            if code != LIMIT_EXCEEDED:
+                message += f"; see docs/protocol.md (protocol {PROTOCOL_VERSION})"
             self.said_once(robot, f"bad {what}", message, "error")
             raise Refusal(code, message, robot=robot) from None
 
