@@ -40,6 +40,7 @@ from backend.protocol.messages import (
     RobotInfo,
     dumps,
 )
+from backend.protocol.timing import HEARTBEAT_S
 from backend.protocol.wire import LIMIT_EXCEEDED, parse, unreadable
 from backend.server.downlink import DownlinkApplier, Host, raise_alerts
 from backend.server.refusals import Handler, JournalFailed
@@ -49,7 +50,6 @@ from backend.transport import serve_async, watch_liveliness
 
 log = logging.getLogger(__name__)
 
-HEARTBEAT_S = 5.0  # robots send a Downlink at least this often (RegisterReply says so)
 HEARD_PUBLISH_S = 10.0  # a robot's `heard` goes out at least this often while it talks
 TICK_S = 1.0  # expiry of queued commands is checked this often
 DELAY_SAMPLES = 8  # the delay estimate: the least of the last few samples
@@ -118,7 +118,7 @@ class RobotLink:
                 sender = self.senders[name] = UplinkSender(self, name)
                 if self._loop is not None:
                     sender.start()
-                sender.kick()  # commands pending from before a restart
+                sender.resend()  # commands pending from before a restart
 
     @property
     def engine(self) -> Engine:
@@ -262,7 +262,7 @@ class RobotLink:
             )
         )
         self._heard(robot, reg.sent)
-        self._kick(robot)  # what it has not answered: again
+        self.senders[robot].resend()  # what it has not answered: again
         return dumps(
             RegisterReply(
                 accepted=True,
@@ -322,12 +322,7 @@ class RobotLink:
             )
         self._heard(robot, dl.sent)
         progress = self._downlink.apply(robot, dl.messages)
-        if self._mission.pending_commands(robot):
-            queued = any(
-                c.state == CommandState.QUEUED for c in self._mission.pending_commands(robot)
-            )
-            if queued or dl.uplink_applied < self._mission.uplink_seqs.get(robot, 0):
-                self._kick(robot)  # it can hear us now
+        self.senders[robot].reachable()  # what did not reach it: now
         return dumps(
             DownlinkAck(
                 last_seq=progress.last_seq, missing=progress.missing, refused=progress.refused
