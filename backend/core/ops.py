@@ -180,8 +180,16 @@ class Unwaive(Strict):
 
 
 class LoadMission(Strict):
+    """Replace the mission. It comes in as a plan: every skill that is not
+    finished is idle (its status was the robots' once; what they hold now is
+    theirs to say), finished ones stay as the log. `keep_state` keeps the
+    file's statuses: refused while a robot of the mission is online."""
+
     op: Literal["load"] = "load"
     mission: Mission
+    keep_state: bool = Field(
+        False, description="keep the file's statuses (refused while a robot of it is online)"
+    )
 
 
 class NewMission(Strict):

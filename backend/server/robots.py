@@ -28,7 +28,7 @@ from pydantic import ValidationError
 
 from backend.core import events as ev
 from backend.core.model import CommandState, Mission
-from backend.core.ops import Control, Reconcile, Retry, Sync, Unsync, UplinkSettle
+from backend.core.ops import Control, LoadMission, Reconcile, Retry, Sync, Unsync, UplinkSettle
 from backend.core.rules.engine import Applied, Engine, Refusal
 from backend.protocol.keys import PROTOCOL_VERSION, Keys
 from backend.protocol.messages import (
@@ -80,6 +80,7 @@ class RobotLink:
         self._delays: dict[str, list[float]] = {}
         self._published_heard: dict[str, datetime] = {}
         self._said: set[tuple[str, str]] = set()
+        self._renew: set[str] = set()  # robots to register again: the mission was replaced
         self._downlink = DownlinkApplier(host)
         self._session: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -153,6 +154,15 @@ class RobotLink:
             found = self._mission.find(op.id)
             if found is not None:
                 self._check_manifest(found[0], [(found[2].id, found[2].skill)])
+        elif isinstance(op, LoadMission) and op.keep_state:
+            online = [r for r in op.mission.robots if self.owner(r) is not None]
+            if online:
+                raise Refusal(
+                    "robots_online",
+                    f"cannot keep the file's statuses while {', '.join(online)} "
+                    f"{'is' if len(online) == 1 else 'are'} online: what a robot holds is its "
+                    "own to say; load the file as a plan (unfinished skills idle, the log kept)",
+                )
         return op
 
     def _sync_skills(self, op: Sync) -> list[tuple[str, str]]:
@@ -191,6 +201,10 @@ class RobotLink:
                     self._kick(c.robot)
             elif isinstance(e, ev.MissionReplaced):
                 self.add_robots(self._mission.robots)
+                # as after a registration, the mission and what each robot
+                # holds are compared: each registers again (told on its next
+                # Downlink)
+                self._renew = {r for r, info in self.robots.items() if info.online}
 
     def _kick(self, robot: str) -> None:
         sender = self.senders.get(robot)
@@ -250,6 +264,7 @@ class RobotLink:
                 robot=robot,
                 kind="reconcile",
             )
+        self._renew.discard(robot)
         info = self.robots[robot]
         self._set_robot(
             info.model_copy(
@@ -318,6 +333,13 @@ class RobotLink:
                 "not_registered",
                 f"robot {robot} (session {dl.session}) is not registered with this server: "
                 "register first (nothing was applied)",
+                robot=robot,
+            )
+        if robot in self._renew:
+            raise Refusal(
+                "not_registered",
+                f"the mission was replaced (loaded): robot {robot} registers again, so what it "
+                "holds is compared with the new mission (nothing was applied)",
                 robot=robot,
             )
         self._heard(robot, dl.sent)
