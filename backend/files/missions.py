@@ -335,20 +335,20 @@ def mission_to_data(m: Mission) -> dict[str, Any]:
     data["robots"] = {n: _drop(r, {"description": ""}) for n, r in data["robots"].items()}
     data["markers"] = {n: _drop(mk, {"description": ""}) for n, mk in data["markers"].items()}
     data["tasks"] = {r: [_drop(s, _SKILL_DEFAULTS) for s in t] for r, t in data["tasks"].items()}
-    return _drop(
-        data,
-        {
-            "task_revs": {},
-            "marker_revs": {},
-            "report_seqs": {},
-            "uplink": {},
-            "uplink_seqs": {},
-            "next_command": 1,
-            "next_skill": 1,
-            "next_barrier": 1,
-            "barriers": {},
-        },
-    )
+    return _drop(data, {**_bookkeeping(), "next_skill": 1, "next_barrier": 1, "barriers": {}})
+
+
+def _bookkeeping() -> dict[str, Any]:
+    """The server's bookkeeping a file leaves out: per-list revisions, the
+    robots' sequence numbers, the uplink (fresh values each time)."""
+    return {
+        "task_revs": {},
+        "marker_revs": {},
+        "report_seqs": {},
+        "uplink": {},
+        "uplink_seqs": {},
+        "next_command": 1,
+    }
 
 
 def mission_to_yaml(m: Mission) -> str:
@@ -362,25 +362,14 @@ SaveWhat = Literal["plan", "state"]
 
 def as_file(m: Mission, what: SaveWhat = "state") -> Mission:
     """The mission as a file holds it: without the server's bookkeeping
-    (per-skill and per-list revisions, the robots' sequence numbers, the
-    uplink); as a plan, every skill idle (status, its information and times
-    reset; attempts kept)."""
+    (`_bookkeeping`, and each skill's revision); as a plan, every skill
+    idle (status, its information and times reset; attempts kept)."""
     reset = {"status": Status.IDLE, "status_info": "", "started_at": None, "finished_at": None}
     tasks = {
         r: [s.model_copy(update={"rev": 0, **(reset if what == "plan" else {})}) for s in t]
         for r, t in m.tasks.items()
     }
-    return m.model_copy(
-        update={
-            "tasks": tasks,
-            "task_revs": {},
-            "marker_revs": {},
-            "report_seqs": {},
-            "uplink": {},
-            "uplink_seqs": {},
-            "next_command": 1,
-        }
-    )
+    return m.model_copy(update={"tasks": tasks, **_bookkeeping()})
 
 
 def library_beside(m: Mission, library: Library, path: str | FsPath) -> FsPath | None:

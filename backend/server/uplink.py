@@ -146,7 +146,8 @@ class UplinkSender:
     async def _run(self) -> None:
         loop = asyncio.get_running_loop()
         while True:
-            timeout = None if self._due is None else max(0.0, self._due - loop.time())
+            full = len(self._sending) >= MAX_IN_FLIGHT  # (a transmission ending wakes us)
+            timeout = None if self._due is None or full else max(0.0, self._due - loop.time())
             try:
                 await asyncio.wait_for(self._wake.wait(), timeout)
             except TimeoutError:
@@ -167,7 +168,7 @@ class UplinkSender:
         untold = any(self._told.get(c.id) != c.cancel_requested for c in pending)
         due = self._due is not None and now >= self._due
         if not (untold or due) or len(self._sending) >= MAX_IN_FLIGHT:
-            return  # (a transmission ending wakes us)
+            return
         self._due = None
         self._told = {c.id: c.cancel_requested for c in pending}
         task = asyncio.get_running_loop().create_task(
