@@ -81,6 +81,8 @@ async def test_a_new_command_leaves_while_the_last_one_waits_for_its_receipt(tmp
             done.append(await client.wait_command(run.value["commands"]["lru1"], WAIT))
             assert [c.state for c in done] == [CommandState.ACKED] * 2
             assert [e.seq for e in robot.received] == [1, 2]  # each applied once, in order
+            # (the answers may be in before the receipts)
+            await asyncio.wait_for(asyncio.gather(*list(sender._sending)), WAIT)
             assert server.engine.transmitting == set()
         finally:
             robot.release.set()
