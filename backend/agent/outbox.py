@@ -22,10 +22,10 @@ from backend.agent.uplink import CommandLog
 from backend.core.ops import Answer, Report
 from backend.protocol.keys import Keys
 from backend.protocol.messages import MAX_BATCH, Downlink, DownlinkAck, ErrorReply, dumps
+from backend.protocol.timing import HEARTBEAT_S  # until the server's RegisterReply says otherwise
 from backend.protocol.wire import parse
 
 Message = Report | Answer
-HEARTBEAT_S = 5.0  # until the server's RegisterReply says otherwise
 RANGE_POLL_S = 0.2  # out of range with messages waiting: look again this often
 
 

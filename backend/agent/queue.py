@@ -43,6 +43,7 @@ class HeldSkill:
     status: Status = Status.IDLE_SYNCHRONIZED
     attempt: int = 1
     retries_used: int = 0
+    reported_attempt: int = 0  # the attempt of its last report
 
     @property
     def id(self) -> str:
@@ -255,7 +256,9 @@ class SkillQueue:
         self._done.add(entry.id)
         if status == Status.FAILURE:
             self.run_enabled = False  # the operator decides: retry, run (continue) or unsync
-        return self.report(entry, status, info)
+        report = self.report(entry, status, info)
+        assert report is not None  # a final status is always reported
+        return report
 
     def next_attempt(self) -> bool:
         """The active skill failed: with a retry left (policies.retries) it
@@ -314,10 +317,16 @@ class SkillQueue:
         self.seq += 1
         return self.seq
 
-    def report(self, entry: HeldSkill, status: Status, info: str = "") -> Report:
-        """Record a status change of `entry` as the next numbered report."""
+    def report(self, entry: HeldSkill, status: Status, info: str = "") -> Report | None:
+        """Record a status change of `entry` as the next numbered report.
+        None when it is no change: `running` again at the same attempt (the
+        ground refuses it: running -> running only with a higher attempt),
+        e.g. the skill starting after recharging first, or a retry resumed."""
+        if status == entry.status == Status.RUNNING and entry.attempt == entry.reported_attempt:
+            return None
         self.seq += 1
         entry.status = status
+        entry.reported_attempt = entry.attempt
         report = Report(
             robot=self.robot,
             seq=self.seq,

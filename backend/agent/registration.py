@@ -363,6 +363,9 @@ class Registrar:
                 self._retry_later(TAKEN_RETRY_S)  # ours again once the other one is gone
             return  # else tried again when the server (re)appears
         self._refused = None
+        self.outbox.refused.extend(reply.refused)
+        for refusal in reply.refused:
+            log.warning("%s: the server refused a message: %s", self.rt.name, refusal.message)
         renumbered = self.queue.continue_after(reply.last_seq, self.outbox.reports)
         if renumbered is not None:
             self.outbox.renumbered(renumbered)

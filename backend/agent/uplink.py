@@ -34,9 +34,8 @@ from backend.protocol.messages import (
     UplinkEntry,
     UplinkReceipt,
     dumps,
-    first_error,
 )
-from backend.protocol.wire import parse
+from backend.protocol.wire import parse, unreadable
 from backend.transport import ReplyError
 
 Dispatch = Callable[[object], Effect]  # a command -> what the robot did
@@ -136,9 +135,8 @@ class UplinkHandler:
         try:
             up = parse(Uplink, payload)
         except ValidationError as e:
-            raise self._refusal(
-                "bad_message", f"{self.rt.name} cannot read the uplink: {first_error(e)}"
-            ) from None
+            what = f"the uplink of {self.rt.name}"
+            raise self._refusal(*unreadable(e, what, "bad_message")) from None
         mine = self.rt.session_id
         if up.session != mine:
             raise self._refusal(

@@ -14,7 +14,7 @@ from backend import transport
 from backend.agent.runtime import Runtime, log
 from backend.protocol.keys import Keys
 from backend.protocol.messages import ErrorReply, WorldMessage, WorldReply, dumps
-from backend.protocol.wire import parse
+from backend.protocol.wire import parse, unreadable
 
 
 class Peers:
@@ -50,15 +50,10 @@ class Peers:
         """The queryable on `Keys.world(name)`: an ask or a tell from a partner."""
         try:
             msg = parse(WorldMessage, payload)
-        except ValidationError as exc:
-            raise transport.ReplyError(
-                dumps(
-                    ErrorReply(
-                        code="bad_request",
-                        message=f"{self.rt.name} cannot read the world message: {exc}",
-                    )
-                )
-            ) from None
+        except ValidationError as e:
+            code, text = unreadable(e, f"a world message to {self.rt.name}", "bad_request")
+            error = ErrorReply(code=code, message=text, robot=self.rt.name)
+            raise transport.ReplyError(dumps(error)) from None
         self.stats[f"{msg.kind}s_received"] += 1
         fn = self._handlers[msg.kind].get(msg.topic)
         if msg.kind == "tell":

@@ -10,7 +10,7 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
-from pydantic import Field
+from pydantic import AwareDatetime, Field
 
 from backend.core.model import (
     AreaMarker,
@@ -180,8 +180,16 @@ class Unwaive(Strict):
 
 
 class LoadMission(Strict):
+    """Replace the mission. It comes in as a plan: every skill that is not
+    finished is idle (its status was the robots' once; what they hold now is
+    theirs to say), finished ones stay as the log. `keep_state` keeps the
+    file's statuses: refused while a robot of the mission is online."""
+
     op: Literal["load"] = "load"
     mission: Mission
+    keep_state: bool = Field(
+        False, description="keep the file's statuses (refused while a robot of it is online)"
+    )
 
 
 class NewMission(Strict):
@@ -328,7 +336,7 @@ class Answer(Strict):
     kept: list[SkillId] = Field(
         default_factory=list, description="dequeue: asked to remove, but started: kept"
     )
-    at: datetime | None = None
+    at: AwareDatetime | None = Field(None, description="when it was processed (robot's clock)")
 
 
 class Report(Strict):
@@ -341,7 +349,7 @@ class Report(Strict):
     status: Status
     info: str = ""
     attempt: int | None = Field(None, ge=1)
-    at: datetime | None = None
+    at: AwareDatetime | None = Field(None, description="when it changed (robot's clock)")
 
 
 # what clients may send; what robots' answers become; everything the engine applies

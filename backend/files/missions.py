@@ -10,7 +10,7 @@ from __future__ import annotations
 import copy
 import os
 from pathlib import Path as FsPath
-from typing import Any, TypeVar
+from typing import Any, Literal, NamedTuple, TypeVar
 
 from pydantic import BaseModel, ValidationError
 
@@ -21,6 +21,7 @@ from backend.core.limits import LIMITS, too_big
 from backend.core.model import (
     MISSION_FORMAT,
     Mission,
+    Status,
 )
 from backend.files import yamlio
 from backend.files.diagnostics import (
@@ -338,29 +339,93 @@ def mission_to_data(m: Mission) -> dict[str, Any]:
     data["robots"] = {n: _drop(r, {"description": ""}) for n, r in data["robots"].items()}
     data["markers"] = {n: _drop(mk, {"description": ""}) for n, mk in data["markers"].items()}
     data["tasks"] = {r: [_drop(s, _SKILL_DEFAULTS) for s in t] for r, t in data["tasks"].items()}
-    return _drop(
-        data,
-        {
-            "task_revs": {},
-            "marker_revs": {},
-            "report_seqs": {},
-            "uplink": {},
-            "uplink_seqs": {},
-            "next_command": 1,
-            "next_skill": 1,
-            "next_barrier": 1,
-            "barriers": {},
-        },
-    )
+    return _drop(data, {**_bookkeeping(), "next_skill": 1, "next_barrier": 1, "barriers": {}})
+
+
+def _bookkeeping() -> dict[str, Any]:
+    """The server's bookkeeping a file leaves out: per-list revisions, the
+    robots' sequence numbers, the uplink (fresh values each time)."""
+    return {
+        "task_revs": {},
+        "marker_revs": {},
+        "report_seqs": {},
+        "uplink": {},
+        "uplink_seqs": {},
+        "next_command": 1,
+    }
 
 
 def mission_to_yaml(m: Mission) -> str:
     return yamlio.dump(mission_to_data(m))
 
 
-def save_mission(m: Mission, path: str | FsPath, library_file: str | FsPath | None = None) -> None:
+# what a saved file holds: "state" (statuses and the log as they are) or
+# "plan" (every skill idle, to run again)
+SaveWhat = Literal["plan", "state"]
+
+
+def as_file(m: Mission, what: SaveWhat = "state") -> Mission:
+    """The mission as a file holds it: without the server's bookkeeping
+    (`_bookkeeping`, and each skill's revision); as a plan, every skill
+    idle (status, its information and times reset; attempts kept)."""
+    reset = {"status": Status.IDLE, "status_info": "", "started_at": None, "finished_at": None}
+    tasks = {
+        r: [s.model_copy(update={"rev": 0, **(reset if what == "plan" else {})}) for s in t]
+        for r, t in m.tasks.items()
+    }
+    return m.model_copy(update={"tasks": tasks, **_bookkeeping()})
+
+
+def library_beside(m: Mission, library: Library, path: str | FsPath) -> FsPath | None:
+    """The skill library file a save of `m` to `path` writes beside it
+    (NAME.library.yaml), when the mission's library reference does not lead
+    from there to `library`; None when it does."""
+    p = FsPath(path)
+    resolved = library_path(p, m.library)
+    try:
+        if resolved.is_file() and load_library(resolved) == library:
+            return None
+    except FileProblems:
+        pass
+    return p.with_name(p.stem + ".library.yaml")
+
+
+def save_library(library: Library, path: str | FsPath) -> None:
+    text = yamlio.dump(
+        library.model_dump(mode="json", exclude_defaults=True) | {"format": library.format}
+    )
+    FsPath(path).write_text(text, encoding="utf-8")
+
+
+class Saved(NamedTuple):
+    library: str  # the reference the file holds, relative to its folder
+    library_file: FsPath | None  # the library written beside it (None: none written)
+
+
+def save_mission_file(
+    m: Mission,
+    library: Library,
+    path: str | FsPath,
+    what: SaveWhat = "state",
+    library_file: str | FsPath | None = None,
+) -> Saved:
+    """Save `m` (`as_file`) so that the file loads from where it is: its
+    library reference leads to `library_file` when given, else to the
+    mission's library when that is `library`, else to `library` written
+    beside it (`library_beside`). The way `ctl save` and the console save."""
+    p = FsPath(path)
+    written = None
+    if library_file is None and (beside := library_beside(m, library, p)) is not None:
+        save_library(library, beside)
+        library_file = written = beside
+    return Saved(save_mission(as_file(m, what), p, library_file), written)
+
+
+def save_mission(m: Mission, path: str | FsPath, library_file: str | FsPath | None = None) -> str:
     """Write atomically (a crash mid-save never leaves half a file). With
-    `library_file`, the library reference is rewritten relative to `path`."""
+    `library_file`, the library reference is rewritten relative to `path`.
+    Returns the reference written. (`save_mission_file` makes a file of a
+    live mission.)"""
     p = FsPath(path)
     if library_file is not None:
         rel = os.path.relpath(FsPath(library_file).resolve(), p.resolve().parent)
@@ -374,3 +439,4 @@ def save_mission(m: Mission, path: str | FsPath, library_file: str | FsPath | No
     except BaseException:
         tmp.unlink(missing_ok=True)  # a full disk leaves no half-written .tmp behind
         raise
+    return m.library

@@ -22,16 +22,28 @@ from backend.core.alerts import LOW_BATTERY, MEANING, AlertKind
 from backend.core.events import (
     CommandChanged,
     CommandQueued,
+    Event,
     EventBatch,
     SkillAdded,
     SkillStatusChanged,
 )
 from backend.core.events import ReportSeq as ReportSeqEvent
 from backend.core.limits import LIMITS, MiB
-from backend.core.model import Enqueue, ParamType, Run, SkillInstance, Status, UplinkCommand
+from backend.core.model import (
+    CHECK_ID_PATTERN,
+    KEEP_SETTLED,
+    Enqueue,
+    ParamType,
+    Run,
+    SkillInstance,
+    Status,
+    UplinkCommand,
+)
 from backend.core.ops import AddSkill, Answer, Control, OperatorOp, Report, Sync
+from backend.core.plan.checks import RULES as CHECK_RULES
 from backend.protocol import mapfeed as mf
 from backend.protocol import messages as p
+from backend.protocol import timing as tm
 from backend.protocol import values as v
 from backend.protocol.keys import PROTOCOL_VERSION, Keys
 from backend.protocol.messages import ALERTS_KEPT
@@ -161,7 +173,11 @@ MODES: list[tuple[str, str, str]] = [
 
 # every refusal code: (code, where it comes from, meaning and what to do)
 ERROR_CODES: list[tuple[str, str, str]] = [
-    ("bad_request", "server", "a request that cannot be read: the field is named"),
+    (
+        "bad_request",
+        "server, robot",
+        "a request (a world message) that cannot be read: the field is named",
+    ),
     ("read_only", "server, clients", "an observer account (or a role without the operation key)"),
     ("stale", "server", "what the operation touches changed after `expected_revision`: reload"),
     ("journal_failed", "server", "the journal cannot be written: nothing changed; send it again"),
@@ -185,7 +201,11 @@ ERROR_CODES: list[tuple[str, str, str]] = [
     ("unknown_waiver", "server", "unwaive: no waiver for that check"),
     ("unknown_command", "server", "cancel: no such command number"),
     ("not_pending", "server", "cancel: the command is settled already"),
-    ("cannot_undo", "server", "undo of a sync that was sent already: cancel it instead"),
+    (
+        "cannot_undo",
+        "server",
+        "undo of a sync that was sent or answered already: cancel it (sent) or unsync",
+    ),
     ("nothing_to_undo", "server", "no edit of yours left to undo"),
     ("nothing_to_redo", "server", "nothing undone to redo"),
     ("barrier_invalid", "server", "a barrier needs idle skills of at least two robots"),
@@ -197,13 +217,31 @@ ERROR_CODES: list[tuple[str, str, str]] = [
     ("bad_mission", "server", "load: the mission does not validate"),
     ("robot_busy", "server", "load/new while commands are pending (or a direct-path command)"),
     ("robots_busy", "server", "load/new while robots hold synchronized skills: reset them"),
+    (
+        "robots_online",
+        "server",
+        "load with `keep_state` while a robot of the mission is online: load it as a plan",
+    ),
     ("unknown_account", "server", "account query for a user the server does not know"),
     ("limit_exceeded", "server, robot", "a message over a limit (see Limits): nothing applied"),
     ("not_replayable", "server", "a change the journal could not read back as it is: refused"),
-    ("bad_message", "server", "a robot's message cannot be read, or names another robot"),
+    (
+        "bad_message",
+        "server, robot",
+        "a message that cannot be read (the field is named), or a robot's naming another robot",
+    ),
     ("bad_register", "server", "a registration on another robot's key"),
-    ("not_registered", "server", "a downlink from a session that is not registered: register"),
-    ("bad_report", "server", "a report or answer the rules refuse (in `DownlinkAck.refused`)"),
+    (
+        "not_registered",
+        "server",
+        "a downlink from a session that is not registered, or after a load: register",
+    ),
+    (
+        "bad_report",
+        "server",
+        "a report or answer the rules refuse, whatever is wrong with it (in "
+        "`DownlinkAck.refused` / `RegisterReply.refused`, with its `seq`)",
+    ),
     ("protocol_mismatch", "server, clients", "the other side speaks another protocol version"),
     ("unreachable", "robot", "out of communication range: the Uplink did not reach it"),
     ("wrong_session", "robot", "an Uplink for another run of the robot: register first"),
@@ -236,13 +274,21 @@ FIELD_RULES: list[tuple[str, str]] = [
     ("`Register.uplink_applied`", "the last uplink seq the robot has processed (0: none)"),
     (
         "`Register.sent`, `Downlink.sent`",
-        "when the message left the robot, its clock; the "
-        "ground estimates the one-way delay from it (clocks must agree: NTP, spacecraft time)",
+        "when the message left the robot, its clock, with its zone (a time without one is "
+        "refused `bad_message` naming the field); the ground estimates the one-way delay "
+        "from it (clocks must agree: NTP, spacecraft time)",
     ),
     (
         "`RegisterReply.last_seq`",
-        "the ground applied the downlink up to here: drop those; if "
-        "it is higher than the robot's own last seq (a restart), number on after it",
+        "the ground applied (or refused) the downlink up to here, exactly as far as it "
+        "has: drop those; if it is higher than the robot's own last seq (a restart), number "
+        "on after it",
+    ),
+    (
+        "`Manifest.skills`",
+        "skill name -> the version it implements (SemVer); a sync or retry of a skill it "
+        "lacks, or whose major version differs from the library's, is refused on the ground "
+        "(`incompatible`); minor and patch versions may differ",
     ),
     (
         "`Downlink.messages`",
@@ -259,14 +305,23 @@ FIELD_RULES: list[tuple[str, str]] = [
         "[first, last] seqs the ground has not got before what you sent: "
         "send again from `last_seq` + 1",
     ),
-    ("`DownlinkAck.refused`", "messages applied as refused (consumed, alerted): do not resend"),
+    (
+        "`DownlinkAck.refused`, `RegisterReply.refused`",
+        "the messages of this Downlink (Register) consumed as refused, alerted: one "
+        "`ErrorReply` each, its `seq` the message's; do not send them again (a message "
+        "refused before and sent again is skipped, not listed again)",
+    ),
     ("`Report.seq`", "the next downlink number; never reused"),
     ("`Report.status`", "the new status, per the transition table"),
-    ("`Report.attempt`", "1, or higher for an autonomous retry; never lower than before"),
     (
-        "`Report.at`",
-        "when the change happened (the first `running` sets `started_at`, "
-        "`success`/`failure` set `finished_at`)",
+        "`Report.attempt`",
+        "the skill's attempt: 1, `N` for a retry `ID.N` the operator queued, + 1 for each "
+        "autonomous retry (`running` again); never lower than before",
+    ),
+    (
+        "`Report.at`, `Answer.at`",
+        "when the change happened, the robot's clock with its zone (the first `running` "
+        "sets `started_at`, `success`/`failure` set `finished_at`)",
     ),
     ("`Answer.command`", "the uplink `seq` of the command answered (not its `id`)"),
     (
@@ -288,12 +343,165 @@ FIELD_RULES: list[tuple[str, str]] = [
         "every pending command, in seq order; seqs may skip numbers (a "
         "command withdrawn before it was ever sent)",
     ),
-    ("`UplinkEntry.seq`", "process each once: ignore seq ≤ your last processed one"),
+    (
+        "`UplinkEntry.seq`",
+        "process each once: ignore seq ≤ your last processed one; transmissions may "
+        "overlap (each carries every pending command), process whichever arrives first",
+    ),
     ("`UplinkEntry.expires`", "past it, answer `expired` instead of applying"),
     ("`UplinkEntry.cancel`", "set: answer `cancelled` instead of applying"),
     ("`Uplink.downlink_ack`", "same as `DownlinkAck.last_seq`: drop those messages"),
     ("`UplinkReceipt.session`", "your session: the ground counts only its registered one's"),
 ]
+
+
+# how a mirror applies each event (`ev`): (event, its fields, what to do). Every
+# kind of the protocol's Event union is here (a test checks it).
+EVENT_RULES: list[tuple[str, str, str]] = [
+    (
+        "`skill_added`",
+        "robot, index, skill",
+        "insert `skill` into `tasks[robot]` at `index`, which counts the robot's whole list "
+        "(log, active, queued, plan; `AddSkill.at` and `MoveSkill.index` count only the "
+        "unsynchronized section); its `rev` = the revision; `task_revs[robot]` = the revision; "
+        "`next_skill` = max(`next_skill`, N + 1) for an id ending in `-N`",
+    ),
+    ("`skill_removed`", "robot, id", "remove it; `task_revs[robot]` = the revision"),
+    (
+        "`skill_moved`",
+        "robot, id, index",
+        "take it out, then insert it at `index` (whole list, counted without it); "
+        "`task_revs[robot]` = the revision",
+    ),
+    (
+        "`skill_status`",
+        "id, status, info, attempt, at",
+        "its execution moved on: set `status` (absent only in old journals); `info` and "
+        "`attempt` when given; `at` with the first `running` sets `started_at`, with "
+        "`success`/`failure` sets `finished_at`, back to `idle` or `idle_synchronized` clears "
+        "`started_at`; its `rev` = the revision",
+    ),
+    (
+        "`skill_edited`",
+        "id, label, params, bindings, policies",
+        "set each field given (absent: keep it); its `rev` = the revision",
+    ),
+    (
+        "`barrier_set`",
+        "id, barrier",
+        "set (add or replace) `barriers[id]`; `next_barrier` = max(`next_barrier`, N + 1) "
+        "for an id `bN`",
+    ),
+    ("`barrier_removed`", "id", "remove `barriers[id]`"),
+    ("`marker_set`", "name, marker", "set `markers[name]`; `marker_revs[name]` = the revision"),
+    ("`marker_removed`", "name", "remove `markers[name]` and `marker_revs[name]`"),
+    ("`report_seq`", "robot, seq", "`report_seqs[robot]` = `seq`"),
+    (
+        "`command_queued`",
+        "command",
+        "append it to `uplink[command.robot]`; `next_command` = max(`next_command`, id + 1); "
+        "`uplink_seqs[robot]` = max(`uplink_seqs[robot]`, seq)",
+    ),
+    (
+        "`command_changed`",
+        "id, state, sent, settled, answered, cancel_requested, reason, done, kept",
+        "set each field given on that command (absent: keep it; none is ever cleared); "
+        "when it is settled after it (not `queued` nor "
+        f"`sent`), keep in its robot's list the pending commands and only the last "
+        f"{KEEP_SETTLED} settled ones (list order): drop the older settled ones",
+    ),
+    (
+        "`waiver_set`",
+        "check, waiver",
+        "set `waivers[check]`, its `revision` = the revision",
+    ),
+    ("`waiver_removed`", "check", "remove `waivers[check]`"),
+    ("`mission_replaced`", "mission", "replace the whole mission with `mission`"),
+]
+
+# the robot's side of awkward commands: (case, what it does and answers)
+ROBOT_CASES: list[tuple[str, str]] = [
+    (
+        "`enqueue` with `front` while a skill is active",
+        "the new skills go before the queued ones, after the active one, which goes on",
+    ),
+    (
+        "`enqueue` of an id it holds (a command sent again)",
+        "not queued twice; `queued` lists it again",
+    ),
+    ("`enqueue` of an id it finished", "never queued nor run again; left out of `queued`"),
+    (
+        "`enqueue` of a skill it has no handler for",
+        "the whole command is `refused`, the `reason` naming the skill",
+    ),
+    ("`dequeue` of an id it never held", "nothing to do; `removed` lists it"),
+    ("`dequeue` of an id it started or finished", "kept; `kept` lists it"),
+    (
+        "`pause` with nothing running",
+        "leaves run mode; `applied`, with a `reason` saying nothing was running",
+    ),
+    ("`pause` at a barrier (`synchwaiting`)", "`refused`: stop it instead"),
+    (
+        "`stop` or `reset` with nothing active",
+        "leaves run mode; `applied` (a reset removes what is queued)",
+    ),
+    (
+        "`run` with nothing queued",
+        "run mode; `applied` with a `reason`; what is synchronized next starts at once",
+    ),
+    (
+        "a retry `ID.N` the operator queued",
+        "an ordinary skill with its own id, reported with `attempt` N",
+    ),
+    (
+        "an autonomous retry (`policies.retries`)",
+        "the same id reports `running` again with `attempt` + 1; `failure` only after the last",
+    ),
+    (
+        "running again at the same attempt (after recharging first, say)",
+        "not reported: the ground refuses it (`bad_report`)",
+    ),
+]
+
+# which operation may be refused with which code (beyond the codes of every request:
+# bad_request, read_only, stale, journal_failed, limit_exceeded, not_replayable)
+OP_CODES: list[tuple[str, str]] = [
+    ("add", "unknown_robot, unknown_skill_type, bad_param, bad_index, locked"),
+    ("delete", "unknown_skill, not_idle, locked, barrier_partner_synchronized"),
+    ("move", "unknown_skill, not_idle, locked, bad_index"),
+    ("edit", "unknown_skill, not_idle, locked, bad_param"),
+    ("retry_edit", "unknown_skill, cannot_retry, locked, bad_param"),
+    (
+        "sync",
+        "unknown_robot, unknown_skill, wrong_robot, not_idle, locked, nothing_to_sync, "
+        "bad_param, plan_errors, incompatible",
+    ),
+    ("unsync", "unknown_robot, unknown_skill, wrong_robot, not_queued, locked, nothing_to_unsync"),
+    ("run, pause, stop, reset", "unknown_robot, not_applicable"),
+    ("retry", "unknown_skill, cannot_retry, incompatible"),
+    ("cancel", "unknown_command, not_pending, cannot_undo (the undo of a sync)"),
+    ("barrier", "unknown_skill, not_idle, locked, barrier_invalid"),
+    ("unbarrier", "unknown_barrier, not_idle, locked"),
+    ("marker_add", "exists"),
+    ("marker_move", "unknown_marker, bad_marker"),
+    ("marker_rename", "unknown_marker, exists, marker_in_use"),
+    ("marker_delete", "unknown_marker, marker_in_use"),
+    ("waive", "unknown_check"),
+    ("unwaive", "unknown_waiver"),
+    ("load", "bad_mission, robot_busy, robots_busy, robots_online"),
+    ("new", "robot_busy, robots_busy"),
+    ("undo, redo", "nothing_to_undo, nothing_to_redo, cannot_undo, and the reverted op's codes"),
+]
+
+
+def _check_names() -> str:
+    return ", ".join(f"`{r.rule}`" for r in CHECK_RULES)
+
+
+def _event_kinds() -> list[str]:
+    """Every `ev` of the protocol's events."""
+    union = Event.__origin__.__args__  # type: ignore[attr-defined]
+    return [m.model_fields["ev"].default for m in union]
 
 
 def _table(head: tuple[str, ...], rows: Sequence[tuple[str, ...]]) -> str:
@@ -409,7 +617,7 @@ def _trace() -> list[tuple[float, str, str, Any]]:
                 revision=3,
                 actor="server",
                 op="uplink_sent",
-                events=[changed(1, state="sent", sent=_t(5).isoformat())],
+                events=[changed(1, state="sent", sent=_t(1).isoformat())],
             ),
         ),
         (5.0, "robot -> server", Keys.downlink("lru1"), down(answer1, at=3.0, applied=1)),
@@ -611,9 +819,10 @@ the key and the field, once per key (`missionctl ctl watch` prints it too).
 - A robot: `transport/link/tx/lease` (ms) bounds how long a hung process
   keeps its presence (missionctl's agent uses 1000; Zenoh's default is 10 s).
   A robot name is owned by one session at a time (see Registration).
-- Queries: consolidation `NONE`, a timeout of a few seconds: every query
-  here is answered at once (nothing waits for the other side of a delayed
-  link); no answer means send again later.
+- Queries: consolidation `NONE`, a timeout of a few seconds plus the round
+  trip (2·D on a link D seconds long; the server waits as the uplink's rule
+  says): every query here is answered at once on arrival (nothing waits for
+  the other side); no answer means send again later.
 - Publications (telemetry): congestion control `BLOCK`.
 - Accounts and TLS: [security.md](security.md) (an operator queries only
   `{Keys.op_as("USER")}`; a robot account only its robots' keys).
@@ -712,6 +921,16 @@ reconciled). Another session's token never changes the owner's presence.
    robot the mission does not name (`unknown_robot`), another type
    (`wrong_type`), the name taken (`taken`). A manifest `name` other than the
    ROBOT of the key is refused with `reply_err` (`bad_register`).
+6. After a mission is loaded (`op: load`, `new`), each online robot is told
+   `not_registered` on its next `Downlink` and registers again: what it
+   holds is compared with the new mission as in step 3.
+
+**Skill versions.** `Manifest.skills` maps each skill the robot offers to the
+version it implements (SemVer). The ground refuses a sync or a retry
+(`incompatible`, nothing is queued) when the robot's manifest lacks the
+skill or implements another major version than the skill library's
+`version`; minor and patch versions may differ. A robot that never
+registered gets the command anyway and refuses (`refused`) what it cannot run.
 
 ### The uplink: commands, ground → robot
 An operation on a robot (sync, unsync, run, pause, stop, reset, retry) is
@@ -720,7 +939,9 @@ mission (`mission.uplink[ROBOT]`, every change an event): `id` (the number
 operators see, "command 17"), `seq` (its place in the robot's sequence),
 `op`, `command` (what the robot gets: `enqueue`, `dequeue`, `run`, `pause`,
 `stop`, `reset`), `skills`, `created`, `sent`, `expires`, `settled`, and its
-`state`:
+`state` (the list keeps the robot's pending commands and its last
+{KEEP_SETTLED} settled ones: an older settled one is dropped when another
+settles, without an event of its own; see Applying events to a mirror):
 
 - `queued`: certainly not on the robot (never transmitted, or every
   transmission was refused);
@@ -730,10 +951,7 @@ operators see, "command 17"), `seq` (its place in the robot's sequence),
 
 The server queries `{Keys.uplink("ROBOT")}` with an `Uplink` holding **every
 pending command** of that robot in seq order, whenever there is one and the
-robot is registered: when a command is added or cancelled, when the robot
-registers or its downlink shows it can hear us again, after a refused or
-unanswered transmission (0.5 s, doubling up to 5 s), and again every 30 s
-(or three one-way delays) while a sent command has no answer.
+robot is registered (see When a command leaves).
 
 The robot answers the query **at once** with `UplinkReceipt{{session,
 applied}}` (or `reply_err` `unreachable` when out of range, `wrong_session`
@@ -776,7 +994,33 @@ its transmission under way) it may be on the robot already: the command gets
 `cancel_requested` and goes out again with `cancel` set; the robot's answer
 says which way it went ("cancel requested" until then). If the transmission
 turns out not to have arrived, the server settles it `cancelled`. The undo
-of a sync cancels its command while it is queued, and is refused once sent.
+of a sync cancels its command while it is queued, and is refused
+(`cannot_undo`) once it was sent or answered.
+
+**When a command leaves, and how long the server waits.** Transmissions are
+pipelined: a command leaves at once, in a transmission of its own, whatever
+earlier transmissions still wait for their receipt (a robot D seconds away
+receipts one 2·D later). Each carries every pending command, so the robot
+meets them in seq order whichever transmission it reads first. The server
+transmits:
+
+- at once when a command is added, or its cancel asked;
+- at once when the robot registers: every pending command again;
+- after a transmission that did not reach the robot (`unreachable`, no
+  responder, another session's receipt): again after {tm.RETRY_S:g} s,
+  doubling up to {tm.RETRY_MAX_S:g} s, or at once when a `Downlink` of the
+  robot arrives;
+- after a transmission without a receipt in time: again after
+  {tm.RETRY_S:g} s, doubling up to {tm.RETRY_MAX_S:g} s;
+- every {tm.RESEND_SENT_S:g} s (or {tm.RESEND_DELAYS}·D, when longer) while
+  a sent command has no answer.
+
+It waits **{tm.RECEIPT_S:g} s + {tm.DELAY_MARGIN}·D** for a transmission's
+receipt (the query and its receipt each cross the link once, plus one D of
+margin), D being the robot's one-way delay as the ground estimates it
+(`RobotInfo.delay_s`; 0 until it is known). Queued commands become `sent`
+when a receipt of the registered session comes, or when none came in time
+(they may have arrived); their `sent` is when that transmission left.
 
 **A robot that applied a command the ground had given up on** (cancelled or
 expired, e.g. the robot got it in the instant the server stopped): its
@@ -800,16 +1044,22 @@ The server applies the messages strictly in `seq` order, each once: one at
 or below the last applied is skipped (sent again); one past a gap is **not**
 applied: `DownlinkAck.missing` names the gap and the robot sends again from
 `last_seq` + 1 (an `Alert` of kind `robot_error` names it once). A message
-the rules refuse (an impossible status change, say) is consumed all the
-same: journaled as refused, alerted (kind `report_refused`), listed in
-`DownlinkAck.refused`. The acknowledgement is cumulative (`last_seq`); the
+the rules refuse is consumed all the same: journaled as refused, alerted
+(kind `report_refused`), listed in `DownlinkAck.refused` (in a registration:
+`RegisterReply.refused`) as an `ErrorReply` whose `seq` is the message's and
+whose code is `bad_report`, whatever is wrong with it: a status change the
+table forbids, a report on a skill the mission does not have or that is not
+this robot's, an answer to a seq the uplink does not hold (never sent, or
+settled long ago) or answered already. The acknowledgement is cumulative (`last_seq`); the
 `Uplink` carries it too (`downlink_ack`). When the server cannot write its
 journal it answers `reply_err` (`journal_failed`) and applies nothing of what
 it could not journal: the robot keeps its outbox and sends it again.
 
 A `Downlink` from a session that is not the registered, online one is
-refused with `not_registered` (register again); one carrying another
-robot's messages with `bad_message`.
+refused with `not_registered` (register again); one whose `robot` is another
+robot with `bad_message`. A message in it (or in a `Register.downlink`)
+naming another robot is consumed as refused, with `bad_message`: its number
+is used up, that robot is not touched.
 
 **Answer a command before anything that waits for the server**: process it,
 put its answer in the outbox and reply to the Uplink query; never query the
@@ -856,6 +1106,12 @@ the next run starts it from the beginning), leaving run mode. `reset` = stop
 and remove everything queued (its answer lists the removed ids, which return
 to the plan). A failure leaves run mode: the operator decides (retry, run to
 go on, unsync). The mode as telemetry shows it:
+
+"""
+
+PROSE_5_CASES = """
+**Awkward commands.** What missionctl's agent does (and what the ground
+expects) when a command meets a state it does not fit:
 
 """
 
@@ -926,6 +1182,41 @@ arrives as `command_changed` events (`sent`, then the robot's answer), and
 the skills change with the answer. On a server with accounts
 (docs/security.md) an operator may query only `{Keys.op_as("USER")}`.
 
+### Applying events to a mirror
+A mirror applies the events of each batch in order, then sets the mission's
+`revision` to the batch's ("the revision" below). Events carry only what
+changed; they maintain every field of the snapshot's mission, so a mirror
+that applied every batch equals a fresh snapshot (`mission.uplink`
+included):
+
+"""
+
+PROSE_LOAD = f"""
+### Loading a mission
+`op: load {{mission, keep_state}}` replaces the mission (one
+`mission_replaced` event). It is refused while commands are pending
+(`robot_busy`) or robots hold synchronized skills (`robots_busy`: reset
+them). The mission comes in **as a plan**: every skill that is not finished
+is `idle` (its status was some robot's once; what the robots hold now is
+theirs to say), finished ones stay as the log, and a barrier left with a
+finished skill and an idle one is dissolved; `value.reset` and
+`value.dissolved` say which. With `keep_state: true` the file's statuses are
+kept, refused (`robots_online`) while a robot of the mission is online: the
+robots reconcile them when they register. Then every online robot registers
+again and is reconciled (see Registration, step 6). The robots' sequence
+numbers and uplinks go on across missions. `op: new {{name}}` loads an empty
+mission with the same robots.
+
+### Plan checks and waivers
+The plan checks ({_check_names()}) run on the ground; a sync is refused
+(`plan_errors`) while an error finding names a skill it would send. A
+finding's id is `RULE:SUBJECT` (pattern `{CHECK_ID_PATTERN}`, e.g.
+`barrier.deadlock:b1+b2`). `op: waive {{check, reason}}` lets that finding's
+skills be synchronized (journaled; a `waiver_set` event; again with another
+reason, the reason is replaced); `op: unwaive {{check}}` withdraws it
+(`waiver_removed`). A check id whose rule is not one of the above is refused
+`unknown_check`; an unwaive without a waiver `unknown_waiver`.
+
 ### The link, as consoles show it
 Per robot: `RobotInfo.delay_s` (the one-way delay, least of the last 8
 `now − sent` of its messages; clocks must agree), `RobotInfo.heard` (when
@@ -936,6 +1227,13 @@ pending commands with their age (`now − created`, `now − sent`) and
 heartbeats (15 s) is stale: show its last known state as such.
 
 ## Error codes
+
+"""
+
+PROSE_CODES = """
+Which operation may be refused with which code, beyond those of every
+request (`bad_request`, `read_only`, `stale`, `journal_failed`,
+`limit_exceeded`, `not_replayable`):
 
 """
 
@@ -1010,8 +1308,14 @@ def render() -> str:
             PROSE_PARAMS,
             PROSE_4,
             _table(("mode", "meaning", "next"), MODES),
+            PROSE_5_CASES,
+            _table(("case", "the robot"), ROBOT_CASES),
             PROSE_5,
+            _table(("event", "fields", "apply"), EVENT_RULES),
+            PROSE_LOAD,
             _table(("code", "from", "meaning"), ERROR_CODES),
+            PROSE_CODES,
+            _table(("operation", "codes"), OP_CODES),
             PROSE_6,
             _table(("code", "meaning"), REGISTER_CODES),
             PROSE_7,

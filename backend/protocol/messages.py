@@ -9,7 +9,7 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, ValidationError
+from pydantic import AwareDatetime, Field, ValidationError
 
 from backend.core.alerts import AlertKind, RaisedAlert
 from backend.core.events import EventBatch
@@ -87,6 +87,9 @@ class ErrorReply(Strict):
     robot: str | None = None
     skill: str | None = None
     param: str | None = None
+    seq: int | None = Field(
+        None, description="in `DownlinkAck.refused`: the downlink seq of the refused message"
+    )
 
 
 class AccountInfo(Strict):
@@ -196,7 +199,9 @@ class Register(Strict):
     )
     last_seq: int = Field(0, ge=0, description="the last downlink seq it has made")
     uplink_applied: int = Field(0, ge=0, description="the last uplink seq it has processed")
-    sent: datetime | None = Field(None, description="when it left the robot (robot's clock)")
+    sent: AwareDatetime | None = Field(
+        None, description="when it left the robot (robot's clock, with its zone)"
+    )
 
 
 # why a registration was not accepted (stable)
@@ -207,7 +212,14 @@ class RegisterReply(Strict):
     accepted: bool = True
     code: RegisterCode = Field("", description="why it was not accepted (stable)")
     reason: str = ""
-    last_seq: int = Field(0, description="the ground applied its downlink up to here")
+    last_seq: int = Field(
+        0, description="the ground applied (or refused) its downlink up to here: drop those"
+    )
+    refused: list[ErrorReply] = Field(
+        default_factory=list,
+        description="messages of its `downlink` applied as refused (consumed, alerted), each "
+        "with its seq: do not send them again",
+    )
     missing: list[SkillId] = Field(
         default_factory=list,
         description="skills the server held as synchronized to this robot that its queue lacks: "
@@ -242,7 +254,7 @@ class Downlink(Strict):
         description="not acknowledged yet, oldest first (empty: a heartbeat)",
     )
     uplink_applied: int = Field(0, ge=0, description="the last uplink seq it has processed")
-    sent: datetime = Field(description="when it left the robot (robot's clock)")
+    sent: AwareDatetime = Field(description="when it left the robot (robot's clock, with its zone)")
 
 
 class DownlinkAck(Strict):
@@ -267,7 +279,7 @@ class Telemetry(Strict):
     progress: float | None = Field(None, ge=0.0, le=1.0)
     eta_s: float | None = None
     info: str = ""
-    at: datetime
+    at: AwareDatetime
 
 
 # -- server -> robot ------------------------------------------------------------------
@@ -278,7 +290,7 @@ class UplinkEntry(Strict):
 
     seq: int = Field(ge=1, description="apply once, in this order")
     id: int = Field(ge=1, description="the command number the operator sees")
-    expires: datetime | None = Field(None, description="never apply it after this")
+    expires: AwareDatetime | None = Field(None, description="never apply it after this")
     cancel: bool = Field(False, description="withdrawn: answer `cancelled` if not applied yet")
     command: RobotCommand
 
@@ -290,7 +302,7 @@ class Uplink(Strict):
     session: Session = Field(description="the registered session it is for")
     commands: list[UplinkEntry] = Field(max_length=MAX_BATCH)
     downlink_ack: int = Field(0, description="the ground applied its downlink up to here")
-    sent: datetime
+    sent: AwareDatetime
 
 
 class UplinkReceipt(Strict):

@@ -8,15 +8,26 @@ from typing import Any, Literal
 
 from pydantic import ConfigDict, Field
 
-from backend.core.model import Name, SkillId, Strict
+from backend.core.model import CheckId, Name, SkillId, Strict
 
 
 class Empty(Strict):
-    """No value: delete, move, edit, unbarrier, marker add/rename/delete, load, new."""
+    """No value: delete, move, edit, unbarrier, marker add/rename/delete."""
+
+
+class Loaded(Strict):
+    """load, new: what loading it as a plan changed (empty with `keep_state`)."""
+
+    reset: list[SkillId] = Field(
+        description="skills the file had synchronized (queued, active): idle again"
+    )
+    dissolved: list[Name] = Field(
+        description="barriers left with a finished skill and an idle one: removed"
+    )
 
 
 class Added(Strict):
-    """add: the new skill's id."""
+    """add, retry_edit: the new skill's id."""
 
     id: SkillId
 
@@ -25,6 +36,12 @@ class BarrierMade(Strict):
     """barrier: the new barrier's id."""
 
     barrier: Name
+
+
+class Checked(Strict):
+    """waive, unwaive: the plan check finding concerned."""
+
+    check: CheckId
 
 
 class MarkerMoved(Strict):
@@ -83,6 +100,7 @@ class Reverted(Strict):
 # the operation (`op`) -> the model of its reply's value
 VALUES: dict[str, type[Strict]] = {
     "add": Added,
+    "retry_edit": Added,
     "delete": Empty,
     "move": Empty,
     "edit": Empty,
@@ -100,8 +118,10 @@ VALUES: dict[str, type[Strict]] = {
     "marker_move": MarkerMoved,
     "marker_rename": Empty,
     "marker_delete": Empty,
-    "load": Empty,
-    "new": Empty,
+    "waive": Checked,
+    "unwaive": Checked,
+    "load": Loaded,
+    "new": Loaded,
     "undo": Reverted,
     "redo": Reverted,
 }

@@ -17,6 +17,7 @@ import pydantic_core
 from pydantic import BaseModel, TypeAdapter, ValidationError
 
 from backend.core.limits import LIMITS, Limits, check_tree, show_path, too_big, too_deep
+from backend.protocol.messages import first_error
 
 M = TypeVar("M", bound=BaseModel)
 T = TypeVar("T")
@@ -75,3 +76,13 @@ def limit_error(title: str, path: tuple[str | int, ...], message: str) -> Valida
 def is_limit(e: ValidationError) -> bool:
     """Was the message refused for a limit (not for its content)?"""
     return any(err["type"] == LIMIT_EXCEEDED for err in e.errors())
+
+
+def unreadable(e: ValidationError, what: str, code: str) -> tuple[str, str]:
+    """(code, sentence) refusing a message that cannot be read (`what`: "the
+    uplink of lru1"): `limit_exceeded` with the field's path and the limit
+    first, as every limit refusal says it, else `code` (the receiver's:
+    bad_request, bad_message) with the first error."""
+    if is_limit(e):
+        return LIMIT_EXCEEDED, f"{first_error(e)} ({what}; nothing of it was applied)"
+    return code, f"{what} cannot be read ({first_error(e)}); nothing of it was applied"

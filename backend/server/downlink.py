@@ -6,8 +6,11 @@ A message numbered past a gap is never applied before the missing ones:
 the acknowledgement says what is missing (`DownlinkAck.missing`) and the
 robot sends again from its last acknowledged number (its outbox keeps
 everything not acknowledged). A message the rules refuse (an impossible
-status change, say) is consumed all the same: journaled as refused
-(`DownlinkRefused`), alerted, listed in the acknowledgement.
+status change, say), or one naming another robot, is consumed all the same:
+journaled as refused (`DownlinkRefused`), alerted, listed in the
+acknowledgement with its seq. What a pass returns (`Progress.last_seq`) is
+read back from the mission: the acknowledgement says only what the ground
+applied or refused.
 """
 
 from __future__ import annotations
@@ -39,9 +42,9 @@ class Submitter(Raises, Protocol):
 class Progress(NamedTuple):
     """What one pass over a robot's messages did."""
 
-    last_seq: int  # applied up to here
+    last_seq: int  # applied (or refused) up to here, as the mission has it
     missing: list[int]  # [first, last] of a gap before the next message, or []
-    refused: list[ErrorReply]
+    refused: list[ErrorReply]  # each with the seq of the message it refused
 
 
 def raise_alerts(host: Submitter, applied: Applied) -> None:
@@ -73,13 +76,13 @@ class DownlinkApplier:
                 continue  # applied before: sent again
             if msg.seq != last + 1:
                 self._gap(robot, last + 1, msg.seq - 1)
-                return Progress(last, [last + 1, msg.seq - 1], refused)
+                return Progress(self.last_seq(robot), [last + 1, msg.seq - 1], refused)
             error = self._apply_one(robot, msg)
             if error is not None:
                 refused.append(error)
             last = msg.seq
         self._gaps.pop(robot, None)
-        return Progress(last, [], refused)
+        return Progress(self.last_seq(robot), [], refused)
 
     def _gap(self, robot: str, first: int, upto: int) -> None:
         if self._gaps.get(robot) == first:
@@ -96,6 +99,13 @@ class DownlinkApplier:
     def _apply_one(self, robot: str, msg: Report | Answer) -> ErrorReply | None:
         host = self._host
         try:
+            if msg.robot != robot:  # its seq is this robot's: used up, never applied
+                raise Refusal(
+                    "bad_message",
+                    f"{robot} cannot send messages of {msg.robot} (its message {msg.seq} names "
+                    f"{msg.robot}); nothing of it was applied",
+                    robot=robot,
+                )
             applied = host.submit(msg, actor=robot)
         except JournalFailed:
             raise
@@ -112,7 +122,7 @@ class DownlinkApplier:
                 skill=msg.id if isinstance(msg, Report) else None,
                 kind=AlertKind.REPORT_REFUSED,
             )
-            return ErrorReply(**r.to_dict())
+            return ErrorReply(**r.to_dict(), seq=msg.seq)
         raise_alerts(host, applied)
         if isinstance(msg, Report) and not applied.duplicate and msg.status.value == "failure":
             host.alert(

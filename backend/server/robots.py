@@ -30,7 +30,7 @@ from backend.core import events as ev
 from backend.core.alerts import AlertKind, Level
 from backend.core.library import SkillSignature
 from backend.core.model import CommandState, Mission
-from backend.core.ops import Reconcile, UplinkSettle
+from backend.core.ops import LoadMission, Reconcile, UplinkSettle
 from backend.core.rules.engine import Applied, Engine, Refusal
 from backend.protocol.keys import PROTOCOL_VERSION, Keys
 from backend.protocol.messages import (
@@ -42,9 +42,9 @@ from backend.protocol.messages import (
     RegisterReply,
     RobotInfo,
     dumps,
-    first_error,
 )
-from backend.protocol.wire import LIMIT_EXCEEDED, is_limit, parse
+from backend.protocol.timing import HEARTBEAT_S
+from backend.protocol.wire import LIMIT_EXCEEDED, parse, unreadable
 from backend.server.downlink import DownlinkApplier, Submitter, raise_alerts
 from backend.server.refusals import Handler, JournalFailed
 from backend.server.uplink import UplinkSender
@@ -52,7 +52,6 @@ from backend.transport import ReplyError, serve_async, watch_liveliness
 
 log = logging.getLogger(__name__)
 
-HEARTBEAT_S = 5.0  # robots send a Downlink at least this often (RegisterReply says so)
 HEARD_PUBLISH_S = 10.0  # a robot's `heard` goes out at least this often while it talks
 TICK_S = 1.0  # expiry of queued commands is checked this often
 DELAY_SAMPLES = 8  # the delay estimate: the least of the last few samples
@@ -78,6 +77,7 @@ class RobotLink:
         self._delays: dict[str, list[float]] = {}
         self._published_heard: dict[str, datetime] = {}
         self._said: set[tuple[str, str]] = set()
+        self._renew: set[str] = set()  # robots to register again: the mission was replaced
         self._downlink = DownlinkApplier(host)
         self._session: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -116,7 +116,7 @@ class RobotLink:
                 sender = self.senders[name] = UplinkSender(self, name)
                 if self._loop is not None:
                     sender.start()
-                sender.kick()  # commands pending from before a restart
+                sender.resend()  # commands pending from before a restart
 
     @property
     def engine(self) -> Engine:
@@ -138,6 +138,20 @@ class RobotLink:
         return applied
 
     # -- operations on robots -----------------------------------------------------------
+    def check_load(self, op: Any) -> None:
+        """Refuse loading a file's statuses while one of its robots is online:
+        what a robot holds is its own to say."""
+        if not (isinstance(op, LoadMission) and op.keep_state):
+            return
+        online = [r for r in op.mission.robots if self.owner(r) is not None]
+        if online:
+            raise Refusal(
+                "robots_online",
+                f"cannot keep the file's statuses while {', '.join(online)} "
+                f"{'is' if len(online) == 1 else 'are'} online: what a robot holds is its "
+                "own to say; load the file as a plan (unfinished skills idle, the log kept)",
+            )
+
     def offered(self, robot: str) -> Mapping[str, str] | None:
         """What `robot`'s manifest offers (skill -> version), as last registered;
         None if it never registered. The rules check syncs and retries with it
@@ -156,6 +170,10 @@ class RobotLink:
                     self._kick(c.robot)
             elif isinstance(e, ev.MissionReplaced):
                 self.add_robots(self._mission.robots)
+                # as after a registration, the mission and what each robot
+                # holds are compared: each registers again (told on its next
+                # Downlink)
+                self._renew = {r for r, info in self.robots.items() if info.online}
 
     def _kick(self, robot: str) -> None:
         sender = self.senders.get(robot)
@@ -183,15 +201,9 @@ class RobotLink:
         try:
             return parse(model, payload)  # within the limits (backend.core.limits)
         except ValidationError as e:
-            if is_limit(e):  # the field's path first, as every limit refusal says it
-                message = f"{first_error(e)} (a {what} of {robot}; nothing of it was applied)"
-                code = LIMIT_EXCEEDED
-            else:
-                message = (
-                    f"{robot} sent a {what} that cannot be read ({first_error(e)}); see "
-                    f"docs/protocol.md (protocol {PROTOCOL_VERSION})"
-                )
-                code = "bad_message"
+            code, message = unreadable(e, f"a {what} of {robot}", "bad_message")
+            if code != LIMIT_EXCEEDED:
+                message += f"; see docs/protocol.md (protocol {PROTOCOL_VERSION})"
             self.said_once(robot, f"bad {what}", message, "error")
             raise Refusal(code, message, robot=robot) from None
 
@@ -221,6 +233,7 @@ class RobotLink:
                 robot=robot,
                 kind=AlertKind.RECONCILE,
             )
+        self._renew.discard(robot)
         info = self.robots[robot]
         self._set_robot(
             info.model_copy(
@@ -233,11 +246,12 @@ class RobotLink:
             )
         )
         self._heard(robot, reg.sent)
-        self._kick(robot)  # what it has not answered: again
+        self.senders[robot].resend()  # what it has not answered: again
         return dumps(
             RegisterReply(
                 accepted=True,
                 last_seq=progress.last_seq,
+                refused=progress.refused,
                 missing=lost,
                 adopted=adopted,
                 dropped=dropped,
@@ -288,9 +302,8 @@ class RobotLink:
     def _handle_downlink(self, payload: bytes, key: str) -> bytes:
         robot = Keys.robot_of(key)
         dl: Downlink = self._parse(Downlink, payload, robot, "downlink")
-        others = {m.robot for m in dl.messages} | {dl.robot}
-        if others != {robot}:  # the key is what the router's rules check
-            message = f"{robot} cannot send messages of {', '.join(sorted(others - {robot}))}"
+        if dl.robot != robot:  # the key is what the router's rules check
+            message = f"{robot} cannot send the downlink of {dl.robot}; nothing was applied"
             self.said_once(robot, "other robot", message, "error")
             raise Refusal("bad_message", message, robot=robot)
         info = self.robots.get(robot)
@@ -301,14 +314,16 @@ class RobotLink:
                 "register first (nothing was applied)",
                 robot=robot,
             )
+        if robot in self._renew:
+            raise Refusal(
+                "not_registered",
+                f"the mission was replaced (loaded): robot {robot} registers again, so what it "
+                "holds is compared with the new mission (nothing was applied)",
+                robot=robot,
+            )
         self._heard(robot, dl.sent)
         progress = self._downlink.apply(robot, dl.messages)
-        if self._mission.pending_commands(robot):
-            queued = any(
-                c.state == CommandState.QUEUED for c in self._mission.pending_commands(robot)
-            )
-            if queued or dl.uplink_applied < self._mission.uplink_seqs.get(robot, 0):
-                self._kick(robot)  # it can hear us now
+        self.senders[robot].reachable()  # what did not reach it: now
         return dumps(
             DownlinkAck(
                 last_seq=progress.last_seq, missing=progress.missing, refused=progress.refused

@@ -426,6 +426,7 @@ class MissionServer:
                 )
             req = req.model_copy(update={"user": user})
         actor = f"{req.user}@{req.client}" if req.user else req.client
+        self.robot_link.check_load(req.op)
         applied = self.submit(
             req.op,
             client=req.client,

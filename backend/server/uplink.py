@@ -2,24 +2,34 @@
 robot has answered each one.
 
 Each transmission is one `Uplink` query carrying every pending command of
-the robot (the robot applies each once, by its seq, and skips the ones it
-has processed already), one transmission at a time per robot. The robot's
-`UplinkReceipt` says it got them: the commands that were `queued` are
-`sent` from then on (journaled after the transmission: until then a cancel
-of them waits for its outcome, see `Rules.transmitting`). A refusal
-(`unreachable`: out of range), no responder or another session's receipt
-means not delivered: they stay `queued` and are tried again, sooner at first.
-No answer at all means they may have arrived: `sent`.
+the robot, in seq order (the robot applies each once, by its seq, and skips
+the ones it has processed already). Transmissions are pipelined: something
+the robot has not been told (a new command, a cancel) leaves at once in a
+transmission of its own, whatever earlier ones still wait for their receipt
+(a round trip later: minutes for a distant robot). As each carries every
+pending command, the robot meets them in seq order whichever it reads first.
 
-When to transmit: a command was queued or cancelled, the robot registered
-or its downlink shows it is reachable (`kick`), a retry is due, or the
-robot has not answered a sent command for a while (sent again; harmless).
+The robot's `UplinkReceipt` says it got them: the commands that were
+`queued` are `sent` from then on (journaled once the receipt is in, with
+the time the transmission left; until then a cancel of them waits for its
+outcome, see `Rules.transmitting`). A refusal (`unreachable`: out of
+range), no responder or another session's receipt means not delivered:
+they stay `queued` and are tried again, sooner at first. No receipt within
+the query timeout (`query_timeout_s`, from the expected one-way delay)
+means they may have arrived: `sent`.
+
+When to transmit: at once when a pending command was not transmitted yet
+or its cancel is new, and when the robot registers (`resend`: everything);
+when its downlink shows it can hear us after a transmission did not reach
+it (`reachable`); when a retry is due; or when a sent command has not been
+answered for a while (sent again; harmless).
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
+from collections import Counter
 from datetime import UTC, datetime
 from typing import Any, Literal, Protocol
 
@@ -39,16 +49,19 @@ from backend.protocol.messages import (
     dumps,
     first_error,
 )
+from backend.protocol.timing import (
+    RETRY_MAX_S,
+    RETRY_S,
+    query_timeout_s,
+    resend_after_s,
+)
 from backend.protocol.wire import parse
 from backend.server.refusals import JournalFailed
 from backend.transport import QueryTimeout, TransportError, query_all
 
 log = logging.getLogger(__name__)
 
-SEND_TIMEOUT_S = 5.0  # a receipt is immediate: this is a dead link
-RETRY_S = 0.5  # first retry of an undelivered transmission, doubling up to RETRY_MAX_S
-RETRY_MAX_S = 5.0
-RESEND_SENT_S = 30.0  # sent, not answered: sent again (at least 3 one-way delays later)
+MAX_IN_FLIGHT = 32  # transmissions under way per robot; more wait for one to end
 
 Outcome = Literal["delivered", "maybe", "undelivered", "absent"]
 
@@ -70,7 +83,9 @@ class LinkView(Protocol):
         """The registered session of an online robot, else None."""
         ...
 
-    def delay_of(self, robot: str) -> float | None: ...
+    def delay_of(self, robot: str) -> float | None:
+        """The expected one-way delay to the robot, in seconds (None: unknown)."""
+        ...
 
     def submit(self, op: Any, *, actor: str) -> Applied: ...
 
@@ -84,15 +99,20 @@ def entry(c: UplinkCommand) -> UplinkEntry:
 
 
 class UplinkSender:
-    """One robot's transmitter (a task on the server's loop)."""
+    """One robot's transmitter (a task on the server's loop, and one task
+    per transmission under way)."""
 
     def __init__(self, link: LinkView, robot: str):
         self.link = link
         self.robot = robot
         self._wake = asyncio.Event()
         self._retry = RETRY_S
-        self._next: float | None = None  # loop time of the next try (None: when woken)
+        self._due: float | None = None  # loop time of the next timed transmission
+        self._told: dict[int, bool] = {}  # command id -> `cancel` it was last transmitted with
+        self._missed = False  # the last transmission to end did not reach the robot
+        self._flight: Counter[int] = Counter()  # queued command id -> transmissions carrying it
         self._task: asyncio.Task[None] | None = None
+        self._sending: set[asyncio.Task[None]] = set()
         self.transmissions = 0  # for tests and benchmarks
 
     def start(self) -> None:
@@ -101,49 +121,92 @@ class UplinkSender:
         )
 
     def stop(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
-            self._task = None
+        for task in [self._task, *self._sending]:
+            if task is not None:
+                task.cancel()
+        self._task = None
+        self._sending.clear()  # (each one's end still releases what it carried)
 
     def kick(self) -> None:
-        """Transmit now (a new command, a cancel, the robot is reachable)."""
+        """A command was added or cancelled: what the robot was not told leaves now."""
+        self._wake.set()
+
+    def resend(self) -> None:
+        """The robot registered (a new session may hold nothing): everything, now."""
+        self._told.clear()
         self._retry = RETRY_S
         self._wake.set()
+
+    def reachable(self) -> None:
+        """The robot can hear us: a transmission that did not reach it is tried now."""
+        if self._missed:
+            self._retry = RETRY_S
+            self._due = 0.0
+            self._wake.set()
 
     async def _run(self) -> None:
         loop = asyncio.get_running_loop()
         while True:
-            timeout = None if self._next is None else max(0.0, self._next - loop.time())
+            full = len(self._sending) >= MAX_IN_FLIGHT  # (a transmission ending wakes us)
+            timeout = None if self._due is None or full else max(0.0, self._due - loop.time())
             try:
                 await asyncio.wait_for(self._wake.wait(), timeout)
             except TimeoutError:
                 pass
             self._wake.clear()
             try:
-                await self._send_once()
-            except asyncio.CancelledError:
-                raise
-            except JournalFailed:  # alerted by the server; the commands stay queued
-                self._later(RETRY_MAX_S)
+                self._maybe_transmit(loop.time())
             except Exception:  # a bug must not end the robot's uplink
                 log.exception("uplink of %s failed; trying again", self.robot)
                 self._later(RETRY_MAX_S)
 
-    def _later(self, seconds: float | None) -> None:
-        loop = asyncio.get_running_loop()
-        self._next = None if seconds is None else loop.time() + seconds
-
-    async def _send_once(self) -> None:
+    def _maybe_transmit(self, now: float) -> None:
         pending = self.link.engine.mission.pending_commands(self.robot)
         owner = self.link.owner(self.robot)
         if not pending or owner is None:
-            self._later(None)  # woken by a new command or a registration
+            self._due = None  # woken by a new command or a registration
             return
+        untold = any(self._told.get(c.id) != c.cancel_requested for c in pending)
+        due = self._due is not None and now >= self._due
+        if not (untold or due) or len(self._sending) >= MAX_IN_FLIGHT:
+            return
+        self._due = None
+        self._told = {c.id: c.cancel_requested for c in pending}
+        task = asyncio.get_running_loop().create_task(
+            self._transmit(pending, owner), name=f"uplink-{self.robot}-{self.transmissions + 1}"
+        )
+        self._sending.add(task)
+        task.add_done_callback(self._ended)
+
+    def _ended(self, task: asyncio.Task[None]) -> None:
+        self._sending.discard(task)
+        self._wake.set()
+
+    def _later(self, seconds: float) -> None:
+        """A timed transmission in `seconds` (or sooner, if one is due sooner)."""
+        at = asyncio.get_running_loop().time() + seconds
+        self._due = at if self._due is None else min(self._due, at)
+
+    async def _transmit(self, pending: list[UplinkCommand], owner: str) -> None:
         queued = [c.id for c in pending if c.state == CommandState.QUEUED]
-        outcome = await self._transmit(pending, owner, queued)
-        now = _now()
+        left = _now()
+        try:
+            outcome = await self._query(pending, owner, queued)
+            self._settle(outcome, pending, queued, left)
+        except asyncio.CancelledError:
+            raise
+        except JournalFailed:  # alerted by the server; the commands stay queued
+            self._later(RETRY_MAX_S)
+        except Exception:  # a bug must not end the robot's uplink
+            log.exception("uplink of %s failed; trying again", self.robot)
+            self._later(RETRY_MAX_S)
+
+    def _settle(
+        self, outcome: Outcome, pending: list[UplinkCommand], queued: list[int], left: datetime
+    ) -> None:
+        """Journal what the transmission's outcome says; time the next one."""
         if outcome in ("delivered", "maybe") and queued:
-            self.link.submit(UplinkSent(robot=self.robot, ids=queued, at=now), actor="server")
+            self.link.submit(UplinkSent(robot=self.robot, ids=queued, at=left), actor="server")
         elif queued:
             withdrawn = [
                 c.id for c in pending if c.id in queued and c.cancel_requested
@@ -155,21 +218,22 @@ class UplinkSender:
                         ids=withdrawn,
                         state=CommandState.CANCELLED,
                         reason=f"cancelled before it reached {self.robot}",
-                        at=now,
+                        at=_now(),
                     ),
                     actor="server",
                 )
+        self._missed = outcome in ("undelivered", "absent")
         if outcome == "delivered":
             self._retry = RETRY_S
-            delay = self.link.delay_of(self.robot) or 0.0
-            self._later(max(RESEND_SENT_S, 3 * delay))
+            self._later(resend_after_s(self._delay()))
         else:
             self._later(self._retry)
             self._retry = min(self._retry * 2, RETRY_MAX_S)
 
-    async def _transmit(
-        self, pending: list[UplinkCommand], owner: str, queued: list[int]
-    ) -> Outcome:
+    def _delay(self) -> float:
+        return self.link.delay_of(self.robot) or 0.0
+
+    async def _query(self, pending: list[UplinkCommand], owner: str, queued: list[int]) -> Outcome:
         engine = self.link.engine
         up = Uplink(
             robot=self.robot,
@@ -178,11 +242,17 @@ class UplinkSender:
             downlink_ack=engine.mission.report_seqs.get(self.robot, 0),
             sent=_now(),
         )
-        engine.transmitting.update(queued)
+        for cid in queued:
+            if not self._flight[cid]:
+                engine.transmitting.add(cid)
+            self._flight[cid] += 1
         self.transmissions += 1
         try:
             replies = await query_all(
-                self.link.session, Keys.uplink(self.robot), dumps(up), SEND_TIMEOUT_S
+                self.link.session,
+                Keys.uplink(self.robot),
+                dumps(up),
+                query_timeout_s(self._delay()),
             )
         except QueryTimeout:
             return "maybe"
@@ -190,7 +260,11 @@ class UplinkSender:
             log.info("uplink of %s: %s", self.robot, e)
             return "undelivered"
         finally:
-            engine.transmitting.difference_update(queued)
+            for cid in queued:
+                self._flight[cid] -= 1
+                if not self._flight[cid]:
+                    del self._flight[cid]
+                    engine.transmitting.discard(cid)
         return self._judge(replies, owner)
 
     def _judge(self, replies: list[Any], owner: str) -> Outcome:

@@ -1,6 +1,8 @@
-"""The mission screen's file actions: save the mission to YAML (its skill
-library beside it when the mission's reference would not resolve from
-there) and load one, which replaces the plan for every operator (asked first).
+"""The mission screen's file actions: save the mission to YAML, its state or
+a plan (its skill library beside it when the mission's reference would not
+resolve from there: backend.files.missions.save_mission_file, as `ctl save`)
+and load one, which replaces the plan for every operator (asked first: as a
+plan, or keeping the file's statuses).
 The path prompt shows the full path, completes, lists recent files and asks
 before replacing a file (console/state/files.py says when). An object the
 mission screen owns (console/screens/mission.py)."""
@@ -11,8 +13,11 @@ import asyncio
 from pathlib import Path
 from typing import Any
 
+from rich.text import Text
+
 from backend.core.ops import LoadMission
-from console.screens.dialogs import ConfirmScreen, PathPrompt
+from backend.files.missions import library_beside, save_mission_file
+from console.screens.dialogs import ChoiceScreen, PathPrompt
 from console.state.files import RecentFiles, default_save_path, shown_path
 
 
@@ -44,15 +49,18 @@ class FileActions:
                 shown_path(default),
                 recent=self.recent.files,
                 suffixes=YAML,
-                also_writes=lambda p: [b] if (b := library_beside(m, p)) is not None else [],
+                also_writes=lambda p: [b] if (b := library_beside(m, lib, p)) is not None else [],
             )
         )
-        if not path:
+        what = path and await self.app.push_screen_wait(
+            ChoiceScreen(f"Save '{m.name}' as:", SAVE_AS)
+        )
+        if not path or not what:
             self.say("not saved")
             return False
         target = Path(path)
         try:
-            note = await asyncio.to_thread(save_with_library, m, lib, target)
+            saved = await asyncio.to_thread(save_mission_file, m, lib, target, what)
         except OSError as e:
             self.say(f"cannot save {target.name}: {e.strerror or e}", "error")
             self.app.notify(
@@ -62,9 +70,10 @@ class FileActions:
         self.last_path = path
         self.recent.add(path)
         self.model.mark_saved()
+        written = saved.library_file
         self.say(
-            f"saved {target.name} (revision {m.revision}) in {shown_path(target.parent)}"
-            + (f"; {note}" if note else ""),
+            f"saved {target.name} ({what}, revision {m.revision}) in {shown_path(target.parent)}"
+            + (f"; its skill library written to {written.name}" if written else ""),
             "ok",
         )
         self.app.notify(shown_path(target), title="Mission saved", timeout=4)
@@ -100,13 +109,14 @@ class FileActions:
         except OSError as e:
             self.say(f"cannot load {name}: {e.strerror or e}", "error")
             return
-        if not await self.app.push_screen_wait(
-            ConfirmScreen(
+        how = await self.app.push_screen_wait(
+            ChoiceScreen(
                 f"Replace the mission with {shown_path(Path(path))} ('{mission.name}')? "
                 "The current plan is replaced for every operator.",
-                yes="Replace",
+                LOAD_AS,
             )
-        ):
+        )
+        if how not in ("plan", "state"):
             return
         self.last_path = path
         self.recent.add(path)
@@ -115,38 +125,18 @@ class FileActions:
             self.model.mark_saved()  # the plan is the file's now
             self.say(f"loaded {name}: '{mission.name}'", "ok")
 
-        self.screen.submit(LoadMission(mission=mission), f"load {name}", then=loaded)
+        op = LoadMission(mission=mission, keep_state=how == "state")
+        self.screen.submit(op, f"load {name}", then=loaded)
 
 
 YAML = (".yaml", ".yml")
-
-
-def library_beside(mission: Any, path: Path) -> Path | None:
-    """The skill library file a save to `path` writes beside it: when the
-    mission's library reference would not resolve from there (else None)."""
-    from backend.files.missions import library_path
-
-    if library_path(path, mission.library).exists():
-        return None
-    return path.with_name(path.stem + ".library.yaml")
-
-
-def save_with_library(mission: Any, library: Any, path: Path) -> str:
-    """Save the mission; if its library reference does not resolve from the
-    new place, write the library beside it and point there (the prompt asked
-    before either file was replaced)."""
-    from backend.files import yamlio
-    from backend.files.missions import save_mission
-
-    beside = library_beside(mission, path)
-    if beside is None:
-        save_mission(mission, path)
-        return ""
-    beside.write_text(
-        yamlio.dump(
-            library.model_dump(mode="json", exclude_defaults=True) | {"format": library.format}
-        ),
-        encoding="utf-8",
-    )
-    save_mission(mission, path, library_file=beside)
-    return f"its skill library written to {beside.name}"
+SAVE_AS = [
+    ("state", Text("its state: the statuses and the log as they are")),
+    ("plan", Text("a plan: every skill idle, to run again")),
+]
+# starts on Cancel: enter alone never replaces the mission
+LOAD_AS = [
+    ("cancel", Text("Cancel")),
+    ("plan", Text("Replace, as a plan: unfinished skills idle, the log kept")),
+    ("state", Text("Replace, keeping the file's statuses (refused while its robots are online)")),
+]

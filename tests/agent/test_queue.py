@@ -334,6 +334,18 @@ class TestRetries:
         assert (entry.attempt, entry.retries_used, entry.skill.attempt) == (3, 2, 3)
         assert queue.finish(S.FAILURE, "stuck").attempt == 3
 
+    def test_running_again_is_reported_only_for_a_new_attempt(self, queue):
+        """The ground refuses running -> running at the same attempt: the skill
+        starting after recharging first (already running) makes no report, its
+        next attempt does."""
+        queue.enqueue([inst("a", retries=1)], offered=OFFERED)
+        queue.start()  # running, attempt 1 ("recharging first")
+        assert queue.report(queue.active.entry, S.RUNNING, "started") is None
+        assert queue.next_attempt()
+        again = queue.report(queue.active.entry, S.RUNNING, "retry 1/1")
+        assert again is not None and again.attempt == 2
+        assert [(r.status.value, r.attempt) for r in queue.made] == [("running", 1), ("running", 2)]
+
     def test_no_retries_no_next_attempt(self, queue):
         enqueue(queue, "a")
         queue.start()

@@ -15,6 +15,8 @@ import time
 import pytest
 import yaml
 
+from backend.files.missions import load_mission
+
 from .helpers import (
     CTL_CMD,
     LIBRARY,
@@ -503,17 +505,20 @@ def test_save_load_round_trip(endpoint, tmp_path):
     )
 
     out3 = ok(endpoint, "load", str(out)).stdout
-    assert out3.startswith("loaded mission 'Tutorial' (2 robots, 6 skills) at revision")
+    assert out3.startswith("loaded mission 'Tutorial' (2 robots, 6 skills) as a plan at revision")
     after = state(endpoint)
     for key in ("tasks", "barriers", "markers", "name"):
         assert after[key] == before[key], key
 
-    # without --library: the reference is written as the server has it (a
-    # loaded file never changes the server's library), and ctl says so when it
-    # does not lead to the library from the new file's folder
+    # without --library: a loaded file never changes the server's library;
+    # where the server's reference does not lead to it, the library is
+    # written beside the file, which loads from there (as the console saves)
     assert after["library"] == before["library"]
-    r = ok(endpoint, "save", str(tmp_path / "again.yaml"))
-    assert "note:" in r.stdout and "--library" in r.stdout
+    again = tmp_path / "again.yaml"
+    r = ok(endpoint, "save", str(again))
+    assert "note:" in r.stdout and "again.library.yaml" in r.stdout
+    assert yaml.safe_load(again.read_text())["library"] == "again.library.yaml"
+    assert load_mission(again)[1] == load_mission(ROOT / "missions" / "tutorial.yaml")[1]
     # next to the mission's library folder the reference is right: no note
     here = ROOT / "missions" / f"_ctl_test_{tmp_path.name}.yaml"
     try:

@@ -452,7 +452,7 @@ async def test_80x24_is_usable_schedule_then_editor():
 
 async def test_save_then_load_a_mission_file_and_undo(tmp_path):
     from backend.files.missions import load_mission
-    from console.screens.dialogs import ConfirmScreen, PathPrompt
+    from console.screens.dialogs import ChoiceScreen, ConfirmScreen, PathPrompt
 
     b = Builder(TUTORIAL)
     app, backend = engine_app(b)
@@ -474,6 +474,9 @@ async def test_save_then_load_a_mission_file_and_undo(tmp_path):
         await wait_until(pilot, lambda: isinstance(app.screen, PathPrompt), what="path prompt")
         app.screen.query_one("Input").value = str(target)
         await pilot.press("enter")
+        await wait_until(pilot, lambda: isinstance(app.screen, ChoiceScreen), what="save as")
+        assert "its state: the statuses and the log as they are" in screen_text(app)
+        await pilot.press("enter")  # its state (a plan: every skill idle)
         await wait_until(pilot, lambda: target.exists(), what="file saved")
         await wait_until(pilot, lambda: "saved" in status_line(app), what="said")
         mission, _ = load_mission(target)  # a valid mission file
@@ -486,9 +489,10 @@ async def test_save_then_load_a_mission_file_and_undo(tmp_path):
         app.screen.query_one("Input").value = str(target)
         await pilot.press("enter")
         await wait_until(
-            pilot, lambda: isinstance(app.screen, ConfirmScreen), what="confirm replace"
+            pilot, lambda: isinstance(app.screen, ChoiceScreen), what="confirm replace"
         )
-        await pilot.press("y")
+        assert "Replace, as a plan: unfinished skills idle" in screen_text(app)
+        await pilot.press("down", "enter")  # it starts on Cancel
         await wait_until(
             pilot,
             lambda: b.mission.find("lru2-1")[2].label == "drive beside POI-A",

@@ -22,7 +22,7 @@ from console_state import (
 )
 
 from console.config import ConsoleConfig
-from console.screens.dialogs import ConfirmScreen, PathPrompt, QuitScreen
+from console.screens.dialogs import ChoiceScreen, ConfirmScreen, PathPrompt, QuitScreen
 from console.state.files import (
     SHIPPED_MISSIONS,
     RecentFiles,
@@ -122,7 +122,10 @@ async def test_save_asks_before_replacing_a_file_then_remembers_it(tmp_path):
         await pilot.press("enter")
         await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="again")
         await pilot.press("y")
+        await wait_until(pilot, lambda: isinstance(app.screen, ChoiceScreen), what="save as")
+        await pilot.press("down", "enter")  # a plan: every skill idle
         await wait_until(pilot, lambda: "Tutorial" in target.read_text(), what="replaced")
+        assert "status:" not in target.read_text()
         await wait_until(pilot, lambda: "saved plan.yaml" in app.mission_screen.message, what="ok")
         assert str(target) in app.recent.files
         assert RecentFiles(tmp_path / "recent.json").files[0] == str(target)
@@ -243,6 +246,8 @@ async def test_quit_offers_to_save_an_edited_plan_first(tmp_path):
         await wait_until(pilot, lambda: isinstance(app.screen, PathPrompt), what="save prompt")
         target = tmp_path / "kept.yaml"
         app.screen.query_one("#path").value = str(target)
+        await pilot.press("enter")
+        await wait_until(pilot, lambda: isinstance(app.screen, ChoiceScreen), what="save as")
         await pilot.press("enter")
         await wait_exit(app)
     assert "lru2-2" not in target.read_text() and "lru2-1" in target.read_text()

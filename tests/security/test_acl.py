@@ -20,6 +20,10 @@ from backend.core.ops import AddSkill, Report
 from backend.protocol.keys import Keys
 from backend.protocol.messages import (
     Downlink,
+    DownlinkAck,
+    Manifest,
+    Register,
+    RegisterReply,
     Request,
     StateSnapshot,
     Telemetry,
@@ -170,13 +174,25 @@ def test_robot_cannot_report_or_register_for_another_robot_nor_change_the_missio
         report = Report(robot="lru2", seq=1, id="lru2-1", status="success")
         assert _replies(rover1, Keys.downlink("lru2"), downlink("lru2", report)) == []
         assert _replies(rover1, Keys.register("lru2"), b"{}") == []
-        # its own key carrying another robot's report: the server refuses it
-        ((ok, raw),) = _replies(rover1, Keys.downlink("lru1"), downlink("lru1", report))
-        assert not ok and b"lru1 cannot send messages of lru2" in raw
         # operations and the state are not a robot's business
         for key in (Keys.OP, Keys.op_as("rover1"), Keys.op_as("ops"), Keys.STATE):
             assert _replies(rover1, key, _add()) == [], key
         assert _revision(ops) == before
+        # registered, its own key carrying another robot's report: the server
+        # refuses that message (its number is used up), lru2 is untouched
+        manifest = Manifest(name="lru1", type="lru_science")
+        ((ok, raw),) = _replies(
+            rover1, Keys.register("lru1"), dumps(Register(manifest=manifest, session="s1"))
+        )
+        assert ok and RegisterReply.model_validate_json(raw).accepted
+        ((ok, raw),) = _replies(rover1, Keys.downlink("lru1"), downlink("lru1", report))
+        ack = DownlinkAck.model_validate_json(raw)
+        assert ok and ack.last_seq == 1 and [r.seq for r in ack.refused] == [1]
+        assert ack.refused[0].code == "bad_message"
+        assert "lru1 cannot send messages of lru2" in ack.refused[0].message
+        ((ok, raw),) = _replies(ops, Keys.STATE)
+        lru2 = StateSnapshot.model_validate_json(raw).mission.tasks["lru2"]
+        assert [s.status.value for s in lru2] == ["idle", "idle"]
 
 
 def test_robots_ask_each_other_but_cannot_pose_as_another(server, accounts):

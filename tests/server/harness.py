@@ -229,15 +229,18 @@ class RawRobot:
         self.outbox.append(r)
         return r
 
-    async def flush(self, messages: list | None = None) -> DownlinkAck:
-        """Send the outbox (or `messages`) as one Downlink; drop what is acknowledged."""
-        dl = Downlink(
+    def downlink(self, messages: list) -> Downlink:
+        return Downlink(
             robot=self.name,
             session=self.session_id,
-            messages=list(self.outbox if messages is None else messages),
+            messages=list(messages),
             uplink_applied=self.applied,
             sent=datetime.now(UTC),
         )
+
+    async def flush(self, messages: list | None = None) -> DownlinkAck:
+        """Send the outbox (or `messages`) as one Downlink; drop what is acknowledged."""
+        dl = self.downlink(self.outbox if messages is None else messages)
         ack = DownlinkAck.model_validate_json(
             await query(self.session, Keys.downlink(self.name), dumps(dl), 10.0)
         )
@@ -245,7 +248,7 @@ class RawRobot:
         self.outbox = [m for m in self.outbox if m.seq > ack.last_seq]
         return ack
 
-    def registration(self, queue: list[str] = ()) -> Register:
+    def registration(self, queue: list[str] = (), sent: datetime | None = None) -> Register:
         _, library = load_mission(ROOT / "missions" / "tutorial.yaml")
         manifest = Manifest(
             name=self.name,
@@ -260,9 +263,13 @@ class RawRobot:
             last_seq=self.seq,
             uplink_applied=self.applied,
             queue=[QueueEntry(id=i, status=Status.IDLE_SYNCHRONIZED) for i in queue],
+            sent=sent,
         )
 
-    async def register(self, rtype: str, queue: list[str] = ()) -> RegisterReply:
+    async def register(
+        self, rtype: str, queue: list[str] = (), sent: datetime | None = None
+    ) -> RegisterReply:
+        """Register (`sent`: when it says the registration left it)."""
         self.rtype = rtype
         if not self._entities:
             self._entities = [
@@ -271,7 +278,7 @@ class RawRobot:
             ]
         reply = RegisterReply.model_validate_json(
             await query(
-                self.session, Keys.register(self.name), dumps(self.registration(queue)), 10.0
+                self.session, Keys.register(self.name), dumps(self.registration(queue, sent)), 10.0
             )
         )
         assert reply.accepted, reply.reason

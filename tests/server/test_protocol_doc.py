@@ -5,6 +5,7 @@ its documented schema)."""
 
 import re
 from pathlib import Path
+from typing import get_args
 
 import pytest
 from pydantic import ValidationError
@@ -13,7 +14,14 @@ from backend.core import ops
 from backend.core.model import Marker, Status
 from backend.core.rules.engine import Engine
 from backend.files.missions import load_mission
-from backend.protocol.doc import ERROR_CODES, render, stale
+from backend.protocol.doc import (
+    ERROR_CODES,
+    EVENT_RULES,
+    OP_CODES,
+    _event_kinds,
+    render,
+    stale,
+)
 from backend.protocol.values import VALUES, check_value
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -65,6 +73,21 @@ def test_every_refusal_code_is_in_the_table():
     assert raised - documented == set()
 
 
+def test_every_event_says_how_a_mirror_applies_it():
+    """A third-party client mirrors the mission from the document alone."""
+    assert [ev.strip("`") for ev, _, _ in EVENT_RULES] == _event_kinds()
+
+
+def test_the_codes_of_each_operation_are_documented_codes():
+    documented = {code for code, _, _ in ERROR_CODES}
+    ops_named = set()
+    for names, codes in OP_CODES:
+        ops_named |= set(names.split(", "))
+        listed = {c.split(" ")[0] for c in codes.split(", ") if not c.startswith("and ")}
+        assert listed <= documented, names
+    assert ops_named == set(VALUES)
+
+
 def test_every_reply_value_fits_its_schema():
     mission, library = load_mission(ROOT / "missions" / "tutorial.yaml")
     e = Engine(mission, library)
@@ -76,6 +99,8 @@ def test_every_reply_value_fits_its_schema():
         seen[op.op] = applied.value
         return applied
 
+    do(ops.NewMission())
+    do(ops.LoadMission(mission=mission.copy_deep()))
     added = do(ops.AddSkill(robot="lru1", skill="recharge")).value["id"]
     do(ops.EditSkill(id=added, label="x"))
     do(ops.MoveSkill(id=added, index=0))
@@ -105,7 +130,16 @@ def test_every_reply_value_fits_its_schema():
     do(ops.Control(op="reset"))
     e.submit(ops.Report(robot="lru1", seq=3, id="lru1-1", status=Status.FAILURE))
     do(ops.Retry(id="lru1-1"))
-    missing = set(VALUES) - set(seen) - {"load", "new"}
-    assert missing == set()
+    do(ops.RetryEdit(id="lru1-1"))
+    do(ops.Waive(check="barrier.deadlock:b1+b2", reason="they meet by radio"))
+    do(ops.Waive(check="barrier.deadlock:b1+b2", reason="they meet by radio"))  # no change
+    do(ops.Unwaive(check="barrier.deadlock:b1+b2"))
+    assert set(VALUES) - set(seen) == set()
+    every_op = {
+        name
+        for model in get_args(ops.OperatorOperation)
+        for name in get_args(model.model_fields["op"].annotation)
+    }
+    assert every_op <= set(VALUES)
     with pytest.raises(ValidationError):
         check_value("sync", {"command": 1})  # a value that does not fit is caught

@@ -436,7 +436,7 @@ def test_garbage_from_the_robot_is_the_robots_fault(cluster, robots):
         assert bad is None
         err = robot.errors[-1]
         assert err["code"] == "bad_message" and err["robot"] == "lru1"
-        assert "lru1 sent a downlink that cannot be read" in err["message"]
+        assert "a downlink of lru1 cannot be read" in err["message"]
         await c.wait_for(
             lambda _m: any(a.robot == "lru1" and a.kind == "robot_error" for a in alerts), 10
         )

@@ -32,8 +32,13 @@ Operations
   marker move NAME (--pose P | --position P | --area A)
   marker rename NAME NEW_NAME
   marker delete NAME
-  load FILE                   validated here first (file:line:col issues, exit 2)
-  save FILE [--library PATH]
+  load FILE [--keep-state]    validated here first (file:line:col issues, exit 2); as
+                              a plan: unfinished skills idle (--keep-state: the
+                              file's statuses; refused while its robots are online)
+  save FILE [--plan] [--library PATH]
+                              the mission with its statuses (--plan: every skill
+                              idle); loads from where it is written (the library
+                              is written beside it when the reference would break)
   new [NAME]                  an empty mission with the same robots
   undo | redo                 your own (same --client-id) edits of the plan
   watch [--count N]           one line per change until Ctrl-C (or N batches)
@@ -409,17 +414,29 @@ def _marker(p: argparse.ArgumentParser) -> None:
         arguments(sp)
 
 
-def _file(p: argparse.ArgumentParser) -> None:
-    p.add_argument("file", metavar="FILE")
-
-
 def _save(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", metavar="FILE")
     p.add_argument(
+        "--plan",
+        action="store_true",
+        help="save the plan: every skill idle (default: the statuses and the log as they are)",
+    )
+    p.add_argument(
         "--library",
         metavar="PATH",
-        help="the skill library file to reference, written relative to FILE "
-        "(default: the server's reference, as is)",
+        help="the skill library file to reference, written relative to FILE (default: the "
+        "server's reference when it leads to its library from there, else FILE's name with "
+        ".library.yaml, written beside it)",
+    )
+
+
+def _load(p: argparse.ArgumentParser) -> None:
+    p.add_argument("file", metavar="FILE")
+    p.add_argument(
+        "--keep-state",
+        action="store_true",
+        help="keep the file's statuses (refused while a robot of the mission is online; "
+        "default: a plan, every unfinished skill idle, the log kept)",
     )
 
 
@@ -461,7 +478,7 @@ OPERATIONS: dict[str, tuple[str, Arguments]] = {
     "barrier": ("make idle skills of different robots start together", _ids),
     "unbarrier": ("remove a barrier", _unbarrier),
     "marker": ("add, move, rename or delete a marker", _marker),
-    "load": ("replace the mission with a mission file (validated here first)", _file),
+    "load": ("replace the mission with a mission file (validated here first)", _load),
     "save": ("write the mission to a YAML file", _save),
     "new": ("start an empty mission with the same robots", _new),
     "undo": ("undo your last edit of the plan", _nothing),

@@ -283,7 +283,7 @@ def _load(args: argparse.Namespace, known: Known) -> Any:
         except FileProblems as e:
             raise FileInvalid(args.file, e.issues) from None
         args.loaded = loaded  # (mission, library): read the file once
-    return ops.LoadMission(mission=loaded[0].copy_deep())
+    return ops.LoadMission(mission=loaded[0].copy_deep(), keep_state=args.keep_state)
 
 
 def _new(args: argparse.Namespace, known: Known) -> Any:

@@ -556,7 +556,8 @@ def _marker_moved(o: Outcome) -> str:
 def _loaded(o: Outcome) -> str:
     m = o.op.mission
     n = sum(len(t) for t in m.tasks.values())
-    return f"loaded mission '{m.name}' ({len(m.robots)} robots, {n} skills) {o.at}"
+    how = "keeping its statuses" if o.op.keep_state else "as a plan"
+    return f"loaded mission '{m.name}' ({len(m.robots)} robots, {n} skills) {how} {o.at}"
 
 
 # the protocol's operation name (`op.op`) -> one line saying what it did

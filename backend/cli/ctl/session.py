@@ -332,76 +332,40 @@ async def _watch(client: Any, args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _session_free(m: Any) -> Any:
-    """The mission without the server's bookkeeping (per-skill and per-list
-    revisions, the robots' sequence numbers, the uplink): a file is a plan and a log."""
-    tasks = {r: [s.model_copy(update={"rev": 0}) for s in t] for r, t in m.tasks.items()}
-    return m.model_copy(
-        update={
-            "tasks": tasks,
-            "task_revs": {},
-            "marker_revs": {},
-            "report_seqs": {},
-            "uplink": {},
-            "uplink_seqs": {},
-            "next_command": 1,
-        }
-    )
-
-
-def _library_note(client: Any, m: Any, target: Path) -> list[str]:
-    """A note when the library reference, as the server has it, does not lead
-    from `target`'s folder to the server's library."""
-    from backend.files.diagnostics import FileProblems
-    from backend.files.missions import library_path, load_library
-
-    resolved = library_path(target, m.library)
-    try:
-        same = resolved.is_file() and load_library(resolved) == client.library
-    except FileProblems:
-        same = False
-    if same:
-        return []
-    return [
-        f"the library reference '{m.library}' is written as the server has it (relative to "
-        f"the mission file the server loaded); from {target.parent or '.'} it does not lead "
-        f"to the server's library '{client.library.name}'; pass --library PATH to set it"
-    ]
-
-
-def _write(client: Any, m: Any, target: Path, library: str | None) -> list[str]:
-    """Write the mission file; the notes to print."""
-    from backend.files.missions import save_mission
-
-    if not library:
-        notes = _library_note(client, m, target)
-        save_mission(m, target)
-        return notes
-    lib_file = Path(library)
-    if not lib_file.is_file():
-        raise UsageError(f"save --library: no such file {library}")
-    save_mission(m, target, library_file=lib_file)
-    return []
-
-
 async def _save(client: Any, args: argparse.Namespace) -> int:
-    m = _session_free(client.mission)
+    from backend.files.missions import save_mission_file
+
+    m = client.mission
     target = Path(args.file)
+    library = Path(args.library) if args.library else None
+    if library is not None and not library.is_file():
+        raise UsageError(f"save --library: no such file {args.library}")
+    what = "plan" if args.plan else "state"
     try:
-        notes = _write(client, m, target, args.library)
+        saved = save_mission_file(m, client.library, target, what, library)
     except OSError as e:
         raise UsageError(f"save: cannot write {args.file}: {e.strerror or e}") from None
-    written = m.library
-    if args.library:
-        written = os.path.relpath(Path(args.library).resolve(), target.resolve().parent)
+    notes = []
+    if saved.library_file is not None:
+        notes.append(
+            f"the server's library reference '{m.library}' does not lead to its library from "
+            f"{target.parent or '.'}: the library was written beside it, {saved.library_file}"
+        )
+    as_what = "as a plan (every skill idle)" if args.plan else "with its statuses"
     return _print_done(
         args,
         lambda: (
-            f"saved mission '{m.name}' at revision {m.revision} to {target} (library: {written})"
+            f"saved mission '{m.name}' at revision {m.revision} {as_what} to {target} "
+            f"(library: {saved.library})"
         ),
         op="save",
         revision=m.revision,
-        value={"file": str(target), "library": written},
+        value={
+            "file": str(target),
+            "library": saved.library,
+            "library_written": str(saved.library_file) if saved.library_file else None,
+            "as": what,
+        },
         notes=notes,
         duplicate=False,
     )

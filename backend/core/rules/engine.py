@@ -77,8 +77,45 @@ def load_mission(rules: Rules, op: LoadMission) -> Change:
     if problems:
         path, msg = problems[0]
         raise Refusal("bad_mission", f"the mission is invalid at {format_path(path)}: {msg}")
+    reset, dissolved = ([], []) if op.keep_state else as_plan(new)
     _take_over(new, rules.mission)
-    return Change([ev.MissionReplaced(mission=new)], [], {}, None)
+    notes = []
+    if reset:
+        notes.append(
+            f"loaded as a plan: {', '.join(reset)} idle again (the file had them synchronized; "
+            "what the robots hold is theirs to say)"
+        )
+    if dissolved:
+        notes.append(
+            f"barrier {', '.join(dissolved)} dissolved: a finished skill and an idle one "
+            "never start together"
+        )
+    value = {"reset": reset, "dissolved": dissolved}
+    return Change([ev.MissionReplaced(mission=new)], notes, value, None)
+
+
+def as_plan(m: Mission) -> tuple[list[str], list[str]]:
+    """`m` as a plan, in place: every skill that is not finished is idle
+    (finished ones stay: the log); a barrier left with a finished skill and
+    an idle one is dissolved. Returns the skills reset and the barriers
+    dissolved."""
+    reset: list[str] = []
+    for task in m.tasks.values():
+        for s in task:
+            if s.status not in FINISHED and s.status != Status.IDLE:
+                reset.append(s.id)
+                s.status, s.status_info, s.started_at = Status.IDLE, "", None
+    dissolved = [
+        bid for bid, b in m.barriers.items() if len({_finished(m, sid) for sid in b.skills}) > 1
+    ]
+    for bid in dissolved:
+        del m.barriers[bid]
+    return reset, dissolved
+
+
+def _finished(m: Mission, sid: str) -> bool:
+    found = m.find(sid)
+    return found is not None and found[2].status in FINISHED
 
 
 def _check_replaceable(rules: Rules) -> None:

@@ -325,7 +325,16 @@ def report(rules: Rules, op: Report) -> Change:
     if op.seq <= last:
         ignored = f"report {op.seq} of {op.robot} was applied already"
         return Change([], [], {"ignored": ignored}, None, duplicate=True)
-    robot, i, s = rules.skill(op.id)
+    rules.task(op.robot)
+    found = rules.mission.find(op.id)
+    if found is None:  # a robot's message: refused like every report the rules refuse
+        raise Refusal(
+            "bad_report",
+            f"{op.robot} reported on skill {op.id}, which this mission does not have",
+            robot=op.robot,
+            skill=op.id,
+        )
+    robot, i, s = found
     if robot != op.robot:
         raise Refusal(
             "bad_report",
@@ -354,13 +363,20 @@ def _check_transition(robot: str, s: SkillInstance, op: Report) -> None:
     """Refused unless the transition table allows the new status."""
     new = op.status
     restart = new == Status.RUNNING and s.status == Status.RUNNING and (op.attempt or 0) > s.attempt
-    # an active skill may repeat its status with new information
-    # ("waiting for lru2 (offline)"); the log and the queue may not
-    same = new == s.status and s.status in ACTIVE
-    if new not in TRANSITIONS[s.status] and not restart and not same:
+    # a skill waiting at a barrier may repeat its status with new information
+    # ("waiting for lru2 (offline)"); running only with a higher attempt (a
+    # retry); the others never
+    waiting = new == s.status == Status.SYNCHWAITING
+    if new not in TRANSITIONS[s.status] and not restart and not waiting:
+        again = (
+            f" at the same attempt {s.attempt} (only a retry, with a higher attempt, reports "
+            "running again)"
+            if new == s.status == Status.RUNNING
+            else ""
+        )
         raise Refusal(
             "bad_report",
-            f"{robot} reported {s.display()} going {s.status.value} -> {new.value}, "
+            f"{robot} reported {s.display()} going {s.status.value} -> {new.value}{again}, "
             "which the transition table forbids",
             robot=robot,
             skill=s.id,

@@ -344,6 +344,13 @@ def cancel(rules: Rules, op: Cancel) -> Change:
         raise Refusal("unknown_command", f"no command {op.command} in this mission")
     if not c.pending:
         said = f": {c.reason}" if c.reason else ""
+        if op.undo:  # the sync reached the robot (or never will): nothing to take back here
+            raise Refusal(
+                "cannot_undo",
+                f"{c.title()} to {c.robot} is {c.state.value} already{said}; "
+                "unsynchronize what it queued instead",
+                robot=c.robot,
+            )
         raise Refusal(
             "not_pending",
             f"{c.title()} to {c.robot} is {c.state.value} already{said}",
@@ -454,10 +461,16 @@ def answer(rules: Rules, op: Answer) -> Change:
     events: list[ev.Event] = [ev.ReportSeq(robot=op.robot, seq=op.seq)]
     c = rules.mission.command_by_seq(op.robot, op.command)
     if c is None or c.answered is not None:
-        what = "which is not in its uplink" if c is None else f"{c.title()}, answered already"
-        msg = f"{op.robot} answered command seq {op.command}, {what}: the answer is ignored"
-        alert = _robot_alert(op.robot, msg, AlertKind.ROBOT_ERROR, "error")
-        return Change(events, [], {}, None, alerts=(alert,))
+        what = (
+            "which its uplink does not hold (never sent, or settled long ago)"
+            if c is None
+            else f"{c.title()}, answered already"
+        )
+        raise Refusal(
+            "bad_report",
+            f"{op.robot} answered command seq {op.command}, {what}: nothing of it was applied",
+            robot=op.robot,
+        )
     fx = _Effects(rules, c, op)
     state = _STATE[op.outcome]
     if op.outcome == "applied":

@@ -15,7 +15,7 @@ from backend.core import events as ev
 from backend.core.model import Waiver
 from backend.core.ops import Unwaive, Waive
 from backend.core.plan.checks import RULE_NAMES
-from backend.core.rules.base import Change, Refusal, Rule, Rules, unchanged
+from backend.core.rules.base import Change, Refusal, Rule, Rules
 
 
 def waive(rules: Rules, op: Waive) -> Change:
@@ -28,7 +28,7 @@ def waive(rules: Rules, op: Waive) -> Change:
         raise Refusal("unknown_check", f"no plan check '{rule}' (checks: {known})")
     old = rules.mission.waivers.get(op.check)
     if old is not None and old.reason == reason:
-        return unchanged()
+        return Change([], [], {"check": op.check}, None)  # nothing new: no revision
     undo: Waive | Unwaive = (
         Unwaive(check=op.check) if old is None else Waive(check=op.check, reason=old.reason)
     )

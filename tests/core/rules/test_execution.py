@@ -91,15 +91,46 @@ class TestTransitionTable:
         )
 
     def test_report_on_an_unknown_skill_refused(self, engine, report, refused):
+        """A robot's message the rules refuse is `bad_report`, whatever is
+        wrong with it (docs/protocol.md, DownlinkAck.refused)."""
         refused(
-            engine, lambda: report(engine, "lru1", "nope-1", S.RUNNING), "unknown_skill", "nope-1"
+            engine,
+            lambda: report(engine, "lru1", "nope-1", S.RUNNING),
+            "bad_report",
+            "nope-1",
+            robot="lru1",
+            skill="nope-1",
         )
 
-    def test_same_status_updates_the_information(self, engine, bring, report, skill):
+    def test_waiting_at_a_barrier_repeats_with_new_information(self, engine, bring, report, skill):
+        bring(engine, "lru1", "lru1-1", S.SYNCHWAITING)
+        report(engine, "lru1", "lru1-1", S.SYNCHWAITING, info="waiting for lru2 (offline)")
+        assert skill(engine, "lru1-1").status_info == "waiting for lru2 (offline)"
+        assert skill(engine, "lru1-1").status == S.SYNCHWAITING
+
+    @pytest.mark.parametrize("status", [S.RUNNING, S.PAUSED, S.IDLE_SYNCHRONIZED])
+    def test_the_same_status_at_the_same_attempt_is_refused(
+        self, engine, bring, report, refused, status
+    ):
+        """The table has running -> running only with a higher attempt (an
+        autonomous retry); paused or queued never repeat."""
+        bring(engine, "lru1", "lru1-1", status)
+        r = refused(
+            engine,
+            lambda: report(engine, "lru1", "lru1-1", status, info="again", attempt=1),
+            "bad_report",
+            "lru1-1",
+            f"{status.value} -> {status.value}",
+            robot="lru1",
+            skill="lru1-1",
+        )
+        if status == S.RUNNING:
+            assert "same attempt 1" in r.message
+
+    def test_running_again_with_a_higher_attempt_is_a_retry(self, engine, bring, report, skill):
         bring(engine, "lru1", "lru1-1", S.RUNNING)
-        report(engine, "lru1", "lru1-1", S.RUNNING, info="halfway")
-        assert skill(engine, "lru1-1").status_info == "halfway"
-        assert skill(engine, "lru1-1").status == S.RUNNING
+        report(engine, "lru1", "lru1-1", S.RUNNING, info="retry 1/2", attempt=2)
+        assert (skill(engine, "lru1-1").status, skill(engine, "lru1-1").attempt) == (S.RUNNING, 2)
 
 
 # -- reports: section order -------------------------------------------------------------

@@ -3,9 +3,11 @@ concurrency (expected_revision), per-client undo/redo, load/new mission."""
 
 from __future__ import annotations
 
+from datetime import UTC, datetime
+
 import pytest
 
-from backend.core.model import Mission, Pose, SkillInstance, Status
+from backend.core.model import Barrier, Mission, Pose, SkillInstance, Status
 from backend.core.ops import (
     AddBarrier,
     AddSkill,
@@ -487,6 +489,26 @@ class TestLoadNew:
         assert engine.mission.barriers == new.barriers
         add(engine)
         assert engine.mission.revision == rev + 2
+
+    def test_a_load_comes_in_as_a_plan_unless_it_keeps_the_state(self, engine):
+        """Issue 28: a saved plan loaded into a running demo brought back the
+        earlier run's statuses on a fresh robot (take off done, land paused)."""
+        m, _ = load_mission(TUTORIAL)
+        lru1, lru2 = m.tasks["lru1"], m.tasks["lru2"]
+        lru1[0].status, lru1[0].finished_at = S.SUCCESS, datetime(2030, 1, 1, tzinfo=UTC)
+        lru1[1].status, lru1[1].status_info = S.PAUSED, "paused by operator"
+        lru2[0].status, lru2[1].status = S.RUNNING, S.IDLE_SYNCHRONIZED
+        m.barriers = {"b1": Barrier(skills=["lru1-1", "lru2-1"])}  # done on one side
+        applied = engine.submit(LoadMission(mission=m))
+        assert applied.value == {"reset": ["lru1-2", "lru2-1", "lru2-2"], "dissolved": ["b1"]}
+        assert "lru1-2, lru2-1, lru2-2 idle again" in applied.notes[0]
+        got = {s.id: (s.status, s.status_info) for t in engine.mission.tasks.values() for s in t}
+        assert got["lru1-1"] == (S.SUCCESS, "") and got["lru1-2"] == (S.IDLE, "")
+        assert {got[i][0] for i in ("lru2-1", "lru2-2")} == {S.IDLE}
+        assert engine.mission.barriers == {}
+        engine.submit(LoadMission(mission=m, keep_state=True))  # robots reconcile at registration
+        assert engine.mission.find("lru1-2")[2].status == S.PAUSED
+        assert engine.mission.barriers == m.barriers
 
     def test_new_empties_the_plan(self, engine, sync, report):
         engine.submit(AddBarrier(ids=["lru1-1", "lru2-1"]))

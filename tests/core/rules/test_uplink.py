@@ -142,8 +142,16 @@ class TestAnswers:
             Answer(robot="lru1", seq=1, command=1, outcome="applied", queued=["lru1-1"])
         )
         assert again.duplicate and not first.duplicate
-        late = answer(engine, "lru1", 1, queued=[])  # a new number: answered already
-        assert "answered already" in late.alerts[0].message
+        # a new number: answered already, refused (the downlink lists it in its ack)
+        with pytest.raises(Refusal) as late:
+            answer(engine, "lru1", 1, queued=[])
+        assert late.value.code == "bad_report" and "answered already" in late.value.message
+
+    def test_an_answer_to_a_seq_never_sent_is_refused(self, engine):
+        with pytest.raises(Refusal) as r:
+            answer(engine, "lru1", 7)
+        assert r.value.code == "bad_report"
+        assert "command seq 7" in r.value.message and "does not hold" in r.value.message
 
     def test_unsync_race_the_started_skill_stays(self, engine, sync, report, ids, status_of):
         sync(engine, "lru1")
@@ -211,7 +219,18 @@ class TestWithdrawing:
         engine.submit(UplinkSent(robot="lru1", ids=[1], at=T0))
         with pytest.raises(Refusal) as r:
             engine.submit(Undo(), client="c")
+        assert r.value.code == "cannot_undo"
         assert "may be on lru1" in r.value.message and "ctl cancel 1" in r.value.message
+
+    def test_undo_of_an_acked_sync_is_refused_as_the_protocol_says(self, engine):
+        """docs/protocol.md: the undo of a sync is refused once sent
+        (`cannot_undo`), also once the robot answered it."""
+        engine.submit(Sync(robot="lru1"), client="c")
+        answer(engine, "lru1", 1, queued=["lru1-1", "lru1-2"])
+        with pytest.raises(Refusal) as r:
+            engine.submit(Undo(), client="c")
+        assert r.value.code == "cannot_undo"
+        assert "acked already" in r.value.message and "unsynchronize" in r.value.message
 
     def test_expiry_before_sending_releases_the_skills(self, engine, status_of):
         engine.submit(Sync(robot="lru1", expire_s=5))
