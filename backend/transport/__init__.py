@@ -35,6 +35,7 @@ from backend.transport.config import (
     apply_options,
     client_config,
     load_config_file,
+    relay_config,
     router_config,
     set_option,
 )
@@ -80,6 +81,7 @@ __all__ = [
     "query_all",
     "query_all_sync",
     "query_sync",
+    "relay_config",
     "router_config",
     "serve",
     "serve_async",
