@@ -156,10 +156,11 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     mission, library, world, world_file = loaded
     try:
-        extra = login_from_args(args).zenoh_options()
+        login = login_from_args(args)
     except AccountsError as e:
         print(f"missionctl sim: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    extra = login.zenoh_options()
     if args.zenoh_config:
         from backend.transport import load_config_file
 
@@ -182,6 +183,7 @@ def run(args: argparse.Namespace) -> int:
             link_delay=args.link_delay,
             comms_window=args.comms_window,
             zenoh_extra=extra,
+            link_delay_hint=login.link_delay_hint,
         )
     except (SimError, ValueError) as e:
         print(f"missionctl sim: {e}", file=sys.stderr)
@@ -249,13 +251,16 @@ async def _status(args: argparse.Namespace) -> int:
     from backend import transport
     from backend.protocol import mapfeed as mf
     from backend.transport.session import TransportUnreachable
+    from backend.transport.timeouts import query_timeout
 
     endpoints = args.connect or ["tcp/127.0.0.1:7447"]
     try:
-        extra = login_from_args(args).zenoh_options()
+        login = login_from_args(args)
     except AccountsError as e:
         print(f"missionctl sim-status: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    extra = login.zenoh_options()
+    timeout = query_timeout(args.timeout, login.link_delay_hint)
     try:
         session = await asyncio.to_thread(
             transport.open_session, transport.client_config(endpoints, extra=extra)
@@ -266,7 +271,7 @@ async def _status(args: argparse.Namespace) -> int:
     try:
         try:
             payload = mf.TRUTH_QUERY if args.truth else b""
-            raw = await transport.query(session, mf.KEY_STATUS, payload, timeout=args.timeout)
+            raw = await transport.query(session, mf.KEY_STATUS, payload, timeout=timeout)
         except transport.NoResponder:
             print(
                 f"missionctl sim-status: no simulator answers at {', '.join(endpoints)}",

@@ -90,6 +90,7 @@ class SimFleet:
         telemetry_hz: float = 4.0,
         feed_period: float = 0.5,
         zenoh_extra: dict[str, Any] | None = None,
+        link_delay_hint: float = 0.0,
     ):
         if speed <= 0 or not math.isfinite(speed):
             raise ValueError("the speed must be a positive number")
@@ -103,6 +104,7 @@ class SimFleet:
         self.comms_window = comms_window  # None: always in contact (coverage permitting)
         self.feed_period = feed_period
         self.zenoh_extra = zenoh_extra
+        self.link_delay_hint = link_delay_hint  # the network's delay (s), not the sim's
         self.robot_seconds = 0.0
         self.exchanges: Counter[str] = Counter(
             asks=0, tells=0, answered=0, unknown=0, unreachable=0
@@ -160,6 +162,7 @@ class SimFleet:
             },
             telemetry_hz=telemetry_hz,
             zenoh_extra=self.zenoh_extra,
+            link_delay_hint=self.link_delay_hint,
         )
         agent.time_scale = self.speed
         agent.pose = lambda r=robot: Pose(

@@ -83,6 +83,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import zenoh
@@ -116,6 +117,7 @@ from backend.protocol.messages import (
     RegisterReply,
     Telemetry,
 )
+from backend.transport import timeouts
 from backend.transport.login import Login
 
 # How often the link model is polled (it is a plain callable of the integrator).
@@ -139,6 +141,7 @@ class RobotAgent:
         telemetry_hz: float = 2.0,
         request_timeout: float = 5.0,
         login: Login | None = None,
+        link_delay_hint: float | None = None,
     ):
         check_name("robot name", name)
         check_name(f"robot {name}: type", robot_type)
@@ -148,11 +151,19 @@ class RobotAgent:
         self.modules = dict(modules or {})
         check_modules(name, self.modules)
         self.properties = dict(properties or {})
-        self.lease_ms = lease_ms
-        # an account (robot role) and TLS files: see docs/security.md
-        self.zenoh_extra = {**(zenoh_extra or {}), **(login.zenoh_options() if login else {})}
+        # the long link's expected one-way delay (s; default: the login's): the
+        # lease, Zenoh's timeouts and the queries' timeouts follow from it
+        login = login or Login()
+        if link_delay_hint is not None:
+            login = replace(login, link_delay_hint=link_delay_hint)
+        self.link_delay_hint = login.link_delay_hint
+        self.lease_ms = timeouts.robot_lease_ms(lease_ms, self.link_delay_hint)
+        # an account (robot role) and TLS files: see docs/security.md; the lease is ours
+        connection = login.zenoh_options()
+        connection.pop("transport/link/tx/lease", None)
+        self.zenoh_extra = {**(zenoh_extra or {}), **connection}
         self.telemetry_hz = telemetry_hz
-        self.request_timeout = request_timeout
+        self.request_timeout = timeouts.query_timeout(request_timeout, self.link_delay_hint)
 
         # integrator-settable sources and models
         self.pose: Callable[[], Pose] = Pose
