@@ -28,7 +28,8 @@ What the agent does (the contract is docs/protocol.md, protocol 2):
 
 - holds the liveliness token `Keys.alive(name, session)` (a fresh session
   per start), takes commands on `Keys.uplink(name)` and robot-to-robot world
-  messages on `Keys.world(name)`, publishes `Telemetry`;
+  messages on `Keys.world(name)`, publishes `Telemetry` when it changes
+  (deadbands, at most `telemetry_hz` a second, at least every 5 s: telemetry.py);
 - watches the server's token and registers (`Register`: manifest, session,
   its queue, its unacknowledged downlink) each time the server appears, or
   when the server no longer knows it; refused because another run of this
@@ -104,7 +105,7 @@ from backend.agent.registration import (
     manifest_bytes,
 )
 from backend.agent.runtime import Runtime, log
-from backend.agent.telemetry import TelemetryFeed
+from backend.agent.telemetry import TelemetryFeed, TelemetryPolicy
 from backend.agent.uplink import UplinkHandler
 from backend.agent.world import World
 from backend.core.model import Dequeue, Enqueue, Pause, Pose, Reset, Run, Status, Stop
@@ -142,6 +143,7 @@ class RobotAgent:
         request_timeout: float = 5.0,
         login: Login | None = None,
         link_delay_hint: float | None = None,
+        telemetry: TelemetryPolicy | None = None,
     ):
         check_name("robot name", name)
         check_name(f"robot {name}: type", robot_type)
@@ -191,7 +193,8 @@ class RobotAgent:
             uplink_applied=lambda: self._uplink.log.applied,
             unregistered=lambda: self._registrar.must_register(),
         )
-        self._telemetry = TelemetryFeed(self._rt, self._queue)
+        # telemetry_hz caps the rate; the policy says what is worth a sample
+        self._telemetry = TelemetryFeed(self._rt, self._queue, telemetry)
         self._world = World(self._rt)
         self._registrar = Registrar(
             self._rt,

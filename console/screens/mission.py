@@ -138,6 +138,7 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
         self.update_top()
         self.schedule.rebuild()
         self._stale: frozenset[str] = frozenset()
+        self._eta_shown: dict[str, int] = {}  # robot -> the ETA's second at the last tick
         # "as of 25s ago" counts up; a robot falling silent turns stale without a message
         self.set_interval(1.0, self.freshness_tick)
 
@@ -151,11 +152,24 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
             self._stale = stale
             self.schedule.refresh()
             return
-        for robot in stale:
+        for robot in stale | self._etas_ticked():
             self.schedule.refresh_telemetry(robot)
         for robot in self.model.robot_order():  # the ages of commands waiting for a robot
             if self.model.pending(robot):
                 self.schedule.refresh_uplinking(robot)
+
+    def _etas_ticked(self) -> set[str]:
+        """Robots whose running skill's ETA shows another second since the last
+        tick: telemetry comes on change, the ETA counts down between samples."""
+        ticked = set()
+        for robot, t in self.model.telemetry.items():
+            if t.eta_s is None:
+                continue
+            shown = int(t.eta_s - (self.model.freshness(robot).age_s or 0.0))
+            if self._eta_shown.setdefault(robot, shown) != shown:
+                self._eta_shown[robot] = shown
+                ticked.add(robot)
+        return ticked
 
     def on_resize(self, event: events.Resize) -> None:
         self.update_keys()

@@ -383,7 +383,8 @@ def progress_segments(
     if t is None or pct is None:
         text = "   running" + (f" · {s.status_info}" if s.status_info else "")
         return [Segment(fit(text, w), st["dim"])]
-    eta = fmt_duration(t.eta_s) if t.eta_s is not None else ""
+    # telemetry comes on change: the ETA counts down from the last sample (as old as `fresh`)
+    eta = fmt_duration(max(0.0, t.eta_s - (fresh.age_s or 0.0))) if t.eta_s is not None else ""
     # the longest label that leaves the bar 4 cells ("45% ETA 2m12s", "45% 2m12s", "45%")
     labels = [f" {int(pct * 100):3d}%" + (f" ETA {eta}" if eta else "")]
     if eta:
