@@ -8,6 +8,7 @@ message, so nothing here ever blocks the UI. Operations go through
 
 from __future__ import annotations
 
+import asyncio
 from typing import Any, Protocol
 
 from backend.client.client import MissionClient
@@ -22,10 +23,10 @@ from backend.client.events import (
     TelemetryReceived,
 )
 from backend.client.mapfollow import MapFeed, MapUpdate
+from backend.client.simstatus import SimStatusFeed
 from backend.protocol.keys import Keys
-from backend.protocol.mapfeed import KEY_STATUS_LIVE, SimStatus
+from backend.protocol.mapfeed import SimStatus
 from backend.protocol.messages import OpReply
-from backend.transport import subscribe
 from backend.transport.login import Login
 from console.messages import (
     AccountKnown,
@@ -63,8 +64,7 @@ class ClientBridge:
         self.login = login
         self.client: MissionClient | None = None
         self.map_feed: MapFeed | None = None
-        self.sim_status: SimStatus | None = None  # the simulator's speed and link delay (plans)
-        self._status_sub: Any = None
+        self._status_feed: SimStatusFeed | None = None
 
     async def connect(self) -> None:
         """Connect (raises backend.client.client.ClientError with a sentence)."""
@@ -87,16 +87,15 @@ class ClientBridge:
         answering is fine: the map screen then says there is no feed)."""
         if self.client is None or self.client.session is None:
             return
-        feed = MapFeed(self.client.session, self._on_map)
+        feed = MapFeed(self.client.session, self._on_map, timeout=self.client.timeout)
         self.map_feed = feed
-        self._status_sub = subscribe(self.client.session, KEY_STATUS_LIVE, self._on_status)
-        await feed.start()
+        self._status_feed = SimStatusFeed(self.client.session, timeout=self.client.timeout)
+        await asyncio.gather(self._status_feed.start(), feed.start())
 
-    def _on_status(self, msg: Any) -> None:  # a Zenoh thread: keep the latest, nothing else
-        try:
-            self.sim_status = SimStatus.model_validate_json(msg.payload)
-        except ValueError:
-            pass  # not a status of ours: the plan goes on without the sim's speed
+    @property
+    def sim_status(self) -> SimStatus | None:
+        """The simulator's speed and link delay (plans); None without a simulator."""
+        return self._status_feed.status if self._status_feed is not None else None
 
     def _on_map(self, update: MapUpdate) -> None:
         feed = self.map_feed
@@ -104,12 +103,9 @@ class ClientBridge:
             self.app.post_message(MapChanged(feed.mirror, update))
 
     async def close(self) -> None:
-        sub, self._status_sub = self._status_sub, None
-        if sub is not None:
-            try:
-                sub.undeclare()
-            except Exception:  # the session may be closed already
-                pass
+        status_feed, self._status_feed = self._status_feed, None
+        if status_feed is not None:
+            status_feed.close()
         feed, self.map_feed = self.map_feed, None
         if feed is not None:
             feed.close()
