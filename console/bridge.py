@@ -65,6 +65,7 @@ class ClientBridge:
         self.client: MissionClient | None = None
         self.map_feed: MapFeed | None = None
         self._status_feed: SimStatusFeed | None = None
+        self._speed: float | None = None  # the sim's, as last told to the app
 
     async def connect(self) -> None:
         """Connect (raises backend.client.client.ClientError with a sentence)."""
@@ -89,13 +90,25 @@ class ClientBridge:
             return
         feed = MapFeed(self.client.session, self._on_map, timeout=self.client.timeout)
         self.map_feed = feed
-        self._status_feed = SimStatusFeed(self.client.session, timeout=self.client.timeout)
+        self._status_feed = SimStatusFeed(
+            self.client.session, self._on_status, timeout=self.client.timeout
+        )
         await asyncio.gather(self._status_feed.start(), feed.start())
 
     @property
     def sim_status(self) -> SimStatus | None:
         """The simulator's speed and link delay (plans); None without a simulator."""
         return self._status_feed.status if self._status_feed is not None else None
+
+    def _on_status(self, status: SimStatus) -> None:
+        """The top bar's sim clock runs at the sim's speed: once it is known (the
+        status may come after the map), the clock is set again from the map."""
+        if status.speed == self._speed:
+            return
+        self._speed = status.speed
+        feed = self.map_feed
+        if feed is not None and feed.mirror.ready:
+            self.app.post_message(MapChanged(feed.mirror, MapUpdate("delta")))
 
     def _on_map(self, update: MapUpdate) -> None:
         feed = self.map_feed
