@@ -42,6 +42,7 @@ from console.state.context import FooterKey, context_keys, fit_footer
 from console.state.defaults import default_params
 from console.state.eventlog import AlertBook
 from console.state.files import RecentFiles
+from console.state.freshness import EtaTicks
 from console.state.model import CONNECTED, ConsoleModel
 from console.state.site import site_text
 from console.widgets.bars import KeyBar, StatusLine, TopBar, connection_text
@@ -138,7 +139,7 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
         self.update_top()
         self.schedule.rebuild()
         self._stale: frozenset[str] = frozenset()
-        self._eta_shown: dict[str, int] = {}  # robot -> the ETA's second at the last tick
+        self._etas = EtaTicks()  # running skills' ETAs count down between samples
         # "as of 25s ago" counts up; a robot falling silent turns stale without a message
         self.set_interval(1.0, self.freshness_tick)
 
@@ -152,24 +153,11 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
             self._stale = stale
             self.schedule.refresh()
             return
-        for robot in stale | self._etas_ticked():
+        for robot in stale | self._etas.ticked(self.model):
             self.schedule.refresh_telemetry(robot)
         for robot in self.model.robot_order():  # the ages of commands waiting for a robot
             if self.model.pending(robot):
                 self.schedule.refresh_uplinking(robot)
-
-    def _etas_ticked(self) -> set[str]:
-        """Robots whose running skill's ETA shows another second since the last
-        tick: telemetry comes on change, the ETA counts down between samples."""
-        ticked = set()
-        for robot, t in self.model.telemetry.items():
-            if t.eta_s is None:
-                continue
-            shown = int(t.eta_s - (self.model.freshness(robot).age_s or 0.0))
-            if self._eta_shown.setdefault(robot, shown) != shown:
-                self._eta_shown[robot] = shown
-                ticked.add(robot)
-        return ticked
 
     def on_resize(self, event: events.Resize) -> None:
         self.update_keys()
