@@ -1,10 +1,16 @@
 """What our routers take to listen, one reading for both: the mission server
 and a site relay (`missionctl router`) — endpoints, a Zenoh config file,
-TLS, accounts, and the link delay hint (docs/security.md, docs/deployment.md)."""
+TLS, accounts, and the link delay hint (docs/security.md, docs/deployment.md) —
+and how both run until a signal."""
 
 from __future__ import annotations
 
 import argparse
+import asyncio
+import logging
+import signal
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
 
@@ -48,10 +54,15 @@ def add_listen_arguments(
 
 
 def config_file_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The options of --zenoh-config (ValueError/OSError naming the file)."""
+    """The options of --zenoh-config (a ValueError naming the file)."""
     from backend.transport import load_config_file
 
-    return load_config_file(args.zenoh_config) if args.zenoh_config else {}
+    if not args.zenoh_config:
+        return {}
+    try:
+        return load_config_file(args.zenoh_config)
+    except (OSError, ValueError) as e:
+        raise ValueError(f"{args.zenoh_config}: {e}") from None
 
 
 def tls_listen_options(args: argparse.Namespace) -> dict[str, Any]:
@@ -85,3 +96,25 @@ def tls_listen_options(args: argparse.Namespace) -> dict[str, Any]:
         out["transport/link/tls/root_ca_certificate"] = str(Path(args.tls_ca).resolve())
         out["transport/link/tls/enable_mtls"] = True
     return out
+
+
+def log_to_stderr(verbose: bool) -> None:
+    logging.basicConfig(
+        level=logging.INFO if verbose else logging.WARNING,
+        format="%(asctime)s %(levelname)s %(message)s",
+    )
+
+
+@asynccontextmanager
+async def until_signalled(service: Any) -> AsyncIterator[asyncio.Event]:
+    """Start `service`; the event is set by SIGINT, SIGTERM or SIGHUP; the
+    service is stopped on the way out, whatever happened."""
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        loop.add_signal_handler(sig, stop.set)
+    await service.start()
+    try:
+        yield stop
+    finally:
+        await service.stop()

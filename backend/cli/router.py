@@ -12,12 +12,16 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import logging
-import signal
 import sys
 from typing import Any
 
-from backend.cli.listening import add_listen_arguments, config_file_options, tls_listen_options
+from backend.cli.listening import (
+    add_listen_arguments,
+    config_file_options,
+    log_to_stderr,
+    tls_listen_options,
+    until_signalled,
+)
 from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK, EXIT_UNREACHABLE
 from backend.transport.login import add_login_arguments
 
@@ -60,18 +64,11 @@ def run(args: argparse.Namespace) -> int:
     from backend.server.relay import SiteRelay
     from backend.transport.login import login_from_args
 
-    logging.basicConfig(
-        level=logging.INFO if args.verbose else logging.WARNING,
-        format="%(asctime)s %(levelname)s %(message)s",
-    )
+    log_to_stderr(args.verbose)
     listen = args.listen or [DEFAULT_LISTEN]
     connect = args.connect or [DEFAULT_CONNECT]
     try:
         file_options = config_file_options(args)
-    except (OSError, ValueError) as e:
-        print(f"missionctl router: {args.zenoh_config}: {e}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    try:
         login = login_from_args(args)
         _check_tls(args)
         accounts = load_accounts(args.accounts) if args.accounts else None
@@ -150,12 +147,7 @@ def _say_ground(up: bool, connect: list[str]) -> None:
 
 
 async def _serve(relay: Any, timeouts_line: str) -> int:
-    stop = asyncio.Event()
-    loop = asyncio.get_running_loop()
-    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-        loop.add_signal_handler(sig, stop.set)
-    await relay.start()
-    try:
+    async with until_signalled(relay) as stop:
         logins = "site logins required" if relay.accounts is not None else "no site logins"
         print(
             f"missionctl router: relaying {', '.join(relay.listen)} (the site) to "
@@ -163,6 +155,4 @@ async def _serve(relay: Any, timeouts_line: str) -> int:
             flush=True,
         )
         await stop.wait()
-    finally:
-        await relay.stop()
     return EXIT_OK

@@ -4,14 +4,18 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import logging
-import signal
 import sys
 from pathlib import Path
 from typing import Any
 
 from backend.cli.ctl.values import parse_duration
-from backend.cli.listening import add_listen_arguments, config_file_options, tls_listen_options
+from backend.cli.listening import (
+    add_listen_arguments,
+    config_file_options,
+    log_to_stderr,
+    tls_listen_options,
+    until_signalled,
+)
 
 EXIT_BAD_INPUT, EXIT_UNREACHABLE = 2, 3
 
@@ -57,21 +61,13 @@ def run(args: argparse.Namespace) -> int:
     from backend.server.server import MissionServer
     from backend.transport.session import TransportError
 
-    logging.basicConfig(
-        level=logging.INFO if args.verbose else logging.WARNING,
-        format="%(asctime)s %(levelname)s %(message)s",
-    )
+    log_to_stderr(args.verbose)
     if not args.mission and not args.db:
         print("missionctl server: give --mission FILE (and optionally --db PATH)", file=sys.stderr)
         return EXIT_BAD_INPUT
     db = Path(args.db) if args.db else Path(args.mission).with_suffix(".db")
     try:
-        extra = config_file_options(args)
-    except (OSError, ValueError) as e:
-        print(f"missionctl server: {args.zenoh_config}: {e}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    try:
-        extra = {**extra, **tls_listen_options(args)}
+        extra = {**config_file_options(args), **tls_listen_options(args)}
         accounts = load_accounts(args.accounts) if args.accounts else None
     except (AccountsError, ValueError) as e:
         print(f"missionctl server: {e}", file=sys.stderr)
@@ -111,12 +107,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 async def _serve(server) -> int:
-    stop = asyncio.Event()
-    loop = asyncio.get_running_loop()
-    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-        loop.add_signal_handler(sig, stop.set)
-    await server.start()
-    try:
+    async with until_signalled(server) as stop:
         if server.recovered:
             print(f"missionctl server: {server.recovered}", flush=True)
         how = (
@@ -150,6 +141,4 @@ async def _serve(server) -> int:
                 flush=True,
             )
         await stop.wait()
-    finally:
-        await server.stop()
     return 0

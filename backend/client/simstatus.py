@@ -24,7 +24,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from backend.protocol.mapfeed import KEY_STATUS, KEY_STATUS_LIVE, SimStatus, StatusMirror
-from backend.transport import Message, QueryFailed, query, subscribe
+from backend.transport import Message, QueryFailed, query, subscribe, undeclare
 
 log = logging.getLogger(__name__)
 
@@ -64,11 +64,7 @@ class SimStatusFeed:
         if self._task is not None:
             self._task.cancel()
         sub, self._sub = self._sub, None
-        if sub is not None:
-            try:
-                sub.undeclare()
-            except Exception:  # the session may be closed already
-                pass
+        undeclare(sub)
 
     async def resync(self) -> None:
         """Query the status and apply it with the publications that came meanwhile."""

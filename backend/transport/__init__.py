@@ -27,6 +27,7 @@ from backend.transport.aio import (
     subscribe,
     subscribe_to_queue,
     transport_events,
+    undeclare,
     wait_matching,
     watch_liveliness,
 )
@@ -90,6 +91,7 @@ __all__ = [
     "subscribe",
     "subscribe_to_queue",
     "transport_events",
+    "undeclare",
     "wait_matching",
     "watch_liveliness",
 ]
