@@ -196,6 +196,14 @@ async def _online(watch: Watch, timeout: float) -> None:
     await c.wait_for(lambda m: all(c.robots[r].online for r in m.robots), timeout)
 
 
+ONE_AT_A_TIME = (
+    "Minus 2 D, what is left above D = 0 is one round trip more: the lander answers as "
+    "soon as the command reaches it (its answer's time stamp is D after the command left), "
+    "but its downlink carries one message at a time, and on a long link the previous one "
+    "(a report, a 5 s heartbeat) is usually still waiting for its acknowledgement: the "
+    "answer waits up to 2 D behind it."
+)
+
 # the relay as a plain Zenoh router was before issue 31: timestamps, no compression
 PLAIN_ROUTER = (
     "{timestamping: {enabled: true}, transport: {unicast: {compression: {enabled: false}}}}"
@@ -343,6 +351,7 @@ def section(result: dict[str, Any], window: float) -> str:
             lines.append(
                 f"| {d:g} s | {r['online']:.1f} s | {r['acked']:.2f} s | {r['overhead']:.2f} s |"
             )
+        lines += ["", ONE_AT_A_TIME]
     return "\n".join(lines) + "\n"
 
 
