@@ -25,6 +25,7 @@ from console.state.capability import (
     robot_type,
     sparkline,
 )
+from console.state.changes import StateChange, Topic
 from console.state.model import ConsoleModel
 from console.state.text import fmt_clock
 
@@ -43,9 +44,10 @@ class FleetScreen(ViewScreen):
         ("Uplink", "uplink"),
         ("Last report", "report"),
     )
-    TOPICS = ("fleet",)
+    # a batch may change any robot's activity or uplink; the others say whose
+    TOPICS = frozenset({Topic.MISSION, Topic.FLEET, Topic.TELEMETRY})
 
-    def __init__(self, model: ConsoleModel, changes: Signal[tuple[str, str | None]]) -> None:
+    def __init__(self, model: ConsoleModel, changes: Signal[StateChange]) -> None:
         super().__init__(changes)
         self.model = model
         self.shown: list[str] = []
@@ -120,8 +122,15 @@ class FleetScreen(ViewScreen):
             "#filter", Input
         ).placeholder = f"filter by capability: {filter_examples(self.model)}"
 
-    def update_view(self, topic: str, robot: str | None) -> None:
+    def update_view(self, change: StateChange) -> None:
         t = self.query_one(DataTable)
+        robot = None
+        if (
+            not change.about(Topic.MISSION)
+            and change.robots is not None
+            and len(change.robots) == 1
+        ):
+            (robot,) = change.robots
         if robot is None or robot not in self.shown:
             # a robot may now match or not (its manifest came), or the mission changed
             if [

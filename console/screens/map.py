@@ -18,6 +18,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal
 from textual.screen import Screen
+from textual.signal import Signal
 from textual.widgets import Footer, Static
 
 from backend.core.model import (
@@ -25,9 +26,11 @@ from backend.core.model import (
 )
 from backend.core.ops import EditSkill, MarkerAdd, MarkerDelete, MarkerMove, MarkerRename
 from console.bindings import bindings
-from console.messages import HelpRequested, OperationRequested
+from console.messages import HelpRequested
+from console.operations import OperationService
 from console.screens.dialogs import ChoiceScreen, ConfirmScreen, MarkerPrompt
 from console.state.actions import ACTIONS
+from console.state.changes import StateChange, Topic
 from console.state.markers import (
     bind_choices,
     followers,
@@ -184,9 +187,13 @@ class MapScreen(Screen):
     ]
     CSS_PATH = TCSS
 
-    def __init__(self, model: ConsoleModel) -> None:
+    def __init__(
+        self, model: ConsoleModel, changes: Signal[StateChange], ops: OperationService
+    ) -> None:
         super().__init__()
         self.model = model
+        self.changes = changes
+        self.ops = ops
         self.feed_state = "waiting"  # waiting | live | none
         self._topbar = TopBar(id="map-topbar")
         self.view = MapView(model, id="map")
@@ -195,6 +202,8 @@ class MapScreen(Screen):
         self._status = StatusLine("", id="map-status")
         self.message = ""
         self.legend_choice: bool | None = None  # None: by terminal width
+        if model.map_mirror is not None:  # the feed came before the screen
+            self.map_changed(model.map_mirror, model.map_update)
 
     def compose(self) -> ComposeResult:
         yield self._topbar
@@ -212,6 +221,7 @@ class MapScreen(Screen):
         self.sync_selection()
         self.update_top()
         self.update_info()
+        self.changes.subscribe(self, self.changed)
 
     def on_resize(self, event: events.Resize) -> None:
         self._apply_legend()
@@ -232,7 +242,21 @@ class MapScreen(Screen):
         )
         self.set_class(not show, "-no-legend")
 
-    # -- state in (called by the app) --------------------------------------------------------------
+    # -- state in (the model's changes) ---------------------------------------------------------
+    def changed(self, c: StateChange) -> None:
+        if c.about(Topic.MAP):
+            self.map_changed(self.model.map_mirror, c.map_update)
+        if c.about(Topic.MISSION):  # marker events change no robot's column but the map
+            self.model_changed()
+        for robot in c.robots or () if c.about(Topic.TELEMETRY) else ():
+            self.view.robot_moved(robot)
+            if self.view.follow == robot:
+                self.update_info()
+        if c.about(Topic.FLEET):
+            self.view.overlays_changed()
+        if c.about(Topic.CONNECTION):
+            self.update_top()
+
     def map_changed(self, mirror: Any, update: Any) -> None:
         kind = getattr(update, "kind", "snapshot")
         if kind == "none":
@@ -260,17 +284,6 @@ class MapScreen(Screen):
         self.update_top()
         self.update_info()
 
-    def telemetry_changed(self, robot: str) -> None:
-        self.view.robot_moved(robot)
-        if self.view.follow == robot:
-            self.update_info()
-
-    def fleet_changed(self) -> None:
-        self.view.overlays_changed()
-
-    def connection_changed(self) -> None:
-        self.update_top()
-
     def sync_selection(self) -> None:
         sid = self.model.selection.skill  # the schedule's cursor
         if sid != self.view.selected_skill:
@@ -297,8 +310,13 @@ class MapScreen(Screen):
         self.message = text
         self._status.show(text, severity)
 
-    def submit(self, op: Any, what: str, **kw: Any) -> None:
-        self.post_message(OperationRequested(op, what, say=self.say, **kw))
+    @work(group="ops", exit_on_error=False)
+    async def submit(self, op: Any, what: str, *, on_ok: Any = None, **kw: Any) -> None:
+        """Submit `op`, await its outcome here; `on_ok(reply)` says what it did."""
+        done = "" if on_ok is not None else None
+        outcome = await self.ops.submit(op, what, say=self.say, done=done, **kw)
+        if outcome.reply is not None and on_ok is not None:
+            on_ok(outcome.reply)
 
     def _connected(self) -> bool:
         if self.model.connection != CONNECTED:
