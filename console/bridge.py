@@ -10,14 +10,15 @@ in workers by the `OperationService`.
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import Callable
 from typing import Any
 
 from backend.client.client import ClientError, MissionClient
 from backend.client.mapfollow import MapFeed, MapUpdate
-from backend.protocol.mapfeed import KEY_STATUS_LIVE, SimStatus
+from backend.client.simstatus import SimStatusFeed
+from backend.protocol.mapfeed import SimStatus
 from backend.protocol.messages import OpReply
-from backend.transport import subscribe
 from backend.transport.login import Login
 from console.state.changes import AccountKnown, MapFed, ModelEvent
 
@@ -39,8 +40,8 @@ class ClientBridge:
         self.login = login
         self.client: MissionClient | None = None
         self.map_feed: MapFeed | None = None
-        self.sim_status: SimStatus | None = None  # the simulator's speed and link delay (plans)
-        self._status_sub: Any = None
+        self._status_feed: SimStatusFeed | None = None
+        self._speed: float | None = None  # the sim's, as last told to the app
 
     async def connect(self) -> None:
         """Connect (raises backend.client.client.ClientError with a sentence)."""
@@ -63,16 +64,27 @@ class ClientBridge:
         answering is fine: the map screen then says there is no feed)."""
         if self.client is None or self.client.session is None:
             return
-        feed = MapFeed(self.client.session, self._on_map)
+        feed = MapFeed(self.client.session, self._on_map, timeout=self.client.timeout)
         self.map_feed = feed
-        self._status_sub = subscribe(self.client.session, KEY_STATUS_LIVE, self._on_status)
-        await feed.start()
+        self._status_feed = SimStatusFeed(
+            self.client.session, self._on_status, timeout=self.client.timeout
+        )
+        await asyncio.gather(self._status_feed.start(), feed.start())
 
-    def _on_status(self, msg: Any) -> None:  # a Zenoh thread: keep the latest, nothing else
-        try:
-            self.sim_status = SimStatus.model_validate_json(msg.payload)
-        except ValueError:
-            pass  # not a status of ours: the plan goes on without the sim's speed
+    @property
+    def sim_status(self) -> SimStatus | None:
+        """The simulator's speed and link delay (plans); None without a simulator."""
+        return self._status_feed.status if self._status_feed is not None else None
+
+    def _on_status(self, status: SimStatus) -> None:
+        """The top bar's sim clock runs at the sim's speed: once it is known (the
+        status may come after the map), the clock is set again from the map."""
+        if status.speed == self._speed:
+            return
+        self._speed = status.speed
+        feed = self.map_feed
+        if feed is not None and feed.mirror.ready:
+            self.post(MapFed(feed.mirror, MapUpdate("delta"), status.speed))
 
     def _on_map(self, update: MapUpdate) -> None:
         feed = self.map_feed
@@ -81,12 +93,9 @@ class ClientBridge:
             self.post(MapFed(feed.mirror, update, status.speed if status is not None else None))
 
     async def close(self) -> None:
-        sub, self._status_sub = self._status_sub, None
-        if sub is not None:
-            try:
-                sub.undeclare()
-            except Exception:  # the session may be closed already
-                pass
+        status_feed, self._status_feed = self._status_feed, None
+        if status_feed is not None:
+            status_feed.close()
         feed, self.map_feed = self.map_feed, None
         if feed is not None:
             feed.close()

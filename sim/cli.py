@@ -42,6 +42,30 @@ def _positive(text: str) -> float:
     return value
 
 
+def _rate(text: str) -> tuple[str | None, float]:
+    """`HZ` or `ROBOT=HZ` (--telemetry-rate)."""
+    robot, _, hz = text.rpartition("=")
+    try:
+        value = float(hz)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a rate: {text!r} (e.g. 1, 0.5 or lru1=2)") from None
+    if not 0 <= value < float("inf"):
+        raise argparse.ArgumentTypeError(f"a rate is 0 or more samples a second, got {text!r}")
+    return (robot or None), value
+
+
+def _telemetry_rates(args: argparse.Namespace) -> tuple[float, dict[str, float]]:
+    """(every robot's cap, per-robot caps)."""
+    everyone = 1.0 if args.link_budget == "on" else 4.0
+    per_robot: dict[str, float] = {}
+    for robot, hz in args.telemetry_rate or []:
+        if robot is None:
+            everyone = hz
+        else:
+            per_robot[robot] = hz
+    return everyone, per_robot
+
+
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "sim", help="run the simulated fleet of a mission's site (Mars sample return)"
@@ -90,6 +114,23 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
             "window at the start, or at OFFSET). Out of a window no robot reaches the ground: "
             "commands wait on the server, reports and the map feed wait aboard"
         ),
+    )
+    p.add_argument(
+        "--telemetry-rate",
+        type=_rate,
+        action="append",
+        metavar="[ROBOT=]HZ",
+        help="the cap of each robot's telemetry, samples a second (default 1; 0: at changes "
+        "and heartbeats only); ROBOT=HZ for one robot; repeatable. Telemetry goes when "
+        "something changed beyond its deadband, and at least every 5 s",
+    )
+    p.add_argument(
+        "--link-budget",
+        choices=("on", "off"),
+        default="on",
+        help="off: telemetry at a steady --telemetry-rate (default then 4) and the full status "
+        "at every publication, as before the link budget (a baseline for "
+        "bench/bench_linkbudget.py)",
     )
     p.add_argument(
         "--connect-timeout",
@@ -167,10 +208,11 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     mission, library, world, world_file = loaded
     try:
-        extra = login_from_args(args).zenoh_options()
+        login = login_from_args(args)
     except AccountsError as e:
         print(f"missionctl sim: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    extra = login.zenoh_options()
     if args.zenoh_config:
         from backend.transport import load_config_file
 
@@ -182,6 +224,15 @@ def run(args: argparse.Namespace) -> int:
     from sim.errors import SimError
     from sim.fleet import SimFleet
 
+    rate, rates = _telemetry_rates(args)
+    unknown = sorted(set(rates) - set(mission.robots))
+    if unknown:
+        print(
+            f"missionctl sim: --telemetry-rate names {', '.join(unknown)}, not a robot of "
+            f"{args.mission} ({', '.join(mission.robots)})",
+            file=sys.stderr,
+        )
+        return EXIT_BAD_INPUT
     try:
         fleet = SimFleet(
             mission,
@@ -193,6 +244,10 @@ def run(args: argparse.Namespace) -> int:
             link_delay=args.link_delay,
             comms_window=args.comms_window,
             zenoh_extra=extra,
+            link_delay_hint=login.link_delay_hint,
+            link_budget=args.link_budget == "on",
+            telemetry_hz=rate,
+            telemetry_rates=rates,
         )
     except (SimError, ValueError) as e:
         print(f"missionctl sim: {e}", file=sys.stderr)
@@ -260,13 +315,16 @@ async def _status(args: argparse.Namespace) -> int:
     from backend import transport
     from backend.protocol import mapfeed as mf
     from backend.transport.session import TransportUnreachable
+    from backend.transport.timeouts import query_timeout
 
     endpoints = args.connect or ["tcp/127.0.0.1:7447"]
     try:
-        extra = login_from_args(args).zenoh_options()
+        login = login_from_args(args)
     except AccountsError as e:
         print(f"missionctl sim-status: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    extra = login.zenoh_options()
+    timeout = query_timeout(args.timeout, login.link_delay_hint)
     try:
         session = await asyncio.to_thread(
             transport.open_session, transport.client_config(endpoints, extra=extra)
@@ -277,7 +335,7 @@ async def _status(args: argparse.Namespace) -> int:
     try:
         try:
             payload = mf.TRUTH_QUERY if args.truth else b""
-            raw = await transport.query(session, mf.KEY_STATUS, payload, timeout=args.timeout)
+            raw = await transport.query(session, mf.KEY_STATUS, payload, timeout=timeout)
         except transport.NoResponder:
             print(
                 f"missionctl sim-status: no simulator answers at {', '.join(endpoints)}",

@@ -26,7 +26,7 @@ from typing import Any
 import zenoh
 
 from backend import transport
-from backend.agent import Link, RobotAgent
+from backend.agent import STEADY, Link, RobotAgent
 from backend.core.library import Library
 from backend.core.model import Mission, Pose
 from backend.protocol import mapfeed as mf
@@ -46,7 +46,9 @@ log = logging.getLogger(__name__)
 
 SIM_VERSION = "0.1.0"
 STATUS_MIN = 0.5  # wall seconds between status publications (when something changed)
-STATUS_MAX = 2.0  # ... and at least this often
+STATUS_MAX = 2.0  # ... and at least this often (--link-budget off: the full status each time)
+STATUS_HEARTBEAT = 10.0  # with the link budget: a patch at least this often
+STATUS_KEYFRAME = 60.0  # ... and the full status this often (a follower that missed one)
 
 
 def step_for(speed: float) -> float:
@@ -97,6 +99,9 @@ class SimFleet:
         telemetry_hz: float = 4.0,
         feed_period: float = 0.5,
         zenoh_extra: dict[str, Any] | None = None,
+        link_delay_hint: float = 0.0,
+        link_budget: bool = True,
+        telemetry_rates: dict[str, float] | None = None,
     ):
         if speed <= 0 or not math.isfinite(speed):
             raise ValueError("the speed must be a positive number")
@@ -110,6 +115,13 @@ class SimFleet:
         self.comms_window = comms_window  # None: always in contact (coverage permitting)
         self.feed_period = feed_period
         self.zenoh_extra = zenoh_extra
+        self.link_delay_hint = link_delay_hint  # the network's delay (s), not the sim's
+        # off: telemetry at a steady rate and the full status at every publication, as
+        # before issue 31 (the baseline of bench/bench_linkbudget.py)
+        self.link_budget = link_budget
+        self._status_seq = 0  # live publications so far
+        self._status_sent: dict[str, Any] | None = None  # the last one, as a patch's base
+        self._status_full_at = -math.inf
         self.robot_seconds = 0.0
         self.exchanges: Counter[str] = Counter(
             asks=0, tells=0, answered=0, unknown=0, unreachable=0
@@ -142,7 +154,8 @@ class SimFleet:
                 )
                 continue
             robot = self.world.add_robot(name, spec.type, index=index)
-            self.agents[name] = self._make_agent(robot, telemetry_hz)
+            hz = (telemetry_rates or {}).get(name, telemetry_hz)
+            self.agents[name] = self._make_agent(robot, hz)
         if not self.agents:
             raise SimError("the mission has no robot this world can simulate")
 
@@ -163,7 +176,9 @@ class SimFleet:
             modules=modules,
             properties=manifest_properties(self.world.spec, m),
             telemetry_hz=telemetry_hz,
+            telemetry=None if self.link_budget else STEADY,
             zenoh_extra=self.zenoh_extra,
+            link_delay_hint=self.link_delay_hint,
         )
         agent.time_scale = self.speed
 
@@ -414,6 +429,7 @@ class SimFleet:
         )
         if with_truth:
             st.truth = truth(self.world, exchanges=self.exchanges, exchange_log=self.exchange_log)
+        st.feed, st.seq = self.feed_id, self._status_seq
         return st
 
     def _digest(self) -> tuple[Any, ...]:
@@ -445,20 +461,38 @@ class SimFleet:
 
     async def _status_loop(self) -> None:
         """Publish the status when it changed (at most every `STATUS_MIN` s)
-        and at least every `STATUS_MAX` s."""
+        and at least every `STATUS_HEARTBEAT` s: what changed (a merge patch),
+        the full status first and every `STATUS_KEYFRAME` s. Without the link
+        budget: the full status, at least every `STATUS_MAX` s."""
         last_digest: tuple[Any, ...] | None = None
         last_put = 0.0
+        heartbeat = STATUS_HEARTBEAT if self.link_budget else STATUS_MAX
         loop = asyncio.get_running_loop()
         while True:
             await asyncio.sleep(STATUS_MIN)
             digest = self._digest()
             now = loop.time()
-            if digest != last_digest or now - last_put >= STATUS_MAX:
+            if digest != last_digest or now - last_put >= heartbeat:
                 last_digest, last_put = digest, now
                 if self._status_pub is not None:
-                    payload = mf.dump(self.status())
+                    payload = self._status_update(now)
                     self.status_bytes += len(payload)
                     self._status_pub.put(payload)
+
+    def _status_update(self, now: float) -> bytes:
+        st = ground_status(
+            self.world, speed=self.speed, link_delay=self.link_delay, window=self.comms_window
+        )
+        if not self.link_budget:
+            return st.model_dump_json(exclude={"feed", "seq"}).encode()
+        self._status_seq += 1
+        raw = st.model_dump(mode="json", exclude={"feed", "seq"})
+        sent, self._status_sent = self._status_sent, raw
+        if sent is None or now - self._status_full_at >= STATUS_KEYFRAME:
+            self._status_full_at = now
+            return mf.dump(mf.StatusUpdate(feed=self.feed_id, seq=self._status_seq, full=st))
+        patch = mf.merge_patch(sent, raw) or {}
+        return mf.dump(mf.StatusUpdate(feed=self.feed_id, seq=self._status_seq, patch=patch))
 
 
 def wants_truth(payload: bytes) -> bool:

@@ -26,6 +26,7 @@ from backend.agent.outcomes import (
     SkillStopped,
     Success,
 )
+from backend.agent.telemetry import STEADY, TelemetryPolicy
 
 __all__ = [
     "AlreadyConnected",
@@ -33,8 +34,10 @@ __all__ = [
     "Link",
     "RegistrationRefused",
     "RobotAgent",
+    "STEADY",
     "SkillContext",
     "SkillFailed",
     "SkillStopped",
     "Success",
+    "TelemetryPolicy",
 ]

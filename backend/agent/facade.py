@@ -28,7 +28,8 @@ What the agent does (the contract is docs/protocol.md, protocol 2):
 
 - holds the liveliness token `Keys.alive(name, session)` (a fresh session
   per start), takes commands on `Keys.uplink(name)` and robot-to-robot world
-  messages on `Keys.world(name)`, publishes `Telemetry`;
+  messages on `Keys.world(name)`, publishes `Telemetry` when it changes
+  (deadbands, at most `telemetry_hz` a second, at least every 5 s: telemetry.py);
 - watches the server's token and registers (`Register`: manifest, session,
   its queue, its unacknowledged downlink) each time the server appears, or
   when the server no longer knows it; refused because another run of this
@@ -83,6 +84,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import zenoh
@@ -103,7 +105,7 @@ from backend.agent.registration import (
     manifest_bytes,
 )
 from backend.agent.runtime import Runtime, Standing, log
-from backend.agent.telemetry import TelemetryFeed
+from backend.agent.telemetry import TelemetryFeed, TelemetryPolicy
 from backend.agent.uplink import CommandLog, UplinkHandler
 from backend.agent.world import Peers
 from backend.core.library import SkillSignature
@@ -117,6 +119,7 @@ from backend.protocol.messages import (
     RegisterReply,
     Telemetry,
 )
+from backend.transport import timeouts
 from backend.transport.login import Login
 
 # How often the link model is polled (it is a plain callable of the integrator).
@@ -140,6 +143,8 @@ class RobotAgent:
         telemetry_hz: float = 2.0,
         request_timeout: float = 5.0,
         login: Login | None = None,
+        link_delay_hint: float | None = None,
+        telemetry: TelemetryPolicy | None = None,
     ):
         check_name("robot name", name)
         check_name(f"robot {name}: type", robot_type)
@@ -149,11 +154,19 @@ class RobotAgent:
         self.modules = dict(modules or {})
         check_modules(name, self.modules)
         self.properties = dict(properties or {})
-        self.lease_ms = lease_ms
-        # an account (robot role) and TLS files: see docs/security.md
-        self.zenoh_extra = {**(zenoh_extra or {}), **(login.zenoh_options() if login else {})}
+        # the long link's expected one-way delay (s; default: the login's): the
+        # lease, Zenoh's timeouts and the queries' timeouts follow from it
+        login = login or Login()
+        if link_delay_hint is not None:
+            login = replace(login, link_delay_hint=link_delay_hint)
+        self.link_delay_hint = login.link_delay_hint
+        self.lease_ms = timeouts.robot_lease_ms(lease_ms, self.link_delay_hint)
+        # an account (robot role) and TLS files: see docs/security.md; the lease is ours
+        connection = login.zenoh_options()
+        connection.pop("transport/link/tx/lease", None)
+        self.zenoh_extra = {**(zenoh_extra or {}), **connection}
         self.telemetry_hz = telemetry_hz
-        self.request_timeout = request_timeout
+        self.request_timeout = timeouts.query_timeout(request_timeout, self.link_delay_hint)
 
         # integrator-settable sources and models
         self.pose: Callable[[], Pose] = Pose
@@ -175,7 +188,8 @@ class RobotAgent:
         self._uplink = UplinkHandler(
             self._rt, self._command_log, self._dispatch, self._queue.next_seq, self._outbox
         )
-        self._telemetry = TelemetryFeed(self._rt, self._queue)
+        # telemetry_hz caps the rate; the policy says what is worth a sample
+        self._telemetry = TelemetryFeed(self._rt, self._queue, telemetry)
         self._peers = Peers(self._rt)
         self._registrar = Registrar(
             self._rt,

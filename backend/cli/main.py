@@ -1,7 +1,7 @@
 """`missionctl` command line.
 
 backend owns the entry point and the commands that need only backend
-(validate, schema, server, certs, ctl: one module each). `sim` and `console`
+(validate, schema, server, router, certs, ctl: one module each). `sim` and `console`
 plug their commands in through the `missionctl.commands` entry-point group, so
 backend never imports them.
 
@@ -15,7 +15,7 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
-from backend.cli import certs, ctl, schema, server, validate
+from backend.cli import certs, ctl, router, schema, server, validate
 from backend.cli.command import Command
 from backend.cli.ctl.args import wants_json
 from backend.cli.parser import Parser
@@ -28,6 +28,7 @@ OWN_COMMANDS: dict[str, Command] = {
     "validate": validate,
     "schema": schema,
     "server": server,
+    "router": router,
     "ctl": ctl,
     "certs": certs,
 }

@@ -4,13 +4,18 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import logging
-import signal
 import sys
 from pathlib import Path
 from typing import Any
 
 from backend.cli.ctl.values import parse_duration
+from backend.cli.listening import (
+    add_listen_arguments,
+    config_file_options,
+    log_to_stderr,
+    tls_listen_options,
+    until_signalled,
+)
 
 EXIT_BAD_INPUT, EXIT_UNREACHABLE = 2, 3
 
@@ -25,35 +30,9 @@ def prepare_parser(subparsers: Any) -> argparse.ArgumentParser:
         help="mission to start from (ignored when --db already holds one)",
     )
     p.add_argument(
-        "--listen",
-        metavar="ENDPOINT",
-        action="append",
-        help="Zenoh endpoint to listen on (default tcp/127.0.0.1:7447); repeatable",
-    )
-    p.add_argument(
         "--db", metavar="PATH", help="SQLite journal (default: MISSION.db next to the mission file)"
     )
-    p.add_argument(
-        "--zenoh-config",
-        metavar="FILE",
-        help="JSON5 Zenoh config merged over ours (TLS, accounts, ACL)",
-    )
-    g = p.add_argument_group("security (docs/security.md)")
-    g.add_argument(
-        "--accounts",
-        metavar="FILE",
-        help="accounts file: require a user/password login and enforce each account's role "
-        "with Zenoh access control",
-    )
-    g.add_argument(
-        "--tls-cert", metavar="FILE", help="server certificate (PEM) for tls/ listen endpoints"
-    )
-    g.add_argument("--tls-key", metavar="FILE", help="private key of --tls-cert")
-    g.add_argument(
-        "--tls-ca",
-        metavar="FILE",
-        help="require client certificates signed by this CA (mutual TLS)",
-    )
+    add_listen_arguments(p, default_listen="tcp/127.0.0.1:7447")
     p.add_argument(
         "--command-expiry",
         type=parse_duration,
@@ -80,24 +59,15 @@ def run(args: argparse.Namespace) -> int:
     from backend.server.accounts import load_accounts
     from backend.server.journal import JournalError, NotReplayable, Unreplayable
     from backend.server.server import MissionServer
-    from backend.transport import load_config_file
     from backend.transport.session import TransportError
 
-    logging.basicConfig(
-        level=logging.INFO if args.verbose else logging.WARNING,
-        format="%(asctime)s %(levelname)s %(message)s",
-    )
+    log_to_stderr(args.verbose)
     if not args.mission and not args.db:
         print("missionctl server: give --mission FILE (and optionally --db PATH)", file=sys.stderr)
         return EXIT_BAD_INPUT
     db = Path(args.db) if args.db else Path(args.mission).with_suffix(".db")
     try:
-        extra = load_config_file(args.zenoh_config) if args.zenoh_config else None
-    except (OSError, ValueError) as e:
-        print(f"missionctl server: {args.zenoh_config}: {e}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    try:
-        extra = {**(extra or {}), **_tls_options(args)}
+        extra = {**config_file_options(args), **tls_listen_options(args)}
         accounts = load_accounts(args.accounts) if args.accounts else None
     except (AccountsError, ValueError) as e:
         print(f"missionctl server: {e}", file=sys.stderr)
@@ -110,6 +80,7 @@ def run(args: argparse.Namespace) -> int:
         command_expiry=args.command_expiry or None,
         accounts=accounts,
         recover=args.recover,
+        link_delay_hint=args.link_delay_hint,
     )
     try:
         return asyncio.run(_serve(server))
@@ -135,46 +106,8 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_UNREACHABLE
 
 
-def _tls_options(args: argparse.Namespace) -> dict:
-    """Zenoh options for --tls-cert/--tls-key/--tls-ca; checks they fit --listen."""
-    tls_listen = any(e.startswith("tls/") for e in args.listen or [])
-    if not (args.tls_cert or args.tls_key or args.tls_ca):
-        if tls_listen:
-            raise ValueError(
-                "a tls/ endpoint needs --tls-cert FILE and --tls-key FILE (see missionctl certs)"
-            )
-        return {}
-    if not (args.tls_cert and args.tls_key):
-        raise ValueError("--tls-cert and --tls-key go together")
-    if not tls_listen:
-        raise ValueError(
-            "--tls-cert/--tls-key/--tls-ca need a tls/ endpoint in --listen "
-            "(e.g. --listen tls/0.0.0.0:7447)"
-        )
-    for opt, path in (
-        ("--tls-cert", args.tls_cert),
-        ("--tls-key", args.tls_key),
-        ("--tls-ca", args.tls_ca),
-    ):
-        if path and not Path(path).is_file():
-            raise ValueError(f"{opt} {path}: no such file")
-    out: dict[str, str | bool] = {
-        "transport/link/tls/listen_certificate": str(Path(args.tls_cert).resolve()),
-        "transport/link/tls/listen_private_key": str(Path(args.tls_key).resolve()),
-    }
-    if args.tls_ca:
-        out["transport/link/tls/root_ca_certificate"] = str(Path(args.tls_ca).resolve())
-        out["transport/link/tls/enable_mtls"] = True
-    return out
-
-
 async def _serve(server) -> int:
-    stop = asyncio.Event()
-    loop = asyncio.get_running_loop()
-    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-        loop.add_signal_handler(sig, stop.set)
-    await server.start()
-    try:
+    async with until_signalled(server) as stop:
         if server.recovered:
             print(f"missionctl server: {server.recovered}", flush=True)
         how = (
@@ -195,6 +128,10 @@ async def _serve(server) -> int:
                 "(the journal holds the mission); to start from it anew, give another --db",
                 flush=True,
             )
+        if server.link_delay_hint > 0:
+            from backend.transport.timeouts import describe
+
+            print(f"missionctl server: {describe(server.link_delay_hint)}", flush=True)
         if server.accounts is not None:
             roles = ", ".join(
                 f"{u} ({a.role})" for u, a in sorted(server.accounts.table.accounts.items())
@@ -204,6 +141,4 @@ async def _serve(server) -> int:
                 flush=True,
             )
         await stop.wait()
-    finally:
-        await server.stop()
     return 0

@@ -78,6 +78,7 @@ from backend.transport.session import (
     close_session,
     open_session,
 )
+from backend.transport.timeouts import query_timeout
 
 log = logging.getLogger(__name__)
 
@@ -189,7 +190,8 @@ class MissionClient:
         self.user = self.login.user or user
         self.zenoh_extra = {**(zenoh_extra or {}), **self.login.zenoh_options()}
         self.account: AccountInfo | None = None  # known once logged in
-        self.timeout = timeout
+        # on a long link every query waits for two crossings more (--link-delay-hint)
+        self.timeout = query_timeout(timeout, self.login.link_delay_hint)
         self.want_telemetry = telemetry
         self.session: zenoh.Session | None = None
         self.mirror = mirror

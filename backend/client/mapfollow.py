@@ -34,7 +34,14 @@ from backend.protocol.mapfeed import (
     MapMirror,
     MapSnapshot,
 )
-from backend.transport import NoResponder, QueryFailed, QueryTimeout, query, subscribe
+from backend.transport import (
+    NoResponder,
+    QueryFailed,
+    QueryTimeout,
+    query,
+    subscribe,
+    undeclare,
+)
 
 log = logging.getLogger(__name__)
 
@@ -91,11 +98,7 @@ class MapFeed:
         if self._task is not None:
             self._task.cancel()
         sub, self._sub = self._sub, None
-        if sub is not None:
-            try:
-                sub.undeclare()
-            except Exception:  # the session may be closed already
-                pass
+        undeclare(sub)
 
     # -- snapshot ------------------------------------------------------------------
     async def resync(self) -> None:

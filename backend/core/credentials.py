@@ -10,7 +10,7 @@ import stat
 from pathlib import Path
 from typing import Literal
 
-Role = Literal["operator", "observer", "robot"]
+Role = Literal["operator", "observer", "robot", "relay"]
 USER_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
 
 

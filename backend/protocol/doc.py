@@ -121,7 +121,7 @@ KEY_SPACE: list[tuple[str, str, str, str]] = [
         f"`{mf.KEY_STATUS_LIVE}`",
         "publication",
         "simulator",
-        "`SimStatus` (on change, at least every 2 s)",
+        "`StatusUpdate`: the full status or a patch (on change, at least every 10 s)",
     ),
 ]
 
@@ -730,6 +730,7 @@ SCHEMAS: list[tuple[str, str, Any]] = [
     ("MapSnapshot", "MapSnapshot", mf.MapSnapshot),
     ("MapDelta", "MapDelta", mf.MapDelta),
     ("SimStatus", "SimStatus", mf.SimStatus),
+    ("StatusUpdate", "StatusUpdate", mf.StatusUpdate),
     *[(f"OpReply.value of `{op}`", f"value-{op}", model) for op, model in v.VALUES.items()],
 ]
 
@@ -1268,6 +1269,38 @@ along whole when any changed. Robot poses come with the robots' telemetry.
    each delta with `seq == current + 1` and the same `feed`.
 3. A larger `seq` (a gap) or another `feed` (the simulator restarted): query
    the snapshot again. (`backend.client.mapfollow.MapFeed` does all of this.)
+
+## Long links and thin links
+
+A deployment through a site relay ([deployment.md](deployment.md)) puts a
+one-way delay D and a narrow link between the ground and the robots.
+
+**Timeouts.** Every process is given the same hint D
+(`--link-delay-hint`); with RTT = 2 D, its Zenoh config gets
+`transport/unicast/open_timeout` and `accept_timeout` and
+`routing/interests/timeout` = 10 s + 4 RTT (the handshake's ~3 round trips),
+`transport/link/tx/lease` = 10 s + 2 RTT (a robot's own lease at least that)
+with `keep_alive` 4 per lease, and every protocol query waits its LAN
+timeout + 2 RTT. D = 0 keeps Zenoh's defaults and missionctl's (a robot's
+lease 1 s). One formula, in `backend/transport/timeouts.py`.
+
+**Telemetry** goes on change: a sample when a field moved beyond its
+deadband (position 0.5 m; yaw, roll, pitch 5°; battery 0.01; link 0.05;
+progress 0.05; an `eta_s` off by 2 s or 10 % from the last one counted down)
+or any other field changed, at most the robot's rate cap a second, and at
+least every 5 s. It is compact JSON of `Telemetry`: fields equal to their
+default are left out (a reader's model puts them back), numbers rounded to
+three decimals (`eta_s` one). A reader counts a running skill's `eta_s`
+down between samples.
+
+**The simulator's live status** (`{mf.KEY_STATUS_LIVE}`) is a
+`StatusUpdate`: `full` (the first publication, then once a minute) or
+`patch`, a JSON merge patch (RFC 7386) of `SimStatus` against the previous
+publication (`seq` consecutive within one `feed`). A follower subscribes,
+queries `{mf.KEY_STATUS}` (whose `SimStatus` names the `feed` and the last
+`seq` it includes), applies the patches that follow, and queries again after
+a gap or another `feed` (`backend.client.simstatus.SimStatusFeed`). A plain
+`SimStatus` on the live key is a full one.
 
 ## Appendix: message schemas
 

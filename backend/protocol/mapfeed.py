@@ -9,7 +9,8 @@ Key space (all JSON from the models below):
     mc/v2/sim/map/snapshot   queryable  -> MapSnapshot (late joiners)
     mc/v2/sim/map/delta      publication: MapDelta, seq consecutive, at most ~2 Hz
     mc/v2/sim/status         queryable  -> SimStatus (score, deliveries, regions, robots)
-    mc/v2/sim/status/live    publication: SimStatus, on change and at least every 2 s
+    mc/v2/sim/status/live    publication: StatusUpdate, seq consecutive: the full status
+                             or what changed (a merge patch), on change, at least every 10 s
 
 (under the protocol's prefix, `backend.protocol.keys.PREFIX`)
 
@@ -37,11 +38,19 @@ Robot poses are not in the feed: they ride on the robots' telemetry.
 A late joiner subscribes to the deltas first, then queries the snapshot, and
 applies deltas whose seq follows the snapshot's (`MapMirror` does this; a gap,
 or a delta of another `feed` run, means: query the snapshot again).
+
+The live status follows the same rule (`StatusMirror`): the status query's
+`SimStatus` says which publication it is as of (`feed`, `seq`); each
+`StatusUpdate` carries the full status (the first, and one a minute) or a
+JSON merge patch (RFC 7386) of what changed since the previous one: a few
+fields instead of the whole status, for a narrow link. A plain `SimStatus`
+on the live key (an older simulator) is taken as a full one.
 """
 
 from __future__ import annotations
 
 import base64
+import json
 import zlib
 from typing import Any, Literal
 
@@ -274,6 +283,93 @@ class SimStatus(_Wire):
     truth: SimTruth | None = Field(
         None, description='only in a reply to the payload {"truth": true}'
     )
+    feed: str = Field("", description="the live publication's run (as in `StatusUpdate`)")
+    seq: int = Field(0, ge=0, description="the last live publication this status includes")
+
+
+class StatusUpdate(_Wire):
+    """The live status publication: the full status, or what changed since
+    the previous publication as a JSON merge patch (RFC 7386) of `SimStatus`."""
+
+    feed: str = Field(description="id of this run of the publisher; another id: query the status")
+    seq: int = Field(ge=1, description="consecutive; a gap means: query the status")
+    full: SimStatus | None = Field(None, description="the whole status (no patch)")
+    patch: dict[str, Any] | None = Field(
+        None, description="what changed: new values; null removes; objects merge, lists replace"
+    )
+
+
+def merge_patch(old: Any, new: Any) -> Any:
+    """The JSON merge patch (RFC 7386) that turns `old` into `new` (None: no change)."""
+    if not isinstance(old, dict) or not isinstance(new, dict):
+        return None if old == new else new
+    patch: dict[str, Any] = {}
+    for key, value in new.items():
+        if key not in old:
+            patch[key] = value
+        elif old[key] != value:
+            patch[key] = merge_patch(old[key], value) if isinstance(value, dict) else value
+    for key in old.keys() - new.keys():
+        patch[key] = None
+    return patch or None
+
+
+def apply_merge_patch(target: Any, patch: Any) -> Any:
+    if not isinstance(patch, dict):
+        return patch
+    out = dict(target) if isinstance(target, dict) else {}
+    for key, value in patch.items():
+        if value is None:
+            out.pop(key, None)
+        else:
+            out[key] = apply_merge_patch(out.get(key), value)
+    return out
+
+
+class StatusMirror:
+    """Receiver side of the live status (a console): full statuses and patches.
+
+    mirror = StatusMirror()
+    mirror.apply_full(SimStatus.model_validate_json(queried))
+    ok = mirror.apply(payload_of_a_publication)  # False: gap or restart, query again
+    mirror.status                                 # SimStatus | None
+    """
+
+    def __init__(self) -> None:
+        self.status: SimStatus | None = None
+        self._raw: dict[str, Any] | None = None
+
+    def apply_full(self, status: SimStatus) -> None:
+        if self.status is not None and status.feed == self.status.feed:
+            if status.seq < self.status.seq:
+                return  # older than what the publications brought
+        self.status = status
+        self._raw = status.model_dump(mode="json")
+
+    def apply(self, payload: bytes | str) -> bool:
+        """Apply one publication; False when one was missed or the publisher
+        restarted (query the status, then `apply_full`). Raises ValueError
+        on what is not a status."""
+        raw = json.loads(payload)
+        if isinstance(raw, dict) and "world" in raw:  # a plain SimStatus: an older simulator
+            self.apply_full(SimStatus.model_validate(raw))
+            return True
+        update = StatusUpdate.model_validate(raw)
+        if update.full is not None:
+            self.apply_full(update.full.model_copy(update={"feed": update.feed, "seq": update.seq}))
+            return True
+        current = self.status
+        if current is None or self._raw is None or update.feed != current.feed:
+            return False
+        if update.seq <= current.seq:
+            return True  # already in the status
+        if update.seq != current.seq + 1:
+            return False
+        merged = apply_merge_patch(self._raw, update.patch or {})
+        merged.update(feed=update.feed, seq=update.seq)
+        self.status = SimStatus.model_validate(merged)
+        self._raw = merged
+        return True
 
 
 # ---------------------------------------------------------------- tiles

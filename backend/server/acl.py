@@ -8,14 +8,17 @@ The router enforces them on every message, with everything not allowed denied:
 - observer: the same reads, no operation key at all;
 - robot: only its robots' keys (register, downlink, telemetry, presence,
   uplink and world queryables, barrier tokens), world queries to any robot,
-  presence of the server and of other robots; plus the simulator's feed.
+  presence of the server and of other robots; plus the simulator's feed;
+- relay (a site's `missionctl router`): everything under the protocol's
+  prefix, both ways: it carries its site's robots and consoles, whose own
+  rules the relay enforces where they log in (`ground_cert_names`).
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from backend.protocol.keys import Keys
+from backend.protocol.keys import PREFIX, Keys
 from backend.protocol.mapfeed import KEY_MAP_DELTA, KEY_MAP_SNAPSHOT, KEY_STATUS, KEY_STATUS_LIVE
 from backend.server.accounts import Accounts
 
@@ -102,16 +105,55 @@ def _robot_rules(rid: str, robots: list[str]) -> list[dict[str, Any]]:
     ]
 
 
-def acl_config(accounts: Accounts, *, cert_names: bool = False) -> dict[str, Any]:
+_EVERY_MESSAGE = [
+    "put",
+    "delete",
+    "declare_subscriber",
+    "query",
+    "declare_queryable",
+    "reply",
+    "liveliness_token",
+    "declare_liveliness_subscriber",
+    "liveliness_query",
+]
+
+
+def _relay_rules(rid: str) -> list[dict[str, Any]]:
+    everything = [f"{PREFIX}/**"]
+    return [
+        _rule(f"{rid}-in", "ingress", _EVERY_MESSAGE, everything),
+        _rule(f"{rid}-out", "egress", _EVERY_MESSAGE, everything),
+    ]
+
+
+def acl_config(
+    accounts: Accounts, *, cert_names: bool = False, ground_cert_names: list[str] | None = None
+) -> dict[str, Any]:
     """Zenoh `access_control` for these accounts: deny by default, one
     subject per account (its user name; under mutual TLS also its
-    certificate's common name), the rules of its role."""
+    certificate's common name), the rules of its role.
+
+    `ground_cert_names` (a relay's): the link to the ground, told from the
+    site's by the common name of the ground's TLS certificate, carries
+    everything (the ground enforces the relay account's rules there)."""
     rules: list[dict[str, Any]] = []
     subjects: list[dict[str, Any]] = []
     policies: list[dict[str, Any]] = []
+    if ground_cert_names:
+        rules += _relay_rules("ground")
+        subjects.append({"id": "ground-link", "cert_common_names": list(ground_cert_names)})
+        policies.append(
+            {
+                "id": "ground-policy",
+                "rules": ["ground-in", "ground-out"],
+                "subjects": ["ground-link"],
+            }
+        )
     for n, (user, acc) in enumerate(sorted(accounts.table.accounts.items())):
         rid = f"a{n}"
-        if acc.role == "robot":
+        if acc.role == "relay":
+            own = _relay_rules(rid)
+        elif acc.role == "robot":
             own = _robot_rules(rid, acc.robots)
         else:
             own = _watcher_rules(rid, user)

@@ -65,6 +65,7 @@ from backend.transport import (
     serve,
     serve_async,
     subscribe,
+    timeouts,
 )
 from backend.transport.session import close_session, open_session
 
@@ -86,6 +87,7 @@ class MissionServer:
         command_expiry: float | None = None,
         accounts: Accounts | None = None,
         recover: bool = False,
+        link_delay_hint: float = 0.0,
     ):
         self.db = Path(db)
         self.mission_file = Path(mission_file) if mission_file else None
@@ -97,6 +99,9 @@ class MissionServer:
         # (the rest goes to its quarantine table) instead of refusing to start
         self.recover = recover
         self.recovered: str | None = None  # what the recovery did, for the operator
+        # the long link's expected one-way delay (s): Zenoh's timeouts follow from it
+        # (backend.transport.timeouts); a floor for the robots' measured delays
+        self.link_delay_hint = link_delay_hint
         self.server_id = uuid.uuid4().hex[:12]
         self.robot_link = RobotLink(self)
         self.engine: Engine | None = None
@@ -216,7 +221,7 @@ class MissionServer:
         """The router session; with accounts, user/password logins and the
         access-control rules of their roles (the dictionary file Zenoh reads
         exists only while the session opens)."""
-        extra = dict(self.zenoh_extra or {})
+        extra = {**timeouts.zenoh_options(self.link_delay_hint), **(self.zenoh_extra or {})}
         if self.accounts is None:
             return await asyncio.to_thread(
                 open_session, router_config(self.listen, extra=extra), what="the listen endpoint"
@@ -410,6 +415,8 @@ class MissionServer:
         role = self.accounts.role(user)
         if role is None:  # the router lets only `user` ask this: unreachable with accounts
             raise Refusal("unknown_account", f"no account '{user}' on this server")
+        if role == "relay":  # it carries its site's accounts; it is none of them
+            raise Refusal("unknown_account", f"'{user}' is a relay's account: log in as yourself")
         return dumps(AccountInfo(user=user, role=role, robots=self.accounts.robots(user)))
 
     def _handle_op(self, payload: bytes, key: str | None = None) -> bytes:

@@ -27,6 +27,7 @@ from backend.transport.aio import (
     subscribe,
     subscribe_to_queue,
     transport_events,
+    undeclare,
     wait_matching,
     watch_liveliness,
 )
@@ -35,6 +36,7 @@ from backend.transport.config import (
     apply_options,
     client_config,
     load_config_file,
+    relay_config,
     router_config,
     set_option,
 )
@@ -80,6 +82,7 @@ __all__ = [
     "query_all",
     "query_all_sync",
     "query_sync",
+    "relay_config",
     "router_config",
     "serve",
     "serve_async",
@@ -88,6 +91,7 @@ __all__ = [
     "subscribe",
     "subscribe_to_queue",
     "transport_events",
+    "undeclare",
     "wait_matching",
     "watch_liveliness",
 ]

@@ -432,6 +432,16 @@ def wait_matching(publisher: zenoh.Publisher, timeout: float) -> bool:
         listener.undeclare()
 
 
+def undeclare(entity: Any) -> None:
+    """Undeclare a subscriber (or queryable) when its session may be closed already."""
+    if entity is None:
+        return
+    try:
+        entity.undeclare()
+    except Exception:  # the session is closed: so is the entity
+        pass
+
+
 def subscribe(
     session: zenoh.Session, key_expr: str, on_message: Callable[[Message], object]
 ) -> zenoh.Subscriber[None]:

@@ -77,6 +77,42 @@ def router_config(
     set_option(config, "transport/link/tx/queue/batching/enabled", False)
     # Needed by zenoh.ext AdvancedPublisher caches (late joiners).
     set_option(config, "timestamping/enabled", True)
+    # Used on a link only when the other end asks for it too: a site relay's
+    # (relay_config); a LAN client does not.
+    set_option(config, "transport/unicast/compression/enabled", True)
+    return apply_options(config, extra)
+
+
+def relay_config(
+    listen: list[str],
+    connect: list[str],
+    *,
+    extra: Mapping[str, Any] | None = None,
+    base: zenoh.Config | None = None,
+) -> zenoh.Config:
+    """Config of a site relay (`missionctl router`): a router listening exactly
+    on `listen` for the site's robots and consoles, connected to the ground's
+    router at `connect`.
+
+    Zenoh's defaults for a router's connect endpoints are what a relay needs:
+    opening does not wait for the ground, and a lost ground link is retried
+    for ever (every 1 s, backing off to 4 s). For a narrow link: batching
+    stays on (the site's small messages share frames), compression is on
+    (the server's router accepts it: about a third off the JSON), and no
+    timestamps are added (nobody at the ground reads them: ~25 bytes less
+    per message).
+    """
+    if not listen:
+        raise ValueError("a relay needs at least one listen endpoint (for the site)")
+    if not connect:
+        raise ValueError("a relay needs the ground's endpoint to connect to")
+    config = base if base is not None else zenoh.Config()
+    set_option(config, "mode", "router")
+    set_option(config, "listen/endpoints", list(listen))
+    set_option(config, "connect/endpoints", list(connect))
+    _common(config)
+    set_option(config, "transport/unicast/compression/enabled", True)
+    set_option(config, "timestamping/enabled", False)
     return apply_options(config, extra)
 
 

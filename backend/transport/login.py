@@ -1,9 +1,12 @@
-"""Client-side login and TLS options, shared by ctl, console, sim and robots.
+"""Client-side connection options, shared by ctl, console, sim and robots.
 
     --user U --password-file F      log in (the password is read from F, never
                                     taken from the command line)
     --ca FILE                       trust this CA for tls/ endpoints
     --cert FILE --key FILE          client certificate (mutual TLS)
+    --link-delay-hint D             the link's expected one-way delay (6s, 1.3):
+                                    every timeout follows from it
+                                    (backend.transport.timeouts)
 
 `Login.zenoh_options()` turns them into Zenoh client config options. The
 password exists only in memory and in the Zenoh config; `repr(Login)` hides it.
@@ -18,6 +21,8 @@ from pathlib import Path
 from typing import Any
 
 from backend.core.credentials import USER_PATTERN, AccountsError, read_password
+from backend.core.durations import duration_s
+from backend.transport import timeouts
 
 
 @dataclass(frozen=True)
@@ -27,6 +32,9 @@ class Login:
     ca: str | None = None
     cert: str | None = None
     key: str | None = None
+    # seconds, one way: the Zenoh timeouts here, the protocol's query
+    # timeouts where the client makes its queries (0: a LAN's defaults)
+    link_delay_hint: float = 0.0
 
     @property
     def logged_in(self) -> bool:
@@ -43,7 +51,36 @@ class Login:
             out["transport/link/tls/enable_mtls"] = True
             out["transport/link/tls/connect_certificate"] = self.cert
             out["transport/link/tls/connect_private_key"] = self.key
+        out.update(timeouts.zenoh_options(self.link_delay_hint))
         return out
+
+
+def delay_hint(text: str) -> float:
+    """argparse's `type` for --link-delay-hint: 6s, 1.3, 500ms, 0."""
+    seconds = duration_s(text)
+    if seconds is None:
+        raise argparse.ArgumentTypeError(
+            f"not a delay: {text!r} (examples: 6s, 1.3, 500ms, 0 for a LAN)"
+        )
+    return seconds
+
+
+DELAY_HINT_HELP = (
+    "the link's expected one-way delay (e.g. 1.3s to the Moon, 6s through a relay pass; "
+    "default 0: a LAN). Zenoh's open/accept timeouts, lease and keep-alive and the "
+    "protocol's query timeouts follow from it (docs/deployment.md); give every process "
+    "of a deployment the same"
+)
+
+
+def add_delay_hint_argument(p: argparse.ArgumentParser | Any, *, suppress: bool = False) -> None:
+    p.add_argument(
+        "--link-delay-hint",
+        type=delay_hint,
+        metavar="D",
+        default=argparse.SUPPRESS if suppress else 0.0,
+        help=DELAY_HINT_HELP,
+    )
 
 
 def add_login_arguments(
@@ -78,6 +115,7 @@ def add_login_arguments(
         help="client certificate for mutual TLS (with --key)",
     )
     p.add_argument("--key", metavar="FILE", default=d(None), help="private key of --cert")
+    add_delay_hint_argument(p, suppress=suppress)
 
 
 def login_from_args(args: argparse.Namespace) -> Login:
@@ -101,6 +139,7 @@ def login_from_args(args: argparse.Namespace) -> Login:
         ca=_absolute(getattr(args, "ca", None)),
         cert=_absolute(cert),
         key=_absolute(key),
+        link_delay_hint=float(getattr(args, "link_delay_hint", 0.0) or 0.0),
     )
 
 

@@ -37,6 +37,7 @@ from console.state.actions import BY_NAME
 from console.state.changes import StateChange, Topic
 from console.state.context import FooterKey, context_keys, fit_footer
 from console.state.files import RecentFiles
+from console.state.freshness import EtaTicks
 from console.state.model import CONNECTED, ConsoleModel
 from console.state.site import site_text
 from console.widgets.bars import KeyBar, StatusLine, TopBar, connection_text
@@ -139,6 +140,7 @@ class MissionScreen(Screen):
         self.update_top()
         self.schedule.rebuild()
         self._stale: frozenset[str] = frozenset()
+        self._etas = EtaTicks()  # running skills' ETAs count down between samples
         self.changes.subscribe(self, self.changed)
         # "as of 25s ago" counts up; a robot falling silent turns stale without a message
         self.set_interval(1.0, self.freshness_tick)
@@ -153,7 +155,7 @@ class MissionScreen(Screen):
             self._stale = stale
             self.schedule.refresh()
             return
-        for robot in stale:
+        for robot in stale | self._etas.ticked(self.model):
             self.schedule.refresh_telemetry(robot)
         for robot in self.model.robot_order():  # the ages of commands waiting for a robot
             if self.model.pending(robot):

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from datetime import datetime
-from typing import Protocol
+from typing import Any, Protocol
 
 from backend.protocol.messages import RobotInfo, Telemetry
 from console.state.text import fmt_duration
@@ -78,3 +78,23 @@ def freshness(model: Heard, robot: str, now: datetime) -> Freshness:
     if delay >= SILENT_AFTER_S:
         return Freshness(True, age, "delayed")
     return Freshness(False, age, "")
+
+
+class EtaTicks:
+    """Which robots' ETA shows another second since the last look: telemetry
+    comes on change, and a running skill's ETA counts down between samples
+    (by the age of the robot's state, see `freshness`)."""
+
+    def __init__(self) -> None:
+        self.shown: dict[str, int] = {}  # robot -> the ETA's second at the last look
+
+    def ticked(self, model: Any) -> set[str]:
+        ticked = set()
+        for robot, t in model.telemetry.items():
+            if t.eta_s is None:
+                continue
+            shown = round(t.eta_s - (model.freshness(robot).age_s or 0.0))  # as fmt_duration
+            if self.shown.setdefault(robot, shown) != shown:
+                self.shown[robot] = shown
+                ticked.add(robot)
+        return ticked

@@ -6,7 +6,7 @@ SDK, used by the live tests and the README's three-terminal walk-through:
 
 On a server with accounts add `--user ACCOUNT --password-file FILE` (a robot
 account listing these robots) and, for tls/ endpoints, `--ca FILE`
-(docs/security.md).
+(docs/security.md); on a long link, `--link-delay-hint D` (docs/deployment.md).
 
 Behaviour by skill label (so a test can script a robot from the plan):
   "hold"   runs until another robot or the test tells it topic "release"
@@ -28,6 +28,7 @@ from backend.agent import RobotAgent, SkillFailed
 from backend.core.credentials import AccountsError
 from backend.transport import TransportUnreachable
 from backend.transport.login import Login, add_login_arguments, login_from_args
+from backend.transport.timeouts import startup_s
 
 SKILLS = {
     "lru_science": ["drive_to", "explore", "take_science_image", "identify_stone", "recharge"],
@@ -113,7 +114,8 @@ async def main(argv: list[str]) -> int:
         return 3
     try:
         for a in agents:
-            await a.wait_registered(timeout=20)
+            # on a long link (--link-delay-hint) registering takes a few round trips more
+            await a.wait_registered(timeout=startup_s(20, login.link_delay_hint))
             print(f"ready {a.name}", flush=True)
         await stop.wait()
     finally:

@@ -27,7 +27,7 @@ from console.escape import split_escape
 from console.state.capability import filter_examples, filter_robots
 from console.state.context import TAIL, context_keys, fit_footer, key_text
 from console.state.eventlog import AlertBook, toast_text
-from console.state.freshness import SILENT_AFTER_S
+from console.state.freshness import SILENT_AFTER_S, EtaTicks
 from console.state.markers import relabel
 from console.state.model import CONNECTED, ConsoleModel
 from console.state.search import search_skills
@@ -148,6 +148,18 @@ def test_a_robot_that_stops_sending_telemetry_turns_stale():
     b = Builder(MARS)
     quiet = model_of(b, at=T0 + timedelta(minutes=5))
     assert not quiet.freshness("lru1").stale
+
+
+def test_a_running_skills_eta_counts_down_between_samples():
+    """Telemetry comes on change: lru1's ETA (132 s at T0) ticks each second."""
+    m = model_of(mars_mid_execution(), telemetry=mars_telemetry())
+    etas = EtaTicks()
+    assert etas.ticked(m) == set()  # the first look: as drawn
+    m.clock = lambda: T0 + timedelta(seconds=0.4)
+    assert etas.ticked(m) == set()  # the same second
+    m.clock = lambda: T0 + timedelta(seconds=2)
+    assert etas.ticked(m) == {"lru1"}  # lru2 is at a barrier: no ETA
+    assert etas.shown["lru1"] == 130
 
 
 # -- unsaved plans -----------------------------------------------------------------------

@@ -27,6 +27,7 @@ ACCOUNTS = {
     "rover1": ("robot", ["lru1"]),
     "rover2": ("robot", ["lru2"]),
     "fleet": ("robot", ["lru1", "lru2"]),  # the simulator: one account for its robots
+    "lander": ("relay", []),  # a site relay (missionctl router)
 }
 
 

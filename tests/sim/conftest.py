@@ -25,6 +25,7 @@ import yaml
 
 from backend import transport
 from backend.client.client import MissionClient
+from backend.client.simstatus import SimStatusFeed
 from backend.protocol import mapfeed as mf
 from backend.transport import free_port, loopback_endpoint
 
@@ -197,20 +198,14 @@ class SimWatch:
 
     def __init__(self, client: MissionClient):
         self.client = client
-        self.status: mf.SimStatus | None = None
         self.changed = asyncio.Event()
-        self._loop = asyncio.get_running_loop()
         assert client.session is not None
-        self._sub = transport.subscribe(client.session, mf.KEY_STATUS_LIVE, self._on)
+        # full statuses and patches (backend.client.simstatus), set on the loop
+        self.feed = SimStatusFeed(client.session, lambda _st: self.changed.set())
 
-    def _on(self, msg: transport.Message) -> None:
-        st = mf.SimStatus.model_validate_json(msg.payload)
-        self._loop.call_soon_threadsafe(self._set, st)
-
-    def _set(self, st: mf.SimStatus) -> None:
-        if self.status is None or st.sim_time >= self.status.sim_time:
-            self.status = st
-        self.changed.set()
+    @property
+    def status(self) -> mf.SimStatus | None:
+        return self.feed.status
 
     async def query(self) -> mf.SimStatus:
         """The ground view: what the robots reported."""
@@ -243,10 +238,7 @@ class SimWatch:
         return self.status
 
     def close(self) -> None:
-        try:
-            self._sub.undeclare()
-        except Exception:
-            pass
+        self.feed.close()
 
 
 async def connect(stack: Stack, **sim_args: Any) -> tuple[MissionClient, SimWatch]:
@@ -258,6 +250,7 @@ async def connect(stack: Stack, **sim_args: Any) -> tuple[MissionClient, SimWatc
     await client.connect()
     watch = SimWatch(client)
     try:
+        await watch.feed.start()  # no simulator yet: its first publication brings the status
         await asyncio.to_thread(stack.start_sim, **sim_args)
         await client.wait_for(lambda m: all(client.robots[r].online for r in m.robots), STARTUP)
     except BaseException:

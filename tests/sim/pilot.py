@@ -27,6 +27,7 @@ from typing import Any
 from backend import transport
 from backend.client.client import MissionClient, OperationRefused
 from backend.client.mapfollow import MapFeed
+from backend.client.simstatus import SimStatusFeed
 from backend.core.ops import AddBarrier, AddSkill, Control, DeleteSkills, Sync
 from backend.protocol import mapfeed as mf
 
@@ -89,25 +90,18 @@ class Operator:
 
     async def start(self) -> None:
         assert self.client.session is not None
-        self._sub = transport.subscribe(self.client.session, mf.KEY_STATUS_LIVE, self._on_status)
+        # full statuses and patches, followed like the map (backend.client.simstatus)
+        self._sub = SimStatusFeed(self.client.session, self._set_status, timeout=10.0)
         self.client.add_listener(lambda _event: self.changed.set())
         self.feed = MapFeed(self.client.session, self._on_map)
         await self.feed.start()
-        raw = await transport.query(self.client.session, mf.KEY_STATUS, b"", timeout=10.0)
-        self._set_status(mf.SimStatus.model_validate_json(raw))
+        await self._sub.start()
 
     def close(self) -> None:
         if self.feed is not None:
             self.feed.close()
         if self._sub is not None:
-            try:
-                self._sub.undeclare()
-            except Exception:
-                pass
-
-    def _on_status(self, msg: transport.Message) -> None:
-        st = mf.SimStatus.model_validate_json(msg.payload)
-        self._loop.call_soon_threadsafe(self._set_status, st)
+            self._sub.close()
 
     def _set_status(self, st: mf.SimStatus) -> None:
         if self.status is None or st.sim_time >= self.status.sim_time:

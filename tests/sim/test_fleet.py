@@ -293,7 +293,8 @@ async def test_drone_flight_longer_than_its_battery_fails_safely_and_landing_rec
 
 
 async def test_pause_stop_and_run_restarts_the_skill(stack: Stack) -> None:
-    client, watch = await connect(stack, speed=40)
+    # steady telemetry (a paused robot sends no news otherwise, only a heartbeat every 5 s)
+    client, watch = await connect(stack, speed=40, extra=["--link-budget", "off"])
     try:
         drive = await add(client, "lru1", "drive_to", {"goal": {"x": -50.0, "y": -30.0}}, at=0)
         await client.submit(Sync(robot="lru1", through=drive))
@@ -426,7 +427,8 @@ async def test_sim_status_shows_what_the_robots_reported_and_the_truth_only_when
     """LRU1 explores behind the ridge, out of coverage, and discovers RSS-C there: the
     ground knows nothing of it (nor where LRU1 is now) until LRU1 is back in range;
     `sim-status --truth` shows it at once, for evaluation."""
-    client, watch = await connect(stack, speed=50)
+    # the full status every 2 s (the link budget's is every 10 s): the truth's polling pace
+    client, watch = await connect(stack, speed=50, extra=["--link-budget", "off"])
     try:
         beyond = [
             {"x": -60.0, "y": 76.0},

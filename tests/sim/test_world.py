@@ -576,4 +576,4 @@ def test_mapfeed_is_self_contained() -> None:
         for n in ast.walk(tree)
         if isinstance(n, ast.ImportFrom) and n.module and n.level == 0
     }
-    assert mods <= {"__future__", "base64", "zlib", "typing", "numpy", "pydantic"}, mods
+    assert mods <= {"__future__", "base64", "json", "zlib", "typing", "numpy", "pydantic"}, mods

@@ -12,7 +12,7 @@ Operations
                               label, skill, parameters that differ from the
                               library defaults), barriers, markers, revision
   robots                      presence, type, manifest (modules, skills) and,
-                              when a robot publishes it within ~1 s, battery,
+                              when a robot publishes it within ~5 s, battery,
                               link quality and activity
   add ROBOT SKILL [--param NAME=VALUE]... [--label TEXT] [--at INDEX] [POLICY]
   delete ID...

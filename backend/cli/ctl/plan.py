@@ -25,8 +25,11 @@ from backend.core.plan.checks import Finding, run_checks
 from backend.core.plan.forecast import Forecast, Forecaster, SkillForecast
 from backend.core.plan.inputs import PlanInputs
 from backend.exit_codes import EXIT_OK, EXIT_REFUSED
+from backend.transport.timeouts import rtt
 
-TELEMETRY_WAIT = 1.0  # seconds to wait for one sample of every online robot
+# seconds to wait for one sample of every online robot: a still robot sends one every
+# 5 s (telemetry goes on change, backend/agent/telemetry.py), plus the link's round trip
+TELEMETRY_WAIT = 5.5
 MARK = {"error": ("✖", "E"), "warning": ("⚠", "W")}
 
 
@@ -46,7 +49,7 @@ async def wait_telemetry(client: Any) -> None:
     client.add_listener(check)
     check()
     try:
-        await asyncio.wait_for(done.wait(), TELEMETRY_WAIT)
+        await asyncio.wait_for(done.wait(), TELEMETRY_WAIT + rtt(client.login.link_delay_hint))
     except TimeoutError:
         pass  # a robot that publishes nothing: shown and planned without its telemetry
     finally:

@@ -380,7 +380,9 @@ def progress_segments(
     if t is None or pct is None:
         text = "   running" + (f" · {s.status_info}" if s.status_info else "")
         return [Segment(fit(text, w), st["dim"])]
-    return _progress_bar(pct, t.eta_s, w, st)
+    # telemetry comes on change: the ETA counts down from the last sample (as old as `fresh`)
+    eta_s = max(0.0, t.eta_s - (fresh.age_s or 0.0)) if t.eta_s is not None else None
+    return _progress_bar(pct, eta_s, w, st)
 
 
 def _progress_bar(pct: float, eta_s: float | None, w: int, st: Styles) -> list[Segment]:
