@@ -121,7 +121,7 @@ class MissionServer:
     # -- start / stop ---------------------------------------------------------
     def _load(self) -> None:
         """Resume from the journal, or start it from the mission file."""
-        journal = Journal.open(self.db)
+        journal = Journal.open(self.db, keep_snapshots=None)
         try:
             mission, requests = self._resume(journal)
             if mission is not None:
@@ -142,7 +142,7 @@ class MissionServer:
                 mission, library = load_mission(self.mission_file)
                 lib_file = library_path(self.mission_file, mission.library)
                 journal.close()
-                journal = Journal.open(self.db, library=str(lib_file))
+                journal = Journal.open(self.db, library=str(lib_file), keep_snapshots=None)
                 try:
                     journal.snapshot(mission)
                 except sqlite3.Error as e:  # e.g. a full disk
