@@ -30,6 +30,7 @@ from backend.core.library import Library
 from backend.core.model import Mission
 from backend.core.rules.engine import Applied, Engine, Refusal
 from backend.files.missions import library_path, load_library, load_mission
+from backend.protocol.archive import archive_path
 from backend.protocol.keys import PROTOCOL_VERSION, Keys
 from backend.protocol.messages import (
     ALERTS_KEPT,
@@ -47,6 +48,7 @@ from backend.protocol.messages import (
 from backend.protocol.wire import parse
 from backend.server.accounts import Accounts, zenoh_dictionary
 from backend.server.acl import acl_config
+from backend.server.archive import MAX_SAMPLES, TelemetryArchive
 from backend.server.journal import (
     Journal,
     JournalError,
@@ -86,6 +88,7 @@ class MissionServer:
         command_expiry: float | None = None,
         accounts: Accounts | None = None,
         recover: bool = False,
+        archive_samples: int = MAX_SAMPLES,
     ):
         self.db = Path(db)
         self.mission_file = Path(mission_file) if mission_file else None
@@ -98,6 +101,9 @@ class MissionServer:
         self.recover = recover
         self.recovered: str | None = None  # what the recovery did, for the operator
         self.server_id = uuid.uuid4().hex[:12]
+        # telemetry, alerts and presence kept beside the journal for review (0: none)
+        self.archive_samples = archive_samples
+        self.archive: TelemetryArchive | None = None
         self.robot_link = RobotLink(self, default_expiry_s=command_expiry)
         self.engine: Engine | None = None
         self.journal: Journal | None = None
@@ -159,6 +165,22 @@ class MissionServer:
         self.engine = Engine(mission, library)
         remember_requests(self.engine, requests)
         self.robot_link.add_robots(mission.robots)
+        self._open_archive()
+
+    def _open_archive(self) -> None:
+        """The telemetry archive beside the journal; one that cannot be
+        opened is said and done without (the mission does not need it)."""
+        if self.archive_samples <= 0:
+            return
+        archive = TelemetryArchive(archive_path(self.db), max_samples=self.archive_samples)
+        try:
+            archive.start()
+        except (sqlite3.Error, OSError) as e:
+            log.warning(
+                "%s: no telemetry archive (%s); the mission goes on without", archive.path, e
+            )
+            return
+        self.archive = archive
 
     def _resume(self, journal: Journal) -> tuple[Mission | None, list[Remembered]]:
         """The journal's mission; with `recover`, a journal that cannot be
@@ -189,6 +211,8 @@ class MissionServer:
             self._session = await self._open_router()
         except BaseException:
             self.journal.close()
+            if self.archive is not None:
+                self.archive.close()
             raise
         s = self._session
         self._events_pub = declare_publisher(s, Keys.EVENTS)
@@ -234,6 +258,9 @@ class MissionServer:
         if self.journal is not None:
             self.journal.close()
             self.journal = None
+        archive, self.archive = self.archive, None
+        if archive is not None:
+            await asyncio.to_thread(archive.close)
 
     async def __aenter__(self) -> MissionServer:
         await self.start()
@@ -388,6 +415,8 @@ class MissionServer:
             at=_now(),
         )
         self.alerts.append(a)
+        if self.archive is not None:
+            self.archive.alert(a)
         if self._alerts_pub is not None:
             self._publish(self._alerts_pub, dumps(a))
 
@@ -397,12 +426,16 @@ class MissionServer:
             t = parse(Telemetry, msg.payload)
         except ValueError:
             return  # not readable: consoles say so (an unreadable-message alert of their own)
+        if self.archive is not None:  # on this (Zenoh) thread: the loop never waits for it
+            self.archive.took(t)
         loop = self._loop
         if loop is not None and not loop.is_closed():
             loop.call_soon_threadsafe(self.telemetry_watch.took, t)
 
     def publish_fleet(self, info: RobotInfo) -> None:
         """A robot's presence or manifest changed (the robot link's news)."""
+        if self.archive is not None:
+            self.archive.fleet(info)
         if self._fleet_pub is not None:
             self._publish(self._fleet_pub, dumps(FleetEvent(robot=info)))
 
