@@ -18,6 +18,7 @@ import logging
 import sqlite3
 import uuid
 from collections import deque
+from collections.abc import Awaitable
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -37,6 +38,7 @@ from backend.protocol.messages import (
     AccountInfo,
     Alert,
     FleetEvent,
+    HistoryRequest,
     OpReply,
     Request,
     RobotInfo,
@@ -46,6 +48,7 @@ from backend.protocol.messages import (
     dumps,
 )
 from backend.protocol.wire import parse
+from backend.server import history
 from backend.server.accounts import Accounts, zenoh_dictionary
 from backend.server.acl import acl_config
 from backend.server.archive import MAX_SAMPLES, TelemetryArchive
@@ -221,6 +224,7 @@ class MissionServer:
         self._entities += [
             serve_async(s, Keys.OP, guard(self._handle_op)),
             serve_async(s, Keys.STATE, guard(self._handle_state)),
+            serve_async(s, Keys.HISTORY, guard(self._handle_history)),
             serve_async(s, Keys.op_as("*"), guard(self._handle_op), with_key=True),
             serve_async(s, Keys.account("*"), guard(self._handle_account), with_key=True),
             *self.robot_link.declare(s, guard),
@@ -453,6 +457,17 @@ class MissionServer:
             alerts=list(self.alerts),
         )
         return snap.model_dump_json().encode()
+
+    def _handle_history(self, payload: bytes) -> Awaitable[bytes]:
+        """`ctl history`: read from the journal on a worker thread (history.py)."""
+        req = parse(HistoryRequest, payload) if payload else HistoryRequest()
+        owners = {s.id: robot for robot, task in self.mission.tasks.items() for s in task}
+
+        async def reply() -> bytes:
+            answer = await asyncio.to_thread(history.answer, self.db, req, owners)
+            return answer.model_dump_json().encode()
+
+        return reply()
 
     # -- operations from consoles and ctl -------------------------------------------
     def _handle_account(self, payload: bytes, key: str) -> bytes:

@@ -1,6 +1,6 @@
 """A recorded mission, read-only: the journal at any instant of either clock,
 the telemetry archive (downsampled, bounded, written off the caller's
-thread) and the plan-against-actual report."""
+thread), the plan-against-actual report and the server's history answer."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import hashlib
 import shutil
 import sqlite3
 import threading
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import pytest
@@ -20,7 +20,8 @@ from backend.core.records import RecordError
 from backend.files.record.journal import JournalReader, apply_in_order
 from backend.files.record.report import plan_against_actual, report_text
 from backend.protocol.archive import ArchiveReader, archive_path
-from backend.protocol.messages import Telemetry
+from backend.protocol.messages import HistoryRequest, Telemetry
+from backend.server import history
 from backend.server.archive import TelemetryArchive
 from backend.server.journal import Journal
 
@@ -247,3 +248,29 @@ def test_the_report_has_plan_against_actual_for_every_synchronized_skill(recorde
     assert actors["lru1"]["report"] > 0
     text = report_text(report)
     assert "Overdue verifications: none listed" in text and "Who did what" in text
+
+
+def test_history_filters_by_robot_user_and_time(recorded):
+    with Journal.open(recorded.db) as journal:
+        mission, _ = journal.load()
+    owners = {s.id: r for r, task in mission.tasks.items() for s in task}
+    everything = history.answer(recorded.db, HistoryRequest(limit=10_000), owners)
+    assert len(everything.entries) == recorded.ops + recorded.reports and not everything.more
+    revisions = [e.revision for e in everything.entries]
+    assert revisions == sorted(revisions)
+
+    alice = history.answer(recorded.db, HistoryRequest(user="alice", limit=10_000), owners)
+    assert alice.entries and {e.user for e in alice.entries} == {"alice"}
+    assert {e.client for e in alice.entries} == {"console-a"}
+
+    lru2 = history.answer(recorded.db, HistoryRequest(robot="lru2", limit=10_000), owners)
+    assert all("lru2" in e.robots for e in lru2.entries)
+    ops = {e.op for e in lru2.entries}
+    assert {"add", "sync", "report", "answer", "uplink_sent"} <= ops
+
+    late = datetime.fromtimestamp(recorded.end, UTC) - timedelta(seconds=60)
+    recent = history.answer(recorded.db, HistoryRequest(since=late, limit=10_000), owners)
+    assert recent.entries and all(e.at >= late for e in recent.entries)
+
+    newest = history.answer(recorded.db, HistoryRequest(limit=5), owners)
+    assert newest.more and [e.revision for e in newest.entries] == revisions[-5:]

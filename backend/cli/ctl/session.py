@@ -19,7 +19,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from backend.cli.ctl import plan
+from backend.cli.ctl import history, plan
 from backend.cli.ctl.args import DEFAULT_CONNECT, ROBOT_OPS
 from backend.cli.ctl.errors import FileInvalid, UsageError
 from backend.cli.ctl.render import (
@@ -505,4 +505,5 @@ VIEWS: dict[str, Callable[[Any, argparse.Namespace], Awaitable[int]]] = {
     "save": _save,
     "check": plan.check,
     "timeline": plan.timeline,
+    "history": history.view,
 }
