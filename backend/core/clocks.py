@@ -65,23 +65,31 @@ class Order:
 
     def __init__(self, keys: Sequence[float]) -> None:
         n = len(keys)
-        self.keys = list(keys)
-        self.order: list[int] = sorted(range(n), key=self.keys.__getitem__)
-        self.sorted_keys = [self.keys[i] for i in self.order]
-        self.pos = [0] * n
-        for p, i in enumerate(self.order):
-            self.pos[i] = p
-        # the furthest position among batches 0..i, the nearest among i..n-1
-        self.reach: list[int] = []
+        self.keys = keys
+        self.order: Sequence[int]
+        self.pos: Sequence[int]
+        self.reach: Sequence[int]  # the furthest position among batches 0..i
+        self.nearest: Sequence[int]  # the nearest position among batches i..n-1
+        if all(a <= b for a, b in zip(keys, keys[1:], strict=False)):  # ground time
+            self.order = self.pos = self.reach = self.nearest = range(n)
+            self.sorted_keys = keys
+            return
+        order = sorted(range(n), key=keys.__getitem__)
+        pos = [0] * n
+        for p, i in enumerate(order):
+            pos[i] = p
+        reach: list[int] = []
         top = -1
-        for p in self.pos:
-            top = max(top, p)
-            self.reach.append(top)
-        self.nearest = [0] * n
+        for p in pos:
+            top = p if p > top else top
+            reach.append(top)
+        nearest = [0] * n
         low = n
         for i in range(n - 1, -1, -1):
-            low = min(low, self.pos[i])
-            self.nearest[i] = low
+            low = pos[i] if pos[i] < low else low
+            nearest[i] = low
+        self.order, self.pos, self.reach, self.nearest = order, pos, reach, nearest
+        self.sorted_keys = [keys[i] for i in order]
 
     def __len__(self) -> int:
         return len(self.order)

@@ -14,7 +14,7 @@ import sqlite3
 from collections.abc import Iterator
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import NamedTuple, TypeVar
+from typing import Any, NamedTuple, TypeVar
 
 from pydantic import ValidationError
 
@@ -48,6 +48,13 @@ CREATE TABLE IF NOT EXISTS notes (
     body TEXT NOT NULL
 );
 CREATE INDEX IF NOT EXISTS notes_at ON notes (at);
+CREATE TABLE IF NOT EXISTS journal (
+    revision INTEGER PRIMARY KEY,
+    ts       REAL NOT NULL,
+    op       TEXT NOT NULL,
+    robot_at REAL,
+    robot    TEXT
+);
 """
 
 SAMPLE_COLUMNS = (
@@ -88,7 +95,7 @@ def sample_row(t: Telemetry, received: float) -> tuple[object, ...]:
     )
 
 
-def _sample(row: tuple[object, ...]) -> Telemetry:
+def _sample(row: tuple[Any, ...]) -> Telemetry:  # a telemetry row as SQLite gives it
     robot, at, _received, x, y, z, roll, pitch, yaw, battery, link, in_range, *rest = row
     mode, skill, progress, eta_s, info = rest
     return Telemetry.model_construct(
@@ -102,7 +109,7 @@ def _sample(row: tuple[object, ...]) -> Telemetry:
         progress=progress,
         eta_s=eta_s,
         info=info or "",
-        at=datetime.fromtimestamp(float(at), UTC),  # type: ignore[arg-type]
+        at=datetime.fromtimestamp(float(at), UTC),
     )
 
 
@@ -167,6 +174,17 @@ class ArchiveReader:
         )
         for row in rows:
             yield Sample(row[0], _sample(row[1:]))
+
+    def journal_index(self, after: int) -> list[tuple[int, float, str, float | None, str | None]]:
+        """The journal's batches after revision `after` as the server indexed
+        them: (revision, journal time, operation, robot time or None, robot or None)."""
+        if "journal" not in tables(self._conn):  # an archive older than the index
+            return []
+        return self._conn.execute(
+            "SELECT revision, ts, op, robot_at, robot FROM journal WHERE revision > ? "
+            "ORDER BY revision",
+            (after,),
+        ).fetchall()
 
     def span(self, clock: str) -> tuple[float, float] | None:
         col = self._column(clock)

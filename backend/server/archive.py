@@ -10,12 +10,18 @@ backend/files/record/archive.py for the schema) the server keeps:
   flaps cannot flood it). The rest are dropped: a rover reporting 4 times a
   second leaves about one sample a second, each with the robot's own time
   and the time the ground took it.
-- the server's alerts and the robots' presence changes (`notes`).
+- the server's alerts and the robots' presence changes (`notes`);
+- an index of the journal by time (`journal`: each batch's revision, when
+  it was journaled, its operation and, for a robot's report or answer, the
+  robot and its own time): a review orders 100,000 batches in either clock from it
+  without reading the journal through (a review of a journal without it
+  reads the journal through instead, slower).
 
 **Bounded**: at most `max_samples` samples (default 2,000,000: about 140
 robot-hours... see docs/performance.md for the bytes per robot-hour); past
 that the oldest samples go first (retention: the newest `max_samples`).
-Alerts and presence are a few per robot and hour and are all kept.
+Alerts and presence are a few per robot and hour and are all kept, as is
+the index (about 30 bytes per journaled batch).
 
 **Off the event loop**: the sample is taken or dropped on the Zenoh thread
 that received it (a comparison), and handed to a writer thread through a
@@ -35,7 +41,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
+from backend.core.clocks import ROBOT_TIMED
 from backend.protocol.archive import (
     ALERT,
     ARCHIVE_FORMAT,
@@ -54,7 +62,10 @@ MAX_SAMPLES = 2_000_000
 QUEUE_MAX = 20_000  # samples waiting for the writer (about a minute of a busy site)
 FLUSH_S = 0.5
 
-_INSERT_SAMPLE = f"INSERT INTO telemetry ({SAMPLE_COLUMNS}) VALUES ({', '.join('?' * 17)})"  # noqa: S608
+_INSERT_SAMPLE = f"INSERT INTO telemetry ({SAMPLE_COLUMNS}) VALUES ({', '.join('?' * 17)})"
+_INSERT_BATCH = (
+    "INSERT OR REPLACE INTO journal (revision, ts, op, robot_at, robot) VALUES (?, ?, ?, ?, ?)"
+)
 
 
 @dataclass
@@ -150,6 +161,15 @@ class TelemetryArchive:
             return True
         return False
 
+    def journaled(self, revision: int, op: Any, ts: float | None = None) -> None:
+        """The journal took `op` at `revision`: its row in the review's index
+        (when, and for a robot's report or answer, the robot and its own time)."""
+        name = str(getattr(op, "op", ""))
+        at = getattr(op, "at", None) if name in ROBOT_TIMED else None
+        robot = getattr(op, "robot", None) if at is not None else None
+        when = time.time() if ts is None else ts
+        self._put(("batch", (revision, when, name, at.timestamp() if at else None, robot)))
+
     def alert(self, a: Alert) -> None:
         self._put(("note", (ALERT, a.at.timestamp(), a.model_dump_json())))
 
@@ -203,10 +223,12 @@ class TelemetryArchive:
     def _commit(self, conn: sqlite3.Connection, items: list, count: int) -> int:
         samples = [row for kind, row in items if kind == "sample"]
         notes = [row for kind, row in items if kind == "note"]
+        batches = [row for kind, row in items if kind == "batch"]
         conn.execute("BEGIN")
         try:
             conn.executemany(_INSERT_SAMPLE, samples)
             conn.executemany("INSERT INTO notes (kind, at, body) VALUES (?, ?, ?)", notes)
+            conn.executemany(_INSERT_BATCH, batches)
             count += len(samples)
             if count > self.max_samples:  # the oldest go first
                 over = count - self.max_samples

@@ -295,6 +295,8 @@ class MissionServer:
                 "%s: cannot store a snapshot (%s); will try again at the next operation", self.db, e
             )
         self._maybe_checkpoint()
+        if self.archive is not None:  # the review's index of the journal by time
+            self.archive.journaled(applied.revision, op)
         batch = EventBatch(revision=applied.revision, events=applied.events, actor=actor, op=op.op)
         self._publish(self._events_pub, batch.model_dump_json().encode())
         self.robot_link.applied(applied.events)  # commands to transmit, robots a mission names

@@ -106,6 +106,7 @@ class _Play:
         )
         self.journal.snapshot(mission)
         self.times: list[tuple[float, int]] = []
+        self.index: list[tuple[int, object, float]] = []  # what the server gives the archive
         self.out = Recorded(db, archive_path(db), start=T0.timestamp())
         self.requests = itertools.count(1)
         self.activity: dict[str, list[tuple[float, float, str]]] = {r: [] for r in SKILLS}
@@ -119,6 +120,7 @@ class _Play:
             applied, op, actor=actor, client=client, request_id=rid, mission=self.engine.mission
         ):
             self.times.append((self.now.timestamp(), applied.revision))
+            self.index.append((applied.revision, op, self.now.timestamp()))
         return applied
 
     def operator(self, op):
@@ -334,6 +336,8 @@ class _Play:
                 )
             for a in self.alerts:
                 archive.alert(a)
+            for revision, op, ts in self.index:
+                archive.journaled(revision, op, ts=ts)
             step = 1.0 / p.telemetry_hz
             ticks = int((self.out.end - self.out.start) / step)
             for k in range(ticks):

@@ -112,6 +112,35 @@ def test_what_is_not_a_journal_is_said(tmp_path):
         JournalReader(other)
 
 
+def _orders(j: JournalReader) -> dict[str, list[float]]:
+    return {clock: list(j.order(clock).keys) for clock in (GROUND, ROBOT)}
+
+
+def test_the_archives_index_orders_the_journal_as_reading_it_through(recorded):
+    """The server's index of the journal (archive) gives the same orders in both
+    clocks as the journal read through; a partial index is completed from it."""
+    with JournalReader(recorded.db) as plain:
+        expect = _orders(plain)
+        syncs = plain.syncs()
+    with ArchiveReader(archive_path(recorded.db)) as archive:
+        rows = archive.journal_index(0)
+    assert len(rows) == len(expect[GROUND]) and syncs
+    for given in (rows, rows[: len(rows) // 2], []):
+        with JournalReader(recorded.db) as j:
+            j.use_index(given)
+            assert _orders(j) == expect
+            assert j.syncs() == syncs
+
+
+def test_a_missing_batch_is_said_with_its_revision(recorded, tmp_path):
+    copy = tmp_path / "copy.db"
+    shutil.copy(recorded.db, copy)
+    with sqlite3.connect(copy) as conn:
+        conn.execute("DELETE FROM batches WHERE revision = 30")
+    with JournalReader(copy) as j, pytest.raises(RecordError, match="batch 30 is missing"):
+        j.order(GROUND)
+
+
 # -- the clocks -------------------------------------------------------------------------------
 
 
@@ -120,6 +149,12 @@ def test_robot_keys_keep_a_robots_order_and_never_pass_the_ground():
     robot = [None, 15.0, 12.0, 99.0]  # lru1's clock goes back, then runs ahead
     keys = robot_keys(ground, robot, ["alice", "lru1", "lru1", "lru1"])
     assert keys == [10.0, 15.0, 15.0, 40.0]
+
+
+def test_keys_in_order_need_no_sorting():
+    order = Order([1.0, 2.0, 2.0, 5.0])
+    assert list(order.order) == list(order.reach) == list(order.nearest) == [0, 1, 2, 3]
+    assert order.position_at(2.0) == 3 and order.position_at(0.5) == 0
 
 
 def test_an_order_plan_applies_exactly_the_first_batches():

@@ -20,6 +20,7 @@ that kept only its last snapshots cannot show what came before them
 
 from __future__ import annotations
 
+import itertools
 import json
 import sqlite3
 from collections.abc import Iterable, Iterator
@@ -34,11 +35,14 @@ from backend.core import events as ev
 from backend.core.bulk import gc_paused
 from backend.core.clocks import CLOCKS, GROUND, ROBOT, ROBOT_TIMED, Order, robot_keys
 from backend.core.model import Mission
-from backend.core.ops import Predicted
 from backend.core.records import RecordError, open_read_only, tables
 
 # the journal formats this reader knows (backend/server/journal_file.py writes them)
 READABLE_FORMATS = frozenset({"missionctl/journal@1"})
+
+
+# the index of a journal by time: (revision, journal time, operation, robot time, robot)
+IndexRow = tuple[int, float, str, float | None, str | None]
 
 
 class Batch(NamedTuple):
@@ -81,13 +85,14 @@ def op_of(text: str) -> dict[str, Any]:
     return {"op": text}
 
 
-def _forecast(raw: dict[str, Any]) -> dict[str, Predicted]:
-    out: dict[str, Predicted] = {}
+def _spans(raw: dict[str, Any]) -> dict[str, tuple[float, float]]:
+    """A sync's forecast ({skill: {"start", "end"}}, ISO times) as seconds."""
+    out: dict[str, tuple[float, float]] = {}
     for sid, p in raw.items():
-        try:
-            out[str(sid)] = Predicted.model_validate(p)
-        except ValidationError:
-            continue  # another version's: the skill has no prediction shown
+        start = _seconds(p.get("start")) if isinstance(p, dict) else None
+        end = _seconds(p.get("end")) if isinstance(p, dict) else None
+        if start is not None and end is not None:
+            out[str(sid)] = (start, end)
     return out
 
 
@@ -115,7 +120,7 @@ class JournalReader:
             self.close()
             raise
         self._orders: dict[str, Order] = {}
-        self._syncs: list[tuple[int, dict[str, Predicted]]] | None = None
+        self._syncs: list[tuple[int, dict[str, tuple[float, float]]]] | None = None
 
     def _read_header(self) -> None:
         conn = self._conn
@@ -128,30 +133,19 @@ class JournalReader:
                 f"{self.path}: journal format {fmt!r} is not one this version reads "
                 f"({', '.join(sorted(READABLE_FORMATS))})"
             )
-        snaps = [r for (r,) in conn.execute("SELECT revision FROM snapshots ORDER BY revision")]
+        rows = conn.execute("SELECT revision FROM snapshots ORDER BY revision")
+        snaps = [int(r) for (r,) in rows]
         if not snaps:
             raise RecordError(f"{self.path}: the journal has no snapshot: nothing to replay from")
         self.base = snaps[0]
         self.snapshot_revisions = snaps
-        first = conn.execute("SELECT min(revision) FROM batches").fetchone()[0]
+        first, last = conn.execute("SELECT min(revision), max(revision) FROM batches").fetchone()
         # batches before the oldest snapshot cannot be replayed: it is where replay starts
         self.gap = first is not None and first <= self.base
-        rows = conn.execute(
-            "SELECT revision, ts FROM batches WHERE revision > ? ORDER BY revision", (self.base,)
-        ).fetchall()
-        expected = self.base + 1
-        ground: list[float] = []
-        for rev, ts in rows:
-            if rev != expected:
-                raise RecordError(
-                    f"{self.path}: batch {expected} is missing (the next one is {rev}); "
-                    "`missionctl server` on this journal says how to recover it"
-                )
-            # journal times never go back in the index (a wall clock stepped back)
-            ground.append(max(ts, ground[-1]) if ground else ts)
-            expected += 1
-        self.ground = ground
-        self.last = self.base + len(ground)
+        self.last: int = max(self.base, int(last or self.base))
+        self._given: list[IndexRow] = []
+        self._index: tuple[list[float], list[float | None], list[str]] | None = None
+        self._names: list[str] = []  # each batch's operation
 
     def close(self) -> None:
         self._conn.close()
@@ -169,53 +163,109 @@ class JournalReader:
         return self.meta.get("library", "")
 
     def __len__(self) -> int:
-        return len(self.ground)
+        return self.last - self.base
+
+    def use_index(self, rows: list[IndexRow]) -> None:
+        """The server's index of this journal by time (the telemetry
+        archive's, backend/protocol/archive.py): what it covers is not read
+        from the journal."""
+        self._given = rows
+
+    def _times(self) -> tuple[list[float], list[float | None], list[str]]:
+        """Per batch: its journal time (never going back: a wall clock that
+        stepped back), its robot time (None: the ground's), its actor."""
+        if self._index is None:
+            rows = self._covered()
+            rows += self._scan(rows[-1][0] if rows else self.base)
+            revisions = [r[0] for r in rows]
+            if revisions != list(range(self.base + 1, self.last + 1)):
+                missing = next(
+                    (e for e, r in zip(itertools.count(self.base + 1), revisions) if e != r),
+                    self.base + 1 + len(rows),
+                )
+                raise RecordError(
+                    f"{self.path}: batch {missing} is missing; `missionctl server` on this "
+                    "journal says how to recover it"
+                )
+            _, ts, names, robot, actors = (
+                (list(c) for c in zip(*rows, strict=True))
+                if rows
+                else (
+                    [],
+                    [],
+                    [],
+                    [],
+                    [],
+                )
+            )
+            ground = list(itertools.accumulate(ts, max))
+            self._index = (ground, robot, [a or "" for a in actors])
+            self._names = names
+        return self._index
+
+    def _covered(self) -> list[IndexRow]:
+        """The given index's rows from the first batch on, while consecutive."""
+        rows = [r for r in self._given if self.base < r[0] <= self.last]
+        for k, r in enumerate(rows):
+            if r[0] != self.base + 1 + k:
+                return rows[:k]
+        return rows
+
+    def _scan(self, after: int) -> list[IndexRow]:
+        """The index of the batches after `after`, read from the journal itself."""
+        rows = self._conn.execute(
+            "SELECT revision, ts, actor, json_extract(op, '$.op'), json_extract(op, '$.at') "
+            "FROM batches WHERE revision > ? ORDER BY revision",
+            (after,),
+        )
+        out: list[IndexRow] = []
+        for rev, ts, actor, name, at in rows:
+            robot_at = _seconds(at) if name in ROBOT_TIMED else None
+            out.append((rev, ts, name or "", robot_at, actor if robot_at is not None else None))
+        return out
+
+    @property
+    def ground(self) -> list[float]:
+        return self._times()[0]
 
     def start_time(self) -> float | None:
         """When the journal starts: its first batch (None: no batch yet)."""
-        return self.ground[0] if self.ground else None
+        ground = self.ground
+        return ground[0] if ground else None
 
     def end_time(self) -> float | None:
-        return self.ground[-1] if self.ground else None
+        ground = self.ground
+        return ground[-1] if ground else None
 
     def order(self, clock: str) -> Order:
-        """The batches in `clock`'s order (robot time's is built when first asked)."""
+        """The batches in `clock`'s order (each built when first asked)."""
         if clock not in CLOCKS:
             raise ValueError(f"no clock {clock!r}: {' or '.join(CLOCKS)}")
         found = self._orders.get(clock)
         if found is None:
-            found = self._orders[clock] = Order(
-                self.ground if clock == GROUND else self._robot_keys()
-            )
+            ground, robot, actors = self._times()
+            keys = ground if clock == GROUND else robot_keys(ground, robot, actors)
+            found = self._orders[clock] = Order(keys)
         return found
 
-    def _robot_keys(self) -> list[float]:
-        robot: list[float | None] = []
-        actors: list[str] = []
-        rows = self._conn.execute(
-            "SELECT actor, json_extract(op, '$.op'), json_extract(op, '$.at') FROM batches "
-            "WHERE revision > ? ORDER BY revision",
-            (self.base,),
-        )
-        for actor, name, at in rows:
-            robot.append(_seconds(at) if name in ROBOT_TIMED else None)
-            actors.append(actor)
-        return robot_keys(self.ground, robot, actors)
-
-    def syncs(self) -> list[tuple[int, dict[str, Predicted]]]:
-        """(batch index, the forecast it was sent with) of every sync that
-        carried one, in journal order (read once)."""
+    def syncs(self) -> list[tuple[int, dict[str, tuple[float, float]]]]:
+        """(batch index, the forecast it was sent with: skill -> (start, end))
+        of every sync that carried one, in journal order (read once)."""
         if self._syncs is None:
-            found: list[tuple[int, dict[str, Predicted]]] = []
-            rows = self._conn.execute(
-                "SELECT revision, op FROM batches WHERE revision > ? AND op LIKE ? "
-                "ORDER BY revision",
-                (self.base, '%"op":"sync"%'),
-            )
-            for rev, text in rows:
-                op = op_of(text)
-                if op.get("op") == "sync" and isinstance(op.get("forecast"), dict):
-                    found.append((rev - self.base - 1, _forecast(op["forecast"])))
+            self._times()
+            revisions = [self.base + 1 + i for i, n in enumerate(self._names) if n == "sync"]
+            found: list[tuple[int, dict[str, tuple[float, float]]]] = []
+            for k in range(0, len(revisions), 500):  # SQLite's limit on parameters
+                part = revisions[k : k + 500]
+                marks = ", ".join("?" * len(part))
+                rows = self._conn.execute(
+                    f"SELECT revision, op FROM batches WHERE revision IN ({marks})", part
+                )
+                for rev, text in rows:
+                    forecast = op_of(text).get("forecast")
+                    if isinstance(forecast, dict) and forecast:
+                        found.append((rev - self.base - 1, _spans(forecast)))
+            found.sort()
             self._syncs = found
         return self._syncs
 
