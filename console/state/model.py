@@ -135,6 +135,7 @@ class ConsoleModel:
     # what happened (bounded), and what needs a person
     log: EventLog = field(default_factory=EventLog)
     alerts: AlertBook = field(default_factory=AlertBook)
+    ordered: bool = True  # False: batches in another order than revisions (replay.py)
 
     # -- taking events --------------------------------------------------------------
     def take(self, event: ModelEvent) -> Change:
@@ -204,7 +205,7 @@ class ConsoleModel:
         return change(*topics, loaded=True, alerts=tuple(raised))
 
     def _applied(self, batch: ev.EventBatch) -> Change:
-        if self.mission is None or batch.revision <= self.mission.revision:
+        if self.mission is None or (self.ordered and batch.revision <= self.mission.revision):
             return NOTHING  # in the state already
         robots = self.apply(batch)
         self.log.add_batch(batch, self.owner, self.clock())
@@ -256,7 +257,7 @@ class ConsoleModel:
         (an old batch, in the state already: none)."""
         if self.mission is None:
             return None
-        if batch.revision <= self.mission.revision:
+        if self.ordered and batch.revision <= self.mission.revision:
             return set()
         self.mission = ev.apply_events(self.mission, batch)
         self._heard_in(batch)
