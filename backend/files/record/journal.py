@@ -177,31 +177,25 @@ class JournalReader:
         if self._index is None:
             rows = self._covered()
             rows += self._scan(rows[-1][0] if rows else self.base)
-            revisions = [r[0] for r in rows]
-            if revisions != list(range(self.base + 1, self.last + 1)):
-                missing = next(
-                    (e for e, r in zip(itertools.count(self.base + 1), revisions) if e != r),
-                    self.base + 1 + len(rows),
-                )
-                raise RecordError(
-                    f"{self.path}: batch {missing} is missing; `missionctl server` on this "
-                    "journal says how to recover it"
-                )
-            _, ts, names, robot, actors = (
-                (list(c) for c in zip(*rows, strict=True))
-                if rows
-                else (
-                    [],
-                    [],
-                    [],
-                    [],
-                    [],
-                )
-            )
-            ground = list(itertools.accumulate(ts, max))
-            self._index = (ground, robot, [a or "" for a in actors])
-            self._names = names
+            self._check_complete([r[0] for r in rows])
+            ground = list(itertools.accumulate((r[1] for r in rows), max))
+            self._index = (ground, [r[3] for r in rows], [r[4] or "" for r in rows])
+            self._names = [r[2] for r in rows]
         return self._index
+
+    def _check_complete(self, revisions: list[int]) -> None:
+        """RecordError naming the first batch missing from `revisions`."""
+        expected = range(self.base + 1, self.last + 1)
+        if revisions == list(expected):
+            return
+        missing = next(
+            (e for e, r in zip(expected, revisions, strict=False) if e != r),
+            self.base + 1 + len(revisions),
+        )
+        raise RecordError(
+            f"{self.path}: batch {missing} is missing; `missionctl server` on this "
+            "journal says how to recover it"
+        )
 
     def _covered(self) -> list[IndexRow]:
         """The given index's rows from the first batch on, while consecutive."""
