@@ -281,14 +281,17 @@ class MissionApp(App[int]):
     def action_show_checks(self) -> None:
         self.switch_mode("checks")
 
+    # every action this app binds (console/state/actions.py; a review adds its own)
+    ACTIONS = ACTIONS
+
     def action_keys(self) -> dict[str, str]:
         """Action name -> its key(s) now (the user's keymap applied)."""
         keymap = getattr(self, "_keymap", {}) or {}
-        return {a.name: keymap.get(a.binding_id, a.key) for a in ACTIONS}
+        return {a.name: keymap.get(a.binding_id, a.key) for a in self.ACTIONS}
 
     def action_help(self) -> None:
         if not isinstance(self.screen, HelpScreen):
-            self.push_screen(HelpScreen(self.action_keys()))
+            self.push_screen(HelpScreen(self.action_keys(), self.ACTIONS))
 
     @on(HelpRequested)
     def _help_requested(self) -> None:

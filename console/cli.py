@@ -8,15 +8,8 @@ import sys
 
 from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK, EXIT_UNREACHABLE
 from backend.transport.login import add_login_arguments
-
-DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
-THEME_HELP = (
-    "theme name: missionctl-dark (default), missionctl-light, missionctl-high-contrast, "
-    "missionctl-colorblind, "
-    "or one of yours in ~/.config/missionctl/themes/*.yaml (default: the config file's; "
-    "a theme picked in the command palette is remembered there)"
-)
-
+from console.options import DEFAULT_CONNECT, THEME_HELP
+from console.options import known_binding_ids as _known_binding_ids
 
 YES_HELP = (
     "quit without asking (for scripts); else ctrl+q asks while robots execute, commands "
@@ -84,17 +77,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--yes", action="store_true", help=YES_HELP)
     d.set_defaults(func=run_demo)
 
+    from console.review.cli import register as register_review
 
-def _known_binding_ids() -> set[str]:
-    from console.state.actions import ACTIONS
-
-    return {a.binding_id for a in ACTIONS} | {
-        "app.help",
-        "app.quit",
-        "editor.apply",
-        "editor.revert",
-        "editor.leave",
-    }
+    register_review(sub)
 
 
 def _run_app(app) -> int:

@@ -132,6 +132,7 @@ class ConsoleModel:
     # the map feed's mirror (None: no feed yet): backend.client.mapfollow
     map_mirror: Any = None
     map_update: Any = None  # its last update (mapfollow.MapUpdate)
+    map_note: str = ""  # why there is no map feed, when that is known (a review)
     # what happened (bounded), and what needs a person
     log: EventLog = field(default_factory=EventLog)
     alerts: AlertBook = field(default_factory=AlertBook)

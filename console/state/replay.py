@@ -102,6 +102,7 @@ class Replay:
         self._waiting: list[EventBatch] = []
         self._syncs: list[tuple[int, str, float, float]] | None = None  # (index, skill, span)
         model.clock = self.now
+        model.map_note = MAP_NOTE
 
     # -- the time -------------------------------------------------------------------------
     def now(self) -> datetime:
@@ -220,7 +221,7 @@ class Replay:
         )
         self.cursor.at = t
         self.model.take(StateSynced(snap))
-        self.model.take(MapFed(None, MapUpdate("none", detail=MAP_NOTE)))
+        self.model.take(MapFed(None, MapUpdate("none", detail="a review")))
 
     def _archive(self, feed: Feed, after: float, upto: float, *, seek: bool = False) -> None:
         """The archive's samples, alerts and presence news in (after, upto];
@@ -230,17 +231,13 @@ class Replay:
             return
         clock = self.cursor.clock
         if seek:
-            for robot in a.robots:
-                for s in a.last_samples(robot, upto, clock, HISTORY):
-                    feed.add(s.at, TelemetryReceived(s.telemetry))
-            for alert in a.alerts(-1e18, upto, ALERTS_KEPT):
-                feed.add(alert.at.timestamp(), AlertRaised(alert))
-            for at, info in a.fleet(after, upto):
-                feed.add(at, RobotChanged(info))
-            return
-        for s in a.samples(after, upto, clock):
+            samples = [s for r in a.robots for s in a.last_samples(r, upto, clock, HISTORY)]
+            alerts = a.alerts(-1e18, upto, ALERTS_KEPT)
+        else:
+            samples, alerts = list(a.samples(after, upto, clock)), a.alerts(after, upto)
+        for s in samples:
             feed.add(s.at, TelemetryReceived(s.telemetry))
-        for alert in a.alerts(after, upto):
+        for alert in alerts:
             feed.add(alert.at.timestamp(), AlertRaised(alert))
         for at, info in a.fleet(after, upto):
             feed.add(at, RobotChanged(info))

@@ -7,10 +7,13 @@ robots, a 60 s link delay, failures retried, telemetry in the archive.
 
 from __future__ import annotations
 
+import json
 from datetime import UTC, datetime
 
 import pytest
+from console_state import screen_text, settle, wait_until
 
+from backend.cli.main import main
 from backend.core.clocks import GROUND, ROBOT
 from backend.core.model import Status
 from backend.files.missions import load_library
@@ -106,3 +109,127 @@ def test_the_timeline_draws_the_plan_as_synced_under_the_bars_not_over_links():
     row = "".join(c for c, _ in tl.planned(cells, [(20.0, 80.0), (-50.0, 5.0)], win))
     assert row[0] == "▔" and row[1] == " "  # a span before the window is clipped
     assert row[2:8] == "▔▔▔" + cells[5][0] + "▔▔" and row[8:] == "    "
+
+
+# -- the review app -----------------------------------------------------------------------------
+
+
+def review_app(replay_of, **kw):
+    """A ReviewApp for tests: no animations, no cursor blink."""
+    from console.review.app import ReviewApp
+
+    app = ReviewApp(replay_of, what="mission.db", **kw)
+    app.animation_level = "none"
+    app.cursor_blink = False
+    return app
+
+
+@pytest.fixture
+def replay_of(recorded):
+    with JournalReader(recorded.db) as j, ArchiveReader(archive_path(recorded.db)) as a:
+        library = load_library(j.library)
+        yield lambda model: Replay(model, j, library, a)
+
+
+async def test_the_review_opens_at_the_end_and_steps_goes_to_and_switches_clocks(
+    recorded, replay_of
+):
+    app = review_app(replay_of)
+    async with app.run_test(size=(100, 30)) as pilot:
+        await settle(pilot)
+        last = app.replay.journal.last
+        text = screen_text(app)
+        assert f"ground time 08:08:55 · {last}/{last} changes (rev {last})" in text
+        assert "read-only: review of mission.db" in text and "lru1" in text
+        await pilot.press("comma")
+        await settle(pilot)
+        assert f"{last - 1}/{last} changes (rev {last - 1})" in screen_text(app)
+        await pilot.press("full_stop")
+        await settle(pilot)
+        assert app.model.mission.revision == last
+        await pilot.press("g")
+        await settle(pilot)
+        await pilot.press(*"08:03", "enter")
+        await settle(pilot)
+        assert "ground time 08:03:00" in screen_text(app)
+        assert app.model.mission.revision < last
+        await pilot.press("C")
+        await settle(pilot)
+        assert "robot time 08:03:00" in screen_text(app)
+
+
+async def test_go_to_says_what_it_cannot_read(replay_of):
+    app = review_app(replay_of)
+    async with app.run_test(size=(100, 30)) as pilot:
+        await settle(pilot)
+        await pilot.press("g", *"soon", "enter")
+        await settle(pilot)
+        assert "cannot go to 'soon'" in screen_text(app)
+        await pilot.press("escape")
+        await settle(pilot)
+        assert "ground time 08:08:55" in screen_text(app)
+
+
+async def test_playing_moves_the_time_on_at_the_chosen_speed(recorded, replay_of):
+    app = review_app(replay_of, at=recorded.start)
+    async with app.run_test(size=(100, 30)) as pilot:
+        await settle(pilot)
+        await pilot.press("right_curly_bracket", "right_curly_bracket")
+        await settle(pilot)
+        assert "paused ×60" in screen_text(app)
+        await pilot.press("o")
+        await wait_until(pilot, lambda: app.replay.cursor.at > recorded.start, what="playing")
+        assert app.playing
+        await pilot.press("o")
+        await settle(pilot)
+        assert "paused ×60" in screen_text(app)
+
+
+async def test_the_help_lists_the_reviews_keys(replay_of):
+    import io
+
+    from rich.console import Console
+
+    from console.screens.dialogs import HelpScreen
+
+    app = review_app(replay_of)
+    async with app.run_test(size=(100, 30)) as pilot:
+        await settle(pilot)
+        await pilot.press("f1")
+        await wait_until(pilot, lambda: isinstance(app.screen, HelpScreen), what="help")
+        out = Console(width=100, file=io.StringIO(), record=True)
+        out.print(app.screen._text())  # all of it, not the part that fits
+        text = out.export_text()
+        assert "\nReview\n" in text and "Switch between ground time" in text
+        assert "review.clock" in text  # its binding id, for the keymap
+
+
+# -- the command ----------------------------------------------------------------------------------
+
+
+def test_the_report_lists_plan_against_actual_as_json(recorded, capsys):
+    assert main(["review", str(recorded.db), "--report", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert {row["id"] for row in report["skills"]} >= set(recorded.done) - set(
+        recorded.retried.values()
+    )
+    assert main(["review", str(recorded.db), "--report"]) == 0
+    assert "Plan against actual" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("argv", "says"),
+    [
+        (["--json"], "--json goes with --report"),
+        (["--at", "soon"], "--at: cannot go to 'soon'"),
+        (["--at", "#999999"], "--at: no revision 999999"),
+    ],
+)
+def test_the_command_says_what_is_wrong(recorded, capsys, argv, says):
+    assert main(["review", str(recorded.db), *argv]) == 2
+    assert says in capsys.readouterr().err
+
+
+def test_what_is_not_a_journal_is_said_without_a_traceback(tmp_path, capsys):
+    assert main(["review", str(tmp_path / "none.db")]) == 2
+    assert "missionctl review: " in capsys.readouterr().err
