@@ -50,7 +50,7 @@ from console.hangup import (
 )
 from console.messages import AlertAcknowledged, HelpRequested, Incoming
 from console.notifier import NotificationFolder
-from console.operations import Backend, OperationService
+from console.operations import Backend, OperationService, ReadOnlyBackend
 from console.plan_modes import PlanRefresher
 from console.quitting import QuitPolicy
 from console.screens.alerts import AlertScreen
@@ -113,12 +113,17 @@ class MissionApp(App[int]):
         login: Login | None = None,
         ask_before_quit: bool = True,
         quitting_stops: str = "",
+        observer: str = "",
     ) -> None:
+        """`observer`: why this console never changes the mission, whatever
+        its account ("" when it may): read-only, and nothing is submitted."""
         super().__init__()
         self.config = config or ConsoleConfig()
         self.recent = RecentFiles(self.config.recent_path)
         self.notices = [*notices, *self.config.problems]
-        self.model = ConsoleModel(endpoint=connect or "")
+        self.model = ConsoleModel(endpoint=connect or "", observer=observer, read_only=observer)
+        if observer:
+            backend = ReadOnlyBackend(observer)
         # the one notice of what changed: every screen and helper subscribes
         self.changes: Signal[Change] = Signal(self, "changes")
         # 16 colours (asked for, or a TERM=xterm terminal: see on_mount)

@@ -15,6 +15,7 @@ YES_HELP = (
     "quit without asking (for scripts); else ctrl+q asks while robots execute, commands "
     "wait for a robot or the plan has edits not saved to a file"
 )
+OBSERVER = "observer: this console watches, it changes nothing"
 DEMO_QUITS = (
     "Quitting ends the demo: its mission server and simulated robots stop, and its journal "
     "(in a temporary folder) is deleted — save the mission to keep the plan."
@@ -45,6 +46,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="settings file (default ~/.config/missionctl/config.toml or .yaml)",
     )
     c.add_argument("--yes", action="store_true", help=YES_HELP)
+    c.add_argument(
+        "--observer",
+        action="store_true",
+        help="watch only: this console changes nothing, whatever the account "
+        "(`missionctl web` serves it so by default)",
+    )
     c.set_defaults(func=run_console)
 
     d = sub.add_parser(
@@ -78,8 +85,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.set_defaults(func=run_demo)
 
     from console.review.cli import register as register_review
+    from console.web import register as register_web
 
     register_review(sub)
+    register_web(sub)
 
 
 def _run_app(app) -> int:
@@ -117,6 +126,7 @@ def run_console(args: argparse.Namespace) -> int:
         config=cfg,
         login=login,
         ask_before_quit=not args.yes,
+        observer=OBSERVER if args.observer else "",
     )
     code = _run_app(app)
     if app.login_refused:

@@ -110,6 +110,7 @@ class ConsoleModel:
     server_id: str = ""
     # why nothing can be changed from this console ("" when it can): an observer account
     read_only: str = ""
+    observer: str = ""  # why it never changes anything, whatever its account (a browser)
     # skill id -> robot, skill id -> barrier id (kept in step with the mission)
     _owner: dict[str, str] = field(default_factory=dict)
     _barrier_of: dict[str, str] = field(default_factory=dict)
@@ -172,7 +173,7 @@ class ConsoleModel:
             case Unreachable(detail=detail):
                 self.connection, self.connection_detail = UNREACHABLE, detail
             case AccountKnown(read_only=read_only):
-                self.read_only = read_only
+                self.read_only = self.observer or read_only
             case MapFed(mirror=mirror, update=update, speed=speed):
                 self.map_mirror, self.map_update = mirror, update
                 objects = getattr(mirror, "objects", None)
