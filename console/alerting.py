@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from console.state.changes import Change
+from console.state.changes import StateChange
 from console.state.eventlog import toast_text
 
 
@@ -19,7 +19,7 @@ class AlertAnnouncer:
     def start(self, changes: Any) -> None:
         changes.subscribe(self.app, self._changed)
 
-    def _changed(self, c: Change) -> None:
+    def _changed(self, c: StateChange) -> None:
         for a in c.alerts:
             if a.level != "info":
                 self.ring()

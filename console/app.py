@@ -4,7 +4,7 @@ Events come in as messages only (`console.messages.Incoming`): the live
 connection (`ClientBridge`) posts the client library's typed events as they
 are, tests post the same ones. The app owns one `ConsoleModel`, the
 console's only mirror: it hands it each event (`ConsoleModel.take`) and
-publishes the one `Change` it answers on `changes`, the signal every screen
+publishes the one `StateChange` it answers on `changes`, the signal every screen
 and the app's own helpers subscribe to (each redraws what it shows of the
 topics that changed, in its own callback). Screens never import the app:
 they are handed the model, the signal and the `OperationService` (they
@@ -63,9 +63,9 @@ from console.screens.mission import MissionScreen
 from console.screens.timeline import TimelineScreen
 from console.state.actions import ACTIONS
 from console.state.changes import (
-    Change,
     Connecting,
     ModelEvent,
+    StateChange,
     Topic,
     Unreachable,
     change,
@@ -125,7 +125,7 @@ class MissionApp(App[int]):
         if observer:
             backend = ReadOnlyBackend(observer)
         # the one notice of what changed: every screen and helper subscribes
-        self.changes: Signal[Change] = Signal(self, "changes")
+        self.changes: Signal[StateChange] = Signal(self, "changes")
         # 16 colours (asked for, or a TERM=xterm terminal: see on_mount)
         self.colour_count = colors
         self.ansi16 = False
@@ -220,7 +220,7 @@ class MissionApp(App[int]):
                 self._unreachable_choice,
             )
 
-    def publish(self, c: Change) -> None:
+    def publish(self, c: StateChange) -> None:
         """Tell every subscriber what changed (nothing: nobody)."""
         if c and self._running and self.return_code is None:
             self.changes.publish(c)

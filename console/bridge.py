@@ -11,7 +11,7 @@ in workers by the `OperationService`.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, Protocol
+from typing import Any
 
 from backend.client.client import ClientError, MissionClient
 from backend.client.mapfollow import MapFeed, MapUpdate
@@ -20,12 +20,6 @@ from backend.protocol.messages import OpReply
 from backend.transport import subscribe
 from backend.transport.login import Login
 from console.state.changes import AccountKnown, MapFed, ModelEvent
-
-
-class Backend(Protocol):
-    """What the console needs to change the mission (the client, or a test double)."""
-
-    async def submit(self, op: Any, *, expected_revision: int | None = None) -> OpReply: ...
 
 
 class ClientBridge:

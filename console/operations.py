@@ -1,7 +1,7 @@
 """Submitting operations: what a screen awaits in its own worker — no Textual here.
 
 A screen calls `await ops.submit(op, what, ...)` from a worker (the UI never
-waits on the network) and gets an `Outcome`: the server's reply, its
+waits on the network) and gets an `OperationOutcome`: the server's reply, its
 refusal, or the failure. Saying so is done here, the same for every
 screen: "… what" and then "✓ what" (or the refusal) on the status line the
 screen passes (`say`), a notification for a refusal, a failure or the
@@ -19,7 +19,7 @@ from typing import Any, Protocol
 
 from backend.client.client import ClientError, OperationRefused
 from backend.protocol.messages import ErrorReply, OpReply
-from console.state.changes import Change, Topic, change
+from console.state.changes import StateChange, Topic, change
 from console.state.model import ConsoleModel
 
 Say = Callable[..., object]  # say(text, severity="info"): a screen's status line
@@ -38,7 +38,7 @@ class Notify(Protocol):
 
 
 @dataclass(frozen=True, slots=True)
-class Outcome:
+class OperationOutcome:
     """How an operation ended: `reply` when applied, else `refusal` (the
     server's, with code, robot, skill and parameter) or `failure` (a
     sentence: timeout, server gone, not connected)."""
@@ -82,7 +82,7 @@ class OperationService:
         model: ConsoleModel,
         backend: Callable[[], Backend | None],
         notify: Notify,
-        publish: Callable[[Change], None],
+        publish: Callable[[StateChange], None],
         whoami: Callable[[], dict[str, str]],
     ) -> None:
         self.model = model
@@ -102,30 +102,30 @@ class OperationService:
         expected_revision: int | None = None,
         say: Say | None = None,
         done: str | None = None,
-    ) -> Outcome:
+    ) -> OperationOutcome:
         """Submit `op` (`what` names it); `done`: the success's status line
         ("✓ what" if None; "" says nothing: the screen says it)."""
         say = say or self.fallback_say or _quiet
         backend = self._backend()
         if backend is None:
             self._notify("not connected to a mission server", severity="error")
-            return Outcome(failure="not connected to a mission server")
+            return OperationOutcome(failure="not connected to a mission server")
         say(f"… {what}")
         try:
             reply = await backend.submit(op, expected_revision=expected_revision)
         except OperationRefused as e:
             self._refused(what, say, e.reply, robot, skill)
-            return Outcome(refusal=e.reply)
+            return OperationOutcome(refusal=e.reply)
         except ClientError as e:
             self._failed(what, say, e, robot, skill)
-            return Outcome(failure=str(e))
+            return OperationOutcome(failure=str(e))
         if done is None:
             say(f"✓ {what}", "ok")
         elif done:
             say(done, "ok")
         for note in reply.notes:
             self._notify(note, title=what, severity="warning", timeout=8)
-        return Outcome(reply=reply)
+        return OperationOutcome(reply=reply)
 
     def _refused(
         self, what: str, say: Say, reply: ErrorReply, robot: str | None, skill: str | None

@@ -15,7 +15,7 @@ from collections.abc import Callable
 from typing import Any
 
 from backend.protocol.mapfeed import SimStatus
-from console.state.changes import Change, Topic, change
+from console.state.changes import StateChange, Topic, change
 from console.state.model import ConsoleModel
 
 PLAN_TICK_S = 0.5
@@ -26,7 +26,7 @@ class PlanRefresher:
     def __init__(
         self,
         model: ConsoleModel,
-        publish: Callable[[Change], None],
+        publish: Callable[[StateChange], None],
         sim_status: Callable[[], SimStatus | None] | None = None,
     ) -> None:
         self.model = model
@@ -41,7 +41,7 @@ class PlanRefresher:
         self.refresh()
         app.set_interval(PLAN_TICK_S, self.refresh)
 
-    def _changed(self, c: Change) -> None:
+    def _changed(self, c: StateChange) -> None:
         if c.topics & PLAN_INPUTS:
             self.refresh()
 

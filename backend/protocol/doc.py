@@ -14,7 +14,7 @@ import sys
 from collections.abc import Sequence
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
-from typing import Any
+from typing import Any, get_args
 
 from pydantic import TypeAdapter
 
@@ -28,7 +28,7 @@ from backend.core.events import (
 )
 from backend.core.events import ReportSeq as ReportSeqEvent
 from backend.core.limits import LIMITS, MiB
-from backend.core.model import Enqueue, Run, SkillInstance, Status, UplinkCommand
+from backend.core.model import Enqueue, ParamType, Run, SkillInstance, Status, UplinkCommand
 from backend.core.ops import AddSkill, Answer, Control, OperatorOp, Report, Sync
 from backend.protocol import mapfeed as mf
 from backend.protocol import messages as p
@@ -827,6 +827,31 @@ server from inside a query callback.
 
 """
 
+KINDS_TEXT = ", ".join(f"`{k}`" for k in get_args(ParamType))
+
+PROSE_PARAMS = f"""
+### Parameters, typed
+A skill's parameters travel as JSON values (`SkillInstance.params`) with
+their kinds: `Enqueue.kinds[SKILL][PARAMETER]` is the kind the library gives
+each parameter of every skill the command carries ({KINDS_TEXT}).
+Read each value by its kind, never by its shape (a `dict` parameter may look
+like a position): a `pose` is `{{x, y, z, roll, pitch, yaw}}` (metres,
+radians), a `position` `{{x, y, z}}`, an `area` a list of at least 3
+positions; `enum`, `marker` and `robot` values are names; the others are
+the JSON values themselves. A parameter bound to a marker arrives as the
+marker's value in its parameter's kind. The server has checked every value
+and filled in every default of the library before the command leaves: a
+parameter listed in `kinds` but missing from `params` is an optional one
+left unset (null to a handler).
+
+Each accepted registration gives the robot the library's signature of each
+skill its manifest offers (`RegisterReply.skills[SKILL]`: each parameter's
+kind, the required ones, and the `defaults` the server fills in for one
+left out): compare the handlers with it once, and call a skill the robot
+runs on its own (a recharge before a skill, `policies.recharge_below`) with
+its `defaults`.
+"""
+
 PROSE_4 = """
 ### Run, pause, stop, reset, and the robot's mode
 The robot starts halted. `run` enters run mode: it executes its queue head to
@@ -990,6 +1015,7 @@ def render() -> str:
             _table(("kind", "meaning"), [(f"`{k}`", MEANING[k]) for k in AlertKind]),
             PROSE_3,
             _table(("field", "rule"), FIELD_RULES),
+            PROSE_PARAMS,
             PROSE_4,
             _table(("mode", "meaning", "next"), MODES),
             PROSE_5,

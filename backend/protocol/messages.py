@@ -13,7 +13,7 @@ from pydantic import Field, ValidationError
 
 from backend.core.alerts import AlertKind, RaisedAlert
 from backend.core.events import EventBatch
-from backend.core.library import Library
+from backend.core.library import Library, SkillSignature
 from backend.core.model import (
     BarrierInfo,
     Dequeue,
@@ -228,11 +228,13 @@ class Register(Strict):
     sent: datetime | None = Field(None, description="when it left the robot (robot's clock)")
 
 
+# why a registration was not accepted (stable)
+RegisterCode = Literal["", "protocol", "unknown_robot", "wrong_type", "taken"]
+
+
 class RegisterReply(Strict):
     accepted: bool = True
-    code: Literal["", "protocol", "unknown_robot", "wrong_type", "taken"] = Field(
-        "", description="why it was not accepted (stable)"
-    )
+    code: RegisterCode = Field("", description="why it was not accepted (stable)")
     reason: str = ""
     last_seq: int = Field(0, description="the ground applied its downlink up to here")
     missing: list[SkillId] = Field(
@@ -250,6 +252,12 @@ class RegisterReply(Strict):
         "drop them",
     )
     heartbeat_s: float = Field(5.0, description="send a Downlink at least this often")
+    skills: dict[Name, SkillSignature] = Field(
+        default_factory=dict,
+        description="the library's signature of each skill the manifest offers that the robot's "
+        "type has: check the handlers against it; a skill the robot runs on its own (a "
+        "recharge before a skill) is called with its `defaults`",
+    )
 
 
 class Downlink(Strict):

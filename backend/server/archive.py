@@ -220,7 +220,7 @@ class TelemetryArchive:
         finally:
             conn.close()
 
-    def _commit(self, conn: sqlite3.Connection, items: list, count: int) -> int:
+    def _commit(self, conn: sqlite3.Connection, items: list[tuple[str, Any]], count: int) -> int:
         samples = [row for kind, row in items if kind == "sample"]
         notes = [row for kind, row in items if kind == "note"]
         batches = [row for kind, row in items if kind == "batch"]

@@ -22,8 +22,9 @@ from backend.protocol.messages import ErrorReply
 from backend.server.refusals import JournalFailed
 
 
-class Host(Raises, Protocol):
-    """What the downlink needs from the server: its engine, `submit`, `alert`."""
+class Submitter(Raises, Protocol):
+    """What the downlink needs from the server: the engine, journaled
+    submission and alerts."""
 
     engine: Engine | None
 
@@ -43,7 +44,7 @@ class Progress(NamedTuple):
     refused: list[ErrorReply]
 
 
-def raise_alerts(host: Host, applied: Applied) -> None:
+def raise_alerts(host: Submitter, applied: Applied) -> None:
     """The alerts a rule raised (`Applied.alerts`)."""
     for a in applied.alerts:
         host.alert(
@@ -52,7 +53,7 @@ def raise_alerts(host: Host, applied: Applied) -> None:
 
 
 class DownlinkApplier:
-    def __init__(self, host: Host):
+    def __init__(self, host: Submitter):
         self._host = host
         self._gaps: dict[str, int] = {}  # robot -> first missing seq already alerted
 

@@ -23,7 +23,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from pydantic_core import PydanticSerializationError
+import zenoh
 
 from backend.core.alerts import AlertKind, Level
 from backend.core.events import EventBatch
@@ -55,12 +55,12 @@ from backend.server.archive import MAX_SAMPLES, TelemetryArchive
 from backend.server.journal import (
     Journal,
     JournalError,
-    NotReplayable,
     Remembered,
     Unreplayable,
     remember_requests,
 )
-from backend.server.refusals import JournalFailed, guard
+from backend.server.recorder import JournalRecorder
+from backend.server.refusals import guard
 from backend.server.robots import RobotLink
 from backend.server.telemetry import TelemetryWatch
 from backend.transport import (
@@ -107,24 +107,23 @@ class MissionServer:
         # telemetry, alerts and presence kept beside the journal for review (0: none)
         self.archive_samples = archive_samples
         self.archive: TelemetryArchive | None = None
-        self.robot_link = RobotLink(self, default_expiry_s=command_expiry)
+        self.robot_link = RobotLink(self)
         self.engine: Engine | None = None
         self.journal: Journal | None = None
         self.library_file: Path | None = None
         self.resumed = False
-        self._session = None
+        self._session: zenoh.Session | None = None
         self._entities: list[Any] = []
-        self._events_pub = None
-        self._fleet_pub = None
-        self._alerts_pub = None
+        self._events_pub: zenoh.Publisher | None = None
+        self._fleet_pub: zenoh.Publisher | None = None
+        self._alerts_pub: zenoh.Publisher | None = None
         self._alert_ids = itertools.count(1)
         self.telemetry_watch = TelemetryWatch(self)
         self.alerts: deque[Alert] = deque(maxlen=ALERTS_KEPT)  # the latest, for snapshots
         # publications waiting for the next loop callback
         self._outbox: list[tuple[Any, bytes]] = []
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._journal_failing = False
-        self._checkpoint: asyncio.Future | None = None  # the journal's, running on a thread
+        self._checkpoint: asyncio.Future[Any] | None = None  # the journal's, on a thread
         self._checkpoint_failing = False
 
     # -- start / stop ---------------------------------------------------------
@@ -165,7 +164,13 @@ class MissionServer:
         self.journal = journal
         journal.checkpoint_in_background()  # see _maybe_checkpoint
         self.library_file = lib_file
-        self.engine = Engine(mission, library)
+        self.engine = Engine(
+            mission,
+            library,
+            recorder=JournalRecorder(journal, self.db, self),
+            offers=self.robot_link,
+            default_expiry_s=self.command_expiry,
+        )
         remember_requests(self.engine, requests)
         self.robot_link.add_robots(mission.robots)
         self._open_archive()
@@ -210,14 +215,14 @@ class MissionServer:
     async def start(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._load()
+        assert self.journal is not None
         try:
-            self._session = await self._open_router()
+            s = self._session = await self._open_router()
         except BaseException:
             self.journal.close()
             if self.archive is not None:
                 self.archive.close()
             raise
-        s = self._session
         self._events_pub = declare_publisher(s, Keys.EVENTS)
         self._fleet_pub = declare_publisher(s, Keys.FLEET)
         self._alerts_pub = declare_publisher(s, Keys.ALERTS)
@@ -235,7 +240,7 @@ class MissionServer:
         # declared last: robots (re)register when they see it
         self._entities.append(declare_token(s, Keys.SERVER_ALIVE))
 
-    async def _open_router(self):
+    async def _open_router(self) -> zenoh.Session:
         """The router session; with accounts, user/password logins and the
         access-control rules of their roles (the dictionary file Zenoh reads
         exists only while the session opens)."""
@@ -288,6 +293,7 @@ class MissionServer:
         """Publish an applied (and journaled) operation; snapshot when due."""
         if applied.duplicate or not applied.events:
             return
+        assert self.journal is not None
         try:
             self.journal.maybe_snapshot(self.mission)
         except (sqlite3.Error, OSError, JournalError) as e:  # in the batches: a slower restart
@@ -305,11 +311,13 @@ class MissionServer:
         """The journal's checkpoint (its log copied into the file, with an
         fsync) runs on a thread: inside a commit it held up one operation
         in ~400 for 4-17 ms."""
-        if self._checkpoint is None and self.journal.checkpoint_due:
-            self._checkpoint = self._loop.run_in_executor(None, self.journal.checkpoint)
+        journal, loop = self.journal, self._loop
+        assert journal is not None and loop is not None
+        if self._checkpoint is None and journal.checkpoint_due:
+            self._checkpoint = loop.run_in_executor(None, journal.checkpoint)
             self._checkpoint.add_done_callback(self._checkpointed)
 
-    def _checkpointed(self, done: asyncio.Future) -> None:
+    def _checkpointed(self, done: asyncio.Future[Any]) -> None:
         self._checkpoint = None
         error = None if done.cancelled() else done.exception()
         if error is None:
@@ -329,6 +337,7 @@ class MissionServer:
         its own event batch waited for the requester to take in the batch
         first. Publications keep their order."""
         if not self._outbox:
+            assert self._loop is not None
             self._loop.call_soon(self._flush)
         self._outbox.append((publisher, payload))
 
@@ -359,42 +368,14 @@ class MissionServer:
         the journal cannot take is refused (JournalFailed) and changes
         nothing, in memory or at a restart; then published."""
         who = actor or client
-
-        def journal(batch: EventBatch) -> None:
-            entry = EventBatch(revision=batch.revision, events=batch.events, actor=who)
-            try:
-                op_json = op.model_dump_json()
-            except PydanticSerializationError:  # from code in this process: its batch says
-                op_json = op.op
-            try:
-                self.journal.append(entry, op_json=op_json, client=client, request_id=request_id)
-            except NotReplayable as e:  # the value, not the journal: refused, nothing changed
-                raise Refusal(
-                    "not_replayable",
-                    f"{op.op} refused: its change could not be journaled as it is, so a "
-                    f"restart could not replay it: {e}; nothing was changed",
-                ) from None
-            except (sqlite3.Error, OSError, JournalError) as e:
-                failed = JournalFailed(self.db, e, op.op)
-                if not self._journal_failing:  # once, not at every retry of every robot
-                    self._journal_failing = True
-                    self.alert(failed.message, level="error", kind=AlertKind.JOURNAL)
-                raise failed from None
-            if self._journal_failing:
-                self._journal_failing = False
-                self.alert(
-                    f"the journal {self.db} can be written again",
-                    level="info",
-                    kind=AlertKind.JOURNAL,
-                )
-
-        self.engine.before_apply = journal
-        try:
-            applied = self.engine.submit(
-                op, client=client, request_id=request_id, expected_revision=expected_revision
-            )
-        finally:
-            self.engine.before_apply = None
+        assert self.engine is not None
+        applied = self.engine.submit(
+            op,
+            client=client,
+            request_id=request_id,
+            expected_revision=expected_revision,
+            actor=who,
+        )
         self._commit(applied, op, actor=who)
         return applied
 
@@ -494,12 +475,9 @@ class MissionServer:
                     "read_only", f"read-only: logged in as {role or 'unknown account'} {user}"
                 )
             req = req.model_copy(update={"user": user})
-        done = self.engine.requests.get((req.client, req.request_id))
-        if done is not None:
-            return _reply(Applied(done.revision, [], done.notes, done.value, duplicate=True))
         actor = f"{req.user}@{req.client}" if req.user else req.client
         applied = self.submit(
-            self.robot_link.prepare(req.op),
+            req.op,
             client=req.client,
             request_id=req.request_id,
             actor=actor,

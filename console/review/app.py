@@ -1,7 +1,7 @@
 """The review console: the operator console, read-only, fed by a `Replay`.
 
 Every screen is the live console's (schedule, map, fleet, log, alerts,
-timeline, checks) with the same model and the same `Change` signal; only
+timeline, checks) with the same model and the same `StateChange` signal; only
 the source differs: a journal and its telemetry archive played by
 `console.state.replay.Replay` instead of a client. A review bar on top of
 every screen says which clock, the time, how far through the journal, and
@@ -24,7 +24,7 @@ from console.app import MissionApp
 from console.bindings import bindings
 from console.review.goto import GotoScreen
 from console.state.actions import ACTIONS, REVIEW_ACTIONS
-from console.state.changes import Change
+from console.state.changes import StateChange
 from console.state.context import key_text
 from console.state.replay import GROUND, ROBOT, SPEEDS, Replay
 
@@ -102,7 +102,7 @@ class ReviewApp(MissionApp):
         screen.mount(bar)
 
     # -- what shows ---------------------------------------------------------------------------
-    def show(self, c: Change) -> None:
+    def show(self, c: StateChange) -> None:
         self.publish(c)
         self.refresh_plan()
         text = self.bar_text()
@@ -152,12 +152,12 @@ class ReviewApp(MissionApp):
 
     def action_review_play(self) -> None:
         self.playing = not self.playing and not self.replay.at_end
-        self.show(Change())
+        self.show(StateChange())
 
     def _speed(self, by: int) -> None:
         k = min(range(len(SPEEDS)), key=lambda i: abs(SPEEDS[i] - self.speed))
         self.speed = SPEEDS[max(0, min(len(SPEEDS) - 1, k + by))]
-        self.show(Change())
+        self.show(StateChange())
 
     def action_review_faster(self) -> None:
         self._speed(1)

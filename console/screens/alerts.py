@@ -13,7 +13,7 @@ from textual.widgets import DataTable, Footer, Static
 from console.bindings import bindings
 from console.messages import AlertAcknowledged
 from console.screens.base import ViewScreen
-from console.state.changes import Change, Topic
+from console.state.changes import StateChange, Topic
 from console.state.eventlog import AlertBook, AlertEntry
 from console.state.text import fmt_clock
 
@@ -44,7 +44,7 @@ class AlertScreen(ViewScreen):
     TOPICS = frozenset({Topic.ALERTS})
     BINDINGS = [*ViewScreen.BINDINGS, *bindings("alerts")]
 
-    def __init__(self, book: AlertBook, changes: Signal[Change]) -> None:
+    def __init__(self, book: AlertBook, changes: Signal[StateChange]) -> None:
         super().__init__(changes)
         self.book = book
         self.ids: list[int] = []

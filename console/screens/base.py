@@ -1,6 +1,6 @@
 """What the part-2 screens (fleet, event log, alerts, checks) share: a title
 bar, the screen-switching keys in the footer, and redrawing when what they
-show changed (`changes`, the app's signal of the model's `Change`, handed to
+show changed (`changes`, the app's signal of the model's `StateChange`, handed to
 the screen with the state it shows) — at once when shown, otherwise when
 shown next."""
 
@@ -16,7 +16,7 @@ from textual.signal import Signal
 from textual.widgets import DataTable, Input
 
 from console.bindings import bindings
-from console.state.changes import Change, Topic
+from console.state.changes import StateChange, Topic
 from console.widgets.bars import TitleBar
 
 # this module's look (CSS_PATH); absolute, so a subclass defined elsewhere finds it too
@@ -33,7 +33,7 @@ class ViewScreen(Screen):
 
     CSS_PATH = TCSS
 
-    def __init__(self, changes: Signal[Change]) -> None:
+    def __init__(self, changes: Signal[StateChange]) -> None:
         super().__init__()
         self.changes = changes
         self._stale = False
@@ -56,7 +56,7 @@ class ViewScreen(Screen):
         self.ready = True
         self.redraw()
 
-    def _changed(self, change: Change) -> None:
+    def _changed(self, change: StateChange) -> None:
         if not (change.topics & self.TOPICS) or not self.ready:
             return
         if self.app.screen is self:
@@ -118,6 +118,6 @@ class ViewScreen(Screen):
     def redraw(self) -> None:
         """Everything again (filter or theme changed, shown after a while)."""
 
-    def update_view(self, change: Change) -> None:
+    def update_view(self, change: StateChange) -> None:
         """Something it shows changed while shown (default: redraw)."""
         self.redraw()

@@ -23,7 +23,7 @@ from backend.core.plan.checks import Finding
 from console.bindings import bindings
 from console.operations import OperationService
 from console.screens.base import ViewScreen
-from console.state.changes import Change, Topic
+from console.state.changes import StateChange, Topic
 from console.state.model import ConsoleModel
 
 TCSS = Path(__file__).with_name("checks.tcss")
@@ -77,7 +77,9 @@ class ChecksScreen(ViewScreen):
     BINDINGS = [*ViewScreen.BINDINGS, *bindings("checks")]
     CSS_PATH = [ViewScreen.CSS_PATH, TCSS]
 
-    def __init__(self, model: ConsoleModel, changes: Signal[Change], ops: OperationService) -> None:
+    def __init__(
+        self, model: ConsoleModel, changes: Signal[StateChange], ops: OperationService
+    ) -> None:
         super().__init__(changes)
         self.model = model
         self.ops = ops

@@ -25,7 +25,7 @@ from console.state.capability import (
     robot_type,
     sparkline,
 )
-from console.state.changes import Change, Topic
+from console.state.changes import StateChange, Topic
 from console.state.model import ConsoleModel
 from console.state.text import fmt_clock
 
@@ -47,7 +47,7 @@ class FleetScreen(ViewScreen):
     # a batch may change any robot's activity or uplink; the others say whose
     TOPICS = frozenset({Topic.MISSION, Topic.FLEET, Topic.TELEMETRY})
 
-    def __init__(self, model: ConsoleModel, changes: Signal[Change]) -> None:
+    def __init__(self, model: ConsoleModel, changes: Signal[StateChange]) -> None:
         super().__init__(changes)
         self.model = model
         self.shown: list[str] = []
@@ -122,7 +122,7 @@ class FleetScreen(ViewScreen):
             "#filter", Input
         ).placeholder = f"filter by capability: {filter_examples(self.model)}"
 
-    def update_view(self, change: Change) -> None:
+    def update_view(self, change: StateChange) -> None:
         t = self.query_one(DataTable)
         robot = None
         if (

@@ -17,7 +17,7 @@ from textual.widgets import DataTable, Footer, Input, Static
 from console.bindings import bindings
 from console.screens.base import ViewScreen
 from console.screens.dialogs import PathPrompt
-from console.state.changes import Change, Topic
+from console.state.changes import StateChange, Topic
 from console.state.eventlog import LOG_LIMIT, EventLog, LogEntry, entry_matches
 from console.state.files import shown_path
 from console.state.text import fmt_clock
@@ -46,7 +46,7 @@ class EventLogScreen(ViewScreen):
     TOPICS = frozenset({Topic.LOG})
     BINDINGS = [*ViewScreen.BINDINGS, *bindings("log")]
 
-    def __init__(self, log: EventLog, changes: Signal[Change]) -> None:
+    def __init__(self, log: EventLog, changes: Signal[StateChange]) -> None:
         super().__init__(changes)
         self.log_ = log
         self.last_seq = 0  # newest entry in the table
@@ -109,7 +109,7 @@ class EventLogScreen(ViewScreen):
         self._title()
         self._show_entry()
 
-    def update_view(self, change: Change) -> None:
+    def update_view(self, change: StateChange) -> None:
         """New entries: append (and drop rows the bounded log forgot)."""
         t = self.query_one(DataTable)
         at_end = t.cursor_row >= t.row_count - 1

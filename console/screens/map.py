@@ -30,7 +30,7 @@ from console.messages import HelpRequested
 from console.operations import OperationService
 from console.screens.dialogs import ChoiceScreen, ConfirmScreen, MarkerPrompt
 from console.state.actions import ACTIONS
-from console.state.changes import Change, Topic
+from console.state.changes import StateChange, Topic
 from console.state.markers import (
     bind_choices,
     followers,
@@ -188,7 +188,9 @@ class MapScreen(Screen):
     ]
     CSS_PATH = TCSS
 
-    def __init__(self, model: ConsoleModel, changes: Signal[Change], ops: OperationService) -> None:
+    def __init__(
+        self, model: ConsoleModel, changes: Signal[StateChange], ops: OperationService
+    ) -> None:
         super().__init__()
         self.model = model
         self.changes = changes
@@ -242,7 +244,7 @@ class MapScreen(Screen):
         self.set_class(not show, "-no-legend")
 
     # -- state in (the model's changes) ---------------------------------------------------------
-    def changed(self, c: Change) -> None:
+    def changed(self, c: StateChange) -> None:
         if c.about(Topic.MAP):
             self.map_changed(self.model.map_mirror, c.map_update)
         if c.about(Topic.MISSION):  # marker events change no robot's column but the map

@@ -34,7 +34,7 @@ from console.screens.mission_plan import PlanActions
 from console.screens.mission_run import RunActions
 from console.state import link
 from console.state.actions import BY_NAME
-from console.state.changes import Change, Topic
+from console.state.changes import StateChange, Topic
 from console.state.context import FooterKey, context_keys, fit_footer
 from console.state.files import RecentFiles
 from console.state.model import CONNECTED, ConsoleModel
@@ -105,7 +105,7 @@ class MissionScreen(Screen):
     def __init__(
         self,
         model: ConsoleModel,
-        changes: Signal[Change],
+        changes: Signal[StateChange],
         ops: OperationService,
         recent: RecentFiles | None = None,
     ) -> None:
@@ -175,7 +175,7 @@ class MissionScreen(Screen):
         return not self.has_class("-narrow") or self.has_class("-editing")
 
     # -- the model changed ------------------------------------------------------------------
-    async def changed(self, c: Change) -> None:
+    async def changed(self, c: StateChange) -> None:
         """Redraw what the change touches."""
         if c.about(Topic.MISSION) and c.robots != frozenset():
             await self.model_changed(None if c.robots is None else set(c.robots))

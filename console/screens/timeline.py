@@ -22,7 +22,7 @@ from textual.widgets import Footer, Static
 
 from console.bindings import bindings
 from console.state import timeline as tl
-from console.state.changes import Change, Topic
+from console.state.changes import StateChange, Topic
 from console.state.model import ConsoleModel
 from console.state.text import fmt_clock
 from console.widgets.bars import TitleBar
@@ -51,7 +51,7 @@ class TimelineScreen(Screen):
     ]
     CSS_PATH = TCSS
 
-    def __init__(self, model: ConsoleModel, changes: Signal[Change]) -> None:
+    def __init__(self, model: ConsoleModel, changes: Signal[StateChange]) -> None:
         super().__init__()
         self.model = model
         self.changes = changes
@@ -78,7 +78,7 @@ class TimelineScreen(Screen):
         if self.win is not None:  # the first draw comes with the screen's resume
             self.call_after_refresh(self.redraw)
 
-    def _changed(self, change: Change) -> None:
+    def _changed(self, change: StateChange) -> None:
         if not change.topics & TOPICS:
             return
         if self.app.screen is self:

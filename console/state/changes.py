@@ -3,9 +3,9 @@
 In: the client library's typed events (`backend.client.events.ClientEvent`)
 as they are, and the few the console says about itself (`ConsoleEvent`: it
 is connecting, the server is unreachable, the account is read-only, the map
-feed moved). `ConsoleModel.take` applies one and answers a `Change`.
+feed moved). `ConsoleModel.take` applies one and answers a `StateChange`.
 
-Out: a `Change` says which topics changed and, where it matters, for which
+Out: a `StateChange` says which topics changed and, where it matters, for which
 robots. The app publishes it on one signal; every screen and widget that
 shows something subscribes and redraws what it shows of those topics, in its
 own callback.
@@ -34,7 +34,7 @@ class Topic(StrEnum):
 
 
 @dataclass(frozen=True, slots=True)
-class Change:
+class StateChange:
     """What one input changed.
 
     - `topics`: what changed;
@@ -64,11 +64,13 @@ class Change:
         return topic in self.topics
 
 
-NOTHING = Change()
+NOTHING = StateChange()
 
 
-def change(*topics: Topic, robots: frozenset[str] | set[str] | None = None, **kw: Any) -> Change:
-    return Change(frozenset(topics), None if robots is None else frozenset(robots), **kw)
+def change(
+    *topics: Topic, robots: frozenset[str] | set[str] | None = None, **kw: Any
+) -> StateChange:
+    return StateChange(frozenset(topics), None if robots is None else frozenset(robots), **kw)
 
 
 # -- what the console says about itself --------------------------------------------

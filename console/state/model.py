@@ -7,7 +7,7 @@ typed events as they are (`take`: a state, an event batch, a robot, a
 telemetry sample, an alert, the connection, an unreadable message) and the
 few the console says about itself (console/state/changes.py), applies each
 through one path (batches through `backend.core.events.apply_events`, as the
-server does) and answers one `Change`: which topics, which robots. Tests
+server does) and answers one `StateChange`: which topics, which robots. Tests
 feed it the same events, without a network. What the screens show is
 derived here and beside it (console/state/text.py: glyphs, summaries;
 availability.py: why an action does not apply).
@@ -40,10 +40,10 @@ from console.state import availability, link
 from console.state.changes import (
     NOTHING,
     AccountKnown,
-    Change,
     Connecting,
     MapFed,
     ModelEvent,
+    StateChange,
     Topic,
     Unreachable,
     change,
@@ -140,7 +140,7 @@ class ConsoleModel:
     ordered: bool = True  # False: batches in another order than revisions (replay.py)
 
     # -- taking events --------------------------------------------------------------
-    def take(self, event: ModelEvent) -> Change:
+    def take(self, event: ModelEvent) -> StateChange:
         """Apply one event; what changed."""
         match event:
             case StateSynced(snapshot=snap):
@@ -163,7 +163,7 @@ class ConsoleModel:
             case _:
                 return self._connection(event)
 
-    def _connection(self, event: ModelEvent) -> Change:
+    def _connection(self, event: ModelEvent) -> StateChange:
         match event:
             case ConnectionState(state=state):
                 self.connection, self.connection_detail = state, ""
@@ -184,7 +184,7 @@ class ConsoleModel:
                 return NOTHING
         return change(Topic.CONNECTION)
 
-    def _synced(self, snap: StateSnapshot) -> Change:
+    def _synced(self, snap: StateSnapshot) -> StateChange:
         """A whole state: the first, or after a gap or a server restart. The
         server's alerts in it that this console has not taken are news (none
         on the first: they happened before it looked)."""
@@ -206,7 +206,7 @@ class ConsoleModel:
             topics += [Topic.ALERTS, Topic.LOG]
         return change(*topics, loaded=True, alerts=tuple(raised))
 
-    def _applied(self, batch: ev.EventBatch) -> Change:
+    def _applied(self, batch: ev.EventBatch) -> StateChange:
         if self.mission is None or (self.ordered and batch.revision <= self.mission.revision):
             return NOTHING  # in the state already
         robots = self.apply(batch)
@@ -218,7 +218,7 @@ class ConsoleModel:
         )
         return change(Topic.MISSION, Topic.LOG, robots=robots, revision=batch.revision, moved=moved)
 
-    def _raised(self, entry: Any) -> Change:
+    def _raised(self, entry: Any) -> StateChange:
         if entry is None:  # taken already, or counted up
             return change(Topic.ALERTS)
         if entry.kind != "failure":  # a failure is a log line already (the report's)

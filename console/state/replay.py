@@ -48,7 +48,7 @@ from backend.core.model import Mission
 from backend.files.record.journal import JournalReader, missing
 from backend.protocol.archive import ArchiveReader
 from backend.protocol.messages import ALERTS_KEPT, RobotInfo, StateSnapshot
-from console.state.changes import Change, MapFed, ModelEvent, Topic, change
+from console.state.changes import MapFed, ModelEvent, StateChange, Topic, change
 from console.state.model import HISTORY, ConsoleModel
 
 LOG_WINDOW = 200  # batches before the cursor the log shows after a seek
@@ -124,23 +124,23 @@ class Replay:
         return (lo or 0.0, hi or lo or 0.0)
 
     # -- moving --------------------------------------------------------------------------
-    def seek(self, t: float) -> Change:
+    def seek(self, t: float) -> StateChange:
         """Everything as it was at `t` (of the cursor's clock)."""
         order = self.journal.order(self.cursor.clock)
         return self._seek(order.position_at(t), t)
 
-    def seek_position(self, position: int) -> Change:
+    def seek_position(self, position: int) -> StateChange:
         order = self.journal.order(self.cursor.clock)
         position = max(0, min(position, len(order)))
         at = order.time_of(position)
         return self._seek(position, at if at is not None else self.span()[0])
 
-    def set_clock(self, clock: str) -> Change:
+    def set_clock(self, clock: str) -> StateChange:
         """The same instant, in the other clock."""
         self.cursor.clock = clock
         return self.seek(self.cursor.at)
 
-    def step(self, by: int) -> Change:
+    def step(self, by: int) -> StateChange:
         """To the next (+1) or previous (-1) batch of the clock's order."""
         if by < 0:
             return self.seek_position(self.cursor.position + by)
@@ -151,13 +151,13 @@ class Replay:
             return change()
         return self._forward(p, max(at, self.cursor.at))
 
-    def advance(self, seconds: float) -> Change:
+    def advance(self, seconds: float) -> StateChange:
         """Time moves on by `seconds` (of the clock): everything up to then."""
         t = self.cursor.at + seconds
         order = self.journal.order(self.cursor.clock)
         return self._forward(order.position_at(t), t)
 
-    def seek_revision(self, revision: int) -> Change:
+    def seek_revision(self, revision: int) -> StateChange:
         """To the instant batch `revision` happened in the cursor's clock."""
         j = self.journal
         i = revision - j.base - 1
@@ -172,7 +172,7 @@ class Replay:
         return self.cursor.at >= self.span()[1]
 
     # -- feeding the model ---------------------------------------------------------------------
-    def _forward(self, position: int, t: float) -> Change:
+    def _forward(self, position: int, t: float) -> StateChange:
         feed = Feed()
         order = self.journal.order(self.cursor.clock)
         indices = order.order[self.cursor.position : position]
@@ -186,7 +186,7 @@ class Replay:
         self.cursor.at = t
         return c
 
-    def _seek(self, position: int, t: float) -> Change:
+    def _seek(self, position: int, t: float) -> StateChange:
         clock = self.cursor.clock
         order = self.journal.order(clock)
         start = max(0, position - LOG_WINDOW)
@@ -242,7 +242,7 @@ class Replay:
         for at, info in a.fleet(after, upto):
             feed.add(at, RobotChanged(info))
 
-    def _take(self, feed: Feed, start: float) -> Change:
+    def _take(self, feed: Feed, start: float) -> StateChange:
         """Each event at its time (the model's clock reads it); one change for all."""
         topics: set[Topic] = set()
         robots: set[str] | None = set()

@@ -7,8 +7,11 @@ from dataclasses import dataclass
 from typing import Any
 
 from backend.agent import SkillContext, Success
+from backend.core.model import Pose, Position
+from sim.ground import RegionSeen, rss_item
+from sim.objects import RssState, Stone, _fmt, newer_stone
+from sim.robot import SimRobot
 from sim.skills.base import SkillBase, xy
-from sim.world import RssState, SimRobot, Stone, _fmt, newer_stone
 
 NEAR_TARGET = 5.0  # extra metres around a search radius that count as "at the target"
 CAMERA_RANGE = 15.0  # science camera
@@ -42,12 +45,7 @@ class ScienceSkills(SkillBase):
     # ------------------------------------------------------------ take_science_image
 
     async def take_science_image(
-        self,
-        ctx: SkillContext,
-        target: Any = None,
-        filter: str = "multispectral",
-        camera: Any = None,
-        **_: Any,
+        self, ctx: SkillContext, target: Pose, filter: str, camera: dict[str, Any]
     ) -> Success:
         r, w = self.robot, self.world
         if not r.has("science_camera"):
@@ -84,18 +82,13 @@ class ScienceSkills(SkillBase):
             msg = f"{rss.name}: top stone score {rss.max_score:g}"
             w.log(f"{r.name} imaged {rss.name}: top stone score {rss.max_score:g}")
         info = r.knowledge.learn_rss(info)
-        w.tell_ground(r, "rss", rss.name, info)
+        w.tell_ground(r, RegionSeen(rss_item(info)))
         return msg
 
     # ------------------------------------------------------------ identify_stone
 
     async def identify_stone(
-        self,
-        ctx: SkillContext,
-        target: Any = None,
-        search_radius: float = 3.0,
-        partner: str | None = None,
-        **_: Any,
+        self, ctx: SkillContext, target: Position, search_radius: float, partner: str | None
     ) -> Success:
         r, w = self.robot, self.world
         tx, ty = xy(target)
@@ -151,7 +144,7 @@ class ScienceSkills(SkillBase):
             return
         rss.found_by.add(r.name)
         info = r.knowledge.learn_rss(rss.sighting())
-        w.tell_ground(r, "rss", rss.name, info)
+        w.tell_ground(r, RegionSeen(rss_item(info)))
         w.log(f"{r.name} discovered {rss.name} at {_fmt(rss.x, rss.y)}")
 
     async def _identify_by_camera(

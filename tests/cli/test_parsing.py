@@ -15,7 +15,7 @@ from backend.cli.ctl.errors import FileInvalid, UsageError
 from backend.cli.ctl.render import short_value
 from backend.cli.ctl.session import default_client_id, default_endpoints, run
 from backend.cli.ctl.values import (
-    MarkerRef,
+    AtMarker,
     parse_area,
     parse_param,
     parse_params,
@@ -68,9 +68,9 @@ def op_of(argv: list[str], tutorial=None):
             "area",
             [{"x": 0, "y": 0}, {"x": 1, "y": 0}, {"x": 1, "y": 1}],
         ),
-        ("goal=@POI-A", "goal", MarkerRef("POI-A")),
-        ('goal="@POI-A"', "goal", MarkerRef("POI-A")),
-        (" goal =@POI-A", "goal", MarkerRef("POI-A")),
+        ("goal=@POI-A", "goal", AtMarker("POI-A")),
+        ('goal="@POI-A"', "goal", AtMarker("POI-A")),
+        (" goal =@POI-A", "goal", AtMarker("POI-A")),
     ],
 )
 def test_param_values(text, name, value):

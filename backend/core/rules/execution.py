@@ -15,11 +15,11 @@ A robot's `Report`s (status changes, numbered per robot) come without a command.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 from backend.core import events as ev
-from backend.core.model import ACTIVE, FINISHED, TRANSITIONS, SkillInstance, Status
+from backend.core.model import ACTIVE, FINISHED, TRANSITIONS, Mission, SkillInstance, Status
 from backend.core.ops import (
     Control,
     Report,
@@ -31,7 +31,7 @@ from backend.core.ops import (
     UnsyncDone,
 )
 from backend.core.plan.gate import check_sync
-from backend.core.rules.base import Change, Refusal, Rule, Rules
+from backend.core.rules.base import Change, Refusal, Rule, Rules, skill_of
 
 # -- commands: claim, plan, release ---------------------------------------------
 
@@ -56,32 +56,19 @@ def release(rules: Rules, robot: str, ids: Iterable[str] = ()) -> None:
 
 def of_robot(rules: Rules, robot: str, skill_id: str) -> tuple[int, SkillInstance]:
     """Index and skill `skill_id`, refused unless it is in `robot`'s list."""
-    owner, i, s = rules.skill(skill_id)
-    if owner != robot:
-        raise Refusal(
-            "wrong_robot",
-            f"skill {s.display()} belongs to {owner}, not {robot}",
-            robot=robot,
-            skill=s.id,
-        )
-    return i, s
+    return skill_of(rules.mission, robot, skill_id)
 
 
-def plan_sync(rules: Rules, op: Sync) -> list[SkillInstance]:
-    """Skills to send to the robot; they are locked until `release` or the
-    robot's `SyncAck`."""
-    task = rules.task(op.robot)
+# which skills a sync sends (the one rule: backend.core.rules.uplink.sync_skills)
+Choose = Callable[[Mission, Sync, Mapping[str, str]], list[SkillInstance]]
+
+
+def plan_sync(rules: Rules, op: Sync, choose: Choose) -> list[SkillInstance]:
+    """Skills to send to the robot (`choose` says which); they are locked
+    until `release` or the robot's `SyncAck`."""
+    rules.task(op.robot)
     claim(rules, op.robot)
-    chosen = _to_sync(rules, op, task)
-    locked = rules.locked
-    for s in chosen:
-        if s.id in locked:
-            raise Refusal(
-                "locked",
-                f"{s.display()} on {op.robot}: {locked[s.id]}",
-                robot=op.robot,
-                skill=s.id,
-            )
+    chosen = choose(rules.mission, op, rules.locked)
     check_sync(rules, op.robot, [s.id for s in chosen])  # unwaived plan errors stay on the ground
     # check against the current library and markers; bound values are
     # taken fresh from their markers as they leave
@@ -95,29 +82,6 @@ def plan_sync(rules: Rules, op: Sync) -> list[SkillInstance]:
     return [
         s.model_copy(update={"params": p}, deep=True) for s, p in zip(chosen, fresh, strict=True)
     ]
-
-
-def _to_sync(rules: Rules, op: Sync, task: list[SkillInstance]) -> list[SkillInstance]:
-    """The head of the unsynchronized section, through `op.through` if given."""
-    start = rules.first_idle(task)
-    idle = task[start:]
-    if not idle:
-        raise Refusal(
-            "nothing_to_sync",
-            f"{op.robot} has no unsynchronized skill to synchronize",
-            robot=op.robot,
-        )
-    if op.through is None:
-        return idle
-    i, s = of_robot(rules, op.robot, op.through)
-    if s.status != Status.IDLE:
-        raise Refusal(
-            "not_idle",
-            f"{s.display()} on {op.robot} is already {s.status.value}",
-            robot=op.robot,
-            skill=s.id,
-        )
-    return task[start : i + 1]
 
 
 def plan_unsync(rules: Rules, op: Unsync) -> list[str]:

@@ -19,7 +19,7 @@ given up on) is returned as the change's alerts (`Change.alerts`).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from collections.abc import Set as AbstractSet
 from datetime import timedelta
 from typing import Any
@@ -34,6 +34,8 @@ from backend.core.model import (
     CommandState,
     Dequeue,
     Enqueue,
+    Mission,
+    ParamType,
     Pause,
     Reset,
     RobotCommand,
@@ -58,7 +60,15 @@ from backend.core.ops import (
 )
 from backend.core.plan.gate import check_sync
 from backend.core.rules import barriers
-from backend.core.rules.base import Change, Refusal, Rule, Rules, unchanged
+from backend.core.rules.base import (
+    Change,
+    Refusal,
+    Rule,
+    Rules,
+    robot_type,
+    skill_of,
+    unchanged,
+)
 from backend.core.rules.execution import (
     back_in_plan,
     check_retriable,
@@ -99,6 +109,48 @@ class _Maker:
         return c
 
 
+def _expiry(rules: Rules, op: Sync | Unsync | Control | Retry) -> float | None:
+    """Seconds the operator gave the command, else the server's default."""
+    return op.expire_s if op.expire_s is not None else rules.default_expiry_s
+
+
+def check_offered(rules: Rules, robot: str, skills: Sequence[SkillInstance]) -> None:
+    """Refused (`incompatible`) when `robot` does not offer one of `skills`, or
+    offers it with another major version than the library's. A robot that
+    never registered is not judged: it refuses what it cannot run itself."""
+    offered = rules.offers.offered(robot) if rules.offers is not None else None
+    if offered is None:
+        return
+    for s in skills:
+        spec = rules.library.skills.get(s.skill)
+        why = _incompatible(offered, s.skill, spec.version) if spec is not None else None
+        if why:
+            raise Refusal(
+                "incompatible",
+                f"{robot} {why}; {s.id} stays unsynchronized (nothing was queued)",
+                robot=robot,
+                skill=s.id,
+            )
+
+
+def _incompatible(offered: Mapping[str, str], skill: str, want: str) -> str | None:
+    """Why a robot offering `offered` cannot run `skill` at version `want`."""
+    have = offered.get(skill)
+    if have is None:
+        return (
+            f"does not offer skill '{skill}' (its manifest lists: {', '.join(offered) or 'none'})"
+        )
+    if have.split(".", 1)[0] != want.split(".", 1)[0]:
+        return f"implements {skill} {have}, the library needs {want} (major versions differ)"
+    return None
+
+
+def _kinds(rules: Rules, skills: Sequence[SkillInstance]) -> dict[str, dict[str, ParamType]]:
+    """The kind of each parameter of the skills sent: they travel with the values."""
+    lib = rules.library.skills
+    return {s.skill: lib[s.skill].kinds() for s in skills if s.skill in lib}
+
+
 def _queued_value(c: UplinkCommand) -> dict[str, Any]:
     return {
         "command": c.id,
@@ -113,8 +165,9 @@ def _queued_value(c: UplinkCommand) -> dict[str, Any]:
 def sync(rules: Rules, op: Sync) -> Change:
     """The idle head of the robot's unsynchronized section (through
     `op.through`) goes to the robot; its skills are uplinking until it answers."""
-    task = rules.task(op.robot)
-    chosen = _to_send(rules, op, task)
+    rules.task(op.robot)
+    chosen = sync_skills(rules.mission, op, rules.locked)
+    check_offered(rules, op.robot, chosen)
     check_sync(rules, op.robot, [s.id for s in chosen])  # unwaived plan errors stay on the ground
     fresh = [
         rules.check_params(op.robot, s.skill, s.params, s.bindings, skill_id=s.id) for s in chosen
@@ -128,8 +181,11 @@ def sync(rules: Rules, op: Sync) -> Change:
         bid = rules.mission.barrier_of(s.id)
         if partners and bid is not None:
             infos[s.id] = BarrierInfo(barrier=bid, partners=dict(partners))
-    c = _Maker(rules, op.expire_s).make(
-        op.robot, "sync", Enqueue(skills=skills, barriers=infos), [s.id for s in skills]
+    c = _Maker(rules, _expiry(rules, op)).make(
+        op.robot,
+        "sync",
+        Enqueue(skills=skills, barriers=infos, kinds=_kinds(rules, skills)),
+        [s.id for s in skills],
     )
     return Change(
         [ev.CommandQueued(command=c)],
@@ -139,19 +195,27 @@ def sync(rules: Rules, op: Sync) -> Change:
     )
 
 
-def _to_send(rules: Rules, op: Sync, task: list[SkillInstance]) -> list[SkillInstance]:
-    """The idle skills after those already being synchronized, through `op.through`."""
-    locked = rules.locked
-    start = rules.first_idle(task)
+def sync_skills(m: Mission, op: Sync, locked: Mapping[str, str]) -> list[SkillInstance]:
+    """Which skills a sync sends: the idle skills of `op.robot` after those
+    being synchronized already (`locked`: they stay at the head of its plan),
+    through `op.through`; refused when there is none.
+
+    The one rule: the sync, the direct path (`Engine.plan_sync`), the
+    server's check against the robot's manifest and the console's
+    availability of its sync action ask it."""
+    robot_type(m, op.robot)
+    task = m.tasks.get(op.robot, [])
+    start = Rules.first_idle(task)
     while start < len(task) and task[start].id in locked:
         start += 1  # uplinking: they stay at the head of the section
     idle = task[start:]
     if op.through is not None:
-        i, s = of_robot(rules, op.robot, op.through)
+        i, s = skill_of(m, op.robot, op.through)
         if s.status != Status.IDLE:
             raise Refusal(
                 "not_idle",
-                f"{s.display()} on {op.robot} is already {s.status.value}",
+                f"{s.display()} on {op.robot} is already {s.status.value}: synchronize "
+                "through an idle (unsynchronized) skill",
                 robot=op.robot,
                 skill=s.id,
             )
@@ -186,7 +250,7 @@ def unsync(rules: Rules, op: Unsync) -> Change:
             robot=op.robot,
         )
     ids = [s.id for s in queued]
-    c = _Maker(rules, op.expire_s).make(op.robot, "unsync", Dequeue(ids=ids), ids)
+    c = _Maker(rules, _expiry(rules, op)).make(op.robot, "unsync", Dequeue(ids=ids), ids)
     return Change([ev.CommandQueued(command=c)], [], _queued_value(c), None)
 
 
@@ -201,7 +265,7 @@ _CONTROL: dict[str, Callable[[], RobotCommand]] = {
 def control(rules: Rules, op: Control) -> Change:
     """run / pause / stop / reset, for one robot or all it applies to."""
     robots = [op.robot] if op.robot is not None else list(rules.mission.robots)
-    maker = _Maker(rules, op.expire_s)
+    maker = _Maker(rules, _expiry(rules, op))
     events: list[ev.Event] = []
     results: dict[str, str] = {}
     commands: dict[str, int] = {}
@@ -256,13 +320,17 @@ def retry(rules: Rules, op: Retry) -> Change:
     """A new attempt of a failed skill, sent to the front of its robot's queue;
     it joins the mission (right after the failed one) once the robot has it."""
     robot, i, s = rules.skill(op.id)
+    check_offered(rules, robot, [s])
     why = rules.locked.get(s.id)
     if why is not None:
         raise Refusal("cannot_retry", f"{s.display()}: {why}", robot=robot, skill=s.id)
     check_retriable(rules, robot, i, s)
     new = s.next_attempt(Status.IDLE_SYNCHRONIZED)
-    c = _Maker(rules, op.expire_s).make(
-        robot, "retry", Enqueue(skills=[new], front=True), [s.id, new.id]
+    c = _Maker(rules, _expiry(rules, op)).make(
+        robot,
+        "retry",
+        Enqueue(skills=[new], front=True, kinds=_kinds(rules, [new])),
+        [s.id, new.id],
     )
     return Change([ev.CommandQueued(command=c)], [], {**_queued_value(c), "id": new.id}, None)
 

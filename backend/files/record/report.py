@@ -89,7 +89,7 @@ class ActorRow(BaseModel):
     operations: dict[str, int]
 
 
-class Report(BaseModel):
+class PlanReport(BaseModel):
     journal: str
     mission: str
     start: datetime | None
@@ -185,9 +185,9 @@ class _Pass:
                     for s in task:
                         self.add(robot, s)
             case ev.WaiverSet(check=check, waiver=w):
-                row = WaiverRow(check=check, reason=w.reason, by=b.actor, at=_t(b.ts))
-                self.waivers[check] = row
-                self.waiver_log.append(row)
+                waiver = WaiverRow(check=check, reason=w.reason, by=b.actor, at=_t(b.ts))
+                self.waivers[check] = waiver
+                self.waiver_log.append(waiver)
             case ev.WaiverRemoved(check=check) if check in self.waivers:
                 self.waivers.pop(check).withdrawn = _t(b.ts)
             case ev.CommandQueued(command=c):
@@ -216,7 +216,7 @@ class _Pass:
             row.failures.append(e.info or "failed")
 
 
-def plan_against_actual(reader: JournalReader) -> Report:
+def plan_against_actual(reader: JournalReader) -> PlanReport:
     """The report of the whole journal."""
     p = _Pass()
     base = reader.snapshot(reader.base)
@@ -236,7 +236,7 @@ def plan_against_actual(reader: JournalReader) -> Report:
         if reader.gap
         else ""
     )
-    return Report(
+    return PlanReport(
         journal=str(reader.path),
         mission=mission,
         start=_t(start) if start is not None else None,
@@ -274,7 +274,7 @@ def _span(planned: datetime | None, actual: datetime | None, late: float | None)
     return f"{_clock(planned)}→{_clock(actual)}{_delta(late)}"
 
 
-def report_text(r: Report) -> str:
+def report_text(r: PlanReport) -> str:
     """The report for a person: a table per section, times in local time."""
     out = [
         f"Plan against actual: {r.mission} ({r.journal}), {_clock(r.start)} to {_clock(r.end)} "
