@@ -30,3 +30,13 @@ def open_read_only(path: Path, what: str) -> sqlite3.Connection:
 
 def tables(conn: sqlite3.Connection) -> set[str]:
     return {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+
+
+def size_on_disk(path: Path) -> int:
+    """Bytes an SQLite database takes: the file and its write-ahead log."""
+    total = 0
+    for suffix in ("", "-wal"):
+        f = path.with_name(path.name + suffix)
+        if f.exists():
+            total += f.stat().st_size
+    return total

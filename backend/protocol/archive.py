@@ -20,7 +20,7 @@ from pydantic import ValidationError
 
 from backend.core.clocks import GROUND, ROBOT
 from backend.core.model import Pose
-from backend.core.records import RecordError, open_read_only, tables
+from backend.core.records import RecordError, open_read_only, size_on_disk, tables
 from backend.protocol.messages import Alert, RobotInfo, Telemetry
 
 ARCHIVE_FORMAT = "missionctl/telemetry-archive@1"
@@ -222,12 +222,7 @@ class ArchiveReader:
         return [(at, info) for at, body in rows if (info := _read(RobotInfo, body)) is not None]
 
     def size_bytes(self) -> int:
-        total = 0
-        for suffix in ("", "-wal"):
-            f = self.path.with_name(self.path.name + suffix)
-            if f.exists():
-                total += f.stat().st_size
-        return total
+        return size_on_disk(self.path)
 
 
 def _read(model: type[M], body: str) -> M | None:

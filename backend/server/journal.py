@@ -68,6 +68,7 @@ from pydantic import BaseModel, ValidationError
 from backend.core.bulk import gc_paused
 from backend.core.events import EventBatch, apply_events
 from backend.core.model import Mission
+from backend.core.records import size_on_disk
 from backend.server.journal_file import (
     JOURNAL_FORMAT,
     JournalCorrupt,
@@ -690,12 +691,7 @@ class Journal:
 
     def size_bytes(self) -> int:
         """Bytes on disk: the database and its write-ahead log."""
-        total = 0
-        for suffix in ("", "-wal"):
-            f = self.path.with_name(self.path.name + suffix)
-            if f.exists():
-                total += f.stat().st_size
-        return total
+        return size_on_disk(self.path)
 
 
 def remember_requests(engine: Any, requests: Iterable[tuple[Any, ...]]) -> None:
