@@ -16,23 +16,13 @@ from console_state import screen_text, settle, wait_until
 from backend.cli.main import main
 from backend.core.clocks import GROUND, ROBOT
 from backend.core.model import Status
-from backend.files.missions import load_library
-from backend.files.record.journal import JournalReader
-from backend.protocol.archive import ArchiveReader, archive_path
 from console.state.model import ConsoleModel
-from console.state.replay import Replay, parse_goto
-from tests.files.recorded import Recorded, record_mission
-
-
-@pytest.fixture(scope="module")
-def recorded(tmp_path_factory) -> Recorded:
-    return record_mission(tmp_path_factory.mktemp("review"))
+from console.state.replay import parse_goto
 
 
 @pytest.fixture
-def replay(recorded):
-    with JournalReader(recorded.db) as j, ArchiveReader(archive_path(recorded.db)) as a:
-        yield Replay(ConsoleModel(), j, load_library(j.library), a)
+def replay(replay_of):
+    return replay_of(ConsoleModel())
 
 
 def _status(model: ConsoleModel, sid: str) -> Status | None:
@@ -122,13 +112,6 @@ def review_app(replay_of, **kw):
     app.animation_level = "none"
     app.cursor_blink = False
     return app
-
-
-@pytest.fixture
-def replay_of(recorded):
-    with JournalReader(recorded.db) as j, ArchiveReader(archive_path(recorded.db)) as a:
-        library = load_library(j.library)
-        yield lambda model: Replay(model, j, library, a)
 
 
 async def test_the_review_opens_at_the_end_and_steps_goes_to_and_switches_clocks(

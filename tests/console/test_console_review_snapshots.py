@@ -7,28 +7,11 @@ Update with: pytest tests/console/test_console_review_snapshots.py --snapshot-up
 
 from __future__ import annotations
 
-import pytest
 from console_state import screen_text, settle
 from test_console_review import review_app
 
 from backend.core.clocks import GROUND
-from backend.files.missions import load_library
 from backend.files.record.journal import JournalReader
-from backend.protocol.archive import ArchiveReader, archive_path
-from console.state.replay import Replay
-from tests.files.recorded import Recorded, record_mission
-
-
-@pytest.fixture(scope="module")
-def recorded(tmp_path_factory) -> Recorded:
-    return record_mission(tmp_path_factory.mktemp("review"))
-
-
-@pytest.fixture
-def replay_of(recorded):
-    with JournalReader(recorded.db) as j, ArchiveReader(archive_path(recorded.db)) as a:
-        library = load_library(j.library)
-        yield lambda model: Replay(model, j, library, a)
 
 
 def _shows(app, *needles):
