@@ -31,6 +31,8 @@ from backend.core.library import Library
 from backend.core.model import Mission, Pose
 from backend.protocol import mapfeed as mf
 from backend.transport import QueryFailed
+from sim.calibration import drift
+from sim.calibration import properties as manifest_properties
 from sim.comms import CommsWindow
 from sim.errors import SimError
 from sim.exchange import WorldExchange
@@ -128,7 +130,10 @@ class SimFleet:
         self._tasks: list[asyncio.Task[None]] = []
         self._started_wall = 0.0
         self._clock_at = (0.0, 0.0)  # (wall, sim) the clock counts from
-        self.warnings: list[str] = []
+        self.warnings: list[str] = [
+            f"the skill library's figures differ from the world's: {d}"
+            for d in drift(library, world_spec, self.world.models)
+        ]
         for index, (name, spec) in enumerate(mission.robots.items()):
             if spec.type not in self.world.models:
                 self.warnings.append(
@@ -156,13 +161,7 @@ class SimFleet:
             robot.type,
             connect=self.connect,
             modules=modules,
-            properties={
-                "simulated": True,
-                "kind": m.kind,
-                "capabilities": list(m.capabilities),
-                "max_speed_mps": m.max_speed,
-                "sensor_range_m": m.sensor_range,
-            },
+            properties=manifest_properties(self.world.spec, m),
             telemetry_hz=telemetry_hz,
             zenoh_extra=self.zenoh_extra,
         )

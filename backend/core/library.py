@@ -17,6 +17,7 @@ from backend.core.model import Name, ParamType, Strict
 from backend.core.params import ParamSpec, check_value, marker_value, normalize_value
 
 LIBRARY_FORMAT: Final = "missionctl/library@1"
+PropertyValue = str | int | float | bool
 VERSION_PATTERN = r"^\d+\.\d+\.\d+$"
 
 
@@ -129,6 +130,12 @@ class SkillSpec(Strict):
         description="the skill needs the operator's link while it runs (plan checks flag it "
         "when it is planned out of comms coverage)",
     )
+    talks_to: Name | None = Field(
+        None,
+        description="robot parameter naming a robot the skill talks to while it runs (e.g. a "
+        "partner it works with): both must be able to talk, through comms coverage or within "
+        "their radio range (plan checks flag it when it is planned out of coverage)",
+    )
 
     def kinds(self) -> dict[str, ParamType]:
         """Parameter -> its kind: what travels with the values to the robot."""
@@ -163,6 +170,19 @@ class RobotType(Strict):
     )
     battery: BatteryModel | None = Field(
         None, description="battery model for predictions and plan checks; none: no battery"
+    )
+    radio_range_m: float = Field(
+        0.0,
+        ge=0,
+        le=1e6,
+        description="robots this close talk to each other without comms coverage (a direct "
+        "radio); 0: only through the comms network, so partners at a barrier meet only where "
+        "both are covered",
+    )
+    properties: dict[Name, PropertyValue] = Field(
+        default_factory=dict,
+        description="the figures an operator plans with (ranges, capacities; units in the "
+        "names: _m, _s, _mps), as the manifests of robots of this type declare them",
     )
 
 

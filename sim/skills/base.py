@@ -23,10 +23,21 @@ from sim.objects import _fmt
 from sim.pathing import SLOW, Follower
 from sim.robot import SimRobot
 from sim.skills.host import SkillHost
+from sim.worldfile import RobotModel
 
 CLIMB_RATE = 1.0  # m/s, drone
 RESYNC_S = 120.0  # sim seconds behind the clock past which a robot stops catching up
 DRONE_MARGIN_S = 40.0  # flight seconds a drone keeps beyond its way back to the lander
+# a drone's explore range: its model's sensor_range at this altitude, in proportion to
+# the altitude, within these bounds (m)
+DRONE_RANGE_ALTITUDE = 5.0
+DRONE_RANGE = (8.0, 40.0)
+
+
+def drone_range(model: RobotModel, altitude: float) -> float:
+    """Metres a drone's camera maps around it at `altitude`."""
+    low, high = DRONE_RANGE
+    return max(low, min(high, model.sensor_range * max(altitude, 1.0) / DRONE_RANGE_ALTITUDE))
 
 
 def xy(value: Pose | Position) -> tuple[float, float]:
@@ -313,7 +324,7 @@ class SkillBase:
     def sensor_range(self) -> float:
         r = self.robot
         if r.kind == "drone":
-            return max(8.0, min(40.0, r.model.sensor_range * max(r.z, 1.0) / 5.0))
+            return drone_range(r.model, r.z)
         return r.model.sensor_range
 
     def learn_stone(self, info: dict[str, Any]) -> None:

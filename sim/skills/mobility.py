@@ -15,6 +15,7 @@ from sim.skills.base import DRONE_MARGIN_S, SkillBase, pct, xy
 from sim.world import World
 
 MAPPED = 0.995  # the share of the area's cells that counts as all of it
+LANE_SPACING = 1.6  # explore lanes lie this many sensor ranges apart
 
 
 class Survey:
@@ -120,7 +121,7 @@ class MobilitySkills(SkillBase):
         poly = self._area_to_explore(area, sensors)
         rng = self.sensor_range()
         survey = Survey(r, self.world, self._mappable(poly), max_duration, return_to_start)
-        lanes = lawnmower(poly, spacing=1.6 * rng, start=survey.start)
+        lanes = lawnmower(poly, spacing=LANE_SPACING * rng, start=survey.start)
         found_before = len(r.knowledge.rss)
         self._look_around(rng)
         await self._sweep(ctx, survey, lanes, rng)

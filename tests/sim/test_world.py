@@ -23,6 +23,7 @@ from backend.protocol import mapfeed as mf
 from sim.exchange import WorldExchange
 from sim.fleet import SimFleet
 from sim.pathing import ROCK, Follower, lawnmower, segment_cells
+from sim.skills import science
 from sim.skills.registry import RobotSkills
 from sim.world import World
 from sim.worldfile import load_world, parse_world
@@ -410,6 +411,47 @@ def test_identify_searches_only_within_its_radius_and_pick_the_whole_region(
     # aimed at the far side of the region, 8.8 m from the stone: it is still found
     result = call(s2, "pick_stone", target=Position(x=29.0, y=18.5))
     assert result.info == "picked RSS-A-s1 of RSS-A (score 0.5); carrying 1/2"
+
+
+async def _together(skills: RobotSkills, robot: Any, **params: Any) -> str:
+    """One partner's identify_stone, working on it as the fleet marks it (a barrier)."""
+    robot.activity = "identify_stone"
+    try:
+        return (await skills.identify_stone(FakeCtx(), **params)).info
+    finally:
+        robot.activity = None
+
+
+@pytest.mark.parametrize("late", ["lru1", "lru2"])
+def test_barrier_partners_name_the_same_stone_when_one_comes_too_late(
+    world: World, monkeypatch: pytest.MonkeyPatch, late: str
+) -> None:
+    """Issue 35: LRU2 gave up waiting for LRU1 and identified a stone alone; LRU1, there
+    later, identified another one alone: the two rows named two stones (RSS-E-s2 and
+    RSS-E-s1) and the region had none left. The partners name one stone."""
+    monkeypatch.setattr(science, "PARTNER_WAIT", 30.0)  # a short wait: LRU1 comes too late
+    lru1 = world.add_robot("lru1", "lru_science")
+    lru2 = world.add_robot("lru2", "lru_manipulator")
+    centre = Position(x=29.0, y=23.0)
+    lru1.x, lru1.y, lru2.x, lru2.y = 29.0, 23.0, 29.5, 23.0
+    world.robots[late].x = -60.0  # about 180 s away, inside the lander's coverage
+    fleet = exchanging_fleet(world)
+    s1, s2 = RobotSkills(fleet, lru1), RobotSkills(fleet, lru2)
+
+    async def both() -> list[str]:
+        return await asyncio.gather(
+            _together(s1, lru1, target=centre, search_radius=6.0, partner="lru2"),
+            _together(s2, lru2, target=centre, search_radius=6.0, partner="lru1"),
+        )
+
+    one, two = run(both())
+    named = {re.search(r"identified (\S+) at", text).group(1) for text in (one, two)}
+    assert len(named) == 1, (one, two)
+    (sid,) = named
+    assert [k.id for k in world.stones.values() if k.state == "identified"] == [sid]
+    assert world.stones[sid].score == 0.1  # nobody waited long enough: alone
+    early = "lru2" if late == "lru1" else "lru1"
+    assert f"{early} had identified it alone" in (one if late == "lru1" else two)
 
 
 def test_a_robot_trusts_its_own_newer_news_of_a_stone_over_a_partners_stale_one(
