@@ -50,7 +50,7 @@ from console.hangup import (
 )
 from console.messages import AlertAcknowledged, HelpRequested, Incoming
 from console.notifier import NotificationFolder
-from console.operations import Backend, OperationService
+from console.operations import Backend, OperationService, ReadOnlyBackend
 from console.plan_modes import PlanRefresher
 from console.quitting import QuitPolicy
 from console.screens.alerts import AlertScreen
@@ -113,12 +113,17 @@ class MissionApp(App[int]):
         login: Login | None = None,
         ask_before_quit: bool = True,
         quitting_stops: str = "",
+        observer: str = "",
     ) -> None:
+        """`observer`: why this console never changes the mission, whatever
+        its account ("" when it may): read-only, and nothing is submitted."""
         super().__init__()
         self.config = config or ConsoleConfig()
         self.recent = RecentFiles(self.config.recent_path)
         self.notices = [*notices, *self.config.problems]
-        self.model = ConsoleModel(endpoint=connect or "")
+        self.model = ConsoleModel(endpoint=connect or "", observer=observer, read_only=observer)
+        if observer:
+            backend = ReadOnlyBackend(observer)
         # the one notice of what changed: every screen and helper subscribes
         self.changes: Signal[StateChange] = Signal(self, "changes")
         # 16 colours (asked for, or a TERM=xterm terminal: see on_mount)
@@ -281,14 +286,17 @@ class MissionApp(App[int]):
     def action_show_checks(self) -> None:
         self.switch_mode("checks")
 
+    # every action this app binds (console/state/actions.py; a review adds its own)
+    ACTIONS = ACTIONS
+
     def action_keys(self) -> dict[str, str]:
         """Action name -> its key(s) now (the user's keymap applied)."""
         keymap = getattr(self, "_keymap", {}) or {}
-        return {a.name: keymap.get(a.binding_id, a.key) for a in ACTIONS}
+        return {a.name: keymap.get(a.binding_id, a.key) for a in self.ACTIONS}
 
     def action_help(self) -> None:
         if not isinstance(self.screen, HelpScreen):
-            self.push_screen(HelpScreen(self.action_keys()))
+            self.push_screen(HelpScreen(self.action_keys(), self.ACTIONS))
 
     @on(HelpRequested)
     def _help_requested(self) -> None:

@@ -5,10 +5,12 @@ from __future__ import annotations
 
 from textual.binding import Binding
 
-from console.state.actions import ACTIONS
+from console.state.actions import ACTIONS, Action
 
 
-def bindings(scope: str = "mission", *, show: bool | None = None) -> list[Binding]:
+def bindings(
+    scope: str = "mission", *, show: bool | None = None, actions: list[Action] = ACTIONS
+) -> list[Binding]:
     """Bindings of one scope; `show` overrides the footer flag (app-wide keys
     are bound twice: hidden on the app, shown by the part-2 screens)."""
     return [
@@ -20,7 +22,7 @@ def bindings(scope: str = "mission", *, show: bool | None = None) -> list[Bindin
             id=a.binding_id,
             tooltip=a.description,
         )
-        for a in ACTIONS
+        for a in actions
         if a.scope == scope
     ]
 

@@ -8,20 +8,14 @@ import sys
 
 from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK, EXIT_UNREACHABLE
 from backend.transport.login import add_login_arguments
-
-DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
-THEME_HELP = (
-    "theme name: missionctl-dark (default), missionctl-light, missionctl-high-contrast, "
-    "missionctl-colorblind, "
-    "or one of yours in ~/.config/missionctl/themes/*.yaml (default: the config file's; "
-    "a theme picked in the command palette is remembered there)"
-)
-
+from console.options import DEFAULT_CONNECT, THEME_HELP
+from console.options import known_binding_ids as _known_binding_ids
 
 YES_HELP = (
     "quit without asking (for scripts); else ctrl+q asks while robots execute, commands "
     "wait for a robot or the plan has edits not saved to a file"
 )
+OBSERVER = "observer: this console watches, it changes nothing"
 DEMO_QUITS = (
     "Quitting ends the demo: its mission server and simulated robots stop, and its journal "
     "(in a temporary folder) is deleted — save the mission to keep the plan."
@@ -52,6 +46,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="settings file (default ~/.config/missionctl/config.toml or .yaml)",
     )
     c.add_argument("--yes", action="store_true", help=YES_HELP)
+    c.add_argument(
+        "--observer",
+        action="store_true",
+        help="watch only: this console changes nothing, whatever the account "
+        "(`missionctl web` serves it so by default)",
+    )
     c.set_defaults(func=run_console)
 
     d = sub.add_parser(
@@ -84,17 +84,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--yes", action="store_true", help=YES_HELP)
     d.set_defaults(func=run_demo)
 
+    from console.review.cli import register as register_review
+    from console.web import register as register_web
 
-def _known_binding_ids() -> set[str]:
-    from console.state.actions import ACTIONS
-
-    return {a.binding_id for a in ACTIONS} | {
-        "app.help",
-        "app.quit",
-        "editor.apply",
-        "editor.revert",
-        "editor.leave",
-    }
+    register_review(sub)
+    register_web(sub)
 
 
 def _run_app(app) -> int:
@@ -132,6 +126,7 @@ def run_console(args: argparse.Namespace) -> int:
         config=cfg,
         login=login,
         ask_before_quit=not args.yes,
+        observer=OBSERVER if args.observer else "",
     )
     code = _run_app(app)
     if app.login_refused:

@@ -59,6 +59,17 @@ def refusal_text(reply: ErrorReply, robot: str | None = None, skill: str | None 
     return f"{head}{reply.message}"
 
 
+class ReadOnlyBackend:
+    """The backend of a console that never changes the mission (an observer's
+    browser view): every operation is refused here, before the network."""
+
+    def __init__(self, reason: str) -> None:
+        self.reason = reason
+
+    async def submit(self, op: Any, *, expected_revision: int | None = None) -> OpReply:
+        raise ClientError(f"read-only: {self.reason}")
+
+
 def _quiet(*_args: Any, **_kw: Any) -> None:
     """A status line nobody shows."""
 

@@ -48,6 +48,14 @@ def prepare_parser(subparsers: Any) -> argparse.ArgumentParser:
         help="when the journal holds a batch that cannot be replayed, start from the mission "
         "before it; that batch and the later ones move to the journal's quarantine table",
     )
+    p.add_argument(
+        "--archive-samples",
+        type=int,
+        default=None,
+        metavar="N",
+        help="telemetry samples kept for review in DB's .telemetry.db beside it, the oldest "
+        "going first (default 2000000; 0: no archive). See docs/review.md",
+    )
     p.add_argument("-v", "--verbose", action="store_true")
     return p
 
@@ -81,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
         accounts=accounts,
         recover=args.recover,
         link_delay_hint=args.link_delay_hint,
+        **({} if args.archive_samples is None else {"archive_samples": args.archive_samples}),
     )
     try:
         return asyncio.run(_serve(server))

@@ -51,6 +51,8 @@ from backend.protocol.messages import (
     Alert,
     ErrorReply,
     FleetEvent,
+    HistoryReply,
+    HistoryRequest,
     OpReply,
     Request,
     RobotInfo,
@@ -523,6 +525,20 @@ class MissionClient:
             ) from None
         reply = OpReply.model_validate_json(raw)
         return reply
+
+    async def history(self, request: HistoryRequest, timeout: float | None = None) -> HistoryReply:
+        """Who did what, from the server's journal (`ctl history`): the newest
+        `request.limit` changes matching its filters, oldest first."""
+        wait = timeout or self.timeout
+        try:
+            raw = await query(self._session(), Keys.HISTORY, dumps(request), wait)
+        except QueryError as e:
+            raise OperationRefused(_error_reply(e.payload)) from None
+        except (QueryTimeout, NoResponder):
+            raise ServerUnreachable(
+                f"no mission server answered the history query within {wait:g} s"
+            ) from None
+        return HistoryReply.model_validate_json(raw)
 
     # -- the robot link -----------------------------------------------------------------
     def pending(self, robot: str | None = None) -> list[UplinkCommand]:

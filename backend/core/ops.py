@@ -81,6 +81,13 @@ ExpireS = Annotated[
 ]
 
 
+class Predicted(Strict):
+    """When the plan's forecast had a skill start and end."""
+
+    start: datetime
+    end: datetime
+
+
 class Sync(Strict):
     op: Literal["sync"] = "sync"
     robot: Name
@@ -88,6 +95,13 @@ class Sync(Strict):
         None, description="last skill to synchronize; all idle if omitted"
     )
     expire_s: ExpireS = None
+    forecast: dict[SkillId, Predicted] = Field(
+        default_factory=dict,
+        max_length=10_000,
+        description="the skills' predicted start and end as the synchronizing client's "
+        "forecast had them: journaled with the operation, so a review draws the plan "
+        "against what happened (the server does not use it)",
+    )
 
 
 class Unsync(Strict):

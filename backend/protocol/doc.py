@@ -74,6 +74,12 @@ KEY_SPACE: list[tuple[str, str, str, str]] = [
         "`StateRequest` (or nothing) → `StateSnapshot`; anything else: `bad_request`",
     ),
     (
+        f"`{Keys.HISTORY}`",
+        "queryable",
+        "server",
+        "`HistoryRequest` (or nothing) → `HistoryReply`: who did what, from the journal",
+    ),
+    (
         f"`{Keys.EVENTS}`",
         "publication",
         "server",
@@ -712,6 +718,8 @@ SCHEMAS: list[tuple[str, str, Any]] = [
     ("StateRequest", "StateRequest", p.StateRequest),
     ("StateSnapshot", "StateSnapshot", p.StateSnapshot),
     ("AccountInfo", "AccountInfo", p.AccountInfo),
+    ("HistoryRequest", "HistoryRequest", p.HistoryRequest),
+    ("HistoryReply", "HistoryReply", p.HistoryReply),
     ("EventBatch", "EventBatch", EventBatch),
     ("FleetEvent", "FleetEvent", p.FleetEvent),
     ("Alert", "Alert", p.Alert),

@@ -21,6 +21,7 @@ class Keys:
     EVENTS = f"{PREFIX}/server/events"  # publication: EventBatch, revisions consecutive
     FLEET = f"{PREFIX}/server/fleet"  # publication: FleetEvent
     ALERTS = f"{PREFIX}/server/alerts"  # publication: Alert
+    HISTORY = f"{PREFIX}/server/history"  # queryable: HistoryRequest -> HistoryReply
     # queryable: anything -> b"pong" (raw-transport baseline for benchmarks)
     PING = f"{PREFIX}/server/ping"
 

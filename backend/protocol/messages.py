@@ -55,6 +55,7 @@ Session = Annotated[str, Field(pattern=r"^[A-Za-z0-9_\-]+$", min_length=1, max_l
 MAX_BATCH = 1000  # messages or commands in one Uplink, Downlink or Register
 
 ALERTS_KEPT = 100  # the server's latest alerts in a state snapshot
+MAX_HISTORY = 10_000  # journal entries in one HistoryReply
 
 # -- consoles and ctl -> server -------------------------------------------------
 
@@ -110,6 +111,34 @@ class AccountInfo(Strict):
 class StateRequest(Strict):
     protocol: int = PROTOCOL_VERSION
     client: str = ""
+
+
+class HistoryRequest(Strict):
+    """Who did what, from the server's journal (`ctl history`): the newest
+    `limit` batches matching every filter given, oldest first."""
+
+    robot: Name | None = Field(None, description="only changes concerning this robot")
+    user: str | None = Field(
+        None, max_length=200, description="only operations of this user (the login or --user)"
+    )
+    since: datetime | None = Field(None, description="only changes journaled at or after this")
+    limit: int = Field(200, ge=1, le=MAX_HISTORY)
+
+
+class HistoryEntry(Strict):
+    revision: int
+    at: datetime = Field(description="when the server journaled it (the ground's clock)")
+    actor: str = Field(description="'user@client', a client id, or the robot for its reports")
+    user: str = ""
+    client: str = ""
+    op: str = Field(description="the operation's name: add, sync, report, answer, uplink_sent...")
+    robots: list[Name] = Field(default_factory=list, description="the robots it concerns")
+    batch: EventBatch = Field(description="what it changed")
+
+
+class HistoryReply(Strict):
+    entries: list[HistoryEntry] = Field(default_factory=list, max_length=MAX_HISTORY)
+    more: bool = Field(False, description="older matching changes were left out (`limit`, size)")
 
 
 class Module(Strict):

@@ -2,9 +2,9 @@
 
 The router enforces them on every message, with everything not allowed denied:
 
-- operator: read everything consoles read, and submit operations — only on
-  its own operation key `mc/v2/server/op/{user}`, so the server knows who
-  sent each operation (the ACL is what authenticates it);
+- operator: read everything consoles read (the journal's history too), and
+  submit operations — only on its own operation key `mc/v2/server/op/{user}`,
+  so the server knows who sent each operation (the ACL is what authenticates it);
 - observer: the same reads, no operation key at all;
 - robot: only its robots' keys (register, downlink, telemetry, presence,
   uplink and world queryables, barrier tokens), world queries to any robot,
@@ -31,7 +31,7 @@ _WATCH_SUBS = [
     KEY_MAP_DELTA,
     KEY_STATUS_LIVE,
 ]
-_WATCH_QUERIES = [Keys.STATE, Keys.PING, KEY_MAP_SNAPSHOT, KEY_STATUS]
+_WATCH_QUERIES = [Keys.STATE, Keys.HISTORY, Keys.PING, KEY_MAP_SNAPSHOT, KEY_STATUS]
 _PRESENCE = [Keys.SERVER_ALIVE, Keys.ALL_ALIVE]
 
 

@@ -25,7 +25,10 @@ Invariants:
 Tables (created by `journal_file`, which opens the file for its one writer):
   meta(key, value)                      format, library, created
   batches(revision PK, ts, actor, client, request_id, op, events, reply)
-  snapshots(revision PK, mission)       the last `keep_snapshots` only
+  snapshots(revision PK, mission)       the last `keep_snapshots` only (None: all, as
+                                        the server keeps them: `missionctl review` seeks
+                                        from the nearest; they add at most twice the
+                                        batches' bytes, SNAPSHOT_BYTES)
   quarantine(id PK, at, reason, kind, revision, ts, actor, client,
              request_id, op, content, reply)   moved aside by a recovery
   index batches_request on batches(client, request_id)
@@ -65,6 +68,7 @@ from pydantic import BaseModel, ValidationError
 from backend.core.bulk import gc_paused
 from backend.core.events import EventBatch, apply_events
 from backend.core.model import Mission
+from backend.core.records import size_on_disk
 from backend.server.journal_file import (
     JOURNAL_FORMAT,
     JournalCorrupt,
@@ -247,7 +251,7 @@ class Journal:
         *,
         snapshot_every: int = SNAPSHOT_EVERY,
         snapshot_bytes: float = SNAPSHOT_BYTES,
-        keep_snapshots: int = KEEP_SNAPSHOTS,
+        keep_snapshots: int | None = KEEP_SNAPSHOTS,
         lock_fd: int | None = None,
     ):
         self._conn: sqlite3.Connection | None = conn
@@ -256,7 +260,8 @@ class Journal:
         self._identity = identity(path)
         self.snapshot_every = snapshot_every
         self.snapshot_bytes = snapshot_bytes
-        self.keep_snapshots = max(1, keep_snapshots)
+        # None: every snapshot is kept (the server's: a review seeks from the nearest one)
+        self.keep_snapshots = None if keep_snapshots is None else max(1, keep_snapshots)
         self._lock = threading.RLock()
         self.load_info = LoadInfo()
         row = conn.execute("SELECT max(revision) FROM snapshots").fetchone()
@@ -300,7 +305,7 @@ class Journal:
         library: str | None = None,
         snapshot_every: int = SNAPSHOT_EVERY,
         snapshot_bytes: float = SNAPSHOT_BYTES,
-        keep_snapshots: int = KEEP_SNAPSHOTS,
+        keep_snapshots: int | None = KEEP_SNAPSHOTS,
     ) -> Journal:
         """Open (or create) the journal at `path`. `library` is recorded in a
         new journal (the skill library file the mission refers to); an
@@ -546,11 +551,12 @@ class Journal:
                     "INSERT OR REPLACE INTO snapshots (revision, mission) VALUES (?, ?)",
                     (rev, text),
                 )
-                conn.execute(
-                    "DELETE FROM snapshots WHERE revision NOT IN "
-                    "(SELECT revision FROM snapshots ORDER BY revision DESC LIMIT ?)",
-                    (self.keep_snapshots,),
-                )
+                if self.keep_snapshots is not None:
+                    conn.execute(
+                        "DELETE FROM snapshots WHERE revision NOT IN "
+                        "(SELECT revision FROM snapshots ORDER BY revision DESC LIMIT ?)",
+                        (self.keep_snapshots,),
+                    )
                 conn.execute("COMMIT")
             except BaseException:
                 rollback(conn)
@@ -685,12 +691,7 @@ class Journal:
 
     def size_bytes(self) -> int:
         """Bytes on disk: the database and its write-ahead log."""
-        total = 0
-        for suffix in ("", "-wal"):
-            f = self.path.with_name(self.path.name + suffix)
-            if f.exists():
-                total += f.stat().st_size
-        return total
+        return size_on_disk(self.path)
 
 
 def remember_requests(engine: Any, requests: Iterable[tuple[Any, ...]]) -> None:

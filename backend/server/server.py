@@ -18,6 +18,7 @@ import logging
 import sqlite3
 import uuid
 from collections import deque
+from collections.abc import Awaitable
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -30,12 +31,14 @@ from backend.core.library import Library
 from backend.core.model import Mission
 from backend.core.rules.engine import Applied, Engine, Refusal
 from backend.files.missions import library_path, load_library, load_mission
+from backend.protocol.archive import archive_path
 from backend.protocol.keys import PROTOCOL_VERSION, Keys
 from backend.protocol.messages import (
     ALERTS_KEPT,
     AccountInfo,
     Alert,
     FleetEvent,
+    HistoryRequest,
     OpReply,
     Request,
     RobotInfo,
@@ -45,8 +48,10 @@ from backend.protocol.messages import (
     dumps,
 )
 from backend.protocol.wire import parse
+from backend.server import history
 from backend.server.accounts import Accounts, zenoh_dictionary
 from backend.server.acl import acl_config
+from backend.server.archive import MAX_SAMPLES, TelemetryArchive
 from backend.server.journal import (
     Journal,
     JournalError,
@@ -88,6 +93,7 @@ class MissionServer:
         accounts: Accounts | None = None,
         recover: bool = False,
         link_delay_hint: float = 0.0,
+        archive_samples: int = MAX_SAMPLES,
     ):
         self.db = Path(db)
         self.mission_file = Path(mission_file) if mission_file else None
@@ -103,6 +109,9 @@ class MissionServer:
         # (backend.transport.timeouts); a floor for the robots' measured delays
         self.link_delay_hint = link_delay_hint
         self.server_id = uuid.uuid4().hex[:12]
+        # telemetry, alerts and presence kept beside the journal for review (0: none)
+        self.archive_samples = archive_samples
+        self.archive: TelemetryArchive | None = None
         self.robot_link = RobotLink(self)
         self.engine: Engine | None = None
         self.journal: Journal | None = None
@@ -125,7 +134,7 @@ class MissionServer:
     # -- start / stop ---------------------------------------------------------
     def _load(self) -> None:
         """Resume from the journal, or start it from the mission file."""
-        journal = Journal.open(self.db)
+        journal = Journal.open(self.db, keep_snapshots=None)
         try:
             mission, requests = self._resume(journal)
             if mission is not None:
@@ -146,7 +155,7 @@ class MissionServer:
                 mission, library = load_mission(self.mission_file)
                 lib_file = library_path(self.mission_file, mission.library)
                 journal.close()
-                journal = Journal.open(self.db, library=str(lib_file))
+                journal = Journal.open(self.db, library=str(lib_file), keep_snapshots=None)
                 try:
                     journal.snapshot(mission)
                 except sqlite3.Error as e:  # e.g. a full disk
@@ -169,6 +178,22 @@ class MissionServer:
         )
         remember_requests(self.engine, requests)
         self.robot_link.add_robots(mission.robots)
+        self._open_archive()
+
+    def _open_archive(self) -> None:
+        """The telemetry archive beside the journal; one that cannot be
+        opened is said and done without (the mission does not need it)."""
+        if self.archive_samples <= 0:
+            return
+        archive = TelemetryArchive(archive_path(self.db), max_samples=self.archive_samples)
+        try:
+            archive.start()
+        except (sqlite3.Error, OSError) as e:
+            log.warning(
+                "%s: no telemetry archive (%s); the mission goes on without", archive.path, e
+            )
+            return
+        self.archive = archive
 
     def _resume(self, journal: Journal) -> tuple[Mission | None, list[Remembered]]:
         """The journal's mission; with `recover`, a journal that cannot be
@@ -200,6 +225,8 @@ class MissionServer:
             s = self._session = await self._open_router()
         except BaseException:
             self.journal.close()
+            if self.archive is not None:
+                self.archive.close()
             raise
         self._events_pub = declare_publisher(s, Keys.EVENTS)
         self._fleet_pub = declare_publisher(s, Keys.FLEET)
@@ -207,6 +234,7 @@ class MissionServer:
         self._entities += [
             serve_async(s, Keys.OP, guard(self._handle_op)),
             serve_async(s, Keys.STATE, guard(self._handle_state)),
+            serve_async(s, Keys.HISTORY, guard(self._handle_history)),
             serve_async(s, Keys.op_as("*"), guard(self._handle_op), with_key=True),
             serve_async(s, Keys.account("*"), guard(self._handle_account), with_key=True),
             *self.robot_link.declare(s, guard),
@@ -244,6 +272,9 @@ class MissionServer:
         if self.journal is not None:
             self.journal.close()
             self.journal = None
+        archive, self.archive = self.archive, None
+        if archive is not None:
+            await asyncio.to_thread(archive.close)
 
     async def __aenter__(self) -> MissionServer:
         await self.start()
@@ -275,6 +306,8 @@ class MissionServer:
                 "%s: cannot store a snapshot (%s); will try again at the next operation", self.db, e
             )
         self._maybe_checkpoint()
+        if self.archive is not None:  # the review's index of the journal by time
+            self.archive.journaled(applied.revision, op)
         batch = EventBatch(revision=applied.revision, events=applied.events, actor=actor, op=op.op)
         self._publish(self._events_pub, batch.model_dump_json().encode())
         self.robot_link.applied(applied.events)  # commands to transmit, robots a mission names
@@ -374,6 +407,8 @@ class MissionServer:
             at=_now(),
         )
         self.alerts.append(a)
+        if self.archive is not None:
+            self.archive.alert(a)
         if self._alerts_pub is not None:
             self._publish(self._alerts_pub, dumps(a))
 
@@ -383,12 +418,16 @@ class MissionServer:
             t = parse(Telemetry, msg.payload)
         except ValueError:
             return  # not readable: consoles say so (an unreadable-message alert of their own)
+        if self.archive is not None:  # on this (Zenoh) thread: the loop never waits for it
+            self.archive.took(t)
         loop = self._loop
         if loop is not None and not loop.is_closed():
             loop.call_soon_threadsafe(self.telemetry_watch.took, t)
 
     def publish_fleet(self, info: RobotInfo) -> None:
         """A robot's presence or manifest changed (the robot link's news)."""
+        if self.archive is not None:
+            self.archive.fleet(info)
         if self._fleet_pub is not None:
             self._publish(self._fleet_pub, dumps(FleetEvent(robot=info)))
 
@@ -406,6 +445,17 @@ class MissionServer:
             alerts=list(self.alerts),
         )
         return snap.model_dump_json().encode()
+
+    def _handle_history(self, payload: bytes) -> Awaitable[bytes]:
+        """`ctl history`: read from the journal on a worker thread (history.py)."""
+        req = parse(HistoryRequest, payload) if payload else HistoryRequest()
+        owners = {s.id: robot for robot, task in self.mission.tasks.items() for s in task}
+
+        async def reply() -> bytes:
+            answer = await asyncio.to_thread(history.answer, self.db, req, owners)
+            return answer.model_dump_json().encode()
+
+        return reply()
 
     # -- operations from consoles and ctl -------------------------------------------
     def _handle_account(self, payload: bytes, key: str) -> bytes:

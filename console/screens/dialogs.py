@@ -20,7 +20,7 @@ from textual.widgets.option_list import Option
 
 from backend.core.library import Library
 from backend.core.model import NAME_RE, Status
-from console.state.actions import ACTIONS, APP_KEYS, EDITOR_KEYS, NAV_KEYS
+from console.state.actions import ACTIONS, APP_KEYS, EDITOR_KEYS, NAV_KEYS, Action
 from console.state.context import help_keys
 from console.state.files import complete, completions, full_path, path_note, save_risks, shown_path
 from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS
@@ -535,9 +535,10 @@ class HelpScreen(ModalScreen[None]):
 
     CSS_PATH = TCSS
 
-    def __init__(self, keys: dict[str, str]) -> None:
+    def __init__(self, keys: dict[str, str], actions: list[Action] = ACTIONS) -> None:
         super().__init__()
         self.keys = keys  # action name -> current key display
+        self.actions = actions  # the app's (a review adds its own)
 
     def compose(self) -> ComposeResult:
         with VerticalScroll():
@@ -571,7 +572,7 @@ class HelpScreen(ModalScreen[None]):
         heading("Navigation")
         table(NAV_KEYS)
         groups: dict[str, list] = {}
-        for a in ACTIONS:
+        for a in self.actions:
             groups.setdefault(a.group, []).append(a)
         for group, actions in groups.items():
             heading(group)
@@ -618,7 +619,7 @@ class HelpScreen(ModalScreen[None]):
         parts.append(
             Text(
                 '  ~/.config/missionctl/config.toml:  [keymap]  "mission.sync" = "S"\n'
-                "  binding ids: " + ", ".join(a.binding_id for a in ACTIONS),
+                "  binding ids: " + ", ".join(a.binding_id for a in self.actions),
                 style="dim",
             )
         )

@@ -144,7 +144,8 @@ def info_text(model: ConsoleModel, v: MapView, feed_state: str) -> Text:
     followed, the selected marker and the schedule's selected skill."""
     t = Text()
     if feed_state == "none" or v.mirror is None or not v.mirror.ready:
-        t.append(NO_FEED if feed_state == "none" else "waiting for the map feed…", style="bold")
+        why = model.map_note or NO_FEED
+        t.append(why if feed_state == "none" else "waiting for the map feed…", style="bold")
         t.append("  ")
     x, y = v.cursor
     t.append(f"cursor ({x:.1f}, {y:.1f}) heading {math.degrees(v.heading):.0f}°")
@@ -202,7 +203,7 @@ class MapScreen(Screen):
         self._status = StatusLine("", id="map-status")
         self.message = ""
         self.legend_choice: bool | None = None  # None: by terminal width
-        if model.map_mirror is not None:  # the feed came before the screen
+        if model.map_update is not None:  # the feed (or its absence) came before the screen
             self.map_changed(model.map_mirror, model.map_update)
 
     def compose(self) -> ComposeResult:

@@ -7,6 +7,7 @@ from __future__ import annotations
 from typing import Any
 
 from backend.core.ops import Control, Retry, Sync, Unsync
+from backend.core.plan.at_sync import at_sync
 from console.screens.dialogs import ConfirmScreen
 
 
@@ -21,14 +22,27 @@ class RunActions:
         robot, sid = s.selection()
         if robot is None or sid is None:
             return
-        op = Unsync(robot=robot, from_id=sid) if undo else Sync(robot=robot, through=sid)
+        if undo:
+            op: Unsync | Sync = Unsync(robot=robot, from_id=sid)
+        else:  # with the plan's forecast of what it sends: the review's plan against actual
+            plan = s.model.plan
+            forecast = at_sync(plan.forecast, s.model.task(robot), sid)
+            op = Sync(robot=robot, through=sid, forecast=forecast)
         what = "unsync" if undo else "sync"
+
+        def done(r: Any) -> None:
+            if not undo:  # this console's own syncs: the timeline draws them as planned
+                s.model.plan.planned.update(
+                    {k: (p.start.timestamp(), p.end.timestamp()) for k, p in op.forecast.items()}
+                )
+            s.say(_queued(robot, what, r.value), "ok")
+
         s.submit(
             op,
             f"{what} {robot} {'from' if undo else 'through'} {sid}",
             robot=robot,
             skill=sid,
-            then=lambda r: s.say(_queued(robot, what, r.value), "ok"),
+            then=done,
         )
 
     def retry(self) -> None:

@@ -124,7 +124,8 @@ class TimelineScreen(Screen):
         delay = self.model.plan.link_delay_s
         link = f" · link delay {delay:g} s" if delay else ""
         zoom = f" · {tl.fmt_step(self.win.dt)} per column"
-        self._summary.update(summary + link + zoom)
+        at_sync = " · ▔ as planned at sync" if self.model.plan.planned else ""
+        self._summary.update(summary + link + zoom + at_sync)
         self._details.update(tl.details(m, fc, self.model.selection.skill) if m else "")
 
     def _keep_selection_visible(self) -> None:

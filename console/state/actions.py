@@ -46,6 +46,7 @@ SCOPE_TITLES = {
     "alerts": "Alerts",
     "timeline": "Timeline",
     "checks": "Plan checks",
+    "review": "Review",
 }
 
 
@@ -374,6 +375,27 @@ ACTIONS: list[Action] = [
         True,
         "checks",
     ),
+]
+
+# `missionctl review` (console/review/app.py) only: bound on its app, so on every
+# screen; its help, palette and footer add them to the rest
+REVIEW_ACTIONS: list[Action] = [
+    Action(f"review_{name}", key, label, text, "Review", True, "review")
+    for name, key, label, text in (
+        ("next", "full_stop", "Next", "Step to the next change (operation, report, alert)"),
+        ("prev", "comma", "Prev", "Step back to the previous change"),
+        ("goto", "g", "Go to", "Go to a time (14:32, 14:32:05, +10m, -30s) or a revision (#120)"),
+        ("play", "o", "Play", "Play from here at the chosen speed, or pause"),
+        ("faster", "right_curly_bracket", "Faster", "Play faster"),
+        ("slower", "left_curly_bracket", "Slower", "Play slower"),
+        (
+            "clock",
+            "C",
+            "Clock",
+            "Switch between ground time (what the ground knew at T) and robot time "
+            "(what the robots reported happened at T)",
+        ),
+    )
 ]
 
 # the mission screen's actions (the rest are bound elsewhere)

@@ -64,6 +64,10 @@ KEY_GLYPHS = {
     "escape": "esc",
     "question_mark": "?",
     "delete": "del",
+    "full_stop": ".",
+    "comma": ",",
+    "left_curly_bracket": "{",
+    "right_curly_bracket": "}",
 }
 
 

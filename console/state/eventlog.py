@@ -86,6 +86,10 @@ class EventLog:
         self.entries: deque[LogEntry] = deque(maxlen=limit)
         self.seq = 0
 
+    def clear(self) -> None:
+        self.entries.clear()
+        self.seq = 0
+
     def add(self, kind: Kind, text: str, at: datetime, **kw: Any) -> LogEntry:
         self.seq += 1
         e = LogEntry(seq=self.seq, at=at, kind=kind, text=text, **kw)
@@ -260,6 +264,11 @@ class AlertBook:
         self.alerts: deque[AlertEntry] = deque(maxlen=limit)
         self.next_id = 1
         self._seen: set[tuple[str, int]] = set()  # (server run, alert id) taken already
+
+    def clear(self) -> None:
+        self.alerts.clear()
+        self._seen.clear()
+        self.next_id = 1
 
     @property
     def unacknowledged(self) -> int:

@@ -110,6 +110,7 @@ class ConsoleModel:
     server_id: str = ""
     # why nothing can be changed from this console ("" when it can): an observer account
     read_only: str = ""
+    observer: str = ""  # why it never changes anything, whatever its account (a browser)
     # skill id -> robot, skill id -> barrier id (kept in step with the mission)
     _owner: dict[str, str] = field(default_factory=dict)
     _barrier_of: dict[str, str] = field(default_factory=dict)
@@ -132,9 +133,11 @@ class ConsoleModel:
     # the map feed's mirror (None: no feed yet): backend.client.mapfollow
     map_mirror: Any = None
     map_update: Any = None  # its last update (mapfollow.MapUpdate)
+    map_note: str = ""  # why there is no map feed, when that is known (a review)
     # what happened (bounded), and what needs a person
     log: EventLog = field(default_factory=EventLog)
     alerts: AlertBook = field(default_factory=AlertBook)
+    ordered: bool = True  # False: batches in another order than revisions (replay.py)
 
     # -- taking events --------------------------------------------------------------
     def take(self, event: ModelEvent) -> StateChange:
@@ -170,7 +173,7 @@ class ConsoleModel:
             case Unreachable(detail=detail):
                 self.connection, self.connection_detail = UNREACHABLE, detail
             case AccountKnown(read_only=read_only):
-                self.read_only = read_only
+                self.read_only = self.observer or read_only
             case MapFed(mirror=mirror, update=update, speed=speed):
                 self.map_mirror, self.map_update = mirror, update
                 objects = getattr(mirror, "objects", None)
@@ -204,7 +207,7 @@ class ConsoleModel:
         return change(*topics, loaded=True, alerts=tuple(raised))
 
     def _applied(self, batch: ev.EventBatch) -> StateChange:
-        if self.mission is None or batch.revision <= self.mission.revision:
+        if self.mission is None or (self.ordered and batch.revision <= self.mission.revision):
             return NOTHING  # in the state already
         robots = self.apply(batch)
         self.log.add_batch(batch, self.owner, self.clock())
@@ -256,7 +259,7 @@ class ConsoleModel:
         (an old batch, in the state already: none)."""
         if self.mission is None:
             return None
-        if batch.revision <= self.mission.revision:
+        if self.ordered and batch.revision <= self.mission.revision:
             return set()
         self.mission = ev.apply_events(self.mission, batch)
         self._heard_in(batch)

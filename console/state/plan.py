@@ -39,6 +39,10 @@ class PlanView:
         self.marks: dict[str, Finding] = {}  # skill id -> its most severe finding
         self.mirror: MapMirror | None = None  # the map feed's, set by the app
         self.status: SimStatus | None = None  # the simulator's, set by the app
+        # skill id -> (start, end) its forecast had when it was synchronized (the
+        # timeline draws the plan under what happened): a review reads them from
+        # the journal, a console keeps those of its own syncs
+        self.planned: dict[str, tuple[float, float]] = {}
         self.generation = 0  # grows with every new forecast
         self.findings_generation = 0  # grows when the findings (or their waivers) change
         self._forecaster: Forecaster | None = None

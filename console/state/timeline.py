@@ -218,6 +218,18 @@ def spacer(columns: set[int], width: int) -> list[Cell]:
     return cells
 
 
+def planned(cells: list[Cell], spans: Iterable[tuple[float, float]], win: Window) -> list[Cell]:
+    """A lane's spacer with the skills as planned when synchronized (▔, just
+    under the bars of what happened); barrier links stay on top."""
+    out = list(cells)
+    for a, b in spans:
+        x1 = max(win.col(a) + 1, math.ceil((b - win.t0) / win.dt))
+        for x in range(max(0, win.col(a)), min(win.width, x1)):
+            if out[x][0] == " ":
+                out[x] = ("▔", ("planned",))
+    return out
+
+
 # -- the time axis ------------------------------------------------------------------------------
 
 

@@ -50,6 +50,10 @@ Operations
   unwaive CHECK_ID            withdraw a waiver
   timeline                    each skill's predicted start and end, barrier waits,
                               battery, spans out of coverage, and the plan's end
+  history [--robot R] [--user U] [--since T] [--limit N]
+                              who did what, from the server's journal: every
+                              operation (with its user and console), robot
+                              report and answer, oldest first (the newest N)
 
 Parameter values (--param NAME=VALUE)
   VALUE is a YAML scalar or flow YAML: `speed=0.4`, `filter=near_infrared`,
@@ -453,6 +457,42 @@ def _waive(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reason", required=True, metavar="TEXT", help="why (journaled, in every log)")
 
 
+def _history(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--robot", metavar="R", help="only changes concerning robot R")
+    p.add_argument(
+        "--user",
+        dest="history_user",
+        metavar="U",
+        help="only operations of user U (to log in, give --user before `history`)",
+    )
+    p.add_argument(
+        "--since",
+        type=_since,
+        metavar="T",
+        help="only changes since T: 30m (ago), 14:32 (today), 2030-07-01T14:32",
+    )
+    p.add_argument(
+        "--limit",
+        type=_history_limit,
+        default=200,
+        metavar="N",
+        help="the newest N matching changes (default 200, at most 10000)",
+    )
+
+
+def _since(text: str) -> Any:
+    from backend.cli.ctl.values import parse_since
+
+    return parse_since(text)
+
+
+def _history_limit(text: str) -> int:
+    n = _nonneg_int(text)
+    if not 1 <= n <= 10_000:
+        raise argparse.ArgumentTypeError(f"expected 1 to 10000, got {n}")
+    return n
+
+
 def _watch(p: argparse.ArgumentParser) -> None:
     p.add_argument("--count", type=_nonneg_int, metavar="N", help="stop after N change batches")
 
@@ -488,6 +528,7 @@ OPERATIONS: dict[str, tuple[str, Arguments]] = {
     "waive": ("let the skills of a plan check's finding be synchronized anyway", _waive),
     "unwaive": ("withdraw a waiver", _check_id),
     "timeline": ("print the predicted timeline of the plan", _nothing),
+    "history": ("who did what: the server's journal, filtered (audit)", _history),
 }
 
 
@@ -502,7 +543,9 @@ def prepare_parser(subparsers: Any) -> argparse.ArgumentParser:
     _common(p, top=True)
     ops = p.add_subparsers(dest="op", metavar="OP")
     for name, (help, arguments) in OPERATIONS.items():
-        sp = ops.add_parser(name, help=help, description=help)
+        # history's own --user (a filter) replaces the login's: log in before OP
+        resolve = "resolve" if name == "history" else "error"
+        sp = ops.add_parser(name, help=help, description=help, conflict_handler=resolve)
         _common(sp, top=False)
         arguments(sp)
     return p

@@ -65,6 +65,16 @@ async def gather(client: Any, timeout: float) -> PlanInputs:
     return plan_inputs(time.time(), dict(client.telemetry), site, status)
 
 
+async def sync_forecast(client: Any, op: Any, timeout: float) -> dict[str, Any]:
+    """What `ctl sync` sends with the sync: the forecast of the skills it
+    synchronizes (backend/core/plan/at_sync.py), from the inputs a console has."""
+    from backend.core.plan.at_sync import at_sync
+
+    inputs = await gather(client, timeout)
+    forecast = Forecaster(client.library).forecast(client.mission, inputs)
+    return at_sync(forecast, client.mission.tasks.get(op.robot, []), op.through)
+
+
 def _inputs_json(inputs: PlanInputs) -> dict[str, Any]:
     return {
         "telemetry": sorted(inputs.robots),

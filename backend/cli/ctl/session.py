@@ -21,6 +21,7 @@ from typing import Any
 
 from backend.cli.ctl.args import DEFAULT_CONNECT, ROBOT_OPS
 from backend.cli.ctl.errors import FileInvalid, UsageError
+from backend.cli.ctl.history import view as history_view
 from backend.cli.ctl.plan import check as plan_check
 from backend.cli.ctl.plan import timeline as plan_timeline
 from backend.cli.ctl.plan import wait_telemetry
@@ -255,7 +256,7 @@ async def _session(args: argparse.Namespace, endpoints: list[str], login: Any = 
         client_id=args.client_id or default_client_id(),
         timeout=args.timeout,
         # watch: to say when a robot's telemetry is unreadable
-        telemetry=args.op in ("robots", "watch", "check", "timeline"),
+        telemetry=args.op in ("robots", "watch", "check", "timeline", "sync"),
     )
     async with client:
         return await VIEWS.get(args.op, _operation)(client, args)
@@ -376,6 +377,10 @@ async def _operation(client: Any, args: argparse.Namespace) -> int:
 
     notes: list[str] = []
     op = build_op(args, client.library, client.mission)
+    if args.op == "sync":  # with the plan's forecast, as a console sends it (a review's plan)
+        from backend.cli.ctl.plan import sync_forecast
+
+        op = op.model_copy(update={"forecast": await sync_forecast(client, op, args.timeout)})
     if args.op == "load":
         file_lib = args.loaded[1]
         if file_lib != client.library:
@@ -467,4 +472,5 @@ VIEWS: dict[str, Callable[[Any, argparse.Namespace], Awaitable[int]]] = {
     "save": _save,
     "check": plan_check,
     "timeline": plan_timeline,
+    "history": history_view,
 }

@@ -12,7 +12,7 @@ import json
 import math
 import re
 from dataclasses import dataclass
-from datetime import date, datetime
+from datetime import UTC, date, datetime, timedelta
 from typing import Any
 
 from backend.cli.ctl.errors import UsageError
@@ -42,6 +42,29 @@ def parse_duration(text: str) -> float:
             f"not a duration: {text!r} (examples: 30m, 2h, 90s, 500ms, never)"
         )
     return seconds
+
+
+def parse_since(text: str, now: datetime | None = None) -> datetime:
+    """`--since`: a duration ago ('30m', '2h'), a time today ('14:32',
+    '14:32:05', local) or an ISO date-time. argparse's `type`."""
+    import argparse
+
+    now = now or datetime.now(UTC)
+    ago = duration_s(text)
+    if ago is not None:
+        return now - timedelta(seconds=ago)
+    try:
+        if ":" in text and "-" not in text and "T" not in text:
+            parts = [int(x) for x in text.split(":")]
+            local = now.astimezone()
+            h, m, s = (*parts, 0) if len(parts) == 2 else parts
+            return local.replace(hour=h, minute=m, second=s, microsecond=0)
+        t = datetime.fromisoformat(text)
+        return t if t.tzinfo else t.astimezone()
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"not a time: {text!r} (examples: 30m (ago), 14:32 (today), 2030-07-01T14:32)"
+        ) from None
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,7 @@ STYLES = (
     "axis-label",
     "name",
     "name-selected",
+    "planned",
 )
 
 
@@ -90,13 +91,17 @@ class TimelineView(Widget):
         )
         critical = frozenset(fc.critical_path()) if fc is not None else frozenset()
         links = tl.links(lanes, shown, win)
+        at_sync: dict[str, list[tuple[float, float]]] = {}  # robot -> spans planned at sync
+        for sid, span in plan.planned.items():
+            at_sync.setdefault(self.model.owner(sid) or "", []).append(span)
         self.rows, self.row_bars = [], {}
         for i, robot in enumerate(shown):
             self.row_bars[len(self.rows)] = lanes.get(robot, [])
             self.rows.append(
                 tl.lane(lanes.get(robot, []), win, now, reach, selected=sel, critical=critical)
             )
-            self.rows.append(tl.spacer(links.get(i, set()), win.width))
+            spacer = tl.spacer(links.get(i, set()), win.width)
+            self.rows.append(tl.planned(spacer, at_sync.get(robot, ()), win))
         self.axis_rows = tl.axis(win, now)
         self.refresh()
 

@@ -1,0 +1,405 @@
+"""A mission journal, read-only: the mission at any instant of either clock.
+
+The server's journal (backend/server/journal.py writes it) holds a snapshot
+of the whole mission every few hundred batches and every batch of events
+in between. `JournalReader` opens it read-only and keeps a small index (each
+batch's journal time; its robot time, built when first asked), so the state
+after any number of batches in either clock's order (`order.Order`) is one
+snapshot read and at most a snapshot's spacing of batches applied through
+`backend.core.events.apply_events`, the one path every mirror uses.
+
+In robot time batches are applied in another order than the journal's. A
+batch that would not apply there (a robot's clock so far behind that its
+report comes before the command it answers) is held back until what it
+needs was applied, and left out if that never comes (`State.unplaced`).
+
+The index starts at the oldest snapshot kept: a journal written by a server
+that kept only its last snapshots cannot show what came before them
+(`JournalReader.gap` says so).
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import sqlite3
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any, NamedTuple
+
+from pydantic import ValidationError
+
+from backend.core import events as ev
+from backend.core.bulk import gc_paused
+from backend.core.clocks import CLOCKS, GROUND, ROBOT, ROBOT_TIMED, Order, robot_keys
+from backend.core.model import Mission
+from backend.core.records import RecordError, open_read_only, tables
+
+# the journal formats this reader knows (backend/server/journal_file.py writes them)
+READABLE_FORMATS = frozenset({"missionctl/journal@1"})
+
+
+# the index of a journal by time: (revision, journal time, operation, robot time, robot)
+IndexRow = tuple[int, float, str, float | None, str | None]
+
+
+class Batch(NamedTuple):
+    """One journaled batch, as read back."""
+
+    revision: int
+    ts: float  # journal time (the ground's clock), seconds since the epoch
+    actor: str  # 'user@client', a client id, or the robot for its reports
+    client: str
+    op: dict[str, Any]  # the operation as journaled (its JSON; {"op": name} when not kept)
+    batch: ev.EventBatch
+
+    @property
+    def name(self) -> str:
+        return str(self.op.get("op", "")) or "change"
+
+    def batch_time(self) -> datetime:
+        return datetime.fromtimestamp(self.ts, UTC)
+
+
+@dataclass
+class State:
+    """The mission after the first `position` batches of a clock's order."""
+
+    clock: str
+    position: int
+    mission: Mission
+    revision: int  # the last batch applied (journal order) or the snapshot's
+    unplaced: list[int] = field(default_factory=list)  # revisions left out (robot time)
+
+
+def op_of(text: str) -> dict[str, Any]:
+    """A journaled operation's JSON as a dict ({"op": text} when it is only a name)."""
+    if text.startswith("{"):
+        try:
+            op = json.loads(text)
+        except ValueError:
+            return {"op": "unreadable"}
+        return op if isinstance(op, dict) else {"op": "unreadable"}
+    return {"op": text}
+
+
+def _spans(raw: dict[str, Any]) -> dict[str, tuple[float, float]]:
+    """A sync's forecast ({skill: {"start", "end"}}, ISO times) as seconds."""
+    out: dict[str, tuple[float, float]] = {}
+    for sid, p in raw.items():
+        start = _seconds(p.get("start")) if isinstance(p, dict) else None
+        end = _seconds(p.get("end")) if isinstance(p, dict) else None
+        if start is not None and end is not None:
+            out[str(sid)] = (start, end)
+    return out
+
+
+def _seconds(text: Any) -> float | None:
+    if not isinstance(text, str):
+        return None
+    try:
+        return datetime.fromisoformat(text).timestamp()
+    except ValueError:
+        return None
+
+
+class JournalReader:
+    """A journal opened read-only. Batch index i is revision `base + 1 + i`."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self._conn = open_read_only(self.path, "journal")
+        try:
+            self._read_header()
+        except sqlite3.Error as e:
+            self.close()
+            raise RecordError(f"{self.path}: cannot read the journal: {e}") from None
+        except RecordError:
+            self.close()
+            raise
+        self._orders: dict[str, Order] = {}
+        self._syncs: list[tuple[int, dict[str, tuple[float, float]]]] | None = None
+
+    def _read_header(self) -> None:
+        conn = self._conn
+        if not {"meta", "batches", "snapshots"} <= tables(conn):
+            raise RecordError(f"{self.path}: not a missionctl journal (no batches or snapshots)")
+        self.meta: dict[str, str] = dict(conn.execute("SELECT key, value FROM meta").fetchall())
+        fmt = self.meta.get("format")
+        if fmt not in READABLE_FORMATS:
+            raise RecordError(
+                f"{self.path}: journal format {fmt!r} is not one this version reads "
+                f"({', '.join(sorted(READABLE_FORMATS))})"
+            )
+        rows = conn.execute("SELECT revision FROM snapshots ORDER BY revision")
+        snaps = [int(r) for (r,) in rows]
+        if not snaps:
+            raise RecordError(f"{self.path}: the journal has no snapshot: nothing to replay from")
+        self.base = snaps[0]
+        self.snapshot_revisions = snaps
+        first, last = conn.execute("SELECT min(revision), max(revision) FROM batches").fetchone()
+        # batches before the oldest snapshot cannot be replayed: it is where replay starts
+        self.gap = first is not None and first <= self.base
+        self.last: int = max(self.base, int(last or self.base))
+        self._given: list[IndexRow] = []
+        self._index: tuple[list[float], list[float | None], list[str]] | None = None
+        self._names: list[str] = []  # each batch's operation
+
+    def close(self) -> None:
+        self._conn.close()
+
+    def __enter__(self) -> JournalReader:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- what it holds ---------------------------------------------------------------------
+    @property
+    def library(self) -> str:
+        """The skill library file the server recorded (as it named it)."""
+        return self.meta.get("library", "")
+
+    def __len__(self) -> int:
+        return self.last - self.base
+
+    def use_index(self, rows: list[IndexRow]) -> None:
+        """The server's index of this journal by time (the telemetry
+        archive's, backend/protocol/archive.py): what it covers is not read
+        from the journal."""
+        self._given = rows
+
+    def _times(self) -> tuple[list[float], list[float | None], list[str]]:
+        """Per batch: its journal time (never going back: a wall clock that
+        stepped back), its robot time (None: the ground's), its actor."""
+        if self._index is None:
+            rows = self._covered()
+            rows += self._scan(rows[-1][0] if rows else self.base)
+            self._check_complete([r[0] for r in rows])
+            ground = list(itertools.accumulate((r[1] for r in rows), max))
+            self._index = (ground, [r[3] for r in rows], [r[4] or "" for r in rows])
+            self._names = [r[2] for r in rows]
+        return self._index
+
+    def _check_complete(self, revisions: list[int]) -> None:
+        """RecordError naming the first batch missing from `revisions`."""
+        expected = range(self.base + 1, self.last + 1)
+        if revisions == list(expected):
+            return
+        missing = next(
+            (e for e, r in zip(expected, revisions, strict=False) if e != r),
+            self.base + 1 + len(revisions),
+        )
+        raise RecordError(
+            f"{self.path}: batch {missing} is missing; `missionctl server` on this "
+            "journal says how to recover it"
+        )
+
+    def _covered(self) -> list[IndexRow]:
+        """The given index's rows from the first batch on, while consecutive."""
+        rows = [r for r in self._given if self.base < r[0] <= self.last]
+        for k, r in enumerate(rows):
+            if r[0] != self.base + 1 + k:
+                return rows[:k]
+        return rows
+
+    def _scan(self, after: int) -> list[IndexRow]:
+        """The index of the batches after `after`, read from the journal itself."""
+        rows = self._conn.execute(
+            "SELECT revision, ts, actor, json_extract(op, '$.op'), json_extract(op, '$.at') "
+            "FROM batches WHERE revision > ? ORDER BY revision",
+            (after,),
+        )
+        out: list[IndexRow] = []
+        for rev, ts, actor, name, at in rows:
+            robot_at = _seconds(at) if name in ROBOT_TIMED else None
+            out.append((rev, ts, name or "", robot_at, actor if robot_at is not None else None))
+        return out
+
+    @property
+    def ground(self) -> list[float]:
+        return self._times()[0]
+
+    def start_time(self) -> float | None:
+        """When the journal starts: its first batch (None: no batch yet)."""
+        ground = self.ground
+        return ground[0] if ground else None
+
+    def end_time(self) -> float | None:
+        ground = self.ground
+        return ground[-1] if ground else None
+
+    def order(self, clock: str) -> Order:
+        """The batches in `clock`'s order (each built when first asked)."""
+        if clock not in CLOCKS:
+            raise ValueError(f"no clock {clock!r}: {' or '.join(CLOCKS)}")
+        found = self._orders.get(clock)
+        if found is None:
+            ground, robot, actors = self._times()
+            keys = ground if clock == GROUND else robot_keys(ground, robot, actors)
+            found = self._orders[clock] = Order(keys)
+        return found
+
+    def syncs(self) -> list[tuple[int, dict[str, tuple[float, float]]]]:
+        """(batch index, the forecast it was sent with: skill -> (start, end))
+        of every sync that carried one, in journal order (read once)."""
+        if self._syncs is None:
+            self._times()
+            revisions = [self.base + 1 + i for i, n in enumerate(self._names) if n == "sync"]
+            found: list[tuple[int, dict[str, tuple[float, float]]]] = []
+            for k in range(0, len(revisions), 500):  # SQLite's limit on parameters
+                part = revisions[k : k + 500]
+                marks = ", ".join("?" * len(part))
+                rows = self._conn.execute(
+                    f"SELECT revision, op FROM batches WHERE revision IN ({marks})", part
+                )
+                for rev, text in rows:
+                    forecast = op_of(text).get("forecast")
+                    if isinstance(forecast, dict) and forecast:
+                        found.append((rev - self.base - 1, _spans(forecast)))
+            found.sort()
+            self._syncs = found
+        return self._syncs
+
+    # -- batches ---------------------------------------------------------------------------
+    def batches(self, first: int, last: int) -> Iterator[Batch]:
+        """Batches with revisions first..last, in journal order."""
+        rows = self._conn.execute(
+            "SELECT revision, ts, actor, client, op, events FROM batches "
+            "WHERE revision BETWEEN ? AND ? ORDER BY revision",
+            (first, last),
+        )
+        for rev, ts, actor, client, op, events in rows:
+            yield self._batch(rev, ts, actor, client, op, events)
+
+    def _batch(self, rev: int, ts: float, actor: str, client: str, op: str, events: str) -> Batch:
+        try:
+            batch = ev.EventBatch.model_validate_json(events)
+        except ValidationError as e:
+            raise RecordError(
+                f"{self.path}: batch {rev} cannot be read ({e.errors()[0]['msg']}); "
+                "`missionctl server` on this journal says how to recover it"
+            ) from None
+        parsed = op_of(op)
+        batch.op = str(parsed.get("op", ""))
+        batch.actor = actor
+        return Batch(rev, ts, actor, client, parsed, batch)
+
+    def newest(self, since: float | None = None) -> Iterator[tuple[Any, ...]]:
+        """Every journaled batch (before the oldest snapshot too), newest
+        first, as raw rows for `read` (an audit reads the actor before it
+        parses anything)."""
+        cur = self._conn.execute(
+            "SELECT revision, ts, actor, client, op, events FROM batches WHERE ts >= ? "
+            "ORDER BY revision DESC",
+            (since if since is not None else float("-inf"),),
+        )
+        while rows := cur.fetchmany(1000):
+            yield from rows
+
+    def read(self, row: tuple[Any, ...]) -> Batch:
+        """A raw row of `newest` as a Batch."""
+        return self._batch(*row)
+
+    def pick(self, indices: Iterable[int]) -> dict[int, Batch]:
+        """The batches at these indices (one read of their span)."""
+        wanted = sorted(set(indices))
+        if not wanted:
+            return {}
+        lo, hi = self.base + 1 + wanted[0], self.base + 1 + wanted[-1]
+        keep = {self.base + 1 + i for i in wanted}
+        return {b.revision - self.base - 1: b for b in self.batches(lo, hi) if b.revision in keep}
+
+    def snapshot(self, revision: int) -> Mission:
+        (text,) = self._conn.execute(
+            "SELECT mission FROM snapshots WHERE revision = ?", (revision,)
+        ).fetchone()
+        try:
+            return Mission.model_validate_json(text)
+        except ValidationError as e:
+            raise RecordError(
+                f"{self.path}: the snapshot at revision {revision} cannot be read "
+                f"({e.errors()[0]['msg']})"
+            ) from None
+
+    # -- the state at a position -----------------------------------------------------------
+    def state(self, position: int, clock: str = GROUND) -> State:
+        """The mission after the first `position` batches in `clock`'s order."""
+        order = self.order(clock)
+        position = max(0, min(position, len(order)))
+        snaps = [r - self.base - 1 for r in self.snapshot_revisions]
+        plan = order.plan(position, snaps)
+        with gc_paused():
+            mission = self.snapshot(self.base + 1 + plan.snapshot)
+            batches = self.pick(plan.apply)
+            unplaced: list[int] = []
+            if clock == ROBOT:
+                mission = apply_in_order(mission, [batches[i] for i in plan.apply], unplaced)
+            else:
+                for i in plan.apply:
+                    mission = ev.apply_events(mission, batches[i].batch)
+        last = max([self.base + 1 + plan.snapshot, *(b.revision for b in batches.values())])
+        return State(clock, position, mission, last, unplaced)
+
+    def state_at(self, t: float, clock: str = GROUND) -> State:
+        """The mission as it was at time `t` of `clock`."""
+        return self.state(self.order(clock).position_at(t), clock)
+
+    def time_of(self, position: int, clock: str = GROUND) -> float | None:
+        return self.order(clock).time_of(position)
+
+    def revision_of(self, index: int) -> int:
+        return self.base + 1 + index
+
+
+# -- robot time: applying out of journal order ---------------------------------------------
+
+
+def missing(mission: Mission, batch: ev.EventBatch) -> str | None:
+    """What `batch` refers to that `mission` lacks (None: it applies)."""
+    skills: set[str] = set()
+    commands: set[int] = set()
+    for e in batch.events:
+        match e:
+            case ev.SkillAdded(skill=s):
+                skills.add(s.id)
+            case ev.CommandQueued(command=c):
+                commands.add(c.id)
+            case ev.MissionReplaced():
+                return None
+            case (
+                ev.SkillRemoved(id=sid)
+                | ev.SkillMoved(id=sid)
+                | ev.SkillStatusChanged(id=sid)
+                | ev.SkillEdited(id=sid)
+            ):
+                if sid not in skills and mission.find(sid) is None:
+                    return f"skill {sid}"
+            case ev.CommandChanged(id=cid):
+                if cid not in commands and mission.command(cid) is None:
+                    return f"command {cid}"
+            case _:
+                pass
+    return None
+
+
+def apply_in_order(mission: Mission, batches: list[Batch], unplaced: list[int]) -> Mission:
+    """Apply `batches` in this order; one that does not apply yet waits until
+    a later one made it apply, or is left out (its revision in `unplaced`)."""
+    waiting: list[Batch] = []
+    for b in batches:
+        if missing(mission, b.batch) is not None:
+            waiting.append(b)
+            continue
+        mission = ev.apply_events(mission, b.batch)
+        while waiting:  # what it made possible
+            ready = [w for w in waiting if missing(mission, w.batch) is None]
+            if not ready:
+                break
+            for w in ready:
+                waiting.remove(w)
+                mission = ev.apply_events(mission, w.batch)
+    unplaced.extend(w.revision for w in waiting)
+    return mission

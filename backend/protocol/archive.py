@@ -1,0 +1,232 @@
+"""The telemetry archive beside a journal: its file, its schema, reading it.
+
+The server writes it (backend/server/archive.py says what it keeps and for
+how long): every robot's telemetry, downsampled, and the server's alerts and
+the robots' presence changes, which the journal does not hold. Each sample
+has two times: `at`, the robot's (when it was measured), and `received`,
+the ground's (when the server took it), so a review can show it in either
+clock. `ArchiveReader` reads it read-only.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+from collections.abc import Iterator
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any, NamedTuple, TypeVar
+
+from pydantic import ValidationError
+
+from backend.core.clocks import GROUND, ROBOT
+from backend.core.model import Pose
+from backend.core.records import RecordError, open_read_only, size_on_disk, tables
+from backend.protocol.messages import Alert, RobotInfo, Telemetry
+
+ARCHIVE_FORMAT = "missionctl/telemetry-archive@1"
+
+SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (
+    key   TEXT PRIMARY KEY,
+    value TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS telemetry (
+    id       INTEGER PRIMARY KEY,
+    robot    TEXT NOT NULL,
+    at       REAL NOT NULL,
+    received REAL NOT NULL,
+    x REAL, y REAL, z REAL, roll REAL, pitch REAL, yaw REAL,
+    battery  REAL, link REAL, in_range INTEGER,
+    mode     TEXT, skill TEXT, progress REAL, eta_s REAL, info TEXT
+);
+CREATE INDEX IF NOT EXISTS telemetry_ground ON telemetry (robot, received);
+CREATE INDEX IF NOT EXISTS telemetry_robot ON telemetry (robot, at);
+CREATE TABLE IF NOT EXISTS notes (
+    id   INTEGER PRIMARY KEY,
+    kind TEXT NOT NULL,
+    at   REAL NOT NULL,
+    body TEXT NOT NULL
+);
+CREATE INDEX IF NOT EXISTS notes_at ON notes (at);
+CREATE TABLE IF NOT EXISTS journal (
+    revision INTEGER PRIMARY KEY,
+    ts       REAL NOT NULL,
+    op       TEXT NOT NULL,
+    robot_at REAL,
+    robot    TEXT
+);
+"""
+
+SAMPLE_COLUMNS = (
+    "robot, at, received, x, y, z, roll, pitch, yaw, battery, link, in_range, "
+    "mode, skill, progress, eta_s, info"
+)
+ALERT, FLEET = "alert", "fleet"  # the kinds of note
+M = TypeVar("M", Alert, RobotInfo)
+
+
+def archive_path(db: str | Path) -> Path:
+    """The archive beside journal `db`: mission.db -> mission.telemetry.db."""
+    p = Path(db)
+    return p.with_name(f"{p.stem}.telemetry{p.suffix or '.db'}")
+
+
+def sample_row(t: Telemetry, received: float) -> tuple[object, ...]:
+    """A sample as the archive's columns (SAMPLE_COLUMNS)."""
+    p = t.pose
+    return (
+        t.robot,
+        t.at.timestamp(),
+        received,
+        p.x,
+        p.y,
+        p.z,
+        p.roll,
+        p.pitch,
+        p.yaw,
+        t.battery,
+        t.link,
+        int(t.in_range),
+        t.mode,
+        t.skill,
+        t.progress,
+        t.eta_s,
+        t.info,
+    )
+
+
+def _sample(row: tuple[Any, ...]) -> Telemetry:  # a telemetry row as SQLite gives it
+    robot, at, _received, x, y, z, roll, pitch, yaw, battery, link, in_range, *rest = row
+    mode, skill, progress, eta_s, info = rest
+    return Telemetry.model_construct(
+        robot=robot,
+        pose=Pose.model_construct(x=x, y=y, z=z, roll=roll, pitch=pitch, yaw=yaw),
+        battery=battery,
+        link=link,
+        in_range=bool(in_range),
+        mode=mode,
+        skill=skill,
+        progress=progress,
+        eta_s=eta_s,
+        info=info or "",
+        at=datetime.fromtimestamp(float(at), UTC),
+    )
+
+
+class Sample(NamedTuple):
+    at: float  # when it shows, in the clock asked for
+    telemetry: Telemetry
+
+
+class ArchiveReader:
+    """A telemetry archive opened read-only."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self._conn = open_read_only(self.path, "telemetry archive")
+        try:
+            if not {"meta", "telemetry", "notes"} <= tables(self._conn):
+                raise RecordError(f"{self.path}: not a missionctl telemetry archive")
+            meta = dict(self._conn.execute("SELECT key, value FROM meta").fetchall())
+            if meta.get("format") != ARCHIVE_FORMAT:
+                raise RecordError(
+                    f"{self.path}: archive format {meta.get('format')!r} is not {ARCHIVE_FORMAT!r}"
+                )
+            self.meta = meta
+            self.robots = [r for (r,) in self._conn.execute("SELECT DISTINCT robot FROM telemetry")]
+        except sqlite3.Error as e:
+            self.close()
+            raise RecordError(f"{self.path}: cannot read the telemetry archive: {e}") from None
+        except RecordError:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        self._conn.close()
+
+    def __enter__(self) -> ArchiveReader:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @staticmethod
+    def _column(clock: str) -> str:
+        return "received" if clock == GROUND else "at" if clock == ROBOT else ""
+
+    def last_samples(self, robot: str, t: float, clock: str, n: int) -> list[Sample]:
+        """The robot's last `n` samples at or before `t` of `clock`, oldest first."""
+        col = self._column(clock)
+        rows = self._conn.execute(
+            f"SELECT {col}, {SAMPLE_COLUMNS} FROM telemetry WHERE robot = ? AND {col} <= ? "
+            f"ORDER BY {col} DESC LIMIT ?",
+            (robot, t, n),
+        ).fetchall()
+        return [Sample(row[0], _sample(row[1:])) for row in reversed(rows)]
+
+    def samples(self, after: float, upto: float, clock: str) -> Iterator[Sample]:
+        """Every robot's samples with `after` < time <= `upto` in `clock`, in time order."""
+        col = self._column(clock)
+        rows = self._conn.execute(
+            f"SELECT {col}, {SAMPLE_COLUMNS} FROM telemetry WHERE {col} > ? AND {col} <= ? "
+            f"ORDER BY {col}",
+            (after, upto),
+        )
+        for row in rows:
+            yield Sample(row[0], _sample(row[1:]))
+
+    def journal_index(self, after: int) -> list[tuple[int, float, str, float | None, str | None]]:
+        """The journal's batches after revision `after` as the server indexed
+        them: (revision, journal time, operation, robot time or None, robot or None)."""
+        if "journal" not in tables(self._conn):  # an archive older than the index
+            return []
+        return self._conn.execute(
+            "SELECT revision, ts, op, robot_at, robot FROM journal WHERE revision > ? "
+            "ORDER BY revision",
+            (after,),
+        ).fetchall()
+
+    def span(self, clock: str) -> tuple[float, float] | None:
+        col = self._column(clock)
+        lo, hi = self._conn.execute(f"SELECT min({col}), max({col}) FROM telemetry").fetchone()
+        return None if lo is None else (lo, hi)
+
+    # -- alerts and presence ---------------------------------------------------------------
+    def alerts(self, after: float, upto: float, limit: int = -1) -> list[Alert]:
+        """The server's alerts raised in (after, upto], oldest first (with
+        `limit`, the last ones)."""
+        rows = self._conn.execute(
+            "SELECT body FROM notes WHERE kind = ? AND at > ? AND at <= ? "
+            "ORDER BY at DESC, id DESC LIMIT ?",
+            (ALERT, after, upto, limit),
+        ).fetchall()
+        return [a for a in (_read(Alert, body) for (body,) in reversed(rows)) if a is not None]
+
+    def presence(self, upto: float) -> dict[str, RobotInfo]:
+        """Each robot's last presence (fleet) news at or before `upto`."""
+        rows = self._conn.execute(
+            "SELECT body FROM notes WHERE kind = ? AND at <= ? ORDER BY at, id", (FLEET, upto)
+        )
+        out: dict[str, RobotInfo] = {}
+        for (body,) in rows:
+            info = _read(RobotInfo, body)
+            if info is not None:
+                out[info.name] = info
+        return out
+
+    def fleet(self, after: float, upto: float) -> list[tuple[float, RobotInfo]]:
+        rows = self._conn.execute(
+            "SELECT at, body FROM notes WHERE kind = ? AND at > ? AND at <= ? ORDER BY at, id",
+            (FLEET, after, upto),
+        )
+        return [(at, info) for at, body in rows if (info := _read(RobotInfo, body)) is not None]
+
+    def size_bytes(self) -> int:
+        return size_on_disk(self.path)
+
+
+def _read(model: type[M], body: str) -> M | None:
+    try:
+        return model.model_validate_json(body)
+    except ValidationError:
+        return None  # written by another version: left out, the rest still shows

@@ -1,0 +1,252 @@
+"""The telemetry archive: what the journal does not hold, kept for review.
+
+Beside the journal (`mission.db` -> `mission.telemetry.db`, see
+backend/files/record/archive.py for the schema) the server keeps:
+
+- every robot's telemetry, **downsampled**: a robot's sample is kept when
+  its mode, its skill or its contact (in range or not) differs from its last
+  kept sample, or when `every_s` (default 1 s) has passed since that one by
+  the ground's clock; never more than 10 a second per robot (a value that
+  flaps cannot flood it). The rest are dropped: a rover reporting 4 times a
+  second leaves about one sample a second, each with the robot's own time
+  and the time the ground took it.
+- the server's alerts and the robots' presence changes (`notes`);
+- an index of the journal by time (`journal`: each batch's revision, when
+  it was journaled, its operation and, for a robot's report or answer, the
+  robot and its own time): a review orders 100,000 batches in either clock from it
+  without reading the journal through (a review of a journal without it
+  reads the journal through instead, slower).
+
+**Bounded**: at most `max_samples` samples (default 2,000,000: about 140
+robot-hours... see docs/performance.md for the bytes per robot-hour); past
+that the oldest samples go first (retention: the newest `max_samples`).
+Alerts and presence are a few per robot and hour and are all kept, as is
+the index (about 30 bytes per journaled batch).
+
+**Off the event loop**: the sample is taken or dropped on the Zenoh thread
+that received it (a comparison), and handed to a writer thread through a
+bounded queue; the writer inserts whatever waits in one transaction, about
+every `flush_s`. A full queue drops the sample (counted in `dropped`,
+logged once): nothing ever waits for the disk but that thread.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import sqlite3
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from backend.core.clocks import ROBOT_TIMED
+from backend.protocol.archive import (
+    ALERT,
+    ARCHIVE_FORMAT,
+    FLEET,
+    SAMPLE_COLUMNS,
+    SCHEMA,
+    sample_row,
+)
+from backend.protocol.messages import Alert, RobotInfo, Telemetry
+
+log = logging.getLogger(__name__)
+
+EVERY_S = 1.0  # a robot's sample at least this often (ground seconds)
+MIN_GAP_S = 0.1  # ...and never more often than this, whatever changes
+MAX_SAMPLES = 2_000_000
+QUEUE_MAX = 20_000  # samples waiting for the writer (about a minute of a busy site)
+FLUSH_S = 0.5
+
+_INSERT_SAMPLE = f"INSERT INTO telemetry ({SAMPLE_COLUMNS}) VALUES ({', '.join('?' * 17)})"
+_INSERT_BATCH = (
+    "INSERT OR REPLACE INTO journal (revision, ts, op, robot_at, robot) VALUES (?, ?, ?, ?, ?)"
+)
+
+
+@dataclass
+class _Kept:
+    """A robot's last kept sample: when (monotonic), and what it said."""
+
+    at: float
+    mode: str
+    skill: str | None
+    in_range: bool
+
+
+class TelemetryArchive:
+    """The archive's writer: `took` and `note` from any thread, `close` once."""
+
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        every_s: float = EVERY_S,
+        max_samples: int = MAX_SAMPLES,
+        flush_s: float = FLUSH_S,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.path = Path(path)
+        self.every_s = every_s
+        self.max_samples = max(1, max_samples)
+        self.flush_s = flush_s
+        self._clock = clock  # for the downsampling (tests and benches play time)
+        self._kept: dict[str, _Kept] = {}
+        self._queue: queue.Queue[tuple[str, tuple[object, ...]] | None] = queue.Queue(QUEUE_MAX)
+        self._thread: threading.Thread | None = None
+        self.kept = 0  # samples handed to the writer
+        self.skipped = 0  # samples the downsampling left out
+        self.dropped = 0  # samples lost to a full queue
+        self.written = 0  # rows the writer committed
+        self.failed: str | None = None  # why the writer stopped writing
+
+    # -- start and stop -------------------------------------------------------------------
+    def start(self) -> None:
+        """Open (or create) the file and start the writer thread. Raises
+        sqlite3.Error / OSError when the file cannot be used."""
+        conn = sqlite3.connect(self.path, isolation_level=None, check_same_thread=False)
+        try:
+            conn.execute("PRAGMA journal_mode=WAL")
+            conn.execute("PRAGMA synchronous=NORMAL")  # a lost last second is acceptable here
+            conn.executescript(SCHEMA)
+            conn.execute(
+                "INSERT OR IGNORE INTO meta (key, value) VALUES ('format', ?), ('created', ?)",
+                (ARCHIVE_FORMAT, datetime.now(UTC).isoformat(timespec="seconds")),
+            )
+            conn.execute(
+                "INSERT OR REPLACE INTO meta (key, value) VALUES ('rule', ?)",
+                (
+                    f"every {self.every_s:g} s or on a change of mode, skill or contact; "
+                    f"the newest {self.max_samples} samples",
+                ),
+            )
+            count = conn.execute("SELECT count(*) FROM telemetry").fetchone()[0]
+        except BaseException:
+            conn.close()
+            raise
+        self._thread = threading.Thread(
+            target=self._write, args=(conn, count), name="telemetry-archive", daemon=True
+        )
+        self._thread.start()
+
+    def close(self, timeout: float = 5.0) -> None:
+        """Write what waits, stop the writer."""
+        thread, self._thread = self._thread, None
+        if thread is None:
+            return
+        self._queue.put(None)
+        thread.join(timeout)
+
+    # -- taking (any thread) --------------------------------------------------------------------
+    def took(self, t: Telemetry, received: float | None = None) -> bool:
+        """A sample the server received: kept (True) or left out by the rule."""
+        if self._thread is None:
+            return False
+        now = self._clock()
+        last = self._kept.get(t.robot)
+        if last is not None:
+            gap = now - last.at
+            changed = (t.mode, t.skill, t.in_range) != (last.mode, last.skill, last.in_range)
+            if gap < MIN_GAP_S or (gap < self.every_s and not changed):
+                self.skipped += 1
+                return False
+        self._kept[t.robot] = _Kept(now, t.mode, t.skill, t.in_range)
+        row = sample_row(t, time.time() if received is None else received)
+        if self._put(("sample", row)):
+            self.kept += 1
+            return True
+        return False
+
+    def journaled(self, revision: int, op: Any, ts: float | None = None) -> None:
+        """The journal took `op` at `revision`: its row in the review's index
+        (when, and for a robot's report or answer, the robot and its own time)."""
+        name = str(getattr(op, "op", ""))
+        at = getattr(op, "at", None) if name in ROBOT_TIMED else None
+        robot = getattr(op, "robot", None) if at is not None else None
+        when = time.time() if ts is None else ts
+        self._put(("batch", (revision, when, name, at.timestamp() if at else None, robot)))
+
+    def alert(self, a: Alert) -> None:
+        self._put(("note", (ALERT, a.at.timestamp(), a.model_dump_json())))
+
+    def fleet(self, info: RobotInfo, at: float | None = None) -> None:
+        when = time.time() if at is None else at
+        self._put(("note", (FLEET, when, info.model_dump_json())))
+
+    def _put(self, item: tuple[str, tuple[object, ...]]) -> bool:
+        try:
+            self._queue.put_nowait(item)
+            return True
+        except queue.Full:
+            self.dropped += 1
+            if self.dropped == 1:
+                log.warning(
+                    "%s: the telemetry archive cannot keep up; samples are dropped "
+                    "(the mission is not affected)",
+                    self.path,
+                )
+            return False
+
+    # -- the writer thread ------------------------------------------------------------------------
+    def _write(self, conn: sqlite3.Connection, count: int) -> None:
+        try:
+            while True:
+                first = self._queue.get()
+                if first is None:
+                    return
+                items = [first]
+                deadline = time.monotonic() + self.flush_s
+                stop = False
+                while True:  # gather what comes within flush_s
+                    try:
+                        item = self._queue.get(timeout=max(0.0, deadline - time.monotonic()))
+                    except queue.Empty:
+                        break
+                    if item is None:
+                        stop = True
+                        break
+                    items.append(item)
+                count = self._commit(conn, items, count)
+                if stop:
+                    return
+        except (sqlite3.Error, OSError) as e:
+            self.failed = str(e)
+            log.warning("%s: the telemetry archive stopped writing: %s", self.path, e)
+            self._drain()
+        finally:
+            conn.close()
+
+    def _commit(self, conn: sqlite3.Connection, items: list[tuple[str, Any]], count: int) -> int:
+        samples = [row for kind, row in items if kind == "sample"]
+        notes = [row for kind, row in items if kind == "note"]
+        batches = [row for kind, row in items if kind == "batch"]
+        conn.execute("BEGIN")
+        try:
+            conn.executemany(_INSERT_SAMPLE, samples)
+            conn.executemany("INSERT INTO notes (kind, at, body) VALUES (?, ?, ?)", notes)
+            conn.executemany(_INSERT_BATCH, batches)
+            count += len(samples)
+            if count > self.max_samples:  # the oldest go first
+                over = count - self.max_samples
+                conn.execute(
+                    "DELETE FROM telemetry WHERE id IN "
+                    "(SELECT id FROM telemetry ORDER BY id LIMIT ?)",
+                    (over,),
+                )
+                count -= over
+            conn.execute("COMMIT")
+        except BaseException:
+            if conn.in_transaction:
+                conn.execute("ROLLBACK")
+            raise
+        self.written += len(items)
+        return count
+
+    def _drain(self) -> None:
+        """After a failure: take what comes so that nobody's put fails on a full queue."""
+        while self._queue.get() is not None:
+            pass

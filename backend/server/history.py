@@ -1,0 +1,96 @@
+"""`ctl history`: who did what, answered from the server's journal.
+
+Each query opens the journal file a second time, read-only
+(backend/files/record/journal.py), on a worker thread: reading through
+100,000 changes never holds up an operation on the server's loop. It walks
+the journal from the newest change back, keeps those matching every filter
+(`HistoryRequest`: robot, user, since) up to `limit`, and answers them
+oldest first, with `more` when older ones were left out (the limit, or the
+reply's size: a whole mission loaded is a big change).
+
+A change concerns the robots its operation names and those of its events
+(a skill's robot; for a skill named only by its id, the robot that holds it
+now, or held it when it was removed or moved: the journal is read newest first).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from backend.core import events as ev
+from backend.files.record.journal import Batch, JournalReader
+from backend.protocol.messages import HistoryEntry, HistoryReply, HistoryRequest
+
+REPLY_BYTES = 8 << 20  # of batches' JSON in one reply, about
+
+
+def split_actor(actor: str) -> tuple[str, str]:
+    """(user, client) of an actor: 'user@client', else a client id or a robot
+    (client ids never hold '@'; a user may: split at the last)."""
+    user, at, client = actor.rpartition("@")
+    return (user, client) if at else ("", actor)
+
+
+def robots_of(b: Batch, owners: dict[str, str]) -> list[str]:
+    """The robots a change concerns (see the module)."""
+    found: list[str] = []
+
+    def add(robot: object) -> None:
+        if isinstance(robot, str) and robot and robot not in found:
+            found.append(robot)
+
+    add(b.op.get("robot"))
+    for e in b.batch.events:
+        match e:
+            case ev.SkillAdded(robot=r, skill=s):
+                owners[s.id] = r
+                add(r)
+            case ev.SkillRemoved(robot=r, id=sid) | ev.SkillMoved(robot=r, id=sid):
+                owners.setdefault(sid, r)  # read newest first: its older changes come next
+                add(r)
+            case ev.SkillStatusChanged(id=sid) | ev.SkillEdited(id=sid):
+                add(owners.get(sid))
+            case ev.BarrierSet(barrier=barrier):
+                for sid in barrier.skills:
+                    add(owners.get(sid))
+            case ev.CommandQueued(command=c):
+                add(c.robot)
+            case _:
+                pass
+    return found
+
+
+def answer(db: Path, req: HistoryRequest, owners: dict[str, str]) -> HistoryReply:
+    """The reply to `req` from journal `db`; `owners`: skill id -> robot now."""
+    owners = dict(owners)
+    since = req.since.timestamp() if req.since is not None else None
+    entries: list[HistoryEntry] = []
+    size = 0
+    more = False
+    with JournalReader(db) as journal:
+        for row in journal.newest(since):
+            user, client = split_actor(row[2])
+            if req.user is not None and user != req.user:
+                continue
+            b = journal.read(row)
+            robots = robots_of(b, owners)
+            if req.robot is not None and req.robot not in robots:
+                continue
+            size += len(row[5])
+            if len(entries) >= req.limit or (entries and size > REPLY_BYTES):
+                more = True
+                break
+            entries.append(
+                HistoryEntry(
+                    revision=b.revision,
+                    at=b.batch_time(),
+                    actor=b.actor,
+                    user=user,
+                    client=client or b.client,
+                    op=b.name,
+                    robots=robots,
+                    batch=b.batch,
+                )
+            )
+    entries.reverse()
+    return HistoryReply(entries=entries, more=more)

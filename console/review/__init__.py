@@ -1,0 +1,1 @@
+"""`missionctl review`: the console, read-only, at any instant of a recorded mission."""
