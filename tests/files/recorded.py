@@ -3,7 +3,7 @@
 The pilot mission's four robots work through cycles: the operator adds
 skills, deletes one, edits one, moves a marker and synchronizes (with the
 forecast a console would send); the server notes the command sent; each
-robot answers and reports its skills (running, progress, success; now and
+robot answers and reports its skills (running, success or failure; now and
 then a failure, which the operator retries), one link delay after it did
 them. Everything goes through the `Engine` and the server's `Journal`
 (every snapshot kept, as the server keeps them) at the times of the play,
@@ -65,7 +65,6 @@ class Plan:
 
     cycles: int = 2  # per robot
     skills: int = 3  # added per cycle (one of them deleted)
-    progress: int = 2  # progress reports per skill, between running and success
     skill_s: float = 30.0  # how long a skill takes on the robot
     delay_s: float = 60.0  # one-way link delay
     fail_every: int = 3  # every n-th skill of a robot fails (and is retried)
@@ -265,9 +264,6 @@ class _Play:
         d = p.delay_s
         start = r
         yield start + d, self._report(robot, sid, Status.RUNNING, "", start)
-        for k in range(p.progress):
-            at = start + (k + 1) * p.skill_s / (p.progress + 1)
-            yield at + d, self._report(robot, sid, Status.RUNNING, f"{k + 1}/{p.progress}", at)
         end = start + (p.skill_s / 2 if fails else p.skill_s)
         status = Status.FAILURE if fails else Status.SUCCESS
         yield end + d, self._report(robot, sid, status, "stuck" if fails else "", end)
