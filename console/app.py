@@ -66,10 +66,11 @@ from console.screens.log import EventLogScreen
 from console.screens.map import MapScreen
 from console.screens.mission import MissionScreen
 from console.state.actions import ACTIONS
+from console.state.clock import MissionClock
 from console.state.eventlog import AlertBook, AlertEntry, EventLog, toast_text
 from console.state.files import RecentFiles
 from console.state.model import CONNECTED, CONNECTING, OFFLINE, UNREACHABLE, ConsoleModel
-from console.state.site import SiteClock
+from console.state.site import Site
 from console.themes.loader import ANSI16_MAP, ANSI16_STATUS, Downgrade16, choose_theme, load_themes
 from console.themes.variables import VARIABLE_DEFAULTS
 
@@ -148,8 +149,8 @@ class MissionApp(SplitEscape, FoldingNotifications, QuitQuestion, PlanModes, App
         # each handed the state it shows and the signal that says it changed
         changes = self.awareness_signal
         self.add_mode("fleet", lambda: FleetScreen(self.model, changes))
-        self.add_mode("log", lambda: EventLogScreen(self.event_log, changes))
-        self.add_mode("alerts", lambda: AlertScreen(self.alerts, changes))
+        self.add_mode("log", lambda: EventLogScreen(self.event_log, changes, self.model.clock))
+        self.add_mode("alerts", lambda: AlertScreen(self.alerts, changes, self.model.clock))
         self.map_screen: MapScreen | None = None
         self.map_feed: tuple[object, object] | None = None  # the latest (mirror, update)
         self.add_mode("map", self._make_map_screen)
@@ -170,13 +171,15 @@ class MissionApp(SplitEscape, FoldingNotifications, QuitQuestion, PlanModes, App
         self.exit_code = 0
 
     @property
-    def clock(self) -> Callable[[], datetime]:
-        """Now, for the log, alerts and how old a robot's state is (tests pin it)."""
+    def clock(self) -> MissionClock:
+        """The mission clock (console/state/clock.py): called, the wall time now
+        (the log's and alerts' stamps); it says every time shown in mission time."""
         return self.model.clock
 
     @clock.setter
-    def clock(self, clock: Callable[[], datetime]) -> None:
-        self.model.clock = clock
+    def clock(self, wall: Callable[[], datetime]) -> None:
+        """Pin the wall clock under the mission clock (tests)."""
+        self.model.clock.wall = wall
 
     # -- theme and screens --------------------------------------------------------------
     def get_theme_variable_defaults(self) -> dict[str, str]:
@@ -400,16 +403,14 @@ class MissionApp(SplitEscape, FoldingNotifications, QuitQuestion, PlanModes, App
     def on_map_changed(self, message: MapChanged) -> None:
         self.map_feed = (message.mirror, message.update)
         objects = getattr(message.mirror, "objects", None)
-        if objects is not None:  # a simulator: its score and clock on the top bar
-            status = self.bridge.sim_status if self.bridge is not None else None
-            self.model.site = SiteClock(
-                objects.score,
-                message.mirror.sim_time,
-                self.model.clock(),
-                status.speed if status is not None else None,
-            )
+        if objects is not None:  # a simulator: its score on the top bar, its time the clock's
+            self.model.site = Site(objects.score)
+            first = not self.model.clock.simulated  # times shown so far were wall times
+            self.model.clock.heard(message.mirror.sim_time, message.mirror.speed)
             if self._screen_live():
                 self.mission_screen.update_top()
+                if first:
+                    self.mission_screen.schedule.refresh()
         if self._map_live():
             self.map_screen.map_changed(message.mirror, message.update)
 

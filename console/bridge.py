@@ -94,9 +94,11 @@ class ClientBridge:
 
     def _on_status(self, msg: Any) -> None:  # a Zenoh thread: keep the latest, nothing else
         try:
-            self.sim_status = SimStatus.model_validate_json(msg.payload)
+            status = SimStatus.model_validate_json(msg.payload)
         except ValueError:
-            pass  # not a status of ours: the plan goes on without the sim's speed
+            return  # not a status of ours: the plan goes on without the sim's speed
+        self.sim_status = status
+        self.app.model.clock.heard(status.sim_time, status.speed)  # thread-safe (clock.py)
 
     def _on_map(self, update: MapUpdate) -> None:
         feed = self.map_feed

@@ -13,8 +13,8 @@ from textual.widgets import DataTable, Footer, Static
 from console.bindings import bindings
 from console.messages import AlertAcknowledged
 from console.screens.base import ViewScreen
+from console.state.clock import MissionClock
 from console.state.eventlog import AlertBook, AlertEntry
-from console.state.text import fmt_clock
 
 LEVEL_VARS = {"error": "error", "warning": "warning", "info": "primary"}
 KIND_WORDS = {
@@ -42,9 +42,15 @@ class AlertScreen(ViewScreen):
     TOPICS = ("alerts",)
     BINDINGS = [*ViewScreen.BINDINGS, *bindings("alerts")]
 
-    def __init__(self, book: AlertBook, changes: Signal[tuple[str, str | None]]) -> None:
+    def __init__(
+        self,
+        book: AlertBook,
+        changes: Signal[tuple[str, str | None]],
+        clock: MissionClock | None = None,
+    ) -> None:
         super().__init__(changes)
         self.book = book
+        self.clock = clock or MissionClock()  # alerts' times are said in mission time
         self.ids: list[int] = []
 
     def compose(self) -> ComposeResult:
@@ -65,7 +71,7 @@ class AlertScreen(ViewScreen):
                 "✓" if a.acknowledged else "●",
                 style="dim" if a.acknowledged else f"bold {self.colour('warning')}",
             ),
-            Text(fmt_clock(a.at)),
+            Text(self.clock.stamp_text(a.at)),
             Text(KIND_WORDS.get(a.kind, a.kind)),
             Text(a.robot or ""),
             Text(a.message + count, style=style or "dim"),
@@ -103,7 +109,7 @@ class AlertScreen(ViewScreen):
             return
         about = " · ".join(x for x in (a.robot, a.skill) if x)
         head = Text.assemble(
-            (f"{fmt_clock(a.at)}  {KIND_WORDS.get(a.kind, a.kind)}", "bold"),
+            (f"{self.clock.stamp_text(a.at)}  {KIND_WORDS.get(a.kind, a.kind)}", "bold"),
             f"  {about}" if about else "",
             (f"  {a.level} · from {a.source}" + (f" · ×{a.count}" if a.count > 1 else ""), "dim"),
         )

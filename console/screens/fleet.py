@@ -26,7 +26,6 @@ from console.state.capability import (
     sparkline,
 )
 from console.state.model import ConsoleModel
-from console.state.text import fmt_clock
 
 SPARK = 6  # samples shown per sparkline (the model keeps model.HISTORY)
 
@@ -67,7 +66,7 @@ class FleetScreen(ViewScreen):
             return Text("? unknown", style=self.colour("presence-unknown"))
         if info.online:
             return Text("● online", style=self.colour("presence-online"))
-        since = f" {fmt_clock(info.since)}" if info.since else " (not seen)"
+        since = f" {self.model.clock.stamp_text(info.since)}" if info.since else " (not seen)"
         return Text(f"○ offline{since}", style=f"bold {self.colour('presence-offline')}")
 
     def _level(self, robot: str, i: int, var: str | None) -> Text:
@@ -82,8 +81,8 @@ class FleetScreen(ViewScreen):
         """'⇡2 1m10s ⇄20s': commands waiting for the robot, its one-way delay."""
         info = self.model.robots.get(robot)
         words = [
-            link.pending_text(self.model.pending(robot), self.model.clock()),
-            link.delay_text(info.delay_s if info is not None else None),
+            link.pending_text(self.model.pending(robot), self.model.clock),
+            link.delay_text(info.delay_s if info is not None else None, self.model.clock),
         ]
         text = " ".join(w for w in words if w)
         return Text(text or "—", style="" if text else "dim")
@@ -179,13 +178,13 @@ class FleetScreen(ViewScreen):
         out.append(f"  {robot_type(self.model, r)}  ")
         out.append_text(self._presence(r))
         if info is not None and info.online and info.since:
-            out.append(f" since {fmt_clock(info.since)}")
+            out.append(f" since {self.model.clock.stamp_text(info.since)}")
         out.append("\ndoing: ", style="bold")
         out.append(self.model.activity_text(r) if self.model.mission else "—")
         out.append(" · last report: ", style="bold")
         out.append(last_report(self.model, r))
         out.append("\nlink: ", style="bold")
-        out.append(link.link_text(self.model, r, self.model.clock()))
+        out.append(link.link_text(self.model, r, self.model.clock))
         return out
 
     # -- events ---------------------------------------------------------------------------

@@ -17,9 +17,9 @@ from textual.widgets import DataTable, Footer, Input, Static
 from console.bindings import bindings
 from console.screens.base import ViewScreen
 from console.screens.dialogs import PathPrompt
+from console.state.clock import MissionClock
 from console.state.eventlog import LOG_LIMIT, EventLog, LogEntry, entry_matches
 from console.state.files import shown_path
-from console.state.text import fmt_clock
 
 # rows in the table (a DataTable of 10k rows takes seconds to fill); export writes all matches
 SHOW_LIMIT = 1_000
@@ -45,9 +45,15 @@ class EventLogScreen(ViewScreen):
     TOPICS = ("log",)
     BINDINGS = [*ViewScreen.BINDINGS, *bindings("log")]
 
-    def __init__(self, log: EventLog, changes: Signal[tuple[str, str | None]]) -> None:
+    def __init__(
+        self,
+        log: EventLog,
+        changes: Signal[tuple[str, str | None]],
+        clock: MissionClock | None = None,
+    ) -> None:
         super().__init__(changes)
         self.log_ = log
+        self.clock = clock or MissionClock()  # entries' times are said in mission time
         self.last_seq = 0  # newest entry in the table
         self.rows: list[int] = []  # seqs shown, oldest first
         self.matching = 0  # entries matching the filter (the table shows the last SHOW_LIMIT)
@@ -79,7 +85,7 @@ class EventLogScreen(ViewScreen):
         colour = self.colour(KIND_VARS.get(e.kind, ""), "")
         # Text, not str: a str cell is parsed as markup ("[lru1] …" would vanish)
         return [
-            Text(fmt_clock(e.at)),
+            Text(self.clock.stamp_text(e.at)),
             Text(e.kind, style=colour),
             Text(", ".join(e.robots)),
             Text(e.text),
@@ -162,7 +168,7 @@ class EventLogScreen(ViewScreen):
             return
         who = f"{e.user} on {e.client}" if e.user else e.client
         out = Text.assemble(
-            (f"{fmt_clock(e.at)} {e.kind}", "bold"),
+            (f"{self.clock.stamp_text(e.at)} {e.kind}", "bold"),
             f"  {', '.join(e.robots)}  " if e.robots else "  ",
             e.text,
         )

@@ -67,7 +67,7 @@ def top_text(m: ConsoleModel, unacked: int, marks: list[str]) -> Text:
     if unacked:  # the badge, first so 80 columns show it: F6 lists them
         t.append(f" ⚠ {unacked} alert{'s' if unacked > 1 else ''} (F6) ", style="bold reverse")
     if m.site is not None:  # the pilot study's score and clock, before what 80 columns cut
-        t.append(f"  {site_text(m.site, m.clock())}", style="bold")
+        t.append(f"  {site_text(m.site, m.clock)}", style="bold")
     if m.mission is not None:
         t.append(f"  {m.mission.name}", style="bold")
         t.append(f"  rev {m.mission.revision}", style="dim")
@@ -230,7 +230,7 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
         self.refresh_availability()
         c = self.model.uplinking(event.skill_id) if event.skill_id else None
         if c is not None:  # its row may have no room for the command: the status line has
-            self.say(link.waiting_text(event.skill_id, c, self.model.clock()))
+            self.say(link.waiting_text(event.skill_id, c, self.model.clock))
         if self.editor_visible:
             await self.editor.show_skill(event.skill_id)
 

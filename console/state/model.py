@@ -12,19 +12,19 @@ from __future__ import annotations
 
 import hashlib
 from collections import deque
-from collections.abc import Callable
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
+from datetime import datetime
 
 from backend.core import events as ev
 from backend.core.library import Library
 from backend.core.model import ACTIVE, Mission, SkillInstance, Status, UplinkCommand
 from backend.protocol.messages import RobotInfo, Telemetry
 from console.state import availability, link
+from console.state.clock import MissionClock
 from console.state.freshness import Freshness, freshness
 from console.state.plan import PlanView
-from console.state.site import SiteClock
-from console.state.text import GLYPHS, STATUS_WORDS, fmt_clock
+from console.state.site import Site
+from console.state.text import GLYPHS, STATUS_WORDS
 
 HISTORY = 120  # telemetry samples kept per robot (bounded memory)
 
@@ -90,13 +90,14 @@ class ConsoleModel:
     saved_digest: str = ""
     # robot -> when this console last heard it (telemetry, a report, presence back)
     heard: dict[str, datetime] = field(default_factory=dict)
-    clock: Callable[[], datetime] = field(default=lambda: datetime.now(UTC))
+    # now: the wall time when called (stamps), mission time for what is shown (state/clock.py)
+    clock: MissionClock = field(default_factory=MissionClock)
     # skill id -> the pending command locking it, for the revision it was built at
     _uplinking: tuple[int, dict[str, UplinkCommand]] = field(default_factory=lambda: (-1, {}))
     # the plan's forecast and checks (console/state/plan.py), refreshed by the app
     plan: PlanView = field(default_factory=PlanView)
-    # the simulator's score and clock from its map feed (None: no simulator)
-    site: SiteClock | None = None
+    # the simulator's score from its map feed (None: no simulator)
+    site: Site | None = None
 
     # -- updates ------------------------------------------------------------------
     def load(
@@ -221,7 +222,7 @@ class ConsoleModel:
                 busy.append(f"{robot} is {STATUS_WORDS[act.status]} ({act.id})")
         if busy:
             risks.append("; ".join(busy))
-        waiting = link.risks(self.mission, self.clock())
+        waiting = link.risks(self.mission, self.clock)
         if waiting:
             risks.append("commands not yet acknowledged — " + "; ".join(waiting))
         if self.unsaved:
@@ -307,7 +308,7 @@ class ConsoleModel:
             return "online"
         if info.since is None:
             return "offline (not seen)"
-        return f"offline since {fmt_clock(info.since)}"
+        return f"offline since {self.clock.stamp_text(info.since)}"
 
     @staticmethod
     def active(task: list[SkillInstance]) -> SkillInstance | None:
@@ -362,7 +363,7 @@ class ConsoleModel:
 
     def freshness(self, robot: str) -> Freshness:
         """Whether what is shown of `robot` is live or its last known state."""
-        return freshness(self, robot, self.clock())
+        return freshness(self, robot, self.clock)
 
     # -- why an action does not apply (None: it applies): console/state/availability.py ----
     def why_not(

@@ -36,7 +36,7 @@ from console.state.text import without_paths
 
 def model_of(b: Builder, online=MARS_FLEET, telemetry=(), at=T0) -> ConsoleModel:
     m = ConsoleModel(connection=CONNECTED)
-    m.clock = lambda: at
+    m.clock.wall = lambda: at
     m.load(b.snapshot(), b.library, fleet(online))
     for t in telemetry:
         m.set_telemetry(t)
@@ -129,7 +129,7 @@ def test_an_offline_robot_is_its_last_known_state_as_of_when_it_was_heard():
     m = model_of(mars_mid_execution(), telemetry=mars_telemetry())
     assert not m.freshness("lru1").stale  # just heard
     m.set_robot(RobotInfo(name="lru1", online=False, since=T0 + timedelta(seconds=3)))
-    m.clock = lambda: T0 + timedelta(seconds=25)
+    m.clock.wall = lambda: T0 + timedelta(seconds=25)
     f = m.freshness("lru1")
     assert (f.stale, f.why, f.age_s) == (True, "offline", 25.0)
     assert f.as_of() == "as of 25s ago" and f.ago() == "25s ago"
@@ -139,9 +139,9 @@ def test_an_offline_robot_is_its_last_known_state_as_of_when_it_was_heard():
 
 def test_a_robot_that_stops_sending_telemetry_turns_stale():
     m = model_of(mars_mid_execution(), telemetry=mars_telemetry())
-    m.clock = lambda: T0 + timedelta(seconds=SILENT_AFTER_S - 1)
+    m.clock.wall = lambda: T0 + timedelta(seconds=SILENT_AFTER_S - 1)
     assert not m.freshness("lru2").stale
-    m.clock = lambda: T0 + timedelta(seconds=SILENT_AFTER_S + 5)
+    m.clock.wall = lambda: T0 + timedelta(seconds=SILENT_AFTER_S + 5)
     f = m.freshness("lru2")
     assert (f.stale, f.why) == (True, "silent")
     # a robot that never sent telemetry is not expected to (presence says it is there)
@@ -167,13 +167,13 @@ def test_unsaved_means_the_plan_differs_from_what_was_saved_or_loaded():
     m2.mission.tasks["lru1"][1].status_info = "moving"
     assert not m2.unsaved
     assert m2.quit_risks()[0].startswith("lru1 is running (lru1-2); lru2 is waiting at barrier")
-    m2.clock = lambda: T0 + timedelta(minutes=2)
+    m2.clock.wall = lambda: T0 + timedelta(minutes=2)
     m2.mission.uplink["lru1"] = [
         UplinkCommand(
             id=7, robot="lru1", seq=1, op="sync", command=Run(), skills=["lru1-4"], created=T0
         )
     ]
-    assert "commands not yet acknowledged — lru1: sync #7 queued 2m00s" in m2.quit_risks()
+    assert "commands not yet acknowledged — lru1: sync #7 queued 2m00s ago" in m2.quit_risks()
 
 
 # -- small things ----------------------------------------------------------------------------

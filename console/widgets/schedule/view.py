@@ -538,5 +538,5 @@ class ScheduleView(ScrollView, can_focus=True):
             extra=self._summary(s) if not col.static or self.expand_static else "",
             cursor=(st["cursor"] if self.has_focus else st["cursor-blur"]) if selected else None,
             stale=stale,
-            uplink=link.command_text(c, self.model.clock()) if c is not None else "",
+            uplink=link.command_text(c, self.model.clock) if c is not None else "",
         )
