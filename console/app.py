@@ -22,7 +22,6 @@ from typing import Any
 
 from textual import on
 from textual.app import App
-from textual.binding import Binding
 from textual.screen import Screen
 from textual.signal import Signal
 
@@ -30,7 +29,7 @@ from backend.client.client import ClientError, LoginFailed, OperationRefused
 from backend.exit_codes import EXIT_UNREACHABLE
 from backend.protocol.messages import ErrorReply
 from backend.transport.login import Login
-from console.bindings import bindings
+from console.bindings import bind, bindings, key_names
 from console.bridge import Backend, ClientBridge
 from console.commands import MissionCommands
 from console.config import ConsoleConfig, save_theme
@@ -65,7 +64,6 @@ from console.screens.fleet import FleetScreen
 from console.screens.log import EventLogScreen
 from console.screens.map import MapScreen
 from console.screens.mission import MissionScreen
-from console.state.actions import ACTIONS
 from console.state.clock import MissionClock
 from console.state.eventlog import AlertBook, AlertEntry, EventLog, toast_text
 from console.state.files import RecentFiles
@@ -90,7 +88,8 @@ class MissionApp(SplitEscape, FoldingNotifications, QuitQuestion, PlanModes, App
     DEFAULT_MODE = "mission"
     COMMANDS = App.COMMANDS | {MissionCommands}
     BINDINGS = [
-        Binding("ctrl+q", "quit", "Quit", priority=True, id="app.quit"),
+        bind("app.quit", "quit", show=True),
+        bind("app.command_palette", "command_palette"),
         *bindings("app", show=False),  # shown in the footers of the part-2 screens
     ]
     # the app's look and its widgets' (each screen loads its own: CSS_PATH there);
@@ -157,6 +156,7 @@ class MissionApp(SplitEscape, FoldingNotifications, QuitQuestion, PlanModes, App
         self.add_plan_modes()  # timeline (F7) and checks (F8): console/plan_modes.py
         if self.config.keymap:
             self.set_keymap(self.config.keymap)
+        self.model.keys = key_names(self)  # the rules' sentences name the user's keys
         self.bridge = (
             ClientBridge(self, connect, user=user, client_id=client_id, login=login)
             if connect
@@ -245,14 +245,9 @@ class MissionApp(SplitEscape, FoldingNotifications, QuitQuestion, PlanModes, App
         self.mission_screen = MissionScreen(self.model, self.alerts, self.recent)
         return self.mission_screen
 
-    def action_keys(self) -> dict[str, str]:
-        """Action name -> its key(s) now (the user's keymap applied)."""
-        keymap = getattr(self, "_keymap", {}) or {}
-        return {a.name: keymap.get(a.binding_id, a.key) for a in ACTIONS}
-
     def action_help(self) -> None:
         if not isinstance(self.screen, HelpScreen):
-            self.push_screen(HelpScreen(self.action_keys()))
+            self.push_screen(HelpScreen(key_names(self)))
 
     @on(HelpRequested)
     def _help_requested(self) -> None:

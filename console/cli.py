@@ -8,6 +8,7 @@ import sys
 
 from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK, EXIT_UNREACHABLE
 from backend.transport.login import add_login_arguments
+from console.state.keys import KeyNames
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 THEME_HELP = (
@@ -19,8 +20,8 @@ THEME_HELP = (
 
 
 YES_HELP = (
-    "quit without asking (for scripts); else ctrl+q asks while robots execute, commands "
-    "wait for a robot or the plan has edits not saved to a file"
+    f"quit without asking (for scripts); else {KeyNames().say('app.quit')} asks while robots "
+    "execute, commands wait for a robot or the plan has edits not saved to a file"
 )
 DEMO_QUITS = (
     "Quitting ends the demo: its mission server and simulated robots stop, and its journal "
@@ -88,13 +89,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _known_binding_ids() -> set[str]:
     from console.state.actions import ACTIONS
 
-    return {a.binding_id for a in ACTIONS} | {
-        "app.help",
-        "app.quit",
-        "editor.apply",
-        "editor.revert",
-        "editor.leave",
-    }
+    return {a.binding_id for a in ACTIONS if not a.fixed}
 
 
 def _run_app(app) -> int:

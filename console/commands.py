@@ -11,6 +11,7 @@ from typing import Any
 
 from textual.command import DiscoveryHit, Hit, Hits, Provider
 
+from console.bindings import key_names
 from console.state.actions import ACTIONS
 
 
@@ -22,15 +23,14 @@ class MissionCommands(Provider):
         screen = self._screen()
         if screen is None:
             return
-        keys = getattr(self.app, "action_keys", lambda: {})()
+        keys = key_names(self)
         # the screen the palette was opened on (its own actions are offered too)
         here = getattr(self.screen, "SCOPE", "mission") if self.screen is not screen else "mission"
         for a in ACTIONS:
-            if a.scope not in ("mission", "app", here):
+            if a.scope not in ("mission", "app", here) or a.fixed or a.name == "command_palette":
                 continue
             why = screen.why_disabled(a.name) if a.scope == "mission" else None
-            key = keys.get(a.name, a.key)
-            help_text = f"{key} · {a.description}" + (
+            help_text = f"{keys.all(a.binding_id)} · {a.description}" + (
                 f" — does not apply now: {why}" if why else ""
             )
             yield a, help_text, partial(self._run, a)

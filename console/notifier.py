@@ -8,6 +8,7 @@ import threading
 from textual.app import App
 from textual.notifications import Notification, SeverityLevel
 
+from console.bindings import key_names
 from console.state.text import without_paths
 
 MAX_TOASTS = 3  # notifications on screen at once (at 80x24 more cover the schedule)
@@ -63,8 +64,10 @@ class FoldingNotifications(App[int]):
         rest = list(self._notifications)  # shown after the fold (it is the oldest news)
         for n in rest:
             self._unnotify(n, refresh=False)
+        keys = key_names(self)
         fold = Notification(
-            f"{count} more — F6 lists the alerts, F5 the event log",
+            f"{count} more — {keys.say('app.show_alerts')} lists the alerts, "
+            f"{keys.say('app.show_log')} the event log",
             "Notifications folded",
             timeout=10,
         )

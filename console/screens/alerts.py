@@ -10,7 +10,7 @@ from textual.app import ComposeResult
 from textual.signal import Signal
 from textual.widgets import DataTable, Footer, Static
 
-from console.bindings import bindings
+from console.bindings import bindings, key_names
 from console.messages import AlertAcknowledged
 from console.screens.base import ViewScreen
 from console.state.clock import MissionClock
@@ -57,9 +57,13 @@ class AlertScreen(ViewScreen):
         yield self.title_bar
         yield DataTable(id="alerts", cursor_type="row")
         yield Static("", id="alert-detail", classes="detail")
-        yield Static(
-            "enter/a acknowledge · A acknowledge all · F2 schedule · F5 event log", classes="hint"
+        hint = key_names(self).hint(
+            ("alerts.ack", "acknowledge"),
+            ("alerts.ack_all", "acknowledge all"),
+            ("app.show_mission", "schedule"),
+            ("app.show_log", "event log"),
         )
+        yield Static(hint, classes="hint")
         yield Footer()
 
     def _cells(self, a: AlertEntry) -> list:

@@ -14,6 +14,7 @@ from textual.signal import Signal
 from textual.widgets import DataTable, Footer, Input, Static
 
 from backend.protocol.messages import RobotInfo
+from console.bindings import key_names
 from console.screens.base import ViewScreen
 from console.state import link
 from console.state.capability import (
@@ -54,8 +55,10 @@ class FleetScreen(ViewScreen):
         yield Input(placeholder="filter by capability", id="filter")
         yield DataTable(id="robots", cursor_type="row", zebra_stripes=False)
         yield Static("", id="detail", classes="detail")
+        keys = key_names(self)
+        back, schedule = keys.say("app.back"), keys.say("app.show_mission")
         yield Static(
-            "type to filter (escape: back to the list) · ↑↓ robot · F2 schedule", classes="hint"
+            f"type to filter ({back}: back to the list) · {schedule}: schedule", classes="hint"
         )
         yield Footer()
 

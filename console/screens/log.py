@@ -14,7 +14,7 @@ from textual.app import ComposeResult
 from textual.signal import Signal
 from textual.widgets import DataTable, Footer, Input, Static
 
-from console.bindings import bindings
+from console.bindings import bindings, key_names
 from console.screens.base import ViewScreen
 from console.screens.dialogs import PathPrompt
 from console.state.clock import MissionClock
@@ -70,11 +70,10 @@ class EventLogScreen(ViewScreen):
         yield DataTable(id="log", cursor_type="row")
         # the selected entry in full (the table cuts at 80 columns)
         yield Static("", id="entry", classes="detail")
-        yield Static(
-            f"last {LOG_LIMIT:,} entries kept in memory · "
-            "ctrl+s export shown entries (JSON lines) · F2 schedule",
-            classes="hint",
+        hint = key_names(self).hint(
+            ("log.export", "export shown entries (JSON lines)"), ("app.show_mission", "schedule")
         )
+        yield Static(f"last {LOG_LIMIT:,} entries kept in memory · {hint}", classes="hint")
         yield Footer()
 
     def shown_entries(self) -> list[LogEntry]:

@@ -24,10 +24,11 @@ from backend.core.model import (
     Status,
 )
 from backend.core.ops import EditSkill, MarkerAdd, MarkerDelete, MarkerMove, MarkerRename
-from console.bindings import bindings
+from console.bindings import bind, bindings, key_names
 from console.messages import HelpRequested, OperationRequested
 from console.screens.dialogs import ChoiceScreen, ConfirmScreen, MarkerPrompt
 from console.state.actions import ACTIONS
+from console.state.keys import KeyNames
 from console.state.markers import (
     bind_choices,
     followers,
@@ -65,9 +66,10 @@ TURN = math.radians(15)
 LEGEND_MIN_WIDTH = 100
 
 
-def legend_text(colours: dict[str, str] | None = None) -> Text:
+def legend_text(colours: dict[str, str] | None = None, keys: KeyNames | None = None) -> Text:
     """The legend; `colours` (theme variables) colour its glyphs like the map."""
     c = colours or {}
+    keys = keys or KeyNames()
 
     def fg(var: str) -> str:
         return f"bold {c[var]}" if var in c else "bold"
@@ -93,7 +95,7 @@ def legend_text(colours: dict[str, str] | None = None) -> Text:
         row(GLYPHS[st], fg(f"status-{STATUS_CSS[st]}"), f"  {STATUS_WORDS[st]}")
     row("✕", fg("presence-offline"), "  offline")
     row(NO_LINK_GLYPH, fg("presence-offline"), "  out of comms range")
-    row(FOLLOW_GLYPH, "bold", "  followed (f)")
+    row(FOLLOW_GLYPH, "bold", f"  followed ({keys.say('map.follow')})")
     row(POSE_ARROWS[0], "bold", "pose marker")
     row(POSITION_GLYPH, "bold", "position marker")
     row(AREA_GLYPH, "bold", "area marker")
@@ -177,7 +179,7 @@ class MapScreen(Screen):
         Binding("ctrl+down", "cursor(0, 8)", show=False),
         Binding("ctrl+left", "cursor(-8, 0)", show=False),
         Binding("ctrl+right", "cursor(8, 0)", show=False),
-        Binding("f1,question_mark", "help", "Help", id="app.help"),
+        bind("app.help", "help", show=True),
         Binding(
             "escape", "app.show_mission", "Schedule", show=False
         ),  # "back to the schedule" (help: App keys)
@@ -206,7 +208,7 @@ class MapScreen(Screen):
         yield Footer()
 
     def on_mount(self) -> None:
-        self._legend.update(legend_text(self.app.get_css_variables()))
+        self._legend.update(legend_text(self.app.get_css_variables(), key_names(self)))
         self._apply_legend()
         self.view.focus()
         self.sync_selection()
@@ -286,7 +288,7 @@ class MapScreen(Screen):
             t.append(f"  {m.mission.name}", style="bold")
             t.append(f"  rev {m.mission.revision}", style="dim")
         t.append(f"   {connection_text(m.connection)}")
-        t.append("   F2 schedule", style="dim")
+        t.append(f"   {key_names(self).say('app.show_mission')} schedule", style="dim")
         self._topbar.update(t, layout=False)
 
     def update_info(self) -> None:
@@ -389,7 +391,8 @@ class MapScreen(Screen):
         else:
             t = self.model.telemetry[nxt]
             self.view.set_view(cx=t.pose.x, cy=t.pose.y)
-            self.say(f"following {nxt} (f: next robot; moving the view stops it)")
+            again = key_names(self).say("map.follow")
+            self.say(f"following {nxt} ({again}: next robot; moving the view stops it)")
         self.view.overlays_changed()
         self.update_info()
 
@@ -513,7 +516,12 @@ class MapScreen(Screen):
         self.sync_selection()
         found = self.model.find(self.view.selected_skill)
         if found is None:
-            self.say("select a skill on the schedule first (F2), then come back (F3)", "warning")
+            keys = key_names(self)
+            self.say(
+                f"select a skill on the schedule first ({keys.say('app.show_mission')}), "
+                f"then come back ({keys.say('app.show_map')})",
+                "warning",
+            )
             return None
         why = self.model.read_only_reason(found[2].id)
         if why:

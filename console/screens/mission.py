@@ -30,7 +30,7 @@ from backend.core.ops import (
     Sync,
     Unsync,
 )
-from console.bindings import mission_bindings
+from console.bindings import bind, key_names, mission_bindings
 from console.messages import HelpRequested, OperationRequested
 from console.screens.dialogs import ConfirmScreen, SkillPicker
 from console.screens.mission_files import MissionFiles
@@ -38,10 +38,11 @@ from console.screens.mission_plan import PlanActions
 from console.state import link
 from console.state.actions import BY_NAME
 from console.state.capability import also_offered_by
-from console.state.context import FooterKey, context_keys, fit_footer
+from console.state.context import EDITOR, context_keys, fit_footer, footer_keys, tail_keys
 from console.state.defaults import default_params
 from console.state.eventlog import AlertBook
 from console.state.files import RecentFiles
+from console.state.keys import KeyNames
 from console.state.model import CONNECTED, ConsoleModel
 from console.state.site import site_text
 from console.widgets.bars import KeyBar, StatusLine, TopBar, connection_text
@@ -52,20 +53,16 @@ from console.widgets.schedule.view import ScheduleView
 TCSS = Path(__file__).with_name("mission.tcss")
 
 NARROW = 100
-# the footer while the editor has the focus (before the keys that always apply)
-EDITOR_FOOTER = (
-    FooterKey("apply", "⏎", "Apply"),
-    FooterKey("revert", "^r", "Revert"),
-    FooterKey("leave", "esc", "Close"),
-)
 
 
-def top_text(m: ConsoleModel, unacked: int, marks: list[str]) -> Text:
+def top_text(m: ConsoleModel, unacked: int, marks: list[str], keys: KeyNames) -> Text:
     """The top bar: alert badge, mission and revision, connection, read-only, marks."""
     t = Text()
     t.append("missionctl", style="bold")
-    if unacked:  # the badge, first so 80 columns show it: F6 lists them
-        t.append(f" ⚠ {unacked} alert{'s' if unacked > 1 else ''} (F6) ", style="bold reverse")
+    if unacked:  # the badge, first so 80 columns show it, with the key that lists them
+        plural = "s" if unacked > 1 else ""
+        badge = f" ⚠ {unacked} alert{plural} ({keys.say('app.show_alerts')}) "
+        t.append(badge, style="bold reverse")
     if m.site is not None:  # the pilot study's score and clock, before what 80 columns cut
         t.append(f"  {site_text(m.site, m.clock)}", style="bold")
     if m.mission is not None:
@@ -86,7 +83,7 @@ def top_text(m: ConsoleModel, unacked: int, marks: list[str]) -> Text:
 class MissionScreen(MissionFiles, PlanActions, Screen):
     BINDINGS = [
         *mission_bindings(),
-        Binding("f1,question_mark", "help", "Help", id="app.help"),
+        bind("app.help", "help", show=False),
         Binding("escape", "clear_marks", "Clear marks", show=False),
     ]
 
@@ -216,7 +213,7 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
 
     def update_top(self) -> None:
         unacked = self.alerts.unacknowledged if self.alerts is not None else 0
-        text = top_text(self.model, unacked, self.schedule.marks)
+        text = top_text(self.model, unacked, self.schedule.marks, key_names(self))
         self._topbar.show(text, self.model.connection)
 
     def say(self, text: str, severity: str = "info") -> None:
@@ -247,13 +244,14 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
         keys that apply to the selection first (console/state/context.py)."""
         if not self.is_mounted:
             return
-        keys = getattr(self.app, "action_keys", dict)()
+        keys = key_names(self)
         if self.editor.focus_within():
-            first = list(EDITOR_FOOTER)
+            first = footer_keys(EDITOR, keys)
         else:
             robot, sid = self.selection()
             first = context_keys(self.model, robot, sid, self.schedule.marks, keys)
-        self._footer.show(fit_footer(first, self.size.width or self.app.size.width))
+        width = self.size.width or self.app.size.width
+        self._footer.show(fit_footer(first, width, tail_keys(keys)))
 
     def on_descendant_focus(self, event: events.DescendantFocus) -> None:
         self.update_keys()
@@ -352,8 +350,11 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
             new = reply.value.get("id")
             if not new:
                 return
+            apply = key_names(self).say("editor.apply")
             self.say(
-                f"added {new} ({choice}) to {robot} {where}: set its parameters, then ctrl+s", "ok"
+                f"added {new} ({choice}) to {robot} {where}: set its parameters; {apply} "
+                "in a field applies them",
+                "ok",
             )
             self.edit_after_select = True
             if self.model.owner(new):
@@ -483,9 +484,10 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
         self.update_top()
         self.refresh_availability()
         n = len(self.schedule.marks)
+        barrier = key_names(self).say("mission.barrier")
         self.say(
             f"{'marked' if marked else 'unmarked'} {sid}; {n} marked"
-            + (" — b makes the barrier" if n >= 2 else " — mark a skill of another robot")
+            + (f" — {barrier} makes the barrier" if n >= 2 else " — mark a skill of another robot")
         )
 
     def action_barrier(self) -> None:

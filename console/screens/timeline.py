@@ -21,7 +21,7 @@ from textual.screen import Screen
 from textual.signal import Signal
 from textual.widgets import Footer, Static
 
-from console.bindings import bindings
+from console.bindings import bind, bindings
 from console.state import timeline as tl
 from console.state.model import ConsoleModel
 from console.widgets.bars import TitleBar
@@ -38,7 +38,7 @@ class TimelineScreen(Screen):
     SCOPE = "timeline"  # its own palette entries (console/commands.py)
     BINDINGS = [
         *bindings("timeline"),
-        Binding("f1,question_mark", "app.help", "Help", id="app.help"),
+        bind("app.help", "app.help", show=True),
         Binding("escape", "app.show_mission", "Schedule", show=False),
     ]
     CSS_PATH = TCSS

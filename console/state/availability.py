@@ -24,6 +24,7 @@ from backend.core.model import (
     how_to_change,
 )
 from backend.core.rules.uplink import pending_allows
+from console.state.keys import KeyNames
 from console.state.text import STATUS_WORDS
 
 Found = tuple[str, int, SkillInstance]  # (robot, index in its task, skill)
@@ -40,6 +41,7 @@ class Facts(Protocol):
     mission: Mission | None
     connection: str
     read_only: str
+    keys: KeyNames  # the user's keys, for the sentences that name one
 
     @property
     def connected(self) -> bool: ...
@@ -198,7 +200,7 @@ def _sync(q: Selected) -> str | None:
         more = f" and {len(blocked) - 2} more" if len(blocked) > 2 else ""
         return (
             f"unwaived plan error {', '.join(blocked[:2])}{more}: fix the plan, or waive "
-            "it with a reason on the checks screen (F8)"
+            f"it with a reason on the checks screen ({q.facts.keys.say('app.show_checks')})"
         )
     return None
 
@@ -226,7 +228,8 @@ def _mark(q: Selected) -> str | None:
 
 def _barrier(q: Selected) -> str | None:
     if len(q.marks) < 2:
-        return "mark one idle skill on each of at least two robots (space), then make the barrier"
+        mark = q.facts.keys.say("mission.mark")
+        return f"mark one idle skill on each of at least two robots ({mark}), then make the barrier"
     robots: dict[str, str] = {}
     for sid in q.marks:
         f = q.facts.find(sid)

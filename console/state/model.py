@@ -22,6 +22,7 @@ from backend.protocol.messages import RobotInfo, Telemetry
 from console.state import availability, link
 from console.state.clock import MissionClock
 from console.state.freshness import Freshness, freshness
+from console.state.keys import KeyNames
 from console.state.plan import PlanView
 from console.state.site import Site
 from console.state.text import GLYPHS, STATUS_WORDS
@@ -98,6 +99,8 @@ class ConsoleModel:
     plan: PlanView = field(default_factory=PlanView)
     # the simulator's score from its map feed (None: no simulator)
     site: Site | None = None
+    # the keys as the user has them (the actions table and their keymap), for sentences
+    keys: KeyNames = field(default_factory=KeyNames)
 
     # -- updates ------------------------------------------------------------------
     def load(

@@ -25,9 +25,10 @@ from backend.core.ops import EditSkill
 from backend.protocol.messages import RobotInfo
 from console.escape import split_escape
 from console.state.capability import filter_examples, filter_robots
-from console.state.context import TAIL, context_keys, fit_footer, key_text
+from console.state.context import context_keys, fit_footer, tail_keys
 from console.state.eventlog import AlertBook, toast_text
 from console.state.freshness import SILENT_AFTER_S
+from console.state.keys import KeyNames, key_text
 from console.state.markers import relabel
 from console.state.model import CONNECTED, ConsoleModel
 from console.state.search import search_skills
@@ -80,13 +81,14 @@ def test_a_halted_failure_offers_both_retries_and_run_first():
 
 def test_the_footer_fits_80_columns_and_keeps_its_tail():
     m = model_of(mars_mid_execution(), telemetry=mars_telemetry())
-    shown = fit_footer(context_keys(m, "lru1", "lru1-4", []), 80)
+    tail = tail_keys(KeyNames())
+    shown = fit_footer(context_keys(m, "lru1", "lru1-4", []), 80, tail)
     text = " ".join(f"{k.key} {k.label}" for k in shown)
     assert len(text) <= 80
-    assert shown[-len(TAIL) :] == list(TAIL)  # find, save, all keys (the palette), quit
-    assert text.startswith("⏎ Edit s Sync a Add")
-    assert [k.action for k in fit_footer(context_keys(m, "lru1", "lru1-4", []), 30)] == [
-        k.action for k in TAIL
+    assert shown[-len(tail) :] == tail  # find, save, all keys (the palette), quit
+    assert text.startswith("⏎ Edit s Sync a Add") and text.endswith("^p All keys ^q Quit")
+    assert [k.action for k in fit_footer(context_keys(m, "lru1", "lru1-4", []), 30, tail)] == [
+        k.action for k in tail
     ]  # too narrow for more: the tail still says where the rest is
 
 
@@ -100,7 +102,7 @@ def test_key_text_is_the_shortest_way_to_show_a_key():
 
 def test_a_remapped_key_shows_in_the_footer():
     m = model_of(mars_mid_execution(), telemetry=mars_telemetry())
-    keys = context_keys(m, "lru1", "lru1-4", [], {"sync": "S"})
+    keys = context_keys(m, "lru1", "lru1-4", [], KeyNames({"mission.sync": "S"}))
     assert next(k.key for k in keys if k.action == "sync") == "S"
 
 

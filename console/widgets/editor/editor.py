@@ -26,13 +26,13 @@ from typing import Any
 from rich.text import Text
 from textual import on
 from textual.app import ComposeResult
-from textual.binding import Binding
 from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.message import Message
 from textual.widgets import Button, Input, Label, Select, Static, Switch, TextArea
 
 from backend.core.model import Policies, SkillInstance, Status
 from backend.core.ops import EditSkill
+from console.bindings import bindings, key_names
 from console.state.markers import relabel
 from console.state.model import ConsoleModel
 from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS
@@ -72,12 +72,8 @@ class ParamEditor(ReadsEdits, VerticalScroll):
     """Edits one skill. Posts `ApplyRequested` with only what changed.
     Its look: editor.tcss (loaded by the app)."""
 
-    BINDINGS = [
-        # enter in a field applies (Input.Submitted); ctrl+s is the mission's save everywhere
-        Binding("enter", "apply", "Apply", id="editor.apply"),
-        Binding("ctrl+r", "revert", "Revert", id="editor.revert"),
-        Binding("escape", "leave", "Back", id="editor.leave"),
-    ]
+    # apply (also enter in a field: Input.Submitted), revert, leave: the actions table's
+    BINDINGS = bindings("editor")
 
     class ApplyRequested(Message):
         def __init__(
@@ -287,9 +283,11 @@ class ParamEditor(ReadsEdits, VerticalScroll):
         """Recompute what differs from the skill; show it; tell the screen."""
         self.dirty = self.changed_names()
         if self.dirty:
+            keys = key_names(self)
             self._set_static(
                 "#dirty",
-                f"unapplied changes: {', '.join(self.dirty)} — enter applies, ctrl+r reverts",
+                f"unapplied changes: {', '.join(self.dirty)} — {keys.say('editor.apply')} "
+                f"applies, {keys.say('editor.revert')} reverts",
             )
         else:
             self._set_static("#dirty", "")
@@ -381,8 +379,10 @@ class ParamEditor(ReadsEdits, VerticalScroll):
         yield from policy_inputs(s.policies, disabled=ro is not None)
         if ro is None:
             with Horizontal(classes="buttons"):
-                yield Button("Apply ⏎", id="apply", variant="primary", compact=True)
-                yield Button("Revert ^r", id="revert", compact=True)
+                keys = key_names(self)
+                apply, revert = keys.short("editor.apply"), keys.short("editor.revert")
+                yield Button(f"Apply {apply}", id="apply", variant="primary", compact=True)
+                yield Button(f"Revert {revert}", id="revert", compact=True)
 
     # -- messages next to fields --------------------------------------------------------------
     def _set_static(self, selector: str, text: str) -> None:
