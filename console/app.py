@@ -20,7 +20,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from textual import on
+from textual import events, on
 from textual.app import App
 from textual.screen import Screen
 from textual.signal import Signal
@@ -71,6 +71,7 @@ from console.state.model import CONNECTED, CONNECTING, OFFLINE, UNREACHABLE, Con
 from console.state.site import Site
 from console.themes.loader import ANSI16_MAP, ANSI16_STATUS, Downgrade16, choose_theme, load_themes
 from console.themes.variables import VARIABLE_DEFAULTS
+from console.typeahead import TypeAhead
 
 HERE = Path(__file__).parent
 
@@ -169,16 +170,22 @@ class MissionApp(SplitEscape, FoldingNotifications, QuitQuestion, PlanModes, App
         self._hanging_up = False
         self.on_forced_exit: list[Callable[[], object]] = []  # before a forced exit (hang-up)
         self.exit_code = 0
+        self.typeahead = TypeAhead(self, self._key_as_typed)
+
+    async def on_event(self, event: events.Event) -> None:
+        if not await self.typeahead.take(event):  # keys typed while a dialog opens wait for it
+            await super().on_event(event)
+
+    async def _key_as_typed(self, key: events.Key) -> None:
+        await super().on_event(key)
 
     @property
     def clock(self) -> MissionClock:
-        """The mission clock (console/state/clock.py): called, the wall time now
-        (the log's and alerts' stamps); it says every time shown in mission time."""
+        """The mission clock (console/state/clock.py); setting it pins its wall clock (tests)."""
         return self.model.clock
 
     @clock.setter
     def clock(self, wall: Callable[[], datetime]) -> None:
-        """Pin the wall clock under the mission clock (tests)."""
         self.model.clock.wall = wall
 
     # -- theme and screens --------------------------------------------------------------

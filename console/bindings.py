@@ -50,8 +50,14 @@ def bind(
     return _binding(a, action, a.footer if show is None else show, priority)
 
 
-def mission_bindings() -> list[Binding]:
-    return bindings("mission")
+def mission_keys(keys: KeyNames) -> dict[str, str]:
+    """Key -> the schedule screen's action it runs (the user's keymap applied)."""
+    return {
+        key: a.name
+        for a in ACTIONS
+        if a.scope == "mission"
+        for key in keys.keys(a.binding_id).split(",")
+    }
 
 
 def key_names(node: Any) -> KeyNames:

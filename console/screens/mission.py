@@ -30,11 +30,12 @@ from backend.core.ops import (
     Sync,
     Unsync,
 )
-from console.bindings import bind, key_names, mission_bindings
+from console.bindings import bind, key_names
 from console.messages import HelpRequested, OperationRequested
 from console.screens.dialogs import ConfirmScreen, SkillPicker
 from console.screens.mission_files import MissionFiles
 from console.screens.mission_plan import PlanActions
+from console.screens.schedule_keys import added_text, refused_off_schedule, schedule_action
 from console.state import link
 from console.state.actions import BY_NAME
 from console.state.capability import also_offered_by
@@ -81,8 +82,9 @@ def top_text(m: ConsoleModel, unacked: int, marks: list[str], keys: KeyNames) ->
 
 
 class MissionScreen(MissionFiles, PlanActions, Screen):
+    SCOPE = "mission"  # its actions (console/state/actions.py)
+    # the actions table's keys are dispatched by on_key (mission_keys), not bound
     BINDINGS = [
-        *mission_bindings(),
         bind("app.help", "help", show=False),
         Binding("escape", "clear_marks", "Clear marks", show=False),
     ]
@@ -236,7 +238,7 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
 
     def refresh_availability(self) -> None:
         """The footer shows the keys that apply now (keys are checked again
-        when pressed: `check_action`)."""
+        when pressed: `run_named`)."""
         self.update_keys()
 
     def update_keys(self) -> None:
@@ -282,11 +284,6 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
         robot, sid = self.selection()
         return self.model.why_not(action, robot, sid, self.schedule.marks)
 
-    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
-        if action in BY_NAME and action != "toggle_static":
-            return None if self.why_disabled(action) else True
-        return True
-
     def explain(self, action: str) -> bool:
         """Say why an action does not apply; True if it does not."""
         why = self.why_disabled(action)
@@ -297,13 +294,17 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
             return True
         return False
 
-    def on_key(self, event: events.Key) -> None:
-        """A key of a disabled action: say why instead of doing nothing."""
-        ab = self.active_bindings.get(event.key)
-        if ab is not None and not ab.enabled and ab.node is self:
-            self.explain(ab.binding.action)
+    async def on_key(self, event: events.Key) -> None:
+        """The schedule's keys (console/screens/schedule_keys.py)."""
+        action = schedule_action(self, event)
+        if action is not None:
             event.stop()
             event.prevent_default()
+            refused = refused_off_schedule(self, action, event)
+            if refused:
+                self.say(refused, "warning")
+            else:
+                await self.run_named(action)
 
     async def run_named(self, action: str) -> None:
         """From the command palette: run it, or say why not."""
@@ -350,12 +351,7 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
             new = reply.value.get("id")
             if not new:
                 return
-            apply = key_names(self).say("editor.apply")
-            self.say(
-                f"added {new} ({choice}) to {robot} {where}: set its parameters; {apply} "
-                "in a field applies them",
-                "ok",
-            )
+            self.say(added_text(key_names(self), f"{new} ({choice}) to {robot} {where}"), "ok")
             self.edit_after_select = True
             if self.model.owner(new):
                 self.schedule.select(new)

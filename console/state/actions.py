@@ -43,6 +43,56 @@ class Action:
     def palette_title(self) -> str:
         return f"{SCOPE_TITLES.get(self.scope, self.scope.title())}: {self.label}"
 
+    @property
+    def opens(self) -> bool:
+        """It opens a dialog, picker, prompt or the editor: keys typed right after
+        it are for that (console/typeahead.py)."""
+        return self.binding_id in OPENS
+
+    @property
+    def to_robot(self) -> bool:
+        """It sends a command to a robot: only a press on the schedule itself runs it."""
+        return self.binding_id in TO_ROBOT
+
+
+# actions that open something keys typed next are for, whenever they apply (quit asks
+# when something is under way, else the console ends)
+OPENS = frozenset(
+    {
+        "mission.add",
+        "mission.edit",
+        "mission.search",
+        "mission.delete",
+        "mission.reset",
+        "mission.reset_all",
+        "mission.save",
+        "mission.load",
+        "log.export",
+        "checks.waive",
+        "map.add_marker",
+        "map.rename_marker",
+        "map.delete_marker",
+        "app.help",
+        "app.command_palette",
+        "app.quit",
+    }
+)
+# actions that send a command up the link to a robot
+TO_ROBOT = frozenset(
+    {
+        "mission.sync",
+        "mission.unsync",
+        "mission.retry",
+        "mission.run",
+        "mission.pause",
+        "mission.stop",
+        "mission.reset",
+        "mission.run_all",
+        "mission.pause_all",
+        "mission.stop_all",
+        "mission.reset_all",
+    }
+)
 
 SCOPE_TITLES = {
     "mission": "Mission",
@@ -438,6 +488,7 @@ ACTIONS: list[Action] = [
             ("apply", "enter", "Apply", "Apply the edited parameters (from any field)"),
             ("revert", "ctrl+r", "Revert", "Discard your changes to the skill"),
             ("leave", "escape", "Close", "Back to the schedule (below 100 columns: closes it)"),
+            ("select_all", "ctrl+a", "Select all", "Select all of a text box (a polygon's points)"),
         )
     ),
     # dialogs (console/screens/dialogs.py): each binds those it offers
