@@ -35,6 +35,11 @@ from console.widgets.schedule.view import ScheduleView
 WIDE = (150, 42)
 
 
+def shows(editor, sid: str) -> bool:
+    """The editor shows `sid`, its fields built."""
+    return editor.skill_id == sid and not editor.loading
+
+
 def status_line(app) -> str:
     return str(app.mission_screen.message)
 
@@ -98,17 +103,17 @@ async def test_read_only_editor_says_why():
     async with app.run_test(size=WIDE) as pilot:
         await inject(app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
         app.screen.query_one(ScheduleView).select("lru1-2")
-        await pilot.pause()
+        editor = app.screen.query_one(ParamEditor)
+        await wait_until(pilot, lambda: shows(editor, "lru1-2"), what="lru1-2 in the editor")
         assert "read-only: lru1-2 is running on lru1" in screen_text(app)
         banner = str(app.screen.query_one("#readonly").render())
         assert banner == (
             "read-only: lru1-2 is running on lru1: only idle skills can be edited; "
             "stop the robot (the skill goes back to its queue), then unsynchronize it"
         )
-        editor = app.screen.query_one(ParamEditor)
         assert all(w.disabled for w in editor.query("Input, Select, Switch, TextArea"))
         app.screen.query_one(ScheduleView).select("lru1-1")
-        await pilot.pause()
+        await wait_until(pilot, lambda: shows(editor, "lru1-1"), what="lru1-1 in the editor")
         assert "finished skills are the execution log" in str(
             app.screen.query_one("#readonly").render()
         )
@@ -511,7 +516,7 @@ async def test_policies_are_typed_inputs_validated_then_applied():
         await inject(app, pilot, b, online={"lru1": True, "lru2": True})
         screen = app.mission_screen
         screen.schedule.select("lru2-1")
-        await pilot.pause()
+        await wait_until(pilot, lambda: shows(screen.editor, "lru2-1"), what="lru2-1 shown")
         text = screen_text(app)
         assert "policies — applied by the robot itself" in text
         assert "retries" in text and "pause out of comms" in text and "recharge below" in text
