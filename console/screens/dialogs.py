@@ -42,10 +42,11 @@ class ConfirmScreen(ModalScreen[bool]):
 
     CSS_PATH = TCSS
 
-    def __init__(self, question: str, yes: str = "Yes") -> None:
+    def __init__(self, question: str, yes: str = "Yes", no: str = "Cancel") -> None:
         super().__init__()
         self.question = question
         self.yes = yes
+        self.no = no
 
     def compose(self) -> ComposeResult:
         with Vertical():
@@ -53,7 +54,7 @@ class ConfirmScreen(ModalScreen[bool]):
             keys = key_names(self)
             with Horizontal():
                 yield Button(f"{self.yes} ({keys.say('dialog.yes')})", id="yes", variant="error")
-                yield Button(f"Cancel ({keys.say('dialog.no')})", id="no")
+                yield Button(f"{self.no} ({keys.say('dialog.no')})", id="no")
 
     def on_mount(self) -> None:
         self.query_one("#no", Button).focus()

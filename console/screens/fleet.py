@@ -8,14 +8,16 @@ from __future__ import annotations
 import json
 
 from rich.text import Text
-from textual import on
+from textual import on, work
 from textual.app import ComposeResult
 from textual.signal import Signal
 from textual.widgets import DataTable, Footer, Input, Static
 
 from backend.protocol.messages import RobotInfo
-from console.bindings import key_names
+from console.bindings import bindings, key_names
 from console.screens.base import ViewScreen
+from console.screens.cancel import ask_and_cancel
+from console.screens.dialogs import ChoiceScreen
 from console.state import link
 from console.state.capability import (
     filter_examples,
@@ -44,6 +46,7 @@ class FleetScreen(ViewScreen):
         ("Last report", "report"),
     )
     TOPICS = ("fleet",)
+    BINDINGS = [*ViewScreen.BINDINGS, *bindings("fleet")]
 
     def __init__(self, model: ConsoleModel, changes: Signal[tuple[str, str | None]]) -> None:
         super().__init__(changes)
@@ -57,8 +60,11 @@ class FleetScreen(ViewScreen):
         yield Static("", id="detail", classes="detail")
         keys = key_names(self)
         back, schedule = keys.say("app.back"), keys.say("app.show_mission")
+        cancel = keys.say("fleet.cancel")
         yield Static(
-            f"type to filter ({back}: back to the list) · {schedule}: schedule", classes="hint"
+            f"type to filter ({back}: back to the list) · {cancel}: cancel a pending command · "
+            f"{schedule}: schedule",
+            classes="hint",
         )
         yield Footer()
 
@@ -189,6 +195,30 @@ class FleetScreen(ViewScreen):
         out.append("\nlink: ", style="bold")
         out.append(link.link_text(self.model, r, self.model.clock))
         return out
+
+    # -- cancelling a pending command ----------------------------------------------------
+    def _say(self, text: str, severity: str = "information") -> None:
+        level = {"ok": "information", "error": "error", "warning": "warning"}.get(severity)
+        self.app.notify(text, title="Uplink", severity=level or "information")
+
+    @work(group="dialog")
+    async def action_fleet_cancel(self) -> None:
+        """One of the selected robot's pending commands (chosen if several), asking first."""
+        robot = self.selected
+        cmds = self.model.pending(robot) if robot else []
+        if not cmds:
+            self._say(f"no command waits for {robot or 'a robot'}'s answer", "warning")
+            return
+        c = cmds[0]
+        if len(cmds) > 1:
+            rows = [(str(x.id), Text(link.command_text(x, self.model.clock))) for x in cmds]
+            chosen = await self.app.push_screen_wait(
+                ChoiceScreen(f"Cancel which command to {robot}?", rows)
+            )
+            if chosen is None:
+                return
+            c = next(x for x in cmds if str(x.id) == chosen)
+        await ask_and_cancel(self, c, self._say)
 
     # -- events ---------------------------------------------------------------------------
     @on(DataTable.RowHighlighted)

@@ -32,14 +32,19 @@ from backend.core.ops import (
 )
 from console.bindings import bind, key_names
 from console.messages import HelpRequested, OperationRequested
+from console.screens.cancel import ask_and_cancel
 from console.screens.dialogs import ConfirmScreen, SkillPicker
 from console.screens.mission_files import MissionFiles
 from console.screens.mission_plan import PlanActions
-from console.screens.schedule_keys import added_text, refused_off_schedule, schedule_action
+from console.screens.schedule_keys import (
+    added_text,
+    footer_now,
+    refused_off_schedule,
+    schedule_action,
+)
 from console.state import link
 from console.state.actions import BY_NAME
 from console.state.capability import also_offered_by
-from console.state.context import EDITOR, context_keys, fit_footer, footer_keys, tail_keys
 from console.state.defaults import default_params
 from console.state.eventlog import AlertBook
 from console.state.files import RecentFiles
@@ -229,7 +234,8 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
         self.refresh_availability()
         c = self.model.uplinking(event.skill_id) if event.skill_id else None
         if c is not None:  # its row may have no room for the command: the status line has
-            self.say(link.waiting_text(event.skill_id, c, self.model.clock))
+            cancel = key_names(self).say("mission.cancel")
+            self.say(link.waiting_text(event.skill_id, c, self.model.clock, cancel))
         if self.editor_visible:
             await self.editor.show_skill(event.skill_id)
 
@@ -242,18 +248,9 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
         self.update_keys()
 
     def update_keys(self) -> None:
-        """The footer: the editor's keys while it has the focus, else the
-        keys that apply to the selection first (console/state/context.py)."""
-        if not self.is_mounted:
-            return
-        keys = key_names(self)
-        if self.editor.focus_within():
-            first = footer_keys(EDITOR, keys)
-        else:
-            robot, sid = self.selection()
-            first = context_keys(self.model, robot, sid, self.schedule.marks, keys)
-        width = self.size.width or self.app.size.width
-        self._footer.show(fit_footer(first, width, tail_keys(keys)))
+        """The footer: the keys that apply now (console/screens/schedule_keys.py)."""
+        if self.is_mounted:
+            self._footer.show(footer_now(self))
 
     def on_descendant_focus(self, event: events.DescendantFocus) -> None:
         self.update_keys()
@@ -508,6 +505,12 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
             skill=sid,
             on_ok=lambda r: self.say(f"barrier {bid} removed", "ok"),
         )
+
+    @work(group="dialog")
+    async def action_cancel(self) -> None:
+        c = self.model.uplinking(self.schedule.cursor_id or "")
+        if c is not None:
+            await ask_and_cancel(self, c, self.say)
 
     def action_retry(self) -> None:
         robot, sid = self.selection()

@@ -15,6 +15,14 @@ from textual import events
 
 from console.bindings import key_names, mission_keys
 from console.state.actions import BY_NAME
+from console.state.context import (
+    EDITOR,
+    FooterKey,
+    context_keys,
+    fit_footer,
+    footer_keys,
+    tail_keys,
+)
 from console.state.keys import KeyNames
 
 
@@ -44,3 +52,15 @@ def refused_off_schedule(screen: Any, action: str, event: events.Key) -> str | N
 def added_text(keys: KeyNames, what: str) -> str:
     """After an add: what was added, and the key that applies its parameters."""
     return f"added {what}: set its parameters; {keys.say('editor.apply')} in a field applies them"
+
+
+def footer_now(screen: Any) -> list[FooterKey]:
+    """The footer: the editor's keys while it has the focus, else the keys that
+    apply to the selection, most likely first (console/state/context.py)."""
+    keys = key_names(screen)
+    if screen.editor.focus_within():
+        first = footer_keys(EDITOR, keys)
+    else:
+        robot, sid = screen.selection()
+        first = context_keys(screen.model, robot, sid, screen.schedule.marks, keys)
+    return fit_footer(first, screen.size.width or screen.app.size.width, tail_keys(keys))

@@ -61,6 +61,8 @@ OPENS = frozenset(
     {
         "mission.add",
         "mission.edit",
+        "mission.cancel",
+        "fleet.cancel",
         "mission.search",
         "mission.delete",
         "mission.reset",
@@ -82,6 +84,7 @@ TO_ROBOT = frozenset(
     {
         "mission.sync",
         "mission.unsync",
+        "mission.cancel",
         "mission.retry",
         "mission.run",
         "mission.pause",
@@ -102,6 +105,7 @@ SCOPE_TITLES = {
     "map": "Map",
     "log": "Event log",
     "alerts": "Alerts",
+    "fleet": "Fleet",
     "timeline": "Timeline",
     "checks": "Plan checks",
 }
@@ -177,6 +181,14 @@ ACTIONS: list[Action] = [
     ),
     Action(
         "unbarrier", "B", "Unbarrier", "Remove the barrier of the selected skill", "Synchronization"
+    ),
+    Action(
+        "cancel",
+        "w",
+        "Cancel cmd",
+        "Cancel the pending command that locks the selected skill (⇡), asking first; one "
+        "already sent is cancelled unless the robot applied it first (its answer says)",
+        "Synchronization",
     ),
     Action(
         "retry",
@@ -275,6 +287,15 @@ ACTIONS: list[Action] = [
         "ack", "enter,a", "Acknowledge", "Acknowledge the selected alert", "Alerts", True, "alerts"
     ),
     Action("ack_all", "A", "Ack all", "Acknowledge every alert", "Alerts", True, "alerts"),
+    Action(
+        "fleet_cancel",
+        "delete",  # not a letter: letters typed on the list start the filter
+        "Cancel cmd",
+        "Cancel one of the selected robot's pending commands (its uplink), asking first",
+        "Fleet",
+        True,
+        "fleet",
+    ),
     # the map screen
     Action("map_zoom_in", "plus,equals_sign", "Zoom+", "Zoom in", "Map", True, scope="map"),
     Action("map_zoom_out", "minus", "Zoom-", "Zoom out", "Map", True, scope="map"),

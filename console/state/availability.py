@@ -108,7 +108,7 @@ def read_only_reason(facts: Facts, skill_id: str) -> str | None:
     if s.status == Status.IDLE:
         c = facts.uplinking(s.id)
         if c is not None:
-            return uplinking_why(c)
+            return uplinking_why(c, facts.keys)
         if not facts.connected:
             return (
                 f"not connected to the mission server ({facts.connection}): "
@@ -118,11 +118,11 @@ def read_only_reason(facts: Facts, skill_id: str) -> str | None:
     return not_idle(robot, s, "only idle skills can be edited")
 
 
-def uplinking_why(c: UplinkCommand) -> str:
-    """Why a skill a pending command concerns cannot change now."""
+def uplinking_why(c: UplinkCommand, keys: KeyNames) -> str:
+    """Why a skill a pending command concerns cannot change now, and the key that cancels it."""
     return (
         f"{c.title()} to {c.robot} is waiting for the robot's answer: "
-        f"wait for it, or cancel the command (ctl cancel {c.id})"
+        f"wait for it, or cancel the command ({keys.say('mission.cancel')} on the schedule)"
     )
 
 
@@ -157,7 +157,7 @@ def _idle_skill(q: Selected, verb: str) -> str | None:
     if s.status != Status.IDLE:
         return not_idle(robot, s, f"only idle skills can be {verb}")
     c = q.facts.uplinking(s.id)
-    return uplinking_why(c) if c is not None else None
+    return uplinking_why(c, q.facts.keys) if c is not None else None
 
 
 def _delete(q: Selected) -> str | None:
@@ -194,7 +194,7 @@ def _sync(q: Selected) -> str | None:
         )
     c = q.facts.uplinking(s.id)
     if c is not None:
-        return uplinking_why(c)
+        return uplinking_why(c, q.facts.keys)
     blocked = q.facts.plan_blocking(r, s.id)
     if blocked:
         more = f" and {len(blocked) - 2} more" if len(blocked) > 2 else ""
@@ -290,6 +290,18 @@ def _retry(q: Selected) -> str | None:
     return None
 
 
+def _cancel(q: Selected) -> str | None:
+    if q.found is None:
+        return "select a skill a pending command locks (⇡)"
+    s = q.found[2]
+    c = q.facts.uplinking(s.id)
+    if c is None:
+        return f"no command waits on {s.id}: only a skill marked ⇡ has one to cancel"
+    if c.cancel_requested:
+        return f"cancelling {c.title()} was asked already: {c.robot}'s answer decides"
+    return None
+
+
 def _duplicate(q: Selected) -> str | None:
     if q.found is None:
         return "select a skill to duplicate"
@@ -377,6 +389,7 @@ RULES: dict[str, Rule] = {
     "unbarrier": _unbarrier,
     "retry": _retry,
     "retry_edit": _failed_once,
+    "cancel": _cancel,
     "duplicate": _duplicate,
     **{verb: _control(verb) for verb in CONTROLS},
     **{f"{verb}_all": _control_all(verb) for verb in CONTROLS},

@@ -29,8 +29,18 @@ from console.state.keys import KeyNames
 SKILL = ("edit", "duplicate", "add")
 ROBOT = ("run", "pause", "stop")
 FIRST: dict[Status | None, tuple[str, ...]] = {
-    Status.IDLE: ("edit", "sync", "add", "duplicate", "delete", "mark", "barrier", "move_up"),
-    Status.IDLE_SYNCHRONIZED: ("unsync", "run", *SKILL),
+    Status.IDLE: (
+        "cancel",
+        "edit",
+        "sync",
+        "add",
+        "duplicate",
+        "delete",
+        "mark",
+        "barrier",
+        "move_up",
+    ),
+    Status.IDLE_SYNCHRONIZED: ("cancel", "unsync", "run", *SKILL),
     Status.RUNNING: ("pause", "stop", *SKILL),
     Status.PAUSED: ("run", "stop", "reset", *SKILL),
     Status.SYNCHWAITING: ("stop", "unbarrier", *SKILL),
@@ -39,6 +49,7 @@ FIRST: dict[Status | None, tuple[str, ...]] = {
     None: ("add", *ROBOT),
 }
 REST = (
+    "cancel",
     "edit",
     "sync",
     "unsync",

@@ -42,12 +42,24 @@ def command_text(c: UplinkCommand, clock: MissionClock) -> str:
     return text
 
 
-def waiting_text(sid: str, c: UplinkCommand, clock: MissionClock) -> str:
-    """The status line on an uplinking skill: its command and how to withdraw it."""
+def waiting_text(sid: str, c: UplinkCommand, clock: MissionClock, cancel_key: str) -> str:
+    """The status line on an uplinking skill: its command and the key that cancels it."""
     return (
-        f"{sid}: {command_text(c, clock)}, waiting for {c.robot}'s answer "
-        f"(ctl cancel {c.id} withdraws it)"
+        f"{sid}: {command_text(c, clock)}, waiting for {c.robot}'s answer ({cancel_key} cancels it)"
     )
+
+
+def cancel_question(c: UplinkCommand, clock: MissionClock) -> str:
+    """'Cancel sync #17 to lru1 (lru1-4, lru1-5)?' and what cancelling does now."""
+    what = f" ({', '.join(c.skills)})" if c.skills else ""
+    head = f"Cancel {c.op} #{c.id} to {c.robot}{what}?"
+    if c.state == CommandState.SENT:
+        sent = f" {clock.age_text(c.sent)} ago" if c.sent is not None else ""
+        return (
+            f"{head}\nIt was sent{sent}: {c.robot} may have it already. It is cancelled "
+            f"unless {c.robot} applied it first; its answer says which."
+        )
+    return f"{head}\nIt has not left the ground: it is withdrawn at once."
 
 
 def pending_text(cmds: list[UplinkCommand], clock: MissionClock) -> str:

@@ -22,7 +22,7 @@ from console_state import (
 from textual import events
 from textual.widgets import Select, Switch, TextArea
 
-from backend.core.ops import AddSkill, EditSkill
+from backend.core.ops import AddSkill, EditSkill, Sync
 from console.bindings import mission_keys
 from console.messages import EventsApplied
 from console.screens.dialogs import SkillPicker
@@ -94,15 +94,17 @@ def _openers() -> list[str]:
 async def test_every_key_that_opens_something_keeps_the_keys_typed_after_it(key):
     b = Builder(TUTORIAL)
     b.sync("lru1", "lru1-1")  # something to reset
+    b.engine.submit(Sync(robot="lru2", through="lru2-1"))  # a command to cancel, pending
     app, backend = engine_app(b)
     async with app.run_test(size=(80, 24)) as pilot:
         await inject(app, pilot, b, online=ONLINE)
         edit = b.engine.submit(EditSkill(id="lru2-2", label="unsaved"))  # quitting asks first
         app.post_message(EventsApplied(edit.batch()))
         screen = app.mission_screen
-        screen.schedule.select("lru1-2")  # idle, after a queued skill
-        await pilot.pause()
         action = mission_keys(KeyNames()).get(key)
+        # an idle skill after a queued one; or one the pending command locks
+        screen.schedule.select("lru2-1" if action == "cancel" else "lru1-2")
+        await pilot.pause()
         assert action is None or screen.why_disabled(action) is None  # it opens now
         # sync, run, stop, unsync, duplicate, delete, barrier on the schedule
         burst(app, [key, *"srxucdb"])

@@ -16,6 +16,7 @@ from console_state import (
     mars_mid_execution,
     mars_telemetry,
     screen_text,
+    wait_until,
 )
 
 from backend.core.model import CommandState
@@ -82,7 +83,7 @@ async def test_a_pending_sync_shows_on_its_skills_and_header_and_locks_them():
         assert m.why_not("delete", "lru2", "lru2-5").startswith(
             f"command {cid} (sync lru2-5, lru2-6) to lru2 is waiting for the robot's answer"
         )
-        assert "ctl cancel" in m.read_only_reason("lru2-6")
+        assert "(w on the schedule)" in m.read_only_reason("lru2-6")  # the console's key
         assert m.why_not("run", "lru1", None)  # lru1 runs lru1-2 already
         assert "queued 40s ago" in m.quit_risks()[1]
         now[0] += timedelta(seconds=5)  # the ages count up without a message
@@ -190,3 +191,68 @@ def test_the_event_log_says_what_became_of_a_command():
     log = EventLog()
     [entry] = log.add_batch(queued, m, T0)
     assert "command 1 (sync lru2-5, lru2-6) queued for lru2" in entry.text, entry.text
+
+
+async def test_a_pending_sync_is_cancelled_from_the_schedule_with_a_confirmation():
+    from console_state import EngineBackend
+
+    from console.screens.dialogs import ConfirmScreen
+
+    b, cid = _with_pending_sync()
+    app = make_app()
+    app.backend = EngineBackend(b, app)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await inject(app, pilot, b, telemetry=mars_telemetry())
+        screen = app.mission_screen
+        screen.schedule.select("lru2-5")
+        await pilot.pause()
+        cancel = app.model.keys.say("mission.cancel")
+        assert f"({cancel} cancels it)" in screen_text(app)  # the status line names the key
+        reason = app.model.read_only_reason("lru2-6")
+        assert f"({cancel} on the schedule)" in reason and "ctl cancel" not in reason
+        await pilot.press(app.model.keys.keys("mission.cancel"))
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="confirm")
+        text = screen_text(app)
+        assert f"Cancel sync #{cid} to lru2 (lru2-5, lru2-6)?" in text, text
+        assert "withdrawn at once" in text  # it never left
+        await pilot.press("y")
+        await wait_until(
+            pilot, lambda: b.mission.command(cid).state == CommandState.CANCELLED, what="cancelled"
+        )
+        await wait_until(pilot, lambda: app.model.uplinking("lru2-5") is None, what="unlocked")
+        assert f"sync #{cid} to lru2 cancelled" in str(screen.message)
+
+
+async def test_the_fleet_and_the_palette_cancel_a_pending_command():
+    from console_state import EngineBackend
+
+    from console.commands import MissionCommands
+    from console.screens.dialogs import ConfirmScreen
+    from console.screens.fleet import FleetScreen
+
+    b, cid = _with_pending_sync()
+    app = make_app()
+    app.backend = EngineBackend(b, app)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await inject(app, pilot, b, telemetry=mars_telemetry())
+        hits = [h async for h in MissionCommands(app.screen).search("cancel sync")]
+        assert any(f"Cancel sync #{cid} to lru2 (lru2-5, lru2-6)" in h.text for h in hits)
+        await pilot.press("f4")
+        await wait_until(pilot, lambda: isinstance(app.screen, FleetScreen), what="fleet")
+        fleet = app.screen
+        fleet.query_one("DataTable").move_cursor(row=fleet.shown.index("lru2"))
+        await pilot.pause()
+        await pilot.press(app.model.keys.keys("fleet.cancel"))
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="confirm")
+        assert f"Cancel sync #{cid} to lru2" in screen_text(app)
+        await pilot.press("n")  # kept
+        await pilot.pause()
+        assert b.mission.command(cid).pending
+        hits = [h async for h in MissionCommands(fleet).search("cancel sync")]
+        [hit] = [h for h in hits if h.text.startswith(f"Cancel sync #{cid}")]
+        hit.command()  # what choosing it in the palette runs
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="confirm")
+        await pilot.press("y")
+        await wait_until(
+            pilot, lambda: b.mission.command(cid).state == CommandState.CANCELLED, what="cancelled"
+        )
