@@ -41,6 +41,7 @@ from console.state.markers import (
     relabel,
 )
 from console.state.model import CONNECTED, ConsoleModel
+from console.state.site import here_text
 from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS, fmt_value
 from console.widgets.bars import InfoLine, StatusLine, TopBar, connection_text
 from console.widgets.map.view import (
@@ -139,8 +140,9 @@ def param_rows(spec: Any, s: Any, names: list[str]) -> list[tuple[str, Text]]:
 
 
 def info_text(model: ConsoleModel, v: MapView, feed_state: str) -> Text:
-    """The info line: the feed (when not live), the cursor and scale, who is
-    followed, the selected marker and the schedule's selected skill."""
+    """The info lines: the feed (when not live), the cursor and scale, who is
+    followed, the selected marker and the schedule's selected skill; then what
+    is under the cursor (console/state/site.py)."""
     t = Text()
     if feed_state == "none" or v.mirror is None or not v.mirror.ready:
         t.append(NO_FEED if feed_state == "none" else "waiting for the map feed…", style="bold")
@@ -157,6 +159,8 @@ def info_text(model: ConsoleModel, v: MapView, feed_state: str) -> Text:
     if found is not None:
         s = found[2]
         t.append(f"  skill {s.id} {s.skill} ({STATUS_WORDS[s.status]})", style="dim")
+    here = here_text(v.mirror, model.mission, model.telemetry, x, y, tol=max(1.0, v.vp.mpp))
+    t.append(f"\nhere: {here}")
     return t
 
 
@@ -208,12 +212,21 @@ class MapScreen(Screen):
         yield Footer()
 
     def on_mount(self) -> None:
+        # a notification never covers the cursor: the view moves it clear
+        self.screen_layout_refresh_signal.subscribe(self, lambda _s: self._uncover_cursor())
         self._legend.update(legend_text(self.app.get_css_variables(), key_names(self)))
         self._apply_legend()
         self.view.focus()
         self.sync_selection()
         self.update_top()
         self.update_info()
+
+    def _uncover_cursor(self) -> None:
+        x, y = self.view.region.x, self.view.region.y
+        for toast in self.query("Toast"):  # Textual's notifications (not exported by name)
+            r = toast.region
+            if r.area and toast.display:
+                self.view.uncover_cursor(r.x - x, r.y - y, r.right - x, r.bottom - y)
 
     def on_resize(self, event: events.Resize) -> None:
         self._apply_legend()
@@ -348,6 +361,7 @@ class MapScreen(Screen):
             return
         self.view.follow = None
         self.view.fit()
+        self.view.set_cursor(self.view.vp.cx, self.view.vp.cy)  # back in the middle of it
         self.update_info()
 
     def _pan(self, dx: int, dy: int) -> None:
