@@ -11,12 +11,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from backend.core.model import Marker, Mission
 from backend.core.plan.geometry import inside
-from backend.protocol import mapfeed as mf
 from backend.protocol.messages import Telemetry
 from console.state.clock import MissionClock
+
+if TYPE_CHECKING:  # the feed's module brings numpy: not needed for the console's first frame
+    from backend.protocol import mapfeed as mf
 
 
 @dataclass(frozen=True)
@@ -33,7 +36,8 @@ def site_text(site: Site, clock: MissionClock) -> str:
 
 # -- what is under the map's cursor ------------------------------------------------------------
 
-GROUND = {mf.T_FREE: "free ground", mf.T_SLOW: "sand (slow)", mf.T_ROCK: "rock (impassable)"}
+# terrain cells (backend.protocol.mapfeed T_FREE, T_SLOW, T_ROCK; 0 is unknown)
+GROUND = {1: "free ground", 2: "sand (slow)", 3: "rock (impassable)"}
 
 
 def clamp_to_site(meta: mf.MapMeta | None, x: float, y: float) -> tuple[float, float]:
@@ -74,7 +78,11 @@ def _things_here(
                 out.append(f"region {r.rss} ({score})")
         if _near(x, y, objects.lander.x, objects.lander.y, max(tol, objects.lander.pad_radius)):
             out.append("lander")
-        out += [f"box {b.box}" for b in objects.boxes if _near(x, y, b.x, b.y, tol)]
+        out += [  # (those on the lander's shelf are the lander's)
+            f"box {b.box}"
+            for b in objects.boxes
+            if b.where != "shelf" and _near(x, y, b.x, b.y, tol)
+        ]
         out += [f"stone {s.id}" for s in objects.stones if _near(x, y, s.x, s.y, tol)]
     markers = mission.markers if mission is not None else {}
     out += [f"marker {name}" for name, mk in markers.items() if _marker_here(mk, x, y, tol)]
