@@ -6,10 +6,10 @@
 Against a 10,000-skill mission (20 robots x 500 drive_to skills: 200 done,
 one running, 99 queued, 200 planned per robot), headless Textual at 200x50:
 
-- time to first full render: from posting the state (the `StateLoaded`
+- time to first full render: from posting the state (the `StateSynced`
   message) to the first frame written with the schedule drawn;
 - time to apply and render one status change: from posting one
-  `EventsApplied` (a queued skill becomes running) to the frame showing it
+  `BatchApplied` (a queued skill becomes running) to the frame showing it
   (median of 30);
 - resident memory of the process after the first render (VmRSS).
 
@@ -126,9 +126,11 @@ class FrameClock:
 
 
 async def run_schedule() -> dict:
+    from backend.client.events import BatchApplied, ConnectionState, StateSynced
     from backend.core import events as ev
+    from backend.protocol.messages import StateSnapshot
     from console.app import MissionApp
-    from console.messages import ConnectionChanged, EventsApplied, StateLoaded
+    from console.messages import Incoming
 
     mission, library = build_mission()
     app = MissionApp()
@@ -136,11 +138,14 @@ async def run_schedule() -> dict:
     out: dict = {}
     async with app.run_test(size=SIZE) as pilot:
         clock = FrameClock(app)
-        app.post_message(ConnectionChanged("connected", endpoint="bench"))
+        app.post_message(Incoming(ConnectionState("connected")))
         await pilot.pause()
         screen = app.mission_screen
         t0, c0 = time.perf_counter(), time.process_time()
-        app.post_message(StateLoaded(mission, library, {}))
+        snap = StateSnapshot(
+            server_id="bench", revision=mission.revision, mission=mission, library=library
+        )
+        app.post_message(Incoming(StateSynced(snap)))
         out["first_render_s"] = await clock.next_frame(
             t0, lambda: len(screen.schedule.columns) == ROBOTS
         )
@@ -156,13 +161,11 @@ async def run_schedule() -> dict:
             rev += 1
             batch = ev.EventBatch(
                 revision=rev,
-                events=[
-                    ev.SkillChanged(id=sid, changes={"status": "paused" if k % 2 else "failure"})
-                ],
+                events=[ev.SkillStatusChanged(id=sid, status="paused" if k % 2 else "failure")],
             )
             await pilot.pause()
             t, c = time.perf_counter(), time.process_time()
-            app.post_message(EventsApplied(batch))
+            app.post_message(Incoming(BatchApplied(batch)))
             times.append(
                 await clock.next_frame(
                     t, lambda sid=sid: app.model.find(sid)[2].status.value != "idle_synchronized"

@@ -53,6 +53,7 @@ def memory(n: int) -> float:
 async def screen_times(n: int, repeats: int = 5) -> tuple[float, float]:
     """(median redraw s, median append-one-entry s) of the log screen."""
     from console.app import MissionApp
+    from console.state.changes import Topic, change
 
     app = MissionApp()
     app.animation_level = "none"
@@ -69,7 +70,7 @@ async def screen_times(n: int, repeats: int = 5) -> tuple[float, float]:
             redraws.append(time.perf_counter() - t)
             t = time.perf_counter()
             app.event_log.add("refusal", "one more", T0, robots=["lru1"])
-            app.awareness_signal.publish(("log", None))
+            app.publish(change(Topic.LOG))
             await pilot.pause()
             appends.append(time.perf_counter() - t)
         return statistics.median(redraws), statistics.median(appends)

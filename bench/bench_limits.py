@@ -41,7 +41,7 @@ if str(ROOT) not in sys.path:
 from bench_core import big_mission  # noqa: E402
 from report import machine, write_section  # noqa: E402
 
-from backend.core.events import EventBatch, ReportSeq, SkillChanged  # noqa: E402
+from backend.core.events import EventBatch, ReportSeq, SkillStatusChanged  # noqa: E402
 from backend.core.ops import AddSkill, Report  # noqa: E402
 from backend.files import yamlio  # noqa: E402
 from backend.files.missions import mission_to_yaml  # noqa: E402
@@ -151,7 +151,7 @@ def bench_journal(n: int) -> dict[str, float]:
         revision=1,
         events=[
             ReportSeq(robot="lru1", seq=7),
-            SkillChanged(id="lru1-3", changes={"status": "running", "started_at": "2030-07-01"}),
+            SkillStatusChanged(id="lru1-3", status="running", at="2030-07-01T00:00:00Z"),
         ],
         actor="lru1",
     )

@@ -131,14 +131,12 @@ def measure(with_map: bool) -> dict[str, float]:
     flips = iter(["paused", "running"] * REPEAT * 2)
     out["apply"] = median_ms(
         lambda: ev.apply_events(
-            mission, batch([ev.SkillChanged(id="r03-201", changes={"status": next(flips)})])
+            mission, batch([ev.SkillStatusChanged(id="r03-201", status=next(flips))])
         )
     )
 
     def status_event() -> None:
-        ev.apply_events(
-            mission, batch([ev.SkillChanged(id="r03-201", changes={"status": next(flips)})])
-        )
+        ev.apply_events(mission, batch([ev.SkillStatusChanged(id="r03-201", status=next(flips))]))
         f.forecast(mission, base)
 
     out["event"] = median_ms(status_event) - out["apply"]
@@ -157,9 +155,8 @@ def measure(with_map: bool) -> dict[str, float]:
             mission,
             batch(
                 [
-                    ev.SkillChanged(
-                        id="r05-350",
-                        changes={"params": {"goal": goal, "speed": 0.5, "tolerance": 0.5}},
+                    ev.SkillEdited(
+                        id="r05-350", params={"goal": goal, "speed": 0.5, "tolerance": 0.5}
                     )
                 ]
             ),

@@ -102,7 +102,7 @@ def patrol_points() -> list[tuple[float, float]]:
     out = []
     for k in range(8):
         a = 2 * math.pi * k / 8
-        p = world.nearest_free(120 * math.cos(a), 120 * math.sin(a), max_r=20)
+        p = world.terrain.nearest_free(120 * math.cos(a), 120 * math.sin(a), max_r=20)
         assert p is not None
         out.append((round(p[0], 1), round(p[1], 1)))
     return out

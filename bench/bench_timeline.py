@@ -34,9 +34,11 @@ CHANGES = 15
 
 
 async def run() -> dict[str, float]:
+    from backend.client.events import BatchApplied, ConnectionState, StateSynced
     from backend.core import events as ev
+    from backend.protocol.messages import StateSnapshot
     from console.app import MissionApp
-    from console.messages import ConnectionChanged, EventsApplied, StateLoaded
+    from console.messages import Incoming
 
     mission, library = build_mission()
     app = MissionApp()
@@ -44,11 +46,14 @@ async def run() -> dict[str, float]:
     out: dict[str, float] = {}
     async with app.run_test(size=SIZE) as pilot:
         clock = FrameClock(app)
-        app.post_message(ConnectionChanged("connected", endpoint="bench"))
+        app.post_message(Incoming(ConnectionState("connected")))
         await pilot.pause()
         screen = app.mission_screen
         t0 = time.perf_counter()
-        app.post_message(StateLoaded(mission, library, {}))
+        snap = StateSnapshot(
+            server_id="bench", revision=mission.revision, mission=mission, library=library
+        )
+        app.post_message(Incoming(StateSynced(snap)))
         out["schedule_first_ms"] = 1e3 * await clock.next_frame(
             t0, lambda: len(screen.schedule.columns) == 20
         )
@@ -73,12 +78,12 @@ async def run() -> dict[str, float]:
                 rev += 1
                 sid = f"r{k % 4:02d}-{202 + k}"
                 batch = ev.EventBatch(
-                    revision=rev, events=[ev.SkillChanged(id=sid, changes={"status": "paused"})]
+                    revision=rev, events=[ev.SkillStatusChanged(id=sid, status="paused")]
                 )
                 # the app's handler called as the message loop would (for both screens),
                 # then the plan timer's tick without waiting for it
                 t = time.perf_counter()
-                await app.on_events_applied(EventsApplied(batch))
+                app._incoming(Incoming(BatchApplied(batch)))
                 app.refresh_plan(force=True)
                 times.append(
                     await clock.next_frame(

@@ -1,62 +1,38 @@
-"""The live connection: `backend.client.client.MissionClient` -> console messages.
+"""The live connection: a `MissionClient` without a mirror of its own, and the map feed.
 
 The client calls its listeners on the asyncio loop (the app's loop) with a
-typed event (`backend.client.events`); each becomes one posted console
-message, so nothing here ever blocks the UI. Operations go through
-`submit`, awaited in workers by the app.
+typed event (`backend.client.events`); each is handed to `post` as it is
+(the app posts it to itself, and its model takes it), so nothing here ever
+blocks the UI. The client keeps no copy of the mission (`mirror=False`): the
+console's model is the one mirror. Operations go through `submit`, awaited
+in workers by the `OperationService`.
 """
 
 from __future__ import annotations
 
-from typing import Any, Protocol
+from collections.abc import Callable
+from typing import Any
 
-from backend.client.client import MissionClient
-from backend.client.events import (
-    AlertRaised,
-    BatchApplied,
-    ClientEvent,
-    ConnectionState,
-    Malformed,
-    RobotChanged,
-    StateSynced,
-    TelemetryReceived,
-)
+from backend.client.client import ClientError, MissionClient
 from backend.client.mapfollow import MapFeed, MapUpdate
-from backend.protocol.keys import Keys
 from backend.protocol.mapfeed import KEY_STATUS_LIVE, SimStatus
 from backend.protocol.messages import OpReply
 from backend.transport import subscribe
 from backend.transport.login import Login
-from console.messages import (
-    AccountKnown,
-    AlertReceived,
-    ConnectionChanged,
-    EventsApplied,
-    FleetChanged,
-    MapChanged,
-    MessageUnreadable,
-    StateLoaded,
-    TelemetryChanged,
-)
-
-
-class Backend(Protocol):
-    """What the console needs to change the mission (the client, or a test double)."""
-
-    async def submit(self, op: Any, *, expected_revision: int | None = None) -> OpReply: ...
+from console.state.changes import AccountKnown, MapFed, ModelEvent
 
 
 class ClientBridge:
     def __init__(
         self,
-        app: Any,
+        post: Callable[[ModelEvent], object],
         endpoint: str,
         *,
         user: str = "",
         client_id: str | None = None,
         login: Login | None = None,
     ) -> None:
-        self.app = app
+        self.post = post
         self.endpoint = endpoint
         self.user = user
         self.client_id = client_id
@@ -70,16 +46,16 @@ class ClientBridge:
         """Connect (raises backend.client.client.ClientError with a sentence)."""
         await self.close()
         client = MissionClient(
-            self.endpoint, user=self.user, client_id=self.client_id, login=self.login
+            self.endpoint, user=self.user, client_id=self.client_id, login=self.login, mirror=False
         )
-        client.add_listener(self._on_client)
+        client.add_listener(self.post)
         self.client = client
         try:
             await client.connect()
         except BaseException:
             self.client = None
             raise
-        self.app.post_message(AccountKnown(client.read_only or ""))
+        self.post(AccountKnown(client.read_only or ""))
         await self.follow_map()
 
     async def follow_map(self) -> None:
@@ -94,16 +70,15 @@ class ClientBridge:
 
     def _on_status(self, msg: Any) -> None:  # a Zenoh thread: keep the latest, nothing else
         try:
-            status = SimStatus.model_validate_json(msg.payload)
+            self.sim_status = SimStatus.model_validate_json(msg.payload)
         except ValueError:
-            return  # not a status of ours: the plan goes on without the sim's speed
-        self.sim_status = status
-        self.app.model.clock.heard(status.sim_time, status.speed)  # thread-safe (clock.py)
+            pass  # not a status of ours: the plan goes on without the sim's speed
 
     def _on_map(self, update: MapUpdate) -> None:
         feed = self.map_feed
         if feed is not None:
-            self.app.post_message(MapChanged(feed.mirror, update))
+            status = self.sim_status
+            self.post(MapFed(feed.mirror, update, status.speed if status is not None else None))
 
     async def close(self) -> None:
         sub, self._status_sub = self._status_sub, None
@@ -127,30 +102,5 @@ class ClientBridge:
 
     async def submit(self, op: Any, *, expected_revision: int | None = None) -> OpReply:
         if self.client is None:
-            from backend.client.client import ClientError
-
             raise ClientError("not connected to the mission server")
         return await self.client.submit(op, expected_revision=expected_revision)
-
-    # -- client events (on the loop) -> messages ----------------------------------------
-    def _on_client(self, event: ClientEvent) -> None:
-        c = self.client
-        post = self.app.post_message
-        match event:
-            case StateSynced(snapshot=snap):
-                if c is not None and c.mission is not None and c.library is not None:
-                    post(StateLoaded(c.mission, c.library, dict(c.robots), snap.server_id))
-            case BatchApplied(batch=batch):
-                if c is not None:
-                    post(EventsApplied(batch, c.mission))
-            case RobotChanged(robot=info):
-                post(FleetChanged(info))
-            case TelemetryReceived(telemetry=t):
-                post(TelemetryChanged(t))
-            case AlertRaised(alert=a):
-                post(AlertReceived(a))
-            case Malformed():
-                robot = Keys.robot_of(event.key) if "/robot/" in event.key else None
-                post(MessageUnreadable(event.what, event.key, event.sentence(), robot))
-            case ConnectionState(state=state):
-                post(ConnectionChanged(state, endpoint=self.endpoint))

@@ -12,7 +12,7 @@ from typing import Any
 from textual.command import DiscoveryHit, Hit, Hits, Provider
 
 from console.bindings import key_names
-from console.screens.cancel import ask_and_cancel
+from console.screens.cancel import ask_and_cancel, toast_say
 from console.state import link
 from console.state.actions import ACTIONS
 
@@ -51,8 +51,8 @@ class MissionCommands(Provider):
 
     def _cancel(self, c) -> None:
         screen = self._screen()
-        say = screen.say if self.app.screen is screen else self.app.notify
-        screen.run_worker(ask_and_cancel(screen, c, say), group="dialog")
+        say = screen.say if self.app.screen is screen else toast_say(self.app)
+        screen.run_worker(ask_and_cancel(screen, screen.ops, c, say), group="dialog")
 
     async def _run(self, a) -> None:
         if a.scope == "mission":

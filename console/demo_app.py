@@ -16,8 +16,7 @@ from backend.exit_codes import EXIT_UNREACHABLE
 from backend.files.missions import load_mission
 from console.app import MissionApp
 from console.demo import DemoError, DemoProcesses
-from console.messages import ConnectionChanged, StateLoaded
-from console.state.model import CONNECTING
+from console.state.changes import Connecting, Previewed
 
 CHECK_CHILDREN_S = 2.0
 
@@ -28,7 +27,6 @@ class DemoApp(MissionApp):
         self.procs = procs
         self.demo_error = ""  # why the demo could not start (the CLI prints it)
         self._server_up = False
-        self._preview: StateLoaded | None = None  # the plan from the file, until the server's
         self._reported: set[str] = set()
 
     # (Textual runs MissionApp's handlers of the same messages after these: no super() calls)
@@ -39,28 +37,19 @@ class DemoApp(MissionApp):
     # -- the plan from the file, at once ---------------------------------------------------
     def _load_preview(self) -> None:
         mission, library = load_mission(self.procs.mission)
-        self.call_from_thread(self._show_preview, StateLoaded(mission, library, {}))
+        self.call_from_thread(self._show_preview, Previewed(mission, library))
 
-    def _show_preview(self, message: StateLoaded) -> None:
+    def _show_preview(self, event: Previewed) -> None:
         if self.model.mission is None:  # the server's state did not come first
-            self._preview = message
-            self.post_message(message)
-
-    async def on_state_loaded(self, message: StateLoaded) -> None:
-        if self._preview is not None and message is not self._preview:
-            self._preview = None
-            self.model.mission = None  # the file's plan was no state: this is the first
+            self._post_event(event)  # the model replaces it with the server's (model.py)
 
     # -- the server, then the fleet, then the connection --------------------------------------
     def connect_now(self) -> None:
         if self._server_up:
             super().connect_now()
             return
-        self.post_message(
-            ConnectionChanged(
-                CONNECTING, "starting the mission server (the plan shown is the file's)"
-            )
-        )
+        detail = "starting the mission server (the plan shown is the file's)"
+        self._post_event(Connecting(self.procs.endpoint, detail))
         self.run_worker(self._start_children, thread=True, group="demo", exit_on_error=False)
 
     def _start_children(self) -> None:

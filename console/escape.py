@@ -5,13 +5,16 @@ apart by time (ESCDELAY, 100 ms). Over SSH the operator's escape and next
 key often arrive together and read as Alt+key — which the console binds to
 nothing — so the escape was lost and the key typed into a field ("Esc, d"
 replaced a label with "d"). The console reads Alt+<printable key> as what
-the operator pressed: escape, then the key.
+the operator pressed: escape, then the key (an object the app owns: its
+`on_event` hands every event to `EscapeSplitter.on_event`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Awaitable, Callable
+from typing import Any
+
 from textual import events
-from textual.app import App
 
 
 def split_escape(key: events.Key) -> tuple[events.Key, events.Key] | None:
@@ -25,17 +28,23 @@ def split_escape(key: events.Key) -> tuple[events.Key, events.Key] | None:
     return events.Key("escape", "\x1b"), events.Key(plain, key.character)
 
 
-class SplitEscape(App[int]):
-    async def on_event(self, event: events.Event) -> None:
+class EscapeSplitter:
+    def __init__(self, app: Any) -> None:
+        self.app = app
+
+    async def on_event(
+        self, event: events.Event, deliver: Callable[[events.Event], Awaitable[None]]
+    ) -> None:
+        """`deliver` an event as Textual would, an Alt+<printable key> as two."""
         if isinstance(event, events.Key) and not event.is_forwarded:
             split = split_escape(event)
             if split is not None:
                 escape, key = split
                 # the escape's binding runs now (a forwarded key's would run only
                 # after the next key reached the field it was meant to leave)
-                if not await self._check_bindings("escape", priority=True):
-                    if not await self._check_bindings("escape"):
-                        await super().on_event(escape)  # bound to nothing: as it came
-                await super().on_event(key)
+                if not await self.app._check_bindings("escape", priority=True):
+                    if not await self.app._check_bindings("escape"):
+                        await deliver(escape)  # bound to nothing: as it came
+                await deliver(key)
                 return
-        await super().on_event(event)
+        await deliver(event)

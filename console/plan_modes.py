@@ -1,66 +1,61 @@
-"""The app's part of the plan's timeline and checks: their screens (F7, F8)
-and the timer that keeps the forecast and the checks current.
+"""The plan's forecast and checks, kept current (an object the app owns).
 
-A mixin of `MissionApp` (console/app.py), which calls `add_plan_modes` when
-it is made and `start_plan` when it is mounted. After each change the app
-announces on its awareness signal (a state, events, telemetry), and every
+After every change of what the plan reads (a state, a batch, a robot,
+telemetry: the model's MISSION, FLEET and TELEMETRY topics), and every
 `PLAN_TICK_S` as the clock moves, the plan (`ConsoleModel.plan`,
 console/state/plan.py) is refreshed from the model, the map feed's mirror
-and the simulator's status; when its forecast or findings changed, the app
-says so ("plan") and the schedule redraws its check glyphs and what its
-sync allows.
+and the simulator's status; a new forecast is announced as FORECAST (the
+timeline, the checks), new findings as FINDINGS (the schedule redraws its
+check glyphs and what its sync allows).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
-from console.screens.checks import ChecksScreen
-from console.screens.timeline import TimelineScreen
+from backend.protocol.mapfeed import SimStatus
+from console.state.changes import StateChange, Topic, change
+from console.state.model import ConsoleModel
 
 PLAN_TICK_S = 0.5
+PLAN_INPUTS = frozenset({Topic.MISSION, Topic.FLEET, Topic.TELEMETRY})
 
 
-class PlanModes:
-    model: Any
-    awareness_signal: Any
-    map_feed: Any
-    bridge: Any
-    mission_screen: Any
-    clock: Any
+class PlanRefresher:
+    def __init__(
+        self,
+        model: ConsoleModel,
+        publish: Callable[[StateChange], None],
+        sim_status: Callable[[], SimStatus | None] | None = None,
+    ) -> None:
+        self.model = model
+        self._publish = publish
+        self._sim_status = sim_status  # None: as set on the plan (tests)
+        self._findings_shown = 0
 
-    def add_plan_modes(self: Any) -> None:
-        changes = self.awareness_signal
-        self.add_mode("timeline", lambda: TimelineScreen(self.model, changes))
-        self.add_mode("checks", lambda: ChecksScreen(self.model, changes))
+    def start(self, app: Any, changes: Any) -> None:
+        """Follow `changes` (at once after each: what the schedule shows
+        follows the inputs in order) and the clock (a timer on `app`)."""
+        changes.subscribe(app, self._changed)
+        self.refresh()
+        app.set_interval(PLAN_TICK_S, self.refresh)
 
-    def start_plan(self: Any) -> None:
-        # after every change the app announces (state, events, telemetry, fleet): at once,
-        # so what the schedule shows follows the messages in order; the timer moves the clock
-        self.awareness_signal.subscribe(self, self._plan_inputs_changed)
-        self.refresh_plan()
-        self.set_interval(PLAN_TICK_S, self.refresh_plan)
+    def _changed(self, c: StateChange) -> None:
+        if c.topics & PLAN_INPUTS:
+            self.refresh()
 
-    def _plan_inputs_changed(self: Any, change: tuple[str, str | None]) -> None:
-        if change[0] in ("fleet", "log"):
-            self.call_next(self.refresh_plan)
-
-    def refresh_plan(self: Any, force: bool = False) -> None:
+    def refresh(self, force: bool = False) -> None:
         """Recompute the plan's forecast and checks from what changed."""
-        plan, m = self.model.plan, self.model
-        if self.map_feed is not None:
-            plan.mirror = self.map_feed[0]
-        if self.bridge is not None:  # else as set (tests)
-            plan.status = self.bridge.sim_status
-        if plan.refresh(m.mission, m.library, m.telemetry, self.clock().timestamp(), force=force):
-            self.awareness_signal.publish(("plan", None))
-        # the schedule shows the findings (glyphs, what sync allows), not the forecast
-        if plan.findings_generation != getattr(self, "_findings_shown", 0) and self._screen_live():
+        m = self.model
+        plan = m.plan
+        plan.mirror = m.map_mirror
+        if self._sim_status is not None:
+            plan.status = self._sim_status()
+        new = plan.refresh(m.mission, m.library, m.telemetry, m.clock().timestamp(), force=force)
+        topics = [Topic.FORECAST] if new else []
+        if plan.findings_generation != self._findings_shown:
             self._findings_shown = plan.findings_generation
-            self.mission_screen.plan_changed()
-
-    def action_show_timeline(self: Any) -> None:
-        self.switch_mode("timeline")
-
-    def action_show_checks(self: Any) -> None:
-        self.switch_mode("checks")
+            topics.append(Topic.FINDINGS)
+        if topics:
+            self._publish(change(*topics))

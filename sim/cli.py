@@ -14,11 +14,22 @@ import signal
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from backend.core.credentials import AccountsError
 from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK, EXIT_REFUSED, EXIT_UNREACHABLE
 from backend.transport.login import add_login_arguments, login_from_args
 from sim.comms import DURATION_EXAMPLES, WINDOW_SYNTAX, parse_duration, parse_window
+
+if TYPE_CHECKING:  # imported when a command runs: `missionctl --help` stays quick
+    from backend.core.library import Library
+    from backend.core.model import Mission
+    from backend.files.diagnostics import Issue
+    from backend.protocol import mapfeed as mf
+    from sim.fleet import SimFleet
+    from sim.worldfile import WorldFile
+
+    Loaded = tuple[Mission, Library, WorldFile, Path]
 
 
 def _positive(text: str) -> float:
@@ -31,7 +42,7 @@ def _positive(text: str) -> float:
     return value
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "sim", help="run the simulated fleet of a mission's site (Mars sample return)"
     )
@@ -127,7 +138,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 # ---------------------------------------------------------------- sim
 
 
-def _load(args: argparse.Namespace):
+def _load(args: argparse.Namespace) -> tuple[Loaded | None, list[Issue]]:
     from backend.files.diagnostics import FileProblems
     from backend.files.missions import load_mission
     from sim.worldfile import default_world_for, load_world
@@ -168,8 +179,8 @@ def run(args: argparse.Namespace) -> int:
         except (OSError, ValueError) as e:
             print(f"missionctl sim: {args.zenoh_config}: {e}", file=sys.stderr)
             return EXIT_BAD_INPUT
+    from sim.errors import SimError
     from sim.fleet import SimFleet
-    from sim.world import SimError
 
     try:
         fleet = SimFleet(
@@ -194,7 +205,7 @@ def run(args: argparse.Namespace) -> int:
     return asyncio.run(_serve(fleet, args, world_file))
 
 
-async def _serve(fleet, args: argparse.Namespace, world_file: Path) -> int:
+async def _serve(fleet: SimFleet, args: argparse.Namespace, world_file: Path) -> int:
     from backend.agent import AlreadyConnected
     from backend.transport.session import LoginRefused, TransportError, TransportUnreachable
 
@@ -286,7 +297,7 @@ async def _status(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def format_status(st) -> str:
+def format_status(st: mf.SimStatus) -> str:
     """The ground view (what the robots reported), then the truth if it is there."""
     lines = [
         f"world {st.world} (seed {st.seed}), sim time {_clock(st.sim_time)} at {st.speed:g}x"
@@ -310,7 +321,7 @@ def _clock(seconds: float) -> str:
     return f"{seconds:.0f} s ({int(seconds // 60)}:{int(seconds % 60):02d})"
 
 
-def _deliveries(delivered) -> list[str]:
+def _deliveries(delivered: list[mf.Delivery]) -> list[str]:
     return [f"  {d.stone} ({d.rss}) {d.score:g} by {d.by} at {d.sim_time:.0f} s" for d in delivered]
 
 
@@ -318,7 +329,7 @@ def _region(name: str, top: float | None) -> str:
     return f"{name} (top {top:g})" if top is not None else name
 
 
-def _robot_lines(r, now: float) -> list[str]:
+def _robot_lines(r: mf.RobotStatus, now: float) -> list[str]:
     flags = []
     if not r.in_range:
         age = f", last heard {now - r.heard_at:.0f} s ago" if r.heard_at is not None else ""
@@ -341,7 +352,7 @@ def _robot_lines(r, now: float) -> list[str]:
     return lines
 
 
-def _truth_lines(tr) -> list[str]:
+def _truth_lines(tr: mf.SimTruth) -> list[str]:
     lines = [
         "TRUTH (for evaluation; the operator cannot know this):",
         f"score {tr.score:g}: {len(tr.delivered)} stone(s) delivered",
@@ -365,5 +376,5 @@ def _truth_lines(tr) -> list[str]:
     return lines
 
 
-def _dump(obj) -> str:  # pragma: no cover - debugging aid
+def _dump(obj: Any) -> str:  # pragma: no cover - debugging aid
     return json.dumps(obj, indent=2, default=str)

@@ -13,7 +13,8 @@ from collections.abc import Callable
 from typing import Any
 
 from backend.agent import RobotAgent
-from sim.world import SimRobot, World
+from sim.robot import SimRobot
+from sim.world import World
 
 Data = dict[str, Any]
 

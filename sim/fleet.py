@@ -14,6 +14,7 @@ publication). See backend/protocol/mapfeed.py for the wire format.
 from __future__ import annotations
 
 import asyncio
+import functools
 import json
 import logging
 import math
@@ -22,17 +23,23 @@ import uuid
 from collections import Counter, deque
 from typing import Any
 
+import zenoh
+
 from backend import transport
 from backend.agent import Link, RobotAgent
 from backend.core.library import Library
 from backend.core.model import Mission, Pose
 from backend.protocol import mapfeed as mf
 from backend.transport import QueryFailed
+from sim.calibration import drift
+from sim.calibration import properties as manifest_properties
 from sim.comms import CommsWindow
+from sim.errors import SimError
 from sim.exchange import WorldExchange
+from sim.robot import SimRobot
 from sim.skills.registry import RobotSkills
 from sim.status import ground_status, truth
-from sim.world import SimError, SimRobot, World
+from sim.world import World
 from sim.worldfile import WorldFile
 
 log = logging.getLogger(__name__)
@@ -115,15 +122,18 @@ class SimFleet:
         self._seq = 0
         self.feed_id = uuid.uuid4().hex[:12]  # a restarted sim is a new feed: followers resync
         self._encoder: mf.TileEncoder | None = None
-        self._objects: dict[str, Any] | None = None
-        self._session = None
+        self._objects: mf.MapObjects | None = None
+        self._session: zenoh.Session | None = None
         self._entities: list[Any] = []
-        self._delta_pub = None
-        self._status_pub = None
+        self._delta_pub: zenoh.Publisher | None = None
+        self._status_pub: zenoh.Publisher | None = None
         self._tasks: list[asyncio.Task[None]] = []
         self._started_wall = 0.0
         self._clock_at = (0.0, 0.0)  # (wall, sim) the clock counts from
-        self.warnings: list[str] = []
+        self.warnings: list[str] = [
+            f"the skill library's figures differ from the world's: {d}"
+            for d in drift(library, world_spec, self.world.models)
+        ]
         for index, (name, spec) in enumerate(mission.robots.items()):
             if spec.type not in self.world.models:
                 self.warnings.append(
@@ -151,21 +161,21 @@ class SimFleet:
             robot.type,
             connect=self.connect,
             modules=modules,
-            properties={
-                "simulated": True,
-                "kind": m.kind,
-                "capabilities": list(m.capabilities),
-                "max_speed_mps": m.max_speed,
-                "sensor_range_m": m.sensor_range,
-            },
+            properties=manifest_properties(self.world.spec, m),
             telemetry_hz=telemetry_hz,
             zenoh_extra=self.zenoh_extra,
         )
         agent.time_scale = self.speed
-        agent.pose = lambda r=robot: Pose(
-            x=round(r.x, 3), y=round(r.y, 3), z=round(r.z, 3), yaw=round(r.yaw, 4)
-        )
-        agent.battery = lambda r=robot: r.battery
+
+        def pose() -> Pose:
+            r = robot
+            return Pose(x=round(r.x, 3), y=round(r.y, 3), z=round(r.z, 3), yaw=round(r.yaw, 4))
+
+        def battery() -> float:
+            return robot.battery
+
+        agent.pose = pose
+        agent.battery = battery
         agent.link = SimLink(self.world, robot, self)
         skills = RobotSkills(self, robot)
         handlers = skills.handlers()
@@ -185,16 +195,16 @@ class SimFleet:
         return agent
 
     def _wrap(self, robot: SimRobot, name: str, fn: Any) -> Any:
-        defaults = {}
-        spec = self.library.skills.get(name)
-        if spec is not None:
-            defaults = {k: p.default for k, p in spec.params.items() if p.default is not None}
+        """The handler with the robot's activity kept for the world; its
+        signature is `fn`'s (`functools.wraps`), which the agent checks
+        against the library's."""
 
+        @functools.wraps(fn)
         async def handler(ctx: Any, **params: Any) -> Any:
             robot.activity = name
             robot.paused = lambda: ctx.paused
             try:
-                return await fn(ctx, **{**defaults, **params})  # a Success carries the result text
+                return await fn(ctx, **params)  # a Success carries the result text
             finally:
                 robot.activity = None
                 robot.paused = lambda: False
@@ -249,11 +259,10 @@ class SimFleet:
 
     async def start(self) -> None:
         cfg = transport.client_config(self.connect, extra=self.zenoh_extra)
-        self._session = await asyncio.to_thread(
+        s = self._session = await asyncio.to_thread(
             transport.open_session, cfg, what="the mission server's router"
         )
         try:
-            s = self._session
             g = self.world.geom
             self._encoder = mf.TileEncoder(
                 mf.MapMeta(
@@ -266,8 +275,8 @@ class SimFleet:
                     height=g.ny,
                 )
             )
-            self._encoder.delta(self.world.ground_layers())  # the snapshot's starting point (seq 0)
-            self._objects = self.world.ground_objects()
+            self._encoder.delta(self._layers())  # the snapshot's starting point (seq 0)
+            self._objects = self.world.ground.objects()
             self._delta_pub = transport.declare_publisher(s, mf.KEY_MAP_DELTA)
             self._status_pub = transport.declare_publisher(s, mf.KEY_STATUS_LIVE)
             self._entities += [
@@ -323,7 +332,7 @@ class SimFleet:
         return self.comms_window is None or self.comms_window.is_open(self.now())
 
     async def _physics(self) -> None:
-        """Idle robots: charge at the lander; hovering drones drain. Link uplink."""
+        """Idle robots: charge at the lander; hovering drones drain. The robots' downlinks."""
         loop = asyncio.get_running_loop()
         w = self.world
         while True:
@@ -337,7 +346,7 @@ class SimFleet:
                         continue
                     r.paused_s += dt
                 if r.kind == "drone" and r.airborne:
-                    r.battery = max(0.0, r.battery - w.flight_energy(r, dt))
+                    r.battery = max(0.0, r.battery - r.flight_energy(dt))
                     if r.usable <= 0.0:
                         r.airborne, r.z = False, 0.0
                         w.log(
@@ -345,15 +354,19 @@ class SimFleet:
                             "battery at the reserve while hovering"
                         )
                 elif w.docked(r):
-                    w.charge(r, dt)
-            w.pump(now, self.link_delay / self.speed, ground_open=self.ground_open())
+                    r.charge(dt)
+            w.pump_downlink(now, self.link_delay / self.speed, ground_open=self.ground_open())
 
     # ------------------------------------------------------------ map feed
 
+    def _layers(self) -> dict[str, Any]:
+        """The map feed's layers as the ground knows them."""
+        return self.world.ground.layers(self.world.terrain.grid, self.world.coverage)
+
     def _map_delta(self) -> mf.MapDelta | None:
         assert self._encoder is not None
-        tiles = self._encoder.delta(self.world.ground_layers())
-        objects = self.world.ground_objects()
+        tiles = self._encoder.delta(self._layers())
+        objects = self.world.ground.objects()
         changed = objects != self._objects
         if not tiles and not changed:
             return None
@@ -365,7 +378,7 @@ class SimFleet:
             sim_time=round(self.world.now(), 2),
             speed=self.speed,
             tiles=tiles,
-            objects=_objects_model(objects) if changed else None,
+            objects=objects if changed else None,
         )
 
     async def _feed(self) -> None:
@@ -386,7 +399,7 @@ class SimFleet:
             sim_time=round(self.world.now(), 2),
             speed=self.speed,
             tiles=self._encoder.full(),
-            objects=_objects_model(self._objects),
+            objects=self._objects,
         )
 
     async def _on_snapshot(self, payload: bytes) -> bytes:
@@ -407,9 +420,9 @@ class SimFleet:
         """What a new live publication is sent for (ground view only)."""
         w = self.world
         return (
-            w.ground_score,
-            len(w.ground_deliveries),
-            w.objects_version,
+            w.ground.score,
+            len(w.ground.deliveries),
+            w.ground.version,
             tuple(
                 (
                     r.name,
@@ -446,23 +459,6 @@ class SimFleet:
                     payload = mf.dump(self.status())
                     self.status_bytes += len(payload)
                     self._status_pub.put(payload)
-
-
-def _objects_model(objects: dict[str, Any]) -> mf.MapObjects:
-    return mf.MapObjects(
-        lander=mf.LanderItem(**objects["lander"]),
-        boxes=[mf.BoxItem(**b) for b in objects["boxes"]],
-        rss=[
-            mf.RssItem(**{k: v for k, v in r.items() if k in mf.RssItem.model_fields})
-            for r in objects["rss"]
-        ],
-        stones=[
-            mf.StoneItem(**{k: v for k, v in s.items() if k in mf.StoneItem.model_fields})
-            for s in objects["stones"]
-            if s.get("state") != "hidden"
-        ],
-        score=objects["score"],
-    )
 
 
 def wants_truth(payload: bytes) -> bool:

@@ -12,8 +12,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
-# terrain codes of the world's grid
-FREE, SLOW, ROCK = 0, 1, 2
+from backend.protocol.mapfeed import T_FREE, T_ROCK, T_SLOW
+
+# terrain codes of the world's grid: the map feed's, so the ground's layer is
+# the grid itself where it is known (0 is the feed's "unknown", never a cell's)
+FREE, SLOW, ROCK = T_FREE, T_SLOW, T_ROCK
 
 SQRT2 = math.sqrt(2.0)
 
@@ -269,7 +272,7 @@ class Follower:
     """Walks along a polyline by distance."""
 
     def __init__(self, points: Sequence[tuple[float, float]]):
-        self.points = [tuple(map(float, p)) for p in points]
+        self.points = [(float(p[0]), float(p[1])) for p in points]
         self.k = 0  # current segment
         self.x, self.y = self.points[0]
         self.total = path_length(self.points)
@@ -340,7 +343,7 @@ def lawnmower(
             inset = min(spacing * 0.5, (b - a) / 2)
             lanes.append((y, a + inset, b - inset))
     if not lanes:
-        return [tuple(start)]
+        return [(start[0], start[1])]
     # start from the lane nearest to `start`: sweep bottom-up or top-down
     if abs(lanes[-1][0] - start[1]) < abs(lanes[0][0] - start[1]):
         lanes.reverse()

@@ -26,15 +26,16 @@ def ground_status(
     world: World, *, speed: float, link_delay: float, window: CommsWindow | None = None
 ) -> mf.SimStatus:
     w = world
+    ground = w.ground
     robots = {}
     for r in w.robots.values():
-        heard = w.ground_robots.get(r.name)
+        heard = ground.robots.get(r.name)
         if heard is None:
             continue  # never heard: the ground knows only its name
         robots[r.name] = mf.RobotStatus(
-            name=r.name, type=r.type, kind=r.kind, in_range=w.in_range(r), **heard
+            name=r.name, type=r.type, kind=r.kind, in_range=w.in_range(r), **asdict(heard)
         )
-    deliveries = sorted(w.ground_deliveries.values(), key=lambda d: (d["sim_time"], d["stone"]))
+    deliveries = sorted(ground.deliveries.values(), key=lambda d: (d.sim_time, d.stone))
     return mf.SimStatus(
         world=w.spec.name,
         seed=w.seed,
@@ -42,13 +43,11 @@ def ground_status(
         link_delay_s=link_delay,
         comms_window=mf.CommsWindowSpec(**asdict(window)) if window is not None else None,
         sim_time=round(w.now(), 1),
-        score=w.ground_score,
-        delivered=[mf.Delivery(**d) for d in deliveries],
-        rss_found=sorted(w.ground_rss),
+        score=ground.score,
+        delivered=deliveries,
+        rss_found=sorted(ground.rss),
         top_scores={
-            n: float(r["top_score"])
-            for n, r in sorted(w.ground_rss.items())
-            if r.get("top_score") is not None
+            n: float(r.top_score) for n, r in sorted(ground.rss.items()) if r.top_score is not None
         },
         explored=round(w.explored_fraction(ground=True), 4),
         robots=robots,
@@ -61,7 +60,7 @@ def truth(
     w = world
     return mf.SimTruth(
         score=round(w.score, 4),
-        delivered=[mf.Delivery(**d) for d in w.delivered],
+        delivered=list(w.delivered),
         regions=[
             mf.RegionTruth(
                 rss=r.name,
@@ -99,5 +98,5 @@ def _robot(w: World, r: Any) -> mf.RobotStatus:
             "stones": len(r.knowledge.stones),
             "boxes": len(r.knowledge.boxes),
         },
-        **state,
+        **asdict(state),
     )

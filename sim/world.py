@@ -4,10 +4,12 @@ Pure state and rules: no Zenoh, no asyncio. The fleet (sim/fleet.py) steps
 robots through it from skill handlers.
 
 Truth and ground view: the world holds the truth (every explored cell, every
-RSS and stone). What the operator sees (the map feed) is the *ground view*:
-what robots sent over the link. A robot out of communication coverage keeps
-what it learns in its outbox; it reaches the ground once the robot is back in
-range (after the link delay).
+RSS and stone). What the operator sees (the map feed) is the *ground view*
+(sim/ground.py): what robots sent over their downlinks (sim/downlink.py). A
+robot out of communication coverage keeps what it learns aboard; it reaches
+the ground once the robot is back in range (after the link delay). Elsewhere:
+the terrain and routes (sim/terrain.py), the objects (sim/objects.py), a
+robot and its energy (sim/robot.py).
 """
 
 from __future__ import annotations
@@ -15,208 +17,18 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
-from sim.pathing import FREE, ROCK, SLOW, GridGeom, NoPath, line_max, plan
-from sim.worldfile import RobotModel, RobotStart, WorldFile
-
-# what the map feed's terrain layer says about a cell
-T_UNKNOWN, T_FREE, T_SLOW, T_ROCK = 0, 1, 2, 3
-
-DEFAULT_MODELS: dict[str, RobotModel] = {
-    "lru_science": RobotModel(kind="rover", capabilities=["science_camera", "stereo_camera"]),
-    "lru_manipulator": RobotModel(
-        kind="rover",
-        capabilities=["manipulator", "stereo_camera"],
-        carry_stones=1,
-        carry_stones_in_box=4,
-    ),
-    "drone": RobotModel(
-        kind="drone",
-        capabilities=["stereo_camera"],
-        speed=2.0,
-        max_speed=5.0,
-        sensor_range=20.0,
-        nav_range=8.0,
-        charge_per_minute=0.5,
-    ),
-    "lander": RobotModel(kind="static"),
-}
-
-
-class SimError(Exception):
-    """A rule of the world refused something; the message is a sentence."""
-
-
-# ---------------------------------------------------------------- objects
-
-
-@dataclass
-class RssState:
-    name: str
-    x: float
-    y: float
-    radius: float
-    max_score: float
-    stones: list[str] = field(default_factory=list)
-    found_by: set[str] = field(default_factory=set)
-
-    def sighting(self) -> dict[str, Any]:
-        """What a robot that sees the region learns (its top score takes a science image)."""
-        return {
-            "rss": self.name,
-            "x": self.x,
-            "y": self.y,
-            "radius": self.radius,
-            "top_score": None,
-        }
-
-
-@dataclass
-class Stone:
-    id: str
-    rss: str
-    x: float
-    y: float
-    score: float | None = None  # set when identified
-    state: str = "hidden"  # hidden | identified | carried | ground | delivered
-    holder: str | None = None
-    identified_by: tuple[str, ...] = ()
-    version: int = 0  # +1 at every change: of two reports about it, the higher is newer
-
-    def public(self) -> dict[str, Any]:
-        return {
-            "id": self.id,
-            "rss": self.rss,
-            "x": round(self.x, 2),
-            "y": round(self.y, 2),
-            "score": self.score,
-            "state": self.state,
-            "holder": self.holder,
-            "v": self.version,
-        }
-
-    def change(self, **values: Any) -> None:
-        """Set some fields; the stone's version goes up (reports of it are newer)."""
-        for k, v in values.items():
-            setattr(self, k, v)
-        self.version += 1
-
-
-@dataclass
-class BoxState:
-    name: str
-    kind: str
-    where: str  # shelf | storage | ground | carried
-    slot: int | None = None
-    x: float = 0.0
-    y: float = 0.0
-    holder: str | None = None
-    on: bool = False  # a deployed Wi-Fi box
-
-    def public(self) -> dict[str, Any]:
-        return {
-            "box": self.name,
-            "kind": self.kind,
-            "where": self.where,
-            "slot": self.slot,
-            "x": round(self.x, 2),
-            "y": round(self.y, 2),
-            "holder": self.holder,
-            "on": self.on,
-        }
-
-
-def merge_rss(old: dict[str, Any] | None, new: dict[str, Any]) -> dict[str, Any]:
-    """A region report over what was known: a top score once revealed stays (a later
-    report of the region without it, e.g. another robot discovering it, keeps it)."""
-    merged = {**(old or {}), **new}
-    if merged.get("top_score") is None and old is not None:
-        merged["top_score"] = old.get("top_score")
-    return merged
-
-
-def newer_stone(old: dict[str, Any] | None, new: dict[str, Any]) -> bool:
-    """Whether a stone report `new` is at least as recent as what was known (`old`)."""
-    return old is None or int(new.get("v", 0)) >= int(old.get("v", 0))
-
-
-@dataclass
-class Knowledge:
-    """What one robot knows about the world (its own world model)."""
-
-    rss: dict[str, dict[str, Any]] = field(default_factory=dict)
-    stones: dict[str, dict[str, Any]] = field(default_factory=dict)
-    boxes: dict[str, dict[str, Any]] = field(default_factory=dict)
-
-    def learn_rss(self, info: dict[str, Any]) -> dict[str, Any]:
-        merged = merge_rss(self.rss.get(info["rss"]), info)
-        self.rss[info["rss"]] = merged
-        return merged
-
-    def learn_stone(self, info: dict[str, Any]) -> bool:
-        """Keep a stone report unless what the robot knows is newer; True if kept."""
-        if not newer_stone(self.stones.get(info["id"]), info):
-            return False
-        self.stones[info["id"]] = dict(info)
-        return True
-
-    def gone_stones(self) -> dict[str, int]:
-        """Stone id -> version, of the stones this robot knows cannot be picked any more."""
-        return {
-            sid: int(s.get("v", 0))
-            for sid, s in self.stones.items()
-            if s.get("state") not in ("identified", "ground")
-        }
-
-
-@dataclass
-class SimRobot:
-    name: str
-    type: str
-    model: RobotModel
-    x: float = 0.0
-    y: float = 0.0
-    z: float = 0.0
-    yaw: float = 0.0
-    battery: float = 1.0
-    airborne: bool = False
-    activity: str | None = None  # skill being executed
-    paused: Callable[[], bool] = lambda: False
-    box: str | None = None  # carried payload box
-    stones: list[str] = field(default_factory=list)  # carried stones
-    knowledge: Knowledge = field(default_factory=Knowledge)
-    odometer: float = 0.0
-    sim_seconds: float = 0.0  # robot time stepped by skills
-    result: str = ""  # the outcome of its last skill (reported with its state)
-    paused_s: float = 0.0  # sim seconds its skills spent paused (the fleet counts them)
-    passed_coverage: bool = False  # moved through coverage since the last uplink (see pump)
-    # uplink to the ground: what waits for coverage, and what is on its way
-    outbox: list[Callable[[], None]] = field(default_factory=list)
-    in_flight: list[tuple[float, Callable[[], None]]] = field(default_factory=list)
-    pending_cells: np.ndarray | None = None  # explored, not yet sent
-
-    @property
-    def kind(self) -> str:
-        return self.model.kind
-
-    def has(self, capability: str) -> bool:
-        return capability in self.model.capabilities
-
-    @property
-    def usable(self) -> float:
-        return max(0.0, self.battery - self.model.reserve)
-
-    def pose_tuple(self) -> tuple[float, float]:
-        return self.x, self.y
-
-
-def _fmt(x: float, y: float) -> str:
-    return f"({x:.1f}, {y:.1f})"
-
+from backend.protocol import mapfeed as mf
+from sim.downlink import DownlinkPump
+from sim.errors import SimError
+from sim.ground import GroundView, News, RegionSeen, RobotState, rss_item
+from sim.objects import BoxState, RssState, Stone, _fmt
+from sim.pathing import GridGeom
+from sim.robot import DEFAULT_MODELS, SimRobot
+from sim.terrain import Terrain
+from sim.worldfile import RobotStart, WorldFile
 
 # ---------------------------------------------------------------- the world
 
@@ -231,10 +43,9 @@ class World:
         self.geom = GridGeom(s.x_min, s.y_min, s.cell, nx, ny)
         self.models = {**DEFAULT_MODELS, **spec.models}
         rng = np.random.default_rng(self.seed)
-        self.terrain = self._generate_terrain(rng)
+        self.terrain = Terrain(spec, self.geom, rng)
         shape = self.geom.shape
         self.explored = np.zeros(shape, dtype=bool)  # truth: seen by any robot
-        self.ground_explored = np.zeros(shape, dtype=bool)  # what the operator has
         self.coverage = np.zeros(shape, dtype=np.float32)  # link quality 0..1
         self.rss: dict[str, RssState] = {}
         self.stones: dict[str, Stone] = {}
@@ -253,122 +64,26 @@ class World:
         self.robots: dict[str, SimRobot] = {}
         # scoring and referee's log
         self.score = 0.0
-        self.delivered: list[dict[str, Any]] = []
+        self.delivered: list[mf.Delivery] = []
         self.events: deque[str] = deque(maxlen=40)
         self.clock = 0.0  # sim seconds (advanced by the fleet)
         # the fleet's clock between its updates of `clock` (None: `clock` is the time)
         self.clock_source: Callable[[], float] | None = None
-        # ground view of objects (what robots reported over the link)
-        self.ground_rss: dict[str, dict[str, Any]] = {}
-        self.ground_stones: dict[str, dict[str, Any]] = {}
-        self.ground_boxes: dict[str, dict[str, Any]] = {
-            n: b.public() for n, b in self.boxes.items()
-        }
-        self.ground_deliveries: dict[str, dict[str, Any]] = {}  # stone id -> delivery
-        self.ground_robots: dict[str, dict[str, Any]] = {}  # name -> state as last heard
-        self.objects_version = 0
-        self.slow_cost = 1.0 / spec.terrain.slow_factor
-
-    # ------------------------------------------------------------ generation
-
-    def _keep_clear(self) -> list[tuple[float, float, float]]:
-        sp = self.spec
-        out = [(c.x, c.y, c.r) for c in sp.terrain.keep_clear]
-        out.append((sp.lander.x, sp.lander.y, sp.lander.pad_radius + 8.0))
-        out += [(r.x, r.y, r.radius + 2.0) for r in sp.rss]
-        out += [(r.x, r.y, 4.0) for r in sp.robots.values()]
-        out += [(b.x, b.y, 3.0) for b in sp.boxes.values() if b.x is not None and b.y is not None]
-        return out
-
-    def _generate_terrain(self, rng: np.random.Generator) -> np.ndarray:
-        g = self.geom
-        t = np.full(g.shape, FREE, dtype=np.uint8)
-        clear = self._keep_clear()
-        s = self.spec.site
-
-        def scatter(count: int, radius: tuple[float, float], code: int) -> None:
-            for _ in range(count):
-                for _try in range(30):
-                    x = float(rng.uniform(s.x_min, s.x_max))
-                    y = float(rng.uniform(s.y_min, s.y_max))
-                    r = float(rng.uniform(*radius))
-                    if all(math.hypot(x - cx, y - cy) > r + cr for cx, cy, cr in clear):
-                        break
-                else:
-                    continue
-                # a blob: one to three overlapping discs
-                for k in range(int(rng.integers(1, 4))):
-                    ox, oy = rng.normal(0, r * 0.5, 2) if k else (0.0, 0.0)
-                    rr = r * (1.0 if k == 0 else float(rng.uniform(0.5, 0.9)))
-                    rows, cols, mask = g.disk(x + float(ox), y + float(oy), rr)
-                    sub = t[rows, cols]
-                    if code == SLOW:
-                        sub[mask & (sub == FREE)] = SLOW
-                    else:
-                        sub[mask] = code
-
-        scatter(self.spec.terrain.rock_fields.count, self.spec.terrain.rock_fields.radius, ROCK)
-        scatter(self.spec.terrain.sand_patches.count, self.spec.terrain.sand_patches.radius, SLOW)
-        codes = {"free": FREE, "slow": SLOW, "impassable": ROCK}
-        for f in self.spec.terrain.features:
-            if f.circle is not None:
-                rows, cols, mask = g.disk(f.circle.x, f.circle.y, f.circle.r)
-                t[rows, cols][mask] = codes[f.kind]
-            else:
-                assert f.polygon is not None
-                t[g.polygon_mask([(p.x, p.y) for p in f.polygon])] = codes[f.kind]
-        # the lander's surroundings are always drivable
-        rows, cols, mask = g.disk(
-            self.spec.lander.x, self.spec.lander.y, self.spec.lander.pad_radius + 3.0
+        lander = spec.lander
+        # what the ground knows: what robots sent over their downlinks
+        self.ground = GroundView(
+            shape,
+            self.boxes,
+            mf.LanderItem(
+                x=lander.x,
+                y=lander.y,
+                pad_radius=lander.pad_radius,
+                comm_radius=lander.comm_radius,
+            ),
         )
-        t[rows, cols][mask] = FREE
-        self._connect(t, clear)
-        return t
-
-    def _reachable(self, t: np.ndarray) -> np.ndarray:
-        """Cells reachable from the lander (4-connected flood fill, numpy)."""
-        passable = t != ROCK
-        reach = np.zeros_like(passable)
-        reach[self.geom.cell_of(self.spec.lander.x, self.spec.lander.y)] = True
-        while True:
-            grown = reach.copy()
-            grown[1:, :] |= reach[:-1, :]
-            grown[:-1, :] |= reach[1:, :]
-            grown[:, 1:] |= reach[:, :-1]
-            grown[:, :-1] |= reach[:, 1:]
-            grown &= passable
-            if (grown == reach).all():
-                return reach
-            reach = grown
-
-    def _connect(self, t: np.ndarray, clear: list[tuple[float, float, float]]) -> None:
-        """Carve corridors to enclosed places that must be reachable; pockets
-        nobody needs become rock (the map has no unreachable islands)."""
-        g = self.geom
-        reach = self._reachable(t)
-        lx, ly = self.spec.lander.x, self.spec.lander.y
-        carved = False
-        for cx, cy, _r in clear:
-            if not g.inside(cx, cy):
-                continue
-            if not reach[g.cell_of(cx, cy)]:
-                rows, cols, mask = g.disk(cx, cy, 1.0)
-                t[rows, cols][mask] = FREE
-                n = int(math.hypot(cx - lx, cy - ly) / (g.cell * 0.5)) + 2
-                for k in range(n + 1):
-                    f = k / n
-                    i, j = g.cell_of(cx + (lx - cx) * f, cy + (ly - cy) * f)
-                    if t[i, j] == ROCK:
-                        t[max(i - 1, 0) : i + 2, max(j - 1, 0) : j + 2][
-                            t[max(i - 1, 0) : i + 2, max(j - 1, 0) : j + 2] == ROCK
-                        ] = SLOW
-                carved = True
-        if carved:
-            reach = self._reachable(t)
-        t[(t != ROCK) & ~reach] = ROCK
+        self.downlink = DownlinkPump(self.ground, shape)
 
     def _place_rss(self, rng: np.random.Generator) -> None:
-        g = self.geom
         for r in self.spec.rss:
             state = RssState(r.name, r.x, r.y, r.radius, r.max_score)
             for k in range(r.stones):
@@ -376,7 +91,7 @@ class World:
                     ang = float(rng.uniform(0, 2 * math.pi))
                     dist = r.radius * math.sqrt(float(rng.uniform(0, 1)))
                     x, y = r.x + dist * math.cos(ang), r.y + dist * math.sin(ang)
-                    if g.inside(x, y) and self.terrain[g.cell_of(x, y)] != ROCK:
+                    if self.terrain.passable(x, y):
                         break
                 sid = f"{r.name}-s{k + 1}"
                 self.stones[sid] = Stone(sid, r.name, round(x, 2), round(y, 2))
@@ -401,7 +116,6 @@ class World:
         robot = SimRobot(
             name, robot_type, model, x=start.x, y=start.y, yaw=start.yaw, battery=start.battery
         )
-        robot.pending_cells = np.zeros(self.geom.shape, dtype=bool)
         if model.kind == "static":
             robot.battery = 1.0
         # every robot starts knowing the lander's boxes (it is the shared landmark)
@@ -432,11 +146,6 @@ class World:
         self.events.append(f"[{self.now():7.0f} s] {text}")
 
     # ------------------------------------------------------------ queries
-
-    def terrain_at(self, x: float, y: float) -> int:
-        if not self.geom.inside(x, y):
-            return ROCK
-        return int(self.terrain[self.geom.cell_of(x, y)])
 
     def dist_to_lander(self, x: float, y: float) -> float:
         return math.hypot(x - self.spec.lander.x, y - self.spec.lander.y)
@@ -475,7 +184,7 @@ class World:
         return best
 
     def explored_fraction(self, mask: np.ndarray | None = None, *, ground: bool = False) -> float:
-        grid = self.ground_explored if ground else self.explored
+        grid = self.ground.explored if ground else self.explored
         if mask is None:
             return float(grid.mean())
         total = int(mask.sum())
@@ -510,94 +219,42 @@ class World:
                     linked = True
         self.coverage = cov
 
-    # ------------------------------------------------------------ uplink (robot -> ground)
+    # ------------------------------------------------------------ downlink (robot -> ground)
 
-    def uplink(self, robot: SimRobot, fn: Callable[[], None]) -> None:
-        """Send something to the ground: it arrives once the robot is in range
-        (plus the link delay); see `pump`."""
-        robot.outbox.append(fn)
+    def tell_ground(self, robot: SimRobot, news: News) -> None:
+        """It reaches the ground once the robot can send (sim/downlink.py)."""
+        self.downlink.send(robot, news)
 
-    def pump(self, now: float, delay: float, ground_open: bool = True) -> bool:
-        """Move what in-range robots have to send onto the link (and their state:
-        pose, battery, activity, last result); deliver what has arrived. `now` and
-        `delay` in wall seconds; out of a comms window (`ground_open` False) nothing
-        leaves, what is on its way arrives. True if anything arrived."""
-        arrived = False
-        for robot in self.robots.values():
-            # a robot that crossed covered ground between two pumps sent from there
-            passed, robot.passed_coverage = robot.passed_coverage, False
-            if ground_open and (self.in_range(robot) or passed):
-                assert robot.pending_cells is not None
-                if robot.pending_cells.any():
-                    cells = np.flatnonzero(robot.pending_cells)
-                    robot.pending_cells[:] = False
-                    robot.outbox.append(lambda c=cells: self._ground_cells(c))
-                state = self.robot_state(robot)
-                robot.outbox.append(lambda n=robot.name, s=state: self._ground_robot(n, s))
-                robot.in_flight += [(now + delay, fn) for fn in robot.outbox]
-                robot.outbox = []
-            if robot.in_flight:
-                due = [fn for t, fn in robot.in_flight if t <= now]
-                if due:
-                    robot.in_flight = [(t, fn) for t, fn in robot.in_flight if t > now]
-                    for fn in due:
-                        fn()
-                    arrived = True
-        return arrived
+    def pump_downlink(self, now: float, delay: float, ground_open: bool = True) -> bool:
+        """Every robot's downlink (`DownlinkPump.pump`); True if anything arrived."""
+        return self.downlink.pump(
+            self.robots.values(),
+            now,
+            delay,
+            ground_open=ground_open,
+            in_range=self.in_range,
+            state_of=self.robot_state,
+        )
 
-    def _ground_cells(self, cells: np.ndarray) -> None:
-        self.ground_explored.ravel()[cells] = True
-
-    def robot_state(self, robot: SimRobot) -> dict[str, Any]:
+    def robot_state(self, robot: SimRobot) -> RobotState:
         """What a robot reports about itself (the ground's record of it, once heard)."""
-        return {
-            "x": round(robot.x, 2),
-            "y": round(robot.y, 2),
-            "z": round(robot.z, 2),
-            "yaw": round(robot.yaw, 3),
-            "battery": round(min(1.0, max(0.0, robot.battery)), 4),
-            "link": round(self.link_quality(robot.x, robot.y), 3),
-            "airborne": robot.airborne,
-            "docked": self.docked(robot),
-            "box": robot.box,
-            "stones": list(robot.stones),
-            "activity": robot.activity,
-            "result": robot.result,
-            "odometer_m": round(robot.odometer, 1),
-            "sim_seconds": round(robot.sim_seconds, 1),
-            "heard_at": round(self.now(), 1),
-        }
-
-    def _ground_robot(self, name: str, state: dict[str, Any]) -> None:
-        self.ground_robots[name] = state
-
-    def _ground_object(self, kind: str, key: str, value: dict[str, Any] | None) -> None:
-        table = {
-            "rss": self.ground_rss,
-            "stone": self.ground_stones,
-            "box": self.ground_boxes,
-            "delivery": self.ground_deliveries,
-        }[kind]
-        if value is None:
-            table.pop(key, None)
-        elif kind == "rss":
-            table[key] = merge_rss(table.get(key), value)
-        elif kind == "stone" and not newer_stone(table.get(key), value):
-            return  # a robot's older news of the stone (e.g. back in range only now)
-        else:
-            table[key] = dict(value)
-        self.objects_version += 1
-
-    @property
-    def ground_score(self) -> float:
-        """The score as the ground knows it: the deliveries robots reported."""
-        return round(sum(d["score"] for d in self.ground_deliveries.values()), 6)
-
-    def tell_ground(
-        self, robot: SimRobot, kind: str, key: str, value: dict[str, Any] | None
-    ) -> None:
-        value = dict(value) if value is not None else None
-        self.uplink(robot, lambda: self._ground_object(kind, key, value))
+        return RobotState(
+            x=round(robot.x, 2),
+            y=round(robot.y, 2),
+            z=round(robot.z, 2),
+            yaw=round(robot.yaw, 3),
+            battery=round(min(1.0, max(0.0, robot.battery)), 4),
+            link=round(self.link_quality(robot.x, robot.y), 3),
+            airborne=robot.airborne,
+            docked=self.docked(robot),
+            box=robot.box,
+            stones=list(robot.stones),
+            activity=robot.activity,
+            result=robot.result,
+            odometer_m=round(robot.odometer, 1),
+            sim_seconds=round(robot.sim_seconds, 1),
+            heard_at=round(self.now(), 1),
+        )
 
     # ------------------------------------------------------------ sensing
 
@@ -609,8 +266,7 @@ class World:
         sub = self.explored[rows, cols]
         new = int((mask & ~sub).sum())
         sub |= mask
-        assert robot.pending_cells is not None
-        robot.pending_cells[rows, cols] |= mask & ~self.ground_explored[rows, cols]
+        self.downlink.explored(robot, rows, cols, mask & ~self.ground.explored[rows, cols])
         return new
 
     def discover(self, robot: SimRobot, r: float) -> list[str]:
@@ -622,81 +278,7 @@ class World:
             if math.hypot(robot.x - rss.x, robot.y - rss.y) <= r + rss.radius * 0.5:
                 rss.found_by.add(robot.name)
                 info = robot.knowledge.learn_rss(rss.sighting())
-                self.tell_ground(robot, "rss", rss.name, info)
+                self.tell_ground(robot, RegionSeen(rss_item(info)))
                 self.log(f"{robot.name} discovered {rss.name} at {_fmt(rss.x, rss.y)}")
                 found.append(rss.name)
         return found
-
-    # ------------------------------------------------------------ energy
-
-    def drive_energy(self, robot: SimRobot, distance: float, code: int) -> float:
-        factor = self.spec.terrain.slow_energy if code == SLOW else 1.0
-        return distance * factor / robot.model.metres_per_battery
-
-    def work_energy(self, robot: SimRobot, dt: float, load: float = 1.0) -> float:
-        return dt * robot.model.work_per_hour * load / 3600.0
-
-    def flight_energy(self, robot: SimRobot, dt: float) -> float:
-        return dt / robot.model.flight_s_per_battery
-
-    def charge(self, robot: SimRobot, dt: float, up_to: float = 1.0) -> None:
-        if robot.battery < up_to:
-            robot.battery = min(up_to, robot.battery + dt * robot.model.charge_per_minute / 60.0)
-
-    # ------------------------------------------------------------ planning
-
-    def plan_route(self, robot: SimRobot, goal: tuple[float, float]) -> list[tuple[float, float]]:
-        """Waypoints for a rover (terrain-aware) or a drone (straight)."""
-        start = (robot.x, robot.y)
-        g = self.geom
-        if robot.kind == "drone":
-            if not g.inside(*goal):
-                raise SimError(f"the goal {_fmt(*goal)} is outside the site")
-            return [start, goal]
-        if g.inside(*goal) and self.terrain[g.cell_of(*goal)] == ROCK:
-            raise SimError(f"the goal {_fmt(*goal)} lies in impassable terrain (rocks)")
-        try:
-            return plan(self.terrain, g, start, goal, self.slow_cost)
-        except NoPath as e:
-            raise SimError(f"no route from {_fmt(*start)} to {_fmt(*goal)}: {e}") from None
-
-    def nearest_free(self, x: float, y: float, max_r: float = 10.0) -> tuple[float, float] | None:
-        """Nearest passable cell centre to (x, y) within max_r, or None."""
-        if self.geom.inside(x, y) and self.terrain[self.geom.cell_of(x, y)] != ROCK:
-            return x, y
-        rows, cols, mask = self.geom.disk(x, y, max_r)
-        ok = mask & (self.terrain[rows, cols] != ROCK)
-        if not ok.any():
-            return None
-        ii, jj = np.nonzero(ok)
-        xs = self.geom.xs[cols][jj]
-        ys = self.geom.ys[rows][ii]
-        k = int(np.argmin((xs - x) ** 2 + (ys - y) ** 2))
-        return float(xs[k]), float(ys[k])
-
-    def straight_clear(self, a: tuple[float, float], b: tuple[float, float]) -> bool:
-        return line_max(self.terrain, self.geom, a, b) < ROCK
-
-    # ------------------------------------------------------------ layers for the map feed
-
-    def ground_layers(self) -> dict[str, np.ndarray]:
-        terrain = np.where(self.ground_explored, self.terrain + 1, T_UNKNOWN).astype(np.uint8)
-        cov = np.where(self.coverage > 0, np.maximum(1, np.rint(self.coverage * 255)), 0).astype(
-            np.uint8
-        )
-        return {"terrain": terrain, "coverage": cov}
-
-    def ground_objects(self) -> dict[str, Any]:
-        lander = self.spec.lander
-        return {
-            "lander": {
-                "x": lander.x,
-                "y": lander.y,
-                "pad_radius": lander.pad_radius,
-                "comm_radius": lander.comm_radius,
-            },
-            "boxes": [dict(v) for _k, v in sorted(self.ground_boxes.items())],
-            "rss": [dict(v) for _k, v in sorted(self.ground_rss.items())],
-            "stones": [dict(v) for _k, v in sorted(self.ground_stones.items())],
-            "score": self.ground_score,
-        }

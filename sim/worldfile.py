@@ -13,7 +13,7 @@ Problems are reported like the mission files': `file:line:col: path: message`
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
+from typing import Final, Literal
 
 from pydantic import Field, ValidationError, model_validator
 
@@ -21,7 +21,8 @@ from backend.core.model import Name, Strict
 from backend.files import yamlio
 from backend.files.diagnostics import FileProblems, Issue, duplicate_issues, pydantic_issues
 
-WORLD_FORMAT = "missionctl/world@1"
+WORLD_FORMAT: Final = "missionctl/world@1"
+RobotKind = Literal["rover", "drone", "static"]
 
 BoxName = Name
 
@@ -95,7 +96,7 @@ class Scatter(Strict):
         return self
 
 
-class Terrain(Strict):
+class TerrainSpec(Strict):
     rock_fields: Scatter = Field(default_factory=lambda: Scatter(count=30, radius=(3.0, 8.0)))
     sand_patches: Scatter = Field(default_factory=lambda: Scatter(count=25, radius=(6.0, 16.0)))
     slow_factor: float = Field(
@@ -143,7 +144,7 @@ class Box(Strict):
 class RobotModel(Strict):
     """Physical model of a robot type (by skill-library type name)."""
 
-    kind: Literal["rover", "drone", "static"]
+    kind: RobotKind
     description: str = ""
     capabilities: list[str] = Field(
         default_factory=list, description="science_camera, manipulator, ..."
@@ -208,7 +209,7 @@ class WorldFile(Strict):
     seed: int = Field(1, ge=0)
     site: Site = Field(default_factory=Site)
     lander: Lander = Field(default_factory=Lander)
-    terrain: Terrain = Field(default_factory=Terrain)
+    terrain: TerrainSpec = Field(default_factory=TerrainSpec)
     comms: Comms = Field(default_factory=Comms)
     scoring: Scoring = Field(default_factory=Scoring)
     rss: list[RSS] = Field(default_factory=list)
@@ -261,9 +262,9 @@ def check_world(w: WorldFile) -> list[tuple[tuple[str | int, ...], str]]:
                     f"cruise speed {m.speed:g} is above max_speed {m.max_speed:g}",
                 )
             )
-    for name, r in w.robots.items():
-        if not _inside(s, r.x, r.y):
-            out.append((("robots", name), f"start ({r.x:g}, {r.y:g}) is outside the site"))
+    for name, start in w.robots.items():
+        if not _inside(s, start.x, start.y):
+            out.append((("robots", name), f"start ({start.x:g}, {start.y:g}) is outside the site"))
     return out
 
 

@@ -120,13 +120,11 @@ async def wait_for_partners(
     )
     act.barrier_token = transport.declare_token(session, Keys.barrier_ready(info.barrier, rt.name))
     for p in partners:
-        act.barrier_entities.append(
-            transport.watch_liveliness(
-                session,
-                Keys.alive(p),
-                lambda _k, alive, p=p: rt.post(meeting.on_alive, p, alive),
-            )
-        )
+
+        def on_alive(_key: str, alive: bool, p: str = p) -> None:
+            rt.post(meeting.on_alive, p, alive)
+
+        act.barrier_entities.append(transport.watch_liveliness(session, Keys.alive(p), on_alive))
     deadline = asyncio.get_running_loop().call_later(PRESENCE_GRACE_S, meeting.presence_deadline)
     try:
         await _until_met(meeting, report, show)

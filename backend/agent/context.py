@@ -19,7 +19,7 @@ from typing import Any, Protocol
 import zenoh
 
 from backend.agent.outcomes import SkillStopped
-from backend.agent.queue import Active, Entry
+from backend.agent.queue import Active, HeldSkill
 from backend.agent.runtime import Runtime
 from backend.core.model import Pose, Position, SkillInstance
 
@@ -48,7 +48,7 @@ class Execution:
         self.resumed_t.set()
 
     @property
-    def entry(self) -> Entry:
+    def entry(self) -> HeldSkill:
         return self.active.entry
 
     @property
@@ -91,8 +91,8 @@ class Execution:
             self.barrier_token = None
 
 
-class Host(Protocol):
-    """What a context needs of the agent (execution.Executor provides it)."""
+class SkillRunner(Protocol):
+    """What a context needs of whoever runs its skill (execution.Executor)."""
 
     agent: Any  # the RobotAgent: ctx.agent, its time_scale, ask and tell
     rt: Runtime
@@ -123,7 +123,9 @@ def _coroutine_only(method: Callable[..., Any]) -> Callable[..., Any]:
 class SkillContext:
     """What a handler gets as its first argument."""
 
-    def __init__(self, host: Host, act: Execution, params: dict[str, Any], purpose: str = "skill"):
+    def __init__(
+        self, host: SkillRunner, act: Execution, params: dict[str, Any], purpose: str = "skill"
+    ):
         self.agent: Any = host.agent  # the RobotAgent
         self._host = host
         self._act = act
@@ -242,8 +244,10 @@ class SkillContext:
     async def ask(
         self, robot: str, topic: str, data: dict[str, Any] | None = None
     ) -> dict[str, Any] | None:
-        return await self.agent.ask(robot, topic, data)
+        answer: dict[str, Any] | None = await self.agent.ask(robot, topic, data)
+        return answer
 
     @_coroutine_only
     async def tell(self, robot: str, topic: str, data: dict[str, Any] | None = None) -> bool:
-        return await self.agent.tell(robot, topic, data)
+        delivered: bool = await self.agent.tell(robot, topic, data)
+        return delivered

@@ -12,7 +12,7 @@ from __future__ import annotations
 import asyncio
 import inspect
 import threading
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -23,8 +23,9 @@ from backend.agent.queue import SkillQueue
 from backend.agent.registration import Handler
 from backend.agent.runtime import Runtime, log
 from backend.agent.telemetry import TelemetryFeed
+from backend.core.library import SkillSignature
 from backend.core.model import Status
-from backend.core.params import typed_by_shape
+from backend.core.params import typed_params
 
 
 @dataclass(frozen=True)
@@ -40,12 +41,21 @@ class _Call:
 class Executor:
     """Starts the queue's next skill, runs its handler, ends it."""
 
-    def __init__(self, agent: Any, rt: Runtime, queue: SkillQueue, telemetry: TelemetryFeed):
+    def __init__(
+        self,
+        agent: Any,
+        rt: Runtime,
+        queue: SkillQueue,
+        telemetry: TelemetryFeed,
+        handlers: Mapping[str, Handler],
+        signatures: Mapping[str, SkillSignature],
+    ):
         self.agent = agent  # the RobotAgent (ctx.agent)
         self.rt = rt
         self.queue = queue
         self.telemetry = telemetry
-        self.handlers: dict[str, Handler] = {}
+        self.handlers = handlers
+        self.signatures = signatures  # the library's, from the last registration
         self.running: Execution | None = None  # the Execution of queue.active
         # the thread of the last plain-function handler, done once it returned
         self._handler_thread: asyncio.Future[None] | None = None
@@ -234,10 +244,13 @@ class Executor:
         """The call, or why the handler cannot take the parameters sent."""
         name = "recharge" if purpose == "recharge" else act.entry.skill.skill
         handler = self.handlers[name]
-        raw_params = dict(act.entry.skill.params) if purpose == "skill" else {}
-        params = (
-            raw_params if handler.raw else {k: typed_by_shape(v) for k, v in raw_params.items()}
-        )
+        if purpose == "skill":
+            raw_params, kinds = dict(act.entry.skill.params), act.entry.kinds
+        else:  # run by the robot itself: with the defaults the server filled in
+            sig = self.signatures.get(name)
+            raw_params = dict(sig.defaults) if sig is not None else {}
+            kinds = sig.params if sig is not None else {}
+        params = raw_params if handler.raw else typed_params(raw_params, kinds)
         ctx = SkillContext(self, act, raw_params, purpose)
         mismatch = signature_problem(handler.fn, params)
         if mismatch is not None:  # else a bare TypeError from inside the call
@@ -294,7 +307,8 @@ def in_daemon_thread(
     returned: asyncio.Future[None] = loop.create_future()
 
     def settle(ok: bool, value: Any) -> None:
-        returned.done() or returned.set_result(None)
+        if not returned.done():
+            returned.set_result(None)
         if future.done():
             return  # cancelled (stopped) meanwhile
         if ok:
@@ -342,10 +356,11 @@ def signature_problem(fn: Callable[..., Any], params: dict[str, Any]) -> str | N
         and p.name not in params
     ]
     if missing:
+        sent = ", ".join(params) or "none"
         return (
             f"handler {name}() needs parameter {', '.join(map(repr, missing))}, which the server "
-            f"did not send (an optional parameter left unset, or not one of the skill's): give "
-            f"it a default, like {missing[0]}=None"
+            f"did not send: it is not a parameter of the skill in the library (sent: {sent}); "
+            f"remove it from the signature"
         )
     return None
 

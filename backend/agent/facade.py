@@ -41,14 +41,14 @@ What the agent does (the contract is docs/protocol.md, protocol 2):
   acknowledges them;
 - meets its partners at barriers directly through liveliness tokens.
 
-Parameters reach handlers converted by shape (the agent has no skill library;
-the server sends normalized values): a mapping with exactly the pose fields
-x, y, z, roll, pitch, yaw becomes a `Pose`; one with exactly x, y, z a
-`Position`; a list of at least three such mappings (an area) a
+Parameters reach handlers typed by their kind, which the server sends with
+the values (`Enqueue.kinds`, the library's; the agent holds no library): a
+`pose` becomes a `Pose`, a `position` a `Position`, an `area` a
 `list[Position]`; everything else (marker/robot/str/enum as str, numbers,
-lists, dicts) is passed as it came. A `dict` parameter that happens to look
-like a position would be converted too: register the skill with `raw=True` to
-get plain values, and use `ctx.params` / `ctx.pose(name)` / `ctx.position(name)`.
+lists, dicts) is passed as it came, and a parameter left unset is None.
+Nothing is guessed from a value's shape. Register a skill with `raw=True` to
+get the values as sent, and use `ctx.params` / `ctx.pose(name)` /
+`ctx.position(name)`.
 
 Behaviour an integrator can rely on:
 
@@ -91,7 +91,7 @@ from backend import transport
 from backend.agent.execution import Executor
 from backend.agent.link import Link
 from backend.agent.outbox import Outbox
-from backend.agent.queue import Change, SkillQueue
+from backend.agent.queue import Effect, SkillQueue
 from backend.agent.registration import (
     Handler,
     Registrar,
@@ -102,10 +102,11 @@ from backend.agent.registration import (
     ensure_alone,
     manifest_bytes,
 )
-from backend.agent.runtime import Runtime, log
+from backend.agent.runtime import Runtime, Standing, log
 from backend.agent.telemetry import TelemetryFeed
-from backend.agent.uplink import UplinkHandler
-from backend.agent.world import World
+from backend.agent.uplink import CommandLog, UplinkHandler
+from backend.agent.world import Peers
+from backend.core.library import SkillSignature
 from backend.core.model import Dequeue, Enqueue, Pause, Pose, Reset, Run, Status, Stop
 from backend.core.ops import Answer, Report
 from backend.protocol.keys import Keys
@@ -162,38 +163,36 @@ class RobotAgent:
         # called with every Report as it is made (simulator, logs, tests)
         self.report_listeners: list[Callable[[Report], object]] = []
 
-        # the parts (every state change runs on the loop that called start())
+        # the parts, each built after what it uses (every state change runs on
+        # the loop that called start())
         self._rt = Runtime(self)
+        self._standing = Standing(name)
         self._queue = SkillQueue(name, on_report=self._on_report)
+        self._command_log = CommandLog(name)
+        self._outbox = Outbox(self._rt, self._standing, self._command_log)
+        self._handlers: dict[str, Handler] = {}
+        self._signatures: dict[str, SkillSignature] = {}  # the library's, from registration
         self._uplink = UplinkHandler(
-            self._rt,
-            dispatch=self._dispatch,
-            seq=self._queue.next_seq,
-            deliver=self._on_answer,
-            session=lambda: self._rt.session_id,
-            acked=lambda last: self._outbox.ack(last),
-        )
-        self._outbox = Outbox(
-            self._rt,
-            registered=lambda: self._registrar.registered,
-            session=lambda: self._rt.session_id,
-            uplink_applied=lambda: self._uplink.log.applied,
-            unregistered=lambda: self._registrar.must_register(),
+            self._rt, self._command_log, self._dispatch, self._queue.next_seq, self._outbox
         )
         self._telemetry = TelemetryFeed(self._rt, self._queue)
-        self._world = World(self._rt)
+        self._peers = Peers(self._rt)
         self._registrar = Registrar(
             self._rt,
+            self._standing,
             self._queue,
             self._outbox,
+            self._command_log,
+            self._handlers,
+            self._signatures,
             self.manifest,
-            lambda: self.connect,
-            uplink_applied=lambda: self._uplink.log.applied,
             taken=self._stand_down,
         )
-        self._executor = Executor(self, self._rt, self._queue, self._telemetry)
-        self.world_stats = self._world.stats
-        self._commands: dict[type, Callable[[Any], Change]] = {
+        self._executor = Executor(
+            self, self._rt, self._queue, self._telemetry, self._handlers, self._signatures
+        )
+        self.world_stats = self._peers.stats
+        self._commands: dict[type, Callable[[Any], Effect]] = {
             Enqueue: self._enqueue,
             Dequeue: self._dequeue,
             Run: self._run,
@@ -235,18 +234,17 @@ class RobotAgent:
     ) -> None:
         """Register `fn(ctx, **params)` as the handler of skill `name` (see `skill`).
         Before `start()`: the manifest listing the skills is sent then."""
-        handlers = self._executor.handlers
         started = self._rt.session is not None
-        add_handler(handlers, self.name, name, Handler(fn, version, raw), started=started)
+        add_handler(self._handlers, self.name, name, Handler(fn, version, raw), started=started)
 
     def on_ask(self, topic: str, fn: Callable[..., Any]) -> None:
         """`fn(data, sender) -> dict | None` (or a coroutine) answers asks on
         `topic`; None means "unknown". Runs on the agent's loop: keep it short."""
-        self._world.add_handler("ask", topic, fn)
+        self._peers.add_handler("ask", topic, fn)
 
     def on_tell(self, topic: str, fn: Callable[..., Any]) -> None:
         """`fn(data, sender)` (or a coroutine) receives tells on `topic`."""
-        self._world.add_handler("tell", topic, fn)
+        self._peers.add_handler("tell", topic, fn)
 
     def manifest(self) -> Manifest:
         return Manifest(
@@ -254,7 +252,7 @@ class RobotAgent:
             type=self.robot_type,
             modules=[Module(name=k, version=v) for k, v in self.modules.items()],
             properties=self.properties,
-            skills={k: h.version for k, h in self._executor.handlers.items()},
+            skills={k: h.version for k, h in self._handlers.items()},
         )
 
     # ------------------------------------------------------------ introspection
@@ -297,6 +295,13 @@ class RobotAgent:
         return self._registrar.registered
 
     @property
+    def handler_problems(self) -> list[str]:
+        """How the handlers differ from the library's signatures the server sent
+        at the last registration (each said once in the log): a sentence each
+        naming robot, skill and parameter; empty when they fit."""
+        return list(self._registrar.handler_problems)
+
+    @property
     def last_register_reply(self) -> RegisterReply | None:
         return self._registrar.last_reply
 
@@ -327,11 +332,11 @@ class RobotAgent:
         self, robot: str, topic: str, data: dict[str, Any] | None = None
     ) -> dict[str, Any] | None:
         """Ask `robot` about `topic`; its answer, or None (unknown / unreachable)."""
-        return await self._world.ask(robot, topic, data)
+        return await self._peers.ask(robot, topic, data)
 
     async def tell(self, robot: str, topic: str, data: dict[str, Any] | None = None) -> bool:
         """Tell `robot` something; True when it was delivered to a handler."""
-        return await self._world.tell(robot, topic, data)
+        return await self._peers.tell(robot, topic, data)
 
     # ------------------------------------------------------------ lifecycle
 
@@ -351,7 +356,7 @@ class RobotAgent:
             raise RuntimeError(f"agent {self.name} is already started")
         manifest_bytes(self.name, self.manifest)  # properties may have changed since
         self._rt.attach()
-        self._registrar.attach()
+        self._standing.attach()
         self._outbox.attach()
         self._uplink.attach()
         self._in_range = self._rt.in_range()
@@ -373,7 +378,7 @@ class RobotAgent:
             transport.serve_async(session, Keys.uplink(self.name), self._uplink.on_uplink)
         )
         self._entities.append(
-            transport.serve_async(session, Keys.world(self.name), self._world.on_message)
+            transport.serve_async(session, Keys.world(self.name), self._peers.on_message)
         )
         self._telemetry.publisher = transport.declare_publisher(session, Keys.telemetry(self.name))
         self._token = transport.declare_token(session, Keys.alive(self.name, self._rt.session_id))
@@ -417,7 +422,7 @@ class RobotAgent:
         # The flag and the wake-ups end our loops even if a cancellation gets
         # lost (Python 3.11's wait_for swallows one that races a completion).
         self._rt.closing = True
-        self._registrar.wake()
+        self._standing.wake()
         self._outbox.wake()
         await self._cancel(tasks)
         self._tasks = []
@@ -467,7 +472,7 @@ class RobotAgent:
             log.info("%s: %s communication range", self.name, "back in" if now else "out of")
             self._executor.apply_comms_policy()
             if now:
-                self._registrar.wake()
+                self._standing.wake()
                 self._outbox.wake()
                 self._telemetry.publish()
 
@@ -488,10 +493,7 @@ class RobotAgent:
 
     # ------------------------------------------------------------ commands
 
-    def _on_answer(self, answer: Answer) -> None:
-        self._outbox.add(answer)
-
-    def _dispatch(self, cmd: object) -> Change:
+    def _dispatch(self, cmd: object) -> Effect:
         """Apply one command of the uplink to the queue and the execution.
         Synchronous: no other command or skill step interleaves, and the
         reports it makes come before its answer."""
@@ -509,31 +511,32 @@ class RobotAgent:
         self._uplink.forget()
         self._telemetry.update_mode()
 
-    def _enqueue(self, cmd: Enqueue) -> Change:
-        handlers = self._executor.handlers
-        change = self._queue.enqueue(cmd.skills, cmd.barriers, front=cmd.front, offered=handlers)
+    def _enqueue(self, cmd: Enqueue) -> Effect:
+        change = self._queue.enqueue(
+            cmd.skills, cmd.barriers, front=cmd.front, offered=self._handlers, kinds=cmd.kinds
+        )
         if change.ok:
             self._executor.kick()
         return change
 
-    def _dequeue(self, cmd: Dequeue) -> Change:
+    def _dequeue(self, cmd: Dequeue) -> Effect:
         return self._queue.unsync(cmd.ids)
 
-    def _run(self, cmd: Run) -> Change:
+    def _run(self, cmd: Run) -> Effect:
         change = self._queue.run()
         self._executor.sync_pause()
         self._executor.kick()
         return change
 
-    def _pause(self, cmd: Pause) -> Change:
+    def _pause(self, cmd: Pause) -> Effect:
         change = self._queue.pause()
         self._executor.sync_pause()
         return change
 
-    def _stop(self, cmd: Stop) -> Change:
+    def _stop(self, cmd: Stop) -> Effect:
         self._executor.abort()
         return self._queue.stop()
 
-    def _reset(self, cmd: Reset) -> Change:
+    def _reset(self, cmd: Reset) -> Effect:
         self._executor.abort()
         return self._queue.reset()

@@ -14,11 +14,11 @@ ground's "heard N s ago" and delay estimate.
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Callable
 from datetime import UTC, datetime, timedelta
 
 from backend import transport
-from backend.agent.runtime import RETRY_S, Runtime, log
+from backend.agent.runtime import RETRY_S, Runtime, Standing, log
+from backend.agent.uplink import CommandLog
 from backend.core.ops import Answer, Report
 from backend.protocol.keys import Keys
 from backend.protocol.messages import MAX_BATCH, Downlink, DownlinkAck, ErrorReply, dumps
@@ -32,19 +32,10 @@ RANGE_POLL_S = 0.2  # out of range with messages waiting: look again this often
 class Outbox:
     """Unacknowledged downlink messages, oldest first, and the task that sends them."""
 
-    def __init__(
-        self,
-        rt: Runtime,
-        registered: Callable[[], bool],
-        session: Callable[[], str],
-        uplink_applied: Callable[[], int],
-        unregistered: Callable[[], None],
-    ):
+    def __init__(self, rt: Runtime, standing: Standing, commands: CommandLog):
         self.rt = rt
-        self._registered = registered
-        self._session = session
-        self._uplink_applied = uplink_applied
-        self._unregistered = unregistered  # the server no longer knows us: register again
+        self.standing = standing  # sends only while registered
+        self.commands = commands  # the uplink's processed commands (each Downlink says how far)
         self.reports: list[Message] = []  # not acknowledged yet, in seq order
         self._ready: dict[int, float] = {}  # seq -> loop time it may leave (made + delay)
         self.refused: list[ErrorReply] = []  # messages the server refused (its reasons)
@@ -115,7 +106,7 @@ class Outbox:
     def _due_in(self) -> float | None:
         """Seconds until there is something to send (None: when woken)."""
         loop = self.rt.loop
-        if loop is None or not self._registered():
+        if loop is None or not self.standing.registered:
             return None
         if not self.rt.in_range():
             # looked at again soon: a stay out of range may be shorter than
@@ -139,7 +130,7 @@ class Outbox:
             except TimeoutError:
                 pass
             wake.clear()
-            if self.rt.closing or not self._registered() or not self.rt.in_range():
+            if self.rt.closing or not self.standing.registered or not self.rt.in_range():
                 continue  # registration / the link loop wakes us again
             now = self.rt.loop.time()
             if self._retry_at is not None and now < self._retry_at:
@@ -162,7 +153,7 @@ class Outbox:
 
     async def flush_before_stop(self) -> None:
         """Best effort, briefly: the agent is stopping."""
-        if self.reports and self._registered() and self.rt.in_range():
+        if self.reports and self.standing.registered and self.rt.in_range():
             try:
                 await asyncio.wait_for(self.send(self.ready()), 1.0)
             except Exception:  # best effort only
@@ -174,9 +165,9 @@ class Outbox:
         self._last_sent = self.rt.loop.time()
         downlink = Downlink(
             robot=self.rt.name,
-            session=self._session(),
+            session=self.rt.session_id,
             messages=messages,
-            uplink_applied=self._uplink_applied(),
+            uplink_applied=self.commands.applied,
             # it left the robot one link delay before it reaches the ground
             sent=datetime.now(UTC) - timedelta(seconds=self.rt.delay_s()),
         )
@@ -203,7 +194,7 @@ class Outbox:
         except ValueError:
             return
         if err.code == "not_registered":
-            self._unregistered()
+            self.standing.lost()
         else:
             self.rt.say_once(
                 f"downlink {err.code}", f"the server refused the downlink: {err.message}"

@@ -2,7 +2,7 @@
 
 It is the one owner of what the robot holds: the skills waiting in order, the
 active one (and why it is paused), the finished ids, run mode and the report
-numbers. Commands return what they actually did (`Change`), so the agent
+numbers. Commands return what they actually did (`Effect`), so the agent
 answers the server with the truth, not with what was asked. Every status
 change is a numbered `Report` handed to `on_report` at once, in order.
 
@@ -33,11 +33,13 @@ def _now() -> datetime:
 
 
 @dataclass
-class Entry:
+class HeldSkill:
     """A skill the robot holds (queued or active)."""
 
     skill: SkillInstance
     barrier: BarrierInfo | None = None
+    # parameter -> its kind, as sent with the skill (Enqueue.kinds): how its handler gets it
+    kinds: Mapping[str, str] = field(default_factory=dict)
     status: Status = Status.IDLE_SYNCHRONIZED
     attempt: int = 1
     retries_used: int = 0
@@ -51,7 +53,7 @@ class Entry:
 class Active:
     """The entry being executed and why it is paused (both reasons may hold)."""
 
-    entry: Entry
+    entry: HeldSkill
     paused_by_operator: bool = False
     paused_by_comms: bool = False
 
@@ -61,7 +63,7 @@ class Active:
 
 
 @dataclass(frozen=True)
-class Change:
+class Effect:
     """What a command did. A command either queues or removes skills."""
 
     ok: bool = True
@@ -83,7 +85,7 @@ class SkillQueue:
         self.robot = robot
         self.on_report = on_report
         self._clock = clock
-        self._waiting: list[Entry] = []
+        self._waiting: list[HeldSkill] = []
         self.active: Active | None = None
         self.run_enabled = False  # halted until `run`
         self._done: set[str] = set()  # finished ids (a re-sent enqueue never re-runs them)
@@ -96,12 +98,12 @@ class SkillQueue:
         """Ids of the queued (not started) skills, in order."""
         return [e.id for e in self._waiting]
 
-    def entries(self) -> list[Entry]:
+    def entries(self) -> list[HeldSkill]:
         """The active entry, then the queued ones: what the robot holds."""
         head = [self.active.entry] if self.active is not None else []
         return head + self._waiting
 
-    def holds(self, skill_id: str) -> Entry | None:
+    def holds(self, skill_id: str) -> HeldSkill | None:
         return next((e for e in self.entries() if e.id == skill_id), None)
 
     @property
@@ -124,20 +126,23 @@ class SkillQueue:
         *,
         front: bool = False,
         offered: Collection[str],
-    ) -> Change:
+        kinds: Mapping[str, Mapping[str, str]] | None = None,
+    ) -> Effect:
         """Queue `skills` (at the head when `front`: a retry the operator asked
-        for). Refused when one has no handler among `offered`. Sent again, it
-        changes nothing: ids queued already or finished are skipped."""
+        for), each with its parameters' kinds (`kinds`: skill name -> parameter
+        -> kind). Refused when one has no handler among `offered`. Sent again,
+        it changes nothing: ids queued already or finished are skipped."""
         skills = list(skills)
         unknown = sorted({s.skill for s in skills if s.skill not in offered})
         if unknown:
-            return Change(
+            return Effect(
                 ok=False,
                 reason=f"{self.robot} has no handler for skill {', '.join(unknown)} "
                 f"(it offers: {', '.join(sorted(offered)) or 'none'})",
             )
         barriers = barriers or {}
-        new: list[Entry] = []
+        kinds = kinds or {}
+        new: list[HeldSkill] = []
         ids: list[str] = []
         for s in skills:
             if s.id in self._done:
@@ -146,11 +151,18 @@ class SkillQueue:
             if self.holds(s.id) is not None or any(e.id == s.id for e in new):
                 continue  # a re-sent enqueue: it is queued already
             skill = s.model_copy(update={"status": Status.IDLE_SYNCHRONIZED})
-            new.append(Entry(skill=skill, barrier=barriers.get(s.id), attempt=s.attempt))
+            new.append(
+                HeldSkill(
+                    skill=skill,
+                    barrier=barriers.get(s.id),
+                    kinds=kinds.get(s.skill, {}),
+                    attempt=s.attempt,
+                )
+            )
         self._waiting = new + self._waiting if front else self._waiting + new
-        return Change(queued=ids)
+        return Effect(queued=ids)
 
-    def unsync(self, ids: list[str]) -> Change:
+    def unsync(self, ids: list[str]) -> Effect:
         """Remove queued skills. Those that started meanwhile (active or
         finished) stay: the unsync race, told by the reports."""
         wanted = set(ids)
@@ -160,9 +172,9 @@ class SkillQueue:
         started = [i for i in ids if i in self._done or i == active]
         # Ids we never had cannot run either: they count as removed.
         removed += [i for i in ids if i not in removed and i not in started]
-        return Change(removed=removed, started=started)
+        return Effect(removed=removed, started=started)
 
-    def run(self) -> Change:
+    def run(self) -> Effect:
         """Run mode; a skill the operator paused resumes."""
         self.run_enabled = True
         act = self.active
@@ -170,44 +182,44 @@ class SkillQueue:
             act.paused_by_operator = False
             if not act.paused:
                 self.report(act.entry, Status.RUNNING, "resumed")
-            return Change()
+            return Effect()
         if act is None and not self._waiting:
             # Stays in run mode: skills synchronized later start at once.
-            return Change(
+            return Effect(
                 reason=f"{self.robot} has nothing queued; it will run what is synchronized next"
             )
-        return Change()
+        return Effect()
 
-    def pause(self) -> Change:
+    def pause(self) -> Effect:
         """Leave run mode; a running skill pauses (not one waiting at a barrier:
         the status table has no synchwaiting -> paused)."""
         act = self.active
         if act is not None and act.entry.status == Status.SYNCHWAITING:
-            return Change(
+            return Effect(
                 ok=False,
                 reason=f"{self.robot} is waiting at a barrier with {act.entry.id}; only a running "
                 f"skill can be paused (stop it instead)",
             )
         self.run_enabled = False
         if act is None:
-            return Change(reason=f"{self.robot} has no running skill; its queue is halted")
+            return Effect(reason=f"{self.robot} has no running skill; its queue is halted")
         if not act.paused_by_operator:
             was_running = act.entry.status == Status.RUNNING
             act.paused_by_operator = True
             if was_running:
                 self.report(act.entry, Status.PAUSED, "paused by operator")
-        return Change()
+        return Effect()
 
-    def stop(self, info: str = "stopped by operator") -> Change:
+    def stop(self, info: str = "stopped by operator") -> Effect:
         """Leave run mode; the active skill goes back to the head of the queue."""
         self.run_enabled = False
         if self.active is None:
-            return Change(reason=f"{self.robot} has no active skill; its queue is halted")
+            return Effect(reason=f"{self.robot} has no active skill; its queue is halted")
         entry = self._end_active(info)
         self._waiting.insert(0, entry)
-        return Change()
+        return Effect()
 
-    def reset(self, info: str = "reset by operator") -> Change:
+    def reset(self, info: str = "reset by operator") -> Effect:
         """Leave run mode; the active skill and the queue are forgotten."""
         self.run_enabled = False
         removed: list[str] = []
@@ -215,9 +227,9 @@ class SkillQueue:
             removed.append(self._end_active(info).id)
         removed += [e.id for e in self._waiting]
         self._waiting = []
-        return Change(removed=removed)
+        return Effect(removed=removed)
 
-    def _end_active(self, info: str) -> Entry:
+    def _end_active(self, info: str) -> HeldSkill:
         """The active skill is no longer active: `idle_synchronized` again."""
         assert self.active is not None
         entry = self.active.entry
@@ -302,7 +314,7 @@ class SkillQueue:
         self.seq += 1
         return self.seq
 
-    def report(self, entry: Entry, status: Status, info: str = "") -> Report:
+    def report(self, entry: HeldSkill, status: Status, info: str = "") -> Report:
         """Record a status change of `entry` as the next numbered report."""
         self.seq += 1
         entry.status = status

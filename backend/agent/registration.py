@@ -1,6 +1,8 @@
 """Registration: what the robot offers (its manifest and handlers, checked
-when the integrator declares them), its presence, and registering with each
-server that appears (again after every restart of either side)."""
+when the integrator declares them, and against the library's signatures
+each server sends when it accepts the robot), its presence, and
+registering with each server that appears (again after every restart of
+either side)."""
 
 from __future__ import annotations
 
@@ -19,8 +21,9 @@ from backend import transport
 from backend.agent.outbox import Outbox
 from backend.agent.outcomes import AlreadyConnected, RegistrationRefused
 from backend.agent.queue import SkillQueue
-from backend.agent.runtime import RETRY_S, Runtime, log
-from backend.core.library import VERSION_PATTERN
+from backend.agent.runtime import RETRY_S, Runtime, Standing, log
+from backend.agent.uplink import CommandLog
+from backend.core.library import VERSION_PATTERN, SkillSignature
 from backend.core.model import NAME_RE
 from backend.protocol.keys import Keys
 from backend.protocol.messages import (
@@ -140,6 +143,41 @@ def _takes_ctx(fn: Callable[..., Any]) -> bool:
     )
 
 
+def handler_differences(robot: str, skill: str, handler: Handler, sig: SkillSignature) -> list[str]:
+    """How `handler`'s signature differs from the library's `sig`, a sentence
+    each naming robot, skill and parameter (none: it fits). A handler taking
+    **params accepts whatever comes: nothing to compare."""
+    try:
+        args = list(inspect.signature(handler.fn).parameters.values())[1:]  # after the context
+    except (TypeError, ValueError):
+        return []
+    if any(p.kind == p.VAR_KEYWORD for p in args):
+        return []
+    where = f"robot {robot}, skill {skill}: handler {getattr(handler.fn, '__name__', 'handler')}()"
+    named = {p.name: p for p in args if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
+    out = [
+        f"{where} has no parameter {name!r} ({kind} in the library): the skill fails when it "
+        f"runs; add it to the signature"
+        for name, kind in sig.params.items()
+        if name not in named
+    ]
+    for name, p in named.items():
+        if name not in sig.params:
+            known = ", ".join(sig.params) or "none"
+            out.append(
+                f"{where} takes {name!r}, which is not a parameter of {skill} in the library "
+                f"({known}): it never gets a value; remove it"
+            )
+        elif p.default is not p.empty:
+            given = sig.defaults.get(name)
+            library = f"the library's default is {given!r}" if given is not None else "no default"
+            out.append(
+                f"{where} gives {name!r} a default ({p.default!r}) it never uses: the server "
+                f"always sends it ({library}); remove the default"
+            )
+    return out
+
+
 def manifest_bytes(robot: str, manifest: Callable[[], Manifest]) -> bytes:
     """The manifest as sent; ValueError naming the robot when it cannot be."""
     try:
@@ -176,80 +214,66 @@ class Registrar:
     def __init__(
         self,
         rt: Runtime,
+        standing: Standing,
         queue: SkillQueue,
         outbox: Outbox,
+        commands: CommandLog,
+        handlers: Mapping[str, Handler],
+        signatures: dict[str, SkillSignature],
         manifest: Callable[[], Manifest],
-        connect: Callable[[], list[str]],
-        uplink_applied: Callable[[], int],
         taken: Callable[[str], None],
     ):
         self.rt = rt
+        self.standing = standing
+        self.handlers = handlers
+        # the library's signatures the server sent (the executor reads them too)
+        self.signatures = signatures
+        # how the handlers differ from them (said once each, in the log)
+        self.handler_problems: list[str] = []
         self.queue = queue
         self.outbox = outbox
+        self.commands = commands  # the uplink's processed commands (registration says how far)
         self._manifest = manifest
-        self._connect = connect
-        self._uplink_applied = uplink_applied
         self._taken = taken  # another run of this robot holds the name: stand down
-        self.server_up = False
-        self.registered = False
         self.last_reply: RegisterReply | None = None
         self._refused: str | None = None  # the server's reason, while it refuses us
         self._error = ""  # why the last registration attempt got no reply
         self._warned_unanswered = False
-        self._wake: asyncio.Event | None = None
-        self._registered_evt: asyncio.Event | None = None
 
-    def attach(self) -> None:
-        """Events on the running loop (start())."""
-        self._wake = asyncio.Event()
-        self._registered_evt = asyncio.Event()
-
-    def wake(self) -> None:
-        if self._wake is not None:
-            self._wake.set()
+    @property
+    def registered(self) -> bool:
+        return self.standing.registered
 
     def offline(self) -> None:
         """The agent stopped."""
-        self.registered = False
-        self.server_up = False
-
-    def must_register(self) -> None:
-        """The server does not know us (any more): register again."""
-        if self.registered:
-            log.warning(
-                "%s: the server no longer knows this robot; registering again", self.rt.name
-            )
-        self.registered = False
-        if self._registered_evt is not None:
-            self._registered_evt.clear()
-        self.wake()
+        self.standing.registered = False
+        self.standing.server_up = False
 
     def on_server(self, alive: bool) -> None:
-        self.server_up = alive
+        self.standing.server_up = alive
         # A (re)appearing server may be a new instance: always register again.
-        self.registered = False
-        if self._registered_evt is not None:
-            self._registered_evt.clear()
-        if alive and self._wake is not None:
-            self._wake.set()
+        self.standing.unregistered()
+        if alive:
+            self.standing.wake()
 
     async def wait_registered(self, timeout: float | None) -> None:
-        if self._registered_evt is None:
+        answered = self.standing.answered
+        if answered is None:
             raise self.rt.not_started()
         try:
             async with asyncio.timeout(timeout):
-                await self._registered_evt.wait()
+                await answered.wait()
         except TimeoutError:
             raise TimeoutError(
                 f"robot {self.rt.name} not registered within {timeout:g} s: {self._why_not()}"
             ) from None
-        if self._refused is not None and not self.registered:
+        if self._refused is not None and not self.standing.registered:
             raise RegistrationRefused(self._refused)
 
     def _why_not(self) -> str:
-        if not self.server_up:
+        if not self.standing.server_up:
             return (
-                f"no mission server is up behind {', '.join(self._connect())} "
+                f"no mission server is up behind {', '.join(self.rt.robot.connect)} "
                 f"(its presence token is missing)"
             )
         if not self.rt.in_range():
@@ -258,12 +282,9 @@ class Registrar:
 
     async def run(self) -> None:
         """Register whenever woken and due, until the agent stops."""
-        wake = self._wake
-        assert wake is not None
         while not self.rt.closing:
-            await wake.wait()
-            wake.clear()
-            if not self.server_up or self.registered or not self.rt.in_range():
+            await self.standing.woken()
+            if not self.standing.server_up or self.registered or not self.rt.in_range():
                 continue  # the link loop / server watcher wakes us again
             try:
                 await self.register_once()
@@ -290,8 +311,23 @@ class Registrar:
             )
 
     def _retry_later(self, seconds: float = RETRY_S) -> None:
-        assert self.rt.loop is not None and self._wake is not None
-        self.rt.loop.call_later(seconds, self._wake.set)
+        assert self.rt.loop is not None
+        self.rt.loop.call_later(seconds, self.standing.wake)
+
+    def _take_signatures(self, skills: Mapping[str, SkillSignature]) -> None:
+        """The library as this server has it: compare the handlers with it."""
+        self.signatures.clear()
+        self.signatures.update(skills)
+        problems = [
+            problem
+            for name, handler in sorted(self.handlers.items())
+            if name in skills
+            for problem in handler_differences(self.rt.name, name, handler, skills[name])
+        ]
+        for problem in problems:
+            if problem not in self.handler_problems:
+                log.error("%s", problem)
+        self.handler_problems = problems
 
     async def register_once(self) -> None:
         assert self.rt.session is not None
@@ -305,7 +341,7 @@ class Registrar:
             ],
             downlink=list(self.outbox.reports),
             last_seq=self.queue.seq,
-            uplink_applied=self._uplink_applied(),
+            uplink_applied=self.commands.applied,
             sent=datetime.now(UTC) - timedelta(seconds=self.rt.delay_s()),
         )
         raw = await transport.query(
@@ -316,11 +352,12 @@ class Registrar:
         )
         reply = parse(RegisterReply, raw)
         self.last_reply = reply
-        assert self._registered_evt is not None
+        answered = self.standing.answered
+        assert answered is not None
         if not reply.accepted:
             log.error("%s: the server refused the registration: %s", self.rt.name, reply.reason)
             self._refused = f"the mission server refused robot {self.rt.name}: {reply.reason}"
-            self._registered_evt.set()  # wait_registered() raises it
+            answered.set()  # wait_registered() raises it
             if reply.code == "taken":
                 self._taken(reply.reason)
                 self._retry_later(TAKEN_RETRY_S)  # ours again once the other one is gone
@@ -332,6 +369,7 @@ class Registrar:
         else:
             self.outbox.ack(reply.last_seq)
         self.outbox.heartbeat_s = reply.heartbeat_s
+        self._take_signatures(reply.skills)
         for what, ids in (
             ("returned to the plan (this robot no longer had them)", reply.missing),
             ("adopted (this robot holds them; the mission had them unsynchronized)", reply.adopted),
@@ -339,6 +377,6 @@ class Registrar:
         ):
             if ids:
                 log.warning("%s: the server %s: %s", self.rt.name, what, ", ".join(ids))
-        self.registered = True
-        self._registered_evt.set()
+        self.standing.registered = True
+        answered.set()
         self.outbox.wake()

@@ -1,6 +1,7 @@
 """What the parts of one agent share: the robot's settable sources, the
 asyncio loop every state change runs on, the Zenoh session while started,
-and safe readings of the integrator's link model."""
+safe readings of the integrator's link model, and the robot's standing with
+the server (registered or not)."""
 
 from __future__ import annotations
 
@@ -28,6 +29,7 @@ class Robot(Protocol):
     """The parts of a RobotAgent its integrator may set at any time: read live."""
 
     name: str
+    connect: list[str]
     link: Link
     pose: Callable[[], Pose]
     battery: Callable[[], float]
@@ -101,3 +103,43 @@ class Runtime:
         if key not in self._said:
             self._said.add(key)
             log.log(level, "%s: %s (said once)", self.name, text, exc_info=exc_info)
+
+
+class Standing:
+    """This run's standing with the current server: the registrar sets it
+    (`Registrar`), the outbox sends only while registered and says when the
+    server no longer knows us. Events on the running loop (`attach`)."""
+
+    def __init__(self, name: str):
+        self.name = name
+        self.server_up = False  # the server's presence token is there
+        self.registered = False  # the current server accepted this run
+        self._wake: asyncio.Event | None = None  # the registrar looks again
+        self.answered: asyncio.Event | None = None  # accepted or refused (wait_registered)
+
+    def attach(self) -> None:
+        self._wake = asyncio.Event()
+        self.answered = asyncio.Event()
+
+    def wake(self) -> None:
+        if self._wake is not None:
+            self._wake.set()
+
+    async def woken(self) -> None:
+        """Return once woken (and clear the wake-up)."""
+        assert self._wake is not None
+        await self._wake.wait()
+        self._wake.clear()
+
+    def unregistered(self) -> None:
+        """Not registered with the server any more: wait_registered() waits again."""
+        self.registered = False
+        if self.answered is not None:
+            self.answered.clear()
+
+    def lost(self) -> None:
+        """The server does not know us (any more): register again."""
+        if self.registered:
+            log.warning("%s: the server no longer knows this robot; registering again", self.name)
+        self.unregistered()
+        self.wake()

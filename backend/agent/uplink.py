@@ -21,10 +21,11 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Callable, Iterable
 from datetime import UTC, datetime
+from typing import Protocol
 
 from pydantic import ValidationError
 
-from backend.agent.queue import Change
+from backend.agent.queue import Effect
 from backend.agent.runtime import Runtime, log
 from backend.core.ops import Answer
 from backend.protocol.messages import (
@@ -36,9 +37,18 @@ from backend.protocol.messages import (
     first_error,
 )
 from backend.protocol.wire import parse
-from backend.transport import Refusal
+from backend.transport import ReplyError
 
-Dispatch = Callable[[object], Change]  # a command -> what the robot did
+Dispatch = Callable[[object], Effect]  # a command -> what the robot did
+
+
+class Answers(Protocol):
+    """Where answers go (the outbox, the robot's downlink): the ground
+    acknowledges what it applied of it in each Uplink."""
+
+    def add(self, message: Answer) -> None: ...
+
+    def ack(self, last_seq: int) -> None: ...
 
 
 def _now() -> datetime:
@@ -99,19 +109,16 @@ class UplinkHandler:
     def __init__(
         self,
         rt: Runtime,
+        commands: CommandLog,
         dispatch: Dispatch,
         seq: Callable[[], int],
-        deliver: Callable[[Answer], None],
-        session: Callable[[], str],
-        acked: Callable[[int], None],
+        downlink: Answers,
     ):
         self.rt = rt
-        self.log = CommandLog(rt.name)
+        self.log = commands
         self._dispatch = dispatch
         self._seq = seq
-        self._deliver = deliver
-        self._session = session
-        self._acked = acked  # the ground applied our downlink up to here
+        self._downlink = downlink  # answers go there; each Uplink acknowledges part of it
         self._inbox: list[tuple[float, list[UplinkEntry]]] = []  # (loop time due, entries)
         self._wake: asyncio.Event | None = None
         self.received: list[UplinkEntry] = []  # every entry that arrived (tests, logs)
@@ -119,8 +126,8 @@ class UplinkHandler:
     def attach(self) -> None:
         self._wake = asyncio.Event()
 
-    def _refusal(self, code: str, message: str) -> Refusal:
-        return Refusal(dumps(ErrorReply(code=code, message=message, robot=self.rt.name)))
+    def _refusal(self, code: str, message: str) -> ReplyError:
+        return ReplyError(dumps(ErrorReply(code=code, message=message, robot=self.rt.name)))
 
     async def on_uplink(self, payload: bytes) -> bytes:
         """The queryable: a receipt at once; the commands wait their link delay."""
@@ -132,14 +139,14 @@ class UplinkHandler:
             raise self._refusal(
                 "bad_message", f"{self.rt.name} cannot read the uplink: {first_error(e)}"
             ) from None
-        mine = self._session()
+        mine = self.rt.session_id
         if up.session != mine:
             raise self._refusal(
                 "wrong_session",
                 f"{self.rt.name} is session {mine}, not {up.session} (a restarted or second "
                 "process): it must register first",
             )
-        self._acked(up.downlink_ack)
+        self._downlink.ack(up.downlink_ack)
         self.received.extend(up.commands)
         if up.commands:
             assert self.rt.loop is not None and self._wake is not None
@@ -175,7 +182,7 @@ class UplinkHandler:
                 answer.outcome,
                 f": {answer.reason}" if answer.reason else "",
             )
-            self._deliver(answer)
+            self._downlink.add(answer)
 
     def forget(self) -> None:
         """Another run of this robot took over: drop what has not been processed."""

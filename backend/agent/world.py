@@ -17,7 +17,7 @@ from backend.protocol.messages import ErrorReply, WorldMessage, WorldReply, dump
 from backend.protocol.wire import parse
 
 
-class World:
+class Peers:
     """This robot's ask/tell handlers, its queries to others, and the counts."""
 
     def __init__(self, rt: Runtime):
@@ -51,7 +51,7 @@ class World:
         try:
             msg = parse(WorldMessage, payload)
         except ValidationError as exc:
-            raise transport.Refusal(
+            raise transport.ReplyError(
                 dumps(
                     ErrorReply(
                         code="bad_request",
@@ -85,12 +85,14 @@ class World:
                 msg, f"its {kind} handler raised {type(exc).__name__}: {exc}", trace=True
             ) from None
 
-    def _refusal(self, msg: WorldMessage, problem: str, trace: bool = False) -> transport.Refusal:
+    def _refusal(
+        self, msg: WorldMessage, problem: str, trace: bool = False
+    ) -> transport.ReplyError:
         """Logged here; the asker's `ask`/`tell` fails (None/False) and its log says why."""
         name = self.rt.name
         text = f"{name} cannot answer {msg.kind} {msg.topic!r} from {msg.sender}: {problem}"
         log.error("%s", text, exc_info=trace)
-        return transport.Refusal(dumps(ErrorReply(code="robot_error", message=text, robot=name)))
+        return transport.ReplyError(dumps(ErrorReply(code="robot_error", message=text, robot=name)))
 
     # ------------------------------------------------------------ asking
 

@@ -178,7 +178,11 @@ class MissionClient:
         timeout: float = DEFAULT_TIMEOUT,
         telemetry: bool = True,
         login: Login | None = None,
+        mirror: bool = True,
     ):
+        """`mirror` False: keep no copy of the mission (`mission` stays None);
+        a listener that keeps its own (a console's model) takes the snapshot's
+        mission from StateSynced and applies every BatchApplied to it."""
         self.endpoints = [connect] if isinstance(connect, str) else list(connect)
         self.client_id = client_id or f"{os.uname().nodename}-{os.getpid()}-{uuid.uuid4().hex[:6]}"
         self.login = login or Login()
@@ -188,7 +192,9 @@ class MissionClient:
         self.timeout = timeout
         self.want_telemetry = telemetry
         self.session: zenoh.Session | None = None
+        self.mirror = mirror
         self.mission: Mission | None = None
+        self._revision = -1  # the last revision taken (the mirror's, or counted without one)
         self.library: Library | None = None
         self.robots: dict[str, RobotInfo] = {}
         self.telemetry: dict[str, Telemetry] = {}
@@ -201,7 +207,7 @@ class MissionClient:
         self._pending: list[ev.EventBatch] = []  # events arriving during a resync
         self._pending_fleet: list[RobotInfo] = []  # presence changes arriving during a resync
         self._syncing = False
-        self._resync_task: asyncio.Task | None = None
+        self._resync_task: asyncio.Task[None] | None = None
         self._ids = itertools.count(1)
         self._malformed_keys: set[tuple[str, str]] = set()  # (what, key) already reported
 
@@ -283,7 +289,7 @@ class MissionClient:
     # -- state -----------------------------------------------------------------
     @property
     def revision(self) -> int:
-        return self.mission.revision if self.mission else -1
+        return self._revision
 
     async def resync(self) -> StateSnapshot:
         """Fetch the full state and apply what arrived meanwhile."""
@@ -326,21 +332,22 @@ class MissionClient:
                     f"the server speaks protocol {snap.protocol}, this client "
                     f"{PROTOCOL_VERSION}; upgrade the older side"
                 )
-            self.mission, self.library = snap.mission, snap.library
+            if self.mirror:
+                self.mission, self.library = snap.mission, snap.library
+            self._revision = snap.mission.revision
             self.robots = dict(snap.robots)
-            # a presence change that arrived while the snapshot was in flight is newer
-            for info in self._pending_fleet:
-                self.robots[info.name] = info
-            self._pending_fleet = []
             self.server_id = snap.server_id
-            pending, self._pending = self._pending, []
-            for batch in pending:
-                if batch.revision > self.mission.revision:
-                    self._apply(batch, emit=False)
         finally:
             self._syncing = False
         self.connected = True
         self._emit(StateSynced(snap))
+        # what arrived while the snapshot was in flight is newer: after it, in order
+        fleet, self._pending_fleet = self._pending_fleet, []
+        for info in fleet:
+            self._got_fleet(info)
+        pending, self._pending = self._pending, []
+        for batch in pending:
+            self._apply(batch)
         self._emit(ConnectionState("connected"))
         return snap
 
@@ -359,16 +366,16 @@ class MissionClient:
             return f"read-only: logged in as {a.role} {a.user}"
         return None
 
-    def _apply(self, batch: ev.EventBatch, *, emit: bool = True) -> None:
-        assert self.mission is not None
-        if batch.revision <= self.mission.revision:
+    def _apply(self, batch: ev.EventBatch) -> None:
+        if batch.revision <= self._revision:
             return  # already in the snapshot
-        if batch.revision != self.mission.revision + 1:
+        if batch.revision != self._revision + 1:
             self._schedule_resync()  # a gap: some events were lost
             return
-        self.mission = ev.apply_events(self.mission, batch)
-        if emit:
-            self._emit(BatchApplied(batch))
+        if self.mission is not None:
+            self.mission = ev.apply_events(self.mission, batch)
+        self._revision = batch.revision
+        self._emit(BatchApplied(batch))
 
     def _schedule_resync(self) -> None:
         if self._resync_task is None or self._resync_task.done():
@@ -401,7 +408,7 @@ class MissionClient:
 
     def _got_batches(self, batches: list[ev.EventBatch]) -> None:
         for batch in batches:
-            if self._syncing or self.mission is None:
+            if self._syncing or self._revision < 0:
                 self._pending.append(batch)
             else:
                 self._apply(batch)
@@ -415,8 +422,9 @@ class MissionClient:
         self._post(self._got_fleet, info)
 
     def _got_fleet(self, info: RobotInfo) -> None:
-        if self._syncing:
+        if self._syncing:  # newer than the snapshot in flight: told after it
             self._pending_fleet.append(info)
+            return
         self.robots[info.name] = info
         self._emit(RobotChanged(info))
 

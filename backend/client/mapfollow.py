@@ -74,7 +74,7 @@ class MapFeed:
         self.resyncs = 0
         self._loop: asyncio.AbstractEventLoop | None = None
         self._sub: Any = None
-        self._task: asyncio.Task | None = None
+        self._task: asyncio.Task[None] | None = None
         self._syncing = False
         self._pending: list[MapDelta] = []
         self._closed = False
@@ -171,7 +171,7 @@ class MapFeed:
             self._pending.append(delta)
             self._schedule_resync()
             return
-        tiles = [(t.layer, t.tx, t.ty) for t in delta.tiles]
+        tiles: list[tuple[str, int, int]] = [(t.layer, t.tx, t.ty) for t in delta.tiles]
         if tiles or delta.objects is not None:
             self._emit(MapUpdate("delta", tiles=tiles, objects=delta.objects is not None))
 

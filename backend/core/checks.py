@@ -57,6 +57,15 @@ def _skill_spec_problems(sname: str, spec: SkillSpec) -> list[Problem]:
                     f"'{d.goal_param}' is not a pose or position parameter of '{sname}'",
                 )
             )
+    if spec.talks_to is not None:
+        p = spec.params.get(spec.talks_to)
+        if p is None or p.type != "robot":
+            out.append(
+                (
+                    ("skills", sname, "talks_to"),
+                    f"'{spec.talks_to}' is not a robot parameter of '{sname}'",
+                )
+            )
     for pname in d.per_param_s:
         p = spec.params.get(pname)
         if p is None or not p.kind.numeric:

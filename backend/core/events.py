@@ -7,19 +7,25 @@ clients mirror the server through it — so the three cannot drift apart.
 
 from __future__ import annotations
 
+import copy
+from datetime import datetime
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, TypeAdapter
+from pydantic import Field, TypeAdapter, model_validator
 
 from backend.core.model import (
+    FINISHED,
     KEEP_SETTLED,
     Barrier,
     CheckId,
+    CommandState,
     Marker,
     Mission,
     Name,
+    Policies,
     SkillId,
     SkillInstance,
+    Status,
     Strict,
     UplinkCommand,
     Waiver,
@@ -46,12 +52,33 @@ class SkillMoved(Strict):
     index: int
 
 
-class SkillChanged(Strict):
-    """Changed fields of one skill (JSON values), e.g. {"status": "running"}."""
+class SkillStatusChanged(Strict):
+    """A skill's execution moved on (a robot's report or answer, a reconcile).
 
-    ev: Literal["skill_changed"] = "skill_changed"
+    `at` is when it happened: the first `running` with it sets `started_at`,
+    `success`/`failure` set `finished_at`; back to `idle` or
+    `idle_synchronized` clears `started_at` (the next run starts afresh).
+    `info` and `attempt` None leave them as they are; `status` None only in
+    journals written before this event existed (an info-only change)."""
+
+    ev: Literal["skill_status"] = "skill_status"
     id: SkillId
-    changes: dict[str, Any]
+    status: Status | None = None
+    info: str | None = None
+    attempt: int | None = Field(None, ge=1)
+    at: datetime | None = None
+
+
+class SkillEdited(Strict):
+    """An operator's (or a marker's) change to a skill's plan: each field
+    given replaces the skill's; None leaves it as it is."""
+
+    ev: Literal["skill_edited"] = "skill_edited"
+    id: SkillId
+    label: str | None = None
+    params: dict[str, Any] | None = None
+    bindings: dict[str, Name] | None = None
+    policies: Policies | None = None
 
 
 class BarrierSet(Strict):
@@ -92,11 +119,32 @@ class CommandQueued(Strict):
 
 
 class CommandChanged(Strict):
-    """Changed fields of one command (JSON values), e.g. {"state": "sent", "sent": "..."}."""
+    """A command moved on: each field given replaces the command's, None
+    leaves it as it is (no field of a command is ever cleared)."""
 
     ev: Literal["command_changed"] = "command_changed"
     id: int
-    changes: dict[str, Any]
+    state: CommandState | None = None
+    sent: datetime | None = None
+    settled: datetime | None = None
+    answered: datetime | None = None
+    cancel_requested: bool | None = None
+    reason: str | None = None
+    done: list[SkillId] | None = None
+    kept: list[SkillId] | None = None
+
+    @model_validator(mode="before")
+    @classmethod
+    def _flatten(cls, data: Any) -> Any:
+        """Journals written before the fields were typed: {"changes": {...}}."""
+        if isinstance(data, dict) and isinstance(data.get("changes"), dict):
+            rest = {k: v for k, v in data.items() if k != "changes"}
+            return {**rest, **data["changes"]}
+        return data
+
+    def changes(self) -> dict[str, Any]:
+        """The fields it sets."""
+        return self.model_dump(exclude={"ev", "id"}, exclude_none=True)
 
 
 class WaiverSet(Strict):
@@ -119,7 +167,8 @@ Event = Annotated[
     SkillAdded
     | SkillRemoved
     | SkillMoved
-    | SkillChanged
+    | SkillStatusChanged
+    | SkillEdited
     | BarrierSet
     | BarrierRemoved
     | MarkerSet
@@ -134,11 +183,50 @@ Event = Annotated[
 ]
 
 
+# what a journal written before the skill events were typed calls a skill's
+# change, field by field: which typed event (and field) each one is now
+_STATUS_FIELDS = {"status": "status", "status_info": "info", "attempt": "attempt"}
+_EDIT_FIELDS = ("label", "params", "bindings", "policies")
+
+
+def _typed_skill_change(e: dict[str, Any]) -> list[dict[str, Any]]:
+    """An old `skill_changed` event ({"id", "changes": {...}}) as the typed
+    events that make the same change (a status and/or an edit)."""
+    changes = e.get("changes")
+    if not isinstance(changes, dict):
+        return [e]  # not ours to mend: validation says what is wrong
+    out: list[dict[str, Any]] = []
+    status = {new: changes[old] for old, new in _STATUS_FIELDS.items() if old in changes}
+    stamp = changes.get("started_at") or changes.get("finished_at")
+    if status or stamp is not None:
+        out.append({"ev": "skill_status", "id": e.get("id"), **status, "at": stamp})
+    edit = {k: changes[k] for k in _EDIT_FIELDS if k in changes}
+    if edit:
+        out.append({"ev": "skill_edited", "id": e.get("id"), **edit})
+    return out
+
+
 class EventBatch(Strict):
     """What one applied operation changed; revisions are consecutive."""
 
     revision: int
     events: list[Event]
+
+    @model_validator(mode="before")
+    @classmethod
+    def _old_skill_changes(cls, data: Any) -> Any:
+        """Replay journals written before skill events were typed (`skill_changed`)."""
+        if not isinstance(data, dict) or not isinstance(data.get("events"), list):
+            return data
+        events = data["events"]
+        if not any(isinstance(e, dict) and e.get("ev") == "skill_changed" for e in events):
+            return data
+        typed: list[Any] = []
+        for e in events:
+            old = isinstance(e, dict) and e.get("ev") == "skill_changed"
+            typed.extend(_typed_skill_change(e) if old else [e])
+        return {**data, "events": typed}
+
     actor: str = Field(
         "",
         description="who: 'user@client' when the request named a user, else the client id; "
@@ -181,13 +269,12 @@ def _queue_command(m: Mission, c: UplinkCommand) -> None:
     m.uplink_seqs[c.robot] = max(m.uplink_seqs.get(c.robot, 0), c.seq)
 
 
-def _change_command(m: Mission, command_id: int, changes: dict[str, Any]) -> None:
+def _change_command(m: Mission, change: CommandChanged) -> None:
+    command_id = change.id
     for cmds in m.uplink.values():
         for i, c in enumerate(cmds):
             if c.id == command_id:
-                data = c.model_dump()
-                data.update(changes)
-                cmds[i] = UplinkCommand.model_validate(data)
+                cmds[i] = c.model_copy(update=change.changes())
                 if not cmds[i].pending:
                     _prune(cmds)
                 return
@@ -199,6 +286,31 @@ def _prune(cmds: list[UplinkCommand]) -> None:
     settled = [i for i, c in enumerate(cmds) if not c.pending]
     for i in reversed(settled[:-KEEP_SETTLED] if len(settled) > KEEP_SETTLED else []):
         del cmds[i]
+
+
+def _changed_skill(
+    s: SkillInstance, e: SkillStatusChanged | SkillEdited, revision: int
+) -> SkillInstance:
+    """Skill `s` after event `e`."""
+    if isinstance(e, SkillEdited):
+        edit = {k: getattr(e, k) for k in _EDIT_FIELDS if getattr(e, k) is not None}
+        # the mission's own copies: an event may be kept (journal, history)
+        return s.model_copy(update={**copy.deepcopy(edit), "rev": revision})
+    # a status: the stamps follow it
+    update: dict[str, Any] = {"rev": revision}
+    status = e.status if e.status is not None else s.status
+    update["status"] = status
+    if e.info is not None:
+        update["status_info"] = e.info
+    if e.attempt is not None:
+        update["attempt"] = e.attempt
+    if status == Status.RUNNING and s.started_at is None and e.at is not None:
+        update["started_at"] = e.at
+    if status in FINISHED and e.at is not None:
+        update["finished_at"] = e.at
+    if status in (Status.IDLE, Status.IDLE_SYNCHRONIZED) and e.status is not None:
+        update["started_at"] = None
+    return s.model_copy(update=update)
 
 
 def apply_event(m: Mission, ev: Any, revision: int) -> Mission:
@@ -218,12 +330,9 @@ def apply_event(m: Mission, ev: Any, revision: int) -> Mission:
             task, i = _task_of(m, sid)
             task.insert(index, task.pop(i))
             m.task_revs[robot] = revision
-        case SkillChanged(id=sid, changes=changes):
-            task, i = _task_of(m, sid)
-            data = task[i].model_dump()
-            data.update(changes)
-            data["rev"] = revision
-            task[i] = SkillInstance.model_validate(data)
+        case SkillStatusChanged() | SkillEdited():
+            task, i = _task_of(m, ev.id)
+            task[i] = _changed_skill(task[i], ev, revision)
         case BarrierSet(id=bid, barrier=b):
             m.barriers[bid] = b.model_copy(deep=True)
             _bump_counters(m, barrier_id=bid)
@@ -239,8 +348,8 @@ def apply_event(m: Mission, ev: Any, revision: int) -> Mission:
             m.report_seqs[robot] = seq
         case CommandQueued(command=c):
             _queue_command(m, c)
-        case CommandChanged(id=cid, changes=changes):
-            _change_command(m, cid, changes)
+        case CommandChanged():
+            _change_command(m, ev)
         case WaiverSet(check=check, waiver=w):
             m.waivers[check] = w.model_copy(update={"revision": revision})
         case WaiverRemoved(check=check):

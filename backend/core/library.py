@@ -13,10 +13,11 @@ from typing import Any, Final, Literal
 
 from pydantic import Field
 
-from backend.core.model import Name, Strict
+from backend.core.model import Name, ParamType, Strict
 from backend.core.params import ParamSpec, check_value, marker_value, normalize_value
 
 LIBRARY_FORMAT: Final = "missionctl/library@1"
+PropertyValue = str | int | float | bool
 VERSION_PATTERN = r"^\d+\.\d+\.\d+$"
 
 
@@ -101,6 +102,23 @@ class BatteryModel(Strict):
     charge_per_s: float = Field(0.0, ge=0, le=1, description="charging rate at home, per second")
 
 
+class SkillSignature(Strict):
+    """A skill as a robot needs to know it to check its handler (sent in each
+    accepted registration): each parameter's kind, the required ones, and
+    the value the server gives one left out (the library's default)."""
+
+    params: dict[Name, ParamType] = Field(default_factory=dict, description="parameter -> its kind")
+    required: list[Name] = Field(
+        default_factory=list, description="parameters that always have a value"
+    )
+    defaults: dict[Name, Any] = Field(
+        default_factory=dict,
+        description="parameter -> the value the server fills in when it is left out (the "
+        "library's default, normalized); a robot running the skill on its own (a recharge "
+        "before a skill) calls it with these",
+    )
+
+
 class SkillSpec(Strict):
     description: str = ""
     version: str = Field("1.0.0", pattern=VERSION_PATTERN)
@@ -112,6 +130,25 @@ class SkillSpec(Strict):
         description="the skill needs the operator's link while it runs (plan checks flag it "
         "when it is planned out of comms coverage)",
     )
+    talks_to: Name | None = Field(
+        None,
+        description="robot parameter naming a robot the skill talks to while it runs (e.g. a "
+        "partner it works with): both must be able to talk, through comms coverage or within "
+        "their radio range (plan checks flag it when it is planned out of coverage)",
+    )
+
+    def kinds(self) -> dict[str, ParamType]:
+        """Parameter -> its kind: what travels with the values to the robot."""
+        return {name: p.type for name, p in self.params.items()}
+
+    def signature(self) -> SkillSignature:
+        return SkillSignature(
+            params=self.kinds(),
+            required=[name for name, p in self.params.items() if p.is_required],
+            defaults={
+                name: default_value(p) for name, p in self.params.items() if p.default is not None
+            },
+        )
 
 
 class RobotType(Strict):
@@ -133,6 +170,19 @@ class RobotType(Strict):
     )
     battery: BatteryModel | None = Field(
         None, description="battery model for predictions and plan checks; none: no battery"
+    )
+    radio_range_m: float = Field(
+        0.0,
+        ge=0,
+        le=1e6,
+        description="robots this close talk to each other without comms coverage (a direct "
+        "radio); 0: only through the comms network, so partners at a barrier meet only where "
+        "both are covered",
+    )
+    properties: dict[Name, PropertyValue] = Field(
+        default_factory=dict,
+        description="the figures an operator plans with (ranges, capacities; units in the "
+        "names: _m, _s, _mps), as the manifests of robots of this type declare them",
     )
 
 
@@ -238,11 +288,16 @@ def _take_bound(
     return []
 
 
+def default_value(pspec: ParamSpec) -> Any:
+    """The value a parameter left out gets (the one fill-in of defaults)."""
+    return normalize_value(pspec, pspec.default) if pspec.default is not None else None
+
+
 def _take_default(
     out: dict[str, Any], name: str, pspec: ParamSpec, fill_defaults: bool
 ) -> list[ParamProblem]:
     if pspec.default is not None and fill_defaults:
-        out[name] = normalize_value(pspec, pspec.default)
+        out[name] = default_value(pspec)
     elif pspec.is_required:
         unit = f" in {pspec.unit}" if pspec.unit else ""
         return [ParamProblem((name,), f"missing required {pspec.type} parameter '{name}'{unit}")]

@@ -91,6 +91,23 @@ TRANSITIONS: dict[Status, frozenset[Status]] = {
 }
 
 
+# the kinds of skill parameter (what each accepts and does: backend.core.params.KINDS)
+ParamType = Literal[
+    "bool",
+    "int",
+    "float",
+    "str",
+    "list",
+    "dict",
+    "pose",
+    "position",
+    "area",
+    "enum",
+    "marker",
+    "robot",
+]
+
+
 class Pose(Strict):
     """Euler 6D pose in the site frame (metres, radians)."""
 
@@ -231,6 +248,13 @@ class Enqueue(Strict):
         default_factory=dict, description="skill id -> its barrier and the partners to wait for"
     )
     front: bool = Field(False, description="put before the rest of the queue (retries)")
+    kinds: dict[Name, dict[Name, ParamType]] = Field(
+        default_factory=dict,
+        description="skill name -> the kind of each of its parameters (the library's), for "
+        "every skill sent: a robot types each value by its kind (a `pose` is a Pose, an "
+        "`area` a list of positions...), never by its shape, and gives a handler every "
+        "parameter (one left unset has no value in `params`: null)",
+    )
 
 
 class Dequeue(Strict):

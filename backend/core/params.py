@@ -1,6 +1,7 @@
 """The one registry of parameter kinds: what each kind of skill parameter accepts,
 its canonical form, what a marker gives it, a starting value for a new skill,
-and the typed value a skill handler receives.
+and the typed value a skill handler receives (by the kind sent with the
+value, `typed_params`).
 
 Libraries, mission files, the rules, `ctl`, the robot agent and the console all
 ask this table (`KINDS[spec.type]`) instead of switching on the kind each on
@@ -24,29 +25,21 @@ from typing import Any, ClassVar, Literal
 from pydantic import Field, model_validator
 
 from backend.core.limits import echo, value_problem
-from backend.core.model import AreaMarker, Pose, PoseMarker, Position, PositionMarker, Strict
+from backend.core.model import (
+    AreaMarker,
+    ParamType,
+    Pose,
+    PoseMarker,
+    Position,
+    PositionMarker,
+    Strict,
+)
 
 POSE_FIELDS = ("x", "y", "z", "roll", "pitch", "yaw")
 POSITION_FIELDS = ("x", "y", "z")
 
 Problem = tuple[tuple[str | int, ...], str]  # (path relative to the value, sentence)
 Markers = Mapping[str, Any]  # marker name -> PoseMarker | PositionMarker | AreaMarker
-
-
-ParamType = Literal[
-    "bool",
-    "int",
-    "float",
-    "str",
-    "list",
-    "dict",
-    "pose",
-    "position",
-    "area",
-    "enum",
-    "marker",
-    "robot",
-]
 
 
 class ParamSpec(Strict):
@@ -601,25 +594,15 @@ def starting_values(
     return params, bindings
 
 
-_POSE_KEYS = frozenset(POSE_FIELDS)
-_POSITION_KEYS = frozenset(POSITION_FIELDS)
-
-
-def typed_by_shape(value: Any) -> Any:
-    """The typed value a handler receives, told by the value's shape (a robot
-    need not hold the library): a full pose mapping is a `Pose`, a full
-    position a `Position`, a list of 3+ positions an area; anything else as is."""
-    if isinstance(value, dict):
-        keys = set(value)
-        if keys == _POSE_KEYS:
-            return KINDS["pose"].typed(value)
-        if keys == _POSITION_KEYS:
-            return KINDS["position"].typed(value)
-        return value
-    if (
-        isinstance(value, list)
-        and len(value) >= 3
-        and all(isinstance(p, dict) and set(p) == _POSITION_KEYS for p in value)
-    ):
-        return KINDS["area"].typed(value)
-    return value
+def typed_params(values: Mapping[str, Any], kinds: Mapping[str, str]) -> dict[str, Any]:
+    """A skill's parameters as its handler receives them: every parameter of
+    `kinds` (its kind from the library, sent with the values), each value
+    typed by its kind (`Kind.typed`: a pose a `Pose`, an area a list of
+    `Position`); one left unset is None. Values without a kind (a server
+    that sends none) are passed as they came: nothing is guessed."""
+    out = dict(values)
+    for name, kind in kinds.items():
+        value = values.get(name)
+        known = KINDS.get(kind)
+        out[name] = known.typed(value) if known is not None and value is not None else value
+    return out

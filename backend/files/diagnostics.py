@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from pydantic import ValidationError
+from pydantic_core import ErrorDetails
 
 from backend.core.library import VERSION_PATTERN
 from backend.core.limits import LIMITS, echo, show_path
@@ -44,7 +45,7 @@ class FileProblems(Exception):
 # -- pydantic errors as sentences -------------------------------------------
 
 
-def _clean_loc(data: Any, loc: tuple) -> Path:
+def _clean_loc(data: Any, loc: tuple[str | int, ...]) -> Path:
     """Map a pydantic error location onto the data: drop the segments pydantic
     adds for tagged unions (the marker kind) and validators."""
     out: list[str | int] = []
@@ -106,7 +107,7 @@ def _shown(value: Any) -> str:
     return text[: LIMITS.echo] + "…"
 
 
-def _sentence(err: dict) -> str:
+def _sentence(err: ErrorDetails) -> str:
     t = err["type"]
     loc = err["loc"]
     last = loc[-1] if loc else ""
@@ -142,7 +143,7 @@ def _sentence(err: dict) -> str:
         return f"needs at least {ctx.get('min_length')} items, has {ctx.get('actual_length')}"
     if t == "too_long":
         return f"has more than {ctx.get('max_length')} items or characters"
-    msg = err["msg"]
+    msg: str = err["msg"]
     if msg.startswith("Value error, "):
         msg = msg[len("Value error, ") :]
     return msg

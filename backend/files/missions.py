@@ -10,9 +10,9 @@ from __future__ import annotations
 import copy
 import os
 from pathlib import Path as FsPath
-from typing import Any
+from typing import Any, TypeVar
 
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
 from backend.core.bulk import gc_paused
 from backend.core.checks import check_library, check_mission, resolve_shorthands
@@ -31,6 +31,8 @@ from backend.files.diagnostics import (
     located,
     pydantic_issues,
 )
+
+M = TypeVar("M", bound=BaseModel)  # a file format's model
 
 
 def _read(path: FsPath) -> tuple[str, yamlio.YamlDoc]:
@@ -64,7 +66,7 @@ def _read(path: FsPath) -> tuple[str, yamlio.YamlDoc]:
     return file, doc
 
 
-def file_kind(data: dict) -> str | None:
+def file_kind(data: dict[str, Any]) -> str | None:
     fmt = data.get("format")
     if isinstance(fmt, str):
         if fmt.startswith("missionctl/mission"):
@@ -117,8 +119,8 @@ def load_library(path: str | FsPath) -> Library:
 
 
 def _validated(
-    model: type, file: str, doc: yamlio.YamlDoc, salvage: _Salvage
-) -> tuple[Any, list[Issue]]:
+    model: type[M], file: str, doc: yamlio.YamlDoc, salvage: _Salvage
+) -> tuple[M, list[Issue]]:
     """Validate the structure; on errors, validate what is left without the
     broken entries so one run reports every problem of the file."""
     issues = duplicate_issues(file, doc)
@@ -203,15 +205,17 @@ class _Salvage:
     """A copy of a file's data without its broken entries, remembering what was
     dropped (to not report it twice) and where the kept task items were."""
 
-    def __init__(self, data: Any, *, entries: tuple[str, ...], required: tuple[str, ...]):
+    def __init__(
+        self, data: Any, *, entries: tuple[tuple[str, ...], ...], required: tuple[str, ...]
+    ):
         self.data = data
         self.entries = entries  # mappings whose broken entries can be dropped
         self.required = required  # top-level fields that cannot be left out
         self.dropped: set[str] = set()
         self.kept: dict[str, list[int]] = {}
 
-    def without(self, paths: list[Path]) -> dict:
-        data = copy.deepcopy(self.data)
+    def without(self, paths: list[Path]) -> dict[Any, Any]:
+        data: dict[Any, Any] = copy.deepcopy(self.data)
         drop_items: dict[str, set[int]] = {}
         for p in paths:
             if not p or (len(p) == 1 and p[0] in self.required):
@@ -223,7 +227,7 @@ class _Salvage:
                 container.pop(name, None)
                 self.dropped.add(str(name))
             elif p[0] == "tasks" and len(p) >= 3 and isinstance(p[2], int):
-                drop_items.setdefault(p[1], set()).add(p[2])
+                drop_items.setdefault(str(p[1]), set()).add(p[2])
             elif p[0] == "tasks" and isinstance(data.get("tasks"), dict):
                 data["tasks"].pop(p[1], None)
                 self.dropped.add(str(p[1]))
@@ -238,7 +242,7 @@ class _Salvage:
             data["tasks"][robot] = [items[i] for i in self.kept[robot]]
         return data
 
-    def _entry(self, data: Any, p: Path) -> tuple[dict, Any] | None:
+    def _entry(self, data: Any, p: Path) -> tuple[dict[Any, Any], Any] | None:
         """The mapping holding the deepest droppable entry on path `p`."""
         for pattern in sorted(self.entries, key=len, reverse=True):
             if len(p) > len(pattern) and all(

@@ -4,13 +4,15 @@ from __future__ import annotations
 
 from typing import Any
 
+from pydantic import BaseModel
+
 from backend.core.library import Library
 from backend.core.model import Mission
 
 SCHEMA_DIALECT = "https://json-schema.org/draft/2020-12/schema"
 
 
-def _schema(model: type, title: str, internal: set[str]) -> dict[str, Any]:
+def _schema(model: type[BaseModel], title: str, internal: set[str]) -> dict[str, Any]:
     s = model.model_json_schema(mode="validation")
     _close_pattern_keys(s)
     s["$schema"] = SCHEMA_DIALECT

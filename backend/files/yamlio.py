@@ -37,7 +37,7 @@ class YamlDoc:
 
 # libyaml's parser is ~4x faster; positions are the same
 _Loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
-_BaseDumper = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+_BaseDumper: type[yaml.SafeDumper] = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 
 
 class YamlSyntaxError(Exception):
@@ -285,11 +285,11 @@ class _Scan:
             raise YamlSyntaxError(first[0], first[1], first[2], first[3], tuple(more))
 
 
-class _Dumper(_BaseDumper):
+class _Dumper(_BaseDumper):  # type: ignore[valid-type,misc]  # chosen at import: libyaml's if any
     pass
 
 
-def _repr_dict(dumper: Any, data: dict) -> yaml.Node:
+def _repr_dict(dumper: yaml.SafeDumper, data: dict[Any, Any]) -> yaml.Node:
     # small mappings of scalars (poses, positions) read best on one line
     flow = (
         0 < len(data) <= 6
@@ -302,7 +302,7 @@ def _repr_dict(dumper: Any, data: dict) -> yaml.Node:
 _FLOW_KEYS = {"x", "y", "z", "roll", "pitch", "yaw"}
 
 
-def _repr_str(dumper: Any, data: str) -> yaml.Node:
+def _repr_str(dumper: yaml.SafeDumper, data: str) -> yaml.Node:
     style = "|" if "\n" in data else None
     return dumper.represent_scalar("tag:yaml.org,2002:str", data, style=style)
 

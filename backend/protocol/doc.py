@@ -14,19 +14,27 @@ import sys
 from collections.abc import Sequence
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
-from typing import Any
+from typing import Any, get_args
 
 from pydantic import TypeAdapter
 
-from backend.core.events import CommandChanged, CommandQueued, EventBatch, SkillAdded, SkillChanged
+from backend.core.alerts import LOW_BATTERY, MEANING, AlertKind
+from backend.core.events import (
+    CommandChanged,
+    CommandQueued,
+    EventBatch,
+    SkillAdded,
+    SkillStatusChanged,
+)
 from backend.core.events import ReportSeq as ReportSeqEvent
 from backend.core.limits import LIMITS, MiB
-from backend.core.model import Enqueue, Run, SkillInstance, Status, UplinkCommand
+from backend.core.model import Enqueue, ParamType, Run, SkillInstance, Status, UplinkCommand
 from backend.core.ops import AddSkill, Answer, Control, OperatorOp, Report, Sync
 from backend.protocol import mapfeed as mf
 from backend.protocol import messages as p
 from backend.protocol import values as v
 from backend.protocol.keys import PROTOCOL_VERSION, Keys
+from backend.protocol.messages import ALERTS_KEPT
 
 ROOT = Path(__file__).resolve().parents[2]
 SCHEMA_DIR = "protocol"  # beside protocol.md
@@ -332,7 +340,7 @@ def _trace() -> list[tuple[float, str, str, Any]]:
         )
 
     def changed(cid: int, **changes: Any) -> CommandChanged:
-        return CommandChanged(id=cid, changes=changes)
+        return CommandChanged.model_validate({"id": cid, **changes})
 
     answer1 = Answer(robot="lru1", seq=1, command=1, outcome="applied", queued=["lru1-3"], at=_t(3))
     answer2 = Answer(robot="lru1", seq=2, command=2, outcome="applied", at=_t(10))
@@ -416,7 +424,7 @@ def _trace() -> list[tuple[float, str, str, Any]]:
                 op="answer",
                 events=[
                     ReportSeqEvent(robot="lru1", seq=1),
-                    SkillChanged(id="lru1-3", changes={"status": "idle_synchronized"}),
+                    SkillStatusChanged(id="lru1-3", status=Status.IDLE_SYNCHRONIZED),
                     changed(
                         1,
                         state="acked",
@@ -637,6 +645,17 @@ dump (except `mission_replaced` when a whole mission is loaded). The batches
 of operations the server handled in a row share one message: a JSON array of
 `EventBatch`, in revision order; a lone operation's batch is a plain object.
 
+Each event is typed by its `ev`: a skill's execution moving on is
+`skill_status` (`status`, `info`, `attempt`, and `at`, when it happened: the
+first `running` sets the skill's `started_at`, `success`/`failure` its
+`finished_at`, back to `idle`/`idle_synchronized` clears `started_at`); a
+change to its plan is `skill_edited` (`label`, `params`, `bindings`,
+`policies`); a command moving on is `command_changed` (`state`, `sent`,
+`settled`, `answered`, `cancel_requested`, `reason`, `done`, `kept`). In all
+three a field left out (or `null`) is unchanged. Servers before these were
+typed published `skill_changed` and `command_changed` with a `changes`
+object; their journals still replay (read as the typed events).
+
 ## Statuses
 
 `idle` (unsynchronized, editable), `idle_synchronized` (queued on the robot),
@@ -800,6 +819,31 @@ server from inside a query callback.
 
 """
 
+KINDS_TEXT = ", ".join(f"`{k}`" for k in get_args(ParamType))
+
+PROSE_PARAMS = f"""
+### Parameters, typed
+A skill's parameters travel as JSON values (`SkillInstance.params`) with
+their kinds: `Enqueue.kinds[SKILL][PARAMETER]` is the kind the library gives
+each parameter of every skill the command carries ({KINDS_TEXT}).
+Read each value by its kind, never by its shape (a `dict` parameter may look
+like a position): a `pose` is `{{x, y, z, roll, pitch, yaw}}` (metres,
+radians), a `position` `{{x, y, z}}`, an `area` a list of at least 3
+positions; `enum`, `marker` and `robot` values are names; the others are
+the JSON values themselves. A parameter bound to a marker arrives as the
+marker's value in its parameter's kind. The server has checked every value
+and filled in every default of the library before the command leaves: a
+parameter listed in `kinds` but missing from `params` is an optional one
+left unset (null to a handler).
+
+Each accepted registration gives the robot the library's signature of each
+skill its manifest offers (`RegisterReply.skills[SKILL]`: each parameter's
+kind, the required ones, and the `defaults` the server fills in for one
+left out): compare the handlers with it once, and call a skill the robot
+runs on its own (a recharge before a skill, `policies.recharge_below`) with
+its `defaults`.
+"""
+
 PROSE_4 = """
 ### Run, pause, stop, reset, and the robot's mode
 The robot starts halted. `run` enters run mode: it executes its queue head to
@@ -935,6 +979,21 @@ JSON Schema (generated from the models) of every message and every
 """
 
 
+PROSE_ALERTS = f"""
+## Alerts
+
+The server alone raises alerts about robots and the mission (an `Alert` on
+`{Keys.ALERTS}`); `robot`, `skill` and `command` say whom it is about,
+`message` is a sentence, `kind` what happened (the table below). Alerts are
+numbered (`id`) per server run; the last {ALERTS_KEPT} are in every
+`StateSnapshot.alerts`, so a console that was away takes what it missed,
+each once (by `server_id` and `id`). A robot's battery falling below
+{LOW_BATTERY:.0%} (`low_battery`) and its telemetry saying it left
+communication range (`out_of_range`) are alerted once per crossing.
+
+"""
+
+
 def render() -> str:
     return "".join(
         [
@@ -944,8 +1003,11 @@ def render() -> str:
             _table(("key", "kind", "who declares", "payload"), KEY_SPACE),
             PROSE_2,
             _table(("from", "to"), REPORTED_TRANSITIONS),
+            PROSE_ALERTS,
+            _table(("kind", "meaning"), [(f"`{k}`", MEANING[k]) for k in AlertKind]),
             PROSE_3,
             _table(("field", "rule"), FIELD_RULES),
+            PROSE_PARAMS,
             PROSE_4,
             _table(("mode", "meaning", "next"), MODES),
             PROSE_5,

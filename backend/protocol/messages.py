@@ -11,8 +11,9 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, ValidationError
 
+from backend.core.alerts import AlertKind, RaisedAlert
 from backend.core.events import EventBatch
-from backend.core.library import Library
+from backend.core.library import Library, SkillSignature
 from backend.core.model import (
     BarrierInfo,
     Dequeue,
@@ -34,6 +35,7 @@ from backend.protocol.keys import PROTOCOL_VERSION
 # the robot-facing models live in core (the uplink is part of the mission);
 # they are protocol messages too
 __all__ = [
+    "AlertKind",
     "Answer",
     "BarrierInfo",
     "Dequeue",
@@ -51,6 +53,8 @@ __all__ = [
 # a robot agent's run: letters, digits, '_' and '-'
 Session = Annotated[str, Field(pattern=r"^[A-Za-z0-9_\-]+$", min_length=1, max_length=64)]
 MAX_BATCH = 1000  # messages or commands in one Uplink, Downlink or Register
+
+ALERTS_KEPT = 100  # the server's latest alerts in a state snapshot
 
 # -- consoles and ctl -> server -------------------------------------------------
 
@@ -144,6 +148,15 @@ class RobotInfo(Strict):
     )
 
 
+class Alert(RaisedAlert):
+    """An alert the server raised: published on the alerts key, and the last
+    `ALERTS_KEPT` of them are in every `StateSnapshot` (a console that was away
+    sees what it missed)."""
+
+    id: int = Field(ge=1, description="numbered from 1 per server run (`StateSnapshot.server_id`)")
+    at: datetime
+
+
 class StateSnapshot(Strict):
     protocol: int = PROTOCOL_VERSION
     server_id: str = Field(description="changes when the server restarts")
@@ -151,25 +164,15 @@ class StateSnapshot(Strict):
     mission: Mission
     library: Library
     robots: dict[Name, RobotInfo] = Field(default_factory=dict)
+    alerts: list[Alert] = Field(
+        default_factory=list,
+        max_length=ALERTS_KEPT,
+        description=f"the server's last {ALERTS_KEPT} alerts of this run, oldest first",
+    )
 
 
 class FleetEvent(Strict):
     robot: RobotInfo
-
-
-class Alert(Strict):
-    level: Literal["info", "warning", "error"] = "warning"
-    kind: str = Field(
-        "",
-        description="what happened: failure | offline | reconcile | report_refused | command "
-        "(a robot refused a command, it expired, or was applied after the ground gave up on it) "
-        "| robot_error (a robot sent something wrong) | journal (the server cannot write its "
-        "journal); consoles merge their own alerts of the same kind",
-    )
-    robot: str | None = None
-    skill: str | None = None
-    message: str
-    at: datetime
 
 
 # -- robots -> server -------------------------------------------------------------
@@ -196,11 +199,13 @@ class Register(Strict):
     sent: datetime | None = Field(None, description="when it left the robot (robot's clock)")
 
 
+# why a registration was not accepted (stable)
+RegisterCode = Literal["", "protocol", "unknown_robot", "wrong_type", "taken"]
+
+
 class RegisterReply(Strict):
     accepted: bool = True
-    code: Literal["", "protocol", "unknown_robot", "wrong_type", "taken"] = Field(
-        "", description="why it was not accepted (stable)"
-    )
+    code: RegisterCode = Field("", description="why it was not accepted (stable)")
     reason: str = ""
     last_seq: int = Field(0, description="the ground applied its downlink up to here")
     missing: list[SkillId] = Field(
@@ -218,6 +223,12 @@ class RegisterReply(Strict):
         "drop them",
     )
     heartbeat_s: float = Field(5.0, description="send a Downlink at least this often")
+    skills: dict[Name, SkillSignature] = Field(
+        default_factory=dict,
+        description="the library's signature of each skill the manifest offers that the robot's "
+        "type has: check the handlers against it; a skill the robot runs on its own (a "
+        "recharge before a skill) is called with its `defaults`",
+    )
 
 
 class Downlink(Strict):

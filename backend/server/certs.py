@@ -17,13 +17,19 @@ import ipaddress
 import os
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
+
+if TYPE_CHECKING:  # imported when the command runs (see above)
+    from cryptography import x509
+    from cryptography.hazmat.primitives.asymmetric.ec import EllipticCurvePrivateKey
+    from cryptography.x509 import GeneralName
 
 
 def make_certs(
     directory: Path,
     *,
     server_names: list[str] | None = None,
-    clients: list[str] = (),
+    clients: list[str] | tuple[str, ...] = (),
     days: int = 365,
 ) -> list[Path]:
     """Create what is missing (or asked for) in `directory`; return the files written."""
@@ -51,13 +57,13 @@ def make_certs(
 # ---------------------------------------------------------------- internals
 
 
-def _new_key():
+def _new_key() -> EllipticCurvePrivateKey:
     from cryptography.hazmat.primitives.asymmetric import ec
 
     return ec.generate_private_key(ec.SECP256R1())
 
 
-def _name(common_name: str):
+def _name(common_name: str) -> x509.Name:
     from cryptography import x509
     from cryptography.x509.oid import NameOID
 
@@ -69,7 +75,9 @@ def _name(common_name: str):
     )
 
 
-def _builder(subject, issuer, public_key, days: int):
+def _builder(
+    subject: x509.Name, issuer: x509.Name, public_key: object, days: int
+) -> x509.CertificateBuilder:
     from cryptography import x509
 
     now = dt.datetime.now(dt.UTC)
@@ -77,14 +85,14 @@ def _builder(subject, issuer, public_key, days: int):
         x509.CertificateBuilder()
         .subject_name(subject)
         .issuer_name(issuer)
-        .public_key(public_key)
+        .public_key(public_key)  # type: ignore[arg-type]  # one of the key types it takes
         .serial_number(x509.random_serial_number())
         .not_valid_before(now - dt.timedelta(minutes=5))  # tolerate small clock skew
         .not_valid_after(now + dt.timedelta(days=days))
     )
 
 
-def _make_ca(days: int):
+def _make_ca(days: int) -> tuple[x509.Certificate, EllipticCurvePrivateKey]:
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes
 
@@ -113,7 +121,15 @@ def _make_ca(days: int):
     return cert, key
 
 
-def _make_leaf(common_name: str, names: list[str], ca_cert, ca_key, days: int, *, server: bool):
+def _make_leaf(
+    common_name: str,
+    names: list[str],
+    ca_cert: x509.Certificate,
+    ca_key: EllipticCurvePrivateKey,
+    days: int,
+    *,
+    server: bool,
+) -> tuple[x509.Certificate, EllipticCurvePrivateKey]:
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes
     from cryptography.x509.oid import ExtendedKeyUsageOID
@@ -139,7 +155,7 @@ def _make_leaf(common_name: str, names: list[str], ca_cert, ca_key, days: int, *
     return builder.sign(ca_key, hashes.SHA256()), key
 
 
-def _san(name: str):
+def _san(name: str) -> GeneralName:
     from cryptography import x509
 
     try:
@@ -152,7 +168,9 @@ def _san(name: str):
         return x509.DNSName(name)
 
 
-def _write(cert, key, cert_path: Path, key_path: Path) -> list[Path]:
+def _write(
+    cert: x509.Certificate, key: EllipticCurvePrivateKey, cert_path: Path, key_path: Path
+) -> list[Path]:
     from cryptography.hazmat.primitives import serialization
 
     key_bytes = key.private_bytes(
@@ -167,7 +185,7 @@ def _write(cert, key, cert_path: Path, key_path: Path) -> list[Path]:
     return [cert_path, key_path]
 
 
-def _load(cert_path: Path, key_path: Path):
+def _load(cert_path: Path, key_path: Path) -> tuple[x509.Certificate, EllipticCurvePrivateKey]:
     from cryptography import x509
     from cryptography.hazmat.primitives import serialization
 
@@ -176,4 +194,4 @@ def _load(cert_path: Path, key_path: Path):
         key = serialization.load_pem_private_key(key_path.read_bytes(), password=None)
     except ValueError as e:
         raise ValueError(f"{cert_path} / {key_path}: not a PEM certificate and key ({e})") from None
-    return cert, key
+    return cert, cast("EllipticCurvePrivateKey", key)  # ours: written by _write

@@ -15,14 +15,16 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any, NamedTuple, Protocol
 
+from backend.core.alerts import AlertKind, Raises
 from backend.core.ops import Answer, DownlinkRefused, Report
 from backend.core.rules.engine import Applied, Engine, Refusal
 from backend.protocol.messages import ErrorReply
 from backend.server.refusals import JournalFailed
 
 
-class Host(Protocol):
-    """What the downlink needs from the server."""
+class Submitter(Raises, Protocol):
+    """What the downlink needs from the server: the engine, journaled
+    submission and alerts."""
 
     engine: Engine | None
 
@@ -33,16 +35,6 @@ class Host(Protocol):
         the journal cannot take it)."""
         ...
 
-    def alert(
-        self,
-        message: str,
-        *,
-        level: str = "warning",
-        robot: str | None = None,
-        skill: str | None = None,
-        kind: str = "",
-    ) -> None: ...
-
 
 class Progress(NamedTuple):
     """What one pass over a robot's messages did."""
@@ -52,20 +44,16 @@ class Progress(NamedTuple):
     refused: list[ErrorReply]
 
 
-def raise_alerts(host: Host, applied: Applied) -> None:
-    """The sentences a rule asked the operator to see (value "alerts")."""
-    for a in applied.value.pop("alerts", []) or []:
+def raise_alerts(host: Submitter, applied: Applied) -> None:
+    """The alerts a rule raised (`Applied.alerts`)."""
+    for a in applied.alerts:
         host.alert(
-            a["message"],
-            level=a.get("level", "warning"),
-            robot=a.get("robot"),
-            skill=a.get("skill"),
-            kind=a.get("kind", ""),
+            a.message, level=a.level, robot=a.robot, skill=a.skill, kind=a.kind, command=a.command
         )
 
 
 class DownlinkApplier:
-    def __init__(self, host: Host):
+    def __init__(self, host: Submitter):
         self._host = host
         self._gaps: dict[str, int] = {}  # robot -> first missing seq already alerted
 
@@ -102,7 +90,7 @@ class DownlinkApplier:
             f"{robot} sent its downlink message {upto + 1} but not {span}: later messages "
             "wait until it sends the missing ones (nothing is skipped)",
             robot=robot,
-            kind="robot_error",
+            kind=AlertKind.ROBOT_ERROR,
         )
 
     def _apply_one(self, robot: str, msg: Report | Answer) -> ErrorReply | None:
@@ -122,7 +110,7 @@ class DownlinkApplier:
                 level="error",
                 robot=robot,
                 skill=msg.id if isinstance(msg, Report) else None,
-                kind="report_refused",
+                kind=AlertKind.REPORT_REFUSED,
             )
             return ErrorReply(**r.to_dict())
         raise_alerts(host, applied)
@@ -132,6 +120,6 @@ class DownlinkApplier:
                 level="error",
                 robot=robot,
                 skill=msg.id,
-                kind="failure",
+                kind=AlertKind.FAILURE,
             )
         return None

@@ -286,10 +286,11 @@ class Journal:
 
     @staticmethod
     def _since(conn: sqlite3.Connection, revision: int) -> int:
-        return conn.execute(
+        size: int = conn.execute(
             "SELECT coalesce(sum(length(op) + length(events)), 0) FROM batches WHERE revision > ?",
             (revision,),
         ).fetchone()[0]
+        return size
 
     @classmethod
     def open(
@@ -373,8 +374,8 @@ class Journal:
 
     @staticmethod
     def _last(conn: sqlite3.Connection) -> int | None:
-        b = conn.execute("SELECT max(revision) FROM batches").fetchone()[0]
-        s = conn.execute("SELECT max(revision) FROM snapshots").fetchone()[0]
+        b: int | None = conn.execute("SELECT max(revision) FROM batches").fetchone()[0]
+        s: int | None = conn.execute("SELECT max(revision) FROM snapshots").fetchone()[0]
         if b is None:
             return s
         return b if s is None else max(b, s)

@@ -15,7 +15,7 @@ from backend.core.rules.engine import Refusal
 from backend.protocol.messages import ErrorReply, dumps, first_error
 from backend.protocol.wire import LIMIT_EXCEEDED, is_limit
 from backend.server.journal import JournalError
-from backend.transport import Refusal as ReplyErr
+from backend.transport import ReplyError
 
 Handler = Callable[..., bytes | Awaitable[bytes]]
 
@@ -41,12 +41,12 @@ async def _guarded(pending: Awaitable[bytes]) -> bytes:
         raise _error(e) from None
 
 
-def _error(e: Refusal | ValidationError) -> ReplyErr:
+def _error(e: Refusal | ValidationError) -> ReplyError:
     if isinstance(e, Refusal):
-        return ReplyErr(dumps(ErrorReply(**e.to_dict())))
+        return ReplyError(dumps(ErrorReply(**e.to_dict())))
     if is_limit(e):
-        return ReplyErr(dumps(ErrorReply(code=LIMIT_EXCEEDED, message=first_error(e))))
-    return ReplyErr(
+        return ReplyError(dumps(ErrorReply(code=LIMIT_EXCEEDED, message=first_error(e))))
+    return ReplyError(
         dumps(ErrorReply(code="bad_request", message=f"malformed request: {first_error(e)}"))
     )
 

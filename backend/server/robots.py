@@ -9,10 +9,10 @@ robot is applied like any other (it queues a command in the mission, see
 can hear it, and applies the robot's answer when it comes, minutes later
 if need be.
 
-The server gives the link a host (`LinkHost`: the engine, journaled
+The server gives the link a host (`LinkServer`: the engine, journaled
 submission, alerts, fleet publication) and asks it to declare its
-queryables, to check an operation before it is submitted (`prepare`), to
-act on what was applied (`applied`), and for the robots' presence (`robots`).
+queryables, to act on what was applied (`applied`), and for the robots'
+presence (`robots`); the engine asks it what each robot offers (`offered`).
 """
 
 from __future__ import annotations
@@ -20,15 +20,17 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from datetime import UTC, datetime
 from typing import Any, Protocol
 
 from pydantic import ValidationError
 
 from backend.core import events as ev
+from backend.core.alerts import AlertKind, Level
+from backend.core.library import SkillSignature
 from backend.core.model import CommandState, Mission
-from backend.core.ops import Control, Reconcile, Retry, Sync, Unsync, UplinkSettle
+from backend.core.ops import Reconcile, UplinkSettle
 from backend.core.rules.engine import Applied, Engine, Refusal
 from backend.protocol.keys import PROTOCOL_VERSION, Keys
 from backend.protocol.messages import (
@@ -36,17 +38,17 @@ from backend.protocol.messages import (
     DownlinkAck,
     Manifest,
     Register,
+    RegisterCode,
     RegisterReply,
     RobotInfo,
     dumps,
     first_error,
 )
 from backend.protocol.wire import LIMIT_EXCEEDED, is_limit, parse
-from backend.server.downlink import DownlinkApplier, Host, raise_alerts
+from backend.server.downlink import DownlinkApplier, Submitter, raise_alerts
 from backend.server.refusals import Handler, JournalFailed
 from backend.server.uplink import UplinkSender
-from backend.transport import Refusal as ReplyErr
-from backend.transport import serve_async, watch_liveliness
+from backend.transport import ReplyError, serve_async, watch_liveliness
 
 log = logging.getLogger(__name__)
 
@@ -60,11 +62,7 @@ def _now() -> datetime:
     return datetime.now(UTC)
 
 
-def _major(version: str) -> str:
-    return version.split(".", 1)[0]
-
-
-class LinkHost(Host, Protocol):
+class LinkServer(Submitter, Protocol):
     """What the robot link needs from the server: what its downlinks need,
     and publishing a robot's fleet entry."""
 
@@ -72,9 +70,8 @@ class LinkHost(Host, Protocol):
 
 
 class RobotLink:
-    def __init__(self, host: LinkHost, *, default_expiry_s: float | None = None) -> None:
+    def __init__(self, host: LinkServer) -> None:
         self._host = host
-        self.default_expiry_s = default_expiry_s
         self.robots: dict[str, RobotInfo] = {}  # presence, manifest, link state, by name
         self.senders: dict[str, UplinkSender] = {}
         self._tokens: dict[str, set[str]] = {}  # robot -> sessions whose token is present
@@ -141,52 +138,19 @@ class RobotLink:
         return applied
 
     # -- operations on robots -----------------------------------------------------------
-    def prepare(self, op: Any) -> Any:
-        """An operator's operation as it is submitted: robot operations get the
-        server's default expiry; a sync or retry is checked against the
-        robot's manifest (when it ever registered)."""
-        if isinstance(op, Sync | Unsync | Control | Retry) and op.expire_s is None:
-            if self.default_expiry_s:
-                op = op.model_copy(update={"expire_s": self.default_expiry_s})
-        if isinstance(op, Sync):
-            self._check_manifest(op.robot, self._sync_skills(op))
-        elif isinstance(op, Retry):
-            found = self._mission.find(op.id)
-            if found is not None:
-                self._check_manifest(found[0], [(found[2].id, found[2].skill)])
-        return op
-
-    def _sync_skills(self, op: Sync) -> list[tuple[str, str]]:
-        """(id, skill) of the idle skills the sync would send."""
-        out = []
-        for s in self._mission.tasks.get(op.robot, []):
-            if s.status.value == "idle":
-                out.append((s.id, s.skill))
-                if s.id == op.through:
-                    break
-        return out
-
-    def _check_manifest(self, robot: str, skills: list[tuple[str, str]]) -> None:
+    def offered(self, robot: str) -> Mapping[str, str] | None:
+        """What `robot`'s manifest offers (skill -> version), as last registered;
+        None if it never registered. The rules check syncs and retries with it
+        (`backend.core.rules.engine.Offers`)."""
         info = self.robots.get(robot)
-        if info is None or info.manifest is None:
-            return  # never registered: it refuses what it cannot run
-        for sid, skill in skills:
-            spec = self.engine.library.skills.get(skill)
-            why = _incompatible(info.manifest, skill, spec.version) if spec else None
-            if why:
-                raise Refusal(
-                    "incompatible",
-                    f"{robot} {why}; {sid} stays unsynchronized (nothing was queued)",
-                    robot=robot,
-                    skill=sid,
-                )
+        return info.manifest.skills if info is not None and info.manifest is not None else None
 
     def applied(self, events: list[Any]) -> None:
         """After an applied operation: transmit what it added or withdrew."""
         for e in events:
             if isinstance(e, ev.CommandQueued):
                 self._kick(e.command.robot)
-            elif isinstance(e, ev.CommandChanged) and e.changes.get("cancel_requested"):
+            elif isinstance(e, ev.CommandChanged) and e.cancel_requested:
                 c = self._mission.command(e.id)
                 if c is not None:
                     self._kick(c.robot)
@@ -207,11 +171,11 @@ class RobotLink:
         info = self.robots.get(robot)
         return info.delay_s if info is not None else None
 
-    def said_once(self, robot: str, what: str, message: str, level: str = "warning") -> None:
+    def said_once(self, robot: str, what: str, message: str, level: Level = "warning") -> None:
         if (robot, what) in self._said:
             return
         self._said.add((robot, what))
-        self._host.alert(message, level=level, robot=robot, kind="robot_error")
+        self._host.alert(message, level=level, robot=robot, kind=AlertKind.ROBOT_ERROR)
 
     # -- registration ----------------------------------------------------------------------
     def _parse(self, model: Any, payload: bytes, robot: str, what: str) -> Any:
@@ -255,7 +219,7 @@ class RobotLink:
                 f"{robot} registered, but its messages {progress.last_seq + 1} to {reg.last_seq} "
                 "have not arrived: its queue is compared with the mission once they have",
                 robot=robot,
-                kind="reconcile",
+                kind=AlertKind.RECONCILE,
             )
         info = self.robots[robot]
         self._set_robot(
@@ -278,10 +242,20 @@ class RobotLink:
                 adopted=adopted,
                 dropped=dropped,
                 heartbeat_s=HEARTBEAT_S,
+                skills=self._signatures(m),
             )
         )
 
-    def _not_registrable(self, m: Manifest) -> tuple[str, str] | None:
+    def _signatures(self, m: Manifest) -> dict[str, SkillSignature]:
+        """The library's signature of each skill the robot offers and its type has."""
+        library = self.engine.library
+        return {
+            name: library.skills[name].signature()
+            for name in library.skills_of(m.type)
+            if name in m.skills and name in library.skills
+        }
+
+    def _not_registrable(self, m: Manifest) -> tuple[RegisterCode, str] | None:
         """Why a robot with manifest `m` cannot register (None: it can)."""
         if m.protocol != PROTOCOL_VERSION:
             return "protocol", (
@@ -298,7 +272,7 @@ class RobotLink:
             return "wrong_type", f"robot '{m.name}' is a {expected} in this mission, not a {m.type}"
         return None
 
-    def _taken(self, robot: str, session: str) -> tuple[str, str] | None:
+    def _taken(self, robot: str, session: str) -> tuple[RegisterCode, str] | None:
         """One owner per robot name: another live session holds it."""
         info = self.robots.get(robot)
         if info is None or not info.online or info.session in (None, session):
@@ -384,7 +358,7 @@ class RobotLink:
         if info is None or alive or not info.online or info.session != session:
             return
         self._set_robot(info.model_copy(update={"online": False, "since": _now()}))
-        self._host.alert(f"robot {robot} went offline", robot=robot, kind="offline")
+        self._host.alert(f"robot {robot} went offline", robot=robot, kind=AlertKind.OFFLINE)
 
     # -- housekeeping ------------------------------------------------------------------
     async def _housekeeping(self) -> None:
@@ -435,19 +409,8 @@ def _legacy(payload: bytes, key: str) -> bytes:
     )
     if "/server/register/" in key:
         return json_bytes({"accepted": False, "reason": message, "last_seq": 0, "missing": []})
-    raise ReplyErr(json_bytes({"ok": False, "code": "protocol_mismatch", "message": message}))
+    raise ReplyError(json_bytes({"ok": False, "code": "protocol_mismatch", "message": message}))
 
 
 def json_bytes(obj: Any) -> bytes:
     return json.dumps(obj).encode()
-
-
-def _incompatible(manifest: Manifest, skill: str, want: str) -> str | None:
-    """Why a robot with `manifest` cannot run `skill` at version `want`."""
-    have = manifest.skills.get(skill)
-    if have is None:
-        offered = ", ".join(manifest.skills) or "none"
-        return f"does not offer skill '{skill}' (its manifest lists: {offered})"
-    if _major(have) != _major(want):
-        return f"implements {skill} {have}, the library needs {want} (major versions differ)"
-    return None

@@ -17,12 +17,14 @@ import itertools
 import logging
 import sqlite3
 import uuid
+from collections import deque
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from pydantic_core import PydanticSerializationError
+import zenoh
 
+from backend.core.alerts import AlertKind, Level
 from backend.core.events import EventBatch
 from backend.core.library import Library
 from backend.core.model import Mission
@@ -30,6 +32,7 @@ from backend.core.rules.engine import Applied, Engine, Refusal
 from backend.files.missions import library_path, load_library, load_mission
 from backend.protocol.keys import PROTOCOL_VERSION, Keys
 from backend.protocol.messages import (
+    ALERTS_KEPT,
     AccountInfo,
     Alert,
     FleetEvent,
@@ -38,6 +41,7 @@ from backend.protocol.messages import (
     RobotInfo,
     StateRequest,
     StateSnapshot,
+    Telemetry,
     dumps,
 )
 from backend.protocol.wire import parse
@@ -46,19 +50,21 @@ from backend.server.acl import acl_config
 from backend.server.journal import (
     Journal,
     JournalError,
-    NotReplayable,
     Remembered,
     Unreplayable,
     remember_requests,
 )
-from backend.server.refusals import JournalFailed, guard
+from backend.server.recorder import JournalRecorder
+from backend.server.refusals import guard
 from backend.server.robots import RobotLink
+from backend.server.telemetry import TelemetryWatch
 from backend.transport import (
     declare_publisher,
     declare_token,
     router_config,
     serve,
     serve_async,
+    subscribe,
 )
 from backend.transport.session import close_session, open_session
 
@@ -92,21 +98,23 @@ class MissionServer:
         self.recover = recover
         self.recovered: str | None = None  # what the recovery did, for the operator
         self.server_id = uuid.uuid4().hex[:12]
-        self.robot_link = RobotLink(self, default_expiry_s=command_expiry)
+        self.robot_link = RobotLink(self)
         self.engine: Engine | None = None
         self.journal: Journal | None = None
         self.library_file: Path | None = None
         self.resumed = False
-        self._session = None
+        self._session: zenoh.Session | None = None
         self._entities: list[Any] = []
-        self._events_pub = None
-        self._fleet_pub = None
-        self._alerts_pub = None
+        self._events_pub: zenoh.Publisher | None = None
+        self._fleet_pub: zenoh.Publisher | None = None
+        self._alerts_pub: zenoh.Publisher | None = None
+        self._alert_ids = itertools.count(1)
+        self.telemetry_watch = TelemetryWatch(self)
+        self.alerts: deque[Alert] = deque(maxlen=ALERTS_KEPT)  # the latest, for snapshots
         # publications waiting for the next loop callback
         self._outbox: list[tuple[Any, bytes]] = []
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._journal_failing = False
-        self._checkpoint: asyncio.Future | None = None  # the journal's, running on a thread
+        self._checkpoint: asyncio.Future[Any] | None = None  # the journal's, on a thread
         self._checkpoint_failing = False
 
     # -- start / stop ---------------------------------------------------------
@@ -147,7 +155,13 @@ class MissionServer:
         self.journal = journal
         journal.checkpoint_in_background()  # see _maybe_checkpoint
         self.library_file = lib_file
-        self.engine = Engine(mission, library)
+        self.engine = Engine(
+            mission,
+            library,
+            recorder=JournalRecorder(journal, self.db, self),
+            offers=self.robot_link,
+            default_expiry_s=self.command_expiry,
+        )
         remember_requests(self.engine, requests)
         self.robot_link.add_robots(mission.robots)
 
@@ -176,12 +190,12 @@ class MissionServer:
     async def start(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._load()
+        assert self.journal is not None
         try:
-            self._session = await self._open_router()
+            s = self._session = await self._open_router()
         except BaseException:
             self.journal.close()
             raise
-        s = self._session
         self._events_pub = declare_publisher(s, Keys.EVENTS)
         self._fleet_pub = declare_publisher(s, Keys.FLEET)
         self._alerts_pub = declare_publisher(s, Keys.ALERTS)
@@ -191,13 +205,14 @@ class MissionServer:
             serve_async(s, Keys.op_as("*"), guard(self._handle_op), with_key=True),
             serve_async(s, Keys.account("*"), guard(self._handle_account), with_key=True),
             *self.robot_link.declare(s, guard),
+            subscribe(s, Keys.ALL_TELEMETRY, self._on_telemetry),
             # trivial, answered on the Zenoh thread: the raw-transport baseline of benchmarks
             serve(s, Keys.PING, lambda _payload: b"pong"),
         ]
         # declared last: robots (re)register when they see it
         self._entities.append(declare_token(s, Keys.SERVER_ALIVE))
 
-    async def _open_router(self):
+    async def _open_router(self) -> zenoh.Session:
         """The router session; with accounts, user/password logins and the
         access-control rules of their roles (the dictionary file Zenoh reads
         exists only while the session opens)."""
@@ -247,6 +262,7 @@ class MissionServer:
         """Publish an applied (and journaled) operation; snapshot when due."""
         if applied.duplicate or not applied.events:
             return
+        assert self.journal is not None
         try:
             self.journal.maybe_snapshot(self.mission)
         except (sqlite3.Error, OSError, JournalError) as e:  # in the batches: a slower restart
@@ -262,11 +278,13 @@ class MissionServer:
         """The journal's checkpoint (its log copied into the file, with an
         fsync) runs on a thread: inside a commit it held up one operation
         in ~400 for 4-17 ms."""
-        if self._checkpoint is None and self.journal.checkpoint_due:
-            self._checkpoint = self._loop.run_in_executor(None, self.journal.checkpoint)
+        journal, loop = self.journal, self._loop
+        assert journal is not None and loop is not None
+        if self._checkpoint is None and journal.checkpoint_due:
+            self._checkpoint = loop.run_in_executor(None, journal.checkpoint)
             self._checkpoint.add_done_callback(self._checkpointed)
 
-    def _checkpointed(self, done: asyncio.Future) -> None:
+    def _checkpointed(self, done: asyncio.Future[Any]) -> None:
         self._checkpoint = None
         error = None if done.cancelled() else done.exception()
         if error is None:
@@ -286,6 +304,7 @@ class MissionServer:
         its own event batch waited for the requester to take in the batch
         first. Publications keep their order."""
         if not self._outbox:
+            assert self._loop is not None
             self._loop.call_soon(self._flush)
         self._outbox.append((publisher, payload))
 
@@ -316,40 +335,14 @@ class MissionServer:
         the journal cannot take is refused (JournalFailed) and changes
         nothing, in memory or at a restart; then published."""
         who = actor or client
-
-        def journal(batch: EventBatch) -> None:
-            entry = EventBatch(revision=batch.revision, events=batch.events, actor=who)
-            try:
-                op_json = op.model_dump_json()
-            except PydanticSerializationError:  # from code in this process: its batch says
-                op_json = op.op
-            try:
-                self.journal.append(entry, op_json=op_json, client=client, request_id=request_id)
-            except NotReplayable as e:  # the value, not the journal: refused, nothing changed
-                raise Refusal(
-                    "not_replayable",
-                    f"{op.op} refused: its change could not be journaled as it is, so a "
-                    f"restart could not replay it: {e}; nothing was changed",
-                ) from None
-            except (sqlite3.Error, OSError, JournalError) as e:
-                failed = JournalFailed(self.db, e, op.op)
-                if not self._journal_failing:  # once, not at every retry of every robot
-                    self._journal_failing = True
-                    self.alert(failed.message, level="error", kind="journal")
-                raise failed from None
-            if self._journal_failing:
-                self._journal_failing = False
-                self.alert(
-                    f"the journal {self.db} can be written again", level="info", kind="journal"
-                )
-
-        self.engine.before_apply = journal
-        try:
-            applied = self.engine.submit(
-                op, client=client, request_id=request_id, expected_revision=expected_revision
-            )
-        finally:
-            self.engine.before_apply = None
+        assert self.engine is not None
+        applied = self.engine.submit(
+            op,
+            client=client,
+            request_id=request_id,
+            expected_revision=expected_revision,
+            actor=who,
+        )
         self._commit(applied, op, actor=who)
         return applied
 
@@ -357,15 +350,37 @@ class MissionServer:
         self,
         message: str,
         *,
-        level: str = "warning",
+        kind: AlertKind,
+        level: Level = "warning",
         robot: str | None = None,
         skill: str | None = None,
-        kind: str = "",
+        command: int | None = None,
     ) -> None:
+        """Raise an alert: logged, numbered, kept for state snapshots, published."""
         log.warning("%s", message)
+        a = Alert(
+            id=next(self._alert_ids),
+            level=level,
+            kind=kind,
+            robot=robot,
+            skill=skill,
+            command=command,
+            message=message,
+            at=_now(),
+        )
+        self.alerts.append(a)
         if self._alerts_pub is not None:
-            a = Alert(level=level, kind=kind, robot=robot, skill=skill, message=message, at=_now())
             self._publish(self._alerts_pub, dumps(a))
+
+    def _on_telemetry(self, msg: Any) -> None:
+        """A robot's sample (a Zenoh thread): its alerts are raised on the loop."""
+        try:
+            t = parse(Telemetry, msg.payload)
+        except ValueError:
+            return  # not readable: consoles say so (an unreadable-message alert of their own)
+        loop = self._loop
+        if loop is not None and not loop.is_closed():
+            loop.call_soon_threadsafe(self.telemetry_watch.took, t)
 
     def publish_fleet(self, info: RobotInfo) -> None:
         """A robot's presence or manifest changed (the robot link's news)."""
@@ -383,6 +398,7 @@ class MissionServer:
             mission=self.mission,
             library=self.library,
             robots=self.robot_link.robots,
+            alerts=list(self.alerts),
         )
         return snap.model_dump_json().encode()
 
@@ -409,12 +425,9 @@ class MissionServer:
                     "read_only", f"read-only: logged in as {role or 'unknown account'} {user}"
                 )
             req = req.model_copy(update={"user": user})
-        done = self.engine.requests.get((req.client, req.request_id))
-        if done is not None:
-            return _reply(Applied(done.revision, [], done.notes, done.value, duplicate=True))
         actor = f"{req.user}@{req.client}" if req.user else req.client
         applied = self.submit(
-            self.robot_link.prepare(req.op),
+            req.op,
             client=req.client,
             request_id=req.request_id,
             actor=actor,

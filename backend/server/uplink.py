@@ -25,6 +25,7 @@ from typing import Any, Literal, Protocol
 
 from pydantic import ValidationError
 
+from backend.core.alerts import Level
 from backend.core.limits import echo
 from backend.core.model import CommandState, UplinkCommand
 from backend.core.ops import UplinkSent, UplinkSettle
@@ -56,7 +57,7 @@ def _now() -> datetime:
     return datetime.now(UTC)
 
 
-class Link(Protocol):
+class LinkView(Protocol):
     """What a sender needs from the robot link."""
 
     @property
@@ -73,7 +74,7 @@ class Link(Protocol):
 
     def submit(self, op: Any, *, actor: str) -> Applied: ...
 
-    def said_once(self, robot: str, what: str, message: str, level: str = "warning") -> None: ...
+    def said_once(self, robot: str, what: str, message: str, level: Level = "warning") -> None: ...
 
 
 def entry(c: UplinkCommand) -> UplinkEntry:
@@ -85,7 +86,7 @@ def entry(c: UplinkCommand) -> UplinkEntry:
 class UplinkSender:
     """One robot's transmitter (a task on the server's loop)."""
 
-    def __init__(self, link: Link, robot: str):
+    def __init__(self, link: LinkView, robot: str):
         self.link = link
         self.robot = robot
         self._wake = asyncio.Event()

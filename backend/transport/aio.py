@@ -60,7 +60,7 @@ class QueryError(QueryFailed):
         super().__init__(key, self.message)
 
 
-class Refusal(Exception):
+class ReplyError(Exception):
     """Raise in a queryable handler to answer with `reply_err(payload)`."""
 
     def __init__(self, payload: bytes | str):
@@ -286,7 +286,7 @@ def _respond(query: zenoh.Query, reply_key: str, outcome: bytes | BaseException)
     """Answer and finalise a query (the querier waits until the query is dropped)."""
     with query:
         try:
-            if isinstance(outcome, Refusal):
+            if isinstance(outcome, ReplyError):
                 query.reply_err(outcome.payload)
             elif isinstance(outcome, BaseException):
                 why = f"{type(outcome).__name__}: {outcome}"
@@ -313,7 +313,7 @@ def serve(
 ) -> zenoh.Queryable[None]:
     """Declare a queryable answering with `handler(payload)` (b"" when no payload).
 
-    `Refusal(payload)` -> `reply_err(payload)`; any other exception is logged
+    `ReplyError(payload)` -> `reply_err(payload)`; any other exception is logged
     and answered with `reply_err("internal error ...")`. The handler runs on a
     Zenoh thread and blocks this queryable while it runs: keep it short.
     """
@@ -323,7 +323,7 @@ def serve(
         outcome: bytes | BaseException
         try:
             outcome = _check_bytes(handler(payload))
-        except Refusal as exc:
+        except ReplyError as exc:
             outcome = exc
         except Exception as exc:
             log.exception("queryable handler for %s failed", key_expr)
@@ -351,10 +351,10 @@ def serve_async(
     wildcard queryables whose key names the robot or user).
     """
     target = loop or asyncio.get_running_loop()
-    tasks: set[asyncio.Task] = set()  # the loop keeps only weak references to tasks
+    tasks: set[asyncio.Task[None]] = set()  # the loop keeps only weak references to tasks
 
     def failed(exc: Exception) -> BaseException:
-        if not isinstance(exc, Refusal):
+        if not isinstance(exc, ReplyError):
             log.error("queryable handler for %s failed", key_expr, exc_info=exc)
         return exc
 
@@ -423,8 +423,9 @@ def wait_matching(publisher: zenoh.Publisher, timeout: float) -> bool:
         lambda status: matched.set() if status.matching else None
     )
     try:
-        # matching_status is a MatchingStatus object, not a bool.
-        if publisher.matching_status.matching:
+        # matching_status is a MatchingStatus object, not a bool (whatever the stubs say)
+        status: Any = publisher.matching_status
+        if status.matching:
             return True
         return matched.wait(timeout)
     finally:

@@ -11,6 +11,7 @@ import json
 import re
 import socket
 import ssl
+from typing import Any
 
 import zenoh
 
@@ -18,7 +19,7 @@ _ENDPOINT = re.compile(r"^(?P<proto>[a-z]+)/(?:\[(?P<v6>[^\]]+)\]|(?P<host>[^:/]
 PROBE_TIMEOUT = 1.0
 
 
-def _get(config: zenoh.Config, path: str):
+def _get(config: zenoh.Config, path: str) -> Any:
     try:
         return json.loads(config.get_json(path))
     except (zenoh.ZError, ValueError):

@@ -13,6 +13,7 @@ from textual.widgets import DataTable, Footer, Static
 from console.bindings import bindings, key_names
 from console.messages import AlertAcknowledged
 from console.screens.base import ViewScreen
+from console.state.changes import StateChange, Topic
 from console.state.clock import MissionClock
 from console.state.eventlog import AlertBook, AlertEntry
 
@@ -23,8 +24,9 @@ KIND_WORDS = {
     "out_of_range": "out of range",
     "low_battery": "low battery",
     "refusal": "refusal",
-    "server": "server",
     "malformed": "unreadable message",
+    "report_refused": "report refused",
+    "robot_error": "robot error",
 }
 
 
@@ -39,13 +41,13 @@ class AlertScreen(ViewScreen):
         ("Level", "level"),
         ("From", "source"),
     )
-    TOPICS = ("alerts",)
+    TOPICS = frozenset({Topic.ALERTS})
     BINDINGS = [*ViewScreen.BINDINGS, *bindings("alerts")]
 
     def __init__(
         self,
         book: AlertBook,
-        changes: Signal[tuple[str, str | None]],
+        changes: Signal[StateChange],
         clock: MissionClock | None = None,
     ) -> None:
         super().__init__(changes)

@@ -1,12 +1,12 @@
-"""What the part-2 screens (fleet, event log, alerts) share: a title bar, the
-screen-switching keys in the footer, and redrawing when the app says what
-they show changed (`changes`, the app's awareness signal, handed to the
-screen with the state it shows) — at once when shown, otherwise when shown next."""
+"""What the part-2 screens (fleet, event log, alerts, checks) share: a title
+bar, the screen-switching keys in the footer, and redrawing when what they
+show changed (`changes`, the app's signal of the model's `StateChange`, handed to
+the screen with the state it shows) — at once when shown, otherwise when
+shown next."""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 from rich.text import Text
 from textual import events, on
@@ -16,6 +16,7 @@ from textual.signal import Signal
 from textual.widgets import DataTable, Input
 
 from console.bindings import bindings
+from console.state.changes import StateChange, Topic
 from console.widgets.bars import TitleBar
 
 # this module's look (CSS_PATH); absolute, so a subclass defined elsewhere finds it too
@@ -26,15 +27,15 @@ class ViewScreen(Screen):
     """Layout: title bar, [#filter input], the DataTable (COLUMNS), [.detail], .hint, footer."""
 
     SCOPE = ""  # the actions.py scope of this screen's own actions
-    TOPICS: tuple[str, ...] = ()  # which awareness changes it shows
+    TOPICS: frozenset[Topic] = frozenset()  # which changes it shows
     COLUMNS: tuple[tuple[str, str], ...] = ()  # (label, key) of the table's columns
     BINDINGS = bindings("app", show=True)
 
     CSS_PATH = TCSS
 
-    def __init__(self, changes: Signal[tuple[str, str | None]]) -> None:
+    def __init__(self, changes: Signal[StateChange]) -> None:
         super().__init__()
-        self.changes = changes  # (topic, robot or None) of what changed
+        self.changes = changes
         self._stale = False
         self.ready = False
         self.query_text = ""  # the #filter input's text, if the screen has one
@@ -55,14 +56,11 @@ class ViewScreen(Screen):
         self.ready = True
         self.redraw()
 
-    def _changed(self, change: Any) -> None:
-        topic, robot = change
-        if topic not in self.TOPICS:
-            return
-        if not self.ready:
+    def _changed(self, change: StateChange) -> None:
+        if not (change.topics & self.TOPICS) or not self.ready:
             return
         if self.app.screen is self:
-            self.update_view(topic, robot)
+            self.update_view(change)
         else:
             self._stale = True
 
@@ -120,7 +118,6 @@ class ViewScreen(Screen):
     def redraw(self) -> None:
         """Everything again (filter or theme changed, shown after a while)."""
 
-    def update_view(self, topic: str, robot: str | None) -> None:
-        """Something of `topic` (about `robot`, None: anything) changed while
-        shown (default: redraw)."""
+    def update_view(self, change: StateChange) -> None:
+        """Something it shows changed while shown (default: redraw)."""
         self.redraw()

@@ -12,34 +12,37 @@ from typing import Any
 
 from backend.core.model import UplinkCommand
 from backend.core.ops import Cancel
-from console.messages import OperationRequested
+from console.operations import OperationService
 from console.screens.dialogs import ConfirmScreen
 from console.state import link
 
 
-def _done(c: UplinkCommand, say: Callable[..., object]) -> Callable[[Any], None]:
-    def ok(reply: Any) -> None:
-        value = reply.value if isinstance(reply.value, dict) else {}
-        if value.get("state") == "cancelled":
-            say(f"{c.op} #{c.id} to {c.robot} cancelled: it never left", "ok")
-        else:
-            say(f"asked {c.robot} to cancel {c.op} #{c.id}: its answer decides", "ok")
+def toast_say(app: Any, title: str = "Uplink") -> Callable[..., None]:
+    """A status line for a screen without one: the outcome as a notification
+    (the "… under way" line is left out: the answer is what it says)."""
 
-    return ok
+    def say(text: str, severity: str = "info") -> None:
+        if not text.startswith("… "):
+            level = {"error": "error", "warning": "warning"}.get(severity, "information")
+            app.notify(text, title=title, severity=level)
+
+    return say
 
 
-async def ask_and_cancel(node: Any, c: UplinkCommand, say: Callable[..., object]) -> None:
+async def ask_and_cancel(
+    node: Any, ops: OperationService, c: UplinkCommand, say: Callable[..., object]
+) -> None:
     """In a worker of `node` (a screen with the model): ask, then submit the cancel."""
     question = link.cancel_question(c, node.model.clock)
-    if await node.app.push_screen_wait(ConfirmScreen(question, yes="Cancel it", no="Keep it")):
-        node.post_message(
-            OperationRequested(
-                Cancel(command=c.id),
-                f"cancel {c.op} #{c.id} to {c.robot}",
-                robot=c.robot,
-                on_ok=_done(c, say),
-                say=say,
-            )
-        )
-    else:
+    if not await node.app.push_screen_wait(ConfirmScreen(question, yes="Cancel it", no="Keep it")):
         say(f"{c.op} #{c.id} to {c.robot} kept")
+        return
+    what = f"cancel {c.op} #{c.id} to {c.robot}"
+    outcome = await ops.submit(Cancel(command=c.id), what, robot=c.robot, say=say, done="")
+    if outcome.reply is None:
+        return  # refused or failed: said already
+    value = outcome.reply.value if isinstance(outcome.reply.value, dict) else {}
+    if value.get("state") == "cancelled":
+        say(f"{c.op} #{c.id} to {c.robot} cancelled: it never left", "ok")
+    else:
+        say(f"asked {c.robot} to cancel {c.op} #{c.id}: its answer decides", "ok")

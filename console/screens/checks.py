@@ -7,9 +7,10 @@ being synchronized (the schedule's sync says so)."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from rich.text import Text
-from textual import on
+from textual import on, work
 from textual.app import ComposeResult
 from textual.containers import Vertical
 from textual.screen import ModalScreen
@@ -19,8 +20,9 @@ from textual.widgets import DataTable, Footer, Input, Label, Static
 from backend.core.ops import Unwaive, Waive
 from backend.core.plan.checks import Finding
 from console.bindings import bind, bindings, key_names
-from console.messages import OperationRequested
+from console.operations import OperationService
 from console.screens.base import ViewScreen
+from console.state.changes import StateChange, Topic
 from console.state.model import ConsoleModel
 
 TCSS = Path(__file__).with_name("checks.tcss")
@@ -71,13 +73,16 @@ class ReasonPrompt(ModalScreen[str | None]):
 class ChecksScreen(ViewScreen):
     SCOPE = "checks"
     COLUMNS = (("", "mark"), ("Check", "id"), ("Robot", "robot"), ("What", "message"))
-    TOPICS = ("plan",)
+    TOPICS = frozenset({Topic.FORECAST, Topic.FINDINGS})
     BINDINGS = [*ViewScreen.BINDINGS, *bindings("checks")]
     CSS_PATH = [ViewScreen.CSS_PATH, TCSS]
 
-    def __init__(self, model: ConsoleModel, changes: Signal[tuple[str, str | None]]) -> None:
+    def __init__(
+        self, model: ConsoleModel, changes: Signal[StateChange], ops: OperationService
+    ) -> None:
         super().__init__(changes)
         self.model = model
+        self.ops = ops
         self.shown: list[Finding] = []
 
     def compose(self) -> ComposeResult:
@@ -171,13 +176,11 @@ class ChecksScreen(ViewScreen):
 
         def done(reason: str | None) -> None:
             if reason:
-                self.post_message(
-                    OperationRequested(
-                        Waive(check=f.id, reason=reason),
-                        f"waive {f.id}",
-                        robot=f.robot,
-                        skill=f.skills[0] if f.skills else None,
-                    )
+                self.submit(
+                    Waive(check=f.id, reason=reason),
+                    f"waive {f.id}",
+                    robot=f.robot,
+                    skill=f.skills[0] if f.skills else None,
                 )
 
         self.app.push_screen(ReasonPrompt(f), done)
@@ -188,7 +191,12 @@ class ChecksScreen(ViewScreen):
             if f is not None:
                 self.app.notify("this finding is not waived", title=f.id, timeout=4)
             return
-        self.post_message(OperationRequested(Unwaive(check=f.id), f"withdraw the waiver of {f.id}"))
+        self.submit(Unwaive(check=f.id), f"withdraw the waiver of {f.id}")
+
+    @work(group="ops", exit_on_error=False)
+    async def submit(self, op: Any, what: str, **kw: Any) -> None:
+        """Its outcome on the schedule's status line (this screen has none)."""
+        await self.ops.submit(op, what, **kw)
 
     def on_data_table_row_selected(self, event: DataTable.RowSelected) -> None:
         event.stop()  # enter on the table (the DataTable binds enter itself)

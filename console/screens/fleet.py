@@ -15,8 +15,9 @@ from textual.widgets import DataTable, Footer, Input, Static
 
 from backend.protocol.messages import RobotInfo
 from console.bindings import bindings, key_names
+from console.operations import OperationService
 from console.screens.base import ViewScreen
-from console.screens.cancel import ask_and_cancel
+from console.screens.cancel import ask_and_cancel, toast_say
 from console.screens.dialogs import ChoiceScreen
 from console.state import link
 from console.state.capability import (
@@ -28,6 +29,7 @@ from console.state.capability import (
     robot_type,
     sparkline,
 )
+from console.state.changes import StateChange, Topic
 from console.state.model import ConsoleModel
 
 SPARK = 6  # samples shown per sparkline (the model keeps model.HISTORY)
@@ -45,12 +47,16 @@ class FleetScreen(ViewScreen):
         ("Uplink", "uplink"),
         ("Last report", "report"),
     )
-    TOPICS = ("fleet",)
+    # a batch may change any robot's activity or uplink; the others say whose
+    TOPICS = frozenset({Topic.MISSION, Topic.FLEET, Topic.TELEMETRY})
     BINDINGS = [*ViewScreen.BINDINGS, *bindings("fleet")]
 
-    def __init__(self, model: ConsoleModel, changes: Signal[tuple[str, str | None]]) -> None:
+    def __init__(
+        self, model: ConsoleModel, changes: Signal[StateChange], ops: OperationService
+    ) -> None:
         super().__init__(changes)
         self.model = model
+        self.ops = ops
         self.shown: list[str] = []
 
     def compose(self) -> ComposeResult:
@@ -128,8 +134,15 @@ class FleetScreen(ViewScreen):
             "#filter", Input
         ).placeholder = f"filter by capability: {filter_examples(self.model)}"
 
-    def update_view(self, topic: str, robot: str | None) -> None:
+    def update_view(self, change: StateChange) -> None:
         t = self.query_one(DataTable)
+        robot = None
+        if (
+            not change.about(Topic.MISSION)
+            and change.robots is not None
+            and len(change.robots) == 1
+        ):
+            (robot,) = change.robots
         if robot is None or robot not in self.shown:
             # a robot may now match or not (its manifest came), or the mission changed
             if [
@@ -197,17 +210,14 @@ class FleetScreen(ViewScreen):
         return out
 
     # -- cancelling a pending command ----------------------------------------------------
-    def _say(self, text: str, severity: str = "information") -> None:
-        level = {"ok": "information", "error": "error", "warning": "warning"}.get(severity)
-        self.app.notify(text, title="Uplink", severity=level or "information")
-
     @work(group="dialog")
     async def action_fleet_cancel(self) -> None:
         """One of the selected robot's pending commands (chosen if several), asking first."""
+        say = toast_say(self.app)
         robot = self.selected
         cmds = self.model.pending(robot) if robot else []
         if not cmds:
-            self._say(f"no command waits for {robot or 'a robot'}'s answer", "warning")
+            say(f"no command waits for {robot or 'a robot'}'s answer", "warning")
             return
         c = cmds[0]
         if len(cmds) > 1:
@@ -218,7 +228,7 @@ class FleetScreen(ViewScreen):
             if chosen is None:
                 return
             c = next(x for x in cmds if str(x.id) == chosen)
-        await ask_and_cancel(self, c, self._say)
+        await ask_and_cancel(self, self.ops, c, say)
 
     # -- events ---------------------------------------------------------------------------
     @on(DataTable.RowHighlighted)

@@ -17,6 +17,7 @@ from textual.widgets import DataTable, Footer, Input, Static
 from console.bindings import bindings, key_names
 from console.screens.base import ViewScreen
 from console.screens.dialogs import PathPrompt
+from console.state.changes import StateChange, Topic
 from console.state.clock import MissionClock
 from console.state.eventlog import LOG_LIMIT, EventLog, LogEntry, entry_matches
 from console.state.files import shown_path
@@ -42,13 +43,13 @@ class EventLogScreen(ViewScreen):
         ("What", "text"),
         ("Who", "who"),
     )
-    TOPICS = ("log",)
+    TOPICS = frozenset({Topic.LOG})
     BINDINGS = [*ViewScreen.BINDINGS, *bindings("log")]
 
     def __init__(
         self,
         log: EventLog,
-        changes: Signal[tuple[str, str | None]],
+        changes: Signal[StateChange],
         clock: MissionClock | None = None,
     ) -> None:
         super().__init__(changes)
@@ -113,7 +114,7 @@ class EventLogScreen(ViewScreen):
         self._title()
         self._show_entry()
 
-    def update_view(self, topic: str, robot: str | None) -> None:
+    def update_view(self, change: StateChange) -> None:
         """New entries: append (and drop rows the bounded log forgot)."""
         t = self.query_one(DataTable)
         at_end = t.cursor_row >= t.row_count - 1

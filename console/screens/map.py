@@ -18,6 +18,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal
 from textual.screen import Screen
+from textual.signal import Signal
 from textual.widgets import Footer, Static
 
 from backend.core.model import (
@@ -25,9 +26,11 @@ from backend.core.model import (
 )
 from backend.core.ops import EditSkill, MarkerAdd, MarkerDelete, MarkerMove, MarkerRename
 from console.bindings import bind, bindings, key_names
-from console.messages import HelpRequested, OperationRequested
+from console.messages import HelpRequested
+from console.operations import OperationService
 from console.screens.dialogs import ChoiceScreen, ConfirmScreen, MarkerPrompt
 from console.state.actions import ACTIONS
+from console.state.changes import StateChange, Topic
 from console.state.keys import KeyNames
 from console.state.markers import (
     bind_choices,
@@ -139,6 +142,18 @@ def param_rows(spec: Any, s: Any, names: list[str]) -> list[tuple[str, Text]]:
     return rows
 
 
+def map_top_text(m: ConsoleModel, keys: KeyNames) -> Text:
+    """The map's top bar: the mission and revision, the connection, the way back."""
+    t = Text()
+    t.append("missionctl map", style="bold")
+    if m.mission is not None:
+        t.append(f"  {m.mission.name}", style="bold")
+        t.append(f"  rev {m.mission.revision}", style="dim")
+    t.append(f"   {connection_text(m.connection)}")
+    t.append(f"   {keys.say('app.show_mission')} schedule", style="dim")
+    return t
+
+
 def info_text(model: ConsoleModel, v: MapView, feed_state: str) -> Text:
     """The info lines: the feed (when not live), the cursor and scale, who is
     followed, the selected marker and the schedule's selected skill; then what
@@ -190,9 +205,13 @@ class MapScreen(Screen):
     ]
     CSS_PATH = TCSS
 
-    def __init__(self, model: ConsoleModel) -> None:
+    def __init__(
+        self, model: ConsoleModel, changes: Signal[StateChange], ops: OperationService
+    ) -> None:
         super().__init__()
         self.model = model
+        self.changes = changes
+        self.ops = ops
         self.feed_state = "waiting"  # waiting | live | none
         self._topbar = TopBar(id="map-topbar")
         self.view = MapView(model, id="map")
@@ -201,6 +220,8 @@ class MapScreen(Screen):
         self._status = StatusLine("", id="map-status")
         self.message = ""
         self.legend_choice: bool | None = None  # None: by terminal width
+        if model.map_mirror is not None:  # the feed came before the screen
+            self.map_changed(model.map_mirror, model.map_update)
 
     def compose(self) -> ComposeResult:
         yield self._topbar
@@ -213,20 +234,17 @@ class MapScreen(Screen):
 
     def on_mount(self) -> None:
         # a notification never covers the cursor: the view moves it clear
-        self.screen_layout_refresh_signal.subscribe(self, lambda _s: self._uncover_cursor())
+        self.screen_layout_refresh_signal.subscribe(
+            self,
+            lambda _s: self.view.uncover(self.query("Toast")),  # Textual's notifications
+        )
         self._legend.update(legend_text(self.app.get_css_variables(), key_names(self)))
         self._apply_legend()
         self.view.focus()
         self.sync_selection()
         self.update_top()
         self.update_info()
-
-    def _uncover_cursor(self) -> None:
-        x, y = self.view.region.x, self.view.region.y
-        for toast in self.query("Toast"):  # Textual's notifications (not exported by name)
-            r = toast.region
-            if r.area and toast.display:
-                self.view.uncover_cursor(r.x - x, r.y - y, r.right - x, r.bottom - y)
+        self.changes.subscribe(self, self.changed)
 
     def on_resize(self, event: events.Resize) -> None:
         self._apply_legend()
@@ -240,14 +258,26 @@ class MapScreen(Screen):
         self.update_info()
 
     def _apply_legend(self) -> None:
-        show = (
-            self.legend_choice
-            if self.legend_choice is not None
-            else self.app.size.width >= LEGEND_MIN_WIDTH
-        )
+        show = self.legend_choice
+        if show is None:
+            show = self.app.size.width >= LEGEND_MIN_WIDTH
         self.set_class(not show, "-no-legend")
 
-    # -- state in (called by the app) --------------------------------------------------------------
+    # -- state in (the model's changes) ---------------------------------------------------------
+    def changed(self, c: StateChange) -> None:
+        if c.about(Topic.MAP):
+            self.map_changed(self.model.map_mirror, c.map_update)
+        if c.about(Topic.MISSION):  # marker events change no robot's column but the map
+            self.model_changed()
+        for robot in c.robots or () if c.about(Topic.TELEMETRY) else ():
+            self.view.robot_moved(robot)
+            if self.view.follow == robot:
+                self.update_info()
+        if c.about(Topic.FLEET):
+            self.view.overlays_changed()
+        if c.about(Topic.CONNECTION):
+            self.update_top()
+
     def map_changed(self, mirror: Any, update: Any) -> None:
         kind = getattr(update, "kind", "snapshot")
         if kind == "none":
@@ -275,17 +305,6 @@ class MapScreen(Screen):
         self.update_top()
         self.update_info()
 
-    def telemetry_changed(self, robot: str) -> None:
-        self.view.robot_moved(robot)
-        if self.view.follow == robot:
-            self.update_info()
-
-    def fleet_changed(self) -> None:
-        self.view.overlays_changed()
-
-    def connection_changed(self) -> None:
-        self.update_top()
-
     def sync_selection(self) -> None:
         sid = self.model.selection.skill  # the schedule's cursor
         if sid != self.view.selected_skill:
@@ -294,15 +313,7 @@ class MapScreen(Screen):
 
     # -- lines -------------------------------------------------------------------------------------
     def update_top(self) -> None:
-        m = self.model
-        t = Text()
-        t.append("missionctl map", style="bold")
-        if m.mission is not None:
-            t.append(f"  {m.mission.name}", style="bold")
-            t.append(f"  rev {m.mission.revision}", style="dim")
-        t.append(f"   {connection_text(m.connection)}")
-        t.append(f"   {key_names(self).say('app.show_mission')} schedule", style="dim")
-        self._topbar.update(t, layout=False)
+        self._topbar.update(map_top_text(self.model, key_names(self)), layout=False)
 
     def update_info(self) -> None:
         self._info.update(info_text(self.model, self.view, self.feed_state), layout=False)
@@ -312,8 +323,13 @@ class MapScreen(Screen):
         self.message = text
         self._status.show(text, severity)
 
-    def submit(self, op: Any, what: str, **kw: Any) -> None:
-        self.post_message(OperationRequested(op, what, say=self.say, **kw))
+    @work(group="ops", exit_on_error=False)
+    async def submit(self, op: Any, what: str, *, on_ok: Any = None, **kw: Any) -> None:
+        """Submit `op`, await its outcome here; `on_ok(reply)` says what it did."""
+        done = "" if on_ok is not None else None
+        outcome = await self.ops.submit(op, what, say=self.say, done=done, **kw)
+        if outcome.reply is not None and on_ok is not None:
+            on_ok(outcome.reply)
 
     def _connected(self) -> bool:
         if self.model.connection != CONNECTED:
@@ -530,12 +546,9 @@ class MapScreen(Screen):
         self.sync_selection()
         found = self.model.find(self.view.selected_skill)
         if found is None:
-            keys = key_names(self)
-            self.say(
-                f"select a skill on the schedule first ({keys.say('app.show_mission')}), "
-                f"then come back ({keys.say('app.show_map')})",
-                "warning",
-            )
+            back, here = (key_names(self).say(a) for a in ("app.show_mission", "app.show_map"))
+            why = f"select a skill on the schedule first ({back}), then come back ({here})"
+            self.say(why, "warning")
             return None
         why = self.model.read_only_reason(found[2].id)
         if why:

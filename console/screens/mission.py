@@ -4,10 +4,17 @@ Layout: top bar / schedule | parameter editor / status line / footer. From
 100 columns the editor is a side panel beside the schedule; below, it is a
 toggle (enter / e opens it beside the schedule, escape closes it). Part 2
 adds the map, fleet and event-log screens as further app modes next to this one.
+
+It follows the model's changes (the app's signal) and redraws what they
+touch; its actions are the keys' (thin), done by the objects it owns: the
+plan's (mission_plan.py), execution's (mission_run.py) and files'
+(mission_files.py). Operations go to the `OperationService`, awaited in the
+screen's own workers (`submit`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -17,36 +24,19 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal
 from textual.screen import Screen
+from textual.signal import Signal
 
-from backend.core.model import Status
-from backend.core.ops import (
-    AddBarrier,
-    AddSkill,
-    Control,
-    DeleteSkills,
-    MoveSkill,
-    RemoveBarrier,
-    Retry,
-    Sync,
-    Unsync,
-)
 from console.bindings import bind, key_names
-from console.messages import HelpRequested, OperationRequested
+from console.messages import HelpRequested
+from console.operations import OperationService
 from console.screens.cancel import ask_and_cancel
-from console.screens.dialogs import ConfirmScreen, SkillPicker
-from console.screens.mission_files import MissionFiles
+from console.screens.mission_files import FileActions
 from console.screens.mission_plan import PlanActions
-from console.screens.schedule_keys import (
-    added_text,
-    footer_now,
-    refused_off_schedule,
-    schedule_action,
-)
+from console.screens.mission_run import RunActions
+from console.screens.schedule_keys import footer_now, refused_off_schedule, schedule_action
 from console.state import link
 from console.state.actions import BY_NAME
-from console.state.capability import also_offered_by
-from console.state.defaults import default_params
-from console.state.eventlog import AlertBook
+from console.state.changes import StateChange, Topic
 from console.state.files import RecentFiles
 from console.state.keys import KeyNames
 from console.state.model import CONNECTED, ConsoleModel
@@ -86,9 +76,24 @@ def top_text(m: ConsoleModel, unacked: int, marks: list[str], keys: KeyNames) ->
     return t
 
 
-class MissionScreen(MissionFiles, PlanActions, Screen):
+def connection_news(m: ConsoleModel, before: str) -> tuple[str, str] | None:
+    """What the status line says when the connection went from `before` to now."""
+    if m.connection == before:
+        return None
+    if m.connection == "reconnecting":
+        return (
+            f"connection to {m.endpoint} lost — reconnecting (the server may be restarting)…",
+            "warning",
+        )
+    if m.connection == CONNECTED and before == "reconnecting":
+        revision = m.mission.revision if m.mission else "?"
+        return f"reconnected to {m.endpoint}: state resynchronized at revision {revision}", "ok"
+    return None
+
+
+class MissionScreen(Screen):
     SCOPE = "mission"  # its actions (console/state/actions.py)
-    # the actions table's keys are dispatched by on_key (mission_keys), not bound
+    # the actions table's keys are dispatched by on_key (schedule_keys.py), not bound
     BINDINGS = [
         bind("app.help", "help", show=False),
         Binding("escape", "clear_marks", "Clear marks", show=False),
@@ -99,49 +104,41 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
     def __init__(
         self,
         model: ConsoleModel,
-        alerts: AlertBook | None = None,
+        changes: Signal[StateChange],
+        ops: OperationService,
         recent: RecentFiles | None = None,
     ) -> None:
         super().__init__()
         self.model = model
-        self.alerts = alerts  # its count of unacknowledged alerts is the top bar's badge
-        self.recent = recent or RecentFiles()  # saved and loaded files, newest first
-        self.last_path: str | None = None  # of the last save or load: the next one's default
-        self.pending_select: str | None = None
+        self.changes = changes
+        self.ops = ops
         # kept as attributes: messages may arrive while the screen is being torn down
         self._topbar = TopBar(id="topbar")
-        self._schedule = ScheduleView(model, id="schedule")
-        self._editor = ParamEditor(model, id="editor")
+        self.schedule = ScheduleView(model, id="schedule")
+        self.editor = ParamEditor(model, id="editor")
         self._status = StatusLine("", id="status")
         self._footer = KeyBar("", id="keys")
-        self.edit_after_select = False
         self.message = ""
+        self._connection = model.connection  # as last shown (what a change of it says)
+        self.plan = PlanActions(self)
+        self.run = RunActions(self)
+        self.files = FileActions(self, recent or RecentFiles())
 
     def compose(self) -> ComposeResult:
         yield self._topbar
         with Horizontal(id="main"):
-            yield self._schedule
-            yield self._editor
+            yield self.schedule
+            yield self.editor
         yield self._status
         yield self._footer
 
-    @property
-    def schedule(self) -> ScheduleView:
-        return self._schedule
-
-    @property
-    def editor(self) -> ParamEditor:
-        return self._editor
-
-    def _set_narrow(self, narrow: bool) -> None:
-        self.set_class(narrow, "-narrow")
-
     def on_mount(self) -> None:
-        self._set_narrow(self.app.size.width < NARROW)
+        self.set_class(self.app.size.width < NARROW, "-narrow")
         self.schedule.focus()
         self.update_top()
         self.schedule.rebuild()
         self._stale: frozenset[str] = frozenset()
+        self.changes.subscribe(self, self.changed)
         # "as of 25s ago" counts up; a robot falling silent turns stale without a message
         self.set_interval(1.0, self.freshness_tick)
 
@@ -165,7 +162,7 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
         self.update_keys()
         narrow = event.size.width < NARROW
         if narrow != self.has_class("-narrow"):
-            self._set_narrow(narrow)
+            self.set_class(narrow, "-narrow")
             if not narrow:
                 self.remove_class("-editing")
                 self.run_worker(
@@ -177,16 +174,34 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
         return not self.has_class("-narrow") or self.has_class("-editing")
 
     # -- the model changed ------------------------------------------------------------------
+    async def changed(self, c: StateChange) -> None:
+        """Redraw what the change touches."""
+        if c.about(Topic.MISSION) and c.robots != frozenset():
+            await self.model_changed(None if c.robots is None else set(c.robots))
+            self.plan.seen(c.revision, c.moved)  # the cursor may follow an undo
+        if c.about(Topic.FLEET):
+            self.schedule.refresh()  # partners' columns show it too (barriers)
+            self.update_keys()
+        if c.about(Topic.TELEMETRY):
+            for robot in c.robots or ():
+                self.schedule.refresh_telemetry(robot)
+        if c.about(Topic.CONNECTION):
+            await self.connection_changed()
+        if c.about(Topic.FINDINGS):  # the rows' check glyphs and what sync allows
+            self.schedule.refresh()
+            self.update_keys()
+        if c.about(Topic.ALERTS) or c.about(Topic.MAP):
+            self.update_top()  # the badge, the sim's score and clock
+        for a in c.alerts:
+            if a.level == "error":
+                self.say(f"✗ {a.message}", "error")
+
     async def model_changed(self, robots: set[str] | None) -> None:
         self.schedule.rebuild(robots)
         self.schedule.marks = [m for m in self.schedule.marks if self.model.owner(m) is not None]
-        if self.pending_select and self.model.owner(self.pending_select):
-            sid, self.pending_select = self.pending_select, None
-            self.schedule.select(sid)
-            if self.edit_after_select:
-                self.call_after_refresh(self._edit_selected)
+        self.plan.arrived()
         self.update_top()
-        self.refresh_availability()
+        self.update_keys()
         if self.editor_visible:
             if self.editor.skill_id != self.schedule.cursor_id:
                 await self.editor.show_skill(self.schedule.cursor_id)
@@ -195,22 +210,16 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
         self.editor.prune_drafts()
 
     async def connection_changed(self) -> None:
+        before, self._connection = self._connection, self.model.connection
+        news = connection_news(self.model, before)
+        if news is not None:
+            self.say(*news)
+            if news[1] == "ok":
+                self.app.notify("reconnected; state resynchronized", title="Server", timeout=3)
         self.update_top()
-        self.refresh_availability()
+        self.update_keys()
         if self.editor_visible:
             await self.editor.model_changed()
-
-    def robot_changed(self, robot: str) -> None:
-        self.schedule.refresh()  # partners' columns show it too (barriers)
-        self.refresh_availability()
-
-    def telemetry_changed(self, robot: str) -> None:
-        self.schedule.refresh_telemetry(robot)
-
-    def plan_changed(self) -> None:
-        """The plan checks' findings changed: the rows' glyphs and what sync allows."""
-        self.schedule.refresh()
-        self.refresh_availability()
 
     def on_screen_resume(self) -> None:
         """Back from the timeline or the checks: the cursor follows their selection."""
@@ -219,8 +228,8 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
             self.schedule.select(sid)
 
     def update_top(self) -> None:
-        unacked = self.alerts.unacknowledged if self.alerts is not None else 0
-        text = top_text(self.model, unacked, self.schedule.marks, key_names(self))
+        keys = key_names(self)
+        text = top_text(self.model, self.model.alerts.unacknowledged, self.schedule.marks, keys)
         self._topbar.show(text, self.model.connection)
 
     def say(self, text: str, severity: str = "info") -> None:
@@ -231,7 +240,7 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
     # -- selection ---------------------------------------------------------------------------------
     @on(ScheduleView.CursorMoved)
     async def _cursor_moved(self, event: ScheduleView.CursorMoved) -> None:
-        self.refresh_availability()
+        self.update_keys()
         c = self.model.uplinking(event.skill_id) if event.skill_id else None
         if c is not None:  # its row may have no room for the command: the status line has
             cancel = key_names(self).say("mission.cancel")
@@ -242,13 +251,9 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
     def selection(self) -> tuple[str | None, str | None]:
         return self.schedule.cursor_robot, self.schedule.cursor_id
 
-    def refresh_availability(self) -> None:
-        """The footer shows the keys that apply now (keys are checked again
-        when pressed: `run_named`)."""
-        self.update_keys()
-
     def update_keys(self) -> None:
-        """The footer: the keys that apply now (console/screens/schedule_keys.py)."""
+        """The footer: the keys that apply now (console/screens/schedule_keys.py);
+        keys are checked again when pressed (`run_named`)."""
         if self.is_mounted:
             self._footer.show(footer_now(self))
 
@@ -309,64 +314,35 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
             await self.run_action(action)
 
     # -- submitting --------------------------------------------------------------------------------
-    def submit(self, op: Any, what: str, **kw: Any) -> None:
-        """The app submits it (OperationRequested) and reports on the status line."""
-        self.post_message(OperationRequested(op, what, **kw))
+    @work(group="ops", exit_on_error=False)
+    async def submit(
+        self,
+        op: Any,
+        what: str,
+        *,
+        then: Callable[[Any], object] | None = None,
+        refused: Callable[[Any], object] | None = None,
+        **kw: Any,
+    ) -> None:
+        """Submit `op` and await its outcome here (the service says it on the
+        status line); `then(reply)` says what it did instead of "✓ what";
+        `refused(error_reply)` after a refusal."""
+        outcome = await self.ops.submit(op, what, say=self.say, done="" if then else None, **kw)
+        if outcome.reply is not None and then is not None:
+            then(outcome.reply)
+        elif outcome.refusal is not None and refused is not None:
+            refused(outcome.refusal)
 
-    # -- actions: plan -----------------------------------------------------------------------------
-    def action_help(self) -> None:
-        self.post_message(HelpRequested())
-
-    def action_clear_marks(self) -> None:
-        if self.schedule.marks:
-            self.schedule.clear_marks()
-            self.update_top()
-            self.refresh_availability()
-            self.say("marks cleared")
-
-    def action_toggle_static(self) -> None:
-        self.schedule.set_expand_static(not self.schedule.expand_static)
-
-    @work(group="dialog")
-    async def action_add(self) -> None:
-        robot, sid = self.selection()
-        if robot is None or self.model.library is None:
-            return
-        at, where = self.model.insertion_point(robot, sid)
-        skills = self.model.skills_of(robot)
-        offered = {name: also_offered_by(self.model, name, robot) for name in skills}
-        choice = await self.app.push_screen_wait(
-            SkillPicker(robot, skills, self.model.library, where, offered)
-        )
-        if not choice:
-            return
-        spec = self.model.library.skills[choice]
-        params, bindings = default_params(spec.params, self.model, robot)
-        op = AddSkill(robot=robot, skill=choice, params=params, bindings=bindings, at=at)
-
-        def added(reply: Any) -> None:
-            new = reply.value.get("id")
-            if not new:
-                return
-            self.say(added_text(key_names(self), f"{new} ({choice}) to {robot} {where}"), "ok")
-            self.edit_after_select = True
-            if self.model.owner(new):
-                self.schedule.select(new)
-                self.call_after_refresh(self._edit_selected)
-            else:
-                self.pending_select = new  # selected (and edited) when its event arrives
-
-        self.submit(op, f"add {choice} to {robot}", robot=robot, on_ok=added)
-
+    # -- the editor ------------------------------------------------------------------------------
     async def action_edit(self) -> None:
         if self.has_class("-narrow"):
             self.add_class("-editing")
         await self.editor.show_skill(self.schedule.cursor_id)
         self.editor.focus_first()
 
-    async def _edit_selected(self) -> None:
-        if self.edit_after_select:
-            self.edit_after_select = False
+    async def edit_selected(self) -> None:
+        if self.plan.edit_after_select:
+            self.plan.edit_after_select = False
             await self.action_edit()
 
     @on(ParamEditor.Left)
@@ -386,88 +362,35 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
 
     @on(ParamEditor.ApplyRequested)
     def _apply(self, event: ParamEditor.ApplyRequested) -> None:
-        robot = self.model.owner(event.skill_id)
         changed = ", ".join(event.changed())
 
         def refused(reply: Any) -> None:
             if reply.skill in (None, event.skill_id) and self.editor.skill_id == event.skill_id:
                 self.editor.show_param_error(reply.param, reply.message)
 
-        def ok(reply: Any) -> None:
-            self.say(f"{event.skill_id}: applied {changed}", "ok")
-
         self.submit(
             event.operation(),
             f"edit {event.skill_id}",
-            robot=robot,
+            robot=self.model.owner(event.skill_id),
             skill=event.skill_id,
             expected_revision=event.base_revision,
-            on_ok=ok,
-            on_refused=refused,
+            then=lambda r: self.say(f"{event.skill_id}: applied {changed}", "ok"),
+            refused=refused,
         )
 
-    @work(group="dialog")
-    async def action_delete(self) -> None:
-        robot, sid = self.selection()
-        found = self.model.find(sid)
-        if found is None:
-            return
-        s = found[2]
-        bid = self.model.barrier_of(s.id)
-        extra = f" It leaves barrier {bid}." if bid else ""
-        if not await self.app.push_screen_wait(
-            ConfirmScreen(f"Delete {s.display()} from {robot}'s plan?{extra}", yes="Delete")
-        ):
-            self.say("delete cancelled")
-            return
-        self.submit(DeleteSkills(ids=[s.id]), f"delete {s.id}", robot=robot, skill=s.id)
+    # -- the keys' actions: the screen's own, then its parts' -----------------------------------
+    def action_help(self) -> None:
+        self.post_message(HelpRequested())
 
-    def _move(self, step: int) -> None:
-        robot, sid = self.selection()
-        if robot is None or sid is None:
-            return
-        idle = [s.id for s in self.model.task(robot) if s.status == Status.IDLE]
-        if sid not in idle:
-            return
-        index = idle.index(sid) + step
-        self.submit(
-            MoveSkill(id=sid, index=index),
-            f"move {sid} {'up' if step < 0 else 'down'}",
-            robot=robot,
-            skill=sid,
-        )
+    def action_clear_marks(self) -> None:
+        if self.schedule.marks:
+            self.schedule.clear_marks()
+            self.update_top()
+            self.update_keys()
+            self.say("marks cleared")
 
-    def action_move_up(self) -> None:
-        self._move(-1)
-
-    def action_move_down(self) -> None:
-        self._move(1)
-
-    # -- actions: synchronization ------------------------------------------------------------------
-    def action_sync(self) -> None:
-        robot, sid = self.selection()
-        if robot is None or sid is None:
-            return
-        self.submit(
-            Sync(robot=robot, through=sid),
-            f"sync {robot} through {sid}",
-            robot=robot,
-            skill=sid,
-            on_ok=lambda r: self.say(_queued(robot, "sync", r.value), "ok"),
-        )
-
-    def action_unsync(self) -> None:
-        robot, sid = self.selection()
-        if robot is None or sid is None:
-            return
-
-        self.submit(
-            Unsync(robot=robot, from_id=sid),
-            f"unsync {robot} from {sid}",
-            robot=robot,
-            skill=sid,
-            on_ok=lambda r: self.say(_queued(robot, "unsync", r.value), "ok"),
-        )
+    def action_toggle_static(self) -> None:
+        self.schedule.set_expand_static(not self.schedule.expand_static)
 
     def action_mark(self) -> None:
         robot, sid = self.selection()
@@ -475,7 +398,7 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
             return
         marked = self.schedule.toggle_mark(sid)
         self.update_top()
-        self.refresh_availability()
+        self.update_keys()
         n = len(self.schedule.marks)
         barrier = key_names(self).say("mission.barrier")
         self.say(
@@ -483,110 +406,87 @@ class MissionScreen(MissionFiles, PlanActions, Screen):
             + (f" — {barrier} makes the barrier" if n >= 2 else " — mark a skill of another robot")
         )
 
+    @work(group="dialog")
+    async def action_add(self) -> None:
+        await self.plan.add()
+
+    @work(group="dialog")
+    async def action_delete(self) -> None:
+        await self.plan.delete()
+
+    def action_move_up(self) -> None:
+        self.plan.move(-1)
+
+    def action_move_down(self) -> None:
+        self.plan.move(1)
+
     def action_barrier(self) -> None:
-        ids = list(self.schedule.marks)
-
-        def ok(r: Any) -> None:
-            self.schedule.clear_marks()
-            self.update_top()
-            self.say(f"barrier {r.value.get('barrier', '')}: {', '.join(ids)} start together", "ok")
-
-        self.submit(AddBarrier(ids=ids), f"barrier {', '.join(ids)}", on_ok=ok)
+        self.plan.barrier()
 
     def action_unbarrier(self) -> None:
-        robot, sid = self.selection()
-        bid = self.model.barrier_of(sid) if sid else None
-        if bid is None:
-            return
-        self.submit(
-            RemoveBarrier(barrier=bid),
-            f"remove barrier {bid}",
-            robot=robot,
-            skill=sid,
-            on_ok=lambda r: self.say(f"barrier {bid} removed", "ok"),
-        )
+        self.plan.unbarrier()
+
+    def action_duplicate(self) -> None:
+        self.plan.duplicate()
+
+    def action_retry_edit(self) -> None:
+        self.plan.retry_edit()
+
+    def action_undo(self) -> None:
+        self.plan.undo()
+
+    def action_redo(self) -> None:
+        self.plan.redo()
+
+    def action_search(self) -> None:
+        self.plan.search()
+
+    def action_sync(self) -> None:
+        self.run.sync()
+
+    def action_unsync(self) -> None:
+        self.run.sync(undo=True)
 
     @work(group="dialog")
     async def action_cancel(self) -> None:
         c = self.model.uplinking(self.schedule.cursor_id or "")
         if c is not None:
-            await ask_and_cancel(self, c, self.say)
+            await ask_and_cancel(self, self.ops, c, self.say)
 
     def action_retry(self) -> None:
-        robot, sid = self.selection()
-        if sid is None:
-            return
-        self.submit(
-            Retry(id=sid),
-            f"retry {sid}",
-            robot=robot,
-            skill=sid,
-            on_ok=lambda r: self.say(
-                f"{robot}: {r.value.get('id', '')} queued right after {sid} (run to start it)", "ok"
-            ),
-        )
-
-    # -- actions: execution ------------------------------------------------------------------------
-    def _control(self, op: str, robot: str | None) -> None:
-        who = robot or "all robots"
-
-        def ok(r: Any) -> None:
-            notes = "; ".join(r.notes)
-            commands = r.value.get("commands", {}) if isinstance(r.value, dict) else {}
-            # the robot's answer comes later (its skills then change): say what waits for it
-            queued = ", ".join(f"{rb} (command {c})" for rb, c in commands.items())
-            done = f"queued for {queued}" if queued else "ok"
-            self.say(
-                f"{op} {who}: {done}" + (f" — {notes}" if notes else ""),
-                "warning" if notes else "ok",
-            )
-            for n in r.notes:
-                self.app.notify(n, title=f"{op}: partly applied", severity="warning")
-
-        self.submit(Control(op=op, robot=robot), f"{op} {who}", robot=robot, on_ok=ok)
+        self.run.retry()
 
     def action_run(self) -> None:
-        self._control("run", self.schedule.cursor_robot)
+        self.run.control("run", self.schedule.cursor_robot)
 
     def action_pause(self) -> None:
-        self._control("pause", self.schedule.cursor_robot)
+        self.run.control("pause", self.schedule.cursor_robot)
 
     def action_stop(self) -> None:
-        self._control("stop", self.schedule.cursor_robot)
+        self.run.control("stop", self.schedule.cursor_robot)
 
     @work(group="dialog")
     async def action_reset(self) -> None:
-        robot = self.schedule.cursor_robot
-        if robot and await self.app.push_screen_wait(
-            ConfirmScreen(
-                f"Reset {robot}? Its active skill stops and everything queued returns to the plan.",
-                yes="Reset",
-            )
-        ):
-            self._control("reset", robot)
+        if self.schedule.cursor_robot:
+            await self.run.reset(self.schedule.cursor_robot)
 
     def action_run_all(self) -> None:
-        self._control("run", None)
+        self.run.control("run", None)
 
     def action_pause_all(self) -> None:
-        self._control("pause", None)
+        self.run.control("pause", None)
 
     def action_stop_all(self) -> None:
-        self._control("stop", None)
+        self.run.control("stop", None)
 
     @work(group="dialog")
     async def action_reset_all(self) -> None:
-        if await self.app.push_screen_wait(
-            ConfirmScreen(
-                "Reset ALL robots? Active skills stop and everything queued returns to the plan.",
-                yes="Reset all",
-            )
-        ):
-            self._control("reset", None)
+        await self.run.reset(None)
 
+    @work(group="dialog")
+    async def action_save(self) -> None:
+        await self.files.save_mission()
 
-def _queued(robot: str, what: str, value: dict[str, Any]) -> str:
-    """Protocol 2: the operation returns once its command is queued for the
-    robot; the skills change when the robot answers."""
-    skills = ", ".join(value.get("skills", []))
-    return f"{robot}: {what} queued (command {value.get('command')}): {skills}"
+    @work(group="dialog")
+    async def action_load(self) -> None:
+        await self.files.load()

@@ -2,36 +2,35 @@
 library beside it when the mission's reference would not resolve from
 there) and load one, which replaces the plan for every operator (asked first).
 The path prompt shows the full path, completes, lists recent files and asks
-before replacing a file (console/state/files.py says when).
-Mixed into `MissionScreen` (console/screens/mission.py)."""
+before replacing a file (console/state/files.py says when). An object the
+mission screen owns (console/screens/mission.py)."""
 
 from __future__ import annotations
 
 import asyncio
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
-
-from textual import work
+from typing import Any
 
 from backend.core.ops import LoadMission
 from console.screens.dialogs import ConfirmScreen, PathPrompt
 from console.state.files import RecentFiles, default_save_path, shown_path
-from console.state.model import ConsoleModel
-
-if TYPE_CHECKING:
-    from textual.app import App
 
 
-class MissionFiles:
+class FileActions:
     """ctrl+s saves, ctrl+o loads (actions of the mission screen)."""
 
-    model: ConsoleModel
-    last_path: str | None  # of the last save or load: the next one's default
-    recent: RecentFiles
-    app: App[Any]
+    def __init__(self, screen: Any, recent: RecentFiles) -> None:
+        self.screen = screen  # MissionScreen: say, submit, app
+        self.model = screen.model
+        self.recent = recent  # saved and loaded files, newest first
+        self.last_path: str | None = None  # of the last save or load: the next one's default
 
-    def say(self, text: str, severity: str = "info") -> None: ...
-    def submit(self, op: Any, what: str, **kw: Any) -> None: ...
+    @property
+    def app(self) -> Any:
+        return self.screen.app
+
+    def say(self, text: str, severity: str = "info") -> None:
+        self.screen.say(text, severity)
 
     async def save_mission(self) -> bool:
         """Ask where, (ask before replacing a file), save; True when saved."""
@@ -71,12 +70,7 @@ class MissionFiles:
         self.app.notify(shown_path(target), title="Mission saved", timeout=4)
         return True
 
-    @work(group="dialog")
-    async def action_save(self) -> None:
-        await self.save_mission()
-
-    @work(group="dialog")
-    async def action_load(self) -> None:
+    async def load(self) -> None:
         start = self.last_path or (
             shown_path(Path(self.recent.files[0]).parent) + "/" if self.recent.files else ""
         )
@@ -121,7 +115,7 @@ class MissionFiles:
             self.model.mark_saved()  # the plan is the file's now
             self.say(f"loaded {name}: '{mission.name}'", "ok")
 
-        self.submit(LoadMission(mission=mission), f"load {name}", on_ok=loaded)
+        self.screen.submit(LoadMission(mission=mission), f"load {name}", then=loaded)
 
 
 YAML = (".yaml", ".yml")

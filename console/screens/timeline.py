@@ -11,7 +11,6 @@ the plan changed (a new forecast), at once when shown, else when shown next.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 from rich.text import Text
 from textual import on
@@ -23,6 +22,7 @@ from textual.widgets import Footer, Static
 
 from console.bindings import bind, bindings
 from console.state import timeline as tl
+from console.state.changes import StateChange, Topic
 from console.state.model import ConsoleModel
 from console.widgets.bars import TitleBar
 from console.widgets.timeline.view import TimelineView
@@ -31,7 +31,8 @@ TCSS = [
     Path(__file__).with_name("timeline.tcss"),
     Path(__file__).parents[1] / "widgets" / "timeline" / "timeline.tcss",
 ]
-TOPICS = ("plan", "fleet")
+# the forecast, and what it is made from
+TOPICS = frozenset({Topic.FORECAST, Topic.MISSION, Topic.FLEET, Topic.TELEMETRY})
 
 
 class TimelineScreen(Screen):
@@ -43,7 +44,7 @@ class TimelineScreen(Screen):
     ]
     CSS_PATH = TCSS
 
-    def __init__(self, model: ConsoleModel, changes: Signal[tuple[str, str | None]]) -> None:
+    def __init__(self, model: ConsoleModel, changes: Signal[StateChange]) -> None:
         super().__init__()
         self.model = model
         self.changes = changes
@@ -70,8 +71,8 @@ class TimelineScreen(Screen):
         if self.win is not None:  # the first draw comes with the screen's resume
             self.call_after_refresh(self.redraw)
 
-    def _changed(self, change: Any) -> None:
-        if change[0] not in TOPICS:
+    def _changed(self, change: StateChange) -> None:
+        if not change.topics & TOPICS:
             return
         if self.app.screen is self:
             self.redraw()

@@ -23,7 +23,9 @@ from backend.core.model import (
     UplinkCommand,
     how_to_change,
 )
-from backend.core.rules.uplink import pending_allows
+from backend.core.ops import Sync
+from backend.core.rules.base import Refusal, uplink_locks
+from backend.core.rules.uplink import pending_allows, sync_skills
 from console.state.keys import KeyNames
 from console.state.text import STATUS_WORDS
 
@@ -187,14 +189,12 @@ def _sync(q: Selected) -> str | None:
     if q.found is None:
         return "select the last skill to synchronize"
     r, _, s = q.found
-    if s.status != Status.IDLE:
-        return (
-            f"{s.id} is {STATUS_WORDS[s.status]} on {r}: "
-            "synchronize through an idle (unsynchronized) skill"
-        )
-    c = q.facts.uplinking(s.id)
-    if c is not None:
-        return uplinking_why(c, q.facts.keys)
+    mission = q.facts.mission
+    assert mission is not None  # why_not says so first
+    try:  # the rule the server applies says which skills it would send
+        sync_skills(mission, Sync(robot=r, through=s.id), uplink_locks(mission))
+    except Refusal as refused:
+        return _sync_refused(q, refused, r, s)
     blocked = q.facts.plan_blocking(r, s.id)
     if blocked:
         more = f" and {len(blocked) - 2} more" if len(blocked) > 2 else ""
@@ -203,6 +203,18 @@ def _sync(q: Selected) -> str | None:
             f"it with a reason on the checks screen ({q.facts.keys.say('app.show_checks')})"
         )
     return None
+
+
+def _sync_refused(q: Selected, refused: Refusal, robot: str, s: SkillInstance) -> str:
+    """The rule's refusal in the console's words where it has its own: the
+    status as the schedule shows it, the pending command and its way out."""
+    if refused.code == "not_idle":
+        return (
+            f"{s.id} is {STATUS_WORDS[s.status]} on {robot}: "
+            "synchronize through an idle (unsynchronized) skill"
+        )
+    c = q.facts.uplinking(s.id) if refused.code == "locked" else None
+    return uplinking_why(c, q.facts.keys) if c is not None else refused.message
 
 
 def _unsync(q: Selected) -> str | None:

@@ -74,7 +74,8 @@ def filter_examples(model: ConsoleModel) -> str:
     def pick(field: str) -> str | None:
         values = [v for f in facets for v in f[field]]
         telling = [v for v in values if sum(v in f[field] for f in facets) < len(facets)]
-        return (telling or values or [None])[0]
+        first = telling or values
+        return first[0] if first else None
 
     examples = []
     for field, prefix in (

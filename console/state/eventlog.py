@@ -1,17 +1,18 @@
 """The event log and the alert book — what happened, and what needs a person.
 
-No Textual here. The app feeds both from its messages: every operation
-(event batch, with the console and user that made it), robot reports (status
-changes), the console's own refusals, failures, and alerts. Both are bounded
-in memory: the log keeps the last `LOG_LIMIT` entries, the alert book the last
-`ALERT_LIMIT` alerts; older ones are dropped (the server's journal keeps the
-full history of operations).
+No Textual here. The console's model (console/state/model.py) feeds both
+from the client's events: every operation (event batch, with the console
+and user that made it), robot reports (one line per status event, rendered
+from the event itself), the console's own refusals and failures, and
+alerts. Both are bounded in memory: the log keeps the last `LOG_LIMIT`
+entries, the alert book the last `ALERT_LIMIT` alerts (the server's journal
+keeps the full history of operations).
 
-Alerts come from two sides: the console derives what it can see itself
-(failures in reports, robots going offline, out of range, low battery, its
-own refusals) and the server publishes `Alert`s (failures, offline, ...).
-The same situation reported by both is one alert: alerts with the same
-(kind, robot, skill, text key) within `MERGE_WINDOW` are merged.
+Alerts about robots come from the server only (`backend.core.alerts`: it
+numbers them, and its state snapshot repeats the last ones, so a console
+that was away takes what it missed, each once). The console's own alerts
+are about itself: its refusals and the messages it could not read; the same
+one again within `REPEAT_WINDOW` counts up instead of piling up.
 """
 
 from __future__ import annotations
@@ -26,21 +27,19 @@ from typing import Any, Literal
 from pydantic import BaseModel
 
 from backend.core import events as ev
-from backend.core.model import Mission
-from backend.protocol.messages import Alert, RobotInfo, Telemetry
-from console.state.model import ConsoleModel
+from backend.core.model import Status
+from backend.protocol.messages import Alert
 from console.state.text import GLYPHS, STATUS_WORDS
 
 LOG_LIMIT = 10_000
 ALERT_LIMIT = 1_000
-MERGE_WINDOW = timedelta(seconds=60)
-LOW_BATTERY = 0.20
+REPEAT_WINDOW = timedelta(seconds=60)
+
+Owner = Callable[[str], str | None]  # skill id -> its robot
 
 Kind = Literal["operation", "report", "refusal", "failure", "alert"]
 KINDS: tuple[str, ...] = ("operation", "report", "refusal", "failure", "alert")
-AlertKind = Literal[
-    "failure", "offline", "out_of_range", "low_battery", "refusal", "server", "malformed"
-]
+OwnKind = Literal["refusal", "malformed"]  # what a console alerts about itself
 
 
 def split_actor(actor: str) -> tuple[str, str]:
@@ -70,11 +69,11 @@ class AlertEntry(BaseModel):
     id: int
     at: datetime
     level: Literal["info", "warning", "error"] = "warning"
-    kind: AlertKind
+    kind: str  # an AlertKind (the server's) or an OwnKind (this console's)
     robot: str | None = None
     skill: str | None = None
     message: str
-    source: Literal["console", "server", "both"] = "console"
+    source: Literal["console", "server"] = "console"
     count: int = 1
     acknowledged: bool = False
 
@@ -87,29 +86,28 @@ class EventLog:
         self.entries: deque[LogEntry] = deque(maxlen=limit)
         self.seq = 0
 
-    def add(self, kind: str, text: str, at: datetime, **kw) -> LogEntry:
+    def add(self, kind: Kind, text: str, at: datetime, **kw: Any) -> LogEntry:
         self.seq += 1
         e = LogEntry(seq=self.seq, at=at, kind=kind, text=text, **kw)
         self.entries.append(e)
         return e
 
-    def add_batch(self, batch: ev.EventBatch, model: ConsoleModel, at: datetime) -> list[LogEntry]:
-        """A batch already applied to `model` -> a report/failure line per status
-        change for robot reports, one operation line otherwise."""
+    def add_batch(self, batch: ev.EventBatch, owner: Owner, at: datetime) -> list[LogEntry]:
+        """A batch (already applied: `owner` knows its skills) -> a
+        report/failure line per status event of a robot's report, one
+        operation line otherwise."""
         user, client = split_actor(batch.actor)
         out: list[LogEntry] = []
         if batch.op == "report":
             for e in batch.events:
-                if isinstance(e, ev.SkillChanged) and "status" in e.changes:
-                    status = e.changes["status"]
-                    robot = model.owner(e.id) or client
-                    info = e.changes.get("status_info") or ""
-                    word = next(
-                        (STATUS_WORDS[s] for s in STATUS_WORDS if s.value == status), status
+                if isinstance(e, ev.SkillStatusChanged) and e.status is not None:
+                    status = e.status
+                    robot = owner(e.id) or client
+                    info = e.info or ""
+                    kind: Kind = "failure" if status == Status.FAILURE else "report"
+                    text = f"{GLYPHS[status]} {e.id} {STATUS_WORDS[status]}" + (
+                        f": {info}" if info else ""
                     )
-                    glyph = next((GLYPHS[s] for s in GLYPHS if s.value == status), "·")
-                    kind = "failure" if status == "failure" else "report"
-                    text = f"{glyph} {e.id} {word}" + (f": {info}" if info else "")
                     out.append(
                         self.add(
                             kind,
@@ -124,13 +122,15 @@ class EventLog:
                         )
                     )
             return out
-        robots, parts = _summary(batch, model)
+        robots, parts = _summary(batch, owner)
         text = f"{batch.op or 'change'}" + (f": {'; '.join(parts)}" if parts else "")
         skill = next(
             (
                 e.id
                 for e in batch.events
-                if isinstance(e, ev.SkillChanged | ev.SkillRemoved | ev.SkillMoved)
+                if isinstance(
+                    e, ev.SkillStatusChanged | ev.SkillEdited | ev.SkillRemoved | ev.SkillMoved
+                )
             ),
             None,
         )
@@ -178,11 +178,14 @@ PHRASES: dict[type, Callable[[Any], str]] = {
     ev.WaiverSet: lambda e: f"waived {e.check}: {e.waiver.reason}",
     ev.WaiverRemoved: lambda e: f"waiver of {e.check} withdrawn",
     ev.CommandQueued: lambda e: f"{e.command.title()} queued for {e.command.robot}",
-    ev.CommandChanged: lambda e: f"command {e.id} {e.changes.get('state', 'changed')}",
+    ev.CommandChanged: lambda e: f"command {e.id} {e.state or 'changed'}",
 }
 
 
-def _summary(batch: ev.EventBatch, model: ConsoleModel) -> tuple[list[str], list[str]]:
+EDIT_FIELDS = ("label", "params", "bindings", "policies")
+
+
+def _summary(batch: ev.EventBatch, owner: Owner) -> tuple[list[str], list[str]]:
     robots: list[str] = []
     parts: list[str] = []
 
@@ -201,13 +204,16 @@ def _summary(batch: ev.EventBatch, model: ConsoleModel) -> tuple[list[str], list
             case ev.SkillMoved(robot=r, id=sid, index=i):
                 robot(r)
                 parts.append(f"{sid} → #{i + 1}")
-            case ev.SkillChanged(id=sid, changes=ch):
-                robot(model.owner(sid))
-                status = ch.get("status")
-                parts.append(f"{sid} {status}" if status else f"{sid} {_changes(ch)}")
+            case ev.SkillStatusChanged(id=sid, status=status):
+                robot(owner(sid))
+                parts.append(f"{sid} {status}" if status else f"{sid} status_info={e.info}")
+            case ev.SkillEdited(id=sid):
+                robot(owner(sid))
+                ch = {k: getattr(e, k) for k in EDIT_FIELDS if getattr(e, k) is not None}
+                parts.append(f"{sid} {_changes(ch)}")
             case ev.BarrierSet(id=bid, barrier=b):
                 for sid in b.skills:
-                    robot(model.owner(sid))
+                    robot(owner(sid))
                 parts.append(f"barrier {bid} ({', '.join(b.skills)})")
             case _:
                 phrase = PHRASES.get(type(e))
@@ -218,7 +224,7 @@ def _summary(batch: ev.EventBatch, model: ConsoleModel) -> tuple[list[str], list
     return robots, parts
 
 
-def _changes(ch: dict) -> str:
+def _changes(ch: dict[str, Any]) -> str:
     """'label=find a stone, params' — short values shown, the rest named."""
     out = []
     for k in sorted(ch):
@@ -253,56 +259,60 @@ class AlertBook:
     def __init__(self, limit: int = ALERT_LIMIT) -> None:
         self.alerts: deque[AlertEntry] = deque(maxlen=limit)
         self.next_id = 1
-        # per robot: last known presence, range, battery side of the threshold
-        self._online: dict[str, bool] = {}
-        self._in_range: dict[str, bool] = {}
-        self._low: dict[str, bool] = {}
+        self._seen: set[tuple[str, int]] = set()  # (server run, alert id) taken already
 
     @property
     def unacknowledged(self) -> int:
         return sum(1 for a in self.alerts if not a.acknowledged)
 
-    def add(
-        self,
-        kind: str,
-        message: str,
-        at: datetime,
-        *,
-        level: str = "warning",
-        robot: str | None = None,
-        skill: str | None = None,
-        source: str = "console",
-    ) -> AlertEntry | None:
-        """A new alert, or None when it merged into an alert of the same situation."""
-        for a in reversed(self.alerts):
-            if (
-                a.kind == kind
-                and a.robot == robot
-                and a.skill == skill
-                and abs(a.at - at) <= MERGE_WINDOW
-            ):
-                if kind == "refusal" and a.message != message:
-                    continue
-                if a.source != source:
-                    a.source = "both"
-                    if source == "server" and len(message) > len(a.message):
-                        a.message = message  # the server's sentence may say more
-                else:
-                    a.count += 1
-                return None
-        a = AlertEntry(
-            id=self.next_id,
-            at=at,
-            level=level,
-            kind=kind,
-            robot=robot,
-            skill=skill,
-            message=message,
-            source=source,
-        )
+    def _append(self, **fields: Any) -> AlertEntry:
+        a = AlertEntry(id=self.next_id, **fields)
         self.next_id += 1
         self.alerts.append(a)
         return a
+
+    def add(
+        self,
+        kind: OwnKind,
+        message: str,
+        at: datetime,
+        *,
+        robot: str | None = None,
+        skill: str | None = None,
+    ) -> AlertEntry | None:
+        """This console's own alert; None when the same one was raised within
+        REPEAT_WINDOW (it counts up instead)."""
+        for a in reversed(self.alerts):
+            same = (a.source, a.kind, a.robot, a.skill, a.message) == (
+                "console",
+                kind,
+                robot,
+                skill,
+                message,
+            )
+            if same and abs(a.at - at) <= REPEAT_WINDOW:
+                a.count += 1
+                return None
+        return self._append(at=at, kind=kind, robot=robot, skill=skill, message=message)
+
+    def from_server(self, a: Alert, server: str) -> AlertEntry | None:
+        """The server's alert (run `server`); None when taken already."""
+        if (server, a.id) in self._seen:
+            return None
+        self._seen.add((server, a.id))
+        return self._append(
+            at=a.at,
+            level=a.level,
+            kind=a.kind.value,
+            robot=a.robot,
+            skill=a.skill,
+            message=a.message,
+            source="server",
+        )
+
+    def seen(self, alerts: Iterable[Alert], server: str) -> None:
+        """Alerts raised before this console first looked: not news."""
+        self._seen.update((server, a.id) for a in alerts)
 
     def acknowledge(self, alert_id: int | None = None) -> int:
         """One alert (by id) or all (None); returns how many changed."""
@@ -312,101 +322,6 @@ class AlertBook:
                 a.acknowledged = True
                 n += 1
         return n
-
-    # -- what the console derives itself ------------------------------------------------
-    def from_server(self, a: Alert) -> AlertEntry | None:
-        kind = {"failure": "failure", "offline": "offline"}.get(
-            getattr(a, "kind", "") or "", "server"
-        )
-        return self.add(
-            kind, a.message, a.at, level=a.level, robot=a.robot, skill=a.skill, source="server"
-        )
-
-    def from_batch(self, entries: list[LogEntry]) -> list[AlertEntry]:
-        out = []
-        for e in entries:
-            if e.kind == "failure":
-                robot = e.robots[0] if e.robots else None
-                a = self.add(
-                    "failure",
-                    f"{robot}: {e.text.removeprefix('✗ ')}",
-                    e.at,
-                    level="error",
-                    robot=robot,
-                    skill=e.skill,
-                )
-                if a:
-                    out.append(a)
-        return out
-
-    def from_fleet(self, info: RobotInfo, at: datetime) -> AlertEntry | None:
-        was = self._online.get(info.name)
-        self._online[info.name] = info.online
-        if was and not info.online:
-            return self.add(
-                "offline", f"robot {info.name} went offline", info.since or at, robot=info.name
-            )
-        return None
-
-    def from_telemetry(self, t: Telemetry, at: datetime) -> list[AlertEntry]:
-        out = []
-        r = t.robot
-        was_in = self._in_range.get(r, True)
-        self._in_range[r] = t.in_range
-        if was_in and not t.in_range:
-            a = self.add("out_of_range", f"{r} is out of communication range", at, robot=r)
-            if a:
-                out.append(a)
-        low = t.battery < LOW_BATTERY
-        was_low = self._low.get(r, False)
-        self._low[r] = low
-        if low and not was_low:  # once per crossing; re-armed when back above
-            a = self.add(
-                "low_battery",
-                f"{r}: battery low ({int(t.battery * 100)} % < {int(LOW_BATTERY * 100)} %)",
-                at,
-                robot=r,
-            )
-            if a:
-                out.append(a)
-        return out
-
-    def seed_fleet(
-        self, robots: dict[str, RobotInfo], at: datetime | None = None
-    ) -> list[AlertEntry]:
-        """A full state: remember presence. On the first one nothing is a
-        change; after a reconnect (`at` given) a robot seen online before and
-        offline now went offline while the console was away: an alert."""
-        out = []
-        for name, info in robots.items():
-            was = self._online.get(name)
-            self._online[name] = info.online
-            if at is not None and was and not info.online:
-                a = self.add("offline", f"robot {name} went offline", info.since or at, robot=name)
-                if a:
-                    out.append(a)
-        return out
-
-    def missed_failures(
-        self, before: dict[str, str], mission: Mission, at: datetime
-    ) -> list[AlertEntry]:
-        """After a reconnect: skills that failed while the console was away
-        (`before`: skill id -> status it last knew)."""
-        out = []
-        for robot, task in mission.tasks.items():
-            for s in task:
-                if s.status.value == "failure" and before.get(s.id) != "failure":
-                    text = (
-                        f"{robot}: {s.id} failure: {s.status_info}"
-                        if s.status_info
-                        else f"{robot}: {s.id} failed"
-                    )
-                    a = self.add(
-                        "failure", text, s.finished_at or at, level="error", robot=robot, skill=s.id
-                    )
-                    if a:
-                        out.append(a)
-        return out
 
 
 TOAST_TOGETHER = timedelta(seconds=30)  # offline alerts this close are one situation

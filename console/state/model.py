@@ -1,11 +1,16 @@
 """What the console knows, and what it derives from it — no Textual here.
 
-`ConsoleModel` holds the mirrored mission, the skill library, the fleet
-(presence, manifests), the latest telemetry per robot and the connection
-state. The app updates it from messages (`console.messages`) only, so tests
-can drive it without a network. What the screens show is derived here and
-beside it (console/state/text.py: glyphs, summaries; availability.py: why an
-action does not apply), so it can be unit-tested without a terminal.
+`ConsoleModel` is the console's only mirror: the mission, the skill
+library, the fleet (presence, manifests), the latest telemetry per robot,
+the connection, the event log and the alerts. It takes the client library's
+typed events as they are (`take`: a state, an event batch, a robot, a
+telemetry sample, an alert, the connection, an unreadable message) and the
+few the console says about itself (console/state/changes.py), applies each
+through one path (batches through `backend.core.events.apply_events`, as the
+server does) and answers one `StateChange`: which topics, which robots. Tests
+feed it the same events, without a network. What the screens show is
+derived here and beside it (console/state/text.py: glyphs, summaries;
+availability.py: why an action does not apply).
 """
 
 from __future__ import annotations
@@ -14,17 +19,41 @@ import hashlib
 from collections import deque
 from dataclasses import dataclass, field
 from datetime import datetime
+from typing import Any
 
+from backend.client.events import (
+    AlertRaised,
+    BatchApplied,
+    ConnectionState,
+    Malformed,
+    RobotChanged,
+    StateSynced,
+    TelemetryReceived,
+)
 from backend.core import events as ev
 from backend.core.library import Library
 from backend.core.model import ACTIVE, Mission, SkillInstance, Status, UplinkCommand
-from backend.protocol.messages import RobotInfo, Telemetry
+from backend.protocol.keys import Keys
+from backend.protocol.messages import RobotInfo, StateSnapshot, Telemetry
 from console.state import availability, link
+from console.state.changes import (
+    NOTHING,
+    AccountKnown,
+    Connecting,
+    MapFed,
+    ModelEvent,
+    Previewed,
+    StateChange,
+    Topic,
+    Unreachable,
+    change,
+)
 from console.state.clock import MissionClock
+from console.state.eventlog import AlertBook, EventLog
 from console.state.freshness import Freshness, freshness
 from console.state.keys import KeyNames
 from console.state.plan import PlanView
-from console.state.site import Site
+from console.state.site import SiteScore
 from console.state.text import GLYPHS, STATUS_WORDS
 
 HISTORY = 120  # telemetry samples kept per robot (bounded memory)
@@ -45,7 +74,11 @@ ROBOT_OPS = frozenset({"report", "answer", "sync_ack", "unsync_done", "retry_ack
 
 
 PLAN_FIELDS = {"id", "skill", "label", "params", "bindings", "policies"}  # a skill, as planned
-_PLAN = {"tasks": {"__all__": {"__all__": PLAN_FIELDS}}, "barriers": True, "markers": True}
+_PLAN: dict[str, Any] = {
+    "tasks": {"__all__": {"__all__": PLAN_FIELDS}},
+    "barriers": True,
+    "markers": True,
+}
 
 
 def plan_digest(mission: Mission) -> str:
@@ -97,10 +130,114 @@ class ConsoleModel:
     _uplinking: tuple[int, dict[str, UplinkCommand]] = field(default_factory=lambda: (-1, {}))
     # the plan's forecast and checks (console/state/plan.py), refreshed by the app
     plan: PlanView = field(default_factory=PlanView)
-    # the simulator's score from its map feed (None: no simulator)
-    site: Site | None = None
+    # the simulator's score from its map feed (None: no simulator; its time is the clock's)
+    site: SiteScore | None = None
+    previewing: bool = False  # what is shown is a mission file's plan, not the server's yet
     # the keys as the user has them (the actions table and their keymap), for sentences
     keys: KeyNames = field(default_factory=KeyNames)
+    # the map feed's mirror (None: no feed yet): backend.client.mapfollow
+    map_mirror: Any = None
+    map_update: Any = None  # its last update (mapfollow.MapUpdate)
+    # what happened (bounded), and what needs a person
+    log: EventLog = field(default_factory=EventLog)
+    alerts: AlertBook = field(default_factory=AlertBook)
+
+    # -- taking events --------------------------------------------------------------
+    def take(self, event: ModelEvent) -> StateChange:
+        """Apply one event; what changed."""
+        match event:
+            case StateSynced(snapshot=snap):
+                return self._synced(snap)
+            case BatchApplied(batch=batch):
+                return self._applied(batch)
+            case RobotChanged(robot=info):
+                self.set_robot(info)
+                return change(Topic.FLEET, robots={info.name})
+            case TelemetryReceived(telemetry=t):
+                self.set_telemetry(t)
+                return change(Topic.TELEMETRY, robots={t.robot})
+            case AlertRaised(alert=a):
+                entry = self.alerts.from_server(a, self.server_id)
+                return self._raised(entry)
+            case Malformed():
+                robot = Keys.robot_of(event.key) if "/robot/" in event.key else None
+                entry = self.alerts.add("malformed", event.sentence(), self.clock(), robot=robot)
+                return self._raised(entry)
+            case _:
+                return self._connection(event)
+
+    def _connection(self, event: ModelEvent) -> StateChange:
+        match event:
+            case ConnectionState(state=state):
+                self.connection, self.connection_detail = state, ""
+            case Connecting(endpoint=endpoint, detail=detail):
+                self.connection, self.connection_detail = CONNECTING, detail
+                self.endpoint = endpoint
+            case Unreachable(detail=detail):
+                self.connection, self.connection_detail = UNREACHABLE, detail
+            case AccountKnown(read_only=read_only):
+                self.read_only = read_only
+            case Previewed(mission=mission, library=library) if self.mission is None:
+                self.load(mission, library)  # (the server's state came first: nothing)
+                self.previewing = True
+                return change(Topic.MISSION, Topic.FLEET, loaded=True)
+            case MapFed(mirror=mirror, update=update, speed=speed):
+                self.map_mirror, self.map_update = mirror, update
+                topics = {Topic.MAP}
+                if (objects := getattr(mirror, "objects", None)) is not None:  # a simulator
+                    self.site = SiteScore(objects.score)  # its time is the mission clock's
+                    if not self.clock.simulated:  # the times shown so far were wall times
+                        topics |= {Topic.MISSION, Topic.FLEET}
+                    self.clock.heard(
+                        mirror.sim_time, getattr(mirror, "speed", None) or speed or 1.0
+                    )
+                return change(*topics, map_update=update)
+            case _:
+                return NOTHING
+        return change(Topic.CONNECTION)
+
+    def _synced(self, snap: StateSnapshot) -> StateChange:
+        """A whole state: the first, or after a gap or a server restart. The
+        server's alerts in it that this console has not taken are news (none
+        on the first: they happened before it looked)."""
+        if self.previewing:  # the file's plan was no state: this is the first
+            self.mission, self.previewing = None, False
+        first = self.mission is None
+        self.load(snap.mission, snap.library, snap.robots, snap.server_id)
+        if first:
+            self.alerts.seen(snap.alerts, snap.server_id)
+        raised = []
+        for a in snap.alerts:
+            entry = self.alerts.from_server(a, snap.server_id)
+            if entry is not None:
+                raised.append(entry)
+                if entry.kind == "failure":  # its report never reached this console
+                    self.log.add("failure", entry.message, entry.at, **_about(entry))
+                else:
+                    self.log.add("alert", entry.message, entry.at, client="server", **_about(entry))
+        topics = [Topic.MISSION, Topic.FLEET, Topic.CONNECTION]
+        if raised:
+            topics += [Topic.ALERTS, Topic.LOG]
+        return change(*topics, loaded=True, alerts=tuple(raised))
+
+    def _applied(self, batch: ev.EventBatch) -> StateChange:
+        if self.mission is None or batch.revision <= self.mission.revision:
+            return NOTHING  # in the state already
+        robots = self.apply(batch)
+        self.log.add_batch(batch, self.owner, self.clock())
+        moved = tuple(
+            e.skill.id if isinstance(e, ev.SkillAdded) else e.id
+            for e in batch.events
+            if isinstance(e, ev.SkillAdded | ev.SkillMoved)
+        )
+        return change(Topic.MISSION, Topic.LOG, robots=robots, revision=batch.revision, moved=moved)
+
+    def _raised(self, entry: Any) -> StateChange:
+        if entry is None:  # taken already, or counted up
+            return change(Topic.ALERTS)
+        if entry.kind != "failure":  # a failure is a log line already (the report's)
+            self.log.add("alert", entry.message, entry.at, client=entry.source, **_about(entry))
+        return change(Topic.ALERTS, Topic.LOG, alerts=(entry,))
 
     # -- updates ------------------------------------------------------------------
     def load(
@@ -130,14 +267,16 @@ class ConsoleModel:
             {sid: bid for bid, b in m.barriers.items() for sid in b.skills} if m else {}
         )
 
-    def apply(self, batch: ev.EventBatch, mission: Mission | None = None) -> set[str] | None:
-        """Take an event batch. `mission` given: the client applied it already
-        (adopt its mirror); otherwise apply it here. Returns the robots whose
-        columns changed, or None when everything may have changed."""
+    def apply(self, batch: ev.EventBatch) -> set[str] | None:
+        """Apply an event batch (the one path: `apply_events`). Returns the
+        robots whose columns changed, or None when everything may have changed
+        (an old batch, in the state already: none)."""
         if self.mission is None:
             return None
-        if not self._take(batch, mission):
+        if batch.revision <= self.mission.revision:
             return set()
+        self.mission = ev.apply_events(self.mission, batch)
+        self._heard_in(batch)
         robots: set[str] = set()
         reindex = False
         barriers = False
@@ -146,7 +285,7 @@ class ConsoleModel:
                 case ev.SkillAdded(robot=r) | ev.SkillRemoved(robot=r) | ev.SkillMoved(robot=r):
                     robots.add(r)
                     reindex = True
-                case ev.SkillChanged(id=sid):
+                case ev.SkillStatusChanged(id=sid) | ev.SkillEdited(id=sid):
                     shown = self._shown_by(sid)
                     reindex = reindex or shown is None
                     robots.update(shown or ())
@@ -155,8 +294,8 @@ class ConsoleModel:
                 case ev.CommandQueued(command=c):
                     robots.add(c.robot)  # its skills show ⇡, its header the count
                 case ev.CommandChanged(id=cid):
-                    c = self.mission.command(cid)
-                    robots.update([c.robot] if c is not None else ())
+                    changed = self.mission.command(cid)
+                    robots.update([changed.robot] if changed is not None else ())
                 case ev.MissionReplaced():
                     for name in self.mission.robots:
                         self.robots.setdefault(name, RobotInfo(name=name))
@@ -188,22 +327,13 @@ class ConsoleModel:
             )
         return out
 
-    def _take(self, batch: ev.EventBatch, mission: Mission | None) -> bool:
-        """The mission after `batch` (False: an old batch, nothing changed)."""
-        assert self.mission is not None
-        if mission is not None:
-            self.mission = mission
-        elif batch.revision <= self.mission.revision:
-            return False
-        else:
-            self.mission = ev.apply_events(self.mission, batch)
+    def _heard_in(self, batch: ev.EventBatch) -> None:
         if batch.op in ROBOT_OPS:  # the robot spoke: it was alive then
             now = self.clock()
             for e in batch.events:
                 robot = self._owner.get(getattr(e, "id", ""), None) or getattr(e, "robot", None)
                 if isinstance(robot, str):
                     self.heard[robot] = now
-        return True
 
     def mark_saved(self) -> None:
         """The plan was just saved to (or loaded from) a file."""
@@ -332,25 +462,15 @@ class ConsoleModel:
     def activity_text(self, robot: str) -> str:
         """What the robot is doing: from telemetry when fresh, else the plan."""
         act, queued = self.robot_state(robot)
-        if act is not None:
-            t = self.telemetry.get(robot)
-            extra = ""
-            if (
-                t is not None
-                and t.skill == act.id
-                and t.progress is not None
-                and act.status == Status.RUNNING
-            ):
-                extra = f" {int(t.progress * 100)}%"
-            return f"{GLYPHS[act.status]} {act.id} {STATUS_WORDS[act.status]}{extra}"
         t = self.telemetry.get(robot)
+        if act is not None:
+            extra = ""
+            if t is not None and t.skill == act.id and act.status == Status.RUNNING:
+                extra = f" {int(t.progress * 100)}%" if t.progress is not None else ""
+            return f"{GLYPHS[act.status]} {act.id} {STATUS_WORDS[act.status]}{extra}"
         mode = t.mode if t is not None else ""
         if queued:
-            return (
-                f"halted · {queued} queued"
-                if not mode or mode == "idle"
-                else f"{mode} · {queued} queued"
-            )
+            return f"{mode if mode and mode != 'idle' else 'halted'} · {queued} queued"
         return mode or "idle"
 
     def uplinking(self, sid: str) -> UplinkCommand | None:
@@ -381,3 +501,8 @@ class ConsoleModel:
     def read_only_reason(self, skill_id: str) -> str | None:
         """Why the parameter editor is read-only for this skill (None: editable)."""
         return availability.read_only_reason(self, skill_id)
+
+
+def _about(entry: Any) -> dict[str, Any]:
+    """An alert's robot and skill, as a log entry names them."""
+    return {"robots": [entry.robot] if entry.robot else [], "skill": entry.skill}

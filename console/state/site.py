@@ -23,13 +23,13 @@ if TYPE_CHECKING:  # the feed's module brings numpy: not needed for the console'
 
 
 @dataclass(frozen=True)
-class Site:
+class SiteScore:
     """The latest score the robots reported."""
 
     score: float
 
 
-def site_text(site: Site, clock: MissionClock) -> str:
+def site_text(site: SiteScore, clock: MissionClock) -> str:
     """'score 1.9 · sim 26:48': the score as reported and the mission clock."""
     return f"score {site.score:g} · {clock.now_text()}"
 

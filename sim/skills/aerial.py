@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 from backend.agent import SkillContext, Success
-from sim.skills.base import CLIMB_RATE, DRONE_MARGIN_S, SkillBase, pct, xy, yaw_of
-from sim.world import _fmt
+from backend.core.model import Pose
+from sim.objects import _fmt
+from sim.skills.base import CLIMB_RATE, DRONE_MARGIN_S, SkillBase, pct, xy
 
 MIN_TAKEOFF = 0.05  # battery above the reserve a drone needs to take off
 
@@ -18,7 +17,7 @@ class AerialSkills(SkillBase):
         if self.robot.kind != "drone":
             raise self.fail(f"{self.robot.name} cannot {skill}: it is not a drone")
 
-    async def takeoff(self, ctx: SkillContext, altitude: float = 5.0, **_: Any) -> Success:
+    async def takeoff(self, ctx: SkillContext, altitude: float) -> Success:
         self._need_drone("take off")
         r = self.robot
         if not r.airborne and r.usable < MIN_TAKEOFF:
@@ -30,14 +29,7 @@ class AerialSkills(SkillBase):
         await self.climb(ctx, float(altitude))
         return self.done(ctx, f"hovering at {r.z:.0f} m, battery {pct(r.battery)}")
 
-    async def fly_to(
-        self,
-        ctx: SkillContext,
-        goal: Any = None,
-        altitude: float = 5.0,
-        speed: float = 2.0,
-        **_: Any,
-    ) -> Success:
+    async def fly_to(self, ctx: SkillContext, goal: Pose, altitude: float, speed: float) -> Success:
         self._need_drone("fly")
         r = self.robot
         if not r.airborne:
@@ -57,9 +49,7 @@ class AerialSkills(SkillBase):
             sense=max(r.model.nav_range, self.sensor_range() * 0.5),
             empty=self._landed_short,
         )
-        yaw = yaw_of(goal)
-        if yaw is not None:
-            r.yaw = yaw
+        r.yaw = goal.yaw
         return self.done(ctx, f"hovering at {_fmt(r.x, r.y)}, battery {pct(r.battery)}")
 
     def _check_range(self, gx: float, gy: float, altitude: float, speed: float) -> None:
@@ -87,7 +77,7 @@ class AerialSkills(SkillBase):
             f"{r.name} made an emergency landing at {_fmt(r.x, r.y)}"
         )
 
-    async def land(self, ctx: SkillContext, where: str = "lander_pad", **_: Any) -> Success:
+    async def land(self, ctx: SkillContext, where: str) -> Success:
         self._need_drone("land")
         r, w = self.robot, self.world
         if not r.airborne:

@@ -16,28 +16,33 @@ from dataclasses import dataclass
 from typing import Any, NoReturn
 
 from backend.agent import SkillContext, SkillFailed, Success
+from backend.core.model import Pose, Position
+from sim.errors import SimError
+from sim.ground import StoneReport, StoneSeen
+from sim.objects import _fmt
 from sim.pathing import SLOW, Follower
+from sim.robot import SimRobot
 from sim.skills.host import SkillHost
-from sim.world import SimError, SimRobot, _fmt
+from sim.worldfile import RobotModel
 
 CLIMB_RATE = 1.0  # m/s, drone
 RESYNC_S = 120.0  # sim seconds behind the clock past which a robot stops catching up
 DRONE_MARGIN_S = 40.0  # flight seconds a drone keeps beyond its way back to the lander
+# a drone's explore range: its model's sensor_range at this altitude, in proportion to
+# the altitude, within these bounds (m)
+DRONE_RANGE_ALTITUDE = 5.0
+DRONE_RANGE = (8.0, 40.0)
 
 
-def xy(value: Any) -> tuple[float, float]:
-    """(x, y) of a Pose, Position or mapping."""
-    if value is None:
-        raise SkillFailed("a position parameter is missing")
-    if isinstance(value, dict):
-        return float(value.get("x", 0.0)), float(value.get("y", 0.0))
+def drone_range(model: RobotModel, altitude: float) -> float:
+    """Metres a drone's camera maps around it at `altitude`."""
+    low, high = DRONE_RANGE
+    return max(low, min(high, model.sensor_range * max(altitude, 1.0) / DRONE_RANGE_ALTITUDE))
+
+
+def xy(value: Pose | Position) -> tuple[float, float]:
+    """(x, y) of a pose or position parameter (typed by its kind: never a mapping)."""
     return float(value.x), float(value.y)
-
-
-def yaw_of(value: Any) -> float | None:
-    if isinstance(value, dict):
-        return float(value["yaw"]) if "yaw" in value else None
-    return float(getattr(value, "yaw", 0.0)) if hasattr(value, "yaw") else None
 
 
 def pct(x: float) -> str:
@@ -45,7 +50,7 @@ def pct(x: float) -> str:
 
 
 @dataclass
-class Leg:
+class MoveLeg:
     """One `move`: the path, what it may spend, what it sees and how it reports."""
 
     path: Follower
@@ -119,9 +124,9 @@ class SkillBase:
         """Energy for dt seconds of work (a drone in the air: flight energy)."""
         r = self.robot
         if r.kind == "drone" and r.airborne:
-            r.battery -= self.world.flight_energy(r, dt)
+            r.battery -= r.flight_energy(dt)
         else:
-            r.battery -= self.world.work_energy(r, dt, load)
+            r.battery -= r.work_energy(dt, load)
         r.battery = max(0.0, r.battery)
 
     async def work(
@@ -189,7 +194,7 @@ class SkillBase:
         if self.dist(*goal) <= tolerance:
             return 0.0
         r = self.robot
-        leg = Leg(
+        leg = MoveLeg(
             path=Follower(self._route(goal)),
             floor=0.0 if allow_reserve else r.model.reserve,
             sense=sense or r.model.nav_range,
@@ -233,7 +238,8 @@ class SkillBase:
 
     def _route(self, goal: tuple[float, float]) -> list[tuple[float, float]]:
         try:
-            return self.world.plan_route(self.robot, goal)
+            r = self.robot
+            return self.world.terrain.route((r.x, r.y), goal, flies=r.kind == "drone")
         except SimError as e:
             raise self.fail(str(e)) from None
 
@@ -243,9 +249,9 @@ class SkillBase:
         r, w = self.robot, self.world
         if r.kind == "drone":
             return speed, 0.0
-        code = w.terrain_at(r.x, r.y)
-        v = speed * (w.spec.terrain.slow_factor if code == SLOW else 1.0)
-        return v, w.drive_energy(r, 1.0, code)
+        slow = w.terrain.at(r.x, r.y) == SLOW
+        v = speed * (w.spec.terrain.slow_factor if slow else 1.0)
+        return v, r.drive_energy(1.0, w.spec.terrain.slow_energy if slow else 1.0)
 
     def _step_time(self, remaining: float, v: float, budget: Callable[[], float] | None) -> float:
         # the last step of a leg takes only the time it needs
@@ -256,10 +262,10 @@ class SkillBase:
 
     def _upkeep(self, dt: float) -> float:
         """Energy a moving robot spends by the second (a drone: all of its flight)."""
-        r, w = self.robot, self.world
-        return w.flight_energy(r, dt) if r.kind == "drone" else w.work_energy(r, dt)
+        r = self.robot
+        return r.flight_energy(dt) if r.kind == "drone" else r.work_energy(dt)
 
-    def _advance(self, leg: Leg, want: float, per_m: float, fixed: float) -> None:
+    def _advance(self, leg: MoveLeg, want: float, per_m: float, fixed: float) -> None:
         """One step of `want` metres, unless the battery runs out on the way."""
         r = self.robot
         if want * per_m + fixed > r.battery - leg.floor:
@@ -268,7 +274,7 @@ class SkillBase:
         r.battery = max(0.0, r.battery - moved * per_m - fixed)
         self._moved(leg, moved)
 
-    def _run_dry(self, leg: Leg, want: float, per_m: float, fixed: float) -> NoReturn:
+    def _run_dry(self, leg: MoveLeg, want: float, per_m: float, fixed: float) -> NoReturn:
         """The battery runs out during this step: go as far as the energy allows, stop."""
         r, path = self.robot, leg.path
         spare = r.battery - leg.floor
@@ -287,7 +293,7 @@ class SkillBase:
             "recharge at the lander"
         )
 
-    def _moved(self, leg: Leg, moved: float) -> None:
+    def _moved(self, leg: MoveLeg, moved: float) -> None:
         r, path = self.robot, leg.path
         r.x, r.y = path.x, path.y
         if moved > 0:
@@ -295,12 +301,12 @@ class SkillBase:
             r.odometer += moved
         self.world.reveal(r, leg.sense)
         if self.world.in_range(r):
-            r.passed_coverage = True  # its news goes out at the next uplink
+            self.world.downlink.crossed_coverage(r)  # its news goes out at the next pump
         if leg.discover:
             for name in self.world.discover(r, leg.sense):
                 self.host.note(r, f"found {name}")
 
-    def _report_leg(self, ctx: SkillContext, leg: Leg, v: float) -> None:
+    def _report_leg(self, ctx: SkillContext, leg: MoveLeg, v: float) -> None:
         path = leg.path
         total = path.total
         frac = leg.frac0 + (leg.frac1 - leg.frac0) * (path.done / total if total > 0 else 1.0)
@@ -318,13 +324,13 @@ class SkillBase:
     def sensor_range(self) -> float:
         r = self.robot
         if r.kind == "drone":
-            return max(8.0, min(40.0, r.model.sensor_range * max(r.z, 1.0) / 5.0))
+            return drone_range(r.model, r.z)
         return r.model.sensor_range
 
     def learn_stone(self, info: dict[str, Any]) -> None:
         """The robot saw the stone (the truth, so the newest): it knows it and reports it."""
         self.robot.knowledge.learn_stone(info)
-        self.world.tell_ground(self.robot, "stone", info["id"], info)
+        self.world.tell_ground(self.robot, StoneSeen(StoneReport.of(info)))
 
     def done(self, ctx: SkillContext, text: str) -> Success:
         """The skill's result: kept for the status, reported as its outcome."""
@@ -345,7 +351,7 @@ class SkillBase:
             dt = min(self.dt, seconds - done)
             await self.tick(ctx, dt)
             done += dt
-            r.battery = max(0.0, r.battery - self.world.flight_energy(r, dt))
+            r.battery = max(0.0, r.battery - r.flight_energy(dt))
             r.z = z0 + (altitude - z0) * min(1.0, done / seconds)
             ctx.progress(
                 frac0 + (frac1 - frac0) * done / seconds,

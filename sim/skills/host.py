@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from typing import Any, Protocol
 
-from sim.world import SimRobot, World
+from sim.robot import SimRobot
+from sim.world import World
 
 
 class SkillHost(Protocol):

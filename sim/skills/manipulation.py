@@ -6,8 +6,12 @@ import math
 from typing import Any
 
 from backend.agent import SkillContext, Success
+from backend.core.model import Pose, Position
+from backend.protocol import mapfeed as mf
+from sim.ground import BoxSeen, Delivered, box_item
+from sim.objects import BoxState, Stone, _fmt
+from sim.robot import SimRobot
 from sim.skills.base import SkillBase, pct, xy
-from sim.world import BoxState, SimRobot, Stone, _fmt
 
 APPROACH = 8.0  # a stone/box this close is approached within the skill
 STONE_SEARCH = 6.0  # metres around pick_stone's target where a known stone counts ...
@@ -22,9 +26,7 @@ class ManipulationSkills(SkillBase):
 
     # ------------------------------------------------------------ stones
 
-    async def pick_stone(
-        self, ctx: SkillContext, target: Any = None, region: str | None = None, **_: Any
-    ) -> Success:
+    async def pick_stone(self, ctx: SkillContext, target: Position, region: str | None) -> Success:
         r, w = self.robot, self.world
         if not r.has("manipulator"):
             raise self.fail(f"{r.name} has no arm to pick stones")
@@ -148,9 +150,7 @@ class ManipulationSkills(SkillBase):
             if other != r.name:
                 await self.host.tell(r, other, "stone", stone.public())
 
-    async def drop_stone(
-        self, ctx: SkillContext, into: str = "lander_sample_box", **_: Any
-    ) -> Success:
+    async def drop_stone(self, ctx: SkillContext, into: str) -> Success:
         r = self.robot
         if not r.has("manipulator"):
             raise self.fail(f"{r.name} has no arm")
@@ -178,21 +178,17 @@ class ManipulationSkills(SkillBase):
             stone.change(state="delivered", holder=None)
             score = stone.score or 0.0
             w.score = round(w.score + score, 6)
-            delivery = {
-                "stone": sid,
-                "rss": stone.rss,
-                "score": score,
-                "by": r.name,
-                "sim_time": round(w.now(), 1),
-            }
+            delivery = mf.Delivery(
+                stone=sid, rss=stone.rss, score=score, by=r.name, sim_time=round(w.now(), 1)
+            )
             w.delivered.append(delivery)
             self.learn_stone(stone.public())
-            w.tell_ground(r, "delivery", sid, delivery)
+            w.tell_ground(r, Delivered(delivery))
             w.log(f"{r.name} delivered {sid}: +{score:g}, score {w.score:g}")
             parts.append(f"{sid} of {stone.rss} +{score:g}")
             await self._tell_identifiers(stone)
         r.stones.clear()
-        gained = round(sum(d["score"] for d in w.delivered[-len(parts) :]), 6)
+        gained = round(sum(d.score for d in w.delivered[-len(parts) :]), 6)
         return f"delivered {', '.join(parts)}: +{gained:g}; score {w.score:g}"
 
     async def _put_stone_down(self, ctx: SkillContext) -> str:
@@ -210,15 +206,13 @@ class ManipulationSkills(SkillBase):
 
     # ------------------------------------------------------------ payload boxes
 
-    async def pick_payload_box(self, ctx: SkillContext, box: str = "", **_: Any) -> Success:
+    async def pick_payload_box(self, ctx: SkillContext, box: str) -> Success:
         if not self.robot.has("manipulator"):
             raise self.fail(f"{self.robot.name} has no arm to carry payload boxes")
         await self._take_box(ctx, box, 120.0)
         return self.done(ctx, f"picked {box}: carrying it")
 
-    async def place_payload_box(
-        self, ctx: SkillContext, box: str = "", goal: Any = None, **_: Any
-    ) -> Success:
+    async def place_payload_box(self, ctx: SkillContext, box: str, goal: Pose) -> Success:
         r = self.robot
         if r.box != box:
             raise self.fail(
@@ -241,9 +235,7 @@ class ManipulationSkills(SkillBase):
         await self._box_moved(box)
         return self.done(ctx, msg)
 
-    async def deploy_wifi_box(
-        self, ctx: SkillContext, box: str = "wifi_box_1", goal: Any = None, **_: Any
-    ) -> Success:
+    async def deploy_wifi_box(self, ctx: SkillContext, box: str, goal: Pose) -> Success:
         r, w = self.robot, self.world
         if not r.has("manipulator"):
             raise self.fail(f"{r.name} has no arm to carry payload boxes")
@@ -430,14 +422,14 @@ class ManipulationSkills(SkillBase):
         r, w = self.robot, self.world
         info = w.boxes[name].public()
         r.knowledge.boxes[name] = dict(info)
-        w.tell_ground(r, "box", name, info)
+        w.tell_ground(r, BoxSeen(box_item(info)))
         for other in sorted(w.robots):
             if other != r.name:
                 await self.host.tell(r, other, "box", info)
 
     # ------------------------------------------------------------ the lander's shelf
 
-    async def load_box(self, ctx: SkillContext, box: str = "", slot: int = 1, **_: Any) -> Success:
+    async def load_box(self, ctx: SkillContext, box: str, slot: int) -> Success:
         r, w = self.robot, self.world
         b, slot = self._loadable(box, slot)
         if b.where == "shelf" and b.slot == slot:
@@ -449,7 +441,7 @@ class ManipulationSkills(SkillBase):
             raise self.fail(f"the shelf changed meanwhile: {box} not loaded")
         b.where, b.slot = "shelf", slot
         r.knowledge.boxes[box] = b.public()
-        w.tell_ground(r, "box", box, b.public())
+        w.tell_ground(r, BoxSeen(box_item(b.public())))
         w.log(f"{r.name} shelved {box} on slot {slot}")
         for other in sorted(w.robots.values(), key=lambda o: o.name):
             if other.has("manipulator"):

@@ -3,16 +3,19 @@
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 
 from backend.agent import SkillContext, SkillFailed, Success
+from backend.core.model import Pose, Position
+from sim.objects import _fmt
 from sim.pathing import ROCK, lawnmower
-from sim.skills.base import DRONE_MARGIN_S, SkillBase, pct, xy, yaw_of
-from sim.world import SimRobot, World, _fmt
+from sim.robot import SimRobot
+from sim.skills.base import DRONE_MARGIN_S, SkillBase, pct, xy
+from sim.world import World
 
 MAPPED = 0.995  # the share of the area's cells that counts as all of it
+LANE_SPACING = 1.6  # explore lanes lie this many sensor ranges apart
 
 
 class Survey:
@@ -93,12 +96,7 @@ class MobilitySkills(SkillBase):
     """drive_to and explore handlers."""
 
     async def drive_to(
-        self,
-        ctx: SkillContext,
-        goal: Any = None,
-        speed: float = 0.5,
-        tolerance: float = 0.5,
-        **_: Any,
+        self, ctx: SkillContext, goal: Pose, speed: float, tolerance: float
     ) -> Success:
         self.need_kind("rover", skill="drive")
         r = self.robot
@@ -107,25 +105,23 @@ class MobilitySkills(SkillBase):
         await self.move(
             ctx, (gx, gy), speed, tolerance=tolerance, what=f"driving to {_fmt(gx, gy)}"
         )
-        yaw = yaw_of(goal)
-        if yaw is not None and self.dist(gx, gy) <= max(tolerance, 1.0):
-            r.yaw = yaw
+        if self.dist(gx, gy) <= max(tolerance, 1.0):
+            r.yaw = goal.yaw
         return self.done(ctx, f"at {_fmt(r.x, r.y)}, battery {pct(r.battery)}")
 
     async def explore(
         self,
         ctx: SkillContext,
-        area: Any = None,
-        max_duration: float = 300.0,
-        return_to_start: bool = False,
-        sensors: Any = None,
-        **_: Any,
+        area: list[Position],
+        max_duration: float,
+        return_to_start: bool,
+        sensors: list[str],
     ) -> Success:
         r = self.robot
         poly = self._area_to_explore(area, sensors)
         rng = self.sensor_range()
         survey = Survey(r, self.world, self._mappable(poly), max_duration, return_to_start)
-        lanes = lawnmower(poly, spacing=1.6 * rng, start=survey.start)
+        lanes = lawnmower(poly, spacing=LANE_SPACING * rng, start=survey.start)
         found_before = len(r.knowledge.rss)
         self._look_around(rng)
         await self._sweep(ctx, survey, lanes, rng)
@@ -148,7 +144,9 @@ class MobilitySkills(SkillBase):
             )
         return self.done(ctx, summary)
 
-    def _area_to_explore(self, area: Any, sensors: Any) -> list[tuple[float, float]]:
+    def _area_to_explore(
+        self, area: list[Position], sensors: list[str]
+    ) -> list[tuple[float, float]]:
         """The area's corners, once the robot can explore it with these sensors."""
         r = self.robot
         self.need_kind("rover", "drone", skill="explore")
@@ -158,7 +156,7 @@ class MobilitySkills(SkillBase):
             raise self.fail("the area needs at least three corners")
         poly = [xy(p) for p in area]
         known = set(r.model.capabilities) | {"stereo_camera"}
-        for s in sensors or []:
+        for s in sensors:
             if str(s) not in known:
                 raise self.fail(
                     f"{r.name} has no sensor '{s}' (it has: {', '.join(sorted(known))})"
@@ -170,7 +168,7 @@ class MobilitySkills(SkillBase):
         w = self.world
         cells = w.geom.polygon_mask(poly)
         if self.robot.kind != "drone":
-            cells &= w.terrain != ROCK
+            cells &= w.terrain.grid != ROCK
         if not cells.any():
             raise self.fail(
                 "the area holds no cell this robot can map (too small, or all impassable)"
@@ -191,7 +189,7 @@ class MobilitySkills(SkillBase):
         for wp in lanes:
             if survey.done() or survey.drone_must_return():
                 break
-            target = wp if r.kind == "drone" else w.nearest_free(*wp, max_r=rng)
+            target = wp if r.kind == "drone" else w.terrain.nearest_free(*wp, max_r=rng)
             if target is None:
                 continue
             try:

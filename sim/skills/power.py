@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 from backend.agent import SkillContext, Success
 from sim.skills.base import SkillBase, pct
 
@@ -13,7 +11,7 @@ PAD_INSIDE = 1.5  # metres inside the pad's edge a rover parks to charge
 class PowerSkills(SkillBase):
     """recharge handlers."""
 
-    async def recharge(self, ctx: SkillContext, target_level: float = 0.95, **_: Any) -> Success:
+    async def recharge(self, ctx: SkillContext, target_level: float) -> Success:
         r, w = self.robot, self.world
         self.need_kind("rover", "drone", skill="recharge")
         target_level = min(1.0, max(0.0, float(target_level)))
@@ -38,7 +36,7 @@ class PowerSkills(SkillBase):
         lx, ly = w.spec.lander.x, w.spec.lander.y
         k = max(0.0, (w.spec.lander.pad_radius - PAD_INSIDE) / d)
         goal = (lx + (r.x - lx) * k, ly + (r.y - ly) * k)
-        free = w.nearest_free(*goal, max_r=w.spec.lander.pad_radius) or goal
+        free = w.terrain.nearest_free(*goal, max_r=w.spec.lander.pad_radius) or goal
         await self.move(
             ctx,
             free,
@@ -59,11 +57,11 @@ class PowerSkills(SkillBase):
         )
 
     async def _charge(self, ctx: SkillContext, target_level: float) -> None:
-        r, w = self.robot, self.world
+        r = self.robot
         start = r.battery
         while r.battery < target_level - 1e-9:
             dt = await self.tick(ctx)
-            w.charge(r, dt, up_to=target_level)
+            r.charge(dt, up_to=target_level)
             span = max(target_level - start, 1e-9)
             rate = r.model.charge_per_minute / 60.0
             ctx.progress(

@@ -7,14 +7,20 @@ from dataclasses import dataclass
 from typing import Any
 
 from backend.agent import SkillContext, Success
+from backend.core.model import Pose, Position
+from sim.ground import RegionSeen, rss_item
+from sim.objects import RssState, Stone, _fmt, newer_stone
+from sim.robot import SimRobot
 from sim.skills.base import SkillBase, xy
-from sim.world import RssState, SimRobot, Stone, _fmt, newer_stone
 
 NEAR_TARGET = 5.0  # extra metres around a search radius that count as "at the target"
 CAMERA_RANGE = 15.0  # science camera
 IMAGE_RSS_MARGIN = 3.0  # metres around a region that an image of it may aim at
 IMAGING_S = 60.0  # sim seconds one science image takes
 IDENTIFY_S = 120.0  # sim seconds identifying takes, once at the search centre
+# metres from the search centre a rover identifies from (it drives there first): the
+# stone it identifies, at most a region's radius from the centre, stays within reach
+IDENTIFY_AT = 2.0
 PARTNER_WAIT = 300.0  # sim seconds one identifier waits for the other
 ASK_PERIOD = 10.0  # sim seconds between asks while waiting for the partner
 CAMERA_WORK = "identifying stones (science camera)"
@@ -42,12 +48,7 @@ class ScienceSkills(SkillBase):
     # ------------------------------------------------------------ take_science_image
 
     async def take_science_image(
-        self,
-        ctx: SkillContext,
-        target: Any = None,
-        filter: str = "multispectral",
-        camera: Any = None,
-        **_: Any,
+        self, ctx: SkillContext, target: Pose, filter: str, camera: dict[str, Any]
     ) -> Success:
         r, w = self.robot, self.world
         if not r.has("science_camera"):
@@ -84,18 +85,13 @@ class ScienceSkills(SkillBase):
             msg = f"{rss.name}: top stone score {rss.max_score:g}"
             w.log(f"{r.name} imaged {rss.name}: top stone score {rss.max_score:g}")
         info = r.knowledge.learn_rss(info)
-        w.tell_ground(r, "rss", rss.name, info)
+        w.tell_ground(r, RegionSeen(rss_item(info)))
         return msg
 
     # ------------------------------------------------------------ identify_stone
 
     async def identify_stone(
-        self,
-        ctx: SkillContext,
-        target: Any = None,
-        search_radius: float = 3.0,
-        partner: str | None = None,
-        **_: Any,
+        self, ctx: SkillContext, target: Position, search_radius: float, partner: str | None
     ) -> Success:
         r, w = self.robot, self.world
         tx, ty = xy(target)
@@ -129,16 +125,17 @@ class ScienceSkills(SkillBase):
         """A rover far from the search centre goes there first (part of the skill).
         Returns the share of the progress that took."""
         r = self.robot
-        if self.dist(tx, ty) <= radius + NEAR_TARGET:
-            return 0.0
         if r.kind != "rover":
             self._near_target(tx, ty, radius, "search centre")
+            return 0.0
+        if self.dist(tx, ty) <= IDENTIFY_AT:
+            return 0.0
         await self.move_before(
             ctx,
             IDENTIFY_S,
             (tx, ty),
             r.model.speed,
-            tolerance=max(1.0, radius * 0.5),
+            tolerance=IDENTIFY_AT,
             what="going to the search centre",
             frac1=0.3,
         )
@@ -151,7 +148,7 @@ class ScienceSkills(SkillBase):
             return
         rss.found_by.add(r.name)
         info = r.knowledge.learn_rss(rss.sighting())
-        w.tell_ground(r, "rss", rss.name, info)
+        w.tell_ground(r, RegionSeen(rss_item(info)))
         w.log(f"{r.name} discovered {rss.name} at {_fmt(rss.x, rss.y)}")
 
     async def _identify_by_camera(
@@ -171,15 +168,45 @@ class ScienceSkills(SkillBase):
             )
             waited += self.dt
         collab = self._collaborating(s.partner, s.x, s.y, "manipulator")
-        stone = self._identify(
-            s,
-            s.rss.max_score if collab else self.world.spec.scoring.min_score,
-            (r.name, s.partner) if collab and s.partner else (r.name,),
-        )
+        earlier = await self._partners_stone(s)
+        if earlier is not None:  # the partners name one stone: never use up two
+            how = f"{s.partner} had identified it alone (only a low-score stone)"
+            stone = earlier
+        else:
+            stone = self._identify(
+                s,
+                s.rss.max_score if collab else self.world.spec.scoring.min_score,
+                (r.name, s.partner) if collab and s.partner else (r.name,),
+            )
+            how = (
+                f"with {s.partner}"
+                if collab
+                else "alone (only a low-score stone without the manipulator)"
+            )
         await self.work(ctx, IDENTIFY_S * 0.2, CAMERA_WORK, frac0=s.at(0.8), frac1=s.at(1.0))
-        if collab:
-            return stone, f"with {s.partner}"
-        return stone, "alone (only a low-score stone without the manipulator)"
+        return stone, how
+
+    async def _partners_stone(self, s: Search) -> Stone | None:
+        """The stone the partner already identified alone in this search (it gave up
+        waiting), if it tells which: the camera names that one too."""
+        r, w = self.robot, self.world
+        alone = {
+            k.id
+            for k in (w.stones[i] for i in s.rss.stones)
+            if k.state == "identified"
+            and k.identified_by == (s.partner,)
+            and math.hypot(k.x - s.x, k.y - s.y) <= s.radius
+        }
+        if not alone or s.partner is None:
+            return None
+        where = {"x": s.x, "y": s.y, "radius": s.radius, "exclude": r.knowledge.gone_stones()}
+        answer = await self.host.ask(r, s.partner, "stone", where)
+        if answer is None or answer.get("id") not in alone:
+            return None
+        r.knowledge.learn_stone(answer)
+        stone = w.stones[answer["id"]]
+        stone.identified_by = (*stone.identified_by, r.name)
+        return stone
 
     def _manipulator_coming(self, s: Search, other: SimRobot | None) -> bool:
         """The partner with the manipulator works on this skill but is not here yet."""
@@ -206,9 +233,15 @@ class ScienceSkills(SkillBase):
         if answer is not None:
             r.knowledge.learn_stone(answer)
             stone = self.world.stones[answer["id"]]
-            if r.name not in stone.identified_by:
+            together = r.name in stone.identified_by
+            if not together:
                 stone.identified_by = (*stone.identified_by, r.name)
-            how = f"with {s.partner}: it told where the stone lies"
+            how = (
+                f"with {s.partner}: it told where the stone lies"
+                if together
+                else f"{s.partner} had identified it alone (only a low-score stone) and told "
+                "where it lies"
+            )
         else:
             stone = self._identify(s, self.world.spec.scoring.min_score, (r.name,))
             how = f"alone ({s.partner} did not point out a stone)"

@@ -26,6 +26,7 @@ import pytest
 import zenoh
 
 from backend.agent import RobotAgent
+from backend.core.library import SkillSignature
 from backend.core.model import Policies, SkillInstance, Status
 from backend.core.ops import Answer, Report
 from backend.protocol.keys import Keys
@@ -112,6 +113,7 @@ class FakeServer:
         self.sessions: dict[str, str] = {}  # robot -> registered session
         self.uplink_seq: dict[str, int] = {}
         self.pending: dict[str, list[UplinkEntry]] = {}
+        self.signatures: dict[str, SkillSignature] = {}  # sent with every accepted registration
 
     async def start(self) -> None:
         self.session = open_session(client_config([self.endpoint]))
@@ -158,7 +160,8 @@ class FakeServer:
             return dumps(RegisterReply(accepted=False, code=self.refuse_code, reason=self.refuse))
         self.sessions[reg.manifest.name] = reg.session
         self.apply(reg.manifest.name, reg.downlink)
-        return dumps(RegisterReply(last_seq=self.last_seq.get(reg.manifest.name, 0)))
+        last_seq = self.last_seq.get(reg.manifest.name, 0)
+        return dumps(RegisterReply(last_seq=last_seq, skills=self.signatures))
 
     async def _on_downlink(self, payload: bytes) -> bytes:
         dl = Downlink.model_validate_json(payload)
@@ -212,10 +215,12 @@ class FakeServer:
         *skills: SkillInstance,
         front: bool = False,
         barriers: dict[str, BarrierInfo] | None = None,
+        kinds: dict[str, dict[str, Any]] | None = None,
     ) -> Reply:
-        return await self.command(
-            robot, Enqueue(skills=list(skills), front=front, barriers=barriers or {})
+        enqueue = Enqueue(
+            skills=list(skills), front=front, barriers=barriers or {}, kinds=kinds or {}
         )
+        return await self.command(robot, enqueue)
 
     # -- inspection --------------------------------------------------------------
     def trail(self, robot: str) -> list[tuple[str, str]]:

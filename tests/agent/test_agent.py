@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 
 from backend.agent import Failure, RobotAgent, SkillFailed, SkillStopped, Success
+from backend.core.library import SkillSignature
 from backend.core.model import Policies, Pose, Position, SkillInstance, Status
 from backend.protocol.keys import Keys
 from backend.protocol.messages import (
@@ -117,7 +118,9 @@ async def test_registers_with_manifest_and_again_after_server_restart(harness: H
 # ---------------------------------------------------------------- execution
 
 
-async def test_enqueue_run_success_with_typed_params_and_consecutive_seqs(harness: Harness) -> None:
+async def test_enqueue_run_success_with_params_typed_by_kind_and_consecutive_seqs(
+    harness: Harness,
+) -> None:
     async with harness as h:
         lru1 = h.name("lru1")
         a = h.agent(lru1)
@@ -139,10 +142,12 @@ async def test_enqueue_run_success_with_typed_params_and_consecutive_seqs(harnes
             {"x": 1.0, "y": 0.0, "z": 0.0},
             {"x": 0.0, "y": 1.0, "z": 0.0},
         ]
+        kinds = {"goal": "pose", "region": "area", "poi": "marker", "n": "int", "speed": "float"}
         reply = await h.server.enqueue(
             lru1,
             skill("s1", "drive_to", goal=goal, region=area, poi="stone1", n=3, speed=0.5),
             skill("s2", "drive_to", goal=goal),
+            kinds={"drive_to": {**kinds, "shape": "dict"}},
         )
         assert reply.ok and reply.ids == ["s1", "s2"]
         # halted until `run`
@@ -163,6 +168,8 @@ async def test_enqueue_run_success_with_typed_params_and_consecutive_seqs(harnes
         assert params["goal"] == Pose(x=1.0, y=2.0, yaw=0.5)
         assert params["region"] == [Position(x=0.0), Position(x=1.0), Position(y=1.0)]
         assert (params["poi"], params["n"], params["speed"]) == ("stone1", 3, 0.5)
+        # every parameter arrives: one left unset is None
+        assert got["s2"]["region"] is None and got["s2"]["shape"] is None
         # every report was acknowledged
         await a.wait_acknowledged(WAIT)
         assert a.pending_reports == []
@@ -543,11 +550,15 @@ async def test_pause_out_of_comms_policy_and_recharge_policy(harness: Harness) -
         level = [0.1]
         a.battery = lambda: level[0]
         started, gates = gated_handler(a)
-        recharges: list[str] = []
+        recharges: list[tuple[str, float]] = []
+        # the library's recharge, as the server sends it with the registration
+        h.server.signatures["recharge"] = SkillSignature(
+            params={"target_level": "float"}, defaults={"target_level": 0.95}
+        )
 
         @a.skill("recharge", version="1.0.0")
-        async def recharge(ctx):
-            recharges.append(ctx.skill.id)
+        async def recharge(ctx, target_level: float):
+            recharges.append((ctx.skill.id, target_level))
             level[0] = 1.0
 
         await a.start()
@@ -558,7 +569,7 @@ async def test_pause_out_of_comms_policy_and_recharge_policy(harness: Harness) -
         await h.server.enqueue(lru1, s1)
         await h.server.command(lru1, Run())
         await asyncio.wait_for(started["s1"].wait(), WAIT)
-        assert recharges == ["s1"]
+        assert recharges == [("s1", 0.95)]  # with the library's default, as the server sent it
         assert h.made(lru1, "s1", S.RUNNING, "recharging first: battery 10% below 30%")
 
         a.link.reachable = False

@@ -11,6 +11,7 @@ import threading
 import pytest
 
 from backend.agent import AlreadyConnected, RegistrationRefused, RobotAgent, SkillFailed, Success
+from backend.core.library import SkillSignature
 from backend.core.model import Pose
 from backend.core.model import Status as S
 from backend.protocol.messages import Pause, Run, Stop
@@ -90,6 +91,40 @@ async def test_wait_registered_says_why(harness: Harness) -> None:
             await b.wait_registered(0.3)
 
 
+async def test_registering_says_how_each_handler_differs_from_the_library(
+    harness: Harness,
+) -> None:
+    async with harness as h:
+        lru1 = h.name("lru1")
+        a = h.agent(lru1)
+        h.server.signatures["drive_to"] = SkillSignature(
+            params={"goal": "pose", "speed": "float", "tolerance": "float"},
+            required=["goal"],
+            defaults={"speed": 0.5, "tolerance": 0.5},
+        )
+        h.server.signatures["look"] = SkillSignature(params={"target": "pose"})
+
+        @a.skill("drive_to")
+        async def drive_to(ctx, goal, speed=0.7, heading=None):
+            return None
+
+        @a.skill("look")
+        async def look(ctx, **params):  # takes whatever comes: nothing to compare
+            return None
+
+        await h.start(a)
+        await a.wait_registered(5.0)  # the reply has been read
+        where = f"robot {lru1}, skill drive_to: handler drive_to()"
+        assert a.handler_problems == [
+            f"{where} has no parameter 'tolerance' (float in the library): the skill fails when "
+            "it runs; add it to the signature",
+            f"{where} gives 'speed' a default (0.7) it never uses: the server always sends it "
+            "(the library's default is 0.5); remove the default",
+            f"{where} takes 'heading', which is not a parameter of drive_to in the library "
+            "(goal, speed, tolerance): it never gets a value; remove it",
+        ]
+
+
 async def test_handler_signatures_that_do_not_fit_the_parameters_fail_with_a_reason(
     harness: Harness,
 ) -> None:
@@ -121,7 +156,10 @@ async def test_handler_signatures_that_do_not_fit_the_parameters_fail_with_a_rea
         assert h.server.applied[lru1][-1].info.startswith(
             "handler identify() needs parameter 'partner', which the server did not send"
         )
-        assert h.server.applied[lru1][-1].info.endswith("give it a default, like partner=None")
+        assert h.server.applied[lru1][-1].info.endswith(
+            "not a parameter of the skill in the library (sent: target); remove it from the "
+            "signature"
+        )
 
 
 async def test_a_handler_bug_is_one_line_for_the_operator_and_a_traceback_in_the_log(

@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 
-from backend.agent.queue import Change, SkillQueue
+from backend.agent.queue import Effect, SkillQueue
 from backend.core.model import Policies, SkillInstance, Status
 from backend.core.ops import Report
 from backend.protocol.messages import BarrierInfo
@@ -68,7 +68,7 @@ def inst(sid: str, name: str = "work", *, attempt: int = 1, retries: int = 0) ->
     )
 
 
-def enqueue(queue: SkillQueue, *ids: str, **kw: Any) -> Change:
+def enqueue(queue: SkillQueue, *ids: str, **kw: Any) -> Effect:
     return queue.enqueue([inst(i) for i in ids], offered=OFFERED, **kw)
 
 
@@ -78,7 +78,7 @@ def enqueue(queue: SkillQueue, *ids: str, **kw: Any) -> Change:
 class TestEnqueue:
     def test_queues_in_order_and_says_what_it_queued(self, queue):
         change = enqueue(queue, "a", "b")
-        assert change == Change(queued=["a", "b"])
+        assert change == Effect(queued=["a", "b"])
         assert enqueue(queue, "c").queued == ["c"]
         assert queue.waiting == ["a", "b", "c"]
         assert [e.status for e in queue.entries()] == [S.IDLE_SYNCHRONIZED] * 3
@@ -143,7 +143,7 @@ class TestNextSkill:
         enqueue(queue, "a")
         assert queue.mode == "halted"
         assert queue.next_skill() is None
-        assert queue.run() == Change()
+        assert queue.run() == Effect()
         assert queue.mode == "running"
         assert queue.next_skill().entry.id == "a"
         assert queue.mode == "starting"  # active, not reported yet
@@ -198,7 +198,7 @@ class TestNextSkill:
 class TestUnsync:
     def test_removes_what_has_not_started(self, queue):
         enqueue(queue, "a", "b", "c")
-        assert queue.unsync(["c", "a"]) == Change(removed=["a", "c"])
+        assert queue.unsync(["c", "a"]) == Effect(removed=["a", "c"])
         assert queue.waiting == ["b"]
 
     def test_what_started_meanwhile_stays_and_is_said(self, queue):
@@ -207,13 +207,13 @@ class TestUnsync:
         queue.finish(S.SUCCESS)
         queue.next_skill()  # b is active now
         change = queue.unsync(["a", "b", "c"])
-        assert change == Change(removed=["c"], started=["a", "b"])
+        assert change == Effect(removed=["c"], started=["a", "b"])
         assert queue.active.entry.id == "b"
         assert queue.waiting == []
 
     def test_ids_it_never_had_count_as_removed(self, queue):
         enqueue(queue, "a")
-        assert queue.unsync(["x", "a"]) == Change(removed=["a", "x"])
+        assert queue.unsync(["x", "a"]) == Effect(removed=["a", "x"])
 
 
 # -- pause and run ---------------------------------------------------------------------------
@@ -223,11 +223,11 @@ class TestPauseAndRun:
     def test_pause_a_running_skill_then_run_resumes_it(self, queue):
         enqueue(queue, "a")
         queue.start()
-        assert queue.pause() == Change()
+        assert queue.pause() == Effect()
         assert not queue.run_enabled
         assert queue.active.paused_by_operator and queue.mode == "paused"
-        assert queue.pause() == Change()  # paused already: no second report
-        assert queue.run() == Change()
+        assert queue.pause() == Effect()  # paused already: no second report
+        assert queue.run() == Effect()
         assert not queue.active.paused
         assert queue.trail() == [
             ("a", "running", ""),
@@ -260,7 +260,7 @@ class TestPauseAndRun:
         enqueue(queue, "a")
         queue.run()
         change = queue.pause()
-        assert change == Change(reason="lru1 has no running skill; its queue is halted")
+        assert change == Effect(reason="lru1 has no running skill; its queue is halted")
         assert queue.mode == "halted"
 
 
@@ -271,7 +271,7 @@ class TestStopAndReset:
     def test_stop_puts_the_skill_back_at_the_head(self, queue):
         enqueue(queue, "a", "b")
         queue.start()
-        assert queue.stop() == Change()
+        assert queue.stop() == Effect()
         assert queue.active is None and not queue.run_enabled
         assert queue.waiting == ["a", "b"]
         assert queue.made[-1].status == S.IDLE_SYNCHRONIZED
@@ -300,13 +300,13 @@ class TestStopAndReset:
         enqueue(queue, "a")
         queue.run()
         change = queue.stop()
-        assert change == Change(reason="lru1 has no active skill; its queue is halted")
+        assert change == Effect(reason="lru1 has no active skill; its queue is halted")
         assert not queue.run_enabled
 
     def test_reset_forgets_everything(self, queue):
         enqueue(queue, "a", "b", "c")
         queue.start()
-        assert queue.reset() == Change(removed=["a", "b", "c"])
+        assert queue.reset() == Effect(removed=["a", "b", "c"])
         assert queue.entries() == [] and not queue.run_enabled
         assert queue.trail()[-1] == ("a", "idle_synchronized", "reset by operator")
         # forgotten, not finished: it may be synchronized again

@@ -304,7 +304,7 @@ def test_handlers_progress_pause_stop_failure_retry_and_server_loss(
         n = await added(c, add("lru1", "take_science_image", params={"target": {"x": 1, "y": 2}}))
         await c.submit(Sync(robot="lru1"))
         m = await until(c, lambda m: status(m, f) == "failure")
-        assert info(m, f) == "no stone within 3 m of (1, 1)"
+        assert info(m, f) == "no stone within 8 m of (1, 1)"  # the library's default radius
         assert status(m, n) == "idle_synchronized"
         await tel.until("lru1", lambda t: t.mode == "halted", "halted after the failure")
         retry = (await c.submit(Retry(id=f))).value["id"]
@@ -330,7 +330,7 @@ def test_handlers_progress_pause_stop_failure_retry_and_server_loss(
         assert m.find(g)[2].attempt == 2
         assert reports(proc, g) == [
             "running attempt 1",
-            "running attempt 2 retry 1/1 after: no stone within 3 m of (1, 1)",
+            "running attempt 2 retry 1/1 after: no stone within 8 m of (1, 1)",
             "success attempt 2 stone s1 found on attempt 2",
         ]
 

@@ -15,7 +15,7 @@ from backend.cli.ctl.errors import FileInvalid, UsageError
 from backend.cli.ctl.render import short_value
 from backend.cli.ctl.session import default_client_id, default_endpoints, run
 from backend.cli.ctl.values import (
-    MarkerRef,
+    AtMarker,
     parse_area,
     parse_param,
     parse_params,
@@ -68,9 +68,9 @@ def op_of(argv: list[str], tutorial=None):
             "area",
             [{"x": 0, "y": 0}, {"x": 1, "y": 0}, {"x": 1, "y": 1}],
         ),
-        ("goal=@POI-A", "goal", MarkerRef("POI-A")),
-        ('goal="@POI-A"', "goal", MarkerRef("POI-A")),
-        (" goal =@POI-A", "goal", MarkerRef("POI-A")),
+        ("goal=@POI-A", "goal", AtMarker("POI-A")),
+        ('goal="@POI-A"', "goal", AtMarker("POI-A")),
+        (" goal =@POI-A", "goal", AtMarker("POI-A")),
     ],
 )
 def test_param_values(text, name, value):
@@ -694,15 +694,11 @@ def test_watch_lines_say_the_status_and_what_an_edit_changed():
             False,
         )
 
-    done = ev.SkillChanged(
-        id="lru1-1", changes={"status": "success", "finished_at": "2026-11-22T07:00:00+00:00"}
-    )
+    done = ev.SkillStatusChanged(id="lru1-1", status="success", at="2026-11-22T07:00:00+00:00")
     assert line(ev.ReportSeq(robot="lru1", seq=4), done) == "r9 report by lru1: lru1-1: success"
-    failed = ev.SkillChanged(
-        id="lru1-2", changes={"status": "failure", "status_info": "battery low", "attempt": 2}
-    )
+    failed = ev.SkillStatusChanged(id="lru1-2", status="failure", info="battery low", attempt=2)
     assert line(failed) == "r9 report by lru1: lru1-2: failure (battery low) attempt 2"
-    edited = ev.SkillChanged(id="lru1-3", changes={"params": {"speed": 0.4}, "label": "slow"})
+    edited = ev.SkillEdited(id="lru1-3", params={"speed": 0.4}, label="slow")
     assert line(edited) == "r9 report by lru1: lru1-3: changed label, params"
 
 

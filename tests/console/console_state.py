@@ -1,5 +1,7 @@
 """Offline mission states for console tests: built with the real rules engine
-(plan_sync + SyncAck + Report), injected into the app as messages."""
+(plan_sync + SyncAck + Report), injected into the app as the events the
+client library would deliver (`backend.client.events`: StateSynced,
+BatchApplied, RobotChanged, ...), each posted as it is (`Incoming`)."""
 
 from __future__ import annotations
 
@@ -124,9 +126,7 @@ class EngineBackend:
 
     def _post(self, applied) -> None:
         if applied.events and self.app is not None:
-            from console.messages import EventsApplied
-
-            self.app.post_message(EventsApplied(applied.batch()))
+            self.app.post_message(applied_batch(applied.batch()))
 
     async def submit(self, op: Any, *, expected_revision: int | None = None) -> OpReply:
         self.ops.append(op)
@@ -167,6 +167,101 @@ class EngineBackend:
         return OpReply(revision=applied.revision, value=applied.value, notes=applied.notes)
 
 
+# -- the events the client library delivers, as the app gets them ----------------------
+
+ENDPOINT = "tcp/127.0.0.1:7447"
+
+
+def incoming(event: Any):
+    from console.messages import Incoming
+
+    return Incoming(event)
+
+
+def state_loaded(
+    mission: Mission,
+    library: Library,
+    robots: dict[str, RobotInfo] | None = None,
+    server_id: str = "",
+    alerts: list[Any] | None = None,
+):
+    """A whole state, as the client delivers it after (re)connecting."""
+    from backend.client.events import StateSynced
+    from backend.protocol.messages import StateSnapshot
+
+    snap = StateSnapshot(
+        server_id=server_id,
+        revision=mission.revision,
+        mission=mission,
+        library=library,
+        robots=robots or {},
+        alerts=alerts or [],
+    )
+    return incoming(StateSynced(snap))
+
+
+def applied_batch(batch: Any):
+    from backend.client.events import BatchApplied
+
+    return incoming(BatchApplied(batch))
+
+
+def fleet_changed(info: RobotInfo):
+    from backend.client.events import RobotChanged
+
+    return incoming(RobotChanged(info))
+
+
+def telemetry_changed(t: Telemetry):
+    from backend.client.events import TelemetryReceived
+
+    return incoming(TelemetryReceived(t))
+
+
+def alert_received(alert: Any):
+    from backend.client.events import AlertRaised
+
+    return incoming(AlertRaised(alert))
+
+
+def account_known(read_only: str = ""):
+    from console.state.changes import AccountKnown
+
+    return incoming(AccountKnown(read_only))
+
+
+def connection_changed(status: str, endpoint: str | None = ENDPOINT) -> list[Any]:
+    """What the app gets as its link to the server reaches `status`:
+    connecting (the app says it), then the client's own word."""
+    from backend.client.events import ConnectionState
+    from console.state.changes import Connecting
+
+    out = [incoming(Connecting(endpoint))] if endpoint is not None else []
+    if status in ("connected", "reconnecting"):
+        out.append(incoming(ConnectionState(status)))
+    return out
+
+
+def link_state(status: str):
+    """The client's word on its link: "connected" (after a resync) or "reconnecting"."""
+    from backend.client.events import ConnectionState
+
+    return incoming(ConnectionState(status))
+
+
+def map_fed(mirror: Any, update: Any, speed: float | None = None):
+    """The simulator's map feed moved (the bridge's, as the map follower says)."""
+    from console.state.changes import MapFed
+
+    return incoming(MapFed(mirror, update, speed))
+
+
+def post_all(app: Any, *messages: Any) -> None:
+    for m in messages:
+        for one in m if isinstance(m, list) else [m]:
+            app.post_message(one)
+
+
 # -- driving the app -------------------------------------------------------------------
 
 
@@ -202,22 +297,26 @@ async def inject(
     telemetry: list[Telemetry] | None = None,
     connection: str = "connected",
 ) -> None:
-    """Post the messages the live connection would post; wait until shown."""
-    from console.messages import ConnectionChanged, StateLoaded, TelemetryChanged
-
-    app.post_message(ConnectionChanged(connection, endpoint="tcp/127.0.0.1:7447"))
+    """Post the events the live connection would deliver; wait until shown."""
+    post_all(app, connection_changed(connection))
     if builder is not None:
         app.post_message(
-            StateLoaded(
+            state_loaded(
                 builder.snapshot(),
                 builder.library,
                 fleet(online if online is not None else MARS_FLEET),
             )
         )
     for t in telemetry or []:
-        app.post_message(TelemetryChanged(t))
-    await pilot.pause()
-    await pilot.pause()
+        app.post_message(telemetry_changed(t))
+    await settle(pilot)
+
+
+async def settle(pilot: Any) -> None:
+    """Until what was posted is shown: the app takes each event, then every
+    screen its change (a hop each), then what their redraws started."""
+    for _ in range(3):
+        await pilot.pause()
 
 
 def screen_text(app: Any) -> str:
@@ -350,31 +449,23 @@ CONSOLE_A = "host-4711-a1b2c3"  # a client id, like MissionClient makes them
 
 async def awareness_scenario(app: Any, pilot: Any) -> Builder:
     """A small history with every kind of log entry and alert, at T0:
-    an operator's edit and sync, robot reports (one failure, also alerted by
-    the server: merged), the console's own refusal, a robot going offline,
-    low battery and out of range."""
+    an operator's edit and sync, robot reports (one failure, alerted by the
+    server), the console's own refusal, a robot going offline, low battery
+    and out of range (the server's alerts)."""
     from backend.core.ops import EditSkill
     from backend.protocol.messages import Alert
-    from console.messages import (
-        AlertReceived,
-        ConnectionChanged,
-        EventsApplied,
-        FleetChanged,
-        StateLoaded,
-        TelemetryChanged,
-    )
 
     pin_clock(app)
     b = Builder(MARS)
     post = app.post_message
-    post(ConnectionChanged("connected", endpoint="tcp/127.0.0.1:7447"))
-    post(StateLoaded(b.snapshot(), b.library, mars_fleet_with_manifests()))
+    post_all(app, connection_changed("connected"))
+    post(state_loaded(b.snapshot(), b.library, mars_fleet_with_manifests()))
     for t in telemetry_series():
-        post(TelemetryChanged(t))
+        post(telemetry_changed(t))
     await pilot.pause()
 
     def op(applied, actor: str, name: str) -> None:
-        post(EventsApplied(applied.batch(actor, name)))
+        post(applied_batch(applied.batch(actor, name)))
 
     e = b.engine
     op(e.submit(EditSkill(id="lru2-2", label="find a good stone")), f"ada@{CONSOLE_A}", "edit")
@@ -401,8 +492,9 @@ async def awareness_scenario(app: Any, pilot: Any) -> Builder:
     report("lru2", "lru2-2", "failure", "no stone in reach")
     await pilot.pause()
     post(
-        AlertReceived(
+        alert_received(
             Alert(
+                id=1,
                 level="error",
                 kind="failure",
                 robot="lru2",
@@ -412,11 +504,12 @@ async def awareness_scenario(app: Any, pilot: Any) -> Builder:
             )
         )
     )
-    app._refused("Run refused: [lru1] lru1 is already executing lru1-1 (running)", "lru1", None)
-    post(FleetChanged(RobotInfo(name="lander", online=False, since=T0)))
+    app.ops.refused("Run refused: [lru1] lru1 is already executing lru1-1 (running)", "lru1", None)
+    post(fleet_changed(RobotInfo(name="lander", online=False, since=T0)))
     post(
-        AlertReceived(
+        alert_received(
             Alert(
+                id=2,
                 level="warning",
                 kind="offline",
                 robot="lander",
@@ -426,7 +519,7 @@ async def awareness_scenario(app: Any, pilot: Any) -> Builder:
         )
     )
     post(
-        TelemetryChanged(
+        telemetry_changed(
             Telemetry(
                 robot="lru1",
                 battery=0.66,
@@ -438,7 +531,30 @@ async def awareness_scenario(app: Any, pilot: Any) -> Builder:
             )
         )
     )
-    post(TelemetryChanged(Telemetry(robot="lru2", battery=0.15, link=0.9, mode="idle", at=T0)))
+    post(telemetry_changed(Telemetry(robot="lru2", battery=0.15, link=0.9, mode="idle", at=T0)))
+    # the server's alerts from that telemetry (backend/server/telemetry.py)
+    post(
+        alert_received(
+            Alert(
+                id=3,
+                kind="out_of_range",
+                robot="lru1",
+                message="lru1 is out of communication range",
+                at=T0,
+            )
+        )
+    )
+    post(
+        alert_received(
+            Alert(
+                id=4,
+                kind="low_battery",
+                robot="lru2",
+                message="lru2: battery low (15 % < 20 %)",
+                at=T0,
+            )
+        )
+    )
     # every message handled (under load a pause or two is not enough)
     await wait_until(
         pilot,

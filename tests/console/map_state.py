@@ -49,7 +49,7 @@ def mirror_of(snap: mf.MapSnapshot) -> mf.MapMirror:
 
 
 def map_message(snap: mf.MapSnapshot | None = None):
-    from console.messages import MapChanged
+    from console_state import map_fed
 
     snap = snap or mars_snapshot()
-    return MapChanged(mirror_of(snap), MapUpdate("snapshot", objects=True))
+    return map_fed(mirror_of(snap), MapUpdate("snapshot", objects=True))

@@ -12,7 +12,9 @@ from console_state import (
     Builder,
     EngineBackend,
     engine_app,
+    fleet_changed,
     inject,
+    link_state,
     make_app,
     mars_mid_execution,
     mars_telemetry,
@@ -27,7 +29,6 @@ from backend.core.ops import Retry, RetryAck
 from backend.protocol.messages import ErrorReply, OpReply
 from backend.transport import free_port, loopback_endpoint
 from console.config import ConsoleConfig
-from console.messages import ConnectionChanged, FleetChanged
 from console.screens.dialogs import HelpScreen, SkillPicker, UnreachableScreen
 from console.widgets.editor.editor import ParamEditor
 from console.widgets.schedule.view import ScheduleView
@@ -285,11 +286,9 @@ async def test_sync_unsync_delete_move_and_retry_offline():
         await wait_until(pilot, lambda: b.mission.find("lru2-5") is None, what="deleted")
         # retry needs a failed skill and no active one: stop ardea's paused skill first
         b.report("ardea", "ardea-3", "idle_synchronized")
-        from console_state import fleet
+        from console_state import fleet, state_loaded
 
-        from console.messages import StateLoaded
-
-        app.post_message(StateLoaded(b.snapshot(), b.library, fleet(MARS_FLEET | {"ardea": True})))
+        app.post_message(state_loaded(b.snapshot(), b.library, fleet(MARS_FLEET | {"ardea": True})))
         await pilot.pause()
         screen.schedule.select("ardea-2")
         await pilot.pause()
@@ -410,13 +409,13 @@ async def test_reconnecting_disables_changes_and_says_so():
     app = make_app(backend=EngineBackend(Builder()))
     async with app.run_test(size=WIDE) as pilot:
         await inject(app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
-        app.post_message(ConnectionChanged("reconnecting", endpoint="tcp/127.0.0.1:7447"))
+        app.post_message(link_state("reconnecting"))
         await pilot.pause()
         text = screen_text(app)
         assert "⟳ reconnecting" in text
         await pilot.press("a")
         assert "not connected to the mission server (reconnecting)" in status_line(app)
-        app.post_message(ConnectionChanged("connected", endpoint="tcp/127.0.0.1:7447"))
+        app.post_message(link_state("connected"))
         await pilot.pause()
         assert "reconnected" in status_line(app)
 
@@ -431,7 +430,7 @@ async def test_robot_going_offline_shows_in_its_header_and_to_its_barrier_partne
         await inject(app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
         assert "b1: waiting for lru1" in screen_text(app)  # lru2 waits for lru1 at b1
         app.post_message(
-            FleetChanged(RobotInfo(name="lru1", online=False, since=T0.replace(minute=50)))
+            fleet_changed(RobotInfo(name="lru1", online=False, since=T0.replace(minute=50)))
         )
         await pilot.pause()
         text = screen_text(app)
@@ -567,9 +566,9 @@ async def test_policies_are_typed_inputs_validated_then_applied():
         )
         # read-only like the parameters once the skill is on the robot
         b.sync("lru2", "lru2-1")
-        from console.messages import StateLoaded
+        from console_state import state_loaded
 
-        app.post_message(StateLoaded(b.snapshot(), b.library, {}))
+        app.post_message(state_loaded(b.snapshot(), b.library, {}))
         await wait_until(pilot, lambda: ed.query("#readonly"), what="read-only")
         assert all(
             w.disabled for w in ed.query("#pf-retries, #pf-pause_out_of_comms, #pf-recharge_below")
@@ -651,24 +650,23 @@ async def test_a_draft_survives_a_lost_connection():
         await pilot.pause()
         screen.editor.query_one("#f-label").value = "kept"
         await pilot.pause()
-        app.post_message(ConnectionChanged("reconnecting"))
+        app.post_message(link_state("reconnecting"))
         await wait_until(
             pilot, lambda: screen.editor.query("#readonly"), what="read-only while reconnecting"
         )
         assert screen.editor.query_one("#f-label").value == "drive next to POI-A"
-        app.post_message(ConnectionChanged("connected"))
+        app.post_message(link_state("connected"))
         await wait_until(pilot, lambda: not screen.editor.query("#readonly"), what="editable again")
         assert screen.editor.query_one("#f-label").value == "kept"
         assert "unapplied changes: label" in screen_text(app)
 
 
 async def test_status_changes_and_telemetry_repaint_the_lines_that_changed():
-    from console_state import T0
+    from console_state import T0, applied_batch, telemetry_changed
 
     from backend.core.model import Pose
     from backend.core.ops import Report
     from backend.protocol.messages import Telemetry
-    from console.messages import EventsApplied, TelemetryChanged
 
     b = mars_mid_execution()
     app = make_app()
@@ -676,7 +674,7 @@ async def test_status_changes_and_telemetry_repaint_the_lines_that_changed():
         await inject(app, pilot, b, telemetry=mars_telemetry())
         assert "45%" in screen_text(app)
         app.post_message(
-            TelemetryChanged(
+            telemetry_changed(
                 Telemetry(
                     robot="lru1",
                     pose=Pose(x=21.0, y=8.0),
@@ -701,7 +699,7 @@ async def test_status_changes_and_telemetry_repaint_the_lines_that_changed():
         ):
             seq += 1
             applied = b.engine.submit(Report(robot="lru1", seq=seq, id=sid, status=status))
-            app.post_message(EventsApplied(applied.batch()))
+            app.post_message(applied_batch(applied.batch()))
             await pilot.pause()
         text = screen_text(app)
         lru1 = [line.split("│")[0] for line in text.splitlines()]
@@ -793,8 +791,9 @@ async def test_at_80x24_a_draft_survives_leaving_the_editor_and_editing_another_
 
 
 async def test_a_partner_reaching_the_barrier_updates_the_waiting_robots_column():
+    from console_state import applied_batch
+
     from backend.core.ops import Report
-    from console.messages import EventsApplied
 
     b = mars_mid_execution()
     app = make_app()
@@ -805,7 +804,7 @@ async def test_a_partner_reaching_the_barrier_updates_the_waiting_robots_column(
             (("lru1-2", "success"), ("lru1-3", "synchwaiting")), start=100
         ):
             app.post_message(
-                EventsApplied(
+                applied_batch(
                     b.engine.submit(Report(robot="lru1", seq=seq, id=sid, status=status)).batch()
                 )
             )

@@ -6,23 +6,27 @@ from __future__ import annotations
 import pytest
 from console_state import (
     MARS,
+    T0,
     Builder,
+    alert_received,
     awareness_scenario,
+    fleet_changed,
     inject,
     make_app,
     mars_fleet_with_manifests,
     screen_text,
+    state_loaded,
     wait_until,
 )
 
-from backend.protocol.messages import RobotInfo
+from backend.protocol.messages import Alert, RobotInfo
 from console.config import ConsoleConfig, load_config
-from console.messages import FleetChanged, StateLoaded
 from console.screens.alerts import AlertScreen
 from console.screens.dialogs import PathPrompt, SkillPicker
 from console.screens.fleet import FleetScreen
 from console.screens.log import EventLogScreen
 from console.screens.mission import MissionScreen
+from console.state.changes import Topic, change
 from console.state.eventlog import read_jsonl
 from console.themes.loader import ANSI16_STATUS
 
@@ -130,7 +134,7 @@ async def test_skill_picker_says_which_other_robots_offer_a_skill():
     app = make_app()
     async with app.run_test(size=SIZE) as pilot:
         b = Builder(MARS)
-        app.post_message(StateLoaded(b.snapshot(), b.library, mars_fleet_with_manifests()))
+        app.post_message(state_loaded(b.snapshot(), b.library, mars_fleet_with_manifests()))
         await inject(app, pilot, None)
         app.mission_screen.schedule.select("lru1-2")
         await pilot.pause()
@@ -182,8 +186,10 @@ async def test_event_log_lists_operations_reports_refusals_failures_and_alerts()
         )  # edit, sync, running, failure
         # new entries appear while the log is shown (filtered)
         n = len(screen.rows)
-        app.post_message(FleetChanged(RobotInfo(name="lru2", online=False)))
-        app.post_message(FleetChanged(RobotInfo(name="lru2", online=False)))
+        app.post_message(fleet_changed(RobotInfo(name="lru2", online=False)))
+        gone = Alert(id=7, kind="offline", robot="lru2", message="robot lru2 went offline", at=T0)
+        app.post_message(alert_received(gone))  # the server's
+        app.post_message(alert_received(gone))  # again (in a snapshot, say): taken once
         await pilot.press("ctrl+u")
         await wait_until(
             pilot, lambda: "robot lru2 went offline" in screen_text(app), what="live entry"
@@ -226,7 +232,8 @@ async def test_alerts_badge_list_and_acknowledge():
         # failure (merged with the server's), refusal, offline (merged), out of range, low battery
         assert app.alerts.unacknowledged == 5
         assert app.bells == 5
-        assert {a.source for a in app.alerts.alerts if a.kind in ("failure", "offline")} == {"both"}
+        # about robots: the server's alone (the console raises none of its own)
+        assert {a.source for a in app.alerts.alerts if a.kind != "refusal"} == {"server"}
         assert "⚠ 5 alerts (F6)" in screen_text(app)
         await pilot.press("f6")
         await wait_until(pilot, lambda: isinstance(app.screen, AlertScreen), what="alert list")
@@ -239,7 +246,7 @@ async def test_alerts_badge_list_and_acknowledge():
             "refusal",
             "failure",
             "no stone in reach",
-            "both",
+            "server",
         ):
             assert needle in text, needle
         await pilot.press("enter")  # the newest: low battery
@@ -347,7 +354,7 @@ async def test_log_screen_shows_the_last_entries_of_a_long_log():
         assert len(screen.rows) == SHOW_LIMIT and screen.matching == SHOW_LIMIT + 200
         assert f"showing the last {SHOW_LIMIT:,}" in screen_text(app)
         app.event_log.add("refusal", "one more", app.clock(), robots=["lru2"])
-        app.awareness_signal.publish(("log", None))
+        app.publish(change(Topic.LOG))
         await pilot.pause()
         assert screen.rows[-1] == app.event_log.seq and len(screen.rows) == SHOW_LIMIT
         assert screen.rows[0] >= app.event_log.entries[0].seq
@@ -466,10 +473,24 @@ async def test_palette_offers_the_shown_screens_own_actions():
 
 
 async def test_what_happened_while_reconnecting_raises_alerts():
-    from console_state import MARS_FLEET, fleet, mars_mid_execution
+    from console_state import MARS_FLEET, T0, fleet, mars_mid_execution, state_loaded
 
-    from console.messages import StateLoaded
+    from backend.protocol.messages import Alert
 
+    # what the server raised meanwhile: its state snapshot repeats its last alerts
+    missed = [
+        Alert(
+            id=1,
+            level="error",
+            kind="failure",
+            robot="lru1",
+            skill="lru1-2",
+            message="lru1: lru1-2 failed: wheel stuck in sand",
+            at=T0,
+        ),
+        Alert(id=2, kind="offline", robot="lru2", message="robot lru2 went offline", at=T0),
+    ]
+    robots = fleet({**MARS_FLEET, "lru2": False})
     b = mars_mid_execution()
     app = make_app()
     async with app.run_test(size=SIZE) as pilot:
@@ -477,7 +498,7 @@ async def test_what_happened_while_reconnecting_raises_alerts():
         assert app.bells == 0 and app.alerts.unacknowledged == 0
         # the console was away; meanwhile lru1's skill failed and lru2 went offline
         b.report("lru1", "lru1-2", "failure", "wheel stuck in sand")
-        app.post_message(StateLoaded(b.snapshot(), b.library, fleet({**MARS_FLEET, "lru2": False})))
+        app.post_message(state_loaded(b.snapshot(), b.library, robots, alerts=missed))
         await wait_until(pilot, lambda: app.alerts.unacknowledged == 2, what="two alerts")
         kinds = {(a.kind, a.robot, a.skill) for a in app.alerts.alerts}
         assert kinds == {("failure", "lru1", "lru1-2"), ("offline", "lru2", None)}
@@ -486,27 +507,27 @@ async def test_what_happened_while_reconnecting_raises_alerts():
             e.kind == "failure" and "wheel stuck in sand" in e.text for e in app.event_log.entries
         )
         # the same state again (another resync): nothing new
-        app.post_message(StateLoaded(b.snapshot(), b.library, fleet({**MARS_FLEET, "lru2": False})))
+        app.post_message(state_loaded(b.snapshot(), b.library, robots, alerts=missed))
         await pilot.pause()
         assert app.alerts.unacknowledged == 2 and app.bells == 2
 
 
 async def test_an_unreadable_message_raises_one_alert_naming_its_key_and_field():
     """The client library reports a message it could not read (once per key);
-    the bridge makes it an alert of the robot whose key it came on."""
+    the model makes it an alert of the robot whose key it came on."""
+    from console_state import incoming
+
     from backend.client.client import Malformed
-    from console.bridge import ClientBridge
 
     app = make_app()
     async with app.run_test(size=SIZE) as pilot:
         await inject(app, pilot, Builder(MARS))
-        bridge = ClientBridge(app, "tcp/127.0.0.1:7447")
         m = Malformed(
             "telemetry",
             "mc/v1/robot/lru1/telemetry",
             "battery: Input should be less than or equal to 1",
         )
-        bridge._on_client(m)
+        app.post_message(incoming(m))
         await wait_until(pilot, lambda: app.alerts.unacknowledged == 1, what="an alert")
         [a] = app.alerts.alerts
         assert (a.kind, a.robot, a.level) == ("malformed", "lru1", "warning")
@@ -515,6 +536,6 @@ async def test_an_unreadable_message_raises_one_alert_naming_its_key_and_field()
         await wait_until(pilot, lambda: isinstance(app.screen, AlertScreen), what="alert list")
         assert "unreadable message" in screen_text(app)
         # the same again (another client session, say): merged, not a second alert
-        bridge._on_client(m)
+        app.post_message(incoming(m))
         await pilot.pause()
         assert len(app.alerts.alerts) == 1

@@ -8,7 +8,7 @@ from datetime import timedelta
 from console_state import MARS, T0, Builder, mars_fleet_with_manifests
 
 from backend.core.ops import Sync, SyncAck
-from backend.protocol.messages import Alert, RobotInfo, Telemetry
+from backend.protocol.messages import Alert, Telemetry
 from console.config import load_config, save_theme
 from console.state.capability import also_offered_by, filter_robots, robots_offering, sparkline
 from console.state.eventlog import AlertBook, EventLog, read_jsonl, split_actor
@@ -93,7 +93,7 @@ def test_log_turns_batches_into_operations_and_reports():
     b.engine.release("lru1", ids)
     batch = applied.batch("ada@host-1-abc", "sync_ack")
     m.apply(batch)
-    (op,) = log.add_batch(batch, m, T0)
+    (op,) = log.add_batch(batch, m.owner, T0)
     assert (op.kind, op.user, op.client, op.robots, op.revision) == (
         "operation",
         "ada",
@@ -109,16 +109,12 @@ def test_log_turns_batches_into_operations_and_reports():
 
     fail = ev.EventBatch(
         revision=m.mission.revision + 1,
-        events=[
-            ev.SkillChanged(
-                id="lru1-1", changes={"status": "failure", "status_info": "wheel stuck"}
-            )
-        ],
+        events=[ev.SkillStatusChanged(id="lru1-1", status="failure", info="wheel stuck")],
         actor="lru1",
         op="report",
     )
     m.apply(fail)
-    (rep,) = log.add_batch(fail, m, T0)
+    (rep,) = log.add_batch(fail, m.owner, T0)
     assert (rep.kind, rep.robots, rep.skill, rep.client) == ("failure", ["lru1"], "lru1-1", "lru1")
     assert rep.text == "✗ lru1-1 failure: wheel stuck"
     assert [e.seq for e in log.select("kind:fail")] == [rep.seq]
@@ -141,64 +137,34 @@ def test_log_is_bounded_and_exports_json_lines(tmp_path):
 # -- alerts --------------------------------------------------------------------------------------
 
 
-def tel(robot: str, battery: float = 1.0, in_range: bool = True) -> Telemetry:
-    return Telemetry(robot=robot, battery=battery, in_range=in_range, at=T0)
-
-
-def test_low_battery_once_per_crossing_and_out_of_range_once_per_loss():
+def test_server_alerts_are_taken_once_per_run_and_acknowledged():
+    """Only the server raises alerts about robots; a console takes each once
+    (live, or again in a state snapshot), per server run."""
     book = AlertBook()
-    kinds = []
-    for battery, in_range in (
-        (0.5, True),
-        (0.15, True),
-        (0.10, False),
-        (0.12, False),
-        (0.5, True),
-        (0.1, False),
-    ):
-        kinds += [
-            a.kind
-            for a in book.from_telemetry(
-                tel("lru1", battery, in_range), T0 + timedelta(minutes=len(kinds) * 5)
-            )
-        ]
-    assert kinds == ["low_battery", "out_of_range", "out_of_range", "low_battery"]
-
-
-def test_offline_only_on_a_change_not_at_load():
-    book = AlertBook()
-    book.seed_fleet(
-        {
-            "ardea": RobotInfo(name="ardea", online=False),
-            "lru1": RobotInfo(name="lru1", online=True),
-        }
-    )
-    assert book.from_fleet(RobotInfo(name="ardea", online=False, since=T0), T0) is None
-    a = book.from_fleet(RobotInfo(name="lru1", online=False, since=T0), T0)
-    assert a is not None and (a.kind, a.robot) == ("offline", "lru1")
-
-
-def test_server_alert_of_a_situation_the_console_saw_is_merged():
-    book = AlertBook()
-    mine = book.add(
-        "failure", "lru1: ✗ lru1-1 failure", T0, level="error", robot="lru1", skill="lru1-1"
-    )
-    theirs = Alert(
+    failure = Alert(
+        id=1,
         level="error",
         kind="failure",
         robot="lru1",
         skill="lru1-1",
         message="lru1: lru1-1 failed: wheel stuck",
-        at=T0 + timedelta(seconds=1),
+        at=T0,
     )
-    assert book.from_server(theirs) is None
-    assert len(book.alerts) == 1 and mine.source == "both"
-    # another attempt's failure is a new alert; an old server's alert (no kind) is its own
-    assert (
-        book.add("failure", "lru1-1.2 failed", T0, level="error", robot="lru1", skill="lru1-1.2")
-        is not None
+    mine = book.from_server(failure, "run-a")
+    assert mine is not None and (mine.kind, mine.source, mine.level) == (
+        "failure",
+        "server",
+        "error",
     )
-    assert book.from_server(Alert(robot="lru1", message="something else", at=T0)).kind == "server"
+    assert book.from_server(failure, "run-a") is None  # the snapshot repeats it: taken already
+    # another server run numbers from 1 again: a new alert
+    assert book.from_server(failure.model_copy(update={"at": T0}), "run-b") is not None
+    # alerts from before the console first looked are not news
+    old = Alert(id=2, kind="offline", robot="lru2", message="robot lru2 went offline", at=T0)
+    book.seen([old], "run-b")
+    assert book.from_server(old, "run-b") is None
+    other = Alert(id=9, kind="robot_error", robot="lru1", message="something else", at=T0)
+    assert book.from_server(other, "run-a").kind == "robot_error"
     assert book.unacknowledged == 3
     assert book.acknowledge(mine.id) == 1 and book.unacknowledged == 2
     assert book.acknowledge(None) == 2 and book.unacknowledged == 0

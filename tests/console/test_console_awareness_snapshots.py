@@ -70,7 +70,7 @@ def test_alert_list(snap_compare):
         make_app(),
         terminal_size=(120, 24),
         run_before=_scenario(
-            "f6", "down", "enter", expect=("4 unacknowledged of 5", "low battery", "both")
+            "f6", "down", "enter", expect=("4 unacknowledged of 5", "low battery", "server")
         ),
     )
 

@@ -9,6 +9,7 @@ from datetime import UTC, datetime, timedelta
 
 from console_state import (
     T0,
+    fleet_changed,
     inject,
     make_app,
     mars_mid_execution,
@@ -20,7 +21,6 @@ from map_state import map_message, mars_snapshot
 
 from backend.core.ops import Sync
 from backend.protocol.messages import RobotInfo
-from console.messages import FleetChanged
 from console.state.clock import MissionClock, sim_clock_text
 
 
@@ -80,7 +80,7 @@ async def test_at_speed_10_every_time_shown_is_sim_time_and_ticks_without_report
         await inject(app, pilot, b, telemetry=mars_telemetry())
         app.post_message(_sim(0.0, 1608.0, speed=10.0))
         far = RobotInfo(name="lru2", online=True, since=T0, heard=T0, delay_s=60.0)
-        app.post_message(FleetChanged(far))  # `--link-delay 10m` at speed 10
+        app.post_message(fleet_changed(far))  # `--link-delay 10m` at speed 10
         await wait_until(pilot, lambda: "sim 26:48" in screen_text(app), what="the sim clock")
         screen = app.mission_screen
         screen.schedule.select("lru2-5")

@@ -14,6 +14,7 @@ from console_state import (
     MARS,
     TUTORIAL,
     Builder,
+    applied_batch,
     engine_app,
     inject,
     screen_text,
@@ -24,7 +25,6 @@ from textual.widgets import Select, Switch, TextArea
 
 from backend.core.ops import AddSkill, EditSkill, Sync
 from console.bindings import mission_keys
-from console.messages import EventsApplied
 from console.screens.dialogs import SkillPicker
 from console.state.actions import ACTIONS
 from console.state.keys import KeyNames
@@ -99,7 +99,7 @@ async def test_every_key_that_opens_something_keeps_the_keys_typed_after_it(key)
     async with app.run_test(size=(80, 24)) as pilot:
         await inject(app, pilot, b, online=ONLINE)
         edit = b.engine.submit(EditSkill(id="lru2-2", label="unsaved"))  # quitting asks first
-        app.post_message(EventsApplied(edit.batch()))
+        app.post_message(applied_batch(edit.batch()))
         screen = app.mission_screen
         action = mission_keys(KeyNames()).get(key)
         # an idle skill after a queued one; or one the pending command locks

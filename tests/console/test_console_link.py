@@ -11,6 +11,7 @@ from datetime import timedelta
 from console_state import (
     MARS_FLEET,
     T0,
+    fleet_changed,
     inject,
     make_app,
     mars_mid_execution,
@@ -22,7 +23,6 @@ from console_state import (
 from backend.core.model import CommandState
 from backend.core.ops import Sync
 from backend.protocol.messages import RobotInfo
-from console.messages import FleetChanged
 from console.state import link
 from console.state.clock import MissionClock
 from console.state.freshness import SILENT_AFTER_S
@@ -98,12 +98,12 @@ async def test_a_distant_robot_shows_its_delay_and_is_drawn_as_of_then():
     async with app.run_test(size=(120, 40)) as pilot:
         await inject(app, pilot, b, telemetry=mars_telemetry())
         far = RobotInfo(name="lru1", online=True, since=T0, heard=T0, delay_s=4.0)
-        app.post_message(FleetChanged(far))
+        app.post_message(fleet_changed(far))
         await pilot.pause()
         assert "⇄4s" in screen_text(app)
         assert not app.model.freshness("lru1").stale  # 4 s: live enough
         mars = RobotInfo(name="lru1", online=True, since=T0, heard=T0, delay_s=600.0)
-        app.post_message(FleetChanged(mars))
+        app.post_message(fleet_changed(mars))
         await pilot.pause()
         fresh = app.model.freshness("lru1")
         assert fresh.stale and fresh.why == "delayed" and fresh.age_s == 600.0
@@ -138,7 +138,7 @@ def test_pending_sync_and_delay_80x24(snap_compare):
         app.clock = lambda: now
         await inject(app, pilot, b, telemetry=mars_telemetry())
         app.post_message(
-            FleetChanged(RobotInfo(name="lru2", online=True, since=T0, heard=now, delay_s=2.0))
+            fleet_changed(RobotInfo(name="lru2", online=True, since=T0, heard=now, delay_s=2.0))
         )
         await pilot.pause()
         app.mission_screen.schedule.select("lru2-5")
@@ -162,7 +162,7 @@ async def test_the_fleet_screen_lists_each_robots_commands_and_delay():
     async with app.run_test(size=(120, 40)) as pilot:
         await inject(app, pilot, b, telemetry=mars_telemetry())
         far = RobotInfo(name="lru2", online=True, since=T0, heard=now, delay_s=20.0)
-        app.post_message(FleetChanged(far))
+        app.post_message(fleet_changed(far))
         await pilot.press("f4")
         await pilot.pause()
         assert isinstance(app.screen, FleetScreen)

@@ -505,8 +505,8 @@ def _processes_mentioning(text: str) -> list[int]:
 
 
 # -- part 2: an injected failure raises an alert that is acknowledged ----------------------------
-# (the "[fail]" label makes console_robots.py fail the skill; the console raises
-# its own alert from the report, merged with the server's, one bell)
+# (the "[fail]" label makes console_robots.py fail the skill; the server raises
+# the alert, the console logs the report: one alert, one bell)
 
 
 async def test_workflow_injected_failure_raises_an_alert_that_is_acknowledged(live):
@@ -546,12 +546,12 @@ async def test_workflow_injected_failure_raises_an_alert_that_is_acknowledged(li
             SLOW,
             "failure alert",
         )
-        # the server's alert about the same failure arrives too: merged, not a second alert
+        # the server's alert, the only one about the failure (the console raises none)
         await wait_until(
             pilot,
-            lambda: [a.source for a in app.alerts.alerts if a.kind == "failure"] == ["both"],
+            lambda: [a.source for a in app.alerts.alerts if a.kind == "failure"] == ["server"],
             SLOW,
-            "server alert merged",
+            "the server's alert",
         )
         failure = [a for a in app.alerts.alerts if a.kind == "failure"]
         assert len(failure) == 1 and failure[0].skill == "lru1-1" and failure[0].level == "error"

@@ -13,9 +13,11 @@ from console_state import (
     EngineBackend,
     inject,
     make_app,
+    map_fed,
     mars_mid_execution,
     mars_telemetry,
     screen_text,
+    telemetry_changed,
     wait_until,
 )
 from map_state import map_message, mars_snapshot
@@ -26,7 +28,6 @@ from backend.client.mapfollow import MapFeed, MapUpdate
 from backend.core.model import Pose, Status
 from backend.protocol import mapfeed as mf
 from backend.protocol.messages import Telemetry
-from console.messages import MapChanged, TelemetryChanged
 from console.screens.map import NO_FEED, MapScreen
 from console.screens.mission import MissionScreen
 from console.widgets.map.view import ROBOT_ARROWS, UPPER_HALF, halfblock_row, heading_glyph
@@ -78,7 +79,7 @@ async def test_without_a_feed_the_map_says_so_and_still_shows_robots_and_markers
     app = make_app()
     async with app.run_test(size=(80, 24)) as pilot:
         await open_map(app, pilot, feed=False)
-        app.post_message(MapChanged(mf.MapMirror(), MapUpdate("none", detail="no simulator")))
+        app.post_message(map_fed(mf.MapMirror(), MapUpdate("none", detail="no simulator")))
         await wait_until(pilot, lambda: NO_FEED in screen_text(app), 10, "the no-feed notice")
         text = screen_text(app)
         assert "lru1" in text and "ROI-east" in text and "POI-B" in text
@@ -98,7 +99,7 @@ async def test_robot_moving_redraws_only_its_rows():
         row_before = view._overlay.where["robot:lru1"][1]
         t = mars_telemetry()[0]
         app.post_message(
-            TelemetryChanged(t.model_copy(update={"pose": Pose(x=20.0, y=-30.0, yaw=math.pi / 2)}))
+            telemetry_changed(t.model_copy(update={"pose": Pose(x=20.0, y=-30.0, yaw=math.pi / 2)}))
         )
         await pilot.pause()
         await pilot.pause()
@@ -120,7 +121,7 @@ async def test_follow_keeps_the_robot_centred():
         assert view.follow == "lru1"
         for x, y in ((30.0, 5.0), (60.0, -20.0)):
             app.post_message(
-                TelemetryChanged(
+                telemetry_changed(
                     Telemetry(robot="lru1", pose=Pose(x=x, y=y), at=mars_telemetry()[0].at)
                 )
             )

@@ -7,12 +7,11 @@ from __future__ import annotations
 
 import math
 
-from console_state import DATA, Builder, engine_app, inject, screen_text, wait_until
+from console_state import DATA, Builder, account_known, engine_app, inject, screen_text, wait_until
 from map_state import map_message
 from textual.widgets import OptionList
 
 from backend.core.ops import EditSkill
-from console.messages import AccountKnown
 from console.screens.dialogs import ChoiceScreen
 from console.screens.map import MapScreen
 
@@ -204,7 +203,7 @@ async def test_a_skill_that_became_read_only_while_choosing_gets_nothing():
         screen.select_marker("POI-A")
         await pilot.press("b")
         await chooser(app, pilot)
-        app.post_message(AccountKnown("read-only: logged in as observer watch"))
+        app.post_message(account_known("read-only: logged in as observer watch"))
         await wait_until(pilot, lambda: app.model.read_only, 10, "the observer account")
         await pilot.press("enter")
         await wait_until(pilot, lambda: app.screen is screen, 10, "back on the map")

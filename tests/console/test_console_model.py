@@ -108,7 +108,7 @@ def test_apply_reports_changed_columns_and_keeps_indexes():
     assert m.apply(applied.batch()) == set()  # already applied
     batch = ev.EventBatch(
         revision=m.mission.revision + 1,
-        events=[ev.SkillChanged(id="lru1-1", changes={"status": "idle_synchronized"})],
+        events=[ev.SkillStatusChanged(id="lru1-1", status="idle_synchronized")],
     )
     assert m.apply(batch) == {"lru1"}
     assert m.find("lru1-1")[2].status == Status.IDLE_SYNCHRONIZED

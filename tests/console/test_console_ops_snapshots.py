@@ -14,14 +14,13 @@ from __future__ import annotations
 from datetime import timedelta
 
 import pytest
-from console_state import T0, inject, mars_telemetry, screen_text, wait_until
+from console_state import T0, fleet_changed, inject, mars_telemetry, screen_text, wait_until
 from map_state import map_message, mars_snapshot
 from plan_state import ONLINE, plan_app, risky_mars, sim_status
 from textual import events
 
 from backend.core.ops import Sync
 from backend.protocol.messages import RobotInfo
-from console.messages import FleetChanged
 
 SIZES = {"80x24": (80, 24), "120x40": (120, 40)}
 
@@ -38,9 +37,9 @@ async def _at_speed_10(app, pilot) -> None:
     snap = mars_snapshot()
     app.post_message(map_message(snap.model_copy(update={"sim_time": 1608.0, "speed": 10.0})))
     app.post_message(
-        FleetChanged(RobotInfo(name="lru2", online=True, since=T0, heard=T0, delay_s=60.0))
+        fleet_changed(RobotInfo(name="lru2", online=True, since=T0, heard=T0, delay_s=60.0))
     )
-    app._refused("Run refused: [lru1] lru1 is already executing lru1-2 (running)", "lru1", None)
+    app.ops.refused("Run refused: [lru1] lru1 is already executing lru1-2 (running)", "lru1", None)
     await wait_until(pilot, lambda: app.model.clock.simulated, what="the sim's clock")
     app.refresh_plan(force=True)
     app.mission_screen.schedule.select("lru2-5")

@@ -349,9 +349,9 @@ def test_observer_account_read_only(snap_compare):
     # logged in as an observer: the top bar says so, the editor and every change action
     # give the reason
     async def after(pilot):
-        from console.messages import AccountKnown
+        from console_state import account_known
 
-        pilot.app.post_message(AccountKnown("read-only: logged in as observer watch"))
+        pilot.app.post_message(account_known("read-only: logged in as observer watch"))
         await pilot.pause()
         await pilot.press("d")
         await pilot.pause()

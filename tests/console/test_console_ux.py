@@ -14,7 +14,9 @@ from console_state import (
     MARS,
     T0,
     Builder,
+    alert_received,
     engine_app,
+    fleet_changed,
     inject,
     make_app,
     mars_mid_execution,
@@ -26,8 +28,7 @@ from textual import events
 
 from backend.core.model import Status
 from backend.core.ops import EditSkill
-from backend.protocol.messages import RobotInfo
-from console.messages import FleetChanged
+from backend.protocol.messages import Alert, RobotInfo
 from console.screens.dialogs import ConfirmScreen, SkillSearch
 from console.screens.fleet import FleetScreen
 
@@ -106,7 +107,7 @@ async def test_a_robot_gone_offline_is_drawn_as_its_last_known_state():
         assert "45% ETA" in text or "45% 2m12s" in text  # live: progress and ETA
         assert "ago" not in text
         now[0] = T0 + timedelta(seconds=25)
-        app.post_message(FleetChanged(RobotInfo(name="lru1", online=False, since=T0)))
+        app.post_message(fleet_changed(RobotInfo(name="lru1", online=False, since=T0)))
         await pilot.pause()
         app.mission_screen.freshness_tick()  # (every second)
         await pilot.pause()
@@ -119,7 +120,7 @@ async def test_a_robot_gone_offline_is_drawn_as_its_last_known_state():
         app.mission_screen.freshness_tick()
         await pilot.pause()
         assert "40s ago: ▶ lru1-2" in screen_text(app)
-        app.post_message(FleetChanged(RobotInfo(name="lru1", online=True, since=now[0])))
+        app.post_message(fleet_changed(RobotInfo(name="lru1", online=True, since=now[0])))
         await pilot.pause()
         app.mission_screen.freshness_tick()
         await pilot.pause()
@@ -381,14 +382,12 @@ async def test_labels_are_cut_in_the_middle_and_whole_in_the_editor():
 
 
 async def test_fleet_filter_examples_and_typing_after_escape():
-    from console_state import mars_fleet_with_manifests
-
-    from console.messages import StateLoaded
+    from console_state import mars_fleet_with_manifests, state_loaded
 
     b = Builder(MARS)
     app = make_app()
     async with app.run_test(size=(80, 24)) as pilot:
-        app.post_message(StateLoaded(b.snapshot(), b.library, mars_fleet_with_manifests()))
+        app.post_message(state_loaded(b.snapshot(), b.library, mars_fleet_with_manifests()))
         await pilot.pause()
         await pilot.press("f4")
         await wait_until(pilot, lambda: isinstance(app.screen, FleetScreen), what="fleet")
@@ -409,8 +408,12 @@ async def test_the_alert_list_shows_the_selected_alert_in_full():
     )
     async with app.run_test(size=(80, 24)) as pilot:
         await inject(app, pilot, Builder(MARS))
-        a = app.alerts.add("failure", long, T0, level="error", robot="lru1", skill="lru1-1")
-        app.raise_alert(a, notify=False)
+        failed = Alert(
+            id=1, level="error", kind="failure", robot="lru1", skill="lru1-1", message=long, at=T0
+        )
+        app.post_message(alert_received(failed))
+        await wait_until(pilot, lambda: app.alerts.alerts, what="the alert")
+        app.clear_notifications()  # (the toast would cover the list at 80x24)
         await pilot.press("f6")
         await pilot.pause()
         await pilot.pause()

@@ -22,7 +22,7 @@ from textual import events
 
 from backend.core.model import Run, UplinkCommand
 from backend.core.ops import EditSkill
-from backend.protocol.messages import RobotInfo
+from backend.protocol.messages import Alert, RobotInfo
 from console.escape import split_escape
 from console.state.capability import filter_examples, filter_robots
 from console.state.context import context_keys, fit_footer, tail_keys
@@ -199,10 +199,21 @@ def test_notifications_carry_no_absolute_paths():
 def test_robots_going_offline_together_are_one_notification():
     book = AlertBook()
     for i, r in enumerate(("lru1", "lru2", "ardea")):
-        book.add("offline", f"robot {r} went offline", T0 + timedelta(seconds=i), robot=r)
+        at = T0 + timedelta(seconds=i)
+        msg = f"robot {r} went offline"
+        book.from_server(Alert(id=i + 1, kind="offline", robot=r, message=msg, at=at), "s")
     title, text = toast_text(book, book.alerts[-1])
     assert (title, text) == ("Robots offline", "lru1, lru2 and ardea went offline")
-    book.add("failure", "lru1: lru1-2 failure", T0, level="error", robot="lru1", skill="lru1-2")
+    failure = Alert(
+        id=9,
+        level="error",
+        kind="failure",
+        robot="lru1",
+        skill="lru1-2",
+        message="lru1: lru1-2 failure",
+        at=T0,
+    )
+    book.from_server(failure, "s")
     assert toast_text(book, book.alerts[-1]) == ("lru1 · lru1-2", "lru1: lru1-2 failure")
 
 

@@ -14,17 +14,22 @@ from console_state import (
     MARS,
     T0,
     Builder,
+    alert_received,
+    applied_batch,
     engine_app,
+    fleet_changed,
     inject,
     make_app,
     mars_mid_execution,
     mars_telemetry,
     screen_text,
+    settle,
+    telemetry_changed,
     wait_until,
 )
 
-from backend.protocol.messages import RobotInfo, Telemetry
-from console.messages import FleetChanged, TelemetryChanged
+from backend.core.ops import EditSkill
+from backend.protocol.messages import Alert, RobotInfo, Telemetry
 from console.state.files import SHIPPED_MISSIONS
 
 ONLINE = {"lru1": True, "lru2": True, "ardea": True, "lander": True}
@@ -59,9 +64,11 @@ def test_stale_robot_80x24(snap_compare):
         app.clock = lambda: now[0]
         await inject(app, pilot, mars_mid_execution(), online=ONLINE, telemetry=mars_telemetry())
         now[0] = T0 + timedelta(seconds=25)
-        app.post_message(FleetChanged(RobotInfo(name="lru1", online=False, since=T0)))
+        app.post_message(fleet_changed(RobotInfo(name="lru1", online=False, since=T0)))
+        gone = Alert(id=1, kind="offline", robot="lru1", message="robot lru1 went offline", at=T0)
+        app.post_message(alert_received(gone))  # the server's
         for r in ("ardea", "lander"):  # still heard
-            app.post_message(TelemetryChanged(Telemetry(robot=r, battery=0.9, link=0.8, at=T0)))
+            app.post_message(telemetry_changed(Telemetry(robot=r, battery=0.9, link=0.8, at=T0)))
         await pilot.pause()
         app.mission_screen.freshness_tick()
         await pilot.pause()
@@ -135,8 +142,13 @@ def test_quit_question_with_robots_running_80x24(snap_compare):
     from console.cli import DEMO_QUITS
 
     async def run(pilot):
-        await inject(pilot.app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
-        pilot.app.model.mission.tasks["lru1"][4].label = "edited"  # an unsaved edit
+        b = mars_mid_execution()
+        await inject(pilot.app, pilot, b, telemetry=mars_telemetry())
+        sid = b.mission.tasks["lru1"][4].id  # an edit not saved to a file
+        pilot.app.post_message(
+            applied_batch(b.engine.submit(EditSkill(id=sid, label="edited")).batch())
+        )
+        await settle(pilot)
         await pilot.press("ctrl+q")
         await pilot.pause()
         _shows(pilot.app, "Quit now?", "lru1 is running (lru1-2)", "Save, then quit (s)")

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from backend.core.events import EventBatch, SkillChanged
+from backend.core.events import EventBatch, SkillEdited, SkillStatusChanged
 from backend.core.model import Mission, Pose, PoseMarker, Position, Status
 from backend.core.ops import (
     AddBarrier,
@@ -355,9 +355,7 @@ def test_a_snapshot_waits_until_the_batches_since_add_up_to_half_its_size(tmp_pa
     while True:
         rev += 1
         j.append(
-            EventBatch(
-                revision=rev, events=[SkillChanged(id="lru1-1", changes={"status_info": "x" * 40})]
-            ),
+            EventBatch(revision=rev, events=[SkillStatusChanged(id="lru1-1", info="x" * 40)]),
             op_json="{}",
         )
         if rev == mission.revision + 15:  # reopened midway: the same sizes, from the file
@@ -435,8 +433,8 @@ def test_non_consecutive_revisions_are_refused(tmp_path):
     with pytest.raises(ValueError, match="no events"):
         j.append(EventBatch(revision=2, events=[]))
     # all or nothing: a gap inside append_many writes none of them
-    ok = EventBatch(revision=2, events=[SkillChanged(id="lru1-1", changes={"label": "x"})])
-    bad = EventBatch(revision=4, events=[SkillChanged(id="lru1-1", changes={"label": "y"})])
+    ok = EventBatch(revision=2, events=[SkillEdited(id="lru1-1", label="x")])
+    bad = EventBatch(revision=4, events=[SkillEdited(id="lru1-1", label="y")])
     with pytest.raises(ValueError):
         j.append_many([Entry(ok, client="c", request_id="1"), bad])
     assert j.last_revision() == 1
@@ -453,7 +451,7 @@ def test_an_empty_journal_loads_nothing_and_needs_a_base(tmp_path):
     with Journal.open(tmp_path / "empty.db", library="libraries/mars.yaml") as j:
         assert j.load() == (None, [])
         assert j.last_revision() is None
-        batch = EventBatch(revision=1, events=[SkillChanged(id="a", changes={})])
+        batch = EventBatch(revision=1, events=[SkillEdited(id="a")])
         with pytest.raises(ValueError, match="no base mission"):
             j.append(batch)
         meta = j.meta()
@@ -861,3 +859,29 @@ def test_a_checkpoint_never_creates_a_journal_that_was_deleted(tmp_path):
     srv.close()
     with pytest.raises(JournalError, match="closed"):  # a checkpoint that starts late opens nothing
         srv.journal.checkpoint()
+
+
+OLD_JOURNAL = Path(__file__).resolve().parents[1] / "data" / "journal_before_typed_events"
+
+
+def test_a_journal_written_before_typed_events_replays_to_the_same_mission(tmp_path):
+    """Written by the code before skill and command events were typed (its
+    `skill_changed`/`command_changed` carried a `changes` dict; see make.py
+    beside the file): it replays to the mission that code had."""
+    db = tmp_path / "old.db"
+    db.write_bytes((OLD_JOURNAL / "mission.db").read_bytes())
+    raw = sqlite3.connect(db).execute("SELECT events FROM batches").fetchall()
+    assert any('"skill_changed"' in r[0] for r in raw)  # the old form, as written
+    with Journal.open(db) as j:
+        mission, _ = j.load()
+    expected = Mission.model_validate_json((OLD_JOURNAL / "mission_after.json").read_text())
+    assert mission == expected
+    s1, s2 = mission.find("lru1-1")[2], mission.find("lru1-2")[2]
+    assert (s1.status, s1.status_info) == (Status.SUCCESS, "arrived")
+    assert s1.started_at is not None and s1.finished_at is not None
+    assert (s2.status, s2.status_info, s2.label) == (
+        Status.FAILURE,
+        "wheel stuck",
+        "a stone, carefully",
+    )
+    assert mission.command(1).state == "acked" and mission.command(1).done == ["lru1-1", "lru1-2"]

@@ -6,7 +6,7 @@ import typing
 
 import pytest
 
-from backend.core.model import AreaMarker, PoseMarker, Position, PositionMarker
+from backend.core.model import AreaMarker, Pose, PoseMarker, Position, PositionMarker
 from backend.core.params import (
     KINDS,
     ParamSpec,
@@ -16,7 +16,7 @@ from backend.core.params import (
     marker_value,
     normalize_value,
     starting_values,
-    typed_by_shape,
+    typed_params,
 )
 
 MARKERS = {
@@ -72,11 +72,19 @@ def test_a_pose_marker_gives_a_position_and_an_area_marker_gives_no_pose():
     )
 
 
-def test_handlers_get_typed_values_by_shape():
-    area = [{"x": 0.0, "y": 0.0, "z": 0.0}] * 3
-    assert typed_by_shape(area) == [Position()] * 3
-    assert typed_by_shape({"x": 1.0, "y": 2.0, "z": 0.0}) == Position(x=1, y=2)
-    assert typed_by_shape({"x": 1.0}) == {"x": 1.0}  # not a full position: as is
+def test_handlers_get_values_typed_by_their_kind_never_by_their_shape():
+    origin = {"x": 0.0, "y": 0.0, "z": 0.0}
+    values = {"area": [origin] * 3, "at": origin, "raw": origin, "goal": {**origin, "yaw": 1.0}}
+    kinds = {"area": "area", "at": "position", "raw": "dict", "goal": "pose", "partner": "robot"}
+    assert typed_params(values, kinds) == {
+        "area": [Position()] * 3,
+        "at": Position(),
+        "raw": origin,  # a dict parameter shaped like a position stays a dict
+        "goal": Pose(yaw=1.0),
+        "partner": None,  # an optional parameter left unset
+    }
+    # no kind sent (an older server): as the values came
+    assert typed_params(values, {}) == values
 
 
 # -- what a person reads and types: angles in degrees ---------------------------------

@@ -39,7 +39,8 @@ def test_observer_console_is_read_only_and_says_why(server, accounts):
             await _until(
                 pilot, lambda: app.model.read_only and app.model.mission is not None, "logged in"
             )
-            assert READ_ONLY in _top(app)
+            # the top bar redraws on the screen's turn, after the model took the account
+            await _until(pilot, lambda: READ_ONLY in _top(app), "the top bar says read-only")
             screen.schedule.select("lru1-1")
             await pilot.pause()
             changing = [a.name for a in ACTIONS if a.name in MUTATING]

@@ -13,10 +13,11 @@ import pytest
 from pydantic import ValidationError
 from zenoh.handlers import Callback
 
-from backend.core.events import EventBatch, SkillChanged, read_batches
+from backend.core.alerts import AlertKind
+from backend.core.events import EventBatch, SkillEdited, read_batches
 from backend.core.ops import EditSkill
 from backend.protocol.keys import Keys
-from backend.protocol.messages import Alert, Request, dumps
+from backend.protocol.messages import Alert, Request, StateSnapshot, dumps
 from backend.transport import client_config
 from backend.transport.session import close_session, open_session
 
@@ -90,9 +91,7 @@ def test_operations_handled_in_a_row_share_one_message_in_order(tmp_path):
             assert payload.startswith(b"[")
             batches = [EventBatch.model_validate(b) for b in json.loads(payload)]
             assert [b.revision for b in batches] == [start + 1, start + 2, start + 3]
-            assert [b.events[0].changes["label"] for b in batches] == [
-                f"in a row {i}" for i in range(3)
-            ]
+            assert [b.events[0].label for b in batches] == [f"in a row {i}" for i in range(3)]
             # the client library applies the whole array
             mission = await client.wait_for(lambda m: m.revision == start + 3)
             assert mission.find("lru1-1")[2].label == "in a row 2"
@@ -110,7 +109,7 @@ def test_grouping_never_moves_a_batch_past_another_keys_publication(tmp_path):
         async with listening(tmp_path / "m.db") as (server, client, listener):
             start = server.mission.revision
             server._handle_op(_edit("a", "before the alert"))
-            server.alert("between the two", kind="test")
+            server.alert("between the two", kind=AlertKind.JOURNAL)
             server._handle_op(_edit("b", "after the alert"))
             server._handle_op(_edit("c", "after the alert too"))
             got = [await listener.next() for _ in range(3)]
@@ -118,12 +117,19 @@ def test_grouping_never_moves_a_batch_past_another_keys_publication(tmp_path):
             assert [b.revision for b in read_batches(got[0][1])] == [start + 1]
             assert Alert.model_validate_json(got[1][1]).message == "between the two"
             assert [b.revision for b in read_batches(got[2][1])] == [start + 2, start + 3]
+            # numbered, and kept for the state snapshot (a console that was away)
+            server.alert("another", kind=AlertKind.OFFLINE, robot="lru1")
+            snap = StateSnapshot.model_validate_json(server._handle_state(b""))
+            assert [(a.id, a.message) for a in snap.alerts][-2:] == [
+                (snap.alerts[-2].id, "between the two"),
+                (snap.alerts[-2].id + 1, "another"),
+            ]
 
     asyncio.run(scenario())
 
 
 def test_read_batches_takes_one_batch_or_an_array_and_names_a_bad_field():
-    one = EventBatch(revision=7, events=[SkillChanged(id="a-1", changes={"label": "x"})], actor="c")
+    one = EventBatch(revision=7, events=[SkillEdited(id="a-1", label="x")], actor="c")
     two = one.model_copy(update={"revision": 8})
     assert read_batches(one.model_dump_json().encode()) == [one]
     array = b"[" + one.model_dump_json().encode() + b"," + two.model_dump_json().encode() + b"]"

@@ -525,6 +525,21 @@ def test_a_robot_speaking_another_protocol_version_is_told(cluster, robots):
     drive(cluster, scenario)
 
 
+def test_a_registration_gives_the_library_signature_of_each_skill_offered(cluster, robots):
+    robot = robots(skills={"drive_to": "1.0.0", "recharge": "1.0.0", "fly_to": "1.0.0"})
+
+    async def scenario(c):
+        skills = (await registered(robot))["skills"]
+        assert sorted(skills) == ["drive_to", "recharge"]  # an lru_science does not fly
+        assert skills["drive_to"] == {
+            "params": {"goal": "pose", "speed": "float", "tolerance": "float"},
+            "required": ["goal"],
+            "defaults": {"speed": 0.5, "tolerance": 0.5},
+        }
+
+    drive(cluster, scenario)
+
+
 def test_sync_refused_as_incompatible_queues_nothing(cluster, robots):
     robot = robots(skills={k: v for k, v in LRU_SCIENCE.items() if k != "take_science_image"})
 

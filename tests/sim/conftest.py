@@ -31,6 +31,7 @@ from backend.transport import free_port, loopback_endpoint
 ROOT = Path(__file__).resolve().parents[2]
 MISSION = ROOT / "missions" / "mars_sample_return.yaml"
 WORLD = ROOT / "missions" / "worlds" / "mars.yaml"
+LIBRARY_FILE = ROOT / "missions" / "libraries" / "mars.yaml"
 STARTUP = 20.0
 
 

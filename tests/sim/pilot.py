@@ -7,9 +7,10 @@ and top scores reported, stones, boxes) and the sim's ground status (the score
 and the sim clock). Never the world's truth: `run_strategy` reads the truth
 only after the strategy is over, to evaluate it.
 
-Operator knowledge from the pilot study's instruction document (not the
-world file): the mission lasts about 26.8 minutes, a Wi-Fi box covers about
-50 m, LRU1's camera sees 15 m.
+Operator knowledge: from the pilot study's instruction document, that the
+mission lasts about 26.8 minutes; every figure it plans with (how far LRU1's
+camera sees, ...) from the skill library, as a newcomer reads them (never the
+world file).
 
     result = await run_strategy(stack, "ideal", seed=1)   # tests/sim/test_pilot_study.py
     python bench/pilot_study.py                            # every strategy, 5 seeds
@@ -32,8 +33,6 @@ from backend.protocol import mapfeed as mf
 PILOT_MINUTES = 26.8  # the participants' average mission time
 DEADLINE = PILOT_MINUTES * 60.0  # sim seconds
 BEST = 1.8  # the paper's best participants scored 1.8 or more
-WIFI_RANGE = 50.0  # metres a Wi-Fi box covers (instruction document)
-CAMERA_RANGE = 15.0  # metres LRU1's science camera sees (instruction document)
 LANDER_DROP = {"x": 2.0, "y": 0.0}
 TERMINAL = ("success", "failure")
 WAKE_S = 0.1  # wall seconds between looks at the clock while nothing happens
@@ -187,6 +186,12 @@ class Operator:
         found = self.client.mission.find(sid)
         assert found is not None, sid
         return found[2]
+
+    def figure(self, robot: str, name: str) -> float:
+        """A figure the library states for the robot's type (its `properties`)."""
+        m, lib = self.client.mission, self.client.library
+        assert m is not None and lib is not None
+        return float(lib.robot_types[m.robots[robot].type].properties[name])
 
     def status_of(self, sid: str) -> str:
         return str(self.skill(sid).status.value)
@@ -407,15 +412,14 @@ def relay_spot(op: Operator, target: XY, margin: float = 0.12) -> XY:
 def image_spot(op: Operator, region: Region, start: XY) -> XY:
     """Where LRU1 stops to image a region: a little short of it, on its way."""
     d = region.dist(*start)
-    back = min(d, CAMERA_RANGE * 0.5)
+    back = min(d, op.figure("lru1", "camera_range_m") * 0.5)
     k = 0.0 if d == 0 else (d - back) / d
     return op.free_near(start[0] + (region.x - start[0]) * k, start[1] + (region.y - start[1]) * k)
 
 
 async def survey_from_the_air(op: Operator, altitude: float = 10.0) -> list[str]:
     """Ardea maps the whole site in one flight (at 10 m its camera sees 40 m: 427 s), lands.
-    The survey is capped at 480 s: the server's sync gate predicts the flight from the
-    library's drone model and refuses one that would empty the battery."""
+    The survey is capped at 480 s (the library predicts 427 s at 240 m²/s)."""
     return await op.do(
         "ardea",
         ("takeoff", {"altitude": altitude}),

@@ -20,6 +20,7 @@ from backend.client.events import ClientEvent, TelemetryReceived
 from backend.core.ops import AddBarrier, AddSkill, Control, EditSkill, Sync
 from backend.protocol import mapfeed as mf
 
+from ..cli.helpers import ctl
 from .conftest import ROOT, Stack, connect, skill, status_of, world_file
 
 
@@ -514,7 +515,14 @@ async def test_a_barrier_needs_a_link_between_the_partners(stack: Stack) -> None
             {"target": g, "search_radius": 6.0, "partner": "lru1"},
             at=0,
         )
-        await client.submit(AddBarrier(ids=[a, b]))
+        bid = (await client.submit(AddBarrier(ids=[a, b]))).value["barrier"]
+        # the plan checks say so before it goes up (issue 35: no error, both rows stale)
+        check = await asyncio.to_thread(ctl, stack.endpoint, "check", "--json")
+        assert check.returncode == 1, check.stderr
+        findings = {f["id"]: f for f in json.loads(check.stdout)["findings"]}
+        f = findings[f"coverage.barrier:{bid}"]
+        assert f["severity"] == "error" and "lru1 waits at (0, -80)" in f["message"], f
+        assert findings[f"coverage.partner:{a}/partner"]["severity"] == "warning"
         await client.submit(Sync(robot="lru1", through=a))
         await client.submit(Sync(robot="lru2", through=b))
         await client.submit(Control(op="run", robot="lru1"))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import inspect
 import math
 import re
 from pathlib import Path
@@ -13,16 +14,23 @@ import numpy as np
 import pytest
 
 from backend.agent import SkillFailed
+from backend.agent.registration import Handler, handler_differences
 from backend.core.model import Pose, Position
+from backend.core.params import typed_params
 from backend.files.diagnostics import FileProblems
+from backend.files.missions import load_library, load_mission
 from backend.protocol import mapfeed as mf
 from sim.exchange import WorldExchange
+from sim.fleet import SimFleet
 from sim.pathing import ROCK, Follower, lawnmower, segment_cells
+from sim.skills import science
 from sim.skills.registry import RobotSkills
 from sim.world import World
 from sim.worldfile import load_world, parse_world
 
-from .conftest import WORLD
+from .conftest import LIBRARY_FILE, MISSION, WORLD
+
+LIBRARY = load_library(LIBRARY_FILE)
 
 
 @pytest.fixture(scope="module")
@@ -40,16 +48,17 @@ def world(spec) -> World:
 
 def test_default_world_is_valid_and_deterministic(spec) -> None:
     a, b, c = World(spec, seed=1), World(spec, seed=1), World(spec, seed=2)
-    assert np.array_equal(a.terrain, b.terrain)
+    assert np.array_equal(a.terrain.grid, b.terrain.grid)
     assert [(s.id, s.x, s.y) for s in a.stones.values()] == [
         (s.id, s.x, s.y) for s in b.stones.values()
     ]
-    assert not np.array_equal(a.terrain, c.terrain)
+    assert not np.array_equal(a.terrain.grid, c.terrain.grid)
     assert [(s.x, s.y) for s in a.stones.values()] != [(s.x, s.y) for s in c.stones.values()]
     # a few hundred metres, some slow and some impassable ground
     assert a.geom.x1 - a.geom.x0 >= 200
-    counts = np.bincount(a.terrain.ravel(), minlength=3)
-    assert counts[1] > 0 and counts[2] > 0
+    counts = np.bincount(a.terrain.grid.ravel(), minlength=4)
+    assert counts[mf.T_SLOW] > 0 and counts[mf.T_ROCK] > 0
+    assert counts[mf.T_UNKNOWN] == 0  # the truth knows every cell
 
 
 def test_pilot_scenario_layout(world: World) -> None:
@@ -70,7 +79,7 @@ def test_pilot_scenario_layout(world: World) -> None:
     assert world.spec.comms.direct_range == 0  # robots talk through the network only
     # every RSS and stone is reachable by a rover
     for stone in world.stones.values():
-        assert world.terrain_at(stone.x, stone.y) != ROCK
+        assert world.terrain.at(stone.x, stone.y) != ROCK
 
 
 def test_world_file_errors_point_at_line_and_field(tmp_path: Path) -> None:
@@ -142,40 +151,40 @@ def test_exploration_reveals_rss_and_reaches_the_ground_only_in_range(spec) -> N
     assert world.discover(near, 10.0) == ["RSS-A"]
     assert world.discover(far, 10.0) == ["RSS-C"]
     assert "RSS-A" in near.knowledge.rss and "RSS-C" not in near.knowledge.rss
-    assert world.pump(now=0.0, delay=0.0)
-    assert set(world.ground_rss) == {"RSS-A"}  # RSS-C waits aboard ardea
+    assert world.pump_downlink(now=0.0, delay=0.0)
+    assert set(world.ground.rss) == {"RSS-A"}  # RSS-C waits aboard ardea
     i, j = world.geom.cell_of(-32.0, 80.0)
-    assert world.explored[i, j] and not world.ground_explored[i, j]
+    assert world.explored[i, j] and not world.ground.explored[i, j]
     far.x, far.y = -20.0, 85.0
     near.x, near.y = -20.0, 72.0  # out of coverage too, but 13 m apart: direct radio
     assert not world.in_range(near) and world.can_talk(near, far)
     near.x, near.y = 29.0, 25.0
     far.x, far.y = 5.0, 5.0  # back in coverage
-    world.pump(now=1.0, delay=2.0)  # on its way: a 2 s link delay
-    assert "RSS-C" not in world.ground_rss
-    world.pump(now=3.5, delay=2.0)
-    assert set(world.ground_rss) == {"RSS-A", "RSS-C"}
-    assert world.ground_explored[i, j]
-    layers = world.ground_layers()
-    assert layers["terrain"][i, j] == world.terrain[i, j] + 1
+    world.pump_downlink(now=1.0, delay=2.0)  # on its way: a 2 s link delay
+    assert "RSS-C" not in world.ground.rss
+    world.pump_downlink(now=3.5, delay=2.0)
+    assert set(world.ground.rss) == {"RSS-A", "RSS-C"}
+    assert world.ground.explored[i, j]
+    layers = world.ground.layers(world.terrain.grid, world.coverage)
+    assert layers["terrain"][i, j] == world.terrain.grid[i, j]  # the codes are the feed's
     assert layers["terrain"][world.geom.cell_of(-150.0, -150.0)] == mf.T_UNKNOWN
 
 
 def test_path_avoids_impassable_cells(world: World) -> None:
     rover = world.add_robot("lru1", "lru_science")
-    start = world.nearest_free(45.0, 38.0)
-    goal = world.nearest_free(80.0, 38.0)
+    start = world.terrain.nearest_free(45.0, 38.0)
+    goal = world.terrain.nearest_free(80.0, 38.0)
     assert start and goal
     rover.x, rover.y = start
-    route = world.plan_route(rover, goal)
-    assert not world.straight_clear(start, goal)  # the crater lies between
+    route = world.terrain.route(start, goal, flies=False)
+    assert not world.terrain.straight_clear(start, goal)  # the crater lies between
     for a, b in zip(route, route[1:], strict=False):
         rows, cols = segment_cells(world.geom, a[0], a[1], b[0], b[1])
-        assert (world.terrain[rows, cols] != ROCK).all()
+        assert (world.terrain.grid[rows, cols] != ROCK).all()
     f = Follower(route)
     assert f.total > math.dist(start, goal) + 5
     with pytest.raises(Exception, match="impassable"):
-        world.plan_route(rover, (62.0, 38.0))  # the crater floor
+        world.terrain.route((rover.x, rover.y), (62.0, 38.0), flies=False)  # the crater floor
 
 
 def test_lawnmower_covers_the_polygon() -> None:
@@ -217,6 +226,33 @@ def run(coro) -> Any:
     return asyncio.run(coro)
 
 
+def call(skills: RobotSkills, skill: str, ctx: Any = None, **given: Any) -> Any:
+    """Run a handler as the agent calls it: every parameter, those not given
+    with the library's defaults (the server's fill-in), typed by their kind."""
+    spec = LIBRARY.skills[skill]
+    params = {**typed_params(spec.signature().defaults, spec.kinds()), **given}
+    return run(getattr(skills, skill)(ctx if ctx is not None else FakeCtx(), **params))
+
+
+def test_every_simulated_handler_fits_the_library_and_the_fleet_keeps_its_signature(
+    spec,
+) -> None:
+    """No handler declares a default of its own (the server fills the library's
+    in) nor takes **params: the check the agent makes at registration finds
+    nothing, through the fleet's wrapper too."""
+    mission, library = load_mission(MISSION)
+    fleet = SimFleet(mission, library, spec, connect=["tcp/127.0.0.1:1"])
+    for name, robot in fleet.world.robots.items():
+        for skill, fn in RobotSkills(fleet, robot).handlers().items():
+            if skill not in library.skills_of(robot.type):
+                continue
+            wrapped = fleet._wrap(robot, skill, fn)
+            assert inspect.signature(wrapped) == inspect.signature(fn)
+            handler = Handler(wrapped, "1.0.0", raw=False)
+            sig = library.skills[skill].signature()
+            assert handler_differences(name, skill, handler, sig) == []
+
+
 def test_battery_drains_with_distance_and_an_empty_battery_fails_with_the_distance(
     world: World,
 ) -> None:
@@ -224,7 +260,7 @@ def test_battery_drains_with_distance_and_an_empty_battery_fails_with_the_distan
     rover.x, rover.y, rover.battery = 4.0, 3.0, 1.0
     skills = RobotSkills(fake_fleet(world), rover)
     ctx = FakeCtx()
-    run(skills.drive_to(ctx, goal=Pose(x=40.0, y=3.0), speed=0.5))
+    call(skills, "drive_to", ctx, goal=Pose(x=40.0, y=3.0), speed=0.5)
     used = 1.0 - rover.battery
     assert math.hypot(rover.x - 40.0, rover.y - 3.0) <= 0.5
     per_m = 1 / rover.model.metres_per_battery
@@ -235,14 +271,14 @@ def test_battery_drains_with_distance_and_an_empty_battery_fails_with_the_distan
     rover.x, rover.y = 20.0, 3.0
     rover.battery = 0.13  # 8 % above the reserve: about 28 m, past the lander
     with pytest.raises(SkillFailed) as exc:
-        run(skills.drive_to(FakeCtx(), goal=Pose(x=-45.0, y=3.0)))
+        call(skills, "drive_to", goal=Pose(x=-45.0, y=3.0))
     m = re.search(r"battery empty after (\d+) m of (\d+) m", exc.value.reason)
     assert m and "recharge at the lander" in exc.value.reason, exc.value.reason
     done, total = int(m.group(1)), int(m.group(2))
     assert 20 <= done <= 32 and total > 45
     assert rover.battery == pytest.approx(rover.model.reserve)
     # recharging uses the reserve to get home, then charges
-    run(skills.recharge(FakeCtx(), target_level=0.9))
+    call(skills, "recharge", target_level=0.9)
     assert world.at_lander(rover) and rover.battery >= 0.9
 
 
@@ -253,19 +289,19 @@ def test_drone_refuses_a_flight_longer_than_its_battery_and_recharges_on_the_pad
     drone.x, drone.y, drone.battery = -2.0, 2.0, 0.3
     skills = RobotSkills(fake_fleet(world), drone)
     with pytest.raises(SkillFailed, match="take off first"):
-        run(skills.fly_to(FakeCtx(), goal=Pose(x=20.0, y=0.0)))
-    run(skills.takeoff(FakeCtx(), altitude=5.0))
+        call(skills, "fly_to", goal=Pose(x=20.0, y=0.0))
+    call(skills, "takeoff", altitude=5.0)
     assert drone.airborne and drone.z == 5.0
     with pytest.raises(SkillFailed) as exc:
-        run(skills.fly_to(FakeCtx(), goal=Pose(x=150.0, y=-150.0)))
+        call(skills, "fly_to", goal=Pose(x=150.0, y=-150.0))
     assert "refused before the flight" in exc.value.reason
     assert drone.airborne and math.hypot(drone.x + 2, drone.y - 2) < 1  # it did not move
-    run(skills.fly_to(FakeCtx(), goal=Pose(x=30.0, y=0.0)))
+    call(skills, "fly_to", goal=Pose(x=30.0, y=0.0))
     assert drone.battery < 0.3
-    run(skills.land(FakeCtx(), where="lander_pad"))
+    call(skills, "land", where="lander_pad")
     assert not drone.airborne and world.docked(drone)
     low = drone.battery
-    world.charge(drone, 60.0)
+    drone.charge(60.0)
     assert drone.battery == pytest.approx(low + drone.model.charge_per_minute)
 
 
@@ -278,7 +314,7 @@ def test_outcomes_hardly_depend_on_the_step_size(spec) -> None:
         fleet = fake_fleet(world)
         fleet.dt = dt
         skills = RobotSkills(fleet, rover)
-        run(skills.drive_to(FakeCtx(), goal=Pose(x=42.0, y=18.0)))
+        call(skills, "drive_to", goal=Pose(x=42.0, y=18.0))
         t0 = rover.sim_seconds
         area = [
             Position(x=30, y=0),
@@ -286,7 +322,7 @@ def test_outcomes_hardly_depend_on_the_step_size(spec) -> None:
             Position(x=80, y=40),
             Position(x=30, y=40),
         ]
-        run(skills.explore(FakeCtx(), area=area, max_duration=150))
+        call(skills, "explore", area=area, max_duration=150)
         assert rover.sim_seconds - t0 == pytest.approx(150.0)
         ends.append((rover.x, rover.y, int(world.explored.sum()), rover.battery))
     (x1, y1, c1, b1), (x2, y2, c2, b2) = ends
@@ -302,29 +338,25 @@ def test_identify_alone_gives_the_minimum_and_together_the_top_score(world: Worl
     fleet = fake_fleet(world)
     s1, s2 = RobotSkills(fleet, lru1), RobotSkills(fleet, lru2)
     at = Position(x=29.0, y=23.0)
-    run(s2.identify_stone(FakeCtx(), target=at, search_radius=6.0))
+    call(s2, "identify_stone", target=at, search_radius=6.0)
     alone = [s for s in world.stones.values() if s.state == "identified"]
     assert [s.score for s in alone] == [0.1]
     lru2.activity = "identify_stone"  # the partner works on it at the same time (a barrier)
     lru1.activity = "identify_stone"
-    run(s1.identify_stone(FakeCtx(), target=at, search_radius=6.0, partner="lru2"))
+    call(s1, "identify_stone", target=at, search_radius=6.0, partner="lru2")
     top = [s for s in world.stones.values() if s.state == "identified" and s.score == 0.5]
     assert len(top) == 1 and top[0].identified_by == ("lru1", "lru2")
     with pytest.raises(SkillFailed, match="no region ideal for sampling stones"):
-        run(s1.identify_stone(FakeCtx(), target=Position(x=-10.0, y=-10.0)))
+        call(s1, "identify_stone", target=Position(x=-10.0, y=-10.0))
 
 
 def test_science_image_reveals_the_top_score(world: World) -> None:
     lru1 = world.add_robot("lru1", "lru_science")
     lru1.x, lru1.y = 22.0, 20.0
-    run(
-        RobotSkills(fake_fleet(world), lru1).take_science_image(
-            FakeCtx(), target=Pose(x=29.0, y=23.0)
-        )
-    )
+    call(RobotSkills(fake_fleet(world), lru1), "take_science_image", target=Pose(x=29.0, y=23.0))
     assert lru1.knowledge.rss["RSS-A"]["top_score"] == 0.5
-    world.pump(0.0, 0.0)
-    assert world.ground_rss["RSS-A"]["top_score"] == 0.5
+    world.pump_downlink(0.0, 0.0)
+    assert world.ground.rss["RSS-A"].top_score == 0.5
 
 
 def exchanging_fleet(world: World) -> Any:
@@ -346,14 +378,14 @@ def test_a_revealed_top_score_stays_when_another_robot_discovers_the_region(worl
     lru1 = world.add_robot("lru1", "lru_science")
     lru2 = world.add_robot("lru2", "lru_manipulator")
     lru1.x, lru1.y = 22.0, 20.0
-    run(RobotSkills(fake_fleet(world), lru1).take_science_image(FakeCtx(), target=Pose(x=29, y=23)))
-    world.pump(0.0, 0.0)
-    assert world.ground_rss["RSS-A"]["top_score"] == 0.5
+    call(RobotSkills(fake_fleet(world), lru1), "take_science_image", target=Pose(x=29, y=23))
+    world.pump_downlink(0.0, 0.0)
+    assert world.ground.rss["RSS-A"].top_score == 0.5
     WorldExchange(world, lru2).tell_rss(lru1.knowledge.rss["RSS-A"], "lru1")
     lru2.x, lru2.y = 29.0, 23.0
     assert world.discover(lru2, 10.0) == ["RSS-A"]  # a later report, without the top score
-    world.pump(1.0, 0.0)
-    assert world.ground_rss["RSS-A"]["top_score"] == 0.5  # the map keeps it
+    world.pump_downlink(1.0, 0.0)
+    assert world.ground.rss["RSS-A"].top_score == 0.5  # the map keeps it
     assert lru2.knowledge.rss["RSS-A"]["top_score"] == 0.5  # and so does LRU2
 
 
@@ -368,17 +400,58 @@ def test_identify_searches_only_within_its_radius_and_pick_the_whole_region(
     s1, s2 = RobotSkills(fleet, lru1), RobotSkills(fleet, lru2)
     centre = Position(x=29.0, y=23.0)
     with pytest.raises(SkillFailed, match=r"no stone to identify within 3 m of \(29.0, 23.0\)"):
-        run(s1.identify_stone(FakeCtx(), target=centre, search_radius=3.0))
+        call(s1, "identify_stone", target=centre, search_radius=3.0)
     assert all(s.state == "hidden" for s in world.stones.values())
     lru1.activity = lru2.activity = "identify_stone"
-    run(s1.identify_stone(FakeCtx(), target=centre, search_radius=5.0, partner="lru2"))
-    run(s2.identify_stone(FakeCtx(), target=centre, search_radius=5.0, partner="lru1"))
+    call(s1, "identify_stone", target=centre, search_radius=5.0, partner="lru2")
+    call(s2, "identify_stone", target=centre, search_radius=5.0, partner="lru1")
     lru1.activity = lru2.activity = None
     stone = world.stones["RSS-A-s1"]
     assert stone.state == "identified" and stone.score == 0.5
     # aimed at the far side of the region, 8.8 m from the stone: it is still found
-    result = run(s2.pick_stone(FakeCtx(), target=Position(x=29.0, y=18.5)))
+    result = call(s2, "pick_stone", target=Position(x=29.0, y=18.5))
     assert result.info == "picked RSS-A-s1 of RSS-A (score 0.5); carrying 1/2"
+
+
+async def _together(skills: RobotSkills, robot: Any, **params: Any) -> str:
+    """One partner's identify_stone, working on it as the fleet marks it (a barrier)."""
+    robot.activity = "identify_stone"
+    try:
+        return (await skills.identify_stone(FakeCtx(), **params)).info
+    finally:
+        robot.activity = None
+
+
+@pytest.mark.parametrize("late", ["lru1", "lru2"])
+def test_barrier_partners_name_the_same_stone_when_one_comes_too_late(
+    world: World, monkeypatch: pytest.MonkeyPatch, late: str
+) -> None:
+    """Issue 35: LRU2 gave up waiting for LRU1 and identified a stone alone; LRU1, there
+    later, identified another one alone: the two rows named two stones (RSS-E-s2 and
+    RSS-E-s1) and the region had none left. The partners name one stone."""
+    monkeypatch.setattr(science, "PARTNER_WAIT", 30.0)  # a short wait: LRU1 comes too late
+    lru1 = world.add_robot("lru1", "lru_science")
+    lru2 = world.add_robot("lru2", "lru_manipulator")
+    centre = Position(x=29.0, y=23.0)
+    lru1.x, lru1.y, lru2.x, lru2.y = 29.0, 23.0, 29.5, 23.0
+    world.robots[late].x = -60.0  # about 180 s away, inside the lander's coverage
+    fleet = exchanging_fleet(world)
+    s1, s2 = RobotSkills(fleet, lru1), RobotSkills(fleet, lru2)
+
+    async def both() -> list[str]:
+        return await asyncio.gather(
+            _together(s1, lru1, target=centre, search_radius=6.0, partner="lru2"),
+            _together(s2, lru2, target=centre, search_radius=6.0, partner="lru1"),
+        )
+
+    one, two = run(both())
+    named = {re.search(r"identified (\S+) at", text).group(1) for text in (one, two)}
+    assert len(named) == 1, (one, two)
+    (sid,) = named
+    assert [k.id for k in world.stones.values() if k.state == "identified"] == [sid]
+    assert world.stones[sid].score == 0.1  # nobody waited long enough: alone
+    early = "lru2" if late == "lru1" else "lru1"
+    assert f"{early} had identified it alone" in (one if late == "lru1" else two)
 
 
 def test_a_robot_trusts_its_own_newer_news_of_a_stone_over_a_partners_stale_one(
@@ -393,18 +466,18 @@ def test_a_robot_trusts_its_own_newer_news_of_a_stone_over_a_partners_stale_one(
     s1, s2 = RobotSkills(fleet, lru1), RobotSkills(fleet, lru2)
     centre = Position(x=29.0, y=23.0)
     lru1.activity = lru2.activity = "identify_stone"
-    run(s1.identify_stone(FakeCtx(), target=centre, search_radius=6.0, partner="lru2"))
-    run(s2.identify_stone(FakeCtx(), target=centre, search_radius=6.0, partner="lru1"))
+    call(s1, "identify_stone", target=centre, search_radius=6.0, partner="lru2")
+    call(s2, "identify_stone", target=centre, search_radius=6.0, partner="lru1")
     lru1.activity = lru2.activity = None
     stale = dict(lru1.knowledge.stones["RSS-A-s1"])
-    run(s2.pick_stone(FakeCtx(), target=centre))
+    call(s2, "pick_stone", target=centre)
     lru2.x, lru2.y = 2.0, 0.0
-    drop = run(s2.drop_stone(FakeCtx()))
+    drop = call(s2, "drop_stone")
     assert drop.info == "delivered RSS-A-s1 of RSS-A +0.5: +0.5; score 0.5"
     lru1.knowledge.stones["RSS-A-s1"] = stale  # it heard nothing of the pick nor the drop
     lru2.x, lru2.y = 29.5, 23.0
     with pytest.raises(SkillFailed) as exc:
-        run(s2.pick_stone(FakeCtx(), target=centre))
+        call(s2, "pick_stone", target=centre)
     assert "knows no identified stone" in exc.value.reason, exc.value.reason
     assert lru2.knowledge.stones["RSS-A-s1"]["state"] == "delivered"  # its own news stays
     # told by the one that knows better, LRU1 learns; told stale news, nobody unlearns

@@ -18,7 +18,7 @@ from backend.transport import (
     NoResponder,
     QueryError,
     QueryTimeout,
-    Refusal,
+    ReplyError,
     TransportChange,
     TransportUnreachable,
     client_config,
@@ -263,7 +263,7 @@ def test_serve_async_and_query_all_between_clients(router: Any, open_client) -> 
         async def handler(payload: bytes) -> bytes:
             assert threading.get_ident() == loop_thread  # runs on the event loop
             if payload == b"no":
-                raise Refusal("r1 refuses")
+                raise ReplyError("r1 refuses")
             await asyncio.sleep(0)
             return b"r1:" + payload
 
@@ -300,7 +300,7 @@ def test_serve_async_plain_handler_answers_at_once_or_with_an_awaitable(
         def handler(payload: bytes) -> bytes | Any:
             seen_threads.add(threading.get_ident())
             if payload == b"no":
-                raise Refusal("plainly not")
+                raise ReplyError("plainly not")
             if payload == b"bug":
                 raise KeyError("oops")
             if payload == b"wrong":

@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from backend.transport import (  # noqa: E402
     ListenFailed,
-    Refusal,
+    ReplyError,
     client_config,
     declare_token,
     router_config,
@@ -29,7 +29,7 @@ from backend.transport import (  # noqa: E402
 
 
 def _refuse(payload: bytes) -> bytes:
-    raise Refusal(b"skill is not idle")
+    raise ReplyError(b"skill is not idle")
 
 
 def _boom(payload: bytes) -> bytes:

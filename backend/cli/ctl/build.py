@@ -14,7 +14,7 @@ from typing import Any
 from backend.cli.ctl.args import CONTROL_OPS
 from backend.cli.ctl.errors import FileInvalid, UsageError
 from backend.cli.ctl.values import (
-    MarkerRef,
+    AtMarker,
     check_name,
     param_value,
     parse_area,
@@ -57,7 +57,7 @@ def _resolve(
     bindings: dict[str, str] = {}
     for name, value in parsed.items():
         pspec = _param_spec(library, mission, robot, skill, name)
-        if not isinstance(value, MarkerRef):
+        if not isinstance(value, AtMarker):
             params[name] = param_value(name, value, pspec)  # angles: degrees -> radians
             continue
         kind = KINDS.get(pspec.type) if pspec is not None else None

@@ -602,20 +602,19 @@ def describe(op: Any, reply: Any, before: int, mission: Any) -> str:
 # ---------------------------------------------------------------- watch
 
 
-def _skill_changed(e: Any) -> str:
+def _skill_status(e: Any) -> str:
     # A status change stamps started_at/finished_at itself: not news.
-    ch = {k: v for k, v in e.changes.items() if k not in ("started_at", "finished_at", "rev")}
-    parts = []
-    if "status" in ch:
-        parts.append(str(ch.pop("status")))
-    if ch.get("status_info"):
-        parts.append(f"({ch['status_info']})")
-    ch.pop("status_info", None)
-    if "attempt" in ch:
-        parts.append(f"attempt {ch.pop('attempt')}")
-    if ch:
-        parts.append("changed " + ", ".join(sorted(ch)))
+    parts = [str(e.status)] if e.status is not None else []
+    if e.info:
+        parts.append(f"({e.info})")
+    if e.attempt is not None:
+        parts.append(f"attempt {e.attempt}")
     return f"{e.id}: {' '.join(parts) or 'timestamps'}"
+
+
+def _skill_edited(e: Any) -> str:
+    fields = [k for k in ("label", "params", "bindings", "policies") if getattr(e, k) is not None]
+    return f"{e.id}: changed {', '.join(fields)}"
 
 
 def _mission_replaced(e: Any) -> str:
@@ -630,7 +629,8 @@ EVENT_TEXT: dict[str, Callable[[Any], str]] = {
     ),
     "skill_removed": lambda e: f"-{e.id} from {e.robot}",
     "skill_moved": lambda e: f"{e.id} moved to {e.index} on {e.robot}",
-    "skill_changed": _skill_changed,
+    "skill_status": _skill_status,
+    "skill_edited": _skill_edited,
     "barrier_set": lambda e: f"barrier {e.id} = {' + '.join(e.barrier.skills)}",
     "barrier_removed": lambda e: f"barrier {e.id} removed",
     "marker_set": lambda e: f"marker {e.name}: {_marker_text(e.marker)}",
@@ -642,9 +642,9 @@ EVENT_TEXT: dict[str, Callable[[Any], str]] = {
     ),
     "command_changed": lambda e: (
         f"command {e.id}: "
-        + (str(e.changes["state"]) if "state" in e.changes else "cancel requested")
-        + (f" ({e.changes['reason']})" if e.changes.get("reason") else "")
-        + (f", did {', '.join(e.changes['done'])}" if e.changes.get("done") else "")
+        + (str(e.state) if e.state is not None else "cancel requested")
+        + (f" ({e.reason})" if e.reason else "")
+        + (f", did {', '.join(e.done)}" if e.done else "")
     ),
     "waiver_set": lambda e: f"waived {e.check}: {e.waiver.reason}",
     "waiver_removed": lambda e: f"waiver of {e.check} withdrawn",

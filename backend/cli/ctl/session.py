@@ -19,9 +19,11 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from backend.cli.ctl import plan
 from backend.cli.ctl.args import DEFAULT_CONNECT, ROBOT_OPS
 from backend.cli.ctl.errors import FileInvalid, UsageError
+from backend.cli.ctl.plan import check as plan_check
+from backend.cli.ctl.plan import timeline as plan_timeline
+from backend.cli.ctl.plan import wait_telemetry
 from backend.cli.ctl.render import (
     command_json,
     describe,
@@ -300,7 +302,7 @@ async def _pending(client: Any, args: argparse.Namespace) -> int:
 
 
 async def _robots(client: Any, args: argparse.Namespace) -> int:
-    await plan.wait_telemetry(client)
+    await wait_telemetry(client)
     if args.json:
         _print_json(robots_json(client))
     else:
@@ -499,6 +501,6 @@ VIEWS: dict[str, Callable[[Any, argparse.Namespace], Awaitable[int]]] = {
     "pending": _pending,
     "watch": _watch,
     "save": _save,
-    "check": plan.check,
-    "timeline": plan.timeline,
+    "check": plan_check,
+    "timeline": plan_timeline,
 }

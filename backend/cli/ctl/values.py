@@ -45,7 +45,7 @@ def parse_duration(text: str) -> float:
 
 
 @dataclass(frozen=True)
-class MarkerRef:
+class AtMarker:
     """`NAME=@MARKER` on the command line."""
 
     name: str
@@ -74,7 +74,7 @@ def _plain(value: Any, where: str) -> Any:
 
 
 def parse_param(text: str) -> tuple[str, Any]:
-    """`NAME=VALUE` -> (name, value); VALUE is YAML, `@M` a MarkerRef."""
+    """`NAME=VALUE` -> (name, value); VALUE is YAML, `@M` a AtMarker."""
     from backend.core.limits import echo, show_path
     from backend.files import yamlio
 
@@ -88,7 +88,7 @@ def parse_param(text: str) -> tuple[str, Any]:
         raise UsageError(f"--param {text!r}: {name!r} is not a parameter name")
     stripped = raw.strip()
     if stripped.startswith("@"):
-        return name, MarkerRef(check_name(stripped[1:], f"--param {name}=@MARKER"))
+        return name, AtMarker(check_name(stripped[1:], f"--param {name}=@MARKER"))
     try:
         value = yamlio.load(raw).data  # within the file limits: an alias bomb is refused here
     except yamlio.YamlSyntaxError as e:
@@ -113,7 +113,7 @@ def parse_param(text: str) -> tuple[str, Any]:
             "({x: 3, y: 4}) and lists in brackets ([a, b]), quoted for the shell"
         )
     if isinstance(value, str) and value.startswith("@") and len(value) > 1:
-        return name, MarkerRef(check_name(value[1:], f"--param {name}=@MARKER"))
+        return name, AtMarker(check_name(value[1:], f"--param {name}=@MARKER"))
     return name, _plain(value, f"--param {name}")
 
 

@@ -20,7 +20,7 @@ from backend.core.library import Library
 from backend.core.model import FINISHED, Mission, SkillInstance, Status, Waiver
 from backend.core.plan.course import Course, LegCache, Step, walk
 from backend.core.plan.forecast import Forecast
-from backend.core.plan.geometry import Point, area, point_of, self_intersecting
+from backend.core.plan.geometry import Point, area, distance, point_of, self_intersecting
 from backend.core.plan.inputs import PlanInputs, SiteMap
 from backend.core.plan.order import BarrierAnalysis, analyse
 
@@ -241,6 +241,97 @@ def _cut_off(ctx: CheckContext) -> Iterator[Hit]:
         )
 
 
+def _radio(ctx: CheckContext, robot: str) -> float:
+    """Metres the robot's radio reaches another robot without coverage (0: none)."""
+    spec = ctx.mission.robots.get(robot)
+    rt = ctx.library.robot_types.get(spec.type) if spec is not None else None
+    return rt.radio_range_m if rt is not None else 0.0
+
+
+def _can_talk(ctx: CheckContext, a: tuple[str, Point], b: tuple[str, Point]) -> bool | None:
+    """Whether two robots at these places talk: both covered, or within both radios
+    (None: the map does not know)."""
+    site = ctx.site
+    assert site is not None
+    ca, cb = site.covered(*a[1]), site.covered(*b[1])
+    if ca and cb:
+        return True
+    radio = min(_radio(ctx, a[0]), _radio(ctx, b[0]))
+    if radio > 0 and distance(a[1], b[1]) <= radio:
+        return True
+    return None if ca is None or cb is None else False
+
+
+def _arrivals(ctx: CheckContext, members: Mapping[str, str]) -> dict[str, Point]:
+    """Where each member robot waits at a barrier: where its course has it when the
+    barrier's skill would start."""
+    out = {}
+    for robot, sid in sorted(members.items()):
+        course = ctx.courses.get(robot)
+        i = course.index.get(sid) if course is not None else None
+        start = course.steps[i].start if course is not None and i is not None else None
+        if start is not None:
+            out[robot] = start
+    return out
+
+
+def _barrier_out(ctx: CheckContext) -> Iterator[Hit]:
+    site = ctx.site
+    assert site is not None
+    for bid, members in sorted(ctx.barriers.pending.items()):
+        if bid in ctx.barriers.stuck:
+            continue  # never passed anyway: the barrier rules say why
+        places = _arrivals(ctx, members)
+        pairs = [((a, places[a]), (b, places[b])) for a in places for b in places if a < b]
+        if all(_can_talk(ctx, a, b) is not False for a, b in pairs):
+            continue
+        out = [r for r, p in places.items() if site.covered(*p) is False]
+        where = "; ".join(f"{r} waits at {_at(places[r])}" for r in out)
+        yield Hit(
+            bid,
+            f"barrier {bid}: {where}, out of comms coverage: partners at a barrier meet only "
+            "when they can talk (through the comms network, or within radio range), so "
+            f"{' and '.join(sorted(members))} would wait there for ever; plan the skills before "
+            "it so that every robot waits in coverage, or deploy a Wi-Fi box there first "
+            "(waive this if a box planned before it will cover the place)",
+            robot=out[0] if out else None,
+            skills=tuple(members[r] for r in sorted(members)),
+        )
+
+
+def _partner_out(ctx: CheckContext) -> Iterator[Hit]:
+    member = {sid: b for b, ms in ctx.barriers.pending.items() for sid in ms.values()}
+    for robot, course in ctx.courses.items():
+        for step in course.steps:
+            spec = ctx.library.skills.get(step.skill.skill)
+            param = spec.talks_to if spec is not None else None
+            other = step.skill.params.get(param) if param is not None else None
+            leg = step.leg
+            if not isinstance(other, str) or other == robot or leg is None or leg.end is None:
+                continue
+            there = _partner_place(ctx, member.get(step.skill.id), other) or leg.end
+            if _can_talk(ctx, (robot, leg.end), (other, there)) is not False:
+                continue
+            yield Hit(
+                f"{step.skill.id}/{param}",
+                f"{robot}: {step.skill.display()} works with {other} ({param}) at "
+                f"{_at(leg.end)}, out of comms coverage: robots talk only through the comms "
+                f"network (or within radio range), so it would go on without {other}; deploy "
+                "a Wi-Fi box there first, or choose a place in coverage",
+                robot=robot,
+                skills=(step.skill.id,),
+            )
+
+
+def _partner_place(ctx: CheckContext, barrier: str | None, other: str) -> Point | None:
+    """Where the partner works on its own skill of the same barrier, if it has one."""
+    sid = ctx.barriers.pending.get(barrier, {}).get(other) if barrier is not None else None
+    course = ctx.courses.get(other)
+    i = course.index.get(sid) if course is not None and sid is not None else None
+    leg = course.steps[i].leg if course is not None and i is not None else None
+    return leg.end if leg is not None else None
+
+
 # -- terrain ---------------------------------------------------------------------------
 
 
@@ -423,6 +514,20 @@ RULES: tuple[CheckRule, ...] = (
         "error",
         "a skill needing the link planned out of comms coverage",
         _needs_comms,
+        needs_site=True,
+    ),
+    CheckRule(
+        "coverage.barrier",
+        "error",
+        "a barrier a robot would wait at out of comms coverage: the partners never meet",
+        _barrier_out,
+        needs_site=True,
+    ),
+    CheckRule(
+        "coverage.partner",
+        "warning",
+        "a skill working with a partner robot planned where they cannot talk",
+        _partner_out,
         needs_site=True,
     ),
     CheckRule(

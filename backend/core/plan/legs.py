@@ -13,7 +13,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from backend.core.library import BatteryModel, RobotType, SkillSpec
+from backend.core.library import BatteryModel, RobotType, SkillSpec, default_value
 from backend.core.plan.geometry import (
     Point,
     along,
@@ -64,12 +64,12 @@ def _number(v: Any) -> float | None:
 
 
 def _param(spec: SkillSpec, params: dict[str, Any], name: str) -> Any:
-    """A parameter's value, else its library default (a mission file fills
-    defaults in; a skill built by hand may not have)."""
+    """A parameter's value, else what the server would fill in (a mission file
+    fills defaults in; a skill built by hand may not have)."""
     if name in params:
         return params[name]
     p = spec.params.get(name)
-    return p.default if p is not None else None
+    return default_value(p) if p is not None else None
 
 
 def _goal(spec: SkillSpec, params: dict[str, Any], home: Point | None) -> Point | None:

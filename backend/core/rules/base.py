@@ -9,12 +9,13 @@ dispatches operations to them and applies what they decide.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Protocol
 
 from backend.core import events as ev
+from backend.core.alerts import RaisedAlert
 from backend.core.library import Library, ParamProblem, check_params
 from backend.core.limits import show_path
 from backend.core.model import ACTIVE, Mission, SkillInstance, Status, how_to_change
@@ -58,6 +59,7 @@ class Applied:
     notes: list[str] = field(default_factory=list)  # e.g. skills still using an old marker value
     value: dict[str, Any] = field(default_factory=dict)  # e.g. {"id": "lru1-7"}
     duplicate: bool = False  # a retried request, applied before
+    alerts: list[RaisedAlert] = field(default_factory=list)  # for the server to raise
 
     def batch(self, actor: str = "", op: str = "") -> ev.EventBatch:
         return ev.EventBatch(revision=self.revision, events=self.events, actor=actor, op=op)
@@ -73,6 +75,7 @@ class Change(NamedTuple):
     value: dict[str, Any]
     undo: Operation | None
     duplicate: bool = False  # a robot's report applied before: nothing to do
+    alerts: tuple[RaisedAlert, ...] = ()  # what a person must see (the server raises them)
 
 
 def unchanged() -> Change:
@@ -84,13 +87,34 @@ def unchanged() -> Change:
 Rule = Callable[["Rules", Any], Change]
 
 
+class Offers(Protocol):
+    """What the robots say they can run (the server's robot link, from their
+    registrations)."""
+
+    def offered(self, robot: str) -> Mapping[str, str] | None:
+        """Skill name -> the version `robot`'s manifest lists; None: it never
+        registered (it refuses what it cannot run itself)."""
+        ...
+
+
 class Rules:
     """The mission, its library and the bookkeeping of commands in flight to
-    robots; the lookups every family of rules uses."""
+    robots; the lookups every family of rules uses. `offers` says what each
+    robot can run (syncs and retries are checked against it);
+    `default_expiry_s` is the expiry of a robot command that gives none."""
 
-    def __init__(self, mission: Mission, library: Library):
+    def __init__(
+        self,
+        mission: Mission,
+        library: Library,
+        *,
+        offers: Offers | None = None,
+        default_expiry_s: float | None = None,
+    ):
         self.mission = mission
         self.library = library
+        self.offers = offers
+        self.default_expiry_s = default_expiry_s
         # The direct path (plan_* ... release, for tools and tests; the
         # server uses the uplink): skill id -> why it cannot be edited now,
         # robot -> the command in flight to it, skill id -> values it sent
@@ -111,23 +135,10 @@ class Rules:
         return out
 
     def robot_type(self, robot: str) -> str:
-        spec = self.mission.robots.get(robot)
-        if spec is None:
-            known = ", ".join(self.mission.robots) or "none"
-            raise Refusal(
-                "unknown_robot",
-                f"no robot '{robot}' in this mission (robots: {known})",
-                robot=robot,
-            )
-        return spec.type
+        return robot_type(self.mission, robot)
 
     def skill(self, skill_id: str) -> tuple[str, int, SkillInstance]:
-        found = self.mission.find(skill_id)
-        if found is None:
-            raise Refusal(
-                "unknown_skill", f"no skill with id '{skill_id}' in this mission", skill=skill_id
-            )
-        return found
+        return find_skill(self.mission, skill_id)
 
     def task(self, robot: str) -> list[SkillInstance]:
         self.robot_type(robot)
@@ -216,6 +227,40 @@ class Rules:
             who = f"{skill_id} ({skill})" if skill_id else skill
             raise _bad_params(robot, who, skill_id, problems)
         return out
+
+
+def robot_type(m: Mission, robot: str) -> str:
+    """The type of `robot`, refused unless the mission has it."""
+    spec = m.robots.get(robot)
+    if spec is None:
+        known = ", ".join(m.robots) or "none"
+        raise Refusal(
+            "unknown_robot", f"no robot '{robot}' in this mission (robots: {known})", robot=robot
+        )
+    return spec.type
+
+
+def find_skill(m: Mission, skill_id: str) -> tuple[str, int, SkillInstance]:
+    """(robot, index, skill) of `skill_id`, refused unless the mission has it."""
+    found = m.find(skill_id)
+    if found is None:
+        raise Refusal(
+            "unknown_skill", f"no skill with id '{skill_id}' in this mission", skill=skill_id
+        )
+    return found
+
+
+def skill_of(m: Mission, robot: str, skill_id: str) -> tuple[int, SkillInstance]:
+    """Index and skill `skill_id`, refused unless it is in `robot`'s list."""
+    owner, i, s = find_skill(m, skill_id)
+    if owner != robot:
+        raise Refusal(
+            "wrong_robot",
+            f"skill {s.display()} belongs to {owner}, not {robot}",
+            robot=robot,
+            skill=s.id,
+        )
+    return i, s
 
 
 def uplink_locks(m: Mission) -> dict[str, str]:

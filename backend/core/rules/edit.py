@@ -239,21 +239,19 @@ def set_skill(rules: Rules, op: SetSkill) -> Change:
         params = s.params
     else:
         params = rules.check_params(robot, s.skill, op.params, op.bindings, skill_id=s.id)
-    changes: dict[str, Any] = {}
-    if op.label != s.label:
-        changes["label"] = op.label
-    if params != s.params:
-        changes["params"] = params
-    if op.bindings != s.bindings:
-        changes["bindings"] = op.bindings
-    if op.policies != s.policies:
-        changes["policies"] = op.policies.model_dump()
-    if not changes:
+    edit = ev.SkillEdited(
+        id=s.id,
+        label=op.label if op.label != s.label else None,
+        params=params if params != s.params else None,
+        bindings=op.bindings if op.bindings != s.bindings else None,
+        policies=op.policies if op.policies != s.policies else None,
+    )
+    if edit == ev.SkillEdited(id=s.id):
         return unchanged()
     old = SetSkill(
         id=s.id, label=s.label, params=s.params, bindings=s.bindings, policies=s.policies
     )
-    return Change([ev.SkillChanged(id=s.id, changes=changes)], [], {}, old)
+    return Change([edit], [], {}, old)
 
 
 RULES: dict[type[Any], Rule] = {

@@ -22,8 +22,8 @@ that play the robot themselves may use the direct path instead: `plan_sync`,
 from __future__ import annotations
 
 from collections import OrderedDict
-from collections.abc import Callable, Container, Iterable
-from typing import Any
+from collections.abc import Container, Iterable
+from typing import Any, NamedTuple, Protocol
 
 from backend.core import events as ev
 from backend.core.checks import check_mission, resolve_shorthands
@@ -53,9 +53,9 @@ from backend.core.ops import (
     Unsync,
 )
 from backend.core.rules import barriers, edit, execution, markers, uplink, waivers
-from backend.core.rules.base import Applied, Change, Refusal, Rule, Rules
+from backend.core.rules.base import Applied, Change, Offers, Refusal, Rule, Rules
 
-__all__ = ["RULES", "Applied", "Engine", "Refusal"]
+__all__ = ["RULES", "Applied", "Engine", "Offers", "Origin", "Recorder", "Refusal"]
 
 REMEMBERED_REQUESTS = 10_000
 UNDO_DEPTH = 100
@@ -188,12 +188,38 @@ def _skill_revs(m: Mission, ids: Iterable[str]) -> list[tuple[int, str]]:
     return [(f[2].rev, f"skill {f[2].display()}") for f in found if f]
 
 
+class Origin(NamedTuple):
+    """What a batch comes from: the operation submitted and who sent it."""
+
+    op: Operation
+    client: str = ""
+    request_id: str | None = None
+    actor: str = ""  # who, as the journal says it (`user@client`, a robot, "server")
+
+
+class Recorder(Protocol):
+    """Where the engine writes each batch before it changes the mission (the
+    server's journal). If it raises, the operation changes nothing."""
+
+    def record(self, batch: ev.EventBatch, origin: Origin) -> None: ...
+
+
 class Engine(Rules):
     """The rules with what they need to be applied: the revision, the
-    requests already answered and each client's undo and redo history."""
+    requests already answered, each client's undo and redo history, and
+    the recorder every batch goes to first (none: nothing is recorded)."""
 
-    def __init__(self, mission: Mission, library: Library):
-        super().__init__(mission, library)
+    def __init__(
+        self,
+        mission: Mission,
+        library: Library,
+        *,
+        recorder: Recorder | None = None,
+        offers: Offers | None = None,
+        default_expiry_s: float | None = None,
+    ):
+        super().__init__(mission, library, offers=offers, default_expiry_s=default_expiry_s)
+        self.recorder = recorder
         self.requests: OrderedDict[tuple[str, str], Applied] = OrderedDict()
         # client -> [(operation that reverts, what it reverts, revision made at)]
         self.undo_stack: History = {}
@@ -201,9 +227,6 @@ class Engine(Rules):
         # client -> revisions its own edits made (undo may revert over them),
         # oldest first: a dict used as an ordered set, so trimming is O(1)
         self.own_revs: dict[str, dict[int, None]] = {}
-        # called with each batch before it changes the mission (the server
-        # journals it there): if it raises, the operation changes nothing
-        self.before_apply: Callable[[ev.EventBatch], None] | None = None
 
     # -- entry point -----------------------------------------------------
     def submit(
@@ -213,27 +236,33 @@ class Engine(Rules):
         client: str = "",
         request_id: str | None = None,
         expected_revision: int | None = None,
+        actor: str = "",
     ) -> Applied:
-        """Apply one operation atomically, or raise Refusal (nothing changes)."""
+        """Apply one operation atomically, or raise Refusal (nothing changes).
+        A request applied already (`client`, `request_id`) gets its first
+        answer again, marked `duplicate`; nothing is applied twice."""
         if request_id is not None:
             done = self.requests.get((client, request_id))
             if done is not None:
                 return Applied(done.revision, [], done.notes, done.value, duplicate=True)
         if expected_revision is not None:
             self.check_fresh(op, expected_revision)
+        origin = Origin(op, client, request_id, actor or client)
         if isinstance(op, Undo):
-            applied = self._revert(client, self.undo_stack, self.redo_stack, "undo")
+            applied = self._revert(origin, self.undo_stack, self.redo_stack, "undo")
         elif isinstance(op, Redo):
-            applied = self._revert(client, self.redo_stack, self.undo_stack, "redo")
+            applied = self._revert(origin, self.redo_stack, self.undo_stack, "redo")
         else:
-            applied = self._apply(op, client)
+            applied = self._apply(origin)
         if request_id is not None:
             self.remember(client, request_id, applied)
         return applied
 
-    def _apply(self, op: Operation, client: str) -> Applied:
+    def _apply(self, origin: Origin) -> Applied:
+        op, client = origin.op, origin.client
         change = rule_for(op)(self, op)
-        applied = self._commit(change.events, change.notes, change.value, change.duplicate)
+        applied = self._commit(origin, change.events, change.notes, change.value, change.duplicate)
+        applied.alerts = list(change.alerts)
         if change.undo is not None and isinstance(op, UNDOABLE) and applied.events:
             self._push_undo(client, change.undo, op.op, applied.revision)
             self._mine(client, applied.revision)
@@ -246,6 +275,7 @@ class Engine(Rules):
 
     def _commit(
         self,
+        origin: Origin,
         events: list[ev.Event],
         notes: list[str],
         value: dict[str, Any],
@@ -255,8 +285,8 @@ class Engine(Rules):
             return Applied(self.mission.revision, [], notes, value, duplicate=duplicate)
         revision = self.mission.revision + 1
         batch = ev.EventBatch(revision=revision, events=events)
-        if self.before_apply is not None:
-            self.before_apply(batch)
+        if self.recorder is not None:
+            self.recorder.record(batch, origin)
         self.mission = ev.apply_events(self.mission, batch)
         if any(isinstance(e, ev.MissionReplaced) for e in events):
             # applied, not just asked: histories end
@@ -280,7 +310,7 @@ class Engine(Rules):
     def plan_sync(self, op: Sync) -> list[SkillInstance]:
         """Skills to send to the robot; they are locked until `release` or the
         robot's `SyncAck`."""
-        return execution.plan_sync(self, op)
+        return execution.plan_sync(self, op, uplink.sync_skills)
 
     def plan_unsync(self, op: Unsync) -> list[str]:
         return execution.plan_unsync(self, op)
@@ -313,9 +343,10 @@ class Engine(Rules):
         del stack[:-UNDO_DEPTH]
         self.redo_stack.pop(client, None)  # a new edit starts a new future
 
-    def _revert(self, client: str, source: History, target: History, verb: str) -> Applied:
+    def _revert(self, origin: Origin, source: History, target: History, verb: str) -> Applied:
         """Apply the client's last entry of `source` (undo or redo history);
         what reverts it goes to `target`."""
+        client = origin.client
         stack = source.get(client) or []
         if not stack:
             raise Refusal(
@@ -327,7 +358,9 @@ class Engine(Rules):
         change = self._checked_inverse(client, inverse, what, made_at, verb)
         done = "undone" if verb == "undo" else "redone"
         try:
-            applied = self._commit(change.events, change.notes, {**change.value, done: what})
+            applied = self._commit(
+                origin, change.events, change.notes, {**change.value, done: what}
+            )
         except Exception:  # not applied (the journal refused it): still to do
             stack.append((inverse, what, made_at))
             raise

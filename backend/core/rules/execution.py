@@ -15,11 +15,11 @@ A robot's `Report`s (status changes, numbered per robot) come without a command.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 from backend.core import events as ev
-from backend.core.model import ACTIVE, FINISHED, TRANSITIONS, SkillInstance, Status
+from backend.core.model import ACTIVE, FINISHED, TRANSITIONS, Mission, SkillInstance, Status
 from backend.core.ops import (
     Control,
     Report,
@@ -31,7 +31,7 @@ from backend.core.ops import (
     UnsyncDone,
 )
 from backend.core.plan.gate import check_sync
-from backend.core.rules.base import Change, Refusal, Rule, Rules
+from backend.core.rules.base import Change, Refusal, Rule, Rules, skill_of
 
 # -- commands: claim, plan, release ---------------------------------------------
 
@@ -56,32 +56,19 @@ def release(rules: Rules, robot: str, ids: Iterable[str] = ()) -> None:
 
 def of_robot(rules: Rules, robot: str, skill_id: str) -> tuple[int, SkillInstance]:
     """Index and skill `skill_id`, refused unless it is in `robot`'s list."""
-    owner, i, s = rules.skill(skill_id)
-    if owner != robot:
-        raise Refusal(
-            "wrong_robot",
-            f"skill {s.display()} belongs to {owner}, not {robot}",
-            robot=robot,
-            skill=s.id,
-        )
-    return i, s
+    return skill_of(rules.mission, robot, skill_id)
 
 
-def plan_sync(rules: Rules, op: Sync) -> list[SkillInstance]:
-    """Skills to send to the robot; they are locked until `release` or the
-    robot's `SyncAck`."""
-    task = rules.task(op.robot)
+# which skills a sync sends (the one rule: backend.core.rules.uplink.sync_skills)
+Choose = Callable[[Mission, Sync, Mapping[str, str]], list[SkillInstance]]
+
+
+def plan_sync(rules: Rules, op: Sync, choose: Choose) -> list[SkillInstance]:
+    """Skills to send to the robot (`choose` says which); they are locked
+    until `release` or the robot's `SyncAck`."""
+    rules.task(op.robot)
     claim(rules, op.robot)
-    chosen = _to_sync(rules, op, task)
-    locked = rules.locked
-    for s in chosen:
-        if s.id in locked:
-            raise Refusal(
-                "locked",
-                f"{s.display()} on {op.robot}: {locked[s.id]}",
-                robot=op.robot,
-                skill=s.id,
-            )
+    chosen = choose(rules.mission, op, rules.locked)
     check_sync(rules, op.robot, [s.id for s in chosen])  # unwaived plan errors stay on the ground
     # check against the current library and markers; bound values are
     # taken fresh from their markers as they leave
@@ -95,29 +82,6 @@ def plan_sync(rules: Rules, op: Sync) -> list[SkillInstance]:
     return [
         s.model_copy(update={"params": p}, deep=True) for s, p in zip(chosen, fresh, strict=True)
     ]
-
-
-def _to_sync(rules: Rules, op: Sync, task: list[SkillInstance]) -> list[SkillInstance]:
-    """The head of the unsynchronized section, through `op.through` if given."""
-    start = rules.first_idle(task)
-    idle = task[start:]
-    if not idle:
-        raise Refusal(
-            "nothing_to_sync",
-            f"{op.robot} has no unsynchronized skill to synchronize",
-            robot=op.robot,
-        )
-    if op.through is None:
-        return idle
-    i, s = of_robot(rules, op.robot, op.through)
-    if s.status != Status.IDLE:
-        raise Refusal(
-            "not_idle",
-            f"{s.display()} on {op.robot} is already {s.status.value}",
-            robot=op.robot,
-            skill=s.id,
-        )
-    return task[start : i + 1]
 
 
 def plan_unsync(rules: Rules, op: Unsync) -> list[str]:
@@ -299,10 +263,9 @@ def sync_ack(rules: Rules, op: SyncAck) -> Change:
         )
     events: list[ev.Event] = []
     for s in task[start : start + len(op.ids)]:
-        changes: dict[str, Any] = {"status": Status.IDLE_SYNCHRONIZED.value}
-        if rules.sent[s.id] != s.params:
-            changes["params"] = rules.sent[s.id]  # what the robot holds
-        events.append(ev.SkillChanged(id=s.id, changes=changes))
+        events.append(ev.SkillStatusChanged(id=s.id, status=Status.IDLE_SYNCHRONIZED))
+        if rules.sent[s.id] != s.params:  # what the robot holds
+            events.append(ev.SkillEdited(id=s.id, params=rules.sent[s.id]))
     for sid in op.ids:
         rules.held.pop(sid, None)
         rules.sent.pop(sid, None)
@@ -320,24 +283,22 @@ def unsync_done(rules: Rules, op: UnsyncDone) -> Change:
         )
     # the removed skills are the end of the queue: turning them idle puts
     # them, in order, at the head of the unsynchronized section
-    events: list[ev.Event] = [
-        ev.SkillChanged(id=sid, changes=back_in_plan(rules, op.robot, sid)) for sid in op.ids
-    ]
+    events = [e for sid in op.ids for e in back_in_plan(rules, op.robot, sid)]
     return Change(events, [], {"unsynchronized": list(op.ids)}, None)
 
 
-def back_in_plan(rules: Rules, robot: str, sid: str) -> dict[str, Any]:
-    """The changes of a skill the robot gave back: idle again."""
+def back_in_plan(rules: Rules, robot: str, sid: str) -> list[ev.Event]:
+    """The events of a skill the robot gave back: idle again."""
     _, _, s = rules.skill(sid)
-    changes: dict[str, Any] = {"status": Status.IDLE.value, "status_info": ""}
+    events: list[ev.Event] = [ev.SkillStatusChanged(id=sid, status=Status.IDLE, info="")]
     if s.bindings:  # back in the plan: bound values follow their markers again
         try:
             params = rules.check_params(robot, s.skill, s.params, s.bindings, skill_id=sid)
             if params != s.params:
-                changes["params"] = params
+                events.append(ev.SkillEdited(id=sid, params=params))
         except Refusal:
             pass  # keeps its values; the operator sees the problem on the next edit
-    return changes
+    return events
 
 
 def retry_ack(rules: Rules, op: RetryAck) -> Change:
@@ -383,9 +344,9 @@ def report(rules: Rules, op: Report) -> Change:
             skill=s.id,
         )
     events: list[ev.Event] = [ev.ReportSeq(robot=robot, seq=op.seq)]
-    changes = _reported_changes(s, op)
-    if changes:
-        events.append(ev.SkillChanged(id=s.id, changes=changes))
+    change = _reported_change(s, op)
+    if change is not None:
+        events.append(change)
     return Change(events, [], {}, None)
 
 
@@ -430,24 +391,16 @@ def _check_turn(rules: Rules, robot: str, i: int, s: SkillInstance, new: Status)
         )
 
 
-def _reported_changes(s: SkillInstance, op: Report) -> dict[str, Any]:
-    """The skill's fields a report changes (JSON values)."""
+def _reported_change(s: SkillInstance, op: Report) -> ev.SkillStatusChanged | None:
+    """What a report changes of the skill (None: nothing)."""
     new = op.status
-    changes: dict[str, Any] = {}
-    if new != s.status:
-        changes["status"] = new.value
-    if op.info != s.status_info:
-        changes["status_info"] = op.info
-    if op.attempt is not None and op.attempt != s.attempt:
-        changes["attempt"] = op.attempt
-    at = op.at.isoformat() if op.at else None
-    if new == Status.RUNNING and s.started_at is None and at:
-        changes["started_at"] = at
-    if new in FINISHED and at:
-        changes["finished_at"] = at
-    if new == Status.IDLE_SYNCHRONIZED:
-        changes["started_at"] = None  # stopped: the next run starts it from the beginning
-    return changes
+    info = op.info if op.info != s.status_info else None
+    attempt = op.attempt if op.attempt is not None and op.attempt != s.attempt else None
+    stamps = (new == Status.RUNNING and s.started_at is None) or new in FINISHED
+    at = op.at if stamps else None
+    if new == s.status and info is None and attempt is None and at is None:
+        return None
+    return ev.SkillStatusChanged(id=s.id, status=new, info=info, attempt=attempt, at=at)
 
 
 RULES: dict[type[Any], Rule] = {

@@ -109,7 +109,7 @@ def _follow(rules: Rules, name: str) -> tuple[list[ev.Event], list[str], list[st
         if s.status == Status.IDLE:
             params = rules.check_params(robot, s.skill, s.params, s.bindings, skill_id=s.id)
             if params != s.params:
-                events.append(ev.SkillChanged(id=s.id, changes={"params": params}))
+                events.append(ev.SkillEdited(id=s.id, params=params))
             if s.id in rules.locked:  # left with the old value; its ack will say so
                 stale.append(s.id)
                 notes.append(
@@ -142,17 +142,13 @@ def rename_marker(rules: Rules, op: MarkerRename) -> Change:
                 robot=robot,
                 skill=s.id,
             )
-        events.append(
-            ev.SkillChanged(id=s.id, changes={"params": {**s.params, pname: op.new_name}})
-        )
+        events.append(ev.SkillEdited(id=s.id, params={**s.params, pname: op.new_name}))
     # a binding names where a value came from, not the value: follow the
     # rename on the plan and the queue; the execution log stays as it ran
     for _, s, pname in bound(rules, op.name):
         if s.status in FINISHED:
             continue
-        events.append(
-            ev.SkillChanged(id=s.id, changes={"bindings": {**s.bindings, pname: op.new_name}})
-        )
+        events.append(ev.SkillEdited(id=s.id, bindings={**s.bindings, pname: op.new_name}))
     return Change(events, [], {}, MarkerRename(name=op.new_name, new_name=op.name))
 
 
@@ -180,7 +176,7 @@ def delete_marker(rules: Rules, op: MarkerDelete) -> Change:
                 skill=s.id,
             )
         bindings = {k: v for k, v in s.bindings.items() if v != op.name}
-        events.append(ev.SkillChanged(id=s.id, changes={"bindings": bindings}))  # keeps its values
+        events.append(ev.SkillEdited(id=s.id, bindings=bindings))  # keeps its values
         unbound.append((s.id, pname))
     return Change(events, [], {}, RestoreMarker(name=op.name, marker=mk, bindings=unbound))
 
@@ -198,7 +194,7 @@ def restore_marker(rules: Rules, op: RestoreMarker) -> Change:
             robot, _, s = found
             bindings = {**s.bindings, pname: op.name}
             params = rules.check_params(robot, s.skill, s.params, bindings, skill_id=sid)
-            events.append(ev.SkillChanged(id=sid, changes={"bindings": bindings, "params": params}))
+            events.append(ev.SkillEdited(id=sid, bindings=bindings, params=params))
     finally:
         del rules.mission.markers[op.name]
     return Change(events, [], {}, MarkerDelete(name=op.name))

@@ -14,17 +14,18 @@ mission shows: the ids it really queued or removed, never the request.
 `Reconcile` makes the mission agree with a robot's own queue when it
 registers (both ways). Every sentence an operator must see (a refusal by the
 robot, a command given up, a robot that applied a command the ground had
-given up on) is returned in the change's value under "alerts".
+given up on) is returned as the change's alerts (`Change.alerts`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from collections.abc import Set as AbstractSet
 from datetime import timedelta
 from typing import Any
 
 from backend.core import events as ev
+from backend.core.alerts import AlertKind, Level, RaisedAlert
 from backend.core.model import (
     ACTIVE,
     FINISHED,
@@ -33,6 +34,8 @@ from backend.core.model import (
     CommandState,
     Dequeue,
     Enqueue,
+    Mission,
+    ParamType,
     Pause,
     Reset,
     RobotCommand,
@@ -57,7 +60,15 @@ from backend.core.ops import (
 )
 from backend.core.plan.gate import check_sync
 from backend.core.rules import barriers
-from backend.core.rules.base import Change, Refusal, Rule, Rules, unchanged
+from backend.core.rules.base import (
+    Change,
+    Refusal,
+    Rule,
+    Rules,
+    robot_type,
+    skill_of,
+    unchanged,
+)
 from backend.core.rules.execution import (
     back_in_plan,
     check_retriable,
@@ -65,8 +76,6 @@ from backend.core.rules.execution import (
     queued_from,
     why_not,
 )
-
-Alert = dict[str, Any]
 
 # -- new commands -------------------------------------------------------------
 
@@ -100,6 +109,48 @@ class _Maker:
         return c
 
 
+def _expiry(rules: Rules, op: Sync | Unsync | Control | Retry) -> float | None:
+    """Seconds the operator gave the command, else the server's default."""
+    return op.expire_s if op.expire_s is not None else rules.default_expiry_s
+
+
+def check_offered(rules: Rules, robot: str, skills: Sequence[SkillInstance]) -> None:
+    """Refused (`incompatible`) when `robot` does not offer one of `skills`, or
+    offers it with another major version than the library's. A robot that
+    never registered is not judged: it refuses what it cannot run itself."""
+    offered = rules.offers.offered(robot) if rules.offers is not None else None
+    if offered is None:
+        return
+    for s in skills:
+        spec = rules.library.skills.get(s.skill)
+        why = _incompatible(offered, s.skill, spec.version) if spec is not None else None
+        if why:
+            raise Refusal(
+                "incompatible",
+                f"{robot} {why}; {s.id} stays unsynchronized (nothing was queued)",
+                robot=robot,
+                skill=s.id,
+            )
+
+
+def _incompatible(offered: Mapping[str, str], skill: str, want: str) -> str | None:
+    """Why a robot offering `offered` cannot run `skill` at version `want`."""
+    have = offered.get(skill)
+    if have is None:
+        return (
+            f"does not offer skill '{skill}' (its manifest lists: {', '.join(offered) or 'none'})"
+        )
+    if have.split(".", 1)[0] != want.split(".", 1)[0]:
+        return f"implements {skill} {have}, the library needs {want} (major versions differ)"
+    return None
+
+
+def _kinds(rules: Rules, skills: Sequence[SkillInstance]) -> dict[str, dict[str, ParamType]]:
+    """The kind of each parameter of the skills sent: they travel with the values."""
+    lib = rules.library.skills
+    return {s.skill: lib[s.skill].kinds() for s in skills if s.skill in lib}
+
+
 def _queued_value(c: UplinkCommand) -> dict[str, Any]:
     return {
         "command": c.id,
@@ -114,8 +165,9 @@ def _queued_value(c: UplinkCommand) -> dict[str, Any]:
 def sync(rules: Rules, op: Sync) -> Change:
     """The idle head of the robot's unsynchronized section (through
     `op.through`) goes to the robot; its skills are uplinking until it answers."""
-    task = rules.task(op.robot)
-    chosen = _to_send(rules, op, task)
+    rules.task(op.robot)
+    chosen = sync_skills(rules.mission, op, rules.locked)
+    check_offered(rules, op.robot, chosen)
     check_sync(rules, op.robot, [s.id for s in chosen])  # unwaived plan errors stay on the ground
     fresh = [
         rules.check_params(op.robot, s.skill, s.params, s.bindings, skill_id=s.id) for s in chosen
@@ -129,8 +181,11 @@ def sync(rules: Rules, op: Sync) -> Change:
         bid = rules.mission.barrier_of(s.id)
         if partners and bid is not None:
             infos[s.id] = BarrierInfo(barrier=bid, partners=dict(partners))
-    c = _Maker(rules, op.expire_s).make(
-        op.robot, "sync", Enqueue(skills=skills, barriers=infos), [s.id for s in skills]
+    c = _Maker(rules, _expiry(rules, op)).make(
+        op.robot,
+        "sync",
+        Enqueue(skills=skills, barriers=infos, kinds=_kinds(rules, skills)),
+        [s.id for s in skills],
     )
     return Change(
         [ev.CommandQueued(command=c)],
@@ -140,19 +195,27 @@ def sync(rules: Rules, op: Sync) -> Change:
     )
 
 
-def _to_send(rules: Rules, op: Sync, task: list[SkillInstance]) -> list[SkillInstance]:
-    """The idle skills after those already being synchronized, through `op.through`."""
-    locked = rules.locked
-    start = rules.first_idle(task)
+def sync_skills(m: Mission, op: Sync, locked: Mapping[str, str]) -> list[SkillInstance]:
+    """Which skills a sync sends: the idle skills of `op.robot` after those
+    being synchronized already (`locked`: they stay at the head of its plan),
+    through `op.through`; refused when there is none.
+
+    The one rule: the sync, the direct path (`Engine.plan_sync`), the
+    server's check against the robot's manifest and the console's
+    availability of its sync action ask it."""
+    robot_type(m, op.robot)
+    task = m.tasks.get(op.robot, [])
+    start = Rules.first_idle(task)
     while start < len(task) and task[start].id in locked:
         start += 1  # uplinking: they stay at the head of the section
     idle = task[start:]
     if op.through is not None:
-        i, s = of_robot(rules, op.robot, op.through)
+        i, s = skill_of(m, op.robot, op.through)
         if s.status != Status.IDLE:
             raise Refusal(
                 "not_idle",
-                f"{s.display()} on {op.robot} is already {s.status.value}",
+                f"{s.display()} on {op.robot} is already {s.status.value}: synchronize "
+                "through an idle (unsynchronized) skill",
                 robot=op.robot,
                 skill=s.id,
             )
@@ -187,7 +250,7 @@ def unsync(rules: Rules, op: Unsync) -> Change:
             robot=op.robot,
         )
     ids = [s.id for s in queued]
-    c = _Maker(rules, op.expire_s).make(op.robot, "unsync", Dequeue(ids=ids), ids)
+    c = _Maker(rules, _expiry(rules, op)).make(op.robot, "unsync", Dequeue(ids=ids), ids)
     return Change([ev.CommandQueued(command=c)], [], _queued_value(c), None)
 
 
@@ -202,7 +265,7 @@ _CONTROL: dict[str, Callable[[], RobotCommand]] = {
 def control(rules: Rules, op: Control) -> Change:
     """run / pause / stop / reset, for one robot or all it applies to."""
     robots = [op.robot] if op.robot is not None else list(rules.mission.robots)
-    maker = _Maker(rules, op.expire_s)
+    maker = _Maker(rules, _expiry(rules, op))
     events: list[ev.Event] = []
     results: dict[str, str] = {}
     commands: dict[str, int] = {}
@@ -257,13 +320,17 @@ def retry(rules: Rules, op: Retry) -> Change:
     """A new attempt of a failed skill, sent to the front of its robot's queue;
     it joins the mission (right after the failed one) once the robot has it."""
     robot, i, s = rules.skill(op.id)
+    check_offered(rules, robot, [s])
     why = rules.locked.get(s.id)
     if why is not None:
         raise Refusal("cannot_retry", f"{s.display()}: {why}", robot=robot, skill=s.id)
     check_retriable(rules, robot, i, s)
     new = s.next_attempt(Status.IDLE_SYNCHRONIZED)
-    c = _Maker(rules, op.expire_s).make(
-        robot, "retry", Enqueue(skills=[new], front=True), [s.id, new.id]
+    c = _Maker(rules, _expiry(rules, op)).make(
+        robot,
+        "retry",
+        Enqueue(skills=[new], front=True, kinds=_kinds(rules, [new])),
+        [s.id, new.id],
     )
     return Change([ev.CommandQueued(command=c)], [], {**_queued_value(c), "id": new.id}, None)
 
@@ -284,9 +351,11 @@ def cancel(rules: Rules, op: Cancel) -> Change:
         )
     now = rules.clock()
     if c.state == CommandState.QUEUED and c.id not in rules.transmitting:
-        changes = {"state": "cancelled", "settled": now.isoformat(), "reason": "cancelled"}
+        change = ev.CommandChanged(
+            id=c.id, state=CommandState.CANCELLED, settled=now, reason="cancelled"
+        )
         value = {"command": c.id, "robot": c.robot, "state": "cancelled"}
-        return Change([ev.CommandChanged(id=c.id, changes=changes)], [], value, None)
+        return Change([change], [], value, None)
     if op.undo:
         raise Refusal(
             "cannot_undo",
@@ -301,7 +370,7 @@ def cancel(rules: Rules, op: Cancel) -> Change:
     )
     if c.cancel_requested:
         return Change([], [note], value, None)
-    events: list[ev.Event] = [ev.CommandChanged(id=c.id, changes={"cancel_requested": True})]
+    events: list[ev.Event] = [ev.CommandChanged(id=c.id, cancel_requested=True)]
     return Change(events, [note], value, None)
 
 
@@ -310,24 +379,22 @@ def uplink_sent(rules: Rules, op: UplinkSent) -> Change:
     for cid in op.ids:
         c = rules.mission.command(cid)
         if c is not None and c.state == CommandState.QUEUED:
-            changes = {"state": "sent", "sent": op.at.isoformat()}
-            events.append(ev.CommandChanged(id=cid, changes=changes))
+            events.append(ev.CommandChanged(id=cid, state=CommandState.SENT, sent=op.at))
     return Change(events, [], {}, None) if events else unchanged()
 
 
 def uplink_settle(rules: Rules, op: UplinkSettle) -> Change:
     """Commands that never left for the robot and never will."""
     events: list[ev.Event] = []
-    alerts: list[Alert] = []
+    alerts: list[RaisedAlert] = []
     for cid in op.ids:
         c = rules.mission.command(cid)
         if c is None or c.state != CommandState.QUEUED or cid in rules.transmitting:
             continue
-        changes = {"state": op.state.value, "settled": op.at.isoformat(), "reason": op.reason}
-        events.append(ev.CommandChanged(id=cid, changes=changes))
+        events.append(ev.CommandChanged(id=cid, state=op.state, settled=op.at, reason=op.reason))
         if op.state == CommandState.EXPIRED:
             alerts.append(_alert(c, f"{c.title()} to {c.robot} {op.reason}{_released(c)}"))
-    return Change(events, [], {"alerts": alerts}, None) if events else unchanged()
+    return Change(events, [], {}, None, alerts=tuple(alerts)) if events else unchanged()
 
 
 def _released(c: UplinkCommand) -> str:
@@ -338,8 +405,10 @@ def _released(c: UplinkCommand) -> str:
     return ""
 
 
-def _alert(c: UplinkCommand, message: str, level: str = "warning") -> Alert:
-    return {"message": message, "robot": c.robot, "level": level, "kind": "command"}
+def _alert(c: UplinkCommand, message: str, level: Level = "warning") -> RaisedAlert:
+    return RaisedAlert(
+        message=message, robot=c.robot, command=c.id, level=level, kind=AlertKind.COMMAND
+    )
 
 
 # -- the robot's answers ----------------------------------------------------------
@@ -362,13 +431,13 @@ class _Effects:
         self.robot = c.robot
         self.task = rules.task(c.robot)
         self.events: list[ev.Event] = []
-        self.alerts: list[Alert] = []
+        self.alerts: list[RaisedAlert] = []
         self.notes: list[str] = []
         self.done: list[str] = []
         self.late = c.state in (CommandState.CANCELLED, CommandState.EXPIRED)
         self.drop: list[str] = []  # skills the robot holds that it must not: asked back
 
-    def alert(self, message: str, level: str = "warning") -> None:
+    def alert(self, message: str, level: Level = "warning") -> None:
         self.alerts.append(_alert(self.c, message, level))
 
     def skill(self, sid: str) -> SkillInstance | None:
@@ -387,8 +456,8 @@ def answer(rules: Rules, op: Answer) -> Change:
     if c is None or c.answered is not None:
         what = "which is not in its uplink" if c is None else f"{c.title()}, answered already"
         msg = f"{op.robot} answered command seq {op.command}, {what}: the answer is ignored"
-        alert = {"message": msg, "robot": op.robot, "level": "error", "kind": "robot_error"}
-        return Change(events, [], {"alerts": [alert]}, None)
+        alert = _robot_alert(op.robot, msg, AlertKind.ROBOT_ERROR, "error")
+        return Change(events, [], {}, None, alerts=(alert,))
     fx = _Effects(rules, c, op)
     state = _STATE[op.outcome]
     if op.outcome == "applied":
@@ -402,25 +471,24 @@ def answer(rules: Rules, op: Answer) -> Change:
         fx.alert(
             f"{op.robot} {op.outcome} {c.title()}: {op.reason or 'no reason given'}{_released(c)}"
         )
-    at = (op.at or rules.clock()).isoformat()
-    changes: dict[str, Any] = {
-        "state": state.value,
-        "settled": at,
-        "answered": at,
-        "reason": op.reason,
-    }
-    if c.sent is None:
-        changes["sent"] = at
-    if fx.done:
-        changes["done"] = fx.done
-    if op.kept:
-        changes["kept"] = [k for k in op.kept if k in c.skills]
+    at = op.at or rules.clock()
     events += fx.events
-    events.append(ev.CommandChanged(id=c.id, changes=changes))
+    events.append(
+        ev.CommandChanged(
+            id=c.id,
+            state=state,
+            settled=at,
+            answered=at,
+            reason=op.reason,
+            sent=at if c.sent is None else None,
+            done=fx.done or None,
+            kept=[k for k in op.kept if k in c.skills] if op.kept else None,
+        )
+    )
     if fx.drop:
         events.append(_drop_command(rules, fx.robot, fx.drop, fx))
-    value = {"command": c.id, "state": state.value, "alerts": fx.alerts}
-    return Change(events, fx.notes, value, None)
+    value = {"command": c.id, "state": state.value}
+    return Change(events, fx.notes, value, None, alerts=tuple(fx.alerts))
 
 
 def _drop_command(rules: Rules, robot: str, ids: list[str], fx: _Effects) -> ev.Event:
@@ -462,10 +530,9 @@ def _enqueued(fx: _Effects) -> None:
     for sid in held:
         s = fx.skill(sid)
         assert s is not None
-        changes: dict[str, Any] = {"status": Status.IDLE_SYNCHRONIZED.value}
-        if sent[sid].params != s.params:
-            changes["params"] = sent[sid].params  # what the robot holds
-        fx.events.append(ev.SkillChanged(id=sid, changes=changes))
+        fx.events.append(ev.SkillStatusChanged(id=sid, status=Status.IDLE_SYNCHRONIZED))
+        if sent[sid].params != s.params:  # what the robot holds
+            fx.events.append(ev.SkillEdited(id=sid, params=sent[sid].params))
         status[sid] = Status.IDLE_SYNCHRONIZED
     fx.events += _arrangement(fx.robot, fx.task, status, queued_last=held)
     fx.done = held
@@ -531,9 +598,7 @@ def _dequeued(fx: _Effects) -> None:
     status: dict[str, Status] = {}
     ordered = [s.id for s in fx.task if s.id in removed]
     for sid in ordered:
-        changes = back_in_plan(fx.rules, fx.robot, sid)
-        changes["started_at"] = None
-        fx.events.append(ev.SkillChanged(id=sid, changes=changes))
+        fx.events += back_in_plan(fx.rules, fx.robot, sid)  # (idle: started_at cleared)
         status[sid] = Status.IDLE
     fx.events += _arrangement(fx.robot, fx.task, status, idle_first=ordered)
     fx.done = ordered
@@ -608,27 +673,9 @@ def reconcile(rules: Rules, op: Reconcile) -> Change:
     robot = op.robot
     task = rules.task(robot)
     mine = {s.id: s for s in task}
-    uplinking = {
-        sid
-        for c in rules.mission.pending_commands(robot)
-        if c.op in ("sync", "retry")
-        for sid in c.skills
-    }
     queue, alerts = _checked_queue(robot, op.queue)
+    held, adopted, strays = _sorted_queue(rules, robot, mine, queue)
     holds = {e.id for e in queue}
-    held: list[QueueEntry] = []
-    adopted: list[str] = []
-    strays: list[str] = []
-    for e in queue:
-        s = mine.get(e.id)
-        if s is None or s.status in FINISHED or _differs(e, s):
-            strays.append(e.id)
-        elif e.id in uplinking:
-            continue  # the answer to its sync settles it
-        else:
-            if s.status == Status.IDLE:
-                adopted.append(e.id)
-            held.append(e)
     lost = [
         s.id
         for s in task
@@ -637,54 +684,70 @@ def reconcile(rules: Rules, op: Reconcile) -> Change:
     events: list[ev.Event] = []
     status: dict[str, Status] = {}
     for sid in lost:
-        changes = {
-            "status": Status.IDLE.value,
-            "status_info": f"returned to the plan: {robot} no longer had it",
-            "started_at": None,
-        }
-        events.append(ev.SkillChanged(id=sid, changes=changes))
+        info = f"returned to the plan: {robot} no longer had it"
+        events.append(ev.SkillStatusChanged(id=sid, status=Status.IDLE, info=info))
         status[sid] = Status.IDLE
     for e in held:
         if e.status != mine[e.id].status:
-            events.append(ev.SkillChanged(id=e.id, changes={"status": e.status.value}))
+            events.append(ev.SkillStatusChanged(id=e.id, status=e.status))
         status[e.id] = e.status
     events += _arrangement(robot, task, status, idle_first=lost, held_order=[e.id for e in held])
+    said = []
     if lost:
-        alerts.append(
-            _robot_alert(
-                robot, f"{robot} no longer had {', '.join(lost)}: returned to the plan", "reconcile"
-            )
-        )
+        said.append(f"{robot} no longer had {', '.join(lost)}: returned to the plan")
     if adopted:
-        alerts.append(
-            _robot_alert(
-                robot,
-                f"{robot} holds {', '.join(adopted)}, which the mission had as unsynchronized: "
-                "shown as synchronized again (unsync to take them back)",
-                "reconcile",
-            )
+        said.append(
+            f"{robot} holds {', '.join(adopted)}, which the mission had as unsynchronized: "
+            "shown as synchronized again (unsync to take them back)"
         )
-    value: dict[str, Any] = {"unsynchronized": lost, "adopted": adopted, "dropped": strays}
     if strays:
         c = _Maker(rules, None).make(robot, "reconcile", Dequeue(ids=strays), strays)
         events.append(ev.CommandQueued(command=c))
-        alerts.append(
-            _robot_alert(
-                robot,
-                f"{robot} holds {', '.join(strays)}, which this mission does not give it (or not "
-                f"as it has them): asked it to drop them (command {c.id})",
-                "reconcile",
-            )
+        said.append(
+            f"{robot} holds {', '.join(strays)}, which this mission does not give it (or not "
+            f"as it has them): asked it to drop them (command {c.id})"
         )
-    value["alerts"] = alerts
-    return Change(events, [], value, None)
+    alerts += [_robot_alert(robot, text, AlertKind.RECONCILE) for text in said]
+    value: dict[str, Any] = {"unsynchronized": lost, "adopted": adopted, "dropped": strays}
+    return Change(events, [], value, None, alerts=tuple(alerts))
 
 
-def _robot_alert(robot: str, message: str, kind: str, level: str = "warning") -> Alert:
-    return {"message": message, "robot": robot, "level": level, "kind": kind}
+def _sorted_queue(
+    rules: Rules, robot: str, mine: dict[str, SkillInstance], queue: list[QueueEntry]
+) -> tuple[list[QueueEntry], list[str], list[str]]:
+    """The robot's queue as the mission sees it: (entries it holds as the
+    mission has them, the ids of those the mission had as idle: adopted, the
+    ids of those it must drop: strays). One being synchronized is left to
+    the answer of its sync."""
+    uplinking = {
+        sid
+        for c in rules.mission.pending_commands(robot)
+        if c.op in ("sync", "retry")
+        for sid in c.skills
+    }
+    held: list[QueueEntry] = []
+    adopted: list[str] = []
+    strays: list[str] = []
+    for e in queue:
+        s = mine.get(e.id)
+        if s is None or s.status in FINISHED or _differs(e, s):
+            strays.append(e.id)
+        elif e.id not in uplinking:
+            if s.status == Status.IDLE:
+                adopted.append(e.id)
+            held.append(e)
+    return held, adopted, strays
 
 
-def _checked_queue(robot: str, queue: list[QueueEntry]) -> tuple[list[QueueEntry], list[Alert]]:
+def _robot_alert(
+    robot: str, message: str, kind: AlertKind, level: Level = "warning"
+) -> RaisedAlert:
+    return RaisedAlert(message=message, robot=robot, level=level, kind=kind)
+
+
+def _checked_queue(
+    robot: str, queue: list[QueueEntry]
+) -> tuple[list[QueueEntry], list[RaisedAlert]]:
     """The robot's queue, active first; one that breaks that is read as all queued."""
     seen: set[str] = set()
     out = []
@@ -701,7 +764,7 @@ def _checked_queue(robot: str, queue: list[QueueEntry]) -> tuple[list[QueueEntry
         f"{robot} registered a queue that is not an active skill followed by queued ones "
         f"({', '.join(f'{e.id} {e.status.value}' for e in out)}): read as all queued"
     )
-    return fixed, [_robot_alert(robot, msg, "robot_error", "error")]
+    return fixed, [_robot_alert(robot, msg, AlertKind.ROBOT_ERROR, "error")]
 
 
 def _differs(e: QueueEntry, s: SkillInstance) -> bool:

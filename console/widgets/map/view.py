@@ -18,7 +18,7 @@ redraw everything.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -703,6 +703,14 @@ class MapView(Widget, can_focus=True):
             target = left // 2 if left >= 4 else (right + self.vp.w) // 2
             self.pan(col - target, 0)
             self.overlays_changed()
+
+    def uncover(self, widgets: Iterable[Widget]) -> None:
+        """Keep the cursor clear of these widgets (notifications over the map)."""
+        x, y = self.region.x, self.region.y
+        for w in widgets:
+            r = w.region
+            if r.area and w.display:
+                self.uncover_cursor(r.x - x, r.y - y, r.right - x, r.bottom - y)
 
     def keep_cursor_visible(self, centre: bool = False) -> None:
         col, row = self.vp.to_cell(*self.cursor)

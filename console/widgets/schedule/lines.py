@@ -377,16 +377,18 @@ def progress_segments(
     if s.status == Status.SYNCHWAITING:
         waiting = barrier_wait_text(model, s)
         return [Segment(fit("   " + waiting, w), st["synchwaiting"])]
-    pct = t.progress if t is not None and has and t.progress is not None else None
+    pct = t.progress if t is not None and has else None
     if s.status == Status.PAUSED:
-        text = "   paused" + (f" at {int(pct * 100)}%" if pct is not None else "")
-        if s.status_info:
-            text += f" · {s.status_info}"
-        return [Segment(fit(text, w), st["paused"])]
+        return [Segment(fit(_paused_text(pct, s.status_info), w), st["paused"])]
     if t is None or pct is None:
         text = "   running" + (f" · {s.status_info}" if s.status_info else "")
         return [Segment(fit(text, w), st["dim"])]
-    eta = fmt_duration(t.eta_s) if t.eta_s is not None else ""
+    return _progress_bar(pct, t.eta_s, w, st)
+
+
+def _progress_bar(pct: float, eta_s: float | None, w: int, st: Styles) -> list[Segment]:
+    """`▕██░░▏ 45% ETA 2m12s` in `w` cells."""
+    eta = fmt_duration(eta_s) if eta_s is not None else ""
     # the longest label that leaves the bar 4 cells ("45% ETA 2m12s", "45% 2m12s", "45%")
     labels = [f" {int(pct * 100):3d}%" + (f" ETA {eta}" if eta else "")]
     if eta:
@@ -402,6 +404,14 @@ def progress_segments(
         Segment("▏", st["dim"]),
         Segment(fit(label, w - 3 - bar_w - 2), st["base"]),
     ]
+
+
+def _paused_text(pct: float | None, info: str) -> str:
+    return (
+        "   paused"
+        + (f" at {int(pct * 100)}%" if pct is not None else "")
+        + (f" · {info}" if info else "")
+    )
 
 
 def _stale_progress(pct: float | None, w: int, st: Styles, fresh: Freshness) -> list[Segment]:

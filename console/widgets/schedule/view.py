@@ -6,12 +6,12 @@ lines are rendered, there is no widget per row, and a change to one robot's
 list re-lays out only that robot's column and repaints only the visible lines
 that show something else (telemetry: the header and progress lines). Column
 headers stay on top while the rows scroll; columns scroll horizontally when
-they do not fit. How each line of a column is drawn: lines.py.
+they do not fit. Which line of which column goes where: paint.py (the view's
+`Painter`); how each line of a column is drawn: lines.py.
 """
 
 from __future__ import annotations
 
-from rich.segment import Segment
 from textual import events
 from textual.binding import Binding
 from textual.geometry import Region, Size
@@ -19,25 +19,18 @@ from textual.message import Message
 from textual.scroll_view import ScrollView
 from textual.strip import Strip
 
-from backend.core.model import SkillInstance, Status
-from console.state import link
 from console.state.model import ConsoleModel
-from console.state.text import STATUS_CSS, param_summary
+from console.state.text import STATUS_CSS
 from console.widgets.schedule.lines import (
     HEADER_H,
-    HEADER_LINES,
     MIN_W,
     Column,
-    Head,
     Styles,
     build_column,
     click_hit,
-    fit,
     hidden_robots,
-    progress_segments,
-    skill_segments,
-    with_hidden_robots,
 )
+from console.widgets.schedule.paint import Painter
 
 STATIC_W = 16
 MAX_W = 46
@@ -96,7 +89,7 @@ class ScheduleView(ScrollView, can_focus=True):
         self.cursor_col = 0
         self.drafts: frozenset[str] = frozenset()  # skills with unapplied edits (marked '*')
         self.expand_static = False
-        self._summary_cache: dict[tuple[str, int], str] = {}
+        self.painter = Painter(self)
         self._last_width = -1
         self.last_key: events.Key | None = None  # a robot command acts on a press made here
 
@@ -137,8 +130,8 @@ class ScheduleView(ScrollView, can_focus=True):
                 build_column(self.model, r, self.model.robot_kind(r) == "static") for r in order
             ]
             self._col_index = {c.robot: i for i, c in enumerate(self.columns)}
-            if len(self._summary_cache) > 50_000:
-                self._summary_cache.clear()
+            if len(self.painter.summaries) > 50_000:
+                self.painter.summaries.clear()
         else:
             before = (self.sync_h, self.total_lines)
             changed: list[tuple[Column, Column]] = []
@@ -421,7 +414,7 @@ class ScheduleView(ScrollView, can_focus=True):
             self._post_cursor()
 
     # -- rendering ----------------------------------------------------------------
-    def _styles(self) -> Styles:
+    def styles_now(self) -> Styles:
         key = (self.app.theme, self.has_focus)
         cached = getattr(self, "_style_cache", None)
         if cached is not None and cached[0] == key:
@@ -437,109 +430,9 @@ class ScheduleView(ScrollView, can_focus=True):
         super().notify_style_update()
 
     def render_line(self, y: int) -> Strip:
-        width = self.size.width
-        scroll_x, scroll_y = int(self.scroll_x), int(self.scroll_y)
-        st = self._styles()
-        base = st["base"]
-        if not self.columns:
-            if y == 1:
-                msg = (
-                    "  no mission yet — waiting for the server…"
-                    if self.model.mission is None
-                    else "  this mission has no robots"
-                )
-                return Strip([Segment(fit(msg, width), st["dim"])]).crop_extend(0, width, base)
-            return Strip.blank(width, base)
-        x0, x1 = scroll_x, scroll_x + width
-        segs: list[Segment] = []
-        line = scroll_y + y - HEADER_H
-        start: int | None = None  # x of the first visible column: only those are drawn
-        for ci, col in enumerate(self.columns):
-            if col.x + col.width + 1 <= x0 or col.x >= x1:
-                continue
-            if start is None:
-                start = col.x
-            if y < HEADER_H:
-                segs.extend(self._header_segments(col, y, st))
-            else:
-                segs.extend(self._content_segments(ci, col, line, st))
-            if y == HEADER_H - 1:
-                segs.append(Segment("┼", st["rule"]))
-            else:
-                segs.append(Segment("│", st["divider"]))
-        start = start or 0
-        strip = Strip(segs).crop_extend(x0 - start, x1 - start, base)
-        if y == HEADER_H - 1:  # on the rule under the headers, which hides nothing
-            strip = with_hidden_robots(strip, self.hidden_robots(), x1 - x0, st["more"])
-        return strip
+        return self.painter.line(y)
 
     def hidden_robots(self) -> tuple[int, int]:
         """(columns cut or hidden on the left, on the right) of the view now."""
         x0 = int(self.scroll_x)
         return hidden_robots(self.columns, x0, x0 + self.scrollable_content_region.width)
-
-    def _header_segments(self, col: Column, y: int, st: Styles) -> list[Segment]:
-        compact = col.static and not self.expand_static
-        selected = y == HEADER_H - 1 and bool(self.columns) and self.columns[self.cursor_col] is col
-        fresh = self.model.freshness(col.robot)
-        return HEADER_LINES[y](Head(self.model, col, st, compact, selected, fresh))
-
-    def _content_segments(self, ci: int, col: Column, line: int, st: Styles) -> list[Segment]:
-        w = col.width
-        task = self.model.task(col.robot)
-        if line < 0 or line >= self.total_lines:
-            return [Segment(" " * w, st["base"])]
-        if line < self.sync_h:
-            if line < len(col.sync):
-                i, kind = col.sync[line]
-                if i < len(task):
-                    s = task[i]
-                    if kind == "row":
-                        return self._skill_segments(ci, col, s, st)
-                    return progress_segments(
-                        self.model, col, s, st, self.model.freshness(col.robot)
-                    )
-            if line == 0 and not col.sync:
-                hint = "  nothing on robot" if not col.static or self.expand_static else "  –"
-                return [Segment(fit(hint, w), st["dim"])]
-            return [Segment(" " * w, st["base"])]
-        if line == self.sync_h:
-            label = " plan " if not col.static or self.expand_static else ""
-            text = "┄┄" + label + "┄" * max(0, w - 2 - len(label))
-            return [Segment(text[:w], st["divider"])]
-        k = line - self.sync_h - 1
-        if k < len(col.idle):
-            i = col.idle[k]
-            if i < len(task):
-                return self._skill_segments(ci, col, task[i], st)
-        if k == 0 and not col.idle:
-            hint = "  empty plan" if not col.static or self.expand_static else "  –"
-            return [Segment(fit(hint, w), st["dim"])]
-        return [Segment(" " * w, st["base"])]
-
-    def _summary(self, s) -> str:
-        key = (s.id, s.rev)
-        text = self._summary_cache.get(key)
-        if text is None:
-            text = param_summary(s, self.model.library)
-            self._summary_cache[key] = text
-        return text
-
-    def _skill_segments(self, ci: int, col: Column, s: SkillInstance, st: Styles) -> list[Segment]:
-        selected = ci == self.cursor_col and s.id == self.cursor_id
-        bid = self.model.barrier_of(s.id)
-        stale = s.status != Status.IDLE and self.model.freshness(col.robot).stale
-        c = self.model.uplinking(s.id)
-        return skill_segments(
-            s,
-            col.width,
-            st,
-            marked=s.id in self.marks,
-            draft=s.id in self.drafts,
-            tag=f"[{bid}]" if bid else "",
-            check=self.model.plan.mark(s.id),
-            extra=self._summary(s) if not col.static or self.expand_static else "",
-            cursor=(st["cursor"] if self.has_focus else st["cursor-blur"]) if selected else None,
-            stale=stale,
-            uplink=link.command_text(c, self.model.clock) if c is not None else "",
-        )

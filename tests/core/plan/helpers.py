@@ -18,7 +18,7 @@ LIBRARY = Library.model_validate(
         "name": "plan-tests",
         "robot_types": {
             "rover": {
-                "skills": ["drive", "work", "charge", "survey", "link", "meet"],
+                "skills": ["drive", "work", "charge", "survey", "link", "meet", "pair"],
                 "speed_mps": 1.0,
                 "battery": {
                     "reserve": 0.05,
@@ -69,6 +69,14 @@ LIBRARY = Library.model_validate(
             "meet": {
                 "params": {"partner": {"type": "robot", "required": False}},
                 "duration": {"base_s": 50},
+            },
+            "pair": {  # works at a place with a partner it talks to
+                "params": {
+                    "place": {"type": "position"},
+                    "partner": {"type": "robot", "required": False},
+                },
+                "duration": {"base_s": 50, "goal_param": "place"},
+                "talks_to": "partner",
             },
         },
     }

@@ -171,6 +171,63 @@ def test_a_skill_that_pauses_out_of_comms_planned_out_of_coverage():
     assert "pauses out of comms" in f.message
 
 
+def test_a_barrier_a_robot_waits_at_out_of_coverage_is_never_passed():
+    """Issue 35: LRU1 and LRU2 out of coverage at their barrier never met; both rows stayed
+    "stale" with no error. Partners meet only where they can talk."""
+    site = FakeSite(radius=50)
+    m = two_rovers(
+        [skill("r1-1", "drive", goal=pose(80, 0)), skill("r1-2", "meet", partner="r2")],
+        [skill("r2-1", "drive", goal=pose(10, 0)), skill("r2-2", "meet", partner="r1")],
+        {"b1": ["r1-2", "r2-2"]},
+    )
+    robots = {r: RobotNow(at=T0, x=0, y=0, battery=1.0) for r in ("r1", "r2")}
+    (f,) = found(m, site=site, robots=robots, rule="coverage.barrier")
+    assert f.id == "coverage.barrier:b1" and f.severity == "error" and f.blocking
+    assert f.skills == ("r1-2", "r2-2") and f.robot == "r1"
+    assert "r1 waits at (80, 0), out of comms coverage" in f.message
+    assert "deploy a Wi-Fi box" in f.message
+    assert found(m, robots=robots, rule="coverage.barrier") == []  # no map: not checked
+    # both in coverage: they meet
+    m.tasks["r1"][0] = skill("r1-1", "drive", goal=pose(40, 0))
+    assert found(m, site=site, robots=robots, rule="coverage.barrier") == []
+
+
+def test_robots_within_radio_range_meet_out_of_coverage():
+    site = FakeSite(radius=50)
+    m = two_rovers(
+        [skill("r1-1", "drive", goal=pose(80, 0)), skill("r1-2", "meet")],
+        [skill("r2-1", "drive", goal=pose(85, 0)), skill("r2-2", "meet")],
+        {"b1": ["r1-2", "r2-2"]},
+    )
+    robots = {r: RobotNow(at=T0, x=0, y=0, battery=1.0) for r in ("r1", "r2")}
+    assert ids(found(m, site=site, robots=robots, rule="coverage.barrier")) == [
+        "coverage.barrier:b1"
+    ]
+    radio = LIBRARY.model_copy(deep=True)
+    radio.robot_types["rover"].radio_range_m = 10.0
+    inputs = PlanInputs(now=T0, site=site, robots=robots, home=(0.0, 0.0))
+    assert [f for f in run_checks(m, radio, inputs) if f.rule == "coverage.barrier"] == []
+
+
+def test_a_skill_working_with_a_partner_where_they_cannot_talk():
+    site = FakeSite(radius=50)
+    m = two_rovers(
+        [skill("r1-1", "pair", place=pose(80, 0), partner="r2")],
+        [skill("r2-1", "pair", place=pose(80, 0), partner="r1")],
+        {"b1": ["r1-1", "r2-1"]},
+    )
+    robots = {r: RobotNow(at=T0, x=0, y=0, battery=1.0) for r in ("r1", "r2")}
+    found_ = found(m, site=site, robots=robots, rule="coverage.partner")
+    assert ids(found_) == ["coverage.partner:r1-1/partner", "coverage.partner:r2-1/partner"]
+    assert found_[0].severity == "warning"
+    assert "works with r2 (partner) at (80, 0), out of comms coverage" in found_[0].message
+    # the barrier itself is met in coverage (both start from the origin)
+    assert found(m, site=site, robots=robots, rule="coverage.barrier") == []
+    for task in m.tasks.values():
+        task[0].params["place"] = pose(30, 0)
+    assert found(m, site=site, robots=robots, rule="coverage.partner") == []
+
+
 def test_a_robot_whose_plan_ends_out_of_coverage_is_stranded():
     site = FakeSite(radius=50)
     m = mission(

@@ -273,7 +273,7 @@ class TestAdd:
         sid = add(engine, robot="lru2", skill="identify_stone", params={"target": GOAL}).value["id"]
         s = skill(engine, sid)
         assert "partner" not in s.params
-        assert s.params["search_radius"] == 3.0
+        assert s.params["search_radius"] == 8.0  # the library's default
 
     def test_policies_are_kept(self, engine, skill):
         pol = Policies(retries=2, pause_out_of_comms=True, recharge_below=0.2)

@@ -553,13 +553,14 @@ class TestLoadNew:
     def test_a_load_that_was_not_applied_keeps_undo(self, engine):
         add(engine)
 
-        def journal_full(batch):  # what the server's journal hook does on a full disk
-            raise Refusal("journal_failed", "disk full: the mission was not changed")
+        class Full:  # what the server's journal recorder does on a full disk
+            def record(self, batch, origin):
+                raise Refusal("journal_failed", "disk full: the mission was not changed")
 
-        engine.before_apply = journal_full
+        engine.recorder = Full()
         with pytest.raises(Refusal):
             engine.submit(NewMission(), client="c2")
-        engine.before_apply = None
+        engine.recorder = None
         assert undo(engine).value["undone"] == "add"
 
     def test_invalid_mission_refused(self, engine, refused):

@@ -116,24 +116,24 @@ class TestAnswers:
         c = cmd(engine, 1)
         assert c.state == CommandState.ACKED and c.done == ["lru1-2"]
         assert "lru1-1" not in engine.locked
-        [alert] = applied.value["alerts"]
-        assert "lru1 did not queue lru1-1" in alert["message"] and alert["robot"] == "lru1"
-        assert "no room" in alert["message"]
+        [alert] = applied.alerts
+        assert "lru1 did not queue lru1-1" in alert.message and alert.robot == "lru1"
+        assert "no room" in alert.message
 
     def test_an_answer_naming_a_skill_it_was_not_sent_is_ignored(self, engine, status_of):
         engine.submit(Sync(robot="lru1", through="lru1-1"))
         applied = answer(engine, "lru1", 1, queued=["lru1-1", "lru1-2", "lru2-1"])
         assert status_of(engine, "lru1-2") == Status.IDLE
         assert status_of(engine, "lru2-1") == Status.IDLE
-        assert len([a for a in applied.value["alerts"] if "did not send" in a["message"]]) == 2
+        assert len([a for a in applied.alerts if "did not send" in a.message]) == 2
 
     def test_a_refusal_returns_the_skills_with_an_alert(self, engine, status_of):
         engine.submit(Sync(robot="lru1"))
         applied = answer(engine, "lru1", 1, "refused", reason="no handler for drive_to")
         assert cmd(engine, 1).state == CommandState.REFUSED
         assert status_of(engine, "lru1-1") == Status.IDLE and engine.locked == {}
-        [alert] = applied.value["alerts"]
-        assert "command 1" in alert["message"] and "no handler" in alert["message"]
+        [alert] = applied.alerts
+        assert "command 1" in alert.message and "no handler" in alert.message
 
     def test_the_same_answer_twice_is_applied_once(self, engine):
         engine.submit(Sync(robot="lru1"))
@@ -143,7 +143,7 @@ class TestAnswers:
         )
         assert again.duplicate and not first.duplicate
         late = answer(engine, "lru1", 1, queued=[])  # a new number: answered already
-        assert "answered already" in late.value["alerts"][0]["message"]
+        assert "answered already" in late.alerts[0].message
 
     def test_unsync_race_the_started_skill_stays(self, engine, sync, report, ids, status_of):
         sync(engine, "lru1")
@@ -219,7 +219,7 @@ class TestWithdrawing:
             UplinkSettle(robot="lru1", ids=[1], state="expired", reason="expired unsent", at=T0)
         )
         assert cmd(engine, 1).state == CommandState.EXPIRED and engine.locked == {}
-        assert "lru1-1, lru1-2 are unsynchronized" in applied.value["alerts"][0]["message"]
+        assert "lru1-1, lru1-2 are unsynchronized" in applied.alerts[0].message
 
     def test_a_robot_that_applied_a_cancelled_sync_is_believed(self, engine, status_of):
         engine.submit(Sync(robot="lru1"))
@@ -230,7 +230,7 @@ class TestWithdrawing:
         assert status_of(engine, "lru1-2") == Status.IDLE  # edited: asked back
         drop = cmd(engine, 2)
         assert drop.op == "reconcile" and drop.command.ids == ["lru1-2"]
-        messages = " ".join(a["message"] for a in applied.value["alerts"])
+        messages = " ".join(a.message for a in applied.alerts)
         assert "after the ground had given up" in messages and "command 2" in messages
 
 
@@ -251,7 +251,7 @@ class TestReconcile:
         assert status_of(engine, "lru1-1") == Status.IDLE
         assert ids(engine, "lru1") == ["lru1-2", "lru1-1"]
         assert engine.mission.pending_commands("lru1")[0].command.ids == ["ghost-9"]
-        assert len(v["alerts"]) == 3
+        assert len(applied.alerts) == 3
 
     def test_a_skill_being_synchronized_is_left_to_its_answer(self, engine, status_of):
         engine.submit(Sync(robot="lru1"))

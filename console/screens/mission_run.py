@@ -1,0 +1,84 @@
+"""The mission screen's execution actions: synchronize and unsynchronize a
+robot's plan, retry a failed skill, run / pause / stop / reset one robot or
+all of them (an object the screen owns; its keys call these)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from backend.core.ops import Control, Retry, Sync, Unsync
+from console.screens.dialogs import ConfirmScreen
+
+
+class RunActions:
+    def __init__(self, screen: Any) -> None:
+        self.screen = screen  # MissionScreen: selection, say, submit, app
+
+    def sync(self, undo: bool = False) -> None:
+        """Synchronize the selected robot through the selected skill (`undo`:
+        unsynchronize it from there)."""
+        s = self.screen
+        robot, sid = s.selection()
+        if robot is None or sid is None:
+            return
+        op = Unsync(robot=robot, from_id=sid) if undo else Sync(robot=robot, through=sid)
+        what = "unsync" if undo else "sync"
+        s.submit(
+            op,
+            f"{what} {robot} {'from' if undo else 'through'} {sid}",
+            robot=robot,
+            skill=sid,
+            then=lambda r: s.say(_queued(robot, what, r.value), "ok"),
+        )
+
+    def retry(self) -> None:
+        s = self.screen
+        robot, sid = s.selection()
+        if sid is None:
+            return
+        s.submit(
+            Retry(id=sid),
+            f"retry {sid}",
+            robot=robot,
+            skill=sid,
+            then=lambda r: s.say(
+                f"{robot}: {r.value.get('id', '')} queued right after {sid} (run to start it)", "ok"
+            ),
+        )
+
+    def control(self, op: str, robot: str | None) -> None:
+        s = self.screen
+        who = robot or "all robots"
+
+        def ok(r: Any) -> None:
+            notes = "; ".join(r.notes)
+            commands = r.value.get("commands", {}) if isinstance(r.value, dict) else {}
+            # the robot's answer comes later (its skills then change): say what waits for it
+            queued = ", ".join(f"{rb} (command {c})" for rb, c in commands.items())
+            done = f"queued for {queued}" if queued else "ok"
+            s.say(
+                f"{op} {who}: {done}" + (f" — {notes}" if notes else ""),
+                "warning" if notes else "ok",
+            )
+            for n in r.notes:
+                s.app.notify(n, title=f"{op}: partly applied", severity="warning")
+
+        s.submit(Control(op=op, robot=robot), f"{op} {who}", robot=robot, then=ok)
+
+    async def reset(self, robot: str | None) -> None:
+        """Asked first: everything queued returns to the plan."""
+        question = (
+            f"Reset {robot}? Its active skill stops and everything queued returns to the plan."
+            if robot
+            else "Reset ALL robots? Active skills stop and everything queued returns to the plan."
+        )
+        yes = "Reset" if robot else "Reset all"
+        if await self.screen.app.push_screen_wait(ConfirmScreen(question, yes=yes)):
+            self.control("reset", robot)
+
+
+def _queued(robot: str, what: str, value: dict[str, Any]) -> str:
+    """Protocol 2: the operation returns once its command is queued for the
+    robot; the skills change when the robot answers."""
+    skills = ", ".join(value.get("skills", []))
+    return f"{robot}: {what} queued (command {value.get('command')}): {skills}"
