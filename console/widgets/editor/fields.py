@@ -5,7 +5,7 @@ the key has bubbled up to the app, while it inserts printable characters at
 once, in the widget. Typed fast — over SSH a burst arrives at once — the two
 overtake each other: `End`, 30 backspaces and "explore SE quadrant" left
 "survey beyon". These fields run their own bindings as the key arrives, in
-order with the characters (`InOrder`).
+order with the characters (`in_order`).
 
 Enter applies the form from every kind of field: an input submits, a closed
 choice or a switch posts `EnterPressed` (they opened or toggled before; space
@@ -15,44 +15,59 @@ text area (a polygon's points), as the actions table says.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, TypeVar
 
 from textual import events
 from textual.message import Message
+from textual.widget import Widget
 from textual.widgets import Input, Switch, TextArea
 
 from console.bindings import bind
 from console.widgets.select import SafeSelect
+
+W = TypeVar("W", bound=Widget)
 
 
 class EnterPressed(Message):
     """Enter on a field that does not submit by itself: apply the form."""
 
 
-class InOrder:
-    """Run this widget's own binding for a key when the key arrives."""
-
-    async def _on_key(self, event: events.Key) -> None:
-        widget: Any = self
-        for binding in widget._bindings.key_to_bindings.get(event.key, ()):
-            if binding.priority:
-                continue  # the app ran those before the key came here
-            event.stop()
-            event.prevent_default()
-            await widget.run_action(binding.action)
-            return
-        await super()._on_key(event)  # type: ignore[misc]
+async def ran_in_order(widget: Any, event: events.Key) -> bool:
+    """Run `widget`'s own binding for a key as the key arrives (True: it had one)."""
+    for binding in widget._bindings.key_to_bindings.get(event.key, ()):
+        if binding.priority:
+            continue  # the app ran those before the key came here
+        event.stop()
+        event.prevent_default()
+        await widget.run_action(binding.action)
+        return True
+    return False
 
 
-class FieldInput(InOrder, Input):
+def in_order(cls: type[W]) -> type[W]:
+    """A field class that runs its own bindings as a key arrives, then Textual's handling."""
+    textuals = cls._on_key
+
+    async def _on_key(self: Any, event: events.Key) -> None:
+        if not await ran_in_order(self, event):
+            await textuals(self, event)
+
+    cls._on_key = _on_key  # type: ignore[method-assign]
+    return cls
+
+
+@in_order
+class FieldInput(Input):
     pass
 
 
-class FieldArea(InOrder, TextArea):
+@in_order
+class FieldArea(TextArea):
     BINDINGS = [bind("editor.select_all", "select_all")]
 
 
-class FieldSelect(InOrder, SafeSelect):
+@in_order
+class FieldSelect(SafeSelect):
     """A choice: enter applies the form (up, down and space open the list)."""
 
     BINDINGS = [bind("editor.apply", "apply_form")]
@@ -61,7 +76,8 @@ class FieldSelect(InOrder, SafeSelect):
         self.post_message(EnterPressed())
 
 
-class FieldSwitch(InOrder, Switch):
+@in_order
+class FieldSwitch(Switch):
     """A yes/no: enter applies the form (space switches it)."""
 
     BINDINGS = [bind("editor.apply", "apply_form")]
