@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import threading
 
-from console_state import MARS, screen_text, wait_exit, wait_until
+from console_state import MARS, screen_text, state_loaded, wait_exit, wait_until
 
 from backend.exit_codes import EXIT_UNREACHABLE
 from backend.protocol import mapfeed as mf
@@ -50,3 +50,18 @@ async def test_the_demo_shows_the_plan_from_its_file_while_the_server_starts():
 
 def test_the_ground_names_follow_the_map_feed():
     assert set(GROUND) == {mf.T_FREE, mf.T_SLOW, mf.T_ROCK}
+
+
+def test_the_servers_first_state_replaces_the_files_plan_and_a_late_preview_is_ignored():
+    from backend.files.missions import load_mission
+    from console.state.changes import NOTHING, Previewed
+    from console.state.model import ConsoleModel
+
+    mission, library = load_mission(MARS)
+    m = ConsoleModel()
+    assert m.take(Previewed(mission, library)).loaded and m.previewing
+    served = mission.model_copy(deep=True, update={"revision": 7})
+    served.tasks["lru1"].pop()  # the server's plan moved on from the file's
+    m.take(state_loaded(served, library, server_id="s1").event)
+    assert m.mission is served and not m.previewing and not m.unsaved  # its first state
+    assert m.take(Previewed(mission, library)) is NOTHING and m.mission is served
