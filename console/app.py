@@ -27,7 +27,6 @@ from typing import Any
 
 from textual import events, on
 from textual.app import App
-from textual.binding import Binding
 from textual.notifications import SeverityLevel
 from textual.screen import Screen
 from textual.signal import Signal
@@ -36,7 +35,7 @@ from backend.client.client import ClientError, LoginFailed
 from backend.exit_codes import EXIT_UNREACHABLE
 from backend.transport.login import Login
 from console.alerting import AlertAnnouncer
-from console.bindings import bindings
+from console.bindings import bind, bindings, key_names
 from console.bridge import ClientBridge
 from console.commands import MissionCommands
 from console.config import ConsoleConfig, save_theme
@@ -70,12 +69,14 @@ from console.state.changes import (
     Unreachable,
     change,
 )
+from console.state.clock import MissionClock
 from console.state.eventlog import AlertBook, EventLog
 from console.state.files import RecentFiles
 from console.state.model import OFFLINE, ConsoleModel
 from console.state.text import without_paths
 from console.themes.loader import ANSI16_MAP, ANSI16_STATUS, Downgrade16, choose_theme, load_themes
 from console.themes.variables import VARIABLE_DEFAULTS
+from console.typeahead import TypeAhead
 
 HERE = Path(__file__).parent
 
@@ -86,7 +87,8 @@ class MissionApp(App[int]):
     DEFAULT_MODE = "mission"
     COMMANDS = App.COMMANDS | {MissionCommands}
     BINDINGS = [
-        Binding("ctrl+q", "quit", "Quit", priority=True, id="app.quit"),
+        bind("app.quit", "quit", show=True),
+        bind("app.command_palette", "command_palette"),
         *bindings("app", show=False),  # shown in the footers of the part-2 screens
     ]
     # the app's look and its widgets' (each screen loads its own: CSS_PATH there);
@@ -168,26 +170,29 @@ class MissionApp(App[int]):
         m, c = self.model, self.changes
         self.add_mode(self.DEFAULT_MODE, self.get_default_screen)
         self.add_mode("map", self._make_map_screen)
-        self.add_mode("fleet", lambda: FleetScreen(m, c))
-        self.add_mode("log", lambda: EventLogScreen(m.log, c))
-        self.add_mode("alerts", lambda: AlertScreen(m.alerts, c))
+        self.add_mode("fleet", lambda: FleetScreen(m, c, self.ops))
+        self.add_mode("log", lambda: EventLogScreen(m.log, c, m.clock))
+        self.add_mode("alerts", lambda: AlertScreen(m.alerts, c, m.clock))
         self.add_mode("timeline", lambda: TimelineScreen(m, c))
         self.add_mode("checks", lambda: ChecksScreen(m, c, self.ops))
         if self.config.keymap:
             self.set_keymap(self.config.keymap)
+        self.model.keys = key_names(self)  # the rules' sentences name the user's keys
         self._connection_closed = False
         self._hanging_up = False
         self.on_forced_exit: list[Callable[[], object]] = []  # before a forced exit (hang-up)
         self.exit_code = 0
+        # keys typed while a dialog opens wait for it (console/typeahead.py)
+        self.typeahead = TypeAhead(self, self._key_as_typed)
 
     @property
-    def clock(self) -> Callable[[], datetime]:
-        """Now, for the log, alerts and how old a robot's state is (tests pin it)."""
+    def clock(self) -> MissionClock:
+        """The mission clock (console/state/clock.py); setting it pins its wall clock (tests)."""
         return self.model.clock
 
     @clock.setter
-    def clock(self, clock: Callable[[], datetime]) -> None:
-        self.model.clock = clock
+    def clock(self, wall: Callable[[], datetime]) -> None:
+        self.model.clock.wall = wall
 
     @property
     def event_log(self) -> EventLog:
@@ -289,14 +294,9 @@ class MissionApp(App[int]):
     # every action this app binds (console/state/actions.py; a review adds its own)
     ACTIONS = ACTIONS
 
-    def action_keys(self) -> dict[str, str]:
-        """Action name -> its key(s) now (the user's keymap applied)."""
-        keymap = getattr(self, "_keymap", {}) or {}
-        return {a.name: keymap.get(a.binding_id, a.key) for a in self.ACTIONS}
-
     def action_help(self) -> None:
         if not isinstance(self.screen, HelpScreen):
-            self.push_screen(HelpScreen(self.action_keys(), self.ACTIONS))
+            self.push_screen(HelpScreen(key_names(self), self.ACTIONS))
 
     @on(HelpRequested)
     def _help_requested(self) -> None:
@@ -332,7 +332,11 @@ class MissionApp(App[int]):
             )
 
     async def on_event(self, event: events.Event) -> None:
-        await self.escape.on_event(event, super().on_event)
+        if not await self.typeahead.take(event):  # held while a dialog opens: typeahead.py
+            await self.escape.on_event(event, super().on_event)
+
+    async def _key_as_typed(self, key: events.Key) -> None:
+        await self.escape.on_event(key, super().on_event)
 
     async def action_quit(self) -> None:
         await self.quitting.quit()

@@ -10,10 +10,11 @@ from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK, EXIT_UNREACHABLE
 from backend.transport.login import add_login_arguments
 from console.options import DEFAULT_CONNECT, THEME_HELP
 from console.options import known_binding_ids as _known_binding_ids
+from console.state.keys import KeyNames
 
 YES_HELP = (
-    "quit without asking (for scripts); else ctrl+q asks while robots execute, commands "
-    "wait for a robot or the plan has edits not saved to a file"
+    f"quit without asking (for scripts); else {KeyNames().say('app.quit')} asks while robots "
+    "execute, commands wait for a robot or the plan has edits not saved to a file"
 )
 OBSERVER = "observer: this console watches, it changes nothing"
 DEMO_QUITS = (
@@ -157,7 +158,6 @@ def _login_refused(endpoint: str, login) -> str | None:
 
 
 def run_demo(args: argparse.Namespace) -> int:
-    from console.app import MissionApp
     from console.config import load_config
     from console.demo import DEFAULT_MISSION, DemoError, DemoProcesses
 
@@ -165,9 +165,6 @@ def run_demo(args: argparse.Namespace) -> int:
         print("missionctl demo: --speed must be positive", file=sys.stderr)
         return EXIT_BAD_INPUT
     mission = args.mission or str(DEFAULT_MISSION)
-    print(
-        f"missionctl demo: starting the mission server for {mission} …", file=sys.stderr, flush=True
-    )
     procs = DemoProcesses(
         mission,
         speed=args.speed,
@@ -175,55 +172,27 @@ def run_demo(args: argparse.Namespace) -> int:
         comms_window=args.comms_window,
     )
     try:
-        procs.launch()
-        # load the console (most of its start-up is imports) while the server starts
-        import console.screens.mission  # noqa: F401
-
-        procs.wait_ready()
+        procs.launch()  # the server starts while the console loads (console/demo_app.py)
     except DemoError as e:
         procs.stop()
         print(f"missionctl demo: {e}", file=sys.stderr)
-        return EXIT_BAD_INPUT if "no such" in str(e) else EXIT_UNREACHABLE
-    except BaseException:
-        procs.stop()
-        raise
+        return EXIT_BAD_INPUT
     try:
-        cfg = load_config(args.config, known_ids=_known_binding_ids())
-
-        class DemoApp(MissionApp):
-            def on_mount(self) -> None:
-                super().on_mount()
-                self._sim_reported = False
-                self.set_interval(2.0, self._check_children)
-
-            def _check_children(self) -> None:
-                problem = procs.sim_problem()
-                if problem and not self._sim_reported:
-                    self._sim_reported = True
-                    self.notify(problem, title="Simulated fleet", severity="error", timeout=15)
-                if (
-                    procs.server is not None
-                    and procs.server.poll() is not None
-                    and not getattr(self, "_server_reported", False)
-                ):
-                    self._server_reported = True
-                    self.notify(
-                        f"the demo's mission server stopped (exit code {procs.server.returncode})",
-                        title="Server",
-                        severity="error",
-                        timeout=15,
-                    )
+        from console.demo_app import DemoApp
 
         app = DemoApp(
-            connect=procs.endpoint,
+            procs,
             user=args.user,
             theme=args.theme,
-            config=cfg,
+            config=load_config(args.config, known_ids=_known_binding_ids()),
             notices=procs.notices,
             ask_before_quit=not args.yes,
             quitting_stops=DEMO_QUITS,
         )
         app.on_forced_exit.append(procs.stop)  # the children must not outlive a hung-up demo
-        return _run_app(app)
+        code = _run_app(app)
+        if app.demo_error:
+            print(f"missionctl demo: {app.demo_error}", file=sys.stderr)
+        return code
     finally:
         procs.stop()

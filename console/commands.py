@@ -11,6 +11,9 @@ from typing import Any
 
 from textual.command import DiscoveryHit, Hit, Hits, Provider
 
+from console.bindings import key_names
+from console.screens.cancel import ask_and_cancel, toast_say
+from console.state import link
 from console.state.actions import ACTIONS
 
 
@@ -22,18 +25,34 @@ class MissionCommands(Provider):
         screen = self._screen()
         if screen is None:
             return
-        keys = getattr(self.app, "action_keys", lambda: {})()
+        keys = key_names(self)
         # the screen the palette was opened on (its own actions are offered too)
         here = getattr(self.screen, "SCOPE", "mission") if self.screen is not screen else "mission"
         for a in ACTIONS:
-            if a.scope not in ("mission", "app", here):
+            if a.scope not in ("mission", "app", here) or a.fixed or a.name == "command_palette":
                 continue
             why = screen.why_disabled(a.name) if a.scope == "mission" else None
-            key = keys.get(a.name, a.key)
-            help_text = f"{key} · {a.description}" + (
+            help_text = f"{keys.all(a.binding_id)} · {a.description}" + (
                 f" — does not apply now: {why}" if why else ""
             )
             yield a, help_text, partial(self._run, a)
+
+    def _cancels(self):
+        """Every pending command, to cancel (asks first)."""
+        screen = self._screen()
+        m = screen.model if screen is not None else None
+        if m is None or m.mission is None:
+            return
+        for c in m.mission.pending_commands():
+            what = f" ({', '.join(c.skills)})" if c.skills else ""
+            title = f"Cancel {c.op} #{c.id} to {c.robot}{what}"
+            help_text = f"{link.command_text(c, m.clock)} · asks first"
+            yield title, help_text, partial(self._cancel, c)
+
+    def _cancel(self, c) -> None:
+        screen = self._screen()
+        say = screen.say if self.app.screen is screen else toast_say(self.app)
+        screen.run_worker(ask_and_cancel(screen, screen.ops, c, say), group="dialog")
 
     async def _run(self, a) -> None:
         if a.scope == "mission":
@@ -50,6 +69,8 @@ class MissionCommands(Provider):
     async def discover(self) -> Hits:
         for a, help_text, run in self._entries():
             yield DiscoveryHit(a.palette_title, run, help=help_text)
+        for title, help_text, run in self._cancels():
+            yield DiscoveryHit(title, run, help=help_text)
 
     async def search(self, query: str) -> Hits:
         matcher = self.matcher(query)
@@ -58,3 +79,7 @@ class MissionCommands(Provider):
             score = max(matcher.match(text), matcher.match(a.description) * 0.5)
             if score > 0:
                 yield Hit(score, matcher.highlight(text), run, text=text, help=help_text)
+        for title, help_text, run in self._cancels():
+            score = matcher.match(title)
+            if score > 0:
+                yield Hit(score, matcher.highlight(title), run, text=title, help=help_text)

@@ -14,6 +14,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from importlib.metadata import entry_points
 from pathlib import Path
@@ -75,6 +76,10 @@ class DemoProcesses:
         self.notices: list[str] = []
         self._attempt = 0
         self._logs: list[IO] = []
+        # the console waits for the server in a thread (console/demo_app.py): once stopped,
+        # nothing is spawned any more (a sim started after stop() would outlive the demo)
+        self._lock = threading.Lock()
+        self._stopped = False
 
     @property
     def server_log(self) -> Path:
@@ -84,15 +89,20 @@ class DemoProcesses:
     def sim_log(self) -> Path:
         return self.workdir / "sim.log"
 
-    def _spawn(self, args: list[str], log: Path) -> subprocess.Popen:
-        f = open(log, "w", encoding="utf-8")  # noqa: SIM115 (closed in stop())
-        self._logs.append(f)
-        return subprocess.Popen(
-            [self.python, "-m", "backend.cli", *args],
-            stdout=f,
-            stderr=subprocess.STDOUT,
-            stdin=subprocess.DEVNULL,
-        )
+    def _spawn(self, role: str, args: list[str], log: Path) -> None:
+        """Start the server or the sim (`role`: the attribute that holds it)."""
+        with self._lock:
+            if self._stopped:
+                raise DemoError("the demo is stopping: nothing more is started")
+            f = open(log, "w", encoding="utf-8")  # noqa: SIM115 (closed in stop())
+            self._logs.append(f)
+            p = subprocess.Popen(
+                [self.python, "-m", "backend.cli", *args],
+                stdout=f,
+                stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL,
+            )
+            setattr(self, role, p)
 
     def start(self, timeout: float = 30.0) -> None:
         self.launch()
@@ -101,7 +111,8 @@ class DemoProcesses:
     def _spawn_server(self) -> None:
         self.endpoint = loopback_endpoint(free_port())
         db = self.workdir / f"demo-{self._attempt}.db"
-        self.server = self._spawn(
+        self._spawn(
+            "server",
             ["server", "--mission", str(self.mission), "--listen", self.endpoint, "--db", str(db)],
             self.server_log,
         )
@@ -133,7 +144,8 @@ class DemoProcesses:
             raise DemoError(f"the mission server did not start{how}:\n{tail}")
         want_sim = sim_available() if self.with_sim is None else self.with_sim
         if want_sim:
-            self.sim = self._spawn(
+            self._spawn(
+                "sim",
                 [
                     "sim",
                     "--mission",
@@ -189,6 +201,8 @@ class DemoProcesses:
             p.wait(timeout)
 
     def stop(self) -> None:
+        with self._lock:
+            self._stopped = True
         self._stop_one(self.sim)
         self._stop_one(self.server)
         for f in self._logs:

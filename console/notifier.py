@@ -8,6 +8,8 @@ from typing import Any
 
 from textual.notifications import Notification, SeverityLevel
 
+from console.bindings import key_names
+
 MAX_TOASTS = 3  # notifications on screen at once (at 80x24 more cover the schedule)
 
 
@@ -64,8 +66,10 @@ class NotificationFolder:
         rest = list(notes)  # shown after the fold (it is the oldest news)
         for n in rest:
             self.app._unnotify(n, refresh=False)
+        keys = key_names(self.app)
         fold = Notification(
-            f"{count} more — F6 lists the alerts, F5 the event log",
+            f"{count} more — {keys.say('app.show_alerts')} lists the alerts, "
+            f"{keys.say('app.show_log')} the event log",
             "Notifications folded",
             timeout=10,
         )

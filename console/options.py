@@ -15,10 +15,4 @@ def known_binding_ids() -> set[str]:
     """Every binding id a user may remap in the config file's [keymap]."""
     from console.state.actions import ACTIONS, REVIEW_ACTIONS
 
-    return {a.binding_id for a in [*ACTIONS, *REVIEW_ACTIONS]} | {
-        "app.help",
-        "app.quit",
-        "editor.apply",
-        "editor.revert",
-        "editor.leave",
-    }
+    return {a.binding_id for a in [*ACTIONS, *REVIEW_ACTIONS] if not a.fixed}

@@ -459,6 +459,7 @@ class MapMirror:
         self.feed = ""
         self.seq = -1
         self.sim_time = 0.0
+        self.speed = 1.0  # sim seconds per wall second, as the feed last said
         self.layers: dict[str, np.ndarray] = {}
         self.objects: MapObjects | None = None
         self._early: list[MapDelta] = []  # deltas received before the snapshot
@@ -494,6 +495,7 @@ class MapMirror:
         self._apply_tiles(snap.tiles)
         self.seq = snap.seq
         self.sim_time = snap.sim_time
+        self.speed = snap.speed
         self.objects = snap.objects
         early, self._early = self._early, []
         for d in sorted(early, key=lambda d: d.seq):
@@ -515,6 +517,7 @@ class MapMirror:
         self._apply_tiles(delta.tiles)
         self.seq = delta.seq
         self.sim_time = delta.sim_time
+        self.speed = delta.speed
         if delta.objects is not None:
             self.objects = delta.objects
         return True

@@ -21,11 +21,10 @@ from textual.screen import ModalScreen, Screen
 from textual.widgets import Static
 
 from console.app import MissionApp
-from console.bindings import bindings
+from console.bindings import bindings, key_names
 from console.review.goto import GotoScreen
 from console.state.actions import ACTIONS, REVIEW_ACTIONS
 from console.state.changes import StateChange
-from console.state.context import key_text
 from console.state.replay import GROUND, ROBOT, SPEEDS, Replay
 
 PLAY_TICK_S = 0.25  # how often playing moves the time on (wall seconds)
@@ -47,9 +46,9 @@ class ReviewCommands(Provider):
     """The review's actions in the command palette."""
 
     def _entries(self):
-        keys = getattr(self.app, "action_keys", lambda: {})()
+        keys = key_names(self)
         for a in REVIEW_ACTIONS:
-            yield a, f"{keys.get(a.name, a.key)} · {a.description}"
+            yield a, f"{keys.all(a.binding_id)} · {a.description}"
 
     async def discover(self) -> Hits:
         for a, help_text in self._entries():
@@ -116,9 +115,9 @@ class ReviewApp(MissionApp):
         t = Text(no_wrap=True)
         t.append(self.replay.where(), style="bold")
         t.append(f" · {'playing' if self.playing else 'paused'} ×{self.speed:g}  ")
-        keys = self.action_keys()
+        keys = key_names(self)
         for a in REVIEW_ACTIONS:
-            t.append(f" {key_text(keys.get(a.name, a.key))}", style="bold")
+            t.append(f" {keys.short(a.binding_id)}", style="bold")
             t.append(f" {a.label}")
         return t
 

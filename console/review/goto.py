@@ -4,18 +4,18 @@ from __future__ import annotations
 
 from textual import on
 from textual.app import ComposeResult
-from textual.binding import Binding
 from textual.containers import Vertical
 from textual.screen import ModalScreen
 from textual.widgets import Input, Static
 
+from console.bindings import bind
 from console.state.replay import GOTO_HELP, parse_goto
 
 
 class GotoScreen(ModalScreen[tuple[str, float] | None]):
     """Dismissed with ("time", t) or ("revision", n), or None (escape)."""
 
-    BINDINGS = [Binding("escape", "cancel", "Cancel")]
+    BINDINGS = [bind("dialog.cancel", "cancel")]
     DEFAULT_CSS = """
     GotoScreen { align: center middle; }
     GotoScreen > Vertical {

@@ -10,12 +10,12 @@ from textual.app import ComposeResult
 from textual.signal import Signal
 from textual.widgets import DataTable, Footer, Static
 
-from console.bindings import bindings
+from console.bindings import bindings, key_names
 from console.messages import AlertAcknowledged
 from console.screens.base import ViewScreen
 from console.state.changes import StateChange, Topic
+from console.state.clock import MissionClock
 from console.state.eventlog import AlertBook, AlertEntry
-from console.state.text import fmt_clock
 
 LEVEL_VARS = {"error": "error", "warning": "warning", "info": "primary"}
 KIND_WORDS = {
@@ -44,18 +44,28 @@ class AlertScreen(ViewScreen):
     TOPICS = frozenset({Topic.ALERTS})
     BINDINGS = [*ViewScreen.BINDINGS, *bindings("alerts")]
 
-    def __init__(self, book: AlertBook, changes: Signal[StateChange]) -> None:
+    def __init__(
+        self,
+        book: AlertBook,
+        changes: Signal[StateChange],
+        clock: MissionClock | None = None,
+    ) -> None:
         super().__init__(changes)
         self.book = book
+        self.clock = clock or MissionClock()  # alerts' times are said in mission time
         self.ids: list[int] = []
 
     def compose(self) -> ComposeResult:
         yield self.title_bar
         yield DataTable(id="alerts", cursor_type="row")
         yield Static("", id="alert-detail", classes="detail")
-        yield Static(
-            "enter/a acknowledge · A acknowledge all · F2 schedule · F5 event log", classes="hint"
+        hint = key_names(self).hint(
+            ("alerts.ack", "acknowledge"),
+            ("alerts.ack_all", "acknowledge all"),
+            ("app.show_mission", "schedule"),
+            ("app.show_log", "event log"),
         )
+        yield Static(hint, classes="hint")
         yield Footer()
 
     def _cells(self, a: AlertEntry) -> list:
@@ -67,7 +77,7 @@ class AlertScreen(ViewScreen):
                 "✓" if a.acknowledged else "●",
                 style="dim" if a.acknowledged else f"bold {self.colour('warning')}",
             ),
-            Text(fmt_clock(a.at)),
+            Text(self.clock.stamp_text(a.at)),
             Text(KIND_WORDS.get(a.kind, a.kind)),
             Text(a.robot or ""),
             Text(a.message + count, style=style or "dim"),
@@ -105,7 +115,7 @@ class AlertScreen(ViewScreen):
             return
         about = " · ".join(x for x in (a.robot, a.skill) if x)
         head = Text.assemble(
-            (f"{fmt_clock(a.at)}  {KIND_WORDS.get(a.kind, a.kind)}", "bold"),
+            (f"{self.clock.stamp_text(a.at)}  {KIND_WORDS.get(a.kind, a.kind)}", "bold"),
             f"  {about}" if about else "",
             (f"  {a.level} · from {a.source}" + (f" · ×{a.count}" if a.count > 1 else ""), "dim"),
         )

@@ -12,7 +12,6 @@ from typing import Any
 from rich.text import Text
 from textual import on, work
 from textual.app import ComposeResult
-from textual.binding import Binding
 from textual.containers import Vertical
 from textual.screen import ModalScreen
 from textual.signal import Signal
@@ -20,7 +19,7 @@ from textual.widgets import DataTable, Footer, Input, Label, Static
 
 from backend.core.ops import Unwaive, Waive
 from backend.core.plan.checks import Finding
-from console.bindings import bindings
+from console.bindings import bind, bindings, key_names
 from console.operations import OperationService
 from console.screens.base import ViewScreen
 from console.state.changes import StateChange, Topic
@@ -40,7 +39,7 @@ def mark(f: Finding) -> tuple[str, str | None]:
 class ReasonPrompt(ModalScreen[str | None]):
     """Why a finding is waived (required: it goes into the journal and every log)."""
 
-    BINDINGS = [Binding("escape", "cancel", "Cancel")]
+    BINDINGS = [bind("dialog.cancel", "cancel")]
     CSS_PATH = TCSS
 
     def __init__(self, finding: Finding) -> None:
@@ -52,7 +51,8 @@ class ReasonPrompt(ModalScreen[str | None]):
             yield Label(f"Waive {self.finding.id}", classes="title")
             yield Static(self.finding.message, classes="message")
             yield Input(placeholder="why it may go up the link anyway", id="reason")
-            yield Static("enter: waive · escape: cancel", classes="hint")
+            hint = key_names(self).hint(("dialog.ok", "waive"), ("dialog.cancel", "cancel"))
+            yield Static(hint, classes="hint")
             yield Static("", id="error", classes="error")
 
     def on_mount(self) -> None:
@@ -89,10 +89,14 @@ class ChecksScreen(ViewScreen):
         yield self.title_bar
         yield DataTable(id="checks", cursor_type="row", zebra_stripes=False)
         yield Static("", id="detail", classes="detail")
-        yield Static(
-            "w waive (with a reason) · u withdraw · enter: its skill · F7 timeline · F2 schedule",
-            classes="hint",
+        hint = key_names(self).hint(
+            ("checks.waive", "waive (with a reason)"),
+            ("checks.unwaive", "withdraw"),
+            ("checks.schedule", "its skill"),
+            ("app.show_timeline", "timeline"),
+            ("app.show_mission", "schedule"),
         )
+        yield Static(hint, classes="hint")
         yield Footer()
 
     def _cells(self, f: Finding) -> list[Text]:

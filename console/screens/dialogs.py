@@ -11,7 +11,6 @@ from rich.table import Table
 from rich.text import Text
 from textual import events, on
 from textual.app import ComposeResult
-from textual.binding import Binding
 from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.fuzzy import Matcher
 from textual.screen import ModalScreen, Screen
@@ -20,9 +19,10 @@ from textual.widgets.option_list import Option
 
 from backend.core.library import Library
 from backend.core.model import NAME_RE, Status
-from console.state.actions import ACTIONS, APP_KEYS, EDITOR_KEYS, NAV_KEYS, Action
-from console.state.context import help_keys
+from console.bindings import bind, key_names
+from console.state.actions import ACTIONS, EDITOR_NOTES, NAV_KEYS, Action
 from console.state.files import complete, completions, full_path, path_note, save_risks, shown_path
+from console.state.keys import KeyNames
 from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS
 from console.widgets.editor.editor import settle_cursors
 from console.widgets.select import SafeSelect
@@ -32,26 +32,29 @@ TCSS = Path(__file__).with_name("dialogs.tcss")
 
 
 class ConfirmScreen(ModalScreen[bool]):
-    """Yes/no. Enter or y confirms, escape or n cancels."""
+    """Yes/no: yes (y) confirms; no (n), cancel (escape) or the focused Cancel button does not."""
 
     BINDINGS = [
-        Binding("y", "answer(True)", "Yes"),
-        Binding("n,escape", "answer(False)", "No"),
+        bind("dialog.yes", "answer(True)"),
+        bind("dialog.no", "answer(False)"),
+        bind("dialog.cancel", "answer(False)"),
     ]
 
     CSS_PATH = TCSS
 
-    def __init__(self, question: str, yes: str = "Yes") -> None:
+    def __init__(self, question: str, yes: str = "Yes", no: str = "Cancel") -> None:
         super().__init__()
         self.question = question
         self.yes = yes
+        self.no = no
 
     def compose(self) -> ComposeResult:
         with Vertical():
             yield Static(self.question, classes="question")
+            keys = key_names(self)
             with Horizontal():
-                yield Button(f"{self.yes} (y)", id="yes", variant="error")
-                yield Button("Cancel (n)", id="no")
+                yield Button(f"{self.yes} ({keys.say('dialog.yes')})", id="yes", variant="error")
+                yield Button(f"{self.no} ({keys.say('dialog.no')})", id="no")
 
     def on_mount(self) -> None:
         self.query_one("#no", Button).focus()
@@ -70,9 +73,10 @@ class QuitScreen(ModalScreen[str | None]):
     None (stay). Starts on "Stay": enter alone never quits."""
 
     BINDINGS = [
-        Binding("q,y,ctrl+q", "answer('quit')", "Quit", priority=True),
-        Binding("s", "answer('save')", "Save first"),
-        Binding("n,escape", "answer(None)", "Stay"),
+        bind("dialog.quit", "answer('quit')"),
+        bind("dialog.save_first", "answer('save')"),
+        bind("dialog.no", "answer(None)"),
+        bind("dialog.cancel", "answer(None)"),
     ]
 
     CSS_PATH = TCSS
@@ -88,11 +92,14 @@ class QuitScreen(ModalScreen[str | None]):
             yield Static("Quit now?", classes="head")
             yield Static("\n".join(f"• {r}" for r in self.risks), classes="risks")
             yield Static(self.consequence, classes="question")
+            keys = key_names(self)
             with Horizontal():
                 if self.can_save:
-                    yield Button("Save, then quit (s)", id="save", variant="primary", compact=True)
-                yield Button("Quit (q)", id="quit", variant="error", compact=True)
-                yield Button("Stay (n)", id="stay", compact=True)
+                    save = f"Save, then quit ({keys.say('dialog.save_first')})"
+                    yield Button(save, id="save", variant="primary", compact=True)
+                quit_ = f"Quit ({keys.say('dialog.quit')})"
+                yield Button(quit_, id="quit", variant="error", compact=True)
+                yield Button(f"Stay ({keys.say('dialog.no')})", id="stay", compact=True)
 
     def on_mount(self) -> None:
         self.query_one("#stay", Button).focus()
@@ -119,9 +126,10 @@ class PathPrompt(ModalScreen[str | None]):
     """
 
     BINDINGS = [
-        Binding("escape", "cancel", "Cancel"),
-        Binding("tab", "complete", "Complete", priority=True, show=False),
-        Binding("down", "to_choices", "Choose", show=False),
+        bind("dialog.cancel", "cancel"),
+        bind("dialog.ok", "ok"),
+        bind("dialog.complete", "complete"),
+        bind("dialog.next", "to_choices"),
     ]
 
     CSS_PATH = TCSS
@@ -154,9 +162,13 @@ class PathPrompt(ModalScreen[str | None]):
             yield Static("", id="note", classes="note")
             yield Static("", id="choices-title", classes="hint")
             yield OptionList(id="choices")
-            yield Static(
-                "enter: ok · tab: complete · ↓: choose below · escape: cancel", classes="hint"
+            hint = key_names(self).hint(
+                ("dialog.ok", "ok"),
+                ("dialog.complete", "complete"),
+                ("dialog.next", "choose below"),
+                ("dialog.cancel", "cancel"),
             )
+            yield Static(hint, classes="hint")
             yield Static("", id="error", classes="error")
 
     def on_mount(self) -> None:
@@ -182,7 +194,10 @@ class PathPrompt(ModalScreen[str | None]):
         self.query_one("#choices-title", Static).update(f"{title}:" if items else "")
 
     def _noted(self, text: str) -> None:
-        note, severity = path_note(text, must_exist=self.must_exist, cwd=self.cwd)
+        complete = key_names(self).say("dialog.complete")
+        note, severity = path_note(
+            text, must_exist=self.must_exist, cwd=self.cwd, complete=complete
+        )
         w = self.query_one("#note", Static)
         w.update(f"→ {note}")
         for c in ("ok", "warning", "hint"):
@@ -230,6 +245,10 @@ class PathPrompt(ModalScreen[str | None]):
     def _submitted(self, event: Input.Submitted) -> None:
         self._submit(event.value)
 
+    def action_ok(self) -> None:
+        """Ok by the table's key where the focused widget does not take it (a remapped key)."""
+        self._submit(self.query_one("#path", Input).value)
+
     def _submit(self, text: str) -> None:
         error = self.query_one("#error", Static)
         if not text.strip():
@@ -259,7 +278,8 @@ class PathPrompt(ModalScreen[str | None]):
             if yes:
                 self.dismiss(str(p))
             else:
-                error.update("nothing written: change the name, or escape")
+                cancel = key_names(self).say("dialog.cancel")
+                error.update(f"nothing written: change the name, or {cancel}")
                 self.query_one("#path", Input).focus()
 
         self.app.push_screen(
@@ -274,14 +294,26 @@ class PathPrompt(ModalScreen[str | None]):
 
 
 class ListChoice(ModalScreen[str | None]):
-    """A list to choose from: ↑↓ move, enter (`choose_highlighted`) or a
-    click chooses (the option's id), escape cancels (None)."""
+    """A list to choose from: next/previous move, ok (`choose_highlighted`) or a
+    click chooses (the option's id), cancel (None)."""
 
     BINDINGS = [
-        Binding("escape", "cancel", "Cancel"),
-        Binding("down", "move(1)", "Next", show=False),
-        Binding("up", "move(-1)", "Previous", show=False),
+        bind("dialog.cancel", "cancel"),
+        bind("dialog.ok", "choose"),
+        bind("dialog.next", "move(1)"),
+        bind("dialog.previous", "move(-1)"),
     ]
+
+    def hint(self, what: str) -> str:
+        """'enter: add · ↑↓: choose · escape: cancel', with the user's keys."""
+        return key_names(self).hint(
+            ("dialog.ok", what),
+            (("dialog.previous", "dialog.next"), "choose"),
+            ("dialog.cancel", "cancel"),
+        )
+
+    def action_choose(self) -> None:
+        self.choose_highlighted()
 
     CSS_PATH = TCSS
 
@@ -330,7 +362,7 @@ class SkillPicker(ListChoice):
             )
             yield Input(placeholder="type to filter…", id="filter")
             yield OptionList(id="skills")
-            yield Static("enter: add · ↑↓: choose · escape: cancel", classes="hint")
+            yield Static(self.hint("add"), classes="hint")
 
     def on_mount(self) -> None:
         settle_cursors(self)
@@ -396,7 +428,7 @@ class SkillSearch(ListChoice):
             yield Input(self.query_text, placeholder="type to search…", id="query", compact=True)
             yield OptionList(id="found")
             yield Static("", id="count", classes="hint")
-            yield Static("enter: go to it · ↑↓: choose · escape: cancel", classes="hint")
+            yield Static(self.hint("go to it"), classes="hint")
 
     def on_mount(self) -> None:
         settle_cursors(self)
@@ -448,9 +480,9 @@ class SkillSearch(ListChoice):
 
 
 class ChoiceScreen(ModalScreen[str | None]):
-    """Choose one of a few rows: enter chooses (its id), escape cancels (None)."""
+    """Choose one of a few rows: ok chooses (its id), cancel (None)."""
 
-    BINDINGS = [Binding("escape", "cancel", "Cancel")]
+    BINDINGS = [bind("dialog.cancel", "cancel")]
 
     CSS_PATH = TCSS
 
@@ -464,7 +496,12 @@ class ChoiceScreen(ModalScreen[str | None]):
         with Vertical():
             yield Label(Text(self.question), classes="question")
             yield OptionList(*(Option(prompt, id=rid) for rid, prompt in self.rows), id="choices")
-            yield Static("enter: choose · ↑↓: move · escape: cancel", classes="hint")
+            hint = key_names(self).hint(
+                ("dialog.ok", "choose"),
+                (("dialog.previous", "dialog.next"), "move"),
+                ("dialog.cancel", "cancel"),
+            )
+            yield Static(hint, classes="hint")
 
     def on_mount(self) -> None:
         ol = self.query_one(OptionList)
@@ -482,7 +519,7 @@ class ChoiceScreen(ModalScreen[str | None]):
 class MarkerPrompt(ModalScreen[tuple[str, str] | None]):
     """Name (and kind) of a new marker; or a new name for one."""
 
-    BINDINGS = [Binding("escape", "cancel", "Cancel")]
+    BINDINGS = [bind("dialog.cancel", "cancel")]
     CSS_PATH = TCSS
 
     def __init__(self, title: str, default: str, *, kinds: bool = True, kind: str = "pose") -> None:
@@ -507,7 +544,8 @@ class MarkerPrompt(ModalScreen[tuple[str, str] | None]):
                     allow_blank=False,
                     id="kind",
                 )
-            yield Static("enter: ok · escape: cancel", classes="hint")
+            hint = key_names(self).hint(("dialog.ok", "ok"), ("dialog.cancel", "cancel"))
+            yield Static(hint, classes="hint")
             yield Static("", id="error", classes="error")
 
     def on_mount(self) -> None:
@@ -531,13 +569,13 @@ class MarkerPrompt(ModalScreen[tuple[str, str] | None]):
 class HelpScreen(ModalScreen[None]):
     """The key map (with the user's remappings) and the status legend."""
 
-    BINDINGS = [Binding("escape,q,f1,question_mark", "close", "Close")]
+    BINDINGS = [bind("dialog.cancel", "close"), bind("app.help", "close")]
 
     CSS_PATH = TCSS
 
-    def __init__(self, keys: dict[str, str], actions: list[Action] = ACTIONS) -> None:
+    def __init__(self, keys: KeyNames, actions: list[Action] = ACTIONS) -> None:
         super().__init__()
-        self.keys = keys  # action name -> current key display
+        self.keys = keys  # the user's keys
         self.actions = actions  # the app's (a review adds its own)
 
     def compose(self) -> ComposeResult:
@@ -567,7 +605,8 @@ class HelpScreen(ModalScreen[None]):
 
         intro = Text()
         intro.append("missionctl — operator console", style="bold")
-        intro.append("   (escape closes; keys can be remapped: see the end)", style="dim")
+        close = self.keys.say("dialog.cancel")
+        intro.append(f"   ({close} closes; keys can be remapped: see the end)", style="dim")
         parts.append(intro)
         heading("Navigation")
         table(NAV_KEYS)
@@ -576,13 +615,9 @@ class HelpScreen(ModalScreen[None]):
             groups.setdefault(a.group, []).append(a)
         for group, actions in groups.items():
             heading(group)
-            table(
-                [(help_keys(self.keys.get(a.name, a.key)), a.label, a.description) for a in actions]
-            )
-        heading("Parameter editor")
-        table(EDITOR_KEYS)
-        heading("App")
-        table(APP_KEYS)
+            table([(self.keys.all(a.binding_id), a.label, a.description) for a in actions])
+        heading("Typing values")
+        table(EDITOR_NOTES)
         heading("Statuses")
         colours = getattr(self.app, "theme_variables", {})  # the theme's status colours
 
@@ -605,7 +640,7 @@ class HelpScreen(ModalScreen[None]):
         table(
             [
                 ("[b1]", "", "barrier tag: partner skills wait for each other"),
-                ("+", "", "marked for a new barrier (space)"),
+                ("+", "", f"marked for a new barrier ({self.keys.say('mission.mark')})"),
                 (
                     "*label",
                     "",
@@ -619,7 +654,7 @@ class HelpScreen(ModalScreen[None]):
         parts.append(
             Text(
                 '  ~/.config/missionctl/config.toml:  [keymap]  "mission.sync" = "S"\n'
-                "  binding ids: " + ", ".join(a.binding_id for a in self.actions),
+                "  binding ids: " + ", ".join(a.binding_id for a in self.actions if not a.fixed),
                 style="dim",
             )
         )
@@ -633,8 +668,8 @@ class UnreachableScreen(Screen[str]):
     """The server cannot be reached: one clear message, retry or quit."""
 
     BINDINGS = [
-        Binding("r", "retry", "Retry", priority=True),
-        Binding("q", "quit_app", "Quit", priority=True),
+        bind("dialog.retry", "retry", show=True),
+        bind("dialog.quit", "quit_app", show=True),
     ]
 
     CSS_PATH = TCSS
@@ -653,7 +688,8 @@ class UnreachableScreen(Screen[str]):
                 "the network and, across machines, TLS and credentials.",
                 classes="hint",
             )
-            yield Static("r: retry   q: quit", classes="hint")
+            hint = key_names(self).hint(("dialog.retry", "retry"), ("dialog.quit", "quit"))
+            yield Static(hint, classes="hint")
         yield Footer()
 
     def action_retry(self) -> None:

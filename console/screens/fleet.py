@@ -8,13 +8,17 @@ from __future__ import annotations
 import json
 
 from rich.text import Text
-from textual import on
+from textual import on, work
 from textual.app import ComposeResult
 from textual.signal import Signal
 from textual.widgets import DataTable, Footer, Input, Static
 
 from backend.protocol.messages import RobotInfo
+from console.bindings import bindings, key_names
+from console.operations import OperationService
 from console.screens.base import ViewScreen
+from console.screens.cancel import ask_and_cancel, toast_say
+from console.screens.dialogs import ChoiceScreen
 from console.state import link
 from console.state.capability import (
     filter_examples,
@@ -27,7 +31,6 @@ from console.state.capability import (
 )
 from console.state.changes import StateChange, Topic
 from console.state.model import ConsoleModel
-from console.state.text import fmt_clock
 
 SPARK = 6  # samples shown per sparkline (the model keeps model.HISTORY)
 
@@ -46,10 +49,14 @@ class FleetScreen(ViewScreen):
     )
     # a batch may change any robot's activity or uplink; the others say whose
     TOPICS = frozenset({Topic.MISSION, Topic.FLEET, Topic.TELEMETRY})
+    BINDINGS = [*ViewScreen.BINDINGS, *bindings("fleet")]
 
-    def __init__(self, model: ConsoleModel, changes: Signal[StateChange]) -> None:
+    def __init__(
+        self, model: ConsoleModel, changes: Signal[StateChange], ops: OperationService
+    ) -> None:
         super().__init__(changes)
         self.model = model
+        self.ops = ops
         self.shown: list[str] = []
 
     def compose(self) -> ComposeResult:
@@ -57,8 +64,13 @@ class FleetScreen(ViewScreen):
         yield Input(placeholder="filter by capability", id="filter")
         yield DataTable(id="robots", cursor_type="row", zebra_stripes=False)
         yield Static("", id="detail", classes="detail")
+        keys = key_names(self)
+        back, schedule = keys.say("app.back"), keys.say("app.show_mission")
+        cancel = keys.say("fleet.cancel")
         yield Static(
-            "type to filter (escape: back to the list) · ↑↓ robot · F2 schedule", classes="hint"
+            f"type to filter ({back}: back to the list) · {cancel}: cancel a pending command · "
+            f"{schedule}: schedule",
+            classes="hint",
         )
         yield Footer()
 
@@ -69,7 +81,7 @@ class FleetScreen(ViewScreen):
             return Text("? unknown", style=self.colour("presence-unknown"))
         if info.online:
             return Text("● online", style=self.colour("presence-online"))
-        since = f" {fmt_clock(info.since)}" if info.since else " (not seen)"
+        since = f" {self.model.clock.stamp_text(info.since)}" if info.since else " (not seen)"
         return Text(f"○ offline{since}", style=f"bold {self.colour('presence-offline')}")
 
     def _level(self, robot: str, i: int, var: str | None) -> Text:
@@ -84,8 +96,8 @@ class FleetScreen(ViewScreen):
         """'⇡2 1m10s ⇄20s': commands waiting for the robot, its one-way delay."""
         info = self.model.robots.get(robot)
         words = [
-            link.pending_text(self.model.pending(robot), self.model.clock()),
-            link.delay_text(info.delay_s if info is not None else None),
+            link.pending_text(self.model.pending(robot), self.model.clock),
+            link.delay_text(info.delay_s if info is not None else None, self.model.clock),
         ]
         text = " ".join(w for w in words if w)
         return Text(text or "—", style="" if text else "dim")
@@ -188,14 +200,35 @@ class FleetScreen(ViewScreen):
         out.append(f"  {robot_type(self.model, r)}  ")
         out.append_text(self._presence(r))
         if info is not None and info.online and info.since:
-            out.append(f" since {fmt_clock(info.since)}")
+            out.append(f" since {self.model.clock.stamp_text(info.since)}")
         out.append("\ndoing: ", style="bold")
         out.append(self.model.activity_text(r) if self.model.mission else "—")
         out.append(" · last report: ", style="bold")
         out.append(last_report(self.model, r))
         out.append("\nlink: ", style="bold")
-        out.append(link.link_text(self.model, r, self.model.clock()))
+        out.append(link.link_text(self.model, r, self.model.clock))
         return out
+
+    # -- cancelling a pending command ----------------------------------------------------
+    @work(group="dialog")
+    async def action_fleet_cancel(self) -> None:
+        """One of the selected robot's pending commands (chosen if several), asking first."""
+        say = toast_say(self.app)
+        robot = self.selected
+        cmds = self.model.pending(robot) if robot else []
+        if not cmds:
+            say(f"no command waits for {robot or 'a robot'}'s answer", "warning")
+            return
+        c = cmds[0]
+        if len(cmds) > 1:
+            rows = [(str(x.id), Text(link.command_text(x, self.model.clock))) for x in cmds]
+            chosen = await self.app.push_screen_wait(
+                ChoiceScreen(f"Cancel which command to {robot}?", rows)
+            )
+            if chosen is None:
+                return
+            c = next(x for x in cmds if str(x.id) == chosen)
+        await ask_and_cancel(self, self.ops, c, say)
 
     # -- events ---------------------------------------------------------------------------
     @on(DataTable.RowHighlighted)

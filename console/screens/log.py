@@ -14,13 +14,13 @@ from textual.app import ComposeResult
 from textual.signal import Signal
 from textual.widgets import DataTable, Footer, Input, Static
 
-from console.bindings import bindings
+from console.bindings import bindings, key_names
 from console.screens.base import ViewScreen
 from console.screens.dialogs import PathPrompt
 from console.state.changes import StateChange, Topic
+from console.state.clock import MissionClock
 from console.state.eventlog import LOG_LIMIT, EventLog, LogEntry, entry_matches
 from console.state.files import shown_path
-from console.state.text import fmt_clock
 
 # rows in the table (a DataTable of 10k rows takes seconds to fill); export writes all matches
 SHOW_LIMIT = 1_000
@@ -46,9 +46,15 @@ class EventLogScreen(ViewScreen):
     TOPICS = frozenset({Topic.LOG})
     BINDINGS = [*ViewScreen.BINDINGS, *bindings("log")]
 
-    def __init__(self, log: EventLog, changes: Signal[StateChange]) -> None:
+    def __init__(
+        self,
+        log: EventLog,
+        changes: Signal[StateChange],
+        clock: MissionClock | None = None,
+    ) -> None:
         super().__init__(changes)
         self.log_ = log
+        self.clock = clock or MissionClock()  # entries' times are said in mission time
         self.last_seq = 0  # newest entry in the table
         self.rows: list[int] = []  # seqs shown, oldest first
         self.matching = 0  # entries matching the filter (the table shows the last SHOW_LIMIT)
@@ -65,11 +71,10 @@ class EventLogScreen(ViewScreen):
         yield DataTable(id="log", cursor_type="row")
         # the selected entry in full (the table cuts at 80 columns)
         yield Static("", id="entry", classes="detail")
-        yield Static(
-            f"last {LOG_LIMIT:,} entries kept in memory · "
-            "ctrl+s export shown entries (JSON lines) · F2 schedule",
-            classes="hint",
+        hint = key_names(self).hint(
+            ("log.export", "export shown entries (JSON lines)"), ("app.show_mission", "schedule")
         )
+        yield Static(f"last {LOG_LIMIT:,} entries kept in memory · {hint}", classes="hint")
         yield Footer()
 
     def shown_entries(self) -> list[LogEntry]:
@@ -80,7 +85,7 @@ class EventLogScreen(ViewScreen):
         colour = self.colour(KIND_VARS.get(e.kind, ""), "")
         # Text, not str: a str cell is parsed as markup ("[lru1] …" would vanish)
         return [
-            Text(fmt_clock(e.at)),
+            Text(self.clock.stamp_text(e.at)),
             Text(e.kind, style=colour),
             Text(", ".join(e.robots)),
             Text(e.text),
@@ -163,7 +168,7 @@ class EventLogScreen(ViewScreen):
             return
         who = f"{e.user} on {e.client}" if e.user else e.client
         out = Text.assemble(
-            (f"{fmt_clock(e.at)} {e.kind}", "bold"),
+            (f"{self.clock.stamp_text(e.at)} {e.kind}", "bold"),
             f"  {', '.join(e.robots)}  " if e.robots else "  ",
             e.text,
         )

@@ -25,12 +25,13 @@ from backend.core.model import (
     Status,
 )
 from backend.core.ops import EditSkill, MarkerAdd, MarkerDelete, MarkerMove, MarkerRename
-from console.bindings import bindings
+from console.bindings import bind, bindings, key_names
 from console.messages import HelpRequested
 from console.operations import OperationService
 from console.screens.dialogs import ChoiceScreen, ConfirmScreen, MarkerPrompt
 from console.state.actions import ACTIONS
 from console.state.changes import StateChange, Topic
+from console.state.keys import KeyNames
 from console.state.markers import (
     bind_choices,
     followers,
@@ -43,6 +44,7 @@ from console.state.markers import (
     relabel,
 )
 from console.state.model import CONNECTED, ConsoleModel
+from console.state.site import here_text
 from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS, fmt_value
 from console.widgets.bars import InfoLine, StatusLine, TopBar, connection_text
 from console.widgets.map.view import (
@@ -68,9 +70,10 @@ TURN = math.radians(15)
 LEGEND_MIN_WIDTH = 100
 
 
-def legend_text(colours: dict[str, str] | None = None) -> Text:
+def legend_text(colours: dict[str, str] | None = None, keys: KeyNames | None = None) -> Text:
     """The legend; `colours` (theme variables) colour its glyphs like the map."""
     c = colours or {}
+    keys = keys or KeyNames()
 
     def fg(var: str) -> str:
         return f"bold {c[var]}" if var in c else "bold"
@@ -96,7 +99,7 @@ def legend_text(colours: dict[str, str] | None = None) -> Text:
         row(GLYPHS[st], fg(f"status-{STATUS_CSS[st]}"), f"  {STATUS_WORDS[st]}")
     row("✕", fg("presence-offline"), "  offline")
     row(NO_LINK_GLYPH, fg("presence-offline"), "  out of comms range")
-    row(FOLLOW_GLYPH, "bold", "  followed (f)")
+    row(FOLLOW_GLYPH, "bold", f"  followed ({keys.say('map.follow')})")
     row(POSE_ARROWS[0], "bold", "pose marker")
     row(POSITION_GLYPH, "bold", "position marker")
     row(AREA_GLYPH, "bold", "area marker")
@@ -139,9 +142,22 @@ def param_rows(spec: Any, s: Any, names: list[str]) -> list[tuple[str, Text]]:
     return rows
 
 
+def map_top_text(m: ConsoleModel, keys: KeyNames) -> Text:
+    """The map's top bar: the mission and revision, the connection, the way back."""
+    t = Text()
+    t.append("missionctl map", style="bold")
+    if m.mission is not None:
+        t.append(f"  {m.mission.name}", style="bold")
+        t.append(f"  rev {m.mission.revision}", style="dim")
+    t.append(f"   {connection_text(m.connection)}")
+    t.append(f"   {keys.say('app.show_mission')} schedule", style="dim")
+    return t
+
+
 def info_text(model: ConsoleModel, v: MapView, feed_state: str) -> Text:
-    """The info line: the feed (when not live), the cursor and scale, who is
-    followed, the selected marker and the schedule's selected skill."""
+    """The info lines: the feed (when not live), the cursor and scale, who is
+    followed, the selected marker and the schedule's selected skill; then what
+    is under the cursor (console/state/site.py)."""
     t = Text()
     if feed_state == "none" or v.mirror is None or not v.mirror.ready:
         why = model.map_note or NO_FEED
@@ -159,6 +175,8 @@ def info_text(model: ConsoleModel, v: MapView, feed_state: str) -> Text:
     if found is not None:
         s = found[2]
         t.append(f"  skill {s.id} {s.skill} ({STATUS_WORDS[s.status]})", style="dim")
+    here = here_text(v.mirror, model.mission, model.telemetry, x, y, tol=max(1.0, v.vp.mpp))
+    t.append(f"\nhere: {here}")
     return t
 
 
@@ -181,7 +199,7 @@ class MapScreen(Screen):
         Binding("ctrl+down", "cursor(0, 8)", show=False),
         Binding("ctrl+left", "cursor(-8, 0)", show=False),
         Binding("ctrl+right", "cursor(8, 0)", show=False),
-        Binding("f1,question_mark", "help", "Help", id="app.help"),
+        bind("app.help", "help", show=True),
         Binding(
             "escape", "app.show_mission", "Schedule", show=False
         ),  # "back to the schedule" (help: App keys)
@@ -216,7 +234,12 @@ class MapScreen(Screen):
         yield Footer()
 
     def on_mount(self) -> None:
-        self._legend.update(legend_text(self.app.get_css_variables()))
+        # a notification never covers the cursor: the view moves it clear
+        self.screen_layout_refresh_signal.subscribe(
+            self,
+            lambda _s: self.view.uncover(self.query("Toast")),  # Textual's notifications
+        )
+        self._legend.update(legend_text(self.app.get_css_variables(), key_names(self)))
         self._apply_legend()
         self.view.focus()
         self.sync_selection()
@@ -236,11 +259,9 @@ class MapScreen(Screen):
         self.update_info()
 
     def _apply_legend(self) -> None:
-        show = (
-            self.legend_choice
-            if self.legend_choice is not None
-            else self.app.size.width >= LEGEND_MIN_WIDTH
-        )
+        show = self.legend_choice
+        if show is None:
+            show = self.app.size.width >= LEGEND_MIN_WIDTH
         self.set_class(not show, "-no-legend")
 
     # -- state in (the model's changes) ---------------------------------------------------------
@@ -293,15 +314,7 @@ class MapScreen(Screen):
 
     # -- lines -------------------------------------------------------------------------------------
     def update_top(self) -> None:
-        m = self.model
-        t = Text()
-        t.append("missionctl map", style="bold")
-        if m.mission is not None:
-            t.append(f"  {m.mission.name}", style="bold")
-            t.append(f"  rev {m.mission.revision}", style="dim")
-        t.append(f"   {connection_text(m.connection)}")
-        t.append("   F2 schedule", style="dim")
-        self._topbar.update(t, layout=False)
+        self._topbar.update(map_top_text(self.model, key_names(self)), layout=False)
 
     def update_info(self) -> None:
         self._info.update(info_text(self.model, self.view, self.feed_state), layout=False)
@@ -365,6 +378,7 @@ class MapScreen(Screen):
             return
         self.view.follow = None
         self.view.fit()
+        self.view.set_cursor(self.view.vp.cx, self.view.vp.cy)  # back in the middle of it
         self.update_info()
 
     def _pan(self, dx: int, dy: int) -> None:
@@ -408,7 +422,8 @@ class MapScreen(Screen):
         else:
             t = self.model.telemetry[nxt]
             self.view.set_view(cx=t.pose.x, cy=t.pose.y)
-            self.say(f"following {nxt} (f: next robot; moving the view stops it)")
+            again = key_names(self).say("map.follow")
+            self.say(f"following {nxt} ({again}: next robot; moving the view stops it)")
         self.view.overlays_changed()
         self.update_info()
 
@@ -532,7 +547,9 @@ class MapScreen(Screen):
         self.sync_selection()
         found = self.model.find(self.view.selected_skill)
         if found is None:
-            self.say("select a skill on the schedule first (F2), then come back (F3)", "warning")
+            back, here = (key_names(self).say(a) for a in ("app.show_mission", "app.show_map"))
+            why = f"select a skill on the schedule first ({back}), then come back ({here})"
+            self.say(why, "warning")
             return None
         why = self.model.read_only_reason(found[2].id)
         if why:

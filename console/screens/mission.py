@@ -26,18 +26,20 @@ from textual.containers import Horizontal
 from textual.screen import Screen
 from textual.signal import Signal
 
-from console.bindings import mission_bindings
+from console.bindings import bind, key_names
 from console.messages import HelpRequested
 from console.operations import OperationService
+from console.screens.cancel import ask_and_cancel
 from console.screens.mission_files import FileActions
 from console.screens.mission_plan import PlanActions
 from console.screens.mission_run import RunActions
+from console.screens.schedule_keys import footer_now, refused_off_schedule, schedule_action
 from console.state import link
 from console.state.actions import BY_NAME
 from console.state.changes import StateChange, Topic
-from console.state.context import FooterKey, context_keys, fit_footer
 from console.state.files import RecentFiles
 from console.state.freshness import EtaTicks
+from console.state.keys import KeyNames
 from console.state.model import CONNECTED, ConsoleModel
 from console.state.site import site_text
 from console.widgets.bars import KeyBar, StatusLine, TopBar, connection_text
@@ -48,22 +50,18 @@ from console.widgets.schedule.view import ScheduleView
 TCSS = Path(__file__).with_name("mission.tcss")
 
 NARROW = 100
-# the footer while the editor has the focus (before the keys that always apply)
-EDITOR_FOOTER = (
-    FooterKey("apply", "⏎", "Apply"),
-    FooterKey("revert", "^r", "Revert"),
-    FooterKey("leave", "esc", "Close"),
-)
 
 
-def top_text(m: ConsoleModel, unacked: int, marks: list[str]) -> Text:
+def top_text(m: ConsoleModel, unacked: int, marks: list[str], keys: KeyNames) -> Text:
     """The top bar: alert badge, mission and revision, connection, read-only, marks."""
     t = Text()
     t.append("missionctl", style="bold")
-    if unacked:  # the badge, first so 80 columns show it: F6 lists them
-        t.append(f" ⚠ {unacked} alert{'s' if unacked > 1 else ''} (F6) ", style="bold reverse")
+    if unacked:  # the badge, first so 80 columns show it, with the key that lists them
+        plural = "s" if unacked > 1 else ""
+        badge = f" ⚠ {unacked} alert{plural} ({keys.say('app.show_alerts')}) "
+        t.append(badge, style="bold reverse")
     if m.site is not None:  # the pilot study's score and clock, before what 80 columns cut
-        t.append(f"  {site_text(m.site, m.clock())}", style="bold")
+        t.append(f"  {site_text(m.site, m.clock)}", style="bold")
     if m.mission is not None:
         t.append(f"  {m.mission.name}", style="bold")
         t.append(f"  rev {m.mission.revision}", style="dim")
@@ -95,9 +93,10 @@ def connection_news(m: ConsoleModel, before: str) -> tuple[str, str] | None:
 
 
 class MissionScreen(Screen):
+    SCOPE = "mission"  # its actions (console/state/actions.py)
+    # the actions table's keys are dispatched by on_key (schedule_keys.py), not bound
     BINDINGS = [
-        *mission_bindings(),
-        Binding("f1,question_mark", "help", "Help", id="app.help"),
+        bind("app.help", "help", show=False),
         Binding("escape", "clear_marks", "Clear marks", show=False),
     ]
 
@@ -231,7 +230,8 @@ class MissionScreen(Screen):
             self.schedule.select(sid)
 
     def update_top(self) -> None:
-        text = top_text(self.model, self.model.alerts.unacknowledged, self.schedule.marks)
+        keys = key_names(self)
+        text = top_text(self.model, self.model.alerts.unacknowledged, self.schedule.marks, keys)
         self._topbar.show(text, self.model.connection)
 
     def say(self, text: str, severity: str = "info") -> None:
@@ -245,7 +245,8 @@ class MissionScreen(Screen):
         self.update_keys()
         c = self.model.uplinking(event.skill_id) if event.skill_id else None
         if c is not None:  # its row may have no room for the command: the status line has
-            self.say(link.waiting_text(event.skill_id, c, self.model.clock()))
+            cancel = key_names(self).say("mission.cancel")
+            self.say(link.waiting_text(event.skill_id, c, self.model.clock, cancel))
         if self.editor_visible:
             await self.editor.show_skill(event.skill_id)
 
@@ -253,18 +254,10 @@ class MissionScreen(Screen):
         return self.schedule.cursor_robot, self.schedule.cursor_id
 
     def update_keys(self) -> None:
-        """The footer: the editor's keys while it has the focus, else the
-        keys that apply to the selection first (console/state/context.py);
-        keys are checked again when pressed (`check_action`)."""
-        if not self.is_mounted:
-            return
-        keys = getattr(self.app, "action_keys", dict)()
-        if self.editor.focus_within():
-            first = list(EDITOR_FOOTER)
-        else:
-            robot, sid = self.selection()
-            first = context_keys(self.model, robot, sid, self.schedule.marks, keys)
-        self._footer.show(fit_footer(first, self.size.width or self.app.size.width))
+        """The footer: the keys that apply now (console/screens/schedule_keys.py);
+        keys are checked again when pressed (`run_named`)."""
+        if self.is_mounted:
+            self._footer.show(footer_now(self))
 
     def on_descendant_focus(self, event: events.DescendantFocus) -> None:
         self.update_keys()
@@ -295,11 +288,6 @@ class MissionScreen(Screen):
         robot, sid = self.selection()
         return self.model.why_not(action, robot, sid, self.schedule.marks)
 
-    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
-        if action in BY_NAME and action != "toggle_static":
-            return None if self.why_disabled(action) else True
-        return True
-
     def explain(self, action: str) -> bool:
         """Say why an action does not apply; True if it does not."""
         why = self.why_disabled(action)
@@ -310,13 +298,17 @@ class MissionScreen(Screen):
             return True
         return False
 
-    def on_key(self, event: events.Key) -> None:
-        """A key of a disabled action: say why instead of doing nothing."""
-        ab = self.active_bindings.get(event.key)
-        if ab is not None and not ab.enabled and ab.node is self:
-            self.explain(ab.binding.action)
+    async def on_key(self, event: events.Key) -> None:
+        """The schedule's keys (console/screens/schedule_keys.py)."""
+        action = schedule_action(self, event)
+        if action is not None:
             event.stop()
             event.prevent_default()
+            refused = refused_off_schedule(self, action, event)
+            if refused:
+                self.say(refused, "warning")
+            else:
+                await self.run_named(action)
 
     async def run_named(self, action: str) -> None:
         """From the command palette: run it, or say why not."""
@@ -410,9 +402,10 @@ class MissionScreen(Screen):
         self.update_top()
         self.update_keys()
         n = len(self.schedule.marks)
+        barrier = key_names(self).say("mission.barrier")
         self.say(
             f"{'marked' if marked else 'unmarked'} {sid}; {n} marked"
-            + (" — b makes the barrier" if n >= 2 else " — mark a skill of another robot")
+            + (f" — {barrier} makes the barrier" if n >= 2 else " — mark a skill of another robot")
         )
 
     @work(group="dialog")
@@ -455,6 +448,12 @@ class MissionScreen(Screen):
 
     def action_unsync(self) -> None:
         self.run.sync(undo=True)
+
+    @work(group="dialog")
+    async def action_cancel(self) -> None:
+        c = self.model.uplinking(self.schedule.cursor_id or "")
+        if c is not None:
+            await ask_and_cancel(self, self.ops, c, self.say)
 
     def action_retry(self) -> None:
         self.run.retry()

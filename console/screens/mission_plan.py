@@ -20,7 +20,9 @@ from backend.core.ops import (
     RetryEdit,
     Undo,
 )
+from console.bindings import key_names
 from console.screens.dialogs import ConfirmScreen, SkillPicker, SkillSearch
+from console.screens.schedule_keys import added_text
 from console.state.capability import also_offered_by
 from console.state.defaults import default_params
 from console.state.search import search_skills
@@ -113,9 +115,7 @@ class PlanActions:
             new = reply.value.get("id")
             if not new:
                 return
-            s.say(
-                f"added {new} ({choice}) to {robot} {where}: set its parameters, then ctrl+s", "ok"
-            )
+            s.say(added_text(key_names(s), f"{new} ({choice}) to {robot} {where}"), "ok")
             self.select_new(new, edit=True)
 
         s.submit(op, f"add {choice} to {robot}", robot=robot, then=added)

@@ -20,11 +20,10 @@ from textual.screen import Screen
 from textual.signal import Signal
 from textual.widgets import Footer, Static
 
-from console.bindings import bindings
+from console.bindings import bind, bindings
 from console.state import timeline as tl
 from console.state.changes import StateChange, Topic
 from console.state.model import ConsoleModel
-from console.state.text import fmt_clock
 from console.widgets.bars import TitleBar
 from console.widgets.timeline.view import TimelineView
 
@@ -36,17 +35,11 @@ TCSS = [
 TOPICS = frozenset({Topic.FORECAST, Topic.MISSION, Topic.FLEET, Topic.TELEMETRY})
 
 
-def _clock(t: float) -> str:
-    from datetime import datetime
-
-    return fmt_clock(datetime.fromtimestamp(t).astimezone())
-
-
 class TimelineScreen(Screen):
     SCOPE = "timeline"  # its own palette entries (console/commands.py)
     BINDINGS = [
         *bindings("timeline"),
-        Binding("f1,question_mark", "app.help", "Help", id="app.help"),
+        bind("app.help", "app.help", show=True),
         Binding("escape", "app.show_mission", "Schedule", show=False),
     ]
     CSS_PATH = TCSS
@@ -96,13 +89,14 @@ class TimelineScreen(Screen):
         return self.model.robot_order()
 
     def _whole(self) -> tuple[float, float]:
-        """From now to the plan's end (or its last predicted skill's)."""
-        fc = self.model.plan.forecast
+        """From now to the plan's end (or its last predicted skill's), in mission time."""
+        fc, clock = self.model.plan.forecast, self.model.clock
         if fc is None:
             return 0.0, 3600.0
         ends = [r.end for r in fc.robots.values() if r.end is not None]
-        end = fc.end if fc.end is not None else max(ends, default=fc.now + 600)
-        return fc.now, max(end, fc.now + 60)
+        end = fc.end if fc.end is not None else max(ends, default=fc.now + 600 / clock.speed)
+        now = clock.of_ts(fc.now)
+        return now, max(clock.of_ts(end), now + 60)
 
     def redraw(self) -> None:
         if not self.is_mounted or self.view.size.width == 0:
@@ -120,13 +114,14 @@ class TimelineScreen(Screen):
         self.title_bar.update(
             Text.assemble(("missionctl", "bold"), "  ", ("timeline", "bold"), f"  {name}")
         )
-        summary = fc.summary(_clock) if fc is not None else "no forecast yet"
+        clock = self.model.clock
+        summary = fc.summary(clock.ts_text) if fc is not None else "no forecast yet"
         delay = self.model.plan.link_delay_s
-        link = f" · link delay {delay:g} s" if delay else ""
+        link = f" · link delay {clock.duration_text(delay)}" if delay else ""
         zoom = f" · {tl.fmt_step(self.win.dt)} per column"
         at_sync = " · ▔ as planned at sync" if self.model.plan.planned else ""
         self._summary.update(summary + link + zoom + at_sync)
-        self._details.update(tl.details(m, fc, self.model.selection.skill) if m else "")
+        self._details.update(tl.details(m, fc, self.model.selection.skill, clock) if m else "")
 
     def _keep_selection_visible(self) -> None:
         sid = self.model.selection.skill
@@ -146,7 +141,7 @@ class TimelineScreen(Screen):
         if sid is None or self.model.mission is None:
             return
         self.model.selection.skill = sid
-        span = tl.times(self.model.mission, self.model.plan.forecast, sid)
+        span = tl.times(self.model.mission, self.model.plan.forecast, sid, self.model.clock)
         if scroll and span is not None and self.win is not None:
             self.win = self.win.showing(*span)
         self.redraw()
@@ -176,14 +171,15 @@ class TimelineScreen(Screen):
         if not 0 <= i < len(order):
             return
         sid = self.model.selection.skill
-        span = tl.times(self.model.mission, self.model.plan.forecast, sid) if sid else None
+        clock = self.model.clock
+        span = tl.times(self.model.mission, self.model.plan.forecast, sid, clock) if sid else None
         target = self.model.task(order[i])
         if not target:
             self.top = max(0, min(self.top + by, len(order) - 1))
             self.redraw()
             return
         at = (span[0] + span[1]) / 2 if span else self._whole()[0]
-        self._select(tl.nearest(self.model.mission, self.model.plan.forecast, target, at))
+        self._select(tl.nearest(self.model.mission, self.model.plan.forecast, target, at, clock))
 
     def action_timeline_prev(self) -> None:
         self._step(-1)
@@ -207,7 +203,8 @@ class TimelineScreen(Screen):
     # -- zoom and scroll ---------------------------------------------------------------------
     def _around(self) -> float:
         sid = self.model.selection.skill
-        span = tl.times(self.model.mission, self.model.plan.forecast, sid) if sid else None
+        fc, clock = self.model.plan.forecast, self.model.clock
+        span = tl.times(self.model.mission, fc, sid, clock) if sid else None
         if span is not None and self.win is not None and span[0] <= self.win.t1:
             return max(self.win.t0, span[0])
         return self.win.t0 + self.win.dt * self.win.width / 2 if self.win else 0.0

@@ -1,7 +1,9 @@
 """Every operator action in one table: key, footer label, help text, group.
 
 Key bindings (console/bindings.py), the footer, the help screen and the
-command palette are all generated from this table, so they cannot disagree.
+command palette are all generated from this table, so they cannot disagree;
+every key named to a person (hints, status lines, buttons, notifications) is
+written from it too, with the user's keymap applied (console/state/keys.py).
 Each action has a stable binding id ("<scope>.<name>") that users remap in their config file:
 
     [keymap]
@@ -9,8 +11,9 @@ Each action has a stable binding id ("<scope>.<name>") that users remap in their
     "app.show_fleet" = "f4,3"
 
 The scope says where an action is bound: "mission" (the schedule screen,
-action_<name> there), "app" (every screen: switching screens), or one screen
-("map", "log", "alerts").
+action_<name> there), "app" (every screen: switching screens), "editor" (the
+parameter editor), "dialog" (the dialogs: each binds the ones it offers), or
+one screen ("map", "log", "alerts").
 """
 
 from __future__ import annotations
@@ -27,6 +30,9 @@ class Action:
     group: str
     footer: bool = False  # shown in the footer (the rest: help screen and palette)
     scope: str = "mission"
+    priority: bool = False  # bound before the focused widget's keys
+    bound: bool = True  # bindings(scope) binds it; else where it applies (bindings.bind)
+    fixed: bool = False  # a key the widgets handle themselves: not remappable
 
     @property
     def binding_id(self) -> str:
@@ -37,13 +43,69 @@ class Action:
     def palette_title(self) -> str:
         return f"{SCOPE_TITLES.get(self.scope, self.scope.title())}: {self.label}"
 
+    @property
+    def opens(self) -> bool:
+        """It opens a dialog, picker, prompt or the editor: keys typed right after
+        it are for that (console/typeahead.py)."""
+        return self.binding_id in OPENS
+
+    @property
+    def to_robot(self) -> bool:
+        """It sends a command to a robot: only a press on the schedule itself runs it."""
+        return self.binding_id in TO_ROBOT
+
+
+# actions that open something keys typed next are for, whenever they apply (quit asks
+# when something is under way, else the console ends)
+OPENS = frozenset(
+    {
+        "mission.add",
+        "mission.edit",
+        "mission.cancel",
+        "fleet.cancel",
+        "mission.search",
+        "mission.delete",
+        "mission.reset",
+        "mission.reset_all",
+        "mission.save",
+        "mission.load",
+        "log.export",
+        "checks.waive",
+        "map.add_marker",
+        "map.rename_marker",
+        "map.delete_marker",
+        "app.help",
+        "app.command_palette",
+        "app.quit",
+    }
+)
+# actions that send a command up the link to a robot
+TO_ROBOT = frozenset(
+    {
+        "mission.sync",
+        "mission.unsync",
+        "mission.cancel",
+        "mission.retry",
+        "mission.run",
+        "mission.pause",
+        "mission.stop",
+        "mission.reset",
+        "mission.run_all",
+        "mission.pause_all",
+        "mission.stop_all",
+        "mission.reset_all",
+    }
+)
 
 SCOPE_TITLES = {
     "mission": "Mission",
     "app": "Screen",
+    "editor": "Editor",
+    "dialog": "Dialog",
     "map": "Map",
     "log": "Event log",
     "alerts": "Alerts",
+    "fleet": "Fleet",
     "timeline": "Timeline",
     "checks": "Plan checks",
     "review": "Review",
@@ -120,6 +182,14 @@ ACTIONS: list[Action] = [
     ),
     Action(
         "unbarrier", "B", "Unbarrier", "Remove the barrier of the selected skill", "Synchronization"
+    ),
+    Action(
+        "cancel",
+        "w",
+        "Cancel cmd",
+        "Cancel the pending command that locks the selected skill (⇡), asking first; one "
+        "already sent is cancelled unless the robot applied it first (its answer says)",
+        "Synchronization",
     ),
     Action(
         "retry",
@@ -218,6 +288,15 @@ ACTIONS: list[Action] = [
         "ack", "enter,a", "Acknowledge", "Acknowledge the selected alert", "Alerts", True, "alerts"
     ),
     Action("ack_all", "A", "Ack all", "Acknowledge every alert", "Alerts", True, "alerts"),
+    Action(
+        "fleet_cancel",
+        "delete",  # not a letter: letters typed on the list start the filter
+        "Cancel cmd",
+        "Cancel one of the selected robot's pending commands (its uplink), asking first",
+        "Fleet",
+        True,
+        "fleet",
+    ),
     # the map screen
     Action("map_zoom_in", "plus,equals_sign", "Zoom+", "Zoom in", "Map", True, scope="map"),
     Action("map_zoom_out", "minus", "Zoom-", "Zoom out", "Map", True, scope="map"),
@@ -374,6 +453,81 @@ ACTIONS: list[Action] = [
         "Checks",
         True,
         "checks",
+    ),  # every screen: help, the palette, quit (bound by the app and the screens that show them)
+    Action(
+        "help",
+        "f1,question_mark",
+        "Help",
+        "This help screen: every key, the statuses, how to remap keys",
+        "App",
+        scope="app",
+        bound=False,
+    ),
+    Action(
+        "command_palette",
+        "ctrl+p",
+        "All keys",
+        "Command palette: every action, searchable, and why it does not apply now",
+        "App",
+        scope="app",
+        priority=True,
+        bound=False,
+    ),
+    Action(
+        "focus",
+        "tab",
+        "Focus",
+        "Move between the schedule and the parameter editor (and between fields)",
+        "App",
+        scope="app",
+        bound=False,
+        fixed=True,
+    ),
+    Action(
+        "back",
+        "escape",
+        "Back",
+        "Back to the schedule; close a dialog; leave a filter field",
+        "App",
+        scope="app",
+        bound=False,
+        fixed=True,
+    ),
+    Action(
+        "quit",
+        "ctrl+q",
+        "Quit",
+        "Quit (asks first while robots execute, commands wait or the plan is unsaved)",
+        "App",
+        scope="app",
+        priority=True,
+        bound=False,
+    ),
+    # the parameter editor (console/widgets/editor/editor.py)
+    *(
+        Action(name, key, label, text, "Parameter editor", scope="editor")
+        for name, key, label, text in (
+            ("apply", "enter", "Apply", "Apply the edited parameters (from any field)"),
+            ("revert", "ctrl+r", "Revert", "Discard your changes to the skill"),
+            ("leave", "escape", "Close", "Back to the schedule (below 100 columns: closes it)"),
+            ("select_all", "ctrl+a", "Select all", "Select all of a text box (a polygon's points)"),
+        )
+    ),
+    # dialogs (console/screens/dialogs.py): each binds those it offers
+    *(
+        Action(name, key, label, text, "Dialogs", scope="dialog", priority=prio, bound=False)
+        for name, key, label, text, prio in (
+            ("ok", "enter", "OK", "Accept: the typed text, the highlighted entry", False),
+            ("cancel", "escape", "Cancel", "Close the dialog; nothing is done", False),
+            ("yes", "y", "Yes", "Answer yes (the question says what it does)", False),
+            ("no", "n", "No", "Answer no: nothing is done", False),
+            ("next", "down", "Next", "The next entry of the list", False),
+            ("previous", "up", "Previous", "The previous entry of the list", False),
+            ("complete", "tab", "Complete", "Complete the typed file path", True),
+            ("save_first", "s", "Save first", "Quitting: save the mission, then quit", False),
+            ("quit", "q,y,ctrl+q", "Quit", "Quitting: quit now", True),
+            ("retry", "r", "Retry", "The server is unreachable: try again", True),
+        )
     ),
 ]
 
@@ -398,20 +552,14 @@ REVIEW_ACTIONS: list[Action] = [
     )
 ]
 
+BY_ID = {a.binding_id: a for a in [*ACTIONS, *REVIEW_ACTIONS]}
+
 # the mission screen's actions (the rest are bound elsewhere)
 BY_NAME = {a.name: a for a in ACTIONS if a.scope == "mission"}
 
 # actions that need a skill/robot under the cursor and apply to the server
 MUTATING = set(BY_NAME) - {"edit", "save", "toggle_static", "mark", "search"}
 
-
-APP_KEYS: list[tuple[str, str, str]] = [
-    ("f1, ?", "Help", "This help screen"),
-    ("ctrl+p", "Commands", "Command palette: every action, searchable"),
-    ("tab", "Focus", "Move between the schedule and the parameter editor"),
-    ("escape", "Back", "Back to the schedule / close a dialog"),
-    ("ctrl+q", "Quit", "Quit (closes the connection to the server)"),
-]
 
 NAV_KEYS: list[tuple[str, str, str]] = [
     ("arrows", "Map cursor", "On the map: move the cursor (ctrl+arrows: 8 cells)"),
@@ -421,9 +569,6 @@ NAV_KEYS: list[tuple[str, str, str]] = [
     ("pgup pgdn", "Page", "Scroll a page"),
 ]
 
-EDITOR_KEYS: list[tuple[str, str, str]] = [
-    ("enter", "Apply", "Apply the edited parameters (enter in a field, or the Apply button)"),
-    ("ctrl+r", "Revert", "Discard your changes (in the editor)"),
-    ("escape", "Close", "Back to the schedule (below 100 columns: closes the editor)"),
+EDITOR_NOTES: list[tuple[str, str, str]] = [
     ("30 / 30deg / 0.5rad", "Angles", "Angles are typed in degrees (heading 0° east, ccw)"),
 ]

@@ -26,6 +26,7 @@ from backend.core.model import (
 from backend.core.ops import Sync
 from backend.core.rules.base import Refusal, uplink_locks
 from backend.core.rules.uplink import pending_allows, sync_skills
+from console.state.keys import KeyNames
 from console.state.text import STATUS_WORDS
 
 Found = tuple[str, int, SkillInstance]  # (robot, index in its task, skill)
@@ -42,6 +43,7 @@ class Facts(Protocol):
     mission: Mission | None
     connection: str
     read_only: str
+    keys: KeyNames  # the user's keys, for the sentences that name one
 
     @property
     def connected(self) -> bool: ...
@@ -108,7 +110,7 @@ def read_only_reason(facts: Facts, skill_id: str) -> str | None:
     if s.status == Status.IDLE:
         c = facts.uplinking(s.id)
         if c is not None:
-            return uplinking_why(c)
+            return uplinking_why(c, facts.keys)
         if not facts.connected:
             return (
                 f"not connected to the mission server ({facts.connection}): "
@@ -118,11 +120,11 @@ def read_only_reason(facts: Facts, skill_id: str) -> str | None:
     return not_idle(robot, s, "only idle skills can be edited")
 
 
-def uplinking_why(c: UplinkCommand) -> str:
-    """Why a skill a pending command concerns cannot change now."""
+def uplinking_why(c: UplinkCommand, keys: KeyNames) -> str:
+    """Why a skill a pending command concerns cannot change now, and the key that cancels it."""
     return (
         f"{c.title()} to {c.robot} is waiting for the robot's answer: "
-        f"wait for it, or cancel the command (ctl cancel {c.id})"
+        f"wait for it, or cancel the command ({keys.say('mission.cancel')} on the schedule)"
     )
 
 
@@ -157,7 +159,7 @@ def _idle_skill(q: Selected, verb: str) -> str | None:
     if s.status != Status.IDLE:
         return not_idle(robot, s, f"only idle skills can be {verb}")
     c = q.facts.uplinking(s.id)
-    return uplinking_why(c) if c is not None else None
+    return uplinking_why(c, q.facts.keys) if c is not None else None
 
 
 def _delete(q: Selected) -> str | None:
@@ -198,7 +200,7 @@ def _sync(q: Selected) -> str | None:
         more = f" and {len(blocked) - 2} more" if len(blocked) > 2 else ""
         return (
             f"unwaived plan error {', '.join(blocked[:2])}{more}: fix the plan, or waive "
-            "it with a reason on the checks screen (F8)"
+            f"it with a reason on the checks screen ({q.facts.keys.say('app.show_checks')})"
         )
     return None
 
@@ -212,7 +214,7 @@ def _sync_refused(q: Selected, refused: Refusal, robot: str, s: SkillInstance) -
             "synchronize through an idle (unsynchronized) skill"
         )
     c = q.facts.uplinking(s.id) if refused.code == "locked" else None
-    return uplinking_why(c) if c is not None else refused.message
+    return uplinking_why(c, q.facts.keys) if c is not None else refused.message
 
 
 def _unsync(q: Selected) -> str | None:
@@ -238,7 +240,8 @@ def _mark(q: Selected) -> str | None:
 
 def _barrier(q: Selected) -> str | None:
     if len(q.marks) < 2:
-        return "mark one idle skill on each of at least two robots (space), then make the barrier"
+        mark = q.facts.keys.say("mission.mark")
+        return f"mark one idle skill on each of at least two robots ({mark}), then make the barrier"
     robots: dict[str, str] = {}
     for sid in q.marks:
         f = q.facts.find(sid)
@@ -296,6 +299,18 @@ def _retry(q: Selected) -> str | None:
     act = q.facts.robot_state(r)[0]
     if act is not None:
         return f"{r} is executing {act.id}: stop it first"
+    return None
+
+
+def _cancel(q: Selected) -> str | None:
+    if q.found is None:
+        return "select a skill a pending command locks (⇡)"
+    s = q.found[2]
+    c = q.facts.uplinking(s.id)
+    if c is None:
+        return f"no command waits on {s.id}: only a skill marked ⇡ has one to cancel"
+    if c.cancel_requested:
+        return f"cancelling {c.title()} was asked already: {c.robot}'s answer decides"
     return None
 
 
@@ -386,6 +401,7 @@ RULES: dict[str, Rule] = {
     "unbarrier": _unbarrier,
     "retry": _retry,
     "retry_edit": _failed_once,
+    "cancel": _cancel,
     "duplicate": _duplicate,
     **{verb: _control(verb) for verb in CONTROLS},
     **{f"{verb}_all": _control_all(verb) for verb in CONTROLS},

@@ -17,7 +17,7 @@ from datetime import datetime
 
 from backend.core.model import Status
 from console.state.model import ConsoleModel
-from console.state.text import GLYPHS, STATUS_WORDS, fmt_clock
+from console.state.text import GLYPHS, STATUS_WORDS
 
 FIELDS = ("skill", "type", "module", "prop", "name")
 SPARKS = "▁▂▃▄▅▆▇█"
@@ -128,6 +128,6 @@ def last_report(model: ConsoleModel, robot: str) -> str:
         if t is None or s.status in (Status.IDLE, Status.IDLE_SYNCHRONIZED):
             continue
         if best is None or t >= best[0]:
-            text = f"{GLYPHS[s.status]} {s.id} {STATUS_WORDS[s.status]} {fmt_clock(t)}"
+            text = f"{GLYPHS[s.status]} {s.id} {STATUS_WORDS[s.status]} {model.clock.stamp_text(t)}"
             best = (t, text)
     return best[1] if best else "no report yet"

@@ -3,7 +3,8 @@
 In: the client library's typed events (`backend.client.events.ClientEvent`)
 as they are, and the few the console says about itself (`ConsoleEvent`: it
 is connecting, the server is unreachable, the account is read-only, the map
-feed moved). `ConsoleModel.take` applies one and answers a `StateChange`.
+feed moved, a mission file's plan is previewed). `ConsoleModel.take` applies
+one and answers a `StateChange`.
 
 Out: a `StateChange` says which topics changed and, where it matters, for which
 robots. The app publishes it on one signal; every screen and widget that
@@ -78,9 +79,11 @@ def change(
 
 @dataclass(frozen=True, slots=True)
 class Connecting:
-    """This console is connecting to `endpoint` (at start, or retrying)."""
+    """This console is connecting to `endpoint` (at start, or retrying);
+    `detail` says what it waits for ("" : the server's answer)."""
 
     endpoint: str
+    detail: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -109,5 +112,14 @@ class MapFed:
     speed: float | None = None
 
 
-ConsoleEvent = Connecting | Unreachable | AccountKnown | MapFed
+@dataclass(frozen=True, slots=True)
+class Previewed:
+    """The plan from a mission file, shown until the server's state replaces
+    it (the demo paints at once while its server starts)."""
+
+    mission: Any  # backend.core.model.Mission
+    library: Any  # backend.core.library.Library
+
+
+ConsoleEvent = Connecting | Unreachable | AccountKnown | MapFed | Previewed
 ModelEvent = ClientEvent | ConsoleEvent

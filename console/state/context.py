@@ -6,28 +6,41 @@ edited and synchronized, a failed one retried, a running robot paused — so
 FIRST lists, per status of the selected skill, the actions most likely
 wanted next, and REST the others; those that apply now (availability.why_not
 is None) are shown in that order, then TAIL (find, save, palette, quit; help
-is F1, and in the palette). What does not fit the terminal's width
-is dropped from the end of the first part, never the tail: the palette
-(ctrl+p) lists every action, with why it does not apply.
+is in the palette). What does not fit the terminal's width is dropped from
+the end of the first part, never the tail: the palette lists every action,
+with why it does not apply. Keys are written from the actions table, with
+the user's keymap (console/state/keys.py).
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 from rich.cells import cell_len
 
 from backend.core.model import Status
-from console.state.actions import BY_NAME
+from console.state.actions import BY_ID, BY_NAME
 from console.state.availability import Facts, why_not
+from console.state.keys import KeyNames
 
 # the mission screen's actions, most likely next first, by the selected skill's status
 # (None: no skill selected); the rest follow in REST's order
 SKILL = ("edit", "duplicate", "add")
 ROBOT = ("run", "pause", "stop")
 FIRST: dict[Status | None, tuple[str, ...]] = {
-    Status.IDLE: ("edit", "sync", "add", "duplicate", "delete", "mark", "barrier", "move_up"),
-    Status.IDLE_SYNCHRONIZED: ("unsync", "run", *SKILL),
+    Status.IDLE: (
+        "cancel",
+        "edit",
+        "sync",
+        "add",
+        "duplicate",
+        "delete",
+        "mark",
+        "barrier",
+        "move_up",
+    ),
+    Status.IDLE_SYNCHRONIZED: ("cancel", "unsync", "run", *SKILL),
     Status.RUNNING: ("pause", "stop", *SKILL),
     Status.PAUSED: ("run", "stop", "reset", *SKILL),
     Status.SYNCHWAITING: ("stop", "unbarrier", *SKILL),
@@ -36,6 +49,7 @@ FIRST: dict[Status | None, tuple[str, ...]] = {
     None: ("add", *ROBOT),
 }
 REST = (
+    "cancel",
     "edit",
     "sync",
     "unsync",
@@ -57,18 +71,6 @@ REST = (
 )
 # short footer labels where the table's are long (the palette and help keep the full ones)
 SHORT = {"retry_edit": "Edit+retry", "duplicate": "Dup", "unbarrier": "Unbar"}
-KEY_GLYPHS = {
-    "enter": "⏎",
-    "space": "␣",
-    "slash": "/",
-    "escape": "esc",
-    "question_mark": "?",
-    "delete": "del",
-    "full_stop": ".",
-    "comma": ",",
-    "left_curly_bracket": "{",
-    "right_curly_bracket": "}",
-}
 
 
 @dataclass(frozen=True)
@@ -78,31 +80,28 @@ class FooterKey:
     label: str
 
 
-# always shown, at the end: (action, key, label)
+# always shown, at the end: (binding id, label)
 TAIL = (
-    FooterKey("search", "/", "Find"),
-    FooterKey("save", "^s", "Save"),
-    FooterKey("command_palette", "^p", "All keys"),
-    FooterKey("quit", "^q", "Quit"),
+    ("mission.search", "Find"),
+    ("mission.save", "Save"),
+    ("app.command_palette", "All keys"),
+    ("app.quit", "Quit"),
 )
+# the footer while the parameter editor has the focus (before the tail)
+EDITOR = ("editor.apply", "editor.revert", "editor.leave")
 
 
-def key_text(keys: str) -> str:
-    """The shortest way to show an action's keys: 'enter,e' -> '⏎',
-    'shift+up,K' -> 'K', 'ctrl+s' -> '^s'."""
-    shown = []
-    for k in (x.strip() for x in keys.split(",") if x.strip()):
-        k = KEY_GLYPHS.get(k, k)
-        if k.startswith("ctrl+"):
-            k = "^" + k.removeprefix("ctrl+")
-        shown.append(k)
-    return min(shown, key=cell_len) if shown else ""
+def footer_keys(ids: Iterable[str | tuple[str, str]], keys: KeyNames) -> list[FooterKey]:
+    """Footer entries for binding ids (or (binding id, label) pairs)."""
+    out = []
+    for item in ids:
+        bid, label = item if isinstance(item, tuple) else (item, BY_ID[item].label)
+        out.append(FooterKey(BY_ID[bid].name, keys.short(bid), label))
+    return out
 
 
-def help_keys(keys: str) -> str:
-    """An action's keys for the help screen: 'enter / e', '/' (not 'slash')."""
-    names = {"slash": "/", "question_mark": "?"}
-    return " / ".join(names.get(k.strip(), k.strip()) for k in keys.split(",") if k.strip())
+def tail_keys(keys: KeyNames) -> list[FooterKey]:
+    return footer_keys(TAIL, keys)
 
 
 def context_keys(
@@ -110,11 +109,11 @@ def context_keys(
     robot: str | None,
     skill_id: str | None,
     marks: list[str],
-    keys: dict[str, str] | None = None,
+    keys: KeyNames | None = None,
 ) -> list[FooterKey]:
     """Every action that applies to the selection now, most likely first
-    (`keys`: action -> its key(s) with the user's keymap; else the table's)."""
-    keys = keys or {}
+    (`keys`: with the user's keymap; else the table's)."""
+    keys = keys or KeyNames()
     found = facts.find(skill_id)
     first = FIRST[found[2].status if found else None]
     out: list[FooterKey] = []
@@ -122,13 +121,11 @@ def context_keys(
         a = BY_NAME.get(name)
         if a is None or why_not(facts, name, robot, skill_id, marks) is not None:
             continue
-        out.append(FooterKey(name, key_text(keys.get(name, a.key)), SHORT.get(name, a.label)))
+        out.append(FooterKey(name, keys.short(a.binding_id), SHORT.get(name, a.label)))
     return out
 
 
-def fit_footer(
-    first: list[FooterKey], width: int, tail: tuple[FooterKey, ...] = TAIL
-) -> list[FooterKey]:
+def fit_footer(first: list[FooterKey], width: int, tail: list[FooterKey]) -> list[FooterKey]:
     """As many of `first` as fit before `tail` in `width` cells (each key
     takes its text, a space, its label and a gap of one)."""
 

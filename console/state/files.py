@@ -87,15 +87,20 @@ def save_risks(path: Path, also_written: list[Path] | None = None) -> list[str]:
     return risks
 
 
-def path_note(text: str, *, must_exist: bool, cwd: Path | None = None) -> tuple[str, str]:
+def path_note(
+    text: str, *, must_exist: bool, cwd: Path | None = None, complete: str = ""
+) -> tuple[str, str]:
     """(what the typed path means, severity) for the line under the input:
-    the full path, and whether it is new, exists, or cannot be used."""
+    the full path, and whether it is new, exists, or cannot be used
+    (`complete`: the key that completes a path, in words)."""
+    by = f" ({complete} completes)" if complete else ""
     if not text.strip():
-        return "type a file path (tab completes)", "hint"
+        return f"type a file path{by}", "hint"
     p = full_path(text, cwd)
     where = shown_path(p)
     if p.is_dir():
-        return f"{where}/ is a folder: add a file name (tab lists it)", "warning"
+        lists = f" ({complete} lists it)" if complete else ""
+        return f"{where}/ is a folder: add a file name{lists}", "warning"
     if must_exist:
         return (where, "ok") if p.is_file() else (f"{where}: no such file", "warning")
     if not p.parent.is_dir():

@@ -21,6 +21,7 @@ from datetime import datetime
 from typing import Any, Protocol
 
 from backend.protocol.messages import RobotInfo, Telemetry
+from console.state.clock import MissionClock
 from console.state.text import fmt_duration
 
 # a robot that was sending telemetry and has been silent this long is stale
@@ -30,8 +31,9 @@ SILENT_AFTER_S = 10.0
 
 @dataclass(frozen=True)
 class Freshness:
-    """`stale`: draw the robot's state as last known; `age_s`: since when
-    (None: never heard); `why`: "offline", "silent", "delayed" or "" (fresh)."""
+    """`stale`: draw the robot's state as last known; `age_s`: since when, in
+    mission seconds (None: never heard); `why`: "offline", "silent", "delayed"
+    or "" (fresh)."""
 
     stale: bool = False
     age_s: float | None = None
@@ -59,8 +61,10 @@ class Heard(Protocol):
     heard: dict[str, datetime]
 
 
-def freshness(model: Heard, robot: str, now: datetime) -> Freshness:
-    """How fresh the console's view of `robot` is at `now`."""
+def freshness(model: Heard, robot: str, clock: MissionClock) -> Freshness:
+    """How fresh the console's view of `robot` is now. Whether it is stale is
+    decided in wall seconds (how often robots send); its age is said in mission time."""
+    now = clock()
     info = model.robots.get(robot)
     heard = model.heard.get(robot)
     if info is not None and info.heard is not None and (heard is None or info.heard > heard):
@@ -69,15 +73,15 @@ def freshness(model: Heard, robot: str, now: datetime) -> Freshness:
     if info is not None and not info.online:
         since = heard or info.since
         age = max(0.0, (now - since).total_seconds()) + delay if since is not None else None
-        return Freshness(True, age, "offline")
+        return Freshness(True, None if age is None else clock.span(age), "offline")
     if heard is None:
         return FRESH
     age = max(0.0, (now - heard).total_seconds()) + delay
     if robot in model.telemetry and age - delay > SILENT_AFTER_S:
-        return Freshness(True, age, "silent")
+        return Freshness(True, clock.span(age), "silent")
     if delay >= SILENT_AFTER_S:
-        return Freshness(True, age, "delayed")
-    return Freshness(False, age, "")
+        return Freshness(True, clock.span(age), "delayed")
+    return Freshness(False, clock.span(age), "")
 
 
 class EtaTicks:

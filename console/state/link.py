@@ -10,11 +10,11 @@ server last heard it come with its fleet entry.
 
 from __future__ import annotations
 
-from datetime import datetime
 from typing import Protocol
 
 from backend.core.model import CommandState, Mission, UplinkCommand
 from backend.protocol.messages import RobotInfo
+from console.state.clock import MissionClock
 from console.state.text import fmt_duration
 
 UPLINK_GLYPH = "⇡"
@@ -22,45 +22,61 @@ DELAY_GLYPH = "⇄"
 SHOWN_DELAY_S = 1.0  # a shorter delay is a LAN's: not worth a word
 
 
-def age_s(c: UplinkCommand, now: datetime) -> float:
-    """How long the command has been waiting for its answer."""
-    return max(0.0, (now - c.created).total_seconds())
+def queued_for(c: UplinkCommand, clock: MissionClock) -> float:
+    """Mission seconds since the command was queued (how long it has waited)."""
+    return clock.since(c.created)
 
 
-def command_text(c: UplinkCommand, now: datetime) -> str:
-    """'sync #17 sent 40s' / 'run #18 queued 2m05s, expires in 28m'."""
-    state = "sent" if c.state == CommandState.SENT else "queued"
-    text = f"{c.op} #{c.id} {state} {fmt_duration(age_s(c, now))}"
+def command_text(c: UplinkCommand, clock: MissionClock) -> str:
+    """'sync #17 sent 40s ago' / 'run #18 queued 2m05s ago, expires in 28m' (mission time;
+    a sent command's age counts from its first transmission)."""
+    if c.state == CommandState.SENT and c.sent is not None:
+        text = f"{c.op} #{c.id} sent {clock.age_text(c.sent)} ago"
+    else:
+        text = f"{c.op} #{c.id} queued {clock.age_text(c.created)} ago"
     if c.cancel_requested:
         text += ", cancel asked"
     if c.expires is not None:
-        left = (c.expires - now).total_seconds()
-        text += f", expires in {fmt_duration(left)}" if left > 0 else ", expiring"
+        left = (c.expires - clock()).total_seconds()
+        text += f", expires in {clock.duration_text(left)}" if left > 0 else ", expiring"
     return text
 
 
-def waiting_text(sid: str, c: UplinkCommand, now: datetime) -> str:
-    """The status line on an uplinking skill: its command and how to withdraw it."""
+def waiting_text(sid: str, c: UplinkCommand, clock: MissionClock, cancel_key: str) -> str:
+    """The status line on an uplinking skill: its command and the key that cancels it."""
     return (
-        f"{sid}: {command_text(c, now)}, waiting for {c.robot}'s answer "
-        f"(ctl cancel {c.id} withdraws it)"
+        f"{sid}: {command_text(c, clock)}, waiting for {c.robot}'s answer ({cancel_key} cancels it)"
     )
 
 
-def pending_text(cmds: list[UplinkCommand], now: datetime) -> str:
+def cancel_question(c: UplinkCommand, clock: MissionClock) -> str:
+    """'Cancel sync #17 to lru1 (lru1-4, lru1-5)?' and what cancelling does now."""
+    what = f" ({', '.join(c.skills)})" if c.skills else ""
+    head = f"Cancel {c.op} #{c.id} to {c.robot}{what}?"
+    if c.state == CommandState.SENT:
+        sent = f" {clock.age_text(c.sent)} ago" if c.sent is not None else ""
+        return (
+            f"{head}\nIt was sent{sent}: {c.robot} may have it already. It is cancelled "
+            f"unless {c.robot} applied it first; its answer says which."
+        )
+    return f"{head}\nIt has not left the ground: it is withdrawn at once."
+
+
+def pending_text(cmds: list[UplinkCommand], clock: MissionClock) -> str:
     """A column header's word on a robot's pending commands: '⇡2 1m10s'
-    (how many, the oldest one's age); '' when none."""
+    (how many, how long the oldest has waited since queued); '' when none."""
     if not cmds:
         return ""
-    oldest = max(age_s(c, now) for c in cmds)
+    oldest = max(queued_for(c, clock) for c in cmds)
     return f"{UPLINK_GLYPH}{len(cmds)} {fmt_duration(oldest)}"
 
 
-def delay_text(delay_s: float | None) -> str:
-    """'⇄20s': the robot's estimated one-way delay, when it matters."""
+def delay_text(delay_s: float | None, clock: MissionClock) -> str:
+    """'⇄10m': the robot's estimated one-way delay (wall seconds) in mission time,
+    when it matters."""
     if delay_s is None or delay_s < SHOWN_DELAY_S:
         return ""
-    return f"{DELAY_GLYPH}{fmt_duration(delay_s)}"
+    return f"{DELAY_GLYPH}{clock.duration_text(delay_s)}"
 
 
 def uplinking(mission: Mission | None) -> dict[str, UplinkCommand]:
@@ -68,13 +84,13 @@ def uplinking(mission: Mission | None) -> dict[str, UplinkCommand]:
     return mission.command_locks() if mission is not None else {}
 
 
-def risks(mission: Mission | None, now: datetime) -> list[str]:
+def risks(mission: Mission | None, clock: MissionClock) -> list[str]:
     """Quit's word on commands still waiting for their robot, per robot."""
     if mission is None:
         return []
     by_robot: dict[str, list[str]] = {}
     for c in mission.pending_commands():
-        by_robot.setdefault(c.robot, []).append(command_text(c, now))
+        by_robot.setdefault(c.robot, []).append(command_text(c, clock))
     return [f"{r}: {', '.join(texts)}" for r, texts in by_robot.items()]
 
 
@@ -86,18 +102,18 @@ class Linked(Protocol):
     def pending(self, robot: str) -> list[UplinkCommand]: ...
 
 
-def link_text(model: Linked, robot: str, now: datetime) -> str:
-    """The robot's link in words: 'one-way delay 20s · heard 5s ago ·
-    waiting for its answer: sync #17 sent 40s'."""
+def link_text(model: Linked, robot: str, clock: MissionClock) -> str:
+    """The robot's link in words, in mission time: 'one-way delay 10m · heard 5s
+    ago · waiting for its answer: sync #17 sent 40s ago'."""
     info = model.robots.get(robot)
     parts = []
     if info is not None and info.delay_s is not None:
-        parts.append(f"one-way delay {fmt_duration(info.delay_s)}")
+        parts.append(f"one-way delay {clock.duration_text(info.delay_s)}")
     if info is not None and info.heard is not None:
-        parts.append(f"heard {fmt_duration((now - info.heard).total_seconds())} ago")
+        parts.append(f"heard {clock.age_text(info.heard)} ago")
     cmds = model.pending(robot)
     if cmds:
-        parts.append("waiting for its answer: " + ", ".join(command_text(c, now) for c in cmds))
+        parts.append("waiting for its answer: " + ", ".join(command_text(c, clock) for c in cmds))
     else:
         parts.append("no command waiting")
     return " · ".join(parts)

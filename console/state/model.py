@@ -17,9 +17,8 @@ from __future__ import annotations
 
 import hashlib
 from collections import deque
-from collections.abc import Callable
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
+from datetime import datetime
 from typing import Any
 
 from backend.client.events import (
@@ -43,16 +42,19 @@ from console.state.changes import (
     Connecting,
     MapFed,
     ModelEvent,
+    Previewed,
     StateChange,
     Topic,
     Unreachable,
     change,
 )
+from console.state.clock import MissionClock
 from console.state.eventlog import AlertBook, EventLog
 from console.state.freshness import Freshness, freshness
+from console.state.keys import KeyNames
 from console.state.plan import PlanView
-from console.state.site import SiteClock
-from console.state.text import GLYPHS, STATUS_WORDS, fmt_clock
+from console.state.site import SiteScore
+from console.state.text import GLYPHS, STATUS_WORDS
 
 HISTORY = 120  # telemetry samples kept per robot (bounded memory)
 
@@ -108,8 +110,7 @@ class ConsoleModel:
     connection_detail: str = ""
     endpoint: str = ""
     server_id: str = ""
-    # why nothing can be changed from this console ("" when it can): an observer account
-    read_only: str = ""
+    read_only: str = ""  # why nothing can be changed from here ("": it can): an observer
     observer: str = ""  # why it never changes anything, whatever its account (a browser)
     # skill id -> robot, skill id -> barrier id (kept in step with the mission)
     _owner: dict[str, str] = field(default_factory=dict)
@@ -123,15 +124,17 @@ class ConsoleModel:
     saved_digest: str = ""
     # robot -> when this console last heard it (telemetry, a report, presence back)
     heard: dict[str, datetime] = field(default_factory=dict)
-    clock: Callable[[], datetime] = field(default=lambda: datetime.now(UTC))
-    # skill id -> the pending command locking it, for the revision it was built at
+    # now: the wall time when called (stamps), mission time for what is shown (state/clock.py)
+    clock: MissionClock = field(default_factory=MissionClock)
+    # skill id -> its pending command's lock, for the revision it was built at
     _uplinking: tuple[int, dict[str, UplinkCommand]] = field(default_factory=lambda: (-1, {}))
     # the plan's forecast and checks (console/state/plan.py), refreshed by the app
     plan: PlanView = field(default_factory=PlanView)
-    # the simulator's score and clock from its map feed (None: no simulator)
-    site: SiteClock | None = None
-    # the map feed's mirror (None: no feed yet): backend.client.mapfollow
-    map_mirror: Any = None
+    # the simulator's score from its map feed (None: no simulator; its time is the clock's)
+    site: SiteScore | None = None
+    previewing: bool = False  # what is shown is a mission file's plan, not the server's yet
+    keys: KeyNames = field(default_factory=KeyNames)  # the user's keys, for sentences
+    map_mirror: Any = None  # the map feed's mirror (None: no feed yet): mapfollow
     map_update: Any = None  # its last update (mapfollow.MapUpdate)
     map_note: str = ""  # why there is no map feed, when that is known (a review)
     # what happened (bounded), and what needs a person
@@ -167,19 +170,28 @@ class ConsoleModel:
         match event:
             case ConnectionState(state=state):
                 self.connection, self.connection_detail = state, ""
-            case Connecting(endpoint=endpoint):
-                self.connection, self.connection_detail = CONNECTING, ""
+            case Connecting(endpoint=endpoint, detail=detail):
+                self.connection, self.connection_detail = CONNECTING, detail
                 self.endpoint = endpoint
             case Unreachable(detail=detail):
                 self.connection, self.connection_detail = UNREACHABLE, detail
             case AccountKnown(read_only=read_only):
                 self.read_only = self.observer or read_only
+            case Previewed(mission=mission, library=library) if self.mission is None:
+                self.load(mission, library)  # (the server's state came first: nothing)
+                self.previewing = True
+                return change(Topic.MISSION, Topic.FLEET, loaded=True)
             case MapFed(mirror=mirror, update=update, speed=speed):
                 self.map_mirror, self.map_update = mirror, update
-                objects = getattr(mirror, "objects", None)
-                if objects is not None:  # a simulator: its score and clock on the top bar
-                    self.site = SiteClock(objects.score, mirror.sim_time, self.clock(), speed)
-                return change(Topic.MAP, map_update=update)
+                topics = {Topic.MAP}
+                if (objects := getattr(mirror, "objects", None)) is not None:  # a simulator
+                    self.site = SiteScore(objects.score)  # its time is the mission clock's
+                    if not self.clock.simulated:  # the times shown so far were wall times
+                        topics |= {Topic.MISSION, Topic.FLEET}
+                    self.clock.heard(
+                        mirror.sim_time, getattr(mirror, "speed", None) or speed or 1.0
+                    )
+                return change(*topics, map_update=update)
             case _:
                 return NOTHING
         return change(Topic.CONNECTION)
@@ -188,6 +200,8 @@ class ConsoleModel:
         """A whole state: the first, or after a gap or a server restart. The
         server's alerts in it that this console has not taken are news (none
         on the first: they happened before it looked)."""
+        if self.previewing:  # the file's plan was no state: this is the first
+            self.mission, self.previewing = None, False
         first = self.mission is None
         self.load(snap.mission, snap.library, snap.robots, snap.server_id)
         if first:
@@ -341,7 +355,7 @@ class ConsoleModel:
                 busy.append(f"{robot} is {STATUS_WORDS[act.status]} ({act.id})")
         if busy:
             risks.append("; ".join(busy))
-        waiting = link.risks(self.mission, self.clock())
+        waiting = link.risks(self.mission, self.clock)
         if waiting:
             risks.append("commands not yet acknowledged — " + "; ".join(waiting))
         if self.unsaved:
@@ -427,7 +441,7 @@ class ConsoleModel:
             return "online"
         if info.since is None:
             return "offline (not seen)"
-        return f"offline since {fmt_clock(info.since)}"
+        return f"offline since {self.clock.stamp_text(info.since)}"
 
     @staticmethod
     def active(task: list[SkillInstance]) -> SkillInstance | None:
@@ -448,25 +462,15 @@ class ConsoleModel:
     def activity_text(self, robot: str) -> str:
         """What the robot is doing: from telemetry when fresh, else the plan."""
         act, queued = self.robot_state(robot)
-        if act is not None:
-            t = self.telemetry.get(robot)
-            extra = ""
-            if (
-                t is not None
-                and t.skill == act.id
-                and t.progress is not None
-                and act.status == Status.RUNNING
-            ):
-                extra = f" {int(t.progress * 100)}%"
-            return f"{GLYPHS[act.status]} {act.id} {STATUS_WORDS[act.status]}{extra}"
         t = self.telemetry.get(robot)
+        if act is not None:
+            extra = ""
+            if t is not None and t.skill == act.id and act.status == Status.RUNNING:
+                extra = f" {int(t.progress * 100)}%" if t.progress is not None else ""
+            return f"{GLYPHS[act.status]} {act.id} {STATUS_WORDS[act.status]}{extra}"
         mode = t.mode if t is not None else ""
         if queued:
-            return (
-                f"halted · {queued} queued"
-                if not mode or mode == "idle"
-                else f"{mode} · {queued} queued"
-            )
+            return f"{mode if mode and mode != 'idle' else 'halted'} · {queued} queued"
         return mode or "idle"
 
     def uplinking(self, sid: str) -> UplinkCommand | None:
@@ -482,7 +486,7 @@ class ConsoleModel:
 
     def freshness(self, robot: str) -> Freshness:
         """Whether what is shown of `robot` is live or its last known state."""
-        return freshness(self, robot, self.clock())
+        return freshness(self, robot, self.clock)
 
     # -- why an action does not apply (None: it applies): console/state/availability.py ----
     def why_not(

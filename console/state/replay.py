@@ -101,7 +101,7 @@ class Replay:
         self.unplaced: list[int] = []  # revisions left out (robot time)
         self._waiting: list[EventBatch] = []
         self._syncs: list[tuple[int, str, float, float]] | None = None  # (index, skill, span)
-        model.clock = self.now
+        model.clock.wall = self.now  # the recording's time is the wall the views read
         model.map_note = MAP_NOTE
 
     # -- the time -------------------------------------------------------------------------

@@ -8,6 +8,11 @@ before the bar; spans out of comms coverage hatched (╱); the link-delay band
 (│). Between two lanes, a spacer line carries the barrier links (┆) joining
 partners at the barrier's start. A cell is a character and the names of the
 styles it takes (the widget turns them into Rich styles).
+
+Times here are mission times (console/state/clock.py: sim seconds while a sim
+runs, else POSIX seconds): the forecast's and the log's wall stamps are turned
+into mission time as they are read, so the axis, the bars' spans, waits and
+coverage read in the sim's time at any speed.
 """
 
 from __future__ import annotations
@@ -15,11 +20,11 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
-from datetime import datetime
 
 from backend.core.model import FINISHED, Mission, SkillInstance, Status
 from backend.core.plan.forecast import Forecast, Span
-from console.state.text import GLYPHS, STATUS_CSS, fmt_duration, skill_title
+from console.state.clock import MissionClock
+from console.state.text import GLYPHS, STATUS_CSS, skill_title
 
 ZOOMS = (1, 2, 5, 10, 15, 30, 60, 120, 300, 600, 900, 1800, 3600)  # seconds per cell
 TICKS = (5, 10, 15, 30, 60, 120, 300, 600, 900, 1800, 3600, 7200, 10800, 21600, 43200, 86400)
@@ -37,7 +42,7 @@ class Bar:
     label: str
     ready: float  # a barrier wait runs from here to start
     barrier: str | None
-    out: tuple[Span, ...]  # wall-clock spans out of comms coverage
+    out: tuple[Span, ...]  # spans out of comms coverage
 
 
 @dataclass
@@ -81,18 +86,23 @@ def _label(s: SkillInstance) -> str:
     return f"{GLYPHS[s.status]} {skill_title(s)}"
 
 
+def _spans(spans: Iterable[Span], clock: MissionClock) -> tuple[Span, ...]:
+    return tuple((clock.of_ts(a), clock.of_ts(b)) for a, b in spans)
+
+
 def bars(
     mission: Mission,
     fc: Forecast | None,
     robot: str,
+    clock: MissionClock,
     t0: float,
     t1: float,
     step: float = 0.0,
     also: str | None = None,
 ) -> list[Bar]:
-    """The robot's bars overlapping [t0, t1]: the log at its times, the rest
-    predicted; with `step` (seconds per cell) one predicted bar per cell at
-    most, and `also` (the selection) whatever the zoom."""
+    """The robot's bars overlapping [t0, t1] (mission time): the log at its
+    times, the rest predicted; with `step` (seconds per cell) one predicted bar
+    per cell at most, and `also` (the selection) whatever the zoom."""
     task = mission.tasks.get(robot, [])
     out: list[Bar] = []
     for s in task:
@@ -100,29 +110,41 @@ def bars(
             break  # the log is the head of the list
         if s.started_at is None or s.finished_at is None:
             continue
-        a, b = s.started_at.timestamp(), s.finished_at.timestamp()
+        a, b = clock.of(s.started_at), clock.of(s.finished_at)
         if b >= t0 and a <= t1:
             out.append(Bar(s.id, a, b, s.status, _label(s), a, None, ()))
     if fc is None:
         return out
-    shown = list(fc.window(robot, t0, t1, step))
+    # the forecast's times are wall stamps: ask for the window in wall time
+    w0, w1 = clock.to_ts(t0), clock.to_ts(t1)
+    shown = list(fc.window(robot, w0, w1, step / clock.speed))
     picked = fc.skill(also) if also is not None else None
     if picked is not None and picked.robot == robot and picked not in shown:
-        if picked.end >= t0 and picked.start <= t1:
+        if picked.end >= w0 and picked.start <= w1:
             shown.append(picked)
     for f in shown:
         s = f.skill
         if s is not None:
+            at = clock.of_ts
             out.append(
                 Bar(
-                    f.id, f.start, f.end, s.status, _label(s), f.ready, f.barrier, f.out_of_coverage
+                    f.id,
+                    at(f.start),
+                    at(f.end),
+                    s.status,
+                    _label(s),
+                    at(f.ready),
+                    f.barrier,
+                    _spans(f.out_of_coverage, clock),
                 )
             )
     return out
 
 
-def times(mission: Mission, fc: Forecast | None, sid: str) -> tuple[float, float] | None:
-    """(start, end) of a skill: actual for the log, else predicted."""
+def times(
+    mission: Mission, fc: Forecast | None, sid: str, clock: MissionClock
+) -> tuple[float, float] | None:
+    """(start, end) of a skill in mission time: actual for the log, else predicted."""
     found = mission.find(sid)
     if found is None:
         return None
@@ -130,9 +152,9 @@ def times(mission: Mission, fc: Forecast | None, sid: str) -> tuple[float, float
     if s.status in FINISHED:
         if s.started_at is None or s.finished_at is None:
             return None
-        return s.started_at.timestamp(), s.finished_at.timestamp()
+        return clock.of(s.started_at), clock.of(s.finished_at)
     f = fc.skill(sid) if fc is not None else None
-    return (f.start, f.end) if f is not None else None
+    return (clock.of_ts(f.start), clock.of_ts(f.end)) if f is not None else None
 
 
 # -- one lane ------------------------------------------------------------------------------
@@ -233,13 +255,8 @@ def planned(cells: list[Cell], spans: Iterable[tuple[float, float]], win: Window
 # -- the time axis ------------------------------------------------------------------------------
 
 
-def _clock(t: float, step: int) -> str:
-    d = datetime.fromtimestamp(t)
-    return d.strftime("%H:%M:%S") if step < 60 else d.strftime("%H:%M")
-
-
-def axis(win: Window, now: float) -> tuple[list[Cell], list[Cell]]:
-    """Two lines: tick labels, then tick marks with `now` (▼)."""
+def axis(win: Window, now: float, clock: MissionClock) -> tuple[list[Cell], list[Cell]]:
+    """Two lines: tick labels (mission time), then tick marks with `now` (▼)."""
     step = next((s for s in TICKS if s / win.dt >= LABEL_CELLS), TICKS[-1])
     labels: list[Cell] = [(" ", ())] * win.width
     marks: list[Cell] = [("─", ("axis",))] * win.width
@@ -248,7 +265,7 @@ def axis(win: Window, now: float) -> tuple[list[Cell], list[Cell]]:
         x = win.col(t)
         if 0 <= x < win.width:
             marks[x] = ("┬", ("axis",))
-            for k, ch in enumerate(_clock(t, step)):
+            for k, ch in enumerate(clock.time_text(t, seconds=step < 60)):
                 if x + k < win.width:
                     labels[x + k] = (ch, ("axis-label",))
         t += step
@@ -265,27 +282,28 @@ def _pct(x: float | None) -> str:
     return "?" if x is None else f"{max(0.0, x) * 100:.0f}%"
 
 
-def details(mission: Mission, fc: Forecast | None, sid: str | None) -> str:
-    """The selected skill in a line: times, wait, battery, coverage."""
+def details(mission: Mission, fc: Forecast | None, sid: str | None, clock: MissionClock) -> str:
+    """The selected skill in a line: times, wait, battery, coverage (mission time)."""
     found = mission.find(sid) if sid is not None else None
     if found is None:
         return "no skill selected"
     robot, _, s = found
     head = f"{robot} · {GLYPHS[s.status]} {s.id} {skill_title(s)}"
-    span = times(mission, fc, s.id)
+    span = times(mission, fc, s.id, clock)
     if span is None:
         why = "never: held at a barrier that is never passed" if s.status not in FINISHED else "-"
         return f"{head} · {why}"
-    parts = [head, f"{_clock(span[0], 1)}–{_clock(span[1], 1)}"]
+    when = f"{clock.time_text(span[0])}–{clock.time_text(span[1])}"
+    parts = [head, f"{clock.unit_prefix}{when}"]
     f = fc.skill(s.id) if fc is not None and s.status not in FINISHED else None
     if f is not None:
         if f.wait_s >= 1:
-            parts.append(f"waits {fmt_duration(f.wait_s)} at {f.barrier}")
+            parts.append(f"waits {clock.duration_text(f.wait_s)} at {f.barrier}")
         if f.battery_start is not None:
             parts.append(f"battery {_pct(f.battery_start)}→{_pct(f.battery_end)}")
         if f.out_of_coverage:
             out = sum(b - a for a, b in f.out_of_coverage)
-            parts.append(f"{fmt_duration(out)} out of coverage")
+            parts.append(f"{clock.duration_text(out)} out of coverage")
     return " · ".join(parts)
 
 
@@ -298,11 +316,13 @@ def fmt_step(dt: float) -> str:
     return f"{dt / 3600:g} h"
 
 
-def nearest(mission: Mission, fc: Forecast | None, task: list[SkillInstance], at: float) -> str:
+def nearest(
+    mission: Mission, fc: Forecast | None, task: list[SkillInstance], at: float, clock: MissionClock
+) -> str:
     """The skill of `task` running at `at`, else the one starting nearest to it."""
     best, best_d = task[0].id, math.inf
     for s in task:
-        span = times(mission, fc, s.id)
+        span = times(mission, fc, s.id, clock)
         if span is None:
             continue
         if span[0] <= at <= span[1]:

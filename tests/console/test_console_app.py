@@ -36,6 +36,11 @@ from console.widgets.schedule.view import ScheduleView
 WIDE = (150, 42)
 
 
+def shows(editor, sid: str) -> bool:
+    """The editor shows `sid`, its fields built."""
+    return editor.skill_id == sid and not editor.loading
+
+
 def status_line(app) -> str:
     return str(app.mission_screen.message)
 
@@ -99,17 +104,17 @@ async def test_read_only_editor_says_why():
     async with app.run_test(size=WIDE) as pilot:
         await inject(app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
         app.screen.query_one(ScheduleView).select("lru1-2")
-        await pilot.pause()
+        editor = app.screen.query_one(ParamEditor)
+        await wait_until(pilot, lambda: shows(editor, "lru1-2"), what="lru1-2 in the editor")
         assert "read-only: lru1-2 is running on lru1" in screen_text(app)
         banner = str(app.screen.query_one("#readonly").render())
         assert banner == (
             "read-only: lru1-2 is running on lru1: only idle skills can be edited; "
             "stop the robot (the skill goes back to its queue), then unsynchronize it"
         )
-        editor = app.screen.query_one(ParamEditor)
         assert all(w.disabled for w in editor.query("Input, Select, Switch, TextArea"))
         app.screen.query_one(ScheduleView).select("lru1-1")
-        await pilot.pause()
+        await wait_until(pilot, lambda: shows(editor, "lru1-1"), what="lru1-1 in the editor")
         assert "finished skills are the execution log" in str(
             app.screen.query_one("#readonly").render()
         )
@@ -122,7 +127,8 @@ async def test_actions_that_do_not_apply_say_why():
         screen = app.mission_screen
         screen.schedule.select("lru1-2")  # running
         await pilot.pause()
-        assert screen.check_action("delete", ()) is None  # greyed out in the footer
+        assert screen.why_disabled("delete")  # not in the footer
+        assert "d Delete" not in screen_text(app).splitlines()[-1]
         await pilot.press("d")
         assert "only idle skills can be deleted" in status_line(app)
         await pilot.press("r")
@@ -234,7 +240,7 @@ async def test_barrier_from_marks_across_robots():
         screen.schedule.select("lru1-5")
         await pilot.pause()
         await pilot.press("space")
-        assert screen.check_action("barrier", ()) is None  # one robot only
+        assert screen.why_disabled("barrier")  # one robot only
         screen.schedule.select("lru2-5")
         await pilot.pause()
         await pilot.press("space")
@@ -353,8 +359,11 @@ async def test_command_palette_has_every_action_and_says_what_does_not_apply():
         # the schedule's actions and the screen switches; the other screens' own actions
         # are offered there
         assert {str(h.display) for h in hits} == {
-            a.palette_title for a in ACTIONS if a.scope in ("mission", "app")
+            a.palette_title
+            for a in ACTIONS
+            if a.scope in ("mission", "app") and not a.fixed and a.name != "command_palette"
         }
+        assert {"Screen: Help", "Screen: Quit"} <= {str(h.display) for h in hits}
         assert "Screen: Fleet" in {str(h.display) for h in hits}
         found = {h.text: h for h in [h async for h in provider.search("delete")]}
         assert "does not apply now: lru1-2 is running on lru1" in found["Mission: Delete"].help
@@ -510,7 +519,7 @@ async def test_policies_are_typed_inputs_validated_then_applied():
         await inject(app, pilot, b, online={"lru1": True, "lru2": True})
         screen = app.mission_screen
         screen.schedule.select("lru2-1")
-        await pilot.pause()
+        await wait_until(pilot, lambda: shows(screen.editor, "lru2-1"), what="lru2-1 shown")
         text = screen_text(app)
         assert "policies — applied by the robot itself" in text
         assert "retries" in text and "pause out of comms" in text and "recharge below" in text

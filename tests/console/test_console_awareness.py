@@ -435,7 +435,7 @@ async def test_screen_keys_are_remappable():
     )
     async with app.run_test(size=SIZE) as pilot:
         await awareness_scenario(app, pilot)
-        assert app.action_keys()["show_fleet"] == "f9"
+        assert app.model.keys.say("app.show_fleet") == "F9"  # what sentences name
         await pilot.press("f4")  # no longer bound
         await pilot.pause()
         assert app.screen is app.mission_screen

@@ -414,8 +414,11 @@ def test_demo_starts_server_and_console_and_stops_everything(tmp_path):
     )
     os.close(slave)
     try:
+        # the plan from the file at once, then the server's state once connected
         out = _read_until(master, b"Mars sample return", 60)
         assert b"Mars sample return" in out, out[-3000:]
+        out = _read_until(master, b"connected", 60)  # (not "connecting")
+        assert b"connected" in out, out[-3000:]
         children = _processes_mentioning(str(tmp_path))
         assert children, "the demo's server was not found among the processes"
         # its sim got the link delay (after its --speed: not the demo's own command line)
@@ -461,8 +464,11 @@ def test_demo_hung_up_terminal_stops_everything(tmp_path):
     )
     os.close(slave)
     try:
+        # the plan from the file at once, then the server's state once connected
         out = _read_until(master, b"Mars sample return", 60)
         assert b"Mars sample return" in out, out[-3000:]
+        out = _read_until(master, b"connected", 60)  # (not "connecting")
+        assert b"connected" in out, out[-3000:]
         assert _processes_mentioning(str(tmp_path))
         os.close(master)  # hang-up: SIGHUP, and every write to the terminal fails from now on
         master = -1

@@ -435,3 +435,63 @@ def test_segments_are_clipped_to_the_view():
     assert clip_segment((-100, -5), (-50, -5), 120, 80) is None
     (a, b) = clip_segment((10, 10), (20, 30), 120, 80)
     assert a == (10, 10) and b == (20, 30)  # inside: unchanged
+
+
+# -- the cursor stays on the site, says what is under it, and no toast covers it (issue 27) --
+
+
+async def test_the_cursor_stays_on_the_site_and_fit_brings_it_back_to_the_middle():
+    app = make_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        await open_map(app, pilot)
+        view = app.screen.view
+        meta = view.mirror.meta
+        for _ in range(40):  # ctrl+arrows: 8 cells a press, far beyond the site's corner
+            await pilot.press("ctrl+right", "ctrl+down")
+        x, y = view.cursor
+        assert meta.x0 < x < meta.x0 + meta.width * meta.cell
+        assert meta.y0 < y < meta.y0 + meta.height * meta.cell
+        assert "off the site" not in screen_text(app)
+        await pilot.press("0")  # fit: the whole site, the cursor in its middle
+        await pilot.pause()
+        assert view.cursor == (view.vp.cx, view.vp.cy)
+        assert view.cursor_cell() == (view.vp.w // 2, view.vp.h // 2)
+
+
+async def test_the_info_line_names_what_is_under_the_cursor():
+    app = make_app()
+    async with app.run_test(size=(120, 40)) as pilot:
+        await open_map(app, pilot)
+        view = app.screen.view
+        view.set_cursor(45.0, 21.0)  # RSS-A's centre: top score 1 known, explored, no link
+        await pilot.pause()
+        here = screen_text(app).split("here: ")[1].splitlines()[0]
+        assert "region RSS-A (top score 1)" in here, here
+        assert "explored: free ground" in here and "in comms coverage" in here, here
+        view.set_cursor(20.0, 8.0)  # where lru1 is (telemetry), near the lander's link
+        await pilot.pause()
+        assert "robot lru1" in screen_text(app)
+        view.set_cursor(-150.0, -150.0)  # the far corner: nobody has been there
+        await pilot.pause()
+        here = screen_text(app).split("here: ")[1].splitlines()[0]
+        assert "unexplored" in here and "no comms coverage" in here, here
+
+
+async def test_a_notification_never_covers_the_cursor():
+    app = make_app()
+    async with app.run_test(size=(80, 24), notifications=True) as pilot:
+        await open_map(app, pilot)
+        view = app.screen.view
+        # the cursor where toasts come: the bottom-right corner of the map
+        view.set_cursor(*view.vp.cell_centre(view.vp.w - 5, view.vp.h - 1))
+        await pilot.pause()
+        before = view.cursor_cell()
+        app.notify("lru2 is out of communication range", title="Alert", timeout=30)
+        await wait_until(pilot, lambda: app.screen.query("Toast"), what="a toast")
+        await pilot.pause()
+        await pilot.pause()
+        col, row = view.cursor_cell()
+        sx, sy = view.region.x + col, view.region.y + row
+        for toast in app.screen.query("Toast"):
+            assert not toast.region.contains(sx, sy), (toast.region, (sx, sy))
+        assert (col, row) != before  # the view moved the cursor clear of the toast

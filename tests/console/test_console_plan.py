@@ -20,7 +20,7 @@ async def test_the_timeline_shows_lanes_the_end_and_the_selection():
         text = screen_text(app)
         for needle in ("timeline", "lru1", "lru2", "ardea", "lander", "plan ends", "critical:"):
             assert needle in text, f"{needle!r} not on screen:\n{text}"
-        assert "link delay 90 s" in text  # the band's length, said too
+        assert "link delay 1m30s" in text  # the band's length, said too
         assert "lru1-2 explore east plain" in text  # the selection in a line
         assert "battery 82%→" in text  # from telemetry
         await pilot.press("right")

@@ -10,9 +10,11 @@ from plan_state import crossed, risky_mars, sim_status
 
 from backend.core.model import Status, Waiver
 from console.state import timeline as tl
+from console.state.clock import MissionClock
 from console.state.plan import CHECKS_EVERY_S, MAP_EVERY_S, PlanView
 
 NOW = datetime(2026, 3, 14, 10, 42, 7, tzinfo=UTC).timestamp()
+WALL = MissionClock(lambda: datetime.fromtimestamp(NOW, UTC))  # no sim: mission time is wall time
 
 
 def refreshed(b: Builder, now: float = NOW, **kw) -> PlanView:
@@ -134,10 +136,20 @@ def test_a_barrier_wait_is_dotted_and_partners_are_linked():
 
 def test_the_axis_labels_ticks_that_fit_and_marks_now():
     win = tl.Window(NOW, 15.0, 60)
-    labels, marks = tl.axis(win, NOW + 150)
+    labels, marks = tl.axis(win, NOW + 150, WALL)
     text = "".join(c for c, _ in labels)
     assert "10:45" in text and "10:50" in text
     assert marks[10] == ("▼", ("now",))
+
+
+def test_with_a_sim_the_axis_reads_sim_time():
+    clock = MissionClock(lambda: datetime.fromtimestamp(NOW, UTC))
+    clock.heard(sim_time=1500.0, speed=10.0)  # sim 25:00 now, 10 sim seconds per wall second
+    win = tl.Window(1500.0, 15.0, 60)  # mission time: 15 sim seconds per column
+    labels, marks = tl.axis(win, clock.now(), clock)
+    text = "".join(c for c, _ in labels)
+    assert "25:00" in text and "30:00" in text and "10:4" not in text, text
+    assert marks[0] == ("▼", ("now",))
 
 
 def test_fit_zoom_and_scroll():
@@ -153,9 +165,24 @@ def test_bars_take_the_log_at_its_times_and_the_rest_from_the_forecast():
     b = mars_mid_execution()
     p = refreshed(b, telemetry={t.robot: t for t in mars_telemetry()})
     fc = p.forecast
-    shown = tl.bars(b.mission, fc, "lru1", NOW - 60, NOW + 3600)
+    shown = tl.bars(b.mission, fc, "lru1", WALL, NOW - 60, NOW + 3600)
     assert [x.id for x in shown][:3] == ["lru1-1", "lru1-2", "lru1-3"]
     assert shown[0].status == Status.SUCCESS
-    assert "waits" not in tl.details(b.mission, fc, "lru1-3")
-    assert "waits" in tl.details(b.mission, fc, "lru2-3")
-    assert tl.nearest(b.mission, fc, b.mission.tasks["lru2"], shown[2].start) == "lru2-3"
+    assert "waits" not in tl.details(b.mission, fc, "lru1-3", WALL)
+    assert "waits" in tl.details(b.mission, fc, "lru2-3", WALL)
+    assert tl.nearest(b.mission, fc, b.mission.tasks["lru2"], shown[2].start, WALL) == "lru2-3"
+
+
+def test_at_a_sims_speed_bars_and_spans_are_in_sim_time():
+    b = mars_mid_execution()
+    fc = refreshed(b, telemetry={t.robot: t for t in mars_telemetry()}).forecast
+    sim = MissionClock(lambda: datetime.fromtimestamp(NOW, UTC))
+    sim.heard(sim_time=0.0, speed=10.0)
+    wall = tl.bars(b.mission, fc, "lru2", WALL, NOW - 60, NOW + 3600)
+    fast = tl.bars(b.mission, fc, "lru2", sim, -600, 36000)
+    assert [x.id for x in fast] == [x.id for x in wall]
+    for w, s in zip(wall, fast, strict=True):  # ten times as long, counted from sim 0:00
+        assert abs((s.end - s.start) - 10 * (w.end - w.start)) < 1e-6
+        assert abs(s.start - 10 * (w.start - NOW)) < 1e-6
+    said = tl.details(b.mission, fc, "lru2-3", sim)
+    assert "sim " in said and "10:4" not in said, said

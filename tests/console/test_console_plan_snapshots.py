@@ -37,7 +37,7 @@ def _app(**kw):
     return app
 
 
-TIMELINE = ("lru2", "ardea", "plan ends", "link delay 90 s", "lru1-3 identify stone", "▼", "┆")
+TIMELINE = ("lru2", "ardea", "plan ends", "link delay 1m30s", "lru1-3 identify stone", "▼", "┆")
 
 
 def test_timeline_80x24(snap_compare):

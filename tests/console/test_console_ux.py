@@ -63,8 +63,10 @@ async def test_angles_are_shown_and_typed_in_degrees_and_stay_radians_on_the_ser
         await inject(app, pilot, b, online={"lru1": True})
         screen = app.mission_screen
         screen.schedule.select("lru1-2")  # carry: from (bound) and to (typed), both poses
-        await pilot.pause()
         ed = screen.editor
+        await wait_until(
+            pilot, lambda: ed.skill_id == "lru1-2" and not ed.loading, what="lru1-2 shown"
+        )
         yaw = ed.query_one("#f-to-yaw")
         assert "yaw°" in screen_text(app)  # the unit in the label
         assert yaw.value == "0"

@@ -25,9 +25,10 @@ from backend.core.ops import EditSkill
 from backend.protocol.messages import Alert, RobotInfo
 from console.escape import split_escape
 from console.state.capability import filter_examples, filter_robots
-from console.state.context import TAIL, context_keys, fit_footer, key_text
+from console.state.context import context_keys, fit_footer, tail_keys
 from console.state.eventlog import AlertBook, toast_text
 from console.state.freshness import SILENT_AFTER_S, EtaTicks
+from console.state.keys import KeyNames, key_text
 from console.state.markers import relabel
 from console.state.model import CONNECTED, ConsoleModel
 from console.state.search import search_skills
@@ -36,7 +37,7 @@ from console.state.text import without_paths
 
 def model_of(b: Builder, online=MARS_FLEET, telemetry=(), at=T0) -> ConsoleModel:
     m = ConsoleModel(connection=CONNECTED)
-    m.clock = lambda: at
+    m.clock.wall = lambda: at
     m.load(b.snapshot(), b.library, fleet(online))
     for t in telemetry:
         m.set_telemetry(t)
@@ -80,13 +81,14 @@ def test_a_halted_failure_offers_both_retries_and_run_first():
 
 def test_the_footer_fits_80_columns_and_keeps_its_tail():
     m = model_of(mars_mid_execution(), telemetry=mars_telemetry())
-    shown = fit_footer(context_keys(m, "lru1", "lru1-4", []), 80)
+    tail = tail_keys(KeyNames())
+    shown = fit_footer(context_keys(m, "lru1", "lru1-4", []), 80, tail)
     text = " ".join(f"{k.key} {k.label}" for k in shown)
     assert len(text) <= 80
-    assert shown[-len(TAIL) :] == list(TAIL)  # find, save, all keys (the palette), quit
-    assert text.startswith("⏎ Edit s Sync a Add")
-    assert [k.action for k in fit_footer(context_keys(m, "lru1", "lru1-4", []), 30)] == [
-        k.action for k in TAIL
+    assert shown[-len(tail) :] == tail  # find, save, all keys (the palette), quit
+    assert text.startswith("⏎ Edit s Sync a Add") and text.endswith("^p All keys ^q Quit")
+    assert [k.action for k in fit_footer(context_keys(m, "lru1", "lru1-4", []), 30, tail)] == [
+        k.action for k in tail
     ]  # too narrow for more: the tail still says where the rest is
 
 
@@ -100,7 +102,7 @@ def test_key_text_is_the_shortest_way_to_show_a_key():
 
 def test_a_remapped_key_shows_in_the_footer():
     m = model_of(mars_mid_execution(), telemetry=mars_telemetry())
-    keys = context_keys(m, "lru1", "lru1-4", [], {"sync": "S"})
+    keys = context_keys(m, "lru1", "lru1-4", [], KeyNames({"mission.sync": "S"}))
     assert next(k.key for k in keys if k.action == "sync") == "S"
 
 
@@ -129,7 +131,7 @@ def test_an_offline_robot_is_its_last_known_state_as_of_when_it_was_heard():
     m = model_of(mars_mid_execution(), telemetry=mars_telemetry())
     assert not m.freshness("lru1").stale  # just heard
     m.set_robot(RobotInfo(name="lru1", online=False, since=T0 + timedelta(seconds=3)))
-    m.clock = lambda: T0 + timedelta(seconds=25)
+    m.clock.wall = lambda: T0 + timedelta(seconds=25)
     f = m.freshness("lru1")
     assert (f.stale, f.why, f.age_s) == (True, "offline", 25.0)
     assert f.as_of() == "as of 25s ago" and f.ago() == "25s ago"
@@ -139,9 +141,9 @@ def test_an_offline_robot_is_its_last_known_state_as_of_when_it_was_heard():
 
 def test_a_robot_that_stops_sending_telemetry_turns_stale():
     m = model_of(mars_mid_execution(), telemetry=mars_telemetry())
-    m.clock = lambda: T0 + timedelta(seconds=SILENT_AFTER_S - 1)
+    m.clock.wall = lambda: T0 + timedelta(seconds=SILENT_AFTER_S - 1)
     assert not m.freshness("lru2").stale
-    m.clock = lambda: T0 + timedelta(seconds=SILENT_AFTER_S + 5)
+    m.clock.wall = lambda: T0 + timedelta(seconds=SILENT_AFTER_S + 5)
     f = m.freshness("lru2")
     assert (f.stale, f.why) == (True, "silent")
     # a robot that never sent telemetry is not expected to (presence says it is there)
@@ -155,9 +157,9 @@ def test_a_running_skills_eta_counts_down_between_samples():
     m = model_of(mars_mid_execution(), telemetry=mars_telemetry())
     etas = EtaTicks()
     assert etas.ticked(m) == set()  # the first look: as drawn
-    m.clock = lambda: T0 + timedelta(seconds=0.4)
+    m.clock.wall = lambda: T0 + timedelta(seconds=0.4)
     assert etas.ticked(m) == set()  # the same second
-    m.clock = lambda: T0 + timedelta(seconds=2)
+    m.clock.wall = lambda: T0 + timedelta(seconds=2)
     assert etas.ticked(m) == {"lru1"}  # lru2 is at a barrier: no ETA
     assert etas.shown["lru1"] == 130
 
@@ -179,13 +181,13 @@ def test_unsaved_means_the_plan_differs_from_what_was_saved_or_loaded():
     m2.mission.tasks["lru1"][1].status_info = "moving"
     assert not m2.unsaved
     assert m2.quit_risks()[0].startswith("lru1 is running (lru1-2); lru2 is waiting at barrier")
-    m2.clock = lambda: T0 + timedelta(minutes=2)
+    m2.clock.wall = lambda: T0 + timedelta(minutes=2)
     m2.mission.uplink["lru1"] = [
         UplinkCommand(
             id=7, robot="lru1", seq=1, op="sync", command=Run(), skills=["lru1-4"], created=T0
         )
     ]
-    assert "commands not yet acknowledged — lru1: sync #7 queued 2m00s" in m2.quit_risks()
+    assert "commands not yet acknowledged — lru1: sync #7 queued 2m00s ago" in m2.quit_risks()
 
 
 # -- small things ----------------------------------------------------------------------------

@@ -82,7 +82,8 @@ def test_side_editor_in_degrees_120x40(snap_compare):
         app = pilot.app
         await inject(app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
         app.mission_screen.schedule.select("lru2-5")
-        await pilot.pause()
+        ed = app.mission_screen.editor
+        await wait_until(pilot, lambda: ed.skill_id == "lru2-5" and not ed.loading, what="shown")
         _shows(app, "lru2-5  drive_to on lru2", "yaw°", "lander", "⏎ Edit s Sync")
 
     assert snap_compare(make_app(), terminal_size=(120, 40), run_before=_settled(run))

@@ -26,17 +26,18 @@ from typing import Any
 from rich.text import Text
 from textual import on
 from textual.app import ComposeResult
-from textual.binding import Binding
 from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.message import Message
 from textual.widgets import Button, Input, Label, Select, Static, Switch, TextArea
 
 from backend.core.model import Policies, SkillInstance, Status
 from backend.core.ops import EditSkill
+from console.bindings import bindings, key_names
 from console.state.markers import relabel
 from console.state.model import ConsoleModel
 from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS
 from console.widgets.editor.changes import ReadsEdits
+from console.widgets.editor.fields import EnterPressed, FieldInput
 from console.widgets.editor.inputs import (
     INPUTS,
     POLICY_HINTS,
@@ -72,12 +73,8 @@ class ParamEditor(ReadsEdits, VerticalScroll):
     """Edits one skill. Posts `ApplyRequested` with only what changed.
     Its look: editor.tcss (loaded by the app)."""
 
-    BINDINGS = [
-        # enter in a field applies (Input.Submitted); ctrl+s is the mission's save everywhere
-        Binding("enter", "apply", "Apply", id="editor.apply"),
-        Binding("ctrl+r", "revert", "Revert", id="editor.revert"),
-        Binding("escape", "leave", "Back", id="editor.leave"),
-    ]
+    # apply (also enter in a field: Input.Submitted), revert, leave: the actions table's
+    BINDINGS = bindings("editor")
 
     class ApplyRequested(Message):
         def __init__(
@@ -196,7 +193,8 @@ class ParamEditor(ReadsEdits, VerticalScroll):
                 if pending:
                     self.dirty = pending
                     self.drafts[self.skill_id] = self._capture()
-        if skill_id != self.skill_id:
+        same = skill_id == self.skill_id
+        if not same:
             self.errors = {}
             self.server_error = ""
         self.skill_id = skill_id
@@ -205,6 +203,8 @@ class ParamEditor(ReadsEdits, VerticalScroll):
         self.base_revision = self.model.mission.revision if self.model.mission else 0
         self.dirty = []
         had_focus = self.focus_within()
+        focused = self.screen.focused if had_focus and same else None
+        field = focused.id if focused is not None else None  # after an apply: stay in it
         draft = (
             self.drafts.pop(skill_id, None)
             if skill_id is not None and self.read_only_reason is None
@@ -226,8 +226,8 @@ class ParamEditor(ReadsEdits, VerticalScroll):
             self._restore(draft)
         self._validate_all()
         self._update_dirty()
-        if had_focus:  # the focused field was rebuilt: keep the operator in the editor
-            self.focus_first()
+        if had_focus:  # the focused field was rebuilt: keep the operator in it
+            self.focus_field(field)
 
     # -- drafts: unapplied changes per skill ---------------------------------------------
     def _capture(self) -> Draft:
@@ -286,18 +286,29 @@ class ParamEditor(ReadsEdits, VerticalScroll):
     def _update_dirty(self) -> None:
         """Recompute what differs from the skill; show it; tell the screen."""
         self.dirty = self.changed_names()
-        if self.dirty:
-            self._set_static(
-                "#dirty",
-                f"unapplied changes: {', '.join(self.dirty)} — enter applies, ctrl+r reverts",
-            )
-        else:
-            self._set_static("#dirty", "")
+        keys = key_names(self)
+        how = f"{keys.say('editor.apply')} applies, {keys.say('editor.revert')} reverts"
+        try:
+            line = self.query_one("#dirty", Static)
+        except Exception:
+            line = None  # being rebuilt
+        if line is not None:
+            changes = f"unapplied changes: {', '.join(self.dirty)} — " if self.dirty else ""
+            line.update(changes + how)
+            line.set_class(not self.dirty, "-clean")
         self._post_drafts()
 
     def focus_within(self) -> bool:
         focused = self.screen.focused if self.is_attached else None
         return focused is not None and self in focused.ancestors_with_self
+
+    def focus_field(self, field: str | None) -> None:
+        """Focus the field with this id (the one the operator was in), else the first."""
+        found = self.query(f"#{field}") if field else None
+        if found and found.first().focusable:
+            self.screen.set_focus(found.first())
+        else:
+            self.focus_first()
 
     def focus_first(self) -> None:
         for w in self.query("Input, Switch, Select, TextArea, Button"):
@@ -358,10 +369,11 @@ class ParamEditor(ReadsEdits, VerticalScroll):
         yield Static(
             self.stale_note, id="stale", classes="stale" + ("" if self.stale_note else " -empty")
         )
-        yield Static("", id="dirty", classes="dirty -empty")
+        # always one line while editable, so its words never move the fields under the cursor
+        yield Static("", id="dirty", classes="dirty" + ("" if ro is None else " -empty"))
         with Vertical(classes="param", id="param-label"):
             yield Label(Text.assemble(("label", "bold"), ("  text", "dim")), classes="plabel")
-            yield Input(
+            yield FieldInput(
                 s.label, id="f-label", compact=True, disabled=ro is not None, placeholder=s.skill
             )
         if spec is None:
@@ -381,8 +393,10 @@ class ParamEditor(ReadsEdits, VerticalScroll):
         yield from policy_inputs(s.policies, disabled=ro is not None)
         if ro is None:
             with Horizontal(classes="buttons"):
-                yield Button("Apply ⏎", id="apply", variant="primary", compact=True)
-                yield Button("Revert ^r", id="revert", compact=True)
+                keys = key_names(self)
+                apply, revert = keys.short("editor.apply"), keys.short("editor.revert")
+                yield Button(f"Apply {apply}", id="apply", variant="primary", compact=True)
+                yield Button(f"Revert {revert}", id="revert", compact=True)
 
     # -- messages next to fields --------------------------------------------------------------
     def _set_static(self, selector: str, text: str) -> None:
@@ -480,8 +494,9 @@ class ParamEditor(ReadsEdits, VerticalScroll):
         self.action_apply()
 
     @on(Input.Submitted)
-    def _field_submitted(self, event: Input.Submitted) -> None:
-        """Enter in a field applies the edits (as in a form)."""
+    @on(EnterPressed)
+    def _field_submitted(self, event: Message) -> None:
+        """Enter in a field applies the edits (as in a form), a choice's and a switch's too."""
         event.stop()
         self.action_apply()
 

@@ -44,7 +44,7 @@ from backend.core.params import (
 )
 from backend.files import yamlio
 from console.state.text import fmt_number
-from console.widgets.select import SafeSelect
+from console.widgets.editor.fields import FieldArea, FieldInput, FieldSelect, FieldSwitch
 
 TYPED = "\x00typed"  # the bind choice meaning "no marker: a typed value"
 BINDABLE_KINDS = {"pose": ("pose", "position"), "position": ("pose", "position"), "area": ("area",)}
@@ -119,14 +119,14 @@ class Field:
 
 def _switch(f: Field) -> ComposeResult:
     with Horizontal(classes="fields"):
-        yield Switch(bool(f.value), id=f"f-{f.name}", disabled=f.disabled)
+        yield FieldSwitch(bool(f.value), id=f"f-{f.name}", disabled=f.disabled)
         yield Label("yes" if f.value else "no", id=f"v-{f.name}", classes="switch-value")
 
 
 TEXT_TYPES = {"int": "integer", "float": "number", "str": "text"}  # kind -> Input type
 
 
-class AngleInput(Input):
+class AngleInput(FieldInput):
     """An angle in degrees (typed `30`, `30deg` or `0.52rad`); remembers the
     value it was shown with, so a field left as shown keeps it exactly."""
 
@@ -155,7 +155,7 @@ def _text(f: Field) -> ComposeResult:
         )
         return
     text = "" if v is None else (fmt_number(v) if t != "str" else str(v))
-    yield Input(
+    yield FieldInput(
         text, id=f"f-{f.name}", type=TEXT_TYPES[t], compact=True, disabled=f.disabled, placeholder=t
     )
 
@@ -180,7 +180,7 @@ def _coordinates(f: Field) -> ComposeResult:
                     )
                     continue
                 yield Label(c)
-                yield Input(
+                yield FieldInput(
                     "" if x is None else fmt_number(x),
                     id=f"f-{f.name}-{c}",
                     type="number",
@@ -191,7 +191,7 @@ def _coordinates(f: Field) -> ComposeResult:
 
 
 def _yaml(f: Field) -> ComposeResult:
-    yield TextArea(
+    yield FieldArea(
         yaml_text(f.value),
         id=f"f-{f.name}",
         compact=True,
@@ -216,7 +216,7 @@ def _choice(f: Field) -> ComposeResult:
     choices = _choices(f)
     if isinstance(f.value, str) and f.value not in choices:
         choices.append(f.value)
-    yield SafeSelect(
+    yield FieldSelect(
         [(c, c) for c in choices],
         value=f.value if f.value in choices else Select.NULL,
         allow_blank=True,
@@ -323,7 +323,7 @@ INPUT_KINDS: dict[str, InputKind] = {
 
 def bind_select(
     name: str, kind: str, bound: str | None, mission: Mission, disabled: bool
-) -> SafeSelect:
+) -> FieldSelect:
     """The choice of a marker to bind a pose, position or area parameter to."""
     kinds = BINDABLE_KINDS[kind]
     options = [("typed value", TYPED)] + [
@@ -333,7 +333,7 @@ def bind_select(
     ]
     if bound and bound not in mission.markers:
         options.append((f"@{bound} (missing)", bound))
-    return SafeSelect(
+    return FieldSelect(
         options,
         value=bound or TYPED,
         allow_blank=False,
@@ -396,12 +396,12 @@ def policy_inputs(p: Policies, *, disabled: bool) -> ComposeResult:
 def _policy_input(name: str, p: Policies, disabled: bool) -> ComposeResult:
     if name == "pause_out_of_comms":
         with Horizontal(classes="fields"):
-            yield Switch(p.pause_out_of_comms, id=f"pf-{name}", disabled=disabled)
+            yield FieldSwitch(p.pause_out_of_comms, id=f"pf-{name}", disabled=disabled)
             yield Label(
                 "yes" if p.pause_out_of_comms else "no", id=f"pv-{name}", classes="switch-value"
             )
     elif name == "retries":
-        yield Input(
+        yield FieldInput(
             str(p.retries),
             id=f"pf-{name}",
             type="integer",
@@ -411,7 +411,7 @@ def _policy_input(name: str, p: Policies, disabled: bool) -> ComposeResult:
         )
     else:
         text = "" if p.recharge_below is None else fmt_number(p.recharge_below)
-        yield Input(
+        yield FieldInput(
             text, id=f"pf-{name}", type="number", compact=True, disabled=disabled, placeholder="off"
         )
 

@@ -18,7 +18,7 @@ redraw everything.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -37,6 +37,7 @@ from backend.core.model import FINISHED, Status
 from backend.protocol.mapfeed import T_FREE, T_ROCK, T_SLOW, T_UNKNOWN, MapMirror
 from console.state.markers import marker_point, marker_use
 from console.state.model import ConsoleModel
+from console.state.site import clamp_to_site
 from console.state.text import GLYPHS, STATUS_CSS
 
 UPPER_HALF = "▀"
@@ -680,16 +681,36 @@ class MapView(Widget, can_focus=True):
 
     def move_cursor(self, dcol: int, drow: int) -> None:
         x, y = self.cursor
-        self.cursor = (x + dcol * self.vp.mpp, y - 2 * drow * self.vp.mpp)
+        self.set_cursor(x + dcol * self.vp.mpp, y - 2 * drow * self.vp.mpp)
+
+    def set_cursor(self, x: float, y: float) -> None:
+        """Put the cursor at (x, y), kept on the site (its map's grid)."""
+        meta = self.mirror.meta if self.mirror is not None else None
+        self.cursor = clamp_to_site(meta, x, y)
         self.keep_cursor_visible()
         self.overlays_changed()
         self.post_message(self.CursorMoved())
 
-    def set_cursor(self, x: float, y: float) -> None:
-        self.cursor = (x, y)
-        self.keep_cursor_visible()
-        self.overlays_changed()
-        self.post_message(self.CursorMoved())
+    def cursor_cell(self) -> tuple[int, int]:
+        """(column, row) of the cursor in this widget."""
+        return self.vp.to_cell(*self.cursor)
+
+    def uncover_cursor(self, left: int, top: int, right: int, bottom: int) -> None:
+        """Pan so the cursor is not under the box [left, right) x [top, bottom) (this
+        widget's cells: a notification over the map): to the middle of what is left of it."""
+        col, row = self.cursor_cell()
+        if left <= col < right and top <= row < bottom:
+            target = left // 2 if left >= 4 else (right + self.vp.w) // 2
+            self.pan(col - target, 0)
+            self.overlays_changed()
+
+    def uncover(self, widgets: Iterable[Widget]) -> None:
+        """Keep the cursor clear of these widgets (notifications over the map)."""
+        x, y = self.region.x, self.region.y
+        for w in widgets:
+            r = w.region
+            if r.area and w.display:
+                self.uncover_cursor(r.x - x, r.y - y, r.right - x, r.bottom - y)
 
     def keep_cursor_visible(self, centre: bool = False) -> None:
         col, row = self.vp.to_cell(*self.cursor)

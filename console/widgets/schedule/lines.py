@@ -21,7 +21,7 @@ from backend.core.plan.checks import Finding
 from console.state import link
 from console.state.freshness import FRESH, Freshness
 from console.state.model import ConsoleModel
-from console.state.text import GLYPHS, STATUS_CSS, fmt_clock, fmt_duration, skill_title
+from console.state.text import GLYPHS, STATUS_CSS, fmt_duration, skill_title
 
 HEADER_H = 4  # name + presence / battery + link / activity / rule
 MIN_W = 18  # a dynamic robot's column, at least (at 80 columns 3 robots and a static one fit)
@@ -190,7 +190,10 @@ def _presence(h: Head) -> tuple[str, Style]:
     elif info.since is None:
         pres, pst = "✕ offline", st["offline"]
     else:
-        pres, pst = _offline_since(h.col.robot, fmt_clock(info.since), h.col.width), st["offline"]
+        pres, pst = (
+            _offline_since(h.col.robot, h.model.clock.stamp_text(info.since), h.col.width),
+            st["offline"],
+        )
     if h.compact:
         pres = "●" if info is not None and info.online else "✕"
     return pres, pst
@@ -236,11 +239,11 @@ def _link_words(h: Head) -> list[tuple[str, Style]]:
     """'⇡2 1m10s' (commands waiting for the robot's answer), '⇄20s' (delay)."""
     robot, st = h.col.robot, h.st
     out = []
-    pending = link.pending_text(h.model.pending(robot), h.model.clock())
+    pending = link.pending_text(h.model.pending(robot), h.model.clock)
     if pending:
         out.append((pending, st["tag"]))
     info = h.model.robots.get(robot)
-    delay = link.delay_text(info.delay_s if info is not None else None)
+    delay = link.delay_text(info.delay_s if info is not None else None, h.model.clock)
     if delay:
         out.append((delay, st["dim"]))
     return out
@@ -445,7 +448,8 @@ def barrier_wait_text(model: ConsoleModel, s: SkillInstance) -> str:
         found = m.find(sid)
         if info is None or not info.online:
             offline.append(
-                f"{robot} OFFLINE" + (f" {fmt_clock(info.since)}" if info and info.since else "")
+                f"{robot} OFFLINE"
+                + (f" {m.clock.stamp_text(info.since)}" if info and info.since else "")
             )
         elif found and found[2].status != Status.SYNCHWAITING:
             waiting.append(robot)

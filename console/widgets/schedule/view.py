@@ -37,8 +37,7 @@ MAX_W = 46
 
 
 class ScheduleView(ScrollView, can_focus=True):
-    """Draws the schedule from a `ConsoleModel`; posts `CursorMoved`.
-    Its look: schedule.tcss (loaded by the app; the status colours are theme variables)."""
+    """Draws the schedule from a `ConsoleModel` (look: schedule.tcss); posts `CursorMoved`."""
 
     COMPONENT_CLASSES = {
         *(f"schedule--{c}" for c in STATUS_CSS.values()),
@@ -92,6 +91,10 @@ class ScheduleView(ScrollView, can_focus=True):
         self.expand_static = False
         self.painter = Painter(self)
         self._last_width = -1
+        self.last_key: events.Key | None = None  # a robot command acts on a press made here
+
+    def on_key(self, event: events.Key) -> None:
+        self.last_key = event
 
     # -- the selection lives in the model (other screens act on it) ----------------
     @property

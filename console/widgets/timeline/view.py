@@ -78,14 +78,14 @@ class TimelineView(Widget):
     def show(self, win: tl.Window, order: list[str], top: int) -> None:
         """Lay out the lanes of `order` from `top` in `win`, then repaint."""
         self.win, self.order, self.top = win, order, top
-        plan = self.model.plan
+        plan, clock = self.model.plan, self.model.clock
         fc, mission = plan.forecast, self.model.mission
-        now = fc.now if fc is not None else win.t0
-        reach = now + plan.link_delay_s
+        now = clock.of_ts(fc.now) if fc is not None else win.t0
+        reach = now + clock.span(plan.link_delay_s)
         shown = order[top : top + self.lanes_shown]
         sel = self.model.selection.skill
         lanes = (
-            {r: tl.bars(mission, fc, r, win.t0, win.t1, win.dt, sel) for r in shown}
+            {r: tl.bars(mission, fc, r, clock, win.t0, win.t1, win.dt, sel) for r in shown}
             if mission
             else {}
         )
@@ -102,7 +102,7 @@ class TimelineView(Widget):
             )
             spacer = tl.spacer(links.get(i, set()), win.width)
             self.rows.append(tl.planned(spacer, at_sync.get(robot, ()), win))
-        self.axis_rows = tl.axis(win, now)
+        self.axis_rows = tl.axis(win, now, clock)
         self.refresh()
 
     def notify_style_update(self) -> None:
