@@ -215,9 +215,9 @@ def _posix(t: datetime) -> float:
     return t.timestamp()
 
 
-def sim_clock_text(seconds: float) -> str:
-    """Sim time as a clock: 26:48, 1:02:05 past an hour."""
+def sim_time_text(seconds: float) -> str:
+    """Sim time as h:mm:ss, hours always shown (0:20:00 is never read as 20 o'clock)."""
     s = max(0, int(seconds))
     h, rest = divmod(s, 3600)
     m, sec = divmod(rest, 60)
-    return f"{h}:{m:02d}:{sec:02d}" if h else f"{m}:{sec:02d}"
+    return f"{h}:{m:02d}:{sec:02d}"

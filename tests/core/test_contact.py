@@ -72,3 +72,14 @@ def test_invalid_windows_are_refused_with_what_to_do() -> None:
         RepeatingWindow(open_s=7200, period_s=7200)
     with pytest.raises(ValidationError, match="end after it starts"):
         ContactPass(start=10, end=10)
+
+
+def test_sim_time_reads_as_hours_minutes_seconds() -> None:
+    from backend.core.contact import sim_time_text
+
+    assert [sim_time_text(t) for t in (0, 1200, 7200.9, 90061)] == [
+        "0:00:00",
+        "0:20:00",
+        "2:00:00",
+        "25:01:01",
+    ]
