@@ -15,6 +15,7 @@ from datetime import UTC, datetime
 from typing import Any
 
 from backend.cli.ctl.args import CONTROL_OPS
+from backend.core.contact import sim_time_text
 from backend.core.params import POSE_FIELDS, POSITION_FIELDS, is_angle, pose_text, value_text
 
 _GLYPHS = {
@@ -130,11 +131,33 @@ def _time(t: datetime | None) -> str:
         return t.strftime("%H:%M:%S")
 
 
+def mission_time_text(clock: str, t: float) -> str:
+    """A time on the mission clock: `sim 2:00:00` (sim time) or `16:51:46` (wall, local)."""
+    if clock == "sim":
+        return f"sim {sim_time_text(t)}"
+    return _time(datetime.fromtimestamp(t, UTC))
+
+
+def _contact(c: Any) -> str:
+    """`in contact until sim 0:20:00`, `out of contact: window closed, next contact sim 2:00:00`."""
+    if c.state == "out_of_contact":
+        if c.next_contact is None:
+            return "out of contact: window closed, no window ahead"
+        nxt = mission_time_text(c.clock, c.next_contact)
+        return f"out of contact: window closed, next contact {nxt}"
+    until = f" until {mission_time_text(c.clock, c.closes)}" if c.closes is not None else ""
+    return f"in contact{until}"
+
+
 def _presence(info: Any) -> str:
     if info is None:
         return "not registered"
+    c = info.contact
+    if info.online and c is not None and c.state == "out_of_contact":  # never "online" then
+        return _contact(c) + (f" (present since {_time(info.since)})" if info.since else "")
     if info.online:
-        return f"online since {_time(info.since)}" if info.since else "online"
+        online = f"online since {_time(info.since)}" if info.since else "online"
+        return online + (f", {_contact(c)}" if c is not None and c.state != "offline" else "")
     return (
         f"offline since {_time(info.since)}"
         if info.since
@@ -247,6 +270,7 @@ def _robot_json(client: Any, name: str, now: datetime | None = None) -> dict[str
         "in_mission": spec is not None,
         "online": bool(info and info.online),
         "since": _iso(info.since) if info else None,
+        "contact": info.contact.model_dump(mode="json") if info and info.contact else None,
         "manifest": manifest.model_dump(mode="json") if manifest else None,
         "link": link_json(client, name, now or datetime.now(UTC)),
     }
