@@ -630,11 +630,17 @@ def test_robots_and_state_say_each_robots_contact_and_next_window(tutorial):
     """Out of contact is never "online"; times are mission time with their clock."""
     from datetime import UTC, datetime
 
-    from backend.cli.ctl.render import robots_json, robots_text, state_json, state_text
+    from backend.cli.ctl.render import (
+        mission_time_text,
+        robots_json,
+        robots_text,
+        state_json,
+        state_text,
+    )
     from backend.protocol.messages import RobotContact
 
     client = _fake_client(tutorial)
-    closes = datetime(2026, 11, 28, 14, 20, tzinfo=UTC)
+    closes = datetime(2031, 1, 2, 12, 20, tzinfo=UTC)  # not today: with its date
     client.robots["lru1"] = client.robots["lru1"].model_copy(
         update={
             "contact": RobotContact(
@@ -650,7 +656,9 @@ def test_robots_and_state_say_each_robots_contact_and_next_window(tutorial):
             ),
         }
     )
-    local = closes.astimezone().strftime("%H:%M:%S")
+    local = closes.astimezone().strftime("%Y-%m-%d %H:%M:%S")
+    today = datetime.now(UTC).replace(microsecond=0)
+    assert mission_time_text("wall", today.timestamp()) == f"{today.astimezone():%H:%M:%S}"
     for text in (robots_text(client), state_text(client)):
         [one] = [line for line in text.splitlines() if line.startswith("lru1 ")]
         [two] = [line for line in text.splitlines() if line.startswith("lru2 ")]

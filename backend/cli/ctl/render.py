@@ -132,10 +132,13 @@ def _time(t: datetime | None) -> str:
 
 
 def mission_time_text(clock: str, t: float) -> str:
-    """A time on the mission clock: `sim 2:00:00` (sim time) or `16:51:46` (wall, local)."""
+    """A time on the mission clock: `sim 2:00:00` (sim time), or the wall's (local):
+    `16:51:46` today, `2026-11-28 00:00:00` another day."""
     if clock == "sim":
         return f"sim {sim_time_text(t)}"
-    return _time(datetime.fromtimestamp(t, UTC))
+    at = datetime.fromtimestamp(t, UTC)
+    day = at.astimezone().date()
+    return _time(at) if day == datetime.now().astimezone().date() else f"{day} {_time(at)}"
 
 
 def _contact(c: Any) -> str:
