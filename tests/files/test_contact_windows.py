@@ -68,3 +68,16 @@ def test_every_problem_says_where_and_what(tmp_path, text: str, said: str) -> No
 def test_a_missing_file_is_said_plainly(tmp_path) -> None:
     with pytest.raises(FileProblems, match="no such file"):
         load_contact_windows(tmp_path / "none.yaml")
+
+
+def test_the_documented_example_loads(tmp_path) -> None:
+    import re
+    from pathlib import Path
+
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "deployment.md").read_text()
+    section = doc.split("## Contact windows", 1)[1]
+    example = re.search(r"```yaml\n(.*?)```", section, re.S)
+    assert example is not None
+    f = tmp_path / "windows.yaml"
+    f.write_text(example.group(1))
+    assert set(load_contact_windows(f)) == {"lru1", "lru2"}
