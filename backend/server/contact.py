@@ -11,8 +11,6 @@ its whole fleet).
 
 Mission time now: the simulator's clock moved on at its speed since its last
 status when a simulator runs, else the wall's.
-
-Zenoh callbacks only hand the payload to the event loop.
 """
 
 from __future__ import annotations
@@ -28,7 +26,7 @@ from pydantic import ValidationError
 from backend.core.contact import ContactWindows, RepeatingWindow, contact_at
 from backend.protocol.mapfeed import KEY_STATUS, KEY_STATUS_LIVE, SimStatus, StatusMirror
 from backend.protocol.messages import MissionClock, RobotContact
-from backend.transport import Message, QueryFailed, query, subscribe
+from backend.transport import QueryFailed, query, subscribe_on_loop
 
 log = logging.getLogger(__name__)
 
@@ -46,21 +44,21 @@ class ContactWatch:
         self.mirror = StatusMirror()
         self._status_at: datetime | None = None  # when the latest status came
         self._sim_windows: ContactWindows | None = None
-        self._loop: asyncio.AbstractEventLoop | None = None
+        self._closed = False
         self._task: asyncio.Task[None] | None = None
 
     def start(self, session: Any) -> Any:
         """Follow the simulator's status; returns the subscriber (to undeclare)."""
-        self._loop = asyncio.get_running_loop()
-        sub = subscribe(session, KEY_STATUS_LIVE, self._on_message)
-        self._task = self._loop.create_task(self._ask(session), name="contact-status")
+        self._closed = False
+        sub = subscribe_on_loop(session, KEY_STATUS_LIVE, self._got)
+        self._task = asyncio.get_running_loop().create_task(self._ask(session), name="contact")
         return sub
 
     def close(self) -> None:
+        self._closed = True
         if self._task is not None:
             self._task.cancel()
             self._task = None
-        self._loop = None
 
     async def _ask(self, session: Any) -> None:
         try:
@@ -71,16 +69,9 @@ class ContactWatch:
             return
         self._changed()
 
-    def _on_message(self, msg: Message) -> None:  # a Zenoh thread
-        loop = self._loop
-        if loop is None:
-            return
-        try:
-            loop.call_soon_threadsafe(self._got, msg.payload)
-        except RuntimeError:  # the loop is closed
-            pass
-
     def _got(self, payload: bytes) -> None:
+        if self._closed:
+            return
         try:
             applied = self.mirror.apply(payload)
         except (ValidationError, ValueError) as e:
