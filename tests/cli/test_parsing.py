@@ -656,6 +656,11 @@ def test_robots_and_state_say_each_robots_contact_and_next_window(tutorial):
             ),
         }
     )
+    from backend.protocol.messages import Telemetry
+
+    client.telemetry = {
+        r: Telemetry(robot=r, battery=0.9, at=datetime.now(UTC)) for r in ("lru1", "lru2")
+    }
     local = closes.astimezone().strftime("%Y-%m-%d %H:%M:%S")
     today = datetime.now(UTC).replace(microsecond=0)
     assert mission_time_text("wall", today.timestamp()) == f"{today.astimezone():%H:%M:%S}"
@@ -665,6 +670,9 @@ def test_robots_and_state_say_each_robots_contact_and_next_window(tutorial):
         assert "out of contact: window closed, next contact sim 2:00:00" in one, one
         assert "online" not in one, one
         assert f"online, in contact until {local}" in two, two
+    robots = robots_text(client).splitlines()
+    assert "; last known: battery 90%" in robots[0]  # lru1, out of contact
+    assert "; battery 90%" in next(line for line in robots if line.startswith("lru2 "))
     for data in (robots_json(client)["robots"], state_json(client)["robots"]):
         assert data["lru1"]["contact"] == {
             "state": "out_of_contact",

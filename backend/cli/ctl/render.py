@@ -447,9 +447,12 @@ def robots_json(client: Any) -> dict[str, Any]:
     return {"revision": client.revision, "robots": out}
 
 
-def _telemetry_text(t: Any) -> str:
+def _telemetry_text(t: Any, info: Any = None) -> str:
+    """`; battery 90%, link 99%, running explore 40%` (`; last known: ...` out of contact)."""
     out_of_range = "" if t.in_range else " (out of range)"
-    text = f"; battery {t.battery:.0%}, link {t.link:.0%}{out_of_range}, {t.mode}"
+    c = info.contact if info is not None else None
+    known = "last known: " if c is not None and c.state == "out_of_contact" else ""
+    text = f"; {known}battery {t.battery:.0%}, link {t.link:.0%}{out_of_range}, {t.mode}"
     if t.skill:
         text += f" {t.skill}" + (f" {t.progress:.0%}" if t.progress is not None else "")
     return text
@@ -480,7 +483,9 @@ def robots_text(client: Any) -> str:
         t = client.telemetry.get(name)
         link = link_text(client, name, datetime.now(UTC))
         lines.append(
-            head + (f"; {link}" if link else "") + (_telemetry_text(t) if t is not None else "")
+            head
+            + (f"; {link}" if link else "")
+            + (_telemetry_text(t, client.robots.get(name)) if t is not None else "")
         )
         lines += _manifest_lines(r["manifest"])
         now = datetime.now(UTC)
