@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import dataclass
+from functools import cached_property
 
+from backend.core.contact import ContactWindows, RepeatingWindow
 from backend.core.durations import duration_s
 
 SIM_UNITS = ("ms", "s", "m", "min", "h")
@@ -40,14 +42,25 @@ class CommsWindow:
     period_s: float
     offset_s: float = 0.0
 
+    @cached_property
+    def windows(self) -> ContactWindows:
+        """As the ground computes contact (backend.core.contact): one reading
+        of a window for the robots and for the server."""
+        return ContactWindows(
+            repeating=RepeatingWindow(
+                open_s=self.open_s, period_s=self.period_s, offset_s=self.offset_s
+            )
+        )
+
     def is_open(self, sim_t: float) -> bool:
-        return (sim_t - self.offset_s) % self.period_s < self.open_s
+        return self.windows.is_open(sim_t)
 
     def next_change(self, sim_t: float) -> float:
         """The sim time at which the window next opens or closes."""
-        phase = (sim_t - self.offset_s) % self.period_s
-        start = sim_t - phase
-        return start + (self.open_s if phase < self.open_s else self.period_s)
+        w = self.windows
+        change = w.closes_at(sim_t) if w.is_open(sim_t) else w.next_opening(sim_t)
+        assert change is not None  # a repeating window always closes and opens again
+        return change
 
     def describe(self) -> str:
         first = f", the first at {_show(self.offset_s)}" if self.offset_s else ""

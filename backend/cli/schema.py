@@ -10,8 +10,12 @@ from backend.exit_codes import EXIT_OK
 
 
 def prepare_parser(subparsers: Any) -> argparse.ArgumentParser:
-    p = subparsers.add_parser("schema", help="print the JSON Schema of mission and library files")
-    p.add_argument("kind", nargs="?", choices=["all", "mission", "library"], default="all")
+    p = subparsers.add_parser(
+        "schema", help="print the JSON Schema of the mission, library and contact windows files"
+    )
+    p.add_argument(
+        "kind", nargs="?", choices=["all", "mission", "library", "contact-windows"], default="all"
+    )
     return p
 
 

@@ -56,6 +56,12 @@ def prepare_parser(subparsers: Any) -> argparse.ArgumentParser:
         help="telemetry samples kept for review in DB's .telemetry.db beside it, the oldest "
         "going first (default 2000000; 0: no archive). See docs/review.md",
     )
+    p.add_argument(
+        "--contact-windows",
+        metavar="FILE",
+        help="each robot's contact windows (YAML, see docs/deployment.md); a robot not in it "
+        "is always in contact, or in the simulator's windows when one runs",
+    )
     p.add_argument("-v", "--verbose", action="store_true")
     return p
 
@@ -63,6 +69,7 @@ def prepare_parser(subparsers: Any) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     # imported here: every missionctl command builds this parser
     from backend.core.credentials import AccountsError
+    from backend.files.contact import load_contact_windows
     from backend.files.diagnostics import FileProblems
     from backend.server.accounts import load_accounts
     from backend.server.journal import JournalError, NotReplayable, Unreplayable
@@ -77,8 +84,13 @@ def run(args: argparse.Namespace) -> int:
     try:
         extra = {**config_file_options(args), **tls_listen_options(args)}
         accounts = load_accounts(args.accounts) if args.accounts else None
+        windows = load_contact_windows(args.contact_windows) if args.contact_windows else None
     except (AccountsError, ValueError) as e:
         print(f"missionctl server: {e}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except FileProblems as e:
+        for issue in e.issues:
+            print(issue, file=sys.stderr)
         return EXIT_BAD_INPUT
     server = MissionServer(
         db=db,
@@ -89,6 +101,7 @@ def run(args: argparse.Namespace) -> int:
         accounts=accounts,
         recover=args.recover,
         link_delay_hint=args.link_delay_hint,
+        contact_windows=windows,
         **({} if args.archive_samples is None else {"archive_samples": args.archive_samples}),
     )
     try:

@@ -7,6 +7,7 @@ issues with sentences an operator can act on (not pydantic's wording).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from datetime import datetime
 from typing import Any
 
 from pydantic import ValidationError
@@ -83,6 +84,7 @@ _EXPECTED = {
     "datetime_parsing": "an ISO date-time",
     "datetime_type": "an ISO date-time",
     "datetime_from_date_parsing": "an ISO date-time",
+    "timezone_aware": "a date-time with its zone, e.g. 2026-11-28T14:00:00Z (UTC)",
 }
 
 _PATTERNS = {
@@ -97,6 +99,8 @@ def _shown(value: Any) -> str:
     may be megabytes long)."""
     if isinstance(value, str):
         return echo(value)
+    if isinstance(value, datetime):  # as YAML wrote it, not its repr
+        return value.isoformat()
     text = repr(value) if not isinstance(value, dict | list | tuple) or len(value) <= 6 else ""
     if text and len(text) <= LIMITS.echo:
         return text

@@ -36,7 +36,7 @@ from backend.files.diagnostics import (
 M = TypeVar("M", bound=BaseModel)  # a file format's model
 
 
-def _read(path: FsPath) -> tuple[str, yamlio.YamlDoc]:
+def read_yaml(path: FsPath) -> tuple[str, yamlio.YamlDoc]:
     file = str(path)
     try:
         size = path.stat().st_size
@@ -115,7 +115,7 @@ def _format_problem(file: str, doc: yamlio.YamlDoc, expected: str) -> FileProble
 
 
 def load_library(path: str | FsPath) -> Library:
-    file, doc = _read(FsPath(path))
+    file, doc = read_yaml(FsPath(path))
     return _library_from(file, doc)
 
 
@@ -162,7 +162,7 @@ def library_path(mission_file: str | FsPath, library: str) -> FsPath:
 
 def load_mission(path: str | FsPath) -> tuple[Mission, Library]:
     with gc_paused():
-        file, doc = _read(FsPath(path))
+        file, doc = read_yaml(FsPath(path))
         return _mission_from(file, doc)
 
 
@@ -292,7 +292,7 @@ def validate_file(path: str | FsPath) -> list[Issue]:
     """All issues of one mission or library file (empty when valid)."""
     try:
         with gc_paused():
-            file, doc = _read(FsPath(path))
+            file, doc = read_yaml(FsPath(path))
             kind = file_kind(doc.data)
             if kind == "library":
                 _library_from(file, doc)

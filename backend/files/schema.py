@@ -6,6 +6,7 @@ from typing import Any
 
 from pydantic import BaseModel
 
+from backend.core.contact import ContactWindowsFile
 from backend.core.library import Library
 from backend.core.model import Mission
 
@@ -53,4 +54,7 @@ def schemas() -> dict[str, dict[str, Any]]:
             },
         ),
         "library": _schema(Library, "missionctl skill library file", set()),
+        "contact-windows": _schema(
+            ContactWindowsFile, "missionctl contact windows file (server --contact-windows)", set()
+        ),
     }

@@ -1235,6 +1235,21 @@ pending commands with their age (`now − created`, `now − sent`) and
 `expires`. A robot offline, out of range or silent for more than three
 heartbeats (15 s) is stale: show its last known state as such.
 
+### Contact state
+`RobotInfo.contact` is computed by the server: `in_contact` (with `closes`,
+when its window closes), `out_of_contact` (present, its window closed; with
+`next_contact`, when the next one opens; null: none ahead) or `offline` (no
+presence: offline wins over any window). Times are mission time on
+`clock`: `sim` (seconds since the simulator started) or `wall` (POSIX
+seconds, UTC). The windows (`source`) come from the server's
+`--contact-windows FILE` (`format: missionctl/contact-windows@1`, wall
+clock, see docs/deployment.md) for the robots it lists, else from the
+simulator's `--comms-window` (the `comms_window` of its status, which the
+server follows on `{mf.KEY_STATUS_LIVE}`), else none: always in contact. A
+`FleetEvent` carries the robot when its state changes (within a second of
+a window opening or closing). A robot out of contact is never shown
+"online", and its last known state is drawn as such.
+
 ## Error codes
 
 """

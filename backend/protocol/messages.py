@@ -12,6 +12,7 @@ from typing import Annotated, Any, Literal
 from pydantic import AwareDatetime, Field, ValidationError
 
 from backend.core.alerts import AlertKind, RaisedAlert
+from backend.core.contact import Contact
 from backend.core.events import EventBatch
 from backend.core.library import Library, SkillSignature
 from backend.core.model import (
@@ -159,6 +160,24 @@ class Manifest(Strict):
     )
 
 
+MissionClock = Literal["sim", "wall"]
+
+
+class RobotContact(Contact):
+    """A robot's contact state as the server computes it, with the mission
+    clock its times are on: `sim` (seconds since the simulator started) or
+    `wall` (POSIX seconds, UTC)."""
+
+    clock: MissionClock = Field(
+        "wall", description="the clock of next_contact and closes: sim or wall"
+    )
+    source: Literal["none", "file", "sim"] = Field(
+        "none",
+        description="where its windows come from: none (always in contact), the server's "
+        "--contact-windows file, or the simulator's --comms-window",
+    )
+
+
 class RobotInfo(Strict):
     """The server's view of a robot: presence, manifest and its link."""
 
@@ -177,6 +196,9 @@ class RobotInfo(Strict):
         ge=0,
         description="estimated one-way delay robot -> ground, from the `sent` times of its "
         "messages (assumes synchronized clocks)",
+    )
+    contact: RobotContact | None = Field(
+        None, description="in contact, out of contact (next contact at T) or offline"
     )
 
 

@@ -45,6 +45,7 @@ from backend.protocol.messages import (
 )
 from backend.protocol.timing import HEARTBEAT_S
 from backend.protocol.wire import LIMIT_EXCEEDED, parse, unreadable
+from backend.server.contact import ContactWatch
 from backend.server.downlink import DownlinkApplier, Submitter, raise_alerts
 from backend.server.refusals import Handler, JournalFailed
 from backend.server.uplink import UplinkSender
@@ -69,8 +70,10 @@ class LinkServer(Submitter, Protocol):
 
 
 class RobotLink:
-    def __init__(self, host: LinkServer) -> None:
+    def __init__(self, host: LinkServer, contact: ContactWatch | None = None) -> None:
         self._host = host
+        self.contact = contact or ContactWatch()
+        self.contact.on_change = self.refresh_contact
         self.robots: dict[str, RobotInfo] = {}  # presence, manifest, link state, by name
         self.senders: dict[str, UplinkSender] = {}
         self._tokens: dict[str, set[str]] = {}  # robot -> sessions whose token is present
@@ -97,9 +100,11 @@ class RobotLink:
             serve_async(session, Keys.downlink("*"), guard(self._handle_downlink), with_key=True),
             serve_async(session, Keys.legacy(1), _legacy, with_key=True),
             watch_liveliness(session, Keys.ALL_ALIVE, self._on_presence),
+            self.contact.start(session),
         ]
 
     def close(self) -> None:
+        self.contact.close()
         for sender in self.senders.values():
             sender.stop()
         if self._tick is not None:
@@ -354,6 +359,7 @@ class RobotLink:
 
     # -- presence ---------------------------------------------------------------------
     def _set_robot(self, info: RobotInfo) -> None:
+        info = info.model_copy(update={"contact": self.contact.of(info.name, info.online)})
         self.robots[info.name] = info
         if info.heard is not None:
             self._published_heard[info.name] = info.heard
@@ -380,11 +386,20 @@ class RobotLink:
         while True:
             await asyncio.sleep(TICK_S)
             try:
+                self.refresh_contact()
                 self._expire()
             except JournalFailed:
                 pass  # alerted by the server; tried again at the next tick
             except Exception:  # a bug must not end the housekeeping
                 log.exception("robot link housekeeping failed")
+
+    def refresh_contact(self) -> None:
+        """Publish the robots whose contact state changed (a window opened or
+        closed, the simulator's windows came)."""
+        now = _now()
+        for name, info in list(self.robots.items()):
+            if self.contact.of(name, info.online, now) != info.contact:
+                self._set_robot(info)
 
     def _expire(self) -> None:
         """Queued commands (never on their way) whose expiry passed."""

@@ -18,7 +18,7 @@ import logging
 import sqlite3
 import uuid
 from collections import deque
-from collections.abc import Awaitable
+from collections.abc import Awaitable, Mapping
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -26,6 +26,7 @@ from typing import Any
 import zenoh
 
 from backend.core.alerts import AlertKind, Level
+from backend.core.contact import ContactWindows
 from backend.core.events import EventBatch
 from backend.core.library import Library
 from backend.core.model import Mission
@@ -52,6 +53,7 @@ from backend.server import history
 from backend.server.accounts import Accounts, zenoh_dictionary
 from backend.server.acl import acl_config
 from backend.server.archive import MAX_SAMPLES, TelemetryArchive
+from backend.server.contact import ContactWatch
 from backend.server.journal import (
     Journal,
     JournalError,
@@ -94,6 +96,7 @@ class MissionServer:
         recover: bool = False,
         link_delay_hint: float = 0.0,
         archive_samples: int = MAX_SAMPLES,
+        contact_windows: Mapping[str, ContactWindows] | None = None,
     ):
         self.db = Path(db)
         self.mission_file = Path(mission_file) if mission_file else None
@@ -112,7 +115,8 @@ class MissionServer:
         # telemetry, alerts and presence kept beside the journal for review (0: none)
         self.archive_samples = archive_samples
         self.archive: TelemetryArchive | None = None
-        self.robot_link = RobotLink(self)
+        # robot -> its contact windows declared by the deployment (wall clock)
+        self.robot_link = RobotLink(self, ContactWatch(contact_windows))
         self.engine: Engine | None = None
         self.journal: Journal | None = None
         self.library_file: Path | None = None

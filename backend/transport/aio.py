@@ -451,6 +451,18 @@ def subscribe(
     )
 
 
+def subscribe_on_loop(
+    session: zenoh.Session,
+    key_expr: str,
+    on_payload: Callable[[bytes], object],
+    loop: asyncio.AbstractEventLoop | None = None,
+) -> zenoh.Subscriber[None]:
+    """Call `on_payload(payload)` on `loop` (the running one by default) for
+    every sample; dropped once the loop is closed."""
+    target = loop or asyncio.get_running_loop()
+    return subscribe(session, key_expr, lambda message: _post(target, on_payload, message.payload))
+
+
 def subscribe_to_queue(
     session: zenoh.Session, key_expr: str, loop: asyncio.AbstractEventLoop | None = None
 ) -> tuple[zenoh.Subscriber[None], asyncio.Queue[Message]]:

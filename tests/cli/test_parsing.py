@@ -626,6 +626,64 @@ def test_robots_show_delay_heard_and_pending_commands(tutorial):
     assert data["lru1"]["pending_commands"] == [] and data["lru1"]["link"]["delay_s"] == 2.0
 
 
+def test_robots_and_state_say_each_robots_contact_and_next_window(tutorial):
+    """Out of contact is never "online"; times are mission time with their clock."""
+    from datetime import UTC, datetime
+
+    from backend.cli.ctl.render import (
+        mission_time_text,
+        robots_json,
+        robots_text,
+        state_json,
+        state_text,
+    )
+    from backend.protocol.messages import RobotContact
+
+    client = _fake_client(tutorial)
+    closes = datetime(2031, 1, 2, 12, 20, tzinfo=UTC)  # not today: with its date
+    client.robots["lru1"] = client.robots["lru1"].model_copy(
+        update={
+            "contact": RobotContact(
+                state="out_of_contact", next_contact=7200.0, clock="sim", source="sim"
+            )
+        }
+    )
+    client.robots["lru2"] = client.robots["lru2"].model_copy(
+        update={
+            "online": True,
+            "contact": RobotContact(
+                state="in_contact", closes=closes.timestamp(), clock="wall", source="file"
+            ),
+        }
+    )
+    from backend.protocol.messages import Telemetry
+
+    client.telemetry = {
+        r: Telemetry(robot=r, battery=0.9, at=datetime.now(UTC)) for r in ("lru1", "lru2")
+    }
+    local = closes.astimezone().strftime("%Y-%m-%d %H:%M:%S")
+    today = datetime.now(UTC).replace(microsecond=0)
+    assert mission_time_text("wall", today.timestamp()) == f"{today.astimezone():%H:%M:%S}"
+    for text in (robots_text(client), state_text(client)):
+        [one] = [line for line in text.splitlines() if line.startswith("lru1 ")]
+        [two] = [line for line in text.splitlines() if line.startswith("lru2 ")]
+        assert "out of contact: window closed, next contact sim 2:00:00" in one, one
+        assert "online" not in one, one
+        assert f"online, in contact until {local}" in two, two
+    robots = robots_text(client).splitlines()
+    assert "; last known: battery 90%" in robots[0]  # lru1, out of contact
+    assert "; battery 90%" in next(line for line in robots if line.startswith("lru2 "))
+    for data in (robots_json(client)["robots"], state_json(client)["robots"]):
+        assert data["lru1"]["contact"] == {
+            "state": "out_of_contact",
+            "next_contact": 7200.0,
+            "closes": None,
+            "clock": "sim",
+            "source": "sim",
+        }
+        assert data["lru2"]["contact"]["closes"] == closes.timestamp()
+
+
 def test_pending_lists_commands_with_age_and_expiry(tutorial):
     from backend.cli.ctl.render import pending_json, pending_text
 

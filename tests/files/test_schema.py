@@ -49,7 +49,7 @@ def load_yaml(path: Path):
 
 
 def test_schema_prints_both_formats(schemas: dict):
-    assert set(schemas) == {"mission", "library"}
+    assert set(schemas) == {"mission", "library", "contact-windows"}
     for kind, s in schemas.items():
         assert s["type"] == "object", kind
         assert s["$schema"].startswith("https://json-schema.org/")
@@ -60,9 +60,12 @@ def test_schema_prints_both_formats(schemas: dict):
     assert schemas["mission"]["properties"]["format"]["const"] == "missionctl/mission@1"
     assert schemas["library"]["properties"]["format"]["const"] == "missionctl/library@1"
     assert "library" in schemas["mission"]["required"]
+    assert schemas["contact-windows"]["properties"]["format"]["const"] == (
+        "missionctl/contact-windows@1"
+    )
 
 
-@pytest.mark.parametrize("kind", ["mission", "library"])
+@pytest.mark.parametrize("kind", ["mission", "library", "contact-windows"])
 def test_schema_of_one_format(kind: str, schemas: dict):
     r = run_schema(kind)
     assert r.returncode == 0

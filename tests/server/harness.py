@@ -56,11 +56,11 @@ def new_server(db, endpoint: str, **kw) -> MissionServer:
 
 
 @asynccontextmanager
-async def serving(db):
-    """A server in the test process on `db` (free loopback port) and a
-    client connected to it, both closed afterwards."""
+async def serving(db, **kw):
+    """A server in the test process on `db` (free loopback port; `kw`: its
+    options) and a client connected to it, both closed afterwards."""
     endpoint = loopback_endpoint(free_port())
-    server = new_server(db, endpoint)
+    server = new_server(db, endpoint, **kw)
     await server.start()
     client = MissionClient(endpoint, client_id="t")
     try:

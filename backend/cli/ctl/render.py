@@ -15,6 +15,7 @@ from datetime import UTC, datetime
 from typing import Any
 
 from backend.cli.ctl.args import CONTROL_OPS
+from backend.core.contact import sim_time_text
 from backend.core.params import POSE_FIELDS, POSITION_FIELDS, is_angle, pose_text, value_text
 
 _GLYPHS = {
@@ -130,11 +131,36 @@ def _time(t: datetime | None) -> str:
         return t.strftime("%H:%M:%S")
 
 
+def mission_time_text(clock: str, t: float) -> str:
+    """A time on the mission clock: `sim 2:00:00` (sim time), or the wall's (local):
+    `16:51:46` today, `2026-11-28 00:00:00` another day."""
+    if clock == "sim":
+        return f"sim {sim_time_text(t)}"
+    at = datetime.fromtimestamp(t, UTC)
+    day = at.astimezone().date()
+    return _time(at) if day == datetime.now().astimezone().date() else f"{day} {_time(at)}"
+
+
+def _contact(c: Any) -> str:
+    """`in contact until sim 0:20:00`, `out of contact: window closed, next contact sim 2:00:00`."""
+    if c.state == "out_of_contact":
+        if c.next_contact is None:
+            return "out of contact: window closed, no window ahead"
+        nxt = mission_time_text(c.clock, c.next_contact)
+        return f"out of contact: window closed, next contact {nxt}"
+    until = f" until {mission_time_text(c.clock, c.closes)}" if c.closes is not None else ""
+    return f"in contact{until}"
+
+
 def _presence(info: Any) -> str:
     if info is None:
         return "not registered"
+    c = info.contact
+    if info.online and c is not None and c.state == "out_of_contact":  # never "online" then
+        return _contact(c) + (f" (present since {_time(info.since)})" if info.since else "")
     if info.online:
-        return f"online since {_time(info.since)}" if info.since else "online"
+        online = f"online since {_time(info.since)}" if info.since else "online"
+        return online + (f", {_contact(c)}" if c is not None and c.state != "offline" else "")
     return (
         f"offline since {_time(info.since)}"
         if info.since
@@ -247,6 +273,7 @@ def _robot_json(client: Any, name: str, now: datetime | None = None) -> dict[str
         "in_mission": spec is not None,
         "online": bool(info and info.online),
         "since": _iso(info.since) if info else None,
+        "contact": info.contact.model_dump(mode="json") if info and info.contact else None,
         "manifest": manifest.model_dump(mode="json") if manifest else None,
         "link": link_json(client, name, now or datetime.now(UTC)),
     }
@@ -420,9 +447,12 @@ def robots_json(client: Any) -> dict[str, Any]:
     return {"revision": client.revision, "robots": out}
 
 
-def _telemetry_text(t: Any) -> str:
+def _telemetry_text(t: Any, info: Any = None) -> str:
+    """`; battery 90%, link 99%, running explore 40%` (`; last known: ...` out of contact)."""
     out_of_range = "" if t.in_range else " (out of range)"
-    text = f"; battery {t.battery:.0%}, link {t.link:.0%}{out_of_range}, {t.mode}"
+    c = info.contact if info is not None else None
+    known = "last known: " if c is not None and c.state == "out_of_contact" else ""
+    text = f"; {known}battery {t.battery:.0%}, link {t.link:.0%}{out_of_range}, {t.mode}"
     if t.skill:
         text += f" {t.skill}" + (f" {t.progress:.0%}" if t.progress is not None else "")
     return text
@@ -453,7 +483,9 @@ def robots_text(client: Any) -> str:
         t = client.telemetry.get(name)
         link = link_text(client, name, datetime.now(UTC))
         lines.append(
-            head + (f"; {link}" if link else "") + (_telemetry_text(t) if t is not None else "")
+            head
+            + (f"; {link}" if link else "")
+            + (_telemetry_text(t, client.robots.get(name)) if t is not None else "")
         )
         lines += _manifest_lines(r["manifest"])
         now = datetime.now(UTC)
