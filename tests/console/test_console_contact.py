@@ -8,7 +8,20 @@ from __future__ import annotations
 
 from datetime import timedelta
 
-from console_state import MARS_FLEET, T0, fleet, mars_mid_execution, mars_telemetry
+from console_state import (
+    MARS_FLEET,
+    T0,
+    fleet,
+    fleet_changed,
+    inject,
+    make_app,
+    mars_mid_execution,
+    mars_telemetry,
+    screen_text,
+    telemetry_changed,
+    wait_until,
+)
+from map_state import map_message, mars_snapshot
 
 from backend.protocol.messages import RobotContact, RobotInfo
 from console.state.clock import MissionClock
@@ -85,3 +98,50 @@ def test_a_robot_out_of_contact_is_its_last_known_state():
     assert not m.freshness("lru1").stale
     m.set_robot(_info(CLOSED, online=False))  # offline wins
     assert m.freshness("lru1").why == "offline"
+
+
+async def _closed_window(app, pilot):
+    """Mid-execution under a sim, now at 0:18:20; lru1's window closed at 0:12:00, when it
+    was last heard (6m20s ago); the others still heard."""
+    now = [T0]
+    app.clock = lambda: now[0]
+    await inject(app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
+    now[0] = T0 + timedelta(seconds=380)
+    snap = mars_snapshot()
+    app.post_message(map_message(snap.model_copy(update={"sim_time": 1100.0, "speed": 1.0})))
+    app.post_message(fleet_changed(_info(CLOSED, heard=T0)))
+    for t in mars_telemetry():
+        if t.robot != "lru1":
+            app.post_message(telemetry_changed(t.model_copy(update={"at": now[0]})))
+    await wait_until(pilot, lambda: "sim 20:00" in screen_text(app), what="the header")
+    app.mission_screen.freshness_tick()
+    await pilot.pause()
+
+
+async def test_the_schedule_and_the_fleet_say_when_the_next_window_opens():
+    app = make_app()
+    async with app.run_test(size=(120, 40)) as pilot:
+        await _closed_window(app, pilot)
+        text = screen_text(app)
+        assert f"{CONTACT_GLYPH} → sim 20:00│" in text, text  # its column is narrow
+        assert "6m20s ago: ▶ lru1-" in text, text  # drawn as last known, as of when it was heard
+        assert "● online" in text  # the others: as before
+        await pilot.press("f4")
+        await pilot.pause()
+        table = app.screen.query_one("DataTable")
+        table.move_cursor(row=app.screen.shown.index("lru1"))
+        await pilot.pause()
+        text = screen_text(app)
+        assert f"{CONTACT_GLYPH} out of contact, next sim 20:00" in text, text
+        assert "link: out of contact: window closed, next contact sim 20:00 · heard" in text
+        assert "4 robots, 2 online, 1 out of contact" in text, text
+
+
+def test_robot_out_of_contact_80x24(snap_compare):
+    async def run(pilot):
+        app = pilot.app
+        await _closed_window(app, pilot)
+        text = screen_text(app)
+        assert f"{CONTACT_GLYPH} → sim 20:00│" in text and "6m20s ago:" in text, text
+
+    assert snap_compare(make_app(), terminal_size=(80, 24), run_before=run)
