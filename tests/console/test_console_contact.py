@@ -32,6 +32,8 @@ from console.state.contact import (
     presence_words,
 )
 from console.state.model import ConsoleModel
+from console.state.text import GLYPHS
+from console.widgets.map.view import OFFLINE_GLYPH, robot_status
 
 CLOSED = RobotContact(state="out_of_contact", next_contact=1200.0, clock="sim", source="sim")
 OPEN = RobotContact(state="in_contact", closes=1920.0, clock="sim", source="sim")
@@ -98,6 +100,15 @@ def test_a_robot_out_of_contact_is_its_last_known_state():
     assert not m.freshness("lru1").stale
     m.set_robot(_info(CLOSED, online=False))  # offline wins
     assert m.freshness("lru1").why == "offline"
+
+
+def test_on_the_map_a_robot_out_of_contact_is_drawn_apart():
+    m = _model()
+    assert robot_status(m, "lru1")[0] == GLYPHS[m.robot_state("lru1")[0].status]
+    m.set_robot(_info(CLOSED))
+    assert robot_status(m, "lru1") == (CONTACT_GLYPH, "presence-unknown")
+    m.set_robot(_info(CLOSED, online=False))
+    assert robot_status(m, "lru1")[0] == OFFLINE_GLYPH
 
 
 async def _closed_window(app, pilot):
