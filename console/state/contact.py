@@ -98,6 +98,7 @@ def _away_words(c: RobotContact, clock: MissionClock) -> list[str]:
     return [
         f"{CONTACT_GLYPH} next {at}",
         f"{CONTACT_GLYPH} → {at}",
+        f"{CONTACT_GLYPH} →{at}",  # 'ardea ◌ →sim 2:00:00' at 80 columns
         f"{CONTACT_GLYPH} {at}",
         CONTACT_GLYPH,
     ]

@@ -58,7 +58,8 @@ def test_out_of_contact_is_said_with_the_next_window_in_mission_time():
     closed = _info(CLOSED)
     assert header_contact(closed, clock, 20) == f"{CONTACT_GLYPH} next sim 20:00"
     assert header_contact(closed, clock, 15) == f"{CONTACT_GLYPH} → sim 20:00"  # 80 columns
-    assert header_contact(closed, clock, 12) == f"{CONTACT_GLYPH} sim 20:00"
+    assert header_contact(closed, clock, 12) == f"{CONTACT_GLYPH} →sim 20:00"
+    assert header_contact(closed, clock, 11) == f"{CONTACT_GLYPH} sim 20:00"
     assert header_contact(closed, clock, 3) == CONTACT_GLYPH
     assert contact_words(closed, clock) == "out of contact: window closed, next contact sim 20:00"
     assert presence_words(closed, clock) == f"{CONTACT_GLYPH} out of contact, next sim 20:00"
