@@ -30,6 +30,7 @@ from console.state.capability import (
     sparkline,
 )
 from console.state.changes import StateChange, Topic
+from console.state.contact import out_of_contact, presence_words
 from console.state.model import ConsoleModel
 
 SPARK = 6  # samples shown per sparkline (the model keeps model.HISTORY)
@@ -79,6 +80,10 @@ class FleetScreen(ViewScreen):
         info = self.model.robots.get(robot)
         if info is None:
             return Text("? unknown", style=self.colour("presence-unknown"))
+        words = presence_words(info, self.model.clock)  # never "online" while it is closed
+        if words:
+            away = out_of_contact(info)
+            return Text(words, style="italic" if away else self.colour("presence-online"))
         if info.online:
             return Text("● online", style=self.colour("presence-online"))
         since = f" {self.model.clock.stamp_text(info.since)}" if info.since else " (not seen)"
@@ -166,9 +171,13 @@ class FleetScreen(ViewScreen):
 
     def _title(self) -> None:
         n = len(fleet_order(self.model))
-        online = sum(1 for r in fleet_order(self.model) if self.model.is_online(r))
+        present = [r for r in fleet_order(self.model) if self.model.is_online(r)]
+        away = sum(1 for r in present if out_of_contact(self.model.robots.get(r)))
         shown = f" · {len(self.shown)} match '{self.query_text}'" if self.query_text else ""
-        self.set_title(("Fleet", "bold"), f"  {n} robots, {online} online{shown}")
+        away_text = f", {away} out of contact" if away else ""
+        self.set_title(
+            ("Fleet", "bold"), f"  {n} robots, {len(present) - away} online{away_text}{shown}"
+        )
 
     @property
     def selected(self) -> str | None:
@@ -200,7 +209,8 @@ class FleetScreen(ViewScreen):
         out.append(f"  {robot_type(self.model, r)}  ")
         out.append_text(self._presence(r))
         if info is not None and info.online and info.since:
-            out.append(f" since {self.model.clock.stamp_text(info.since)}")
+            present = "present since" if out_of_contact(info) else "since"
+            out.append(f" {present} {self.model.clock.stamp_text(info.since)}")
         out.append("\ndoing: ", style="bold")
         out.append(self.model.activity_text(r) if self.model.mission else "—")
         out.append(" · last report: ", style="bold")

@@ -11,7 +11,8 @@ When it was last heard is the later of the console's own arrival stamps
 downlink message). A robot's estimated one-way delay (RobotInfo.delay_s) is
 added: what arrives now left the robot that long ago. A delay of
 `SILENT_AFTER_S` or more makes the robot stale even while its messages keep
-arriving in order ("delayed").
+arriving in order ("delayed"). A robot out of contact (its window closed,
+RobotInfo.contact) is stale too, whatever it sent last ("out of contact").
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from typing import Any, Protocol
 
 from backend.protocol.messages import RobotInfo, Telemetry
 from console.state.clock import MissionClock
+from console.state.contact import out_of_contact
 from console.state.text import fmt_duration
 
 # a robot that was sending telemetry and has been silent this long is stale
@@ -32,8 +34,8 @@ SILENT_AFTER_S = 10.0
 @dataclass(frozen=True)
 class Freshness:
     """`stale`: draw the robot's state as last known; `age_s`: since when, in
-    mission seconds (None: never heard); `why`: "offline", "silent", "delayed"
-    or "" (fresh)."""
+    mission seconds (None: never heard); `why`: "offline", "out of contact",
+    "silent", "delayed" or "" (fresh)."""
 
     stale: bool = False
     age_s: float | None = None
@@ -70,10 +72,11 @@ def freshness(model: Heard, robot: str, clock: MissionClock) -> Freshness:
     if info is not None and info.heard is not None and (heard is None or info.heard > heard):
         heard = info.heard
     delay = info.delay_s if info is not None and info.delay_s is not None else 0.0
-    if info is not None and not info.online:
+    away = _away(info)
+    if info is not None and away:  # nothing it does now reaches the ground
         since = heard or info.since
         age = max(0.0, (now - since).total_seconds()) + delay if since is not None else None
-        return Freshness(True, None if age is None else clock.span(age), "offline")
+        return Freshness(True, None if age is None else clock.span(age), away)
     if heard is None:
         return FRESH
     age = max(0.0, (now - heard).total_seconds()) + delay
@@ -82,6 +85,13 @@ def freshness(model: Heard, robot: str, clock: MissionClock) -> Freshness:
     if delay >= SILENT_AFTER_S:
         return Freshness(True, clock.span(age), "delayed")
     return Freshness(False, clock.span(age), "")
+
+
+def _away(info: RobotInfo | None) -> str:
+    """'offline' (no presence), 'out of contact' (its window closed), or ''."""
+    if info is not None and not info.online:
+        return "offline"
+    return "out of contact" if out_of_contact(info) else ""
 
 
 class EtaTicks:

@@ -15,6 +15,7 @@ from typing import Protocol
 from backend.core.model import CommandState, Mission, UplinkCommand
 from backend.protocol.messages import RobotInfo
 from console.state.clock import MissionClock
+from console.state.contact import contact_words
 from console.state.text import fmt_duration
 
 UPLINK_GLYPH = "⇡"
@@ -104,9 +105,11 @@ class Linked(Protocol):
 
 def link_text(model: Linked, robot: str, clock: MissionClock) -> str:
     """The robot's link in words, in mission time: 'one-way delay 10m · heard 5s
-    ago · waiting for its answer: sync #17 sent 40s ago'."""
+    ago · waiting for its answer: sync #17 sent 40s ago', after its contact
+    state when it has windows ('out of contact: window closed, next contact sim 20:00')."""
     info = model.robots.get(robot)
-    parts = []
+    contact = contact_words(info, clock)
+    parts = [contact] if contact else []
     if info is not None and info.delay_s is not None:
         parts.append(f"one-way delay {clock.duration_text(info.delay_s)}")
     if info is not None and info.heard is not None:

@@ -49,6 +49,7 @@ from console.state.changes import (
     change,
 )
 from console.state.clock import MissionClock
+from console.state.contact import out_of_contact
 from console.state.eventlog import AlertBook, EventLog
 from console.state.freshness import Freshness, freshness
 from console.state.keys import KeyNames
@@ -364,7 +365,7 @@ class ConsoleModel:
 
     def set_robot(self, info: RobotInfo) -> None:
         self.robots[info.name] = info
-        if info.online:
+        if info.online and not out_of_contact(info):  # (its window closing is no word from it)
             self.heard[info.name] = self.clock()
 
     def set_telemetry(self, t: Telemetry) -> None:

@@ -35,6 +35,7 @@ from textual.widget import Widget
 
 from backend.core.model import FINISHED, Status
 from backend.protocol.mapfeed import T_FREE, T_ROCK, T_SLOW, T_UNKNOWN, MapMirror
+from console.state.contact import CONTACT_GLYPH, out_of_contact
 from console.state.markers import marker_point, marker_use
 from console.state.model import ConsoleModel
 from console.state.site import clamp_to_site
@@ -345,6 +346,8 @@ def robot_status(model: ConsoleModel, robot: str) -> tuple[str, str]:
     """(glyph, colour variable) of what a robot is doing, for its map label."""
     if not model.is_online(robot):
         return OFFLINE_GLYPH, "presence-offline"
+    if out_of_contact(model.robots.get(robot)):  # drawn where it was last heard, dimmed
+        return CONTACT_GLYPH, "presence-unknown"
     act, queued = model.robot_state(robot)
     if act is not None:
         st = act.status

@@ -19,6 +19,7 @@ from textual.strip import Strip
 from backend.core.model import ACTIVE, SkillInstance, Status
 from backend.core.plan.checks import Finding
 from console.state import link
+from console.state.contact import CONTACT_GLYPH, header_contact, out_of_contact
 from console.state.freshness import FRESH, Freshness
 from console.state.model import ConsoleModel
 from console.state.text import GLYPHS, STATUS_CSS, fmt_duration, skill_title
@@ -186,7 +187,11 @@ def _presence(h: Head) -> tuple[str, Style]:
     if info is None:
         pres, pst = "? unknown", st["unknown"]
     elif info.online:
-        pres, pst = "● online", st["online"]
+        said = header_contact(info, h.model.clock, h.col.width - cell_len(h.col.robot) - 1)
+        if out_of_contact(info):  # never "online" while its window is closed
+            pres, pst = said or CONTACT_GLYPH, st["stale-head"]
+        else:
+            pres, pst = said or "● online", st["online"]
     elif info.since is None:
         pres, pst = "✕ offline", st["offline"]
     else:
@@ -195,7 +200,7 @@ def _presence(h: Head) -> tuple[str, Style]:
             st["offline"],
         )
     if h.compact:
-        pres = "●" if info is not None and info.online else "✕"
+        pres = pres[0] if info is not None and info.online else "✕"
     return pres, pst
 
 
