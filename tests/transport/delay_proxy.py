@@ -72,8 +72,9 @@ class _Pipe:
                 await self.proxy.link_up.wait()
                 if data is _CLOSE or not data:
                     break
-                self.writer.write(data)
+                # counted first: the far end may read the bytes before write() returns
                 self.count(len(data))
+                self.writer.write(data)
                 await self.writer.drain()
         except (ConnectionError, OSError):
             pass
