@@ -50,9 +50,15 @@ async def connected(app, pilot, *online: str) -> None:
 
 
 async def pick(app, pilot, sid: str) -> None:
-    app.mission_screen.schedule.select(sid)
-    app.mission_screen.schedule.focus()
-    await pilot.pause()
+    schedule = app.mission_screen.schedule
+    # the model has the state before the screen draws it (its own turn): a select
+    # before that draw is undone by the first rebuild
+    await wait_until(
+        pilot, lambda: any(sid in c.line_of for c in schedule.columns), SLOW, f"{sid} shown"
+    )
+    schedule.select(sid)
+    schedule.focus()
+    await wait_until(pilot, lambda: app.model.selection.skill == sid, SLOW, f"{sid} selected")
 
 
 async def test_add_edit_sync_run_success(live):
