@@ -11,7 +11,7 @@ first, then query the status, then apply the publications that follow it
 A gap or a restarted simulator queries again; nobody answering is normal (no
 simulator): the next full publication brings the status.
 
-Zenoh callbacks only hand the payload to the asyncio loop.
+Zenoh callbacks only hand the payload to the asyncio loop (subscribe_on_loop).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from backend.protocol.mapfeed import KEY_STATUS, KEY_STATUS_LIVE, SimStatus, StatusMirror
-from backend.transport import Message, QueryFailed, query, subscribe, undeclare
+from backend.transport import QueryFailed, query, subscribe_on_loop, undeclare
 
 log = logging.getLogger(__name__)
 
@@ -42,7 +42,6 @@ class SimStatusFeed:
         self.timeout = timeout
         self.mirror = StatusMirror()
         self.queries = 0  # status queries made (first one and after gaps)
-        self._loop: asyncio.AbstractEventLoop | None = None
         self._sub: Any = None
         self._task: asyncio.Task[None] | None = None
         self._early: list[bytes] = []  # publications that came while querying
@@ -55,8 +54,7 @@ class SimStatusFeed:
         return self.mirror.status
 
     async def start(self) -> None:
-        self._loop = asyncio.get_running_loop()
-        self._sub = subscribe(self.session, KEY_STATUS_LIVE, self._on_message)
+        self._sub = subscribe_on_loop(self.session, KEY_STATUS_LIVE, self._got)
         await self.resync()
 
     def close(self) -> None:
@@ -82,16 +80,9 @@ class SimStatusFeed:
             self._apply(payload)
         self._emit()
 
-    def _on_message(self, msg: Message) -> None:  # a Zenoh thread
-        loop = self._loop
-        if loop is None or self._closed:
-            return
-        try:
-            loop.call_soon_threadsafe(self._got, msg.payload)
-        except RuntimeError:  # the loop is closed
-            pass
-
     def _got(self, payload: bytes) -> None:
+        if self._closed:
+            return
         if self._querying:
             self._early.append(payload)
             return
