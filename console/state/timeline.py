@@ -141,6 +141,17 @@ def bars(
     return out
 
 
+def first_start(mission: Mission, clock: MissionClock) -> float | None:
+    """When the log's first skill started (mission time); None before any did."""
+    starts = [
+        s.started_at
+        for task in mission.tasks.values()
+        for s in task
+        if s.status in FINISHED and s.started_at is not None
+    ]
+    return clock.of(min(starts)) if starts else None
+
+
 def times(
     mission: Mission, fc: Forecast | None, sid: str, clock: MissionClock
 ) -> tuple[float, float] | None:
