@@ -40,7 +40,7 @@ from console.state.changes import StateChange, Topic
 from console.state.files import RecentFiles
 from console.state.freshness import EtaTicks
 from console.state.keys import KeyNames
-from console.state.model import CONNECTED, ConsoleModel
+from console.state.model import CONNECTED, REVIEW, ConsoleModel
 from console.state.site import site_text
 from console.widgets.bars import KeyBar, StatusLine, TopBar, connection_text
 from console.widgets.editor.editor import ParamEditor
@@ -65,11 +65,12 @@ def top_text(m: ConsoleModel, unacked: int, marks: list[str], keys: KeyNames) ->
     if m.mission is not None:
         t.append(f"  {m.mission.name}", style="bold")
         t.append(f"  rev {m.mission.revision}", style="dim")
-    t.append(f"   {connection_text(m.connection)}")
-    if m.endpoint:
-        t.append(f" {m.endpoint}", style="dim")
-    if m.connection_detail and m.connection != CONNECTED:
-        t.append(f" — {m.connection_detail}", style="dim")
+    if m.connection != REVIEW:
+        t.append(f"   {connection_text(m.connection)}")
+        if m.endpoint:
+            t.append(f" {m.endpoint}", style="dim")
+        if m.connection_detail and m.connection != CONNECTED:
+            t.append(f" — {m.connection_detail}", style="dim")
     if m.read_only:
         t.append(f"   {m.read_only}", style="bold")
     if marks:
@@ -245,7 +246,8 @@ class MissionScreen(Screen):
         self.update_keys()
         c = self.model.uplinking(event.skill_id) if event.skill_id else None
         if c is not None:  # its row may have no room for the command: the status line has
-            cancel = key_names(self).say("mission.cancel")
+            # a read-only console cannot cancel: it names no key
+            cancel = None if self.model.read_only else key_names(self).say("mission.cancel")
             self.say(link.waiting_text(event.skill_id, c, self.model.clock, cancel))
         if self.editor_visible:
             await self.editor.show_skill(event.skill_id)

@@ -31,6 +31,9 @@ def test_review_schedule_in_robot_time_80x24(snap_compare, recorded, replay_of):
         pilot.app.clear_notifications()
         await settle(pilot)
         _shows(pilot.app, "robot time 08:05:00", "lru1", "review of mission.db")
+        text = screen_text(pilot.app)  # a recording: no connection, no key to cancel
+        assert "offline" not in text and "cancels it" not in text, text
+        assert "waiting for lru1's answer" in text
 
     assert snap_compare(app, terminal_size=(80, 24), run_before=run)
 
