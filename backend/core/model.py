@@ -398,10 +398,19 @@ class Mission(Strict):
                 if found is not None:
                     return found
             del hints[skill_id]
+        if not hints:  # a mission fresh from a file or snapshot: note every list at once
+            found = None
+            for robot, task in self.tasks.items():
+                found = self._rehint(robot, task, skill_id) or found
+            return found
         for robot, task in self.tasks.items():
             if any(s.id == skill_id for s in task):
                 return self._rehint(robot, task, skill_id)
         return None
+
+    def hint(self, robot: str, index: int, skill_id: str) -> None:
+        """Where a skill was just put (an added skill is found without a scan)."""
+        self._hint_map()[skill_id] = (robot, index)
 
     def _hint_map(self) -> _Hints:
         # `self._hints` goes through pydantic's __getattr__, which probes the
