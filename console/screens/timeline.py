@@ -224,9 +224,7 @@ class TimelineScreen(Screen):
     def action_timeline_fit(self) -> None:
         """What happened (actual bars over the plan as synced) and the plan ahead."""
         now, end = self._whole()
-        m = self.model.mission
-        first = tl.first_start(m, self.model.clock) if m is not None else None
-        start = now if first is None else min(first, now)
+        start = tl.first_start(self.model.mission, self.model.clock, now)
         self.win = tl.fit(start, end, self.view.lanes_w)
         self.redraw()
 

@@ -141,15 +141,11 @@ def bars(
     return out
 
 
-def first_start(mission: Mission, clock: MissionClock) -> float | None:
-    """When the log's first skill started (mission time); None before any did."""
-    starts = [
-        s.started_at
-        for task in mission.tasks.values()
-        for s in task
-        if s.status in FINISHED and s.started_at is not None
-    ]
-    return clock.of(min(starts)) if starts else None
+def first_start(mission: Mission | None, clock: MissionClock, now: float) -> float:
+    """When the first skill started (mission time: the log is the head of
+    each list), or `now` when none has."""
+    heads = [task[0] for task in mission.tasks.values() if task] if mission else []
+    return min([now, *(clock.of(s.started_at) for s in heads if s.started_at)])
 
 
 def times(
