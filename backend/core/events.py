@@ -320,6 +320,7 @@ def apply_event(m: Mission, ev: Any, revision: int) -> Mission:
             s = skill.model_copy(deep=True)
             s.rev = revision
             m.tasks.setdefault(robot, []).insert(index, s)
+            m.hint(robot, index, s.id)
             m.task_revs[robot] = revision
             _bump_counters(m, skill_id=s.id)
         case SkillRemoved(robot=robot, id=sid):

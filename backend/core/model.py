@@ -385,7 +385,7 @@ class Mission(Strict):
     def find(self, skill_id: str) -> tuple[str, int, SkillInstance] | None:
         """(robot, index, skill) of a skill id, or None. O(1) for a skill
         found before whose list has not moved it; else one robot's list;
-        else (a new or unknown id) the whole mission, as a plain scan."""
+        else (a new or unknown id) every list, noted as it goes."""
         hints = self._hint_map()
         hint = hints.get(skill_id)
         if hint is not None:
@@ -398,10 +398,16 @@ class Mission(Strict):
                 if found is not None:
                     return found
             del hints[skill_id]
+        # not noted (a mission fresh from a file or snapshot, or an unknown id):
+        # note every list in one pass, so that no other skill needs a scan
+        found = None
         for robot, task in self.tasks.items():
-            if any(s.id == skill_id for s in task):
-                return self._rehint(robot, task, skill_id)
-        return None
+            found = self._rehint(robot, task, skill_id) or found
+        return found
+
+    def hint(self, robot: str, index: int, skill_id: str) -> None:
+        """Where a skill was just put (an added skill is found without a scan)."""
+        self._hint_map()[skill_id] = (robot, index)
 
     def _hint_map(self) -> _Hints:
         # `self._hints` goes through pydantic's __getattr__, which probes the

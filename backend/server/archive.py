@@ -25,8 +25,8 @@ the index (about 30 bytes per journaled batch).
 
 **Off the event loop**: the sample is taken or dropped on the Zenoh thread
 that received it (a comparison), and handed to a writer thread through a
-bounded queue; the writer inserts whatever waits in one transaction, about
-every `flush_s`. A full queue drops the sample (counted in `dropped`,
+bounded queue; the writer wakes once every `flush_s` at most and inserts
+whatever waits in one transaction. A full queue drops the sample (counted in `dropped`,
 logged once): nothing ever waits for the disk but that thread.
 """
 
@@ -98,6 +98,7 @@ class TelemetryArchive:
         self._kept: dict[str, _Kept] = {}
         self._queue: queue.Queue[tuple[str, tuple[object, ...]] | None] = queue.Queue(QUEUE_MAX)
         self._thread: threading.Thread | None = None
+        self._closing = threading.Event()  # ends the writer's gathering at once
         self.kept = 0  # samples handed to the writer
         self.skipped = 0  # samples the downsampling left out
         self.dropped = 0  # samples lost to a full queue
@@ -138,6 +139,7 @@ class TelemetryArchive:
         thread, self._thread = self._thread, None
         if thread is None:
             return
+        self._closing.set()
         self._queue.put(None)
         thread.join(timeout)
 
@@ -198,12 +200,14 @@ class TelemetryArchive:
                 first = self._queue.get()
                 if first is None:
                     return
-                items = [first]
-                deadline = time.monotonic() + self.flush_s
-                stop = False
-                while True:  # gather what comes within flush_s
+                # let flush_s of samples gather, then take them all: one wake-up
+                # of this thread per flush, not one per sample (each would take
+                # the GIL from the Zenoh thread that receives the telemetry)
+                self._closing.wait(self.flush_s)
+                items, stop = [first], False
+                while True:
                     try:
-                        item = self._queue.get(timeout=max(0.0, deadline - time.monotonic()))
+                        item = self._queue.get_nowait()
                     except queue.Empty:
                         break
                     if item is None:

@@ -25,6 +25,7 @@ from console.bindings import bindings, key_names
 from console.review.goto import GotoScreen
 from console.state.actions import ACTIONS, REVIEW_ACTIONS
 from console.state.changes import StateChange
+from console.state.model import REVIEW
 from console.state.replay import GROUND, ROBOT, SPEEDS, Replay
 
 PLAY_TICK_S = 0.25  # how often playing moves the time on (wall seconds)
@@ -78,6 +79,7 @@ class ReviewApp(MissionApp):
         super().__init__(ask_before_quit=False, **kw)
         self.replay: Replay = make_replay(self.model)
         self.model.read_only = f"review of {what}"
+        self.model.connection = REVIEW
         self.start_at = at
         self.playing = False
         self.speed = 10.0

@@ -40,7 +40,7 @@ from console.state.changes import StateChange, Topic
 from console.state.files import RecentFiles
 from console.state.freshness import EtaTicks
 from console.state.keys import KeyNames
-from console.state.model import CONNECTED, ConsoleModel
+from console.state.model import CONNECTED, REVIEW, ConsoleModel
 from console.state.site import site_text
 from console.widgets.bars import KeyBar, StatusLine, TopBar, connection_text
 from console.widgets.editor.editor import ParamEditor
@@ -65,16 +65,23 @@ def top_text(m: ConsoleModel, unacked: int, marks: list[str], keys: KeyNames) ->
     if m.mission is not None:
         t.append(f"  {m.mission.name}", style="bold")
         t.append(f"  rev {m.mission.revision}", style="dim")
-    t.append(f"   {connection_text(m.connection)}")
-    if m.endpoint:
-        t.append(f" {m.endpoint}", style="dim")
-    if m.connection_detail and m.connection != CONNECTED:
-        t.append(f" — {m.connection_detail}", style="dim")
+    _connection(t, m)
     if m.read_only:
         t.append(f"   {m.read_only}", style="bold")
     if marks:
         t.append(f"   marked: {', '.join(marks)}", style="bold")
     return t
+
+
+def _connection(t: Text, m: ConsoleModel) -> None:
+    """The connection's state, where to, and why not (a review has none)."""
+    if m.connection == REVIEW:
+        return
+    t.append(f"   {connection_text(m.connection)}")
+    if m.endpoint:
+        t.append(f" {m.endpoint}", style="dim")
+    if m.connection_detail and m.connection != CONNECTED:
+        t.append(f" — {m.connection_detail}", style="dim")
 
 
 def connection_news(m: ConsoleModel, before: str) -> tuple[str, str] | None:
@@ -245,7 +252,7 @@ class MissionScreen(Screen):
         self.update_keys()
         c = self.model.uplinking(event.skill_id) if event.skill_id else None
         if c is not None:  # its row may have no room for the command: the status line has
-            cancel = key_names(self).say("mission.cancel")
+            cancel = None if self.model.read_only else key_names(self).say("mission.cancel")
             self.say(link.waiting_text(event.skill_id, c, self.model.clock, cancel))
         if self.editor_visible:
             await self.editor.show_skill(event.skill_id)

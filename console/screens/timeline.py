@@ -4,7 +4,8 @@ Layout: title bar / the lanes (console/widgets/timeline.py) / the plan's
 end ("plan ends 15:42 · critical: lru2") / the selected skill in a line /
 footer. The selection is the schedule's (the model's): arrows move it
 between skills and robots, enter shows it in the schedule. +/- zoom around
-it, 0 fits the whole plan, shift+arrows scroll. Redrawn when the app says
+it, 0 fits the whole mission (what happened, then the plan), shift+arrows
+scroll. Redrawn when the app says
 the plan changed (a new forecast), at once when shown, else when shown next.
 """
 
@@ -221,7 +222,10 @@ class TimelineScreen(Screen):
         self._zoom(1)
 
     def action_timeline_fit(self) -> None:
-        self.win = tl.fit(*self._whole(), self.view.lanes_w)
+        """What happened (actual bars over the plan as synced) and the plan ahead."""
+        now, end = self._whole()
+        start = tl.first_start(self.model.mission, self.model.clock, now)
+        self.win = tl.fit(start, end, self.view.lanes_w)
         self.redraw()
 
     def action_timeline_now(self) -> None:

@@ -420,7 +420,7 @@ ACTIONS: list[Action] = [
             ),
             ("zoom_in", "plus,equals_sign", "Zoom+", "Zoom in (around the selection)", True),
             ("zoom_out", "minus", "Zoom-", "Zoom out (around the selection)", True),
-            ("fit", "0,home", "Fit", "Show the whole plan, from now to its end", True),
+            ("fit", "0,home", "Fit", "Show the whole mission: what happened, then the plan", True),
             ("now", "n", "Now", "Scroll to now", False),
             ("earlier", "shift+left,less_than_sign", "Earlier", "Scroll back in time", False),
             ("later", "shift+right,greater_than_sign", "Later", "Scroll on in time", False),

@@ -87,12 +87,12 @@ def why_not(
 ) -> str | None:
     if facts.mission is None:
         return "no mission loaded yet"
+    if facts.read_only and action not in READ_ONLY_OK:
+        return facts.read_only  # first: a review is never connected, and need not say so
     if not facts.connected and action not in OFFLINE_OK:
         return (
             f"not connected to the mission server ({facts.connection}): nothing can be changed now"
         )
-    if facts.read_only and action not in READ_ONLY_OK:
-        return facts.read_only
     rule = RULES.get(action)
     if rule is None:
         return None  # undo, redo, load, save: the server decides

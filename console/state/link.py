@@ -43,11 +43,11 @@ def command_text(c: UplinkCommand, clock: MissionClock) -> str:
     return text
 
 
-def waiting_text(sid: str, c: UplinkCommand, clock: MissionClock, cancel_key: str) -> str:
-    """The status line on an uplinking skill: its command and the key that cancels it."""
-    return (
-        f"{sid}: {command_text(c, clock)}, waiting for {c.robot}'s answer ({cancel_key} cancels it)"
-    )
+def waiting_text(sid: str, c: UplinkCommand, clock: MissionClock, cancel_key: str | None) -> str:
+    """The status line on an uplinking skill: its command and the key that
+    cancels it (none for a console that cannot: an observer, a review)."""
+    text = f"{sid}: {command_text(c, clock)}, waiting for {c.robot}'s answer"
+    return f"{text} ({cancel_key} cancels it)" if cancel_key else text
 
 
 def cancel_question(c: UplinkCommand, clock: MissionClock) -> str:

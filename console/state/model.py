@@ -66,6 +66,7 @@ CONNECTING, CONNECTED, RECONNECTING, UNREACHABLE, OFFLINE = (
     "unreachable",
     "offline",
 )
+REVIEW = "review"  # a recording, not a server: there is no connection to show
 
 
 # -- the model --------------------------------------------------------------------

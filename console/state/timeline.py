@@ -141,6 +141,13 @@ def bars(
     return out
 
 
+def first_start(mission: Mission | None, clock: MissionClock, now: float) -> float:
+    """When the first skill started (mission time: the log is the head of
+    each list), or `now` when none has."""
+    heads = [task[0] for task in mission.tasks.values() if task] if mission else []
+    return min([now, *(clock.of(s.started_at) for s in heads if s.started_at)])
+
+
 def times(
     mission: Mission, fc: Forecast | None, sid: str, clock: MissionClock
 ) -> tuple[float, float] | None:

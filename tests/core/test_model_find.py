@@ -88,3 +88,23 @@ def test_hints_change_neither_equality_nor_what_is_stored():
         0,
         looked_up.tasks["a"][0],
     )  # the original's lists are its own
+
+
+def test_a_fresh_mission_notes_every_list_on_its_first_lookup():
+    m = mission()
+    assert m.find("c-2") == ("c", 1, m.tasks["c"][1])
+    # the other robots' skills are noted too: their first lookups need no scan
+    assert {sid for sid in m._hints} == {s.id for t in m.tasks.values() for s in t}
+
+
+def test_an_added_skill_is_noted_where_it_was_put():
+    from backend.core.events import EventBatch, SkillAdded, apply_events
+
+    m = mission()
+    m.find("a-1")  # every list noted
+    added = SkillInstance(id="b-9", skill="drive_to")
+    m = apply_events(
+        m, EventBatch(revision=1, events=[SkillAdded(robot="b", index=4, skill=added)])
+    )
+    assert m._hints["b-9"] == ("b", 4)
+    assert m.find("b-9") == ("b", 4, m.tasks["b"][4])
