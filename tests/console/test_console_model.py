@@ -115,6 +115,30 @@ def test_apply_reports_changed_columns_and_keeps_indexes():
     assert m.robot_state("lru1") == (None, 1)
 
 
+def test_the_owner_index_follows_adds_moves_and_deletes_as_a_rebuild_would():
+    from backend.core.ops import DeleteSkills, MoveSkill
+
+    b = Builder(TUTORIAL)
+    m = model_of(b, {"lru1": True, "lru2": True})
+    ops = [
+        AddSkill(robot="lru2", skill="recharge"),
+        AddSkill(robot="lru1", skill="recharge", at=0),
+        MoveSkill(id="lru1-1", index=2),
+        DeleteSkills(ids=["lru2-1"]),
+        AddSkill(robot="lru2", skill="recharge"),
+    ]
+    added = []
+    for op in ops:
+        applied = b.engine.submit(op)
+        m.apply(applied.batch())
+        added += [applied.value["id"]] if isinstance(op, AddSkill) else []
+        kept = dict(m._owner)
+        m.reindex()
+        assert kept == m._owner, op
+    assert m.owner("lru2-1") is None
+    assert [m.owner(sid) for sid in added] == ["lru2", "lru1", "lru2"]
+
+
 def test_default_params_make_a_valid_new_skill():
     from backend.core.library import check_params
 
