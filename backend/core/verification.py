@@ -64,6 +64,11 @@ class Stage(Strict):
     )
     tolerance_s: float = Field(0.0, ge=0, description="how late past its due it is overdue")
 
+    def late(self, now: datetime, grace_s: float = 0.0) -> bool:
+        """Past its due by more than its tolerance and `grace_s` (reached or not)."""
+        allowed = self.tolerance_s + grace_s
+        return self.due is not None and (now - self.due).total_seconds() > allowed
+
 
 class Verification(Strict):
     """A command's stages, in order."""
@@ -75,7 +80,7 @@ class Verification(Strict):
     stages: list[Stage] = Field(max_length=len(STAGES))
 
     def stage(self, name: StageName) -> Stage:
-        return next(s for s in self.stages if s.name == name)
+        return self.stages[STAGES.index(name)]
 
     @property
     def current(self) -> Stage | None:
@@ -123,22 +128,19 @@ def verify(
 ) -> Verification:
     """The command's stages at `now` (`grace_s`: more tolerance, a reader's own)."""
     timing = _Timing(c, path)
-    skills = [f[2] for f in (mission.find(s) for s in watched(c)) if f is not None]
-    plan = [forecast[s.id] for s in skills if s.id in forecast]
-    started = _started_at(skills)
+    skills = _Skills(c, mission)
     stages = [
         Stage(name="queued", state="ok", at=c.created),
         _sent(c, timing.back),
         _received(c, timing.back),
-        *_execution(c, skills, plan, timing, started),
+        *_execution(c, skills, skills.plan(forecast), timing),
     ]
-    stages = [_judged(s, now, c, grace_s) for s in stages]
     return Verification(
         command=c.id,
         robot=c.robot,
         op=c.op,
-        skills=[s.id for s in skills] or list(c.skills),
-        stages=stages,
+        skills=skills.ids() or list(c.skills),
+        stages=[_judged(s, now, c, grace_s) for s in stages],
     )
 
 
@@ -148,79 +150,108 @@ class _Timing:
     def __init__(self, c: UplinkCommand, path: Path) -> None:
         self.path = path
         self.delay = timedelta(seconds=path.delay_s)
-        leaves = path.open_from(c.created)
-        self.on_robot = None if leaves is None else leaves + self.delay
+        self.on_robot = self.returns(c.created)
         if c.answered is not None:  # it did reach the robot: one delay before its answer
             self.on_robot = c.answered - self.delay
         self.back = self.returns(self.on_robot)
 
     def returns(self, t: datetime | None) -> datetime | None:
-        """When word of something the robot does at `t` reaches the ground."""
-        if t is None:
-            return None
-        opens = self.path.open_from(t)
+        """When something sent at `t` (or as soon as the robot is in contact) arrives."""
+        opens = None if t is None else self.path.open_from(t)
         return None if opens is None else opens + self.delay
+
+
+class _Skills:
+    """The skills a command executes, as the mission has them now."""
+
+    def __init__(self, c: UplinkCommand, mission: Mission) -> None:
+        self.skills = [f[2] for f in filter(None, map(mission.find, watched(c)))]
+        # applied, then taken back (unsynchronized) before they started: they never will
+        self.withdrawn = c.state == CommandState.ACKED and self.all_in({Status.IDLE})
+
+    def ids(self) -> list[str]:
+        return [s.id for s in self.skills]
+
+    def plan(self, forecast: Mapping[str, Predicted]) -> list[Predicted]:
+        return [forecast[i] for i in self.ids() if i in forecast]
+
+    def all_in(self, statuses: set[Status]) -> bool:
+        return bool(self.skills) and all(s.status in statuses for s in self.skills)
+
+    def any_failed(self) -> bool:
+        return any(s.status == Status.FAILURE for s in self.skills)
+
+    def started(self) -> datetime | None:
+        return min(filter(None, map(_start_of, self.skills)), default=None)
+
+    def ended(self) -> datetime | None:
+        return max(filter(None, (s.finished_at for s in self.skills)), default=None)
+
+
+def _start_of(s: SkillInstance) -> datetime | None:
+    """When it started (a skill that failed before running: when it ended)."""
+    return None if s.status in _UNSTARTED else s.started_at or s.finished_at
 
 
 def _sent(c: UplinkCommand, due: datetime | None) -> Stage:
     if c.sent is not None:
         return Stage(name="sent", state="ok", at=c.sent, due=due)
-    if c.state in _FAIL_STATES:
-        return Stage(name="sent", state="failed", at=c.settled, due=due)
-    return Stage(name="sent", state="waiting", due=due)
+    return Stage(name="sent", state=_RECEIVED.get(c.state, "waiting"), at=c.settled, due=due)
 
 
 def _received(c: UplinkCommand, due: datetime | None) -> Stage:
-    if c.state == CommandState.ACKED:
-        return Stage(name="received", state="ok", at=c.answered or c.settled, due=due)
-    if c.state in _FAIL_STATES:
-        return Stage(name="received", state="failed", at=c.answered or c.settled, due=due)
-    return Stage(name="received", state="waiting", due=due)
+    state = _RECEIVED.get(c.state, "waiting")
+    return Stage(name="received", state=state, at=c.answered or c.settled, due=due)
 
 
-def _started_at(skills: list[SkillInstance]) -> datetime | None:
-    times = [s.started_at or s.finished_at for s in skills if s.status not in _UNSTARTED]
-    return min((t for t in times if t is not None), default=None)
+# a command's state -> its received stage (queued and sent: waiting)
+_RECEIVED: dict[CommandState, StageState] = {
+    CommandState.ACKED: "ok",
+    **dict.fromkeys(_FAIL_STATES, "failed"),
+}
+
+
+def _executes(c: UplinkCommand) -> bool:
+    return c.op in EXECUTES and not (c.state == CommandState.ACKED and not c.done)
 
 
 def _execution(
-    c: UplinkCommand,
-    skills: list[SkillInstance],
-    plan: list[Predicted],
-    timing: _Timing,
-    started: datetime | None,
+    c: UplinkCommand, skills: _Skills, plan: list[Predicted], timing: _Timing
 ) -> list[Stage]:
     """The started and completed stages (none for a command that executes nothing)."""
-    if c.op not in EXECUTES or (c.state == CommandState.ACKED and not c.done):
+    if not _executes(c):
         return [Stage(name="started", state="none"), Stage(name="completed", state="none")]
     if c.state in _FAIL_STATES:
         return [Stage(name="started", state="failed"), Stage(name="completed", state="failed")]
-    start_due = end_due = None
-    if plan and timing.on_robot is not None:
-        planned = min(p.start for p in plan)
-        expected = max(planned, timing.on_robot)
-        start_due = timing.returns(expected)
-        shift = (started or expected) - planned
-        end_due = timing.returns(max(p.end for p in plan) + max(shift, timedelta(0)))
-    # applied, then taken back (unsynchronized) before they started: they never will
-    withdrawn = c.state == CommandState.ACKED and all(s.status == Status.IDLE for s in skills)
-    return [_start_stage(started, start_due, withdrawn), _end_stage(skills, end_due, withdrawn)]
+    start_due, end_due = _execution_dues(plan, timing, skills.started())
+    return [_start_stage(skills, start_due), _end_stage(skills, end_due)]
 
 
-def _start_stage(at: datetime | None, due: datetime | None, withdrawn: bool) -> Stage:
+def _execution_dues(
+    plan: list[Predicted], timing: _Timing, started: datetime | None
+) -> tuple[datetime | None, datetime | None]:
+    """When word of the start and of the end is due: the plan's times, later if
+    the command reached the robot later; the end moves with the actual start."""
+    if not plan or timing.on_robot is None:
+        return None, None
+    planned = min(p.start for p in plan)
+    expected = max(planned, timing.on_robot)
+    shift = max((started or expected) - planned, timedelta(0))
+    return timing.returns(expected), timing.returns(max(p.end for p in plan) + shift)
+
+
+def _start_stage(skills: _Skills, due: datetime | None) -> Stage:
+    at = skills.started()
     if at is not None:
         return Stage(name="started", state="ok", at=at, due=due)
-    return Stage(name="started", state="failed" if withdrawn else "waiting", due=due)
+    return Stage(name="started", state="failed" if skills.withdrawn else "waiting", due=due)
 
 
-def _end_stage(skills: list[SkillInstance], due: datetime | None, withdrawn: bool) -> Stage:
-    ends = [s.finished_at for s in skills if s.status in (Status.SUCCESS, Status.FAILURE)]
-    if skills and len(ends) == len(skills):
-        last = max((e for e in ends if e is not None), default=None)
-        ok = all(s.status == Status.SUCCESS for s in skills)
-        return Stage(name="completed", state="ok" if ok else "failed", at=last, due=due)
-    if withdrawn or any(s.status == Status.FAILURE for s in skills):
-        return Stage(name="completed", state="failed", due=due)
+def _end_stage(skills: _Skills, due: datetime | None) -> Stage:
+    if skills.all_in({Status.SUCCESS}):
+        return Stage(name="completed", state="ok", at=skills.ended(), due=due)
+    if skills.withdrawn or skills.any_failed():
+        return Stage(name="completed", state="failed", at=skills.ended(), due=due)
     return Stage(name="completed", state="waiting", due=due)
 
 
@@ -228,10 +259,8 @@ def _judged(s: Stage, now: datetime, c: UplinkCommand, grace_s: float) -> Stage:
     """Its tolerance; a waiting stage past its due and its tolerance is overdue."""
     if s.due is None:
         return s
-    tol = round(tolerance_s(c, s.due) + grace_s, 3)
-    late = (now - s.due).total_seconds()
-    overdue = s.state == "waiting" and late > tol
-    return s.model_copy(update={"tolerance_s": tol, "state": "overdue" if overdue else s.state})
+    s = s.model_copy(update={"tolerance_s": round(tolerance_s(c, s.due) + grace_s, 3)})
+    return s.model_copy(update={"state": "overdue"}) if s.state == "waiting" and s.late(now) else s
 
 
 def late_s(s: Stage, now: datetime) -> float:
@@ -241,14 +270,17 @@ def late_s(s: Stage, now: datetime) -> float:
 
 def under_way(c: UplinkCommand, mission: Mission) -> bool:
     """Whether a command is still being verified: pending, or a sync/retry the
-    robot applied whose skills have not all ended."""
+    robot applied whose skills have not all ended (nor been taken back)."""
     if c.pending:
         return True
     if c.state != CommandState.ACKED or c.op not in EXECUTES:
         return False
-    for sid in c.done:
-        found = mission.find(sid)
-        if found is not None and found[2].status not in (Status.SUCCESS, Status.FAILURE):
-            if found[2].status != Status.IDLE:
-                return True
-    return False
+    return any(_executing(mission, sid) for sid in c.done)
+
+
+def _executing(mission: Mission, skill_id: str) -> bool:
+    found = mission.find(skill_id)
+    return found is not None and found[2].status not in _NOT_EXECUTING
+
+
+_NOT_EXECUTING = frozenset({Status.SUCCESS, Status.FAILURE, Status.IDLE})

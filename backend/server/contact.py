@@ -127,25 +127,19 @@ class ContactWatch:
     def speed(self, clock: MissionClock) -> float:
         """Mission seconds per wall second on `clock`."""
         status = self.mirror.status
-        if clock == "sim" and status is not None and status.speed > 0:
-            return status.speed
+        if clock == "sim" and status is not None:
+            return status.speed or 1.0
         return 1.0
 
     def open_from(self, robot: str, present: bool, t: datetime) -> datetime | None:
         """The first instant at or after `t` (wall) when the robot is in contact
         (None: offline, or no window ahead)."""
-        if not present:
-            return None
         windows, clock, _ = self._windows(robot)
-        if windows is None or windows.always:
-            return t
+        if not present or windows is None:
+            return t if present else None
         m = self.mission_now(clock, t)
-        if windows.is_open(m):
-            return t
-        opens = windows.next_opening(m)
-        if opens is None:
-            return None
-        return t + timedelta(seconds=(opens - m) / self.speed(clock))
+        opens = m if windows.is_open(m) else windows.next_opening(m)
+        return None if opens is None else t + timedelta(seconds=(opens - m) / self.speed(clock))
 
     def time_text(self, t: datetime) -> str:
         """A wall stamp in mission time, with its unit: 'sim 0:32:00', '14:32:05'."""

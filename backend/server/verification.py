@@ -15,6 +15,7 @@ a stage's state changes or a due moves by more than `MOVED_S`.
 from __future__ import annotations
 
 from datetime import datetime
+from itertools import chain
 from typing import Any, Final
 
 from backend.core.alerts import AlertKind, Raises
@@ -56,30 +57,35 @@ class VerificationWatch:
     def refresh(self, mission: Mission, robots: dict[str, RobotInfo], now: datetime) -> list[str]:
         """Every command under way verified at `now`; overdue stages alerted.
         Returns the robots whose list changed (to publish)."""
-        changed: list[str] = []
-        kept: set[str] = set()
-        for robot, cmds in mission.uplink.items():
-            path = self.path(robots.get(robot))
-            going = [c for c in cmds if under_way(c, mission)][-MAX_VERIFIED:]
-            new = [verify(c, mission, path, self.forecasts, now) for c in going]
-            for v in new:
-                kept.update(v.skills)
-                self._alert(v, robots.get(robot), now)
-            if _moved(self.lists.get(robot, []), new):
-                changed.append(robot)
-            self.lists[robot] = new
-        for robot in [r for r in self.lists if r not in mission.uplink]:
+        changed = [r for r in self.lists if r not in mission.uplink]
+        for robot in changed:
             del self.lists[robot]
-            changed.append(robot)
-        self.forecasts = {s: p for s, p in self.forecasts.items() if s in kept}
+        for robot in mission.uplink:
+            if self._robot(mission, robots.get(robot), robot, now):
+                changed.append(robot)
+        self._forget()
         return changed
 
+    def _forget(self) -> None:
+        """The forecasts of skills no longer under way."""
+        kept = {s for v in chain.from_iterable(self.lists.values()) for s in v.skills}
+        self.forecasts = {s: self.forecasts[s] for s in kept & self.forecasts.keys()}
+
+    def _robot(self, mission: Mission, info: RobotInfo | None, robot: str, now: datetime) -> bool:
+        """One robot's commands verified; whether its list changed."""
+        path = self.path(info)
+        going = [c for c in mission.uplink[robot] if under_way(c, mission)][-MAX_VERIFIED:]
+        new = [verify(c, mission, path, self.forecasts, now) for c in going]
+        for v in new:
+            self._alert(v, info, now)
+        moved = _moved(self.lists.get(robot, []), new)
+        self.lists[robot] = new
+        return moved
+
     def _alert(self, v: Verification, info: RobotInfo | None, now: datetime) -> None:
-        stage = v.current
-        if stage is None or stage.state != "overdue" or (v.command, stage.name) in self._alerted:
+        stage = self._new_overdue(v)
+        if stage is None or stage.due is None:
             return
-        self._alerted.add((v.command, stage.name))
-        assert stage.due is not None
         clock: MissionClock = "sim" if self.contact.mirror.status is not None else "wall"
         late = late_s(stage, now) * self.contact.speed(clock)
         self.host.alert(
@@ -91,27 +97,34 @@ class VerificationWatch:
             command=v.command,
         )
 
+    def _new_overdue(self, v: Verification) -> Stage | None:
+        """Its current stage if it is overdue and was not said yet."""
+        stage = v.current
+        key = (v.command, stage.name if stage is not None else "")
+        if stage is None or stage.state != "overdue" or key in self._alerted:
+            return None
+        self._alerted.add(key)
+        return stage
+
     def _context(self, robot: str, info: RobotInfo | None) -> str:
         """What the ground knows of the robot's link: why it may be late."""
-        if info is None or not info.online:
-            return f"; {robot} is offline"
-        c = info.contact
-        if c is not None and c.state == "out_of_contact":
-            return f"; {robot} is out of contact"
-        heard = f"; {robot} last heard {self.contact.time_text(info.heard)}" if info.heard else ""
-        return heard
+        state = info.contact.state if info is not None and info.contact else "offline"
+        if state != "in_contact" or info is None or info.heard is None:
+            return f"; {robot} is {state.replace('_', ' ')}"
+        return f"; {robot} last heard {self.contact.time_text(info.heard)}"
 
 
 def _what(v: Verification, stage: Stage) -> str:
     """The stage not reached, in words: 'lru1-4 has not started (command 17)'."""
     title = f"command {v.command} ({v.op}{' ' + ', '.join(v.skills) if v.skills else ''})"
-    if stage.name == "sent":
-        return f"{title} has not left for {v.robot} (no receipt)"
-    if stage.name == "received":
-        return f"{title} has not been received by {v.robot}"
+    if stage.name in _UPLINK_WORDS:
+        return f"{title} {_UPLINK_WORDS[stage.name]} {v.robot}"
     names = ", ".join(v.skills) if len(v.skills) <= 3 else f"{v.skills[0]}..{v.skills[-1]}"
     verb = "has" if len(v.skills) == 1 else "have"
     return f"{names} {verb} not {stage.name} (command {v.command})"
+
+
+_UPLINK_WORDS = {"sent": "has no receipt from", "received": "has not been received by"}
 
 
 def span_text(seconds: float) -> str:
@@ -124,16 +137,15 @@ def span_text(seconds: float) -> str:
     return f"{s // 3600} h {(s % 3600) // 60:02d} min"
 
 
+def _states(vs: list[Verification]) -> list[tuple[int, list[str]]]:
+    return [(v.command, [s.state for s in v.stages]) for v in vs]
+
+
 def _moved(old: list[Verification], new: list[Verification]) -> bool:
-    if [(v.command, [s.state for s in v.stages]) for v in old] != [
-        (v.command, [s.state for s in v.stages]) for v in new
-    ]:
+    if _states(old) != _states(new):
         return True
-    return any(
-        _due_moved(a.due, b.due)
-        for x, y in zip(old, new, strict=True)
-        for a, b in zip(x.stages, y.stages, strict=True)
-    )
+    pairs = (zip(x.stages, y.stages, strict=True) for x, y in zip(old, new, strict=True))
+    return any(_due_moved(a.due, b.due) for stages in pairs for a, b in stages)
 
 
 def _due_moved(a: datetime | None, b: datetime | None) -> bool:

@@ -23,9 +23,17 @@ Operations
   run|pause|stop|reset (ROBOT | --all) [--expire D] [--wait [S]]
   retry ID                             [--expire D] [--wait [S]]
   pending [ROBOT...]          commands to robots not settled yet: number,
-                              robot, what, state, age, expiry
+                              robot, what, state, age, expiry, and the stage
+                              it waits for with its due time (--json: every
+                              stage: queued, sent, received, started,
+                              completed, each with state, at, due, tolerance)
   cancel COMMAND [--wait [S]] withdraw a pending command (final while it is
                               queued; once sent, the robot's answer decides)
+  wait COMMAND [--until received|started|completed] [--grace D] [--max-wait S]
+                              until the command's stage is reached (exit 0),
+                              never will be (1: refused, expired, a skill
+                              failed) or is overdue: past its due time and
+                              tolerance, plus D (4)
   barrier ID ID...
   unbarrier BARRIER_ID
   marker add NAME (--pose P | --position P | --area A) [--description TEXT]
@@ -114,8 +122,8 @@ Output
 
 Exit codes: 0 ok, 1 refused by the server, 2 bad usage or input (nothing is
 sent), 3 server unreachable, not answering in time, or speaking another
-protocol version. Never a traceback (MISSIONCTL_DEBUG=1 shows one for
-unexpected errors).
+protocol version; `wait` only: 4 the stage is overdue. Never a traceback
+(MISSIONCTL_DEBUG=1 shows one for unexpected errors).
 """
 
 from __future__ import annotations
@@ -371,6 +379,33 @@ def _cancel(p: argparse.ArgumentParser) -> None:
     _wait_and_expire(p, expire=False)
 
 
+DEFAULT_MAX_WAIT = 600.0  # `wait`: seconds for a stage that has no due
+
+
+def _wait_stage(p: argparse.ArgumentParser) -> None:
+    p.add_argument("command", type=_command_number, metavar="COMMAND", help="its number")
+    p.add_argument(
+        "--until",
+        choices=("received", "started", "completed"),
+        default="received",
+        help="the stage to wait for (default: received)",
+    )
+    p.add_argument(
+        "--grace",
+        type=_duration,
+        default=0.0,
+        metavar="D",
+        help="more tolerance past the stage's due before it counts as overdue (90s, 5m)",
+    )
+    p.add_argument(
+        "--max-wait",
+        type=_positive_float,
+        default=DEFAULT_MAX_WAIT,
+        metavar="S",
+        help=f"seconds to wait when the stage has no due (default {DEFAULT_MAX_WAIT:g})",
+    )
+
+
 def _command_number(text: str) -> int:
     try:
         v = int(text.removeprefix("command").strip())
@@ -515,6 +550,7 @@ OPERATIONS: dict[str, tuple[str, Arguments]] = {
     "retry": ("retry a failed skill (a new attempt right after it)", _retry),
     "pending": ("commands to robots not settled yet (age, expiry)", _state),
     "cancel": ("withdraw a pending command to a robot", _cancel),
+    "wait": ("wait for a command's stage: received, started or completed", _wait_stage),
     "barrier": ("make idle skills of different robots start together", _ids),
     "unbarrier": ("remove a barrier", _unbarrier),
     "marker": ("add, move, rename or delete a marker", _marker),

@@ -37,6 +37,7 @@ from backend.cli.ctl.render import (
     unicode_ok,
     watch_line,
 )
+from backend.cli.ctl.verify import wait_stage
 from backend.core.credentials import AccountsError
 from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK, EXIT_REFUSED, EXIT_UNREACHABLE
 from backend.transport.login import login_from_args
@@ -473,4 +474,5 @@ VIEWS: dict[str, Callable[[Any, argparse.Namespace], Awaitable[int]]] = {
     "check": plan_check,
     "timeline": plan_timeline,
     "history": history_view,
+    "wait": wait_stage,
 }
