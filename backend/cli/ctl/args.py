@@ -8,9 +8,13 @@ connection (a `MissionClient`, subscribed to telemetry only for `robots`),
 does one thing and always closes the connection.
 
 Operations
-  state [ROBOT...]            the mission: per robot its skills (glyph, id,
+  state [ROBOT...] [--nowcast]
+                              the mission: per robot its skills (glyph, id,
                               label, skill, parameters that differ from the
-                              library defaults), barriers, markers, revision
+                              library defaults), barriers, markers, revision;
+                              --nowcast: each robot's probable present (≈:
+                              skill, progress, position, battery) predicted
+                              from its last report, and that report's age
   robots                      presence, type, manifest (modules, skills) and,
                               when a robot publishes it within ~5 s, battery,
                               link quality and activity
@@ -311,6 +315,16 @@ def _state(p: argparse.ArgumentParser) -> None:
     p.add_argument("robots", nargs="*", metavar="ROBOT", help="only these robots")
 
 
+def _state_op(p: argparse.ArgumentParser) -> None:
+    _state(p)
+    p.add_argument(
+        "--nowcast",
+        action="store_true",
+        help="also each robot's probable present (≈): skill and progress, position, battery, "
+        "predicted from its last report, its plan and the time since",
+    )
+
+
 def _add(p: argparse.ArgumentParser) -> None:
     p.add_argument("robot", metavar="ROBOT")
     p.add_argument("skill", metavar="SKILL")
@@ -535,7 +549,7 @@ def _watch(p: argparse.ArgumentParser) -> None:
 # ctl's operations, in the order `ctl --help` lists them: name -> (help, its arguments).
 # Each also takes the common options (_common).
 OPERATIONS: dict[str, tuple[str, Arguments]] = {
-    "state": ("print the mission: robots, skills, barriers, markers, revision", _state),
+    "state": ("print the mission: robots, skills, barriers, markers, revision", _state_op),
     "robots": ("robot presence, type, manifest and telemetry", _nothing),
     "add": ("add a skill to a robot's unsynchronized section", _add),
     "delete": ("delete idle skills", _ids),
