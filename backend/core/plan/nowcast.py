@@ -9,23 +9,29 @@ route (straight from where the skill starts to its goal, travel first), and
 its battery (linear over each skill). The active skill lasts what its
 telemetry's ETA says when it gives one.
 
-It advances only over skills the robot holds (synchronized) and stops where
-the robot would wait: a halted robot (its telemetry says so), a barrier not
-passed yet, the end of its queue. Its basis and age say how old what it
-starts from is.
+It advances over the skills the robot holds and those a pending sync carries
+(from when the sync reaches it: the link's delay and windows), and stops
+where the robot would wait: halted or idle without a run since (a pending
+run counts from when it arrives), paused, a barrier not passed yet, the end
+of its queue. Its basis and age say how old what it starts from is.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from backend.core.model import Mission, Status
+from backend.core.model import CommandState, Mission, SkillInstance, Status, UplinkCommand
 from backend.core.plan.course import Course, Step
 from backend.core.plan.geometry import Point
+from backend.core.plan.inputs import LinkModel
 
 _ON_ROBOT = frozenset(
     {Status.IDLE_SYNCHRONIZED, Status.SYNCHWAITING, Status.RUNNING, Status.PAUSED}
 )
+_CONTROLS = frozenset({"run", "pause", "stop", "reset"})
+_STILL = frozenset({"halted", "idle"})  # modes in which it executes only after a run
+_NEVER = frozenset({CommandState.REFUSED, CommandState.EXPIRED, CommandState.CANCELLED})
+_NO_LINK = LinkModel()
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,53 +55,92 @@ class Nowcast:
         return {f: getattr(self, f) for f in self.__slots__} | {"age_s": self.age_s}
 
 
-def nowcast(course: Course, mission: Mission, at: float, speed: float = 1.0) -> Nowcast | None:
+def nowcast(
+    course: Course,
+    mission: Mission,
+    at: float,
+    speed: float = 1.0,
+    link: LinkModel = _NO_LINK,
+) -> Nowcast | None:
     """The robot's probable state at `at` (None: no telemetry to start from).
-    `speed`: robot (sim) seconds per wall second."""
+    `speed`: robot (sim) seconds per wall second; `link`: when what the ground
+    sent reaches the robot (a pending sync's skills, a pending run)."""
     now = course.now
     if now is None:
         return None
-    steps = _held(course, mission)
-    elapsed = max(0.0, at - now.at) * speed
     base = Nowcast(course.robot, at, now.at, now.skill, now.progress, now.x, now.y, now.battery, "")
-    if not steps.steps:
-        return _replace(base, held=steps.why)
-    return _along(base, steps, elapsed)
+    uplink = _Uplink(mission, course.robot, now.at, link)
+    start = uplink.runs_from(now.mode)
+    steps = _held(course, mission, uplink)
+    if start is None or not steps.steps:
+        return _replace(base, held="halted" if start is None else steps.why)
+    return _along(base, steps, start, at, speed)
+
+
+class _Uplink:
+    """What the ground sent the robot that it may have by now, and when it got it."""
+
+    def __init__(self, mission: Mission, robot: str, basis: float, link: LinkModel) -> None:
+        self.mission, self.basis, self.link = mission, basis, link
+        self.locks = mission.command_locks()
+        controls = [c for c in mission.uplink.get(robot, []) if c.op in _CONTROLS]
+        self.control = controls[-1] if controls else None
+
+    def arrives(self, c: UplinkCommand) -> float:
+        """When the robot had (or will have) the command, wall seconds."""
+        if c.answered is not None:
+            return c.answered.timestamp() - self.link.one_way_s
+        return self.link.reaches((c.sent or c.created).timestamp())
+
+    def runs_from(self, mode: str) -> float | None:
+        """From when the robot executes its queue (None: it waits for a run)."""
+        if mode not in _STILL:
+            return self.basis
+        c = self.control
+        if c is None or c.op != "run" or c.state in _NEVER:
+            return None
+        arrives = self.arrives(c)
+        return max(self.basis, arrives) if c.pending or arrives >= self.basis else None
+
+    def earliest(self, s: SkillInstance) -> float | None:
+        """When a skill reaches the robot (0: it holds it; None: it never will)."""
+        if s.status in _ON_ROBOT:
+            return 0.0
+        c = self.locks.get(s.id)
+        return self.arrives(c) if c is not None and c.op == "sync" else None
 
 
 @dataclass(frozen=True, slots=True)
 class _Steps:
     steps: tuple[Step, ...]  # the ones it may execute from its basis on
     durations: tuple[float, ...]  # robot seconds of each
+    earliest: tuple[float, ...]  # when each reaches the robot (wall)
     why: str  # why it stops after them
 
 
-def _held(course: Course, mission: Mission) -> _Steps:
-    """The steps the robot executes without the ground or a partner, and their durations."""
-    now = course.now
-    if now is not None and now.mode == "halted":
-        return _Steps((), (), "halted")
+def _held(course: Course, mission: Mission, uplink: _Uplink) -> _Steps:
+    """The steps the robot executes without a partner or the operator, and their durations."""
     out: list[Step] = []
-    why = "queue end"
+    earliest: list[float] = []
+    why = ""
     for i, step in enumerate(course.steps):
-        why = _waits(step, i, mission)
+        when = uplink.earliest(step.skill)
+        why = "queue end" if when is None else _waits(step, i, mission)
         if why:
             break
         out.append(step)
+        earliest.append(when or 0.0)
     durations = [st.busy_s for st in out]
     if out and _eta_of(course, out[0]) is not None:
         durations[0] = _eta_of(course, out[0])  # type: ignore[assignment]
-    return _Steps(tuple(out), tuple(durations), why or "queue end")
+    return _Steps(tuple(out), tuple(durations), tuple(earliest), why or "queue end")
 
 
 def _waits(step: Step, i: int, mission: Mission) -> str:
     """Why the robot does not go on to step i ('': it does)."""
-    s = step.skill
-    if s.status not in _ON_ROBOT:
-        return "queue end"
-    if s.status == Status.PAUSED:
+    if step.skill.status == Status.PAUSED:
         return "paused"
-    return "barrier" if i > 0 and mission.barrier_of(s.id) is not None else ""
+    return "barrier" if i > 0 and mission.barrier_of(step.skill.id) is not None else ""
 
 
 def _eta_of(course: Course, step: Step) -> float | None:
@@ -104,21 +149,20 @@ def _eta_of(course: Course, step: Step) -> float | None:
     return now.eta_s if now is not None and now.skill == step.skill.id else None
 
 
-def _along(base: Nowcast, steps: _Steps, elapsed: float) -> Nowcast:
-    """Walk `elapsed` robot seconds along the steps."""
-    for step, busy in zip(steps.steps, steps.durations, strict=True):
-        if elapsed < busy:
-            return _within(base, step, busy, elapsed)
-        elapsed -= busy
+def _along(base: Nowcast, steps: _Steps, start: float, at: float, speed: float) -> Nowcast:
+    """Walk the steps on the wall clock from `start` to `at`."""
+    cursor = start
+    for step, busy, earliest in zip(steps.steps, steps.durations, steps.earliest, strict=True):
+        begin = max(cursor, earliest)
+        if at < begin:  # it waits for the skill to reach it
+            return _replace(base, skill=None, progress=None, point=step.start, held="uplink")
+        cursor = begin + busy / speed
+        if at < cursor:
+            return _within(base, step, busy, (at - begin) * speed)
     last = steps.steps[-1]
     end = last.leg.end if last.leg is not None else None
     return _replace(
-        base,
-        skill=None,
-        progress=None,
-        point=end,
-        battery=last.battery_end,
-        held=steps.why,
+        base, skill=None, progress=None, point=end, battery=last.battery_end, held=steps.why
     )
 
 

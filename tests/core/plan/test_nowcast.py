@@ -64,3 +64,40 @@ def test_the_robots_eta_sets_how_long_its_active_skill_lasts():
 def test_without_telemetry_there_is_no_nowcast():
     m = _driving()
     assert nowcast(Forecaster(LIBRARY).course(m, "r1", PlanInputs(now=T0)), m, T0) is None
+
+
+def test_a_pending_sync_and_run_count_from_when_they_reach_the_robot():
+    from datetime import UTC, datetime
+
+    from backend.core.model import Enqueue, Run, UplinkCommand
+    from backend.core.plan.inputs import LinkModel
+
+    m = mission(
+        {"r1": "rover"},
+        {"r1": [skill("r1-1", "drive", "idle", goal=pose(100, 0), speed=1.0)]},
+    )
+    sent = datetime.fromtimestamp(T0, UTC)
+    m.uplink["r1"] = [
+        UplinkCommand(
+            id=1,
+            robot="r1",
+            seq=1,
+            op="sync",
+            command=Enqueue(skills=[]),
+            skills=["r1-1"],
+            state="sent",
+            created=sent,
+            sent=sent,
+        ),
+        UplinkCommand(
+            id=2, robot="r1", seq=2, op="run", command=Run(), state="sent", created=sent, sent=sent
+        ),
+    ]
+    idle = RobotNow(at=T0, x=0.0, y=0.0, battery=1.0, mode="idle")
+    c = _course(m, idle)
+    link = LinkModel(one_way_s=10.0)
+    waiting = nowcast(c, m, T0 + 5, link=link)
+    assert waiting is not None and waiting.skill is None and waiting.held == "uplink"
+    moving = nowcast(c, m, T0 + 50, link=link)  # it got both at T0 + 10: 40 s of driving
+    assert moving is not None and moving.skill == "r1-1" and round(moving.x, 3) == 40.0
+    assert nowcast(c, m, T0 + 50).x == 50.0  # no delay: from the basis on
