@@ -13,7 +13,7 @@ from typing import Any
 
 from backend.cli.ctl.plan import gather
 from backend.core.plan.forecast import Forecaster
-from backend.core.plan.nowcast import nowcast
+from backend.core.plan.nowcast import nowcasts
 
 
 async def nowcasts_json(client: Any, args: Any, only: list[str]) -> dict[str, Any]:
@@ -23,10 +23,10 @@ async def nowcasts_json(client: Any, args: Any, only: list[str]) -> dict[str, An
     inputs = await gather(client, args.timeout)
     forecaster = Forecaster(client.library)
     now, m = time.time(), client.mission
-    found = {
-        r: nowcast(forecaster.course(m, r, inputs), m, now, inputs.speed)
-        for r in only or list(m.robots)
-    }
+    courses = {r: forecaster.course(m, r, inputs) for r in m.robots}
+    links = {r: inputs.link_of(r) for r in courses}
+    every = nowcasts(courses, m, now, inputs.speed, links)
+    found = {r: every.get(r) for r in only or list(m.robots)}
     return {"nowcast": {r: nc.as_json() if nc else None for r, nc in found.items()}}
 
 

@@ -18,6 +18,7 @@ of its queue. Its basis and age say how old what it starts from is.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 from backend.core.model import CommandState, Mission, SkillInstance, Status, UplinkCommand
@@ -44,7 +45,9 @@ class Nowcast:
     x: float | None
     y: float | None
     battery: float | None
-    held: str  # why it stopped advancing: "", "halted", "paused", "barrier", "queue end"
+    # why it is not executing a skill: "", "halted" (no run), "waiting" (for a skill to
+    # reach it, or for a partner), "paused", "barrier" (never passed), "queue end"
+    held: str
 
     @property
     def age_s(self) -> float:
@@ -62,19 +65,62 @@ def nowcast(
     speed: float = 1.0,
     link: LinkModel = _NO_LINK,
 ) -> Nowcast | None:
-    """The robot's probable state at `at` (None: no telemetry to start from).
-    `speed`: robot (sim) seconds per wall second; `link`: when what the ground
-    sent reaches the robot (a pending sync's skills, a pending run)."""
+    """One robot's probable state at `at` (None: no telemetry to start from);
+    its barriers wait for partners it is not told about: they hold it."""
+    return nowcasts({course.robot: course}, mission, at, speed, {course.robot: link})[course.robot]
+
+
+def nowcasts(
+    courses: Mapping[str, Course],
+    mission: Mission,
+    at: float,
+    speed: float = 1.0,
+    links: Mapping[str, LinkModel] | None = None,
+) -> dict[str, Nowcast | None]:
+    """Each robot's probable state at `at` (None: no telemetry to start from).
+    `speed`: robot (sim) seconds per wall second; `links`: when what the ground
+    sent reaches each robot (a pending sync's skills, a pending run). A barrier
+    passes when every partner's walk has reached it."""
+    walks = {
+        r: _walk(c, mission, (links or {}).get(r, _NO_LINK), speed) for r, c in courses.items()
+    }
+    _barriers(walks, mission)
+    return {r: w.state_at(at) if w is not None else None for r, w in walks.items()}
+
+
+def _walk(course: Course, mission: Mission, link: LinkModel, speed: float) -> _Walk | None:
     now = course.now
     if now is None:
         return None
-    base = Nowcast(course.robot, at, now.at, now.skill, now.progress, now.x, now.y, now.battery, "")
     uplink = _Uplink(mission, course.robot, now.at, link)
+    base = Nowcast(
+        course.robot, 0.0, now.at, now.skill, now.progress, now.x, now.y, now.battery, ""
+    )
     start = uplink.runs_from(now.mode)
-    steps = _held(course, mission, uplink)
-    if start is None or not steps.steps:
-        return _replace(base, held="halted" if start is None else steps.why)
-    return _along(base, steps, start, at, speed)
+    steps = _held(course, mission, uplink) if start is not None else _Steps((), (), (), (), "")
+    w = _Walk(base, steps, start if start is not None else now.at, speed)
+    w.halted = start is None
+    w.lay()
+    return w
+
+
+def _barriers(walks: Mapping[str, _Walk | None], mission: Mission) -> None:
+    """Pass every barrier all of whose robots' walks wait at it, until none moves."""
+    going = [w for w in walks.values() if w is not None]
+    while _pass_one(going, mission):
+        pass
+
+
+def _pass_one(walks: list[_Walk], mission: Mission) -> bool:
+    """Pass one barrier whose robots all wait at it; whether one passed."""
+    for b in {w.barrier for w in walks} - {None}:
+        there = [w for w in walks if w.barrier == b]
+        if len(there) == len(mission.barriers[b].skills):  # type: ignore[index]
+            at = max(w.cursor for w in there)
+            for w in there:
+                w.pass_barrier(at)
+            return True
+    return False
 
 
 class _Uplink:
@@ -115,32 +161,45 @@ class _Steps:
     steps: tuple[Step, ...]  # the ones it may execute from its basis on
     durations: tuple[float, ...]  # robot seconds of each
     earliest: tuple[float, ...]  # when each reaches the robot (wall)
+    barriers: tuple[str | None, ...]  # the barrier each waits at first (None: none)
     why: str  # why it stops after them
 
 
 def _held(course: Course, mission: Mission, uplink: _Uplink) -> _Steps:
-    """The steps the robot executes without a partner or the operator, and their durations."""
+    """The steps the robot executes without the operator, and their durations."""
+    out, earliest, why = _reachable(course, uplink)
+    durations = [st.busy_s for st in out]
+    eta = _eta_of(course, out[0]) if out else None
+    if eta is not None:
+        durations[0] = eta
+    barriers = [_barrier(st, i, mission) for i, st in enumerate(out)]
+    return _Steps(tuple(out), tuple(durations), tuple(earliest), tuple(barriers), why)
+
+
+def _reachable(course: Course, uplink: _Uplink) -> tuple[list[Step], list[float], str]:
+    """The steps the robot has or will have in order, when each reaches it, why no more."""
     out: list[Step] = []
     earliest: list[float] = []
-    why = ""
-    for i, step in enumerate(course.steps):
+    for step in course.steps:
         when = uplink.earliest(step.skill)
-        why = "queue end" if when is None else _waits(step, i, mission)
+        why = "queue end" if when is None else _waits(step)
         if why:
-            break
+            return out, earliest, why
         out.append(step)
         earliest.append(when or 0.0)
-    durations = [st.busy_s for st in out]
-    if out and _eta_of(course, out[0]) is not None:
-        durations[0] = _eta_of(course, out[0])  # type: ignore[assignment]
-    return _Steps(tuple(out), tuple(durations), tuple(earliest), why or "queue end")
+    return out, earliest, "queue end"
 
 
-def _waits(step: Step, i: int, mission: Mission) -> str:
-    """Why the robot does not go on to step i ('': it does)."""
-    if step.skill.status == Status.PAUSED:
-        return "paused"
-    return "barrier" if i > 0 and mission.barrier_of(step.skill.id) is not None else ""
+def _barrier(step: Step, i: int, mission: Mission) -> str | None:
+    """The barrier the step waits at first (its active skill's: only while it waits)."""
+    if i == 0 and step.skill.status != Status.SYNCHWAITING:
+        return None
+    return mission.barrier_of(step.skill.id)
+
+
+def _waits(step: Step) -> str:
+    """Why the robot does not go on to the step ('': it does)."""
+    return "paused" if step.skill.status == Status.PAUSED else ""
 
 
 def _eta_of(course: Course, step: Step) -> float | None:
@@ -149,21 +208,57 @@ def _eta_of(course: Course, step: Step) -> float | None:
     return now.eta_s if now is not None and now.skill == step.skill.id else None
 
 
-def _along(base: Nowcast, steps: _Steps, start: float, at: float, speed: float) -> Nowcast:
-    """Walk the steps on the wall clock from `start` to `at`."""
-    cursor = start
-    for step, busy, earliest in zip(steps.steps, steps.durations, steps.earliest, strict=True):
-        begin = max(cursor, earliest)
-        if at < begin:  # it waits for the skill to reach it
-            return _replace(base, skill=None, progress=None, point=step.start, held="uplink")
-        cursor = begin + busy / speed
-        if at < cursor:
-            return _within(base, step, busy, (at - begin) * speed)
-    last = steps.steps[-1]
-    end = last.leg.end if last.leg is not None else None
-    return _replace(
-        base, skill=None, progress=None, point=end, battery=last.battery_end, held=steps.why
-    )
+class _Walk:
+    """A robot's steps laid on the wall clock, up to a barrier not passed yet."""
+
+    def __init__(self, base: Nowcast, steps: _Steps, start: float, speed: float) -> None:
+        self.base, self.steps, self.cursor, self.speed = base, steps, start, speed
+        self.laid: list[tuple[float, float]] = []  # (begin, end) of each step laid
+        self.passed: set[int] = set()  # steps whose barrier passed
+        self.halted = False
+
+    @property
+    def barrier(self) -> str | None:
+        """The barrier it waits at (None: it does not)."""
+        k = len(self.laid)
+        return self.steps.barriers[k] if k < len(self.steps.steps) else None
+
+    def lay(self) -> None:
+        for k in range(len(self.laid), len(self.steps.steps)):
+            if self.steps.barriers[k] is not None and k not in self.passed:
+                return
+            begin = max(self.cursor, self.steps.earliest[k])
+            self.cursor = begin + self.steps.durations[k] / self.speed
+            self.laid.append((begin, self.cursor))
+
+    def pass_barrier(self, at: float) -> None:
+        self.passed.add(len(self.laid))
+        self.cursor = max(self.cursor, at)
+        self.lay()
+
+    def state_at(self, at: float) -> Nowcast:
+        base = _replace(self.base, at=at)
+        if self.halted:
+            return _replace(base, held="halted")
+        for step, busy, (begin, end) in zip(
+            self.steps.steps, self.steps.durations, self.laid, strict=False
+        ):
+            if at < begin:  # it waits for the skill to reach it, or for a partner
+                return _replace(base, skill=None, progress=None, point=step.start, held="waiting")
+            if at < end:
+                return _within(base, step, busy, (at - begin) * self.speed)
+        return self._after(base)
+
+    def _after(self, base: Nowcast) -> Nowcast:
+        """Past every step laid: at the end of the last one, waiting."""
+        held = "barrier" if self.barrier is not None else self.steps.why
+        if not self.laid:
+            return _replace(base, held=held)
+        last = self.steps.steps[len(self.laid) - 1]
+        end = last.leg.end if last.leg is not None else None
+        return _replace(
+            base, skill=None, progress=None, point=end, battery=last.battery_end, held=held
+        )
 
 
 def _within(base: Nowcast, step: Step, busy: float, t: float) -> Nowcast:

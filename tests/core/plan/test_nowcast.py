@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from backend.core.plan.forecast import Forecaster
 from backend.core.plan.inputs import PlanInputs, RobotNow
-from backend.core.plan.nowcast import nowcast
+from backend.core.plan.nowcast import nowcast, nowcasts
 
 from .helpers import LIBRARY, T0, mission, pose, skill
 
@@ -97,7 +97,38 @@ def test_a_pending_sync_and_run_count_from_when_they_reach_the_robot():
     c = _course(m, idle)
     link = LinkModel(one_way_s=10.0)
     waiting = nowcast(c, m, T0 + 5, link=link)
-    assert waiting is not None and waiting.skill is None and waiting.held == "uplink"
+    assert waiting is not None and waiting.skill is None and waiting.held == "waiting"
     moving = nowcast(c, m, T0 + 50, link=link)  # it got both at T0 + 10: 40 s of driving
     assert moving is not None and moving.skill == "r1-1" and round(moving.x, 3) == 40.0
     assert nowcast(c, m, T0 + 50).x == 50.0  # no delay: from the basis on
+
+
+def test_a_barrier_passes_when_every_partner_gets_there():
+    m = mission(
+        {"r1": "rover", "r2": "rover"},
+        {
+            "r1": [
+                skill("r1-1", "work", "running", seconds=10),
+                skill("r1-2", "work", "idle_synchronized", seconds=10),
+            ],
+            "r2": [
+                skill("r2-1", "work", "running", seconds=50),
+                skill("r2-2", "work", "idle_synchronized", seconds=10),
+            ],
+        },
+        barriers={"b1": ["r1-2", "r2-2"]},
+    )
+    at0 = {
+        r: RobotNow(at=T0, x=0.0, y=0.0, battery=1.0, skill=f"{r}-1", progress=0.0)
+        for r in m.robots
+    }
+    inputs = PlanInputs(now=T0, robots=at0)
+    f = Forecaster(LIBRARY)
+    courses = {r: f.course(m, r, inputs) for r in m.robots}
+    early = nowcasts(courses, m, T0 + 30)
+    assert early["r1"].skill is None and early["r1"].held == "waiting"  # for r2
+    late = nowcasts(courses, m, T0 + 55)
+    assert late["r1"].skill == "r1-2" and late["r2"].skill == "r2-2"  # both from T0 + 50
+    assert round(late["r1"].progress, 3) == 0.5
+    # told nothing of its partner, a robot stays at the barrier
+    assert nowcast(courses["r1"], m, T0 + 55).held == "barrier"
