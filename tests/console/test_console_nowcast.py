@@ -57,20 +57,25 @@ def test_the_next_report_logs_how_far_the_prediction_was(caplog):
     assert nowcast_words(nc).startswith("≈ now: r1-1 50%, battery ")
 
 
+async def _lru1_far_and_later(app, pilot, seconds: float) -> None:
+    """Mid-execution; lru1 ten minutes away (its state last known); the clock
+    `seconds` past its report; the plan's forecast taken then."""
+    await inject(app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
+    far = RobotInfo(name="lru1", online=True, since=T0, heard=T0, delay_s=600.0)
+    app.post_message(fleet_changed(far))
+    later = T0 + timedelta(seconds=seconds)
+    app.clock = lambda: later
+    app.model.clock.wall = lambda: later
+    await pilot.pause()
+    app.plan.refresh(force=True)
+
+
 async def test_a_distant_robot_is_drawn_where_it_probably_is_now():
     from console.screens.map import MapScreen
 
-    b = mars_mid_execution()
     app = make_app()
-    later = T0 + timedelta(seconds=90)
     async with app.run_test(size=(120, 40)) as pilot:
-        await inject(app, pilot, b, telemetry=mars_telemetry())
-        far = RobotInfo(name="lru1", online=True, since=T0, heard=T0, delay_s=600.0)
-        app.post_message(fleet_changed(far))
-        app.clock = lambda: later
-        app.model.clock.wall = lambda: later
-        await pilot.pause()
-        app.plan.refresh(force=True)
+        await _lru1_far_and_later(app, pilot, seconds=90)
         await pilot.press("f3")
         await wait_until(pilot, lambda: isinstance(app.screen, MapScreen), 10, "map screen")
         await pilot.pause()
@@ -85,16 +90,9 @@ async def test_a_distant_robot_is_drawn_where_it_probably_is_now():
 async def test_the_fleet_says_what_a_distant_robot_probably_does_now():
     from console.screens.fleet import FleetScreen
 
-    b = mars_mid_execution()
     app = make_app()
-    later = T0 + timedelta(seconds=30)
     async with app.run_test(size=(140, 40)) as pilot:
-        await inject(app, pilot, b, telemetry=mars_telemetry())
-        far = RobotInfo(name="lru1", online=True, since=T0, heard=T0, delay_s=600.0)
-        app.post_message(fleet_changed(far))
-        app.clock = lambda: later
-        app.model.clock.wall = lambda: later
-        app.plan.refresh(force=True)
+        await _lru1_far_and_later(app, pilot, seconds=30)
         await pilot.press("f4")
         await pilot.pause()
         assert isinstance(app.screen, FleetScreen)
