@@ -97,10 +97,11 @@ def _walk(course: Course, mission: Mission, link: LinkModel, speed: float) -> _W
         course.robot, 0.0, now.at, now.skill, now.progress, now.x, now.y, now.battery, ""
     )
     start = uplink.runs_from(now.mode)
-    steps = _held(course, mission, uplink) if start is not None else _Steps((), (), (), (), "")
+    steps = _held(course, mission, uplink)
     w = _Walk(base, steps, start if start is not None else now.at, speed)
-    w.halted = start is None
-    w.lay()
+    w.halted = start is None and bool(steps.steps)  # it has skills, and waits for a run
+    if not w.halted:
+        w.lay()
     return w
 
 
