@@ -57,14 +57,9 @@ log = logging.getLogger(__name__)
 HEARD_PUBLISH_S = 10.0  # a robot's `heard` goes out at least this often while it talks
 TICK_S = 1.0  # expiry of queued commands is checked this often
 DELAY_SAMPLES = 8  # the delay estimate: the least of the last few samples
-# what moves a command's verification on (anything else waits for the next tick)
-_VERIFIED_BY = (
-    ev.CommandQueued,
-    ev.CommandChanged,
-    ev.SkillStatusChanged,
-    ev.SkillRemoved,
-    ev.MissionReplaced,
-)
+# what moves a command's verification on at once; a skill's status (a report: many
+# per second from a busy fleet) waits for the next tick, a second at most
+_VERIFIED_BY = (ev.CommandQueued, ev.CommandChanged, ev.MissionReplaced)
 
 
 def _now() -> datetime:
