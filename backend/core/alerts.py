@@ -33,6 +33,7 @@ class AlertKind(StrEnum):
     COMMAND = "command"
     ROBOT_ERROR = "robot_error"
     JOURNAL = "journal"
+    OVERDUE = "overdue"
 
 
 MEANING: dict[AlertKind, str] = {
@@ -46,6 +47,8 @@ MEANING: dict[AlertKind, str] = {
     "gave up on it",
     AlertKind.ROBOT_ERROR: "a robot sent something wrong (a gap, an unreadable message)",
     AlertKind.JOURNAL: "the server cannot write its journal (or can again)",
+    AlertKind.OVERDUE: "a command's verification stage (sent, received, started, completed) "
+    "is later than its due time and tolerance (backend/core/verification.py)",
 }
 
 

@@ -31,6 +31,7 @@ from backend.core.model import (
     Strict,
 )
 from backend.core.ops import Answer, DownlinkMessage, OperatorOp, QueueEntry, Report
+from backend.core.verification import Verification
 from backend.protocol.keys import PROTOCOL_VERSION
 
 # the robot-facing models live in core (the uplink is part of the mission);
@@ -199,6 +200,12 @@ class RobotInfo(Strict):
     )
     contact: RobotContact | None = Field(
         None, description="in contact, out of contact (next contact at T) or offline"
+    )
+    verification: list[Verification] = Field(
+        default_factory=list,
+        max_length=200,
+        description="its commands under way (pending, or applied with skills not ended): "
+        "each one's stages queued, sent, received, started, completed, with due times",
     )
 
 

@@ -18,12 +18,12 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import Callable, Mapping
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 from typing import Any
 
 from pydantic import ValidationError
 
-from backend.core.contact import ContactWindows, RepeatingWindow, contact_at
+from backend.core.contact import ContactWindows, RepeatingWindow, contact_at, sim_time_text
 from backend.protocol.mapfeed import KEY_STATUS, KEY_STATUS_LIVE, SimStatus, StatusMirror
 from backend.protocol.messages import MissionClock, RobotContact
 from backend.transport import QueryFailed, query, subscribe_on_loop
@@ -122,3 +122,27 @@ class ContactWatch:
         windows, clock, source = self._windows(robot)
         c = contact_at(windows, self.mission_now(clock, now or _now()), present=present)
         return RobotContact.model_validate({**c.model_dump(), "clock": clock, "source": source})
+
+    # -- when a robot can be reached (backend.core.verification's Path) -------------------
+    def speed(self, clock: MissionClock) -> float:
+        """Mission seconds per wall second on `clock`."""
+        status = self.mirror.status
+        if clock == "sim" and status is not None:
+            return status.speed or 1.0
+        return 1.0
+
+    def open_from(self, robot: str, present: bool, t: datetime) -> datetime | None:
+        """The first instant at or after `t` (wall) when the robot is in contact
+        (None: offline, or no window ahead)."""
+        windows, clock, _ = self._windows(robot)
+        if not present or windows is None:
+            return t if present else None
+        m = self.mission_now(clock, t)
+        opens = m if windows.is_open(m) else windows.next_opening(m)
+        return None if opens is None else t + timedelta(seconds=(opens - m) / self.speed(clock))
+
+    def time_text(self, t: datetime) -> str:
+        """A wall stamp in mission time, with its unit: 'sim 0:32:00', '14:32:05'."""
+        if self.mirror.status is not None:
+            return f"sim {sim_time_text(self.mission_now('sim', t))}"
+        return f"{t:%H:%M:%S}"

@@ -49,6 +49,7 @@ from backend.server.contact import ContactWatch
 from backend.server.downlink import DownlinkApplier, Submitter, raise_alerts
 from backend.server.refusals import Handler, JournalFailed
 from backend.server.uplink import UplinkSender
+from backend.server.verification import VerificationWatch
 from backend.transport import ReplyError, serve_async, watch_liveliness
 
 log = logging.getLogger(__name__)
@@ -56,6 +57,9 @@ log = logging.getLogger(__name__)
 HEARD_PUBLISH_S = 10.0  # a robot's `heard` goes out at least this often while it talks
 TICK_S = 1.0  # expiry of queued commands is checked this often
 DELAY_SAMPLES = 8  # the delay estimate: the least of the last few samples
+# what moves a command's verification on at once; a skill's status (a report: many
+# per second from a busy fleet) waits for the next tick, a second at most
+_VERIFIED_BY = (ev.CommandQueued, ev.CommandChanged, ev.MissionReplaced)
 
 
 def _now() -> datetime:
@@ -82,6 +86,7 @@ class RobotLink:
         self._said: set[tuple[str, str]] = set()
         self._renew: set[str] = set()  # robots to register again: the mission was replaced
         self._downlink = DownlinkApplier(host)
+        self.verification = VerificationWatch(host, self.contact)
         self._session: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._tick: asyncio.Task[None] | None = None
@@ -164,8 +169,15 @@ class RobotLink:
         info = self.robots.get(robot)
         return info.manifest.skills if info is not None and info.manifest is not None else None
 
-    def applied(self, events: list[Any]) -> None:
-        """After an applied operation: transmit what it added or withdrew."""
+    def applied(self, events: list[Any], op: Any = None) -> None:
+        """After an applied operation: transmit what it added or withdrew;
+        verify the commands it moved on."""
+        self.verification.applied(op)
+        self._events(events)
+        if any(isinstance(e, _VERIFIED_BY) for e in events):
+            self.refresh_verification()
+
+    def _events(self, events: list[Any]) -> None:
         for e in events:
             if isinstance(e, ev.CommandQueued):
                 self._kick(e.command.robot)
@@ -359,7 +371,12 @@ class RobotLink:
 
     # -- presence ---------------------------------------------------------------------
     def _set_robot(self, info: RobotInfo) -> None:
-        info = info.model_copy(update={"contact": self.contact.of(info.name, info.online)})
+        info = info.model_copy(
+            update={
+                "contact": self.contact.of(info.name, info.online),
+                "verification": self.verification.of(info.name),
+            }
+        )
         self.robots[info.name] = info
         if info.heard is not None:
             self._published_heard[info.name] = info.heard
@@ -388,6 +405,7 @@ class RobotLink:
             try:
                 self.refresh_contact()
                 self._expire()
+                self.refresh_verification()
             except JournalFailed:
                 pass  # alerted by the server; tried again at the next tick
             except Exception:  # a bug must not end the housekeeping
@@ -399,6 +417,15 @@ class RobotLink:
         now = _now()
         for name, info in list(self.robots.items()):
             if self.contact.of(name, info.online, now) != info.contact:
+                self._set_robot(info)
+
+    def refresh_verification(self) -> None:
+        """Publish the robots whose commands' stages moved on (or fell overdue)."""
+        if self._host.engine is None:
+            return
+        for name in self.verification.refresh(self._mission, self.robots, _now()):
+            info = self.robots.get(name)
+            if info is not None:
                 self._set_robot(info)
 
     def _expire(self) -> None:

@@ -314,7 +314,7 @@ class MissionServer:
             self.archive.journaled(applied.revision, op)
         batch = EventBatch(revision=applied.revision, events=applied.events, actor=actor, op=op.op)
         self._publish(self._events_pub, batch.model_dump_json().encode())
-        self.robot_link.applied(applied.events)  # commands to transmit, robots a mission names
+        self.robot_link.applied(applied.events, op)  # commands to transmit, robots a mission names
 
     def _maybe_checkpoint(self) -> None:
         """The journal's checkpoint (its log copied into the file, with an

@@ -32,6 +32,7 @@ from console.state.capability import (
 from console.state.changes import StateChange, Topic
 from console.state.contact import out_of_contact, presence_words
 from console.state.model import ConsoleModel
+from console.state.nowcast import nowcast_words, robot_nowcast
 
 SPARK = 6  # samples shown per sparkline (the model keeps model.HISTORY)
 
@@ -215,6 +216,9 @@ class FleetScreen(ViewScreen):
         out.append(self.model.activity_text(r) if self.model.mission else "—")
         out.append(" · last report: ", style="bold")
         out.append(last_report(self.model, r))
+        nc = robot_nowcast(self.model, r)  # its report is old: what it probably does now
+        if nc is not None:
+            out.append(f" · {nowcast_words(nc)}", style="italic")
         out.append("\nlink: ", style="bold")
         out.append(link.link_text(self.model, r, self.model.clock))
         return out

@@ -31,6 +31,7 @@ from console.operations import OperationService
 from console.screens.dialogs import ChoiceScreen, ConfirmScreen, MarkerPrompt
 from console.state.actions import ACTIONS
 from console.state.changes import StateChange, Topic
+from console.state.contact import CONTACT_GLYPH
 from console.state.keys import KeyNames
 from console.state.markers import (
     bind_choices,
@@ -44,6 +45,7 @@ from console.state.markers import (
     relabel,
 )
 from console.state.model import CONNECTED, ConsoleModel
+from console.state.nowcast import NOWCAST_GLYPH
 from console.state.site import here_text
 from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS, fmt_value
 from console.widgets.bars import InfoLine, StatusLine, TopBar, connection_text
@@ -54,6 +56,7 @@ from console.widgets.map.view import (
     GOAL_GLYPH,
     LANDER_GLYPH,
     NO_LINK_GLYPH,
+    NOWCAST_ARROWS,
     POSE_ARROWS,
     POSITION_GLYPH,
     ROBOT_ARROWS,
@@ -98,6 +101,8 @@ def legend_text(colours: dict[str, str] | None = None, keys: KeyNames | None = N
     ):
         row(GLYPHS[st], fg(f"status-{STATUS_CSS[st]}"), f"  {STATUS_WORDS[st]}")
     row("✕", fg("presence-offline"), "  offline")
+    row(CONTACT_GLYPH, fg("presence-unknown"), "  out of contact")
+    row(NOWCAST_ARROWS[0], fg("presence-unknown"), f"{NOWCAST_GLYPH} probably now")
     row(NO_LINK_GLYPH, fg("presence-offline"), "  out of comms range")
     row(FOLLOW_GLYPH, "bold", f"  followed ({keys.say('map.follow')})")
     row(POSE_ARROWS[0], "bold", "pose marker")

@@ -13,10 +13,12 @@ from __future__ import annotations
 from typing import Protocol
 
 from backend.core.model import CommandState, Mission, UplinkCommand
+from backend.core.verification import Verification
 from backend.protocol.messages import RobotInfo
 from console.state.clock import MissionClock
 from console.state.contact import contact_words
 from console.state.text import fmt_duration
+from console.state.verification import command_stage, executing, stage_words
 
 UPLINK_GLYPH = "⇡"
 DELAY_GLYPH = "⇄"
@@ -116,7 +118,21 @@ def link_text(model: Linked, robot: str, clock: MissionClock) -> str:
         parts.append(f"heard {clock.age_text(info.heard)} ago")
     cmds = model.pending(robot)
     if cmds:
-        parts.append("waiting for its answer: " + ", ".join(command_text(c, clock) for c in cmds))
+        texts = (staged_text(model, c, clock) for c in cmds)
+        parts.append("waiting for its answer: " + ", ".join(texts))
     else:
         parts.append("no command waiting")
+    parts += [executing_text(v, clock) for v in executing(info)]
     return " · ".join(parts)
+
+
+def staged_text(model: Linked, c: UplinkCommand, clock: MissionClock) -> str:
+    """'sync #17 sent 40s ago (received due 14:32:05)': with the stage it waits for."""
+    stage = command_stage(model.robots.get(c.robot), c.id, clock)
+    return command_text(c, clock) + (f" ({stage})" if stage else "")
+
+
+def executing_text(v: Verification, clock: MissionClock) -> str:
+    """'executing sync #17: started due 14:40:00' (an applied command's skills under way)."""
+    stage = v.current
+    return f"executing {v.op} #{v.command}" + (f": {stage_words(stage, clock)}" if stage else "")

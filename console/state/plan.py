@@ -21,6 +21,7 @@ from backend.core.plan.checks import Finding, run_checks
 from backend.core.plan.forecast import Forecast, Forecaster
 from backend.protocol.mapfeed import MapMirror, SimStatus
 from backend.protocol.messages import Telemetry
+from console.state.nowcast import NowcastView
 
 CHECKS_EVERY_S = 2.0
 MAP_EVERY_S = 5.0
@@ -44,6 +45,7 @@ class PlanView:
         # the journal, a console keeps those of its own syncs
         self.planned: dict[str, tuple[float, float]] = {}
         self.generation = 0  # grows with every new forecast
+        self.nowcast = NowcastView()  # each robot's probable present, from the forecast
         self.findings_generation = 0  # grows when the findings (or their waivers) change
         self._forecaster: Forecaster | None = None
         self._library: Library | None = None
@@ -97,6 +99,7 @@ class PlanView:
         self._seen = seen
         inputs = plan_inputs(now, telemetry, self._site if site is not None else None, self.status)
         assert self._forecaster is not None
+        self.nowcast.reported(self.forecast, mission, telemetry, self.status)
         self.forecast = self._forecaster.forecast(mission, inputs)
         checked = (plan, site, status)
         if force or checked != self._checked or now - self._checked_at >= CHECKS_EVERY_S:

@@ -8,9 +8,13 @@ connection (a `MissionClient`, subscribed to telemetry only for `robots`),
 does one thing and always closes the connection.
 
 Operations
-  state [ROBOT...]            the mission: per robot its skills (glyph, id,
+  state [ROBOT...] [--nowcast]
+                              the mission: per robot its skills (glyph, id,
                               label, skill, parameters that differ from the
-                              library defaults), barriers, markers, revision
+                              library defaults), barriers, markers, revision;
+                              --nowcast: each robot's probable present (≈:
+                              skill, progress, position, battery) predicted
+                              from its last report, and that report's age
   robots                      presence, type, manifest (modules, skills) and,
                               when a robot publishes it within ~5 s, battery,
                               link quality and activity
@@ -23,9 +27,17 @@ Operations
   run|pause|stop|reset (ROBOT | --all) [--expire D] [--wait [S]]
   retry ID                             [--expire D] [--wait [S]]
   pending [ROBOT...]          commands to robots not settled yet: number,
-                              robot, what, state, age, expiry
+                              robot, what, state, age, expiry, and the stage
+                              it waits for with its due time (--json: every
+                              stage: queued, sent, received, started,
+                              completed, each with state, at, due, tolerance)
   cancel COMMAND [--wait [S]] withdraw a pending command (final while it is
                               queued; once sent, the robot's answer decides)
+  wait COMMAND [--until received|started|completed] [--grace D] [--max-wait S]
+                              until the command's stage is reached (exit 0),
+                              never will be (1: refused, expired, a skill
+                              failed) or is overdue: past its due time and
+                              tolerance, plus D (4)
   barrier ID ID...
   unbarrier BARRIER_ID
   marker add NAME (--pose P | --position P | --area A) [--description TEXT]
@@ -114,8 +126,8 @@ Output
 
 Exit codes: 0 ok, 1 refused by the server, 2 bad usage or input (nothing is
 sent), 3 server unreachable, not answering in time, or speaking another
-protocol version. Never a traceback (MISSIONCTL_DEBUG=1 shows one for
-unexpected errors).
+protocol version; `wait` only: 4 the stage is overdue. Never a traceback
+(MISSIONCTL_DEBUG=1 shows one for unexpected errors).
 """
 
 from __future__ import annotations
@@ -303,6 +315,16 @@ def _state(p: argparse.ArgumentParser) -> None:
     p.add_argument("robots", nargs="*", metavar="ROBOT", help="only these robots")
 
 
+def _state_op(p: argparse.ArgumentParser) -> None:
+    _state(p)
+    p.add_argument(
+        "--nowcast",
+        action="store_true",
+        help="also each robot's probable present (≈): skill and progress, position, battery, "
+        "predicted from its last report, its plan and the time since",
+    )
+
+
 def _add(p: argparse.ArgumentParser) -> None:
     p.add_argument("robot", metavar="ROBOT")
     p.add_argument("skill", metavar="SKILL")
@@ -369,6 +391,33 @@ def _retry(p: argparse.ArgumentParser) -> None:
 def _cancel(p: argparse.ArgumentParser) -> None:
     p.add_argument("command", type=_command_number, metavar="COMMAND", help="its number")
     _wait_and_expire(p, expire=False)
+
+
+DEFAULT_MAX_WAIT = 600.0  # `wait`: seconds for a stage that has no due
+
+
+def _wait_stage(p: argparse.ArgumentParser) -> None:
+    p.add_argument("command", type=_command_number, metavar="COMMAND", help="its number")
+    p.add_argument(
+        "--until",
+        choices=("received", "started", "completed"),
+        default="received",
+        help="the stage to wait for (default: received)",
+    )
+    p.add_argument(
+        "--grace",
+        type=_duration,
+        default=0.0,
+        metavar="D",
+        help="more tolerance past the stage's due before it counts as overdue (90s, 5m)",
+    )
+    p.add_argument(
+        "--max-wait",
+        type=_positive_float,
+        default=DEFAULT_MAX_WAIT,
+        metavar="S",
+        help=f"seconds to wait when the stage has no due (default {DEFAULT_MAX_WAIT:g})",
+    )
 
 
 def _command_number(text: str) -> int:
@@ -500,7 +549,7 @@ def _watch(p: argparse.ArgumentParser) -> None:
 # ctl's operations, in the order `ctl --help` lists them: name -> (help, its arguments).
 # Each also takes the common options (_common).
 OPERATIONS: dict[str, tuple[str, Arguments]] = {
-    "state": ("print the mission: robots, skills, barriers, markers, revision", _state),
+    "state": ("print the mission: robots, skills, barriers, markers, revision", _state_op),
     "robots": ("robot presence, type, manifest and telemetry", _nothing),
     "add": ("add a skill to a robot's unsynchronized section", _add),
     "delete": ("delete idle skills", _ids),
@@ -515,6 +564,7 @@ OPERATIONS: dict[str, tuple[str, Arguments]] = {
     "retry": ("retry a failed skill (a new attempt right after it)", _retry),
     "pending": ("commands to robots not settled yet (age, expiry)", _state),
     "cancel": ("withdraw a pending command to a robot", _cancel),
+    "wait": ("wait for a command's stage: received, started or completed", _wait_stage),
     "barrier": ("make idle skills of different robots start together", _ids),
     "unbarrier": ("remove a barrier", _unbarrier),
     "marker": ("add, move, rename or delete a marker", _marker),

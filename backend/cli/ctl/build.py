@@ -301,7 +301,7 @@ def _redo(args: argparse.Namespace, known: Known) -> Any:
 # ctl's operation name -> its builder (None: `ctl` alone, refused before this)
 BUILDERS: dict[str | None, Builder] = {
     **dict.fromkeys(("state", "robots", "pending", "watch", "save", None), _no_operation),
-    **dict.fromkeys(("check", "timeline", "history"), _no_operation),
+    **dict.fromkeys(("check", "timeline", "history", "wait"), _no_operation),
     "add": _add,
     "delete": _delete,
     "move": _move,

@@ -205,7 +205,7 @@ def _since(t: datetime | None, now: datetime) -> float | None:
     return (now - t).total_seconds() if t is not None else None
 
 
-def command_line(c: Any, now: datetime) -> str:
+def command_line(c: Any, now: datetime, client: Any = None) -> str:
     """One pending (or settled) command: `17 lru1 sync lru1-1, lru1-2: sent 12 s ago ...`."""
     what = f"{c.op} {', '.join(c.skills)}" if c.skills else c.op
     if c.state.value == "queued":
@@ -214,21 +214,37 @@ def command_line(c: Any, now: datetime) -> str:
         when = f"sent {age_text(_since(c.sent, now))} ago, no answer yet"
     else:
         when = f"{c.state.value} {_time(c.settled)}" + (f": {c.reason}" if c.reason else "")
+    extra = _command_notes(c, now) + _stage_note(client, c, now)
+    tail = f" [{'; '.join(extra)}]" if extra else ""
+    return f"command {c.id} to {c.robot} (seq {c.seq}): {what}: {when}{tail}"
+
+
+def _command_notes(c: Any, now: datetime) -> list[str]:
     extra = []
     if c.expires is not None and c.pending:
         passed = " (passed)" if c.expires <= now else ""
         extra.append(f"expires {_time(c.expires)}{passed}")
     if c.cancel_requested and c.pending:
         extra.append("cancel requested")
-    tail = f" [{'; '.join(extra)}]" if extra else ""
-    return f"command {c.id} to {c.robot} (seq {c.seq}): {what}: {when}{tail}"
+    return extra
 
 
-def command_json(c: Any, now: datetime) -> dict[str, Any]:
+def _stage_note(client: Any, c: Any, now: datetime) -> list[str]:
+    """The stage it waits for, with its due (the server's verification)."""
+    from backend.cli.ctl.verify import stage_text
+
+    text = stage_text(client, c, now, _time) if client is not None else ""
+    return [text] if text else []
+
+
+def command_json(c: Any, now: datetime, client: Any = None) -> dict[str, Any]:
+    from backend.cli.ctl.verify import stages_json
+
     return {
         **c.model_dump(mode="json", exclude={"command"}),
         "age_s": _since(c.created, now),
         "sent_age_s": _since(c.sent, now),
+        "stages": stages_json(client, c) if client is not None else None,
     }
 
 
@@ -443,7 +459,7 @@ def robots_json(client: Any) -> dict[str, Any]:
     for name, entry in out.items():
         t = client.telemetry.get(name)
         entry["telemetry"] = t.model_dump(mode="json") if t else None
-        entry["pending_commands"] = [command_json(c, now) for c in client.pending(name)]
+        entry["pending_commands"] = [command_json(c, now, client) for c in client.pending(name)]
     return {"revision": client.revision, "robots": out}
 
 
@@ -499,15 +515,27 @@ def robots_text(client: Any) -> str:
 def pending_json(client: Any, only: list[str] | None = None) -> dict[str, Any]:
     now = datetime.now(UTC)
     cmds = [c for c in client.pending() if _shown(c.robot, only)]
-    return {"revision": client.revision, "pending": [command_json(c, now) for c in cmds]}
+    return {
+        "revision": client.revision,
+        "pending": [command_json(c, now, client) for c in cmds],
+        # applied, their skills not ended: verified until they are
+        "executing": [command_json(c, now, client) for c in _executing(client, only)],
+    }
+
+
+def _executing(client: Any, only: list[str] | None) -> list[Any]:
+    from backend.cli.ctl.verify import executing
+
+    return [c for c in executing(client) if _shown(c.robot, only)]
 
 
 def pending_text(client: Any, only: list[str] | None = None) -> str:
     now = datetime.now(UTC)
     cmds = [c for c in client.pending() if _shown(c.robot, only)]
+    cmds += _executing(client, only)
     if not cmds:
         return "no pending commands" + (f" for {', '.join(only)}" if only else "")
-    return "\n".join(command_line(c, now) for c in cmds)
+    return "\n".join(command_line(c, now, client) for c in cmds)
 
 
 # ---------------------------------------------------------------- describe

@@ -22,6 +22,7 @@ from typing import Any
 from backend.cli.ctl.args import DEFAULT_CONNECT, ROBOT_OPS
 from backend.cli.ctl.errors import FileInvalid, UsageError
 from backend.cli.ctl.history import view as history_view
+from backend.cli.ctl.nowcast import nowcasts_json, nowcasts_text
 from backend.cli.ctl.plan import check as plan_check
 from backend.cli.ctl.plan import timeline as plan_timeline
 from backend.cli.ctl.plan import wait_telemetry
@@ -37,6 +38,7 @@ from backend.cli.ctl.render import (
     unicode_ok,
     watch_line,
 )
+from backend.cli.ctl.verify import wait_stage
 from backend.core.credentials import AccountsError
 from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK, EXIT_REFUSED, EXIT_UNREACHABLE
 from backend.transport.login import login_from_args
@@ -256,7 +258,8 @@ async def _session(args: argparse.Namespace, endpoints: list[str], login: Any = 
         client_id=args.client_id or default_client_id(),
         timeout=args.timeout,
         # watch: to say when a robot's telemetry is unreadable
-        telemetry=args.op in ("robots", "watch", "check", "timeline", "sync"),
+        telemetry=args.op in ("robots", "watch", "check", "timeline", "sync")
+        or getattr(args, "nowcast", False),
     )
     async with client:
         return await VIEWS.get(args.op, _operation)(client, args)
@@ -280,10 +283,12 @@ async def _state(client: Any, args: argparse.Namespace) -> int:
     if unknown:
         known = ", ".join(client.mission.robots) or "none"
         raise UsageError(f"state: no robot {', '.join(unknown)} in this mission (robots: {known})")
+    predicted = await nowcasts_json(client, args, only)
     if args.json:
-        _print_json(state_json(client, only or None))
+        _print_json(state_json(client, only or None) | predicted)
     else:
-        print(state_text(client, only or None, unicode=unicode_ok()), flush=True)
+        text = state_text(client, only or None, unicode=unicode_ok())
+        print(text + nowcasts_text(predicted), flush=True)
     return EXIT_OK
 
 
@@ -473,4 +478,5 @@ VIEWS: dict[str, Callable[[Any, argparse.Namespace], Awaitable[int]]] = {
     "check": plan_check,
     "timeline": plan_timeline,
     "history": history_view,
+    "wait": wait_stage,
 }

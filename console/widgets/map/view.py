@@ -38,6 +38,7 @@ from backend.protocol.mapfeed import T_FREE, T_ROCK, T_SLOW, T_UNKNOWN, MapMirro
 from console.state.contact import CONTACT_GLYPH, out_of_contact
 from console.state.markers import marker_point, marker_use
 from console.state.model import ConsoleModel
+from console.state.nowcast import NOWCAST_GLYPH, robot_nowcast
 from console.state.site import clamp_to_site
 from console.state.text import GLYPHS, STATUS_CSS
 
@@ -46,6 +47,7 @@ OUTSIDE = 8  # ground class of pixels outside the map (0..7: terrain + 4 if cove
 
 # heading glyphs, counter-clockwise from east in 45° steps
 ROBOT_ARROWS = "▶◥▲◤◀◣▼◢"
+NOWCAST_ARROWS = "▷◹△◸◁◺▽◿"  # hollow: where a robot probably is now (≈, its now-cast)
 POSE_ARROWS = "→↗↑↖←↙↓↘"
 POSITION_GLYPH = "⊕"
 AREA_GLYPH = "◇"
@@ -285,15 +287,17 @@ class Overlay:
         if 0 <= px < self.vp.w and 0 <= py < 2 * self.vp.h:
             self.pixels.setdefault(py, {})[px] = var
 
-    def line(self, a: tuple[float, float], b: tuple[float, float], var: str) -> None:
-        """Pixels of a segment, clipped to the view first (zoomed in, a long
-        edge would otherwise cost a pixel step per metre off screen)."""
+    def line(
+        self, a: tuple[float, float], b: tuple[float, float], var: str, every: int = 1
+    ) -> None:
+        """Pixels of a segment (every `every`-th: dotted), clipped to the view first
+        (zoomed in, a long edge would otherwise cost a pixel step per metre off screen)."""
         clipped = clip_segment(self.vp.to_pixel(*a), self.vp.to_pixel(*b), self.vp.w, 2 * self.vp.h)
         if clipped is None:
             return
         (x0, y0), (x1, y1) = clipped
         n = max(abs(round(x1) - round(x0)), abs(round(y1) - round(y0)), 1)
-        for k in range(n + 1):
+        for k in range(0, n + 1, every):
             self.pixel(round(x0 + (x1 - x0) * k / n), round(y0 + (y1 - y0) * k / n), var)
 
     def polygon(self, pts: list[tuple[float, float]], var: str) -> None:
@@ -456,6 +460,20 @@ def draw_robots(ov: Overlay, model: ConsoleModel, follow: str | None) -> None:
             + (f" {FOLLOW_GLYPH}" if follow == robot else "")
         )
         ov.point(f"robot:{robot}", t.pose.x, t.pose.y, arrow, var, name, var)
+        draw_nowcast(ov, model, robot, t)
+
+
+def draw_nowcast(ov: Overlay, model: ConsoleModel, robot: str, t: Any) -> None:
+    """Where a robot last known is probably now: hollow, dotted from its last known place."""
+    nc = robot_nowcast(model, robot)
+    if nc is None or nc.x is None or nc.y is None:
+        return
+    if ov.vp.to_cell(nc.x, nc.y) == ov.where.get(f"robot:{robot}"):
+        return  # where it was last known: nothing more to say
+    ov.line((t.pose.x, t.pose.y), (nc.x, nc.y), "presence-unknown", every=2)
+    arrow = heading_glyph(t.pose.yaw, NOWCAST_ARROWS)
+    label = f"{NOWCAST_GLYPH}{robot}"
+    ov.point(f"nowcast:{robot}", nc.x, nc.y, arrow, "presence-unknown", label, "presence-unknown")
 
 
 # -- the widget -------------------------------------------------------------------------------

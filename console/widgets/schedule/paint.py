@@ -136,5 +136,5 @@ class Painter:
             extra=self._summary(s) if not col.static or v.expand_static else "",
             cursor=(st["cursor"] if v.has_focus else st["cursor-blur"]) if selected else None,
             stale=stale,
-            uplink=link.command_text(c, self.model.clock) if c is not None else "",
+            uplink=link.staged_text(self.model, c, self.model.clock) if c is not None else "",
         )

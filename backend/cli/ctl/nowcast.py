@@ -1,0 +1,54 @@
+"""`ctl state --nowcast`: each robot's probable present beside its last report.
+
+What a console draws with ≈: from each robot's last telemetry, its course and
+the mission time elapsed since (backend/core/plan/nowcast.py), the skill it
+probably executes and how far, where it probably is, its battery, and how
+old the report it starts from is.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from backend.cli.ctl.plan import gather
+from backend.core.plan.forecast import Forecaster
+from backend.core.plan.nowcast import nowcasts
+
+
+async def nowcasts_json(client: Any, args: Any, only: list[str]) -> dict[str, Any]:
+    """--nowcast: {"nowcast": {robot: its probable present, or None}} ({} without it)."""
+    if not getattr(args, "nowcast", False):
+        return {}
+    inputs = await gather(client, args.timeout)
+    forecaster = Forecaster(client.library)
+    now, m = time.time(), client.mission
+    courses = {r: forecaster.course(m, r, inputs) for r in m.robots}
+    links = {r: inputs.link_of(r) for r in courses}
+    every = nowcasts(courses, m, now, inputs.speed, links)
+    found = {r: every.get(r) for r in only or list(m.robots)}
+    return {"nowcast": {r: nc.as_json() if nc else None for r, nc in found.items()}}
+
+
+def nowcasts_text(predicted: dict[str, Any]) -> str:
+    """One line per robot, after the state ('' without --nowcast)."""
+    lines = [nowcast_line(r, nc) for r, nc in predicted.get("nowcast", {}).items()]
+    return "".join(f"\n{line}" for line in lines)
+
+
+def nowcast_line(robot: str, nc: dict[str, Any] | None) -> str:
+    """'≈ lru1 now: lru1-5 62% at (12.0, -3.5), battery 41% (from a report 600 s old)'."""
+    if nc is None:
+        return f"≈ {robot}: no telemetry to predict from"
+    return f"≈ {robot} now: {_doing(nc)}{_where(nc)} (from a report {nc['age_s']:.0f} s old)"
+
+
+def _doing(nc: dict[str, Any]) -> str:
+    if nc["skill"] is None:
+        return f"no skill, waiting ({nc['held']})" if nc["held"] else "no skill"
+    return f"{nc['skill']} {nc['progress'] or 0:.0%}"
+
+
+def _where(nc: dict[str, Any]) -> str:
+    at = "" if nc["x"] is None else f" at ({nc['x']:.1f}, {nc['y']:.1f})"
+    return at + ("" if nc["battery"] is None else f", battery {nc['battery']:.0%}")

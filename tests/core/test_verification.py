@@ -1,0 +1,143 @@
+"""A command's verification stages and their dues (backend/core/verification.py)."""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime, timedelta
+
+from backend.core.model import (
+    CommandState,
+    Enqueue,
+    Mission,
+    Run,
+    SkillInstance,
+    Status,
+    UplinkCommand,
+)
+from backend.core.ops import Predicted
+from backend.core.verification import Path, under_way, verify
+
+T0 = datetime(2026, 11, 28, 12, 0, tzinfo=UTC)
+D = 10.0  # one-way delay, s
+
+
+def at(s: float) -> datetime:
+    return T0 + timedelta(seconds=s)
+
+
+def mission(*statuses: Status, started: float | None = None) -> Mission:
+    skills = [
+        SkillInstance(id=f"r1-{i + 1}", skill="drive", status=st) for i, st in enumerate(statuses)
+    ]
+    if started is not None:
+        skills[0] = skills[0].model_copy(update={"started_at": at(started)})
+    return Mission(library="lib.yaml", tasks={"r1": skills})
+
+
+def sync(**kw: object) -> UplinkCommand:
+    base: dict[str, object] = {
+        "id": 7,
+        "robot": "r1",
+        "seq": 1,
+        "op": "sync",
+        "command": Enqueue(skills=[]),
+        "skills": ["r1-1", "r1-2"],
+        "created": T0,
+    }
+    return UplinkCommand.model_validate({**base, **kw})
+
+
+PLAN = {
+    "r1-1": Predicted(start=at(30), end=at(100)),
+    "r1-2": Predicted(start=at(100), end=at(200)),
+}
+
+
+def states(v: object) -> dict[str, str]:
+    return {s.name: s.state for s in v.stages}  # type: ignore[attr-defined]
+
+
+def test_dues_follow_the_delay_and_the_forecast() -> None:
+    v = verify(sync(), mission(Status.IDLE, Status.IDLE), Path(D), PLAN, at(1))
+    dues = {s.name: s.due for s in v.stages}
+    assert dues["sent"] == dues["received"] == at(2 * D)  # there and back
+    assert dues["started"] == at(30 + D)  # as planned, reported a delay later
+    assert dues["completed"] == at(200 + D)
+    assert states(v) == {
+        "queued": "ok",
+        "sent": "waiting",
+        "received": "waiting",
+        "started": "waiting",
+        "completed": "waiting",
+    }
+
+
+def test_a_closed_window_moves_the_dues() -> None:
+    opens = at(300)
+    path = Path(D, open_from=lambda t: max(t, opens))  # closed until 300 s
+    v = verify(sync(), mission(Status.IDLE, Status.IDLE), path, PLAN, at(1))
+    assert v.stage("received").due == at(300 + 2 * D)
+    # it reaches the robot at 310 s, later than the plan's start: it starts then
+    assert v.stage("started").due == at(310 + D)
+    assert v.stage("completed").due == at(200 + 280 + D)
+
+
+def test_no_contact_ahead_or_no_forecast_means_no_due() -> None:
+    offline = verify(sync(), mission(Status.IDLE), Path(D, lambda _t: None), PLAN, at(1))
+    assert all(s.due is None for s in offline.stages[1:])
+    unplanned = verify(sync(), mission(Status.IDLE), Path(D), {}, at(1))
+    assert unplanned.stage("received").due is not None
+    assert unplanned.stage("started").due is None
+
+
+def test_a_late_stage_is_overdue_past_its_tolerance() -> None:
+    c = sync(state=CommandState.SENT, sent=at(0))
+    m = mission(Status.IDLE, Status.IDLE)
+    due = at(2 * D)
+    tol = verify(c, m, Path(D), PLAN, at(1)).stage("received").tolerance_s
+    assert tol >= 2.0
+    just = verify(c, m, Path(D), PLAN, due + timedelta(seconds=tol - 0.1))
+    assert just.stage("received").state == "waiting"
+    late = verify(c, m, Path(D), PLAN, due + timedelta(seconds=tol + 0.1))
+    assert late.stage("received").state == "overdue"
+    assert late.current is not None and late.current.name == "received"
+    graced = verify(c, m, Path(D), PLAN, due + timedelta(seconds=tol + 0.1), grace_s=5)
+    assert graced.stage("received").state == "waiting"
+
+
+def test_acked_is_received_then_running_is_started_then_ended_is_completed() -> None:
+    acked = sync(
+        state=CommandState.ACKED, sent=at(0), answered=at(20), settled=at(20), done=["r1-1"]
+    )
+    m = mission(Status.RUNNING, Status.IDLE_SYNCHRONIZED, started=45)
+    v = verify(acked, m, Path(D), PLAN, at(60))
+    assert v.skills == ["r1-1"]  # what the robot says it queued
+    assert states(v)["received"] == "ok" and v.stage("received").at == at(20)
+    assert v.stage("started").at == at(45)
+    # started 15 s after the plan said: its end moves with it
+    assert v.stage("completed").due == at(100 + 15 + D)
+    assert under_way(acked, m)
+    done = mission(Status.SUCCESS, started=45)
+    assert states(verify(acked, done, Path(D), PLAN, at(60)))["completed"] == "ok"
+    assert not under_way(acked, done)
+    failed = mission(Status.FAILURE, started=45)
+    assert states(verify(acked, failed, Path(D), PLAN, at(60)))["completed"] == "failed"
+
+
+def test_refused_fails_received_and_what_follows() -> None:
+    c = sync(state=CommandState.REFUSED, sent=at(0), answered=at(20), settled=at(20))
+    v = verify(c, mission(Status.IDLE, Status.IDLE), Path(D), PLAN, at(30))
+    assert states(v) == {
+        "queued": "ok",
+        "sent": "ok",
+        "received": "failed",
+        "started": "failed",
+        "completed": "failed",
+    }
+    assert v.failed and v.current is None
+    assert not under_way(c, mission(Status.IDLE))
+
+
+def test_a_control_command_has_no_started_or_completed_stage() -> None:
+    c = sync(op="run", command=Run(), skills=[])
+    v = verify(c, mission(Status.IDLE), Path(D), {}, at(1))
+    assert states(v)["started"] == states(v)["completed"] == "none"
