@@ -68,6 +68,7 @@ from pydantic import BaseModel, ValidationError
 from backend.core.bulk import gc_paused
 from backend.core.events import EventBatch, apply_events
 from backend.core.model import Mission
+from backend.core.ops import Predicted, Sync
 from backend.core.records import size_on_disk
 from backend.server.journal_file import (
     JOURNAL_FORMAT,
@@ -184,6 +185,14 @@ def _faithful_serializer(model_cls: type[BaseModel]) -> pydantic_core.SchemaSeri
         return pydantic_core.SchemaSerializer(schema, {"ser_json_inf_nan": "constants"})
     except Exception:  # pragma: no cover - a future pydantic: fall back to model_dump_json
         return None
+
+
+def _forecast_of(op_text: str) -> dict[str, Predicted]:
+    """A journaled sync's forecast ({} for one that cannot be read)."""
+    try:
+        return Sync.model_validate_json(op_text).forecast
+    except ValidationError:
+        return {}
 
 
 _INSERT_BATCH = (
@@ -583,6 +592,23 @@ class Journal:
         return True
 
     # -- reading -------------------------------------------------------------------
+    def sync_forecasts(self, skills: set[str]) -> dict[str, Predicted]:
+        """What the newest journaled syncs of `skills` forecast for them (a
+        restart's verification times their started and completed stages
+        from it, as before the restart)."""
+        wanted, found = set(skills), {}
+        if wanted:
+            with self._lock:
+                rows = self.conn.execute(
+                    "SELECT op FROM batches WHERE op LIKE ? ORDER BY revision DESC",
+                    ('{"op":"sync"%',),
+                ).fetchall()
+            for (text,) in rows:
+                forecast = _forecast_of(text)
+                found.update({s: forecast[s] for s in wanted & forecast.keys()})
+                wanted -= forecast.keys()
+        return found
+
     def load(self) -> tuple[Mission | None, list[Remembered]]:
         """The mission as of the last committed batch, and the last requests
         (`Remembered`: client, request_id, revision, reply), oldest first.

@@ -151,6 +151,7 @@ class MissionServer:
                     )
                 library = load_library(lib_file)
                 self.resumed = True
+                self.robot_link.verification.resume(mission, journal.sync_forecasts)
             else:
                 if self.mission_file is None:
                     raise SystemExit(

@@ -3,9 +3,8 @@
 backend.core.verification).
 
 The forecast a client sends with a sync (`Sync.forecast`) is kept here while
-its skills are under way: it times the started and completed stages. It
-lives in memory: after a restart a command's skills have no due until they
-are synchronized again (their earlier stages still have theirs).
+its skills are under way: it times the started and completed stages. After a
+restart it is read back from the journaled syncs (`resume`).
 
 A stage's due moves a little with every estimate of the delay and every
 status of the simulator (its clock): a robot's list is published again when
@@ -14,6 +13,7 @@ a stage's state changes or a due moves by more than `MOVED_S`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from datetime import datetime
 from itertools import chain
 from typing import Any, Final
@@ -21,7 +21,15 @@ from typing import Any, Final
 from backend.core.alerts import AlertKind, Raises
 from backend.core.model import Mission
 from backend.core.ops import Predicted, Sync
-from backend.core.verification import Path, Stage, Verification, late_s, under_way, verify
+from backend.core.verification import (
+    Path,
+    Stage,
+    Verification,
+    late_s,
+    under_way,
+    verify,
+    watched,
+)
 from backend.protocol.messages import MissionClock, RobotInfo
 from backend.server.contact import ContactWatch
 
@@ -41,6 +49,14 @@ class VerificationWatch:
         """An operation was applied: a sync's forecast is kept."""
         if isinstance(op, Sync):
             self.forecasts.update(op.forecast)
+
+    def resume(
+        self, mission: Mission, forecasts: Callable[[set[str]], dict[str, Predicted]]
+    ) -> None:
+        """After a restart: `forecasts(skills)` (the journal's) for the skills
+        of the commands still under way."""
+        going = [c for cmds in mission.uplink.values() for c in cmds if under_way(c, mission)]
+        self.forecasts.update(forecasts({s for c in going for s in watched(c)}))
 
     def of(self, robot: str) -> list[Verification]:
         return self.lists.get(robot, [])
