@@ -143,6 +143,14 @@ def robot_nowcast(model: Shown, robot: str) -> Nowcast | None:
     return view.at(plan.forecast, model.mission, model.clock().timestamp(), plan.status).get(robot)
 
 
+def probably_doing(model: Shown, robot: str) -> str | None:
+    """'≈ lru1-5 62%' (a schedule header's room): the skill the robot probably
+    executes now and how far (None when it probably executes none: what it
+    was last seen doing says more)."""
+    nc = robot_nowcast(model, robot)
+    return f"{NOWCAST_GLYPH} {nc.skill} {nc.progress or 0:.0%}" if nc and nc.skill else None
+
+
 def nowcast_words(nc: Nowcast) -> str:
     """'≈ now: lru1-5 62%, battery 33%' (what the robot probably does now)."""
     doing = f"{nc.skill} {nc.progress or 0:.0%}" if nc.skill else f"waiting ({nc.held})"

@@ -100,3 +100,15 @@ async def test_the_fleet_says_what_a_distant_robot_probably_does_now():
         await pilot.pause()
         text = screen_text(app)
         assert "last report:" in text and "≈ now: lru1-2 " in text, text
+
+
+async def test_the_schedule_header_says_what_a_distant_robot_probably_does_now():
+    app = make_app()
+    async with app.run_test(size=(140, 40)) as pilot:
+        await _lru1_far_and_later(app, pilot, seconds=30)
+        await pilot.pause()
+        header = screen_text(app).splitlines()[1:4]
+        lru1 = [line.split("│")[0] for line in header]
+        assert "≈ lru1-2 " in lru1[2], lru1  # the activity line: the probable present
+        # the battery as heard; the now-cast's only where it differs (here it does not)
+        assert "bat 82%" in lru1[1] and "≈" not in lru1[1], lru1

@@ -72,7 +72,8 @@ def test_stale_robot_80x24(snap_compare):
         await pilot.pause()
         app.mission_screen.freshness_tick()
         await pilot.pause()
-        _shows(app, "25s ago: ▶ lru1-2", "45% as of 25s ago", "25s ago: ◷ lru2-3")
+        # lru1 probably drives on (the now-cast); lru2 waits where it was seen waiting
+        _shows(app, "25s ago ≈ lru1-2 ", "45% as of 25s ago", "25s ago: ◷ lru2-3")
 
     assert snap_compare(make_app(), terminal_size=(80, 24), run_before=_settled(run))
 

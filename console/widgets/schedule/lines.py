@@ -22,6 +22,7 @@ from console.state import link
 from console.state.contact import CONTACT_GLYPH, header_contact, out_of_contact
 from console.state.freshness import FRESH, Freshness
 from console.state.model import ConsoleModel
+from console.state.nowcast import NOWCAST_GLYPH, probably_doing, robot_nowcast
 from console.state.text import GLYPHS, STATUS_CSS, fmt_duration, skill_title
 
 HEADER_H = 4  # name + presence / battery + link / activity / rule
@@ -225,8 +226,8 @@ def _levels_line(h: Head) -> list[Segment]:
     gap = st["base"]
     if t is None:
         bat, link, gap = ("bat –", st["dim"]), ("link –", st["dim"]), st["dim"]
-    elif h.fresh.stale:  # the last levels heard, not live ones
-        bat = (f"bat {int(round(t.battery * 100))}%", st["stale"])
+    elif h.fresh.stale:  # the last levels heard, not live ones (and the now-cast's)
+        bat = (f"bat {t.battery:.0%}{_probable_battery(h, t.battery)}", st["stale"])
         link = (f"link {int(round(t.link * 100))}%", st["stale"])
         gap = st["stale"]
     else:
@@ -238,6 +239,13 @@ def _levels_line(h: Head) -> list[Segment]:
             else ("link: out of range", st["offline"])
         )
     return _spread([bat, *_link_words(h), link], w, gap)
+
+
+def _probable_battery(h: Head, heard: float) -> str:
+    """' ≈33%': the battery the now-cast puts it at now ('': none, or the same)."""
+    nc = robot_nowcast(h.model, h.col.robot)
+    now = f"{nc.battery:.0%}" if nc and nc.battery is not None else f"{heard:.0%}"
+    return "" if now == f"{heard:.0%}" else f" {NOWCAST_GLYPH}{now}"
 
 
 def _link_words(h: Head) -> list[tuple[str, Style]]:
@@ -284,11 +292,12 @@ def _activity_line(h: Head) -> list[Segment]:
             return [Segment(fit(h.fresh.as_of(), h.col.width), h.st["stale-head"])]
         return [Segment(fit(f"{n} skill{'s' if n != 1 else ''}", h.col.width), h.st["dim"])]
     activity = h.model.activity_text(h.col.robot)
-    if h.fresh.stale:  # what it was doing, as of when: first, so it is never cut
-        w = h.col.width
+    if h.fresh.stale:  # as of when: first, so it is never cut; then what it probably
+        w = h.col.width  # does now (the now-cast), else what it was doing then
         ago = h.fresh.ago()
         as_of = fit(ago, w) if cell_len(ago) > w else ago
-        rest = fit(f": {activity}", w - cell_len(as_of))
+        probably = probably_doing(h.model, h.col.robot)
+        rest = fit(f" {probably}" if probably else f": {activity}", w - cell_len(as_of))
         return [Segment(as_of, h.st["stale-head"]), Segment(rest, h.st["stale"])]
     return [Segment(fit(activity, h.col.width), h.st["dim"])]
 
