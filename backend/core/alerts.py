@@ -33,6 +33,7 @@ class AlertKind(StrEnum):
     COMMAND = "command"
     ROBOT_ERROR = "robot_error"
     JOURNAL = "journal"
+    TEAM = "team"
 
 
 MEANING: dict[AlertKind, str] = {
@@ -46,6 +47,7 @@ MEANING: dict[AlertKind, str] = {
     "gave up on it",
     AlertKind.ROBOT_ERROR: "a robot sent something wrong (a gap, an unreadable message)",
     AlertKind.JOURNAL: "the server cannot write its journal (or can again)",
+    AlertKind.TEAM: "a robot asked to join the mission, was added or was retired",
 }
 
 

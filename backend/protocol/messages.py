@@ -200,6 +200,11 @@ class RobotInfo(Strict):
     contact: RobotContact | None = Field(
         None, description="in contact, out of contact (next contact at T) or offline"
     )
+    joining: bool = Field(
+        False,
+        description="it registered under a name the mission lacks, with a type the library "
+        "knows (`manifest`): an operator may add it (operation `robot_add`)",
+    )
 
 
 class Alert(RaisedAlert):
@@ -256,7 +261,9 @@ class Register(Strict):
 
 
 # why a registration was not accepted (stable)
-RegisterCode = Literal["", "protocol", "unknown_robot", "wrong_type", "taken"]
+RegisterCode = Literal[
+    "", "protocol", "unknown_robot", "unknown_type", "joining", "wrong_type", "taken"
+]
 
 
 class RegisterReply(Strict):

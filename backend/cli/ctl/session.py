@@ -37,6 +37,7 @@ from backend.cli.ctl.render import (
     unicode_ok,
     watch_line,
 )
+from backend.cli.ctl.team import joining_type
 from backend.core.credentials import AccountsError
 from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK, EXIT_REFUSED, EXIT_UNREACHABLE
 from backend.transport.login import login_from_args
@@ -303,6 +304,9 @@ async def _pending(client: Any, args: argparse.Namespace) -> int:
 
 
 async def _robots(client: Any, args: argparse.Namespace) -> int:
+    if getattr(args, "robots_op", None) is not None:  # add or retire: an operation
+        args.joining_type = joining_type(client, args.name)
+        return await _operation(client, args)
     await wait_telemetry(client)
     if args.json:
         _print_json(robots_json(client))
