@@ -87,3 +87,18 @@ def test_unknown_type_and_bad_usage(server):
     assert r.returncode == 2 and "give skill ids, or --from ROBOT" in r.stderr, r
     r = ctl(server.endpoint, "robots", "retire", "lru2")
     assert r.returncode == 2 and "--reason" in r.stderr, r
+
+
+def test_suggest_ranks_robots_by_the_forecast(server):
+    endpoint = server.endpoint
+    ok(endpoint, "robots", "add", "lru3", "--type", "lru_science")
+    hint = ok_json(endpoint, "suggest", "lru1-1", "lru1-2")
+    rows = {r["robot"]: r for r in hint["robots"]}
+    assert hint["robots"][0]["robot"] == "lru3" and rows["lru3"]["capable"] is True
+    assert rows["lru3"]["end_in_s"] is not None and rows["lru3"]["battery_end"] is not None
+    assert "has no skill 'take_science_image'" in rows["lru2"]["refused"]["lru1-2"]
+    text = ok(endpoint, "suggest", "take_science_image").stdout.splitlines()
+    assert text[0] == "who can take take_science_image (earliest end first):"
+    assert text[-1].startswith("  3. lru2 cannot: lru2 (lru_manipulator) has no skill"), text
+    r = ctl(endpoint, "suggest", "nope-1")
+    assert r.returncode == 2 and "no skill with id or library name nope-1" in r.stderr, r

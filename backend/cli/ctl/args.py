@@ -20,6 +20,9 @@ Operations
   reassign ID... --to ROBOT | reassign --from ROBOT --to ROBOT
                               give idle skills (or a robot's whole plan) to a robot
                               that offers them; each one that cannot move says why
+  suggest SKILL_OR_ID...      the robots that can take these skills (or a new one of
+                              this library skill), earliest predicted end first, with
+                              the battery left (the forecast, with telemetry)
   add ROBOT SKILL [--param NAME=VALUE]... [--label TEXT] [--at INDEX] [POLICY]
   delete ID...
   move ID INDEX               INDEX within the unsynchronized section (0 = first)
@@ -131,7 +134,7 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from backend.cli.ctl.team import reassign_arguments, robots_arguments
+from backend.cli.ctl.team import reassign_arguments, robots_arguments, suggest_arguments
 from backend.cli.parser import Parser
 from backend.transport.login import add_login_arguments
 
@@ -528,6 +531,7 @@ OPERATIONS: dict[str, tuple[str, Arguments]] = {
     "barrier": ("make idle skills of different robots start together", _ids),
     "unbarrier": ("remove a barrier", _unbarrier),
     "reassign": ("give idle skills, or a robot's plan, to another robot", reassign_arguments),
+    "suggest": ("rank the robots that can take skills: forecast end, battery", suggest_arguments),
     "marker": ("add, move, rename or delete a marker", _marker),
     "load": ("replace the mission with a mission file (validated here first)", _load),
     "save": ("write the mission to a YAML file", _save),

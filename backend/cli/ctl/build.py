@@ -304,7 +304,7 @@ BUILDERS: dict[str | None, Builder] = {
     **dict.fromkeys(("state", "pending", "watch", "save", None), _no_operation),
     "robots": build_robots,
     "reassign": build_reassign,
-    **dict.fromkeys(("check", "timeline", "history"), _no_operation),
+    **dict.fromkeys(("check", "timeline", "history", "suggest"), _no_operation),
     "add": _add,
     "delete": _delete,
     "move": _move,

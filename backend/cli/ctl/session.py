@@ -37,6 +37,7 @@ from backend.cli.ctl.render import (
     unicode_ok,
     watch_line,
 )
+from backend.cli.ctl.suggest import suggest_view
 from backend.cli.ctl.team import joining_type
 from backend.core.credentials import AccountsError
 from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK, EXIT_REFUSED, EXIT_UNREACHABLE
@@ -257,7 +258,7 @@ async def _session(args: argparse.Namespace, endpoints: list[str], login: Any = 
         client_id=args.client_id or default_client_id(),
         timeout=args.timeout,
         # watch: to say when a robot's telemetry is unreadable
-        telemetry=args.op in ("robots", "watch", "check", "timeline", "sync"),
+        telemetry=args.op in ("robots", "watch", "check", "timeline", "sync", "suggest"),
     )
     async with client:
         return await VIEWS.get(args.op, _operation)(client, args)
@@ -477,4 +478,5 @@ VIEWS: dict[str, Callable[[Any, argparse.Namespace], Awaitable[int]]] = {
     "check": plan_check,
     "timeline": plan_timeline,
     "history": history_view,
+    "suggest": suggest_view,
 }

@@ -45,6 +45,12 @@ def reassign_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--to", required=True, metavar="ROBOT", help="the robot to give them to")
 
 
+def suggest_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "what", nargs="+", metavar="SKILL_OR_ID", help="skill ids, or one skill of the library"
+    )
+
+
 # ---------------------------------------------------------------- builders
 
 

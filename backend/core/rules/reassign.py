@@ -17,6 +17,8 @@ from backend.core.ops import Reassign, RestoreItem, ReturnSkills
 from backend.core.rules.base import Change, Refusal, Rule, Rules, check_in_service
 from backend.core.rules.uplink import incompatible
 
+__all__ = ["chosen", "incompatible", "reassign", "return_skills", "why_not"]
+
 
 def chosen(rules: Rules, op: Reassign) -> list[str]:
     """The ids to move, in the order of their lists: those named, then the
