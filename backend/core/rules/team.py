@@ -98,6 +98,7 @@ def retire_robot(rules: Rules, op: RetireRobot) -> Change:
         how = "on the ground (it is out of reach: it drops them when it registers again)"
     task = rules.mission.tasks.get(op.name, [])
     plan = [s.id for s in task if s.status in (Status.IDLE, Status.IDLE_SYNCHRONIZED)]
+    plan[:0] = [e.skill.id for e in events if isinstance(e, ev.SkillAdded)]
     notes = [f"{op.name} retired: no new syncs; its log stays; queued skills are taken back {how}"]
     if plan:
         notes.append(
@@ -135,13 +136,15 @@ def _take_back(rules: Rules, robot: str) -> list[ev.Event]:
         )
         for c in rules.mission.pending_commands(robot)
     ]
-    for s in rules.mission.tasks.get(robot, []):
+    for i, s in enumerate(rules.mission.tasks.get(robot, [])):
         if s.status == Status.IDLE_SYNCHRONIZED:
             info = f"taken back on the ground: {said}"
             events.append(ev.SkillStatusChanged(id=s.id, status=Status.IDLE, info=info, at=now))
         elif s.status in ACTIVE:
-            info = f"{said}: its outcome is unknown"
+            # its next attempt leads the plan to reassign: the work is not lost
+            info = f"{said}: its outcome is unknown; {s.retry_id()} is its next attempt"
             events.append(ev.SkillStatusChanged(id=s.id, status=Status.FAILURE, info=info, at=now))
+            events.append(ev.SkillAdded(robot=robot, index=i + 1, skill=s.next_attempt()))
     return events
 
 

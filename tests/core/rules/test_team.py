@@ -94,10 +94,14 @@ def test_retiring_an_unreachable_robot_takes_its_queue_back_on_the_ground(
     engine.offers = _Link(reachable=False)
     bring(engine, "lru1", "lru1-1", Status.RUNNING)
     sync_queued = engine.submit(Sync(robot="lru1"))  # never transmitted
-    engine.submit(RetireRobot(name="lru1", reason="stopped responding"))
+    retired = engine.submit(RetireRobot(name="lru1", reason="stopped responding"))
+    assert retired.value["to_reassign"] == ["lru1-1.2", "lru1-2"]
     assert status_of(engine, "lru1-1") == Status.FAILURE
     assert "outcome is unknown" in skill(engine, "lru1-1").status_info
     assert status_of(engine, "lru1-2") == Status.IDLE
+    # the interrupted skill's next attempt leads the plan to reassign
+    assert ids(engine, "lru1") == ["lru1-1", "lru1-1.2", "lru1-2"]
+    assert skill(engine, "lru1-1.2").attempt == 2
     command = engine.mission.command(sync_queued.value["command"])
     assert command is not None and command.state == CommandState.CANCELLED
     assert engine.mission.pending_commands("lru1") == []
