@@ -689,6 +689,8 @@ EVENT_TEXT: dict[str, Callable[[Any], str]] = {
     ),
     "waiver_set": lambda e: f"waived {e.check}: {e.waiver.reason}",
     "waiver_removed": lambda e: f"waiver of {e.check} withdrawn",
+    "robot_added": lambda e: f"robot {e.name} ({e.spec.type}) joined the mission",
+    "robot_retired": lambda e: f"robot {e.name} retired: {e.reason}",
 }
 
 
