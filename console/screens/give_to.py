@@ -9,37 +9,37 @@ from pathlib import Path
 from typing import Any
 
 from rich.text import Text
-from textual import on, work
+from textual import work
 from textual.app import ComposeResult
 from textual.containers import Vertical
-from textual.screen import ModalScreen
 from textual.widgets import Label, OptionList, Static
 from textual.widgets.option_list import Option
 
 from backend.core.plan.suggest import Suggestion
-from console.bindings import bind, key_names
+from console.bindings import key_names
+from console.screens.dialogs import TCSS, ChoiceScreen
 from console.state.clock import MissionClock
 from console.state.team import Gift, gift, hint_words, ranked
 
 
-class GiveToScreen(ModalScreen[str | None]):
-    """The robots ranked for a gift; enter gives it to the highlighted one."""
+class GiveToScreen(ChoiceScreen):
+    """The robots ranked for a gift; enter gives it to the highlighted one (a
+    robot that can take none of it cannot be chosen: it says why)."""
 
-    BINDINGS = [bind("dialog.cancel", "cancel")]
-    CSS_PATH = Path(__file__).with_name("team.tcss")
+    CSS_PATH = [TCSS, Path(__file__).with_name("team.tcss")]
 
     def __init__(self, words: str, hints: list[Suggestion], now: float, clock: MissionClock):
-        super().__init__()
-        self.words = words
-        self.hints = hints
-        self.now = now
-        self.clock = clock
+        rows = [(h.robot, _row(n, h, now, clock)) for n, h in enumerate(hints)]
+        first = next((i for i, h in enumerate(hints) if h.moved), 0)
+        super().__init__(f"Give {words} to…", rows, highlighted=first)
+        self.takers = {h.robot for h in hints if h.moved}
 
     def compose(self) -> ComposeResult:
         with Vertical():
-            yield Label(Text(f"Give {self.words} to…", style="bold"), classes="question")
+            yield Label(Text(self.question, style="bold"), classes="question")
             yield Static("ranked by the forecast: earliest end with them, then battery left")
-            yield OptionList(*(self._option(n, h) for n, h in enumerate(self.hints)), id="robots")
+            options = (Option(p, id=r, disabled=r not in self.takers) for r, p in self.rows)
+            yield OptionList(*options, id="choices")
             hint = key_names(self).hint(
                 ("dialog.ok", "give"),
                 (("dialog.previous", "dialog.next"), "move"),
@@ -47,27 +47,14 @@ class GiveToScreen(ModalScreen[str | None]):
             )
             yield Static(hint, classes="hint")
 
-    def _option(self, n: int, h: Suggestion) -> Option:
-        text = Text()
-        text.append(f"{h.robot:<8}", style="bold" if h.moved else "dim")
-        text.append(hint_words(h, self.now, self.clock), style="" if h.capable else "dim")
-        if h.capable and n == 0:
-            text.append("  ★ best", style="bold")
-        return Option(text, id=h.robot, disabled=not h.moved)
 
-    def on_mount(self) -> None:
-        ol = self.query_one(OptionList)
-        first = next((i for i, h in enumerate(self.hints) if h.moved), None)
-        if first is not None:
-            ol.highlighted = first
-        ol.focus()
-
-    @on(OptionList.OptionSelected)
-    def _selected(self, event: OptionList.OptionSelected) -> None:
-        self.dismiss(event.option.id)
-
-    def action_cancel(self) -> None:
-        self.dismiss(None)
+def _row(n: int, h: Suggestion, now: float, clock: MissionClock) -> Text:
+    text = Text()
+    text.append(f"{h.robot:<8}", style="bold" if h.moved else "dim")
+    text.append(hint_words(h, now, clock), style="" if h.capable else "dim")
+    if h.capable and n == 0:
+        text.append("  ★ best", style="bold")
+    return text
 
 
 @work(group="dialog")

@@ -3,54 +3,12 @@ join, retire one (asking why: it is journaled)."""
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
-
-from textual import on
-from textual.app import ComposeResult
-from textual.containers import Vertical
-from textual.screen import ModalScreen
-from textual.widgets import Input, Label, Static
 
 from backend.core.model import Status
 from backend.core.ops import AddRobot, RetireRobot
-from console.bindings import bind, key_names
+from console.screens.checks import ReasonPrompt
 from console.state.team import joining, retired
-
-
-class RetirePrompt(ModalScreen[str | None]):
-    """Why a robot is retired (required: it goes into the journal and every log)."""
-
-    BINDINGS = [bind("dialog.cancel", "cancel")]
-    CSS_PATH = Path(__file__).with_name("team.tcss")
-
-    def __init__(self, robot: str, what: str) -> None:
-        super().__init__()
-        self.robot = robot
-        self.what = what
-
-    def compose(self) -> ComposeResult:
-        with Vertical():
-            yield Label(f"Retire {self.robot}", classes="title")
-            yield Static(self.what, classes="message")
-            yield Input(placeholder="why (e.g. stopped responding)", id="reason")
-            hint = key_names(self).hint(("dialog.ok", "retire"), ("dialog.cancel", "cancel"))
-            yield Static(hint, classes="hint")
-            yield Static("", id="error", classes="error")
-
-    def on_mount(self) -> None:
-        self.query_one(Input).focus()
-
-    @on(Input.Submitted)
-    def _submitted(self, event: Input.Submitted) -> None:
-        reason = event.value.strip()
-        if not reason:
-            self.query_one("#error", Static).update("give a reason: it is journaled")
-            return
-        self.dismiss(reason[:500])
-
-    def action_cancel(self) -> None:
-        self.dismiss(None)
 
 
 async def add_robot(screen: Any, robot: str | None, say: Any) -> None:
@@ -82,9 +40,10 @@ async def retire_robot(screen: Any, robot: str | None, say: Any) -> None:
         f"the ground while it is out of reach); its plan ({len(plan)} skills) awaits "
         "reassignment (give to… on the schedule); its log stays"
     )
-    reason = await screen.app.push_screen_wait(RetirePrompt(robot, what))
+    prompt = ReasonPrompt(f"Retire {robot}", what, "why (e.g. stopped responding)", "retire")
+    reason = await screen.app.push_screen_wait(prompt)
     if reason is None:
         say(f"{robot} kept in service")
         return
-    op = RetireRobot(name=robot, reason=reason)
+    op = RetireRobot(name=robot, reason=reason[:500])
     await screen.ops.submit(op, f"retire {robot}", robot=robot, say=say)
