@@ -132,7 +132,8 @@ def _take_back(rules: Rules, robot: str) -> list[ev.Event]:
             id=c.id,
             state=CommandState.CANCELLED,
             settled=now,
-            reason=f"{said}: never sent",
+            reason=f"{said}: given up on the ground (if it comes back, its registration "
+            "says what it holds)",
         )
         for c in rules.mission.pending_commands(robot)
     ]
