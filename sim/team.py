@@ -77,6 +77,18 @@ def parse_join(text: str) -> Arrival:
     return Arrival(_name(robot, "--join robot"), _name(rtype, "--join type"), parse_duration(when))
 
 
+def _check_join(fleet: Any, j: Arrival) -> None:
+    if j.robot in fleet.agents:
+        raise ValueError(f"--join {j.robot}: a robot of that name is simulated already")
+    if j.type not in fleet.library.robot_types:
+        known = ", ".join(fleet.library.robot_types)
+        raise ValueError(
+            f"--join {j.robot}: the library has no robot type '{j.type}' (types: {known})"
+        )
+    if j.type not in fleet.world.models:
+        raise ValueError(f"--join {j.robot}: the world has no model for type '{j.type}'")
+
+
 class TeamEvents:
     """Breakdowns and arrivals, each done when the sim clock reaches it."""
 
@@ -92,15 +104,7 @@ class TeamEvents:
                 known = ", ".join(fleet.agents)
                 raise ValueError(f"--break {b.robot}: not a simulated robot (robots: {known})")
         for j in self.joins:
-            if j.robot in fleet.agents:
-                raise ValueError(f"--join {j.robot}: a robot of that name is simulated already")
-            if j.type not in fleet.library.robot_types:
-                known = ", ".join(fleet.library.robot_types)
-                raise ValueError(
-                    f"--join {j.robot}: the library has no robot type '{j.type}' (types: {known})"
-                )
-            if j.type not in fleet.world.models:
-                raise ValueError(f"--join {j.robot}: the world has no model for type '{j.type}'")
+            _check_join(fleet, j)
 
     def arm_failed(self, robot: str, skill: str) -> bool:
         return robot in self.broken_arms and skill in ARM_SKILLS

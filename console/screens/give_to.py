@@ -19,7 +19,7 @@ from backend.core.plan.suggest import Suggestion
 from console.bindings import key_names
 from console.screens.dialogs import TCSS, ChoiceScreen
 from console.state.clock import MissionClock
-from console.state.team import Gift, gift, hint_words, ranked
+from console.state.team import Gift, gift, hint_words, nobody_takes, ranked
 
 
 class GiveToScreen(ChoiceScreen):
@@ -73,9 +73,9 @@ async def give(screen: Any) -> None:
         screen.say(str(e), "warning")
         return
     hints = ranked(model, g)
-    if not any(h.moved for h in hints):
-        why = "; ".join(f"{h.robot}: {hint_words(h, 0, model.clock)}" for h in hints)
-        screen.say(f"no robot can take {g.words}: {why or 'no other robot in service'}", "warning")
+    nobody = nobody_takes(g, hints, model.clock)
+    if nobody is not None:
+        screen.say(nobody, "warning")
         return
     now = model.clock().timestamp()
     chosen = await screen.app.push_screen_wait(GiveToScreen(g.words, hints, now, model.clock))

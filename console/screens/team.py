@@ -26,20 +26,30 @@ async def add_robot(screen: Any, robot: str | None, say: Any) -> None:
     await screen.ops.submit(AddRobot(name=robot, type=rtype), f"add robot {robot}", say=say)
 
 
-async def retire_robot(screen: Any, robot: str | None, say: Any) -> None:
-    model = screen.model
+def _why_not_retire(model: Any, robot: str | None) -> str | None:
     if robot is None or model.mission is None or robot not in model.mission.robots:
-        say("select a robot of the mission to retire it", "warning")
-        return
+        return "select a robot of the mission to retire it"
     if retired(model, robot):
-        say(f"{robot} is retired already ({retired(model, robot)})", "warning")
-        return
+        return f"{robot} is retired already ({retired(model, robot)})"
+    return None
+
+
+def _retiring(model: Any, robot: str) -> str:
+    """What retiring `robot` does, in the prompt."""
     plan = [s.id for s in model.task(robot) if s.status in (Status.IDLE, Status.IDLE_SYNCHRONIZED)]
-    what = (
+    return (
         f"{robot} gets no new syncs; its queued skills are taken back (by its uplink, or on "
         f"the ground while it is out of reach); its plan ({len(plan)} skills) awaits "
         "reassignment (give to… on the schedule); its log stays"
     )
+
+
+async def retire_robot(screen: Any, robot: str | None, say: Any) -> None:
+    why = _why_not_retire(screen.model, robot)
+    if why is not None or robot is None:
+        say(why, "warning")
+        return
+    what = _retiring(screen.model, robot)
     prompt = ReasonPrompt(f"Retire {robot}", what, "why (e.g. stopped responding)", "retire")
     reason = await screen.app.push_screen_wait(prompt)
     if reason is None:

@@ -68,16 +68,26 @@ def ranked(model: ConsoleModel, g: Gift) -> list[Suggestion]:
     """The robots in service ranked for the gift (see backend/core/plan/suggest.py)."""
     if model.mission is None or model.library is None:
         return []
-    ids = list(g.ids) or [s.id for s in model.task(g.from_robot or "") if s.status == Status.IDLE]
-    now = model.clock().timestamp()
-    offers = Manifests(
-        {n: dict(r.manifest.skills) for n, r in model.robots.items() if r.manifest is not None}
-    )
+    inputs = model.plan.inputs(model.telemetry, model.clock().timestamp())
     try:
-        inputs = model.plan.inputs(model.telemetry, now)
-        return suggest(model.mission, model.library, inputs, ids, offers)
+        return suggest(
+            model.mission, model.library, inputs, _ids(model, g), Manifests.of(model.robots)
+        )
     except Refusal:
         return []
+
+
+def nobody_takes(g: Gift, hints: list[Suggestion], clock: MissionClock) -> str | None:
+    """Why no robot can take the gift (None: one can)."""
+    if any(h.moved for h in hints):
+        return None
+    why = "; ".join(f"{h.robot}: {hint_words(h, 0, clock)}" for h in hints)
+    return f"no robot can take {g.words}: {why or 'no other robot in service'}"
+
+
+def _ids(model: ConsoleModel, g: Gift) -> list[str]:
+    """The gift's skill ids (a robot's plan: its idle skills now)."""
+    return list(g.ids) or [s.id for s in model.task(g.from_robot or "") if s.status == Status.IDLE]
 
 
 def hint_words(h: Suggestion, now: float, clock: MissionClock) -> str:
@@ -88,9 +98,13 @@ def hint_words(h: Suggestion, now: float, clock: MissionClock) -> str:
         end = "never ends (a barrier is never passed)"
     else:
         end = f"ends {clock.ts_text(h.end)} (in {clock.duration_text(h.end - now)})"
-    left = ""
-    if h.battery_end is not None:
-        assumed = " (no telemetry: full at start)" if h.battery_assumed else ""
-        left = f", {h.battery_end:.0%} battery left{assumed}"
     stays = "".join(f"; {k} stays: {v}" for k, v in h.refused.items())
-    return end + left + stays
+    return end + battery_words(h) + stays
+
+
+def battery_words(h: Suggestion) -> str:
+    """', 62% battery left' (and whether it was assumed full at the start)."""
+    if h.battery_end is None:
+        return ""
+    assumed = " (no telemetry: full at start)" if h.battery_assumed else ""
+    return f", {h.battery_end:.0%} battery left{assumed}"

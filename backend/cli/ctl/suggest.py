@@ -15,17 +15,12 @@ from backend.core.plan.suggest import Manifests, suggest
 from backend.core.rules.base import Refusal
 
 
-def manifests(client: Any) -> Any:
-    return Manifests(
-        {n: dict(r.manifest.skills) for n, r in client.robots.items() if r.manifest is not None}
-    )
-
-
 async def suggest_view(client: Any, args: argparse.Namespace) -> int:
     """`ctl suggest`: the robots ranked for the skills (the forecast's end, battery left)."""
     inputs = await gather(client, args.timeout)
     try:
-        hints = suggest(client.mission, client.library, inputs, list(args.what), manifests(client))
+        offers = Manifests.of(client.robots)
+        hints = suggest(client.mission, client.library, inputs, list(args.what), offers)
     except Refusal as r:
         raise UsageError(f"suggest: {r.message}") from None
     rows = [_hint_json(h, inputs.now) for h in hints]
@@ -58,11 +53,15 @@ def hint_text(row: dict[str, Any]) -> str:
     if not row["moved"]:
         return f"{row['robot']} cannot: " + "; ".join(row["refused"].values())
     end = _duration(row["end_in_s"]) if row["end_in_s"] is not None else "never (a barrier)"
-    battery = row["battery_end"]
-    left = f", battery {battery:.0%} left" if battery is not None else ""
+    stays = "".join(f"; {k} stays: {v}" for k, v in row["refused"].items())
+    return f"{row['robot']}: ends in {end}{_battery(row)}{stays}"
+
+
+def _battery(row: dict[str, Any]) -> str:
+    if row["battery_end"] is None:
+        return ""
     assumed = " (no telemetry: full at start)" if row["battery_assumed"] else ""
-    partial = "; " + "; ".join(f"{k} stays: {v}" for k, v in row["refused"].items())
-    return f"{row['robot']}: ends in {end}{left}{assumed}{partial if row['refused'] else ''}"
+    return f", battery {row['battery_end']:.0%} left{assumed}"
 
 
 def _duration(s: float) -> str:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 from backend.core import events as ev
 from backend.core.library import Library, default_value
@@ -58,6 +59,11 @@ class Manifests:
     def offered(self, robot: str) -> Mapping[str, str] | None:
         return self._skills.get(robot)
 
+    @classmethod
+    def of(cls, fleet: Mapping[str, Any]) -> Manifests:
+        """From a fleet's entries (robot -> an object with a `manifest` or None)."""
+        return cls({n: dict(r.manifest.skills) for n, r in fleet.items() if r.manifest is not None})
+
 
 def suggest(
     mission: Mission,
@@ -69,18 +75,27 @@ def suggest(
     """The robots in service ranked for `what`: skill ids, or one skill name."""
     if len(what) == 1 and mission.find(what[0]) is None and what[0] in library.skills:
         return _ranked(_by_name(mission, library, inputs, what[0], offers))
-    ids = [sid for sid in what if mission.find(sid) is not None]
-    if len(ids) != len(what):
-        missing = ", ".join(sid for sid in what if sid not in ids)
-        raise Refusal("unknown_skill", f"no skill with id or library name {missing}")
-    owners = {mission.find(sid)[0] for sid in ids}  # type: ignore[index]
+    return _ranked(_by_ids(mission, library, inputs, _known(mission, what), offers))
+
+
+def _known(mission: Mission, ids: list[str]) -> list[str]:
+    missing = [sid for sid in ids if mission.find(sid) is None]
+    if missing:
+        raise Refusal("unknown_skill", f"no skill with id or library name {', '.join(missing)}")
+    return ids
+
+
+def _by_ids(
+    mission: Mission, library: Library, inputs: PlanInputs, ids: list[str], offers: Offers | None
+) -> list[Suggestion]:
+    """Each robot in service but the skills' only owner, given them all."""
+    owners = {found[0] for sid in ids if (found := mission.find(sid)) is not None}
     forecaster = Forecaster(library)
-    bids = [
+    return [
         _bid(mission, library, inputs, forecaster, ids, robot, offers)
         for robot, spec in mission.robots.items()
         if not spec.retired and owners != {robot}
     ]
-    return _ranked(bids)
 
 
 def _ranked(bids: list[Suggestion]) -> list[Suggestion]:

@@ -99,19 +99,23 @@ def retire_robot(rules: Rules, op: RetireRobot) -> Change:
     task = rules.mission.tasks.get(op.name, [])
     plan = [s.id for s in task if s.status in (Status.IDLE, Status.IDLE_SYNCHRONIZED)]
     plan[:0] = [e.skill.id for e in events if isinstance(e, ev.SkillAdded)]
-    notes = [f"{op.name} retired: no new syncs; its log stays; queued skills are taken back {how}"]
-    if plan:
-        notes.append(
-            f"its plan ({', '.join(plan)}) awaits reassignment: "
-            f"missionctl ctl reassign --from {op.name} --to ROBOT"
-        )
     alert = RaisedAlert(
         kind=AlertKind.TEAM,
         robot=op.name,
         message=f"robot {op.name} retired ({op.reason}); {len(plan)} skill(s) to reassign",
     )
     value = {"robot": op.name, "to_reassign": plan}
-    return Change(events, notes, value, None, alerts=(alert,))
+    return Change(events, _retired_notes(op.name, how, plan), value, None, alerts=(alert,))
+
+
+def _retired_notes(robot: str, how: str, plan: list[str]) -> list[str]:
+    notes = [f"{robot} retired: no new syncs; its log stays; queued skills are taken back {how}"]
+    if plan:
+        notes.append(
+            f"its plan ({', '.join(plan)}) awaits reassignment: "
+            f"missionctl ctl reassign --from {robot} --to ROBOT"
+        )
+    return notes
 
 
 def _unsync_by_uplink(rules: Rules, op: RetireRobot) -> list[ev.Event]:
