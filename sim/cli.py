@@ -20,6 +20,7 @@ from backend.core.credentials import AccountsError
 from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK, EXIT_REFUSED, EXIT_UNREACHABLE
 from backend.transport.login import add_login_arguments, login_from_args
 from sim.comms import DURATION_EXAMPLES, WINDOW_SYNTAX, parse_duration, parse_window
+from sim.team import TeamEvents, parse_break, parse_join
 
 if TYPE_CHECKING:  # imported when a command runs: `missionctl --help` stays quick
     from backend.core.library import Library
@@ -131,6 +132,24 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="off: telemetry at a steady --telemetry-rate (default then 4) and the full status "
         "at every publication, as before the link budget (a baseline for "
         "bench/bench_linkbudget.py)",
+    )
+    p.add_argument(
+        "--break",
+        dest="breaks",
+        type=parse_break,
+        action="append",
+        metavar="ROBOT@T[:HOW]",
+        help="ROBOT breaks at sim time T: stops responding (silent, the default) or its "
+        "manipulator fails (arm); repeatable, e.g. lru1@12m",
+    )
+    p.add_argument(
+        "--join",
+        dest="joins",
+        type=parse_join,
+        action="append",
+        metavar="ROBOT:TYPE@T",
+        help="a robot of TYPE arrives at sim time T and asks to join the mission (an operator "
+        "adds it); repeatable, e.g. lru3:lru_science@15m",
     )
     p.add_argument(
         "--connect-timeout",
@@ -248,6 +267,9 @@ def run(args: argparse.Namespace) -> int:
             link_budget=args.link_budget == "on",
             telemetry_hz=rate,
             telemetry_rates=rates,
+            team=TeamEvents(args.breaks or [], args.joins or [])
+            if args.breaks or args.joins
+            else None,
         )
     except (SimError, ValueError) as e:
         print(f"missionctl sim: {e}", file=sys.stderr)

@@ -26,7 +26,7 @@ from typing import Any
 import zenoh
 
 from backend import transport
-from backend.agent import STEADY, Link, RobotAgent
+from backend.agent import STEADY, Link, RobotAgent, SkillFailed
 from backend.core.library import Library
 from backend.core.model import Mission, Pose
 from backend.protocol import mapfeed as mf
@@ -39,6 +39,7 @@ from sim.exchange import WorldExchange
 from sim.robot import SimRobot
 from sim.skills.registry import RobotSkills
 from sim.status import ground_status, truth
+from sim.team import TeamEvents
 from sim.world import World
 from sim.worldfile import WorldFile
 
@@ -102,6 +103,7 @@ class SimFleet:
         link_delay_hint: float = 0.0,
         link_budget: bool = True,
         telemetry_rates: dict[str, float] | None = None,
+        team: TeamEvents | None = None,
     ):
         if speed <= 0 or not math.isfinite(speed):
             raise ValueError("the speed must be a positive number")
@@ -158,6 +160,10 @@ class SimFleet:
             self.agents[name] = self._make_agent(robot, hz)
         if not self.agents:
             raise SimError("the mission has no robot this world can simulate")
+        self.telemetry_hz = telemetry_hz
+        self.team = team  # robots that break or join (sim/team.py)
+        if team is not None:
+            team.check(self)
 
     # ------------------------------------------------------------ agents
 
@@ -216,6 +222,8 @@ class SimFleet:
 
         @functools.wraps(fn)
         async def handler(ctx: Any, **params: Any) -> Any:
+            if self.team is not None and self.team.arm_failed(robot.name, name):
+                raise SkillFailed(f"{robot.name}'s manipulator failed: it cannot {name}")
             robot.activity = name
             robot.paused = lambda: ctx.paused
             try:
@@ -226,6 +234,12 @@ class SimFleet:
 
         handler.__name__ = f"{robot.name}_{name}"
         return handler
+
+    async def join(self, name: str, robot_type: str) -> None:
+        """A robot arrives (`--join`): it registers under its new name."""
+        robot = self.world.add_robot(name, robot_type, index=len(self.world.robots))
+        agent = self.agents[name] = self._make_agent(robot, self.telemetry_hz)
+        await agent.start()
 
     # ------------------------------------------------------------ world knowledge exchange
 
@@ -308,6 +322,8 @@ class SimFleet:
                 asyncio.create_task(self._feed(), name="sim-feed"),
                 asyncio.create_task(self._status_loop(), name="sim-status"),
             ]
+            if self.team is not None:
+                self._tasks.append(asyncio.create_task(self.team.run(self), name="sim-team"))
         except BaseException:
             await self.stop()
             raise

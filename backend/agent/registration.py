@@ -354,6 +354,12 @@ class Registrar:
         self.last_reply = reply
         answered = self.standing.answered
         assert answered is not None
+        if not reply.accepted and reply.code == "joining":
+            # announced to the operators: asked again until one adds it
+            log.info("%s: %s", self.rt.name, reply.reason)
+            self._error = reply.reason
+            self._retry_later()
+            return
         if not reply.accepted:
             log.error("%s: the server refused the registration: %s", self.rt.name, reply.reason)
             self._refused = f"the mission server refused robot {self.rt.name}: {reply.reason}"

@@ -34,6 +34,7 @@ class AlertKind(StrEnum):
     ROBOT_ERROR = "robot_error"
     JOURNAL = "journal"
     OVERDUE = "overdue"
+    TEAM = "team"
 
 
 MEANING: dict[AlertKind, str] = {
@@ -49,6 +50,7 @@ MEANING: dict[AlertKind, str] = {
     AlertKind.JOURNAL: "the server cannot write its journal (or can again)",
     AlertKind.OVERDUE: "a command's verification stage (sent, received, started, completed) "
     "is later than its due time and tolerance (backend/core/verification.py)",
+    AlertKind.TEAM: "a robot asked to join the mission, was added or was retired",
 }
 
 

@@ -8,6 +8,7 @@ clients mirror the server through it — so the three cannot drift apart.
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
@@ -23,6 +24,7 @@ from backend.core.model import (
     Mission,
     Name,
     Policies,
+    RobotSpec,
     SkillId,
     SkillInstance,
     Status,
@@ -159,6 +161,22 @@ class WaiverRemoved(Strict):
     check: CheckId
 
 
+class RobotAdded(Strict):
+    """A robot joined the mission (it registered with a type the library knows)."""
+
+    ev: Literal["robot_added"] = "robot_added"
+    name: Name
+    spec: RobotSpec
+
+
+class RobotRetired(Strict):
+    """A robot was retired: no new syncs; its log stays."""
+
+    ev: Literal["robot_retired"] = "robot_retired"
+    name: Name
+    reason: str = Field(min_length=1, max_length=500)
+
+
 class MissionReplaced(Strict):
     ev: Literal["mission_replaced"] = "mission_replaced"
     mission: Mission
@@ -179,6 +197,8 @@ Event = Annotated[
     | CommandChanged
     | WaiverSet
     | WaiverRemoved
+    | RobotAdded
+    | RobotRetired
     | MissionReplaced,
     Field(discriminator="ev"),
 ]
@@ -314,8 +334,40 @@ def _changed_skill(
     return s.model_copy(update=update)
 
 
+def _waiver_set(m: Mission, e: WaiverSet, revision: int) -> None:
+    m.waivers[e.check] = e.waiver.model_copy(update={"revision": revision})
+
+
+def _waiver_removed(m: Mission, e: WaiverRemoved, revision: int) -> None:
+    m.waivers.pop(e.check, None)
+
+
+def _robot_added(m: Mission, e: RobotAdded, revision: int) -> None:
+    m.robots[e.name] = e.spec.model_copy()
+    m.tasks.setdefault(e.name, [])
+    m.task_revs[e.name] = revision
+
+
+def _robot_retired(m: Mission, e: RobotRetired, revision: int) -> None:
+    m.robots[e.name] = m.robots[e.name].model_copy(update={"retired": e.reason})
+    m.task_revs[e.name] = revision
+
+
+# events that change one part of a mission, as a table (keeps apply_event short)
+_APPLY: dict[type[Any], Callable[[Mission, Any, int], None]] = {
+    WaiverSet: _waiver_set,
+    WaiverRemoved: _waiver_removed,
+    RobotAdded: _robot_added,
+    RobotRetired: _robot_retired,
+}
+
+
 def apply_event(m: Mission, ev: Any, revision: int) -> Mission:
     """Apply one event in place (or return the replacement mission)."""
+    simple = _APPLY.get(type(ev))
+    if simple is not None:
+        simple(m, ev, revision)
+        return m
     match ev:
         case SkillAdded(robot=robot, index=index, skill=skill):
             s = json_copy(skill)
@@ -352,10 +404,6 @@ def apply_event(m: Mission, ev: Any, revision: int) -> Mission:
             _queue_command(m, c)
         case CommandChanged():
             _change_command(m, ev)
-        case WaiverSet(check=check, waiver=w):
-            m.waivers[check] = w.model_copy(update={"revision": revision})
-        case WaiverRemoved(check=check):
-            m.waivers.pop(check, None)
         case MissionReplaced(mission=new):
             m = new.copy_deep()
         case _:

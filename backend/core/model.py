@@ -216,6 +216,12 @@ class SkillInstance(Strict):
 class RobotSpec(Strict):
     type: Name
     description: str = ""
+    retired: str = Field(
+        "",
+        max_length=500,
+        description="why it was retired (empty: in service); a retired robot gets no new "
+        "syncs, its log stays and its plan awaits reassignment",
+    )
 
 
 class Barrier(Strict):

@@ -193,6 +193,38 @@ class Unwaive(Strict):
     check: CheckId
 
 
+class AddRobot(Strict):
+    """Add a robot to the mission: one that registered under a new name with a
+    type the library knows (the server announces it), or one to come."""
+
+    op: Literal["robot_add"] = "robot_add"
+    name: Name
+    type: Name
+    description: str = Field("", max_length=500)
+
+
+class RetireRobot(Strict):
+    """Retire a robot: no new syncs; its queued skills are taken back (by its
+    uplink, or on the ground while it is offline) and its unsynchronized plan
+    awaits reassignment; its log stays."""
+
+    op: Literal["robot_retire"] = "robot_retire"
+    name: Name
+    reason: str = Field(min_length=1, max_length=500, description="why, for the log")
+    expire_s: ExpireS = None
+
+
+class Reassign(Strict):
+    """Give idle skills (`ids`, or the whole unsynchronized plan of `from_robot`)
+    to robot `to`, keeping parameters, bindings and order; each skill that
+    cannot move says why (the others move)."""
+
+    op: Literal["reassign"] = "reassign"
+    ids: list[SkillId] = Field(default_factory=list, max_length=10_000)
+    from_robot: Name | None = Field(None, description="its whole unsynchronized plan")
+    to: Name
+
+
 class LoadMission(Strict):
     """Replace the mission. It comes in as a plan: every skill that is not
     finished is idle (its status was the robots' once; what they hold now is
@@ -241,6 +273,16 @@ class SetSkill(Strict):
     params: dict[str, Any]
     bindings: dict[str, Name]
     policies: Policies
+
+
+class ReturnSkills(Strict):
+    """The undo of a reassignment: each skill back where it was, with the
+    barriers it was in."""
+
+    op: Literal["return_skills"] = "return_skills"
+    items: list[RestoreItem]
+    to: Name = Field(description="where the reassignment gave them (its redo)")
+    barriers: dict[Name, Barrier] = Field(default_factory=dict)
 
 
 class RestoreMarker(Strict):
@@ -386,12 +428,15 @@ OperatorOperation = (
     | MarkerDelete
     | Waive
     | Unwaive
+    | AddRobot
+    | RetireRobot
+    | Reassign
     | LoadMission
     | NewMission
     | Undo
     | Redo
 )
-InternalOperation = RestoreSkills | SetSkill | RestoreBarrier | RestoreMarker
+InternalOperation = RestoreSkills | SetSkill | RestoreBarrier | RestoreMarker | ReturnSkills
 RobotOperation = SyncAck | UnsyncDone | RetryAck | Reconcile | Report | Answer
 # what the server applies for the uplink (never sent by clients or robots)
 LinkOperation = UplinkSent | UplinkSettle | DownlinkRefused
@@ -425,6 +470,8 @@ UNDOABLE = (
     RestoreMarker,
     Waive,
     Unwaive,
+    Reassign,
+    ReturnSkills,
 )
 
 MARKER_TYPES = {"pose": PoseMarker, "position": PositionMarker, "area": AreaMarker}

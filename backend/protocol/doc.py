@@ -220,6 +220,11 @@ ERROR_CODES: list[tuple[str, str, str]] = [
     ("unknown_marker", "server", "no such marker"),
     ("bad_marker", "server", "a marker value of the wrong kind"),
     ("marker_in_use", "server", "a synchronized skill still uses the marker"),
+    ("robot_exists", "server", "robot_add: the mission has a robot of that name"),
+    ("unknown_robot_type", "server", "robot_add: the library has no such robot type"),
+    ("retired", "server", "the robot is retired: no new syncs, nothing given to it"),
+    ("nothing_to_reassign", "server", "reassign: no skill named, or the robot's plan is empty"),
+    ("cannot_reassign", "server", "reassign: no skill named can go to the robot (each says why)"),
     ("bad_mission", "server", "load: the mission does not validate"),
     ("robot_busy", "server", "load/new while commands are pending (or a direct-path command)"),
     ("robots_busy", "server", "load/new while robots hold synchronized skills: reset them"),
@@ -258,7 +263,13 @@ ERROR_CODES: list[tuple[str, str, str]] = [
 # RegisterReply.code
 REGISTER_CODES: list[tuple[str, str]] = [
     ("protocol", "the manifest's `protocol` is not this server's"),
-    ("unknown_robot", "the mission has no robot of that name"),
+    ("unknown_robot", "the mission has no robot of that name (no longer sent: see `joining`)"),
+    ("unknown_type", "a new name with a type the library lacks: the reason says what is missing"),
+    (
+        "joining",
+        "a new name with a type the library knows: announced to the operators; register "
+        "again (every few seconds) until one adds the robot (`robot_add`)",
+    ),
     ("wrong_type", "the mission gives that robot another type"),
     ("taken", "another session holds the name and is online: stand down, ask again later"),
 ]
@@ -422,6 +433,17 @@ EVENT_RULES: list[tuple[str, str, str]] = [
         "set `waivers[check]`, its `revision` = the revision",
     ),
     ("`waiver_removed`", "check", "remove `waivers[check]`"),
+    (
+        "`robot_added`",
+        "name, spec",
+        "set `robots[name]` = spec; `tasks[name]` = [] unless it exists; "
+        "`task_revs[name]` = the revision",
+    ),
+    (
+        "`robot_retired`",
+        "name, reason",
+        "set `robots[name].retired` = reason; `task_revs[name]` = the revision",
+    ),
     ("`mission_replaced`", "mission", "replace the whole mission with `mission`"),
 ]
 
@@ -494,6 +516,9 @@ OP_CODES: list[tuple[str, str]] = [
     ("marker_delete", "unknown_marker, marker_in_use"),
     ("waive", "unknown_check"),
     ("unwaive", "unknown_waiver"),
+    ("robot_add", "robot_exists, unknown_robot_type"),
+    ("robot_retire", "unknown_robot, retired"),
+    ("reassign", "unknown_robot, unknown_skill, retired, nothing_to_reassign, cannot_reassign"),
     ("load", "bad_mission, robot_busy, robots_busy, robots_online"),
     ("new", "robot_busy, robots_busy"),
     ("undo, redo", "nothing_to_undo, nothing_to_redo, cannot_undo, and the reverted op's codes"),

@@ -207,6 +207,11 @@ class RobotInfo(Strict):
         description="its commands under way (pending, or applied with skills not ended): "
         "each one's stages queued, sent, received, started, completed, with due times",
     )
+    joining: bool = Field(
+        False,
+        description="it registered under a name the mission lacks, with a type the library "
+        "knows (`manifest`): an operator may add it (operation `robot_add`)",
+    )
 
 
 class Alert(RaisedAlert):
@@ -263,7 +268,9 @@ class Register(Strict):
 
 
 # why a registration was not accepted (stable)
-RegisterCode = Literal["", "protocol", "unknown_robot", "wrong_type", "taken"]
+RegisterCode = Literal[
+    "", "protocol", "unknown_robot", "unknown_type", "joining", "wrong_type", "taken"
+]
 
 
 class RegisterReply(Strict):

@@ -98,6 +98,31 @@ class Reverted(Strict):
 
 
 # the operation (`op`) -> the model of its reply's value
+class Joined(Strict):
+    """robot_add: the robot added and its type."""
+
+    robot: Name
+    type: Name
+
+
+class Retired(Strict):
+    """robot_retire: its unsynchronized plan, which awaits reassignment (with
+    the queued skills taken back)."""
+
+    robot: Name
+    to_reassign: list[SkillId]
+
+
+class Reassigned(Strict):
+    """reassign: the skills given to `to` (in their new order), why each other
+    one stays, and the barriers dissolved (they would tie a robot to itself)."""
+
+    to: Name
+    moved: list[SkillId]
+    refused: dict[SkillId, str]
+    dissolved: list[Name]
+
+
 VALUES: dict[str, type[Strict]] = {
     "add": Added,
     "retry_edit": Added,
@@ -120,6 +145,9 @@ VALUES: dict[str, type[Strict]] = {
     "marker_delete": Empty,
     "waive": Checked,
     "unwaive": Checked,
+    "robot_add": Joined,
+    "robot_retire": Retired,
+    "reassign": Reassigned,
     "load": Loaded,
     "new": Loaded,
     "undo": Reverted,

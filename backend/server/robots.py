@@ -48,6 +48,7 @@ from backend.protocol.wire import LIMIT_EXCEEDED, parse, unreadable
 from backend.server.contact import ContactWatch
 from backend.server.downlink import DownlinkApplier, Submitter, raise_alerts
 from backend.server.refusals import Handler, JournalFailed
+from backend.server.team import announcement, unknown_type
 from backend.server.uplink import UplinkSender
 from backend.server.verification import VerificationWatch
 from backend.transport import ReplyError, serve_async, watch_liveliness
@@ -122,6 +123,8 @@ class RobotLink:
         for name in names:
             if name not in self.robots:
                 self._set_robot(RobotInfo(name=name))
+            elif self.robots[name].joining:  # added: it registers as any other now
+                self._set_robot(self.robots[name].model_copy(update={"joining": False}))
             if name not in self.senders:
                 sender = self.senders[name] = UplinkSender(self, name)
                 if self._loop is not None:
@@ -185,6 +188,8 @@ class RobotLink:
                 c = self._mission.command(e.id)
                 if c is not None:
                     self._kick(c.robot)
+            elif isinstance(e, ev.RobotAdded):
+                self.add_robots([e.name])
             elif isinstance(e, ev.MissionReplaced):
                 self.add_robots(self._mission.robots)
                 # as after a registration, the mission and what each robot
@@ -294,14 +299,34 @@ class RobotLink:
                 f"{PROTOCOL_VERSION} (docs/protocol.md); upgrade the robot's side"
             )
         if m.name not in self._mission.robots:
-            return "unknown_robot", (
-                f"robot '{m.name}' is not part of this mission "
-                f"(robots: {', '.join(self._mission.robots)})"
-            )
+            return self._joining(m)
         expected = self._mission.robots[m.name].type
         if m.type != expected:
             return "wrong_type", f"robot '{m.name}' is a {expected} in this mission, not a {m.type}"
         return None
+
+    def _joining(self, m: Manifest) -> tuple[RegisterCode, str]:
+        """A robot under a new name: refused if its type is unknown, else
+        announced (alert and fleet entry) for an operator to add; it registers
+        again until one does (`backend.server.team`)."""
+        why = unknown_type(self.engine.library, m.name, m.type)
+        if why is not None:
+            return "unknown_type", why
+        info = self.robots.get(m.name)
+        if info is None or not info.joining or info.manifest != m:
+            self._set_robot(RobotInfo(name=m.name, manifest=m, joining=True, since=_now()))
+            self._host.alert(
+                announcement(self.engine.library, m), robot=m.name, kind=AlertKind.TEAM
+            )
+        return "joining", (
+            f"robot '{m.name}' ({m.type}) is not part of this mission yet: the operators "
+            "were told; it is accepted once one adds it"
+        )
+
+    def reachable(self, robot: str) -> bool:
+        """It can be told something now: registered and online (the rules ask
+        it when a robot is retired: `backend.core.rules.team.Reach`)."""
+        return self.owner(robot) is not None
 
     def _taken(self, robot: str, session: str) -> tuple[RegisterCode, str] | None:
         """One owner per robot name: another live session holds it."""

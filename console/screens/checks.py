@@ -37,21 +37,25 @@ def mark(f: Finding) -> tuple[str, str | None]:
 
 
 class ReasonPrompt(ModalScreen[str | None]):
-    """Why a finding is waived (required: it goes into the journal and every log)."""
+    """Why (required: it goes into the journal and every log): a finding is
+    waived, a robot retired (console/screens/team.py)."""
 
     BINDINGS = [bind("dialog.cancel", "cancel")]
     CSS_PATH = TCSS
 
-    def __init__(self, finding: Finding) -> None:
+    def __init__(self, title: str, message: str, placeholder: str, verb: str) -> None:
         super().__init__()
-        self.finding = finding
+        self.title_text = title
+        self.message = message
+        self.placeholder = placeholder
+        self.verb = verb
 
     def compose(self) -> ComposeResult:
         with Vertical():
-            yield Label(f"Waive {self.finding.id}", classes="title")
-            yield Static(self.finding.message, classes="message")
-            yield Input(placeholder="why it may go up the link anyway", id="reason")
-            hint = key_names(self).hint(("dialog.ok", "waive"), ("dialog.cancel", "cancel"))
+            yield Label(self.title_text, classes="title")
+            yield Static(self.message, classes="message")
+            yield Input(placeholder=self.placeholder, id="reason")
+            hint = key_names(self).hint(("dialog.ok", self.verb), ("dialog.cancel", "cancel"))
             yield Static(hint, classes="hint")
             yield Static("", id="error", classes="error")
 
@@ -183,7 +187,10 @@ class ChecksScreen(ViewScreen):
                     skill=f.skills[0] if f.skills else None,
                 )
 
-        self.app.push_screen(ReasonPrompt(f), done)
+        prompt = ReasonPrompt(
+            f"Waive {f.id}", f.message, "why it may go up the link anyway", "waive"
+        )
+        self.app.push_screen(prompt, done)
 
     def action_checks_unwaive(self) -> None:
         f = self.selected

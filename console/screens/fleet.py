@@ -19,7 +19,8 @@ from console.operations import OperationService
 from console.screens.base import ViewScreen
 from console.screens.cancel import ask_and_cancel, toast_say
 from console.screens.dialogs import ChoiceScreen
-from console.state import link
+from console.screens.team import add_robot, retire_robot
+from console.state import link, team
 from console.state.capability import (
     filter_examples,
     fleet_order,
@@ -69,9 +70,10 @@ class FleetScreen(ViewScreen):
         keys = key_names(self)
         back, schedule = keys.say("app.back"), keys.say("app.show_mission")
         cancel = keys.say("fleet.cancel")
+        add, retire = keys.say("fleet.add"), keys.say("fleet.retire")
         yield Static(
-            f"type to filter ({back}: back to the list) · {cancel}: cancel a pending command · "
-            f"{schedule}: schedule",
+            f"type to filter ({back}: back to the list) · {cancel}: cancel a command · "
+            f"{add}: add ✚ · {retire}: retire · {schedule}: schedule",
             classes="hint",
         )
         yield Footer()
@@ -79,6 +81,10 @@ class FleetScreen(ViewScreen):
     # -- cells -------------------------------------------------------------------------
     def _presence(self, robot: str) -> Text:
         info = self.model.robots.get(robot)
+        if robot in team.joining(self.model):
+            return Text(team.joining_words(self.model, robot), style="bold reverse")
+        if team.retired(self.model, robot):
+            return Text(f"⊘ retired: {team.retired(self.model, robot)}", style="dim")
         if info is None:
             return Text("? unknown", style=self.colour("presence-unknown"))
         words = presence_words(info, self.model.clock)  # never "online" while it is closed
@@ -176,6 +182,10 @@ class FleetScreen(ViewScreen):
         away = sum(1 for r in present if out_of_contact(self.model.robots.get(r)))
         shown = f" · {len(self.shown)} match '{self.query_text}'" if self.query_text else ""
         away_text = f", {away} out of contact" if away else ""
+        asking = team.joining(self.model)
+        if asking:
+            add = key_names(self).say("fleet.add")
+            away_text += f" · ✚ {', '.join(asking)} asks to join ({add}: add)"
         self.set_title(
             ("Fleet", "bold"), f"  {n} robots, {len(present) - away} online{away_text}{shown}"
         )
@@ -243,6 +253,15 @@ class FleetScreen(ViewScreen):
                 return
             c = next(x for x in cmds if str(x.id) == chosen)
         await ask_and_cancel(self, self.ops, c, say)
+
+    # -- the team: adding a robot that asks to join, retiring one ------------------------
+    @work(group="dialog")
+    async def action_fleet_add(self) -> None:
+        await add_robot(self, self.selected, toast_say(self.app, "Fleet"))
+
+    @work(group="dialog")
+    async def action_fleet_retire(self) -> None:
+        await retire_robot(self, self.selected, toast_say(self.app, "Fleet"))
 
     # -- events ---------------------------------------------------------------------------
     @on(DataTable.RowHighlighted)

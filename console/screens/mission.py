@@ -30,6 +30,7 @@ from console.bindings import bind, key_names
 from console.messages import HelpRequested
 from console.operations import OperationService
 from console.screens.cancel import ask_and_cancel
+from console.screens.give_to import give_action
 from console.screens.mission_files import FileActions
 from console.screens.mission_plan import PlanActions
 from console.screens.mission_run import RunActions
@@ -106,8 +107,8 @@ class MissionScreen(Screen):
         bind("app.help", "help", show=False),
         Binding("escape", "clear_marks", "Clear marks", show=False),
     ]
-
     CSS_PATH = TCSS
+    action_give_to = give_action  # "give to…" (console/screens/give_to.py)
 
     def __init__(
         self,

@@ -63,6 +63,8 @@ OPENS = frozenset(
         "mission.edit",
         "mission.cancel",
         "fleet.cancel",
+        "fleet.retire",
+        "mission.give_to",
         "mission.search",
         "mission.delete",
         "mission.reset",
@@ -184,6 +186,14 @@ ACTIONS: list[Action] = [
         "unbarrier", "B", "Unbarrier", "Remove the barrier of the selected skill", "Synchronization"
     ),
     Action(
+        "give_to",
+        "G",
+        "Give to…",
+        "Give the selected idle skill (or the marked ones, or a retired robot's whole plan) "
+        "to another robot that offers it: robots ranked by the forecast's end and battery left",
+        "Plan",
+    ),
+    Action(
         "cancel",
         "w",
         "Cancel cmd",
@@ -293,6 +303,25 @@ ACTIONS: list[Action] = [
         "delete",  # not a letter: letters typed on the list start the filter
         "Cancel cmd",
         "Cancel one of the selected robot's pending commands (its uplink), asking first",
+        "Fleet",
+        True,
+        "fleet",
+    ),
+    Action(
+        "fleet_add",
+        "insert",  # not a letter: letters typed on the list start the filter
+        "Add robot",
+        "Add the selected robot that asks to join (✚) to the mission",
+        "Fleet",
+        True,
+        "fleet",
+    ),
+    Action(
+        "fleet_retire",
+        "ctrl+x",
+        "Retire",
+        "Retire the selected robot (asks why): no new syncs, its queue taken back, its plan "
+        "to give to another robot",
         "Fleet",
         True,
         "fleet",

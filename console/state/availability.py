@@ -323,6 +323,17 @@ def _duplicate(q: Selected) -> str | None:
     return None
 
 
+def _give_to(q: Selected) -> str | None:
+    """Marked skills, a retired robot's plan, or the idle skill under the cursor."""
+    if q.marks:
+        return None
+    m = q.facts.mission
+    spec = m.robots.get(q.robot) if m is not None and q.robot is not None else None
+    if spec is not None and spec.retired:
+        return None
+    return _idle_skill(q, "given to another robot")
+
+
 # -- execution: what a robot can be asked, from (active skill, any queued) ---------------------
 
 
@@ -403,6 +414,7 @@ RULES: dict[str, Rule] = {
     "retry_edit": _failed_once,
     "cancel": _cancel,
     "duplicate": _duplicate,
+    "give_to": _give_to,
     **{verb: _control(verb) for verb in CONTROLS},
     **{f"{verb}_all": _control_all(verb) for verb in CONTROLS},
 }

@@ -181,6 +181,8 @@ PHRASES: dict[type, Callable[[Any], str]] = {
     ev.MissionReplaced: lambda e: f"mission replaced by '{e.mission.name}'",
     ev.WaiverSet: lambda e: f"waived {e.check}: {e.waiver.reason}",
     ev.WaiverRemoved: lambda e: f"waiver of {e.check} withdrawn",
+    ev.RobotAdded: lambda e: f"robot {e.name} ({e.spec.type}) joined the mission",
+    ev.RobotRetired: lambda e: f"robot {e.name} retired: {e.reason}",
     ev.CommandQueued: lambda e: f"{e.command.title()} queued for {e.command.robot}",
     ev.CommandChanged: lambda e: f"command {e.id} {e.state or 'changed'}",
 }

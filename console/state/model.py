@@ -310,7 +310,7 @@ class ConsoleModel:
                 case ev.CommandChanged(id=cid):
                     changed = self.mission.command(cid)
                     robots.update([changed.robot] if changed is not None else ())
-                case ev.MissionReplaced():
+                case ev.MissionReplaced() | ev.RobotAdded() | ev.RobotRetired():
                     for name in self.mission.robots:
                         self.robots.setdefault(name, RobotInfo(name=name))
                     self.reindex()

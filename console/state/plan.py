@@ -19,6 +19,7 @@ from backend.core.library import Library
 from backend.core.model import Mission, SkillInstance, Status
 from backend.core.plan.checks import Finding, run_checks
 from backend.core.plan.forecast import Forecast, Forecaster
+from backend.core.plan.inputs import PlanInputs
 from backend.protocol.mapfeed import MapMirror, SimStatus
 from backend.protocol.messages import Telemetry
 from console.state.nowcast import NowcastView
@@ -107,6 +108,11 @@ class PlanView:
             self._set_findings(run_checks(mission, library, inputs, forecast=self.forecast))
         self.generation += 1
         return True
+
+    def inputs(self, telemetry: Mapping[str, Telemetry], now: float) -> PlanInputs:
+        """What the last forecast was made with, at `now` (allocation hints)."""
+        site = self._site if self._map_key is not None else None
+        return plan_inputs(now, telemetry, site, self.status)
 
     def _set_findings(self, findings: list[Finding]) -> None:
         if [(f.id, f.message, f.waiver) for f in findings] != [

@@ -231,12 +231,16 @@ def test_first_robot_gets_typed_values_and_exits_cleanly(cluster: Any, tmp_path:
     assert proc.p.returncode == 0, proc.output()
 
 
-def test_a_robot_outside_the_mission_is_refused_with_the_reason(
+def test_a_robot_of_an_unknown_type_outside_the_mission_is_refused(
     cluster: Any, tmp_path: Path
 ) -> None:
-    proc = robot(cluster, tmp_path, "versions", edit=lambda code: code.replace('"lru2"', '"lru7"'))
+    def rename(code: str) -> str:
+        return code.replace('"lru2", "lru_manipulator"', '"lru7", "hovercraft"')
+
+    proc = robot(cluster, tmp_path, "versions", edit=rename)
     line = proc.wait_line("RegistrationRefused: ")
-    assert "the mission server refused robot lru7: robot 'lru7' is not part of this mission" in line
+    assert "the mission server refused robot lru7: robot lru7 is a 'hovercraft'" in line
+    assert "add robot type 'hovercraft'" in line
     assert proc.p.wait(WAIT) != 0
 
 

@@ -70,7 +70,7 @@ SCREENS = {
     "timeline": (_keys("f7"), ("plan ends sim", "link delay 10m00s")),
     "checks": (_keys("f8"), ("waive",)),
     "map": (_keys("f3"), ("here: ", "cursor (")),
-    "fleet": (_keys("f4"), ("4 online", "cancel a pending command")),
+    "fleet": (_keys("f4"), ("4 online", "cancel a command")),
     "log": (_keys("f5"), ("sim 26:48", "refusal")),
     "alerts": (_keys("f6"), ("sim 26:48", "acknowledge")),
     "help": (_keys("f1"), ("operator console", "Navigation")),

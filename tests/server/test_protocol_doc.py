@@ -134,6 +134,9 @@ def test_every_reply_value_fits_its_schema():
     do(ops.Waive(check="barrier.deadlock:b1+b2", reason="they meet by radio"))
     do(ops.Waive(check="barrier.deadlock:b1+b2", reason="they meet by radio"))  # no change
     do(ops.Unwaive(check="barrier.deadlock:b1+b2"))
+    do(ops.AddRobot(name="lru3", type="lru_science"))
+    do(ops.Reassign(from_robot="lru2", to="lru3"))
+    do(ops.RetireRobot(name="lru3", reason="a test"))
     assert set(VALUES) - set(seen) == set()
     every_op = {
         name

@@ -18,6 +18,15 @@ Operations
   robots                      presence, type, manifest (modules, skills) and,
                               when a robot publishes it within ~5 s, battery,
                               link quality and activity
+  robots add NAME [--type T]  add a robot that asks to join (announced), or one to come
+  robots retire NAME --reason TEXT
+                              no new syncs; its queue taken back; its plan to reassign
+  reassign ID... --to ROBOT | reassign --from ROBOT --to ROBOT
+                              give idle skills (or a robot's whole plan) to a robot
+                              that offers them; each one that cannot move says why
+  suggest SKILL_OR_ID...      the robots that can take these skills (or a new one of
+                              this library skill), earliest predicted end first, with
+                              the battery left (the forecast, with telemetry)
   add ROBOT SKILL [--param NAME=VALUE]... [--label TEXT] [--at INDEX] [POLICY]
   delete ID...
   move ID INDEX               INDEX within the unsynchronized section (0 = first)
@@ -137,6 +146,7 @@ import math
 from collections.abc import Callable
 from typing import Any
 
+from backend.cli.ctl.team import reassign_arguments, robots_arguments, suggest_arguments
 from backend.cli.parser import Parser
 from backend.transport.login import add_login_arguments
 
@@ -550,7 +560,10 @@ def _watch(p: argparse.ArgumentParser) -> None:
 # Each also takes the common options (_common).
 OPERATIONS: dict[str, tuple[str, Arguments]] = {
     "state": ("print the mission: robots, skills, barriers, markers, revision", _state_op),
-    "robots": ("robot presence, type, manifest and telemetry", _nothing),
+    "robots": (
+        "robot presence, type, manifest and telemetry; add or retire a robot",
+        lambda p: robots_arguments(p, _common),
+    ),
     "add": ("add a skill to a robot's unsynchronized section", _add),
     "delete": ("delete idle skills", _ids),
     "move": ("move an idle skill within its robot's unsynchronized section", _move),
@@ -567,6 +580,8 @@ OPERATIONS: dict[str, tuple[str, Arguments]] = {
     "wait": ("wait for a command's stage: received, started or completed", _wait_stage),
     "barrier": ("make idle skills of different robots start together", _ids),
     "unbarrier": ("remove a barrier", _unbarrier),
+    "reassign": ("give idle skills, or a robot's plan, to another robot", reassign_arguments),
+    "suggest": ("rank the robots that can take skills: forecast end, battery", suggest_arguments),
     "marker": ("add, move, rename or delete a marker", _marker),
     "load": ("replace the mission with a mission file (validated here first)", _load),
     "save": ("write the mission to a YAML file", _save),

@@ -13,6 +13,7 @@ from typing import Any
 
 from backend.cli.ctl.args import CONTROL_OPS
 from backend.cli.ctl.errors import FileInvalid, UsageError
+from backend.cli.ctl.team import build_reassign, build_robots
 from backend.cli.ctl.values import (
     AtMarker,
     check_name,
@@ -300,8 +301,10 @@ def _redo(args: argparse.Namespace, known: Known) -> Any:
 
 # ctl's operation name -> its builder (None: `ctl` alone, refused before this)
 BUILDERS: dict[str | None, Builder] = {
-    **dict.fromkeys(("state", "robots", "pending", "watch", "save", None), _no_operation),
-    **dict.fromkeys(("check", "timeline", "history", "wait"), _no_operation),
+    **dict.fromkeys(("state", "pending", "watch", "save", None), _no_operation),
+    "robots": build_robots,
+    "reassign": build_reassign,
+    **dict.fromkeys(("check", "timeline", "history", "wait", "suggest"), _no_operation),
     "add": _add,
     "delete": _delete,
     "move": _move,

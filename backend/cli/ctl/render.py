@@ -15,6 +15,7 @@ from datetime import UTC, datetime
 from typing import Any
 
 from backend.cli.ctl.args import CONTROL_OPS
+from backend.cli.ctl.team import DESCRIBE as TEAM_DESCRIBE
 from backend.core.contact import sim_time_text
 from backend.core.params import POSE_FIELDS, POSITION_FIELDS, is_angle, pose_text, value_text
 
@@ -287,6 +288,8 @@ def _robot_json(client: Any, name: str, now: datetime | None = None) -> dict[str
         "type": rtype,
         "kind": rt.kind if rt else None,
         "in_mission": spec is not None,
+        "joining": bool(info and info.joining),
+        "retired": spec.retired if spec else "",
         "online": bool(info and info.online),
         "since": _iso(info.since) if info else None,
         "contact": info.contact.model_dump(mode="json") if info and info.contact else None,
@@ -495,6 +498,10 @@ def robots_text(client: Any) -> str:
     lines = []
     for name, r in data.items():
         outside = ", not in the mission" if not r["in_mission"] else ""
+        if r["joining"]:
+            outside = f", asks to join: missionctl ctl robots add {name}"
+        elif r["retired"]:
+            outside = f", retired: {r['retired']}"
         head = f"{name} ({r['type'] or '?'}{outside}): {_presence(client.robots.get(name))}"
         t = client.telemetry.get(name)
         link = link_text(client, name, datetime.now(UTC))
@@ -647,6 +654,7 @@ DESCRIBE: dict[str, Callable[[Outcome], str]] = {
         f"waived {o.op.check} {o.at}" if o.changed else o.unchanged(f"{o.op.check} was waived")
     ),
     "unwaive": lambda o: f"withdrew the waiver of {o.op.check} {o.at}",
+    **TEAM_DESCRIBE,
 }
 
 
@@ -709,6 +717,8 @@ EVENT_TEXT: dict[str, Callable[[Any], str]] = {
     ),
     "waiver_set": lambda e: f"waived {e.check}: {e.waiver.reason}",
     "waiver_removed": lambda e: f"waiver of {e.check} withdrawn",
+    "robot_added": lambda e: f"robot {e.name} ({e.spec.type}) joined the mission",
+    "robot_retired": lambda e: f"robot {e.name} retired: {e.reason}",
 }
 
 

@@ -38,6 +38,8 @@ from backend.cli.ctl.render import (
     unicode_ok,
     watch_line,
 )
+from backend.cli.ctl.suggest import suggest_view
+from backend.cli.ctl.team import joining_type
 from backend.cli.ctl.verify import wait_stage
 from backend.core.credentials import AccountsError
 from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK, EXIT_REFUSED, EXIT_UNREACHABLE
@@ -258,7 +260,7 @@ async def _session(args: argparse.Namespace, endpoints: list[str], login: Any = 
         client_id=args.client_id or default_client_id(),
         timeout=args.timeout,
         # watch: to say when a robot's telemetry is unreadable
-        telemetry=args.op in ("robots", "watch", "check", "timeline", "sync")
+        telemetry=args.op in ("robots", "watch", "check", "timeline", "sync", "suggest")
         or getattr(args, "nowcast", False),
     )
     async with client:
@@ -308,6 +310,9 @@ async def _pending(client: Any, args: argparse.Namespace) -> int:
 
 
 async def _robots(client: Any, args: argparse.Namespace) -> int:
+    if getattr(args, "robots_op", None) is not None:  # add or retire: an operation
+        args.joining_type = joining_type(client, args.name)
+        return await _operation(client, args)
     await wait_telemetry(client)
     if args.json:
         _print_json(robots_json(client))
@@ -479,4 +484,5 @@ VIEWS: dict[str, Callable[[Any, argparse.Namespace], Awaitable[int]]] = {
     "timeline": plan_timeline,
     "history": history_view,
     "wait": wait_stage,
+    "suggest": suggest_view,
 }

@@ -240,6 +240,18 @@ def robot_type(m: Mission, robot: str) -> str:
     return spec.type
 
 
+def check_in_service(rules: Rules, robot: str) -> None:
+    """Refused for a retired robot (no new syncs)."""
+    spec = rules.mission.robots.get(robot)
+    if spec is not None and spec.retired:
+        raise Refusal(
+            "retired",
+            f"robot {robot} is retired ({spec.retired}): it gets no new syncs; give its plan "
+            f"to another robot (missionctl ctl reassign --from {robot} --to ROBOT)",
+            robot=robot,
+        )
+
+
 def find_skill(m: Mission, skill_id: str) -> tuple[str, int, SkillInstance]:
     """(robot, index, skill) of `skill_id`, refused unless the mission has it."""
     found = m.find(skill_id)

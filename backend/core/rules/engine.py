@@ -52,7 +52,7 @@ from backend.core.ops import (
     Undo,
     Unsync,
 )
-from backend.core.rules import barriers, edit, execution, markers, uplink, waivers
+from backend.core.rules import barriers, edit, execution, markers, reassign, team, uplink, waivers
 from backend.core.rules.base import Applied, Change, Offers, Refusal, Rule, Rules
 
 __all__ = ["RULES", "Applied", "Engine", "Offers", "Origin", "Recorder", "Refusal"]
@@ -185,6 +185,8 @@ RULES: dict[type[Any], Rule] = {
     **execution.RULES,
     **uplink.RULES,
     **waivers.RULES,
+    **team.RULES,
+    **reassign.RULES,
     LoadMission: load_mission,
     NewMission: new_mission,
 }

@@ -65,6 +65,7 @@ from backend.core.rules.base import (
     Refusal,
     Rule,
     Rules,
+    check_in_service,
     robot_type,
     skill_of,
     unchanged,
@@ -123,7 +124,7 @@ def check_offered(rules: Rules, robot: str, skills: Sequence[SkillInstance]) -> 
         return
     for s in skills:
         spec = rules.library.skills.get(s.skill)
-        why = _incompatible(offered, s.skill, spec.version) if spec is not None else None
+        why = incompatible(offered, s.skill, spec.version) if spec is not None else None
         if why:
             raise Refusal(
                 "incompatible",
@@ -133,7 +134,7 @@ def check_offered(rules: Rules, robot: str, skills: Sequence[SkillInstance]) -> 
             )
 
 
-def _incompatible(offered: Mapping[str, str], skill: str, want: str) -> str | None:
+def incompatible(offered: Mapping[str, str], skill: str, want: str) -> str | None:
     """Why a robot offering `offered` cannot run `skill` at version `want`."""
     have = offered.get(skill)
     if have is None:
@@ -166,6 +167,7 @@ def sync(rules: Rules, op: Sync) -> Change:
     """The idle head of the robot's unsynchronized section (through
     `op.through`) goes to the robot; its skills are uplinking until it answers."""
     rules.task(op.robot)
+    check_in_service(rules, op.robot)
     chosen = sync_skills(rules.mission, op, rules.locked)
     check_offered(rules, op.robot, chosen)
     check_sync(rules, op.robot, [s.id for s in chosen])  # unwaived plan errors stay on the ground

@@ -23,6 +23,7 @@ from console.state.contact import CONTACT_GLYPH, header_contact, out_of_contact
 from console.state.freshness import FRESH, Freshness
 from console.state.model import ConsoleModel
 from console.state.nowcast import NOWCAST_GLYPH, probably_doing, robot_nowcast
+from console.state.team import retired
 from console.state.text import GLYPHS, STATUS_CSS, fmt_duration, skill_title
 
 HEADER_H = 4  # name + presence / battery + link / activity / rule
@@ -184,6 +185,8 @@ def _offline_since(robot: str, clock: str, width: int) -> str:
 def _presence(h: Head) -> tuple[str, Style]:
     """The robot's presence and its style (a compact column: only the glyph)."""
     st = h.st
+    if retired(h.model, h.col.robot):  # no new syncs; its plan awaits "give to…"
+        return ("⊘" if h.compact else "⊘ retired"), st["offline"]
     info = h.model.robots.get(h.col.robot)
     if info is None:
         pres, pst = "? unknown", st["unknown"]

@@ -1,0 +1,71 @@
+"""`ctl suggest SKILL_OR_ID...` (issue 30): the robots that can take skills,
+ranked by the forecast (their predicted end with them, the battery left);
+see backend/core/plan/suggest.py."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from datetime import UTC, datetime
+from typing import Any
+
+from backend.cli.ctl.errors import UsageError
+from backend.cli.ctl.plan import gather
+from backend.core.plan.suggest import Manifests, suggest
+from backend.core.rules.base import Refusal
+
+
+async def suggest_view(client: Any, args: argparse.Namespace) -> int:
+    """`ctl suggest`: the robots ranked for the skills (the forecast's end, battery left)."""
+    inputs = await gather(client, args.timeout)
+    try:
+        offers = Manifests.of(client.robots)
+        hints = suggest(client.mission, client.library, inputs, list(args.what), offers)
+    except Refusal as r:
+        raise UsageError(f"suggest: {r.message}") from None
+    rows = [_hint_json(h, inputs.now) for h in hints]
+    if args.json:
+        out = {"ok": True, "what": list(args.what), "robots": rows}
+        print(json.dumps(out, ensure_ascii=False), flush=True)
+    else:
+        print(f"who can take {', '.join(args.what)} (earliest end first):", flush=True)
+        for n, row in enumerate(rows, 1):
+            print(f"  {n}. {hint_text(row)}", flush=True)
+    return 0
+
+
+def _hint_json(h: Any, now: float) -> dict[str, Any]:
+    end = datetime.fromtimestamp(h.end, UTC).isoformat() if h.end is not None else None
+    return {
+        "robot": h.robot,
+        "capable": h.capable,
+        "moved": list(h.moved),
+        "refused": dict(h.refused),
+        "end": end,
+        "end_in_s": round(h.end - now, 1) if h.end is not None else None,
+        "battery_end": round(h.battery_end, 3) if h.battery_end is not None else None,
+        "battery_assumed": h.battery_assumed,
+    }
+
+
+def hint_text(row: dict[str, Any]) -> str:
+    """'lru3: ends in 12m30s, battery 62% left' / 'lru2 cannot: lru1-2: ...'."""
+    if not row["moved"]:
+        return f"{row['robot']} cannot: " + "; ".join(row["refused"].values())
+    end = _duration(row["end_in_s"]) if row["end_in_s"] is not None else "never (a barrier)"
+    stays = "".join(f"; {k} stays: {v}" for k, v in row["refused"].items())
+    return f"{row['robot']}: ends in {end}{_battery(row)}{stays}"
+
+
+def _battery(row: dict[str, Any]) -> str:
+    if row["battery_end"] is None:
+        return ""
+    assumed = " (no telemetry: full at start)" if row["battery_assumed"] else ""
+    return f", battery {row['battery_end']:.0%} left{assumed}"
+
+
+def _duration(s: float) -> str:
+    s = max(0, int(round(s)))
+    h, rest = divmod(s, 3600)
+    m, sec = divmod(rest, 60)
+    return f"{h}h{m:02d}m" if h else (f"{m}m{sec:02d}s" if m else f"{sec}s")

@@ -1,0 +1,169 @@
+"""Reassignment: idle skills given to another robot whose type and manifest
+offer them (issue 30), keeping parameters, marker bindings and order.
+
+Each skill that cannot move says why; the others move. A barrier that
+would tie two skills of one robot is dissolved (saying so); the others
+follow their skills (a barrier names skills, not robots). Undone by
+`ReturnSkills`: each skill back where it was, with its barriers.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from backend.core import events as ev
+from backend.core.model import FINISHED, Barrier, SkillInstance, Status
+from backend.core.ops import Reassign, RestoreItem, ReturnSkills
+from backend.core.rules.base import Change, Refusal, Rule, Rules, check_in_service
+from backend.core.rules.uplink import incompatible
+
+__all__ = ["chosen", "incompatible", "reassign", "return_skills", "why_not"]
+
+
+def chosen(rules: Rules, op: Reassign) -> list[str]:
+    """The ids to move, in the order of their lists: those named, then the
+    unsynchronized plan of `from_robot`."""
+    ids = list(op.ids) + _plan_of(rules, op.from_robot)
+    if not ids:
+        source = f"{op.from_robot} has no unsynchronized skill" if op.from_robot else "no skill"
+        raise Refusal("nothing_to_reassign", f"nothing to give to {op.to}: {source}", robot=op.to)
+    order = {r: n for n, r in enumerate(rules.mission.tasks)}
+    places = {sid: rules.skill(sid)[:2] for sid in dict.fromkeys(ids)}  # refused if unknown
+    return sorted(places, key=lambda sid: (order[places[sid][0]], places[sid][1]))
+
+
+def _plan_of(rules: Rules, robot: str | None) -> list[str]:
+    if robot is None:
+        return []
+    return [s.id for s in rules.task(robot) if s.status == Status.IDLE]
+
+
+def why_not(rules: Rules, s: SkillInstance, robot: str, to: str) -> str | None:
+    """Why skill `s` of `robot` cannot go to `to` (None: it can)."""
+    if robot == to:
+        return f"it is {to}'s already"
+    if s.status != Status.IDLE:
+        return f"it is {s.status.value}: only unsynchronized (idle) skills move"
+    return rules.locked.get(s.id) or _unable(rules, s, to) or _barrier_held(rules, s, to)
+
+
+def _unable(rules: Rules, s: SkillInstance, to: str) -> str | None:
+    """Why `to` cannot run `s`: its type, its manifest, the parameters."""
+    rtype = rules.robot_type(to)
+    spec = rules.library.skill_for(rtype, s.skill)
+    if spec is None:
+        return f"{to} ({rtype}) has no skill '{s.skill}'"
+    offered = rules.offers.offered(to) if rules.offers is not None else None
+    why = incompatible(offered, s.skill, spec.version) if offered is not None else None
+    if why is not None:
+        return f"{to} {why}"
+    try:
+        rules.check_params(to, s.skill, s.params, s.bindings, skill_id=s.id)
+    except Refusal as r:
+        return r.message
+    return None
+
+
+def _barrier_held(rules: Rules, s: SkillInstance, to: str) -> str | None:
+    """A partner already on its robot waits for this skill's robot: it cannot change."""
+    bid = rules.mission.barrier_of(s.id)
+    if bid is None:
+        return None
+    for sid in rules.mission.barriers[bid].skills:
+        robot, _, partner = rules.skill(sid)
+        if partner.status != Status.IDLE and partner.status not in FINISHED and robot != to:
+            return (
+                f"barrier {bid} ties it to {partner.display()}, already on {robot} (which "
+                f"waits for this skill's robot); unsynchronize {partner.id} first"
+            )
+    return None
+
+
+def reassign(rules: Rules, op: Reassign) -> Change:
+    rules.robot_type(op.to)
+    check_in_service(rules, op.to)
+    items, refused = _split(rules, chosen(rules, op), op.to)
+    moved = {it.skill.id for it in items}
+    barrier_events, before, barrier_notes = _barriers(rules, moved, op.to)
+    events: list[ev.Event] = [
+        ev.SkillRemoved(robot=it.robot, id=it.skill.id)
+        for it in sorted(items, key=lambda it: (it.robot, -it.index))
+    ]
+    end = len(rules.task(op.to))
+    events += [
+        ev.SkillAdded(robot=op.to, index=end + n, skill=it.skill) for n, it in enumerate(items)
+    ]
+    notes = [f"{len(items)} skill(s) given to {op.to}: {', '.join(moved_ids(items))}"]
+    notes += [f"{sid} stays: {why}" for sid, why in refused.items()] + barrier_notes
+    value = {"to": op.to, "moved": moved_ids(items), "refused": refused, "dissolved": list(before)}
+    undo = ReturnSkills(items=items, to=op.to, barriers=before)
+    return Change(events + barrier_events, notes, value, undo)
+
+
+def _split(rules: Rules, ids: list[str], to: str) -> tuple[list[RestoreItem], dict[str, str]]:
+    """The skills that can go to `to` (where they are), and why the others cannot;
+    refused when none can."""
+    items: list[RestoreItem] = []
+    refused: dict[str, str] = {}
+    for sid in ids:
+        robot, i, s = rules.skill(sid)
+        why = why_not(rules, s, robot, to)
+        if why is None:
+            items.append(RestoreItem(robot=robot, index=i, skill=s))
+        else:
+            refused[sid] = why
+    if not items:
+        said = "; ".join(f"{sid}: {why}" for sid, why in refused.items())
+        raise Refusal("cannot_reassign", f"nothing can go to {to}: {said}", robot=to)
+    return items, refused
+
+
+def moved_ids(items: list[RestoreItem]) -> list[str]:
+    return [it.skill.id for it in items]
+
+
+def _barriers(
+    rules: Rules, moved: set[str], to: str
+) -> tuple[list[ev.Event], dict[str, Barrier], list[str]]:
+    """Barriers whose members would share a robot are dissolved (and kept to
+    restore); the others follow their skills (said in a note)."""
+    events: list[ev.Event] = []
+    before: dict[str, Barrier] = {}
+    notes: list[str] = []
+    for bid, b in rules.mission.barriers.items():
+        if not moved & set(b.skills):
+            continue
+        robots = [to if sid in moved else rules.skill(sid)[0] for sid in b.skills]
+        if len(set(robots)) == len(robots):
+            notes.append(f"barrier {bid} now ties {', '.join(b.skills)} on {', '.join(robots)}")
+            continue
+        before[bid] = b
+        events.append(ev.BarrierRemoved(id=bid))
+        notes.append(
+            f"barrier {bid} dissolved: {', '.join(b.skills)} would all be on {to}, and a "
+            "robot never waits for itself"
+        )
+    return events, before, notes
+
+
+def return_skills(rules: Rules, op: ReturnSkills) -> Change:
+    """Each skill back where it was (the undo of a reassignment)."""
+    events: list[ev.Event] = []
+    for it in op.items:
+        robot, _, s = rules.skill(it.skill.id)
+        rules.editable(robot, s, "give back")
+        events.append(ev.SkillRemoved(robot=robot, id=s.id))
+    sizes: dict[str, int] = {}
+    for it in sorted(op.items, key=lambda it: (it.robot, it.index)):
+        task = rules.task(it.robot)
+        sizes.setdefault(it.robot, len(task))
+        idx = min(max(it.index, rules.first_idle(task)), sizes[it.robot])
+        sizes[it.robot] += 1
+        _, _, now = rules.skill(it.skill.id)  # as it is now (it may have been edited)
+        events.append(ev.SkillAdded(robot=it.robot, index=idx, skill=now))
+    events += [ev.BarrierSet(id=bid, barrier=b) for bid, b in op.barriers.items()]
+    ids = [it.skill.id for it in op.items]
+    return Change(events, [], {"returned": ids}, Reassign(ids=ids, to=op.to))
+
+
+RULES: dict[type[Any], Rule] = {Reassign: reassign, ReturnSkills: return_skills}

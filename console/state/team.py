@@ -1,0 +1,110 @@
+"""The team as the console shows it (issue 30) — no Textual here: robots
+that ask to join, retired robots, what "give to…" gives and the ranked list
+of robots that could take it (the forecast's end and battery left)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from backend.core.model import Status
+from backend.core.ops import Reassign
+from backend.core.plan.suggest import Manifests, Suggestion, suggest
+from backend.core.rules.base import Refusal
+from console.state.clock import MissionClock
+from console.state.model import ConsoleModel
+
+
+def joining(model: ConsoleModel) -> list[str]:
+    """Robots that registered under a name the mission lacks (a known type)."""
+    return [r for r, info in model.robots.items() if info.joining and not _in_mission(model, r)]
+
+
+def _in_mission(model: ConsoleModel, robot: str) -> bool:
+    return model.mission is not None and robot in model.mission.robots
+
+
+def retired(model: ConsoleModel, robot: str | None) -> str:
+    """Why `robot` was retired ('' : in service)."""
+    spec = model.mission.robots.get(robot) if model.mission and robot else None
+    return spec.retired if spec is not None else ""
+
+
+def joining_words(model: ConsoleModel, robot: str) -> str:
+    """The fleet's presence cell of a robot that asks to join."""
+    info = model.robots.get(robot)
+    rtype = info.manifest.type if info and info.manifest else "?"
+    return f"✚ asks to join ({rtype})"
+
+
+@dataclass(frozen=True)
+class Gift:
+    """What "give to…" gives: skill ids, or a robot's whole plan, in words."""
+
+    ids: tuple[str, ...]
+    from_robot: str | None
+    words: str
+
+    def op(self, to: str) -> Reassign:
+        return Reassign(ids=list(self.ids), from_robot=self.from_robot, to=to)
+
+
+def gift(model: ConsoleModel, robot: str | None, cursor: str | None, marks: list[str]) -> Gift:
+    """The marked skills; else, on a retired robot, its whole plan; else the
+    skill under the cursor. Raises ValueError saying why there is nothing."""
+    if marks:
+        return Gift(tuple(marks), None, f"{len(marks)} marked skill(s) ({', '.join(marks)})")
+    if robot is not None and retired(model, robot):
+        plan = [s.id for s in model.task(robot) if s.status == Status.IDLE]
+        if not plan:
+            raise ValueError(f"{robot} is retired and has no unsynchronized skill left to give")
+        return Gift((), robot, f"{robot}'s plan ({len(plan)} skills: {', '.join(plan)})")
+    found = model.find(cursor)
+    if found is None:
+        raise ValueError("select a skill (or mark several) to give it to another robot")
+    return Gift((found[2].id,), None, found[2].display())
+
+
+def ranked(model: ConsoleModel, g: Gift) -> list[Suggestion]:
+    """The robots in service ranked for the gift (see backend/core/plan/suggest.py)."""
+    if model.mission is None or model.library is None:
+        return []
+    inputs = model.plan.inputs(model.telemetry, model.clock().timestamp())
+    try:
+        return suggest(
+            model.mission, model.library, inputs, _ids(model, g), Manifests.of(model.robots)
+        )
+    except Refusal:
+        return []
+
+
+def nobody_takes(g: Gift, hints: list[Suggestion], clock: MissionClock) -> str | None:
+    """Why no robot can take the gift (None: one can)."""
+    if any(h.moved for h in hints):
+        return None
+    why = "; ".join(f"{h.robot}: {hint_words(h, 0, clock)}" for h in hints)
+    return f"no robot can take {g.words}: {why or 'no other robot in service'}"
+
+
+def _ids(model: ConsoleModel, g: Gift) -> list[str]:
+    """The gift's skill ids (a robot's plan: its idle skills now)."""
+    return list(g.ids) or [s.id for s in model.task(g.from_robot or "") if s.status == Status.IDLE]
+
+
+def hint_words(h: Suggestion, now: float, clock: MissionClock) -> str:
+    """'ends 14:32 (in 12m30s), 62% battery left' / 'cannot: lru1-2: ...'."""
+    if not h.moved:
+        return "cannot: " + "; ".join(f"{k}: {v}" for k, v in h.refused.items())
+    if h.end is None:
+        end = "never ends (a barrier is never passed)"
+    else:
+        end = f"ends {clock.ts_text(h.end)} (in {clock.duration_text(h.end - now)})"
+    stays = "".join(f"; {k} stays: {v}" for k, v in h.refused.items())
+    return end + battery_words(h) + stays
+
+
+def battery_words(h: Suggestion) -> str:
+    """', 62% battery left' (and whether it was assumed full at the start)."""
+    if h.battery_end is None:
+        return ""
+    assumed = " (no telemetry: full at start)" if h.battery_assumed else ""
+    return f", {h.battery_end:.0%} battery left{assumed}"

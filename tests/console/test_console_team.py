@@ -1,0 +1,167 @@
+"""The team in the console (issue 30): a robot that asks to join is
+announced (fleet screen, alert) and added with one key; "give to…" lists
+the robots ranked by the forecast and gives the skills; undo returns them."""
+
+from __future__ import annotations
+
+from console_state import (
+    T0,
+    TUTORIAL,
+    Builder,
+    alert_received,
+    connection_changed,
+    engine_app,
+    fleet,
+    fleet_changed,
+    manifest,
+    post_all,
+    screen_text,
+    settle,
+    state_loaded,
+    wait_until,
+)
+
+from backend.core.ops import AddRobot, Reassign, RetireRobot
+from backend.protocol.messages import Alert, RobotInfo
+from console.screens.fleet import FleetScreen
+from console.screens.give_to import GiveToScreen
+
+SIZE = (100, 30)
+
+
+def _lru3(b: Builder) -> RobotInfo:
+    skills = b.library.skills_of("lru_science")
+    return RobotInfo(
+        name="lru3",
+        joining=True,
+        since=T0,
+        manifest=manifest("lru3", "lru_science", skills, {"nav": "2.1.0"}),
+    )
+
+
+def _announce(app, b: Builder) -> None:
+    app.post_message(fleet_changed(_lru3(b)))
+    alert = Alert(
+        id=1,
+        at=T0,
+        kind="team",
+        robot="lru3",
+        message="robot lru3 (lru_science) asks to join the mission: add it with "
+        "`missionctl ctl robots add lru3` or from the fleet screen",
+    )
+    app.post_message(alert_received(alert))
+
+
+async def _load(app, pilot, b: Builder, online: dict[str, bool]) -> None:
+    post_all(app, connection_changed("connected"))
+    app.post_message(state_loaded(b.snapshot(), b.library, fleet(online)))
+    await settle(pilot)
+
+
+async def _joining_on_fleet(app, pilot, b: Builder) -> None:
+    await _load(app, pilot, b, {"lru1": True, "lru2": True})
+    _announce(app, b)
+    await settle(pilot)
+    await pilot.press("f4")
+    await wait_until(pilot, lambda: isinstance(app.screen, FleetScreen), what="fleet")
+    await wait_until(pilot, lambda: "asks to join" in screen_text(app), what="announcement")
+
+
+def _retired_lru1() -> Builder:
+    b = Builder(TUTORIAL)
+    b.engine.submit(AddRobot(name="lru3", type="lru_science"))
+    b.engine.submit(RetireRobot(name="lru1", reason="stopped responding"))
+    return b
+
+
+async def test_a_robot_that_asks_to_join_is_announced_and_added_with_one_key():
+    b = Builder(TUTORIAL)
+    app, backend = engine_app(b)
+    async with app.run_test(size=SIZE) as pilot:
+        await _joining_on_fleet(app, pilot, b)
+        text = screen_text(app)
+        assert "✚ lru3 asks to join (insert: add)" in text
+        assert "✚ asks to join (lru_science)" in text
+        assert app.model.alerts.unacknowledged >= 1  # the alert, on every console
+        await pilot.press("insert")  # the only robot that asks: no need to select it
+        await wait_until(pilot, lambda: "lru3" in app.model.mission.robots, what="added")
+        assert backend.ops[-1] == AddRobot(name="lru3", type="lru_science")
+        await pilot.press("f2")
+        # its column appears on the schedule
+        schedule = app.mission_screen.schedule
+        await wait_until(
+            pilot, lambda: "lru3" in [c.robot for c in schedule.columns], what="lru3's column"
+        )
+
+
+async def test_give_to_lists_robots_ranked_and_gives_a_retired_robots_plan():
+    b = _retired_lru1()
+    app, backend = engine_app(b)
+    async with app.run_test(size=SIZE) as pilot:
+        await _load(app, pilot, b, {"lru1": False, "lru2": True, "lru3": True})
+        app.mission_screen.schedule.select("lru1-1")  # on the retired robot's column
+        await pilot.press("G")
+        await wait_until(pilot, lambda: isinstance(app.screen, GiveToScreen), what="give to")
+        text = screen_text(app)
+        assert "Give lru1's plan (2 skills: lru1-1, lru1-2) to…" in text
+        assert "lru3" in text and "★ best" in text and "battery left" in text
+        # lru2 could take the drive only: after lru3, saying why the other stays
+        assert "lru1-2 stays: lru2 (lru_manipulator) has no skill" in text
+        await pilot.press("enter")
+        await wait_until(
+            pilot,
+            lambda: [s.id for s in app.model.task("lru3")] == ["lru1-1", "lru1-2"],
+            what="given",
+        )
+        assert backend.ops[-1] == Reassign(from_robot="lru1", to="lru3")
+        await pilot.press("ctrl+z")  # undo: back where they were
+        await wait_until(
+            pilot,
+            lambda: [s.id for s in app.model.task("lru1")] == ["lru1-1", "lru1-2"],
+            what="undone",
+        )
+
+
+async def test_give_to_says_why_when_no_robot_can_take_it():
+    b = Builder(TUTORIAL)
+    app, _ = engine_app(b)
+    async with app.run_test(size=SIZE) as pilot:
+        await _load(app, pilot, b, {"lru1": True})
+        app.mission_screen.schedule.select("lru1-2")  # take_science_image: lru2 cannot
+        await pilot.press("G")
+        await wait_until(
+            pilot, lambda: "no robot can take lru1-2" in screen_text(app), what="why not"
+        )
+        assert not isinstance(app.screen, GiveToScreen)
+
+
+# -- snapshots (deterministic: the app's clock at T0; each asserts real content first) ---------
+
+
+def test_fleet_announces_a_robot_that_asks_to_join(snap_compare):
+    b = Builder(TUTORIAL)
+    app, _ = engine_app(b)
+
+    async def run_before(pilot):
+        await _joining_on_fleet(app, pilot, b)
+        app.clear_notifications()
+        await pilot.pause()
+        assert "✚ asks to join (lru_science)" in screen_text(app)
+
+    assert snap_compare(app, terminal_size=SIZE, run_before=run_before)
+
+
+def test_give_to_dialog(snap_compare):
+    b = _retired_lru1()
+    app, _ = engine_app(b)
+
+    async def run_before(pilot):
+        await _load(app, pilot, b, {"lru1": False, "lru2": True, "lru3": True})
+        app.mission_screen.schedule.select("lru1-1")
+        await pilot.press("G")
+        await wait_until(pilot, lambda: isinstance(app.screen, GiveToScreen), what="give to")
+        app.clear_notifications()
+        await pilot.pause()
+        assert "★ best" in screen_text(app)
+
+    assert snap_compare(app, terminal_size=SIZE, run_before=run_before)

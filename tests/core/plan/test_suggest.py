@@ -1,0 +1,61 @@
+"""Allocation hints (issue 30): robots ranked by the forecast's end and the
+battery left with the skills given to them (`backend.core.plan.suggest`)."""
+
+from __future__ import annotations
+
+from backend.core.model import RobotSpec
+from backend.core.ops import AddRobot, AddSkill, RetireRobot
+from backend.core.plan.inputs import PlanInputs, RobotNow
+from backend.core.plan.suggest import suggest
+from backend.core.rules.engine import Engine
+from tests.core.rules.conftest import tutorial_engine
+
+NOW = 1_900_000_000.0
+
+
+def _engine() -> Engine:
+    e = tutorial_engine()
+    e.submit(AddRobot(name="lru3", type="lru_science"))
+    e.submit(AddRobot(name="lru4", type="lru_science"))
+    # lru4 is busy for a long while first: lru3 ends earlier with the same skills
+    for x in (0, 200, 0):  # (the first leg starts where it is: unknown, so it takes 0 s)
+        e.submit(AddSkill(robot="lru4", skill="drive_to", params={"goal": {"x": x, "y": 0}}))
+    return e
+
+
+def test_robots_that_can_take_the_plan_are_ranked_by_their_end() -> None:
+    e = _engine()
+    hints = suggest(e.mission, e.library, PlanInputs(now=NOW), ["lru1-1", "lru1-2"])
+    names = [h.robot for h in hints]
+    assert names[:2] == ["lru3", "lru4"], hints
+    lru3, lru4 = hints[0], hints[1]
+    assert lru3.capable and lru3.moved == ("lru1-1", "lru1-2")
+    assert lru3.end is not None and lru4.end is not None and lru3.end < lru4.end
+    # lru2 (a manipulator) cannot take the science image: last, saying why
+    lru2 = hints[-1]
+    assert lru2.robot == "lru2" and not lru2.capable
+    assert "has no skill 'take_science_image'" in lru2.refused["lru1-2"]
+    assert "lru1" not in names  # their owner
+
+
+def test_battery_left_breaks_a_tie_and_retired_robots_bid_nothing() -> None:
+    e = tutorial_engine()
+    e.mission.robots["lru3"] = RobotSpec(type="lru_science")
+    e.mission.tasks["lru3"] = []
+    e.mission.robots["lru4"] = RobotSpec(type="lru_science")
+    e.mission.tasks["lru4"] = []
+    inputs = PlanInputs(
+        now=NOW, robots={"lru3": RobotNow(at=NOW, battery=0.4), "lru4": RobotNow(NOW, battery=0.9)}
+    )
+    hints = suggest(e.mission, e.library, inputs, ["lru1-2"])
+    assert [h.robot for h in hints if h.capable][:2] == ["lru4", "lru3"]
+    e.submit(RetireRobot(name="lru4", reason="broken"))
+    assert "lru4" not in [h.robot for h in suggest(e.mission, e.library, inputs, ["lru1-2"])]
+
+
+def test_a_skill_by_name_is_a_new_one_at_the_end_of_each_plan() -> None:
+    e = _engine()
+    hints = suggest(e.mission, e.library, PlanInputs(now=NOW), ["take_science_image"])
+    capable = [h.robot for h in hints if h.capable]
+    assert set(capable) == {"lru1", "lru3", "lru4"} and capable[-1] == "lru4"
+    assert hints[-1].robot == "lru2" and "no skill" in hints[-1].refused["take_science_image"]

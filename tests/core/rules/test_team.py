@@ -1,0 +1,198 @@
+"""Robots joining and retiring at runtime, and skills given to another robot
+(issue 30): `backend.core.rules.team` and `backend.core.rules.reassign`."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from backend.core.events import EventBatch, apply_events
+from backend.core.model import CommandState, Status
+from backend.core.ops import (
+    AddBarrier,
+    AddRobot,
+    AddSkill,
+    Reassign,
+    RetireRobot,
+    Sync,
+    Undo,
+)
+from backend.core.rules.engine import Engine
+from tests.core.rules.conftest import bring, ids, refused, skill, status_of
+
+
+def test_a_robot_of_a_known_type_joins_with_an_empty_plan(engine: Engine) -> None:
+    applied = engine.submit(AddRobot(name="lru3", type="lru_science"))
+    assert engine.mission.robots["lru3"].type == "lru_science"
+    assert engine.mission.tasks["lru3"] == []
+    assert [a.robot for a in applied.alerts] == ["lru3"]
+    assert "joined" in applied.alerts[0].message
+    # it can be planned for at once
+    engine.submit(AddSkill(robot="lru3", skill="drive_to", params={"goal": {"x": 1, "y": 2}}))
+    assert len(ids(engine, "lru3")) == 1
+
+
+def test_an_unknown_type_is_refused_naming_what_is_missing(engine: Engine) -> None:
+    r = refused(
+        engine,
+        lambda: engine.submit(AddRobot(name="rover9", type="hovercraft")),
+        "unknown_robot_type",
+        "hovercraft",
+        "lru_science",
+        "add robot type",
+        robot="rover9",
+    )
+    assert "rover9" in r.message
+
+
+def test_a_robot_is_added_once(engine: Engine) -> None:
+    refused(
+        engine,
+        lambda: engine.submit(AddRobot(name="lru1", type="lru_science")),
+        "robot_exists",
+        "lru1",
+    )
+
+
+def test_retired_robot_gets_no_new_syncs_and_keeps_its_log(engine: Engine) -> None:
+    bring(engine, "lru1", "lru1-1", Status.SUCCESS)
+    applied = engine.submit(RetireRobot(name="lru1", reason="wheel stuck"))
+    assert engine.mission.robots["lru1"].retired == "wheel stuck"
+    assert status_of(engine, "lru1-1") == Status.SUCCESS  # the log stays
+    assert applied.value["to_reassign"] == ["lru1-2"]
+    assert any("reassign --from lru1" in n for n in applied.notes)
+    refused(engine, lambda: engine.submit(Sync(robot="lru1")), "retired", "wheel stuck")
+
+
+class _Link:
+    """The robot link as the rules see it: lru1 registered, then went out of reach."""
+
+    def __init__(self, reachable: bool, offers: Mapping[str, Mapping[str, str]] = {}):
+        self._reachable = reachable
+        self._offers = offers
+
+    def offered(self, robot: str) -> Mapping[str, str] | None:
+        return self._offers.get(robot)
+
+    def reachable(self, robot: str) -> bool:
+        return self._reachable
+
+
+def test_retiring_a_reachable_robot_unsyncs_its_queue_by_its_uplink(engine: Engine) -> None:
+    engine.offers = _Link(reachable=True)
+    bring(engine, "lru1", "lru1-2", Status.IDLE_SYNCHRONIZED)
+    applied = engine.submit(RetireRobot(name="lru1", reason="low battery"))
+    [c] = engine.mission.pending_commands("lru1")
+    assert (c.op, c.skills) == ("unsync", ["lru1-1", "lru1-2"])
+    # until the robot answers, they are its: locked, still queued
+    assert status_of(engine, "lru1-1") == Status.IDLE_SYNCHRONIZED
+    assert applied.value["to_reassign"] == ["lru1-1", "lru1-2"]
+
+
+def test_retiring_an_unreachable_robot_takes_its_queue_back_on_the_ground(
+    engine: Engine,
+) -> None:
+    engine.offers = _Link(reachable=False)
+    bring(engine, "lru1", "lru1-1", Status.RUNNING)
+    sync_queued = engine.submit(Sync(robot="lru1"))  # never transmitted
+    retired = engine.submit(RetireRobot(name="lru1", reason="stopped responding"))
+    assert retired.value["to_reassign"] == ["lru1-1.2", "lru1-2"]
+    assert status_of(engine, "lru1-1") == Status.FAILURE
+    assert "outcome is unknown" in skill(engine, "lru1-1").status_info
+    assert status_of(engine, "lru1-2") == Status.IDLE
+    # the interrupted skill's next attempt leads the plan to reassign
+    assert ids(engine, "lru1") == ["lru1-1", "lru1-1.2", "lru1-2"]
+    assert skill(engine, "lru1-1.2").attempt == 2
+    command = engine.mission.command(sync_queued.value["command"])
+    assert command is not None and command.state == CommandState.CANCELLED
+    assert engine.mission.pending_commands("lru1") == []
+
+
+def test_whole_plan_moves_keeping_params_bindings_and_order(engine: Engine) -> None:
+    engine.submit(AddRobot(name="lru3", type="lru_science"))
+    before = [skill(engine, sid) for sid in ("lru1-1", "lru1-2")]
+    applied = engine.submit(Reassign(from_robot="lru1", to="lru3"))
+    assert ids(engine, "lru3") == ["lru1-1", "lru1-2"]
+    assert ids(engine, "lru1") == []
+    for old in before:
+        new = skill(engine, old.id)
+        assert (new.params, new.bindings, new.label) == (old.params, old.bindings, old.label)
+    assert applied.value["moved"] == ["lru1-1", "lru1-2"]
+
+
+def test_a_skill_the_target_cannot_do_stays_and_says_why(engine: Engine) -> None:
+    engine.submit(AddRobot(name="lru3", type="lru_science"))
+    engine.submit(AddSkill(robot="lru2", skill="pick_stone", params={"target": {"x": 1, "y": 1}}))
+    picked = ids(engine, "lru2")[-1]
+    applied = engine.submit(Reassign(ids=["lru2-1", picked], to="lru3"))
+    assert applied.value["moved"] == ["lru2-1"]
+    assert "has no skill 'pick_stone'" in applied.value["refused"][picked]
+    assert any(n.startswith(f"{picked} stays") for n in applied.notes)
+
+
+def test_nothing_movable_is_refused_with_each_reason(engine: Engine) -> None:
+    engine.submit(AddRobot(name="lru3", type="lru_science"))
+    bring(engine, "lru1", "lru1-1", Status.IDLE_SYNCHRONIZED)
+    refused(
+        engine,
+        lambda: engine.submit(Reassign(ids=["lru1-1"], to="lru3")),
+        "cannot_reassign",
+        "lru1-1",
+        "idle_synchronized",
+    )
+
+
+def test_manifest_without_the_skill_refuses_it(engine: Engine) -> None:
+    engine.submit(AddRobot(name="lru3", type="lru_science"))
+    engine.offers = _Link(reachable=True, offers={"lru3": {"drive_to": "1.0.0"}})
+    applied = engine.submit(Reassign(from_robot="lru1", to="lru3"))
+    assert applied.value["moved"] == ["lru1-1"]
+    assert "does not offer skill 'take_science_image'" in applied.value["refused"]["lru1-2"]
+
+
+def test_barrier_follows_its_skill_or_is_dissolved(engine: Engine) -> None:
+    engine.submit(AddRobot(name="lru3", type="lru_science"))
+    engine.submit(AddBarrier(ids=["lru1-2", "lru2-2"]))
+    kept = engine.submit(Reassign(ids=["lru1-2"], to="lru3"))
+    assert engine.mission.barrier_of("lru1-2") is not None
+    assert any("now ties" in n for n in kept.notes)
+    engine.submit(AddBarrier(ids=["lru1-1", "lru2-1"]))
+    gone = engine.submit(Reassign(ids=["lru2-1"], to="lru1"))
+    assert engine.mission.barrier_of("lru1-1") is None
+    assert any("dissolved" in n for n in gone.notes) and gone.value["dissolved"]
+
+
+def test_undo_returns_each_skill_with_its_barrier(engine: Engine) -> None:
+    engine.submit(AddRobot(name="lru3", type="lru_science"))
+    engine.submit(AddBarrier(ids=["lru1-1", "lru2-1"]), client="c")
+    engine.submit(Reassign(ids=["lru1-1", "lru2-1"], to="lru3"), client="c")
+    assert engine.mission.barrier_of("lru1-1") is None
+    engine.submit(Undo(), client="c")
+    assert ids(engine, "lru1") == ["lru1-1", "lru1-2"]
+    assert ids(engine, "lru2") == ["lru2-1", "lru2-2"]
+    assert engine.mission.barrier_of("lru1-1") == engine.mission.barrier_of("lru2-1") is not None
+
+
+def test_reassigning_to_a_retired_robot_is_refused(engine: Engine) -> None:
+    engine.submit(RetireRobot(name="lru2", reason="arm broken"))
+    refused(
+        engine,
+        lambda: engine.submit(Reassign(ids=["lru1-1"], to="lru2")),
+        "retired",
+        "arm broken",
+    )
+
+
+def test_team_events_replay_to_the_same_mission(engine: Engine) -> None:
+    start = engine.mission.copy_deep()
+    batches: list[EventBatch] = []
+    for op in (
+        AddRobot(name="lru3", type="lru_science"),
+        RetireRobot(name="lru1", reason="broken"),
+        Reassign(from_robot="lru1", to="lru3"),
+    ):
+        applied = engine.submit(op)
+        batches.append(EventBatch.model_validate_json(applied.batch().model_dump_json()))
+    replayed = start
+    for b in batches:
+        replayed = apply_events(replayed, b)
+    assert replayed.model_dump() == engine.mission.model_dump()
