@@ -83,6 +83,7 @@ they may call `ctx.progress()` and `ctx.check()` (blocks while paused, raises
 from __future__ import annotations
 
 import asyncio
+import time
 from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
@@ -173,6 +174,9 @@ class RobotAgent:
         self.battery: Callable[[], float] = lambda: 1.0
         self.link = Link()
         self.time_scale = 1.0
+        # the mission clock, in seconds (policies.not_after): the simulator's when one
+        # runs (it sets this), else POSIX time
+        self.mission_time: Callable[[], float] = time.time
         # called with every Report as it is made (simulator, logs, tests)
         self.report_listeners: list[Callable[[Report], object]] = []
 
@@ -527,7 +531,12 @@ class RobotAgent:
 
     def _enqueue(self, cmd: Enqueue) -> Effect:
         change = self._queue.enqueue(
-            cmd.skills, cmd.barriers, front=cmd.front, offered=self._handlers, kinds=cmd.kinds
+            cmd.skills,
+            cmd.barriers,
+            front=cmd.front,
+            offered=self._handlers,
+            kinds=cmd.kinds,
+            contingencies=cmd.contingencies,
         )
         if change.ok:
             self._executor.kick()

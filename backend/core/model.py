@@ -13,9 +13,10 @@ from datetime import datetime
 from enum import StrEnum
 from typing import Annotated, Any, Final, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PrivateAttr
 
 from backend.core.bulk import gc_paused
+from backend.core.durations import duration_s
 
 MISSION_FORMAT: Final = "missionctl/mission@1"
 
@@ -146,6 +147,59 @@ class AreaMarker(Strict):
 Marker = Annotated[PoseMarker | PositionMarker | AreaMarker, Field(discriminator="kind")]
 
 
+def _mission_seconds(value: Any) -> Any:
+    """'10m', '1.5h', 90 -> seconds (backend.core.durations); other values as given."""
+    if isinstance(value, str):
+        seconds = duration_s(value)
+        return value if seconds is None else seconds
+    return value
+
+
+# a span or an instant of mission time, in seconds; typed like any duration ("10m")
+MissionSeconds = Annotated[
+    float,
+    Field(ge=0, le=1e10),
+    BeforeValidator(_mission_seconds, json_schema_input_type=float | str),
+]
+
+
+def _unset(value: object) -> bool:
+    return value is None
+
+
+def _halt(value: object) -> bool:
+    return value == "halt"
+
+
+def _empty(value: object) -> bool:
+    return not value
+
+
+class FallbackSkill(Strict):
+    """A skill the robot runs in place of a failed one (sent with the sync)."""
+
+    skill: Name
+    params: dict[str, Any] = Field(default_factory=dict)
+    bindings: dict[str, Name] = Field(default_factory=dict)
+
+
+class Fallback(Strict):
+    """Run these skills in place of the failed one, then go on with the queue."""
+
+    fallback: list[FallbackSkill] = Field(min_length=1, max_length=10)
+
+
+class Goto(Strict):
+    """Drive to this marker (a rally point) with the robot's own drive skill, then halt."""
+
+    goto: Name
+
+
+# what the robot does, on board, when a skill fails or runs out of time
+# (backend.agent.contingency; docs/robots.md "Contingencies")
+Branch = Literal["halt", "skip", "continue"] | Fallback | Goto
+
+
 class Policies(Strict):
     """Optional per-skill policies the robot applies without a round trip."""
 
@@ -157,8 +211,42 @@ class Policies(Strict):
         None, ge=0.0, le=1.0, description="return to recharge below this battery level (0..1)"
     )
 
+    # the contingencies are left out of dumps while unset: a mission without
+    # them is as large as before (journal snapshots, the wire)
+    timeout: MissionSeconds | None = Field(
+        None,
+        exclude_if=_unset,
+        description="mission seconds the skill may run (retries included); then on_timeout",
+    )
+    not_after: MissionSeconds | None = Field(
+        None,
+        exclude_if=_unset,
+        description="mission-time deadline (the mission clock: sim seconds with a simulator, "
+        "POSIX seconds otherwise): not started after it, stopped at it; then on_timeout",
+    )
+    on_failure: Branch = Field(
+        "halt",
+        exclude_if=_halt,
+        description="after a failure (once retries are used up): halt | skip | "
+        "continue | {fallback: [skills]} | {goto: MARKER}",
+    )
+    on_timeout: Branch = Field(
+        "halt",
+        exclude_if=_halt,
+        description="at the timeout or deadline: halt | skip (stop it, go on) | "
+        "continue (let it run on) | {fallback: [skills]} | {goto: MARKER}",
+    )
+
     def is_default(self) -> bool:
         return self == Policies()
+
+
+class Taken(Strict):
+    """The contingency branch a robot took for a skill, and why."""
+
+    trigger: Literal["failure", "timeout"]
+    branch: Literal["halt", "skip", "continue", "fallback", "goto"]
+    reason: str = Field("", max_length=2000)
 
 
 class SkillInstance(Strict):
@@ -175,6 +263,9 @@ class SkillInstance(Strict):
     started_at: datetime | None = None
     finished_at: datetime | None = None
     policies: Policies = Field(default_factory=Policies)
+    branch: Taken | None = Field(
+        None, exclude_if=_unset, description="the contingency its robot took, if any"
+    )
     # revision of the last change to this skill (optimistic concurrency)
     rev: int = Field(0, ge=0)
 
@@ -200,6 +291,14 @@ class SkillInstance(Strict):
             attempt=self.attempt + 1,
             policies=self.policies,
         )
+
+
+class Branches(Strict):
+    """A skill's fallback or goto branches, made concrete at sync: the skills
+    (parameters checked, markers resolved) the robot runs for each trigger."""
+
+    on_failure: list[SkillInstance] = Field(default_factory=list, max_length=10)
+    on_timeout: list[SkillInstance] = Field(default_factory=list, max_length=10)
 
 
 class RobotSpec(Strict):
@@ -248,6 +347,11 @@ class Enqueue(Strict):
         default_factory=dict, description="skill id -> its barrier and the partners to wait for"
     )
     front: bool = Field(False, description="put before the rest of the queue (retries)")
+    contingencies: dict[SkillId, Branches] = Field(
+        default_factory=dict,
+        exclude_if=_empty,
+        description="skill id -> the skills its fallback / goto branches run (policies)",
+    )
     kinds: dict[Name, dict[Name, ParamType]] = Field(
         default_factory=dict,
         description="skill name -> the kind of each of its parameters (the library's), for "

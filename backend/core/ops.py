@@ -29,6 +29,7 @@ from backend.core.model import (
     SkillInstance,
     Status,
     Strict,
+    Taken,
 )
 
 # -- operator operations -------------------------------------------------------
@@ -364,6 +365,11 @@ class Report(Strict):
     info: str = ""
     attempt: int | None = Field(None, ge=1)
     at: AwareDatetime | None = Field(None, description="when it changed (robot's clock)")
+    branch: Taken | None = Field(
+        None,
+        exclude_if=lambda v: v is None,
+        description="the contingency it took (policies on_failure / on_timeout), and why",
+    )
 
 
 # what clients may send; what robots' answers become; everything the engine applies
