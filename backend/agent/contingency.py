@@ -19,11 +19,10 @@ with the branch and why.
 from __future__ import annotations
 
 import asyncio
-from datetime import UTC, datetime
 from typing import Any, Literal, cast
 
 from backend.agent.context import Execution
-from backend.core.contact import sim_time_text
+from backend.core.contingency import clock_text, span_text
 from backend.core.model import Fallback, Goto, SkillInstance, Status, Taken
 
 Trigger = Literal["failure", "timeout"]
@@ -44,7 +43,7 @@ def past_deadline(ex: Any, act: Execution) -> str | None:
     deadline = act.entry.skill.policies.not_after
     if deadline is None or _now(ex) < deadline:
         return None
-    return f"not started: past its deadline (not_after {_clock(deadline)})"
+    return f"not started: past its deadline (not_after {clock_text(deadline)})"
 
 
 def arm(ex: Any, act: Execution) -> None:
@@ -52,9 +51,9 @@ def arm(ex: Any, act: Execution) -> None:
     pol = act.entry.skill.policies
     budgets: list[tuple[float, str]] = []
     if pol.timeout is not None:
-        budgets.append((pol.timeout, f"out of time after {_span(pol.timeout)}"))
+        budgets.append((pol.timeout, f"out of time after {span_text(pol.timeout)}"))
     if pol.not_after is not None:
-        budgets.append((pol.not_after - _now(ex), f"past its deadline {_clock(pol.not_after)}"))
+        budgets.append((pol.not_after - _now(ex), f"past its deadline {clock_text(pol.not_after)}"))
     if budgets:
         mission_s, why = min(budgets)
         wall = max(0.0, mission_s) / _scale(ex)
@@ -128,21 +127,3 @@ def _branch_skills(act: Execution, trigger: Trigger) -> list[SkillInstance]:
     if b is None:
         return []
     return b.on_failure if trigger == "failure" else b.on_timeout
-
-
-def _span(seconds: float) -> str:
-    """600 -> '10m', 5400 -> '90m', 7200 -> '2h', 45 -> '45s'."""
-    for unit, size in (("h", 3600), ("m", 60)):
-        if seconds >= size and seconds % size == 0:
-            return f"{seconds / size:g}{unit}"
-    return f"{seconds:g}s"
-
-
-def _clock(t: float) -> str:
-    """A mission-clock instant: sim time, or a UTC time on a POSIX clock."""
-    if t >= _POSIX_FROM:
-        return datetime.fromtimestamp(t, UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
-    return f"sim {sim_time_text(t)}"
-
-
-_POSIX_FROM = 1e9  # no simulated mission runs 31 years: beyond it, the clock is POSIX

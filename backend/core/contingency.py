@@ -11,10 +11,14 @@ parameter and no base time: drive_to, fly_to).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any, Literal
+from datetime import UTC, datetime
+from typing import Any, Literal, cast
 
+from backend.core.contact import sim_time_text
+from backend.core.durations import duration_s
 from backend.core.library import Library, SkillSpec, check_params
 from backend.core.model import (
+    NAME_RE,
     Branch,
     Branches,
     Fallback,
@@ -23,6 +27,7 @@ from backend.core.model import (
     Policies,
     SkillInstance,
     Status,
+    Taken,
 )
 
 Path = tuple[str | int, ...]
@@ -134,3 +139,94 @@ def resolved(
             for n, f in enumerate(skills, 1)
         ]
     return Branches(**lists) if lists else None
+
+
+# -- how rows show them ---------------------------------------------------------
+
+
+def span_text(seconds: float) -> str:
+    """600 -> '10m', 5400 -> '90m', 7200 -> '2h', 45 -> '45s'."""
+    for unit, size in (("h", 3600), ("m", 60)):
+        if seconds >= size and seconds % size == 0:
+            return f"{seconds / size:g}{unit}"
+    return f"{seconds:g}s"
+
+
+def clock_text(t: float) -> str:
+    """A mission-clock instant: sim time, or a UTC time on a POSIX clock."""
+    if t >= POSIX_FROM:
+        return datetime.fromtimestamp(t, UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
+    return f"sim {sim_time_text(t)}"
+
+
+POSIX_FROM = 1e9  # no simulated mission runs 31 years: beyond it, the clock is POSIX
+
+
+def branch_text(branch: Branch) -> str:
+    """'skip', 'recharge@Lander' (a fallback, with its skills' markers), 'goto@Lander'."""
+    if isinstance(branch, Goto):
+        return f"goto@{branch.goto}"
+    if isinstance(branch, Fallback):
+        return "+".join(
+            f.skill + "".join(f"@{m}" for m in f.bindings.values()) for f in branch.fallback
+        )
+    return branch
+
+
+def marks(p: Policies, unicode: bool = True) -> list[str]:
+    """A row's contingency marks: '⏱10m→skip', '✗→recharge@Lander' (ASCII: T10m->skip)."""
+    arrow = "→" if unicode else "->"
+    out: list[str] = []
+    if p.timeout is not None or p.not_after is not None:
+        limits = [span_text(p.timeout)] if p.timeout is not None else []
+        if p.not_after is not None:
+            limits.append(("≤" if unicode else "<=") + clock_text(p.not_after).removeprefix("sim "))
+        clock = "⏱" if unicode else "T"
+        out.append(f"{clock}{','.join(limits)}{arrow}{branch_text(p.on_timeout)}")
+    if p.on_failure != "halt":
+        out.append(f"{'✗' if unicode else 'X'}{arrow}{branch_text(p.on_failure)}")
+    return out
+
+
+def taken_text(t: Taken) -> str:
+    """What a robot did: 'on failure: skip', 'on timeout: fallback'."""
+    return f"on {t.trigger}: {t.branch}"
+
+
+# -- as people type them (ctl options, the console's editor) ------------------------
+
+OFF = ("", "off", "none", "no", "never")
+BRANCH_SYNTAX = "halt | skip | continue | goto:MARKER | fallback:SKILL[+SKILL...]"
+
+
+def read_seconds(text: str) -> float | None | str:
+    """'10m', '1.5h', '90' -> seconds; 'off' or empty -> None; else what is wrong."""
+    if text.strip().lower() in OFF:
+        return None
+    seconds = duration_s(text)
+    if seconds is None:
+        return f"expected a mission-time duration such as 90s, 10m, 1.5h (or 'off'), got {text!r}"
+    return seconds
+
+
+def read_branch(text: str) -> Branch | None:
+    """A branch from 'skip', 'goto:Lander', 'fallback:recharge+explore'; None
+    when it is none of them (see BRANCH_SYNTAX)."""
+    word, _, rest = text.strip().partition(":")
+    if word in ("halt", "skip", "continue") and not rest:
+        return cast(Branch, word)
+    if word == "goto" and NAME_RE.match(rest):
+        return Goto(goto=rest)
+    skills = rest.split("+")
+    if word == "fallback" and rest and all(NAME_RE.match(s) for s in skills):
+        return Fallback(fallback=[FallbackSkill(skill=s) for s in skills])
+    return None
+
+
+def typed_branch(branch: Branch) -> str:
+    """The text `read_branch` reads back (a fallback's parameters are not in it)."""
+    if isinstance(branch, Goto):
+        return f"goto:{branch.goto}"
+    if isinstance(branch, Fallback):
+        return "fallback:" + "+".join(f.skill for f in branch.fallback)
+    return branch

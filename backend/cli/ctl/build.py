@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from backend.cli.ctl.args import CONTROL_OPS
+from backend.cli.ctl.contingency import given as given_contingency
 from backend.cli.ctl.errors import FileInvalid, UsageError
 from backend.cli.ctl.values import (
     AtMarker,
@@ -78,7 +79,7 @@ def _given_policies(args: argparse.Namespace) -> dict[str, Any]:
         out["pause_out_of_comms"] = args.pause_out_of_comms
     if hasattr(args, "recharge_below"):
         out["recharge_below"] = args.recharge_below
-    return out
+    return out | given_contingency(args)
 
 
 def _validated(model: type, what: str, **fields: Any) -> Any:
