@@ -227,14 +227,14 @@ class Policies(Strict):
     on_failure: Branch = Field(
         "halt",
         exclude_if=_halt,
-        description="after a failure (once retries are used up): halt | skip | "
-        "continue | {fallback: [skills]} | {goto: MARKER}",
+        description="after a failure (its retries used up): halt, skip (go on with the "
+        "next skill), continue (the same), fallback skills run in its place, or goto a marker",
     )
     on_timeout: Branch = Field(
         "halt",
         exclude_if=_halt,
-        description="at the timeout or deadline: halt | skip (stop it, go on) | "
-        "continue (let it run on) | {fallback: [skills]} | {goto: MARKER}",
+        description="at the timeout or deadline: halt, skip (stop it, go on), continue (let "
+        "it run on), fallback skills run in its place, or goto a marker",
     )
 
     def is_default(self) -> bool:

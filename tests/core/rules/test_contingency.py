@@ -9,7 +9,7 @@ from backend.core.model import Fallback, FallbackSkill, Goto, Policies, Status, 
 from backend.core.ops import EditSkill, Sync
 from backend.files.missions import load_mission
 
-from .conftest import TUTORIAL, T0
+from .conftest import T0, TUTORIAL
 
 S = Status
 
