@@ -112,14 +112,20 @@ async def _run_branch(
     names = ", ".join(s.skill for s in skills)
     what = f"{reason} → {kind}" + (f" to {branch.goto}" if isinstance(branch, Goto) else "")
     ex.queue.report(act.entry, Status.RUNNING, f"{what}: {names}", taken)
+    failed = await _run_all(ex, act, skills)
+    if act.aborted:
+        return  # stopped: whoever stopped it reported it
+    done = f"{what}: {failed or names + ' done'}"
+    ex.finish(act, Status.FAILURE, done, taken, go_on=kind == "fallback" and not failed)
+
+
+async def _run_all(ex: Any, act: Execution, skills: list[SkillInstance]) -> str:
+    """Run the branch's skills in order: '' when all succeeded, else which failed and why."""
     for s in skills:
         why = await ex.call_handler(act, purpose="branch", skill=s)
-        if act.aborted:
-            return
         if why is not None:
-            ex.finish(act, Status.FAILURE, f"{what}: {s.skill} failed too: {why}", taken)
-            return
-    ex.finish(act, Status.FAILURE, f"{what}: {names} done", taken, go_on=kind == "fallback")
+            return f"{s.skill} failed too: {why}"
+    return ""
 
 
 def _branch_skills(act: Execution, trigger: Trigger) -> list[SkillInstance]:

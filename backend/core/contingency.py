@@ -176,16 +176,19 @@ def branch_text(branch: Branch) -> str:
 def marks(p: Policies, unicode: bool = True) -> list[str]:
     """A row's contingency marks: '⏱10m→skip', '✗→recharge@Lander' (ASCII: T10m->skip)."""
     arrow = "→" if unicode else "->"
-    out: list[str] = []
-    if p.timeout is not None or p.not_after is not None:
-        limits = [span_text(p.timeout)] if p.timeout is not None else []
-        if p.not_after is not None:
-            limits.append(("≤" if unicode else "<=") + clock_text(p.not_after).removeprefix("sim "))
-        clock = "⏱" if unicode else "T"
-        out.append(f"{clock}{','.join(limits)}{arrow}{branch_text(p.on_timeout)}")
+    out = [_timeout_mark(p, unicode) + arrow + branch_text(p.on_timeout)]
+    out = out if p.timeout is not None or p.not_after is not None else []
     if p.on_failure != "halt":
-        out.append(f"{'✗' if unicode else 'X'}{arrow}{branch_text(p.on_failure)}")
+        out.append(("✗" if unicode else "X") + arrow + branch_text(p.on_failure))
     return out
+
+
+def _timeout_mark(p: Policies, unicode: bool) -> str:
+    """'⏱10m', '⏱≤2:00:00', '⏱10m,≤2:00:00' (ASCII: T10m, T<=2:00:00)."""
+    limits = [span_text(p.timeout)] if p.timeout is not None else []
+    if p.not_after is not None:
+        limits.append(("≤" if unicode else "<=") + clock_text(p.not_after).removeprefix("sim "))
+    return ("⏱" if unicode else "T") + ",".join(limits)
 
 
 def taken_text(t: Taken) -> str:
@@ -212,15 +215,15 @@ def read_seconds(text: str) -> float | None | str:
 def read_branch(text: str) -> Branch | None:
     """A branch from 'skip', 'goto:Lander', 'fallback:recharge+explore'; None
     when it is none of them (see BRANCH_SYNTAX)."""
-    word, _, rest = text.strip().partition(":")
-    if word in ("halt", "skip", "continue") and not rest:
-        return cast(Branch, word)
-    if word == "goto" and NAME_RE.match(rest):
-        return Goto(goto=rest)
-    skills = rest.split("+")
-    if word == "fallback" and rest and all(NAME_RE.match(s) for s in skills):
-        return Fallback(fallback=[FallbackSkill(skill=s) for s in skills])
-    return None
+    word, colon, rest = text.strip().partition(":")
+    if not colon:
+        return cast(Branch, word) if word in ("halt", "skip", "continue") else None
+    names = rest.split("+")
+    if not all(NAME_RE.match(n) for n in names):
+        return None
+    if word == "fallback":
+        return Fallback(fallback=[FallbackSkill(skill=n) for n in names])
+    return Goto(goto=rest) if word == "goto" and len(names) == 1 else None
 
 
 def typed_branch(branch: Branch) -> str:

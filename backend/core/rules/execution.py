@@ -417,11 +417,10 @@ def _reported_change(s: SkillInstance, op: Report) -> ev.SkillStatusChanged | No
     stamps = (new == Status.RUNNING and s.started_at is None) or new in FINISHED
     at = op.at if stamps else None
     branch = op.branch if op.branch != s.branch else None
-    if new == s.status and info is None and attempt is None and at is None and branch is None:
-        return None
-    return ev.SkillStatusChanged(
+    change = ev.SkillStatusChanged(
         id=s.id, status=new, info=info, attempt=attempt, at=at, branch=branch
     )
+    return None if change == ev.SkillStatusChanged(id=s.id, status=s.status) else change
 
 
 RULES: dict[type[Any], Rule] = {

@@ -369,3 +369,28 @@ def test_docs_plan_md_lists_every_rule_with_its_severity():
     text = (Path(__file__).resolve().parents[3] / "docs" / "plan.md").read_text()
     for r in RULES:
         assert f"| `{r.rule}` | {r.severity} |" in text, r.rule
+
+
+# -- contingencies ---------------------------------------------------------------------------
+
+
+def test_a_timeout_the_forecast_cannot_meet_and_a_rally_point_on_rocks():
+    from backend.core.model import Goto, PoseMarker
+
+    site = FakeSite(radius=500, rocks={(20, 0)})
+    slow = skill("r1-1", "drive", goal=pose(100, 0))
+    slow.policies = Policies(timeout="10s", on_timeout="skip")
+    roomy = skill("r1-2", "drive", goal=pose(0, 0))
+    roomy.policies = Policies(timeout="10h", on_failure=Goto(goto="Rocks"))
+    m = mission({"r1": "rover"}, {"r1": [slow, roomy]})
+    m.markers["Rocks"] = PoseMarker(pose=pose(20, 0))
+    robots = {"r1": RobotNow(at=T0, x=0, y=0, battery=1.0)}
+    out = found(m, site=site, robots=robots)
+    contingency = [f for f in out if f.rule.startswith("contingency")]
+    assert ids(contingency) == [
+        "contingency.goto_impassable:r1-2/on_failure",
+        "contingency.timeout_short:r1-1/timeout",
+    ]
+    assert "longer than its timeout 10s" in contingency[1].message
+    # without a map only the timeout is checked
+    assert ids(found(m, robots=robots, rule="contingency.goto_impassable")) == []
