@@ -19,6 +19,7 @@ with the branch and why.
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Awaitable
 from typing import Any, Literal, cast
 
 from backend.agent.context import Execution
@@ -133,3 +134,27 @@ def _branch_skills(act: Execution, trigger: Trigger) -> list[SkillInstance]:
     if b is None:
         return []
     return b.on_failure if trigger == "failure" else b.on_timeout
+
+
+async def barrier_wait(ex: Any, act: Execution, waiting: Awaitable[None]) -> str | None:
+    """Wait at the skill's barrier within its timeout (BarrierInfo). '' when
+    the partners came; the start text when it starts alone (on_timeout
+    continue); None when it failed (halt)."""
+    info = act.entry.barrier
+    assert info is not None
+    if info.timeout is None:
+        await waiting
+        return ""
+    try:
+        async with asyncio.timeout(info.timeout / _scale(ex)):
+            await waiting
+        return ""
+    except TimeoutError:
+        why = f"barrier {info.barrier}: partners not ready after {span_text(info.timeout)}"
+    taken = Taken(trigger="timeout", branch=info.on_timeout, reason=why)
+    if info.on_timeout == "halt":
+        ex.finish(act, Status.FAILURE, why, taken)
+        return None
+    started = f"{why} → continue: starting alone"
+    ex.queue.report(act.entry, Status.RUNNING, started, taken)
+    return started

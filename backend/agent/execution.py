@@ -18,7 +18,7 @@ from typing import Any
 
 from backend.agent.barriers import wait_for_partners
 from backend.agent.context import Execution, SkillContext
-from backend.agent.contingency import guarded, past_deadline, take
+from backend.agent.contingency import barrier_wait, guarded, past_deadline, take
 from backend.agent.outcomes import Failure, SkillFailed, Success
 from backend.agent.queue import SkillQueue
 from backend.agent.registration import Handler
@@ -161,15 +161,16 @@ class Executor:
             return None
         if entry.barrier is None:
             return ""
-        await wait_for_partners(
+        waiting = wait_for_partners(
             self.rt,
             act,
             lambda text: self.queue.report(entry, Status.SYNCHWAITING, text),
             self.telemetry.show,
         )
-        if act.aborted:
-            return None
-        return f"barrier {entry.barrier.barrier}: all partners ready"
+        late = await barrier_wait(self, act, waiting)
+        if act.aborted or late is None:
+            return late
+        return late or f"barrier {entry.barrier.barrier}: all partners ready"
 
     async def attempts(self, act: Execution, start_info: str) -> None:
         """The handler, again after each failure while retries are left."""

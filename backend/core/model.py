@@ -306,7 +306,15 @@ class RobotSpec(Strict):
     description: str = ""
 
 
-class Barrier(Strict):
+class BarrierTimeout(Strict):
+    """How long a robot waits at a barrier for its partners (mission time),
+    and then: start alone (`continue`) or fail its skill (`halt`), on board."""
+
+    timeout: MissionSeconds | None = Field(None, exclude_if=_unset)
+    on_timeout: Literal["continue", "halt"] = Field("halt", exclude_if=_halt)
+
+
+class Barrier(BarrierTimeout):
     # distinct skills of distinct robots; checked by core.checks.check_mission (files and rules)
     skills: list[SkillId] = Field(min_length=2)
 
@@ -331,8 +339,9 @@ class CommandState(StrEnum):
 PENDING = frozenset({CommandState.QUEUED, CommandState.SENT})
 
 
-class BarrierInfo(Strict):
-    """A synchronized skill's barrier: the partners' robot -> skill id."""
+class BarrierInfo(BarrierTimeout):
+    """A synchronized skill's barrier: the partners' robot -> skill id, and
+    how long to wait for them."""
 
     barrier: Name
     partners: dict[Name, SkillId]

@@ -15,6 +15,7 @@ from pydantic import AwareDatetime, Field
 from backend.core.model import (
     AreaMarker,
     Barrier,
+    BarrierTimeout,
     CheckId,
     CommandState,
     Marker,
@@ -145,7 +146,7 @@ class RetryEdit(Strict):
     id: SkillId
 
 
-class AddBarrier(Strict):
+class AddBarrier(BarrierTimeout):
     op: Literal["barrier"] = "barrier"
     ids: list[SkillId] = Field(min_length=2)
 
@@ -253,7 +254,7 @@ class RestoreMarker(Strict):
     )
 
 
-class RestoreBarrier(Strict):
+class RestoreBarrier(BarrierTimeout):
     op: Literal["restore_barrier"] = "restore_barrier"
     barrier: Name
     skills: list[SkillId]

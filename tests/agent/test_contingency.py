@@ -213,3 +213,32 @@ async def test_past_its_deadline_a_skill_never_starts(harness: Harness) -> None:
         await h.until(lambda: h.server.has(lru1, "d2", S.SUCCESS), what="d2")
         assert [r.status for r in h.server.applied[lru1] if r.id == "d1"] == [S.FAILURE]
         assert "not_after sim 0:10:00" in h.server.applied[lru1][0].info
+
+
+async def test_a_barrier_timeout_starts_alone_or_halts(harness: Harness) -> None:
+    from backend.core.model import BarrierInfo
+
+    async with harness as h:
+        lru1, lru2 = h.names("lru1", "lru2")  # lru2 never comes
+        a = rover(h, lru1, {})
+        await h.start(a)
+        alone = BarrierInfo(
+            barrier="b1", partners={lru2: "x1"}, timeout="1m", on_timeout="continue"
+        )
+        halt = BarrierInfo(barrier="b2", partners={lru2: "x2"}, timeout="1m")
+        await h.server.command(
+            lru1,
+            Enqueue(
+                skills=[planned("b1", "ok"), planned("b2", "ok"), planned("b3", "ok")],
+                barriers={"b1": alone, "b2": halt},
+            ),
+        )
+        await h.server.command(lru1, Run())
+        await h.until(lambda: h.server.has(lru1, "b2", S.FAILURE), what="b2 gives up")
+        assert h.server.has(lru1, "b1", S.SUCCESS)  # started alone
+        started = branch_of(h, lru1, "b1", S.RUNNING)
+        assert started is not None and (started.trigger, started.branch) == ("timeout", "continue")
+        gave_up = branch_of(h, lru1, "b2", S.FAILURE)
+        assert gave_up is not None and gave_up.branch == "halt"
+        assert "partners not ready after 1m" in gave_up.reason
+        assert a.queue == ["b3"]  # halted

@@ -107,7 +107,7 @@ def _barriers_without(
         robots_left = {_unsynchronized_partner(rules, bid, sid, gone, doing) for sid in rest}
         barriers_before[bid] = b
         if len(robots_left) >= 2:
-            events.append(ev.BarrierSet(id=bid, barrier=Barrier(skills=rest)))
+            events.append(ev.BarrierSet(id=bid, barrier=b.model_copy(update={"skills": rest})))
         else:
             events.append(ev.BarrierRemoved(id=bid))
     return events, barriers_before

@@ -180,7 +180,10 @@ def sync(rules: Rules, op: Sync) -> Change:
         partners = barriers.barrier_partners(rules, s.id)
         bid = rules.mission.barrier_of(s.id)
         if partners and bid is not None:
-            infos[s.id] = BarrierInfo(barrier=bid, partners=dict(partners))
+            b = rules.mission.barriers[bid]
+            infos[s.id] = BarrierInfo(
+                barrier=bid, partners=dict(partners), timeout=b.timeout, on_timeout=b.on_timeout
+            )
     found = contingency.branches(rules, op.robot, skills)
     check_offered(rules, op.robot, contingency.run_by(found))
     c = _Maker(rules, _expiry(rules, op)).make(

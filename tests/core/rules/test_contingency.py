@@ -86,3 +86,20 @@ def test_a_mission_file_names_where_a_contingency_is_wrong(tmp_path):
     assert [(p, "fly_to" in why) for p, why in problems] == [
         (("tasks", "lru2", 0, "policies", "on_failure", "fallback", 0), True)
     ]
+
+
+def test_a_barrier_timeout_travels_with_the_sync_and_survives_undo(engine):
+    from backend.core.ops import AddBarrier, RemoveBarrier, Undo
+
+    added = engine.submit(
+        AddBarrier(ids=["lru1-1", "lru2-1"], timeout="20m", on_timeout="continue"), client="c"
+    )
+    bid = added.value["barrier"]
+    engine.submit(RemoveBarrier(barrier=bid), client="c")
+    engine.submit(Undo(), client="c")
+    b = engine.mission.barriers[bid]
+    assert (b.timeout, b.on_timeout) == (1200, "continue")
+    engine.clock = lambda: T0
+    applied = engine.submit(Sync(robot="lru1", through="lru1-1"))
+    info = engine.mission.command(applied.value["command"]).command.barriers["lru1-1"]
+    assert (info.timeout, info.on_timeout) == (1200, "continue")
