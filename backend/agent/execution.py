@@ -18,7 +18,7 @@ from typing import Any
 
 from backend.agent.barriers import wait_for_partners
 from backend.agent.context import Execution, SkillContext
-from backend.agent.contingency import barrier_wait, guarded, past_deadline, take
+from backend.agent.contingency import barrier_wait, guarded, past_deadline, take, wait_after
 from backend.agent.outcomes import Failure, SkillFailed, Success
 from backend.agent.queue import SkillQueue
 from backend.agent.registration import Handler
@@ -152,6 +152,10 @@ class Executor:
         late = past_deadline(self, act)
         if late is not None and entry.skill.policies.on_timeout != "continue":
             await take(self, act, "timeout", late)
+            return None
+        failed = await wait_after(self, act)
+        if failed is not None:
+            await take(self, act, "failure", failed)
             return None
         recharge = await self._maybe_recharge(act)
         if act.aborted:

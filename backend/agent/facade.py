@@ -91,6 +91,7 @@ from typing import Any
 import zenoh
 
 from backend import transport
+from backend.agent.contingency import OUTCOME_TOPIC
 from backend.agent.execution import Executor
 from backend.agent.link import Link
 from backend.agent.outbox import Outbox
@@ -210,6 +211,8 @@ class RobotAgent:
             self, self._rt, self._queue, self._telemetry, self._handlers, self._signatures
         )
         self.world_stats = self._peers.stats
+        # other robots ask how a skill ended before starting one after it (policies.after)
+        self._peers.add_handler("ask", OUTCOME_TOPIC, self._outcome)
         self._commands: dict[type, Callable[[Any], Effect]] = {
             Enqueue: self._enqueue,
             Dequeue: self._dequeue,
@@ -529,6 +532,9 @@ class RobotAgent:
         self._uplink.forget()
         self._telemetry.update_mode()
 
+    def _outcome(self, data: dict[str, Any], sender: str) -> dict[str, Any]:
+        return {"status": self._queue.outcome(str(data.get("skill", "")))}  # always a dict
+
     def _enqueue(self, cmd: Enqueue) -> Effect:
         change = self._queue.enqueue(
             cmd.skills,
@@ -537,6 +543,7 @@ class RobotAgent:
             offered=self._handlers,
             kinds=cmd.kinds,
             contingencies=cmd.contingencies,
+            after=cmd.after,
         )
         if change.ok:
             self._executor.kick()

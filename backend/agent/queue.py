@@ -21,6 +21,7 @@ from __future__ import annotations
 from collections.abc import Callable, Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
+from types import MappingProxyType
 
 from backend.core.model import BarrierInfo, Branches, SkillInstance, Status, Taken
 from backend.core.ops import Answer, Report
@@ -44,6 +45,7 @@ class HeldSkill:
     # the skills its fallback / goto branches run (Enqueue.contingencies), their kinds
     branches: Branches | None = None
     branch_kinds: Mapping[str, Mapping[str, str]] = field(default_factory=dict)
+    after_robot: str | None = None  # the robot running policies.after (Enqueue.after)
     attempt: int = 1
     retries_used: int = 0
     reported_attempt: int = 0  # the attempt of its last report
@@ -92,7 +94,9 @@ class SkillQueue:
         self._waiting: list[HeldSkill] = []
         self.active: Active | None = None
         self.run_enabled = False  # halted until `run`
-        self._done: set[str] = set()  # finished ids (a re-sent enqueue never re-runs them)
+        # finished ids and how they ended (a re-sent enqueue never re-runs them; other
+        # robots ask for the outcome of a skill they start after: policies.after)
+        self.outcomes: dict[str, Status] = {}
         self.seq = 0  # number of the last report made
 
     # ------------------------------------------------------------ views
@@ -106,6 +110,14 @@ class SkillQueue:
         """The active entry, then the queued ones: what the robot holds."""
         head = [self.active.entry] if self.active is not None else []
         return head + self._waiting
+
+    def outcome(self, skill_id: str) -> str:
+        """How a skill stands here: 'success' / 'failure' when it ended, its
+        status while held, else 'unknown' (not synchronized to this robot)."""
+        ended = self.outcomes.get(skill_id)
+        held = self.holds(skill_id)
+        status = ended or (held.status if held is not None else None)
+        return status.value if status is not None else "unknown"
 
     def holds(self, skill_id: str) -> HeldSkill | None:
         return next((e for e in self.entries() if e.id == skill_id), None)
@@ -132,6 +144,7 @@ class SkillQueue:
         offered: Collection[str],
         kinds: Mapping[str, Mapping[str, str]] | None = None,
         contingencies: Mapping[str, Branches] | None = None,
+        after: Mapping[str, str] = MappingProxyType({}),
     ) -> Effect:
         """Queue `skills` (at the head when `front`: a retry the operator asked
         for), each with its parameters' kinds (`kinds`: skill name -> parameter
@@ -151,7 +164,7 @@ class SkillQueue:
         new: list[HeldSkill] = []
         ids: list[str] = []
         for s in skills:
-            if s.id in self._done:
+            if s.id in self.outcomes:
                 continue  # a re-sent enqueue: it ran already
             ids.append(s.id)
             if self.holds(s.id) is not None or any(e.id == s.id for e in new):
@@ -164,6 +177,7 @@ class SkillQueue:
                     kinds=kinds.get(s.skill, {}),
                     branches=contingencies.get(s.id),
                     branch_kinds=kinds,
+                    after_robot=after.get(s.id),
                     attempt=s.attempt,
                 )
             )
@@ -177,7 +191,7 @@ class SkillQueue:
         removed = [e.id for e in self._waiting if e.id in wanted]
         self._waiting = [e for e in self._waiting if e.id not in wanted]
         active = self.active.entry.id if self.active is not None else None
-        started = [i for i in ids if i in self._done or i == active]
+        started = [i for i in ids if i in self.outcomes or i == active]
         # Ids we never had cannot run either: they count as removed.
         removed += [i for i in ids if i not in removed and i not in started]
         return Effect(removed=removed, started=started)
@@ -264,7 +278,7 @@ class SkillQueue:
         assert self.active is not None
         entry = self.active.entry
         self.active = None
-        self._done.add(entry.id)
+        self.outcomes[entry.id] = status
         if status == Status.FAILURE and not go_on:
             self.run_enabled = False  # the operator decides: retry, run (continue) or unsync
         report = self.report(entry, status, info, branch)

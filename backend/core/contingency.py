@@ -24,6 +24,7 @@ from backend.core.model import (
     Fallback,
     FallbackSkill,
     Goto,
+    Mission,
     Policies,
     SkillInstance,
     Status,
@@ -78,6 +79,17 @@ def contingency_problems(
     ]
 
 
+def after_problems(m: Mission, robot: str, policies: Policies) -> list[Problem]:
+    """policies.after names a skill of another robot of the mission."""
+    if policies.after is None:
+        return []
+    found = m.find(policies.after)
+    if found is None or found[0] == robot:
+        why = "no such skill" if found is None else f"it is {robot}'s own (order it in the plan)"
+        return [(("policies", "after"), f"after {policies.after}: {why}")]
+    return []
+
+
 def _branch_problems(
     branch: Branch,
     trigger: str,
@@ -87,14 +99,13 @@ def _branch_problems(
     robots: set[str],
 ) -> list[Problem]:
     here: Path = ("policies", trigger)
-    if isinstance(branch, Goto) and branch.goto not in markers:
-        known = ", ".join(sorted(markers)) or "none"
-        return [((*here, "goto"), f"no marker '{branch.goto}' (markers: {known})")]
     skills = branch_skills(branch, lib, robot_type)
     if isinstance(skills, str):
         return [(here, skills)]
+    # a goto is its drive skill bound to the marker: an unknown marker is its problem
+    kind = "goto" if isinstance(branch, Goto) else "fallback"
     return [
-        ((*here, "fallback", i, *p.path), p.message)
+        ((*here, kind, i, *p.path), p.message)
         for i, f in enumerate(skills)
         for p in _checked(f, lib, robot_type, markers, robots)[1]
     ]
@@ -178,6 +189,8 @@ def marks(p: Policies, unicode: bool = True) -> list[str]:
     arrow = "→" if unicode else "->"
     out = [_timeout_mark(p, unicode) + arrow + branch_text(p.on_timeout)]
     out = out if p.timeout is not None or p.not_after is not None else []
+    if p.after is not None:
+        out.append(f"after {p.after}")
     if p.on_failure != "halt":
         out.append(("✗" if unicode else "X") + arrow + branch_text(p.on_failure))
     return out

@@ -237,6 +237,13 @@ class Policies(Strict):
         "it run on), fallback skills run in its place, or goto a marker",
     )
 
+    after: SkillId | None = Field(
+        None,
+        exclude_if=_unset,
+        description="start only once this skill of another robot succeeded (asked robot to "
+        "robot); if it failed, on_failure applies",
+    )
+
     def is_default(self) -> bool:
         return self == Policies()
 
@@ -356,6 +363,11 @@ class Enqueue(Strict):
         default_factory=dict, description="skill id -> its barrier and the partners to wait for"
     )
     front: bool = Field(False, description="put before the rest of the queue (retries)")
+    after: dict[SkillId, Name] = Field(
+        default_factory=dict,
+        exclude_if=_empty,
+        description="skill id -> the robot running the skill it waits for (policies.after)",
+    )
     contingencies: dict[SkillId, Branches] = Field(
         default_factory=dict,
         exclude_if=_empty,

@@ -242,3 +242,45 @@ async def test_a_barrier_timeout_starts_alone_or_halts(harness: Harness) -> None
         assert gave_up is not None and gave_up.branch == "halt"
         assert "partners not ready after 1m" in gave_up.reason
         assert a.queue == ["b3"]  # halted
+
+
+async def test_after_waits_for_the_other_robots_success_or_takes_on_failure(
+    harness: Harness,
+) -> None:
+    async with harness as h:
+        lander, lru2 = h.names("lander", "lru2")
+        a, b = rover(h, lander, {}), rover(h, lru2, {})
+        await h.start(a, b)
+        # lru2's deploy waits for the lander's shelve; its second skill for a failing one
+        deploy = planned("deploy", "ok", after="shelve")
+        doomed = planned("doomed", "ok", after="broken", on_failure="skip")
+        await h.server.command(
+            lru2,
+            Enqueue(
+                skills=[deploy, doomed, planned("last", "ok")],
+                after={"deploy": lander, "doomed": lander},
+            ),
+        )
+        await h.server.command(lru2, Run())
+        await h.until(
+            lambda: h.server.has(
+                lru2, "deploy", S.SYNCHWAITING, f"after shelve on {lander}: unknown"
+            ),
+            what="deploy waits",
+        )
+        await h.server.enqueue(lander, planned("shelve", "ok"), planned("broken", "stuck"))
+        await h.server.command(lander, Run())
+        await h.until(lambda: h.server.has(lru2, "last", S.SUCCESS), what="lru2 done")
+        assert h.server.has(lander, "shelve", S.SUCCESS)
+        assert h.server.has(lru2, "deploy", S.SUCCESS)
+        taken = branch_of(h, lru2, "doomed", S.FAILURE)
+        assert taken is not None and taken.branch == "skip"
+        assert taken.reason == f"after broken: it failed on {lander}"
+        # deploy started only after shelve had succeeded
+        shelved = next(
+            r.at for r in h.server.applied[lander] if r.id == "shelve" and r.status == S.SUCCESS
+        )
+        started = next(
+            r.at for r in h.server.applied[lru2] if r.id == "deploy" and r.status == S.RUNNING
+        )
+        assert started >= shelved

@@ -66,3 +66,10 @@ def test_marks_on_a_row():
         "✗→goto@Lander",
     ]
     assert marks(Policies()) == []
+
+
+def test_after_is_set_and_cleared(tutorial):
+    op = op_of(["edit", "lru1-1", "--after", "lru2-1"], tutorial)
+    assert op.policies.after == "lru2-1"
+    assert op_of(["edit", "lru1-1", "--after", "off"], tutorial).policies.after is None
+    assert marks(Policies(after="lander-1")) == ["after lander-1"]

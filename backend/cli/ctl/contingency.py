@@ -44,6 +44,13 @@ def add_options(g: argparse._ArgumentGroup) -> None:
         default=argparse.SUPPRESS,
         help="mission-clock deadline (sim time with a simulator: 2h is sim 2:00:00; 'off')",
     )
+    g.add_argument(
+        "--after",
+        type=lambda t: None if t.strip().lower() in ("off", "none") else t.strip(),
+        metavar="SKILL",
+        default=argparse.SUPPRESS,
+        help="start only once this skill of another robot succeeded ('off')",
+    )
     for trigger, when in (("failure", "after a failure"), ("timeout", "at the timeout")):
         g.add_argument(
             f"--on-{trigger}",
@@ -58,5 +65,5 @@ def add_options(g: argparse._ArgumentGroup) -> None:
 def given(args: argparse.Namespace) -> dict[str, Any]:
     """The contingency fields the command line names."""
     names = {"skill_timeout": "timeout", "not_after": "not_after"}
-    names |= {"on_failure": "on_failure", "on_timeout": "on_timeout"}
+    names |= {"on_failure": "on_failure", "on_timeout": "on_timeout", "after": "after"}
     return {field: getattr(args, k) for k, field in names.items() if hasattr(args, k)}

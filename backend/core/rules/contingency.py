@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from backend.core.contingency import contingency_problems, resolved
+from backend.core.contingency import after_problems, contingency_problems, resolved
 from backend.core.model import Branches, ParamType, Policies, SkillInstance, format_path
 from backend.core.rules.base import Refusal, Rules
 
@@ -17,7 +17,7 @@ def check(rules: Rules, robot: str, policies: Policies | None, skill_id: str | N
     m = rules.mission
     problems = contingency_problems(
         policies, rules.library, rules.robot_type(robot), m.markers, set(m.robots)
-    )
+    ) + after_problems(m, robot, policies)
     if problems:
         who = f"{skill_id}: " if skill_id else ""
         text = "; ".join(f"{format_path(path)}: {why}" for path, why in problems)
@@ -52,3 +52,13 @@ def kinds(rules: Rules, found: dict[str, Branches]) -> dict[str, dict[str, Param
     """The parameter kinds of the skills the branches run (Enqueue.kinds)."""
     lib = rules.library.skills
     return {s.skill: lib[s.skill].kinds() for s in run_by(found) if s.skill in lib}
+
+
+def afters(rules: Rules, skills: Sequence[SkillInstance]) -> dict[str, str]:
+    """Skill id -> the robot running the skill it waits for (Enqueue.after)."""
+    out: dict[str, str] = {}
+    for s in skills:
+        found = rules.mission.find(s.policies.after) if s.policies.after else None
+        if found is not None:
+            out[s.id] = found[0]
+    return out

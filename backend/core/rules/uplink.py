@@ -194,6 +194,7 @@ def sync(rules: Rules, op: Sync) -> Change:
             barriers=infos,
             kinds={**contingency.kinds(rules, found), **_kinds(rules, skills)},
             contingencies=found,
+            after=contingency.afters(rules, skills),
         ),
         [s.id for s in skills],
     )
@@ -346,6 +347,7 @@ def retry(rules: Rules, op: Retry) -> Change:
             front=True,
             kinds={**contingency.kinds(rules, found), **_kinds(rules, [new])},
             contingencies=found,
+            after=contingency.afters(rules, [new]),
         ),
         [s.id, new.id],
     )

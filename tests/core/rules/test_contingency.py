@@ -103,3 +103,22 @@ def test_a_barrier_timeout_travels_with_the_sync_and_survives_undo(engine):
     applied = engine.submit(Sync(robot="lru1", through="lru1-1"))
     info = engine.mission.command(applied.value["command"]).command.barriers["lru1-1"]
     assert (info.timeout, info.on_timeout) == (1200, "continue")
+
+
+def test_after_names_another_robots_skill_and_goes_with_the_sync(engine, refused):
+    refused(
+        engine,
+        lambda: engine.submit(EditSkill(id="lru1-2", policies=Policies(after="lru1-1"))),
+        "bad_contingency",
+        "lru1's own",
+    )
+    refused(
+        engine,
+        lambda: engine.submit(EditSkill(id="lru1-2", policies=Policies(after="nope-9"))),
+        "bad_contingency",
+        "no such skill",
+    )
+    engine.submit(EditSkill(id="lru1-1", policies=Policies(after="lru2-1")))
+    engine.clock = lambda: T0
+    applied = engine.submit(Sync(robot="lru1", through="lru1-1"))
+    assert engine.mission.command(applied.value["command"]).command.after == {"lru1-1": "lru2"}
