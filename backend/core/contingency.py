@@ -10,15 +10,16 @@ parameter and no base time: drive_to, fly_to).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from datetime import UTC, datetime
-from typing import Any, Literal, cast
+from typing import Any, Literal
+
+from pydantic import TypeAdapter, ValidationError
 
 from backend.core.contact import sim_time_text
 from backend.core.durations import duration_s
 from backend.core.library import Library, SkillSpec, check_params
 from backend.core.model import (
-    NAME_RE,
     Branch,
     Branches,
     Fallback,
@@ -227,16 +228,22 @@ def read_seconds(text: str) -> float | None | str:
 
 def read_branch(text: str) -> Branch | None:
     """A branch from 'skip', 'goto:Lander', 'fallback:recharge+explore'; None
-    when it is none of them (see BRANCH_SYNTAX)."""
+    when it is none of them (see BRANCH_SYNTAX). The model checks the words
+    and the names."""
     word, colon, rest = text.strip().partition(":")
-    if not colon:
-        return cast(Branch, word) if word in ("halt", "skip", "continue") else None
-    names = rest.split("+")
-    if not all(NAME_RE.match(n) for n in names):
+    shape = _SHAPES.get(word) if colon else (lambda _rest: word)
+    try:
+        return _BRANCH.validate_python(shape(rest)) if shape is not None else None
+    except ValidationError:
         return None
-    if word == "fallback":
-        return Fallback(fallback=[FallbackSkill(skill=n) for n in names])
-    return Goto(goto=rest) if word == "goto" and len(names) == 1 else None
+
+
+# what 'goto:X' and 'fallback:A+B' stand for, as the model reads them
+_SHAPES: dict[str, Callable[[str], Any]] = {
+    "goto": lambda rest: {"goto": rest},
+    "fallback": lambda rest: {"fallback": [{"skill": n} for n in rest.split("+")]},
+}
+_BRANCH: TypeAdapter[Branch] = TypeAdapter(Branch)
 
 
 def typed_branch(branch: Branch) -> str:

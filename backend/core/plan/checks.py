@@ -18,7 +18,7 @@ from typing import Literal
 
 from backend.core.library import Library
 from backend.core.model import FINISHED, Mission, SkillInstance, Status, Waiver
-from backend.core.plan.contingency_checks import goto_impassable, timeout_short
+from backend.core.plan.contingency_checks import after_deadlock, goto_impassable, timeout_short
 from backend.core.plan.course import Course, LegCache, Step, walk
 from backend.core.plan.forecast import Forecast
 from backend.core.plan.geometry import Point, area, distance, point_of, self_intersecting
@@ -565,6 +565,12 @@ RULES: tuple[CheckRule, ...] = (
         "warning",
         "a timeout shorter than the skill's forecast duration",
         timeout_short,
+    ),
+    CheckRule(
+        "contingency.after_deadlock",
+        "error",
+        "skills waiting (after) for skills that can only start after them",
+        after_deadlock,
     ),
     CheckRule(
         "contingency.goto_impassable",
