@@ -73,3 +73,11 @@ def test_after_is_set_and_cleared(tutorial):
     assert op.policies.after == "lru2-1"
     assert op_of(["edit", "lru1-1", "--after", "off"], tutorial).policies.after is None
     assert marks(Policies(after="lander-1")) == ["after lander-1"]
+
+
+def test_ctl_after_edits_only_the_after(tutorial):
+    mission, _ = tutorial
+    mission.tasks["lru1"][0].policies = Policies(retries=2)
+    op = op_of(["after", "lru1-1", "lru2-1"], tutorial)
+    assert (op.id, op.policies) == ("lru1-1", Policies(retries=2, after="lru2-1"))
+    assert op_of(["after", "lru1-1", "off"], tutorial).policies.after is None

@@ -127,6 +127,7 @@ import math
 from collections.abc import Callable
 from typing import Any
 
+from backend.cli.ctl.contingency import add_after_args
 from backend.cli.ctl.contingency import add_options as add_contingency_options
 from backend.cli.parser import Parser
 from backend.transport.login import add_login_arguments
@@ -520,6 +521,7 @@ OPERATIONS: dict[str, tuple[str, Arguments]] = {
     "pending": ("commands to robots not settled yet (age, expiry)", _state),
     "cancel": ("withdraw a pending command to a robot", _cancel),
     "barrier": ("make idle skills of different robots start together", _ids),
+    "after": ("start an idle skill only once another robot's skill succeeded", add_after_args),
     "unbarrier": ("remove a barrier", _unbarrier),
     "marker": ("add, move, rename or delete a marker", _marker),
     "load": ("replace the mission with a mission file (validated here first)", _load),

@@ -171,6 +171,15 @@ def _edit(args: argparse.Namespace, known: Known) -> Any:
     )
 
 
+def _after(args: argparse.Namespace, known: Known) -> Any:
+    """ctl after ID SKILL: edit ID's policies.after, the rest kept."""
+    found = known.mission.find(args.id) if known.mission is not None else None
+    base = found[2].policies.model_dump() if found else {}
+    after = None if args.after.strip().lower() in ("off", "none") else args.after.strip()
+    policies = _validated(Policies, "policies", **{**base, "after": after})
+    return _validated(ops.EditSkill, "after", id=args.id, policies=policies)
+
+
 def _expire(args: argparse.Namespace) -> dict[str, Any]:
     """--expire D: seconds (0: never); not given: the server's default."""
     return {} if getattr(args, "expire", None) is None else {"expire_s": args.expire}
@@ -313,6 +322,7 @@ BUILDERS: dict[str | None, Builder] = {
     "retry": _retry,
     "cancel": _cancel,
     "barrier": _barrier,
+    "after": _after,
     "unbarrier": _unbarrier,
     "marker": _marker,
     "load": _load,

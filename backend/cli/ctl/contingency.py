@@ -67,3 +67,9 @@ def given(args: argparse.Namespace) -> dict[str, Any]:
     names = {"skill_timeout": "timeout", "not_after": "not_after"}
     names |= {"on_failure": "on_failure", "on_timeout": "on_timeout", "after": "after"}
     return {field: getattr(args, k) for k, field in names.items() if hasattr(args, k)}
+
+
+def add_after_args(p: argparse.ArgumentParser) -> None:
+    """ctl after ID SKILL: the same as `edit ID --after SKILL` ('off' clears it)."""
+    p.add_argument("id", metavar="ID")
+    p.add_argument("after", metavar="SKILL", help="the other robot's skill ('off': no more)")
