@@ -58,6 +58,15 @@ def rover(h: Harness, name: str, seen: dict[str, str | None]) -> RobotAgent:
     return a
 
 
+async def with_branch(
+    h: Harness, robot: str, skills: list[SkillInstance], branches: Branches
+) -> None:
+    """Queue `skills`, the first with `branches` (drive_to skills), as a sync sends them."""
+    kinds = {"drive_to": {"goal": "pose"}}
+    contingencies = {skills[0].id: branches}
+    await h.server.command(robot, Enqueue(skills=skills, contingencies=contingencies, kinds=kinds))
+
+
 def branch_of(h: Harness, robot: str, sid: str, status: Status) -> Taken | None:
     found = [r for r in h.server.applied.get(robot, []) if r.id == sid and r.status == status]
     return found[-1].branch if found else None
@@ -155,14 +164,7 @@ async def test_fallback_runs_in_place_then_the_queue_goes_on(harness: Harness) -
         run = SkillInstance(
             id="f1-f1", skill="drive_to", label="on failure of f1", params={"goal": {"x": 3}}
         )
-        await h.server.command(
-            lru1,
-            Enqueue(
-                skills=[f1, planned("f2", "ok")],
-                contingencies={"f1": Branches(on_failure=[run])},
-                kinds={"drive_to": {"goal": "pose"}},
-            ),
-        )
+        await with_branch(h, lru1, [f1, planned("f2", "ok")], Branches(on_failure=[run]))
         await h.server.command(lru1, Run())
         await h.until(lambda: h.server.has(lru1, "f2", S.SUCCESS), what="f2 after the fallback")
         assert seen["drive_to"] == "3,0 for on failure of f1"  # typed by its kind: a Pose
@@ -183,14 +185,7 @@ async def test_goto_drives_to_the_marker_then_halts(harness: Harness) -> None:
         await h.start(a)
         g1 = planned("g1", "slow", timeout="2m", on_timeout=Goto(goto="Lander"))
         run = SkillInstance(id="g1-t1", skill="drive_to", params={"goal": {"x": 1, "y": 2}})
-        await h.server.command(
-            lru1,
-            Enqueue(
-                skills=[g1, planned("g2", "ok")],
-                contingencies={"g1": Branches(on_timeout=[run])},
-                kinds={"drive_to": {"goal": "pose"}},
-            ),
-        )
+        await with_branch(h, lru1, [g1, planned("g2", "ok")], Branches(on_timeout=[run]))
         await h.server.command(lru1, Run())
         await h.until(lambda: h.server.has(lru1, "g1", S.FAILURE), what="g1 failure")
         taken = branch_of(h, lru1, "g1", S.FAILURE)
