@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import asyncio
 
-from backend.core.model import Goto, Status
-from backend.core.ops import Control, Sync
+from backend.core.model import FINISHED, Goto, Policies, Status
+from backend.core.ops import AddSkill, Control, Sync
 
 from ..cli.helpers import ok
 from .conftest import Stack, connect, skill
@@ -57,6 +57,39 @@ async def test_an_impassable_drive_goes_to_its_rally_point_on_board(stack: Stack
         line = next(ln for ln in shown.stdout.splitlines() if sid in ln)
         assert "[on failure: goto]" in line and "impassable" in line, line
         assert "✗→goto@POI-A" in line or "X->goto@POI-A" in line, line
+    finally:
+        watch.close()
+        await client.close()
+
+
+async def test_the_lander_shelves_the_wifi_box_before_lru2_deploys_it(stack: Stack) -> None:
+    """The newcomer's mistake (issue 29): run together, LRU2 asked for the box before
+    it was on the shelf. With `after`, LRU2 waits on board for the lander's success."""
+    client, watch = await connect(stack, speed=100, seed=1, extra=["--link-delay", "30s"])
+    endpoint = stack.endpoint
+    try:
+        reply = await client.submit(
+            AddSkill(
+                robot="lru2",
+                skill="deploy_wifi_box",
+                params={"goal": {"x": 20.0, "y": 5.0}},
+                at=0,
+                policies=Policies(after="lander-1"),
+            )
+        )
+        deploy = reply.value["id"]
+        await client.submit(Sync(robot="lru2", through=deploy))
+        await client.submit(Sync(robot="lander"))
+        await client.submit(Control(op="run", robot="lru2"))  # first: it must wait
+        await client.wait_for(lambda m: skill(m, deploy).status == Status.SYNCHWAITING, 30.0)
+        assert "after lander-1 on lander" in skill(client.mission, deploy).status_info
+        await client.submit(Control(op="run", robot="lander"))
+        await client.wait_for(lambda m: skill(m, deploy).status in FINISHED, 90.0)
+        s, shelved = skill(client.mission, deploy), skill(client.mission, "lander-1")
+        assert (shelved.status, s.status) == (Status.SUCCESS, Status.SUCCESS), s.status_info
+        assert s.started_at >= shelved.finished_at
+        shown = await asyncio.to_thread(ok, endpoint, "state", "lru2")
+        assert "after lander-1" in next(ln for ln in shown.stdout.splitlines() if deploy in ln)
     finally:
         watch.close()
         await client.close()
