@@ -187,6 +187,7 @@ class SimFleet:
             link_delay_hint=self.link_delay_hint,
         )
         agent.time_scale = self.speed
+        agent.mission_time = self.now
 
         def pose() -> Pose:
             r = robot

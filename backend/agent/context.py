@@ -42,6 +42,12 @@ class Execution:
     barrier_entities: list[Any] = field(default_factory=list)
     barrier_token: zenoh.LivelinessToken | None = None
     result_info: str = ""  # a handler's Success text, reported with `success`
+    # a timeout (policies.timeout / not_after) cancels the handler calls made so
+    # far: those numbered below `expired_upto` (the contexts count them in `calls`)
+    calls: int = 0
+    expired_upto: int = 0
+    timeout_reason: str = ""  # its task was cancelled for a timeout (not a stop): why
+    deadline: asyncio.TimerHandle | None = None
 
     def __post_init__(self) -> None:
         self.resumed.set()
@@ -68,15 +74,28 @@ class Execution:
 
     def release(self, *, abort: bool) -> None:
         """Withdraw the barrier resources; `abort` also stops the handler."""
+        self.disarm()
         if abort:
             self.aborted = True
             self.resumed.set()  # wake waiters so they see the stop
             self.resumed_t.set()
-            # not the task we run in: a handler calling `await agent.stop()` would
-            # be cancelled inside stop(), before the session is closed
-            task = self.task
-            if task is not None and not task.done() and task is not asyncio.current_task():
-                task.cancel()
+            self.cancel_task()
+        self.release_barrier()
+
+    def cancel_task(self) -> None:
+        # not the task we run in: a handler calling `await agent.stop()` would
+        # be cancelled inside stop(), before the session is closed
+        task = self.task
+        if task is not None and not task.done() and task is not asyncio.current_task():
+            task.cancel()
+
+    def disarm(self) -> None:
+        """No timeout any more (the skill ended, or its branch runs)."""
+        if self.deadline is not None:
+            self.deadline.cancel()
+            self.deadline = None
+
+    def release_barrier(self) -> None:
         for entity in self.barrier_entities:
             try:
                 entity.undeclare()
@@ -124,20 +143,40 @@ class SkillContext:
     """What a handler gets as its first argument."""
 
     def __init__(
-        self, host: SkillRunner, act: Execution, params: dict[str, Any], purpose: str = "skill"
+        self,
+        host: SkillRunner,
+        act: Execution,
+        params: dict[str, Any],
+        purpose: str = "skill",
+        skill: SkillInstance | None = None,
     ):
         self.agent: Any = host.agent  # the RobotAgent
         self._host = host
         self._act = act
-        self.skill: SkillInstance = act.entry.skill
+        self.skill: SkillInstance = skill or act.entry.skill
         self.params: dict[str, Any] = params  # the raw values as sent by the server
         self.attempt: int = act.entry.attempt
-        self.purpose = purpose  # "skill" or "recharge" (a recharge run before this skill)
+        # "skill", "recharge" (run before this skill) or "branch" (a fallback or goto run
+        # in its place: then `skill` is the one run)
+        self.purpose = purpose
+        self._call = act.calls
+        act.calls += 1
 
     # -- state -----------------------------------------------------------
     @property
     def stopped(self) -> bool:
-        return self._act.aborted
+        """Stopped by the operator or out of time: the handler should return."""
+        return self.cancelled_because is not None
+
+    @property
+    def cancelled_because(self) -> str | None:
+        """Why the handler was cancelled: "stop" (stop, reset, the agent
+        stopping), "timeout" (its policies' timeout or not_after), else None."""
+        if self._act.aborted:
+            return "stop"
+        if self._call < self._act.expired_upto:
+            return "timeout"
+        return None
 
     @property
     def paused(self) -> bool:
@@ -152,7 +191,7 @@ class SkillContext:
 
         Raises `SkillStopped` once the skill was stopped (handy for sync loops).
         """
-        if self._act.aborted:
+        if self.stopped:
             raise SkillStopped()
         fraction = min(1.0, max(0.0, float(fraction)))
         info = "" if info is None else str(info)  # it goes into telemetry, which checks its types
@@ -167,7 +206,7 @@ class SkillContext:
     async def checkpoint(self) -> None:
         """Return when not paused; raise `SkillStopped` if stopped."""
         while True:
-            if self._act.aborted:
+            if self.stopped:
                 raise SkillStopped()
             if not self._act.paused:
                 return
@@ -178,7 +217,7 @@ class SkillContext:
         paused, raises `SkillStopped` once stopped."""
         if self._on_loop():
             # never block the event loop: an async handler must await checkpoint()
-            if self._act.aborted:
+            if self.stopped:
                 raise SkillStopped()
             if self._act.paused:
                 self._host.rt.say_once(
@@ -190,10 +229,10 @@ class SkillContext:
                 )
             return
         while True:
-            if self._act.aborted:
+            if self.stopped:
                 raise SkillStopped()
             if self._act.resumed_t.wait(0.1):
-                if self._act.aborted:
+                if self.stopped:
                     raise SkillStopped()
                 return
 

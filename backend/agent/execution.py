@@ -18,13 +18,14 @@ from typing import Any
 
 from backend.agent.barriers import wait_for_partners
 from backend.agent.context import Execution, SkillContext
+from backend.agent.contingency import barrier_wait, guarded, past_deadline, take, wait_after
 from backend.agent.outcomes import Failure, SkillFailed, Success
 from backend.agent.queue import SkillQueue
 from backend.agent.registration import Handler
 from backend.agent.runtime import Runtime, log
 from backend.agent.telemetry import TelemetryFeed
 from backend.core.library import SkillSignature
-from backend.core.model import Status
+from backend.core.model import SkillInstance, Status, Taken
 from backend.core.params import typed_params
 
 
@@ -86,10 +87,19 @@ class Executor:
             self.running = None
         return act
 
-    def _finish(self, act: Execution, status: Status, info: str) -> None:
+    def finish(
+        self,
+        act: Execution,
+        status: Status,
+        info: str,
+        branch: Taken | None = None,
+        go_on: bool = False,
+    ) -> None:
+        """The skill ended; the queue goes on with the next one in run mode
+        (after a failure only when its contingency says so: `go_on`)."""
         act.release(abort=False)
         self.running = None
-        self.queue.finish(status, info)
+        self.queue.finish(status, info, branch, go_on)
         self.kick()
 
     # ------------------------------------------------------------ pause
@@ -125,7 +135,7 @@ class Executor:
         try:
             start_info = await self._before_start(act)
             if start_info is not None:
-                await self._attempts(act, start_info)
+                await guarded(self, act, start_info)
         except asyncio.CancelledError:
             if act.aborted or self.rt.session is None:
                 return  # stopped / agent stopping: whoever cancelled reported it
@@ -133,31 +143,40 @@ class Executor:
         except Exception as exc:  # a bug in the SDK itself: never leave the skill hanging
             log.exception("%s: executing %s failed", self.rt.name, act.entry.id)
             if not act.aborted and self.running is act:
-                self._finish(act, Status.FAILURE, f"agent error: {type(exc).__name__}: {exc}")
+                self.finish(act, Status.FAILURE, f"agent error: {type(exc).__name__}: {exc}")
 
     async def _before_start(self, act: Execution) -> str | None:
         """Recharge and barrier; the first running report's text, or None when
         the skill ended meanwhile."""
         entry = act.entry
+        late = past_deadline(self, act)
+        if late is not None and entry.skill.policies.on_timeout != "continue":
+            await take(self, act, "timeout", late)
+            return None
+        failed = await wait_after(self, act)
+        if failed is not None:
+            await take(self, act, "failure", failed)
+            return None
         recharge = await self._maybe_recharge(act)
         if act.aborted:
             return None
         if recharge is not None:  # the recharge failed: the skill fails
-            self._finish(act, Status.FAILURE, recharge)
+            self.finish(act, Status.FAILURE, recharge)
             return None
         if entry.barrier is None:
             return ""
-        await wait_for_partners(
+        waiting = wait_for_partners(
             self.rt,
             act,
             lambda text: self.queue.report(entry, Status.SYNCHWAITING, text),
             self.telemetry.show,
         )
-        if act.aborted:
-            return None
-        return f"barrier {entry.barrier.barrier}: all partners ready"
+        late = await barrier_wait(self, act, waiting)
+        if act.aborted or late is None:
+            return late
+        return late or f"barrier {entry.barrier.barrier}: all partners ready"
 
-    async def _attempts(self, act: Execution, start_info: str) -> None:
+    async def attempts(self, act: Execution, start_info: str) -> None:
         """The handler, again after each failure while retries are left."""
         entry = act.entry
         retries = entry.skill.policies.retries
@@ -173,10 +192,10 @@ class Executor:
             if act.aborted:
                 return
             if reason is None:
-                self._finish(act, Status.SUCCESS, act.result_info)
+                self.finish(act, Status.SUCCESS, act.result_info)
                 return
             if not self.queue.next_attempt():
-                self._finish(act, Status.FAILURE, reason)
+                await take(self, act, "failure", reason)
                 return
             self.telemetry.progress = None
             start_info = f"retry {entry.retries_used}/{retries} after: {reason}"
@@ -211,10 +230,12 @@ class Executor:
 
     # ------------------------------------------------------------ one handler call
 
-    async def call_handler(self, act: Execution, purpose: str = "skill") -> str | None:
-        """Run the handler once. None = success, else the failure reason.
-        Cancellation (stop) propagates."""
-        call = self._prepare(act, purpose)
+    async def call_handler(
+        self, act: Execution, purpose: str = "skill", skill: SkillInstance | None = None
+    ) -> str | None:
+        """Run the handler once (of `skill` for a contingency's branch). None =
+        success, else the failure reason. Cancellation (stop, timeout) propagates."""
+        call = self._prepare(act, purpose, skill)
         if isinstance(call, str):
             return call
         await self._after_straggler(act)
@@ -223,7 +244,7 @@ class Executor:
         except SkillFailed as exc:
             return str(exc.reason) or "skill failed"
         except asyncio.CancelledError:
-            if act.aborted or self.rt.session is None:
+            if act.aborted or act.timeout_reason or self.rt.session is None:
                 raise
             # The handler cancelled itself (e.g. a SkillStopped it raised
             # without a stop): a failure, not a stop.
@@ -240,18 +261,21 @@ class Executor:
             return f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
         return _judge(act, result, purpose)
 
-    def _prepare(self, act: Execution, purpose: str) -> _Call | str:
+    def _prepare(self, act: Execution, purpose: str, skill: SkillInstance | None) -> _Call | str:
         """The call, or why the handler cannot take the parameters sent."""
-        name = "recharge" if purpose == "recharge" else act.entry.skill.skill
+        run = skill or act.entry.skill
+        name = "recharge" if purpose == "recharge" else run.skill
         handler = self.handlers[name]
         if purpose == "skill":
             raw_params, kinds = dict(act.entry.skill.params), act.entry.kinds
+        elif purpose == "branch":  # a fallback or a goto: sent with the skill
+            raw_params, kinds = dict(run.params), act.entry.branch_kinds.get(name, {})
         else:  # run by the robot itself: with the defaults the server filled in
             sig = self.signatures.get(name)
             raw_params = dict(sig.defaults) if sig is not None else {}
             kinds = sig.params if sig is not None else {}
         params = raw_params if handler.raw else typed_params(raw_params, kinds)
-        ctx = SkillContext(self, act, raw_params, purpose)
+        ctx = SkillContext(self, act, raw_params, purpose, skill)
         mismatch = signature_problem(handler.fn, params)
         if mismatch is not None:  # else a bare TypeError from inside the call
             log.error("%s: skill %s (%s): %s", self.rt.name, act.entry.id, name, mismatch)

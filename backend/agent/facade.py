@@ -83,6 +83,7 @@ they may call `ctx.progress()` and `ctx.check()` (blocks while paused, raises
 from __future__ import annotations
 
 import asyncio
+import time
 from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
@@ -90,6 +91,7 @@ from typing import Any
 import zenoh
 
 from backend import transport
+from backend.agent.contingency import OUTCOME_TOPIC
 from backend.agent.execution import Executor
 from backend.agent.link import Link
 from backend.agent.outbox import Outbox
@@ -173,6 +175,9 @@ class RobotAgent:
         self.battery: Callable[[], float] = lambda: 1.0
         self.link = Link()
         self.time_scale = 1.0
+        # the mission clock, in seconds (policies.not_after): the simulator's when one
+        # runs (it sets this), else POSIX time
+        self.mission_time: Callable[[], float] = time.time
         # called with every Report as it is made (simulator, logs, tests)
         self.report_listeners: list[Callable[[Report], object]] = []
 
@@ -206,6 +211,8 @@ class RobotAgent:
             self, self._rt, self._queue, self._telemetry, self._handlers, self._signatures
         )
         self.world_stats = self._peers.stats
+        # other robots ask how a skill ended before starting one after it (policies.after)
+        self._peers.add_handler("ask", OUTCOME_TOPIC, self._outcome)
         self._commands: dict[type, Callable[[Any], Effect]] = {
             Enqueue: self._enqueue,
             Dequeue: self._dequeue,
@@ -525,9 +532,18 @@ class RobotAgent:
         self._uplink.forget()
         self._telemetry.update_mode()
 
+    def _outcome(self, data: dict[str, Any], sender: str) -> dict[str, Any]:
+        return {"status": self._queue.outcome(str(data.get("skill", "")))}  # always a dict
+
     def _enqueue(self, cmd: Enqueue) -> Effect:
         change = self._queue.enqueue(
-            cmd.skills, cmd.barriers, front=cmd.front, offered=self._handlers, kinds=cmd.kinds
+            cmd.skills,
+            cmd.barriers,
+            front=cmd.front,
+            offered=self._handlers,
+            kinds=cmd.kinds,
+            contingencies=cmd.contingencies,
+            after=cmd.after,
         )
         if change.ok:
             self._executor.kick()

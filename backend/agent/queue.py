@@ -21,8 +21,9 @@ from __future__ import annotations
 from collections.abc import Callable, Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
+from types import MappingProxyType
 
-from backend.core.model import BarrierInfo, SkillInstance, Status
+from backend.core.model import BarrierInfo, Branches, SkillInstance, Status, Taken
 from backend.core.ops import Answer, Report
 
 Msg = Report | Answer  # a downlink message
@@ -41,6 +42,10 @@ class HeldSkill:
     # parameter -> its kind, as sent with the skill (Enqueue.kinds): how its handler gets it
     kinds: Mapping[str, str] = field(default_factory=dict)
     status: Status = Status.IDLE_SYNCHRONIZED
+    # the skills its fallback / goto branches run (Enqueue.contingencies), their kinds
+    branches: Branches | None = None
+    branch_kinds: Mapping[str, Mapping[str, str]] = field(default_factory=dict)
+    after_robot: str | None = None  # the robot running policies.after (Enqueue.after)
     attempt: int = 1
     retries_used: int = 0
     reported_attempt: int = 0  # the attempt of its last report
@@ -89,7 +94,9 @@ class SkillQueue:
         self._waiting: list[HeldSkill] = []
         self.active: Active | None = None
         self.run_enabled = False  # halted until `run`
-        self._done: set[str] = set()  # finished ids (a re-sent enqueue never re-runs them)
+        # finished ids and how they ended (a re-sent enqueue never re-runs them; other
+        # robots ask for the outcome of a skill they start after: policies.after)
+        self.outcomes: dict[str, Status] = {}
         self.seq = 0  # number of the last report made
 
     # ------------------------------------------------------------ views
@@ -103,6 +110,14 @@ class SkillQueue:
         """The active entry, then the queued ones: what the robot holds."""
         head = [self.active.entry] if self.active is not None else []
         return head + self._waiting
+
+    def outcome(self, skill_id: str) -> str:
+        """How a skill stands here: 'success' / 'failure' when it ended, its
+        status while held, else 'unknown' (not synchronized to this robot)."""
+        ended = self.outcomes.get(skill_id)
+        held = self.holds(skill_id)
+        status = ended or (held.status if held is not None else None)
+        return status.value if status is not None else "unknown"
 
     def holds(self, skill_id: str) -> HeldSkill | None:
         return next((e for e in self.entries() if e.id == skill_id), None)
@@ -128,13 +143,16 @@ class SkillQueue:
         front: bool = False,
         offered: Collection[str],
         kinds: Mapping[str, Mapping[str, str]] | None = None,
+        contingencies: Mapping[str, Branches] | None = None,
+        after: Mapping[str, str] = MappingProxyType({}),
     ) -> Effect:
         """Queue `skills` (at the head when `front`: a retry the operator asked
         for), each with its parameters' kinds (`kinds`: skill name -> parameter
         -> kind). Refused when one has no handler among `offered`. Sent again,
         it changes nothing: ids queued already or finished are skipped."""
         skills = list(skills)
-        unknown = sorted({s.skill for s in skills if s.skill not in offered})
+        contingencies = contingencies or {}
+        unknown = sorted({s.skill for s in _with_branches(skills, contingencies)} - set(offered))
         if unknown:
             return Effect(
                 ok=False,
@@ -146,7 +164,7 @@ class SkillQueue:
         new: list[HeldSkill] = []
         ids: list[str] = []
         for s in skills:
-            if s.id in self._done:
+            if s.id in self.outcomes:
                 continue  # a re-sent enqueue: it ran already
             ids.append(s.id)
             if self.holds(s.id) is not None or any(e.id == s.id for e in new):
@@ -157,6 +175,9 @@ class SkillQueue:
                     skill=skill,
                     barrier=barriers.get(s.id),
                     kinds=kinds.get(s.skill, {}),
+                    branches=contingencies.get(s.id),
+                    branch_kinds=kinds,
+                    after_robot=after.get(s.id),
                     attempt=s.attempt,
                 )
             )
@@ -170,7 +191,7 @@ class SkillQueue:
         removed = [e.id for e in self._waiting if e.id in wanted]
         self._waiting = [e for e in self._waiting if e.id not in wanted]
         active = self.active.entry.id if self.active is not None else None
-        started = [i for i in ids if i in self._done or i == active]
+        started = [i for i in ids if i in self.outcomes or i == active]
         # Ids we never had cannot run either: they count as removed.
         removed += [i for i in ids if i not in removed and i not in started]
         return Effect(removed=removed, started=started)
@@ -248,15 +269,19 @@ class SkillQueue:
         self.active = Active(self._waiting.pop(0))
         return self.active
 
-    def finish(self, status: Status, info: str = "") -> Report:
-        """The active skill ended (success or failure: final)."""
+    def finish(
+        self, status: Status, info: str = "", branch: Taken | None = None, go_on: bool = False
+    ) -> Report:
+        """The active skill ended (success or failure: final). A failure halts
+        the queue unless its contingency goes on (`go_on`: skip, continue, a
+        fallback that succeeded)."""
         assert self.active is not None
         entry = self.active.entry
         self.active = None
-        self._done.add(entry.id)
-        if status == Status.FAILURE:
+        self.outcomes[entry.id] = status
+        if status == Status.FAILURE and not go_on:
             self.run_enabled = False  # the operator decides: retry, run (continue) or unsync
-        report = self.report(entry, status, info)
+        report = self.report(entry, status, info, branch)
         assert report is not None  # a final status is always reported
         return report
 
@@ -317,12 +342,16 @@ class SkillQueue:
         self.seq += 1
         return self.seq
 
-    def report(self, entry: HeldSkill, status: Status, info: str = "") -> Report | None:
+    def report(
+        self, entry: HeldSkill, status: Status, info: str = "", branch: Taken | None = None
+    ) -> Report | None:
         """Record a status change of `entry` as the next numbered report.
         None when it is no change: `running` again at the same attempt (the
         ground refuses it: running -> running only with a higher attempt),
-        e.g. the skill starting after recharging first, or a retry resumed."""
-        if status == entry.status == Status.RUNNING and entry.attempt == entry.reported_attempt:
+        e.g. the skill starting after recharging first, or a retry resumed; but
+        running again with the contingency branch it takes is news."""
+        again = status == entry.status == Status.RUNNING and entry.attempt == entry.reported_attempt
+        if again and branch is None:
             return None
         self.seq += 1
         entry.status = status
@@ -335,6 +364,7 @@ class SkillQueue:
             info=info,
             attempt=entry.attempt,
             at=self._clock(),
+            branch=branch,
         )
         self.on_report(report)
         return report
@@ -350,3 +380,10 @@ class SkillQueue:
             return None
         self.seq = last_seq + len(pending)
         return [r.model_copy(update={"seq": last_seq + 1 + i}) for i, r in enumerate(pending)]
+
+
+def _with_branches(
+    skills: list[SkillInstance], contingencies: Mapping[str, Branches]
+) -> list[SkillInstance]:
+    """The skills and those their fallback / goto branches run: all need a handler."""
+    return skills + [x for b in contingencies.values() for x in (*b.on_failure, *b.on_timeout)]

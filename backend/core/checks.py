@@ -7,6 +7,7 @@ same things with the same sentences. Each problem is a (field path, message).
 
 from __future__ import annotations
 
+from backend.core.contingency import after_problems, contingency_problems
 from backend.core.library import Library, RobotType, SkillSpec, check_params
 from backend.core.model import Mission, SkillInstance, Status, format_path, section_problems
 
@@ -232,6 +233,12 @@ def _skill_problems(
         out.append(((*here, "bindings" if bound else "params", *p.path), p.message))
     if not problems and fill:
         s.params = params
+    if idle:  # a skill sent already keeps the contingencies it was sent with
+        out += [
+            ((*here, *path), why)
+            for path, why in contingency_problems(s.policies, lib, rtype, m.markers, robots)
+            + after_problems(m, robot, s.policies)
+        ]
     return out
 
 

@@ -29,6 +29,7 @@ from backend.core.model import (
     SkillInstance,
     Status,
     Strict,
+    Taken,
     UplinkCommand,
     Waiver,
     json_copy,
@@ -70,6 +71,8 @@ class SkillStatusChanged(Strict):
     info: str | None = None
     attempt: int | None = Field(None, ge=1)
     at: datetime | None = None
+    # the contingency the robot took (kept until idle again); left out while unset
+    branch: Taken | None = Field(None, exclude_if=lambda v: v is None)
 
 
 class SkillEdited(Strict):
@@ -331,6 +334,9 @@ def _changed_skill(
         update["finished_at"] = e.at
     if status in (Status.IDLE, Status.IDLE_SYNCHRONIZED) and e.status is not None:
         update["started_at"] = None
+        update["branch"] = None
+    if e.branch is not None:
+        update["branch"] = e.branch
     return s.model_copy(update=update)
 
 

@@ -13,9 +13,10 @@ from datetime import datetime
 from enum import StrEnum
 from typing import Annotated, Any, Final, Literal, TypeVar
 
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PrivateAttr
 
 from backend.core.bulk import gc_paused
+from backend.core.durations import duration_s
 
 MISSION_FORMAT: Final = "missionctl/mission@1"
 
@@ -157,6 +158,59 @@ class AreaMarker(Strict):
 Marker = Annotated[PoseMarker | PositionMarker | AreaMarker, Field(discriminator="kind")]
 
 
+def _mission_seconds(value: Any) -> Any:
+    """'10m', '1.5h', 90 -> seconds (backend.core.durations); other values as given."""
+    if isinstance(value, str):
+        seconds = duration_s(value)
+        return value if seconds is None else seconds
+    return value
+
+
+# a span or an instant of mission time, in seconds; typed like any duration ("10m")
+MissionSeconds = Annotated[
+    float,
+    Field(ge=0, le=1e10),
+    BeforeValidator(_mission_seconds, json_schema_input_type=float | str),
+]
+
+
+def _unset(value: object) -> bool:
+    return value is None
+
+
+def _halt(value: object) -> bool:
+    return value == "halt"
+
+
+def _empty(value: object) -> bool:
+    return not value
+
+
+class FallbackSkill(Strict):
+    """A skill the robot runs in place of a failed one (sent with the sync)."""
+
+    skill: Name
+    params: dict[str, Any] = Field(default_factory=dict)
+    bindings: dict[str, Name] = Field(default_factory=dict)
+
+
+class Fallback(Strict):
+    """Run these skills in place of the failed one, then go on with the queue."""
+
+    fallback: list[FallbackSkill] = Field(min_length=1, max_length=10)
+
+
+class Goto(Strict):
+    """Drive to this marker (a rally point) with the robot's own drive skill, then halt."""
+
+    goto: Name
+
+
+# what the robot does, on board, when a skill fails or runs out of time
+# (backend.agent.contingency; docs/robots.md "Contingencies")
+Branch = Literal["halt", "skip", "continue"] | Fallback | Goto
+
+
 class Policies(Strict):
     """Optional per-skill policies the robot applies without a round trip."""
 
@@ -168,8 +222,49 @@ class Policies(Strict):
         None, ge=0.0, le=1.0, description="return to recharge below this battery level (0..1)"
     )
 
+    # the contingencies are left out of dumps while unset: a mission without
+    # them is as large as before (journal snapshots, the wire)
+    timeout: MissionSeconds | None = Field(
+        None,
+        exclude_if=_unset,
+        description="mission seconds the skill may run (retries included); then on_timeout",
+    )
+    not_after: MissionSeconds | None = Field(
+        None,
+        exclude_if=_unset,
+        description="mission-time deadline (the mission clock: sim seconds with a simulator, "
+        "POSIX seconds otherwise): not started after it, stopped at it; then on_timeout",
+    )
+    on_failure: Branch = Field(
+        "halt",
+        exclude_if=_halt,
+        description="after a failure (its retries used up): halt, skip (go on with the "
+        "next skill), continue (the same), fallback skills run in its place, or goto a marker",
+    )
+    on_timeout: Branch = Field(
+        "halt",
+        exclude_if=_halt,
+        description="at the timeout or deadline: halt, skip (stop it, go on), continue (let "
+        "it run on), fallback skills run in its place, or goto a marker",
+    )
+
+    after: SkillId | None = Field(
+        None,
+        exclude_if=_unset,
+        description="start only once this skill of another robot succeeded (asked robot to "
+        "robot); if it failed, on_failure applies",
+    )
+
     def is_default(self) -> bool:
         return self == Policies()
+
+
+class Taken(Strict):
+    """The contingency branch a robot took for a skill, and why."""
+
+    trigger: Literal["failure", "timeout"]
+    branch: Literal["halt", "skip", "continue", "fallback", "goto"]
+    reason: str = Field("", max_length=2000)
 
 
 class SkillInstance(Strict):
@@ -186,6 +281,9 @@ class SkillInstance(Strict):
     started_at: datetime | None = None
     finished_at: datetime | None = None
     policies: Policies = Field(default_factory=Policies)
+    branch: Taken | None = Field(
+        None, exclude_if=_unset, description="the contingency its robot took, if any"
+    )
     # revision of the last change to this skill (optimistic concurrency)
     rev: int = Field(0, ge=0)
 
@@ -213,6 +311,14 @@ class SkillInstance(Strict):
         )
 
 
+class Branches(Strict):
+    """A skill's fallback or goto branches, made concrete at sync: the skills
+    (parameters checked, markers resolved) the robot runs for each trigger."""
+
+    on_failure: list[SkillInstance] = Field(default_factory=list, max_length=10)
+    on_timeout: list[SkillInstance] = Field(default_factory=list, max_length=10)
+
+
 class RobotSpec(Strict):
     type: Name
     description: str = ""
@@ -224,7 +330,15 @@ class RobotSpec(Strict):
     )
 
 
-class Barrier(Strict):
+class BarrierTimeout(Strict):
+    """How long a robot waits at a barrier for its partners (mission time),
+    and then: start alone (`continue`) or fail its skill (`halt`), on board."""
+
+    timeout: MissionSeconds | None = Field(None, exclude_if=_unset)
+    on_timeout: Literal["continue", "halt"] = Field("halt", exclude_if=_halt)
+
+
+class Barrier(BarrierTimeout):
     # distinct skills of distinct robots; checked by core.checks.check_mission (files and rules)
     skills: list[SkillId] = Field(min_length=2)
 
@@ -249,8 +363,9 @@ class CommandState(StrEnum):
 PENDING = frozenset({CommandState.QUEUED, CommandState.SENT})
 
 
-class BarrierInfo(Strict):
-    """A synchronized skill's barrier: the partners' robot -> skill id."""
+class BarrierInfo(BarrierTimeout):
+    """A synchronized skill's barrier: the partners' robot -> skill id, and
+    how long to wait for them."""
 
     barrier: Name
     partners: dict[Name, SkillId]
@@ -265,6 +380,16 @@ class Enqueue(Strict):
         default_factory=dict, description="skill id -> its barrier and the partners to wait for"
     )
     front: bool = Field(False, description="put before the rest of the queue (retries)")
+    after: dict[SkillId, Name] = Field(
+        default_factory=dict,
+        exclude_if=_empty,
+        description="skill id -> the robot running the skill it waits for (policies.after)",
+    )
+    contingencies: dict[SkillId, Branches] = Field(
+        default_factory=dict,
+        exclude_if=_empty,
+        description="skill id -> the skills its fallback / goto branches run (policies)",
+    )
     kinds: dict[Name, dict[Name, ParamType]] = Field(
         default_factory=dict,
         description="skill name -> the kind of each of its parameters (the library's), for "

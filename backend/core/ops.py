@@ -15,6 +15,7 @@ from pydantic import AwareDatetime, Field
 from backend.core.model import (
     AreaMarker,
     Barrier,
+    BarrierTimeout,
     CheckId,
     CommandState,
     Marker,
@@ -29,6 +30,7 @@ from backend.core.model import (
     SkillInstance,
     Status,
     Strict,
+    Taken,
 )
 
 # -- operator operations -------------------------------------------------------
@@ -144,7 +146,7 @@ class RetryEdit(Strict):
     id: SkillId
 
 
-class AddBarrier(Strict):
+class AddBarrier(BarrierTimeout):
     op: Literal["barrier"] = "barrier"
     ids: list[SkillId] = Field(min_length=2)
 
@@ -294,7 +296,7 @@ class RestoreMarker(Strict):
     )
 
 
-class RestoreBarrier(Strict):
+class RestoreBarrier(BarrierTimeout):
     op: Literal["restore_barrier"] = "restore_barrier"
     barrier: Name
     skills: list[SkillId]
@@ -406,6 +408,11 @@ class Report(Strict):
     info: str = ""
     attempt: int | None = Field(None, ge=1)
     at: AwareDatetime | None = Field(None, description="when it changed (robot's clock)")
+    branch: Taken | None = Field(
+        None,
+        exclude_if=lambda v: v is None,
+        description="the contingency it took (policies on_failure / on_timeout), and why",
+    )
 
 
 # what clients may send; what robots' answers become; everything the engine applies

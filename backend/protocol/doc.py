@@ -191,6 +191,12 @@ ERROR_CODES: list[tuple[str, str, str]] = [
     ("unknown_skill", "server", "no skill with that id"),
     ("unknown_skill_type", "server", "the robot's type offers no such skill"),
     ("bad_param", "server", "a parameter does not fit the library (named in `param`)"),
+    (
+        "bad_contingency",
+        "server",
+        "a fallback skill the robot does not have or whose parameters do not fit, a goto to no "
+        "marker or for a robot without a drive skill (policies on_failure / on_timeout)",
+    ),
     ("bad_index", "server", "a position outside the unsynchronized section"),
     ("exists", "server", "an id or name in use already"),
     ("not_idle", "server", "only idle (unsynchronized) skills can change"),

@@ -7,6 +7,7 @@ import re
 from datetime import datetime
 from typing import Any
 
+from backend.core.contingency import marks as contingency_marks
 from backend.core.library import Library
 from backend.core.model import SkillInstance, Status
 from backend.core.params import POSE_FIELDS, ParamSpec, pose_text, value_text
@@ -115,14 +116,15 @@ def param_summary(skill: SkillInstance, library: Library | None) -> str:
 
 
 def policy_marks(skill: SkillInstance) -> list[str]:
-    """Short marks for the policies that are set: 'retry×2 pause-out-of-comms recharge<20%'."""
+    """Short marks for the policies that are set: 'retry×2 pause-out-of-comms recharge<20%
+    ⏱10m→skip'."""
     p = skill.policies
     marks = [f"retry×{p.retries}"] if p.retries else []
     if p.pause_out_of_comms:
         marks.append("pause-out-of-comms")
     if p.recharge_below is not None:
         marks.append(f"recharge<{round(p.recharge_below * 100)}%")
-    return marks
+    return marks + contingency_marks(p)  # ⏱10m→skip ✗→recharge@Lander
 
 
 def skill_title(skill: SkillInstance) -> str:

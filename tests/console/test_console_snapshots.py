@@ -162,7 +162,8 @@ def test_editor_policies_with_errors_and_a_draft_on_another_skill(snap_compare):
         editor.query_one("#pf-pause_out_of_comms").value = True
         editor.query_one("#pf-recharge_below").value = "0.25"
         await pilot.pause()
-        editor.scroll_end(animate=False, immediate=True)
+        # the policies at the top (the Contingency group follows them)
+        editor.scroll_to_widget(editor.query_one("#policy-retries"), animate=False, top=True)
         await pilot.pause()
 
     assert snap_compare(

@@ -84,7 +84,9 @@ Parameter values (--param NAME=VALUE)
   names the marker. An empty VALUE (`speed=`) means the library default.
   `--unbind NAME` (edit) keeps the current value but drops the binding.
   POLICY: --retries N, --pause-out-of-comms / --no-pause-out-of-comms,
-  --recharge-below F (0..1, or `off`); on edit, unnamed policies are kept.
+  --recharge-below F (0..1, or `off`); contingencies: --skill-timeout 10m,
+  --not-after 2h, --on-failure / --on-timeout halt|skip|continue|goto:MARKER|
+  fallback:SKILL[+SKILL]; on edit, unnamed policies are kept.
 
 Geometry
   --pose x,y[,z[,roll,pitch,yaw]] or a flow mapping '{x: 1, y: 2, yaw: 90}'
@@ -146,6 +148,8 @@ import math
 from collections.abc import Callable
 from typing import Any
 
+from backend.cli.ctl.contingency import add_after_args
+from backend.cli.ctl.contingency import add_options as add_contingency_options
 from backend.cli.ctl.team import reassign_arguments, robots_arguments, suggest_arguments
 from backend.cli.parser import Parser
 from backend.transport.login import add_login_arguments
@@ -295,6 +299,7 @@ def _policies(p: argparse.ArgumentParser) -> None:
         default=argparse.SUPPRESS,
         help="return to recharge below this battery fraction (0..1, or 'off')",
     )
+    add_contingency_options(p.add_argument_group("contingency (applied on board)"))
 
 
 def _geometry(p: argparse.ArgumentParser) -> None:
@@ -579,6 +584,7 @@ OPERATIONS: dict[str, tuple[str, Arguments]] = {
     "cancel": ("withdraw a pending command to a robot", _cancel),
     "wait": ("wait for a command's stage: received, started or completed", _wait_stage),
     "barrier": ("make idle skills of different robots start together", _ids),
+    "after": ("start an idle skill only once another robot's skill succeeded", add_after_args),
     "unbarrier": ("remove a barrier", _unbarrier),
     "reassign": ("give idle skills, or a robot's plan, to another robot", reassign_arguments),
     "suggest": ("rank the robots that can take skills: forecast end, battery", suggest_arguments),

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from backend.cli.ctl.args import CONTROL_OPS
+from backend.cli.ctl.contingency import given as given_contingency
 from backend.cli.ctl.errors import FileInvalid, UsageError
 from backend.cli.ctl.team import build_reassign, build_robots
 from backend.cli.ctl.values import (
@@ -79,7 +80,7 @@ def _given_policies(args: argparse.Namespace) -> dict[str, Any]:
         out["pause_out_of_comms"] = args.pause_out_of_comms
     if hasattr(args, "recharge_below"):
         out["recharge_below"] = args.recharge_below
-    return out
+    return out | given_contingency(args)
 
 
 def _validated(model: type, what: str, **fields: Any) -> Any:
@@ -169,6 +170,15 @@ def _edit(args: argparse.Namespace, known: Known) -> Any:
         bindings=all_bindings,
         policies=policies,
     )
+
+
+def _after(args: argparse.Namespace, known: Known) -> Any:
+    """ctl after ID SKILL: edit ID's policies.after, the rest kept."""
+    found = known.mission.find(args.id) if known.mission is not None else None
+    base = found[2].policies.model_dump() if found else {}
+    after = None if args.after.strip().lower() in ("off", "none") else args.after.strip()
+    policies = _validated(Policies, "policies", **{**base, "after": after})
+    return _validated(ops.EditSkill, "after", id=args.id, policies=policies)
 
 
 def _expire(args: argparse.Namespace) -> dict[str, Any]:
@@ -315,6 +325,7 @@ BUILDERS: dict[str | None, Builder] = {
     "retry": _retry,
     "cancel": _cancel,
     "barrier": _barrier,
+    "after": _after,
     "unbarrier": _unbarrier,
     "marker": _marker,
     "load": _load,

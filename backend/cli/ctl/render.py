@@ -17,6 +17,7 @@ from typing import Any
 from backend.cli.ctl.args import CONTROL_OPS
 from backend.cli.ctl.team import DESCRIBE as TEAM_DESCRIBE
 from backend.core.contact import sim_time_text
+from backend.core.contingency import marks, taken_text
 from backend.core.params import POSE_FIELDS, POSITION_FIELDS, is_angle, pose_text, value_text
 
 _GLYPHS = {
@@ -347,7 +348,7 @@ def state_json(client: Any, only: list[str] | None = None) -> dict[str, Any]:
 # ---------------------------------------------------------------- state (text)
 
 
-def _policy_words(p: Any) -> list[str]:
+def _policy_words(p: Any, unicode: bool = True) -> list[str]:
     words = []
     if p.retries:
         words.append(f"retries={p.retries}")
@@ -355,7 +356,7 @@ def _policy_words(p: Any) -> list[str]:
         words.append("pause-out-of-comms")
     if p.recharge_below is not None:
         words.append(f"recharge<{p.recharge_below:g}")
-    return words
+    return words + marks(p, unicode)
 
 
 def _skill_line(s: Any, columns: str, lib: Any, dash: str, pending: Any = None) -> str:
@@ -374,7 +375,9 @@ def _skill_line(s: Any, columns: str, lib: Any, dash: str, pending: Any = None) 
     if s.attempt > 1:
         parts.append(f"(attempt {s.attempt})")
     if not s.policies.is_default():
-        parts.append("{" + " ".join(_policy_words(s.policies)) + "}")
+        parts.append("{" + " ".join(_policy_words(s.policies, dash != "-")) + "}")
+    if s.branch is not None:
+        parts.append(f"[{taken_text(s.branch)}]")
     if s.status_info:
         parts.append(f"{dash} {s.status_info}")
     return "  ".join(parts).rstrip()

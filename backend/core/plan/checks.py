@@ -14,25 +14,20 @@ from __future__ import annotations
 
 from collections.abc import Callable, Collection, Iterator, Mapping
 from dataclasses import dataclass
-from typing import Literal, NamedTuple
+from typing import Literal
 
 from backend.core.library import Library
 from backend.core.model import FINISHED, Mission, SkillInstance, Status, Waiver
+from backend.core.plan.contingency_checks import after_deadlock, goto_impassable, timeout_short
 from backend.core.plan.course import Course, LegCache, Step, walk
 from backend.core.plan.forecast import Forecast
 from backend.core.plan.geometry import Point, area, distance, point_of, self_intersecting
+from backend.core.plan.hit import Hit
 from backend.core.plan.inputs import PlanInputs, SiteMap
 from backend.core.plan.order import BarrierAnalysis, analyse
 
 Severity = Literal["warning", "error"]
 MIN_AREA_M2 = 1.0  # an area smaller than this is a line or a point
-
-
-class Hit(NamedTuple):
-    subject: str  # what the finding is about, in its id
-    message: str
-    robot: str | None = None
-    skills: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -564,6 +559,25 @@ RULES: tuple[CheckRule, ...] = (
     CheckRule("params.crossed_area", "warning", "an area whose edges cross", _crossed_area),
     CheckRule(
         "params.useless_charge", "warning", "a recharge that will not charge", _useless_charge
+    ),
+    CheckRule(
+        "contingency.timeout_short",
+        "warning",
+        "a timeout shorter than the skill's forecast duration",
+        timeout_short,
+    ),
+    CheckRule(
+        "contingency.after_deadlock",
+        "error",
+        "skills waiting (after) for skills that can only start after them",
+        after_deadlock,
+    ),
+    CheckRule(
+        "contingency.goto_impassable",
+        "error",
+        "a goto (rally point) on impassable ground",
+        goto_impassable,
+        needs_site=True,
     ),
 )
 RULE_NAMES = frozenset(r.rule for r in RULES)

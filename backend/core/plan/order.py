@@ -85,11 +85,12 @@ def _walk(out: BarrierAnalysis) -> None:
             for bid in seq[at[robot] + 1 :]:
                 graph.setdefault(bid, set()).add(holding)
                 out.held_by.setdefault((bid, holding), robot)
-    out.cycles = [sorted(c) for c in _cycles(graph) if not any(b in out.orphaned for b in c)]
+    found = strong_components(graph)
+    out.cycles = [sorted(c) for c in found if not any(b in out.orphaned for b in c)]
     out.cycles.sort()
 
 
-def _cycles(graph: dict[str, set[str]]) -> Iterable[list[str]]:
+def strong_components(graph: dict[str, set[str]]) -> Iterable[list[str]]:
     """Strongly connected components with more than one node (Tarjan, iterative)."""
     index: dict[str, int] = {}
     low: dict[str, int] = {}

@@ -6,7 +6,7 @@ from __future__ import annotations
 from typing import Any
 
 from backend.core import events as ev
-from backend.core.model import FINISHED, Barrier, Status, how_to_change
+from backend.core.model import FINISHED, Barrier, BarrierTimeout, Status, how_to_change
 from backend.core.ops import AddBarrier, RemoveBarrier, RestoreBarrier
 from backend.core.rules.base import Change, Refusal, Rule, Rules
 
@@ -23,7 +23,7 @@ def add_barrier(rules: Rules, op: AddBarrier) -> Change:
         n += 1
     bid = f"b{n}"
     return Change(
-        [ev.BarrierSet(id=bid, barrier=Barrier(skills=list(op.ids)))],
+        [ev.BarrierSet(id=bid, barrier=Barrier(skills=list(op.ids), **_waiting(op)))],
         [],
         {"barrier": bid},
         RemoveBarrier(barrier=bid),
@@ -73,7 +73,8 @@ def restore_barrier(rules: Rules, op: RestoreBarrier) -> Change:
         raise Refusal("exists", f"barrier {op.barrier} exists already")
     # the same checks as a new barrier, under its old name
     notes = add_barrier(rules, AddBarrier(ids=op.skills)).notes
-    events: list[ev.Event] = [ev.BarrierSet(id=op.barrier, barrier=Barrier(skills=list(op.skills)))]
+    barrier = Barrier(skills=list(op.skills), **_waiting(op))
+    events: list[ev.Event] = [ev.BarrierSet(id=op.barrier, barrier=barrier)]
     return Change(events, notes, {"barrier": op.barrier}, RemoveBarrier(barrier=op.barrier))
 
 
@@ -103,8 +104,13 @@ def remove_barrier(rules: Rules, op: RemoveBarrier) -> Change:
         [ev.BarrierRemoved(id=op.barrier)],
         [],
         {},
-        RestoreBarrier(barrier=op.barrier, skills=list(b.skills)),
+        RestoreBarrier(barrier=op.barrier, skills=list(b.skills), **_waiting(b)),
     )
+
+
+def _waiting(b: BarrierTimeout) -> dict[str, Any]:
+    """A barrier's timeout and what follows it, to carry over."""
+    return {"timeout": b.timeout, "on_timeout": b.on_timeout}
 
 
 def barrier_partners(rules: Rules, skill_id: str) -> list[tuple[str, str]]:

@@ -18,6 +18,7 @@ from backend.core.ops import (
     RetryEdit,
     SetSkill,
 )
+from backend.core.rules import contingency
 from backend.core.rules.base import Change, Refusal, Rule, Rules, unchanged
 from backend.core.rules.execution import check_failed_once
 
@@ -25,6 +26,7 @@ from backend.core.rules.execution import check_failed_once
 def add(rules: Rules, op: AddSkill) -> Change:
     task = rules.task(op.robot)
     params = rules.check_params(op.robot, op.skill, op.params, op.bindings)
+    contingency.check(rules, op.robot, op.policies, None)
     start = rules.first_idle(task)
     n_idle = len(task) - start
     at = n_idle if op.at is None else op.at
@@ -105,7 +107,7 @@ def _barriers_without(
         robots_left = {_unsynchronized_partner(rules, bid, sid, gone, doing) for sid in rest}
         barriers_before[bid] = b
         if len(robots_left) >= 2:
-            events.append(ev.BarrierSet(id=bid, barrier=Barrier(skills=rest)))
+            events.append(ev.BarrierSet(id=bid, barrier=b.model_copy(update={"skills": rest})))
         else:
             events.append(ev.BarrierRemoved(id=bid))
     return events, barriers_before
@@ -239,6 +241,8 @@ def set_skill(rules: Rules, op: SetSkill) -> Change:
         params = s.params
     else:
         params = rules.check_params(robot, s.skill, op.params, op.bindings, skill_id=s.id)
+    if op.policies != s.policies:
+        contingency.check(rules, robot, op.policies, s.id)
     edit = ev.SkillEdited(
         id=s.id,
         label=op.label if op.label != s.label else None,

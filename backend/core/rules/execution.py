@@ -367,7 +367,9 @@ def _check_transition(robot: str, s: SkillInstance, op: Report) -> None:
     # ("waiting for lru2 (offline)"); running only with a higher attempt (a
     # retry); the others never
     waiting = new == s.status == Status.SYNCHWAITING
-    if new not in TRANSITIONS[s.status] and not restart and not waiting:
+    # running again to say which contingency it took (a fallback, a goto, over time)
+    branching = new == s.status == Status.RUNNING and op.branch is not None
+    if new not in TRANSITIONS[s.status] and not (restart or waiting or branching):
         again = (
             f" at the same attempt {s.attempt} (only a retry, with a higher attempt, reports "
             "running again)"
@@ -414,9 +416,11 @@ def _reported_change(s: SkillInstance, op: Report) -> ev.SkillStatusChanged | No
     attempt = op.attempt if op.attempt is not None and op.attempt != s.attempt else None
     stamps = (new == Status.RUNNING and s.started_at is None) or new in FINISHED
     at = op.at if stamps else None
-    if new == s.status and info is None and attempt is None and at is None:
-        return None
-    return ev.SkillStatusChanged(id=s.id, status=new, info=info, attempt=attempt, at=at)
+    branch = op.branch if op.branch != s.branch else None
+    change = ev.SkillStatusChanged(
+        id=s.id, status=new, info=info, attempt=attempt, at=at, branch=branch
+    )
+    return None if change == ev.SkillStatusChanged(id=s.id, status=s.status) else change
 
 
 RULES: dict[type[Any], Rule] = {

@@ -59,7 +59,7 @@ from backend.core.ops import (
     UplinkSettle,
 )
 from backend.core.plan.gate import check_sync
-from backend.core.rules import barriers
+from backend.core.rules import barriers, contingency
 from backend.core.rules.base import (
     Change,
     Refusal,
@@ -182,11 +182,22 @@ def sync(rules: Rules, op: Sync) -> Change:
         partners = barriers.barrier_partners(rules, s.id)
         bid = rules.mission.barrier_of(s.id)
         if partners and bid is not None:
-            infos[s.id] = BarrierInfo(barrier=bid, partners=dict(partners))
+            b = rules.mission.barriers[bid]
+            infos[s.id] = BarrierInfo(
+                barrier=bid, partners=dict(partners), timeout=b.timeout, on_timeout=b.on_timeout
+            )
+    found = contingency.branches(rules, op.robot, skills)
+    check_offered(rules, op.robot, contingency.run_by(found))
     c = _Maker(rules, _expiry(rules, op)).make(
         op.robot,
         "sync",
-        Enqueue(skills=skills, barriers=infos, kinds=_kinds(rules, skills)),
+        Enqueue(
+            skills=skills,
+            barriers=infos,
+            kinds={**contingency.kinds(rules, found), **_kinds(rules, skills)},
+            contingencies=found,
+            after=contingency.afters(rules, skills),
+        ),
         [s.id for s in skills],
     )
     return Change(
@@ -328,10 +339,18 @@ def retry(rules: Rules, op: Retry) -> Change:
         raise Refusal("cannot_retry", f"{s.display()}: {why}", robot=robot, skill=s.id)
     check_retriable(rules, robot, i, s)
     new = s.next_attempt(Status.IDLE_SYNCHRONIZED)
+    found = contingency.branches(rules, robot, [new])
+    check_offered(rules, robot, contingency.run_by(found))
     c = _Maker(rules, _expiry(rules, op)).make(
         robot,
         "retry",
-        Enqueue(skills=[new], front=True, kinds=_kinds(rules, [new])),
+        Enqueue(
+            skills=[new],
+            front=True,
+            kinds={**contingency.kinds(rules, found), **_kinds(rules, [new])},
+            contingencies=found,
+            after=contingency.afters(rules, [new]),
+        ),
         [s.id, new.id],
     )
     return Change([ev.CommandQueued(command=c)], [], {**_queued_value(c), "id": new.id}, None)

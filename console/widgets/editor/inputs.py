@@ -44,6 +44,11 @@ from backend.core.params import (
 )
 from backend.files import yamlio
 from console.state.text import fmt_number
+from console.widgets.editor.contingency import (
+    CONTINGENCY_HINTS,
+    contingency_input,
+    read_contingency,
+)
 from console.widgets.editor.fields import FieldArea, FieldInput, FieldSelect, FieldSwitch
 
 TYPED = "\x00typed"  # the bind choice meaning "no marker: a typed value"
@@ -53,7 +58,7 @@ POLICY_HINTS = {
     "retries": ("retries", "int 0..20"),
     "pause_out_of_comms": ("pause out of comms", "bool"),
     "recharge_below": ("recharge below", "float 0..1, empty: off"),
-}
+} | CONTINGENCY_HINTS
 INPUTS = "Input, Switch, Select, TextArea"  # what holds a value (drafts keep them)
 
 Reading = tuple[Any, str | None]  # (value, None: unset), or (None, what is wrong)
@@ -384,17 +389,25 @@ def read_binding(root: DOMNode, name: str) -> str | None:
 
 def policy_inputs(p: Policies, *, disabled: bool) -> ComposeResult:
     yield Static("policies — applied by the robot itself", classes="section")
-    fields = Policies.model_fields
-    for name, (label, hint) in POLICY_HINTS.items():
-        with Vertical(classes="param", id=f"policy-{name}"):
-            yield Label(Text.assemble((label, "bold"), ("  " + hint, "dim")), classes="plabel")
-            yield from _policy_input(name, p, disabled)
-            yield Static(fields[name].description or "", classes="pdesc")
-            yield Static("", id=f"perr-{name}", classes="perror -empty")
+    for name, hint in POLICY_HINTS.items():
+        if name == next(iter(CONTINGENCY_HINTS)):
+            yield Static("Contingency — decided on board, no round trip", classes="section")
+        yield from _policy_group(name, hint, p, disabled)
+
+
+def _policy_group(name: str, hint: tuple[str, str], p: Policies, disabled: bool) -> ComposeResult:
+    label, kind = hint
+    with Vertical(classes="param", id=f"policy-{name}"):
+        yield Label(Text.assemble((label, "bold"), ("  " + kind, "dim")), classes="plabel")
+        yield from _policy_input(name, p, disabled)
+        yield Static(Policies.model_fields[name].description or "", classes="pdesc")
+        yield Static("", id=f"perr-{name}", classes="perror -empty")
 
 
 def _policy_input(name: str, p: Policies, disabled: bool) -> ComposeResult:
-    if name == "pause_out_of_comms":
+    if name in CONTINGENCY_HINTS:
+        yield from contingency_input(name, p, disabled)
+    elif name == "pause_out_of_comms":
         with Horizontal(classes="fields"):
             yield FieldSwitch(p.pause_out_of_comms, id=f"pf-{name}", disabled=disabled)
             yield Label(
@@ -439,6 +452,9 @@ def read_policies(root: DOMNode) -> tuple[Policies | None, dict[str, str]]:
             problems["recharge_below"] = (
                 f"expected a number between 0 and 1 (empty: off), got '{below}'"
             )
+    more, bad = read_contingency(root)
+    raw |= more
+    problems |= bad
     if problems:
         return None, problems
     try:  # the protocol's own model: the same bounds the server checks

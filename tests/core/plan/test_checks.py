@@ -369,3 +369,46 @@ def test_docs_plan_md_lists_every_rule_with_its_severity():
     text = (Path(__file__).resolve().parents[3] / "docs" / "plan.md").read_text()
     for r in RULES:
         assert f"| `{r.rule}` | {r.severity} |" in text, r.rule
+
+
+# -- contingencies ---------------------------------------------------------------------------
+
+
+def test_a_timeout_the_forecast_cannot_meet_and_a_rally_point_on_rocks():
+    from backend.core.model import Goto, PoseMarker
+
+    site = FakeSite(radius=500, rocks={(20, 0)})
+    slow = skill("r1-1", "drive", goal=pose(100, 0))
+    slow.policies = Policies(timeout="10s", on_timeout="skip")
+    roomy = skill("r1-2", "drive", goal=pose(0, 0))
+    roomy.policies = Policies(timeout="10h", on_failure=Goto(goto="Rocks"))
+    m = mission({"r1": "rover"}, {"r1": [slow, roomy]})
+    m.markers["Rocks"] = PoseMarker(pose=pose(20, 0))
+    robots = {"r1": RobotNow(at=T0, x=0, y=0, battery=1.0)}
+    out = found(m, site=site, robots=robots)
+    contingency = [f for f in out if f.rule.startswith("contingency")]
+    assert ids(contingency) == [
+        "contingency.goto_impassable:r1-2/on_failure",
+        "contingency.timeout_short:r1-1/timeout",
+    ]
+    assert "longer than its timeout 10s" in contingency[1].message
+    # without a map only the timeout is checked
+    assert ids(found(m, robots=robots, rule="contingency.goto_impassable")) == []
+
+
+def test_skills_waiting_for_each_other_through_after_are_a_deadlock():
+    a1, a2 = skill("r1-1", "drive", goal=pose(1, 0)), skill("r1-2", "drive", goal=pose(2, 0))
+    b1, b2 = skill("r2-1", "drive", goal=pose(1, 1)), skill("r2-2", "drive", goal=pose(2, 1))
+    a1.policies = Policies(after="r2-2")  # r1 waits for r2's second skill...
+    b1.policies = Policies(after="r1-2")  # ...and r2 for r1's second: neither starts
+    m = two_rovers([a1, a2], [b1, b2], {})
+    (f,) = found(m, rule="contingency.after_deadlock")
+    assert f.id == "contingency.after_deadlock:r1-1+r2-1" and f.blocking
+    # one way round is fine, and so is an after across a barrier the other robot reaches later
+    b1.policies = Policies()
+    assert found(m, rule="contingency.after_deadlock") == []
+    c1, c2 = skill("r1-1", "drive", goal=pose(1, 0)), skill("r1-2", "drive", goal=pose(2, 0))
+    d1, d2 = skill("r2-1", "drive", goal=pose(1, 1)), skill("r2-2", "drive", goal=pose(2, 1))
+    c2.policies = Policies(after="r2-1")
+    m = two_rovers([c1, c2], [d1, d2], {"b1": ["r1-1", "r2-2"]})
+    assert found(m, rule="contingency.after_deadlock") == []

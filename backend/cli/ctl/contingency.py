@@ -1,0 +1,75 @@
+"""ctl's contingency options (add, edit): --skill-timeout, --not-after,
+--on-failure, --on-timeout, read into Policies fields. (`--timeout` is
+already every ctl command's wait for the server, in seconds.)"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from backend.core.contingency import BRANCH_SYNTAX, read_branch, read_seconds
+from backend.core.model import Branch
+
+
+def mission_seconds(text: str) -> float | None:
+    """'10m', '1.5h', '90' -> seconds; 'off' -> None."""
+    seconds = read_seconds(text)
+    if isinstance(seconds, str):
+        raise argparse.ArgumentTypeError(seconds)
+    return seconds
+
+
+def branch(text: str) -> Branch:
+    """A branch as Policies takes it."""
+    found = read_branch(text)
+    if found is None:
+        raise argparse.ArgumentTypeError(f"expected {BRANCH_SYNTAX}, got {text!r}")
+    return found
+
+
+def add_options(g: argparse._ArgumentGroup) -> None:
+    g.add_argument(
+        "--skill-timeout",
+        dest="skill_timeout",
+        type=mission_seconds,
+        metavar="DURATION",
+        default=argparse.SUPPRESS,
+        help="mission time the skill may run, retries included (10m; 'off'); then --on-timeout",
+    )
+    g.add_argument(
+        "--not-after",
+        dest="not_after",
+        type=mission_seconds,
+        metavar="TIME",
+        default=argparse.SUPPRESS,
+        help="mission-clock deadline (sim time with a simulator: 2h is sim 2:00:00; 'off')",
+    )
+    g.add_argument(
+        "--after",
+        type=lambda t: None if t.strip().lower() in ("off", "none") else t.strip(),
+        metavar="SKILL",
+        default=argparse.SUPPRESS,
+        help="start only once this skill of another robot succeeded ('off')",
+    )
+    for trigger, when in (("failure", "after a failure"), ("timeout", "at the timeout")):
+        g.add_argument(
+            f"--on-{trigger}",
+            dest=f"on_{trigger}",
+            type=branch,
+            metavar="BRANCH",
+            default=argparse.SUPPRESS,
+            help=f"what the robot does {when}, on board: {BRANCH_SYNTAX}",
+        )
+
+
+def given(args: argparse.Namespace) -> dict[str, Any]:
+    """The contingency fields the command line names."""
+    names = {"skill_timeout": "timeout", "not_after": "not_after"}
+    names |= {"on_failure": "on_failure", "on_timeout": "on_timeout", "after": "after"}
+    return {field: getattr(args, k) for k, field in names.items() if hasattr(args, k)}
+
+
+def add_after_args(p: argparse.ArgumentParser) -> None:
+    """ctl after ID SKILL: the same as `edit ID --after SKILL` ('off' clears it)."""
+    p.add_argument("id", metavar="ID")
+    p.add_argument("after", metavar="SKILL", help="the other robot's skill ('off': no more)")

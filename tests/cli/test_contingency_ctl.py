@@ -1,0 +1,83 @@
+"""ctl's contingency options and how a row shows them."""
+
+from __future__ import annotations
+
+import pytest
+
+from backend.cli.ctl.args import parse_args
+from backend.cli.ctl.build import build_op
+from backend.cli.ctl.errors import UsageError
+from backend.core.contingency import marks
+from backend.core.model import Fallback, FallbackSkill, Goto, Policies
+from backend.files.missions import load_mission
+
+from .helpers import TUTORIAL
+
+
+@pytest.fixture
+def tutorial():
+    return load_mission(TUTORIAL)
+
+
+def op_of(argv, tutorial):
+    mission, library = tutorial
+    return build_op(parse_args(argv), mission=mission, library=library)
+
+
+def test_edit_sets_contingencies_and_keeps_the_rest(tutorial):
+    mission, _ = tutorial
+    mission.tasks["lru1"][0].policies = Policies(retries=2, on_timeout="skip")
+    op = op_of(["edit", "lru1-1", "--skill-timeout", "10m", "--on-failure", "skip"], tutorial)
+    assert op.policies == Policies(retries=2, timeout=600, on_timeout="skip", on_failure="skip")
+    op = op_of(["edit", "lru1-1", "--on-failure", "goto:POI-A", "--not-after", "2h"], tutorial)
+    assert op.policies.on_failure == Goto(goto="POI-A") and op.policies.not_after == 7200
+    op = op_of(["edit", "lru1-1", "--on-timeout", "fallback:recharge+explore"], tutorial)
+    assert op.policies.on_timeout == Fallback(
+        fallback=[FallbackSkill(skill="recharge"), FallbackSkill(skill="explore")]
+    )
+    op = op_of(["edit", "lru1-1", "--skill-timeout", "off"], tutorial)
+    assert op.policies.timeout is None
+
+
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["--skill-timeout", "soon"], "mission-time duration"),
+        (["--on-failure", "retry"], "goto:MARKER"),
+        (["--on-timeout", "goto:"], "goto:MARKER"),
+    ],
+)
+def test_bad_contingency_options_say_what_they_take(tutorial, argv, needle, capsys):
+    with pytest.raises((UsageError, SystemExit)):
+        op_of(["edit", "lru1-1", *argv], tutorial)
+    assert needle in capsys.readouterr().err
+
+
+def test_marks_on_a_row():
+    p = Policies(
+        timeout="10m",
+        on_timeout="skip",
+        on_failure=Fallback(fallback=[FallbackSkill(skill="recharge", bindings={"at": "Lander"})]),
+    )
+    assert marks(p) == ["⏱10m→skip", "✗→recharge@Lander"]
+    assert marks(p, unicode=False) == ["T10m->skip", "X->recharge@Lander"]
+    assert marks(Policies(not_after=7200, on_failure=Goto(goto="Lander"))) == [
+        "⏱≤2:00:00→halt",
+        "✗→goto@Lander",
+    ]
+    assert marks(Policies()) == []
+
+
+def test_after_is_set_and_cleared(tutorial):
+    op = op_of(["edit", "lru1-1", "--after", "lru2-1"], tutorial)
+    assert op.policies.after == "lru2-1"
+    assert op_of(["edit", "lru1-1", "--after", "off"], tutorial).policies.after is None
+    assert marks(Policies(after="lander-1")) == ["after lander-1"]
+
+
+def test_ctl_after_edits_only_the_after(tutorial):
+    mission, _ = tutorial
+    mission.tasks["lru1"][0].policies = Policies(retries=2)
+    op = op_of(["after", "lru1-1", "lru2-1"], tutorial)
+    assert (op.id, op.policies) == ("lru1-1", Policies(retries=2, after="lru2-1"))
+    assert op_of(["after", "lru1-1", "off"], tutorial).policies.after is None
