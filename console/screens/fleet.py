@@ -33,7 +33,7 @@ from console.state.capability import (
 from console.state.changes import StateChange, Topic
 from console.state.contact import out_of_contact, presence_words
 from console.state.model import ConsoleModel
-from console.state.nowcast import nowcast_words, robot_nowcast
+from console.state.nowcast import battery_now, nowcast_words, robot_nowcast
 
 SPARK = 6  # samples shown per sparkline (the model keeps model.HISTORY)
 
@@ -97,12 +97,19 @@ class FleetScreen(ViewScreen):
         return Text(f"○ offline{since}", style=f"bold {self.colour('presence-offline')}")
 
     def _level(self, robot: str, i: int, var: str | None) -> Text:
+        """A level's sparkline and last value; a robot's last known ones drawn
+        as such (dim, italic), the battery with the now-cast's ('(≈33% now)')."""
         h = [x[i] for x in self.model.history.get(robot, ())]
         if not h:
             return Text("—", style="dim")
         low = var is not None and h[-1] < 0.2
         style = f"bold {self.colour(var)}" if low else ""
-        return Text(f"{sparkline(h, SPARK)} {int(round(h[-1] * 100)):3d}%", style=style)
+        text = Text(f"{sparkline(h, SPARK)} {int(round(h[-1] * 100)):3d}%", style=style)
+        if self.model.freshness(robot).stale:
+            text.stylize("dim italic")
+            now = battery_now(self.model, robot, h[-1]) if i == 0 else ""
+            text.append(f" ({now} now)" if now else "", style="italic")
+        return text
 
     def _uplink(self, robot: str) -> Text:
         """'⇡2 1m10s ⇄20s': commands waiting for the robot, its one-way delay."""

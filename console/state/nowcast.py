@@ -143,6 +143,14 @@ def robot_nowcast(model: Shown, robot: str) -> Nowcast | None:
     return view.at(plan.forecast, model.mission, model.clock().timestamp(), plan.status).get(robot)
 
 
+def battery_now(model: Shown, robot: str, heard: float) -> str:
+    """'≈33%': the battery the now-cast puts the robot at now, where it differs
+    from the one last heard ('' otherwise, or without a now-cast)."""
+    nc = robot_nowcast(model, robot)
+    now = f"{nc.battery:.0%}" if nc and nc.battery is not None else f"{heard:.0%}"
+    return "" if now == f"{heard:.0%}" else f"{NOWCAST_GLYPH}{now}"
+
+
 def probably_doing(model: Shown, robot: str) -> str | None:
     """'≈ lru1-5 62%' (a schedule header's room): the skill the robot probably
     executes now and how far (None when it probably executes none: what it

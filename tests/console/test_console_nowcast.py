@@ -23,7 +23,7 @@ from backend.core.model import Pose
 from backend.core.plan.forecast import Forecaster
 from backend.core.plan.inputs import PlanInputs, RobotNow
 from backend.protocol.messages import RobotInfo, Telemetry
-from console.state.nowcast import NowcastView, nowcast_words
+from console.state.nowcast import NowcastView, nowcast_words, robot_nowcast
 
 
 def _rover_mission():
@@ -112,3 +112,21 @@ async def test_the_schedule_header_says_what_a_distant_robot_probably_does_now()
         assert "≈ lru1-2 " in lru1[2], lru1  # the activity line: the probable present
         # the battery as heard; the now-cast's only where it differs (here it does not)
         assert "bat 82%" in lru1[1] and "≈" not in lru1[1], lru1
+
+
+async def test_the_battery_a_distant_robot_probably_has_now_beside_the_last_heard():
+    from console.screens.fleet import FleetScreen
+
+    app = make_app()
+    async with app.run_test(size=(160, 40)) as pilot:
+        await _lru1_far_and_later(app, pilot, seconds=600)
+        nc = robot_nowcast(app.model, "lru1")
+        assert nc is not None and nc.battery is not None and f"{nc.battery:.0%}" != "82%"
+        now = f"≈{nc.battery:.0%}"
+        header = [line.split("│")[0] for line in screen_text(app).splitlines()[1:4]]
+        assert f"bat 82% {now}" in header[1], header
+        await pilot.press("f4")
+        await pilot.pause()
+        assert isinstance(app.screen, FleetScreen)
+        row = next(line for line in screen_text(app).splitlines() if " lru1 " in line)
+        assert f"82% ({now} now)" in row, row

@@ -22,7 +22,7 @@ from console.state import link
 from console.state.contact import CONTACT_GLYPH, header_contact, out_of_contact
 from console.state.freshness import FRESH, Freshness
 from console.state.model import ConsoleModel
-from console.state.nowcast import NOWCAST_GLYPH, probably_doing, robot_nowcast
+from console.state.nowcast import battery_now, probably_doing
 from console.state.team import retired
 from console.state.text import GLYPHS, STATUS_CSS, fmt_duration, skill_title
 
@@ -230,7 +230,8 @@ def _levels_line(h: Head) -> list[Segment]:
     if t is None:
         bat, link, gap = ("bat –", st["dim"]), ("link –", st["dim"]), st["dim"]
     elif h.fresh.stale:  # the last levels heard, not live ones (and the now-cast's)
-        bat = (f"bat {t.battery:.0%}{_probable_battery(h, t.battery)}", st["stale"])
+        now = battery_now(h.model, h.col.robot, t.battery)  # the now-cast's, if it differs
+        bat = (f"bat {t.battery:.0%} {now}".rstrip(), st["stale"])
         link = (f"link {int(round(t.link * 100))}%", st["stale"])
         gap = st["stale"]
     else:
@@ -242,13 +243,6 @@ def _levels_line(h: Head) -> list[Segment]:
             else ("link: out of range", st["offline"])
         )
     return _spread([bat, *_link_words(h), link], w, gap)
-
-
-def _probable_battery(h: Head, heard: float) -> str:
-    """' ≈33%': the battery the now-cast puts it at now ('': none, or the same)."""
-    nc = robot_nowcast(h.model, h.col.robot)
-    now = f"{nc.battery:.0%}" if nc and nc.battery is not None else f"{heard:.0%}"
-    return "" if now == f"{heard:.0%}" else f" {NOWCAST_GLYPH}{now}"
 
 
 def _link_words(h: Head) -> list[tuple[str, Style]]:
