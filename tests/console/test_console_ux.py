@@ -119,7 +119,7 @@ async def test_a_robot_gone_offline_is_drawn_as_its_last_known_state():
         now[0] = T0 + timedelta(seconds=40)
         app.mission_screen.freshness_tick()
         await pilot.pause()
-        assert "40s ago: ▶ lru1-2" in screen_text(app)
+        assert "40s ago ≈ lru1-2" in screen_text(app)
         app.post_message(fleet_changed(RobotInfo(name="lru1", online=True, since=now[0])))
         await pilot.pause()
         app.mission_screen.freshness_tick()
