@@ -61,6 +61,7 @@ MIN_GAP_S = 0.1  # ...and never more often than this, whatever changes
 MAX_SAMPLES = 2_000_000
 QUEUE_MAX = 20_000  # samples waiting for the writer (about a minute of a busy site)
 FLUSH_S = 0.5
+WAKE_AT = 1_000  # samples waiting that wake the writer before its flush_s is up
 
 _INSERT_SAMPLE = f"INSERT INTO telemetry ({SAMPLE_COLUMNS}) VALUES ({', '.join('?' * 17)})"
 _INSERT_BATCH = (
@@ -98,7 +99,8 @@ class TelemetryArchive:
         self._kept: dict[str, _Kept] = {}
         self._queue: queue.Queue[tuple[str, tuple[object, ...]] | None] = queue.Queue(QUEUE_MAX)
         self._thread: threading.Thread | None = None
-        self._closing = threading.Event()  # ends the writer's gathering at once
+        # ends the writer's gathering at once: closing, or the queue half full
+        self._wake = threading.Event()
         self.kept = 0  # samples handed to the writer
         self.skipped = 0  # samples the downsampling left out
         self.dropped = 0  # samples lost to a full queue
@@ -139,9 +141,20 @@ class TelemetryArchive:
         thread, self._thread = self._thread, None
         if thread is None:
             return
-        self._closing.set()
+        self._wake.set()
         self._queue.put(None)
         thread.join(timeout)
+
+    def flush(self, timeout: float = 60.0) -> bool:
+        """Wait until what was taken so far is written (True), for a caller
+        that takes samples faster than any robot sends them (a recording): a
+        sample taken while the queue is full is dropped, never waited for."""
+        if self._thread is None:
+            return True
+        done = threading.Event()
+        self._queue.put(("flush", (done,)))  # this caller asked to wait: it may
+        self._wake.set()
+        return done.wait(timeout)
 
     # -- taking (any thread) --------------------------------------------------------------------
     def took(self, t: Telemetry, received: float | None = None) -> bool:
@@ -182,6 +195,8 @@ class TelemetryArchive:
     def _put(self, item: tuple[str, tuple[object, ...]]) -> bool:
         try:
             self._queue.put_nowait(item)
+            if self._queue.qsize() > WAKE_AT:  # a burst: write now, before the queue fills
+                self._wake.set()
             return True
         except queue.Full:
             self.dropped += 1
@@ -203,7 +218,8 @@ class TelemetryArchive:
                 # let flush_s of samples gather, then take them all: one wake-up
                 # of this thread per flush, not one per sample (each would take
                 # the GIL from the Zenoh thread that receives the telemetry)
-                self._closing.wait(self.flush_s)
+                self._wake.wait(self.flush_s)
+                self._wake.clear()
                 items, stop = [first], False
                 while True:
                     try:
@@ -225,9 +241,10 @@ class TelemetryArchive:
             conn.close()
 
     def _commit(self, conn: sqlite3.Connection, items: list[tuple[str, Any]], count: int) -> int:
-        samples = [row for kind, row in items if kind == "sample"]
-        notes = [row for kind, row in items if kind == "note"]
-        batches = [row for kind, row in items if kind == "batch"]
+        by: dict[str, list[Any]] = {"sample": [], "note": [], "batch": [], "flush": []}
+        for kind, row in items:
+            by[kind].append(row)
+        samples, notes, batches = by["sample"], by["note"], by["batch"]
         conn.execute("BEGIN")
         try:
             conn.executemany(_INSERT_SAMPLE, samples)
@@ -247,10 +264,12 @@ class TelemetryArchive:
             if conn.in_transaction:
                 conn.execute("ROLLBACK")
             raise
-        self.written += len(items)
+        self.written += len(items) - len(by["flush"])
+        for (done,) in by["flush"]:
+            done.set()
         return count
 
     def _drain(self) -> None:
         """After a failure: take what comes so that nobody's put fails on a full queue."""
-        while self._queue.get() is not None:
+        while self._queue.get() is not None:  # (a flush waiting then times out: False)
             pass

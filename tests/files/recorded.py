@@ -341,6 +341,8 @@ class _Play:
                 clock[0] = t
                 for robot in SKILLS:
                     archive.took(self._sample(robot, t - p.delay_s), received=t)
+                if k % 2000 == 1999:  # hours in a moment: let the writer keep up
+                    archive.flush()
         finally:
             archive.close(timeout=120)
 

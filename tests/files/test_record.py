@@ -225,6 +225,24 @@ def test_the_archive_keeps_the_newest_samples_only(tmp_path):
     assert len(samples) == 50 and samples[-1].at == 199.0
 
 
+def test_a_recording_faster_than_any_robot_flushes_and_loses_nothing(tmp_path):
+    from backend.server.archive import QUEUE_MAX
+
+    archive = TelemetryArchive(tmp_path / "d.telemetry.db", every_s=0.0, flush_s=60.0)
+    archive.start()
+    n = 3 * QUEUE_MAX
+    try:
+        for k in range(n):
+            archive._clock = lambda k=k: k * 1.0
+            assert archive.took(_sample("lru1", float(k)), received=float(k))
+            if k % (QUEUE_MAX // 2) == 0:
+                assert archive.flush()  # written, though flush_s is a minute
+                assert archive.written == k + 1
+    finally:
+        archive.close(timeout=60)
+    assert archive.dropped == 0 and archive.written == n
+
+
 def test_taking_a_sample_never_waits_for_the_disk(tmp_path):
     archive = TelemetryArchive(tmp_path / "c.telemetry.db", every_s=0.0)
     archive.start()
