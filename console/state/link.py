@@ -132,6 +132,14 @@ def staged_text(model: Linked, c: UplinkCommand, clock: MissionClock) -> str:
     return command_text(c, clock) + (f" ({stage})" if stage else "")
 
 
+def executing_stage(model: Linked, robot: str, sid: str, clock: MissionClock) -> str:
+    """'completed due 14:40:00' on a skill of a command its robot applied and
+    still executes: the stage the ground waits for ('' for other skills)."""
+    v = next((v for v in executing(model.robots.get(robot)) if sid in v.skills), None)
+    stage = v.current if v is not None else None
+    return stage_words(stage, clock) if stage is not None else ""
+
+
 def executing_text(v: Verification, clock: MissionClock) -> str:
     """'executing sync #17: started due 14:40:00' (an applied command's skills under way)."""
     stage = v.current

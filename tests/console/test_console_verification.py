@@ -1,7 +1,7 @@
 """A command's verification stage on the console (issue 34.2): the stage each
 command waits for and when it is due, where its pending commands are shown
-(the fleet's link line, the schedule's uplinking rows). State injected as
-messages, the clock pinned."""
+(the fleet's link line, the schedule's uplinking rows, an executing command's
+skills). State injected as messages, the clock pinned."""
 
 from __future__ import annotations
 
@@ -66,3 +66,27 @@ async def test_the_fleet_shows_a_pending_commands_stage():
         text = screen_text(app)
         due = app.model.clock.stamp_text(T0 + timedelta(seconds=40))
         assert f"sync #{cid} queued 30s ago (sent due {due})" in text, text
+
+
+async def test_an_executing_commands_skill_says_the_stage_waited_for():
+    from console_state import mars_mid_execution
+
+    from backend.core.verification import Stage, Verification
+
+    due = T0 + timedelta(minutes=5)
+    stages = [Stage(name=n, state="ok", at=T0) for n in ("queued", "sent", "received")]
+    stages += [Stage(name="started", state="ok", at=T0)]
+    stages += [Stage(name="completed", state="waiting", due=due, tolerance_s=2.0)]
+    v = Verification(command=7, robot="lru1", op="sync", skills=["lru1-2"], stages=stages)
+    app = make_app()
+    now = T0 + timedelta(seconds=30)
+    app.clock = lambda: now
+    async with app.run_test(size=(240, 40)) as pilot:
+        await inject(app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
+        info = RobotInfo(name="lru1", online=True, since=T0, heard=now, verification=[v])
+        app.post_message(fleet_changed(info))
+        await pilot.pause()
+        await pilot.pause()
+        words = f"completed due {app.model.clock.stamp_text(due)}"
+        rows = [line.split("│")[0] for line in screen_text(app).splitlines()]
+        assert any("explore" in r and words in r for r in rows), rows

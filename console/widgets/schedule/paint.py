@@ -119,6 +119,14 @@ class Painter:
             self.summaries[key] = text
         return text
 
+    def _extra(self, col: Column, s: SkillInstance) -> str:
+        """A synchronized skill's stage when its command is executing
+        ('completed due 14:40'), else its parameters (a narrow static column: none)."""
+        if col.static and not self.view.expand_static:
+            return ""
+        stage = link.executing_stage(self.model, col.robot, s.id, self.model.clock)
+        return stage or self._summary(s)
+
     def _skill_segments(self, ci: int, col: Column, s: SkillInstance, st: Styles) -> list[Segment]:
         v = self.view
         selected = ci == v.cursor_col and s.id == v.cursor_id
@@ -133,7 +141,7 @@ class Painter:
             draft=s.id in v.drafts,
             tag=f"[{bid}]" if bid else "",
             check=self.model.plan.mark(s.id),
-            extra=self._summary(s) if not col.static or v.expand_static else "",
+            extra=self._extra(col, s),
             cursor=(st["cursor"] if v.has_focus else st["cursor-blur"]) if selected else None,
             stale=stale,
             uplink=link.staged_text(self.model, c, self.model.clock) if c is not None else "",
