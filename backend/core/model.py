@@ -577,7 +577,7 @@ class Mission(Strict):
         mission in Python for ~0.4 s (JSON keeps every value: the journal's
         snapshots rely on it too)."""
         with gc_paused():
-            return Mission.model_validate_json(self.model_dump_json())
+            return json_copy(self)
 
     def barrier_of(self, skill_id: str) -> str | None:
         for bid, b in self.barriers.items():
