@@ -17,6 +17,13 @@ from console.state import link
 from console.state.actions import ACTIONS
 
 
+def _help(keys: Any, a: Any, why: str | None) -> str:
+    """An entry's help: its keys, what it does, and why it does not apply now."""
+    return f"{keys.all(a.binding_id)} · {a.description}" + (
+        f" — does not apply now: {why}" if why else ""
+    )
+
+
 class MissionCommands(Provider):
     def _screen(self) -> Any:
         return getattr(self.app, "mission_screen", None)
@@ -32,10 +39,7 @@ class MissionCommands(Provider):
             if a.scope not in ("mission", "app", here) or a.fixed or a.name == "command_palette":
                 continue
             why = screen.why_disabled(a.name) if a.scope == "mission" else None
-            help_text = f"{keys.all(a.binding_id)} · {a.description}" + (
-                f" — does not apply now: {why}" if why else ""
-            )
-            yield a, help_text, partial(self._run, a)
+            yield a, _help(keys, a, why), partial(self._run, a)
 
     def _cancels(self):
         """Every pending command, to cancel (asks first)."""

@@ -36,15 +36,20 @@ class EscapeSplitter:
         self, event: events.Event, deliver: Callable[[events.Event], Awaitable[None]]
     ) -> None:
         """`deliver` an event as Textual would, an Alt+<printable key> as two."""
-        if isinstance(event, events.Key) and not event.is_forwarded:
-            split = split_escape(event)
-            if split is not None:
-                escape, key = split
-                # the escape's binding runs now (a forwarded key's would run only
-                # after the next key reached the field it was meant to leave)
-                if not await self.app._check_bindings("escape", priority=True):
-                    if not await self.app._check_bindings("escape"):
-                        await deliver(escape)  # bound to nothing: as it came
-                await deliver(key)
-                return
-        await deliver(event)
+        is_key = isinstance(event, events.Key) and not event.is_forwarded
+        split = split_escape(event) if is_key else None
+        if split is None:
+            await deliver(event)
+            return
+        escape, key = split
+        # the escape's binding runs now (a forwarded key's would run only
+        # after the next key reached the field it was meant to leave)
+        if not await self._escape_bound():
+            await deliver(escape)  # bound to nothing: as it came
+        await deliver(key)
+
+    async def _escape_bound(self) -> bool:
+        """Run escape's binding (a priority one first); False when it has none."""
+        if await self.app._check_bindings("escape", priority=True):
+            return True
+        return bool(await self.app._check_bindings("escape"))

@@ -33,12 +33,7 @@ class NotificationFolder:
         most MAX_TOASTS on screen (the oldest fold into one "N more" toast:
         the alert list and the event log keep them all)."""
         app = self.app
-        live = list(app._notifications)  # (iterating drops the expired ones)
-        repeats = 1
-        for n in live:
-            if n.title == title and n.severity == severity and n.identity != self._folded[0]:
-                repeats += self._repeats.pop(n.identity, 1)
-                app._unnotify(n, refresh=False)
+        repeats = 1 + self._take_same(title, severity)
         others = [n for n in app._notifications if n.identity != self._folded[0]]
         if len(others) > MAX_TOASTS - 2:
             self._fold(others[: len(others) - (MAX_TOASTS - 2)])
@@ -52,6 +47,17 @@ class NotificationFolder:
         self._repeats[n.identity] = repeats
         app._notifications.add(n)
         app._refresh_notifications()
+
+    def _take_same(self, title: str, severity: SeverityLevel) -> int:
+        """Remove the toasts of this situation (title and severity; not the
+        fold); how many times they had said it."""
+        app = self.app
+        said = 0
+        for n in list(app._notifications):  # (iterating drops the expired ones)
+            if n.title == title and n.severity == severity and n.identity != self._folded[0]:
+                said += self._repeats.pop(n.identity, 1)
+                app._unnotify(n, refresh=False)
+        return said
 
     def _fold(self, oldest: list[Notification]) -> None:
         """Replace the oldest toasts (and an earlier fold) with one that counts them."""

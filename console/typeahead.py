@@ -70,18 +70,22 @@ class TypeAhead:
         if isinstance(focused, Input | TextArea) and event.is_printable:
             return ""  # typed into a field
         screen = app.screen
-        keys = key_names(app)
         scopes = ("app", getattr(screen, "SCOPE", ""))  # a dialog has none: only the app's
-        for a in ACTIONS:
-            if a.opens and a.scope in scopes and event.key in keys.keys(a.binding_id).split(","):
-                bound = screen.active_bindings.get(event.key)
-                if bound is not None and bound.node not in (screen, app):
-                    return ""  # a widget takes this key itself (enter in a list)
-                why_not = getattr(screen, "why_disabled", None)
-                if a.scope != "app" and why_not is not None and why_not(a.name):
-                    return ""  # it says why it does not apply: nothing opens
-                return a.label
-        return ""
+        a = _opening_action(key_names(app), event.key, scopes)
+        if a is None or not self._acts(a, event.key, screen):
+            return ""
+        return a.label
+
+    def _acts(self, a: Any, key: str, screen: Any) -> bool:
+        """Action `a`, bound to `key`, runs on `screen` (no widget takes the key
+        and the screen does not say why it does not apply)."""
+        bound = screen.active_bindings.get(key)
+        if bound is not None and bound.node not in (screen, self.app):
+            return False  # a widget takes this key itself (enter in a list)
+        why_not = getattr(screen, "why_disabled", None)
+        if a.scope != "app" and why_not is not None and why_not(a.name):
+            return False  # it says why it does not apply: nothing opens
+        return True
 
     def _poll(self) -> None:
         self.app.call_next(self._settle)
@@ -96,14 +100,18 @@ class TypeAhead:
         app = self.app
         if not self.holding or not app.is_running or not app.screen_stack:
             return
-        moved = app.screen is not self._screen or (
-            app.focused is not None and app.focused is not self._focus
-        )
         waited = time.monotonic() - self._since
-        if moved and app.screen.is_mounted:
+        if self._moved() and app.screen.is_mounted:
             await self._release(app.screen)
         elif waited > HOLD_S or (waited > SETTLE_S and not self._opening()):
             self._drop()
+
+    def _moved(self) -> bool:
+        """The screen or the focus is another than when the opening key came."""
+        app = self.app
+        return app.screen is not self._screen or (
+            app.focused is not None and app.focused is not self._focus
+        )
 
     def _stop(self) -> list[events.Key]:
         held, self.held, self.what = self.held, [], ""
@@ -137,3 +145,15 @@ class TypeAhead:
             severity="warning",
             timeout=4,
         )
+
+
+def _opening_action(keys: Any, key: str, scopes: tuple[str, ...]) -> Any:
+    """The first action of `scopes` that opens something and runs on `key`, or None."""
+    return next(
+        (
+            a
+            for a in ACTIONS
+            if a.opens and a.scope in scopes and key in keys.keys(a.binding_id).split(",")
+        ),
+        None,
+    )

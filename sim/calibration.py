@@ -136,8 +136,17 @@ def _survey(where: str, rt: RobotType, m: RobotModel) -> list[str]:
 
 def _robot_type(world: WorldFile, name: str, rt: RobotType, m: RobotModel) -> list[str]:
     where = f"robot_types.{name}"
+    out = _properties(where, rt.properties, figures(world, m))
+    if m.kind == "static":
+        return out
+    return out + _motion(world, where, name, rt, m) + _survey(where, rt, m) + _battery(where, rt, m)
+
+
+def _properties(
+    where: str, stated: dict[str, PropertyValue], truth: dict[str, PropertyValue]
+) -> list[str]:
+    """The type's properties against the world's figures: missing, differing, unknown."""
     out = []
-    stated, truth = rt.properties, figures(world, m)
     missing = [f"{k}: {_show(v)}" for k, v in truth.items() if k not in stated]
     if missing:
         out.append(f"{where}.properties: missing {', '.join(missing)} (the world's figures)")
@@ -146,8 +155,12 @@ def _robot_type(world: WorldFile, name: str, rt: RobotType, m: RobotModel) -> li
             out.append(f"{where}.properties.{key}: {_show(stated[key])}; the world: {_show(value)}")
     for key in sorted(set(stated) - set(truth)):
         out.append(f"{where}.properties.{key}: {_show(stated[key])}; the world has no such figure")
-    if m.kind == "static":
-        return out
+    return out
+
+
+def _motion(world: WorldFile, where: str, name: str, rt: RobotType, m: RobotModel) -> list[str]:
+    """A mobile robot's speed, whether it flies and its radio's range."""
+    out = []
     if rt.speed_mps is None or _differs(rt.speed_mps, m.speed):
         said = "none" if rt.speed_mps is None else _g(rt.speed_mps)
         out.append(f"{where}.speed_mps: {said}; the world: {_g(m.speed)}")
@@ -158,7 +171,7 @@ def _robot_type(world: WorldFile, name: str, rt: RobotType, m: RobotModel) -> li
             f"{where}.radio_range_m: {_g(rt.radio_range_m)}; the world: "
             f"{_g(world.comms.direct_range)} (comms.direct_range)"
         )
-    return out + _survey(where, rt, m) + _battery(where, rt, m)
+    return out
 
 
 def drift(library: Library, world: WorldFile, models: dict[str, RobotModel]) -> list[str]:

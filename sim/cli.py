@@ -215,6 +215,10 @@ def _load(args: argparse.Namespace) -> tuple[Loaded | None, list[Issue]]:
     return (mission, library, world, world_file), []
 
 
+class _BadInput(Exception):
+    """What `missionctl sim` says on stderr before it exits with EXIT_BAD_INPUT."""
+
+
 def run(args: argparse.Namespace) -> int:
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING,
@@ -227,33 +231,39 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     mission, library, world, world_file = loaded
     try:
-        login = login_from_args(args)
-    except AccountsError as e:
+        fleet = _fleet(args, mission, library, world)
+    except _BadInput as e:
         print(f"missionctl sim: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    extra = login.zenoh_options()
-    if args.zenoh_config:
-        from backend.transport import load_config_file
+    for warning in fleet.warnings:
+        print(f"missionctl sim: {warning}", file=sys.stderr)
+    if args.check:
+        print(f"{args.mission}: ok\n{world_file}: ok")
+        return EXIT_OK
+    return asyncio.run(_serve(fleet, args, world_file))
 
-        try:
-            extra = {**load_config_file(args.zenoh_config), **extra}
-        except (OSError, ValueError) as e:
-            print(f"missionctl sim: {args.zenoh_config}: {e}", file=sys.stderr)
-            return EXIT_BAD_INPUT
+
+def _fleet(
+    args: argparse.Namespace, mission: Mission, library: Library, world: WorldFile
+) -> SimFleet:
+    """The simulated fleet the command line asks for (_BadInput: why not)."""
     from sim.errors import SimError
     from sim.fleet import SimFleet
 
+    try:
+        login = login_from_args(args)
+    except AccountsError as e:
+        raise _BadInput(str(e)) from None
+    extra = _zenoh_options(args, login.zenoh_options())
     rate, rates = _telemetry_rates(args)
     unknown = sorted(set(rates) - set(mission.robots))
     if unknown:
-        print(
-            f"missionctl sim: --telemetry-rate names {', '.join(unknown)}, not a robot of "
-            f"{args.mission} ({', '.join(mission.robots)})",
-            file=sys.stderr,
+        raise _BadInput(
+            f"--telemetry-rate names {', '.join(unknown)}, not a robot of "
+            f"{args.mission} ({', '.join(mission.robots)})"
         )
-        return EXIT_BAD_INPUT
     try:
-        fleet = SimFleet(
+        return SimFleet(
             mission,
             library,
             world,
@@ -272,29 +282,48 @@ def run(args: argparse.Namespace) -> int:
             else None,
         )
     except (SimError, ValueError) as e:
-        print(f"missionctl sim: {e}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    for warning in fleet.warnings:
-        print(f"missionctl sim: {warning}", file=sys.stderr)
-    if args.check:
-        print(f"{args.mission}: ok\n{world_file}: ok")
-        return EXIT_OK
-    return asyncio.run(_serve(fleet, args, world_file))
+        raise _BadInput(str(e)) from None
+
+
+def _zenoh_options(args: argparse.Namespace, login_options: dict[str, Any]) -> dict[str, Any]:
+    """--zenoh-config's options under the login's."""
+    if not args.zenoh_config:
+        return login_options
+    from backend.transport import load_config_file
+
+    try:
+        return {**load_config_file(args.zenoh_config), **login_options}
+    except (OSError, ValueError) as e:
+        raise _BadInput(f"{args.zenoh_config}: {e}") from None
 
 
 async def _serve(fleet: SimFleet, args: argparse.Namespace, world_file: Path) -> int:
-    from backend.agent import AlreadyConnected
-    from backend.transport.session import LoginRefused, TransportError, TransportUnreachable
-
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         loop.add_signal_handler(sig, stop.set)
-    deadline = time.monotonic() + max(0.0, args.connect_timeout)
+    refused = await _start(fleet, args.connect_timeout, stop)
+    if refused is not None:
+        return refused
+    try:
+        print(_greeting(fleet, world_file), flush=True)
+        await stop.wait()
+    finally:
+        await fleet.stop()
+    return EXIT_OK
+
+
+async def _start(fleet: SimFleet, connect_timeout: float, stop: asyncio.Event) -> int | None:
+    """Connect the fleet, trying again for `connect_timeout` seconds while the
+    server is unreachable; None once connected, else the exit code (said)."""
+    from backend.agent import AlreadyConnected
+    from backend.transport.session import LoginRefused, TransportError, TransportUnreachable
+
+    deadline = time.monotonic() + max(0.0, connect_timeout)
     while True:
         try:
             await fleet.start()
-            break
+            return None
         except TransportUnreachable as e:
             if isinstance(e, LoginRefused) or time.monotonic() >= deadline or stop.is_set():
                 print(f"missionctl sim: {e}", file=sys.stderr)
@@ -309,21 +338,18 @@ async def _serve(fleet: SimFleet, args: argparse.Namespace, world_file: Path) ->
         except AlreadyConnected as e:  # another sim (or robot) holds these robots
             print(f"missionctl sim: {e}", file=sys.stderr)
             return EXIT_REFUSED
-    try:
-        w = fleet.world
-        delay = f", link delay {fleet.link_delay:g} s (sim time)" if fleet.link_delay else ""
-        if fleet.comms_window is not None:
-            delay += f", comms windows: {fleet.comms_window.describe()}"
-        print(
-            f"missionctl sim: world '{w.spec.name}' ({world_file}), seed {w.seed}, robots "
-            f"{', '.join(fleet.agents)}; speed {fleet.speed:g}x{delay}; "
-            f"connected to {', '.join(fleet.connect)}",
-            flush=True,
-        )
-        await stop.wait()
-    finally:
-        await fleet.stop()
-    return EXIT_OK
+
+
+def _greeting(fleet: SimFleet, world_file: Path) -> str:
+    w = fleet.world
+    delay = f", link delay {fleet.link_delay:g} s (sim time)" if fleet.link_delay else ""
+    if fleet.comms_window is not None:
+        delay += f", comms windows: {fleet.comms_window.describe()}"
+    return (
+        f"missionctl sim: world '{w.spec.name}' ({world_file}), seed {w.seed}, robots "
+        f"{', '.join(fleet.agents)}; speed {fleet.speed:g}x{delay}; "
+        f"connected to {', '.join(fleet.connect)}"
+    )
 
 
 # ---------------------------------------------------------------- sim-status
@@ -410,6 +436,19 @@ def _region(name: str, top: float | None) -> str:
 
 
 def _robot_lines(r: mf.RobotStatus, now: float) -> list[str]:
+    flags = _flags(r, now)
+    lines = [
+        f"  {r.name:<8} {r.kind:<6} ({r.x:7.1f}, {r.y:7.1f})  "
+        f"battery {r.battery:4.0%}  link {r.link:.2f}  "
+        f"{r.activity or 'idle'}{'  [' + '; '.join(flags) + ']' if flags else ''}"
+    ]
+    if r.result:
+        lines.append(f"           last: {r.result}")
+    return lines
+
+
+def _flags(r: mf.RobotStatus, now: float) -> list[str]:
+    """What is worth knowing about a robot beyond its place, battery and activity."""
     flags = []
     if not r.in_range:
         age = f", last heard {now - r.heard_at:.0f} s ago" if r.heard_at is not None else ""
@@ -422,14 +461,7 @@ def _robot_lines(r: mf.RobotStatus, now: float) -> list[str]:
         flags.append(f"carries {r.box}")
     if r.stones:
         flags.append(f"stones {', '.join(r.stones)}")
-    lines = [
-        f"  {r.name:<8} {r.kind:<6} ({r.x:7.1f}, {r.y:7.1f})  "
-        f"battery {r.battery:4.0%}  link {r.link:.2f}  "
-        f"{r.activity or 'idle'}{'  [' + '; '.join(flags) + ']' if flags else ''}"
-    ]
-    if r.result:
-        lines.append(f"           last: {r.result}")
-    return lines
+    return flags
 
 
 def _truth_lines(tr: mf.SimTruth) -> list[str]:

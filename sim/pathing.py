@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import heapq
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from itertools import accumulate
 
 import numpy as np
 
@@ -118,23 +119,40 @@ def astar(
 ) -> list[tuple[int, int]]:
     """Cheapest 8-connected cell path (time-based costs: free 1, slow `slow_cost`,
     rock impassable; no corner cutting past rocks). Raises NoPath."""
-    ny, nx = terrain.shape
     if terrain[start] == ROCK:
         raise NoPath("the start lies in impassable terrain")
     if terrain[goal] == ROCK:
         raise NoPath("the goal lies in impassable terrain")
-    # pad with a ring of rock: no bounds checks in the loop
-    w = nx + 2
-    padded = np.full((ny + 2, w), ROCK, dtype=np.uint8)
-    padded[1:-1, 1:-1] = terrain
-    flat = padded.ravel()
-    cost = np.where(flat == FREE, 1.0, np.where(flat == SLOW, slow_cost, 0.0)).tolist()
+    cost = _crossing_costs(terrain, slow_cost)
+    w = terrain.shape[1] + 2
     s = (start[0] + 1) * w + start[1] + 1
     g = (goal[0] + 1) * w + goal[1] + 1
+    came = _search(cost, w, s, g)
+    if came is None:
+        raise NoPath("no passable route to the goal")
+    return _walk_back(came, s, g, w)
+
+
+def _crossing_costs(terrain: np.ndarray, slow_cost: float) -> list[float]:
+    """The time to cross each cell, row by row, the grid in a ring of rock
+    (0.0: impassable), so that the search needs no bounds checks."""
+    ny, nx = terrain.shape
+    padded = np.full((ny + 2, nx + 2), ROCK, dtype=np.uint8)
+    padded[1:-1, 1:-1] = terrain
+    flat = padded.ravel()
+    costs: list[float] = np.where(
+        flat == FREE, 1.0, np.where(flat == SLOW, slow_cost, 0.0)
+    ).tolist()
+    return costs
+
+
+def _search(cost: list[float], w: int, s: int, g: int) -> list[int] | None:
+    """A* from cell `s` to cell `g` of the padded grid (`w` cells a row):
+    each cell's predecessor on the cheapest path, None when `g` is out of
+    reach. (The hot loop of every rover's route: written for speed.)"""
     gi, gj = divmod(g, w)
     n = len(cost)
-    inf = math.inf
-    best = [inf] * n
+    best = [math.inf] * n
     came = [-1] * n
     best[s] = 0.0
     heap = [(0.0, 0.0, s)]
@@ -142,12 +160,10 @@ def astar(
     # diagonal step, and the two orthogonal cells it passes between
     diagonal = ((-w - 1, -w, -1), (-w + 1, -w, 1), (w - 1, w, -1), (w + 1, w, 1))
     push, pop = heapq.heappush, heapq.heappop
-    found = False
     while heap:
         _f, d, u = pop(heap)
         if u == g:
-            found = True
-            break
+            return came
         if d > best[u]:
             continue  # a stale entry
         cu = cost[u]
@@ -175,17 +191,16 @@ def astar(
                 vi, vj = divmod(v, w)
                 hi, hj = abs(vi - gi), abs(vj - gj)
                 push(heap, (nd + (hi + hj) + (SQRT2 - 2.0) * (hi if hi < hj else hj), nd, v))
-    if not found:
-        raise NoPath("no passable route to the goal")
+    return None
+
+
+def _walk_back(came: list[int], s: int, g: int, w: int) -> list[tuple[int, int]]:
+    """The path from `s` to `g` (padded cells) as (row, col) of the grid."""
     path = [g]
     while path[-1] != s:
         path.append(came[path[-1]])
     path.reverse()
-    out = []
-    for c in path:
-        i, j = divmod(c, w)
-        out.append((i - 1, j - 1))
-    return out
+    return [(c // w - 1, c % w - 1) for c in path]
 
 
 def smooth(
@@ -200,40 +215,44 @@ def smooth(
     out = [points[0]]
     k = 0
     while k < n - 1:
-        run_max = []
-        m = 0
-        for c in codes[k:]:
-            m = max(m, c)
-            run_max.append(m)
+        run_max = list(accumulate(codes[k:], max))  # the worst code from k to each j
 
         def ok(j: int, k: int = k, run_max: list[int] = run_max) -> bool:
             return line_max(terrain, geom, points[k], points[j]) <= run_max[j - k]
 
-        lo = k + 1  # always fine: consecutive cells
-        step = 1
-        hi = None
-        while True:
-            j = min(k + 1 + step, n - 1)
-            if j == lo:
-                break
-            if ok(j):
-                lo = j
-                if j == n - 1:
-                    break
-                step *= 2
-            else:
-                hi = j
-                break
-        if hi is not None:
-            while hi - lo > 1:
-                mid = (lo + hi) // 2
-                if ok(mid):
-                    lo = mid
-                else:
-                    hi = mid
-        out.append(points[lo])
-        k = lo
+        k = _farthest(ok, k + 1, n - 1)  # k + 1 is always fine: consecutive cells
+        out.append(points[k])
     return out
+
+
+def _farthest(ok: Callable[[int], bool], first: int, last: int) -> int:
+    """The j in first..last up to which `ok` holds (it holds at `first`):
+    steps doubling from `first` until it fails, then bisection."""
+    lo, hi = _gallop(ok, first, last)
+    if hi is not None:
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if ok(mid):
+                lo = mid
+            else:
+                hi = mid
+    return lo
+
+
+def _gallop(ok: Callable[[int], bool], first: int, last: int) -> tuple[int, int | None]:
+    """(the farthest j found where `ok` holds, the first where it fails or None)."""
+    lo = first
+    step = 1
+    while True:
+        j = min(first + step, last)
+        if j == lo:
+            return lo, None
+        if not ok(j):
+            return lo, j
+        lo = j
+        if j == last:
+            return lo, None
+        step *= 2
 
 
 def plan(
@@ -327,18 +346,9 @@ def lawnmower(
     lanes_n = max(1, int(math.ceil(height / spacing)))
     step = height / lanes_n if lanes_n else 0.0
     lanes: list[tuple[float, float, float]] = []  # (y, xa, xb)
-    n = len(polygon)
     for k in range(lanes_n):
         y = ylo + step * (k + 0.5) if height > 0 else ylo
-        xs: list[float] = []
-        for e in range(n):
-            xa, ya = polygon[e]
-            xb, yb = polygon[(e + 1) % n]
-            if ya == yb:
-                continue
-            if (ya > y) != (yb > y):
-                xs.append(xa + (y - ya) * (xb - xa) / (yb - ya))
-        xs.sort()
+        xs = _crossings(polygon, y)
         for a, b in zip(xs[0::2], xs[1::2], strict=False):
             inset = min(spacing * 0.5, (b - a) / 2)
             lanes.append((y, a + inset, b - inset))
@@ -347,8 +357,27 @@ def lawnmower(
     # start from the lane nearest to `start`: sweep bottom-up or top-down
     if abs(lanes[-1][0] - start[1]) < abs(lanes[0][0] - start[1]):
         lanes.reverse()
+    return _mow(lanes, start[0])
+
+
+def _crossings(polygon: Sequence[tuple[float, float]], y: float) -> list[float]:
+    """Where the line at height `y` crosses the polygon's edges, west to east."""
+    n = len(polygon)
+    xs: list[float] = []
+    for e in range(n):
+        xa, ya = polygon[e]
+        xb, yb = polygon[(e + 1) % n]
+        if ya == yb:
+            continue
+        if (ya > y) != (yb > y):
+            xs.append(xa + (y - ya) * (xb - xa) / (yb - ya))
+    xs.sort()
+    return xs
+
+
+def _mow(lanes: list[tuple[float, float, float]], x_now: float) -> list[tuple[float, float]]:
+    """The lanes in order, each driven from its end nearest to where the last one ended."""
     out: list[tuple[float, float]] = []
-    x_now = start[0]
     for y, a, b in lanes:
         if abs(a - x_now) <= abs(b - x_now):
             out += [(a, y), (b, y)]

@@ -153,17 +153,24 @@ class Terrain:
             if not g.inside(cx, cy):
                 continue
             if not reach[g.cell_of(cx, cy)]:
-                rows, cols, mask = g.disk(cx, cy, 1.0)
-                t[rows, cols][mask] = FREE
-                n = int(math.hypot(cx - lx, cy - ly) / (g.cell * 0.5)) + 2
-                for k in range(n + 1):
-                    f = k / n
-                    i, j = g.cell_of(cx + (lx - cx) * f, cy + (ly - cy) * f)
-                    if t[i, j] == ROCK:
-                        t[max(i - 1, 0) : i + 2, max(j - 1, 0) : j + 2][
-                            t[max(i - 1, 0) : i + 2, max(j - 1, 0) : j + 2] == ROCK
-                        ] = SLOW
+                self._carve(t, (cx, cy), (lx, ly))
                 carved = True
         if carved:
             reach = self._reachable(t)
         t[(t != ROCK) & ~reach] = ROCK
+
+    def _carve(self, t: np.ndarray, a: tuple[float, float], b: tuple[float, float]) -> None:
+        """Free ground at `a` and a corridor of sand from it to `b` through the
+        rocks on the way (three cells wide)."""
+        g = self.geom
+        (cx, cy), (lx, ly) = a, b
+        rows, cols, mask = g.disk(cx, cy, 1.0)
+        t[rows, cols][mask] = FREE
+        n = int(math.hypot(cx - lx, cy - ly) / (g.cell * 0.5)) + 2
+        for k in range(n + 1):
+            f = k / n
+            i, j = g.cell_of(cx + (lx - cx) * f, cy + (ly - cy) * f)
+            if t[i, j] == ROCK:
+                t[max(i - 1, 0) : i + 2, max(j - 1, 0) : j + 2][
+                    t[max(i - 1, 0) : i + 2, max(j - 1, 0) : j + 2] == ROCK
+                ] = SLOW

@@ -12,6 +12,7 @@ Problems are reported like the mission files': `file:line:col: path: message`
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Final, Literal
 
@@ -222,50 +223,82 @@ def _inside(site: Site, x: float, y: float) -> bool:
     return site.x_min <= x <= site.x_max and site.y_min <= y <= site.y_max
 
 
-def check_world(w: WorldFile) -> list[tuple[tuple[str | int, ...], str]]:
+Problem = tuple[tuple[str | int, ...], str]  # (field path, sentence)
+
+
+def check_world(w: WorldFile) -> list[Problem]:
     """Semantic problems: (field path, sentence)."""
-    out: list[tuple[tuple[str | int, ...], str]] = []
-    s = w.site
-    if not _inside(s, w.lander.x, w.lander.y):
-        out.append(
-            (("lander",), f"the lander ({w.lander.x:g}, {w.lander.y:g}) is outside the site")
-        )
+    return [problem for check in _CHECKS for problem in check(w)]
+
+
+def _lander_problems(w: WorldFile) -> list[Problem]:
+    if _inside(w.site, w.lander.x, w.lander.y):
+        return []
+    return [(("lander",), f"the lander ({w.lander.x:g}, {w.lander.y:g}) is outside the site")]
+
+
+def _region_problems(w: WorldFile) -> list[Problem]:
+    out: list[Problem] = []
     names: set[str] = set()
     for i, r in enumerate(w.rss):
         if r.name in names:
             out.append((("rss", i, "name"), f"duplicate region name '{r.name}'"))
         names.add(r.name)
-        if not _inside(s, r.x, r.y):
+        if not _inside(w.site, r.x, r.y):
             out.append((("rss", i), f"region {r.name} ({r.x:g}, {r.y:g}) is outside the site"))
-    slots: dict[int, str] = {}
+    return out
+
+
+def _box_problems(w: WorldFile) -> list[Problem]:
+    out: list[Problem] = []
+    slots: dict[int, str] = {}  # slot -> the box in it
     for name, b in w.boxes.items():
         if b.at == "shelf" and b.slot is not None:
-            if b.slot > w.lander.shelf_slots:
-                out.append(
-                    (
-                        ("boxes", name, "slot"),
-                        f"slot {b.slot} does not exist (the shelf has {w.lander.shelf_slots})",
-                    )
-                )
-            elif b.slot in slots:
-                out.append(
-                    (("boxes", name, "slot"), f"slot {b.slot} already holds {slots[b.slot]}")
-                )
+            out += _slot_problems(w, name, b.slot, slots)
             slots[b.slot] = name
-        if b.at == "ground" and b.x is not None and b.y is not None and not _inside(s, b.x, b.y):
+        if (
+            b.at == "ground"
+            and b.x is not None
+            and b.y is not None
+            and not _inside(w.site, b.x, b.y)
+        ):
             out.append((("boxes", name), "the box lies outside the site"))
-    for name, m in w.models.items():
-        if m.speed > m.max_speed:
-            out.append(
-                (
-                    ("models", name, "speed"),
-                    f"cruise speed {m.speed:g} is above max_speed {m.max_speed:g}",
-                )
-            )
-    for name, start in w.robots.items():
-        if not _inside(s, start.x, start.y):
-            out.append((("robots", name), f"start ({start.x:g}, {start.y:g}) is outside the site"))
     return out
+
+
+def _slot_problems(w: WorldFile, name: str, slot: int, slots: dict[int, str]) -> list[Problem]:
+    where = ("boxes", name, "slot")
+    if slot > w.lander.shelf_slots:
+        return [(where, f"slot {slot} does not exist (the shelf has {w.lander.shelf_slots})")]
+    if slot in slots:
+        return [(where, f"slot {slot} already holds {slots[slot]}")]
+    return []
+
+
+def _model_problems(w: WorldFile) -> list[Problem]:
+    return [
+        (("models", name, "speed"), f"cruise speed {m.speed:g} is above max_speed {m.max_speed:g}")
+        for name, m in w.models.items()
+        if m.speed > m.max_speed
+    ]
+
+
+def _start_problems(w: WorldFile) -> list[Problem]:
+    return [
+        (("robots", name), f"start ({start.x:g}, {start.y:g}) is outside the site")
+        for name, start in w.robots.items()
+        if not _inside(w.site, start.x, start.y)
+    ]
+
+
+# in the order a world file is written
+_CHECKS: tuple[Callable[[WorldFile], list[Problem]], ...] = (
+    _lander_problems,
+    _region_problems,
+    _box_problems,
+    _model_problems,
+    _start_problems,
+)
 
 
 def parse_world(text: str, file: str = "<world>") -> WorldFile:

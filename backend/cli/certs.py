@@ -52,38 +52,41 @@ def prepare_parser(subparsers: Any) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     from backend.server.certs import make_certs
 
-    bad = [n for n in args.client if not _NAME.match(n)]
-    if bad:
-        print(
-            f"missionctl certs: invalid client name(s) {', '.join(map(repr, bad))}: "
-            "use letters, digits, '.', '_', '-'",
-            file=sys.stderr,
-        )
-        return EXIT_BAD_INPUT
-    if args.days < 1:
-        print("missionctl certs: --days must be at least 1", file=sys.stderr)
+    problem = _usage_problem(args)
+    if problem is not None:
+        print(f"missionctl certs: {problem}", file=sys.stderr)
         return EXIT_BAD_INPUT
     try:
         written = make_certs(
             Path(args.dir), server_names=args.server_name, clients=args.client, days=args.days
         )
-    except ImportError:
-        print(
-            "missionctl certs: needs the 'cryptography' package (pip install cryptography)",
-            file=sys.stderr,
-        )
-        return EXIT_BAD_INPUT
-    except OSError as e:  # a folder that cannot be made or written: say which and why
-        where = e.filename or args.dir
-        print(
-            f"missionctl certs: cannot write into {where}: {e.strerror or e}; "
-            "choose a DIR you can create and write",
-            file=sys.stderr,
-        )
-        return EXIT_BAD_INPUT
-    except ValueError as e:
-        print(f"missionctl certs: {e}", file=sys.stderr)
+    except (ImportError, OSError, ValueError) as e:
+        print(f"missionctl certs: {_not_written(e, args.dir)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     for path in written:
         print(path)
     return EXIT_OK
+
+
+def _usage_problem(args: argparse.Namespace) -> str | None:
+    bad = [n for n in args.client if not _NAME.match(n)]
+    if bad:
+        return (
+            f"invalid client name(s) {', '.join(map(repr, bad))}: "
+            "use letters, digits, '.', '_', '-'"
+        )
+    if args.days < 1:
+        return "--days must be at least 1"
+    return None
+
+
+def _not_written(e: Exception, folder: str) -> str:
+    """Why no certificate was written, and what to do."""
+    if isinstance(e, ImportError):
+        return "needs the 'cryptography' package (pip install cryptography)"
+    if isinstance(e, OSError):  # a folder that cannot be made or written: say which and why
+        return (
+            f"cannot write into {e.filename or folder}: {e.strerror or e}; "
+            "choose a DIR you can create and write"
+        )
+    return str(e)

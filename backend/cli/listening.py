@@ -67,20 +67,8 @@ def config_file_options(args: argparse.Namespace) -> dict[str, Any]:
 
 def tls_listen_options(args: argparse.Namespace) -> dict[str, Any]:
     """Zenoh options for --tls-cert/--tls-key/--tls-ca; checks they fit --listen."""
-    tls_listen = any(e.startswith("tls/") for e in args.listen or [])
-    if not (args.tls_cert or args.tls_key or args.tls_ca):
-        if tls_listen:
-            raise ValueError(
-                "a tls/ endpoint needs --tls-cert FILE and --tls-key FILE (see missionctl certs)"
-            )
+    if not _uses_tls(args):
         return {}
-    if not (args.tls_cert and args.tls_key):
-        raise ValueError("--tls-cert and --tls-key go together")
-    if not tls_listen:
-        raise ValueError(
-            "--tls-cert/--tls-key/--tls-ca need a tls/ endpoint in --listen "
-            "(e.g. --listen tls/0.0.0.0:7447)"
-        )
     for opt, path in (
         ("--tls-cert", args.tls_cert),
         ("--tls-key", args.tls_key),
@@ -96,6 +84,26 @@ def tls_listen_options(args: argparse.Namespace) -> dict[str, Any]:
         out["transport/link/tls/root_ca_certificate"] = str(Path(args.tls_ca).resolve())
         out["transport/link/tls/enable_mtls"] = True
     return out
+
+
+def _uses_tls(args: argparse.Namespace) -> bool:
+    """--listen and the --tls-* options ask for TLS (a ValueError when they
+    do not go together)."""
+    tls_listen = any(e.startswith("tls/") for e in args.listen or [])
+    if not (args.tls_cert or args.tls_key or args.tls_ca):
+        if tls_listen:
+            raise ValueError(
+                "a tls/ endpoint needs --tls-cert FILE and --tls-key FILE (see missionctl certs)"
+            )
+        return False
+    if not (args.tls_cert and args.tls_key):
+        raise ValueError("--tls-cert and --tls-key go together")
+    if not tls_listen:
+        raise ValueError(
+            "--tls-cert/--tls-key/--tls-ca need a tls/ endpoint in --listen "
+            "(e.g. --listen tls/0.0.0.0:7447)"
+        )
+    return True
 
 
 def log_to_stderr(verbose: bool) -> None:

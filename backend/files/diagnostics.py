@@ -6,6 +6,7 @@ issues with sentences an operator can act on (not pydantic's wording).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
@@ -51,22 +52,34 @@ def _clean_loc(data: Any, loc: tuple[str | int, ...]) -> Path:
     adds for tagged unions (the marker kind) and validators."""
     out: list[str | int] = []
     cur = data
-    for i, seg in enumerate(loc):
-        nxt = loc[i + 1] if i + 1 < len(loc) else None
-        if seg == "[key]":
-            continue  # the error is about the key itself
-        if isinstance(cur, dict) and cur.get("kind") == seg and nxt is not None and nxt in cur:
-            continue  # union tag
-        if isinstance(cur, dict) and seg in cur:
-            out.append(seg if isinstance(seg, str) else str(seg))  # a key, not an index
-            cur = cur[seg]
-        elif isinstance(cur, list) and isinstance(seg, int) and 0 <= seg < len(cur):
-            out.append(seg)
-            cur = cur[seg]
-        elif isinstance(cur, dict) and isinstance(seg, str) and not seg.startswith("function-"):
-            out.append(seg)  # a missing field: nothing below it exists
-            cur = None
+    for seg, nxt in zip(loc, (*loc[1:], None), strict=False):
+        if seg == "[key]" or _is_union_tag(cur, seg, nxt):
+            continue  # "[key]": the error is about the key itself
+        step = _step(cur, seg)
+        if step is not None:
+            out.append(step[0])
+            cur = step[1]
     return tuple(out)
+
+
+def _is_union_tag(cur: Any, seg: str | int, nxt: str | int | None) -> bool:
+    """`seg` is the tag pydantic puts in the location of a tagged union's
+    member (the marker's kind), not a field of the data."""
+    return isinstance(cur, dict) and nxt is not None and cur.get("kind") == seg and nxt in cur
+
+
+def _step(cur: Any, seg: str | int) -> tuple[str | int, Any] | None:
+    """The path segment `seg` is in the data under `cur`, and the data below
+    it; None for a segment pydantic adds (a validator's)."""
+    if isinstance(cur, dict):
+        if seg in cur:
+            return (seg if isinstance(seg, str) else str(seg)), cur[seg]  # a key, not an index
+        if isinstance(seg, str) and not seg.startswith("function-"):
+            return seg, None  # a missing field: nothing below it exists
+        return None
+    if isinstance(cur, list) and isinstance(seg, int) and 0 <= seg < len(cur):
+        return seg, cur[seg]
+    return None
 
 
 _EXPECTED = {
@@ -111,46 +124,103 @@ def _shown(value: Any) -> str:
     return text[: LIMITS.echo] + "…"
 
 
-def _sentence(err: ErrorDetails) -> str:
-    t = err["type"]
+def _last(err: ErrorDetails) -> str | int:
     loc = err["loc"]
-    last = loc[-1] if loc else ""
-    if t == "missing":
-        return f"missing required field '{last}'"
-    if t == "extra_forbidden":
-        return f"unknown field '{last}'"
-    if t == "literal_error" and last == "format":
-        return f"unsupported format {_shown(err.get('input'))}; expected {err['ctx']['expected']}"
-    if t == "union_tag_invalid":
-        tag, expected = err["ctx"].get("tag"), err["ctx"].get("expected_tags")
-        return f"unknown kind {_shown(tag)}; expected one of {expected}"
-    if t == "union_tag_not_found":
-        return "missing field 'kind' (pose, position or area)"
-    value = _shown(err.get("input"))
-    ctx = err.get("ctx", {})
-    if t in _EXPECTED:
-        return f"expected {_EXPECTED[t]}, got {value}"
-    if t == "string_pattern_mismatch":
-        pattern = ctx.get("pattern", "")
-        return f"{value} " + _PATTERNS.get(pattern, f"does not match {pattern}")
-    if t in ("enum", "literal_error"):
-        return f"{value} is not one of: {ctx.get('expected')}"
-    if t in ("greater_than_equal", "greater_than"):
-        bound = ctx.get("ge", ctx.get("gt"))
-        return f"{value} is below the minimum {bound}"
-    if t in ("less_than_equal", "less_than"):
-        bound = ctx.get("le", ctx.get("lt"))
-        return f"{value} is above the maximum {bound}"
-    if t == "too_short":
-        if len(loc) >= 3 and loc[0] == "barriers" and loc[-1] == "skills":
-            return "a barrier needs skills of at least two robots"
-        return f"needs at least {ctx.get('min_length')} items, has {ctx.get('actual_length')}"
-    if t == "too_long":
-        return f"has more than {ctx.get('max_length')} items or characters"
-    msg: str = err["msg"]
-    if msg.startswith("Value error, "):
-        msg = msg[len("Value error, ") :]
-    return msg
+    return loc[-1] if loc else ""
+
+
+def _value(err: ErrorDetails) -> str:
+    return _shown(err.get("input"))
+
+
+def _ctx(err: ErrorDetails) -> dict[str, Any]:
+    return err.get("ctx", {})
+
+
+def _missing(err: ErrorDetails) -> str:
+    return f"missing required field '{_last(err)}'"
+
+
+def _unknown_field(err: ErrorDetails) -> str:
+    return f"unknown field '{_last(err)}'"
+
+
+def _literal(err: ErrorDetails) -> str:
+    if _last(err) == "format":
+        return f"unsupported format {_value(err)}; expected {err['ctx']['expected']}"
+    return _not_one_of(err)
+
+
+def _not_one_of(err: ErrorDetails) -> str:
+    return f"{_value(err)} is not one of: {_ctx(err).get('expected')}"
+
+
+def _unknown_kind(err: ErrorDetails) -> str:
+    tag, expected = err["ctx"].get("tag"), err["ctx"].get("expected_tags")
+    return f"unknown kind {_shown(tag)}; expected one of {expected}"
+
+
+def _no_kind(err: ErrorDetails) -> str:
+    return "missing field 'kind' (pose, position or area)"
+
+
+def _wrong_type(err: ErrorDetails) -> str:
+    return f"expected {_EXPECTED[err['type']]}, got {_value(err)}"
+
+
+def _no_match(err: ErrorDetails) -> str:
+    pattern = _ctx(err).get("pattern", "")
+    return f"{_value(err)} " + _PATTERNS.get(pattern, f"does not match {pattern}")
+
+
+def _below(err: ErrorDetails) -> str:
+    ctx = _ctx(err)
+    return f"{_value(err)} is below the minimum {ctx.get('ge', ctx.get('gt'))}"
+
+
+def _above(err: ErrorDetails) -> str:
+    ctx = _ctx(err)
+    return f"{_value(err)} is above the maximum {ctx.get('le', ctx.get('lt'))}"
+
+
+def _too_short(err: ErrorDetails) -> str:
+    loc = err["loc"]
+    if len(loc) >= 3 and loc[0] == "barriers" and loc[-1] == "skills":
+        return "a barrier needs skills of at least two robots"
+    ctx = _ctx(err)
+    return f"needs at least {ctx.get('min_length')} items, has {ctx.get('actual_length')}"
+
+
+def _too_long(err: ErrorDetails) -> str:
+    return f"has more than {_ctx(err).get('max_length')} items or characters"
+
+
+def _own_words(err: ErrorDetails) -> str:
+    """A validator's own message, without pydantic's prefix."""
+    return err["msg"].removeprefix("Value error, ")
+
+
+# pydantic error type -> the sentence saying it (others: the error's message)
+_PHRASES: dict[str, Callable[[ErrorDetails], str]] = {
+    "missing": _missing,
+    "extra_forbidden": _unknown_field,
+    "literal_error": _literal,
+    "enum": _not_one_of,
+    "union_tag_invalid": _unknown_kind,
+    "union_tag_not_found": _no_kind,
+    **dict.fromkeys(_EXPECTED, _wrong_type),
+    "string_pattern_mismatch": _no_match,
+    "greater_than_equal": _below,
+    "greater_than": _below,
+    "less_than_equal": _above,
+    "less_than": _above,
+    "too_short": _too_short,
+    "too_long": _too_long,
+}
+
+
+def _sentence(err: ErrorDetails) -> str:
+    return _PHRASES.get(err["type"], _own_words)(err)
 
 
 def pydantic_issues(file: str, doc: yamlio.YamlDoc, exc: ValidationError) -> list[Issue]:

@@ -38,6 +38,22 @@ M = TypeVar("M", bound=BaseModel)  # a file format's model
 
 def read_yaml(path: FsPath) -> tuple[str, yamlio.YamlDoc]:
     file = str(path)
+    text = _read_text(path, file)
+    try:
+        doc = yamlio.load(text)
+    except yamlio.YamlSyntaxError as e:
+        raise FileProblems(
+            [Issue(file, path, message, line, col) for line, col, message, path in e.problems]
+        ) from None
+    if not isinstance(doc.data, dict):
+        raise FileProblems(
+            [Issue(file, (), "expected a YAML mapping at the top of the file", 1, 1)]
+        )
+    return file, doc
+
+
+def _read_text(path: FsPath, file: str) -> str:
+    """The file's text, or FileProblems saying why it cannot be read."""
     try:
         size = path.stat().st_size
         if size > LIMITS.file and path.is_file():  # not read: it could be anything
@@ -54,17 +70,7 @@ def read_yaml(path: FsPath) -> tuple[str, yamlio.YamlDoc]:
         ) from None
     except OSError as e:
         raise FileProblems([Issue(file, (), f"cannot read: {e.strerror}")]) from None
-    try:
-        doc = yamlio.load(text)
-    except yamlio.YamlSyntaxError as e:
-        raise FileProblems(
-            [Issue(file, path, message, line, col) for line, col, message, path in e.problems]
-        ) from None
-    if not isinstance(doc.data, dict):
-        raise FileProblems(
-            [Issue(file, (), "expected a YAML mapping at the top of the file", 1, 1)]
-        )
-    return file, doc
+    return text
 
 
 def file_kind(data: dict[str, Any]) -> str | None:
@@ -100,18 +106,25 @@ def _format_problem(file: str, doc: yamlio.YamlDoc, expected: str) -> FileProble
     said = file_kind({"format": fmt}) if isinstance(fmt, str) else None
     if said is None:
         return None  # no format, or another one: the model says which it expects
-    has = {kind: [f for f in fields if f in doc.data] for kind, fields in _FIELDS.items()}
-    content = next((k for k in has if has[k] and not any(has[o] for o in has if o != k)), None)
+    content, fields = _own_fields(doc.data)
     if content is not None and content != said:
         message = (
             f"{fmt!r} is the format of {_NAMES[said]}, but this file has the fields of "
-            f"{_NAMES[content]} ({', '.join(has[content])}): set 'format: {_FORMATS[content]}'"
+            f"{_NAMES[content]} ({', '.join(fields)}): set 'format: {_FORMATS[content]}'"
         )
     elif said != expected:
         message = f"this is {_NAMES[said]} ({fmt!r}), not {_NAMES[expected]}"
     else:
         return None
     return FileProblems([located(file, doc, ("format",), message)])
+
+
+def _own_fields(data: dict[str, Any]) -> tuple[str | None, list[str]]:
+    """The one kind of file whose own fields `data` has, and those fields
+    (None: it has the fields of neither kind, or of both)."""
+    has = {kind: [f for f in fields if f in data] for kind, fields in _FIELDS.items()}
+    kinds = [kind for kind, fields in has.items() if fields]
+    return (kinds[0], has[kinds[0]]) if len(kinds) == 1 else (None, [])
 
 
 def load_library(path: str | FsPath) -> Library:
@@ -173,9 +186,22 @@ def _mission_from(file: str, doc: yamlio.YamlDoc) -> tuple[Mission, Library]:
         doc.data, entries=(("markers",), ("robots",), ("barriers",)), required=("format", "library")
     )
     m, issues = _validated(Mission, file, doc, salvage)
-    lib_file = library_path(file, m.library)
+    lib = _library_of(file, doc, m, issues)
+    resolve_shorthands(m, lib)
+    for path, msg in check_mission(m, lib):
+        if not salvage.explains(msg):
+            issues.append(located(file, doc, _written_at(salvage, doc, path), msg))
+    if issues:
+        raise FileProblems(_sorted(issues))
+    _fill_counters(m)
+    return m, lib
+
+
+def _library_of(file: str, doc: yamlio.YamlDoc, m: Mission, issues: list[Issue]) -> Library:
+    """The library the mission names; when it cannot be loaded, FileProblems
+    with the mission's `issues`, one saying so, then the library's."""
     try:
-        lib = load_library(lib_file)
+        return load_library(library_path(file, m.library))
     except FileProblems as e:
         head = located(
             file,
@@ -184,18 +210,15 @@ def _mission_from(file: str, doc: yamlio.YamlDoc) -> tuple[Mission, Library]:
             f"library '{m.library}' cannot be loaded ({len(e.issues)} problem(s) listed below)",
         )
         raise FileProblems([*_sorted([*issues, head]), *e.issues]) from None
-    resolve_shorthands(m, lib)
-    for path, msg in check_mission(m, lib):
-        if salvage.explains(msg):
-            continue
-        path = salvage.original(path)
-        if len(path) > 4 and path[3] == "bindings" and (*path[:3], "params", path[4]) in doc.marks:
-            path = (*path[:3], "params", *path[4:])  # written as "@MARKER" under params
-        issues.append(located(file, doc, path, msg))
-    if issues:
-        raise FileProblems(_sorted(issues))
-    _fill_counters(m)
-    return m, lib
+
+
+def _written_at(salvage: _Salvage, doc: yamlio.YamlDoc, path: Path) -> Path:
+    """Where in the file the model's `path` was written: a task item at its
+    index before the salvage, a marker binding under params ("@MARKER")."""
+    path = salvage.original(path)
+    if len(path) > 4 and path[3] == "bindings" and (*path[:3], "params", path[4]) in doc.marks:
+        return (*path[:3], "params", *path[4:])
+    return path
 
 
 class _Unsalvageable(Exception):
@@ -217,43 +240,54 @@ class _Salvage:
 
     def without(self, paths: list[Path]) -> dict[Any, Any]:
         data: dict[Any, Any] = copy.deepcopy(self.data)
-        drop_items: dict[str, set[int]] = {}
+        drop_items: dict[str, set[int]] = {}  # robot -> indices of its broken task items
         for p in paths:
-            if not p or (len(p) == 1 and p[0] in self.required):
-                raise _Unsalvageable(p)
-            if len(p) == 1:
-                data.pop(p[0], None)  # an unknown or broken optional field
-            elif (where := self._entry(data, p)) is not None:
-                container, name = where
-                container.pop(name, None)
-                self.dropped.add(str(name))
-            elif p[0] == "tasks" and len(p) >= 3 and isinstance(p[2], int):
-                drop_items.setdefault(str(p[1]), set()).add(p[2])
-            elif p[0] == "tasks" and isinstance(data.get("tasks"), dict):
-                data["tasks"].pop(p[1], None)
-                self.dropped.add(str(p[1]))
-            else:
-                raise _Unsalvageable(p)
+            self._drop(data, p, drop_items)
         for robot, idx in drop_items.items():
-            items = data["tasks"][robot]
-            for i in idx:
-                if isinstance(items[i], dict) and isinstance(items[i].get("id"), str):
-                    self.dropped.add(items[i]["id"])
-            self.kept[robot] = [i for i in range(len(items)) if i not in idx]
-            data["tasks"][robot] = [items[i] for i in self.kept[robot]]
+            self._drop_items(data, robot, idx)
         return data
+
+    def _drop(self, data: dict[Any, Any], p: Path, drop_items: dict[str, set[int]]) -> None:
+        """Drop what the broken path `p` is in (task items: noted in
+        `drop_items`, dropped after, as their indices are the paths'), or
+        raise _Unsalvageable."""
+        if not p or (len(p) == 1 and p[0] in self.required):
+            raise _Unsalvageable(p)
+        if len(p) == 1:
+            data.pop(p[0], None)  # an unknown or broken optional field
+        elif (where := self._entry(data, p)) is not None:
+            container, name = where
+            container.pop(name, None)
+            self.dropped.add(str(name))
+        elif p[0] == "tasks":
+            self._drop_task(data, p, drop_items)
+        else:
+            raise _Unsalvageable(p)
+
+    def _drop_task(self, data: dict[Any, Any], p: Path, drop_items: dict[str, set[int]]) -> None:
+        if len(p) >= 3 and isinstance(p[2], int):
+            drop_items.setdefault(str(p[1]), set()).add(p[2])
+        elif isinstance(data.get("tasks"), dict):
+            data["tasks"].pop(p[1], None)
+            self.dropped.add(str(p[1]))
+        else:
+            raise _Unsalvageable(p)
+
+    def _drop_items(self, data: dict[Any, Any], robot: str, idx: set[int]) -> None:
+        """Drop task items `idx` of `robot`, remembering their ids and where
+        the kept ones were."""
+        items = data["tasks"][robot]
+        for i in idx:
+            if isinstance(items[i], dict) and isinstance(items[i].get("id"), str):
+                self.dropped.add(items[i]["id"])
+        self.kept[robot] = [i for i in range(len(items)) if i not in idx]
+        data["tasks"][robot] = [items[i] for i in self.kept[robot]]
 
     def _entry(self, data: Any, p: Path) -> tuple[dict[Any, Any], Any] | None:
         """The mapping holding the deepest droppable entry on path `p`."""
         for pattern in sorted(self.entries, key=len, reverse=True):
-            if len(p) > len(pattern) and all(
-                a == "*" or a == b for a, b in zip(pattern, p, strict=False)
-            ):
-                cur = data
-                for seg in p[: len(pattern)]:
-                    cur = cur.get(seg) if isinstance(cur, dict) else None
-                if isinstance(cur, dict):
-                    return cur, p[len(pattern)]
+            if _below(pattern, p) and isinstance(cur := _at(data, p[: len(pattern)]), dict):
+                return cur, p[len(pattern)]
         return None
 
     def explains(self, message: str) -> bool:
@@ -273,6 +307,20 @@ class _Salvage:
         ):
             return (*path[:2], self.kept[path[1]][path[2]], *path[3:])
         return path
+
+
+def _below(pattern: tuple[str, ...], p: Path) -> bool:
+    """Path `p` leads below `pattern` ("*": any segment)."""
+    return len(p) > len(pattern) and all(
+        a == "*" or a == b for a, b in zip(pattern, p, strict=False)
+    )
+
+
+def _at(data: Any, path: Path) -> Any:
+    """The value at `path` in `data`, None when there is none."""
+    for seg in path:
+        data = data.get(seg) if isinstance(data, dict) else None
+    return data
 
 
 def _fill_counters(m: Mission) -> None:

@@ -76,16 +76,21 @@ def load(text: str, limits: Limits = LIMITS) -> YamlDoc:
         doc.data = loader.construct_document(node)
         return doc
     except yaml.MarkedYAMLError as e:
-        mark = e.problem_mark or e.context_mark
-        line, col = (mark.line + 1, mark.column + 1) if mark else (1, 1)
-        what = e.problem or str(e)
-        if e.context and e.context not in what:
-            what = f"{e.context}: {what}"
-        raise YamlSyntaxError(line, col, f"YAML syntax error: {what}") from None
+        raise _syntax_error(e) from None
     except yaml.YAMLError as e:
         raise YamlSyntaxError(1, 1, f"YAML error: {e}") from None
     finally:
         loader.dispose()
+
+
+def _syntax_error(e: yaml.MarkedYAMLError) -> YamlSyntaxError:
+    """The parser's error where it found it, its context first."""
+    mark = e.problem_mark or e.context_mark
+    line, col = (mark.line + 1, mark.column + 1) if mark else (1, 1)
+    what = e.problem or str(e)
+    if e.context and e.context not in what:
+        what = f"{e.context}: {what}"
+    return YamlSyntaxError(line, col, f"YAML syntax error: {what}")
 
 
 def _pos(mark: Any) -> tuple[int, int]:
@@ -158,17 +163,20 @@ class _Scan:
         else:
             path = self._place(top, e)
         if len(e.value) > self.limits.text:
-            what = too_long(len(e.value), self.limits)
-            shown = echo(e.value, self.limits)
-            if at_key:  # said of the mapping: the path would hold the key
-                self._problem(_pos(e.start_mark), path[:-1], f"a key of {what} ({shown})")
-            else:
-                self._problem(_pos(e.start_mark), path, f"{what} ({shown})")
+            self._too_long(e, path, at_key)
         if e.anchor is not None:
             self.anchors[e.anchor] = (1, 0, self._key_text(e))
         self.nodes += 1
         if self.nodes > self.limits.yaml_nodes:
             self._too_many_nodes(e, path)
+
+    def _too_long(self, e: Any, path: Path, at_key: bool) -> None:
+        what = too_long(len(e.value), self.limits)
+        shown = echo(e.value, self.limits)
+        if at_key:  # said of the mapping: the path would hold the key
+            self._problem(_pos(e.start_mark), path[:-1], f"a key of {what} ({shown})")
+        else:
+            self._problem(_pos(e.start_mark), path, f"{what} ({shown})")
 
     def _alias(self, e: Any) -> None:
         size, depth, text = self.anchors.get(e.anchor, (1, 0, None))
@@ -188,9 +196,13 @@ class _Scan:
         if self.nodes > self.limits.yaml_nodes:
             self._too_many_nodes(e, path)
         if top is not None:
-            top.below = max(top.below, depth)
-            if len(stack) + depth > self.limits.depth:
-                raise YamlSyntaxError(*_pos(e.start_mark), too_deep(self.limits.depth), brief(path))
+            self._nest(top, depth, e, path)
+
+    def _nest(self, top: _Frame, depth: int, e: Any, path: Path) -> None:
+        """An alias in `top` brings the nesting its anchor had (`depth`)."""
+        top.below = max(top.below, depth)
+        if len(self.stack) + depth > self.limits.depth:
+            raise YamlSyntaxError(*_pos(e.start_mark), too_deep(self.limits.depth), brief(path))
 
     def _open(self, e: Any) -> None:
         top = self.stack[-1] if self.stack else None

@@ -22,7 +22,7 @@ from datetime import UTC, datetime
 from typing import Any
 
 from backend.core.plan.checks import Finding, run_checks
-from backend.core.plan.forecast import Forecast, Forecaster, SkillForecast
+from backend.core.plan.forecast import Forecast, Forecaster, RobotForecast, SkillForecast
 from backend.core.plan.inputs import PlanInputs
 from backend.exit_codes import EXIT_OK, EXIT_REFUSED
 from backend.transport.timeouts import rtt
@@ -122,35 +122,44 @@ def _finding_lines(f: Finding, unicode: bool) -> list[str]:
 async def check(client: Any, args: argparse.Namespace) -> int:
     from backend.cli.ctl.render import unicode_ok
 
-    robots = list(args.robots or [])
     inputs = await gather(client, args.timeout)
+    found = _findings(client, list(args.robots or []), inputs)
+    if args.json:
+        _print_json(_check_json(found, inputs))
+    else:
+        _print_check(found, inputs, unicode_ok())
+    return EXIT_REFUSED if any(f.blocking for f in found) else EXIT_OK
+
+
+def _findings(client: Any, robots: list[str], inputs: PlanInputs) -> list[Finding]:
+    """The plan's findings that concern `robots` (none given: all)."""
     m = client.mission
     owner = {s.id: r for r, t in m.tasks.items() for s in t}
-    found = [f for f in run_checks(m, client.library, inputs) if _concerns(f, robots, owner)]
+    return [f for f in run_checks(m, client.library, inputs) if _concerns(f, robots, owner)]
+
+
+def _check_json(found: list[Finding], inputs: PlanInputs) -> dict[str, Any]:
+    errors = sum(f.severity == "error" for f in found)
+    return {
+        "ok": not any(f.blocking for f in found),
+        "errors": errors,
+        "warnings": len(found) - errors,
+        "waived": sum(f.waiver is not None for f in found),
+        "findings": [_finding_json(f) for f in found],
+        "inputs": _inputs_json(inputs),
+    }
+
+
+def _print_check(found: list[Finding], inputs: PlanInputs, unicode: bool) -> None:
+    for f in found:
+        for line in _finding_lines(f, unicode):
+            print(line)
     errors = sum(f.severity == "error" for f in found)
     waived = sum(f.waiver is not None for f in found)
-    blocking = sum(f.blocking for f in found)
-    if args.json:
-        _print_json(
-            {
-                "ok": blocking == 0,
-                "errors": errors,
-                "warnings": len(found) - errors,
-                "waived": waived,
-                "findings": [_finding_json(f) for f in found],
-                "inputs": _inputs_json(inputs),
-            }
-        )
-    else:
-        unicode = unicode_ok()
-        for f in found:
-            for line in _finding_lines(f, unicode):
-                print(line)
-        what = f"{errors} error(s) ({waived} waived), {len(found) - errors} warning(s)"
-        if not found:
-            what = "no findings: the plan passes every check"
-        print(f"{what} — checked with {_inputs_text(inputs)}", flush=True)
-    return EXIT_REFUSED if blocking else EXIT_OK
+    what = f"{errors} error(s) ({waived} waived), {len(found) - errors} warning(s)"
+    if not found:
+        what = "no findings: the plan passes every check"
+    print(f"{what} — checked with {_inputs_text(inputs)}", flush=True)
 
 
 # -- timeline ------------------------------------------------------------------------
@@ -233,17 +242,22 @@ def timeline_text(fc: Forecast, mission: Any) -> str:
     for robot, r in fc.robots.items():
         skills = {s.id: s for s in mission.tasks.get(robot, [])}
         rows = [_skill_line(f, skills[f.id]) for f in fc.robot_skills(robot)]
-        head = f"{robot}: ends {_clock(r.end)}" if r.end is not None else f"{robot}:"
-        if r.blocked_at is not None:
-            head += f" never: held at {r.blocked_at}"
-        elif not rows:
-            head += " nothing planned"
-        if r.battery_end is not None:
-            head += f", battery {_pct(r.battery_end)} at the end" + (
-                " (from an assumed full battery)" if r.battery_assumed else ""
-            )
-        lines += [head, *rows]
+        lines += [_robot_head(robot, r, planned=bool(rows)), *rows]
     return "\n".join(lines)
+
+
+def _robot_head(robot: str, r: RobotForecast, planned: bool) -> str:
+    """`lru1: ends 14:02:10, battery 40% at the end` (held, nothing planned)."""
+    head = f"{robot}: ends {_clock(r.end)}" if r.end is not None else f"{robot}:"
+    if r.blocked_at is not None:
+        head += f" never: held at {r.blocked_at}"
+    elif not planned:
+        head += " nothing planned"
+    if r.battery_end is not None:
+        head += f", battery {_pct(r.battery_end)} at the end" + (
+            " (from an assumed full battery)" if r.battery_assumed else ""
+        )
+    return head
 
 
 async def timeline(client: Any, args: argparse.Namespace) -> int:

@@ -19,6 +19,7 @@ from backend.cli.ctl.team import DESCRIBE as TEAM_DESCRIBE
 from backend.core.contact import sim_time_text
 from backend.core.contingency import marks, taken_text
 from backend.core.params import POSE_FIELDS, POSITION_FIELDS, is_angle, pose_text, value_text
+from backend.protocol.messages import RobotInfo
 
 _GLYPHS = {
     "idle": ("○", "."),
@@ -157,17 +158,17 @@ def _contact(c: Any) -> str:
 def _presence(info: Any) -> str:
     if info is None:
         return "not registered"
+    if not info.online:
+        return (
+            f"offline since {_time(info.since)}"
+            if info.since
+            else "offline (not seen since the server started)"
+        )
     c = info.contact
-    if info.online and c is not None and c.state == "out_of_contact":  # never "online" then
+    if c is not None and c.state == "out_of_contact":  # never "online" then
         return _contact(c) + (f" (present since {_time(info.since)})" if info.since else "")
-    if info.online:
-        online = f"online since {_time(info.since)}" if info.since else "online"
-        return online + (f", {_contact(c)}" if c is not None and c.state != "offline" else "")
-    return (
-        f"offline since {_time(info.since)}"
-        if info.since
-        else "offline (not seen since the server started)"
-    )
+    online = f"online since {_time(info.since)}" if info.since else "online"
+    return online + (f", {_contact(c)}" if c is not None and c.state != "offline" else "")
 
 
 def _marker_text(mk: Any) -> str:
@@ -281,22 +282,29 @@ def link_text(client: Any, name: str, now: datetime) -> str:
 
 def _robot_json(client: Any, name: str, now: datetime | None = None) -> dict[str, Any]:
     spec = client.mission.robots.get(name)
-    info = client.robots.get(name)
-    manifest = info.manifest if info else None
-    rtype = spec.type if spec else (manifest.type if manifest else None)
-    rt = client.library.robot_types.get(rtype) if rtype else None
+    # a robot the server never heard of: offline, no manifest, no contact
+    info = client.robots.get(name) or RobotInfo.model_construct(name=name)
+    manifest = info.manifest
+    rtype, kind = _robot_type(client, spec, manifest)
     return {
         "type": rtype,
-        "kind": rt.kind if rt else None,
+        "kind": kind,
         "in_mission": spec is not None,
-        "joining": bool(info and info.joining),
+        "joining": info.joining,
         "retired": spec.retired if spec else "",
-        "online": bool(info and info.online),
-        "since": _iso(info.since) if info else None,
-        "contact": info.contact.model_dump(mode="json") if info and info.contact else None,
+        "online": info.online,
+        "since": _iso(info.since),
+        "contact": info.contact.model_dump(mode="json") if info.contact else None,
         "manifest": manifest.model_dump(mode="json") if manifest else None,
         "link": link_json(client, name, now or datetime.now(UTC)),
     }
+
+
+def _robot_type(client: Any, spec: Any, manifest: Any) -> tuple[str | None, str | None]:
+    """(type, its kind): the mission's, else what the robot registered with."""
+    rtype = spec.type if spec else (manifest.type if manifest else None)
+    rt = client.library.robot_types.get(rtype) if rtype else None
+    return rtype, (rt.kind if rt else None)
 
 
 def _skill_json(m: Any, s: Any, locks: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -322,26 +330,32 @@ def state_json(client: Any, only: list[str] | None = None) -> dict[str, Any]:
     m = client.mission
     now = datetime.now(UTC)
     names = list(m.robots) + [r for r in client.robots if r not in m.robots]
-    locks = m.command_locks()
     return {
         "revision": m.revision,
         "name": m.name,
         "library": m.library,
         "server_id": client.server_id,
         "robots": {n: _robot_json(client, n, now) for n in names if _shown(n, only)},
-        "tasks": {
-            r: [_skill_json(m, s, locks) for s in task]
-            for r, task in m.tasks.items()
-            if _shown(r, only)
-        },
-        "uplink": {
-            r: [command_json(c, now) for c in cmds]
-            for r, cmds in m.uplink.items()
-            if _shown(r, only)
-        },
+        "tasks": _tasks_json(m, only),
+        "uplink": _uplink_json(m, now, only),
         "barriers": {bid: list(b.skills) for bid, b in m.barriers.items()},
         "markers": {n: mk.model_dump(mode="json") for n, mk in m.markers.items()},
         "waivers": {c: w.model_dump(mode="json") for c, w in m.waivers.items()},
+    }
+
+
+def _tasks_json(m: Any, only: list[str] | None) -> dict[str, list[dict[str, Any]]]:
+    locks = m.command_locks()
+    return {
+        r: [_skill_json(m, s, locks) for s in task]
+        for r, task in m.tasks.items()
+        if _shown(r, only)
+    }
+
+
+def _uplink_json(m: Any, now: datetime, only: list[str] | None) -> dict[str, list[Any]]:
+    return {
+        r: [command_json(c, now) for c in cmds] for r, cmds in m.uplink.items() if _shown(r, only)
     }
 
 
@@ -364,11 +378,7 @@ def _skill_line(s: Any, columns: str, lib: Any, dash: str, pending: Any = None) 
     `pending`: (command, now) when a pending command concerns it."""
     parts = [columns]
     if pending is not None:
-        c, now = pending
-        doing = {"sync": "uplinking", "retry": "retrying", "unsync": "unsynchronizing"}[c.op]
-        since = c.sent if c.sent is not None else c.created
-        verb = "sent" if c.sent is not None else "queued"
-        parts.append(f"({doing}: command {c.id}, {verb} {age_text(_since(since, now))} ago)")
+        parts.append(_pending_note(*pending))
     extra = short_params(s, lib)
     if extra:
         parts.append(extra)
@@ -383,25 +393,36 @@ def _skill_line(s: Any, columns: str, lib: Any, dash: str, pending: Any = None) 
     return "  ".join(parts).rstrip()
 
 
+def _pending_note(c: Any, now: datetime) -> str:
+    """`(uplinking: command 3, sent 12 s ago)`: the command a skill waits for."""
+    doing = {"sync": "uplinking", "retry": "retrying", "unsync": "unsynchronizing"}[c.op]
+    since = c.sent if c.sent is not None else c.created
+    verb = "sent" if c.sent is not None else "queued"
+    return f"({doing}: command {c.id}, {verb} {age_text(_since(since, now))} ago)"
+
+
 def _task_lines(m: Any, task: list[Any], lib: Any, unicode: bool) -> list[str]:
     if not task:
         return ["  (no skills)"]
     locks = m.command_locks()
     now = datetime.now(UTC)
     dash = "—" if unicode else "-"
+    return [
+        _skill_line(s, columns, lib, dash, (locks[s.id], now) if s.id in locks else None)
+        for s, columns in zip(task, _task_columns(m, task, unicode), strict=True)
+    ]
+
+
+def _task_columns(m: Any, task: list[Any], unicode: bool) -> list[str]:
+    """Each skill's glyph, id (with its barrier), label and skill, padded to
+    the task's widths."""
     ids = [s.id + (f" [{m.barrier_of(s.id)}]" if m.barrier_of(s.id) else "") for s in task]
     wid = max(len(i) for i in ids)
     wlabel = max(len(s.label) for s in task)
     wskill = max(len(s.skill) for s in task)
     return [
-        _skill_line(
-            s,
-            f"  {glyph(s.status.value, unicode)} {ident:<{wid}}  {s.label:<{wlabel}}  "
-            f"{s.skill:<{wskill}}",
-            lib,
-            dash,
-            (locks[s.id], now) if s.id in locks else None,
-        )
+        f"  {glyph(s.status.value, unicode)} {ident:<{wid}}  {s.label:<{wlabel}}  "
+        f"{s.skill:<{wskill}}"
         for s, ident in zip(task, ids, strict=True)
     ]
 
@@ -498,25 +519,32 @@ def robots_text(client: Any) -> str:
     data = robots_json(client)["robots"]
     if not data:
         return "no robots"
-    lines = []
-    for name, r in data.items():
-        outside = ", not in the mission" if not r["in_mission"] else ""
-        if r["joining"]:
-            outside = f", asks to join: missionctl ctl robots add {name}"
-        elif r["retired"]:
-            outside = f", retired: {r['retired']}"
-        head = f"{name} ({r['type'] or '?'}{outside}): {_presence(client.robots.get(name))}"
-        t = client.telemetry.get(name)
-        link = link_text(client, name, datetime.now(UTC))
-        lines.append(
-            head
-            + (f"; {link}" if link else "")
-            + (_telemetry_text(t, client.robots.get(name)) if t is not None else "")
-        )
-        lines += _manifest_lines(r["manifest"])
-        now = datetime.now(UTC)
-        lines += [f"  pending: {command_line(c, now)}" for c in client.pending(name)]
-    return "\n".join(lines)
+    return "\n".join(line for name, r in data.items() for line in _robot_block(client, name, r))
+
+
+def _robot_block(client: Any, name: str, r: dict[str, Any]) -> list[str]:
+    """A robot of `ctl robots`: presence, link and telemetry, manifest, pending commands."""
+    head = f"{name} ({r['type'] or '?'}{_standing(name, r)}): {_presence(client.robots.get(name))}"
+    t = client.telemetry.get(name)
+    link = link_text(client, name, datetime.now(UTC))
+    head += (f"; {link}" if link else "") + (
+        _telemetry_text(t, client.robots.get(name)) if t is not None else ""
+    )
+    now = datetime.now(UTC)
+    return [
+        head,
+        *_manifest_lines(r["manifest"]),
+        *(f"  pending: {command_line(c, now)}" for c in client.pending(name)),
+    ]
+
+
+def _standing(name: str, r: dict[str, Any]) -> str:
+    """`, retired: ...`: where a robot stands with the mission (in it: nothing)."""
+    if r["joining"]:
+        return f", asks to join: missionctl ctl robots add {name}"
+    if r["retired"]:
+        return f", retired: {r['retired']}"
+    return ", not in the mission" if not r["in_mission"] else ""
 
 
 # ---------------------------------------------------------------- pending

@@ -14,7 +14,7 @@ import re
 import socket
 import sys
 import uuid
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Collection
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -123,14 +123,7 @@ def run(args: argparse.Namespace) -> int:
             args, "bad_input", str(e), EXIT_BAD_INPUT, lines=[f"missionctl ctl: error: {e}"]
         )
     except FileInvalid as e:
-        return _fail(
-            args,
-            "bad_file",
-            str(e),
-            EXIT_BAD_INPUT,
-            extra={"issues": [str(i) for i in e.issues]},
-            lines=[str(i) for i in e.issues],
-        )
+        return _file_invalid(args, e)
     except KeyboardInterrupt:
         return EXIT_OK if args.op == "watch" else 130
     except BrokenPipeError:
@@ -138,12 +131,28 @@ def run(args: argparse.Namespace) -> int:
     except Exception as e:  # never a traceback for a person
         if os.environ.get("MISSIONCTL_DEBUG"):
             raise
-        return _fail(
-            args,
-            "internal_error",
-            f"unexpected error: {type(e).__name__}: {e} (MISSIONCTL_DEBUG=1 shows the traceback)",
-            EXIT_REFUSED,
-        )
+        return _unexpected(args, e)
+
+
+def _unexpected(args: argparse.Namespace, e: Exception) -> int:
+    return _fail(
+        args,
+        "internal_error",
+        f"unexpected error: {type(e).__name__}: {e} (MISSIONCTL_DEBUG=1 shows the traceback)",
+        EXIT_REFUSED,
+    )
+
+
+def _file_invalid(args: argparse.Namespace, e: FileInvalid) -> int:
+    """A file given on the command line has problems: each on its own line."""
+    return _fail(
+        args,
+        "bad_file",
+        str(e),
+        EXIT_BAD_INPUT,
+        extra={"issues": [str(i) for i in e.issues]},
+        lines=[str(i) for i in e.issues],
+    )
 
 
 def _endpoints(args: argparse.Namespace) -> list[str]:
@@ -279,12 +288,20 @@ def _print_done(args: argparse.Namespace, line: Callable[[], str], **reply: Any)
     return EXIT_OK
 
 
-async def _state(client: Any, args: argparse.Namespace) -> int:
+def _only(args: argparse.Namespace, verb: str, known: Collection[str], robots: Any) -> list[str]:
+    """The robots `--robots` names (none: all), each one of `known`, else
+    UsageError listing the mission's `robots`."""
     only = list(args.robots or [])
-    unknown = [r for r in only if r not in client.mission.robots and r not in client.robots]
+    unknown = [r for r in only if r not in known]
     if unknown:
-        known = ", ".join(client.mission.robots) or "none"
-        raise UsageError(f"state: no robot {', '.join(unknown)} in this mission (robots: {known})")
+        names = ", ".join(robots) or "none"
+        raise UsageError(f"{verb}: no robot {', '.join(unknown)} in this mission (robots: {names})")
+    return only
+
+
+async def _state(client: Any, args: argparse.Namespace) -> int:
+    robots = client.mission.robots
+    only = _only(args, "state", {*robots, *client.robots}, robots)
     predicted = await nowcasts_json(client, args, only)
     if args.json:
         _print_json(state_json(client, only or None) | predicted)
@@ -295,13 +312,7 @@ async def _state(client: Any, args: argparse.Namespace) -> int:
 
 
 async def _pending(client: Any, args: argparse.Namespace) -> int:
-    only = list(args.robots or [])
-    unknown = [r for r in only if r not in client.mission.robots]
-    if unknown:
-        known = ", ".join(client.mission.robots) or "none"
-        raise UsageError(
-            f"pending: no robot {', '.join(unknown)} in this mission (robots: {known})"
-        )
+    only = _only(args, "pending", client.mission.robots, client.mission.robots)
     if args.json:
         _print_json(pending_json(client, only or None))
     else:
@@ -348,20 +359,13 @@ async def _save(client: Any, args: argparse.Namespace) -> int:
 
     m = client.mission
     target = Path(args.file)
-    library = Path(args.library) if args.library else None
-    if library is not None and not library.is_file():
-        raise UsageError(f"save --library: no such file {args.library}")
+    library = _library_file(args)
     what = "plan" if args.plan else "state"
     try:
         saved = save_mission_file(m, client.library, target, what, library)
     except OSError as e:
         raise UsageError(f"save: cannot write {args.file}: {e.strerror or e}") from None
-    notes = []
-    if saved.library_file is not None:
-        notes.append(
-            f"the server's library reference '{m.library}' does not lead to its library from "
-            f"{target.parent or '.'}: the library was written beside it, {saved.library_file}"
-        )
+    notes = [] if saved.library_file is None else [_library_written(m, target, saved)]
     as_what = "as a plan (every skill idle)" if args.plan else "with its statuses"
     return _print_done(
         args,
@@ -382,22 +386,32 @@ async def _save(client: Any, args: argparse.Namespace) -> int:
     )
 
 
+def _library_file(args: argparse.Namespace) -> Path | None:
+    """`save --library FILE`: the file, which must exist."""
+    if not args.library:
+        return None
+    library = Path(args.library)
+    if not library.is_file():
+        raise UsageError(f"save --library: no such file {args.library}")
+    return library
+
+
+def _library_written(m: Any, target: Path, saved: Any) -> str:
+    return (
+        f"the server's library reference '{m.library}' does not lead to its library from "
+        f"{target.parent or '.'}: the library was written beside it, {saved.library_file}"
+    )
+
+
 async def _operation(client: Any, args: argparse.Namespace) -> int:
     from backend.cli.ctl.build import build_op
 
-    notes: list[str] = []
     op = build_op(args, client.library, client.mission)
     if args.op == "sync":  # with the plan's forecast, as a console sends it (a review's plan)
         from backend.cli.ctl.plan import sync_forecast
 
         op = op.model_copy(update={"forecast": await sync_forecast(client, op, args.timeout)})
-    if args.op == "load":
-        file_lib = args.loaded[1]
-        if file_lib != client.library:
-            notes.append(
-                f"{args.file} names library '{file_lib.name}', which differs from the server's "
-                f"'{client.library.name}'; the server checks the mission against its own library"
-            )
+    notes = _library_differs(client, args) if args.op == "load" else []
     before = client.revision
     request_id = args.request_id or f"ctl-{os.getpid()}-{uuid.uuid4().hex[:12]}"
     reply = await client.submit(op, expected_revision=args.expect_revision, request_id=request_id)
@@ -418,6 +432,17 @@ async def _operation(client: Any, args: argparse.Namespace) -> int:
     return await _wait_answers(client, args, _command_ids(reply.value), wait, done)
 
 
+def _library_differs(client: Any, args: argparse.Namespace) -> list[str]:
+    """`load`: a note when the file's library is not the server's."""
+    file_lib = args.loaded[1]
+    if file_lib == client.library:
+        return []
+    return [
+        f"{args.file} names library '{file_lib.name}', which differs from the server's "
+        f"'{client.library.name}'; the server checks the mission against its own library"
+    ]
+
+
 def _command_ids(value: dict[str, Any]) -> list[int]:
     if "commands" in value:
         return [int(c) for c in value["commands"].values()]
@@ -436,20 +461,12 @@ async def _wait_answers(
         for cid in ids:
             settled.append(await client.wait_command(cid, max(0.0, deadline - loop.time())))
     except TimeoutError:
-        pending = [c for c in (client.mission.command(i) for i in ids) if c and c.pending]
-        names = ", ".join(f"command {c.id} ({c.state.value})" for c in pending)
-        message = (
-            f"no answer from the robot within {wait:g} s: {names} stays pending "
-            f"(`missionctl ctl pending`, `missionctl ctl cancel N`)"
-        )
-        now = datetime.now(UTC)
-        return _fail(
-            args,
-            "pending",
-            message,
-            EXIT_UNREACHABLE,
-            extra={"answers": [command_json(c, now) for c in pending], **done},
-        )
+        return _no_answer(client, args, ids, wait, done)
+    return _answers(args, settled, done)
+
+
+def _answers(args: argparse.Namespace, settled: list[Any], done: dict[str, Any]) -> int:
+    """Every command settled: exit 0 if each was applied, else 1."""
     now = datetime.now(UTC)
     bad = [c for c in settled if c.state.value != "acked"]
     if args.json:
@@ -459,6 +476,26 @@ async def _wait_answers(
             stream = sys.stderr if c.state.value != "acked" else sys.stdout
             print(_answer_line(c), file=stream, flush=True)
     return EXIT_REFUSED if bad else EXIT_OK
+
+
+def _no_answer(
+    client: Any, args: argparse.Namespace, ids: list[int], wait: float, done: dict[str, Any]
+) -> int:
+    """--wait ran out: the commands still pending, exit 3."""
+    pending = [c for c in (client.mission.command(i) for i in ids) if c and c.pending]
+    names = ", ".join(f"command {c.id} ({c.state.value})" for c in pending)
+    message = (
+        f"no answer from the robot within {wait:g} s: {names} stays pending "
+        f"(`missionctl ctl pending`, `missionctl ctl cancel N`)"
+    )
+    now = datetime.now(UTC)
+    return _fail(
+        args,
+        "pending",
+        message,
+        EXIT_UNREACHABLE,
+        extra={"answers": [command_json(c, now) for c in pending], **done},
+    )
 
 
 def _answer_line(c: Any) -> str:

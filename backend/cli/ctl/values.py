@@ -55,16 +55,20 @@ def parse_since(text: str, now: datetime | None = None) -> datetime:
         return now - timedelta(seconds=ago)
     try:
         if ":" in text and "-" not in text and "T" not in text:
-            parts = [int(x) for x in text.split(":")]
-            local = now.astimezone()
-            h, m, s = (*parts, 0) if len(parts) == 2 else parts
-            return local.replace(hour=h, minute=m, second=s, microsecond=0)
+            return _today_at(text, now)
         t = datetime.fromisoformat(text)
         return t if t.tzinfo else t.astimezone()
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"not a time: {text!r} (examples: 30m (ago), 14:32 (today), 2030-07-01T14:32)"
         ) from None
+
+
+def _today_at(text: str, now: datetime) -> datetime:
+    """'14:32' or '14:32:05', local, on `now`'s day (ValueError if it is none)."""
+    parts = [int(x) for x in text.split(":")]
+    h, m, s = (*parts, 0) if len(parts) == 2 else parts
+    return now.astimezone().replace(hour=h, minute=m, second=s, microsecond=0)
 
 
 @dataclass(frozen=True)
@@ -98,38 +102,14 @@ def _plain(value: Any, where: str) -> Any:
 
 def parse_param(text: str) -> tuple[str, Any]:
     """`NAME=VALUE` -> (name, value); VALUE is YAML, `@M` a AtMarker."""
-    from backend.core.limits import echo, show_path
-    from backend.files import yamlio
-
-    name, sep, raw = text.partition("=")
-    name = name.strip()
-    if not sep or not name:
-        raise UsageError(
-            f"--param {text!r}: expected NAME=VALUE (e.g. --param speed=0.5 or --param goal=@POI-A)"
-        )
-    if not _NAME_RE.match(name):
-        raise UsageError(f"--param {text!r}: {name!r} is not a parameter name")
+    name, raw = _param_name(text)
     stripped = raw.strip()
     if stripped.startswith("@"):
         return name, AtMarker(check_name(stripped[1:], f"--param {name}=@MARKER"))
-    try:
-        value = yamlio.load(raw).data  # within the file limits: an alias bomb is refused here
-    except yamlio.YamlSyntaxError as e:
-        if not e.message.startswith("YAML"):  # over a limit
-            where = show_path(e.path)
-            raise UsageError(
-                f"--param {name}: {f'{where}: ' if where else ''}{e.message}"
-            ) from None
-        why = e.message.removeprefix("YAML syntax error: ").splitlines()[0]
-        hint = ""
-        if stripped[:1] in "{[":
-            hint = f"; quote the whole argument for the shell: --param '{name}={{x: 3, y: 4}}'"
-        elif ":" in stripped:
-            hint = f"; write a mapping in braces: --param '{name}={{x: 3, y: 4}}'"
-        raise UsageError(
-            f"--param {name}: {echo(raw)} is not a valid YAML value ({why}){hint}"
-        ) from None
+    value = _yaml_value(name, raw)
     if isinstance(value, dict | list) and stripped[:1] not in "{[":
+        from backend.core.limits import echo
+
         raise UsageError(
             f"--param {name}: {echo(raw)} reads as a YAML block "
             f"{'mapping' if isinstance(value, dict) else 'list'}; write mappings in braces "
@@ -138,6 +118,49 @@ def parse_param(text: str) -> tuple[str, Any]:
     if isinstance(value, str) and value.startswith("@") and len(value) > 1:
         return name, AtMarker(check_name(value[1:], f"--param {name}=@MARKER"))
     return name, _plain(value, f"--param {name}")
+
+
+def _param_name(text: str) -> tuple[str, str]:
+    """`NAME=VALUE` -> (NAME, VALUE as typed), NAME a parameter's name."""
+    name, sep, raw = text.partition("=")
+    name = name.strip()
+    if not sep or not name:
+        raise UsageError(
+            f"--param {text!r}: expected NAME=VALUE (e.g. --param speed=0.5 or --param goal=@POI-A)"
+        )
+    if not _NAME_RE.match(name):
+        raise UsageError(f"--param {text!r}: {name!r} is not a parameter name")
+    return name, raw
+
+
+def _yaml_value(name: str, raw: str) -> Any:
+    """`--param NAME=RAW`'s value read as YAML, within the file limits (an
+    alias bomb is refused here); a syntax error says how to write it."""
+    from backend.core.limits import echo, show_path
+    from backend.files import yamlio
+
+    try:
+        return yamlio.load(raw).data
+    except yamlio.YamlSyntaxError as e:
+        if not e.message.startswith("YAML"):  # over a limit
+            where = show_path(e.path)
+            raise UsageError(
+                f"--param {name}: {f'{where}: ' if where else ''}{e.message}"
+            ) from None
+        why = e.message.removeprefix("YAML syntax error: ").splitlines()[0]
+        raise UsageError(
+            f"--param {name}: {echo(raw)} is not a valid YAML value ({why}){_yaml_hint(name, raw)}"
+        ) from None
+
+
+def _yaml_hint(name: str, raw: str) -> str:
+    """How to write what the shell or YAML misread."""
+    stripped = raw.strip()
+    if stripped[:1] in "{[":
+        return f"; quote the whole argument for the shell: --param '{name}={{x: 3, y: 4}}'"
+    if ":" in stripped:
+        return f"; write a mapping in braces: --param '{name}={{x: 3, y: 4}}'"
+    return ""
 
 
 def param_value(name: str, value: Any, spec: ParamSpec | None) -> Any:
@@ -194,13 +217,17 @@ def _mapping(text: str, what: str, fields: tuple[str, ...]) -> dict[str, float]:
     for k, v in data.items():
         if k not in fields:
             raise UsageError(f"{what}: unknown field {k!r} (fields: {', '.join(fields)})")
-        if k in ANGLE_FIELDS:
-            out[k] = _angle(v, f"{what}: {k}")
-            continue
-        if not isinstance(v, int | float) or isinstance(v, bool) or not math.isfinite(v):
-            raise UsageError(f"{what}: {k} must be a finite number, got {v!r}")
-        out[k] = float(v)
+        out[k] = _coordinate(v, what, k)
     return out
+
+
+def _coordinate(v: Any, what: str, k: str) -> float:
+    """Field `k` of a pose or position: an angle (in radians), or a finite number."""
+    if k in ANGLE_FIELDS:
+        return _angle(v, f"{what}: {k}")
+    if not isinstance(v, int | float) or isinstance(v, bool) or not math.isfinite(v):
+        raise UsageError(f"{what}: {k} must be a finite number, got {v!r}")
+    return float(v)
 
 
 def _angle(v: Any, what: str) -> float:
@@ -233,29 +260,9 @@ def parse_position(text: str, what: str = "--position") -> dict[str, float]:
 
 
 def parse_area(text: str) -> list[dict[str, float]]:
-    from backend.core.limits import echo
-    from backend.files import yamlio
-
     stripped = text.strip()
     if stripped.startswith("["):
-        try:
-            data = yamlio.load(stripped).data
-        except yamlio.YamlSyntaxError as e:
-            raise UsageError(
-                f"--area: {echo(text)} is not a valid YAML list ({e.message})"
-            ) from None
-        if not isinstance(data, list):
-            raise UsageError(f"--area: expected a list of positions, got {text!r}")
-        points = []
-        for i, p in enumerate(data):
-            if isinstance(p, dict):
-                points.append(_mapping(json.dumps(p), f"--area point {i + 1}", POSITION_FIELDS))
-            elif isinstance(p, list):
-                points.append(parse_position(",".join(str(v) for v in p), f"--area point {i + 1}"))
-            else:
-                raise UsageError(
-                    f"--area point {i + 1}: expected [x, y] or {{x: .., y: ..}}, got {p!r}"
-                )
+        points = [_area_point(i, p) for i, p in enumerate(_area_list(text))]
     else:
         chunks = [c for c in re.split(r"[;\s]+", stripped) if c]
         points = [parse_position(c, f"--area point {i + 1}") for i, c in enumerate(chunks)]
@@ -264,3 +271,26 @@ def parse_area(text: str) -> list[dict[str, float]]:
             f'--area: a polygon needs at least 3 points, got {len(points)} (write "x,y x,y x,y")'
         )
     return points
+
+
+def _area_list(text: str) -> list[Any]:
+    """`--area '[[0, 0], {x: 1, y: 0}, ...]'`: the YAML list."""
+    from backend.core.limits import echo
+    from backend.files import yamlio
+
+    try:
+        data = yamlio.load(text.strip()).data
+    except yamlio.YamlSyntaxError as e:
+        raise UsageError(f"--area: {echo(text)} is not a valid YAML list ({e.message})") from None
+    if not isinstance(data, list):
+        raise UsageError(f"--area: expected a list of positions, got {text!r}")
+    return data
+
+
+def _area_point(i: int, p: Any) -> dict[str, float]:
+    """Item `i` of an --area list: `[x, y]` or `{x: .., y: ..}`."""
+    if isinstance(p, dict):
+        return _mapping(json.dumps(p), f"--area point {i + 1}", POSITION_FIELDS)
+    if isinstance(p, list):
+        return parse_position(",".join(str(v) for v in p), f"--area point {i + 1}")
+    raise UsageError(f"--area point {i + 1}: expected [x, y] or {{x: .., y: ..}}, got {p!r}")
