@@ -102,14 +102,17 @@ class ViewScreen(Screen):
             return  # a key with a meaning here (the digits: other screens)
         if event.is_printable and event.character and not event.character.isspace():
             event.stop()
-            field.select_on_focus = False  # else the next key replaces this one
-            field.focus()
-            field.cursor_position = len(field.value)
-            if not self._typing and field.value and not field.value.endswith(" "):
-                field.insert_text_at_cursor(" ")  # a new word of the filter (all must match)
-            # keys typed before the focus moves come here too: one word until back at the table
-            self._typing = True
-            field.insert_text_at_cursor(event.character)
+            self._type_into(field, event.character)
+
+    def _type_into(self, field: Input, character: str) -> None:
+        field.select_on_focus = False  # else the next key replaces this one
+        field.focus()
+        field.cursor_position = len(field.value)
+        if not self._typing and field.value and not field.value.endswith(" "):
+            field.insert_text_at_cursor(" ")  # a new word of the filter (all must match)
+        # keys typed before the focus moves come here too: one word until back at the table
+        self._typing = True
+        field.insert_text_at_cursor(character)
 
     # subclasses
     def compose(self) -> ComposeResult:  # pragma: no cover - overridden

@@ -154,34 +154,29 @@ class FleetScreen(ViewScreen):
         ).placeholder = f"filter by capability: {filter_examples(self.model)}"
 
     def update_view(self, change: StateChange) -> None:
+        robots = self._rows_to_update(change)
+        if robots is None:
+            self.redraw()
+            return
         t = self.query_one(DataTable)
-        robot = None
-        if (
-            not change.about(Topic.MISSION)
-            and change.robots is not None
-            and len(change.robots) == 1
-        ):
-            (robot,) = change.robots
-        if robot is None or robot not in self.shown:
-            # a robot may now match or not (its manifest came), or the mission changed
-            if [
-                r for r in fleet_order(self.model) if matches(self.model, r, self.query_text)
-            ] != self.shown:
-                self.redraw()
-                return
-            robots = self.shown if robot is None else []
-        else:
-            robots = [robot]
         for r in robots:
-            for key, value in zip(
-                ("robot", "presence", "type", "battery", "link", "doing", "uplink", "report"),
-                self._row(r),
-                strict=True,
-            ):
+            for (_, key), value in zip(self.COLUMNS, self._row(r), strict=True):
                 t.update_cell(r, key, value)
         self._title()
         if self.selected in robots:
             self._detail()
+
+    def _rows_to_update(self, change: StateChange) -> list[str] | None:
+        """The rows a change touches; None when the rows themselves change (a
+        robot matches the filter or not now, its manifest came, the mission changed)."""
+        one = not change.about(Topic.MISSION) and change.robots is not None
+        robot = next(iter(change.robots)) if one and len(change.robots) == 1 else None
+        if robot is not None and robot in self.shown:
+            return [robot]
+        order = fleet_order(self.model)
+        if [r for r in order if matches(self.model, r, self.query_text)] != self.shown:
+            return None
+        return self.shown if robot is None else []
 
     def _title(self) -> None:
         n = len(fleet_order(self.model))

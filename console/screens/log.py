@@ -122,24 +122,30 @@ class EventLogScreen(ViewScreen):
         # the new ones are at the end: walk back only over them
         new = list(takewhile(lambda e: e.seq > self.last_seq, reversed(entries)))[::-1]
         self.last_seq = self.log_.seq
-        oldest = entries[0].seq if entries else 0
         with self.app.batch_update():
-            evicting = len(entries) == entries.maxlen
-            while self.rows and self.rows[0] < oldest:
-                t.remove_row(str(self.rows.pop(0)))
+            self._drop_rows_before(t, entries[0].seq if entries else 0)
             added = [e for e in new if entry_matches(e, self.query_text)]
-            if not self.query_text:
-                self.matching = len(entries)
-            elif evicting:  # forgotten entries may have matched: count again
-                self.matching = sum(1 for e in entries if entry_matches(e, self.query_text))
-            else:
-                self.matching += len(added)
+            self._count_matching(added, evicting=len(entries) == entries.maxlen)
             self._add(t, added)
             while len(self.rows) > SHOW_LIMIT:
                 t.remove_row(str(self.rows.pop(0)))
             if at_end:
                 t.move_cursor(row=max(0, t.row_count - 1))
         self._title()
+
+    def _drop_rows_before(self, t: DataTable, oldest: int) -> None:
+        """The rows of entries the bounded log forgot."""
+        while self.rows and self.rows[0] < oldest:
+            t.remove_row(str(self.rows.pop(0)))
+
+    def _count_matching(self, added: list[LogEntry], *, evicting: bool) -> None:
+        entries = self.log_.entries
+        if not self.query_text:
+            self.matching = len(entries)
+        elif evicting:  # forgotten entries may have matched: count again
+            self.matching = sum(1 for e in entries if entry_matches(e, self.query_text))
+        else:
+            self.matching += len(added)
 
     def _title(self) -> None:
         n = len(self.log_.entries)
@@ -155,30 +161,26 @@ class EventLogScreen(ViewScreen):
         t = self.query_one(DataTable)
         box = self.query_one("#entry", Static)
         if not self.rows or t.cursor_row >= len(self.rows):
-            box.update(
-                Text(
-                    "no entry matches the filter" if self.query_text else "nothing happened yet",
-                    style="dim",
-                )
-            )
+            empty = "no entry matches the filter" if self.query_text else "nothing happened yet"
+            box.update(Text(empty, style="dim"))
             return
         seq = self.rows[t.cursor_row]
         e = next((x for x in self.log_.entries if x.seq == seq), None)
-        if e is None:
-            return
-        who = f"{e.user} on {e.client}" if e.user else e.client
+        if e is not None:
+            box.update(self._entry_text(e))
+
+    def _entry_text(self, e: LogEntry) -> Text:
+        """An entry in full: when, what, about whom; by whom, its op and revision."""
         out = Text.assemble(
             (f"{self.clock.stamp_text(e.at)} {e.kind}", "bold"),
             f"  {', '.join(e.robots)}  " if e.robots else "  ",
             e.text,
         )
-        out.append(
-            f"\nby {who}"
-            + (f" · op {e.op}" if e.op else "")
-            + (f" · revision {e.revision}" if e.revision is not None else ""),
-            style="dim",
-        )
-        box.update(out)
+        who = f"{e.user} on {e.client}" if e.user else e.client
+        op = f" · op {e.op}" if e.op else ""
+        revision = f" · revision {e.revision}" if e.revision is not None else ""
+        out.append(f"\nby {who}{op}{revision}", style="dim")
+        return out
 
     @work(group="dialog")
     async def action_export(self) -> None:

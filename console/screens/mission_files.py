@@ -15,6 +15,7 @@ from typing import Any
 
 from rich.text import Text
 
+from backend.core.model import Mission
 from backend.core.ops import LoadMission
 from backend.files.missions import library_beside, save_mission_file
 from console.screens.dialogs import ChoiceScreen, PathPrompt
@@ -67,17 +68,19 @@ class FileActions:
                 f"{shown_path(target)}: {e.strerror or e}", title="Not saved", severity="error"
             )
             return False
+        self._saved(path, what, m.revision, saved.library_file)
+        return True
+
+    def _saved(self, path: str, what: str, revision: int, library_file: Path | None) -> None:
+        """Remember the file, and say what was written where."""
+        target = Path(path)
         self.last_path = path
         self.recent.add(path)
         self.model.mark_saved()
-        written = saved.library_file
-        self.say(
-            f"saved {target.name} ({what}, revision {m.revision}) in {shown_path(target.parent)}"
-            + (f"; its skill library written to {written.name}" if written else ""),
-            "ok",
-        )
+        beside = f"; its skill library written to {library_file.name}" if library_file else ""
+        where = shown_path(target.parent)
+        self.say(f"saved {target.name} ({what}, revision {revision}) in {where}{beside}", "ok")
         self.app.notify(shown_path(target), title="Mission saved", timeout=4)
-        return True
 
     async def load(self) -> None:
         start = self.last_path or (
@@ -94,20 +97,8 @@ class FileActions:
         )
         if not path:
             return
-        from backend.files.diagnostics import FileProblems
-        from backend.files.missions import load_mission
-
-        name = Path(path).name
-        try:
-            mission, _lib = await asyncio.to_thread(load_mission, path)
-        except FileProblems as e:
-            first = str(e.issues[0]) if e.issues else str(e)
-            more = f" (and {len(e.issues) - 1} more)" if len(e.issues) > 1 else ""
-            self.say(f"cannot load {name}: {first}{more}", "error")
-            self.app.notify(first + more, title="Mission file invalid", severity="error")
-            return
-        except OSError as e:
-            self.say(f"cannot load {name}: {e.strerror or e}", "error")
+        mission = await self._read(path)
+        if mission is None:
             return
         how = await self.app.push_screen_wait(
             ChoiceScreen(
@@ -120,6 +111,7 @@ class FileActions:
             return
         self.last_path = path
         self.recent.add(path)
+        name = Path(path).name
 
         def loaded(reply: Any) -> None:
             self.model.mark_saved()  # the plan is the file's now
@@ -127,6 +119,25 @@ class FileActions:
 
         op = LoadMission(mission=mission, keep_state=how == "state")
         self.screen.submit(op, f"load {name}", then=loaded)
+
+    async def _read(self, path: str) -> Mission | None:
+        """The mission in the file, or None when it cannot be read (said)."""
+        from backend.files.diagnostics import FileProblems
+        from backend.files.missions import load_mission
+
+        name = Path(path).name
+        try:
+            mission, _lib = await asyncio.to_thread(load_mission, path)
+        except FileProblems as e:
+            first = str(e.issues[0]) if e.issues else str(e)
+            more = f" (and {len(e.issues) - 1} more)" if len(e.issues) > 1 else ""
+            self.say(f"cannot load {name}: {first}{more}", "error")
+            self.app.notify(first + more, title="Mission file invalid", severity="error")
+            return None
+        except OSError as e:
+            self.say(f"cannot load {name}: {e.strerror or e}", "error")
+            return None
+        return mission
 
 
 YAML = (".yaml", ".yml")

@@ -109,20 +109,24 @@ class TimelineScreen(Screen):
             self.win = tl.Window(self.win.t0, self.win.dt, width)
         self._keep_selection_visible()
         self.view.show(self.win, self.order, self.top)
-        fc = self.model.plan.forecast
         m = self.model.mission
         name = m.name if m is not None else "no mission"
         self.title_bar.update(
             Text.assemble(("missionctl", "bold"), "  ", ("timeline", "bold"), f"  {name}")
         )
-        clock = self.model.clock
+        self._summary.update(self._summary_text(self.win))
+        fc, clock = self.model.plan.forecast, self.model.clock
+        self._details.update(tl.details(m, fc, self.model.selection.skill, clock) if m else "")
+
+    def _summary_text(self, win: tl.Window) -> str:
+        """The forecast's summary, the link delay, the zoom, what ▔ is."""
+        fc, clock = self.model.plan.forecast, self.model.clock
         summary = fc.summary(clock.ts_text) if fc is not None else "no forecast yet"
         delay = self.model.plan.link_delay_s
         link = f" · link delay {clock.duration_text(delay)}" if delay else ""
-        zoom = f" · {tl.fmt_step(self.win.dt)} per column"
+        zoom = f" · {tl.fmt_step(win.dt)} per column"
         at_sync = " · ▔ as planned at sync" if self.model.plan.planned else ""
-        self._summary.update(summary + link + zoom + at_sync)
-        self._details.update(tl.details(m, fc, self.model.selection.skill, clock) if m else "")
+        return summary + link + zoom + at_sync
 
     def _keep_selection_visible(self) -> None:
         sid = self.model.selection.skill

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from datetime import datetime
 
-from backend.core.model import Status
+from backend.core.model import SkillInstance, Status
 from console.state.model import ConsoleModel
 from console.state.text import GLYPHS, STATUS_WORDS
 
@@ -52,17 +52,18 @@ def _facets(model: ConsoleModel, robot: str) -> dict[str, list[str]]:
 
 
 def matches(model: ConsoleModel, robot: str, query: str) -> bool:
+    """Every word of `query` is in one of the robot's facets (`field:value`: in that one)."""
     facets = _facets(model, robot)
-    for word in query.lower().split():
-        field, sep, value = word.partition(":")
-        if sep and field in FIELDS:
-            pools = facets[field]
-        else:
-            value = word
-            pools = [x for vals in facets.values() for x in vals]
-        if not any(value in x.lower() for x in pools):
-            return False
-    return True
+    return all(_word_matches(facets, word) for word in query.lower().split())
+
+
+def _word_matches(facets: dict[str, list[str]], word: str) -> bool:
+    field, sep, value = word.partition(":")
+    if sep and field in FIELDS:
+        pools = facets[field]
+    else:
+        value, pools = word, [x for vals in facets.values() for x in vals]
+    return any(value in x.lower() for x in pools)
 
 
 def filter_examples(model: ConsoleModel) -> str:
@@ -122,12 +123,15 @@ def sparkline(values: list[float], width: int) -> str:
 
 def last_report(model: ConsoleModel, robot: str) -> str:
     """The robot's last status change: the skill that started or finished last."""
-    best: tuple[datetime, str] | None = None
-    for s in model.task(robot):
-        t = s.finished_at or s.started_at
-        if t is None or s.status in (Status.IDLE, Status.IDLE_SYNCHRONIZED):
-            continue
-        if best is None or t >= best[0]:
-            text = f"{GLYPHS[s.status]} {s.id} {STATUS_WORDS[s.status]} {model.clock.stamp_text(t)}"
-            best = (t, text)
-    return best[1] if best else "no report yet"
+    reported = [(t, s) for s in model.task(robot) if (t := _reported_at(s)) is not None]
+    if not reported:
+        return "no report yet"
+    t, s = max(reversed(reported), key=lambda x: x[0])  # of equal times, the lowest row
+    return f"{GLYPHS[s.status]} {s.id} {STATUS_WORDS[s.status]} {model.clock.stamp_text(t)}"
+
+
+def _reported_at(s: SkillInstance) -> datetime | None:
+    """When the robot last said something of the skill (started, finished)."""
+    if s.status in (Status.IDLE, Status.IDLE_SYNCHRONIZED):
+        return None
+    return s.finished_at or s.started_at

@@ -103,6 +103,12 @@ def path_note(
         return f"{where}/ is a folder: add a file name{lists}", "warning"
     if must_exist:
         return (where, "ok") if p.is_file() else (f"{where}: no such file", "warning")
+    return _new_path_note(p, where)
+
+
+def _new_path_note(p: Path, where: str) -> tuple[str, str]:
+    """A path to write: whether its folder exists, it would replace a file or
+    write into the shipped examples."""
     if not p.parent.is_dir():
         return f"{where}: the folder {shown_path(p.parent)} does not exist", "warning"
     if p.exists():
@@ -120,22 +126,30 @@ def completions(text: str, cwd: Path | None = None, suffixes: tuple[str, ...] = 
     head, sep, tail = raw.rpartition("/")
     folder_text = head + sep
     folder = full_path(folder_text or ".", cwd)
-    out: list[str] = []
     try:
         entries = sorted(folder.iterdir(), key=lambda e: e.name)[:COMPLETION_LIMIT]
     except OSError:
         return []
+    out = []
     for e in entries:
-        if not e.name.startswith(tail) or (e.name.startswith(".") and not tail.startswith(".")):
-            continue
-        try:
-            is_dir = e.is_dir()
-        except OSError:
-            continue
-        if not is_dir and suffixes and not e.name.endswith(suffixes):
-            continue
-        out.append(folder_text + e.name + ("/" if is_dir else ""))
+        kind = _entry_kind(e, tail, suffixes)
+        if kind is not None:
+            out.append(folder_text + e.name + kind)
     return out
+
+
+def _entry_kind(e: Path, tail: str, suffixes: tuple[str, ...]) -> str | None:
+    """'/' for a folder, '' for a file, None when the entry does not complete
+    `tail` (another start, hidden unless asked for, a file of another suffix)."""
+    if not e.name.startswith(tail) or (e.name.startswith(".") and not tail.startswith(".")):
+        return None
+    try:
+        is_dir = e.is_dir()
+    except OSError:
+        return None
+    if is_dir:
+        return "/"
+    return "" if not suffixes or e.name.endswith(suffixes) else None
 
 
 def complete(text: str, cwd: Path | None = None, suffixes: tuple[str, ...] = ()) -> str:

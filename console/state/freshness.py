@@ -68,9 +68,7 @@ def freshness(model: Heard, robot: str, clock: MissionClock) -> Freshness:
     decided in wall seconds (how often robots send); its age is said in mission time."""
     now = clock()
     info = model.robots.get(robot)
-    heard = model.heard.get(robot)
-    if info is not None and info.heard is not None and (heard is None or info.heard > heard):
-        heard = info.heard
+    heard = _last_heard(model.heard.get(robot), info)
     delay = info.delay_s if info is not None and info.delay_s is not None else 0.0
     away = _away(info)
     if info is not None and away:  # nothing it does now reaches the ground
@@ -80,11 +78,24 @@ def freshness(model: Heard, robot: str, clock: MissionClock) -> Freshness:
     if heard is None:
         return FRESH
     age = max(0.0, (now - heard).total_seconds()) + delay
-    if robot in model.telemetry and age - delay > SILENT_AFTER_S:
-        return Freshness(True, clock.span(age), "silent")
+    stale, why = _stale_why(robot in model.telemetry, age, delay)
+    return Freshness(stale, clock.span(age), why)
+
+
+def _last_heard(heard: datetime | None, info: RobotInfo | None) -> datetime | None:
+    """The later of the console's own stamp and the server's."""
+    if info is None or info.heard is None or (heard is not None and info.heard <= heard):
+        return heard
+    return info.heard
+
+
+def _stale_why(sends_telemetry: bool, age: float, delay: float) -> tuple[bool, str]:
+    """Silent (it was sending and stopped), delayed (too far to be live), or fresh."""
+    if sends_telemetry and age - delay > SILENT_AFTER_S:
+        return True, "silent"
     if delay >= SILENT_AFTER_S:
-        return Freshness(True, clock.span(age), "delayed")
-    return Freshness(False, clock.span(age), "")
+        return True, "delayed"
+    return False, ""
 
 
 def _away(info: RobotInfo | None) -> str:

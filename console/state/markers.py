@@ -15,6 +15,7 @@ from backend.core.model import (
     PoseMarker,
     Position,
     PositionMarker,
+    SkillInstance,
     Status,
 )
 from backend.core.params import marker_value
@@ -105,6 +106,9 @@ def bind_choices(spec: Any, mk: Any) -> tuple[list[str], list[str]]:
     return fits, names
 
 
+_USE_RANK = {"unused": 0, "bound": 1, "active": 2}
+
+
 def marker_use(model: ConsoleModel) -> dict[str, str]:
     """marker -> 'active' (a skill on a robot uses it), 'bound' (idle skills
     only) or 'unused'."""
@@ -112,20 +116,18 @@ def marker_use(model: ConsoleModel) -> dict[str, str]:
     if m is None:
         return {}
     use = dict.fromkeys(m.markers, "unused")
-    for task in m.tasks.values():
-        for s in task:
-            if s.status in FINISHED:
-                continue
-            names = set(s.bindings.values()) | {
-                v for v in s.params.values() if isinstance(v, str) and v in use
-            }
-            for name in names:
-                if name in use:
-                    if s.status != Status.IDLE:
-                        use[name] = "active"
-                    elif use[name] == "unused":
-                        use[name] = "bound"
+    for s in (s for task in m.tasks.values() for s in task if s.status not in FINISHED):
+        how = "bound" if s.status == Status.IDLE else "active"
+        for name in _markers_named(s, use):
+            if _USE_RANK[how] > _USE_RANK[use[name]]:
+                use[name] = how
     return use
+
+
+def _markers_named(s: SkillInstance, markers: dict[str, str]) -> set[str]:
+    """The markers a skill is bound to or names in a (marker-typed) parameter."""
+    named = set(s.bindings.values()) | {v for v in s.params.values() if isinstance(v, str)}
+    return named & markers.keys()
 
 
 def relabel(label: str, old: str | None, new: str | None) -> str | None:

@@ -91,10 +91,9 @@ class PlanView:
         if library is not self._library:
             self._library, self._forecaster = library, Forecaster(library)
         plan = (id(mission), mission.revision, id(library))
-        tele = tuple((r, id(t)) for r, t in telemetry.items())
         site = self._site_now(now)
         status = (self.status.speed, self.status.link_delay_s) if self.status else None
-        seen = (plan, tele, site, status, int(now))
+        seen = (plan, tuple((r, id(t)) for r, t in telemetry.items()), site, status, int(now))
         if seen == self._seen and not force:
             return False
         self._seen = seen
@@ -102,12 +101,24 @@ class PlanView:
         assert self._forecaster is not None
         self.nowcast.reported(self.forecast, mission, telemetry, self.status)
         self.forecast = self._forecaster.forecast(mission, inputs)
-        checked = (plan, site, status)
+        self._check((plan, site, status), mission, library, inputs, now, force)
+        self.generation += 1
+        return True
+
+    def _check(
+        self,
+        checked: tuple[object, ...],
+        mission: Mission,
+        library: Library,
+        inputs: PlanInputs,
+        now: float,
+        force: bool,
+    ) -> None:
+        """The plan checks, again when the plan, the map or the sim changed
+        (or every CHECKS_EVERY_S: what they read of the present moves on)."""
         if force or checked != self._checked or now - self._checked_at >= CHECKS_EVERY_S:
             self._checked, self._checked_at = checked, now
             self._set_findings(run_checks(mission, library, inputs, forecast=self.forecast))
-        self.generation += 1
-        return True
 
     def inputs(self, telemetry: Mapping[str, Telemetry], now: float) -> PlanInputs:
         """What the last forecast was made with, at `now` (allocation hints)."""
@@ -120,13 +131,7 @@ class PlanView:
         ]:
             self.findings_generation += 1
         self.findings = findings
-        marks: dict[str, Finding] = {}
-        for f in findings:
-            for sid in f.skills:
-                old = marks.get(sid)
-                if old is None or _rank(f) < _rank(old):
-                    marks[sid] = f
-        self.marks = marks
+        self.marks = _marks(findings)
 
     # -- what the screens ask ------------------------------------------------------------------
     @property
@@ -154,3 +159,13 @@ class PlanView:
         errors = sum(f.blocking for f in self.findings)
         waived = sum(f.waiver is not None for f in self.findings)
         return errors, len(self.findings) - errors - waived, waived
+
+
+def _marks(findings: list[Finding]) -> dict[str, Finding]:
+    """skill -> the finding its row shows: the most severe on it."""
+    marks: dict[str, Finding] = {}
+    for f in findings:
+        for sid in f.skills:
+            if sid not in marks or _rank(f) < _rank(marks[sid]):
+                marks[sid] = f
+    return marks

@@ -69,25 +69,30 @@ def _things_here(
     tol: float,
 ) -> list[str]:
     """Regions (with their known score), markers, robots and objects at (x, y)."""
-    out = []
-    objects = mirror.objects
-    if objects is not None:
-        for r in objects.rss:
-            if _near(x, y, r.x, r.y, r.radius):
-                score = f"top score {r.top_score:g}" if r.top_score is not None else "score unknown"
-                out.append(f"region {r.rss} ({score})")
-        if _near(x, y, objects.lander.x, objects.lander.y, max(tol, objects.lander.pad_radius)):
-            out.append("lander")
-        out += [  # (those on the lander's shelf are the lander's)
-            f"box {b.box}"
-            for b in objects.boxes
-            if b.where != "shelf" and _near(x, y, b.x, b.y, tol)
-        ]
-        out += [f"stone {s.id}" for s in objects.stones if _near(x, y, s.x, s.y, tol)]
+    out = _objects_here(mirror.objects, x, y, tol) if mirror.objects is not None else []
     markers = mission.markers if mission is not None else {}
     out += [f"marker {name}" for name, mk in markers.items() if _marker_here(mk, x, y, tol)]
     out += [f"robot {r}" for r, t in telemetry.items() if _near(x, y, t.pose.x, t.pose.y, tol)]
     return out
+
+
+def _objects_here(objects: mf.MapObjects, x: float, y: float, tol: float) -> list[str]:
+    """The simulator's regions, lander, boxes and stones at (x, y)."""
+    out = [
+        f"region {r.rss} ({_score_text(r.top_score)})"
+        for r in objects.rss
+        if _near(x, y, r.x, r.y, r.radius)
+    ]
+    if _near(x, y, objects.lander.x, objects.lander.y, max(tol, objects.lander.pad_radius)):
+        out.append("lander")
+    out += [  # (those on the lander's shelf are the lander's)
+        f"box {b.box}" for b in objects.boxes if b.where != "shelf" and _near(x, y, b.x, b.y, tol)
+    ]
+    return out + [f"stone {s.id}" for s in objects.stones if _near(x, y, s.x, s.y, tol)]
+
+
+def _score_text(top_score: float | None) -> str:
+    return f"top score {top_score:g}" if top_score is not None else "score unknown"
 
 
 def here_text(

@@ -10,7 +10,7 @@ from typing import Any
 from backend.core.contingency import marks as contingency_marks
 from backend.core.library import Library
 from backend.core.model import SkillInstance, Status
-from backend.core.params import POSE_FIELDS, ParamSpec, pose_text, value_text
+from backend.core.params import POSE_FIELDS, ParamSpec, normalize_value, pose_text, value_text
 
 # -- statuses -------------------------------------------------------------------
 
@@ -70,49 +70,47 @@ def fmt_number(v: Any) -> str:
 def fmt_value(spec: ParamSpec | None, v: Any) -> str:
     """A short, one-line rendering of a parameter value (angles in degrees)."""
     t = spec.type if spec else None
-    if (
-        isinstance(v, dict)
-        and t in ("pose", "position")
-        or (isinstance(v, dict) and set(v) <= set(POSE_FIELDS) and v)
-    ):
-        return pose_text(v)  # (x,y) and what is not 0: (3,4 yaw=90°)
-    if t == "area" and isinstance(v, list):
-        return f"area[{len(v)}]"
-    if isinstance(v, list):
-        return "[" + ",".join(fmt_number(x) for x in v[:3]) + ("…" if len(v) > 3 else "") + "]"
     if isinstance(v, dict):
-        return (
-            "{"
-            + ",".join(f"{k}:{fmt_number(x)}" for k, x in list(v.items())[:2])
-            + ("…" if len(v) > 2 else "")
-            + "}"
-        )
+        return _dict_text(t, v)
+    if isinstance(v, list):
+        return f"area[{len(v)}]" if t == "area" else _clipped("[", list(map(fmt_number, v)), 3, "]")
     if spec is not None and isinstance(v, int | float) and not isinstance(v, bool):
         return value_text(spec, v)  # with its unit; an angle in degrees
     return fmt_number(v)
 
 
+def _dict_text(kind: str | None, v: dict[str, Any]) -> str:
+    if kind in ("pose", "position") or (v and set(v) <= set(POSE_FIELDS)):
+        return pose_text(v)  # (x,y) and what is not 0: (3,4 yaw=90°)
+    return _clipped("{", [f"{k}:{fmt_number(x)}" for k, x in v.items()], 2, "}")
+
+
+def _clipped(opening: str, items: list[str], room: int, closing: str) -> str:
+    """'[1,2,3…]': the first `room` items, and an ellipsis when there are more."""
+    more = "…" if len(items) > room else ""
+    return opening + ",".join(items[:room]) + more + closing
+
+
 def param_summary(skill: SkillInstance, library: Library | None) -> str:
     """Bindings and the values that differ from the library defaults."""
     spec = library.skills.get(skill.skill) if library else None
-    parts: list[str] = []
-    for name, marker in skill.bindings.items():
-        parts.append(f"{name}@{marker}")
-    for name, value in skill.params.items():
-        if name in skill.bindings:
-            continue
-        pspec = spec.params.get(name) if spec else None
-        if pspec is not None and pspec.default is not None:
-            try:
-                from backend.core.params import normalize_value
+    specs = spec.params if spec else {}
+    parts = [f"{name}@{marker}" for name, marker in skill.bindings.items()]
+    parts += [
+        f"{name}={fmt_value(specs.get(name), value)}"
+        for name, value in skill.params.items()
+        if name not in skill.bindings and not _is_default(specs.get(name), value)
+    ]
+    return " ".join(parts + policy_marks(skill))
 
-                if normalize_value(pspec, pspec.default) == value:
-                    continue
-            except Exception:
-                pass
-        parts.append(f"{name}={fmt_value(pspec, value)}")
-    parts.extend(policy_marks(skill))
-    return " ".join(parts)
+
+def _is_default(spec: ParamSpec | None, value: Any) -> bool:
+    if spec is None or spec.default is None:
+        return False
+    try:
+        return bool(normalize_value(spec, spec.default) == value)
+    except Exception:  # a default its kind cannot read: the value is worth showing
+        return False
 
 
 def policy_marks(skill: SkillInstance) -> list[str]:

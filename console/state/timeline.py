@@ -22,7 +22,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 from backend.core.model import FINISHED, Mission, SkillInstance, Status
-from backend.core.plan.forecast import Forecast, Span
+from backend.core.plan.forecast import Forecast, SkillForecast, Span
 from console.state.clock import MissionClock
 from console.state.text import GLYPHS, STATUS_CSS, skill_title
 
@@ -103,16 +103,7 @@ def bars(
     """The robot's bars overlapping [t0, t1] (mission time): the log at its
     times, the rest predicted; with `step` (seconds per cell) one predicted bar
     per cell at most, and `also` (the selection) whatever the zoom."""
-    task = mission.tasks.get(robot, [])
-    out: list[Bar] = []
-    for s in task:
-        if s.status not in FINISHED:
-            break  # the log is the head of the list
-        if s.started_at is None or s.finished_at is None:
-            continue
-        a, b = clock.of(s.started_at), clock.of(s.finished_at)
-        if b >= t0 and a <= t1:
-            out.append(Bar(s.id, a, b, s.status, _label(s), a, None, ()))
+    out = _log_bars(mission.tasks.get(robot, []), clock, t0, t1)
     if fc is None:
         return out
     # the forecast's times are wall stamps: ask for the window in wall time
@@ -122,23 +113,27 @@ def bars(
     if picked is not None and picked.robot == robot and picked not in shown:
         if picked.end >= w0 and picked.start <= w1:
             shown.append(picked)
-    for f in shown:
-        s = f.skill
-        if s is not None:
-            at = clock.of_ts
-            out.append(
-                Bar(
-                    f.id,
-                    at(f.start),
-                    at(f.end),
-                    s.status,
-                    _label(s),
-                    at(f.ready),
-                    f.barrier,
-                    _spans(f.out_of_coverage, clock),
-                )
-            )
+    return out + [_predicted(f, f.skill, clock) for f in shown if f.skill is not None]
+
+
+def _log_bars(task: list[SkillInstance], clock: MissionClock, t0: float, t1: float) -> list[Bar]:
+    """The finished skills (the head of the list) at their actual times."""
+    out: list[Bar] = []
+    for s in task:
+        if s.status not in FINISHED:
+            break
+        if s.started_at is None or s.finished_at is None:
+            continue
+        a, b = clock.of(s.started_at), clock.of(s.finished_at)
+        if b >= t0 and a <= t1:
+            out.append(Bar(s.id, a, b, s.status, _label(s), a, None, ()))
     return out
+
+
+def _predicted(f: SkillForecast, s: SkillInstance, clock: MissionClock) -> Bar:
+    at = clock.of_ts
+    out = _spans(f.out_of_coverage, clock)
+    return Bar(f.id, at(f.start), at(f.end), s.status, _label(s), at(f.ready), f.barrier, out)
 
 
 def first_start(mission: Mission | None, clock: MissionClock, now: float) -> float:
@@ -301,17 +296,22 @@ def details(mission: Mission, fc: Forecast | None, sid: str | None, clock: Missi
         why = "never: held at a barrier that is never passed" if s.status not in FINISHED else "-"
         return f"{head} · {why}"
     when = f"{clock.time_text(span[0])}–{clock.time_text(span[1])}"
-    parts = [head, f"{clock.unit_prefix}{when}"]
     f = fc.skill(s.id) if fc is not None and s.status not in FINISHED else None
-    if f is not None:
-        if f.wait_s >= 1:
-            parts.append(f"waits {clock.duration_text(f.wait_s)} at {f.barrier}")
-        if f.battery_start is not None:
-            parts.append(f"battery {_pct(f.battery_start)}→{_pct(f.battery_end)}")
-        if f.out_of_coverage:
-            out = sum(b - a for a, b in f.out_of_coverage)
-            parts.append(f"{clock.duration_text(out)} out of coverage")
-    return " · ".join(parts)
+    more = _forecast_words(f, clock) if f is not None else []
+    return " · ".join([head, f"{clock.unit_prefix}{when}", *more])
+
+
+def _forecast_words(f: SkillForecast, clock: MissionClock) -> list[str]:
+    """What the forecast adds: the barrier wait, the battery, time out of coverage."""
+    parts = []
+    if f.wait_s >= 1:
+        parts.append(f"waits {clock.duration_text(f.wait_s)} at {f.barrier}")
+    if f.battery_start is not None:
+        parts.append(f"battery {_pct(f.battery_start)}→{_pct(f.battery_end)}")
+    if f.out_of_coverage:
+        out = sum(b - a for a, b in f.out_of_coverage)
+        parts.append(f"{clock.duration_text(out)} out of coverage")
+    return parts
 
 
 def fmt_step(dt: float) -> str:
