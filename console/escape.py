@@ -1,4 +1,4 @@
-"""Escape, then a key, over a laggy link (mixed into the app).
+"""Escape, then a key, over a laggy link (an EscapeSplitter the app owns).
 
 A terminal sends Alt+key as ESC followed by the key; Textual tells the two
 apart by time (ESCDELAY, 100 ms). Over SSH the operator's escape and next

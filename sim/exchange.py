@@ -65,15 +65,11 @@ class WorldExchange:
         cands = [
             s
             for s in self.robot.knowledge.stones.values()
-            if s.get("state") in ("identified", "ground")
-            and math.hypot(s["x"] - x, s["y"] - y) <= radius
-            and int(s.get("v", 0)) > int(exclude.get(s["id"], -1))
+            if pickable_near(s, x, y, radius) and not _known_gone(s, exclude)
         ]
         if not cands:
             return None
-        best: Data = min(
-            cands, key=lambda s: (-(s.get("score") or 0), math.hypot(s["x"] - x, s["y"] - y))
-        )
+        best: Data = min(cands, key=lambda s: best_first(s, x, y))
         return dict(best)
 
     def ask_rss(self, data: Data, sender: str) -> Data | None:
@@ -123,3 +119,20 @@ class WorldExchange:
     def tell_rss(self, data: Data, sender: str) -> None:
         if self.reachable(sender) and "rss" in data:
             self.robot.knowledge.learn_rss(data)  # a revealed top score stays
+
+
+def pickable_near(s: Data, x: float, y: float, radius: float) -> bool:
+    """A stone of a world model an arm can pick, within `radius` of (x, y)."""
+    return (
+        s.get("state") in ("identified", "ground") and math.hypot(s["x"] - x, s["y"] - y) <= radius
+    )
+
+
+def _known_gone(s: Data, exclude: dict[str, int]) -> bool:
+    """The asker knew the stone gone at this version of it or a later one."""
+    return int(s.get("v", 0)) <= int(exclude.get(s["id"], -1))
+
+
+def best_first(s: Data, x: float, y: float) -> tuple[float, float]:
+    """A stone's rank: the best score first, the nearest to (x, y) among equals."""
+    return (-(s.get("score") or 0), math.hypot(s["x"] - x, s["y"] - y))

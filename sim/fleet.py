@@ -41,7 +41,7 @@ from sim.skills.registry import RobotSkills
 from sim.status import ground_status, truth
 from sim.team import TeamEvents
 from sim.world import World
-from sim.worldfile import WorldFile
+from sim.worldfile import RobotModel, WorldFile
 
 log = logging.getLogger(__name__)
 
@@ -148,6 +148,17 @@ class SimFleet:
             f"the skill library's figures differ from the world's: {d}"
             for d in drift(library, world_spec, self.world.models)
         ]
+        self._add_robots(mission, telemetry_hz, telemetry_rates or {})
+        self.telemetry_hz = telemetry_hz
+        self.team = team  # robots that break or join (sim/team.py)
+        if team is not None:
+            team.check(self)
+
+    # ------------------------------------------------------------ agents
+
+    def _add_robots(self, mission: Mission, hz: float, rates: dict[str, float]) -> None:
+        """A robot and its agent for each of the mission's robots the world has a
+        model for (the others: a warning)."""
         for index, (name, spec) in enumerate(mission.robots.items()):
             if spec.type not in self.world.models:
                 self.warnings.append(
@@ -156,30 +167,20 @@ class SimFleet:
                 )
                 continue
             robot = self.world.add_robot(name, spec.type, index=index)
-            hz = (telemetry_rates or {}).get(name, telemetry_hz)
-            self.agents[name] = self._make_agent(robot, hz)
+            self.agents[name] = self._make_agent(robot, rates.get(name, hz))
         if not self.agents:
             raise SimError("the mission has no robot this world can simulate")
-        self.telemetry_hz = telemetry_hz
-        self.team = team  # robots that break or join (sim/team.py)
-        if team is not None:
-            team.check(self)
-
-    # ------------------------------------------------------------ agents
 
     def _make_agent(self, robot: SimRobot, telemetry_hz: float) -> RobotAgent:
         rtype = self.library.robot_types.get(robot.type)
         if rtype is None:
             raise SimError(f"robot {robot.name}: type '{robot.type}' is not in the skill library")
         m = robot.model
-        modules = {"missionctl-sim": SIM_VERSION, "nav": "1.0.0"}
-        for cap in m.capabilities:
-            modules[cap] = "1.0.0"
         agent = RobotAgent(
             robot.name,
             robot.type,
             connect=self.connect,
-            modules=modules,
+            modules=_modules(m),
             properties=manifest_properties(self.world.spec, m),
             telemetry_hz=telemetry_hz,
             telemetry=None if self.link_budget else STEADY,
@@ -199,22 +200,25 @@ class SimFleet:
         agent.pose = pose
         agent.battery = battery
         agent.link = SimLink(self.world, robot, self)
-        skills = RobotSkills(self, robot)
-        handlers = skills.handlers()
-        missing = [s for s in rtype.skills if s not in handlers]
+        self._add_skills(agent, robot, rtype.skills)
+        WorldExchange(self.world, robot).register(agent)
+        return agent
+
+    def _add_skills(self, agent: RobotAgent, robot: SimRobot, skills: list[str]) -> None:
+        """The skills of the robot's type the simulator has (the others: a warning)."""
+        handlers = RobotSkills(self, robot).handlers()
+        missing = [s for s in skills if s not in handlers]
         if missing:
             self.warnings.append(
                 f"{robot.name} offers no {', '.join(missing)} (the simulator has no such skill): "
                 "syncing them is refused"
             )
-        for name in rtype.skills:
+        for name in skills:
             if name not in handlers:
                 continue
             spec = self.library.skills.get(name)
             version = spec.version if spec is not None else "1.0.0"
             agent.add_skill(name, self._wrap(robot, name, handlers[name]), version=version)
-        WorldExchange(self.world, robot).register(agent)
-        return agent
 
     def _wrap(self, robot: SimRobot, name: str, fn: Any) -> Any:
         """The handler with the robot's activity kept for the world; its
@@ -373,20 +377,8 @@ class SimFleet:
             clock = self.now()
             dt, w.clock = clock - w.clock, clock
             for r in w.robots.values():
-                if r.activity is not None:
-                    if not r.paused():
-                        continue
-                    r.paused_s += dt
-                if r.kind == "drone" and r.airborne:
-                    r.battery = max(0.0, r.battery - r.flight_energy(dt))
-                    if r.usable <= 0.0:
-                        r.airborne, r.z = False, 0.0
-                        w.log(
-                            f"{r.name} made an emergency landing at ({r.x:.1f}, {r.y:.1f}): "
-                            "battery at the reserve while hovering"
-                        )
-                elif w.docked(r):
-                    r.charge(dt)
+                if r.activity is None or r.paused():  # else its skill moves it
+                    _rest(w, r, dt)
             w.pump_downlink(now, self.link_delay / self.speed, ground_open=self.ground_open())
 
     # ------------------------------------------------------------ map feed
@@ -510,6 +502,33 @@ class SimFleet:
             return mf.dump(mf.StatusUpdate(feed=self.feed_id, seq=self._status_seq, full=st))
         patch = mf.merge_patch(sent, raw) or {}
         return mf.dump(mf.StatusUpdate(feed=self.feed_id, seq=self._status_seq, patch=patch))
+
+
+def _modules(m: RobotModel) -> dict[str, str]:
+    """The software modules a simulated robot registers with: one per capability."""
+    return {"missionctl-sim": SIM_VERSION, "nav": "1.0.0", **dict.fromkeys(m.capabilities, "1.0.0")}
+
+
+def _rest(w: World, r: SimRobot, dt: float) -> None:
+    """`dt` sim seconds of a robot no skill moves: a paused skill's pause lasts, a
+    hovering drone drains, one at the lander charges."""
+    if r.activity is not None:
+        r.paused_s += dt
+    if r.kind == "drone" and r.airborne:
+        _hover(w, r, dt)
+    elif w.docked(r):
+        r.charge(dt)
+
+
+def _hover(w: World, r: SimRobot, dt: float) -> None:
+    """A drone hovering drains; at the reserve it comes down where it is."""
+    r.battery = max(0.0, r.battery - r.flight_energy(dt))
+    if r.usable <= 0.0:
+        r.airborne, r.z = False, 0.0
+        w.log(
+            f"{r.name} made an emergency landing at ({r.x:.1f}, {r.y:.1f}): "
+            "battery at the reserve while hovering"
+        )
 
 
 def wants_truth(payload: bytes) -> bool:

@@ -27,14 +27,6 @@ def ground_status(
 ) -> mf.SimStatus:
     w = world
     ground = w.ground
-    robots = {}
-    for r in w.robots.values():
-        heard = ground.robots.get(r.name)
-        if heard is None:
-            continue  # never heard: the ground knows only its name
-        robots[r.name] = mf.RobotStatus(
-            name=r.name, type=r.type, kind=r.kind, in_range=w.in_range(r), **asdict(heard)
-        )
     deliveries = sorted(ground.deliveries.values(), key=lambda d: (d.sim_time, d.stone))
     return mf.SimStatus(
         world=w.spec.name,
@@ -50,8 +42,20 @@ def ground_status(
             n: float(r.top_score) for n, r in sorted(ground.rss.items()) if r.top_score is not None
         },
         explored=round(w.explored_fraction(ground=True), 4),
-        robots=robots,
+        robots=_heard_robots(w),
     )
+
+
+def _heard_robots(w: World) -> dict[str, mf.RobotStatus]:
+    """Each robot as the ground last heard it (never heard: the ground knows only its name)."""
+    robots = {}
+    for r in w.robots.values():
+        heard = w.ground.robots.get(r.name)
+        if heard is not None:
+            robots[r.name] = mf.RobotStatus(
+                name=r.name, type=r.type, kind=r.kind, in_range=w.in_range(r), **asdict(heard)
+            )
+    return robots
 
 
 def truth(

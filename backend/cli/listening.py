@@ -89,21 +89,25 @@ def tls_listen_options(args: argparse.Namespace) -> dict[str, Any]:
 def _uses_tls(args: argparse.Namespace) -> bool:
     """--listen and the --tls-* options ask for TLS (a ValueError when they
     do not go together)."""
-    tls_listen = any(e.startswith("tls/") for e in args.listen or [])
-    if not (args.tls_cert or args.tls_key or args.tls_ca):
-        if tls_listen:
-            raise ValueError(
-                "a tls/ endpoint needs --tls-cert FILE and --tls-key FILE (see missionctl certs)"
-            )
-        return False
-    if not (args.tls_cert and args.tls_key):
+    wanted = bool(args.tls_cert or args.tls_key or args.tls_ca)
+    if wanted and not (args.tls_cert and args.tls_key):
         raise ValueError("--tls-cert and --tls-key go together")
-    if not tls_listen:
-        raise ValueError(
-            "--tls-cert/--tls-key/--tls-ca need a tls/ endpoint in --listen "
-            "(e.g. --listen tls/0.0.0.0:7447)"
-        )
-    return True
+    if wanted != _tls_listen(args):  # TLS options and a tls/ endpoint: both or neither
+        raise ValueError(_NEEDS_TLS_ENDPOINT if wanted else _NEEDS_TLS_OPTIONS)
+    return wanted
+
+
+def _tls_listen(args: argparse.Namespace) -> bool:
+    return any(e.startswith("tls/") for e in args.listen or [])
+
+
+_NEEDS_TLS_OPTIONS = (
+    "a tls/ endpoint needs --tls-cert FILE and --tls-key FILE (see missionctl certs)"
+)
+_NEEDS_TLS_ENDPOINT = (
+    "--tls-cert/--tls-key/--tls-ca need a tls/ endpoint in --listen "
+    "(e.g. --listen tls/0.0.0.0:7447)"
+)
 
 
 def log_to_stderr(verbose: bool) -> None:

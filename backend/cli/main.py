@@ -62,13 +62,22 @@ def _registrations() -> list[tuple[str, Callable[[Any], None]]]:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    command = next((a for a in argv if not a.startswith("-")), None)
-    parser = build_parser(plugins=command not in OWN_COMMANDS)
+    parser = build_parser(plugins=_command_word(argv) not in OWN_COMMANDS)
     Parser.json_errors = wants_json(argv)
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help(sys.stderr)
         return EXIT_BAD_INPUT
+    return _run(args)
+
+
+def _command_word(argv: list[str]) -> str | None:
+    """The command named (`ctl` of `missionctl -v ctl state`), if any."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
+def _run(args: argparse.Namespace) -> int:
+    """The command's exit code; Ctrl-C and a reader gone away are no errors."""
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:

@@ -60,28 +60,10 @@ def prepare_parser(subparsers: Any) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     from backend.core.credentials import AccountsError
-    from backend.server.accounts import load_accounts
-    from backend.server.relay import SiteRelay
-    from backend.transport.login import login_from_args
 
     log_to_stderr(args.verbose)
-    listen = args.listen or [DEFAULT_LISTEN]
-    connect = args.connect or [DEFAULT_CONNECT]
     try:
-        file_options = config_file_options(args)
-        login = login_from_args(args)
-        _check_tls(args)
-        accounts = load_accounts(args.accounts) if args.accounts else None
-        _check_open_site(listen, login.logged_in, accounts is not None)
-        extra = {**login.zenoh_options(), **tls_listen_options(args), **file_options}
-        relay = SiteRelay(
-            listen=listen,
-            connect=connect,
-            zenoh_extra=extra,
-            accounts=accounts,
-            ground_cert_names=args.ground_cert_name,
-            on_ground=lambda up: _say_ground(up, connect),
-        )
+        relay, login = _relay(args)
     except (AccountsError, ValueError) as e:
         print(f"missionctl router: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -93,6 +75,32 @@ def run(args: argparse.Namespace) -> int:
     except TransportError as e:
         print(f"missionctl router: {e}", file=sys.stderr)
         return EXIT_UNREACHABLE
+
+
+def _relay(args: argparse.Namespace) -> tuple[Any, Any]:
+    """The relay the options ask for, and its login at the ground (their
+    errors, AccountsError or ValueError, are the caller's to say)."""
+    from backend.server.accounts import load_accounts
+    from backend.server.relay import SiteRelay
+    from backend.transport.login import login_from_args
+
+    listen = args.listen or [DEFAULT_LISTEN]
+    connect = args.connect or [DEFAULT_CONNECT]
+    file_options = config_file_options(args)
+    login = login_from_args(args)
+    _check_tls(args)
+    accounts = load_accounts(args.accounts) if args.accounts else None
+    _check_open_site(listen, login.logged_in, accounts is not None)
+    extra = {**login.zenoh_options(), **tls_listen_options(args), **file_options}
+    relay = SiteRelay(
+        listen=listen,
+        connect=connect,
+        zenoh_extra=extra,
+        accounts=accounts,
+        ground_cert_names=args.ground_cert_name,
+        on_ground=lambda up: _say_ground(up, connect),
+    )
+    return relay, login
 
 
 def _check_tls(args: argparse.Namespace) -> None:

@@ -17,15 +17,17 @@ def prepare_parser(subparsers: Any) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
+    bad = [f for f in args.files if not _valid(f, args.quiet)]
+    return EXIT_BAD_INPUT if bad else EXIT_OK
+
+
+def _valid(file: str, quiet: bool) -> bool:
+    """Check one file: its issues on stderr, or `FILE: ok` (unless quiet)."""
     from backend.files.missions import validate_file
 
-    bad = 0
-    for f in args.files:
-        issues = validate_file(f)
-        for issue in issues:
-            print(issue, file=sys.stderr)
-        if issues:
-            bad += 1
-        elif not args.quiet:
-            print(f"{f}: ok")
-    return EXIT_BAD_INPUT if bad else EXIT_OK
+    issues = validate_file(file)
+    for issue in issues:
+        print(issue, file=sys.stderr)
+    if not issues and not quiet:
+        print(f"{file}: ok")
+    return not issues

@@ -24,7 +24,7 @@ import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from pydantic import Field, ValidationError, field_validator
 
@@ -49,6 +49,19 @@ class Account(Strict):
         return v
 
 
+def _account_problem(user: str, acc: Account) -> str | None:
+    """What is wrong with an account's name or its robots (None: nothing)."""
+    import re
+
+    if not re.match(USER_PATTERN, user):
+        return f"account name {user!r}: use letters, digits, '.', '_', '-' (at most 64)"
+    if acc.role == "robot" and not acc.robots:
+        return f"account {user!r}: a robot account lists its robots (robots: [NAME, ...])"
+    if acc.role != "robot" and acc.robots:
+        return f"account {user!r}: only robot accounts list robots"
+    return None
+
+
 class AccountsFile(Strict):
     format: Literal["missionctl/accounts@1"] = "missionctl/accounts@1"
     accounts: dict[str, Account]
@@ -56,19 +69,10 @@ class AccountsFile(Strict):
     @field_validator("accounts")
     @classmethod
     def _names(cls, v: dict[str, Account]) -> dict[str, Account]:
-        import re
-
         for user, acc in v.items():
-            if not re.match(USER_PATTERN, user):
-                raise ValueError(
-                    f"account name {user!r}: use letters, digits, '.', '_', '-' (at most 64)"
-                )
-            if acc.role == "robot" and not acc.robots:
-                raise ValueError(
-                    f"account {user!r}: a robot account lists its robots (robots: [NAME, ...])"
-                )
-            if acc.role != "robot" and acc.robots:
-                raise ValueError(f"account {user!r}: only robot accounts list robots")
+            problem = _account_problem(user, acc)
+            if problem is not None:
+                raise ValueError(problem)
         if not v:
             raise ValueError("no accounts: nobody could log in")
         return v
@@ -95,19 +99,32 @@ class Accounts:
 
 
 def load_accounts(path: str | Path) -> Accounts:
+    p = Path(path)
+    table = _table(p, _read(p))
+    passwords = {
+        user: read_password(_beside(p, acc.password_file)) for user, acc in table.accounts.items()
+    }
+    return Accounts(p, table, passwords)
+
+
+def _read(p: Path) -> Any:
+    """The accounts file's YAML document (AccountsError: unreadable, or not YAML)."""
     from backend.files import yamlio
 
-    p = Path(path)
     try:
-        doc = yamlio.load(p.read_text(encoding="utf-8"))
+        return yamlio.load(p.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise AccountsError(f"{p}: no such accounts file") from None
     except OSError as e:
         raise AccountsError(f"{p}: {e.strerror}") from None
     except yamlio.YamlSyntaxError as e:
         raise AccountsError(f"{p}:{e.line}:{e.col}: {e.message}") from None
+
+
+def _table(p: Path, doc: Any) -> AccountsFile:
+    """The accounts it holds; AccountsError with the first problem's file:line:col."""
     try:
-        table = AccountsFile.model_validate(doc.data)
+        return AccountsFile.model_validate(doc.data)
     except ValidationError as e:
         first = e.errors()[0]
         loc = tuple(first["loc"])
@@ -116,15 +133,11 @@ def load_accounts(path: str | Path) -> Accounts:
         raise AccountsError(
             f"{p}:{line}:{col}: {where + ': ' if where else ''}{first['msg']}"
         ) from None
-    passwords = {
-        user: read_password(
-            (p.parent / acc.password_file)
-            if not Path(acc.password_file).is_absolute()
-            else acc.password_file
-        )
-        for user, acc in table.accounts.items()
-    }
-    return Accounts(p, table, passwords)
+
+
+def _beside(p: Path, password_file: str) -> str | Path:
+    """A password file's path: relative ones from the accounts file's folder."""
+    return password_file if Path(password_file).is_absolute() else p.parent / password_file
 
 
 @contextmanager

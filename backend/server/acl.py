@@ -16,11 +16,12 @@ The router enforces them on every message, with everything not allowed denied:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from backend.protocol.keys import PREFIX, Keys
 from backend.protocol.mapfeed import KEY_MAP_DELTA, KEY_MAP_SNAPSHOT, KEY_STATUS, KEY_STATUS_LIVE
-from backend.server.accounts import Accounts
+from backend.server.accounts import Account, Accounts
 
 # what consoles read: (subscriptions, queries, liveliness)
 _WATCH_SUBS = [
@@ -64,11 +65,17 @@ def _watcher_rules(rid: str, user: str) -> list[dict[str, Any]]:
     ]
 
 
+def _per_robot(robots: list[str], *keys: Callable[[str], str]) -> list[str]:
+    """Each robot's keys, robot by robot."""
+    return [key(r) for r in robots for key in keys]
+
+
 def _robot_rules(rid: str, robots: list[str]) -> list[dict[str, Any]]:
-    own_queryables = [k for r in robots for k in (Keys.uplink(r), Keys.world(r))]
-    server_queries = [k for r in robots for k in (Keys.register(r), Keys.downlink(r))]
+    own_queryables = _per_robot(robots, Keys.uplink, Keys.world)
+    server_queries = _per_robot(robots, Keys.register, Keys.downlink)
     worlds = [Keys.world("*")]
-    own_tokens = [k for r in robots for k in (Keys.alive(r), Keys.barrier_ready("*", r))]
+    own_tokens = _per_robot(robots, Keys.alive, lambda r: Keys.barrier_ready("*", r))
+    telemetry = _per_robot(robots, Keys.telemetry)
     partners = [Keys.SERVER_ALIVE, Keys.ALL_ALIVE, Keys.barrier_ready("*", "*")]
     sim_pub = [KEY_MAP_DELTA, KEY_STATUS_LIVE]
     sim_serve = [KEY_MAP_SNAPSHOT, KEY_STATUS]
@@ -80,9 +87,7 @@ def _robot_rules(rid: str, robots: list[str]) -> list[dict[str, Any]]:
             ["declare_queryable", "reply"],
             [*own_queryables, *sim_serve],
         ),
-        _rule(
-            f"{rid}-in-pub", "ingress", ["put"], [*(Keys.telemetry(r) for r in robots), *sim_pub]
-        ),
+        _rule(f"{rid}-in-pub", "ingress", ["put"], [*telemetry, *sim_pub]),
         _rule(f"{rid}-in-tok", "ingress", ["liveliness_token"], own_tokens),
         _rule(
             f"{rid}-in-l",
@@ -99,7 +104,7 @@ def _robot_rules(rid: str, robots: list[str]) -> list[dict[str, Any]]:
             f"{rid}-out-d",
             "egress",
             ["declare_subscriber"],
-            [Keys.ALL_TELEMETRY, *(Keys.telemetry(r) for r in robots), *sim_pub],
+            [Keys.ALL_TELEMETRY, *telemetry, *sim_pub],
         ),
         _rule(f"{rid}-out-dq", "egress", ["declare_queryable"], [*server_queries, *worlds]),
     ]
@@ -124,6 +129,22 @@ def _relay_rules(rid: str) -> list[dict[str, Any]]:
         _rule(f"{rid}-in", "ingress", _EVERY_MESSAGE, everything),
         _rule(f"{rid}-out", "egress", _EVERY_MESSAGE, everything),
     ]
+
+
+def _role_rules(rid: str, user: str, acc: Account) -> list[dict[str, Any]]:
+    """The rules of an account's role: a relay's, a robot's, an observer's, and
+    an operator's (an observer's, and its operations)."""
+    if acc.role == "relay":
+        return _relay_rules(rid)
+    if acc.role == "robot":
+        return _robot_rules(rid, acc.robots)
+    own = _watcher_rules(rid, user)
+    if acc.role == "operator":
+        own += [
+            _rule(f"{rid}-op-in", "ingress", ["query"], [Keys.op_as(user)]),
+            _rule(f"{rid}-op-out", "egress", ["reply"], [Keys.op_as(user)]),
+        ]
+    return own
 
 
 def acl_config(
@@ -151,17 +172,7 @@ def acl_config(
         )
     for n, (user, acc) in enumerate(sorted(accounts.table.accounts.items())):
         rid = f"a{n}"
-        if acc.role == "relay":
-            own = _relay_rules(rid)
-        elif acc.role == "robot":
-            own = _robot_rules(rid, acc.robots)
-        else:
-            own = _watcher_rules(rid, user)
-            if acc.role == "operator":
-                own += [
-                    _rule(f"{rid}-op-in", "ingress", ["query"], [Keys.op_as(user)]),
-                    _rule(f"{rid}-op-out", "egress", ["reply"], [Keys.op_as(user)]),
-                ]
+        own = _role_rules(rid, user, acc)
         subject: dict[str, Any] = {"id": f"{rid}-{user}", "usernames": [user]}
         if cert_names:
             subject["cert_common_names"] = [user]

@@ -16,6 +16,7 @@ now, or held it when it was removed or moved: the journal is read newest first).
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from backend.core import events as ev
 from backend.files.record.journal import Batch, JournalReader
@@ -69,28 +70,42 @@ def answer(db: Path, req: HistoryRequest, owners: dict[str, str]) -> HistoryRepl
     more = False
     with JournalReader(db) as journal:
         for row in journal.newest(since):
-            user, client = split_actor(row[2])
-            if req.user is not None and user != req.user:
-                continue
-            b = journal.read(row)
-            robots = robots_of(b, owners)
-            if req.robot is not None and req.robot not in robots:
+            entry = _entry(journal, row, req, owners)
+            if entry is None:
                 continue
             size += len(row[5])
-            if len(entries) >= req.limit or (entries and size > REPLY_BYTES):
+            if _full(entries, size, req.limit):
                 more = True
                 break
-            entries.append(
-                HistoryEntry(
-                    revision=b.revision,
-                    at=b.batch_time(),
-                    actor=b.actor,
-                    user=user,
-                    client=client or b.client,
-                    op=b.name,
-                    robots=robots,
-                    batch=b.batch,
-                )
-            )
+            entries.append(entry)
     entries.reverse()
     return HistoryReply(entries=entries, more=more)
+
+
+def _entry(
+    journal: JournalReader, row: Any, req: HistoryRequest, owners: dict[str, str]
+) -> HistoryEntry | None:
+    """A journal row as the history shows it, if it passes the request's filters
+    (the user's before the row is read; the robots' once its events are)."""
+    user, client = split_actor(row[2])
+    if req.user is not None and user != req.user:
+        return None
+    b = journal.read(row)
+    robots = robots_of(b, owners)
+    if req.robot is not None and req.robot not in robots:
+        return None
+    return HistoryEntry(
+        revision=b.revision,
+        at=b.batch_time(),
+        actor=b.actor,
+        user=user,
+        client=client or b.client,
+        op=b.name,
+        robots=robots,
+        batch=b.batch,
+    )
+
+
+def _full(entries: list[HistoryEntry], size: int, limit: int) -> bool:
+    """The reply holds `limit` changes, or is too big for one more (one at least)."""
+    return len(entries) >= limit or (bool(entries) and size > REPLY_BYTES)

@@ -72,10 +72,17 @@ def _what_to_do(error: BaseException, why: str) -> str:
             "save the mission (`missionctl ctl save FILE`) and restart the server "
             "with --mission FILE and a new --db"
         )
-    if "locked" in why or "busy" in why:
-        return "another program holds the file locked: close it, then send it again"
-    if "full" in why:
-        return "free disk space, then send it again"
-    if "readonly" in why or "read-only" in why or isinstance(error, PermissionError):
-        return "make the file writable, then send it again"
-    return "check the disk and the file, then send it again"
+    if isinstance(error, PermissionError):  # as a read-only file
+        why += " read-only"
+    return next(
+        (advice for words, advice in _ADVICE if any(w in why for w in words)),
+        "check the disk and the file, then send it again",
+    )
+
+
+# what the failure's message says -> what to do (the first that fits)
+_ADVICE = (
+    (("locked", "busy"), "another program holds the file locked: close it, then send it again"),
+    (("full",), "free disk space, then send it again"),
+    (("readonly", "read-only"), "make the file writable, then send it again"),
+)

@@ -122,25 +122,34 @@ def login_from_args(args: argparse.Namespace) -> Login:
     """Read the password file; raises `AccountsError` (a sentence naming the file) on problems."""
     user = getattr(args, "user", "") or ""
     password_file = getattr(args, "password_file", None)
-    cert, key = getattr(args, "cert", None), getattr(args, "key", None)
+    ca, cert, key = (getattr(args, name, None) for name in ("ca", "cert", "key"))
+    _check_login(user, password_file, cert, key)
+    _check_files((("--ca", ca), ("--cert", cert), ("--key", key)))
+    return Login(
+        user=user,
+        password=read_password(password_file) if password_file else "",
+        ca=_absolute(ca),
+        cert=_absolute(cert),
+        key=_absolute(key),
+        link_delay_hint=float(getattr(args, "link_delay_hint", 0.0) or 0.0),
+    )
+
+
+def _check_login(user: str, password_file: str | None, cert: str | None, key: str | None) -> None:
+    """A password file with the account it is for; a certificate with its key."""
     if password_file and not user:
         raise AccountsError("--password-file needs --user (the account it belongs to)")
     if bool(cert) != bool(key):
         raise AccountsError("--cert and --key go together (mutual TLS)")
     if password_file and not re.match(USER_PATTERN, user):
         raise AccountsError(f"--user {user!r}: account names use letters, digits, '.', '_', '-'")
-    for opt, path in (("--ca", getattr(args, "ca", None)), ("--cert", cert), ("--key", key)):
+
+
+def _check_files(files: tuple[tuple[str, str | None], ...]) -> None:
+    """Each (option, file) given names a file."""
+    for opt, path in files:
         if path and not Path(path).is_file():
             raise AccountsError(f"{opt} {path}: no such file")
-    password = read_password(password_file) if password_file else ""
-    return Login(
-        user=user,
-        password=password,
-        ca=_absolute(getattr(args, "ca", None)),
-        cert=_absolute(cert),
-        key=_absolute(key),
-        link_delay_hint=float(getattr(args, "link_delay_hint", 0.0) or 0.0),
-    )
 
 
 def _absolute(path: str | None) -> str | None:

@@ -67,9 +67,9 @@ def _endpoints(config: zenoh.Config, section: str) -> list[str]:
         value = json.loads(config.get_json(f"{section}/endpoints"))
     except (zenoh.ZError, ValueError):
         return []
-    if isinstance(value, dict):  # per-mode form: {"router": [...], "client": [...]}
-        return [str(e) for eps in value.values() for e in (eps or [])]
-    return [str(e) for e in (value or [])]
+    # a list, or the per-mode form: {"router": [...], "client": [...]}
+    lists = value.values() if isinstance(value, dict) else [value]
+    return [str(e) for eps in lists for e in (eps or [])]
 
 
 def open_session(config: zenoh.Config, *, what: str = "the mission server") -> zenoh.Session:

@@ -73,10 +73,7 @@ class AlertScreen(ViewScreen):
         level = Text(a.level, style=f"{style} {self.colour(LEVEL_VARS[a.level])}".strip())
         count = f" (×{a.count})" if a.count > 1 else ""
         return [
-            Text(
-                "✓" if a.acknowledged else "●",
-                style="dim" if a.acknowledged else f"bold {self.colour('warning')}",
-            ),
+            self._mark(a),
             Text(self.clock.stamp_text(a.at)),
             Text(KIND_WORDS.get(a.kind, a.kind)),
             Text(a.robot or ""),
@@ -84,6 +81,12 @@ class AlertScreen(ViewScreen):
             level,
             Text(a.source),
         ]
+
+    def _mark(self, a: AlertEntry) -> Text:
+        """✓ acknowledged, ● not yet."""
+        if a.acknowledged:
+            return Text("✓", style="dim")
+        return Text("●", style=f"bold {self.colour('warning')}")
 
     def redraw(self) -> None:
         if not self.ready:
@@ -106,29 +109,35 @@ class AlertScreen(ViewScreen):
 
     def _detail(self) -> None:
         """The selected alert in full: when, what, about whom, from where."""
-        t = self.query_one(DataTable)
         box = self.query_one("#alert-detail", Static)
-        by_id = {a.id: a for a in self.book.alerts}
-        a = by_id.get(self.ids[t.cursor_row]) if self.ids and t.cursor_row < len(self.ids) else None
+        selected = self._selected_id()
+        a = next((x for x in self.book.alerts if x.id == selected), None)
         if a is None:
             box.update("")
             return
+        box.update(Text.assemble(self._head(a), "\n", a.message))
+
+    def _head(self, a: AlertEntry) -> Text:
+        """When, what kind, about whom; its level, source and count dim."""
         about = " · ".join(x for x in (a.robot, a.skill) if x)
-        head = Text.assemble(
+        return Text.assemble(
             (f"{self.clock.stamp_text(a.at)}  {KIND_WORDS.get(a.kind, a.kind)}", "bold"),
             f"  {about}" if about else "",
             (f"  {a.level} · from {a.source}" + (f" · ×{a.count}" if a.count > 1 else ""), "dim"),
         )
-        box.update(Text.assemble(head, "\n", a.message))
+
+    def _selected_id(self) -> int | None:
+        """The id of the alert under the cursor (None: no alert there)."""
+        row = self.query_one(DataTable).cursor_row
+        return self.ids[row] if self.ids and row < len(self.ids) else None
 
     def on_data_table_row_highlighted(self, event: DataTable.RowHighlighted) -> None:
         self._detail()
 
     def action_ack(self) -> None:
-        t = self.query_one(DataTable)
-        if not self.ids or t.cursor_row >= len(self.ids):
-            return
-        self.post_message(AlertAcknowledged(self.ids[t.cursor_row]))
+        selected = self._selected_id()
+        if selected is not None:
+            self.post_message(AlertAcknowledged(selected))
 
     def action_ack_all(self) -> None:
         self.post_message(AlertAcknowledged(None))

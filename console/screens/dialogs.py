@@ -255,22 +255,34 @@ class PathPrompt(ModalScreen[str | None]):
             error.update("give a file path")
             return
         p = full_path(text, self.cwd)
-        if p.is_dir():
-            error.update(f"{shown_path(p)} is a folder: add a file name")
+        problem = self._problem(p)
+        if problem is not None:
+            error.update(problem)
             return
-        if self.must_exist:
-            if not p.is_file():
-                error.update(f"{shown_path(p)}: no such file")
-                return
-            self.dismiss(str(p))
-            return
-        if not p.parent.is_dir():
-            error.update(f"{shown_path(p.parent)}: no such folder")
-            return
-        risks = save_risks(p, self.also_writes(p) if self.also_writes else [])
+        risks = self._risks(p)
         if not risks:
             self.dismiss(str(p))
             return
+        self._confirm(p, risks, error)
+
+    def _problem(self, p: Path) -> str | None:
+        """Why `p` cannot be opened (or written to); None: it can."""
+        if p.is_dir():
+            return f"{shown_path(p)} is a folder: add a file name"
+        if self.must_exist:
+            return None if p.is_file() else f"{shown_path(p)}: no such file"
+        if not p.parent.is_dir():
+            return f"{shown_path(p.parent)}: no such folder"
+        return None
+
+    def _risks(self, p: Path) -> list[str]:
+        """What writing `p` would replace (a file to open: nothing)."""
+        if self.must_exist:
+            return []
+        return save_risks(p, self.also_writes(p) if self.also_writes else [])
+
+    def _confirm(self, p: Path, risks: list[str], error: Static) -> None:
+        """Ask before writing over what `risks` names; no: say nothing was written."""
         self.asking = True
 
         def answered(yes: bool | None) -> None:
@@ -385,23 +397,21 @@ class SkillPicker(ListChoice):
     def _fill(self, query: str) -> None:
         ol = self.query_one(OptionList)
         ol.clear_options()
-        if query:
-            matcher = Matcher(query)
-            scored = []
-            for name in self.skills:
-                spec = self.library.skills.get(name)
-                score = max(
-                    matcher.match(name), 0.5 * matcher.match(spec.description if spec else "")
-                )
-                if score > 0:
-                    scored.append((score, name))
-            names = [n for _, n in sorted(scored, key=lambda x: -x[0])]
-        else:
-            matcher = None
-            names = list(self.skills)
+        matcher = Matcher(query) if query else None
+        names = self._ranked(matcher) if matcher is not None else list(self.skills)
         ol.add_options([self._option(n, matcher) for n in names])
         if names:
             ol.highlighted = 0
+
+    def _ranked(self, matcher: Matcher) -> list[str]:
+        """The skills the query matches, best first (a description's match counts half)."""
+        scored = []
+        for name in self.skills:
+            spec = self.library.skills.get(name)
+            score = max(matcher.match(name), 0.5 * matcher.match(spec.description if spec else ""))
+            if score > 0:
+                scored.append((score, name))
+        return [n for _, n in sorted(scored, key=lambda x: -x[0])]
 
     @on(Input.Changed, "#filter")
     def _filter(self, event: Input.Changed) -> None:

@@ -13,6 +13,7 @@ from textual.app import ComposeResult
 from textual.signal import Signal
 from textual.widgets import DataTable, Footer, Input, Static
 
+from backend.core.model import UplinkCommand
 from backend.protocol.messages import RobotInfo
 from console.bindings import bindings, key_names
 from console.operations import OperationService
@@ -81,12 +82,23 @@ class FleetScreen(ViewScreen):
     # -- cells -------------------------------------------------------------------------
     def _presence(self, robot: str) -> Text:
         info = self.model.robots.get(robot)
+        in_team = self._team_presence(robot)
+        if in_team is not None:
+            return in_team
+        if info is None:
+            return Text("? unknown", style=self.colour("presence-unknown"))
+        return self._heard_presence(info)
+
+    def _team_presence(self, robot: str) -> Text | None:
+        """A robot asking to join, or retired (None: neither)."""
         if robot in team.joining(self.model):
             return Text(team.joining_words(self.model, robot), style="bold reverse")
         if team.retired(self.model, robot):
             return Text(f"⊘ retired: {team.retired(self.model, robot)}", style="dim")
-        if info is None:
-            return Text("? unknown", style=self.colour("presence-unknown"))
+        return None
+
+    def _heard_presence(self, info: RobotInfo) -> Text:
+        """In or out of contact, online, or offline since when."""
         words = presence_words(info, self.model.clock)  # never "online" while it is closed
         if words:
             away = out_of_contact(info)
@@ -106,10 +118,14 @@ class FleetScreen(ViewScreen):
         style = f"bold {self.colour(var)}" if low else ""
         text = Text(f"{sparkline(h, SPARK)} {int(round(h[-1] * 100)):3d}%", style=style)
         if self.model.freshness(robot).stale:
-            text.stylize("dim italic")
-            now = battery_now(self.model, robot, h[-1]) if i == 0 else ""
-            text.append(f" ({now} now)" if now else "", style="italic")
+            self._last_known(text, robot, h[-1] if i == 0 else None)
         return text
+
+    def _last_known(self, text: Text, robot: str, battery: float | None) -> None:
+        """A stale robot's level, drawn as last known; a battery with its now-cast."""
+        text.stylize("dim italic")
+        now = battery_now(self.model, robot, battery) if battery is not None else ""
+        text.append(f" ({now} now)" if now else "", style="italic")
 
     def _uplink(self, robot: str) -> Text:
         """'⇡2 1m10s ⇄20s': commands waiting for the robot, its one-way delay."""
@@ -139,7 +155,7 @@ class FleetScreen(ViewScreen):
             return
         t = self.query_one(DataTable)
         keep = t.cursor_row
-        self.shown = [r for r in fleet_order(self.model) if matches(self.model, r, self.query_text)]
+        self.shown = self._matching()
         with self.app.batch_update():
             t.clear()
             for r in self.shown:
@@ -169,28 +185,39 @@ class FleetScreen(ViewScreen):
     def _rows_to_update(self, change: StateChange) -> list[str] | None:
         """The rows a change touches; None when the rows themselves change (a
         robot matches the filter or not now, its manifest came, the mission changed)."""
-        one = not change.about(Topic.MISSION) and change.robots is not None
-        robot = next(iter(change.robots)) if one and len(change.robots) == 1 else None
+        robot = _only_robot(change)
         if robot is not None and robot in self.shown:
             return [robot]
-        order = fleet_order(self.model)
-        if [r for r in order if matches(self.model, r, self.query_text)] != self.shown:
+        if self._matching() != self.shown:
             return None
         return self.shown if robot is None else []
 
+    def _matching(self) -> list[str]:
+        """The robots the filter finds, in the fleet's order."""
+        return [r for r in fleet_order(self.model) if matches(self.model, r, self.query_text)]
+
     def _title(self) -> None:
-        n = len(fleet_order(self.model))
-        present = [r for r in fleet_order(self.model) if self.model.is_online(r)]
-        away = sum(1 for r in present if out_of_contact(self.model.robots.get(r)))
+        n, online, away = self._counts()
         shown = f" · {len(self.shown)} match '{self.query_text}'" if self.query_text else ""
-        away_text = f", {away} out of contact" if away else ""
+        self.set_title(
+            ("Fleet", "bold"), f"  {n} robots, {online} online{self._title_notes(away)}{shown}"
+        )
+
+    def _counts(self) -> tuple[int, int, int]:
+        """Robots, those online (in contact) and those present but out of contact."""
+        order = fleet_order(self.model)
+        present = [r for r in order if self.model.is_online(r)]
+        away = sum(1 for r in present if out_of_contact(self.model.robots.get(r)))
+        return len(order), len(present) - away, away
+
+    def _title_notes(self, away: int) -> str:
+        """`, 1 out of contact · ✚ lru3 asks to join (a: add)`."""
+        notes = f", {away} out of contact" if away else ""
         asking = team.joining(self.model)
         if asking:
             add = key_names(self).say("fleet.add")
-            away_text += f" · ✚ {', '.join(asking)} asks to join ({add}: add)"
-        self.set_title(
-            ("Fleet", "bold"), f"  {n} robots, {len(present) - away} online{away_text}{shown}"
-        )
+            notes += f" · ✚ {', '.join(asking)} asks to join ({add}: add)"
+        return notes
 
     @property
     def selected(self) -> str | None:
@@ -221,9 +248,7 @@ class FleetScreen(ViewScreen):
         out.append(r, style="bold")
         out.append(f"  {robot_type(self.model, r)}  ")
         out.append_text(self._presence(r))
-        if info is not None and info.online and info.since:
-            present = "present since" if out_of_contact(info) else "since"
-            out.append(f" {present} {self.model.clock.stamp_text(info.since)}")
+        out.append(self._since(info))
         out.append("\ndoing: ", style="bold")
         out.append(self.model.activity_text(r) if self.model.mission else "—")
         out.append(" · last report: ", style="bold")
@@ -235,6 +260,13 @@ class FleetScreen(ViewScreen):
         out.append(link.link_text(self.model, r, self.model.clock))
         return out
 
+    def _since(self, info: RobotInfo | None) -> str:
+        """` since 0:12:00` (` present since` out of contact): an online robot's."""
+        if info is None or not info.online or not info.since:
+            return ""
+        present = "present since" if out_of_contact(info) else "since"
+        return f" {present} {self.model.clock.stamp_text(info.since)}"
+
     # -- cancelling a pending command ----------------------------------------------------
     @work(group="dialog")
     async def action_fleet_cancel(self) -> None:
@@ -245,16 +277,19 @@ class FleetScreen(ViewScreen):
         if not cmds:
             say(f"no command waits for {robot or 'a robot'}'s answer", "warning")
             return
-        c = cmds[0]
-        if len(cmds) > 1:
-            rows = [(str(x.id), Text(link.command_text(x, self.model.clock))) for x in cmds]
-            chosen = await self.app.push_screen_wait(
-                ChoiceScreen(f"Cancel which command to {robot}?", rows)
-            )
-            if chosen is None:
-                return
-            c = next(x for x in cmds if str(x.id) == chosen)
-        await ask_and_cancel(self, self.ops, c, say)
+        c = cmds[0] if len(cmds) == 1 else await self._which_command(robot, cmds)
+        if c is not None:
+            await ask_and_cancel(self, self.ops, c, say)
+
+    async def _which_command(
+        self, robot: str | None, cmds: list[UplinkCommand]
+    ) -> UplinkCommand | None:
+        """The command the operator picks of several (None: none)."""
+        rows = [(str(x.id), Text(link.command_text(x, self.model.clock))) for x in cmds]
+        chosen = await self.app.push_screen_wait(
+            ChoiceScreen(f"Cancel which command to {robot}?", rows)
+        )
+        return next((x for x in cmds if str(x.id) == chosen), None)
 
     # -- the team: adding a robot that asks to join, retiring one ------------------------
     @work(group="dialog")
@@ -295,13 +330,28 @@ def _manifest_text(info: RobotInfo | None) -> Text:
 
 def _skills_text(skills: dict[str, str], query: str) -> Text:
     """The skills offered (name and version), those the filter's words hit in reverse."""
-    words = [w.partition(":")[2] if ":" in w else w for w in query.lower().split()]
+    words = _filter_words(query)
     out = Text()
     for i, (name, version) in enumerate(sorted(skills.items())):
         if i:
             out.append(", ")
-        hit = any(w and w in name.lower() for w in words)
-        out.append(name, style="bold reverse" if hit else "")
+        out.append(name, style="bold reverse" if _hit(name, words) else "")
         if version:
             out.append(f" {version}", style="dim")
     return out
+
+
+def _filter_words(query: str) -> list[str]:
+    """The filter's words, each without its `field:` prefix."""
+    return [w.partition(":")[2] if ":" in w else w for w in query.lower().split()]
+
+
+def _hit(name: str, words: list[str]) -> bool:
+    return any(w and w in name.lower() for w in words)
+
+
+def _only_robot(change: StateChange) -> str | None:
+    """The one robot a change is about (None: the mission, or not one robot)."""
+    if change.about(Topic.MISSION) or change.robots is None or len(change.robots) != 1:
+        return None
+    return next(iter(change.robots))

@@ -63,6 +63,13 @@ class MoveLeg:
     frac1: float
 
 
+def _leg_over(path: Follower, tolerance: float, stop_when: Callable[[], bool] | None) -> bool:
+    """The leg's end is reached (within `tolerance`), or `stop_when()` ends it early."""
+    if path.finished or path.remaining <= tolerance:
+        return True
+    return stop_when is not None and stop_when()
+
+
 class SkillBase:
     """The plumbing shared by the skill handlers of one simulated robot."""
 
@@ -204,22 +211,33 @@ class SkillBase:
             frac0=frac0,
             frac1=frac1,
         )
-        path = leg.path
-        while not path.finished and path.remaining > tolerance:
-            if stop_when is not None and stop_when():
+        while not _leg_over(leg.path, tolerance, stop_when):
+            if not await self._move_step(ctx, leg, speed, tolerance, budget, report):
                 break
-            v, per_m = self._pace(speed)
-            remaining = max(0.0, path.remaining - tolerance * 0.5)
-            step = self._step_time(remaining, v, budget)
-            if step <= 1e-6:
-                break
-            dt = await self.tick(ctx, step)
-            self._advance(leg, min(v * dt, remaining), per_m, self._upkeep(dt))
-            if report is not None:
-                report()
-            else:
-                self._report_leg(ctx, leg, v)
-        return path.done
+        return leg.path.done
+
+    async def _move_step(
+        self,
+        ctx: SkillContext,
+        leg: MoveLeg,
+        speed: float,
+        tolerance: float,
+        budget: Callable[[], float] | None,
+        report: Callable[[], None] | None,
+    ) -> bool:
+        """One step along the leg, reported (False: no time left to move in)."""
+        v, per_m = self._pace(speed)
+        remaining = max(0.0, leg.path.remaining - tolerance * 0.5)
+        step = self._step_time(remaining, v, budget)
+        if step <= 1e-6:
+            return False
+        dt = await self.tick(ctx, step)
+        self._advance(leg, min(v * dt, remaining), per_m, self._upkeep(dt))
+        if report is not None:
+            report()
+        else:
+            self._report_leg(ctx, leg, v)
+        return True
 
     async def move_before(
         self,

@@ -5,9 +5,10 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from backend.agent import SkillContext, Success
+from backend.agent import SkillContext, SkillFailed, Success
 from backend.core.model import Pose, Position
 from backend.protocol import mapfeed as mf
+from sim.exchange import best_first, pickable_near
 from sim.ground import BoxSeen, Delivered, box_item
 from sim.objects import BoxState, Stone, _fmt
 from sim.robot import SimRobot
@@ -111,30 +112,20 @@ class ManipulationSkills(SkillBase):
         """The best-scored pickable stone near the target in the robot's world model
         (of `region` if it knows one there), the nearest among equals."""
         cands = [
-            s
-            for s in self.robot.knowledge.stones.values()
-            if s.get("state") in PICKABLE and math.hypot(s["x"] - tx, s["y"] - ty) <= radius
+            s for s in self.robot.knowledge.stones.values() if pickable_near(s, tx, ty, radius)
         ]
         if region:
             cands = [s for s in cands if s.get("rss") == region] or cands
-        return min(
-            cands,
-            key=lambda s: (-(s.get("score") or 0), math.hypot(s["x"] - tx, s["y"] - ty)),
-            default=None,
-        )
+        return min(cands, key=lambda s: best_first(s, tx, ty), default=None)
 
     async def _ask_for_a_stone(
         self, tx: float, ty: float, radius: float
     ) -> tuple[dict[str, Any] | None, list[str]]:
         """Ask the other mobile robots (science camera first) for a pickable stone near
         the target: the first answer newer than what this robot knows, and who was asked."""
-        r, w = self.robot, self.world
-        order = sorted(
-            (o for o in w.robots.values() if o.name != r.name and o.kind != "static"),
-            key=lambda o: (not o.has("science_camera"), o.name),
-        )
+        r = self.robot
         asked: list[str] = []
-        for other in order:
+        for other in self._stone_askers():
             asked.append(other.name)
             where = {"x": tx, "y": ty, "radius": radius, "exclude": r.knowledge.gone_stones()}
             answer = await self.host.ask(r, other.name, "stone", where)
@@ -142,6 +133,14 @@ class ManipulationSkills(SkillBase):
                 if r.knowledge.learn_stone(answer):  # else its own news of the stone is newer
                     return answer, asked
         return None, asked
+
+    def _stone_askers(self) -> list[SimRobot]:
+        """The other mobile robots, those with a science camera first."""
+        r = self.robot
+        return sorted(
+            (o for o in self.world.robots.values() if o.name != r.name and o.kind != "static"),
+            key=lambda o: (not o.has("science_camera"), o.name),
+        )
 
     async def _tell_identifiers(self, stone: Stone) -> None:
         """The robots that identified `stone` learn where it is now."""
@@ -282,22 +281,9 @@ class ManipulationSkills(SkillBase):
     ) -> None:
         """Pick `box` from the lander's shelf or the ground (approached within the skill)."""
         r, w = self.robot, self.world
-        if box not in w.boxes:
-            raise self.fail(
-                f"there is no payload box '{box}' on this site "
-                f"(boxes: {', '.join(sorted(w.boxes))})"
-            )
-        if r.box is not None:
-            raise self.fail(f"{r.name} already carries {r.box}: place it first")
-        b = w.boxes[box]
+        b = self._box_to_take(box)
         landers = [o for o in w.robots.values() if o.type == "lander" or o.kind == "static"]
-        believed_on_shelf = r.knowledge.boxes.get(box, {}).get("where") == "shelf"
-        if b.where in ("shelf", "storage") or believed_on_shelf:
-            await self._check_shelf(b, landers)
-        elif b.where == "carried":
-            raise self.fail(f"{box} is carried by {b.holder}")
-        else:  # on the ground
-            await self._approach_box(ctx, b, seconds, frac0)
+        await self._reach_box(ctx, b, landers, seconds, frac0)
         await self.work(ctx, seconds, f"picking {box}", load=2.0, frac0=frac0, frac1=frac1)
         if b.where == "carried":
             raise self.fail(f"{box} was taken meanwhile by {b.holder}")
@@ -309,6 +295,31 @@ class ManipulationSkills(SkillBase):
         w.recompute_coverage()
         w.log(f"{r.name} picked {box}")
         await self._box_moved(box)
+
+    def _box_to_take(self, box: str) -> BoxState:
+        """The box named, if there is one and the robot's arm is free."""
+        r, w = self.robot, self.world
+        if box not in w.boxes:
+            raise self.fail(
+                f"there is no payload box '{box}' on this site "
+                f"(boxes: {', '.join(sorted(w.boxes))})"
+            )
+        if r.box is not None:
+            raise self.fail(f"{r.name} already carries {r.box}: place it first")
+        return w.boxes[box]
+
+    async def _reach_box(
+        self, ctx: SkillContext, b: BoxState, landers: list[SimRobot], seconds: float, frac0: float
+    ) -> None:
+        """Within reach of `b`: at the lander's shelf (as the robot believes), or at
+        the box on the ground; carried by another robot: no."""
+        believed_on_shelf = self.robot.knowledge.boxes.get(b.name, {}).get("where") == "shelf"
+        if b.where in ("shelf", "storage") or believed_on_shelf:
+            await self._check_shelf(b, landers)
+        elif b.where == "carried":
+            raise self.fail(f"{b.name} is carried by {b.holder}")
+        else:  # on the ground
+            await self._approach_box(ctx, b, seconds, frac0)
 
     async def _check_shelf(self, b: BoxState, landers: list[SimRobot]) -> None:
         """At the lander, the lander says `b` is on its shelf (the robot learns the shelf)."""
@@ -326,15 +337,17 @@ class ManipulationSkills(SkillBase):
             return
         self._learn_shelf(slots)
         if b.name not in slots.values():
-            listing = ", ".join(f"{s}: {n}" for s, n in sorted(slots.items())) or "empty"
-            hint = (
-                " (it is inside the lander: shelve it with the lander's load_box)"
-                if b.where == "storage"
-                else ""
-            )
-            raise self.fail(
-                f"the lander says {b.name} is not on its shelf (shelf: {listing}){hint}"
-            )
+            raise self._not_on_shelf(b, slots)
+
+    def _not_on_shelf(self, b: BoxState, slots: dict[str, str]) -> SkillFailed:
+        """The lander's shelf, as it said, does not hold `b`."""
+        listing = ", ".join(f"{s}: {n}" for s, n in sorted(slots.items())) or "empty"
+        hint = (
+            " (it is inside the lander: shelve it with the lander's load_box)"
+            if b.where == "storage"
+            else ""
+        )
+        return self.fail(f"the lander says {b.name} is not on its shelf (shelf: {listing}){hint}")
 
     async def _ask_shelf(self, landers: list[SimRobot]) -> dict[str, str] | None:
         """Slot -> box on the shelf, from the first lander that answers (None: none did)."""
@@ -406,16 +419,29 @@ class ManipulationSkills(SkillBase):
         b = w.boxes[box]
         r.box = None
         b.holder = None
-        used = {o.slot for o in w.boxes.values() if o.where == "shelf"}
-        free = [s for s in range(1, w.spec.lander.shelf_slots + 1) if s not in used]
-        if w.dist_to_lander(gx, gy) <= w.spec.lander.pad_radius and free:
-            b.where, b.slot, b.x, b.y = "shelf", free[0], w.spec.lander.x, w.spec.lander.y
-            for lander in w.robots.values():
-                if lander.kind == "static":
-                    lander.knowledge.boxes[box] = b.public()
-            return f"put {box} back on the lander's shelf (slot {free[0]})"
+        slot = self._shelf_slot_at(gx, gy)
+        if slot is not None:
+            return self._shelve(b, slot)
         b.where, b.slot, b.x, b.y = "ground", None, round(r.x, 2), round(r.y, 2)
         return f"placed {box} at {_fmt(b.x, b.y)}"
+
+    def _shelf_slot_at(self, gx: float, gy: float) -> int | None:
+        """The first free slot of the shelf, when (gx, gy) is on the lander's pad."""
+        w = self.world
+        if w.dist_to_lander(gx, gy) > w.spec.lander.pad_radius:
+            return None
+        used = {o.slot for o in w.boxes.values() if o.where == "shelf"}
+        free = [s for s in range(1, w.spec.lander.shelf_slots + 1) if s not in used]
+        return free[0] if free else None
+
+    def _shelve(self, b: BoxState, slot: int) -> str:
+        """`b` back on the shelf: the landers see it there."""
+        w = self.world
+        b.where, b.slot, b.x, b.y = "shelf", slot, w.spec.lander.x, w.spec.lander.y
+        for lander in w.robots.values():
+            if lander.kind == "static":
+                lander.knowledge.boxes[b.name] = b.public()
+        return f"put {b.name} back on the lander's shelf (slot {slot})"
 
     async def _box_moved(self, name: str) -> None:
         """LRU2 tells the others where a box is now (their world models)."""
@@ -435,9 +461,7 @@ class ManipulationSkills(SkillBase):
         if b.where == "shelf" and b.slot == slot:
             return self.done(ctx, f"{box} is on slot {slot} already")
         await self.work(ctx, 60.0, f"loading {box} onto slot {slot}")
-        if b.where not in ("storage", "shelf") or any(
-            o.where == "shelf" and o.slot == slot and o.name != box for o in w.boxes.values()
-        ):
+        if b.where not in ("storage", "shelf") or self._slot_holder(slot, box) is not None:
             raise self.fail(f"the shelf changed meanwhile: {box} not loaded")
         b.where, b.slot = "shelf", slot
         r.knowledge.boxes[box] = b.public()
@@ -447,6 +471,17 @@ class ManipulationSkills(SkillBase):
             if other.has("manipulator"):
                 await self.host.tell(r, other.name, "box", b.public())
         return self.done(ctx, f"{box} on the shelf, slot {slot}")
+
+    def _slot_holder(self, slot: int, box: str) -> BoxState | None:
+        """Another box than `box` on that shelf slot (None: the slot is free for it)."""
+        return next(
+            (
+                o
+                for o in self.world.boxes.values()
+                if o.where == "shelf" and o.slot == slot and o.name != box
+            ),
+            None,
+        )
 
     def _loadable(self, box: str, slot: int) -> tuple[BoxState, int]:
         """The box inside the lander and the free shelf slot it goes to, or why not."""
@@ -461,14 +496,16 @@ class ManipulationSkills(SkillBase):
         slot = int(slot)
         if not 1 <= slot <= w.spec.lander.shelf_slots:
             raise self.fail(f"the shelf has slots 1..{w.spec.lander.shelf_slots}")
-        holder = next((o for o in w.boxes.values() if o.where == "shelf" and o.slot == slot), None)
-        if holder is not None and holder.name != box:
+        holder = self._slot_holder(slot, box)
+        if holder is not None:
             raise self.fail(f"slot {slot} holds {holder.name}: choose another slot")
         if b.where not in ("storage", "shelf"):
-            where = (
-                f"carried by {b.holder}"
-                if b.where == "carried"
-                else f"on the ground at {_fmt(b.x, b.y)}"
-            )
-            raise self.fail(f"{box} is not in the lander ({where})")
+            raise self.fail(f"{box} is not in the lander ({_outside_text(b)})")
         return b, slot
+
+
+def _outside_text(b: BoxState) -> str:
+    """Where a box outside the lander is: carried, or on the ground."""
+    return (
+        f"carried by {b.holder}" if b.where == "carried" else f"on the ground at {_fmt(b.x, b.y)}"
+    )

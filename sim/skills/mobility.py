@@ -155,13 +155,18 @@ class MobilitySkills(SkillBase):
         if not isinstance(area, list) or len(area) < 3:
             raise self.fail("the area needs at least three corners")
         poly = [xy(p) for p in area]
+        self._check_sensors(sensors)
+        return poly
+
+    def _check_sensors(self, sensors: list[str]) -> None:
+        """The robot has every sensor asked for (each has the stereo camera)."""
+        r = self.robot
         known = set(r.model.capabilities) | {"stereo_camera"}
         for s in sensors:
             if str(s) not in known:
                 raise self.fail(
                     f"{r.name} has no sensor '{s}' (it has: {', '.join(sorted(known))})"
                 )
-        return poly
 
     def _mappable(self, poly: list[tuple[float, float]]) -> np.ndarray:
         """The grid cells of the area this robot can map (a rover: not the impassable ones)."""
@@ -190,25 +195,30 @@ class MobilitySkills(SkillBase):
             if survey.done() or survey.drone_must_return():
                 break
             target = wp if r.kind == "drone" else w.terrain.nearest_free(*wp, max_r=rng)
-            if target is None:
-                continue
-            try:
-                await self.move(
-                    ctx,
-                    target,
-                    survey.speed,
-                    tolerance=1.0,
-                    sense=rng,
-                    discover=True,
-                    what="exploring",
-                    stop_when=survey.should_stop,
-                    report=lambda: survey.report(ctx),
-                    budget=survey.budget,
-                )
-            except SkillFailed:
-                if r.usable <= 0:
-                    raise
-                # else an unreachable lane end: go on with the next
+            if target is not None:
+                await self._sweep_to(ctx, survey, target, rng)
+
+    async def _sweep_to(
+        self, ctx: SkillContext, survey: Survey, target: tuple[float, float], rng: float
+    ) -> None:
+        """Map the way to a lane's end; one it cannot reach is left out (a battery
+        run out is not)."""
+        try:
+            await self.move(
+                ctx,
+                target,
+                survey.speed,
+                tolerance=1.0,
+                sense=rng,
+                discover=True,
+                what="exploring",
+                stop_when=survey.should_stop,
+                report=lambda: survey.report(ctx),
+                budget=survey.budget,
+            )
+        except SkillFailed:
+            if self.robot.usable <= 0:
+                raise
 
     def _survey_summary(self, survey: Survey, found_before: int) -> str:
         found = list(self.robot.knowledge.rss)[found_before:]

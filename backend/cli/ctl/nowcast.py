@@ -20,14 +20,18 @@ async def nowcasts_json(client: Any, args: Any, only: list[str]) -> dict[str, An
     """--nowcast: {"nowcast": {robot: its probable present, or None}} ({} without it)."""
     if not getattr(args, "nowcast", False):
         return {}
-    inputs = await gather(client, args.timeout)
+    every = _every_nowcast(client, await gather(client, args.timeout))
+    found = {r: every.get(r) for r in only or list(client.mission.robots)}
+    return {"nowcast": {r: nc.as_json() if nc else None for r, nc in found.items()}}
+
+
+def _every_nowcast(client: Any, inputs: Any) -> dict[str, Any]:
+    """Each robot's probable present, from its course and its link."""
+    m = client.mission
     forecaster = Forecaster(client.library)
-    now, m = time.time(), client.mission
     courses = {r: forecaster.course(m, r, inputs) for r in m.robots}
     links = {r: inputs.link_of(r) for r in courses}
-    every = nowcasts(courses, m, now, inputs.speed, links)
-    found = {r: every.get(r) for r in only or list(m.robots)}
-    return {"nowcast": {r: nc.as_json() if nc else None for r, nc in found.items()}}
+    return nowcasts(courses, m, time.time(), inputs.speed, links)
 
 
 def nowcasts_text(predicted: dict[str, Any]) -> str:

@@ -79,17 +79,24 @@ def _str_text(v: str) -> str:
 def short_value(v: Any, limit: int = 40, spec: Any = None) -> str:
     """A compact rendering of a parameter value for one line of `state`
     (with its spec: as a person reads it, angles in degrees)."""
-    if spec is not None and is_angle(spec) and isinstance(v, int | float):
-        text = value_text(spec, v)
-    elif _is_pose(v):
-        text = _pose_text(v)
-    elif _is_area(v):
-        text = f"[{len(v)} points]"
-    elif isinstance(v, str):
-        text = _str_text(v)
-    else:
-        text = json.dumps(v, separators=(",", ":"), ensure_ascii=False)
+    text = _value_text(v, spec)
     return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _value_text(v: Any, spec: Any) -> str:
+    if _is_angle_value(v, spec):
+        return value_text(spec, v)
+    if _is_pose(v):
+        return _pose_text(v)
+    if _is_area(v):
+        return f"[{len(v)} points]"
+    if isinstance(v, str):
+        return _str_text(v)
+    return json.dumps(v, separators=(",", ":"), ensure_ascii=False)
+
+
+def _is_angle_value(v: Any, spec: Any) -> bool:
+    return spec is not None and is_angle(spec) and isinstance(v, int | float)
 
 
 def _differs_from_default(library: Any, skill: str, name: str, value: Any) -> bool:
@@ -156,18 +163,32 @@ def _contact(c: Any) -> str:
 
 
 def _presence(info: Any) -> str:
+    """Whether the server knows a robot, hears it, and its contact."""
     if info is None:
         return "not registered"
     if not info.online:
-        return (
-            f"offline since {_time(info.since)}"
-            if info.since
-            else "offline (not seen since the server started)"
-        )
-    c = info.contact
-    if c is not None and c.state == "out_of_contact":  # never "online" then
-        return _contact(c) + (f" (present since {_time(info.since)})" if info.since else "")
+        return _offline(info)
+    if info.contact is not None and info.contact.state == "out_of_contact":
+        return _out_of_contact(info)  # never "online" then
+    return _online(info)
+
+
+def _offline(info: Any) -> str:
+    if info.since:
+        return f"offline since {_time(info.since)}"
+    return "offline (not seen since the server started)"
+
+
+def _out_of_contact(info: Any) -> str:
+    """`out of contact: ... (present since 12:00:01)`."""
+    present = f" (present since {_time(info.since)})" if info.since else ""
+    return _contact(info.contact) + present
+
+
+def _online(info: Any) -> str:
+    """`online since 12:00:01, in contact until sim 0:20:00`."""
     online = f"online since {_time(info.since)}" if info.since else "online"
+    c = info.contact
     return online + (f", {_contact(c)}" if c is not None and c.state != "offline" else "")
 
 
@@ -329,19 +350,25 @@ def _skill_json(m: Any, s: Any, locks: dict[str, Any] | None = None) -> dict[str
 def state_json(client: Any, only: list[str] | None = None) -> dict[str, Any]:
     m = client.mission
     now = datetime.now(UTC)
-    names = list(m.robots) + [r for r in client.robots if r not in m.robots]
     return {
         "revision": m.revision,
         "name": m.name,
         "library": m.library,
         "server_id": client.server_id,
-        "robots": {n: _robot_json(client, n, now) for n in names if _shown(n, only)},
+        "robots": _robots_json(client, now, only),
         "tasks": _tasks_json(m, only),
         "uplink": _uplink_json(m, now, only),
         "barriers": {bid: list(b.skills) for bid, b in m.barriers.items()},
         "markers": {n: mk.model_dump(mode="json") for n, mk in m.markers.items()},
         "waivers": {c: w.model_dump(mode="json") for c, w in m.waivers.items()},
     }
+
+
+def _robots_json(client: Any, now: datetime, only: list[str] | None) -> dict[str, Any]:
+    """The mission's robots, then those only the server knows of."""
+    m = client.mission
+    names = list(m.robots) + [r for r in client.robots if r not in m.robots]
+    return {n: _robot_json(client, n, now) for n in names if _shown(n, only)}
 
 
 def _tasks_json(m: Any, only: list[str] | None) -> dict[str, list[dict[str, Any]]]:
@@ -429,20 +456,24 @@ def _task_columns(m: Any, task: list[Any], unicode: bool) -> list[str]:
 
 def _robot_lines(client: Any, robot: str, unicode: bool) -> list[str]:
     m, lib = client.mission, client.library
-    spec = m.robots.get(robot)
-    rtype = spec.type if spec else "?"
-    kind = lib.robot_types[rtype].kind if rtype in lib.robot_types else ""
-    static = ", " + kind if kind == "static" else ""
     dash = "—" if unicode else "-"
     now = datetime.now(UTC)
     link = link_text(client, robot, now)
-    head = f"{robot} ({rtype}{static}) {dash} {_presence(client.robots.get(robot))}"
+    head = f"{robot} ({_type_text(m, lib, robot)}) {dash} {_presence(client.robots.get(robot))}"
     pending = [f"  pending: {command_line(c, now)}" for c in m.pending_commands(robot)]
     return [
         head + (f"; {link}" if link else ""),
         *_task_lines(m, m.tasks.get(robot, []), lib, unicode),
         *pending,
     ]
+
+
+def _type_text(m: Any, lib: Any, robot: str) -> str:
+    """A robot's type in the mission (`?`: not in it), `, static` for a static one."""
+    spec = m.robots.get(robot)
+    rtype = spec.type if spec else "?"
+    kind = lib.robot_types[rtype].kind if rtype in lib.robot_types else ""
+    return rtype + (", " + kind if kind == "static" else "")
 
 
 def _barrier_line(m: Any) -> str:
@@ -495,24 +526,32 @@ def _telemetry_text(t: Any, info: Any = None) -> str:
     out_of_range = "" if t.in_range else " (out of range)"
     c = info.contact if info is not None else None
     known = "last known: " if c is not None and c.state == "out_of_contact" else ""
-    text = f"; {known}battery {t.battery:.0%}, link {t.link:.0%}{out_of_range}, {t.mode}"
-    if t.skill:
-        text += f" {t.skill}" + (f" {t.progress:.0%}" if t.progress is not None else "")
-    return text
+    return f"; {known}battery {t.battery:.0%}, link {t.link:.0%}{out_of_range}, {_mode_text(t)}"
+
+
+def _mode_text(t: Any) -> str:
+    """`running explore 40%`: the mode, and the skill it executes."""
+    if not t.skill:
+        return t.mode
+    return f"{t.mode} {t.skill}" + (f" {t.progress:.0%}" if t.progress is not None else "")
 
 
 def _manifest_lines(man: dict[str, Any] | None) -> list[str]:
     if not man:
         return ["  (no manifest: never registered with this server)"]
-    mods = ", ".join(f"{x['name']} {x['version']}" for x in man["modules"]) or "none"
-    skills = ", ".join(f"{k} {v}" for k, v in man["skills"].items()) or "none"
-    lines = [f"  modules: {mods}", f"  skills:  {skills}"]
-    if man["properties"]:
-        lines.append(
-            "  properties: "
-            + ", ".join(f"{k}={short_value(v)}" for k, v in man["properties"].items())
-        )
-    return lines
+    mods = [f"{x['name']} {x['version']}" for x in man["modules"]]
+    skills = [f"{k} {v}" for k, v in man["skills"].items()]
+    return [f"  modules: {_listed(mods)}", f"  skills:  {_listed(skills)}", *_properties(man)]
+
+
+def _listed(items: list[str]) -> str:
+    return ", ".join(items) or "none"
+
+
+def _properties(man: dict[str, Any]) -> list[str]:
+    """`  properties: arm=ur5, ...` (none: no line)."""
+    props = [f"{k}={short_value(v)}" for k, v in man["properties"].items()]
+    return ["  properties: " + ", ".join(props)] if props else []
 
 
 def robots_text(client: Any) -> str:

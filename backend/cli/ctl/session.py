@@ -109,29 +109,33 @@ def run(args: argparse.Namespace) -> int:
     """`missionctl ctl ...`: returns the exit code; never raises for bad input."""
     _tolerant_output()
     if not getattr(args, "op", None):
-        return _fail(
-            args,
-            "bad_input",
-            "give an operation (missionctl ctl --help lists them)",
-            EXIT_BAD_INPUT,
-            lines=["missionctl ctl: error: give an operation (missionctl ctl --help lists them)"],
-        )
+        return _usage(args, "give an operation (missionctl ctl --help lists them)")
     try:
         return _run(args)
     except UsageError as e:
-        return _fail(
-            args, "bad_input", str(e), EXIT_BAD_INPUT, lines=[f"missionctl ctl: error: {e}"]
-        )
+        return _usage(args, str(e))
     except FileInvalid as e:
         return _file_invalid(args, e)
     except KeyboardInterrupt:
-        return EXIT_OK if args.op == "watch" else 130
+        return _interrupted(args)
     except BrokenPipeError:
         return _quiet_broken_pipe()
     except Exception as e:  # never a traceback for a person
         if os.environ.get("MISSIONCTL_DEBUG"):
             raise
         return _unexpected(args, e)
+
+
+def _usage(args: argparse.Namespace, message: str) -> int:
+    """The command line is wrong: said as argparse says it, exit 2."""
+    return _fail(
+        args, "bad_input", message, EXIT_BAD_INPUT, lines=[f"missionctl ctl: error: {message}"]
+    )
+
+
+def _interrupted(args: argparse.Namespace) -> int:
+    """Ctrl-C: the way to end `watch`; any other operation was cut short."""
+    return EXIT_OK if args.op == "watch" else 130
 
 
 def _unexpected(args: argparse.Namespace, e: Exception) -> int:
@@ -156,20 +160,30 @@ def _file_invalid(args: argparse.Namespace, e: FileInvalid) -> int:
 
 
 def _endpoints(args: argparse.Namespace) -> list[str]:
+    """--connect (repeated, or comma-separated), each one checked, or UsageError."""
     raw = args.connect or default_endpoints()
     out = [e.strip() for item in raw for e in item.split(",") if e.strip()]
-    for e in out:
-        if not _ENDPOINT_RE.match(e):
-            raise UsageError(f"--connect: {e!r} is not a Zenoh endpoint (e.g. tcp/127.0.0.1:7447)")
     if not out:
         raise UsageError("--connect: no endpoint given")
+    for e in out:
+        _check_endpoint(e)
+    _check_config(out)
+    return out
+
+
+def _check_endpoint(e: str) -> None:
+    if not _ENDPOINT_RE.match(e):
+        raise UsageError(f"--connect: {e!r} is not a Zenoh endpoint (e.g. tcp/127.0.0.1:7447)")
+
+
+def _check_config(endpoints: list[str]) -> None:
+    """Endpoints Zenoh's client config refuses."""
     from backend.transport import client_config
 
     try:
-        client_config(out)
+        client_config(endpoints)
     except ValueError as e:
         raise UsageError(f"--connect: {e}") from None
-    return out
 
 
 def _check_save_target(args: argparse.Namespace) -> None:
@@ -472,10 +486,15 @@ def _answers(args: argparse.Namespace, settled: list[Any], done: dict[str, Any])
     if args.json:
         _print_json({"ok": not bad, **done, "answers": [command_json(c, now) for c in settled]})
     else:
-        for c in settled:
-            stream = sys.stderr if c.state.value != "acked" else sys.stdout
-            print(_answer_line(c), file=stream, flush=True)
+        _print_answers(settled)
     return EXIT_REFUSED if bad else EXIT_OK
+
+
+def _print_answers(settled: list[Any]) -> None:
+    """A line per command: on stdout if it was applied, else on stderr."""
+    for c in settled:
+        stream = sys.stderr if c.state.value != "acked" else sys.stdout
+        print(_answer_line(c), file=stream, flush=True)
 
 
 def _no_answer(
