@@ -20,6 +20,7 @@ from backend.core.contact import sim_time_text
 from backend.core.durations import duration_s
 from backend.core.library import Library, SkillSpec, check_params
 from backend.core.model import (
+    FINISHED,
     Branch,
     Branches,
     Fallback,
@@ -89,6 +90,28 @@ def after_problems(m: Mission, robot: str, policies: Policies) -> list[Problem]:
         why = "no such skill" if found is None else f"it is {robot}'s own (order it in the plan)"
         return [(("policies", "after"), f"after {policies.after}: {why}")]
     return []
+
+
+def awaited_outcomes(m: Mission, robot: str) -> dict[str, Literal["success", "failure"]]:
+    """How `robot`'s finished skills ended that an unfinished skill of another
+    robot waits for (policies.after): what a restarted robot must still answer."""
+    out: dict[str, Literal["success", "failure"]] = {}
+    for other, task in m.tasks.items():
+        for s in task:
+            found = _awaited(m, other, s)
+            if found is not None and found[0] == robot:
+                out[found[2].id] = "success" if found[2].status == Status.SUCCESS else "failure"
+    return out
+
+
+def _awaited(m: Mission, robot: str, s: SkillInstance) -> tuple[str, int, SkillInstance] | None:
+    """The finished skill of another robot that unfinished `s` waits for."""
+    if s.policies.after is None or s.status in FINISHED:
+        return None
+    found = m.find(s.policies.after)
+    if found is None or found[0] == robot or found[2].status not in FINISHED:
+        return None
+    return found
 
 
 def _branch_problems(

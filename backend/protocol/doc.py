@@ -1195,6 +1195,15 @@ waits (the barrier is met by the robots at it together).
 robots (and tools) query it; a robot that shares no knowledge may answer
 every ask with `known: false`.
 
+Precedence (`policies.after`, `Enqueue.after`) uses two topics. A robot
+whose skill another robot waits for answers the ask `missionctl.outcome`
+(`data: {{skill}}`) with `{{status}}`: `success`, `failure`, the skill's
+status while it holds it, or `unknown`; it notes the asker while the skill
+has not ended and, when it ends, tells it (`missionctl.outcome_ended`,
+`data: {{skill, status}}`). It answers for skills it finished before a
+restart from `RegisterReply.outcomes`. The waiter asks again when the other
+robot's presence changes or it comes back within reach, else rarely.
+
 ## Consoles and scripts
 
 ### Late join and event stream
