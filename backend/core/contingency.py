@@ -228,6 +228,27 @@ def _timeout_mark(p: Policies, unicode: bool) -> str:
     return ("⏱" if unicode else "T") + ",".join(limits)
 
 
+def awaited_by(m: Mission) -> dict[str, list[str]]:
+    """Skill id -> the skills that start only after it (their policies.after)."""
+    out: dict[str, list[str]] = {}
+    for task in m.tasks.values():
+        for s in task:
+            if s.policies.after is not None:
+                out.setdefault(s.policies.after, []).append(s.id)
+    return out
+
+
+def after_tags(p: Policies, waiting: list[str], unicode: bool = True) -> list[str]:
+    """The tags of both rows of an `after`, like a barrier's: '⇠lander-1' (it
+    starts after lander-1), '⇢lru2-4' (lru2-4 starts after it; '+1' more).
+    ASCII: 'after:lander-1', 'before:lru2-4'."""
+    out = [("⇠" if unicode else "after:") + p.after] if p.after is not None else []
+    if waiting:
+        more = f"+{len(waiting) - 1}" if len(waiting) > 1 else ""
+        out.append(("⇢" if unicode else "before:") + waiting[0] + more)
+    return out
+
+
 def taken_text(t: Taken) -> str:
     """What a robot did: 'on failure: skip', 'on timeout: fallback'."""
     return f"on {t.trigger}: {t.branch}"

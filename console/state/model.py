@@ -114,6 +114,30 @@ def _kept_indexed(
     return not isinstance(e, ev.SkillRemoved)
 
 
+def _touches_after(m: Mission, batch: ev.EventBatch) -> bool:
+    """The batch sets, clears or removes an `after` (policies.after): the rows
+    at both of its ends carry a tag, in two robots' columns."""
+    for e in batch.events:
+        if isinstance(e, ev.SkillEdited) and e.policies is not None:
+            if e.policies.after is not None or _after_of(m, e.id) is not None:
+                return True
+        elif isinstance(e, ev.SkillRemoved) and _after_of(m, e.id) is not None:
+            return True
+    return False
+
+
+def _doing(s: SkillInstance) -> str:
+    """Its status in words; one waiting on board for its `after`, not at a barrier, says so."""
+    if s.status == Status.SYNCHWAITING and s.status_info.startswith("after "):
+        return f"after {s.policies.after}"
+    return STATUS_WORDS[s.status]
+
+
+def _after_of(m: Mission, sid: str) -> str | None:
+    found = m.find(sid)
+    return found[2].policies.after if found is not None else None
+
+
 @dataclass
 class ConsoleModel:
     mission: Mission | None = None
@@ -289,6 +313,7 @@ class ConsoleModel:
             return None
         if self.ordered and batch.revision <= self.mission.revision:
             return set()
+        linked = _touches_after(self.mission, batch)  # read before the batch changes it
         self.mission = ev.apply_events(self.mission, batch)
         self._heard_in(batch)
         robots: set[str] = set()
@@ -321,7 +346,7 @@ class ConsoleModel:
             self._robot_state.pop(r, None)
         if reindex or barriers:
             self.reindex()
-        if barriers:  # tags of partner rows in other columns change too
+        if barriers or linked:  # tags of partner rows in other columns change too
             return None
         return robots
 
@@ -481,7 +506,7 @@ class ConsoleModel:
             extra = ""
             if t is not None and t.skill == act.id and act.status == Status.RUNNING:
                 extra = f" {int(t.progress * 100)}%" if t.progress is not None else ""
-            return f"{GLYPHS[act.status]} {act.id} {STATUS_WORDS[act.status]}{extra}"
+            return f"{GLYPHS[act.status]} {act.id} {_doing(act)}{extra}"
         mode = t.mode if t is not None else ""
         if queued:
             return f"{mode if mode and mode != 'idle' else 'halted'} · {queued} queued"

@@ -81,3 +81,20 @@ def test_ctl_after_edits_only_the_after(tutorial):
     op = op_of(["after", "lru1-1", "lru2-1"], tutorial)
     assert (op.id, op.policies) == ("lru1-1", Policies(retries=2, after="lru2-1"))
     assert op_of(["after", "lru1-1", "off"], tutorial).policies.after is None
+
+
+def test_ctl_state_tags_both_ends_of_an_after(tutorial):
+    from backend.cli.ctl.render import state_json, state_text
+    from backend.client.client import MissionClient
+
+    mission, library = tutorial
+    mission.tasks["lru2"][0].policies = Policies(after="lru1-2")
+    client = MissionClient("tcp/127.0.0.1:1")  # never connected: filled in here
+    client.mission, client.library, client.robots = mission, library, {}
+    text = state_text(client, unicode=True)
+    line = {ln.split()[1]: ln for ln in text.splitlines() if ln.startswith("  ")}
+    assert "lru1-2 [⇢lru2-1]" in line["lru1-2"]  # the awaited row
+    assert "lru2-1 [⇠lru1-2]" in line["lru2-1"] and "after lru1-2" in line["lru2-1"]
+    assert "[before:lru2-1]" in state_text(client, unicode=False)
+    assert state_json(client)["tasks"]["lru1"][1]["awaited_by"] == ["lru2-1"]
+

@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from console_state import TUTORIAL, Builder, engine_app, inject, screen_text, wait_until
+from console_state import MARS, TUTORIAL, Builder, engine_app, inject, screen_text, wait_until
 
 from backend.core.model import Fallback, FallbackSkill, Goto, Policies, Taken
+from backend.core.ops import EditSkill
 
 WIDE = (150, 42)
 
@@ -68,3 +69,65 @@ def test_the_branch_taken_is_on_the_failed_row():
     s.policies = Policies(timeout="30s", on_timeout="skip")
     s.branch = Taken(trigger="timeout", branch="skip", reason="out of time after 30s")
     assert policy_marks(s) == ["⏱30s→skip"]
+
+
+def _lru2_waits_for_the_lander() -> Builder:
+    """lru2-1 starts only after lander-1 (policies.after), synchronized and
+    waiting on board: its robot said what for."""
+    b = Builder(MARS)
+    b.engine.submit(EditSkill(id="lru2-1", policies=Policies(after="lander-1")))
+    b.sync("lru2", "lru2-1")
+    b.report("lru2", "lru2-1", "synchwaiting", "after lander-1 on lander: idle_synchronized")
+    return b
+
+
+async def test_both_rows_of_an_after_carry_its_tag_and_the_waiter_says_the_partner_is_off():
+    b = _lru2_waits_for_the_lander()
+    app, backend = engine_app(b)
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, online={"lru1": True, "lru2": True, "ardea": True})
+        text = screen_text(app)
+        assert "⇠lander-1" in text  # the waiting row
+        assert "⇢lru2-1" in text  # the awaited row, in the lander's column
+        assert "after lander-1: lander …" in text  # OFFLINE, cut at this width
+        assert "◷ lru2-1 after lander-1" in text  # the header: not "at barrier"
+        # another robot's edit changes the awaited row's tag (in the lander's column)
+        await backend.submit(EditSkill(id="lru2-2", policies=Policies(after="lander-1")))
+        await wait_until(pilot, lambda: "⇢lru2-1+1" in screen_text(app), what="two wait")
+        await backend.submit(EditSkill(id="lru2-2", policies=Policies()))
+        await wait_until(pilot, lambda: "⇢lru2-1+1" not in screen_text(app), what="one waits")
+        assert "⇢lru2-1" in screen_text(app)
+
+
+def test_the_wait_for_an_after_says_what_the_ground_knows():
+    from console.state.model import ConsoleModel
+    from console.widgets.schedule.lines import after_wait_text
+
+    from backend.protocol.messages import RobotInfo
+
+    b = _lru2_waits_for_the_lander()
+    m = ConsoleModel(mission=b.snapshot(), library=b.library)
+    m.reindex()
+    s = m.find("lru2-1")[2]
+    assert after_wait_text(m, s) == "after lander-1: lander OFFLINE"
+    m.robots["lander"] = RobotInfo(name="lander", online=True)
+    assert after_wait_text(m, s) == "after lander-1: waiting for lander (idle)"
+    s.status_info = "after lander-1 on lander: lander unreachable"  # the robot's own words
+    assert after_wait_text(m, s) == s.status_info
+
+
+def test_snapshot_an_after_waiting_for_an_offline_robot(snap_compare):
+    """Both rows' tags, the waiter's line and header, at 120x40."""
+    from console_state import make_app
+
+    b = _lru2_waits_for_the_lander()
+
+    async def run_before(pilot):
+        await inject(pilot.app, pilot, b, online={"lru1": True, "lru2": True, "ardea": True})
+        pilot.app.mission_screen.schedule.select("lander-1")
+        await pilot.pause()
+        text = screen_text(pilot.app)
+        assert "⇢lru2-1" in text and "⇠lander-1" in text, text
+
+    assert snap_compare(make_app(), terminal_size=(120, 40), run_before=run_before)
+

@@ -17,7 +17,7 @@ from typing import Any
 from backend.cli.ctl.args import CONTROL_OPS
 from backend.cli.ctl.team import DESCRIBE as TEAM_DESCRIBE
 from backend.core.contact import sim_time_text
-from backend.core.contingency import marks, taken_text
+from backend.core.contingency import after_tags, awaited_by, marks, taken_text
 from backend.core.params import POSE_FIELDS, POSITION_FIELDS, is_angle, pose_text, value_text
 
 _GLYPHS = {
@@ -299,7 +299,12 @@ def _robot_json(client: Any, name: str, now: datetime | None = None) -> dict[str
     }
 
 
-def _skill_json(m: Any, s: Any, locks: dict[str, Any] | None = None) -> dict[str, Any]:
+def _skill_json(
+    m: Any,
+    s: Any,
+    locks: dict[str, Any] | None = None,
+    waits: dict[str, list[str]] | None = None,
+) -> dict[str, Any]:
     c = (locks or {}).get(s.id)
     return {
         "uplink": {"command": c.id, "op": c.op, "state": c.state.value} if c else None,
@@ -313,6 +318,7 @@ def _skill_json(m: Any, s: Any, locks: dict[str, Any] | None = None) -> dict[str
         "bindings": s.bindings,
         "policies": s.policies.model_dump(mode="json"),
         "barrier": m.barrier_of(s.id),
+        "awaited_by": (waits or {}).get(s.id, []),  # skills that start after it
         "started_at": _iso(s.started_at),
         "finished_at": _iso(s.finished_at),
     }
@@ -323,6 +329,7 @@ def state_json(client: Any, only: list[str] | None = None) -> dict[str, Any]:
     now = datetime.now(UTC)
     names = list(m.robots) + [r for r in client.robots if r not in m.robots]
     locks = m.command_locks()
+    waits = awaited_by(m)
     return {
         "revision": m.revision,
         "name": m.name,
@@ -330,7 +337,7 @@ def state_json(client: Any, only: list[str] | None = None) -> dict[str, Any]:
         "server_id": client.server_id,
         "robots": {n: _robot_json(client, n, now) for n in names if _shown(n, only)},
         "tasks": {
-            r: [_skill_json(m, s, locks) for s in task]
+            r: [_skill_json(m, s, locks, waits) for s in task]
             for r, task in m.tasks.items()
             if _shown(r, only)
         },
@@ -389,7 +396,8 @@ def _task_lines(m: Any, task: list[Any], lib: Any, unicode: bool) -> list[str]:
     locks = m.command_locks()
     now = datetime.now(UTC)
     dash = "—" if unicode else "-"
-    ids = [s.id + (f" [{m.barrier_of(s.id)}]" if m.barrier_of(s.id) else "") for s in task]
+    waits = awaited_by(m)
+    ids = [_id_tags(m, s, waits.get(s.id, []), unicode) for s in task]
     wid = max(len(i) for i in ids)
     wlabel = max(len(s.label) for s in task)
     wskill = max(len(s.skill) for s in task)
@@ -404,6 +412,13 @@ def _task_lines(m: Any, task: list[Any], lib: Any, unicode: bool) -> list[str]:
         )
         for s, ident in zip(task, ids, strict=True)
     ]
+
+
+def _id_tags(m: Any, s: Any, waiting: list[str], unicode: bool) -> str:
+    """'lru2-4 [b1] [⇠lander-1]': the id, its barrier, both ends of an after."""
+    bid = m.barrier_of(s.id)
+    tags = ([bid] if bid else []) + after_tags(s.policies, waiting, unicode)
+    return " ".join([s.id, *(f"[{t}]" for t in tags)])
 
 
 def _robot_lines(client: Any, robot: str, unicode: bool) -> list[str]:
