@@ -17,7 +17,7 @@ from typing import Any, Literal
 from pydantic import TypeAdapter, ValidationError
 
 from backend.core.contact import sim_time_text
-from backend.core.durations import duration_s
+from backend.core.durations import duration_s, instant_s
 from backend.core.library import Library, SkillSpec, check_params
 from backend.core.model import (
     FINISHED,
@@ -221,10 +221,10 @@ def marks(p: Policies, unicode: bool = True) -> list[str]:
 
 
 def _timeout_mark(p: Policies, unicode: bool) -> str:
-    """'⏱10m', '⏱≤2:00:00', '⏱10m,≤2:00:00' (ASCII: T10m, T<=2:00:00)."""
+    """'⏱10m', '⏱≤sim 2:00:00', '⏱10m,≤sim 2:00:00' (ASCII: T10m, T<=sim 2:00:00)."""
     limits = [span_text(p.timeout)] if p.timeout is not None else []
-    if p.not_after is not None:
-        limits.append(("≤" if unicode else "<=") + clock_text(p.not_after).removeprefix("sim "))
+    if p.not_after is not None:  # an instant of the mission clock, said as one
+        limits.append(("≤" if unicode else "<=") + clock_text(p.not_after))
     return ("⏱" if unicode else "T") + ",".join(limits)
 
 
@@ -268,6 +268,21 @@ def read_seconds(text: str) -> float | None | str:
     if seconds is None:
         return f"expected a mission-time duration such as 90s, 10m, 1.5h (or 'off'), got {text!r}"
     return seconds
+
+
+INSTANT_SYNTAX = (
+    "a mission-clock time: sim 2:00:00 (or 2:00:00, or 2h: two hours of sim time), "
+    "or a UTC time 2030-07-01 14:32 on a real mission"
+)
+
+
+def read_instant(text: str) -> float | None | str:
+    """policies.not_after as people type it (backend.core.durations.instant_s);
+    'off' or empty -> None; else what is wrong."""
+    if text.strip().lower() in OFF:
+        return None
+    at = instant_s(text)
+    return at if at is not None else f"expected {INSTANT_SYNTAX} (or 'off'), got {text!r}"
 
 
 def read_branch(text: str) -> Branch | None:

@@ -62,7 +62,7 @@ def test_marks_on_a_row():
     assert marks(p) == ["⏱10m→skip", "✗→recharge@Lander"]
     assert marks(p, unicode=False) == ["T10m->skip", "X->recharge@Lander"]
     assert marks(Policies(not_after=7200, on_failure=Goto(goto="Lander"))) == [
-        "⏱≤2:00:00→halt",
+        "⏱≤sim 2:00:00→halt",  # an instant of the mission clock, not a duration
         "✗→goto@Lander",
     ]
     assert marks(Policies()) == []
@@ -98,3 +98,22 @@ def test_ctl_state_tags_both_ends_of_an_after(tutorial):
     assert "[before:lru2-1]" in state_text(client, unicode=False)
     assert state_json(client)["tasks"]["lru1"][1]["awaited_by"] == ["lru2-1"]
 
+
+@pytest.mark.parametrize(
+    ("typed", "seconds"),
+    [
+        ("sim 1:30:00", 5400.0),
+        ("1:30:00", 5400.0),
+        ("90m", 5400.0),  # a duration: that far into the simulation
+        ("2030-01-01 12:00", 1893499200.0),  # a real mission: a UTC time
+        ("2030-01-01T12:00:00+00:00", 1893499200.0),
+    ],
+)
+def test_not_after_is_a_mission_clock_time(tutorial, typed, seconds):
+    op = op_of(["edit", "lru1-1", "--not-after", typed], tutorial)
+    assert op.policies.not_after == seconds
+    assert marks(op.policies)[0].startswith("⏱≤sim 1:30:00" if seconds < 1e9 else "⏱≤2030-01-01")
+
+
+def test_a_mission_file_takes_not_after_as_a_sim_clock_time():
+    assert Policies(not_after="sim 0:20:00").not_after == 1200

@@ -131,3 +131,42 @@ def test_snapshot_an_after_waiting_for_an_offline_robot(snap_compare):
 
     assert snap_compare(make_app(), terminal_size=(120, 40), run_before=run_before)
 
+
+async def test_not_after_shows_and_reads_as_a_mission_clock_time():
+    b = Builder(TUTORIAL)
+    b.mission.find("lru2-1")[2].policies = Policies(not_after=5400, on_timeout="skip")
+    app, backend = engine_app(b)
+    async with app.run_test(size=WIDE) as pilot:
+        await inject(app, pilot, b, online={"lru1": True, "lru2": True})
+        screen = app.mission_screen
+        await wait_until(pilot, lambda: "⏱≤sim 1:30:…" in screen_text(app), what="row mark")
+        screen.schedule.select("lru2-1")
+        await wait_until(pilot, lambda: shows(screen.editor, "lru2-1"), what="lru2-1 shown")
+        ed = screen.editor
+        assert ed.query_one("#pf-not_after").value == "sim 1:30:00"  # an instant, not "90m"
+        ed.query_one("#pf-not_after").value = "sim 2:00:00"
+        await pilot.pause()
+        ed.action_apply()
+        await wait_until(
+            pilot, lambda: b.mission.find("lru2-1")[2].policies.not_after == 7200, what="applied"
+        )
+        await wait_until(
+            pilot, lambda: _value(ed, "#pf-not_after") == "sim 2:00:00", what="shown"
+        )
+        ed.query_one("#pf-not_after").value = "at noon"
+        await wait_until(
+            pilot,
+            lambda: "mission-clock time" in _shown(ed, "#perr-not_after"),
+            what="the field says what it takes",
+        )
+
+
+def _value(ed, selector: str) -> str:
+    """A field's value ('' while the editor recomposes after an apply)."""
+    found = ed.query(selector)
+    return found.first().value if found else ""
+
+
+def _shown(ed, selector: str) -> str:
+    found = ed.query(selector)
+    return str(found.first().render()) if found else ""

@@ -85,7 +85,8 @@ Parameter values (--param NAME=VALUE)
   `--unbind NAME` (edit) keeps the current value but drops the binding.
   POLICY: --retries N, --pause-out-of-comms / --no-pause-out-of-comms,
   --recharge-below F (0..1, or `off`); contingencies: --skill-timeout 10m,
-  --not-after 2h, --on-failure / --on-timeout halt|skip|continue|goto:MARKER|
+  --not-after 'sim 2:00:00' (a mission-clock time; 2h: two hours of sim time),
+  --on-failure / --on-timeout halt|skip|continue|goto:MARKER|
   fallback:SKILL[+SKILL]; on edit, unnamed policies are kept.
 
 Geometry

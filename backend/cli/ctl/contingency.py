@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from backend.core.contingency import BRANCH_SYNTAX, read_branch, read_seconds
+from backend.core.contingency import BRANCH_SYNTAX, read_branch, read_instant, read_seconds
 from backend.core.model import Branch
 
 
@@ -17,6 +17,14 @@ def mission_seconds(text: str) -> float | None:
     if isinstance(seconds, str):
         raise argparse.ArgumentTypeError(seconds)
     return seconds
+
+
+def mission_instant(text: str) -> float | None:
+    """'sim 2:00:00', '2h' (sim time), '2030-07-01 14:32' (UTC) -> mission-clock seconds."""
+    at = read_instant(text)
+    if isinstance(at, str):
+        raise argparse.ArgumentTypeError(at)
+    return at
 
 
 def branch(text: str) -> Branch:
@@ -39,10 +47,11 @@ def add_options(g: argparse._ArgumentGroup) -> None:
     g.add_argument(
         "--not-after",
         dest="not_after",
-        type=mission_seconds,
+        type=mission_instant,
         metavar="TIME",
         default=argparse.SUPPRESS,
-        help="mission-clock deadline (sim time with a simulator: 2h is sim 2:00:00; 'off')",
+        help="mission-clock deadline: sim 2:00:00 (or 2h of sim time) with a simulator, "
+        "a UTC time 2030-07-01 14:32 on a real mission; 'off'",
     )
     g.add_argument(
         "--after",
