@@ -516,6 +516,7 @@ OP_CODES: list[tuple[str, str]] = [
     ("cancel", "unknown_command, not_pending, cannot_undo (the undo of a sync)"),
     ("barrier", "unknown_skill, not_idle, locked, barrier_invalid"),
     ("unbarrier", "unknown_barrier, not_idle, locked"),
+    ("barrier_edit", "unknown_barrier, not_idle, locked"),
     ("marker_add", "exists"),
     ("marker_move", "unknown_marker, bad_marker"),
     ("marker_rename", "unknown_marker, exists, marker_in_use"),

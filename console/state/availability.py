@@ -239,9 +239,14 @@ def _mark(q: Selected) -> str | None:
 
 
 def _barrier(q: Selected) -> str | None:
+    if not q.marks and q.skill is not None and q.facts.barrier_of(q.skill.id) is not None:
+        return _barrier_wait(q, q.facts.barrier_of(q.skill.id) or "")  # its wait is changed
     if len(q.marks) < 2:
         mark = q.facts.keys.say("mission.mark")
-        return f"mark one idle skill on each of at least two robots ({mark}), then make the barrier"
+        return (
+            f"mark one idle skill on each of at least two robots ({mark}), then make the "
+            "barrier (or select a skill of a barrier to change how long it waits)"
+        )
     robots: dict[str, str] = {}
     for sid in q.marks:
         f = q.facts.find(sid)
@@ -256,6 +261,18 @@ def _barrier(q: Selected) -> str | None:
         bid = q.facts.barrier_of(sid)
         if bid is not None:
             return f"{sid} is already in barrier {bid}"
+    return None
+
+
+def _barrier_wait(q: Selected, bid: str) -> str | None:
+    """A barrier's wait changes while all its skills are idle (a robot holds the rest)."""
+    mission = q.facts.mission
+    for sid in mission.barriers[bid].skills if mission is not None else []:
+        f = q.facts.find(sid)
+        if f is not None and f[2].status != Status.IDLE:
+            return not_idle(
+                f[0], f[2], f"barrier {bid}'s wait changes only while its skills are idle"
+            )
     return None
 
 

@@ -117,3 +117,26 @@ def test_not_after_is_a_mission_clock_time(tutorial, typed, seconds):
 
 def test_a_mission_file_takes_not_after_as_a_sim_clock_time():
     assert Policies(not_after="sim 0:20:00").not_after == 1200
+
+
+def test_ctl_barrier_takes_a_timeout_and_changes_an_existing_one(tutorial):
+    from backend.core.model import Barrier
+
+    op = op_of(
+        ["barrier", "lru1-1", "lru2-1", "--barrier-timeout", "10m", "--on-timeout", "continue"],
+        tutorial,
+    )
+    assert (op.op, op.ids, op.timeout, op.on_timeout) == (
+        "barrier",
+        ["lru1-1", "lru2-1"],
+        600,
+        "continue",
+    )
+    mission, _ = tutorial
+    mission.barriers["b1"] = Barrier(skills=["lru1-1", "lru2-1"], timeout=600, on_timeout="continue")
+    op = op_of(["barrier", "b1", "--on-timeout", "halt"], tutorial)  # the timeout is kept
+    assert (op.op, op.barrier, op.timeout, op.on_timeout) == ("barrier_edit", "b1", 600, "halt")
+    op = op_of(["barrier", "b1", "--barrier-timeout", "off"], tutorial)
+    assert (op.timeout, op.on_timeout) == (None, "continue")
+    with pytest.raises(UsageError, match="lru1-1 is no barrier"):
+        op_of(["barrier", "lru1-1", "--barrier-timeout", "5m"], tutorial)

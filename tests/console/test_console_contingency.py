@@ -5,7 +5,7 @@ from __future__ import annotations
 from console_state import MARS, TUTORIAL, Builder, engine_app, inject, screen_text, wait_until
 
 from backend.core.model import Fallback, FallbackSkill, Goto, Policies, Taken
-from backend.core.ops import EditSkill
+from backend.core.ops import EditBarrier, EditSkill
 
 WIDE = (150, 42)
 
@@ -100,10 +100,9 @@ async def test_both_rows_of_an_after_carry_its_tag_and_the_waiter_says_the_partn
 
 
 def test_the_wait_for_an_after_says_what_the_ground_knows():
+    from backend.protocol.messages import RobotInfo
     from console.state.model import ConsoleModel
     from console.widgets.schedule.lines import after_wait_text
-
-    from backend.protocol.messages import RobotInfo
 
     b = _lru2_waits_for_the_lander()
     m = ConsoleModel(mission=b.snapshot(), library=b.library)
@@ -150,9 +149,7 @@ async def test_not_after_shows_and_reads_as_a_mission_clock_time():
         await wait_until(
             pilot, lambda: b.mission.find("lru2-1")[2].policies.not_after == 7200, what="applied"
         )
-        await wait_until(
-            pilot, lambda: _value(ed, "#pf-not_after") == "sim 2:00:00", what="shown"
-        )
+        await wait_until(pilot, lambda: _value(ed, "#pf-not_after") == "sim 2:00:00", what="shown")
         ed.query_one("#pf-not_after").value = "at noon"
         await wait_until(
             pilot,
@@ -170,3 +167,70 @@ def _value(ed, selector: str) -> str:
 def _shown(ed, selector: str) -> str:
     found = ed.query(selector)
     return str(found.first().render()) if found else ""
+
+
+async def _open_barrier_wait(pilot, app, b) -> None:
+    from console.screens.barrier_wait import BarrierWaitPrompt
+
+    await inject(app, pilot, b, online={"lru1": True, "lru2": True, "ardea": True})
+    app.mission_screen.schedule.select("lru2-3")  # a skill of barrier b1, nothing marked
+    await pilot.pause()
+    app.mission_screen.action_barrier()
+    await wait_until(
+        pilot,
+        lambda: isinstance(app.screen, BarrierWaitPrompt) and "Barrier b1" in screen_text(app),
+        what="the prompt",
+    )
+
+
+async def test_the_barrier_action_sets_how_long_a_barrier_waits():
+    b = Builder(MARS)
+    app, backend = engine_app(b)
+    async with app.run_test(size=WIDE) as pilot:
+        await _open_barrier_wait(pilot, app, b)
+        assert "Barrier b1 (lru1-3, lru2-3)" in screen_text(app)
+        app.screen.query_one("#timeout").value = "soon"
+        await pilot.press("enter")
+        assert "mission-time duration" in _shown(app.screen, "#error")  # still open, says why
+        app.screen.query_one("#timeout").value = "10m"
+        app.screen.query_one("#then").value = "continue"
+        await pilot.pause()
+        app.screen.query_one("#timeout").focus()
+        await pilot.press("enter")
+        await wait_until(
+            pilot,
+            lambda: (
+                (b.mission.barriers["b1"].timeout, b.mission.barriers["b1"].on_timeout)
+                == (600, "continue")
+            ),
+            what="applied",
+        )
+        await wait_until(
+            pilot, lambda: "b1 waits 10m, then continue" in screen_text(app), what="said"
+        )
+
+
+def test_a_barrier_whose_skill_is_synchronized_keeps_its_wait():
+    from console.state.availability import why_not
+    from console.state.model import ConsoleModel
+
+    b = Builder(MARS)
+    b.sync("lru1", "lru1-3")
+    m = ConsoleModel(mission=b.snapshot(), library=b.library, connection="connected")
+    m.reindex()
+    why = why_not(m, "barrier", "lru2", "lru2-3")
+    assert why is not None and "barrier b1's wait changes only while its skills are idle" in why
+    assert why_not(m, "barrier", "lru2", "lru2-4") is not None  # in no barrier, nothing marked
+
+
+def test_snapshot_the_barrier_wait_prompt(snap_compare):
+    from console_state import make_app
+
+    b = Builder(MARS)
+    b.engine.submit(EditBarrier(barrier="b1", timeout=300, on_timeout="continue"))
+
+    async def run_before(pilot):
+        await _open_barrier_wait(pilot, pilot.app, b)
+        assert "how long does each robot wait" in screen_text(pilot.app)
+
+    assert snap_compare(make_app(), terminal_size=(100, 30), run_before=run_before)

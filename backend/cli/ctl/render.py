@@ -17,7 +17,7 @@ from typing import Any
 from backend.cli.ctl.args import CONTROL_OPS
 from backend.cli.ctl.team import DESCRIBE as TEAM_DESCRIBE
 from backend.core.contact import sim_time_text
-from backend.core.contingency import after_tags, awaited_by, marks, taken_text
+from backend.core.contingency import after_tags, awaited_by, marks, span_text, taken_text
 from backend.core.params import POSE_FIELDS, POSITION_FIELDS, is_angle, pose_text, value_text
 
 _GLYPHS = {
@@ -347,6 +347,10 @@ def state_json(client: Any, only: list[str] | None = None) -> dict[str, Any]:
             if _shown(r, only)
         },
         "barriers": {bid: list(b.skills) for bid, b in m.barriers.items()},
+        # how long each barrier's robots wait for each other (mission seconds; null: for ever)
+        "barrier_waits": {
+            bid: {"timeout": b.timeout, "on_timeout": b.on_timeout} for bid, b in m.barriers.items()
+        },
         "markers": {n: mk.model_dump(mode="json") for n, mk in m.markers.items()},
         "waivers": {c: w.model_dump(mode="json") for c, w in m.waivers.items()},
     }
@@ -443,7 +447,9 @@ def _barrier_line(m: Any) -> str:
     if not m.barriers:
         return "barriers: none"
     return "barriers: " + "; ".join(
-        f"{bid} = {' + '.join(b.skills)}" for bid, b in m.barriers.items()
+        f"{bid} = {' + '.join(b.skills)}"
+        + (f" (waits {_barrier_wait(b)})" if b.timeout is not None else "")
+        for bid, b in m.barriers.items()
     )
 
 
@@ -645,6 +651,13 @@ def _loaded(o: Outcome) -> str:
     return f"loaded mission '{m.name}' ({len(m.robots)} robots, {n} skills) {how} {o.at}"
 
 
+def _barrier_wait(b: Any) -> str:
+    """'10m, then continue' / 'for ever' (a barrier's timeout)."""
+    if b.timeout is None:
+        return "for ever"
+    return f"{span_text(b.timeout)}, then {b.on_timeout}"
+
+
 # the protocol's operation name (`op.op`) -> one line saying what it did
 DESCRIBE: dict[str, Callable[[Outcome], str]] = {
     "add": lambda o: f"added {o.value.get('id', '?')} ({o.op.skill}) to {o.op.robot} {o.at}",
@@ -657,9 +670,12 @@ DESCRIBE: dict[str, Callable[[Outcome], str]] = {
     "retry": lambda o: _queued(o, f"retry {o.op.id} as {o.value.get('id', '?')}"),
     "cancel": _cancelled,
     "barrier": lambda o: (
-        f"created barrier {o.value.get('barrier', '?')} ({', '.join(o.op.ids)}) {o.at}"
+        f"created barrier {o.value.get('barrier', '?')} ({', '.join(o.op.ids)})"
+        + (f", waits {_barrier_wait(o.op)}" if o.op.timeout is not None else "")
+        + f" {o.at}"
     ),
     "unbarrier": lambda o: f"removed barrier {o.op.barrier} {o.at}",
+    "barrier_edit": lambda o: f"barrier {o.op.barrier} waits {_barrier_wait(o.op)} {o.at}",
     "marker_add": lambda o: f"added marker {o.op.name} ({o.op.marker.kind}) {o.at}",
     "marker_move": _marker_moved,
     "marker_rename": lambda o: f"renamed marker {o.op.name} to {o.op.new_name} {o.at}",

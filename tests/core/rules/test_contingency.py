@@ -143,3 +143,31 @@ def test_a_restarted_robot_learns_the_outcomes_others_wait_for(engine, sync, rep
     report(engine, "lru2", "lru2-1", S.RUNNING)
     report(engine, "lru2", "lru2-1", S.SUCCESS)  # nobody waits for lru1-1 any more
     assert awaited_outcomes(engine.mission, "lru1") == {"lru1-2": "failure"}
+
+
+def test_a_barriers_timeout_is_changed_while_its_skills_are_idle(engine, refused, sync):
+    from backend.core.ops import AddBarrier, EditBarrier, Undo
+
+    bid = engine.submit(AddBarrier(ids=["lru1-1", "lru2-1"]), client="c").value["barrier"]
+    engine.submit(EditBarrier(barrier=bid, timeout="10m", on_timeout="continue"), client="c")
+    b = engine.mission.barriers[bid]
+    assert (b.skills, b.timeout, b.on_timeout) == (["lru1-1", "lru2-1"], 600, "continue")
+    engine.submit(Undo(), client="c")  # back to waiting for ever
+    b = engine.mission.barriers[bid]
+    assert (b.timeout, b.on_timeout) == (None, "halt")
+    refused(
+        engine,
+        lambda: engine.submit(EditBarrier(barrier="b99", timeout=60)),
+        "unknown_barrier",
+        bid,  # the barriers there are
+    )
+    sync(engine, "lru1", "lru1-1")  # on the robot with the barrier as it was
+    refused(
+        engine,
+        lambda: engine.submit(EditBarrier(barrier=bid, timeout=60)),
+        "not_idle",
+        "lru1-1",
+        "holds the barrier as it was synchronized",
+        robot="lru1",
+        skill="lru1-1",
+    )
