@@ -239,14 +239,20 @@ def _mark(q: Selected) -> str | None:
 
 
 def _barrier(q: Selected) -> str | None:
-    if not q.marks and q.skill is not None and q.facts.barrier_of(q.skill.id) is not None:
-        return _barrier_wait(q, q.facts.barrier_of(q.skill.id) or "")  # its wait is changed
+    bid = q.facts.barrier_of(q.skill.id) if q.skill is not None and not q.marks else None
+    if bid is not None:  # nothing marked, on a skill of a barrier: its wait changes
+        return _barrier_wait(q, bid)
     if len(q.marks) < 2:
         mark = q.facts.keys.say("mission.mark")
         return (
             f"mark one idle skill on each of at least two robots ({mark}), then make the "
             "barrier (or select a skill of a barrier to change how long it waits)"
         )
+    return _marks_joinable(q)
+
+
+def _marks_joinable(q: Selected) -> str | None:
+    """Why the marked skills cannot make a barrier (None: they can)."""
     robots: dict[str, str] = {}
     for sid in q.marks:
         f = q.facts.find(sid)

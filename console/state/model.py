@@ -117,13 +117,13 @@ def _kept_indexed(
 def _touches_after(m: Mission, batch: ev.EventBatch) -> bool:
     """The batch sets, clears or removes an `after` (policies.after): the rows
     at both of its ends carry a tag, in two robots' columns."""
-    for e in batch.events:
-        if isinstance(e, ev.SkillEdited) and e.policies is not None:
-            if e.policies.after is not None or _after_of(m, e.id) is not None:
-                return True
-        elif isinstance(e, ev.SkillRemoved) and _after_of(m, e.id) is not None:
-            return True
-    return False
+    return any(_after_event(m, e) for e in batch.events)
+
+
+def _after_event(m: Mission, e: ev.Event) -> bool:
+    if isinstance(e, ev.SkillEdited) and e.policies is not None:
+        return e.policies.after is not None or _after_of(m, e.id) is not None
+    return isinstance(e, ev.SkillRemoved) and _after_of(m, e.id) is not None
 
 
 def _doing(s: SkillInstance) -> str:
@@ -313,12 +313,11 @@ class ConsoleModel:
             return None
         if self.ordered and batch.revision <= self.mission.revision:
             return set()
-        linked = _touches_after(self.mission, batch)  # read before the batch changes it
+        tags = _touches_after(self.mission, batch)  # partner rows' tags change (before it applies)
         self.mission = ev.apply_events(self.mission, batch)
         self._heard_in(batch)
         robots: set[str] = set()
         reindex = False
-        barriers = False
         for e in batch.events:
             match e:
                 case ev.SkillAdded(robot=r) | ev.SkillRemoved(robot=r) | ev.SkillMoved(robot=r):
@@ -329,7 +328,7 @@ class ConsoleModel:
                     reindex = reindex or shown is None
                     robots.update(shown or ())
                 case ev.BarrierSet() | ev.BarrierRemoved():
-                    barriers = True
+                    tags = True
                 case ev.CommandQueued(command=c):
                     robots.add(c.robot)  # its skills show ⇡, its header the count
                 case ev.CommandChanged(id=cid):
@@ -344,9 +343,9 @@ class ConsoleModel:
                     pass
         for r in robots:
             self._robot_state.pop(r, None)
-        if reindex or barriers:
+        if reindex or tags:
             self.reindex()
-        if barriers or linked:  # tags of partner rows in other columns change too
+        if tags:  # tags of partner rows in other columns change too
             return None
         return robots
 

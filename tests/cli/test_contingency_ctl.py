@@ -133,7 +133,9 @@ def test_ctl_barrier_takes_a_timeout_and_changes_an_existing_one(tutorial):
         "continue",
     )
     mission, _ = tutorial
-    mission.barriers["b1"] = Barrier(skills=["lru1-1", "lru2-1"], timeout=600, on_timeout="continue")
+    mission.barriers["b1"] = Barrier(
+        skills=["lru1-1", "lru2-1"], timeout=600, on_timeout="continue"
+    )
     op = op_of(["barrier", "b1", "--on-timeout", "halt"], tutorial)  # the timeout is kept
     assert (op.op, op.barrier, op.timeout, op.on_timeout) == ("barrier_edit", "b1", 600, "halt")
     op = op_of(["barrier", "b1", "--barrier-timeout", "off"], tutorial)

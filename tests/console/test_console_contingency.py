@@ -143,6 +143,12 @@ async def test_not_after_shows_and_reads_as_a_mission_clock_time():
         await wait_until(pilot, lambda: shows(screen.editor, "lru2-1"), what="lru2-1 shown")
         ed = screen.editor
         assert ed.query_one("#pf-not_after").value == "sim 1:30:00"  # an instant, not "90m"
+        ed.query_one("#pf-not_after").value = "at noon"
+        await wait_until(
+            pilot,
+            lambda: "mission-clock time" in _shown(ed, "#perr-not_after"),
+            what="the field says what it takes",
+        )
         ed.query_one("#pf-not_after").value = "sim 2:00:00"
         await pilot.pause()
         ed.action_apply()
@@ -150,12 +156,6 @@ async def test_not_after_shows_and_reads_as_a_mission_clock_time():
             pilot, lambda: b.mission.find("lru2-1")[2].policies.not_after == 7200, what="applied"
         )
         await wait_until(pilot, lambda: _value(ed, "#pf-not_after") == "sim 2:00:00", what="shown")
-        ed.query_one("#pf-not_after").value = "at noon"
-        await wait_until(
-            pilot,
-            lambda: "mission-clock time" in _shown(ed, "#perr-not_after"),
-            what="the field says what it takes",
-        )
 
 
 def _value(ed, selector: str) -> str:

@@ -122,9 +122,12 @@ class _Run:
         )
         self.busy_s += leg.busy_s
         self.at = leg.end if leg.end is not None else self.at
-        if self.level is None:
-            return
-        low = self.level - leg.energy
+        if self.level is not None:
+            self._spend(c, leg, self.level)
+
+    def _spend(self, c: Costing, leg: Any, level: float) -> None:
+        """The battery through one leg, and the time it charges (a recharge)."""
+        low = level - leg.energy
         charging = charge_s(c.rt, leg, max(0.0, low))
         self.busy_s += charging
         self.low = min(low, self.low if self.low is not None else low)
@@ -149,27 +152,43 @@ def _start(step: Any, trigger: Trigger) -> Started:
     """Where and at what level a branch starts, at the latest: the skill's
     end, or its timeout when that comes first (and stops it: not `continue`,
     unless it is the timeout's own branch)."""
+    cut = _cut_at(step, trigger)
+    if cut is None:
+        return Started(step.busy_s, _end_of(step), step.battery_min)
+    return Started(cut, _stopped_at(step, cut), _level_at(step, cut / step.busy_s))
+
+
+def _cut_at(step: Any, trigger: Trigger) -> float | None:
+    """The timeout, when it stops the skill before its forecast end."""
     p = step.skill.policies
-    cut = p.timeout is not None and 0 < p.timeout < step.busy_s
-    if not cut or (trigger == "failure" and p.on_timeout == "continue"):
-        end = step.leg.end if step.leg is not None else step.start
-        return Started(step.busy_s, end, step.battery_min)
-    share = p.timeout / step.busy_s
-    level = None
-    if step.battery_start is not None and step.battery_min is not None:
-        level = step.battery_start - (step.battery_start - step.battery_min) * share
-    return Started(p.timeout, _stopped_at(step, p.timeout), level)
+    if p.timeout is None or not 0 < p.timeout < step.busy_s:
+        return None
+    return None if trigger == "failure" and p.on_timeout == "continue" else float(p.timeout)
+
+
+def _level_at(step: Any, share: float) -> float | None:
+    if step.battery_start is None or step.battery_min is None:
+        return None
+    return float(step.battery_start - (step.battery_start - step.battery_min) * share)
+
+
+def _end_of(step: Any) -> Point | None:
+    return step.leg.end if step.leg is not None else step.start  # type: ignore[no-any-return]
 
 
 def _stopped_at(step: Any, seconds: float) -> Point | None:
     """Where a skill stopped after `seconds`: along its travel (a straight
     line's share), else where it works."""
-    leg = step.leg
-    if leg is None or step.start is None or leg.goal is None or step.travel_s <= 0:
-        return leg.end if leg is not None else step.start
+    if not _travels(step):
+        return _end_of(step)
     k = min(1.0, seconds / step.travel_s)
-    (x0, y0), (x1, y1) = step.start, leg.goal
+    (x0, y0), (x1, y1) = step.start, step.leg.goal
     return (x0 + (x1 - x0) * k, y0 + (y1 - y0) * k)
+
+
+def _travels(step: Any) -> bool:
+    leg = step.leg
+    return leg is not None and leg.goal is not None and step.start is not None and step.travel_s > 0
 
 
 def worst(costs: list[BranchCost]) -> BranchCost | None:

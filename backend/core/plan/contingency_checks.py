@@ -40,23 +40,28 @@ def timeout_short(ctx: CheckContext) -> Iterator[Hit]:
 
 def branch_energy(ctx: CheckContext) -> Iterator[Hit]:
     """A branch that would run the battery below the reserve (the worst path:
-    a failure at the skill's end, or its timeout, then the branch's skills)."""
+    from the skill's end, or its timeout if sooner, then the branch's skills)."""
+    for robot, step, b, reserve in _short_branches(ctx):
+        when = "fails at its end" if b.trigger == "failure" else "times out"
+        yield Hit(
+            f"{step.skill.id}/on_{b.trigger}",
+            f"{robot}: if {step.skill.display()} {when}, its {b.text} would take the battery "
+            f"to {max(0.0, b.battery_min or 0.0) * 100:.0f}%, below the reserve "
+            f"{reserve * 100:.0f}% it stops at: the branch could not finish; recharge "
+            "before the skill, or choose a nearer branch",
+            robot=robot,
+            skills=(step.skill.id,),
+        )
+
+
+def _short_branches(ctx: CheckContext) -> Iterator[tuple[str, Step, Any, float]]:
+    """(robot, step, its worst branch, the reserve) where that branch goes below it."""
     for robot, c in ctx.courses.items():
-        reserve = c.battery.reserve if c.battery is not None else None
+        reserve = c.battery.reserve if c.battery is not None else -1.0
         for step in c.steps:
-            b = step.worst
-            if reserve is None or b is None or b.battery_min is None or b.battery_min >= reserve:
-                continue
-            when = "fails at its end" if b.trigger == "failure" else "times out"
-            yield Hit(
-                f"{step.skill.id}/on_{b.trigger}",
-                f"{robot}: if {step.skill.display()} {when}, its {b.text} would take the battery "
-                f"to {max(0.0, b.battery_min) * 100:.0f}%, below the reserve "
-                f"{reserve * 100:.0f}% it stops at: the branch could not finish; recharge "
-                "before the skill, or choose a nearer branch",
-                robot=robot,
-                skills=(step.skill.id,),
-            )
+            low = step.worst.battery_min if step.worst is not None else None
+            if low is not None and low < reserve:
+                yield robot, step, step.worst, reserve
 
 
 def goto_impassable(ctx: CheckContext) -> Iterator[Hit]:

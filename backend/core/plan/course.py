@@ -140,30 +140,35 @@ def walk(
     pos = now.position if now is not None else None
     if pos is None:  # where its last goal took it, else home (where robots start)
         pos = _last_place(library, robot_type, task) or inputs.home_point()
-    level: float | None = None
-    assumed = False
-    if battery_model is not None:
-        if now is not None and now.battery is not None:
-            level = now.battery
-        else:
-            level, assumed = 1.0, True
+    level, assumed = _level_now(battery_model, now)
     steps: list[Step] = []
     offsets = [0.0]
-    for s in task:
-        if s.status in FINISHED:
-            continue
+    for s in (s for s in task if s.status not in FINISHED):
         leg = legs.leg(library, rt, robot_type, s, pos, inputs) if rt is not None else None
         step = _step(rt, s, leg, pos, level, _progress(s, now) if s.status in ACTIVE else 0.0)
         step = _contingent(costing, step) if costing is not None else step
         steps.append(step)
         offsets.append(offsets[-1] + step.busy_s)
         level = step.battery_end
-        if step.assumed is not None:
-            pos = step.assumed.end
-        elif leg is not None:
-            pos = leg.end
+        pos = _place_after(step, pos)
     index = {step.skill.id: i for i, step in enumerate(steps)}
     return Course(robot, rt, tuple(steps), battery_model, assumed, now, tuple(offsets), index)
+
+
+def _level_now(model: BatteryModel | None, now: RobotNow | None) -> tuple[float | None, bool]:
+    """(the battery now, whether a full one is assumed: no telemetry); None: no battery."""
+    if model is None:
+        return None, False
+    if now is not None and now.battery is not None:
+        return now.battery, False
+    return 1.0, True
+
+
+def _place_after(step: Step, pos: Point | None) -> Point | None:
+    """Where the robot is once the step is done: where its assumed branch ended, else its leg."""
+    if step.assumed is not None:
+        return step.assumed.end
+    return step.leg.end if step.leg is not None else pos
 
 
 def _contingent(c: Costing, step: Step) -> Step:
@@ -177,11 +182,10 @@ def _contingent(c: Costing, step: Step) -> Step:
     plan = assumed(c, step)
     if plan is None:
         return step
-    lows = [x for x in (plan.battery_min, step.battery_start) if x is not None]
     return replace(
         step,
         busy_s=plan.total_s,
-        battery_min=min(lows) if lows else None,
+        battery_min=plan.battery_min,  # the skill's share, then the branch: the lowest
         battery_end=plan.battery_end,
         assumed=plan,
     )

@@ -485,23 +485,34 @@ def wait_text(model: ConsoleModel, s: SkillInstance) -> str:
 
 def after_wait_text(model: ConsoleModel, s: SkillInstance) -> str:
     """'after lander-1: lander OFFLINE 12:30', '…: lander out of contact', the
-    robot's own words when it says its partner is unreachable, else what the
+    robot's own words when it says it cannot reach its partner, else what the
     other skill is doing."""
     sid = str(s.policies.after)
     robot = model.owner(sid)
-    info = model.robots.get(robot) if robot is not None else None
     if robot is None:
         return s.status_info or f"after {sid}"
-    if info is None or not info.online:
-        since = f" {model.clock.stamp_text(info.since)}" if info and info.since else ""
-        return f"after {sid}: {robot} OFFLINE{since}"
+    offline = _offline_text(model, robot)
+    if offline:
+        return f"after {sid}: {offline}"
     if "unreachable" in s.status_info or "offline" in s.status_info:
         return s.status_info  # the waiting robot cannot reach it (its radio, the network)
-    if out_of_contact(info):
-        return f"after {sid}: {robot} out of contact"
+    return f"after {sid}: {_partner_doing(model, robot, sid)}"
+
+
+def _offline_text(model: ConsoleModel, robot: str) -> str:
+    """'lander OFFLINE 12:30' (since when, if known); '' while it is online."""
+    info = model.robots.get(robot)
+    if info is not None and info.online:
+        return ""
+    since = f" {model.clock.stamp_text(info.since)}" if info and info.since else ""
+    return f"{robot} OFFLINE{since}"
+
+
+def _partner_doing(model: ConsoleModel, robot: str, sid: str) -> str:
+    if out_of_contact(model.robots.get(robot)):
+        return f"{robot} out of contact"
     found = model.find(sid)
-    doing = STATUS_WORDS[found[2].status] if found is not None else "unknown"
-    return f"after {sid}: waiting for {robot} ({doing})"
+    return f"waiting for {robot} ({STATUS_WORDS[found[2].status] if found else 'unknown'})"
 
 
 def barrier_wait_text(model: ConsoleModel, s: SkillInstance) -> str:
