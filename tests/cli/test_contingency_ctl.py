@@ -142,3 +142,24 @@ def test_ctl_barrier_takes_a_timeout_and_changes_an_existing_one(tutorial):
     assert (op.timeout, op.on_timeout) == (None, "continue")
     with pytest.raises(UsageError, match="lru1-1 is no barrier"):
         op_of(["barrier", "lru1-1", "--barrier-timeout", "5m"], tutorial)
+
+
+def test_ctl_barrier_wait_against_a_server(tmp_path):
+    """Every step a separate ctl process, as a script runs it."""
+    from .helpers import Server, ok, ok_json, state
+
+    server = Server(tmp_path)
+    try:
+        e = server.endpoint
+        made = ok_json(
+            e, "barrier", "lru1-1", "lru2-1", "--barrier-timeout", "10m", "--on-timeout", "continue"
+        )
+        bid = made["value"]["barrier"]
+        said = ok(e, "barrier", bid, "--barrier-timeout", "5m").stdout
+        assert f"barrier {bid} waits 5m, then continue" in said, said
+        assert state(e)["barrier_waits"][bid] == {"timeout": 300.0, "on_timeout": "continue"}
+        ok(e, "undo")
+        shown = ok(e, "state").stdout
+        assert f"{bid} = lru1-1 + lru2-1 (waits 10m, then continue)" in shown, shown
+    finally:
+        server.stop()
