@@ -216,17 +216,23 @@ def _cancel(args: argparse.Namespace, known: Known) -> Any:
 
 def _barrier(args: argparse.Namespace, known: Known) -> Any:
     if len(args.ids) == 1:  # a barrier's id: its wait changes
-        (bid,) = args.ids
-        m = known.mission
-        if m is not None and bid not in m.barriers:
-            raise UsageError(
-                f"barrier: {bid} is no barrier (barriers: {', '.join(m.barriers) or 'none'}); "
-                "give a barrier's id, or the ids of at least two skills of different robots"
-            )
-        current = m.barriers[bid] if m is not None else None
-        waiting = barrier_waiting(args, current)
-        return _validated(ops.EditBarrier, "barrier", barrier=bid, **waiting)
+        return _barrier_edit(args, args.ids[0], known.mission)
     return _validated(ops.AddBarrier, "barrier", ids=args.ids, **barrier_waiting(args))
+
+
+def _barrier_edit(args: argparse.Namespace, bid: str, m: Any) -> Any:
+    if not {"barrier_timeout", "barrier_on_timeout"} & set(vars(args)):
+        raise UsageError(
+            "barrier: give the ids of at least two skills of different robots, or one "
+            "barrier's id with --barrier-timeout or --on-timeout"
+        )
+    if m is not None and bid not in m.barriers:
+        raise UsageError(
+            f"barrier: {bid} is no barrier (barriers: {', '.join(m.barriers) or 'none'}); "
+            "give a barrier's id, or the ids of at least two skills of different robots"
+        )
+    current = m.barriers[bid] if m is not None else None
+    return _validated(ops.EditBarrier, "barrier", barrier=bid, **barrier_waiting(args, current))
 
 
 def _unbarrier(args: argparse.Namespace, known: Known) -> Any:
