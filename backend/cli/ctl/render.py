@@ -346,13 +346,19 @@ def state_json(client: Any, only: list[str] | None = None) -> dict[str, Any]:
             for r, cmds in m.uplink.items()
             if _shown(r, only)
         },
+        **_barriers_json(m),
+        "markers": {n: mk.model_dump(mode="json") for n, mk in m.markers.items()},
+        "waivers": {c: w.model_dump(mode="json") for c, w in m.waivers.items()},
+    }
+
+
+def _barriers_json(m: Any) -> dict[str, Any]:
+    return {
         "barriers": {bid: list(b.skills) for bid, b in m.barriers.items()},
         # how long each barrier's robots wait for each other (mission seconds; null: for ever)
         "barrier_waits": {
             bid: {"timeout": b.timeout, "on_timeout": b.on_timeout} for bid, b in m.barriers.items()
         },
-        "markers": {n: mk.model_dump(mode="json") for n, mk in m.markers.items()},
-        "waivers": {c: w.model_dump(mode="json") for c, w in m.waivers.items()},
     }
 
 
