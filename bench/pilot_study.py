@@ -4,6 +4,7 @@ operator of tests/sim/pilot.py over several seeds, at sim speed.
     .venv/bin/python bench/pilot_study.py                       # 5 seeds, a Markdown table
     .venv/bin/python bench/pilot_study.py --write docs/pilot-study.md
     .venv/bin/python bench/pilot_study.py --seeds 1 2 --strategies ideal naive -v
+    .venv/bin/python bench/pilot_study.py --link-delay 10m --write docs/pilot-study.md
 
 Each run starts its own mission server and `missionctl sim --seed N` as
 subprocesses on a free loopback port (as the tests do) and plays one strategy
@@ -11,6 +12,12 @@ through MissionClient and the map feed for 26.8 sim-minutes; the truth is read
 only afterwards. `--jobs` runs that many at once (each run needs about a core).
 
 With --write, the "## Results" section of the file is replaced; the rest stays.
+
+With --link-delay D (sim time), the strategies of tests/sim/pilot_delay.py
+(default: both) play at that one-way delay until their last skill ends (at
+most 3 sim-hours), beside the no-delay ideal on the same seeds as the
+baseline; --write then replaces the section "### Results at a D delay" (the
+last of the section on the delay study).
 """
 
 from __future__ import annotations
@@ -31,8 +38,12 @@ if str(ROOT) not in sys.path:
 
 from report import machine, write_section  # noqa: E402
 
+from backend.core.durations import duration_s  # noqa: E402
 from tests.sim.conftest import Stack, connect  # noqa: E402
 from tests.sim.pilot import BEST, DEADLINE, STRATEGIES, Result, play  # noqa: E402
+from tests.sim.pilot_delay import DELAY_DEADLINE, DELAY_STRATEGIES  # noqa: E402
+
+ALL = {**STRATEGIES, **DELAY_STRATEGIES}
 
 # the paper's figures (section V-B) next to each strategy
 PAPER = {
@@ -41,16 +52,23 @@ PAPER = {
     "ideal": "5 of 9 participants: 1.8 or more in 26.8 min on average",
     "ignoring_batteries": "(the study's batteries constrain the robots)",
     "ignoring_coverage": "(adaptation only inside coverage, extended by Wi-Fi boxes)",
+    "ideal_by_hand": "today's policies: the ground sequences each step",
+    "ideal_on_board": "contingencies + after: one uplink after the survey",
 }
 
 
-async def one(strategy: str, seed: int, speed: float) -> Result:
+async def one(strategy: str, seed: int, speed: float, delay: str = "") -> Result:
+    """One run; `delay` (sim time, e.g. '10m'): a delayed strategy at that link delay."""
+    extra = ["--link-delay", delay] if delay else []
+    deadline = DELAY_DEADLINE if delay else DEADLINE
     with tempfile.TemporaryDirectory(prefix="pilot-") as tmp:
         stack = Stack(Path(tmp))
         try:
-            client, watch = await connect(stack, speed=speed, seed=seed)
+            client, watch = await connect(stack, speed=speed, seed=seed, extra=extra)
             try:
-                return await play(client, strategy, seed)
+                return await play(
+                    client, strategy, seed, deadline=deadline, linger=not delay, strategies=ALL
+                )
             finally:
                 watch.close()
                 await client.close()
@@ -59,16 +77,24 @@ async def one(strategy: str, seed: int, speed: float) -> Result:
 
 
 async def run_all(
-    strategies: list[str], seeds: list[int], speed: float, jobs: int, verbose: bool
+    strategies: list[str],
+    seeds: list[int],
+    speed: float,
+    jobs: int,
+    verbose: bool,
+    delay: str = "",
 ) -> list[Result]:
     gate = asyncio.Semaphore(jobs)
 
     async def guarded(strategy: str, seed: int) -> Result:
         async with gate:
             t0 = time.monotonic()
-            r = await one(strategy, seed, speed)
+            at = delay if strategy in DELAY_STRATEGIES else ""
+            r = await one(strategy, seed, speed, at)
+            took = r.took()
+            reached = f", 1.8 after {took / 60:.1f} sim min" if took is not None else ""
             print(
-                f"{strategy:<19} seed {seed}: score {r.score:g}"
+                f"{strategy:<19} seed {seed}: score {r.score:g}{reached}"
                 f" ({time.monotonic() - t0:.0f} s wall)",
                 file=sys.stderr,
                 flush=True,
@@ -160,21 +186,135 @@ Measured on {date.today().isoformat()}: {machine()}.
 """
 
 
+def _ratios(rs: list[Result], base: dict[int, float]) -> str:
+    """Per seed, how long it took to 1.8 over how long the no-delay ideal took."""
+    got = [t / base[r.seed] for r in rs if (t := r.took()) is not None and r.seed in base]
+    return f"{min(got):.2f}–{max(got):.2f}" if got else "–"
+
+
+def _when(rs: list[Result]) -> str:
+    """Sim minutes from the operator's start to 1.8, min–max (in how many runs)."""
+    took = [t / 60 for r in rs if (t := r.took()) is not None]
+    return f"{min(took):.1f}–{max(took):.1f} ({len(took)}/{len(rs)})" if took else "never"
+
+
+def _delay_row(name: str, rs: list[Result], base: dict[int, float], delay: str) -> str:
+    nominal = name == "ideal"
+    cells = [
+        name,
+        "none" if nominal else delay,
+        *(f"{r.score:g}" for r in rs),
+        f"{statistics.mean(r.score for r in rs):.2f}",
+        f"{statistics.mean(r.within(DEADLINE) for r in rs):.2f}",
+        _when(rs),
+        "1" if nominal else _ratios(rs, base),
+        "the baseline (no delay)" if nominal else PAPER.get(name, ""),
+    ]
+    return "| " + " | ".join(cells) + " |"
+
+
+def delay_table(results: list[Result], strategies: list[str], seeds: list[int], delay: str) -> str:
+    base = {r.seed: t for r in results if r.strategy == "ideal" and (t := r.took()) is not None}
+    rows = [
+        "| strategy | link delay | " + " | ".join(f"seed {s}" for s in seeds) + " | mean |"
+        " in 26.8 min | 1.8 after (sim min) | × the no-delay ideal | what it uses |",
+        "|---|---|" + "---:|" * (len(seeds) + 2) + "---|---:|---|",
+    ]
+    for name in ["ideal", *strategies]:
+        rs = sorted((r for r in results if r.strategy == name), key=lambda r: r.seed)
+        if rs:
+            rows.append(_delay_row(name, rs, base, delay))
+    return "\n".join(rows)
+
+
+def _branches(results: list[Result], strategies: list[str]) -> str:
+    taken = [
+        f"- {r.strategy} seed {r.seed}: {b}"
+        for r in sorted(results, key=lambda r: (r.strategy, r.seed))
+        if r.strategy in strategies
+        for b in r.branches
+    ]
+    return "\n".join(taken) or "- none: no skill failed or timed out"
+
+
+def delay_section(
+    results: list[Result], strategies: list[str], seeds: list[int], speed: float, delay: str
+) -> str:
+    args = " ".join(str(s) for s in seeds)
+    notes = "\n".join(
+        f"- {r.strategy} seed {r.seed}: {n}"
+        for r in sorted(results, key=lambda r: (r.strategy, r.seed))
+        for n in r.notes
+        if r.strategy in strategies
+    )
+    return f"""### Results at a {delay} delay
+
+Scores delivered within {DELAY_DEADLINE / 3600:g} sim-hours (and within the study's
+{DEADLINE / 60:g} minutes), at `--link-delay {delay}` (sim time) and `--speed {speed:g}`, beside
+the no-delay ideal on the same seeds (its time to 1.8 is the baseline of the ratio). A
+delayed run ends once the ground saw its last skill end. Reproduce with:
+
+    .venv/bin/python bench/pilot_study.py --link-delay {delay} --seeds {args} \\
+        --write docs/pilot-study.md
+
+{delay_table(results, strategies, seeds, delay)}
+
+Skills that failed, per strategy:
+
+{failures(results, ["ideal", *strategies])}
+
+Contingency branches the robots took:
+
+{_branches(results, strategies)}
+
+What the operators noted:
+
+{notes or "- nothing"}
+
+Measured on {date.today().isoformat()}: {machine()}.
+"""
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5])
-    ap.add_argument("--strategies", nargs="+", choices=list(STRATEGIES), default=list(STRATEGIES))
+    ap.add_argument("--strategies", nargs="+", choices=list(ALL), help="default: all of them")
+    ap.add_argument(
+        "--link-delay",
+        metavar="D",
+        default="",
+        help="one-way link delay in sim time (10m): the delayed strategies, beside the "
+        "no-delay ideal",
+    )
     ap.add_argument("--speed", type=float, default=100.0)
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--write", metavar="FILE", help="replace the '## Results' section of FILE")
     ap.add_argument("-v", "--verbose", action="store_true", help="each run's notes and failures")
     args = ap.parse_args()
-    results = asyncio.run(run_all(args.strategies, args.seeds, args.speed, args.jobs, args.verbose))
-    text = section(results, args.strategies, args.seeds, args.speed)
+    if args.link_delay:
+        return _delay_study(args)
+    strategies = args.strategies or list(STRATEGIES)
+    results = asyncio.run(run_all(strategies, args.seeds, args.speed, args.jobs, args.verbose))
+    text = section(results, strategies, args.seeds, args.speed)
     print(text)
     if args.write:
         write_section(Path(args.write), "## Results", text)
     return 0 if all(r.strategy != "ideal" or r.score >= BEST for r in results) else 1
+
+
+def _delay_study(args: argparse.Namespace) -> int:
+    if duration_s(args.link_delay) is None:
+        raise SystemExit(f"--link-delay: expected a duration such as 10m, got {args.link_delay!r}")
+    strategies = [s for s in args.strategies or DELAY_STRATEGIES if s in DELAY_STRATEGIES]
+    every = ["ideal", *strategies]
+    results = asyncio.run(
+        run_all(every, args.seeds, args.speed, args.jobs, args.verbose, args.link_delay)
+    )
+    text = delay_section(results, strategies, args.seeds, args.speed, args.link_delay)
+    print(text)
+    if args.write:
+        write_section(Path(args.write), f"### Results at a {args.link_delay} delay", text)
+    return 0 if all(r.score >= BEST for r in results) else 1
 
 
 if __name__ == "__main__":

@@ -27,13 +27,12 @@ from backend.core.contingency import clock_text, span_text
 from backend.core.model import Fallback, Goto, SkillInstance, Status, Taken
 
 Trigger = Literal["failure", "timeout"]
-OUTCOME_TOPIC = "missionctl.outcome"  # a robot-to-robot ask: how did skill X end?
-AFTER_POLL_S = 10.0  # robot seconds between asks while waiting for another robot's skill
 
 
-def _scale(ex: Any) -> float:
-    scale = float(ex.agent.time_scale)
-    return scale if scale > 0 else 1.0
+def scale(ex: Any) -> float:
+    """Mission seconds per robot second (the sim's speed)."""
+    value = float(ex.agent.time_scale)
+    return value if value > 0 else 1.0
 
 
 def _now(ex: Any) -> float:
@@ -59,7 +58,7 @@ def arm(ex: Any, act: Execution) -> None:
         budgets.append((pol.not_after - _now(ex), f"past its deadline {clock_text(pol.not_after)}"))
     if budgets:
         mission_s, why = min(budgets)
-        wall = max(0.0, mission_s) / _scale(ex)
+        wall = max(0.0, mission_s) / scale(ex)
         act.deadline = asyncio.get_running_loop().call_later(wall, expire, ex, act, why)
 
 
@@ -148,7 +147,7 @@ async def barrier_wait(ex: Any, act: Execution, waiting: Awaitable[None]) -> str
         await waiting
         return ""
     try:
-        async with asyncio.timeout(info.timeout / _scale(ex)):
+        async with asyncio.timeout(info.timeout / scale(ex)):
             await waiting
         return ""
     except TimeoutError:
@@ -160,27 +159,3 @@ async def barrier_wait(ex: Any, act: Execution, waiting: Awaitable[None]) -> str
     started = f"{why} → continue: starting alone"
     ex.queue.report(act.entry, Status.RUNNING, started, taken)
     return started
-
-
-async def wait_after(ex: Any, act: Execution) -> str | None:
-    """policies.after: wait (synchwaiting, saying for what) until the other
-    robot's skill succeeded, asking that robot directly. None to start, else
-    why its own on_failure applies (the other skill failed)."""
-    entry = act.entry
-    sid, robot = entry.skill.policies.after, entry.after_robot
-    if sid is None or robot is None:
-        return None
-    said = ""
-    while (status := await _outcome_of(ex, robot, sid)) not in ("success", "failure"):
-        text = f"after {sid} on {robot}: {status}"
-        if text != said:
-            ex.queue.report(entry, Status.SYNCHWAITING, text)
-            said = text
-        await asyncio.sleep(AFTER_POLL_S / _scale(ex))
-    return None if status == "success" else f"after {sid}: it failed on {robot}"
-
-
-async def _outcome_of(ex: Any, robot: str, sid: str) -> str:
-    """How `robot` says its skill `sid` stands (SkillQueue.outcome)."""
-    answer = await ex.agent.ask(robot, OUTCOME_TOPIC, {"skill": sid})
-    return str(answer.get("status")) if isinstance(answer, dict) else f"{robot} unreachable"

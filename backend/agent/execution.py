@@ -18,8 +18,9 @@ from typing import Any
 
 from backend.agent.barriers import wait_for_partners
 from backend.agent.context import Execution, SkillContext
-from backend.agent.contingency import barrier_wait, guarded, past_deadline, take, wait_after
+from backend.agent.contingency import barrier_wait, guarded, past_deadline, scale, take
 from backend.agent.outcomes import Failure, SkillFailed, Success
+from backend.agent.precedence import Precedence
 from backend.agent.queue import SkillQueue
 from backend.agent.registration import Handler
 from backend.agent.runtime import Runtime, log
@@ -50,6 +51,7 @@ class Executor:
         telemetry: TelemetryFeed,
         handlers: Mapping[str, Handler],
         signatures: Mapping[str, SkillSignature],
+        precedence: Precedence,
     ):
         self.agent = agent  # the RobotAgent (ctx.agent)
         self.rt = rt
@@ -57,6 +59,7 @@ class Executor:
         self.telemetry = telemetry
         self.handlers = handlers
         self.signatures = signatures  # the library's, from the last registration
+        self.precedence = precedence  # policies.after: waits for other robots' skills
         self.running: Execution | None = None  # the Execution of queue.active
         # the thread of the last plain-function handler, done once it returned
         self._handler_thread: asyncio.Future[None] | None = None
@@ -153,7 +156,9 @@ class Executor:
         if late is not None and entry.skill.policies.on_timeout != "continue":
             await take(self, act, "timeout", late)
             return None
-        failed = await wait_after(self, act)
+        failed = await self.precedence.wait(
+            act, scale(self), lambda text: self.queue.report(entry, Status.SYNCHWAITING, text)
+        )
         if failed is not None:
             await take(self, act, "failure", failed)
             return None

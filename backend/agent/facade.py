@@ -91,10 +91,10 @@ from typing import Any
 import zenoh
 
 from backend import transport
-from backend.agent.contingency import OUTCOME_TOPIC
 from backend.agent.execution import Executor
 from backend.agent.link import Link
 from backend.agent.outbox import Outbox
+from backend.agent.precedence import Precedence
 from backend.agent.queue import Effect, SkillQueue
 from backend.agent.registration import (
     Handler,
@@ -196,6 +196,8 @@ class RobotAgent:
         # telemetry_hz caps the rate; the policy says what is worth a sample
         self._telemetry = TelemetryFeed(self._rt, self._queue, telemetry)
         self._peers = Peers(self._rt)
+        # other robots ask how a skill ended before starting one after it (policies.after)
+        self._precedence = Precedence(self._rt, self._queue, self._peers)
         self._registrar = Registrar(
             self._rt,
             self._standing,
@@ -206,13 +208,18 @@ class RobotAgent:
             self._signatures,
             self.manifest,
             taken=self._stand_down,
+            learned=self._precedence.learned,
         )
         self._executor = Executor(
-            self, self._rt, self._queue, self._telemetry, self._handlers, self._signatures
+            self,
+            self._rt,
+            self._queue,
+            self._telemetry,
+            self._handlers,
+            self._signatures,
+            self._precedence,
         )
         self.world_stats = self._peers.stats
-        # other robots ask how a skill ended before starting one after it (policies.after)
-        self._peers.add_handler("ask", OUTCOME_TOPIC, self._outcome)
         self._commands: dict[type, Callable[[Any], Effect]] = {
             Enqueue: self._enqueue,
             Dequeue: self._dequeue,
@@ -502,6 +509,7 @@ class RobotAgent:
     def _on_report(self, report: Report) -> None:
         """Every status change the queue makes: outbox, listeners, telemetry."""
         self._outbox.add(report)
+        self._precedence.on_report(report.id, report.status)
         self._telemetry.info = report.info
         self._telemetry.update_mode()
         for listener in list(self.report_listeners):
@@ -531,9 +539,6 @@ class RobotAgent:
         self._outbox.clear()
         self._uplink.forget()
         self._telemetry.update_mode()
-
-    def _outcome(self, data: dict[str, Any], sender: str) -> dict[str, Any]:
-        return {"status": self._queue.outcome(str(data.get("skill", "")))}  # always a dict
 
     def _enqueue(self, cmd: Enqueue) -> Effect:
         change = self._queue.enqueue(

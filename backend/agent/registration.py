@@ -222,6 +222,7 @@ class Registrar:
         signatures: dict[str, SkillSignature],
         manifest: Callable[[], Manifest],
         taken: Callable[[str], None],
+        learned: Callable[[Mapping[str, str]], None] = lambda outcomes: None,
     ):
         self.rt = rt
         self.standing = standing
@@ -235,6 +236,8 @@ class Registrar:
         self.commands = commands  # the uplink's processed commands (registration says how far)
         self._manifest = manifest
         self._taken = taken  # another run of this robot holds the name: stand down
+        # how its finished skills ended that others wait for (a restart forgot them)
+        self._learned = learned
         self.last_reply: RegisterReply | None = None
         self._refused: str | None = None  # the server's reason, while it refuses us
         self._error = ""  # why the last registration attempt got no reply
@@ -379,6 +382,7 @@ class Registrar:
             self.outbox.ack(reply.last_seq)
         self.outbox.heartbeat_s = reply.heartbeat_s
         self._take_signatures(reply.skills)
+        self._learned(reply.outcomes)
         for what, ids in (
             ("returned to the plan (this robot no longer had them)", reply.missing),
             ("adopted (this robot holds them; the mission had them unsynchronized)", reply.adopted),

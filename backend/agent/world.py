@@ -107,7 +107,8 @@ class Peers:
             self.stats["tells_failed"] += 1
         return reply is not None and reply.known
 
-    def _reachable(self, robot: str) -> bool:
+    def reachable(self, robot: str) -> bool:
+        """What the link model says (a model that fails counts as reachable)."""
         link = self.rt.robot.link
         try:
             return bool(link.can_reach(robot)) if hasattr(link, "can_reach") else True
@@ -122,7 +123,7 @@ class Peers:
             raise self.rt.not_started()
         name = self.rt.name
         msg = WorldMessage(kind=kind, sender=name, topic=topic, data=dict(data or {}))
-        if not self._reachable(robot):
+        if not self.reachable(robot):
             log.info("%s: %s %s/%s not sent: %s is out of reach", name, kind, robot, topic, robot)
             return None
         try:

@@ -17,9 +17,10 @@ from typing import Any, Literal
 from pydantic import TypeAdapter, ValidationError
 
 from backend.core.contact import sim_time_text
-from backend.core.durations import duration_s
+from backend.core.durations import duration_s, instant_s
 from backend.core.library import Library, SkillSpec, check_params
 from backend.core.model import (
+    FINISHED,
     Branch,
     Branches,
     Fallback,
@@ -89,6 +90,28 @@ def after_problems(m: Mission, robot: str, policies: Policies) -> list[Problem]:
         why = "no such skill" if found is None else f"it is {robot}'s own (order it in the plan)"
         return [(("policies", "after"), f"after {policies.after}: {why}")]
     return []
+
+
+def awaited_outcomes(m: Mission, robot: str) -> dict[str, Literal["success", "failure"]]:
+    """How `robot`'s finished skills ended that an unfinished skill of another
+    robot waits for (policies.after): what a restarted robot must still answer."""
+    out: dict[str, Literal["success", "failure"]] = {}
+    for other, task in m.tasks.items():
+        for s in task:
+            found = _awaited(m, other, s)
+            if found is not None and found[0] == robot:
+                out[found[2].id] = "success" if found[2].status == Status.SUCCESS else "failure"
+    return out
+
+
+def _awaited(m: Mission, robot: str, s: SkillInstance) -> tuple[str, int, SkillInstance] | None:
+    """The finished skill of another robot that unfinished `s` waits for."""
+    if s.policies.after is None or s.status in FINISHED:
+        return None
+    found = m.find(s.policies.after)
+    if found is None or found[0] == robot or found[2].status not in FINISHED:
+        return None
+    return found
 
 
 def _branch_problems(
@@ -198,11 +221,32 @@ def marks(p: Policies, unicode: bool = True) -> list[str]:
 
 
 def _timeout_mark(p: Policies, unicode: bool) -> str:
-    """'⏱10m', '⏱≤2:00:00', '⏱10m,≤2:00:00' (ASCII: T10m, T<=2:00:00)."""
+    """'⏱10m', '⏱≤sim 2:00:00', '⏱10m,≤sim 2:00:00' (ASCII: T10m, T<=sim 2:00:00)."""
     limits = [span_text(p.timeout)] if p.timeout is not None else []
-    if p.not_after is not None:
-        limits.append(("≤" if unicode else "<=") + clock_text(p.not_after).removeprefix("sim "))
+    if p.not_after is not None:  # an instant of the mission clock, said as one
+        limits.append(("≤" if unicode else "<=") + clock_text(p.not_after))
     return ("⏱" if unicode else "T") + ",".join(limits)
+
+
+def awaited_by(m: Mission) -> dict[str, list[str]]:
+    """Skill id -> the skills that start only after it (their policies.after)."""
+    out: dict[str, list[str]] = {}
+    for task in m.tasks.values():
+        for s in task:
+            if s.policies.after is not None:
+                out.setdefault(s.policies.after, []).append(s.id)
+    return out
+
+
+def after_tags(p: Policies, waiting: list[str], unicode: bool = True) -> list[str]:
+    """The tags of both rows of an `after`, like a barrier's: '⇠lander-1' (it
+    starts after lander-1), '⇢lru2-4' (lru2-4 starts after it; '+1' more).
+    ASCII: 'after:lander-1', 'before:lru2-4'."""
+    out = [("⇠" if unicode else "after:") + p.after] if p.after is not None else []
+    if waiting:
+        more = f"+{len(waiting) - 1}" if len(waiting) > 1 else ""
+        out.append(("⇢" if unicode else "before:") + waiting[0] + more)
+    return out
 
 
 def taken_text(t: Taken) -> str:
@@ -224,6 +268,21 @@ def read_seconds(text: str) -> float | None | str:
     if seconds is None:
         return f"expected a mission-time duration such as 90s, 10m, 1.5h (or 'off'), got {text!r}"
     return seconds
+
+
+INSTANT_SYNTAX = (
+    "a mission-clock time: sim 2:00:00 (or 2:00:00, or 2h: two hours of sim time), "
+    "or a UTC time 2030-07-01 14:32 on a real mission"
+)
+
+
+def read_instant(text: str) -> float | None | str:
+    """policies.not_after as people type it (backend.core.durations.instant_s);
+    'off' or empty -> None; else what is wrong."""
+    if text.strip().lower() in OFF:
+        return None
+    at = instant_s(text)
+    return at if at is not None else f"expected {INSTANT_SYNTAX} (or 'off'), got {text!r}"
 
 
 def read_branch(text: str) -> Branch | None:

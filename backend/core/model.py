@@ -16,7 +16,7 @@ from typing import Annotated, Any, Final, Literal, TypeVar
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PrivateAttr
 
 from backend.core.bulk import gc_paused
-from backend.core.durations import duration_s
+from backend.core.durations import duration_s, instant_s
 
 MISSION_FORMAT: Final = "missionctl/mission@1"
 
@@ -174,6 +174,24 @@ MissionSeconds = Annotated[
 ]
 
 
+def _mission_instant(value: Any) -> Any:
+    """'sim 2:00:00', '2h', '2030-07-01 14:32' -> mission-clock seconds
+    (backend.core.durations.instant_s); other values as given."""
+    if isinstance(value, str):
+        at = instant_s(value)
+        return value if at is None else at
+    return value
+
+
+# an instant of the mission clock, in seconds (sim seconds with a simulator,
+# POSIX seconds otherwise); typed like a sim clock ("sim 2:00:00") or a date
+MissionInstant = Annotated[
+    float,
+    Field(ge=0, le=1e10),
+    BeforeValidator(_mission_instant, json_schema_input_type=float | str),
+]
+
+
 def _unset(value: object) -> bool:
     return value is None
 
@@ -229,7 +247,7 @@ class Policies(Strict):
         exclude_if=_unset,
         description="mission seconds the skill may run (retries included); then on_timeout",
     )
-    not_after: MissionSeconds | None = Field(
+    not_after: MissionInstant | None = Field(
         None,
         exclude_if=_unset,
         description="mission-time deadline (the mission clock: sim seconds with a simulator, "

@@ -156,6 +156,15 @@ class RemoveBarrier(Strict):
     barrier: Name
 
 
+class EditBarrier(BarrierTimeout):
+    """Set how long a barrier's robots wait for each other (mission time) and
+    what follows (`continue`: start alone; `halt`: fail); every skill of the
+    barrier must be idle (a synchronized one's robot holds the old ones)."""
+
+    op: Literal["barrier_edit"] = "barrier_edit"
+    barrier: Name
+
+
 class MarkerAdd(Strict):
     op: Literal["marker_add"] = "marker_add"
     name: Name
@@ -429,6 +438,7 @@ OperatorOperation = (
     | RetryEdit
     | AddBarrier
     | RemoveBarrier
+    | EditBarrier
     | MarkerAdd
     | MarkerMove
     | MarkerRename
@@ -467,6 +477,7 @@ UNDOABLE = (
     EditSkill,
     AddBarrier,
     RemoveBarrier,
+    EditBarrier,
     MarkerAdd,
     MarkerMove,
     MarkerRename,

@@ -516,6 +516,7 @@ OP_CODES: list[tuple[str, str]] = [
     ("cancel", "unknown_command, not_pending, cannot_undo (the undo of a sync)"),
     ("barrier", "unknown_skill, not_idle, locked, barrier_invalid"),
     ("unbarrier", "unknown_barrier, not_idle, locked"),
+    ("barrier_edit", "unknown_barrier, not_idle, locked"),
     ("marker_add", "exists"),
     ("marker_move", "unknown_marker, bad_marker"),
     ("marker_rename", "unknown_marker, exists, marker_in_use"),
@@ -1194,6 +1195,15 @@ waits (the barrier is met by the robots at it together).
 `{Keys.world("ROBOT")}`; the answer is a `WorldReply{{known, data}}`. Only
 robots (and tools) query it; a robot that shares no knowledge may answer
 every ask with `known: false`.
+
+Precedence (`policies.after`, `Enqueue.after`) uses two topics. A robot
+whose skill another robot waits for answers the ask `missionctl.outcome`
+(`data: {{skill}}`) with `{{status}}`: `success`, `failure`, the skill's
+status while it holds it, or `unknown`; it notes the asker while the skill
+has not ended and, when it ends, tells it (`missionctl.outcome_ended`,
+`data: {{skill, status}}`). It answers for skills it finished before a
+restart from `RegisterReply.outcomes`. The waiter asks again when the other
+robot's presence changes or it comes back within reach, else rarely.
 
 ## Consoles and scripts
 

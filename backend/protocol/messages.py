@@ -300,6 +300,13 @@ class RegisterReply(Strict):
         "drop them",
     )
     heartbeat_s: float = Field(5.0, description="send a Downlink at least this often")
+    outcomes: dict[SkillId, Literal["success", "failure"]] = Field(
+        default_factory=dict,
+        max_length=10_000,
+        exclude_if=lambda v: not v,  # left out while empty: older robots read the reply
+        description="how this robot's finished skills ended that a skill of another robot "
+        "waits for (policies.after): answer them to partners (a restarted robot forgot)",
+    )
     skills: dict[Name, SkillSignature] = Field(
         default_factory=dict,
         description="the library's signature of each skill the manifest offers that the robot's "

@@ -139,6 +139,7 @@ VALUES: dict[str, type[Strict]] = {
     "cancel": Cancelled,
     "barrier": BarrierMade,
     "unbarrier": Empty,
+    "barrier_edit": BarrierMade,
     "marker_add": Empty,
     "marker_move": MarkerMoved,
     "marker_rename": Empty,

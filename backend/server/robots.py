@@ -28,6 +28,7 @@ from pydantic import ValidationError
 
 from backend.core import events as ev
 from backend.core.alerts import AlertKind, Level
+from backend.core.contingency import awaited_outcomes
 from backend.core.library import SkillSignature
 from backend.core.model import CommandState, Mission
 from backend.core.ops import LoadMission, Reconcile, UplinkSettle
@@ -278,6 +279,7 @@ class RobotLink:
                 adopted=adopted,
                 dropped=dropped,
                 heartbeat_s=HEARTBEAT_S,
+                outcomes=awaited_outcomes(self._mission, robot),
                 skills=self._signatures(m),
             )
         )

@@ -650,6 +650,7 @@ class HelpScreen(ModalScreen[None]):
         table(
             [
                 ("[b1]", "", "barrier tag: partner skills wait for each other"),
+                ("⇠id ⇢id", "", "after: it starts after skill id / skill id starts after it"),
                 ("+", "", f"marked for a new barrier ({self.keys.say('mission.mark')})"),
                 (
                     "*label",

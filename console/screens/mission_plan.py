@@ -9,11 +9,13 @@ from __future__ import annotations
 from collections import deque
 from typing import Any
 
-from backend.core.model import Status
+from backend.core.contingency import span_text
+from backend.core.model import BarrierTimeout, Status
 from backend.core.ops import (
     AddBarrier,
     AddSkill,
     DeleteSkills,
+    EditBarrier,
     MoveSkill,
     Redo,
     RemoveBarrier,
@@ -21,6 +23,7 @@ from backend.core.ops import (
     Undo,
 )
 from console.bindings import key_names
+from console.screens.barrier_wait import BarrierWaitPrompt
 from console.screens.dialogs import ConfirmScreen, SkillPicker, SkillSearch
 from console.screens.schedule_keys import added_text
 from console.state.capability import also_offered_by
@@ -153,6 +156,9 @@ class PlanActions:
     def barrier(self) -> None:
         s = self.screen
         ids = list(s.schedule.marks)
+        if not ids:  # on a skill of a barrier: how long it waits
+            self.barrier_wait()
+            return
 
         def ok(r: Any) -> None:
             s.schedule.clear_marks()
@@ -160,6 +166,33 @@ class PlanActions:
             s.say(f"barrier {r.value.get('barrier', '')}: {', '.join(ids)} start together", "ok")
 
         s.submit(AddBarrier(ids=ids), f"barrier {', '.join(ids)}", then=ok)
+
+    def barrier_wait(self) -> None:
+        s = self.screen
+        robot, sid = s.selection()
+        bid = self.model.barrier_of(sid) if sid else None
+        m = self.model.mission
+        if bid is None or m is None or bid not in m.barriers:
+            return
+
+        def chosen(wait: BarrierTimeout | None) -> None:
+            if wait is None:
+                s.say(f"barrier {bid} unchanged")
+                return
+            how = (
+                f"waits {span_text(wait.timeout)}, then {wait.on_timeout}"
+                if wait.timeout is not None
+                else "waits for ever"
+            )
+            s.submit(
+                EditBarrier(barrier=bid, timeout=wait.timeout, on_timeout=wait.on_timeout),
+                f"barrier {bid} wait",
+                robot=robot,
+                skill=sid,
+                then=lambda r: s.say(f"barrier {bid} {how}", "ok"),
+            )
+
+        s.app.push_screen(BarrierWaitPrompt(bid, m.barriers[bid]), chosen)
 
     def unbarrier(self) -> None:
         s = self.screen

@@ -180,7 +180,13 @@ ACTIONS: list[Action] = [
         "Synchronization",
     ),
     Action(
-        "barrier", "b", "Barrier", "Make a barrier of the marked skills", "Synchronization", True
+        "barrier",
+        "b",
+        "Barrier",
+        "Make a barrier of the marked skills; with none marked, set how long the selected "
+        "skill's barrier waits (then start alone or fail)",
+        "Synchronization",
+        True,
     ),
     Action(
         "unbarrier", "B", "Unbarrier", "Remove the barrier of the selected skill", "Synchronization"

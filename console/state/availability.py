@@ -239,9 +239,20 @@ def _mark(q: Selected) -> str | None:
 
 
 def _barrier(q: Selected) -> str | None:
+    bid = q.facts.barrier_of(q.skill.id) if q.skill is not None and not q.marks else None
+    if bid is not None:  # nothing marked, on a skill of a barrier: its wait changes
+        return _barrier_wait(q, bid)
     if len(q.marks) < 2:
         mark = q.facts.keys.say("mission.mark")
-        return f"mark one idle skill on each of at least two robots ({mark}), then make the barrier"
+        return (
+            f"mark one idle skill on each of at least two robots ({mark}), then make the "
+            "barrier (or select a skill of a barrier to change how long it waits)"
+        )
+    return _marks_joinable(q)
+
+
+def _marks_joinable(q: Selected) -> str | None:
+    """Why the marked skills cannot make a barrier (None: they can)."""
     robots: dict[str, str] = {}
     for sid in q.marks:
         f = q.facts.find(sid)
@@ -256,6 +267,18 @@ def _barrier(q: Selected) -> str | None:
         bid = q.facts.barrier_of(sid)
         if bid is not None:
             return f"{sid} is already in barrier {bid}"
+    return None
+
+
+def _barrier_wait(q: Selected, bid: str) -> str | None:
+    """A barrier's wait changes while all its skills are idle (a robot holds the rest)."""
+    mission = q.facts.mission
+    for sid in mission.barriers[bid].skills if mission is not None else []:
+        f = q.facts.find(sid)
+        if f is not None and f[2].status != Status.IDLE:
+            return not_idle(
+                f[0], f[2], f"barrier {bid}'s wait changes only while its skills are idle"
+            )
     return None
 
 

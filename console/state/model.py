@@ -114,6 +114,30 @@ def _kept_indexed(
     return not isinstance(e, ev.SkillRemoved)
 
 
+def _touches_after(m: Mission, batch: ev.EventBatch) -> bool:
+    """The batch sets, clears or removes an `after` (policies.after): the rows
+    at both of its ends carry a tag, in two robots' columns."""
+    return any(_after_event(m, e) for e in batch.events)
+
+
+def _after_event(m: Mission, e: ev.Event) -> bool:
+    if isinstance(e, ev.SkillEdited) and e.policies is not None:
+        return e.policies.after is not None or _after_of(m, e.id) is not None
+    return isinstance(e, ev.SkillRemoved) and _after_of(m, e.id) is not None
+
+
+def _doing(s: SkillInstance) -> str:
+    """Its status in words; one waiting on board for its `after`, not at a barrier, says so."""
+    if s.status == Status.SYNCHWAITING and s.status_info.startswith("after "):
+        return f"after {s.policies.after}"
+    return STATUS_WORDS[s.status]
+
+
+def _after_of(m: Mission, sid: str) -> str | None:
+    found = m.find(sid)
+    return found[2].policies.after if found is not None else None
+
+
 @dataclass
 class ConsoleModel:
     mission: Mission | None = None
@@ -289,11 +313,11 @@ class ConsoleModel:
             return None
         if self.ordered and batch.revision <= self.mission.revision:
             return set()
+        tags = _touches_after(self.mission, batch)  # partner rows' tags change (before it applies)
         self.mission = ev.apply_events(self.mission, batch)
         self._heard_in(batch)
         robots: set[str] = set()
         reindex = False
-        barriers = False
         for e in batch.events:
             match e:
                 case ev.SkillAdded(robot=r) | ev.SkillRemoved(robot=r) | ev.SkillMoved(robot=r):
@@ -304,7 +328,7 @@ class ConsoleModel:
                     reindex = reindex or shown is None
                     robots.update(shown or ())
                 case ev.BarrierSet() | ev.BarrierRemoved():
-                    barriers = True
+                    tags = True
                 case ev.CommandQueued(command=c):
                     robots.add(c.robot)  # its skills show ⇡, its header the count
                 case ev.CommandChanged(id=cid):
@@ -319,9 +343,9 @@ class ConsoleModel:
                     pass
         for r in robots:
             self._robot_state.pop(r, None)
-        if reindex or barriers:
+        if reindex or tags:
             self.reindex()
-        if barriers:  # tags of partner rows in other columns change too
+        if tags:  # tags of partner rows in other columns change too
             return None
         return robots
 
@@ -481,7 +505,7 @@ class ConsoleModel:
             extra = ""
             if t is not None and t.skill == act.id and act.status == Status.RUNNING:
                 extra = f" {int(t.progress * 100)}%" if t.progress is not None else ""
-            return f"{GLYPHS[act.status]} {act.id} {STATUS_WORDS[act.status]}{extra}"
+            return f"{GLYPHS[act.status]} {act.id} {_doing(act)}{extra}"
         mode = t.mode if t is not None else ""
         if queued:
             return f"{mode if mode and mode != 'idle' else 'halted'} · {queued} queued"

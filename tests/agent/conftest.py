@@ -114,6 +114,8 @@ class FakeServer:
         self.uplink_seq: dict[str, int] = {}
         self.pending: dict[str, list[UplinkEntry]] = {}
         self.signatures: dict[str, SkillSignature] = {}  # sent with every accepted registration
+        # robot -> how its finished skills ended that others wait for (RegisterReply.outcomes)
+        self.outcomes: dict[str, dict[str, Any]] = {}
 
     async def start(self) -> None:
         self.session = open_session(client_config([self.endpoint]))
@@ -161,7 +163,8 @@ class FakeServer:
         self.sessions[reg.manifest.name] = reg.session
         self.apply(reg.manifest.name, reg.downlink)
         last_seq = self.last_seq.get(reg.manifest.name, 0)
-        return dumps(RegisterReply(last_seq=last_seq, skills=self.signatures))
+        outcomes = self.outcomes.get(reg.manifest.name, {})
+        return dumps(RegisterReply(last_seq=last_seq, skills=self.signatures, outcomes=outcomes))
 
     async def _on_downlink(self, payload: bytes) -> bytes:
         dl = Downlink.model_validate_json(payload)

@@ -105,6 +105,7 @@ def test_every_reply_value_fits_its_schema():
     do(ops.EditSkill(id=added, label="x"))
     do(ops.MoveSkill(id=added, index=0))
     do(ops.AddBarrier(ids=[added, "lru2-1"]))
+    do(ops.EditBarrier(barrier="b1", timeout=600, on_timeout="continue"))
     do(ops.RemoveBarrier(barrier="b1"))
     marker = Marker.__args__[0].__args__[0](pose={"x": 1, "y": 1})  # a PoseMarker
     do(ops.MarkerAdd(name="M", marker=marker))

@@ -66,6 +66,17 @@ class Result:
     seen: dict[str, float] = field(default_factory=dict)  # region -> first on the map (s)
     skills: list[str] = field(default_factory=list)  # "robot skill: status, result" in order
     truth: mf.SimTruth | None = None  # evaluation only, read after the run
+    started_at: float = 0.0  # sim seconds when the operator began (robots registered)
+    branches: list[str] = field(default_factory=list)  # "robot skill: on failure: skip" taken
+
+    def took(self) -> float | None:
+        """Sim seconds from the operator's start to BEST (None: never)."""
+        return None if self.reached_best_at is None else self.reached_best_at - self.started_at
+
+    def within(self, seconds: float) -> float:
+        """The score delivered within `seconds` of the operator's start."""
+        got = sum(v for _s, v, t in self.deliveries if t - self.started_at <= seconds)
+        return round(got, 3)
 
 
 class Deadline(Exception):
@@ -85,6 +96,7 @@ class Operator:
         self.refusals: list[str] = []
         self.notes: list[str] = []
         self.seen: dict[str, float] = {}  # region -> sim time it first showed on the map
+        self.shelved: str | None = None  # the lander's skill that shelves the Wi-Fi box
         self._sub: Any = None
         self._loop = asyncio.get_running_loop()
 
@@ -461,7 +473,7 @@ async def ideal(op: Operator, *, mind_batteries: bool = True, use_wifi: bool = T
 async def explore_with_all_three(op: Operator, mind_batteries: bool) -> tuple[list[str], list[str]]:
     """Ardea surveys the site; the rovers map the ground near the lander meanwhile (and
     recharge, unless batteries are ignored); LRU2 comes back for the Wi-Fi box."""
-    await op.do("lander", ("load_box", {"box": "wifi_box_1", "slot": 2}))
+    (op.shelved,) = await op.do("lander", ("load_box", {"box": "wifi_box_1", "slot": 2}))
     await survey_from_the_air(op)
     if mind_batteries:
         lru1 = [await explore_near(op, "lru1", "east", 200.0)]
@@ -551,7 +563,9 @@ async def ignoring_coverage(op: Operator) -> None:
     await ideal(op, use_wifi=False)
 
 
-STRATEGIES: dict[str, Callable[[Operator], Awaitable[None]]] = {
+Strategy = Callable[[Operator], Awaitable[None]]
+
+STRATEGIES: dict[str, Strategy] = {  # at no delay
     "naive": naive,
     "farming": farming,
     "ideal": ideal,
@@ -563,55 +577,85 @@ STRATEGIES: dict[str, Callable[[Operator], Awaitable[None]]] = {
 # ---------------------------------------------------------------- running one
 
 
-async def play(client: MissionClient, strategy: str, seed: int) -> Result:
-    """Play `strategy` until it is done or the pilot study's time is up; evaluate."""
-    op = Operator(client)
+async def play(
+    client: MissionClient,
+    strategy: str,
+    seed: int,
+    *,
+    deadline: float = DEADLINE,
+    linger: bool = True,
+    strategies: dict[str, Strategy] | None = None,
+) -> Result:
+    """Play `strategy` until it is done or `deadline` (sim seconds) is up;
+    evaluate. `linger`: wait out the deadline first (reports in flight);
+    a delayed run ends once its strategy saw its last skill end."""
+    op = Operator(client, deadline)
     await op.start()
     try:
+        started = op.clock()  # under a delay the robots register one delay into the run
         await op.clear_plan()
         try:
-            await STRATEGIES[strategy](op)
+            await (strategies or STRATEGIES)[strategy](op)
         except Deadline:
             op.note("time is up")
-        await op.until(lambda: False)  # the rest of the 26.8 minutes (reports in flight)
-        return await _evaluate(op, strategy, seed)
+        if linger:
+            await op.until(lambda: False)  # the rest of the 26.8 minutes (reports in flight)
+        result = await _evaluate(op, strategy, seed, deadline, referee=not linger)
+        result.started_at = started
+        return result
     finally:
         op.close()
 
 
-async def _evaluate(op: Operator, strategy: str, seed: int) -> Result:
+async def _evaluate(
+    op: Operator, strategy: str, seed: int, deadline: float, referee: bool = False
+) -> Result:
+    """The deliveries as the ground saw them; `referee`: as the world has them
+    (a run that ends as soon as its last skill ended: the ground view of the
+    delivery may still be on its way)."""
     assert op.client.session is not None
     raw = await transport.query(op.client.session, mf.KEY_STATUS, mf.TRUTH_QUERY, timeout=10.0)
     status = mf.SimStatus.model_validate_json(raw)
-    deliveries = [(d.stone, d.score, d.sim_time) for d in status.delivered]
-    in_time = [d for d in deliveries if d[2] <= DEADLINE]
-    score, reached = 0.0, None
-    for _stone, s, t in sorted(in_time, key=lambda d: d[2]):
-        score += s
-        if reached is None and score >= BEST - 1e-9:
-            reached = t
-    m = op.client.mission
-    assert m is not None
-    failures = [
-        (robot, s.skill, s.status_info)
-        for robot, task in m.tasks.items()
-        for s in task
-        if s.status.value == "failure"
-    ]
+    seen = status.truth.delivered if referee and status.truth is not None else status.delivered
+    deliveries = [(d.stone, d.score, d.sim_time) for d in seen]
+    score, reached = _scored(deliveries, deadline)
     return Result(
         strategy=strategy,
         seed=seed,
-        score=round(score, 3),
+        score=score,
         reached_best_at=reached,
         deliveries=deliveries,
-        failures=failures,
         refusals=op.refusals,
         notes=op.notes,
         seen=op.seen,
-        skills=[
-            f"{robot} {s.skill}: {s.status.value} {s.status_info}".rstrip()
-            for robot, task in m.tasks.items()
-            for s in task
-        ],
         truth=status.truth,
+        **_what_the_skills_did(op),
     )
+
+
+def _what_the_skills_did(op: Operator) -> dict[str, Any]:
+    """Result's failures, skills and branches, from the ground's mission."""
+    m = op.client.mission
+    assert m is not None
+    skills = [(robot, s) for robot, task in m.tasks.items() for s in task]
+    return {
+        "failures": [(r, s.skill, s.status_info) for r, s in skills if s.status.value == "failure"],
+        "skills": [f"{r} {s.skill}: {s.status.value} {s.status_info}".rstrip() for r, s in skills],
+        "branches": [
+            f"{r} {s.skill}: on {s.branch.trigger}: {s.branch.branch}"
+            for r, s in skills
+            if s.branch is not None
+        ],
+    }
+
+
+def _scored(
+    deliveries: list[tuple[str, float, float]], deadline: float
+) -> tuple[float, float | None]:
+    """The score delivered by `deadline` and when it reached BEST (None: never)."""
+    score, reached = 0.0, None
+    for _stone, s, t in sorted((d for d in deliveries if d[2] <= deadline), key=lambda d: d[2]):
+        score += s
+        if reached is None and score >= BEST - 1e-9:
+            reached = t
+    return round(score, 3), reached

@@ -47,7 +47,12 @@ Operations
                               never will be (1: refused, expired, a skill
                               failed) or is overdue: past its due time and
                               tolerance, plus D (4)
-  barrier ID ID...
+  barrier ID ID... [--barrier-timeout D] [--on-timeout continue|halt]
+  barrier BARRIER_ID [--barrier-timeout D] [--on-timeout continue|halt]
+                              idle skills start together; a robot waits for its
+                              partners D of mission time (off: for ever), then starts
+                              alone (continue) or fails (halt); one barrier's id:
+                              change its wait (its skills idle), unnamed ones kept
   unbarrier BARRIER_ID
   marker add NAME (--pose P | --position P | --area A) [--description TEXT]
   marker move NAME (--pose P | --position P | --area A)
@@ -85,7 +90,8 @@ Parameter values (--param NAME=VALUE)
   `--unbind NAME` (edit) keeps the current value but drops the binding.
   POLICY: --retries N, --pause-out-of-comms / --no-pause-out-of-comms,
   --recharge-below F (0..1, or `off`); contingencies: --skill-timeout 10m,
-  --not-after 2h, --on-failure / --on-timeout halt|skip|continue|goto:MARKER|
+  --not-after 'sim 2:00:00' (a mission-clock time; 2h: two hours of sim time),
+  --on-failure / --on-timeout halt|skip|continue|goto:MARKER|
   fallback:SKILL[+SKILL]; on edit, unnamed policies are kept.
 
 Geometry
@@ -148,7 +154,7 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from backend.cli.ctl.contingency import add_after_args
+from backend.cli.ctl.contingency import add_after_args, add_barrier_args
 from backend.cli.ctl.contingency import add_options as add_contingency_options
 from backend.cli.ctl.team import reassign_arguments, robots_arguments, suggest_arguments
 from backend.cli.parser import Parser
@@ -583,7 +589,10 @@ OPERATIONS: dict[str, tuple[str, Arguments]] = {
     "pending": ("commands to robots not settled yet (age, expiry)", _state),
     "cancel": ("withdraw a pending command to a robot", _cancel),
     "wait": ("wait for a command's stage: received, started or completed", _wait_stage),
-    "barrier": ("make idle skills of different robots start together", _ids),
+    "barrier": (
+        "make idle skills of different robots start together, or change a barrier's timeout",
+        add_barrier_args,
+    ),
     "after": ("start an idle skill only once another robot's skill succeeded", add_after_args),
     "unbarrier": ("remove a barrier", _unbarrier),
     "reassign": ("give idle skills, or a robot's plan, to another robot", reassign_arguments),

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from backend.cli.ctl.args import CONTROL_OPS
+from backend.cli.ctl.contingency import barrier_waiting
 from backend.cli.ctl.contingency import given as given_contingency
 from backend.cli.ctl.errors import FileInvalid, UsageError
 from backend.cli.ctl.team import build_reassign, build_robots
@@ -214,9 +215,24 @@ def _cancel(args: argparse.Namespace, known: Known) -> Any:
 
 
 def _barrier(args: argparse.Namespace, known: Known) -> Any:
-    if len(args.ids) < 2:
-        raise UsageError("barrier: give the ids of at least two skills of different robots")
-    return _validated(ops.AddBarrier, "barrier", ids=args.ids)
+    if len(args.ids) == 1:  # a barrier's id: its wait changes
+        return _barrier_edit(args, args.ids[0], known.mission)
+    return _validated(ops.AddBarrier, "barrier", ids=args.ids, **barrier_waiting(args))
+
+
+def _barrier_edit(args: argparse.Namespace, bid: str, m: Any) -> Any:
+    if not {"barrier_timeout", "barrier_on_timeout"} & set(vars(args)):
+        raise UsageError(
+            "barrier: give the ids of at least two skills of different robots, or one "
+            "barrier's id with --barrier-timeout or --on-timeout"
+        )
+    if m is not None and bid not in m.barriers:
+        raise UsageError(
+            f"barrier: {bid} is no barrier (barriers: {', '.join(m.barriers) or 'none'}); "
+            "give a barrier's id, or the ids of at least two skills of different robots"
+        )
+    current = m.barriers[bid] if m is not None else None
+    return _validated(ops.EditBarrier, "barrier", barrier=bid, **barrier_waiting(args, current))
 
 
 def _unbarrier(args: argparse.Namespace, known: Known) -> Any:

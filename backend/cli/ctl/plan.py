@@ -21,6 +21,7 @@ import time
 from datetime import UTC, datetime
 from typing import Any
 
+from backend.core.plan.branches import BranchCost
 from backend.core.plan.checks import Finding, run_checks
 from backend.core.plan.forecast import Forecast, Forecaster, RobotForecast, SkillForecast
 from backend.core.plan.inputs import PlanInputs
@@ -197,7 +198,36 @@ def _skill_json(f: SkillForecast, s: Any) -> dict[str, Any]:
         "battery_min": f.battery_min,
         "battery_end": f.battery_end,
         "out_of_coverage": [[_iso(a), _iso(b)] for a, b in f.out_of_coverage],
+        "assumed": _branch_json(f.assumed),
+        "worst": _branch_json(f.worst),
     }
+
+
+def _branch_json(b: BranchCost | None) -> dict[str, Any] | None:
+    """A contingency branch as the forecast costs it (backend.core.plan.branches)."""
+    if b is None:
+        return None
+    return {
+        "trigger": b.trigger,
+        "branch": b.text,
+        "before_s": round(b.before_s, 1),
+        "busy_s": round(b.busy_s, 1),
+        "battery_min": b.battery_min,
+        "battery_end": b.battery_end,
+    }
+
+
+def _branch_words(f: SkillForecast) -> list[str]:
+    """'on timeout → skip (assumed: its timeout is short)', 'if it fails:
+    goto@POI-A +3:20, battery 12%'."""
+    out = []
+    if f.assumed is not None:
+        out.append(f"on timeout → {f.assumed.text} (assumed: the timeout is shorter)")
+    w = f.worst
+    if w is not None and not (f.assumed is not None and w.trigger == "timeout"):
+        when = "if it fails" if w.trigger == "failure" else "on timeout"
+        out.append(f"{when}: {w.text} +{_span_s(w.busy_s)}, battery {_pct(w.battery_min)}")
+    return out
 
 
 def timeline_json(fc: Forecast, mission: Any) -> dict[str, Any]:
@@ -234,6 +264,7 @@ def _skill_line(f: SkillForecast, s: Any) -> str:
         parts.append(f"battery {_pct(f.battery_end)}")
     for a, b in f.out_of_coverage:
         parts.append(f"out of coverage {_clock(a)}-{_clock(b)}")
+    parts += _branch_words(f)
     return "  ".join(parts)
 
 

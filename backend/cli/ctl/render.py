@@ -17,7 +17,7 @@ from typing import Any
 from backend.cli.ctl.args import CONTROL_OPS
 from backend.cli.ctl.team import DESCRIBE as TEAM_DESCRIBE
 from backend.core.contact import sim_time_text
-from backend.core.contingency import marks, taken_text
+from backend.core.contingency import after_tags, awaited_by, marks, span_text, taken_text
 from backend.core.params import POSE_FIELDS, POSITION_FIELDS, is_angle, pose_text, value_text
 from backend.protocol.messages import RobotInfo
 
@@ -328,7 +328,12 @@ def _robot_type(client: Any, spec: Any, manifest: Any) -> tuple[str | None, str 
     return rtype, (rt.kind if rt else None)
 
 
-def _skill_json(m: Any, s: Any, locks: dict[str, Any] | None = None) -> dict[str, Any]:
+def _skill_json(
+    m: Any,
+    s: Any,
+    locks: dict[str, Any] | None = None,
+    waits: dict[str, list[str]] | None = None,
+) -> dict[str, Any]:
     c = (locks or {}).get(s.id)
     return {
         "uplink": {"command": c.id, "op": c.op, "state": c.state.value} if c else None,
@@ -342,6 +347,7 @@ def _skill_json(m: Any, s: Any, locks: dict[str, Any] | None = None) -> dict[str
         "bindings": s.bindings,
         "policies": s.policies.model_dump(mode="json"),
         "barrier": m.barrier_of(s.id),
+        "awaited_by": (waits or {}).get(s.id, []),  # skills that start after it
         "started_at": _iso(s.started_at),
         "finished_at": _iso(s.finished_at),
     }
@@ -358,7 +364,7 @@ def state_json(client: Any, only: list[str] | None = None) -> dict[str, Any]:
         "robots": _robots_json(client, now, only),
         "tasks": _tasks_json(m, only),
         "uplink": _uplink_json(m, now, only),
-        "barriers": {bid: list(b.skills) for bid, b in m.barriers.items()},
+        **_barriers_json(m),
         "markers": {n: mk.model_dump(mode="json") for n, mk in m.markers.items()},
         "waivers": {c: w.model_dump(mode="json") for c, w in m.waivers.items()},
     }
@@ -373,8 +379,9 @@ def _robots_json(client: Any, now: datetime, only: list[str] | None) -> dict[str
 
 def _tasks_json(m: Any, only: list[str] | None) -> dict[str, list[dict[str, Any]]]:
     locks = m.command_locks()
+    waits = awaited_by(m)
     return {
-        r: [_skill_json(m, s, locks) for s in task]
+        r: [_skill_json(m, s, locks, waits) for s in task]
         for r, task in m.tasks.items()
         if _shown(r, only)
     }
@@ -383,6 +390,16 @@ def _tasks_json(m: Any, only: list[str] | None) -> dict[str, list[dict[str, Any]
 def _uplink_json(m: Any, now: datetime, only: list[str] | None) -> dict[str, list[Any]]:
     return {
         r: [command_json(c, now) for c in cmds] for r, cmds in m.uplink.items() if _shown(r, only)
+    }
+
+
+def _barriers_json(m: Any) -> dict[str, Any]:
+    return {
+        "barriers": {bid: list(b.skills) for bid, b in m.barriers.items()},
+        # how long each barrier's robots wait for each other (mission seconds; null: for ever)
+        "barrier_waits": {
+            bid: {"timeout": b.timeout, "on_timeout": b.on_timeout} for bid, b in m.barriers.items()
+        },
     }
 
 
@@ -441,9 +458,10 @@ def _task_lines(m: Any, task: list[Any], lib: Any, unicode: bool) -> list[str]:
 
 
 def _task_columns(m: Any, task: list[Any], unicode: bool) -> list[str]:
-    """Each skill's glyph, id (with its barrier), label and skill, padded to
+    """Each skill's glyph, id (with its barrier and after tags), label and skill, padded to
     the task's widths."""
-    ids = [s.id + (f" [{m.barrier_of(s.id)}]" if m.barrier_of(s.id) else "") for s in task]
+    waits = awaited_by(m)
+    ids = [_id_tags(m, s, waits.get(s.id, []), unicode) for s in task]
     wid = max(len(i) for i in ids)
     wlabel = max(len(s.label) for s in task)
     wskill = max(len(s.skill) for s in task)
@@ -452,6 +470,13 @@ def _task_columns(m: Any, task: list[Any], unicode: bool) -> list[str]:
         f"{s.skill:<{wskill}}"
         for s, ident in zip(task, ids, strict=True)
     ]
+
+
+def _id_tags(m: Any, s: Any, waiting: list[str], unicode: bool) -> str:
+    """'lru2-4 [b1] [⇠lander-1]': the id, its barrier, both ends of an after."""
+    bid = m.barrier_of(s.id)
+    tags = ([bid] if bid else []) + after_tags(s.policies, waiting, unicode)
+    return " ".join([s.id, *(f"[{t}]" for t in tags)])
 
 
 def _robot_lines(client: Any, robot: str, unicode: bool) -> list[str]:
@@ -480,7 +505,9 @@ def _barrier_line(m: Any) -> str:
     if not m.barriers:
         return "barriers: none"
     return "barriers: " + "; ".join(
-        f"{bid} = {' + '.join(b.skills)}" for bid, b in m.barriers.items()
+        f"{bid} = {' + '.join(b.skills)}"
+        + (f" (waits {_barrier_wait(b)})" if b.timeout is not None else "")
+        for bid, b in m.barriers.items()
     )
 
 
@@ -697,6 +724,13 @@ def _loaded(o: Outcome) -> str:
     return f"loaded mission '{m.name}' ({len(m.robots)} robots, {n} skills) {how} {o.at}"
 
 
+def _barrier_wait(b: Any) -> str:
+    """'10m, then continue' / 'for ever' (a barrier's timeout)."""
+    if b.timeout is None:
+        return "for ever"
+    return f"{span_text(b.timeout)}, then {b.on_timeout}"
+
+
 # the protocol's operation name (`op.op`) -> one line saying what it did
 DESCRIBE: dict[str, Callable[[Outcome], str]] = {
     "add": lambda o: f"added {o.value.get('id', '?')} ({o.op.skill}) to {o.op.robot} {o.at}",
@@ -709,9 +743,12 @@ DESCRIBE: dict[str, Callable[[Outcome], str]] = {
     "retry": lambda o: _queued(o, f"retry {o.op.id} as {o.value.get('id', '?')}"),
     "cancel": _cancelled,
     "barrier": lambda o: (
-        f"created barrier {o.value.get('barrier', '?')} ({', '.join(o.op.ids)}) {o.at}"
+        f"created barrier {o.value.get('barrier', '?')} ({', '.join(o.op.ids)})"
+        + (f", waits {_barrier_wait(o.op)}" if o.op.timeout is not None else "")
+        + f" {o.at}"
     ),
     "unbarrier": lambda o: f"removed barrier {o.op.barrier} {o.at}",
+    "barrier_edit": lambda o: f"barrier {o.op.barrier} waits {_barrier_wait(o.op)} {o.at}",
     "marker_add": lambda o: f"added marker {o.op.name} ({o.op.marker.kind}) {o.at}",
     "marker_move": _marker_moved,
     "marker_rename": lambda o: f"renamed marker {o.op.name} to {o.op.new_name} {o.at}",

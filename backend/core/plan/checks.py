@@ -18,7 +18,12 @@ from typing import Literal
 
 from backend.core.library import Library
 from backend.core.model import FINISHED, Mission, SkillInstance, Status, Waiver
-from backend.core.plan.contingency_checks import after_deadlock, goto_impassable, timeout_short
+from backend.core.plan.contingency_checks import (
+    after_deadlock,
+    branch_energy,
+    goto_impassable,
+    timeout_short,
+)
 from backend.core.plan.course import Course, LegCache, Step, walk
 from backend.core.plan.forecast import Forecast
 from backend.core.plan.geometry import Point, area, distance, point_of, self_intersecting
@@ -567,6 +572,12 @@ RULES: tuple[CheckRule, ...] = (
         timeout_short,
     ),
     CheckRule(
+        "contingency.branch_energy",
+        "warning",
+        "a fallback or goto that would run the battery below the reserve (worst case)",
+        branch_energy,
+    ),
+    CheckRule(
         "contingency.after_deadlock",
         "error",
         "skills waiting (after) for skills that can only start after them",
@@ -591,7 +602,7 @@ def _courses(
     for robot, spec in mission.robots.items():
         if robots is None or robot in robots:
             task = mission.tasks.get(robot, [])
-            out[robot] = walk(library, robot, spec.type, task, inputs, legs)
+            out[robot] = walk(library, robot, spec.type, task, inputs, legs, mission.markers)
     return out
 
 

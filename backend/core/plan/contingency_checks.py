@@ -26,15 +26,42 @@ def timeout_short(ctx: CheckContext) -> Iterator[Hit]:
     steps = [(robot, step) for robot, c in ctx.courses.items() for step in c.steps]
     for robot, step in steps:
         timeout = step.skill.policies.timeout or float("inf")
-        if step.remaining == 1 and step.busy_s > timeout:  # not started, and too long
+        takes = step.assumed.skill_s if step.assumed is not None else step.busy_s
+        if step.remaining == 1 and takes > timeout:  # not started, and too long
             yield Hit(
                 f"{step.skill.id}/timeout",
-                f"{robot}: {step.skill.display()} takes about {span_text(round(step.busy_s))} "
+                f"{robot}: {step.skill.display()} takes about {span_text(round(takes))} "
                 f"by the forecast, longer than its timeout {span_text(timeout)}: it would "
-                f"end by its on_timeout; give it more time",
+                f"end by its on_timeout (the forecast counts that); give it more time",
                 robot=robot,
                 skills=(step.skill.id,),
             )
+
+
+def branch_energy(ctx: CheckContext) -> Iterator[Hit]:
+    """A branch that would run the battery below the reserve (the worst path:
+    from the skill's end, or its timeout if sooner, then the branch's skills)."""
+    for robot, step, b, reserve in _short_branches(ctx):
+        when = "fails at its end" if b.trigger == "failure" else "times out"
+        yield Hit(
+            f"{step.skill.id}/on_{b.trigger}",
+            f"{robot}: if {step.skill.display()} {when}, its {b.text} would take the battery "
+            f"to {max(0.0, b.battery_min or 0.0) * 100:.0f}%, below the reserve "
+            f"{reserve * 100:.0f}% it stops at: the branch could not finish; recharge "
+            "before the skill, or choose a nearer branch",
+            robot=robot,
+            skills=(step.skill.id,),
+        )
+
+
+def _short_branches(ctx: CheckContext) -> Iterator[tuple[str, Step, Any, float]]:
+    """(robot, step, its worst branch, the reserve) where that branch goes below it."""
+    for robot, c in ctx.courses.items():
+        reserve = c.battery.reserve if c.battery is not None else -1.0
+        for step in c.steps:
+            low = step.worst.battery_min if step.worst is not None else None
+            if low is not None and low < reserve:
+                yield robot, step, step.worst, reserve
 
 
 def goto_impassable(ctx: CheckContext) -> Iterator[Hit]:

@@ -12,11 +12,13 @@ start place and map version, so an event recomputes only what it touched.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from typing import Any
 
 from backend.core.library import BatteryModel, Library, RobotType
 from backend.core.model import ACTIVE, FINISHED, SkillInstance
+from backend.core.plan.branches import TRIGGERS, BranchCost, Costing, assumed, cost, worst
 from backend.core.plan.geometry import Point, point_of
 from backend.core.plan.inputs import PlanInputs, RobotNow
 from backend.core.plan.legs import Leg, build_leg, charge_s
@@ -37,6 +39,11 @@ class Step:
     battery_start: float | None
     battery_min: float | None  # lowest level during the skill
     battery_end: float | None
+    # its on_timeout, when the forecast says it outlasts its timeout: the plan
+    # (busy_s and the battery count it; backend.core.plan.branches)
+    assumed: BranchCost | None = None
+    # of its branches that run skills, the one leaving the battery lowest
+    worst: BranchCost | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -122,34 +129,66 @@ def walk(
     task: Sequence[SkillInstance],
     inputs: PlanInputs,
     legs: LegCache,
+    markers: Mapping[str, Any] | None = None,
 ) -> Course:
+    """The robot's unfinished skills, one after the other (`markers`: the
+    mission's, for the places its contingency branches go to)."""
     rt = library.robot_types.get(robot_type)
+    costing = Costing(library, rt, robot_type, markers or {}, inputs) if rt is not None else None
     now = inputs.robots.get(robot)
     battery_model = rt.battery if rt is not None else None
     pos = now.position if now is not None else None
     if pos is None:  # where its last goal took it, else home (where robots start)
         pos = _last_place(library, robot_type, task) or inputs.home_point()
-    level: float | None = None
-    assumed = False
-    if battery_model is not None:
-        if now is not None and now.battery is not None:
-            level = now.battery
-        else:
-            level, assumed = 1.0, True
+    level, assumed = _level_now(battery_model, now)
     steps: list[Step] = []
     offsets = [0.0]
-    for s in task:
-        if s.status in FINISHED:
-            continue
+    for s in (s for s in task if s.status not in FINISHED):
         leg = legs.leg(library, rt, robot_type, s, pos, inputs) if rt is not None else None
         step = _step(rt, s, leg, pos, level, _progress(s, now) if s.status in ACTIVE else 0.0)
+        step = _contingent(costing, step) if costing is not None else step
         steps.append(step)
         offsets.append(offsets[-1] + step.busy_s)
         level = step.battery_end
-        if leg is not None:
-            pos = leg.end
+        pos = _place_after(step, pos)
     index = {step.skill.id: i for i, step in enumerate(steps)}
     return Course(robot, rt, tuple(steps), battery_model, assumed, now, tuple(offsets), index)
+
+
+def _level_now(model: BatteryModel | None, now: RobotNow | None) -> tuple[float | None, bool]:
+    """(the battery now, whether a full one is assumed: no telemetry); None: no battery."""
+    if model is None:
+        return None, False
+    if now is not None and now.battery is not None:
+        return now.battery, False
+    return 1.0, True
+
+
+def _place_after(step: Step, pos: Point | None) -> Point | None:
+    """Where the robot is once the step is done: where its assumed branch ended, else its leg."""
+    if step.assumed is not None:
+        return step.assumed.end
+    return step.leg.end if step.leg is not None else pos
+
+
+def _contingent(c: Costing, step: Step) -> Step:
+    """The step with its branches' costs: the worst for the battery, and the
+    on_timeout the forecast assumes when the skill outlasts its timeout."""
+    p = step.skill.policies
+    if p.on_failure == "halt" and p.on_timeout == "halt" and p.timeout is None:
+        return step  # most skills: nothing to cost
+    costs = [b for t in TRIGGERS if (b := cost(c, t, step)) is not None]
+    step = replace(step, worst=worst(costs))
+    plan = assumed(c, step)
+    if plan is None:
+        return step
+    return replace(
+        step,
+        busy_s=plan.total_s,
+        battery_min=plan.battery_min,  # the skill's share, then the branch: the lowest
+        battery_end=plan.battery_end,
+        assumed=plan,
+    )
 
 
 def _step(

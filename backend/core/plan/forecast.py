@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 
 from backend.core.library import Library
 from backend.core.model import ACTIVE, FINISHED, Mission, SkillInstance, Status
+from backend.core.plan.branches import BranchCost
 from backend.core.plan.course import Course, LegCache, Step, walk
 from backend.core.plan.inputs import PlanInputs
 from backend.core.plan.order import BarrierAnalysis, analyse
@@ -49,6 +50,10 @@ class SkillForecast:
     battery_end: float | None
     out_of_coverage: tuple[Span, ...]  # wall-clock spans out of comms coverage
     skill: SkillInstance = field(compare=False, repr=False)  # as the course saw it
+    # the on_timeout its end assumes (its timeout is short), and the branch
+    # that would leave the battery lowest (backend.core.plan.branches)
+    assumed: BranchCost | None = field(default=None, compare=False)
+    worst: BranchCost | None = field(default=None, compare=False)
 
     @property
     def wait_s(self) -> float:
@@ -225,6 +230,8 @@ def _skill(robot: str, track: Track, seg: Segment, i: int, speed: float) -> Skil
         battery_end=step.battery_end,
         out_of_coverage=_spans(step, start, end, speed),
         skill=step.skill,
+        assumed=step.assumed,
+        worst=step.worst,
     )
 
 
@@ -402,7 +409,7 @@ class Forecaster:
             return hit[2]
         spec = mission.robots.get(robot)
         rtype = spec.type if spec is not None else ""
-        course = walk(self.library, robot, rtype, task, inputs, self.legs)
+        course = walk(self.library, robot, rtype, task, inputs, self.legs, mission.markers)
         self._courses[robot] = (tuple(task), key, course)
         return course
 

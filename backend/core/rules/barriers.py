@@ -7,7 +7,7 @@ from typing import Any
 
 from backend.core import events as ev
 from backend.core.model import FINISHED, Barrier, BarrierTimeout, Status, how_to_change
-from backend.core.ops import AddBarrier, RemoveBarrier, RestoreBarrier
+from backend.core.ops import AddBarrier, EditBarrier, RemoveBarrier, RestoreBarrier
 from backend.core.rules.base import Change, Refusal, Rule, Rules
 
 
@@ -78,11 +78,50 @@ def restore_barrier(rules: Rules, op: RestoreBarrier) -> Change:
     return Change(events, notes, {"barrier": op.barrier}, RemoveBarrier(barrier=op.barrier))
 
 
-def remove_barrier(rules: Rules, op: RemoveBarrier) -> Change:
-    b = rules.mission.barriers.get(op.barrier)
+def _existing(rules: Rules, bid: str) -> Barrier:
+    b = rules.mission.barriers.get(bid)
     if b is None:
         known = ", ".join(rules.mission.barriers) or "none"
-        raise Refusal("unknown_barrier", f"no barrier '{op.barrier}' (barriers: {known})")
+        raise Refusal("unknown_barrier", f"no barrier '{bid}' (barriers: {known})")
+    return b
+
+
+def edit_barrier(rules: Rules, op: EditBarrier) -> Change:
+    """A barrier's timeout and what follows it, while all its skills are idle."""
+    b = _existing(rules, op.barrier)
+    for sid in b.skills:
+        robot, _, s = rules.skill(sid)
+        if s.status != Status.IDLE:
+            raise Refusal(
+                "not_idle",
+                f"cannot change barrier {op.barrier}'s timeout: {s.display()} is "
+                f"{s.status.value} on {robot}, which holds the barrier as it was synchronized; "
+                f"{how_to_change(s.status)}",
+                robot=robot,
+                skill=sid,
+            )
+        _unlocked(rules, op.barrier, robot, sid, s.display())
+    new = b.model_copy(update=_waiting(op))
+    return Change(
+        [ev.BarrierSet(id=op.barrier, barrier=new)],
+        [],
+        {"barrier": op.barrier},
+        EditBarrier(barrier=op.barrier, **_waiting(b)),
+    )
+
+
+def _unlocked(rules: Rules, bid: str, robot: str, sid: str, shown: str) -> None:
+    if sid in rules.locked:
+        raise Refusal(
+            "locked",
+            f"cannot change barrier {bid}: {shown}: {rules.locked[sid]}",
+            robot=robot,
+            skill=sid,
+        )
+
+
+def remove_barrier(rules: Rules, op: RemoveBarrier) -> Change:
+    b = _existing(rules, op.barrier)
     for sid in b.skills:
         robot, _, s = rules.skill(sid)
         if s.status != Status.IDLE and s.status not in FINISHED:
@@ -131,4 +170,5 @@ RULES: dict[type[Any], Rule] = {
     AddBarrier: add_barrier,
     RestoreBarrier: restore_barrier,
     RemoveBarrier: remove_barrier,
+    EditBarrier: edit_barrier,
 }

@@ -35,6 +35,7 @@ from backend.core.ops import (
     AddSkill,
     Control,
     DeleteSkills,
+    EditBarrier,
     EditSkill,
     LoadMission,
     MarkerDelete,
@@ -209,7 +210,7 @@ def _touched(m: Mission, op: Operation) -> list[tuple[int, str]]:
             return _skill_revs(m, [sid]) + ([_task_rev(m, found[0])] if found else [])
         case EditSkill(id=sid) | Retry(id=sid) | SetSkill(id=sid):
             return _skill_revs(m, [sid])
-        case RemoveBarrier(barrier=bid):
+        case RemoveBarrier(barrier=bid) | EditBarrier(barrier=bid):
             return _skill_revs(m, m.barriers[bid].skills if bid in m.barriers else [])
         case (
             MarkerMove(name=n) | MarkerRename(name=n) | MarkerDelete(name=n) | RestoreMarker(name=n)

@@ -12,7 +12,9 @@ from textual.widgets import Input
 
 from backend.core.contingency import (
     BRANCH_SYNTAX,
+    clock_text,
     read_branch,
+    read_instant,
     read_seconds,
     span_text,
     typed_branch,
@@ -23,7 +25,7 @@ from console.widgets.editor.fields import FieldInput
 # policy -> (label, type hint), in the order the group shows them
 CONTINGENCY_HINTS = {
     "timeout": ("timeout", "mission time: 10m, 1.5h; empty: none"),
-    "not_after": ("not after", "mission clock: 2h is sim 2:00:00; empty: none"),
+    "not_after": ("not after", "mission clock: sim 2:00:00; empty: none"),
     "on_failure": ("on failure", "skip, goto:M, fallback:S+S"),
     "on_timeout": ("on timeout", "skip, goto:M, fallback:S+S"),
 }
@@ -44,10 +46,15 @@ class BranchInput(FieldInput):
         return read_branch(self.value)
 
 
+# how each time is written in its field, and read back
+_WRITE = {"timeout": span_text, "not_after": clock_text}  # '10m'; 'sim 2:00:00' (an instant)
+_READ = {"timeout": read_seconds, "not_after": read_instant}
+
+
 def time_text(name: str, p: Policies) -> str:
-    """A time as typed: '10m'; a deadline too, read as mission seconds ('2h')."""
+    """A time as typed: a timeout '10m', a deadline the instant it is: 'sim 2:00:00'."""
     value = getattr(p, name)
-    return "" if value is None else span_text(value)
+    return "" if value is None else _WRITE[name](value)
 
 
 def contingency_input(name: str, p: Policies, disabled: bool) -> ComposeResult:
@@ -68,7 +75,7 @@ def read_contingency(root: DOMNode) -> tuple[dict[str, Any], dict[str, str]]:
     raw: dict[str, Any] = {}
     problems: dict[str, str] = {}
     for name in TIMES:
-        seconds = read_seconds(_time_input(root, name).value)
+        seconds = _READ[name](_time_input(root, name).value)
         if isinstance(seconds, str):
             problems[name] = seconds
         else:

@@ -16,6 +16,7 @@ from rich.segment import Segment
 from rich.style import Style
 from textual.strip import Strip
 
+from backend.core.contingency import after_tags, awaited_by
 from backend.core.model import ACTIVE, SkillInstance, Status
 from backend.core.plan.checks import Finding
 from console.state import link
@@ -24,7 +25,7 @@ from console.state.freshness import FRESH, Freshness
 from console.state.model import ConsoleModel
 from console.state.nowcast import battery_now, probably_doing
 from console.state.team import retired
-from console.state.text import GLYPHS, STATUS_CSS, fmt_duration, skill_title
+from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS, fmt_duration, skill_title
 
 HEADER_H = 4  # name + presence / battery + link / activity / rule
 MIN_W = 18  # a dynamic robot's column, at least (at 80 columns 3 robots and a static one fit)
@@ -46,8 +47,9 @@ class Column:
     # what each line of a section shows (id, kind, revision): comparing two
     # builds tells which lines a change touched, so only those are repainted
     # (the last: the pending command shown on the row, "" when none)
-    sync_keys: list[tuple[str, str, int, str]] = field(default_factory=list)
-    idle_keys: list[tuple[str, int, str]] = field(default_factory=list)
+    # (and last, the row's tags: an after's partner changes them, not the skill's rev)
+    sync_keys: list[tuple[str, str, int, str, str]] = field(default_factory=list)
+    idle_keys: list[tuple[str, int, str, str]] = field(default_factory=list)
 
     def resting_id(self) -> str | None:
         """Where the cursor goes in this column: the first unsynchronized
@@ -79,16 +81,45 @@ def build_column(model: ConsoleModel, robot: str, static: bool) -> Column:
         col.ids.append(s.id)
         c = model.uplinking(s.id)
         up = f"{c.id} {c.state}" if c is not None else ""  # its row shows the command
+        tag = row_tag(model, s)
         if s.status == Status.IDLE:
             col.idle.append(i)
-            col.idle_keys.append((s.id, s.rev, up))
+            col.idle_keys.append((s.id, s.rev, up, tag))
         else:
             col.sync.append((i, "row"))
-            col.sync_keys.append((s.id, "row", s.rev, up))
+            col.sync_keys.append((s.id, "row", s.rev, up, tag))
             if s.status in ACTIVE or (s.status == Status.FAILURE and s.status_info):
                 col.sync.append((i, "progress"))
-                col.sync_keys.append((s.id, "progress", s.rev, ""))
+                col.sync_keys.append((s.id, "progress", s.rev, "", ""))
     return col
+
+
+class _Awaited:
+    """Skill id -> the skills that start after it, for the mission at one revision."""
+
+    def __init__(self) -> None:
+        self.mission: object = None
+        self.revision = -1
+        self.index: dict[str, list[str]] = {}
+
+    def of(self, model: ConsoleModel) -> dict[str, list[str]]:
+        m = model.mission
+        if m is None:
+            return {}
+        if m is not self.mission or m.revision != self.revision:
+            self.mission, self.revision, self.index = m, m.revision, awaited_by(m)
+        return self.index
+
+
+_AWAITED = _Awaited()
+
+
+def row_tag(model: ConsoleModel, s: SkillInstance) -> str:
+    """A row's tags: its barrier '[b1]', both ends of an after ('⇠lander-1' on
+    the waiting row, '⇢lru2-4' on the awaited one)."""
+    bid = model.barrier_of(s.id)
+    tags = [f"[{bid}]"] if bid else []
+    return " ".join(tags + after_tags(s.policies, _AWAITED.of(model).get(s.id, [])))
 
 
 def fit(text: str, width: int) -> str:
@@ -386,7 +417,7 @@ def progress_segments(
     if s.status == Status.FAILURE:
         return [Segment(fit("   ↳ " + s.status_info, w), st["failure"])]
     if s.status == Status.SYNCHWAITING:
-        waiting = barrier_wait_text(model, s)
+        waiting = wait_text(model, s)
         return [Segment(fit("   " + waiting, w), st["synchwaiting"])]
     pct = t.progress if t is not None and has else None
     if s.status == Status.PAUSED:
@@ -441,6 +472,47 @@ def _stale_progress(pct: float | None, w: int, st: Styles, fresh: Freshness) -> 
         Segment("   ▕" + "█" * filled + "░" * (bar_w - filled) + "▏", st["stale"]),
         Segment(fit(label, w - 5 - bar_w), st["stale-head"]),
     ]
+
+
+def wait_text(model: ConsoleModel, s: SkillInstance) -> str:
+    """What a synchwaiting skill waits for: its barrier's partners, else the
+    skill it starts after (policies.after)."""
+    after = s.policies.after is not None  # waited for first, then its barrier
+    if after and (model.barrier_of(s.id) is None or s.status_info.startswith("after ")):
+        return after_wait_text(model, s)
+    return barrier_wait_text(model, s)
+
+
+def after_wait_text(model: ConsoleModel, s: SkillInstance) -> str:
+    """'after lander-1: lander OFFLINE 12:30', '…: lander out of contact', the
+    robot's own words when it says it cannot reach its partner, else what the
+    other skill is doing."""
+    sid = str(s.policies.after)
+    robot = model.owner(sid)
+    if robot is None:
+        return s.status_info or f"after {sid}"
+    offline = _offline_text(model, robot)
+    if offline:
+        return f"after {sid}: {offline}"
+    if "unreachable" in s.status_info or "offline" in s.status_info:
+        return s.status_info  # the waiting robot cannot reach it (its radio, the network)
+    return f"after {sid}: {_partner_doing(model, robot, sid)}"
+
+
+def _offline_text(model: ConsoleModel, robot: str) -> str:
+    """'lander OFFLINE 12:30' (since when, if known); '' while it is online."""
+    info = model.robots.get(robot)
+    if info is not None and info.online:
+        return ""
+    since = f" {model.clock.stamp_text(info.since)}" if info and info.since else ""
+    return f"{robot} OFFLINE{since}"
+
+
+def _partner_doing(model: ConsoleModel, robot: str, sid: str) -> str:
+    if out_of_contact(model.robots.get(robot)):
+        return f"{robot} out of contact"
+    found = model.find(sid)
+    return f"waiting for {robot} ({STATUS_WORDS[found[2].status] if found else 'unknown'})"
 
 
 def barrier_wait_text(model: ConsoleModel, s: SkillInstance) -> str:

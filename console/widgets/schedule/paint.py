@@ -21,6 +21,7 @@ from console.widgets.schedule.lines import (
     Styles,
     fit,
     progress_segments,
+    row_tag,
     skill_segments,
     with_hidden_robots,
 )
@@ -130,7 +131,6 @@ class Painter:
     def _skill_segments(self, ci: int, col: Column, s: SkillInstance, st: Styles) -> list[Segment]:
         v = self.view
         selected = ci == v.cursor_col and s.id == v.cursor_id
-        bid = self.model.barrier_of(s.id)
         stale = s.status != Status.IDLE and self.model.freshness(col.robot).stale
         c = self.model.uplinking(s.id)
         return skill_segments(
@@ -139,7 +139,7 @@ class Painter:
             st,
             marked=s.id in v.marks,
             draft=s.id in v.drafts,
-            tag=f"[{bid}]" if bid else "",
+            tag=row_tag(self.model, s),
             check=self.model.plan.mark(s.id),
             extra=self._extra(col, s),
             cursor=(st["cursor"] if v.has_focus else st["cursor-blur"]) if selected else None,

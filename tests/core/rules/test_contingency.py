@@ -122,3 +122,52 @@ def test_after_names_another_robots_skill_and_goes_with_the_sync(engine, refused
     engine.clock = lambda: T0
     applied = engine.submit(Sync(robot="lru1", through="lru1-1"))
     assert engine.mission.command(applied.value["command"]).command.after == {"lru1-1": "lru2"}
+
+
+def test_a_restarted_robot_learns_the_outcomes_others_wait_for(engine, sync, report):
+    """RegisterReply.outcomes: a finished skill another robot's unfinished
+    skill waits for (after); none once nobody waits, none unfinished."""
+    from backend.core.contingency import awaited_outcomes
+
+    engine.submit(EditSkill(id="lru2-1", policies=Policies(after="lru1-1")))
+    engine.submit(EditSkill(id="lru2-2", policies=Policies(after="lru1-2")))
+    assert awaited_outcomes(engine.mission, "lru1") == {}  # lru1's skills have not ended
+    sync(engine, "lru1")
+    report(engine, "lru1", "lru1-1", S.RUNNING)
+    report(engine, "lru1", "lru1-1", S.SUCCESS)
+    report(engine, "lru1", "lru1-2", S.RUNNING)
+    report(engine, "lru1", "lru1-2", S.FAILURE, info="lens cap on")
+    assert awaited_outcomes(engine.mission, "lru1") == {"lru1-1": "success", "lru1-2": "failure"}
+    assert awaited_outcomes(engine.mission, "lru2") == {}
+    sync(engine, "lru2")
+    report(engine, "lru2", "lru2-1", S.RUNNING)
+    report(engine, "lru2", "lru2-1", S.SUCCESS)  # nobody waits for lru1-1 any more
+    assert awaited_outcomes(engine.mission, "lru1") == {"lru1-2": "failure"}
+
+
+def test_a_barriers_timeout_is_changed_while_its_skills_are_idle(engine, refused, sync):
+    from backend.core.ops import AddBarrier, EditBarrier, Undo
+
+    bid = engine.submit(AddBarrier(ids=["lru1-1", "lru2-1"]), client="c").value["barrier"]
+    engine.submit(EditBarrier(barrier=bid, timeout="10m", on_timeout="continue"), client="c")
+    b = engine.mission.barriers[bid]
+    assert (b.skills, b.timeout, b.on_timeout) == (["lru1-1", "lru2-1"], 600, "continue")
+    engine.submit(Undo(), client="c")  # back to waiting for ever
+    b = engine.mission.barriers[bid]
+    assert (b.timeout, b.on_timeout) == (None, "halt")
+    refused(
+        engine,
+        lambda: engine.submit(EditBarrier(barrier="b99", timeout=60)),
+        "unknown_barrier",
+        bid,  # the barriers there are
+    )
+    sync(engine, "lru1", "lru1-1")  # on the robot with the barrier as it was
+    refused(
+        engine,
+        lambda: engine.submit(EditBarrier(barrier=bid, timeout=60)),
+        "not_idle",
+        "lru1-1",
+        "holds the barrier as it was synchronized",
+        robot="lru1",
+        skill="lru1-1",
+    )
