@@ -91,6 +91,30 @@ def test_robot_time_shows_what_a_robot_did_before_the_ground_heard_it(recorded):
         assert j.state(len(j), ROBOT).mission.tasks == j.state(len(j), GROUND).mission.tasks
 
 
+def test_a_state_brings_the_batches_of_its_window_as_taken(tmp_path):
+    """`state(p, window=w).recent`: the batches at positions p-w..p-1, those
+    held by the snapshot it starts from too (snapshots every 20 batches: every
+    window of 30 reaches back over one), each with the batch it was taken with."""
+    rec = record_mission(tmp_path, Plan(snapshot_every=20))
+    with JournalReader(rec.db) as j:
+        assert len(j.snapshot_revisions) > 4
+        for clock in (GROUND, ROBOT):
+            order = j.order(clock)
+            for p in range(0, len(j) + 1, 7):
+                state = j.state(p, clock, window=30)
+                start = max(0, p - 30)
+                window = {j.revision_of(i) for i in order.order[start:p]}
+                got = [b.revision for b, _ in state.recent]
+                assert len(got) == len(set(got)) and all(
+                    start <= order.pos[by] < p for _, by in state.recent
+                ), (clock, p)
+                if clock == GROUND:
+                    assert got == sorted(window)
+                    assert all(j.revision_of(by) == b.revision for b, by in state.recent)
+                else:  # all but those still waiting; at most a few let in from before
+                    assert window - set(state.unplaced) <= set(got), (clock, p)
+
+
 def test_a_journal_that_lost_its_first_snapshots_starts_at_the_oldest_kept(tmp_path):
     rec = record_mission(tmp_path, Plan(snapshot_every=20))
     with sqlite3.connect(rec.db) as conn:
@@ -177,8 +201,13 @@ def test_a_batch_that_cannot_apply_yet_waits_for_what_it_needs(recorded):
         edit = next(i for i, b in enumerate(batches) if b.name == "edit")
         ahead = [*batches[:add], batches[edit], *batches[add:edit], *batches[edit + 1 :]]
         left: list[int] = []
-        done = apply_in_order(mission, ahead, left)
+        taken: list = []
+        done = apply_in_order(mission, [b.batch for b in ahead], left, taken)
         assert left == [] and done == j.state(len(j)).mission
+        # the edit was taken right after the add that made it apply, with that add
+        k = next(k for k, (b, _) in enumerate(taken) if b is batches[edit].batch)
+        by = taken[k - 1][0]
+        assert by.op == "add" and taken[k][1] == by.revision < batches[edit].revision
 
 
 # -- the archive ------------------------------------------------------------------------------
