@@ -63,6 +63,31 @@ def test_playing_on_from_an_instant_reaches_the_same_end_as_a_seek(recorded, rep
     assert played == replay.model.mission and played.revision == replay.journal.last
 
 
+def _batch_lines(model: ConsoleModel, n: int) -> list[tuple]:
+    lines = [e for e in model.log.entries if e.revision is not None]
+    return [(e.kind, e.text, e.at, e.robots, e.skill, e.revision) for e in lines[-n:]]
+
+
+@pytest.mark.parametrize("clock", [GROUND, ROBOT])
+def test_a_seeks_log_reads_as_a_console_that_watched_until_then(recorded, replay, clock):
+    """A seek builds the state at the instant at once and logs the batches
+    before it without applying them again: the same lines, times and robots
+    as taking each batch as it came."""
+    from console.state.replay import LOG_WINDOW
+
+    replay.set_clock(clock)
+    lo, hi = replay.span()
+    for t in (lo + (hi - lo) * k / 5 for k in range(1, 6)):
+        replay.seek(lo)
+        while replay.cursor.at < t:  # played up to t, batch after batch
+            replay.advance(min(7.0, t - replay.cursor.at))
+        n = min(LOG_WINDOW, replay.cursor.position) // 2
+        played, position = _batch_lines(replay.model, n), replay.cursor.position
+        replay.seek(t)
+        assert replay.cursor.position == position
+        assert _batch_lines(replay.model, n) == played, t
+
+
 def test_a_seek_brings_the_robots_telemetry_alerts_and_the_plan_as_synced(recorded, replay):
     replay.seek(recorded.end)
     assert set(replay.model.telemetry) == {"lru1", "lru2", "ardea", "lander"}
