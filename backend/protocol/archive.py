@@ -164,6 +164,17 @@ class ArchiveReader:
         ).fetchall()
         return [Sample(row[0], _sample(row[1:])) for row in reversed(rows)]
 
+    def last_levels(self, robot: str, t: float, clock: str, n: int) -> list[tuple[float, float]]:
+        """(battery, link) of the robot's last `n` samples at or before `t` of
+        `clock`, oldest first: a sparkline's, without making each sample."""
+        col = self._column(clock)
+        rows = self._conn.execute(
+            f"SELECT battery, link FROM telemetry WHERE robot = ? AND {col} <= ? "
+            f"ORDER BY {col} DESC LIMIT ?",
+            (robot, t, n),
+        ).fetchall()
+        return rows[::-1]
+
     def samples(self, after: float, upto: float, clock: str) -> Iterator[Sample]:
         """Every robot's samples with `after` < time <= `upto` in `clock`, in time order."""
         col = self._column(clock)

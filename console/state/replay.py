@@ -28,6 +28,7 @@ counted in `unplaced`.
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -235,8 +236,11 @@ class Replay:
         if a is None:
             return
         clock = self.cursor.clock
-        if seek:
-            samples = [s for r in a.robots for s in a.last_samples(r, upto, clock, HISTORY)]
+        if seek:  # each robot's last sample; the levels before it (its sparkline) as such
+            samples = [s for r in a.robots for s in a.last_samples(r, upto, clock, 1)]
+            for r in a.robots:
+                if levels := a.last_levels(r, upto, clock, HISTORY):
+                    self.model.history[r] = deque(levels[:-1], maxlen=HISTORY)
             alerts = a.alerts(-1e18, upto, ALERTS_KEPT)
         else:
             samples, alerts = list(a.samples(after, upto, clock)), a.alerts(after, upto)
@@ -365,14 +369,15 @@ def _redo(owners: dict[str, str], e: object) -> None:
 
 def forget(model: ConsoleModel) -> None:
     """Empty the model (going to another instant); the log and the alert
-    book in place: the screens showing them keep them."""
-    model.mission = None
+    book in place: the screens showing them keep them. The mission stays
+    until the next is loaded: a load that is not the first digests no plan
+    to tell unsaved edits by (a review saves nothing; 15-25 ms a seek), and
+    its load indexes it."""
     for kept in (model.robots, model.telemetry, model.history, model.heard):
         kept.clear()
     model.log.clear()
     model.alerts.clear()
     model.selection.marks.clear()
-    model.reindex()
 
 
 # -- where to go, as typed -------------------------------------------------------------------
