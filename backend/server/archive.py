@@ -24,11 +24,12 @@ Alerts and presence are a few per robot and hour and are all kept, as is
 the index (about 30 bytes per journaled batch).
 
 **Off the event loop**: the sample is taken or dropped on the Zenoh thread
-that received it (a comparison), and handed to a writer thread as it is
-(appended to a deque: no lock, no row made there); the writer wakes once
-every `flush_s` at most, makes the rows and inserts whatever waits in one
-transaction. A full queue drops the sample (counted in `dropped`, logged
-once): nothing ever waits for the disk but that thread.
+that received it (a comparison), made a row there and handed to a writer
+thread (appended to a deque: no lock); the writer wakes once every
+`flush_s` at most and inserts whatever waits in one transaction. (Making
+the rows in the writer cost more: the samples then crossed threads, and
+were freed on the other one.) A full queue drops the sample (counted in
+`dropped`, logged once): nothing ever waits for the disk but that thread.
 """
 
 from __future__ import annotations
@@ -71,7 +72,7 @@ _INSERT_BATCH = (
 
 # a robot's last kept sample: when (the archive's clock), and its mode, skill, contact
 _Kept = tuple[float, tuple[str, str | None, bool]]
-_Item = tuple[str, Any]  # ("sample", (telemetry, received)), ("note", row), ... for the writer
+_Item = tuple[str, Any]  # ("sample", row), ("note", row), ... for the writer
 
 
 class TelemetryArchive:
@@ -161,7 +162,7 @@ class TelemetryArchive:
         """A sample the server received: kept (True) or left out by the rule."""
         if self._thread is None or self._left_out(t):
             return False
-        kept = self._put(("sample", (t, time.time() if received is None else received)))
+        kept = self._put(("sample", sample_row(t, time.time() if received is None else received)))
         self.kept += kept
         return kept
 
@@ -238,7 +239,7 @@ class TelemetryArchive:
         by: dict[str, list[Any]] = {"sample": [], "note": [], "batch": [], "flush": []}
         for kind, row in items:
             by[kind].append(row)
-        samples = [sample_row(t, received) for t, received in by["sample"]]
+        samples = by["sample"]
         try:
             count = self._insert(conn, samples, by["note"], by["batch"], count)
         except (sqlite3.Error, OSError) as e:  # what comes later is taken and left out
