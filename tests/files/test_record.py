@@ -240,6 +240,33 @@ def test_the_archive_keeps_a_sample_a_second_and_every_change(tmp_path):
         assert [s.telemetry.mode for s in lru1] == ["idle"] * 3 + ["executing"] * 8
 
 
+def test_the_archive_writes_every_sample_taken_as_it_was(tmp_path):
+    """Samples go in several to a statement (ROWS_A_STATEMENT): a number of
+    them that is no multiple of it, each read back as it was taken."""
+    from backend.server.archive import ROWS_A_STATEMENT
+
+    archive = TelemetryArchive(tmp_path / "e.telemetry.db", every_s=0.0)
+    archive.start()
+    n = 2 * ROWS_A_STATEMENT + 23
+    taken = [
+        _sample("lru1", float(k), mode="executing" if k % 3 else "idle").model_copy(
+            update={"battery": k / n, "skill": f"lru1-{k}" if k % 2 else None}
+        )
+        for k in range(n)
+    ]
+    try:
+        for k, t in enumerate(taken):
+            archive._clock = lambda k=k: k * 1.0
+            assert archive.took(t, received=1000.0 + k)
+        assert archive.flush()
+    finally:
+        archive.close()
+    with ArchiveReader(archive.path) as r:
+        back = r.last_samples("lru1", 1e9, GROUND, 10 * n)
+    assert [s.at for s in back] == [1000.0 + k for k in range(n)]
+    assert [s.telemetry for s in back] == taken
+
+
 def test_the_archive_keeps_the_newest_samples_only(tmp_path):
     archive = TelemetryArchive(tmp_path / "b.telemetry.db", every_s=0.0, max_samples=50)
     archive.start()
