@@ -9,11 +9,13 @@ timeline's now). The cursor is a position in a clock's order of the
 journal's batches (`backend.core.clocks`: the first `position`
 batches applied) and a time `at`:
 
-- `seek(t)`: the model is emptied and given the mission at the start of a
-  window of `LOG_WINDOW` batches before `t` as a state, then the window's
-  batches, the alerts and presence news up to `t` and each robot's last
-  samples, in time order: the log, the alerts and the fleet's history are
-  as a console watching then would have them (the window's part of them);
+- `seek(t)`: the model is emptied and given the mission at `t` as a
+  state (the journal's nearest snapshot before it and the batches after
+  that), then, in time order, the `LOG_WINDOW` batches before `t` for the
+  log only (the state holds them), the alerts and presence news up to `t`
+  and each robot's last sample with its sparkline's levels: the log, the
+  alerts and the fleet's history are as a console watching then would
+  have them (the window's part of them);
 - `step(+1/-1)`: the next batch (with what the archive holds up to its
   time) is taken, or back to the previous one (a seek);
 - `advance(seconds)`: the time moves on (playing at a speed), everything up
