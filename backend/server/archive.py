@@ -102,7 +102,7 @@ class TelemetryArchive:
         # (a deque's append and popleft need no lock: 0.1 us against a Queue's 2.8)
         self._queue: deque[_Item] = deque()
         self._thread: threading.Thread | None = None
-        self._ready = threading.Event()  # something waits (set by the first put)
+        self._ready = threading.Event()  # something waits (set by a put that found it clear)
         self._now = threading.Event()  # write at once: a burst, a flush, closing
         self._closing = False
         self.kept = 0  # samples handed to the writer
@@ -211,7 +211,10 @@ class TelemetryArchive:
                 )
             return False
         self._queue.append(item)
-        if waiting == 0:
+        # after the append: the writer clears _ready before it takes, so either it
+        # takes this item or this test sees _ready clear (a test of the length
+        # before the append missed the wake-up when the writer took all between)
+        if not self._ready.is_set():
             self._ready.set()
         elif waiting >= WAKE_AT:  # a burst: write now, before the queue fills
             self._now.set()
