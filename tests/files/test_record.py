@@ -326,6 +326,72 @@ def test_taking_a_sample_never_waits_for_the_disk(tmp_path):
         assert len(r.last_samples("lru1", 1e9, GROUND, 1000)) == 500
 
 
+def _held(archive: TelemetryArchive) -> tuple[threading.Event, threading.Event]:
+    """The writer held up in its next commit, as by a slow disk: (it is held, let it go)."""
+    blocked, release = threading.Event(), threading.Event()
+    real = archive._commit
+
+    def slow(*a, **kw):
+        blocked.set()
+        release.wait(10)
+        return real(*a, **kw)
+
+    archive._commit = slow
+    return blocked, release
+
+
+def test_a_full_queue_drops_what_comes_counts_it_and_says_it_once(tmp_path, monkeypatch, caplog):
+    import logging
+
+    import backend.server.archive as module
+
+    monkeypatch.setattr(module, "QUEUE_MAX", 100)
+    archive = TelemetryArchive(tmp_path / "f.telemetry.db", every_s=0.0)
+    archive.start()
+    blocked, release = _held(archive)
+    taken = []
+    try:
+        with caplog.at_level(logging.WARNING, logger=module.__name__):
+            archive._clock = lambda: 0.0
+            assert archive.took(_sample("lru1", 0.0), received=0.0)
+            assert blocked.wait(10)  # the writer has the first and waits for the disk
+            for k in range(1, 131):  # 100 wait for it, the 30 after them are dropped
+                archive._clock = lambda k=k: k * 1.0
+                taken.append(archive.took(_sample("lru1", float(k)), received=float(k)))
+    finally:
+        release.set()
+        archive.close()
+    assert taken == [True] * 100 + [False] * 30
+    assert (archive.kept, archive.dropped, archive.written) == (101, 30, 101)
+    said = [r.getMessage() for r in caplog.records if "cannot keep up" in r.getMessage()]
+    assert len(said) == 1 and "f.telemetry.db" in said[0]
+    with ArchiveReader(archive.path) as r:
+        assert [s.at for s in r.last_samples("lru1", 1e9, GROUND, 1000)] == list(range(101))
+
+
+def test_an_archive_that_cannot_write_says_why_and_never_holds_anyone_up(tmp_path):
+    archive = TelemetryArchive(tmp_path / "g.telemetry.db", every_s=0.0)
+    archive.start()
+
+    def full(*a, **kw):
+        raise sqlite3.OperationalError("database or disk is full")
+
+    archive._insert = full
+    try:
+        archive._clock = lambda: 0.0
+        assert archive.took(_sample("lru1", 0.0), received=0.0)
+        assert not archive.flush(timeout=0.2)  # never written: the flush says so
+        assert archive.failed == "database or disk is full"
+        for k in range(1, 50):  # still taken, and left out: nobody waits for it
+            archive._clock = lambda k=k: k * 1.0
+            assert archive.took(_sample("lru1", float(k)), received=float(k))
+    finally:
+        thread = archive._thread
+        archive.close()
+    assert thread is not None and not thread.is_alive()
+    assert archive.written == 0 and not archive._queue  # what came later was taken
+
+
 def test_the_archive_is_named_after_the_journal():
     assert archive_path("/x/mission.db") == Path("/x/mission.telemetry.db")
     assert archive_path("journal") == Path("journal.telemetry.db")
