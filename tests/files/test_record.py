@@ -115,6 +115,15 @@ def test_a_state_brings_the_batches_of_its_window_as_taken(tmp_path):
                     assert window - set(state.unplaced) <= set(got), (clock, p)
 
 
+def test_events_reads_the_batches_pick_does_named_from_the_index(recorded):
+    with JournalReader(recorded.db) as j:
+        wanted = [len(j) - 1, 0, 5, 5, len(j) // 2]
+        picked, events = j.pick(wanted), j.events(iter(wanted))
+        assert sorted(events) == sorted(set(wanted)) and j.events([]) == {}
+        for i, batch in events.items():
+            assert batch == picked[i].batch and batch.op and batch.actor
+
+
 def test_a_journal_that_lost_its_first_snapshots_starts_at_the_oldest_kept(tmp_path):
     rec = record_mission(tmp_path, Plan(snapshot_every=20))
     with sqlite3.connect(rec.db) as conn:
@@ -238,6 +247,38 @@ def test_the_archive_keeps_a_sample_a_second_and_every_change(tmp_path):
         assert len(r.last_samples("lru2", 1e9, GROUND, 100)) <= 5
         lru1 = r.last_samples("lru1", 1e9, ROBOT, 100)
         assert [s.telemetry.mode for s in lru1] == ["idle"] * 3 + ["executing"] * 8
+
+
+def test_the_archive_reads_its_span_ranges_and_levels_as_its_table_holds_them(recorded):
+    """span, samples and last_levels read each robot's index, not the table:
+    the same answers as statements over the whole table (ties of a time in
+    the robots' order)."""
+    with ArchiveReader(recorded.archive) as r, sqlite3.connect(recorded.archive) as conn:
+        rank = {robot: k for k, robot in enumerate(r.robots)}
+        for clock, col in ((GROUND, "received"), (ROBOT, "at")):
+            lo, hi = conn.execute(f"SELECT min({col}), max({col}) FROM telemetry").fetchone()
+            assert r.span(clock) == (lo, hi)
+            after, upto = lo + 10.0, (lo + hi) / 2
+            rows = conn.execute(
+                f"SELECT robot, {col} FROM telemetry WHERE {col} > ? AND {col} <= ?",
+                (after, upto),
+            ).fetchall()
+            got = [(s.telemetry.robot, s.at) for s in r.samples(after, upto, clock)]
+            assert got == sorted(rows, key=lambda row: (row[1], rank[row[0]]))
+            assert len(got) > len(set(t for _, t in got))  # robots' samples at one time
+            for robot in r.robots:
+                samples = r.last_samples(robot, upto, clock, 120)
+                levels = [(s.telemetry.battery, s.telemetry.link) for s in samples]
+                assert len(levels) == 120 and r.last_levels(robot, upto, clock, 120) == levels
+
+
+def test_an_archive_without_samples_has_no_span(tmp_path):
+    archive = TelemetryArchive(tmp_path / "h.telemetry.db")
+    archive.start()
+    archive.close()
+    with ArchiveReader(archive.path) as r:
+        assert r.span(GROUND) is None and r.span(ROBOT) is None
+        assert list(r.samples(-1e18, 1e18, GROUND)) == []
 
 
 def test_the_archive_writes_every_sample_taken_as_it_was(tmp_path):
