@@ -24,10 +24,16 @@ Figures, each in one run:
   running in another thread as live) for 100,000 samples at a simulated
   4 Hz per robot (so the archive keeps what it keeps live), archive on
   against off; the process's CPU time, the archive's writer thread
-  included. Eight pairs of runs, off and on back to back (which first in
-  turn): the ratio is the median of the pairs' (what else the machine does
-  moved a single run by up to 20 %, and hits both runs of a pair alike),
-  the CPU a sample the median of the runs.
+  included (each chunk with the archive on ends when its rows are
+  written). One server is fed chunks of 5,000 samples, the archive on and
+  off in turn (off on on off ...), so that what else the machine does,
+  which moves a run of seconds by up to 20 %, hits both alike; a chunk
+  keeps about 1,250, so the writer wakes within it (1,000 waiting) and
+  competes with the receiving thread as in a flood. The ratio is the
+  median of five such servers (their range shown), the CPU a sample the
+  median of each way. Fed as a flood, a transaction carries about 1,000
+  rows; live (4 robots at 4 Hz, a write every 0.5 s) it carries about 2,
+  and its own cost is not in this figure (docs/performance.md says it).
 """
 
 from __future__ import annotations
@@ -52,8 +58,9 @@ from report import machine, write_section  # noqa: E402
 HEADING = "## Review"
 CYCLES = 340  # per robot: about 4 h and 10,000 operations (see record)
 SEEKS = 40
-SAMPLES = 100_000
-ROUNDS = 8  # pairs of runs, archive off and on
+SAMPLES = 105_000  # a chunk to warm up, then 100,000 counted (half each way)
+CHUNK = 5_000  # samples fed with the archive on, or off, in turn
+ROUNDS = 5  # servers fed so
 
 
 def record(folder: Path, cycles: int):
@@ -163,46 +170,63 @@ def _samples(robots: list[str]) -> list[_Msg]:
     return out
 
 
-def handling_s(folder: Path, msgs: list[_Msg], archive_on: bool, n: int) -> float:
-    """CPU seconds (every thread of this process: the receiving one, the
-    server's loop, the archive's writer until it has written all) of the
-    server's `_on_telemetry` over `msgs`; CPU time, not wall time, so that
-    other work on the machine does not blur a 10 % difference."""
-    from backend.protocol.archive import archive_path
-    from backend.server.archive import TelemetryArchive
-    from backend.server.server import MissionServer
+class _Live:
+    """A server receiving telemetry as live (its loop in another thread), its
+    archive started; `feed` gives it samples with the archive on or off."""
 
-    server = MissionServer(db=folder / f"live-{n}.db")
-    loop = asyncio.new_event_loop()
-    runner = threading.Thread(target=loop.run_forever, daemon=True)
-    runner.start()
-    server._loop = loop
-    archive = None
-    if archive_on:  # the clock of 4 Hz per robot, so it keeps and drops as live
-        now = [0.0]
-        archive = TelemetryArchive(archive_path(server.db), clock=lambda: now[0])
-        archive.start()
-        server.archive = archive
-    robots = 4
-    try:
+    def __init__(self, folder: Path, n: int) -> None:
+        from backend.protocol.archive import archive_path
+        from backend.server.archive import TelemetryArchive
+        from backend.server.server import MissionServer
+
+        self.server = MissionServer(db=folder / f"live-{n}.db")
+        self.loop = asyncio.new_event_loop()
+        self.runner = threading.Thread(target=self.loop.run_forever, daemon=True)
+        self.runner.start()
+        self.server._loop = self.loop
+        self.now = [0.0]  # the clock of 4 Hz per robot, so it keeps and drops as live
+        self.archive = TelemetryArchive(archive_path(self.server.db), clock=lambda: self.now[0])
+        self.archive.start()
+
+    def feed(self, msgs: list[_Msg], first: int, archive_on: bool) -> float:
+        """CPU seconds (every thread of this process: the receiving one, the
+        server's loop, the archive's writer until it has written them) of the
+        server's `_on_telemetry` over `msgs`, the `first`-th sample on."""
+        self.server.archive = self.archive if archive_on else None
         t0 = time.process_time()
-        for k, m in enumerate(msgs):
-            now_s = (k // robots) * 0.25
-            if archive is not None:
-                now[0] = now_s
-            server._on_telemetry(m)
+        for k, m in enumerate(msgs, first):
+            self.now[0] = (k // 4) * 0.25
+            self.server._on_telemetry(m)
         done = threading.Event()
-        loop.call_soon_threadsafe(done.set)  # the loop has taken every hand-over
+        self.loop.call_soon_threadsafe(done.set)  # the loop has taken every hand-over
         done.wait()
-        if archive is not None:  # its writer's work is the archive's cost too
-            archive.close(timeout=60)
+        if archive_on:  # its writer's work is the archive's cost too
+            self.archive.flush()
         return time.process_time() - t0
+
+    def close(self) -> None:
+        self.archive.close(timeout=60)
+        self.loop.call_soon_threadsafe(self.loop.stop)
+        self.runner.join()
+        self.loop.close()
+
+
+def handling_round(folder: Path, msgs: list[_Msg], n: int) -> tuple[float, float]:
+    """CPU seconds a sample (archive on, archive off) of one server fed
+    `msgs` in chunks, the archive on and off in turn (off on on off ...):
+    the machine's other work, which moves from second to second, hits both
+    alike. A first chunk warms up and is not counted."""
+    live = _Live(folder, n)
+    cpu, fed = {True: 0.0, False: 0.0}, {True: 0, False: 0}
+    try:
+        live.feed(msgs[:CHUNK], 0, True)
+        for j, k in enumerate(range(CHUNK, len(msgs), CHUNK)):
+            archive_on, chunk = j % 4 in (1, 2), msgs[k : k + CHUNK]
+            cpu[archive_on] += live.feed(chunk, k, archive_on)
+            fed[archive_on] += len(chunk)
     finally:
-        if archive is not None:
-            archive.close(timeout=60)
-        loop.call_soon_threadsafe(loop.stop)
-        runner.join()
-        loop.close()
+        live.close()
+    return cpu[True] / fed[True], cpu[False] / fed[False]
 
 
 def run(cycles: int = CYCLES) -> dict[str, float]:
@@ -224,48 +248,62 @@ def run(cycles: int = CYCLES) -> dict[str, float]:
 
 
 def handling(folder: Path) -> dict[str, float]:
-    """The archive's cost: ROUNDS pairs of runs, off and on back to back (in
-    turn which first), so that what else the machine does hits both of a
-    pair; the median of the pairs' ratios, and the median CPU of each."""
+    """The archive's cost: ROUNDS servers fed interleaved chunks; the median
+    round's ratio, and the median CPU a sample each way."""
     msgs = _samples(["lru1", "lru2", "ardea", "lander"])
-    on, off = [], []
-    for i in range(ROUNDS):
-        for archive_on in (False, True) if i % 2 else (True, False):
-            (on if archive_on else off).append(handling_s(folder, msgs, archive_on, len(on + off)))
+    rounds = [handling_round(folder, msgs, n) for n in range(ROUNDS)]
     return {
-        "handling_off_s": statistics.median(off),
-        "handling_on_s": statistics.median(on),
-        "handling_ratio": statistics.median(a / b for a, b in zip(on, off, strict=True)),
+        "handling_on_s": statistics.median(on for on, _ in rounds),
+        "handling_off_s": statistics.median(off for _, off in rounds),
+        "handling_ratio": statistics.median(on / off for on, off in rounds),
+        "handling_ratio_lo": min(on / off for on, off in rounds),
+        "handling_ratio_hi": max(on / off for on, off in rounds),
     }
 
 
 WHERE_THE_TIME_GOES = """\
-Where the time goes (cProfile of the worst seek, issue 32): a seek reads the
-newest snapshot before the instant (the whole mission: 2,700 skills by the
-end, about the baseline), applies up to 500 journaled batches to it (the
-journal snapshots every 500), then feeds the 200 batches before the instant
-and each robot's last 120 samples through the console's model, as live, so
-that the log, the alerts and the sparklines read as they did then. Median
-seeks are within the target; the worst are those just before a snapshot,
-late in the day. Done this round: hints for `find`, the console's owner index
-kept without rebuilds, JSON copies of skills and commands (worst seek 1.24 s
--> 0.43 s). Next: keep the states a review has been through (seeking back
-and forth costs nothing then), or snapshot more often in the journal.
+Where the time goes (issue 32, cProfile and timers of the worst seeks): a
+seek reads the newest snapshot before the instant (the whole mission: 2,700
+skills by the end, about the baseline), applies the batches after it up to
+the instant (the journal snapshots after 500 batches once they add up to
+half the snapshot's size: 1,340 apart late in the day; reading them 20 ms,
+applying them 37 ms), then logs the 200 batches before the instant without
+applying them again and takes each robot's last sample and sparkline from
+the archive (about 15 ms with the model's load). The worst seeks are those
+just before a snapshot, late in the day; the open is one seek, the
+archive's index of the journal (21,000 rows, 30-40 ms), the syncs'
+forecasts (15-25 ms) and the plan's digest of the first load (10-20 ms).
 
-The archive's cost is about 3 us to keep or drop a sample and 10 us of
-SQLite per kept row (a quarter at 4 Hz), on a server whose own handling is
-80 us of CPU a sample (parsing, the telemetry alerts, the hand-over to its
-loop): about 6 us on 80 by that count (1.08x), measured 1.16-1.22x with
-the writer thread competing for the one GIL. Writing rows without the
-archive's indexes, or several samples to a row, is what would bring the
-measured ratio under 1.1x.
+Done this round: `Mission.find` looks a few places around a stale hint
+(applying the batches 71 -> 37 ms: a skill added or removed shifted every
+later hint, and each lookup rescanned its robot's list); the state at the
+instant built at once and the log window only logged (it was the state at
+the window's start, before the snapshot for 200 positions after each one,
+plus the window applied: the open applied 1,467 batches, now 127); the
+batches read without their operations' JSON; the sparklines read as levels,
+not as 480 samples; no plan digest after the first load; the state frozen
+out of the cyclic collector's walks until the next seek (gc.freeze: they
+took 25 ms a seek and 40-110 ms every few). What bounds a seek now: the
+snapshot's parse and a snapshot spacing of batches. Snapshots more often
+would halve the batches, but the server writes the 1.4 MB snapshot on its
+loop in 60-120 ms (measured): every 500 batches instead of about 1,300 is
+2.6 times that, and 12 MB more journal a day; not done.
+
+The archive's cost: the receiving thread's keep-or-drop test and, for the
+quarter kept at 4 Hz, its row and the hand-over (a deque, no lock), about
+1 us a sample; the writer's SQLite rows with their two indexes, 5-7 us a
+row (50 rows to an INSERT: one row a statement took the GIL back from the
+receiving thread at every row), 1.3-2.3 us a sample; about 3 us on 45-50.
+Several samples to a row (a robot's samples of a flush, as the robot's
+JSON) cut the writer to 1.8-2.1 us a sample in a prototype, at the cost of
+a second archive format to read and about twice the bytes; not done.
 """
 
 
 def section(r: dict[str, float]) -> str:
     base = r["baseline_s"]
     ms = 1e3
-    per = 1e6 / SAMPLES
+    us = 1e6
 
     def vs(key: str) -> str:
         return f"{r[key] * ms:.0f} ms ({r[key] / base:.1f}x)"
@@ -291,9 +329,10 @@ def section(r: dict[str, float]) -> str:
         f"{vs('seek_robot_max_s')} | ≤ 300 ms |",
         f"| archive per robot-hour | {r['bytes_per_robot_hour'] / 1e3:.0f} kB "
         f"({r['archive_bytes'] / 1e6:.1f} MB in all) | — |",
-        f"| server's telemetry handling, archive off | {r['handling_off_s'] * per:.1f} µs "
+        f"| server's telemetry handling, archive off | {r['handling_off_s'] * us:.1f} µs "
         "CPU a sample | — |",
-        f"| same, archive on (x off) | {r['handling_on_s'] * per:.1f} µs CPU a sample "
+        f"| same, archive on (x off; rounds {r['handling_ratio_lo']:.2f}-"
+        f"{r['handling_ratio_hi']:.2f}x) | {r['handling_on_s'] * us:.1f} µs CPU a sample "
         f"({r['handling_ratio']:.2f}x) | ≤ 1.1x |",
     ]
     return "\n".join(lines) + "\n\n" + WHERE_THE_TIME_GOES
