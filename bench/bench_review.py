@@ -48,6 +48,7 @@ import threading
 import time
 from datetime import UTC, date, datetime
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
@@ -261,6 +262,57 @@ def handling(folder: Path) -> dict[str, float]:
     }
 
 
+def _archive_alone(folder: Path, name: str) -> tuple[Any, list[float]]:
+    from backend.server.archive import TelemetryArchive
+
+    now = [0.0]
+    archive = TelemetryArchive(folder / name, clock=lambda: now[0], flush_s=60)
+    archive.start()
+    return archive, now
+
+
+def _took_and_write(archive: Any, now: list[float], ts: list[Any], per: int) -> tuple[float, float]:
+    """CPU seconds of `archive.took` over `ts` (its writer idle: each flush
+    comes before 1,000 wait) and of the writer's flushes, fed `per` at a time
+    at 4 Hz a robot."""
+    took = write = 0.0
+    for k in range(0, len(ts), per):
+        t0 = time.thread_time()
+        for i in range(k, min(k + per, len(ts))):
+            now[0] = (i // 4) * 0.25
+            archive.took(ts[i])
+        t1 = time.process_time()
+        took += time.thread_time() - t0
+        archive.flush()
+        write += time.process_time() - t1
+    return took, write
+
+
+def floor(folder: Path) -> dict[str, float]:
+    """The archive's parts measured alone (us): the server's parse of a
+    sample, `took` a sample with the writer idle, the writer a row when a
+    flush carries about 1,000 rows or 2 (as live: 4 robots at 4 Hz, a write
+    every 0.5 s); then one interleaved round, for the two threads together."""
+    from backend.protocol.messages import Telemetry
+    from backend.protocol.wire import parse
+
+    msgs = _samples(["lru1", "lru2", "ardea", "lander"])
+    ts = [parse(Telemetry, m.payload) for m in msgs[:40_000]]
+    t0 = time.thread_time()
+    for m in msgs[:40_000]:
+        parse(Telemetry, m.payload)
+    out = {"parse_us": (time.thread_time() - t0) / len(ts) * 1e6}
+    for per, name in ((3_996, "flood"), (8, "live")):
+        archive, now = _archive_alone(folder, f"floor-{name}.db")
+        took, write = _took_and_write(archive, now, ts if per > 8 else ts[:4_000], per)
+        n, rows = (len(ts) if per > 8 else 4_000), archive.written
+        archive.close(timeout=60)
+        out[f"took_{name}_us"], out[f"row_{name}_us"] = took / n * 1e6, write / rows * 1e6
+    on, off = handling_round(folder, msgs, 0)
+    out.update(on_us=on * 1e6, off_us=off * 1e6)
+    return out
+
+
 WHERE_THE_TIME_GOES = """\
 Where the time goes (issue 32, cProfile and timers of the worst seeks): a
 seek reads the newest snapshot before the instant (the whole mission: 2,700
@@ -343,7 +395,12 @@ def main() -> None:
     ap.add_argument("--write", metavar="FILE", help=f"write/update the '{HEADING}' section of FILE")
     ap.add_argument("--cycles", type=int, default=CYCLES, help="a smaller day, to try it")
     ap.add_argument("--review-only", metavar="DB", help=argparse.SUPPRESS)
+    ap.add_argument("--floor", action="store_true", help="the archive's parts alone (us)")
     args = ap.parse_args()
+    if args.floor:
+        with tempfile.TemporaryDirectory() as tmp:
+            print({k: round(v, 2) for k, v in floor(Path(tmp)).items()})
+        return
     if args.review_only:
         import json
 
