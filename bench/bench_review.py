@@ -292,28 +292,45 @@ def _took_and_write(archive: Any, now: list[float], ts: list[Any], per: int) -> 
     return took, write
 
 
+# samples a write carries in --floor: as the bench's flood (under the 1,000
+# waiting that wake the writer early), and live at 4 robots and 4 Hz with a
+# write every 0.5 s (FLUSH_S), 2.5 s and 5 s
+FLOOR_WRITES = {"flood": 3_996, "0.5s": 8, "2.5s": 40, "5s": 80}
+
+
+def _floor_write(folder: Path, name: str, ts: list[Any]) -> dict[str, float]:
+    """`took` a sample, the writer a row, and both a sample (us), fed so."""
+    per = FLOOR_WRITES[name]
+    ts = ts if per > 100 else ts[:8_000]
+    archive, now = _archive_alone(folder, f"floor-{name}.db")
+    took, write = _took_and_write(archive, now, ts, per)
+    rows = archive.written
+    archive.close(timeout=60)
+    return {
+        f"took_{name}_us": took / len(ts) * 1e6,
+        f"row_{name}_us": write / rows * 1e6,
+        f"all_{name}_us": (took + write) / len(ts) * 1e6,
+    }
+
+
 def floor(folder: Path) -> dict[str, float]:
     """The archive's parts measured alone (us): the server's parse of a
-    sample, `took` a sample with the writer idle, the writer a row when a
-    flush carries about 1,000 rows or 2 (as live: 4 robots at 4 Hz, a write
-    every 0.5 s); then one interleaved round, for the two threads together."""
+    sample; the archive's `took` a sample (its writer idle) and the writer
+    a row, for each of FLOOR_WRITES; then one interleaved round, for the two
+    threads together."""
     from backend.protocol.messages import Telemetry
     from backend.protocol.wire import parse
 
     msgs = _samples(["lru1", "lru2", "ardea", "lander"])
-    ts = [parse(Telemetry, m.payload) for m in msgs[:40_000]]
     t0 = time.thread_time()
-    for m in msgs[:40_000]:
-        parse(Telemetry, m.payload)
+    ts = [parse(Telemetry, m.payload) for m in msgs[:40_000]]
     out = {"parse_us": (time.thread_time() - t0) / len(ts) * 1e6}
-    for per, name in ((3_996, "flood"), (8, "live")):
-        archive, now = _archive_alone(folder, f"floor-{name}.db")
-        took, write = _took_and_write(archive, now, ts if per > 8 else ts[:4_000], per)
-        n, rows = (len(ts) if per > 8 else 4_000), archive.written
-        archive.close(timeout=60)
-        out[f"took_{name}_us"], out[f"row_{name}_us"] = took / n * 1e6, write / rows * 1e6
+    for name in FLOOR_WRITES:
+        out.update(_floor_write(folder, name, ts))
     on, off = handling_round(folder, msgs, 0)
-    out.update(on_us=on * 1e6, off_us=off * 1e6)
+    out.update(on_us=on * 1e6, off_us=off * 1e6, round_x=on / off)
+    for name in FLOOR_WRITES:  # by the parts: (off + the archive's) / off
+        out[f"parts_{name}_x"] = 1 + out[f"all_{name}_us"] / out["off_us"]
     return out
 
 
@@ -350,26 +367,30 @@ loop in 60-120 ms (measured): every 500 batches instead of about 1,300 is
 
 The archive's cost moves with the shared machine more than the 10 % it is
 about: on 2026-12-02 the bench's five rounds spread 1.13-1.29x (load
-average 4.5-5.8), and one round of `--floor` minutes later gave 1.03x. Its parts measured alone
-(`.venv/bin/python bench/bench_review.py --floor`, same day, load 5): the
-server's own handling is 45 us a sample (its parse 22 us); the archive's
-`took` (keep-or-drop and, for the quarter kept at 4 Hz, its row and the
-hand-over on a deque) 1.3 us a sample; its writer 6.1 us a row when a write
-carries about 1,000 rows as the bench's flood does (50 rows to an INSERT;
-one row a statement took the GIL back at every row), 1.5 us a sample. That
-is 2.8 us on 45, 1.06x: the floor as the bench feeds it; the rest of the
-measured ratio is the two threads competing for the GIL and the caches.
-Live it is higher, and the bench's flood does not show it: at 4 robots and
-4 Hz the writer wakes every 0.5 s (FLUSH_S) with about 2 rows, and a
-write's own cost (BEGIN, COMMIT to the WAL, the wake-ups, about 70 us) makes
-it 34-36 us a row, 11 us a sample in all (about 1.24x on 45 us). Writes
-every 2.5 s or 5 s (40 or 80 samples a write) measured 5.7 and 4.3 us a
-sample (about 1.13x and 1.09x). Next: write when enough rows wait or
-several seconds have passed, at the price of a copy of a live server's
-database (and a crash) that many seconds behind; then several samples to a
-row (a robot's samples of a write, as the robot's JSON: the writer 1.8-2.1
-us a sample in a prototype, at the cost of a second archive format to read
-and about twice the bytes). Not done.
+average 4.5-5.8), and three single rounds of `--floor` in the next ten
+minutes 1.01-1.17x. Its parts measured alone
+(`.venv/bin/python bench/bench_review.py --floor`, three runs at load 5-6,
+as ratios against that run's archive-off round): the server's own
+handling is 45-56 us a sample (its parse 22-35 us); the archive's `took`
+(keep-or-drop and, for the quarter kept at 4 Hz, its row and the
+hand-over on a deque) 1.3-2.3 us a sample; its writer 6-9 us a row when a
+write carries about 1,000 rows as the bench's flood does (50 rows to an
+INSERT; one row a statement took the GIL back at every row), 1.5-2.2 us a
+sample. By its parts, 1.06-1.08x: the floor as the bench feeds it; the
+rest of the measured ratio is the two threads competing for the GIL and
+the caches. Live it is higher, and the bench's flood does not show it: at
+4 robots and 4 Hz the writer wakes every 0.5 s (FLUSH_S) with about 2
+rows, and a write's own cost (BEGIN, COMMIT to the WAL, the wake-ups:
+55-85 us) makes it 34-49 us a row, 11-16 us a sample in all, 1.24-1.31x
+by its parts. A write every 2.5 s or 5 s (40 or 80 samples) measured
+1.14-1.15x and 1.12x by its parts: a longer interval alone does not reach
+1.1x either. Next: write when enough rows wait or several seconds have
+passed (the price: a copy of a live server's database, and a crash, that
+many seconds behind), with several samples to a row (a robot's samples of
+a write as the robot's JSON: the writer 1.8-2.1 us a sample in a
+prototype, at the cost of a second archive format to read and about twice
+the bytes), and the row made with fewer of the model's attribute reads.
+Not done.
 """
 
 
