@@ -381,7 +381,7 @@ rest of the measured ratio is the two threads competing for the GIL and
 the caches. Live it is higher, and the bench's flood does not show it: at
 4 robots and 4 Hz the writer wakes every 0.5 s (FLUSH_S) with about 2
 rows, and a write's own cost (BEGIN, COMMIT to the WAL, the wake-ups:
-55-85 us) makes it 34-49 us a row, 11-16 us a sample in all, 1.24-1.31x
+55-85 us) makes it 34-49 us a row, 11-16 us a sample in all, 1.23-1.31x
 by its parts. A write every 2.5 s or 5 s (40 or 80 samples) measured
 1.14-1.15x and 1.12x by its parts: a longer interval alone does not reach
 1.1x either. Next: write when enough rows wait or several seconds have
