@@ -3,6 +3,7 @@ live server's telemetry handling with the archive on against off (not a test).
 
     .venv/bin/python bench/bench_review.py                 # print a Markdown section
     .venv/bin/python bench/bench_review.py --write docs/performance.md
+    .venv/bin/python bench/bench_review.py --floor         # the archive's parts alone
 
 The recording: tests/files/recorded.py's play (the pilot mission's four
 robots; operators add, delete, edit, move a marker, synchronize, retry;
