@@ -510,6 +510,22 @@ class _Hints(dict[str, tuple[str, int]]):
     __hash__ = None
 
 
+NEAR = 8  # places either side of a stale hint looked at before the whole list
+_OFFSETS = (0, *(k for d in range(1, NEAR + 1) for k in (-d, d)))
+
+
+def _near(task: list[SkillInstance], i: int, skill_id: str) -> int | None:
+    """Where `skill_id` is within NEAR places of `i` in `task` (None: not
+    there). Adding or removing a skill shifts the hints of those after it by
+    one; a review applying 1,300 batches rescanned 700-skill lists 120 times."""
+    n = len(task)
+    for d in _OFFSETS:
+        j = i + d
+        if 0 <= j < n and task[j].id == skill_id:
+            return j
+    return None
+
+
 class Mission(Strict):
     format: Literal["missionctl/mission@1"] = MISSION_FORMAT
     name: str = "mission"
@@ -552,9 +568,11 @@ class Mission(Strict):
             robot, i = hint
             task = self.tasks.get(robot)
             if task is not None:
-                if i < len(task) and task[i].id == skill_id:
-                    return robot, i, task[i]
-                found = self._rehint(robot, task, skill_id)  # moved within its list, or gone
+                j = _near(task, i, skill_id)
+                if j is not None:  # where it was, or a few places off (a skill put or
+                    hints[skill_id] = (robot, j)  # taken before it): no scan of the list
+                    return robot, j, task[j]
+                found = self._rehint(robot, task, skill_id)  # moved further, or gone
                 if found is not None:
                     return found
             del hints[skill_id]

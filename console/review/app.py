@@ -94,6 +94,9 @@ class ReviewApp(MissionApp):
         self.show(self.replay.seek(start))
         self.set_interval(PLAY_TICK_S, self._tick)
 
+    def on_unmount(self) -> None:
+        self.replay.release()
+
     def _screen_changed(self, screen: Screen) -> None:
         """Every full screen gets the review bar (dialogs are over one)."""
         if isinstance(screen, ModalScreen) or screen.query(ReviewBar):

@@ -50,7 +50,7 @@ from console.state.changes import (
 )
 from console.state.clock import MissionClock
 from console.state.contact import out_of_contact
-from console.state.eventlog import AlertBook, EventLog
+from console.state.eventlog import AlertBook, EventLog, Owner
 from console.state.freshness import Freshness, freshness
 from console.state.keys import KeyNames
 from console.state.plan import PlanView
@@ -71,8 +71,19 @@ REVIEW = "review"  # a recording, not a server: there is no connection to show
 
 # -- the model --------------------------------------------------------------------
 
+
 # operations a robot's answer or report becomes (the robot was heard)
 ROBOT_OPS = frozenset({"report", "answer", "sync_ack", "unsync_done", "retry_ack", "reconcile"})
+
+
+def heard_in(heard: dict[str, datetime], batch: ev.EventBatch, owner: Owner, now: datetime) -> None:
+    """Note in `heard` the robots a robot's answer or report in `batch` speaks
+    for (it was alive `now`); `owner`: each skill's robot."""
+    if batch.op in ROBOT_OPS:
+        for e in batch.events:
+            robot = owner(getattr(e, "id", "")) or getattr(e, "robot", None)
+            if isinstance(robot, str):
+                heard[robot] = now
 
 
 PLAN_FIELDS = {"id", "skill", "label", "params", "bindings", "policies"}  # a skill, as planned
@@ -315,7 +326,7 @@ class ConsoleModel:
             return set()
         tags = _touches_after(self.mission, batch)  # partner rows' tags change (before it applies)
         self.mission = ev.apply_events(self.mission, batch)
-        self._heard_in(batch)
+        heard_in(self.heard, batch, self._owner.get, self.clock())
         robots: set[str] = set()
         reindex = False
         for e in batch.events:
@@ -364,14 +375,6 @@ class ConsoleModel:
                 self._owner[x] for x in self.mission.barriers[bid].skills if x in self._owner
             )
         return out
-
-    def _heard_in(self, batch: ev.EventBatch) -> None:
-        if batch.op in ROBOT_OPS:  # the robot spoke: it was alive then
-            now = self.clock()
-            for e in batch.events:
-                robot = self._owner.get(getattr(e, "id", ""), None) or getattr(e, "robot", None)
-                if isinstance(robot, str):
-                    self.heard[robot] = now
 
     def mark_saved(self) -> None:
         """The plan was just saved to (or loaded from) a file."""

@@ -9,11 +9,13 @@ timeline's now). The cursor is a position in a clock's order of the
 journal's batches (`backend.core.clocks`: the first `position`
 batches applied) and a time `at`:
 
-- `seek(t)`: the model is emptied and given the mission at the start of a
-  window of `LOG_WINDOW` batches before `t` as a state, then the window's
-  batches, the alerts and presence news up to `t` and each robot's last
-  samples, in time order: the log, the alerts and the fleet's history are
-  as a console watching then would have them (the window's part of them);
+- `seek(t)`: the model is emptied and given the mission at `t` as a
+  state (the journal's nearest snapshot before it and the batches after
+  that), then, in time order, the `LOG_WINDOW` batches before `t` for the
+  log only (the state holds them), the alerts and presence news up to `t`
+  and each robot's last sample with its sparkline's levels: the log, the
+  alerts and the fleet's history are as a console watching then would
+  have them (the window's part of them);
 - `step(+1/-1)`: the next batch (with what the archive holds up to its
   time) is taken, or back to the previous one (a seek);
 - `advance(seconds)`: the time moves on (playing at a speed), everything up
@@ -28,6 +30,8 @@ counted in `unplaced`.
 
 from __future__ import annotations
 
+import gc
+from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -40,6 +44,8 @@ from backend.client.events import (
     TelemetryReceived,
 )
 from backend.client.mapfollow import MapUpdate
+from backend.core import events as ev
+from backend.core.bulk import gc_paused
 from backend.core.clocks import GROUND, ROBOT
 from backend.core.durations import duration_s
 from backend.core.events import EventBatch
@@ -49,7 +55,7 @@ from backend.files.record.journal import JournalReader, missing
 from backend.protocol.archive import ArchiveReader
 from backend.protocol.messages import ALERTS_KEPT, RobotInfo, StateSnapshot
 from console.state.changes import MapFed, ModelEvent, StateChange, Topic, change
-from console.state.model import HISTORY, ConsoleModel
+from console.state.model import HISTORY, ConsoleModel, heard_in
 
 LOG_WINDOW = 200  # batches before the cursor the log shows after a seek
 SERVER_ID = "review"
@@ -72,12 +78,12 @@ class Cursor:
 class Feed:
     """What one move of the cursor takes, in time order."""
 
-    events: list[tuple[float, ModelEvent]] = field(default_factory=list)
+    events: list[tuple[float, ModelEvent | HeldBatch]] = field(default_factory=list)
 
-    def add(self, at: float, event: ModelEvent) -> None:
+    def add(self, at: float, event: ModelEvent | HeldBatch) -> None:
         self.events.append((at, event))
 
-    def sorted(self) -> Iterator[tuple[float, ModelEvent]]:
+    def sorted(self) -> Iterator[tuple[float, ModelEvent | HeldBatch]]:
         # stable: a batch and the samples at its time keep their order
         return iter(sorted(self.events, key=lambda e: e[0]))
 
@@ -101,6 +107,7 @@ class Replay:
         self.unplaced: list[int] = []  # revisions left out (robot time)
         self._waiting: list[EventBatch] = []
         self._syncs: list[tuple[int, str, float, float]] | None = None  # (index, skill, span)
+        self._owners: dict[str, str] = {}  # skill -> robot along a seek's window
         model.clock.wall = self.now  # the recording's time is the wall the views read
         model.map_note = MAP_NOTE
 
@@ -187,22 +194,42 @@ class Replay:
         return c
 
     def _seek(self, position: int, t: float) -> StateChange:
+        """Everything as it was at batch `position`, time `t`. The state is a
+        whole mission (150,000 objects at 2,700 skills): the collector walked
+        it in each young generation right after (25 ms) and whole every few
+        seeks (40-100 ms). It is built without the collector and frozen out
+        of its walks (gc.freeze) until the next seek, which drops it (freed
+        by reference counting) and gives the collector back the rest."""
+        gc.unfreeze()
+        with gc_paused():
+            c = self._rebuild(position, t)
+            gc.freeze()
+        return c
+
+    def release(self) -> None:
+        """Give the collector back what the last seek froze (the review ends)."""
+        gc.unfreeze()
+
+    def _rebuild(self, position: int, t: float) -> StateChange:
         clock = self.cursor.clock
         order = self.journal.order(clock)
         start = max(0, position - LOG_WINDOW)
-        state = self.journal.state(start, clock)
-        self.unplaced = list(state.unplaced)
-        self._waiting = []
+        # the state at the instant at once (from the snapshot nearest before it),
+        # and the window's batches for the log only: never the state at the
+        # window's start, which may lie before that snapshot (a whole spacing more)
+        state = self.journal.state(position, clock, window=position - start)
+        self.unplaced = []
+        held = self.journal.events(r - self.journal.base - 1 for r in state.unplaced)
+        self._waiting = list(held.values())  # a later batch may still let them apply
         forget(self.model)
         self.model.ordered = clock == GROUND
         window_t = order.time_of(start) if start else self.span()[0]
         feed = Feed()
-        indices = order.order[start:position]
-        batches = self.journal.pick(indices)
-        for i in indices:
-            feed.add(order.keys[i], BatchApplied(batches[i].batch))
+        for batch, by in state.recent:
+            feed.add(order.keys[by], HeldBatch(batch))
         self._archive(feed, window_t or t, t, seek=True)
         self._load(state.mission, window_t or t)
+        self._owners = window_owners(self.model, [b for b, _ in state.recent])
         self.cursor.position = position
         self._read_planned(position)
         c = self._take(feed, window_t or t)
@@ -230,8 +257,11 @@ class Replay:
         if a is None:
             return
         clock = self.cursor.clock
-        if seek:
-            samples = [s for r in a.robots for s in a.last_samples(r, upto, clock, HISTORY)]
+        if seek:  # each robot's last sample; the levels before it (its sparkline) as such
+            samples = [s for r in a.robots for s in a.last_samples(r, upto, clock, 1)]
+            for r in a.robots:
+                if levels := a.last_levels(r, upto, clock, HISTORY):
+                    self.model.history[r] = deque(levels[:-1], maxlen=HISTORY)
             alerts = a.alerts(-1e18, upto, ALERTS_KEPT)
         else:
             samples, alerts = list(a.samples(after, upto, clock)), a.alerts(after, upto)
@@ -248,6 +278,10 @@ class Replay:
         robots: set[str] | None = set()
         for at, event in feed.sorted():
             self.cursor.at = max(start, at)
+            if isinstance(event, HeldBatch):
+                self._log(event.batch)
+                topics.add(Topic.LOG)
+                continue
             if isinstance(event, BatchApplied) and not self._placeable(event):
                 continue
             c = self.model.take(event)
@@ -256,6 +290,15 @@ class Replay:
             if isinstance(event, BatchApplied):
                 self._retry_waiting(topics)
         return change(*topics, robots=robots)
+
+    def _log(self, batch: EventBatch) -> None:
+        """A batch the state holds already: its log lines and who was heard,
+        as when it applied, with the skill index as it was then."""
+        for e in batch.events:
+            _redo(self._owners, e)
+        m, owner = self.model, self._owners.get
+        heard_in(m.heard, batch, owner, m.clock())
+        m.log.add_batch(batch, owner, m.clock())
 
     def _placeable(self, event: BatchApplied) -> bool:
         """In robot time, a batch that refers to what is not taken yet waits."""
@@ -305,16 +348,57 @@ class Replay:
         )
 
 
+@dataclass(frozen=True)
+class HeldBatch:
+    """A batch the shown state holds already: a seek's window, for the log."""
+
+    batch: EventBatch
+
+
+def window_owners(model: ConsoleModel, window: list[EventBatch]) -> dict[str, str]:
+    """skill -> robot before the window's first batch: the shown state's index
+    with the window's additions and removals undone (a mission replaced in
+    the window is not undone: its skills are named from the index after it)."""
+    assert model.mission is not None
+    owners = owners_of(model.mission)
+    for batch in reversed(window):
+        for e in reversed(batch.events):
+            _undo(owners, e)
+    return owners
+
+
+def owners_of(mission: Mission) -> dict[str, str]:
+    return {s.id: r for r, task in mission.tasks.items() for s in task}
+
+
+def _undo(owners: dict[str, str], e: object) -> None:
+    if isinstance(e, ev.SkillAdded):
+        owners.pop(e.skill.id, None)
+    elif isinstance(e, ev.SkillRemoved):
+        owners[e.id] = e.robot
+
+
+def _redo(owners: dict[str, str], e: object) -> None:
+    if isinstance(e, ev.SkillAdded):
+        owners[e.skill.id] = e.robot
+    elif isinstance(e, ev.SkillRemoved):
+        owners.pop(e.id, None)
+    elif isinstance(e, ev.MissionReplaced):
+        owners.clear()
+        owners.update(owners_of(e.mission))
+
+
 def forget(model: ConsoleModel) -> None:
     """Empty the model (going to another instant); the log and the alert
-    book in place: the screens showing them keep them."""
-    model.mission = None
+    book in place: the screens showing them keep them. The mission stays
+    until the next is loaded: a load that is not the first digests no plan
+    to tell unsaved edits by (a review saves nothing; 15-25 ms a seek), and
+    its load indexes it."""
     for kept in (model.robots, model.telemetry, model.history, model.heard):
         kept.clear()
     model.log.clear()
     model.alerts.clear()
     model.selection.marks.clear()
-    model.reindex()
 
 
 # -- where to go, as typed -------------------------------------------------------------------

@@ -10,6 +10,7 @@ are shown in local time, so the tests pin TZ=UTC.
 
 from __future__ import annotations
 
+import gc
 import os
 import time
 
@@ -48,3 +49,4 @@ def replay_of(recorded):
     with JournalReader(recorded.db) as j, ArchiveReader(archive_path(recorded.db)) as a:
         library = load_library(j.library)
         yield lambda model: Replay(model, j, library, a)
+    gc.unfreeze()  # what a seek froze (Replay.release), for the tests after

@@ -7,6 +7,7 @@ robots, a 60 s link delay, failures retried, telemetry in the archive.
 
 from __future__ import annotations
 
+import gc
 import json
 from datetime import UTC, datetime
 
@@ -63,6 +64,31 @@ def test_playing_on_from_an_instant_reaches_the_same_end_as_a_seek(recorded, rep
     assert played == replay.model.mission and played.revision == replay.journal.last
 
 
+def _batch_lines(model: ConsoleModel, n: int) -> list[tuple]:
+    lines = [e for e in model.log.entries if e.revision is not None]
+    return [(e.kind, e.text, e.at, e.robots, e.skill, e.revision) for e in lines[-n:]]
+
+
+@pytest.mark.parametrize("clock", [GROUND, ROBOT])
+def test_a_seeks_log_reads_as_a_console_that_watched_until_then(recorded, replay, clock):
+    """A seek builds the state at the instant at once and logs the batches
+    before it without applying them again: the same lines, times and robots
+    as taking each batch as it came."""
+    from console.state.replay import LOG_WINDOW
+
+    replay.set_clock(clock)
+    lo, hi = replay.span()
+    for t in (lo + (hi - lo) * k / 5 for k in range(1, 6)):
+        replay.seek(lo)
+        while replay.cursor.at < t:  # played up to t, batch after batch
+            replay.advance(min(7.0, t - replay.cursor.at))
+        n = min(LOG_WINDOW, replay.cursor.position) // 2
+        played, position = _batch_lines(replay.model, n), replay.cursor.position
+        replay.seek(t)
+        assert replay.cursor.position == position
+        assert _batch_lines(replay.model, n) == played, t
+
+
 def test_a_seek_brings_the_robots_telemetry_alerts_and_the_plan_as_synced(recorded, replay):
     replay.seek(recorded.end)
     assert set(replay.model.telemetry) == {"lru1", "lru2", "ardea", "lander"}
@@ -73,6 +99,48 @@ def test_a_seek_brings_the_robots_telemetry_alerts_and_the_plan_as_synced(record
     assert synced and synced <= set(replay.model.plan.planned)
     replay.seek(recorded.start)
     assert replay.model.plan.planned == {}
+
+
+def test_a_change_waiting_at_a_seek_applies_when_the_steps_bring_what_it_needs(recorded):
+    """lru1's clock two minutes behind: in robot time its answers come before
+    the skills they answer were added. A seek in between says they wait; the
+    steps that bring the skills let them apply, as the journal's state at
+    each position has them (a seek used to leave them out for good)."""
+    from backend.files.missions import load_library
+    from backend.files.record.journal import JournalReader
+    from backend.protocol.archive import ArchiveReader, archive_path
+    from console.state.replay import Replay
+
+    with JournalReader(recorded.db) as j, ArchiveReader(archive_path(recorded.db)) as a:
+        j.use_index(
+            [
+                (rev, ts, op, at - 120.0 if robot == "lru1" and at is not None else at, robot)
+                for rev, ts, op, at, robot in a.journal_index(j.base)
+            ]
+        )
+        replay = Replay(ConsoleModel(), j, load_library(j.library))
+        try:
+            replay.set_clock(ROBOT)
+            p = next(p for p in range(len(j)) if j.state(p, ROBOT).unplaced)
+            replay.seek_position(p)
+            assert "not placed in robot time" in replay.where()
+            while "not placed" in replay.where():
+                assert replay.cursor.position < len(j)
+                replay.step(1)
+                assert replay.model.mission == j.state(replay.cursor.position, ROBOT).mission
+            assert replay.cursor.position > p + 1 and replay.unplaced == []
+        finally:
+            replay.release()
+
+
+def test_a_seek_leaves_the_collector_on_and_the_review_gives_back_what_it_froze(
+    recorded, replay_of
+):
+    replay = replay_of(ConsoleModel())
+    replay.seek(recorded.end)
+    assert gc.isenabled() and gc.get_freeze_count() > 0  # the state, out of its walks
+    replay.release()
+    assert gc.get_freeze_count() == 0
 
 
 def test_a_revision_the_journal_does_not_hold_is_said(replay):
@@ -139,6 +207,7 @@ async def test_the_review_opens_at_the_end_and_steps_goes_to_and_switches_clocks
         await pilot.press("C")
         await settle(pilot)
         assert "robot time 08:03:00" in screen_text(app)
+    assert gc.get_freeze_count() == 0  # the review ended: the collector has it all back
 
 
 async def test_go_to_says_what_it_cannot_read(replay_of):

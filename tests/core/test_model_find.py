@@ -108,3 +108,17 @@ def test_an_added_skill_is_noted_where_it_was_put():
     )
     assert m._hints["b-9"] == ("b", 4)
     assert m.find("b-9") == ("b", 4, m.tasks["b"][4])
+
+
+def test_a_skill_a_few_places_off_its_hint_is_found_without_a_scan(monkeypatch):
+    m = mission(per_robot=50)
+    m.find("a-1")  # every list noted
+    del m.tasks["a"][0]  # every hint of robot a is one place off now
+    m.tasks["a"].insert(10, SkillInstance(id="a-77", skill="drive_to"))
+    scans = []
+    monkeypatch.setattr(Mission, "_rehint", lambda self, *a: scans.append(a))
+    for j in (2, 11, 30, 50):
+        sid = f"a-{j}"
+        assert m.find(sid) == scan(m, sid)
+        assert m._hints[sid] == ("a", scan(m, sid)[1])  # noted where it is now
+    assert scans == []

@@ -91,6 +91,39 @@ def test_robot_time_shows_what_a_robot_did_before_the_ground_heard_it(recorded):
         assert j.state(len(j), ROBOT).mission.tasks == j.state(len(j), GROUND).mission.tasks
 
 
+def test_a_state_brings_the_batches_of_its_window_as_taken(tmp_path):
+    """`state(p, window=w).recent`: the batches at positions p-w..p-1, those
+    held by the snapshot it starts from too (snapshots every 20 batches: every
+    window of 30 reaches back over one), each with the batch it was taken with."""
+    rec = record_mission(tmp_path, Plan(snapshot_every=20))
+    with JournalReader(rec.db) as j:
+        assert len(j.snapshot_revisions) > 4
+        for clock in (GROUND, ROBOT):
+            order = j.order(clock)
+            for p in range(0, len(j) + 1, 7):
+                state = j.state(p, clock, window=30)
+                start = max(0, p - 30)
+                window = {j.revision_of(i) for i in order.order[start:p]}
+                got = [b.revision for b, _ in state.recent]
+                assert len(got) == len(set(got)) and all(
+                    start <= order.pos[by] < p for _, by in state.recent
+                ), (clock, p)
+                if clock == GROUND:
+                    assert got == sorted(window)
+                    assert all(j.revision_of(by) == b.revision for b, by in state.recent)
+                else:  # all but those still waiting; at most a few let in from before
+                    assert window - set(state.unplaced) <= set(got), (clock, p)
+
+
+def test_events_reads_the_batches_pick_does_named_from_the_index(recorded):
+    with JournalReader(recorded.db) as j:
+        wanted = [len(j) - 1, 0, 5, 5, len(j) // 2]
+        picked, events = j.pick(wanted), j.events(iter(wanted))
+        assert sorted(events) == sorted(set(wanted)) and j.events([]) == {}
+        for i, batch in events.items():
+            assert batch == picked[i].batch and batch.op and batch.actor
+
+
 def test_a_journal_that_lost_its_first_snapshots_starts_at_the_oldest_kept(tmp_path):
     rec = record_mission(tmp_path, Plan(snapshot_every=20))
     with sqlite3.connect(rec.db) as conn:
@@ -177,8 +210,13 @@ def test_a_batch_that_cannot_apply_yet_waits_for_what_it_needs(recorded):
         edit = next(i for i, b in enumerate(batches) if b.name == "edit")
         ahead = [*batches[:add], batches[edit], *batches[add:edit], *batches[edit + 1 :]]
         left: list[int] = []
-        done = apply_in_order(mission, ahead, left)
+        taken: list = []
+        done = apply_in_order(mission, [b.batch for b in ahead], left, taken)
         assert left == [] and done == j.state(len(j)).mission
+        # the edit was taken right after the add that made it apply, with that add
+        k = next(k for k, (b, _) in enumerate(taken) if b is batches[edit].batch)
+        by = taken[k - 1][0]
+        assert by.op == "add" and taken[k][1] == by.revision < batches[edit].revision
 
 
 # -- the archive ------------------------------------------------------------------------------
@@ -209,6 +247,65 @@ def test_the_archive_keeps_a_sample_a_second_and_every_change(tmp_path):
         assert len(r.last_samples("lru2", 1e9, GROUND, 100)) <= 5
         lru1 = r.last_samples("lru1", 1e9, ROBOT, 100)
         assert [s.telemetry.mode for s in lru1] == ["idle"] * 3 + ["executing"] * 8
+
+
+def test_the_archive_reads_its_span_ranges_and_levels_as_its_table_holds_them(recorded):
+    """span, samples and last_levels read each robot's index, not the table:
+    the same answers as statements over the whole table (ties of a time in
+    the robots' order)."""
+    with ArchiveReader(recorded.archive) as r, sqlite3.connect(recorded.archive) as conn:
+        rank = {robot: k for k, robot in enumerate(r.robots)}
+        for clock, col in ((GROUND, "received"), (ROBOT, "at")):
+            lo, hi = conn.execute(f"SELECT min({col}), max({col}) FROM telemetry").fetchone()
+            assert r.span(clock) == (lo, hi)
+            after, upto = lo + 10.0, (lo + hi) / 2
+            rows = conn.execute(
+                f"SELECT robot, {col} FROM telemetry WHERE {col} > ? AND {col} <= ?",
+                (after, upto),
+            ).fetchall()
+            got = [(s.telemetry.robot, s.at) for s in r.samples(after, upto, clock)]
+            assert got == sorted(rows, key=lambda row: (row[1], rank[row[0]]))
+            assert len(got) > len(set(t for _, t in got))  # robots' samples at one time
+            for robot in r.robots:
+                samples = r.last_samples(robot, upto, clock, 120)
+                levels = [(s.telemetry.battery, s.telemetry.link) for s in samples]
+                assert len(levels) == 120 and r.last_levels(robot, upto, clock, 120) == levels
+
+
+def test_an_archive_without_samples_has_no_span(tmp_path):
+    archive = TelemetryArchive(tmp_path / "h.telemetry.db")
+    archive.start()
+    archive.close()
+    with ArchiveReader(archive.path) as r:
+        assert r.span(GROUND) is None and r.span(ROBOT) is None
+        assert list(r.samples(-1e18, 1e18, GROUND)) == []
+
+
+def test_the_archive_writes_every_sample_taken_as_it_was(tmp_path):
+    """Samples go in several to a statement (ROWS_A_STATEMENT): a number of
+    them that is no multiple of it, each read back as it was taken."""
+    from backend.server.archive import ROWS_A_STATEMENT
+
+    archive = TelemetryArchive(tmp_path / "e.telemetry.db", every_s=0.0)
+    archive.start()
+    n = 2 * ROWS_A_STATEMENT + 23
+    taken = [
+        _sample("lru1", float(k), mode="executing" if k % 3 else "idle").model_copy(
+            update={"battery": k / n, "skill": f"lru1-{k}" if k % 2 else None}
+        )
+        for k in range(n)
+    ]
+    try:
+        for k, t in enumerate(taken):
+            archive._clock = lambda k=k: k * 1.0
+            assert archive.took(t, received=1000.0 + k)
+        assert archive.flush()
+    finally:
+        archive.close()
+    with ArchiveReader(archive.path) as r:
+        back = r.last_samples("lru1", 1e9, GROUND, 10 * n)
+    assert [s.at for s in back] == [1000.0 + k for k in range(n)]
+    assert [s.telemetry for s in back] == taken
 
 
 def test_the_archive_keeps_the_newest_samples_only(tmp_path):
@@ -268,6 +365,72 @@ def test_taking_a_sample_never_waits_for_the_disk(tmp_path):
         archive.close()
     with ArchiveReader(archive.path) as r:
         assert len(r.last_samples("lru1", 1e9, GROUND, 1000)) == 500
+
+
+def _held(archive: TelemetryArchive) -> tuple[threading.Event, threading.Event]:
+    """The writer held up in its next commit, as by a slow disk: (it is held, let it go)."""
+    blocked, release = threading.Event(), threading.Event()
+    real = archive._commit
+
+    def slow(*a, **kw):
+        blocked.set()
+        release.wait(10)
+        return real(*a, **kw)
+
+    archive._commit = slow
+    return blocked, release
+
+
+def test_a_full_queue_drops_what_comes_counts_it_and_says_it_once(tmp_path, monkeypatch, caplog):
+    import logging
+
+    import backend.server.archive as module
+
+    monkeypatch.setattr(module, "QUEUE_MAX", 100)
+    archive = TelemetryArchive(tmp_path / "f.telemetry.db", every_s=0.0)
+    archive.start()
+    blocked, release = _held(archive)
+    taken = []
+    try:
+        with caplog.at_level(logging.WARNING, logger=module.__name__):
+            archive._clock = lambda: 0.0
+            assert archive.took(_sample("lru1", 0.0), received=0.0)
+            assert blocked.wait(10)  # the writer has the first and waits for the disk
+            for k in range(1, 131):  # 100 wait for it, the 30 after them are dropped
+                archive._clock = lambda k=k: k * 1.0
+                taken.append(archive.took(_sample("lru1", float(k)), received=float(k)))
+    finally:
+        release.set()
+        archive.close()
+    assert taken == [True] * 100 + [False] * 30
+    assert (archive.kept, archive.dropped, archive.written) == (101, 30, 101)
+    said = [r.getMessage() for r in caplog.records if "cannot keep up" in r.getMessage()]
+    assert len(said) == 1 and "f.telemetry.db" in said[0]
+    with ArchiveReader(archive.path) as r:
+        assert [s.at for s in r.last_samples("lru1", 1e9, GROUND, 1000)] == list(range(101))
+
+
+def test_an_archive_that_cannot_write_says_why_and_never_holds_anyone_up(tmp_path):
+    archive = TelemetryArchive(tmp_path / "g.telemetry.db", every_s=0.0)
+    archive.start()
+
+    def full(*a, **kw):
+        raise sqlite3.OperationalError("database or disk is full")
+
+    archive._insert = full
+    try:
+        archive._clock = lambda: 0.0
+        assert archive.took(_sample("lru1", 0.0), received=0.0)
+        assert not archive.flush(timeout=0.2)  # never written: the flush says so
+        assert archive.failed == "database or disk is full"
+        for k in range(1, 50):  # still taken, and left out: nobody waits for it
+            archive._clock = lambda k=k: k * 1.0
+            assert archive.took(_sample("lru1", float(k)), received=float(k))
+    finally:
+        thread = archive._thread
+        archive.close()
+    assert thread is not None and not thread.is_alive()
+    assert archive.written == 0 and not archive._queue  # what came later was taken
 
 
 def test_the_archive_is_named_after_the_journal():

@@ -72,6 +72,10 @@ class State:
     mission: Mission
     revision: int  # the last batch applied (journal order) or the snapshot's
     unplaced: list[int] = field(default_factory=list)  # revisions left out (robot time)
+    # the last batches taken, as a console watching would have taken them (oldest
+    # first): (the batch, the batch index whose time it was taken at — its own, or
+    # in robot time that of the batch that let it apply)
+    recent: list[tuple[ev.EventBatch, int]] = field(default_factory=list)
 
 
 def op_of(text: str) -> dict[str, Any]:
@@ -275,16 +279,8 @@ class JournalReader:
             yield self._batch(rev, ts, actor, client, op, events)
 
     def _batch(self, rev: int, ts: float, actor: str, client: str, op: str, events: str) -> Batch:
-        try:
-            batch = ev.EventBatch.model_validate_json(events)
-        except ValidationError as e:
-            raise RecordError(
-                f"{self.path}: batch {rev} cannot be read ({e.errors()[0]['msg']}); "
-                "`missionctl server` on this journal says how to recover it"
-            ) from None
         parsed = op_of(op)
-        batch.op = str(parsed.get("op", ""))
-        batch.actor = actor
+        batch = self._events(rev, events, str(parsed.get("op", "")), actor)
         return Batch(rev, ts, actor, client, parsed, batch)
 
     def newest(self, since: float | None = None) -> Iterator[tuple[Any, ...]]:
@@ -302,6 +298,39 @@ class JournalReader:
     def read(self, row: tuple[Any, ...]) -> Batch:
         """A raw row of `newest` as a Batch."""
         return self._batch(*row)
+
+    def events(self, indices: Iterable[int]) -> dict[int, ev.EventBatch]:
+        """The event batches at these indices (one read of their span), named
+        from the index: without the operations' JSON, which a replay does not
+        read (a sync's holds its forecast: a third of a batch's reading)."""
+        wanted = sorted(set(indices))
+        if not wanted:
+            return {}
+        self._times()  # each batch's operation, named
+        names = self._names
+        lo, hi = self.base + 1 + wanted[0], self.base + 1 + wanted[-1]
+        keep = {self.base + 1 + i for i in wanted}
+        rows = self._conn.execute(
+            "SELECT revision, actor, events FROM batches WHERE revision BETWEEN ? AND ?",
+            (lo, hi),
+        )
+        out: dict[int, ev.EventBatch] = {}
+        for rev, actor, events in rows:
+            if rev in keep:
+                i = rev - self.base - 1
+                out[i] = self._events(rev, events, names[i], actor)
+        return out
+
+    def _events(self, rev: int, events: str, name: str, actor: str) -> ev.EventBatch:
+        try:
+            batch = ev.EventBatch.model_validate_json(events)
+        except ValidationError as e:
+            raise RecordError(
+                f"{self.path}: batch {rev} cannot be read ({e.errors()[0]['msg']}); "
+                "`missionctl server` on this journal says how to recover it"
+            ) from None
+        batch.op, batch.actor = name, actor
+        return batch
 
     def pick(self, indices: Iterable[int]) -> dict[int, Batch]:
         """The batches at these indices (one read of their span)."""
@@ -325,23 +354,45 @@ class JournalReader:
             ) from None
 
     # -- the state at a position -----------------------------------------------------------
-    def state(self, position: int, clock: str = GROUND) -> State:
-        """The mission after the first `position` batches in `clock`'s order."""
+    def state(self, position: int, clock: str = GROUND, window: int = 0) -> State:
+        """The mission after the first `position` batches in `clock`'s order;
+        with `window`, the batches among the last `window` positions as taken
+        (`State.recent`: a review's log shows them)."""
         order = self.order(clock)
         position = max(0, min(position, len(order)))
         snaps = [r - self.base - 1 for r in self.snapshot_revisions]
         plan = order.plan(position, snaps)
         with gc_paused():
             mission = self.snapshot(self.base + 1 + plan.snapshot)
-            batches = self.pick(plan.apply)
+            batches = self.events(plan.apply)
+            listed = [batches[i] for i in plan.apply]
             unplaced: list[int] = []
+            taken: list[tuple[ev.EventBatch, int]] = []
             if clock == ROBOT:
-                mission = apply_in_order(mission, [batches[i] for i in plan.apply], unplaced)
+                mission = apply_in_order(mission, listed, unplaced, taken)
             else:
-                for i in plan.apply:
-                    mission = ev.apply_events(mission, batches[i].batch)
+                for b in listed:
+                    mission = ev.apply_events(mission, b)
+                taken = [(b, b.revision) for b in listed]
+            taken = [(b, by - self.base - 1) for b, by in taken]  # revisions -> indices
+            recent = self._recent(order, position - window, position, plan.snapshot, taken)
         last = max([self.base + 1 + plan.snapshot, *(b.revision for b in batches.values())])
-        return State(clock, position, mission, last, unplaced)
+        return State(clock, position, mission, last, unplaced, recent)
+
+    def _recent(
+        self,
+        order: Order,
+        start: int,
+        position: int,
+        snapshot: int,
+        taken: list[tuple[ev.EventBatch, int]],
+    ) -> list[tuple[ev.EventBatch, int]]:
+        """The batches taken at positions start..position-1: those the
+        snapshot holds (at their own time), then those applied after it."""
+        held = [i for i in order.order[max(0, start) : position] if i <= snapshot]
+        picked = self.events(held)
+        pos = order.pos
+        return [(picked[i], i) for i in held] + [(b, by) for b, by in taken if pos[by] >= start]
 
     def state_at(self, t: float, clock: str = GROUND) -> State:
         """The mission as it was at time `t` of `clock`."""
@@ -385,21 +436,38 @@ def missing(mission: Mission, batch: ev.EventBatch) -> str | None:
     return None
 
 
-def apply_in_order(mission: Mission, batches: list[Batch], unplaced: list[int]) -> Mission:
+def apply_in_order(
+    mission: Mission,
+    batches: list[ev.EventBatch],
+    unplaced: list[int],
+    taken: list[tuple[ev.EventBatch, int]] | None = None,
+) -> Mission:
     """Apply `batches` in this order; one that does not apply yet waits until
-    a later one made it apply, or is left out (its revision in `unplaced`)."""
-    waiting: list[Batch] = []
+    a later one made it apply, or is left out (its revision in `unplaced`).
+    `taken` gets each batch applied, with the revision it was applied with."""
+    waiting: list[ev.EventBatch] = []
+    done = taken if taken is not None else []
     for b in batches:
-        if missing(mission, b.batch) is not None:
+        if missing(mission, b) is not None:
             waiting.append(b)
             continue
-        mission = ev.apply_events(mission, b.batch)
-        while waiting:  # what it made possible
-            ready = [w for w in waiting if missing(mission, w.batch) is None]
-            if not ready:
-                break
-            for w in ready:
-                waiting.remove(w)
-                mission = ev.apply_events(mission, w.batch)
+        mission = ev.apply_events(mission, b)
+        done.append((b, b.revision))
+        mission = _let_in(mission, waiting, b.revision, done)
     unplaced.extend(w.revision for w in waiting)
+    return mission
+
+
+def _let_in(
+    mission: Mission,
+    waiting: list[ev.EventBatch],
+    by: int,
+    done: list[tuple[ev.EventBatch, int]],
+) -> Mission:
+    """Apply what waits and applies now (batch `by` made it possible), until nothing does."""
+    while ready := [w for w in waiting if missing(mission, w) is None]:
+        for w in ready:
+            waiting.remove(w)
+            mission = ev.apply_events(mission, w)
+            done.append((w, by))
     return mission
