@@ -14,6 +14,11 @@ and paint. The floor is a Textual app that loads the mission file with the
 backend's models and paints a robot and a label: what any console that shows
 the mission must import and do. With --before DIR the demo of the source tree
 DIR (e.g. `git archive main | tar -x -C DIR`) is measured too, interleaved.
+Python's bytecode cache is on, as for an installed program (pip compiles at
+install, an editable install on the first run): each command runs once
+unmeasured first, so every run reads its modules' bytecode; --cold measures
+with PYTHONDONTWRITEBYTECODE=1 instead (every module compiled at every start,
+the baseline's Textual excepted: its bytecode came with its install).
 Each run ends with Ctrl+Q; the script then checks that the demo and every
 process it started (server, sim) have exited. With --write, the
 "## Demo start-up" section of the file is replaced.
@@ -96,6 +101,8 @@ def alive(pid: int) -> bool:
 class PtyRun:
     """A command in a pseudo-terminal; its output read as plain text."""
 
+    cold = False  # --cold: no bytecode cache for what the command imports
+
     def __init__(self, argv: list[str], pythonpath: str | None = None):
         self.master, slave = os.openpty()
         fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", SIZE[1], SIZE[0], 0, 0))
@@ -103,6 +110,10 @@ class PtyRun:
             os.environ, TERM="xterm-256color", COLORTERM="truecolor", TEXTUAL_ANIMATIONS="none"
         )
         env.pop("TEXTUAL", None)
+        if self.cold:
+            env["PYTHONDONTWRITEBYTECODE"] = "1"
+        else:
+            env.pop("PYTHONDONTWRITEBYTECODE", None)
         if pythonpath:  # another source tree's code first (--before)
             env["PYTHONPATH"] = pythonpath
         self.t0 = time.perf_counter()
@@ -240,16 +251,25 @@ def main() -> int:
     ap.add_argument(
         "--write", metavar="FILE", help="write/update the '## Demo start-up' section of FILE"
     )
+    ap.add_argument(
+        "--cold", action="store_true", help="without the bytecode cache (PYTHONDONTWRITEBYTECODE)"
+    )
     args = ap.parse_args()
+    PtyRun.cold = args.cold
     demo: dict[str, list[list[float]]] = {"after": [], "before": []}
     bare, floor, problems = [], [], []
     trees = [("after", None)] + ([("before", args.before)] if args.before else [])
+    demo_argv = [sys.executable, "-m", "backend.cli", "demo"]
+    if not args.cold:  # once unmeasured: the bytecode caches are written
+        measure([sys.executable, "-c", BASELINE_APP], (BASELINE_MARK,))
+        measure([sys.executable, "-c", FLOOR_APP], DEMO_MARKS)
+        for _name, tree in trees:
+            measure(demo_argv, DEMO_MARKS, (CONNECTED_MARK,), pythonpath=tree)
     for _ in range(args.runs):  # interleaved, so all see the same machine load
         bare.append(measure([sys.executable, "-c", BASELINE_APP], (BASELINE_MARK,))[0][0])
-        floor.append(measure([sys.executable, "-c", FLOOR_APP], ("lru1", "drive to POI-A"))[0][0])
+        floor.append(measure([sys.executable, "-c", FLOOR_APP], DEMO_MARKS)[0][0])
         for name, tree in trees:
-            argv = [sys.executable, "-m", "backend.cli", "demo"]
-            seconds, code, left = measure(argv, DEMO_MARKS, (CONNECTED_MARK,), pythonpath=tree)
+            seconds, code, left = measure(demo_argv, DEMO_MARKS, (CONNECTED_MARK,), pythonpath=tree)
             demo[name].append(seconds)
             if code != 0 or left:
                 problems.append(f"{name}: demo exit code {code}, processes left: {left}")
