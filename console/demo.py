@@ -5,11 +5,15 @@ opens any Zenoh session: never fork after Zenoh is open). Quitting the
 console — or any error — stops them: terminate, then kill after a timeout.
 For a quick start, `launch()` only spawns the server; the caller loads the
 console meanwhile, then `wait_ready()` waits for the server and starts the sim.
+Both children run at a lower CPU priority (`CHILD_NICENESS`): on a busy machine
+the console the operator watches paints and answers first, and the children
+take what it leaves (on an idle one they run as fast as ever).
 """
 
 from __future__ import annotations
 
 import importlib.util
+import os
 import shutil
 import subprocess
 import sys
@@ -24,6 +28,7 @@ from backend.transport import free_port, loopback_endpoint
 
 DEFAULT_MISSION = Path(__file__).resolve().parents[1] / "missions" / "mars_sample_return.yaml"
 READY_MARK = "listening on"
+CHILD_NICENESS = 10  # the server's and the sim's, above the console's (os.setpriority)
 
 
 class DemoError(Exception):
@@ -36,6 +41,15 @@ def _tail(path: Path, lines: int = 8) -> str:
     except OSError:
         return ""
     return "\n".join(text.strip().splitlines()[-lines:])
+
+
+def _lower_priority(pid: int) -> None:
+    """The child's niceness goes up by CHILD_NICENESS (threads it starts later inherit it).
+    Where that is not possible, it runs as it is: only start-up is slower."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, pid, os.getpriority(os.PRIO_PROCESS, 0) + CHILD_NICENESS)
+    except (AttributeError, OSError):  # no setpriority (Windows), or the child is gone
+        pass
 
 
 def sim_available() -> bool:
@@ -102,6 +116,7 @@ class DemoProcesses:
                 stderr=subprocess.STDOUT,
                 stdin=subprocess.DEVNULL,
             )
+            _lower_priority(p.pid)
             setattr(self, role, p)
 
     def start(self, timeout: float = 30.0) -> None:
