@@ -2,8 +2,9 @@
 
 Layout: top bar / map | legend / info line (cursor, selection, feed) /
 status line / footer. Marker edits and parameter picks go through the same
-operations as everywhere (backend.core.ops via `app.submit`); the "selected
-skill" is the schedule's cursor on the mission screen.
+operations as everywhere (backend.core.ops, submitted by the screen), done by
+the objects it owns (map_markers.py, map_params.py); the "selected skill" is
+the schedule's cursor on the mission screen.
 """
 
 from __future__ import annotations
@@ -21,33 +22,21 @@ from textual.screen import Screen
 from textual.signal import Signal
 from textual.widgets import Footer, Static
 
-from backend.core.model import (
-    Status,
-)
-from backend.core.ops import EditSkill, MarkerAdd, MarkerDelete, MarkerMove, MarkerRename
+from backend.core.model import Status
 from console.bindings import bind, bindings, key_names
 from console.messages import HelpRequested
 from console.operations import OperationService
-from console.screens.dialogs import ChoiceScreen, ConfirmScreen, MarkerPrompt
+from console.screens.map_markers import MarkerActions
+from console.screens.map_params import ParamActions
 from console.state.actions import ACTIONS
 from console.state.changes import StateChange, Topic
 from console.state.contact import CONTACT_GLYPH
 from console.state.keys import KeyNames
-from console.state.markers import (
-    bind_choices,
-    followers,
-    free_name,
-    marker_point,
-    marker_use,
-    moved_value,
-    new_marker,
-    picked_value,
-    relabel,
-)
-from console.state.model import CONNECTED, ConsoleModel
+from console.state.markers import marker_point, marker_use
+from console.state.model import ConsoleModel
 from console.state.nowcast import NOWCAST_GLYPH
 from console.state.site import here_text
-from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS, fmt_value
+from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS
 from console.widgets.bars import InfoLine, StatusLine, TopBar, connection_text
 from console.widgets.map.view import (
     AREA_GLYPH,
@@ -125,26 +114,6 @@ def legend_text(colours: dict[str, str] | None = None, keys: KeyNames | None = N
         "cursor (heading)",
     )
     return t
-
-
-def param_rows(spec: Any, s: Any, names: list[str]) -> list[tuple[str, Text]]:
-    """Rows for choosing among a skill's parameters: name, type and what it
-    holds now (@MARKER when bound to one), in aligned columns."""
-    wn = max(len(n) for n in names)
-    wt = max(len(spec.params[n].type) for n in names)
-    rows = []
-    for n in names:
-        ps = spec.params[n]
-        if n in s.bindings:
-            now = Text(f"@{s.bindings[n]}")
-        elif s.params.get(n) is not None:
-            now = Text(fmt_value(ps, s.params[n]))
-        else:
-            now = Text("not set", style="dim")
-        rows.append(
-            (n, Text.assemble((n.ljust(wn), "bold"), "  ", (ps.type.ljust(wt), "dim"), "  ", now))
-        )
-    return rows
 
 
 def map_top_text(m: ConsoleModel, keys: KeyNames) -> Text:
@@ -226,6 +195,8 @@ class MapScreen(Screen):
         self._status = StatusLine("", id="map-status")
         self.message = ""
         self.legend_choice: bool | None = None  # None: by terminal width
+        self.markers = MarkerActions(self)
+        self.params = ParamActions(self)
         if model.map_update is not None:  # the feed (or its absence) came before the screen
             self.map_changed(model.map_mirror, model.map_update)
 
@@ -337,26 +308,6 @@ class MapScreen(Screen):
         if outcome.reply is not None and on_ok is not None:
             on_ok(outcome.reply)
 
-    def _connected(self) -> bool:
-        if self.model.connection != CONNECTED:
-            self.say(
-                f"not connected to the mission server ({self.model.connection}): "
-                "markers cannot be changed now",
-                "warning",
-            )
-            return False
-        return True
-
-    def _marker(self) -> Any:
-        name = self.view.selected_marker
-        m = self.model.mission
-        if name is None or m is None or name not in m.markers:
-            self.say(
-                "select a marker first: n selects the next one (the cursor jumps to it)", "warning"
-            )
-            return None
-        return m.markers[name]
-
     # -- actions: view -----------------------------------------------------------------------------
     def action_help(self) -> None:
         self.post_message(HelpRequested())
@@ -465,223 +416,29 @@ class MapScreen(Screen):
         self.say(f"marker {name} ({mk.kind}){': ' + mk.description if mk.description else ''}")
         self.update_info()
 
-    # -- actions: markers ------------------------------------------------------------------
-
+    # -- actions: markers (map_markers.py) and parameters (map_params.py) ------------------
     @work(group="dialog")
     async def action_map_add_marker(self) -> None:
-        if not self._connected():
-            return
-        answer = await self.app.push_screen_wait(
-            MarkerPrompt("New marker at the cursor — name:", free_name(self.model.mission))
-        )
-        if not answer:
-            return
-        name, kind = answer
-        x, y = (round(c, 1) for c in self.view.cursor)
-        marker = new_marker(kind, x, y, self.view.heading, self.view.vp.mpp)
-
-        def ok(reply: Any) -> None:
-            self.view.selected_marker = name
-            self.say(f"added {kind} marker {name} at ({x:g}, {y:g})", "ok")
-
-        self.submit(MarkerAdd(name=name, marker=marker), f"add marker {name}", on_ok=ok)
+        await self.markers.add()
 
     def action_map_move_marker(self) -> None:
-        mk = self._marker()
-        if mk is None or not self._connected():
-            return
-        name = self.view.selected_marker
-        following = followers(self.model.mission, name)
-        x, y = (round(c, 1) for c in self.view.cursor)
-        value = moved_value(mk, x, y, self.view.heading)
-
-        def ok(reply: Any) -> None:
-            x, y = self.view.cursor
-            text = f"moved {name} to ({x:.1f}, {y:.1f})"
-            if following:
-                text += f"; {', '.join(following)} follow{'s' if len(following) == 1 else ''}"
-            stale = reply.value.get("stale", [])
-            if stale:
-                text += (
-                    f"; {', '.join(stale)} still use{'s' if len(stale) == 1 else ''} "
-                    "the old value — unsynchronize to update"
-                )
-            self.say(text, "warning" if stale else "ok")
-
-        self.submit(MarkerMove(name=name, value=value), f"move marker {name}", on_ok=ok)
+        self.markers.move()
 
     @work(group="dialog")
     async def action_map_rename_marker(self) -> None:
-        if self._marker() is None or not self._connected():
-            return
-        old = self.view.selected_marker
-        answer = await self.app.push_screen_wait(
-            MarkerPrompt(f"Rename marker {old} to:", old, kinds=False)
-        )
-        if not answer or answer[0] == old:
-            return
-        new = answer[0]
-
-        def ok(reply: Any) -> None:
-            self.view.selected_marker = new
-            self.say(f"renamed {old} to {new}", "ok")
-
-        self.submit(MarkerRename(name=old, new_name=new), f"rename marker {old}", on_ok=ok)
+        await self.markers.rename()
 
     @work(group="dialog")
     async def action_map_delete_marker(self) -> None:
-        if self._marker() is None or not self._connected():
-            return
-        name = self.view.selected_marker
-        if not await self.app.push_screen_wait(
-            ConfirmScreen(
-                f"Delete marker {name}? Idle skills bound to it keep its value.", yes="Delete"
-            )
-        ):
-            self.say("delete cancelled")
-            return
-
-        def ok(reply: Any) -> None:
-            self.view.selected_marker = None
-            self.say(f"deleted marker {name}", "ok")
-
-        self.submit(MarkerDelete(name=name), f"delete marker {name}", on_ok=ok)
-
-    # -- actions: parameters of the selected skill -------------------------------------------------
-    def _skill(self) -> Any:
-        self.sync_selection()
-        found = self.model.find(self.view.selected_skill)
-        if found is None:
-            back, here = (key_names(self).say(a) for a in ("app.show_mission", "app.show_map"))
-            why = f"select a skill on the schedule first ({back}), then come back ({here})"
-            self.say(why, "warning")
-            return None
-        why = self.model.read_only_reason(found[2].id)
-        if why:
-            self.say(f"{found[2].id}: {why}", "warning")
-            return None
-        spec = self.model.library.skills.get(found[2].skill) if self.model.library else None
-        if spec is None:
-            self.say(f"{found[2].skill} is not in the skill library", "error")
-            return None
-        return found[0], found[2], spec
-
-    def _choose(
-        self,
-        question: str,
-        spec: Any,
-        s: Any,
-        names: list[str],
-        then: Any,
-        *,
-        cancelled: str,
-        highlighted: int = 0,
-    ) -> None:
-        """`then(name)` at once when one parameter fits; when several do, the
-        operator picks one first (escape: nothing is sent)."""
-        if len(names) == 1:
-            then(names[0])
-            return
-
-        def chosen(pname: str | None) -> None:
-            if pname is None:
-                self.say(cancelled)
-                return
-            why = self.model.read_only_reason(s.id)  # it may have changed while the dialog was open
-            if why:
-                self.say(f"{s.id}: {why}", "warning")
-                return
-            then(pname)
-
-        self.app.push_screen(
-            ChoiceScreen(question, param_rows(spec, s, names), highlighted), chosen
-        )
+        await self.markers.delete()
 
     def action_map_bind(self) -> None:
-        mk = self._marker()
-        got = self._skill() if mk is not None else None
-        if got is None:
-            return
-        robot, s, spec = got
-        name = self.view.selected_marker
-        # a parameter the marker can give a value is bound to it; a marker-typed one takes its name
-        fits, names = bind_choices(spec, mk)
-        if not fits and not names:
-            kinds = ", ".join(f"{p} ({ps.type})" for p, ps in spec.params.items()) or "none"
-            self.say(
-                f"{s.id} ({s.skill}) has no parameter for a {mk.kind} marker; "
-                f"its parameters: {kinds}",
-                "warning",
-            )
-            return
-
-        def bind(pname: str) -> None:
-            # a label naming the marker bound before ("drive to POI-A") names the new one
-            before = s.bindings.get(pname) or (s.params.get(pname) if pname in names else None)
-            label = relabel(s.label, before if isinstance(before, str) else None, name)
-            op = (
-                EditSkill(id=s.id, bindings={pname: name}, label=label)
-                if pname in fits
-                else EditSkill(id=s.id, params={pname: name}, label=label)
-            )
-            also = f"; label now '{label}'" if label is not None else ""
-            self.submit(
-                op,
-                f"bind {s.id}.{pname} to {name}",
-                robot=robot,
-                skill=s.id,
-                on_ok=lambda r: self.say(f"{s.id}: {pname} bound to marker {name}{also}", "ok"),
-            )
-
-        def holds(p: str) -> bool:
-            return s.bindings.get(p) == name or (p in names and s.params.get(p) == name)
-
-        candidates = fits + names
-        first = next((i for i, p in enumerate(candidates) if not holds(p)), 0)  # the likely choice
-        self._choose(
-            f"Bind {name} to which parameter of {s.id}?",
-            spec,
-            s,
-            candidates,
-            bind,
-            highlighted=first,
-            cancelled=f"bind cancelled: {s.id} unchanged",
-        )
+        marker = self.markers.selected()
+        if marker is not None:
+            self.params.bind(marker)
 
     def action_map_pick(self) -> None:
-        got = self._skill()
-        if got is None:
-            return
-        robot, s, spec = got
-        params = [p for p, ps in spec.params.items() if ps.type in ("pose", "position")]
-        if not params:
-            self.say(f"{s.id} ({s.skill}) has no pose or position parameter", "warning")
-            return
-        x, y = (round(c, 1) for c in self.view.cursor)
-
-        def pick(pname: str) -> None:
-            ptype = spec.params[pname].type
-            value = picked_value(ptype, x, y, self.view.heading)
-            where = f"({x:g}, {y:g})" + (
-                f" heading {math.degrees(self.view.heading):.0f}°" if ptype == "pose" else ""
-            )
-            unbound = " (its marker binding is replaced)" if pname in s.bindings else ""
-            self.submit(
-                EditSkill(id=s.id, params={pname: value}),
-                f"set {s.id}.{pname}",
-                robot=robot,
-                skill=s.id,
-                on_ok=lambda r: self.say(f"{s.id}: {pname} = {where}{unbound}", "ok"),
-            )
-
-        self._choose(
-            f"Set which parameter of {s.id} to the cursor ({x:g}, {y:g})?",
-            spec,
-            s,
-            params,
-            pick,
-            cancelled=f"pick cancelled: {s.id} unchanged",
-        )
+        self.params.pick()
 
     # -- disabled keys are explained, like on the mission screen -----------------------------------
     async def run_named(self, action: str) -> None:
