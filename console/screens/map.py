@@ -10,6 +10,7 @@ the schedule's cursor on the mission screen.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -62,14 +63,59 @@ TURN = math.radians(15)
 LEGEND_MIN_WIDTH = 100
 
 
+LEGEND_STATUSES = (
+    Status.RUNNING,
+    Status.PAUSED,
+    Status.SYNCHWAITING,
+    Status.FAILURE,
+    Status.IDLE_SYNCHRONIZED,
+    Status.IDLE,
+)
+
+
+def _fg(c: dict[str, str], var: str) -> str:
+    """A glyph in a theme colour (bold: as on the map)."""
+    return f"bold {c[var]}" if var in c else "bold"
+
+
+def _bg(c: dict[str, str], var: str, default: str = "") -> str:
+    """A ground's background colour."""
+    return f"on {c[var]}" if var in c else default
+
+
+def _legend_rows(c: dict[str, str], keys: KeyNames) -> list[tuple[str, str, str]]:
+    """(glyph, style, what) of the legend, below the robots' heading."""
+    statuses = [
+        (GLYPHS[st], _fg(c, f"status-{STATUS_CSS[st]}"), f"  {STATUS_WORDS[st]}")
+        for st in LEGEND_STATUSES
+    ]
+    return [
+        *statuses,
+        ("✕", _fg(c, "presence-offline"), "  offline"),
+        (CONTACT_GLYPH, _fg(c, "presence-unknown"), "  out of contact"),
+        (NOWCAST_ARROWS[0], _fg(c, "presence-unknown"), f"{NOWCAST_GLYPH} probably now"),
+        (NO_LINK_GLYPH, _fg(c, "presence-offline"), "  out of comms range"),
+        (FOLLOW_GLYPH, "bold", f"  followed ({keys.say('map.follow')})"),
+        (POSE_ARROWS[0], "bold", "pose marker"),
+        (POSITION_GLYPH, "bold", "position marker"),
+        (AREA_GLYPH, "bold", "area marker"),
+        ("●", _fg(c, "map-marker-active"), "  used on a robot"),
+        ("○", _fg(c, "map-marker-bound"), "  used by idle skill"),
+        (GOAL_GLYPH, _fg(c, "map-goal"), "goal of a skill"),
+        (LANDER_GLYPH, _fg(c, "map-lander"), "lander"),
+        (BOX_GLYPH, _fg(c, "map-box"), "payload box"),
+        (RSS_GLYPH, _fg(c, "map-rss"), "sampling region"),
+        (STONE_GLYPH, _fg(c, "map-stone"), "stone found"),
+        ("·", _bg(c, "map-unknown"), "unexplored"),
+        ("~", _bg(c, "map-sand"), "sand (slow)"),
+        ("▴", _bg(c, "map-rock"), "rock (impassable)"),
+        (" ", _bg(c, "map-link", "reverse"), "in comms range"),
+        (POSE_ARROWS[0], _fg(c, "map-cursor"), "cursor (heading)"),
+    ]
+
+
 def legend_text(colours: dict[str, str] | None = None, keys: KeyNames | None = None) -> Text:
     """The legend; `colours` (theme variables) colour its glyphs like the map."""
-    c = colours or {}
-    keys = keys or KeyNames()
-
-    def fg(var: str) -> str:
-        return f"bold {c[var]}" if var in c else "bold"
-
     t = Text()
 
     def row(glyph: str, style: str, what: str) -> None:
@@ -80,39 +126,8 @@ def legend_text(colours: dict[str, str] | None = None, keys: KeyNames | None = N
     row(ROBOT_ARROWS[0], "bold", "robot, heading")
     # the one heading convention (the editor, ctl and the info line use it too)
     t.append("   heading: 0° east,\n   counter-clockwise\n", style="dim")
-    for st in (
-        Status.RUNNING,
-        Status.PAUSED,
-        Status.SYNCHWAITING,
-        Status.FAILURE,
-        Status.IDLE_SYNCHRONIZED,
-        Status.IDLE,
-    ):
-        row(GLYPHS[st], fg(f"status-{STATUS_CSS[st]}"), f"  {STATUS_WORDS[st]}")
-    row("✕", fg("presence-offline"), "  offline")
-    row(CONTACT_GLYPH, fg("presence-unknown"), "  out of contact")
-    row(NOWCAST_ARROWS[0], fg("presence-unknown"), f"{NOWCAST_GLYPH} probably now")
-    row(NO_LINK_GLYPH, fg("presence-offline"), "  out of comms range")
-    row(FOLLOW_GLYPH, "bold", f"  followed ({keys.say('map.follow')})")
-    row(POSE_ARROWS[0], "bold", "pose marker")
-    row(POSITION_GLYPH, "bold", "position marker")
-    row(AREA_GLYPH, "bold", "area marker")
-    row("●", fg("map-marker-active"), "  used on a robot")
-    row("○", fg("map-marker-bound"), "  used by idle skill")
-    row(GOAL_GLYPH, fg("map-goal"), "goal of a skill")
-    row(LANDER_GLYPH, fg("map-lander"), "lander")
-    row(BOX_GLYPH, fg("map-box"), "payload box")
-    row(RSS_GLYPH, fg("map-rss"), "sampling region")
-    row(STONE_GLYPH, fg("map-stone"), "stone found")
-    row("·", f"on {c['map-unknown']}" if "map-unknown" in c else "", "unexplored")
-    row("~", f"on {c['map-sand']}" if "map-sand" in c else "", "sand (slow)")
-    row("▴", f"on {c['map-rock']}" if "map-rock" in c else "", "rock (impassable)")
-    row(" ", f"on {c['map-link']}" if "map-link" in c else "reverse", "in comms range")
-    row(
-        POSE_ARROWS[0],
-        f"bold {c['map-cursor']}" if "map-cursor" in c else "bold",
-        "cursor (heading)",
-    )
+    for glyph, style, what in _legend_rows(colours or {}, keys or KeyNames()):
+        row(glyph, style, what)
     return t
 
 
@@ -128,18 +143,17 @@ def map_top_text(m: ConsoleModel, keys: KeyNames) -> Text:
     return t
 
 
-def info_text(model: ConsoleModel, v: MapView, feed_state: str) -> Text:
-    """The info lines: the feed (when not live), the cursor and scale, who is
-    followed, the selected marker and the schedule's selected skill; then what
-    is under the cursor (console/state/site.py)."""
-    t = Text()
-    if feed_state == "none" or v.mirror is None or not v.mirror.ready:
-        why = model.map_note or NO_FEED
-        t.append(why if feed_state == "none" else "waiting for the map feed…", style="bold")
-        t.append("  ")
-    x, y = v.cursor
-    t.append(f"cursor ({x:.1f}, {y:.1f}) heading {math.degrees(v.heading):.0f}°")
-    t.append(f"  {v.vp.mpp:.2g} m/px", style="dim")
+def _feed_note(model: ConsoleModel, v: MapView, feed_state: str) -> str:
+    """Why there is no map (yet), or nothing when it is live."""
+    if feed_state == "none":
+        return model.map_note or NO_FEED
+    if v.mirror is None or not v.mirror.ready:
+        return "waiting for the map feed…"
+    return ""
+
+
+def _selection_text(model: ConsoleModel, v: MapView, t: Text) -> None:
+    """Who is followed, the selected marker and the schedule's selected skill."""
     if v.follow:
         t.append(f"  following {v.follow}", style="bold")
     if v.selected_marker:
@@ -149,9 +163,30 @@ def info_text(model: ConsoleModel, v: MapView, feed_state: str) -> Text:
     if found is not None:
         s = found[2]
         t.append(f"  skill {s.id} {s.skill} ({STATUS_WORDS[s.status]})", style="dim")
+
+
+def info_text(model: ConsoleModel, v: MapView, feed_state: str) -> Text:
+    """The info lines: the feed (when not live), the cursor and scale, who is
+    followed, the selected marker and the schedule's selected skill; then what
+    is under the cursor (console/state/site.py)."""
+    t = Text()
+    note = _feed_note(model, v, feed_state)
+    if note:
+        t.append(note, style="bold")
+        t.append("  ")
+    x, y = v.cursor
+    t.append(f"cursor ({x:.1f}, {y:.1f}) heading {math.degrees(v.heading):.0f}°")
+    t.append(f"  {v.vp.mpp:.2g} m/px", style="dim")
+    _selection_text(model, v, t)
     here = here_text(v.mirror, model.mission, model.telemetry, x, y, tol=max(1.0, v.vp.mpp))
     t.append(f"\nhere: {here}")
     return t
+
+
+def next_after(items: list[str], current: str | None) -> str | None:
+    """The item after `current` (the first when it is none of them; None after the last)."""
+    i = items.index(current) + 1 if current in items else 0
+    return items[i] if i < len(items) else None
 
 
 class Legend(Static):
@@ -246,14 +281,18 @@ class MapScreen(Screen):
             self.map_changed(self.model.map_mirror, c.map_update)
         if c.about(Topic.MISSION):  # marker events change no robot's column but the map
             self.model_changed()
-        for robot in c.robots or () if c.about(Topic.TELEMETRY) else ():
-            self.view.robot_moved(robot)
-            if self.view.follow == robot:
-                self.update_info()
+        if c.about(Topic.TELEMETRY):
+            self._robots_moved(c.robots or ())
         if c.about(Topic.FLEET):
             self.view.overlays_changed()
         if c.about(Topic.CONNECTION):
             self.update_top()
+
+    def _robots_moved(self, robots: Iterable[str]) -> None:
+        for robot in robots:
+            self.view.robot_moved(robot)
+            if self.view.follow == robot:
+                self.update_info()
 
     def map_changed(self, mirror: Any, update: Any) -> None:
         kind = getattr(update, "kind", "snapshot")
@@ -360,18 +399,11 @@ class MapScreen(Screen):
         self.update_info()
 
     def action_map_follow(self) -> None:
-        robots = [
-            r
-            for r in self.model.robot_order()
-            if self.model.robot_kind(r) != "static" and r in self.model.telemetry
-        ]
+        robots = self._followable()
         if not robots:
             self.say("no robot position known yet (no telemetry): nothing to follow", "warning")
             return
-        # the next robot; after the last one: nobody
-        cur = self.view.follow
-        i = robots.index(cur) + 1 if cur in robots else 0
-        nxt = robots[i] if i < len(robots) else None
+        nxt = next_after(robots, self.view.follow)  # after the last one: nobody
         self.view.follow = nxt
         if nxt is None:
             self.say("stopped following")
@@ -382,6 +414,11 @@ class MapScreen(Screen):
             self.say(f"following {nxt} ({again}: next robot; moving the view stops it)")
         self.view.overlays_changed()
         self.update_info()
+
+    def _followable(self) -> list[str]:
+        """The robots that move and whose position is known, in the schedule's order."""
+        m = self.model
+        return [r for r in m.robot_order() if m.robot_kind(r) != "static" and r in m.telemetry]
 
     def action_map_turn_left(self) -> None:
         self.view.heading = (self.view.heading + TURN) % (2 * math.pi)
