@@ -14,7 +14,13 @@ from textual.widgets import Input
 from backend.core.library import SkillSpec
 from backend.core.model import Mission, Policies, SkillInstance
 from backend.core.params import ParamSpec, check_value, normalize_value
-from console.widgets.editor.inputs import BINDABLE_KINDS, read_binding, read_param, read_policies
+from console.widgets.editor.inputs import (
+    BINDABLE_KINDS,
+    Reading,
+    read_binding,
+    read_param,
+    read_policies,
+)
 
 # (label change, params changed, bindings changed, problems per parameter)
 Collected = tuple[str | None, dict[str, Any], dict[str, str | None], dict[str, str]]
@@ -90,15 +96,21 @@ def _collect_param(
         if bound != s.bindings.get(name):
             ch.bindings[name] = bound
         return
-    value, problem = read_param(form, name, pspec)
-    if problem is None and value is not None:
-        problem = value_problem(pspec, value, mission)
+    value, problem = _checked(form, name, pspec, mission)
     if problem is not None:
         ch.problems[name] = problem
     elif value is None:
         ch.unset(s, name, pspec)
     else:
         ch.typed(s, name, pspec, value)
+
+
+def _checked(form: DOMNode, name: str, pspec: ParamSpec, mission: Mission | None) -> Reading:
+    """(value, problem) of a parameter as typed, checked as the server would."""
+    value, problem = read_param(form, name, pspec)
+    if problem is None and value is not None:
+        problem = value_problem(pspec, value, mission)
+    return value, problem
 
 
 def policies_change(form: DOMNode, s: SkillInstance) -> tuple[Policies | None, dict[str, str]]:

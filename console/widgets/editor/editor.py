@@ -150,13 +150,12 @@ class ParamEditor(VerticalScroll):
     async def _show_skill(self, skill_id: str | None, *, force: bool, discard: bool) -> None:
         found = self.model.find(skill_id)
         rev = found[2].rev if found else -1
-        if not force and skill_id == self.skill_id and rev == self.loaded_rev:
-            return
+        if not force and (skill_id, rev) == (self.skill_id, self.loaded_rev):
+            return  # shown as it is
         self._keep_draft(discard)
         same = skill_id == self.skill_id
         had_focus = self.focus_within()
-        focused = self.screen.focused if had_focus and same else None
-        field = focused.id if focused is not None else None  # after an apply: stay in it
+        field = self._focused_id() if had_focus and same else None  # after an apply: stay in it
         self._start(skill_id, rev, same)
         draft = self._draft_for(skill_id, rev)
         await self.recompose()
@@ -265,6 +264,10 @@ class ParamEditor(VerticalScroll):
         self._post_drafts()
 
     # -- focus ------------------------------------------------------------------------------
+    def _focused_id(self) -> str | None:
+        focused = self.screen.focused
+        return focused.id if focused is not None else None
+
     def focus_within(self) -> bool:
         focused = self.screen.focused if self.is_attached else None
         return focused is not None and self in focused.ancestors_with_self
@@ -362,15 +365,14 @@ class ParamEditor(VerticalScroll):
             return
         label, params, binds, problems = self.collect()
         policies, policy_problems = changes.policies_change(self, found[1])
+        apply = ApplyRequested(found[1].id, label, params, binds, self.base_revision, policies)
         if problems or policy_problems:
             self._not_applied(found[1].id, problems, policy_problems)
-        elif label is None and not (params or binds) and policies is None:
+        elif not apply.changed():
             self.app.notify("nothing changed", timeout=2)
         else:
             self.notes.clear_server_error()
-            self.post_message(
-                ApplyRequested(found[1].id, label, params, binds, self.base_revision, policies)
-            )
+            self.post_message(apply)
 
     def _not_applied(
         self, skill_id: str, problems: dict[str, str], policy_problems: dict[str, str]
