@@ -75,6 +75,7 @@ from console.themes.variables import VARIABLE_DEFAULTS
 from console.typeahead import TypeAhead
 
 if TYPE_CHECKING:
+    from backend.protocol.mapfeed import SimStatus
     from console.screens.map import MapScreen
 
 HERE = Path(__file__).parent
@@ -183,14 +184,8 @@ class MissionApp(App[int]):
         self.ansi16 = False
         if colors == 16:
             self._use_16_colours()
-        themes, problems = load_themes()
-        self.notices.extend(problems)
-        for t in themes.values():
-            self.register_theme(t)
-        self.theme, notice = choose_theme(theme or self.config.theme, self.available_themes)
-        if notice:
-            self.notices.append(notice)
-        self.bridge = (
+        self._load_themes(theme or self.config.theme)
+        self.bridge = (  # the live connection (none: tests post the events themselves)
             ClientBridge(self._post_event, connect, user=user, client_id=client_id, login=login)
             if connect
             else None
@@ -209,10 +204,7 @@ class MissionApp(App[int]):
         self.folder = NotificationFolder(self)
         self.escape = EscapeSplitter(self)
         self.announcer = AlertAnnouncer(self)
-        bridge = self.bridge
-        self.plan = PlanRefresher(
-            self.model, self.publish, (lambda: bridge.sim_status) if bridge is not None else None
-        )
+        self.plan = PlanRefresher(self.model, self.publish, self._sim_status())
         self.mission_screen: MissionScreen | None = None
         self.map_screen: MapScreen | None = None
         # the screens as app modes (F2/1 back to the schedule), each handed the
@@ -231,6 +223,21 @@ class MissionApp(App[int]):
         self.exit_code = 0
         # keys typed while a dialog opens wait for it (console/typeahead.py)
         self.typeahead = TypeAhead(self, self._key_as_typed)
+
+    def _load_themes(self, wanted: str | None) -> None:
+        """Register the themes (before any CSS is parsed), then use the one asked for."""
+        themes, problems = load_themes()
+        self.notices.extend(problems)
+        for t in themes.values():
+            self.register_theme(t)
+        self.theme, notice = choose_theme(wanted, self.available_themes)
+        if notice:
+            self.notices.append(notice)
+
+    def _sim_status(self) -> Callable[[], SimStatus | None] | None:
+        """Where the plan reads the simulator's status (None without a connection)."""
+        bridge = self.bridge
+        return (lambda: bridge.sim_status) if bridge is not None else None
 
     @property
     def clock(self) -> MissionClock:

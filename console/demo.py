@@ -43,6 +43,12 @@ def _tail(path: Path, lines: int = 8) -> str:
     return "\n".join(text.strip().splitlines()[-lines:])
 
 
+def _port_taken(log: str) -> bool:
+    """Whether a server's last words say its port was in use."""
+    low = log.lower()
+    return "address" in low and "use" in low
+
+
 def _lower_priority(pid: int) -> None:
     """The child's niceness goes up by CHILD_NICENESS (threads it starts later inherit it).
     Where that is not possible, it runs as it is: only start-up is slower."""
@@ -140,45 +146,48 @@ class DemoProcesses:
 
     def wait_ready(self, timeout: float = 30.0) -> None:
         """Until the server listens (retrying on a port taken meanwhile); then start the sim."""
-        while True:
-            if self._wait_ready(timeout):
-                break
-            code = self.server.poll()
-            tail = _tail(self.server_log)
-            self._stop_one(self.server)
-            if (
-                code is not None
-                and "address" in tail.lower()
-                and "use" in tail.lower()
-                and self._attempt < 2
-            ):
-                self._attempt += 1  # the free port was taken meanwhile
-                self._spawn_server()
-                continue
-            how = f" (exit code {code})" if code is not None else " in time"
-            raise DemoError(f"the mission server did not start{how}:\n{tail}")
+        while not self._wait_ready(timeout):
+            self._server_failed()  # raises, or spawned it again
         want_sim = sim_available() if self.with_sim is None else self.with_sim
         if want_sim:
-            self._spawn(
-                "sim",
-                [
-                    "sim",
-                    "--mission",
-                    str(self.mission),
-                    "--connect",
-                    self.endpoint,
-                    "--speed",
-                    f"{self.speed:g}",
-                    *(["--link-delay", self.link_delay] if self.link_delay else []),
-                    *(["--comms-window", self.comms_window] if self.comms_window else []),
-                ],
-                self.sim_log,
-            )
+            self._spawn_sim()
         else:
             self.notices.append(
                 "the simulated fleet is unavailable (`missionctl sim` is not installed): "
                 "robots stay offline; the plan can still be edited"
             )
+
+    def _server_failed(self) -> None:
+        """The server stopped or did not listen in time: again on another port
+        if its port was taken meanwhile (twice at most), else DemoError with its words."""
+        code = self.server.poll() if self.server is not None else None
+        tail = _tail(self.server_log)
+        self._stop_one(self.server)
+        if code is not None and _port_taken(tail) and self._attempt < 2:
+            self._attempt += 1
+            self._spawn_server()
+            return
+        how = f" (exit code {code})" if code is not None else " in time"
+        raise DemoError(f"the mission server did not start{how}:\n{tail}")
+
+    def _spawn_sim(self) -> None:
+        delay = ["--link-delay", self.link_delay] if self.link_delay else []
+        window = ["--comms-window", self.comms_window] if self.comms_window else []
+        self._spawn(
+            "sim",
+            [
+                "sim",
+                "--mission",
+                str(self.mission),
+                "--connect",
+                self.endpoint,
+                "--speed",
+                f"{self.speed:g}",
+                *delay,
+                *window,
+            ],
+            self.sim_log,
+        )
 
     def _wait_ready(self, timeout: float) -> bool:
         deadline = time.monotonic() + timeout
