@@ -220,7 +220,6 @@ class MissionApp(App[int]):
         self._connection_closed = False
         self._hanging_up = False
         self.on_forced_exit: list[Callable[[], object]] = []  # before a forced exit (hang-up)
-        self.after_first_frame: list[Callable[[], object]] = []  # once it is painted (the CLI's)
         self.exit_code = 0
         # keys typed while a dialog opens wait for it (console/typeahead.py)
         self.typeahead = TypeAhead(self, self._key_as_typed)
@@ -422,14 +421,9 @@ class MissionApp(App[int]):
             self._use_16_colours()
             self.refresh_css()
         self.announcer.start(self.changes)
-        self.call_after_refresh(self._first_frame_painted)
         if self.bridge is not None:
             self.connect_now()
         self.plan.start(self, self.changes)
-
-    def _first_frame_painted(self) -> None:
-        for hook in self.after_first_frame:
-            hook()
 
     async def on_unmount(self) -> None:
         """However the app ends (quit, hang-up, a test's teardown): close the

@@ -4,7 +4,6 @@ through the `missionctl.commands` entry-point group)."""
 from __future__ import annotations
 
 import argparse
-import gc
 import sys
 
 from backend.exit_codes import EXIT_BAD_INPUT, EXIT_OK, EXIT_UNREACHABLE
@@ -93,20 +92,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     register_web(sub)
 
 
-def _pause_gc() -> None:
-    """No cyclic garbage collection until the app's first frame is painted
-    (`_run_app` turns it back on then): start-up creates ~110k long-lived
-    objects (mostly the models' classes) and the collector's passes over
-    them cost ~10% of the time to the first frame."""
-    gc.disable()
-
-
 def _run_app(app) -> int:
-    app.after_first_frame.append(gc.enable)
     try:
         result = app.run()
     finally:
-        gc.enable()
         if app.bridge is not None:
             app.bridge.close_now()  # never leave a Zenoh session open at exit (it hangs)
     code = app.return_code
@@ -116,7 +105,6 @@ def _run_app(app) -> int:
 
 
 def run_console(args: argparse.Namespace) -> int:
-    _pause_gc()
     from backend.core.credentials import AccountsError
     from backend.transport.login import login_from_args
     from console.app import MissionApp
@@ -190,7 +178,6 @@ def run_demo(args: argparse.Namespace) -> int:
         print(f"missionctl demo: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
     try:
-        _pause_gc()
         from console.demo_app import DemoApp
 
         app = DemoApp(

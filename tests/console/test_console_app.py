@@ -54,17 +54,6 @@ async def test_before_any_state_the_schedule_says_it_waits():
         assert "missionctl" in text
 
 
-async def test_the_first_frame_hooks_run_once_it_is_painted():
-    """The CLI pauses the garbage collector until then (console/cli.py)."""
-    app = make_app()
-    painted: list[str] = []
-    app.after_first_frame.append(lambda: painted.append(screen_text(app)))
-    async with app.run_test(size=(100, 24)) as pilot:
-        await wait_until(pilot, lambda: painted, what="the hook")
-        await pilot.pause()
-        assert len(painted) == 1 and "no mission yet" in painted[0]
-
-
 async def test_mars_mid_execution_shows_every_status_barrier_progress_and_presence():
     app = make_app()
     async with app.run_test(size=WIDE) as pilot:
