@@ -22,8 +22,9 @@ import signal
 import threading
 from collections.abc import Callable
 from datetime import datetime
+from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 from textual import events, on
 from textual.app import App
@@ -52,14 +53,9 @@ from console.notifier import NotificationFolder
 from console.operations import Backend, OperationService, ReadOnlyBackend
 from console.plan_modes import PlanRefresher
 from console.quitting import QuitPolicy
-from console.screens.alerts import AlertScreen
-from console.screens.checks import ChecksScreen
 from console.screens.dialogs import HelpScreen, UnreachableScreen
-from console.screens.fleet import FleetScreen
-from console.screens.log import EventLogScreen
-from console.screens.map import MapScreen
+from console.screens.mission import TCSS as MISSION_TCSS
 from console.screens.mission import MissionScreen
-from console.screens.timeline import TimelineScreen
 from console.state.actions import ACTIONS
 from console.state.changes import (
     Connecting,
@@ -78,7 +74,59 @@ from console.themes.loader import ANSI16_MAP, ANSI16_STATUS, Downgrade16, choose
 from console.themes.variables import VARIABLE_DEFAULTS
 from console.typeahead import TypeAhead
 
+if TYPE_CHECKING:
+    from backend.protocol.mapfeed import SimStatus
+    from console.screens.map import MapScreen
+
 HERE = Path(__file__).parent
+
+
+# the part-2 screens (app modes beside the schedule's), each made by a function
+# that imports its module: none is needed before the first frame
+def _map_screen(app: MissionApp) -> Screen:
+    from console.screens.map import MapScreen
+
+    return MapScreen(app.model, app.changes, app.ops)
+
+
+def _fleet_screen(app: MissionApp) -> Screen:
+    from console.screens.fleet import FleetScreen
+
+    return FleetScreen(app.model, app.changes, app.ops)
+
+
+def _log_screen(app: MissionApp) -> Screen:
+    from console.screens.log import EventLogScreen
+
+    return EventLogScreen(app.model.log, app.changes, app.model.clock)
+
+
+def _alert_screen(app: MissionApp) -> Screen:
+    from console.screens.alerts import AlertScreen
+
+    return AlertScreen(app.model.alerts, app.changes, app.model.clock)
+
+
+def _timeline_screen(app: MissionApp) -> Screen:
+    from console.screens.timeline import TimelineScreen
+
+    return TimelineScreen(app.model, app.changes)
+
+
+def _checks_screen(app: MissionApp) -> Screen:
+    from console.screens.checks import ChecksScreen
+
+    return ChecksScreen(app.model, app.changes, app.ops)
+
+
+PART_2_SCREENS: dict[str, Callable[[MissionApp], Screen]] = {
+    "map": _map_screen,
+    "fleet": _fleet_screen,
+    "log": _log_screen,
+    "alerts": _alert_screen,
+    "timeline": _timeline_screen,
+    "checks": _checks_screen,
+}
 
 
 class MissionApp(App[int]):
@@ -91,7 +139,9 @@ class MissionApp(App[int]):
         bind("app.command_palette", "command_palette"),
         *bindings("app", show=False),  # shown in the footers of the part-2 screens
     ]
-    # the app's look and its widgets' (each screen loads its own: CSS_PATH there);
+    # the app's look and its widgets' (each screen loads its own: CSS_PATH there;
+    # the first screen's is read with the app's: Textual would otherwise parse
+    # every stylesheet once more before the first frame, when that screen loads);
     # absolute, so a subclass defined elsewhere (tests) finds them too
     CSS_PATH = [
         HERE / "app.tcss",
@@ -99,6 +149,7 @@ class MissionApp(App[int]):
         HERE / "widgets" / "schedule" / "schedule.tcss",
         HERE / "widgets" / "editor" / "editor.tcss",
         HERE / "widgets" / "map" / "map.tcss",
+        MISSION_TCSS,  # last, as when its screen loads it
     ]
 
     def __init__(
@@ -133,14 +184,8 @@ class MissionApp(App[int]):
         self.ansi16 = False
         if colors == 16:
             self._use_16_colours()
-        themes, problems = load_themes()
-        self.notices.extend(problems)
-        for t in themes.values():
-            self.register_theme(t)
-        self.theme, notice = choose_theme(theme or self.config.theme, self.available_themes)
-        if notice:
-            self.notices.append(notice)
-        self.bridge = (
+        self._load_themes(theme or self.config.theme)
+        self.bridge = (  # the live connection (none: tests post the events themselves)
             ClientBridge(self._post_event, connect, user=user, client_id=client_id, login=login)
             if connect
             else None
@@ -159,22 +204,16 @@ class MissionApp(App[int]):
         self.folder = NotificationFolder(self)
         self.escape = EscapeSplitter(self)
         self.announcer = AlertAnnouncer(self)
-        bridge = self.bridge
-        self.plan = PlanRefresher(
-            self.model, self.publish, (lambda: bridge.sim_status) if bridge is not None else None
-        )
+        self.plan = PlanRefresher(self.model, self.publish, self._sim_status())
         self.mission_screen: MissionScreen | None = None
         self.map_screen: MapScreen | None = None
         # the screens as app modes (F2/1 back to the schedule), each handed the
         # state it shows and the signal that says it changed
-        m, c = self.model, self.changes
+        # (the part-2 screens' modules are imported when first shown: the first
+        # frame is the schedule's, and it comes sooner without them)
         self.add_mode(self.DEFAULT_MODE, self.get_default_screen)
-        self.add_mode("map", self._make_map_screen)
-        self.add_mode("fleet", lambda: FleetScreen(m, c, self.ops))
-        self.add_mode("log", lambda: EventLogScreen(m.log, c, m.clock))
-        self.add_mode("alerts", lambda: AlertScreen(m.alerts, c, m.clock))
-        self.add_mode("timeline", lambda: TimelineScreen(m, c))
-        self.add_mode("checks", lambda: ChecksScreen(m, c, self.ops))
+        for mode in PART_2_SCREENS:
+            self.add_mode(mode, partial(self._make_screen, mode))
         if self.config.keymap:
             self.set_keymap(self.config.keymap)
         self.model.keys = key_names(self)  # the rules' sentences name the user's keys
@@ -184,6 +223,21 @@ class MissionApp(App[int]):
         self.exit_code = 0
         # keys typed while a dialog opens wait for it (console/typeahead.py)
         self.typeahead = TypeAhead(self, self._key_as_typed)
+
+    def _load_themes(self, wanted: str | None) -> None:
+        """Register the themes (before any CSS is parsed), then use the one asked for."""
+        themes, problems = load_themes()
+        self.notices.extend(problems)
+        for t in themes.values():
+            self.register_theme(t)
+        self.theme, notice = choose_theme(wanted, self.available_themes)
+        if notice:
+            self.notices.append(notice)
+
+    def _sim_status(self) -> Callable[[], SimStatus | None] | None:
+        """Where the plan reads the simulator's status (None without a connection)."""
+        bridge = self.bridge
+        return (lambda: bridge.sim_status) if bridge is not None else None
 
     @property
     def clock(self) -> MissionClock:
@@ -266,9 +320,11 @@ class MissionApp(App[int]):
         self.ops.fallback_say = self.mission_screen.say  # screens without a status line
         return self.mission_screen
 
-    def _make_map_screen(self) -> Screen:
-        self.map_screen = MapScreen(self.model, self.changes, self.ops)
-        return self.map_screen
+    def _make_screen(self, mode: str) -> Screen:
+        screen = PART_2_SCREENS[mode](self)
+        if mode == "map":
+            self.map_screen = cast("MapScreen", screen)
+        return screen
 
     def action_show_mission(self) -> None:
         self.switch_mode(self.DEFAULT_MODE)

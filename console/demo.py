@@ -5,11 +5,15 @@ opens any Zenoh session: never fork after Zenoh is open). Quitting the
 console — or any error — stops them: terminate, then kill after a timeout.
 For a quick start, `launch()` only spawns the server; the caller loads the
 console meanwhile, then `wait_ready()` waits for the server and starts the sim.
+Both children run at a lower CPU priority (`CHILD_NICENESS`): on a busy machine
+the console the operator watches paints and answers first, and the children
+take what it leaves (on an idle one they run as fast as ever).
 """
 
 from __future__ import annotations
 
 import importlib.util
+import os
 import shutil
 import subprocess
 import sys
@@ -24,6 +28,7 @@ from backend.transport import free_port, loopback_endpoint
 
 DEFAULT_MISSION = Path(__file__).resolve().parents[1] / "missions" / "mars_sample_return.yaml"
 READY_MARK = "listening on"
+CHILD_NICENESS = 10  # the server's and the sim's, above the console's (os.setpriority)
 
 
 class DemoError(Exception):
@@ -36,6 +41,21 @@ def _tail(path: Path, lines: int = 8) -> str:
     except OSError:
         return ""
     return "\n".join(text.strip().splitlines()[-lines:])
+
+
+def _port_taken(log: str) -> bool:
+    """Whether a server's last words say its port was in use."""
+    low = log.lower()
+    return "address" in low and "use" in low
+
+
+def _lower_priority(pid: int) -> None:
+    """The child's niceness goes up by CHILD_NICENESS (threads it starts later inherit it).
+    Where that is not possible, it runs as it is: only start-up is slower."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, pid, os.getpriority(os.PRIO_PROCESS, 0) + CHILD_NICENESS)
+    except (AttributeError, OSError):  # no setpriority (Windows), or the child is gone
+        pass
 
 
 def sim_available() -> bool:
@@ -102,6 +122,7 @@ class DemoProcesses:
                 stderr=subprocess.STDOUT,
                 stdin=subprocess.DEVNULL,
             )
+            _lower_priority(p.pid)
             setattr(self, role, p)
 
     def start(self, timeout: float = 30.0) -> None:
@@ -125,45 +146,48 @@ class DemoProcesses:
 
     def wait_ready(self, timeout: float = 30.0) -> None:
         """Until the server listens (retrying on a port taken meanwhile); then start the sim."""
-        while True:
-            if self._wait_ready(timeout):
-                break
-            code = self.server.poll()
-            tail = _tail(self.server_log)
-            self._stop_one(self.server)
-            if (
-                code is not None
-                and "address" in tail.lower()
-                and "use" in tail.lower()
-                and self._attempt < 2
-            ):
-                self._attempt += 1  # the free port was taken meanwhile
-                self._spawn_server()
-                continue
-            how = f" (exit code {code})" if code is not None else " in time"
-            raise DemoError(f"the mission server did not start{how}:\n{tail}")
+        while not self._wait_ready(timeout):
+            self._server_failed()  # raises, or spawned it again
         want_sim = sim_available() if self.with_sim is None else self.with_sim
         if want_sim:
-            self._spawn(
-                "sim",
-                [
-                    "sim",
-                    "--mission",
-                    str(self.mission),
-                    "--connect",
-                    self.endpoint,
-                    "--speed",
-                    f"{self.speed:g}",
-                    *(["--link-delay", self.link_delay] if self.link_delay else []),
-                    *(["--comms-window", self.comms_window] if self.comms_window else []),
-                ],
-                self.sim_log,
-            )
+            self._spawn_sim()
         else:
             self.notices.append(
                 "the simulated fleet is unavailable (`missionctl sim` is not installed): "
                 "robots stay offline; the plan can still be edited"
             )
+
+    def _server_failed(self) -> None:
+        """The server stopped or did not listen in time: again on another port
+        if its port was taken meanwhile (twice at most), else DemoError with its words."""
+        code = self.server.poll() if self.server is not None else None
+        tail = _tail(self.server_log)
+        self._stop_one(self.server)
+        if code is not None and _port_taken(tail) and self._attempt < 2:
+            self._attempt += 1
+            self._spawn_server()
+            return
+        how = f" (exit code {code})" if code is not None else " in time"
+        raise DemoError(f"the mission server did not start{how}:\n{tail}")
+
+    def _spawn_sim(self) -> None:
+        delay = ["--link-delay", self.link_delay] if self.link_delay else []
+        window = ["--comms-window", self.comms_window] if self.comms_window else []
+        self._spawn(
+            "sim",
+            [
+                "sim",
+                "--mission",
+                str(self.mission),
+                "--connect",
+                self.endpoint,
+                "--speed",
+                f"{self.speed:g}",
+                *delay,
+                *window,
+            ],
+            self.sim_log,
+        )
 
     def _wait_ready(self, timeout: float) -> bool:
         deadline = time.monotonic() + timeout

@@ -65,13 +65,15 @@ class DemoApp(MissionApp):
         self.demo_error = why
         self.exit(EXIT_UNREACHABLE, return_code=EXIT_UNREACHABLE)
 
-    def _check_children(self) -> None:
-        problems = {"sim": self.procs.sim_problem()}
+    def _server_problem(self) -> str | None:
+        """If the server stopped after it came up: why, in a sentence."""
         server = self.procs.server
-        if self._server_up and server is not None and server.poll() is not None:
-            problems["server"] = (
-                f"the demo's mission server stopped (exit code {server.returncode})"
-            )
+        if not self._server_up or server is None or server.poll() is None:
+            return None
+        return f"the demo's mission server stopped (exit code {server.returncode})"
+
+    def _check_children(self) -> None:
+        problems = {"sim": self.procs.sim_problem(), "server": self._server_problem()}
         for who, problem in problems.items():
             if problem and who not in self._reported:
                 self._reported.add(who)

@@ -35,18 +35,15 @@ MAX_CONSOLE_CLASS_LINES = 400  # the console's classes (issue 27)
 KNOWN_LARGE_CLASSES: set[str] = set()
 
 # Console classes still over 400 lines, each to be split (issue 27). May only shrink.
-KNOWN_LARGE_CONSOLE_CLASSES: set[str] = {
-    "console/screens/map.py:MapScreen",
-    "console/widgets/editor/editor.py:ParamEditor",
-}
+KNOWN_LARGE_CONSOLE_CLASSES: set[str] = set()
 
 # Console classes still mixing in a class of the project (issue 27). May only shrink.
-KNOWN_MIXINS: set[str] = {"console/widgets/editor/editor.py:ParamEditor"}
+KNOWN_MIXINS: set[str] = set()
 
 # radon (`radon cc -a -s backend console sim`): the average complexity and the
 # number of functions ranked D or worse. May only shrink (issue 27's target: 3.0 and 1).
-MAX_AVERAGE_COMPLEXITY = 3.21
-MAX_D_RANK = 1
+MAX_AVERAGE_COMPLEXITY = 3.16
+MAX_D_RANK = 0
 
 # Import cycles still to be broken (issue 18), as sorted module lists. May only shrink.
 KNOWN_CYCLES: list[list[str]] = []

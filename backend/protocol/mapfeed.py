@@ -2,7 +2,9 @@
 
 The simulator (sim.fleet) publishes it; consoles follow it through
 `backend.client.mapfollow.MapFeed`. Kept free of transport code (pydantic + numpy
-only) so any process can use the models and the codec.
+only) so any process can use the models and the codec. numpy is imported only by
+the functions that make or read a grid: the models alone (a console's first frame,
+a plan's inputs) do without its ~0.1 s import.
 
 Key space (all JSON from the models below):
 
@@ -52,10 +54,12 @@ from __future__ import annotations
 import base64
 import json
 import zlib
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
-import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
+
+if TYPE_CHECKING:
+    import numpy as np
 
 FEED_VERSION = 1
 # under the protocol's prefix (backend.protocol.keys.PREFIX; spelled out to
@@ -376,12 +380,16 @@ class StatusMirror:
 
 
 def encode_tile(cells: np.ndarray) -> str:
+    import numpy as np
+
     return base64.b64encode(
         zlib.compress(np.ascontiguousarray(cells, dtype=np.uint8).tobytes(), 6)
     ).decode("ascii")
 
 
 def decode_tile(data: str, shape: tuple[int, int]) -> np.ndarray:
+    import numpy as np
+
     raw = zlib.decompress(base64.b64decode(data))
     if len(raw) != shape[0] * shape[1]:
         raise ValueError(f"tile holds {len(raw)} cells, expected {shape[0]}x{shape[1]}")
@@ -395,6 +403,8 @@ def tile_shape(meta: MapMeta, tx: int, ty: int) -> tuple[int, int]:
 
 def changed_tiles(old: np.ndarray | None, new: np.ndarray, tile: int) -> list[tuple[int, int]]:
     """(tx, ty) of the tiles where `new` differs from `old` (all when old is None)."""
+    import numpy as np
+
     h, w = new.shape
     nty, ntx = -(-h // tile), -(-w // tile)
     if old is None:
@@ -433,6 +443,8 @@ class TileEncoder:
 
     def full(self) -> list[Tile]:
         """Every tile of what was sent so far (for snapshots)."""
+        import numpy as np
+
         out: list[Tile] = []
         t = self.meta.tile
         for name in self.meta.layers:
@@ -486,6 +498,8 @@ class MapMirror:
             )
 
     def apply_snapshot(self, snap: MapSnapshot) -> None:
+        import numpy as np
+
         self.meta = snap.meta
         self.feed = snap.feed
         self.layers = {

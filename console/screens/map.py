@@ -2,13 +2,15 @@
 
 Layout: top bar / map | legend / info line (cursor, selection, feed) /
 status line / footer. Marker edits and parameter picks go through the same
-operations as everywhere (backend.core.ops via `app.submit`); the "selected
-skill" is the schedule's cursor on the mission screen.
+operations as everywhere (backend.core.ops, submitted by the screen), done by
+the objects it owns (map_markers.py, map_params.py); the "selected skill" is
+the schedule's cursor on the mission screen.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -21,33 +23,21 @@ from textual.screen import Screen
 from textual.signal import Signal
 from textual.widgets import Footer, Static
 
-from backend.core.model import (
-    Status,
-)
-from backend.core.ops import EditSkill, MarkerAdd, MarkerDelete, MarkerMove, MarkerRename
+from backend.core.model import Status
 from console.bindings import bind, bindings, key_names
 from console.messages import HelpRequested
 from console.operations import OperationService
-from console.screens.dialogs import ChoiceScreen, ConfirmScreen, MarkerPrompt
+from console.screens.map_markers import MarkerActions
+from console.screens.map_params import ParamActions
 from console.state.actions import ACTIONS
 from console.state.changes import StateChange, Topic
 from console.state.contact import CONTACT_GLYPH
 from console.state.keys import KeyNames
-from console.state.markers import (
-    bind_choices,
-    followers,
-    free_name,
-    marker_point,
-    marker_use,
-    moved_value,
-    new_marker,
-    picked_value,
-    relabel,
-)
-from console.state.model import CONNECTED, ConsoleModel
+from console.state.markers import marker_point, marker_use
+from console.state.model import ConsoleModel
 from console.state.nowcast import NOWCAST_GLYPH
 from console.state.site import here_text
-from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS, fmt_value
+from console.state.text import GLYPHS, STATUS_CSS, STATUS_WORDS
 from console.widgets.bars import InfoLine, StatusLine, TopBar, connection_text
 from console.widgets.map.view import (
     AREA_GLYPH,
@@ -73,14 +63,59 @@ TURN = math.radians(15)
 LEGEND_MIN_WIDTH = 100
 
 
+LEGEND_STATUSES = (
+    Status.RUNNING,
+    Status.PAUSED,
+    Status.SYNCHWAITING,
+    Status.FAILURE,
+    Status.IDLE_SYNCHRONIZED,
+    Status.IDLE,
+)
+
+
+def _fg(c: dict[str, str], var: str) -> str:
+    """A glyph in a theme colour (bold: as on the map)."""
+    return f"bold {c[var]}" if var in c else "bold"
+
+
+def _bg(c: dict[str, str], var: str, default: str = "") -> str:
+    """A ground's background colour."""
+    return f"on {c[var]}" if var in c else default
+
+
+def _legend_rows(c: dict[str, str], keys: KeyNames) -> list[tuple[str, str, str]]:
+    """(glyph, style, what) of the legend, below the robots' heading."""
+    statuses = [
+        (GLYPHS[st], _fg(c, f"status-{STATUS_CSS[st]}"), f"  {STATUS_WORDS[st]}")
+        for st in LEGEND_STATUSES
+    ]
+    return [
+        *statuses,
+        ("✕", _fg(c, "presence-offline"), "  offline"),
+        (CONTACT_GLYPH, _fg(c, "presence-unknown"), "  out of contact"),
+        (NOWCAST_ARROWS[0], _fg(c, "presence-unknown"), f"{NOWCAST_GLYPH} probably now"),
+        (NO_LINK_GLYPH, _fg(c, "presence-offline"), "  out of comms range"),
+        (FOLLOW_GLYPH, "bold", f"  followed ({keys.say('map.follow')})"),
+        (POSE_ARROWS[0], "bold", "pose marker"),
+        (POSITION_GLYPH, "bold", "position marker"),
+        (AREA_GLYPH, "bold", "area marker"),
+        ("●", _fg(c, "map-marker-active"), "  used on a robot"),
+        ("○", _fg(c, "map-marker-bound"), "  used by idle skill"),
+        (GOAL_GLYPH, _fg(c, "map-goal"), "goal of a skill"),
+        (LANDER_GLYPH, _fg(c, "map-lander"), "lander"),
+        (BOX_GLYPH, _fg(c, "map-box"), "payload box"),
+        (RSS_GLYPH, _fg(c, "map-rss"), "sampling region"),
+        (STONE_GLYPH, _fg(c, "map-stone"), "stone found"),
+        ("·", _bg(c, "map-unknown"), "unexplored"),
+        ("~", _bg(c, "map-sand"), "sand (slow)"),
+        ("▴", _bg(c, "map-rock"), "rock (impassable)"),
+        (" ", _bg(c, "map-link", "reverse"), "in comms range"),
+        (POSE_ARROWS[0], _fg(c, "map-cursor"), "cursor (heading)"),
+    ]
+
+
 def legend_text(colours: dict[str, str] | None = None, keys: KeyNames | None = None) -> Text:
     """The legend; `colours` (theme variables) colour its glyphs like the map."""
-    c = colours or {}
-    keys = keys or KeyNames()
-
-    def fg(var: str) -> str:
-        return f"bold {c[var]}" if var in c else "bold"
-
     t = Text()
 
     def row(glyph: str, style: str, what: str) -> None:
@@ -91,60 +126,9 @@ def legend_text(colours: dict[str, str] | None = None, keys: KeyNames | None = N
     row(ROBOT_ARROWS[0], "bold", "robot, heading")
     # the one heading convention (the editor, ctl and the info line use it too)
     t.append("   heading: 0° east,\n   counter-clockwise\n", style="dim")
-    for st in (
-        Status.RUNNING,
-        Status.PAUSED,
-        Status.SYNCHWAITING,
-        Status.FAILURE,
-        Status.IDLE_SYNCHRONIZED,
-        Status.IDLE,
-    ):
-        row(GLYPHS[st], fg(f"status-{STATUS_CSS[st]}"), f"  {STATUS_WORDS[st]}")
-    row("✕", fg("presence-offline"), "  offline")
-    row(CONTACT_GLYPH, fg("presence-unknown"), "  out of contact")
-    row(NOWCAST_ARROWS[0], fg("presence-unknown"), f"{NOWCAST_GLYPH} probably now")
-    row(NO_LINK_GLYPH, fg("presence-offline"), "  out of comms range")
-    row(FOLLOW_GLYPH, "bold", f"  followed ({keys.say('map.follow')})")
-    row(POSE_ARROWS[0], "bold", "pose marker")
-    row(POSITION_GLYPH, "bold", "position marker")
-    row(AREA_GLYPH, "bold", "area marker")
-    row("●", fg("map-marker-active"), "  used on a robot")
-    row("○", fg("map-marker-bound"), "  used by idle skill")
-    row(GOAL_GLYPH, fg("map-goal"), "goal of a skill")
-    row(LANDER_GLYPH, fg("map-lander"), "lander")
-    row(BOX_GLYPH, fg("map-box"), "payload box")
-    row(RSS_GLYPH, fg("map-rss"), "sampling region")
-    row(STONE_GLYPH, fg("map-stone"), "stone found")
-    row("·", f"on {c['map-unknown']}" if "map-unknown" in c else "", "unexplored")
-    row("~", f"on {c['map-sand']}" if "map-sand" in c else "", "sand (slow)")
-    row("▴", f"on {c['map-rock']}" if "map-rock" in c else "", "rock (impassable)")
-    row(" ", f"on {c['map-link']}" if "map-link" in c else "reverse", "in comms range")
-    row(
-        POSE_ARROWS[0],
-        f"bold {c['map-cursor']}" if "map-cursor" in c else "bold",
-        "cursor (heading)",
-    )
+    for glyph, style, what in _legend_rows(colours or {}, keys or KeyNames()):
+        row(glyph, style, what)
     return t
-
-
-def param_rows(spec: Any, s: Any, names: list[str]) -> list[tuple[str, Text]]:
-    """Rows for choosing among a skill's parameters: name, type and what it
-    holds now (@MARKER when bound to one), in aligned columns."""
-    wn = max(len(n) for n in names)
-    wt = max(len(spec.params[n].type) for n in names)
-    rows = []
-    for n in names:
-        ps = spec.params[n]
-        if n in s.bindings:
-            now = Text(f"@{s.bindings[n]}")
-        elif s.params.get(n) is not None:
-            now = Text(fmt_value(ps, s.params[n]))
-        else:
-            now = Text("not set", style="dim")
-        rows.append(
-            (n, Text.assemble((n.ljust(wn), "bold"), "  ", (ps.type.ljust(wt), "dim"), "  ", now))
-        )
-    return rows
 
 
 def map_top_text(m: ConsoleModel, keys: KeyNames) -> Text:
@@ -159,18 +143,17 @@ def map_top_text(m: ConsoleModel, keys: KeyNames) -> Text:
     return t
 
 
-def info_text(model: ConsoleModel, v: MapView, feed_state: str) -> Text:
-    """The info lines: the feed (when not live), the cursor and scale, who is
-    followed, the selected marker and the schedule's selected skill; then what
-    is under the cursor (console/state/site.py)."""
-    t = Text()
-    if feed_state == "none" or v.mirror is None or not v.mirror.ready:
-        why = model.map_note or NO_FEED
-        t.append(why if feed_state == "none" else "waiting for the map feed…", style="bold")
-        t.append("  ")
-    x, y = v.cursor
-    t.append(f"cursor ({x:.1f}, {y:.1f}) heading {math.degrees(v.heading):.0f}°")
-    t.append(f"  {v.vp.mpp:.2g} m/px", style="dim")
+def _feed_note(model: ConsoleModel, v: MapView, feed_state: str) -> str:
+    """Why there is no map (yet), or nothing when it is live."""
+    if feed_state == "none":
+        return model.map_note or NO_FEED
+    if v.mirror is None or not v.mirror.ready:
+        return "waiting for the map feed…"
+    return ""
+
+
+def _selection_text(model: ConsoleModel, v: MapView, t: Text) -> None:
+    """Who is followed, the selected marker and the schedule's selected skill."""
     if v.follow:
         t.append(f"  following {v.follow}", style="bold")
     if v.selected_marker:
@@ -180,9 +163,30 @@ def info_text(model: ConsoleModel, v: MapView, feed_state: str) -> Text:
     if found is not None:
         s = found[2]
         t.append(f"  skill {s.id} {s.skill} ({STATUS_WORDS[s.status]})", style="dim")
+
+
+def info_text(model: ConsoleModel, v: MapView, feed_state: str) -> Text:
+    """The info lines: the feed (when not live), the cursor and scale, who is
+    followed, the selected marker and the schedule's selected skill; then what
+    is under the cursor (console/state/site.py)."""
+    t = Text()
+    note = _feed_note(model, v, feed_state)
+    if note:
+        t.append(note, style="bold")
+        t.append("  ")
+    x, y = v.cursor
+    t.append(f"cursor ({x:.1f}, {y:.1f}) heading {math.degrees(v.heading):.0f}°")
+    t.append(f"  {v.vp.mpp:.2g} m/px", style="dim")
+    _selection_text(model, v, t)
     here = here_text(v.mirror, model.mission, model.telemetry, x, y, tol=max(1.0, v.vp.mpp))
     t.append(f"\nhere: {here}")
     return t
+
+
+def next_after(items: list[str], current: str | None) -> str | None:
+    """The item after `current` (the first when it is none of them; None after the last)."""
+    i = items.index(current) + 1 if current in items else 0
+    return items[i] if i < len(items) else None
 
 
 class Legend(Static):
@@ -226,6 +230,8 @@ class MapScreen(Screen):
         self._status = StatusLine("", id="map-status")
         self.message = ""
         self.legend_choice: bool | None = None  # None: by terminal width
+        self.markers = MarkerActions(self)
+        self.params = ParamActions(self)
         if model.map_update is not None:  # the feed (or its absence) came before the screen
             self.map_changed(model.map_mirror, model.map_update)
 
@@ -275,14 +281,18 @@ class MapScreen(Screen):
             self.map_changed(self.model.map_mirror, c.map_update)
         if c.about(Topic.MISSION):  # marker events change no robot's column but the map
             self.model_changed()
-        for robot in c.robots or () if c.about(Topic.TELEMETRY) else ():
-            self.view.robot_moved(robot)
-            if self.view.follow == robot:
-                self.update_info()
+        if c.about(Topic.TELEMETRY):
+            self._robots_moved(c.robots or ())
         if c.about(Topic.FLEET):
             self.view.overlays_changed()
         if c.about(Topic.CONNECTION):
             self.update_top()
+
+    def _robots_moved(self, robots: Iterable[str]) -> None:
+        for robot in robots:
+            self.view.robot_moved(robot)
+            if self.view.follow == robot:
+                self.update_info()
 
     def map_changed(self, mirror: Any, update: Any) -> None:
         kind = getattr(update, "kind", "snapshot")
@@ -337,26 +347,6 @@ class MapScreen(Screen):
         if outcome.reply is not None and on_ok is not None:
             on_ok(outcome.reply)
 
-    def _connected(self) -> bool:
-        if self.model.connection != CONNECTED:
-            self.say(
-                f"not connected to the mission server ({self.model.connection}): "
-                "markers cannot be changed now",
-                "warning",
-            )
-            return False
-        return True
-
-    def _marker(self) -> Any:
-        name = self.view.selected_marker
-        m = self.model.mission
-        if name is None or m is None or name not in m.markers:
-            self.say(
-                "select a marker first: n selects the next one (the cursor jumps to it)", "warning"
-            )
-            return None
-        return m.markers[name]
-
     # -- actions: view -----------------------------------------------------------------------------
     def action_help(self) -> None:
         self.post_message(HelpRequested())
@@ -409,18 +399,11 @@ class MapScreen(Screen):
         self.update_info()
 
     def action_map_follow(self) -> None:
-        robots = [
-            r
-            for r in self.model.robot_order()
-            if self.model.robot_kind(r) != "static" and r in self.model.telemetry
-        ]
+        robots = self._followable()
         if not robots:
             self.say("no robot position known yet (no telemetry): nothing to follow", "warning")
             return
-        # the next robot; after the last one: nobody
-        cur = self.view.follow
-        i = robots.index(cur) + 1 if cur in robots else 0
-        nxt = robots[i] if i < len(robots) else None
+        nxt = next_after(robots, self.view.follow)  # after the last one: nobody
         self.view.follow = nxt
         if nxt is None:
             self.say("stopped following")
@@ -431,6 +414,11 @@ class MapScreen(Screen):
             self.say(f"following {nxt} ({again}: next robot; moving the view stops it)")
         self.view.overlays_changed()
         self.update_info()
+
+    def _followable(self) -> list[str]:
+        """The robots that move and whose position is known, in the schedule's order."""
+        m = self.model
+        return [r for r in m.robot_order() if m.robot_kind(r) != "static" and r in m.telemetry]
 
     def action_map_turn_left(self) -> None:
         self.view.heading = (self.view.heading + TURN) % (2 * math.pi)
@@ -465,223 +453,29 @@ class MapScreen(Screen):
         self.say(f"marker {name} ({mk.kind}){': ' + mk.description if mk.description else ''}")
         self.update_info()
 
-    # -- actions: markers ------------------------------------------------------------------
-
+    # -- actions: markers (map_markers.py) and parameters (map_params.py) ------------------
     @work(group="dialog")
     async def action_map_add_marker(self) -> None:
-        if not self._connected():
-            return
-        answer = await self.app.push_screen_wait(
-            MarkerPrompt("New marker at the cursor — name:", free_name(self.model.mission))
-        )
-        if not answer:
-            return
-        name, kind = answer
-        x, y = (round(c, 1) for c in self.view.cursor)
-        marker = new_marker(kind, x, y, self.view.heading, self.view.vp.mpp)
-
-        def ok(reply: Any) -> None:
-            self.view.selected_marker = name
-            self.say(f"added {kind} marker {name} at ({x:g}, {y:g})", "ok")
-
-        self.submit(MarkerAdd(name=name, marker=marker), f"add marker {name}", on_ok=ok)
+        await self.markers.add()
 
     def action_map_move_marker(self) -> None:
-        mk = self._marker()
-        if mk is None or not self._connected():
-            return
-        name = self.view.selected_marker
-        following = followers(self.model.mission, name)
-        x, y = (round(c, 1) for c in self.view.cursor)
-        value = moved_value(mk, x, y, self.view.heading)
-
-        def ok(reply: Any) -> None:
-            x, y = self.view.cursor
-            text = f"moved {name} to ({x:.1f}, {y:.1f})"
-            if following:
-                text += f"; {', '.join(following)} follow{'s' if len(following) == 1 else ''}"
-            stale = reply.value.get("stale", [])
-            if stale:
-                text += (
-                    f"; {', '.join(stale)} still use{'s' if len(stale) == 1 else ''} "
-                    "the old value — unsynchronize to update"
-                )
-            self.say(text, "warning" if stale else "ok")
-
-        self.submit(MarkerMove(name=name, value=value), f"move marker {name}", on_ok=ok)
+        self.markers.move()
 
     @work(group="dialog")
     async def action_map_rename_marker(self) -> None:
-        if self._marker() is None or not self._connected():
-            return
-        old = self.view.selected_marker
-        answer = await self.app.push_screen_wait(
-            MarkerPrompt(f"Rename marker {old} to:", old, kinds=False)
-        )
-        if not answer or answer[0] == old:
-            return
-        new = answer[0]
-
-        def ok(reply: Any) -> None:
-            self.view.selected_marker = new
-            self.say(f"renamed {old} to {new}", "ok")
-
-        self.submit(MarkerRename(name=old, new_name=new), f"rename marker {old}", on_ok=ok)
+        await self.markers.rename()
 
     @work(group="dialog")
     async def action_map_delete_marker(self) -> None:
-        if self._marker() is None or not self._connected():
-            return
-        name = self.view.selected_marker
-        if not await self.app.push_screen_wait(
-            ConfirmScreen(
-                f"Delete marker {name}? Idle skills bound to it keep its value.", yes="Delete"
-            )
-        ):
-            self.say("delete cancelled")
-            return
-
-        def ok(reply: Any) -> None:
-            self.view.selected_marker = None
-            self.say(f"deleted marker {name}", "ok")
-
-        self.submit(MarkerDelete(name=name), f"delete marker {name}", on_ok=ok)
-
-    # -- actions: parameters of the selected skill -------------------------------------------------
-    def _skill(self) -> Any:
-        self.sync_selection()
-        found = self.model.find(self.view.selected_skill)
-        if found is None:
-            back, here = (key_names(self).say(a) for a in ("app.show_mission", "app.show_map"))
-            why = f"select a skill on the schedule first ({back}), then come back ({here})"
-            self.say(why, "warning")
-            return None
-        why = self.model.read_only_reason(found[2].id)
-        if why:
-            self.say(f"{found[2].id}: {why}", "warning")
-            return None
-        spec = self.model.library.skills.get(found[2].skill) if self.model.library else None
-        if spec is None:
-            self.say(f"{found[2].skill} is not in the skill library", "error")
-            return None
-        return found[0], found[2], spec
-
-    def _choose(
-        self,
-        question: str,
-        spec: Any,
-        s: Any,
-        names: list[str],
-        then: Any,
-        *,
-        cancelled: str,
-        highlighted: int = 0,
-    ) -> None:
-        """`then(name)` at once when one parameter fits; when several do, the
-        operator picks one first (escape: nothing is sent)."""
-        if len(names) == 1:
-            then(names[0])
-            return
-
-        def chosen(pname: str | None) -> None:
-            if pname is None:
-                self.say(cancelled)
-                return
-            why = self.model.read_only_reason(s.id)  # it may have changed while the dialog was open
-            if why:
-                self.say(f"{s.id}: {why}", "warning")
-                return
-            then(pname)
-
-        self.app.push_screen(
-            ChoiceScreen(question, param_rows(spec, s, names), highlighted), chosen
-        )
+        await self.markers.delete()
 
     def action_map_bind(self) -> None:
-        mk = self._marker()
-        got = self._skill() if mk is not None else None
-        if got is None:
-            return
-        robot, s, spec = got
-        name = self.view.selected_marker
-        # a parameter the marker can give a value is bound to it; a marker-typed one takes its name
-        fits, names = bind_choices(spec, mk)
-        if not fits and not names:
-            kinds = ", ".join(f"{p} ({ps.type})" for p, ps in spec.params.items()) or "none"
-            self.say(
-                f"{s.id} ({s.skill}) has no parameter for a {mk.kind} marker; "
-                f"its parameters: {kinds}",
-                "warning",
-            )
-            return
-
-        def bind(pname: str) -> None:
-            # a label naming the marker bound before ("drive to POI-A") names the new one
-            before = s.bindings.get(pname) or (s.params.get(pname) if pname in names else None)
-            label = relabel(s.label, before if isinstance(before, str) else None, name)
-            op = (
-                EditSkill(id=s.id, bindings={pname: name}, label=label)
-                if pname in fits
-                else EditSkill(id=s.id, params={pname: name}, label=label)
-            )
-            also = f"; label now '{label}'" if label is not None else ""
-            self.submit(
-                op,
-                f"bind {s.id}.{pname} to {name}",
-                robot=robot,
-                skill=s.id,
-                on_ok=lambda r: self.say(f"{s.id}: {pname} bound to marker {name}{also}", "ok"),
-            )
-
-        def holds(p: str) -> bool:
-            return s.bindings.get(p) == name or (p in names and s.params.get(p) == name)
-
-        candidates = fits + names
-        first = next((i for i, p in enumerate(candidates) if not holds(p)), 0)  # the likely choice
-        self._choose(
-            f"Bind {name} to which parameter of {s.id}?",
-            spec,
-            s,
-            candidates,
-            bind,
-            highlighted=first,
-            cancelled=f"bind cancelled: {s.id} unchanged",
-        )
+        marker = self.markers.selected()
+        if marker is not None:
+            self.params.bind(marker)
 
     def action_map_pick(self) -> None:
-        got = self._skill()
-        if got is None:
-            return
-        robot, s, spec = got
-        params = [p for p, ps in spec.params.items() if ps.type in ("pose", "position")]
-        if not params:
-            self.say(f"{s.id} ({s.skill}) has no pose or position parameter", "warning")
-            return
-        x, y = (round(c, 1) for c in self.view.cursor)
-
-        def pick(pname: str) -> None:
-            ptype = spec.params[pname].type
-            value = picked_value(ptype, x, y, self.view.heading)
-            where = f"({x:g}, {y:g})" + (
-                f" heading {math.degrees(self.view.heading):.0f}°" if ptype == "pose" else ""
-            )
-            unbound = " (its marker binding is replaced)" if pname in s.bindings else ""
-            self.submit(
-                EditSkill(id=s.id, params={pname: value}),
-                f"set {s.id}.{pname}",
-                robot=robot,
-                skill=s.id,
-                on_ok=lambda r: self.say(f"{s.id}: {pname} = {where}{unbound}", "ok"),
-            )
-
-        self._choose(
-            f"Set which parameter of {s.id} to the cursor ({x:g}, {y:g})?",
-            spec,
-            s,
-            params,
-            pick,
-            cancelled=f"pick cancelled: {s.id} unchanged",
-        )
+        self.params.pick()
 
     # -- disabled keys are explained, like on the mission screen -----------------------------------
     async def run_named(self, action: str) -> None:

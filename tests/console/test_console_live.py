@@ -16,6 +16,7 @@ from console_live import ROOT, running
 from console_state import TUTORIAL, make_app, screen_text, wait_until
 
 from backend.core.model import Status
+from console.demo import CHILD_NICENESS
 from console.screens.dialogs import SkillPicker
 
 SIZE = (150, 40)
@@ -428,7 +429,11 @@ def test_demo_starts_server_and_console_and_stops_everything(tmp_path):
         children = _processes_mentioning(str(tmp_path))
         assert children, "the demo's server was not found among the processes"
         # its sim got the link delay (after its --speed: not the demo's own command line)
-        assert _processes_mentioning("--speed\x005\x00--link-delay\x0020s"), "no delayed sim"
+        sims = _processes_mentioning("--speed\x005\x00--link-delay\x0020s")
+        assert sims, "no delayed sim"
+        # the server and the sim yield the CPU to the console (console/demo.py)
+        for child in {*children, *sims}:
+            assert _niceness(child) == _niceness(p.pid) + CHILD_NICENESS, child
         os.write(master, b"\x11")
         assert _drain_until_exit(master, p, 30) == 0
         deadline = time.monotonic() + 10
@@ -491,6 +496,11 @@ def test_demo_hung_up_terminal_stops_everything(tmp_path):
             os.kill(pid, signal.SIGKILL)
         if master >= 0:
             os.close(master)
+
+
+def _niceness(pid: int) -> int:
+    with open(f"/proc/{pid}/stat") as f:
+        return int(f.read().rsplit(")", 1)[1].split()[16])  # field 19 of proc(5)
 
 
 def _processes_mentioning(text: str) -> list[int]:

@@ -1,18 +1,29 @@
-"""Reading the parameter editor's fields back: what differs from the skill
+"""Reading the parameter editor's form back: what differs from the skill
 (parameters, bindings, label, policies) and what is wrong with it, checked
-with the server's own checks. Mixed into `ParamEditor`."""
+with the server's own checks. Functions of the form (the editor, a DOM node
+whose fields they query) and of the skill it shows."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+from textual.dom import DOMNode
 from textual.widgets import Input
 
+from backend.core.library import SkillSpec
 from backend.core.model import Mission, Policies, SkillInstance
 from backend.core.params import ParamSpec, check_value, normalize_value
-from console.state.model import ConsoleModel
-from console.widgets.editor.inputs import BINDABLE_KINDS, read_binding, read_param, read_policies
+from console.widgets.editor.inputs import (
+    BINDABLE_KINDS,
+    Reading,
+    read_binding,
+    read_param,
+    read_policies,
+)
+
+# (label change, params changed, bindings changed, problems per parameter)
+Collected = tuple[str | None, dict[str, Any], dict[str, str | None], dict[str, str]]
 
 
 @dataclass
@@ -33,6 +44,15 @@ class Changes:
         ):
             self.params[name] = None  # back to the default
 
+    def typed(self, s: SkillInstance, name: str, spec: ParamSpec, value: Any) -> None:
+        """A value typed (or chosen) for the parameter."""
+        norm = normalize_value(spec, value)
+        if s.bindings.get(name) is not None:  # a typed value replaces the binding
+            self.bindings[name] = None
+            self.params[name] = norm
+        elif s.params.get(name) != norm:
+            self.params[name] = norm
+
 
 def value_problem(spec: ParamSpec, value: Any, mission: Mission | None) -> str | None:
     """The first problem the server's own check finds with a typed value."""
@@ -47,79 +67,67 @@ def value_problem(spec: ParamSpec, value: Any, mission: Mission | None) -> str |
     return f"{where}: {msg}" if where else msg
 
 
-class ReadsEdits:
-    model: ConsoleModel
+def collect(
+    form: DOMNode, s: SkillInstance, spec: SkillSpec | None, mission: Mission | None
+) -> Collected:
+    """What the form changes of skill `s`, and what is wrong with it."""
+    try:
+        label = form.query_one("#f-label", Input).value
+    except Exception:  # being rebuilt
+        label = s.label
+    changes = Changes()
+    for name, pspec in spec.params.items() if spec is not None else ():
+        _collect_param(form, changes, s, name, pspec, mission)
+    label_change = label if label != s.label else None
+    return label_change, changes.params, changes.bindings, changes.problems
 
-    if TYPE_CHECKING:  # what ParamEditor provides
 
-        @property
-        def read_only_reason(self) -> str | None: ...
-        def _skill(self) -> tuple[str, SkillInstance] | None: ...
-        def _spec(self, skill: SkillInstance) -> Any: ...
-        def query_one(self, selector: str, expect_type: Any = None) -> Any: ...
+def _collect_param(
+    form: DOMNode,
+    ch: Changes,
+    s: SkillInstance,
+    name: str,
+    pspec: ParamSpec,
+    mission: Mission | None,
+) -> None:
+    """One parameter's change (or its problem), as typed or chosen."""
+    bound = read_binding(form, name) if pspec.type in BINDABLE_KINDS else None
+    if bound is not None:
+        if bound != s.bindings.get(name):
+            ch.bindings[name] = bound
+        return
+    value, problem = _checked(form, name, pspec, mission)
+    if problem is not None:
+        ch.problems[name] = problem
+    elif value is None:
+        ch.unset(s, name, pspec)
+    else:
+        ch.typed(s, name, pspec, value)
 
-    def collect(self) -> tuple[str | None, dict[str, Any], dict[str, str | None], dict[str, str]]:
-        """(label change, params changed, bindings changed, problems per parameter)."""
-        found = self._skill()
-        if found is None:
-            return None, {}, {}, {}
-        _, s = found
-        spec = self._spec(s)
-        try:
-            label = self.query_one("#f-label", Input).value
-        except Exception:
-            label = s.label
-        changes = Changes()
-        for name, pspec in spec.params.items() if spec is not None else ():
-            self._collect_param(changes, s, name, pspec)
-        label_change = label if label != s.label else None
-        return label_change, changes.params, changes.bindings, changes.problems
 
-    def _collect_param(self, ch: Changes, s: SkillInstance, name: str, pspec: ParamSpec) -> None:
-        """One parameter's change (or its problem), as typed or chosen."""
-        old_bound = s.bindings.get(name)
-        bound = read_binding(self, name) if pspec.type in BINDABLE_KINDS else None
-        if bound is not None:
-            if bound != old_bound:
-                ch.bindings[name] = bound
-            return
-        value, problem = read_param(self, name, pspec)
-        if problem is None and value is not None:
-            problem = value_problem(pspec, value, self.model.mission)
-        if problem is not None:
-            ch.problems[name] = problem
-        elif value is None:
-            ch.unset(s, name, pspec)
-        else:
-            norm = normalize_value(pspec, value)
-            if old_bound is not None:  # a typed value replaces the binding
-                ch.bindings[name] = None
-                ch.params[name] = norm
-            elif s.params.get(name) != norm:
-                ch.params[name] = norm
+def _checked(form: DOMNode, name: str, pspec: ParamSpec, mission: Mission | None) -> Reading:
+    """(value, problem) of a parameter as typed, checked as the server would."""
+    value, problem = read_param(form, name, pspec)
+    if problem is None and value is not None:
+        problem = value_problem(pspec, value, mission)
+    return value, problem
 
-    def policies_change(self) -> tuple[Policies | None, dict[str, str]]:
-        """(new policies if they changed, problems per policy)."""
-        found = self._skill()
-        if found is None:
-            return None, {}
-        policies, problems = read_policies(self)
-        return (
-            policies if policies is not None and policies != found[1].policies else None
-        ), problems
 
-    def changed_names(self, *, even_read_only: bool = False) -> list[str]:
-        """What differs from the skill (including fields that do not read)."""
-        if self._skill() is None or (self.read_only_reason is not None and not even_read_only):
-            return []
-        label, params, bindings, problems = self.collect()
-        policies, policy_problems = self.policies_change()
-        names = (["label"] if label is not None else []) + list(
-            dict.fromkeys([*params, *bindings, *problems])
-        )
-        if policies is not None or policy_problems:
-            names.append("policies")
-        return names
+def policies_change(form: DOMNode, s: SkillInstance) -> tuple[Policies | None, dict[str, str]]:
+    """(the new policies if they changed, problems per policy)."""
+    policies, problems = read_policies(form)
+    return (policies if policies is not None and policies != s.policies else None), problems
 
-    def is_dirty(self) -> bool:
-        return bool(self.changed_names())
+
+def changed_names(
+    form: DOMNode, s: SkillInstance, spec: SkillSpec | None, mission: Mission | None
+) -> list[str]:
+    """What differs from the skill (including fields that do not read)."""
+    label, params, bindings, problems = collect(form, s, spec, mission)
+    policies, policy_problems = policies_change(form, s)
+    names = (["label"] if label is not None else []) + list(
+        dict.fromkeys([*params, *bindings, *problems])
+    )
+    if policies is not None or policy_problems:
+        names.append("policies")
+    return names

@@ -88,24 +88,24 @@ def yaml_text(value: Any) -> str:
     ).strip()
 
 
-def spec_hint(spec: ParamSpec) -> str:
-    """type, unit and bounds: 'float m/s 0.1..1', 'float ° -180..180'."""
-    parts = [spec.type]
-    if shown_unit(spec):
-        parts.append(shown_unit(spec))
+def _bounds(spec: ParamSpec) -> str:
+    """'0.1..1', '..5', '' (none); angles in degrees."""
+    if spec.min is None and spec.max is None:
+        return ""
 
-    def bound(b: float) -> str:
+    def bound(b: float | None) -> str:
+        if b is None:
+            return ""
         return angle_number(b) if is_angle(spec) else f"{b:g}"
 
-    if spec.min is not None or spec.max is not None:
-        lo = bound(spec.min) if spec.min is not None else ""
-        hi = bound(spec.max) if spec.max is not None else ""
-        parts.append(f"{lo}..{hi}")
-    if spec.type == "marker" and spec.marker_kinds:
-        parts.append("/".join(spec.marker_kinds))
-    if spec.is_required:
-        parts.append("required")
-    return " ".join(parts)
+    return f"{bound(spec.min)}..{bound(spec.max)}"
+
+
+def spec_hint(spec: ParamSpec) -> str:
+    """type, unit and bounds: 'float m/s 0.1..1', 'float ° -180..180'."""
+    kinds = "/".join(spec.marker_kinds or []) if spec.type == "marker" else ""
+    parts = [spec.type, shown_unit(spec), _bounds(spec), kinds]
+    return " ".join([p for p in parts if p] + (["required"] if spec.is_required else []))
 
 
 @dataclass(frozen=True)
@@ -206,15 +206,23 @@ def _yaml(f: Field) -> ComposeResult:
     )
 
 
+def _marker_choices(f: Field) -> list[str]:
+    """The mission's markers of the kinds the parameter takes (any, when it names none)."""
+    kinds = f.spec.marker_kinds
+    markers = f.mission.markers if f.mission else {}
+    return [mk for mk, marker in markers.items() if not kinds or marker.kind in kinds]
+
+
+# what a choice offers, by parameter kind
+CHOICES: dict[str, Callable[[Field], list[str]]] = {
+    "enum": lambda f: list(f.spec.choices or []),
+    "marker": _marker_choices,
+    "robot": lambda f: list(f.mission.robots) if f.mission else [],
+}
+
+
 def _choices(f: Field) -> list[str]:
-    m = f.mission
-    if f.spec.type == "enum":
-        return list(f.spec.choices or [])
-    if f.spec.type == "marker":
-        kinds = f.spec.marker_kinds
-        markers = m.markers if m else {}
-        return [mk for mk, marker in markers.items() if not kinds or marker.kind in kinds]
-    return list(m.robots) if m else []  # robot
+    return CHOICES[f.spec.type](f)
 
 
 def _choice(f: Field) -> ComposeResult:
@@ -258,27 +266,32 @@ def _read_number(root: DOMNode, name: str, spec: ParamSpec) -> Reading:
 
 
 def _read_coordinates(root: DOMNode, name: str, spec: ParamSpec) -> Reading:
-    fields = [
-        root.query_one(f"#f-{name}-{c}", Input) for row in _coordinate_rows(spec.type) for c in row
-    ]
-    if not any(w.value.strip() for w in fields):
+    fields = {
+        c: root.query_one(f"#f-{name}-{c}", Input)
+        for row in _coordinate_rows(spec.type)
+        for c in row
+    }
+    if not any(w.value.strip() for w in fields.values()):
         return None, None  # all empty: unset
     out: dict[str, float] = {}
-    for row in _coordinate_rows(spec.type):
-        for c in row:
-            field = root.query_one(f"#f-{name}-{c}", Input)
-            if isinstance(field, AngleInput):
-                rad, problem = field.radians()
-                if problem is not None:
-                    return None, f"{c}: {problem}"
-                out[c] = rad if rad is not None else 0.0
-                continue
-            raw = field.value.strip()
-            try:
-                out[c] = float(raw) if raw else 0.0
-            except ValueError:
-                return None, f"{c}: expected a number, got '{raw}'"
+    for c, field in fields.items():
+        value, problem = _coordinate(field)
+        if problem is not None:
+            return None, f"{c}: {problem}"
+        out[c] = value
     return out, None
+
+
+def _coordinate(field: Input) -> Reading:
+    """One coordinate as typed (an empty field is 0), or what is wrong with it."""
+    if isinstance(field, AngleInput):
+        rad, problem = field.radians()
+        return (rad if rad is not None else 0.0), problem
+    raw = field.value.strip()
+    try:
+        return (float(raw) if raw else 0.0), None
+    except ValueError:
+        return None, f"expected a number, got '{raw}'"
 
 
 def _read_yaml(root: DOMNode, name: str, spec: ParamSpec) -> Reading:
@@ -431,35 +444,50 @@ def _policy_input(name: str, p: Policies, disabled: bool) -> ComposeResult:
 
 def read_policies(root: DOMNode) -> tuple[Policies | None, dict[str, str]]:
     """The policies as typed (None if unreadable) and problems per policy."""
-    raw: dict[str, Any] = {}
-    problems: dict[str, str] = {}
     try:
-        raw["pause_out_of_comms"] = root.query_one("#pf-pause_out_of_comms", Switch).value
+        pause = root.query_one("#pf-pause_out_of_comms", Switch).value
         retries = root.query_one("#pf-retries", Input).value.strip()
         below = root.query_one("#pf-recharge_below", Input).value.strip()
     except Exception:  # not composed (no skill, or being rebuilt)
         return None, {}
-    try:
-        raw["retries"] = int(retries) if retries else 0
-    except ValueError:
-        problems["retries"] = f"expected an integer, got '{retries}'"
-    if below.lower() in ("", "off"):
-        raw["recharge_below"] = None
-    else:
-        try:
-            raw["recharge_below"] = float(below)
-        except ValueError:
-            problems["recharge_below"] = (
-                f"expected a number between 0 and 1 (empty: off), got '{below}'"
-            )
+    raw: dict[str, Any] = {"pause_out_of_comms": pause}
+    problems: dict[str, str] = {}
+    for name, (value, problem) in (
+        ("retries", _retries(retries)),
+        ("recharge_below", _recharge_below(below)),
+    ):
+        if problem is None:
+            raw[name] = value
+        else:
+            problems[name] = problem
     more, bad = read_contingency(root)
-    raw |= more
-    problems |= bad
-    if problems:
-        return None, problems
-    try:  # the protocol's own model: the same bounds the server checks
+    if problems or bad:
+        return None, problems | bad
+    return _policies(raw | more)
+
+
+def _retries(raw: str) -> Reading:
+    try:
+        return (int(raw) if raw else 0), None
+    except ValueError:
+        return None, f"expected an integer, got '{raw}'"
+
+
+def _recharge_below(raw: str) -> Reading:
+    if raw.lower() in ("", "off"):
+        return None, None
+    try:
+        return float(raw), None
+    except ValueError:
+        return None, f"expected a number between 0 and 1 (empty: off), got '{raw}'"
+
+
+def _policies(raw: dict[str, Any]) -> tuple[Policies | None, dict[str, str]]:
+    """The policies checked by the protocol's own model: the same bounds the server checks."""
+    try:
         return Policies(**raw), {}
     except ValidationError as e:
+        problems = {}
         for err in e.errors():
             name = str(err["loc"][0]) if err["loc"] else "retries"
             problems[name] = f"{err['input']!r}: {err['msg'].removeprefix('Input ')}"

@@ -94,11 +94,14 @@ def _style(fg: RichColor | None, bg: RichColor | None, bold: bool = False) -> St
     return st
 
 
+Glyph = tuple[str, RichColor, bool, RichColor | None]  # char, colour, bold, background
+
+
 def halfblock_row(
     top: Sequence[Any],
     bottom: Sequence[Any],
     colours: Mapping[Any, RichColor],
-    glyphs: Mapping[int, tuple[str, RichColor, bool, RichColor | None]] | None = None,
+    glyphs: Mapping[int, Glyph] | None = None,
     pattern: Callable[[int, Any], str] | None = None,
     textures: Mapping[Any, RichColor] | None = None,
 ) -> list[Segment]:
@@ -110,24 +113,43 @@ def halfblock_row(
     gives the character drawn where both pixels are equal (" " for none), in
     `textures[key]` (default: the key's colour, a little lighter). Runs of
     equal style are merged."""
+    cells = HalfBlocks(colours, glyphs or {}, pattern or _no_pattern, textures or {})
+    if len(top) != len(bottom):
+        raise ValueError(f"pixel rows of {len(top)} and {len(bottom)} columns")
+    return merged(map(cells.cell, range(len(top)), top, bottom))
+
+
+def _no_pattern(i: int, key: Any) -> str:
+    return " "
+
+
+@dataclass(frozen=True)
+class HalfBlocks:
+    """How one text cell is drawn from its two pixels (halfblock_row says)."""
+
+    colours: Mapping[Any, RichColor]
+    glyphs: Mapping[int, Glyph]
+    pattern: Callable[[int, Any], str]
+    textures: Mapping[Any, RichColor]
+
+    def cell(self, i: int, a: Any, b: Any) -> tuple[str, Style]:
+        """Column i's character and style: its glyph, its ground's pattern, or a half-block."""
+        g = self.glyphs.get(i)
+        if g is not None:
+            return g[0], _style(g[1], g[3] or self.colours[a], g[2])
+        if a != b:
+            return UPPER_HALF, _style(self.colours[a], self.colours[b])
+        ch = self.pattern(i, a)
+        fg = None if ch == " " else self.textures.get(a) or _pattern_fg(self.colours[a])
+        return ch, _style(fg, self.colours[a])
+
+
+def merged(cells: Iterable[tuple[str, Style]]) -> list[Segment]:
+    """Segments of (character, style) cells, a run of one style in one segment."""
     segs: list[Segment] = []
     text: list[str] = []
     run: Style | None = None
-    glyphs = glyphs or {}
-    for i, (a, b) in enumerate(zip(top, bottom, strict=True)):
-        g = glyphs.get(i)
-        if g is not None:
-            ch, st = g[0], _style(g[1], g[3] or colours[a], g[2])
-        elif a == b:
-            ch = pattern(i, a) if pattern is not None else " "
-            fg = (
-                None
-                if ch == " "
-                else (textures.get(a) if textures else None) or _pattern_fg(colours[a])
-            )
-            st = _style(fg, colours[a])
-        else:
-            ch, st = UPPER_HALF, _style(colours[a], colours[b])
+    for ch, st in cells:
         if st is not run:
             if text:
                 segs.append(Segment("".join(text), run))
@@ -252,29 +274,28 @@ class Overlay:
         A label goes right of its glyph, else left, above or below, wherever
         it covers no glyph and no earlier label; else right, cut short."""
         for col, row, text, var in reversed(self._labels):
-            n = len(text)
-            spots = [
-                (col, row),
-                (col - n - 3, row),
-                (col - 2 - n // 2, row - 1),
-                (col - 2 - n // 2, row + 1),
-            ]
-            for c0, r0 in spots:
-                if (
-                    0 <= r0 < self.vp.h
-                    and c0 >= 0
-                    and c0 + n <= self.vp.w
-                    and not any(c0 + i in self.cells.get(r0, {}) for i in range(n))
-                ):
-                    break
-            else:
-                c0, r0 = col, row
+            c0, r0 = self._label_spot(col, row, len(text))
             taken = self.cells.get(r0, {})
             for i, c in enumerate(text):
                 if c0 + i in taken:
                     break
                 self.put(c0 + i, r0, c, var, label=True)
         self._labels.clear()
+
+    def _label_spot(self, col: int, row: int, n: int) -> tuple[int, int]:
+        """Where a label of `n` cells for the glyph left of (col, row) goes."""
+        spots = [
+            (col, row),
+            (col - n - 3, row),
+            (col - 2 - n // 2, row - 1),
+            (col - 2 - n // 2, row + 1),
+        ]
+        return next((spot for spot in spots if self._free(*spot, n)), (col, row))
+
+    def _free(self, c0: int, r0: int, n: int) -> bool:
+        """Whether `n` cells from (c0, r0) are in the view and hold nothing yet."""
+        inside = 0 <= r0 < self.vp.h and c0 >= 0 and c0 + n <= self.vp.w
+        return inside and not any(c0 + i in self.cells.get(r0, {}) for i in range(n))
 
     def cursor(self, x: float, y: float, arrow: str) -> None:
         """The cursor: the glyph under it (or the heading arrow), reversed."""
@@ -346,22 +367,54 @@ def clip_segment(
     return (x0 + t0 * dx, y0 + t0 * dy), (x0 + t1 * dx, y0 + t1 * dy)
 
 
+def marker_points(mk: Any) -> list[tuple[float, float]]:
+    """A marker's points: a pose's or a position's, an area's corners."""
+    if mk.kind == "area":
+        return [(p.x, p.y) for p in mk.area]
+    return [marker_point(mk)]
+
+
+def explored_points(mirror: MapMirror | None) -> list[tuple[float, float]]:
+    """The lander and the corners of the box around what is explored."""
+    if mirror is None or mirror.meta is None:
+        return []
+    g = mirror.meta
+    pts = [(mirror.objects.lander.x, mirror.objects.lander.y)] if mirror.objects else []
+    rows, cols = np.nonzero(mirror.layers["terrain"] != T_UNKNOWN)
+    if len(rows):
+        pts += [
+            (g.x0 + cols.min() * g.cell, g.y0 + rows.min() * g.cell),
+            (g.x0 + (cols.max() + 1) * g.cell, g.y0 + (rows.max() + 1) * g.cell),
+        ]
+    return pts
+
+
+def known_points(model: ConsoleModel, mirror: MapMirror | None) -> list[tuple[float, float]]:
+    """What is known of the site: robots, markers, the lander, the explored area."""
+    pts = [(t.pose.x, t.pose.y) for t in model.telemetry.values()]
+    markers = model.mission.markers.values() if model.mission is not None else []
+    return pts + [p for mk in markers for p in marker_points(mk)] + explored_points(mirror)
+
+
 def robot_status(model: ConsoleModel, robot: str) -> tuple[str, str]:
     """(glyph, colour variable) of what a robot is doing, for its map label."""
     if not model.is_online(robot):
         return OFFLINE_GLYPH, "presence-offline"
     if out_of_contact(model.robots.get(robot)):  # drawn where it was last heard, dimmed
         return CONTACT_GLYPH, "presence-unknown"
+    st = _doing(model, robot)
+    return GLYPHS[st], f"status-{STATUS_CSS[st]}"
+
+
+def _doing(model: ConsoleModel, robot: str) -> Status:
+    """The status a robot's label shows: its acting skill's, else whether it waits."""
     act, queued = model.robot_state(robot)
     if act is not None:
-        st = act.status
-    else:
-        finished = [s for s in model.task(robot) if s.status in FINISHED]
-        if finished and finished[-1].status == Status.FAILURE:
-            st = Status.FAILURE  # halted after a failure: the operator decides
-        else:
-            st = Status.IDLE_SYNCHRONIZED if queued else Status.IDLE
-    return GLYPHS[st], f"status-{STATUS_CSS[st]}"
+        return act.status
+    finished = [s for s in model.task(robot) if s.status in FINISHED]
+    if finished and finished[-1].status == Status.FAILURE:
+        return Status.FAILURE  # halted after a failure: the operator decides
+    return Status.IDLE_SYNCHRONIZED if queued else Status.IDLE
 
 
 MARKER_USE_GLYPH = {"active": " ●", "bound": " ○", "unused": ""}
@@ -373,25 +426,34 @@ def skill_goals(model: ConsoleModel) -> list[tuple[str, str, float, float, Statu
     m, lib = model.mission, model.library
     if m is None or lib is None:
         return []
-    out = []
+    return [
+        (robot, s.id, x, y, s.status)
+        for robot, s, spec in _unfinished(m, lib)
+        for x, y in typed_goals(s, spec)
+    ]
+
+
+def _unfinished(m: Any, lib: Any) -> Iterable[tuple[str, Any, Any]]:
+    """(robot, skill, its spec) of every unfinished skill of the library's."""
     for robot, task in m.tasks.items():
         for s in task:
-            if s.status in FINISHED:
-                continue
             spec = lib.skills.get(s.skill)
-            if spec is None:
-                continue
-            for pname, p in spec.params.items():
-                v = s.params.get(pname)
-                if (
-                    p.type in ("pose", "position")
-                    and pname not in s.bindings
-                    and isinstance(v, dict)
-                    and "x" in v
-                    and "y" in v
-                ):
-                    out.append((robot, s.id, float(v["x"]), float(v["y"]), s.status))
+            if s.status not in FINISHED and spec is not None:
+                yield robot, s, spec
+
+
+def typed_goals(s: Any, spec: Any) -> list[tuple[float, float]]:
+    """(x, y) of a skill's pose and position parameters given as typed values."""
+    out = []
+    for pname, p in spec.params.items():
+        v = s.params.get(pname)
+        if p.type in ("pose", "position") and pname not in s.bindings and _has_xy(v):
+            out.append((float(v["x"]), float(v["y"])))
     return out
+
+
+def _has_xy(v: Any) -> bool:
+    return isinstance(v, dict) and "x" in v and "y" in v
 
 
 # -- what the overlay shows (MapView._build_overlay draws them in this order) --
@@ -418,11 +480,21 @@ def draw_objects(ov: Overlay, objects: Any) -> None:
     for r in objects.rss:
         score = f" {r.top_score:g}" if r.top_score is not None else ""
         ov.point(f"rss:{r.rss}", r.x, r.y, RSS_GLYPH, "map-rss", r.rss + score, "map-rss")
-    for b in objects.boxes:
+    draw_boxes(ov, objects.boxes)
+    draw_stones(ov, objects.stones)
+
+
+def draw_boxes(ov: Overlay, boxes: Any) -> None:
+    """The payload boxes on the ground (" on": switched on)."""
+    for b in boxes:
         if b.where == "ground":
             label = b.box + (" on" if b.on else "")
             ov.point(f"box:{b.box}", b.x, b.y, BOX_GLYPH, "map-box", label, "map-box")
-    for s in objects.stones:
+
+
+def draw_stones(ov: Overlay, stones: Any) -> None:
+    """The stones found (identified, or left on the ground)."""
+    for s in stones:
         if s.state in ("identified", "ground"):
             ov.point(f"stone:{s.id}", s.x, s.y, STONE_GLYPH, "map-stone")
 
@@ -615,28 +687,7 @@ class MapView(Widget, can_focus=True):
     def fit_known(self) -> None:
         """Zoom and centre on what is known: robots, markers, the lander and
         the explored area (the whole site is mostly unknown at first)."""
-        pts: list[tuple[float, float]] = [
-            (t.pose.x, t.pose.y) for t in self.model.telemetry.values()
-        ]
-        m = self.model.mission
-        for mk in m.markers.values() if m is not None else []:
-            if mk.kind == "pose":
-                pts.append((mk.pose.x, mk.pose.y))
-            elif mk.kind == "position":
-                pts.append((mk.position.x, mk.position.y))
-            else:
-                pts += [(p.x, p.y) for p in mk.area]
-        mirror = self.mirror
-        if mirror is not None and mirror.meta is not None:
-            g = mirror.meta
-            if mirror.objects is not None:
-                pts.append((mirror.objects.lander.x, mirror.objects.lander.y))
-            rows, cols = np.nonzero(mirror.layers["terrain"] != T_UNKNOWN)
-            if len(rows):
-                pts += [
-                    (g.x0 + cols.min() * g.cell, g.y0 + rows.min() * g.cell),
-                    (g.x0 + (cols.max() + 1) * g.cell, g.y0 + (rows.max() + 1) * g.cell),
-                ]
+        pts = known_points(self.model, self.mirror)
         if not pts:
             self.fit()
             return
@@ -774,21 +825,17 @@ class MapView(Widget, can_focus=True):
         return ov
 
     # -- rendering ---------------------------------------------------------------------------------
-    def render_line(self, y: int) -> Strip:
-        strip = self._rows.get(y)
-        if strip is not None:
-            return strip
-        self.rendered_rows += 1
-        pal = self._palette()
-        vp = self.vp
-        w = self.size.width
-        top = ground_classes(self.mirror, vp, 2 * y, self._xs_index).tolist()
-        bottom = ground_classes(self.mirror, vp, 2 * y + 1, self._xs_index).tolist()
-        for py, keys in ((2 * y, top), (2 * y + 1, bottom)):
-            for px, var in self._overlay.pixels.get(py, {}).items():
-                if px < len(keys):
-                    keys[px] = var
-        glyphs = {
+    def _pixel_row(self, py: int) -> list[Any]:
+        """Colour keys of pixel row `py`: the ground's, the shapes' over it."""
+        keys = ground_classes(self.mirror, self.vp, py, self._xs_index).tolist()
+        for px, var in self._overlay.pixels.get(py, {}).items():
+            if px < len(keys):
+                keys[px] = var
+        return keys
+
+    def _glyphs(self, y: int, pal: dict[Any, RichColor]) -> dict[int, Glyph]:
+        """The overlay's glyphs of row `y`, in colours (the cursor's reversed)."""
+        return {
             col: (
                 ch,
                 pal.get(var) or pal["map-label"],
@@ -797,25 +844,49 @@ class MapView(Widget, can_focus=True):
             )
             for col, (ch, var, bold) in self._overlay.cells.get(y, {}).items()
         }
+
+    def render_line(self, y: int) -> Strip:
+        strip = self._rows.get(y)
+        if strip is not None:
+            return strip
+        self.rendered_rows += 1
+        pal = self._palette()
+        vp = self.vp
+        top, bottom = self._pixel_row(2 * y), self._pixel_row(2 * y + 1)
         origin = round(vp.cx / vp.mpp) - vp.w // 2  # texture fixed to the ground, not the screen
         strip = Strip(
             halfblock_row(
-                top, bottom, pal, glyphs, lambda i, k: _texture(origin + i, y, k), self._textures
+                top,
+                bottom,
+                pal,
+                self._glyphs(y, pal),
+                lambda i, k: _texture(origin + i, y, k),
+                self._textures,
             )
-        ).crop_extend(0, w, None)
+        ).crop_extend(0, self.size.width, None)
         self._rows[y] = strip
         return strip
 
 
+def _unknown_texture(x: int, row: int) -> str:
+    return "·" if (x + 2 * row) % 4 == 0 else " "
+
+
+def _sand_texture(x: int, row: int) -> str:
+    return "~" if (x + row) % 3 == 0 else " "
+
+
+# ground class -> its pattern at (x, row); free ground has none
+TEXTURES: dict[int, Callable[[int, int], str]] = {
+    T_UNKNOWN: _unknown_texture,
+    T_ROCK: lambda x, row: "▴",
+    T_SLOW: _sand_texture,
+}
+
+
 def _texture(x: int, row: int, key: Any) -> str:
     """Patterns where a whole cell is one ground class (colour is not alone)."""
-    if not isinstance(key, int):
+    if not isinstance(key, int) or key == OUTSIDE:
         return " "
-    t = key % 4 if key != OUTSIDE else -1
-    if t == T_UNKNOWN:
-        return "·" if (x + 2 * row) % 4 == 0 else " "
-    if t == T_ROCK:
-        return "▴"
-    if t == T_SLOW:
-        return "~" if (x + row) % 3 == 0 else " "
-    return " "
+    pattern = TEXTURES.get(key % 4)
+    return pattern(x, row) if pattern is not None else " "
