@@ -135,6 +135,43 @@ async def test_give_to_says_why_when_no_robot_can_take_it():
         assert not isinstance(app.screen, GiveToScreen)
 
 
+def _toasts(app, title: str) -> list[str]:
+    return [n.message for n in app._notifications if n.title == title]
+
+
+async def test_retire_and_give_to_say_their_notes_in_one_notification():
+    """Two notes of one reply used to be two toasts of one title, folded into
+    the last one with "(×2)": the first note was lost."""
+    b = Builder(TUTORIAL)
+    b.engine.submit(AddRobot(name="lru3", type="lru_science"))
+    app, _ = engine_app(b)
+    async with app.run_test(size=SIZE) as pilot:
+        await _load(app, pilot, b, {"lru1": True, "lru2": True, "lru3": True})
+        await pilot.press("f4")
+        await wait_until(pilot, lambda: isinstance(app.screen, FleetScreen), what="fleet")
+        app.clear_notifications()
+        await pilot.press("ctrl+x")  # lru1, the first row
+        await wait_until(pilot, lambda: "Retire lru1" in screen_text(app), what="the prompt")
+        await pilot.press(*"broken", "enter")
+        await wait_until(pilot, lambda: _toasts(app, "retire lru1"), what="the notes")
+        (said,) = _toasts(app, "retire lru1")
+        assert "lru1 retired: no new syncs" in said and "awaits reassignment" in said
+        assert "(×" not in said
+
+        await pilot.press("f2")
+        await wait_until(pilot, lambda: app.screen is app.mission_screen, what="schedule")
+        app.clear_notifications()
+        app.mission_screen.schedule.select("lru1-1")
+        await pilot.press("G")
+        await wait_until(pilot, lambda: isinstance(app.screen, GiveToScreen), what="give to")
+        await pilot.press("down", "enter")  # lru2: it takes the drive, not the image
+        what = "give lru1's plan (2 skills: lru1-1, lru1-2) to lru2"
+        await wait_until(pilot, lambda: _toasts(app, what), what="the notes")
+        (said,) = _toasts(app, what)
+        assert "1 skill(s) given to lru2: lru1-1" in said and "lru1-2 stays:" in said
+        assert "(×" not in said
+
+
 # -- snapshots (deterministic: the app's clock at T0; each asserts real content first) ---------
 
 
