@@ -4,6 +4,7 @@ over the plan of a retired robot; every step is a separate ctl process."""
 
 from __future__ import annotations
 
+import json
 import sys
 import time
 
@@ -87,6 +88,33 @@ def test_unknown_type_and_bad_usage(server):
     assert r.returncode == 2 and "give skill ids, or --from ROBOT" in r.stderr, r
     r = ctl(server.endpoint, "robots", "retire", "lru2")
     assert r.returncode == 2 and "--reason" in r.stderr, r
+
+
+def _stale(endpoint: str, *args: str) -> str:
+    r = ctl(endpoint, "--json", *args)
+    assert r.returncode == 1, r
+    obj = json.loads(r.stdout)
+    assert obj["ok"] is False and obj["code"] == "stale", obj
+    return str(obj["message"])
+
+
+def test_expect_revision_refuses_stale_team_operations(server):
+    endpoint = server.endpoint
+    seen = str(state(endpoint)["revision"])
+    ok(endpoint, "robots", "add", "lru3", "--type", "lru_science", "--expect-revision", seen)
+    seen = str(state(endpoint)["revision"])
+    ok(endpoint, "edit", "lru1-2", "--label", "look again")  # someone else's change
+    said = _stale(endpoint, "reassign", "lru1-2", "--to", "lru3", "--expect-revision", seen)
+    assert "lru1-2" in said and f"after the revision {seen} you saw" in said
+    ok(endpoint, "add", "lru1", "recharge")
+    for args in (("reassign", "--from", "lru1", "--to", "lru3"), ("robots", "retire", "lru1")):
+        extra = ("--reason", "broken") if args[0] == "robots" else ()
+        assert "the list of lru1" in _stale(endpoint, *args, *extra, "--expect-revision", seen)
+    st = state(endpoint)
+    assert ids(st, "lru3") == [] and st["robots"]["lru1"]["retired"] in (None, "")
+    fresh = str(st["revision"])
+    ok(endpoint, "reassign", "--from", "lru1", "--to", "lru3", "--expect-revision", fresh)
+    assert ids(state(endpoint), "lru1") == []
 
 
 def test_suggest_ranks_robots_by_the_forecast(server):

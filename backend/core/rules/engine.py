@@ -32,6 +32,7 @@ from backend.core.model import FINISHED, Mission, SkillInstance, Status, format_
 from backend.core.ops import (
     UNDOABLE,
     AddBarrier,
+    AddRobot,
     AddSkill,
     Control,
     DeleteSkills,
@@ -43,10 +44,13 @@ from backend.core.ops import (
     MoveSkill,
     NewMission,
     Operation,
+    Reassign,
     Redo,
     RemoveBarrier,
     RestoreMarker,
+    RetireRobot,
     Retry,
+    ReturnSkills,
     SetSkill,
     Sync,
     Undo,
@@ -215,7 +219,36 @@ def _touched(m: Mission, op: Operation) -> list[tuple[int, str]]:
             MarkerMove(name=n) | MarkerRename(name=n) | MarkerDelete(name=n) | RestoreMarker(name=n)
         ):
             return [(m.marker_revs.get(n, 0), f"marker {n}")]
+    return _TEAM_TOUCHED.get(type(op), _untouched)(m, op)
+
+
+def _untouched(m: Mission, op: Any) -> list[tuple[int, str]]:
     return []
+
+
+def _robot_touched(m: Mission, op: AddRobot | RetireRobot) -> list[tuple[int, str]]:
+    """A robot joining or retiring: its entry and list (an add or retire stamps it)."""
+    return [_task_rev(m, op.name)]
+
+
+def _reassign_touched(m: Mission, op: Reassign) -> list[tuple[int, str]]:
+    """The skills named, the plan given away and the list they go to."""
+    lists = [r for r in (op.from_robot, op.to) if r is not None]
+    return _skill_revs(m, op.ids) + [_task_rev(m, r) for r in lists]
+
+
+def _return_touched(m: Mission, op: ReturnSkills) -> list[tuple[int, str]]:
+    """The skills given back (an undo must not overwrite a later edit of them)."""
+    return _skill_revs(m, [it.skill.id for it in op.items])
+
+
+# the team's operations (issue 30), kept out of the match above: one table, no ladder
+_TEAM_TOUCHED: dict[type[Any], Any] = {
+    AddRobot: _robot_touched,
+    RetireRobot: _robot_touched,
+    Reassign: _reassign_touched,
+    ReturnSkills: _return_touched,
+}
 
 
 def _task_rev(m: Mission, robot: str) -> tuple[int, str]:

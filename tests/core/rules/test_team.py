@@ -11,6 +11,7 @@ from backend.core.ops import (
     AddBarrier,
     AddRobot,
     AddSkill,
+    EditSkill,
     Reassign,
     RetireRobot,
     Sync,
@@ -196,3 +197,33 @@ def test_team_events_replay_to_the_same_mission(engine: Engine) -> None:
     for b in batches:
         replayed = apply_events(replayed, b)
     assert replayed.model_dump() == engine.mission.model_dump()
+
+
+def test_team_operations_are_refused_stale_after_a_later_change(engine: Engine) -> None:
+    """--expect-revision: retire, reassign (and the undo of a reassign) touch
+    the robot's list and the skills they move."""
+    engine.submit(AddRobot(name="lru3", type="lru_science"))
+    seen = engine.mission.revision
+    engine.submit(EditSkill(id="lru1-2", label="look again"), client="other")
+    give = Reassign(ids=["lru1-2"], to="lru3")
+    refused(engine, lambda: engine.submit(give, expected_revision=seen), "stale", "skill lru1-2")
+    seen = engine.mission.revision
+    engine.submit(AddSkill(robot="lru1", skill="recharge"), client="other")
+    for op, what in (
+        (RetireRobot(name="lru1", reason="broken"), "the list of lru1"),
+        (Reassign(from_robot="lru1", to="lru3"), "the list of lru1"),
+        (Reassign(ids=["lru2-1"], to="lru1"), "the list of lru1"),  # the list it goes to
+    ):
+        r = refused(engine, lambda op=op: engine.submit(op, expected_revision=seen), "stale", what)
+        assert f"after the revision {seen} you saw" in r.message
+    # the robots' lists as the client saw them now: accepted
+    now = engine.mission.revision
+    engine.submit(Reassign(ids=["lru1-2"], to="lru3"), expected_revision=now, client="c")
+    engine.submit(AddSkill(robot="lru3", skill="recharge"), client="other")
+    engine.submit(EditSkill(id="lru1-2", label="mine now"), client="other")
+    undo = refused(engine, lambda: engine.submit(Undo(), client="c"), "stale", "another client")
+    assert "cannot undo" in undo.message
+    assert ids(engine, "lru3")[0] == "lru1-2"  # the other client's edit stays
+    fresh = engine.mission.revision
+    engine.submit(AddRobot(name="lru4", type="lru_science"), expected_revision=fresh)
+    engine.submit(RetireRobot(name="lru4", reason="not needed"), expected_revision=fresh + 1)
