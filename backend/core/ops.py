@@ -285,6 +285,11 @@ class ReturnSkills(Strict):
     items: list[RestoreItem]
     to: Name = Field(description="where the reassignment gave them (its redo)")
     barriers: dict[Name, Barrier] = Field(default_factory=dict)
+    afters: dict[SkillId, SkillId] = Field(
+        default_factory=dict,
+        max_length=10_000,
+        description="skill id -> the `after` it had, dissolved by the reassignment",
+    )
 
 
 class RestoreMarker(Strict):

@@ -3,8 +3,13 @@ offer them (issue 30), keeping parameters, marker bindings and order.
 
 Each skill that cannot move says why; the others move. A barrier that
 would tie two skills of one robot is dissolved (saying so); the others
-follow their skills (a barrier names skills, not robots). Undone by
-`ReturnSkills`: each skill back where it was, with its barriers.
+follow their skills (a barrier names skills, not robots). An `after` link
+(`policies.after`) names a skill, not a robot, so it follows too: the
+robot asked is the awaited skill's, wherever it is now; one that would
+make a robot wait for itself is dissolved, saying which skill its plan
+runs first. A skill awaited by one already on a robot stays (the waiter
+asks its robot by name). Undone by `ReturnSkills`: each skill back where
+it was, with its barriers and `after` links.
 """
 
 from __future__ import annotations
@@ -12,7 +17,7 @@ from __future__ import annotations
 from typing import Any
 
 from backend.core import events as ev
-from backend.core.model import FINISHED, Barrier, SkillInstance, Status
+from backend.core.model import FINISHED, Barrier, Mission, SkillInstance, Status
 from backend.core.ops import Reassign, RestoreItem, ReturnSkills
 from backend.core.rules.base import Change, Refusal, Rule, Rules, check_in_service
 from backend.core.rules.uplink import incompatible
@@ -38,13 +43,40 @@ def _plan_of(rules: Rules, robot: str | None) -> list[str]:
     return [s.id for s in rules.task(robot) if s.status == Status.IDLE]
 
 
-def why_not(rules: Rules, s: SkillInstance, robot: str, to: str) -> str | None:
+Waiters = dict[str, list[tuple[str, SkillInstance]]]  # awaited id -> (robot, waiter)
+
+
+def waiters(m: Mission) -> Waiters:
+    """Each skill that some unfinished skill waits for (`after`), and those waiters."""
+    out: Waiters = {}
+    for robot, task in m.tasks.items():
+        for s in task:
+            if s.policies.after is not None and s.status not in FINISHED:
+                out.setdefault(s.policies.after, []).append((robot, s))
+    return out
+
+
+def why_not(
+    rules: Rules, s: SkillInstance, robot: str, to: str, waiting: Waiters | None = None
+) -> str | None:
     """Why skill `s` of `robot` cannot go to `to` (None: it can)."""
     if robot == to:
         return f"it is {to}'s already"
     if s.status != Status.IDLE:
         return f"it is {s.status.value}: only unsynchronized (idle) skills move"
-    return rules.locked.get(s.id) or _unable(rules, s, to) or _barrier_held(rules, s, to)
+    held = _after_held(s, robot, waiters(rules.mission) if waiting is None else waiting)
+    return rules.locked.get(s.id) or _unable(rules, s, to) or _barrier_held(rules, s, to) or held
+
+
+def _after_held(s: SkillInstance, robot: str, waiting: Waiters) -> str | None:
+    """A waiter on its robot already asks this skill's robot, by name: it cannot change."""
+    for other, w in waiting.get(s.id, []):
+        if w.status != Status.IDLE:
+            return (
+                f"{w.display()} ({w.status.value} on {other}) waits for it, asking {robot} "
+                f"robot to robot; unsynchronize {w.id} first"
+            )
+    return None
 
 
 def _unable(rules: Rules, s: SkillInstance, to: str) -> str | None:
@@ -82,9 +114,11 @@ def _barrier_held(rules: Rules, s: SkillInstance, to: str) -> str | None:
 def reassign(rules: Rules, op: Reassign) -> Change:
     rules.robot_type(op.to)
     check_in_service(rules, op.to)
-    items, refused = _split(rules, chosen(rules, op), op.to)
+    waiting = waiters(rules.mission)
+    items, refused = _split(rules, chosen(rules, op), op.to, waiting)
     moved = {it.skill.id for it in items}
     barrier_events, before, barrier_notes = _barriers(rules, moved, op.to)
+    after_events, afters, after_notes = _afters(rules, moved_ids(items), op.to, waiting)
     events: list[ev.Event] = [
         ev.SkillRemoved(robot=it.robot, id=it.skill.id)
         for it in sorted(items, key=lambda it: (it.robot, -it.index))
@@ -94,20 +128,28 @@ def reassign(rules: Rules, op: Reassign) -> Change:
         ev.SkillAdded(robot=op.to, index=end + n, skill=it.skill) for n, it in enumerate(items)
     ]
     notes = [f"{len(items)} skill(s) given to {op.to}: {', '.join(moved_ids(items))}"]
-    notes += [f"{sid} stays: {why}" for sid, why in refused.items()] + barrier_notes
-    value = {"to": op.to, "moved": moved_ids(items), "refused": refused, "dissolved": list(before)}
-    undo = ReturnSkills(items=items, to=op.to, barriers=before)
-    return Change(events + barrier_events, notes, value, undo)
+    notes += [f"{sid} stays: {why}" for sid, why in refused.items()] + barrier_notes + after_notes
+    value = {
+        "to": op.to,
+        "moved": moved_ids(items),
+        "refused": refused,
+        "dissolved": list(before),
+        "afters_dissolved": afters,
+    }
+    undo = ReturnSkills(items=items, to=op.to, barriers=before, afters=afters)
+    return Change(events + barrier_events + after_events, notes, value, undo)
 
 
-def _split(rules: Rules, ids: list[str], to: str) -> tuple[list[RestoreItem], dict[str, str]]:
+def _split(
+    rules: Rules, ids: list[str], to: str, waiting: Waiters
+) -> tuple[list[RestoreItem], dict[str, str]]:
     """The skills that can go to `to` (where they are), and why the others cannot;
     refused when none can."""
     items: list[RestoreItem] = []
     refused: dict[str, str] = {}
     for sid in ids:
         robot, i, s = rules.skill(sid)
-        why = why_not(rules, s, robot, to)
+        why = why_not(rules, s, robot, to, waiting)
         if why is None:
             items.append(RestoreItem(robot=robot, index=i, skill=s))
         else:
@@ -146,6 +188,58 @@ def _barriers(
     return events, before, notes
 
 
+def _afters(
+    rules: Rules, moved: list[str], to: str, waiting: Waiters
+) -> tuple[list[ev.Event], dict[str, str], list[str]]:
+    """`after` links of or to the moved skills: each follows its skill (said),
+    or is dissolved (and kept to restore) where a robot would wait for itself."""
+    order = [s.id for s in rules.task(to)] + moved  # `to`'s plan once they moved
+    events: list[ev.Event] = []
+    afters: dict[str, str] = {}
+    notes: list[str] = []
+    for w, a in _links(rules, moved, waiting):
+        robots = _robots_of(rules, w.id, a, to, set(moved))
+        if robots is None:
+            continue
+        if robots[0] != robots[1]:
+            notes.append(f"{w.id} (on {robots[0]}) still starts after {a}, now on {robots[1]}")
+            continue
+        afters[w.id] = a
+        policies = w.policies.model_copy(update={"after": None})
+        events.append(ev.SkillEdited(id=w.id, policies=policies))
+        notes.append(_dissolved(w.id, a, to, order))
+    return events, afters, notes
+
+
+def _links(rules: Rules, moved: list[str], waiting: Waiters) -> list[tuple[SkillInstance, str]]:
+    """(waiter, awaited id): the moved skills' own links, then those waiting for them."""
+    mine = [rules.skill(sid)[2] for sid in moved]
+    links = [(w, str(w.policies.after)) for w in mine if w.policies.after is not None]
+    gone = set(moved)
+    return links + [(w, a) for a in moved for _, w in waiting.get(a, []) if w.id not in gone]
+
+
+def _robots_of(
+    rules: Rules, waiter: str, awaited: str, to: str, gone: set[str]
+) -> tuple[str, str] | None:
+    """Where the waiter and the awaited skill are once the skills moved (None: gone)."""
+    found = rules.mission.find(awaited)
+    if found is None:
+        return None
+    here = to if waiter in gone else rules.skill(waiter)[0]
+    return here, to if awaited in gone else found[0]
+
+
+def _dissolved(waiter: str, awaited: str, to: str, order: list[str]) -> str:
+    said = (
+        f"{waiter} no longer starts after {awaited}: both are on {to} now, and a robot never "
+        "waits for itself"
+    )
+    if order.index(awaited) < order.index(waiter):
+        return f"{said}; its plan runs {awaited} first, as before"
+    return f"{said}; its plan runs {waiter} first: move {awaited} above it to keep the order"
+
+
 def return_skills(rules: Rules, op: ReturnSkills) -> Change:
     """Each skill back where it was (the undo of a reassignment)."""
     events: list[ev.Event] = []
@@ -162,8 +256,21 @@ def return_skills(rules: Rules, op: ReturnSkills) -> Change:
         _, _, now = rules.skill(it.skill.id)  # as it is now (it may have been edited)
         events.append(ev.SkillAdded(robot=it.robot, index=idx, skill=now))
     events += [ev.BarrierSet(id=bid, barrier=b) for bid, b in op.barriers.items()]
+    events += _relinked(rules, op.afters)
     ids = [it.skill.id for it in op.items]
     return Change(events, [], {"returned": ids}, Reassign(ids=ids, to=op.to))
+
+
+def _relinked(rules: Rules, afters: dict[str, str]) -> list[ev.Event]:
+    """The `after` links a reassignment dissolved, set again (on skills still unfinished)."""
+    events: list[ev.Event] = []
+    for sid, awaited in afters.items():
+        found = rules.mission.find(sid)
+        if found is None or found[2].status in FINISHED:
+            continue
+        policies = found[2].policies.model_copy(update={"after": awaited})
+        events.append(ev.SkillEdited(id=sid, policies=policies))
+    return events
 
 
 RULES: dict[type[Any], Rule] = {Reassign: reassign, ReturnSkills: return_skills}

@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from backend.core.events import EventBatch, apply_events
-from backend.core.model import CommandState, Status
+from backend.core.model import CommandState, Policies, Status
 from backend.core.ops import (
     AddBarrier,
     AddRobot,
@@ -18,7 +18,7 @@ from backend.core.ops import (
     Undo,
 )
 from backend.core.rules.engine import Engine
-from tests.core.rules.conftest import bring, ids, refused, skill, status_of
+from tests.core.rules.conftest import bring, ids, refused, skill, status_of, sync
 
 
 def test_a_robot_of_a_known_type_joins_with_an_empty_plan(engine: Engine) -> None:
@@ -227,3 +227,62 @@ def test_team_operations_are_refused_stale_after_a_later_change(engine: Engine) 
     fresh = engine.mission.revision
     engine.submit(AddRobot(name="lru4", type="lru_science"), expected_revision=fresh)
     engine.submit(RetireRobot(name="lru4", reason="not needed"), expected_revision=fresh + 1)
+
+
+def _after(engine: Engine, waiter: str, awaited: str | None) -> None:
+    engine.submit(EditSkill(id=waiter, policies=Policies(after=awaited)))
+
+
+def _waits_for(engine: Engine, sid: str) -> str | None:
+    return skill(engine, sid).policies.after
+
+
+def test_an_after_link_follows_its_skill_to_another_robot(engine: Engine) -> None:
+    engine.submit(AddRobot(name="lru3", type="lru_science"))
+    _after(engine, "lru1-2", "lru2-1")
+    applied = engine.submit(Reassign(ids=["lru1-2"], to="lru3"))
+    assert _waits_for(engine, "lru1-2") == "lru2-1"  # lru3 asks lru2 now
+    assert "lru1-2 (on lru3) still starts after lru2-1, now on lru2" in applied.notes
+    assert applied.value["afters_dissolved"] == {}
+    # the awaited skill moves: its waiter asks the new robot (the link names the skill)
+    applied = engine.submit(Reassign(ids=["lru2-1"], to="lru1"))
+    assert _waits_for(engine, "lru1-2") == "lru2-1"
+    assert "lru1-2 (on lru3) still starts after lru2-1, now on lru1" in applied.notes
+
+
+def test_an_after_link_that_would_tie_a_robot_to_itself_is_dissolved(engine: Engine) -> None:
+    _after(engine, "lru1-1", "lru2-1")
+    applied = engine.submit(Reassign(ids=["lru1-1"], to="lru2"))
+    assert _waits_for(engine, "lru1-1") is None
+    assert applied.value["afters_dissolved"] == {"lru1-1": "lru2-1"}
+    said = next(n for n in applied.notes if n.startswith("lru1-1 no longer starts after"))
+    assert "both are on lru2 now, and a robot never waits for itself" in said
+    assert said.endswith("its plan runs lru2-1 first, as before")
+    sync(engine, "lru2")  # nothing left for the plan checks to refuse
+
+
+def test_a_dissolved_after_says_when_the_plan_runs_the_waiter_first(engine: Engine) -> None:
+    _after(engine, "lru1-2", "lru2-1")  # lru1-2 stays; what it waits for comes to lru1
+    applied = engine.submit(Reassign(ids=["lru2-1"], to="lru1"), client="c")
+    assert ids(engine, "lru1") == ["lru1-1", "lru1-2", "lru2-1"]
+    assert _waits_for(engine, "lru1-2") is None
+    assert any(
+        n.endswith("its plan runs lru1-2 first: move lru2-1 above it to keep the order")
+        for n in applied.notes
+    ), applied.notes
+    engine.submit(Undo(), client="c")  # back, and the link with it
+    assert ids(engine, "lru2") == ["lru2-1", "lru2-2"]
+    assert _waits_for(engine, "lru1-2") == "lru2-1"
+
+
+def test_a_skill_awaited_by_one_on_its_robot_stays(engine: Engine) -> None:
+    engine.submit(AddRobot(name="lru3", type="lru_science"))
+    _after(engine, "lru2-1", "lru1-1")
+    sync(engine, "lru2", "lru2-1")  # lru2 asks lru1 for lru1-1, robot to robot
+    refused(
+        engine,
+        lambda: engine.submit(Reassign(ids=["lru1-1"], to="lru3")),
+        "cannot_reassign",
+        "lru2-1",
+        "waits for it, asking lru1 robot to robot; unsynchronize lru2-1 first",
+    )
