@@ -1,7 +1,8 @@
 """ "Give to…" (issue 30): the selected skill, the marked ones or a retired
 robot's whole plan go to another robot, chosen from a list of the robots
-in service ranked by the forecast (earliest end with them, then battery
-left); a robot that cannot take them says why and cannot be chosen."""
+in service ranked by the forecast (earliest end with them, then the least
+time out of comms coverage, then battery left); a robot that cannot take
+them says why and cannot be chosen."""
 
 from __future__ import annotations
 
@@ -37,7 +38,7 @@ class GiveToScreen(ChoiceScreen):
     def compose(self) -> ComposeResult:
         with Vertical():
             yield Label(Text(self.question, style="bold"), classes="question")
-            yield Static("ranked by the forecast: earliest end with them, then battery left")
+            yield Static("ranked: earliest end, then least time out of coverage, then most battery")
             options = (Option(p, id=r, disabled=r not in self.takers) for r, p in self.rows)
             yield OptionList(*options, id="choices")
             hint = key_names(self).hint(

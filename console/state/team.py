@@ -1,6 +1,7 @@
 """The team as the console shows it (issue 30) — no Textual here: robots
 that ask to join, retired robots, what "give to…" gives and the ranked list
-of robots that could take it (the forecast's end and battery left)."""
+of robots that could take it (the forecast's end, time out of comms coverage
+and battery left)."""
 
 from __future__ import annotations
 
@@ -99,7 +100,7 @@ def hint_words(h: Suggestion, now: float, clock: MissionClock) -> str:
     else:
         end = f"ends {clock.ts_text(h.end)} (in {clock.duration_text(h.end - now)})"
     stays = "".join(f"; {k} stays: {v}" for k, v in h.refused.items())
-    return end + battery_words(h) + stays
+    return end + battery_words(h) + coverage_words(h, clock) + stays
 
 
 def battery_words(h: Suggestion) -> str:
@@ -108,3 +109,13 @@ def battery_words(h: Suggestion) -> str:
         return ""
     assumed = " (no telemetry: full at start)" if h.battery_assumed else ""
     return f", {h.battery_end:.0%} battery left{assumed}"
+
+
+def coverage_words(h: Suggestion, clock: MissionClock) -> str:
+    """', 3m10s out of coverage' (nothing without a site map: unknown)."""
+    out = h.out_of_coverage_s
+    if out is None:
+        return ""
+    if out < 0.5:
+        return ", in coverage throughout"
+    return f", {clock.duration_text(out)} out of coverage"

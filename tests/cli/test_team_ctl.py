@@ -124,9 +124,27 @@ def test_suggest_ranks_robots_by_the_forecast(server):
     rows = {r["robot"]: r for r in hint["robots"]}
     assert hint["robots"][0]["robot"] == "lru3" and rows["lru3"]["capable"] is True
     assert rows["lru3"]["end_in_s"] is not None and rows["lru3"]["battery_end"] is not None
+    assert rows["lru3"]["out_of_coverage_s"] is None  # no simulator: no site map, unknown
     assert "has no skill 'take_science_image'" in rows["lru2"]["refused"]["lru1-2"]
     text = ok(endpoint, "suggest", "take_science_image").stdout.splitlines()
     assert text[0] == "who can take take_science_image (earliest end first):"
     assert text[-1].startswith("  3. lru2 cannot: lru2 (lru_manipulator) has no skill"), text
     r = ctl(endpoint, "suggest", "nope-1")
     assert r.returncode == 2 and "no skill with id or library name nope-1" in r.stderr, r
+
+
+def test_suggest_text_says_the_time_out_of_coverage():
+    from backend.cli.ctl.suggest import hint_text
+
+    row = {
+        "robot": "lru3",
+        "moved": ["lru1-4"],
+        "refused": {},
+        "end_in_s": 750.0,
+        "battery_end": 0.62,
+        "battery_assumed": False,
+        "out_of_coverage_s": 190.0,
+    }
+    assert hint_text(row) == "lru3: ends in 12m30s, battery 62% left, 3m10s out of coverage"
+    assert hint_text({**row, "out_of_coverage_s": 0.0}).endswith(", in coverage throughout")
+    assert hint_text({**row, "out_of_coverage_s": None}).endswith("battery 62% left")

@@ -21,10 +21,12 @@ from console_state import (
     wait_until,
 )
 
-from backend.core.ops import AddRobot, Reassign, RetireRobot
-from backend.protocol.messages import Alert, RobotInfo
+from backend.core.model import Pose
+from backend.core.ops import AddRobot, AddSkill, Reassign, RetireRobot
+from backend.protocol.messages import Alert, RobotInfo, Telemetry
 from console.screens.fleet import FleetScreen
 from console.screens.give_to import GiveToScreen
+from console.state.team import gift, ranked
 
 SIZE = (100, 30)
 
@@ -170,6 +172,31 @@ async def test_retire_and_give_to_say_their_notes_in_one_notification():
         (said,) = _toasts(app, what)
         assert "1 skill(s) given to lru2: lru1-1" in said and "lru1-2 stays:" in said
         assert "(×" not in said
+
+
+async def test_give_to_says_how_long_each_robot_would_be_out_of_coverage():
+    from plan_state import show_plan
+
+    b = Builder(TUTORIAL)
+    b.engine.submit(AddRobot(name="lru3", type="lru_science"))
+    far = {"goal": {"x": 120.0, "y": -40.0}}  # the test map's coverage ends 60 m out
+    sid = b.engine.submit(AddSkill(robot="lru1", skill="drive_to", params=far)).value["id"]
+    app, _ = engine_app(b)
+    here = [
+        Telemetry(robot=r, pose=Pose(x=5.0, y=0.0), battery=0.9, at=T0) for r in ("lru2", "lru3")
+    ]
+    async with app.run_test(size=SIZE) as pilot:
+        await show_plan(app, pilot, b, telemetry=here)
+        app.mission_screen.schedule.select(sid)
+        await pilot.press("G")
+        await wait_until(pilot, lambda: isinstance(app.screen, GiveToScreen), what="give to")
+        text = screen_text(app)
+        assert "ranked: earliest end, then least time out of coverage" in text
+        hints = {h.robot: h for h in ranked(app.model, gift(app.model, "lru1", sid, []))}
+        out = hints["lru3"].out_of_coverage_s
+        assert out is not None and out > 30  # about 70 of its 125 m, at 0.5 m/s
+        shown = app.model.clock.duration_text(out)
+        assert f"{shown} out of coverage" in text, text
 
 
 # -- snapshots (deterministic: the app's clock at T0; each asserts real content first) ---------

@@ -1,6 +1,6 @@
 """`ctl suggest SKILL_OR_ID...` (issue 30): the robots that can take skills,
-ranked by the forecast (their predicted end with them, the battery left);
-see backend/core/plan/suggest.py."""
+ranked by the forecast (their predicted end with them, the time out of comms
+coverage doing them, the battery left); see backend/core/plan/suggest.py."""
 
 from __future__ import annotations
 
@@ -45,7 +45,12 @@ def _hint_json(h: Any, now: float) -> dict[str, Any]:
         "end_in_s": round(h.end - now, 1) if h.end is not None else None,
         "battery_end": round(h.battery_end, 3) if h.battery_end is not None else None,
         "battery_assumed": h.battery_assumed,
+        "out_of_coverage_s": _rounded(h.out_of_coverage_s),
     }
+
+
+def _rounded(s: float | None) -> float | None:
+    return round(s, 1) if s is not None else None
 
 
 def hint_text(row: dict[str, Any]) -> str:
@@ -54,7 +59,15 @@ def hint_text(row: dict[str, Any]) -> str:
         return f"{row['robot']} cannot: " + "; ".join(row["refused"].values())
     end = _duration(row["end_in_s"]) if row["end_in_s"] is not None else "never (a barrier)"
     stays = "".join(f"; {k} stays: {v}" for k, v in row["refused"].items())
-    return f"{row['robot']}: ends in {end}{_battery(row)}{stays}"
+    return f"{row['robot']}: ends in {end}{_battery(row)}{_coverage(row)}{stays}"
+
+
+def _coverage(row: dict[str, Any]) -> str:
+    """', 3m10s out of coverage' (nothing without a site map: unknown)."""
+    out = row["out_of_coverage_s"]
+    if out is None:
+        return ""
+    return f", {_duration(out)} out of coverage" if out >= 0.5 else ", in coverage throughout"
 
 
 def _battery(row: dict[str, Any]) -> str:

@@ -1,12 +1,15 @@
 """Allocation hints (issue 30): which robots can do a skill, or take over a
-selection of skills, ranked by the forecast — when each would end with them
-and the battery it would have left.
+selection of skills, ranked by the forecast — when each would end with them,
+how long it would be out of comms coverage doing them, and the battery it
+would have left.
 
 For each robot in service, the skills are given to it in a copy of the
 mission (the reassign rule decides which can move and why the others
 cannot; a skill named by its library name is a new one at the end of its
 plan), and the copy is forecast. Robots that can take everything come
-first, the earliest end first, then the most battery left.
+first, the earliest end first; between equal ends, the one out of coverage
+for less time (it can be told what to do meanwhile), then the most battery
+left.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ from backend.core import events as ev
 from backend.core.library import Library, default_value
 from backend.core.model import Mission, SkillInstance
 from backend.core.ops import Reassign
-from backend.core.plan.forecast import Forecaster
+from backend.core.plan.forecast import Forecast, Forecaster
 from backend.core.plan.inputs import PlanInputs
 from backend.core.rules import reassign as reassigning
 from backend.core.rules.base import Offers, Refusal, Rules
@@ -38,15 +41,18 @@ class Suggestion:
     end: float | None = None  # its last skill's predicted end with them (None: never)
     battery_end: float | None = None
     battery_assumed: bool = False  # no telemetry: a full battery was assumed
+    # wall seconds out of comms coverage doing them, the drives to them
+    # included (None: no site map, unknown)
+    out_of_coverage_s: float | None = None
 
     @property
     def capable(self) -> bool:
         return bool(self.moved) and not self.refused
 
-    def rank(self) -> tuple[bool, float, float]:
+    def rank(self) -> tuple[bool, float, float, float]:
         end = self.end if self.end is not None else math.inf
         battery = -(self.battery_end if self.battery_end is not None else 0.0)
-        return (not self.capable, end, battery)
+        return (not self.capable, end, self.out_of_coverage_s or 0.0, battery)
 
 
 class Manifests:
@@ -138,11 +144,20 @@ def _forecast(
     robot: str,
     moved: tuple[str, ...],
     refused: Mapping[str, str],
+    probed: tuple[str, ...] = (),
 ) -> Suggestion:
-    fc = forecaster.forecast(mission, inputs).robots.get(robot)
+    forecast = forecaster.forecast(mission, inputs)
+    fc = forecast.robots.get(robot)
     if fc is None:
         return Suggestion(robot, moved, dict(refused))
-    return Suggestion(robot, moved, dict(refused), fc.end, fc.battery_end, fc.battery_assumed)
+    out = _out_of_coverage(forecast, probed or moved) if inputs.site is not None else None
+    return Suggestion(robot, moved, dict(refused), fc.end, fc.battery_end, fc.battery_assumed, out)
+
+
+def _out_of_coverage(forecast: Forecast, ids: tuple[str, ...]) -> float:
+    """Wall seconds the skills spend out of comms coverage, by the forecast."""
+    spans = [span for sid in ids if (f := forecast.skill(sid)) for span in f.out_of_coverage]
+    return sum(b - a for a, b in spans)
 
 
 def _by_name(
@@ -163,7 +178,7 @@ def _by_name(
             continue
         copy = mission.copy_deep()
         copy.tasks.setdefault(robot, []).append(probe.model_copy())
-        out.append(_forecast(forecaster, copy, inputs, robot, (skill,), {}))
+        out.append(_forecast(forecaster, copy, inputs, robot, (skill,), {}, (PROBE_ID,)))
     return out
 
 
