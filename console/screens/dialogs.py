@@ -345,6 +345,7 @@ class SkillPicker(ListChoice):
         library: Library,
         where: str,
         offered_by: dict[str, str] | None = None,
+        who_can: Callable[[str], str] | None = None,
     ) -> None:
         super().__init__()
         self.robot = robot
@@ -352,6 +353,8 @@ class SkillPicker(ListChoice):
         self.library = library
         self.where = where
         self.offered_by = offered_by or {}  # skill -> "also offered by: lru2"
+        self.who_can = who_can  # skill -> the robots ranked for it (console/state/team.py)
+        self._ranked: dict[str, str] = {}  # asked once per skill while the picker is open
 
     def compose(self) -> ComposeResult:
         with Vertical():
@@ -362,6 +365,7 @@ class SkillPicker(ListChoice):
             )
             yield Input(placeholder="type to filter…", id="filter")
             yield OptionList(id="skills")
+            yield Static("", id="who")
             yield Static(self.hint("add"), classes="hint")
 
     def on_mount(self) -> None:
@@ -402,6 +406,17 @@ class SkillPicker(ListChoice):
         ol.add_options([self._option(n, matcher) for n in names])
         if names:
             ol.highlighted = 0
+
+    @on(OptionList.OptionHighlighted, "#skills")
+    def _highlighted(self, event: OptionList.OptionHighlighted) -> None:
+        """The allocation hint of the highlighted skill: who can do it, ranked."""
+        name = event.option.id
+        if self.who_can is None or name is None:
+            return
+        if name not in self._ranked:
+            self._ranked[name] = self.who_can(name)
+        said = self._ranked[name]
+        self.query_one("#who", Static).update(f"{name}: {said}" if said else "")
 
     @on(Input.Changed, "#filter")
     def _filter(self, event: Input.Changed) -> None:

@@ -119,3 +119,31 @@ def coverage_words(h: Suggestion, clock: MissionClock) -> str:
     if out < 0.5:
         return ", in coverage throughout"
     return f", {clock.duration_text(out)} out of coverage"
+
+
+def picker_hint(model: ConsoleModel, skill: str, robot: str) -> str:
+    """For the add-skill picker: who can do `skill`, ranked as `ctl suggest`
+    ranks them (a new one at the end of each plan): '★ lru3 ends sim 32:10,
+    71% left · lru1 (here) ends sim 35:00, 40% left · cannot: lru2'."""
+    if model.mission is None or model.library is None:
+        return ""
+    inputs = model.plan.inputs(model.telemetry, model.clock().timestamp())
+    try:
+        hints = suggest(model.mission, model.library, inputs, [skill], Manifests.of(model.robots))
+    except Refusal:
+        return ""
+    able = [h for h in hints if h.capable]
+    words = [_bid(h, n == 0, robot, model.clock) for n, h in enumerate(able)]
+    cannot = [h.robot for h in hints if not h.capable]
+    if cannot:
+        words.append(f"cannot: {', '.join(cannot)}")
+    return " · ".join(words)
+
+
+def _bid(h: Suggestion, best: bool, robot: str, clock: MissionClock) -> str:
+    who = ("★ " if best else "") + h.robot + (" (here)" if h.robot == robot else "")
+    end = f"ends {clock.ts_text(h.end)}" if h.end is not None else "never ends"
+    left = f", {h.battery_end:.0%} left" if h.battery_end is not None else ""
+    out = h.out_of_coverage_s or 0.0
+    reach = f", {clock.duration_text(out)} out of coverage" if out >= 0.5 else ""
+    return f"{who} {end}{left}{reach}"

@@ -18,12 +18,14 @@ from console_state import (
     screen_text,
     settle,
     state_loaded,
+    telemetry_changed,
     wait_until,
 )
 
 from backend.core.model import Pose
 from backend.core.ops import AddRobot, AddSkill, Reassign, RetireRobot
 from backend.protocol.messages import Alert, RobotInfo, Telemetry
+from console.screens.dialogs import SkillPicker
 from console.screens.fleet import FleetScreen
 from console.screens.give_to import GiveToScreen
 from console.state.team import gift, ranked
@@ -197,6 +199,43 @@ async def test_give_to_says_how_long_each_robot_would_be_out_of_coverage():
         assert out is not None and out > 30  # about 70 of its 125 m, at 0.5 m/s
         shown = app.model.clock.duration_text(out)
         assert f"{shown} out of coverage" in text, text
+
+
+async def test_the_add_skill_picker_ranks_the_robots_that_can_do_the_skill():
+    """The allocation hint where a skill is added: ranked as ctl suggest ranks
+    them (lru3 is free, lru1 has its plan first), and who cannot."""
+    b = Builder(TUTORIAL)
+    b.engine.submit(AddRobot(name="lru3", type="lru_science"))
+    app, _ = engine_app(b)
+    here = [
+        Telemetry(robot=r, pose=Pose(x=0.0, y=0.0), battery=level, at=T0)
+        for r, level in (("lru1", 0.5), ("lru2", 0.8), ("lru3", 0.7))
+    ]
+    async with app.run_test(size=SIZE) as pilot:
+        await _load(app, pilot, b, {"lru1": True, "lru2": True, "lru3": True})
+        for t in here:
+            app.post_message(telemetry_changed(t))
+        await settle(pilot)
+        app.mission_screen.schedule.select("lru1-2")
+        await pilot.press("a")
+        await wait_until(pilot, lambda: isinstance(app.screen, SkillPicker), what="picker")
+        await pilot.press(*"science")
+        who = app.screen.query_one("#who")
+        await wait_until(pilot, lambda: "take_science_image:" in str(who.render()), what="hint")
+        said = str(who.render())
+        assert said.startswith("take_science_image: ★ lru3 ends ")
+        assert "69% left · lru1 (here) ends " in said and said.endswith("cannot: lru2")
+        # the same ranking as ctl suggest
+        order = [h.robot for h in suggest_hints(app.model, "take_science_image")]
+        assert order[:2] == ["lru3", "lru1"]
+        await pilot.press("escape")
+
+
+def suggest_hints(model, skill: str):
+    from backend.core.plan.suggest import Manifests, suggest
+
+    inputs = model.plan.inputs(model.telemetry, model.clock().timestamp())
+    return suggest(model.mission, model.library, inputs, [skill], Manifests.of(model.robots))
 
 
 # -- snapshots (deterministic: the app's clock at T0; each asserts real content first) ---------
