@@ -85,6 +85,8 @@ def _unable(rules: Rules, s: SkillInstance, to: str) -> str | None:
     spec = rules.library.skill_for(rtype, s.skill)
     if spec is None:
         return f"{to} ({rtype}) has no skill '{s.skill}'"
+    if spec.talks_to is not None and s.params.get(spec.talks_to) == to:
+        return f"its {spec.talks_to} is {to}: a robot is not its own partner"
     offered = rules.offers.offered(to) if rules.offers is not None else None
     why = incompatible(offered, s.skill, spec.version) if offered is not None else None
     if why is not None:

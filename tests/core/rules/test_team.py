@@ -286,3 +286,14 @@ def test_a_skill_awaited_by_one_on_its_robot_stays(engine: Engine) -> None:
         "lru2-1",
         "waits for it, asking lru1 robot to robot; unsynchronize lru2-1 first",
     )
+
+
+def test_a_skill_whose_partner_is_the_robot_it_goes_to_stays(engine: Engine) -> None:
+    look = {"target": {"x": 1, "y": 1}, "partner": "lru2"}
+    sid = engine.submit(AddSkill(robot="lru1", skill="identify_stone", params=look)).value["id"]
+    refused(
+        engine,
+        lambda: engine.submit(Reassign(ids=[sid], to="lru2")),
+        "cannot_reassign",
+        "its partner is lru2: a robot is not its own partner",
+    )
