@@ -58,7 +58,8 @@ def gift(model: ConsoleModel, robot: str | None, cursor: str | None, marks: list
         plan = [s.id for s in model.task(robot) if s.status == Status.IDLE]
         if not plan:
             raise ValueError(f"{robot} is retired and has no unsynchronized skill left to give")
-        return Gift((), robot, f"{robot}'s plan ({len(plan)} skills: {', '.join(plan)})")
+        many = f"{len(plan)} skill" + ("s" if len(plan) != 1 else "")
+        return Gift((), robot, f"{robot}'s plan ({many}: {', '.join(plan)})")
     found = model.find(cursor)
     if found is None:
         raise ValueError("select a skill (or mark several) to give it to another robot")
@@ -100,7 +101,8 @@ def hint_words(h: Suggestion, now: float, clock: MissionClock) -> str:
     else:
         end = f"ends {clock.ts_text(h.end)} (in {clock.duration_text(h.end - now)})"
     stays = "".join(f"; {k} stays: {v}" for k, v in h.refused.items())
-    return end + battery_words(h) + coverage_words(h, clock) + stays
+    part = f"takes {len(h.moved)} of {len(h.moved) + len(h.refused)}, " if h.refused else ""
+    return part + end + battery_words(h) + coverage_words(h, clock) + stays
 
 
 def battery_words(h: Suggestion) -> str:

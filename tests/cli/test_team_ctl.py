@@ -127,7 +127,10 @@ def test_suggest_ranks_robots_by_the_forecast(server):
     assert rows["lru3"]["out_of_coverage_s"] is None  # no simulator: no site map, unknown
     assert "has no skill 'take_science_image'" in rows["lru2"]["refused"]["lru1-2"]
     text = ok(endpoint, "suggest", "take_science_image").stdout.splitlines()
-    assert text[0] == "who can take take_science_image (earliest end first):"
+    assert text[0] == (
+        "who can take take_science_image (the most taken, then the earliest end, "
+        "the least out of coverage, the most battery):"
+    )
     assert text[-1].startswith("  3. lru2 cannot: lru2 (lru_manipulator) has no skill"), text
     r = ctl(endpoint, "suggest", "nope-1")
     assert r.returncode == 2 and "no skill with id or library name nope-1" in r.stderr, r
@@ -148,3 +151,5 @@ def test_suggest_text_says_the_time_out_of_coverage():
     assert hint_text(row) == "lru3: ends in 12m30s, battery 62% left, 3m10s out of coverage"
     assert hint_text({**row, "out_of_coverage_s": 0.0}).endswith(", in coverage throughout")
     assert hint_text({**row, "out_of_coverage_s": None}).endswith("battery 62% left")
+    partial = hint_text({**row, "refused": {"lru1-5": "lru3 has no skill 'x'"}})
+    assert partial.startswith("lru3: takes 1 of 2, ends in 12m30s")

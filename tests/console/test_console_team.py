@@ -111,6 +111,7 @@ async def test_give_to_lists_robots_ranked_and_gives_a_retired_robots_plan():
         assert "lru3" in text and "★ best" in text and "battery left" in text
         # lru2 could take the drive only: after lru3, saying why the other stays
         assert "lru1-2 stays: lru2 (lru_manipulator) has no skill" in text
+        assert "takes 1 of 2, ends" in text  # lru2's row says how much it would take
         await pilot.press("enter")
         await wait_until(
             pilot,
@@ -193,7 +194,7 @@ async def test_give_to_says_how_long_each_robot_would_be_out_of_coverage():
         await pilot.press("G")
         await wait_until(pilot, lambda: isinstance(app.screen, GiveToScreen), what="give to")
         text = screen_text(app)
-        assert "ranked: earliest end, then least time out of coverage" in text
+        assert "ranked: most taken, earliest end, least time out of coverage" in text
         hints = {h.robot: h for h in ranked(app.model, gift(app.model, "lru1", sid, []))}
         out = hints["lru3"].out_of_coverage_s
         assert out is not None and out > 30  # about 70 of its 125 m, at 0.5 m/s

@@ -14,6 +14,8 @@ from backend.cli.ctl.plan import gather
 from backend.core.plan.suggest import Manifests, suggest
 from backend.core.rules.base import Refusal
 
+RANKED = "the most taken, then the earliest end, the least out of coverage, the most battery"
+
 
 async def suggest_view(client: Any, args: argparse.Namespace) -> int:
     """`ctl suggest`: the robots ranked for the skills (the forecast's end, battery left)."""
@@ -28,7 +30,7 @@ async def suggest_view(client: Any, args: argparse.Namespace) -> int:
         out = {"ok": True, "what": list(args.what), "robots": rows}
         print(json.dumps(out, ensure_ascii=False), flush=True)
     else:
-        print(f"who can take {', '.join(args.what)} (earliest end first):", flush=True)
+        print(f"who can take {', '.join(args.what)} ({RANKED}):", flush=True)
         for n, row in enumerate(rows, 1):
             print(f"  {n}. {hint_text(row)}", flush=True)
     return 0
@@ -59,7 +61,9 @@ def hint_text(row: dict[str, Any]) -> str:
         return f"{row['robot']} cannot: " + "; ".join(row["refused"].values())
     end = _duration(row["end_in_s"]) if row["end_in_s"] is not None else "never (a barrier)"
     stays = "".join(f"; {k} stays: {v}" for k, v in row["refused"].items())
-    return f"{row['robot']}: ends in {end}{_battery(row)}{_coverage(row)}{stays}"
+    n = len(row["moved"])
+    part = f"takes {n} of {n + len(row['refused'])}, " if row["refused"] else ""
+    return f"{row['robot']}: {part}ends in {end}{_battery(row)}{_coverage(row)}{stays}"
 
 
 def _coverage(row: dict[str, Any]) -> str:

@@ -7,9 +7,10 @@ For each robot in service, the skills are given to it in a copy of the
 mission (the reassign rule decides which can move and why the others
 cannot; a skill named by its library name is a new one at the end of its
 plan), and the copy is forecast. Robots that can take everything come
-first, the earliest end first; between equal ends, the one out of coverage
-for less time (it can be told what to do meanwhile), then the most battery
-left.
+first, then those that take the most (one that takes less ends earlier for
+that alone); the earliest end first; between equal ends, the one out of
+coverage for less time (it can be told what to do meanwhile), then the most
+battery left.
 """
 
 from __future__ import annotations
@@ -49,10 +50,10 @@ class Suggestion:
     def capable(self) -> bool:
         return bool(self.moved) and not self.refused
 
-    def rank(self) -> tuple[bool, float, float, float]:
+    def rank(self) -> tuple[bool, int, float, float, float]:
         end = self.end if self.end is not None else math.inf
         battery = -(self.battery_end if self.battery_end is not None else 0.0)
-        return (not self.capable, end, self.out_of_coverage_s or 0.0, battery)
+        return (not self.capable, -len(self.moved), end, self.out_of_coverage_s or 0.0, battery)
 
 
 class Manifests:

@@ -89,3 +89,15 @@ def test_time_out_of_coverage_is_reported_and_weighed_between_equal_ends() -> No
     blind = suggest(m, LIBRARY, PlanInputs(now=T0, robots=robots), ["r1-1"])
     assert all(h.out_of_coverage_s is None for h in blind)
     assert [h.robot for h in blind] == ["r3", "r2"]  # then the battery decides
+
+
+def test_a_robot_that_takes_more_ranks_above_one_that_ends_sooner_with_less() -> None:
+    """Nobody takes everything (a barrier holds one skill): the robot that takes
+    three of four ranks above one that takes one and so ends sooner."""
+    from backend.core.plan.suggest import Suggestion
+
+    most = Suggestion("lru3", ("a", "b", "c"), {"d": "held"}, end=NOW + 600, battery_end=0.8)
+    least = Suggestion("ardea", ("a",), {"b": "no", "c": "no", "d": "no"}, end=NOW + 60)
+    every = Suggestion("lru4", ("a", "b", "c", "d"), {}, end=NOW + 900)
+    ranked = sorted([least, most, every], key=Suggestion.rank)
+    assert [s.robot for s in ranked] == ["lru4", "lru3", "ardea"]
