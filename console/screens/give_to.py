@@ -22,7 +22,7 @@ from console.screens.dialogs import TCSS, ChoiceScreen
 from console.state.clock import MissionClock
 from console.state.team import Gift, gift, hint_words, nobody_takes, ranked
 
-RANKED = "ranked: most taken, earliest end, least time out of coverage, most battery"
+RANKED = "ranked: most taken, soonest end, least out of coverage, most battery"
 
 
 class GiveToScreen(ChoiceScreen):

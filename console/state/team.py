@@ -68,13 +68,16 @@ def gift(model: ConsoleModel, robot: str | None, cursor: str | None, marks: list
 
 def ranked(model: ConsoleModel, g: Gift) -> list[Suggestion]:
     """The robots in service ranked for the gift (see backend/core/plan/suggest.py)."""
+    return _suggest(model, _ids(model, g))
+
+
+def _suggest(model: ConsoleModel, what: list[str]) -> list[Suggestion]:
+    """The robots ranked for skill ids or one skill name ([]: nothing to rank)."""
     if model.mission is None or model.library is None:
         return []
     inputs = model.plan.inputs(model.telemetry, model.clock().timestamp())
     try:
-        return suggest(
-            model.mission, model.library, inputs, _ids(model, g), Manifests.of(model.robots)
-        )
+        return suggest(model.mission, model.library, inputs, what, Manifests.of(model.robots))
     except Refusal:
         return []
 
@@ -127,25 +130,33 @@ def picker_hint(model: ConsoleModel, skill: str, robot: str) -> str:
     """For the add-skill picker: who can do `skill`, ranked as `ctl suggest`
     ranks them (a new one at the end of each plan): '★ lru3 ends sim 32:10,
     71% left · lru1 (here) ends sim 35:00, 40% left · cannot: lru2'."""
-    if model.mission is None or model.library is None:
-        return ""
-    inputs = model.plan.inputs(model.telemetry, model.clock().timestamp())
-    try:
-        hints = suggest(model.mission, model.library, inputs, [skill], Manifests.of(model.robots))
-    except Refusal:
-        return ""
+    hints = _suggest(model, [skill])
     able = [h for h in hints if h.capable]
-    words = [_bid(h, n == 0, robot, model.clock) for n, h in enumerate(able)]
+    words = [f"{_who(model, h, n == 0, robot)} {_bid(model, h)}" for n, h in enumerate(able)]
     cannot = [h.robot for h in hints if not h.capable]
     if cannot:
         words.append(f"cannot: {', '.join(cannot)}")
     return " · ".join(words)
 
 
-def _bid(h: Suggestion, best: bool, robot: str, clock: MissionClock) -> str:
-    who = ("★ " if best else "") + h.robot + (" (here)" if h.robot == robot else "")
-    end = f"ends {clock.ts_text(h.end)}" if h.end is not None else "never ends"
+def _who(model: ConsoleModel, h: Suggestion, best: bool, robot: str) -> str:
+    """'★ lru3', 'lru1 (here)', 'lru1 (offline)'."""
+    info = model.robots.get(h.robot)
+    words = [("★ " if best else "") + h.robot]
+    if h.robot == robot:
+        words.append("(here)")
+    if info is not None and not info.online:
+        words.append("(offline)")
+    return " ".join(words)
+
+
+def _bid(model: ConsoleModel, h: Suggestion) -> str:
+    """'ends sim 32:10, 71% left, 2m out of coverage'."""
+    if h.end is None:
+        return "never ends"
+    # an idle robot's end is about now: never before it (the two clocks differ a little)
+    end = f"ends {model.clock.ts_text(max(h.end, model.clock().timestamp()))}"
     left = f", {h.battery_end:.0%} left" if h.battery_end is not None else ""
     out = h.out_of_coverage_s or 0.0
-    reach = f", {clock.duration_text(out)} out of coverage" if out >= 0.5 else ""
-    return f"{who} {end}{left}{reach}"
+    reach = f", {model.clock.duration_text(out)} out of coverage" if out >= 0.5 else ""
+    return f"{end}{left}{reach}"

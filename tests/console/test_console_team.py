@@ -194,7 +194,7 @@ async def test_give_to_says_how_long_each_robot_would_be_out_of_coverage():
         await pilot.press("G")
         await wait_until(pilot, lambda: isinstance(app.screen, GiveToScreen), what="give to")
         text = screen_text(app)
-        assert "ranked: most taken, earliest end, least time out of coverage" in text
+        assert "ranked: most taken, soonest end, least out of coverage" in text
         hints = {h.robot: h for h in ranked(app.model, gift(app.model, "lru1", sid, []))}
         out = hints["lru3"].out_of_coverage_s
         assert out is not None and out > 30  # about 70 of its 125 m, at 0.5 m/s
@@ -213,7 +213,7 @@ async def test_the_add_skill_picker_ranks_the_robots_that_can_do_the_skill():
         for r, level in (("lru1", 0.5), ("lru2", 0.8), ("lru3", 0.7))
     ]
     async with app.run_test(size=SIZE) as pilot:
-        await _load(app, pilot, b, {"lru1": True, "lru2": True, "lru3": True})
+        await _load(app, pilot, b, {"lru1": False, "lru2": True, "lru3": True})
         for t in here:
             app.post_message(telemetry_changed(t))
         await settle(pilot)
@@ -225,7 +225,7 @@ async def test_the_add_skill_picker_ranks_the_robots_that_can_do_the_skill():
         await wait_until(pilot, lambda: "take_science_image:" in str(who.render()), what="hint")
         said = str(who.render())
         assert said.startswith("take_science_image: ★ lru3 ends ")
-        assert "69% left · lru1 (here) ends " in said and said.endswith("cannot: lru2")
+        assert "69% left · lru1 (here) (offline) ends " in said and said.endswith("cannot: lru2")
         # the same ranking as ctl suggest
         order = [h.robot for h in suggest_hints(app.model, "take_science_image")]
         assert order[:2] == ["lru3", "lru1"]
