@@ -353,8 +353,7 @@ class SkillPicker(ListChoice):
         self.library = library
         self.where = where
         self.offered_by = offered_by or {}  # skill -> "also offered by: lru2"
-        self.who_can = who_can  # skill -> the robots ranked for it (console/state/team.py)
-        self._ranked: dict[str, str] = {}  # asked once per skill while the picker is open
+        self.who_can = who_can  # skill -> a line ranking the robots for it ('': none)
 
     def compose(self) -> ComposeResult:
         with Vertical():
@@ -410,13 +409,8 @@ class SkillPicker(ListChoice):
     @on(OptionList.OptionHighlighted, "#skills")
     def _highlighted(self, event: OptionList.OptionHighlighted) -> None:
         """The allocation hint of the highlighted skill: who can do it, ranked."""
-        name = event.option.id
-        if self.who_can is None or name is None:
-            return
-        if name not in self._ranked:
-            self._ranked[name] = self.who_can(name)
-        said = self._ranked[name]
-        self.query_one("#who", Static).update(f"{name}: {said}" if said else "")
+        if self.who_can is not None and event.option.id is not None:
+            self.query_one("#who", Static).update(self.who_can(event.option.id))
 
     @on(Input.Changed, "#filter")
     def _filter(self, event: Input.Changed) -> None:

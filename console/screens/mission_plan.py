@@ -7,7 +7,7 @@ after which the cursor goes to the skill they brought back."""
 from __future__ import annotations
 
 from collections import deque
-from functools import partial
+from functools import cache, partial
 from typing import Any
 
 from backend.core.model import Status
@@ -106,7 +106,7 @@ class PlanActions:
         at, where = m.insertion_point(robot, sid)
         skills = m.skills_of(robot)
         offered = {name: also_offered_by(m, name, robot) for name in skills}
-        ranked = partial(picker_hint, m, robot=robot)  # who can do each, ranked
+        ranked = cache(partial(picker_hint, m, robot=robot))  # once a skill, while it is open
         picker = SkillPicker(robot, skills, m.library, where, offered, ranked)
         choice = await s.app.push_screen_wait(picker)
         if not choice:

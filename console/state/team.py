@@ -99,13 +99,15 @@ def hint_words(h: Suggestion, now: float, clock: MissionClock) -> str:
     """'ends 14:32 (in 12m30s), 62% battery left' / 'cannot: lru1-2: ...'."""
     if not h.moved:
         return "cannot: " + "; ".join(f"{k}: {v}" for k, v in h.refused.items())
-    if h.end is None:
-        end = "never ends (a barrier is never passed)"
-    else:
-        end = f"ends {clock.ts_text(h.end)} (in {clock.duration_text(h.end - now)})"
     stays = "".join(f"; {k} stays: {v}" for k, v in h.refused.items())
     part = f"takes {len(h.moved)} of {len(h.moved) + len(h.refused)}, " if h.refused else ""
-    return part + end + battery_words(h) + coverage_words(h, clock) + stays
+    return part + _end_words(h, now, clock) + battery_words(h) + coverage_words(h, clock) + stays
+
+
+def _end_words(h: Suggestion, now: float, clock: MissionClock) -> str:
+    if h.end is None:
+        return "never ends (a barrier is never passed)"
+    return f"ends {clock.ts_text(h.end)} (in {clock.duration_text(h.end - now)})"
 
 
 def battery_words(h: Suggestion) -> str:
@@ -128,15 +130,17 @@ def coverage_words(h: Suggestion, clock: MissionClock) -> str:
 
 def picker_hint(model: ConsoleModel, skill: str, robot: str) -> str:
     """For the add-skill picker: who can do `skill`, ranked as `ctl suggest`
-    ranks them (a new one at the end of each plan): '★ lru3 ends sim 32:10,
-    71% left · lru1 (here) ends sim 35:00, 40% left · cannot: lru2'."""
+    ranks them (a new one at the end of each plan): 'explore: ★ lru3 ends sim
+    32:10, 71% left · lru1 (here) ends sim 35:00, 40% left · cannot: lru2'
+    ('': nothing to rank)."""
     hints = _suggest(model, [skill])
-    able = [h for h in hints if h.capable]
-    words = [f"{_who(model, h, n == 0, robot)} {_bid(model, h)}" for n, h in enumerate(able)]
-    cannot = [h.robot for h in hints if not h.capable]
-    if cannot:
-        words.append(f"cannot: {', '.join(cannot)}")
-    return " · ".join(words)
+    able = sum(h.capable for h in hints)  # ranked first
+    words = [
+        f"{_who(model, h, n == 0, robot)} {_bid(model, h)}" for n, h in enumerate(hints[:able])
+    ]
+    if able < len(hints):
+        words.append(f"cannot: {', '.join(h.robot for h in hints[able:])}")
+    return f"{skill}: {' · '.join(words)}" if words else ""
 
 
 def _who(model: ConsoleModel, h: Suggestion, best: bool, robot: str) -> str:

@@ -132,9 +132,10 @@ def _bid(
 
 def _reasons(rules: Rules, ids: list[str], robot: str, said: str) -> dict[str, str]:
     out: dict[str, str] = {}
+    waiting = reassigning.waiters(rules.mission)
     for sid in ids:
         owner, _, s = rules.skill(sid)
-        out[sid] = reassigning.why_not(rules, s, owner, robot) or said
+        out[sid] = reassigning.why_not(rules, s, owner, robot, waiting) or said
     return out
 
 
@@ -151,14 +152,19 @@ def _forecast(
     fc = forecast.robots.get(robot)
     if fc is None:
         return Suggestion(robot, moved, dict(refused))
-    out = _out_of_coverage(forecast, probed or moved) if inputs.site is not None else None
+    out = _out_of_coverage(forecast, robot, probed or moved, inputs)
     return Suggestion(robot, moved, dict(refused), fc.end, fc.battery_end, fc.battery_assumed, out)
 
 
-def _out_of_coverage(forecast: Forecast, ids: tuple[str, ...]) -> float:
-    """Wall seconds the skills spend out of comms coverage, by the forecast."""
-    spans = [span for sid in ids if (f := forecast.skill(sid)) for span in f.out_of_coverage]
-    return sum(b - a for a, b in spans)
+def _out_of_coverage(
+    forecast: Forecast, robot: str, ids: tuple[str, ...], inputs: PlanInputs
+) -> float | None:
+    """Wall seconds the robot spends out of comms coverage doing the skills, by
+    the forecast (None: no site map, unknown)."""
+    if inputs.site is None:
+        return None
+    skills = [f for f in forecast.robot_skills(robot) if f.id in ids]
+    return sum(b - a for f in skills for a, b in f.out_of_coverage)
 
 
 def _by_name(

@@ -22,7 +22,7 @@ that play the robot themselves may use the direct path instead: `plan_sync`,
 from __future__ import annotations
 
 from collections import OrderedDict
-from collections.abc import Container, Iterable
+from collections.abc import Callable, Container, Iterable
 from typing import Any, NamedTuple, Protocol
 
 from backend.core import events as ev
@@ -233,7 +233,7 @@ def _robot_touched(m: Mission, op: AddRobot | RetireRobot) -> list[tuple[int, st
 
 def _reassign_touched(m: Mission, op: Reassign) -> list[tuple[int, str]]:
     """The skills named, the plan given away and the list they go to."""
-    lists = [r for r in (op.from_robot, op.to) if r is not None]
+    lists = dict.fromkeys((op.from_robot or op.to, op.to))  # the plan given, and its target
     return _skill_revs(m, op.ids) + [_task_rev(m, r) for r in lists]
 
 
@@ -243,7 +243,7 @@ def _return_touched(m: Mission, op: ReturnSkills) -> list[tuple[int, str]]:
 
 
 # the team's operations (issue 30), kept out of the match above: one table, no ladder
-_TEAM_TOUCHED: dict[type[Any], Any] = {
+_TEAM_TOUCHED: dict[type[Any], Callable[[Mission, Any], list[tuple[int, str]]]] = {
     AddRobot: _robot_touched,
     RetireRobot: _robot_touched,
     Reassign: _reassign_touched,

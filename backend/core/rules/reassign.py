@@ -56,16 +56,15 @@ def waiters(m: Mission) -> Waiters:
     return out
 
 
-def why_not(
-    rules: Rules, s: SkillInstance, robot: str, to: str, waiting: Waiters | None = None
-) -> str | None:
-    """Why skill `s` of `robot` cannot go to `to` (None: it can)."""
+def why_not(rules: Rules, s: SkillInstance, robot: str, to: str, waiting: Waiters) -> str | None:
+    """Why skill `s` of `robot` cannot go to `to` (None: it can); `waiting`: the
+    mission's `waiters`."""
     if robot == to:
         return f"it is {to}'s already"
     if s.status != Status.IDLE:
         return f"it is {s.status.value}: only unsynchronized (idle) skills move"
-    held = _after_held(s, robot, waiters(rules.mission) if waiting is None else waiting)
-    return rules.locked.get(s.id) or _unable(rules, s, to) or _barrier_held(rules, s, to) or held
+    held = _barrier_held(rules, s, to) or _after_held(s, robot, waiting)
+    return rules.locked.get(s.id) or _unable(rules, s, to) or held
 
 
 def _after_held(s: SkillInstance, robot: str, waiting: Waiters) -> str | None:
@@ -196,15 +195,14 @@ def _afters(
     """`after` links of or to the moved skills: each follows its skill (said),
     or is dissolved (and kept to restore) where a robot would wait for itself."""
     order = [s.id for s in rules.task(to)] + moved  # `to`'s plan once they moved
+    gone = set(moved)
     events: list[ev.Event] = []
     afters: dict[str, str] = {}
     notes: list[str] = []
-    for w, a in _links(rules, moved, waiting):
-        robots = _robots_of(rules, w.id, a, to, set(moved))
-        if robots is None:
-            continue
-        if robots[0] != robots[1]:
-            notes.append(f"{w.id} (on {robots[0]}) still starts after {a}, now on {robots[1]}")
+    for w, a in _links(moved, waiting):
+        here, there = _where(rules, w.id, to, gone), _where(rules, a, to, gone)
+        if here != there:  # (an awaited skill that is gone: its check says so)
+            notes.append(f"{w.id} (on {here}) still starts after {a}, now on {there or '?'}")
             continue
         afters[w.id] = a
         policies = w.policies.model_copy(update={"after": None})
@@ -213,23 +211,16 @@ def _afters(
     return events, afters, notes
 
 
-def _links(rules: Rules, moved: list[str], waiting: Waiters) -> list[tuple[SkillInstance, str]]:
-    """(waiter, awaited id): the moved skills' own links, then those waiting for them."""
-    mine = [rules.skill(sid)[2] for sid in moved]
-    links = [(w, str(w.policies.after)) for w in mine if w.policies.after is not None]
+def _links(moved: list[str], waiting: Waiters) -> list[tuple[SkillInstance, str]]:
+    """(waiter, awaited id) of every link with a moved skill at one end or both."""
     gone = set(moved)
-    return links + [(w, a) for a in moved for _, w in waiting.get(a, []) if w.id not in gone]
+    return [(w, a) for a, ws in waiting.items() for _, w in ws if a in gone or w.id in gone]
 
 
-def _robots_of(
-    rules: Rules, waiter: str, awaited: str, to: str, gone: set[str]
-) -> tuple[str, str] | None:
-    """Where the waiter and the awaited skill are once the skills moved (None: gone)."""
-    found = rules.mission.find(awaited)
-    if found is None:
-        return None
-    here = to if waiter in gone else rules.skill(waiter)[0]
-    return here, to if awaited in gone else found[0]
+def _where(rules: Rules, sid: str, to: str, gone: set[str]) -> str | None:
+    """The robot skill `sid` is on once the skills in `gone` moved to `to`."""
+    found = rules.mission.find(sid)
+    return to if sid in gone else (found[0] if found is not None else None)
 
 
 def _dissolved(waiter: str, awaited: str, to: str, order: list[str]) -> str:
