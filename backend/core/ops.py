@@ -279,7 +279,7 @@ class SetSkill(Strict):
 
 class ReturnSkills(Strict):
     """The undo of a reassignment: each skill back where it was, with the
-    barriers it was in."""
+    barriers it was in, its `after` links and its partners' parameters."""
 
     op: Literal["return_skills"] = "return_skills"
     items: list[RestoreItem]
@@ -289,6 +289,12 @@ class ReturnSkills(Strict):
         default_factory=dict,
         max_length=10_000,
         description="skill id -> the `after` it had, dissolved by the reassignment",
+    )
+    partners: dict[SkillId, Name] = Field(
+        default_factory=dict,
+        max_length=10_000,
+        description="barrier partner skill id -> the robot its partner parameter (talks_to) "
+        "named before the reassignment named `to` there",
     )
 
 

@@ -238,8 +238,9 @@ def _reassign_touched(m: Mission, op: Reassign) -> list[tuple[int, str]]:
 
 
 def _return_touched(m: Mission, op: ReturnSkills) -> list[tuple[int, str]]:
-    """The skills given back (an undo must not overwrite a later edit of them)."""
-    return _skill_revs(m, [it.skill.id for it in op.items])
+    """The skills given back and the partners renamed (an undo must not
+    overwrite a later edit of them)."""
+    return _skill_revs(m, [it.skill.id for it in op.items] + list(op.partners))
 
 
 # the team's operations (issue 30), kept out of the match above: one table, no ladder

@@ -8,8 +8,10 @@ follow their skills (a barrier names skills, not robots). An `after` link
 robot asked is the awaited skill's, wherever it is now; one that would
 make a robot wait for itself is dissolved, saying which skill its plan
 runs first. A skill awaited by one already on a robot stays (the waiter
-asks its robot by name). Undone by `ReturnSkills`: each skill back where
-it was, with its barriers and `after` links.
+asks its robot by name). A barrier partner whose robot parameter
+(`talks_to`) named the robot a skill left names the new one. Undone by
+`ReturnSkills`: each skill back where it was, with its barriers, `after`
+links and partners' parameters.
 """
 
 from __future__ import annotations
@@ -119,6 +121,7 @@ def reassign(rules: Rules, op: Reassign) -> Change:
     items, refused = _split(rules, chosen(rules, op), op.to, waiting)
     moved = {it.skill.id for it in items}
     barrier_events, before, barrier_notes = _barriers(rules, moved, op.to)
+    partner_events, partners, partner_notes = _partners(rules, items, op.to, set(before))
     after_events, afters, after_notes = _afters(rules, moved_ids(items), op.to, waiting)
     events: list[ev.Event] = [
         ev.SkillRemoved(robot=it.robot, id=it.skill.id)
@@ -129,16 +132,19 @@ def reassign(rules: Rules, op: Reassign) -> Change:
         ev.SkillAdded(robot=op.to, index=end + n, skill=it.skill) for n, it in enumerate(items)
     ]
     notes = [f"{len(items)} skill(s) given to {op.to}: {', '.join(moved_ids(items))}"]
-    notes += [f"{sid} stays: {why}" for sid, why in refused.items()] + barrier_notes + after_notes
+    notes += [f"{sid} stays: {why}" for sid, why in refused.items()] + barrier_notes
+    notes += partner_notes + after_notes
     value = {
         "to": op.to,
         "moved": moved_ids(items),
         "refused": refused,
         "dissolved": list(before),
         "afters_dissolved": afters,
+        "partners_renamed": partners,
     }
-    undo = ReturnSkills(items=items, to=op.to, barriers=before, afters=afters)
-    return Change(events + barrier_events + after_events, notes, value, undo)
+    undo = ReturnSkills(items=items, to=op.to, barriers=before, afters=afters, partners=partners)
+    events += barrier_events + partner_events + after_events
+    return Change(events, notes, value, undo)
 
 
 def _split(
@@ -187,6 +193,54 @@ def _barriers(
             "robot never waits for itself"
         )
     return events, before, notes
+
+
+def _partners(
+    rules: Rules, items: list[RestoreItem], to: str, dissolved: set[str]
+) -> tuple[list[ev.Event], dict[str, str], list[str]]:
+    """A barrier that follows its skill to `to` keeps its partners together
+    only if they work with `to` now: a partner skill whose robot parameter
+    (`talks_to`, e.g. identify_stone's partner) names the robot a member left
+    names `to` instead (and the robot it named is kept to restore)."""
+    came_from = {it.skill.id: it.robot for it in items}
+    kept = set(rules.mission.barriers) - dissolved
+    edits = [edit for bid in sorted(kept) for edit in _partner_edits(rules, bid, came_from, to)]
+    return _said_partners(edits, to)
+
+
+def _said_partners(
+    edits: list[tuple[ev.SkillEdited, str]], to: str
+) -> tuple[list[ev.Event], dict[str, str], list[str]]:
+    notes = [f"{e.id} works with {to} now (its partner was {was})" for e, was in edits]
+    return [e for e, _ in edits], {e.id: was for e, was in edits}, notes
+
+
+def _partner_edits(
+    rules: Rules, bid: str, came_from: dict[str, str], to: str
+) -> list[tuple[ev.SkillEdited, str]]:
+    """The renames in barrier `bid`: its members that stay, naming a robot one left."""
+    members = rules.mission.barriers[bid].skills
+    left = {came_from.get(sid) for sid in members} - {None}
+    stay = sorted(set(members) - came_from.keys())
+    return [f for f in (_renamed(rules, sid, left, to) for sid in stay) if f is not None]
+
+
+def _renamed(
+    rules: Rules, sid: str, left: set[str | None], to: str
+) -> tuple[ev.SkillEdited, str] | None:
+    """The edit that has idle skill `sid` name `to` where it named one of `left`,
+    and the robot it named (None: it names none of them)."""
+    _, _, s = rules.skill(sid)
+    param = _talks_to(rules, s.skill)
+    if param is None or s.status != Status.IDLE or s.params.get(param) not in left:
+        return None
+    return ev.SkillEdited(id=sid, params={**s.params, param: to}), str(s.params[param])
+
+
+def _talks_to(rules: Rules, skill: str) -> str | None:
+    """The skill's parameter naming a robot it works with (the library's `talks_to`)."""
+    spec = rules.library.skills.get(skill)
+    return spec.talks_to if spec is not None else None
 
 
 def _afters(
@@ -249,7 +303,7 @@ def return_skills(rules: Rules, op: ReturnSkills) -> Change:
         _, _, now = rules.skill(it.skill.id)  # as it is now (it may have been edited)
         events.append(ev.SkillAdded(robot=it.robot, index=idx, skill=now))
     events += [ev.BarrierSet(id=bid, barrier=b) for bid, b in op.barriers.items()]
-    events += _relinked(rules, op.afters)
+    events += _relinked(rules, op.afters) + _partners_back(rules, op.partners, op.to)
     ids = [it.skill.id for it in op.items]
     return Change(events, [], {"returned": ids}, Reassign(ids=ids, to=op.to))
 
@@ -263,6 +317,18 @@ def _relinked(rules: Rules, afters: dict[str, str]) -> list[ev.Event]:
             continue
         policies = found[2].policies.model_copy(update={"after": awaited})
         events.append(ev.SkillEdited(id=sid, policies=policies))
+    return events
+
+
+def _partners_back(rules: Rules, partners: dict[str, str], to: str) -> list[ev.Event]:
+    """The partner parameters a reassignment renamed, naming the robot they
+    named before (on skills still idle that name `to`: a later edit stays)."""
+    events: list[ev.Event] = []
+    for sid, was in partners.items():
+        found = rules.mission.find(sid)
+        back = _renamed(rules, sid, {to}, was) if found is not None else None
+        if back is not None:
+            events.append(back[0])
     return events
 
 

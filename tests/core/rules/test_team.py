@@ -13,6 +13,7 @@ from backend.core.ops import (
     AddSkill,
     EditSkill,
     Reassign,
+    RemoveBarrier,
     RetireRobot,
     Sync,
     Undo,
@@ -297,3 +298,54 @@ def test_a_skill_whose_partner_is_the_robot_it_goes_to_stays(engine: Engine) -> 
         "cannot_reassign",
         "its partner is lru2: a robot is not its own partner",
     )
+
+
+def _identify_together(engine: Engine) -> str:
+    """lru1's new identify_stone with lru2 (partner) at a barrier with lru2-2, whose
+    partner is lru1: the pair of the demo mission. Returns lru1's skill id."""
+    look = {"target": {"x": 10, "y": 5}, "partner": "lru2"}
+    sid = engine.submit(AddSkill(robot="lru1", skill="identify_stone", params=look)).value["id"]
+    params = {**skill(engine, "lru2-2").params, "partner": "lru1"}
+    engine.submit(EditSkill(id="lru2-2", params=params))
+    engine.submit(AddBarrier(ids=[sid, "lru2-2"]))
+    return sid
+
+
+def test_a_barrier_partner_works_with_the_robot_its_partner_skill_went_to(
+    engine: Engine,
+) -> None:
+    """Seen in the demo: lru2-3 kept `partner: lru1` after lru1-3 went to lru3
+    with their barrier, so lru2 asked the broken lru1 and identified alone."""
+    engine.submit(AddRobot(name="lru3", type="lru_science"))
+    sid = _identify_together(engine)
+    applied = engine.submit(Reassign(ids=[sid], to="lru3"), client="c")
+    assert skill(engine, "lru2-2").params["partner"] == "lru3"
+    assert skill(engine, sid).params["partner"] == "lru2"  # the one moved keeps its own
+    assert applied.value["partners_renamed"] == {"lru2-2": "lru1"}
+    assert "lru2-2 works with lru3 now (its partner was lru1)" in applied.notes
+    assert engine.mission.barrier_of(sid) == engine.mission.barrier_of("lru2-2") is not None
+    engine.submit(Undo(), client="c")
+    assert skill(engine, "lru2-2").params["partner"] == "lru1"
+    assert sid in ids(engine, "lru1")
+
+
+def test_undo_keeps_a_later_edit_of_the_renamed_partner(engine: Engine) -> None:
+    engine.submit(AddRobot(name="lru3", type="lru_science"))
+    sid = _identify_together(engine)
+    engine.submit(Reassign(ids=[sid], to="lru3"), client="c")
+    params = {**skill(engine, "lru2-2").params, "search_radius": 3.0}
+    engine.submit(EditSkill(id="lru2-2", params=params), client="other")
+    refused(engine, lambda: engine.submit(Undo(), client="c"), "stale", "another client")
+    assert skill(engine, "lru2-2").params["partner"] == "lru3"
+
+
+def test_a_partner_elsewhere_is_not_renamed(engine: Engine) -> None:
+    """A skill in no barrier with the one moved keeps its partner (the plan
+    checks say it names a robot it will not meet)."""
+    sid = _identify_together(engine)
+    engine.submit(AddRobot(name="lru3", type="lru_science"))
+    engine.submit(RemoveBarrier(barrier=engine.mission.barrier_of(sid) or ""))
+    applied = engine.submit(Reassign(ids=[sid], to="lru3"))
+    assert skill(engine, "lru2-2").params["partner"] == "lru1"
+    assert applied.value["partners_renamed"] == {}
+
