@@ -19,12 +19,12 @@ from __future__ import annotations
 from typing import Any
 
 from backend.core import events as ev
-from backend.core.model import FINISHED, Barrier, Mission, SkillInstance, Status
+from backend.core.model import ACTIVE, FINISHED, Barrier, Mission, SkillInstance, Status
 from backend.core.ops import Reassign, RestoreItem, ReturnSkills
 from backend.core.rules.base import Change, Refusal, Rule, Rules, check_in_service
 from backend.core.rules.uplink import incompatible
 
-__all__ = ["chosen", "incompatible", "reassign", "return_skills", "why_not"]
+__all__ = ["chosen", "held", "incompatible", "reassign", "return_skills", "why_not"]
 
 
 def chosen(rules: Rules, op: Reassign) -> list[str]:
@@ -75,9 +75,30 @@ def _after_held(s: SkillInstance, robot: str, waiting: Waiters) -> str | None:
         if w.status != Status.IDLE:
             return (
                 f"{w.display()} ({w.status.value} on {other}) waits for it, asking {robot} "
-                f"robot to robot; unsynchronize {w.id} first"
+                f"robot to robot; {_free(other, w)}"
             )
     return None
+
+
+def _free(robot: str, s: SkillInstance) -> str:
+    """What frees `s` of `robot` (queued or under way) to change with the skill that moves."""
+    if s.status in ACTIVE:  # a queued skill only can be unsynchronized
+        return f"stop {robot} ({s.id} goes back to its queue), then unsynchronize {s.id}"
+    return f"unsynchronize {s.id} first"
+
+
+def held(rules: Rules, robot: str) -> list[str]:
+    """Why skills of `robot`'s plan can go to no robot yet: a partner under way
+    elsewhere waits for `robot` by name (said when it is retired)."""
+    waiting = waiters(rules.mission)
+    whys = ((s.id, _held(rules, s, robot, waiting)) for s in rules.task(robot))
+    return [f"{sid} cannot be given away yet: {why}" for sid, why in whys if why]
+
+
+def _held(rules: Rules, s: SkillInstance, robot: str, waiting: Waiters) -> str | None:
+    if s.status not in (Status.IDLE, Status.IDLE_SYNCHRONIZED):
+        return None  # the log, or the interrupted skill (its next attempt is in the plan)
+    return _barrier_held(rules, s, robot) or _after_held(s, robot, waiting)
 
 
 def _unable(rules: Rules, s: SkillInstance, to: str) -> str | None:
@@ -108,8 +129,8 @@ def _barrier_held(rules: Rules, s: SkillInstance, to: str) -> str | None:
         robot, _, partner = rules.skill(sid)
         if partner.status != Status.IDLE and partner.status not in FINISHED and robot != to:
             return (
-                f"barrier {bid} ties it to {partner.display()}, already on {robot} (which "
-                f"waits for this skill's robot); unsynchronize {partner.id} first"
+                f"barrier {bid} ties it to {partner.display()}, {partner.status.value} on "
+                f"{robot} (which waits for this skill's robot by name); {_free(robot, partner)}"
             )
     return None
 

@@ -349,3 +349,31 @@ def test_a_partner_elsewhere_is_not_renamed(engine: Engine) -> None:
     assert skill(engine, "lru2-2").params["partner"] == "lru1"
     assert applied.value["partners_renamed"] == {}
 
+
+def test_a_skill_tied_to_a_partner_under_way_says_to_stop_its_robot(engine: Engine) -> None:
+    """The demo's lru2 waits at the barrier for lru1 by name: it must be stopped
+    before its skill can be unsynchronized (unsync takes queued skills only)."""
+    engine.submit(AddRobot(name="lru3", type="lru_science"))
+    sid = _identify_together(engine)
+    bring(engine, "lru2", "lru2-1", Status.SUCCESS)
+    bring(engine, "lru2", "lru2-2", Status.SYNCHWAITING)
+    refused(
+        engine,
+        lambda: engine.submit(Reassign(ids=[sid], to="lru3")),
+        "cannot_reassign",
+        "barrier",
+        "synchwaiting on lru2 (which waits for this skill's robot by name)",
+        "stop lru2 (lru2-2 goes back to its queue), then unsynchronize lru2-2",
+    )
+
+
+def test_retiring_says_which_skills_a_partner_under_way_holds(engine: Engine) -> None:
+    """lru2 waits at the barrier for lru1, which breaks: retiring lru1 says what
+    frees the skill lru2 waits for (and nothing of skills no one waits for)."""
+    sid = _identify_together(engine)
+    bring(engine, "lru2", "lru2-1", Status.SUCCESS)
+    bring(engine, "lru2", "lru2-2", Status.SYNCHWAITING)
+    applied = engine.submit(RetireRobot(name="lru1", reason="stopped responding"))
+    (said,) = [n for n in applied.notes if "cannot be given away yet" in n]
+    assert said.startswith(f"{sid} cannot be given away yet: barrier")
+    assert said.endswith("stop lru2 (lru2-2 goes back to its queue), then unsynchronize lru2-2")
