@@ -11,6 +11,7 @@ from backend.core.ops import (
     AddBarrier,
     AddRobot,
     AddSkill,
+    Control,
     EditSkill,
     Reassign,
     RemoveBarrier,
@@ -377,3 +378,17 @@ def test_retiring_says_which_skills_a_partner_under_way_holds(engine: Engine) ->
     (said,) = [n for n in applied.notes if "cannot be given away yet" in n]
     assert said.startswith(f"{sid} cannot be given away yet: barrier")
     assert said.endswith("stop lru2 (lru2-2 goes back to its queue), then unsynchronize lru2-2")
+
+
+def test_run_all_says_nothing_of_a_retired_robot(engine: Engine) -> None:
+    """It gets no new syncs: "lru1 has nothing to run: synchronize skills first"
+    (seen in the demo after lru1 was retired) told the operator to do what is refused."""
+    engine.submit(RetireRobot(name="lru1", reason="broken"))
+    sync(engine, "lru2")
+    applied = engine.submit(Control(op="run"))
+    assert applied.value["commands"].keys() == {"lru2"}
+    assert not any("lru1" in n for n in applied.notes), applied.notes
+    alone = refused(
+        engine, lambda: engine.submit(Control(op="run", robot="lru1")), "not_applicable"
+    )
+    assert "lru1" in alone.message  # named, it still says why
