@@ -8,11 +8,13 @@ from console_state import (
     T0,
     TUTORIAL,
     Builder,
+    EngineBackend,
     alert_received,
     connection_changed,
     engine_app,
     fleet,
     fleet_changed,
+    make_app,
     manifest,
     post_all,
     screen_text,
@@ -23,8 +25,8 @@ from console_state import (
 )
 
 from backend.core.model import Pose
-from backend.core.ops import AddRobot, AddSkill, Reassign, RetireRobot
-from backend.protocol.messages import Alert, RobotInfo, Telemetry
+from backend.core.ops import AddRobot, AddSkill, Control, Reassign, RetireRobot
+from backend.protocol.messages import Alert, OpReply, RobotInfo, Telemetry
 from console.screens.dialogs import SkillPicker
 from console.screens.fleet import FleetScreen
 from console.screens.give_to import GiveToScreen
@@ -162,6 +164,9 @@ async def test_retire_and_give_to_say_their_notes_in_one_notification():
         (said,) = _toasts(app, "retire lru1")
         assert "lru1 retired: no new syncs" in said and "awaits reassignment" in said
         assert "(×" not in said
+        await settle(pilot)
+        # and no second one saying it went well (the fleet screen's "✓ retire lru1")
+        assert [n.title for n in app._notifications] == ["retire lru1"]
 
         await pilot.press("f2")
         await wait_until(pilot, lambda: app.screen is app.mission_screen, what="schedule")
@@ -175,6 +180,39 @@ async def test_retire_and_give_to_say_their_notes_in_one_notification():
         (said,) = _toasts(app, what)
         assert "1 skill(s) given to lru2: lru1-1" in said and "lru1-2 stays:" in said
         assert "(×" not in said
+        await settle(pilot)
+        assert [n.title for n in app._notifications] == [what]  # the status line says it went
+
+
+class _ControlNotes(EngineBackend):
+    """Control through the rules, as the server does: its reply has the notes."""
+
+    async def submit(self, op, *, expected_revision=None):
+        if not isinstance(op, Control):
+            return await super().submit(op, expected_revision=expected_revision)
+        applied = self.b.engine.submit(op)
+        self._post(applied)
+        return OpReply(revision=applied.revision, value=applied.value, notes=applied.notes)
+
+
+async def test_run_all_says_a_robot_it_did_not_reach_once():
+    """The notes of "run all" were notified twice: by the operation service and
+    again, note by note, as "run: partly applied" (folded "(×2)")."""
+    b = Builder(TUTORIAL)
+    backend = _ControlNotes(b)
+    app = make_app(backend=backend)
+    backend.app = app
+    async with app.run_test(size=SIZE) as pilot:
+        await _load(app, pilot, b, {"lru1": True, "lru2": True})
+        b.sync("lru2")  # lru1 has nothing to run
+        await _load(app, pilot, b, {"lru1": True, "lru2": True})
+        app.clear_notifications()
+        await pilot.press("R")
+        await wait_until(pilot, lambda: app._notifications, what="the note")
+        await settle(pilot)
+        [n] = app._notifications
+        assert n.title == "run all robots", n.message
+        assert "lru1 has nothing to run" in n.message
 
 
 async def test_give_to_says_how_long_each_robot_would_be_out_of_coverage():
