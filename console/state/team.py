@@ -55,15 +55,20 @@ def gift(model: ConsoleModel, robot: str | None, cursor: str | None, marks: list
     if marks:
         return Gift(tuple(marks), None, f"{len(marks)} marked skill(s) ({', '.join(marks)})")
     if robot is not None and retired(model, robot):
-        plan = [s.id for s in model.task(robot) if s.status == Status.IDLE]
-        if not plan:
-            raise ValueError(f"{robot} is retired and has no unsynchronized skill left to give")
-        many = f"{len(plan)} skill" + ("s" if len(plan) != 1 else "")
-        return Gift((), robot, f"{robot}'s plan ({many}: {', '.join(plan)})")
+        return _plan_gift(model, robot)
     found = model.find(cursor)
     if found is None:
         raise ValueError("select a skill (or mark several) to give it to another robot")
     return Gift((found[2].id,), None, found[2].display())
+
+
+def _plan_gift(model: ConsoleModel, robot: str) -> Gift:
+    """A retired robot's whole unsynchronized plan."""
+    plan = [s.id for s in model.task(robot) if s.status == Status.IDLE]
+    if not plan:
+        raise ValueError(f"{robot} is retired and has no unsynchronized skill left to give")
+    many = f"{len(plan)} skill" + ("s" if len(plan) != 1 else "")
+    return Gift((), robot, f"{robot}'s plan ({many}: {', '.join(plan)})")
 
 
 def ranked(model: ConsoleModel, g: Gift) -> list[Suggestion]:

@@ -109,10 +109,17 @@ def _unable(rules: Rules, s: SkillInstance, to: str) -> str | None:
         return f"{to} ({rtype}) has no skill '{s.skill}'"
     if spec.talks_to is not None and s.params.get(spec.talks_to) == to:
         return f"its {spec.talks_to} is {to}: a robot is not its own partner"
+    return _not_offered(rules, s.skill, spec.version, to) or _bad_params(rules, s, to)
+
+
+def _not_offered(rules: Rules, skill: str, version: str, to: str) -> str | None:
+    """Why `to`'s manifest refuses the skill (None: it offers it, or is not known)."""
     offered = rules.offers.offered(to) if rules.offers is not None else None
-    why = incompatible(offered, s.skill, spec.version) if offered is not None else None
-    if why is not None:
-        return f"{to} {why}"
+    why = incompatible(offered, skill, version) if offered is not None else None
+    return f"{to} {why}" if why is not None else None
+
+
+def _bad_params(rules: Rules, s: SkillInstance, to: str) -> str | None:
     try:
         rules.check_params(to, s.skill, s.params, s.bindings, skill_id=s.id)
     except Refusal as r:
