@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 from backend.core.model import Status
 from backend.core.ops import Reassign
-from backend.core.plan.suggest import Manifests, Suggestion, suggest
+from backend.core.plan.suggest import Manifests, Suggestion, suggest, taken_words
 from backend.core.rules.base import Refusal
 from console.state.clock import MissionClock
 from console.state.model import ConsoleModel
@@ -105,7 +105,7 @@ def hint_words(h: Suggestion, now: float, clock: MissionClock) -> str:
     if not h.moved:
         return "cannot: " + "; ".join(f"{k}: {v}" for k, v in h.refused.items())
     stays = "".join(f"; {k} stays: {v}" for k, v in h.refused.items())
-    part = f"takes {len(h.moved)} of {len(h.moved) + len(h.refused)}, " if h.refused else ""
+    part = taken_words(len(h.moved), len(h.refused))
     return part + _end_words(h, now, clock) + battery_words(h) + coverage_words(h, clock) + stays
 
 

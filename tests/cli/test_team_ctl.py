@@ -153,3 +153,6 @@ def test_suggest_text_says_the_time_out_of_coverage():
     assert hint_text({**row, "out_of_coverage_s": None}).endswith("battery 62% left")
     partial = hint_text({**row, "refused": {"lru1-5": "lru3 has no skill 'x'"}})
     assert partial.startswith("lru3: takes 1 of 2, ends in 12m30s")
+    # the row that takes them all says so: why it ranks first (seen in the demo walk)
+    whole = hint_text({**row, "moved": ["lru1-3", "lru1-4", "lru1-5"]})
+    assert whole.startswith("lru3: takes all 3, ends in 12m30s")

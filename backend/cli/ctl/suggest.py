@@ -11,7 +11,7 @@ from typing import Any
 
 from backend.cli.ctl.errors import UsageError
 from backend.cli.ctl.plan import gather
-from backend.core.plan.suggest import Manifests, suggest
+from backend.core.plan.suggest import Manifests, suggest, taken_words
 from backend.core.rules.base import Refusal
 
 RANKED = "the most taken, then the earliest end, the least out of coverage, the most battery"
@@ -61,8 +61,7 @@ def hint_text(row: dict[str, Any]) -> str:
         return f"{row['robot']} cannot: " + "; ".join(row["refused"].values())
     end = _duration(row["end_in_s"]) if row["end_in_s"] is not None else "never (a barrier)"
     stays = "".join(f"; {k} stays: {v}" for k, v in row["refused"].items())
-    n = len(row["moved"])
-    part = f"takes {n} of {n + len(row['refused'])}, " if row["refused"] else ""
+    part = taken_words(len(row["moved"]), len(row["refused"]))
     return f"{row['robot']}: {part}ends in {end}{_battery(row)}{_coverage(row)}{stays}"
 
 

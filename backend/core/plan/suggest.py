@@ -85,6 +85,14 @@ def suggest(
     return _ranked(_by_ids(mission, library, inputs, _known(mission, what), offers))
 
 
+def taken_words(moved: int, refused: int) -> str:
+    """Why a robot ranks where it does, first: 'takes 3 of 4, ' or 'takes all 3, '
+    ('' for a single skill: its row is the robot taking it)."""
+    if refused:
+        return f"takes {moved} of {moved + refused}, "
+    return f"takes all {moved}, " if moved > 1 else ""
+
+
 def _known(mission: Mission, ids: list[str]) -> list[str]:
     missing = [sid for sid in ids if mission.find(sid) is None]
     if missing:

@@ -8,7 +8,7 @@ import pytest
 from backend.core.model import RobotSpec
 from backend.core.ops import AddRobot, AddSkill, RetireRobot
 from backend.core.plan.inputs import PlanInputs, RobotNow
-from backend.core.plan.suggest import suggest
+from backend.core.plan.suggest import suggest, taken_words
 from backend.core.rules.engine import Engine
 from tests.core.plan.helpers import LIBRARY, T0, FakeSite, mission, pose, skill
 from tests.core.rules.conftest import tutorial_engine
@@ -101,3 +101,9 @@ def test_a_robot_that_takes_more_ranks_above_one_that_ends_sooner_with_less() ->
     every = Suggestion("lru4", ("a", "b", "c", "d"), {}, end=NOW + 900)
     ranked = sorted([least, most, every], key=Suggestion.rank)
     assert [s.robot for s in ranked] == ["lru4", "lru3", "ardea"]
+
+
+def test_a_row_says_how_much_of_the_gift_its_robot_takes():
+    assert taken_words(3, 1) == "takes 3 of 4, "
+    assert taken_words(3, 0) == "takes all 3, "  # why it ranks above one that takes part
+    assert taken_words(1, 0) == ""  # one skill: the row is the robot taking it
