@@ -138,14 +138,14 @@ class FleetScreen(ViewScreen):
         if not self.ready:
             return
         t = self.query_one(DataTable)
-        keep = t.cursor_row
+        keep = (self.selected, t.cursor_row)
         self.shown = [r for r in fleet_order(self.model) if matches(self.model, r, self.query_text)]
         with self.app.batch_update():
             t.clear()
             for r in self.shown:
                 t.add_row(*self._row(r), key=r)
             if self.shown:
-                t.move_cursor(row=min(keep, len(self.shown) - 1))
+                t.move_cursor(row=_row_of(self.shown, *keep))
         self._title()
         self._detail()
         # examples from this fleet, so each of them finds something
@@ -310,3 +310,9 @@ def _skills_text(skills: dict[str, str], query: str) -> Text:
         if version:
             out.append(f" {version}", style="dim")
     return out
+
+
+def _row_of(shown: list[str], robot: str | None, row: int) -> int:
+    """The selected robot's row once the list changed (a robot added moves in the
+    fleet's order), else the same row."""
+    return shown.index(robot) if robot in shown else min(row, len(shown) - 1)

@@ -5,6 +5,8 @@ the robots ranked by the forecast and gives the skills; undo returns them."""
 from __future__ import annotations
 
 from console_state import (
+    MARS,
+    MARS_FLEET,
     T0,
     TUTORIAL,
     Builder,
@@ -71,6 +73,29 @@ async def _joining_on_fleet(app, pilot, b: Builder) -> None:
     await pilot.press("f4")
     await wait_until(pilot, lambda: isinstance(app.screen, FleetScreen), what="fleet")
     await wait_until(pilot, lambda: "asks to join" in screen_text(app), what="announcement")
+
+
+async def test_the_robot_added_stays_selected_where_the_fleet_order_puts_it():
+    """Seen in the demo: lru3 (dynamic) moves above the static lander once added,
+    and the selection used to stay on the row (the lander) instead of lru3."""
+    b = Builder(MARS)
+    app, _ = engine_app(b)
+    async with app.run_test(size=SIZE) as pilot:
+        await _load(app, pilot, b, MARS_FLEET)
+        _announce(app, b)
+        await pilot.press("f4")
+        await wait_until(pilot, lambda: isinstance(app.screen, FleetScreen), what="fleet")
+        await wait_until(pilot, lambda: "asks to join" in screen_text(app), what="announcement")
+        fleet_screen = app.screen
+        assert fleet_screen.shown[-1] == "lru3"
+        await pilot.press(*["down"] * len(fleet_screen.shown))
+        assert fleet_screen.selected == "lru3"
+        await pilot.press("insert")
+        await wait_until(pilot, lambda: "lru3" in app.model.mission.robots, what="added")
+        await settle(pilot)
+        assert fleet_screen.shown.index("lru3") < fleet_screen.shown.index("lander")
+        assert fleet_screen.selected == "lru3"
+        assert "lru3  lru_science" in screen_text(app)  # its detail, not the lander's
 
 
 def _retired_lru1() -> Builder:
