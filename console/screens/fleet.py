@@ -65,7 +65,7 @@ class FleetScreen(ViewScreen):
     def compose(self) -> ComposeResult:
         yield self.title_bar
         yield Input(placeholder="filter by capability", id="filter")
-        yield DataTable(id="robots", cursor_type="row", zebra_stripes=False)
+        yield _RobotTable(id="robots", cursor_type="row", zebra_stripes=False)
         yield Static("", id="detail", classes="detail")
         keys = key_names(self)
         back, schedule = keys.say("app.back"), keys.say("app.show_mission")
@@ -316,3 +316,20 @@ def _row_of(shown: list[str], robot: str | None, row: int) -> int:
     """The selected robot's row once the list changed (a robot added moves in the
     fleet's order), else the same row."""
     return shown.index(robot) if robot in shown else min(row, len(shown) - 1)
+
+
+class _RobotTable(DataTable):
+    """The robots; a longer detail below (a robot's manifest) shrinks it: its
+    selected row stays in sight."""
+
+    def on_resize(self) -> None:
+        self.call_after_refresh(_cursor_in_sight, self)
+
+
+def _cursor_in_sight(table: DataTable) -> None:
+    """Scroll the table so its cursor row is shown (moving the cursor there would
+    post a highlight again, and the detail)."""
+    rows = table.scrollable_content_region.height - table.header_height
+    row, top = table.cursor_row, round(table.scroll_y)
+    if rows > 0 and not top <= row < top + rows:
+        table.scroll_to(y=row if row < top else row - rows + 1, animate=False)

@@ -98,6 +98,38 @@ async def test_the_robot_added_stays_selected_where_the_fleet_order_puts_it():
         assert "lru3  lru_science" in screen_text(app)  # its detail, not the lander's
 
 
+async def test_the_selected_robot_stays_in_sight_when_its_detail_is_longer():
+    """Seen in the demo walk at 80x24: selecting lru3 (last of 5) showed its long
+    manifest, the table lost a row and lru3's row scrolled out of sight."""
+    b = Builder(MARS)
+    app, _ = engine_app(b)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await _load(app, pilot, b, MARS_FLEET)
+        _announce(app, b)
+        # the sim's manifest: modules and properties take 6 lines at 80 columns
+        sims = {"missionctl-sim": "0.1.0", "nav": "1.0.0", "science_camera": "1.0.0"}
+        sims["stereo_camera"] = "1.0.0"
+        props = dict(simulated=True, kind="rover", capabilities=["science_camera", "stereo"])
+        props |= dict(max_speed_mps=1.0, sensor_range_m=10.0)
+        props |= dict(metres_per_battery=350.0, camera_range_m=15.0, radio_range_m=0.0)
+        skills = b.library.skills_of("lru_science")
+        man = manifest("lru3", "lru_science", skills, sims, **props)
+        app.post_message(fleet_changed(_lru3(b).model_copy(update={"manifest": man})))
+        await pilot.press("f4")
+        await wait_until(pilot, lambda: isinstance(app.screen, FleetScreen), what="fleet")
+        await wait_until(pilot, lambda: _props(app, "lru3"), what="lru3's manifest")
+        await pilot.press(*["down"] * len(app.screen.shown))
+        assert app.screen.selected == "lru3"
+        await settle(pilot)
+        rows = [line for line in screen_text(app).splitlines() if line.startswith(" lru3  ")]
+        assert any("✚ asks to join (lru_science)  lru_science" in r for r in rows)
+
+
+def _props(app, robot: str) -> dict:
+    info = app.model.robots.get(robot)
+    return info.manifest.properties if info is not None and info.manifest else {}
+
+
 def _retired_lru1() -> Builder:
     b = Builder(TUTORIAL)
     b.engine.submit(AddRobot(name="lru3", type="lru_science"))
