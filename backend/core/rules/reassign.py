@@ -161,6 +161,7 @@ def reassign(rules: Rules, op: Reassign) -> Change:
     ]
     notes = [f"{len(items)} skill(s) given to {op.to}: {', '.join(moved_ids(items))}"]
     notes += [f"{sid} stays: {why}" for sid, why in refused.items()] + barrier_notes
+    notes += _order_notes(rules, items, refused, op.to)
     notes += partner_notes + after_notes
     value = {
         "to": op.to,
@@ -193,6 +194,24 @@ def _split(
         said = "; ".join(f"{sid}: {why}" for sid, why in refused.items())
         raise Refusal("cannot_reassign", f"nothing can go to {to}: {said}", robot=to)
     return items, refused
+
+
+def _order_notes(
+    rules: Rules, items: list[RestoreItem], refused: dict[str, str], to: str
+) -> list[str]:
+    """A skill that stays, ahead of moved ones of its robot, goes last on `to` when
+    it is given later: the plan's order is lost unless the operator restores it
+    (seen in the demo: an identification after the science image it prepared)."""
+    notes = []
+    for sid in refused:
+        robot, i, s = rules.skill(sid)
+        later = [it.skill.id for it in items if it.robot == robot and it.index > i]
+        if later and s.status not in FINISHED:
+            notes.append(
+                f"{sid} came before {later[0]} on {robot}: given later, it goes last on {to}; "
+                f"move it before {later[0]} there, or undo and give them once {sid} can move"
+            )
+    return notes
 
 
 def moved_ids(items: list[RestoreItem]) -> list[str]:

@@ -368,6 +368,31 @@ def test_a_skill_tied_to_a_partner_under_way_says_to_stop_its_robot(engine: Engi
     )
 
 
+def test_a_skill_that_stays_ahead_of_moved_ones_says_the_order_is_lost(engine: Engine) -> None:
+    """Seen in the demo walk: lru1-3 (held by lru2 at their barrier) stayed while
+    lru1-4 moved; given later it went last on lru3, after the science image it
+    prepared, which failed. The gift says so, and how to restore the order."""
+    engine.submit(AddRobot(name="lru3", type="lru_science"))
+    sid = _identify_together(engine)  # last of lru1's plan: add one after it
+    image = {"target": {"x": 10, "y": 5}}
+    after = engine.submit(AddSkill(robot="lru1", skill="take_science_image", params=image))
+    bring(engine, "lru2", "lru2-1", Status.SUCCESS)
+    bring(engine, "lru2", "lru2-2", Status.SYNCHWAITING)
+    applied = engine.submit(Reassign(from_robot="lru1", to="lru3"))
+    later = after.value["id"]
+    assert later in applied.value["moved"] and sid in applied.value["refused"]
+    (said,) = [n for n in applied.notes if n.startswith(f"{sid} came before")]
+    assert said == (
+        f"{sid} came before {later} on lru1: given later, it goes last on lru3; "
+        f"move it before {later} there, or undo and give them once {sid} can move"
+    )
+    # a skill that stays after the moved ones loses no order: nothing said
+    engine.submit(Undo())
+    quiet = engine.submit(Reassign(ids=["lru1-1", sid], to="lru3"))
+    assert sid in quiet.value["refused"]
+    assert not [n for n in quiet.notes if "came before" in n]
+
+
 def test_retiring_says_which_skills_a_partner_under_way_holds(engine: Engine) -> None:
     """lru2 waits at the barrier for lru1, which breaks: retiring lru1 says what
     frees the skill lru2 waits for (and nothing of skills no one waits for)."""
