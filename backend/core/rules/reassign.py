@@ -204,14 +204,22 @@ def _order_notes(
     (seen in the demo: an identification after the science image it prepared)."""
     notes = []
     for sid in refused:
-        robot, i, s = rules.skill(sid)
-        later = [it.skill.id for it in items if it.robot == robot and it.index > i]
-        if later and s.status not in FINISHED:
+        robot, later = rules.skill(sid)[0], _moved_after(rules, items, sid)
+        if later is not None:
             notes.append(
-                f"{sid} came before {later[0]} on {robot}: given later, it goes last on {to}; "
-                f"move it before {later[0]} there, or undo and give them once {sid} can move"
+                f"{sid} came before {later} on {robot}: given later, it goes last on {to}; "
+                f"move it before {later} there, or undo and give them once {sid} can move"
             )
     return notes
+
+
+def _moved_after(rules: Rules, items: list[RestoreItem], sid: str) -> str | None:
+    """The first moved skill that came after `sid` on its robot (None: none, or
+    `sid` is finished: the log has no order to keep)."""
+    robot, i, s = rules.skill(sid)
+    if s.status in FINISHED:
+        return None
+    return next((it.skill.id for it in items if it.robot == robot and it.index > i), None)
 
 
 def moved_ids(items: list[RestoreItem]) -> list[str]:
