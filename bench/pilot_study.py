@@ -40,7 +40,14 @@ from report import machine, write_section  # noqa: E402
 
 from backend.core.durations import duration_s  # noqa: E402
 from tests.sim.conftest import Stack, connect  # noqa: E402
-from tests.sim.pilot import BEST, DEADLINE, STRATEGIES, Result, play  # noqa: E402
+from tests.sim.pilot import (  # noqa: E402
+    BEST,
+    DEADLINE,
+    SIM_OPTIONS,
+    STRATEGIES,
+    Result,
+    play,
+)
 from tests.sim.pilot_delay import DELAY_DEADLINE, DELAY_STRATEGIES  # noqa: E402
 
 ALL = {**STRATEGIES, **DELAY_STRATEGIES}
@@ -52,6 +59,7 @@ PAPER = {
     "ideal": "5 of 9 participants: 1.8 or more in 26.8 min on average",
     "ignoring_batteries": "(the study's batteries constrain the robots)",
     "ignoring_coverage": "(adaptation only inside coverage, extended by Wi-Fi boxes)",
+    "substituted": "(not in the paper: lru1 broken at 12 min, lru3 joins at 15; issue 30)",
     "ideal_by_hand": "today's policies: the ground sequences each step",
     "ideal_on_board": "contingencies + after: one uplink after the survey",
 }
@@ -59,7 +67,7 @@ PAPER = {
 
 async def one(strategy: str, seed: int, speed: float, delay: str = "") -> Result:
     """One run; `delay` (sim time, e.g. '10m'): a delayed strategy at that link delay."""
-    extra = ["--link-delay", delay] if delay else []
+    extra = SIM_OPTIONS.get(strategy, []) + (["--link-delay", delay] if delay else [])
     deadline = DELAY_DEADLINE if delay else DEADLINE
     with tempfile.TemporaryDirectory(prefix="pilot-") as tmp:
         stack = Stack(Path(tmp))

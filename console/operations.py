@@ -123,8 +123,8 @@ class OperationService:
             say(f"✓ {what}", "ok")
         elif done:
             say(done, "ok")
-        for note in reply.notes:
-            self._notify(note, title=what, severity="warning", timeout=8)
+        if reply.notes:  # one toast: toasts of one title fold into the last, "(×2)"
+            self._notify("\n".join(reply.notes), title=what, severity="warning", timeout=8)
         return OperationOutcome(reply=reply)
 
     def _refused(

@@ -288,12 +288,23 @@ class SetSkill(Strict):
 
 class ReturnSkills(Strict):
     """The undo of a reassignment: each skill back where it was, with the
-    barriers it was in."""
+    barriers it was in, its `after` links and its partners' parameters."""
 
     op: Literal["return_skills"] = "return_skills"
     items: list[RestoreItem]
     to: Name = Field(description="where the reassignment gave them (its redo)")
     barriers: dict[Name, Barrier] = Field(default_factory=dict)
+    afters: dict[SkillId, SkillId] = Field(
+        default_factory=dict,
+        max_length=10_000,
+        description="skill id -> the `after` it had, dissolved by the reassignment",
+    )
+    partners: dict[SkillId, Name] = Field(
+        default_factory=dict,
+        max_length=10_000,
+        description="barrier partner skill id -> the robot its partner parameter (talks_to) "
+        "named before the reassignment named `to` there",
+    )
 
 
 class RestoreMarker(Strict):

@@ -115,12 +115,17 @@ class Retired(Strict):
 
 class Reassigned(Strict):
     """reassign: the skills given to `to` (in their new order), why each other
-    one stays, and the barriers dissolved (they would tie a robot to itself)."""
+    one stays, the barriers dissolved (they would tie a robot to itself), the
+    `after` links dissolved for the same reason (skill -> what it awaited) and
+    the barrier partners that work with `to` now (skill -> the robot its
+    partner parameter named before)."""
 
     to: Name
     moved: list[SkillId]
     refused: dict[SkillId, str]
     dissolved: list[Name]
+    afters_dissolved: dict[SkillId, SkillId] = Field(default_factory=dict)
+    partners_renamed: dict[SkillId, Name] = Field(default_factory=dict)
 
 
 VALUES: dict[str, type[Strict]] = {

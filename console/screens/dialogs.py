@@ -357,6 +357,7 @@ class SkillPicker(ListChoice):
         library: Library,
         where: str,
         offered_by: dict[str, str] | None = None,
+        who_can: Callable[[str], str] | None = None,
     ) -> None:
         super().__init__()
         self.robot = robot
@@ -364,6 +365,7 @@ class SkillPicker(ListChoice):
         self.library = library
         self.where = where
         self.offered_by = offered_by or {}  # skill -> "also offered by: lru2"
+        self.who_can = who_can  # skill -> a line ranking the robots for it ('': none)
 
     def compose(self) -> ComposeResult:
         with Vertical():
@@ -374,6 +376,7 @@ class SkillPicker(ListChoice):
             )
             yield Input(placeholder="type to filter…", id="filter")
             yield OptionList(id="skills")
+            yield Static("", id="who")
             yield Static(self.hint("add"), classes="hint")
 
     def on_mount(self) -> None:
@@ -412,6 +415,12 @@ class SkillPicker(ListChoice):
             if score > 0:
                 scored.append((score, name))
         return [n for _, n in sorted(scored, key=lambda x: -x[0])]
+
+    @on(OptionList.OptionHighlighted, "#skills")
+    def _highlighted(self, event: OptionList.OptionHighlighted) -> None:
+        """The allocation hint of the highlighted skill: who can do it, ranked."""
+        if self.who_can is not None and event.option.id is not None:
+            self.query_one("#who", Static).update(self.who_can(event.option.id))
 
     @on(Input.Changed, "#filter")
     def _filter(self, event: Input.Changed) -> None:

@@ -66,7 +66,7 @@ class FleetScreen(ViewScreen):
     def compose(self) -> ComposeResult:
         yield self.title_bar
         yield Input(placeholder="filter by capability", id="filter")
-        yield DataTable(id="robots", cursor_type="row", zebra_stripes=False)
+        yield _RobotTable(id="robots", cursor_type="row", zebra_stripes=False)
         yield Static("", id="detail", classes="detail")
         keys = key_names(self)
         back, schedule = keys.say("app.back"), keys.say("app.show_mission")
@@ -154,14 +154,14 @@ class FleetScreen(ViewScreen):
         if not self.ready:
             return
         t = self.query_one(DataTable)
-        keep = t.cursor_row
+        keep = (self.selected, t.cursor_row)
         self.shown = self._matching()
         with self.app.batch_update():
             t.clear()
             for r in self.shown:
                 t.add_row(*self._row(r), key=r)
             if self.shown:
-                t.move_cursor(row=min(keep, len(self.shown) - 1))
+                t.move_cursor(row=_row_of(self.shown, *keep))
         self._title()
         self._detail()
         # examples from this fleet, so each of them finds something
@@ -355,3 +355,26 @@ def _only_robot(change: StateChange) -> str | None:
     if change.about(Topic.MISSION) or change.robots is None or len(change.robots) != 1:
         return None
     return next(iter(change.robots))
+
+
+def _row_of(shown: list[str], robot: str | None, row: int) -> int:
+    """The selected robot's row once the list changed (a robot added moves in the
+    fleet's order), else the same row."""
+    return shown.index(robot) if robot in shown else min(row, len(shown) - 1)
+
+
+class _RobotTable(DataTable):
+    """The robots; a longer detail below (a robot's manifest) shrinks it: its
+    selected row stays in sight."""
+
+    def on_resize(self) -> None:
+        self.call_after_refresh(_cursor_in_sight, self)
+
+
+def _cursor_in_sight(table: DataTable) -> None:
+    """Scroll the table so its cursor row is shown (moving the cursor there would
+    post a highlight again, and the detail)."""
+    rows = table.scrollable_content_region.height - table.header_height
+    row, top = table.cursor_row, round(table.scroll_y)
+    if rows > 0 and not top <= row < top + rows:
+        table.scroll_to(y=row if row < top else row - rows + 1, animate=False)

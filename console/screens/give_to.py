@@ -1,7 +1,8 @@
 """ "Give to…" (issue 30): the selected skill, the marked ones or a retired
 robot's whole plan go to another robot, chosen from a list of the robots
-in service ranked by the forecast (earliest end with them, then battery
-left); a robot that cannot take them says why and cannot be chosen."""
+in service ranked by the forecast (the most of them taken, the earliest end
+with them, then the least time out of comms coverage, then battery left); a
+robot that cannot take them says why and cannot be chosen."""
 
 from __future__ import annotations
 
@@ -21,6 +22,8 @@ from console.screens.dialogs import TCSS, ChoiceScreen
 from console.state.clock import MissionClock
 from console.state.team import Gift, gift, hint_words, nobody_takes, ranked
 
+RANKED = "ranked: most taken, soonest end, least out of coverage, most battery"
+
 
 class GiveToScreen(ChoiceScreen):
     """The robots ranked for a gift; enter gives it to the highlighted one (a
@@ -37,7 +40,7 @@ class GiveToScreen(ChoiceScreen):
     def compose(self) -> ComposeResult:
         with Vertical():
             yield Label(Text(self.question, style="bold"), classes="question")
-            yield Static("ranked by the forecast: earliest end with them, then battery left")
+            yield Static(RANKED)
             options = (Option(p, id=r, disabled=r not in self.takers) for r, p in self.rows)
             yield OptionList(*options, id="choices")
             hint = key_names(self).hint(
@@ -52,7 +55,7 @@ def _row(n: int, h: Suggestion, now: float, clock: MissionClock) -> Text:
     text = Text()
     text.append(f"{h.robot:<8}", style="bold" if h.moved else "dim")
     text.append(hint_words(h, now, clock), style="" if h.capable else "dim")
-    if h.capable and n == 0:
+    if h.moved and n == 0:  # the ranking's first: it takes the most, soonest
         text.append("  ★ best", style="bold")
     return text
 

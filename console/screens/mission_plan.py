@@ -7,6 +7,7 @@ after which the cursor goes to the skill they brought back."""
 from __future__ import annotations
 
 from collections import deque
+from functools import cache, partial
 from typing import Any
 
 from backend.core.contingency import span_text
@@ -29,6 +30,7 @@ from console.screens.schedule_keys import added_text
 from console.state.capability import also_offered_by
 from console.state.defaults import default_params
 from console.state.search import search_skills
+from console.state.team import picker_hint
 
 
 class PlanActions:
@@ -107,7 +109,9 @@ class PlanActions:
         at, where = m.insertion_point(robot, sid)
         skills = m.skills_of(robot)
         offered = {name: also_offered_by(m, name, robot) for name in skills}
-        choice = await s.app.push_screen_wait(SkillPicker(robot, skills, m.library, where, offered))
+        ranked = cache(partial(picker_hint, m, robot=robot))  # once a skill, while it is open
+        picker = SkillPicker(robot, skills, m.library, where, offered, ranked)
+        choice = await s.app.push_screen_wait(picker)
         if not choice:
             return
         spec = m.library.skills[choice]

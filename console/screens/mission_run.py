@@ -73,9 +73,7 @@ class RunActions:
             s.say(
                 f"{op} {who}: {done}" + (f" — {notes}" if notes else ""),
                 "warning" if notes else "ok",
-            )
-            for n in r.notes:
-                s.app.notify(n, title=f"{op}: partly applied", severity="warning")
+            )  # the notes' notification is the operation service's (one, not two)
 
         s.submit(Control(op=op, robot=robot), f"{op} {who}", robot=robot, then=ok)
 

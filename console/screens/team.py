@@ -56,4 +56,5 @@ async def retire_robot(screen: Any, robot: str | None, say: Any) -> None:
         say(f"{robot} kept in service")
         return
     op = RetireRobot(name=robot, reason=reason[:500])
-    await screen.ops.submit(op, f"retire {robot}", robot=robot, say=say)
+    # its notes (always some: what happened to its queue) are the one notification
+    await screen.ops.submit(op, f"retire {robot}", robot=robot, say=say, done="")

@@ -17,6 +17,7 @@ from datetime import datetime
 
 from backend.core.model import SkillInstance, Status
 from console.state.model import ConsoleModel
+from console.state.team import retired
 from console.state.text import GLYPHS, STATUS_WORDS
 
 FIELDS = ("skill", "type", "module", "prop", "name")
@@ -106,8 +107,9 @@ def robots_offering(model: ConsoleModel, skill: str) -> list[str]:
 
 
 def also_offered_by(model: ConsoleModel, skill: str, robot: str) -> str:
-    """For the skill picker: 'also offered by: lru2' / 'only lru1 offers it'."""
-    others = [r for r in robots_offering(model, skill) if r != robot]
+    """For the skill picker: 'also offered by: lru2' / 'only lru1 offers it'
+    (a retired robot offers nothing: it gets no new syncs)."""
+    others = [r for r in robots_offering(model, skill) if r != robot and not retired(model, r)]
     return f"also offered by: {', '.join(others)}" if others else f"only {robot} offers it"
 
 

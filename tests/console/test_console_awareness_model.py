@@ -249,3 +249,11 @@ def test_theme_saved_in_toml_and_yaml_config_keeping_the_rest(tmp_path):
     assert save_theme(yml, "missionctl-high-contrast") is None
     cfg = load_config(yml)
     assert (cfg.theme, cfg.keymap) == ("missionctl-high-contrast", {"mission.sync": "S"})
+
+
+def test_picker_says_no_retired_robot_offers_a_skill():
+    """Seen in the demo: the picker said lru1 offers identify_stone after lru1 was retired."""
+    m = mars_model()
+    m.mission.robots["lru2"] = m.mission.robots["lru2"].model_copy(update={"retired": "broken"})
+    assert also_offered_by(m, "identify_stone", "lru1") == "only lru1 offers it"
+    assert also_offered_by(m, "recharge", "lru1") == "also offered by: ardea"

@@ -19,6 +19,7 @@ world file).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
@@ -28,7 +29,17 @@ from backend import transport
 from backend.client.client import MissionClient, OperationRefused
 from backend.client.mapfollow import MapFeed
 from backend.client.simstatus import SimStatusFeed
-from backend.core.ops import AddBarrier, AddSkill, Control, DeleteSkills, Sync
+from backend.core.ops import (
+    AddBarrier,
+    AddRobot,
+    AddSkill,
+    Control,
+    DeleteSkills,
+    Reassign,
+    RetireRobot,
+    Sync,
+    Unsync,
+)
 from backend.protocol import mapfeed as mf
 
 PILOT_MINUTES = 26.8  # the participants' average mission time
@@ -37,6 +48,7 @@ BEST = 1.8  # the paper's best participants scored 1.8 or more
 LANDER_DROP = {"x": 2.0, "y": 0.0}
 TERMINAL = ("success", "failure")
 WAKE_S = 0.1  # wall seconds between looks at the clock while nothing happens
+IN_FLIGHT_S = 10.0  # sim seconds the robots' news may take to reach the ground's view
 
 XY = tuple[float, float]
 
@@ -501,14 +513,14 @@ async def bring_coverage(op: Operator, cluster: list[Region]) -> None:
     )
 
 
-async def image_all(op: Operator, cluster: list[Region]) -> list[str]:
-    """LRU1 images the regions of the group, nearest first."""
-    here = op.pose("lru1")
+async def image_all(op: Operator, cluster: list[Region], robot: str = "lru1") -> list[str]:
+    """LRU1 (or the robot in its place) images the regions of the group, nearest first."""
+    here = op.pose(robot)
     images = []
     for region in sorted(cluster, key=lambda g: g.dist(*here)):
         spot = image_spot(op, region, here)
         images += await op.do(
-            "lru1",
+            robot,
             ("drive_to", {"goal": _pose(spot), "speed": 1.0}),
             ("take_science_image", {"target": _pose((region.x, region.y))}),
         )
@@ -516,28 +528,33 @@ async def image_all(op: Operator, cluster: list[Region]) -> list[str]:
     return images
 
 
-async def take_together(op: Operator, targets: list[Region]) -> None:
+async def take_together(
+    op: Operator, targets: list[Region], first: str = "lru1", approach: bool = False
+) -> None:
     """One plan for both rovers: at each region a barrier (identify together) and LRU2
-    picks; then LRU2 drives home and drops the stones into the sample box."""
-    lru1_steps: list[tuple[str, dict[str, Any]]] = []
-    lru2_steps: list[tuple[str, dict[str, Any]]] = []
+    picks; then LRU2 drives home and drops the stones into the sample box. `first`: LRU1
+    or the robot in its place; `approach`: both drive to each region at full speed first
+    (identify goes there at cruise speed)."""
+    pair = ((first, "lru2"), ("lru2", first))
+    steps: dict[str, list[tuple[str, dict[str, Any]]]] = {first: [], "lru2": []}
+    at: dict[str, list[int]] = {first: [], "lru2": []}  # where each identifies
     for region in targets:
         where, radius = _pose((region.x, region.y)), min(10.0, region.radius + 1.5)
-        lru1_steps.append(
-            ("identify_stone", {"target": where, "search_radius": radius, "partner": "lru2"})
-        )
-        lru2_steps += [
-            ("identify_stone", {"target": where, "search_radius": radius, "partner": "lru1"}),
-            ("pick_stone", {"target": where}),
-        ]
-    lru2_steps += [("drive_to", {"goal": _pose((2.0, 0.0)), "speed": 1.0}), ("drop_stone", {})]
-    a = await op.plan("lru1", *lru1_steps)
-    b = await op.plan("lru2", *lru2_steps)
-    for k in range(len(targets)):
-        await op.client.submit(AddBarrier(ids=[a[k], b[2 * k]]))
-    await op.send("lru1", a)
-    await op.send("lru2", b)
-    await op.done(b[-1])
+        for robot, partner in pair:
+            if approach:
+                goal = _pose(op.free_near(region.x, region.y))
+                steps[robot].append(("drive_to", {"goal": goal, "speed": 1.0}))
+            at[robot].append(len(steps[robot]))
+            look = {"target": where, "search_radius": radius, "partner": partner}
+            steps[robot].append(("identify_stone", look))
+        steps["lru2"].append(("pick_stone", {"target": where}))
+    steps["lru2"] += [("drive_to", {"goal": _pose((2.0, 0.0)), "speed": 1.0}), ("drop_stone", {})]
+    ids = {robot: await op.plan(robot, *steps[robot]) for robot, _ in pair}
+    for i, j in zip(at[first], at["lru2"], strict=True):
+        await op.client.submit(AddBarrier(ids=[ids[first][i], ids["lru2"][j]]))
+    await op.send(first, ids[first])
+    await op.send("lru2", ids["lru2"])
+    await op.done(ids["lru2"][-1])
 
 
 def _all_known(op: Operator, cluster: list[Region]) -> bool:
@@ -563,6 +580,163 @@ async def ignoring_coverage(op: Operator) -> None:
     await ideal(op, use_wifi=False)
 
 
+# ---------------------------------------------------------------- a robot substituted (issue 30)
+
+BROKEN = "lru1"
+PARTNER = "lru2"  # LRU1's partner at the barriers
+QUIET = ("idle", "idle_synchronized", *TERMINAL)  # nothing under way
+
+
+async def substituted(op: Operator) -> None:
+    """The ideal plan until LRU1 stops responding (`--break lru1@12m`). LRU2 is stopped
+    at once (a partner that waits for LRU1 would wait in vain, or identify alone) and
+    its queue taken back. A robot of LRU1's type arrives (`--join lru3:lru_science@15m`):
+    the operator adds it, retires LRU1 and gives it LRU1's remaining plan (two actions),
+    then goes on with it in LRU1's part."""
+    plan = asyncio.create_task(ideal(op))
+    cluster: list[Region] = []  # the ideal's target, seen before the Wi-Fi box covers it
+
+    def broken() -> bool:
+        if not cluster:
+            cluster.extend(best_cluster(op) or [])
+        return plan.done() or not op.client.robots[BROKEN].online
+
+    await op.until(broken)
+    if plan.done():
+        return await plan  # LRU1 never broke down (or the time was up: Deadline)
+    await _stop(plan)
+    op.note(f"{BROKEN} stopped responding: the ideal plan stops here")
+    await halt(op, PARTNER)
+    new = await take_over(op, BROKEN)
+    if new is not None:
+        await finish_with(op, new, cluster)
+
+
+async def _stop(task: asyncio.Task[None]) -> None:
+    """Cancel `task` until it ends: Python 3.11's wait_for (in Operator.until) can
+    swallow a cancellation that meets its timeout."""
+    while not task.done():
+        task.cancel()
+        await asyncio.wait([task], timeout=0.05)
+    if not task.cancelled() and task.exception() is not None:
+        raise task.exception()  # type: ignore[misc]
+
+
+async def halt(op: Operator, robot: str) -> None:
+    """Take the robot's queue back (its plan is the operator's again), stopping it if it
+    identifies with LRU1: alone it would find a low-score stone. Another skill ends."""
+    if any(s.skill == "identify_stone" for s in _all(op, robot) if s.status.value not in QUIET):
+        with contextlib.suppress(OperationRefused):  # it ended meanwhile
+            await op.client.submit(Control(op="stop", robot=robot))
+        op.note(f"{robot} stopped")
+    # a stopped skill goes back to the head of its queue: then the queue comes back
+    await op.until(lambda: all(s.status.value in QUIET for s in _all(op, robot)))
+    if any(s.status.value == "idle_synchronized" for s in _all(op, robot)):
+        await op.client.submit(Unsync(robot=robot))
+    await op.until(lambda: all(s.status.value in ("idle", *TERMINAL) for s in _all(op, robot)))
+    op.note(f"{robot}'s queue taken back")
+
+
+def _joining(op: Operator) -> list[str]:
+    return [r for r, info in op.client.robots.items() if info.joining]
+
+
+async def take_over(op: Operator, broken: str) -> str | None:
+    """Add the robot that asks to join, retire `broken` and give it its plan: its name
+    (None: nobody came in time)."""
+    if not await op.until(lambda: bool(_joining(op))):
+        return None
+    new = _joining(op)[0]
+    manifest = op.client.robots[new].manifest
+    assert manifest is not None
+    await op.client.submit(AddRobot(name=new, type=manifest.type))
+    await op.until(lambda: op.client.robots[new].online)
+    retired = await op.client.submit(RetireRobot(name=broken, reason="stopped responding"))
+    plan = retired.value["to_reassign"]
+    op.note(f"{new} ({manifest.type}) added; {broken} retired, its plan: {plan}")
+    if plan:
+        given = await op.client.submit(Reassign(from_robot=broken, to=new))
+        op.note(f"given to {new}: {given.value['moved']}, staying: {given.value['refused']}")
+    return new
+
+
+async def finish_with(op: Operator, robot: str, cluster: list[Region]) -> None:
+    """LRU1's part, by `robot`, with LRU2: the coverage if it is not there yet, the
+    images still to take (none once the two best known top scores reach BEST), then
+    the best stones together, as many as LRU2 can still carry."""
+    if not cluster:  # LRU1 broke before the survey found the group
+        if not await op.until(lambda: best_cluster(op) is not None):
+            return
+        cluster = best_cluster(op) or []
+    # the identifications planned with LRU1 are planned again, with `robot`
+    stale = [s.id for s in _task(op, PARTNER)]
+    stale += [s.id for s in _task(op, robot) if s.skill == "identify_stone"]
+    if stale:
+        await op.client.submit(DeleteSkills(ids=stale))
+    if not _succeeded(op, PARTNER, "deploy_wifi_box"):
+        await bring_coverage(op, cluster)
+    await _images(op, robot, cluster)
+    free = int(op.figure(PARTNER, "carry_stones")) - _carried(op, PARTNER)
+    targets = _two_best(op, cluster)[: max(0, free)]
+    op.note(f"{robot} takes " + ", ".join(f"{g.name} (top {g.top})" for g in targets))
+    await take_together(op, targets, first=robot, approach=True)
+
+
+async def _images(op: Operator, robot: str, cluster: list[Region]) -> None:
+    """The images given to `robot` (LRU1's), and those of the regions still unknown."""
+    given = [s.id for s in _task(op, robot)]
+    if given and _enough_known(op, cluster):
+        op.note(f"the top scores known reach {BEST}: {robot} drops {given}")
+        await op.client.submit(DeleteSkills(ids=given))
+    elif given:
+        await op.send(robot, given)
+        await op.done(*given)
+    if not _enough_known(op, cluster):
+        unknown = [g for g in cluster if op.regions().get(g.name, g).top is None]
+        await op.done(*await image_all(op, unknown, robot))
+        await op.until(lambda: _all_known(op, cluster), op.clock() + 60.0)
+
+
+def _all(op: Operator, robot: str) -> list[Any]:
+    m = op.client.mission
+    assert m is not None
+    return list(m.tasks.get(robot, []))
+
+
+def _task(op: Operator, robot: str) -> list[Any]:
+    """The robot's unsynchronized plan."""
+    return [s for s in _all(op, robot) if s.status.value == "idle"]
+
+
+def _succeeded(op: Operator, robot: str, skill: str) -> bool:
+    return any(s.skill == skill and s.status.value == "success" for s in _all(op, robot))
+
+
+def _carried(op: Operator, robot: str) -> int:
+    """Stones the robot picked since it last dropped them (its skills' outcomes)."""
+    n = 0
+    for s in _all(op, robot):
+        if s.status.value == "success":
+            n = n + 1 if s.skill == "pick_stone" else (0 if s.skill == "drop_stone" else n)
+    return n
+
+
+def _enough_known(op: Operator, cluster: list[Region]) -> bool:
+    """The two best top scores revealed reach BEST: other images cannot matter."""
+    regions = op.regions()
+    tops = sorted((regions[g.name].top or 0.0 for g in cluster if g.name in regions), reverse=True)
+    return sum(tops[:2]) >= BEST - 1e-9
+
+
+# the simulator's options a strategy needs (bench/pilot_study.py, the tests)
+SIM_OPTIONS: dict[str, list[str]] = {
+    "substituted": ["--break", f"{BROKEN}@12m", "--join", "lru3:lru_science@15m"],
+}
+# sim seconds a strategy plays on after the deadline, so that a late delivery's time
+# is known (its score counts only what was delivered in time)
+OVERTIME: dict[str, float] = {"substituted": 600.0}
+
+
 Strategy = Callable[[Operator], Awaitable[None]]
 
 STRATEGIES: dict[str, Strategy] = {  # at no delay
@@ -571,6 +745,7 @@ STRATEGIES: dict[str, Strategy] = {  # at no delay
     "ideal": ideal,
     "ignoring_batteries": ignoring_batteries,
     "ignoring_coverage": ignoring_coverage,
+    "substituted": substituted,
 }
 
 
@@ -586,10 +761,11 @@ async def play(
     linger: bool = True,
     strategies: dict[str, Strategy] | None = None,
 ) -> Result:
-    """Play `strategy` until it is done or `deadline` (sim seconds) is up;
-    evaluate. `linger`: wait out the deadline first (reports in flight);
-    a delayed run ends once its strategy saw its last skill end."""
-    op = Operator(client, deadline)
+    """Play `strategy` until it is done or `deadline` (sim seconds, and the
+    strategy's OVERTIME) is up; evaluate. `linger`: wait out the deadline first
+    (reports in flight), or a moment after overtime; a delayed run ends once
+    its strategy saw its last skill end."""
+    op = Operator(client, deadline + OVERTIME.get(strategy, 0.0))
     await op.start()
     try:
         started = op.clock()  # under a delay the robots register one delay into the run
@@ -598,8 +774,8 @@ async def play(
             await (strategies or STRATEGIES)[strategy](op)
         except Deadline:
             op.note("time is up")
-        if linger:
-            await op.until(lambda: False)  # the rest of the 26.8 minutes (reports in flight)
+        if linger:  # the rest of the 26.8 minutes (reports in flight), or a moment after overtime
+            await op.until(lambda: False, max(deadline, op.clock() + IN_FLIGHT_S))
         result = await _evaluate(op, strategy, seed, deadline, referee=not linger)
         result.started_at = started
         return result

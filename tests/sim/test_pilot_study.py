@@ -10,13 +10,14 @@ reports the scores beside the paper's.
 from __future__ import annotations
 
 from .conftest import Stack, connect
-from .pilot import BEST, DEADLINE, Result, play
+from .pilot import BEST, DEADLINE, SIM_OPTIONS, Result, play
 
 SPEED = 100.0  # 26.8 sim-minutes in about 16 wall seconds
 
 
 async def run_strategy(stack: Stack, strategy: str, seed: int) -> Result:
-    client, watch = await connect(stack, speed=SPEED, seed=seed)
+    extra = SIM_OPTIONS.get(strategy, [])
+    client, watch = await connect(stack, speed=SPEED, seed=seed, extra=extra)
     try:
         return await play(client, strategy, seed)
     finally:
@@ -75,3 +76,23 @@ async def test_ignoring_the_coverage_fails(stack: Stack) -> None:
     assert r.truth is not None
     assert not [s for s in r.truth.stones if s.score is not None and s.score > 0.1], _why(r)
     assert any("(unreachable)" in line for line in r.skills), _why(r)
+
+
+async def test_lru1_broken_at_12_minutes_is_substituted_by_lru3(stack: Stack) -> None:
+    """The ideal plan with LRU1 stopping at 12 sim-minutes and LRU3 (an lru_science)
+    arriving at 15: the operator takes LRU2's queue back, adds LRU3, retires LRU1, gives
+    it LRU1's plan, and LRU3 identifies the two best stones with LRU2 in LRU1's place.
+    It plays on past the deadline (OVERTIME) so that the delivery's time is known."""
+    r = await run_strategy(stack, "substituted", seed=1)
+    notes = "\n".join(r.notes)
+    assert "lru1 stopped responding" in notes and "lru2's queue taken back" in notes, _why(r)
+    assert "lru3 (lru_science) added; lru1 retired" in notes, _why(r)
+    assert any(
+        line.startswith("lru3 identify_stone: success") and line.endswith("with lru2")
+        for line in r.skills
+    ), _why(r)
+    # both top stones, by LRU3 and LRU2 together; the score counts what came in time
+    assert {s.split("-s")[0] for s, _v, _t in r.deliveries} == {"RSS-E", "RSS-F"}, _why(r)
+    assert sum(v for _s, v, _t in r.deliveries) >= BEST, _why(r)
+    assert r.score == sum(v for _s, v, t in r.deliveries if t <= DEADLINE)
+    assert not [f for f in r.failures if f[0] != "lru1"], _why(r)  # lru1's: outcome unknown

@@ -1,6 +1,6 @@
 """`ctl suggest SKILL_OR_ID...` (issue 30): the robots that can take skills,
-ranked by the forecast (their predicted end with them, the battery left);
-see backend/core/plan/suggest.py."""
+ranked by the forecast (their predicted end with them, the time out of comms
+coverage doing them, the battery left); see backend/core/plan/suggest.py."""
 
 from __future__ import annotations
 
@@ -11,8 +11,10 @@ from typing import Any
 
 from backend.cli.ctl.errors import UsageError
 from backend.cli.ctl.plan import gather
-from backend.core.plan.suggest import Manifests, suggest
+from backend.core.plan.suggest import Manifests, suggest, taken_words
 from backend.core.rules.base import Refusal
+
+RANKED = "the most taken, then the earliest end, the least out of coverage, the most battery"
 
 
 async def suggest_view(client: Any, args: argparse.Namespace) -> int:
@@ -28,7 +30,7 @@ async def suggest_view(client: Any, args: argparse.Namespace) -> int:
         out = {"ok": True, "what": list(args.what), "robots": rows}
         print(json.dumps(out, ensure_ascii=False), flush=True)
     else:
-        print(f"who can take {', '.join(args.what)} (earliest end first):", flush=True)
+        print(f"who can take {', '.join(args.what)} ({RANKED}):", flush=True)
         for n, row in enumerate(rows, 1):
             print(f"  {n}. {hint_text(row)}", flush=True)
     return 0
@@ -45,7 +47,12 @@ def _hint_json(h: Any, now: float) -> dict[str, Any]:
         "end_in_s": round(h.end - now, 1) if h.end is not None else None,
         "battery_end": round(h.battery_end, 3) if h.battery_end is not None else None,
         "battery_assumed": h.battery_assumed,
+        "out_of_coverage_s": _rounded(h.out_of_coverage_s),
     }
+
+
+def _rounded(s: float | None) -> float | None:
+    return round(s, 1) if s is not None else None
 
 
 def hint_text(row: dict[str, Any]) -> str:
@@ -54,7 +61,16 @@ def hint_text(row: dict[str, Any]) -> str:
         return f"{row['robot']} cannot: " + "; ".join(row["refused"].values())
     end = _duration(row["end_in_s"]) if row["end_in_s"] is not None else "never (a barrier)"
     stays = "".join(f"; {k} stays: {v}" for k, v in row["refused"].items())
-    return f"{row['robot']}: ends in {end}{_battery(row)}{stays}"
+    part = taken_words(len(row["moved"]), len(row["refused"]))
+    return f"{row['robot']}: {part}ends in {end}{_battery(row)}{_coverage(row)}{stays}"
+
+
+def _coverage(row: dict[str, Any]) -> str:
+    """', 3m10s out of coverage' (nothing without a site map: unknown)."""
+    out = row["out_of_coverage_s"]
+    if out is None:
+        return ""
+    return f", {_duration(out)} out of coverage" if out >= 0.5 else ", in coverage throughout"
 
 
 def _battery(row: dict[str, Any]) -> str:

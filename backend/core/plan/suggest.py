@@ -1,12 +1,16 @@
 """Allocation hints (issue 30): which robots can do a skill, or take over a
-selection of skills, ranked by the forecast — when each would end with them
-and the battery it would have left.
+selection of skills, ranked by the forecast — when each would end with them,
+how long it would be out of comms coverage doing them, and the battery it
+would have left.
 
 For each robot in service, the skills are given to it in a copy of the
 mission (the reassign rule decides which can move and why the others
 cannot; a skill named by its library name is a new one at the end of its
 plan), and the copy is forecast. Robots that can take everything come
-first, the earliest end first, then the most battery left.
+first, then those that take the most (one that takes less ends earlier for
+that alone); the earliest end first; between equal ends, the one out of
+coverage for less time (it can be told what to do meanwhile), then the most
+battery left.
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ from backend.core import events as ev
 from backend.core.library import Library, default_value
 from backend.core.model import Mission, SkillInstance
 from backend.core.ops import Reassign
-from backend.core.plan.forecast import Forecaster
+from backend.core.plan.forecast import Forecast, Forecaster
 from backend.core.plan.inputs import PlanInputs
 from backend.core.rules import reassign as reassigning
 from backend.core.rules.base import Offers, Refusal, Rules
@@ -38,15 +42,18 @@ class Suggestion:
     end: float | None = None  # its last skill's predicted end with them (None: never)
     battery_end: float | None = None
     battery_assumed: bool = False  # no telemetry: a full battery was assumed
+    # wall seconds out of comms coverage doing them, the drives to them
+    # included (None: no site map, unknown)
+    out_of_coverage_s: float | None = None
 
     @property
     def capable(self) -> bool:
         return bool(self.moved) and not self.refused
 
-    def rank(self) -> tuple[bool, float, float]:
+    def rank(self) -> tuple[bool, int, float, float, float]:
         end = self.end if self.end is not None else math.inf
         battery = -(self.battery_end if self.battery_end is not None else 0.0)
-        return (not self.capable, end, battery)
+        return (not self.capable, -len(self.moved), end, self.out_of_coverage_s or 0.0, battery)
 
 
 class Manifests:
@@ -76,6 +83,14 @@ def suggest(
     if len(what) == 1 and mission.find(what[0]) is None and what[0] in library.skills:
         return _ranked(_by_name(mission, library, inputs, what[0], offers))
     return _ranked(_by_ids(mission, library, inputs, _known(mission, what), offers))
+
+
+def taken_words(moved: int, refused: int) -> str:
+    """Why a robot ranks where it does, first: 'takes 3 of 4, ' or 'takes all 3, '
+    ('' for a single skill: its row is the robot taking it)."""
+    if refused:
+        return f"takes {moved} of {moved + refused}, "
+    return f"takes all {moved}, " if moved > 1 else ""
 
 
 def _known(mission: Mission, ids: list[str]) -> list[str]:
@@ -125,9 +140,10 @@ def _bid(
 
 def _reasons(rules: Rules, ids: list[str], robot: str, said: str) -> dict[str, str]:
     out: dict[str, str] = {}
+    waiting = reassigning.waiters(rules.mission)
     for sid in ids:
         owner, _, s = rules.skill(sid)
-        out[sid] = reassigning.why_not(rules, s, owner, robot) or said
+        out[sid] = reassigning.why_not(rules, s, owner, robot, waiting) or said
     return out
 
 
@@ -138,11 +154,25 @@ def _forecast(
     robot: str,
     moved: tuple[str, ...],
     refused: Mapping[str, str],
+    probed: tuple[str, ...] = (),
 ) -> Suggestion:
-    fc = forecaster.forecast(mission, inputs).robots.get(robot)
+    forecast = forecaster.forecast(mission, inputs)
+    fc = forecast.robots.get(robot)
     if fc is None:
         return Suggestion(robot, moved, dict(refused))
-    return Suggestion(robot, moved, dict(refused), fc.end, fc.battery_end, fc.battery_assumed)
+    out = _out_of_coverage(forecast, robot, probed or moved, inputs)
+    return Suggestion(robot, moved, dict(refused), fc.end, fc.battery_end, fc.battery_assumed, out)
+
+
+def _out_of_coverage(
+    forecast: Forecast, robot: str, ids: tuple[str, ...], inputs: PlanInputs
+) -> float | None:
+    """Wall seconds the robot spends out of comms coverage doing the skills, by
+    the forecast (None: no site map, unknown)."""
+    if inputs.site is None:
+        return None
+    skills = [f for f in forecast.robot_skills(robot) if f.id in ids]
+    return sum(b - a for f in skills for a, b in f.out_of_coverage)
 
 
 def _by_name(
@@ -163,7 +193,7 @@ def _by_name(
             continue
         copy = mission.copy_deep()
         copy.tasks.setdefault(robot, []).append(probe.model_copy())
-        out.append(_forecast(forecaster, copy, inputs, robot, (skill,), {}))
+        out.append(_forecast(forecaster, copy, inputs, robot, (skill,), {}, (PROBE_ID,)))
     return out
 
 

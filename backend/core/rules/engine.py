@@ -22,7 +22,7 @@ that play the robot themselves may use the direct path instead: `plan_sync`,
 from __future__ import annotations
 
 from collections import OrderedDict
-from collections.abc import Container, Iterable
+from collections.abc import Callable, Container, Iterable
 from typing import Any, NamedTuple, Protocol
 
 from backend.core import events as ev
@@ -32,6 +32,7 @@ from backend.core.model import FINISHED, Mission, SkillInstance, Status, format_
 from backend.core.ops import (
     UNDOABLE,
     AddBarrier,
+    AddRobot,
     AddSkill,
     Control,
     DeleteSkills,
@@ -44,10 +45,13 @@ from backend.core.ops import (
     MoveSkill,
     NewMission,
     Operation,
+    Reassign,
     Redo,
     RemoveBarrier,
     RestoreMarker,
+    RetireRobot,
     Retry,
+    ReturnSkills,
     SetSkill,
     Sync,
     Undo,
@@ -216,7 +220,37 @@ def _touched(m: Mission, op: Operation) -> list[tuple[int, str]]:
             MarkerMove(name=n) | MarkerRename(name=n) | MarkerDelete(name=n) | RestoreMarker(name=n)
         ):
             return [(m.marker_revs.get(n, 0), f"marker {n}")]
+    return _TEAM_TOUCHED.get(type(op), _untouched)(m, op)
+
+
+def _untouched(m: Mission, op: Any) -> list[tuple[int, str]]:
     return []
+
+
+def _robot_touched(m: Mission, op: AddRobot | RetireRobot) -> list[tuple[int, str]]:
+    """A robot joining or retiring: its entry and list (an add or retire stamps it)."""
+    return [_task_rev(m, op.name)]
+
+
+def _reassign_touched(m: Mission, op: Reassign) -> list[tuple[int, str]]:
+    """The skills named, the plan given away and the list they go to."""
+    lists = dict.fromkeys((op.from_robot or op.to, op.to))  # the plan given, and its target
+    return _skill_revs(m, op.ids) + [_task_rev(m, r) for r in lists]
+
+
+def _return_touched(m: Mission, op: ReturnSkills) -> list[tuple[int, str]]:
+    """The skills given back and the partners renamed (an undo must not
+    overwrite a later edit of them)."""
+    return _skill_revs(m, [it.skill.id for it in op.items] + list(op.partners))
+
+
+# the team's operations (issue 30), kept out of the match above: one table, no ladder
+_TEAM_TOUCHED: dict[type[Any], Callable[[Mission, Any], list[tuple[int, str]]]] = {
+    AddRobot: _robot_touched,
+    RetireRobot: _robot_touched,
+    Reassign: _reassign_touched,
+    ReturnSkills: _return_touched,
+}
 
 
 def _task_rev(m: Mission, robot: str) -> tuple[int, str]:

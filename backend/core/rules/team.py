@@ -17,7 +17,7 @@ from backend.core.alerts import AlertKind, RaisedAlert
 from backend.core.library import Library
 from backend.core.model import ACTIVE, CommandState, RobotSpec, Status
 from backend.core.ops import AddRobot, RetireRobot, Unsync
-from backend.core.rules import uplink
+from backend.core.rules import reassign, uplink
 from backend.core.rules.base import Change, Refusal, Rule, Rules
 
 
@@ -105,7 +105,8 @@ def retire_robot(rules: Rules, op: RetireRobot) -> Change:
         message=f"robot {op.name} retired ({op.reason}); {len(plan)} skill(s) to reassign",
     )
     value = {"robot": op.name, "to_reassign": plan}
-    return Change(events, _retired_notes(op.name, how, plan), value, None, alerts=(alert,))
+    notes = _retired_notes(op.name, how, plan) + reassign.held(rules, op.name)
+    return Change(events, notes, value, None, alerts=(alert,))
 
 
 def _retired_notes(robot: str, how: str, plan: list[str]) -> list[str]:

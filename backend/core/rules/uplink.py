@@ -297,8 +297,23 @@ def control(rules: Rules, op: Control) -> Change:
         raise Refusal(
             "not_applicable", f"{op.op} applies to no robot: " + "; ".join(results.values())
         )
-    notes = [f"{op.op} not sent: {why}" for why in results.values() if why != "queued"]
-    return Change(events, notes, {"robots": results, "commands": commands}, None)
+    value = {"robots": results, "commands": commands}
+    return Change(events, _not_sent(rules, op, results), value, None)
+
+
+def _not_sent(rules: Rules, op: Control, results: dict[str, str]) -> list[str]:
+    """Where the command did not go, and why; not a retired robot's when it was
+    for all (it gets no new syncs: "nothing to run, synchronize" would mislead)."""
+    quiet = _retired(rules, op)
+    said = [(r, why) for r, why in results.items() if why != "queued"]
+    return [f"{op.op} not sent: {why}" for r, why in said if r not in quiet]
+
+
+def _retired(rules: Rules, op: Control) -> set[str]:
+    """The retired robots a command for all went past (none for one robot)."""
+    if op.robot is not None:
+        return set()
+    return {r for r, spec in rules.mission.robots.items() if spec.retired}
 
 
 def _why_not_now(rules: Rules, action: str, robot: str) -> str | None:
