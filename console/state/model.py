@@ -72,7 +72,9 @@ REVIEW = "review"  # a recording, not a server: there is no connection to show
 # -- the model --------------------------------------------------------------------
 
 # operations a robot's answer or report becomes (the robot was heard)
-ROBOT_OPS = frozenset({"report", "answer", "sync_ack", "unsync_done", "retry_ack", "reconcile"})
+ROBOT_OPS = frozenset(
+    {"report", "answer", "ask", "ask_ended", "sync_ack", "unsync_done", "retry_ack", "reconcile"}
+)
 
 
 PLAN_FIELDS = {"id", "skill", "label", "params", "bindings", "policies"}  # a skill, as planned
