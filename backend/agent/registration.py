@@ -222,6 +222,7 @@ class Registrar:
         signatures: dict[str, SkillSignature],
         manifest: Callable[[], Manifest],
         taken: Callable[[str], None],
+        asking: Callable[[], list[str]] = list,
     ):
         self.rt = rt
         self.standing = standing
@@ -235,6 +236,7 @@ class Registrar:
         self.commands = commands  # the uplink's processed commands (registration says how far)
         self._manifest = manifest
         self._taken = taken  # another run of this robot holds the name: stand down
+        self._asking = asking  # the refs of the questions its skills still ask
         self.last_reply: RegisterReply | None = None
         self._refused: str | None = None  # the server's reason, while it refuses us
         self._error = ""  # why the last registration attempt got no reply
@@ -343,6 +345,7 @@ class Registrar:
             last_seq=self.queue.seq,
             uplink_applied=self.commands.applied,
             sent=datetime.now(UTC) - timedelta(seconds=self.rt.delay_s()),
+            asking=self._asking(),
         )
         raw = await transport.query(
             self.rt.session,
