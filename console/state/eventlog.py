@@ -76,6 +76,7 @@ class AlertEntry(BaseModel):
     source: Literal["console", "server"] = "console"
     count: int = 1
     acknowledged: bool = False
+    question: int | None = None  # a robot's question it announces (kind "question")
 
 
 # -- the log ---------------------------------------------------------------------------
@@ -185,7 +186,26 @@ PHRASES: dict[type, Callable[[Any], str]] = {
     ev.RobotRetired: lambda e: f"robot {e.name} retired: {e.reason}",
     ev.CommandQueued: lambda e: f"{e.command.title()} queued for {e.command.robot}",
     ev.CommandChanged: lambda e: f"command {e.id} {e.state or 'changed'}",
+    ev.QuestionAsked: lambda e: (
+        f"question #{e.question.id} from {e.question.robot} ({e.question.skill}): "
+        f"{e.question.text} [{' / '.join(e.question.choices)}; default {e.question.default}]"
+    ),
+    ev.QuestionAnswered: lambda e: (
+        f"question #{e.id} answered {e.choice} by {e.by or 'an operator'} (command {e.command})"
+    ),
+    ev.QuestionClosed: lambda e: (
+        f"question #{e.id} {_closed_words(e)}" + (f" ({e.reason})" if e.reason else "")
+    ),
 }
+
+
+def _closed_words(e: ev.QuestionClosed) -> str:
+    """How a question ended, in the log's words."""
+    if e.state == "answered":
+        return f"answered: the robot goes on with {e.choice}"
+    if e.state == "defaulted":
+        return f"defaulted: no answer in time, the robot goes on with {e.choice}"
+    return "withdrawn"
 
 
 EDIT_FIELDS = ("label", "params", "bindings", "policies")
@@ -221,6 +241,9 @@ def _summary(batch: ev.EventBatch, owner: Owner) -> tuple[list[str], list[str]]:
                 for sid in b.skills:
                     robot(owner(sid))
                 parts.append(f"barrier {bid} ({', '.join(b.skills)})")
+            case ev.QuestionAsked(question=q):
+                robot(q.robot)
+                parts.append(PHRASES[ev.QuestionAsked](e))
             case _:
                 phrase = PHRASES.get(type(e))
                 if phrase is not None:
@@ -319,6 +342,7 @@ class AlertBook:
             skill=a.skill,
             message=a.message,
             source="server",
+            question=a.question,
         )
 
     def seen(self, alerts: Iterable[Alert], server: str) -> None:
