@@ -598,7 +598,9 @@ async def test_a_robots_question_is_answered_from_the_console(live):
             await client.submit(Sync(robot="lru1", through="lru1-1"))
             await client.submit(Control(op="run", robot="lru1"))
         await wait_until(pilot, lambda: isinstance(app.screen, QuestionScreen), SLOW, "dialog")
-        assert "Go on?" in screen_text(app) and "Question #1 from lru1" in screen_text(app)
+        # pushed is not drawn yet: wait for its text
+        await wait_until(pilot, lambda: "Go on?" in screen_text(app), SLOW, "its text")
+        assert "Question #1 from lru1" in screen_text(app)
         assert any(a.kind == "question" for a in app.model.alerts.alerts)
         await pilot.press("2")
         line = live.robots.wait_line("lru1-1: ")
