@@ -9,10 +9,12 @@ from __future__ import annotations
 import asyncio
 from typing import Any
 
+import pytest
+
 from backend.agent import RobotAgent
 from backend.core.model import QuestionAnswer, Status
 from backend.core.ops import Ask, AskEnded
-from backend.protocol.messages import Stop
+from backend.protocol.messages import Pause, Run, Stop
 
 from .conftest import Harness, skill
 
@@ -143,6 +145,36 @@ async def test_a_stop_withdraws_the_question(harness: Harness) -> None:
         assert a.questions.asking == []
         late = await h.server.command(lru, answer(asks(h, lru)[0], "wider"))
         assert not late.ok and "withdrawn (q1 was stopped)" in late.reason
+
+
+async def test_a_pause_keeps_the_question_and_the_handler_goes_on_once_resumed(
+    harness: Harness,
+) -> None:
+    async with harness as h:
+        lru = h.name("lru1")
+        a = h.agent(lru)
+        returned = asyncio.Event()
+        got: dict[str, Any] = {}
+
+        @a.skill("search", version="1.0.0")
+        async def search(ctx):
+            got["reply"] = await ctx.ask_operator("wider?", ["wider", "give up"], "wider", "10m")
+            returned.set()
+
+        await h.start(a)
+        await h.run(lru, skill("q1", "search"))
+        await h.until(lambda: bool(asks(h, lru)), what="the question")
+        (q,) = asks(h, lru)
+        assert (await h.server.command(lru, Pause())).ok
+        assert a.questions.asking == [q.ref]  # a pause does not withdraw it
+        assert (await h.server.command(lru, answer(q, "give up"))).ok
+        # taken, but the handler waits at its checkpoint while paused
+        with pytest.raises(TimeoutError):
+            await asyncio.wait_for(returned.wait(), 0.3)
+        await h.server.command(lru, Run())
+        await h.until(lambda: h.server.has(lru, "q1", S.SUCCESS), what="q1 goes on")
+        assert got["reply"].choice == "give up" and got["reply"].answered
+        assert ended(h, lru) == []  # answered: nothing withdrawn, no default
 
 
 async def test_a_registration_lists_the_questions_still_asked(harness: Harness) -> None:
