@@ -37,17 +37,21 @@ def answer_arguments(p: argparse.ArgumentParser, wait: Any) -> None:
 # ---------------------------------------------------------------- the builder
 
 
+def _numbered(q: Any, choice: str) -> str:
+    """The choice a number names, as `ctl questions` lists them (else `choice`)."""
+    if q is None or choice in q.choices or not choice.isdigit():
+        return choice
+    n = int(choice)
+    if not 1 <= n <= len(q.choices):
+        raise UsageError(f"answer: question {q.id} has choices 1 to {len(q.choices)}, not {n}")
+    return str(q.choices[n - 1])
+
+
 def build_answer(args: argparse.Namespace, known: Any) -> Any:
     """The answer; CHOICE may be a choice's number as `ctl questions` lists it."""
-    choice = args.choice.strip()
     q = known.mission.question(args.question) if known.mission is not None else None
-    if q is not None and choice not in q.choices and choice.isdigit():
-        n = int(choice)
-        if not 1 <= n <= len(q.choices):
-            raise UsageError(f"answer: question {q.id} has choices 1 to {len(q.choices)}, not {n}")
-        choice = q.choices[n - 1]
     try:
-        return ops.AnswerQuestion(question=args.question, choice=choice)
+        return ops.AnswerQuestion(question=args.question, choice=_numbered(q, args.choice.strip()))
     except ValidationError as e:
         raise UsageError(f"answer: {e.errors()[0]['msg']} ({args.choice!r})") from None
 
@@ -82,44 +86,59 @@ def question_json(q: Question, client: Any, now: datetime) -> dict[str, Any]:
     }
 
 
+def _when(q: Question, left: float) -> str:
+    if left > 0:
+        return f"its default '{q.default}' applies in {_span(left)} of mission time"
+    return f"past its due: '{q.default}' applies on board (not confirmed yet)"
+
+
+def _answered(q: Question, client: Any) -> list[str]:
+    """An operator's answer on its way, and its command's state."""
+    if q.answer is None:
+        return []
+    c = client.mission.command(q.command) if q.command is not None else None
+    state = f"command {c.id} {c.state.value}" if c is not None else "its command settled"
+    return [f"  answered '{q.answer}' by {q.answered_by or 'an operator'} ({state})"]
+
+
 def question_lines(q: Question, client: Any, now: datetime) -> list[str]:
     """'question 3 lru2 (lru2-4): Nothing found: search wider?' and its choices."""
-    left = mission_left_s(q, now)
-    when = (
-        f"its default '{q.default}' applies in {_span(left)} of mission time"
-        if left > 0
-        else f"past its due: '{q.default}' applies on board (not confirmed yet)"
-    )
     lines = [f"question {q.id} {q.robot} ({q.skill}): {q.text}"]
     lines += [f"  {i}. {choice}" for i, choice in enumerate(q.choices, 1)]
-    lines.append(f"  {when}")
-    if q.answer is not None:
-        c = client.mission.command(q.command) if q.command is not None else None
-        state = f"command {c.id} {c.state.value}" if c is not None else "its command settled"
-        lines.append(f"  answered '{q.answer}' by {q.answered_by or 'an operator'} ({state})")
-    return lines
+    lines.append(f"  {_when(q, mission_left_s(q, now))}")
+    return lines + _answered(q, client)
 
 
-async def questions_view(client: Any, args: argparse.Namespace) -> int:
-    only = list(args.robots or [])
+def _check_robots(client: Any, only: list[str]) -> None:
     unknown = [r for r in only if r not in client.mission.robots]
     if unknown:
         known = ", ".join(client.mission.robots) or "none"
         raise UsageError(
             f"questions: no robot {', '.join(unknown)} in this mission (robots: {known})"
         )
-    now = datetime.now(UTC)
+
+
+def questions_json(questions: list[Question], client: Any, now: datetime) -> str:
+    out = {
+        "revision": client.revision,
+        "questions": [question_json(q, client, now) for q in questions],
+    }
+    return json.dumps(out, ensure_ascii=False)
+
+
+def questions_text(questions: list[Question], client: Any, now: datetime) -> str:
+    if not questions:
+        return "no open questions"
+    lines = [line for q in questions for line in question_lines(q, client, now)]
+    return "\n".join([*lines, "answer with: missionctl ctl answer Q CHOICE"])
+
+
+async def questions_view(client: Any, args: argparse.Namespace) -> int:
+    only = list(args.robots or [])
+    _check_robots(client, only)
     open_ = [q for q in client.mission.open_questions() if not only or q.robot in only]
-    if args.json:
-        out = {
-            "revision": client.revision,
-            "questions": [question_json(q, client, now) for q in open_],
-        }
-        print(json.dumps(out, ensure_ascii=False), flush=True)
-        return EXIT_OK
-    lines = [line for q in open_ for line in question_lines(q, client, now)]
-    hint = "answer with: missionctl ctl answer Q CHOICE" if open_ else ""
-    print("\n".join(lines + [hint]) if open_ else "no open questions", flush=True)
+    show = questions_json if args.json else questions_text
+    print(show(open_, client, datetime.now(UTC)), flush=True)
     return EXIT_OK
 
 
