@@ -209,6 +209,14 @@ def _closed_words(e: ev.QuestionClosed) -> str:
 
 
 EDIT_FIELDS = ("label", "params", "bindings", "policies")
+# events that name their robot themselves (the others above go by skill id)
+ROBOT_OF: dict[type, Callable[[Any], str | None]] = {
+    ev.QuestionAsked: lambda e: e.question.robot,
+}
+
+
+def _no_robot(_e: Any) -> None:
+    return None
 
 
 def _summary(batch: ev.EventBatch, owner: Owner) -> tuple[list[str], list[str]]:
@@ -241,10 +249,8 @@ def _summary(batch: ev.EventBatch, owner: Owner) -> tuple[list[str], list[str]]:
                 for sid in b.skills:
                     robot(owner(sid))
                 parts.append(f"barrier {bid} ({', '.join(b.skills)})")
-            case ev.QuestionAsked(question=q):
-                robot(q.robot)
-                parts.append(PHRASES[ev.QuestionAsked](e))
             case _:
+                robot(ROBOT_OF.get(type(e), _no_robot)(e))
                 phrase = PHRASES.get(type(e))
                 if phrase is not None:
                     parts.append(phrase(e))
