@@ -33,6 +33,11 @@ WIDER_CHOICE, GIVE_UP = "wider", "give up"
 ASK_S = 180.0
 
 
+def _nothing_of(rss: RssState | None) -> str:
+    """What a search found nothing of: the region's stones, or a region."""
+    return f"no stone of {rss.name}" if rss is not None else "no region ideal for sampling stones"
+
+
 @dataclass
 class Search:
     """One identify_stone: where, in which region, with whom, and its share of the progress."""
@@ -140,13 +145,21 @@ class ScienceSkills(SkillBase):
         """Nothing within `radius`: the operators are asked whether to search
         wider (the default, at the timeout) or give up (a failure, for the
         skill's on_failure to act on). The wider radius and its region."""
-        what = (
-            f"no stone of {rss.name}" if rss is not None else "no region ideal for sampling stones"
-        )
-        nothing = f"{what} within {radius:g} m of {_fmt(tx, ty)}"
+        nothing = f"{_nothing_of(rss)} within {radius:g} m of {_fmt(tx, ty)}"
         if rss is None:
             await self.work(ctx, SEARCH_S, "searching for stones", frac0=f0, frac1=f0)
         wider = radius * WIDER
+        how = await self._ask_wider(ctx, nothing, wider)
+        ring_s = SEARCH_S * (WIDER**2 - 1)  # the ring's share of the search, by area
+        await self.work(ctx, ring_s, f"searching wider ({wider:g} m, {how})", frac0=f0, frac1=f0)
+        found = self.world.rss_near(tx, ty, wider)
+        if found is None or not self._reaches_a_stone(found, tx, ty, wider):
+            raise self.fail(f"{nothing}, nor within {wider:g} m: nothing to identify here")
+        return wider, found
+
+    async def _ask_wider(self, ctx: SkillContext, nothing: str, wider: float) -> str:
+        """The operators' word (or the default): how the wider search was
+        decided; a failure saying who gave up."""
         reply = await ctx.ask_operator(
             f"{self.robot.name}: {nothing}. Search wider ({wider:g} m)?",
             [WIDER_CHOICE, GIVE_UP],
@@ -156,19 +169,7 @@ class ScienceSkills(SkillBase):
         if reply.choice == GIVE_UP:
             by = f" ({reply.by})" if reply.by else ""
             raise self.fail(f"{nothing}: nothing to identify here; the operator{by} gave up")
-        how = "answered" if reply.answered else "by default"
-        await self.work(
-            ctx,
-            SEARCH_S * (WIDER**2 - 1),
-            f"searching wider ({wider:g} m, {how})",
-            frac0=f0,
-            frac1=f0,
-        )
-        found = self.world.rss_near(tx, ty, wider)
-        if not self._reaches_a_stone(found, tx, ty, wider):
-            raise self.fail(f"{nothing}, nor within {wider:g} m: nothing to identify here")
-        assert found is not None
-        return wider, found
+        return "answered" if reply.answered else "by default"
 
     async def _reach_search_centre(
         self, ctx: SkillContext, tx: float, ty: float, radius: float

@@ -443,6 +443,23 @@ def test_identify_finding_nothing_asks_and_searches_wider_by_default(world: Worl
     assert any("searching wider (6 m, by default)" in info for _, info, _ in ctx.progress_calls)
 
 
+def test_identify_searches_wider_when_the_operator_answers_so(world: World) -> None:
+    """The operator's "wider" (before the timeout): the same wider search, saying
+    it was answered; the stone is found as by default."""
+    lru2 = world.add_robot("lru2", "lru_manipulator")
+    lru2.x, lru2.y = 29.0, 23.0
+    skills = RobotSkills(fake_fleet(world), lru2)
+    ctx = FakeCtx(replies=["wider"])
+    t0 = lru2.sim_seconds
+    found = call(skills, "identify_stone", ctx, target=Position(x=29.0, y=23.0), search_radius=3.0)
+    assert len(ctx.asked) == 1 and ctx.replies == []  # asked once, the answer taken
+    assert found.info.startswith("identified RSS-A-s")
+    assert lru2.sim_seconds - t0 == pytest.approx(36.0 * 3 + 120.0)
+    infos = [info for _, info, _ in ctx.progress_calls]
+    assert any("searching wider (6 m, answered)" in info for info in infos)
+    assert not any("by default" in info for info in infos)
+
+
 def test_identify_finding_nothing_gives_up_or_fails_wider_too(world: World) -> None:
     lru2 = world.add_robot("lru2", "lru_manipulator")
     lru2.x, lru2.y = -10.0, -10.0
