@@ -10,7 +10,14 @@ from typing import Any
 
 from console.screens.question import open_question
 from console.state.changes import StateChange, Topic
-from console.state.eventlog import toast_text
+from console.state.eventlog import AlertEntry, toast_text
+
+
+def prompted(a: AlertEntry) -> bool:
+    """A robot asks: its dialog says it (or, another dialog open, the
+    prompter's note), not a toast over the dialog's countdown. How a
+    question ended (level info) is a toast."""
+    return a.kind == "question" and a.level != "info"
 
 
 class AlertAnnouncer:
@@ -25,11 +32,14 @@ class AlertAnnouncer:
         for a in c.alerts:
             if a.level != "info":
                 self.ring()
-            if not c.notified:
-                severity = {"error": "error", "warning": "warning"}.get(a.level, "information")
-                title, text = toast_text(self.app.model.alerts, a)  # robots offline together: one
-                timeout = 8 if a.level == "error" else 5
-                self.app.notify(text, title=title, severity=severity, timeout=timeout)
+            if not c.notified and not prompted(a):
+                self._toast(a)
+
+    def _toast(self, a: AlertEntry) -> None:
+        severity = {"error": "error", "warning": "warning"}.get(a.level, "information")
+        title, text = toast_text(self.app.model.alerts, a)  # robots offline together: one
+        timeout = 8 if a.level == "error" else 5
+        self.app.notify(text, title=title, severity=severity, timeout=timeout)
 
     def ring(self) -> None:
         self.bells += 1

@@ -32,6 +32,7 @@ from backend.core.model import QuestionState
 from backend.core.ops import AnswerQuestion, Ask, AskEnded
 from backend.protocol.messages import Alert
 from console.screens.alerts import AlertScreen
+from console.screens.dialogs import ConfirmScreen
 from console.screens.question import QuestionScreen
 from console.state.eventlog import EventLog
 
@@ -99,6 +100,7 @@ async def test_a_question_opens_a_dialog_naming_everything_and_a_key_answers():
         assert "default wider at 10:47:07, in 5m00s" in text  # the mission clock (wall: no sim)
         assert "escape: later" in text and "F9" in text
         assert app.model.alerts.alerts[-1].question == 1
+        assert _toasts(app) == []  # the dialog says it: no toast over its countdown
         await pilot.press("2")
         await wait_until(pilot, lambda: backend.ops, what="the answer submitted")
         assert backend.ops[-1] == AnswerQuestion(question=1, choice="give up")
@@ -110,6 +112,28 @@ async def test_a_question_opens_a_dialog_naming_everything_and_a_key_answers():
         assert (q.answer, q.answered_by) == ("give up", "console") and q.is_open
         log = [e.text for e in app.model.log.entries]
         assert any("question #1 answered give up by console" in t for t in log)
+
+
+def _toasts(app) -> list[str]:
+    return [f"{n.title}: {n.message}" for n in app._notifications]
+
+
+async def test_another_dialog_open_is_not_covered_a_toast_says_how_to_answer():
+    b = asking()
+    app, _ = engine_app(b)
+    async with app.run_test(size=(100, 30)) as pilot:
+        post_all(app, connection_changed("connected"))
+        app.post_message(state_loaded(b.snapshot(), b.library, fleet({"lru2": True})))
+        await settle(pilot)
+        app.push_screen(ConfirmScreen("Delete it?"))
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), what="confirm")
+        app.post_message(alert_received(question_alert()))
+        await wait_until(pilot, lambda: _toasts(app), what="the note")
+        assert isinstance(app.screen, ConfirmScreen)
+        assert _toasts(app) == [
+            "A robot asks: #1 from lru2: Nothing found within 6 m of (10.0, 5.0): "
+            "search wider (12 m)? (F9: answer)"
+        ]
 
 
 async def test_later_leaves_it_open_and_it_is_reachable_again():
