@@ -27,7 +27,7 @@ from typing import Any, Literal
 from pydantic import BaseModel
 
 from backend.core import events as ev
-from backend.core.model import Status
+from backend.core.model import QuestionState, Status
 from backend.protocol.messages import Alert
 from console.state.text import GLYPHS, STATUS_WORDS
 
@@ -199,13 +199,15 @@ PHRASES: dict[type, Callable[[Any], str]] = {
 }
 
 
+CLOSED_WORDS = {
+    QuestionState.ANSWERED: "answered: the robot goes on with {choice}",
+    QuestionState.DEFAULTED: "defaulted: no answer in time, the robot goes on with {choice}",
+}
+
+
 def _closed_words(e: ev.QuestionClosed) -> str:
     """How a question ended, in the log's words."""
-    if e.state == "answered":
-        return f"answered: the robot goes on with {e.choice}"
-    if e.state == "defaulted":
-        return f"defaulted: no answer in time, the robot goes on with {e.choice}"
-    return "withdrawn"
+    return CLOSED_WORDS.get(e.state, "withdrawn").format(choice=e.choice)
 
 
 EDIT_FIELDS = ("label", "params", "bindings", "policies")
