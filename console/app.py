@@ -35,7 +35,7 @@ from textual.signal import Signal
 from backend.client.client import ClientError, LoginFailed
 from backend.exit_codes import EXIT_UNREACHABLE
 from backend.transport.login import Login
-from console.alerting import AlertAnnouncer
+from console.alerting import AlertAnnouncer, QuestionPrompter
 from console.bindings import bind, bindings, key_names
 from console.bridge import ClientBridge
 from console.commands import MissionCommands
@@ -48,7 +48,7 @@ from console.hangup import (
     start_watchdog,
     unhandle_signals,
 )
-from console.messages import AlertAcknowledged, HelpRequested, Incoming
+from console.messages import AlertAcknowledged, HelpRequested, Incoming, QuestionRequested
 from console.notifier import NotificationFolder
 from console.operations import Backend, OperationService, ReadOnlyBackend
 from console.plan_modes import PlanRefresher
@@ -56,6 +56,7 @@ from console.quitting import QuitPolicy
 from console.screens.dialogs import HelpScreen, UnreachableScreen
 from console.screens.mission import TCSS as MISSION_TCSS
 from console.screens.mission import MissionScreen
+from console.screens.question import open_question
 from console.state.actions import ACTIONS
 from console.state.changes import (
     Connecting,
@@ -137,6 +138,7 @@ class MissionApp(App[int]):
     BINDINGS = [
         bind("app.quit", "quit", show=True),
         bind("app.command_palette", "command_palette"),
+        bind("app.answer", "answer", show=False),
         *bindings("app", show=False),  # shown in the footers of the part-2 screens
     ]
     # the app's look and its widgets' (each screen loads its own: CSS_PATH there;
@@ -205,6 +207,7 @@ class MissionApp(App[int]):
         self.escape = EscapeSplitter(self)
         self.announcer = AlertAnnouncer(self)
         self.plan = PlanRefresher(self.model, self.publish, self._sim_status())
+        self.prompter = QuestionPrompter(self)  # a robot's question opens its dialog
         self.mission_screen: MissionScreen | None = None
         self.map_screen: MapScreen | None = None
         # the screens as app modes (F2/1 back to the schedule), each handed the
@@ -358,6 +361,14 @@ class MissionApp(App[int]):
     def _help_requested(self) -> None:
         self.action_help()
 
+    def action_answer(self) -> None:
+        """A robot's question: the oldest open one (console/screens/question.py)."""
+        open_question(self)
+
+    @on(QuestionRequested)
+    def _question_requested(self, message: QuestionRequested) -> None:
+        open_question(self, message.question_id)
+
     @on(AlertAcknowledged)
     def _alert_acknowledged(self, message: AlertAcknowledged) -> None:
         self.acknowledge(message.alert_id)
@@ -421,6 +432,7 @@ class MissionApp(App[int]):
             self._use_16_colours()
             self.refresh_css()
         self.announcer.start(self.changes)
+        self.prompter.start(self.changes)
         if self.bridge is not None:
             self.connect_now()
         self.plan.start(self, self.changes)

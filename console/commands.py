@@ -13,8 +13,10 @@ from textual.command import DiscoveryHit, Hit, Hits, Provider
 
 from console.bindings import key_names
 from console.screens.cancel import ask_and_cancel, toast_say
+from console.screens.question import open_question
 from console.state import link
 from console.state.actions import ACTIONS
+from console.state.questions import due_text, open_questions, palette_title
 
 
 def _help(keys: Any, a: Any, why: str | None) -> str:
@@ -53,6 +55,20 @@ class MissionCommands(Provider):
             help_text = f"{link.command_text(c, m.clock)} · asks first"
             yield title, help_text, partial(self._cancel, c)
 
+    def _questions(self):
+        """Every open question of a robot, to answer."""
+        m = getattr(self.app, "model", None)
+        if m is None:
+            return
+        for q in open_questions(m.mission):
+            help_text = f"{q.text} · {due_text(q, m.clock)}"
+            yield palette_title(q), help_text, partial(open_question, self.app, q.id)
+
+    def _offers(self):
+        """The pending commands to cancel and the questions to answer."""
+        yield from self._cancels()
+        yield from self._questions()
+
     def _cancel(self, c) -> None:
         screen = self._screen()
         say = screen.say if self.app.screen is screen else toast_say(self.app)
@@ -73,7 +89,7 @@ class MissionCommands(Provider):
     async def discover(self) -> Hits:
         for a, help_text, run in self._entries():
             yield DiscoveryHit(a.palette_title, run, help=help_text)
-        for title, help_text, run in self._cancels():
+        for title, help_text, run in self._offers():
             yield DiscoveryHit(title, run, help=help_text)
 
     async def search(self, query: str) -> Hits:
@@ -83,7 +99,7 @@ class MissionCommands(Provider):
             score = max(matcher.match(text), matcher.match(a.description) * 0.5)
             if score > 0:
                 yield Hit(score, matcher.highlight(text), run, text=text, help=help_text)
-        for title, help_text, run in self._cancels():
+        for title, help_text, run in self._offers():
             score = matcher.match(title)
             if score > 0:
                 yield Hit(score, matcher.highlight(title), run, text=title, help=help_text)

@@ -37,3 +37,11 @@ class AlertAcknowledged(Message):
     def __init__(self, alert_id: int | None) -> None:
         super().__init__()
         self.alert_id = alert_id
+
+
+class QuestionRequested(Message):
+    """Open a robot's question to answer it (`question_id` None: the oldest open one)."""
+
+    def __init__(self, question_id: int | None) -> None:
+        super().__init__()
+        self.question_id = question_id

@@ -11,6 +11,7 @@
   server's reconciliation); uplink: the ground's commands, each applied once
   by sequence number; outbox: the downlink (reports and answers, one
   numbered sequence) until acknowledged;
+- questions: a handler's questions to the operators (`ctx.ask_operator`);
 - telemetry, barriers, world (robot-to-robot ask/tell);
 - link: the link model; runtime: the loop, session and link the parts share.
 """
@@ -26,6 +27,7 @@ from backend.agent.outcomes import (
     SkillStopped,
     Success,
 )
+from backend.agent.questions import Reply
 from backend.agent.telemetry import STEADY, TelemetryPolicy
 
 __all__ = [
@@ -33,6 +35,7 @@ __all__ = [
     "Failure",
     "Link",
     "RegistrationRefused",
+    "Reply",
     "RobotAgent",
     "STEADY",
     "SkillContext",

@@ -3,7 +3,7 @@ active skill (its task, pause and stop state, barrier resources).
 
 Handlers run on the agent's loop (coroutines) or in a worker thread (plain
 functions): `progress` and `check` work from both; the coroutines
-(`checkpoint`, `sleep`, `ask`, `tell`) only on the loop.
+(`checkpoint`, `sleep`, `ask`, `tell`, `ask_operator`) only on the loop.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ from typing import Any, Protocol
 import zenoh
 
 from backend.agent.outcomes import SkillStopped
+from backend.agent.questions import Reply
 from backend.agent.queue import Active, HeldSkill
 from backend.agent.runtime import Runtime
 from backend.core.model import Pose, Position, SkillInstance
@@ -290,3 +291,28 @@ class SkillContext:
     async def tell(self, robot: str, topic: str, data: dict[str, Any] | None = None) -> bool:
         delivered: bool = await self.agent.tell(robot, topic, data)
         return delivered
+
+    # -- the operators ------------------------------------------------------------
+    @_coroutine_only
+    async def ask_operator(
+        self, text: str, choices: list[str], default: str, timeout: float | str
+    ) -> Reply:
+        """Ask the operators (docs/robots.md "Asking the operator"): `choices`
+        (2 to 9), the `default` taken when no answer reaches the robot within
+        `timeout` of mission time (seconds, or '5m'; divided by
+        `agent.time_scale`). Returns `Reply(choice, answered, by)`: `answered`
+        False when the default applied (the robot says so to the ground).
+        A stop cancels the wait (the question is withdrawn); while paused it
+        returns once resumed. ValueError for a question that breaks the limits."""
+        question = self.agent.questions.make(self.skill.id, text, choices, default, timeout)
+        reply: Reply = await self.agent.questions.ask(question, self._withdrawn_because)
+        await self.checkpoint()
+        return reply
+
+    def _withdrawn_because(self) -> str:
+        why = self.cancelled_because
+        if why == "stop":
+            return f"{self.skill.id} was stopped"
+        if why == "timeout":
+            return f"{self.skill.id} ran out of time ({self._act.timeout_reason})"
+        return f"the handler of {self.skill.id} was cancelled"

@@ -95,6 +95,7 @@ from backend.agent.execution import Executor
 from backend.agent.link import Link
 from backend.agent.outbox import Outbox
 from backend.agent.precedence import Precedence
+from backend.agent.questions import Questions
 from backend.agent.queue import Effect, SkillQueue
 from backend.agent.registration import (
     Handler,
@@ -111,8 +112,18 @@ from backend.agent.telemetry import TelemetryFeed, TelemetryPolicy
 from backend.agent.uplink import CommandLog, UplinkHandler
 from backend.agent.world import Peers
 from backend.core.library import SkillSignature
-from backend.core.model import Dequeue, Enqueue, Pause, Pose, Reset, Run, Status, Stop
-from backend.core.ops import Answer, Report
+from backend.core.model import (
+    Dequeue,
+    Enqueue,
+    Pause,
+    Pose,
+    QuestionAnswer,
+    Reset,
+    Run,
+    Status,
+    Stop,
+)
+from backend.core.ops import Answer, Ask, AskEnded, Report
 from backend.protocol.keys import Keys
 from backend.protocol.messages import (
     ErrorReply,
@@ -180,6 +191,8 @@ class RobotAgent:
         self.mission_time: Callable[[], float] = time.time
         # called with every Report as it is made (simulator, logs, tests)
         self.report_listeners: list[Callable[[Report], object]] = []
+        # called with every question (Ask) and its end (AskEnded) as it is made
+        self.question_listeners: list[Callable[[Ask | AskEnded], object]] = []
 
         # the parts, each built after what it uses (every state change runs on
         # the loop that called start())
@@ -192,6 +205,10 @@ class RobotAgent:
         self._signatures: dict[str, SkillSignature] = {}  # the library's, from registration
         self._uplink = UplinkHandler(
             self._rt, self._command_log, self._dispatch, self._queue.next_seq, self._outbox
+        )
+        # the operators' questions of its skills (ctx.ask_operator), answered on the uplink
+        self.questions = Questions(
+            self._rt, self._queue.next_seq, self._on_question, lambda: self.time_scale
         )
         # telemetry_hz caps the rate; the policy says what is worth a sample
         self._telemetry = TelemetryFeed(self._rt, self._queue, telemetry)
@@ -209,6 +226,7 @@ class RobotAgent:
             self.manifest,
             taken=self._stand_down,
             learned=self._precedence.learned,
+            asking=lambda: self.questions.asking,
         )
         self._executor = Executor(
             self,
@@ -227,6 +245,7 @@ class RobotAgent:
             Pause: self._pause,
             Stop: self._stop,
             Reset: self._reset,
+            QuestionAnswer: self.questions.answer,
         }
 
         # connection state
@@ -299,8 +318,8 @@ class RobotAgent:
         return active.entry.id, active.entry.status
 
     @property
-    def pending_reports(self) -> list[Report | Answer]:
-        """Downlink messages (reports, answers) not acknowledged by the server yet."""
+    def pending_reports(self) -> list[Report | Answer | Ask | AskEnded]:
+        """Downlink messages (reports, answers, questions) not acknowledged by the server yet."""
         return list(self._outbox.reports)
 
     @property
@@ -520,6 +539,15 @@ class RobotAgent:
         self._telemetry.publish()
         self._outbox.wake()
 
+    def _on_question(self, message: Ask | AskEnded) -> None:
+        """A question or its end: the outbox, then the listeners."""
+        self._outbox.add(message)
+        for listener in list(self.question_listeners):
+            try:
+                listener(message)
+            except Exception:
+                log.exception("%s: question listener failed", self.name)
+
     # ------------------------------------------------------------ commands
 
     def _dispatch(self, cmd: object) -> Effect:
@@ -536,6 +564,7 @@ class RobotAgent:
         log.error("%s: standing down: %s", self.name, reason)
         self._executor.abort()
         self._queue.forget()
+        self.questions.forget()
         self._outbox.clear()
         self._uplink.forget()
         self._telemetry.update_mode()

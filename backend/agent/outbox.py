@@ -19,13 +19,13 @@ from datetime import UTC, datetime, timedelta
 from backend import transport
 from backend.agent.runtime import RETRY_S, Runtime, Standing, log
 from backend.agent.uplink import CommandLog
-from backend.core.ops import Answer, Report
+from backend.core.ops import Answer, Ask, AskEnded, Report
 from backend.protocol.keys import Keys
 from backend.protocol.messages import MAX_BATCH, Downlink, DownlinkAck, ErrorReply, dumps
 from backend.protocol.timing import HEARTBEAT_S  # until the server's RegisterReply says otherwise
 from backend.protocol.wire import parse
 
-Message = Report | Answer
+Message = Report | Answer | Ask | AskEnded  # the downlink's messages
 RANGE_POLL_S = 0.2  # out of range with messages waiting: look again this often
 
 

@@ -24,9 +24,9 @@ from datetime import UTC, datetime
 from types import MappingProxyType
 
 from backend.core.model import BarrierInfo, Branches, SkillInstance, Status, Taken
-from backend.core.ops import Answer, Report
+from backend.core.ops import Answer, Ask, AskEnded, Report
 
-Msg = Report | Answer  # a downlink message
+Msg = Report | Answer | Ask | AskEnded  # a downlink message
 
 
 def _now() -> datetime:

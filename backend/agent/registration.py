@@ -223,6 +223,7 @@ class Registrar:
         manifest: Callable[[], Manifest],
         taken: Callable[[str], None],
         learned: Callable[[Mapping[str, str]], None] = lambda outcomes: None,
+        asking: Callable[[], list[str]] = list,
     ):
         self.rt = rt
         self.standing = standing
@@ -238,6 +239,7 @@ class Registrar:
         self._taken = taken  # another run of this robot holds the name: stand down
         # how its finished skills ended that others wait for (a restart forgot them)
         self._learned = learned
+        self._asking = asking  # the refs of the questions its skills still ask
         self.last_reply: RegisterReply | None = None
         self._refused: str | None = None  # the server's reason, while it refuses us
         self._error = ""  # why the last registration attempt got no reply
@@ -346,6 +348,7 @@ class Registrar:
             last_seq=self.queue.seq,
             uplink_applied=self.commands.applied,
             sent=datetime.now(UTC) - timedelta(seconds=self.rt.delay_s()),
+            asking=self._asking(),
         )
         raw = await transport.query(
             self.rt.session,

@@ -35,6 +35,7 @@ class AlertKind(StrEnum):
     JOURNAL = "journal"
     OVERDUE = "overdue"
     TEAM = "team"
+    QUESTION = "question"
 
 
 MEANING: dict[AlertKind, str] = {
@@ -51,6 +52,8 @@ MEANING: dict[AlertKind, str] = {
     AlertKind.OVERDUE: "a command's verification stage (sent, received, started, completed) "
     "is later than its due time and tolerance (backend/core/verification.py)",
     AlertKind.TEAM: "a robot asked to join the mission, was added or was retired",
+    AlertKind.QUESTION: "a robot's skill asks the operators a question (answer it before its "
+    "default applies on board)",
 }
 
 
@@ -62,6 +65,9 @@ class RaisedAlert(Strict):
     robot: Name | None = None
     skill: SkillId | None = None
     command: int | None = Field(None, description="the command it is about, if any")
+    question: int | None = Field(
+        None, exclude_if=lambda v: v is None, description="the question it is about, if any"
+    )
     message: str
 
 
@@ -77,4 +83,5 @@ class Raises(Protocol):
         robot: str | None = None,
         skill: str | None = None,
         command: int | None = None,
+        question: int | None = None,
     ) -> None: ...

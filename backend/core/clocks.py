@@ -30,7 +30,7 @@ ROBOT = "robot"
 CLOCKS = (GROUND, ROBOT)
 
 # operations whose own time is the robot's (the rest happen on the ground)
-ROBOT_TIMED = frozenset({"report", "answer"})
+ROBOT_TIMED = frozenset({"report", "answer", "ask", "ask_ended"})
 
 
 def robot_keys(

@@ -19,11 +19,14 @@ from backend.core.model import (
     KEEP_SETTLED,
     Barrier,
     CheckId,
+    Choice,
     CommandState,
     Marker,
     Mission,
     Name,
     Policies,
+    Question,
+    QuestionState,
     RobotSpec,
     SkillId,
     SkillInstance,
@@ -180,6 +183,41 @@ class RobotRetired(Strict):
     reason: str = Field(min_length=1, max_length=500)
 
 
+class QuestionAsked(Strict):
+    """A robot's skill asked the operators a question (its `Ask`)."""
+
+    ev: Literal["question_asked"] = "question_asked"
+    question: Question
+
+
+class QuestionAnswered(Strict):
+    """An operator answered an open question: the answer is on its way up
+    (`command`); the question stays open until the robot says it took it."""
+
+    ev: Literal["question_answered"] = "question_answered"
+    id: int
+    choice: Choice
+    by: str = ""
+    at: datetime
+    command: int
+
+
+# how a question ends (QuestionState without `open`)
+Closed = Literal[QuestionState.ANSWERED, QuestionState.DEFAULTED, QuestionState.WITHDRAWN]
+
+
+class QuestionClosed(Strict):
+    """How a robot's question ended, as the robot says (or the ground, for a
+    robot that registered without it: withdrawn)."""
+
+    ev: Literal["question_closed"] = "question_closed"
+    id: int
+    state: Closed
+    choice: Choice | None = None
+    at: datetime | None = None
+    reason: str = ""
+
+
 class MissionReplaced(Strict):
     ev: Literal["mission_replaced"] = "mission_replaced"
     mission: Mission
@@ -202,6 +240,9 @@ Event = Annotated[
     | WaiverRemoved
     | RobotAdded
     | RobotRetired
+    | QuestionAsked
+    | QuestionAnswered
+    | QuestionClosed
     | MissionReplaced,
     Field(discriminator="ev"),
 ]
@@ -359,12 +400,49 @@ def _robot_retired(m: Mission, e: RobotRetired, revision: int) -> None:
     m.task_revs[e.name] = revision
 
 
+def _question_asked(m: Mission, e: QuestionAsked, revision: int) -> None:
+    q = e.question.model_copy()
+    m.questions.setdefault(q.robot, []).append(q)
+    m.next_question = max(m.next_question, q.id + 1)
+
+
+def _question_changed(m: Mission, qid: int, update: dict[str, Any]) -> None:
+    for qs in m.questions.values():
+        for i, q in enumerate(qs):
+            if q.id == qid:
+                qs[i] = q.model_copy(update=update)
+                if not qs[i].is_open:
+                    _prune_questions(qs)
+                return
+    raise KeyError(f"question {qid}")
+
+
+def _prune_questions(qs: list[Question]) -> None:
+    """Keep the open questions and the last KEEP_SETTLED closed ones."""
+    closed = [i for i, q in enumerate(qs) if not q.is_open]
+    for i in reversed(closed[:-KEEP_SETTLED] if len(closed) > KEEP_SETTLED else []):
+        del qs[i]
+
+
+def _question_answered(m: Mission, e: QuestionAnswered, revision: int) -> None:
+    update = {"answer": e.choice, "answered_by": e.by, "answered_at": e.at, "command": e.command}
+    _question_changed(m, e.id, update)
+
+
+def _question_closed(m: Mission, e: QuestionClosed, revision: int) -> None:
+    update = {"state": e.state, "choice": e.choice, "closed": e.at, "reason": e.reason}
+    _question_changed(m, e.id, update)
+
+
 # events that change one part of a mission, as a table (keeps apply_event short)
 _APPLY: dict[type[Any], Callable[[Mission, Any, int], None]] = {
     WaiverSet: _waiver_set,
     WaiverRemoved: _waiver_removed,
     RobotAdded: _robot_added,
     RobotRetired: _robot_retired,
+    QuestionAsked: _question_asked,
+    QuestionAnswered: _question_answered,
+    QuestionClosed: _question_closed,
 }
 
 

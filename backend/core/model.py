@@ -440,11 +440,44 @@ class Reset(Strict):
     cmd: Literal["reset"] = "reset"
 
 
-RobotCommand = Annotated[Enqueue | Dequeue | Run | Pause | Stop | Reset, Field(discriminator="cmd")]
+# -- robots ask: a skill handler's question to the operators ----------------------
+
+MAX_QUESTION_TEXT = 500  # characters of a question
+MAX_CHOICES = 9  # choices of one question (a console gives each a key, 1..9)
+MAX_CHOICE = 40  # characters of one choice
+# a choice: printable, no line break, no space at either end ("wider", "give up")
+Choice = Annotated[
+    str,
+    Field(
+        min_length=1,
+        max_length=MAX_CHOICE,
+        pattern=r"^[^\s\x00-\x1f](?:[^\x00-\x1f]*[^\s\x00-\x1f])?$",
+    ),
+]
+# the robot's own name for one of its questions (unique per run of its agent)
+AskRef = Annotated[str, Field(pattern=ID_PATTERN, max_length=64)]
+
+
+class QuestionAnswer(Strict):
+    """An operator's answer to one of the robot's questions (`ref`, its own name
+    for it); the robot goes on with `choice` unless its default applied first."""
+
+    cmd: Literal["answer"] = "answer"
+    question: int = Field(ge=1, description="the question's number, mission-wide")
+    ref: AskRef
+    choice: Choice
+    by: str = Field("", max_length=200, description="who answered ('user@console')")
+
+
+RobotCommand = Annotated[
+    Enqueue | Dequeue | Run | Pause | Stop | Reset | QuestionAnswer, Field(discriminator="cmd")
+]
 
 # what the operator asked for (`reconcile`: the server, to drop skills a robot
-# holds that the mission does not give it)
-CommandOp = Literal["sync", "unsync", "run", "pause", "stop", "reset", "retry", "reconcile"]
+# holds that the mission does not give it; `answer`: a question's answer)
+CommandOp = Literal[
+    "sync", "unsync", "run", "pause", "stop", "reset", "retry", "reconcile", "answer"
+]
 
 
 class UplinkCommand(Strict):
@@ -490,6 +523,51 @@ class UplinkCommand(Strict):
 
 # settled commands kept per robot (the pending ones are always kept)
 KEEP_SETTLED = 20
+
+
+class QuestionState(StrEnum):
+    """Where a robot's question stands. `open`: asked, the robot waits (an
+    operator's answer may be on its way up: `answer`); then the robot says
+    how it ended: `answered` (it took the operator's answer), `defaulted`
+    (its timeout came first: it went on with the default) or `withdrawn`
+    (its skill stopped or ended before either)."""
+
+    OPEN = "open"
+    ANSWERED = "answered"
+    DEFAULTED = "defaulted"
+    WITHDRAWN = "withdrawn"
+
+
+class Question(Strict):
+    """A question a robot's skill asked the operators (docs/robots.md "Asking
+    the operator"). Changed only through events."""
+
+    id: int = Field(ge=1, description="its number, mission-wide ('question 3')")
+    robot: Name
+    ref: AskRef = Field(description="the robot's own name for it")
+    skill: SkillId = Field(description="the skill whose handler asks")
+    text: str = Field(min_length=1, max_length=MAX_QUESTION_TEXT)
+    choices: list[Choice] = Field(min_length=2, max_length=MAX_CHOICES)
+    default: Choice = Field(description="what the robot does if no answer reaches it in time")
+    timeout_s: float = Field(gt=0, le=1e7, description="mission seconds it waits for an answer")
+    asked: datetime = Field(description="when it asked (the robot's clock)")
+    due: datetime = Field(description="when its default applies on board (the robot's clock)")
+    state: QuestionState = QuestionState.OPEN
+    answer: Choice | None = Field(None, description="the operator's choice (on its way while open)")
+    answered_by: str = Field("", description="who answered ('user@console')")
+    answered_at: datetime | None = Field(None, description="when the operator answered")
+    command: int | None = Field(None, description="the uplink command carrying the answer")
+    choice: Choice | None = Field(None, description="what the robot went on with, once closed")
+    closed: datetime | None = Field(None, description="when the robot said how it ended")
+    reason: str = Field("", max_length=2000, description="why it was withdrawn")
+
+    @property
+    def is_open(self) -> bool:
+        return self.state == QuestionState.OPEN
+
+    def title(self) -> str:
+        """How messages name it: 'question 3 (lru1, lru1-4)'."""
+        return f"question {self.id} ({self.robot}, {self.skill})"
 
 
 class Waiver(Strict):
@@ -550,10 +628,14 @@ class Mission(Strict):
     uplink: dict[Name, list[UplinkCommand]] = Field(default_factory=dict)
     # highest uplink sequence number given out per robot
     uplink_seqs: dict[Name, int] = Field(default_factory=dict)
+    # per robot: its robots' questions to the operators, open ones and the last
+    # closed ones (left out of dumps while there are none: files keep their form)
+    questions: dict[Name, list[Question]] = Field(default_factory=dict, exclude_if=_empty)
     # counters for generated ids; persisted so ids are never reused
     next_skill: int = Field(1, ge=1)
     next_barrier: int = Field(1, ge=1)
     next_command: int = Field(1, ge=1)
+    next_question: int = Field(1, ge=1, exclude_if=lambda v: v == 1)
     # a 10,000-skill mission took ~0.6 ms per scan, and every status change needs one
     _hints: _Hints = PrivateAttr(default_factory=_Hints)
 
@@ -645,6 +727,18 @@ class Mission(Strict):
                 for sid in c.skills:
                     out.setdefault(sid, c)
         return out
+
+    def question(self, question_id: int) -> Question | None:
+        for qs in self.questions.values():
+            for q in qs:
+                if q.id == question_id:
+                    return q
+        return None
+
+    def open_questions(self, robot: str | None = None) -> list[Question]:
+        """Questions the robots still wait on, per robot oldest first."""
+        lists = [self.questions.get(robot, [])] if robot is not None else self.questions.values()
+        return [q for qs in lists for q in qs if q.is_open]
 
     def all_ids(self) -> set[str]:
         return {s.id for task in self.tasks.values() for s in task}

@@ -10,13 +10,17 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
-from pydantic import AwareDatetime, Field
+from pydantic import AwareDatetime, Field, model_validator
 
 from backend.core.model import (
+    MAX_CHOICES,
+    MAX_QUESTION_TEXT,
     AreaMarker,
+    AskRef,
     Barrier,
     BarrierTimeout,
     CheckId,
+    Choice,
     CommandState,
     Marker,
     Mission,
@@ -236,6 +240,16 @@ class Reassign(Strict):
     to: Name
 
 
+class AnswerQuestion(Strict):
+    """Answer a robot's open question with one of its choices: the answer
+    goes up the robot's uplink like any command (it expires when the
+    question's default applies on board); the robot says which it took."""
+
+    op: Literal["answer_question"] = "answer_question"
+    question: int = Field(ge=1, description="the question's number")
+    choice: Choice = Field(description="one of the choices it offers")
+
+
 class LoadMission(Strict):
     """Replace the mission. It comes in as a plan: every skill that is not
     finished is idle (its status was the robots' once; what they hold now is
@@ -363,6 +377,13 @@ class Reconcile(Strict):
     op: Literal["reconcile"] = "reconcile"
     robot: Name
     queue: list[QueueEntry] = Field(max_length=10_000)
+    asking: list[AskRef] | None = Field(
+        None,
+        max_length=1000,
+        exclude_if=lambda v: v is None,
+        description="the questions it still asks (None: it did not say); the mission's "
+        "other open questions of it are withdrawn",
+    )
 
 
 class UplinkSent(Strict):
@@ -435,6 +456,54 @@ class Report(Strict):
     )
 
 
+def choices_problem(choices: list[str], default: str) -> str | None:
+    """What is wrong with a question's choices and default, or None."""
+    if len(set(choices)) != len(choices):
+        return f"choices {choices} repeat one"
+    if default not in choices:
+        return f"the default {default!r} is not one of the choices {choices}"
+    return None
+
+
+class Ask(Strict):
+    """A robot's question to the operators, asked by a skill's handler
+    (`ctx.ask_operator`); numbered with its reports. It waits `timeout_s` of
+    mission time, then goes on with `default` and says so (`AskEnded`)."""
+
+    op: Literal["ask"] = "ask"
+    robot: Name
+    seq: int = Field(ge=1, description="downlink sequence number (shared with reports)")
+    ref: AskRef = Field(description="the robot's own name for the question (unique per run)")
+    skill: SkillId = Field(description="the skill whose handler asks")
+    text: str = Field(min_length=1, max_length=MAX_QUESTION_TEXT)
+    choices: list[Choice] = Field(min_length=2, max_length=MAX_CHOICES)
+    default: Choice
+    timeout_s: float = Field(gt=0, le=1e7, description="mission seconds it waits")
+    at: AwareDatetime = Field(description="when it asked (robot's clock)")
+    due: AwareDatetime = Field(description="when the default applies (robot's clock)")
+
+    @model_validator(mode="after")
+    def _choices(self) -> Ask:
+        problem = choices_problem(self.choices, self.default)
+        if problem is not None:
+            raise ValueError(problem)
+        return self
+
+
+class AskEnded(Strict):
+    """A robot's question ended without the operator's answer: its default
+    applied at the timeout, or its skill stopped or ended (withdrawn)."""
+
+    op: Literal["ask_ended"] = "ask_ended"
+    robot: Name
+    seq: int = Field(ge=1, description="downlink sequence number (shared with reports)")
+    ref: AskRef
+    outcome: Literal["default", "withdrawn"]
+    choice: Choice | None = Field(None, description="default: the choice it went on with")
+    reason: str = Field("", max_length=2000)
+    at: AwareDatetime | None = Field(None, description="when (robot's clock)")
+
+
 # what clients may send; what robots' answers become; everything the engine applies
 OperatorOperation = (
     AddSkill
@@ -459,13 +528,14 @@ OperatorOperation = (
     | AddRobot
     | RetireRobot
     | Reassign
+    | AnswerQuestion
     | LoadMission
     | NewMission
     | Undo
     | Redo
 )
 InternalOperation = RestoreSkills | SetSkill | RestoreBarrier | RestoreMarker | ReturnSkills
-RobotOperation = SyncAck | UnsyncDone | RetryAck | Reconcile | Report | Answer
+RobotOperation = SyncAck | UnsyncDone | RetryAck | Reconcile | Report | Answer | Ask | AskEnded
 # what the server applies for the uplink (never sent by clients or robots)
 LinkOperation = UplinkSent | UplinkSettle | DownlinkRefused
 Operation = OperatorOperation | InternalOperation | RobotOperation | LinkOperation
@@ -474,8 +544,9 @@ Operation = OperatorOperation | InternalOperation | RobotOperation | LinkOperati
 OperatorOp = Annotated[OperatorOperation, Field(discriminator="op")]
 RobotOp = Annotated[RobotOperation, Field(discriminator="op")]
 AnyOp = Annotated[Operation, Field(discriminator="op")]
-# what a robot sends on its downlink: its reports and its answers, one sequence
-DownlinkMessage = Annotated[Report | Answer, Field(discriminator="op")]
+# what a robot sends on its downlink: its reports, its answers and its
+# questions, one sequence
+DownlinkMessage = Annotated[Report | Answer | Ask | AskEnded, Field(discriminator="op")]
 
 # operations that change the unsynchronized plan and can be undone (a sync:
 # while its command is still queued, its undo is a cancel)

@@ -32,6 +32,9 @@ from backend.core.limits import LIMITS, MiB
 from backend.core.model import (
     CHECK_ID_PATTERN,
     KEEP_SETTLED,
+    MAX_CHOICE,
+    MAX_CHOICES,
+    MAX_QUESTION_TEXT,
     Enqueue,
     ParamType,
     Run,
@@ -39,7 +42,7 @@ from backend.core.model import (
     Status,
     UplinkCommand,
 )
-from backend.core.ops import AddSkill, Answer, Control, OperatorOp, Report, Sync
+from backend.core.ops import AddSkill, Answer, Ask, AskEnded, Control, OperatorOp, Report, Sync
 from backend.core.plan.checks import RULES as CHECK_RULES
 from backend.protocol import mapfeed as mf
 from backend.protocol import messages as p
@@ -231,6 +234,15 @@ ERROR_CODES: list[tuple[str, str, str]] = [
     ("retired", "server", "the robot is retired: no new syncs, nothing given to it"),
     ("nothing_to_reassign", "server", "reassign: no skill named, or the robot's plan is empty"),
     ("cannot_reassign", "server", "reassign: no skill named can go to the robot (each says why)"),
+    ("unknown_question", "server", "answer_question: no question of that number"),
+    ("bad_choice", "server", "answer_question: a choice the question does not offer"),
+    (
+        "already_answered",
+        "server",
+        "answer_question: an answer is on its way (its command pending) or taken: cancel it first",
+    ),
+    ("question_closed", "server", "answer_question: the robot ended the question already"),
+    ("too_late", "server", "answer_question: its default applied on board (past its due)"),
     ("bad_mission", "server", "load: the mission does not validate"),
     ("robot_busy", "server", "load/new while commands are pending (or a direct-path command)"),
     ("robots_busy", "server", "load/new while robots hold synchronized skills: reset them"),
@@ -450,6 +462,23 @@ EVENT_RULES: list[tuple[str, str, str]] = [
         "name, reason",
         "set `robots[name].retired` = reason; `task_revs[name]` = the revision",
     ),
+    (
+        "`question_asked`",
+        "question",
+        "append it to `questions[question.robot]`; `next_question` = max(`next_question`, id + 1)",
+    ),
+    (
+        "`question_answered`",
+        "id, choice, by, at, command",
+        "on that question set `answer` = choice, `answered_by` = by, `answered_at` = at, "
+        "`command`; it stays `open`",
+    ),
+    (
+        "`question_closed`",
+        "id, state, choice, at, reason",
+        "on that question set `state`, `choice`, `closed` = at, `reason`; keep in its robot's "
+        f"list the open questions and only the last {KEEP_SETTLED} closed ones",
+    ),
     ("`mission_replaced`", "mission", "replace the whole mission with `mission`"),
 ]
 
@@ -495,6 +524,14 @@ ROBOT_CASES: list[tuple[str, str]] = [
         "running again at the same attempt (after recharging first, say)",
         "not reported: the ground refuses it (`bad_report`)",
     ),
+    (
+        "`answer` to a question it no longer asks (its default applied, its skill ended)",
+        "`refused`, the `reason` saying how the question ended",
+    ),
+    (
+        "`answer` with a choice the question does not offer",
+        "`refused`; the question stays open",
+    ),
 ]
 
 # which operation may be refused with which code (beyond the codes of every request:
@@ -526,6 +563,10 @@ OP_CODES: list[tuple[str, str]] = [
     ("robot_add", "robot_exists, unknown_robot_type"),
     ("robot_retire", "unknown_robot, retired"),
     ("reassign", "unknown_robot, unknown_skill, retired, nothing_to_reassign, cannot_reassign"),
+    (
+        "answer_question",
+        "unknown_question, bad_choice, already_answered, question_closed, too_late",
+    ),
     ("load", "bad_mission, robot_busy, robots_busy, robots_online"),
     ("new", "robot_busy, robots_busy"),
     ("undo, redo", "nothing_to_undo, nothing_to_redo, cannot_undo, and the reverted op's codes"),
@@ -763,6 +804,8 @@ SCHEMAS: list[tuple[str, str, Any]] = [
     ("DownlinkAck", "DownlinkAck", p.DownlinkAck),
     ("Report", "Report", Report),
     ("Answer", "Answer", Answer),
+    ("Ask", "Ask", Ask),
+    ("AskEnded", "AskEnded", AskEnded),
     ("Telemetry", "Telemetry", p.Telemetry),
     ("WorldMessage", "WorldMessage", p.WorldMessage),
     ("WorldReply", "WorldReply", p.WorldReply),
@@ -1101,6 +1144,21 @@ refused with `not_registered` (register again); one whose `robot` is another
 robot with `bad_message`. A message in it (or in a `Register.downlink`)
 naming another robot is consumed as refused, with `bad_message`: its number
 is used up, that robot is not touched.
+
+**Questions** (docs/robots.md "Asking the operator"): a skill's handler may
+ask the operators, `Ask{{robot, seq, ref, skill, text, choices, default,
+timeout_s, at, due}}` in the same sequence (`ref`: the robot's own name for
+it, unique per run; at most {MAX_CHOICES} choices of {MAX_CHOICE} characters, a
+text of {MAX_QUESTION_TEXT}). The ground opens it (`question_asked`, a
+`question` alert). An operator's `answer_question` queues an `answer` command
+on the robot's uplink (`{{cmd: "answer", question, ref, choice, by}}`,
+expiring at the question's `due`); the robot answers it `applied` (it goes on
+with the choice: the question is `answered`) or `refused` (it no longer asks).
+When `timeout_s` of mission time passes first the robot goes on with the
+default and says so: `AskEnded{{robot, seq, ref, outcome: "default", choice,
+at}}`; a skill stopped or ended while asking sends `outcome: "withdrawn"`.
+`Register.asking` lists the refs it still asks: the mission's other open
+questions of that robot are withdrawn (a restart ended them).
 
 **Answer a command before anything that waits for the server**: process it,
 put its answer in the outbox and reply to the Uplink query; never query the

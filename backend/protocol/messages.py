@@ -16,6 +16,7 @@ from backend.core.contact import Contact
 from backend.core.events import EventBatch
 from backend.core.library import Library, SkillSignature
 from backend.core.model import (
+    AskRef,
     BarrierInfo,
     Dequeue,
     Enqueue,
@@ -23,6 +24,7 @@ from backend.core.model import (
     Name,
     Pause,
     Pose,
+    QuestionAnswer,
     Reset,
     RobotCommand,
     Run,
@@ -30,7 +32,7 @@ from backend.core.model import (
     Stop,
     Strict,
 )
-from backend.core.ops import Answer, DownlinkMessage, OperatorOp, QueueEntry, Report
+from backend.core.ops import Answer, Ask, AskEnded, DownlinkMessage, OperatorOp, QueueEntry, Report
 from backend.core.verification import Verification
 from backend.protocol.keys import PROTOCOL_VERSION
 
@@ -39,11 +41,14 @@ from backend.protocol.keys import PROTOCOL_VERSION
 __all__ = [
     "AlertKind",
     "Answer",
+    "Ask",
+    "AskEnded",
     "BarrierInfo",
     "Dequeue",
     "DownlinkMessage",
     "Enqueue",
     "Pause",
+    "QuestionAnswer",
     "QueueEntry",
     "Report",
     "Reset",
@@ -264,6 +269,12 @@ class Register(Strict):
     uplink_applied: int = Field(0, ge=0, description="the last uplink seq it has processed")
     sent: AwareDatetime | None = Field(
         None, description="when it left the robot (robot's clock, with its zone)"
+    )
+    asking: list[AskRef] | None = Field(
+        None,
+        max_length=1000,
+        description="the refs of the questions its skills still ask (None: it does not say): "
+        "the mission's other open questions of this robot are withdrawn",
     )
 
 

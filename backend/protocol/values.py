@@ -70,6 +70,13 @@ class RetryQueued(Queued):
     id: SkillId
 
 
+class AnswerQueued(Queued):
+    """answer_question: the command carrying the answer (expiring when the
+    question's default applies on board) and the question's number."""
+
+    question: int
+
+
 class ControlQueued(Strict):
     """run, pause, stop, reset: per robot "queued" or why it does not apply
     (for one robot, a refusal instead), and the commands queued."""
@@ -141,6 +148,7 @@ VALUES: dict[str, type[Strict]] = {
     "stop": ControlQueued,
     "reset": ControlQueued,
     "retry": RetryQueued,
+    "answer_question": AnswerQueued,
     "cancel": Cancelled,
     "barrier": BarrierMade,
     "unbarrier": Empty,

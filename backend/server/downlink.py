@@ -19,10 +19,13 @@ from collections.abc import Sequence
 from typing import Any, NamedTuple, Protocol
 
 from backend.core.alerts import AlertKind, Raises
-from backend.core.ops import Answer, DownlinkRefused, Report
+from backend.core.ops import Answer, Ask, AskEnded, DownlinkRefused, Report
 from backend.core.rules.engine import Applied, Engine, Refusal
 from backend.protocol.messages import ErrorReply
 from backend.server.refusals import JournalFailed
+
+Message = Report | Answer | Ask | AskEnded  # what a downlink carries
+_WHAT: dict[type, str] = {Report: "report", Answer: "answer", Ask: "question", AskEnded: "question"}
 
 
 class Submitter(Raises, Protocol):
@@ -51,7 +54,13 @@ def raise_alerts(host: Submitter, applied: Applied) -> None:
     """The alerts a rule raised (`Applied.alerts`)."""
     for a in applied.alerts:
         host.alert(
-            a.message, level=a.level, robot=a.robot, skill=a.skill, kind=a.kind, command=a.command
+            a.message,
+            level=a.level,
+            robot=a.robot,
+            skill=a.skill,
+            kind=a.kind,
+            command=a.command,
+            question=a.question,
         )
 
 
@@ -65,7 +74,7 @@ class DownlinkApplier:
         assert engine is not None
         return engine.mission.report_seqs.get(robot, 0)
 
-    def apply(self, robot: str, messages: Sequence[Report | Answer]) -> Progress:
+    def apply(self, robot: str, messages: Sequence[Message]) -> Progress:
         """Apply `robot`'s messages in seq order, up to the first gap.
         JournalFailed propagates: nothing after it is consumed, the robot
         sends it again."""
@@ -96,7 +105,7 @@ class DownlinkApplier:
             kind=AlertKind.ROBOT_ERROR,
         )
 
-    def _apply_one(self, robot: str, msg: Report | Answer) -> ErrorReply | None:
+    def _apply_one(self, robot: str, msg: Message) -> ErrorReply | None:
         host = self._host
         try:
             if msg.robot != robot:  # its seq is this robot's: used up, never applied
@@ -114,7 +123,7 @@ class DownlinkApplier:
                 DownlinkRefused(robot=robot, seq=msg.seq, code=r.code, message=r.message),
                 actor=robot,
             )
-            what = "report" if isinstance(msg, Report) else "answer"
+            what = _WHAT.get(type(msg), "message")
             host.alert(
                 f"{what} {msg.seq} of {robot} refused: {r.message}",
                 level="error",

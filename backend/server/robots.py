@@ -247,7 +247,8 @@ class RobotLink:
         adopted: list[str] = []
         dropped: list[str] = []
         if progress.last_seq >= reg.last_seq:
-            value = self.submit(Reconcile(robot=robot, queue=reg.queue), actor=robot).value
+            reconcile = Reconcile(robot=robot, queue=reg.queue, asking=reg.asking)
+            value = self.submit(reconcile, actor=robot).value
             lost, adopted, dropped = value["unsynchronized"], value["adopted"], value["dropped"]
         else:
             self._host.alert(

@@ -398,6 +398,7 @@ class MissionServer:
         robot: str | None = None,
         skill: str | None = None,
         command: int | None = None,
+        question: int | None = None,
     ) -> None:
         """Raise an alert: logged, numbered, kept for state snapshots, published."""
         log.warning("%s", message)
@@ -408,6 +409,7 @@ class MissionServer:
             robot=robot,
             skill=skill,
             command=command,
+            question=question,
             message=message,
             at=_now(),
         )

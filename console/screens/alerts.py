@@ -11,7 +11,7 @@ from textual.signal import Signal
 from textual.widgets import DataTable, Footer, Static
 
 from console.bindings import bindings, key_names
-from console.messages import AlertAcknowledged
+from console.messages import AlertAcknowledged, QuestionRequested
 from console.screens.base import ViewScreen
 from console.state.changes import StateChange, Topic
 from console.state.clock import MissionClock
@@ -27,6 +27,7 @@ KIND_WORDS = {
     "malformed": "unreadable message",
     "report_refused": "report refused",
     "robot_error": "robot error",
+    "question": "question",
 }
 
 
@@ -62,6 +63,7 @@ class AlertScreen(ViewScreen):
         hint = key_names(self).hint(
             ("alerts.ack", "acknowledge"),
             ("alerts.ack_all", "acknowledge all"),
+            ("alerts.answer", "answer"),
             ("app.show_mission", "schedule"),
             ("app.show_log", "event log"),
         )
@@ -138,6 +140,13 @@ class AlertScreen(ViewScreen):
         selected = self._selected_id()
         if selected is not None:
             self.post_message(AlertAcknowledged(selected))
+
+    def action_answer(self) -> None:
+        """The selected alert's question (another alert: the oldest open question)."""
+        t = self.query_one(DataTable)
+        by_id = {a.id: a for a in self.book.alerts}
+        a = by_id.get(self.ids[t.cursor_row]) if self.ids and t.cursor_row < len(self.ids) else None
+        self.post_message(QuestionRequested(a.question if a is not None else None))
 
     def action_ack_all(self) -> None:
         self.post_message(AlertAcknowledged(None))

@@ -79,6 +79,8 @@ OPENS = frozenset(
         "app.help",
         "app.command_palette",
         "app.quit",
+        "app.answer",
+        "alerts.answer",
     }
 )
 # actions that send a command up the link to a robot
@@ -305,6 +307,15 @@ ACTIONS: list[Action] = [
     ),
     Action("ack_all", "A", "Ack all", "Acknowledge every alert", "Alerts", True, "alerts"),
     Action(
+        "answer",
+        "o",
+        "Answer",
+        "Answer the question of the selected alert (a robot asks)",
+        "Alerts",
+        False,  # the screen's hint names it: its footer is full at 80 columns
+        "alerts",
+    ),
+    Action(
         "fleet_cancel",
         "delete",  # not a letter: letters typed on the list start the filter
         "Cancel cmd",
@@ -431,6 +442,16 @@ ACTIONS: list[Action] = [
         "Show the predicted timeline of the plan: bars per skill, barrier waits, coverage",
         "Screens",
         scope="app",
+    ),
+    Action(
+        "answer",
+        "f9",
+        "Answer",
+        "Answer a robot's question (the oldest open one; the palette lists each, the alerts "
+        "screen the one of its alert)",
+        "Screens",
+        scope="app",
+        bound=False,  # the app binds it, out of the footers (full at 80 columns)
     ),
     Action(
         "show_checks",
@@ -562,6 +583,13 @@ ACTIONS: list[Action] = [
             ("save_first", "s", "Save first", "Quitting: save the mission, then quit", False),
             ("quit", "q,y,ctrl+q", "Quit", "Quitting: quit now", True),
             ("retry", "r", "Retry", "The server is unreachable: try again", True),
+            (
+                "choose",
+                "1,2,3,4,5,6,7,8,9",
+                "Choose",
+                "A robot's question: answer with the choice of that number",
+                True,
+            ),
         )
     ),
 ]

@@ -27,7 +27,7 @@ from typing import Any, Literal
 from pydantic import BaseModel
 
 from backend.core import events as ev
-from backend.core.model import Status
+from backend.core.model import QuestionState, Status
 from backend.protocol.messages import Alert
 from console.state.text import GLYPHS, STATUS_WORDS
 
@@ -76,6 +76,7 @@ class AlertEntry(BaseModel):
     source: Literal["console", "server"] = "console"
     count: int = 1
     acknowledged: bool = False
+    question: int | None = None  # a robot's question it announces (kind "question")
 
 
 # -- the log ---------------------------------------------------------------------------
@@ -185,10 +186,39 @@ PHRASES: dict[type, Callable[[Any], str]] = {
     ev.RobotRetired: lambda e: f"robot {e.name} retired: {e.reason}",
     ev.CommandQueued: lambda e: f"{e.command.title()} queued for {e.command.robot}",
     ev.CommandChanged: lambda e: f"command {e.id} {e.state or 'changed'}",
+    ev.QuestionAsked: lambda e: (
+        f"question #{e.question.id} from {e.question.robot} ({e.question.skill}): "
+        f"{e.question.text} [{' / '.join(e.question.choices)}; default {e.question.default}]"
+    ),
+    ev.QuestionAnswered: lambda e: (
+        f"question #{e.id} answered {e.choice} by {e.by or 'an operator'} (command {e.command})"
+    ),
+    ev.QuestionClosed: lambda e: (
+        f"question #{e.id} {_closed_words(e)}" + (f" ({e.reason})" if e.reason else "")
+    ),
 }
 
 
+CLOSED_WORDS = {
+    QuestionState.ANSWERED: "answered: the robot goes on with {choice}",
+    QuestionState.DEFAULTED: "defaulted: no answer in time, the robot goes on with {choice}",
+}
+
+
+def _closed_words(e: ev.QuestionClosed) -> str:
+    """How a question ended, in the log's words."""
+    return CLOSED_WORDS.get(e.state, "withdrawn").format(choice=e.choice)
+
+
 EDIT_FIELDS = ("label", "params", "bindings", "policies")
+# events that name their robot themselves (the others above go by skill id)
+ROBOT_OF: dict[type, Callable[[Any], str | None]] = {
+    ev.QuestionAsked: lambda e: e.question.robot,
+}
+
+
+def _no_robot(_e: Any) -> None:
+    return None
 
 
 def _summary(batch: ev.EventBatch, owner: Owner) -> tuple[list[str], list[str]]:
@@ -222,6 +252,7 @@ def _summary(batch: ev.EventBatch, owner: Owner) -> tuple[list[str], list[str]]:
                     robot(owner(sid))
                 parts.append(f"barrier {bid} ({', '.join(b.skills)})")
             case _:
+                robot(ROBOT_OF.get(type(e), _no_robot)(e))
                 phrase = PHRASES.get(type(e))
                 if phrase is not None:
                     parts.append(phrase(e))
@@ -319,6 +350,7 @@ class AlertBook:
             skill=a.skill,
             message=a.message,
             source="server",
+            question=a.question,
         )
 
     def seen(self, alerts: Iterable[Alert], server: str) -> None:

@@ -73,7 +73,9 @@ REVIEW = "review"  # a recording, not a server: there is no connection to show
 
 
 # operations a robot's answer or report becomes (the robot was heard)
-ROBOT_OPS = frozenset({"report", "answer", "sync_ack", "unsync_done", "retry_ack", "reconcile"})
+ROBOT_OPS = frozenset(
+    {"report", "answer", "ask", "ask_ended", "sync_ack", "unsync_done", "retry_ack", "reconcile"}
+)
 
 
 def heard_in(heard: dict[str, datetime], batch: ev.EventBatch, owner: Owner, now: datetime) -> None:

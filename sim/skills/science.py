@@ -24,6 +24,18 @@ IDENTIFY_AT = 2.0
 PARTNER_WAIT = 300.0  # sim seconds one identifier waits for the other
 ASK_PERIOD = 10.0  # sim seconds between asks while waiting for the partner
 CAMERA_WORK = "identifying stones (science camera)"
+SEARCH_S = IDENTIFY_S * 0.3  # sim seconds searching a radius for stones
+# finding nothing, identify_stone asks the operators whether to search wider: a radius
+# WIDER times as large, the ring around the first search taking its share of SEARCH_S
+# by area; no answer within ASK_S (mission time) takes the default, WIDER_CHOICE
+WIDER = 2.0
+WIDER_CHOICE, GIVE_UP = "wider", "give up"
+ASK_S = 180.0
+
+
+def _nothing_of(rss: RssState | None) -> str:
+    """What a search found nothing of: the region's stones, or a region."""
+    return f"no stone of {rss.name}" if rss is not None else "no region ideal for sampling stones"
 
 
 @dataclass
@@ -97,12 +109,9 @@ class ScienceSkills(SkillBase):
         tx, ty = xy(target)
         f0 = await self._reach_search_centre(ctx, tx, ty, search_radius)
         rss = w.rss_near(tx, ty, search_radius)
-        if rss is None:
-            await self.work(ctx, IDENTIFY_S * 0.3, "searching for stones", frac0=f0)
-            raise self.fail(
-                f"no region ideal for sampling stones within {search_radius:g} m of "
-                f"{_fmt(tx, ty)}: nothing to identify here"
-            )
+        if not self._reaches_a_stone(rss, tx, ty, search_radius):
+            search_radius, rss = await self._search_wider(ctx, tx, ty, search_radius, rss, f0)
+        assert rss is not None
         self._found_region(rss)
         search = Search(tx, ty, search_radius, rss, partner, f0)
         other = w.robots.get(partner) if partner else None
@@ -118,6 +127,49 @@ class ScienceSkills(SkillBase):
             how = "alone (only a low-score stone without LRU1 and LRU2 together)"
         msg = f"identified {stone.id} at {_fmt(stone.x, stone.y)}, score {stone.score:g}, {how}"
         return self.done(ctx, msg)
+
+    def _reaches_a_stone(self, rss: RssState | None, tx: float, ty: float, radius: float) -> bool:
+        """A region within `radius` of the target, with a stone there (identified or not)."""
+        stones = (self.world.stones[k] for k in rss.stones) if rss is not None else ()
+        return any(math.hypot(k.x - tx, k.y - ty) <= radius for k in stones)
+
+    async def _search_wider(
+        self,
+        ctx: SkillContext,
+        tx: float,
+        ty: float,
+        radius: float,
+        rss: RssState | None,
+        f0: float,
+    ) -> tuple[float, RssState]:
+        """Nothing within `radius`: the operators are asked whether to search
+        wider (the default, at the timeout) or give up (a failure, for the
+        skill's on_failure to act on). The wider radius and its region."""
+        nothing = f"{_nothing_of(rss)} within {radius:g} m of {_fmt(tx, ty)}"
+        if rss is None:
+            await self.work(ctx, SEARCH_S, "searching for stones", frac0=f0, frac1=f0)
+        wider = radius * WIDER
+        how = await self._ask_wider(ctx, nothing, wider)
+        ring_s = SEARCH_S * (WIDER**2 - 1)  # the ring's share of the search, by area
+        await self.work(ctx, ring_s, f"searching wider ({wider:g} m, {how})", frac0=f0, frac1=f0)
+        found = self.world.rss_near(tx, ty, wider)
+        if found is None or not self._reaches_a_stone(found, tx, ty, wider):
+            raise self.fail(f"{nothing}, nor within {wider:g} m: nothing to identify here")
+        return wider, found
+
+    async def _ask_wider(self, ctx: SkillContext, nothing: str, wider: float) -> str:
+        """The operators' word (or the default): how the wider search was
+        decided; a failure saying who gave up."""
+        reply = await ctx.ask_operator(
+            f"{self.robot.name}: {nothing}. Search wider ({wider:g} m)?",
+            [WIDER_CHOICE, GIVE_UP],
+            WIDER_CHOICE,
+            ASK_S,
+        )
+        if reply.choice == GIVE_UP:
+            by = f" ({reply.by})" if reply.by else ""
+            raise self.fail(f"{nothing}: nothing to identify here; the operator{by} gave up")
+        return "answered" if reply.answered else "by default"
 
     async def _reach_search_centre(
         self, ctx: SkillContext, tx: float, ty: float, radius: float

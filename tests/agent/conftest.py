@@ -28,7 +28,7 @@ import zenoh
 from backend.agent import RobotAgent
 from backend.core.library import SkillSignature
 from backend.core.model import Policies, SkillInstance, Status
-from backend.core.ops import Answer, Report
+from backend.core.ops import Answer, Ask, AskEnded, Report
 from backend.protocol.keys import Keys
 from backend.protocol.messages import (
     BarrierInfo,
@@ -106,6 +106,7 @@ class FakeServer:
         self.batches: list[Downlink] = []
         self.applied: dict[str, list[Report]] = {}  # per robot, in applied order
         self.answers: dict[str, list[Answer]] = {}
+        self.asks: dict[str, list[Ask | AskEnded]] = {}  # questions, in applied order
         self.last_seq: dict[str, int] = {}
         self.gaps: list[str] = []  # a seq that did not follow the previous one
         self.refuse: str | None = None  # when set, registrations are refused with this reason
@@ -137,7 +138,7 @@ class FakeServer:
             close_session(self.session)
 
     # -- what robots send -------------------------------------------------
-    def apply(self, robot: str, messages: list[Report | Answer]) -> None:
+    def apply(self, robot: str, messages: list[Report | Answer | Ask | AskEnded]) -> None:
         for r in sorted(messages, key=lambda m: m.seq):
             if r.robot != robot:
                 continue  # not ours (the fake server does not check senders)
@@ -149,8 +150,10 @@ class FakeServer:
                 break  # never past a gap
             if isinstance(r, Report):
                 self.applied.setdefault(robot, []).append(r)
-            else:
+            elif isinstance(r, Answer):
                 self.answers.setdefault(robot, []).append(r)
+            else:
+                self.asks.setdefault(robot, []).append(r)
             self.last_seq[robot] = r.seq
         self.changed.set()
 
@@ -245,7 +248,11 @@ class FakeServer:
 
     def downlink(self, robot: str) -> list[int]:
         """Downlink numbers of everything applied (reports and answers), in order."""
-        msgs = [*self.applied.get(robot, []), *self.answers.get(robot, [])]
+        msgs = [
+            *self.applied.get(robot, []),
+            *self.answers.get(robot, []),
+            *self.asks.get(robot, []),
+        ]
         return sorted(m.seq for m in msgs)
 
 
@@ -286,6 +293,7 @@ class Harness:
     def agent(self, name: str, robot_type: str = "rover", **kwargs: Any) -> RobotAgent:
         agent = RobotAgent(name, robot_type, connect=[self.endpoint], **kwargs)
         agent.report_listeners.append(self._on_local_report)
+        agent.question_listeners.append(lambda _message: self.changed.set())
         self.agents.append(agent)
         return agent
 

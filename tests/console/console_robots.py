@@ -5,7 +5,9 @@
 Runs one backend.agent.RobotAgent per robot with trivial handlers for every
 skill its type offers: a skill takes ~0.4 s with progress reports; a skill
 whose label contains "[fail]" fails on its first attempt (a retry succeeds);
-one whose label contains "[hold]" runs until stopped. Prints "ready" once
+one whose label contains "[hold]" runs until stopped; one whose label
+contains "[ask]" asks the operators "go on?" (go on / stop here, default go
+on after an hour), prints the reply and fails on "stop here". Prints "ready" once
 every robot is registered, then runs until stdin closes or SIGTERM.
 """
 
@@ -25,6 +27,13 @@ from backend.files.missions import load_library  # noqa: E402
 def make_handler(name: str):
     async def handler(ctx, **params):
         label = ctx.skill.label
+        if "[ask]" in label:
+            reply = await ctx.ask_operator("Go on?", ["go on", "stop here"], "go on", "1h")
+            print(
+                f"{ctx.skill.id}: {reply.choice} (answered {reply.answered} by {reply.by})",
+                flush=True,
+            )
+            return None if reply.choice == "go on" else Failure("the operator said stop here")
         if "[hold]" in label:
             i = 0
             while True:

@@ -597,3 +597,34 @@ async def test_workflow_injected_failure_raises_an_alert_that_is_acknowledged(li
             pilot, lambda: app.screen is app.mission_screen, SLOW, "back to the schedule"
         )
         assert "⚠" not in screen_text(app).splitlines()[0]
+
+
+async def test_a_robots_question_is_answered_from_the_console(live):
+    """The robot asks; the console's dialog opens by itself; a key answers;
+    the answer goes up the robot's uplink and the robot goes on with it."""
+    from backend.client.client import MissionClient
+    from backend.core.ops import Control, EditSkill, Sync
+    from console.screens.question import QuestionScreen
+
+    live.start_robots()
+    app = make_app(connect=live.endpoint, user="op1")
+    async with app.run_test(size=SIZE) as pilot:
+        await connected(app, pilot, "lru1")
+        async with MissionClient(live.endpoint, client_id="script") as client:
+            await client.submit(EditSkill(id="lru1-1", label="drive [ask]"))
+            await client.submit(Sync(robot="lru1", through="lru1-1"))
+            await client.submit(Control(op="run", robot="lru1"))
+        await wait_until(pilot, lambda: isinstance(app.screen, QuestionScreen), SLOW, "dialog")
+        # pushed is not drawn yet: wait for its text
+        await wait_until(pilot, lambda: "Go on?" in screen_text(app), SLOW, "its text")
+        assert "Question #1 from lru1" in screen_text(app)
+        assert any(a.kind == "question" for a in app.model.alerts.alerts)
+        await pilot.press("2")
+        line = live.robots.wait_line("lru1-1: ")
+        assert "stop here (answered True by op1@" in line
+        await wait_until(pilot, lambda: status(app, "lru1-1") == Status.FAILURE, SLOW, "failure")
+        q = app.model.mission.question(1)
+        assert q.state.value == "answered" and q.answered_by.startswith("op1@")
+        log = "\n".join(e.text for e in app.model.log.entries)
+        assert "question #1 from lru1 (lru1-1): Go on?" in log
+        assert "question #1 answered: the robot goes on with stop here" in log

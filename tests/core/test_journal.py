@@ -885,3 +885,64 @@ def test_a_journal_written_before_typed_events_replays_to_the_same_mission(tmp_p
         "a stone, carefully",
     )
     assert mission.command(1).state == "acked" and mission.command(1).done == ["lru1-1", "lru1-2"]
+
+
+def test_questions_replay_open_and_answered(tmp_path):
+    """A restart keeps a robot's open question (and its answer on its way)
+    and the answered one with who answered and what the robot took."""
+    from backend.core.model import QuestionState
+    from backend.core.ops import Answer, AnswerQuestion, Ask
+
+    db = tmp_path / "mission.db"
+    srv = Server(db)
+    srv.sync("lru1")
+    srv.report("lru1", "lru1-1", Status.RUNNING)
+
+    def ask(ref: str) -> None:
+        srv.seqs["lru1"] += 1
+        due = T0 + timedelta(hours=1)
+        fields = {"text": "search wider?", "choices": ["wider", "give up"], "default": "wider"}
+        op = Ask(
+            robot="lru1",
+            seq=srv.seqs["lru1"],
+            ref=ref,
+            skill="lru1-1",
+            timeout_s=300,
+            at=T0,
+            due=due,
+            **fields,
+        )
+        srv.submit(op, "robot:lru1")
+
+    ask("a-1")
+    srv.engine.clock = lambda: T0 + timedelta(seconds=5)
+    taken = srv.submit(AnswerQuestion(question=1, choice="give up"), actor="ann@c1")
+    c = srv.engine.mission.command(taken.value["command"])
+    srv.seqs["lru1"] += 1
+    srv.submit(
+        Answer(
+            robot="lru1",
+            seq=srv.seqs["lru1"],
+            command=c.seq,
+            outcome="applied",
+            at=T0 + timedelta(seconds=9),
+        ),
+        "robot:lru1",
+    )
+    ask("a-2")
+    srv.submit(AnswerQuestion(question=2, choice="wider"), actor="bob@c2")
+    want = srv.engine.mission
+    srv.close()
+
+    mission, _, j = reopen(db)
+    with j:
+        assert mission is not None
+        assert_same(mission, want)
+        q1, q2 = mission.questions["lru1"]
+        assert (q1.state, q1.choice, q1.answered_by) == (
+            QuestionState.ANSWERED,
+            "give up",
+            "ann@c1",
+        )
+        assert q2.is_open and (q2.answer, q2.answered_by) == ("wider", "bob@c2")
+        assert mission.next_question == 3

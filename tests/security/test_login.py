@@ -141,6 +141,7 @@ def test_observer_reads_but_every_operation_is_refused(server):
         ["run", "--all"],
         ["new", "x"],
         ["marker", "delete", "POI-A"],
+        ["answer", "1", "wider"],  # a robot's question (issue 29): an operator's to answer
     ):
         r = server.ctl("watch", *args)
         assert r.returncode == 1, (args, r.stderr)

@@ -4,6 +4,7 @@ code the code can raise is in the table; every operation's reply value fits
 its documented schema)."""
 
 import re
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import get_args
 
@@ -129,7 +130,22 @@ def test_every_reply_value_fits_its_schema():
     do(ops.Control(op="stop", robot="lru1"))
     do(ops.Unsync(robot="lru1", from_id="lru1-2"))
     do(ops.Control(op="reset"))
-    e.submit(ops.Report(robot="lru1", seq=3, id="lru1-1", status=Status.FAILURE))
+    at = datetime.now(UTC)
+    asked = ops.Ask(
+        robot="lru1",
+        seq=3,
+        ref="r-1",
+        skill="lru1-1",
+        text="search wider?",
+        choices=["wider", "give up"],
+        default="wider",
+        timeout_s=600,
+        at=at,
+        due=at + timedelta(minutes=10),
+    )
+    e.submit(asked)
+    do(ops.AnswerQuestion(question=1, choice="wider"))
+    e.submit(ops.Report(robot="lru1", seq=4, id="lru1-1", status=Status.FAILURE))
     do(ops.Retry(id="lru1-1"))
     do(ops.RetryEdit(id="lru1-1"))
     do(ops.Waive(check="barrier.deadlock:b1+b2", reason="they meet by radio"))

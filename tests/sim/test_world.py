@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from backend.agent import SkillFailed
+from backend.agent import Reply, SkillFailed
 from backend.agent.registration import Handler, handler_differences
 from backend.core.model import Pose, Position
 from backend.core.params import typed_params
@@ -198,9 +198,17 @@ def test_lawnmower_covers_the_polygon() -> None:
 
 
 class FakeCtx:
-    def __init__(self) -> None:
+    def __init__(self, replies: list[str] | None = None) -> None:
         self.paused = False
         self.progress_calls: list[tuple[float, str, float | None]] = []
+        self.replies = list(replies or [])  # the operators' answers; none left: the default
+        self.asked: list[tuple[str, list[str], str, float | str]] = []
+
+    async def ask_operator(self, text, choices, default, timeout) -> Reply:
+        self.asked.append((text, list(choices), default, timeout))
+        if self.replies:
+            return Reply(self.replies.pop(0), True, "ann@console")
+        return Reply(default, False)
 
     async def sleep(self, seconds: float) -> None:
         await asyncio.sleep(0)
@@ -399,8 +407,10 @@ def test_identify_searches_only_within_its_radius_and_pick_the_whole_region(
     fleet = exchanging_fleet(world)
     s1, s2 = RobotSkills(fleet, lru1), RobotSkills(fleet, lru2)
     centre = Position(x=29.0, y=23.0)
-    with pytest.raises(SkillFailed, match=r"no stone to identify within 3 m of \(29.0, 23.0\)"):
-        call(s1, "identify_stone", target=centre, search_radius=3.0)
+    gave_up = FakeCtx(replies=["give up"])
+    with pytest.raises(SkillFailed, match=r"no stone of RSS-A within 3 m of \(29.0, 23.0\)"):
+        call(s1, "identify_stone", gave_up, target=centre, search_radius=3.0)
+    assert gave_up.asked[0][1:3] == (["wider", "give up"], "wider")
     assert all(s.state == "hidden" for s in world.stones.values())
     lru1.activity = lru2.activity = "identify_stone"
     call(s1, "identify_stone", target=centre, search_radius=5.0, partner="lru2")
@@ -411,6 +421,58 @@ def test_identify_searches_only_within_its_radius_and_pick_the_whole_region(
     # aimed at the far side of the region, 8.8 m from the stone: it is still found
     result = call(s2, "pick_stone", target=Position(x=29.0, y=18.5))
     assert result.info == "picked RSS-A-s1 of RSS-A (score 0.5); carrying 1/2"
+
+
+def test_identify_finding_nothing_asks_and_searches_wider_by_default(world: World) -> None:
+    """Seed 1: RSS-A's stones lie 4.4 and 4.8 m from (29, 23). Within 3 m there is
+    none: the operators are asked; no answer (the default) searches 6 m, which
+    costs the ring's share of the search time and its battery, and finds one."""
+    lru2 = world.add_robot("lru2", "lru_manipulator")
+    lru2.x, lru2.y = 29.0, 23.0
+    skills = RobotSkills(fake_fleet(world), lru2)
+    ctx = FakeCtx()
+    t0, b0 = lru2.sim_seconds, lru2.battery
+    found = call(skills, "identify_stone", ctx, target=Position(x=29.0, y=23.0), search_radius=3.0)
+    ((text, choices, default, timeout),) = ctx.asked
+    assert "no stone of RSS-A within 3 m of (29.0, 23.0). Search wider (6 m)?" in text
+    assert (choices, default, timeout) == (["wider", "give up"], "wider", 180.0)
+    assert found.info.startswith("identified RSS-A-s")
+    wider_s = 36.0 * 3  # the 6 m ring: three times the area of the first 3 m
+    assert lru2.sim_seconds - t0 == pytest.approx(wider_s + 120.0)
+    assert b0 - lru2.battery == pytest.approx(lru2.work_energy(wider_s + 120.0))
+    assert any("searching wider (6 m, by default)" in info for _, info, _ in ctx.progress_calls)
+
+
+def test_identify_searches_wider_when_the_operator_answers_so(world: World) -> None:
+    """The operator's "wider" (before the timeout): the same wider search, saying
+    it was answered; the stone is found as by default."""
+    lru2 = world.add_robot("lru2", "lru_manipulator")
+    lru2.x, lru2.y = 29.0, 23.0
+    skills = RobotSkills(fake_fleet(world), lru2)
+    ctx = FakeCtx(replies=["wider"])
+    t0 = lru2.sim_seconds
+    found = call(skills, "identify_stone", ctx, target=Position(x=29.0, y=23.0), search_radius=3.0)
+    assert len(ctx.asked) == 1 and ctx.replies == []  # asked once, the answer taken
+    assert found.info.startswith("identified RSS-A-s")
+    assert lru2.sim_seconds - t0 == pytest.approx(36.0 * 3 + 120.0)
+    infos = [info for _, info, _ in ctx.progress_calls]
+    assert any("searching wider (6 m, answered)" in info for info in infos)
+    assert not any("by default" in info for info in infos)
+
+
+def test_identify_finding_nothing_gives_up_or_fails_wider_too(world: World) -> None:
+    lru2 = world.add_robot("lru2", "lru_manipulator")
+    lru2.x, lru2.y = -10.0, -10.0
+    skills = RobotSkills(fake_fleet(world), lru2)
+    far = Position(x=-10.0, y=-10.0)
+    with pytest.raises(
+        SkillFailed, match=r"nothing to identify here; the operator \(ann@console\) gave up"
+    ):
+        call(skills, "identify_stone", FakeCtx(replies=["give up"]), target=far)
+    t0 = lru2.sim_seconds
+    with pytest.raises(SkillFailed, match=r"within 8 m of \(-10.0, -10.0\), nor within 16 m"):
+        call(skills, "identify_stone", FakeCtx(), target=far)
+    assert lru2.sim_seconds - t0 == pytest.approx(36.0 * 4)  # the search, then the wider one
 
 
 async def _together(skills: RobotSkills, robot: Any, **params: Any) -> str:

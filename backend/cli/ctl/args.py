@@ -42,6 +42,12 @@ Operations
                               completed, each with state, at, due, tolerance)
   cancel COMMAND [--wait [S]] withdraw a pending command (final while it is
                               queued; once sent, the robot's answer decides)
+  questions [ROBOT...]        robots' open questions: text, numbered choices, and
+                              how long until the default applies on board
+                              (mission time); --json: every field
+  answer Q CHOICE [--wait [S]]
+                              answer question Q with one of its choices (or its
+                              number): a command up the robot's uplink
   wait COMMAND [--until received|started|completed] [--grace D] [--max-wait S]
                               until the command's stage is reached (exit 0),
                               never will be (1: refused, expired, a skill
@@ -156,6 +162,7 @@ from typing import Any
 
 from backend.cli.ctl.contingency import add_after_args, add_barrier_args
 from backend.cli.ctl.contingency import add_options as add_contingency_options
+from backend.cli.ctl.questions import answer_arguments, questions_arguments
 from backend.cli.ctl.team import reassign_arguments, robots_arguments, suggest_arguments
 from backend.cli.parser import Parser
 from backend.transport.login import add_login_arguments
@@ -165,7 +172,7 @@ DEFAULT_TIMEOUT = 10.0
 
 CONTROL_OPS = ("run", "pause", "stop", "reset")  # on one robot or --all (see OPERATIONS)
 # operations that queue commands to robots (the robot's answer comes later: --wait)
-ROBOT_OPS = ("sync", "unsync", *CONTROL_OPS, "retry", "cancel")
+ROBOT_OPS = ("sync", "unsync", *CONTROL_OPS, "retry", "cancel", "answer")
 
 
 def _recharge(text: str) -> float | None:
@@ -592,6 +599,11 @@ OPERATIONS: dict[str, tuple[str, Arguments]] = {
     "barrier": (
         "make idle skills of different robots start together, or change a barrier's timeout",
         add_barrier_args,
+    ),
+    "questions": ("robots' open questions and when their defaults apply", questions_arguments),
+    "answer": (
+        "answer a robot's question with one of its choices",
+        lambda p: answer_arguments(p, _wait_and_expire),
     ),
     "after": ("start an idle skill only once another robot's skill succeeded", add_after_args),
     "unbarrier": ("remove a barrier", _unbarrier),

@@ -15,6 +15,7 @@ from backend.cli.ctl.args import CONTROL_OPS
 from backend.cli.ctl.contingency import barrier_waiting
 from backend.cli.ctl.contingency import given as given_contingency
 from backend.cli.ctl.errors import FileInvalid, UsageError
+from backend.cli.ctl.questions import build_answer
 from backend.cli.ctl.team import build_reassign, build_robots
 from backend.cli.ctl.values import (
     AtMarker,
@@ -331,6 +332,8 @@ BUILDERS: dict[str | None, Builder] = {
     "robots": build_robots,
     "reassign": build_reassign,
     **dict.fromkeys(("check", "timeline", "history", "wait", "suggest"), _no_operation),
+    "questions": _no_operation,
+    "answer": build_answer,
     "add": _add,
     "delete": _delete,
     "move": _move,

@@ -15,6 +15,8 @@ from datetime import UTC, datetime
 from typing import Any
 
 from backend.cli.ctl.args import CONTROL_OPS
+from backend.cli.ctl.questions import DESCRIBE as QUESTION_DESCRIBE
+from backend.cli.ctl.questions import EVENT_TEXT as QUESTION_EVENT_TEXT
 from backend.cli.ctl.team import DESCRIBE as TEAM_DESCRIBE
 from backend.core.contact import sim_time_text
 from backend.core.contingency import after_tags, awaited_by, marks, span_text, taken_text
@@ -762,6 +764,7 @@ DESCRIBE: dict[str, Callable[[Outcome], str]] = {
     ),
     "unwaive": lambda o: f"withdrew the waiver of {o.op.check} {o.at}",
     **TEAM_DESCRIBE,
+    **QUESTION_DESCRIBE,
 }
 
 
@@ -826,6 +829,7 @@ EVENT_TEXT: dict[str, Callable[[Any], str]] = {
     "waiver_removed": lambda e: f"waiver of {e.check} withdrawn",
     "robot_added": lambda e: f"robot {e.name} ({e.spec.type}) joined the mission",
     "robot_retired": lambda e: f"robot {e.name} retired: {e.reason}",
+    **QUESTION_EVENT_TEXT,
 }
 
 

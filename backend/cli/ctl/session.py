@@ -26,6 +26,7 @@ from backend.cli.ctl.nowcast import nowcasts_json, nowcasts_text
 from backend.cli.ctl.plan import check as plan_check
 from backend.cli.ctl.plan import timeline as plan_timeline
 from backend.cli.ctl.plan import wait_telemetry
+from backend.cli.ctl.questions import questions_view
 from backend.cli.ctl.render import (
     command_json,
     describe,
@@ -541,4 +542,5 @@ VIEWS: dict[str, Callable[[Any, argparse.Namespace], Awaitable[int]]] = {
     "history": history_view,
     "wait": wait_stage,
     "suggest": suggest_view,
+    "questions": questions_view,
 }

@@ -125,6 +125,9 @@ class Rules:
         # may reach the robot, so a cancel cannot be final yet
         self.transmitting: set[int] = set()
         self.clock: Callable[[], datetime] = lambda: datetime.now(UTC)
+        # who submitted the operation being applied ('user@client', a robot): the
+        # engine sets it; rules that record who did something read it
+        self.actor = ""
 
     @property
     def locked(self) -> dict[str, str]:

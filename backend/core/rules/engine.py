@@ -57,7 +57,17 @@ from backend.core.ops import (
     Undo,
     Unsync,
 )
-from backend.core.rules import barriers, edit, execution, markers, reassign, team, uplink, waivers
+from backend.core.rules import (
+    barriers,
+    edit,
+    execution,
+    markers,
+    questions,
+    reassign,
+    team,
+    uplink,
+    waivers,
+)
 from backend.core.rules.base import Applied, Change, Offers, Refusal, Rule, Rules
 
 __all__ = ["RULES", "Applied", "Engine", "Offers", "Origin", "Recorder", "Refusal"]
@@ -167,6 +177,7 @@ def _take_over(new: Mission, old: Mission) -> None:
     new.uplink = {r: [c.model_copy() for c in cmds] for r, cmds in old.uplink.items()}
     new.uplink_seqs = dict(old.uplink_seqs)
     new.next_command = max(new.next_command, old.next_command)
+    new.next_question = max(new.next_question, old.next_question)  # never one number twice
     for robot in new.robots:
         new.tasks.setdefault(robot, [])
 
@@ -192,6 +203,7 @@ RULES: dict[type[Any], Rule] = {
     **waivers.RULES,
     **team.RULES,
     **reassign.RULES,
+    **questions.RULES,
     LoadMission: load_mission,
     NewMission: new_mission,
 }
@@ -334,6 +346,7 @@ class Engine(Rules):
 
     def _apply(self, origin: Origin) -> Applied:
         op, client = origin.op, origin.client
+        self.actor = origin.actor
         change = rule_for(op)(self, op)
         applied = self._commit(origin, change.events, change.notes, change.value, change.duplicate)
         applied.alerts = list(change.alerts)

@@ -59,7 +59,7 @@ from backend.core.ops import (
     UplinkSettle,
 )
 from backend.core.plan.gate import check_sync
-from backend.core.rules import barriers, contingency
+from backend.core.rules import barriers, contingency, questions
 from backend.core.rules.base import (
     Change,
     Refusal,
@@ -445,6 +445,8 @@ def _released(c: UplinkCommand) -> str:
         return f"; {', '.join(c.skills)} are unsynchronized (idle) again"
     if c.op == "unsync":
         return f"; {', '.join(c.skills)} stay on {c.robot}"
+    if c.op == "answer":
+        return f"; {c.robot} goes on with the question's default"
     return ""
 
 
@@ -670,6 +672,7 @@ _APPLIED: dict[str, Callable[[_Effects], None]] = {
     "pause": _controlled,
     "stop": _controlled,
     "reset": _controlled,
+    "answer": questions.applied_answer,
 }
 
 
@@ -741,6 +744,7 @@ def reconcile(rules: Rules, op: Reconcile) -> Change:
             events.append(ev.SkillStatusChanged(id=e.id, status=e.status))
         status[e.id] = e.status
     events += _arrangement(robot, task, status, idle_first=lost, held_order=[e.id for e in held])
+    events += questions.reconciled(rules, op)
     said = []
     if lost:
         said.append(f"{robot} no longer had {', '.join(lost)}: returned to the plan")
