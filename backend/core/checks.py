@@ -7,9 +7,12 @@ same things with the same sentences. Each problem is a (field path, message).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from backend.core.contingency import after_problems, contingency_problems
 from backend.core.library import Library, RobotType, SkillSpec, check_params
 from backend.core.model import Mission, SkillInstance, Status, format_path, section_problems
+from backend.core.params import ParamSpec
 
 Path = tuple[str | int, ...]
 Problem = tuple[Path, str]
@@ -21,7 +24,7 @@ def check_library(lib: Library) -> list[Problem]:
         out += _robot_type_problems(lib, tname, rt)
     for sname, spec in lib.skills.items():
         out += _skill_spec_problems(sname, spec)
-        out += _model_problems(lib, sname, spec)
+        out += _energy_problems(lib, sname, spec)
     return out
 
 
@@ -43,82 +46,61 @@ def _robot_type_problems(lib: Library, tname: str, rt: RobotType) -> list[Proble
 
 
 def _skill_spec_problems(sname: str, spec: SkillSpec) -> list[Problem]:
-    out: list[Problem] = []
-    for pname, pspec in spec.params.items():
-        why = pspec.default_problem()
-        if why:
-            out.append((("skills", sname, "params", pname, "default"), why))
-    d = spec.duration
-    if d.goal_param is not None:
-        p = spec.params.get(d.goal_param)
-        if p is None or not p.kind.goal:
-            out.append(
-                (
-                    ("skills", sname, "duration", "goal_param"),
-                    f"'{d.goal_param}' is not a pose or position parameter of '{sname}'",
-                )
-            )
-    if spec.talks_to is not None:
-        p = spec.params.get(spec.talks_to)
-        if p is None or p.type != "robot":
-            out.append(
-                (
-                    ("skills", sname, "talks_to"),
-                    f"'{spec.talks_to}' is not a robot parameter of '{sname}'",
-                )
-            )
-    for pname in d.per_param_s:
+    """A skill's parameter defaults valid, and every parameter its spec names
+    one of the kind it needs."""
+    out: list[Problem] = [
+        (("skills", sname, "params", pname, "default"), why)
+        for pname, pspec in spec.params.items()
+        if (why := pspec.default_problem())
+    ]
+    for path, pname, kind in _references(spec):
+        what, fits = _KINDS[kind]
         p = spec.params.get(pname)
-        if p is None or not p.kind.numeric:
-            out.append(
-                (
-                    ("skills", sname, "duration", "per_param_s", pname),
-                    f"'{pname}' is not a numeric parameter of '{sname}'",
-                )
-            )
+        if p is None or not fits(p):
+            out.append((("skills", sname, *path), f"'{pname}' is not {what} of '{sname}'"))
     return out
 
 
-def _model_problems(lib: Library, sname: str, spec: SkillSpec) -> list[Problem]:
-    """The duration and energy models name parameters and robot types that exist."""
+# The kind of parameter a reference needs: how a sentence names it, and the test.
+_KINDS: dict[str, tuple[str, Callable[[ParamSpec], bool]]] = {
+    "goal": ("a pose or position parameter", lambda p: p.kind.goal),
+    "robot": ("a robot parameter", lambda p: p.type == "robot"),
+    "numeric": ("a numeric parameter", lambda p: p.kind.numeric),
+    "area": ("an area parameter", lambda p: p.type == "area"),
+    "any": ("a parameter", lambda p: True),
+}
+
+
+def _references(spec: SkillSpec) -> list[tuple[Path, str, str]]:
+    """Where a skill's spec names one of its parameters, in the order the
+    problems are told: (path under the skill, the name, its kind in _KINDS)."""
     d = spec.duration
-    out: list[Problem] = []
-    for field, pname in (("speed_param", d.speed_param), ("charge_param", d.charge_param)):
-        p = spec.params.get(pname) if pname is not None else None
-        if pname is not None and (p is None or not p.kind.numeric):
-            out.append(
-                (
-                    ("skills", sname, "duration", field),
-                    f"'{pname}' is not a numeric parameter of '{sname}'",
-                )
-            )
-    a = spec.params.get(d.area_param) if d.area_param is not None else None
-    if d.area_param is not None and (a is None or a.type != "area"):
-        out.append(
-            (
-                ("skills", sname, "duration", "area_param"),
-                f"'{d.area_param}' is not an area parameter of '{sname}'",
-            )
-        )
+    refs: list[tuple[Path, str | None, str]] = [
+        (("duration", "goal_param"), d.goal_param, "goal"),
+        (("talks_to",), spec.talks_to, "robot"),
+    ]
+    refs += [(("duration", "per_param_s", p), p, "numeric") for p in d.per_param_s]
+    refs += [
+        (("duration", "speed_param"), d.speed_param, "numeric"),
+        (("duration", "charge_param"), d.charge_param, "numeric"),
+        (("duration", "area_param"), d.area_param, "area"),
+    ]
     if isinstance(d.to_home, dict):
-        for pname in d.to_home:
-            if pname not in spec.params:
-                out.append(
-                    (
-                        ("skills", sname, "duration", "to_home", pname),
-                        f"'{pname}' is not a parameter of '{sname}'",
-                    )
-                )
-    for tname in spec.energy.by_type:
-        if tname not in lib.robot_types:
-            known = ", ".join(lib.robot_types) or "none"
-            out.append(
-                (
-                    ("skills", sname, "energy", "by_type", tname),
-                    f"unknown robot type '{tname}' (library types: {known})",
-                )
-            )
-    return out
+        refs += [(("duration", "to_home", p), p, "any") for p in d.to_home]
+    return [(path, name, kind) for path, name, kind in refs if name is not None]
+
+
+def _energy_problems(lib: Library, sname: str, spec: SkillSpec) -> list[Problem]:
+    """The energy model names robot types that exist."""
+    known = ", ".join(lib.robot_types) or "none"
+    return [
+        (
+            ("skills", sname, "energy", "by_type", tname),
+            f"unknown robot type '{tname}' (library types: {known})",
+        )
+        for tname in spec.energy.by_type
+        if tname not in lib.robot_types
+    ]
 
 
 def resolve_shorthands(m: Mission, lib: Library) -> None:
