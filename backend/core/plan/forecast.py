@@ -257,23 +257,24 @@ def _spans(step: Step, start: float, end: float, speed: float) -> tuple[Span, ..
     return tuple(spans)
 
 
+# A step's kind of segment by its status: "active" (running or paused: the
+# one on the clock now), "idle" (not on the robot yet), else "queued".
+_MOVING = ACTIVE - {Status.SYNCHWAITING}
+_KIND = {s: "active" if s in _MOVING else "idle" if s == Status.IDLE else "queued" for s in Status}
+# (the kind of the segment so far, a step's kind) where the step goes on in it
+# without a wait: the active step is alone in its segment, and the first idle
+# step after queued ones waits for its sync
+_GOES_ON = frozenset({("queued", "queued"), ("idle", "idle"), ("idle", "queued")})
+
+
 def segments(course: Course, member: Mapping[str, str]) -> list[Segment]:
     """Cut a course where a wait may come: after the active skill, at the first
     unsynchronized skill, at each barrier skill."""
     out: list[Segment] = []
     for i, step in enumerate(course.steps):
-        s = step.skill
-        bid = member.get(s.id)
-        moving = s.status in ACTIVE and s.status != Status.SYNCHWAITING
-        kind = "active" if moving else "idle" if s.status == Status.IDLE else "queued"
-        new = (
-            not out
-            or moving
-            or out[-1].kind == "active"
-            or bid is not None
-            or (kind == "idle" and out[-1].kind != "idle")
-        )
-        if new:
+        bid = member.get(step.skill.id)
+        kind = _KIND[step.skill.status]
+        if not out or bid is not None or (out[-1].kind, kind) not in _GOES_ON:
             if out:
                 out[-1].last = i
             out.append(Segment(i, i + 1, kind, bid))
