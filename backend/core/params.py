@@ -215,6 +215,22 @@ class Dict(_Simple):
     name, types, expected, empty = "dict", (dict,), "a mapping", dict
 
 
+def _range_problem(spec: ParamSpec, v: float) -> str | None:
+    """A number not finite, or out of its parameter's bounds."""
+    if not math.isfinite(float(v)):
+        return "expected a finite number"
+    if spec.min is not None and v < spec.min:
+        return f"{_given_text(spec, v)} is below the minimum {bound_text(spec, spec.min)}"
+    if spec.max is not None and v > spec.max:
+        return f"{_given_text(spec, v)} is above the maximum {bound_text(spec, spec.max)}"
+    return None
+
+
+def _given_text(spec: ParamSpec, v: float) -> str:
+    """A value as given (`2.0 m/s`: bounds are short, `1 m/s`); angles in degrees."""
+    return angle_text(v) if is_angle(spec) else f"{v}{' ' + spec.unit if spec.unit else ''}"
+
+
 class _Number(Kind):
     integer: ClassVar[bool]
     numeric = True
@@ -222,19 +238,12 @@ class _Number(Kind):
     def check(
         self, spec: ParamSpec, v: Any, markers: Markers | None, robots: Collection[str] | None
     ) -> list[Problem]:
-        if self.integer and not (isinstance(v, int) and not isinstance(v, bool)):
-            return [((), f"expected an integer, got {describe(v)}")]
-        if not self.integer and not is_number(v):
-            return [((), f"expected a number, got {describe(v)}")]
-        if not math.isfinite(float(v)):
-            return [((), "expected a finite number")]
-        # a value as given (`2.0 m/s`), bounds short (`1 m/s`); angles in degrees
-        given = angle_text(v) if is_angle(spec) else f"{v}{' ' + spec.unit if spec.unit else ''}"
-        if spec.min is not None and v < spec.min:
-            return [((), f"{given} is below the minimum {bound_text(spec, spec.min)}")]
-        if spec.max is not None and v > spec.max:
-            return [((), f"{given} is above the maximum {bound_text(spec, spec.max)}")]
-        return []
+        why = self.type_problem(v) or _range_problem(spec, v)
+        return [((), why)] if why else []
+
+    def type_problem(self, v: Any) -> str | None:
+        """What is wrong with a value that is not of this kind of number."""
+        raise NotImplementedError
 
     def start(self, spec: ParamSpec, ctx: StartContext) -> tuple[Any, str | None]:
         v = spec.min if spec.min is not None else 0
@@ -246,9 +255,17 @@ class _Number(Kind):
 class Int(_Number):
     name, integer = "int", True
 
+    def type_problem(self, v: Any) -> str | None:
+        if isinstance(v, int) and not isinstance(v, bool):
+            return None
+        return f"expected an integer, got {describe(v)}"
+
 
 class Float(_Number):
     name, integer = "float", False
+
+    def type_problem(self, v: Any) -> str | None:
+        return None if is_number(v) else f"expected a number, got {describe(v)}"
 
     def normalize(self, spec: ParamSpec, v: Any) -> Any:
         return float(v)
