@@ -107,18 +107,27 @@ def resolve_shorthands(m: Mission, lib: Library) -> None:
     """`goal: "@POI-A"` in a file binds the parameter to marker POI-A (or,
     for a marker parameter, names it)."""
     for robot, task in m.tasks.items():
-        rtype = m.robots[robot].type if robot in m.robots else None
+        spec = m.robots.get(robot)
+        if spec is None or not spec.type:
+            continue
         for s in task:
-            spec = lib.skill_for(rtype, s.skill) if rtype else None
-            for name, v in list(s.params.items()):
-                if not (isinstance(v, str) and v.startswith("@")):
-                    continue
-                pspec = spec.params.get(name) if spec else None
-                if pspec is not None and pspec.kind.names_marker:
-                    s.params[name] = v[1:]
-                elif pspec is not None and pspec.kind.bindable_to:
-                    s.bindings[name] = v[1:]
-                    del s.params[name]
+            skill = lib.skill_for(spec.type, s.skill)
+            if skill is not None:
+                _resolve(s, skill)
+
+
+def _resolve(s: SkillInstance, spec: SkillSpec) -> None:
+    """The `@NAME` values of a skill's parameters that take a marker: the
+    marker's name, or a binding to it (the checks refuse the others)."""
+    for name, v in list(s.params.items()):
+        pspec = spec.params.get(name)
+        if pspec is None or not (isinstance(v, str) and v.startswith("@")):
+            continue
+        if pspec.kind.names_marker:
+            s.params[name] = v[1:]
+        elif pspec.kind.bindable_to:
+            s.bindings[name] = v[1:]
+            del s.params[name]
 
 
 def check_mission(m: Mission, lib: Library, *, fill: bool = True) -> list[Problem]:
@@ -196,6 +205,28 @@ def _skill_problems(
                 f"robot '{robot}' ({rtype}) has no skill '{s.skill}' (it offers: {offered})",
             )
         ]
+    out = _param_problems(m, lib, rtype, s, here, robots=robots, fill=fill)
+    if s.status == Status.IDLE:  # a skill sent already keeps the contingencies it was sent with
+        out += [
+            ((*here, *path), why)
+            for path, why in contingency_problems(s.policies, lib, rtype, m.markers, robots)
+            + after_problems(m, robot, s.policies)
+        ]
+    return out
+
+
+def _param_problems(
+    m: Mission,
+    lib: Library,
+    rtype: str,
+    s: SkillInstance,
+    here: Path,
+    *,
+    robots: set[str],
+    fill: bool,
+) -> list[Problem]:
+    """A skill's parameters and bindings checked; with `fill`, its parameters
+    normalized (defaults filled in) when they are all valid."""
     # a skill on a robot (or in the log) keeps the values it was sent
     # with: its bindings are history, never re-applied
     idle = s.status == Status.IDLE
@@ -209,19 +240,17 @@ def _skill_problems(
         robots=robots,
         fill_defaults=idle,
     )
-    out: list[Problem] = []
-    for p in problems:
-        bound = bool(p.path) and p.path[0] in s.bindings and p.path[0] not in s.params
-        out.append(((*here, "bindings" if bound else "params", *p.path), p.message))
+    out = [((*here, _field_of(s, p.path), *p.path), p.message) for p in problems]
     if not problems and fill:
         s.params = params
-    if idle:  # a skill sent already keeps the contingencies it was sent with
-        out += [
-            ((*here, *path), why)
-            for path, why in contingency_problems(s.policies, lib, rtype, m.markers, robots)
-            + after_problems(m, robot, s.policies)
-        ]
     return out
+
+
+def _field_of(s: SkillInstance, path: tuple[str | int, ...]) -> str:
+    """Where a parameter's problem is in the file: under `bindings` if the
+    parameter is bound (and not given), else under `params`."""
+    bound = bool(path) and path[0] in s.bindings and path[0] not in s.params
+    return "bindings" if bound else "params"
 
 
 def _barrier_problems(m: Mission) -> list[Problem]:
