@@ -362,27 +362,33 @@ def report(rules: Rules, op: Report) -> Change:
 def _check_transition(robot: str, s: SkillInstance, op: Report) -> None:
     """Refused unless the transition table allows the new status."""
     new = op.status
-    restart = new == Status.RUNNING and s.status == Status.RUNNING and (op.attempt or 0) > s.attempt
-    # a skill waiting at a barrier may repeat its status with new information
-    # ("waiting for lru2 (offline)"); running only with a higher attempt (a
-    # retry); the others never
-    waiting = new == s.status == Status.SYNCHWAITING
-    # running again to say which contingency it took (a fallback, a goto, over time)
-    branching = new == s.status == Status.RUNNING and op.branch is not None
-    if new not in TRANSITIONS[s.status] and not (restart or waiting or branching):
-        again = (
-            f" at the same attempt {s.attempt} (only a retry, with a higher attempt, reports "
-            "running again)"
-            if new == s.status == Status.RUNNING
-            else ""
-        )
-        raise Refusal(
-            "bad_report",
-            f"{robot} reported {s.display()} going {s.status.value} -> {new.value}{again}, "
-            "which the transition table forbids",
-            robot=robot,
-            skill=s.id,
-        )
+    if new in TRANSITIONS[s.status] or _may_repeat(s, op):
+        return
+    again = (
+        f" at the same attempt {s.attempt} (only a retry, with a higher attempt, reports "
+        "running again)"
+        if new == s.status == Status.RUNNING
+        else ""
+    )
+    raise Refusal(
+        "bad_report",
+        f"{robot} reported {s.display()} going {s.status.value} -> {new.value}{again}, "
+        "which the transition table forbids",
+        robot=robot,
+        skill=s.id,
+    )
+
+
+def _may_repeat(s: SkillInstance, op: Report) -> bool:
+    """A skill reporting its status again: waiting at a barrier, with new
+    information ("waiting for lru2 (offline)"); running, with a higher
+    attempt (a retry) or to say which contingency it took (a fallback, a
+    goto, over time); the others never."""
+    if op.status != s.status:
+        return False
+    if s.status == Status.SYNCHWAITING:
+        return True
+    return s.status == Status.RUNNING and ((op.attempt or 0) > s.attempt or op.branch is not None)
 
 
 def _check_turn(rules: Rules, robot: str, i: int, s: SkillInstance, new: Status) -> None:
