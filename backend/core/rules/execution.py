@@ -16,6 +16,7 @@ A robot's `Report`s (status changes, numbered per robot) come without a command.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
+from datetime import datetime
 from typing import Any
 
 from backend.core import events as ev
@@ -118,24 +119,42 @@ def queued_from(robot: str, s: SkillInstance, queued: list[SkillInstance]) -> li
 def plan_control(rules: Rules, op: Control) -> list[str]:
     """Robots the command goes to; refused when it applies to none."""
     robots = [op.robot] if op.robot is not None else list(rules.mission.robots)
-    reasons: list[str] = []
+    out, reasons = _takers(rules, op.op, robots)
+    if not out:
+        raise _applies_to_none(op, reasons)
+    if op.op == "reset":
+        _claim_resets(rules, out)
+    return out
+
+
+def _takers(rules: Rules, command: str, robots: list[str]) -> tuple[list[str], list[str]]:
+    """The robots that can take the command, and why each other cannot."""
     out: list[str] = []
+    reasons: list[str] = []
     for r in robots:
-        why = _control_refusal(rules, op.op, r, rules.task(r))
+        why = _control_refusal(rules, command, r, rules.task(r))
         if why is None:
             out.append(r)
         else:
             reasons.append(why)
-    if not out:
-        if op.robot is not None:
-            raise Refusal("not_applicable", reasons[0], robot=op.robot)
-        raise Refusal("not_applicable", f"{op.op} applies to no robot: " + "; ".join(reasons))
-    if op.op == "reset":  # the robot answers a reset: one command at a time
-        for r in out:
-            claim(rules, r)
-        for r in out:
-            rules.pending[r] = "a reset"
-    return out
+    return out, reasons
+
+
+def _claim_resets(rules: Rules, robots: list[str]) -> None:
+    """The robots answer a reset: one command at a time (refused if one
+    has a command pending)."""
+    for r in robots:
+        claim(rules, r)
+    for r in robots:
+        rules.pending[r] = "a reset"
+
+
+def _applies_to_none(op: Control, reasons: list[str]) -> Refusal:
+    """The refusal of a command no robot can take: the robot's reason, or
+    every robot's."""
+    if op.robot is not None:
+        return Refusal("not_applicable", reasons[0], robot=op.robot)
+    return Refusal("not_applicable", f"{op.op} applies to no robot: " + "; ".join(reasons))
 
 
 def _why_not_run(robot: str, act: SkillInstance | None, queued: bool) -> str | None:
@@ -244,7 +263,22 @@ def check_retriable(rules: Rules, robot: str, i: int, s: SkillInstance) -> None:
 def sync_ack(rules: Rules, op: SyncAck) -> Change:
     task = rules.task(op.robot)
     start = rules.first_idle(task)
-    head = [s.id for s in task[start : start + len(op.ids)]]
+    acked = task[start : start + len(op.ids)]
+    _check_acked(rules, op, [s.id for s in acked])
+    events: list[ev.Event] = []
+    for s in acked:
+        events.append(ev.SkillStatusChanged(id=s.id, status=Status.IDLE_SYNCHRONIZED))
+        if rules.sent[s.id] != s.params:  # what the robot holds
+            events.append(ev.SkillEdited(id=s.id, params=rules.sent[s.id]))
+    for sid in op.ids:
+        rules.held.pop(sid, None)
+        rules.sent.pop(sid, None)
+    return Change(events, [], {"synchronized": list(op.ids)}, None)
+
+
+def _check_acked(rules: Rules, op: SyncAck, head: list[str]) -> None:
+    """Refused unless the robot acknowledges the head of its unsynchronized
+    section, all of it being synchronized."""
     if head != list(op.ids):
         raise Refusal(
             "bad_report",
@@ -261,15 +295,6 @@ def sync_ack(rules: Rules, op: SyncAck) -> Change:
             f"{op.robot} acknowledged {', '.join(late)}, which is not being synchronized",
             robot=op.robot,
         )
-    events: list[ev.Event] = []
-    for s in task[start : start + len(op.ids)]:
-        events.append(ev.SkillStatusChanged(id=s.id, status=Status.IDLE_SYNCHRONIZED))
-        if rules.sent[s.id] != s.params:  # what the robot holds
-            events.append(ev.SkillEdited(id=s.id, params=rules.sent[s.id]))
-    for sid in op.ids:
-        rules.held.pop(sid, None)
-        rules.sent.pop(sid, None)
-    return Change(events, [], {"synchronized": list(op.ids)}, None)
 
 
 def unsync_done(rules: Rules, op: UnsyncDone) -> Change:
@@ -420,13 +445,17 @@ def _reported_change(s: SkillInstance, op: Report) -> ev.SkillStatusChanged | No
     new = op.status
     info = op.info if op.info != s.status_info else None
     attempt = op.attempt if op.attempt is not None and op.attempt != s.attempt else None
-    stamps = (new == Status.RUNNING and s.started_at is None) or new in FINISHED
-    at = op.at if stamps else None
     branch = op.branch if op.branch != s.branch else None
     change = ev.SkillStatusChanged(
-        id=s.id, status=new, info=info, attempt=attempt, at=at, branch=branch
+        id=s.id, status=new, info=info, attempt=attempt, at=_stamp(s, op), branch=branch
     )
     return None if change == ev.SkillStatusChanged(id=s.id, status=s.status) else change
+
+
+def _stamp(s: SkillInstance, op: Report) -> datetime | None:
+    """The report's time, kept when it starts the skill or ends it."""
+    starts = op.status == Status.RUNNING and s.started_at is None
+    return op.at if starts or op.status in FINISHED else None
 
 
 RULES: dict[type[Any], Rule] = {
