@@ -33,7 +33,10 @@ def test_a_skill_naming_parameters_it_lacks_gets_every_sentence_in_order() -> No
     )
     sk = ("skills", "survey")
     assert check_library(lib) == [
-        ((*sk, "duration", "goal_param"), "'speed' is not a pose or position parameter of 'survey'"),
+        (
+            (*sk, "duration", "goal_param"),
+            "'speed' is not a pose or position parameter of 'survey'",
+        ),
         ((*sk, "talks_to"), "'who' is not a robot parameter of 'survey'"),
         ((*sk, "duration", "per_param_s", "who"), "'who' is not a numeric parameter of 'survey'"),
         ((*sk, "duration", "speed_param"), "'who' is not a numeric parameter of 'survey'"),
