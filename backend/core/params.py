@@ -119,11 +119,18 @@ def _check_fields(v: Any, fields: tuple[str, ...], what: str) -> list[Problem]:
         if k not in fields:
             out.append(((k,), f"unknown {what} field '{k}' (fields: {', '.join(fields)})"))
     for f in fields:
-        if f in v and not is_number(v[f]):
-            out.append(((f,), f"expected a number, got {describe(v[f])}"))
-        elif f in v and not math.isfinite(float(v[f])):
-            out.append(((f,), "expected a finite number"))
+        why = _coordinate_problem(v[f]) if f in v else None
+        if why is not None:
+            out.append(((f,), why))
     return out
+
+
+def _coordinate_problem(x: Any) -> str | None:
+    """What is wrong with a field of a pose, position or area point (it
+    must be a finite number)."""
+    if not is_number(x):
+        return f"expected a number, got {describe(x)}"
+    return None if math.isfinite(float(x)) else "expected a finite number"
 
 
 @dataclass(frozen=True)
@@ -394,6 +401,13 @@ class Enum(Kind):
         return (spec.choices[0] if spec.choices else None), None
 
 
+def _marker_kind_problem(spec: ParamSpec, name: str, m: Any) -> str | None:
+    """Marker `name` is not of a kind the parameter takes."""
+    if m is None or not spec.marker_kinds or m.kind in spec.marker_kinds:
+        return None
+    return f"marker '{name}' is a {m.kind} marker; expected {'/'.join(spec.marker_kinds)}"
+
+
 class MarkerRef(Kind):
     name = "marker"
     names_marker = True
@@ -403,13 +417,12 @@ class MarkerRef(Kind):
     ) -> list[Problem]:
         if not isinstance(v, str):
             return [((), f"expected a marker name, got {describe(v)}")]
-        if markers is not None and v not in markers:
+        if markers is None:  # no markers to check against (a library's default)
+            return []
+        if v not in markers:
             return [((), f"unknown marker '{v}' (markers: {', '.join(sorted(markers)) or 'none'})")]
-        m = markers.get(v) if markers is not None else None
-        if m is not None and spec.marker_kinds and m.kind not in spec.marker_kinds:
-            kinds = "/".join(spec.marker_kinds)
-            return [((), f"marker '{v}' is a {m.kind} marker; expected {kinds}")]
-        return []
+        why = _marker_kind_problem(spec, v, markers[v])
+        return [((), why)] if why else []
 
     def start(self, spec: ParamSpec, ctx: StartContext) -> tuple[Any, str | None]:
         fit = [
@@ -513,18 +526,19 @@ def parse_angle(v: Any) -> tuple[float | None, str | None]:
     A bare number is in degrees (the unit shown); `30deg`, `30°` and
     `0.52rad` say their unit."""
     if is_number(v):
-        if not math.isfinite(float(v)):
-            return None, "expected a finite angle"
-        return math.radians(float(v)), None
-    if isinstance(v, str):
-        m = _ANGLE_RE.match(v)
-        if m:
-            number, unit = float(m.group(1)), (m.group(2) or "°").lower()
-            if not math.isfinite(number):
-                return None, "expected a finite angle"
-            return (number if unit.startswith("rad") else math.radians(number)), None
+        return _radians(float(v), "°")
+    m = _ANGLE_RE.match(v) if isinstance(v, str) else None
+    if m:
+        return _radians(float(m.group(1)), (m.group(2) or "°").lower())
     shown = v.strip() if isinstance(v, str) else describe(v)
     return None, f"expected an angle in degrees (30, 30deg or 0.52rad), got {shown!r}"
+
+
+def _radians(number: float, unit: str) -> tuple[float | None, str | None]:
+    """An angle in `unit` (`rad`, else degrees) in radians, if it is finite."""
+    if not math.isfinite(number):
+        return None, "expected a finite angle"
+    return (number if unit.startswith("rad") else math.radians(number)), None
 
 
 def pose_text(v: Mapping[str, Any]) -> str:
