@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Collection, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
@@ -88,22 +88,24 @@ class ParamSpec(Strict):
         return KINDS[self.type]
 
 
+# How an error sentence names a value, by its type (the first of its MRO
+# here: a bool is not "an integer", a StrEnum is a string).
+_DESCRIBED: dict[type, Callable[[Any], str]] = {
+    type(None): lambda v: "nothing (null)",
+    bool: lambda v: f"a boolean ({v})",
+    int: lambda v: f"an integer ({v})",
+    float: lambda v: f"a number ({v})",
+    str: lambda v: f"a string ({echo(v)})",
+    list: lambda v: "a list",
+    dict: lambda v: "a mapping",
+}
+
+
 def describe(v: Any) -> str:
     """What a value is, for an error sentence ('a string ('x')')."""
-    if v is None:
-        return "nothing (null)"
-    if isinstance(v, bool):
-        return f"a boolean ({v})"
-    if isinstance(v, int):
-        return f"an integer ({v})"
-    if isinstance(v, float):
-        return f"a number ({v})"
-    if isinstance(v, str):
-        return f"a string ({echo(v)})"
-    if isinstance(v, list):
-        return "a list"
-    if isinstance(v, dict):
-        return "a mapping"
+    for t in type(v).__mro__:
+        if t in _DESCRIBED:
+            return _DESCRIBED[t](v)
     return type(v).__name__
 
 
