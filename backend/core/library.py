@@ -227,17 +227,9 @@ def check_params(
     Bound parameters take their value from the marker. Missing optional
     parameters get their default when `fill_defaults`.
     """
-    rt = library.robot_types.get(robot_type)
-    if rt is None:
-        return params, [ParamProblem((), f"unknown robot type '{robot_type}'")]
-    spec = library.skill_for(robot_type, skill)
-    if spec is None:
-        offered = ", ".join(rt.skills) or "none"
-        return params, [
-            ParamProblem(
-                (), f"robot type '{robot_type}' has no skill '{skill}' (it offers: {offered})"
-            )
-        ]
+    spec = _offered(library, robot_type, skill)
+    if isinstance(spec, ParamProblem):
+        return params, [spec]
     problems = _unknown_names(skill, spec, params, bindings)
     out: dict[str, Any] = {}
     for name, pspec in spec.params.items():
@@ -248,6 +240,20 @@ def check_params(
         else:
             problems += _take_given(out, name, pspec, params[name], markers, robots)
     return out, problems
+
+
+def _offered(library: Library, robot_type: str, skill: str) -> SkillSpec | ParamProblem:
+    """The skill's spec, or why the robot type does not offer it."""
+    rt = library.robot_types.get(robot_type)
+    if rt is None:
+        return ParamProblem((), f"unknown robot type '{robot_type}'")
+    spec = library.skill_for(robot_type, skill)
+    if spec is None:
+        offered = ", ".join(rt.skills) or "none"
+        return ParamProblem(
+            (), f"robot type '{robot_type}' has no skill '{skill}' (it offers: {offered})"
+        )
+    return spec
 
 
 def _unknown_names(
