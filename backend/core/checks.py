@@ -257,15 +257,23 @@ def _barrier_problems(m: Mission) -> list[Problem]:
     out: list[Problem] = []
     owner: dict[str, str] = {}  # skill id -> its barrier
     for bid, b in m.barriers.items():
-        robots_in: dict[str, str] = {}  # robot -> its skill in this barrier
-        for j, sid in enumerate(b.skills):
-            where: Path = ("barriers", bid, "skills", j)
-            found = _member_problems(m, bid, b.skills[:j], sid, robots_in, owner)
-            out += [(where, why) for why in found]
-        if len(robots_in) < 2 and len(b.skills) >= 2 and all(m.find(s) for s in b.skills):
-            out.append((("barriers", bid), "a barrier needs skills of at least two robots"))
-        out += _stranded(m, bid, b.skills)
+        out += _one_barrier_problems(m, bid, b.skills, owner)
     return out
+
+
+def _one_barrier_problems(
+    m: Mission, bid: str, ids: list[str], owner: dict[str, str]
+) -> list[Problem]:
+    """Barrier `bid`'s problems: its members' (noted in `owner`), too few
+    robots, members that would wait forever."""
+    out: list[Problem] = []
+    robots_in: dict[str, str] = {}  # robot -> its skill in this barrier
+    for j, sid in enumerate(ids):
+        found = _member_problems(m, bid, ids[:j], sid, robots_in, owner)
+        out += [(("barriers", bid, "skills", j), why) for why in found]
+    if len(robots_in) < 2 and len(ids) >= 2 and all(m.find(s) for s in ids):
+        out.append((("barriers", bid), "a barrier needs skills of at least two robots"))
+    return out + _stranded(m, bid, ids)
 
 
 # Where a barrier's skills can be: `ctl barrier` joins idle skills, which are
