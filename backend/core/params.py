@@ -60,15 +60,26 @@ class ParamSpec(Strict):
 
     @model_validator(mode="after")
     def _coherent(self) -> ParamSpec:
-        if self.type == "enum" and not self.choices:
-            raise ValueError("an enum parameter needs a non-empty 'choices' list")
-        if self.type != "enum" and self.choices is not None:
-            raise ValueError("'choices' only applies to enum parameters")
-        if (self.min is not None or self.max is not None) and self.type not in ("int", "float"):
-            raise ValueError("'min'/'max' only apply to int and float parameters")
-        if self.min is not None and self.max is not None and self.min > self.max:
-            raise ValueError(f"min {self.min} is greater than max {self.max}")
+        why = self._choices_problem() or self._bounds_problem()
+        if why:
+            raise ValueError(why)
         return self
+
+    def _choices_problem(self) -> str | None:
+        """An enum without choices, or choices on another type."""
+        if self.type == "enum" and not self.choices:
+            return "an enum parameter needs a non-empty 'choices' list"
+        if self.type != "enum" and self.choices is not None:
+            return "'choices' only applies to enum parameters"
+        return None
+
+    def _bounds_problem(self) -> str | None:
+        """Bounds on a type that is not a number, or the wrong way round."""
+        if (self.min is not None or self.max is not None) and self.type not in ("int", "float"):
+            return "'min'/'max' only apply to int and float parameters"
+        if self.min is not None and self.max is not None and self.min > self.max:
+            return f"min {self.min} is greater than max {self.max}"
+        return None
 
     def default_problem(self) -> str | None:
         """Why the default does not fit the spec (checked with the library file,
