@@ -169,20 +169,25 @@ def _restored_barriers(rules: Rules, op: RestoreSkills) -> list[ev.Event]:
     restored = {it.skill.id for it in op.items}
     for bid, b in op.barriers.items():
         for sid in b.skills:
-            if sid in restored:
-                continue
-            robot, _, partner = rules.skill(sid)
-            other = rules.mission.barrier_of(sid)
-            if partner.status != Status.IDLE or other not in (None, bid):
-                raise Refusal(
-                    "barrier_invalid",
-                    f"cannot restore barrier {bid}: its partner {partner.display()} on {robot} "
-                    "has changed since",
-                    robot=robot,
-                    skill=sid,
-                )
+            if sid not in restored:
+                _check_partner_unchanged(rules, bid, sid)
         events.append(ev.BarrierSet(id=bid, barrier=b))
     return events
+
+
+def _check_partner_unchanged(rules: Rules, bid: str, sid: str) -> None:
+    """Refused unless barrier `bid`'s partner `sid` is still idle and in no
+    other barrier."""
+    robot, _, partner = rules.skill(sid)
+    other = rules.mission.barrier_of(sid)
+    if partner.status != Status.IDLE or other not in (None, bid):
+        raise Refusal(
+            "barrier_invalid",
+            f"cannot restore barrier {bid}: its partner {partner.display()} on {robot} "
+            "has changed since",
+            robot=robot,
+            skill=sid,
+        )
 
 
 def move(rules: Rules, op: MoveSkill) -> Change:
