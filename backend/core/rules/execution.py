@@ -350,6 +350,20 @@ def report(rules: Rules, op: Report) -> Change:
     if op.seq <= last:
         ignored = f"report {op.seq} of {op.robot} was applied already"
         return Change([], [], {"ignored": ignored}, None, duplicate=True)
+    robot, i, s = _reported_skill(rules, op)
+    _check_transition(robot, s, op)
+    _check_turn(rules, robot, i, s, op.status)
+    _check_attempt(robot, s, op)
+    events: list[ev.Event] = [ev.ReportSeq(robot=robot, seq=op.seq)]
+    change = _reported_change(s, op)
+    if change is not None:
+        events.append(change)
+    return Change(events, [], {}, None)
+
+
+def _reported_skill(rules: Rules, op: Report) -> tuple[str, int, SkillInstance]:
+    """(robot, index, skill) a report is about; refused if the mission has no
+    such skill or it is another robot's."""
     rules.task(op.robot)
     found = rules.mission.find(op.id)
     if found is None:  # a robot's message: refused like every report the rules refuse
@@ -359,7 +373,7 @@ def report(rules: Rules, op: Report) -> Change:
             robot=op.robot,
             skill=op.id,
         )
-    robot, i, s = found
+    robot, _, s = found
     if robot != op.robot:
         raise Refusal(
             "bad_report",
@@ -367,8 +381,11 @@ def report(rules: Rules, op: Report) -> Change:
             robot=op.robot,
             skill=s.id,
         )
-    _check_transition(robot, s, op)
-    _check_turn(rules, robot, i, s, op.status)
+    return found
+
+
+def _check_attempt(robot: str, s: SkillInstance, op: Report) -> None:
+    """Refused if the report is about an earlier attempt than the skill's."""
     if op.attempt is not None and op.attempt < s.attempt:
         raise Refusal(
             "bad_report",
@@ -377,11 +394,6 @@ def report(rules: Rules, op: Report) -> Change:
             robot=robot,
             skill=s.id,
         )
-    events: list[ev.Event] = [ev.ReportSeq(robot=robot, seq=op.seq)]
-    change = _reported_change(s, op)
-    if change is not None:
-        events.append(change)
-    return Change(events, [], {}, None)
 
 
 def _check_transition(robot: str, s: SkillInstance, op: Report) -> None:
