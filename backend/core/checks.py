@@ -169,20 +169,23 @@ def _task_problems(
     out: list[Problem] = []
     for i, s in enumerate(task):
         here: Path = ("tasks", robot, i)
-        if s.id in ids:
-            out.append(
-                (
-                    (*here, "id"),
-                    f"duplicate skill id '{s.id}' (first used at {format_path(ids[s.id])})",
-                )
-            )
-        else:
-            ids[s.id] = here
+        out += _first_use(ids, s.id, here)
         if rtype in lib.robot_types:
             out += _skill_problems(m, lib, robot, s, here, robots=robots, fill=fill)
     for i, why in section_problems(task):
         out.append((("tasks", robot, i, "status"), why))
     return out
+
+
+def _first_use(ids: dict[str, Path], sid: str, here: Path) -> list[Problem]:
+    """A skill id used before is a duplicate (said with where it was first);
+    else it is noted as first used `here`."""
+    if sid in ids:
+        return [
+            ((*here, "id"), f"duplicate skill id '{sid}' (first used at {format_path(ids[sid])})")
+        ]
+    ids[sid] = here
+    return []
 
 
 def _skill_problems(
