@@ -7,9 +7,12 @@ same things with the same sentences. Each problem is a (field path, message).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from backend.core.contingency import after_problems, contingency_problems
 from backend.core.library import Library, RobotType, SkillSpec, check_params
 from backend.core.model import Mission, SkillInstance, Status, format_path, section_problems
+from backend.core.params import ParamSpec
 
 Path = tuple[str | int, ...]
 Problem = tuple[Path, str]
@@ -21,7 +24,7 @@ def check_library(lib: Library) -> list[Problem]:
         out += _robot_type_problems(lib, tname, rt)
     for sname, spec in lib.skills.items():
         out += _skill_spec_problems(sname, spec)
-        out += _model_problems(lib, sname, spec)
+        out += _energy_problems(lib, sname, spec)
     return out
 
 
@@ -43,100 +46,88 @@ def _robot_type_problems(lib: Library, tname: str, rt: RobotType) -> list[Proble
 
 
 def _skill_spec_problems(sname: str, spec: SkillSpec) -> list[Problem]:
-    out: list[Problem] = []
-    for pname, pspec in spec.params.items():
-        why = pspec.default_problem()
-        if why:
-            out.append((("skills", sname, "params", pname, "default"), why))
-    d = spec.duration
-    if d.goal_param is not None:
-        p = spec.params.get(d.goal_param)
-        if p is None or not p.kind.goal:
-            out.append(
-                (
-                    ("skills", sname, "duration", "goal_param"),
-                    f"'{d.goal_param}' is not a pose or position parameter of '{sname}'",
-                )
-            )
-    if spec.talks_to is not None:
-        p = spec.params.get(spec.talks_to)
-        if p is None or p.type != "robot":
-            out.append(
-                (
-                    ("skills", sname, "talks_to"),
-                    f"'{spec.talks_to}' is not a robot parameter of '{sname}'",
-                )
-            )
-    for pname in d.per_param_s:
+    """A skill's parameter defaults valid, and every parameter its spec names
+    one of the kind it needs."""
+    out: list[Problem] = [
+        (("skills", sname, "params", pname, "default"), why)
+        for pname, pspec in spec.params.items()
+        if (why := pspec.default_problem())
+    ]
+    for path, pname, kind in _references(spec):
+        what, fits = _KINDS[kind]
         p = spec.params.get(pname)
-        if p is None or not p.kind.numeric:
-            out.append(
-                (
-                    ("skills", sname, "duration", "per_param_s", pname),
-                    f"'{pname}' is not a numeric parameter of '{sname}'",
-                )
-            )
+        if p is None or not fits(p):
+            out.append((("skills", sname, *path), f"'{pname}' is not {what} of '{sname}'"))
     return out
 
 
-def _model_problems(lib: Library, sname: str, spec: SkillSpec) -> list[Problem]:
-    """The duration and energy models name parameters and robot types that exist."""
+# The kind of parameter a reference needs: how a sentence names it, and the test.
+_KINDS: dict[str, tuple[str, Callable[[ParamSpec], bool]]] = {
+    "goal": ("a pose or position parameter", lambda p: p.kind.goal),
+    "robot": ("a robot parameter", lambda p: p.type == "robot"),
+    "numeric": ("a numeric parameter", lambda p: p.kind.numeric),
+    "area": ("an area parameter", lambda p: p.type == "area"),
+    "any": ("a parameter", lambda p: True),
+}
+
+
+def _references(spec: SkillSpec) -> list[tuple[Path, str, str]]:
+    """Where a skill's spec names one of its parameters, in the order the
+    problems are told: (path under the skill, the name, its kind in _KINDS)."""
     d = spec.duration
-    out: list[Problem] = []
-    for field, pname in (("speed_param", d.speed_param), ("charge_param", d.charge_param)):
-        p = spec.params.get(pname) if pname is not None else None
-        if pname is not None and (p is None or not p.kind.numeric):
-            out.append(
-                (
-                    ("skills", sname, "duration", field),
-                    f"'{pname}' is not a numeric parameter of '{sname}'",
-                )
-            )
-    a = spec.params.get(d.area_param) if d.area_param is not None else None
-    if d.area_param is not None and (a is None or a.type != "area"):
-        out.append(
-            (
-                ("skills", sname, "duration", "area_param"),
-                f"'{d.area_param}' is not an area parameter of '{sname}'",
-            )
-        )
+    refs: list[tuple[Path, str | None, str]] = [
+        (("duration", "goal_param"), d.goal_param, "goal"),
+        (("talks_to",), spec.talks_to, "robot"),
+    ]
+    refs += [(("duration", "per_param_s", p), p, "numeric") for p in d.per_param_s]
+    refs += [
+        (("duration", "speed_param"), d.speed_param, "numeric"),
+        (("duration", "charge_param"), d.charge_param, "numeric"),
+        (("duration", "area_param"), d.area_param, "area"),
+    ]
     if isinstance(d.to_home, dict):
-        for pname in d.to_home:
-            if pname not in spec.params:
-                out.append(
-                    (
-                        ("skills", sname, "duration", "to_home", pname),
-                        f"'{pname}' is not a parameter of '{sname}'",
-                    )
-                )
-    for tname in spec.energy.by_type:
-        if tname not in lib.robot_types:
-            known = ", ".join(lib.robot_types) or "none"
-            out.append(
-                (
-                    ("skills", sname, "energy", "by_type", tname),
-                    f"unknown robot type '{tname}' (library types: {known})",
-                )
-            )
-    return out
+        refs += [(("duration", "to_home", p), p, "any") for p in d.to_home]
+    return [(path, name, kind) for path, name, kind in refs if name is not None]
+
+
+def _energy_problems(lib: Library, sname: str, spec: SkillSpec) -> list[Problem]:
+    """The energy model names robot types that exist."""
+    known = ", ".join(lib.robot_types) or "none"
+    return [
+        (
+            ("skills", sname, "energy", "by_type", tname),
+            f"unknown robot type '{tname}' (library types: {known})",
+        )
+        for tname in spec.energy.by_type
+        if tname not in lib.robot_types
+    ]
 
 
 def resolve_shorthands(m: Mission, lib: Library) -> None:
     """`goal: "@POI-A"` in a file binds the parameter to marker POI-A (or,
     for a marker parameter, names it)."""
     for robot, task in m.tasks.items():
-        rtype = m.robots[robot].type if robot in m.robots else None
+        spec = m.robots.get(robot)
+        if spec is None or not spec.type:
+            continue
         for s in task:
-            spec = lib.skill_for(rtype, s.skill) if rtype else None
-            for name, v in list(s.params.items()):
-                if not (isinstance(v, str) and v.startswith("@")):
-                    continue
-                pspec = spec.params.get(name) if spec else None
-                if pspec is not None and pspec.kind.names_marker:
-                    s.params[name] = v[1:]
-                elif pspec is not None and pspec.kind.bindable_to:
-                    s.bindings[name] = v[1:]
-                    del s.params[name]
+            skill = lib.skill_for(spec.type, s.skill)
+            if skill is not None:
+                _resolve(s, skill)
+
+
+def _resolve(s: SkillInstance, spec: SkillSpec) -> None:
+    """The `@NAME` values of a skill's parameters that take a marker: the
+    marker's name, or a binding to it (the checks refuse the others)."""
+    for name, v in list(s.params.items()):
+        pspec = spec.params.get(name)
+        if pspec is None or not (isinstance(v, str) and v.startswith("@")):
+            continue
+        if pspec.kind.names_marker:
+            s.params[name] = v[1:]
+        elif pspec.kind.bindable_to:
+            s.bindings[name] = v[1:]
+            del s.params[name]
 
 
 def check_mission(m: Mission, lib: Library, *, fill: bool = True) -> list[Problem]:
@@ -178,20 +169,23 @@ def _task_problems(
     out: list[Problem] = []
     for i, s in enumerate(task):
         here: Path = ("tasks", robot, i)
-        if s.id in ids:
-            out.append(
-                (
-                    (*here, "id"),
-                    f"duplicate skill id '{s.id}' (first used at {format_path(ids[s.id])})",
-                )
-            )
-        else:
-            ids[s.id] = here
+        out += _first_use(ids, s.id, here)
         if rtype in lib.robot_types:
             out += _skill_problems(m, lib, robot, s, here, robots=robots, fill=fill)
     for i, why in section_problems(task):
         out.append((("tasks", robot, i, "status"), why))
     return out
+
+
+def _first_use(ids: dict[str, Path], sid: str, here: Path) -> list[Problem]:
+    """A skill id used before is a duplicate (said with where it was first);
+    else it is noted as first used `here`."""
+    if sid in ids:
+        return [
+            ((*here, "id"), f"duplicate skill id '{sid}' (first used at {format_path(ids[sid])})")
+        ]
+    ids[sid] = here
+    return []
 
 
 def _skill_problems(
@@ -214,6 +208,28 @@ def _skill_problems(
                 f"robot '{robot}' ({rtype}) has no skill '{s.skill}' (it offers: {offered})",
             )
         ]
+    out = _param_problems(m, lib, rtype, s, here, robots=robots, fill=fill)
+    if s.status == Status.IDLE:  # a skill sent already keeps the contingencies it was sent with
+        out += [
+            ((*here, *path), why)
+            for path, why in contingency_problems(s.policies, lib, rtype, m.markers, robots)
+            + after_problems(m, robot, s.policies)
+        ]
+    return out
+
+
+def _param_problems(
+    m: Mission,
+    lib: Library,
+    rtype: str,
+    s: SkillInstance,
+    here: Path,
+    *,
+    robots: set[str],
+    fill: bool,
+) -> list[Problem]:
+    """A skill's parameters and bindings checked; with `fill`, its parameters
+    normalized (defaults filled in) when they are all valid."""
     # a skill on a robot (or in the log) keeps the values it was sent
     # with: its bindings are history, never re-applied
     idle = s.status == Status.IDLE
@@ -227,34 +243,40 @@ def _skill_problems(
         robots=robots,
         fill_defaults=idle,
     )
-    out: list[Problem] = []
-    for p in problems:
-        bound = bool(p.path) and p.path[0] in s.bindings and p.path[0] not in s.params
-        out.append(((*here, "bindings" if bound else "params", *p.path), p.message))
+    out = [((*here, _field_of(s, p.path), *p.path), p.message) for p in problems]
     if not problems and fill:
         s.params = params
-    if idle:  # a skill sent already keeps the contingencies it was sent with
-        out += [
-            ((*here, *path), why)
-            for path, why in contingency_problems(s.policies, lib, rtype, m.markers, robots)
-            + after_problems(m, robot, s.policies)
-        ]
     return out
+
+
+def _field_of(s: SkillInstance, path: tuple[str | int, ...]) -> str:
+    """Where a parameter's problem is in the file: under `bindings` if the
+    parameter is bound (and not given), else under `params`."""
+    bound = bool(path) and path[0] in s.bindings and path[0] not in s.params
+    return "bindings" if bound else "params"
 
 
 def _barrier_problems(m: Mission) -> list[Problem]:
     out: list[Problem] = []
     owner: dict[str, str] = {}  # skill id -> its barrier
     for bid, b in m.barriers.items():
-        robots_in: dict[str, str] = {}  # robot -> its skill in this barrier
-        for j, sid in enumerate(b.skills):
-            where: Path = ("barriers", bid, "skills", j)
-            found = _member_problems(m, bid, b.skills[:j], sid, robots_in, owner)
-            out += [(where, why) for why in found]
-        if len(robots_in) < 2 and len(b.skills) >= 2 and all(m.find(s) for s in b.skills):
-            out.append((("barriers", bid), "a barrier needs skills of at least two robots"))
-        out += _stranded(m, bid, b.skills)
+        out += _one_barrier_problems(m, bid, b.skills, owner)
     return out
+
+
+def _one_barrier_problems(
+    m: Mission, bid: str, ids: list[str], owner: dict[str, str]
+) -> list[Problem]:
+    """Barrier `bid`'s problems: its members' (noted in `owner`), too few
+    robots, members that would wait forever."""
+    out: list[Problem] = []
+    robots_in: dict[str, str] = {}  # robot -> its skill in this barrier
+    for j, sid in enumerate(ids):
+        found = _member_problems(m, bid, ids[:j], sid, robots_in, owner)
+        out += [(("barriers", bid, "skills", j), why) for why in found]
+    if len(robots_in) < 2 and len(ids) >= 2 and all(m.find(s) for s in ids):
+        out.append((("barriers", bid), "a barrier needs skills of at least two robots"))
+    return out + _stranded(m, bid, ids)
 
 
 # Where a barrier's skills can be: `ctl barrier` joins idle skills, which are

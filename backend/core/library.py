@@ -76,15 +76,21 @@ class EnergyModel(EnergyRates):
 
     def rates(self, robot_type: str, battery: BatteryModel) -> tuple[float, float]:
         """(per second, per metre) for a robot of this type."""
-        mine = self.by_type.get(robot_type)
-        per_s = mine.per_s if mine is not None and mine.per_s is not None else self.per_s
-        per_m = (
-            mine.per_metre if mine is not None and mine.per_metre is not None else self.per_metre
-        )
+        mine = self.by_type.get(robot_type, _NO_RATES)
         return (
-            battery.per_s if per_s is None else per_s,
-            battery.per_metre if per_m is None else per_m,
+            _first_set(mine.per_s, self.per_s, battery.per_s),
+            _first_set(mine.per_metre, self.per_metre, battery.per_metre),
         )
+
+
+_NO_RATES = EnergyRates()  # a robot type without rates of its own
+
+
+def _first_set(for_type: float | None, for_skill: float | None, battery: float) -> float:
+    """The rate the robot type's entry sets, else the skill's, else the battery's."""
+    if for_type is not None:
+        return for_type
+    return for_skill if for_skill is not None else battery
 
 
 class BatteryModel(Strict):
@@ -227,17 +233,9 @@ def check_params(
     Bound parameters take their value from the marker. Missing optional
     parameters get their default when `fill_defaults`.
     """
-    rt = library.robot_types.get(robot_type)
-    if rt is None:
-        return params, [ParamProblem((), f"unknown robot type '{robot_type}'")]
-    spec = library.skill_for(robot_type, skill)
-    if spec is None:
-        offered = ", ".join(rt.skills) or "none"
-        return params, [
-            ParamProblem(
-                (), f"robot type '{robot_type}' has no skill '{skill}' (it offers: {offered})"
-            )
-        ]
+    spec = _offered(library, robot_type, skill)
+    if isinstance(spec, ParamProblem):
+        return params, [spec]
     problems = _unknown_names(skill, spec, params, bindings)
     out: dict[str, Any] = {}
     for name, pspec in spec.params.items():
@@ -248,6 +246,20 @@ def check_params(
         else:
             problems += _take_given(out, name, pspec, params[name], markers, robots)
     return out, problems
+
+
+def _offered(library: Library, robot_type: str, skill: str) -> SkillSpec | ParamProblem:
+    """The skill's spec, or why the robot type does not offer it."""
+    rt = library.robot_types.get(robot_type)
+    if rt is None:
+        return ParamProblem((), f"unknown robot type '{robot_type}'")
+    spec = library.skill_for(robot_type, skill)
+    if spec is None:
+        offered = ", ".join(rt.skills) or "none"
+        return ParamProblem(
+            (), f"robot type '{robot_type}' has no skill '{skill}' (it offers: {offered})"
+        )
+    return spec
 
 
 def _unknown_names(

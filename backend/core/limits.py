@@ -100,21 +100,35 @@ def check_tree(value: Any, *, depth: int, limits: Limits = LIMITS) -> Exceeded |
     mappings and lists: a flat mapping is 1 level. Iterative: any nesting is
     measured, never recursed into."""
     for path, v, level in _nodes(value):
-        if isinstance(v, str):
-            if len(v) > limits.text:
-                return Exceeded(path, f"{too_long(len(v), limits)} ({echo(v, limits)})")
-            continue
-        if level > depth:
-            return Exceeded(brief(path), too_deep(depth))
-        what = "entries" if isinstance(v, dict) else "items"
-        if len(v) > limits.items:
-            return Exceeded(brief(path), too_many(len(v), what, limits))
-        if isinstance(v, dict):
-            for k in v:
-                if isinstance(k, str) and len(k) > limits.text:
-                    return Exceeded(
-                        brief(path), f"a key of {too_long(len(k), limits)}: {echo(k, limits)}"
-                    )
+        if not isinstance(v, str):
+            found = _container_problem(path, v, level, depth, limits)
+            if found is not None:
+                return found
+        elif len(v) > limits.text:  # strings are most nodes: checked here
+            return Exceeded(path, f"{too_long(len(v), limits)} ({echo(v, limits)})")
+    return None
+
+
+def _container_problem(
+    path: Path, v: dict[Any, Any] | list[Any], level: int, depth: int, limits: Limits
+) -> Exceeded | None:
+    """A mapping or list nested too deep, too long, or with a key too long."""
+    if level > depth:
+        return Exceeded(brief(path), too_deep(depth))
+    what = "entries" if isinstance(v, dict) else "items"
+    if len(v) > limits.items:
+        return Exceeded(brief(path), too_many(len(v), what, limits))
+    key = _long_key(v, limits) if isinstance(v, dict) else None
+    if key is None:
+        return None
+    return Exceeded(brief(path), f"a key of {too_long(len(key), limits)}: {echo(key, limits)}")
+
+
+def _long_key(v: dict[Any, Any], limits: Limits) -> str | None:
+    """The first key of a mapping longer than the text limit."""
+    for k in v:
+        if isinstance(k, str) and len(k) > limits.text:
+            return k
     return None
 
 

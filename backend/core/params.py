@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Collection, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
@@ -60,15 +60,26 @@ class ParamSpec(Strict):
 
     @model_validator(mode="after")
     def _coherent(self) -> ParamSpec:
-        if self.type == "enum" and not self.choices:
-            raise ValueError("an enum parameter needs a non-empty 'choices' list")
-        if self.type != "enum" and self.choices is not None:
-            raise ValueError("'choices' only applies to enum parameters")
-        if (self.min is not None or self.max is not None) and self.type not in ("int", "float"):
-            raise ValueError("'min'/'max' only apply to int and float parameters")
-        if self.min is not None and self.max is not None and self.min > self.max:
-            raise ValueError(f"min {self.min} is greater than max {self.max}")
+        why = self._choices_problem() or self._bounds_problem()
+        if why:
+            raise ValueError(why)
         return self
+
+    def _choices_problem(self) -> str | None:
+        """An enum without choices, or choices on another type."""
+        if self.type == "enum" and not self.choices:
+            return "an enum parameter needs a non-empty 'choices' list"
+        if self.type != "enum" and self.choices is not None:
+            return "'choices' only applies to enum parameters"
+        return None
+
+    def _bounds_problem(self) -> str | None:
+        """Bounds on a type that is not a number, or the wrong way round."""
+        if (self.min is not None or self.max is not None) and self.type not in ("int", "float"):
+            return "'min'/'max' only apply to int and float parameters"
+        if self.min is not None and self.max is not None and self.min > self.max:
+            return f"min {self.min} is greater than max {self.max}"
+        return None
 
     def default_problem(self) -> str | None:
         """Why the default does not fit the spec (checked with the library file,
@@ -88,22 +99,24 @@ class ParamSpec(Strict):
         return KINDS[self.type]
 
 
+# How an error sentence names a value, by its type (the first of its MRO
+# here: a bool is not "an integer", a StrEnum is a string).
+_DESCRIBED: dict[type, Callable[[Any], str]] = {
+    type(None): lambda v: "nothing (null)",
+    bool: lambda v: f"a boolean ({v})",
+    int: lambda v: f"an integer ({v})",
+    float: lambda v: f"a number ({v})",
+    str: lambda v: f"a string ({echo(v)})",
+    list: lambda v: "a list",
+    dict: lambda v: "a mapping",
+}
+
+
 def describe(v: Any) -> str:
     """What a value is, for an error sentence ('a string ('x')')."""
-    if v is None:
-        return "nothing (null)"
-    if isinstance(v, bool):
-        return f"a boolean ({v})"
-    if isinstance(v, int):
-        return f"an integer ({v})"
-    if isinstance(v, float):
-        return f"a number ({v})"
-    if isinstance(v, str):
-        return f"a string ({echo(v)})"
-    if isinstance(v, list):
-        return "a list"
-    if isinstance(v, dict):
-        return "a mapping"
+    for t in type(v).__mro__:
+        if t in _DESCRIBED:
+            return _DESCRIBED[t](v)
     return type(v).__name__
 
 
@@ -119,11 +132,18 @@ def _check_fields(v: Any, fields: tuple[str, ...], what: str) -> list[Problem]:
         if k not in fields:
             out.append(((k,), f"unknown {what} field '{k}' (fields: {', '.join(fields)})"))
     for f in fields:
-        if f in v and not is_number(v[f]):
-            out.append(((f,), f"expected a number, got {describe(v[f])}"))
-        elif f in v and not math.isfinite(float(v[f])):
-            out.append(((f,), "expected a finite number"))
+        why = _coordinate_problem(v[f]) if f in v else None
+        if why is not None:
+            out.append(((f,), why))
     return out
+
+
+def _coordinate_problem(x: Any) -> str | None:
+    """What is wrong with a field of a pose, position or area point (it
+    must be a finite number)."""
+    if not is_number(x):
+        return f"expected a number, got {describe(x)}"
+    return None if math.isfinite(float(x)) else "expected a finite number"
 
 
 @dataclass(frozen=True)
@@ -215,6 +235,22 @@ class Dict(_Simple):
     name, types, expected, empty = "dict", (dict,), "a mapping", dict
 
 
+def _range_problem(spec: ParamSpec, v: float) -> str | None:
+    """A number not finite, or out of its parameter's bounds."""
+    if not math.isfinite(float(v)):
+        return "expected a finite number"
+    if spec.min is not None and v < spec.min:
+        return f"{_given_text(spec, v)} is below the minimum {bound_text(spec, spec.min)}"
+    if spec.max is not None and v > spec.max:
+        return f"{_given_text(spec, v)} is above the maximum {bound_text(spec, spec.max)}"
+    return None
+
+
+def _given_text(spec: ParamSpec, v: float) -> str:
+    """A value as given (`2.0 m/s`: bounds are short, `1 m/s`); angles in degrees."""
+    return angle_text(v) if is_angle(spec) else f"{v}{' ' + spec.unit if spec.unit else ''}"
+
+
 class _Number(Kind):
     integer: ClassVar[bool]
     numeric = True
@@ -222,19 +258,12 @@ class _Number(Kind):
     def check(
         self, spec: ParamSpec, v: Any, markers: Markers | None, robots: Collection[str] | None
     ) -> list[Problem]:
-        if self.integer and not (isinstance(v, int) and not isinstance(v, bool)):
-            return [((), f"expected an integer, got {describe(v)}")]
-        if not self.integer and not is_number(v):
-            return [((), f"expected a number, got {describe(v)}")]
-        if not math.isfinite(float(v)):
-            return [((), "expected a finite number")]
-        # a value as given (`2.0 m/s`), bounds short (`1 m/s`); angles in degrees
-        given = angle_text(v) if is_angle(spec) else f"{v}{' ' + spec.unit if spec.unit else ''}"
-        if spec.min is not None and v < spec.min:
-            return [((), f"{given} is below the minimum {bound_text(spec, spec.min)}")]
-        if spec.max is not None and v > spec.max:
-            return [((), f"{given} is above the maximum {bound_text(spec, spec.max)}")]
-        return []
+        why = self.type_problem(v) or _range_problem(spec, v)
+        return [((), why)] if why else []
+
+    def type_problem(self, v: Any) -> str | None:
+        """What is wrong with a value that is not of this kind of number."""
+        raise NotImplementedError
 
     def start(self, spec: ParamSpec, ctx: StartContext) -> tuple[Any, str | None]:
         v = spec.min if spec.min is not None else 0
@@ -246,9 +275,17 @@ class _Number(Kind):
 class Int(_Number):
     name, integer = "int", True
 
+    def type_problem(self, v: Any) -> str | None:
+        if isinstance(v, int) and not isinstance(v, bool):
+            return None
+        return f"expected an integer, got {describe(v)}"
+
 
 class Float(_Number):
     name, integer = "float", False
+
+    def type_problem(self, v: Any) -> str | None:
+        return None if is_number(v) else f"expected a number, got {describe(v)}"
 
     def normalize(self, spec: ParamSpec, v: Any) -> Any:
         return float(v)
@@ -377,6 +414,13 @@ class Enum(Kind):
         return (spec.choices[0] if spec.choices else None), None
 
 
+def _marker_kind_problem(spec: ParamSpec, name: str, m: Any) -> str | None:
+    """Marker `name` is not of a kind the parameter takes."""
+    if m is None or not spec.marker_kinds or m.kind in spec.marker_kinds:
+        return None
+    return f"marker '{name}' is a {m.kind} marker; expected {'/'.join(spec.marker_kinds)}"
+
+
 class MarkerRef(Kind):
     name = "marker"
     names_marker = True
@@ -386,13 +430,12 @@ class MarkerRef(Kind):
     ) -> list[Problem]:
         if not isinstance(v, str):
             return [((), f"expected a marker name, got {describe(v)}")]
-        if markers is not None and v not in markers:
+        if markers is None:  # no markers to check against (a library's default)
+            return []
+        if v not in markers:
             return [((), f"unknown marker '{v}' (markers: {', '.join(sorted(markers)) or 'none'})")]
-        m = markers.get(v) if markers is not None else None
-        if m is not None and spec.marker_kinds and m.kind not in spec.marker_kinds:
-            kinds = "/".join(spec.marker_kinds)
-            return [((), f"marker '{v}' is a {m.kind} marker; expected {kinds}")]
-        return []
+        why = _marker_kind_problem(spec, v, markers[v])
+        return [((), why)] if why else []
 
     def start(self, spec: ParamSpec, ctx: StartContext) -> tuple[Any, str | None]:
         fit = [
@@ -496,18 +539,19 @@ def parse_angle(v: Any) -> tuple[float | None, str | None]:
     A bare number is in degrees (the unit shown); `30deg`, `30°` and
     `0.52rad` say their unit."""
     if is_number(v):
-        if not math.isfinite(float(v)):
-            return None, "expected a finite angle"
-        return math.radians(float(v)), None
-    if isinstance(v, str):
-        m = _ANGLE_RE.match(v)
-        if m:
-            number, unit = float(m.group(1)), (m.group(2) or "°").lower()
-            if not math.isfinite(number):
-                return None, "expected a finite angle"
-            return (number if unit.startswith("rad") else math.radians(number)), None
+        return _radians(float(v), "°")
+    m = _ANGLE_RE.match(v) if isinstance(v, str) else None
+    if m:
+        return _radians(float(m.group(1)), (m.group(2) or "°").lower())
     shown = v.strip() if isinstance(v, str) else describe(v)
     return None, f"expected an angle in degrees (30, 30deg or 0.52rad), got {shown!r}"
+
+
+def _radians(number: float, unit: str) -> tuple[float | None, str | None]:
+    """An angle in `unit` (`rad`, else degrees) in radians, if it is finite."""
+    if not math.isfinite(number):
+        return None, "expected a finite angle"
+    return (number if unit.startswith("rad") else math.radians(number)), None
 
 
 def pose_text(v: Mapping[str, Any]) -> str:

@@ -86,22 +86,28 @@ def _at(p: tuple[float, float] | None) -> str:
 def _deadlocks(ctx: CheckContext) -> Iterator[Hit]:
     b = ctx.barriers
     for cycle in b.cycles:
-        waits = []
-        for waiting in cycle:
-            for holding in cycle:
-                robot = b.held_by.get((waiting, holding))
-                if robot is not None:
-                    waits.append(
-                        f"{robot} must pass {holding} ({b.skill_of(holding, robot)}) before it "
-                        f"reaches {waiting} ({b.skill_of(waiting, robot)})"
-                    )
         skills = tuple(sid for bid in cycle for sid in b.pending[bid].values())
         yield Hit(
             "+".join(cycle),
-            f"barriers {', '.join(cycle)} can never be passed: {'; '.join(sorted(waits))}. "
+            f"barriers {', '.join(cycle)} can never be passed: {'; '.join(_waits(b, cycle))}. "
             "Reorder these skills or remove one of the barriers",
             skills=skills,
         )
+
+
+def _waits(b: BarrierAnalysis, cycle: list[str]) -> list[str]:
+    """Why each robot of a deadlock waits, sorted: which barrier of the cycle
+    it must pass before it reaches another."""
+    waits = []
+    for waiting in cycle:
+        for holding in cycle:
+            robot = b.held_by.get((waiting, holding))
+            if robot is not None:
+                waits.append(
+                    f"{robot} must pass {holding} ({b.skill_of(holding, robot)}) before it "
+                    f"reaches {waiting} ({b.skill_of(waiting, robot)})"
+                )
+    return sorted(waits)
 
 
 def _orphans(ctx: CheckContext) -> Iterator[Hit]:
@@ -138,26 +144,32 @@ def _energy(ctx: CheckContext, low: Callable[[Course, float], bool], what: str) 
             continue
         assumed = " (assuming a full battery now: no telemetry)" if course.battery_assumed else ""
         for seg in _segments(course):
-            step = next(
-                (s for s in seg if s.battery_min is not None and low(course, s.battery_min)),
-                None,
-            )
+            step = _first_low(course, seg, low)
             if step is None or step.battery_min is None:
                 continue
-            recharge = seg[-1].leg is not None and seg[-1].leg.charge_to is not None
-            before = (
-                f"before {seg[-1].skill.id} recharges it"
-                if recharge
-                else "with no recharge planned"
-            )
             yield Hit(
                 step.skill.id,
                 f"{robot}: battery predicted at {_pct(max(0.0, step.battery_min))} during "
-                f"{step.skill.display()}, {what} {before}{assumed}; add a recharge before "
+                f"{step.skill.display()}, {what} {_before(seg)}{assumed}; add a recharge before "
                 "it, or make the skills before it shorter",
                 robot=robot,
                 skills=(step.skill.id,),
             )
+
+
+def _first_low(
+    course: Course, seg: list[Step], low: Callable[[Course, float], bool]
+) -> Step | None:
+    """The first step of a segment whose battery falls `low`."""
+    return next((s for s in seg if s.battery_min is not None and low(course, s.battery_min)), None)
+
+
+def _before(seg: list[Step]) -> str:
+    """What ends a segment of the course: the recharge it ends with, or none."""
+    last = seg[-1]
+    if last.leg is not None and last.leg.charge_to is not None:
+        return f"before {last.skill.id} recharges it"
+    return "with no recharge planned"
 
 
 def _empty(ctx: CheckContext) -> Iterator[Hit]:
@@ -184,14 +196,7 @@ def _needs_comms(ctx: CheckContext) -> Iterator[Hit]:
             leg = step.leg
             if leg is None or not (leg.work_out or leg.travel_out):
                 continue
-            spec = ctx.library.skills.get(step.skill.skill)
-            why = (
-                "it needs the operator's link"
-                if spec is not None and spec.needs_comms
-                else "it pauses out of comms (its policy), so it would never go on"
-                if step.skill.policies.pause_out_of_comms
-                else None
-            )
+            why = _why_comms(ctx, step.skill)
             if why is None:
                 continue
             yield Hit(
@@ -201,6 +206,16 @@ def _needs_comms(ctx: CheckContext) -> Iterator[Hit]:
                 robot=robot,
                 skills=(step.skill.id,),
             )
+
+
+def _why_comms(ctx: CheckContext, s: SkillInstance) -> str | None:
+    """Why a skill must not be out of comms coverage (None: it may be)."""
+    spec = ctx.library.skills.get(s.skill)
+    if spec is not None and spec.needs_comms:
+        return "it needs the operator's link"
+    if s.policies.pause_out_of_comms:
+        return "it pauses out of comms (its policy), so it would never go on"
+    return None
 
 
 def _out(ctx: CheckContext, step: Step) -> bool:
@@ -282,45 +297,73 @@ def _barrier_out(ctx: CheckContext) -> Iterator[Hit]:
         if bid in ctx.barriers.stuck:
             continue  # never passed anyway: the barrier rules say why
         places = _arrivals(ctx, members)
-        pairs = [((a, places[a]), (b, places[b])) for a in places for b in places if a < b]
-        if all(_can_talk(ctx, a, b) is not False for a, b in pairs):
-            continue
-        out = [r for r, p in places.items() if site.covered(*p) is False]
-        where = "; ".join(f"{r} waits at {_at(places[r])}" for r in out)
-        yield Hit(
-            bid,
-            f"barrier {bid}: {where}, out of comms coverage: partners at a barrier meet only "
-            "when they can talk (through the comms network, or within radio range), so "
-            f"{' and '.join(sorted(members))} would wait there for ever; plan the skills before "
-            "it so that every robot waits in coverage, or deploy a Wi-Fi box there first "
-            "(waive this if a box planned before it will cover the place)",
-            robot=out[0] if out else None,
-            skills=tuple(members[r] for r in sorted(members)),
-        )
+        if not _all_talk(ctx, places):
+            yield _waiting_out(site, bid, members, places)
+
+
+def _waiting_out(
+    site: SiteMap, bid: str, members: Mapping[str, str], places: Mapping[str, Point]
+) -> Hit:
+    """A barrier whose robots would wait where they cannot talk: who waits
+    out of coverage, where."""
+    out = [r for r, p in places.items() if site.covered(*p) is False]
+    where = "; ".join(f"{r} waits at {_at(places[r])}" for r in out)
+    return Hit(
+        bid,
+        f"barrier {bid}: {where}, out of comms coverage: partners at a barrier meet only "
+        "when they can talk (through the comms network, or within radio range), so "
+        f"{' and '.join(sorted(members))} would wait there for ever; plan the skills before "
+        "it so that every robot waits in coverage, or deploy a Wi-Fi box there first "
+        "(waive this if a box planned before it will cover the place)",
+        robot=out[0] if out else None,
+        skills=tuple(members[r] for r in sorted(members)),
+    )
+
+
+def _all_talk(ctx: CheckContext, places: Mapping[str, Point]) -> bool:
+    """No two of the robots at these places are known not to talk."""
+    pairs = [((a, places[a]), (b, places[b])) for a in places for b in places if a < b]
+    return all(_can_talk(ctx, a, b) is not False for a, b in pairs)
 
 
 def _partner_out(ctx: CheckContext) -> Iterator[Hit]:
-    member = {sid: b for b, ms in ctx.barriers.pending.items() for sid in ms.values()}
+    member = _barrier_of(ctx)
     for robot, course in ctx.courses.items():
-        for step in course.steps:
-            spec = ctx.library.skills.get(step.skill.skill)
-            param = spec.talks_to if spec is not None else None
-            other = step.skill.params.get(param) if param is not None else None
-            leg = step.leg
-            if not isinstance(other, str) or other == robot or leg is None or leg.end is None:
-                continue
-            there = _partner_place(ctx, member.get(step.skill.id), other) or leg.end
-            if _can_talk(ctx, (robot, leg.end), (other, there)) is not False:
+        for step, param, other, end in _with_partner(ctx, robot, course):
+            there = _partner_place(ctx, member.get(step.skill.id), other) or end
+            if _can_talk(ctx, (robot, end), (other, there)) is not False:
                 continue
             yield Hit(
                 f"{step.skill.id}/{param}",
                 f"{robot}: {step.skill.display()} works with {other} ({param}) at "
-                f"{_at(leg.end)}, out of comms coverage: robots talk only through the comms "
+                f"{_at(end)}, out of comms coverage: robots talk only through the comms "
                 f"network (or within radio range), so it would go on without {other}; deploy "
                 "a Wi-Fi box there first, or choose a place in coverage",
                 robot=robot,
                 skills=(step.skill.id,),
             )
+
+
+def _with_partner(
+    ctx: CheckContext, robot: str, course: Course
+) -> Iterator[tuple[Step, str, str, Point]]:
+    """(step, parameter, partner, where it works) of the robot's skills that
+    work with another robot (the library's `talks_to`) at a known place."""
+    for step in course.steps:
+        spec = ctx.library.skills.get(step.skill.skill)
+        param = spec.talks_to if spec is not None else None
+        if param is None:
+            continue
+        other = step.skill.params.get(param)
+        leg = step.leg
+        if not isinstance(other, str) or other == robot or leg is None or leg.end is None:
+            continue
+        yield step, param, other, leg.end
+
+
+def _barrier_of(ctx: CheckContext) -> dict[str, str]:
+    """Skill id -> the pending barrier it is in."""
+    return {sid: b for b, ms in ctx.barriers.pending.items() for sid in ms.values()}
 
 
 def _partner_place(ctx: CheckContext, barrier: str | None, other: str) -> Point | None:
@@ -337,10 +380,7 @@ def _partner_place(ctx: CheckContext, barrier: str | None, other: str) -> Point 
 
 def _goals(ctx: CheckContext) -> Iterator[tuple[str, Step, str, tuple[float, float]]]:
     """(robot, step, goal parameter, goal) of the rovers' skills that travel."""
-    for robot, course in ctx.courses.items():
-        rt = course.robot_type
-        if rt is None or rt.flies:
-            continue
+    for robot, course in _rovers(ctx):
         for step in course.steps:
             spec = ctx.library.skills.get(step.skill.skill)
             if step.leg is None or step.leg.goal is None or spec is None:
@@ -348,6 +388,15 @@ def _goals(ctx: CheckContext) -> Iterator[tuple[str, Step, str, tuple[float, flo
             param = spec.duration.goal_param
             if param is not None and not spec.duration.goes_home(step.skill.params):
                 yield robot, step, param, step.leg.goal
+
+
+def _rovers(ctx: CheckContext) -> list[tuple[str, Course]]:
+    """The courses of the robots that drive on the ground (terrain matters)."""
+    return [
+        (robot, c)
+        for robot, c in ctx.courses.items()
+        if c.robot_type is not None and not c.robot_type.flies
+    ]
 
 
 def _impassable(ctx: CheckContext) -> Iterator[Hit]:
@@ -438,7 +487,7 @@ def _self_reference(ctx: CheckContext) -> Iterator[Hit]:
 
 
 def _partner_apart(ctx: CheckContext) -> Iterator[Hit]:
-    member = {sid: b for b, ms in ctx.barriers.pending.items() for sid in ms.values()}
+    member = _barrier_of(ctx)
     for robot, s, name, other in _robot_params(ctx):
         if other == robot or other not in ctx.mission.robots:
             continue
@@ -617,15 +666,7 @@ def run_checks(
     """Every finding, with its waiver; errors first. With a forecast, its
     courses are used (a console keeps one); `robots` limits the per-robot
     rules (barrier rules see every robot)."""
-    if forecast is not None:
-        courses: Mapping[str, Course] = forecast.courses
-        barriers = forecast.barriers
-    else:
-        courses = _courses(mission, library, inputs, robots)
-        barriers = analyse(mission)
-    if robots is not None:
-        courses = {r: c for r, c in courses.items() if r in robots}
-    ctx = CheckContext(mission, library, inputs, courses, barriers)
+    ctx = _context(mission, library, inputs, forecast, robots)
     out: list[Finding] = []
     for rule in RULES:
         if rule.needs_site and inputs.site is None:
@@ -645,6 +686,26 @@ def run_checks(
             )
     out.sort(key=lambda f: (f.severity != "error", f.id))
     return out
+
+
+def _context(
+    mission: Mission,
+    library: Library,
+    inputs: PlanInputs,
+    forecast: Forecast | None,
+    robots: Collection[str] | None,
+) -> CheckContext:
+    """What the rules look at: the forecast's courses (else walked now) of
+    `robots` (None: all), and the barriers of every robot."""
+    if forecast is not None:
+        courses: Mapping[str, Course] = forecast.courses
+        barriers = forecast.barriers
+    else:
+        courses = _courses(mission, library, inputs, robots)
+        barriers = analyse(mission)
+    if robots is not None:
+        courses = {r: c for r, c in courses.items() if r in robots}
+    return CheckContext(mission, library, inputs, courses, barriers)
 
 
 def unfinished(mission: Mission) -> dict[str, list[SkillInstance]]:

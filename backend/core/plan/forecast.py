@@ -150,27 +150,42 @@ class Forecast:
         track = self.tracks.get(robot)
         if track is None:
             return
-        c = track.course
         for seg in track.segments[: track.laid]:
-            if seg.end < t0 or seg.start > t1:
-                continue
-            k = seg.first
-            if seg.kind != "active" and t0 > seg.start:
-                k = self._step_at(c, seg, t0, seg.first)
-            while k < seg.last:
-                sid = c.steps[k].skill.id
-                f = self._memo.get(sid)
-                if f is None:
-                    f = self._memo[sid] = _skill(robot, track, seg, k, self.speed)
-                if f.start > t1:
-                    break
-                if f.end >= t0:
-                    yield f
-                if step > 0 and seg.kind != "active":  # on to the next cell
-                    cell_end = t0 + (math.floor((f.start - t0) / step) + 1) * step
-                    k = max(k + 1, self._step_at(c, seg, cell_end, k + 1))
-                else:
-                    k += 1
+            if seg.end >= t0 and seg.start <= t1:
+                yield from self._in_segment(robot, track, seg, (t0, t1), step)
+
+    def _in_segment(
+        self, robot: str, track: Track, seg: Segment, span: Span, step: float
+    ) -> Iterator[SkillForecast]:
+        """The skills of one segment that overlap `span` (with `step`, the
+        first of each cell)."""
+        t0, t1 = span
+        c = track.course
+        cells = step > 0 and seg.kind != "active"
+        k = self._first_at(c, seg, t0)
+        memo = self._memo  # looked up inline: this loop runs per shown skill
+        while k < seg.last:
+            sid = c.steps[k].skill.id
+            f = memo.get(sid)
+            if f is None:
+                f = memo[sid] = _skill(robot, track, seg, k, self.speed)
+            if f.start > t1:
+                break
+            if f.end >= t0:
+                yield f
+            k = self._next_cell(c, seg, t0, step, f.start, k) if cells else k + 1
+
+    def _first_at(self, c: Course, seg: Segment, t: float) -> int:
+        """The first step of `seg` going on at time t (the active skill's
+        segment: its first, which is running now)."""
+        if seg.kind != "active" and t > seg.start:
+            return self._step_at(c, seg, t, seg.first)
+        return seg.first
+
+    def _next_cell(self, c: Course, seg: Segment, t0: float, step: float, t: float, k: int) -> int:
+        """The first step after `k` going on in the cell after the one of time `t`."""
+        cell_end = t0 + (math.floor((t - t0) / step) + 1) * step
+        return max(k + 1, self._step_at(c, seg, cell_end, k + 1))
 
     def _step_at(self, c: Course, seg: Segment, t: float, lo: int) -> int:
         """The first step of `seg` (from `lo`) still going at time t."""
@@ -249,23 +264,24 @@ def _spans(step: Step, start: float, end: float, speed: float) -> tuple[Span, ..
     return tuple(spans)
 
 
+# A step's kind of segment by its status: "active" (running or paused: the
+# one on the clock now), "idle" (not on the robot yet), else "queued".
+_MOVING = ACTIVE - {Status.SYNCHWAITING}
+_KIND = {s: "active" if s in _MOVING else "idle" if s == Status.IDLE else "queued" for s in Status}
+# (the kind of the segment so far, a step's kind) where the step goes on in it
+# without a wait: the active step is alone in its segment, and the first idle
+# step after queued ones waits for its sync
+_GOES_ON = frozenset({("queued", "queued"), ("idle", "idle"), ("idle", "queued")})
+
+
 def segments(course: Course, member: Mapping[str, str]) -> list[Segment]:
     """Cut a course where a wait may come: after the active skill, at the first
     unsynchronized skill, at each barrier skill."""
     out: list[Segment] = []
     for i, step in enumerate(course.steps):
-        s = step.skill
-        bid = member.get(s.id)
-        moving = s.status in ACTIVE and s.status != Status.SYNCHWAITING
-        kind = "active" if moving else "idle" if s.status == Status.IDLE else "queued"
-        new = (
-            not out
-            or moving
-            or out[-1].kind == "active"
-            or bid is not None
-            or (kind == "idle" and out[-1].kind != "idle")
-        )
-        if new:
+        bid = member.get(step.skill.id)
+        kind = _KIND[step.skill.status]
+        if not out or bid is not None or (out[-1].kind, kind) not in _GOES_ON:
             if out:
                 out[-1].last = i
             out.append(Segment(i, i + 1, kind, bid))
@@ -368,27 +384,41 @@ def _started(s: SkillInstance, now: float) -> float:
 
 def _summaries(fc: Forecast) -> None:
     for robot, track in fc.tracks.items():
-        c = track.course
-        blocked = track.laid < len(track.segments)
-        laid = track.segments[: track.laid]
-        fc.robots[robot] = RobotForecast(
-            robot=robot,
-            end=laid[-1].end if laid and not blocked else None,
-            blocked_at=c.steps[track.segments[track.laid].first].skill.id if blocked else None,
-            battery_end=c.steps[-1].battery_end if c.steps else None,
-            battery_assumed=c.battery_assumed,
-            halted=track.halted,
-        )
+        fc.robots[robot] = _robot_summary(robot, track)
+    fc.end = _mission_end(fc)
+    fc.last = _last_skill(fc)
+
+
+def _robot_summary(robot: str, track: Track) -> RobotForecast:
+    """A robot's forecast: its end, or the barrier skill it is held at."""
+    c = track.course
+    blocked = track.laid < len(track.segments)
+    laid = track.segments[: track.laid]
+    return RobotForecast(
+        robot=robot,
+        end=laid[-1].end if laid and not blocked else None,
+        blocked_at=c.steps[track.segments[track.laid].first].skill.id if blocked else None,
+        battery_end=c.steps[-1].battery_end if c.steps else None,
+        battery_assumed=c.battery_assumed,
+        halted=track.halted,
+    )
+
+
+def _mission_end(fc: Forecast) -> float | None:
+    """When the last robot ends (None: never, one is held at a barrier)."""
     if any(r.blocked_at is not None for r in fc.robots.values()):
-        fc.end = None
-    else:
-        ends = [(r.end, r.robot) for r in fc.robots.values() if r.end is not None]
-        fc.end = max(ends)[0] if ends else fc.now
+        return None
+    ends = [(r.end, r.robot) for r in fc.robots.values() if r.end is not None]
+    return max(ends)[0] if ends else fc.now
+
+
+def _last_skill(fc: Forecast) -> str | None:
+    """The skill laid on the clock that ends last."""
     last = [(t.segments[t.laid - 1].end, r) for r, t in fc.tracks.items() if t.laid and t.segments]
-    if last:
-        robot = max(last)[1]
-        track = fc.tracks[robot]
-        fc.last = track.course.steps[track.segments[track.laid - 1].last - 1].skill.id
+    if not last:
+        return None
+    track = fc.tracks[max(last)[1]]
+    return track.course.steps[track.segments[track.laid - 1].last - 1].skill.id
 
 
 class Forecaster:
@@ -433,14 +463,19 @@ class Forecaster:
             fc.tracks[robot] = Track(
                 course, self._track(robot, course, fc.barriers), 0, halted(mission, inputs, robot)
             )
+        self._forget(mission)
+        _Clock(fc, inputs).run()
+        _summaries(fc)
+        return fc
+
+    def _forget(self, mission: Mission) -> None:
+        """Drop what is kept of robots the mission no longer has, and the legs
+        of skills it no longer has once they outnumber its skills twice."""
         for gone in [r for r in self._courses if r not in mission.robots]:
             del self._courses[gone]
             self._segments.pop(gone, None)
         if self.legs.size() > 2 * sum(len(t) for t in mission.tasks.values()) + 64:
             self.legs.forget({s.id for t in mission.tasks.values() for s in t})
-        _Clock(fc, inputs).run()
-        _summaries(fc)
-        return fc
 
 
 def _same(old: tuple[SkillInstance, ...], new: list[SkillInstance]) -> bool:

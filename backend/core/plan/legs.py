@@ -124,22 +124,46 @@ def _coverage(
     """Out-of-coverage parts of the travel, and whether the place of work is out."""
     if site is None:
         return (), False
-    spans: list[Span] = []
-    if start is not None and goal is not None:
-        pts = along(start, goal, COVERAGE_STEP_M)
-        run: float | None = None
-        for f, (x, y) in pts:
-            out = site.covered(x, y) is False
-            if out and run is None:
-                run = f
-            elif not out and run is not None:
-                spans.append((run, f))
-                run = None
-        if run is not None:
-            spans.append((run, 1.0))
+    spans = _out_spans(site, start, goal) if start is not None and goal is not None else ()
     where = samples(area) if area is not None else ([place] if place is not None else [])
-    work_out = any(site.covered(x, y) is False for x, y in where)
-    return tuple(spans), work_out
+    return spans, any(site.covered(x, y) is False for x, y in where)
+
+
+def _out_spans(site: SiteMap, start: Point, goal: Point) -> tuple[Span, ...]:
+    """The runs of the path start -> goal out of coverage, as fractions of it."""
+    spans: list[Span] = []
+    run: float | None = None  # where the run out of coverage began
+    for f, (x, y) in along(start, goal, COVERAGE_STEP_M):
+        out = site.covered(x, y) is False
+        if out and run is None:
+            run = f
+        elif not out and run is not None:
+            spans.append((run, f))
+            run = None
+    if run is not None:
+        spans.append((run, 1.0))
+    return tuple(spans)
+
+
+def _end(start: Point | None, goal: Point | None, area: tuple[Point, ...] | None) -> Point | None:
+    """Where the robot is when the skill is done: its goal, else the middle
+    of the area it works in, else where it started."""
+    if goal is not None:
+        return goal
+    return centroid(area) if area is not None else start
+
+
+def _charge_to(spec: SkillSpec, params: dict[str, Any]) -> float | None:
+    """The battery level (0..1) a charging skill stops at, if it names one."""
+    name = spec.duration.charge_param
+    level = _number(_param(spec, params, name)) if name else None
+    return None if level is None else min(1.0, max(0.0, level))
+
+
+def _survey_s(rt: RobotType, start: Point | None, area: tuple[Point, ...], rate: float) -> float:
+    """Robot seconds to reach an area and map all of it at `rate` m2/s."""
+    reach = to_polygon(start, area) / (rt.speed_mps or 1.0) if start is not None else 0.0
+    return reach + polygon_area(area) / rate
 
 
 def build_leg(
@@ -155,18 +179,11 @@ def build_leg(
     goal = _goal(spec, params, home)
     metres, no_route = _travel(rt, start, goal, site)
     area = polygon_of(params.get(d.area_param)) if d.area_param else None
-    if goal is not None:
-        end: Point | None = goal
-    elif area is not None:
-        end = centroid(area)
-    else:
-        end = start
-    charge_to = _number(_param(spec, params, d.charge_param)) if d.charge_param else None
+    end = _end(start, goal, area)
     per_s, per_metre = spec.energy.rates(robot_type, rt.battery or NO_BATTERY)
     work_s = _work_s(spec, params)
     if area is not None and rt.survey_m2_per_s:  # done once mapped, if sooner
-        reach = to_polygon(start, area) / (rt.speed_mps or 1.0) if start is not None else 0.0
-        work_s = min(work_s, reach + polygon_area(area) / rt.survey_m2_per_s)
+        work_s = min(work_s, _survey_s(rt, start, area, rt.survey_m2_per_s))
     travel_out, work_out = _coverage(site, start if goal is not None else None, goal, end, area)
     return Leg(
         travel_m=metres,
@@ -175,7 +192,7 @@ def build_leg(
         goal=goal,
         end=end,
         no_route=no_route,
-        charge_to=None if charge_to is None else min(1.0, max(0.0, charge_to)),
+        charge_to=_charge_to(spec, params),
         per_s=per_s,
         per_metre=per_metre,
         travel_out=travel_out,

@@ -169,20 +169,25 @@ def _restored_barriers(rules: Rules, op: RestoreSkills) -> list[ev.Event]:
     restored = {it.skill.id for it in op.items}
     for bid, b in op.barriers.items():
         for sid in b.skills:
-            if sid in restored:
-                continue
-            robot, _, partner = rules.skill(sid)
-            other = rules.mission.barrier_of(sid)
-            if partner.status != Status.IDLE or other not in (None, bid):
-                raise Refusal(
-                    "barrier_invalid",
-                    f"cannot restore barrier {bid}: its partner {partner.display()} on {robot} "
-                    "has changed since",
-                    robot=robot,
-                    skill=sid,
-                )
+            if sid not in restored:
+                _check_partner_unchanged(rules, bid, sid)
         events.append(ev.BarrierSet(id=bid, barrier=b))
     return events
+
+
+def _check_partner_unchanged(rules: Rules, bid: str, sid: str) -> None:
+    """Refused unless barrier `bid`'s partner `sid` is still idle and in no
+    other barrier."""
+    robot, _, partner = rules.skill(sid)
+    other = rules.mission.barrier_of(sid)
+    if partner.status != Status.IDLE or other not in (None, bid):
+        raise Refusal(
+            "barrier_invalid",
+            f"cannot restore barrier {bid}: its partner {partner.display()} on {robot} "
+            "has changed since",
+            robot=robot,
+            skill=sid,
+        )
 
 
 def move(rules: Rules, op: MoveSkill) -> Change:
@@ -235,27 +240,36 @@ def edit(rules: Rules, op: EditSkill) -> Change:
 def set_skill(rules: Rules, op: SetSkill) -> Change:
     robot, _, s = rules.skill(op.id)
     rules.editable(robot, s, "edit")
-    if not op.bindings and not s.bindings and op.params == s.params:
-        # checked when they were set (e.g. only the label changes); bound
-        # ones are re-resolved below, as a marker may have moved since
-        params = s.params
-    else:
-        params = rules.check_params(robot, s.skill, op.params, op.bindings, skill_id=s.id)
+    params = _set_params(rules, robot, s, op)
     if op.policies != s.policies:
         contingency.check(rules, robot, op.policies, s.id)
-    edit = ev.SkillEdited(
-        id=s.id,
-        label=op.label if op.label != s.label else None,
-        params=params if params != s.params else None,
-        bindings=op.bindings if op.bindings != s.bindings else None,
-        policies=op.policies if op.policies != s.policies else None,
-    )
+    edit = _edited(s, op, params)
     if edit == ev.SkillEdited(id=s.id):
         return unchanged()
     old = SetSkill(
         id=s.id, label=s.label, params=s.params, bindings=s.bindings, policies=s.policies
     )
     return Change([edit], [], {}, old)
+
+
+def _set_params(rules: Rules, robot: str, s: SkillInstance, op: SetSkill) -> dict[str, Any]:
+    """The parameters a SetSkill gives the skill, checked."""
+    if not op.bindings and not s.bindings and op.params == s.params:
+        # checked when they were set (e.g. only the label changes); bound
+        # ones are re-resolved below, as a marker may have moved since
+        return s.params
+    return rules.check_params(robot, s.skill, op.params, op.bindings, skill_id=s.id)
+
+
+def _edited(s: SkillInstance, op: SetSkill, params: dict[str, Any]) -> ev.SkillEdited:
+    """The event of a SetSkill: the fields it changes, the others None."""
+    return ev.SkillEdited(
+        id=s.id,
+        label=op.label if op.label != s.label else None,
+        params=params if params != s.params else None,
+        bindings=op.bindings if op.bindings != s.bindings else None,
+        policies=op.policies if op.policies != s.policies else None,
+    )
 
 
 RULES: dict[type[Any], Rule] = {

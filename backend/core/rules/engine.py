@@ -114,18 +114,25 @@ def as_plan(m: Mission) -> tuple[list[str], list[str]]:
     (finished ones stay: the log); a barrier left with a finished skill and
     an idle one is dissolved. Returns the skills reset and the barriers
     dissolved."""
-    reset: list[str] = []
-    for task in m.tasks.values():
-        for s in task:
-            if s.status not in FINISHED and s.status != Status.IDLE:
-                reset.append(s.id)
-                s.status, s.status_info, s.started_at = Status.IDLE, "", None
+    reset = _reset_to_idle(m)
     dissolved = [
         bid for bid, b in m.barriers.items() if len({_finished(m, sid) for sid in b.skills}) > 1
     ]
     for bid in dissolved:
         del m.barriers[bid]
     return reset, dissolved
+
+
+def _reset_to_idle(m: Mission) -> list[str]:
+    """Makes every skill that is on a robot (not idle, not finished) idle;
+    returns their ids."""
+    reset: list[str] = []
+    for task in m.tasks.values():
+        for s in task:
+            if s.status not in FINISHED and s.status != Status.IDLE:
+                reset.append(s.id)
+                s.status, s.status_info, s.started_at = Status.IDLE, "", None
+    return reset
 
 
 def _finished(m: Mission, sid: str) -> bool:
@@ -135,9 +142,7 @@ def _finished(m: Mission, sid: str) -> bool:
 
 def _check_replaceable(rules: Rules) -> None:
     """Refused while a robot holds or is being sent part of the mission."""
-    busy = [f"{r} ({what})" for r, what in rules.pending.items()] + [
-        f"{c.robot} ({c.title()}, {c.state.value})" for c in rules.mission.pending_commands()
-    ]
+    busy = _in_flight(rules)
     if busy:
         busy_text = ", ".join(busy)
         raise Refusal(
@@ -145,17 +150,26 @@ def _check_replaceable(rules: Rules) -> None:
             f"cannot replace the mission while commands are in flight: {busy_text}; "
             "try again when they end (or cancel them)",
         )
-    held = [
-        r
-        for r, t in rules.mission.tasks.items()
-        if any(s.status not in FINISHED and s.status != Status.IDLE for s in t)
-    ]
+    held = [r for r, t in rules.mission.tasks.items() if _holds(t)]
     if held:
         raise Refusal(
             "robots_busy",
             f"cannot replace the mission while {', '.join(held)} hold synchronized skills; "
             "reset them first",
         )
+
+
+def _in_flight(rules: Rules) -> list[str]:
+    """The commands in flight, as `robot (what)`: the rules' pending ones,
+    then the mission's uplink commands."""
+    return [f"{r} ({what})" for r, what in rules.pending.items()] + [
+        f"{c.robot} ({c.title()}, {c.state.value})" for c in rules.mission.pending_commands()
+    ]
+
+
+def _holds(task: list[SkillInstance]) -> bool:
+    """A robot holds skills of its task (synchronized, queued or active)."""
+    return any(s.status not in FINISHED and s.status != Status.IDLE for s in task)
 
 
 def _take_over(new: Mission, old: Mission) -> None:

@@ -16,6 +16,7 @@ A robot's `Report`s (status changes, numbered per robot) come without a command.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
+from datetime import datetime
 from typing import Any
 
 from backend.core import events as ev
@@ -118,24 +119,42 @@ def queued_from(robot: str, s: SkillInstance, queued: list[SkillInstance]) -> li
 def plan_control(rules: Rules, op: Control) -> list[str]:
     """Robots the command goes to; refused when it applies to none."""
     robots = [op.robot] if op.robot is not None else list(rules.mission.robots)
-    reasons: list[str] = []
+    out, reasons = _takers(rules, op.op, robots)
+    if not out:
+        raise _applies_to_none(op, reasons)
+    if op.op == "reset":
+        _claim_resets(rules, out)
+    return out
+
+
+def _takers(rules: Rules, command: str, robots: list[str]) -> tuple[list[str], list[str]]:
+    """The robots that can take the command, and why each other cannot."""
     out: list[str] = []
+    reasons: list[str] = []
     for r in robots:
-        why = _control_refusal(rules, op.op, r, rules.task(r))
+        why = _control_refusal(rules, command, r, rules.task(r))
         if why is None:
             out.append(r)
         else:
             reasons.append(why)
-    if not out:
-        if op.robot is not None:
-            raise Refusal("not_applicable", reasons[0], robot=op.robot)
-        raise Refusal("not_applicable", f"{op.op} applies to no robot: " + "; ".join(reasons))
-    if op.op == "reset":  # the robot answers a reset: one command at a time
-        for r in out:
-            claim(rules, r)
-        for r in out:
-            rules.pending[r] = "a reset"
-    return out
+    return out, reasons
+
+
+def _claim_resets(rules: Rules, robots: list[str]) -> None:
+    """The robots answer a reset: one command at a time (refused if one
+    has a command pending)."""
+    for r in robots:
+        claim(rules, r)
+    for r in robots:
+        rules.pending[r] = "a reset"
+
+
+def _applies_to_none(op: Control, reasons: list[str]) -> Refusal:
+    """The refusal of a command no robot can take: the robot's reason, or
+    every robot's."""
+    if op.robot is not None:
+        return Refusal("not_applicable", reasons[0], robot=op.robot)
+    return Refusal("not_applicable", f"{op.op} applies to no robot: " + "; ".join(reasons))
 
 
 def _why_not_run(robot: str, act: SkillInstance | None, queued: bool) -> str | None:
@@ -244,7 +263,22 @@ def check_retriable(rules: Rules, robot: str, i: int, s: SkillInstance) -> None:
 def sync_ack(rules: Rules, op: SyncAck) -> Change:
     task = rules.task(op.robot)
     start = rules.first_idle(task)
-    head = [s.id for s in task[start : start + len(op.ids)]]
+    acked = task[start : start + len(op.ids)]
+    _check_acked(rules, op, [s.id for s in acked])
+    events: list[ev.Event] = []
+    for s in acked:
+        events.append(ev.SkillStatusChanged(id=s.id, status=Status.IDLE_SYNCHRONIZED))
+        if rules.sent[s.id] != s.params:  # what the robot holds
+            events.append(ev.SkillEdited(id=s.id, params=rules.sent[s.id]))
+    for sid in op.ids:
+        rules.held.pop(sid, None)
+        rules.sent.pop(sid, None)
+    return Change(events, [], {"synchronized": list(op.ids)}, None)
+
+
+def _check_acked(rules: Rules, op: SyncAck, head: list[str]) -> None:
+    """Refused unless the robot acknowledges the head of its unsynchronized
+    section, all of it being synchronized."""
     if head != list(op.ids):
         raise Refusal(
             "bad_report",
@@ -261,15 +295,6 @@ def sync_ack(rules: Rules, op: SyncAck) -> Change:
             f"{op.robot} acknowledged {', '.join(late)}, which is not being synchronized",
             robot=op.robot,
         )
-    events: list[ev.Event] = []
-    for s in task[start : start + len(op.ids)]:
-        events.append(ev.SkillStatusChanged(id=s.id, status=Status.IDLE_SYNCHRONIZED))
-        if rules.sent[s.id] != s.params:  # what the robot holds
-            events.append(ev.SkillEdited(id=s.id, params=rules.sent[s.id]))
-    for sid in op.ids:
-        rules.held.pop(sid, None)
-        rules.sent.pop(sid, None)
-    return Change(events, [], {"synchronized": list(op.ids)}, None)
 
 
 def unsync_done(rules: Rules, op: UnsyncDone) -> Change:
@@ -325,6 +350,20 @@ def report(rules: Rules, op: Report) -> Change:
     if op.seq <= last:
         ignored = f"report {op.seq} of {op.robot} was applied already"
         return Change([], [], {"ignored": ignored}, None, duplicate=True)
+    robot, i, s = _reported_skill(rules, op)
+    _check_transition(robot, s, op)
+    _check_turn(rules, robot, i, s, op.status)
+    _check_attempt(robot, s, op)
+    events: list[ev.Event] = [ev.ReportSeq(robot=robot, seq=op.seq)]
+    change = _reported_change(s, op)
+    if change is not None:
+        events.append(change)
+    return Change(events, [], {}, None)
+
+
+def _reported_skill(rules: Rules, op: Report) -> tuple[str, int, SkillInstance]:
+    """(robot, index, skill) a report is about; refused if the mission has no
+    such skill or it is another robot's."""
     rules.task(op.robot)
     found = rules.mission.find(op.id)
     if found is None:  # a robot's message: refused like every report the rules refuse
@@ -334,7 +373,7 @@ def report(rules: Rules, op: Report) -> Change:
             robot=op.robot,
             skill=op.id,
         )
-    robot, i, s = found
+    robot, _, s = found
     if robot != op.robot:
         raise Refusal(
             "bad_report",
@@ -342,8 +381,11 @@ def report(rules: Rules, op: Report) -> Change:
             robot=op.robot,
             skill=s.id,
         )
-    _check_transition(robot, s, op)
-    _check_turn(rules, robot, i, s, op.status)
+    return found
+
+
+def _check_attempt(robot: str, s: SkillInstance, op: Report) -> None:
+    """Refused if the report is about an earlier attempt than the skill's."""
     if op.attempt is not None and op.attempt < s.attempt:
         raise Refusal(
             "bad_report",
@@ -352,37 +394,38 @@ def report(rules: Rules, op: Report) -> Change:
             robot=robot,
             skill=s.id,
         )
-    events: list[ev.Event] = [ev.ReportSeq(robot=robot, seq=op.seq)]
-    change = _reported_change(s, op)
-    if change is not None:
-        events.append(change)
-    return Change(events, [], {}, None)
 
 
 def _check_transition(robot: str, s: SkillInstance, op: Report) -> None:
     """Refused unless the transition table allows the new status."""
     new = op.status
-    restart = new == Status.RUNNING and s.status == Status.RUNNING and (op.attempt or 0) > s.attempt
-    # a skill waiting at a barrier may repeat its status with new information
-    # ("waiting for lru2 (offline)"); running only with a higher attempt (a
-    # retry); the others never
-    waiting = new == s.status == Status.SYNCHWAITING
-    # running again to say which contingency it took (a fallback, a goto, over time)
-    branching = new == s.status == Status.RUNNING and op.branch is not None
-    if new not in TRANSITIONS[s.status] and not (restart or waiting or branching):
-        again = (
-            f" at the same attempt {s.attempt} (only a retry, with a higher attempt, reports "
-            "running again)"
-            if new == s.status == Status.RUNNING
-            else ""
-        )
-        raise Refusal(
-            "bad_report",
-            f"{robot} reported {s.display()} going {s.status.value} -> {new.value}{again}, "
-            "which the transition table forbids",
-            robot=robot,
-            skill=s.id,
-        )
+    if new in TRANSITIONS[s.status] or _may_repeat(s, op):
+        return
+    again = (
+        f" at the same attempt {s.attempt} (only a retry, with a higher attempt, reports "
+        "running again)"
+        if new == s.status == Status.RUNNING
+        else ""
+    )
+    raise Refusal(
+        "bad_report",
+        f"{robot} reported {s.display()} going {s.status.value} -> {new.value}{again}, "
+        "which the transition table forbids",
+        robot=robot,
+        skill=s.id,
+    )
+
+
+def _may_repeat(s: SkillInstance, op: Report) -> bool:
+    """A skill reporting its status again: waiting at a barrier, with new
+    information ("waiting for lru2 (offline)"); running, with a higher
+    attempt (a retry) or to say which contingency it took (a fallback, a
+    goto, over time); the others never."""
+    if op.status != s.status:
+        return False
+    if s.status == Status.SYNCHWAITING:
+        return True
+    return s.status == Status.RUNNING and ((op.attempt or 0) > s.attempt or op.branch is not None)
 
 
 def _check_turn(rules: Rules, robot: str, i: int, s: SkillInstance, new: Status) -> None:
@@ -414,13 +457,17 @@ def _reported_change(s: SkillInstance, op: Report) -> ev.SkillStatusChanged | No
     new = op.status
     info = op.info if op.info != s.status_info else None
     attempt = op.attempt if op.attempt is not None and op.attempt != s.attempt else None
-    stamps = (new == Status.RUNNING and s.started_at is None) or new in FINISHED
-    at = op.at if stamps else None
     branch = op.branch if op.branch != s.branch else None
     change = ev.SkillStatusChanged(
-        id=s.id, status=new, info=info, attempt=attempt, at=at, branch=branch
+        id=s.id, status=new, info=info, attempt=attempt, at=_stamp(s, op), branch=branch
     )
     return None if change == ev.SkillStatusChanged(id=s.id, status=s.status) else change
+
+
+def _stamp(s: SkillInstance, op: Report) -> datetime | None:
+    """The report's time, kept when it starts the skill or ends it."""
+    starts = op.status == Status.RUNNING and s.started_at is None
+    return op.at if starts or op.status in FINISHED else None
 
 
 RULES: dict[type[Any], Rule] = {

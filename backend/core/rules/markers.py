@@ -8,6 +8,7 @@ from collections.abc import Iterator
 from typing import Any
 
 from backend.core import events as ev
+from backend.core.library import SkillSpec
 from backend.core.model import (
     FINISHED,
     AreaMarker,
@@ -43,16 +44,22 @@ def bound(rules: Rules, name: str) -> Iterator[tuple[str, SkillInstance, str]]:
 
 def named(rules: Rules, name: str) -> Iterator[tuple[str, SkillInstance, str]]:
     """Skills whose marker-type parameter names marker `name` (not finished)."""
+    for robot, s, spec in _unfinished(rules):
+        for pname, pspec in spec.params.items():
+            if pspec.kind.names_marker and s.params.get(pname) == name:
+                yield robot, s, pname
+
+
+def _unfinished(rules: Rules) -> Iterator[tuple[str, SkillInstance, SkillSpec]]:
+    """(robot, skill, its spec) of every skill not finished that its robot's
+    type offers."""
     m = rules.mission
     for robot, task in m.tasks.items():
         rtype = m.robots[robot].type if robot in m.robots else ""
         for s in task:
             spec = rules.library.skill_for(rtype, s.skill)
-            if spec is None or s.status in FINISHED:
-                continue
-            for pname, pspec in spec.params.items():
-                if pspec.kind.names_marker and s.params.get(pname) == name:
-                    yield robot, s, pname
+            if spec is not None and s.status not in FINISHED:
+                yield robot, s, spec
 
 
 def add_marker(rules: Rules, op: MarkerAdd) -> Change:

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from collections.abc import Set as AbstractSet
-from datetime import timedelta
+from datetime import datetime, timedelta
 from typing import Any
 
 from backend.core import events as ev
@@ -177,15 +177,6 @@ def sync(rules: Rules, op: Sync) -> Change:
     skills = [
         s.model_copy(update={"params": p}, deep=True) for s, p in zip(chosen, fresh, strict=True)
     ]
-    infos: dict[str, BarrierInfo] = {}
-    for s in skills:
-        partners = barriers.barrier_partners(rules, s.id)
-        bid = rules.mission.barrier_of(s.id)
-        if partners and bid is not None:
-            b = rules.mission.barriers[bid]
-            infos[s.id] = BarrierInfo(
-                barrier=bid, partners=dict(partners), timeout=b.timeout, on_timeout=b.on_timeout
-            )
     found = contingency.branches(rules, op.robot, skills)
     check_offered(rules, op.robot, contingency.run_by(found))
     c = _Maker(rules, _expiry(rules, op)).make(
@@ -193,7 +184,7 @@ def sync(rules: Rules, op: Sync) -> Change:
         "sync",
         Enqueue(
             skills=skills,
-            barriers=infos,
+            barriers=_barrier_infos(rules, skills),
             kinds={**contingency.kinds(rules, found), **_kinds(rules, skills)},
             contingencies=found,
             after=contingency.afters(rules, skills),
@@ -208,6 +199,21 @@ def sync(rules: Rules, op: Sync) -> Change:
     )
 
 
+def _barrier_infos(rules: Rules, skills: Sequence[SkillInstance]) -> dict[str, BarrierInfo]:
+    """What the robot must know of each sent skill's barrier: its partners
+    (robot, skill), its timeout and what to do then."""
+    infos: dict[str, BarrierInfo] = {}
+    for s in skills:
+        partners = barriers.barrier_partners(rules, s.id)
+        bid = rules.mission.barrier_of(s.id)
+        if partners and bid is not None:
+            b = rules.mission.barriers[bid]
+            infos[s.id] = BarrierInfo(
+                barrier=bid, partners=dict(partners), timeout=b.timeout, on_timeout=b.on_timeout
+            )
+    return infos
+
+
 def sync_skills(m: Mission, op: Sync, locked: Mapping[str, str]) -> list[SkillInstance]:
     """Which skills a sync sends: the idle skills of `op.robot` after those
     being synchronized already (`locked`: they stay at the head of its plan),
@@ -218,23 +224,11 @@ def sync_skills(m: Mission, op: Sync, locked: Mapping[str, str]) -> list[SkillIn
     availability of its sync action ask it."""
     robot_type(m, op.robot)
     task = m.tasks.get(op.robot, [])
-    start = Rules.first_idle(task)
-    while start < len(task) and task[start].id in locked:
-        start += 1  # uplinking: they stay at the head of the section
-    idle = task[start:]
-    if op.through is not None:
-        i, s = skill_of(m, op.robot, op.through)
-        if s.status != Status.IDLE:
-            raise Refusal(
-                "not_idle",
-                f"{s.display()} on {op.robot} is already {s.status.value}: synchronize "
-                "through an idle (unsynchronized) skill",
-                robot=op.robot,
-                skill=s.id,
-            )
-        if s.id in locked:
-            raise Refusal("locked", f"{s.display()}: {locked[s.id]}", robot=op.robot, skill=s.id)
-        idle = task[start : i + 1]
+    start = _after_uplinking(task, locked)
+    if op.through is None:
+        idle = task[start:]
+    else:
+        idle = task[start : _through(m, op.robot, op.through, locked) + 1]
     if not idle:
         busy = [s.id for s in task if s.status == Status.IDLE and s.id in locked]
         more = f" ({', '.join(busy)} are being synchronized already)" if busy else ""
@@ -246,6 +240,37 @@ def sync_skills(m: Mission, op: Sync, locked: Mapping[str, str]) -> list[SkillIn
     return idle
 
 
+def _after_uplinking(task: list[SkillInstance], locked: Mapping[str, str]) -> int:
+    """Where a new sync starts: the first idle skill after those being
+    synchronized already (they stay at the head of the section)."""
+    start = Rules.first_idle(task)
+    while start < len(task) and task[start].id in locked:
+        start += 1
+    return start
+
+
+def _through(m: Mission, robot: str, through: str, locked: Mapping[str, str]) -> int:
+    """The index of the last skill a sync sends, refused unless it is idle
+    and not locked."""
+    i, s = skill_of(m, robot, through)
+    if s.status != Status.IDLE:
+        raise Refusal(
+            "not_idle",
+            f"{s.display()} on {robot} is already {s.status.value}: synchronize "
+            "through an idle (unsynchronized) skill",
+            robot=robot,
+            skill=s.id,
+        )
+    _check_unlocked(robot, s, locked)
+    return i
+
+
+def _check_unlocked(robot: str, s: SkillInstance, locked: Mapping[str, str]) -> None:
+    """Refused while a pending command concerns `s`."""
+    if s.id in locked:
+        raise Refusal("locked", f"{s.display()}: {locked[s.id]}", robot=robot, skill=s.id)
+
+
 def unsync(rules: Rules, op: Unsync) -> Change:
     """Ask the robot to give back its queued skills from `op.from_id` (or all)."""
     task = rules.task(op.robot)
@@ -253,8 +278,7 @@ def unsync(rules: Rules, op: Unsync) -> Change:
     queued = [s for s in task if s.status == Status.IDLE_SYNCHRONIZED and s.id not in locked]
     if op.from_id is not None:
         _, s = of_robot(rules, op.robot, op.from_id)
-        if s.id in locked:
-            raise Refusal("locked", f"{s.display()}: {locked[s.id]}", robot=op.robot, skill=s.id)
+        _check_unlocked(op.robot, s, locked)
         queued = queued_from(op.robot, s, queued)
     if not queued:
         raise Refusal(
@@ -379,19 +403,7 @@ def cancel(rules: Rules, op: Cancel) -> Change:
     if c is None:
         raise Refusal("unknown_command", f"no command {op.command} in this mission")
     if not c.pending:
-        said = f": {c.reason}" if c.reason else ""
-        if op.undo:  # the sync reached the robot (or never will): nothing to take back here
-            raise Refusal(
-                "cannot_undo",
-                f"{c.title()} to {c.robot} is {c.state.value} already{said}; "
-                "unsynchronize what it queued instead",
-                robot=c.robot,
-            )
-        raise Refusal(
-            "not_pending",
-            f"{c.title()} to {c.robot} is {c.state.value} already{said}",
-            robot=c.robot,
-        )
+        raise _settled_already(c, op.undo)
     now = rules.clock()
     if c.state == CommandState.QUEUED and c.id not in rules.transmitting:
         change = ev.CommandChanged(
@@ -399,7 +411,30 @@ def cancel(rules: Rules, op: Cancel) -> Change:
         )
         value = {"command": c.id, "robot": c.robot, "state": "cancelled"}
         return Change([change], [], value, None)
-    if op.undo:
+    return _cancel_asked(c, op.undo)
+
+
+def _settled_already(c: UplinkCommand, undo: bool) -> Refusal:
+    """The refusal of a cancel (or a sync's undo) of a command settled already."""
+    said = f": {c.reason}" if c.reason else ""
+    if undo:  # the sync reached the robot (or never will): nothing to take back here
+        return Refusal(
+            "cannot_undo",
+            f"{c.title()} to {c.robot} is {c.state.value} already{said}; "
+            "unsynchronize what it queued instead",
+            robot=c.robot,
+        )
+    return Refusal(
+        "not_pending",
+        f"{c.title()} to {c.robot} is {c.state.value} already{said}",
+        robot=c.robot,
+    )
+
+
+def _cancel_asked(c: UplinkCommand, undo: bool) -> Change:
+    """A command that may be on the robot already: its cancel is a request
+    the robot's answer settles (an undo is refused)."""
+    if undo:
         raise Refusal(
             "cannot_undo",
             f"{c.title()} may be on {c.robot} already (it was sent); "
@@ -497,20 +532,39 @@ def answer(rules: Rules, op: Answer) -> Change:
         return Change([], [], {"ignored": f"answer {op.seq} was applied already"}, None, True)
     rules.task(op.robot)
     events: list[ev.Event] = [ev.ReportSeq(robot=op.robot, seq=op.seq)]
-    c = rules.mission.command_by_seq(op.robot, op.command)
-    if c is None or c.answered is not None:
-        what = (
-            "which its uplink does not hold (never sent, or settled long ago)"
-            if c is None
-            else f"{c.title()}, answered already"
-        )
-        raise Refusal(
-            "bad_report",
-            f"{op.robot} answered command seq {op.command}, {what}: nothing of it was applied",
-            robot=op.robot,
-        )
+    c = _answered_command(rules, op)
     fx = _Effects(rules, c, op)
+    _take_outcome(fx)
     state = _STATE[op.outcome]
+    events += fx.events
+    events.append(_command_ended(fx, state, op.at or rules.clock()))
+    if fx.drop:
+        events.append(_drop_command(rules, fx.robot, fx.drop, fx))
+    value = {"command": c.id, "state": state.value}
+    return Change(events, fx.notes, value, None, alerts=tuple(fx.alerts))
+
+
+def _answered_command(rules: Rules, op: Answer) -> UplinkCommand:
+    """The command an answer is about, refused unless it waits for one."""
+    c = rules.mission.command_by_seq(op.robot, op.command)
+    if c is not None and c.answered is None:
+        return c
+    what = (
+        "which its uplink does not hold (never sent, or settled long ago)"
+        if c is None
+        else f"{c.title()}, answered already"
+    )
+    raise Refusal(
+        "bad_report",
+        f"{op.robot} answered command seq {op.command}, {what}: nothing of it was applied",
+        robot=op.robot,
+    )
+
+
+def _take_outcome(fx: _Effects) -> None:
+    """What the robot says it did with the command, applied; what it did
+    not do, said (unless the ground had given up on the command)."""
+    c, op = fx.c, fx.op
     if op.outcome == "applied":
         _APPLIED[c.command.cmd](fx)
         if fx.late:
@@ -522,24 +576,22 @@ def answer(rules: Rules, op: Answer) -> Change:
         fx.alert(
             f"{op.robot} {op.outcome} {c.title()}: {op.reason or 'no reason given'}{_released(c)}"
         )
-    at = op.at or rules.clock()
-    events += fx.events
-    events.append(
-        ev.CommandChanged(
-            id=c.id,
-            state=state,
-            settled=at,
-            answered=at,
-            reason=op.reason,
-            sent=at if c.sent is None else None,
-            done=fx.done or None,
-            kept=[k for k in op.kept if k in c.skills] if op.kept else None,
-        )
+
+
+def _command_ended(fx: _Effects, state: CommandState, at: datetime) -> ev.Event:
+    """The answered command as it ends: its state, when, and what the robot
+    did of it."""
+    c, op = fx.c, fx.op
+    return ev.CommandChanged(
+        id=c.id,
+        state=state,
+        settled=at,
+        answered=at,
+        reason=op.reason,
+        sent=at if c.sent is None else None,
+        done=fx.done or None,
+        kept=[k for k in op.kept if k in c.skills] if op.kept else None,
     )
-    if fx.drop:
-        events.append(_drop_command(rules, fx.robot, fx.drop, fx))
-    value = {"command": c.id, "state": state.value}
-    return Change(events, fx.notes, value, None, alerts=tuple(fx.alerts))
 
 
 def _drop_command(rules: Rules, robot: str, ids: list[str], fx: _Effects) -> ev.Event:
@@ -558,6 +610,19 @@ def _enqueued(fx: _Effects) -> None:
         _retried(fx, cmd)
         return
     sent = {s.id: s for s in cmd.skills}
+    held = _held(fx, sent)
+    _say_not_queued(fx, [sid for sid in sent if sid not in fx.op.queued])
+    status: dict[str, Status] = {}
+    for sid in held:
+        fx.events += _now_queued(fx, sent[sid])
+        status[sid] = Status.IDLE_SYNCHRONIZED
+    fx.events += _arrangement(fx.robot, fx.task, status, queued_last=held)
+    fx.done = held
+
+
+def _held(fx: _Effects, sent: dict[str, SkillInstance]) -> list[str]:
+    """The ids the robot says it queued that the mission shows as queued now;
+    the others it holds are to drop, an id never sent is said and ignored."""
     held: list[str] = []
     for sid in fx.op.queued:
         s = fx.skill(sid)
@@ -570,23 +635,28 @@ def _enqueued(fx: _Effects) -> None:
             fx.drop.append(sid)  # not ours to show as queued any more
         else:
             held.append(sid)
-    missing = [sid for sid in sent if sid not in fx.op.queued]
+    return held
+
+
+def _say_not_queued(fx: _Effects, missing: list[str]) -> None:
+    """The skills sent that the robot did not queue (idle again), and why,
+    unless the ground had given up on the command."""
     if missing and not fx.late:
         why = f": {fx.op.reason}" if fx.op.reason else ""
         fx.alert(
             f"{fx.robot} did not queue {', '.join(missing)} ({fx.c.title()}){why}; "
             "they are unsynchronized (idle) again"
         )
-    status: dict[str, Status] = {}
-    for sid in held:
-        s = fx.skill(sid)
-        assert s is not None
-        fx.events.append(ev.SkillStatusChanged(id=sid, status=Status.IDLE_SYNCHRONIZED))
-        if sent[sid].params != s.params:  # what the robot holds
-            fx.events.append(ev.SkillEdited(id=sid, params=sent[sid].params))
-        status[sid] = Status.IDLE_SYNCHRONIZED
-    fx.events += _arrangement(fx.robot, fx.task, status, queued_last=held)
-    fx.done = held
+
+
+def _now_queued(fx: _Effects, sent: SkillInstance) -> list[ev.Event]:
+    """A skill the robot holds, synchronized, with the values it was sent."""
+    s = fx.skill(sent.id)
+    assert s is not None
+    out: list[ev.Event] = [ev.SkillStatusChanged(id=sent.id, status=Status.IDLE_SYNCHRONIZED)]
+    if sent.params != s.params:  # what the robot holds
+        out.append(ev.SkillEdited(id=sent.id, params=sent.params))
+    return out
 
 
 def _edited(s: SkillInstance, sent: SkillInstance) -> bool:
@@ -613,39 +683,31 @@ def _retried(fx: _Effects, cmd: Enqueue) -> None:
     if fx.rules.mission.find(new.id) is not None or found is None or found[0] != fx.robot:
         fx.drop.append(new.id)
         return
-    # at the head of the robot's queue: after the log and the active skill
-    index = next(
-        (k for k, s in enumerate(fx.task) if s.status not in FINISHED and s.status not in ACTIVE),
-        len(fx.task),
-    )
+    index = _queue_head(fx.task)
     skill = new.model_copy(update={"status": Status.IDLE_SYNCHRONIZED})
     fx.events.append(ev.SkillAdded(robot=fx.robot, index=index, skill=skill))
     fx.done = [new.id]
 
 
+def _queue_head(task: list[SkillInstance]) -> int:
+    """Where the head of the robot's queue is: after the log and the active skill."""
+    return next(
+        (k for k, s in enumerate(task) if s.status not in FINISHED and s.status not in ACTIVE),
+        len(task),
+    )
+
+
 def _dequeued(fx: _Effects) -> None:
     asked = set(fx.c.skills) if fx.c.op != "reset" else None
-    removed: list[str] = []
-    for sid in fx.op.removed:
-        s = fx.skill(sid)
-        if asked is not None and sid not in asked:
-            if fx.c.op != "reconcile":
-                fx.alert(
-                    f"{fx.robot} says it removed {sid}, which {fx.c.title()} did not ask "
-                    "for: ignored",
-                    "error",
-                )
-            continue
-        if s is None or s.status == Status.IDLE:
-            continue  # nothing the mission shows as on the robot
-        if s.status in FINISHED:
-            fx.alert(
-                f"{fx.robot} says it removed {sid}, which it had finished "
-                f"({s.status.value}): the log stays",
-                "error",
-            )
-            continue
-        removed.append(sid)
+    _returned_to_plan(fx, [sid for sid in fx.op.removed if _removal_taken(fx, sid, asked)])
+    kept = [k for k in fx.op.kept if k in fx.c.skills]
+    if kept:
+        fx.notes.append(f"{fx.robot} had already started {', '.join(kept)}: it stays synchronized")
+
+
+def _returned_to_plan(fx: _Effects, removed: list[str]) -> None:
+    """The skills the robot removed, idle again at the head of the plan in
+    the mission's order."""
     status: dict[str, Status] = {}
     ordered = [s.id for s in fx.task if s.id in removed]
     for sid in ordered:
@@ -653,9 +715,30 @@ def _dequeued(fx: _Effects) -> None:
         status[sid] = Status.IDLE
     fx.events += _arrangement(fx.robot, fx.task, status, idle_first=ordered)
     fx.done = ordered
-    kept = [k for k in fx.op.kept if k in fx.c.skills]
-    if kept:
-        fx.notes.append(f"{fx.robot} had already started {', '.join(kept)}: it stays synchronized")
+
+
+def _removal_taken(fx: _Effects, sid: str, asked: AbstractSet[str] | None) -> bool:
+    """Whether the mission takes the robot's word that it removed `sid`:
+    one it was asked to remove (`asked`; None: any, a reset) that it held.
+    A removal it was not asked for, or of a finished skill, is said."""
+    if asked is not None and sid not in asked:
+        if fx.c.op != "reconcile":
+            fx.alert(
+                f"{fx.robot} says it removed {sid}, which {fx.c.title()} did not ask for: ignored",
+                "error",
+            )
+        return False
+    s = fx.skill(sid)
+    if s is None or s.status == Status.IDLE:
+        return False  # nothing the mission shows as on the robot
+    if s.status in FINISHED:
+        fx.alert(
+            f"{fx.robot} says it removed {sid}, which it had finished "
+            f"({s.status.value}): the log stays",
+            "error",
+        )
+        return False
+    return True
 
 
 def _controlled(fx: _Effects) -> None:
@@ -772,12 +855,7 @@ def _sorted_queue(
     mission has them, the ids of those the mission had as idle: adopted, the
     ids of those it must drop: strays). One being synchronized is left to
     the answer of its sync."""
-    uplinking = {
-        sid
-        for c in rules.mission.pending_commands(robot)
-        if c.op in ("sync", "retry")
-        for sid in c.skills
-    }
+    uplinking = _uplinking(rules, robot)
     held: list[QueueEntry] = []
     adopted: list[str] = []
     strays: list[str] = []
@@ -792,6 +870,16 @@ def _sorted_queue(
     return held, adopted, strays
 
 
+def _uplinking(rules: Rules, robot: str) -> set[str]:
+    """The skills a pending sync or retry is bringing to `robot`."""
+    return {
+        sid
+        for c in rules.mission.pending_commands(robot)
+        if c.op in ("sync", "retry")
+        for sid in c.skills
+    }
+
+
 def _robot_alert(
     robot: str, message: str, kind: AlertKind, level: Level = "warning"
 ) -> RaisedAlert:
@@ -802,15 +890,11 @@ def _checked_queue(
     robot: str, queue: list[QueueEntry]
 ) -> tuple[list[QueueEntry], list[RaisedAlert]]:
     """The robot's queue, active first; one that breaks that is read as all queued."""
-    seen: set[str] = set()
-    out = []
+    first: dict[str, QueueEntry] = {}
     for e in queue:
-        if e.id not in seen:
-            seen.add(e.id)
-            out.append(e)
-    active = [k for k, e in enumerate(out) if e.status in ACTIVE]
-    wrong = [e for e in out if e.status in FINISHED or e.status == Status.IDLE]
-    if active in ([], [0]) and not wrong:
+        first.setdefault(e.id, e)  # an id said twice: its first entry
+    out = list(first.values())
+    if _active_then_queued(out):
         return out, []
     fixed = [e.model_copy(update={"status": Status.IDLE_SYNCHRONIZED}) for e in out]
     msg = (
@@ -818,6 +902,14 @@ def _checked_queue(
         f"({', '.join(f'{e.id} {e.status.value}' for e in out)}): read as all queued"
     )
     return fixed, [_robot_alert(robot, msg, AlertKind.ROBOT_ERROR, "error")]
+
+
+def _active_then_queued(queue: list[QueueEntry]) -> bool:
+    """A queue as a robot holds one: at most one active skill, first, then
+    queued ones (none finished, none idle)."""
+    active = [k for k, e in enumerate(queue) if e.status in ACTIVE]
+    wrong = [e for e in queue if e.status in FINISHED or e.status == Status.IDLE]
+    return active in ([], [0]) and not wrong
 
 
 def _differs(e: QueueEntry, s: SkillInstance) -> bool:
