@@ -19,6 +19,7 @@ from textual.strip import Strip
 from backend.core.contingency import after_tags, awaited_by
 from backend.core.model import ACTIVE, SkillInstance, Status
 from backend.core.plan.checks import Finding
+from backend.protocol.messages import Telemetry
 from console.state import link
 from console.state.contact import CONTACT_GLYPH, header_contact, out_of_contact
 from console.state.freshness import FRESH, Freshness
@@ -367,34 +368,48 @@ def skill_segments(
     `uplink`: a pending command concerns it ('sync #17 sent 40s'): ⇡ and that
     text instead of the parameter summary."""
     sst = st[STATUS_CSS[s.status]] + st["stale"] if stale else st[STATUS_CSS[s.status]]
-    title = ("*" if draft else "") + skill_title(s)
-    attempt = f" #{s.attempt}" if s.attempt > 1 else ""
-    if check is not None:
-        tag = f"{tag} " if tag else ""
-    room = width - 2 - (cell_len(tag) + 1 if tag else 0) - (1 if check is not None else 0)
-    segs: list[Segment] = [
-        Segment("+" if marked else " ", st["mark"] if marked else st["base"]),
+    end, end_w = _row_end(tag, check, st)
+    segs = [
+        Segment("+", st["mark"]) if marked else Segment(" ", st["base"]),
         Segment(link.UPLINK_GLYPH, st["tag"]) if uplink else Segment(GLYPHS[s.status], sst),
     ]
-    extra = uplink or extra
+    title = ("*" if draft else "") + skill_title(s)
+    segs += _title_and_summary(title, s.attempt, uplink or extra, width - 2 - end_w, sst, st)
+    segs += end
+    return segs if cursor is None else _on_cursor(segs, cursor)
+
+
+def _title_and_summary(
+    title: str, attempt_n: int, extra: str, room: int, sst: Style, st: Styles
+) -> list[Segment]:
+    """The title and attempt in `room` cells, and `extra` (the summary) in what they leave."""
+    attempt = f" #{attempt_n}" if attempt_n > 1 else ""
     body = " " + title + attempt
-    if cell_len(body) >= room:  # the label is cut in the middle, never the attempt number
-        segs.append(Segment(" " + fit_middle(title, room - 1 - len(attempt)) + attempt, sst))
-    else:
-        segs.append(Segment(body, sst))
-        rest = room - cell_len(body)
-        if extra and rest >= 8:  # a summary cut to a letter or two says nothing
-            segs.append(Segment(fit(" " + extra, rest), st["dim"]))
-        else:
-            segs.append(Segment(" " * rest, st["base"]))
+    rest = room - cell_len(body)
+    if rest <= 0:  # the label is cut in the middle, never the attempt number
+        return [Segment(" " + fit_middle(title, room - 1 - len(attempt)) + attempt, sst)]
+    if extra and rest >= 8:  # a summary cut to a letter or two says nothing
+        return [Segment(body, sst), Segment(fit(" " + extra, rest), st["dim"])]
+    return [Segment(body, sst), Segment(" " * rest, st["base"])]
+
+
+def _row_end(tag: str, check: Finding | None, st: Styles) -> tuple[list[Segment], int]:
+    """The row's end and its cells: the tags, then the plan checks' glyph."""
+    end: list[Segment] = []
+    cells = 0
     if tag:
-        segs.append(Segment(" ", st["base"]))
-        segs.append(Segment(tag, st["tag"]))
+        tag = f"{tag} " if check is not None else tag
+        end += [Segment(" ", st["base"]), Segment(tag, st["tag"])]
+        cells = cell_len(tag) + 1
     if check is not None:
-        segs.append(Segment(*_check_glyph(check, st)))
-    if cursor is not None:
-        segs = [Segment(seg.text, (seg.style or Style()) + cursor) for seg in segs]
-    return segs
+        end.append(Segment(*_check_glyph(check, st)))
+        cells += 1
+    return end, cells
+
+
+def _on_cursor(segs: list[Segment], cursor: Style) -> list[Segment]:
+    """A row under the cursor: each segment on the cursor's background."""
+    return [Segment(seg.text, (seg.style or Style()) + cursor) for seg in segs]
 
 
 def _check_glyph(f: Finding, st: Styles) -> tuple[str, Style]:
@@ -411,23 +426,60 @@ def progress_segments(
     stops where it was last heard, without an ETA."""
     w = col.width
     t = model.telemetry.get(col.robot)
-    has = t is not None and t.skill == s.id
+    pct = t.progress if t is not None and t.skill == s.id else None
     if fresh.stale and s.status in (Status.RUNNING, Status.PAUSED):
-        return _stale_progress(t.progress if t is not None and has else None, w, st, fresh)
-    if s.status == Status.FAILURE:
-        return [Segment(fit("   ↳ " + s.status_info, w), st["failure"])]
-    if s.status == Status.SYNCHWAITING:
-        waiting = wait_text(model, s)
-        return [Segment(fit("   " + waiting, w), st["synchwaiting"])]
-    pct = t.progress if t is not None and has else None
-    if s.status == Status.PAUSED:
-        return [Segment(fit(_paused_text(pct, s.status_info), w), st["paused"])]
+        return _stale_progress(pct, w, st, fresh)
+    said = _SAID_UNDER.get(s.status)
+    if said is not None:
+        return said(model, s, pct, w, st)
+    return _running(t, pct, s.status_info, w, st, fresh)
+
+
+def _running(
+    t: Telemetry | None, pct: float | None, info: str, w: int, st: Styles, fresh: Freshness
+) -> list[Segment]:
+    """A running skill's bar and ETA; without telemetry of it, 'running'."""
     if t is None or pct is None:
-        text = "   running" + (f" · {s.status_info}" if s.status_info else "")
+        text = "   running" + (f" · {info}" if info else "")
         return [Segment(fit(text, w), st["dim"])]
     # telemetry comes on change: the ETA counts down from the last sample (as old as `fresh`)
     eta_s = max(0.0, t.eta_s - (fresh.age_s or 0.0)) if t.eta_s is not None else None
     return _progress_bar(pct, eta_s, w, st)
+
+
+_Under = Callable[[ConsoleModel, SkillInstance, float | None, int, Styles], list[Segment]]
+
+
+def _failed(
+    model: ConsoleModel, s: SkillInstance, pct: float | None, w: int, st: Styles
+) -> list[Segment]:
+    return [Segment(fit("   ↳ " + s.status_info, w), st["failure"])]
+
+
+def _waiting(
+    model: ConsoleModel, s: SkillInstance, pct: float | None, w: int, st: Styles
+) -> list[Segment]:
+    return [Segment(fit("   " + wait_text(model, s), w), st["synchwaiting"])]
+
+
+def _paused(
+    model: ConsoleModel, s: SkillInstance, pct: float | None, w: int, st: Styles
+) -> list[Segment]:
+    text = (
+        "   paused"
+        + (f" at {int(pct * 100)}%" if pct is not None else "")
+        + (f" · {s.status_info}" if s.status_info else "")
+    )
+    return [Segment(fit(text, w), st["paused"])]
+
+
+# the progress line of a skill that does not progress: why it failed, what it
+# waits for, where it paused (a running skill's: its bar)
+_SAID_UNDER: dict[Status, _Under] = {
+    Status.FAILURE: _failed,
+    Status.SYNCHWAITING: _waiting,
+    Status.PAUSED: _paused,
+}
 
 
 def _progress_bar(pct: float, eta_s: float | None, w: int, st: Styles) -> list[Segment]:
@@ -448,14 +500,6 @@ def _progress_bar(pct: float, eta_s: float | None, w: int, st: Styles) -> list[S
         Segment("▏", st["dim"]),
         Segment(fit(label, w - 3 - bar_w - 2), st["base"]),
     ]
-
-
-def _paused_text(pct: float | None, info: str) -> str:
-    return (
-        "   paused"
-        + (f" at {int(pct * 100)}%" if pct is not None else "")
-        + (f" · {info}" if info else "")
-    )
 
 
 def _stale_progress(pct: float | None, w: int, st: Styles, fresh: Freshness) -> list[Segment]:
@@ -517,27 +561,35 @@ def _partner_doing(model: ConsoleModel, robot: str, sid: str) -> str:
 
 def barrier_wait_text(model: ConsoleModel, s: SkillInstance) -> str:
     """What a robot waiting at a barrier waits for; offline partners first."""
-    m = model
-    bid = m.barrier_of(s.id)
-    if bid is None or m.mission is None:
+    bid = model.barrier_of(s.id)
+    if bid is None or model.mission is None:
         return s.status_info or "waiting at a barrier"
-    offline: list[str] = []
-    waiting: list[str] = []
-    for sid in m.mission.barriers[bid].skills:
-        robot = m.owner(sid)
-        if sid == s.id or robot is None:
-            continue
-        info = m.robots.get(robot)
-        found = m.find(sid)
-        if info is None or not info.online:
-            offline.append(
-                f"{robot} OFFLINE"
-                + (f" {m.clock.stamp_text(info.since)}" if info and info.since else "")
-            )
-        elif found and found[2].status != Status.SYNCHWAITING:
-            waiting.append(robot)
+    offline, waiting = _absent(model, model.mission.barriers[bid].skills, s.id)
     if offline:
         return f"{bid}: " + ", ".join(offline)
     if waiting:
         return f"{bid}: waiting for " + ", ".join(waiting)
     return f"{bid}: all partners ready"
+
+
+def _absent(model: ConsoleModel, skills: list[str], own: str) -> tuple[list[str], list[str]]:
+    """A barrier's partners not there: the offline ones ('lander OFFLINE
+    12:30'), the robots whose skill has not reached it yet."""
+    offline: list[str] = []
+    waiting: list[str] = []
+    for sid in skills:
+        robot = model.owner(sid)
+        if sid == own or robot is None:
+            continue
+        said = _offline_text(model, robot)
+        if said:
+            offline.append(said)
+        elif not _arrived(model, sid):
+            waiting.append(robot)
+    return offline, waiting
+
+
+def _arrived(model: ConsoleModel, sid: str) -> bool:
+    """Whether a partner's skill waits at the barrier (or is gone: nothing to wait for)."""
+    found = model.find(sid)
+    return not found or found[2].status == Status.SYNCHWAITING
