@@ -8,7 +8,7 @@ decides which lines to draw and where the cursor is.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from rich.cells import cell_len, set_cell_size
@@ -59,18 +59,30 @@ class Column:
             return self.ids[self.idle[0]]
         return self.ids[-1] if self.ids else None
 
+    def place_lines(self, sync_h: int) -> None:
+        """Where each skill's row is (`line_of`), the plan starting under the divider."""
+        self.line_of = {}
+        for line, (i, kind) in enumerate(self.sync):
+            if kind == "row":
+                self.line_of[self.ids[i]] = line
+        for k, i in enumerate(self.idle):
+            self.line_of[self.ids[i]] = sync_h + 1 + k
+
     def line_key(self, line: int, sync_h: int) -> object:
         """What a content line shows (compared, never drawn)."""
         if line < sync_h:
-            if line < len(self.sync_keys):
-                return self.sync_keys[line]
-            return "blank" if line or self.sync else "hint"
+            return _section_key(self.sync_keys, line, bool(self.sync))
         if line == sync_h:
             return "divider"
-        k = line - sync_h - 1
-        if k < len(self.idle_keys):
-            return self.idle_keys[k]
-        return "blank" if k or self.idle else "hint"
+        return _section_key(self.idle_keys, line - sync_h - 1, bool(self.idle))
+
+
+def _section_key(keys: Sequence[object], k: int, filled: bool) -> object:
+    """What the k-th line of a section shows: a skill's key, else a blank
+    line or, first in an empty section, its hint."""
+    if k < len(keys):
+        return keys[k]
+    return "blank" if k or filled else "hint"
 
 
 def build_column(model: ConsoleModel, robot: str, static: bool) -> Column:

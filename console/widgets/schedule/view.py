@@ -126,40 +126,51 @@ class ScheduleView(ScrollView, can_focus=True):
         """Re-lay out the columns of `robots` (all when None) and repaint."""
         order = self.model.robot_order()
         if robots is None or [c.robot for c in self.columns] != order:
-            self.columns = [
-                build_column(self.model, r, self.model.robot_kind(r) == "static") for r in order
-            ]
-            self._col_index = {c.robot: i for i, c in enumerate(self.columns)}
-            if len(self.painter.summaries) > 50_000:
-                self.painter.summaries.clear()
+            self._build(order)
+            self._relayout()
         else:
             before = (self.sync_h, self.total_lines)
-            changed: list[tuple[Column, Column]] = []
-            for r in robots:
-                i = self._col_index.get(r)
-                if i is not None:
-                    old = self.columns[i]
-                    self.columns[i] = build_column(self.model, r, old.static)
-                    changed.append((old, self.columns[i]))
+            changed = self._rebuild_columns(robots)
             self._relayout([new for _, new in changed])
             if self.cursor_id in self.columns[self.cursor_col].line_of:
-                # repaint only the visible lines that show something else now:
-                # in the changed columns, and across all columns from the
-                # divider down when the synchronized section grew or shrank
-                for old, new in changed:
-                    self._refresh_changed_lines(old, new, before[0])
-                if self.sync_h != before[0]:
-                    start = min(self.sync_h, before[0])
-                    self._refresh_content_lines(
-                        0, self.size.width, range(start, max(self.total_lines, before[1]))
-                    )
+                self._refresh_rebuilt(changed, *before)
                 return
-            self._keep_cursor()
-            self.refresh()
-            return
-        self._relayout()
         self._keep_cursor()
         self.refresh()
+
+    def _build(self, order: list[str]) -> None:
+        """Every robot's column, in this order."""
+        self.columns = [
+            build_column(self.model, r, self.model.robot_kind(r) == "static") for r in order
+        ]
+        self._col_index = {c.robot: i for i, c in enumerate(self.columns)}
+        if len(self.painter.summaries) > 50_000:
+            self.painter.summaries.clear()
+
+    def _rebuild_columns(self, robots: set[str]) -> list[tuple[Column, Column]]:
+        """These robots' columns built again: (before, now) of each."""
+        changed: list[tuple[Column, Column]] = []
+        for r in robots:
+            i = self._col_index.get(r)
+            if i is not None:
+                old = self.columns[i]
+                self.columns[i] = build_column(self.model, r, old.static)
+                changed.append((old, self.columns[i]))
+        return changed
+
+    def _refresh_rebuilt(
+        self, changed: list[tuple[Column, Column]], old_sync_h: int, old_total: int
+    ) -> None:
+        """Repaint only the visible lines that show something else now: in the
+        changed columns, and across all columns from the divider down when the
+        synchronized section grew or shrank."""
+        for old, new in changed:
+            self._refresh_changed_lines(old, new, old_sync_h)
+        if self.sync_h != old_sync_h:
+            start = min(self.sync_h, old_sync_h)
+            self._refresh_content_lines(
+                0, self.size.width, range(start, max(self.total_lines, old_total))
+            )
 
     def refresh_uplinking(self, robot: str) -> None:
         """A second passed: the header's and the rows' command ages."""
@@ -218,30 +229,30 @@ class ScheduleView(ScrollView, can_focus=True):
         self.total_lines = self.sync_h + 1 + idle_h
         self._place_columns()
         for c in self.columns if only is None else only:
-            c.line_of = {}
-            for line, (i, kind) in enumerate(c.sync):
-                if kind == "row":
-                    c.line_of[c.ids[i]] = line
-            for k, i in enumerate(c.idle):
-                c.line_of[c.ids[i]] = self.sync_h + 1 + k
+            c.place_lines(self.sync_h)
 
     def _place_columns(self) -> None:
         avail = max(self.scrollable_content_region.width, 20) if self.is_mounted else 80
         self._last_width = avail
-        statics = [c for c in self.columns if c.static]
-        dyn = [c for c in self.columns if not c.static]
-        static_w = STATIC_W if not self.expand_static else MIN_W + 6
-        if dyn:
-            w = (avail + 1 - len(statics) * (static_w + 1)) // len(dyn) - 1
-            w = max(MIN_W, min(MAX_W, w))
-        else:
-            w = MAX_W
+        static_w, w = self._widths(avail)
         x = 0
         for c in self.columns:
             c.x = x
             c.width = static_w if c.static else w
             x += c.width + 1
-        size = Size(max(x - 1, 1), HEADER_H + self.total_lines)
+        self._set_virtual_size(Size(max(x - 1, 1), HEADER_H + self.total_lines))
+
+    def _widths(self, avail: int) -> tuple[int, int]:
+        """A static column's width, and a dynamic one's: they share what the statics leave."""
+        statics = sum(1 for c in self.columns if c.static)
+        dyn = len(self.columns) - statics
+        static_w = STATIC_W if not self.expand_static else MIN_W + 6
+        if not dyn:
+            return static_w, MAX_W
+        w = (avail + 1 - statics * (static_w + 1)) // dyn - 1
+        return static_w, max(MIN_W, min(MAX_W, w))
+
+    def _set_virtual_size(self, size: Size) -> None:
         old = self.virtual_size
         if size == old:
             return
@@ -315,18 +326,10 @@ class ScheduleView(ScrollView, can_focus=True):
             return
         region = self.scrollable_content_region
         col = self.columns[self.cursor_col]
-        x = self.scroll_x
-        if col.x < x:
-            x = col.x
-        elif col.x + col.width > x + region.width:
-            x = col.x + col.width - region.width
+        x = _scrolled_to(self.scroll_x, col.x, col.width, region.width)
         line = self._cursor_line()
         rows = max(1, region.height - HEADER_H)
-        y = self.scroll_y
-        if line < y:
-            y = line
-        elif line >= y + rows:
-            y = line - rows + 1
+        y = _scrolled_to(self.scroll_y, line, 1, rows)
         if line <= self.sync_h and self.sync_h < rows and y > 0 and line - y < 2:
             y = max(0, line - 1)
         self.scroll_to(x=x, y=y, animate=False, immediate=True)
@@ -436,3 +439,12 @@ class ScheduleView(ScrollView, can_focus=True):
         """(columns cut or hidden on the left, on the right) of the view now."""
         x0 = int(self.scroll_x)
         return hidden_robots(self.columns, x0, x0 + self.scrollable_content_region.width)
+
+
+def _scrolled_to(offset: float, start: int, length: int, span: int) -> float:
+    """The scroll offset nearest `offset` that shows [start, start + length) in `span` cells."""
+    if start < offset:
+        return start
+    if start + length > offset + span:
+        return start + length - span
+    return offset
