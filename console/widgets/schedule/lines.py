@@ -19,7 +19,7 @@ from textual.strip import Strip
 from backend.core.contingency import after_tags, awaited_by
 from backend.core.model import ACTIVE, SkillInstance, Status
 from backend.core.plan.checks import Finding
-from backend.protocol.messages import Telemetry
+from backend.protocol.messages import RobotInfo, Telemetry
 from console.state import link
 from console.state.contact import CONTACT_GLYPH, header_contact, out_of_contact
 from console.state.freshness import FRESH, Freshness
@@ -228,28 +228,33 @@ def _offline_since(robot: str, clock: str, width: int) -> str:
 
 def _presence(h: Head) -> tuple[str, Style]:
     """The robot's presence and its style (a compact column: only the glyph)."""
-    st = h.st
     if retired(h.model, h.col.robot):  # no new syncs; its plan awaits "give to…"
-        return ("⊘" if h.compact else "⊘ retired"), st["offline"]
+        return ("⊘" if h.compact else "⊘ retired"), h.st["offline"]
     info = h.model.robots.get(h.col.robot)
     if info is None:
-        pres, pst = "? unknown", st["unknown"]
+        pres, pst = "? unknown", h.st["unknown"]
     elif info.online:
-        said = header_contact(info, h.model.clock, h.col.width - cell_len(h.col.robot) - 1)
-        if out_of_contact(info):  # never "online" while its window is closed
-            pres, pst = said or CONTACT_GLYPH, st["stale-head"]
-        else:
-            pres, pst = said or "● online", st["online"]
-    elif info.since is None:
-        pres, pst = "✕ offline", st["offline"]
+        pres, pst = _online(h, info)
     else:
-        pres, pst = (
-            _offline_since(h.col.robot, h.model.clock.stamp_text(info.since), h.col.width),
-            st["offline"],
-        )
+        pres, pst = _offline(h, info), h.st["offline"]
     if h.compact:
         pres = pres[0] if info is not None and info.online else "✕"
     return pres, pst
+
+
+def _online(h: Head, info: RobotInfo) -> tuple[str, Style]:
+    """An online robot's contact ('● online'; never so while its window is closed)."""
+    said = header_contact(info, h.model.clock, h.col.width - cell_len(h.col.robot) - 1)
+    if out_of_contact(info):
+        return said or CONTACT_GLYPH, h.st["stale-head"]
+    return said or "● online", h.st["online"]
+
+
+def _offline(h: Head, info: RobotInfo) -> str:
+    """'✕ offline', since when if known, as it fits beside the name."""
+    if info.since is None:
+        return "✕ offline"
+    return _offline_since(h.col.robot, h.model.clock.stamp_text(info.since), h.col.width)
 
 
 def _name_line(h: Head) -> list[Segment]:
