@@ -79,21 +79,15 @@ class TimelineView(Widget):
         """Lay out the lanes of `order` from `top` in `win`, then repaint."""
         self.win, self.order, self.top = win, order, top
         plan, clock = self.model.plan, self.model.clock
-        fc, mission = plan.forecast, self.model.mission
+        fc = plan.forecast
         now = clock.of_ts(fc.now) if fc is not None else win.t0
         reach = now + clock.span(plan.link_delay_s)
         shown = order[top : top + self.lanes_shown]
         sel = self.model.selection.skill
-        lanes = (
-            {r: tl.bars(mission, fc, r, clock, win.t0, win.t1, win.dt, sel) for r in shown}
-            if mission
-            else {}
-        )
+        lanes = self._bars(shown, win, sel)
         critical = frozenset(fc.critical_path()) if fc is not None else frozenset()
         links = tl.links(lanes, shown, win)
-        at_sync: dict[str, list[tuple[float, float]]] = {}  # robot -> spans planned at sync
-        for sid, span in plan.planned.items():
-            at_sync.setdefault(self.model.owner(sid) or "", []).append(span)
+        at_sync = self._planned_at_sync()
         self.rows, self.row_bars = [], {}
         for i, robot in enumerate(shown):
             self.row_bars[len(self.rows)] = lanes.get(robot, [])
@@ -104,6 +98,20 @@ class TimelineView(Widget):
             self.rows.append(tl.planned(spacer, at_sync.get(robot, ()), win))
         self.axis_rows = tl.axis(win, now, clock)
         self.refresh()
+
+    def _bars(self, shown: list[str], win: tl.Window, sel: str | None) -> dict[str, list[tl.Bar]]:
+        """Each shown robot's bars in the window (none before there is a mission)."""
+        mission, fc, clock = self.model.mission, self.model.plan.forecast, self.model.clock
+        if not mission:
+            return {}
+        return {r: tl.bars(mission, fc, r, clock, win.t0, win.t1, win.dt, sel) for r in shown}
+
+    def _planned_at_sync(self) -> dict[str, list[tuple[float, float]]]:
+        """Robot -> the spans its skills were planned at when synchronized."""
+        at_sync: dict[str, list[tuple[float, float]]] = {}
+        for sid, span in self.model.plan.planned.items():
+            at_sync.setdefault(self.model.owner(sid) or "", []).append(span)
+        return at_sync
 
     def notify_style_update(self) -> None:
         self._looks = {}  # the theme changed
