@@ -309,8 +309,20 @@ def _link_words(h: Head) -> list[tuple[str, Style]]:
 
 
 def _spread(parts: list[tuple[str, Style]], width: int, base: Style) -> list[Segment]:
-    """Parts two spaces apart, in order of importance: the last ones cut to
-    the room left (8 cells at least: a word and its value) or left out until the rest fits."""
+    """Parts two spaces apart in `width` cells, as many as fit (`_fitting`)."""
+    shown = _fitting(parts, width)
+    segs: list[Segment] = []
+    for i, (text, style) in enumerate(shown):
+        if i:
+            segs.append(Segment("  ", base))
+        segs.append(Segment(fit(text, width) if cell_len(text) > width else text, style))
+    used = sum(cell_len(seg.text) for seg in segs)
+    return [*segs, Segment(" " * max(0, width - used), shown[-1][1])]
+
+
+def _fitting(parts: list[tuple[str, Style]], width: int) -> list[tuple[str, Style]]:
+    """Parts in order of importance: the last ones cut to the room left (8
+    cells at least: a word and its value) or left out until the rest fits."""
 
     def total(ps: list[tuple[str, Style]]) -> int:
         return sum(cell_len(p) for p, _ in ps) + 2 * (len(ps) - 1)
@@ -322,30 +334,35 @@ def _spread(parts: list[tuple[str, Style]], width: int, base: Style) -> list[Seg
             shown[-1] = (fit(shown[-1][0], room), shown[-1][1])
             break
         shown.pop()
-    segs: list[Segment] = []
-    for i, (text, style) in enumerate(shown):
-        if i:
-            segs.append(Segment("  ", base))
-        segs.append(Segment(fit(text, width) if cell_len(text) > width else text, style))
-    used = sum(cell_len(seg.text) for seg in segs)
-    return [*segs, Segment(" " * max(0, width - used), shown[-1][1])]
+    return shown
 
 
 def _activity_line(h: Head) -> list[Segment]:
     if h.compact:
-        n = len(h.col.ids)
-        if h.fresh.stale:
-            return [Segment(fit(h.fresh.as_of(), h.col.width), h.st["stale-head"])]
-        return [Segment(fit(f"{n} skill{'s' if n != 1 else ''}", h.col.width), h.st["dim"])]
+        return _skill_count(h)
     activity = h.model.activity_text(h.col.robot)
-    if h.fresh.stale:  # as of when: first, so it is never cut; then what it probably
-        w = h.col.width  # does now (the now-cast), else what it was doing then
-        ago = h.fresh.ago()
-        as_of = fit(ago, w) if cell_len(ago) > w else ago
-        probably = probably_doing(h.model, h.col.robot)
-        rest = fit(f" {probably}" if probably else f": {activity}", w - cell_len(as_of))
-        return [Segment(as_of, h.st["stale-head"]), Segment(rest, h.st["stale"])]
+    if h.fresh.stale:
+        return _stale_activity(h, activity)
     return [Segment(fit(activity, h.col.width), h.st["dim"])]
+
+
+def _skill_count(h: Head) -> list[Segment]:
+    """A compact column's activity line: how many skills (as of when, if stale)."""
+    if h.fresh.stale:
+        return [Segment(fit(h.fresh.as_of(), h.col.width), h.st["stale-head"])]
+    n = len(h.col.ids)
+    return [Segment(fit(f"{n} skill{'s' if n != 1 else ''}", h.col.width), h.st["dim"])]
+
+
+def _stale_activity(h: Head, activity: str) -> list[Segment]:
+    """As of when: first, so it is never cut; then what the robot probably
+    does now (the now-cast), else what it was doing then."""
+    w = h.col.width
+    ago = h.fresh.ago()
+    as_of = fit(ago, w) if cell_len(ago) > w else ago
+    probably = probably_doing(h.model, h.col.robot)
+    rest = fit(f" {probably}" if probably else f": {activity}", w - cell_len(as_of))
+    return [Segment(as_of, h.st["stale-head"]), Segment(rest, h.st["stale"])]
 
 
 def _rule_line(h: Head) -> list[Segment]:
