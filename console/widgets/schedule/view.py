@@ -340,19 +340,12 @@ class ScheduleView(ScrollView, can_focus=True):
         if dx:
             line = self._cursor_line()
             self.cursor_col = min(max(self.cursor_col + dx, 0), len(self.columns) - 1)
-            col = self.columns[self.cursor_col]
-            if col.line_of:
-                self.cursor_id = min(
-                    col.line_of, key=lambda sid: (abs(col.line_of[sid] - line), col.line_of[sid])
-                )
-            else:
-                self.cursor_id = None
+            self.cursor_id = _nearest(self.columns[self.cursor_col], line)
         elif dy:
             col = self.columns[self.cursor_col]
             if not col.ids:
                 return
-            i = col.ids.index(self.cursor_id) if self.cursor_id in col.ids else 0
-            self.cursor_id = col.ids[min(max(i + dy, 0), len(col.ids) - 1)]
+            self.cursor_id = _stepped(col, self.cursor_id, dy)
         self._scroll_cursor_visible()
         self.refresh()
         self._post_cursor()
@@ -374,8 +367,7 @@ class ScheduleView(ScrollView, can_focus=True):
         col = self.columns[self.cursor_col]
         if not col.ids:
             return
-        i = col.ids.index(self.cursor_id) if self.cursor_id in col.ids else 0
-        self.cursor_id = col.ids[min(max(i + direction * rows, 0), len(col.ids) - 1)]
+        self.cursor_id = _stepped(col, self.cursor_id, direction * rows)
         self._scroll_cursor_visible()
         self.refresh()
         self._post_cursor()
@@ -448,3 +440,16 @@ def _scrolled_to(offset: float, start: int, length: int, span: int) -> float:
     if start + length > offset + span:
         return start + length - span
     return offset
+
+
+def _nearest(col: Column, line: int) -> str | None:
+    """The skill of `col` whose row is nearest `line` (the upper one of two), None: it has none."""
+    if not col.line_of:
+        return None
+    return min(col.line_of, key=lambda sid: (abs(col.line_of[sid] - line), col.line_of[sid]))
+
+
+def _stepped(col: Column, skill_id: str | None, n: int) -> str:
+    """The skill n rows from `skill_id` in `col` (from the first when not in it), clamped."""
+    i = col.ids.index(skill_id) if skill_id in col.ids else 0
+    return col.ids[min(max(i + n, 0), len(col.ids) - 1)]
