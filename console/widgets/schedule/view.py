@@ -285,14 +285,18 @@ class ScheduleView(ScrollView, can_focus=True):
         if self.cursor_id is not None and self.cursor_id in col.line_of:
             return
         # the skill moved to another robot's column? (not possible today) or was deleted
-        if self.cursor_id is not None:
-            owner = self.model.owner(self.cursor_id)
-            if owner is not None and owner in self._col_index:
-                self.cursor_col = self._col_index[owner]
-                return
+        moved = self._column_with(self.cursor_id)
+        if moved is not None:
+            self.cursor_col = moved
+            return
         # prefer the first unsynchronized skill, else the active one, else the last
         self.cursor_id = col.resting_id()
         self._post_cursor()
+
+    def _column_with(self, skill_id: str | None) -> int | None:
+        """The index of the column of the robot that has this skill (None: none has)."""
+        owner = self.model.owner(skill_id) if skill_id is not None else None
+        return self._col_index.get(owner) if owner is not None else None
 
     def _post_cursor(self) -> None:
         self.post_message(self.CursorMoved(self.cursor_robot, self.cursor_id))
@@ -300,11 +304,10 @@ class ScheduleView(ScrollView, can_focus=True):
     def select(self, skill_id: str | None = None, robot: str | None = None) -> None:
         """Put the cursor on a skill (or a robot's column)."""
         if skill_id is not None:
-            owner = self.model.owner(skill_id)
-            if owner is None or owner not in self._col_index:
+            i = self._column_with(skill_id)
+            if i is None:
                 return
-            self.cursor_col = self._col_index[owner]
-            self.cursor_id = skill_id
+            self.cursor_col, self.cursor_id = i, skill_id
         elif robot is not None and robot in self._col_index:
             self.cursor_col = self._col_index[robot]
             col = self.columns[self.cursor_col]
