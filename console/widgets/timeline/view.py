@@ -146,30 +146,39 @@ class TimelineView(Widget):
         st = {"base": self._look(()), "name": self._look(("name",))}
         st["name-selected"] = self._look(("name-selected",))
         w = self.size.width
-        if y < AXIS_H:
-            cells = self.axis_rows[y]
-            name = ""
-        else:
-            k = y - AXIS_H
-            if k >= len(self.rows):
-                return Strip([Segment(" " * w, st["base"])], w)
-            cells = self.rows[k]
-            name = self.order[self.top + k // 2] if k % 2 == 0 else ""
+        shown = self._line(y)
+        if shown is None:
+            return Strip([Segment(" " * w, st["base"])], w)
+        cells, name = shown
         owner = self.model.owner(self.model.selection.skill or "")
         nst = st["name-selected"] if name and name == owner else st["name"]
         segs = [Segment(tl_name(name, self.name_w), nst), *self._segments(cells[: self.lanes_w])]
         return Strip(segs).adjust_cell_length(w, st["base"])
+
+    def _line(self, y: int) -> tuple[list[tl.Cell], str] | None:
+        """Screen row y's cells and the robot named beside them ('' on the
+        axis and under a lane); None below the last lane."""
+        if y < AXIS_H:
+            return self.axis_rows[y], ""
+        k = y - AXIS_H
+        if k >= len(self.rows):
+            return None
+        return self.rows[k], self.order[self.top + k // 2] if k % 2 == 0 else ""
 
     def on_click(self, event: events.Click) -> None:
         k = event.y - AXIS_H
         x = event.x - self.name_w
         if self.win is None or k < 0 or k % 2 or x < 0:
             return
-        t = self.win.t0 + (x + 0.5) * self.win.dt
-        for bar in self.row_bars.get(k, []):
-            if bar.start - self.win.dt <= t <= bar.end + self.win.dt / 2:
-                self.post_message(self.Selected(bar.id))
-                return
+        bar = self._bar_at(k, self.win.t0 + (x + 0.5) * self.win.dt, self.win.dt)
+        if bar is not None:
+            self.post_message(self.Selected(bar.id))
+
+    def _bar_at(self, k: int, t: float, dt: float) -> tl.Bar | None:
+        """The bar of lane line k at time t, a cell's width of slack on either side."""
+        return next(
+            (b for b in self.row_bars.get(k, []) if b.start - dt <= t <= b.end + dt / 2), None
+        )
 
 
 def tl_name(name: str, width: int) -> str:
