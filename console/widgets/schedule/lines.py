@@ -101,10 +101,16 @@ def build_column(model: ConsoleModel, robot: str, static: bool) -> Column:
         else:
             col.sync.append((i, "row"))
             col.sync_keys.append((s.id, "row", s.rev, up, tag))
-            if s.status in ACTIVE or (s.status == Status.FAILURE and s.status_info):
+            if _has_progress_line(s):
                 col.sync.append((i, "progress"))
                 col.sync_keys.append((s.id, "progress", s.rev, "", ""))
     return col
+
+
+def _has_progress_line(s: SkillInstance) -> bool:
+    """An active skill has a line under its row (its progress, what it waits
+    for), a failed one when it says why."""
+    return s.status in ACTIVE or (s.status == Status.FAILURE and bool(s.status_info))
 
 
 class _Awaited:
