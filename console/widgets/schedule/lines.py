@@ -8,7 +8,7 @@ decides which lines to draw and where the cursor is.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from rich.cells import cell_len, set_cell_size
@@ -19,6 +19,7 @@ from textual.strip import Strip
 from backend.core.contingency import after_tags, awaited_by
 from backend.core.model import ACTIVE, SkillInstance, Status
 from backend.core.plan.checks import Finding
+from backend.protocol.messages import RobotInfo, Telemetry
 from console.state import link
 from console.state.contact import CONTACT_GLYPH, header_contact, out_of_contact
 from console.state.freshness import FRESH, Freshness
@@ -58,18 +59,30 @@ class Column:
             return self.ids[self.idle[0]]
         return self.ids[-1] if self.ids else None
 
+    def place_lines(self, sync_h: int) -> None:
+        """Where each skill's row is (`line_of`), the plan starting under the divider."""
+        self.line_of = {}
+        for line, (i, kind) in enumerate(self.sync):
+            if kind == "row":
+                self.line_of[self.ids[i]] = line
+        for k, i in enumerate(self.idle):
+            self.line_of[self.ids[i]] = sync_h + 1 + k
+
     def line_key(self, line: int, sync_h: int) -> object:
         """What a content line shows (compared, never drawn)."""
         if line < sync_h:
-            if line < len(self.sync_keys):
-                return self.sync_keys[line]
-            return "blank" if line or self.sync else "hint"
+            return _section_key(self.sync_keys, line, bool(self.sync))
         if line == sync_h:
             return "divider"
-        k = line - sync_h - 1
-        if k < len(self.idle_keys):
-            return self.idle_keys[k]
-        return "blank" if k or self.idle else "hint"
+        return _section_key(self.idle_keys, line - sync_h - 1, bool(self.idle))
+
+
+def _section_key(keys: Sequence[object], k: int, filled: bool) -> object:
+    """What the k-th line of a section shows: a skill's key, else a blank
+    line or, first in an empty section, its hint."""
+    if k < len(keys):
+        return keys[k]
+    return "blank" if k or filled else "hint"
 
 
 def build_column(model: ConsoleModel, robot: str, static: bool) -> Column:
@@ -88,10 +101,16 @@ def build_column(model: ConsoleModel, robot: str, static: bool) -> Column:
         else:
             col.sync.append((i, "row"))
             col.sync_keys.append((s.id, "row", s.rev, up, tag))
-            if s.status in ACTIVE or (s.status == Status.FAILURE and s.status_info):
+            if _has_progress_line(s):
                 col.sync.append((i, "progress"))
                 col.sync_keys.append((s.id, "progress", s.rev, "", ""))
     return col
+
+
+def _has_progress_line(s: SkillInstance) -> bool:
+    """An active skill has a line under its row (its progress, what it waits
+    for), a failed one when it says why."""
+    return s.status in ACTIVE or (s.status == Status.FAILURE and bool(s.status_info))
 
 
 class _Awaited:
@@ -215,28 +234,33 @@ def _offline_since(robot: str, clock: str, width: int) -> str:
 
 def _presence(h: Head) -> tuple[str, Style]:
     """The robot's presence and its style (a compact column: only the glyph)."""
-    st = h.st
     if retired(h.model, h.col.robot):  # no new syncs; its plan awaits "give to…"
-        return ("⊘" if h.compact else "⊘ retired"), st["offline"]
+        return ("⊘" if h.compact else "⊘ retired"), h.st["offline"]
     info = h.model.robots.get(h.col.robot)
     if info is None:
-        pres, pst = "? unknown", st["unknown"]
+        pres, pst = "? unknown", h.st["unknown"]
     elif info.online:
-        said = header_contact(info, h.model.clock, h.col.width - cell_len(h.col.robot) - 1)
-        if out_of_contact(info):  # never "online" while its window is closed
-            pres, pst = said or CONTACT_GLYPH, st["stale-head"]
-        else:
-            pres, pst = said or "● online", st["online"]
-    elif info.since is None:
-        pres, pst = "✕ offline", st["offline"]
+        pres, pst = _online(h, info)
     else:
-        pres, pst = (
-            _offline_since(h.col.robot, h.model.clock.stamp_text(info.since), h.col.width),
-            st["offline"],
-        )
+        pres, pst = _offline(h, info), h.st["offline"]
     if h.compact:
         pres = pres[0] if info is not None and info.online else "✕"
     return pres, pst
+
+
+def _online(h: Head, info: RobotInfo) -> tuple[str, Style]:
+    """An online robot's contact ('● online'; never so while its window is closed)."""
+    said = header_contact(info, h.model.clock, h.col.width - cell_len(h.col.robot) - 1)
+    if out_of_contact(info):
+        return said or CONTACT_GLYPH, h.st["stale-head"]
+    return said or "● online", h.st["online"]
+
+
+def _offline(h: Head, info: RobotInfo) -> str:
+    """'✕ offline', since when if known, as it fits beside the name."""
+    if info.since is None:
+        return "✕ offline"
+    return _offline_since(h.col.robot, h.model.clock.stamp_text(info.since), h.col.width)
 
 
 def _name_line(h: Head) -> list[Segment]:
@@ -291,8 +315,20 @@ def _link_words(h: Head) -> list[tuple[str, Style]]:
 
 
 def _spread(parts: list[tuple[str, Style]], width: int, base: Style) -> list[Segment]:
-    """Parts two spaces apart, in order of importance: the last ones cut to
-    the room left (8 cells at least: a word and its value) or left out until the rest fits."""
+    """Parts two spaces apart in `width` cells, as many as fit (`_fitting`)."""
+    shown = _fitting(parts, width)
+    segs: list[Segment] = []
+    for i, (text, style) in enumerate(shown):
+        if i:
+            segs.append(Segment("  ", base))
+        segs.append(Segment(fit(text, width) if cell_len(text) > width else text, style))
+    used = sum(cell_len(seg.text) for seg in segs)
+    return [*segs, Segment(" " * max(0, width - used), shown[-1][1])]
+
+
+def _fitting(parts: list[tuple[str, Style]], width: int) -> list[tuple[str, Style]]:
+    """Parts in order of importance: the last ones cut to the room left (8
+    cells at least: a word and its value) or left out until the rest fits."""
 
     def total(ps: list[tuple[str, Style]]) -> int:
         return sum(cell_len(p) for p, _ in ps) + 2 * (len(ps) - 1)
@@ -304,30 +340,35 @@ def _spread(parts: list[tuple[str, Style]], width: int, base: Style) -> list[Seg
             shown[-1] = (fit(shown[-1][0], room), shown[-1][1])
             break
         shown.pop()
-    segs: list[Segment] = []
-    for i, (text, style) in enumerate(shown):
-        if i:
-            segs.append(Segment("  ", base))
-        segs.append(Segment(fit(text, width) if cell_len(text) > width else text, style))
-    used = sum(cell_len(seg.text) for seg in segs)
-    return [*segs, Segment(" " * max(0, width - used), shown[-1][1])]
+    return shown
 
 
 def _activity_line(h: Head) -> list[Segment]:
     if h.compact:
-        n = len(h.col.ids)
-        if h.fresh.stale:
-            return [Segment(fit(h.fresh.as_of(), h.col.width), h.st["stale-head"])]
-        return [Segment(fit(f"{n} skill{'s' if n != 1 else ''}", h.col.width), h.st["dim"])]
+        return _skill_count(h)
     activity = h.model.activity_text(h.col.robot)
-    if h.fresh.stale:  # as of when: first, so it is never cut; then what it probably
-        w = h.col.width  # does now (the now-cast), else what it was doing then
-        ago = h.fresh.ago()
-        as_of = fit(ago, w) if cell_len(ago) > w else ago
-        probably = probably_doing(h.model, h.col.robot)
-        rest = fit(f" {probably}" if probably else f": {activity}", w - cell_len(as_of))
-        return [Segment(as_of, h.st["stale-head"]), Segment(rest, h.st["stale"])]
+    if h.fresh.stale:
+        return _stale_activity(h, activity)
     return [Segment(fit(activity, h.col.width), h.st["dim"])]
+
+
+def _skill_count(h: Head) -> list[Segment]:
+    """A compact column's activity line: how many skills (as of when, if stale)."""
+    if h.fresh.stale:
+        return [Segment(fit(h.fresh.as_of(), h.col.width), h.st["stale-head"])]
+    n = len(h.col.ids)
+    return [Segment(fit(f"{n} skill{'s' if n != 1 else ''}", h.col.width), h.st["dim"])]
+
+
+def _stale_activity(h: Head, activity: str) -> list[Segment]:
+    """As of when: first, so it is never cut; then what the robot probably
+    does now (the now-cast), else what it was doing then."""
+    w = h.col.width
+    ago = h.fresh.ago()
+    as_of = fit(ago, w) if cell_len(ago) > w else ago
+    probably = probably_doing(h.model, h.col.robot)
+    rest = fit(f" {probably}" if probably else f": {activity}", w - cell_len(as_of))
+    return [Segment(as_of, h.st["stale-head"]), Segment(rest, h.st["stale"])]
 
 
 def _rule_line(h: Head) -> list[Segment]:
@@ -367,34 +408,48 @@ def skill_segments(
     `uplink`: a pending command concerns it ('sync #17 sent 40s'): ⇡ and that
     text instead of the parameter summary."""
     sst = st[STATUS_CSS[s.status]] + st["stale"] if stale else st[STATUS_CSS[s.status]]
-    title = ("*" if draft else "") + skill_title(s)
-    attempt = f" #{s.attempt}" if s.attempt > 1 else ""
-    if check is not None:
-        tag = f"{tag} " if tag else ""
-    room = width - 2 - (cell_len(tag) + 1 if tag else 0) - (1 if check is not None else 0)
-    segs: list[Segment] = [
-        Segment("+" if marked else " ", st["mark"] if marked else st["base"]),
+    end, end_w = _row_end(tag, check, st)
+    segs = [
+        Segment("+", st["mark"]) if marked else Segment(" ", st["base"]),
         Segment(link.UPLINK_GLYPH, st["tag"]) if uplink else Segment(GLYPHS[s.status], sst),
     ]
-    extra = uplink or extra
+    title = ("*" if draft else "") + skill_title(s)
+    segs += _title_and_summary(title, s.attempt, uplink or extra, width - 2 - end_w, sst, st)
+    segs += end
+    return segs if cursor is None else _on_cursor(segs, cursor)
+
+
+def _title_and_summary(
+    title: str, attempt_n: int, extra: str, room: int, sst: Style, st: Styles
+) -> list[Segment]:
+    """The title and attempt in `room` cells, and `extra` (the summary) in what they leave."""
+    attempt = f" #{attempt_n}" if attempt_n > 1 else ""
     body = " " + title + attempt
-    if cell_len(body) >= room:  # the label is cut in the middle, never the attempt number
-        segs.append(Segment(" " + fit_middle(title, room - 1 - len(attempt)) + attempt, sst))
-    else:
-        segs.append(Segment(body, sst))
-        rest = room - cell_len(body)
-        if extra and rest >= 8:  # a summary cut to a letter or two says nothing
-            segs.append(Segment(fit(" " + extra, rest), st["dim"]))
-        else:
-            segs.append(Segment(" " * rest, st["base"]))
+    rest = room - cell_len(body)
+    if rest <= 0:  # the label is cut in the middle, never the attempt number
+        return [Segment(" " + fit_middle(title, room - 1 - len(attempt)) + attempt, sst)]
+    if extra and rest >= 8:  # a summary cut to a letter or two says nothing
+        return [Segment(body, sst), Segment(fit(" " + extra, rest), st["dim"])]
+    return [Segment(body, sst), Segment(" " * rest, st["base"])]
+
+
+def _row_end(tag: str, check: Finding | None, st: Styles) -> tuple[list[Segment], int]:
+    """The row's end and its cells: the tags, then the plan checks' glyph."""
+    end: list[Segment] = []
+    cells = 0
     if tag:
-        segs.append(Segment(" ", st["base"]))
-        segs.append(Segment(tag, st["tag"]))
+        tag = f"{tag} " if check is not None else tag
+        end += [Segment(" ", st["base"]), Segment(tag, st["tag"])]
+        cells = cell_len(tag) + 1
     if check is not None:
-        segs.append(Segment(*_check_glyph(check, st)))
-    if cursor is not None:
-        segs = [Segment(seg.text, (seg.style or Style()) + cursor) for seg in segs]
-    return segs
+        end.append(Segment(*_check_glyph(check, st)))
+        cells += 1
+    return end, cells
+
+
+def _on_cursor(segs: list[Segment], cursor: Style) -> list[Segment]:
+    """A row under the cursor: each segment on the cursor's background."""
+    return [Segment(seg.text, (seg.style or Style()) + cursor) for seg in segs]
 
 
 def _check_glyph(f: Finding, st: Styles) -> tuple[str, Style]:
@@ -411,23 +466,60 @@ def progress_segments(
     stops where it was last heard, without an ETA."""
     w = col.width
     t = model.telemetry.get(col.robot)
-    has = t is not None and t.skill == s.id
+    pct = t.progress if t is not None and t.skill == s.id else None
     if fresh.stale and s.status in (Status.RUNNING, Status.PAUSED):
-        return _stale_progress(t.progress if t is not None and has else None, w, st, fresh)
-    if s.status == Status.FAILURE:
-        return [Segment(fit("   ↳ " + s.status_info, w), st["failure"])]
-    if s.status == Status.SYNCHWAITING:
-        waiting = wait_text(model, s)
-        return [Segment(fit("   " + waiting, w), st["synchwaiting"])]
-    pct = t.progress if t is not None and has else None
-    if s.status == Status.PAUSED:
-        return [Segment(fit(_paused_text(pct, s.status_info), w), st["paused"])]
+        return _stale_progress(pct, w, st, fresh)
+    said = _SAID_UNDER.get(s.status)
+    if said is not None:
+        return said(model, s, pct, w, st)
+    return _running(t, pct, s.status_info, w, st, fresh)
+
+
+def _running(
+    t: Telemetry | None, pct: float | None, info: str, w: int, st: Styles, fresh: Freshness
+) -> list[Segment]:
+    """A running skill's bar and ETA; without telemetry of it, 'running'."""
     if t is None or pct is None:
-        text = "   running" + (f" · {s.status_info}" if s.status_info else "")
+        text = "   running" + (f" · {info}" if info else "")
         return [Segment(fit(text, w), st["dim"])]
     # telemetry comes on change: the ETA counts down from the last sample (as old as `fresh`)
     eta_s = max(0.0, t.eta_s - (fresh.age_s or 0.0)) if t.eta_s is not None else None
     return _progress_bar(pct, eta_s, w, st)
+
+
+_Under = Callable[[ConsoleModel, SkillInstance, float | None, int, Styles], list[Segment]]
+
+
+def _failed(
+    model: ConsoleModel, s: SkillInstance, pct: float | None, w: int, st: Styles
+) -> list[Segment]:
+    return [Segment(fit("   ↳ " + s.status_info, w), st["failure"])]
+
+
+def _waiting(
+    model: ConsoleModel, s: SkillInstance, pct: float | None, w: int, st: Styles
+) -> list[Segment]:
+    return [Segment(fit("   " + wait_text(model, s), w), st["synchwaiting"])]
+
+
+def _paused(
+    model: ConsoleModel, s: SkillInstance, pct: float | None, w: int, st: Styles
+) -> list[Segment]:
+    text = (
+        "   paused"
+        + (f" at {int(pct * 100)}%" if pct is not None else "")
+        + (f" · {s.status_info}" if s.status_info else "")
+    )
+    return [Segment(fit(text, w), st["paused"])]
+
+
+# the progress line of a skill that does not progress: why it failed, what it
+# waits for, where it paused (a running skill's: its bar)
+_SAID_UNDER: dict[Status, _Under] = {
+    Status.FAILURE: _failed,
+    Status.SYNCHWAITING: _waiting,
+    Status.PAUSED: _paused,
+}
 
 
 def _progress_bar(pct: float, eta_s: float | None, w: int, st: Styles) -> list[Segment]:
@@ -448,14 +540,6 @@ def _progress_bar(pct: float, eta_s: float | None, w: int, st: Styles) -> list[S
         Segment("▏", st["dim"]),
         Segment(fit(label, w - 3 - bar_w - 2), st["base"]),
     ]
-
-
-def _paused_text(pct: float | None, info: str) -> str:
-    return (
-        "   paused"
-        + (f" at {int(pct * 100)}%" if pct is not None else "")
-        + (f" · {info}" if info else "")
-    )
 
 
 def _stale_progress(pct: float | None, w: int, st: Styles, fresh: Freshness) -> list[Segment]:
@@ -517,27 +601,35 @@ def _partner_doing(model: ConsoleModel, robot: str, sid: str) -> str:
 
 def barrier_wait_text(model: ConsoleModel, s: SkillInstance) -> str:
     """What a robot waiting at a barrier waits for; offline partners first."""
-    m = model
-    bid = m.barrier_of(s.id)
-    if bid is None or m.mission is None:
+    bid = model.barrier_of(s.id)
+    if bid is None or model.mission is None:
         return s.status_info or "waiting at a barrier"
-    offline: list[str] = []
-    waiting: list[str] = []
-    for sid in m.mission.barriers[bid].skills:
-        robot = m.owner(sid)
-        if sid == s.id or robot is None:
-            continue
-        info = m.robots.get(robot)
-        found = m.find(sid)
-        if info is None or not info.online:
-            offline.append(
-                f"{robot} OFFLINE"
-                + (f" {m.clock.stamp_text(info.since)}" if info and info.since else "")
-            )
-        elif found and found[2].status != Status.SYNCHWAITING:
-            waiting.append(robot)
+    offline, waiting = _absent(model, model.mission.barriers[bid].skills, s.id)
     if offline:
         return f"{bid}: " + ", ".join(offline)
     if waiting:
         return f"{bid}: waiting for " + ", ".join(waiting)
     return f"{bid}: all partners ready"
+
+
+def _absent(model: ConsoleModel, skills: list[str], own: str) -> tuple[list[str], list[str]]:
+    """A barrier's partners not there: the offline ones ('lander OFFLINE
+    12:30'), the robots whose skill has not reached it yet."""
+    offline: list[str] = []
+    waiting: list[str] = []
+    for sid in skills:
+        robot = model.owner(sid)
+        if sid == own or robot is None:
+            continue
+        said = _offline_text(model, robot)
+        if said:
+            offline.append(said)
+        elif not _arrived(model, sid):
+            waiting.append(robot)
+    return offline, waiting
+
+
+def _arrived(model: ConsoleModel, sid: str) -> bool:
+    """Whether a partner's skill waits at the barrier (or is gone: nothing to wait for)."""
+    found = model.find(sid)
+    return not found or found[2].status == Status.SYNCHWAITING

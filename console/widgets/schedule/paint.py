@@ -36,81 +36,104 @@ class Painter:
     def line(self, y: int) -> Strip:
         v = self.view
         width = v.size.width
-        scroll_x, scroll_y = int(v.scroll_x), int(v.scroll_y)
         st = v.styles_now()
-        base = st["base"]
         if not v.columns:
-            if y == 1:
-                msg = (
-                    "  no mission yet — waiting for the server…"
-                    if self.model.mission is None
-                    else "  this mission has no robots"
-                )
-                return Strip([Segment(fit(msg, width), st["dim"])]).crop_extend(0, width, base)
-            return Strip.blank(width, base)
-        x0, x1 = scroll_x, scroll_x + width
-        segs: list[Segment] = []
-        line = scroll_y + y - HEADER_H
-        start: int | None = None  # x of the first visible column: only those are drawn
-        for ci, col in enumerate(v.columns):
-            if col.x + col.width + 1 <= x0 or col.x >= x1:
-                continue
-            if start is None:
-                start = col.x
-            if y < HEADER_H:
-                segs.extend(self._header_segments(col, y, st))
-            else:
-                segs.extend(self._content_segments(ci, col, line, st))
-            if y == HEADER_H - 1:
-                segs.append(Segment("┼", st["rule"]))
-            else:
-                segs.append(Segment("│", st["divider"]))
-        start = start or 0
-        strip = Strip(segs).crop_extend(x0 - start, x1 - start, base)
+            return self._no_columns(y, width, st)
+        x0 = int(v.scroll_x)
+        x1 = x0 + width
+        shown = self._shown(x0, x1)
+        start = shown[0][1].x if shown else 0
+        strip = Strip(self._row(shown, y, st)).crop_extend(x0 - start, x1 - start, st["base"])
         if y == HEADER_H - 1:  # on the rule under the headers, which hides nothing
             strip = with_hidden_robots(strip, v.hidden_robots(), x1 - x0, st["more"])
         return strip
 
+    def _no_columns(self, y: int, width: int, st: Styles) -> Strip:
+        """The panel before there is a column: why, on its second line."""
+        if y != 1:
+            return Strip.blank(width, st["base"])
+        msg = (
+            "  no mission yet — waiting for the server…"
+            if self.model.mission is None
+            else "  this mission has no robots"
+        )
+        return Strip([Segment(fit(msg, width), st["dim"])]).crop_extend(0, width, st["base"])
+
+    def _shown(self, x0: int, x1: int) -> list[tuple[int, Column]]:
+        """The columns (and their indexes) seen between x0 and x1: only those are drawn."""
+        return [
+            (ci, col)
+            for ci, col in enumerate(self.view.columns)
+            if col.x + col.width + 1 > x0 and col.x < x1
+        ]
+
+    def _row(self, shown: list[tuple[int, Column]], y: int, st: Styles) -> list[Segment]:
+        """Screen row y across these columns, each followed by its divider."""
+        if y == HEADER_H - 1:
+            divider = Segment("┼", st["rule"])
+        else:
+            divider = Segment("│", st["divider"])
+        line = int(self.view.scroll_y) + y - HEADER_H
+        segs: list[Segment] = []
+        for ci, col in shown:
+            if y < HEADER_H:
+                segs.extend(self._header_segments(col, y, st))
+            else:
+                segs.extend(self._content_segments(ci, col, line, st))
+            segs.append(divider)
+        return segs
+
     def _header_segments(self, col: Column, y: int, st: Styles) -> list[Segment]:
         v = self.view
-        compact = col.static and not v.expand_static
+        compact = self._compact(col)
         selected = y == HEADER_H - 1 and bool(v.columns) and v.columns[v.cursor_col] is col
         fresh = self.model.freshness(col.robot)
         return HEADER_LINES[y](Head(self.model, col, st, compact, selected, fresh))
 
+    def _compact(self, col: Column) -> bool:
+        """A static robot's narrow column (not expanded): hints and labels shorten."""
+        return col.static and not self.view.expand_static
+
     def _content_segments(self, ci: int, col: Column, line: int, st: Styles) -> list[Segment]:
         v = self.view
-        w = col.width
-        task = self.model.task(col.robot)
         if line < 0 or line >= v.total_lines:
-            return [Segment(" " * w, st["base"])]
+            return [Segment(" " * col.width, st["base"])]
         if line < v.sync_h:
-            if line < len(col.sync):
-                i, kind = col.sync[line]
-                if i < len(task):
-                    s = task[i]
-                    if kind == "row":
-                        return self._skill_segments(ci, col, s, st)
-                    return progress_segments(
-                        self.model, col, s, st, self.model.freshness(col.robot)
-                    )
-            if line == 0 and not col.sync:
-                hint = "  nothing on robot" if not col.static or v.expand_static else "  –"
-                return [Segment(fit(hint, w), st["dim"])]
-            return [Segment(" " * w, st["base"])]
+            return self._sync_line(ci, col, line, st)
         if line == v.sync_h:
-            label = " plan " if not col.static or v.expand_static else ""
-            text = "┄┄" + label + "┄" * max(0, w - 2 - len(label))
-            return [Segment(text[:w], st["divider"])]
-        k = line - v.sync_h - 1
+            label = "" if self._compact(col) else " plan "
+            text = "┄┄" + label + "┄" * max(0, col.width - 2 - len(label))
+            return [Segment(text[: col.width], st["divider"])]
+        return self._plan_line(ci, col, line - v.sync_h - 1, st)
+
+    def _sync_line(self, ci: int, col: Column, line: int, st: Styles) -> list[Segment]:
+        """A line of the synchronized section: a skill's row or its progress line."""
+        if line < len(col.sync):
+            i, kind = col.sync[line]
+            task = self.model.task(col.robot)
+            if i < len(task):
+                if kind == "row":
+                    return self._skill_segments(ci, col, task[i], st)
+                fresh = self.model.freshness(col.robot)
+                return progress_segments(self.model, col, task[i], st, fresh)
+        if line == 0 and not col.sync:
+            return self._hint(col, "  nothing on robot", st)
+        return [Segment(" " * col.width, st["base"])]
+
+    def _plan_line(self, ci: int, col: Column, k: int, st: Styles) -> list[Segment]:
+        """The k-th line under the divider: an unsynchronized skill's row."""
         if k < len(col.idle):
             i = col.idle[k]
+            task = self.model.task(col.robot)
             if i < len(task):
                 return self._skill_segments(ci, col, task[i], st)
         if k == 0 and not col.idle:
-            hint = "  empty plan" if not col.static or v.expand_static else "  –"
-            return [Segment(fit(hint, w), st["dim"])]
-        return [Segment(" " * w, st["base"])]
+            return self._hint(col, "  empty plan", st)
+        return [Segment(" " * col.width, st["base"])]
+
+    def _hint(self, col: Column, text: str, st: Styles) -> list[Segment]:
+        """What an empty section says ('  –' in a compact column)."""
+        return [Segment(fit("  –" if self._compact(col) else text, col.width), st["dim"])]
 
     def _summary(self, s: SkillInstance) -> str:
         key = (s.id, s.rev)
@@ -123,7 +146,7 @@ class Painter:
     def _extra(self, col: Column, s: SkillInstance) -> str:
         """A synchronized skill's stage when its command is executing
         ('completed due 14:40'), else its parameters (a narrow static column: none)."""
-        if col.static and not self.view.expand_static:
+        if self._compact(col):
             return ""
         stage = link.executing_stage(self.model, col.robot, s.id, self.model.clock)
         return stage or self._summary(s)

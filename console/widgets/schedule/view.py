@@ -126,40 +126,51 @@ class ScheduleView(ScrollView, can_focus=True):
         """Re-lay out the columns of `robots` (all when None) and repaint."""
         order = self.model.robot_order()
         if robots is None or [c.robot for c in self.columns] != order:
-            self.columns = [
-                build_column(self.model, r, self.model.robot_kind(r) == "static") for r in order
-            ]
-            self._col_index = {c.robot: i for i, c in enumerate(self.columns)}
-            if len(self.painter.summaries) > 50_000:
-                self.painter.summaries.clear()
+            self._build(order)
+            self._relayout()
         else:
             before = (self.sync_h, self.total_lines)
-            changed: list[tuple[Column, Column]] = []
-            for r in robots:
-                i = self._col_index.get(r)
-                if i is not None:
-                    old = self.columns[i]
-                    self.columns[i] = build_column(self.model, r, old.static)
-                    changed.append((old, self.columns[i]))
+            changed = self._rebuild_columns(robots)
             self._relayout([new for _, new in changed])
             if self.cursor_id in self.columns[self.cursor_col].line_of:
-                # repaint only the visible lines that show something else now:
-                # in the changed columns, and across all columns from the
-                # divider down when the synchronized section grew or shrank
-                for old, new in changed:
-                    self._refresh_changed_lines(old, new, before[0])
-                if self.sync_h != before[0]:
-                    start = min(self.sync_h, before[0])
-                    self._refresh_content_lines(
-                        0, self.size.width, range(start, max(self.total_lines, before[1]))
-                    )
+                self._refresh_rebuilt(changed, *before)
                 return
-            self._keep_cursor()
-            self.refresh()
-            return
-        self._relayout()
         self._keep_cursor()
         self.refresh()
+
+    def _build(self, order: list[str]) -> None:
+        """Every robot's column, in this order."""
+        self.columns = [
+            build_column(self.model, r, self.model.robot_kind(r) == "static") for r in order
+        ]
+        self._col_index = {c.robot: i for i, c in enumerate(self.columns)}
+        if len(self.painter.summaries) > 50_000:
+            self.painter.summaries.clear()
+
+    def _rebuild_columns(self, robots: set[str]) -> list[tuple[Column, Column]]:
+        """These robots' columns built again: (before, now) of each."""
+        changed: list[tuple[Column, Column]] = []
+        for r in robots:
+            i = self._col_index.get(r)
+            if i is not None:
+                old = self.columns[i]
+                self.columns[i] = build_column(self.model, r, old.static)
+                changed.append((old, self.columns[i]))
+        return changed
+
+    def _refresh_rebuilt(
+        self, changed: list[tuple[Column, Column]], old_sync_h: int, old_total: int
+    ) -> None:
+        """Repaint only the visible lines that show something else now: in the
+        changed columns, and across all columns from the divider down when the
+        synchronized section grew or shrank."""
+        for old, new in changed:
+            self._refresh_changed_lines(old, new, old_sync_h)
+        if self.sync_h != old_sync_h:
+            start = min(self.sync_h, old_sync_h)
+            self._refresh_content_lines(
+                0, self.size.width, range(start, max(self.total_lines, old_total))
+            )
 
     def refresh_uplinking(self, robot: str) -> None:
         """A second passed: the header's and the rows' command ages."""
@@ -218,30 +229,30 @@ class ScheduleView(ScrollView, can_focus=True):
         self.total_lines = self.sync_h + 1 + idle_h
         self._place_columns()
         for c in self.columns if only is None else only:
-            c.line_of = {}
-            for line, (i, kind) in enumerate(c.sync):
-                if kind == "row":
-                    c.line_of[c.ids[i]] = line
-            for k, i in enumerate(c.idle):
-                c.line_of[c.ids[i]] = self.sync_h + 1 + k
+            c.place_lines(self.sync_h)
 
     def _place_columns(self) -> None:
         avail = max(self.scrollable_content_region.width, 20) if self.is_mounted else 80
         self._last_width = avail
-        statics = [c for c in self.columns if c.static]
-        dyn = [c for c in self.columns if not c.static]
-        static_w = STATIC_W if not self.expand_static else MIN_W + 6
-        if dyn:
-            w = (avail + 1 - len(statics) * (static_w + 1)) // len(dyn) - 1
-            w = max(MIN_W, min(MAX_W, w))
-        else:
-            w = MAX_W
+        static_w, w = self._widths(avail)
         x = 0
         for c in self.columns:
             c.x = x
             c.width = static_w if c.static else w
             x += c.width + 1
-        size = Size(max(x - 1, 1), HEADER_H + self.total_lines)
+        self._set_virtual_size(Size(max(x - 1, 1), HEADER_H + self.total_lines))
+
+    def _widths(self, avail: int) -> tuple[int, int]:
+        """A static column's width, and a dynamic one's: they share what the statics leave."""
+        statics = sum(1 for c in self.columns if c.static)
+        dyn = len(self.columns) - statics
+        static_w = STATIC_W if not self.expand_static else MIN_W + 6
+        if not dyn:
+            return static_w, MAX_W
+        w = (avail + 1 - statics * (static_w + 1)) // dyn - 1
+        return static_w, max(MIN_W, min(MAX_W, w))
+
+    def _set_virtual_size(self, size: Size) -> None:
         old = self.virtual_size
         if size == old:
             return
@@ -274,14 +285,18 @@ class ScheduleView(ScrollView, can_focus=True):
         if self.cursor_id is not None and self.cursor_id in col.line_of:
             return
         # the skill moved to another robot's column? (not possible today) or was deleted
-        if self.cursor_id is not None:
-            owner = self.model.owner(self.cursor_id)
-            if owner is not None and owner in self._col_index:
-                self.cursor_col = self._col_index[owner]
-                return
+        moved = self._column_with(self.cursor_id)
+        if moved is not None:
+            self.cursor_col = moved
+            return
         # prefer the first unsynchronized skill, else the active one, else the last
         self.cursor_id = col.resting_id()
         self._post_cursor()
+
+    def _column_with(self, skill_id: str | None) -> int | None:
+        """The index of the column of the robot that has this skill (None: none has)."""
+        owner = self.model.owner(skill_id) if skill_id is not None else None
+        return self._col_index.get(owner) if owner is not None else None
 
     def _post_cursor(self) -> None:
         self.post_message(self.CursorMoved(self.cursor_robot, self.cursor_id))
@@ -289,11 +304,10 @@ class ScheduleView(ScrollView, can_focus=True):
     def select(self, skill_id: str | None = None, robot: str | None = None) -> None:
         """Put the cursor on a skill (or a robot's column)."""
         if skill_id is not None:
-            owner = self.model.owner(skill_id)
-            if owner is None or owner not in self._col_index:
+            i = self._column_with(skill_id)
+            if i is None:
                 return
-            self.cursor_col = self._col_index[owner]
-            self.cursor_id = skill_id
+            self.cursor_col, self.cursor_id = i, skill_id
         elif robot is not None and robot in self._col_index:
             self.cursor_col = self._col_index[robot]
             col = self.columns[self.cursor_col]
@@ -315,18 +329,10 @@ class ScheduleView(ScrollView, can_focus=True):
             return
         region = self.scrollable_content_region
         col = self.columns[self.cursor_col]
-        x = self.scroll_x
-        if col.x < x:
-            x = col.x
-        elif col.x + col.width > x + region.width:
-            x = col.x + col.width - region.width
+        x = _scrolled_to(self.scroll_x, col.x, col.width, region.width)
         line = self._cursor_line()
         rows = max(1, region.height - HEADER_H)
-        y = self.scroll_y
-        if line < y:
-            y = line
-        elif line >= y + rows:
-            y = line - rows + 1
+        y = _scrolled_to(self.scroll_y, line, 1, rows)
         if line <= self.sync_h and self.sync_h < rows and y > 0 and line - y < 2:
             y = max(0, line - 1)
         self.scroll_to(x=x, y=y, animate=False, immediate=True)
@@ -337,19 +343,12 @@ class ScheduleView(ScrollView, can_focus=True):
         if dx:
             line = self._cursor_line()
             self.cursor_col = min(max(self.cursor_col + dx, 0), len(self.columns) - 1)
-            col = self.columns[self.cursor_col]
-            if col.line_of:
-                self.cursor_id = min(
-                    col.line_of, key=lambda sid: (abs(col.line_of[sid] - line), col.line_of[sid])
-                )
-            else:
-                self.cursor_id = None
+            self.cursor_id = _nearest(self.columns[self.cursor_col], line)
         elif dy:
             col = self.columns[self.cursor_col]
             if not col.ids:
                 return
-            i = col.ids.index(self.cursor_id) if self.cursor_id in col.ids else 0
-            self.cursor_id = col.ids[min(max(i + dy, 0), len(col.ids) - 1)]
+            self.cursor_id = _stepped(col, self.cursor_id, dy)
         self._scroll_cursor_visible()
         self.refresh()
         self._post_cursor()
@@ -371,8 +370,7 @@ class ScheduleView(ScrollView, can_focus=True):
         col = self.columns[self.cursor_col]
         if not col.ids:
             return
-        i = col.ids.index(self.cursor_id) if self.cursor_id in col.ids else 0
-        self.cursor_id = col.ids[min(max(i + direction * rows, 0), len(col.ids) - 1)]
+        self.cursor_id = _stepped(col, self.cursor_id, direction * rows)
         self._scroll_cursor_visible()
         self.refresh()
         self._post_cursor()
@@ -436,3 +434,25 @@ class ScheduleView(ScrollView, can_focus=True):
         """(columns cut or hidden on the left, on the right) of the view now."""
         x0 = int(self.scroll_x)
         return hidden_robots(self.columns, x0, x0 + self.scrollable_content_region.width)
+
+
+def _scrolled_to(offset: float, start: int, length: int, span: int) -> float:
+    """The scroll offset nearest `offset` that shows [start, start + length) in `span` cells."""
+    if start < offset:
+        return start
+    if start + length > offset + span:
+        return start + length - span
+    return offset
+
+
+def _nearest(col: Column, line: int) -> str | None:
+    """The skill of `col` whose row is nearest `line` (the upper one of two), None: it has none."""
+    if not col.line_of:
+        return None
+    return min(col.line_of, key=lambda sid: (abs(col.line_of[sid] - line), col.line_of[sid]))
+
+
+def _stepped(col: Column, skill_id: str | None, n: int) -> str:
+    """The skill n rows from `skill_id` in `col` (from the first when not in it), clamped."""
+    i = col.ids.index(skill_id) if skill_id in col.ids else 0
+    return col.ids[min(max(i + n, 0), len(col.ids) - 1)]

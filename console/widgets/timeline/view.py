@@ -79,21 +79,15 @@ class TimelineView(Widget):
         """Lay out the lanes of `order` from `top` in `win`, then repaint."""
         self.win, self.order, self.top = win, order, top
         plan, clock = self.model.plan, self.model.clock
-        fc, mission = plan.forecast, self.model.mission
+        fc = plan.forecast
         now = clock.of_ts(fc.now) if fc is not None else win.t0
         reach = now + clock.span(plan.link_delay_s)
         shown = order[top : top + self.lanes_shown]
         sel = self.model.selection.skill
-        lanes = (
-            {r: tl.bars(mission, fc, r, clock, win.t0, win.t1, win.dt, sel) for r in shown}
-            if mission
-            else {}
-        )
+        lanes = self._bars(shown, win, sel)
         critical = frozenset(fc.critical_path()) if fc is not None else frozenset()
         links = tl.links(lanes, shown, win)
-        at_sync: dict[str, list[tuple[float, float]]] = {}  # robot -> spans planned at sync
-        for sid, span in plan.planned.items():
-            at_sync.setdefault(self.model.owner(sid) or "", []).append(span)
+        at_sync = self._planned_at_sync()
         self.rows, self.row_bars = [], {}
         for i, robot in enumerate(shown):
             self.row_bars[len(self.rows)] = lanes.get(robot, [])
@@ -104,6 +98,20 @@ class TimelineView(Widget):
             self.rows.append(tl.planned(spacer, at_sync.get(robot, ()), win))
         self.axis_rows = tl.axis(win, now, clock)
         self.refresh()
+
+    def _bars(self, shown: list[str], win: tl.Window, sel: str | None) -> dict[str, list[tl.Bar]]:
+        """Each shown robot's bars in the window (none before there is a mission)."""
+        mission, fc, clock = self.model.mission, self.model.plan.forecast, self.model.clock
+        if not mission:
+            return {}
+        return {r: tl.bars(mission, fc, r, clock, win.t0, win.t1, win.dt, sel) for r in shown}
+
+    def _planned_at_sync(self) -> dict[str, list[tuple[float, float]]]:
+        """Robot -> the spans its skills were planned at when synchronized."""
+        at_sync: dict[str, list[tuple[float, float]]] = {}
+        for sid, span in self.model.plan.planned.items():
+            at_sync.setdefault(self.model.owner(sid) or "", []).append(span)
+        return at_sync
 
     def notify_style_update(self) -> None:
         self._looks = {}  # the theme changed
@@ -138,30 +146,39 @@ class TimelineView(Widget):
         st = {"base": self._look(()), "name": self._look(("name",))}
         st["name-selected"] = self._look(("name-selected",))
         w = self.size.width
-        if y < AXIS_H:
-            cells = self.axis_rows[y]
-            name = ""
-        else:
-            k = y - AXIS_H
-            if k >= len(self.rows):
-                return Strip([Segment(" " * w, st["base"])], w)
-            cells = self.rows[k]
-            name = self.order[self.top + k // 2] if k % 2 == 0 else ""
+        shown = self._line(y)
+        if shown is None:
+            return Strip([Segment(" " * w, st["base"])], w)
+        cells, name = shown
         owner = self.model.owner(self.model.selection.skill or "")
         nst = st["name-selected"] if name and name == owner else st["name"]
         segs = [Segment(tl_name(name, self.name_w), nst), *self._segments(cells[: self.lanes_w])]
         return Strip(segs).adjust_cell_length(w, st["base"])
+
+    def _line(self, y: int) -> tuple[list[tl.Cell], str] | None:
+        """Screen row y's cells and the robot named beside them ('' on the
+        axis and under a lane); None below the last lane."""
+        if y < AXIS_H:
+            return self.axis_rows[y], ""
+        k = y - AXIS_H
+        if k >= len(self.rows):
+            return None
+        return self.rows[k], self.order[self.top + k // 2] if k % 2 == 0 else ""
 
     def on_click(self, event: events.Click) -> None:
         k = event.y - AXIS_H
         x = event.x - self.name_w
         if self.win is None or k < 0 or k % 2 or x < 0:
             return
-        t = self.win.t0 + (x + 0.5) * self.win.dt
-        for bar in self.row_bars.get(k, []):
-            if bar.start - self.win.dt <= t <= bar.end + self.win.dt / 2:
-                self.post_message(self.Selected(bar.id))
-                return
+        bar = self._bar_at(k, self.win.t0 + (x + 0.5) * self.win.dt, self.win.dt)
+        if bar is not None:
+            self.post_message(self.Selected(bar.id))
+
+    def _bar_at(self, k: int, t: float, dt: float) -> tl.Bar | None:
+        """The bar of lane line k at time t, a cell's width of slack on either side."""
+        return next(
+            (b for b in self.row_bars.get(k, []) if b.start - dt <= t <= b.end + dt / 2), None
+        )
 
 
 def tl_name(name: str, width: int) -> str:
