@@ -2,9 +2,10 @@
 the choices one key each, the default and when it applies on board (the
 mission clock, counting down). A choice key answers (dismissed with the
 choice); escape leaves the question open: it stays reachable from the
-alerts screen, the palette and the app's answer key. The dialog closes by
-itself once the question ended (answered elsewhere, its default applied).
-An observer console shows it and cannot answer.
+alerts screen, the palette and the app's answer key. Once the question
+ended (answered elsewhere, its default applied) the dialog says how and
+stays until escape: a choice key pressed as it ends must not fall through
+to the screen beneath. An observer console shows it and cannot answer.
 
 `open_question(app, id)` opens it in a worker and submits the answer; the
 app, its alert prompter and the palette call it (screens never import the app)."""
@@ -98,24 +99,37 @@ class QuestionScreen(ModalScreen[str | None]):
         self.set_interval(TICK_S, self._tick)
 
     def _tick(self) -> None:
-        self.query_one("#due", Static).update(due_text(self.question, self.model.clock))
+        if self.question.is_open:
+            self.query_one("#due", Static).update(due_text(self.question, self.model.clock))
 
     def _changed(self, c: StateChange) -> None:
         m = self.model.mission
-        if not c.about(Topic.MISSION) or m is None:
+        if not c.about(Topic.MISSION) or m is None or not self.question.is_open:
             return
         q = m.question(self.question.id)
-        if q is None or not q.is_open:  # answered elsewhere, defaulted, withdrawn
-            if q is not None:
-                self.notify(ended_text(q), title="Question")
+        if q is None:  # a mission loaded without it
             self.dismiss(None)
             return
         self.question = q
+        if not q.is_open:  # answered elsewhere, defaulted, withdrawn
+            self._ended()
+            return
         answered = self.query_one("#answered", Static)
         answered.update(self._answer_line())
         answered.display = bool(self._answer_line())
 
+    def _ended(self) -> None:
+        """Say how the question ended; the choices no longer answer."""
+        self.query_one("#choices", Static).add_class("ended")
+        self.query_one("#due", Static).update(ended_text(self.question))
+        self.query_one("#answered", Static).display = False
+        close = key_names(self).hint(("dialog.cancel", "close"))
+        self.query_one(".hint", Static).update(f"nothing to answer any more · {close}")
+
     def action_choose(self, n: int) -> None:
+        if not self.question.is_open:
+            self.notify(ended_text(self.question), title="Question")
+            return
         if self.model.read_only:
             self.notify(self._read_only_line(), severity="warning", title="Question")
             return

@@ -193,7 +193,7 @@ async def test_an_observer_sees_it_and_cannot_answer():
         assert app.model.mission.question(1).answer is None
 
 
-async def test_the_dialog_closes_when_the_default_applied_on_board():
+async def test_the_dialog_says_the_default_applied_and_keeps_a_late_key():
     b = asking()
     app, _ = engine_app(b)
     async with app.run_test(size=(100, 30)) as pilot:
@@ -204,8 +204,17 @@ async def test_the_dialog_closes_when_the_default_applied_on_board():
         )
         applied = b.engine.submit(ended, actor="lru2")
         app.post_message(applied_batch(applied.batch(actor="lru2", op="ask_ended")))
-        await wait_until(pilot, lambda: not isinstance(app.screen, QuestionScreen), what="closed")
+        await wait_until(pilot, lambda: "defaulted with wider" in screen_text(app), what="ended")
         assert app.model.mission.question(1).state == QuestionState.DEFAULTED
+        assert "nothing to answer any more" in screen_text(app)
+        # a choice key pressed as the question ends stays in the dialog: it neither
+        # answers nor reaches the screen beneath (`2` there would open the map)
+        await pilot.press("2")
+        await settle(pilot)
+        assert isinstance(app.screen, QuestionScreen)
+        assert app.model.mission.question(1).answer is None
+        await pilot.press("escape")
+        await wait_until(pilot, lambda: not isinstance(app.screen, QuestionScreen), what="closed")
         log = [e.text for e in app.model.log.entries]
         assert any(
             "question #1 defaulted: no answer in time, the robot goes on with wider" in t
