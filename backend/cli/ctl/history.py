@@ -3,8 +3,9 @@
     history [--robot R] [--user U] [--since T] [--limit N]
 
 One line per change, oldest first: when the server journaled it (local
-time), its revision, the operation and who did it, and what it changed
-(as `ctl watch` says it). --json: {"ok": true, "entries": [...], "more"}
+time; `sim h:mm:ss` for a change during a running simulator's run), its
+revision, the operation and who did it, and what it changed (as `ctl watch`
+says it). --json: {"ok": true, "entries": [...], "more"}
 with each entry's `batch` (its events) as the protocol carries it.
 """
 
@@ -14,6 +15,7 @@ import argparse
 import json
 from typing import Any
 
+from backend.cli.ctl.clock import WALL, CtlClock, ask
 from backend.cli.ctl.render import watch_line
 from backend.exit_codes import EXIT_OK
 from backend.protocol.messages import HistoryReply, HistoryRequest
@@ -25,10 +27,10 @@ def request(args: argparse.Namespace) -> HistoryRequest:
     )
 
 
-def text(reply: HistoryReply) -> str:
+def text(reply: HistoryReply, clock: CtlClock = WALL) -> str:
     lines = []
-    for e in reply.entries:
-        when = e.at.astimezone().strftime("%Y-%m-%d %H:%M:%S")
+    for e in reply.entries:  # in sim time if it was journaled during the sim's run
+        when = clock.sim_stamp(e.at) or e.at.astimezone().strftime("%Y-%m-%d %H:%M:%S")
         lines.append(f"{when} {watch_line('events', e.batch, False)}")
     if not reply.entries:
         lines.append("no change matches")
@@ -44,5 +46,5 @@ async def view(client: Any, args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps({"ok": True, **reply.model_dump(mode="json")}), flush=True)
     else:
-        print(text(reply), flush=True)
+        print(text(reply, await ask(client, args.timeout)), flush=True)
     return EXIT_OK

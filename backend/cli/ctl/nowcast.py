@@ -11,6 +11,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
+from backend.cli.ctl.clock import WALL, CtlClock
 from backend.cli.ctl.plan import gather
 from backend.core.plan.forecast import Forecaster
 from backend.core.plan.nowcast import nowcasts
@@ -34,17 +35,23 @@ def _every_nowcast(client: Any, inputs: Any) -> dict[str, Any]:
     return nowcasts(courses, m, time.time(), inputs.speed, links)
 
 
-def nowcasts_text(predicted: dict[str, Any]) -> str:
+def nowcasts_text(predicted: dict[str, Any], clock: CtlClock = WALL) -> str:
     """One line per robot, after the state ('' without --nowcast)."""
-    lines = [nowcast_line(r, nc) for r, nc in predicted.get("nowcast", {}).items()]
+    lines = [nowcast_line(r, nc, clock) for r, nc in predicted.get("nowcast", {}).items()]
     return "".join(f"\n{line}" for line in lines)
 
 
-def nowcast_line(robot: str, nc: dict[str, Any] | None) -> str:
-    """'≈ lru1 now: lru1-5 62% at (12.0, -3.5), battery 41% (from a report 600 s old)'."""
+def nowcast_line(robot: str, nc: dict[str, Any] | None, clock: CtlClock = WALL) -> str:
+    """'≈ lru1 now: lru1-5 62% at (12.0, -3.5), battery 41% (from a report 10 min old)'."""
     if nc is None:
         return f"≈ {robot}: no telemetry to predict from"
-    return f"≈ {robot} now: {_doing(nc)}{_where(nc)} (from a report {nc['age_s']:.0f} s old)"
+    old = _age(nc["age_s"], clock)
+    return f"≈ {robot} now: {_doing(nc)}{_where(nc)} (from a report {old} old)"
+
+
+def _age(age_s: float, clock: CtlClock) -> str:
+    """The report's age: wall seconds as ever (`600 s`), in mission time with a sim."""
+    return clock.duration(age_s) if clock.simulated else f"{age_s:.0f} s"
 
 
 def _doing(nc: dict[str, Any]) -> str:

@@ -15,6 +15,8 @@ from datetime import UTC, datetime
 from typing import Any
 
 from backend.cli.ctl.args import CONTROL_OPS
+from backend.cli.ctl.clock import WALL, CtlClock
+from backend.cli.ctl.clock import wall_time as _time
 from backend.cli.ctl.questions import DESCRIBE as QUESTION_DESCRIBE
 from backend.cli.ctl.questions import EVENT_TEXT as QUESTION_EVENT_TEXT
 from backend.cli.ctl.team import DESCRIBE as TEAM_DESCRIBE
@@ -134,15 +136,6 @@ def short_params(s: Any, library: Any) -> str:
     return " ".join(parts)
 
 
-def _time(t: datetime | None) -> str:
-    if t is None:
-        return ""
-    try:
-        return t.astimezone().strftime("%H:%M:%S")
-    except (ValueError, OSError):
-        return t.strftime("%H:%M:%S")
-
-
 def mission_time_text(clock: str, t: float) -> str:
     """A time on the mission clock: `sim 2:00:00` (sim time), or the wall's (local):
     `16:51:46` today, `2026-11-28 00:00:00` another day."""
@@ -164,32 +157,32 @@ def _contact(c: Any) -> str:
     return f"in contact{until}"
 
 
-def _presence(info: Any) -> str:
+def _presence(info: Any, clock: CtlClock = WALL) -> str:
     """Whether the server knows a robot, hears it, and its contact."""
     if info is None:
         return "not registered"
     if not info.online:
-        return _offline(info)
+        return _offline(info, clock)
     if info.contact is not None and info.contact.state == "out_of_contact":
-        return _out_of_contact(info)  # never "online" then
-    return _online(info)
+        return _out_of_contact(info, clock)  # never "online" then
+    return _online(info, clock)
 
 
-def _offline(info: Any) -> str:
+def _offline(info: Any, clock: CtlClock) -> str:
     if info.since:
-        return f"offline since {_time(info.since)}"
+        return f"offline since {clock.stamp(info.since)}"
     return "offline (not seen since the server started)"
 
 
-def _out_of_contact(info: Any) -> str:
+def _out_of_contact(info: Any, clock: CtlClock) -> str:
     """`out of contact: ... (present since 12:00:01)`."""
-    present = f" (present since {_time(info.since)})" if info.since else ""
+    present = f" (present since {clock.stamp(info.since)})" if info.since else ""
     return _contact(info.contact) + present
 
 
-def _online(info: Any) -> str:
+def _online(info: Any, clock: CtlClock) -> str:
     """`online since 12:00:01, in contact until sim 0:20:00`."""
-    online = f"online since {_time(info.since)}" if info.since else "online"
+    online = f"online since {clock.stamp(info.since)}" if info.since else "online"
     c = info.contact
     return online + (f", {_contact(c)}" if c is not None and c.state != "offline" else "")
 
@@ -215,51 +208,39 @@ def _iso(t: datetime | None) -> str | None:
     return t.isoformat() if t else None
 
 
-def age_text(seconds: float | None) -> str:
-    """12 s, 4 min, 2 h 5 min."""
-    if seconds is None:
-        return "?"
-    s = max(0, round(seconds))
-    if s < 120:
-        return f"{s} s"
-    if s < 7200:
-        return f"{s // 60} min"
-    return f"{s // 3600} h {s % 3600 // 60} min"
-
-
 def _since(t: datetime | None, now: datetime) -> float | None:
     return (now - t).total_seconds() if t is not None else None
 
 
-def command_line(c: Any, now: datetime, client: Any = None) -> str:
+def command_line(c: Any, now: datetime, client: Any = None, clock: CtlClock = WALL) -> str:
     """One pending (or settled) command: `17 lru1 sync lru1-1, lru1-2: sent 12 s ago ...`."""
     what = f"{c.op} {', '.join(c.skills)}" if c.skills else c.op
     if c.state.value == "queued":
-        when = f"queued {age_text(_since(c.created, now))} ago, not sent yet"
+        when = f"queued {clock.age(c.created, now)} ago, not sent yet"
     elif c.state.value == "sent":
-        when = f"sent {age_text(_since(c.sent, now))} ago, no answer yet"
+        when = f"sent {clock.age(c.sent, now)} ago, no answer yet"
     else:
-        when = f"{c.state.value} {_time(c.settled)}" + (f": {c.reason}" if c.reason else "")
-    extra = _command_notes(c, now) + _stage_note(client, c, now)
+        when = f"{c.state.value} {clock.stamp(c.settled)}" + (f": {c.reason}" if c.reason else "")
+    extra = _command_notes(c, now, clock) + _stage_note(client, c, now, clock)
     tail = f" [{'; '.join(extra)}]" if extra else ""
     return f"command {c.id} to {c.robot} (seq {c.seq}): {what}: {when}{tail}"
 
 
-def _command_notes(c: Any, now: datetime) -> list[str]:
+def _command_notes(c: Any, now: datetime, clock: CtlClock) -> list[str]:
     extra = []
     if c.expires is not None and c.pending:
         passed = " (passed)" if c.expires <= now else ""
-        extra.append(f"expires {_time(c.expires)}{passed}")
+        extra.append(f"expires {clock.stamp(c.expires)}{passed}")
     if c.cancel_requested and c.pending:
         extra.append("cancel requested")
     return extra
 
 
-def _stage_note(client: Any, c: Any, now: datetime) -> list[str]:
+def _stage_note(client: Any, c: Any, now: datetime, clock: CtlClock) -> list[str]:
     """The stage it waits for, with its due (the server's verification)."""
     from backend.cli.ctl.verify import stage_text
 
-    text = stage_text(client, c, now, _time) if client is not None else ""
+    text = stage_text(client, c, now, clock) if client is not None else ""
     return [text] if text else []
 
 
@@ -285,14 +266,14 @@ def link_json(client: Any, name: str, now: datetime) -> dict[str, Any]:
     }
 
 
-def link_text(client: Any, name: str, now: datetime) -> str:
+def link_text(client: Any, name: str, now: datetime, clock: CtlClock = WALL) -> str:
     """`delay 2.0 s, heard 3 s ago, 2 pending` (+ `stale: last known state`)."""
     ls = client.link(name, now)
     parts = []
     if ls.delay_s is not None:
-        parts.append(f"delay {ls.delay_s:.1f} s")
+        parts.append(f"delay {clock.fine(ls.delay_s)}")
     if ls.heard_age_s is not None:
-        parts.append(f"heard {age_text(ls.heard_age_s)} ago")
+        parts.append(f"heard {clock.duration(ls.heard_age_s)} ago")
     if ls.pending:
         parts.append(f"{len(ls.pending)} pending")
     if ls.stale and ls.online:
@@ -421,7 +402,7 @@ def _policy_words(p: Any, unicode: bool = True) -> list[str]:
 
 def _skill_line(s: Any, columns: str, lib: Any, dash: str, pending: Any = None) -> str:
     """`columns`: glyph, id, label and skill already padded to the task's widths;
-    `pending`: (command, now) when a pending command concerns it."""
+    `pending`: (command, now, clock) when a pending command concerns it."""
     parts = [columns]
     if pending is not None:
         parts.append(_pending_note(*pending))
@@ -439,22 +420,22 @@ def _skill_line(s: Any, columns: str, lib: Any, dash: str, pending: Any = None) 
     return "  ".join(parts).rstrip()
 
 
-def _pending_note(c: Any, now: datetime) -> str:
+def _pending_note(c: Any, now: datetime, clock: CtlClock) -> str:
     """`(uplinking: command 3, sent 12 s ago)`: the command a skill waits for."""
     doing = {"sync": "uplinking", "retry": "retrying", "unsync": "unsynchronizing"}[c.op]
     since = c.sent if c.sent is not None else c.created
     verb = "sent" if c.sent is not None else "queued"
-    return f"({doing}: command {c.id}, {verb} {age_text(_since(since, now))} ago)"
+    return f"({doing}: command {c.id}, {verb} {clock.age(since, now)} ago)"
 
 
-def _task_lines(m: Any, task: list[Any], lib: Any, unicode: bool) -> list[str]:
+def _task_lines(m: Any, task: list[Any], lib: Any, unicode: bool, clock: CtlClock) -> list[str]:
     if not task:
         return ["  (no skills)"]
     locks = m.command_locks()
     now = datetime.now(UTC)
     dash = "—" if unicode else "-"
     return [
-        _skill_line(s, columns, lib, dash, (locks[s.id], now) if s.id in locks else None)
+        _skill_line(s, columns, lib, dash, (locks[s.id], now, clock) if s.id in locks else None)
         for s, columns in zip(task, _task_columns(m, task, unicode), strict=True)
     ]
 
@@ -481,16 +462,17 @@ def _id_tags(m: Any, s: Any, waiting: list[str], unicode: bool) -> str:
     return " ".join([s.id, *(f"[{t}]" for t in tags)])
 
 
-def _robot_lines(client: Any, robot: str, unicode: bool) -> list[str]:
+def _robot_lines(client: Any, robot: str, unicode: bool, clock: CtlClock) -> list[str]:
     m, lib = client.mission, client.library
     dash = "—" if unicode else "-"
     now = datetime.now(UTC)
-    link = link_text(client, robot, now)
-    head = f"{robot} ({_type_text(m, lib, robot)}) {dash} {_presence(client.robots.get(robot))}"
-    pending = [f"  pending: {command_line(c, now)}" for c in m.pending_commands(robot)]
+    link = link_text(client, robot, now, clock)
+    presence = _presence(client.robots.get(robot), clock)
+    head = f"{robot} ({_type_text(m, lib, robot)}) {dash} {presence}"
+    pending = [f"  pending: {command_line(c, now, clock=clock)}" for c in m.pending_commands(robot)]
     return [
         head + (f"; {link}" if link else ""),
-        *_task_lines(m, m.tasks.get(robot, []), lib, unicode),
+        *_task_lines(m, m.tasks.get(robot, []), lib, unicode, clock),
         *pending,
     ]
 
@@ -520,7 +502,9 @@ def _marker_lines(m: Any) -> list[str]:
     return ["markers:", *(f"  {n:<{w}}  {_marker_text(mk)}" for n, mk in m.markers.items())]
 
 
-def state_text(client: Any, only: list[str] | None = None, unicode: bool = True) -> str:
+def state_text(
+    client: Any, only: list[str] | None = None, unicode: bool = True, clock: CtlClock = WALL
+) -> str:
     m, lib = client.mission, client.library
     lines = [
         f"mission '{m.name}' at revision {m.revision} "
@@ -528,7 +512,7 @@ def state_text(client: Any, only: list[str] | None = None, unicode: bool = True)
     ]
     for robot in list(m.robots) + [r for r in m.tasks if r not in m.robots]:
         if _shown(robot, only):
-            lines += _robot_lines(client, robot, unicode)
+            lines += _robot_lines(client, robot, unicode, clock)
     lines.append(_barrier_line(m))
     lines += _marker_lines(m)
     lines += [f"waived {c} at revision {w.revision}: {w.reason}" for c, w in m.waivers.items()]
@@ -583,18 +567,21 @@ def _properties(man: dict[str, Any]) -> list[str]:
     return ["  properties: " + ", ".join(props)] if props else []
 
 
-def robots_text(client: Any) -> str:
+def robots_text(client: Any, clock: CtlClock = WALL) -> str:
     data = robots_json(client)["robots"]
     if not data:
         return "no robots"
-    return "\n".join(line for name, r in data.items() for line in _robot_block(client, name, r))
+    return "\n".join(
+        line for name, r in data.items() for line in _robot_block(client, name, r, clock)
+    )
 
 
-def _robot_block(client: Any, name: str, r: dict[str, Any]) -> list[str]:
+def _robot_block(client: Any, name: str, r: dict[str, Any], clock: CtlClock) -> list[str]:
     """A robot of `ctl robots`: presence, link and telemetry, manifest, pending commands."""
-    head = f"{name} ({r['type'] or '?'}{_standing(name, r)}): {_presence(client.robots.get(name))}"
+    presence = _presence(client.robots.get(name), clock)
+    head = f"{name} ({r['type'] or '?'}{_standing(name, r)}): {presence}"
     t = client.telemetry.get(name)
-    link = link_text(client, name, datetime.now(UTC))
+    link = link_text(client, name, datetime.now(UTC), clock)
     head += (f"; {link}" if link else "") + (
         _telemetry_text(t, client.robots.get(name)) if t is not None else ""
     )
@@ -602,7 +589,7 @@ def _robot_block(client: Any, name: str, r: dict[str, Any]) -> list[str]:
     return [
         head,
         *_manifest_lines(r["manifest"]),
-        *(f"  pending: {command_line(c, now)}" for c in client.pending(name)),
+        *(f"  pending: {command_line(c, now, clock=clock)}" for c in client.pending(name)),
     ]
 
 
@@ -635,13 +622,13 @@ def _executing(client: Any, only: list[str] | None) -> list[Any]:
     return [c for c in executing(client) if _shown(c.robot, only)]
 
 
-def pending_text(client: Any, only: list[str] | None = None) -> str:
+def pending_text(client: Any, only: list[str] | None = None, clock: CtlClock = WALL) -> str:
     now = datetime.now(UTC)
     cmds = [c for c in client.pending() if _shown(c.robot, only)]
     cmds += _executing(client, only)
     if not cmds:
         return "no pending commands" + (f" for {', '.join(only)}" if only else "")
-    return "\n".join(command_line(c, now, client) for c in cmds)
+    return "\n".join(command_line(c, now, client, clock) for c in cmds)
 
 
 # ---------------------------------------------------------------- describe

@@ -20,6 +20,8 @@ from pathlib import Path
 from typing import Any
 
 from backend.cli.ctl.args import DEFAULT_CONNECT, ROBOT_OPS
+from backend.cli.ctl.clock import WALL, CtlClock
+from backend.cli.ctl.clock import ask as ask_clock
 from backend.cli.ctl.errors import FileInvalid, UsageError
 from backend.cli.ctl.history import view as history_view
 from backend.cli.ctl.nowcast import nowcasts_json, nowcasts_text
@@ -321,8 +323,9 @@ async def _state(client: Any, args: argparse.Namespace) -> int:
     if args.json:
         _print_json(state_json(client, only or None) | predicted)
     else:
-        text = state_text(client, only or None, unicode=unicode_ok())
-        print(text + nowcasts_text(predicted), flush=True)
+        clock = await ask_clock(client, args.timeout)
+        text = state_text(client, only or None, unicode=unicode_ok(), clock=clock)
+        print(text + nowcasts_text(predicted, clock), flush=True)
     return EXIT_OK
 
 
@@ -331,7 +334,7 @@ async def _pending(client: Any, args: argparse.Namespace) -> int:
     if args.json:
         _print_json(pending_json(client, only or None))
     else:
-        print(pending_text(client, only or None), flush=True)
+        print(pending_text(client, only or None, await ask_clock(client, args.timeout)), flush=True)
     return EXIT_OK
 
 
@@ -343,7 +346,7 @@ async def _robots(client: Any, args: argparse.Namespace) -> int:
     if args.json:
         _print_json(robots_json(client))
     else:
-        print(robots_text(client), flush=True)
+        print(robots_text(client, await ask_clock(client, args.timeout)), flush=True)
     return EXIT_OK
 
 
@@ -477,25 +480,28 @@ async def _wait_answers(
             settled.append(await client.wait_command(cid, max(0.0, deadline - loop.time())))
     except TimeoutError:
         return _no_answer(client, args, ids, wait, done)
-    return _answers(args, settled, done)
+    clock = WALL if args.json else await ask_clock(client, args.timeout)
+    return _answers(args, settled, done, clock)
 
 
-def _answers(args: argparse.Namespace, settled: list[Any], done: dict[str, Any]) -> int:
+def _answers(
+    args: argparse.Namespace, settled: list[Any], done: dict[str, Any], clock: CtlClock
+) -> int:
     """Every command settled: exit 0 if each was applied, else 1."""
     now = datetime.now(UTC)
     bad = [c for c in settled if c.state.value != "acked"]
     if args.json:
         _print_json({"ok": not bad, **done, "answers": [command_json(c, now) for c in settled]})
     else:
-        _print_answers(settled)
+        _print_answers(settled, clock)
     return EXIT_REFUSED if bad else EXIT_OK
 
 
-def _print_answers(settled: list[Any]) -> None:
+def _print_answers(settled: list[Any], clock: CtlClock) -> None:
     """A line per command: on stdout if it was applied, else on stderr."""
     for c in settled:
         stream = sys.stderr if c.state.value != "acked" else sys.stdout
-        print(_answer_line(c), file=stream, flush=True)
+        print(_answer_line(c, clock), file=stream, flush=True)
 
 
 def _no_answer(
@@ -518,10 +524,10 @@ def _no_answer(
     )
 
 
-def _answer_line(c: Any) -> str:
+def _answer_line(c: Any, clock: CtlClock = WALL) -> str:
     took = ""
     if c.settled is not None:
-        took = f" after {(c.settled - c.created).total_seconds():.1f} s"
+        took = f" after {clock.fine((c.settled - c.created).total_seconds())}"
     did = f": {', '.join(c.done)}" if c.done else ""
     kept = f" (kept, already started: {', '.join(c.kept)})" if c.kept else ""
     why = f": {c.reason}" if c.reason and c.state.value != "acked" else ""

@@ -19,6 +19,7 @@ import sys
 from datetime import UTC, datetime
 from typing import Any
 
+from backend.cli.ctl.clock import CtlClock, ask
 from backend.cli.ctl.errors import UsageError
 from backend.core.verification import Path, Stage, Verification, verify
 from backend.exit_codes import EXIT_OK, EXIT_OVERDUE, EXIT_REFUSED
@@ -45,8 +46,9 @@ def stages_json(client: Any, c: Any) -> list[dict[str, Any]] | None:
     return None if v is None else [s.model_dump(mode="json") for s in v.stages]
 
 
-def stage_text(client: Any, c: Any, now: datetime, time: Any) -> str:
-    """`received due 12:00:20 (in 12 s)`, `started OVERDUE since 12:00:20` ('' if unknown)."""
+def stage_text(client: Any, c: Any, now: datetime, clock: Any) -> str:
+    """`received due 12:00:20 (in 12 s)`, `started OVERDUE since 12:00:20` ('' if unknown);
+    in mission time (`clock`: a CtlClock)."""
     v = verification_of(client, c.id)
     stage = v.current if v is not None else None
     if stage is None:
@@ -54,9 +56,9 @@ def stage_text(client: Any, c: Any, now: datetime, time: Any) -> str:
     if stage.due is None:
         return f"{stage.name}: no due"
     if stage.state == "overdue":
-        return f"{stage.name} OVERDUE, due {time(stage.due)}"
-    left = (stage.due - now).total_seconds()
-    return f"{stage.name} due {time(stage.due)} (in {max(0, round(left))} s)"
+        return f"{stage.name} OVERDUE, due {clock.stamp(stage.due)}"
+    left = max(0.0, (stage.due - now).total_seconds())
+    return f"{stage.name} due {clock.stamp(stage.due)} (in {clock.duration(left)})"
 
 
 def _outcome(v: Verification, until: str, grace_s: float, now: datetime) -> int | None:
@@ -78,14 +80,17 @@ async def wait_stage(client: Any, args: argparse.Namespace) -> int:
     def heard(_event: Any = None) -> None:
         changed.set()
 
+    clock = await ask(client, args.timeout)  # its messages in mission time
     client.add_listener(heard)
     try:
-        return await _wait(client, args, changed)
+        return await _wait(client, args, changed, clock)
     finally:
         client.remove_listener(heard)
 
 
-async def _wait(client: Any, args: argparse.Namespace, changed: asyncio.Event) -> int:
+async def _wait(
+    client: Any, args: argparse.Namespace, changed: asyncio.Event, clock: CtlClock
+) -> int:
     """Look at the command's stages at every news, and when a due passes."""
     loop = asyncio.get_running_loop()
     give_up = loop.time() + args.max_wait
@@ -97,7 +102,7 @@ async def _wait(client: Any, args: argparse.Namespace, changed: asyncio.Event) -
         if code is None and left <= 0:
             code = EXIT_OVERDUE
         if code is not None:
-            return _report(args, v, args.until, code, now)
+            return _report(args, v, args.until, code, now, clock)
         changed.clear()
         try:  # a stage's due passes with no news: look again then
             await asyncio.wait_for(changed.wait(), min(left, _next_due(v, args.grace, now)))
@@ -134,9 +139,14 @@ def _until_late(s: Stage, grace_s: float, now: datetime) -> float | None:
 
 
 def _report(
-    args: argparse.Namespace, v: Verification | None, until: str, code: int, now: datetime
+    args: argparse.Namespace,
+    v: Verification | None,
+    until: str,
+    code: int,
+    now: datetime,
+    clock: CtlClock,
 ) -> int:
-    line = f"command {args.command}: {_result(args, v, until, code, now)}"
+    line = f"command {args.command}: {_result(args, v, until, code, now, clock)}"
     if not args.json:
         print(line, file=sys.stdout if code == EXIT_OK else sys.stderr, flush=True)
         return code
@@ -155,22 +165,23 @@ def _report(
 
 
 def _result(
-    args: argparse.Namespace, v: Verification | None, until: str, code: int, now: datetime
+    args: argparse.Namespace,
+    v: Verification | None,
+    until: str,
+    code: int,
+    now: datetime,
+    clock: CtlClock,
 ) -> str:
     """'received at 12:00:20', 'received OVERDUE: due 12:00:20, 14 s late', ..."""
     stage = v.stage(until) if v is not None else None  # type: ignore[arg-type]
     if code == EXIT_OK and stage is not None:
-        return f"{until} at {_time(stage.at)}"
+        return f"{until} at {clock.stamp(stage.at) or '?'}"
     if code == EXIT_REFUSED:
         return f"{until} never will be ({_failed(v)})"
     if stage is not None and stage.due is not None:
-        late = round((now - stage.due).total_seconds())
-        return f"{until} OVERDUE: due {_time(stage.due)}, {late} s late"
+        late = clock.duration((now - stage.due).total_seconds())
+        return f"{until} OVERDUE: due {clock.stamp(stage.due)}, {late} late"
     return f"not {until} within {args.max_wait:g} s (no due known)"
-
-
-def _time(t: datetime | None) -> str:
-    return "?" if t is None else t.astimezone().strftime("%H:%M:%S")
 
 
 def _failed(v: Verification | None) -> str:
