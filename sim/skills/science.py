@@ -27,10 +27,10 @@ CAMERA_WORK = "identifying stones (science camera)"
 SEARCH_S = IDENTIFY_S * 0.3  # sim seconds searching a radius for stones
 # finding nothing, identify_stone asks the operators whether to search wider: a radius
 # WIDER times as large, the ring around the first search taking its share of SEARCH_S
-# by area; no answer within ASK_S (mission time) takes the default, WIDER_CHOICE
+# by area; no answer within the skill's answer_within (mission time, the library's
+# default 180 s) takes the default, WIDER_CHOICE
 WIDER = 2.0
 WIDER_CHOICE, GIVE_UP = "wider", "give up"
-ASK_S = 180.0
 
 
 def _nothing_of(rss: RssState | None) -> str:
@@ -103,14 +103,21 @@ class ScienceSkills(SkillBase):
     # ------------------------------------------------------------ identify_stone
 
     async def identify_stone(
-        self, ctx: SkillContext, target: Position, search_radius: float, partner: str | None
+        self,
+        ctx: SkillContext,
+        target: Position,
+        search_radius: float,
+        partner: str | None,
+        answer_within: float,
     ) -> Success:
         r, w = self.robot, self.world
         tx, ty = xy(target)
         f0 = await self._reach_search_centre(ctx, tx, ty, search_radius)
         rss = w.rss_near(tx, ty, search_radius)
         if not self._reaches_a_stone(rss, tx, ty, search_radius):
-            search_radius, rss = await self._search_wider(ctx, tx, ty, search_radius, rss, f0)
+            search_radius, rss = await self._search_wider(
+                ctx, (tx, ty), search_radius, rss, f0, answer_within
+            )
         assert rss is not None
         self._found_region(rss)
         search = Search(tx, ty, search_radius, rss, partner, f0)
@@ -136,20 +143,21 @@ class ScienceSkills(SkillBase):
     async def _search_wider(
         self,
         ctx: SkillContext,
-        tx: float,
-        ty: float,
+        at: tuple[float, float],
         radius: float,
         rss: RssState | None,
         f0: float,
+        answer_within: float,
     ) -> tuple[float, RssState]:
         """Nothing within `radius`: the operators are asked whether to search
         wider (the default, at the timeout) or give up (a failure, for the
         skill's on_failure to act on). The wider radius and its region."""
+        tx, ty = at
         nothing = f"{_nothing_of(rss)} within {radius:g} m of {_fmt(tx, ty)}"
         if rss is None:
             await self.work(ctx, SEARCH_S, "searching for stones", frac0=f0, frac1=f0)
         wider = radius * WIDER
-        how = await self._ask_wider(ctx, nothing, wider)
+        how = await self._ask_wider(ctx, nothing, wider, answer_within)
         ring_s = SEARCH_S * (WIDER**2 - 1)  # the ring's share of the search, by area
         await self.work(ctx, ring_s, f"searching wider ({wider:g} m, {how})", frac0=f0, frac1=f0)
         found = self.world.rss_near(tx, ty, wider)
@@ -157,14 +165,16 @@ class ScienceSkills(SkillBase):
             raise self.fail(f"{nothing}, nor within {wider:g} m: nothing to identify here")
         return wider, found
 
-    async def _ask_wider(self, ctx: SkillContext, nothing: str, wider: float) -> str:
+    async def _ask_wider(
+        self, ctx: SkillContext, nothing: str, wider: float, answer_within: float
+    ) -> str:
         """The operators' word (or the default): how the wider search was
         decided; a failure saying who gave up."""
         reply = await ctx.ask_operator(
             f"{self.robot.name}: {nothing}. Search wider ({wider:g} m)?",
             [WIDER_CHOICE, GIVE_UP],
             WIDER_CHOICE,
-            ASK_S,
+            answer_within,
         )
         if reply.choice == GIVE_UP:
             by = f" ({reply.by})" if reply.by else ""

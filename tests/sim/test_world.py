@@ -476,7 +476,10 @@ def test_identify_finding_nothing_gives_up_or_fails_wider_too(world: World) -> N
 
 
 async def _together(skills: RobotSkills, robot: Any, **params: Any) -> str:
-    """One partner's identify_stone, working on it as the fleet marks it (a barrier)."""
+    """One partner's identify_stone, working on it as the fleet marks it (a barrier);
+    the parameters not given with the library's defaults, as in `call`."""
+    spec = LIBRARY.skills["identify_stone"]
+    params = {**typed_params(spec.signature().defaults, spec.kinds()), **params}
     robot.activity = "identify_stone"
     try:
         return (await skills.identify_stone(FakeCtx(), **params)).info
