@@ -274,57 +274,93 @@ def _span(planned: datetime | None, actual: datetime | None, late: float | None)
     return f"{_clock(planned)}→{_clock(actual)}{_delta(late)}"
 
 
-def report_text(r: PlanReport) -> str:
-    """The report for a person: a table per section, times in local time."""
+def _notes(k: SkillRow) -> str:
+    """What a skill's line says after its spans: failures, retries, a missing forecast."""
+    notes = [
+        note
+        for note, shown in (
+            ("failed: " + "; ".join(k.failures), k.failures),
+            (f"retry of {k.retry_of}", k.retry_of),
+            (f"retried as {k.retried_as}", k.retried_as),
+            ("no forecast sent with its sync", k.predicted_start is None and not k.retry_of),
+        )
+        if shown
+    ]
+    return f"  {'; '.join(notes)}" if notes else ""
+
+
+def _skill_line(k: SkillRow) -> str:
+    return (
+        f"  {k.robot:<8} {k.id:<14} {k.skill:<18} {k.status.value:<17} "
+        f"start {_span(k.predicted_start, k.started, k.start_late_s)}  "
+        f"end {_span(k.predicted_end, k.finished, k.end_late_s)}" + _notes(k)
+    )
+
+
+def _heading(r: PlanReport) -> list[str]:
     out = [
         f"Plan against actual: {r.mission} ({r.journal}), {_clock(r.start)} to {_clock(r.end)} "
         f"ground time, {r.changes} changes",
     ]
     if r.gap:
         out.append(f"note: {r.gap}")
-    out += [
-        "",
+    return out
+
+
+def _skills(r: PlanReport) -> list[str]:
+    out = [
         "Skills (start and end: as forecast when synchronized → as the robot did it, "
         "robot time; (+late / -early))",
+        *map(_skill_line, r.skills),
     ]
-    for k in r.skills:
-        notes = []
-        if k.failures:
-            notes.append("failed: " + "; ".join(k.failures))
-        if k.retry_of:
-            notes.append(f"retry of {k.retry_of}")
-        if k.retried_as:
-            notes.append(f"retried as {k.retried_as}")
-        if k.predicted_start is None and not k.retry_of:
-            notes.append("no forecast sent with its sync")
-        out.append(
-            f"  {k.robot:<8} {k.id:<14} {k.skill:<18} {k.status.value:<17} "
-            f"start {_span(k.predicted_start, k.started, k.start_late_s)}  "
-            f"end {_span(k.predicted_end, k.finished, k.end_late_s)}"
-            + (f"  {'; '.join(notes)}" if notes else "")
-        )
     if not r.skills:
         out.append("  none was synchronized")
     out.append(
         f"  ({r.deleted_unsynchronized} deleted before being synchronized, "
         f"{r.unsynchronized_at_end} never synchronized)"
     )
+    return out
+
+
+def _failures(r: PlanReport) -> list[str]:
     failed = [k for k in r.skills if k.failures]
-    out += ["", f"Failures and retries: {len(failed)} failed"]
+    out = [f"Failures and retries: {len(failed)} failed"]
     for k in failed:
         again = f", retried as {k.retried_as}" if k.retried_as else ", not retried"
         out.append(f"  {k.id} ({k.robot}) at {_clock(k.finished)}: {k.failures[-1]}{again}")
-    out += ["", f"Waivers: {len(r.waivers)}"]
+    return out
+
+
+def _waivers(r: PlanReport) -> list[str]:
+    out = [f"Waivers: {len(r.waivers)}"]
     for w in r.waivers:
         gone = f", withdrawn {_clock(w.withdrawn)}" if w.withdrawn else ""
         out.append(f"  {w.check}: {w.reason!r} by {w.by} at {_clock(w.at)}{gone}")
-    out += ["", f"Refusals: {len(r.refusals)}"]
-    for x in r.refusals:
-        out.append(f"  {_clock(x.at)} {x.robot}: {x.what}: {x.reason}")
-    out += ["", "Overdue verifications: none listed", f"  ({r.overdue_note})"]
-    out += ["", "Who did what"]
+    return out
+
+
+def _refusals(r: PlanReport) -> list[str]:
+    return [f"Refusals: {len(r.refusals)}"] + [
+        f"  {_clock(x.at)} {x.robot}: {x.what}: {x.reason}" for x in r.refusals
+    ]
+
+
+def _overdue(r: PlanReport) -> list[str]:
+    return ["Overdue verifications: none listed", f"  ({r.overdue_note})"]
+
+
+def _actors(r: PlanReport) -> list[str]:
+    out = ["Who did what"]
     for a in r.actors:
         total = sum(a.operations.values())
         kinds = ", ".join(f"{op} {n}" for op, n in a.operations.items())
         out.append(f"  {a.actor}: {total} ({kinds})")
-    return "\n".join(out) + "\n"
+    return out
+
+
+_SECTIONS = (_heading, _skills, _failures, _waivers, _refusals, _overdue, _actors)
+
+
+def report_text(r: PlanReport) -> str:
+    """The report for a person: a table per section, times in local time."""
+    return "\n\n".join("\n".join(section(r)) for section in _SECTIONS) + "\n"
