@@ -751,36 +751,51 @@ def _replay(conn: sqlite3.Connection, path: Path, mission: Mission, info: LoadIn
         (mission.revision,),
     )
     for rev, text, actor, op in cur:
-        why = f"it is missing (the next one is {rev})" if rev != expected else None
-        if why is None:
-            try:
-                batch = EventBatch.model_validate_json(text)
-                if batch.revision != rev:
-                    raise ValueError(f"it says revision {batch.revision}")
-                mission = apply_events(mission, batch)
-                info.replayed += 1
-                expected += 1
-                continue
-            except (ValidationError, ValueError, KeyError, TypeError, IndexError) as e:
-                why = _why(e)
-        later = conn.execute(
-            "SELECT count(*) FROM batches WHERE revision > ?", (expected,)
-        ).fetchone()[0]
-        what = f"{_op_name(op)} by {actor}" if rev == expected and actor else ""
-        message = (
-            f"{path}: batch {expected} is missing (the next one is {rev}); "
-            f"cannot replay past revision {expected - 1}"
-            if rev != expected
-            else f"{path}: batch {expected}{f' ({what})' if what else ''} cannot be replayed: {why}"
-        )
-        raise Unreplayable(
-            message,
-            revision=expected,
-            why=why,
-            later=later,
-            what=what,
-        )
+        if rev != expected:
+            raise _missing(conn, path, expected, rev)
+        try:
+            batch = EventBatch.model_validate_json(text)
+            if batch.revision != rev:
+                raise ValueError(f"it says revision {batch.revision}")
+            mission = apply_events(mission, batch)
+        except (ValidationError, ValueError, KeyError, TypeError, IndexError) as e:
+            raise _unappliable(conn, path, expected, actor, op, _why(e)) from None
+        info.replayed += 1
+        expected += 1
     return mission
+
+
+def _later(conn: sqlite3.Connection, revision: int) -> int:
+    """How many batches the journal holds after `revision`."""
+    return int(
+        conn.execute("SELECT count(*) FROM batches WHERE revision > ?", (revision,)).fetchone()[0]
+    )
+
+
+def _missing(conn: sqlite3.Connection, path: Path, expected: int, rev: int) -> Unreplayable:
+    """Batch `expected` is not in the journal: the next one there is `rev`."""
+    return Unreplayable(
+        f"{path}: batch {expected} is missing (the next one is {rev}); "
+        f"cannot replay past revision {expected - 1}",
+        revision=expected,
+        why=f"it is missing (the next one is {rev})",
+        later=_later(conn, expected),
+        what="",
+    )
+
+
+def _unappliable(
+    conn: sqlite3.Connection, path: Path, expected: int, actor: str, op: str, why: str
+) -> Unreplayable:
+    """Batch `expected` is there but cannot be read or applied, for `why`."""
+    what = f"{_op_name(op)} by {actor}" if actor else ""
+    return Unreplayable(
+        f"{path}: batch {expected}{f' ({what})' if what else ''} cannot be replayed: {why}",
+        revision=expected,
+        why=why,
+        later=_later(conn, expected),
+        what=what,
+    )
 
 
 def _op_name(op: str) -> str:
