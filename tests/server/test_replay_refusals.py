@@ -12,7 +12,7 @@ import pytest
 from backend.core.ops import AddSkill
 from backend.core.rules.engine import Engine
 from backend.files.missions import load_mission
-from backend.server.journal import Journal, Unreplayable
+from backend.server.journal import Journal, JournalCorrupt, Unreplayable
 
 from .harness import ROOT, TUTORIAL
 
@@ -65,3 +65,46 @@ def test_a_batch_without_an_actor_is_named_by_its_revision_alone(tmp_path):
     e = refusal(db)
     assert str(e).startswith(f"{db}: batch 3 cannot be replayed: ")
     assert (e.revision, e.later, e.what) == (3, 0, "")
+
+
+def test_a_journal_whose_snapshots_all_fail_names_each_and_why(tmp_path):
+    db = tmp_path / "m.db"
+    three_adds(db)
+    with sqlite3.connect(db) as conn:
+        (text,) = conn.execute("SELECT mission FROM snapshots WHERE revision = 0").fetchone()
+        conn.execute(
+            "UPDATE snapshots SET mission = ? WHERE revision = 0",
+            (json.dumps({**json.loads(text), "revision": 9}),),
+        )
+    with Journal.open(db) as j, pytest.raises(JournalCorrupt) as e:
+        j.load()
+    assert str(e.value) == f"{db}: no snapshot can be read (revision 0: it holds revision 9)"
+    with sqlite3.connect(db) as conn:
+        conn.execute("DELETE FROM snapshots")
+    with Journal.open(db) as j, pytest.raises(JournalCorrupt) as e:
+        j.load()
+    assert str(e.value) == f"{db}: batches without a base snapshot"
+
+
+def test_appending_says_what_a_journal_cannot_take(tmp_path):
+    db = tmp_path / "m.db"
+    three_adds(db)
+    with Journal.open(db) as j:
+        (record,) = j.records(after=2)
+        with pytest.raises(ValueError) as e:
+            j.append_many([record.batch])
+        assert str(e.value) == (
+            "batch revision 3 does not follow the journal's last revision 3 (expected 4): "
+            "revisions are consecutive"
+        )
+        with pytest.raises(ValueError) as e:
+            j.append_many([record.batch.model_copy(update={"revision": 4, "events": []})])
+        assert str(e.value) == "batch 4 has no events: no-ops are not journaled"
+        mission, _ = j.load()
+        with pytest.raises(ValueError) as e:
+            j.snapshot(mission.model_copy(update={"revision": 5}))
+        assert str(e.value) == (
+            "cannot snapshot revision 5: the journal ends at revision 3; "
+            "append the batches up to it first"
+        )
+        assert [r.revision for r in j.records()] == [1, 2, 3]
