@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import os
 import sqlite3
+from collections.abc import Iterator
+from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -156,8 +158,7 @@ def quarantine(conn: sqlite3.Connection, revision: int, reason: str) -> tuple[in
     nothing is deleted (an operator can read them there). Returns how many
     batches and snapshots moved."""
     now = datetime.now(UTC).isoformat(timespec="seconds")
-    conn.execute("BEGIN IMMEDIATE")
-    try:
+    with transaction(conn):
         batches = conn.execute(
             "INSERT INTO quarantine (at, reason, kind, revision, ts, actor, client, request_id, "
             "op, content, reply) SELECT ?, ?, 'batch', revision, ts, actor, client, request_id, "
@@ -172,10 +173,6 @@ def quarantine(conn: sqlite3.Connection, revision: int, reason: str) -> tuple[in
         ).rowcount
         conn.execute("DELETE FROM batches WHERE revision >= ?", (revision,))
         conn.execute("DELETE FROM snapshots WHERE revision >= ?", (revision,))
-        conn.execute("COMMIT")
-    except BaseException:
-        rollback(conn)
-        raise
     return batches, snapshots
 
 
@@ -224,6 +221,19 @@ def _lock_writer(p: Path) -> int:
             "stop it first, or give this one another --db"
         ) from None
     return fd
+
+
+@contextmanager
+def transaction(conn: sqlite3.Connection) -> Iterator[None]:
+    """One write transaction: committed at the end, rolled back on any
+    exception (which goes on)."""
+    conn.execute("BEGIN IMMEDIATE")
+    try:
+        yield
+        conn.execute("COMMIT")
+    except BaseException:
+        rollback(conn)
+        raise
 
 
 def rollback(conn: sqlite3.Connection) -> None:
