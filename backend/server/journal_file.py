@@ -118,6 +118,14 @@ def _prepare(conn: sqlite3.Connection, p: Path, library: str | None) -> None:
     # that too at the price of an fsync per operation.
     conn.execute("PRAGMA synchronous=NORMAL")
     conn.execute("BEGIN IMMEDIATE")
+    _make_tables(conn, p)
+    _check_meta(conn, p, library)
+    conn.execute("COMMIT")
+
+
+def _make_tables(conn: sqlite3.Connection, p: Path) -> None:
+    """The journal's tables, created (or brought up to date); a database of
+    something else is refused."""
     tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
     if tables and "meta" not in tables:
         raise JournalError(
@@ -127,11 +135,14 @@ def _prepare(conn: sqlite3.Connection, p: Path, library: str | None) -> None:
     for stmt in _SCHEMA.split(";"):
         if stmt.strip():
             conn.execute(stmt)
+    _add_columns(conn)
+
+
+def _add_columns(conn: sqlite3.Connection) -> None:
+    """A journal written before a column was added gets it (empty)."""
     for table, column, kind in _ADDED_COLUMNS:
         if column not in {row[1] for row in conn.execute(f"PRAGMA table_info({table})")}:
             conn.execute(f"ALTER TABLE {table} ADD COLUMN {column} {kind}")
-    _check_meta(conn, p, library)
-    conn.execute("COMMIT")
 
 
 def _check_meta(conn: sqlite3.Connection, p: Path, library: str | None) -> None:
