@@ -23,7 +23,7 @@ from __future__ import annotations
 import itertools
 import json
 import sqlite3
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -410,30 +410,51 @@ class JournalReader:
 
 def missing(mission: Mission, batch: ev.EventBatch) -> str | None:
     """What `batch` refers to that `mission` lacks (None: it applies)."""
-    skills: set[str] = set()
-    commands: set[int] = set()
+    brought: set[str | int] = set()  # what the batch adds: skill ids (text), command ids
     for e in batch.events:
-        match e:
-            case ev.SkillAdded(skill=s):
-                skills.add(s.id)
-            case ev.CommandQueued(command=c):
-                commands.add(c.id)
-            case ev.MissionReplaced():
-                return None
-            case (
-                ev.SkillRemoved(id=sid)
-                | ev.SkillMoved(id=sid)
-                | ev.SkillStatusChanged(id=sid)
-                | ev.SkillEdited(id=sid)
-            ):
-                if sid not in skills and mission.find(sid) is None:
-                    return f"skill {sid}"
-            case ev.CommandChanged(id=cid):
-                if cid not in commands and mission.command(cid) is None:
-                    return f"command {cid}"
-            case _:
-                pass
+        kind = type(e)
+        if kind is ev.MissionReplaced:
+            return None
+        bring = _BRINGS.get(kind)
+        if bring is not None:
+            brought.add(bring(e))
+        elif kind in _LACKS:
+            lacks = _LACKS[kind](mission, e, brought)
+            if lacks is not None:
+                return lacks
     return None
+
+
+def _skill_id(e: ev.SkillAdded) -> str | int:
+    return e.skill.id
+
+
+def _command_id(e: ev.CommandQueued) -> str | int:
+    return e.command.id
+
+
+def _lacks_skill(mission: Mission, e: Any, brought: set[str | int]) -> str | None:
+    sid = e.id
+    return f"skill {sid}" if sid not in brought and mission.find(sid) is None else None
+
+
+def _lacks_command(mission: Mission, e: Any, brought: set[str | int]) -> str | None:
+    cid = e.id
+    return f"command {cid}" if cid not in brought and mission.command(cid) is None else None
+
+
+# the events that add what later events refer to, and those that refer to it
+_BRINGS: dict[type[Any], Callable[[Any], str | int]] = {
+    ev.SkillAdded: _skill_id,
+    ev.CommandQueued: _command_id,
+}
+_LACKS: dict[type[Any], Callable[[Mission, Any, set[str | int]], str | None]] = {
+    ev.SkillRemoved: _lacks_skill,
+    ev.SkillMoved: _lacks_skill,
+    ev.SkillStatusChanged: _lacks_skill,
+    ev.SkillEdited: _lacks_skill,
+    ev.CommandChanged: _lacks_command,
+}
 
 
 def apply_in_order(
