@@ -253,19 +253,22 @@ class JournalReader:
             self._times()
             revisions = [self.base + 1 + i for i, n in enumerate(self._names) if n == "sync"]
             found: list[tuple[int, dict[str, tuple[float, float]]]] = []
-            for k in range(0, len(revisions), 500):  # SQLite's limit on parameters
-                part = revisions[k : k + 500]
-                marks = ", ".join("?" * len(part))
-                rows = self._conn.execute(
-                    f"SELECT revision, op FROM batches WHERE revision IN ({marks})", part
-                )
-                for rev, text in rows:
-                    forecast = op_of(text).get("forecast")
-                    if isinstance(forecast, dict) and forecast:
-                        found.append((rev - self.base - 1, _spans(forecast)))
+            for rev, text in self._ops(revisions):
+                forecast = op_of(text).get("forecast")
+                if isinstance(forecast, dict) and forecast:
+                    found.append((rev - self.base - 1, _spans(forecast)))
             found.sort()
             self._syncs = found
         return self._syncs
+
+    def _ops(self, revisions: list[int]) -> Iterator[tuple[int, str]]:
+        """(revision, operation JSON) of these batches, in no given order."""
+        for k in range(0, len(revisions), 500):  # SQLite's limit on parameters
+            part = revisions[k : k + 500]
+            marks = ", ".join("?" * len(part))
+            yield from self._conn.execute(
+                f"SELECT revision, op FROM batches WHERE revision IN ({marks})", part
+            )
 
     # -- batches ---------------------------------------------------------------------------
     def batches(self, first: int, last: int) -> Iterator[Batch]:
@@ -367,13 +370,7 @@ class JournalReader:
             batches = self.events(plan.apply)
             listed = [batches[i] for i in plan.apply]
             unplaced: list[int] = []
-            taken: list[tuple[ev.EventBatch, int]] = []
-            if clock == ROBOT:
-                mission = apply_in_order(mission, listed, unplaced, taken)
-            else:
-                for b in listed:
-                    mission = ev.apply_events(mission, b)
-                taken = [(b, b.revision) for b in listed]
+            mission, taken = _apply(clock, mission, listed, unplaced)
             taken = [(b, by - self.base - 1) for b, by in taken]  # revisions -> indices
             recent = self._recent(order, position - window, position, plan.snapshot, taken)
         last = max([self.base + 1 + plan.snapshot, *(b.revision for b in batches.values())])
@@ -406,6 +403,19 @@ class JournalReader:
 
 
 # -- robot time: applying out of journal order ---------------------------------------------
+
+
+def _apply(
+    clock: str, mission: Mission, batches: list[ev.EventBatch], unplaced: list[int]
+) -> tuple[Mission, list[tuple[ev.EventBatch, int]]]:
+    """`batches` applied to `mission` in `clock`'s order, and each batch taken
+    with the revision it was taken at (`apply_in_order` in robot time)."""
+    taken: list[tuple[ev.EventBatch, int]] = []
+    if clock == ROBOT:
+        return apply_in_order(mission, batches, unplaced, taken), taken
+    for b in batches:
+        mission = ev.apply_events(mission, b)
+    return mission, [(b, b.revision) for b in batches]
 
 
 def missing(mission: Mission, batch: ev.EventBatch) -> str | None:
