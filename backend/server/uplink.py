@@ -260,10 +260,7 @@ class UplinkSender:
             downlink_ack=engine.mission.report_seqs.get(self.robot, 0),
             sent=_now(),
         )
-        for cid in queued:
-            if not self._flight[cid]:
-                engine.transmitting.add(cid)
-            self._flight[cid] += 1
+        self._carry(queued)
         self.transmissions += 1
         try:
             replies = await query_all(
@@ -278,12 +275,24 @@ class UplinkSender:
             log.info("uplink of %s: %s", self.robot, e)
             return "undelivered"
         finally:
-            for cid in queued:
-                self._flight[cid] -= 1
-                if not self._flight[cid]:
-                    del self._flight[cid]
-                    engine.transmitting.discard(cid)
+            self._landed(queued)
         return self._judge(replies, owner)
+
+    def _carry(self, queued: list[int]) -> None:
+        """A transmission carries these queued commands: the engine counts
+        them transmitting while any transmission does."""
+        for cid in queued:
+            if not self._flight[cid]:
+                self.link.engine.transmitting.add(cid)
+            self._flight[cid] += 1
+
+    def _landed(self, queued: list[int]) -> None:
+        """A transmission carrying these ended."""
+        for cid in queued:
+            self._flight[cid] -= 1
+            if not self._flight[cid]:
+                del self._flight[cid]
+                self.link.engine.transmitting.discard(cid)
 
     def _judge(self, replies: list[Any], owner: str) -> Outcome:
         """What the replies say: the owner's receipt, a refusal, or nobody."""
