@@ -21,7 +21,7 @@ import asyncio
 import json
 import logging
 from collections.abc import Callable, Iterable, Mapping
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 from typing import Any, Protocol
 
 from pydantic import ValidationError
@@ -389,21 +389,22 @@ class RobotLink:
         if info is None:
             return
         now = _now()
-        delay = info.delay_s
-        if sent is not None:
-            samples = self._delays.setdefault(robot, [])
-            samples.append(max(0.0, (now - sent).total_seconds()))
-            del samples[:-DELAY_SAMPLES]
-            delay = round(min(samples), 3)
-        moved = info.delay_s is None or (
-            delay is not None and abs(delay - info.delay_s) > max(0.2, 0.1 * info.delay_s)
-        )
+        delay = info.delay_s if sent is None else self._delay_sample(robot, now - sent)
         last = self._published_heard.get(robot)
         update = {"heard": now, "delay_s": delay}
+        moved = _moved(info.delay_s, delay)
         if moved or last is None or (now - last).total_seconds() >= HEARD_PUBLISH_S:
             self._set_robot(info.model_copy(update=update))
         else:  # kept for snapshots; published with the next notable change
             self.robots[robot] = info.model_copy(update=update)
+
+    def _delay_sample(self, robot: str, took: timedelta) -> float:
+        """The one-way delay estimate with this message's (`took`): the least
+        of the last DELAY_SAMPLES."""
+        samples = self._delays.setdefault(robot, [])
+        samples.append(max(0.0, took.total_seconds()))
+        del samples[:-DELAY_SAMPLES]
+        return round(min(samples), 3)
 
     # -- presence ---------------------------------------------------------------------
     def _set_robot(self, info: RobotInfo) -> None:
@@ -497,6 +498,11 @@ _ON_EVENT: dict[type[Any], Callable[[RobotLink, Any], None]] = {
     ev.RobotAdded: RobotLink._robot_added,
     ev.MissionReplaced: RobotLink._mission_replaced,
 }
+
+
+def _moved(before: float | None, delay: float | None) -> bool:
+    """A delay estimate moved enough to be published at once."""
+    return before is None or (delay is not None and abs(delay - before) > max(0.2, 0.1 * before))
 
 
 def _why_unsent(robot: str, info: RobotInfo | None) -> str:
