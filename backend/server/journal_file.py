@@ -97,13 +97,18 @@ def open_database(
         raise
     except sqlite3.Error as e:
         _abandon(conn, lock_fd)
-        if "locked" in str(e) or "busy" in str(e):
-            raise JournalError(
-                f"{p}: the journal is locked by another program (an sqlite3 shell, a backup?): "
-                "close it, then start again"
-            ) from None
-        raise JournalError(f"{p}: not a usable journal: {e}") from None
+        raise _unusable(p, e) from None
     return conn, lock_fd
+
+
+def _unusable(p: Path, e: sqlite3.Error) -> JournalError:
+    """What SQLite's refusal to prepare the journal means for a person."""
+    if "locked" in str(e) or "busy" in str(e):
+        return JournalError(
+            f"{p}: the journal is locked by another program (an sqlite3 shell, a backup?): "
+            "close it, then start again"
+        )
+    return JournalError(f"{p}: not a usable journal: {e}")
 
 
 def _prepare(conn: sqlite3.Connection, p: Path, library: str | None) -> None:
