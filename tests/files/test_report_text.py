@@ -7,13 +7,16 @@ from datetime import UTC, datetime
 
 import pytest
 
-from backend.core.model import Status
+from backend.core import events as ev
+from backend.core.model import Mission, Status
+from backend.files.record.journal import Batch
 from backend.files.record.report import (
     ActorRow,
     PlanReport,
     RefusalRow,
     SkillRow,
     WaiverRow,
+    _Pass,
     report_text,
 )
 
@@ -110,3 +113,21 @@ def test_a_report_without_skills_says_none_was_synchronized(utc):
     assert "  none was synchronized\n  (0 deleted before being synchronized, 0 never" in text
     assert "Failures and retries: 0 failed\n\nWaivers: 0\n\nRefusals: 0\n\n" in text
     assert text.endswith("Who did what\n")
+
+
+def test_a_refused_downlink_message_is_a_refusal_of_its_robot():
+    op = {"op": "downlink_refused", "robot": "lru1", "seq": 4, "message": "no skill 'x'"}
+    p = _Pass(Mission(name="m", library="lib.yaml"))
+    p.batch(Batch(7, 60.0, "lru1", "", op, ev.EventBatch(revision=7, events=[])))
+    p.batch(
+        Batch(8, 61.0, "lru2", "", {"op": "downlink_refused"}, ev.EventBatch(revision=8, events=[]))
+    )
+    assert p.refusals == [
+        RefusalRow(at=datetime.fromtimestamp(60.0, UTC), robot="lru1", what="downlink message 4",
+                   reason="no skill 'x'"),
+        RefusalRow(at=datetime.fromtimestamp(61.0, UTC), robot="", what="downlink message ?",
+                   reason=""),
+    ]  # fmt: skip
+    assert {a: dict(c) for a, c in p.actors.items()} == {
+        "lru1": {"downlink_refused": 1}, "lru2": {"downlink_refused": 1}
+    }  # fmt: skip
