@@ -145,18 +145,9 @@ class _Pass:
 
     def batch(self, b: Batch) -> None:
         self.actors.setdefault(b.actor or b.client or "?", Counter())[b.name] += 1
-        if b.name == "sync":
-            self._sync(b)
-        elif b.name == "downlink_refused":
-            op = b.op
-            self.refusals.append(
-                RefusalRow(
-                    at=_t(b.ts),
-                    robot=str(op.get("robot", "")),
-                    what=f"downlink message {op.get('seq', '?')}",
-                    reason=str(op.get("message", "")),
-                )
-            )
+        read = _ON_OP.get(b.name)
+        if read is not None:
+            read(self, b)
         for e in b.batch.events:
             on = _ON_EVENT.get(type(e))
             if on is not None:
@@ -176,6 +167,17 @@ class _Pass:
             except (KeyError, ValueError):
                 continue
             row.synchronized, row.synchronized_by = _t(b.ts), b.actor
+
+    def _downlink_refused(self, b: Batch) -> None:
+        op = b.op
+        self.refusals.append(
+            RefusalRow(
+                at=_t(b.ts),
+                robot=str(op.get("robot", "")),
+                what=f"downlink message {op.get('seq', '?')}",
+                reason=str(op.get("message", "")),
+            )
+        )
 
     # -- one method per kind of event the report follows
 
@@ -230,6 +232,11 @@ class _Pass:
             )
 
 
+# the operations the report reads (besides their events), by name
+_ON_OP: dict[str, Callable[[_Pass, Batch], None]] = {
+    "sync": _Pass._sync,
+    "downlink_refused": _Pass._downlink_refused,
+}
 _ON_EVENT: dict[type[Any], Callable[[_Pass, Batch, Any], None]] = {
     ev.SkillAdded: _Pass._added,
     ev.SkillRemoved: _Pass._removed,
