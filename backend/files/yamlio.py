@@ -278,8 +278,11 @@ class _Scan:
             tag = self.loader.resolve(yaml.ScalarNode, value, e.implicit)
         else:
             tag = e.tag or _STR_TAG
-        if tag == _STR_TAG:
-            return str(value)
+        return str(value) if tag == _STR_TAG else self._typed_key(tag, value)
+
+    def _typed_key(self, tag: str, value: str) -> str:
+        """A key of another type than a string, named as the data has it
+        (`1` is '1', `true` 'True')."""
         try:
             typed = self.loader.construct_object(yaml.ScalarNode(tag, value))
         except yaml.YAMLError:
