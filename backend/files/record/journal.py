@@ -179,13 +179,19 @@ class JournalReader:
         """Per batch: its journal time (never going back: a wall clock that
         stepped back), its robot time (None: the ground's), its actor."""
         if self._index is None:
-            rows = self._covered()
-            rows += self._scan(rows[-1][0] if rows else self.base)
-            self._check_complete([r[0] for r in rows])
+            rows = self._index_rows()
             ground = list(itertools.accumulate((r[1] for r in rows), max))
             self._index = (ground, [r[3] for r in rows], [r[4] or "" for r in rows])
             self._names = [r[2] for r in rows]
         return self._index
+
+    def _index_rows(self) -> list[IndexRow]:
+        """The index's rows: the given index's while it covers the batches,
+        then the journal's own; RecordError if a batch is missing."""
+        rows = self._covered()
+        rows += self._scan(rows[-1][0] if rows else self.base)
+        self._check_complete([r[0] for r in rows])
+        return rows
 
     def _check_complete(self, revisions: list[int]) -> None:
         """RecordError naming the first batch missing from `revisions`."""
