@@ -73,19 +73,19 @@ def _read_text(path: FsPath, file: str) -> str:
     return text
 
 
+# what tells a file's kind: its format's prefix (a wrong version is reported
+# by the model), else a field only that kind has
+_KINDS = (
+    ("mission", "missionctl/mission", ("tasks", "robots")),
+    ("library", "missionctl/library", ("robot_types", "skills")),
+)
+
+
 def file_kind(data: dict[str, Any]) -> str | None:
     fmt = data.get("format")
     if isinstance(fmt, str):
-        if fmt.startswith("missionctl/mission"):
-            return "mission"  # a wrong version is reported by the model
-        if fmt.startswith("missionctl/library"):
-            return "library"
-        return None
-    if "tasks" in data or "robots" in data:
-        return "mission"
-    if "robot_types" in data or "skills" in data:
-        return "library"
-    return None
+        return next((kind for kind, prefix, _ in _KINDS if fmt.startswith(prefix)), None)
+    return next((kind for kind, _, fields in _KINDS if any(f in data for f in fields)), None)
 
 
 # fields only one kind of file has

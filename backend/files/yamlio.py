@@ -133,21 +133,20 @@ class _Scan:
 
     def run(self) -> None:
         get = self.loader.get_event
-        scalar, alias = yaml.ScalarEvent, yaml.AliasEvent
-        opening = (yaml.MappingStartEvent, yaml.SequenceStartEvent)
-        closing = (yaml.MappingEndEvent, yaml.SequenceEndEvent)
+        on = {
+            yaml.ScalarEvent: self._scalar,
+            yaml.MappingStartEvent: self._open,
+            yaml.SequenceStartEvent: self._open,
+            yaml.MappingEndEvent: self._close,
+            yaml.SequenceEndEvent: self._close,
+            yaml.AliasEvent: self._alias,
+        }.get
         while True:
             e = get()
-            kind = type(e)
-            if kind is scalar:
-                self._scalar(e)
-            elif kind in opening:
-                self._open(e)
-            elif kind in closing:
-                self._close()
-            elif kind is alias:
-                self._alias(e)
-            elif e is None or kind is yaml.StreamEndEvent:
+            handle = on(type(e))
+            if handle is not None:
+                handle(e)
+            elif e is None or type(e) is yaml.StreamEndEvent:
                 break
         if self.problems:
             first, *more = sorted(self.problems)
@@ -180,13 +179,8 @@ class _Scan:
 
     def _alias(self, e: Any) -> None:
         size, depth, text = self.anchors.get(e.anchor, (1, 0, None))
+        self._not_within_itself(e)
         stack = self.stack
-        if any(f.anchor == e.anchor for f in stack):
-            raise YamlSyntaxError(
-                *_pos(e.start_mark),
-                "recursive YAML alias: a value cannot contain itself",
-                stack[-1].path,
-            )
         top = stack[-1] if stack else None
         if top is not None and top.is_map and top.key is None:
             path = self._key(top, "None" if text is None else text, e)
@@ -197,6 +191,16 @@ class _Scan:
             self._too_many_nodes(e, path)
         if top is not None:
             self._nest(top, depth, e, path)
+
+    def _not_within_itself(self, e: Any) -> None:
+        """An alias inside the value its anchor names would be that value, endlessly."""
+        stack = self.stack
+        if any(f.anchor == e.anchor for f in stack):
+            raise YamlSyntaxError(
+                *_pos(e.start_mark),
+                "recursive YAML alias: a value cannot contain itself",
+                stack[-1].path,
+            )
 
     def _nest(self, top: _Frame, depth: int, e: Any, path: Path) -> None:
         """An alias in `top` brings the nesting its anchor had (`depth`)."""
@@ -219,7 +223,7 @@ class _Scan:
         is_map = type(e) is yaml.MappingStartEvent
         self.stack.append(_Frame(path, is_map, e.anchor, self.nodes - 1))
 
-    def _close(self) -> None:
+    def _close(self, e: Any) -> None:
         done = self.stack.pop()
         depth = done.below + 1
         if self.stack:
@@ -274,8 +278,11 @@ class _Scan:
             tag = self.loader.resolve(yaml.ScalarNode, value, e.implicit)
         else:
             tag = e.tag or _STR_TAG
-        if tag == _STR_TAG:
-            return str(value)
+        return str(value) if tag == _STR_TAG else self._typed_key(tag, value)
+
+    def _typed_key(self, tag: str, value: str) -> str:
+        """A key of another type than a string, named as the data has it
+        (`1` is '1', `true` 'True')."""
         try:
             typed = self.loader.construct_object(yaml.ScalarNode(tag, value))
         except yaml.YAMLError:

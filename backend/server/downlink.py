@@ -119,26 +119,36 @@ class DownlinkApplier:
         except JournalFailed:
             raise
         except Refusal as r:
-            host.submit(
-                DownlinkRefused(robot=robot, seq=msg.seq, code=r.code, message=r.message),
-                actor=robot,
-            )
-            what = _WHAT.get(type(msg), "message")
-            host.alert(
-                f"{what} {msg.seq} of {robot} refused: {r.message}",
-                level="error",
-                robot=robot,
-                skill=msg.id if isinstance(msg, Report) else None,
-                kind=AlertKind.REPORT_REFUSED,
-            )
-            return ErrorReply(**r.to_dict(), seq=msg.seq)
+            return self._refused(robot, msg, r)
         raise_alerts(host, applied)
-        if isinstance(msg, Report) and not applied.duplicate and msg.status.value == "failure":
-            host.alert(
-                f"{robot}: {msg.id} failed: {msg.info}",
-                level="error",
-                robot=robot,
-                skill=msg.id,
-                kind=AlertKind.FAILURE,
-            )
+        self._failed(robot, msg, applied)
         return None
+
+    def _refused(self, robot: str, msg: Message, r: Refusal) -> ErrorReply:
+        """A message refused: journaled as such, alerted, and its error for the robot."""
+        host = self._host
+        host.submit(
+            DownlinkRefused(robot=robot, seq=msg.seq, code=r.code, message=r.message),
+            actor=robot,
+        )
+        what = _WHAT.get(type(msg), "message")
+        host.alert(
+            f"{what} {msg.seq} of {robot} refused: {r.message}",
+            level="error",
+            robot=robot,
+            skill=msg.id if isinstance(msg, Report) else None,
+            kind=AlertKind.REPORT_REFUSED,
+        )
+        return ErrorReply(**r.to_dict(), seq=msg.seq)
+
+    def _failed(self, robot: str, msg: Message, applied: Applied) -> None:
+        """A report that a skill failed (not a duplicate): the operator is told."""
+        if not isinstance(msg, Report) or applied.duplicate or msg.status.value != "failure":
+            return
+        self._host.alert(
+            f"{robot}: {msg.id} failed: {msg.info}",
+            level="error",
+            robot=robot,
+            skill=msg.id,
+            kind=AlertKind.FAILURE,
+        )

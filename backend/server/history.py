@@ -15,6 +15,7 @@ now, or held it when it was removed or moved: the journal is read newest first).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -42,23 +43,49 @@ def robots_of(b: Batch, owners: dict[str, str]) -> list[str]:
 
     add(b.op.get("robot"))
     for e in b.batch.events:
-        match e:
-            case ev.SkillAdded(robot=r, skill=s):
-                owners[s.id] = r
-                add(r)
-            case ev.SkillRemoved(robot=r, id=sid) | ev.SkillMoved(robot=r, id=sid):
-                owners.setdefault(sid, r)  # read newest first: its older changes come next
-                add(r)
-            case ev.SkillStatusChanged(id=sid) | ev.SkillEdited(id=sid):
-                add(owners.get(sid))
-            case ev.BarrierSet(barrier=barrier):
-                for sid in barrier.skills:
-                    add(owners.get(sid))
-            case ev.CommandQueued(command=c):
-                add(c.robot)
-            case _:
-                pass
+        concerns = _CONCERNS.get(type(e))
+        if concerns is not None:
+            for robot in concerns(e, owners):
+                add(robot)
     return found
+
+
+# -- the robots an event concerns, by its kind; `owners` learns who holds a skill
+
+
+def _added(e: ev.SkillAdded, owners: dict[str, str]) -> tuple[str | None, ...]:
+    owners[e.skill.id] = e.robot
+    return (e.robot,)
+
+
+def _left(e: ev.SkillRemoved | ev.SkillMoved, owners: dict[str, str]) -> tuple[str | None, ...]:
+    owners.setdefault(e.id, e.robot)  # read newest first: its older changes come next
+    return (e.robot,)
+
+
+def _held(
+    e: ev.SkillStatusChanged | ev.SkillEdited, owners: dict[str, str]
+) -> tuple[str | None, ...]:
+    return (owners.get(e.id),)
+
+
+def _barrier(e: ev.BarrierSet, owners: dict[str, str]) -> tuple[str | None, ...]:
+    return tuple(owners.get(sid) for sid in e.barrier.skills)
+
+
+def _queued(e: ev.CommandQueued, owners: dict[str, str]) -> tuple[str | None, ...]:
+    return (e.command.robot,)
+
+
+_CONCERNS: dict[type[Any], Callable[[Any, dict[str, str]], tuple[str | None, ...]]] = {
+    ev.SkillAdded: _added,
+    ev.SkillRemoved: _left,
+    ev.SkillMoved: _left,
+    ev.SkillStatusChanged: _held,
+    ev.SkillEdited: _held,
+    ev.BarrierSet: _barrier,
+    ev.CommandQueued: _queued,
+}
 
 
 def answer(db: Path, req: HistoryRequest, owners: dict[str, str]) -> HistoryReply:

@@ -80,6 +80,7 @@ from backend.server.journal_file import (
     open_database,
     quarantine,
     rollback,
+    transaction,
 )
 
 __all__ = [
@@ -245,6 +246,42 @@ def _op_text(op: Any) -> str:
     if isinstance(op, BaseModel):
         return op.model_dump_json()
     return json.dumps(op)
+
+
+# revision, ts, actor, client, request_id, op, events, reply: a row of `batches`
+_BatchRow = tuple[int, float, str, str, str | None, str, str, str | None]
+
+
+def _batch_rows(entries: Iterable[Entry | EventBatch], now: float) -> list[_BatchRow]:
+    """The rows to insert for `entries`, each stamped `now`; ValueError for a
+    batch without events."""
+    rows = []
+    for e in entries:
+        if isinstance(e, EventBatch):
+            e = Entry(e)
+        b = e.batch
+        if not b.events:
+            raise ValueError(f"batch {b.revision} has no events: no-ops are not journaled")
+        op, text = e.op_json or b.op, _batch_text(b)
+        rows.append((b.revision, now, b.actor, e.client, e.request_id, op, text, e.reply))
+    return rows
+
+
+def _following(last: int | None, rows: list[_BatchRow]) -> int:
+    """The journal's last revision once `rows` follow `last`; ValueError unless
+    they follow it one by one (and there is a base snapshot)."""
+    if last is None:
+        raise ValueError(
+            "the journal has no base mission: store a snapshot(mission) before appending batches"
+        )
+    for row in rows:
+        if row[0] != last + 1:
+            raise ValueError(
+                f"batch revision {row[0]} does not follow the journal's last revision "
+                f"{last} (expected {last + 1}): revisions are consecutive"
+            )
+        last = row[0]
+    return last
 
 
 class Journal:
@@ -416,44 +453,17 @@ class Journal:
     def append_many(self, entries: Iterable[Entry | EventBatch]) -> int:
         """Append several batches in one transaction (all or none). Returns
         how many were appended."""
-        now = time.time()
-        rows = []
-        for e in entries:
-            if isinstance(e, EventBatch):
-                e = Entry(e)
-            b = e.batch
-            if not b.events:
-                raise ValueError(f"batch {b.revision} has no events: no-ops are not journaled")
-            op = e.op_json or b.op
-            text = _batch_text(b)
-            rows.append((b.revision, now, b.actor, e.client, e.request_id, op, text, e.reply))
+        rows = _batch_rows(entries, time.time())
         if not rows:
             return 0
         with self._lock:
-            last = self._last_rev
-            if last is None:
-                raise ValueError(
-                    "the journal has no base mission: "
-                    "store a snapshot(mission) before appending batches"
-                )
-            for row in rows:
-                if row[0] != last + 1:
-                    raise ValueError(
-                        f"batch revision {row[0]} does not follow the journal's last revision "
-                        f"{last} (expected {last + 1}): revisions are consecutive"
-                    )
-                last = row[0]
+            last = _following(self._last_rev, rows)
             conn = self._writable()
             if len(rows) == 1:  # one statement is its own transaction (autocommit)
                 conn.execute(_INSERT_BATCH, rows[0])
             else:
-                conn.execute("BEGIN IMMEDIATE")
-                try:
+                with transaction(conn):
                     conn.executemany(_INSERT_BATCH, rows)
-                    conn.execute("COMMIT")
-                except BaseException:
-                    rollback(conn)
-                    raise
             self._last_rev = last
             self._appended += len(rows)
             self._since_snapshot += sum(len(row[5]) + len(row[6]) for row in rows)
@@ -541,21 +551,17 @@ class Journal:
         which must read back: a restart starts from it)."""
         text = _dump(_MISSION_JSON, mission)
         if self._snapshot_rev is None:
-            try:
-                Mission.model_validate_json(text)
-            except ValueError as e:
-                raise NotReplayable(f"the mission cannot be read back ({_why(e)})") from None
+            _reads_back(text)
         rev = mission.revision
         with self._lock:
             conn = self._writable()
-            conn.execute("BEGIN IMMEDIATE")
-            try:
-                last = self._last_rev
-                if last is not None and rev > last:
-                    raise ValueError(
-                        f"cannot snapshot revision {rev}: the journal ends at revision {last}; "
-                        "append the batches up to it first"
-                    )
+            last = self._last_rev
+            if last is not None and rev > last:
+                raise ValueError(
+                    f"cannot snapshot revision {rev}: the journal ends at revision {last}; "
+                    "append the batches up to it first"
+                )
+            with transaction(conn):
                 conn.execute(
                     "INSERT OR REPLACE INTO snapshots (revision, mission) VALUES (?, ?)",
                     (rev, text),
@@ -566,10 +572,6 @@ class Journal:
                         "(SELECT revision FROM snapshots ORDER BY revision DESC LIMIT ?)",
                         (self.keep_snapshots,),
                     )
-                conn.execute("COMMIT")
-            except BaseException:
-                rollback(conn)
-                raise
             if self._snapshot_rev is None or rev >= self._snapshot_rev:
                 self._snapshot_rev = rev
                 self._snapshot_size, self._since_snapshot = len(text), self._since(conn, rev)
@@ -640,26 +642,7 @@ class Journal:
                 if not snaps and not n_batches:
                     self.load_info = info
                     return None, []
-                mission: Mission | None = None
-                for (rev,) in snaps:
-                    (text,) = conn.execute(
-                        "SELECT mission FROM snapshots WHERE revision = ?", (rev,)
-                    ).fetchone()
-                    try:
-                        m = Mission.model_validate_json(text)
-                    except (ValidationError, ValueError, TypeError) as e:
-                        info.skipped_snapshots.append((rev, _why(e)))
-                        continue
-                    if m.revision != rev:
-                        info.skipped_snapshots.append((rev, f"it holds revision {m.revision}"))
-                        continue
-                    mission = m
-                    break
-                if mission is None:
-                    if snaps:
-                        why = "; ".join(f"revision {r}: {w}" for r, w in info.skipped_snapshots)
-                        raise JournalCorrupt(f"{self.path}: no snapshot can be read ({why})")
-                    raise JournalCorrupt(f"{self.path}: batches without a base snapshot")
+                mission = _newest_snapshot(conn, self.path, [rev for (rev,) in snaps], info)
                 info.snapshot_revision = mission.revision
                 mission = _replay(conn, self.path, mission, info)
                 rows = conn.execute(
@@ -742,6 +725,38 @@ def _reply(text: str | None) -> dict[str, Any] | None:
     return reply if isinstance(reply, dict) else None
 
 
+def _reads_back(text: str) -> None:
+    """NotReplayable unless the mission in `text` reads back (a restart starts from it)."""
+    try:
+        Mission.model_validate_json(text)
+    except ValueError as e:
+        raise NotReplayable(f"the mission cannot be read back ({_why(e)})") from None
+
+
+def _newest_snapshot(
+    conn: sqlite3.Connection, path: Path, revisions: list[int], info: LoadInfo
+) -> Mission:
+    """The newest of the snapshots at `revisions` (newest first) that reads
+    back as the mission of its revision; the others it passes are noted in
+    `info`. JournalCorrupt when none does."""
+    for rev in revisions:
+        (text,) = conn.execute(
+            "SELECT mission FROM snapshots WHERE revision = ?", (rev,)
+        ).fetchone()
+        try:
+            m = Mission.model_validate_json(text)
+        except (ValidationError, ValueError, TypeError) as e:
+            info.skipped_snapshots.append((rev, _why(e)))
+            continue
+        if m.revision == rev:
+            return m
+        info.skipped_snapshots.append((rev, f"it holds revision {m.revision}"))
+    if revisions:
+        why = "; ".join(f"revision {r}: {w}" for r, w in info.skipped_snapshots)
+        raise JournalCorrupt(f"{path}: no snapshot can be read ({why})")
+    raise JournalCorrupt(f"{path}: batches without a base snapshot")
+
+
 def _replay(conn: sqlite3.Connection, path: Path, mission: Mission, info: LoadInfo) -> Mission:
     """`mission` with the batches after its revision applied, in order; or
     Unreplayable naming the first that is missing or cannot be applied."""
@@ -751,36 +766,51 @@ def _replay(conn: sqlite3.Connection, path: Path, mission: Mission, info: LoadIn
         (mission.revision,),
     )
     for rev, text, actor, op in cur:
-        why = f"it is missing (the next one is {rev})" if rev != expected else None
-        if why is None:
-            try:
-                batch = EventBatch.model_validate_json(text)
-                if batch.revision != rev:
-                    raise ValueError(f"it says revision {batch.revision}")
-                mission = apply_events(mission, batch)
-                info.replayed += 1
-                expected += 1
-                continue
-            except (ValidationError, ValueError, KeyError, TypeError, IndexError) as e:
-                why = _why(e)
-        later = conn.execute(
-            "SELECT count(*) FROM batches WHERE revision > ?", (expected,)
-        ).fetchone()[0]
-        what = f"{_op_name(op)} by {actor}" if rev == expected and actor else ""
-        message = (
-            f"{path}: batch {expected} is missing (the next one is {rev}); "
-            f"cannot replay past revision {expected - 1}"
-            if rev != expected
-            else f"{path}: batch {expected}{f' ({what})' if what else ''} cannot be replayed: {why}"
-        )
-        raise Unreplayable(
-            message,
-            revision=expected,
-            why=why,
-            later=later,
-            what=what,
-        )
+        if rev != expected:
+            raise _missing(conn, path, expected, rev)
+        try:
+            batch = EventBatch.model_validate_json(text)
+            if batch.revision != rev:
+                raise ValueError(f"it says revision {batch.revision}")
+            mission = apply_events(mission, batch)
+        except (ValidationError, ValueError, KeyError, TypeError, IndexError) as e:
+            raise _unappliable(conn, path, expected, actor, op, _why(e)) from None
+        info.replayed += 1
+        expected += 1
     return mission
+
+
+def _later(conn: sqlite3.Connection, revision: int) -> int:
+    """How many batches the journal holds after `revision`."""
+    return int(
+        conn.execute("SELECT count(*) FROM batches WHERE revision > ?", (revision,)).fetchone()[0]
+    )
+
+
+def _missing(conn: sqlite3.Connection, path: Path, expected: int, rev: int) -> Unreplayable:
+    """Batch `expected` is not in the journal: the next one there is `rev`."""
+    return Unreplayable(
+        f"{path}: batch {expected} is missing (the next one is {rev}); "
+        f"cannot replay past revision {expected - 1}",
+        revision=expected,
+        why=f"it is missing (the next one is {rev})",
+        later=_later(conn, expected),
+        what="",
+    )
+
+
+def _unappliable(
+    conn: sqlite3.Connection, path: Path, expected: int, actor: str, op: str, why: str
+) -> Unreplayable:
+    """Batch `expected` is there but cannot be read or applied, for `why`."""
+    what = f"{_op_name(op)} by {actor}" if actor else ""
+    return Unreplayable(
+        f"{path}: batch {expected}{f' ({what})' if what else ''} cannot be replayed: {why}",
+        revision=expected,
+        why=why,
+        later=_later(conn, expected),
+        what=what,
+    )
 
 
 def _op_name(op: str) -> str:

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import os
 import sqlite3
+from collections.abc import Iterator
+from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -95,13 +97,18 @@ def open_database(
         raise
     except sqlite3.Error as e:
         _abandon(conn, lock_fd)
-        if "locked" in str(e) or "busy" in str(e):
-            raise JournalError(
-                f"{p}: the journal is locked by another program (an sqlite3 shell, a backup?): "
-                "close it, then start again"
-            ) from None
-        raise JournalError(f"{p}: not a usable journal: {e}") from None
+        raise _unusable(p, e) from None
     return conn, lock_fd
+
+
+def _unusable(p: Path, e: sqlite3.Error) -> JournalError:
+    """What SQLite's refusal to prepare the journal means for a person."""
+    if "locked" in str(e) or "busy" in str(e):
+        return JournalError(
+            f"{p}: the journal is locked by another program (an sqlite3 shell, a backup?): "
+            "close it, then start again"
+        )
+    return JournalError(f"{p}: not a usable journal: {e}")
 
 
 def _prepare(conn: sqlite3.Connection, p: Path, library: str | None) -> None:
@@ -116,6 +123,14 @@ def _prepare(conn: sqlite3.Connection, p: Path, library: str | None) -> None:
     # that too at the price of an fsync per operation.
     conn.execute("PRAGMA synchronous=NORMAL")
     conn.execute("BEGIN IMMEDIATE")
+    _make_tables(conn, p)
+    _check_meta(conn, p, library)
+    conn.execute("COMMIT")
+
+
+def _make_tables(conn: sqlite3.Connection, p: Path) -> None:
+    """The journal's tables, created (or brought up to date); a database of
+    something else is refused."""
     tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
     if tables and "meta" not in tables:
         raise JournalError(
@@ -125,11 +140,14 @@ def _prepare(conn: sqlite3.Connection, p: Path, library: str | None) -> None:
     for stmt in _SCHEMA.split(";"):
         if stmt.strip():
             conn.execute(stmt)
+    _add_columns(conn)
+
+
+def _add_columns(conn: sqlite3.Connection) -> None:
+    """A journal written before a column was added gets it (empty)."""
     for table, column, kind in _ADDED_COLUMNS:
         if column not in {row[1] for row in conn.execute(f"PRAGMA table_info({table})")}:
             conn.execute(f"ALTER TABLE {table} ADD COLUMN {column} {kind}")
-    _check_meta(conn, p, library)
-    conn.execute("COMMIT")
 
 
 def _check_meta(conn: sqlite3.Connection, p: Path, library: str | None) -> None:
@@ -156,8 +174,7 @@ def quarantine(conn: sqlite3.Connection, revision: int, reason: str) -> tuple[in
     nothing is deleted (an operator can read them there). Returns how many
     batches and snapshots moved."""
     now = datetime.now(UTC).isoformat(timespec="seconds")
-    conn.execute("BEGIN IMMEDIATE")
-    try:
+    with transaction(conn):
         batches = conn.execute(
             "INSERT INTO quarantine (at, reason, kind, revision, ts, actor, client, request_id, "
             "op, content, reply) SELECT ?, ?, 'batch', revision, ts, actor, client, request_id, "
@@ -172,10 +189,6 @@ def quarantine(conn: sqlite3.Connection, revision: int, reason: str) -> tuple[in
         ).rowcount
         conn.execute("DELETE FROM batches WHERE revision >= ?", (revision,))
         conn.execute("DELETE FROM snapshots WHERE revision >= ?", (revision,))
-        conn.execute("COMMIT")
-    except BaseException:
-        rollback(conn)
-        raise
     return batches, snapshots
 
 
@@ -224,6 +237,19 @@ def _lock_writer(p: Path) -> int:
             "stop it first, or give this one another --db"
         ) from None
     return fd
+
+
+@contextmanager
+def transaction(conn: sqlite3.Connection) -> Iterator[None]:
+    """One write transaction: committed at the end, rolled back on any
+    exception (which goes on)."""
+    conn.execute("BEGIN IMMEDIATE")
+    try:
+        yield
+        conn.execute("COMMIT")
+    except BaseException:
+        rollback(conn)
+        raise
 
 
 def rollback(conn: sqlite3.Connection) -> None:

@@ -21,7 +21,7 @@ import asyncio
 import json
 import logging
 from collections.abc import Callable, Iterable, Mapping
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 from typing import Any, Protocol
 
 from pydantic import ValidationError
@@ -183,20 +183,28 @@ class RobotLink:
 
     def _events(self, events: list[Any]) -> None:
         for e in events:
-            if isinstance(e, ev.CommandQueued):
-                self._kick(e.command.robot)
-            elif isinstance(e, ev.CommandChanged) and e.cancel_requested:
-                c = self._mission.command(e.id)
-                if c is not None:
-                    self._kick(c.robot)
-            elif isinstance(e, ev.RobotAdded):
-                self.add_robots([e.name])
-            elif isinstance(e, ev.MissionReplaced):
-                self.add_robots(self._mission.robots)
-                # as after a registration, the mission and what each robot
-                # holds are compared: each registers again (told on its next
-                # Downlink)
-                self._renew = {r for r, info in self.robots.items() if info.online}
+            on = _ON_EVENT.get(type(e))
+            if on is not None:
+                on(self, e)
+
+    # -- one method per kind of event the link acts on
+
+    def _queued(self, e: ev.CommandQueued) -> None:
+        self._kick(e.command.robot)
+
+    def _command_changed(self, e: ev.CommandChanged) -> None:
+        c = self._mission.command(e.id) if e.cancel_requested else None
+        if c is not None:
+            self._kick(c.robot)
+
+    def _robot_added(self, e: ev.RobotAdded) -> None:
+        self.add_robots([e.name])
+
+    def _mission_replaced(self, e: ev.MissionReplaced) -> None:
+        self.add_robots(self._mission.robots)
+        # as after a registration, the mission and what each robot holds are
+        # compared: each registers again (told on its next Downlink)
+        self._renew = {r for r, info in self.robots.items() if info.online}
 
     def _kick(self, robot: str) -> None:
         sender = self.senders.get(robot)
@@ -381,21 +389,22 @@ class RobotLink:
         if info is None:
             return
         now = _now()
-        delay = info.delay_s
-        if sent is not None:
-            samples = self._delays.setdefault(robot, [])
-            samples.append(max(0.0, (now - sent).total_seconds()))
-            del samples[:-DELAY_SAMPLES]
-            delay = round(min(samples), 3)
-        moved = info.delay_s is None or (
-            delay is not None and abs(delay - info.delay_s) > max(0.2, 0.1 * info.delay_s)
-        )
+        delay = info.delay_s if sent is None else self._delay_sample(robot, now - sent)
         last = self._published_heard.get(robot)
         update = {"heard": now, "delay_s": delay}
+        moved = _moved(info.delay_s, delay)
         if moved or last is None or (now - last).total_seconds() >= HEARD_PUBLISH_S:
             self._set_robot(info.model_copy(update=update))
         else:  # kept for snapshots; published with the next notable change
             self.robots[robot] = info.model_copy(update=update)
+
+    def _delay_sample(self, robot: str, took: timedelta) -> float:
+        """The one-way delay estimate with this message's (`took`): the least
+        of the last DELAY_SAMPLES."""
+        samples = self._delays.setdefault(robot, [])
+        samples.append(max(0.0, took.total_seconds()))
+        del samples[:-DELAY_SAMPLES]
+        return round(min(samples), 3)
 
     # -- presence ---------------------------------------------------------------------
     def _set_robot(self, info: RobotInfo) -> None:
@@ -459,30 +468,49 @@ class RobotLink:
     def _expire(self) -> None:
         """Queued commands (never on their way) whose expiry passed."""
         now = _now()
+        for robot, ids in self._expired(now).items():
+            why = _why_unsent(robot, self.robots.get(robot))
+            self.submit(
+                UplinkSettle(
+                    robot=robot,
+                    ids=ids,
+                    state=CommandState.EXPIRED,
+                    reason=f"expired before it could be sent ({why})",
+                    at=now,
+                ),
+                actor="server",
+            )
+
+    def _expired(self, now: datetime) -> dict[str, list[int]]:
+        """By robot, the queued commands not being transmitted whose expiry passed at `now`."""
         transmitting = self.engine.transmitting
         due: dict[str, list[int]] = {}
         for c in self._mission.pending_commands():
             if c.state == CommandState.QUEUED and c.expires is not None and c.expires <= now:
                 if c.id not in transmitting:
                     due.setdefault(c.robot, []).append(c.id)
-        for robot, ids in due.items():
-            info = self.robots.get(robot)
-            where = (
-                "it was out of reach"
-                if info is not None and info.online
-                else f"{robot} was offline"
-                + (f" since {info.since:%H:%M:%S}" if info and info.since else "")
-            )
-            self.submit(
-                UplinkSettle(
-                    robot=robot,
-                    ids=ids,
-                    state=CommandState.EXPIRED,
-                    reason=f"expired before it could be sent ({where})",
-                    at=now,
-                ),
-                actor="server",
-            )
+        return due
+
+
+_ON_EVENT: dict[type[Any], Callable[[RobotLink, Any], None]] = {
+    ev.CommandQueued: RobotLink._queued,
+    ev.CommandChanged: RobotLink._command_changed,
+    ev.RobotAdded: RobotLink._robot_added,
+    ev.MissionReplaced: RobotLink._mission_replaced,
+}
+
+
+def _moved(before: float | None, delay: float | None) -> bool:
+    """A delay estimate moved enough to be published at once."""
+    return before is None or (delay is not None and abs(delay - before) > max(0.2, 0.1 * before))
+
+
+def _why_unsent(robot: str, info: RobotInfo | None) -> str:
+    """Why a queued command expired unsent: its robot online but out of reach, or offline."""
+    if info is not None and info.online:
+        return "it was out of reach"
+    since = f" since {info.since:%H:%M:%S}" if info and info.since else ""
+    return f"{robot} was offline{since}"
 
 
 def _legacy(payload: bytes, key: str) -> bytes:

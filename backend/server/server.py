@@ -142,13 +142,7 @@ class MissionServer:
         try:
             mission, requests = self._resume(journal)
             if mission is not None:
-                lib_file = Path(journal.library) if journal.library else None
-                if lib_file is None and self.mission_file is not None:
-                    lib_file = library_path(self.mission_file, mission.library)
-                if lib_file is None:
-                    raise SystemExit(
-                        f"{self.db}: the journal does not say which skill library it uses"
-                    )
+                lib_file = self._library_file(journal, mission)
                 library = load_library(lib_file)
                 self.resumed = True
                 self.robot_link.verification.resume(mission, journal.sync_forecasts)
@@ -184,6 +178,15 @@ class MissionServer:
         remember_requests(self.engine, requests)
         self.robot_link.add_robots(mission.robots)
         self._open_archive()
+
+    def _library_file(self, journal: Journal, mission: Mission) -> Path:
+        """The skill library of a resumed mission: the one its journal names,
+        else the mission file's."""
+        if journal.library:
+            return Path(journal.library)
+        if self.mission_file is not None:
+            return library_path(self.mission_file, mission.library)
+        raise SystemExit(f"{self.db}: the journal does not say which skill library it uses")
 
     def _open_archive(self) -> None:
         """The telemetry archive beside the journal; one that cannot be

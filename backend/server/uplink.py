@@ -166,9 +166,7 @@ class UplinkSender:
         if not pending or owner is None:
             self._due = None  # woken by a new command or a registration
             return
-        untold = any(self._told.get(c.id) != c.cancel_requested for c in pending)
-        due = self._due is not None and now >= self._due
-        if not (untold or due) or len(self._sending) >= MAX_IN_FLIGHT:
+        if not self._worth_sending(pending, now):
             return
         self._due = None
         self._told = {c.id: c.cancel_requested for c in pending}
@@ -177,6 +175,15 @@ class UplinkSender:
         )
         self._sending.add(task)
         task.add_done_callback(self._ended)
+
+    def _worth_sending(self, pending: list[UplinkCommand], now: float) -> bool:
+        """Room in flight, and something the robot was not told yet (a
+        command, a cancel) or a timed transmission due."""
+        if len(self._sending) >= MAX_IN_FLIGHT:
+            return False
+        if self._due is not None and now >= self._due:
+            return True
+        return any(self._told.get(c.id) != c.cancel_requested for c in pending)
 
     def _ended(self, task: asyncio.Task[None]) -> None:
         self._sending.discard(task)
@@ -205,24 +212,35 @@ class UplinkSender:
         self, outcome: Outcome, pending: list[UplinkCommand], queued: list[int], left: datetime
     ) -> None:
         """Journal what the transmission's outcome says; time the next one."""
-        if outcome in ("delivered", "maybe") and queued:
-            self.link.submit(UplinkSent(robot=self.robot, ids=queued, at=left), actor="server")
-        elif queued:
-            withdrawn = [
-                c.id for c in pending if c.id in queued and c.cancel_requested
-            ]  # asked while on the way, and it never arrived
-            if withdrawn:
-                self.link.submit(
-                    UplinkSettle(
-                        robot=self.robot,
-                        ids=withdrawn,
-                        state=CommandState.CANCELLED,
-                        reason=f"cancelled before it reached {self.robot}",
-                        at=_now(),
-                    ),
-                    actor="server",
-                )
+        if queued:
+            self._journal_outcome(outcome, pending, queued, left)
         self._missed = outcome in ("undelivered", "absent")
+        self._time_next(outcome)
+
+    def _journal_outcome(
+        self, outcome: Outcome, pending: list[UplinkCommand], queued: list[int], left: datetime
+    ) -> None:
+        """The queued commands transmitted: sent (or maybe), else those
+        cancelled while on the way withdrawn, as they never arrived."""
+        if outcome in ("delivered", "maybe"):
+            self.link.submit(UplinkSent(robot=self.robot, ids=queued, at=left), actor="server")
+            return
+        withdrawn = [c.id for c in pending if c.id in queued and c.cancel_requested]
+        if withdrawn:
+            self.link.submit(
+                UplinkSettle(
+                    robot=self.robot,
+                    ids=withdrawn,
+                    state=CommandState.CANCELLED,
+                    reason=f"cancelled before it reached {self.robot}",
+                    at=_now(),
+                ),
+                actor="server",
+            )
+
+    def _time_next(self, outcome: Outcome) -> None:
+        """A delivered transmission is resent after the round trip; any other
+        is retried, backing off up to RETRY_MAX_S."""
         if outcome == "delivered":
             self._retry = RETRY_S
             self._later(resend_after_s(self._delay()))
@@ -242,10 +260,7 @@ class UplinkSender:
             downlink_ack=engine.mission.report_seqs.get(self.robot, 0),
             sent=_now(),
         )
-        for cid in queued:
-            if not self._flight[cid]:
-                engine.transmitting.add(cid)
-            self._flight[cid] += 1
+        self._carry(queued)
         self.transmissions += 1
         try:
             replies = await query_all(
@@ -260,12 +275,24 @@ class UplinkSender:
             log.info("uplink of %s: %s", self.robot, e)
             return "undelivered"
         finally:
-            for cid in queued:
-                self._flight[cid] -= 1
-                if not self._flight[cid]:
-                    del self._flight[cid]
-                    engine.transmitting.discard(cid)
+            self._landed(queued)
         return self._judge(replies, owner)
+
+    def _carry(self, queued: list[int]) -> None:
+        """A transmission carries these queued commands: the engine counts
+        them transmitting while any transmission does."""
+        for cid in queued:
+            if not self._flight[cid]:
+                self.link.engine.transmitting.add(cid)
+            self._flight[cid] += 1
+
+    def _landed(self, queued: list[int]) -> None:
+        """A transmission carrying these ended."""
+        for cid in queued:
+            self._flight[cid] -= 1
+            if not self._flight[cid]:
+                del self._flight[cid]
+                self.link.engine.transmitting.discard(cid)
 
     def _judge(self, replies: list[Any], owner: str) -> Outcome:
         """What the replies say: the owner's receipt, a refusal, or nobody."""

@@ -23,7 +23,7 @@ from __future__ import annotations
 import itertools
 import json
 import sqlite3
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -179,13 +179,19 @@ class JournalReader:
         """Per batch: its journal time (never going back: a wall clock that
         stepped back), its robot time (None: the ground's), its actor."""
         if self._index is None:
-            rows = self._covered()
-            rows += self._scan(rows[-1][0] if rows else self.base)
-            self._check_complete([r[0] for r in rows])
+            rows = self._index_rows()
             ground = list(itertools.accumulate((r[1] for r in rows), max))
             self._index = (ground, [r[3] for r in rows], [r[4] or "" for r in rows])
             self._names = [r[2] for r in rows]
         return self._index
+
+    def _index_rows(self) -> list[IndexRow]:
+        """The index's rows: the given index's while it covers the batches,
+        then the journal's own; RecordError if a batch is missing."""
+        rows = self._covered()
+        rows += self._scan(rows[-1][0] if rows else self.base)
+        self._check_complete([r[0] for r in rows])
+        return rows
 
     def _check_complete(self, revisions: list[int]) -> None:
         """RecordError naming the first batch missing from `revisions`."""
@@ -253,19 +259,22 @@ class JournalReader:
             self._times()
             revisions = [self.base + 1 + i for i, n in enumerate(self._names) if n == "sync"]
             found: list[tuple[int, dict[str, tuple[float, float]]]] = []
-            for k in range(0, len(revisions), 500):  # SQLite's limit on parameters
-                part = revisions[k : k + 500]
-                marks = ", ".join("?" * len(part))
-                rows = self._conn.execute(
-                    f"SELECT revision, op FROM batches WHERE revision IN ({marks})", part
-                )
-                for rev, text in rows:
-                    forecast = op_of(text).get("forecast")
-                    if isinstance(forecast, dict) and forecast:
-                        found.append((rev - self.base - 1, _spans(forecast)))
+            for rev, text in self._ops(revisions):
+                forecast = op_of(text).get("forecast")
+                if isinstance(forecast, dict) and forecast:
+                    found.append((rev - self.base - 1, _spans(forecast)))
             found.sort()
             self._syncs = found
         return self._syncs
+
+    def _ops(self, revisions: list[int]) -> Iterator[tuple[int, str]]:
+        """(revision, operation JSON) of these batches, in no given order."""
+        for k in range(0, len(revisions), 500):  # SQLite's limit on parameters
+            part = revisions[k : k + 500]
+            marks = ", ".join("?" * len(part))
+            yield from self._conn.execute(
+                f"SELECT revision, op FROM batches WHERE revision IN ({marks})", part
+            )
 
     # -- batches ---------------------------------------------------------------------------
     def batches(self, first: int, last: int) -> Iterator[Batch]:
@@ -367,13 +376,7 @@ class JournalReader:
             batches = self.events(plan.apply)
             listed = [batches[i] for i in plan.apply]
             unplaced: list[int] = []
-            taken: list[tuple[ev.EventBatch, int]] = []
-            if clock == ROBOT:
-                mission = apply_in_order(mission, listed, unplaced, taken)
-            else:
-                for b in listed:
-                    mission = ev.apply_events(mission, b)
-                taken = [(b, b.revision) for b in listed]
+            mission, taken = _apply(clock, mission, listed, unplaced)
             taken = [(b, by - self.base - 1) for b, by in taken]  # revisions -> indices
             recent = self._recent(order, position - window, position, plan.snapshot, taken)
         last = max([self.base + 1 + plan.snapshot, *(b.revision for b in batches.values())])
@@ -408,32 +411,66 @@ class JournalReader:
 # -- robot time: applying out of journal order ---------------------------------------------
 
 
+def _apply(
+    clock: str, mission: Mission, batches: list[ev.EventBatch], unplaced: list[int]
+) -> tuple[Mission, list[tuple[ev.EventBatch, int]]]:
+    """`batches` applied to `mission` in `clock`'s order, and each batch taken
+    with the revision it was taken at (`apply_in_order` in robot time)."""
+    taken: list[tuple[ev.EventBatch, int]] = []
+    if clock == ROBOT:
+        return apply_in_order(mission, batches, unplaced, taken), taken
+    for b in batches:
+        mission = ev.apply_events(mission, b)
+    return mission, [(b, b.revision) for b in batches]
+
+
 def missing(mission: Mission, batch: ev.EventBatch) -> str | None:
     """What `batch` refers to that `mission` lacks (None: it applies)."""
-    skills: set[str] = set()
-    commands: set[int] = set()
+    brought: set[str | int] = set()  # what the batch adds: skill ids (text), command ids
     for e in batch.events:
-        match e:
-            case ev.SkillAdded(skill=s):
-                skills.add(s.id)
-            case ev.CommandQueued(command=c):
-                commands.add(c.id)
-            case ev.MissionReplaced():
-                return None
-            case (
-                ev.SkillRemoved(id=sid)
-                | ev.SkillMoved(id=sid)
-                | ev.SkillStatusChanged(id=sid)
-                | ev.SkillEdited(id=sid)
-            ):
-                if sid not in skills and mission.find(sid) is None:
-                    return f"skill {sid}"
-            case ev.CommandChanged(id=cid):
-                if cid not in commands and mission.command(cid) is None:
-                    return f"command {cid}"
-            case _:
-                pass
+        kind = type(e)
+        if kind is ev.MissionReplaced:
+            return None
+        bring = _BRINGS.get(kind)
+        if bring is not None:
+            brought.add(bring(e))
+        elif kind in _LACKS:
+            lacks = _LACKS[kind](mission, e, brought)
+            if lacks is not None:
+                return lacks
     return None
+
+
+def _skill_id(e: ev.SkillAdded) -> str | int:
+    return e.skill.id
+
+
+def _command_id(e: ev.CommandQueued) -> str | int:
+    return e.command.id
+
+
+def _lacks_skill(mission: Mission, e: Any, brought: set[str | int]) -> str | None:
+    sid = e.id
+    return f"skill {sid}" if sid not in brought and mission.find(sid) is None else None
+
+
+def _lacks_command(mission: Mission, e: Any, brought: set[str | int]) -> str | None:
+    cid = e.id
+    return f"command {cid}" if cid not in brought and mission.command(cid) is None else None
+
+
+# the events that add what later events refer to, and those that refer to it
+_BRINGS: dict[type[Any], Callable[[Any], str | int]] = {
+    ev.SkillAdded: _skill_id,
+    ev.CommandQueued: _command_id,
+}
+_LACKS: dict[type[Any], Callable[[Mission, Any, set[str | int]], str | None]] = {
+    ev.SkillRemoved: _lacks_skill,
+    ev.SkillMoved: _lacks_skill,
+    ev.SkillStatusChanged: _lacks_skill,
+    ev.SkillEdited: _lacks_skill,
+    ev.CommandChanged: _lacks_command,
+}
 
 
 def apply_in_order(

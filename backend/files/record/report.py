@@ -19,12 +19,14 @@ Skills deleted before they were ever synchronized are counted, not listed.
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Callable
 from datetime import UTC, datetime
+from typing import Any
 
 from pydantic import BaseModel, Field
 
 from backend.core import events as ev
-from backend.core.model import CommandState, SkillInstance, Status
+from backend.core.model import CommandState, Mission, SkillInstance, Status
 from backend.files.record.journal import Batch, JournalReader
 
 OVERDUE_NOTE = (
@@ -107,17 +109,19 @@ class PlanReport(BaseModel):
 
 
 class _Pass:
-    """What the pass keeps while it reads the batches."""
+    """What the pass keeps while it reads the batches, from the mission it starts at."""
 
-    def __init__(self) -> None:
+    def __init__(self, base: Mission) -> None:
         self.rows: dict[str, SkillRow] = {}
         self.synced: set[str] = set()
         self.deleted = 0
+        self.mission = base.name
         self.waivers: dict[str, WaiverRow] = {}
         self.waiver_log: list[WaiverRow] = []
         self.refusals: list[RefusalRow] = []
         self.commands: dict[int, tuple[str, str]] = {}  # id -> (robot, title)
         self.actors: dict[str, Counter[str]] = {}
+        self._add_tasks(base)
 
     def add(self, robot: str, s: SkillInstance) -> None:
         row = SkillRow(
@@ -134,22 +138,20 @@ class _Pass:
             self.synced.add(s.id)
         self.rows[s.id] = row
 
+    def _add_tasks(self, m: Mission) -> None:
+        for robot, task in m.tasks.items():
+            for s in task:
+                self.add(robot, s)
+
     def batch(self, b: Batch) -> None:
         self.actors.setdefault(b.actor or b.client or "?", Counter())[b.name] += 1
-        if b.name == "sync":
-            self._sync(b)
-        elif b.name == "downlink_refused":
-            op = b.op
-            self.refusals.append(
-                RefusalRow(
-                    at=_t(b.ts),
-                    robot=str(op.get("robot", "")),
-                    what=f"downlink message {op.get('seq', '?')}",
-                    reason=str(op.get("message", "")),
-                )
-            )
+        read = _ON_OP.get(b.name)
+        if read is not None:
+            read(self, b)
         for e in b.batch.events:
-            self.event(b, e)
+            on = _ON_EVENT.get(type(e))
+            if on is not None:
+                on(self, b, e)
 
     def _sync(self, b: Batch) -> None:
         forecast = b.op.get("forecast")
@@ -166,92 +168,136 @@ class _Pass:
                 continue
             row.synchronized, row.synchronized_by = _t(b.ts), b.actor
 
-    def event(self, b: Batch, e: ev.Event) -> None:  # noqa: C901 - one case per event kind
-        match e:
-            case ev.SkillAdded(robot=robot, skill=s):
-                self.add(robot, s)
-            case ev.SkillRemoved(id=sid):
-                row = self.rows.get(sid)
-                if row is not None and sid not in self.synced:
-                    del self.rows[sid]
-                    self.deleted += 1
-            case ev.SkillEdited(id=sid, label=label) if label is not None and sid in self.rows:
-                self.rows[sid].label = label
-            case ev.SkillStatusChanged(id=sid) if sid in self.rows:
-                self._status(self.rows[sid], e)
-            case ev.MissionReplaced(mission=m):
-                self.rows = {k: r for k, r in self.rows.items() if k in self.synced}
-                for robot, task in m.tasks.items():
-                    for s in task:
-                        self.add(robot, s)
-            case ev.WaiverSet(check=check, waiver=w):
-                waiver = WaiverRow(check=check, reason=w.reason, by=b.actor, at=_t(b.ts))
-                self.waivers[check] = waiver
-                self.waiver_log.append(waiver)
-            case ev.WaiverRemoved(check=check) if check in self.waivers:
-                self.waivers.pop(check).withdrawn = _t(b.ts)
-            case ev.CommandQueued(command=c):
-                self.commands[c.id] = (c.robot, c.title())
-            case ev.CommandChanged(id=cid, state=CommandState.REFUSED):
-                robot, title = self.commands.get(cid, ("", f"command {cid}"))
-                self.refusals.append(
-                    RefusalRow(at=_t(b.ts), robot=robot, what=title, reason=e.reason or "")
-                )
-            case _:
-                pass
+    def _downlink_refused(self, b: Batch) -> None:
+        op = b.op
+        self.refusals.append(
+            RefusalRow(
+                at=_t(b.ts),
+                robot=str(op.get("robot", "")),
+                what=f"downlink message {op.get('seq', '?')}",
+                reason=str(op.get("message", "")),
+            )
+        )
 
-    def _status(self, row: SkillRow, e: ev.SkillStatusChanged) -> None:
-        if e.status is None:
+    # -- one method per kind of event the report follows
+
+    def _added(self, b: Batch, e: ev.SkillAdded) -> None:
+        self.add(e.robot, e.skill)
+
+    def _removed(self, b: Batch, e: ev.SkillRemoved) -> None:
+        if e.id in self.rows and e.id not in self.synced:
+            del self.rows[e.id]
+            self.deleted += 1
+
+    def _edited(self, b: Batch, e: ev.SkillEdited) -> None:
+        if e.label is not None and e.id in self.rows:
+            self.rows[e.id].label = e.label
+
+    def _status(self, b: Batch, e: ev.SkillStatusChanged) -> None:
+        row = self.rows.get(e.id)
+        if row is None or e.status is None:
             return
         row.status = e.status
         if e.status != Status.IDLE:
             self.synced.add(row.id)
         if e.attempt is not None:
             row.attempt = e.attempt
-        if e.status == Status.RUNNING and row.started is None and e.at is not None:
-            row.started = e.at
-        if e.status in (Status.SUCCESS, Status.FAILURE) and e.at is not None:
-            row.finished = e.at
+        if e.at is not None:
+            _robot_times(row, e.status, e.at)
         if e.status == Status.FAILURE:
             row.failures.append(e.info or "failed")
+
+    def _replaced(self, b: Batch, e: ev.MissionReplaced) -> None:
+        self.rows = {k: r for k, r in self.rows.items() if k in self.synced}
+        self._add_tasks(e.mission)
+        self.mission = e.mission.name
+
+    def _waiver_set(self, b: Batch, e: ev.WaiverSet) -> None:
+        waiver = WaiverRow(check=e.check, reason=e.waiver.reason, by=b.actor, at=_t(b.ts))
+        self.waivers[e.check] = waiver
+        self.waiver_log.append(waiver)
+
+    def _waiver_removed(self, b: Batch, e: ev.WaiverRemoved) -> None:
+        if e.check in self.waivers:
+            self.waivers.pop(e.check).withdrawn = _t(b.ts)
+
+    def _queued(self, b: Batch, e: ev.CommandQueued) -> None:
+        self.commands[e.command.id] = (e.command.robot, e.command.title())
+
+    def _command(self, b: Batch, e: ev.CommandChanged) -> None:
+        if e.state == CommandState.REFUSED:
+            robot, title = self.commands.get(e.id, ("", f"command {e.id}"))
+            self.refusals.append(
+                RefusalRow(at=_t(b.ts), robot=robot, what=title, reason=e.reason or "")
+            )
+
+
+# the operations the report reads (besides their events), by name
+_ON_OP: dict[str, Callable[[_Pass, Batch], None]] = {
+    "sync": _Pass._sync,
+    "downlink_refused": _Pass._downlink_refused,
+}
+_ON_EVENT: dict[type[Any], Callable[[_Pass, Batch, Any], None]] = {
+    ev.SkillAdded: _Pass._added,
+    ev.SkillRemoved: _Pass._removed,
+    ev.SkillEdited: _Pass._edited,
+    ev.SkillStatusChanged: _Pass._status,
+    ev.MissionReplaced: _Pass._replaced,
+    ev.WaiverSet: _Pass._waiver_set,
+    ev.WaiverRemoved: _Pass._waiver_removed,
+    ev.CommandQueued: _Pass._queued,
+    ev.CommandChanged: _Pass._command,
+}
+
+
+def _robot_times(row: SkillRow, status: Status, at: datetime) -> None:
+    """When a skill started and ended by the robot's clock: its first run, its last end."""
+    if status == Status.RUNNING and row.started is None:
+        row.started = at
+    if status in (Status.SUCCESS, Status.FAILURE):
+        row.finished = at
+
+
+def _ground_time(seconds: float | None) -> datetime | None:
+    return _t(seconds) if seconds is not None else None
+
+
+def _gap(reader: JournalReader) -> str:
+    if not reader.gap:
+        return ""
+    return (
+        f"the journal keeps what came after revision {reader.base} only (its older "
+        "snapshots were not kept): earlier skills are not listed"
+    )
+
+
+def _actor_rows(actors: dict[str, Counter[str]]) -> list[ActorRow]:
+    """Each actor's operations by kind, the busiest actor first."""
+    return [
+        ActorRow(actor=a, operations=dict(c.most_common()))
+        for a, c in sorted(actors.items(), key=lambda kv: -sum(kv[1].values()))
+    ]
 
 
 def plan_against_actual(reader: JournalReader) -> PlanReport:
     """The report of the whole journal."""
-    p = _Pass()
-    base = reader.snapshot(reader.base)
-    for robot, task in base.tasks.items():
-        for s in task:
-            p.add(robot, s)
-    mission = base.name
+    p = _Pass(reader.snapshot(reader.base))
     for b in reader.batches(reader.base + 1, reader.last):
         p.batch(b)
-        for e in b.batch.events:
-            if isinstance(e, ev.MissionReplaced):
-                mission = e.mission.name
-    start, end = reader.start_time(), reader.end_time()
-    gap = (
-        f"the journal keeps what came after revision {reader.base} only (its older "
-        "snapshots were not kept): earlier skills are not listed"
-        if reader.gap
-        else ""
-    )
+    synced = [r for r in p.rows.values() if r.id in p.synced]
     return PlanReport(
         journal=str(reader.path),
-        mission=mission,
-        start=_t(start) if start is not None else None,
-        end=_t(end) if end is not None else None,
+        mission=p.mission,
+        start=_ground_time(reader.start_time()),
+        end=_ground_time(reader.end_time()),
         changes=len(reader),
-        gap=gap,
-        skills=[r for r in p.rows.values() if r.id in p.synced],
+        gap=_gap(reader),
+        skills=synced,
         deleted_unsynchronized=p.deleted,
-        unsynchronized_at_end=sum(1 for r in p.rows.values() if r.id not in p.synced),
+        unsynchronized_at_end=len(p.rows) - len(synced),
         waivers=p.waiver_log,
         refusals=p.refusals,
-        actors=[
-            ActorRow(actor=a, operations=dict(c.most_common()))
-            for a, c in sorted(p.actors.items(), key=lambda kv: -sum(kv[1].values()))
-        ],
+        actors=_actor_rows(p.actors),
     )
 
 
@@ -274,57 +320,93 @@ def _span(planned: datetime | None, actual: datetime | None, late: float | None)
     return f"{_clock(planned)}→{_clock(actual)}{_delta(late)}"
 
 
-def report_text(r: PlanReport) -> str:
-    """The report for a person: a table per section, times in local time."""
+def _notes(k: SkillRow) -> str:
+    """What a skill's line says after its spans: failures, retries, a missing forecast."""
+    notes = [
+        note
+        for note, shown in (
+            ("failed: " + "; ".join(k.failures), k.failures),
+            (f"retry of {k.retry_of}", k.retry_of),
+            (f"retried as {k.retried_as}", k.retried_as),
+            ("no forecast sent with its sync", k.predicted_start is None and not k.retry_of),
+        )
+        if shown
+    ]
+    return f"  {'; '.join(notes)}" if notes else ""
+
+
+def _skill_line(k: SkillRow) -> str:
+    return (
+        f"  {k.robot:<8} {k.id:<14} {k.skill:<18} {k.status.value:<17} "
+        f"start {_span(k.predicted_start, k.started, k.start_late_s)}  "
+        f"end {_span(k.predicted_end, k.finished, k.end_late_s)}" + _notes(k)
+    )
+
+
+def _heading(r: PlanReport) -> list[str]:
     out = [
         f"Plan against actual: {r.mission} ({r.journal}), {_clock(r.start)} to {_clock(r.end)} "
         f"ground time, {r.changes} changes",
     ]
     if r.gap:
         out.append(f"note: {r.gap}")
-    out += [
-        "",
+    return out
+
+
+def _skills(r: PlanReport) -> list[str]:
+    out = [
         "Skills (start and end: as forecast when synchronized → as the robot did it, "
         "robot time; (+late / -early))",
+        *map(_skill_line, r.skills),
     ]
-    for k in r.skills:
-        notes = []
-        if k.failures:
-            notes.append("failed: " + "; ".join(k.failures))
-        if k.retry_of:
-            notes.append(f"retry of {k.retry_of}")
-        if k.retried_as:
-            notes.append(f"retried as {k.retried_as}")
-        if k.predicted_start is None and not k.retry_of:
-            notes.append("no forecast sent with its sync")
-        out.append(
-            f"  {k.robot:<8} {k.id:<14} {k.skill:<18} {k.status.value:<17} "
-            f"start {_span(k.predicted_start, k.started, k.start_late_s)}  "
-            f"end {_span(k.predicted_end, k.finished, k.end_late_s)}"
-            + (f"  {'; '.join(notes)}" if notes else "")
-        )
     if not r.skills:
         out.append("  none was synchronized")
     out.append(
         f"  ({r.deleted_unsynchronized} deleted before being synchronized, "
         f"{r.unsynchronized_at_end} never synchronized)"
     )
+    return out
+
+
+def _failures(r: PlanReport) -> list[str]:
     failed = [k for k in r.skills if k.failures]
-    out += ["", f"Failures and retries: {len(failed)} failed"]
+    out = [f"Failures and retries: {len(failed)} failed"]
     for k in failed:
         again = f", retried as {k.retried_as}" if k.retried_as else ", not retried"
         out.append(f"  {k.id} ({k.robot}) at {_clock(k.finished)}: {k.failures[-1]}{again}")
-    out += ["", f"Waivers: {len(r.waivers)}"]
+    return out
+
+
+def _waivers(r: PlanReport) -> list[str]:
+    out = [f"Waivers: {len(r.waivers)}"]
     for w in r.waivers:
         gone = f", withdrawn {_clock(w.withdrawn)}" if w.withdrawn else ""
         out.append(f"  {w.check}: {w.reason!r} by {w.by} at {_clock(w.at)}{gone}")
-    out += ["", f"Refusals: {len(r.refusals)}"]
-    for x in r.refusals:
-        out.append(f"  {_clock(x.at)} {x.robot}: {x.what}: {x.reason}")
-    out += ["", "Overdue verifications: none listed", f"  ({r.overdue_note})"]
-    out += ["", "Who did what"]
+    return out
+
+
+def _refusals(r: PlanReport) -> list[str]:
+    return [f"Refusals: {len(r.refusals)}"] + [
+        f"  {_clock(x.at)} {x.robot}: {x.what}: {x.reason}" for x in r.refusals
+    ]
+
+
+def _overdue(r: PlanReport) -> list[str]:
+    return ["Overdue verifications: none listed", f"  ({r.overdue_note})"]
+
+
+def _actors(r: PlanReport) -> list[str]:
+    out = ["Who did what"]
     for a in r.actors:
         total = sum(a.operations.values())
         kinds = ", ".join(f"{op} {n}" for op, n in a.operations.items())
         out.append(f"  {a.actor}: {total} ({kinds})")
-    return "\n".join(out) + "\n"
+    return out
+
+
+_SECTIONS = (_heading, _skills, _failures, _waivers, _refusals, _overdue, _actors)
+
+
+def report_text(r: PlanReport) -> str:
+    """The report for a person: a table per section, times in local time."""
+    return "\n\n".join("\n".join(section(r)) for section in _SECTIONS) + "\n"
