@@ -254,6 +254,10 @@ _STATUS_FIELDS = {"status": "status", "status_info": "info", "attempt": "attempt
 _EDIT_FIELDS = ("label", "params", "bindings", "policies")
 
 
+def _is_old_skill_change(e: Any) -> bool:
+    return isinstance(e, dict) and e.get("ev") == "skill_changed"
+
+
 def _typed_skill_change(e: dict[str, Any]) -> list[dict[str, Any]]:
     """An old `skill_changed` event ({"id", "changes": {...}}) as the typed
     events that make the same change (a status and/or an edit)."""
@@ -284,12 +288,11 @@ class EventBatch(Strict):
         if not isinstance(data, dict) or not isinstance(data.get("events"), list):
             return data
         events = data["events"]
-        if not any(isinstance(e, dict) and e.get("ev") == "skill_changed" for e in events):
+        if not any(map(_is_old_skill_change, events)):
             return data
         typed: list[Any] = []
         for e in events:
-            old = isinstance(e, dict) and e.get("ev") == "skill_changed"
-            typed.extend(_typed_skill_change(e) if old else [e])
+            typed.extend(_typed_skill_change(e) if _is_old_skill_change(e) else [e])
         return {**data, "events": typed}
 
     actor: str = Field(
