@@ -137,9 +137,7 @@ def walk(
     costing = Costing(library, rt, robot_type, markers or {}, inputs) if rt is not None else None
     now = inputs.robots.get(robot)
     battery_model = rt.battery if rt is not None else None
-    pos = now.position if now is not None else None
-    if pos is None:  # where its last goal took it, else home (where robots start)
-        pos = _last_place(library, robot_type, task) or inputs.home_point()
+    pos = _start(library, robot_type, task, inputs, now)
     level, assumed = _level_now(battery_model, now)
     steps: list[Step] = []
     offsets = [0.0]
@@ -153,6 +151,20 @@ def walk(
         pos = _place_after(step, pos)
     index = {step.skill.id: i for i, step in enumerate(steps)}
     return Course(robot, rt, tuple(steps), battery_model, assumed, now, tuple(offsets), index)
+
+
+def _start(
+    library: Library,
+    robot_type: str,
+    task: Sequence[SkillInstance],
+    inputs: PlanInputs,
+    now: RobotNow | None,
+) -> Point | None:
+    """Where the robot is: as it last said, else where its last goal took
+    it, else home (where robots start)."""
+    if now is not None and now.position is not None:
+        return now.position
+    return _last_place(library, robot_type, task) or inputs.home_point()
 
 
 def _level_now(model: BatteryModel | None, now: RobotNow | None) -> tuple[float | None, bool]:
