@@ -679,14 +679,20 @@ def _retried(fx: _Effects, cmd: Enqueue) -> None:
                 f"{fx.op.reason or 'no reason given'}"
             )
         return
-    found = fx.rules.mission.find(failed_id)
-    if fx.rules.mission.find(new.id) is not None or found is None or found[0] != fx.robot:
+    if not _retry_fits(fx, new.id, failed_id):
         fx.drop.append(new.id)
         return
     index = _queue_head(fx.task)
     skill = new.model_copy(update={"status": Status.IDLE_SYNCHRONIZED})
     fx.events.append(ev.SkillAdded(robot=fx.robot, index=index, skill=skill))
     fx.done = [new.id]
+
+
+def _retry_fits(fx: _Effects, new_id: str, failed_id: str) -> bool:
+    """Whether a retry the robot queued can join the mission: its id is
+    free and the skill it retries is still this robot's."""
+    found = fx.rules.mission.find(failed_id)
+    return fx.rules.mission.find(new_id) is None and found is not None and found[0] == fx.robot
 
 
 def _queue_head(task: list[SkillInstance]) -> int:
