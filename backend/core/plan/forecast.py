@@ -475,7 +475,7 @@ class Forecaster:
             del self._courses[gone]
             self._segments.pop(gone, None)
         if self.legs.size() > 2 * sum(len(t) for t in mission.tasks.values()) + 64:
-            self.legs.forget({s.id for t in mission.tasks.values() for s in t})
+            self.legs.forget(mission.all_ids())
 
 
 def _same(old: tuple[SkillInstance, ...], new: list[SkillInstance]) -> bool:
