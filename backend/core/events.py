@@ -264,15 +264,22 @@ def _typed_skill_change(e: dict[str, Any]) -> list[dict[str, Any]]:
     changes = e.get("changes")
     if not isinstance(changes, dict):
         return [e]  # not ours to mend: validation says what is wrong
-    out: list[dict[str, Any]] = []
+    return _old_status(e.get("id"), changes) + _old_edit(e.get("id"), changes)
+
+
+def _old_status(sid: Any, changes: dict[str, Any]) -> list[dict[str, Any]]:
+    """The status part of an old skill change, as a `skill_status` event (if any)."""
     status = {new: changes[old] for old, new in _STATUS_FIELDS.items() if old in changes}
     stamp = changes.get("started_at") or changes.get("finished_at")
     if status or stamp is not None:
-        out.append({"ev": "skill_status", "id": e.get("id"), **status, "at": stamp})
+        return [{"ev": "skill_status", "id": sid, **status, "at": stamp}]
+    return []
+
+
+def _old_edit(sid: Any, changes: dict[str, Any]) -> list[dict[str, Any]]:
+    """The edit part of an old skill change, as a `skill_edited` event (if any)."""
     edit = {k: changes[k] for k in _EDIT_FIELDS if k in changes}
-    if edit:
-        out.append({"ev": "skill_edited", "id": e.get("id"), **edit})
-    return out
+    return [{"ev": "skill_edited", "id": sid, **edit}] if edit else []
 
 
 class EventBatch(Strict):
