@@ -379,16 +379,18 @@ class Engine(Rules):
                 return Applied(done.revision, [], done.notes, done.value, duplicate=True)
         if expected_revision is not None:
             self.check_fresh(op, expected_revision)
-        origin = Origin(op, client, request_id, actor or client)
-        if isinstance(op, Undo):
-            applied = self._revert(origin, self.undo_stack, self.redo_stack, "undo")
-        elif isinstance(op, Redo):
-            applied = self._revert(origin, self.redo_stack, self.undo_stack, "redo")
-        else:
-            applied = self._apply(origin)
+        applied = self._run(Origin(op, client, request_id, actor or client))
         if request_id is not None:
             self.remember(client, request_id, applied)
         return applied
+
+    def _run(self, origin: Origin) -> Applied:
+        """Undo and redo walk the client's history; any other operation applies its rule."""
+        if isinstance(origin.op, Undo):
+            return self._revert(origin, self.undo_stack, self.redo_stack, "undo")
+        if isinstance(origin.op, Redo):
+            return self._revert(origin, self.redo_stack, self.undo_stack, "redo")
+        return self._apply(origin)
 
     def _apply(self, origin: Origin) -> Applied:
         op, client = origin.op, origin.client
