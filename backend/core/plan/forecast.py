@@ -296,7 +296,11 @@ def halted(mission: Mission, inputs: PlanInputs, robot: str) -> bool:
     now = inputs.robots.get(robot)
     if now is not None and now.mode == "halted":
         return True
-    task = mission.tasks.get(robot, [])
+    return _failure_halts(mission.tasks.get(robot, []))
+
+
+def _failure_halts(task: list[SkillInstance]) -> bool:
+    """Nothing of `task` is active and its last finished skill failed."""
     if any(s.status in ACTIVE for s in task):
         return False
     last = next((s for s in reversed(task) if s.status in FINISHED), None)
