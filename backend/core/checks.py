@@ -289,10 +289,9 @@ def _stranded(m: Mission, bid: str, ids: list[str]) -> list[Problem]:
     finished: they would wait for it forever (the live rules never make such
     a barrier; a file must not either)."""
     found = [(j, f[2]) for j, sid in enumerate(ids) if (f := m.find(sid)) is not None]
-    started = [s for _, s in found if s.status not in _BEFORE]
-    if not started:
+    past = ", ".join(f"'{s.id}' is {s.status.value}" for _, s in found if s.status not in _BEFORE)
+    if not past:  # no partner started
         return []
-    past = ", ".join(f"'{s.id}' is {s.status.value}" for s in started)
     return [
         (
             ("barriers", bid, "skills", j),

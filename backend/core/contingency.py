@@ -208,24 +208,29 @@ def branch_text(branch: Branch) -> str:
     return branch
 
 
+# the marks' symbols: then, failed, timeout, no later than; in unicode and in ASCII
+_SYMBOLS = {True: ("→", "✗", "⏱", "≤"), False: ("->", "X", "T", "<=")}
+
+
 def marks(p: Policies, unicode: bool = True) -> list[str]:
     """A row's contingency marks: '⏱10m→skip', '✗→recharge@Lander' (ASCII: T10m->skip)."""
-    arrow = "→" if unicode else "->"
+    arrow, failed, _, _ = _SYMBOLS[unicode]
     out = [_timeout_mark(p, unicode) + arrow + branch_text(p.on_timeout)]
     out = out if p.timeout is not None or p.not_after is not None else []
     if p.after is not None:
         out.append(f"after {p.after}")
     if p.on_failure != "halt":
-        out.append(("✗" if unicode else "X") + arrow + branch_text(p.on_failure))
+        out.append(failed + arrow + branch_text(p.on_failure))
     return out
 
 
 def _timeout_mark(p: Policies, unicode: bool) -> str:
     """'⏱10m', '⏱≤sim 2:00:00', '⏱10m,≤sim 2:00:00' (ASCII: T10m, T<=sim 2:00:00)."""
+    _, _, timeout, by = _SYMBOLS[unicode]
     limits = [span_text(p.timeout)] if p.timeout is not None else []
     if p.not_after is not None:  # an instant of the mission clock, said as one
-        limits.append(("≤" if unicode else "<=") + clock_text(p.not_after))
-    return ("⏱" if unicode else "T") + ",".join(limits)
+        limits.append(by + clock_text(p.not_after))
+    return timeout + ",".join(limits)
 
 
 def awaited_by(m: Mission) -> dict[str, list[str]]:

@@ -254,21 +254,32 @@ _STATUS_FIELDS = {"status": "status", "status_info": "info", "attempt": "attempt
 _EDIT_FIELDS = ("label", "params", "bindings", "policies")
 
 
+def _is_old_skill_change(e: Any) -> bool:
+    return isinstance(e, dict) and e.get("ev") == "skill_changed"
+
+
 def _typed_skill_change(e: dict[str, Any]) -> list[dict[str, Any]]:
     """An old `skill_changed` event ({"id", "changes": {...}}) as the typed
     events that make the same change (a status and/or an edit)."""
     changes = e.get("changes")
     if not isinstance(changes, dict):
         return [e]  # not ours to mend: validation says what is wrong
-    out: list[dict[str, Any]] = []
+    return _old_status(e.get("id"), changes) + _old_edit(e.get("id"), changes)
+
+
+def _old_status(sid: Any, changes: dict[str, Any]) -> list[dict[str, Any]]:
+    """The status part of an old skill change, as a `skill_status` event (if any)."""
     status = {new: changes[old] for old, new in _STATUS_FIELDS.items() if old in changes}
     stamp = changes.get("started_at") or changes.get("finished_at")
     if status or stamp is not None:
-        out.append({"ev": "skill_status", "id": e.get("id"), **status, "at": stamp})
+        return [{"ev": "skill_status", "id": sid, **status, "at": stamp}]
+    return []
+
+
+def _old_edit(sid: Any, changes: dict[str, Any]) -> list[dict[str, Any]]:
+    """The edit part of an old skill change, as a `skill_edited` event (if any)."""
     edit = {k: changes[k] for k in _EDIT_FIELDS if k in changes}
-    if edit:
-        out.append({"ev": "skill_edited", "id": e.get("id"), **edit})
-    return out
+    return [{"ev": "skill_edited", "id": sid, **edit}] if edit else []
 
 
 class EventBatch(Strict):
@@ -284,12 +295,11 @@ class EventBatch(Strict):
         if not isinstance(data, dict) or not isinstance(data.get("events"), list):
             return data
         events = data["events"]
-        if not any(isinstance(e, dict) and e.get("ev") == "skill_changed" for e in events):
+        if not any(map(_is_old_skill_change, events)):
             return data
         typed: list[Any] = []
         for e in events:
-            old = isinstance(e, dict) and e.get("ev") == "skill_changed"
-            typed.extend(_typed_skill_change(e) if old else [e])
+            typed.extend(_typed_skill_change(e) if _is_old_skill_change(e) else [e])
         return {**data, "events": typed}
 
     actor: str = Field(
@@ -328,13 +338,14 @@ def _bump_counters(m: Mission, skill_id: str | None = None, barrier_id: str | No
         m.next_barrier = max(m.next_barrier, int(barrier_id[1:]) + 1)
 
 
-def _queue_command(m: Mission, c: UplinkCommand) -> None:
+def _queue_command(m: Mission, e: CommandQueued, revision: int) -> None:
+    c = e.command
     m.uplink.setdefault(c.robot, []).append(json_copy(c))
     m.next_command = max(m.next_command, c.id + 1)
     m.uplink_seqs[c.robot] = max(m.uplink_seqs.get(c.robot, 0), c.seq)
 
 
-def _change_command(m: Mission, change: CommandChanged) -> None:
+def _change_command(m: Mission, change: CommandChanged, revision: int) -> None:
     command_id = change.id
     for cmds in m.uplink.values():
         for i, c in enumerate(cmds):
@@ -353,32 +364,39 @@ def _prune(cmds: list[UplinkCommand]) -> None:
         del cmds[i]
 
 
-def _changed_skill(
-    s: SkillInstance, e: SkillStatusChanged | SkillEdited, revision: int
-) -> SkillInstance:
-    """Skill `s` after event `e`."""
-    if isinstance(e, SkillEdited):
-        edit = {k: getattr(e, k) for k in _EDIT_FIELDS if getattr(e, k) is not None}
-        # the mission's own copies: an event may be kept (journal, history)
-        return s.model_copy(update={**copy.deepcopy(edit), "rev": revision})
-    # a status: the stamps follow it
-    update: dict[str, Any] = {"rev": revision}
+def _stamps(s: SkillInstance, status: Status, at: datetime | None) -> dict[str, Any]:
+    """The start or the finish that `status`, reported at `at`, stamps on `s`."""
+    if at is None:
+        return {}
+    if status == Status.RUNNING and s.started_at is None:
+        return {"started_at": at}
+    if status in FINISHED:
+        return {"finished_at": at}
+    return {}
+
+
+def _skill_status(m: Mission, e: SkillStatusChanged, revision: int) -> None:
+    task, i = _task_of(m, e.id)
+    s = task[i]
     status = e.status if e.status is not None else s.status
-    update["status"] = status
+    update: dict[str, Any] = {"rev": revision, "status": status, **_stamps(s, status, e.at)}
     if e.info is not None:
         update["status_info"] = e.info
     if e.attempt is not None:
         update["attempt"] = e.attempt
-    if status == Status.RUNNING and s.started_at is None and e.at is not None:
-        update["started_at"] = e.at
-    if status in FINISHED and e.at is not None:
-        update["finished_at"] = e.at
-    if status in (Status.IDLE, Status.IDLE_SYNCHRONIZED) and e.status is not None:
+    if e.status in (Status.IDLE, Status.IDLE_SYNCHRONIZED):
         update["started_at"] = None
         update["branch"] = None
     if e.branch is not None:
         update["branch"] = e.branch
-    return s.model_copy(update=update)
+    task[i] = s.model_copy(update=update)
+
+
+def _skill_edited(m: Mission, e: SkillEdited, revision: int) -> None:
+    task, i = _task_of(m, e.id)
+    edit = {k: getattr(e, k) for k in _EDIT_FIELDS if getattr(e, k) is not None}
+    # the mission's own copies: an event may be kept (journal, history)
+    task[i] = task[i].model_copy(update={**copy.deepcopy(edit), "rev": revision})
 
 
 def _waiver_set(m: Mission, e: WaiverSet, revision: int) -> None:
@@ -434,8 +452,65 @@ def _question_closed(m: Mission, e: QuestionClosed, revision: int) -> None:
     _question_changed(m, e.id, update)
 
 
-# events that change one part of a mission, as a table (keeps apply_event short)
+def _skill_added(m: Mission, e: SkillAdded, revision: int) -> None:
+    s = json_copy(e.skill)
+    s.rev = revision
+    m.tasks.setdefault(e.robot, []).insert(e.index, s)
+    m.hint(e.robot, e.index, s.id)
+    m.task_revs[e.robot] = revision
+    _bump_counters(m, skill_id=s.id)
+
+
+def _skill_removed(m: Mission, e: SkillRemoved, revision: int) -> None:
+    task, i = _task_of(m, e.id)
+    del task[i]
+    m.task_revs[e.robot] = revision
+
+
+def _skill_moved(m: Mission, e: SkillMoved, revision: int) -> None:
+    task, i = _task_of(m, e.id)
+    task.insert(e.index, task.pop(i))
+    m.task_revs[e.robot] = revision
+
+
+def _barrier_set(m: Mission, e: BarrierSet, revision: int) -> None:
+    m.barriers[e.id] = e.barrier.model_copy(deep=True)
+    _bump_counters(m, barrier_id=e.id)
+
+
+def _barrier_removed(m: Mission, e: BarrierRemoved, revision: int) -> None:
+    m.barriers.pop(e.id, None)
+
+
+def _marker_set(m: Mission, e: MarkerSet, revision: int) -> None:
+    m.markers[e.name] = e.marker.model_copy(deep=True)
+    m.marker_revs[e.name] = revision
+
+
+def _marker_removed(m: Mission, e: MarkerRemoved, revision: int) -> None:
+    m.markers.pop(e.name, None)
+    m.marker_revs.pop(e.name, None)
+
+
+def _report_seq(m: Mission, e: ReportSeq, revision: int) -> None:
+    m.report_seqs[e.robot] = e.seq
+
+
+# what each event changes in a mission, by its type (MissionReplaced
+# replaces the mission instead: apply_event's own case)
 _APPLY: dict[type[Any], Callable[[Mission, Any, int], None]] = {
+    SkillAdded: _skill_added,
+    SkillRemoved: _skill_removed,
+    SkillMoved: _skill_moved,
+    SkillStatusChanged: _skill_status,
+    SkillEdited: _skill_edited,
+    BarrierSet: _barrier_set,
+    BarrierRemoved: _barrier_removed,
+    MarkerSet: _marker_set,
+    MarkerRemoved: _marker_removed,
+    ReportSeq: _report_seq,
+    CommandQueued: _queue_command,
+    CommandChanged: _change_command,
     WaiverSet: _waiver_set,
     WaiverRemoved: _waiver_removed,
     RobotAdded: _robot_added,
@@ -448,50 +523,12 @@ _APPLY: dict[type[Any], Callable[[Mission, Any, int], None]] = {
 
 def apply_event(m: Mission, ev: Any, revision: int) -> Mission:
     """Apply one event in place (or return the replacement mission)."""
-    simple = _APPLY.get(type(ev))
-    if simple is not None:
-        simple(m, ev, revision)
-        return m
-    match ev:
-        case SkillAdded(robot=robot, index=index, skill=skill):
-            s = json_copy(skill)
-            s.rev = revision
-            m.tasks.setdefault(robot, []).insert(index, s)
-            m.hint(robot, index, s.id)
-            m.task_revs[robot] = revision
-            _bump_counters(m, skill_id=s.id)
-        case SkillRemoved(robot=robot, id=sid):
-            task, i = _task_of(m, sid)
-            del task[i]
-            m.task_revs[robot] = revision
-        case SkillMoved(robot=robot, id=sid, index=index):
-            task, i = _task_of(m, sid)
-            task.insert(index, task.pop(i))
-            m.task_revs[robot] = revision
-        case SkillStatusChanged() | SkillEdited():
-            task, i = _task_of(m, ev.id)
-            task[i] = _changed_skill(task[i], ev, revision)
-        case BarrierSet(id=bid, barrier=b):
-            m.barriers[bid] = b.model_copy(deep=True)
-            _bump_counters(m, barrier_id=bid)
-        case BarrierRemoved(id=bid):
-            m.barriers.pop(bid, None)
-        case MarkerSet(name=name, marker=marker):
-            m.markers[name] = marker.model_copy(deep=True)
-            m.marker_revs[name] = revision
-        case MarkerRemoved(name=name):
-            m.markers.pop(name, None)
-            m.marker_revs.pop(name, None)
-        case ReportSeq(robot=robot, seq=seq):
-            m.report_seqs[robot] = seq
-        case CommandQueued(command=c):
-            _queue_command(m, c)
-        case CommandChanged():
-            _change_command(m, ev)
-        case MissionReplaced(mission=new):
-            m = new.copy_deep()
-        case _:
-            raise TypeError(f"unknown event {ev!r}")
+    if isinstance(ev, MissionReplaced):
+        return ev.mission.copy_deep()
+    apply = _APPLY.get(type(ev))
+    if apply is None:
+        raise TypeError(f"unknown event {ev!r}")
+    apply(m, ev, revision)
     return m
 
 

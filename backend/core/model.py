@@ -747,10 +747,13 @@ class Mission(Strict):
 def section_problems(task: list[SkillInstance]) -> list[tuple[int, str]]:
     """Where a robot's list breaks the section order: (index, sentence)."""
     problems: list[tuple[int, str]] = []
+    if not task:
+        return problems
     active: int | None = None
-    prev: SkillInstance | None = None
+    prev = task[0]  # the last skill in order: the others are compared with it
     for i, s in enumerate(task):
-        if prev is not None and SECTION_RANK[s.status] < SECTION_RANK[prev.status]:
+        broken = SECTION_RANK[s.status] < SECTION_RANK[prev.status]
+        if broken:
             problems.append(
                 (
                     i,
@@ -759,7 +762,13 @@ def section_problems(task: list[SkillInstance]) -> list[tuple[int, str]]:
                     "idle_synchronized, then idle)",
                 )
             )
-        elif s.status in ACTIVE and active is not None:
+        else:
+            prev = s
+        if s.status not in ACTIVE:
+            continue
+        if active is None:
+            active = i
+        elif not broken:
             problems.append(
                 (
                     i,
@@ -767,10 +776,6 @@ def section_problems(task: list[SkillInstance]) -> list[tuple[int, str]]:
                     f"{task[active].status.value}",
                 )
             )
-        if s.status in ACTIVE and active is None:
-            active = i
-        if prev is None or SECTION_RANK[s.status] >= SECTION_RANK[prev.status]:
-            prev = s
     return problems
 
 

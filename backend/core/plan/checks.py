@@ -16,7 +16,7 @@ from collections.abc import Callable, Collection, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Literal
 
-from backend.core.library import Library
+from backend.core.library import Library, SkillSpec
 from backend.core.model import FINISHED, Mission, SkillInstance, Status, Waiver
 from backend.core.plan.contingency_checks import (
     after_deadlock,
@@ -445,14 +445,23 @@ def _unexplored(ctx: CheckContext) -> Iterator[Hit]:
 def _kinds(ctx: CheckContext) -> dict[tuple[str, str], tuple[list[str], list[str]]]:
     """(robot type, skill) -> (its robot parameters, its area parameters)."""
     return {
-        (t, name): (
-            [n for n, p in spec.params.items() if p.type == "robot"],
-            [n for n, p in spec.params.items() if p.type == "area"],
-        )
+        (t, name): _robot_and_area_params(spec)
         for t, rt in ctx.library.robot_types.items()
         for name in rt.skills
         if (spec := ctx.library.skills.get(name)) is not None
     }
+
+
+def _robot_and_area_params(spec: SkillSpec) -> tuple[list[str], list[str]]:
+    """The names of the skill's robot parameters and of its area parameters."""
+    robots: list[str] = []
+    areas: list[str] = []
+    for n, p in spec.params.items():
+        if p.type == "robot":
+            robots.append(n)
+        elif p.type == "area":
+            areas.append(n)
+    return robots, areas
 
 
 def _planned(ctx: CheckContext, which: int) -> Iterator[tuple[str, SkillInstance, str]]:

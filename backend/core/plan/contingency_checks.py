@@ -106,15 +106,23 @@ def after_deadlock(ctx: CheckContext) -> Iterator[Hit]:
     graph = _start_order(tasks, node)  # a skill (or barrier) -> what must start before it
     for sid, after in waits.items():
         graph.setdefault(node(sid), set()).add(node(after))
+    for ring in _rings(graph, waits, node):
+        yield Hit(
+            "+".join(ring),
+            f"{', '.join(ring)} wait (after) for skills that can only start after them; "
+            "reorder these skills or drop an after",
+            skills=tuple(ring),
+        )
+
+
+def _rings(
+    graph: dict[str, set[str]], waits: dict[str, str], node: Callable[[str], str]
+) -> Iterator[list[str]]:
+    """The waiting skills of each cycle of `graph` that has some, sorted."""
     for comp in strong_components(graph):
         ring = sorted(sid for sid in waits if node(sid) in comp)
         if ring:
-            yield Hit(
-                "+".join(ring),
-                f"{', '.join(ring)} wait (after) for skills that can only start after them; "
-                "reorder these skills or drop an after",
-                skills=tuple(ring),
-            )
+            yield ring
 
 
 def _waits(tasks: list[list[SkillInstance]]) -> dict[str, str]:

@@ -58,13 +58,16 @@ class Course:
     index: dict[str, int]  # skill id -> its step
 
 
+# what a leg was built from besides its skill: the start (quantized), the
+# map's version and home; a leg is built again when one of them changed
+_LegBasis = tuple[tuple[int, int] | None, int, Point | None]
+
+
 class LegCache:
-    """skill id -> (the skill object, start key, map version, home, its leg)."""
+    """skill id -> (the skill object, what its leg was built from, its leg)."""
 
     def __init__(self) -> None:
-        self._legs: dict[
-            str, tuple[SkillInstance, tuple[int, int] | None, int, Point | None, Leg]
-        ] = {}
+        self._legs: dict[str, tuple[SkillInstance, _LegBasis, Leg]] = {}
 
     def leg(
         self,
@@ -76,22 +79,16 @@ class LegCache:
         inputs: PlanInputs,
     ) -> Leg | None:
         key = None if start is None else (round(start[0] / QUANTUM_M), round(start[1] / QUANTUM_M))
-        version = inputs.site_version()
         home = inputs.home_point()
+        basis = (key, inputs.site_version(), home)
         hit = self._legs.get(s.id)
-        if (
-            hit is not None
-            and hit[0] is s
-            and hit[1] == key
-            and hit[2] == version
-            and hit[3] == home
-        ):
-            return hit[4]
+        if hit is not None and hit[0] is s and hit[1] == basis:
+            return hit[2]
         spec = library.skill_for(robot_type, s.skill)
         if spec is None:
             return None
         leg = build_leg(rt, robot_type, spec, s.params, start, home, inputs.site)
-        self._legs[s.id] = (s, key, version, home, leg)
+        self._legs[s.id] = (s, basis, leg)
         return leg
 
     def size(self) -> int:
@@ -137,9 +134,7 @@ def walk(
     costing = Costing(library, rt, robot_type, markers or {}, inputs) if rt is not None else None
     now = inputs.robots.get(robot)
     battery_model = rt.battery if rt is not None else None
-    pos = now.position if now is not None else None
-    if pos is None:  # where its last goal took it, else home (where robots start)
-        pos = _last_place(library, robot_type, task) or inputs.home_point()
+    pos = _start(library, robot_type, task, inputs, now)
     level, assumed = _level_now(battery_model, now)
     steps: list[Step] = []
     offsets = [0.0]
@@ -153,6 +148,20 @@ def walk(
         pos = _place_after(step, pos)
     index = {step.skill.id: i for i, step in enumerate(steps)}
     return Course(robot, rt, tuple(steps), battery_model, assumed, now, tuple(offsets), index)
+
+
+def _start(
+    library: Library,
+    robot_type: str,
+    task: Sequence[SkillInstance],
+    inputs: PlanInputs,
+    now: RobotNow | None,
+) -> Point | None:
+    """Where the robot is: as it last said, else where its last goal took
+    it, else home (where robots start)."""
+    if now is not None and now.position is not None:
+        return now.position
+    return _last_place(library, robot_type, task) or inputs.home_point()
 
 
 def _level_now(model: BatteryModel | None, now: RobotNow | None) -> tuple[float | None, bool]:

@@ -296,7 +296,11 @@ def halted(mission: Mission, inputs: PlanInputs, robot: str) -> bool:
     now = inputs.robots.get(robot)
     if now is not None and now.mode == "halted":
         return True
-    task = mission.tasks.get(robot, [])
+    return _failure_halts(mission.tasks.get(robot, []))
+
+
+def _failure_halts(task: list[SkillInstance]) -> bool:
+    """Nothing of `task` is active and its last finished skill failed."""
     if any(s.status in ACTIVE for s in task):
         return False
     last = next((s for s in reversed(task) if s.status in FINISHED), None)
@@ -475,7 +479,7 @@ class Forecaster:
             del self._courses[gone]
             self._segments.pop(gone, None)
         if self.legs.size() > 2 * sum(len(t) for t in mission.tasks.values()) + 64:
-            self.legs.forget({s.id for t in mission.tasks.values() for s in t})
+            self.legs.forget(mission.all_ids())
 
 
 def _same(old: tuple[SkillInstance, ...], new: list[SkillInstance]) -> bool:

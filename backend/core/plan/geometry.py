@@ -27,10 +27,13 @@ def polygon_of(value: Any) -> tuple[Point, ...] | None:
     """The corners of an area value (a list of positions), else None."""
     if not isinstance(value, list) or len(value) < 3:
         return None
-    corners = [point_of(v) for v in value]
-    if any(c is None for c in corners):
-        return None
-    return tuple(c for c in corners if c is not None)
+    corners = []
+    for v in value:
+        c = point_of(v)
+        if c is None:
+            return None
+        corners.append(c)
+    return tuple(corners)
 
 
 def distance(a: Point, b: Point) -> float:

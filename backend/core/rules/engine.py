@@ -228,29 +228,46 @@ RULES: dict[type[Any], Rule] = {
 
 def _touched(m: Mission, op: Operation) -> list[tuple[int, str]]:
     """(revision of its last change, name for a person) of what `op` touches."""
-    match op:
-        case AddSkill(robot=r) | Unsync(robot=r):
-            return [_task_rev(m, r)]
-        case Sync(robot=r, through=t):
-            return [_task_rev(m, r), *_skill_revs(m, [t] if t else [])]
-        case DeleteSkills(ids=ids) | AddBarrier(ids=ids):
-            return _skill_revs(m, ids)
-        case MoveSkill(id=sid):
-            found = m.find(sid)
-            return _skill_revs(m, [sid]) + ([_task_rev(m, found[0])] if found else [])
-        case EditSkill(id=sid) | Retry(id=sid) | SetSkill(id=sid):
-            return _skill_revs(m, [sid])
-        case RemoveBarrier(barrier=bid) | EditBarrier(barrier=bid):
-            return _skill_revs(m, m.barriers[bid].skills if bid in m.barriers else [])
-        case (
-            MarkerMove(name=n) | MarkerRename(name=n) | MarkerDelete(name=n) | RestoreMarker(name=n)
-        ):
-            return [(m.marker_revs.get(n, 0), f"marker {n}")]
-    return _TEAM_TOUCHED.get(type(op), _untouched)(m, op)
+    return _TOUCHED.get(type(op), _untouched)(m, op)
 
 
 def _untouched(m: Mission, op: Any) -> list[tuple[int, str]]:
     return []
+
+
+def _list_touched(m: Mission, op: AddSkill | Unsync) -> list[tuple[int, str]]:
+    return [_task_rev(m, op.robot)]
+
+
+def _sync_touched(m: Mission, op: Sync) -> list[tuple[int, str]]:
+    """The list, and the skill it synchronizes through."""
+    return [_task_rev(m, op.robot), *_skill_revs(m, [op.through] if op.through else [])]
+
+
+def _skills_touched(m: Mission, op: DeleteSkills | AddBarrier) -> list[tuple[int, str]]:
+    return _skill_revs(m, op.ids)
+
+
+def _skill_touched(m: Mission, op: EditSkill | Retry | SetSkill) -> list[tuple[int, str]]:
+    return _skill_revs(m, [op.id])
+
+
+def _move_touched(m: Mission, op: MoveSkill) -> list[tuple[int, str]]:
+    """The skill, and the list it is in."""
+    found = m.find(op.id)
+    return _skill_revs(m, [op.id]) + ([_task_rev(m, found[0])] if found else [])
+
+
+def _barrier_touched(m: Mission, op: RemoveBarrier | EditBarrier) -> list[tuple[int, str]]:
+    """The skills the barrier holds."""
+    b = m.barriers.get(op.barrier)
+    return _skill_revs(m, b.skills if b is not None else [])
+
+
+def _marker_touched(
+    m: Mission, op: MarkerMove | MarkerRename | MarkerDelete | RestoreMarker
+) -> list[tuple[int, str]]:
+    return [(m.marker_revs.get(op.name, 0), f"marker {op.name}")]
 
 
 def _robot_touched(m: Mission, op: AddRobot | RetireRobot) -> list[tuple[int, str]]:
@@ -270,8 +287,23 @@ def _return_touched(m: Mission, op: ReturnSkills) -> list[tuple[int, str]]:
     return _skill_revs(m, [it.skill.id for it in op.items] + list(op.partners))
 
 
-# the team's operations (issue 30), kept out of the match above: one table, no ladder
-_TEAM_TOUCHED: dict[type[Any], Callable[[Mission, Any], list[tuple[int, str]]]] = {
+# operation type -> what it touches; the others touch nothing a client saw
+_TOUCHED: dict[type[Any], Callable[[Mission, Any], list[tuple[int, str]]]] = {
+    AddSkill: _list_touched,
+    Unsync: _list_touched,
+    Sync: _sync_touched,
+    DeleteSkills: _skills_touched,
+    AddBarrier: _skills_touched,
+    MoveSkill: _move_touched,
+    EditSkill: _skill_touched,
+    Retry: _skill_touched,
+    SetSkill: _skill_touched,
+    RemoveBarrier: _barrier_touched,
+    EditBarrier: _barrier_touched,
+    MarkerMove: _marker_touched,
+    MarkerRename: _marker_touched,
+    MarkerDelete: _marker_touched,
+    RestoreMarker: _marker_touched,
     AddRobot: _robot_touched,
     RetireRobot: _robot_touched,
     Reassign: _reassign_touched,
@@ -347,16 +379,18 @@ class Engine(Rules):
                 return Applied(done.revision, [], done.notes, done.value, duplicate=True)
         if expected_revision is not None:
             self.check_fresh(op, expected_revision)
-        origin = Origin(op, client, request_id, actor or client)
-        if isinstance(op, Undo):
-            applied = self._revert(origin, self.undo_stack, self.redo_stack, "undo")
-        elif isinstance(op, Redo):
-            applied = self._revert(origin, self.redo_stack, self.undo_stack, "redo")
-        else:
-            applied = self._apply(origin)
+        applied = self._run(Origin(op, client, request_id, actor or client))
         if request_id is not None:
             self.remember(client, request_id, applied)
         return applied
+
+    def _run(self, origin: Origin) -> Applied:
+        """Undo and redo walk the client's history; any other operation applies its rule."""
+        if isinstance(origin.op, Undo):
+            return self._revert(origin, self.undo_stack, self.redo_stack, "undo")
+        if isinstance(origin.op, Redo):
+            return self._revert(origin, self.redo_stack, self.undo_stack, "redo")
+        return self._apply(origin)
 
     def _apply(self, origin: Origin) -> Applied:
         op, client = origin.op, origin.client

@@ -199,8 +199,8 @@ def _check_answerable(rules: Rules, q: Question) -> None:
         raise Refusal(
             "question_closed", f"{q.title()} is {q.state.value} already{went}{_why(q)}", **where
         )
-    c = rules.mission.command(q.command) if q.command is not None else None
-    if c is not None and c.state in (CommandState.QUEUED, CommandState.SENT, CommandState.ACKED):
+    c = _answer_under_way(rules, q)
+    if c is not None:
         raise Refusal(
             "already_answered",
             f"{q.title()} was answered '{q.answer}' by {q.answered_by or 'an operator'}: "
@@ -214,6 +214,16 @@ def _check_answerable(rules: Rules, q: Question) -> None:
             "an answer would arrive after it",
             **where,
         )
+
+
+def _answer_under_way(rules: Rules, q: Question) -> UplinkCommand | None:
+    """The command taking the answer given already, while it is on its way
+    to the robot or taken by it."""
+    c = rules.mission.command(q.command) if q.command is not None else None
+    return c if c is not None and c.state in _UNDER_WAY else None
+
+
+_UNDER_WAY = (CommandState.QUEUED, CommandState.SENT, CommandState.ACKED)
 
 
 def _why(q: Question) -> str:

@@ -679,14 +679,20 @@ def _retried(fx: _Effects, cmd: Enqueue) -> None:
                 f"{fx.op.reason or 'no reason given'}"
             )
         return
-    found = fx.rules.mission.find(failed_id)
-    if fx.rules.mission.find(new.id) is not None or found is None or found[0] != fx.robot:
+    if not _retry_fits(fx, new.id, failed_id):
         fx.drop.append(new.id)
         return
     index = _queue_head(fx.task)
     skill = new.model_copy(update={"status": Status.IDLE_SYNCHRONIZED})
     fx.events.append(ev.SkillAdded(robot=fx.robot, index=index, skill=skill))
     fx.done = [new.id]
+
+
+def _retry_fits(fx: _Effects, new_id: str, failed_id: str) -> bool:
+    """Whether a retry the robot queued can join the mission: its id is
+    free and the skill it retries is still this robot's."""
+    found = fx.rules.mission.find(failed_id)
+    return fx.rules.mission.find(new_id) is None and found is not None and found[0] == fx.robot
 
 
 def _queue_head(task: list[SkillInstance]) -> int:
@@ -810,32 +816,11 @@ def reconcile(rules: Rules, op: Reconcile) -> Change:
     mine = {s.id: s for s in task}
     queue, alerts = _checked_queue(robot, op.queue)
     held, adopted, strays = _sorted_queue(rules, robot, mine, queue)
-    holds = {e.id for e in queue}
-    lost = [
-        s.id
-        for s in task
-        if s.status != Status.IDLE and s.status not in FINISHED and s.id not in holds
-    ]
-    events: list[ev.Event] = []
-    status: dict[str, Status] = {}
-    for sid in lost:
-        info = f"returned to the plan: {robot} no longer had it"
-        events.append(ev.SkillStatusChanged(id=sid, status=Status.IDLE, info=info))
-        status[sid] = Status.IDLE
-    for e in held:
-        if e.status != mine[e.id].status:
-            events.append(ev.SkillStatusChanged(id=e.id, status=e.status))
-        status[e.id] = e.status
+    lost = _lost(task, queue)
+    events, status = _reconciled_statuses(robot, mine, lost, held)
     events += _arrangement(robot, task, status, idle_first=lost, held_order=[e.id for e in held])
     events += questions.reconciled(rules, op)
-    said = []
-    if lost:
-        said.append(f"{robot} no longer had {', '.join(lost)}: returned to the plan")
-    if adopted:
-        said.append(
-            f"{robot} holds {', '.join(adopted)}, which the mission had as unsynchronized: "
-            "shown as synchronized again (unsync to take them back)"
-        )
+    said = _reconcile_sentences(robot, lost, adopted)
     if strays:
         c = _Maker(rules, None).make(robot, "reconcile", Dequeue(ids=strays), strays)
         events.append(ev.CommandQueued(command=c))
@@ -846,6 +831,47 @@ def reconcile(rules: Rules, op: Reconcile) -> Change:
     alerts += [_robot_alert(robot, text, AlertKind.RECONCILE) for text in said]
     value: dict[str, Any] = {"unsynchronized": lost, "adopted": adopted, "dropped": strays}
     return Change(events, [], value, None, alerts=tuple(alerts))
+
+
+def _lost(task: list[SkillInstance], queue: list[QueueEntry]) -> list[str]:
+    """The skills the mission has on the robot's side (synchronized or
+    under way) that its registered queue no longer holds."""
+    holds = {e.id for e in queue}
+    return [
+        s.id
+        for s in task
+        if s.status != Status.IDLE and s.status not in FINISHED and s.id not in holds
+    ]
+
+
+def _reconciled_statuses(
+    robot: str, mine: dict[str, SkillInstance], lost: list[str], held: list[QueueEntry]
+) -> tuple[list[ev.Event], dict[str, Status]]:
+    """The status events of a registration (the skills `robot` lost back
+    in the plan, those it holds as it has them) and each one's new status."""
+    info = f"returned to the plan: {robot} no longer had it"
+    events: list[ev.Event] = [
+        ev.SkillStatusChanged(id=sid, status=Status.IDLE, info=info) for sid in lost
+    ]
+    status = dict.fromkeys(lost, Status.IDLE)
+    for e in held:
+        if e.status != mine[e.id].status:
+            events.append(ev.SkillStatusChanged(id=e.id, status=e.status))
+        status[e.id] = e.status
+    return events, status
+
+
+def _reconcile_sentences(robot: str, lost: list[str], adopted: list[str]) -> list[str]:
+    """What a registration says of the skills `robot` lost and those it adopted."""
+    said = []
+    if lost:
+        said.append(f"{robot} no longer had {', '.join(lost)}: returned to the plan")
+    if adopted:
+        said.append(
+            f"{robot} holds {', '.join(adopted)}, which the mission had as unsynchronized: "
+            "shown as synchronized again (unsync to take them back)"
+        )
+    return said
 
 
 def _sorted_queue(
