@@ -147,6 +147,20 @@ def _doing(s: SkillInstance) -> str:
     return STATUS_WORDS[s.status]
 
 
+def _progress(act: SkillInstance, t: Telemetry | None) -> str:
+    """' 42%': how far the running skill is, when its robot's telemetry says."""
+    if t is None or t.progress is None or t.skill != act.id or act.status != Status.RUNNING:
+        return ""
+    return f" {int(t.progress * 100)}%"
+
+
+def _idle_text(mode: str, queued: int) -> str:
+    """A robot without an active skill: its mode, and the skills it has queued."""
+    if queued:
+        return f"{mode if mode and mode != 'idle' else 'halted'} · {queued} queued"
+    return mode or "idle"
+
+
 def _after_of(m: Mission, sid: str) -> str | None:
     found = m.find(sid)
     return found[2].policies.after if found is not None else None
@@ -238,20 +252,25 @@ class ConsoleModel:
                 self.load(mission, library)  # (the server's state came first: nothing)
                 self.previewing = True
                 return change(Topic.MISSION, Topic.FLEET, loaded=True)
-            case MapFed(mirror=mirror, update=update, speed=speed):
-                self.map_mirror, self.map_update = mirror, update
-                topics = {Topic.MAP}
-                if (objects := getattr(mirror, "objects", None)) is not None:  # a simulator
-                    self.site = SiteScore(objects.score)  # its time is the mission clock's
-                    if not self.clock.simulated:  # the times shown so far were wall times
-                        topics |= {Topic.MISSION, Topic.FLEET}
-                    self.clock.heard(
-                        mirror.sim_time, getattr(mirror, "speed", None) or speed or 1.0
-                    )
-                return change(*topics, map_update=update)
+            case MapFed():
+                return self._map_fed(event)
             case _:
                 return NOTHING
         return change(Topic.CONNECTION)
+
+    def _map_fed(self, fed: MapFed) -> StateChange:
+        """The map feed moved; a simulator's brings the site's score and the
+        mission clock (the simulator's time is the mission's)."""
+        self.map_mirror, self.map_update = fed.mirror, fed.update
+        topics = {Topic.MAP}
+        if (objects := getattr(fed.mirror, "objects", None)) is not None:  # a simulator
+            self.site = SiteScore(objects.score)
+            if not self.clock.simulated:  # the times shown so far were wall times
+                topics |= {Topic.MISSION, Topic.FLEET}
+            self.clock.heard(
+                fed.mirror.sim_time, getattr(fed.mirror, "speed", None) or fed.speed or 1.0
+            )
+        return change(*topics, map_update=fed.update)
 
     def _synced(self, snap: StateSnapshot) -> StateChange:
         """A whole state: the first, or after a gap or a server restart. The
@@ -506,14 +525,8 @@ class ConsoleModel:
         act, queued = self.robot_state(robot)
         t = self.telemetry.get(robot)
         if act is not None:
-            extra = ""
-            if t is not None and t.skill == act.id and act.status == Status.RUNNING:
-                extra = f" {int(t.progress * 100)}%" if t.progress is not None else ""
-            return f"{GLYPHS[act.status]} {act.id} {_doing(act)}{extra}"
-        mode = t.mode if t is not None else ""
-        if queued:
-            return f"{mode if mode and mode != 'idle' else 'halted'} · {queued} queued"
-        return mode or "idle"
+            return f"{GLYPHS[act.status]} {act.id} {_doing(act)}{_progress(act, t)}"
+        return _idle_text(t.mode if t is not None else "", queued)
 
     def uplinking(self, sid: str) -> UplinkCommand | None:
         """The pending command to a robot that locks skill `sid`, if any."""
