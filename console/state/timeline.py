@@ -109,11 +109,21 @@ def bars(
     # the forecast's times are wall stamps: ask for the window in wall time
     w0, w1 = clock.to_ts(t0), clock.to_ts(t1)
     shown = list(fc.window(robot, w0, w1, step / clock.speed))
-    picked = fc.skill(also) if also is not None else None
-    if picked is not None and picked.robot == robot and picked not in shown:
-        if picked.end >= w0 and picked.start <= w1:
-            shown.append(picked)
+    picked = _picked(fc, also, robot, w0, w1)
+    if picked is not None and picked not in shown:
+        shown.append(picked)
     return out + [_predicted(f, f.skill, clock) for f in shown if f.skill is not None]
+
+
+def _picked(
+    fc: Forecast, also: str | None, robot: str, w0: float, w1: float
+) -> SkillForecast | None:
+    """The selected skill's prediction, when it is the robot's and overlaps
+    [w0, w1] (wall time): shown whatever the zoom."""
+    picked = fc.skill(also) if also is not None else None
+    if picked is None or picked.robot != robot or picked.end < w0 or picked.start > w1:
+        return None
+    return picked
 
 
 def _log_bars(task: list[SkillInstance], clock: MissionClock, t0: float, t1: float) -> list[Bar]:
