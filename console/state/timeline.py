@@ -228,21 +228,27 @@ def _bar(cells: list[Cell], win: Window, bar: Bar, selected: bool, critical: boo
 
 def links(lanes: dict[str, list[Bar]], order: list[str], win: Window) -> dict[int, set[int]]:
     """Spacer line i (below lane i) -> the columns where a barrier link crosses it."""
-    where: dict[str, list[tuple[int, int]]] = {}  # barrier -> (lane, column)
+    out: dict[int, set[int]] = {}
+    for members in _barrier_starts(lanes, order, win).values():
+        x = members[0][1]
+        if len(members) < 2 or not 0 <= x < win.width:
+            continue
+        rows = [r for r, _ in members]
+        for spacer in range(min(rows), max(rows)):
+            out.setdefault(spacer, set()).add(x)
+    return out
+
+
+def _barrier_starts(
+    lanes: dict[str, list[Bar]], order: list[str], win: Window
+) -> dict[str, list[tuple[int, int]]]:
+    """Barrier -> the (lane, column) where each of its skills' bars starts."""
+    where: dict[str, list[tuple[int, int]]] = {}
     for i, robot in enumerate(order):
         for bar in lanes.get(robot, []):
             if bar.barrier is not None:
                 where.setdefault(bar.barrier, []).append((i, win.col(bar.start)))
-    out: dict[int, set[int]] = {}
-    for members in where.values():
-        if len(members) < 2:
-            continue
-        rows = [r for r, _ in members]
-        x = members[0][1]
-        if 0 <= x < win.width:
-            for spacer in range(min(rows), max(rows)):
-                out.setdefault(spacer, set()).add(x)
-    return out
+    return where
 
 
 def spacer(columns: set[int], width: int) -> list[Cell]:
