@@ -104,21 +104,7 @@ class EventLog:
         operation line otherwise."""
         user, client = split_actor(batch.actor)
         if batch.op == "report":
-            return [
-                self.add(
-                    "failure" if e.status == Status.FAILURE else "report",
-                    report_text(e.status, e.id, e.info),
-                    at,
-                    robots=[owner(e.id) or client],
-                    skill=e.id,
-                    client=client,
-                    user=user,
-                    op=batch.op,
-                    revision=batch.revision,
-                )
-                for e in batch.events
-                if isinstance(e, ev.SkillStatusChanged) and e.status is not None
-            ]
+            return self._reports(batch, owner, at, user, client)
         robots, parts = _summary(batch, owner)
         text = f"{batch.op or 'change'}" + (f": {'; '.join(parts)}" if parts else "")
         return [
@@ -133,6 +119,26 @@ class EventLog:
                 op=batch.op,
                 revision=batch.revision,
             )
+        ]
+
+    def _reports(
+        self, batch: ev.EventBatch, owner: Owner, at: datetime, user: str, client: str
+    ) -> list[LogEntry]:
+        """A robot's report: a report (or failure) line per status it sets."""
+        return [
+            self.add(
+                "failure" if e.status == Status.FAILURE else "report",
+                report_text(e.status, e.id, e.info),
+                at,
+                robots=[owner(e.id) or client],
+                skill=e.id,
+                client=client,
+                user=user,
+                op=batch.op,
+                revision=batch.revision,
+            )
+            for e in batch.events
+            if isinstance(e, ev.SkillStatusChanged) and e.status is not None
         ]
 
     def select(self, query: str) -> list[LogEntry]:
