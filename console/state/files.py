@@ -147,10 +147,15 @@ def completions(text: str, cwd: Path | None = None, suffixes: tuple[str, ...] = 
     return out
 
 
+def _completes(name: str, tail: str) -> bool:
+    """`name` starts with `tail`; a hidden one only when `tail` asks for it."""
+    return name.startswith(tail) and (not name.startswith(".") or tail.startswith("."))
+
+
 def _entry_kind(e: Path, tail: str, suffixes: tuple[str, ...]) -> str | None:
     """'/' for a folder, '' for a file, None when the entry does not complete
     `tail` (another start, hidden unless asked for, a file of another suffix)."""
-    if not e.name.startswith(tail) or (e.name.startswith(".") and not tail.startswith(".")):
+    if not _completes(e.name, tail):
         return None
     try:
         is_dir = e.is_dir()
