@@ -85,6 +85,18 @@ def why_not(
     skill_id: str | None,
     marks: list[str] | None = None,
 ) -> str | None:
+    refused = _refused_here(facts, action)
+    if refused is not None:
+        return refused
+    rule = RULES.get(action)
+    if rule is None:
+        return None  # undo, redo, load, save: the server decides
+    return rule(Selected(facts, robot, facts.find(skill_id), marks or []))
+
+
+def _refused_here(facts: Facts, action: str) -> str | None:
+    """Why `action` cannot be done from this console now, whatever it acts
+    on: no mission yet, a read-only view, no connection to the server."""
     if facts.mission is None:
         return "no mission loaded yet"
     if facts.read_only and action not in READ_ONLY_OK:
@@ -93,10 +105,7 @@ def why_not(
         return (
             f"not connected to the mission server ({facts.connection}): nothing can be changed now"
         )
-    rule = RULES.get(action)
-    if rule is None:
-        return None  # undo, redo, load, save: the server decides
-    return rule(Selected(facts, robot, facts.find(skill_id), marks or []))
+    return None
 
 
 def read_only_reason(facts: Facts, skill_id: str) -> str | None:

@@ -17,6 +17,7 @@ one again within `REPEAT_WINDOW` counts up instead of piling up.
 
 from __future__ import annotations
 
+import functools
 import json
 from collections import deque
 from collections.abc import Callable, Iterable
@@ -102,57 +103,43 @@ class EventLog:
         report/failure line per status event of a robot's report, one
         operation line otherwise."""
         user, client = split_actor(batch.actor)
-        out: list[LogEntry] = []
         if batch.op == "report":
-            for e in batch.events:
-                if isinstance(e, ev.SkillStatusChanged) and e.status is not None:
-                    status = e.status
-                    robot = owner(e.id) or client
-                    info = e.info or ""
-                    kind: Kind = "failure" if status == Status.FAILURE else "report"
-                    text = f"{GLYPHS[status]} {e.id} {STATUS_WORDS[status]}" + (
-                        f": {info}" if info else ""
-                    )
-                    out.append(
-                        self.add(
-                            kind,
-                            text,
-                            at,
-                            robots=[robot],
-                            skill=e.id,
-                            client=client,
-                            user=user,
-                            op=batch.op,
-                            revision=batch.revision,
-                        )
-                    )
-            return out
+            return self._reports(batch, owner, at, user, client)
         robots, parts = _summary(batch, owner)
         text = f"{batch.op or 'change'}" + (f": {'; '.join(parts)}" if parts else "")
-        skill = next(
-            (
-                e.id
-                for e in batch.events
-                if isinstance(
-                    e, ev.SkillStatusChanged | ev.SkillEdited | ev.SkillRemoved | ev.SkillMoved
-                )
-            ),
-            None,
-        )
-        out.append(
+        return [
             self.add(
                 "operation",
                 text,
                 at,
                 robots=robots,
-                skill=skill,
+                skill=_first_skill(batch),
                 client=client,
                 user=user,
                 op=batch.op,
                 revision=batch.revision,
             )
-        )
-        return out
+        ]
+
+    def _reports(
+        self, batch: ev.EventBatch, owner: Owner, at: datetime, user: str, client: str
+    ) -> list[LogEntry]:
+        """A robot's report: a report (or failure) line per status it sets."""
+        return [
+            self.add(
+                "failure" if e.status == Status.FAILURE else "report",
+                report_text(e.status, e.id, e.info),
+                at,
+                robots=[owner(e.id) or client],
+                skill=e.id,
+                client=client,
+                user=user,
+                op=batch.op,
+                revision=batch.revision,
+            )
+            for e in batch.events
+            if isinstance(e, ev.SkillStatusChanged) and e.status is not None
+        ]
 
     def select(self, query: str) -> list[LogEntry]:
         return [e for e in self.entries if entry_matches(e, query)]
@@ -166,6 +153,19 @@ class EventLog:
         return len(rows)
 
 
+def report_text(status: Status, skill: str, info: str | None) -> str:
+    """A robot's report of a skill's new status, as its log line says it."""
+    return f"{GLYPHS[status]} {skill} {STATUS_WORDS[status]}" + (f": {info}" if info else "")
+
+
+def _first_skill(batch: ev.EventBatch) -> str | None:
+    """The skill an operation is about: the first one an event names by id."""
+    return next((e.id for e in batch.events if isinstance(e, _NAMES_A_SKILL)), None)
+
+
+_NAMES_A_SKILL = (ev.SkillStatusChanged, ev.SkillEdited, ev.SkillRemoved, ev.SkillMoved)
+
+
 def read_jsonl(path: Path) -> list[LogEntry]:
     return [
         LogEntry.model_validate(json.loads(line))
@@ -174,8 +174,16 @@ def read_jsonl(path: Path) -> list[LogEntry]:
     ]
 
 
-# events that touch no robot's column -> their phrase in an operation's log line
+# each event -> its phrase in an operation's log line
 PHRASES: dict[type, Callable[[Any], str]] = {
+    ev.SkillAdded: lambda e: f"+{e.skill.id} ({e.skill.skill})",
+    ev.SkillRemoved: lambda e: f"-{e.id}",
+    ev.SkillMoved: lambda e: f"{e.id} → #{e.index + 1}",
+    ev.SkillStatusChanged: lambda e: (
+        f"{e.id} {e.status}" if e.status else f"{e.id} status_info={e.info}"
+    ),
+    ev.SkillEdited: lambda e: f"{e.id} {_changes(_edited(e))}",
+    ev.BarrierSet: lambda e: f"barrier {e.id} ({', '.join(e.barrier.skills)})",
     ev.BarrierRemoved: lambda e: f"barrier {e.id} removed",
     ev.MarkerSet: lambda e: f"marker {e.name}",
     ev.MarkerRemoved: lambda e: f"marker {e.name} removed",
@@ -211,54 +219,42 @@ def _closed_words(e: ev.QuestionClosed) -> str:
 
 
 EDIT_FIELDS = ("label", "params", "bindings", "policies")
-# events that name their robot themselves (the others above go by skill id)
-ROBOT_OF: dict[type, Callable[[Any], str | None]] = {
-    ev.QuestionAsked: lambda e: e.question.robot,
+
+
+def _edited(e: ev.SkillEdited) -> dict[str, Any]:
+    """The fields an edit sets, by name."""
+    return {k: getattr(e, k) for k in EDIT_FIELDS if getattr(e, k) is not None}
+
+
+# each event -> the robots whose columns it touches (a skill's, by its id: `owner`)
+ROBOTS_OF: dict[type, Callable[[Any, Owner], Iterable[str | None]]] = {
+    ev.SkillAdded: lambda e, owner: (e.robot,),
+    ev.SkillRemoved: lambda e, owner: (e.robot,),
+    ev.SkillMoved: lambda e, owner: (e.robot,),
+    ev.SkillStatusChanged: lambda e, owner: (owner(e.id),),
+    ev.SkillEdited: lambda e, owner: (owner(e.id),),
+    ev.BarrierSet: lambda e, owner: map(owner, e.barrier.skills),
+    ev.QuestionAsked: lambda e, owner: (e.question.robot,),
 }
 
 
-def _no_robot(_e: Any) -> None:
-    return None
+def _no_robot(_e: Any, _owner: Owner) -> tuple[()]:
+    return ()
 
 
 def _summary(batch: ev.EventBatch, owner: Owner) -> tuple[list[str], list[str]]:
-    robots: list[str] = []
+    """The robots an operation touches (in the order it names them) and its
+    phrases, the fifth and later counted."""
+    robots: dict[str, None] = {}
     parts: list[str] = []
-
-    def robot(r: str | None) -> None:
-        if r and r not in robots:
-            robots.append(r)
-
     for e in batch.events:
-        match e:
-            case ev.SkillAdded(robot=r, skill=s):
-                robot(r)
-                parts.append(f"+{s.id} ({s.skill})")
-            case ev.SkillRemoved(robot=r, id=sid):
-                robot(r)
-                parts.append(f"-{sid}")
-            case ev.SkillMoved(robot=r, id=sid, index=i):
-                robot(r)
-                parts.append(f"{sid} → #{i + 1}")
-            case ev.SkillStatusChanged(id=sid, status=status):
-                robot(owner(sid))
-                parts.append(f"{sid} {status}" if status else f"{sid} status_info={e.info}")
-            case ev.SkillEdited(id=sid):
-                robot(owner(sid))
-                ch = {k: getattr(e, k) for k in EDIT_FIELDS if getattr(e, k) is not None}
-                parts.append(f"{sid} {_changes(ch)}")
-            case ev.BarrierSet(id=bid, barrier=b):
-                for sid in b.skills:
-                    robot(owner(sid))
-                parts.append(f"barrier {bid} ({', '.join(b.skills)})")
-            case _:
-                robot(ROBOT_OF.get(type(e), _no_robot)(e))
-                phrase = PHRASES.get(type(e))
-                if phrase is not None:
-                    parts.append(phrase(e))
+        robots.update((r, None) for r in ROBOTS_OF.get(type(e), _no_robot)(e, owner) if r)
+        phrase = PHRASES.get(type(e))
+        if phrase is not None:
+            parts.append(phrase(e))
     if len(parts) > 4:
         parts = parts[:4] + [f"… {len(parts) - 4} more"]
-    return robots, parts
+    return list(robots), parts
 
 
 def _changes(ch: dict[str, Any]) -> str:
@@ -272,21 +268,33 @@ def _changes(ch: dict[str, Any]) -> str:
 
 def entry_matches(e: LogEntry, query: str) -> bool:
     """`robot:lru1 kind:failure words…` — every part must match."""
+    for test, value in _query_parts(query):  # (a loop: all() over a generator is slower)
+        if not test(e, value):
+            return False
+    return True
+
+
+def _has_word(e: LogEntry, word: str) -> bool:
+    hay = " ".join([e.text, e.kind, *e.robots, e.skill or "", e.client, e.user, e.op])
+    return word in hay.lower()
+
+
+# a query's `field:value` parts, by field (any other word is looked for in the entry)
+FIELD_MATCHES: dict[str, Callable[[LogEntry, str], bool]] = {
+    "robot": lambda e, value: any(value in r.lower() for r in e.robots),
+    "kind": lambda e, value: e.kind.startswith(value),
+}
+
+
+@functools.lru_cache(maxsize=16)
+def _query_parts(query: str) -> tuple[tuple[Callable[[LogEntry, str], bool], str], ...]:
+    """A query as (test, value) per word, read once for all the entries it filters."""
+    parts = []
     for word in query.lower().split():
         field, sep, value = word.partition(":")
-        if sep and field == "robot":
-            if not any(value in r.lower() for r in e.robots):
-                return False
-        elif sep and field == "kind":
-            if not e.kind.startswith(value):
-                return False
-        else:
-            hay = " ".join(
-                [e.text, e.kind, *e.robots, e.skill or "", e.client, e.user, e.op]
-            ).lower()
-            if word not in hay:
-                return False
-    return True
+        test = FIELD_MATCHES.get(field) if sep else None
+        parts.append((test, value) if test is not None else (_has_word, word))
+    return tuple(parts)
 
 
 # -- alerts ---------------------------------------------------------------------------------
@@ -374,19 +382,25 @@ def toast_text(book: AlertBook, a: AlertEntry) -> tuple[str, str]:
     """(title, message) of the notification for alert `a`: robots going
     offline together (the link, the sim or the site went down) are one
     notification naming them all, each later one replacing it."""
-    if a.kind == "offline" and a.robot:
-        robots = list(
-            dict.fromkeys(
-                x.robot
-                for x in book.alerts
-                if x.kind == "offline"
-                and x.robot
-                and not x.acknowledged
-                and abs(x.at - a.at) <= TOAST_TOGETHER
-            )
+    if a.kind != "offline" or not a.robot:
+        return " · ".join(x for x in (a.robot, a.skill) if x) or "Alert", a.message
+    robots = _offline_with(book, a)
+    if len(robots) > 1:
+        names = ", ".join(robots[:-1]) + f" and {robots[-1]}"
+        return "Robots offline", f"{names} went offline"
+    return "Robots offline", a.message
+
+
+def _offline_with(book: AlertBook, a: AlertEntry) -> list[str]:
+    """The robots of the unacknowledged offline alerts within TOAST_TOGETHER
+    of `a` (its own included), each once, oldest first."""
+    return list(
+        dict.fromkeys(
+            x.robot
+            for x in book.alerts
+            if x.kind == "offline"
+            and x.robot
+            and not x.acknowledged
+            and abs(x.at - a.at) <= TOAST_TOGETHER
         )
-        if len(robots) > 1:
-            names = ", ".join(robots[:-1]) + f" and {robots[-1]}"
-            return "Robots offline", f"{names} went offline"
-        return "Robots offline", a.message
-    return " · ".join(x for x in (a.robot, a.skill) if x) or "Alert", a.message
+    )

@@ -54,11 +54,17 @@ def default_save_path(name: str, last: str | None, recent: list[str], cwd: Path)
     folder (then the home folder)."""
     if last:
         return full_path(last, cwd)
-    stem = "".join(c if c.isalnum() or c in "-_" else "_" for c in name.lower()) or "mission"
+    stem = _file_stem(name)
     folder = Path(recent[0]).parent if recent else cwd
     if is_shipped(folder / "x"):
         folder = Path.home()
     return folder / f"{stem}.yaml"
+
+
+def _file_stem(name: str) -> str:
+    """A mission's name as a file's: lower case, letters, digits, - and _ kept,
+    any other character _ ("mission" for no name)."""
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in name.lower()) or "mission"
 
 
 def _describe(p: Path) -> str:
@@ -73,18 +79,21 @@ def _describe(p: Path) -> str:
 def save_risks(path: Path, also_written: list[Path] | None = None) -> list[str]:
     """What writing `path` (and `also_written`) would do that needs a yes:
     files that exist and would be replaced, the shipped examples' folder."""
-    risks: list[str] = []
-    for p in [path, *(also_written or [])]:
-        if p.is_dir():
-            risks.append(f"{shown_path(p)} is a folder")
-        elif p.exists():
-            risks.append(f"{_describe(p)} exists and would be replaced")
-    if any(is_shipped(p) for p in [path, *(also_written or [])]):
+    written = [path, *(also_written or [])]
+    risks = [risk for p in written if (risk := _in_the_way(p))]
+    if any(is_shipped(p) for p in written):
         risks.append(
             f"{shown_path(path.parent)} holds the examples shipped with missionctl"
             " (the demo starts from them)"
         )
     return risks
+
+
+def _in_the_way(p: Path) -> str:
+    """What is at `p` already ('' when nothing): a folder, or a file a write replaces."""
+    if p.is_dir():
+        return f"{shown_path(p)} is a folder"
+    return f"{_describe(p)} exists and would be replaced" if p.exists() else ""
 
 
 def path_note(
@@ -138,10 +147,15 @@ def completions(text: str, cwd: Path | None = None, suffixes: tuple[str, ...] = 
     return out
 
 
+def _completes(name: str, tail: str) -> bool:
+    """`name` starts with `tail`; a hidden one only when `tail` asks for it."""
+    return name.startswith(tail) and (not name.startswith(".") or tail.startswith("."))
+
+
 def _entry_kind(e: Path, tail: str, suffixes: tuple[str, ...]) -> str | None:
     """'/' for a folder, '' for a file, None when the entry does not complete
     `tail` (another start, hidden unless asked for, a file of another suffix)."""
-    if not e.name.startswith(tail) or (e.name.startswith(".") and not tail.startswith(".")):
+    if not _completes(e.name, tail):
         return None
     try:
         is_dir = e.is_dir()

@@ -69,17 +69,27 @@ def freshness(model: Heard, robot: str, clock: MissionClock) -> Freshness:
     now = clock()
     info = model.robots.get(robot)
     heard = _last_heard(model.heard.get(robot), info)
-    delay = info.delay_s if info is not None and info.delay_s is not None else 0.0
+    delay = _delay(info)
     away = _away(info)
     if info is not None and away:  # nothing it does now reaches the ground
         since = heard or info.since
-        age = max(0.0, (now - since).total_seconds()) + delay if since is not None else None
-        return Freshness(True, None if age is None else clock.span(age), away)
+        return Freshness(True, None if since is None else clock.span(_age(now, since, delay)), away)
     if heard is None:
         return FRESH
-    age = max(0.0, (now - heard).total_seconds()) + delay
+    age = _age(now, heard, delay)
     stale, why = _stale_why(robot in model.telemetry, age, delay)
     return Freshness(stale, clock.span(age), why)
+
+
+def _delay(info: RobotInfo | None) -> float:
+    """The robot's one-way delay in seconds (0 when not known)."""
+    return info.delay_s if info is not None and info.delay_s is not None else 0.0
+
+
+def _age(now: datetime, heard: datetime, delay: float) -> float:
+    """How old, in seconds, a robot's state heard at `heard` is: it left the
+    robot `delay` before it arrived."""
+    return max(0.0, (now - heard).total_seconds()) + delay
 
 
 def _last_heard(heard: datetime | None, info: RobotInfo | None) -> datetime | None:

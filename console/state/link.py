@@ -110,20 +110,28 @@ def link_text(model: Linked, robot: str, clock: MissionClock) -> str:
     ago · waiting for its answer: sync #17 sent 40s ago', after its contact
     state when it has windows ('out of contact: window closed, next contact sim 20:00')."""
     info = model.robots.get(robot)
+    executes = [executing_text(v, clock) for v in executing(info)]
+    return " · ".join([*_known(info, clock), _waiting(model, robot, clock), *executes])
+
+
+def _known(info: RobotInfo | None, clock: MissionClock) -> list[str]:
+    """What the ground knows of the link: its contact state, one-way delay
+    and when the robot was last heard, those known."""
     contact = contact_words(info, clock)
     parts = [contact] if contact else []
     if info is not None and info.delay_s is not None:
         parts.append(f"one-way delay {clock.duration_text(info.delay_s)}")
     if info is not None and info.heard is not None:
         parts.append(f"heard {clock.age_text(info.heard)} ago")
+    return parts
+
+
+def _waiting(model: Linked, robot: str, clock: MissionClock) -> str:
+    """The robot's commands not answered yet, each with the stage it waits for."""
     cmds = model.pending(robot)
-    if cmds:
-        texts = (staged_text(model, c, clock) for c in cmds)
-        parts.append("waiting for its answer: " + ", ".join(texts))
-    else:
-        parts.append("no command waiting")
-    parts += [executing_text(v, clock) for v in executing(info)]
-    return " · ".join(parts)
+    if not cmds:
+        return "no command waiting"
+    return "waiting for its answer: " + ", ".join(staged_text(model, c, clock) for c in cmds)
 
 
 def staged_text(model: Linked, c: UplinkCommand, clock: MissionClock) -> str:

@@ -118,9 +118,8 @@ def marker_use(model: ConsoleModel) -> dict[str, str]:
     use = dict.fromkeys(m.markers, "unused")
     for s in (s for task in m.tasks.values() for s in task if s.status not in FINISHED):
         how = "bound" if s.status == Status.IDLE else "active"
-        for name in _markers_named(s, use):
-            if _USE_RANK[how] > _USE_RANK[use[name]]:
-                use[name] = how
+        for name in _markers_named(s, use):  # the busiest use wins
+            use[name] = max(use[name], how, key=_USE_RANK.__getitem__)
     return use
 
 

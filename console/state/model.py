@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import hashlib
 from collections import deque
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any
@@ -146,9 +147,28 @@ def _doing(s: SkillInstance) -> str:
     return STATUS_WORDS[s.status]
 
 
+def _progress(act: SkillInstance, t: Telemetry | None) -> str:
+    """' 42%': how far the running skill is, when its robot's telemetry says."""
+    if t is None or t.progress is None or t.skill != act.id or act.status != Status.RUNNING:
+        return ""
+    return f" {int(t.progress * 100)}%"
+
+
+def _idle_text(mode: str, queued: int) -> str:
+    """A robot without an active skill: its mode, and the skills it has queued."""
+    if queued:
+        return f"{mode if mode and mode != 'idle' else 'halted'} · {queued} queued"
+    return mode or "idle"
+
+
 def _after_of(m: Mission, sid: str) -> str | None:
     found = m.find(sid)
     return found[2].policies.after if found is not None else None
+
+
+# what one event shows in the schedule: the robots whose columns change, and
+# whether the skill -> robot index must be rebuilt for it
+_Columns = tuple[Iterable[str], bool]
 
 
 @dataclass
@@ -232,20 +252,25 @@ class ConsoleModel:
                 self.load(mission, library)  # (the server's state came first: nothing)
                 self.previewing = True
                 return change(Topic.MISSION, Topic.FLEET, loaded=True)
-            case MapFed(mirror=mirror, update=update, speed=speed):
-                self.map_mirror, self.map_update = mirror, update
-                topics = {Topic.MAP}
-                if (objects := getattr(mirror, "objects", None)) is not None:  # a simulator
-                    self.site = SiteScore(objects.score)  # its time is the mission clock's
-                    if not self.clock.simulated:  # the times shown so far were wall times
-                        topics |= {Topic.MISSION, Topic.FLEET}
-                    self.clock.heard(
-                        mirror.sim_time, getattr(mirror, "speed", None) or speed or 1.0
-                    )
-                return change(*topics, map_update=update)
+            case MapFed():
+                return self._map_fed(event)
             case _:
                 return NOTHING
         return change(Topic.CONNECTION)
+
+    def _map_fed(self, fed: MapFed) -> StateChange:
+        """The map feed moved; a simulator's brings the site's score and the
+        mission clock (the simulator's time is the mission's)."""
+        self.map_mirror, self.map_update = fed.mirror, fed.update
+        topics = {Topic.MAP}
+        if (objects := getattr(fed.mirror, "objects", None)) is not None:  # a simulator
+            self.site = SiteScore(objects.score)
+            if not self.clock.simulated:  # the times shown so far were wall times
+                topics |= {Topic.MISSION, Topic.FLEET}
+            self.clock.heard(
+                fed.mirror.sim_time, getattr(fed.mirror, "speed", None) or fed.speed or 1.0
+            )
+        return change(*topics, map_update=fed.update)
 
     def _synced(self, snap: StateSnapshot) -> StateChange:
         """A whole state: the first, or after a gap or a server restart. The
@@ -329,38 +354,31 @@ class ConsoleModel:
         tags = _touches_after(self.mission, batch)  # partner rows' tags change (before it applies)
         self.mission = ev.apply_events(self.mission, batch)
         heard_in(self.heard, batch, self._owner.get, self.clock())
-        robots: set[str] = set()
-        reindex = False
-        for e in batch.events:
-            match e:
-                case ev.SkillAdded(robot=r) | ev.SkillRemoved(robot=r) | ev.SkillMoved(robot=r):
-                    robots.add(r)
-                    reindex = reindex or not _kept_indexed(self._owner, e)
-                case ev.SkillStatusChanged(id=sid) | ev.SkillEdited(id=sid):
-                    shown = self._shown_by(sid)
-                    reindex = reindex or shown is None
-                    robots.update(shown or ())
-                case ev.BarrierSet() | ev.BarrierRemoved():
-                    tags = True
-                case ev.CommandQueued(command=c):
-                    robots.add(c.robot)  # its skills show ⇡, its header the count
-                case ev.CommandChanged(id=cid):
-                    changed = self.mission.command(cid)
-                    robots.update([changed.robot] if changed is not None else ())
-                case ev.MissionReplaced() | ev.RobotAdded() | ev.RobotRetired():
-                    for name in self.mission.robots:
-                        self.robots.setdefault(name, RobotInfo(name=name))
-                    self.reindex()
-                    return None
-                case _:
-                    pass
-        for r in robots:
-            self._robot_state.pop(r, None)
-        if reindex or tags:
-            self.reindex()
-        if tags:  # tags of partner rows in other columns change too
+        touched = _touched(self, batch.events)
+        if touched is None:
+            self._reshaped()
             return None
-        return robots
+        robots, unindexed, tagging = touched
+        tags = tags or tagging
+        self._recache(robots, unindexed or tags)
+        return None if tags else robots  # tags of partner rows in other columns change too
+
+    def _recache(self, robots: set[str], rebuild: bool) -> None:
+        """Forget the cached state of the robots whose columns changed, or
+        rebuild the indexes (which forgets every robot's)."""
+        if rebuild:
+            self.reindex()
+        else:
+            for r in robots:
+                self._robot_state.pop(r, None)
+
+    def _reshaped(self) -> None:
+        """The mission was replaced, or a robot joined or left: every column
+        may have changed (None), the fleet lists each of its robots."""
+        assert self.mission is not None
+        for name in self.mission.robots:
+            self.robots.setdefault(name, RobotInfo(name=name))
+        self.reindex()
 
     def _shown_by(self, sid: str) -> set[str] | None:
         """The columns that show skill `sid`'s state: its robot's and, at a
@@ -507,14 +525,8 @@ class ConsoleModel:
         act, queued = self.robot_state(robot)
         t = self.telemetry.get(robot)
         if act is not None:
-            extra = ""
-            if t is not None and t.skill == act.id and act.status == Status.RUNNING:
-                extra = f" {int(t.progress * 100)}%" if t.progress is not None else ""
-            return f"{GLYPHS[act.status]} {act.id} {_doing(act)}{extra}"
-        mode = t.mode if t is not None else ""
-        if queued:
-            return f"{mode if mode and mode != 'idle' else 'halted'} · {queued} queued"
-        return mode or "idle"
+            return f"{GLYPHS[act.status]} {act.id} {_doing(act)}{_progress(act, t)}"
+        return _idle_text(t.mode if t is not None else "", queued)
 
     def uplinking(self, sid: str) -> UplinkCommand | None:
         """The pending command to a robot that locks skill `sid`, if any."""
@@ -544,6 +556,62 @@ class ConsoleModel:
     def read_only_reason(self, skill_id: str) -> str | None:
         """Why the parameter editor is read-only for this skill (None: editable)."""
         return availability.read_only_reason(self, skill_id)
+
+
+# events after which every column may have changed: the mission's robots or all of it
+_RESHAPING = frozenset({ev.MissionReplaced, ev.RobotAdded, ev.RobotRetired})
+# events that change the tags of rows in other robots' columns (a barrier's partners)
+_TAGGING = frozenset({ev.BarrierSet, ev.BarrierRemoved})
+
+
+def _placed(m: ConsoleModel, e: ev.SkillAdded | ev.SkillRemoved | ev.SkillMoved) -> _Columns:
+    return (e.robot,), not _kept_indexed(m._owner, e)
+
+
+def _skill_shown(m: ConsoleModel, e: ev.SkillStatusChanged | ev.SkillEdited) -> _Columns:
+    shown = m._shown_by(e.id)
+    return shown or (), shown is None
+
+
+def _command_queued(_m: ConsoleModel, e: ev.CommandQueued) -> _Columns:
+    return (e.command.robot,), False  # its skills show ⇡, its header the count
+
+
+def _command_changed(m: ConsoleModel, e: ev.CommandChanged) -> _Columns:
+    assert m.mission is not None
+    changed = m.mission.command(e.id)
+    return ((changed.robot,) if changed is not None else ()), False
+
+
+# the columns an applied event shows, by its type (how `_touched` reads each)
+_COLUMNS: dict[type, Callable[[ConsoleModel, Any], _Columns]] = {
+    ev.SkillAdded: _placed,
+    ev.SkillRemoved: _placed,
+    ev.SkillMoved: _placed,
+    ev.SkillStatusChanged: _skill_shown,
+    ev.SkillEdited: _skill_shown,
+    ev.CommandQueued: _command_queued,
+    ev.CommandChanged: _command_changed,
+}
+
+
+def _touched(m: ConsoleModel, events: list[ev.Event]) -> tuple[set[str], bool, bool] | None:
+    """What the applied `events` changed in the schedule: the robots whose
+    columns show it, whether the skill indexes need a rebuild, whether rows'
+    tags in other columns change; None when every column may have."""
+    robots: set[str] = set()
+    unindexed = tags = False
+    for e in events:
+        kind = type(e)
+        if kind in _RESHAPING:
+            return None
+        tags = tags or kind in _TAGGING
+        columns = _COLUMNS.get(kind)
+        if columns is not None:
+            shown, rebuild = columns(m, e)
+            robots.update(shown)
+            unindexed = unindexed or rebuild
+    return robots, unindexed, tags
 
 
 def _about(entry: Any) -> dict[str, Any]:

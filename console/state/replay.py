@@ -52,8 +52,8 @@ from backend.core.events import EventBatch
 from backend.core.library import Library
 from backend.core.model import Mission
 from backend.files.record.journal import JournalReader, missing
-from backend.protocol.archive import ArchiveReader
-from backend.protocol.messages import ALERTS_KEPT, RobotInfo, StateSnapshot
+from backend.protocol.archive import ArchiveReader, Sample
+from backend.protocol.messages import ALERTS_KEPT, Alert, RobotInfo, StateSnapshot
 from console.state.changes import MapFed, ModelEvent, StateChange, Topic, change
 from console.state.model import HISTORY, ConsoleModel, heard_in
 
@@ -257,12 +257,8 @@ class Replay:
         if a is None:
             return
         clock = self.cursor.clock
-        if seek:  # each robot's last sample; the levels before it (its sparkline) as such
-            samples = [s for r in a.robots for s in a.last_samples(r, upto, clock, 1)]
-            for r in a.robots:
-                if levels := a.last_levels(r, upto, clock, HISTORY):
-                    self.model.history[r] = deque(levels[:-1], maxlen=HISTORY)
-            alerts = a.alerts(-1e18, upto, ALERTS_KEPT)
+        if seek:
+            samples, alerts = self._before(a, upto, clock)
         else:
             samples, alerts = list(a.samples(after, upto, clock)), a.alerts(after, upto)
         for s in samples:
@@ -271,6 +267,18 @@ class Replay:
             feed.add(alert.at.timestamp(), AlertRaised(alert))
         for at, info in a.fleet(after, upto):
             feed.add(at, RobotChanged(info))
+
+    def _before(
+        self, a: ArchiveReader, upto: float, clock: str
+    ) -> tuple[list[Sample], list[Alert]]:
+        """What a seek to `upto` shows of the archive before it: each robot's
+        last sample (the levels before it are its sparkline, set as such) and
+        the last alerts."""
+        samples = [s for r in a.robots for s in a.last_samples(r, upto, clock, 1)]
+        for r in a.robots:
+            if levels := a.last_levels(r, upto, clock, HISTORY):
+                self.model.history[r] = deque(levels[:-1], maxlen=HISTORY)
+        return samples, a.alerts(-1e18, upto, ALERTS_KEPT)
 
     def _take(self, feed: Feed, start: float) -> StateChange:
         """Each event at its time (the model's clock reads it); one change for all."""

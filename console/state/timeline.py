@@ -109,11 +109,21 @@ def bars(
     # the forecast's times are wall stamps: ask for the window in wall time
     w0, w1 = clock.to_ts(t0), clock.to_ts(t1)
     shown = list(fc.window(robot, w0, w1, step / clock.speed))
-    picked = fc.skill(also) if also is not None else None
-    if picked is not None and picked.robot == robot and picked not in shown:
-        if picked.end >= w0 and picked.start <= w1:
-            shown.append(picked)
+    picked = _picked(fc, also, robot, w0, w1)
+    if picked is not None and picked not in shown:
+        shown.append(picked)
     return out + [_predicted(f, f.skill, clock) for f in shown if f.skill is not None]
+
+
+def _picked(
+    fc: Forecast, also: str | None, robot: str, w0: float, w1: float
+) -> SkillForecast | None:
+    """The selected skill's prediction, when it is the robot's and overlaps
+    [w0, w1] (wall time): shown whatever the zoom."""
+    picked = fc.skill(also) if also is not None else None
+    if picked is None or picked.robot != robot or picked.end < w0 or picked.start > w1:
+        return None
+    return picked
 
 
 def _log_bars(task: list[SkillInstance], clock: MissionClock, t0: float, t1: float) -> list[Bar]:
@@ -218,21 +228,27 @@ def _bar(cells: list[Cell], win: Window, bar: Bar, selected: bool, critical: boo
 
 def links(lanes: dict[str, list[Bar]], order: list[str], win: Window) -> dict[int, set[int]]:
     """Spacer line i (below lane i) -> the columns where a barrier link crosses it."""
-    where: dict[str, list[tuple[int, int]]] = {}  # barrier -> (lane, column)
+    out: dict[int, set[int]] = {}
+    for members in _barrier_starts(lanes, order, win).values():
+        x = members[0][1]
+        if len(members) < 2 or not 0 <= x < win.width:
+            continue
+        rows = [r for r, _ in members]
+        for spacer in range(min(rows), max(rows)):
+            out.setdefault(spacer, set()).add(x)
+    return out
+
+
+def _barrier_starts(
+    lanes: dict[str, list[Bar]], order: list[str], win: Window
+) -> dict[str, list[tuple[int, int]]]:
+    """Barrier -> the (lane, column) where each of its skills' bars starts."""
+    where: dict[str, list[tuple[int, int]]] = {}
     for i, robot in enumerate(order):
         for bar in lanes.get(robot, []):
             if bar.barrier is not None:
                 where.setdefault(bar.barrier, []).append((i, win.col(bar.start)))
-    out: dict[int, set[int]] = {}
-    for members in where.values():
-        if len(members) < 2:
-            continue
-        rows = [r for r, _ in members]
-        x = members[0][1]
-        if 0 <= x < win.width:
-            for spacer in range(min(rows), max(rows)):
-                out.setdefault(spacer, set()).add(x)
-    return out
+    return where
 
 
 def spacer(columns: set[int], width: int) -> list[Cell]:
