@@ -100,7 +100,6 @@ async def fetch_site(session: Any, timeout: float) -> tuple[MirrorSite | None, S
     """The map and the simulator's status, asked once (ctl); None for what
     nobody answers (no simulator: no map, no speed, no link delay)."""
     site: MirrorSite | None = None
-    status: SimStatus | None = None
     try:
         mirror = MapMirror()
         mirror.apply_snapshot(
@@ -109,11 +108,16 @@ async def fetch_site(session: Any, timeout: float) -> tuple[MirrorSite | None, S
         site = MirrorSite(mirror)
     except (QueryFailed, ValidationError, ValueError) as e:
         log.info("no site map: %s", e)
+    return site, await fetch_status(session, timeout)
+
+
+async def fetch_status(session: Any, timeout: float) -> SimStatus | None:
+    """The simulator's status, asked once; None when no simulator answers."""
     try:
-        status = SimStatus.model_validate_json(await query(session, KEY_STATUS, b"", timeout))
+        return SimStatus.model_validate_json(await query(session, KEY_STATUS, b"", timeout))
     except (QueryFailed, ValidationError) as e:
         log.info("no simulator status: %s", e)
-    return site, status
+        return None
 
 
 class MirrorSite:

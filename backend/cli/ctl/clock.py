@@ -12,14 +12,11 @@ sim the clock is `WALL` and every text is the wall's, as before.
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any
 
 from backend.core.contact import sim_time_text
-
-log = logging.getLogger(__name__)
 
 
 def wall_time(t: datetime | None) -> str:
@@ -98,14 +95,6 @@ WALL = CtlClock()
 async def ask(client: Any, timeout: float) -> CtlClock:
     """The mission clock now: one query of the sim's status (none answers at
     once when no sim runs: `NoResponder`), else the wall's."""
-    from pydantic import ValidationError
+    from backend.client.planning import fetch_status
 
-    from backend.protocol.mapfeed import KEY_STATUS, SimStatus
-    from backend.transport import QueryFailed, query
-
-    try:
-        raw = await query(client.session, KEY_STATUS, b"", timeout)
-        return CtlClock.of_status(SimStatus.model_validate_json(raw))
-    except (QueryFailed, ValidationError, ValueError) as e:
-        log.debug("no simulator status: %s", e)
-        return WALL
+    return CtlClock.of_status(await fetch_status(client.session, timeout))
