@@ -61,7 +61,9 @@ class MissionCommands(Provider):
         if m is None:
             return
         for q in open_questions(m.mission):
-            help_text = f"{q.text} · {due_text(q, m.clock)}"
+            info = m.robots.get(q.robot)
+            due = due_text(q, m.clock, info.delay_s if info is not None else None)
+            help_text = f"{q.text} · {due}"
             yield palette_title(q), help_text, partial(open_question, self.app, q.id)
 
     def _offers(self):

@@ -60,10 +60,16 @@ class QuestionScreen(ModalScreen[str | None]):
             yield Static(self._skill_line(), classes="skill")
             yield Static(q.text, classes="text")
             yield Static(self._choices(), id="choices")
-            yield Static(due_text(q, self.model.clock), id="due")
+            yield Static(self._due_line(), id="due")
             yield _shown(self._answer_line(), id="answered")
             yield _shown(self._read_only_line(), id="read-only", classes="warning")
             yield Static(self._hint(), classes="hint")
+
+    def _due_line(self) -> str:
+        """When the default applies, and what of it the link leaves an answer."""
+        info = self.model.robots.get(self.question.robot)
+        delay = info.delay_s if info is not None else None
+        return due_text(self.question, self.model.clock, delay)
 
     def _skill_line(self) -> str:
         q = self.question
@@ -100,7 +106,7 @@ class QuestionScreen(ModalScreen[str | None]):
 
     def _tick(self) -> None:
         if self.question.is_open:
-            self.query_one("#due", Static).update(due_text(self.question, self.model.clock))
+            self.query_one("#due", Static).update(self._due_line())
 
     def _changed(self, c: StateChange) -> None:
         m = self.model.mission

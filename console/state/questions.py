@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from backend.core.model import Mission, Question
 from console.state.clock import MissionClock
+from console.state.link import SHOWN_DELAY_S
 
 
 def open_questions(mission: Mission | None) -> list[Question]:
@@ -42,13 +43,28 @@ def palette_title(q: Question) -> str:
     return f"Answer question #{q.id} from {q.robot}…"
 
 
-def due_text(q: Question, clock: MissionClock) -> str:
-    """'default wider at sim 12:34, in 4m12s' (mission time), or past it."""
+def due_text(q: Question, clock: MissionClock, delay_s: float | None = None) -> str:
+    """'default wider at sim 12:34, in 4m12s' (mission time), or past it; with
+    the robot's one-way delay (`delay_s`, wall seconds), how long an answer
+    still has to leave the ground to reach the robot before the default."""
     left = (q.due - clock()).total_seconds()
     at = clock.stamp_text(q.due)
     if left <= 0:
         return f"default {q.default} applied on {q.robot} at {at} (not confirmed yet)"
-    return f"default {q.default} at {at}, in {clock.duration_text(left)}"
+    return f"default {q.default} at {at}, in {clock.duration_text(left)}" + _in_time(
+        left, delay_s, clock
+    )
+
+
+def _in_time(left: float, delay_s: float | None, clock: MissionClock) -> str:
+    """The link's share of the time left: an answer must cross it first
+    (the on-board deadline alone would promise the operator too much)."""
+    if delay_s is None or delay_s < SHOWN_DELAY_S:
+        return ""
+    link = clock.duration_text(delay_s)
+    if left <= delay_s:
+        return f"; an answer sent now arrives after it (the link takes {link})"
+    return f"; answer within {clock.duration_text(left - delay_s)} (the link takes {link})"
 
 
 def answer_text(q: Question, mission: Mission, clock: MissionClock) -> str:

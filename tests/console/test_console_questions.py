@@ -276,3 +276,24 @@ def test_question_dialog_80x24(snap_compare):
 
 def test_question_dialog_120x40(snap_compare):
     _snapshot(snap_compare, (120, 40))
+
+
+def test_the_due_line_says_what_the_link_leaves_of_the_time():
+    """Under a delay the on-board deadline alone promises too much: an answer
+    must cross the link before it."""
+    from console.state.clock import MissionClock
+    from console.state.questions import due_text
+
+    q = asking().engine.mission.question(1)
+    clock = MissionClock(wall=lambda: T0 + timedelta(seconds=20))  # 4m40s before the default
+    assert due_text(q, clock) == "default wider at 10:47:07, in 4m40s"
+    assert due_text(q, clock, 0.2) == "default wider at 10:47:07, in 4m40s"  # a LAN's
+    assert due_text(q, clock, 120) == (
+        "default wider at 10:47:07, in 4m40s; answer within 2m40s (the link takes 2m00s)"
+    )
+    assert due_text(q, clock, 600) == (
+        "default wider at 10:47:07, in 4m40s; an answer sent now arrives after it"
+        " (the link takes 10m00s)"
+    )
+    late = MissionClock(wall=lambda: DUE + timedelta(seconds=1))
+    assert due_text(q, late, 600) == "default wider applied on lru2 at 10:47:07 (not confirmed yet)"
