@@ -653,7 +653,9 @@ async def test_a_draft_survives_a_lost_connection():
         screen.schedule.select("lru2-1")
         await pilot.pause()
         screen.editor.query_one("#f-label").value = "kept"
-        await pilot.pause()
+        await wait_until(
+            pilot, lambda: "unapplied changes: label" in screen_text(app), what="the change seen"
+        )
         app.post_message(link_state("reconnecting"))
         await wait_until(
             pilot, lambda: screen.editor.query("#readonly"), what="read-only while reconnecting"
@@ -661,8 +663,10 @@ async def test_a_draft_survives_a_lost_connection():
         assert screen.editor.query_one("#f-label").value == "drive next to POI-A"
         app.post_message(link_state("connected"))
         await wait_until(pilot, lambda: not screen.editor.query("#readonly"), what="editable again")
+        await wait_until(
+            pilot, lambda: "unapplied changes: label" in screen_text(app), what="the draft said"
+        )
         assert screen.editor.query_one("#f-label").value == "kept"
-        assert "unapplied changes: label" in screen_text(app)
 
 
 async def test_status_changes_and_telemetry_repaint_the_lines_that_changed():

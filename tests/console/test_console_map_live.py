@@ -164,11 +164,11 @@ async def test_follow_a_robot_and_the_mirror_matches_the_sim(live_sim):
             )
 
         await wait_until(pilot, centred, SLOW, "the view tracks lru1 as it drives")
-        assert "following lru1" in screen_text(app)
+        await wait_until(pilot, lambda: "following lru1" in screen_text(app), SLOW, "said")
         # the console's mirror equals the sim's world (a fresh snapshot) after deltas
         await wait_until(pilot, lambda: feed.mirror.seq > start, SLOW, "deltas applied")
         session = app.bridge.client.session
-        for _attempt in range(20):
+        for _attempt in range(100):  # the sim goes on: until a snapshot and the mirror meet
             snap = mf.MapSnapshot.model_validate_json(
                 await transport.query(session, mf.KEY_MAP_SNAPSHOT, b"", 10.0)
             )
