@@ -245,6 +245,16 @@ def _branches(results: list[Result], strategies: list[str]) -> str:
     return "\n".join(taken) or "- none: no skill failed or timed out"
 
 
+def _questions(results: list[Result], strategies: list[str]) -> str:
+    asked = [
+        f"- {r.strategy} seed {r.seed}: {q}"
+        for r in sorted(results, key=lambda r: (r.strategy, r.seed))
+        if r.strategy in strategies
+        for q in r.questions
+    ]
+    return "\n".join(asked) or "- none: every identify_stone found a stone where it looked"
+
+
 def delay_section(
     results: list[Result], strategies: list[str], seeds: list[int], speed: float, delay: str
 ) -> str:
@@ -274,6 +284,11 @@ Skills that failed, per strategy:
 Contingency branches the robots took:
 
 {_branches(results, strategies)}
+
+Questions the robots asked (nobody answers them here: each applies its default
+at its `answer_within`, on board):
+
+{_questions(results, strategies)}
 
 What the operators noted:
 

@@ -80,6 +80,7 @@ class Result:
     truth: mf.SimTruth | None = None  # evaluation only, read after the run
     started_at: float = 0.0  # sim seconds when the operator began (robots registered)
     branches: list[str] = field(default_factory=list)  # "robot skill: on failure: skip" taken
+    questions: list[str] = field(default_factory=list)  # "robot skill: text -> defaulted wider"
 
     def took(self) -> float | None:
         """Sim seconds from the operator's start to BEST (None: never)."""
@@ -821,6 +822,11 @@ def _what_the_skills_did(op: Operator) -> dict[str, Any]:
             f"{r} {s.skill}: on {s.branch.trigger}: {s.branch.branch}"
             for r, s in skills
             if s.branch is not None
+        ],
+        "questions": [
+            f"{q.robot} {q.skill}: {q.text} -> {q.state.value} {q.choice or ''}".rstrip()
+            for asked in m.questions.values()
+            for q in asked
         ],
     }
 
