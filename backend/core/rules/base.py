@@ -250,7 +250,8 @@ def check_in_service(rules: Rules, robot: str) -> None:
         raise Refusal(
             "retired",
             f"robot {robot} is retired ({spec.retired}): it gets no new syncs; give its plan "
-            f"to another robot (missionctl ctl reassign --from {robot} --to ROBOT)",
+            f"to another robot ('Give to…' in a console, or missionctl ctl reassign --from {robot} "
+            "--to ROBOT)",
             robot=robot,
         )
 

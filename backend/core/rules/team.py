@@ -114,7 +114,7 @@ def _retired_notes(robot: str, how: str, plan: list[str]) -> list[str]:
     if plan:
         notes.append(
             f"its plan ({', '.join(plan)}) awaits reassignment: "
-            f"missionctl ctl reassign --from {robot} --to ROBOT"
+            f"'Give to…' in a console, or missionctl ctl reassign --from {robot} --to ROBOT"
         )
     return notes
 
