@@ -157,7 +157,7 @@ def reassign(rules: Rules, op: Reassign) -> Change:
     ]
     end = len(rules.task(op.to))
     events += [
-        ev.SkillAdded(robot=op.to, index=end + n, skill=it.skill) for n, it in enumerate(items)
+        ev.SkillAdded(robot=op.to, index=end + n, skill=_given(it)) for n, it in enumerate(items)
     ]
     notes = [f"{len(items)} skill(s) given to {op.to}: {', '.join(moved_ids(items))}"]
     notes += [f"{sid} stays: {why}" for sid, why in refused.items()] + barrier_notes
@@ -174,6 +174,14 @@ def reassign(rules: Rules, op: Reassign) -> Change:
     undo = ReturnSkills(items=items, to=op.to, barriers=before, afters=afters, partners=partners)
     events += barrier_events + partner_events + after_events
     return Change(events, notes, value, undo)
+
+
+def _given(it: RestoreItem) -> SkillInstance:
+    """The skill as its new robot holds it: what it said of its old robot
+    ('taken back on the ground: lru1 was retired…') is not true of the new one."""
+    if not it.skill.status_info:
+        return it.skill
+    return it.skill.model_copy(update={"status_info": f"given by {it.robot}"})
 
 
 def _split(
@@ -356,7 +364,8 @@ def return_skills(rules: Rules, op: ReturnSkills) -> Change:
         idx = min(max(it.index, rules.first_idle(task)), sizes[it.robot])
         sizes[it.robot] += 1
         _, _, now = rules.skill(it.skill.id)  # as it is now (it may have been edited)
-        events.append(ev.SkillAdded(robot=it.robot, index=idx, skill=now))
+        back = now.model_copy(update={"status_info": it.skill.status_info})  # its own news
+        events.append(ev.SkillAdded(robot=it.robot, index=idx, skill=back))
     events += [ev.BarrierSet(id=bid, barrier=b) for bid, b in op.barriers.items()]
     events += _relinked(rules, op.afters) + _partners_back(rules, op.partners, op.to)
     ids = [it.skill.id for it in op.items]

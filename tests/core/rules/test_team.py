@@ -110,6 +110,20 @@ def test_retiring_an_unreachable_robot_takes_its_queue_back_on_the_ground(
     assert engine.mission.pending_commands("lru1") == []
 
 
+def test_a_given_skill_says_where_it_came_from_not_its_old_robots_news(
+    engine: Engine,
+) -> None:
+    engine.offers = _Link(reachable=False)
+    bring(engine, "lru1", "lru1-2", Status.IDLE_SYNCHRONIZED)
+    engine.submit(RetireRobot(name="lru1", reason="stopped responding"))
+    assert "taken back on the ground" in skill(engine, "lru1-2").status_info
+    engine.submit(AddRobot(name="lru3", type="lru_science"))
+    engine.submit(Reassign(from_robot="lru1", to="lru3"))
+    assert skill(engine, "lru1-2").status_info == "given by lru1"
+    engine.submit(Undo())  # back on lru1, as it was
+    assert "taken back on the ground" in skill(engine, "lru1-2").status_info
+
+
 def test_whole_plan_moves_keeping_params_bindings_and_order(engine: Engine) -> None:
     engine.submit(AddRobot(name="lru3", type="lru_science"))
     before = [skill(engine, sid) for sid in ("lru1-1", "lru1-2")]
