@@ -18,8 +18,8 @@ what it sends arrives one delay later (docs/pilot-study.md, "The ideal at a
   out there. Without LRU1's scores (they would cost two more delays) it
   takes the two regions of the group closest together: one short trip.
 
-Neither depends on robots' questions (the other part of issue 29): they are
-re-measured once questions are answered by default.
+Robots' questions are on and nobody answers them: a question applies its
+default on board at its answer_within (bench/pilot_study.py lists those asked).
 """
 
 from __future__ import annotations
