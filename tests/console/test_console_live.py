@@ -603,7 +603,9 @@ async def test_workflow_injected_failure_raises_an_alert_that_is_acknowledged(li
         book = app.alerts
         await wait_until(
             pilot,
-            lambda: f"{book.unacknowledged} unacknowledged of {len(book.alerts)}" in screen_text(app),
+            lambda: (
+                f"{book.unacknowledged} unacknowledged of {len(book.alerts)}" in screen_text(app)
+            ),
             SLOW,
             "the count said",
         )
