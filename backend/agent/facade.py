@@ -199,7 +199,10 @@ class RobotAgent:
         self._rt = Runtime(self)
         self._standing = Standing(name)
         self._queue = SkillQueue(name, on_report=self._on_report)
-        self._command_log = CommandLog(name)
+        # an expired command's reason says the mission clock (the sim's, once it sets it)
+        self._command_log = CommandLog(
+            name, lambda: self.mission_time(), lambda: float(self.time_scale)
+        )
         self._outbox = Outbox(self._rt, self._standing, self._command_log)
         self._handlers: dict[str, Handler] = {}
         self._signatures: dict[str, SkillSignature] = {}  # the library's, from registration

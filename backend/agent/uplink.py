@@ -19,6 +19,7 @@ of a query only says the commands arrived (or `unreachable`: out of range).
 from __future__ import annotations
 
 import asyncio
+import time
 from collections.abc import Callable, Iterable
 from datetime import UTC, datetime
 from typing import Protocol
@@ -27,6 +28,7 @@ from pydantic import ValidationError
 
 from backend.agent.queue import Effect
 from backend.agent.runtime import Runtime, log
+from backend.core.contingency import POSIX_FROM, clock_text
 from backend.core.ops import Answer
 from backend.protocol.messages import (
     ErrorReply,
@@ -54,12 +56,35 @@ def _now() -> datetime:
     return datetime.now(UTC)
 
 
-class CommandLog:
-    """Which commands were processed, and how an entry becomes an answer."""
+def expired_reason(
+    now: datetime, expires: datetime, mission_now: float, time_scale: float = 1.0
+) -> str:
+    """Why a command arrived too late, on the mission clock: a simulator's
+    (`it arrived at sim 1:02:00, after its expiry sim 1:00:00`: the wall's
+    lateness × `time_scale` before `mission_now`), else the wall's, in UTC."""
+    if mission_now >= POSIX_FROM:  # no simulator: the wall's clock, as ever
+        return (
+            f"it arrived at {now:%H:%M:%S}, after its expiry {expires.astimezone(UTC):%H:%M:%S} UTC"
+        )
+    late = (now - expires).total_seconds() * (time_scale if time_scale > 0 else 1.0)
+    due = clock_text(mission_now - late)
+    return f"it arrived at {clock_text(mission_now)}, after its expiry {due}"
 
-    def __init__(self, robot: str):
+
+class CommandLog:
+    """Which commands were processed, and how an entry becomes an answer
+    (`mission_time`, `time_scale`: the agent's, read when an entry expires)."""
+
+    def __init__(
+        self,
+        robot: str,
+        mission_time: Callable[[], float] = time.time,
+        time_scale: Callable[[], float] = lambda: 1.0,
+    ):
         self.robot = robot
         self.applied = 0  # the last uplink seq processed
+        self._mission_time = mission_time
+        self._time_scale = time_scale
 
     def due(self, entries: Iterable[UplinkEntry]) -> list[UplinkEntry]:
         """The entries not processed yet, in seq order, each once."""
@@ -85,8 +110,7 @@ class CommandLog:
         elif e.expires is not None and now > e.expires:
             fields = {
                 "outcome": "expired",
-                "reason": f"it arrived at {now:%H:%M:%S}, after its expiry "
-                f"{e.expires.astimezone(UTC):%H:%M:%S} UTC",
+                "reason": expired_reason(now, e.expires, self._mission_time(), self._time_scale()),
             }
         else:
             change = dispatch(e.command)

@@ -16,7 +16,7 @@ from backend.cli.ctl.session import _answer_line
 from backend.files.missions import load_mission
 from backend.protocol import mapfeed as mf
 
-from .helpers import TUTORIAL, Robots, Server, ok, ok_json, until
+from .helpers import TUTORIAL, Robots, Server, ctl, ok, ok_json, until
 from .test_parsing import _fake_client
 
 
@@ -156,3 +156,110 @@ def test_ctl_state_is_in_sim_time_while_a_sim_runs(live):
     data = ok_json(endpoint, "state", "lru1")  # JSON: wall stamps, as ever
     assert datetime.fromisoformat(data["robots"]["lru1"]["since"]).tzinfo is not None
     assert "sim " not in json.dumps(data["robots"])
+
+
+# ---------------------------------------------------------------- watch, queued, plan views
+
+
+def test_watch_says_a_robots_stamps_in_sim_time():
+    from backend.cli.ctl.render import watch_line
+    from backend.protocol.messages import RobotInfo
+
+    clock = _sim_clock(60.0)
+    info = RobotInfo(name="lru1", online=True, since=clock.wall - timedelta(seconds=30))
+    assert watch_line("fleet", info, False, clock) == "robot lru1 online since sim 0:30:00"
+    wall = watch_line("fleet", info, False)
+    assert wall is not None and re.fullmatch(r"robot lru1 online since \d\d:\d\d:\d\d", wall)
+    data = json.loads(watch_line("fleet", info, True, clock) or "")  # JSON: the wall's ISO stamp
+    assert datetime.fromisoformat(data["robot"]["since"]) == info.since
+
+
+def test_a_queued_command_says_its_expiry_in_sim_time():
+    from types import SimpleNamespace
+
+    from backend.cli.ctl.render import describe
+
+    clock = _sim_clock(60.0)
+    expires = clock.wall + timedelta(seconds=10)  # 10 wall s: 10 sim minutes on
+    value = {"robot": "lru1", "command": 4, "skills": ["lru1-1"], "expires": expires.isoformat()}
+    op = SimpleNamespace(op="sync")
+    reply = SimpleNamespace(value=value, revision=7, duplicate=False)
+    said = describe(op, reply, 6, None, clock)
+    assert said == "queued for lru1, command 4: sync lru1-1 (expires sim 1:10:00) at revision 7"
+    wall = describe(op, reply, 6, None)
+    assert re.search(r"\(expires \d\d:\d\d:\d\d\) at revision 7$", wall) and "sim " not in wall
+
+
+def _waiting_plan(speed: float):
+    """r1 drives 100 m (100 robot s), then meets r2 at barrier b1: r2 waits for it."""
+    from backend.core.plan.forecast import forecast
+    from backend.core.plan.inputs import PlanInputs, RobotNow
+    from tests.core.plan.helpers import LIBRARY, T0, mission, pose, skill
+
+    tasks = {
+        "r1": [skill("r1-1", "drive", goal=pose(100, 0)), skill("r1-2", "meet")],
+        "r2": [skill("r2-1", "meet")],
+    }
+    m = mission({"r1": "rover", "r2": "rover"}, tasks, {"b1": ["r1-2", "r2-1"]})
+    robots = {r: RobotNow(at=T0, x=0.0, y=0.0, battery=1.0) for r in m.robots}
+    fc = forecast(m, LIBRARY, PlanInputs(now=T0, robots=robots, speed=speed))
+    wall = datetime.fromtimestamp(T0, UTC)  # the sim said 1:00:00 then
+    return fc, m, CtlClock(speed, 3600.0, wall)
+
+
+def test_timeline_says_times_and_waits_in_sim_time():
+    from backend.cli.ctl.plan import timeline_json, timeline_text
+
+    fc, m, clock = _waiting_plan(speed=10.0)  # the drive: 10 wall s, 100 sim s
+    lines = timeline_text(fc, m, clock).splitlines()
+    assert lines[0] == "now sim 1:00:00 · plan ends sim 1:02:30 · critical: r2", lines
+    r1 = next(ln for ln in lines if ln.startswith("  r1-1"))
+    assert "sim 1:00:00 - sim 1:01:40" in r1, r1
+    r2 = next(ln for ln in lines if ln.startswith("  r2-1"))
+    # the wait: 10 wall s, i.e. 1:40 on the sim's clock
+    assert "waits 1:40 at b1" in r2 and "sim 1:01:40 - sim 1:02:30" in r2, r2
+    assert "r1: ends sim 1:02:30, battery 90% at the end" in lines
+    assert "sim " not in json.dumps(timeline_json(fc, m))  # JSON: ISO wall stamps, as ever
+    fc, m, _ = _waiting_plan(speed=1.0)  # no sim: the wall's clock and seconds
+    text = timeline_text(fc, m)
+    assert re.match(r"now \d\d:\d\d:\d\d · plan ends \d\d:\d\d:\d\d", text), text
+    assert "waits 1:40 at b1" in text and "sim " not in text
+
+
+def test_check_says_the_link_delay_in_sim_time():
+    from backend.cli.ctl.plan import _inputs_text
+    from backend.core.plan.inputs import LinkModel, PlanInputs
+
+    inputs = PlanInputs(now=0.0, link=LinkModel(one_way_s=10.0))  # 600 sim s at speed 60
+    assert _inputs_text(inputs, _sim_clock(60.0)).endswith("; link delay 10 min")
+    assert _inputs_text(inputs).endswith("; link delay 10 s")
+
+
+def test_suggest_says_ends_and_coverage_in_sim_time():
+    from backend.cli.ctl.suggest import hint_text
+
+    row = {
+        "robot": "lru3",
+        "moved": ["lru1-4"],
+        "refused": {},
+        "end_in_s": 75.0,  # wall seconds: 12m30s at speed 10
+        "battery_end": 0.62,
+        "battery_assumed": False,
+        "out_of_coverage_s": 19.0,
+    }
+    said = "lru3: ends in 12m30s, battery 62% left, 3m10s out of coverage"
+    assert hint_text(row, _sim_clock(10.0)) == said
+    assert hint_text(row) == "lru3: ends in 1m15s, battery 62% left, 19s out of coverage"
+
+
+def test_ctl_queued_timeline_and_check_are_in_sim_time_while_a_sim_runs(live):
+    endpoint, sim = live
+    wall = ok(endpoint, "sync", "lru1", "--expire", "10m").stdout
+    assert re.search(r"\(expires \d\d:\d\d:\d\d\) at revision", wall) and "sim " not in wall, wall
+    sim(10.0)
+    said = ok(endpoint, "unsync", "lru1", "--expire", "10m").stdout
+    assert re.search(r"\(expires sim \d+:\d\d:\d\d\) at revision", said), said
+    timeline = ok(endpoint, "timeline").stdout
+    assert timeline.startswith("now sim 1:00:"), timeline
+    checked = ctl(endpoint, "check").stdout  # the sim's 600 s delay, not its 60 wall seconds
+    assert checked.rstrip().endswith("; link delay 10 min"), checked

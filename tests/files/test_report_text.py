@@ -66,11 +66,13 @@ def test_every_section_says_what_it_holds(utc):
         actors=[ActorRow(actor="alice", operations={"add": 3, "sync": 1})],
     )  # fmt: skip
     assert report_text(report) == (
-        "Plan against actual: survey (m.db), 07:59:00 to - ground time, 12 changes\n"
+        "Plan against actual: survey (m.db), 07:59:00 to - ground wall time, 12 changes\n"
+        "times: wall time (local) throughout, lateness in wall seconds: the journal records "
+        "no simulator's mission clock (a simulated mission's sim times cannot be shown)\n"
         "note: older snapshots were not kept\n"
         "\n"
         "Skills (start and end: as forecast when synchronized → as the robot did it, "
-        "robot time; (+late / -early))\n"
+        "robot wall time; (+late / -early))\n"
         "  lru1     lru1-3         drive_to           failure           "
         "start 08:00:00→08:00:30 (+30s)  end 08:01:00→08:04:00 (+3.0m)  "
         "failed: stuck; stuck again; retried as lru1-3.2\n"
@@ -110,6 +112,9 @@ def test_a_report_without_skills_says_none_was_synchronized(utc):
     )  # fmt: skip
     text = report_text(report)
     assert "note:" not in text
+    # the clock is named: wall, whether or not a simulator ran (the journal cannot tell)
+    assert text.startswith("Plan against actual: m (m.db), - to - ground wall time, 0 changes\n")
+    assert "\ntimes: wall time (local) throughout" in text
     assert "  none was synchronized\n  (0 deleted before being synchronized, 0 never" in text
     assert "Failures and retries: 0 failed\n\nWaivers: 0\n\nRefusals: 0\n\n" in text
     assert text.endswith("Who did what\n")

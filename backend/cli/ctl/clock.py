@@ -88,6 +88,10 @@ class CtlClock:
         """`sim 0:20:00`, else the wall's `HH:MM:SS` ('' for none)."""
         return (self.sim_stamp(t) if t is not None else None) or wall_time(t)
 
+    def at(self, t: float) -> str:
+        """A wall instant in seconds since the epoch (a forecast's), as `stamp`."""
+        return self.stamp(datetime.fromtimestamp(t, UTC))
+
 
 WALL = CtlClock()
 

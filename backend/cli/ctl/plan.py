@@ -10,6 +10,10 @@ and status when one answers. The same inputs give a console the same answers.
                        battery and spans out of coverage, and the plan's end;
                        --json: {"now", "end", "critical", "critical_robot",
                        "robots": {...}} with ISO times
+
+Their text is on the mission clock (backend/cli/ctl/clock.py): while a sim
+runs, times `sim h:mm:ss` and waits and the link delay in sim seconds (the
+forecast's wall seconds × its speed); else the wall's. --json stays wall.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ import time
 from datetime import UTC, datetime
 from typing import Any
 
+from backend.cli.ctl.clock import WALL, CtlClock
 from backend.core.plan.branches import BranchCost
 from backend.core.plan.checks import Finding, run_checks
 from backend.core.plan.forecast import Forecast, Forecaster, RobotForecast, SkillForecast
@@ -58,12 +63,20 @@ async def wait_telemetry(client: Any) -> None:
 
 
 async def gather(client: Any, timeout: float) -> PlanInputs:
+    return (await gather_clocked(client, timeout))[0]
+
+
+async def gather_clocked(client: Any, timeout: float) -> tuple[PlanInputs, CtlClock]:
+    """The plan's inputs, and the mission clock their text is said on (the
+    sim's status asked once, for both)."""
     # imported here: the map's mirror is numpy, which other ctl commands never load
     from backend.client.planning import fetch_site, plan_inputs
 
     await wait_telemetry(client)
     site, status = await fetch_site(client.session, min(timeout, 3.0))
-    return plan_inputs(time.time(), dict(client.telemetry), site, status)
+    now = time.time()
+    clock = CtlClock.of_status(status, datetime.fromtimestamp(now, UTC))
+    return plan_inputs(now, dict(client.telemetry), site, status), clock
 
 
 async def sync_forecast(client: Any, op: Any, timeout: float) -> dict[str, Any]:
@@ -85,12 +98,17 @@ def _inputs_json(inputs: PlanInputs) -> dict[str, Any]:
     }
 
 
-def _inputs_text(inputs: PlanInputs) -> str:
+def _inputs_text(inputs: PlanInputs, clock: CtlClock = WALL) -> str:
     tele = ", ".join(sorted(inputs.robots)) or "no robot"
     site = (
         "the site map" if inputs.site is not None else "no site map (coverage, terrain unchecked)"
     )
-    return f"telemetry of {tele}; {site}; link delay {inputs.link.one_way_s:g} s"
+    return f"telemetry of {tele}; {site}; link delay {_delay(inputs.link.one_way_s, clock)}"
+
+
+def _delay(wall_s: float, clock: CtlClock) -> str:
+    """The link's one-way delay: `10 min` on the sim's clock, `2 s` on the wall's."""
+    return clock.duration(wall_s) if clock.simulated else f"{wall_s:g} s"
 
 
 # -- check ---------------------------------------------------------------------------
@@ -123,12 +141,12 @@ def _finding_lines(f: Finding, unicode: bool) -> list[str]:
 async def check(client: Any, args: argparse.Namespace) -> int:
     from backend.cli.ctl.render import unicode_ok
 
-    inputs = await gather(client, args.timeout)
+    inputs, clock = await gather_clocked(client, args.timeout)
     found = _findings(client, list(args.robots or []), inputs)
     if args.json:
         _print_json(_check_json(found, inputs))
     else:
-        _print_check(found, inputs, unicode_ok())
+        _print_check(found, inputs, unicode_ok(), clock)
     return EXIT_REFUSED if any(f.blocking for f in found) else EXIT_OK
 
 
@@ -151,7 +169,9 @@ def _check_json(found: list[Finding], inputs: PlanInputs) -> dict[str, Any]:
     }
 
 
-def _print_check(found: list[Finding], inputs: PlanInputs, unicode: bool) -> None:
+def _print_check(
+    found: list[Finding], inputs: PlanInputs, unicode: bool, clock: CtlClock = WALL
+) -> None:
     for f in found:
         for line in _finding_lines(f, unicode):
             print(line)
@@ -160,7 +180,7 @@ def _print_check(found: list[Finding], inputs: PlanInputs, unicode: bool) -> Non
     what = f"{errors} error(s) ({waived} waived), {len(found) - errors} warning(s)"
     if not found:
         what = "no findings: the plan passes every check"
-    print(f"{what} — checked with {_inputs_text(inputs)}", flush=True)
+    print(f"{what} — checked with {_inputs_text(inputs, clock)}", flush=True)
 
 
 # -- timeline ------------------------------------------------------------------------
@@ -171,7 +191,8 @@ def _iso(t: float | None) -> str | None:
 
 
 def _clock(t: float) -> str:
-    return datetime.fromtimestamp(t).strftime("%H:%M:%S")
+    """A forecast's instant on the wall's clock (the JSON's summary)."""
+    return WALL.at(t)
 
 
 def _span_s(s: float) -> str:
@@ -256,30 +277,34 @@ def _pct(x: float | None) -> str:
     return "?" if x is None else f"{x * 100:.0f}%"
 
 
-def _skill_line(f: SkillForecast, s: Any) -> str:
-    parts = [f"  {f.id:<12} {(s.label or s.skill)[:28]:<28} {_clock(f.start)} - {_clock(f.end)}"]
+def _skill_line(f: SkillForecast, s: Any, clock: CtlClock = WALL) -> str:
+    """A skill's predicted start and end, its wait (mission seconds), battery, spans out
+    of coverage and contingency branches (robot seconds: mission time already)."""
+    span = f"{clock.at(f.start)} - {clock.at(f.end)}"
+    parts = [f"  {f.id:<12} {(s.label or s.skill)[:28]:<28} {span}"]
     if f.wait_s > 0.5:
-        parts.append(f"waits {_span_s(f.wait_s)} at {f.barrier}")
+        parts.append(f"waits {_span_s(clock.span(f.wait_s) or 0.0)} at {f.barrier}")
     if f.battery_end is not None:
         parts.append(f"battery {_pct(f.battery_end)}")
     for a, b in f.out_of_coverage:
-        parts.append(f"out of coverage {_clock(a)}-{_clock(b)}")
+        parts.append(f"out of coverage {clock.at(a)}-{clock.at(b)}")
     parts += _branch_words(f)
     return "  ".join(parts)
 
 
-def timeline_text(fc: Forecast, mission: Any) -> str:
-    lines = [f"now {_clock(fc.now)} · {fc.summary(_clock)}"]
+def timeline_text(fc: Forecast, mission: Any, clock: CtlClock = WALL) -> str:
+    """The timeline for a person, its times on `clock` (the wall's without a sim)."""
+    lines = [f"now {clock.at(fc.now)} · {fc.summary(clock.at)}"]
     for robot, r in fc.robots.items():
         skills = {s.id: s for s in mission.tasks.get(robot, [])}
-        rows = [_skill_line(f, skills[f.id]) for f in fc.robot_skills(robot)]
-        lines += [_robot_head(robot, r, planned=bool(rows)), *rows]
+        rows = [_skill_line(f, skills[f.id], clock) for f in fc.robot_skills(robot)]
+        lines += [_robot_head(robot, r, bool(rows), clock), *rows]
     return "\n".join(lines)
 
 
-def _robot_head(robot: str, r: RobotForecast, planned: bool) -> str:
+def _robot_head(robot: str, r: RobotForecast, planned: bool, clock: CtlClock = WALL) -> str:
     """`lru1: ends 14:02:10, battery 40% at the end` (held, nothing planned)."""
-    head = f"{robot}: ends {_clock(r.end)}" if r.end is not None else f"{robot}:"
+    head = f"{robot}: ends {clock.at(r.end)}" if r.end is not None else f"{robot}:"
     if r.blocked_at is not None:
         head += f" never: held at {r.blocked_at}"
     elif not planned:
@@ -292,10 +317,10 @@ def _robot_head(robot: str, r: RobotForecast, planned: bool) -> str:
 
 
 async def timeline(client: Any, args: argparse.Namespace) -> int:
-    inputs = await gather(client, args.timeout)
+    inputs, clock = await gather_clocked(client, args.timeout)
     fc = Forecaster(client.library).forecast(client.mission, inputs)
     if args.json:
         _print_json(timeline_json(fc, client.mission))
     else:
-        print(timeline_text(fc, client.mission), flush=True)
+        print(timeline_text(fc, client.mission, clock), flush=True)
     return EXIT_OK

@@ -643,6 +643,7 @@ class Outcome:
     revision: int
     changed: bool  # the revision moved (or the request had been applied before)
     mission: Any  # the mission after it (None: unknown)
+    clock: CtlClock = WALL  # the mission clock its times are said in
 
     @property
     def at(self) -> str:
@@ -675,7 +676,7 @@ def _queued(o: Outcome, what: str) -> str:
     expires = v.get("expires")
     until = ""
     if expires:
-        until = f" (expires {_time(datetime.fromisoformat(expires))})"
+        until = f" (expires {o.clock.stamp(datetime.fromisoformat(expires))})"
     return (
         f"queued for {v.get('robot', '?')}, command {v.get('command', '?')}: {what}{until} {o.at}"
     )
@@ -755,10 +756,10 @@ DESCRIBE: dict[str, Callable[[Outcome], str]] = {
 }
 
 
-def describe(op: Any, reply: Any, before: int, mission: Any) -> str:
-    """One line saying what an applied operation did."""
+def describe(op: Any, reply: Any, before: int, mission: Any, clock: CtlClock = WALL) -> str:
+    """One line saying what an applied operation did (its times on `clock`)."""
     changed = reply.revision != before or reply.duplicate
-    outcome = Outcome(op, reply.value, reply.revision, changed, mission)
+    outcome = Outcome(op, reply.value, reply.revision, changed, mission, clock)
     text = DESCRIBE.get(op.op, lambda o: f"{o.op.op} done {o.at}")(outcome)
     if reply.duplicate:
         text += " (this request had been applied already)"
@@ -836,10 +837,15 @@ def _alert_text(a: Any) -> str:
     return f"{a.level}{where}: {a.message}"
 
 
+def fleet_text(r: Any, clock: CtlClock = WALL) -> str:
+    """A robot's line of `watch`: `robot lru1 online since sim 0:20:00, in contact`."""
+    return f"robot {r.name} {_presence(r, clock)}"
+
+
 # the client's message kind -> a line of `watch` (telemetry and others: none)
 WATCH_TEXT: dict[str, Callable[[Any], str]] = {
     "events": _events_text,
-    "fleet": lambda r: f"robot {r.name} {_presence(r)}",
+    "fleet": fleet_text,
     "alert": _alert_text,
     "malformed": lambda m: f"unreadable {m.what} on {m.key} (ignored): {m.error}",
     "connection": lambda state: f"connection: {state}",
@@ -856,9 +862,12 @@ WATCH_JSON: dict[str, Callable[[Any], dict[str, Any]]] = {
 }
 
 
-def watch_line(kind: str, payload: Any, as_json: bool) -> str | None:
+def watch_line(kind: str, payload: Any, as_json: bool, clock: CtlClock = WALL) -> str | None:
+    """A line of `watch` (None: nothing to say); its times on `clock` (text only)."""
     if as_json:
         obj = WATCH_JSON.get(kind)
         return json.dumps(obj(payload)) if obj else None
+    if kind == "fleet":
+        return fleet_text(payload, clock)
     text = WATCH_TEXT.get(kind)
     return text(payload) if text else None

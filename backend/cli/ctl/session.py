@@ -364,12 +364,21 @@ async def _watch(client: Any, args: argparse.Namespace) -> int:
         kind, payload = await q.get()
         if kind == "telemetry":
             continue
-        line = watch_line(kind, payload, args.json)
+        line = await _watch_line(client, args, kind, payload)
         if kind == "events":
             batches += 1
         if line is not None:
             print(line, flush=True)
     return EXIT_OK
+
+
+async def _watch_line(client: Any, args: argparse.Namespace, kind: str, payload: Any) -> str | None:
+    """A robot's line says its stamps in mission time: the clock asked at each
+    (a sim may start, pause or change speed while watch runs)."""
+    clock = WALL
+    if kind == "fleet" and not args.json:
+        clock = await ask_clock(client, args.timeout)
+    return watch_line(kind, payload, args.json, clock)
 
 
 async def _save(client: Any, args: argparse.Namespace) -> int:
@@ -442,12 +451,20 @@ async def _operation(client: Any, args: argparse.Namespace) -> int:
         "notes": notes,
         "duplicate": reply.duplicate,
     }
+    clock = await _expiry_clock(client, args, reply.value)
     wait = getattr(args, "wait", None) if args.op in ROBOT_OPS else None
     if wait is None:
-        return _print_done(args, lambda: describe(op, reply, before, mission), **done)
+        return _print_done(args, lambda: describe(op, reply, before, mission, clock), **done)
     if not args.json:
-        _print_done(args, lambda: describe(op, reply, before, mission), **done)
+        _print_done(args, lambda: describe(op, reply, before, mission, clock), **done)
     return await _wait_answers(client, args, _command_ids(reply.value), wait, done)
+
+
+async def _expiry_clock(client: Any, args: argparse.Namespace, value: dict[str, Any]) -> CtlClock:
+    """The clock a queued command's `(expires ...)` is said on (the text only)."""
+    if args.json or not value.get("expires"):
+        return WALL
+    return await ask_clock(client, args.timeout)
 
 
 def _library_differs(client: Any, args: argparse.Namespace) -> list[str]:

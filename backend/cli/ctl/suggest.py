@@ -9,8 +9,9 @@ import json
 from datetime import UTC, datetime
 from typing import Any
 
+from backend.cli.ctl.clock import WALL, CtlClock
 from backend.cli.ctl.errors import UsageError
-from backend.cli.ctl.plan import gather
+from backend.cli.ctl.plan import gather_clocked
 from backend.core.plan.suggest import Manifests, suggest, taken_words
 from backend.core.rules.base import Refusal
 
@@ -19,7 +20,7 @@ RANKED = "the most taken, then the earliest end, the least out of coverage, the 
 
 async def suggest_view(client: Any, args: argparse.Namespace) -> int:
     """`ctl suggest`: the robots ranked for the skills (the forecast's end, battery left)."""
-    inputs = await gather(client, args.timeout)
+    inputs, clock = await gather_clocked(client, args.timeout)
     try:
         offers = Manifests.of(client.robots)
         hints = suggest(client.mission, client.library, inputs, list(args.what), offers)
@@ -32,7 +33,7 @@ async def suggest_view(client: Any, args: argparse.Namespace) -> int:
     else:
         print(f"who can take {', '.join(args.what)} ({RANKED}):", flush=True)
         for n, row in enumerate(rows, 1):
-            print(f"  {n}. {hint_text(row)}", flush=True)
+            print(f"  {n}. {hint_text(row, clock)}", flush=True)
     return 0
 
 
@@ -55,19 +56,21 @@ def _rounded(s: float | None) -> float | None:
     return round(s, 1) if s is not None else None
 
 
-def hint_text(row: dict[str, Any]) -> str:
-    """'lru3: ends in 12m30s, battery 62% left' / 'lru2 cannot: lru1-2: ...'."""
+def hint_text(row: dict[str, Any], clock: CtlClock = WALL) -> str:
+    """'lru3: ends in 12m30s, battery 62% left' / 'lru2 cannot: lru1-2: ...'; the
+    row's wall seconds said in mission time on `clock` (× the sim's speed)."""
     if not row["moved"]:
         return f"{row['robot']} cannot: " + "; ".join(row["refused"].values())
-    end = _duration(row["end_in_s"]) if row["end_in_s"] is not None else "never (a barrier)"
+    end_in = clock.span(row["end_in_s"])
+    end = _duration(end_in) if end_in is not None else "never (a barrier)"
     stays = "".join(f"; {k} stays: {v}" for k, v in row["refused"].items())
     part = taken_words(len(row["moved"]), len(row["refused"]))
-    return f"{row['robot']}: {part}ends in {end}{_battery(row)}{_coverage(row)}{stays}"
+    return f"{row['robot']}: {part}ends in {end}{_battery(row)}{_coverage(row, clock)}{stays}"
 
 
-def _coverage(row: dict[str, Any]) -> str:
+def _coverage(row: dict[str, Any], clock: CtlClock) -> str:
     """', 3m10s out of coverage' (nothing without a site map: unknown)."""
-    out = row["out_of_coverage_s"]
+    out = clock.span(row["out_of_coverage_s"])
     if out is None:
         return ""
     return f", {_duration(out)} out of coverage" if out >= 0.5 else ", in coverage throughout"

@@ -29,6 +29,10 @@ from backend.core import events as ev
 from backend.core.model import CommandState, Mission, SkillInstance, Status
 from backend.files.record.journal import Batch, JournalReader
 
+WALL_NOTE = (
+    "wall time (local) throughout, lateness in wall seconds: the journal records no "
+    "simulator's mission clock (a simulated mission's sim times cannot be shown)"
+)
 OVERDUE_NOTE = (
     "verification stages of commands (queued, sent, received, started, completed, each "
     "with a due time) do not exist yet; this section lists the overdue ones once they do"
@@ -346,7 +350,8 @@ def _skill_line(k: SkillRow) -> str:
 def _heading(r: PlanReport) -> list[str]:
     out = [
         f"Plan against actual: {r.mission} ({r.journal}), {_clock(r.start)} to {_clock(r.end)} "
-        f"ground time, {r.changes} changes",
+        f"ground wall time, {r.changes} changes",
+        f"times: {WALL_NOTE}",
     ]
     if r.gap:
         out.append(f"note: {r.gap}")
@@ -356,7 +361,7 @@ def _heading(r: PlanReport) -> list[str]:
 def _skills(r: PlanReport) -> list[str]:
     out = [
         "Skills (start and end: as forecast when synchronized → as the robot did it, "
-        "robot time; (+late / -early))",
+        "robot wall time; (+late / -early))",
         *map(_skill_line, r.skills),
     ]
     if not r.skills:
@@ -408,5 +413,6 @@ _SECTIONS = (_heading, _skills, _failures, _waivers, _refusals, _overdue, _actor
 
 
 def report_text(r: PlanReport) -> str:
-    """The report for a person: a table per section, times in local time."""
+    """The report for a person: a table per section, times in local wall time
+    (said in its heading: BRIEF "One mission clock" names no clock wrongly)."""
     return "\n\n".join("\n".join(section(r)) for section in _SECTIONS) + "\n"
