@@ -28,13 +28,15 @@ Figures, each in one run:
   included (each chunk with the archive on ends when its rows are
   written). One server is fed chunks of 5,000 samples, the archive on and
   off in turn (off on on off ...), so that what else the machine does,
-  which moves a run of seconds by up to 20 %, hits both alike; a chunk
-  keeps about 1,250, so the writer wakes within it (1,000 waiting) and
-  competes with the receiving thread as in a flood. The ratio is the
-  median of five such servers (their range shown), the CPU a sample the
-  median of each way. Fed as a flood, a transaction carries about 1,000
-  rows; live (4 robots at 4 Hz, a write every 0.5 s) it carries about 2,
-  and its own cost is not in this figure (docs/performance.md says it).
+  which moves a run of seconds by up to 20 %, hits both alike. With the
+  archive on, its writer writes what the robots send in one of its
+  `flush_s` (5 s: 80 samples, about 20 rows kept), as live: each write
+  carries what a live one carries, and costs what a live one costs (before
+  2026-12-02 a chunk was fed as a flood and a write carried about 1,000
+  rows, which hid a write's own cost). The receiving thread waits for each
+  write (a live one does not): its wake-up is counted against the archive.
+  The ratio is the median of five such servers (their range shown), the
+  CPU a sample the median of each way.
 """
 
 from __future__ import annotations
@@ -173,6 +175,13 @@ def _samples(robots: list[str]) -> list[_Msg]:
     return out
 
 
+def live_write() -> int:
+    """Samples 4 robots at 4 Hz send in the writer's flush_s: what a live write takes."""
+    from backend.server.archive import FLUSH_S
+
+    return round(4 * 4 * FLUSH_S)
+
+
 class _Live:
     """A server receiving telemetry as live (its loop in another thread), its
     archive started; `feed` gives it samples with the archive on or off."""
@@ -196,10 +205,13 @@ class _Live:
         server's loop, the archive's writer until it has written them) of the
         server's `_on_telemetry` over `msgs`, the `first`-th sample on."""
         self.server.archive = self.archive if archive_on else None
+        write_every = live_write() if archive_on else 0
         t0 = time.process_time()
         for k, m in enumerate(msgs, first):
             self.now[0] = (k // 4) * 0.25
             self.server._on_telemetry(m)
+            if write_every and k % write_every == write_every - 1:
+                self.archive.flush()  # the write a live writer makes every flush_s
         done = threading.Event()
         self.loop.call_soon_threadsafe(done.set)  # the loop has taken every hand-over
         done.wait()
@@ -293,10 +305,10 @@ def _took_and_write(archive: Any, now: list[float], ts: list[Any], per: int) -> 
     return took, write
 
 
-# samples a write carries in --floor: as the bench's flood (under the 1,000
-# waiting that wake the writer early), and live at 4 robots and 4 Hz with a
-# write every 0.5 s (FLUSH_S), 2.5 s and 5 s
-FLOOR_WRITES = {"flood": 3_996, "0.5s": 8, "2.5s": 40, "5s": 80}
+# samples a write carries in --floor: as a flood (under the 1,000 waiting
+# that wake the writer early), and live at 4 robots and 4 Hz with a write
+# every 0.5 s (FLUSH_S before 2026-12-02), 2.5 s, 5 s (FLUSH_S) and 10 s
+FLOOR_WRITES = {"flood": 3_996, "0.5s": 8, "2.5s": 40, "5s": 80, "10s": 160}
 
 
 def _floor_write(folder: Path, name: str, ts: list[Any]) -> dict[str, float]:
