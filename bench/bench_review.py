@@ -28,13 +28,15 @@ Figures, each in one run:
   included (each chunk with the archive on ends when its rows are
   written). One server is fed chunks of 5,000 samples, the archive on and
   off in turn (off on on off ...), so that what else the machine does,
-  which moves a run of seconds by up to 20 %, hits both alike; a chunk
-  keeps about 1,250, so the writer wakes within it (1,000 waiting) and
-  competes with the receiving thread as in a flood. The ratio is the
-  median of five such servers (their range shown), the CPU a sample the
-  median of each way. Fed as a flood, a transaction carries about 1,000
-  rows; live (4 robots at 4 Hz, a write every 0.5 s) it carries about 2,
-  and its own cost is not in this figure (docs/performance.md says it).
+  which moves a run of seconds by up to 20 %, hits both alike. With the
+  archive on, its writer writes what the robots send in one of its
+  `flush_s` (5 s: 80 samples, about 20 rows kept), as live: each write
+  carries what a live one carries, and costs what a live one costs (before
+  2026-12-02 a chunk was fed as a flood and a write carried about 1,000
+  rows, which hid a write's own cost). The receiving thread waits for each
+  write (a live one does not): its wake-up is counted against the archive.
+  The ratio is the median of five such servers (their range shown), the
+  CPU a sample the median of each way.
 """
 
 from __future__ import annotations
@@ -173,6 +175,13 @@ def _samples(robots: list[str]) -> list[_Msg]:
     return out
 
 
+def live_write() -> int:
+    """Samples 4 robots at 4 Hz send in the writer's flush_s: what a live write takes."""
+    from backend.server.archive import FLUSH_S
+
+    return round(4 * 4 * FLUSH_S)
+
+
 class _Live:
     """A server receiving telemetry as live (its loop in another thread), its
     archive started; `feed` gives it samples with the archive on or off."""
@@ -196,10 +205,13 @@ class _Live:
         server's loop, the archive's writer until it has written them) of the
         server's `_on_telemetry` over `msgs`, the `first`-th sample on."""
         self.server.archive = self.archive if archive_on else None
+        write_every = live_write() if archive_on else 0
         t0 = time.process_time()
         for k, m in enumerate(msgs, first):
             self.now[0] = (k // 4) * 0.25
             self.server._on_telemetry(m)
+            if write_every and k % write_every == write_every - 1:
+                self.archive.flush()  # the write a live writer makes every flush_s
         done = threading.Event()
         self.loop.call_soon_threadsafe(done.set)  # the loop has taken every hand-over
         done.wait()
@@ -293,10 +305,10 @@ def _took_and_write(archive: Any, now: list[float], ts: list[Any], per: int) -> 
     return took, write
 
 
-# samples a write carries in --floor: as the bench's flood (under the 1,000
-# waiting that wake the writer early), and live at 4 robots and 4 Hz with a
-# write every 0.5 s (FLUSH_S), 2.5 s and 5 s
-FLOOR_WRITES = {"flood": 3_996, "0.5s": 8, "2.5s": 40, "5s": 80}
+# samples a write carries in --floor: as a flood (under the 1,000 waiting
+# that wake the writer early), and live at 4 robots and 4 Hz with a write
+# every 0.5 s (FLUSH_S before 2026-12-02), 2.5 s, 5 s (FLUSH_S) and 10 s
+FLOOR_WRITES = {"flood": 3_996, "0.5s": 8, "2.5s": 40, "5s": 80, "10s": 160}
 
 
 def _floor_write(folder: Path, name: str, ts: list[Any]) -> dict[str, float]:
@@ -366,32 +378,41 @@ would halve the batches, but the server writes the 1.4 MB snapshot on its
 loop in 60-120 ms (measured): every 500 batches instead of about 1,300 is
 2.6 times that, and 12 MB more journal a day; not done.
 
-The archive's cost moves with the shared machine more than the 10 % it is
-about: on 2026-12-02 the bench's five rounds spread 1.13-1.29x (load
-average 4.5-5.8), and three single rounds of `--floor` in the next ten
-minutes 1.01-1.17x. Its parts measured alone
-(`.venv/bin/python bench/bench_review.py --floor`, three runs at load 5-6,
-as ratios against that run's archive-off round): the server's own
-handling is 45-56 us a sample (its parse 22-35 us); the archive's `took`
-(keep-or-drop and, for the quarter kept at 4 Hz, its row and the
-hand-over on a deque) 1.3-2.3 us a sample; its writer 6-9 us a row when a
-write carries about 1,000 rows as the bench's flood does (50 rows to an
-INSERT; one row a statement took the GIL back at every row), 1.5-2.2 us a
-sample. By its parts, 1.06-1.08x: the floor as the bench feeds it; the
-rest of the measured ratio is the two threads competing for the GIL and
-the caches. Live it is higher, and the bench's flood does not show it: at
-4 robots and 4 Hz the writer wakes every 0.5 s (FLUSH_S) with about 2
-rows, and a write's own cost (BEGIN, COMMIT to the WAL, the wake-ups:
-55-85 us) makes it 34-49 us a row, 11-16 us a sample in all, 1.23-1.31x
-by its parts. A write every 2.5 s or 5 s (40 or 80 samples) measured
-1.14-1.15x and 1.12x by its parts: a longer interval alone does not reach
-1.1x either. Next: write when enough rows wait or several seconds have
-passed (the price: a copy of a live server's database, and a crash, that
-many seconds behind), with several samples to a row (a robot's samples of
-a write as the robot's JSON: the writer 1.8-2.1 us a sample in a
-prototype, at the cost of a second archive format to read and about twice
-the bytes), and the row made with fewer of the model's attribute reads.
-Not done.
+The archive's cost (2026-12-02, second round). Until this round the
+bench's rounds fed the archive as a flood: a write carried about 1,000
+rows, the writer 6-9 us a row. Live, at 4 robots and 4 Hz, the writer
+woke every 0.5 s with about 2 rows, and a write's own cost (BEGIN, the
+COMMIT to the WAL, the wake-ups: 55-100 us) made it 43-47 us a row,
+1.31-1.36x by its parts: the 1.16x measured before was the flood's, not
+the live server's. Done: the writer writes every 5 s (FLUSH_S) or at once
+when 1,000 rows wait; the price, in backend/server/archive.py's
+docstring: a copy of a live server's database, and a crash, lack up to
+the last 5 s of telemetry, alerts, presence and the journal's index (the
+review completes the index from the journal); a clean stop writes what
+waits (tests/server/test_archive_stop.py). The bench's rounds now have
+the writer write each 5 s of samples (80, about 20 rows kept) as live,
+the receiving thread waiting for each write (a write's round trip about
+32 us, 0.4 us a sample, counted against the archive). A sample's row is
+read from the models' __dict__ in two calls (1.7 -> 1.4 us a row, the
+rest mostly the pydantic TzInfo's timestamp()).
+
+Measured at load 0.6-1.4 on 2 cores: two runs of `--floor`: `took` 1.3
+us a sample (the drop path, three quarters of them, about 0.5 us), the
+writer 12.8-16.0 us a row written every 5 s (of a write of 20 rows: the
+INSERT 6.5 us a row, the COMMIT about 95 us), 4.6-5.3 us a sample in all:
+1.12-1.13x by its parts against the server's own 38-41 us a sample (its
+parse 25-29 us); their single rounds 1.09x and 1.14x; the full bench
+before this text 1.18x (rounds 1.12-1.21x). Not met: by its parts alone
+the floor is 1.12x with a write every 5 s, 1.10-1.11x every 10 s, and a
+round adds the two threads' GIL handoffs and caches. What bounds it: a
+write's COMMIT (the WAL frames of the table's and both indexes' pages of
+each robot; a page size of 1 kB or a later checkpoint did not move it,
+synchronous=OFF took 10 % off and risks a corrupt archive on a power
+loss: not done) and SQLite's insert into three B-trees. What would reach
+1.1x: several samples to a row (a robot's samples of a write as one row:
+the writer 1.8-2.1 us a sample in a prototype of the first round, at the
+cost of a second archive format for the review and about twice the
+bytes), or a write every 30 s or more (that much behind). Not done.
 """
 
 

@@ -10,6 +10,7 @@ clock. `ArchiveReader` reads it read-only.
 
 from __future__ import annotations
 
+import operator
 import sqlite3
 from collections.abc import Iterator
 from datetime import UTC, datetime
@@ -71,28 +72,19 @@ def archive_path(db: str | Path) -> Path:
     return p.with_name(f"{p.stem}.telemetry{p.suffix or '.db'}")
 
 
+# a sample's fields as the archive's columns, read from the models' __dict__ in one
+# call each (17 attribute reads of the models were 1.7 us a row, most of its cost)
+_POSE = operator.itemgetter("x", "y", "z", "roll", "pitch", "yaw")
+_REST = operator.itemgetter(
+    "battery", "link", "in_range", "mode", "skill", "progress", "eta_s", "info"
+)
+
+
 def sample_row(t: Telemetry, received: float) -> tuple[object, ...]:
-    """A sample as the archive's columns (SAMPLE_COLUMNS)."""
-    p = t.pose
-    return (
-        t.robot,
-        t.at.timestamp(),
-        received,
-        p.x,
-        p.y,
-        p.z,
-        p.roll,
-        p.pitch,
-        p.yaw,
-        t.battery,
-        t.link,
-        int(t.in_range),
-        t.mode,
-        t.skill,
-        t.progress,
-        t.eta_s,
-        t.info,
-    )
+    """A sample as the archive's columns (SAMPLE_COLUMNS); `in_range` a
+    bool, which SQLite stores as the integer 1 or 0."""
+    d = t.__dict__
+    return (d["robot"], d["at"].timestamp(), received, *_POSE(d["pose"].__dict__), *_REST(d))
 
 
 def _sample(row: tuple[Any, ...]) -> Telemetry:  # a telemetry row as SQLite gives it

@@ -332,8 +332,10 @@ class _Play:
                 )
             for a in self.alerts:
                 archive.alert(a)
-            for revision, op, ts in self.index:
+            for n, (revision, op, ts) in enumerate(self.index, 1):
                 archive.journaled(revision, op, ts=ts)
+                if n % 5_000 == 0:  # never QUEUE_MAX waiting: a full queue drops
+                    archive.flush()
             step = 1.0 / p.telemetry_hz
             ticks = int((self.out.end - self.out.start) / step)
             for k in range(ticks):
@@ -341,7 +343,9 @@ class _Play:
                 clock[0] = t
                 for robot in SKILLS:
                     archive.took(self._sample(robot, t - p.delay_s), received=t)
-                if k % 2000 == 1999:  # hours in a moment: let the writer keep up
+                # hours in a moment: let the writer keep up (a flood faster than
+                # the writer's turns at the GIL filled its queue on a loaded machine)
+                if k % 500 == 499:
                     archive.flush()
         finally:
             archive.close(timeout=120)
