@@ -104,7 +104,8 @@ class ContactWatch:
     def mission_now(self, clock: MissionClock, now: datetime) -> float:
         status = self.mirror.status
         if clock == "sim" and status is not None and self._status_at is not None:
-            ran = max(0.0, (now - self._status_at).total_seconds())
+            # a past stamp too (negative: before the status), at the status's speed
+            ran = (now - self._status_at).total_seconds()
             return status.sim_time + ran * status.speed
         return now.timestamp()
 

@@ -344,7 +344,7 @@ class RobotLink:
         info = self.robots.get(robot)
         if info is None or not info.online or info.session in (None, session):
             return None
-        since = f" since {info.since:%H:%M:%S}" if info.since else ""
+        since = f" since {self.contact.time_text(info.since)}" if info.since else ""
         return "taken", (
             f"robot {robot} is connected already as another session ({info.session}, online"
             f"{since}): a second process under this name would execute every skill twice; stop "
@@ -469,7 +469,7 @@ class RobotLink:
         """Queued commands (never on their way) whose expiry passed."""
         now = _now()
         for robot, ids in self._expired(now).items():
-            why = _why_unsent(robot, self.robots.get(robot))
+            why = _why_unsent(robot, self.robots.get(robot), self.contact.time_text)
             self.submit(
                 UplinkSettle(
                     robot=robot,
@@ -505,11 +505,12 @@ def _moved(before: float | None, delay: float | None) -> bool:
     return before is None or (delay is not None and abs(delay - before) > max(0.2, 0.1 * before))
 
 
-def _why_unsent(robot: str, info: RobotInfo | None) -> str:
-    """Why a queued command expired unsent: its robot online but out of reach, or offline."""
+def _why_unsent(robot: str, info: RobotInfo | None, said: Callable[[datetime], str]) -> str:
+    """Why a queued command expired unsent: its robot online but out of reach, or
+    offline (since when, said on the mission clock by `said`)."""
     if info is not None and info.online:
         return "it was out of reach"
-    since = f" since {info.since:%H:%M:%S}" if info and info.since else ""
+    since = f" since {said(info.since)}" if info and info.since else ""
     return f"{robot} was offline{since}"
 
 
