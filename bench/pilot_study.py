@@ -235,24 +235,18 @@ def delay_table(results: list[Result], strategies: list[str], seeds: list[int], 
     return "\n".join(rows)
 
 
-def _branches(results: list[Result], strategies: list[str]) -> str:
-    taken = [
-        f"- {r.strategy} seed {r.seed}: {b}"
-        for r in sorted(results, key=lambda r: (r.strategy, r.seed))
-        if r.strategy in strategies
-        for b in r.branches
-    ]
-    return "\n".join(taken) or "- none: no skill failed or timed out"
+NO_QUESTION = "every identify_stone found a stone where it looked"
 
 
-def _questions(results: list[Result], strategies: list[str]) -> str:
-    asked = [
-        f"- {r.strategy} seed {r.seed}: {q}"
+def _per_run(results: list[Result], strategies: list[str], what: str, none: str) -> str:
+    """Each run's `what` (a list field of Result: branches, questions), one per line."""
+    said = [
+        f"- {r.strategy} seed {r.seed}: {x}"
         for r in sorted(results, key=lambda r: (r.strategy, r.seed))
         if r.strategy in strategies
-        for q in r.questions
+        for x in getattr(r, what)
     ]
-    return "\n".join(asked) or "- none: every identify_stone found a stone where it looked"
+    return "\n".join(said) or f"- none: {none}"
 
 
 def delay_section(
@@ -283,12 +277,12 @@ Skills that failed, per strategy:
 
 Contingency branches the robots took:
 
-{_branches(results, strategies)}
+{_per_run(results, strategies, "branches", "no skill failed or timed out")}
 
 Questions the robots asked (nobody answers them here: each applies its default
 at its `answer_within`, on board):
 
-{_questions(results, strategies)}
+{_per_run(results, strategies, "questions", NO_QUESTION)}
 
 What the operators noted:
 
