@@ -12,18 +12,22 @@ import time
 from typing import Any
 
 from backend.cli.ctl.clock import WALL, CtlClock
-from backend.cli.ctl.plan import gather
+from backend.cli.ctl.plan import gather_clocked
 from backend.core.plan.forecast import Forecaster
 from backend.core.plan.nowcast import nowcasts
 
 
-async def nowcasts_json(client: Any, args: Any, only: list[str]) -> dict[str, Any]:
-    """--nowcast: {"nowcast": {robot: its probable present, or None}} ({} without it)."""
+async def nowcasts_json(
+    client: Any, args: Any, only: list[str]
+) -> tuple[dict[str, Any], CtlClock | None]:
+    """--nowcast: {"nowcast": {robot: its probable present, or None}} ({} without it),
+    and the mission clock of the sim status it asked (None: it asked none)."""
     if not getattr(args, "nowcast", False):
-        return {}
-    every = _every_nowcast(client, await gather(client, args.timeout))
+        return {}, None
+    inputs, clock = await gather_clocked(client, args.timeout)
+    every = _every_nowcast(client, inputs)
     found = {r: every.get(r) for r in only or list(client.mission.robots)}
-    return {"nowcast": {r: nc.as_json() if nc else None for r, nc in found.items()}}
+    return {"nowcast": {r: nc.as_json() if nc else None for r, nc in found.items()}}, clock
 
 
 def _every_nowcast(client: Any, inputs: Any) -> dict[str, Any]:

@@ -319,11 +319,11 @@ def _only(args: argparse.Namespace, verb: str, known: Collection[str], robots: A
 async def _state(client: Any, args: argparse.Namespace) -> int:
     robots = client.mission.robots
     only = _only(args, "state", {*robots, *client.robots}, robots)
-    predicted = await nowcasts_json(client, args, only)
+    predicted, clock = await nowcasts_json(client, args, only)
     if args.json:
         _print_json(state_json(client, only or None) | predicted)
     else:
-        clock = await ask_clock(client, args.timeout)
+        clock = clock or await ask_clock(client, args.timeout)  # the sim asked once
         text = state_text(client, only or None, unicode=unicode_ok(), clock=clock)
         print(text + nowcasts_text(predicted, clock), flush=True)
     return EXIT_OK
