@@ -79,6 +79,24 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="contact only in windows, in sim time: OPEN/PERIOD[@OFFSET], e.g. 20m/2h "
         "(passed to `missionctl sim --comms-window`)",
     )
+    d.add_argument(
+        "--break",
+        dest="breaks",
+        metavar="ROBOT@T[:HOW]",
+        action="append",
+        default=[],
+        help="ROBOT breaks at sim time T, e.g. lru1@12m (repeatable; passed to `missionctl sim "
+        "--break`)",
+    )
+    d.add_argument(
+        "--join",
+        dest="joins",
+        metavar="ROBOT:TYPE@T",
+        action="append",
+        default=[],
+        help="a robot of TYPE asks to join at sim time T, e.g. lru3:lru_science@15m "
+        "(repeatable; passed to `missionctl sim --join`)",
+    )
     d.add_argument("--user", metavar="U", default="", help="operator name")
     d.add_argument("--theme", metavar="T", help=THEME_HELP)
     d.add_argument("--config", metavar="FILE")
@@ -157,6 +175,13 @@ def _login_refused(endpoint: str, login) -> str | None:
     return None
 
 
+def _sim_options(args: argparse.Namespace) -> list[str]:
+    """The demo's options that are the sim's, in its own words."""
+    said = [("--link-delay", args.link_delay), ("--comms-window", args.comms_window)]
+    said += [("--break", b) for b in args.breaks] + [("--join", j) for j in args.joins]
+    return [word for name, value in said if value for word in (name, value)]
+
+
 def run_demo(args: argparse.Namespace) -> int:
     from console.config import load_config
     from console.demo import DEFAULT_MISSION, DemoError, DemoProcesses
@@ -165,12 +190,7 @@ def run_demo(args: argparse.Namespace) -> int:
         print("missionctl demo: --speed must be positive", file=sys.stderr)
         return EXIT_BAD_INPUT
     mission = args.mission or str(DEFAULT_MISSION)
-    procs = DemoProcesses(
-        mission,
-        speed=args.speed,
-        link_delay=args.link_delay,
-        comms_window=args.comms_window,
-    )
+    procs = DemoProcesses(mission, speed=args.speed, sim_options=_sim_options(args))
     try:
         procs.launch()  # the server starts while the console loads (console/demo_app.py)
     except DemoError as e:

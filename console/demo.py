@@ -20,6 +20,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Sequence
 from importlib.metadata import entry_points
 from pathlib import Path
 from typing import IO
@@ -74,16 +75,15 @@ class DemoProcesses:
         mission: str | Path = DEFAULT_MISSION,
         *,
         speed: float = 1.0,
-        link_delay: str | None = None,
-        comms_window: str | None = None,
+        sim_options: Sequence[str] = (),
         python: str = sys.executable,
         workdir: str | Path | None = None,
         with_sim: bool | None = None,
     ):
         self.mission = Path(mission).resolve()
         self.speed = speed
-        self.link_delay = link_delay  # the sim's --link-delay, as given (it checks it)
-        self.comms_window = comms_window  # the sim's --comms-window, as given
+        # the sim's own options as given (--link-delay 10m, --break lru1@12m, …): it checks them
+        self.sim_options = list(sim_options)
         self.python = python
         self._own_dir = workdir is None
         self.workdir = (
@@ -171,8 +171,6 @@ class DemoProcesses:
         raise DemoError(f"the mission server did not start{how}:\n{tail}")
 
     def _spawn_sim(self) -> None:
-        delay = ["--link-delay", self.link_delay] if self.link_delay else []
-        window = ["--comms-window", self.comms_window] if self.comms_window else []
         self._spawn(
             "sim",
             [
@@ -183,8 +181,7 @@ class DemoProcesses:
                 self.endpoint,
                 "--speed",
                 f"{self.speed:g}",
-                *delay,
-                *window,
+                *self.sim_options,
             ],
             self.sim_log,
         )

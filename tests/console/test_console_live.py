@@ -401,9 +401,10 @@ def test_console_process_exits_cleanly_on_hangup_and_ctrl_q(live, how):
 
 
 def test_demo_starts_server_and_console_and_stops_everything(tmp_path):
-    """`missionctl demo --link-delay 20s` in a pty: the console shows the Mars
-    mission, the sim runs with the delay; ctrl+q stops the console, the server
-    and the sim (no process left behind)."""
+    """`missionctl demo --link-delay 20s --break … --join …` in a pty: the
+    console shows the Mars mission, the sim runs with the delay and the team's
+    events; ctrl+q stops the console, the server and the sim (no process left
+    behind)."""
     master, slave = pty.openpty()
     env = {
         **os.environ,
@@ -412,7 +413,10 @@ def test_demo_starts_server_and_console_and_stops_everything(tmp_path):
         "MISSIONCTL_CONFIG": "/nonexistent.toml",
     }
     p = subprocess.Popen(
-        [sys.executable, "-m", "backend.cli", "demo", "--link-delay", "20s", "--speed", "5"],
+        [
+            *(sys.executable, "-m", "backend.cli", "demo", "--link-delay", "20s", "--speed", "5"),
+            *("--break", "lru1@12m", "--join", "lru3:lru_science@15m"),
+        ],
         stdin=slave,
         stdout=slave,
         stderr=slave,
@@ -430,8 +434,11 @@ def test_demo_starts_server_and_console_and_stops_everything(tmp_path):
         children = _processes_mentioning(str(tmp_path))
         assert children, "the demo's server was not found among the processes"
         # its sim got the link delay (after its --speed: not the demo's own command line)
-        sims = _processes_mentioning("--speed\x005\x00--link-delay\x0020s")
-        assert sims, "no delayed sim"
+        sims = _processes_mentioning(
+            "--speed\x005\x00--link-delay\x0020s\x00--break\x00lru1@12m\x00"
+            "--join\x00lru3:lru_science@15m"
+        )
+        assert sims, "no delayed sim with the team's events"
         # the server and the sim yield the CPU to the console (console/demo.py)
         for child in {*children, *sims}:
             assert _niceness(child) == _niceness(p.pid) + CHILD_NICENESS, child
