@@ -47,10 +47,9 @@ def test_join_retire_and_reassign(server, fleet):
     endpoint = server.endpoint
     info = _robots_until(endpoint, lambda r: r.get("lru3", {}).get("joining"), "lru3 joining")
     assert info["lru3"]["in_mission"] is False and info["lru3"]["type"] == "lru_science"
-    assert (
-        "lru3 (lru_science, asks to join: missionctl ctl robots add lru3)"
-        in ok(endpoint, "robots").stdout
-    )
+    said = ok(endpoint, "robots").stdout
+    head = "lru3 (lru_science, asks to join: missionctl ctl robots add lru3): "
+    assert f"{head}waiting to be added since" in said  # heard: not "offline"
 
     out = ok(endpoint, "robots", "add", "lru3").stdout
     assert out.startswith("added robot lru3 (lru_science) to the mission at revision"), out

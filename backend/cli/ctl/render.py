@@ -161,6 +161,9 @@ def _presence(info: Any, clock: CtlClock = WALL) -> str:
     """Whether the server knows a robot, hears it, and its contact."""
     if info is None:
         return "not registered"
+    if getattr(info, "joining", False):  # it is heard: not "offline", but not in the mission
+        asked = f" since {clock.stamp(info.since)}" if info.since else ""
+        return f"waiting to be added{asked}"
     if not info.online:
         return _offline(info, clock)
     if info.contact is not None and info.contact.state == "out_of_contact":
