@@ -166,6 +166,7 @@ class _Skills:
 
     def __init__(self, c: UplinkCommand, mission: Mission) -> None:
         self.skills = [f[2] for f in filter(None, map(mission.find, watched(c)))]
+        self.asked = _asked(mission, c.robot, set(self.ids()))
         # applied, then taken back (unsynchronized) before they started: they never will
         self.withdrawn = c.state == CommandState.ACKED and self.all_in({Status.IDLE})
 
@@ -186,6 +187,17 @@ class _Skills:
 
     def ended(self) -> datetime | None:
         return max(filter(None, (s.finished_at for s in self.skills)), default=None)
+
+
+def _asked(mission: Mission, robot: str, ids: set[str]) -> timedelta:
+    """How long the skills waited, or may wait, on the operators: each question
+    from its asking to its end (an open one: to its default). The forecast
+    does not know of questions; without this a robot that waits for an answer
+    would be said overdue."""
+    waits = [
+        (q.closed or q.due) - q.asked for q in mission.questions.get(robot, []) if q.skill in ids
+    ]
+    return sum(waits, timedelta(0))
 
 
 def _start_of(s: SkillInstance) -> datetime | None:
@@ -223,20 +235,21 @@ def _execution(
         return [Stage(name="started", state="none"), Stage(name="completed", state="none")]
     if c.state in _FAIL_STATES:
         return [Stage(name="started", state="failed"), Stage(name="completed", state="failed")]
-    start_due, end_due = _execution_dues(plan, timing, skills.started())
+    start_due, end_due = _execution_dues(plan, timing, skills.started(), skills.asked)
     return [_start_stage(skills, start_due), _end_stage(skills, end_due)]
 
 
 def _execution_dues(
-    plan: list[Predicted], timing: _Timing, started: datetime | None
+    plan: list[Predicted], timing: _Timing, started: datetime | None, asked: timedelta
 ) -> tuple[datetime | None, datetime | None]:
     """When word of the start and of the end is due: the plan's times, later if
-    the command reached the robot later; the end moves with the actual start."""
+    the command reached the robot later; the end moves with the actual start
+    and with the time its skills waited on questions (`asked`)."""
     if not plan or timing.on_robot is None:
         return None, None
     planned = min(p.start for p in plan)
     expected = max(planned, timing.on_robot)
-    shift = max((started or expected) - planned, timedelta(0))
+    shift = max((started or expected) - planned, timedelta(0)) + asked
     return timing.returns(expected), timing.returns(max(p.end for p in plan) + shift)
 
 

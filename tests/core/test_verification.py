@@ -141,3 +141,40 @@ def test_a_control_command_has_no_started_or_completed_stage() -> None:
     c = sync(op="run", command=Run(), skills=[])
     v = verify(c, mission(Status.IDLE), Path(D), {}, at(1))
     assert states(v)["started"] == states(v)["completed"] == "none"
+
+
+def _question(asked: float, due: float, closed: float | None = None) -> object:
+    from backend.core.model import Question, QuestionState
+
+    return Question(
+        id=1,
+        robot="r1",
+        ref="q-1",
+        skill="r1-1",
+        text="search wider?",
+        choices=["wider", "give up"],
+        default="wider",
+        timeout_s=due - asked,
+        asked=at(asked),
+        due=at(due),
+        state=QuestionState.OPEN if closed is None else QuestionState.ANSWERED,
+        closed=None if closed is None else at(closed),
+    )
+
+
+def test_a_question_moves_the_end_by_its_wait_not_overdue_meanwhile() -> None:
+    acked = sync(
+        state=CommandState.ACKED, sent=at(0), answered=at(20), settled=at(20), done=["r1-1"]
+    )
+    m = mission(Status.RUNNING, Status.IDLE_SYNCHRONIZED, started=30)
+    asking = m.model_copy(update={"questions": {"r1": [_question(40, 340)]}})
+    # without the question, the end is due at 100 + D; the robot may wait 300 s more
+    plain = verify(acked, m, Path(D), PLAN, at(200)).stage("completed")
+    assert plain.due == at(100 + D) and plain.state == "overdue"
+    v = verify(acked, asking, Path(D), PLAN, at(200)).stage("completed")
+    assert v.due == at(100 + 300 + D) and v.state == "waiting"
+    # answered after 60 s: only those 60 s count
+    answered = m.model_copy(update={"questions": {"r1": [_question(40, 340, closed=100)]}})
+    assert verify(acked, answered, Path(D), PLAN, at(200)).stage("completed").due == at(
+        100 + 60 + D
+    )
