@@ -150,7 +150,8 @@ class _Timing:
     def __init__(self, c: UplinkCommand, path: Path) -> None:
         self.path = path
         self.delay = timedelta(seconds=path.delay_s)
-        self.on_robot = self.returns(c.created)
+        # from when it left (a robot not heard yet when it was queued gets it later)
+        self.on_robot = self.returns(c.sent or c.created)
         if c.answered is not None:  # it did reach the robot: one delay before its answer
             self.on_robot = c.answered - self.delay
         self.back = self.returns(self.on_robot)

@@ -178,3 +178,19 @@ def test_a_question_moves_the_end_by_its_wait_not_overdue_meanwhile() -> None:
     assert verify(acked, answered, Path(D), PLAN, at(200)).stage("completed").due == at(
         100 + 60 + D
     )
+
+
+def test_dues_count_from_when_the_command_left() -> None:
+    """Queued before its robot was heard, it left when the robot registered:
+    there and back from then, not from its queuing."""
+    late = sync(state=CommandState.SENT, sent=at(600))
+    v = verify(late, mission(Status.IDLE, Status.IDLE), Path(D), PLAN, at(601))
+    assert v.stage("received").due == at(600 + 2 * D)
+    assert v.stage("started").due == at(600 + D + D)  # on the robot at 610, later than planned
+    assert states(verify(late, mission(Status.IDLE, Status.IDLE), Path(D), PLAN, at(615))) == {
+        "queued": "ok",
+        "sent": "ok",
+        "received": "waiting",
+        "started": "waiting",
+        "completed": "waiting",
+    }
