@@ -499,7 +499,9 @@ class UplinkCommand(Strict):
     sent: datetime | None = Field(None, description="first transmission that may have reached it")
     expires: datetime | None = Field(None, description="the robot never applies it after this")
     settled: datetime | None = Field(None, description="when it left queued/sent")
-    answered: datetime | None = Field(None, description="when the robot's answer arrived")
+    answered: datetime | None = Field(
+        None, description="when the robot processed it (its clock; else when its answer came)"
+    )
     cancel_requested: bool = Field(
         False, description="withdrawn while it may be on the robot: the robot's answer decides"
     )

@@ -152,8 +152,8 @@ class _Timing:
         self.delay = timedelta(seconds=path.delay_s)
         # from when it left (a robot not heard yet when it was queued gets it later)
         self.on_robot = self.returns(c.sent or c.created)
-        if c.answered is not None:  # it did reach the robot: one delay before its answer
-            self.on_robot = c.answered - self.delay
+        if c.answered is not None:  # it reached the robot: its answer says when (its clock)
+            self.on_robot = c.answered
         self.back = self.returns(self.on_robot)
 
     def returns(self, t: datetime | None) -> datetime | None:

@@ -194,3 +194,14 @@ def test_dues_count_from_when_the_command_left() -> None:
         "started": "waiting",
         "completed": "waiting",
     }
+
+
+def test_the_robots_answer_says_when_the_command_reached_it() -> None:
+    """`answered` is the robot's own stamp of processing it: on board then, its
+    start reported a delay later (not a delay earlier, as for an arrival)."""
+    acked = sync(
+        state=CommandState.ACKED, sent=at(590), answered=at(600), settled=at(600), done=["r1-1"]
+    )
+    v = verify(acked, mission(Status.IDLE_SYNCHRONIZED, Status.IDLE), Path(D), PLAN, at(611))
+    assert v.stage("started").due == at(600 + D)
+    assert v.stage("started").state == "waiting"
