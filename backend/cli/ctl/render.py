@@ -161,7 +161,7 @@ def _presence(info: Any, clock: CtlClock = WALL) -> str:
     """Whether the server knows a robot, hears it, and its contact."""
     if info is None:
         return "not registered"
-    if getattr(info, "joining", False):  # it is heard: not "offline", but not in the mission
+    if info.joining:  # it is heard: not "offline", but not in the mission
         asked = f" since {clock.stamp(info.since)}" if info.since else ""
         return f"waiting to be added{asked}"
     if not info.online:
@@ -846,13 +846,13 @@ def fleet_text(r: Any, clock: CtlClock = WALL) -> str:
 
 
 # the client's message kind -> a line of `watch` (telemetry and others: none)
-WATCH_TEXT: dict[str, Callable[[Any], str]] = {
-    "events": _events_text,
-    "fleet": fleet_text,
-    "alert": _alert_text,
-    "malformed": lambda m: f"unreadable {m.what} on {m.key} (ignored): {m.error}",
-    "connection": lambda state: f"connection: {state}",
-    "state": lambda s: f"resynchronized at revision {s.revision} (server {s.server_id})",
+WATCH_TEXT: dict[str, Callable[[Any, CtlClock], str]] = {
+    "events": lambda batch, _clock: _events_text(batch),
+    "fleet": fleet_text,  # the one with stamps: said on the clock
+    "alert": lambda a, _clock: _alert_text(a),
+    "malformed": lambda m, _clock: f"unreadable {m.what} on {m.key} (ignored): {m.error}",
+    "connection": lambda state, _clock: f"connection: {state}",
+    "state": lambda s, _clock: f"resynchronized at revision {s.revision} (server {s.server_id})",
 }
 
 WATCH_JSON: dict[str, Callable[[Any], dict[str, Any]]] = {
@@ -870,7 +870,5 @@ def watch_line(kind: str, payload: Any, as_json: bool, clock: CtlClock = WALL) -
     if as_json:
         obj = WATCH_JSON.get(kind)
         return json.dumps(obj(payload)) if obj else None
-    if kind == "fleet":
-        return fleet_text(payload, clock)
     text = WATCH_TEXT.get(kind)
-    return text(payload) if text else None
+    return text(payload, clock) if text else None
