@@ -61,8 +61,7 @@ class MissionCommands(Provider):
         if m is None:
             return
         for q in open_questions(m.mission):
-            info = m.robots.get(q.robot)
-            due = due_text(q, m.clock, info.delay_s if info is not None else None)
+            due = due_text(q, m.clock, link.robot_delay_s(m.robots, q.robot))
             help_text = f"{q.text} · {due}"
             yield palette_title(q), help_text, partial(open_question, self.app, q.id)
 

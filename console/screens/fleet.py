@@ -129,10 +129,9 @@ class FleetScreen(ViewScreen):
 
     def _uplink(self, robot: str) -> Text:
         """'⇡2 1m10s ⇄20s': commands waiting for the robot, its one-way delay."""
-        info = self.model.robots.get(robot)
         words = [
             link.pending_text(self.model.pending(robot), self.model.clock),
-            link.delay_text(info.delay_s if info is not None else None, self.model.clock),
+            link.delay_text(link.robot_delay_s(self.model.robots, robot), self.model.clock),
         ]
         text = " ".join(w for w in words if w)
         return Text(text or "—", style="" if text else "dim")

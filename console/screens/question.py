@@ -26,6 +26,7 @@ from backend.core.model import Question
 from backend.core.ops import AnswerQuestion
 from console.bindings import bind, key_names
 from console.state.changes import StateChange, Topic
+from console.state.link import robot_delay_s
 from console.state.model import ConsoleModel
 from console.state.questions import answer_text, due_text, ended_text, not_open_text, pick
 
@@ -67,8 +68,7 @@ class QuestionScreen(ModalScreen[str | None]):
 
     def _due_line(self) -> str:
         """When the default applies, and what of it the link leaves an answer."""
-        info = self.model.robots.get(self.question.robot)
-        delay = info.delay_s if info is not None else None
+        delay = robot_delay_s(self.model.robots, self.question.robot)
         return due_text(self.question, self.model.clock, delay)
 
     def _skill_line(self) -> str:

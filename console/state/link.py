@@ -10,6 +10,7 @@ server last heard it come with its fleet entry.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Protocol
 
 from backend.core.model import CommandState, Mission, UplinkCommand
@@ -72,6 +73,12 @@ def pending_text(cmds: list[UplinkCommand], clock: MissionClock) -> str:
         return ""
     oldest = max(queued_for(c, clock) for c in cmds)
     return f"{UPLINK_GLYPH}{len(cmds)} {fmt_duration(oldest)}"
+
+
+def robot_delay_s(robots: Mapping[str, RobotInfo], robot: str) -> float | None:
+    """The robot's estimated one-way delay, wall seconds (None: not known)."""
+    info = robots.get(robot)
+    return info.delay_s if info is not None else None
 
 
 def delay_text(delay_s: float | None, clock: MissionClock) -> str:

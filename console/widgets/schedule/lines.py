@@ -307,8 +307,7 @@ def _link_words(h: Head) -> list[tuple[str, Style]]:
     pending = link.pending_text(h.model.pending(robot), h.model.clock)
     if pending:
         out.append((pending, st["tag"]))
-    info = h.model.robots.get(robot)
-    delay = link.delay_text(info.delay_s if info is not None else None, h.model.clock)
+    delay = link.delay_text(link.robot_delay_s(h.model.robots, robot), h.model.clock)
     if delay:
         out.append((delay, st["dim"]))
     return out
