@@ -19,6 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 
+from backend.core.contact import sim_time_text
 from console.state.text import fmt_clock, fmt_duration
 
 # a sim report up to this many wall seconds behind the clock's interpolation does
@@ -40,12 +41,11 @@ class SimAnchor:
 
 
 def sim_clock_text(seconds: float) -> str:
-    """Sim time as a clock: 26:48, 1:02:05 past an hour, -0:05 before the start."""
+    """Sim time as h:mm:ss, hours always shown as in the server's and ctl's
+    sentences (`sim 0:20:00` is never read as 20 o'clock, and an alert's
+    stamp reads like the top bar's): 0:26:48, 1:02:05, -0:00:05 before the start."""
     sign = "-" if seconds <= -1 else ""
-    s = abs(int(seconds))
-    h, rest = divmod(s, 3600)
-    m, sec = divmod(rest, 60)
-    return f"{sign}{h}:{m:02d}:{sec:02d}" if h else f"{sign}{m}:{sec:02d}"
+    return sign + sim_time_text(abs(seconds))
 
 
 class MissionClock:
@@ -115,14 +115,14 @@ class MissionClock:
 
     # -- in words ---------------------------------------------------------------------------
     def time_text(self, m: float, *, seconds: bool = True) -> str:
-        """A mission time: '26:48' (sim), '15:42:10' (wall, local; '15:42' without seconds)."""
+        """A mission time: '0:26:48' (sim), '15:42:10' (wall, local; '15:42' without seconds)."""
         if self.anchor is not None:
             return sim_clock_text(m)
         text = fmt_clock(datetime.fromtimestamp(m, UTC))
         return text if seconds else text[:5]
 
     def stamp_text(self, t: datetime | None) -> str:
-        """When a wall stamp was, in mission time: 'sim 26:48' or '15:42:10'."""
+        """When a wall stamp was, in mission time: 'sim 0:26:48' or '15:42:10'."""
         if t is None:
             return "--:--:--"
         return self.ts_text(t.timestamp())
@@ -137,7 +137,7 @@ class MissionClock:
         return "sim " if self.anchor is not None else ""
 
     def now_text(self) -> str:
-        """'sim 26:48' (the top bar)."""
+        """'sim 0:26:48' (the top bar)."""
         return f"{self.unit_prefix}{self.time_text(self.now())}"
 
     def duration_text(self, wall_seconds: float | None) -> str:

@@ -33,14 +33,14 @@ def out_of_contact(info: RobotInfo | None) -> bool:
 
 
 def contact_time_text(c: RobotContact, t: float, clock: MissionClock) -> str:
-    """A time of the contact's, in mission time with its unit: 'sim 20:00', '15:42:10'."""
+    """A time of the contact's, in mission time with its unit: 'sim 0:20:00', '15:42:10'."""
     if c.clock == "sim":  # the simulator's seconds: mission time itself
         return f"sim {sim_clock_text(t)}"
     return clock.ts_text(t)
 
 
 def next_contact_text(c: RobotContact, clock: MissionClock) -> str:
-    """'next contact sim 20:00' (or 'no window ahead')."""
+    """'next contact sim 0:20:00' (or 'no window ahead')."""
     if c.next_contact is None:
         return "no window ahead"
     return f"next contact {contact_time_text(c, c.next_contact, clock)}"
@@ -48,7 +48,7 @@ def next_contact_text(c: RobotContact, clock: MissionClock) -> str:
 
 def contact_words(info: RobotInfo | None, clock: MissionClock) -> str:
     """The contact state in a sentence: 'out of contact: window closed, next
-    contact sim 20:00', 'in contact until sim 32:00'; '' when the robot has no
+    contact sim 0:20:00', 'in contact until sim 0:32:00'; '' when the robot has no
     windows (always in contact) or is not present."""
     c = contact_of(info)
     if c is None:
@@ -62,7 +62,7 @@ def contact_words(info: RobotInfo | None, clock: MissionClock) -> str:
 
 def presence_words(info: RobotInfo | None, clock: MissionClock) -> str:
     """The fleet table's presence, when the contact says more than 'online':
-    '◌ out of contact, next sim 20:00', '● in contact until sim 32:00'; '' otherwise."""
+    '◌ out of contact, next sim 0:20:00', '● in contact until sim 0:32:00'; '' otherwise."""
     c = contact_of(info)
     if c is None:
         return ""
@@ -77,8 +77,8 @@ def presence_words(info: RobotInfo | None, clock: MissionClock) -> str:
 
 def header_contact(info: RobotInfo | None, clock: MissionClock, room: int) -> str:
     """A column header's word on the contact, the longest that fits in `room`
-    cells: '◌ next sim 20:00' ('◌ → sim 20:00' at 80 columns) out of contact, '● until
-    sim 32:00' in contact with windows; '' when there is nothing to say or no room
+    cells: '◌ next sim 0:20:00' ('◌ → sim 0:20:00' at 80 columns) out of contact, '● until
+    sim 0:32:00' in contact with windows; '' when there is nothing to say or no room
     (the caller's own word stands)."""
     c = contact_of(info)
     if c is None:

@@ -115,7 +115,7 @@ class Linked(Protocol):
 def link_text(model: Linked, robot: str, clock: MissionClock) -> str:
     """The robot's link in words, in mission time: 'one-way delay 10m · heard 5s
     ago · waiting for its answer: sync #17 sent 40s ago', after its contact
-    state when it has windows ('out of contact: window closed, next contact sim 20:00')."""
+    state when it has windows ('out of contact: window closed, next contact sim 0:20:00')."""
     info = model.robots.get(robot)
     executes = [executing_text(v, clock) for v in executing(info)]
     return " · ".join([*_known(info, clock), _waiting(model, robot, clock), *executes])

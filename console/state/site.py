@@ -30,7 +30,7 @@ class SiteScore:
 
 
 def site_text(site: SiteScore, clock: MissionClock) -> str:
-    """'score 1.9 · sim 26:48': the score as reported and the mission clock."""
+    """'score 1.9 · sim 0:26:48': the score as reported and the mission clock."""
     return f"score {site.score:g} · {clock.now_text()}"
 
 

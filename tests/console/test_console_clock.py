@@ -37,16 +37,16 @@ def test_the_clock_moves_on_at_the_sims_speed_between_reports():
     clock = MissionClock(lambda: wall[0])
     assert not clock.simulated and clock.now_text() == "10:42:07"  # no sim: wall time
     clock.heard(sim_time=1608.0, speed=10.0)
-    assert clock.now_text() == "sim 26:48"
+    assert clock.now_text() == "sim 0:26:48"
     wall[0] += timedelta(seconds=6)
-    assert clock.now_text() == "sim 27:48"
-    assert clock.stamp_text(T0 + timedelta(seconds=3)) == "sim 27:18"
+    assert clock.now_text() == "sim 0:27:48"
+    assert clock.stamp_text(T0 + timedelta(seconds=3)) == "sim 0:27:18"
     assert clock.age_text(T0) == "1m00s" and clock.duration_text(60) == "10m00s"
     clock.heard(sim_time=1667.0, speed=10.0)  # the sim lags a little: the clock waits
-    assert clock.now_text() == "sim 27:48"
+    assert clock.now_text() == "sim 0:27:48"
     clock.heard(sim_time=30.0, speed=10.0)  # a new sim run: the clock follows
-    assert clock.now_text() == "sim 0:30"
-    assert sim_clock_text(3725) == "1:02:05" and sim_clock_text(-5) == "-0:05"
+    assert clock.now_text() == "sim 0:00:30"
+    assert sim_clock_text(3725) == "1:02:05" and sim_clock_text(-5) == "-0:00:05"
 
 
 def test_a_stamp_and_its_mission_time_go_both_ways():
@@ -63,10 +63,10 @@ async def test_the_top_bar_shows_the_reported_score_and_the_sim_clock():
         await inject(app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
         assert "score" not in screen_text(app).splitlines()[0]  # no simulator, no line
         app.post_message(_sim(0.9, 1608.0))
-        await wait_until(pilot, lambda: "sim 26:48" in screen_text(app), what="the sim clock")
-        assert "score 0.9 · sim 26:48" in screen_text(app).splitlines()[0]
+        await wait_until(pilot, lambda: "sim 0:26:48" in screen_text(app), what="the sim clock")
+        assert "score 0.9 · sim 0:26:48" in screen_text(app).splitlines()[0]
         app.post_message(_sim(1.9, 1700.0))  # a stone delivered, reported
-        await wait_until(pilot, lambda: "score 1.9 · sim 28:20" in screen_text(app), what="1.9")
+        await wait_until(pilot, lambda: "score 1.9 · sim 0:28:20" in screen_text(app), what="1.9")
 
 
 async def test_at_speed_10_every_time_shown_is_sim_time_and_ticks_without_reports():
@@ -81,12 +81,12 @@ async def test_at_speed_10_every_time_shown_is_sim_time_and_ticks_without_report
         app.post_message(_sim(0.0, 1608.0, speed=10.0))
         far = RobotInfo(name="lru2", online=True, since=T0, heard=T0, delay_s=60.0)
         app.post_message(fleet_changed(far))  # `--link-delay 10m` at speed 10
-        await wait_until(pilot, lambda: "sim 26:48" in screen_text(app), what="the sim clock")
+        await wait_until(pilot, lambda: "sim 0:26:48" in screen_text(app), what="the sim clock")
         screen = app.mission_screen
         screen.schedule.select("lru2-5")
         await pilot.pause()
         assert "⇡1 0s  ⇄10m00s" in screen_text(app)  # the delay in sim time, not 1m00s
-        for second, shown in ((1, "26:58"), (2, "27:08"), (3, "27:18")):
+        for second, shown in ((1, "0:26:58"), (2, "0:27:08"), (3, "0:27:18")):
             wall[0] = T0 + timedelta(seconds=second)  # no report: 10 sim seconds a second
             screen.freshness_tick()
             await pilot.pause()
@@ -108,6 +108,6 @@ def test_score_and_sim_clock_80x24(snap_compare):
         app = pilot.app
         await inject(app, pilot, mars_mid_execution(), telemetry=mars_telemetry())
         app.post_message(_sim(0.9, 1608.0))
-        await wait_until(pilot, lambda: "score 0.9 · sim 26:48" in screen_text(app), what="clock")
+        await wait_until(pilot, lambda: "score 0.9 · sim 0:26:48" in screen_text(app), what="clock")
 
     assert snap_compare(make_app(), terminal_size=(80, 24), run_before=run)

@@ -56,13 +56,13 @@ def _model(now=T0) -> ConsoleModel:
 def test_out_of_contact_is_said_with_the_next_window_in_mission_time():
     clock = MissionClock(lambda: T0)
     closed = _info(CLOSED)
-    assert header_contact(closed, clock, 20) == f"{CONTACT_GLYPH} next sim 20:00"
-    assert header_contact(closed, clock, 15) == f"{CONTACT_GLYPH} → sim 20:00"  # 80 columns
-    assert header_contact(closed, clock, 12) == f"{CONTACT_GLYPH} →sim 20:00"
-    assert header_contact(closed, clock, 11) == f"{CONTACT_GLYPH} sim 20:00"
+    assert header_contact(closed, clock, 20) == f"{CONTACT_GLYPH} next sim 0:20:00"
+    assert header_contact(closed, clock, 17) == f"{CONTACT_GLYPH} → sim 0:20:00"  # 80 columns
+    assert header_contact(closed, clock, 14) == f"{CONTACT_GLYPH} →sim 0:20:00"
+    assert header_contact(closed, clock, 13) == f"{CONTACT_GLYPH} sim 0:20:00"
     assert header_contact(closed, clock, 3) == CONTACT_GLYPH
-    assert contact_words(closed, clock) == "out of contact: window closed, next contact sim 20:00"
-    assert presence_words(closed, clock) == f"{CONTACT_GLYPH} out of contact, next sim 20:00"
+    assert contact_words(closed, clock) == "out of contact: window closed, next contact sim 0:20:00"
+    assert presence_words(closed, clock) == f"{CONTACT_GLYPH} out of contact, next sim 0:20:00"
     never = _info(CLOSED.model_copy(update={"next_contact": None}))
     assert header_contact(never, clock, 15) == f"{CONTACT_GLYPH} no contact"
     assert contact_words(never, clock) == "out of contact: window closed, no window ahead"
@@ -70,9 +70,9 @@ def test_out_of_contact_is_said_with_the_next_window_in_mission_time():
 
 def test_in_contact_with_windows_says_until_when_and_without_windows_nothing():
     clock = MissionClock(lambda: T0)
-    assert header_contact(_info(OPEN), clock, 20) == "● until sim 32:00"
+    assert header_contact(_info(OPEN), clock, 20) == "● until sim 0:32:00"
     assert header_contact(_info(OPEN), clock, 10) == ""  # the caller's "● online" stands
-    assert contact_words(_info(OPEN), clock) == "in contact until sim 32:00"
+    assert contact_words(_info(OPEN), clock) == "in contact until sim 0:32:00"
     for info in (_info(ALWAYS), _info(None), _info(CLOSED, online=False)):
         assert header_contact(info, clock, 40) == contact_words(info, clock) == ""
         assert presence_words(info, clock) == ""
@@ -87,7 +87,7 @@ def test_a_wall_clock_window_is_said_in_the_consoles_mission_time():
         "next contact " + clock.ts_text((T0 + timedelta(minutes=5)).timestamp())
     )
     clock.heard(sim_time=600.0, speed=1.0)  # a sim runs: mission time is its time
-    assert contact_words(_info(wall), clock).endswith("next contact sim 15:00")
+    assert contact_words(_info(wall), clock).endswith("next contact sim 0:15:00")
 
 
 def test_a_robot_out_of_contact_is_its_last_known_state():
@@ -125,7 +125,7 @@ async def _closed_window(app, pilot):
     for t in mars_telemetry():
         if t.robot != "lru1":
             app.post_message(telemetry_changed(t.model_copy(update={"at": now[0]})))
-    await wait_until(pilot, lambda: "sim 20:00" in screen_text(app), what="the header")
+    await wait_until(pilot, lambda: "sim 0:20:00" in screen_text(app), what="the header")
     app.mission_screen.freshness_tick()
     await pilot.pause()
 
@@ -135,7 +135,7 @@ async def test_the_schedule_and_the_fleet_say_when_the_next_window_opens():
     async with app.run_test(size=(120, 40)) as pilot:
         await _closed_window(app, pilot)
         text = screen_text(app)
-        assert f"{CONTACT_GLYPH} → sim 20:00│" in text, text  # its column is narrow
+        assert f"{CONTACT_GLYPH} →sim 0:20:00│" in text, text  # its column is narrow
         # drawn as last known, as of when it was heard, with what it probably does now
         assert "6m20s ago ≈ lru1-" in text, text
         assert "● online" in text  # the others: as before
@@ -145,8 +145,8 @@ async def test_the_schedule_and_the_fleet_say_when_the_next_window_opens():
         table.move_cursor(row=app.screen.shown.index("lru1"))
         await pilot.pause()
         text = screen_text(app)
-        assert f"{CONTACT_GLYPH} out of contact, next sim 20:00" in text, text
-        assert "link: out of contact: window closed, next contact sim 20:00 · heard" in text
+        assert f"{CONTACT_GLYPH} out of contact, next sim 0:20:00" in text, text
+        assert "link: out of contact: window closed, next contact sim 0:20:00 · heard" in text
         assert "4 robots, 2 online, 1 out of contact" in text, text
 
 
@@ -155,6 +155,6 @@ def test_robot_out_of_contact_80x24(snap_compare):
         app = pilot.app
         await _closed_window(app, pilot)
         text = screen_text(app)
-        assert f"{CONTACT_GLYPH} → sim 20:00│" in text and "6m20s ago:" in text, text
+        assert f"{CONTACT_GLYPH} → sim 0:20:00│" in text and "6m20s ago:" in text, text
 
     assert snap_compare(make_app(), terminal_size=(80, 24), run_before=run)

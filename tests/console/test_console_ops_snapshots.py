@@ -66,13 +66,13 @@ async def _picker(app, pilot):
 
 
 SCREENS = {
-    "schedule": (_keys(), ("sim 26:48", "sync #1 queued 30s ago", "w Cancel cmd")),
+    "schedule": (_keys(), ("sim 0:26:48", "sync #1 queued 30s ago", "w Cancel cmd")),
     "timeline": (_keys("f7"), ("plan ends sim", "link delay 10m00s")),
     "checks": (_keys("f8"), ("waive",)),
     "map": (_keys("f3"), ("here: ", "cursor (")),
     "fleet": (_keys("f4"), ("4 online", "cancel a command")),
-    "log": (_keys("f5"), ("sim 26:48", "refusal")),
-    "alerts": (_keys("f6"), ("sim 26:48", "acknowledge")),
+    "log": (_keys("f5"), ("sim 0:26:48", "refusal")),
+    "alerts": (_keys("f6"), ("sim 0:26:48", "acknowledge")),
     "help": (_keys("f1"), ("operator console", "Navigation")),
     "cancel": (_keys("w"), ("Cancel sync #1 to lru2 (lru2-5, lru2-6)?", "Keep it (n)")),
     "picker": (_picker, ("take_science_image", "science")),

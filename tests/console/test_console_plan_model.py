@@ -144,7 +144,7 @@ def test_the_axis_labels_ticks_that_fit_and_marks_now():
 
 def test_with_a_sim_the_axis_reads_sim_time():
     clock = MissionClock(lambda: datetime.fromtimestamp(NOW, UTC))
-    clock.heard(sim_time=1500.0, speed=10.0)  # sim 25:00 now, 10 sim seconds per wall second
+    clock.heard(sim_time=1500.0, speed=10.0)  # sim 0:25:00 now, 10 sim seconds per wall second
     win = tl.Window(1500.0, 15.0, 60)  # mission time: 15 sim seconds per column
     labels, marks = tl.axis(win, clock.now(), clock)
     text = "".join(c for c, _ in labels)
@@ -181,7 +181,7 @@ def test_at_a_sims_speed_bars_and_spans_are_in_sim_time():
     wall = tl.bars(b.mission, fc, "lru2", WALL, NOW - 60, NOW + 3600)
     fast = tl.bars(b.mission, fc, "lru2", sim, -600, 36000)
     assert [x.id for x in fast] == [x.id for x in wall]
-    for w, s in zip(wall, fast, strict=True):  # ten times as long, counted from sim 0:00
+    for w, s in zip(wall, fast, strict=True):  # ten times as long, counted from sim 0:00:00
         assert abs((s.end - s.start) - 10 * (w.end - w.start)) < 1e-6
         assert abs(s.start - 10 * (w.start - NOW)) < 1e-6
     said = tl.details(b.mission, fc, "lru2-3", sim)
