@@ -14,7 +14,9 @@ A stage's *due* is when its evidence should reach the ground, on the wall clock
 leaves when the robot is next in contact, reaches it one delay later, and its
 answer comes back when the robot is in contact again, one delay later. A
 skill starts when the plan's forecast (sent with the sync) said, or once the
-robot has the command if that is later; it ends the forecast's duration after
+robot has the command if that is later, and only in run mode: a robot halted
+(no run, or a pause, stop or reset since) starts nothing before the next run
+reaches it, and none on its way means no start is due; it ends the forecast's duration after
 it actually started; its report comes back as the answer does. No forecast, or
 no contact ahead: no due (nothing to be late against). A stage not reached
 `tolerance_s` after its due is *overdue*.
@@ -52,6 +54,7 @@ TOLERANCE_MIN_S: Final = 2.0  # wall seconds: the downlink's own pace, a busy lo
 TOLERANCE_SHARE: Final = 0.1  # of the time from the command's creation to the due
 EXECUTES: Final = frozenset({"sync", "retry"})  # the commands whose skills start and complete
 _FAIL_STATES = frozenset({CommandState.REFUSED, CommandState.EXPIRED, CommandState.CANCELLED})
+_MODE_OPS = frozenset({"run", "pause", "stop", "reset"})  # what sets the robot's run mode
 _UNSTARTED = frozenset({Status.IDLE, Status.IDLE_SYNCHRONIZED, Status.SYNCHWAITING})
 
 
@@ -133,7 +136,7 @@ def verify(
         Stage(name="queued", state="ok", at=c.created),
         _sent(c, timing.back),
         _received(c, timing.back),
-        *_execution(c, skills, skills.plan(forecast), timing),
+        *_execution(c, skills, timing, skills.plan(forecast)),
     ]
     return Verification(
         command=c.id,
@@ -166,6 +169,7 @@ class _Skills:
     """The skills a command executes, as the mission has them now."""
 
     def __init__(self, c: UplinkCommand, mission: Mission) -> None:
+        self.mission = mission
         self.skills = [f[2] for f in filter(None, map(mission.find, watched(c)))]
         self.asked = _asked(mission, c.robot, set(self.ids()))
         # applied, then taken back (unsynchronized) before they started: they never will
@@ -229,27 +233,52 @@ def _executes(c: UplinkCommand) -> bool:
 
 
 def _execution(
-    c: UplinkCommand, skills: _Skills, plan: list[Predicted], timing: _Timing
+    c: UplinkCommand, skills: _Skills, timing: _Timing, plan: list[Predicted]
 ) -> list[Stage]:
     """The started and completed stages (none for a command that executes nothing)."""
     if not _executes(c):
         return [Stage(name="started", state="none"), Stage(name="completed", state="none")]
     if c.state in _FAIL_STATES:
         return [Stage(name="started", state="failed"), Stage(name="completed", state="failed")]
-    start_due, end_due = _execution_dues(plan, timing, skills.started(), skills.asked)
+    runs = timing.on_robot if skills.started() else _runs_from(c, skills.mission, timing)
+    start_due, end_due = _execution_dues(plan, timing, runs, skills.started(), skills.asked)
     return [_start_stage(skills, start_due), _end_stage(skills, end_due)]
 
 
+def _runs_from(c: UplinkCommand, mission: Mission, timing: _Timing) -> datetime | None:
+    """When the robot may start the command's skills: once it has them, if it
+    is in run mode then (the last run, pause, stop or reset it applied before
+    them was a run), else once the next run reaches it; None while none is on
+    its way (it is halted: nothing is late before an operator sends a run)."""
+    modes = [
+        m
+        for m in mission.uplink.get(c.robot, [])
+        if m.op in _MODE_OPS and m.state not in _FAIL_STATES
+    ]
+    before = [m for m in modes if m.seq < c.seq]
+    if before and before[-1].op == "run":
+        return timing.on_robot
+    run = next((m for m in modes if m.seq > c.seq and m.op == "run"), None)
+    if run is None or timing.on_robot is None:
+        return None
+    run_on = _Timing(run, timing.path).on_robot
+    return None if run_on is None else max(timing.on_robot, run_on)
+
+
 def _execution_dues(
-    plan: list[Predicted], timing: _Timing, started: datetime | None, asked: timedelta
+    plan: list[Predicted],
+    timing: _Timing,
+    runs: datetime | None,
+    started: datetime | None,
+    asked: timedelta,
 ) -> tuple[datetime | None, datetime | None]:
     """When word of the start and of the end is due: the plan's times, later if
-    the command reached the robot later; the end moves with the actual start
-    and with the time its skills waited on questions (`asked`)."""
-    if not plan or timing.on_robot is None:
+    the robot could run them later (`runs`); the end moves with the actual
+    start and with the time its skills waited on questions (`asked`)."""
+    if not plan or runs is None:
         return None, None
     planned = min(p.start for p in plan)
-    expected = max(planned, timing.on_robot)
+    expected = max(planned, runs)
     shift = max((started or expected) - planned, timedelta(0)) + asked
     return timing.returns(expected), timing.returns(max(p.end for p in plan) + shift)
 

@@ -24,20 +24,32 @@ def at(s: float) -> datetime:
     return T0 + timedelta(seconds=s)
 
 
-def mission(*statuses: Status, started: float | None = None) -> Mission:
+def mission(
+    *statuses: Status, started: float | None = None, modes: tuple[UplinkCommand, ...] | None = None
+) -> Mission:
+    """r1's skills; by default r1 is in run mode (a run it applied before the sync)."""
     skills = [
         SkillInstance(id=f"r1-{i + 1}", skill="drive", status=st) for i, st in enumerate(statuses)
     ]
     if started is not None:
         skills[0] = skills[0].model_copy(update={"started_at": at(started)})
-    return Mission(library="lib.yaml", tasks={"r1": skills})
+    uplink = list(modes if modes is not None else (mode("run", seq=1, answered=at(-5)),))
+    return Mission(library="lib.yaml", tasks={"r1": skills}, uplink={"r1": uplink})
+
+
+def mode(op: str, seq: int, **kw: object) -> UplinkCommand:
+    """A run, pause, stop or reset for r1 (acked when `answered` is given)."""
+    state = CommandState.ACKED if "answered" in kw else CommandState.QUEUED
+    base: dict[str, object] = {"id": seq, "robot": "r1", "seq": seq, "op": op}
+    base |= {"command": {"cmd": op}, "created": T0 - timedelta(seconds=30), "state": state}
+    return UplinkCommand.model_validate({**base, **kw})
 
 
 def sync(**kw: object) -> UplinkCommand:
     base: dict[str, object] = {
         "id": 7,
         "robot": "r1",
-        "seq": 1,
+        "seq": 2,
         "op": "sync",
         "command": Enqueue(skills=[]),
         "skills": ["r1-1", "r1-2"],
@@ -205,3 +217,35 @@ def test_the_robots_answer_says_when_the_command_reached_it() -> None:
     v = verify(acked, mission(Status.IDLE_SYNCHRONIZED, Status.IDLE), Path(D), PLAN, at(611))
     assert v.stage("started").due == at(600 + D)
     assert v.stage("started").state == "waiting"
+
+
+def test_a_halted_robot_is_not_late_to_start_until_a_run_is_on_its_way() -> None:
+    """Synchronized without a run, the skills wait for the operator, not the
+    robot: no start or end is due (the demo said 'has not started … 27 s late')."""
+    halted = mission(Status.IDLE_SYNCHRONIZED, Status.IDLE_SYNCHRONIZED, modes=())
+    v = verify(
+        sync(sent=T0, state=CommandState.ACKED, answered=at(D), done=["r1-1", "r1-2"]),
+        halted,
+        Path(D),
+        PLAN,
+        at(500),
+    )
+    assert v.stage("started").due is None and v.stage("completed").due is None
+    assert states(v)["started"] == "waiting"  # not overdue
+    ran = mode("run", seq=1, answered=at(-9))
+    stopped = mission(Status.IDLE_SYNCHRONIZED, modes=(ran, mode("stop", seq=2, answered=at(-5))))
+    v = verify(sync(seq=3), stopped, Path(D), PLAN, at(500))
+    assert v.stage("started").due is None
+
+
+def test_a_run_sent_after_the_sync_times_the_start_from_its_arrival() -> None:
+    run = mode("run", seq=3, created=at(100), sent=at(100))
+    later = mission(Status.IDLE_SYNCHRONIZED, Status.IDLE_SYNCHRONIZED, modes=(run,))
+    v = verify(sync(sent=T0), later, Path(D), PLAN, at(101))
+    assert v.stage("started").due == at(100 + 2 * D)  # the run arrives, word comes back
+    assert v.stage("completed").due == at(200 + 70 + 2 * D)  # the plan, 70 s later than it said
+    cancelled = run.model_copy(update={"state": CommandState.CANCELLED})
+    v = verify(
+        sync(sent=T0), mission(Status.IDLE_SYNCHRONIZED, modes=(cancelled,)), Path(D), PLAN, at(101)
+    )
+    assert v.stage("started").due is None  # a run that never goes does not count
