@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Awaitable, Callable
+from itertools import chain
 from typing import Any
 
 from backend.agent import Choice
@@ -45,22 +46,20 @@ class SimChooser:
 
     async def __call__(self, choice: Choice) -> Pose | None:
         for other in choice.rule.ask:
-            if other != self.robot.name:
-                await self._learn_from(other)
+            await self._learn_from(other)
         picked = pick(self.world, list(self.robot.knowledge.rss.values()), choice.rule)
-        if picked is None:
+        where = None if picked is None else place(self.world, picked, choice.rule)
+        if picked is None or where is None:
             return None
-        where = place(self.world, picked, choice.rule)
-        if where is not None:
-            self.world.log(
-                f"{self.robot.name} chose {choice.marker} at ({where[0]:.1f}, {where[1]:.1f}): "
-                f"{choice.rule.describe()} ({', '.join(g['rss'] for g in picked)})"
-            )
-        return None if where is None else Pose(x=round(where[0], 1), y=round(where[1], 1))
+        self.world.log(
+            f"{self.robot.name} chose {choice.marker} at ({where[0]:.1f}, {where[1]:.1f}): "
+            f"{choice.rule.describe()} ({', '.join(g['rss'] for g in picked)})"
+        )
+        return Pose(x=round(where[0], 1), y=round(where[1], 1))
 
     async def _learn_from(self, other: str) -> None:
         """What `other` knows of the regions (nothing while they cannot talk)."""
-        answer = await self.ask(self.robot, other, "rss", {})
+        answer = await self.ask(self.robot, other, "rss", {}) if other != self.robot.name else None
         for region in (answer or {}).get("regions", []):
             self.robot.knowledge.learn_rss(region)
 
@@ -73,12 +72,13 @@ def pick(world: World, regions: list[Region], rule: ChooseRule) -> list[Region] 
     group = best_group(world, regions)
     if group is None:
         return None
-    if rule.pick == "closest_pair":
-        chosen = closest_pair(group)
-    else:
-        chosen = sorted(group, key=lambda g: (-(g.get("top_score") or 0.0), _to_lander(world, g)))
-        chosen = chosen[:2]
+    chosen = closest_pair(group) if rule.pick == "closest_pair" else best_two(world, group)
     return sorted(chosen, key=lambda g: (_to_lander(world, g), g["rss"]))
+
+
+def best_two(world: World, group: list[Region]) -> list[Region]:
+    """The two best revealed top scores (unknown ones last), the nearest among equals."""
+    return sorted(group, key=lambda g: (-(g.get("top_score") or 0.0), _to_lander(world, g)))[:2]
 
 
 def best_group(world: World, regions: list[Region]) -> list[Region] | None:
@@ -93,9 +93,9 @@ def best_group(world: World, regions: list[Region]) -> list[Region] | None:
 def _groups(regions: list[Region]) -> list[list[Region]]:
     """The regions grouped: single link within LINK_M."""
     groups: list[list[Region]] = []
-    for g in sorted(regions, key=lambda r: r["rss"]):
+    for g in sorted(regions, key=lambda r: str(r["rss"])):
         near = [c for c in groups if _links(g, c)]
-        groups = [c for c in groups if c not in near] + [[g] + [o for c in near for o in c]]
+        groups = [c for c in groups if c not in near] + [[g, *chain.from_iterable(near)]]
     return groups
 
 

@@ -196,12 +196,11 @@ def _as_place(value: Any, marker: str) -> Pose | None | str:
 
 
 def _pose(value: Any) -> Pose | None:
-    if isinstance(value, Pose):
-        return value
-    if not isinstance(value, dict):
-        return None
+    """A place from a raw value (a partner's message, a parameter), or None."""
+    if isinstance(value, Pose) or not isinstance(value, dict):
+        return value if isinstance(value, Pose) else None
     try:
-        return Pose.model_validate({k: v for k, v in value.items() if k in Pose.model_fields})
+        return Pose.model_validate({k: value[k] for k in Pose.model_fields if k in value})
     except ValidationError:
         return None
 

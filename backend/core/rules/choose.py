@@ -30,6 +30,7 @@ from backend.core.model import (
 )
 from backend.core.ops import Report
 from backend.core.rules.base import Rules
+from backend.core.rules.markers import bound
 
 NEAR_M = 0.5  # metres two robots' choices may differ by and still agree
 
@@ -115,21 +116,20 @@ def reported(rules: Rules, op: Report) -> tuple[list[ev.Event], list[RaisedAlert
 def _follow(rules: Rules, name: str, old: Marker, new: Marker) -> list[ev.Event]:
     """Idle skills bound to the marker take its chosen place (those on their
     way to a robot, or on it, choose it there)."""
-    events: list[ev.Event] = []
+    idle = {s.id: (robot, s) for robot, s, _p in bound(rules, name) if _follows(rules, s)}
     rules.mission.markers[name] = new  # to compute the bound values
     try:
-        for robot, task in rules.mission.tasks.items():
-            for s in task:
-                if s.status != Status.IDLE or s.id in rules.locked:
-                    continue
-                if name not in s.bindings.values():
-                    continue
-                params = rules.check_params(robot, s.skill, s.params, s.bindings, skill_id=s.id)
-                if params != s.params:
-                    events.append(ev.SkillEdited(id=s.id, params=params))
+        edits = [
+            (s, rules.check_params(robot, s.skill, s.params, s.bindings, skill_id=s.id))
+            for robot, s in idle.values()
+        ]
     finally:
         rules.mission.markers[name] = old
-    return events
+    return [ev.SkillEdited(id=s.id, params=p) for s, p in edits if p != s.params]
+
+
+def _follows(rules: Rules, s: SkillInstance) -> bool:
+    return s.status == Status.IDLE and s.id not in rules.locked
 
 
 def placed(mk: PoseMarker | PositionMarker, pose: Pose, chosen: Chosen) -> Marker:
