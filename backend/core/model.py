@@ -251,6 +251,21 @@ class _Choosable:
         return getattr(self, "choose", None) is not None and getattr(self, "chosen", None) is None
 
 
+def on_board_text(mk: object, before: str = "", after: str = "") -> str:
+    """How views say a marker chosen on board came where it is, between
+    `before` and `after` ('' for any other marker): 'to be chosen on board
+    (...): the place shown is an estimate' or 'chosen on board by lru1 (lru1-5)'."""
+    rule: ChooseRule | None = getattr(mk, "choose", None)
+    chosen: Chosen | None = getattr(mk, "chosen", None)
+    if rule is None:
+        return ""
+    if chosen is None:
+        text = f"to be chosen on board ({rule.describe()}): the place shown is an estimate"
+    else:
+        text = f"chosen on board by {chosen.robot} ({chosen.skill})"
+    return before + text + after
+
+
 class PoseMarker(Strict, _Choosable):
     kind: Literal["pose"] = "pose"
     pose: Pose
