@@ -62,6 +62,7 @@ PAPER = {
     "substituted": "(not in the paper: lru1 broken at 12 min, lru3 joins at 15; issue 30)",
     "ideal_by_hand": "today's policies: the ground sequences each step",
     "ideal_on_board": "contingencies + after: one uplink after the survey",
+    "ideal_chosen_on_board": "+ places chosen on board: the whole mission in the first uplink",
 }
 
 

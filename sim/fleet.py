@@ -33,6 +33,7 @@ from backend.protocol import mapfeed as mf
 from backend.transport import QueryFailed
 from sim.calibration import drift
 from sim.calibration import properties as manifest_properties
+from sim.choice import SimChooser
 from sim.comms import CommsWindow
 from sim.errors import SimError
 from sim.exchange import WorldExchange
@@ -202,6 +203,7 @@ class SimFleet:
         agent.link = SimLink(self.world, robot, self)
         self._add_skills(agent, robot, rtype.skills)
         WorldExchange(self.world, robot).register(agent)
+        agent.on_choose(SimChooser(self.ask, self.world, robot))  # markers chosen on board
         return agent
 
     def _add_skills(self, agent: RobotAgent, robot: SimRobot, skills: list[str]) -> None:

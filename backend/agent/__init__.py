@@ -12,10 +12,12 @@
   by sequence number; outbox: the downlink (reports and answers, one
   numbered sequence) until acknowledged;
 - questions: a handler's questions to the operators (`ctx.ask_operator`);
+- choices: markers whose place the robot chooses on board (`agent.on_choose`);
 - telemetry, barriers, world (robot-to-robot ask/tell);
 - link: the link model; runtime: the loop, session and link the parts share.
 """
 
+from backend.agent.choices import Choice
 from backend.agent.context import SkillContext
 from backend.agent.facade import RobotAgent
 from backend.agent.link import Link
@@ -32,6 +34,7 @@ from backend.agent.telemetry import STEADY, TelemetryPolicy
 
 __all__ = [
     "AlreadyConnected",
+    "Choice",
     "Failure",
     "Link",
     "RegistrationRefused",

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from backend.agent.barriers import wait_for_partners
+from backend.agent.choices import Choices
 from backend.agent.context import Execution, SkillContext
 from backend.agent.contingency import barrier_wait, guarded, past_deadline, scale, take
 from backend.agent.outcomes import Failure, SkillFailed, Success
@@ -52,6 +53,7 @@ class Executor:
         handlers: Mapping[str, Handler],
         signatures: Mapping[str, SkillSignature],
         precedence: Precedence,
+        choices: Choices,
     ):
         self.agent = agent  # the RobotAgent (ctx.agent)
         self.rt = rt
@@ -60,6 +62,7 @@ class Executor:
         self.handlers = handlers
         self.signatures = signatures  # the library's, from the last registration
         self.precedence = precedence  # policies.after: waits for other robots' skills
+        self.choices = choices  # markers chosen on board, before the handler runs
         self.running: Execution | None = None  # the Execution of queue.active
         # the thread of the last plain-function handler, done once it returned
         self._handler_thread: asyncio.Future[None] | None = None
@@ -158,6 +161,13 @@ class Executor:
             return None
         failed = await self.precedence.wait(
             act, scale(self), lambda text: self.queue.report(entry, Status.SYNCHWAITING, text)
+        )
+        if failed is not None:
+            await take(self, act, "failure", failed)
+            return None
+        failed = await self.choices.resolve(
+            act,
+            lambda text, chosen: self.queue.report(entry, Status.SYNCHWAITING, text, chosen=chosen),
         )
         if failed is not None:
             await take(self, act, "failure", failed)

@@ -91,6 +91,7 @@ from typing import Any
 import zenoh
 
 from backend import transport
+from backend.agent.choices import Choices, ChooseHook
 from backend.agent.execution import Executor
 from backend.agent.link import Link
 from backend.agent.outbox import Outbox
@@ -231,6 +232,8 @@ class RobotAgent:
             learned=self._precedence.learned,
             asking=lambda: self.questions.asking,
         )
+        # markers chosen on board: asked of partners, or of the integrator's hook
+        self._choices = Choices(self._rt, self._peers, lambda: float(self.time_scale) or 1.0)
         self._executor = Executor(
             self,
             self._rt,
@@ -239,6 +242,7 @@ class RobotAgent:
             self._handlers,
             self._signatures,
             self._precedence,
+            self._choices,
         )
         self.world_stats = self._peers.stats
         self._commands: dict[type, Callable[[Any], Effect]] = {
@@ -295,6 +299,26 @@ class RobotAgent:
     def on_tell(self, topic: str, fn: Callable[..., Any]) -> None:
         """`fn(data, sender)` (or a coroutine) receives tells on `topic`."""
         self._peers.add_handler("tell", topic, fn)
+
+    def on_choose(self, fn: ChooseHook) -> ChooseHook:
+        """Register the hook that chooses the place of a marker chosen on board:
+        `fn(choice: Choice) -> Pose | None` (or a coroutine); None while it
+        does not know enough yet (asked again), SkillFailed to give up. Usable
+        as a decorator. docs/robots.md "Places chosen on board"."""
+        if not callable(fn):
+            raise TypeError(
+                f"robot {self.name}: on_choose takes a function fn(choice) -> Pose | None, "
+                f"not {type(fn).__name__}"
+            )
+        if self._choices.hook is not None:
+            raise ValueError(f"robot {self.name}: a choice hook is registered already")
+        self._choices.hook = fn
+        return fn
+
+    @property
+    def chosen(self) -> dict[str, Pose]:
+        """Marker -> the place this robot holds for it (its choice or a partner's)."""
+        return dict(self._choices.places)
 
     def manifest(self) -> Manifest:
         return Manifest(
@@ -581,6 +605,7 @@ class RobotAgent:
             kinds=cmd.kinds,
             contingencies=cmd.contingencies,
             after=cmd.after,
+            choose=cmd.choose,
         )
         if change.ok:
             self._executor.kick()

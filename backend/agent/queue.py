@@ -23,7 +23,15 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from types import MappingProxyType
 
-from backend.core.model import BarrierInfo, Branches, SkillInstance, Status, Taken
+from backend.core.model import (
+    BarrierInfo,
+    Branches,
+    ChooseOnBoard,
+    Pose,
+    SkillInstance,
+    Status,
+    Taken,
+)
 from backend.core.ops import Answer, Ask, AskEnded, Report
 
 Msg = Report | Answer | Ask | AskEnded  # a downlink message
@@ -46,6 +54,8 @@ class HeldSkill:
     branches: Branches | None = None
     branch_kinds: Mapping[str, Mapping[str, str]] = field(default_factory=dict)
     after_robot: str | None = None  # the robot running policies.after (Enqueue.after)
+    # parameter -> the marker chosen on board it takes its value from (Enqueue.choose)
+    choose: Mapping[str, ChooseOnBoard] = field(default_factory=dict)
     attempt: int = 1
     retries_used: int = 0
     reported_attempt: int = 0  # the attempt of its last report
@@ -145,6 +155,7 @@ class SkillQueue:
         kinds: Mapping[str, Mapping[str, str]] | None = None,
         contingencies: Mapping[str, Branches] | None = None,
         after: Mapping[str, str] = MappingProxyType({}),
+        choose: Mapping[str, Mapping[str, ChooseOnBoard]] = MappingProxyType({}),
     ) -> Effect:
         """Queue `skills` (at the head when `front`: a retry the operator asked
         for), each with its parameters' kinds (`kinds`: skill name -> parameter
@@ -178,6 +189,7 @@ class SkillQueue:
                     branches=contingencies.get(s.id),
                     branch_kinds=kinds,
                     after_robot=after.get(s.id),
+                    choose=choose.get(s.id, {}),
                     attempt=s.attempt,
                 )
             )
@@ -343,7 +355,12 @@ class SkillQueue:
         return self.seq
 
     def report(
-        self, entry: HeldSkill, status: Status, info: str = "", branch: Taken | None = None
+        self,
+        entry: HeldSkill,
+        status: Status,
+        info: str = "",
+        branch: Taken | None = None,
+        chosen: Mapping[str, Pose] | None = None,
     ) -> Report | None:
         """Record a status change of `entry` as the next numbered report.
         None when it is no change: `running` again at the same attempt (the
@@ -365,6 +382,7 @@ class SkillQueue:
             attempt=entry.attempt,
             at=self._clock(),
             branch=branch,
+            chosen=dict(chosen or {}),
         )
         self.on_report(report)
         return report

@@ -36,6 +36,7 @@ class AlertKind(StrEnum):
     OVERDUE = "overdue"
     TEAM = "team"
     QUESTION = "question"
+    CHOSEN = "chosen"
 
 
 MEANING: dict[AlertKind, str] = {
@@ -54,6 +55,8 @@ MEANING: dict[AlertKind, str] = {
     AlertKind.TEAM: "a robot asked to join the mission, was added or was retired",
     AlertKind.QUESTION: "a robot's skill asks the operators a question (answer it before its "
     "default applies on board)",
+    AlertKind.CHOSEN: "a robot chose the place of a marker chosen on board (or two robots "
+    "chose it differently)",
 }
 
 

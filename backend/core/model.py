@@ -137,27 +137,6 @@ class Position(Strict):
     z: float = 0.0
 
 
-class PoseMarker(Strict):
-    kind: Literal["pose"] = "pose"
-    pose: Pose
-    description: str = ""
-
-
-class PositionMarker(Strict):
-    kind: Literal["position"] = "position"
-    position: Position
-    description: str = ""
-
-
-class AreaMarker(Strict):
-    kind: Literal["area"] = "area"
-    area: list[Position] = Field(min_length=3)
-    description: str = ""
-
-
-Marker = Annotated[PoseMarker | PositionMarker | AreaMarker, Field(discriminator="kind")]
-
-
 def _mission_seconds(value: Any) -> Any:
     """'10m', '1.5h', 90 -> seconds (backend.core.durations); other values as given."""
     if isinstance(value, str):
@@ -202,6 +181,114 @@ def _halt(value: object) -> bool:
 
 def _empty(value: object) -> bool:
     return not value
+
+
+class ChooseRule(Strict):
+    """How a robot chooses a marker's place on board, from what it knows
+    (docs/robots.md "Places chosen on board"): among the regions it knows,
+    pick a pair or the best, take the `rank`-th, and go to its `place`."""
+
+    among: Literal["regions_beyond_coverage", "regions"] = Field(
+        "regions_beyond_coverage",
+        description="the regions to choose from: those beyond the lander's coverage, or all",
+    )
+    pick: Literal["closest_pair", "best_score"] = Field(
+        "closest_pair",
+        description="closest_pair: the two regions nearest each other (one short trip); "
+        "best_score: the best revealed top scores",
+    )
+    rank: int = Field(1, ge=1, le=10, description="which of those picked (1: nearest the lander)")
+    place: Literal["region", "approach", "relay"] = Field(
+        "region",
+        description="region: its centre; approach: a passable point next to it; relay: where "
+        "a Wi-Fi box at the edge of coverage covers the picked regions",
+    )
+    ask: list[Name] = Field(
+        default_factory=list,
+        max_length=10,
+        description="robots to ask what they know first (a survey drone)",
+    )
+    wait_s: MissionSeconds = Field(
+        1800.0, description="mission seconds a robot may wait to know enough to choose"
+    )
+
+    def describe(self) -> str:
+        """'approach to #2 of closest_pair among regions_beyond_coverage'."""
+        where = "relay for" if self.place == "relay" else f"{self.place} of #{self.rank} of"
+        return f"{where} {self.pick} among {self.among}"
+
+
+class Chosen(Strict):
+    """Who chose a marker's place on board, and when (its report's)."""
+
+    robot: Name
+    skill: SkillId
+    at: datetime | None = None
+
+
+def _choose_field() -> Any:
+    # chosen on board: its place is the ground's estimate until a robot reports
+    # its choice (`chosen`); left out of dumps while unset (files keep their form)
+    return Field(
+        None,
+        exclude_if=_unset,
+        description="chosen on board by the robot whose skill is bound to it (the value here "
+        "is the ground's estimate until then)",
+    )
+
+
+def _chosen_field() -> Any:
+    return Field(None, exclude_if=_unset, description="set when a robot reported its choice")
+
+
+class _Choosable:
+    """A marker a robot may choose the place of (its fields: each class's own,
+    so that files keep `kind` first)."""
+
+    @property
+    def to_choose(self) -> bool:
+        """Its place is still to be chosen by a robot."""
+        return getattr(self, "choose", None) is not None and getattr(self, "chosen", None) is None
+
+
+def on_board_text(mk: object, before: str = "", after: str = "") -> str:
+    """How views say a marker chosen on board came where it is, between
+    `before` and `after` ('' for any other marker): 'to be chosen on board
+    (...): the place shown is an estimate' or 'chosen on board by lru1 (lru1-5)'."""
+    rule: ChooseRule | None = getattr(mk, "choose", None)
+    chosen: Chosen | None = getattr(mk, "chosen", None)
+    if rule is None:
+        return ""
+    if chosen is None:
+        text = f"to be chosen on board ({rule.describe()}): the place shown is an estimate"
+    else:
+        text = f"chosen on board by {chosen.robot} ({chosen.skill})"
+    return before + text + after
+
+
+class PoseMarker(Strict, _Choosable):
+    kind: Literal["pose"] = "pose"
+    pose: Pose
+    description: str = ""
+    choose: ChooseRule | None = _choose_field()
+    chosen: Chosen | None = _chosen_field()
+
+
+class PositionMarker(Strict, _Choosable):
+    kind: Literal["position"] = "position"
+    position: Position
+    description: str = ""
+    choose: ChooseRule | None = _choose_field()
+    chosen: Chosen | None = _chosen_field()
+
+
+class AreaMarker(Strict):
+    kind: Literal["area"] = "area"
+    area: list[Position] = Field(min_length=3)
+    description: str = ""
+
+
+Marker = Annotated[PoseMarker | PositionMarker | AreaMarker, Field(discriminator="kind")]
 
 
 class FallbackSkill(Strict):
@@ -389,6 +476,20 @@ class BarrierInfo(BarrierTimeout):
     partners: dict[Name, SkillId]
 
 
+class ChooseOnBoard(Strict):
+    """A parameter of a sent skill bound to a marker chosen on board: the robot
+    chooses its value before the handler runs (`RobotAgent.on_choose`)."""
+
+    marker: Name
+    rule: ChooseRule
+    team: list[Name] = Field(
+        default_factory=list,
+        max_length=100,
+        description="the other robots with skills bound to the marker: asked first, and told "
+        "the choice, so that they agree",
+    )
+
+
 class Enqueue(Strict):
     """Queue these skills (at the head with `front`: a retry)."""
 
@@ -407,6 +508,12 @@ class Enqueue(Strict):
         default_factory=dict,
         exclude_if=_empty,
         description="skill id -> the skills its fallback / goto branches run (policies)",
+    )
+    choose: dict[SkillId, dict[Name, ChooseOnBoard]] = Field(
+        default_factory=dict,
+        exclude_if=_empty,
+        description="skill id -> its parameters whose values the robot chooses on board "
+        "(markers chosen on board; the value in params is the ground's estimate)",
     )
     kinds: dict[Name, dict[Name, ParamType]] = Field(
         default_factory=dict,

@@ -454,6 +454,13 @@ class Report(Strict):
         exclude_if=lambda v: v is None,
         description="the contingency it took (policies on_failure / on_timeout), and why",
     )
+    chosen: dict[Name, Pose] = Field(
+        default_factory=dict,
+        max_length=100,
+        exclude_if=lambda v: not v,
+        description="markers chosen on board for this skill -> the place the robot chose "
+        "(or took from a partner's choice)",
+    )
 
 
 def choices_problem(choices: list[str], default: str) -> str | None:

@@ -23,7 +23,7 @@ from textual.screen import Screen
 from textual.signal import Signal
 from textual.widgets import Footer, Static
 
-from backend.core.model import Status
+from backend.core.model import Status, on_board_text
 from console.bindings import bind, bindings, key_names
 from console.messages import HelpRequested
 from console.operations import OperationService
@@ -159,6 +159,8 @@ def _selection_text(model: ConsoleModel, v: MapView, t: Text) -> None:
     if v.selected_marker:
         use = marker_use(model).get(v.selected_marker, "unused")
         t.append(f"  marker {v.selected_marker} ({use})")
+        markers = model.mission.markers if model.mission is not None else {}
+        t.append(on_board_text(markers.get(v.selected_marker), " "), style="italic")
     found = model.find(v.selected_skill)
     if found is not None:
         s = found[2]
@@ -450,7 +452,10 @@ class MapScreen(Screen):
         if mk.kind == "pose":
             self.view.heading = mk.pose.yaw
         self.view.set_cursor(*marker_point(mk))
-        self.say(f"marker {name} ({mk.kind}){': ' + mk.description if mk.description else ''}")
+        self.say(
+            f"marker {name} ({mk.kind}){': ' + mk.description if mk.description else ''}"
+            + on_board_text(mk, "; ")
+        )
         self.update_info()
 
     # -- actions: markers (map_markers.py) and parameters (map_params.py) ------------------

@@ -18,6 +18,14 @@ what it sends arrives one delay later (docs/pilot-study.md, "The ideal at a
   out there. Without LRU1's scores (they would cost two more delays) it
   takes the two regions of the group closest together: one short trip.
 
+- **ideal_chosen_on_board** (contingencies + precedence + places chosen on
+  board): the whole mission in the first uplink. The two regions and the
+  Wi-Fi box's spot are markers chosen on board: the robots choose them
+  from Ardea's survey (asked robot to robot once Ardea is back in coverage)
+  with the rule ideal_on_board's operator follows on the ground (the closest
+  pair of the largest group beyond the lander's coverage), agree robot to
+  robot and report the places; the rest is ideal_on_board's plan.
+
 Robots' questions are on and nobody answers them: a question applies its
 default on board at its answer_within (bench/pilot_study.py lists those asked).
 """
@@ -27,17 +35,19 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from backend.core.model import Policies
-from backend.core.ops import AddBarrier, AddSkill
+from backend.core.model import ChooseRule, Policies, Pose, PoseMarker, Position, PositionMarker
+from backend.core.ops import AddBarrier, AddSkill, MarkerAdd
 
 from .pilot import (
     Operator,
     Region,
     _pose,
     best_cluster,
+    explore_near,
     explore_with_all_three,
     ideal,
     relay_spot,
+    survey_from_the_air,
 )
 
 DELAY_DEADLINE = 3 * 3600.0  # sim seconds a delayed run may take (the study's 26.8 min cannot)
@@ -133,4 +143,109 @@ def _in_order(op: Operator, pair: list[Region]) -> list[Region]:
     return sorted(pair, key=lambda g: math.hypot(g.x - lx, g.y - ly))
 
 
-DELAY_STRATEGIES = {"ideal_by_hand": ideal_by_hand, "ideal_on_board": ideal_on_board}
+# ---------------------------------------------------------------- chosen on board
+
+SURVEYOR = "ardea"  # the robot the rovers ask for the survey's regions
+# the places the robots choose (markers chosen on board): (name, kind, rule)
+CHOSEN = (
+    ("RELAY", "pose", ChooseRule(place="relay", ask=[SURVEYOR])),
+    ("R1-near", "pose", ChooseRule(rank=1, place="approach", ask=[SURVEYOR])),
+    ("R1", "position", ChooseRule(rank=1, place="region", ask=[SURVEYOR])),
+    ("R2-near", "pose", ChooseRule(rank=2, place="approach", ask=[SURVEYOR])),
+    ("R2", "position", ChooseRule(rank=2, place="region", ask=[SURVEYOR])),
+)
+
+Bound = tuple[str, dict[str, Any], dict[str, str], Policies]  # skill, params, bindings
+
+
+async def ideal_chosen_on_board(op: Operator) -> None:
+    """The whole mission in the first uplink: the robots choose the two
+    regions (the closest pair beyond the lander's coverage, from Ardea's
+    survey, asked on board) and the Wi-Fi box's spot themselves, agreeing
+    robot to robot; the rest is ideal_on_board's plan, bound to those places."""
+    await _chosen_markers(op)
+    (op.shelved,) = await op.do("lander", ("load_box", {"box": "wifi_box_1", "slot": 2}))
+    await survey_from_the_air(op)
+    lru1 = [await explore_near(op, "lru1", "east", 200.0)]
+    lru1 += await op.do("lru1", ("recharge", {"target_level": 0.95}))
+    lru2 = [await explore_near(op, "lru2", "west", 100.0)]
+    lru2 += await op.do(
+        "lru2",
+        ("drive_to", {"goal": _pose((3.0, -2.0)), "speed": 1.0}),
+        ("recharge", {"target_level": 0.95}),
+    )
+    regions = (("R1", "R1-near"), ("R2", "R2-near"))
+    lru1 += await _bound(op, "lru1", *(s for g in regions for s in _chosen_visit(*g, "lru2")))
+    lru2 += await _bound(
+        op,
+        "lru2",
+        (
+            "deploy_wifi_box",
+            {"box": "wifi_box_1"},
+            {"goal": "RELAY"},
+            Policies(after=op.shelved, on_failure="skip"),
+        ),
+        *(s for g in regions for s in _chosen_visit(*g, "lru1") + [_chosen_pick(g[0])]),
+        ("drive_to", {"goal": _pose((2.0, 0.0)), "speed": 1.0}, {}, Policies()),
+        ("drop_stone", {}, {}, Policies()),
+    )
+    # lru1: explore, recharge, (drive, identify) x 2; lru2: explore, drive, recharge,
+    # deploy, (drive, identify, pick) x 2, drive, drop
+    for a, b in ((lru1[3], lru2[5]), (lru1[5], lru2[8])):
+        await op.client.submit(AddBarrier(ids=[a, b], timeout=BARRIER_WAIT, on_timeout="continue"))
+    await op.send("lru1", lru1[2:])
+    await op.send("lru2", lru2[3:])
+    await op.done(lru2[-1])
+    m = op.client.mission
+    assert m is not None
+    for name, _kind, _rule in CHOSEN:
+        mk = m.markers[name]
+        if getattr(mk, "chosen", None) is not None:
+            p = mk.pose if mk.kind == "pose" else mk.position  # type: ignore[union-attr]
+            op.note(f"{name} chosen on board by {mk.chosen.robot}: ({p.x:.0f}, {p.y:.0f})")  # type: ignore[union-attr]
+
+
+async def _chosen_markers(op: Operator) -> None:
+    """The places to choose, each estimated at the lander until a robot chose it."""
+    lx, ly = op.lander().x, op.lander().y
+    for name, kind, rule in CHOSEN:
+        marker: PoseMarker | PositionMarker
+        if kind == "pose":
+            marker = PoseMarker(pose=Pose(x=lx, y=ly), choose=rule, description="chosen on board")
+        else:
+            marker = PositionMarker(
+                position=Position(x=lx, y=ly), choose=rule, description="chosen on board"
+            )
+        await op.client.submit(MarkerAdd(name=name, marker=marker))
+
+
+async def _bound(op: Operator, robot: str, *steps: Bound) -> list[str]:
+    ids = []
+    for skill_name, params, bindings, policies in steps:
+        reply = await op.client.submit(
+            AddSkill(
+                robot=robot, skill=skill_name, params=params, bindings=bindings, policies=policies
+            )
+        )
+        ids.append(reply.value["id"])
+    return ids
+
+
+def _chosen_visit(region: str, near: str, partner: str) -> list[Bound]:
+    """Drive next to the chosen region at full speed, identify with the partner
+    (the library's search radius takes in a whole region); each goes on if it fails."""
+    return [
+        ("drive_to", {"speed": 1.0}, {"goal": near}, ON_FAILURE_GO_ON),
+        ("identify_stone", {"partner": partner}, {"target": region}, ON_FAILURE_GO_ON),
+    ]
+
+
+def _chosen_pick(region: str) -> Bound:
+    return ("pick_stone", {}, {"target": region}, ON_FAILURE_GO_ON)
+
+
+DELAY_STRATEGIES = {
+    "ideal_by_hand": ideal_by_hand,
+    "ideal_on_board": ideal_on_board,
+    "ideal_chosen_on_board": ideal_chosen_on_board,
+}

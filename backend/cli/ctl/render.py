@@ -22,6 +22,7 @@ from backend.cli.ctl.questions import EVENT_TEXT as QUESTION_EVENT_TEXT
 from backend.cli.ctl.team import DESCRIBE as TEAM_DESCRIBE
 from backend.core.contact import sim_time_text
 from backend.core.contingency import after_tags, awaited_by, marks, span_text, taken_text
+from backend.core.model import on_board_text
 from backend.core.params import POSE_FIELDS, POSITION_FIELDS, is_angle, pose_text, value_text
 from backend.protocol.messages import RobotInfo
 
@@ -200,7 +201,12 @@ def _marker_text(mk: Any) -> str:
             f"{_num(p.x)},{_num(p.y)}" + (f",{_num(p.z)}" if p.z else "") for p in mk.area
         )
         text = f"area {pts}"
-    return text + (f"  {mk.description}" if mk.description else "")
+    origin = on_board_text(mk)  # a place chosen on board says so, never silently
+    return (
+        text
+        + (f"  {mk.description}" if mk.description else "")
+        + (f"  [{origin}]" if origin else "")
+    )
 
 
 def _shown(robot: str, only: list[str] | None) -> bool:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from backend.core.library import Library, SkillSpec
-from backend.core.model import FINISHED, Mission, SkillInstance, Status, Waiver
+from backend.core.model import FINISHED, Mission, SkillInstance, Status, Waiver, on_board_text
 from backend.core.plan.contingency_checks import (
     after_deadlock,
     branch_energy,
@@ -386,8 +386,35 @@ def _goals(ctx: CheckContext) -> Iterator[tuple[str, Step, str, tuple[float, flo
             if step.leg is None or step.leg.goal is None or spec is None:
                 continue
             param = spec.duration.goal_param
-            if param is not None and not spec.duration.goes_home(step.skill.params):
+            if param is None or spec.duration.goes_home(step.skill.params):
+                continue
+            if _chosen_on_board(ctx, step.skill, param) is None:  # an estimate: said apart
                 yield robot, step, param, step.leg.goal
+
+
+def _chosen_on_board(ctx: CheckContext, s: SkillInstance, param: str) -> str | None:
+    """The marker chosen on board the parameter is bound to, while no robot chose it."""
+    name = s.bindings.get(param)
+    mk = ctx.mission.markers.get(name) if name is not None else None
+    return name if mk is not None and on_board_text(mk).startswith("to be chosen") else None
+
+
+def _estimated(ctx: CheckContext) -> Iterator[Hit]:
+    """Skills bound to a place a robot chooses on board: the ground only estimates it."""
+    steps = [(robot, step) for robot, course in ctx.courses.items() for step in course.steps]
+    for robot, step in steps:
+        s = step.skill
+        for param, name in sorted((p, _chosen_on_board(ctx, s, p)) for p in s.bindings):
+            if name is None:
+                continue
+            yield Hit(
+                f"{s.id}/{param}",
+                f"{robot}: {s.display()} goes where {robot} or its team chooses on board "
+                f"({name}, {param}): the forecast and checks use the ground's estimate until "
+                "a robot reports the place",
+                robot=robot,
+                skills=(s.id,),
+            )
 
 
 def _rovers(ctx: CheckContext) -> list[tuple[str, Course]]:
@@ -608,6 +635,12 @@ RULES: tuple[CheckRule, ...] = (
     CheckRule("terrain.no_route", "error", "no route to a goal", _no_route, needs_site=True),
     CheckRule(
         "terrain.unexplored", "warning", "a goal on unexplored ground", _unexplored, needs_site=True
+    ),
+    CheckRule(
+        "marker.chosen_on_board",
+        "warning",
+        "a skill bound to a place chosen on board: the ground only estimates it",
+        _estimated,
     ),
     CheckRule(
         "params.self_reference", "error", "a robot parameter naming its own robot", _self_reference

@@ -32,6 +32,7 @@ from backend.core.ops import (
     UnsyncDone,
 )
 from backend.core.plan.gate import check_sync
+from backend.core.rules import choose
 from backend.core.rules.base import Change, Refusal, Rule, Rules, skill_of
 
 # -- commands: claim, plan, release ---------------------------------------------
@@ -358,7 +359,8 @@ def report(rules: Rules, op: Report) -> Change:
     change = _reported_change(s, op)
     if change is not None:
         events.append(change)
-    return Change(events, [], {}, None)
+    placed, alerts = choose.reported(rules, op)  # markers it chose on board
+    return Change(events + placed, [], {}, None, alerts=tuple(alerts))
 
 
 def _reported_skill(rules: Rules, op: Report) -> tuple[str, int, SkillInstance]:

@@ -59,7 +59,7 @@ from backend.core.ops import (
     UplinkSettle,
 )
 from backend.core.plan.gate import check_sync
-from backend.core.rules import barriers, contingency, questions
+from backend.core.rules import barriers, choose, contingency, questions
 from backend.core.rules.base import (
     Change,
     Refusal,
@@ -188,6 +188,7 @@ def sync(rules: Rules, op: Sync) -> Change:
             kinds={**contingency.kinds(rules, found), **_kinds(rules, skills)},
             contingencies=found,
             after=contingency.afters(rules, skills),
+            choose=choose.on_board(rules, op.robot, skills),
         ),
         [s.id for s in skills],
     )
@@ -389,6 +390,7 @@ def retry(rules: Rules, op: Retry) -> Change:
             kinds={**contingency.kinds(rules, found), **_kinds(rules, [new])},
             contingencies=found,
             after=contingency.afters(rules, [new]),
+            choose=choose.on_board(rules, robot, [new]),
         ),
         [s.id, new.id],
     )

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from backend.core.model import Policies, Waiver
+from backend.core.model import ChooseRule, Chosen, Policies, Pose, PoseMarker, Waiver
 from backend.core.plan.checks import RULES, run_checks
 from backend.core.plan.inputs import PlanInputs, RobotNow
 
@@ -283,6 +283,25 @@ def test_goals_on_impassable_and_unexplored_ground_and_without_a_route():
     assert "terrain.no_route:r1-3/goal" in ids(out)
     assert not any("r1-4" in i or "d1-1" in i for i in ids(out) if i.startswith("terrain"))
     assert [f for f in found(m, robots=robots) if f.rule.startswith("terrain")] == []
+
+
+def test_a_goal_chosen_on_board_is_an_estimate_said_so_not_judged_by_the_map():
+    site = FakeSite(radius=500, rocks={(20, 0)})
+    to_choose = skill("r1-1", "drive", goal=pose(20, 0))
+    to_choose.bindings = {"goal": "R1"}
+    m = mission({"r1": "rover"}, {"r1": [to_choose]})
+    m.markers["R1"] = PoseMarker(pose=Pose(x=20, y=0), choose=ChooseRule())
+    robots = {"r1": RobotNow(at=T0, x=0, y=0, battery=1.0)}
+    out = found(m, site=site, robots=robots)
+    (said,) = [f for f in out if f.rule == "marker.chosen_on_board"]
+    assert said.id == "marker.chosen_on_board:r1-1/goal" and said.severity == "warning"
+    assert "chooses on board (R1, goal)" in said.message and "estimate" in said.message
+    assert not [f for f in out if f.rule.startswith("terrain")]  # the estimate is no goal
+    # once a robot chose it, it is a goal like any other
+    m.markers["R1"].chosen = Chosen(robot="r1", skill="r1-1")
+    out = found(m, site=site, robots=robots)
+    assert "terrain.impassable:r1-1/goal" in ids(out)
+    assert not [f for f in out if f.rule == "marker.chosen_on_board"]
 
 
 # -- parameters ----------------------------------------------------------------------------
