@@ -379,6 +379,9 @@ def retry(rules: Rules, op: Retry) -> Change:
         raise Refusal("cannot_retry", f"{s.display()}: {why}", robot=robot, skill=s.id)
     check_retriable(rules, robot, i, s)
     new = s.next_attempt(Status.IDLE_SYNCHRONIZED)
+    # its markers resolved again, as a sync does: one chosen on board (or
+    # moved) since the failed attempt went up sends its place, not the old one
+    new.params = rules.check_params(robot, new.skill, new.params, new.bindings, skill_id=new.id)
     found = contingency.branches(rules, robot, [new])
     check_offered(rules, robot, contingency.run_by(found))
     c = _Maker(rules, _expiry(rules, op)).make(

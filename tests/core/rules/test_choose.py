@@ -10,7 +10,7 @@ from pathlib import Path
 
 from backend.core.alerts import AlertKind
 from backend.core.model import ChooseOnBoard, ChooseRule, Enqueue, Pose, PoseMarker, Status
-from backend.core.ops import EditSkill, MarkerAdd, Report, Sync, SyncAck
+from backend.core.ops import EditSkill, MarkerAdd, Report, Retry, Sync, SyncAck
 from backend.core.rules.engine import Engine
 from backend.server.journal import Journal
 
@@ -140,3 +140,18 @@ def test_the_journal_gives_the_chosen_marker_back(tmp_path):
     assert mission is not None
     assert mission.markers["R1"] == j.engine.mission.markers["R1"]
     assert mission.model_dump() == j.engine.mission.model_dump()
+
+
+def test_a_retry_sends_the_place_chosen_since_the_failed_attempt(tmp_path):
+    j = planned(tmp_path)
+    j.sync("lru2", "lru2-1")
+    j.report("lru2", "lru2-1", S.RUNNING)
+    j.report("lru2", "lru2-1", S.FAILURE, info="stuck")  # before anyone chose R1
+    j.sync("lru1", "lru1-1")
+    j.report("lru1", "lru1-1", S.SYNCHWAITING, chosen={"R1": CHOSEN})
+    applied = j.submit(Retry(id="lru2-1"))
+    c = j.engine.mission.command(applied.value["command"])
+    assert c is not None and isinstance(c.command, Enqueue)
+    (attempt,) = c.command.skills
+    assert (attempt.params["goal"]["x"], attempt.params["goal"]["y"]) == (57.0, -38.0)
+    assert c.command.choose == {}  # chosen already: it goes up as a value
