@@ -432,8 +432,9 @@ leaves hold whole rows), page size 1 kB or 16 kB, wal_autocheckpoint
 every reader of the live file out: not done. Figures: this run above; a
 run 2 minutes before, beside a test run, 1.20x (rounds 1.12-1.38x); the
 `--floor` just after: `took` 1.8 us a sample, the writer 12.2 us a row
-every 5 s, 1.12x by its parts, its round 1.02x. So the target is met in
-quiet runs and not by the parts' sum: what is left is `took` (the pydantic
+every 5 s, 1.12x by its parts, its round 1.02x; a full run after it
+1.10x (rounds 1.05-1.16x). So the target is met, barely, in quiet runs,
+and not by the parts' sum: what is left is `took` (the pydantic
 TzInfo's timestamp() 1.5 us of a kept sample's 3; the same-tzinfo
 subtraction 0.65 us, not done) and a write's own COMMIT and wake-ups.
 """
