@@ -24,14 +24,12 @@ from backend.core.model import Pose
 from backend.core.records import RecordError, open_read_only, size_on_disk, tables
 from backend.protocol.messages import Alert, RobotInfo, Telemetry
 
-ARCHIVE_FORMAT = "missionctl/telemetry-archive@1"
+# @2 added `recent` (the newest samples, not yet in `telemetry`); @1 files read as ever
+ARCHIVE_FORMAT = "missionctl/telemetry-archive@2"
+FORMATS = ("missionctl/telemetry-archive@1", ARCHIVE_FORMAT)
 
-SCHEMA = """
-CREATE TABLE IF NOT EXISTS meta (
-    key   TEXT PRIMARY KEY,
-    value TEXT NOT NULL
-);
-CREATE TABLE IF NOT EXISTS telemetry (
+_SAMPLE_TABLE = """
+CREATE TABLE IF NOT EXISTS {name} (
     id       INTEGER PRIMARY KEY,
     robot    TEXT NOT NULL,
     at       REAL NOT NULL,
@@ -39,9 +37,20 @@ CREATE TABLE IF NOT EXISTS telemetry (
     x REAL, y REAL, z REAL, roll REAL, pitch REAL, yaw REAL,
     battery  REAL, link REAL, in_range INTEGER,
     mode     TEXT, skill TEXT, progress REAL, eta_s REAL, info TEXT
+);"""
+
+# `telemetry`: the samples, by robot in either clock (two indexes); `recent`:
+# the newest ones, appended without an index (one B-tree a row, not three)
+# and moved to `telemetry` in bulk by the writer (backend/server/archive.py)
+SCHEMA = f"""
+CREATE TABLE IF NOT EXISTS meta (
+    key   TEXT PRIMARY KEY,
+    value TEXT NOT NULL
 );
+{_SAMPLE_TABLE.format(name="telemetry")}
 CREATE INDEX IF NOT EXISTS telemetry_ground ON telemetry (robot, received);
 CREATE INDEX IF NOT EXISTS telemetry_robot ON telemetry (robot, at);
+{_SAMPLE_TABLE.format(name="recent")}
 CREATE TABLE IF NOT EXISTS notes (
     id   INTEGER PRIMARY KEY,
     kind TEXT NOT NULL,
@@ -62,6 +71,7 @@ SAMPLE_COLUMNS = (
     "robot, at, received, x, y, z, roll, pitch, yaw, battery, link, in_range, "
     "mode, skill, progress, eta_s, info"
 )
+_ROBOTS = "SELECT DISTINCT robot FROM {}"
 ALERT, FLEET = "alert", "fleet"  # the kinds of note
 M = TypeVar("M", Alert, RobotInfo)
 
@@ -117,15 +127,21 @@ class ArchiveReader:
         self.path = Path(path)
         self._conn = open_read_only(self.path, "telemetry archive")
         try:
-            if not {"meta", "telemetry", "notes"} <= tables(self._conn):
+            have = tables(self._conn)
+            if not {"meta", "telemetry", "notes"} <= have:
                 raise RecordError(f"{self.path}: not a missionctl telemetry archive")
             meta = dict(self._conn.execute("SELECT key, value FROM meta").fetchall())
-            if meta.get("format") != ARCHIVE_FORMAT:
+            if meta.get("format") not in FORMATS:
                 raise RecordError(
-                    f"{self.path}: archive format {meta.get('format')!r} is not {ARCHIVE_FORMAT!r}"
+                    f"{self.path}: archive format {meta.get('format')!r} is not one of "
+                    f"{', '.join(map(repr, FORMATS))}"
                 )
             self.meta = meta
-            self.robots = [r for (r,) in self._conn.execute("SELECT DISTINCT robot FROM telemetry")]
+            # the samples' tables, oldest samples first (@1: `telemetry` alone)
+            self._tables = ("telemetry", "recent") if "recent" in have else ("telemetry",)
+            self.robots = sorted(  # the index's order (SQLite compares UTF-8 bytes)
+                {r for t in self._tables for (r,) in self._conn.execute(_ROBOTS.format(t))}
+            )
         except sqlite3.Error as e:
             self.close()
             raise RecordError(f"{self.path}: cannot read the telemetry archive: {e}") from None
@@ -146,42 +162,54 @@ class ArchiveReader:
     def _column(clock: str) -> str:
         return "received" if clock == GROUND else "at" if clock == ROBOT else ""
 
+    def _newest(self, cols: str, robot: str, t: float, col: str, n: int) -> list[tuple[Any, ...]]:
+        """Rows (`col` first, then `cols`) of the robot's last `n` samples at or
+        before `t` in `col`, newest first (ties: the newer written first): from
+        each table (`recent` holds the newest, a few minutes, unindexed), merged."""
+        rows: list[tuple[Any, ...]] = []
+        for table in reversed(self._tables):
+            rows += self._conn.execute(
+                f"SELECT {col}, {cols} FROM {table} WHERE robot = ? AND {col} <= ? "
+                f"ORDER BY {col} DESC, id DESC LIMIT ?",
+                (robot, t, n),
+            ).fetchall()
+        if len(self._tables) > 1:
+            rows.sort(key=_first, reverse=True)  # stable: ties stay newer first
+            del rows[n:]
+        return rows
+
     def last_samples(self, robot: str, t: float, clock: str, n: int) -> list[Sample]:
         """The robot's last `n` samples at or before `t` of `clock`, oldest first."""
-        col = self._column(clock)
-        rows = self._conn.execute(
-            f"SELECT {col}, {SAMPLE_COLUMNS} FROM telemetry WHERE robot = ? AND {col} <= ? "
-            f"ORDER BY {col} DESC LIMIT ?",
-            (robot, t, n),
-        ).fetchall()
+        rows = self._newest(SAMPLE_COLUMNS, robot, t, self._column(clock), n)
         return [Sample(row[0], _sample(row[1:])) for row in reversed(rows)]
 
     def last_levels(self, robot: str, t: float, clock: str, n: int) -> list[tuple[float, float]]:
         """(battery, link) of the robot's last `n` samples at or before `t` of
         `clock`, oldest first: a sparkline's, without making each sample."""
-        col = self._column(clock)
-        rows = self._conn.execute(
-            f"SELECT battery, link FROM telemetry WHERE robot = ? AND {col} <= ? "
-            f"ORDER BY {col} DESC LIMIT ?",
-            (robot, t, n),
-        ).fetchall()
-        return rows[::-1]
+        rows = self._newest("battery, link", robot, t, self._column(clock), n)
+        return [(battery, link) for _, battery, link in reversed(rows)]
 
     def samples(self, after: float, upto: float, clock: str) -> Iterator[Sample]:
         """Every robot's samples with `after` < time <= `upto` in `clock`, in
         time order: a range of each robot's index (over all robots at once,
-        SQLite scanned the whole table for playing's every step)."""
+        SQLite scanned the whole table for playing's every step), then the
+        newest ones not yet indexed (`recent`: a few minutes' worth)."""
         col = self._column(clock)
+        where = f"{col} > ? AND {col} <= ? ORDER BY {col}, id"
+        select = f"SELECT {col}, {SAMPLE_COLUMNS} FROM"
         rows = [
             row
             for r in self.robots
             for row in self._conn.execute(
-                f"SELECT {col}, {SAMPLE_COLUMNS} FROM telemetry "
-                f"WHERE robot = ? AND {col} > ? AND {col} <= ? ORDER BY {col}",
-                (r, after, upto),
+                f"{select} telemetry WHERE robot = ? AND {where}", (r, after, upto)
             )
         ]
-        rows.sort(key=lambda row: row[0])  # stable: ties in robot order, as the index
+        if "recent" in self._tables:
+            rank = {r: k for k, r in enumerate(self.robots)}
+            news = self._conn.execute(f"{select} recent WHERE {where}", (after, upto)).fetchall()
+            news.sort(key=lambda row: rank.get(row[1], len(rank)))  # as the index: by robot
+            rows += news
+        rows.sort(key=_first)  # stable: ties in robot order, as the index
         for row in rows:
             yield Sample(row[0], _sample(row[1:]))
 
@@ -199,7 +227,8 @@ class ArchiveReader:
     def span(self, clock: str) -> tuple[float, float] | None:
         """The first and last sample's time in `clock` (None: no sample): the
         ends of each robot's index (min() and max() over the whole table
-        scanned it: 10 ms at 74,000 samples, asked at every step of playing)."""
+        scanned it: 10 ms at 74,000 samples, asked at every step of playing),
+        and of the few newest not yet indexed."""
         if not self.robots:
             return None
         col = self._column(clock)
@@ -207,7 +236,10 @@ class ArchiveReader:
             f"SELECT (SELECT min({col}) FROM telemetry WHERE robot = ?) AS lo, "
             f"(SELECT max({col}) FROM telemetry WHERE robot = ?) AS hi"
         )
-        sql = f"SELECT min(lo), max(hi) FROM ({' UNION ALL '.join([one] * len(self.robots))})"
+        parts = [one] * len(self.robots)
+        if "recent" in self._tables:
+            parts.append(f"SELECT min({col}), max({col}) FROM recent")
+        sql = f"SELECT min(lo), max(hi) FROM ({' UNION ALL '.join(parts)})"
         lo, hi = self._conn.execute(sql, [r for r in self.robots for _ in "lh"]).fetchone()
         return None if lo is None else (lo, hi)
 
@@ -243,6 +275,10 @@ class ArchiveReader:
 
     def size_bytes(self) -> int:
         return size_on_disk(self.path)
+
+
+def _first(row: tuple[Any, ...]) -> Any:
+    return row[0]
 
 
 def _read(model: type[M], body: str) -> M | None:

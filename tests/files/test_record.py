@@ -490,3 +490,82 @@ def test_history_filters_by_robot_user_and_time(recorded):
 
     newest = history.answer(recorded.db, HistoryRequest(limit=5), owners)
     assert newest.more and [e.revision for e in newest.entries] == revisions[-5:]
+
+
+_FORMAT_1 = """
+CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE telemetry (
+    id INTEGER PRIMARY KEY, robot TEXT NOT NULL, at REAL NOT NULL, received REAL NOT NULL,
+    x REAL, y REAL, z REAL, roll REAL, pitch REAL, yaw REAL,
+    battery REAL, link REAL, in_range INTEGER,
+    mode TEXT, skill TEXT, progress REAL, eta_s REAL, info TEXT
+);
+CREATE INDEX telemetry_ground ON telemetry (robot, received);
+CREATE INDEX telemetry_robot ON telemetry (robot, at);
+CREATE TABLE notes (
+    id INTEGER PRIMARY KEY, kind TEXT NOT NULL, at REAL NOT NULL, body TEXT NOT NULL
+);
+INSERT INTO meta VALUES ('format', 'missionctl/telemetry-archive@1');
+"""
+
+
+def test_an_archive_of_the_first_format_reads_as_ever(tmp_path):
+    """@1 (before `recent`): its samples in both clocks, its span; a server
+    that opens it again makes it @2 and keeps them."""
+    from backend.protocol.archive import ARCHIVE_FORMAT, SAMPLE_COLUMNS, sample_row
+
+    path = tmp_path / "old.telemetry.db"
+    with sqlite3.connect(path) as conn:
+        conn.executescript(_FORMAT_1)
+        for k in range(5):
+            row = sample_row(_sample("lru1", 1000.0 + k), 2000.0 + k)
+            conn.execute(
+                f"INSERT INTO telemetry ({SAMPLE_COLUMNS}) VALUES ({', '.join('?' * 17)})", row
+            )
+    conn.close()
+    with ArchiveReader(path) as r:
+        assert r.robots == ["lru1"] and r.span(GROUND) == (2000.0, 2004.0)
+        assert [s.at for s in r.last_samples("lru1", 1002.0, ROBOT, 2)] == [1001.0, 1002.0]
+        assert [s.at for s in r.samples(2001.0, 2003.0, GROUND)] == [2002.0, 2003.0]
+    archive = TelemetryArchive(path, every_s=0.0)
+    archive.start()
+    archive.close()
+    with ArchiveReader(path) as r:
+        assert r.meta["format"] == ARCHIVE_FORMAT and r.span(ROBOT) == (1000.0, 1004.0)
+
+
+def test_the_newest_samples_read_before_they_are_moved_and_after(tmp_path, monkeypatch):
+    """A live archive's samples wait in `recent` until MOVE_AT do: a review
+    reads them there as in `telemetry`; a clean stop moves them all."""
+    import backend.server.archive as writer
+
+    monkeypatch.setattr(writer, "MOVE_AT", 10)
+    archive = TelemetryArchive(tmp_path / "m.telemetry.db", every_s=0.0, max_samples=12)
+    archive.start()
+    try:
+        for k in range(24):
+            archive._clock = lambda k=k: k * 1.0
+            archive.took(_sample("lru1", 1000.0 + k), received=2000.0 + k)
+            if k == 14:  # a write of 15: moved
+                assert archive.flush()
+        assert archive.flush()  # a write of 9 more: waiting, to move at the next
+        with ArchiveReader(archive.path) as r, sqlite3.connect(archive.path) as conn:
+            waiting = conn.execute("SELECT count(*) FROM recent").fetchone()[0]
+            assert waiting == 9
+            got = [s.at for s in r.last_samples("lru1", 1e9, GROUND, 100)]
+            assert got[-1] == 2023.0 and got == sorted(got) and len(got) <= 12 + 10
+            assert r.span(ROBOT)[1] == 1023.0
+            assert [s.at for s in r.samples(2019.0, 2023.0, GROUND)] == [
+                2020.0,
+                2021.0,
+                2022.0,
+                2023.0,
+            ]
+            assert r.last_levels("lru1", 1e9, GROUND, 3) == [(1.0, 1.0)] * 3
+    finally:
+        archive.close()
+    with ArchiveReader(archive.path) as r, sqlite3.connect(archive.path) as conn:
+        assert conn.execute("SELECT count(*) FROM recent").fetchone()[0] == 0
+        assert [s.at for s in r.last_samples("lru1", 1e9, GROUND, 100)] == [
+            2012.0 + k for k in range(12)
+        ]
