@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from backend.core.library import Library, SkillSpec
-from backend.core.model import FINISHED, Mission, SkillInstance, Status, Waiver, on_board_text
+from backend.core.model import FINISHED, Mission, SkillInstance, Status, Waiver
 from backend.core.plan.contingency_checks import (
     after_deadlock,
     branch_energy,
@@ -396,7 +396,7 @@ def _chosen_on_board(ctx: CheckContext, s: SkillInstance, param: str) -> str | N
     """The marker chosen on board the parameter is bound to, while no robot chose it."""
     name = s.bindings.get(param)
     mk = ctx.mission.markers.get(name) if name is not None else None
-    return name if mk is not None and on_board_text(mk).startswith("to be chosen") else None
+    return name if getattr(mk, "to_choose", False) else None
 
 
 def _estimated(ctx: CheckContext) -> Iterator[Hit]:

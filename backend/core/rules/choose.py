@@ -30,7 +30,7 @@ from backend.core.model import (
 )
 from backend.core.ops import Report
 from backend.core.rules.base import Rules
-from backend.core.rules.markers import bound
+from backend.core.rules.markers import bound, placed_at
 
 NEAR_M = 0.5  # metres two robots' choices may differ by and still agree
 
@@ -54,7 +54,7 @@ def on_board(
 
 def _still_to_choose(mk: Marker | None) -> ChooseRule | None:
     """Its rule while no robot chose it (once chosen, its place goes up like any value)."""
-    if isinstance(mk, PoseMarker | PositionMarker) and mk.chosen is None:
+    if isinstance(mk, PoseMarker | PositionMarker) and mk.to_choose:
         return mk.choose
     return None
 
@@ -101,7 +101,7 @@ def reported(rules: Rules, op: Report) -> tuple[list[ev.Event], list[RaisedAlert
         chosen = Chosen(robot=op.robot, skill=op.id, at=op.at)
         new = placed(mk, pose, chosen)
         events.append(ev.MarkerSet(name=name, marker=new))
-        events += _follow(rules, name, mk, new)
+        events += _follow(rules, name, new)
         alerts.append(
             _alert(
                 op,
@@ -113,18 +113,15 @@ def reported(rules: Rules, op: Report) -> tuple[list[ev.Event], list[RaisedAlert
     return events, alerts
 
 
-def _follow(rules: Rules, name: str, old: Marker, new: Marker) -> list[ev.Event]:
+def _follow(rules: Rules, name: str, new: Marker) -> list[ev.Event]:
     """Idle skills bound to the marker take its chosen place (those on their
     way to a robot, or on it, choose it there)."""
     idle = {s.id: (robot, s) for robot, s, _p in bound(rules, name) if _follows(rules, s)}
-    rules.mission.markers[name] = new  # to compute the bound values
-    try:
+    with placed_at(rules, name, new):
         edits = [
             (s, rules.check_params(robot, s.skill, s.params, s.bindings, skill_id=s.id))
             for robot, s in idle.values()
         ]
-    finally:
-        rules.mission.markers[name] = old
     return [ev.SkillEdited(id=s.id, params=p) for s, p in edits if p != s.params]
 
 

@@ -5,6 +5,7 @@ rename and delete a marker (and restore it, for undo)."""
 from __future__ import annotations
 
 from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 from backend.core import events as ev
@@ -31,6 +32,22 @@ def marker(rules: Rules, name: str) -> Marker:
         known = ", ".join(rules.mission.markers) or "none"
         raise Refusal("unknown_marker", f"no marker '{name}' (markers: {known})")
     return mk
+
+
+@contextmanager
+def placed_at(rules: Rules, name: str, mk: Marker) -> Iterator[None]:
+    """The mission as if marker `name` were `mk` (to compute the values bound
+    to it), then as it was (the events apply the change)."""
+    markers = rules.mission.markers
+    old = markers.get(name)
+    markers[name] = mk
+    try:
+        yield
+    finally:
+        if old is None:
+            del markers[name]
+        else:
+            markers[name] = old
 
 
 def bound(rules: Rules, name: str) -> Iterator[tuple[str, SkillInstance, str]]:
@@ -73,11 +90,8 @@ def move_marker(rules: Rules, op: MarkerMove) -> Change:
     old = marker(rules, op.name)
     new = _moved(op.name, old, op.value)
     events: list[ev.Event] = [ev.MarkerSet(name=op.name, marker=new)]
-    rules.mission.markers[op.name] = new  # to compute the bound values
-    try:
+    with placed_at(rules, op.name, new):
         followed, notes, stale = _follow(rules, op.name)
-    finally:
-        rules.mission.markers[op.name] = old
     return Change(
         events + followed, notes, {"stale": stale}, MarkerMove(name=op.name, value=_value(old))
     )
@@ -192,8 +206,7 @@ def restore_marker(rules: Rules, op: RestoreMarker) -> Change:
     if op.name in rules.mission.markers:
         raise Refusal("exists", f"a marker named '{op.name}' exists already")
     events: list[ev.Event] = [ev.MarkerSet(name=op.name, marker=op.marker)]
-    rules.mission.markers[op.name] = op.marker  # to compute the bound values
-    try:
+    with placed_at(rules, op.name, op.marker):
         for sid, pname in op.bindings:
             found = rules.mission.find(sid)
             if found is None or found[2].status != Status.IDLE or sid in rules.locked:
@@ -202,8 +215,6 @@ def restore_marker(rules: Rules, op: RestoreMarker) -> Change:
             bindings = {**s.bindings, pname: op.name}
             params = rules.check_params(robot, s.skill, s.params, bindings, skill_id=sid)
             events.append(ev.SkillEdited(id=sid, bindings=bindings, params=params))
-    finally:
-        del rules.mission.markers[op.name]
     return Change(events, [], {}, MarkerDelete(name=op.name))
 
 
